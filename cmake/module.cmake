@@ -1,0 +1,12 @@
+# shadowtile_module(NAME DIR [DEPS ...]): one library per module folder; sources are the
+# folder's *.cpp files; include root is the repository root ("tiles/core/x.hpp").
+function(shadowtile_module name dir)
+  cmake_parse_arguments(M "" "" "PUBLIC_DEPS;PRIVATE_DEPS" ${ARGN})
+  file(GLOB srcs CONFIGURE_DEPENDS ${dir}/*.cpp)
+  add_library(shadowtile_${name} ${srcs})
+  add_library(shadowtile::${name} ALIAS shadowtile_${name})
+  target_include_directories(shadowtile_${name} PUBLIC
+    $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}> $<INSTALL_INTERFACE:include>)
+  target_link_libraries(shadowtile_${name} PUBLIC ${M_PUBLIC_DEPS} PRIVATE shadowtile_warnings ${M_PRIVATE_DEPS})
+  set_target_properties(shadowtile_${name} PROPERTIES POSITION_INDEPENDENT_CODE ON)
+endfunction()

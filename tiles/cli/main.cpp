@@ -1,0 +1,71 @@
+// shadowtile: one executable, one subcommand per job (bounds, build, serve, load, ...).
+#include <algorithm>
+#include <cstdio>
+#include <iostream>
+
+#include "tiles/cli/command.hpp"
+#include "tiles/core/error.hpp"
+#include "tiles/core/interval.hpp"
+
+namespace st::cli {
+
+std::vector<Command>& registry() {
+  static std::vector<Command> commands;
+  return commands;
+}
+
+uint32_t parse_resolution(const std::string& text) {
+  std::string s = text;
+  uint64_t mult = 1;
+  if (!s.empty() && (s.back() == 'k' || s.back() == 'K')) mult = 1024, s.pop_back();
+  else if (!s.empty() && (s.back() == 'm' || s.back() == 'M')) mult = 1024 * 1024, s.pop_back();
+  uint64_t n = 0;
+  size_t used = 0;
+  try {
+    n = std::stoull(s, &used);
+  } catch (...) {
+    used = 0;
+  }
+  if (s.empty() || used != s.size() || s[0] == '-')
+    throw Error("--resolution: '" + text + "' is not a number like 4096, 16k or 1m");
+  n *= mult;
+  if (!is_power_of_two(n)) throw Error("--resolution: " + text + " is not a power of two");
+  uint32_t level = log2_exact(n);
+  if (level > kMaxLevel) throw Error("--resolution: " + text + " exceeds the maximum 1m (2^20)");
+  return level;
+}
+
+}  // namespace st::cli
+
+int main(int argc, char** argv) {
+  using namespace st::cli;
+  CLI::App app{
+      "shadowtile: lossless compressed shadow maps, built offline and streamed as tiles.\n"
+      "Exit codes: 0 ok, 1 error (bad input or I/O), 2 usage, 3 verification mismatch."};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "shadowtile 0.1.0");
+  auto& cmds = registry();
+  std::sort(cmds.begin(), cmds.end(), [](auto& a, auto& b) { return a.name < b.name; });
+  for (auto& c : cmds) {
+    CLI::App* sub = app.add_subcommand(c.name, c.description);
+    c.setup(*sub);
+  }
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    int rc = app.exit(e);
+    return rc == 0 ? 0 : kExitUsage;
+  } catch (const ExitCode& e) {
+    return e.code;
+  } catch (const st::Error& e) {
+    std::fprintf(stderr, "shadowtile: error: %s\n", e.what());
+    return kExitError;
+  } catch (const std::bad_alloc&) {
+    std::fprintf(stderr, "shadowtile: error: out of memory\n");
+    return kExitError;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "shadowtile: error: %s\n", e.what());
+    return kExitError;
+  }
+  return kExitOk;
+}

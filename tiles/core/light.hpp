@@ -1,0 +1,80 @@
+// Light space (DESIGN.md "Definitions"). A directional light ("sun") uses an orthographic
+// box fitted to the scene; a spot light a perspective frustum. A world point maps to
+// (u, v, d): u, v in [0,1) across the map, d in [0,1] linear between near and far
+// (for a spot light: linear in distance along the light axis). All math in double.
+//
+// Texel (x, y) of a map of level L (R = 2^L) covers [x/R, (x+1)/R) x [y/R, (y+1)/R); its
+// ray goes through the texel centre. Lookups use integer texel coordinates computed in
+// double, so maps up to 2^20 a side are addressed exactly.
+#pragma once
+#include <array>
+#include <cstdint>
+#include <string>
+
+#include "tiles/core/vec.hpp"
+
+namespace st {
+
+enum class LightKind : uint8_t { sun = 0, spot = 1 };
+
+// What the user asked for: `sun:azimuth=DEG,elevation=DEG[,margin=F]` or
+// `spot:pos=X,Y,Z,target=X,Y,Z,fov=DEG`. Parsing throws st::Error naming the bad field.
+struct LightSpec {
+  LightKind kind = LightKind::sun;
+  double azimuth_deg = 30, elevation_deg = 50, margin = 0.01;  // sun
+  Vec3d pos{}, target{};                                      // spot
+  double fov_deg = 60;                                        // spot, full angle
+  static LightSpec parse(const std::string& text);
+  std::string to_string() const;
+};
+
+// A texel's ray in world space: p(t) = origin + t * dir, t in [0, 1] spans near..far for
+// a sun (so t == d); for a spot, depth_of_t(t) converts.
+struct LightRay {
+  Vec3d origin, dir;
+};
+
+struct LightPoint {
+  double u, v, d;
+};
+
+class LightSpace {
+ public:
+  LightSpace() = default;
+  // Fits the light box/frustum to `bounds` (the scene's world AABB). Throws st::Error on
+  // a zero-extent box, bad angles or a scene behind the spot light.
+  static LightSpace fit(const LightSpec& spec, const Aabb& bounds);
+
+  LightKind kind() const { return kind_; }
+  const LightSpec& spec() const { return spec_; }
+
+  LightPoint to_light(const Vec3d& world) const;
+  // Ray through the centre of texel (x, y) of a map of level `level`.
+  LightRay texel_ray(uint32_t level, uint64_t x, uint64_t y) const;
+  // Depth of the point at parameter t on a texel ray (sun: d = t).
+  double depth_of_t(const LightRay& ray, double t) const;
+  // Integer texel containing (u, v) at `level`, clamped to the map.
+  static std::array<uint64_t, 2> texel_of(uint32_t level, double u, double v);
+
+  // Basis and extents, for serialization in pack headers.
+  Vec3d origin() const { return origin_; }  // sun: corner of the near plane; spot: eye
+  Vec3d axis_u() const { return axis_u_; }
+  Vec3d axis_v() const { return axis_v_; }
+  Vec3d forward() const { return forward_; }
+  double extent_uv() const { return extent_uv_; }  // sun: side of the square box
+  double near_plane() const { return near_; }
+  double far_plane() const { return far_; }
+
+  // Serialized form: 18 doubles + kind; exact round trip.
+  std::array<double, 18> to_array() const;
+  static LightSpace from_array(LightKind kind, const std::array<double, 18>& a);
+
+ private:
+  LightKind kind_ = LightKind::sun;
+  LightSpec spec_{};
+  Vec3d origin_{}, axis_u_{1, 0, 0}, axis_v_{0, 0, 1}, forward_{0, -1, 0};
+  double extent_uv_ = 1;    // sun: box side; spot: tan(fov/2) * 2 (image plane at 1)
+  double near_ = 0, far_ = 1;
+};
+
+}  // namespace st
