@@ -26,8 +26,10 @@ std::string check_lossless(const Hierarchy& h, const IntervalTile& tile);
 // [min lo, max hi] of the texels below it.
 std::string check_levels_complete(const Hierarchy& h, const IntervalTile& tile);
 
-// Every valued node's [lo, hi] is exactly the intersection of the intervals of the
-// texels it answers for (those whose deepest valued ancestor-or-self it is).
-std::string check_admissible(const Hierarchy& h, const IntervalTile& tile);
+// Every valued node's [lo, hi] is exactly (`exact`) or is inside (not `exact`) the
+// intersection of the intervals of the texels it answers for (those whose deepest valued
+// ancestor-or-self it is). With `exact`, every valued node answers for some texel; else
+// a node answering for none (it serves coarser levels only) may hold any [lo, hi].
+std::string check_admissible(const Hierarchy& h, const IntervalTile& tile, bool exact = true);
 
 }  // namespace st::fields

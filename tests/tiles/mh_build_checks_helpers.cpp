@@ -112,7 +112,7 @@ std::string check_levels_complete(const Hierarchy& h, const IntervalTile& tile) 
   return "";
 }
 
-std::string check_admissible(const Hierarchy& h, const IntervalTile& tile) {
+std::string check_admissible(const Hierarchy& h, const IntervalTile& tile, bool exact) {
   // Answering node per texel: propagate global node ids down the levels.
   std::vector<std::vector<uint32_t>> ids(h.depth + 1);
   std::vector<const HNode*> nodes;
@@ -137,8 +137,12 @@ std::string check_admissible(const Hierarchy& h, const IntervalTile& tile) {
   }
   for (size_t id = 0; id < nodes.size(); ++id) {
     const HNode& n = *nodes[id];
-    if (!used[id]) return fmt("valued node #%g (morton %g) answers for no texel", double(id), double(n.morton));
-    if (!(n.lo == lo[id] && n.hi == hi[id]))
+    if (!used[id]) {
+      if (!exact) continue;
+      return fmt("valued node #%g (morton %g) answers for no texel", double(id), double(n.morton));
+    }
+    bool ok = exact ? (n.lo == lo[id] && n.hi == hi[id]) : (lo[id] <= n.lo && n.hi <= hi[id]);
+    if (!ok)
       return fmt("valued node #%g: [lo, hi] = [%.9g, %.9g], texels it answers for give [%.9g, %.9g]", double(id), n.lo,
                  n.hi, lo[id], hi[id]);
   }

@@ -183,7 +183,7 @@ Hierarchy build_hierarchy(const IntervalTile& tile, MhConstruction method) {
     case MhConstruction::bottom_up:
       return mh_detail::build_bottom_up(tile, n);
     case MhConstruction::top_down:
-      throw Error("build_hierarchy: top-down construction is not in this build yet");
+      return mh_detail::build_top_down(tile, n);
   }
   throw Error("build_hierarchy: unknown construction method " + std::to_string(int(method)));
 }
