@@ -48,10 +48,33 @@ struct SceneOptions {
 // Loads "procedural:NAME[,k=v...]" or a file path. Throws st::Error with a one-line
 // message naming the file / mesh / parameter at fault: missing file, unknown format,
 // NaN or Inf vertices, assimp validation failures, unknown procedural name or key.
+// Files: one st::Mesh per mesh instance (node transforms applied in double, named after
+// the mesh, else the node), triangulated, points and lines dropped, vertices welded by
+// exact position per mesh, degenerate triangles dropped (counted), closed meshes turned
+// outwards (counted). options.up applies to files only (procedural scenes are +Y up).
+// COLLADA files carrying <up_axis>Z_UP</up_axis> are already turned by assimp itself.
 Scene load_scene(const std::string& spec, const SceneOptions& options = {});
 
-// Procedural scenes (deterministic): cube, sphere, city, terrain, hairball. `params`
-// are the key=value pairs after the name.
+// Procedural scenes (deterministic: splitmix64, same spec -> same content_hash()).
+// Spec: "procedural:NAME[,key=value...]" (the prefix is optional here). Common keys:
+// scale (default 1) then ox, oy, oz (default 0): v' = v * scale + (ox, oy, oz), in double.
+//   cube     size=1             axis-aligned [-size/2, size/2]^3, 12 triangles, closed
+//   sphere   radius=1 segments=32
+//            closed UV sphere: stacks = max(2, segments / 2); vertices are the poles
+//            (0, +-radius, 0) and, for j = 1..stacks-1, i = 0..segments-1,
+//            radius * (sin t cos p, cos t, sin t sin p) with t = pi j / stacks,
+//            p = 2 pi i / segments; quads between neighbouring rings split along the
+//            diagonal from (j+1, i) to (j, i+1); 2 segments (stacks - 1) triangles
+//   plane    size=10            open quad at y = 0 facing +Y, 2 triangles
+//   boxes    (none)             box_a and box_b intersect; inner is nested in outer
+//   city     seed=1 size=14 block=60   closed buildings on a closed ground slab
+//   terrain  seed=1 size=256 extent=1000 height=150   closed solid heightfield
+//   hairball seed=1 count=256 segments=96 sides=6     closed thin tubes, one mesh each
+// Unknown names or keys and malformed or out-of-range values throw st::Error.
 Scene make_procedural(const std::string& spec);
+
+// One paragraph for CLIs: triangles, vertices, meshes, closed meshes and triangles,
+// dropped degenerates, flipped meshes and the bounds.
+std::string summary(const Scene& scene);
 
 }  // namespace st

@@ -1,0 +1,155 @@
+// load_scene: "procedural:..." specs or any file assimp 5.2 reads, flattened into one
+// world-space triangle soup in double (node transforms applied, +Y up). Every mesh goes
+// through append_mesh() (scene_mesh.hpp), which decides closedness from the triangles
+// themselves: nothing a file claims about its geometry is trusted.
+#include <assimp/Importer.hpp>
+#include <assimp/postprocess.h>
+#include <assimp/scene.h>
+
+#include <cmath>
+#include <filesystem>
+#include <system_error>
+#include <utility>
+#include <vector>
+
+#include "tiles/bake/scene_mesh.hpp"
+#include "tiles/core/error.hpp"
+
+namespace st {
+namespace {
+
+// Affine transform in double (assimp stores float matrices; products are taken in
+// double so deep hierarchies do not accumulate float rounding).
+struct Affine {
+  double m[3][4] = {{1, 0, 0, 0}, {0, 1, 0, 0}, {0, 0, 1, 0}};
+
+  static Affine from(const aiMatrix4x4& a) {
+    Affine r;
+    const float* rows[3] = {&a.a1, &a.b1, &a.c1};
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 4; ++j) r.m[i][j] = rows[i][j];
+    return r;
+  }
+  Affine operator*(const Affine& o) const {
+    Affine r;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 4; ++j) {
+        double s = j == 3 ? m[i][3] : 0.0;
+        for (int k = 0; k < 3; ++k) s += m[i][k] * o.m[k][j];
+        r.m[i][j] = s;
+      }
+    return r;
+  }
+  Vec3d apply(const aiVector3D& p) const {
+    const double x = p.x, y = p.y, z = p.z;
+    return {m[0][0] * x + m[0][1] * y + m[0][2] * z + m[0][3],
+            m[1][0] * x + m[1][1] * y + m[1][2] * z + m[1][3],
+            m[2][0] * x + m[2][1] * y + m[2][2] * z + m[2][3]};
+  }
+  double determinant() const {
+    return m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) -
+           m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0]) +
+           m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+  }
+};
+
+// Z-up to Y-up: a -90 degree rotation about X, (x, y, z) -> (x, z, -y). A rotation
+// (determinant +1), so handedness and winding are kept; a mirror (y <-> z) would not.
+Affine z_up_to_y_up() {
+  Affine r;
+  r.m[1][1] = 0, r.m[1][2] = 1;
+  r.m[2][1] = -1, r.m[2][2] = 0;
+  return r;
+}
+
+std::string one_line(std::string s) {
+  for (char& c : s)
+    if (c == '\n' || c == '\r') c = ' ';
+  while (!s.empty() && s.back() == ' ') s.pop_back();
+  return s;
+}
+
+std::string mesh_name(const aiMesh& mesh, const aiNode& node, unsigned index) {
+  if (mesh.mName.length) return mesh.mName.C_Str();
+  if (node.mName.length) return node.mName.C_Str();
+  return "mesh#" + std::to_string(index);
+}
+
+MeshSoup instance(const aiMesh& mesh, const std::string& name, const Affine& world) {
+  MeshSoup soup;
+  soup.name = name;
+  soup.vertices.reserve(mesh.mNumVertices);
+  for (unsigned v = 0; v < mesh.mNumVertices; ++v) soup.vertices.push_back(world.apply(mesh.mVertices[v]));
+  // A mirroring transform turns the winding inside out; undo it so that front faces stay
+  // front faces (closed meshes would be re-oriented anyway, open ones would not).
+  const bool mirrored = world.determinant() < 0;
+  soup.triangles.reserve(mesh.mNumFaces);
+  for (unsigned f = 0; f < mesh.mNumFaces; ++f) {
+    const aiFace& face = mesh.mFaces[f];
+    if (face.mNumIndices != 3) continue;  // points and lines (Triangulate split polygons)
+    Triangle t{face.mIndices[0], face.mIndices[1], face.mIndices[2]};
+    if (mirrored) std::swap(t[1], t[2]);
+    soup.triangles.push_back(t);
+  }
+  return soup;
+}
+
+Scene load_file(const std::string& path, const SceneOptions& options) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const auto status = fs::status(path, ec);
+  if (ec || !fs::exists(status)) throw Error("scene file not found: " + path);
+  if (!fs::is_regular_file(status)) throw Error("scene path is not a regular file: " + path);
+
+  Assimp::Importer importer;
+  // Validation stays on: assimp 5.2.5 crashes on some inputs (Quake 3 .bsp) without it
+  // (MACHINE.md). No JoinIdenticalVertices/FindDegenerates: welding and degenerate
+  // removal happen in append_mesh() so they are counted and identical for all sources.
+  const unsigned flags = aiProcess_Triangulate | aiProcess_ValidateDataStructure;
+  const aiScene* as = nullptr;
+  try {
+    as = importer.ReadFile(path, flags);
+  } catch (const std::exception& e) {
+    throw Error(path + ": assimp failed: " + one_line(e.what()));
+  }
+  if (!as) {
+    const std::string why = one_line(importer.GetErrorString());
+    const std::string ext = fs::path(path).extension().string();
+    if (!importer.IsExtensionSupported(ext))
+      throw Error(path + ": unknown scene format '" + ext + "' (" + why + ")");
+    if (why.find("alidat") != std::string::npos)
+      throw Error(path + ": invalid scene data, assimp validation failed: " + why);
+    throw Error(path + ": cannot read scene: " + why);
+  }
+  if (!as->mRootNode) throw Error(path + ": scene has no node hierarchy");
+
+  Scene scene;
+  scene.name = path;
+  const Affine root = options.up == UpAxis::z ? z_up_to_y_up() : Affine{};
+  // Iterative walk (a hostile file may nest nodes deeper than the stack allows); children
+  // are pushed in reverse so meshes come out in document order.
+  std::vector<std::pair<const aiNode*, Affine>> stack{{as->mRootNode, root * Affine::from(as->mRootNode->mTransformation)}};
+  while (!stack.empty()) {
+    auto [node, world] = stack.back();
+    stack.pop_back();
+    for (unsigned i = 0; i < node->mNumMeshes; ++i) {
+      const unsigned index = node->mMeshes[i];
+      if (index >= as->mNumMeshes) throw Error(path + ": node '" + node->mName.C_Str() + "' references a missing mesh");
+      const aiMesh& mesh = *as->mMeshes[index];
+      append_mesh(scene, instance(mesh, mesh_name(mesh, *node, index), world));
+    }
+    for (unsigned c = node->mNumChildren; c-- > 0;)
+      stack.push_back({node->mChildren[c], world * Affine::from(node->mChildren[c]->mTransformation)});
+  }
+  return scene;
+}
+
+}  // namespace
+
+Scene load_scene(const std::string& spec, const SceneOptions& options) {
+  // Procedural scenes are generated +Y up; options.up only describes file sources.
+  if (spec.rfind("procedural:", 0) == 0) return make_procedural(spec);
+  return load_file(spec, options);
+}
+
+}  // namespace st

@@ -1,0 +1,29 @@
+// summary(): the one paragraph a CLI prints after loading a scene.
+#include <cstdio>
+
+#include "tiles/bake/scene.hpp"
+
+namespace st {
+
+std::string summary(const Scene& scene) {
+  size_t closed = 0;
+  for (auto& m : scene.meshes) closed += m.closed ? 1 : 0;
+  const Aabb b = scene.bounds();
+  char box[256];
+  if (b.empty())
+    std::snprintf(box, sizeof box, "empty bounds");
+  else
+    std::snprintf(box, sizeof box, "bounds [%.9g, %.9g, %.9g] - [%.9g, %.9g, %.9g]", b.lo.x, b.lo.y, b.lo.z,
+                  b.hi.x, b.hi.y, b.hi.z);
+  char text[768];
+  std::snprintf(text, sizeof text,
+                "%zu triangles, %zu vertices, %zu meshes (%zu closed, %zu closed triangles), "
+                "%llu degenerate triangles dropped, %llu meshes flipped outwards, %s",
+                scene.triangles.size(), scene.vertices.size(), scene.meshes.size(), closed,
+                scene.closed_triangle_count(),
+                static_cast<unsigned long long>(scene.stats.degenerate_dropped),
+                static_cast<unsigned long long>(scene.stats.meshes_flipped), box);
+  return "scene '" + scene.name + "': " + text;
+}
+
+}  // namespace st
