@@ -1,0 +1,101 @@
+// Dual depth bounds with Embree 3 (MH §3 and §3.1; voxel paper §6.1 "closed objects").
+//
+// For each texel of a map of level L the ray from the light through the texel centre
+// (LightSpace::texel_ray) gives an Interval:
+//   lo = depth of the first hit (the ordinary shadow map),
+//   hi = depth where the ray leaves all closed objects again.
+// Counting (MH §3: front faces +1, back faces -1, stop when the counter is back to 0;
+// voxel §6.1: a per-pixel counter handles intersecting closed objects): we keep one
+// counter per closed mesh, so a ray inside mesh A that crosses an edge of a nested mesh B
+// (where watertight traversal may report two triangles) can never make A look exited.
+// Hits are processed in groups of equal t (every primitive hit at exactly that t is
+// collected in the same traversal by an intersection filter, then the next traversal
+// starts at tnear = t and excludes every primitive already processed): no epsilon steps,
+// so coplanar and touching faces are handled (MACHINE.md pitfall). Within a group a mesh
+// contributes sign(sum of its facings) in {-1, 0, +1}.
+//
+// Conservative fallbacks (hi = lo): the first hit group holds no closed hit (open
+// geometry), any counter would go negative (e.g. inverted winding), the ray leaves the
+// scene with a counter > 0, or a bounded per-ray table overflows. Open surfaces met while
+// inside a closed object are ignored. No hit: kLitDepth sentinel [1, 1].
+//
+// Lossless contract: lo is the first-hit depth of the traced ray and every point of the
+// ray between lo and hi is inside a closed object (up to float32 tracing precision).
+// Depths: double from the float hit t (depth_of_t), then float32, clamped to [0,1] with
+// lo <= hi.
+//
+// Precision: vertices are recentred on the scene AABB centre in double, then converted
+// to float, and texel rays are transformed the same way, so a scene offset by 1e7 traces
+// like the same scene at the origin.
+//
+// Thread safety: the constructor builds the Embree scene once; trace() is const and may
+// be called concurrently from several threads (each call also parallelises internally
+// with TBB over blocks of rows; 8-wide coherent packets on 2x4 texel blocks).
+// Errors: st::Error for non-finite vertices, bad indices, bad regions, Embree failures.
+#pragma once
+#include <atomic>
+#include <cstdint>
+#include <memory>
+
+#include "tiles/bake/scene.hpp"
+#include "tiles/core/interval.hpp"
+#include "tiles/core/light.hpp"
+
+namespace st {
+
+struct DepthBoundsStats {
+  uint64_t texels = 0;      // texels traced
+  uint64_t rays = 0;        // texel rays (== texels)
+  uint64_t traversals = 0;  // Embree traversals, counted per active ray lane
+  uint64_t hits = 0;        // texels with a first hit (lo < kLitDepth or hit at 1)
+  uint64_t closed = 0;      // texels with hi > lo
+  uint64_t fallbacks = 0;   // texels where counting was not trusted (hi = lo)
+  double seconds = 0;       // wall time of the call
+
+  DepthBoundsStats& operator+=(const DepthBoundsStats& o);
+};
+
+enum class TraceMode : uint8_t {
+  bounds,     // lo and hi (hi = lo everywhere when the scene has no closed mesh)
+  first_hit,  // plain shadow map: one traversal per ray, hi = lo (benchmark baseline)
+};
+
+struct TraceRegion {
+  uint32_t level = 0;  // map of 2^level texels a side, level <= kMaxLevel
+  uint64_t x0 = 0, y0 = 0;
+  uint32_t width = 0, height = 0;
+};
+
+class DepthBoundsTracer {
+ public:
+  // The largest region one call traces (8192^2 texels: 512 MiB of intervals).
+  static constexpr uint64_t kMaxRegionTexels = uint64_t(8192) * 8192;
+
+  // Builds the Embree scene (robust, watertight triangles). Throws st::Error.
+  DepthBoundsTracer(const Scene& scene, const LightSpace& light);
+  ~DepthBoundsTracer();
+  DepthBoundsTracer(const DepthBoundsTracer&) = delete;
+  DepthBoundsTracer& operator=(const DepthBoundsTracer&) = delete;
+
+  // False when the scene has no closed mesh: exit depths are never traced (hi = lo).
+  bool traces_exit_depths() const;
+  double build_seconds() const;
+  uint64_t triangle_count() const;
+
+  // Traces a rectangular region of the level-`region.level` map. Throws st::Error when
+  // the region is empty, leaves the map or exceeds kMaxRegionTexels. If `progress` is
+  // given, the number of finished texels is added to it as rows complete (another
+  // thread may poll it). `stats`, if given, receives this call's figures.
+  IntervalTile trace(const TraceRegion& region, TraceMode mode = TraceMode::bounds,
+                     DepthBoundsStats* stats = nullptr,
+                     std::atomic<uint64_t>* progress = nullptr) const;
+
+  // Checks a region against the map and the size limit (same messages as trace()).
+  static void check_region(const TraceRegion& region);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace st
