@@ -1,0 +1,78 @@
+// The out-of-core, parallel map build (issue 4; DESIGN.md "Pipeline"): level-K cells
+// stream through  bounds (Embree) -> MH construction -> cut + encode -> compress -> append
+// with memory bounded by the cell size and the thread count, never by the map's
+// resolution. Cells larger than kMaxTraceSide are traced in sub-tiles whose hierarchies
+// are stitched (MH §3.1 "Tiled construction").
+//
+//   MapBuildOptions o; o.map_level = 16; o.encoding = Encoding::dagmh;
+//   MapBuildReport r = build_map(scene, light, o, "city.pack");
+//
+// Thread safety: one build per output path at a time. Errors: st::Error (bad options,
+// I/O); a killed build leaves "<out>.tmp", which `resume` continues.
+#pragma once
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "tiles/bake/scene.hpp"
+#include "tiles/core/encoding.hpp"
+#include "tiles/core/light.hpp"
+#include "tiles/core/mh_build.hpp"
+
+namespace st {
+
+inline constexpr uint32_t kMaxTraceSide = 4096;  // largest square traced in one call
+
+struct TexelRegion {
+  uint64_t x = 0, y = 0, w = 0, h = 0;  // texels of the finest level
+};
+
+struct MapBuildOptions {
+  uint32_t map_level = 12;
+  Encoding encoding = Encoding::dagmh;
+  std::optional<uint32_t> skip_level;  // default: default_skip_level(map_level)
+  uint32_t tile_bytes = 64 * 1024;
+  MhConstruction construction = MhConstruction::bottom_up;
+  bool resume = false;  // continue "<out>.tmp" if present
+  int compression_level = 6;
+  // Build only the cells touching this region; every other cell is the constant
+  // kLitDepth (a partial map: only texels inside the region are traced and lossless).
+  std::optional<TexelRegion> region;
+  std::string scene_spec, light_spec;  // provenance written into the pack's params
+  // Called from a background thread about 5 times a second with the progress so far.
+  std::function<void(uint64_t cells_done, uint64_t cells_total, uint64_t texels_done)> progress;
+  // Test hook: stop (throw st::Error "interrupted") after this many cells were appended.
+  std::optional<uint64_t> stop_after_cells;
+  // Set from another thread (e.g. SIGINT) to stop at the next cell; "<out>.tmp" remains.
+  std::atomic<bool>* cancel = nullptr;
+};
+
+struct MapBuildReport {
+  uint32_t map_level = 0, skip_level = 0;
+  std::string encoding;
+  uint64_t cells_total = 0, cells_built = 0, cells_resumed = 0, cells_outside_region = 0;
+  uint64_t texels_traced = 0;
+  bool exit_depths = false;
+  double wall_seconds = 0;
+  // Thread-seconds per stage (summed over workers).
+  double trace_seconds = 0, hierarchy_seconds = 0, cut_encode_seconds = 0, write_seconds = 0,
+         finish_seconds = 0, bvh_seconds = 0;
+  uint64_t pack_bytes = 0, tile_count = 0, index_tile_count = 0;
+  uint64_t constant_entries = 0, grid_entries = 0;
+  std::vector<uint64_t> stored_bytes_per_level;      // by tile root level
+  std::vector<std::pair<uint64_t, uint64_t>> tile_size_histogram;  // (upper bound bytes, count)
+  uint64_t peak_rss_bytes = 0;
+  std::string to_json() const;
+};
+
+// Builds the pack at `out_path` (written as "<out_path>.tmp", renamed when complete).
+MapBuildReport build_map(const Scene& scene, const LightSpace& light, const MapBuildOptions& options,
+                         const std::string& out_path);
+
+// Peak resident set size of this process so far (getrusage), in bytes.
+uint64_t peak_rss_bytes();
+
+}  // namespace st
