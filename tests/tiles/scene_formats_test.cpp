@@ -57,6 +57,8 @@ struct Format {
   bool one_mesh;    // the format merges all meshes into one
 };
 
+void PrintTo(const Format& f, std::ostream* os) { *os << f.id; }
+
 class ExportedFormat : public ::testing::TestWithParam<Format> {};
 
 TEST_P(ExportedFormat, RoundTripKeepsTrianglesClosednessAndBounds) {
