@@ -155,6 +155,17 @@ TEST(SceneMesh, NonFiniteVertexNamesTheMesh) {
   EXPECT_EQ(scene_of({m}).vertices.size(), 8u);
 }
 
+TEST(SceneMesh, IndexPastTheVerticesNamesTheMesh) {
+  MeshSoup m = cube("bad_index");
+  m.triangles.push_back({0, 1, 8});
+  try {
+    scene_of({m});
+    ADD_FAILURE() << "no error";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("bad_index"), std::string::npos) << e.what();
+  }
+}
+
 TEST(SceneMesh, EmptyMeshesAndScenes) {
   Scene s = scene_of({MeshSoup{"nothing", {}, {}}, MeshSoup{"points_only", {{1, 2, 3}}, {}}});
   ASSERT_EQ(s.meshes.size(), 2u);

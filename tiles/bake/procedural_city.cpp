@@ -19,6 +19,7 @@ namespace {
 constexpr double kFloor = 3.5;  // storey height, metres
 constexpr double kBay = 4.0;    // window bay width, metres
 constexpr double kStreet = 12.0;
+constexpr double kMinPlot = 8.0;  // narrowest building plot, metres
 
 struct Rect {
   double x0, z0, x1, z1;
@@ -156,7 +157,9 @@ class CityBuilder {
 
   void plots(const Rect& r) {
     const double gap = rng_.uniform(2, 5);
-    const int nx = rng_.range(1, 3), nz = rng_.range(1, 3);
+    // Plots at least kMinPlot wide, so small blocks never produce inverted boxes.
+    auto most = [&](double len) { return std::clamp(static_cast<int>((len + gap) / (kMinPlot + gap)), 1, 3); };
+    const int nx = rng_.range(1, most(r.w())), nz = rng_.range(1, most(r.d()));
     for (int i = 0; i < nx; ++i)
       for (int k = 0; k < nz; ++k) {
         const Rect p{r.x0 + r.w() * i / nx + (i ? gap / 2 : 0), r.z0 + r.d() * k / nz + (k ? gap / 2 : 0),
@@ -194,7 +197,7 @@ class CityBuilder {
 std::vector<MeshSoup> make_city(Params& p) {
   const uint64_t seed = static_cast<uint64_t>(p.integer("seed", 1, 0, INT64_MAX));
   const int size = static_cast<int>(p.integer("size", 14, 1, 256));
-  const double pitch = p.real("block", 60.0, 20.0, 1000.0);
+  const double pitch = p.real("block", 60.0, 30.0, 1000.0);
   p.finish();
 
   CityBuilder city(seed);

@@ -6,6 +6,7 @@
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <system_error>
@@ -13,6 +14,7 @@
 #include <vector>
 
 #include "tiles/bake/scene_mesh.hpp"
+#include "tiles/bake/scene_q3bsp.hpp"
 #include "tiles/core/error.hpp"
 
 namespace st {
@@ -69,10 +71,19 @@ std::string one_line(std::string s) {
   return s;
 }
 
-std::string mesh_name(const aiMesh& mesh, const aiNode& node, unsigned index) {
-  if (mesh.mName.length) return mesh.mName.C_Str();
-  if (node.mName.length) return node.mName.C_Str();
-  return "mesh#" + std::to_string(index);
+// The mesh's own name, else its node's; a mesh instanced by several nodes is named
+// "node/mesh" so that error messages and stats tell the instances apart.
+std::string mesh_name(const aiMesh& mesh, const aiNode& node, unsigned index, bool instanced) {
+  const std::string m = mesh.mName.length ? mesh.mName.C_Str() : "mesh#" + std::to_string(index);
+  if (!node.mName.length) return m;
+  if (instanced) return std::string(node.mName.C_Str()) + "/" + m;
+  return mesh.mName.length ? m : node.mName.C_Str();
+}
+
+bool has_triangles(const aiMesh& mesh) {
+  for (unsigned f = 0; f < mesh.mNumFaces; ++f)
+    if (mesh.mFaces[f].mNumIndices == 3) return true;
+  return false;
 }
 
 MeshSoup instance(const aiMesh& mesh, const std::string& name, const Affine& world) {
@@ -101,6 +112,10 @@ Scene load_file(const std::string& path, const SceneOptions& options) {
   if (ec || !fs::exists(status)) throw Error("scene file not found: " + path);
   if (!fs::is_regular_file(status)) throw Error("scene path is not a regular file: " + path);
 
+  std::string ext = fs::path(path).extension().string();
+  for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (ext == ".pk3" || ext == ".bsp") check_quake3_archive(path);
+
   Assimp::Importer importer;
   // Validation stays on: assimp 5.2.5 crashes on some inputs (Quake 3 .bsp) without it
   // (MACHINE.md). No JoinIdenticalVertices/FindDegenerates: welding and degenerate
@@ -114,9 +129,10 @@ Scene load_file(const std::string& path, const SceneOptions& options) {
   }
   if (!as) {
     const std::string why = one_line(importer.GetErrorString());
-    const std::string ext = fs::path(path).extension().string();
     if (!importer.IsExtensionSupported(ext))
       throw Error(path + ": unknown scene format '" + ext + "' (" + why + ")");
+    if (why.find("mNumMeshes is 0") != std::string::npos)
+      throw Error(path + ": scene contains no meshes");
     if (why.find("alidat") != std::string::npos)
       throw Error(path + ": invalid scene data, assimp validation failed: " + why);
     throw Error(path + ": cannot read scene: " + why);
@@ -126,6 +142,17 @@ Scene load_file(const std::string& path, const SceneOptions& options) {
   Scene scene;
   scene.name = path;
   const Affine root = options.up == UpAxis::z ? z_up_to_y_up() : Affine{};
+  std::vector<unsigned> uses(as->mNumMeshes, 0);
+  {
+    std::vector<const aiNode*> todo{as->mRootNode};
+    while (!todo.empty()) {
+      const aiNode* node = todo.back();
+      todo.pop_back();
+      for (unsigned i = 0; i < node->mNumMeshes; ++i)
+        if (node->mMeshes[i] < as->mNumMeshes) ++uses[node->mMeshes[i]];
+      for (unsigned c = 0; c < node->mNumChildren; ++c) todo.push_back(node->mChildren[c]);
+    }
+  }
   // Iterative walk (a hostile file may nest nodes deeper than the stack allows); children
   // are pushed in reverse so meshes come out in document order.
   std::vector<std::pair<const aiNode*, Affine>> stack{{as->mRootNode, root * Affine::from(as->mRootNode->mTransformation)}};
@@ -136,7 +163,8 @@ Scene load_file(const std::string& path, const SceneOptions& options) {
       const unsigned index = node->mMeshes[i];
       if (index >= as->mNumMeshes) throw Error(path + ": node '" + node->mName.C_Str() + "' references a missing mesh");
       const aiMesh& mesh = *as->mMeshes[index];
-      append_mesh(scene, instance(mesh, mesh_name(mesh, *node, index), world));
+      if (!has_triangles(mesh)) continue;  // point clouds and line sets carry no surface
+      append_mesh(scene, instance(mesh, mesh_name(mesh, *node, index, uses[index] > 1), world));
     }
     for (unsigned c = node->mNumChildren; c-- > 0;)
       stack.push_back({node->mChildren[c], world * Affine::from(node->mChildren[c]->mTransformation)});

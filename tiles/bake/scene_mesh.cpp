@@ -133,7 +133,9 @@ double mesh_signed_volume(const Scene& scene, size_t mesh_index) {
 void append_mesh(Scene& scene, MeshSoup mesh) {
   for (auto& t : mesh.triangles)
     for (uint32_t i : t) {
-      ST_CHECK(i < mesh.vertices.size());
+      if (i >= mesh.vertices.size())
+        throw Error(scene.name + ": mesh '" + mesh.name + "' has a triangle index " + std::to_string(i) +
+                    " past its " + std::to_string(mesh.vertices.size()) + " vertices");
       if (!is_finite(mesh.vertices[i]))
         throw Error(scene.name + ": mesh '" + mesh.name + "' has a non-finite (NaN or Inf) vertex " +
                     std::to_string(i));

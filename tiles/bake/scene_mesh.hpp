@@ -14,7 +14,7 @@ namespace st {
 using Triangle = std::array<uint32_t, 3>;
 
 // One mesh as produced by a source: vertices in world space (double), triangles indexing
-// them. Vertices may be duplicated (split by normals/UVs); indices must be < vertices.size().
+// them. Vertices may be duplicated (split by normals/UVs).
 struct MeshSoup {
   std::string name;
   std::vector<Vec3d> vertices;
@@ -22,8 +22,8 @@ struct MeshSoup {
 };
 
 // Appends `mesh` to `scene` as one st::Mesh, in this order:
-//   1. every vertex referenced by a triangle must be finite, else st::Error naming the
-//      mesh and the scene (`scene.name`);
+//   1. every index must be < vertices.size() and every vertex referenced by a triangle
+//      finite, else st::Error naming the mesh and the scene (`scene.name`);
 //   2. vertices are welded by exact position (-0.0 == +0.0), per mesh only;
 //   3. triangles with repeated indices or a zero cross product (computed in double) are
 //      dropped and counted in scene.stats.degenerate_dropped;
