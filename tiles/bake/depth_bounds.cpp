@@ -134,7 +134,9 @@ struct DepthBoundsTracer::Impl {
   Vec3d centre;
   RTCDevice device = nullptr;
   RTCScene scene = nullptr;
-  std::vector<uint32_t> closed_mesh;  // closed prim -> scene mesh index
+  // closed prim -> (scene mesh index << 2) | facing code: one 4-byte random read per hit.
+  // Facing codes: 0 front (+1), 1 back (-1), 2 edge-on (0), 3 depends on the ray (spot).
+  std::vector<uint32_t> closed_info;
   std::vector<Vec3d> closed_normal;   // closed prim -> geometric normal (double, outwards)
   std::vector<double> closed_plane;   // closed prim -> dot(normal, v0 - centre)
   uint64_t triangles = 0;
@@ -178,7 +180,7 @@ std::string embree_error(RTCDevice d) {
 void DepthBoundsTracer::Impl::build(const Scene& s) {
   const auto t_start = std::chrono::steady_clock::now();
   const size_t nv = s.vertices.size(), nt = s.triangles.size();
-  if (nt > std::numeric_limits<uint32_t>::max() / 2)
+  if (nt > std::numeric_limits<uint32_t>::max() / 4 || s.meshes.size() >= (size_t(1) << 30))
     throw Error("depth bounds: scene '" + s.name + "' has too many triangles for Embree");
   // Which triangles are closed (meshes partition the triangles; anything else is open).
   std::vector<uint8_t> is_closed(nt, 0);
@@ -248,9 +250,14 @@ void DepthBoundsTracer::Impl::build(const Scene& s) {
       const auto& t = s.triangles[i];
       ip[3 * k] = t[0], ip[3 * k + 1] = t[1], ip[3 * k + 2] = t[2];
       if (closed) {
-        closed_mesh.push_back(tri_mesh[i]);
         const Vec3d& a = s.vertices[t[0]];
         closed_normal.push_back(cross(s.vertices[t[1]] - a, s.vertices[t[2]] - a));
+        uint32_t code = 3;
+        if (light.kind() == LightKind::sun) {  // one direction for every texel ray
+          const double f = dot(closed_normal.back(), light.forward());
+          code = f < 0 ? 0 : (f > 0 ? 1 : 2);
+        }
+        closed_info.push_back(tri_mesh[i] << 2 | code);
         closed_plane.push_back(dot(closed_normal.back(), a - centre));
       }
       ++k;
@@ -260,7 +267,7 @@ void DepthBoundsTracer::Impl::build(const Scene& s) {
     rtcReleaseGeometry(g);
   }
   rtcReleaseBuffer(vbuf);
-  any_closed = !closed_mesh.empty();
+  any_closed = !closed_info.empty();
   rtcCommitScene(scene);
   if (rtcGetDeviceError(device) != RTC_ERROR_NONE)
     throw Error("embree: building the scene '" + s.name + "' failed: " + embree_error(device));
@@ -290,9 +297,12 @@ bool DepthBoundsTracer::Impl::apply_group(const LaneHits& h, const Vec3d& dir, L
     if ((h.group[i] >> 32) != kClosedGeom) continue;  // open: ignored inside closed objects
     ++closed_hits;
     const uint32_t prim = uint32_t(h.group[i]);
-    const double f = dot(closed_normal[prim], dir);
-    const int32_t facing = f < 0 ? 1 : (f > 0 ? -1 : 0);  // against the outward normal: entering
-    const uint32_t m = closed_mesh[prim];
+    const uint32_t info = closed_info[prim], m = info >> 2;
+    int32_t facing = (info & 3) == 0 ? 1 : ((info & 3) == 1 ? -1 : 0);
+    if ((info & 3) == 3) {
+      const double f = dot(closed_normal[prim], dir);
+      facing = f < 0 ? 1 : (f > 0 ? -1 : 0);  // against the outward normal: entering
+    }
     uint32_t j = 0;
     while (j < n && meshes[j] != m) ++j;
     if (j == n) meshes[n] = m, sums[n] = 0, ++n;
