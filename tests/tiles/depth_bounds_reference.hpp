@@ -1,6 +1,8 @@
 // Test helpers for the depth-bounds tracer: hand-built scenes (boxes, spheres, planes)
 // and an independent double-precision reference tracer (every triangle, every texel).
 #pragma once
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
@@ -168,6 +170,57 @@ inline RefResult reference_ray(const Scene& s, const LightSpace& light, const Li
     i = j;
   }
   return r;  // left the scene inside: hi = lo
+}
+
+inline constexpr double kUlp = 1.0 / (1 << 24);  // the float grid just below 1.0
+
+struct CompareResult {
+  uint64_t compared = 0, skipped = 0, closed = 0, failures = 0;
+};
+
+// Compares every texel with the reference: texels whose reference changes when the
+// triangles are fattened or shrunk by 1e-7 (rays through silhouettes) are skipped.
+// Tolerance: `ulps` float steps of [0,1), divided by |cos| of the incidence.
+// `stride` > 1 checks a pseudo-random subset of about 1/stride of the texels (big scenes).
+inline CompareResult compare_with_reference(const Scene& s, const LightSpace& light,
+                                            const IntervalTile& tile, double ulps = 16,
+                                            uint32_t stride = 1) {
+  CompareResult c;
+  uint64_t pick = 0x9e3779b97f4a7c15ull;
+  for (uint32_t j = 0; j < tile.height; ++j)
+    for (uint32_t i = 0; i < tile.width; ++i) {
+      if (stride > 1) {
+        pick = pick * 6364136223846793005ull + 1442695040888963407ull;
+        if ((pick >> 33) % stride != 0) continue;
+      }
+      const Interval iv = tile.at(i, j);
+      EXPECT_LE(iv.lo, iv.hi) << "texel " << i << "," << j;
+      LightRay ray = light.texel_ray(tile.level, tile.x0 + i, tile.y0 + j);
+      auto fat = reference_ray(s, light, ray, 1e-7), thin = reference_ray(s, light, ray, -1e-7);
+      if (fat.hit != thin.hit || std::fabs(fat.lo - thin.lo) > 1e-9 ||
+          std::fabs(fat.hi - thin.hi) > 1e-9) {
+        ++c.skipped;
+        continue;
+      }
+      auto ref = reference_ray(s, light, ray, 0);
+      ++c.compared;
+      bool ok;
+      if (!ref.hit) {
+        ok = iv.lo == kLitDepth && iv.hi == kLitDepth;
+      } else {
+        double tol_lo = ulps * kUlp / std::max(ref.lo_cos, 1e-3);
+        double tol_hi = ulps * kUlp / std::max(ref.hi_cos, 1e-3);
+        ok = std::fabs(iv.lo - ref.lo) <= tol_lo && std::fabs(iv.hi - ref.hi) <= tol_hi;
+        c.closed += ref.hi > ref.lo;
+      }
+      if (!ok && ++c.failures <= 5)
+        ADD_FAILURE() << "texel " << tile.x0 + i << "," << tile.y0 + j << " level "
+                      << tile.level << ": traced [" << iv.lo << ", " << iv.hi
+                      << "] reference [" << ref.lo << ", " << ref.hi << "] hit " << ref.hit;
+    }
+  EXPECT_EQ(c.failures, 0u);
+  EXPECT_LT(c.skipped, c.compared / 50 + 4) << "too many ambiguous texels";
+  return c;
 }
 
 }  // namespace st::test

@@ -17,9 +17,9 @@ namespace {
 using test::add_box;
 using test::add_plane;
 using test::add_sphere;
+using test::compare_with_reference;
+using test::kUlp;
 using test::reference_ray;
-
-constexpr double kUlp = 1.0 / (1 << 24);  // half an ulp of 1.0: the float grid below 1
 
 uint32_t test_level(uint32_t full) { return test::small_scale() ? full - 2 : full; }
 
@@ -33,48 +33,6 @@ IntervalTile trace_all(const Scene& s, const LightSpace& l, uint32_t level,
                        DepthBoundsStats* stats = nullptr) {
   DepthBoundsTracer tracer(s, l);
   return tracer.trace({level, 0, 0, 1u << level, 1u << level}, TraceMode::bounds, stats);
-}
-
-struct CompareResult {
-  uint64_t compared = 0, skipped = 0, closed = 0, failures = 0;
-};
-
-// Compares every texel with the reference: texels whose reference changes when the
-// triangles are fattened or shrunk by 1e-7 (rays through silhouettes) are skipped.
-// Tolerance: `ulps` float steps of [0,1), divided by |cos| of the incidence.
-CompareResult compare_with_reference(const Scene& s, const LightSpace& light,
-                                     const IntervalTile& tile, double ulps = 16) {
-  CompareResult c;
-  for (uint32_t j = 0; j < tile.height; ++j)
-    for (uint32_t i = 0; i < tile.width; ++i) {
-      const Interval iv = tile.at(i, j);
-      EXPECT_LE(iv.lo, iv.hi) << "texel " << i << "," << j;
-      LightRay ray = light.texel_ray(tile.level, tile.x0 + i, tile.y0 + j);
-      auto fat = reference_ray(s, light, ray, 1e-7), thin = reference_ray(s, light, ray, -1e-7);
-      if (fat.hit != thin.hit || std::fabs(fat.lo - thin.lo) > 1e-9 ||
-          std::fabs(fat.hi - thin.hi) > 1e-9) {
-        ++c.skipped;
-        continue;
-      }
-      auto ref = reference_ray(s, light, ray, 0);
-      ++c.compared;
-      bool ok;
-      if (!ref.hit) {
-        ok = iv.lo == kLitDepth && iv.hi == kLitDepth;
-      } else {
-        double tol_lo = ulps * kUlp / std::max(ref.lo_cos, 1e-3);
-        double tol_hi = ulps * kUlp / std::max(ref.hi_cos, 1e-3);
-        ok = std::fabs(iv.lo - ref.lo) <= tol_lo && std::fabs(iv.hi - ref.hi) <= tol_hi;
-        c.closed += ref.hi > ref.lo;
-      }
-      if (!ok && ++c.failures <= 5)
-        ADD_FAILURE() << "texel " << tile.x0 + i << "," << tile.y0 + j << " level "
-                      << tile.level << ": traced [" << iv.lo << ", " << iv.hi
-                      << "] reference [" << ref.lo << ", " << ref.hi << "] hit " << ref.hit;
-    }
-  EXPECT_EQ(c.failures, 0u);
-  EXPECT_LT(c.skipped, c.compared / 50 + 4) << "too many ambiguous texels";
-  return c;
 }
 
 TEST(DepthBounds, CubeUnderStraightAndObliqueSunMatchesDoubleReference) {

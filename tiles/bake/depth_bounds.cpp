@@ -31,9 +31,18 @@ constexpr uint32_t kMaxDone = 48;        // primitives already processed on one 
 constexpr uint32_t kMaxMeshes = 16;      // closed meshes one ray is inside at once
 constexpr uint32_t kMaxTraversals = 64;  // traversals per ray
 
-// Faces whose hits lie within this fraction of the ray's t range after an exit count as
-// touching (coplanar faces of stacked boxes: their float t differ by an ulp or two).
-constexpr float kTouchTolerance = 8.0f / (1 << 24);
+// Embree's float t is not exact, and neither is its box culling: a triangle whose float
+// t lies an ulp below the accepted hit can be culled in that traversal and then fall
+// below the next traversal's tnear (seen on the city: ground top vs building bottom).
+// So re-traces start kBackoff * t_range before the last group (processed primitives are
+// excluded by id, so nothing is counted twice), and after the counters reach 0 at float
+// t1 a look-ahead gathers every unprocessed closed hit in t1 +- kLookAhead * t_range
+// (wide enough for float error on big triangles); such a hit counts as touching the exit
+// (a box standing on another) only if its exact ray-plane t in double is within
+// kTouchDouble * t_range of the exit's.
+constexpr float kBackoff = 16.0f / (1 << 24);
+constexpr float kLookAhead = 1.0f / (1 << 13);
+constexpr double kTouchDouble = 1e-9;
 
 constexpr float kNoHit = std::numeric_limits<float>::infinity();
 
@@ -44,6 +53,7 @@ struct LaneHits {
   uint32_t n_group;
   uint32_t n_done;
   bool overflow;
+  bool window;  // look-ahead: record every unprocessed hit up to tfar, accept none
   uint64_t group[kMaxGroup];
   uint64_t done[kMaxDone];  // primitives of earlier groups: never counted twice
 };
@@ -81,6 +91,12 @@ void collect_equal_t(const RTCFilterFunctionNArguments* args) {
     const uint64_t key = hit_key(RTCHitN_geomID(args->hit, n, i), RTCHitN_primID(args->hit, n, i));
     if (contains(h.done, h.n_done, key)) {
       args->valid[i] = 0;
+    } else if (h.window) {
+      if (!contains(h.group, h.n_group, key)) {
+        if (h.n_group < kMaxGroup) h.group[h.n_group++] = key;
+        else h.overflow = true;
+      }
+      args->valid[i] = 0;  // never shrink tfar: the whole window is searched
     } else if (t < h.best_t) {
       h.best_t = t;
       h.group[0] = key;
@@ -118,8 +134,11 @@ struct DepthBoundsTracer::Impl {
   Vec3d centre;
   RTCDevice device = nullptr;
   RTCScene scene = nullptr;
-  std::vector<uint32_t> closed_mesh;  // closed prim -> scene mesh index
+  // closed prim -> (scene mesh index << 2) | facing code: one 4-byte random read per hit.
+  // Facing codes: 0 front (+1), 1 back (-1), 2 edge-on (0), 3 depends on the ray (spot).
+  std::vector<uint32_t> closed_info;
   std::vector<Vec3d> closed_normal;   // closed prim -> geometric normal (double, outwards)
+  std::vector<double> closed_plane;   // closed prim -> dot(normal, v0 - centre)
   uint64_t triangles = 0;
   bool any_closed = false;
   double build_s = 0;
@@ -135,6 +154,11 @@ struct DepthBoundsTracer::Impl {
   bool apply_group(const LaneHits& h, const Vec3d& dir, LaneCount& c,
                    uint32_t& closed_hits) const;
   float depth_of(float t) const;
+  // Exact ray parameter of the plane of closed prim `prim` (double, recentred origin).
+  double plane_t(uint32_t prim, const Vec3d& origin_c, const Vec3d& dir) const {
+    const Vec3d& n = closed_normal[prim];
+    return (closed_plane[prim] - dot(n, origin_c)) / dot(n, dir);
+  }
 };
 
 namespace {
@@ -156,7 +180,7 @@ std::string embree_error(RTCDevice d) {
 void DepthBoundsTracer::Impl::build(const Scene& s) {
   const auto t_start = std::chrono::steady_clock::now();
   const size_t nv = s.vertices.size(), nt = s.triangles.size();
-  if (nt > std::numeric_limits<uint32_t>::max() / 2)
+  if (nt > std::numeric_limits<uint32_t>::max() / 4 || s.meshes.size() >= (size_t(1) << 30))
     throw Error("depth bounds: scene '" + s.name + "' has too many triangles for Embree");
   // Which triangles are closed (meshes partition the triangles; anything else is open).
   std::vector<uint8_t> is_closed(nt, 0);
@@ -226,9 +250,15 @@ void DepthBoundsTracer::Impl::build(const Scene& s) {
       const auto& t = s.triangles[i];
       ip[3 * k] = t[0], ip[3 * k + 1] = t[1], ip[3 * k + 2] = t[2];
       if (closed) {
-        closed_mesh.push_back(tri_mesh[i]);
         const Vec3d& a = s.vertices[t[0]];
         closed_normal.push_back(cross(s.vertices[t[1]] - a, s.vertices[t[2]] - a));
+        uint32_t code = 3;
+        if (light.kind() == LightKind::sun) {  // one direction for every texel ray
+          const double f = dot(closed_normal.back(), light.forward());
+          code = f < 0 ? 0 : (f > 0 ? 1 : 2);
+        }
+        closed_info.push_back(tri_mesh[i] << 2 | code);
+        closed_plane.push_back(dot(closed_normal.back(), a - centre));
       }
       ++k;
     }
@@ -237,7 +267,7 @@ void DepthBoundsTracer::Impl::build(const Scene& s) {
     rtcReleaseGeometry(g);
   }
   rtcReleaseBuffer(vbuf);
-  any_closed = !closed_mesh.empty();
+  any_closed = !closed_info.empty();
   rtcCommitScene(scene);
   if (rtcGetDeviceError(device) != RTC_ERROR_NONE)
     throw Error("embree: building the scene '" + s.name + "' failed: " + embree_error(device));
@@ -267,9 +297,12 @@ bool DepthBoundsTracer::Impl::apply_group(const LaneHits& h, const Vec3d& dir, L
     if ((h.group[i] >> 32) != kClosedGeom) continue;  // open: ignored inside closed objects
     ++closed_hits;
     const uint32_t prim = uint32_t(h.group[i]);
-    const double f = dot(closed_normal[prim], dir);
-    const int32_t facing = f < 0 ? 1 : (f > 0 ? -1 : 0);  // against the outward normal: entering
-    const uint32_t m = closed_mesh[prim];
+    const uint32_t info = closed_info[prim], m = info >> 2;
+    int32_t facing = (info & 3) == 0 ? 1 : ((info & 3) == 1 ? -1 : 0);
+    if ((info & 3) == 3) {
+      const double f = dot(closed_normal[prim], dir);
+      facing = f < 0 ? 1 : (f > 0 ? -1 : 0);  // against the outward normal: entering
+    }
     uint32_t j = 0;
     while (j < n && meshes[j] != m) ++j;
     if (j == n) meshes[n] = m, sums[n] = 0, ++n;
@@ -306,7 +339,7 @@ void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, ui
   const float t_min = sun ? 0.0f : float(light.near_plane());
   const float t_max = sun ? 1.0f : float(light.far_plane());
 
-  Vec3d dirs[kLanes];
+  Vec3d dirs[kLanes], origins[kLanes];
   float lo_t[kLanes], floor_t[kLanes] = {};
   bool active[kLanes];
   LaneCount counts[kLanes];
@@ -332,11 +365,12 @@ void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, ui
     LightRay ray = light.texel_ray(r.level, r.x0 + i, r.y0 + j);
     const Vec3d o = ray.origin - centre;
     dirs[l] = ray.dir;
+    origins[l] = o;
     rh.ray.org_x[l] = float(o.x), rh.ray.org_y[l] = float(o.y), rh.ray.org_z[l] = float(o.z);
     rh.ray.dir_x[l] = float(ray.dir.x), rh.ray.dir_y[l] = float(ray.dir.y);
     rh.ray.dir_z[l] = float(ray.dir.z);
     LaneHits& h = fc.lane[l];
-    h.best_t = kNoHit, h.n_group = 0, h.n_done = 0, h.overflow = false;
+    h.best_t = kNoHit, h.n_group = 0, h.n_done = 0, h.overflow = false, h.window = false;
   }
   if (n_lanes == 0) return;
   st.rays += n_lanes;
@@ -345,7 +379,8 @@ void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, ui
   // First traversal: lo for everyone, and the first group of hits for counting.
   rtcIntersect8(valid, scene, &fc.ctx, &rh);
   st.traversals += n_lanes;
-  float hi_t[kLanes], exit_t[kLanes];
+  float hi_t[kLanes], exit_t[kLanes];  // exit_t: float t where the counters reached 0
+  double exit_d[kLanes] = {};          // its exact t (max over the exit group, double)
   uint32_t n_active = 0;
   for (unsigned l = 0; l < kLanes; ++l) {
     hi_t[l] = exit_t[l] = kNoHit;
@@ -373,48 +408,68 @@ void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, ui
   }
 
   // Re-trace from tnear = the last group's t (inclusive; processed primitives are
-  // excluded by id) until every counter is back to 0 (MH §3.1 depth peeling). When the
-  // counters reach 0 at t1, one short look-ahead over [t1, t1 + touch] decides whether
-  // another closed object is entered right there (a box standing on another: the exit
-  // and entry faces are coplanar, but their float t may differ by an ulp either way).
-  const float touch = kTouchTolerance * t_max;
+  // excluded by id) until every counter is back to 0 (MH §3.1 depth peeling), then one
+  // look-ahead confirms the exit or finds a touching entry (see kLookAhead).
+  const float window = kLookAhead * (t_max - t_min);
+  const float backoff = kBackoff * (t_max - t_min);
+  const double touch = kTouchDouble * (double(t_max) - t_min);
   for (uint32_t pass = 1; n_active > 0; ++pass) {
     for (unsigned l = 0; l < kLanes; ++l) {
       valid[l] = active[l] ? -1 : 0;
       if (!active[l]) continue;
-      rh.ray.tnear[l] = floor_t[l];
-      rh.ray.tfar[l] = exit_t[l] == kNoHit ? t_max : std::min(t_max, exit_t[l] + touch);
+      LaneHits& h = fc.lane[l];
+      h.window = exit_t[l] != kNoHit;
+      rh.ray.tnear[l] = h.window ? std::max(t_min, exit_t[l] - window)
+                                 : std::max(t_min, floor_t[l] - backoff);
+      rh.ray.tfar[l] = h.window ? std::min(t_max, exit_t[l] + window) : t_max;
       rh.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
-      fc.lane[l].best_t = kNoHit, fc.lane[l].n_group = 0, fc.lane[l].overflow = false;
+      h.best_t = kNoHit, h.n_group = 0, h.overflow = false;
     }
     rtcIntersect8(valid, scene, &fc.ctx, &rh);
     st.traversals += n_active;
     for (unsigned l = 0; l < kLanes; ++l) {
       if (!active[l]) continue;
       LaneHits& h = fc.lane[l];
-      bool trusted = true, finished = false;
-      if (h.n_group == 0) {
-        // Nothing more: after a confirmed exit that is hi; still inside means the ray
-        // left the scene inside a closed object, which we do not trust.
-        finished = true;
-        trusted = exit_t[l] != kNoHit;
-        if (trusted) hi_t[l] = exit_t[l];
-      } else {
-        uint32_t closed_hits = 0;
-        trusted = apply_group(h, dirs[l], counts[l], closed_hits) && pass + 1 < kMaxTraversals &&
-                  h.n_done + h.n_group <= kMaxDone;
-        if (trusted) {
-          if (counts[l].total == 0) {
-            if (exit_t[l] == kNoHit) exit_t[l] = h.best_t;
-          } else {
-            exit_t[l] = kNoHit;
-          }
-          for (uint32_t k = 0; k < h.n_group; ++k) h.done[h.n_done++] = h.group[k];
-          floor_t[l] = h.best_t;
+      bool trusted = h.n_done + h.n_group <= kMaxDone && !h.overflow, finished = false;
+      if (h.window) {
+        // Keep the closed hits whose exact t touches the exit; drop the rest (they lie
+        // beyond a real gap and are found again by a later pass if we go on).
+        uint32_t keep = 0;
+        for (uint32_t k = 0; k < h.n_group; ++k) {
+          if ((h.group[k] >> 32) != kClosedGeom) continue;
+          if (plane_t(uint32_t(h.group[k]), origins[l], dirs[l]) <= exit_d[l] + touch)
+            h.group[keep++] = h.group[k];
         }
-        finished = !trusted;
+        h.n_group = keep;
+        if (trusted && keep == 0) {
+          hi_t[l] = exit_t[l];  // confirmed: nothing touches the exit
+          finished = true;
+        }
+      } else if (h.n_group == 0) {
+        trusted = false;  // left the scene inside a closed object: do not trust it
       }
-      if (!finished) continue;
+      if (!finished && trusted) {
+        uint32_t closed_hits = 0;
+        trusted = apply_group(h, dirs[l], counts[l], closed_hits) && pass + 1 < kMaxTraversals;
+      }
+      if (!finished && trusted) {
+        for (uint32_t k = 0; k < h.n_group; ++k) h.done[h.n_done++] = h.group[k];
+        if (h.window) {
+          // Touching entry: inside again; resume from the exit (inclusive) so window hits
+          // that did not touch are still met in order.
+          if (counts[l].total > 0) floor_t[l] = exit_t[l], exit_t[l] = kNoHit;
+        } else {
+          floor_t[l] = h.best_t;
+          if (counts[l].total == 0) {
+            exit_t[l] = h.best_t;
+            exit_d[l] = -INFINITY;
+            for (uint32_t k = 0; k < h.n_group; ++k)
+              if ((h.group[k] >> 32) == kClosedGeom)
+                exit_d[l] = std::max(exit_d[l], plane_t(uint32_t(h.group[k]), origins[l], dirs[l]));
+          }
+        }
+        continue;
+      }
       if (!trusted) ++st.fallbacks;
       active[l] = false;
       --n_active;
