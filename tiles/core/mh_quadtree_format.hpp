@@ -79,10 +79,17 @@ inline uint32_t word_abs_flags(uint32_t w) { return (w >> 8) & 0xFu; }
 inline uint32_t word_shift(uint32_t w) { return (w >> 12) & 0xFu; }
 inline uint32_t word_offset(uint32_t w) { return w >> 16; }
 
+// Bit count of an 8-bit mask without a library call (the build has no -mpopcnt).
+inline uint32_t popcount8(uint32_t m) {
+  m = m - ((m >> 1) & 0x55u);
+  m = (m & 0x33u) + ((m >> 2) & 0x33u);
+  return (m + (m >> 4)) & 0x0Fu;
+}
+
 inline uint32_t child_code(uint32_t mask, uint32_t slot) { return (mask >> (2 * slot)) & 3u; }
 // Words before child `slot` in its block: each code's popcount is its size in words.
 inline uint32_t child_skip(uint32_t mask, uint32_t slot) {
-  return uint32_t(std::popcount(mask & ((1u << (2 * slot)) - 1u)));
+  return popcount8(mask & ((1u << (2 * slot)) - 1u));
 }
 inline uint64_t block_start(uint64_t parent_word, uint32_t shift, uint32_t off) {
   return ((parent_word >> shift) + off) << shift;
