@@ -678,7 +678,7 @@ Status encode_tile_data_prefix(const TileMeta& meta, std::span<const std::uint8_
                                const Limits& limits,
                                std::array<std::uint8_t, kTileDataPrefixBytes>& out) {
   if (Status s = check_tile(meta, tile_bytes.size()); !s) return s;
-  if (tile_bytes.size() > limits.max_payload_bytes() - kTileMetaBytes)
+  if (std::uint64_t(tile_bytes.size()) + kTileMetaBytes > limits.max_payload_bytes())
     return Status::fail(ErrorCode::tile_too_large,
                         "tile " + std::to_string(meta.tile_id) + " of " +
                             std::to_string(tile_bytes.size()) + " bytes does not fit max_frame_bytes " +
