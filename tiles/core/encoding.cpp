@@ -28,8 +28,20 @@ namespace {
 }
 }  // namespace
 
-std::vector<uint8_t> encode(const Hierarchy&, Encoding e) { not_built(e); }
+std::vector<uint8_t> encode(const Hierarchy& h, Encoding e) {
+  switch (e) {
+    case Encoding::dagmh: return encode_dagmh(h);
+    default: break;
+  }
+  not_built(e);
+}
 
-std::unique_ptr<Evaluator> open_encoded(Encoding e, std::span<const uint8_t>) { not_built(e); }
+std::unique_ptr<Evaluator> open_encoded(Encoding e, std::span<const uint8_t> bytes) {
+  switch (e) {
+    case Encoding::dagmh: return open_dagmh(bytes);
+    default: break;
+  }
+  not_built(e);
+}
 
 }  // namespace st
