@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "tiles/bake/scene_mesh.hpp"
-#include "tiles/bake/scene_q3bsp.hpp"
+#include "tiles/bake/scene_quake3.hpp"
 #include "tiles/core/error.hpp"
 
 namespace st {
@@ -114,7 +114,7 @@ Scene load_file(const std::string& path, const SceneOptions& options) {
 
   std::string ext = fs::path(path).extension().string();
   for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  if (ext == ".pk3" || ext == ".bsp") check_quake3_archive(path);
+  if (ext == ".pk3" || ext == ".bsp") return load_quake3(path, options);
 
   Assimp::Importer importer;
   // Validation stays on: assimp 5.2.5 crashes on some inputs (Quake 3 .bsp) without it
