@@ -188,6 +188,18 @@ TEST(Quake3, MapInStoredAndDeflatedPk3AndBareBspLoads) {
     SCOPED_TRACE(path);
     expect_test_map(load_scene(path, z_up));
   }
+  // Picking a member: the second map of a pack by name, and a clear error for a wrong one.
+  const std::string pack = tmp("pack.pk3");
+  const std::string other = bsp({{"textures/x", 0}}, {{{0, 0, 0}, {0, 0, 1}}, {{1, 0, 0}, {0, 0, 1}}, {{0, 1, 0}, {0, 0, 1}}},
+                                {0, 1, 2}, {{0, 1, 0, 3, 0, 3}});
+  write_bytes(pack, zip({{"maps/a.bsp", other}, {"maps/test.bsp", map}}, true));
+  EXPECT_EQ(load_scene(pack, z_up).triangles.size(), 1u);  // the first map by default
+  const Scene picked = load_scene(pack + ":maps/test.bsp", z_up);
+  EXPECT_EQ(picked.name, pack + ":maps/test.bsp");
+  expect_test_map(picked);
+  EXPECT_NE(error_of(pack + ":maps/none.bsp").find("no map 'maps/none.bsp'"), std::string::npos);
+  EXPECT_NE(error_of(tmp("missing.pk3") + ":maps/a.bsp").find("not found"), std::string::npos);
+
   const std::string bare = tmp("bare.bsp");
   write_bytes(bare, map);
   expect_test_map(load_scene(bare, z_up));

@@ -23,11 +23,14 @@ namespace {
 //   face     (lump 13) 104 bytes: texture @0, effect @4, type @8, vertex @12, n_vertexes
 //                               @16, meshvert @20, n_meshverts @24, lightmap @28, ...,
 //                               patch size int32[2] @96
-//   lightmap (lump 14) 128 x 128 x 3 bytes
 constexpr size_t kHeaderSize = 8 + 17 * 8;
 constexpr int kLumps = 17;
-enum Lump { kTextures = 1, kVertices = 10, kMeshVerts = 11, kFaces = 13, kLightmaps = 14 };
-constexpr size_t kRecord[kLumps] = {1, 72, 1, 1, 1, 1, 1, 1, 1, 1, 44, 4, 1, 104, 128 * 128 * 3, 1, 1};
+// Lightmap indices are not checked: they are never read here, and maps compiled with
+// external lightmaps (q3map2 -external) or vertex lighting (-3) store indices outside
+// the lightmap lump.
+enum Lump { kTextures = 1, kVertices = 10, kMeshVerts = 11, kFaces = 13 };
+// Record sizes of the lumps read here; the others are only checked to lie in the file.
+constexpr size_t kRecord[kLumps] = {1, 72, 1, 1, 1, 1, 1, 1, 1, 1, 44, 4, 1, 104, 1, 1, 1};
 enum FaceType { kPolygon = 1, kPatch = 2, kMeshFace = 3, kBillboard = 4 };
 constexpr int32_t kSurfSky = 0x4, kSurfNodraw = 0x80;
 
@@ -73,12 +76,10 @@ void validate(Bsp& bsp, const std::string& where) {
   for (size_t f = 0; f < bsp.count[kFaces]; ++f) {
     const size_t at = bsp.face(f);
     const int32_t texture = bsp.i32(at), type = bsp.i32(at + 8), vertex = bsp.i32(at + 12), nvert = bsp.i32(at + 16);
-    const int32_t meshvert = bsp.i32(at + 20), nmeshvert = bsp.i32(at + 24), lightmap = bsp.i32(at + 28);
+    const int32_t meshvert = bsp.i32(at + 20), nmeshvert = bsp.i32(at + 24);
     const std::string face = "face " + std::to_string(f) + ": ";
     if (type < kPolygon || type > kBillboard) fail(face + "unknown type " + std::to_string(type));
     if (texture < -1 || (texture >= 0 && size_t(texture) >= bsp.count[kTextures])) fail(face + "texture index out of range");
-    if (lightmap < -1 || (lightmap >= 0 && size_t(lightmap) >= bsp.count[kLightmaps]))
-      fail(face + "lightmap index out of range");
     if (vertex < 0 || nvert < 0 || size_t(vertex) + size_t(nvert) > bsp.count[kVertices])
       fail(face + "vertex range out of range");
     if (meshvert < 0 || nmeshvert < 0 || size_t(meshvert) + size_t(nmeshvert) > bsp.count[kMeshVerts])
@@ -164,24 +165,31 @@ std::vector<uint8_t> read_all(const std::string& path) {
 
 }  // namespace
 
-Scene load_quake3(const std::string& path, const SceneOptions& options) {
+Scene load_quake3(const std::string& path, const SceneOptions& options, const std::string& member) {
   std::string ext = std::filesystem::path(path).extension().string();
   for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return load_quake3_bytes(read_all(path), path, ext == ".pk3", options);
+  return load_quake3_bytes(read_all(path), path, ext == ".pk3", options, member);
 }
 
 Scene load_quake3_bytes(std::vector<uint8_t> bytes, const std::string& path, bool is_pk3,
-                        const SceneOptions& options) {
+                        const SceneOptions& options, const std::string& member) {
   std::string where = path;
   if (is_pk3) {
-    auto members = read_zip_members(bytes, path, ".bsp");
-    if (!members) throw Error(path + ": not a zip archive (a .pk3 must be one)");
-    if (members->empty()) throw Error(path + ": no .bsp map in the archive");
+    const auto entries = list_zip(bytes, path, ".bsp");
+    if (!entries) throw Error(path + ": not a zip archive (a .pk3 must be one)");
+    if (entries->empty()) throw Error(path + ": no .bsp map in the archive");
     size_t pick = 0;
-    for (size_t i = members->size(); i-- > 0;)
-      if ((*members)[i].name.rfind("maps/", 0) == 0) pick = i;
-    bytes = std::move((*members)[pick].data);
-    where = path + ": " + (*members)[pick].name;
+    if (!member.empty()) {
+      pick = entries->size();
+      for (size_t i = 0; i < entries->size() && pick == entries->size(); ++i)
+        if ((*entries)[i].name == member) pick = i;
+      if (pick == entries->size()) throw Error(path + ": no map '" + member + "' in the archive");
+    } else {
+      for (size_t i = entries->size(); i-- > 0;)
+        if ((*entries)[i].name.rfind("maps/", 0) == 0) pick = i;
+    }
+    where = path + ": " + (*entries)[pick].name;
+    bytes = extract_zip(bytes, path, (*entries)[pick]);
   }
   Bsp bsp{bytes};
   validate(bsp, where);
@@ -207,7 +215,7 @@ Scene load_quake3_bytes(std::vector<uint8_t> bytes, const std::string& path, boo
     orient_face(bsp, first, nvert, m, from);
   }
   Scene scene;
-  scene.name = path;
+  scene.name = member.empty() ? path : path + ":" + member;
   for (auto& [texture, soup] : by_texture) {
     soup.name = texture_name(bsp, texture);
     if (options.up == UpAxis::z)  // (x, y, z) -> (x, z, -y), a rotation: winding kept

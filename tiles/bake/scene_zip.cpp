@@ -33,8 +33,8 @@ bool ends_with_lower(std::string name, const std::string& suffix) {
 
 }  // namespace
 
-std::optional<std::vector<ZipMember>> read_zip_members(const std::vector<uint8_t>& zip, const std::string& path,
-                                                       const std::string& suffix) {
+std::optional<std::vector<ZipEntry>> list_zip(const std::vector<uint8_t>& zip, const std::string& path,
+                                              const std::string& suffix) {
   auto fail = [&](const std::string& what) { throw Error(path + ": malformed zip archive: " + what); };
   if (zip.size() < kEndSize) return std::nullopt;
   size_t end = std::string::npos;
@@ -47,48 +47,58 @@ std::optional<std::vector<ZipMember>> read_zip_members(const std::vector<uint8_t
   const size_t entries = u16(zip, end + 10), cd_size = u32(zip, end + 12), cd_at = u32(zip, end + 16);
   if (cd_at > end || cd_size > end - cd_at) fail("central directory outside the file");
   const size_t cd_end = cd_at + cd_size;
-  std::vector<ZipMember> out;
+  std::vector<ZipEntry> out;
   size_t at = cd_at;
   for (size_t e = 0; e < entries; ++e) {
     if (at > cd_end || cd_end - at < kCentralSize || u32(zip, at) != kCentralMagic)
       fail("bad central directory entry " + std::to_string(e));
-    const uint16_t method = u16(zip, at + 10);
-    const uint32_t crc = u32(zip, at + 16);
-    const size_t packed = u32(zip, at + 20), size = u32(zip, at + 24);
+    ZipEntry entry;
+    entry.method = u16(zip, at + 10);
+    entry.crc = u32(zip, at + 16);
+    entry.packed = u32(zip, at + 20);
+    entry.size = u32(zip, at + 24);
     const size_t name_len = u16(zip, at + 28), extra = u16(zip, at + 30), comment = u16(zip, at + 32);
     const size_t local = u32(zip, at + 42);
     if (cd_end - at - kCentralSize < name_len) fail("entry " + std::to_string(e) + " name outside the directory");
-    std::string name(zip.begin() + long(at + kCentralSize), zip.begin() + long(at + kCentralSize + name_len));
+    entry.name.assign(zip.begin() + long(at + kCentralSize), zip.begin() + long(at + kCentralSize + name_len));
     at += kCentralSize + name_len + extra + comment;
-    if (!ends_with_lower(name, suffix)) continue;
+    if (!ends_with_lower(entry.name, suffix)) continue;
     if (local > zip.size() || zip.size() - local < kLocalSize || u32(zip, local) != kLocalMagic)
-      fail("bad local header of '" + name + "'");
-    const size_t data_at = local + kLocalSize + u16(zip, local + 26) + u16(zip, local + 28);
-    if (data_at > zip.size() || packed > zip.size() - data_at) fail("data of '" + name + "' outside the file");
-    if (size > kMaxMember) fail("'" + name + "' claims " + std::to_string(size) + " bytes");
-    ZipMember member{name, std::vector<uint8_t>(size)};
-    if (method == 0) {
-      if (packed != size) fail("stored '" + name + "' has different packed and unpacked sizes");
-      std::copy_n(zip.begin() + long(data_at), size, member.data.begin());
-    } else if (method == 8) {
-      z_stream z{};
-      if (inflateInit2(&z, -MAX_WBITS) != Z_OK) fail("zlib initialisation failed");
-      z.next_in = const_cast<Bytef*>(zip.data() + data_at);
-      z.avail_in = static_cast<uInt>(packed);
-      z.next_out = member.data.data();
-      z.avail_out = static_cast<uInt>(size);
-      const int rc = inflate(&z, Z_FINISH);
-      const size_t produced = z.total_out;
-      inflateEnd(&z);
-      if (rc != Z_STREAM_END || produced != size) fail("'" + name + "' does not inflate to its stated size");
-    } else {
-      fail("'" + name + "' uses unsupported compression method " + std::to_string(method));
-    }
-    const uLong got = crc32(0L, member.data.data(), static_cast<uInt>(member.data.size()));
-    if (uint32_t(got) != crc) fail("'" + name + "' fails its CRC-32 check");
-    out.push_back(std::move(member));
+      fail("bad local header of '" + entry.name + "'");
+    entry.data_at = local + kLocalSize + u16(zip, local + 26) + u16(zip, local + 28);
+    if (entry.data_at > zip.size() || entry.packed > zip.size() - entry.data_at)
+      fail("data of '" + entry.name + "' outside the file");
+    if (entry.size > kMaxMember) fail("'" + entry.name + "' claims " + std::to_string(entry.size) + " bytes");
+    out.push_back(std::move(entry));
   }
   return out;
+}
+
+std::vector<uint8_t> extract_zip(const std::vector<uint8_t>& zip, const std::string& path, const ZipEntry& entry) {
+  auto fail = [&](const std::string& what) {
+    throw Error(path + ": malformed zip archive: '" + entry.name + "' " + what);
+  };
+  ST_CHECK(entry.data_at <= zip.size() && entry.packed <= zip.size() - entry.data_at);
+  std::vector<uint8_t> data(entry.size);
+  if (entry.method == 0) {
+    if (entry.packed != entry.size) fail("is stored with different packed and unpacked sizes");
+    std::copy_n(zip.begin() + long(entry.data_at), entry.size, data.begin());
+  } else if (entry.method == 8) {
+    z_stream z{};
+    if (inflateInit2(&z, -MAX_WBITS) != Z_OK) fail("could not start zlib");
+    z.next_in = const_cast<Bytef*>(zip.data() + entry.data_at);
+    z.avail_in = static_cast<uInt>(entry.packed);
+    z.next_out = data.data();
+    z.avail_out = static_cast<uInt>(data.size());
+    const int rc = inflate(&z, Z_FINISH);
+    const size_t produced = z.total_out;
+    inflateEnd(&z);
+    if (rc != Z_STREAM_END || produced != entry.size) fail("does not inflate to its stated size");
+  } else {
+    fail("uses unsupported compression method " + std::to_string(entry.method));
+  }
+  if (uint32_t(crc32(0L, data.data(), static_cast<uInt>(data.size()))) != entry.crc) fail("fails its CRC-32 check");
+  return data;
 }
 
 }  // namespace st

@@ -8,17 +8,25 @@
 
 namespace st {
 
-struct ZipMember {
-  std::string name;           // path inside the archive, as stored
-  std::vector<uint8_t> data;  // uncompressed bytes
+// One member as its central-directory entry describes it; data_at/packed were checked
+// to lie inside the archive.
+struct ZipEntry {
+  std::string name;  // path inside the archive, as stored
+  uint16_t method = 0;
+  uint32_t crc = 0;
+  size_t packed = 0, size = 0, data_at = 0;
 };
 
-// The members of the archive `zip` whose lower-cased name ends with `suffix` (all if
+// The entries of the archive `zip` whose lower-cased name ends with `suffix` (all if
 // empty), in central-directory order. std::nullopt if there is no end-of-central-directory
 // record (not a zip). Throws st::Error naming `path` when offsets or sizes point outside
-// the archive, a member does not inflate to its stated size or fails its CRC-32, or uses a compression
-// method other than stored (0) or deflate (8). Members are capped at 1 GiB.
-std::optional<std::vector<ZipMember>> read_zip_members(const std::vector<uint8_t>& zip, const std::string& path,
-                                                       const std::string& suffix);
+// the archive or a member claims more than 1 GiB.
+std::optional<std::vector<ZipEntry>> list_zip(const std::vector<uint8_t>& zip, const std::string& path,
+                                              const std::string& suffix);
+
+// The uncompressed bytes of `entry`. Throws st::Error naming `path` and the member when
+// it does not inflate to its stated size, fails its CRC-32, or uses a compression method
+// other than stored (0) or deflate (8).
+std::vector<uint8_t> extract_zip(const std::vector<uint8_t>& zip, const std::string& path, const ZipEntry& entry);
 
 }  // namespace st
