@@ -76,7 +76,7 @@ TEST(ProceduralScene, EverySeedGivesClosedOutwardSolids) {
   const int seeds = small_scale() ? 3 : 12;
   for (int seed = 1; seed <= seeds; ++seed)
     for (const std::string base : {"procedural:city,size=2", "procedural:city,size=2,block=30",
-                                   "procedural:city,size=1,block=1000", "procedural:hairball,count=6,segments=40",
+                                   "procedural:city,size=1,block=300", "procedural:hairball,count=6,segments=40",
                                    "procedural:terrain,size=6,height=0"}) {
       const std::string spec = base + ",seed=" + std::to_string(seed);
       SCOPED_TRACE(spec);

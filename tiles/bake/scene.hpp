@@ -53,6 +53,8 @@ struct SceneOptions {
 // exact position per mesh, degenerate triangles dropped (counted), closed meshes turned
 // outwards (counted). options.up applies to files only (procedural scenes are +Y up).
 // COLLADA files carrying <up_axis>Z_UP</up_axis> are already turned by assimp itself.
+// Quake 3 maps (.bsp, .pk3, "ARCHIVE.pk3:maps/NAME.bsp") are read by our own checked
+// parser, not assimp (scene_quake3.hpp); they are Z-up: pass UpAxis::z.
 Scene load_scene(const std::string& spec, const SceneOptions& options = {});
 
 // Procedural scenes (deterministic: splitmix64, same spec -> same content_hash()).

@@ -14,7 +14,7 @@
 #include <vector>
 
 #include "tiles/bake/scene_mesh.hpp"
-#include "tiles/bake/scene_q3bsp.hpp"
+#include "tiles/bake/scene_quake3.hpp"
 #include "tiles/core/error.hpp"
 
 namespace st {
@@ -114,7 +114,7 @@ Scene load_file(const std::string& path, const SceneOptions& options) {
 
   std::string ext = fs::path(path).extension().string();
   for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  if (ext == ".pk3" || ext == ".bsp") check_quake3_archive(path);
+  if (ext == ".pk3" || ext == ".bsp") return load_quake3(path, options);
 
   Assimp::Importer importer;
   // Validation stays on: assimp 5.2.5 crashes on some inputs (Quake 3 .bsp) without it
@@ -177,6 +177,15 @@ Scene load_file(const std::string& path, const SceneOptions& options) {
 Scene load_scene(const std::string& spec, const SceneOptions& options) {
   // Procedural scenes are generated +Y up; options.up only describes file sources.
   if (spec.rfind("procedural:", 0) == 0) return make_procedural(spec);
+  // "ARCHIVE.pk3:maps/NAME.bsp" picks one map of a pack (when no file has that name).
+  std::string lower = spec;
+  for (char& c : lower) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  const size_t pk3 = lower.find(".pk3:");
+  if (pk3 != std::string::npos && !std::filesystem::exists(spec)) {
+    const std::string archive = spec.substr(0, pk3 + 4), member = spec.substr(pk3 + 5);
+    if (!std::filesystem::is_regular_file(archive)) throw Error("scene file not found: " + archive);
+    return load_quake3(archive, options, member);
+  }
   return load_file(spec, options);
 }
 

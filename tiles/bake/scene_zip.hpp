@@ -1,0 +1,32 @@
+// A minimal, bounds-checked zip reader (stored and deflated members) for Quake 3 .pk3
+// archives, so that hostile archives never reach a parser that trusts them.
+#pragma once
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace st {
+
+// One member as its central-directory entry describes it; data_at/packed were checked
+// to lie inside the archive.
+struct ZipEntry {
+  std::string name;  // path inside the archive, as stored
+  uint16_t method = 0;
+  uint32_t crc = 0;
+  size_t packed = 0, size = 0, data_at = 0;
+};
+
+// The entries of the archive `zip` whose lower-cased name ends with `suffix` (all if
+// empty), in central-directory order. std::nullopt if there is no end-of-central-directory
+// record (not a zip). Throws st::Error naming `path` when offsets or sizes point outside
+// the archive or a member claims more than 1 GiB.
+std::optional<std::vector<ZipEntry>> list_zip(const std::vector<uint8_t>& zip, const std::string& path,
+                                              const std::string& suffix);
+
+// The uncompressed bytes of `entry`. Throws st::Error naming `path` and the member when
+// it does not inflate to its stated size, fails its CRC-32, or uses a compression method
+// other than stored (0) or deflate (8).
+std::vector<uint8_t> extract_zip(const std::vector<uint8_t>& zip, const std::string& path, const ZipEntry& entry);
+
+}  // namespace st
