@@ -1,0 +1,197 @@
+// Shared by bench/encodings.cpp and bench/lookups.cpp (header only: bench/CMakeLists.txt
+// makes one executable per *.cpp): a scene's map built tile by tile the way the paper
+// builds big maps (MH §3.1 "Tiled construction": trace 4096^2 tiles with Embree, build
+// each tile's hierarchy bottom-up, stitch the tiles' roots), timing helpers, and the
+// finest-level values of a hierarchy painted into a flat float array.
+#pragma once
+#include <sys/mman.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <ctime>
+#include <functional>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "tiles/bake/depth_bounds.hpp"
+#include "tiles/bake/scene.hpp"
+#include "tiles/core/error.hpp"
+#include "tiles/core/hierarchy.hpp"
+#include "tiles/core/interval.hpp"
+#include "tiles/core/light.hpp"
+#include "tiles/core/mh_build.hpp"
+
+namespace st::bench {
+
+using Clock = std::chrono::steady_clock;
+
+inline double seconds_since(Clock::time_point t0) {
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+inline double thread_cpu_now() {
+  timespec ts;
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+
+inline double median(std::vector<double> v) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
+}
+
+// "4k" -> 12, "16384" -> 14, "64K" -> 16 (power of two sides only).
+inline uint32_t parse_level(std::string s) {
+  uint64_t mult = 1;
+  if (!s.empty() && (s.back() == 'k' || s.back() == 'K')) mult = 1024, s.pop_back();
+  uint64_t n = std::stoull(s) * mult;
+  if (!is_power_of_two(n) || n > (uint64_t(1) << kMaxLevel))
+    throw Error("resolution " + s + ": not a power of two <= 1M");
+  return log2_exact(n);
+}
+
+inline std::string side_name(uint32_t level) {
+  uint64_t n = uint64_t(1) << level;
+  return n >= 1024 ? std::to_string(n / 1024) + "K" : std::to_string(n);
+}
+
+inline double load_average() {
+  double l[1] = {0};
+  return getloadavg(l, 1) == 1 ? l[0] : -1;
+}
+
+inline std::vector<std::string> split_list(const std::string& s) {
+  std::vector<std::string> out;
+  size_t p = 0;
+  while (p <= s.size()) {
+    size_t q = s.find(',', p);
+    if (q == std::string::npos) q = s.size();
+    if (q > p) out.push_back(s.substr(p, q - p));
+    p = q + 1;
+  }
+  return out;
+}
+
+inline constexpr uint32_t kTileSide = 4096;  // traced and built per call (map_build's kMaxTraceSide)
+
+// One traced tile of a tiled map: tile (ti, tj) of the grid covers texels
+// [ti * side, (ti + 1) * side) x [tj * side, (tj + 1) * side) of the level-`map_level` map.
+struct TileJob {
+  uint32_t ti = 0, tj = 0, index = 0;  // index = tj * grid + ti
+  IntervalTile intervals;
+};
+
+struct TiledRun {
+  uint32_t map_level = 0, tile_side = 0, grid_level = 0;
+  double trace_s = 0, per_tile_s = 0, bottom_up_s = 0;  // summed call times (seconds)
+  double wall_s = 0;
+};
+
+// Traces the map tile by tile (row-major tiles of min(2^L, 4096)^2 texels) with `workers`
+// threads, each of which also runs `per_tile` (after the trace, with the tile's intervals)
+// and the bottom-up construction; `built` receives each tile's hierarchy (from the worker
+// thread, tiles in any order). The tracer parallelises each call itself (TBB), so on a
+// 2-core machine one worker is best.
+inline TiledRun trace_and_build_tiles(const DepthBoundsTracer& tracer, uint32_t map_level, unsigned workers,
+                                      const std::function<void(const TileJob&)>& per_tile,
+                                      const std::function<void(uint32_t index, Hierarchy&&)>& built) {
+  TiledRun run;
+  run.map_level = map_level;
+  run.tile_side = uint32_t(std::min<uint64_t>(uint64_t(1) << map_level, kTileSide));
+  run.grid_level = map_level - log2_exact(run.tile_side);
+  const uint32_t grid = 1u << run.grid_level, tiles = grid * grid;
+  std::atomic<uint32_t> next{0};
+  std::mutex mu;
+  std::string error;
+  auto t0 = Clock::now();
+  auto work = [&]() {
+    try {
+      for (uint32_t i; (i = next++) < tiles;) {
+        TileJob job;
+        job.index = i, job.ti = i % grid, job.tj = i / grid;
+        auto a = Clock::now();
+        job.intervals = tracer.trace(
+            {map_level, uint64_t(job.ti) * run.tile_side, uint64_t(job.tj) * run.tile_side, run.tile_side, run.tile_side});
+        double trace = seconds_since(a);
+        a = Clock::now();
+        if (per_tile) per_tile(job);
+        double extra = seconds_since(a);
+        a = Clock::now();
+        Hierarchy h = build_hierarchy(job.intervals, MhConstruction::bottom_up);
+        double bu = seconds_since(a);
+        job.intervals.data = {};
+        built(i, std::move(h));
+        std::lock_guard<std::mutex> lock(mu);
+        run.trace_s += trace, run.per_tile_s += extra, run.bottom_up_s += bu;
+      }
+    } catch (const std::exception& e) {
+      std::lock_guard<std::mutex> lock(mu);
+      if (error.empty()) error = e.what();
+      next = tiles;
+    }
+  };
+  std::vector<std::thread> ts;
+  for (unsigned k = 0; k < std::max(1u, workers); ++k) ts.emplace_back(work);
+  for (auto& t : ts) t.join();
+  if (!error.empty()) throw Error(error);
+  run.wall_s = seconds_since(t0);
+  return run;
+}
+
+// A float array of 2^level x 2^level (row-major), backed by anonymous memory with
+// transparent huge pages requested (MACHINE.md: random reads over GiBs are ~2x faster).
+struct FloatMap {
+  uint32_t level = 0;
+  uint64_t side = 0;
+  float* data = nullptr;
+  size_t bytes = 0;
+
+  explicit FloatMap(uint32_t l) : level(l), side(uint64_t(1) << l) {
+    bytes = size_t(side * side * sizeof(float));
+    void* p = mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    if (p == MAP_FAILED) throw Error("FloatMap: mmap of " + std::to_string(bytes) + " bytes failed");
+    madvise(p, bytes, MADV_HUGEPAGE);
+    data = static_cast<float*>(p);
+  }
+  ~FloatMap() {
+    if (data) munmap(data, bytes);
+  }
+  FloatMap(const FloatMap&) = delete;
+  FloatMap& operator=(const FloatMap&) = delete;
+  float at(uint64_t x, uint64_t y) const { return data[y * side + x]; }
+};
+
+// Writes every finest-level texel's value (Hierarchy::depth_at(depth, x, y)) once: a walk
+// down the node lists, filling the block of every node whose subtree stores nothing
+// below it (or of every absent child) with the inherited value.
+inline void paint_finest(const Hierarchy& h, FloatMap& out) {
+  if (out.level != h.depth) throw Error("paint_finest: level mismatch");
+  const auto first = h.first_child_index();
+  const uint32_t L = h.depth;
+  auto fill = [&](uint32_t level, uint64_t morton, float v) {
+    const uint32_t s = L - level;
+    const uint64_t x0 = uint64_t(morton_compact(morton)) << s, y0 = uint64_t(morton_compact(morton >> 1)) << s;
+    const uint64_t n = uint64_t(1) << s;
+    for (uint64_t y = y0; y < y0 + n; ++y) std::fill_n(out.data + y * out.side + x0, n, v);
+  };
+  std::function<void(uint32_t, uint32_t, float)> walk = [&](uint32_t level, uint32_t j, float inherited) {
+    const HNode& node = h.levels[level][j];
+    const float v = node.has_value ? node.value : inherited;
+    if (level == L || node.child_mask == 0) return fill(level, node.morton, v);
+    uint32_t k = first[level][j];
+    for (uint32_t c = 0; c < 4; ++c) {
+      if (node.child_mask & (1u << c)) walk(level + 1, k++, v);
+      else fill(level + 1, node.morton * 4 + c, v);
+    }
+  };
+  walk(0, 0, h.levels[0][0].value);
+}
+
+}  // namespace st::bench

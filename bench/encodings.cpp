@@ -1,0 +1,314 @@
+// Encoded sizes (issue 3 part 5), shaped like DAG-MH 2021 Table 1: for each scene and map
+// side, the bytes of the MH quadtree (MH §3.2), MMH and DAG-MH next to the raw float32
+// shadow map (4 N^2 bytes: the first-hit depths `lo`, i.e. the ordinary shadow map) and
+// that raw map compressed with zstd (level 19 by default, libzstd ZSTD_compress), with
+// the ratios DAG-MH/MMH and MH/raw, and the construction time per stage.
+//
+//   bench_encodings [--scenes city,terrain,hairball] [--light sun:azimuth=30,elevation=50]
+//                   [--min-res 4k] [--max-res 16k] [--quick] [--workers 1]
+//                   [--zstd-level 19] [--whole-max 16k] [--json PATH]
+//
+// Maps are built tile by tile (MH §3.1 "Tiled construction"): 4096^2 tiles are traced
+// with DepthBoundsTracer and built bottom-up, zstd compresses each tile's raw floats on
+// its own (so "zstd" is the sum over 4096^2 chunks, each compressed independently), and
+// stitch_tiles joins the tiles' hierarchies into the whole map's, which every encoder
+// takes at once. Above --whole-max (default 16K) the whole-map hierarchy is not kept:
+// each 4096^2 tile's hierarchy is encoded on its own and the coarse top (the hierarchy
+// over the tiles' root intervals, as tile_cut's coarse_grid does) is encoded once more;
+// the bytes reported are the sum (one header per tile included), and the output says so.
+// Top-down construction (MH §3.1 Alg. 1) is timed on one 4096^2 tile per scene.
+// --quick: sides 2K only (under a minute on an idle 2-core machine).
+#include <zstd.h>
+
+#include <fstream>
+#include <map>
+#include <nlohmann/json.hpp>
+
+#include "bench/bench_map.hpp"
+#include "tiles/core/encoding.hpp"
+
+namespace {
+
+using namespace st::bench;
+
+const st::Encoding kEncodings[] = {st::Encoding::mh, st::Encoding::mmh, st::Encoding::dagmh};
+
+struct EncodingResult {
+  uint64_t bytes = 0;
+  double seconds = 0;
+  std::string error;
+};
+
+struct Row {
+  std::string scene;
+  uint32_t level = 0;
+  bool whole = true;  // whole-map encode (else per-tile subtrees + coarse top)
+  uint64_t raw_bytes = 0, zstd_bytes = 0, nodes = 0, valued = 0, tiles = 0;
+  double trace_s = 0, zstd_s = 0, bottom_up_s = 0, stitch_s = 0, top_down_s = -1, wall_s = 0;
+  std::map<st::Encoding, EncodingResult> enc;
+};
+
+// zstd of one tile's first-hit depths (row-major float32, as a raw shadow map stores them).
+uint64_t zstd_tile(const st::IntervalTile& t, int level, std::vector<float>& raw, std::vector<char>& out) {
+  raw.resize(t.data.size());
+  for (size_t i = 0; i < raw.size(); ++i) raw[i] = t.data[i].lo;
+  const size_t in_bytes = raw.size() * sizeof(float);
+  out.resize(ZSTD_compressBound(in_bytes));
+  size_t n = ZSTD_compress(out.data(), out.size(), raw.data(), in_bytes, level);
+  if (ZSTD_isError(n)) throw st::Error(std::string("zstd: ") + ZSTD_getErrorName(n));
+  return n;
+}
+
+// Coarse top for the per-tile mode: the hierarchy over the tiles' root intervals.
+st::IntervalTile root_grid(const std::vector<st::Interval>& roots, uint32_t grid_level) {
+  st::IntervalTile g;
+  g.level = grid_level;
+  g.width = g.height = 1u << grid_level;
+  g.data = roots;
+  return g;
+}
+
+Row run_one(const std::string& scene_name, const st::DepthBoundsTracer& tracer, uint32_t level, unsigned workers,
+            int zstd_level, uint32_t whole_max) {
+  Row row;
+  row.scene = scene_name;
+  row.level = level;
+  row.whole = level <= whole_max;
+  row.raw_bytes = (uint64_t(1) << (2 * level)) * sizeof(float);
+  std::mutex mu;
+  const uint32_t grid_level = level > 12 ? level - 12 : 0, grid = 1u << grid_level;
+  std::vector<st::Hierarchy> tiles(row.whole ? size_t(grid) * grid : 0);
+  std::vector<st::Interval> roots(size_t(grid) * grid);
+  auto t0 = Clock::now();
+  TiledRun run = trace_and_build_tiles(
+      tracer, level, workers,
+      [&](const TileJob& job) {
+        thread_local std::vector<float> raw;
+        thread_local std::vector<char> out;
+        uint64_t n = zstd_tile(job.intervals, zstd_level, raw, out);
+        std::lock_guard<std::mutex> lock(mu);
+        row.zstd_bytes += n;
+      },
+      [&](uint32_t i, st::Hierarchy&& h) {
+        const st::HNode& r = h.levels[0][0];
+        roots[i] = {r.lo, r.hi};
+        if (row.whole) {
+          tiles[i] = std::move(h);
+          return;
+        }
+        // Per-tile mode: encode now, keep only the sizes.
+        std::map<st::Encoding, EncodingResult> local;
+        for (st::Encoding e : kEncodings) {
+          auto a = Clock::now();
+          try {
+            local[e].bytes = st::encode(h, e).size();
+          } catch (const std::exception& ex) {
+            local[e].error = ex.what();
+          }
+          local[e].seconds = seconds_since(a);
+        }
+        std::lock_guard<std::mutex> lock(mu);
+        row.nodes += h.node_count(), row.valued += h.valued_count();
+        for (auto& [e, r2] : local) {
+          row.enc[e].bytes += r2.bytes, row.enc[e].seconds += r2.seconds;
+          if (!r2.error.empty()) row.enc[e].error = r2.error;
+        }
+      });
+  row.tiles = uint64_t(grid) * grid;
+  row.trace_s = run.trace_s, row.zstd_s = run.per_tile_s, row.bottom_up_s = run.bottom_up_s;
+  if (row.whole) {
+    auto a = Clock::now();
+    st::Hierarchy h = grid_level ? st::stitch_tiles(std::move(tiles), grid_level) : std::move(tiles[0]);
+    row.stitch_s = seconds_since(a);
+    row.nodes = h.node_count(), row.valued = h.valued_count();
+    for (st::Encoding e : kEncodings) {
+      auto b = Clock::now();
+      try {
+        row.enc[e].bytes = st::encode(h, e).size();
+      } catch (const std::exception& ex) {
+        row.enc[e].error = ex.what();
+      }
+      row.enc[e].seconds = seconds_since(b);
+    }
+  } else {
+    auto a = Clock::now();
+    st::Hierarchy top = st::build_hierarchy(root_grid(roots, grid_level));
+    row.stitch_s = seconds_since(a);
+    row.nodes += top.node_count(), row.valued += top.valued_count();
+    for (st::Encoding e : kEncodings) {
+      auto b = Clock::now();
+      try {
+        row.enc[e].bytes += st::encode(top, e).size();
+      } catch (const std::exception& ex) {
+        row.enc[e].error = ex.what();
+      }
+      row.enc[e].seconds += seconds_since(b);
+    }
+  }
+  row.wall_s = seconds_since(t0);
+  return row;
+}
+
+// Top-down (Alg. 1) next to bottom-up (Alg. 2) on one 4096^2 tile of the map: the centre one.
+std::pair<double, double> time_constructions(const st::DepthBoundsTracer& tracer, uint32_t level) {
+  const uint32_t side = uint32_t(std::min<uint64_t>(uint64_t(1) << level, kTileSide));
+  const uint64_t c = ((uint64_t(1) << level) - side) / 2;
+  st::IntervalTile t = tracer.trace({level, c, c, side, side});
+  auto a = Clock::now();
+  st::Hierarchy bu = st::build_hierarchy(t, st::MhConstruction::bottom_up);
+  double bu_s = seconds_since(a);
+  a = Clock::now();
+  st::Hierarchy td = st::build_hierarchy(t, st::MhConstruction::top_down);
+  return {bu_s, seconds_since(a)};
+}
+
+std::string fmt_bytes(uint64_t b) {
+  char s[32];
+  if (b >= (uint64_t(1) << 30)) std::snprintf(s, sizeof s, "%.2f GiB", double(b) / double(1 << 30));
+  else if (b >= (1u << 20)) std::snprintf(s, sizeof s, "%.2f MiB", double(b) / double(1 << 20));
+  else std::snprintf(s, sizeof s, "%.1f KiB", double(b) / 1024.0);
+  return s;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string scenes = "city,terrain,hairball", light_spec = "sun:azimuth=30,elevation=50", json_path;
+  uint32_t min_level = 12, max_level = 14, whole_max = 14;
+  unsigned workers = 1;
+  int zstd_level = 19;
+  bool quick = false;
+  try {
+    for (int i = 1; i < argc; ++i) {
+      std::string a = argv[i];
+      auto next = [&]() -> std::string {
+        if (i + 1 >= argc) throw st::Error(a + " needs a value");
+        return argv[++i];
+      };
+      if (a == "--scenes") scenes = next();
+      else if (a == "--light") light_spec = next();
+      else if (a == "--min-res") min_level = parse_level(next());
+      else if (a == "--max-res") max_level = parse_level(next());
+      else if (a == "--whole-max") whole_max = parse_level(next());
+      else if (a == "--workers") workers = unsigned(std::max(1, std::stoi(next())));
+      else if (a == "--zstd-level") zstd_level = std::stoi(next());
+      else if (a == "--quick") quick = true;
+      else if (a == "--json") json_path = next();
+      else
+        throw st::Error("usage: bench_encodings [--scenes city,terrain,hairball] [--light L] [--min-res 4k] "
+                        "[--max-res 16k|64k] [--whole-max 16k] [--workers N] [--zstd-level 19] [--quick] [--json PATH]");
+    }
+    if (quick) min_level = max_level = 11;
+    if (min_level > max_level) throw st::Error("--min-res is above --max-res");
+
+    std::printf("bench_encodings: light %s, zstd level %d on 4096^2 chunks of the raw map, %u worker(s), %u cores, "
+                "load %.1f\n",
+                light_spec.c_str(), zstd_level, workers, std::thread::hardware_concurrency(), load_average());
+    std::vector<Row> rows;
+    nlohmann::json scene_info = nlohmann::json::array();
+    for (const std::string& name : split_list(scenes)) {
+      const std::string spec = name.find(':') == std::string::npos ? "procedural:" + name : name;
+      st::Scene scene = st::load_scene(spec);
+      st::LightSpace light = st::LightSpace::fit(st::LightSpec::parse(light_spec), scene.bounds());
+      st::DepthBoundsTracer tracer(scene, light);
+      auto [bu_s, td_s] = time_constructions(tracer, std::min<uint32_t>(max_level, 12));
+      scene_info.push_back({{"scene", spec}, {"triangles", tracer.triangle_count()},
+                            {"exit_depths", tracer.traces_exit_depths()}, {"bvh_s", tracer.build_seconds()},
+                            {"tile_bottom_up_s", bu_s}, {"tile_top_down_s", td_s},
+                            {"tile_side", std::min<uint64_t>(uint64_t(1) << std::min<uint32_t>(max_level, 12), kTileSide)}});
+      std::printf("  %s: %llu triangles, exit depths %s; one %s^2 tile: bottom-up %.2f s, top-down %.2f s\n",
+                  spec.c_str(), (unsigned long long)tracer.triangle_count(), tracer.traces_exit_depths() ? "yes" : "no",
+                  side_name(std::min<uint32_t>(max_level, 12)).c_str(), bu_s, td_s);
+      std::fflush(stdout);
+      for (uint32_t level = min_level; level <= max_level; level += 2) {
+        Row r = run_one(name, tracer, level, workers, zstd_level, whole_max);
+        if (level == std::min<uint32_t>(max_level, 12)) r.top_down_s = td_s;
+        rows.push_back(r);
+        std::printf("  %s %s^2 done in %.1f s (load %.1f)\n", name.c_str(), side_name(level).c_str(), r.wall_s,
+                    load_average());
+        std::fflush(stdout);
+      }
+    }
+
+    std::printf("\nBytes (DAG-MH 2021 Table 1 shape); raw = 4 N^2 (float32 first-hit depths); zstd = sum over 4096^2 "
+                "chunks\n");
+    std::printf("%-9s %5s %11s %11s %11s %11s %11s %9s %10s %10s %5s\n", "scene", "side", "raw", "zstd", "MH", "MMH",
+                "DAG-MH", "DAG/MMH", "MH/raw %", "DAG/raw %", "mode");
+    for (const Row& r : rows) {
+      auto b = [&](st::Encoding e) {
+        const EncodingResult& x = r.enc.at(e);
+        return x.error.empty() ? fmt_bytes(x.bytes) : std::string("error");
+      };
+      const double mh = double(r.enc.at(st::Encoding::mh).bytes), mmh = double(r.enc.at(st::Encoding::mmh).bytes),
+                   dag = double(r.enc.at(st::Encoding::dagmh).bytes);
+      std::printf("%-9s %5s %11s %11s %11s %11s %11s %9.3f %10.4f %10.4f %5s\n", r.scene.c_str(),
+                  side_name(r.level).c_str(), fmt_bytes(r.raw_bytes).c_str(), fmt_bytes(r.zstd_bytes).c_str(),
+                  b(st::Encoding::mh).c_str(), b(st::Encoding::mmh).c_str(), b(st::Encoding::dagmh).c_str(), dag / mmh,
+                  100 * mh / double(r.raw_bytes), 100 * dag / double(r.raw_bytes), r.whole ? "whole" : "tiles");
+    }
+    std::printf("mode: whole = one encode of the stitched whole-map hierarchy; tiles = sum of per-4096^2-tile "
+                "encodes + the coarse top over the tiles' roots (whole map kept out of memory)\n");
+
+    std::printf("\nConstruction seconds per stage (summed call times; trace uses all cores itself)\n");
+    std::printf("%-9s %5s %8s %8s %8s %8s %9s %8s %8s %8s %8s %12s\n", "scene", "side", "trace", "zstd", "bot-up",
+                "top-down", "stitch", "enc MH", "enc MMH", "enc DAG", "wall", "nodes");
+    for (const Row& r : rows) {
+      char td[16] = "-";
+      if (r.top_down_s >= 0) std::snprintf(td, sizeof td, "%.2f", r.top_down_s);
+      std::printf("%-9s %5s %8.2f %8.2f %8.2f %8s %9.2f %8.2f %8.2f %8.2f %8.1f %12llu\n", r.scene.c_str(),
+                  side_name(r.level).c_str(), r.trace_s, r.zstd_s, r.bottom_up_s, td, r.stitch_s,
+                  r.enc.at(st::Encoding::mh).seconds, r.enc.at(st::Encoding::mmh).seconds,
+                  r.enc.at(st::Encoding::dagmh).seconds, r.wall_s, (unsigned long long)r.nodes);
+    }
+    std::printf("(top-down: one %s^2 tile, next to bottom-up on that tile in the scene lines above; "
+                "stitch in tiles mode = building the coarse top)\n",
+                side_name(std::min<uint32_t>(max_level, 12)).c_str());
+    for (const Row& r : rows)
+      for (auto& [e, x] : r.enc)
+        if (!x.error.empty())
+          std::printf("error: %s %s %s: %s\n", r.scene.c_str(), side_name(r.level).c_str(), st::to_string(e).c_str(),
+                      x.error.c_str());
+
+    std::printf("\nTargets (issue): DAG-MH <= 0.6x MMH bytes at 64K^2 on city and terrain; MH <= 0.1%% of raw at "
+                "64K^2 city\n");
+    for (const Row& r : rows) {
+      const double mh = double(r.enc.at(st::Encoding::mh).bytes), mmh = double(r.enc.at(st::Encoding::mmh).bytes),
+                   dag = double(r.enc.at(st::Encoding::dagmh).bytes);
+      if (r.scene == "city" || r.scene == "terrain")
+        std::printf("  %-8s %5s DAG-MH/MMH = %.3f (target <= 0.6%s) %s\n", r.scene.c_str(), side_name(r.level).c_str(),
+                    dag / mmh, r.level == 16 ? "" : ", stated for 64K", dag / mmh <= 0.6 ? "met" : "NOT met");
+      if (r.scene == "city")
+        std::printf("  %-8s %5s MH/raw = %.4f%% (target <= 0.1%%%s) %s\n", r.scene.c_str(), side_name(r.level).c_str(),
+                    100 * mh / double(r.raw_bytes), r.level == 16 ? "" : ", stated for 64K",
+                    mh / double(r.raw_bytes) <= 0.001 ? "met" : "NOT met");
+    }
+
+    if (!json_path.empty()) {
+      nlohmann::json j{{"bench", "encodings"}, {"light", light_spec}, {"zstd_level", zstd_level},
+                       {"zstd_chunk_side", kTileSide}, {"workers", workers},
+                       {"cores", std::thread::hardware_concurrency()}, {"load_average_end", load_average()},
+                       {"scenes", scene_info}};
+      for (const Row& r : rows) {
+        nlohmann::json enc;
+        for (auto& [e, x] : r.enc)
+          enc[st::to_string(e)] = {{"bytes", x.bytes}, {"encode_s", x.seconds}, {"error", x.error}};
+        const double mh = double(r.enc.at(st::Encoding::mh).bytes), mmh = double(r.enc.at(st::Encoding::mmh).bytes),
+                     dag = double(r.enc.at(st::Encoding::dagmh).bytes);
+        j["results"].push_back({{"scene", r.scene}, {"side", uint64_t(1) << r.level}, {"level", r.level},
+                                {"mode", r.whole ? "whole" : "tiles"}, {"tiles", r.tiles},
+                                {"raw_bytes", r.raw_bytes}, {"zstd_bytes", r.zstd_bytes}, {"encodings", enc},
+                                {"dagmh_over_mmh", dag / mmh}, {"mh_over_raw", mh / double(r.raw_bytes)},
+                                {"nodes", r.nodes}, {"valued", r.valued},
+                                {"seconds", {{"trace", r.trace_s}, {"zstd", r.zstd_s}, {"bottom_up", r.bottom_up_s},
+                                             {"top_down_one_tile", r.top_down_s}, {"stitch_or_top", r.stitch_s},
+                                             {"wall", r.wall_s}}}});
+      }
+      std::ofstream out(json_path);
+      if (!(out << j.dump(2) << "\n")) throw st::Error("bench_encodings: cannot write " + json_path);
+    }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_encodings: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,272 @@
+// Lookup speed (issue 3 part 5): single taps, 3x3 and 5x5 PCF per second on each
+// encoding (MH quadtree MH §3.2/§3.3, MMH, DAG-MH §3.5) of one traced map, each as a ratio
+// to the same lookups on the uncompressed float array of the same map (the hierarchy's
+// finest-level values, huge pages requested), in the same run.
+//
+//   bench_lookups [--scene city] [--light sun:azimuth=30,elevation=50] [--res 16k]
+//                 [--lookups 1048576] [--reps 5] [--quick] [--workers 1] [--json PATH]
+//
+// Access patterns, precomputed once and shared by every encoding:
+//   random:   uniformly random texels of the finest level;
+//   coherent: runs of 256 consecutive texels along a row, each run at a random start
+//             (a screen scanline mapped into light space, roughly).
+// Receivers come from the traced intervals: half the lookups use lo (a receiver on the
+// first surface: lit for every admissible value) and half the next float above hi
+// (behind the occluder: shadowed for every admissible value), so every encoding must give
+// exactly the uncompressed array's single-tap answers; the bench checks that on every
+// position before timing. Single-threaded; each figure is the median over --reps passes,
+// and the encodings take turns inside each pass so that load changes hit all of them.
+// --quick: an 8K^2 map, 128K lookups per pattern, 3 reps.
+#include <cmath>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <random>
+
+#include "bench/bench_map.hpp"
+#include "tiles/core/encoding.hpp"
+#include "tiles/core/evaluator.hpp"
+
+namespace {
+
+using namespace st::bench;
+
+struct Lookup {
+  uint32_t x, y;
+  float receiver;
+};
+
+// What one pass measures: `op` r = 1 is a single lit test, r > 1 an r x r PCF kernel.
+struct Subject {
+  std::string name;
+  const st::Evaluator* ev = nullptr;  // null: the float array
+  uint64_t bytes = 0;
+};
+
+// Uncompressed r x r PCF with the Evaluator::pcf semantics (taps clamped to the map).
+inline float array_pcf(const FloatMap& m, uint64_t x, uint64_t y, uint32_t r, float receiver) {
+  uint32_t lit = 0;
+  for (uint32_t j = 0; j < r; ++j) {
+    const float* row = m.data + st::pcf_tap(y, j, r, m.side) * m.side;
+    for (uint32_t i = 0; i < r; ++i) lit += receiver <= row[st::pcf_tap(x, i, r, m.side)];
+  }
+  return float(lit) / float(r * r);
+}
+
+// Seconds for one pass of `op` over `list`; `sink` keeps the results alive.
+double time_pass(const Subject& s, const FloatMap& map, const std::vector<Lookup>& list, uint32_t r, double& sink) {
+  const uint32_t L = map.level;
+  double acc = 0;
+  auto t0 = Clock::now();
+  if (!s.ev) {
+    if (r == 1) {
+      uint64_t lit = 0;
+      for (const Lookup& q : list) lit += q.receiver <= map.at(q.x, q.y);
+      acc = double(lit);
+    } else {
+      for (const Lookup& q : list) acc += array_pcf(map, q.x, q.y, r, q.receiver);
+    }
+  } else if (r == 1) {
+    uint64_t lit = 0;
+    for (const Lookup& q : list) lit += s.ev->lit(q.x, q.y, q.receiver);
+    acc = double(lit);
+  } else {
+    for (const Lookup& q : list) acc += s.ev->pcf(L, q.x, q.y, r, q.receiver);
+  }
+  double t = seconds_since(t0);
+  sink += acc;
+  return t;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string scene_spec = "procedural:city", light_spec = "sun:azimuth=30,elevation=50", json_path;
+  uint32_t level = 14;
+  size_t count = size_t(1) << 20;
+  int reps = 5;
+  unsigned workers = 1;
+  bool quick = false, level_given = false;
+  try {
+    for (int i = 1; i < argc; ++i) {
+      std::string a = argv[i];
+      auto next = [&]() -> std::string {
+        if (i + 1 >= argc) throw st::Error(a + " needs a value");
+        return argv[++i];
+      };
+      if (a == "--scene") scene_spec = next();
+      else if (a == "--light") light_spec = next();
+      else if (a == "--res") level = parse_level(next()), level_given = true;
+      else if (a == "--lookups") count = size_t(std::max(1ll, std::stoll(next())));
+      else if (a == "--reps") reps = std::max(1, std::stoi(next()));
+      else if (a == "--workers") workers = unsigned(std::max(1, std::stoi(next())));
+      else if (a == "--quick") quick = true;
+      else if (a == "--json") json_path = next();
+      else
+        throw st::Error("usage: bench_lookups [--scene S] [--light L] [--res 16k] [--lookups N] [--reps R] "
+                        "[--quick] [--workers N] [--json PATH]");
+    }
+    if (scene_spec.find(':') == std::string::npos) scene_spec = "procedural:" + scene_spec;
+    if (quick) {
+      if (!level_given) level = 13;
+      count = std::min<size_t>(count, size_t(1) << 17);
+      reps = std::min(reps, 3);
+    }
+    if (level < 9) throw st::Error("--res must be at least 512");
+    const uint64_t side = uint64_t(1) << level;
+    std::printf("bench_lookups: %s, %s, %s^2, %zu lookups per pattern, median of %d, load %.1f\n",
+                scene_spec.c_str(), light_spec.c_str(), side_name(level).c_str(), count, reps, load_average());
+    std::fflush(stdout);
+
+    // Positions first (the receivers are filled in while the tiles are traced).
+    std::mt19937_64 rng(20261122);
+    std::vector<Lookup> random(count), coherent(count);
+    std::vector<uint8_t> behind(2 * count);
+    for (auto& q : random) q = {uint32_t(rng() & (side - 1)), uint32_t(rng() & (side - 1)), 0};
+    for (size_t i = 0; i < count; i += 256) {
+      const uint32_t x0 = uint32_t(rng() % (side - 256)), y = uint32_t(rng() & (side - 1));
+      for (size_t k = 0; k < 256 && i + k < count; ++k) coherent[i + k] = {uint32_t(x0 + k), y, 0};
+    }
+    for (auto& b : behind) b = uint8_t(rng() & 1);
+    const uint32_t tile_side = uint32_t(std::min<uint64_t>(side, kTileSide));
+    const uint32_t grid = uint32_t(side / tile_side);
+    std::vector<std::vector<uint32_t>> by_tile(size_t(grid) * grid);  // indices into random ++ coherent
+    auto lookup_at = [&](uint32_t i) -> Lookup& { return i < count ? random[i] : coherent[i - count]; };
+    for (uint32_t i = 0; i < 2 * count; ++i) {
+      const Lookup& q = lookup_at(i);
+      by_tile[(q.y / tile_side) * grid + q.x / tile_side].push_back(i);
+    }
+
+    st::Scene scene = st::load_scene(scene_spec);
+    st::LightSpace light = st::LightSpace::fit(st::LightSpec::parse(light_spec), scene.bounds());
+    st::DepthBoundsTracer tracer(scene, light);
+    std::vector<st::Hierarchy> tiles(size_t(grid) * grid);
+    std::mutex mu;
+    TiledRun run = trace_and_build_tiles(
+        tracer, level, workers,
+        [&](const TileJob& job) {
+          const uint64_t x0 = uint64_t(job.ti) * tile_side, y0 = uint64_t(job.tj) * tile_side;
+          for (uint32_t i : by_tile[job.index]) {
+            Lookup& q = lookup_at(i);
+            const st::Interval& iv = job.intervals.at(uint32_t(q.x - x0), uint32_t(q.y - y0));
+            q.receiver = behind[i] ? std::nextafter(iv.hi, INFINITY) : iv.lo;
+          }
+        },
+        [&](uint32_t i, st::Hierarchy&& h) {
+          std::lock_guard<std::mutex> lock(mu);
+          tiles[i] = std::move(h);
+        });
+    auto t0 = Clock::now();
+    st::Hierarchy h = grid > 1 ? st::stitch_tiles(std::move(tiles), st::log2_exact(grid)) : std::move(tiles[0]);
+    const double stitch_s = seconds_since(t0);
+    std::printf("  map built: trace %.1f s, bottom-up %.1f s, stitch %.1f s, %zu nodes\n", run.trace_s,
+                run.bottom_up_s, stitch_s, h.node_count());
+    std::fflush(stdout);
+
+    FloatMap map(level);
+    paint_finest(h, map);
+    for (int k = 0; k < 1000; ++k) {  // the painted array is the hierarchy's finest level
+      const uint64_t x = rng() & (side - 1), y = rng() & (side - 1);
+      if (map.at(x, y) != h.depth_at(level, x, y)) throw st::Error("paint_finest disagrees with depth_at");
+    }
+    const st::Encoding encs[] = {st::Encoding::mh, st::Encoding::mmh, st::Encoding::dagmh};
+    std::vector<std::vector<uint8_t>> buffers;
+    std::vector<std::unique_ptr<st::Evaluator>> evaluators;
+    std::vector<Subject> subjects{{"float array", nullptr, map.bytes}};
+    for (st::Encoding e : encs) {
+      auto a = Clock::now();
+      buffers.push_back(st::encode(h, e));
+      const double enc_s = seconds_since(a);
+      evaluators.push_back(st::open_encoded(e, buffers.back()));
+      subjects.push_back({st::to_string(e), evaluators.back().get(), buffers.back().size()});
+      std::printf("  %-6s %12zu bytes, encoded in %.1f s\n", st::to_string(e).c_str(), buffers.back().size(), enc_s);
+      std::fflush(stdout);
+    }
+    h = {};
+
+    // Every encoding gives the array's single-tap answer at every position (lossless).
+    uint64_t mismatches = 0;
+    for (const auto* list : {&random, &coherent})
+      for (const Lookup& q : *list) {
+        const bool want = q.receiver <= map.at(q.x, q.y);
+        for (const auto& ev : evaluators) mismatches += ev->lit(q.x, q.y, q.receiver) != want;
+      }
+    std::printf("  lossless check on %zu positions x %zu encodings: %llu mismatches\n", 2 * count,
+                evaluators.size(), (unsigned long long)mismatches);
+
+    struct Result {
+      std::string pattern, subject;
+      uint32_t r = 1;
+      double seconds = 0;  // median per pass
+    };
+    std::vector<Result> results;
+    double sink = 0;
+    const std::pair<const char*, const std::vector<Lookup>*> patterns[] = {{"random", &random}, {"coherent", &coherent}};
+    const uint32_t kernels[] = {1, 3, 5};
+    for (auto& [pname, list] : patterns)
+      for (uint32_t r : kernels) {
+        std::vector<std::vector<double>> t(subjects.size());
+        for (const Subject& s : subjects) time_pass(s, map, *list, r, sink);  // warm-up
+        for (int rep = 0; rep < reps; ++rep)
+          for (size_t s = 0; s < subjects.size(); ++s) t[s].push_back(time_pass(subjects[s], map, *list, r, sink));
+        for (size_t s = 0; s < subjects.size(); ++s) results.push_back({pname, subjects[s].name, r, median(t[s])});
+      }
+
+    auto find = [&](const std::string& p, const std::string& s, uint32_t r) {
+      for (const Result& x : results)
+        if (x.pattern == p && x.subject == s && x.r == r) return x.seconds;
+      return 0.0;
+    };
+    std::printf("\nLookups on %s %s^2 (single thread; M/s = kernels per second; x array = time / float-array time "
+                "of the same lookups; /single = time / this encoding's single-tap time)\n",
+                scene_spec.c_str(), side_name(level).c_str());
+    std::printf("%-9s %-6s %-12s %12s %10s %10s %9s %9s\n", "pattern", "kernel", "encoding", "bytes", "M/s", "ns/kernel",
+                "x array", "/single");
+    nlohmann::json jres = nlohmann::json::array();
+    for (const Result& x : results) {
+      const double per = x.seconds / double(count);
+      const double vs_array = x.seconds / find(x.pattern, "float array", x.r);
+      const double vs_single = x.seconds / find(x.pattern, x.subject, 1);
+      uint64_t bytes = 0;
+      for (const Subject& s : subjects)
+        if (s.name == x.subject) bytes = s.bytes;
+      const std::string kernel = x.r == 1 ? "single" : std::to_string(x.r) + "x" + std::to_string(x.r);
+      std::printf("%-9s %-6s %-12s %12llu %10.2f %10.1f %9.2f %9.2f\n", x.pattern.c_str(), kernel.c_str(),
+                  x.subject.c_str(), (unsigned long long)bytes, 1e-6 / per, 1e9 * per, vs_array, vs_single);
+      jres.push_back({{"pattern", x.pattern}, {"kernel", x.r}, {"subject", x.subject}, {"bytes", bytes},
+                      {"seconds_per_pass", x.seconds}, {"lookups_per_pass", count},
+                      {"mlookups_per_s", 1e-6 / per}, {"ns_per_lookup", 1e9 * per},
+                      {"ratio_to_float_array", vs_array}, {"ratio_to_single", vs_single}});
+    }
+
+    std::printf("\nTargets (issue) against the measured figures:\n");
+    nlohmann::json targets = nlohmann::json::array();
+    for (auto& [pname, list] : patterns) {
+      (void)list;
+      const double single = find(pname, "dagmh", 1) / find(pname, "float array", 1);
+      std::printf("  %-9s DAG-MH single lookup = %.2fx uncompressed (target <= 3) %s\n", pname, single,
+                  single <= 3 ? "met" : "NOT met");
+      targets.push_back({{"target", "dagmh_single_over_array<=3"}, {"pattern", pname}, {"value", single}});
+      for (const char* e : {"mh", "mmh", "dagmh"}) {
+        const double pcf = find(pname, e, 5) / find(pname, e, 1);
+        std::printf("  %-9s %-6s 5x5 PCF = %.2fx a single lookup (target <= 6) %s\n", pname, e, pcf,
+                    pcf <= 6 ? "met" : "NOT met");
+        targets.push_back({{"target", "pcf5_over_single<=6"}, {"pattern", pname}, {"encoding", e}, {"value", pcf}});
+      }
+    }
+    std::printf("  (sink %.0f, load %.1f)\n", sink, load_average());
+
+    if (!json_path.empty()) {
+      nlohmann::json j{{"bench", "lookups"}, {"scene", scene_spec}, {"light", light_spec}, {"side", side},
+                       {"level", level}, {"lookups_per_pattern", count}, {"reps", reps},
+                       {"lossless_mismatches", mismatches}, {"load_average_end", load_average()},
+                       {"build", {{"trace_s", run.trace_s}, {"bottom_up_s", run.bottom_up_s}, {"stitch_s", stitch_s}}},
+                       {"results", jres}, {"targets", targets}};
+      std::ofstream out(json_path);
+      if (!(out << j.dump(2) << "\n")) throw st::Error("bench_lookups: cannot write " + json_path);
+    }
+    return mismatches == 0 ? 0 : 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_lookups: %s\n", e.what());
+    return 1;
+  }
+}
