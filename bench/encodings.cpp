@@ -6,7 +6,7 @@
 //
 //   bench_encodings [--scenes city,terrain,hairball] [--light sun:azimuth=30,elevation=50]
 //                   [--min-res 4k] [--max-res 16k] [--quick] [--workers 1]
-//                   [--zstd-level 19] [--whole-max 16k] [--json PATH]
+//                   [--zstd-level 19] [--zstd-max-res 64k] [--whole-max 16k] [--json PATH]
 //
 // Maps are built tile by tile (MH §3.1 "Tiled construction"): 4096^2 tiles are traced
 // with DepthBoundsTracer and built bottom-up, zstd compresses each tile's raw floats on
@@ -17,6 +17,8 @@
 // over the tiles' root intervals, as tile_cut's coarse_grid does) is encoded once more;
 // the bytes reported are the sum (one header per tile included), and the output says so.
 // Top-down construction (MH §3.1 Alg. 1) is timed on one 4096^2 tile per scene.
+// --zstd-max-res R: no zstd above side R (its column shows "-"): level 19 runs at about
+// 3 MB/s on this machine, so a 16K^2 map (1 GiB raw) takes minutes per scene.
 // --quick: sides 2K only (under a minute on an idle 2-core machine).
 #include <zstd.h>
 
@@ -43,6 +45,7 @@ struct Row {
   std::string scene;
   uint32_t level = 0;
   bool whole = true;  // whole-map encode (else per-tile subtrees + coarse top)
+  bool zstd = true;   // zstd_bytes measured
   uint64_t raw_bytes = 0, zstd_bytes = 0, nodes = 0, valued = 0, tiles = 0;
   double trace_s = 0, zstd_s = 0, bottom_up_s = 0, stitch_s = 0, top_down_s = -1, wall_s = 0;
   std::map<st::Encoding, EncodingResult> enc;
@@ -69,11 +72,12 @@ st::IntervalTile root_grid(const std::vector<st::Interval>& roots, uint32_t grid
 }
 
 Row run_one(const std::string& scene_name, const st::DepthBoundsTracer& tracer, uint32_t level, unsigned workers,
-            int zstd_level, uint32_t whole_max) {
+            int zstd_level, uint32_t zstd_max, uint32_t whole_max) {
   Row row;
   row.scene = scene_name;
   row.level = level;
   row.whole = level <= whole_max;
+  row.zstd = level <= zstd_max;
   row.raw_bytes = (uint64_t(1) << (2 * level)) * sizeof(float);
   std::mutex mu;
   const uint32_t grid_level = level > 12 ? level - 12 : 0, grid = 1u << grid_level;
@@ -83,6 +87,7 @@ Row run_one(const std::string& scene_name, const st::DepthBoundsTracer& tracer, 
   TiledRun run = trace_and_build_tiles(
       tracer, level, workers,
       [&](const TileJob& job) {
+        if (!row.zstd) return;
         thread_local std::vector<float> raw;
         thread_local std::vector<char> out;
         uint64_t n = zstd_tile(job.intervals, zstd_level, raw, out);
@@ -174,7 +179,7 @@ std::string fmt_bytes(uint64_t b) {
 
 int main(int argc, char** argv) {
   std::string scenes = "city,terrain,hairball", light_spec = "sun:azimuth=30,elevation=50", json_path;
-  uint32_t min_level = 12, max_level = 14, whole_max = 14;
+  uint32_t min_level = 12, max_level = 14, whole_max = 14, zstd_max = st::kMaxLevel;
   unsigned workers = 1;
   int zstd_level = 19;
   bool quick = false;
@@ -192,11 +197,12 @@ int main(int argc, char** argv) {
       else if (a == "--whole-max") whole_max = parse_level(next());
       else if (a == "--workers") workers = unsigned(std::max(1, std::stoi(next())));
       else if (a == "--zstd-level") zstd_level = std::stoi(next());
+      else if (a == "--zstd-max-res") zstd_max = parse_level(next());
       else if (a == "--quick") quick = true;
       else if (a == "--json") json_path = next();
       else
         throw st::Error("usage: bench_encodings [--scenes city,terrain,hairball] [--light L] [--min-res 4k] "
-                        "[--max-res 16k|64k] [--whole-max 16k] [--workers N] [--zstd-level 19] [--quick] [--json PATH]");
+                        "[--max-res 16k|64k] [--whole-max 16k] [--workers N] [--zstd-level 19] [--zstd-max-res R] [--quick] [--json PATH]");
     }
     if (quick) min_level = max_level = 11;
     if (min_level > max_level) throw st::Error("--min-res is above --max-res");
@@ -221,7 +227,7 @@ int main(int argc, char** argv) {
                   side_name(std::min<uint32_t>(max_level, 12)).c_str(), bu_s, td_s);
       std::fflush(stdout);
       for (uint32_t level = min_level; level <= max_level; level += 2) {
-        Row r = run_one(name, tracer, level, workers, zstd_level, whole_max);
+        Row r = run_one(name, tracer, level, workers, zstd_level, zstd_max, whole_max);
         if (level == std::min<uint32_t>(max_level, 12)) r.top_down_s = td_s;
         rows.push_back(r);
         std::printf("  %s %s^2 done in %.1f s (load %.1f)\n", name.c_str(), side_name(level).c_str(), r.wall_s,
@@ -242,7 +248,8 @@ int main(int argc, char** argv) {
       const double mh = double(r.enc.at(st::Encoding::mh).bytes), mmh = double(r.enc.at(st::Encoding::mmh).bytes),
                    dag = double(r.enc.at(st::Encoding::dagmh).bytes);
       std::printf("%-9s %5s %11s %11s %11s %11s %11s %9.3f %10.4f %10.4f %5s\n", r.scene.c_str(),
-                  side_name(r.level).c_str(), fmt_bytes(r.raw_bytes).c_str(), fmt_bytes(r.zstd_bytes).c_str(),
+                  side_name(r.level).c_str(), fmt_bytes(r.raw_bytes).c_str(),
+                  r.zstd ? fmt_bytes(r.zstd_bytes).c_str() : "-",
                   b(st::Encoding::mh).c_str(), b(st::Encoding::mmh).c_str(), b(st::Encoding::dagmh).c_str(), dag / mmh,
                   100 * mh / double(r.raw_bytes), 100 * dag / double(r.raw_bytes), r.whole ? "whole" : "tiles");
     }
@@ -296,7 +303,8 @@ int main(int argc, char** argv) {
                      dag = double(r.enc.at(st::Encoding::dagmh).bytes);
         j["results"].push_back({{"scene", r.scene}, {"side", uint64_t(1) << r.level}, {"level", r.level},
                                 {"mode", r.whole ? "whole" : "tiles"}, {"tiles", r.tiles},
-                                {"raw_bytes", r.raw_bytes}, {"zstd_bytes", r.zstd_bytes}, {"encodings", enc},
+                                {"raw_bytes", r.raw_bytes},
+                                {"zstd_bytes", r.zstd ? nlohmann::json(r.zstd_bytes) : nlohmann::json(nullptr)}, {"encodings", enc},
                                 {"dagmh_over_mmh", dag / mmh}, {"mh_over_raw", mh / double(r.raw_bytes)},
                                 {"nodes", r.nodes}, {"valued", r.valued},
                                 {"seconds", {{"trace", r.trace_s}, {"zstd", r.zstd_s}, {"bottom_up", r.bottom_up_s},

@@ -14,7 +14,7 @@
 // first surface: lit for every admissible value) and half the next float above hi
 // (behind the occluder: shadowed for every admissible value), so every encoding must give
 // exactly the uncompressed array's single-tap answers; the bench checks that on every
-// position before timing. Single-threaded; each figure is the median over --reps passes,
+// position before timing. Single-threaded, timed in thread-CPU seconds; each figure is the median over --reps passes,
 // and the encodings take turns inside each pass so that load changes hit all of them.
 // --quick: an 8K^2 map, 128K lookups per pattern, 3 reps.
 #include <cmath>
@@ -52,11 +52,13 @@ inline float array_pcf(const FloatMap& m, uint64_t x, uint64_t y, uint32_t r, fl
   return float(lit) / float(r * r);
 }
 
-// Seconds for one pass of `op` over `list`; `sink` keeps the results alive.
+// Thread-CPU seconds for one pass of `op` over `list` (the machine may be shared with more
+// runnable threads than cores: CPU time leaves out the time this thread waited for a
+// core, wall time does not); `sink` keeps the results alive.
 double time_pass(const Subject& s, const FloatMap& map, const std::vector<Lookup>& list, uint32_t r, double& sink) {
   const uint32_t L = map.level;
   double acc = 0;
-  auto t0 = Clock::now();
+  const double c0 = thread_cpu_now();
   if (!s.ev) {
     if (r == 1) {
       uint64_t lit = 0;
@@ -72,7 +74,7 @@ double time_pass(const Subject& s, const FloatMap& map, const std::vector<Lookup
   } else {
     for (const Lookup& q : list) acc += s.ev->pcf(L, q.x, q.y, r, q.receiver);
   }
-  double t = seconds_since(t0);
+  double t = thread_cpu_now() - c0;
   sink += acc;
   return t;
 }
@@ -216,7 +218,7 @@ int main(int argc, char** argv) {
         if (x.pattern == p && x.subject == s && x.r == r) return x.seconds;
       return 0.0;
     };
-    std::printf("\nLookups on %s %s^2 (single thread; M/s = kernels per second; x array = time / float-array time "
+    std::printf("\nLookups on %s %s^2 (single thread, thread-CPU time; M/s = kernels per second; x array = time / float-array time "
                 "of the same lookups; /single = time / this encoding's single-tap time)\n",
                 scene_spec.c_str(), side_name(level).c_str());
     std::printf("%-9s %-6s %-12s %12s %10s %10s %9s %9s\n", "pattern", "kernel", "encoding", "bytes", "M/s", "ns/kernel",
