@@ -34,8 +34,12 @@ class DagmhEvaluator final : public Evaluator {
     // in which the kernel's extreme corners differ (MH Fig. 5).
     const uint64_t differ = (tx[0] ^ tx[r - 1]) | (ty[0] ^ ty[r - 1]);
     const uint32_t common = level - uint32_t(differ ? 64 - __builtin_clzll(differ) : 0);
+    // A common node above the skip level is a worse start than each tap's own skip entry
+    // (§3.7): then the taps start where depth() starts.
+    const bool from_skip = common < v_.skip_level && level >= v_.skip_level;
     const dagmh::Cursor lca =
-        v_.descend(v_.start(common, level, tx[0], ty[0]), common, level, tx[0], ty[0]);
+        from_skip ? v_.skip_entry(level, tx[0], ty[0])
+                  : v_.descend(v_.start(common, level, tx[0], ty[0]), common, level, tx[0], ty[0]);
     dagmh::Cursor cache = lca;
     uint64_t cache_x = tx[0], cache_y = ty[0];
     uint32_t last_index = ~0u;
@@ -45,7 +49,8 @@ class DagmhEvaluator final : public Evaluator {
       for (uint32_t i = 0; i < r; ++i) {
         const uint32_t shift = level - cache.level;
         const bool on_path = (tx[i] >> shift) == (cache_x >> shift) && (ty[j] >> shift) == (cache_y >> shift);
-        const dagmh::Cursor c = v_.descend(on_path ? cache : lca, level, level, tx[i], ty[j]);
+        const dagmh::Cursor c = v_.descend(on_path ? cache : from_skip ? v_.skip_entry(level, tx[i], ty[j]) : lca,
+                                           level, level, tx[i], ty[j]);
         const uint32_t index = v_.finish(c, level, tx[i], ty[j]);
         if (index != last_index) last_index = index, last_value = v_.value(index);
         lit += receiver <= last_value;
