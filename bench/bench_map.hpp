@@ -168,6 +168,19 @@ struct FloatMap {
   float at(uint64_t x, uint64_t y) const { return data[y * side + x]; }
 };
 
+// Bytes of this process's anonymous memory backed by transparent huge pages (to show
+// whether MADV_HUGEPAGE took effect), or -1 when /proc cannot tell.
+inline double anon_huge_mib() {
+  std::FILE* f = std::fopen("/proc/self/smaps_rollup", "r");
+  if (!f) return -1;
+  char line[256];
+  double kb = -1;
+  while (std::fgets(line, sizeof line, f))
+    if (std::sscanf(line, "AnonHugePages: %lf kB", &kb) == 1) break;
+  std::fclose(f);
+  return kb < 0 ? -1 : kb / 1024.0;
+}
+
 // Writes every finest-level texel's value (Hierarchy::depth_at(depth, x, y)) once: a walk
 // down the node lists, filling the block of every node whose subtree stores nothing
 // below it (or of every absent child) with the inherited value.
