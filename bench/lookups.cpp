@@ -14,7 +14,8 @@
 // first surface: lit for every admissible value) and half the next float above hi
 // (behind the occluder: shadowed for every admissible value), so every encoding must give
 // exactly the uncompressed array's single-tap answers; the bench checks that on every
-// position before timing. Single-threaded, timed in thread-CPU seconds; each figure is the median over --reps passes,
+// position before timing (and the PCF paths against the average of single lookups on a
+// sample). Single-threaded, timed in thread-CPU seconds; each figure is the median over --reps passes,
 // and the encodings take turns inside each pass so that load changes hit all of them.
 // --quick: an 8K^2 map, 128K lookups per pattern, 3 reps.
 #include <cmath>
@@ -204,6 +205,18 @@ int main(int argc, char** argv) {
       }
     std::printf("  lossless check on %zu positions x %zu encodings: %llu mismatches\n", 2 * count,
                 evaluators.size(), (unsigned long long)mismatches);
+    // The encodings' shared-traversal PCF equals the average of single lookups (the
+    // Evaluator base implementation) on a sample of the positions.
+    uint64_t pcf_mismatches = 0;
+    for (const auto* list : {&random, &coherent})
+      for (size_t i = 0; i < std::min<size_t>(count, 4096); ++i)
+        for (const auto& ev : evaluators)
+          for (uint32_t r : {3u, 5u}) {
+            const Lookup& q = (*list)[i];
+            pcf_mismatches += ev->pcf(level, q.x, q.y, r, q.receiver) != ev->Evaluator::pcf(level, q.x, q.y, r, q.receiver);
+          }
+    std::printf("  PCF 3x3/5x5 vs the average of single lookups on %zu positions: %llu mismatches\n",
+                2 * std::min<size_t>(count, 4096), (unsigned long long)pcf_mismatches);
 
     struct Result {
       std::string pattern, subject;
@@ -270,13 +283,13 @@ int main(int argc, char** argv) {
     if (!json_path.empty()) {
       nlohmann::json j{{"bench", "lookups"}, {"scene", scene_spec}, {"light", light_spec}, {"side", side},
                        {"level", level}, {"lookups_per_pattern", count}, {"reps", reps},
-                       {"lossless_mismatches", mismatches}, {"anon_huge_mib", huge_mib}, {"load_average_end", load_average()},
+                       {"lossless_mismatches", mismatches}, {"pcf_mismatches", pcf_mismatches}, {"anon_huge_mib", huge_mib}, {"load_average_end", load_average()},
                        {"build", {{"trace_s", run.trace_s}, {"bottom_up_s", run.bottom_up_s}, {"stitch_s", stitch_s}}},
                        {"results", jres}, {"targets", targets}};
       std::ofstream out(json_path);
       if (!(out << j.dump(2) << "\n")) throw st::Error("bench_lookups: cannot write " + json_path);
     }
-    return mismatches == 0 ? 0 : 1;
+    return mismatches == 0 && pcf_mismatches == 0 ? 0 : 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_lookups: %s\n", e.what());
     return 1;
