@@ -47,16 +47,6 @@ inline constexpr uint32_t kRefNone = 0u << 30;     // no node: the answer is `la
 inline constexpr uint32_t kRefInner = 1u << 30;    // index = word offset in the node section
 inline constexpr uint32_t kRefTreelet = 2u << 30;  // index = treelet number
 
-// Population count without a libgcc call: std::popcount compiles to a call of
-// __popcountdi2 unless the target has POPCNT (-mpopcnt is not set), and every lookup runs
-// several of these (child rank, treelet rank, chunk rank).
-inline constexpr uint32_t popcount_bits(uint64_t v) {
-  v = v - ((v >> 1) & 0x5555555555555555ull);
-  v = (v & 0x3333333333333333ull) + ((v >> 2) & 0x3333333333333333ull);
-  v = (v + (v >> 4)) & 0x0F0F0F0F0F0F0F0Full;
-  return uint32_t((v * 0x0101010101010101ull) >> 56);
-}
-
 // Inner node: word 0 = flags, then per present child (child order) two words:
 // child reference (word offset, or treelet number if its treelet bit is set) and the
 // child's value offset (= own value + values of the earlier present children).
@@ -65,7 +55,7 @@ inline constexpr uint32_t kNodeTreeletShift = 4;        // bit 4+c: child c is a
 inline constexpr uint32_t kNodeValuedBit = 1u << 8;     // the node itself has a value
 inline constexpr uint32_t kNodeFlagBits = 0x1FFu;       // the others must be zero
 inline constexpr uint32_t node_words(uint32_t flags) {
-  return 1 + 2 * popcount_bits(flags & kNodeChildMask);
+  return 1 + 2 * uint32_t(std::popcount(flags & kNodeChildMask));
 }
 
 struct Header {

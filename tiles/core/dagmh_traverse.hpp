@@ -61,7 +61,7 @@ struct View {
         c.ref = kRefNone;
         return c;
       }
-      const uint32_t rank = popcount_bits(flags & kNodeChildMask & ((1u << child) - 1));
+      const uint32_t rank = uint32_t(std::popcount(flags & kNodeChildMask & ((1u << child) - 1)));
       const uint8_t* entry = node + 4 + 8 * rank;
       c.base += load32(entry + 4);
       c.ref = load32(entry) | ((flags >> (kNodeTreeletShift + child)) & 1 ? kRefTreelet : kRefInner);
@@ -90,8 +90,9 @@ struct View {
       const uint32_t p = pos[n];
       const bool set = p < 64 ? (low >> p) & 1 : (high >> (p - 64)) & 1;
       if (!set) continue;
-      const uint32_t before = p < 64 ? popcount_bits(low & ((uint64_t(1) << p) - 1))
-                                     : popcount_bits(low) + popcount_bits(high & ((1u << (p - 64)) - 1));
+      const uint32_t before = p < 64 ? uint32_t(std::popcount(low & ((uint64_t(1) << p) - 1)))
+                                     : uint32_t(std::popcount(low)) +
+                                           uint32_t(std::popcount(high & ((1u << (p - 64)) - 1)));
       return c.base + before;
     }
     return c.last;
