@@ -70,7 +70,7 @@ inline void prefetch_parent_rows(const Interval* data, size_t w, size_t m) {
 bool step_from_texels(const IntervalTile& tile, uint32_t n, Dense& d) {
   const size_t count = size_t(1) << (2 * (n - 1)), out = d.base[n - 1], w = tile.width;
   const Interval* data = tile.data.data();
-#if defined(__SSE2__)
+#if ST_MH_SSE2
   const __m128 neg_max = _mm_set1_ps(-FLT_MAX), pos_max = _mm_set1_ps(FLT_MAX);
   __m128 ok = _mm_castsi128_ps(_mm_set1_epi32(-1));
   for (size_t m = 0; m < count; ++m) {
@@ -104,7 +104,7 @@ void step_from_level(uint32_t l, Dense& d) {
     size_t c = in + 4 * m;
     uint32_t desc = uint32_t(d.present[c] != 0) | uint32_t(d.present[c + 1] != 0) << 1 |
                     uint32_t(d.present[c + 2] != 0) << 2 | uint32_t(d.present[c + 3] != 0) << 3;
-#if defined(__SSE2__)
+#if ST_MH_SSE2
     d.store(out + m, level_step_sse(_mm_loadu_ps(&d.lo[c]), _mm_loadu_ps(&d.hi[c]), desc));
 #else
     d.store(out + m, level_step_scalar(&d.lo[c], &d.hi[c], desc));
