@@ -17,6 +17,7 @@
 
 #include <algorithm>
 #include <cfloat>
+#include <cstdio>
 #include <memory>
 #include <string>
 
@@ -49,13 +50,14 @@ struct Dense {
 };
 
 // A morton walk over a row-major input defeats the hardware prefetcher (each texel row is
-// a page of its own at 2^10+ texels a side): fetch the texel rows of the 2^k parents
-// `kPrefetchAhead` ahead (a 2^(k/2) square of parents, i.e. rows of 2^(k/2+1) texels).
-constexpr size_t kPrefetchAhead = 64;
+// a page of its own at 2^10+ texels a side): when the walk enters an aligned block of
+// 8x8 parents, fetch the 16 rows of 16 texels of the next block. Only called while that
+// block exists (the parent grid is then at least 16 wide), so every address is in the tile.
+constexpr size_t kPrefetchAhead = 64;  // parents per 8x8 block
 inline void prefetch_parent_rows(const Interval* data, size_t w, size_t m) {
   size_t px = morton_compact(m), py = morton_compact(m >> 1);
   const Interval* p = data + (2 * py) * w + 2 * px;
-  for (size_t r = 0; r < 16; ++r) __builtin_prefetch(p + r * w);  // 8x8 parents: 16 rows of 16 texels (two lines)
+  for (size_t r = 0; r < 16; ++r) __builtin_prefetch(p + r * w);  // 16 texels = two cache lines
   for (size_t r = 0; r < 16; ++r) __builtin_prefetch(p + r * w + 8);
 }
 
@@ -131,9 +133,10 @@ void validate_tile_values(const IntervalTile& tile) {
     const Interval& v = tile.data[i];
     if (interval_ok(v)) continue;
     uint64_t x = i % tile.width, y = i / tile.width;
+    char bounds[64];
+    std::snprintf(bounds, sizeof bounds, "[%.9g, %.9g]", double(v.lo), double(v.hi));
     throw Error("build_hierarchy: texel (" + std::to_string(tile.x0 + x) + ", " + std::to_string(tile.y0 + y) +
-                ") of level " + std::to_string(tile.level) + ": interval [" + std::to_string(v.lo) + ", " +
-                std::to_string(v.hi) + "] is not finite with lo <= hi");
+                ") of level " + std::to_string(tile.level) + ": interval " + bounds + " is not finite with lo <= hi");
   }
 }
 
