@@ -94,6 +94,50 @@ TEST(DagmhRoundTrip, SpecialValuesAreKeptInsideTheirIntervals) {
             "");
 }
 
+// Level-20 maps: a few random deep paths (texel coordinates up to 2^20, the skip table
+// and every treelet depth exercised), checked on and around the paths at every level.
+TEST(DagmhRoundTrip, DeepSparsePathsAtLevel20) {
+  fields::Rng rng(99);
+  Hierarchy h;
+  h.depth = 20;
+  h.levels.resize(21);
+  std::vector<std::pair<uint64_t, uint64_t>> targets;
+  for (int t = 0; t < 6; ++t) targets.push_back({rng.below(1u << 20), rng.below(1u << 20)});
+  // Node set: every prefix of every target, valued at random levels.
+  std::vector<std::vector<uint64_t>> codes(21);
+  for (auto [x, y] : targets)
+    for (uint32_t l = 0; l <= 20; ++l) codes[l].push_back(morton_encode(uint32_t(x >> (20 - l)), uint32_t(y >> (20 - l))));
+  for (uint32_t l = 0; l <= 20; ++l) {
+    std::sort(codes[l].begin(), codes[l].end());
+    codes[l].erase(std::unique(codes[l].begin(), codes[l].end()), codes[l].end());
+    for (uint64_t m : codes[l]) {
+      HNode n;
+      n.morton = m;
+      n.has_value = l == 0 || l == 20 || rng.below(3) == 0;
+      const Interval iv = dagmh_test::mixed_interval(rng);
+      n.lo = iv.lo, n.hi = iv.hi, n.value = iv.lo;
+      if (l < 20)
+        for (uint64_t c : codes[l + 1])
+          if ((c >> 2) == m) n.child_mask |= uint8_t(1u << (c & 3));
+      h.levels[l].push_back(n);
+    }
+  }
+  auto o = encode_and_open(h);
+  for (auto [x, y] : targets)
+    for (uint32_t l = 0; l <= 20; ++l)
+      for (int dx = -2; dx <= 2; ++dx)
+        for (int dy = -2; dy <= 2; ++dy) {
+          const uint64_t side = uint64_t(1) << l;
+          const uint64_t px = std::min<uint64_t>(side - 1, uint64_t(std::max<int64_t>(0, int64_t(x >> (20 - l)) + dx)));
+          const uint64_t py = std::min<uint64_t>(side - 1, uint64_t(std::max<int64_t>(0, int64_t(y >> (20 - l)) + dy)));
+          const Interval iv = dagmh_test::admissible_at(h, l, px, py);
+          const float v = o.eval->depth(l, px, py);
+          ASSERT_TRUE(iv.lo <= v && v <= iv.hi) << "level " << l << " (" << px << ", " << py << ")";
+          for (uint32_t r : {2u, 5u, 9u})
+            ASSERT_EQ(o.eval->pcf(l, px, py, r, 0.5f), o.eval->Evaluator::pcf(l, px, py, r, 0.5f));
+        }
+}
+
 TEST(DagmhRoundTrip, PcfEqualsTheAverageOfSingleLookupsExactly) {
   const uint32_t side = fields::small_test_scale() ? 64 : 256;
   const auto tile = fields::scene_field(side, 11);
