@@ -138,6 +138,16 @@ TEST(DagmhRoundTrip, DeepSparsePathsAtLevel20) {
         }
 }
 
+TEST(DagmhRoundTrip, FinerLevelsAndOutOfRangeCoordinatesAreClamped) {
+  const Hierarchy h = random_hierarchy(6, 4, 0.6, 0.5, dagmh_test::mixed_interval);
+  auto o = encode_and_open(h);
+  for (uint64_t y = 0; y < 64; y += 3)
+    for (uint64_t x = 0; x < 64; x += 5) {
+      EXPECT_EQ(o.eval->depth(8, 4 * x + 3, 4 * y + 1), o.eval->depth(6, x, y));
+      EXPECT_EQ(o.eval->depth(2, 1000 + x, y / 16), o.eval->depth(2, 3, y / 16));
+    }
+}
+
 TEST(DagmhRoundTrip, PcfEqualsTheAverageOfSingleLookupsExactly) {
   const uint32_t side = fields::small_test_scale() ? 64 : 256;
   const auto tile = fields::scene_field(side, 11);
