@@ -54,6 +54,27 @@ TEST(DagmhRoundTrip, EveryFieldEveryLevelAdmissibleAndLossless) {
   }
 }
 
+// Top-down and tiled (stitched) constructions give other node sets and intervals.
+TEST(DagmhRoundTrip, TopDownAndStitchedHierarchies) {
+  const uint32_t side = fields::small_test_scale() ? 64 : 128, grid = 4, part = side / grid;
+  for (const auto& f : fields::all_fields(side, 5)) {
+    SCOPED_TRACE(f.name);
+    std::vector<Hierarchy> tiles;
+    for (uint32_t tj = 0; tj < grid; ++tj)
+      for (uint32_t ti = 0; ti < grid; ++ti) {
+        IntervalTile t = fields::constant_field(part, Interval{});
+        for (uint32_t j = 0; j < part; ++j)
+          for (uint32_t i = 0; i < part; ++i) t.at(i, j) = f.tile.at(ti * part + i, tj * part + j);
+        tiles.push_back(build_hierarchy(t));
+      }
+    for (const Hierarchy& h : {build_hierarchy(f.tile, MhConstruction::top_down), stitch_tiles(std::move(tiles), 2)}) {
+      auto o = encode_and_open(h);
+      EXPECT_EQ(check_every_level(h, *o.eval), "");
+      EXPECT_EQ(fields::first_violation(f.tile, [&](uint32_t i, uint32_t j) { return o.eval->depth(h.depth, i, j); }), "");
+    }
+  }
+}
+
 TEST(DagmhRoundTrip, RandomHierarchiesWithArbitraryIntervals) {
   const int runs = fields::small_test_scale() ? 20 : 80;
   for (int seed = 0; seed < runs; ++seed) {
