@@ -273,8 +273,10 @@ TEST(DepthBounds, RegionEqualsTheSameTexelsOfAFullTrace) {
   const uint32_t level = test_level(7);
   DepthBoundsTracer tracer(s, l);
   auto full = tracer.trace({level, 0, 0, 1u << level, 1u << level});
-  for (TraceRegion r : {TraceRegion{level, 13, 7, 21, 9}, TraceRegion{level, 1, 2, 3, 5},
-                        TraceRegion{level, (1u << level) - 17, (1u << level) - 1, 17, 1}}) {
+  const uint32_t side = 1u << level;
+  for (TraceRegion r : {TraceRegion{level, side / 8 + 1, side / 16 - 1, side / 4 + 5, 9},
+                        TraceRegion{level, 1, 2, 3, 5},
+                        TraceRegion{level, side - 17, side - 1, 17, 1}}) {
     auto part = tracer.trace(r);
     ASSERT_EQ(part.width, r.width);
     for (uint32_t j = 0; j < r.height; ++j)
