@@ -189,7 +189,8 @@ TEST(Messages, ErrorCodesZeroAndControlCharactersAreRejected) {
 }
 
 TEST(Messages, MakeErrorAlwaysEncodes) {
-  const std::string nasty = std::string("line1\nline2\x1b[0m\0tail", 22) + std::string(3000, 'x');
+  static const char raw[] = "line1\nline2\x1b[0m\0tail";
+  const std::string nasty = std::string(raw, sizeof raw - 1) + std::string(3000, 'x');
   const ErrorMessage e = make_error(ErrorCode::unknown_map, nasty);
   EXPECT_EQ(e.code, ErrorCode::unknown_map);
   EXPECT_EQ(e.message.size(), kMaxErrorMessageBytes);
