@@ -289,6 +289,7 @@ class Planner {
     state_[cand_of_[j]] |= kMerger;
     plan_.block_parent_levels[j] |= (1u << t_.level[j]) | (1u << t_.level[i]);
     ++stats_.merges;
+    stats_.cross_level_merges += t_.level[i] != t_.level[j];
     return true;
   }
 
