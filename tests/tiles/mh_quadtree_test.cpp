@@ -103,7 +103,8 @@ TEST(MhQuadtree, SpecialValuesKeepTheirBits) {
   h.levels[0] = {valued(0, 0.0f, 0b1111)};
   h.levels[1] = {valued(0, vals[0]), empty(1, 0b1000), valued(2, vals[2], 0b0001), valued(3, vals[3])};
   h.levels[2] = {valued(7, vals[1]), valued(8, 1.0f)};
-  const auto ev = open_mh(encode_mh(h));
+  const auto bytes = encode_mh(h);  // the evaluator reads these in place
+  const auto ev = open_mh(bytes);
   EXPECT_EQ(mhtest::check_equals_hierarchy(*ev, h), "");
   EXPECT_TRUE(std::signbit(ev->depth(1, 0, 0)));
   EXPECT_EQ(ev->depth(2, 3, 1), sub);  // morton 7 = (3, 1)
