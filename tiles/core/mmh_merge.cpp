@@ -43,7 +43,7 @@ struct ScanKey {
   float rel_lo, rel_hi, abs_lo, abs_hi;
 };
 
-constexpr uint8_t kBlocked = 1;  // dead (below a mergee) or frozen (below a merger)
+constexpr uint8_t kBlocked = 1;  // dead: below a mergee, never emitted
 constexpr uint8_t kMergee = 2, kMerger = 4;
 
 struct Assign {
@@ -56,6 +56,7 @@ class Planner {
  public:
   Planner(const FlatTree& t, const MergeOptions& o, MergeStats& s) : t_(t), opt_(o), stats_(s) {
     opt_.max_paths = std::clamp<uint32_t>(opt_.max_paths, 2, kPathsCap);
+    (void)kMerger;
   }
 
   EmitPlan run() {
@@ -69,7 +70,9 @@ class Planner {
     plan_.absolute.assign(n, 0);
     decoded_.assign(n, 0);
     base_.assign(n, 0);
-    frozen_.assign(n, 0);
+    shared_.assign(n, 0);
+    parent_.assign(n, 0);
+    slot_.assign(n, 0);
     initial_values();
     shape();
     merge();
@@ -139,6 +142,8 @@ class Planner {
       for (uint32_t slot = 0; slot < 4; ++slot) {
         if (!(t_.mask[n] >> slot & 1u)) continue;
         const uint32_t c = t_.child(n, slot);
+        parent_[c] = n;
+        slot_[c] = uint8_t(slot);
         base_[c] = b;
         if (!t_.valued[c]) continue;
         float v;
@@ -250,7 +255,7 @@ class Planner {
     return true;
   }
 
-  void mark_subtree(uint32_t root, std::vector<uint8_t>& flags) {
+  void mark_subtree(uint32_t root, std::vector<uint8_t>& flags, bool block_candidates) {
     std::vector<uint32_t> stack;
     for (uint32_t slot = 0; slot < 4; ++slot)
       if (t_.mask[root] >> slot & 1u) stack.push_back(t_.child(root, slot));
@@ -258,32 +263,67 @@ class Planner {
       const uint32_t i = stack.back();
       stack.pop_back();
       flags[i] = 1;
-      if (cand_of_[i] != ~0u) state_[cand_of_[i]] |= kBlocked;
+      if (block_candidates && cand_of_[i] != ~0u) state_[cand_of_[i]] |= kBlocked;
       for (uint32_t slot = 0; slot < 4; ++slot)
         if (t_.mask[i] >> slot & 1u) stack.push_back(t_.child(i, slot));
     }
   }
 
+  struct PathState {
+    uint32_t orig;  // the original node this path reaches
+    float dval;     // decoded value of its nearest valued ancestor-or-self on this path
+  };
+
+  // Appends every root path into emitted node e (its own path first). Outside shared
+  // blocks that is e alone with its initial decoded values (values change only inside
+  // shared blocks); inside, the paths of the block's parent and of each of its mergees,
+  // one step down, decoded with the current stored numbers. False past the path limit.
+  bool paths_of(uint32_t e, std::vector<PathState>& out) const {
+    if (!shared_[e]) {
+      out.push_back({e, child_base(e)});
+      return out.size() <= opt_.max_paths;
+    }
+    std::vector<PathState> up;
+    const uint32_t p = parent_[e];
+    if (!paths_of(p, up)) return false;
+    auto it = mergees_.find(p);
+    if (it != mergees_.end())
+      for (uint32_t m : it->second)
+        if (!paths_of(m, up)) return false;
+    for (const PathState& s : up) {
+      float d = s.dval;
+      if (t_.valued[e]) d = plan_.absolute[e] ? plan_.stored[e] : mmh_add(s.dval, plan_.stored[e]);
+      out.push_back({t_.child(s.orig, slot_[e]), d});
+      if (out.size() > opt_.max_paths) return false;
+    }
+    return true;
+  }
+
+  // Paths into j's block: j's own, its mergees', then the candidate's (its own path
+  // last: compare() checks the topology of the last path against the first).
   bool try_merge(uint32_t i, uint32_t j) {
-    static const std::vector<uint32_t> kNone;
+    paths_.clear();
+    if (!paths_of(j, paths_)) return false;
     auto found = mergees_.find(j);
-    const std::vector<uint32_t>& mergees = found == mergees_.end() ? kNone : found->second;
+    if (found != mergees_.end())
+      for (uint32_t m : found->second)
+        if (!paths_of(m, paths_)) return false;
+    const size_t first_i = paths_.size();
+    if (!paths_of(i, paths_)) return false;
+    std::swap(paths_[first_i], paths_.back());
+    const uint32_t k = uint32_t(paths_.size());
     uint32_t roots[kPathsCap];
     float bases[kPathsCap];
-    uint32_t k = 0;
-    roots[k++] = j;
-    for (uint32_t m : mergees) roots[k++] = m;
-    roots[k++] = i;
-    for (uint32_t p = 0; p < k; ++p) bases[p] = child_base(roots[p]);
+    for (uint32_t p = 0; p < k; ++p) roots[p] = paths_[p].orig, bases[p] = paths_[p].dval;
     scratch_.clear();
     if (!compare(roots, bases, k)) return false;
     for (const Assign& a : scratch_) {
       plan_.stored[a.node] = a.stored;
       plan_.absolute[a.node] = a.absolute;
     }
-    if (mergees.empty()) mark_subtree(j, frozen_);
+    if (found == mergees_.end()) mark_subtree(j, shared_, false);
     mergees_[j].push_back(i);
-    mark_subtree(i, dead_);
+    mark_subtree(i, dead_, true);
     plan_.block_owner[i] = j;
     state_[cand_of_[i]] |= kMergee;
     state_[cand_of_[j]] |= kMerger;
@@ -316,10 +356,6 @@ class Planner {
           if (quick_reject(key_a, keys_[b]) | bool(state_[b] & (kBlocked | kMergee))) continue;
           ++passed;
           const uint32_t j = cands_[b].node;
-          if (state_[b] & kMerger) {
-            auto it = mergees_.find(j);
-            if (it->second.size() + 2 > opt_.max_paths) continue;
-          }
           if (try_merge(i, j)) break;
           ++stats_.full_rejects;
         }
@@ -371,7 +407,10 @@ class Planner {
   MergeStats& stats_;
   EmitPlan plan_;
   std::vector<float> decoded_, base_;
-  std::vector<uint8_t> frozen_, dead_;
+  std::vector<uint8_t> shared_, dead_;  // below a merger / below a mergee
+  std::vector<uint32_t> parent_;
+  std::vector<uint8_t> slot_;
+  std::vector<PathState> paths_;
   std::vector<uint32_t> pre_, pos0_, cand_of_;
   std::vector<Candidate> cands_;
   std::vector<ScanKey> keys_;  // the scanned data, in candidate order
