@@ -4,7 +4,11 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <cstring>
 #include <unordered_map>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "tiles/core/error.hpp"
 
@@ -39,6 +43,8 @@ struct Candidate {
 // number and of the decoder's add admits a little more than the exact interval. A
 // reject is always safe (only an accepted merge needs proof); the widening just keeps
 // the merges that rounding makes possible.
+// Kept as separate arrays (rel_lo_, rel_hi_, abs_lo_, abs_hi_ in candidate order) so the
+// scan compares 4 candidates per SSE instruction.
 struct ScanKey {
   float rel_lo, rel_hi, abs_lo, abs_hi;
 };
@@ -211,24 +217,57 @@ class Planner {
     std::vector<uint32_t> block0;
     unscaled_layout(t_, pos0_, block0);
     cand_of_.assign(n, ~0u);
-    keys_.resize(cands_.size());
+    rel_lo_.resize(cands_.size());
+    rel_hi_.resize(cands_.size());
+    abs_lo_.resize(cands_.size());
+    abs_hi_.resize(cands_.size());
     block0_.resize(cands_.size());
     state_.assign(cands_.size(), 0);
     for (uint32_t c = 0; c < cands_.size(); ++c) {
       const uint32_t i = cands_[c].node, f = first_valued[i];
       const double b = child_base(i), lo = t_.lo[f], hi = t_.hi[f];
       const double slack = 0x1p-20 * (std::fabs(b) + std::fabs(lo) + std::fabs(hi)) + 0x1p-126;
-      keys_[c] = {float(lo - b - slack), float(hi - b + slack), t_.lo[f], t_.hi[f]};
+      rel_lo_[c] = float(lo - b - slack);
+      rel_hi_[c] = float(hi - b + slack);
+      abs_lo_[c] = t_.lo[f];
+      abs_hi_[c] = t_.hi[f];
       block0_[c] = block0[i];
       cand_of_[i] = c;
     }
   }
 
-  // Branch-free: nearly every test is a reject, so the scan is this loop.
-  static bool quick_reject(const ScanKey& a, const ScanKey& b) {
-    const bool rel_apart = (a.rel_hi < b.rel_lo) | (b.rel_hi < a.rel_lo);
-    const bool abs_apart = (a.abs_hi < b.abs_lo) | (b.abs_hi < a.abs_lo);
-    return rel_apart & abs_apart;
+  // Candidates b in [b0, b0 + n) (n <= 32) that pass the quick reject against `a` and are
+  // neither dead nor mergees, as a bit mask. Nearly every test is a reject, so the scan
+  // is this function: 4 candidates per SSE2 step where available.
+  uint32_t scan_chunk(const ScanKey& a, size_t b0, size_t n) const {
+    uint32_t mask = 0;
+    size_t k = 0;
+#if defined(__SSE2__)
+    const __m128 a_rl = _mm_set1_ps(a.rel_lo), a_rh = _mm_set1_ps(a.rel_hi);
+    const __m128 a_al = _mm_set1_ps(a.abs_lo), a_ah = _mm_set1_ps(a.abs_hi);
+    for (; k + 4 <= n; k += 4) {
+      const size_t b = b0 + k;
+      const __m128 rel_apart = _mm_or_ps(_mm_cmplt_ps(a_rh, _mm_loadu_ps(&rel_lo_[b])),
+                                         _mm_cmplt_ps(_mm_loadu_ps(&rel_hi_[b]), a_rl));
+      const __m128 abs_apart = _mm_or_ps(_mm_cmplt_ps(a_ah, _mm_loadu_ps(&abs_lo_[b])),
+                                         _mm_cmplt_ps(_mm_loadu_ps(&abs_hi_[b]), a_al));
+      const uint32_t rejected = uint32_t(_mm_movemask_ps(_mm_and_ps(rel_apart, abs_apart)));
+      uint32_t st;
+      std::memcpy(&st, &state_[b], 4);
+      st &= 0x01010101u * (kBlocked | kMergee);
+      st = (st | (st >> 1)) & 0x01010101u;                  // byte j: 1 if unusable
+      const uint32_t unusable = ((st * 0x01020408u) >> 24) & 0xFu;  // gather the 4 bits
+      mask |= (~(rejected | unusable) & 0xFu) << k;
+    }
+#endif
+    for (; k < n; ++k) {
+      const size_t b = b0 + k;
+      const bool rel_apart = (a.rel_hi < rel_lo_[b]) | (rel_hi_[b] < a.rel_lo);
+      const bool abs_apart = (a.abs_hi < abs_lo_[b]) | (abs_hi_[b] < a.abs_lo);
+      const bool usable = (state_[b] & (kBlocked | kMergee)) == 0;
+      mask |= uint32_t(!(rel_apart & abs_apart) & usable) << k;
+    }
+    return mask;
   }
 
   // Lock-step walk of the block below the merger (nodes[0]) and the corresponding
@@ -302,6 +341,7 @@ class Planner {
   // Paths into j's block: j's own, its mergees', then the candidate's (its own path
   // last: compare() checks the topology of the last path against the first).
   bool try_merge(uint32_t i, uint32_t j) {
+    ST_CHECK(plan_.block_owner[j] == j && !dead_[j] && plan_.block_owner[i] == i && !dead_[i]);
     paths_.clear();
     if (!paths_of(j, paths_)) return false;
     auto found = mergees_.find(j);
@@ -350,16 +390,24 @@ class Planner {
         while (reach_end < g1 && block0_[reach_end] - from <= kMergeReach) ++reach_end;
         if (state_[a]) continue;  // a mergee is neither blocked, merged nor a merger
         const size_t end = std::min<size_t>(reach_end, a + 1 + opt_.window);
-        const ScanKey key_a = keys_[a];
-        size_t b = a + 1;
-        for (; b < end; ++b) {
-          if (quick_reject(key_a, keys_[b]) | bool(state_[b] & (kBlocked | kMergee))) continue;
-          ++passed;
-          const uint32_t j = cands_[b].node;
-          if (try_merge(i, j)) break;
-          ++stats_.full_rejects;
+        const ScanKey key_a{rel_lo_[a], rel_hi_[a], abs_lo_[a], abs_hi_[a]};
+        size_t scanned_to = end;
+        bool merged = false;
+        for (size_t b0 = a + 1; b0 < end && !merged; b0 += 32) {
+          uint32_t mask = scan_chunk(key_a, b0, std::min<size_t>(32, end - b0));
+          while (mask) {
+            const size_t b = b0 + size_t(__builtin_ctz(mask));
+            mask &= mask - 1;
+            ++passed;
+            if (try_merge(i, cands_[b].node)) {
+              merged = true;
+              scanned_to = b + 1;
+              break;
+            }
+            ++stats_.full_rejects;
+          }
         }
-        tests += std::min(b, end) - (a + 1);
+        tests += scanned_to - (a + 1);
       }
       stats_.tests += tests;
       stats_.quick_rejects += tests - passed;
@@ -413,7 +461,7 @@ class Planner {
   std::vector<PathState> paths_;
   std::vector<uint32_t> pre_, pos0_, cand_of_;
   std::vector<Candidate> cands_;
-  std::vector<ScanKey> keys_;  // the scanned data, in candidate order
+  std::vector<float> rel_lo_, rel_hi_, abs_lo_, abs_hi_;  // scanned data, candidate order
   std::vector<uint32_t> block0_;
   std::vector<uint8_t> state_;
   std::unordered_map<uint32_t, std::vector<uint32_t>> mergees_;
