@@ -116,9 +116,13 @@ class Planner {
     a.node = nodes[0];
     a.absolute = 0;
     if (lo <= hi + 1e-6 * (1.0 + std::fabs(lo))) {
-      const float mid = float(0.5 * (lo + hi));
-      for (float r : {mid, float(lo), float(hi), std::nextafter(float(lo), INFINITY),
-                      std::nextafter(float(hi), -INFINITY)}) {
+      // Candidates in order, the rounded ends only when the middle fails.
+      for (int c = 0; c < 5; ++c) {
+        const float r = c == 0   ? float(0.5 * (lo + hi))
+                        : c == 1 ? float(lo)
+                        : c == 2 ? float(hi)
+                        : c == 3 ? std::nextafter(float(lo), INFINITY)
+                                 : std::nextafter(float(hi), -INFINITY);
         if (try_relative(nodes, bases, k, r, out)) {
           a.stored = r;
           return true;
