@@ -62,7 +62,6 @@ class Planner {
  public:
   Planner(const FlatTree& t, const MergeOptions& o, MergeStats& s) : t_(t), opt_(o), stats_(s) {
     opt_.max_paths = std::clamp<uint32_t>(opt_.max_paths, 2, kPathsCap);
-    (void)kMerger;
   }
 
   EmitPlan run() {
