@@ -189,7 +189,15 @@ TEST(MhQuadtree, ErrorsNameTheFieldAndOffset) {
   bad = b;
   std::memcpy(bad.data() + 28, "\x00\x00\xc0\x7f", 4);  // NaN leaf
   expect_error(bad, "value at byte 28");
-  expect_error(encode_mmh(tiny()), "open_mmh");
+  // open_mh reads MMH buffers too; open_mmh only MMH.
+  const auto mmh = encode_mmh(tiny());
+  EXPECT_EQ(open_mh(mmh)->depth(1, 0, 1), 0.75f);
+  try {
+    open_mmh(b);
+    ADD_FAILURE() << "open_mmh accepted an MH buffer";
+  } catch (const FormatError& e) {
+    EXPECT_NE(std::string(e.what()).find("this is an MH buffer"), std::string::npos) << e.what();
+  }
 }
 
 TEST(MhQuadtree, MalformedHierarchiesAreRejected) {
