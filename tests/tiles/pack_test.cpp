@@ -116,6 +116,10 @@ TEST(Pack, HeaderRecordsTheBuild) {
   EXPECT_EQ(b.reader->header_bytes().size(), kPackHeaderBytes);
   EXPECT_EQ(b.reader->grid_bytes().size(), CutGrid::serialized_size(2));
   EXPECT_FALSE(std::filesystem::exists(b.path + ".tmp"));
+  const std::string summary = b.reader->summary();
+  EXPECT_NE(summary.find("map level 5 (32 texels a side), skip level 2"), std::string::npos) << summary;
+  EXPECT_NE(summary.find("exit_depths"), std::string::npos) << summary;
+  EXPECT_NE(summary.find("scene = header"), std::string::npos) << summary;
   // Stored bytes are the zlib stream as it lies in the file.
   for (const TileIndexEntry& e : b.reader->tiles()) {
     std::vector<uint8_t> stored = b.reader->read_stored(e.id);
