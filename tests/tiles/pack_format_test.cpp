@@ -11,6 +11,8 @@
 namespace st {
 namespace {
 
+constexpr size_t kDefaultTileBytesForTest = 64 * 1024;
+
 template <class T>
 T at(const uint8_t* b, size_t off) {
   T v;
@@ -165,17 +167,18 @@ TEST(PackFormat, IndexOffsetsArePinnedAndEntriesChecked) {
   EXPECT_EQ(at<uint32_t>(b.data(), 32 + 20), 40u);
   EXPECT_EQ(at<uint32_t>(b.data(), 32 + 24), 7u);
   EXPECT_EQ(b[32 + 28], 2);
-  auto back = parse_index(b, 9000, 300, 600, "x.pack");
+  auto back = parse_index(b, 9000, 300, 600, 65536, "x.pack");
   ASSERT_EQ(back.size(), 2u);
   EXPECT_EQ(back[0].crc, 0xabcdef01u);
-  EXPECT_THROW(parse_index(b, 9000, 300, 520, "x.pack"), FormatError);  // payload past the journal
-  EXPECT_THROW(parse_index(b, 9000, 450, 600, "x.pack"), FormatError);  // payload before it
+  EXPECT_THROW(parse_index(b, 9000, 300, 520, 65536, "x.pack"), FormatError);  // payload past the journal
+  EXPECT_THROW(parse_index(b, 9000, 450, 600, 65536, "x.pack"), FormatError);  // payload before it
+  EXPECT_THROW(parse_index(b, 9000, 300, 600, 39, "x.pack"), FormatError);      // raw > tile_bytes
   std::swap(e[0], e[1]);
-  EXPECT_THROW(parse_index(serialize_index(e), 9000, 300, 600, "x.pack"), FormatError);  // unsorted
+  EXPECT_THROW(parse_index(serialize_index(e), 9000, 300, 600, 65536, "x.pack"), FormatError);  // unsorted
   try {
     auto bad = b;
     bad[32 + 29] = 1;
-    parse_index(bad, 9000, 300, 600, "x.pack");
+    parse_index(bad, 9000, 300, 600, 65536, "x.pack");
     ADD_FAILURE();
   } catch (const FormatError& err) {
     EXPECT_NE(std::string(err.what()).find("entry 1"), std::string::npos) << err.what();
@@ -206,6 +209,14 @@ TEST(PackFormat, ParamsAndZlib) {
   std::vector<uint8_t> trailing = z;
   trailing.push_back(0);
   EXPECT_THROW(zlib_decompress(trailing, uint32_t(raw.size()), "t"), FormatError);
+  // Incompressible tiles stay within the bound readers accept, at every level.
+  std::vector<uint8_t> noise(kDefaultTileBytesForTest);
+  for (auto& v : noise) v = uint8_t(rng.next());
+  for (int level : {0, 1, 6, 12}) {
+    std::vector<uint8_t> zn = zlib_compress(noise, level);
+    EXPECT_LE(zn.size(), max_stored_size(noise.size())) << level;
+    EXPECT_EQ(zlib_decompress(zn, uint32_t(noise.size()), "t"), noise);
+  }
   for (size_t n = 0; n < z.size(); n += 13)
     EXPECT_THROW(zlib_decompress(std::span(z).first(n), uint32_t(raw.size()), "t"), FormatError) << n;
 }

@@ -100,7 +100,8 @@ void PackReader::load() {
   std::vector<uint8_t> index_bytes(header_.tile_count * kIndexEntryBytes);
   read_at(header_.index_offset, index_bytes);
   if (crc32_of(index_bytes) != header_.index_crc) throw FormatError(where(header_.index_offset) + ": tile index CRC mismatch");
-  index_ = parse_index(index_bytes, header_.index_offset, header_.journal_offset, header_.grid_offset, name_);
+  index_ = parse_index(index_bytes, header_.index_offset, header_.journal_offset, header_.grid_offset,
+                       header_.tile_bytes, name_);
 
   bool any_index = std::any_of(index_.begin(), index_.end(), [](auto& e) { return e.kind == TileKind::index; });
   if (any_index != bool(header_.flags & kFeatureIndexTiles))
