@@ -2,6 +2,7 @@
 // per valued node, independent of the MH construction) and a dense reference of the
 // admissible interval answering for every texel of every level.
 #pragma once
+#include <algorithm>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -80,6 +81,21 @@ inline std::vector<std::vector<Interval>> admissible_levels(const Hierarchy& h) 
     }
   }
   return out;
+}
+
+// The admissible interval answering for (l, x, y), by binary search in the node lists
+// (for big sparse hierarchies where admissible_levels would be too large).
+inline Interval admissible_at(const Hierarchy& h, uint32_t level, uint64_t x, uint64_t y) {
+  Interval iv{h.levels[0][0].lo, h.levels[0][0].hi};
+  for (uint32_t l = 1; l <= level && l <= h.depth; ++l) {
+    const uint64_t code = morton_encode(uint32_t(x >> (level - l)), uint32_t(y >> (level - l)));
+    const auto& lv = h.levels[l];
+    auto it = std::lower_bound(lv.begin(), lv.end(), code,
+                               [](const HNode& n, uint64_t c) { return n.morton < c; });
+    if (it == lv.end() || it->morton != code) break;
+    if (it->has_value) iv = {it->lo, it->hi};
+  }
+  return iv;
 }
 
 // Bytes and their evaluator together (the evaluator references the bytes).

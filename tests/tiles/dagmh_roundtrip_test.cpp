@@ -54,6 +54,27 @@ TEST(DagmhRoundTrip, EveryFieldEveryLevelAdmissibleAndLossless) {
   }
 }
 
+// Top-down and tiled (stitched) constructions give other node sets and intervals.
+TEST(DagmhRoundTrip, TopDownAndStitchedHierarchies) {
+  const uint32_t side = fields::small_test_scale() ? 64 : 128, grid = 4, part = side / grid;
+  for (const auto& f : fields::all_fields(side, 5)) {
+    SCOPED_TRACE(f.name);
+    std::vector<Hierarchy> tiles;
+    for (uint32_t tj = 0; tj < grid; ++tj)
+      for (uint32_t ti = 0; ti < grid; ++ti) {
+        IntervalTile t = fields::constant_field(part, Interval{});
+        for (uint32_t j = 0; j < part; ++j)
+          for (uint32_t i = 0; i < part; ++i) t.at(i, j) = f.tile.at(ti * part + i, tj * part + j);
+        tiles.push_back(build_hierarchy(t));
+      }
+    for (const Hierarchy& h : {build_hierarchy(f.tile, MhConstruction::top_down), stitch_tiles(std::move(tiles), 2)}) {
+      auto o = encode_and_open(h);
+      EXPECT_EQ(check_every_level(h, *o.eval), "");
+      EXPECT_EQ(fields::first_violation(f.tile, [&](uint32_t i, uint32_t j) { return o.eval->depth(h.depth, i, j); }), "");
+    }
+  }
+}
+
 TEST(DagmhRoundTrip, RandomHierarchiesWithArbitraryIntervals) {
   const int runs = fields::small_test_scale() ? 20 : 80;
   for (int seed = 0; seed < runs; ++seed) {
@@ -92,6 +113,60 @@ TEST(DagmhRoundTrip, SpecialValuesAreKeptInsideTheirIntervals) {
   auto o = encode_and_open(h);
   EXPECT_EQ(fields::first_violation(tile, [&](uint32_t i, uint32_t j) { return o.eval->depth(6, i, j); }),
             "");
+}
+
+// Level-20 maps: a few random deep paths (texel coordinates up to 2^20, the skip table
+// and every treelet depth exercised), checked on and around the paths at every level.
+TEST(DagmhRoundTrip, DeepSparsePathsAtLevel20) {
+  fields::Rng rng(99);
+  Hierarchy h;
+  h.depth = 20;
+  h.levels.resize(21);
+  std::vector<std::pair<uint64_t, uint64_t>> targets;
+  for (int t = 0; t < 6; ++t) targets.push_back({rng.below(1u << 20), rng.below(1u << 20)});
+  // Node set: every prefix of every target, valued at random levels.
+  std::vector<std::vector<uint64_t>> codes(21);
+  for (auto [x, y] : targets)
+    for (uint32_t l = 0; l <= 20; ++l) codes[l].push_back(morton_encode(uint32_t(x >> (20 - l)), uint32_t(y >> (20 - l))));
+  for (uint32_t l = 0; l <= 20; ++l) {
+    std::sort(codes[l].begin(), codes[l].end());
+    codes[l].erase(std::unique(codes[l].begin(), codes[l].end()), codes[l].end());
+    for (uint64_t m : codes[l]) {
+      HNode n;
+      n.morton = m;
+      n.has_value = l == 0 || l == 20 || rng.below(3) == 0;
+      const Interval iv = dagmh_test::mixed_interval(rng);
+      n.lo = iv.lo, n.hi = iv.hi, n.value = iv.lo;
+      if (l < 20)
+        for (uint64_t c : codes[l + 1])
+          if ((c >> 2) == m) n.child_mask |= uint8_t(1u << (c & 3));
+      h.levels[l].push_back(n);
+    }
+  }
+  auto o = encode_and_open(h);
+  for (auto [x, y] : targets)
+    for (uint32_t l = 0; l <= 20; ++l)
+      for (int dx = -2; dx <= 2; ++dx)
+        for (int dy = -2; dy <= 2; ++dy) {
+          const uint64_t side = uint64_t(1) << l;
+          const uint64_t px = std::min<uint64_t>(side - 1, uint64_t(std::max<int64_t>(0, int64_t(x >> (20 - l)) + dx)));
+          const uint64_t py = std::min<uint64_t>(side - 1, uint64_t(std::max<int64_t>(0, int64_t(y >> (20 - l)) + dy)));
+          const Interval iv = dagmh_test::admissible_at(h, l, px, py);
+          const float v = o.eval->depth(l, px, py);
+          ASSERT_TRUE(iv.lo <= v && v <= iv.hi) << "level " << l << " (" << px << ", " << py << ")";
+          for (uint32_t r : {2u, 5u, 9u})
+            ASSERT_EQ(o.eval->pcf(l, px, py, r, 0.5f), o.eval->Evaluator::pcf(l, px, py, r, 0.5f));
+        }
+}
+
+TEST(DagmhRoundTrip, FinerLevelsAndOutOfRangeCoordinatesAreClamped) {
+  const Hierarchy h = random_hierarchy(6, 4, 0.6, 0.5, dagmh_test::mixed_interval);
+  auto o = encode_and_open(h);
+  for (uint64_t y = 0; y < 64; y += 3)
+    for (uint64_t x = 0; x < 64; x += 5) {
+      EXPECT_EQ(o.eval->depth(8, 4 * x + 3, 4 * y + 1), o.eval->depth(6, x, y));
+      EXPECT_EQ(o.eval->depth(2, 1000 + x, y / 16), o.eval->depth(2, 3, y / 16));
+    }
 }
 
 TEST(DagmhRoundTrip, PcfEqualsTheAverageOfSingleLookupsExactly) {

@@ -4,7 +4,9 @@
 #include <gtest/gtest.h>
 
 #include "tests/tiles/dagmh_fixtures.hpp"
+#include "tests/tiles/interval_fields.hpp"
 #include "tiles/core/dagmh_encode.hpp"
+#include "tiles/core/mh_build.hpp"
 
 namespace st {
 namespace {
@@ -60,6 +62,30 @@ TEST(DagmhSharing, RepeatedTopologyIsStoredOnce) {
       const Interval iv = want[h.depth][y * (1u << h.depth) + x];
       ASSERT_TRUE(iv.lo <= v && v <= iv.hi) << x << ", " << y;
     }
+}
+
+// A field made of one 32x32 random block repeated: the bottom-up construction gives every
+// copy the same topology, so the structure is stored about once.
+TEST(DagmhSharing, RepeatedPatternFieldSharesItsStructure) {
+  const uint32_t side = fields::small_test_scale() ? 128 : 256, block = 32;
+  const IntervalTile pattern = fields::uniform_field(block, 5);
+  IntervalTile tile = fields::constant_field(side, Interval{});
+  for (uint32_t j = 0; j < side; ++j)
+    for (uint32_t i = 0; i < side; ++i) tile.at(i, j) = pattern.at(i % block, j % block);
+  const Hierarchy h = build_hierarchy(tile);
+  dagmh::EncodeStats st;
+  const auto bytes = dagmh::encode(h, &st);
+  const uint64_t copies = (side / block) * (side / block);
+  EXPECT_LE(st.dag_inner + st.dag_treelets, (st.tree_inner + st.tree_treelets) / (copies / 4));
+  EXPECT_LT(st.node_bytes + st.treelet_bytes, 4 * h.node_count() / 20);  // MH: a word per node
+  EXPECT_LT(bytes.size(), 4 * (h.node_count() + h.valued_count()));
+  std::printf("repeated %ux%u block over %u^2: inner %llu -> %llu, treelets %llu -> %llu, structure %llu B "
+              "for %zu nodes; total %zu B\n", block, block, side, (unsigned long long)st.tree_inner,
+              (unsigned long long)st.dag_inner, (unsigned long long)st.tree_treelets,
+              (unsigned long long)st.dag_treelets, (unsigned long long)(st.node_bytes + st.treelet_bytes),
+              h.node_count(), bytes.size());
+  auto e = open_dagmh(bytes);
+  EXPECT_EQ(fields::first_violation(tile, [&](uint32_t i, uint32_t j) { return e->depth(h.depth, i, j); }), "");
 }
 
 uint64_t constant_hash(const uint32_t*, size_t) { return 42; }

@@ -21,8 +21,8 @@ TEST(DepthBoundsProcedural, ScenesMatchTheDoubleReference) {
       {"procedural:sphere,segments=24", "sun:azimuth=200,elevation=35", 7, 1},
       {"procedural:boxes", "sun:azimuth=45,elevation=55", 7, 1},
       {"procedural:city,size=2", "sun:azimuth=30,elevation=50", 9, small ? 400u : 100u},
-      {"procedural:terrain,size=32", "sun:azimuth=120,elevation=20", 8, small ? 200u : 50u},
-      {"procedural:hairball,count=8", "sun:azimuth=10,elevation=70", 8, small ? 200u : 50u},
+      {"procedural:terrain,size=32", "sun:azimuth=120,elevation=20", 8, small ? 100u : 50u},
+      {"procedural:hairball,count=8", "sun:azimuth=10,elevation=70", 8, small ? 100u : 50u},
   };
   for (const Case& c : cases) {
     SCOPED_TRACE(c.spec);

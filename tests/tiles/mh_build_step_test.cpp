@@ -56,7 +56,7 @@ TEST(MhLevelStep, MatchesItsDefinitionOnRandomQuads) {
     ASSERT_EQ(std::popcount(covered), best);
     // Stored: every uncovered child, and covered children with descendants (empty).
     ASSERT_EQ(uint32_t(s.present), uint32_t(s.valued) | (covered & desc));
-#if defined(__SSE2__)
+#if ST_MH_SSE2
     StepOut v = level_step_sse(_mm_loadu_ps(lo), _mm_loadu_ps(hi), desc);
     ASSERT_EQ(v.lo, s.lo);  // float equality: -0.0 and 0.0 may be picked differently
     ASSERT_EQ(v.hi, s.hi);

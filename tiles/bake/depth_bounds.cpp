@@ -10,6 +10,7 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <unordered_map>
 #include <vector>
 
 #include "tiles/core/error.hpp"
@@ -113,11 +114,11 @@ void collect_equal_t(const RTCFilterFunctionNArguments* args) {
 }
 
 // Host-side counting state of one ray.
-struct LaneCount {
-  uint32_t n_mesh = 0;
+struct LaneCount {  // plain data: trace_packet resets n_mesh and total per ray
+  uint32_t n_mesh;
+  int32_t total;
   uint32_t mesh[kMaxMeshes];
   int32_t count[kMaxMeshes];
-  int32_t total = 0;
 };
 
 
@@ -139,6 +140,9 @@ struct DepthBoundsTracer::Impl {
   std::vector<uint32_t> closed_info;
   std::vector<Vec3d> closed_normal;   // closed prim -> geometric normal (double, outwards)
   std::vector<double> closed_plane;   // closed prim -> dot(normal, v0 - centre)
+  // closed prim -> 1 when a closed prim of another mesh lies in the same plane facing the
+  // other way (a possible touching contact); exits through other prims need no look-ahead.
+  std::vector<uint8_t> closed_touchable;
   uint64_t triangles = 0;
   bool any_closed = false;
   double build_s = 0;
@@ -149,6 +153,7 @@ struct DepthBoundsTracer::Impl {
   }
 
   void build(const Scene& s);
+  void mark_touchable(double scene_size);
   void trace_packet(const TraceRegion& r, uint32_t px, uint32_t py, TraceMode mode,
                     IntervalTile& out, DepthBoundsStats& st) const;
   bool apply_group(const LaneHits& h, const Vec3d& dir, LaneCount& c,
@@ -268,10 +273,70 @@ void DepthBoundsTracer::Impl::build(const Scene& s) {
   }
   rtcReleaseBuffer(vbuf);
   any_closed = !closed_info.empty();
+  mark_touchable(b.empty() ? 1.0 : std::max({b.extent().x, b.extent().y, b.extent().z, 1e-300}));
   rtcCommitScene(scene);
   if (rtcGetDeviceError(device) != RTC_ERROR_NONE)
     throw Error("embree: building the scene '" + s.name + "' failed: " + embree_error(device));
   build_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+}
+
+// Coplanar, oppositely facing closed prims of different meshes (a box standing on
+// another). Planes are keyed by the unit normal turned to a canonical orientation and the
+// plane offset, quantised; two prims of one exact plane share a key. A pair that lands in
+// neighbouring cells is missed, which only costs compression: without the look-ahead the
+// exit is reported where the counters first reach 0 (conservative).
+void DepthBoundsTracer::Impl::mark_touchable(double scene_size) {
+  struct Key {
+    int64_t q[4];
+    bool operator==(const Key& o) const {
+      return q[0] == o.q[0] && q[1] == o.q[1] && q[2] == o.q[2] && q[3] == o.q[3];
+    }
+  };
+  struct KeyHash {
+    size_t operator()(const Key& k) const {
+      uint64_t h = 1469598103934665603ull;
+      for (int64_t v : k.q) h = (h ^ uint64_t(v)) * 1099511628211ull;
+      return size_t(h);
+    }
+  };
+  struct Side {
+    uint32_t mesh;
+    int8_t orientation;
+  };
+  const size_t n = closed_info.size();
+  std::vector<Key> keys(n);
+  std::vector<int8_t> orient(n, 0);
+  std::unordered_map<Key, std::vector<Side>, KeyHash> planes;
+  planes.reserve(n / 2 + 1);
+  for (size_t k = 0; k < n; ++k) {
+    const Vec3d& nn = closed_normal[k];
+    const double len = length(nn);
+    if (!(len > 0) || !std::isfinite(len)) continue;
+    const Vec3d u = nn / len;
+    const double ax = std::fabs(u.x), ay = std::fabs(u.y), az = std::fabs(u.z);
+    const double major = ax >= ay && ax >= az ? u.x : (ay >= az ? u.y : u.z);
+    const int8_t o = major > 0 ? 1 : -1;
+    const double d = closed_plane[k] / len * o / scene_size;
+    keys[k] = {{std::llround(u.x * o * 0x1p24), std::llround(u.y * o * 0x1p24),
+                std::llround(u.z * o * 0x1p24), std::llround(d * 0x1p32)}};
+    orient[k] = o;
+    auto& sides = planes[keys[k]];
+    const uint32_t mesh = closed_info[k] >> 2;
+    bool seen = false;
+    for (const Side& sd : sides) seen |= sd.mesh == mesh && sd.orientation == o;
+    if (!seen && sides.size() < 8) sides.push_back({mesh, o});
+  }
+  closed_touchable.assign(n, 0);
+  for (size_t k = 0; k < n; ++k) {
+    if (orient[k] == 0) continue;
+    const auto& sides = planes[keys[k]];
+    if (sides.size() >= 8) {  // crowded plane: assume contact
+      closed_touchable[k] = 1;
+      continue;
+    }
+    for (const Side& sd : sides)
+      if (sd.mesh != closed_info[k] >> 2 && sd.orientation != orient[k]) closed_touchable[k] = 1;
+  }
 }
 
 float DepthBoundsTracer::Impl::depth_of(float t) const {
@@ -349,6 +414,7 @@ void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, ui
     active[l] = i < r.width && j < r.height;
     valid[l] = active[l] ? -1 : 0;
     lo_t[l] = kNoHit;
+    counts[l].n_mesh = 0, counts[l].total = 0;
     rh.ray.tnear[l] = t_min;
     rh.ray.tfar[l] = t_max;
     rh.ray.mask[l] = 0xFFFFFFFFu;
@@ -380,7 +446,7 @@ void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, ui
   rtcIntersect8(valid, scene, &fc.ctx, &rh);
   st.traversals += n_lanes;
   float hi_t[kLanes], exit_t[kLanes];  // exit_t: float t where the counters reached 0
-  double exit_d[kLanes] = {};          // its exact t (max over the exit group, double)
+  double exit_d[kLanes];               // its exact t (max over the exit group, double)
   uint32_t n_active = 0;
   for (unsigned l = 0; l < kLanes; ++l) {
     hi_t[l] = exit_t[l] = kNoHit;
@@ -461,6 +527,16 @@ void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, ui
         } else {
           floor_t[l] = h.best_t;
           if (counts[l].total == 0) {
+            bool touchable = false;
+            for (uint32_t k = 0; k < h.n_group; ++k)
+              touchable |= (h.group[k] >> 32) == kClosedGeom &&
+                           closed_touchable[uint32_t(h.group[k])] != 0;
+            if (!touchable) {  // nothing can touch this exit: no look-ahead needed
+              hi_t[l] = h.best_t;
+              active[l] = false;
+              --n_active;
+              continue;
+            }
             exit_t[l] = h.best_t;
             exit_d[l] = -INFINITY;
             for (uint32_t k = 0; k < h.n_group; ++k)

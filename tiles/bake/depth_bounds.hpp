@@ -14,13 +14,22 @@
 // so coplanar and touching faces are handled (MACHINE.md pitfall). Within a group a mesh
 // contributes sign(sum of its facings) in {-1, 0, +1}.
 //
+// Touching faces (a building standing on the ground slab): Embree's float t of coplanar
+// faces may differ by an ulp either way, and its box culling can hide a hit an ulp below
+// the accepted one. So re-traces start slightly before the last group (ids exclude what
+// was processed), and when the counters reach 0 a short look-ahead around the exit
+// gathers unprocessed closed hits; one counts as touching only when its exact ray-plane
+// t in double equals the exit's (within 1e-9 of the ray's t range).
+//
 // Conservative fallbacks (hi = lo): the first hit group holds no closed hit (open
 // geometry), any counter would go negative (e.g. inverted winding), the ray leaves the
 // scene with a counter > 0, or a bounded per-ray table overflows. Open surfaces met while
-// inside a closed object are ignored. No hit: kLitDepth sentinel [1, 1].
+// inside a closed object are ignored. No hit: kLitDepth sentinel [1, 1]. A scene without
+// triangles is valid and traces to [1, 1] everywhere (the caller fits the light).
 //
 // Lossless contract: lo is the first-hit depth of the traced ray and every point of the
-// ray between lo and hi is inside a closed object (up to float32 tracing precision).
+// ray between lo and hi is inside a closed object (up to float32 tracing precision, and
+// faces touching within 1e-9 of the t range count as touching).
 // Depths: double from the float hit t (depth_of_t), then float32, clamped to [0,1] with
 // lo <= hi.
 //

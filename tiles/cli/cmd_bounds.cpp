@@ -105,6 +105,12 @@ void run_bounds(const BoundsOptions& o) {
   if (o.up == "z") so.up = UpAxis::z;
   else if (o.up != "y") throw Error("--up: expected y or z, got '" + o.up + "'");
   if (o.output.empty()) throw Error("-o: an output .exr path is required");
+  {  // fail before a long trace, not after it
+    const auto dir = std::filesystem::path(o.output).parent_path();
+    std::error_code ec;
+    if (!dir.empty() && !std::filesystem::is_directory(dir, ec))
+      throw Error("-o " + o.output + ": directory '" + dir.string() + "' does not exist");
+  }
 
   const auto t0 = std::chrono::steady_clock::now();
   Scene scene = load_scene(o.scene, so);

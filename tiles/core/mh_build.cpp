@@ -17,11 +17,9 @@
 
 #include <algorithm>
 #include <cfloat>
+#include <cstdio>
 #include <memory>
 #include <string>
-#if defined(__linux__)
-#include <sys/mman.h>
-#endif
 
 #include "tiles/core/error.hpp"
 #include "tiles/core/mh_internal.hpp"
@@ -39,8 +37,7 @@ inline bool interval_ok(const Interval& v) { return (v.lo >= -FLT_MAX) && (v.lo 
 // Dense per-level working arrays (levels 0..n-1, morton order).
 struct Dense {
   std::vector<size_t> base;  // base[l]: offset of level l (levels 0..n-1)
-  // Uninitialized (every entry is written by its level step before it is read), so the
-  // huge-page advice comes before the first touch.
+  // Uninitialized: every entry is written by its level step before it is read.
   std::unique_ptr<float[]> lo, hi;
   std::unique_ptr<uint8_t[]> present, valued;
   explicit Dense(uint32_t n) : base(n + 1, 0) {
@@ -48,20 +45,19 @@ struct Dense {
     const size_t count = base[n];
     lo.reset(new float[count]), hi.reset(new float[count]);
     present.reset(new uint8_t[count]), valued.reset(new uint8_t[count]);
-    advise_huge_pages(lo.get(), count * sizeof(float)), advise_huge_pages(hi.get(), count * sizeof(float));
-    advise_huge_pages(present.get(), count), advise_huge_pages(valued.get(), count);
   }
   void store(size_t i, const StepOut& s) { lo[i] = s.lo, hi[i] = s.hi, present[i] = s.present, valued[i] = s.valued; }
 };
 
 // A morton walk over a row-major input defeats the hardware prefetcher (each texel row is
-// a page of its own at 2^10+ texels a side): fetch the texel rows of the 2^k parents
-// `kPrefetchAhead` ahead (a 2^(k/2) square of parents, i.e. rows of 2^(k/2+1) texels).
-constexpr size_t kPrefetchAhead = 64;
+// a page of its own at 2^10+ texels a side): when the walk enters an aligned block of
+// 8x8 parents, fetch the 16 rows of 16 texels of the next block. Only called while that
+// block exists (the parent grid is then at least 16 wide), so every address is in the tile.
+constexpr size_t kPrefetchAhead = 64;  // parents per 8x8 block
 inline void prefetch_parent_rows(const Interval* data, size_t w, size_t m) {
   size_t px = morton_compact(m), py = morton_compact(m >> 1);
   const Interval* p = data + (2 * py) * w + 2 * px;
-  for (size_t r = 0; r < 16; ++r) __builtin_prefetch(p + r * w);  // 8x8 parents: 16 rows of 16 texels (two lines)
+  for (size_t r = 0; r < 16; ++r) __builtin_prefetch(p + r * w);  // 16 texels = two cache lines
   for (size_t r = 0; r < 16; ++r) __builtin_prefetch(p + r * w + 8);
 }
 
@@ -70,7 +66,7 @@ inline void prefetch_parent_rows(const Interval* data, size_t w, size_t m) {
 bool step_from_texels(const IntervalTile& tile, uint32_t n, Dense& d) {
   const size_t count = size_t(1) << (2 * (n - 1)), out = d.base[n - 1], w = tile.width;
   const Interval* data = tile.data.data();
-#if defined(__SSE2__)
+#if ST_MH_SSE2
   const __m128 neg_max = _mm_set1_ps(-FLT_MAX), pos_max = _mm_set1_ps(FLT_MAX);
   __m128 ok = _mm_castsi128_ps(_mm_set1_epi32(-1));
   for (size_t m = 0; m < count; ++m) {
@@ -104,7 +100,7 @@ void step_from_level(uint32_t l, Dense& d) {
     size_t c = in + 4 * m;
     uint32_t desc = uint32_t(d.present[c] != 0) | uint32_t(d.present[c + 1] != 0) << 1 |
                     uint32_t(d.present[c + 2] != 0) << 2 | uint32_t(d.present[c + 3] != 0) << 3;
-#if defined(__SSE2__)
+#if ST_MH_SSE2
     d.store(out + m, level_step_sse(_mm_loadu_ps(&d.lo[c]), _mm_loadu_ps(&d.hi[c]), desc));
 #else
     d.store(out + m, level_step_scalar(&d.lo[c], &d.hi[c], desc));
@@ -113,17 +109,6 @@ void step_from_level(uint32_t l, Dense& d) {
 }
 
 }  // namespace
-
-void advise_huge_pages(void* p, size_t bytes) {
-#if defined(__linux__) && defined(MADV_HUGEPAGE)
-  constexpr uintptr_t kHuge = uintptr_t(2) << 20;
-  if (bytes < 2 * kHuge) return;
-  uintptr_t a = (uintptr_t(p) + kHuge - 1) & ~(kHuge - 1), e = (uintptr_t(p) + bytes) & ~(kHuge - 1);
-  if (e > a) madvise(reinterpret_cast<void*>(a), e - a, MADV_HUGEPAGE);  // advisory: failure is harmless
-#else
-  (void)p, (void)bytes;
-#endif
-}
 
 uint32_t validate_tile_shape(const IntervalTile& tile) {
   if (tile.width != tile.height || !is_power_of_two(tile.width))
@@ -148,9 +133,10 @@ void validate_tile_values(const IntervalTile& tile) {
     const Interval& v = tile.data[i];
     if (interval_ok(v)) continue;
     uint64_t x = i % tile.width, y = i / tile.width;
+    char bounds[64];
+    std::snprintf(bounds, sizeof bounds, "[%.9g, %.9g]", double(v.lo), double(v.hi));
     throw Error("build_hierarchy: texel (" + std::to_string(tile.x0 + x) + ", " + std::to_string(tile.y0 + y) +
-                ") of level " + std::to_string(tile.level) + ": interval [" + std::to_string(v.lo) + ", " +
-                std::to_string(v.hi) + "] is not finite with lo <= hi");
+                ") of level " + std::to_string(tile.level) + ": interval " + bounds + " is not finite with lo <= hi");
   }
 }
 
@@ -177,7 +163,6 @@ Hierarchy build_bottom_up(const IntervalTile& tile, uint32_t n) {
     size_t total = 0;
     for (const HNode& p : parents) total += kPop4[p.child_mask & 0xF];
     nodes.reserve(total);
-    advise_huge_pages(nodes.data(), total * sizeof(HNode));
     const size_t pbase = d.base[l - 1];
     if (l < n) {
       const size_t cbase = d.base[l];

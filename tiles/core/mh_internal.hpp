@@ -20,12 +20,6 @@ inline float safe_midpoint(float lo, float hi) {
   return m > hi ? hi : m;
 }
 
-// Asks the kernel to back [p, p + bytes) with transparent huge pages (THP is in madvise
-// mode on our machines, MACHINE.md): the constructions write 100+ MB outputs once, and
-// 4 KiB page faults were a quarter of the bottom-up build time. Call before first touch;
-// a no-op for small ranges and off Linux.
-void advise_huge_pages(void* p, size_t bytes);
-
 // Throws st::Error unless the tile is square, a power of two a side (<= 2^14) and its
 // data has width*height entries. Returns log2(side).
 uint32_t validate_tile_shape(const IntervalTile& tile);

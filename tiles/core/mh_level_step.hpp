@@ -13,8 +13,13 @@
 #include <algorithm>
 #include <cfloat>
 #include <cstdint>
-#if defined(__SSE2__)
+// ST_MH_SSE2: 1 where SSE2 is there (all x86-64); define ST_MH_NO_SIMD to build and test
+// the portable path on x86 too.
+#if defined(__SSE2__) && !defined(ST_MH_NO_SIMD)
+#define ST_MH_SSE2 1
 #include <emmintrin.h>
+#else
+#define ST_MH_SSE2 0
 #endif
 
 namespace st::mh_detail {
@@ -61,7 +66,7 @@ inline StepOut level_step_scalar(const float lo[4], const float hi[4], uint32_t 
   return finish_mode(lo, hi, mask, desc);
 }
 
-#if defined(__SSE2__)
+#if ST_MH_SSE2
 inline StepOut level_step_sse(__m128 lo, __m128 hi, uint32_t desc) {
   __m128 mx = _mm_max_ps(lo, _mm_shuffle_ps(lo, lo, _MM_SHUFFLE(2, 3, 0, 1)));
   mx = _mm_max_ps(mx, _mm_shuffle_ps(mx, mx, _MM_SHUFFLE(1, 0, 3, 2)));

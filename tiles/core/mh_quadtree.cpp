@@ -11,8 +11,10 @@ std::vector<uint8_t> encode_mh(const Hierarchy& h) {
   return mhq::serialize(t, mhq::EmitPlan{});
 }
 
+// Opens MH and, by its magic, MMH buffers too (encoding.hpp); open_mmh takes MMH only.
 std::unique_ptr<Evaluator> open_mh(std::span<const uint8_t> bytes) {
-  return mhq::make_evaluator(bytes, mhq::validate(bytes, /*relative=*/false));
+  const bool mmh = bytes.size() >= 4 && mhq::load_u32(bytes.data()) == mhq::kMagicMmh;
+  return mhq::make_evaluator(bytes, mhq::validate(bytes, /*relative=*/mmh));
 }
 
 }  // namespace st

@@ -4,7 +4,11 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <cstring>
 #include <unordered_map>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "tiles/core/error.hpp"
 
@@ -35,15 +39,17 @@ struct Candidate {
 // Quick reject data of a candidate: the interval of its first valued descendant in
 // pre-order, relative and absolute. Every node between it and the candidate is empty,
 // so its ancestor value is the candidate's children base. The relative interval is
-// widened by 2^-20 of the magnitudes involved: float rounding of the stored number and
-// of the decoder's add can admit a little more than the exact real interval, and a
-// quick reject must never refuse what the full comparison would accept... nor need it:
-// refusing is always safe, this only keeps merges that rounding makes possible.
+// widened by 2^-20 of the magnitudes involved because the float rounding of the stored
+// number and of the decoder's add admits a little more than the exact interval. A
+// reject is always safe (only an accepted merge needs proof); the widening just keeps
+// the merges that rounding makes possible.
+// Kept as separate arrays (rel_lo_, rel_hi_, abs_lo_, abs_hi_ in candidate order) so the
+// scan compares 4 candidates per SSE instruction.
 struct ScanKey {
   float rel_lo, rel_hi, abs_lo, abs_hi;
 };
 
-constexpr uint8_t kBlocked = 1;  // dead (below a mergee) or frozen (below a merger)
+constexpr uint8_t kBlocked = 1;  // dead: below a mergee, never emitted
 constexpr uint8_t kMergee = 2, kMerger = 4;
 
 struct Assign {
@@ -69,7 +75,9 @@ class Planner {
     plan_.absolute.assign(n, 0);
     decoded_.assign(n, 0);
     base_.assign(n, 0);
-    frozen_.assign(n, 0);
+    shared_.assign(n, 0);
+    parent_.assign(n, 0);
+    slot_.assign(n, 0);
     initial_values();
     shape();
     merge();
@@ -107,9 +115,13 @@ class Planner {
     a.node = nodes[0];
     a.absolute = 0;
     if (lo <= hi + 1e-6 * (1.0 + std::fabs(lo))) {
-      const float mid = float(0.5 * (lo + hi));
-      for (float r : {mid, float(lo), float(hi), std::nextafter(float(lo), INFINITY),
-                      std::nextafter(float(hi), -INFINITY)}) {
+      // Candidates in order, the rounded ends only when the middle fails.
+      for (int c = 0; c < 5; ++c) {
+        const float r = c == 0   ? float(0.5 * (lo + hi))
+                        : c == 1 ? float(lo)
+                        : c == 2 ? float(hi)
+                        : c == 3 ? std::nextafter(float(lo), INFINITY)
+                                 : std::nextafter(float(hi), -INFINITY);
         if (try_relative(nodes, bases, k, r, out)) {
           a.stored = r;
           return true;
@@ -139,6 +151,8 @@ class Planner {
       for (uint32_t slot = 0; slot < 4; ++slot) {
         if (!(t_.mask[n] >> slot & 1u)) continue;
         const uint32_t c = t_.child(n, slot);
+        parent_[c] = n;
+        slot_[c] = uint8_t(slot);
         base_[c] = b;
         if (!t_.valued[c]) continue;
         float v;
@@ -206,24 +220,57 @@ class Planner {
     std::vector<uint32_t> block0;
     unscaled_layout(t_, pos0_, block0);
     cand_of_.assign(n, ~0u);
-    keys_.resize(cands_.size());
+    rel_lo_.resize(cands_.size());
+    rel_hi_.resize(cands_.size());
+    abs_lo_.resize(cands_.size());
+    abs_hi_.resize(cands_.size());
     block0_.resize(cands_.size());
     state_.assign(cands_.size(), 0);
     for (uint32_t c = 0; c < cands_.size(); ++c) {
       const uint32_t i = cands_[c].node, f = first_valued[i];
       const double b = child_base(i), lo = t_.lo[f], hi = t_.hi[f];
       const double slack = 0x1p-20 * (std::fabs(b) + std::fabs(lo) + std::fabs(hi)) + 0x1p-126;
-      keys_[c] = {float(lo - b - slack), float(hi - b + slack), t_.lo[f], t_.hi[f]};
+      rel_lo_[c] = float(lo - b - slack);
+      rel_hi_[c] = float(hi - b + slack);
+      abs_lo_[c] = t_.lo[f];
+      abs_hi_[c] = t_.hi[f];
       block0_[c] = block0[i];
       cand_of_[i] = c;
     }
   }
 
-  // Branch-free: nearly every test is a reject, so the scan is this loop.
-  static bool quick_reject(const ScanKey& a, const ScanKey& b) {
-    const bool rel_apart = (a.rel_hi < b.rel_lo) | (b.rel_hi < a.rel_lo);
-    const bool abs_apart = (a.abs_hi < b.abs_lo) | (b.abs_hi < a.abs_lo);
-    return rel_apart & abs_apart;
+  // Candidates b in [b0, b0 + n) (n <= 32) that pass the quick reject against `a` and are
+  // neither dead nor mergees, as a bit mask. Nearly every test is a reject, so the scan
+  // is this function: 4 candidates per SSE2 step where available.
+  uint32_t scan_chunk(const ScanKey& a, size_t b0, size_t n) const {
+    uint32_t mask = 0;
+    size_t k = 0;
+#if defined(__SSE2__)
+    const __m128 a_rl = _mm_set1_ps(a.rel_lo), a_rh = _mm_set1_ps(a.rel_hi);
+    const __m128 a_al = _mm_set1_ps(a.abs_lo), a_ah = _mm_set1_ps(a.abs_hi);
+    for (; k + 4 <= n; k += 4) {
+      const size_t b = b0 + k;
+      const __m128 rel_apart = _mm_or_ps(_mm_cmplt_ps(a_rh, _mm_loadu_ps(&rel_lo_[b])),
+                                         _mm_cmplt_ps(_mm_loadu_ps(&rel_hi_[b]), a_rl));
+      const __m128 abs_apart = _mm_or_ps(_mm_cmplt_ps(a_ah, _mm_loadu_ps(&abs_lo_[b])),
+                                         _mm_cmplt_ps(_mm_loadu_ps(&abs_hi_[b]), a_al));
+      const uint32_t rejected = uint32_t(_mm_movemask_ps(_mm_and_ps(rel_apart, abs_apart)));
+      uint32_t st;
+      std::memcpy(&st, &state_[b], 4);
+      st &= 0x01010101u * (kBlocked | kMergee);
+      st = (st | (st >> 1)) & 0x01010101u;                  // byte j: 1 if unusable
+      const uint32_t unusable = ((st * 0x01020408u) >> 24) & 0xFu;  // gather the 4 bits
+      mask |= (~(rejected | unusable) & 0xFu) << k;
+    }
+#endif
+    for (; k < n; ++k) {
+      const size_t b = b0 + k;
+      const bool rel_apart = (a.rel_hi < rel_lo_[b]) | (rel_hi_[b] < a.rel_lo);
+      const bool abs_apart = (a.abs_hi < abs_lo_[b]) | (abs_hi_[b] < a.abs_lo);
+      const bool usable = (state_[b] & (kBlocked | kMergee)) == 0;
+      mask |= uint32_t(!(rel_apart & abs_apart) & usable) << k;
+    }
+    return mask;
   }
 
   // Lock-step walk of the block below the merger (nodes[0]) and the corresponding
@@ -250,7 +297,7 @@ class Planner {
     return true;
   }
 
-  void mark_subtree(uint32_t root, std::vector<uint8_t>& flags) {
+  void mark_subtree(uint32_t root, std::vector<uint8_t>& flags, bool block_candidates) {
     std::vector<uint32_t> stack;
     for (uint32_t slot = 0; slot < 4; ++slot)
       if (t_.mask[root] >> slot & 1u) stack.push_back(t_.child(root, slot));
@@ -258,37 +305,74 @@ class Planner {
       const uint32_t i = stack.back();
       stack.pop_back();
       flags[i] = 1;
-      if (cand_of_[i] != ~0u) state_[cand_of_[i]] |= kBlocked;
+      if (block_candidates && cand_of_[i] != ~0u) state_[cand_of_[i]] |= kBlocked;
       for (uint32_t slot = 0; slot < 4; ++slot)
         if (t_.mask[i] >> slot & 1u) stack.push_back(t_.child(i, slot));
     }
   }
 
+  struct PathState {
+    uint32_t orig;  // the original node this path reaches
+    float dval;     // decoded value of its nearest valued ancestor-or-self on this path
+  };
+
+  // Appends every root path into emitted node e (its own path first). Outside shared
+  // blocks that is e alone with its initial decoded values (values change only inside
+  // shared blocks); inside, the paths of the block's parent and of each of its mergees,
+  // one step down, decoded with the current stored numbers. False past the path limit.
+  bool paths_of(uint32_t e, std::vector<PathState>& out) const {
+    if (!shared_[e]) {
+      out.push_back({e, child_base(e)});
+      return out.size() <= opt_.max_paths;
+    }
+    std::vector<PathState> up;
+    const uint32_t p = parent_[e];
+    if (!paths_of(p, up)) return false;
+    auto it = mergees_.find(p);
+    if (it != mergees_.end())
+      for (uint32_t m : it->second)
+        if (!paths_of(m, up)) return false;
+    for (const PathState& s : up) {
+      float d = s.dval;
+      if (t_.valued[e]) d = plan_.absolute[e] ? plan_.stored[e] : mmh_add(s.dval, plan_.stored[e]);
+      out.push_back({t_.child(s.orig, slot_[e]), d});
+      if (out.size() > opt_.max_paths) return false;
+    }
+    return true;
+  }
+
+  // Paths into j's block: j's own, its mergees', then the candidate's (its own path
+  // last: compare() checks the topology of the last path against the first).
   bool try_merge(uint32_t i, uint32_t j) {
-    static const std::vector<uint32_t> kNone;
+    ST_CHECK(plan_.block_owner[j] == j && !dead_[j] && plan_.block_owner[i] == i && !dead_[i]);
+    paths_.clear();
+    if (!paths_of(j, paths_)) return false;
     auto found = mergees_.find(j);
-    const std::vector<uint32_t>& mergees = found == mergees_.end() ? kNone : found->second;
+    if (found != mergees_.end())
+      for (uint32_t m : found->second)
+        if (!paths_of(m, paths_)) return false;
+    const size_t first_i = paths_.size();
+    if (!paths_of(i, paths_)) return false;
+    std::swap(paths_[first_i], paths_.back());
+    const uint32_t k = uint32_t(paths_.size());
     uint32_t roots[kPathsCap];
     float bases[kPathsCap];
-    uint32_t k = 0;
-    roots[k++] = j;
-    for (uint32_t m : mergees) roots[k++] = m;
-    roots[k++] = i;
-    for (uint32_t p = 0; p < k; ++p) bases[p] = child_base(roots[p]);
+    for (uint32_t p = 0; p < k; ++p) roots[p] = paths_[p].orig, bases[p] = paths_[p].dval;
     scratch_.clear();
     if (!compare(roots, bases, k)) return false;
     for (const Assign& a : scratch_) {
       plan_.stored[a.node] = a.stored;
       plan_.absolute[a.node] = a.absolute;
     }
-    if (mergees.empty()) mark_subtree(j, frozen_);
+    if (found == mergees_.end()) mark_subtree(j, shared_, false);
     mergees_[j].push_back(i);
-    mark_subtree(i, dead_);
+    mark_subtree(i, dead_, true);
     plan_.block_owner[i] = j;
     state_[cand_of_[i]] |= kMergee;
     state_[cand_of_[j]] |= kMerger;
     plan_.block_parent_levels[j] |= (1u << t_.level[j]) | (1u << t_.level[i]);
     ++stats_.merges;
+    stats_.cross_level_merges += t_.level[i] != t_.level[j];
     return true;
   }
 
@@ -309,20 +393,24 @@ class Planner {
         while (reach_end < g1 && block0_[reach_end] - from <= kMergeReach) ++reach_end;
         if (state_[a]) continue;  // a mergee is neither blocked, merged nor a merger
         const size_t end = std::min<size_t>(reach_end, a + 1 + opt_.window);
-        const ScanKey key_a = keys_[a];
-        size_t b = a + 1;
-        for (; b < end; ++b) {
-          if (quick_reject(key_a, keys_[b]) | bool(state_[b] & (kBlocked | kMergee))) continue;
-          ++passed;
-          const uint32_t j = cands_[b].node;
-          if (state_[b] & kMerger) {
-            auto it = mergees_.find(j);
-            if (it->second.size() + 2 > opt_.max_paths) continue;
+        const ScanKey key_a{rel_lo_[a], rel_hi_[a], abs_lo_[a], abs_hi_[a]};
+        size_t scanned_to = end;
+        bool merged = false;
+        for (size_t b0 = a + 1; b0 < end && !merged; b0 += 32) {
+          uint32_t mask = scan_chunk(key_a, b0, std::min<size_t>(32, end - b0));
+          while (mask) {
+            const size_t b = b0 + size_t(__builtin_ctz(mask));
+            mask &= mask - 1;
+            ++passed;
+            if (try_merge(i, cands_[b].node)) {
+              merged = true;
+              scanned_to = b + 1;
+              break;
+            }
+            ++stats_.full_rejects;
           }
-          if (try_merge(i, j)) break;
-          ++stats_.full_rejects;
         }
-        tests += std::min(b, end) - (a + 1);
+        tests += scanned_to - (a + 1);
       }
       stats_.tests += tests;
       stats_.quick_rejects += tests - passed;
@@ -370,10 +458,13 @@ class Planner {
   MergeStats& stats_;
   EmitPlan plan_;
   std::vector<float> decoded_, base_;
-  std::vector<uint8_t> frozen_, dead_;
+  std::vector<uint8_t> shared_, dead_;  // below a merger / below a mergee
+  std::vector<uint32_t> parent_;
+  std::vector<uint8_t> slot_;
+  std::vector<PathState> paths_;
   std::vector<uint32_t> pre_, pos0_, cand_of_;
   std::vector<Candidate> cands_;
-  std::vector<ScanKey> keys_;  // the scanned data, in candidate order
+  std::vector<float> rel_lo_, rel_hi_, abs_lo_, abs_hi_;  // scanned data, candidate order
   std::vector<uint32_t> block0_;
   std::vector<uint8_t> state_;
   std::unordered_map<uint32_t, std::vector<uint32_t>> mergees_;

@@ -18,9 +18,11 @@
 //   merges into the same block keep room.
 // - The mergee is the earlier node in depth-first pre-order, so the shared block (laid
 //   out when the merger is visited) lies after every parent: offsets stay forward.
-// - Subtrees below a merger are frozen (neither merged nor merged into again) and a merger
-//   is never itself merged away; with big subtrees tried first this keeps every path into
-//   a block known, at the cost of merges inside shared blocks.
+// - Big subtrees first (heights descending): when a height is done, no value at or
+//   above it changes again, so every path into a node (through the shared blocks above
+//   it, each with its own decoded ancestors) can be enumerated and stays valid. Nodes
+//   inside shared blocks may merge again (nested repeats), checked on all their paths;
+//   a merger is never itself merged away; at most max_paths paths reach one block.
 // After planning, every node of the original tree is decoded as the reader would and
 // checked against its interval (an always-on check).
 #pragma once
@@ -33,12 +35,12 @@ namespace st::mhq {
 struct MergeOptions {
   uint32_t window = 1024;    // later candidates each candidate is tested against (demo: 1,024)
   uint32_t max_height = 12;  // candidates only in the bottom 12 levels (demo)
-  uint32_t max_paths = 16;   // merger + mergees sharing one block
+  uint32_t max_paths = 16;   // root paths reaching one shared block
 };
 
 struct MergeStats {
   uint64_t candidates = 0, tests = 0, quick_rejects = 0, full_rejects = 0;
-  uint64_t merges = 0, nodes_removed = 0, absolute_values = 0;
+  uint64_t merges = 0, cross_level_merges = 0, nodes_removed = 0, absolute_values = 0;
 };
 
 EmitPlan plan_mmh(const FlatTree& t, const MergeOptions& options, MergeStats* stats = nullptr);
