@@ -83,6 +83,7 @@ TEST(TileQueueProperty, MatchesSortedReference) {
         if (!p) continue;
         auto best = std::min_element(ref.begin(), ref.end(), [](const Ref& a, const Ref& b) {
           if (a.cancelled != b.cancelled) return a.cancelled;
+          if (a.cancelled) return a.seq < b.seq;  // cancelled: in cancellation order
           return a.prio != b.prio ? a.prio > b.prio : a.seq < b.seq;
         });
         EXPECT_EQ(p->tile.tile, best->t.tile);
