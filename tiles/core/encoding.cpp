@@ -1,0 +1,35 @@
+// Dispatch of the encodings by their format tag (encoding.hpp). Each case may only name
+// an encoder that is linked into this build: the others answer with a clear st::Error.
+#include "tiles/core/encoding.hpp"
+
+#include "tiles/core/error.hpp"
+
+namespace st {
+
+std::string to_string(Encoding e) {
+  switch (e) {
+    case Encoding::mh: return "mh";
+    case Encoding::mmh: return "mmh";
+    case Encoding::dagmh: return "dagmh";
+  }
+  return "encoding#" + std::to_string(int(e));
+}
+
+Encoding parse_encoding(const std::string& name) {
+  if (name == "mh") return Encoding::mh;
+  if (name == "mmh") return Encoding::mmh;
+  if (name == "dagmh") return Encoding::dagmh;
+  throw Error("unknown encoding '" + name + "' (expected mh, mmh or dagmh)");
+}
+
+namespace {
+[[noreturn]] void not_built(Encoding e) {
+  throw Error("encoding '" + to_string(e) + "' is not available in this build");
+}
+}  // namespace
+
+std::vector<uint8_t> encode(const Hierarchy&, Encoding e) { not_built(e); }
+
+std::unique_ptr<Evaluator> open_encoded(Encoding e, std::span<const uint8_t>) { not_built(e); }
+
+}  // namespace st

@@ -1,0 +1,91 @@
+#include "tiles/core/pack_evaluator.hpp"
+
+#include <cstring>
+
+#include "tiles/core/error.hpp"
+
+namespace st {
+
+PackEvaluator::PackEvaluator(std::shared_ptr<const PackReader> reader, size_t cache_tiles,
+                             PackReader::TileOpener open_tile)
+    : reader_(std::move(reader)), capacity_(std::max<size_t>(cache_tiles, 1)), open_tile_(std::move(open_tile)) {
+  if (!open_tile_) {
+    Encoding e = reader_->encoding();
+    open_tile_ = [e](std::span<const uint8_t> bytes) { return open_encoded(e, bytes); };
+  }
+}
+
+uint64_t PackEvaluator::tiles_opened() const {
+  std::lock_guard lock(mu_);
+  return opened_;
+}
+
+std::shared_ptr<const PackEvaluator::Loaded> PackEvaluator::load(uint64_t id, const GridEntry& entry) const {
+  {
+    std::lock_guard lock(mu_);
+    auto it = cache_.find(id);
+    if (it != cache_.end()) {
+      lru_.splice(lru_.begin(), lru_, it->second.pos);
+      return it->second.tile;
+    }
+  }
+  auto t = std::make_shared<Loaded>();
+  if (entry.kind == EntryKind::index) {
+    t->grid = reader_->read_index_tile(id, entry);
+  } else {
+    t->raw = reader_->read_raw(id);
+    const TileAddress a = tile_address(id);
+    const std::string what = reader_->name() + ": " + describe_tile(id);
+    try {
+      t->eval = open_tile_(t->raw);
+    } catch (const FormatError&) {
+      throw;
+    } catch (const Error& err) {
+      throw FormatError(what + ": " + err.what());
+    }
+    if (t->eval->finest_level() != reader_->map_level() - a.level)
+      throw FormatError(what + ": finest level " + std::to_string(t->eval->finest_level()) + ", expected " +
+                        std::to_string(reader_->map_level() - a.level));
+  }
+  std::lock_guard lock(mu_);
+  ++opened_;
+  auto it = cache_.find(id);
+  if (it != cache_.end()) return it->second.tile;  // another thread won the race
+  lru_.push_front(id);
+  cache_[id] = Slot{t, lru_.begin()};
+  while (cache_.size() > capacity_) {
+    cache_.erase(lru_.back());
+    lru_.pop_back();
+  }
+  return t;
+}
+
+float PackEvaluator::depth(uint32_t level, uint64_t x, uint64_t y) const {
+  const uint32_t map_level = reader_->map_level();
+  if (level > map_level || (x >> level) || (y >> level))
+    throw Error(reader_->name() + ": texel (" + std::to_string(x) + ", " + std::to_string(y) + ") of level " +
+                std::to_string(level) + " outside the map of level " + std::to_string(map_level));
+  const CutGrid& top = reader_->grid();
+  const uint32_t k = top.levels;
+  if (level < k) return top.coarse_at(level, x, y);
+  // Walk the page table: entry at (l, ex, ey), the node above texel (x, y) of `level`.
+  uint32_t l = k;
+  uint64_t ex = x >> (level - k), ey = y >> (level - k);
+  GridEntry e = top.entry(ex, ey);
+  for (;;) {
+    if (e.kind == EntryKind::constant || l == level) return e.value;
+    const uint64_t id = make_tile_id(l, uint32_t(ex), uint32_t(ey));
+    std::shared_ptr<const Loaded> t = load(id, e);
+    const uint32_t rel = level - l;
+    const uint64_t lx = x - (ex << rel), ly = y - (ey << rel);  // texel inside the tile
+    if (e.kind == EntryKind::tile) return t->eval->depth(rel, lx, ly);
+    const uint32_t d = t->grid.levels;
+    if (rel < d) return t->grid.coarse_at(rel, lx, ly);
+    ex = (ex << d) + (lx >> (rel - d));
+    ey = (ey << d) + (ly >> (rel - d));
+    l += d;
+    e = t->grid.entry(lx >> (rel - d), ly >> (rel - d));
+  }
+}
+
+}  // namespace st

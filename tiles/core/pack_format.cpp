@@ -1,0 +1,307 @@
+#include "tiles/core/pack_format.hpp"
+
+#include <libdeflate.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <cstring>
+#include <memory>
+
+#include "tiles/core/error.hpp"
+#include "tiles/core/interval.hpp"
+#include "tiles/core/pack_bytes.hpp"
+
+namespace st {
+
+using packbytes::load;
+using packbytes::put;
+using packbytes::store;
+
+std::string hex32(uint32_t v) {
+  char buf[16];
+  std::snprintf(buf, sizeof buf, "0x%08x", v);
+  return buf;
+}
+
+uint32_t crc32_of(std::span<const uint8_t> bytes) {
+  return libdeflate_crc32(0, bytes.data(), bytes.size());
+}
+
+// ---- header -------------------------------------------------------------------------
+
+std::array<uint8_t, kPackHeaderBytes> PackHeader::serialize() const {
+  std::array<uint8_t, kPackHeaderBytes> b{};
+  uint8_t* p = b.data();
+  std::memcpy(p, kPackMagic.data(), 8);
+  store<uint32_t>(p + 8, kPackVersion);
+  store<uint32_t>(p + 12, kPackHeaderBytes);
+  store<uint32_t>(p + 16, uint32_t(state));
+  store<uint32_t>(p + 20, flags);
+  p[24] = uint8_t(encoding);
+  p[25] = uint8_t(light_kind);
+  p[26] = uint8_t(map_level);
+  p[27] = uint8_t(skip_level);
+  store<uint32_t>(p + 28, tile_bytes);
+  store<uint64_t>(p + 32, scene_hash);
+  for (size_t i = 0; i < 18; ++i) store<double>(p + 40 + 8 * i, light[i]);
+  store<uint64_t>(p + 184, params_offset);
+  store<uint64_t>(p + 192, params_size);
+  store<uint64_t>(p + 200, journal_offset);
+  store<uint64_t>(p + 208, grid_offset);
+  store<uint64_t>(p + 216, grid_size);
+  store<uint64_t>(p + 224, index_offset);
+  store<uint64_t>(p + 232, tile_count);
+  store<uint32_t>(p + 240, params_crc);
+  store<uint32_t>(p + 244, grid_crc);
+  store<uint32_t>(p + 248, index_crc);
+  store<uint32_t>(p + 252, crc32_of({p, 252}));
+  return b;
+}
+
+PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what) {
+  auto fail = [&](size_t off, const std::string& msg) -> void {
+    throw FormatError(what + ": header: " + msg + " at byte " + std::to_string(off));
+  };
+  if (b.size() < kPackHeaderBytes)
+    fail(b.size(), "truncated (" + std::to_string(b.size()) + " of " +
+                       std::to_string(kPackHeaderBytes) + " header bytes)");
+  if (!std::equal(kPackMagic.begin(), kPackMagic.end(), b.begin())) fail(0, "not a shadowtile pack (bad magic)");
+  uint32_t version = load<uint32_t>(b, 8);
+  if (version != kPackVersion)
+    fail(8, "unsupported version " + std::to_string(version) + " (this build reads " +
+                std::to_string(kPackVersion) + ")");
+  if (load<uint32_t>(b, 12) != kPackHeaderBytes) fail(12, "bad header size");
+  uint32_t stored_crc = load<uint32_t>(b, 252), crc = crc32_of(b.first(252));
+  if (stored_crc != crc) fail(252, "header CRC mismatch (stored " + hex32(stored_crc) + ", computed " + hex32(crc) + ")");
+  PackHeader h;
+  uint32_t state = load<uint32_t>(b, 16);
+  if (state > uint32_t(PackState::complete)) fail(16, "bad state " + std::to_string(state));
+  h.state = PackState(state);
+  h.flags = load<uint32_t>(b, 20);
+  if (h.flags & ~uint32_t(kKnownFeatures)) fail(20, "unknown feature flags " + hex32(h.flags));
+  if (b[24] > uint8_t(Encoding::dagmh)) fail(24, "unknown encoding " + std::to_string(b[24]));
+  h.encoding = Encoding(b[24]);
+  if (b[25] > uint8_t(LightKind::spot)) fail(25, "unknown light kind " + std::to_string(b[25]));
+  h.light_kind = LightKind(b[25]);
+  h.map_level = b[26];
+  h.skip_level = b[27];
+  if (h.map_level > kMaxLevel) fail(26, "map level " + std::to_string(h.map_level) + " > 20");
+  if (h.skip_level > std::min(h.map_level, kMaxSkipLevel)) fail(27, "bad skip level " + std::to_string(h.skip_level));
+  h.tile_bytes = load<uint32_t>(b, 28);
+  if (h.tile_bytes == 0 || h.tile_bytes > kMaxTileBytes) fail(28, "bad tile_bytes " + std::to_string(h.tile_bytes));
+  h.scene_hash = load<uint64_t>(b, 32);
+  for (size_t i = 0; i < 18; ++i) h.light[i] = load<double>(b, 40 + 8 * i);
+  h.params_offset = load<uint64_t>(b, 184);
+  h.params_size = load<uint64_t>(b, 192);
+  h.journal_offset = load<uint64_t>(b, 200);
+  h.grid_offset = load<uint64_t>(b, 208);
+  h.grid_size = load<uint64_t>(b, 216);
+  h.index_offset = load<uint64_t>(b, 224);
+  h.tile_count = load<uint64_t>(b, 232);
+  h.params_crc = load<uint32_t>(b, 240);
+  h.grid_crc = load<uint32_t>(b, 244);
+  h.index_crc = load<uint32_t>(b, 248);
+  // Section order: header, params, journal, grid, index (no overflow: each bound first).
+  if (h.params_offset != kPackHeaderBytes) fail(184, "bad params offset");
+  if (h.params_size > kMaxParamsBytes) fail(192, "params size " + std::to_string(h.params_size) + " too large");
+  if (h.journal_offset != h.params_offset + h.params_size) fail(200, "bad journal offset");
+  if (h.state == PackState::complete) {
+    const uint64_t limit = uint64_t(1) << 56;
+    if (h.grid_offset < h.journal_offset || h.grid_offset > limit || h.grid_offset % 8) fail(208, "bad grid offset");
+    if (h.grid_size != CutGrid::serialized_size(h.skip_level)) fail(216, "grid size does not match the skip level");
+    if (h.index_offset != h.grid_offset + h.grid_size) fail(224, "bad index offset");
+    if (h.tile_count > limit / kIndexEntryBytes) fail(232, "tile count too large");
+    bool has_tiles = h.tile_count > 0;
+    if (bool(h.flags & kFeatureHasTiles) != has_tiles) fail(20, "has_tiles flag disagrees with the tile count");
+  }
+  return h;
+}
+
+// ---- journal records ------------------------------------------------------------------
+
+std::array<uint8_t, kRecordBytes> TileRecord::serialize() const {
+  std::array<uint8_t, kRecordBytes> b{};
+  store<uint32_t>(b.data(), kTileRecordMagic);
+  b[4] = uint8_t(kind);
+  store<uint64_t>(b.data() + 8, id);
+  store<uint32_t>(b.data() + 16, stored_size);
+  store<uint32_t>(b.data() + 20, raw_size);
+  store<uint32_t>(b.data() + 24, crc);
+  store<uint32_t>(b.data() + 28, crc32_of({b.data(), 28}));
+  return b;
+}
+
+std::array<uint8_t, kRecordBytes> CellRecord::serialize() const {
+  std::array<uint8_t, kRecordBytes> b{};
+  store<uint32_t>(b.data(), kCellRecordMagic);
+  b[4] = uint8_t(entry.kind);
+  b[5] = entry.index_levels;
+  store<uint32_t>(b.data() + 8, cx);
+  store<uint32_t>(b.data() + 12, cy);
+  store<float>(b.data() + 16, entry.value);
+  store<float>(b.data() + 20, lo);
+  store<float>(b.data() + 24, hi);
+  store<uint32_t>(b.data() + 28, crc32_of({b.data(), 28}));
+  return b;
+}
+
+RecordType parse_record(std::span<const uint8_t, kRecordBytes> b, TileRecord* tile, CellRecord* cell) {
+  if (load<uint32_t>(b, 28) != crc32_of(b.first(28))) return RecordType::none;
+  uint32_t magic = load<uint32_t>(b, 0);
+  if (magic == kTileRecordMagic) {
+    if (b[5] || b[6] || b[7]) return RecordType::none;
+    if (b[4] != uint8_t(TileKind::encoded) && b[4] != uint8_t(TileKind::index)) return RecordType::none;
+    tile->kind = TileKind(b[4]);
+    tile->id = load<uint64_t>(b, 8);
+    tile->stored_size = load<uint32_t>(b, 16);
+    tile->raw_size = load<uint32_t>(b, 20);
+    tile->crc = load<uint32_t>(b, 24);
+    if (!is_valid_tile_id(tile->id) || tile->stored_size > kMaxTileBytes || tile->raw_size > kMaxTileBytes)
+      return RecordType::none;
+    return RecordType::tile;
+  }
+  if (magic == kCellRecordMagic) {
+    if (b[6] || b[7] || b[4] > uint8_t(EntryKind::index)) return RecordType::none;
+    cell->entry.kind = EntryKind(b[4]);
+    cell->entry.index_levels = b[5];
+    cell->cx = load<uint32_t>(b, 8);
+    cell->cy = load<uint32_t>(b, 12);
+    cell->entry.value = load<float>(b, 16);
+    cell->lo = load<float>(b, 20);
+    cell->hi = load<float>(b, 24);
+    return RecordType::cell;
+  }
+  return RecordType::none;
+}
+
+// ---- tile index -----------------------------------------------------------------------
+
+std::vector<uint8_t> serialize_index(std::span<const TileIndexEntry> entries) {
+  std::vector<uint8_t> out;
+  out.reserve(entries.size() * kIndexEntryBytes);
+  for (const TileIndexEntry& e : entries) {
+    put<uint64_t>(out, e.id);
+    put<uint64_t>(out, e.offset);
+    put<uint32_t>(out, e.stored_size);
+    put<uint32_t>(out, e.raw_size);
+    put<uint32_t>(out, e.crc);
+    put<uint8_t>(out, uint8_t(e.kind));
+    put<uint8_t>(out, 0);
+    put<uint16_t>(out, 0);
+  }
+  return out;
+}
+
+std::vector<TileIndexEntry> parse_index(std::span<const uint8_t> bytes, uint64_t base_offset,
+                                        uint64_t journal_begin, uint64_t journal_end,
+                                        const std::string& what) {
+  if (bytes.size() % kIndexEntryBytes) throw FormatError(what + ": tile index size not a multiple of 32");
+  std::vector<TileIndexEntry> out(bytes.size() / kIndexEntryBytes);
+  for (size_t i = 0; i < out.size(); ++i) {
+    size_t o = i * kIndexEntryBytes;
+    auto fail = [&](size_t field, const std::string& msg) {
+      throw FormatError(what + ": tile index entry " + std::to_string(i) + ": " + msg + " at byte " +
+                        std::to_string(base_offset + o + field));
+    };
+    TileIndexEntry& e = out[i];
+    e.id = load<uint64_t>(bytes, o);
+    e.offset = load<uint64_t>(bytes, o + 8);
+    e.stored_size = load<uint32_t>(bytes, o + 16);
+    e.raw_size = load<uint32_t>(bytes, o + 20);
+    e.crc = load<uint32_t>(bytes, o + 24);
+    uint8_t kind = bytes[o + 28];
+    if (!is_valid_tile_id(e.id)) fail(0, "invalid " + describe_tile(e.id));
+    if (i > 0 && e.id <= out[i - 1].id) fail(0, "ids not strictly increasing");
+    if (kind != uint8_t(TileKind::encoded) && kind != uint8_t(TileKind::index)) fail(28, "bad tile kind");
+    e.kind = TileKind(kind);
+    if (bytes[o + 29] || load<uint16_t>(bytes, o + 30)) fail(29, "nonzero padding");
+    if (e.stored_size == 0 || e.stored_size > kMaxTileBytes || e.raw_size == 0 || e.raw_size > kMaxTileBytes)
+      fail(16, "bad tile size");
+    if (e.offset < journal_begin + kRecordBytes || e.offset > journal_end ||
+        journal_end - e.offset < e.stored_size)
+      fail(8, describe_tile(e.id) + " payload [" + std::to_string(e.offset) + ", +" +
+                  std::to_string(e.stored_size) + ") outside the journal");
+  }
+  return out;
+}
+
+// ---- params ---------------------------------------------------------------------------
+
+namespace {
+bool valid_key(const std::string& k) {
+  if (k.empty()) return false;
+  return std::all_of(k.begin(), k.end(), [](char c) {
+    return (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '_' || c == '.' || c == '-';
+  });
+}
+}  // namespace
+
+std::vector<uint8_t> serialize_params(const PackParamList& params) {
+  PackParamList sorted = params;
+  std::sort(sorted.begin(), sorted.end());
+  std::string text;
+  for (size_t i = 0; i < sorted.size(); ++i) {
+    auto& [k, v] = sorted[i];
+    if (!valid_key(k)) throw Error("pack build parameter: bad key '" + k + "'");
+    if (i > 0 && sorted[i - 1].first == k) throw Error("pack build parameter: duplicate key '" + k + "'");
+    if (v.find('\n') != std::string::npos || v.find('\0') != std::string::npos)
+      throw Error("pack build parameter '" + k + "': value has a newline or NUL");
+    text += k + "=" + v + "\n";
+  }
+  if (text.size() > kMaxParamsBytes) throw Error("pack build parameters exceed 1 MiB");
+  return std::vector<uint8_t>(text.begin(), text.end());
+}
+
+PackParamList parse_params(std::span<const uint8_t> bytes, const std::string& what) {
+  PackParamList out;
+  size_t pos = 0;
+  while (pos < bytes.size()) {
+    auto nl = std::find(bytes.begin() + pos, bytes.end(), uint8_t('\n'));
+    if (nl == bytes.end()) throw FormatError(what + ": params: unterminated line at byte " + std::to_string(pos));
+    std::string line(bytes.begin() + pos, nl);
+    size_t eq = line.find('=');
+    if (eq == std::string::npos || !valid_key(line.substr(0, eq)) || line.find('\0') != std::string::npos)
+      throw FormatError(what + ": params: malformed line at byte " + std::to_string(pos));
+    out.emplace_back(line.substr(0, eq), line.substr(eq + 1));
+    pos = size_t(nl - bytes.begin()) + 1;
+  }
+  return out;
+}
+
+// ---- zlib via libdeflate --------------------------------------------------------------
+
+std::vector<uint8_t> zlib_compress(std::span<const uint8_t> raw, int level) {
+  struct Free {
+    void operator()(libdeflate_compressor* c) const { libdeflate_free_compressor(c); }
+  };
+  std::unique_ptr<libdeflate_compressor, Free> c(libdeflate_alloc_compressor(level));
+  if (!c) throw Error("zlib: cannot allocate a compressor at level " + std::to_string(level));
+  std::vector<uint8_t> out(libdeflate_zlib_compress_bound(c.get(), raw.size()));
+  size_t n = libdeflate_zlib_compress(c.get(), raw.data(), raw.size(), out.data(), out.size());
+  ST_CHECK(n != 0);  // the bound guarantees room
+  out.resize(n);
+  return out;
+}
+
+std::vector<uint8_t> zlib_decompress(std::span<const uint8_t> stored, uint32_t raw_size,
+                                     const std::string& what) {
+  struct Free {
+    void operator()(libdeflate_decompressor* d) const { libdeflate_free_decompressor(d); }
+  };
+  thread_local std::unique_ptr<libdeflate_decompressor, Free> d(libdeflate_alloc_decompressor());
+  if (!d) throw Error("zlib: cannot allocate a decompressor");
+  std::vector<uint8_t> out(raw_size);
+  size_t in_used = 0, out_used = 0;
+  libdeflate_result r = libdeflate_zlib_decompress_ex(d.get(), stored.data(), stored.size(), out.data(),
+                                                      out.size(), &in_used, &out_used);
+  if (r == LIBDEFLATE_INSUFFICIENT_SPACE)
+    throw FormatError(what + ": decompresses to more than the recorded " + std::to_string(raw_size) + " bytes");
+  if (r != LIBDEFLATE_SUCCESS) throw FormatError(what + ": malformed zlib stream");
+  if (out_used != raw_size)
+    throw FormatError(what + ": decompresses to " + std::to_string(out_used) + " bytes, recorded " +
+                      std::to_string(raw_size));
+  if (in_used != stored.size()) throw FormatError(what + ": trailing bytes after the zlib stream");
+  return out;
+}
+
+}  // namespace st

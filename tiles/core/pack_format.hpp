@@ -1,0 +1,137 @@
+// The pack file format, version 1 (tiles/PACK.md draws it in full; pack_format_test pins
+// every offset). All integers little-endian; every byte a reader uses is covered by a
+// CRC-32 (zlib polynomial, libdeflate_crc32).
+//
+//   [0, 256)            header (PackHeader): magic, version, state, light, levels, offsets
+//   [256, +params)      build parameters: "key=value\n" text (params_crc)
+//   journal             appended in build order: tile records (32-byte header + stored
+//                       payload) and cell records (32 bytes, one per finished level-K cell)
+//   zero padding        to a multiple of 8
+//   skip grid           CutGrid bytes (tile_cut_grid.hpp) of K levels (grid_crc)
+//   tile index          tile_count * 32-byte TileIndexEntry sorted by id (index_crc)
+//   end of file         == index_offset + 32 * tile_count (trailing bytes are rejected)
+//
+// While a build runs the file is "<name>.tmp" with state = building and only the header,
+// params and journal; finish() appends grid + index, rewrites the header (state complete),
+// fsyncs and renames. Resume re-reads the journal: each record carries its own CRCs, so a
+// torn tail is found and cut off at the last complete cell record.
+#pragma once
+#include <array>
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "tiles/core/encoding.hpp"
+#include "tiles/core/light.hpp"
+#include "tiles/core/tile_cut_grid.hpp"
+
+namespace st {
+
+// Format constants.
+inline constexpr std::array<uint8_t, 8> kPackMagic = {'S', 'T', 'P', 'A', 'C', 'K', '\r', '\n'};
+inline constexpr uint32_t kPackVersion = 1;
+inline constexpr uint32_t kPackHeaderBytes = 256;
+inline constexpr uint32_t kRecordBytes = 32;      // tile and cell record headers
+inline constexpr uint32_t kIndexEntryBytes = 32;  // one tile index entry
+inline constexpr uint32_t kTileRecordMagic = 0x43455254;  // "TREC"
+inline constexpr uint32_t kCellRecordMagic = 0x43455243;  // "CREC"
+inline constexpr uint32_t kMaxParamsBytes = 1 << 20;
+inline constexpr uint32_t kMaxTileBytes = 1u << 30;  // bound on any tile's raw/stored size
+
+enum class PackState : uint32_t { building = 0, complete = 1 };
+
+// Feature flags (header `flags`): what the pack uses, so a client can refuse what it lacks.
+enum PackFeature : uint32_t {
+  kFeatureExitDepths = 1u << 0,  // intervals traced exit depths (closed geometry); else hi = lo
+  kFeatureHasTiles = 1u << 1,    // at least one tile (else the skip grid answers everything)
+  kFeatureIndexTiles = 1u << 2,  // some subtree was cut deeper into index tiles
+  kFeatureDeepShadow = 1u << 3,  // reserved: deep-shadow data (not produced yet)
+  kKnownFeatures = 0xF,
+};
+
+// Header layout (offset: size field):
+//   0:8 magic  8:4 version  12:4 header_size  16:4 state  20:4 flags
+//   24:1 encoding  25:1 light_kind  26:1 map_level  27:1 skip_level  28:4 tile_bytes
+//   32:8 scene_hash  40:144 light (18 x f64, LightSpace::to_array)
+//   184:8 params_offset  192:8 params_size  200:8 journal_offset  208:8 grid_offset
+//   216:8 grid_size  224:8 index_offset  232:8 tile_count
+//   240:4 params_crc  244:4 grid_crc  248:4 index_crc  252:4 header_crc (of bytes 0..251)
+struct PackHeader {
+  PackState state = PackState::building;
+  uint32_t flags = 0;
+  Encoding encoding = Encoding::mh;
+  LightKind light_kind = LightKind::sun;
+  uint32_t map_level = 0, skip_level = 0;
+  uint32_t tile_bytes = 0;  // bound on any tile's uncompressed (encoded) size
+  uint64_t scene_hash = 0;
+  std::array<double, 18> light{};
+  uint64_t params_offset = 0, params_size = 0, journal_offset = 0;
+  uint64_t grid_offset = 0, grid_size = 0, index_offset = 0, tile_count = 0;
+  uint32_t params_crc = 0, grid_crc = 0, index_crc = 0;
+
+  std::array<uint8_t, kPackHeaderBytes> serialize() const;  // computes header_crc
+  // Checks magic, version, size, header CRC, enums and levels; `what` names the file.
+  static PackHeader parse(std::span<const uint8_t> bytes, const std::string& what);
+  uint64_t file_size() const { return index_offset + tile_count * kIndexEntryBytes; }
+};
+
+enum class TileKind : uint8_t { encoded = 1, index = 2 };  // == EntryKind::tile / ::index
+
+// Tile record header in the journal (offset: size): 0:4 magic "TREC"  4:1 kind  5:3 zero
+// 8:8 id  16:4 stored_size  20:4 raw_size  24:4 payload_crc  28:4 header_crc (of 0..27).
+// Followed by stored_size bytes: the zlib stream of the raw tile.
+struct TileRecord {
+  TileKind kind = TileKind::encoded;
+  uint64_t id = 0;
+  uint32_t stored_size = 0, raw_size = 0, crc = 0;
+  std::array<uint8_t, kRecordBytes> serialize() const;
+};
+
+// Cell record (0:4 magic "CREC"  4:1 entry kind  5:1 index_levels  6:2 zero  8:4 cx
+// 12:4 cy  16:4 value  20:4 lo  24:4 hi  28:4 header_crc): level-K cell (cx, cy) is done;
+// its entry and its root's admissible interval (for the coarse levels, MH §3.1 tiled).
+struct CellRecord {
+  uint32_t cx = 0, cy = 0;
+  GridEntry entry;
+  float lo = 0, hi = 0;
+  std::array<uint8_t, kRecordBytes> serialize() const;
+};
+
+// Parses either record header from 32 bytes; returns false on a bad magic/CRC/field (a
+// torn or corrupt journal record). Exactly one of `tile` / `cell` is filled.
+enum class RecordType { none, tile, cell };
+RecordType parse_record(std::span<const uint8_t, kRecordBytes> bytes, TileRecord* tile, CellRecord* cell);
+
+// Tile index entry: 0:8 id  8:8 payload offset  16:4 stored_size  20:4 raw_size
+// 24:4 crc (of the stored bytes)  28:1 kind  29:3 zero.
+struct TileIndexEntry {
+  uint64_t id = 0;
+  uint64_t offset = 0;
+  uint32_t stored_size = 0, raw_size = 0, crc = 0;
+  TileKind kind = TileKind::encoded;
+};
+std::vector<uint8_t> serialize_index(std::span<const TileIndexEntry> entries);
+// Checks sizes, kinds, ids, strict id order and that each payload lies in
+// [journal_begin, journal_end); throws st::FormatError naming the entry.
+std::vector<TileIndexEntry> parse_index(std::span<const uint8_t> bytes, uint64_t base_offset,
+                                        uint64_t journal_begin, uint64_t journal_end,
+                                        const std::string& what);
+
+// Build parameters blob: sorted "key=value\n" lines; keys [a-z0-9_.-]+, values without
+// newlines.
+using PackParamList = std::vector<std::pair<std::string, std::string>>;
+std::vector<uint8_t> serialize_params(const PackParamList& params);
+PackParamList parse_params(std::span<const uint8_t> bytes, const std::string& what);
+
+uint32_t crc32_of(std::span<const uint8_t> bytes);
+// zlib-format (RFC 1950) compression via libdeflate; level 0..12.
+std::vector<uint8_t> zlib_compress(std::span<const uint8_t> raw, int level);
+// Decompresses exactly `raw_size` bytes; throws st::FormatError(what + ...) if the stream
+// is malformed, has trailing bytes or decodes to another size.
+std::vector<uint8_t> zlib_decompress(std::span<const uint8_t> stored, uint32_t raw_size,
+                                     const std::string& what);
+
+std::string hex32(uint32_t v);
+
+}  // namespace st

@@ -1,0 +1,249 @@
+#include "tiles/core/pack_reader.hpp"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <map>
+
+#include "tiles/core/error.hpp"
+
+namespace st {
+
+struct PackReader::Source {
+  int fd = -1;
+  std::vector<uint8_t> memory;
+  uint64_t size = 0;
+  ~Source() {
+    if (fd >= 0) ::close(fd);
+  }
+};
+
+PackReader::PackReader(std::unique_ptr<Source> src, std::string name) : src_(std::move(src)), name_(std::move(name)) {}
+PackReader::~PackReader() = default;
+
+std::unique_ptr<PackReader> PackReader::open(const std::string& path) {
+  auto src = std::make_unique<Source>();
+  src->fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+  if (src->fd < 0) throw Error(path + ": cannot open: " + std::strerror(errno));
+  struct stat st{};
+  if (::fstat(src->fd, &st) != 0) throw Error(path + ": stat: " + std::strerror(errno));
+  if (!S_ISREG(st.st_mode)) throw Error(path + ": not a regular file");
+  src->size = uint64_t(st.st_size);
+  std::unique_ptr<PackReader> r(new PackReader(std::move(src), path));
+  r->load();
+  return r;
+}
+
+std::unique_ptr<PackReader> PackReader::open_memory(std::vector<uint8_t> bytes, const std::string& name) {
+  auto src = std::make_unique<Source>();
+  src->size = bytes.size();
+  src->memory = std::move(bytes);
+  std::unique_ptr<PackReader> r(new PackReader(std::move(src), name));
+  r->load();
+  return r;
+}
+
+std::string PackReader::where(uint64_t offset) const { return name_ + " at byte " + std::to_string(offset); }
+
+void PackReader::read_at(uint64_t offset, std::span<uint8_t> out) const {
+  if (offset > src_->size || src_->size - offset < out.size())
+    throw FormatError(name_ + ": truncated: need bytes [" + std::to_string(offset) + ", " +
+                      std::to_string(offset + out.size()) + "), file has " + std::to_string(src_->size));
+  if (src_->fd < 0) {
+    std::memcpy(out.data(), src_->memory.data() + offset, out.size());
+    return;
+  }
+  size_t done = 0;
+  while (done < out.size()) {
+    ssize_t n = ::pread(src_->fd, out.data() + done, out.size() - done, off_t(offset + done));
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) throw Error(name_ + ": read at byte " + std::to_string(offset + done) + ": " + std::strerror(errno));
+    if (n == 0) throw FormatError(name_ + ": truncated (file shrank) at byte " + std::to_string(offset + done));
+    done += size_t(n);
+  }
+}
+
+void PackReader::load() {
+  const uint64_t size = src_->size;
+  if (size < kPackHeaderBytes)
+    throw FormatError(name_ + ": truncated: " + std::to_string(size) + " bytes, the header alone needs " +
+                      std::to_string(kPackHeaderBytes));
+  header_bytes_.resize(kPackHeaderBytes);
+  read_at(0, header_bytes_);
+  header_ = PackHeader::parse(header_bytes_, name_);
+  if (header_.state != PackState::complete)
+    throw FormatError(name_ + ": an unfinished build (state 'building'): resume or rebuild it");
+  if (header_.grid_offset > size || header_.index_offset > size ||
+      (size - header_.index_offset) / kIndexEntryBytes < header_.tile_count)
+    throw FormatError(name_ + ": truncated: the header needs " + std::to_string(header_.file_size()) +
+                      " bytes, the file has " + std::to_string(size));
+  if (size != header_.file_size())
+    throw FormatError(name_ + ": " + std::to_string(size - header_.file_size()) + " trailing bytes after the tile index at byte " +
+                      std::to_string(header_.file_size()));
+
+  std::vector<uint8_t> blob(header_.params_size);
+  read_at(header_.params_offset, blob);
+  if (crc32_of(blob) != header_.params_crc) throw FormatError(where(header_.params_offset) + ": build parameters CRC mismatch");
+  params_ = parse_params(blob, name_);
+
+  grid_bytes_.resize(header_.grid_size);
+  read_at(header_.grid_offset, grid_bytes_);
+  if (crc32_of(grid_bytes_) != header_.grid_crc) throw FormatError(where(header_.grid_offset) + ": skip grid CRC mismatch");
+  grid_ = CutGrid::parse(grid_bytes_, name_ + ": skip grid at byte " + std::to_string(header_.grid_offset));
+  if (grid_.levels != header_.skip_level) throw FormatError(where(header_.grid_offset) + ": skip grid levels != skip level");
+
+  std::vector<uint8_t> index_bytes(header_.tile_count * kIndexEntryBytes);
+  read_at(header_.index_offset, index_bytes);
+  if (crc32_of(index_bytes) != header_.index_crc) throw FormatError(where(header_.index_offset) + ": tile index CRC mismatch");
+  index_ = parse_index(index_bytes, header_.index_offset, header_.journal_offset, header_.grid_offset, name_);
+
+  bool any_index = std::any_of(index_.begin(), index_.end(), [](auto& e) { return e.kind == TileKind::index; });
+  if (any_index != bool(header_.flags & kFeatureIndexTiles))
+    throw FormatError(where(20) + ": index_tiles flag disagrees with the tile index");
+  const uint32_t k = header_.skip_level;
+  for (uint32_t cy = 0; cy < (1u << k); ++cy)
+    for (uint32_t cx = 0; cx < (1u << k); ++cx) {
+      const GridEntry& e = grid_.entry(cx, cy);
+      if (e.kind == EntryKind::constant) continue;
+      uint64_t id = make_tile_id(k, cx, cy);
+      auto t = find(id);
+      if (!t || uint8_t(t->kind) != uint8_t(e.kind) || (k == header_.map_level))
+        throw FormatError(name_ + ": skip grid entry (" + std::to_string(cx) + ", " + std::to_string(cy) + ") names " +
+                          describe_tile(id) + ", which the tile index lacks or holds with another kind");
+    }
+}
+
+std::optional<TileIndexEntry> PackReader::find(uint64_t id) const {
+  auto it = std::lower_bound(index_.begin(), index_.end(), id, [](const TileIndexEntry& e, uint64_t v) { return e.id < v; });
+  if (it == index_.end() || it->id != id) return std::nullopt;
+  return *it;
+}
+
+std::vector<uint8_t> PackReader::read_stored(uint64_t id) const {
+  auto t = find(id);
+  if (!t) throw FormatError(name_ + ": " + describe_tile(id) + " is not in the tile index");
+  std::vector<uint8_t> stored(t->stored_size);
+  read_at(t->offset, stored);
+  uint32_t crc = crc32_of(stored);
+  if (crc != t->crc)
+    throw FormatError(name_ + ": " + describe_tile(id) + " at byte " + std::to_string(t->offset) +
+                      ": CRC32 mismatch (index " + hex32(t->crc) + ", data " + hex32(crc) + ")");
+  return stored;
+}
+
+std::vector<uint8_t> PackReader::read_raw(uint64_t id) const {
+  std::vector<uint8_t> stored = read_stored(id);
+  auto t = find(id);
+  return zlib_decompress(stored, t->raw_size,
+                         name_ + ": " + describe_tile(id) + " at byte " + std::to_string(t->offset));
+}
+
+CutGrid PackReader::read_index_tile(uint64_t id, const GridEntry& parent) const {
+  auto t = find(id);
+  const std::string what = name_ + ": index " + describe_tile(id) + " at byte " + std::to_string(t ? t->offset : 0);
+  if (!t || t->kind != TileKind::index) throw FormatError(what + ": not an index tile in the tile index");
+  CutGrid g = CutGrid::parse(read_raw(id), what, kMaxIndexLevels);
+  TileAddress a = tile_address(id);
+  if (g.levels != parent.index_levels || a.level + g.levels > header_.map_level)
+    throw FormatError(what + ": has " + std::to_string(g.levels) + " levels, its entry says " +
+                      std::to_string(parent.index_levels));
+  if (std::memcmp(&g.coarse[0], &parent.value, sizeof(float)) != 0)
+    throw FormatError(what + ": root value differs from its entry's");
+  return g;
+}
+
+void PackReader::verify(const TileOpener& open_tile) const {
+  // 1. The journal: a clean sequence of records, then < 8 zero bytes of padding.
+  std::map<uint64_t, TileRecord> records;  // payload offset -> record
+  std::vector<CellRecord> cells;
+  uint64_t pos = header_.journal_offset;
+  const uint64_t end = header_.grid_offset;
+  while (pos < end) {
+    if (end - pos < 8) {
+      std::vector<uint8_t> pad(end - pos);
+      read_at(pos, pad);
+      if (std::any_of(pad.begin(), pad.end(), [](uint8_t b) { return b != 0; }))
+        throw FormatError(where(pos) + ": nonzero padding before the skip grid");
+      break;
+    }
+    std::array<uint8_t, kRecordBytes> rec{};
+    if (end - pos < kRecordBytes) throw FormatError(where(pos) + ": torn journal record");
+    read_at(pos, rec);
+    TileRecord t;
+    CellRecord c;
+    RecordType type = parse_record(rec, &t, &c);
+    if (type == RecordType::none) throw FormatError(where(pos) + ": corrupt journal record (bad magic, field or CRC)");
+    if (type == RecordType::cell) {
+      cells.push_back(c);
+      pos += kRecordBytes;
+      continue;
+    }
+    if (end - pos - kRecordBytes < t.stored_size)
+      throw FormatError(where(pos) + ": journal record of " + describe_tile(t.id) + " runs past the journal");
+    records[pos + kRecordBytes] = t;
+    pos += kRecordBytes + t.stored_size;
+  }
+  if (records.size() != index_.size())
+    throw FormatError(name_ + ": journal holds " + std::to_string(records.size()) + " tiles, the index " +
+                      std::to_string(index_.size()));
+  for (const TileIndexEntry& e : index_) {
+    auto it = records.find(e.offset);
+    if (it == records.end() || it->second.id != e.id || it->second.kind != e.kind ||
+        it->second.stored_size != e.stored_size || it->second.raw_size != e.raw_size || it->second.crc != e.crc)
+      throw FormatError(name_ + ": " + describe_tile(e.id) + " at byte " + std::to_string(e.offset) +
+                        ": index entry disagrees with its journal record");
+  }
+  // 2. Cells: each exactly once, agreeing with the skip grid.
+  const uint32_t k = header_.skip_level;
+  const size_t side = size_t(1) << k;
+  if (cells.size() != side * side)
+    throw FormatError(name_ + ": journal has " + std::to_string(cells.size()) + " cell records, the skip grid " +
+                      std::to_string(side * side) + " cells");
+  std::vector<uint8_t> seen(side * side, 0);
+  for (const CellRecord& c : cells) {
+    if (c.cx >= side || c.cy >= side || seen[c.cy * side + c.cx]++ || !(grid_.entry(c.cx, c.cy) == c.entry))
+      throw FormatError(name_ + ": cell record (" + std::to_string(c.cx) + ", " + std::to_string(c.cy) +
+                        ") repeated, out of range or disagreeing with the skip grid");
+  }
+  // 3. The page table reaches every tile exactly once; every tile decodes.
+  size_t reached = 0;
+  const uint32_t map_level = header_.map_level;
+  std::function<void(uint32_t, uint32_t, uint32_t, const GridEntry&)> walk =
+      [&](uint32_t level, uint32_t x, uint32_t y, const GridEntry& e) {
+        if (e.kind == EntryKind::constant) return;
+        uint64_t id = make_tile_id(level, x, y);
+        auto t = find(id);
+        if (!t || uint8_t(t->kind) != uint8_t(e.kind) || level >= map_level)
+          throw FormatError(name_ + ": " + describe_tile(id) + " is named by the page table but missing from the index");
+        ++reached;
+        if (e.kind == EntryKind::index) {
+          CutGrid g = read_index_tile(id, e);
+          for (uint32_t j = 0; j < (1u << g.levels); ++j)
+            for (uint32_t i = 0; i < (1u << g.levels); ++i)
+              walk(level + g.levels, (x << g.levels) + i, (y << g.levels) + j, g.entry(i, j));
+          return;
+        }
+        std::vector<uint8_t> raw = read_raw(id);
+        if (!open_tile) return;
+        const std::string what = name_ + ": " + describe_tile(id) + " at byte " + std::to_string(t->offset);
+        std::unique_ptr<Evaluator> ev;
+        try {
+          ev = open_tile(raw);
+        } catch (const Error& err) {
+          throw FormatError(what + ": " + err.what());
+        }
+        if (ev->finest_level() != map_level - level) throw FormatError(what + ": wrong finest level");
+        float root = ev->depth(0, 0, 0);
+        if (std::memcmp(&root, &e.value, sizeof(float)) != 0) throw FormatError(what + ": root value differs from its entry's");
+      };
+  for (uint32_t cy = 0; cy < side; ++cy)
+    for (uint32_t cx = 0; cx < side; ++cx) walk(k, cx, cy, grid_.entry(cx, cy));
+  if (reached != index_.size())
+    throw FormatError(name_ + ": " + std::to_string(index_.size() - reached) + " tiles the page table never reaches");
+}
+
+}  // namespace st

@@ -1,0 +1,82 @@
+// Reads a pack file (pack_format.hpp, tiles/PACK.md). Hostile input is the normal case:
+// open() checks the header, the section layout against the file size, the CRCs of the
+// params, skip grid and tile index, every index entry and that every skip-grid entry that
+// names a tile finds it; read_stored() checks a tile's CRC on every read; verify() checks
+// every byte of the file. Every failure is an st::FormatError naming the pack, and the
+// tile id and byte offset where there is one.
+//
+// Thread safety: all const methods may be called concurrently (reads use pread).
+// The skip grid, params and tile index are held in memory (the tile payloads are not).
+#pragma once
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <optional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "tiles/core/evaluator.hpp"
+#include "tiles/core/pack_format.hpp"
+#include "tiles/core/tile_cut_grid.hpp"
+
+namespace st {
+
+class PackReader {
+ public:
+  static std::unique_ptr<PackReader> open(const std::string& path);
+  // A pack held in memory (tests; a server that keeps small packs resident).
+  static std::unique_ptr<PackReader> open_memory(std::vector<uint8_t> bytes, const std::string& name);
+  ~PackReader();
+  PackReader(const PackReader&) = delete;
+  PackReader& operator=(const PackReader&) = delete;
+
+  const std::string& name() const { return name_; }
+  const PackHeader& header() const { return header_; }
+  uint32_t map_level() const { return header_.map_level; }
+  uint32_t skip_level() const { return header_.skip_level; }
+  Encoding encoding() const { return header_.encoding; }
+  LightSpace light() const { return LightSpace::from_array(header_.light_kind, header_.light); }
+  const PackParamList& params() const { return params_; }
+  const CutGrid& grid() const { return grid_; }
+  uint64_t file_size() const { return header_.file_size(); }
+
+  // Raw blobs a server sends as they lie.
+  std::span<const uint8_t> header_bytes() const { return header_bytes_; }
+  std::span<const uint8_t> grid_bytes() const { return grid_bytes_; }
+
+  const std::vector<TileIndexEntry>& tiles() const { return index_; }
+  std::optional<TileIndexEntry> find(uint64_t id) const;
+  // The tile's stored (zlib) bytes, CRC checked; throws st::FormatError if the id is
+  // unknown or the bytes are corrupt.
+  std::vector<uint8_t> read_stored(uint64_t id) const;
+  // Stored bytes, decompressed; the size checked against the index.
+  std::vector<uint8_t> read_raw(uint64_t id) const;
+  // An index tile, parsed and checked against the entry that points at it.
+  CutGrid read_index_tile(uint64_t id, const GridEntry& parent) const;
+
+  // Checks the whole file: every journal record, every tile's CRC, size and zlib stream,
+  // every index tile, that the page table reaches every tile exactly once, that every
+  // cell record agrees with the skip grid and, with `open_tile`, that every encoded tile
+  // opens with its root value equal to its entry's and the right finest level.
+  using TileOpener = std::function<std::unique_ptr<Evaluator>(std::span<const uint8_t>)>;
+  void verify(const TileOpener& open_tile = {}) const;
+
+  std::string where(uint64_t offset) const;  // "<name> at byte N"
+
+ private:
+  struct Source;
+  PackReader(std::unique_ptr<Source> src, std::string name);
+  void load();
+  void read_at(uint64_t offset, std::span<uint8_t> out) const;
+
+  std::unique_ptr<Source> src_;
+  std::string name_;
+  PackHeader header_;
+  std::vector<uint8_t> header_bytes_, grid_bytes_;
+  PackParamList params_;
+  CutGrid grid_;
+  std::vector<TileIndexEntry> index_;
+};
+
+}  // namespace st
