@@ -70,7 +70,7 @@ void Connection::wake_writer() { writer_wake_.cancel(); }
 
 // ---------------------------------------------------------------- reader
 
-asio::awaitable<void> Connection::reader(std::shared_ptr<Connection> self) {
+asio::awaitable<void> Connection::reader(std::shared_ptr<Connection> /*keep alive*/) {
   std::vector<uint8_t> buf(kReadChunk);
   try {
     while (!closed_ && !closing_) {
@@ -382,7 +382,7 @@ asio::awaitable<void> Connection::writer(std::shared_ptr<Connection> self) {
 
 // ---------------------------------------------------------------- watchdog
 
-asio::awaitable<void> Connection::watchdog(std::shared_ptr<Connection> self) {
+asio::awaitable<void> Connection::watchdog(std::shared_ptr<Connection> /*keep alive*/) {
   using std::chrono::milliseconds;
   const auto shortest = std::min({opt_.handshake_timeout, opt_.idle_timeout, opt_.read_timeout,
                                   opt_.write_timeout});
