@@ -28,8 +28,22 @@ namespace {
 }
 }  // namespace
 
-std::vector<uint8_t> encode(const Hierarchy&, Encoding e) { not_built(e); }
+std::vector<uint8_t> encode(const Hierarchy& h, Encoding e) {
+  switch (e) {
+    case Encoding::mh: return encode_mh(h);
+    case Encoding::mmh: return encode_mmh(h);
+    case Encoding::dagmh: return encode_dagmh(h);
+  }
+  not_built(e);
+}
 
-std::unique_ptr<Evaluator> open_encoded(Encoding e, std::span<const uint8_t>) { not_built(e); }
+std::unique_ptr<Evaluator> open_encoded(Encoding e, std::span<const uint8_t> bytes) {
+  switch (e) {
+    case Encoding::mh: return open_mh(bytes);
+    case Encoding::mmh: return open_mmh(bytes);
+    case Encoding::dagmh: return open_dagmh(bytes);
+  }
+  not_built(e);
+}
 
 }  // namespace st

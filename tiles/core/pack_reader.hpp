@@ -58,7 +58,7 @@ class PackReader {
   // Checks the whole file: every journal record, every tile's CRC, size and zlib stream,
   // every index tile, that the page table reaches every tile exactly once, that every
   // cell record agrees with the skip grid and, with `open_tile`, that every encoded tile
-  // opens with its root value equal to its entry's and the right finest level.
+  // opens (the encoding validates its whole buffer) with the right finest level.
   using TileOpener = std::function<std::unique_ptr<Evaluator>(std::span<const uint8_t>)>;
   void verify(const TileOpener& open_tile = {}) const;
 

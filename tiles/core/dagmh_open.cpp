@@ -1,0 +1,79 @@
+// DAG-MH evaluator over a validated buffer: single lookups start at the skip table
+// (§3.7); PCF walks once to the lowest common node of the kernel (MH §3.3, Fig. 5) and
+// then resumes each tap from the last tap's final cursor when that lies on the tap's
+// path, else from the common node (DAG-MH §3.5 "cache the last node traversed").
+// Every tap runs the same walk as depth() from a cursor on its own path, so it reaches
+// the same value index: pcf equals the average of single lookups exactly.
+#include <algorithm>
+#include <memory>
+
+#include "tiles/core/dagmh_validate.hpp"
+#include "tiles/core/encoding.hpp"
+
+namespace st {
+namespace {
+
+class DagmhEvaluator final : public Evaluator {
+ public:
+  explicit DagmhEvaluator(const dagmh::View& view) : v_(view) {}
+
+  uint32_t finest_level() const override { return v_.finest_level; }
+
+  float depth(uint32_t level, uint64_t x, uint64_t y) const override {
+    clamp(level, x, y);
+    return v_.value(v_.lookup_index(level, x, y));
+  }
+
+  float pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver) const override {
+    r = std::clamp<uint32_t>(r, 1, kMaxPcf);
+    clamp(level, x, y);
+    const uint64_t side = uint64_t(1) << level;
+    uint64_t tx[kMaxPcf], ty[kMaxPcf];
+    for (uint32_t i = 0; i < r; ++i) tx[i] = pcf_tap(x, i, r, side), ty[i] = pcf_tap(y, i, r, side);
+    // Lowest common node: the taps agree on every coordinate bit above the highest bit
+    // in which the kernel's extreme corners differ (MH Fig. 5).
+    const uint64_t differ = (tx[0] ^ tx[r - 1]) | (ty[0] ^ ty[r - 1]);
+    const uint32_t common = level - uint32_t(differ ? 64 - __builtin_clzll(differ) : 0);
+    const dagmh::Cursor lca =
+        v_.descend(v_.start(common, level, tx[0], ty[0]), common, level, tx[0], ty[0]);
+    dagmh::Cursor cache = lca;
+    uint64_t cache_x = tx[0], cache_y = ty[0];
+    uint32_t last_index = ~0u;
+    float last_value = 0;
+    uint32_t lit = 0;
+    for (uint32_t j = 0; j < r; ++j)
+      for (uint32_t i = 0; i < r; ++i) {
+        const uint32_t shift = level - cache.level;
+        const bool on_path = (tx[i] >> shift) == (cache_x >> shift) && (ty[j] >> shift) == (cache_y >> shift);
+        const dagmh::Cursor c = v_.descend(on_path ? cache : lca, level, level, tx[i], ty[j]);
+        const uint32_t index = v_.finish(c, level, tx[i], ty[j]);
+        if (index != last_index) last_index = index, last_value = v_.value(index);
+        lit += receiver <= last_value;
+        cache = c, cache_x = tx[i], cache_y = ty[j];
+      }
+    return float(lit) / float(r * r);
+  }
+
+ private:
+  // Levels finer than the map answer like the finest level; coordinates are clamped to
+  // the map (callers should not rely on either).
+  void clamp(uint32_t& level, uint64_t& x, uint64_t& y) const {
+    if (level > v_.finest_level) {
+      const uint32_t shift = std::min<uint32_t>(level - v_.finest_level, 63);
+      x >>= shift, y >>= shift;
+      level = v_.finest_level;
+    }
+    const uint64_t top = (uint64_t(1) << level) - 1;
+    x = std::min(x, top), y = std::min(y, top);
+  }
+
+  dagmh::View v_;
+};
+
+}  // namespace
+
+std::unique_ptr<Evaluator> open_dagmh(std::span<const uint8_t> bytes) {
+  return std::make_unique<DagmhEvaluator>(dagmh::validate(bytes));
+}
+
+}  // namespace st

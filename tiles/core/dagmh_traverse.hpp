@@ -1,0 +1,109 @@
+// DAG-MH traversal (DAG-MH §3.5, Alg. 1) over a buffer's sections. Used by the evaluator,
+// by the encoder to fill the skip table and by the validator to check it.
+//
+// A lookup of texel (x, y) of `level` walks inner nodes keeping two value indices
+// (§3.5): `base`, the depth-first index of the current node's first value, and `last`,
+// the index of the deepest valued node passed. Entering child c adds the child's stored
+// value offset to `base`. A treelet answers bottom-up from its bitmap (Alg. 1).
+//
+// Safety (after open_dagmh's validation): every reference is a node start or treelet
+// number in range, child references point strictly forward (so the walk ends; it also
+// never goes below `level`), and every node's value offsets equal the value counts of
+// its subtree, so every index a walk returns is < value_count. Coordinates only select
+// child bits, so any x, y is harmless.
+#pragma once
+#include <algorithm>
+#include <bit>
+#include <cstdint>
+
+#include "tiles/core/dagmh_format.hpp"
+#include "tiles/core/dagmh_values.hpp"
+
+namespace st::dagmh {
+
+struct View {
+  const uint8_t* skip = nullptr;
+  const uint8_t* nodes = nullptr;
+  const uint8_t* treelets = nullptr;
+  const uint8_t* chunks = nullptr;
+  const uint8_t* multipliers = nullptr;
+  uint32_t finest_level = 0, skip_level = 0, root_ref = 0, value_count = 0;
+
+  Cursor root() const { return {root_ref, 0, 0, 0}; }
+
+  // The skip-list cursor for texel (x, y) of `level` >= skip_level (§3.7).
+  Cursor skip_entry(uint32_t level, uint64_t x, uint64_t y) const {
+    const uint32_t shift = level - skip_level;
+    const uint64_t index = ((y >> shift) << skip_level) + (x >> shift);
+    Cursor c;
+    std::memcpy(&c, skip + index * sizeof(Cursor), sizeof(Cursor));
+    return c;
+  }
+
+  // Cheapest valid start for a walk to a node of level `stop` on the path to (x, y) at
+  // `level`: the skip table when stop >= skip_level, else the root.
+  Cursor start(uint32_t stop, uint32_t level, uint64_t x, uint64_t y) const {
+    return stop >= skip_level ? skip_entry(level, x, y) : root();
+  }
+
+  // Walks inner nodes from `c` towards (x, y) of `level` and stops at the first of: an
+  // inner node at level `stop` (its own value not yet applied), a treelet, or a missing
+  // child (ref = kRefNone, level = the missing child's level).
+  Cursor descend(Cursor c, uint32_t stop, uint32_t level, uint64_t x, uint64_t y) const {
+    while ((c.ref & kRefTagMask) == kRefInner && c.level < stop) {
+      const uint8_t* node = nodes + size_t(c.ref & kRefIndexMask) * 4;
+      const uint32_t flags = load32(node);
+      if (flags & kNodeValuedBit) c.last = c.base;
+      const uint32_t shift = level - c.level - 1;
+      const uint32_t child = uint32_t((x >> shift) & 1) | uint32_t(((y >> shift) & 1) << 1);
+      ++c.level;
+      if (!((flags >> child) & 1)) {
+        c.ref = kRefNone;
+        return c;
+      }
+      const uint32_t rank = uint32_t(std::popcount(flags & kNodeChildMask & ((1u << child) - 1)));
+      const uint8_t* entry = node + 4 + 8 * rank;
+      c.base += load32(entry + 4);
+      c.ref = load32(entry) | ((flags >> (kNodeTreeletShift + child)) & 1 ? kRefTreelet : kRefInner);
+    }
+    return c;
+  }
+
+  // The value index for (x, y) of `level`, given descend(c, level, level, x, y)'s cursor.
+  uint32_t finish(const Cursor& c, uint32_t level, uint64_t x, uint64_t y) const {
+    const uint32_t tag = c.ref & kRefTagMask;
+    if (tag == kRefInner) return load32(nodes + size_t(c.ref & kRefIndexMask) * 4) & kNodeValuedBit ? c.base : c.last;
+    if (tag != kRefTreelet) return c.last;
+    // Alg. 1: from the deepest treelet level on the path up to the treelet root; the
+    // first valued node answers, its index = base + set bits before it (depth-first).
+    const uint8_t* t = treelets + size_t(c.ref & kRefIndexMask) * kTreeletBytes;
+    const uint64_t low = load64(t);
+    const uint32_t high = load32(t + 8);
+    const uint32_t depth = std::min<uint32_t>(level - c.level, kTreeletLevels - 1);
+    uint32_t pos[kTreeletLevels] = {0, 0, 0, 0};
+    for (uint32_t n = 1; n <= depth; ++n) {
+      const uint32_t shift = level - c.level - n;
+      const uint32_t child = uint32_t((x >> shift) & 1) | uint32_t(((y >> shift) & 1) << 1);
+      pos[n] = pos[n - 1] + 1 + kTreeletStride[n - 1] * child;
+    }
+    for (uint32_t n = depth + 1; n-- > 0;) {
+      const uint32_t p = pos[n];
+      const bool set = p < 64 ? (low >> p) & 1 : (high >> (p - 64)) & 1;
+      if (!set) continue;
+      const uint32_t before = p < 64 ? uint32_t(std::popcount(low & ((uint64_t(1) << p) - 1)))
+                                     : uint32_t(std::popcount(low)) +
+                                           uint32_t(std::popcount(high & ((1u << (p - 64)) - 1)));
+      return c.base + before;
+    }
+    return c.last;
+  }
+
+  float value(uint32_t index) const { return read_value(chunks, multipliers, index); }
+
+  uint32_t lookup_index(uint32_t level, uint64_t x, uint64_t y) const {
+    const Cursor c = descend(start(level, level, x, y), level, level, x, y);
+    return finish(c, level, x, y);
+  }
+};
+
+}  // namespace st::dagmh

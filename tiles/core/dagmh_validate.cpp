@@ -1,0 +1,204 @@
+// DAG-MH validation: hostile input is the normal case (STYLE.md). Never trusts a length:
+// every section's extent is derived from counts in 64-bit arithmetic and compared to
+// the header's offsets and to the buffer's size.
+#include "tiles/core/dagmh_validate.hpp"
+
+#include <bit>
+#include <string>
+#include <vector>
+
+#include "tiles/core/error.hpp"
+#include "tiles/core/interval.hpp"
+
+namespace st::dagmh {
+namespace {
+
+[[noreturn]] void fail(const std::string& field, uint64_t offset, const std::string& what) {
+  throw FormatError("dagmh: " + field + " at byte " + std::to_string(offset) + ": " + what);
+}
+
+void expect_field(const char* name, uint32_t offset, uint64_t value, uint64_t expected) {
+  if (value != expected)
+    fail(name, offset, "is " + std::to_string(value) + ", expected " + std::to_string(expected));
+}
+
+struct Sections {
+  uint64_t skip, nodes, treelets, chunks, multipliers, end;
+};
+
+Sections check_header(const Header& h, size_t size) {
+  expect_field("magic", offsetof(Header, magic), h.magic, kMagic);
+  expect_field("version", offsetof(Header, version), h.version, kVersion);
+  expect_field("header_bytes", offsetof(Header, header_bytes), h.header_bytes, sizeof(Header));
+  expect_field("total_bytes", offsetof(Header, total_bytes), h.total_bytes, size);
+  expect_field("reserved", offsetof(Header, reserved), h.reserved, 0);
+  if (h.finest_level > kMaxLevel) fail("finest_level", offsetof(Header, finest_level), "exceeds 20");
+  if (h.skip_level > std::min(h.finest_level, kMaxSkipLevel))
+    fail("skip_level", offsetof(Header, skip_level), "exceeds min(finest_level, 6)");
+  if (h.node_words > kRefIndexMask) fail("node_words", offsetof(Header, node_words), "exceeds 2^30");
+  if (h.treelet_count > kRefIndexMask)
+    fail("treelet_count", offsetof(Header, treelet_count), "exceeds 2^30");
+  if (h.value_count == 0) fail("value_count", offsetof(Header, value_count), "is zero (the root has a value)");
+  expect_field("chunk_count", offsetof(Header, chunk_count), h.chunk_count,
+               (uint64_t(h.value_count) + kChunkValues - 1) / kChunkValues);
+  if (h.multiplier_bytes % 4 != 0 || h.multiplier_bytes < kMultiplierPadBytes)
+    fail("multiplier_bytes", offsetof(Header, multiplier_bytes), "not a multiple of 4 of at least 8");
+  Sections s;
+  s.skip = sizeof(Header);
+  s.nodes = s.skip + (uint64_t(1) << (2 * h.skip_level)) * kSkipEntryBytes;
+  s.treelets = s.nodes + uint64_t(h.node_words) * 4;
+  s.chunks = s.treelets + uint64_t(h.treelet_count) * kTreeletBytes;
+  s.multipliers = s.chunks + uint64_t(h.chunk_count) * sizeof(ChunkInfo);
+  s.end = s.multipliers + h.multiplier_bytes;
+  expect_field("skip_offset", offsetof(Header, skip_offset), h.skip_offset, s.skip);
+  expect_field("node_offset", offsetof(Header, node_offset), h.node_offset, s.nodes);
+  expect_field("treelet_offset", offsetof(Header, treelet_offset), h.treelet_offset, s.treelets);
+  expect_field("chunk_offset", offsetof(Header, chunk_offset), h.chunk_offset, s.chunks);
+  expect_field("multiplier_offset", offsetof(Header, multiplier_offset), h.multiplier_offset,
+               s.multipliers);
+  if (s.end != size)
+    fail("sections", s.end, "end at byte " + std::to_string(s.end) + " but the buffer has " +
+                                std::to_string(size) + " bytes");
+  return s;
+}
+
+// Inner nodes and treelets: extents, references, value counts, reachability.
+void check_structure(const Header& h, const Sections& s, const uint8_t* base) {
+  const uint8_t* nodes = base + s.nodes;
+  const uint32_t words = h.node_words;
+  auto node_byte = [&](uint64_t w) { return s.nodes + 4 * w; };
+  std::vector<uint32_t> starts;
+  std::vector<uint8_t> is_start(words, 0);
+  for (uint32_t w = 0; w < words;) {
+    const uint32_t flags = load32(nodes + 4 * size_t(w));
+    if (flags & ~kNodeFlagBits) fail("node flags", node_byte(w), "reserved bits set");
+    const uint32_t mask = flags & kNodeChildMask;
+    if (mask == 0) fail("node flags", node_byte(w), "inner node without children");
+    if ((flags >> kNodeTreeletShift) & ~mask & 0xF)
+      fail("node flags", node_byte(w), "treelet bit for an absent child");
+    if (uint64_t(w) + node_words(flags) > words)
+      fail("node", node_byte(w), "overruns the node section");
+    is_start[w] = 1;
+    starts.push_back(w);
+    w += node_words(flags);
+  }
+  const uint8_t* treelets = base + s.treelets;
+  std::vector<uint32_t> treelet_values(h.treelet_count);
+  for (uint32_t t = 0; t < h.treelet_count; ++t) {
+    const uint8_t* p = treelets + size_t(t) * kTreeletBytes;
+    if (load32(p + 8) >> (kTreeletNodes - 64))
+      fail("treelet", s.treelets + uint64_t(t) * kTreeletBytes + 8, "bits past 85 set");
+    treelet_values[t] = uint32_t(std::popcount(load64(p)) + std::popcount(load32(p + 8)));
+  }
+  // References and value counts, children first (they lie after their parents).
+  std::vector<uint32_t> count(words, 0);
+  for (size_t i = starts.size(); i-- > 0;) {
+    const uint32_t w = starts[i];
+    const uint32_t flags = load32(nodes + 4 * size_t(w));
+    uint64_t expected = (flags & kNodeValuedBit) ? 1 : 0;
+    uint32_t rank = 0;
+    for (uint32_t c = 0; c < 4; ++c) {
+      if (!((flags >> c) & 1)) continue;
+      const uint64_t at = uint64_t(w) + 1 + 2 * rank++;
+      const uint32_t ref = load32(nodes + 4 * at);
+      const uint32_t offset = load32(nodes + 4 * (at + 1));
+      uint64_t child_count;
+      if ((flags >> (kNodeTreeletShift + c)) & 1) {
+        if (ref >= h.treelet_count) fail("node child reference", node_byte(at), "treelet out of range");
+        child_count = treelet_values[ref];
+      } else {
+        if (ref <= w || ref >= words || !is_start[ref])
+          fail("node child reference", node_byte(at), "not a later node's start");
+        child_count = count[ref];
+      }
+      if (offset != expected) fail("node value offset", node_byte(at + 1), "disagrees with the value counts");
+      expected += child_count;
+      if (child_count == 0) fail("node child reference", node_byte(at), "subtree without values");
+    }
+    if (expected > h.value_count) fail("node", node_byte(w), "subtree has more values than value_count");
+    count[w] = uint32_t(expected);
+  }
+  // The root: valued, holding exactly value_count values; everything reachable from it.
+  const uint32_t tag = h.root_ref & kRefTagMask, index = h.root_ref & kRefIndexMask;
+  const uint32_t root_field = offsetof(Header, root_ref);
+  std::vector<uint8_t> reached(words, 0), treelet_reached(h.treelet_count, 0);
+  if (tag == kRefInner) {
+    if (index >= words || !is_start[index]) fail("root_ref", root_field, "not a node start");
+    if (!(load32(nodes + 4 * size_t(index)) & kNodeValuedBit)) fail("root_ref", root_field, "root has no value");
+    if (count[index] != h.value_count) fail("root_ref", root_field, "root's values != value_count");
+    reached[index] = 1;
+  } else if (tag == kRefTreelet) {
+    if (index >= h.treelet_count) fail("root_ref", root_field, "treelet out of range");
+    if (!(treelets[size_t(index) * kTreeletBytes] & 1)) fail("root_ref", root_field, "root has no value");
+    if (treelet_values[index] != h.value_count) fail("root_ref", root_field, "root's values != value_count");
+    treelet_reached[index] = 1;
+  } else {
+    fail("root_ref", root_field, "bad tag");
+  }
+  for (uint32_t w : starts) {
+    if (!reached[w]) fail("node", node_byte(w), "unreachable from the root");
+    const uint32_t flags = load32(nodes + 4 * size_t(w));
+    uint32_t rank = 0;
+    for (uint32_t c = 0; c < 4; ++c) {
+      if (!((flags >> c) & 1)) continue;
+      const uint32_t ref = load32(nodes + 4 * (size_t(w) + 1 + 2 * rank++));
+      ((flags >> (kNodeTreeletShift + c)) & 1 ? treelet_reached : reached)[ref] = 1;
+    }
+  }
+  for (uint32_t t = 0; t < h.treelet_count; ++t)
+    if (!treelet_reached[t]) fail("treelet", s.treelets + uint64_t(t) * kTreeletBytes, "unreachable");
+}
+
+void check_chunks(const Header& h, const Sections& s, const uint8_t* base) {
+  const uint64_t usable_bits = uint64_t(h.multiplier_bytes - kMultiplierPadBytes) * 8;
+  for (uint32_t c = 0; c < h.chunk_count; ++c) {
+    const uint64_t at = s.chunks + uint64_t(c) * sizeof(ChunkInfo);
+    const ChunkInfo info = load_chunk(base + s.chunks, c);
+    if (info.pad[0] | info.pad[1] | info.pad[2]) fail("chunk pad", at + 21, "not zero");
+    const uint32_t k = info.factor_bits;
+    if (k > kMaxFactorBits && k != kRawFactorBits) fail("chunk factor_bits", at + 20, "not 0..24 or 32");
+    const uint64_t in_chunk = std::min<uint64_t>(kChunkValues, uint64_t(h.value_count) - uint64_t(c) * kChunkValues);
+    if (in_chunk < kChunkValues && (info.mask >> in_chunk) != 0)
+      fail("chunk mask", at + 4, "bits set past the last value");
+    const uint64_t end = uint64_t(info.bit_offset) + uint64_t(std::popcount(info.mask)) * k;
+    if (end > usable_bits) fail("chunk bit_offset", at + 16, "multipliers run past the multiplier section");
+  }
+}
+
+void check_skip_table(const Header& h, const Sections& s, const View& view) {
+  const uint64_t side = uint64_t(1) << h.skip_level;
+  for (uint64_t y = 0; y < side; ++y)
+    for (uint64_t x = 0; x < side; ++x) {
+      const Cursor want = view.descend(view.root(), h.skip_level, h.skip_level, x, y);
+      const Cursor got = view.skip_entry(h.skip_level, x, y);
+      if (std::memcmp(&want, &got, sizeof(Cursor)) != 0)
+        fail("skip entry", s.skip + (y * side + x) * kSkipEntryBytes, "disagrees with the DAG");
+    }
+}
+
+}  // namespace
+
+View validate(std::span<const uint8_t> bytes) {
+  if (bytes.size() < sizeof(Header))
+    fail("header", 0, "buffer of " + std::to_string(bytes.size()) + " bytes is shorter than the header");
+  Header h;
+  std::memcpy(&h, bytes.data(), sizeof(Header));
+  const Sections s = check_header(h, bytes.size());
+  const uint8_t* base = bytes.data();
+  check_structure(h, s, base);
+  check_chunks(h, s, base);
+  View view;
+  view.skip = base + s.skip;
+  view.nodes = base + s.nodes;
+  view.treelets = base + s.treelets;
+  view.chunks = base + s.chunks;
+  view.multipliers = base + s.multipliers;
+  view.finest_level = h.finest_level;
+  view.skip_level = h.skip_level;
+  view.root_ref = h.root_ref;
+  view.value_count = h.value_count;
+  check_skip_table(h, s, view);
+  return view;
+}
+
+}  // namespace st::dagmh

@@ -1,0 +1,281 @@
+#include "tiles/core/mh_quadtree_reader.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "tiles/core/error.hpp"
+#include "tiles/core/interval.hpp"
+
+namespace st::mhq {
+namespace {
+
+const char* format_name(bool relative) { return relative ? "MMH" : "MH quadtree"; }
+
+[[noreturn]] void fail(bool relative, const char* field, uint64_t byte, const std::string& what) {
+  throw FormatError(std::string(format_name(relative)) + ": " + field + " at byte " + std::to_string(byte) +
+                    ": " + what);
+}
+
+// Walks every node reachable from the root once. Marks record which words hold which
+// node kind, so a shared MMH block reached again must be the same kind at the same word
+// (and is not walked twice), and any overlap between nodes is caught.
+class Validator {
+ public:
+  Validator(const uint8_t* tree, const TreeInfo& info)
+      : tree_(tree), info_(info), mark_(info.words, 0), height_(info.words, 0) {}
+
+  void run() {
+    node(0, info_.root_leaf ? kCodeLeaf : kCodeInner, 0);
+    for (uint64_t w = 0; w < info_.words; ++w)
+      if (!mark_[w] && load_u32(tree_ + 4 * w) != 0) fail_at("padding", w, "non-zero word outside every node");
+    if (!mark_[info_.words - 1]) fail_at("byte_size", info_.words - 1, "trailing bytes after the last node");
+    if (nodes_ != info_.node_count)
+      fail(info_.relative, "node_count", kOffNodeCount,
+           "header says " + std::to_string(info_.node_count) + ", the tree holds " + std::to_string(nodes_));
+  }
+
+ private:
+  static constexpr uint8_t kMarkValue = 4;  // second word of an inner node
+
+  [[noreturn]] void fail_at(const char* field, uint64_t word, const std::string& what) const {
+    fail(info_.relative, field, info_.tree_offset + 4 * word, what);
+  }
+
+  uint32_t node(uint64_t p, uint32_t code, uint32_t level) {
+    const uint32_t finest = info_.levels - 1;
+    const uint32_t size = code_words(code);
+    if (p + size > info_.words) fail_at("node", p, "extends past the end of the buffer");
+    if (mark_[p] != 0) {
+      if (info_.relative && mark_[p] == code) {  // a shared block, already validated
+        if (level + height_[p] > finest) fail_at("node", p, "shared subtree reaches below the finest level");
+        return height_[p];
+      }
+      fail_at("node", p, info_.relative ? "overlaps another node of a different kind"
+                                        : "reached twice or overlaps another node (MH is a tree)");
+    }
+    if (code == kCodeInner && mark_[p + 1] != 0) fail_at("node", p + 1, "overlaps another node");
+    mark_[p] = uint8_t(code);
+    if (code == kCodeInner) mark_[p + 1] = kMarkValue;
+    ++nodes_;
+    if (code != kCodeEmpty) {
+      const uint64_t vp = code == kCodeLeaf ? p : p + 1;
+      if (!std::isfinite(bits_float(load_u32(tree_ + 4 * vp)))) fail_at("value", vp, "not a finite float");
+    }
+    if (code == kCodeLeaf) return 0;
+
+    const uint32_t w = load_u32(tree_ + 4 * p);
+    const uint32_t mask = word_mask(w);
+    if (mask == 0) fail_at("child mask", p, "inner or empty node without children");
+    if (level >= finest) fail_at("child mask", p, "children below the finest level");
+    uint32_t shift = info_.shift[level];
+    if (info_.relative) {
+      uint32_t valued_slots = 0;
+      for (uint32_t s = 0; s < 4; ++s)
+        if (child_code(mask, s) == kCodeLeaf || child_code(mask, s) == kCodeInner) valued_slots |= 1u << s;
+      if (word_abs_flags(w) & ~valued_slots) fail_at("absolute flags", p, "flag set on a child without a value");
+      shift = word_shift(w);
+    } else if (word_pad(w) != 0) {
+      fail_at("pad byte", p, "must be zero in MH");
+    }
+    const uint32_t off = word_offset(w);
+    if (off == 0) fail_at("child offset", p, "zero (offsets point strictly forward)");
+    const uint64_t block = block_start(p, shift, off);
+    if (block < p + size) fail_at("child offset", p, "children block overlaps its parent");
+    if (block + uint32_t(std::popcount(mask)) > info_.words)
+      fail_at("child offset", p, "children block past the end of the buffer");
+    uint32_t h = 0;
+    for (uint32_t s = 0; s < 4; ++s) {
+      const uint32_t cc = child_code(mask, s);
+      if (cc) h = std::max(h, node(block + child_skip(mask, s), cc, level + 1) + 1);
+    }
+    height_[p] = uint8_t(h);
+    return h;
+  }
+
+  const uint8_t* tree_;
+  const TreeInfo& info_;
+  std::vector<uint8_t> mark_;
+  std::vector<uint8_t> height_;
+  uint64_t nodes_ = 0;
+};
+
+// Lookups over a validated buffer (MH §3.2 traversal). MH fetches lazily: it remembers
+// the word of the last valued node and reads the float once at the end. MMH must sum the
+// relative values along the path, so it reads each valued node it passes.
+template <bool kRelative>
+class TreeEvaluator final : public Evaluator {
+ public:
+  TreeEvaluator(std::span<const uint8_t> bytes, const TreeInfo& info)
+      : tree_(bytes.data() + info.tree_offset), finest_(info.levels - 1), root_leaf_(info.root_leaf),
+        shift_(info.shift) {}
+
+  uint32_t finest_level() const override { return finest_; }
+
+  float depth(uint32_t level, uint64_t x, uint64_t y) const override {
+    level = std::min(level, kMaxLevel);
+    Cursor c = root();
+    descend(c, level, x, y, level);
+    return value(c);
+  }
+
+  // MH §3.3, Fig. 5: the taps share the root path down to the lowest common node of the
+  // kernel's corner texels; each tap continues from there, and a tap whose texel lies in
+  // the region where the previous tap's walk stopped reuses its answer (the last-sample
+  // cache). Same walks as depth(), so the result equals the average of single lookups.
+  float pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver) const override {
+    r = std::clamp<uint32_t>(r, 1, kMaxPcf);
+    level = std::min(level, kMaxLevel);
+    const uint64_t side = uint64_t(1) << level;
+    const uint64_t x0 = pcf_tap(x, 0, r, side), x1 = pcf_tap(x, r - 1, r, side);
+    const uint64_t y0 = pcf_tap(y, 0, r, side), y1 = pcf_tap(y, r - 1, r, side);
+    const uint64_t diff = (x0 ^ x1) | (y0 ^ y1);
+    const uint32_t common = level - uint32_t(std::bit_width(diff));
+    Cursor base = root();
+    descend(base, level, x0, y0, common);
+    uint32_t lit = 0;
+    if (base.missing || base.code == kCodeLeaf || base.level == level) {
+      lit = receiver <= value(base) ? r * r : 0;
+    } else {
+      bool cached = false;
+      uint32_t cache_shift = 0, cache_lit = 0;
+      uint64_t cache_x = 0, cache_y = 0;
+      for (uint32_t j = 0; j < r; ++j) {
+        const uint64_t ty = pcf_tap(y, j, r, side);
+        for (uint32_t i = 0; i < r; ++i) {
+          const uint64_t tx = pcf_tap(x, i, r, side);
+          if (cached && (tx >> cache_shift) == cache_x && (ty >> cache_shift) == cache_y) {
+            lit += cache_lit;
+            continue;
+          }
+          Cursor c = base;
+          descend(c, level, tx, ty, level);
+          cache_lit = receiver <= value(c) ? 1 : 0;
+          lit += cache_lit;
+          // Every texel under the node where the walk ended (or under the missing child)
+          // takes the same path and gets the same value.
+          cache_shift = level - (c.missing ? c.level + 1 : c.level);
+          cache_x = tx >> cache_shift;
+          cache_y = ty >> cache_shift;
+          cached = true;
+        }
+      }
+    }
+    return float(lit) / float(r * r);
+  }
+
+ private:
+  struct Cursor {
+    uint64_t pos = 0;      // word of the current node
+    uint64_t val_pos = 0;  // MH: word of the last valued node's float
+    float value = 0;       // MMH: decoded value of the last valued node
+    uint32_t code = 0;
+    uint32_t level = 0;
+    bool missing = false;  // stopped because the next child is absent
+  };
+
+  uint32_t word(uint64_t w) const { return load_u32(tree_ + 4 * w); }
+
+  Cursor root() const {
+    Cursor c;
+    c.code = root_leaf_ ? kCodeLeaf : kCodeInner;
+    c.val_pos = root_leaf_ ? 0 : 1;
+    if constexpr (kRelative) c.value = bits_float(word(c.val_pos));
+    return c;
+  }
+
+  float value(const Cursor& c) const {
+    if constexpr (kRelative) return c.value;
+    return bits_float(word(c.val_pos));
+  }
+
+  // Walks toward texel (x, y) of `level` until level `until`, a leaf or a missing child;
+  // the child slot at level l comes from bit (level - l) of x and y (MH Fig. 5).
+  void descend(Cursor& c, uint32_t level, uint64_t x, uint64_t y, uint32_t until) const {
+    while (c.level < until && c.code != kCodeLeaf) {
+      const uint32_t bit = level - (c.level + 1);
+      const uint32_t slot = uint32_t((x >> bit) & 1u) | uint32_t(((y >> bit) & 1u) << 1);
+      const uint32_t w = word(c.pos);
+      const uint32_t mask = word_mask(w);
+      const uint32_t code = child_code(mask, slot);
+      if (!code) {
+        c.missing = true;
+        return;
+      }
+      const uint32_t shift = kRelative ? word_shift(w) : shift_[c.level];
+      const uint64_t child = block_start(c.pos, shift, word_offset(w)) + child_skip(mask, slot);
+      c.pos = child;
+      c.code = code;
+      c.level += 1;
+      if (code != kCodeEmpty) {
+        const uint64_t vp = code == kCodeLeaf ? child : child + 1;
+        if constexpr (kRelative) {
+          const float s = bits_float(word(vp));
+          c.value = (word_abs_flags(w) >> slot & 1u) ? s : mmh_add(c.value, s);
+        } else {
+          c.val_pos = vp;
+        }
+      }
+    }
+  }
+
+  const uint8_t* tree_;
+  uint32_t finest_;
+  bool root_leaf_;
+  std::array<uint8_t, kMaxLevels> shift_;
+};
+
+}  // namespace
+
+TreeInfo validate(std::span<const uint8_t> bytes, bool relative) {
+  const size_t size = bytes.size();
+  const uint8_t* b = bytes.data();
+  if (size < kHeaderFixedSize)
+    fail(relative, "header", 0, "truncated: " + std::to_string(size) + " bytes, need at least 16");
+  const uint32_t magic = load_u32(b + kOffMagic);
+  const uint32_t want = relative ? kMagicMmh : kMagicMh;
+  if (magic != want) {
+    if (magic == (relative ? kMagicMh : kMagicMmh))
+      fail(relative, "magic", kOffMagic, relative ? "this is an MH buffer (open_mh)" : "this is an MMH buffer (open_mmh)");
+    fail(relative, "magic", kOffMagic, "not an MH/MMH buffer");
+  }
+  const uint16_t version = load_u16(b + kOffVersion);
+  if (version != kVersion) fail(relative, "version", kOffVersion, "unsupported version " + std::to_string(version));
+  TreeInfo info;
+  info.relative = relative;
+  info.levels = b[kOffLevels];
+  if (info.levels < 1 || info.levels > kMaxLevels)
+    fail(relative, "levels", kOffLevels, std::to_string(info.levels) + " not in 1..21");
+  const uint8_t flags = b[kOffFlags];
+  if (flags & ~kFlagsKnown) fail(relative, "flags", kOffFlags, "unknown bits set");
+  if (bool(flags & kFlagRelative) != relative)
+    fail(relative, "flags", kOffFlags, "relative-values bit disagrees with the magic");
+  info.root_leaf = flags & kFlagRootLeaf;
+  info.node_count = load_u32(b + kOffNodeCount);
+  const uint32_t byte_size = load_u32(b + kOffByteSize);
+  if (byte_size != size)
+    fail(relative, "byte_size", kOffByteSize,
+         "header says " + std::to_string(byte_size) + " bytes, buffer has " + std::to_string(size));
+  info.tree_offset = tree_offset(info.levels);
+  if (size < info.tree_offset + 4)
+    fail(relative, "header", 0, "truncated: " + std::to_string(size) + " bytes, no room for the root");
+  for (uint32_t l = 0; l < info.levels; ++l) {
+    info.shift[l] = b[kOffShifts + l];
+    if (info.shift[l] > kMaxShift) fail(relative, "shift", kOffShifts + l, "greater than 15");
+  }
+  for (size_t o = kOffShifts + info.levels; o < info.tree_offset; ++o)
+    if (b[o] != 0) fail(relative, "header padding", o, "must be zero");
+  if ((size - info.tree_offset) % 4 != 0)
+    fail(relative, "byte_size", kOffByteSize, "tree is not a whole number of 32-bit words");
+  info.words = (size - info.tree_offset) / 4;
+  Validator(b + info.tree_offset, info).run();
+  return info;
+}
+
+std::unique_ptr<Evaluator> make_evaluator(std::span<const uint8_t> bytes, const TreeInfo& info) {
+  if (info.relative) return std::make_unique<TreeEvaluator<true>>(bytes, info);
+  return std::make_unique<TreeEvaluator<false>>(bytes, info);
+}
+
+}  // namespace st::mhq

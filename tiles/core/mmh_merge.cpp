@@ -1,0 +1,352 @@
+#include "tiles/core/mmh_merge.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <string>
+#include <unordered_map>
+
+#include "tiles/core/error.hpp"
+
+namespace st::mhq {
+namespace {
+
+constexpr uint32_t kPathsCap = 64;  // hard bound of MergeOptions::max_paths (stack arrays)
+
+uint64_t mix(uint64_t h) {  // splitmix64 finalizer
+  h ^= h >> 30;
+  h *= 0xBF58476D1CE4E5B9ull;
+  h ^= h >> 27;
+  h *= 0x94D049BB133111EBull;
+  return h ^ (h >> 31);
+}
+
+struct Candidate {
+  uint64_t hash;
+  uint32_t height;
+  uint32_t pre;
+  uint32_t node;
+  // Quick reject data: the first valued descendant in pre-order. Every node between it
+  // and the candidate is empty, so its ancestor value is the candidate's children base.
+  double rel_lo, rel_hi;
+  float abs_lo, abs_hi;
+};
+
+struct Assign {
+  uint32_t node;
+  float stored;
+  uint8_t absolute;
+};
+
+class Planner {
+ public:
+  Planner(const FlatTree& t, const MergeOptions& o, MergeStats& s) : t_(t), opt_(o), stats_(s) {
+    opt_.max_paths = std::clamp<uint32_t>(opt_.max_paths, 2, kPathsCap);
+  }
+
+  EmitPlan run() {
+    const size_t n = t_.size();
+    plan_.relative = true;
+    plan_.alive.assign(n, 1);
+    plan_.block_owner.resize(n);
+    for (uint32_t i = 0; i < n; ++i) plan_.block_owner[i] = i;
+    plan_.block_parent_levels.assign(n, 0);
+    plan_.stored.assign(n, 0);
+    plan_.absolute.assign(n, 0);
+    decoded_.assign(n, 0);
+    base_.assign(n, 0);
+    frozen_.assign(n, 0);
+    initial_values();
+    shape();
+    merge();
+    verify();
+    for (uint32_t i = 0; i < n; ++i) stats_.absolute_values += plan_.alive[i] && plan_.absolute[i];
+    return std::move(plan_);
+  }
+
+ private:
+  float child_base(uint32_t n) const { return t_.valued[n] ? decoded_[n] : base_[n]; }
+
+  // Verifies candidate stored number `r` (relative) on every path; fills the decoded values.
+  bool try_relative(const uint32_t* nodes, const float* bases, uint32_t k, float r, float* out) const {
+    if (!std::isfinite(r)) return false;
+    for (uint32_t p = 0; p < k; ++p) {
+      const float v = mmh_add(bases[p], r);
+      if (!(t_.lo[nodes[p]] <= v && v <= t_.hi[nodes[p]])) return false;
+      out[p] = v;
+    }
+    return true;
+  }
+
+  // One stored number for corresponding valued nodes `nodes[0..k)` whose ancestors decode
+  // to `bases`: relative mid-intersection first (most room for later merges), then its
+  // rounded ends, then an absolute value in the intersection of the intervals.
+  bool choose(const uint32_t* nodes, const float* bases, uint32_t k, Assign& a, float* out) const {
+    double lo = -std::numeric_limits<double>::infinity(), hi = -lo;
+    float alo = -std::numeric_limits<float>::infinity(), ahi = -alo;
+    for (uint32_t p = 0; p < k; ++p) {
+      lo = std::max(lo, double(t_.lo[nodes[p]]) - double(bases[p]));
+      hi = std::min(hi, double(t_.hi[nodes[p]]) - double(bases[p]));
+      alo = std::max(alo, t_.lo[nodes[p]]);
+      ahi = std::min(ahi, t_.hi[nodes[p]]);
+    }
+    a.node = nodes[0];
+    a.absolute = 0;
+    if (lo <= hi + 1e-6 * (1.0 + std::fabs(lo))) {
+      const float mid = float(0.5 * (lo + hi));
+      for (float r : {mid, float(lo), float(hi), std::nextafter(float(lo), INFINITY),
+                      std::nextafter(float(hi), -INFINITY)}) {
+        if (try_relative(nodes, bases, k, r, out)) {
+          a.stored = r;
+          return true;
+        }
+      }
+    }
+    if (alo <= ahi) {
+      float v = float(0.5 * double(alo) + 0.5 * double(ahi));
+      if (!(alo <= v && v <= ahi)) v = alo;
+      a.stored = v;
+      a.absolute = 1;
+      for (uint32_t p = 0; p < k; ++p) out[p] = v;
+      return true;
+    }
+    return false;
+  }
+
+  // Top-down: each value relative to its decoded ancestor if that decodes inside its
+  // interval (trying the hierarchy's own value first), else absolute.
+  void initial_values() {
+    plan_.stored[0] = t_.value[0];
+    plan_.absolute[0] = 1;
+    decoded_[0] = t_.value[0];
+    for (uint32_t n = 0; n < t_.size(); ++n) {
+      if (!t_.mask[n]) continue;
+      const float b = child_base(n);
+      for (uint32_t slot = 0; slot < 4; ++slot) {
+        if (!(t_.mask[n] >> slot & 1u)) continue;
+        const uint32_t c = t_.child(n, slot);
+        base_[c] = b;
+        if (!t_.valued[c]) continue;
+        float v;
+        const float r = t_.value[c] - b;
+        if (try_relative(&c, &b, 1, r, &v)) {
+          plan_.stored[c] = r;
+          decoded_[c] = v;
+          continue;
+        }
+        Assign a;
+        ST_CHECK(choose(&c, &b, 1, a, &v));  // the absolute value always fits one interval
+        plan_.stored[c] = a.stored;
+        plan_.absolute[c] = a.absolute;
+        decoded_[c] = v;
+      }
+    }
+  }
+
+  // Heights, shape hashes (the node's mask and its children's kinds and shapes; the
+  // node's own kind is left out: it lives in the parent, not in the shared block) and
+  // pre-order numbers; then the sorted candidate list.
+  void shape() {
+    const size_t n = t_.size();
+    std::vector<uint8_t> height(n, 0);
+    std::vector<uint64_t> hash(n, 0);
+    std::vector<uint32_t> first_valued(n, 0);
+    for (size_t i = n; i-- > 0;) {
+      if (!t_.mask[i]) continue;
+      uint64_t h = mix(t_.code_mask(uint32_t(i)) + 1);
+      uint32_t ht = 0;
+      bool first = true;
+      for (uint32_t slot = 0; slot < 4; ++slot) {
+        if (!(t_.mask[i] >> slot & 1u)) continue;
+        const uint32_t c = t_.child(uint32_t(i), slot);
+        if (first) first_valued[i] = t_.valued[c] ? c : first_valued[c];
+        first = false;
+        if (t_.mask[c]) {
+          h = mix(h ^ (hash[c] + slot));
+          ht = std::max<uint32_t>(ht, height[c]);
+        }
+      }
+      hash[i] = h;
+      height[i] = uint8_t(ht + 1);
+    }
+    pre_.assign(n, 0);
+    uint32_t counter = 0;
+    std::vector<uint32_t> stack{0};
+    while (!stack.empty()) {
+      const uint32_t i = stack.back();
+      stack.pop_back();
+      pre_[i] = counter++;
+      for (uint32_t slot = 4; slot-- > 0;)
+        if (t_.mask[i] >> slot & 1u) stack.push_back(t_.child(i, slot));
+    }
+    for (uint32_t i = 1; i < n; ++i) {
+      if (!t_.mask[i] || height[i] > opt_.max_height) continue;
+      const uint32_t f = first_valued[i];
+      const double b = child_base(i);
+      cands_.push_back({hash[i], height[i], pre_[i], i, double(t_.lo[f]) - b, double(t_.hi[f]) - b, t_.lo[f],
+                        t_.hi[f]});
+    }
+    std::sort(cands_.begin(), cands_.end(), [](const Candidate& a, const Candidate& b) {
+      if (a.height != b.height) return a.height > b.height;  // big subtrees first
+      if (a.hash != b.hash) return a.hash < b.hash;
+      return a.pre < b.pre;
+    });
+    stats_.candidates = cands_.size();
+  }
+
+  static bool quick_reject(const Candidate& a, const Candidate& b) {
+    const double slack = 1e-6 * (1.0 + std::max(std::fabs(a.rel_lo), std::fabs(b.rel_lo)));
+    const bool rel_apart = a.rel_hi + slack < b.rel_lo || b.rel_hi + slack < a.rel_lo;
+    const bool abs_apart = a.abs_hi < b.abs_lo || b.abs_hi < a.abs_lo;
+    return rel_apart && abs_apart;
+  }
+
+  // Lock-step walk of the block below the merger (nodes[0]) and the corresponding
+  // nodes of every path; the last path is the candidate, whose topology is compared.
+  bool compare(const uint32_t* nodes, const float* bases, uint32_t k) {
+    const uint32_t nj = nodes[0], ni = nodes[k - 1];
+    if (t_.mask[ni] != t_.mask[nj]) return false;
+    for (uint32_t slot = 0; slot < 4; ++slot) {
+      if (!(t_.mask[nj] >> slot & 1u)) continue;
+      uint32_t child[kPathsCap];
+      float child_bases[kPathsCap];
+      for (uint32_t p = 0; p < k; ++p) child[p] = t_.child(nodes[p], slot);
+      const uint32_t cj = child[0], ci = child[k - 1];
+      if (t_.valued[ci] != t_.valued[cj] || t_.mask[ci] != t_.mask[cj]) return false;
+      if (t_.valued[cj]) {
+        Assign a;
+        if (!choose(child, bases, k, a, child_bases)) return false;
+        scratch_.push_back(a);
+      } else {
+        std::copy(bases, bases + k, child_bases);
+      }
+      if (t_.mask[cj] && !compare(child, child_bases, k)) return false;
+    }
+    return true;
+  }
+
+  void mark_subtree(uint32_t root, std::vector<uint8_t>& flags) {
+    std::vector<uint32_t> stack;
+    for (uint32_t slot = 0; slot < 4; ++slot)
+      if (t_.mask[root] >> slot & 1u) stack.push_back(t_.child(root, slot));
+    while (!stack.empty()) {
+      const uint32_t i = stack.back();
+      stack.pop_back();
+      flags[i] = 1;
+      for (uint32_t slot = 0; slot < 4; ++slot)
+        if (t_.mask[i] >> slot & 1u) stack.push_back(t_.child(i, slot));
+    }
+  }
+
+  bool try_merge(uint32_t i, uint32_t j) {
+    auto& mergees = mergees_[j];
+    uint32_t roots[kPathsCap];
+    float bases[kPathsCap];
+    uint32_t k = 0;
+    roots[k++] = j;
+    for (uint32_t m : mergees) roots[k++] = m;
+    roots[k++] = i;
+    for (uint32_t p = 0; p < k; ++p) bases[p] = child_base(roots[p]);
+    scratch_.clear();
+    if (!compare(roots, bases, k)) {
+      if (mergees.empty()) mergees_.erase(j);
+      return false;
+    }
+    for (const Assign& a : scratch_) {
+      plan_.stored[a.node] = a.stored;
+      plan_.absolute[a.node] = a.absolute;
+    }
+    if (mergees.empty()) mark_subtree(j, frozen_);
+    mergees.push_back(i);
+    mark_subtree(i, dead_);
+    plan_.block_owner[i] = j;
+    plan_.block_parent_levels[j] |= (1u << t_.level[j]) | (1u << t_.level[i]);
+    ++stats_.merges;
+    return true;
+  }
+
+  void merge() {
+    dead_.assign(t_.size(), 0);
+    size_t g0 = 0;
+    while (g0 < cands_.size()) {
+      size_t g1 = g0 + 1;
+      while (g1 < cands_.size() && cands_[g1].height == cands_[g0].height && cands_[g1].hash == cands_[g0].hash)
+        ++g1;
+      for (size_t a = g0; a + 1 < g1; ++a) {
+        const uint32_t i = cands_[a].node;
+        if (dead_[i] || frozen_[i] || plan_.block_owner[i] != i || mergees_.count(i)) continue;
+        uint32_t tested = 0;
+        for (size_t b = a + 1; b < g1 && tested < opt_.window; ++b) {
+          const uint32_t j = cands_[b].node;
+          if (dead_[j] || frozen_[j] || plan_.block_owner[j] != j) continue;
+          ++tested;
+          ++stats_.tests;
+          if (quick_reject(cands_[a], cands_[b])) {
+            ++stats_.quick_rejects;
+            continue;
+          }
+          auto it = mergees_.find(j);
+          if (it != mergees_.end() && it->second.size() + 1 >= opt_.max_paths) continue;
+          if (try_merge(i, j)) break;
+          ++stats_.full_rejects;
+        }
+      }
+      g0 = g1;
+    }
+    for (uint32_t i = 0; i < t_.size(); ++i) {
+      plan_.alive[i] = !dead_[i];
+      stats_.nodes_removed += dead_[i];
+    }
+  }
+
+  // Decodes every node of the original tree the way the reader will (through shared
+  // blocks, with each path's own ancestors) and checks its interval: the lossless
+  // invariant of the whole plan, always on.
+  void verify() const {
+    struct Item {
+      uint32_t orig, emitted;
+      float base;
+    };
+    std::vector<Item> stack{{0, 0, t_.value[0]}};
+    ST_CHECK(plan_.absolute[0] && plan_.stored[0] == t_.value[0]);
+    while (!stack.empty()) {
+      const Item it = stack.back();
+      stack.pop_back();
+      if (!t_.mask[it.orig]) continue;
+      const uint32_t owner = plan_.block_owner[it.emitted];
+      ST_CHECK(t_.mask[owner] == t_.mask[it.orig] && plan_.alive[owner]);
+      for (uint32_t slot = 0; slot < 4; ++slot) {
+        if (!(t_.mask[it.orig] >> slot & 1u)) continue;
+        const uint32_t o = t_.child(it.orig, slot), e = t_.child(owner, slot);
+        ST_CHECK(t_.valued[o] == t_.valued[e] && plan_.alive[e]);
+        float v = it.base;
+        if (t_.valued[e]) {
+          v = plan_.absolute[e] ? plan_.stored[e] : mmh_add(it.base, plan_.stored[e]);
+          if (!(t_.lo[o] <= v && v <= t_.hi[o]))
+            throw Error("MMH: internal error: node " + std::to_string(o) + " decodes outside its interval");
+        }
+        stack.push_back({o, e, v});
+      }
+    }
+  }
+
+  const FlatTree& t_;
+  MergeOptions opt_;
+  MergeStats& stats_;
+  EmitPlan plan_;
+  std::vector<float> decoded_, base_;
+  std::vector<uint8_t> frozen_, dead_;
+  std::vector<uint32_t> pre_;
+  std::vector<Candidate> cands_;
+  std::unordered_map<uint32_t, std::vector<uint32_t>> mergees_;
+  std::vector<Assign> scratch_;
+};
+
+}  // namespace
+
+EmitPlan plan_mmh(const FlatTree& t, const MergeOptions& options, MergeStats* stats) {
+  MergeStats local;
+  return Planner(t, options, stats ? *stats : local).run();
+}
+
+}  // namespace st::mhq
