@@ -276,10 +276,12 @@ asio::awaitable<bool> Fetcher::session() {
   proto::Frame f;
   proto::HelloAck ack;
   proto::Limits negotiated;
-  bool ok = bool(proto::encode_message(hello, next_id(), proto::kFlagFinal, limits_, out)) &&
-            co_await write(*sock, out) && co_await read_frame(*sock, f) &&
-            f.header.type == MessageType::hello_ack &&
-            proto::decode_payload(f.payload, limits_, ack) && proto::check_hello_ack(hello, ack, negotiated);
+  // One step per statement: g++ 12 miscompiles co_await inside && chains.
+  bool ok = bool(proto::encode_message(hello, next_id(), proto::kFlagFinal, limits_, out));
+  if (ok) ok = co_await write(*sock, out);
+  if (ok) ok = co_await read_frame(*sock, f);
+  ok = ok && f.header.type == MessageType::hello_ack && proto::decode_payload(f.payload, limits_, ack) &&
+       proto::check_hello_ack(hello, ack, negotiated);
   if (!ok || stopping_io_) {
     fail_connect();
     end_session();
@@ -381,7 +383,11 @@ void Fetcher::end_session() {
 
 asio::awaitable<void> Fetcher::reader(std::shared_ptr<tcp::socket> sock) {
   proto::Frame f;
-  while (sock->is_open() && co_await read_frame(*sock, f)) handle(std::move(f));
+  while (sock->is_open()) {
+    const bool got = co_await read_frame(*sock, f);
+    if (!got) break;
+    handle(std::move(f));
+  }
   error_code ec;
   sock->close(ec);
   wake();  // the pump sees the closed socket and ends the session
