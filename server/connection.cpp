@@ -122,6 +122,7 @@ void Connection::handle(proto::Frame&& frame) {
   }
   if (!handshaken_) {
     if (auto* h = std::get_if<proto::Hello>(&msg)) return on_hello(frame, *h);
+    core_.stats.protocol_error();
     return fail(ErrorCode::handshake_required,
                 std::string("expected hello, got ") + std::string(proto::to_string(frame.header.type)));
   }
