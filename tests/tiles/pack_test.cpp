@@ -190,8 +190,7 @@ TEST(Pack, CellByCellBuildAnswersLikeTheCellsAndTheCoarseHierarchy) {
     std::thread other(worker, 1);
     worker(0);
     other.join();
-    auto build_coarse = [](const IntervalTile& roots) { return build_hierarchy(roots); };
-    w->finish(cutter.coarse_grid(w->cells(), build_coarse));
+    w->finish(cutter.coarse_grid(w->cells()));
 
     auto reader = std::shared_ptr<PackReader>(PackReader::open(path));
     ASSERT_NO_THROW(reader->verify(cut.codec.open));

@@ -2,9 +2,11 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 
 #include "tiles/core/error.hpp"
 #include "tiles/core/interval.hpp"
+#include "tiles/core/mh_build.hpp"
 
 namespace st {
 
@@ -139,13 +141,20 @@ GridEntry cut_subtree(const CutParams& p, Hierarchy&& h, uint32_t level, uint32_
   const HNode root = h.levels[0][0];
   if (root.child_mask == 0) return GridEntry{root.value, EntryKind::constant, 0};
   const uint64_t id = make_tile_id(level, x, y);
-  std::vector<uint8_t> bytes = p.codec.encode(h);
-  if (bytes.size() <= p.tile_bytes) {
-    out.push_back(CutTile{id, TileKind::encoded, std::move(bytes)});
-    return GridEntry{root.value, EntryKind::tile, 0};
+  size_t encoded_size = SIZE_MAX;
+  try {
+    std::vector<uint8_t> bytes = p.codec.encode(h);
+    if (bytes.size() <= p.tile_bytes) {
+      out.push_back(CutTile{id, TileKind::encoded, std::move(bytes)});
+      return GridEntry{root.value, EntryKind::tile, 0};
+    }
+    encoded_size = bytes.size();
+  } catch (const Error&) {
+    // An encoder may refuse a subtree too large for its format (e.g. offsets that no
+    // longer fit): cut it deeper like any oversized subtree. A small one is a real error.
+    if (h.depth <= kMaxIndexLevels) throw;
   }
-  const uint32_t d = choose_index_levels(bytes.size(), p.tile_bytes, h.depth);
-  bytes = {};
+  const uint32_t d = choose_index_levels(encoded_size, p.tile_bytes, h.depth);
   SplitResult s = split_hierarchy(h, d);
   h = Hierarchy{};  // the children hold copies: free the parent before recursing
   const uint32_t side = 1u << d;
@@ -204,7 +213,7 @@ CutGrid TileCutter::coarse_grid(std::span<const CellRecord> cells, const CoarseB
   CutGrid g;
   if (k > 0) {
     // MH §3.1 tiled construction: the cells' root bounds form a 2^K map compressed again.
-    Hierarchy coarse = build_coarse(roots);
+    Hierarchy coarse = build_coarse ? build_coarse(roots) : build_hierarchy(roots);
     if (coarse.depth != k) throw Error("cut: coarse hierarchy has the wrong depth");
     check_hierarchy(coarse, "cut: coarse hierarchy");
     g = split_hierarchy(coarse, k).grid;

@@ -93,10 +93,10 @@ class TileCutter {
   CutCell cut_cell(uint32_t cx, uint32_t cy, Hierarchy&& cell) const;
 
   // The skip grid once every cell is cut: entries from the cells, levels 0..K-1 from a
-  // hierarchy built (`build_coarse`) over the cells' root intervals. Throws st::Error if a
-  // cell is missing or repeated.
+  // hierarchy built over the cells' root intervals (`build_coarse`; empty: bottom-up
+  // build_hierarchy, MH §3.1 Alg. 2). Throws st::Error if a cell is missing or repeated.
   using CoarseBuilder = std::function<Hierarchy(const IntervalTile&)>;
-  CutGrid coarse_grid(std::span<const CellRecord> cells, const CoarseBuilder& build_coarse) const;
+  CutGrid coarse_grid(std::span<const CellRecord> cells, const CoarseBuilder& build_coarse = {}) const;
 
  private:
   CutParams params_;
