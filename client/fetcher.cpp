@@ -402,48 +402,50 @@ void Fetcher::answer_control(uint32_t request_id, proto::Message&& m) {
   wake();
 }
 
+// PROTOCOL.md §3, §7.2: a payload that does not decode, an answer to a tile request not
+// in flight, or a connection-level Error ends the connection (run() reconnects and the
+// maps re-request what was in flight). Late answers to control calls that timed out are
+// dropped quietly: the API already gave up on them.
 void Fetcher::handle(proto::Frame&& f) {
   const uint32_t id = f.header.request_id;
+  auto protocol_error = [&] {
+    {
+      std::lock_guard lock(stats_mu_);
+      ++stats_.protocol_errors;
+    }
+    error_code ec;
+    if (socket_) socket_->close(ec);
+  };
   auto end_tile_request = [&] {
     if (f.header.final() && tile_requests_.erase(id)) wake();
   };
-  switch (f.header.type) {
-    case MessageType::tile_data: {
+  if (f.header.type == MessageType::tile_data || f.header.type == MessageType::tile_error) {
+    auto it = tile_requests_.find(id);
+    if (it == tile_requests_.end()) return protocol_error();
+    if (f.header.type == MessageType::tile_data) {
       proto::TileMeta meta;
       std::span<const uint8_t> bytes;
-      auto it = tile_requests_.find(id);
-      if (it != tile_requests_.end() && proto::decode_tile_data_view(f.payload, meta, bytes) &&
-          meta.map_id == it->second.map_id)
-        it->second.map->tile_arrived(meta, bytes);
-      return end_tile_request();
-    }
-    case MessageType::tile_error: {
+      if (!proto::decode_tile_data_view(f.payload, meta, bytes) || meta.map_id != it->second.map_id)
+        return protocol_error();
+      it->second.map->tile_arrived(meta, bytes);
+    } else {
       proto::TileError te;
-      auto it = tile_requests_.find(id);
-      if (it != tile_requests_.end() && proto::decode_payload(f.payload, limits_, te) &&
-          te.map_id == it->second.map_id)
-        it->second.map->tile_refused(te.tile_id, te.code);
-      return end_tile_request();
+      if (!proto::decode_payload(f.payload, limits_, te) || te.map_id != it->second.map_id)
+        return protocol_error();
+      it->second.map->tile_refused(te.tile_id, te.code);
     }
-    default: break;
+    return end_tile_request();
   }
   proto::Message m;
-  if (!proto::decode_message(f, limits_, m)) {
-    std::lock_guard lock(stats_mu_);
-    ++stats_.protocol_errors;
-    return;
-  }
+  if (!proto::decode_message(f, limits_, m)) return protocol_error();
   if (f.header.type == MessageType::error && (id == proto::kNoRequest || tile_requests_.count(id))) {
-    // The server gave up on the connection, or refused a tile batch (which a correct
-    // client never provokes): drop the connection; run() reconnects and re-requests.
+    // The server gave up on the connection, or refused a tile batch as a whole
+    // (overloaded, shutting down): reconnect, and re-request after the backoff.
     error_code ec;
     if (socket_) socket_->close(ec);
     return;
   }
-  if (f.header.type == MessageType::ping) {
-    // Servers do not ping in version 1; ignore rather than answer from the reader.
-    return;
-  }
+  if (f.header.type == MessageType::ping) return;  // v1 servers do not ping
   answer_control(id, std::move(m));
 }
 

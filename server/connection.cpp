@@ -115,10 +115,9 @@ void Connection::handle(proto::Frame&& frame) {
   const uint32_t id = frame.header.request_id;
   proto::Message msg;
   if (proto::Status s = proto::decode_message(frame, limits_, msg); !s) {
-    // A payload that does not decode: the framing is intact, so only the request fails.
+    // A payload that does not decode: the peer broke the protocol (PROTOCOL.md §3).
     core_.stats.protocol_error();
-    if (!handshaken_) return fail(s.code, proto::to_string(s));
-    return answer_error(id, s.code, proto::to_string(s));
+    return fail(s.code, proto::to_string(s));
   }
   if (!handshaken_) {
     if (auto* h = std::get_if<proto::Hello>(&msg)) return on_hello(frame, *h);
@@ -126,13 +125,21 @@ void Connection::handle(proto::Frame&& frame) {
     return fail(ErrorCode::handshake_required,
                 std::string("expected hello, got ") + std::string(proto::to_string(frame.header.type)));
   }
-  core_.stats.request();
   switch (frame.header.type) {
     case MessageType::hello:
-      return answer_error(id, ErrorCode::unexpected_type, "hello after the handshake");
+      core_.stats.protocol_error();
+      return fail(ErrorCode::unexpected_type, "hello after the handshake");
     case MessageType::error:
       // The client gave up on the connection (PROTOCOL.md: the sender closes).
       return close();
+    case MessageType::cancel: return on_cancel(std::get<proto::Cancel>(msg));
+    case MessageType::pong: return;  // answer to a ping we never send; harmless
+    default: break;
+  }
+  // Everything else is a request: it holds an in-flight slot until its FINAL answer.
+  core_.stats.request();
+  if (!admit(id)) return;
+  switch (frame.header.type) {
     case MessageType::list_maps: {
       proto::MapList list;
       for (const auto& m : core_.catalog.maps()) {
@@ -143,7 +150,6 @@ void Connection::handle(proto::Frame&& frame) {
     }
     case MessageType::open_map: return on_open_map(id, std::get<proto::OpenMap>(msg));
     case MessageType::get_tiles: return on_get_tiles(id, std::get<proto::GetTiles>(msg));
-    case MessageType::cancel: return on_cancel(std::get<proto::Cancel>(msg));
     case MessageType::ping: {
       proto::Pong pong;
       pong.echo_timestamp = std::get<proto::Ping>(msg).timestamp;
@@ -151,12 +157,28 @@ void Connection::handle(proto::Frame&& frame) {
           std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count());
       return answer(pong, id);
     }
-    case MessageType::pong: return;  // answer to a ping we never send; harmless
     case MessageType::get_stats: return on_get_stats(id);
     default:
       return answer_error(id, ErrorCode::unexpected_type,
                           std::string(proto::to_string(frame.header.type)) + " is not a request");
   }
+}
+
+bool Connection::admit(uint32_t id) {
+  proto::Status s = in_flight_.begin(id);
+  if (s) return true;
+  core_.stats.protocol_error();
+  if (s.code == ErrorCode::too_many_in_flight) {
+    // Refused as a whole; the id is not in the tracker, so nothing to release later.
+    core_.stats.error();
+    proto::ErrorMessage e{s.code, proto::to_string(s)};
+    std::vector<uint8_t> out;
+    if (proto::encode_message(e, id, proto::kFlagFinal, limits_, out)) control_.push_back({std::move(out), 0});
+    wake_writer();
+    return false;
+  }
+  fail(s.code, proto::to_string(s));  // duplicate id or id 0: the client lost track
+  return false;
 }
 
 void Connection::on_hello(const proto::Frame& f, const proto::Hello& m) {
@@ -168,7 +190,7 @@ void Connection::on_hello(const proto::Frame& f, const proto::Hello& m) {
   std::vector<uint8_t> out;
   s = proto::encode_message(ack, f.header.request_id, proto::kFlagFinal, limits_, out);
   if (!s) return fail(ErrorCode::internal, proto::to_string(s));
-  control_.push_back(std::move(out));
+  control_.push_back({std::move(out), 0});
   limits_ = negotiated;
   parser_.set_limits(negotiated);
   in_flight_.set_capacity(negotiated.max_in_flight);
@@ -200,14 +222,6 @@ void Connection::on_get_tiles(uint32_t id, const proto::GetTiles& m) {
   if (m.map_id == 0 || m.map_id > open_maps_.size())
     return answer_error(id, ErrorCode::unknown_map_id,
                         "map_id " + std::to_string(m.map_id) + " was not opened on this connection");
-  if (proto::Status s = in_flight_.begin(id); !s) {
-    // The id is not ours to end: answer without touching the tracker.
-    std::vector<uint8_t> out;
-    proto::ErrorMessage e{s.code, proto::to_string(s)};
-    if (proto::encode_message(e, id, proto::kFlagFinal, limits_, out)) control_.push_back(std::move(out));
-    core_.stats.error();
-    return wake_writer();
-  }
   const auto now = Clock::now();
   for (const auto& t : m.tiles) {
     PendingTile p;
@@ -219,7 +233,7 @@ void Connection::on_get_tiles(uint32_t id, const proto::GetTiles& m) {
     // Cannot fail: capacity is max_in_flight x max_tiles_per_batch and the decoder
     // capped the batch; checked anyway, since the bound is the whole point.
     if (!tiles_.push(p)) {
-      tiles_.cancel_request(id);
+      tiles_.cancel_request(id);  // the ones queued still get their answer and FINAL
       break;
     }
   }
@@ -251,7 +265,7 @@ void Connection::answer(const proto::Message& m, uint32_t request_id) {
   proto::Status s = proto::encode_message(m, request_id, proto::kFlagFinal, limits_, out);
   if (!s) return answer_error(request_id, s.code == ErrorCode::oversized_frame ? ErrorCode::limit_exceeded : s.code,
                               "answer does not fit: " + proto::to_string(s));
-  control_.push_back(std::move(out));
+  control_.push_back({std::move(out), request_id});
   wake_writer();
 }
 
@@ -263,7 +277,7 @@ void Connection::answer_error(uint32_t request_id, ErrorCode code, const std::st
     if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) c = ' ';
   proto::ErrorMessage e{code, text};
   if (proto::encode_message(e, request_id, proto::kFlagFinal, limits_, out))
-    control_.push_back(std::move(out));
+    control_.push_back({std::move(out), request_id});
   wake_writer();
 }
 
@@ -352,12 +366,12 @@ asio::awaitable<void> Connection::writer(std::shared_ptr<Connection> self) {
   try {
     while (!closed_) {
       if (!control_.empty()) {
-        std::vector<uint8_t> frame = std::move(control_.front());
+        ControlFrame frame = std::move(control_.front());
         control_.pop_front();
         reader_wake_.cancel();  // room in the control queue again
-        std::vector<asio::const_buffer> bufs{asio::buffer(frame)};
-        // Control answers never hold an in-flight slot: only GetTiles batches do.
-        if (!co_await write_buffers(bufs, frame.size())) break;
+        std::vector<asio::const_buffer> bufs{asio::buffer(frame.bytes)};
+        if (!co_await write_buffers(bufs, frame.bytes.size())) break;
+        if (frame.ends_request) in_flight_.end(frame.ends_request);  // FINAL written
         continue;
       }
       if (auto p = tiles_.pop()) {

@@ -49,9 +49,13 @@ class Connection : public std::enable_shared_from_this<Connection> {
   void on_cancel(const proto::Cancel& m);
   void on_get_stats(uint32_t request_id);
 
-  // Queues a whole frame answering `request_id` (FINAL) and releases the request.
+  // Queues a whole frame answering `request_id` (FINAL); the request leaves in_flight_
+  // once the frame is written.
   void answer(const proto::Message& m, uint32_t request_id);
   void answer_error(uint32_t request_id, proto::ErrorCode code, const std::string& message);
+  // Admits a request into in_flight_ (PROTOCOL.md §6-7): false if refused (too many:
+  // answered with Error; duplicate id: the connection fails).
+  bool admit(uint32_t request_id);
   // Connection-level failure: Error with request id 0, then close once it is written.
   void fail(proto::ErrorCode code, const std::string& message);
   void close();
@@ -71,7 +75,11 @@ class Connection : public std::enable_shared_from_this<Connection> {
   proto::FrameParser parser_;
   proto::InFlight in_flight_;
   TileQueue tiles_;
-  std::deque<std::vector<uint8_t>> control_;
+  struct ControlFrame {
+    std::vector<uint8_t> bytes;
+    uint32_t ends_request = 0;  // in_flight_ id released once written (0: none)
+  };
+  std::deque<ControlFrame> control_;
   std::vector<const CatalogMap*> open_maps_;  // map_id = index + 1
 
   bool handshaken_ = false;

@@ -163,6 +163,68 @@ TEST(ServerLoopback, HostileClientsLeaveOthersServed) {
   EXPECT_GE(st.errors, 4u);
 }
 
+TEST(ServerLoopback, ProtocolViolationsCloseTheConnection) {
+  auto p = build_pack("violations", 5, 3, first_encoding(), 2, 1024);
+  auto srv = start_server({p.path});
+  proto::Limits l;  // what hello_frame proposes; the server grants the same
+  {  // A second Hello: unexpected_type, closed (PROTOCOL.md §5).
+    RawSocket s(srv.port);
+    handshake(s);
+    ASSERT_TRUE(s.send(looptest::hello_frame(2)));
+    EXPECT_EQ(error_code_of(read_frame(s)), proto::ErrorCode::unexpected_type);
+    EXPECT_TRUE(s.wait_closed());
+  }
+  {  // A payload that does not decode (ListMaps carries nothing): trailing_bytes, closed.
+    RawSocket s(srv.port);
+    handshake(s);
+    std::vector<uint8_t> out;
+    const uint8_t junk[] = {1, 2, 3};
+    ASSERT_TRUE(proto::append_frame(proto::MessageType::list_maps, proto::kFlagFinal, 3, junk, l, out));
+    ASSERT_TRUE(s.send(out));
+    RawFrame e = read_frame(s);
+    EXPECT_EQ(e.header.request_id, 0u);
+    EXPECT_EQ(error_code_of(e), proto::ErrorCode::trailing_bytes);
+    EXPECT_TRUE(s.wait_closed());
+  }
+  {  // A request id reused while in flight: duplicate_request_id, closed.
+    RawSocket s(srv.port);
+    handshake(s);
+    ASSERT_TRUE(s.send(looptest::open_map_frame("violations", 4)));
+    ASSERT_EQ(read_frame(s).header.type, proto::MessageType::map_info);
+    proto::GetTiles g;
+    g.map_id = 1;
+    for (auto& t : p.reader->tiles()) g.tiles.push_back({t.id, 0});
+    std::vector<uint8_t> out;
+    ASSERT_TRUE(proto::encode_message(g, 9, proto::kFlagFinal, l, out));
+    ASSERT_TRUE(proto::encode_message(g, 9, proto::kFlagFinal, l, out));  // same id, same read
+    ASSERT_TRUE(s.send(out));
+    bool saw_duplicate = false;
+    for (RawFrame f = read_frame(s); f.ok; f = read_frame(s))
+      if (f.header.type == proto::MessageType::error && f.header.request_id == 0)
+        saw_duplicate = error_code_of(f) == proto::ErrorCode::duplicate_request_id;
+    EXPECT_TRUE(saw_duplicate);
+  }
+  // Unknown tiles fail alone.
+  {
+    RawSocket s(srv.port);
+    handshake(s);
+    ASSERT_TRUE(s.send(looptest::open_map_frame("violations", 4)));
+    ASSERT_EQ(read_frame(s).header.type, proto::MessageType::map_info);
+    proto::GetTiles g;
+    g.map_id = 1;
+    g.tiles.push_back({make_tile_id(2, 3, 3) + 12345, 0});
+    std::vector<uint8_t> out;
+    ASSERT_TRUE(proto::encode_message(g, 5, proto::kFlagFinal, l, out));
+    ASSERT_TRUE(s.send(out));
+    RawFrame f = read_frame(s);
+    EXPECT_EQ(f.header.type, proto::MessageType::tile_error);
+    EXPECT_TRUE(f.header.final());
+    proto::TileError te;
+    ASSERT_TRUE(proto::decode_payload(f.payload, l, te));
+    EXPECT_EQ(te.code, proto::ErrorCode::unknown_tile);
+  }
+}
+
 TEST(ServerLoopback, ClientsCanNameOnlyCatalogMaps) {
   auto p = build_pack("catalog", 5, 1, first_encoding(), 2, 1024);
   auto srv = start_server({p.path});
