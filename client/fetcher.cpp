@@ -50,7 +50,6 @@ Fetcher::Fetcher(Endpoint endpoint, ClientOptions options)
 Fetcher::~Fetcher() { stop(); }
 
 void Fetcher::start() {
-  auto self = shared_from_this();
   asio::co_spawn(io_, run(), asio::detached);
   asio::co_spawn(io_, notifier_loop(), asio::detached);
   thread_ = std::thread([this] {

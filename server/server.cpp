@@ -184,6 +184,10 @@ void Server::stop() {
   });
   for (auto& t : d.threads) t.join();
   d.threads.clear();
+  {  // Sockets must go before their io_context (they would if io.stop() cut run() short).
+    std::lock_guard lock(d.core.mu);
+    d.core.connections.clear();
+  }
   {
     std::lock_guard lock(d.state_mu);
     d.running = false;
@@ -194,13 +198,25 @@ void Server::stop() {
 
 int Server::wait_for_signal() {
   Impl& d = *impl_;
+  {
+    std::lock_guard lock(d.state_mu);
+    if (!d.running || d.stopped) return 0;
+  }
   std::promise<int> got;
   auto fut = got.get_future();
-  d.signals.add(SIGINT);
-  d.signals.add(SIGTERM);
-  d.signals.async_wait([&d, &got](const error_code& ec, int sig) {
-    got.set_value(ec ? 0 : sig);
-    if (!ec) d.shutdown_on_io();
+  // The signal set lives on the control strand, like everything shutdown touches.
+  asio::post(d.control, [&d, &got] {
+    {
+      std::lock_guard lock(d.core.mu);
+      if (d.core.stopping) return got.set_value(0);  // stop() came first
+    }
+    error_code ec;
+    d.signals.add(SIGINT, ec);
+    d.signals.add(SIGTERM, ec);
+    d.signals.async_wait([&d, &got](const error_code& e, int sig) {
+      got.set_value(e ? 0 : sig);
+      if (!e) d.shutdown_on_io();
+    });
   });
   int sig = fut.get();
   stop();

@@ -355,3 +355,29 @@ TEST(ServerLoopback, CancelledTilesAreAnsweredAndNotSent) {
 
 }  // namespace
 }  // namespace st::client
+
+namespace st::client {
+namespace {
+
+TEST(ServerLoopback, StopEndsConnectionsAndWakesTheSignalWaiter) {
+  auto p = build_pack("lifecycle", 5, 6, first_encoding(), 2, 1024);
+  auto srv = start_server({p.path});
+  Client c({"127.0.0.1", srv.port}, quick_options());
+  Map m = c.open("lifecycle");
+  ASSERT_TRUE(c.connected());
+  std::atomic<int> waited{-1};
+  std::thread waiter([&] { waited = srv.server->wait_for_signal(); });
+  std::this_thread::sleep_for(50ms);  // let it register
+  const auto t0 = std::chrono::steady_clock::now();
+  srv.server->stop();
+  waiter.join();
+  EXPECT_EQ(waited.load(), 0);
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 3s);
+  ASSERT_TRUE(wait_until([&] { return !c.connected(); }, 5s));
+  // The map keeps answering (coarsely) without a server.
+  EXPECT_NO_THROW((void)m.depth(5, 1, 1));
+  srv.server->stop();  // idempotent
+}
+
+}  // namespace
+}  // namespace st::client
