@@ -40,11 +40,12 @@ std::vector<float> smooth_surface(uint32_t side, Rng& rng) {
 }
 
 // Closed boxes: interval from the roof down to `ground` (its exit depth), overlapping
-// boxes keep the nearest roof. Sizes scale with the side so the density stays similar.
+// boxes keep the nearest roof. Buildings are 1..48 texels a side whatever the map size
+// and their number grows with the area, so about a third of a big map is covered.
 void add_buildings(IntervalTile& t, Rng& rng, const std::vector<float>* ground, float flat_ground) {
   const uint32_t side = t.width;
-  const uint32_t count = std::max<uint32_t>(1, uint32_t(uint64_t(side) * side / 1200));
-  const uint32_t max_size = std::max<uint32_t>(2, side / 24);
+  const uint32_t count = std::max<uint32_t>(1, uint32_t(uint64_t(side) * side / 1500));
+  const uint32_t max_size = std::max<uint32_t>(2, std::min<uint32_t>(side / 4, 48));
   for (uint32_t b = 0; b < count; ++b) {
     uint32_t w = 1 + rng.below(max_size), h = 1 + rng.below(max_size);
     uint32_t x0 = rng.below(side), y0 = rng.below(side);
@@ -168,7 +169,7 @@ IntervalTile scene_field(uint32_t side, uint64_t seed) {
   add_buildings(t, rng, &z, 0.0f);
   // Trees: open geometry, so zero-width intervals with noisy depths over a disc.
   const uint32_t trees = std::max<uint32_t>(1, uint32_t(uint64_t(side) * side / 4000));
-  const uint32_t max_r = std::max<uint32_t>(1, side / 64);
+  const uint32_t max_r = std::max<uint32_t>(1, std::min<uint32_t>(side / 64, 12));  // radius in texels
   for (uint32_t k = 0; k < trees; ++k) {
     int cx = int(rng.below(side)), cy = int(rng.below(side)), r = 1 + int(rng.below(max_r));
     float top = float(rng.uniform(0.3, 0.5));

@@ -66,6 +66,45 @@ TEST_P(MhStitch, SmallTilesAndDegenerateGrids) {
   EXPECT_EQ(fields::check_lossless(c, flat), "");
 }
 
+// A hand-made tile of depth `n`: root 0.5 (an exact point) with one deep texel at
+// (x, y) holding 0.25 behind a chain of empty nodes.
+Hierarchy deep_chain_tile(uint32_t n, uint32_t x, uint32_t y) {
+  Hierarchy h;
+  h.depth = n;
+  h.levels.resize(n + 1);
+  h.levels[0].push_back(HNode{0, 0.5f, 0.5f, 0.5f, 0, 1});
+  for (uint32_t l = 1; l <= n; ++l) {
+    uint64_t m = morton_encode(x >> (n - l), y >> (n - l));
+    h.levels[l - 1].back().child_mask = uint8_t(1u << (m & 3));
+    h.levels[l].push_back(l == n ? HNode{m, 0.25f, 0.25f, 0.25f, 0, 1} : HNode{m, 0, 0, 0, 0, 0});
+  }
+  return h;
+}
+
+TEST_P(MhStitch, ReachesLevel20) {
+  // 16 tiles of depth 18: one 2^20 map, checked at the deep texels and their neighbours.
+  constexpr uint32_t kTileDepth = 18, kGrid = 2;
+  std::vector<Hierarchy> tiles;
+  std::vector<std::pair<uint64_t, uint64_t>> deep;
+  for (uint32_t t = 0; t < 16; ++t) {
+    uint32_t x = (t * 40503u + 7) & ((1u << kTileDepth) - 1), y = (t * 9973u + 3) & ((1u << kTileDepth) - 1);
+    tiles.push_back(deep_chain_tile(kTileDepth, x, y));
+    deep.push_back({(uint64_t(t % 4) << kTileDepth) + x, (uint64_t(t / 4) << kTileDepth) + y});
+  }
+  Hierarchy h = stitch_tiles(std::move(tiles), kGrid, GetParam());
+  ASSERT_EQ(h.depth, 20u);
+  ASSERT_EQ(fields::check_well_formed(h), "");
+  // Same roots everywhere: one coarse root, the tile roots turned empty.
+  EXPECT_EQ(h.levels[0][0].value, 0.5f);
+  EXPECT_EQ(h.levels[kGrid].size(), 16u);
+  for (const HNode& n : h.levels[kGrid]) EXPECT_FALSE(n.has_value);
+  for (auto [x, y] : deep) {
+    EXPECT_EQ(h.depth_at(20, x, y), 0.25f) << x << "," << y;
+    EXPECT_EQ(h.depth_at(20, x ^ 1, y), 0.5f) << x << "," << y;
+    EXPECT_EQ(h.depth_at(19, x >> 1, y >> 1), 0.5f);
+  }
+}
+
 TEST_P(MhStitch, RejectsInconsistentTiles) {
   auto tile = [](uint32_t side) { return build_hierarchy(fields::uniform_field(side, 1)); };
   std::vector<Hierarchy> three;

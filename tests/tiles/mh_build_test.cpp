@@ -99,6 +99,7 @@ TEST_P(MhBuild, RejectsBadInputNamingTheTexel) {
   IntervalTile t = fields::constant_field(8, {0.1f, 0.2f});
   t.at(3, 5) = {0.3f, 0.2f};
   expect_error(t, "texel (3, 5)");
+  expect_error(t, "[0.300000012, 0.200000003]");
   t = fields::constant_field(8, {0.1f, 0.2f});
   t.at(7, 0).lo = std::numeric_limits<float>::quiet_NaN();
   expect_error(t, "texel (7, 0)");

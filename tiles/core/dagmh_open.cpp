@@ -38,8 +38,10 @@ class DagmhEvaluator final : public Evaluator {
         v_.descend(v_.start(common, level, tx[0], ty[0]), common, level, tx[0], ty[0]);
     dagmh::Cursor cache = lca;
     uint64_t cache_x = tx[0], cache_y = ty[0];
-    uint32_t last_index = ~0u;
-    float last_value = 0;
+    // Taps of a kernel often share a value (a coarse node): decode each index once.
+    uint32_t cached_index[16];
+    float cached_value[16];
+    std::fill(cached_index, cached_index + 16, ~0u);
     uint32_t lit = 0;
     for (uint32_t j = 0; j < r; ++j)
       for (uint32_t i = 0; i < r; ++i) {
@@ -47,8 +49,9 @@ class DagmhEvaluator final : public Evaluator {
         const bool on_path = (tx[i] >> shift) == (cache_x >> shift) && (ty[j] >> shift) == (cache_y >> shift);
         const dagmh::Cursor c = v_.descend(on_path ? cache : lca, level, level, tx[i], ty[j]);
         const uint32_t index = v_.finish(c, level, tx[i], ty[j]);
-        if (index != last_index) last_index = index, last_value = v_.value(index);
-        lit += receiver <= last_value;
+        const uint32_t slot = index & 15;
+        if (cached_index[slot] != index) cached_index[slot] = index, cached_value[slot] = v_.value(index);
+        lit += receiver <= cached_value[slot];
         cache = c, cache_x = tx[i], cache_y = ty[j];
       }
     return float(lit) / float(r * r);

@@ -37,7 +37,6 @@ const std::array<TreeletPos, kTreeletNodes>& treelet_positions() {
   return table;
 }
 
-bool bit_of(const TreeletBits& b, uint32_t p) { return (b[p >> 5] >> (p & 31)) & 1; }
 void set_bit(TreeletBits& b, uint32_t p) { b[p >> 5] |= 1u << (p & 31); }
 
 // Key interner: candidates found by hash, merged only on full key equality.
@@ -139,12 +138,13 @@ DagStructure build_structure(const Hierarchy& h, StructureHash hash) {
           if (!((node.child_mask >> c) & 1)) continue;
           const Summary& ch = below[k++];
           if (ch.count == 0) continue;
-          for (uint32_t p = 0; p < kTreeletNodes; ++p) {
-            if (!bit_of(ch.bits, p)) continue;
-            const TreeletPos& q = pos[p];  // q.n <= 2: the child has height <= 2
-            const uint32_t path[3] = {c, q.l[0], q.l[1]};
-            set_bit(s.bits, treelet_position(q.n + 1, path));
-          }
+          for (uint32_t w = 0; w < kTreeletWords; ++w)
+            for (uint32_t word = ch.bits[w]; word; word &= word - 1) {
+              const uint32_t p = 32 * w + uint32_t(std::countr_zero(word));
+              const TreeletPos& q = pos[p];  // q.n <= 2: the child has height <= 2
+              const uint32_t path[3] = {c, q.l[0], q.l[1]};
+              set_bit(s.bits, treelet_position(q.n + 1, path));
+            }
         }
         continue;
       }

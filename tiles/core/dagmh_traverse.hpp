@@ -61,7 +61,9 @@ struct View {
         c.ref = kRefNone;
         return c;
       }
-      const uint32_t rank = uint32_t(std::popcount(flags & kNodeChildMask & ((1u << child) - 1)));
+      // popcount of the 4-bit mask below the child, from a nibble table in a constant
+      const uint32_t below = flags & kNodeChildMask & ((1u << child) - 1);
+      const uint32_t rank = uint32_t(0x4332322132212110ull >> (4 * below)) & 0xF;
       const uint8_t* entry = node + 4 + 8 * rank;
       c.base += load32(entry + 4);
       c.ref = load32(entry) | ((flags >> (kNodeTreeletShift + child)) & 1 ? kRefTreelet : kRefInner);
@@ -90,9 +92,9 @@ struct View {
       const uint32_t p = pos[n];
       const bool set = p < 64 ? (low >> p) & 1 : (high >> (p - 64)) & 1;
       if (!set) continue;
-      const uint32_t before = p < 64 ? uint32_t(std::popcount(low & ((uint64_t(1) << p) - 1)))
-                                     : uint32_t(std::popcount(low)) +
-                                           uint32_t(std::popcount(high & ((1u << (p - 64)) - 1)));
+      const uint32_t before = p < 64 ? bit_count(uint64_t(low & ((uint64_t(1) << p) - 1)))
+                                     : bit_count(uint64_t(low)) +
+                                           bit_count(uint64_t(high & ((1u << (p - 64)) - 1)));
       return c.base + before;
     }
     return c.last;

@@ -92,41 +92,57 @@ Factors fit_factors(std::span<const Span> rest) {
   const float c_l = min_hi;
   const double span = double(max_lo) - double(c_l);
   if (!(span > 0) || !std::isfinite(span)) return f;
-  for (uint32_t k = 1; k <= kMaxFactorBits; ++k) {
+  auto fits = [&](uint32_t k, Factors& out) {
     const double s0 = span / double((uint64_t(1) << k) - 1);
-    if (s0 > double(std::numeric_limits<float>::max())) continue;
+    if (s0 > double(std::numeric_limits<float>::max())) return false;
     float up = float(s0);
     if (double(up) < s0) up = std::nextafter(up, std::numeric_limits<float>::infinity());
     int e = 0;
     const double m = std::frexp(s0, &e);  // s0 = m * 2^e, m in [0.5, 1)
     const float pow2 = m == 0.5 ? float(s0) : float(std::ldexp(1.0, e));
     for (float c_f : {up, up * (1.0f + 0x1p-20f), pow2}) {
-      if (try_progression(rest, c_l, c_f, k, f.mult)) {
-        f.c_l = c_l, f.c_f = c_f, f.k = k;
-        return f;
+      if (try_progression(rest, c_l, c_f, k, out.mult)) {
+        out.c_l = c_l, out.c_f = c_f, out.k = k;
+        return true;
       }
     }
+    return false;
+  };
+  // Feasibility grows with k (finer steps; power-of-two grids nest), so a binary search
+  // finds the fewest bits; where rounding breaks monotonicity it may return a few bits
+  // more than necessary, never an unverified k.
+  Factors best;
+  if (!fits(kMaxFactorBits, best)) return f;
+  uint32_t lo = 1, hi = kMaxFactorBits;  // hi: verified feasible
+  while (lo < hi) {
+    const uint32_t mid = (lo + hi) / 2;
+    Factors trial;
+    if (fits(mid, trial)) hi = mid, best = std::move(trial);
+    else lo = mid + 1;
   }
-  f.mult.clear();
-  return f;  // k = 32: raw floats
+  return best;
 }
 
 class BitWriter {
  public:
   uint64_t bits() const { return bits_; }
-  void put(uint32_t v, uint32_t k) {
-    for (uint32_t b = 0; b < k; ++b, ++bits_) {
-      if ((bits_ >> 3) >= bytes_.size()) bytes_.push_back(0);
-      bytes_[bits_ >> 3] |= uint8_t(((v >> b) & 1) << (bits_ & 7));
-    }
+  void put(uint32_t v, uint32_t k) {  // k <= 32 bits, least significant first
+    if (k == 0) return;
+    const uint64_t value = uint64_t(v) & ((uint64_t(1) << k) - 1);
+    const uint64_t word = bits_ >> 6, shift = bits_ & 63;
+    if (word + 2 > words_.size()) words_.resize(word + 2, 0);
+    words_[word] |= value << shift;
+    if (shift + k > 64) words_[word + 1] |= value >> (64 - shift);
+    bits_ += k;
   }
-  std::vector<uint8_t> finish() {
-    bytes_.resize(align4(bytes_.size()) + kMultiplierPadBytes, 0);
-    return std::move(bytes_);
+  std::vector<uint8_t> finish() const {
+    std::vector<uint8_t> bytes(align4((bits_ + 7) / 8) + kMultiplierPadBytes, 0);
+    for (size_t b = 0; b < (bits_ + 7) / 8; ++b) bytes[b] = uint8_t(words_[b >> 3] >> (8 * (b & 7)));
+    return bytes;
   }
 
  private:
-  std::vector<uint8_t> bytes_;
+  std::vector<uint64_t> words_;
   uint64_t bits_ = 0;
 };
 

@@ -70,7 +70,7 @@ inline float read_value(const uint8_t* chunks, const uint8_t* multipliers, uint3
   const uint32_t mask = load32(c + offsetof(ChunkInfo, mask));
   if (!((mask >> bit) & 1)) return std::bit_cast<float>(load32(c + offsetof(ChunkInfo, base)));
   const uint32_t k = c[offsetof(ChunkInfo, factor_bits)];
-  const uint32_t rank = uint32_t(std::popcount(mask & ((1u << bit) - 1)));
+  const uint32_t rank = bit_count(uint64_t(mask & ((1u << bit) - 1)));
   const uint64_t pos = uint64_t(load32(c + offsetof(ChunkInfo, bit_offset))) + uint64_t(rank) * k;
   const uint64_t word = load64(multipliers + (pos >> 3)) >> (pos & 7);
   const uint32_t i = uint32_t(word & ((uint64_t(1) << k) - 1));

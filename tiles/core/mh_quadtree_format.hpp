@@ -38,6 +38,7 @@
 // contraction possible. The root value is always absolute.
 #pragma once
 #include <bit>
+#include <cfloat>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -45,6 +46,12 @@
 namespace st::mhq {
 
 static_assert(std::endian::native == std::endian::little, "tree words are little-endian");
+// mmh_add must be one binary32 rounding on the encoder (which verifies with it) and the
+// reader alike: no excess precision, no value-changing optimizations.
+static_assert(FLT_EVAL_METHOD == 0, "float arithmetic must evaluate in float (MMH relative values)");
+#if defined(__FAST_MATH__)
+#error "tiles/core must not be built with -ffast-math: MMH verifies values with exact float adds"
+#endif
 
 inline constexpr uint32_t kMagicMh = 0x484D5453u;   // bytes "STMH"
 inline constexpr uint32_t kMagicMmh = 0x4D4D5453u;  // bytes "STMM"
@@ -79,10 +86,17 @@ inline uint32_t word_abs_flags(uint32_t w) { return (w >> 8) & 0xFu; }
 inline uint32_t word_shift(uint32_t w) { return (w >> 12) & 0xFu; }
 inline uint32_t word_offset(uint32_t w) { return w >> 16; }
 
+// Bit count of an 8-bit mask without a library call (the build has no -mpopcnt).
+inline uint32_t popcount8(uint32_t m) {
+  m = m - ((m >> 1) & 0x55u);
+  m = (m & 0x33u) + ((m >> 2) & 0x33u);
+  return (m + (m >> 4)) & 0x0Fu;
+}
+
 inline uint32_t child_code(uint32_t mask, uint32_t slot) { return (mask >> (2 * slot)) & 3u; }
 // Words before child `slot` in its block: each code's popcount is its size in words.
 inline uint32_t child_skip(uint32_t mask, uint32_t slot) {
-  return uint32_t(std::popcount(mask & ((1u << (2 * slot)) - 1u)));
+  return popcount8(mask & ((1u << (2 * slot)) - 1u));
 }
 inline uint64_t block_start(uint64_t parent_word, uint32_t shift, uint32_t off) {
   return ((parent_word >> shift) + off) << shift;

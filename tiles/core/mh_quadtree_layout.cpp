@@ -88,8 +88,6 @@ FlatTree flatten(const Hierarchy& h, bool need_intervals) {
 
 namespace {
 
-constexpr uint32_t kNoPos = 0xFFFFFFFFu;
-
 struct Pass {
   std::vector<uint32_t> pos;    // word of each emitted node
   std::vector<uint32_t> block;  // word of each owned children block
@@ -102,7 +100,11 @@ struct Pass {
 
 class Layouter {
  public:
-  Layouter(const FlatTree& t, const EmitPlan& p) : t_(t), p_(p) {}
+  Layouter(const FlatTree& t, const EmitPlan& p) : t_(t), p_(p) {
+    if (!p_.block_owner.empty())
+      for (uint32_t n = 0; n < t_.size(); ++n)
+        if (p_.block_owner[n] != n && p_.alive[n]) mergees_.push_back(n);
+  }
 
   bool alive(uint32_t n) const { return p_.alive.empty() || p_.alive[n]; }
   uint32_t owner(uint32_t n) const { return p_.block_owner.empty() ? n : p_.block_owner[n]; }
@@ -117,11 +119,11 @@ class Layouter {
   }
 
   // Depth-first pre-order: visiting a node writes its children block, then its
-  // children are visited in slot order.
+  // children are visited in slot order. Nodes below a mergee are never reached.
   void run(const std::array<uint8_t, kMaxLevels>& sh, Pass& out) const {
     const size_t n_nodes = t_.size();
-    out.pos.assign(n_nodes, kNoPos);
-    out.block.assign(n_nodes, kNoPos);
+    out.pos.resize(n_nodes);
+    out.block.resize(n_nodes);
     out.max_off.fill(0);
     out.fits = true;
     out.too_big = false;
@@ -129,10 +131,17 @@ class Layouter {
     uint64_t w = code_words(t_.code(0));
     out.pos[0] = 0;
     uint32_t nodes = 1;
-    std::vector<uint32_t> stack{0};
-    while (!stack.empty()) {
-      const uint32_t n = stack.back();
-      stack.pop_back();
+    stack_.assign(1, 0);
+    auto note_offset = [&](uint32_t n, uint64_t block) {
+      const uint32_t s = sh[t_.level[n]];
+      const uint64_t off = (block >> s) - (uint64_t(out.pos[n]) >> s);
+      ST_CHECK(off >= 1);  // blocks follow every parent (pre-order layout)
+      auto& m = out.max_off[t_.level[n]];
+      m = std::max(m, off);
+    };
+    while (!stack_.empty()) {
+      const uint32_t n = stack_.back();
+      stack_.pop_back();
       if (!t_.mask[n] || owner(n) != n) continue;
       const uint64_t align = uint64_t(1) << block_shift(n, sh);
       const uint64_t start = (w + align - 1) & ~(align - 1);
@@ -143,15 +152,16 @@ class Layouter {
         return;
       }
       out.block[n] = uint32_t(w);
+      note_offset(n, w);
       const uint32_t c0 = t_.first_child[n];
-      const uint32_t cn = uint32_t(std::popcount(uint32_t(t_.mask[n])));
+      const uint32_t cn = popcount8(t_.mask[n]);
       for (uint32_t c = c0; c < c0 + cn; ++c) {
         out.pos[c] = uint32_t(w);
         w += code_words(t_.code(c));
       }
       nodes += cn;
       for (uint32_t c = c0 + cn; c-- > c0;)
-        if (t_.mask[c]) stack.push_back(c);
+        if (t_.mask[c]) stack_.push_back(c);
     }
     out.words = w;
     out.nodes = nodes;
@@ -159,20 +169,15 @@ class Layouter {
       out.too_big = true;
       return;
     }
-    for (uint32_t n = 0; n < n_nodes; ++n) {
-      if (out.pos[n] == kNoPos || !t_.mask[n]) continue;
-      const uint32_t s = sh[t_.level[n]];
-      const uint64_t off = (uint64_t(out.block[owner(n)]) >> s) - (uint64_t(out.pos[n]) >> s);
-      ST_CHECK(off >= 1);  // blocks follow every parent (pre-order layout)
-      auto& m = out.max_off[t_.level[n]];
-      m = std::max(m, off);
-      if (off > kMaxOffset) out.fits = false;
-    }
+    for (uint32_t n : mergees_) note_offset(n, out.block[owner(n)]);
+    for (uint64_t m : out.max_off) out.fits = out.fits && m <= kMaxOffset;
   }
 
  private:
   const FlatTree& t_;
   const EmitPlan& p_;
+  std::vector<uint32_t> mergees_;
+  mutable std::vector<uint32_t> stack_;
 };
 
 [[noreturn]] void too_big(uint64_t words) {
@@ -184,14 +189,23 @@ void put_u32(std::vector<uint8_t>& b, size_t off, uint32_t v) { std::memcpy(b.da
 
 }  // namespace
 
+void unscaled_layout(const FlatTree& t, std::vector<uint32_t>& pos, std::vector<uint32_t>& block) {
+  const EmitPlan plain;
+  Pass pass;
+  Layouter(t, plain).run(std::array<uint8_t, kMaxLevels>{}, pass);
+  pos = std::move(pass.pos);
+  block = std::move(pass.block);
+}
+
 std::vector<uint8_t> serialize(const FlatTree& t, const EmitPlan& plan, LayoutStats* stats) {
   Layouter lay(t, plan);
   std::array<uint8_t, kMaxLevels> sh{};
   Pass pass;
   uint32_t passes = 0;
   // 1) The smallest per-level shifts that make every offset fit: raise the shift of each
-  //    level whose largest offset overflows 16 bits and lay out again (a shift changes the
-  //    padding and hence other levels' offsets, so iterate to the fixed point).
+  //    level whose largest offset overflows 16 bits by as much as that overflow needs and
+  //    lay out again (a shift changes the padding and so other levels' offsets; iterate
+  //    to the fixed point, usually one or two rounds).
   for (;;) {
     lay.run(sh, pass);
     ++passes;
@@ -199,33 +213,32 @@ std::vector<uint8_t> serialize(const FlatTree& t, const EmitPlan& plan, LayoutSt
     if (pass.fits) break;
     for (uint32_t l = 0; l < t.depth; ++l) {
       if (pass.max_off[l] <= kMaxOffset) continue;
-      if (sh[l] >= kMaxShift) too_big(pass.words);
-      ++sh[l];
+      const uint32_t raise = std::max<uint32_t>(1, uint32_t(std::bit_width((pass.max_off[l] - 1) / kMaxOffset)));
+      if (sh[l] + raise > kMaxShift) too_big(pass.words);
+      sh[l] = uint8_t(sh[l] + raise);
     }
   }
   // 2) Exhaustive search around it (Lefebvre & Hoppe 2007): for every scaled level try
-  //    each neighbouring shift and keep the one giving the smallest buffer.
-  uint64_t best_words = pass.words;
+  //    the neighbouring shifts and keep the one giving the smallest buffer. Larger
+  //    shifts only add padding unless they happen to align blocks, so one step each way
+  //    is where a smaller layout can hide.
+  Pass trial;
   for (uint32_t l = 0; l < t.depth; ++l) {
     if (sh[l] == 0) continue;
     const uint8_t base = sh[l];
-    uint8_t best = base;
-    for (int d : {-1, 1, 2, 3}) {
-      int cand = int(base) + d;
+    for (int d : {-1, 1}) {
+      const int cand = int(base) + d;
       if (cand < 0 || cand > int(kMaxShift)) continue;
-      sh[l] = uint8_t(cand);
-      Pass trial;
-      lay.run(sh, trial);
+      auto trial_sh = sh;
+      trial_sh[l] = uint8_t(cand);
+      lay.run(trial_sh, trial);
       ++passes;
-      if (!trial.too_big && trial.fits && trial.words < best_words) {
-        best_words = trial.words;
-        best = uint8_t(cand);
+      if (!trial.too_big && trial.fits && trial.words < pass.words) {
+        std::swap(pass, trial);
+        sh = trial_sh;
       }
     }
-    sh[l] = best;
   }
-  lay.run(sh, pass);
-  ++passes;
   ST_CHECK(pass.fits && !pass.too_big);
 
   const uint32_t levels = t.depth + 1;
@@ -244,7 +257,7 @@ std::vector<uint8_t> serialize(const FlatTree& t, const EmitPlan& plan, LayoutSt
   auto owner = [&](uint32_t n) { return plan.block_owner.empty() ? n : plan.block_owner[n]; };
   auto stored = [&](uint32_t n) { return plan.stored.empty() ? t.value[n] : plan.stored[n]; };
   for (uint32_t n = 0; n < t.size(); ++n) {
-    if (pass.pos[n] == kNoPos) continue;
+    if (!lay.alive(n)) continue;
     const size_t at = tree_off + size_t(pass.pos[n]) * 4;
     const uint32_t code = t.code(n);
     if (code == kCodeLeaf) {

@@ -26,7 +26,7 @@ struct FlatTree {
 
   size_t size() const { return mask.size(); }
   uint32_t child(uint32_t n, uint32_t slot) const {
-    return first_child[n] + uint32_t(std::popcount(uint32_t(mask[n]) & ((1u << slot) - 1u)));
+    return first_child[n] + popcount8(uint32_t(mask[n]) & ((1u << slot) - 1u));
   }
   // The node's own 2-bit code (kCodeLeaf / kCodeEmpty / kCodeInner).
   uint32_t code(uint32_t n) const {
@@ -63,6 +63,10 @@ struct LayoutStats {
 // earlier siblings' subtrees, so offsets shrink level by level, MH §3.2), searches the
 // per-level scales and writes the buffer. Throws st::Error when the buffer would exceed
 // the 32-bit byte_size (the caller cuts such a tile deeper).
+// The plain tree laid out without scaling: each node's word and each children block's
+// word. MMH uses it to keep merged pointers within 16-bit reach.
+void unscaled_layout(const FlatTree& t, std::vector<uint32_t>& pos, std::vector<uint32_t>& block);
+
 std::vector<uint8_t> serialize(const FlatTree& t, const EmitPlan& plan, LayoutStats* stats = nullptr);
 
 }  // namespace st::mhq

@@ -83,7 +83,7 @@ class Validator {
     if (off == 0) fail_at("child offset", p, "zero (offsets point strictly forward)");
     const uint64_t block = block_start(p, shift, off);
     if (block < p + size) fail_at("child offset", p, "children block overlaps its parent");
-    if (block + uint32_t(std::popcount(mask)) > info_.words)
+    if (block + popcount8(mask) > info_.words)
       fail_at("child offset", p, "children block past the end of the buffer");
     uint32_t h = 0;
     for (uint32_t s = 0; s < 4; ++s) {

@@ -12,6 +12,10 @@ namespace st::mhq {
 namespace {
 
 constexpr uint32_t kPathsCap = 64;  // hard bound of MergeOptions::max_paths (stack arrays)
+// A merged pointer must reach from the mergee to the merger's block within 16 bits
+// unscaled (the demo's "offset rejection"), with room for alignment padding; longer ones
+// would force scaling (and padding) onto the deep levels, where blocks are many.
+constexpr uint64_t kMergeReach = kMaxOffset - 4096;
 
 uint64_t mix(uint64_t h) {  // splitmix64 finalizer
   h ^= h >> 30;
@@ -26,11 +30,21 @@ struct Candidate {
   uint32_t height;
   uint32_t pre;
   uint32_t node;
-  // Quick reject data: the first valued descendant in pre-order. Every node between it
-  // and the candidate is empty, so its ancestor value is the candidate's children base.
-  double rel_lo, rel_hi;
-  float abs_lo, abs_hi;
 };
+
+// Quick reject data of a candidate: the interval of its first valued descendant in
+// pre-order, relative and absolute. Every node between it and the candidate is empty,
+// so its ancestor value is the candidate's children base. The relative interval is
+// widened by 2^-20 of the magnitudes involved because the float rounding of the stored
+// number and of the decoder's add admits a little more than the exact interval. A
+// reject is always safe (only an accepted merge needs proof); the widening just keeps
+// the merges that rounding makes possible.
+struct ScanKey {
+  float rel_lo, rel_hi, abs_lo, abs_hi;
+};
+
+constexpr uint8_t kBlocked = 1;  // dead (below a mergee) or frozen (below a merger)
+constexpr uint8_t kMergee = 2, kMerger = 4;
 
 struct Assign {
   uint32_t node;
@@ -181,10 +195,7 @@ class Planner {
     }
     for (uint32_t i = 1; i < n; ++i) {
       if (!t_.mask[i] || height[i] > opt_.max_height) continue;
-      const uint32_t f = first_valued[i];
-      const double b = child_base(i);
-      cands_.push_back({hash[i], height[i], pre_[i], i, double(t_.lo[f]) - b, double(t_.hi[f]) - b, t_.lo[f],
-                        t_.hi[f]});
+      cands_.push_back({hash[i], height[i], pre_[i], i});
     }
     std::sort(cands_.begin(), cands_.end(), [](const Candidate& a, const Candidate& b) {
       if (a.height != b.height) return a.height > b.height;  // big subtrees first
@@ -192,13 +203,27 @@ class Planner {
       return a.pre < b.pre;
     });
     stats_.candidates = cands_.size();
+    std::vector<uint32_t> block0;
+    unscaled_layout(t_, pos0_, block0);
+    cand_of_.assign(n, ~0u);
+    keys_.resize(cands_.size());
+    block0_.resize(cands_.size());
+    state_.assign(cands_.size(), 0);
+    for (uint32_t c = 0; c < cands_.size(); ++c) {
+      const uint32_t i = cands_[c].node, f = first_valued[i];
+      const double b = child_base(i), lo = t_.lo[f], hi = t_.hi[f];
+      const double slack = 0x1p-20 * (std::fabs(b) + std::fabs(lo) + std::fabs(hi)) + 0x1p-126;
+      keys_[c] = {float(lo - b - slack), float(hi - b + slack), t_.lo[f], t_.hi[f]};
+      block0_[c] = block0[i];
+      cand_of_[i] = c;
+    }
   }
 
-  static bool quick_reject(const Candidate& a, const Candidate& b) {
-    const double slack = 1e-6 * (1.0 + std::max(std::fabs(a.rel_lo), std::fabs(b.rel_lo)));
-    const bool rel_apart = a.rel_hi + slack < b.rel_lo || b.rel_hi + slack < a.rel_lo;
-    const bool abs_apart = a.abs_hi < b.abs_lo || b.abs_hi < a.abs_lo;
-    return rel_apart && abs_apart;
+  // Branch-free: nearly every test is a reject, so the scan is this loop.
+  static bool quick_reject(const ScanKey& a, const ScanKey& b) {
+    const bool rel_apart = (a.rel_hi < b.rel_lo) | (b.rel_hi < a.rel_lo);
+    const bool abs_apart = (a.abs_hi < b.abs_lo) | (b.abs_hi < a.abs_lo);
+    return rel_apart & abs_apart;
   }
 
   // Lock-step walk of the block below the merger (nodes[0]) and the corresponding
@@ -233,13 +258,16 @@ class Planner {
       const uint32_t i = stack.back();
       stack.pop_back();
       flags[i] = 1;
+      if (cand_of_[i] != ~0u) state_[cand_of_[i]] |= kBlocked;
       for (uint32_t slot = 0; slot < 4; ++slot)
         if (t_.mask[i] >> slot & 1u) stack.push_back(t_.child(i, slot));
     }
   }
 
   bool try_merge(uint32_t i, uint32_t j) {
-    auto& mergees = mergees_[j];
+    static const std::vector<uint32_t> kNone;
+    auto found = mergees_.find(j);
+    const std::vector<uint32_t>& mergees = found == mergees_.end() ? kNone : found->second;
     uint32_t roots[kPathsCap];
     float bases[kPathsCap];
     uint32_t k = 0;
@@ -248,20 +276,20 @@ class Planner {
     roots[k++] = i;
     for (uint32_t p = 0; p < k; ++p) bases[p] = child_base(roots[p]);
     scratch_.clear();
-    if (!compare(roots, bases, k)) {
-      if (mergees.empty()) mergees_.erase(j);
-      return false;
-    }
+    if (!compare(roots, bases, k)) return false;
     for (const Assign& a : scratch_) {
       plan_.stored[a.node] = a.stored;
       plan_.absolute[a.node] = a.absolute;
     }
     if (mergees.empty()) mark_subtree(j, frozen_);
-    mergees.push_back(i);
+    mergees_[j].push_back(i);
     mark_subtree(i, dead_);
     plan_.block_owner[i] = j;
+    state_[cand_of_[i]] |= kMergee;
+    state_[cand_of_[j]] |= kMerger;
     plan_.block_parent_levels[j] |= (1u << t_.level[j]) | (1u << t_.level[i]);
     ++stats_.merges;
+    stats_.cross_level_merges += t_.level[i] != t_.level[j];
     return true;
   }
 
@@ -272,25 +300,33 @@ class Planner {
       size_t g1 = g0 + 1;
       while (g1 < cands_.size() && cands_[g1].height == cands_[g0].height && cands_[g1].hash == cands_[g0].hash)
         ++g1;
+      size_t reach_end = g0;
+      uint64_t tests = 0, passed = 0;
       for (size_t a = g0; a + 1 < g1; ++a) {
         const uint32_t i = cands_[a].node;
-        if (dead_[i] || frozen_[i] || plan_.block_owner[i] != i || mergees_.count(i)) continue;
-        uint32_t tested = 0;
-        for (size_t b = a + 1; b < g1 && tested < opt_.window; ++b) {
+        const uint64_t from = pos0_[i];
+        // Blocks are laid out in pre-order, so the candidates within reach of this one's
+        // pointer end at a position that only moves forward.
+        while (reach_end < g1 && block0_[reach_end] - from <= kMergeReach) ++reach_end;
+        if (state_[a]) continue;  // a mergee is neither blocked, merged nor a merger
+        const size_t end = std::min<size_t>(reach_end, a + 1 + opt_.window);
+        const ScanKey key_a = keys_[a];
+        size_t b = a + 1;
+        for (; b < end; ++b) {
+          if (quick_reject(key_a, keys_[b]) | bool(state_[b] & (kBlocked | kMergee))) continue;
+          ++passed;
           const uint32_t j = cands_[b].node;
-          if (dead_[j] || frozen_[j] || plan_.block_owner[j] != j) continue;
-          ++tested;
-          ++stats_.tests;
-          if (quick_reject(cands_[a], cands_[b])) {
-            ++stats_.quick_rejects;
-            continue;
+          if (state_[b] & kMerger) {
+            auto it = mergees_.find(j);
+            if (it->second.size() + 2 > opt_.max_paths) continue;
           }
-          auto it = mergees_.find(j);
-          if (it != mergees_.end() && it->second.size() + 1 >= opt_.max_paths) continue;
           if (try_merge(i, j)) break;
           ++stats_.full_rejects;
         }
+        tests += std::min(b, end) - (a + 1);
       }
+      stats_.tests += tests;
+      stats_.quick_rejects += tests - passed;
       g0 = g1;
     }
     for (uint32_t i = 0; i < t_.size(); ++i) {
@@ -336,8 +372,11 @@ class Planner {
   EmitPlan plan_;
   std::vector<float> decoded_, base_;
   std::vector<uint8_t> frozen_, dead_;
-  std::vector<uint32_t> pre_;
+  std::vector<uint32_t> pre_, pos0_, cand_of_;
   std::vector<Candidate> cands_;
+  std::vector<ScanKey> keys_;  // the scanned data, in candidate order
+  std::vector<uint32_t> block0_;
+  std::vector<uint8_t> state_;
   std::unordered_map<uint32_t, std::vector<uint32_t>> mergees_;
   std::vector<Assign> scratch_;
 };
