@@ -97,7 +97,7 @@ std::vector<Bytes> pack_files(uint64_t seed) {
   std::vector<Bytes> out;
   int n = 0;
   for (Encoding e : {Encoding::mh, Encoding::mmh, Encoding::dagmh})
-    for (uint32_t level : {2u, 4u, 6u})
+    for (uint32_t level : {2u, 3u, 5u})
       for (uint32_t tile_bytes : {kDefaultTileBytes, 256u}) {
         const FieldKind kind = FieldKind(n % kFieldKinds);
         const Hierarchy h = build_hierarchy(random_field(level, kind, rng));
