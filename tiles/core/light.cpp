@@ -67,7 +67,11 @@ LightSpec LightSpec::parse(const std::string& text) {
     }
   }
   bool have_az = false, have_el = false, have_pos = false, have_target = false;
-  for (auto& [key, vals] : fields) {
+  for (auto& field : fields) {
+    // Named references, not a structured binding: clang < 16 cannot capture bindings in
+    // a lambda (the fuzz preset builds with clang 14).
+    const std::string& key = field.first;
+    auto& vals = field.second;
     auto one = [&]() {
       if (vals.size() != 1) throw Error("--light: '" + key + "' takes one number");
       return parse_number(key, vals[0]);
