@@ -84,7 +84,8 @@ class FrameParser {
   Result feed(std::span<const std::uint8_t> bytes);
 
   // Moves out the frame completed by the last feed (precondition: it returned frame).
-  // The parser then waits for the next header.
+  // The parser then waits for the next header. Feeding again without taking the frame
+  // drops it.
   Frame take_frame();
 
   const Status& status() const { return status_; }

@@ -1,0 +1,114 @@
+// The client's network side (internal to client/): one thread running an io_context with
+//   run()      - connect with retry and exponential backoff, handshake, then a session;
+//   pump       - the session's only writer: control requests (OpenMap, ListMaps, GetStats),
+//                Cancels, and GetTiles batches taken highest priority first from every
+//                map while fewer than the negotiated max_in_flight are unanswered;
+//   reader     - feeds the FrameParser; hands tiles to their RemoteMap, answers to the
+//                waiting API call, frees in-flight slots on FINAL;
+//   watchdog   - closes a connection that makes no progress (connect, write, or no
+//                answer for io_timeout while answers are owed); run() then reconnects;
+//   notifier   - reads the eventfd lookups poke when they queue a tile.
+// Everything runs on that one thread, so the session state needs no locks; API calls
+// reach it with asio::post.
+#pragma once
+#include <utility>
+// <utility> before Asio (MACHINE.md pitfall with g++ 12 / Boost 1.74)
+
+#include <boost/asio.hpp>
+#include <boost/asio/posix/stream_descriptor.hpp>
+#include <chrono>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <memory>
+#include <thread>
+#include <unordered_map>
+#include <vector>
+
+#include "client/client.hpp"
+#include "client/remote_map.hpp"
+#include "proto/proto.hpp"
+
+namespace st::client {
+
+namespace asio = boost::asio;
+using tcp = asio::ip::tcp;
+
+class Fetcher : public std::enable_shared_from_this<Fetcher> {
+ public:
+  Fetcher(Endpoint endpoint, ClientOptions options);
+  ~Fetcher();
+  void start();  // the thread (separate from the constructor: shared_from_this)
+  void stop();
+
+  // Sends `request` once connected and waits for its answer (request_timeout). Error
+  // answers, timeouts and a stopped client throw st::Error.
+  proto::Message call(const proto::Message& request);
+  std::shared_ptr<RemoteMap> open(const std::string& name);
+
+  ClientStats stats() const;
+  bool connected() const { return connected_.load(); }
+
+ private:
+  using Clock = std::chrono::steady_clock;
+  struct Control {
+    proto::Message request;
+    std::function<void(proto::Message&&)> done;  // runs on the I/O thread
+    uint32_t request_id = 0;                     // 0: not sent on this connection
+  };
+  struct MapSlot {
+    std::shared_ptr<RemoteMap> map;
+    uint32_t map_id = 0;  // on the current connection; 0: (re)opening
+  };
+  struct TileRequest {
+    RemoteMap* map;
+    uint32_t map_id;
+    std::vector<uint64_t> tiles;  // not yet answered
+  };
+
+  asio::awaitable<void> run();
+  asio::awaitable<bool> session();  // true if the handshake succeeded
+  asio::awaitable<void> reader(std::shared_ptr<tcp::socket> sock);
+  asio::awaitable<void> watchdog(std::shared_ptr<tcp::socket> sock, uint64_t epoch);
+  asio::awaitable<void> notifier_loop();
+  asio::awaitable<bool> write(tcp::socket& sock, const std::vector<uint8_t>& bytes);
+  asio::awaitable<bool> read_frame(tcp::socket& sock, proto::Frame& out);
+
+  void handle(proto::Frame&& f);
+  void answer_control(uint32_t request_id, proto::Message&& m);
+  void reopen(MapSlot& slot);
+  void end_session();
+  void wake() { wake_timer_.cancel(); }
+  uint32_t next_id();
+
+  const Endpoint endpoint_;
+  const ClientOptions options_;
+  std::shared_ptr<Notifier> notifier_;
+
+  asio::io_context io_;
+  asio::steady_timer wake_timer_{io_};
+  asio::steady_timer backoff_timer_{io_};
+  asio::posix::stream_descriptor notify_desc_{io_};
+  std::thread thread_;
+
+  // I/O-thread state.
+  std::shared_ptr<tcp::socket> socket_;
+  uint64_t epoch_ = 0;  // sessions so far
+  proto::Limits limits_;
+  std::unique_ptr<proto::FrameParser> parser_;
+  std::vector<uint8_t> rx_;
+  size_t rx_begin_ = 0, rx_end_ = 0;
+  std::deque<std::shared_ptr<Control>> controls_;
+  std::unordered_map<uint32_t, std::shared_ptr<Control>> controls_sent_;
+  std::unordered_map<uint32_t, TileRequest> tile_requests_;
+  std::vector<MapSlot> maps_;
+  uint32_t last_id_ = 0;
+  bool writing_ = false, stopping_io_ = false;
+  Clock::time_point write_started_, last_rx_;
+
+  std::atomic<bool> connected_{false}, stopped_{false};
+  mutable std::mutex stats_mu_;
+  ClientStats stats_;
+};
+
+}  // namespace st::client

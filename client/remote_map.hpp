@@ -1,0 +1,137 @@
+// One opened remote map (internal to client/): the pack header and skip grid from
+// MapInfo, the tile cache with the opened tile of every resident slot, the queue of
+// wanted tiles, and the evaluator walking skip grid -> index tiles -> tiles like
+// PackEvaluator does, answering from the deepest node reached when a tile is missing.
+//
+// Locking: one mutex guards everything mutable. Lookups hold it for one walk (a few
+// hundred ns); the fetcher holds it only for O(1) bookkeeping and writes tile bytes into
+// a reserved (pinned, unpublished) slot outside it, so lookups never wait on the network,
+// on decompression or on tile validation.
+#pragma once
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <span>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "client/client.hpp"
+#include "client/tile_cache.hpp"
+#include "proto/messages.hpp"
+#include "tiles/core/light.hpp"
+#include "tiles/core/pack_format.hpp"
+#include "tiles/core/tile_cut_grid.hpp"
+
+namespace st::client {
+
+// Wakes the fetcher from any thread without allocating or blocking (an eventfd; the
+// flag keeps it to one write per fetcher round).
+class Notifier {
+ public:
+  Notifier();  // st::Error if no eventfd can be made
+  ~Notifier();
+  Notifier(const Notifier&) = delete;
+  Notifier& operator=(const Notifier&) = delete;
+  int fd() const { return fd_; }
+  void notify() noexcept;
+  void clear() noexcept;  // the fetcher, before it looks for work
+
+ private:
+  int fd_ = -1;
+  std::atomic<bool> pending_{false};
+};
+
+// A tile the fetcher is to request, or has requested.
+struct WantedTile {
+  uint64_t tile = 0;
+  uint16_t priority = 0;
+  uint64_t seq = 0;          // FIFO among equal priorities
+  GridEntry entry;           // the page-table entry naming it (value = coarse answer)
+};
+
+class RemoteMap final : public Evaluator {
+ public:
+  // Parses and checks the MapInfo blobs (st::Error naming the map otherwise).
+  RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::vector<uint8_t> grid_bytes,
+            const ClientOptions& options, std::shared_ptr<Notifier> notifier);
+
+  // ---- Evaluator (noexcept; never blocks, never allocates) ----
+  uint32_t finest_level() const override { return header_.map_level; }
+  float depth(uint32_t level, uint64_t x, uint64_t y) const noexcept override;
+  float pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver) const noexcept override;
+  float visibility(const Vec3d& world, uint32_t pcf_radius) const noexcept;
+
+  size_t request_region(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, uint64_t h,
+                        uint16_t priority) noexcept;
+  size_t cancel_outside(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, uint64_t h) noexcept;
+  bool region_resident(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, uint64_t h) const noexcept;
+  MapStats stats() const noexcept;
+
+  const std::string& name() const { return name_; }
+  const PackHeader& header() const { return header_; }
+  const CutGrid& grid() const { return grid_; }
+  const std::vector<uint8_t>& header_bytes() const { return header_bytes_; }
+  uint32_t slot_bytes() const { return cache_.slot_bytes(); }
+
+  // ---- fetcher side ----
+  // Pops up to `max` wanted tiles (highest priority first) and records them as sent.
+  void take_wanted(size_t max, std::vector<WantedTile>& out);
+  // Tiles sent but no longer wanted (cancel_outside): the fetcher sends Cancel.
+  void take_cancels(std::vector<uint64_t>& out);
+  bool has_work() const;
+  // A TileData: end-to-end CRC, decompress, open, publish; refetch or give up on failure.
+  void tile_arrived(const proto::TileMeta& meta, std::span<const uint8_t> stored) noexcept;
+  // A TileError: cancelled -> absent again; any other code -> given up (coarse answers).
+  void tile_refused(uint64_t tile, proto::ErrorCode code) noexcept;
+  // The connection dropped: every sent tile is queued again.
+  void connection_lost() noexcept;
+  // Test hook: how many tiles are sent and unanswered.
+  size_t sent_count() const;
+
+ private:
+  float depth_locked(uint32_t level, uint64_t x, uint64_t y) const noexcept;
+  // Queues `tile` (lock held). Returns true if newly queued or raised.
+  bool want_locked(uint64_t tile, const GridEntry& e, uint16_t priority) const noexcept;
+  void give_up_locked(uint64_t tile, float value);
+  void retry_or_give_up(uint64_t tile, const char* why, uint64_t MapStats::*counter) noexcept;
+  // Visits the tiles needed for lookups at `level` in [x0, x1) x [y0, y1) (lock held):
+  // fn(tile_id, entry, page) for each non-resident one; returns false if fn did.
+  template <class Fn>
+  bool walk_region(uint32_t level, uint64_t x0, uint64_t y0, uint64_t x1, uint64_t y1, Fn&& fn) const;
+  template <class Fn>
+  bool walk_entry(uint32_t l, uint64_t ex, uint64_t ey, const GridEntry& e, uint32_t level,
+                  uint64_t x0, uint64_t y0, uint64_t x1, uint64_t y1, Fn& fn) const;
+  void rerequest_regions_locked();
+
+  const std::string name_;
+  const ClientOptions options_;
+  std::shared_ptr<Notifier> notifier_;
+  std::vector<uint8_t> header_bytes_;
+  PackHeader header_;
+  CutGrid grid_;
+  LightSpace light_;
+
+  mutable std::mutex mu_;
+  mutable TileCache cache_;
+  std::vector<std::unique_ptr<Evaluator>> slot_eval_;  // encoded tiles, per slot
+  std::vector<CutGrid> slot_grid_;                     // index tiles, per slot
+  mutable std::vector<WantedTile> heap_;               // capacity want_capacity, never grows
+  mutable uint64_t next_seq_ = 0;
+  std::unordered_map<uint64_t, WantedTile> sent_;      // fetcher thread only inserts
+  std::unordered_map<uint64_t, uint32_t> retries_;
+  std::vector<uint64_t> cancels_;
+  struct Region {
+    uint32_t level;
+    uint64_t x0, y0, x1, y1;
+    uint16_t priority;
+  };
+  static constexpr size_t kMaxRegions = 16;  // remembered so index tiles' children follow
+  std::array<Region, kMaxRegions> regions_{};
+  size_t region_count_ = 0;
+  mutable MapStats stats_;
+};
+
+}  // namespace st::client

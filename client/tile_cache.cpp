@@ -1,0 +1,328 @@
+#include "client/tile_cache.hpp"
+
+#include <cassert>
+#include <cstring>
+#include <string>
+
+namespace st::client {
+namespace {
+
+constexpr uint64_t kMaxPoolBytes = uint64_t(1) << 40;
+constexpr size_t kNpos = ~size_t(0);
+constexpr size_t kInitialBuckets = 64;
+
+// splitmix64 finalizer: tile ids are often small dense integers; spread them.
+inline uint64_t mix(uint64_t x) {
+  x ^= x >> 30;
+  x *= 0xbf58476d1ce4e5b9ull;
+  x ^= x >> 27;
+  x *= 0x94d049bb133111ebull;
+  x ^= x >> 31;
+  return x;
+}
+
+}  // namespace
+
+TileCache::TileCache(uint32_t slot_count, uint32_t slot_bytes)
+    : slot_count_(slot_count), slot_bytes_(slot_bytes) {
+  if (slot_count == 0 || slot_bytes == 0)
+    throw Error("tile cache: slot_count and slot_bytes must be > 0 (got " +
+                std::to_string(slot_count) + " x " + std::to_string(slot_bytes) + ")");
+  if (uint64_t(slot_count) * slot_bytes > kMaxPoolBytes)
+    throw Error("tile cache: pool of " + std::to_string(slot_count) + " x " +
+                std::to_string(slot_bytes) + " bytes exceeds 2^40");
+  pool_.assign(size_t(slot_count) * slot_bytes, 0);
+  slots_.resize(slot_count);
+  // Free list in ascending slot order, so an empty cache fills slots 0, 1, 2, ...
+  for (uint32_t s = slot_count; s-- > 0;) free_push(s);
+  table_.resize(kInitialBuckets);
+}
+
+std::span<const uint8_t> TileCache::tile_bytes(uint32_t slot) const {
+  assert(slot < slot_count_);
+  return std::span<const uint8_t>(pool_).subspan(slot_offset(slot), slots_[slot].used);
+}
+
+std::span<uint8_t> TileCache::slot_span(uint32_t slot) {
+  assert(slot < slot_count_);
+  return std::span<uint8_t>(pool_).subspan(slot_offset(slot), slot_bytes_);
+}
+
+// ---------------------------------------------------------------- LRU and free lists
+
+void TileCache::lru_unlink(uint32_t s) {
+  Slot& n = slots_[s];
+  assert(n.on_lru);
+  if (n.prev != kNoSlot) slots_[n.prev].next = n.next;
+  else lru_head_ = n.next;
+  if (n.next != kNoSlot) slots_[n.next].prev = n.prev;
+  else lru_tail_ = n.prev;
+  n.prev = n.next = kNoSlot;
+  n.on_lru = false;
+}
+
+void TileCache::lru_push_front(uint32_t s) {
+  Slot& n = slots_[s];
+  assert(!n.on_lru && n.pins == 0 && n.state == SlotState::resident);
+  n.prev = kNoSlot;
+  n.next = lru_head_;
+  if (lru_head_ != kNoSlot) slots_[lru_head_].prev = s;
+  else lru_tail_ = s;
+  lru_head_ = s;
+  n.on_lru = true;
+}
+
+void TileCache::free_push(uint32_t s) {
+  Slot& n = slots_[s];
+  n.state = SlotState::free;
+  n.tile = kInvalidTile;
+  n.prev = kNoSlot;
+  n.next = free_head_;
+  free_head_ = s;
+  ++free_count_;
+}
+
+uint32_t TileCache::free_pop() {
+  uint32_t s = free_head_;
+  if (s == kNoSlot) return s;
+  free_head_ = slots_[s].next;
+  slots_[s].next = kNoSlot;
+  --free_count_;
+  return s;
+}
+
+void TileCache::drop_slot(uint32_t s) {
+  Slot& n = slots_[s];
+  assert(n.state != SlotState::free);
+  if (n.on_lru) lru_unlink(s);
+  if (n.pins > 0) --pinned_count_;
+  if (n.state == SlotState::resident) --resident_count_;
+  // Zero the used bytes so a slot's unused tail is always zero (deterministic uploads).
+  std::memset(pool_.data() + slot_offset(s), 0, n.used);
+  n.used = 0;
+  n.pins = 0;
+  free_push(s);
+}
+
+// ---------------------------------------------------------------- page table
+
+size_t TileCache::find_bucket(TileId key) const noexcept {
+  const size_t mask = table_.size() - 1;
+  for (size_t i = mix(key) & mask;; i = (i + 1) & mask) {
+    if (table_[i].key == key) return i;
+    if (table_[i].key == kInvalidTile) return kNpos;
+  }
+}
+
+void TileCache::grow() {
+  std::vector<Bucket> old(table_.size() * 2);
+  old.swap(table_);
+  const size_t mask = table_.size() - 1;
+  for (const Bucket& b : old) {
+    if (b.key == kInvalidTile) continue;
+    size_t i = mix(b.key) & mask;
+    while (table_[i].key != kInvalidTile) i = (i + 1) & mask;
+    table_[i] = b;
+  }
+}
+
+PageEntry& TileCache::upsert(TileId key) {
+  if (key == kInvalidTile) throw Error("tile cache: tile id 2^64-1 is reserved");
+  size_t b = find_bucket(key);
+  if (b != kNpos) return table_[b].entry;
+  if ((table_used_ + 1) * 4 > table_.size() * 3) grow();  // load factor <= 3/4
+  const size_t mask = table_.size() - 1;
+  size_t i = mix(key) & mask;
+  while (table_[i].key != kInvalidTile) i = (i + 1) & mask;
+  table_[i].key = key;
+  table_[i].entry = PageEntry{};
+  ++table_used_;
+  return table_[i].entry;
+}
+
+// Backward-shift deletion keeps every probe chain unbroken without tombstones.
+void TileCache::erase(TileId key) {
+  size_t i = find_bucket(key);
+  if (i == kNpos) return;
+  const size_t mask = table_.size() - 1;
+  for (size_t j = (i + 1) & mask; table_[j].key != kInvalidTile; j = (j + 1) & mask) {
+    size_t home = mix(table_[j].key) & mask;
+    // Move j into the hole at i if its home is not cyclically within (i, j].
+    bool home_in_range = (i < j) ? (home > i && home <= j) : (home > i || home <= j);
+    if (!home_in_range) {
+      table_[i] = table_[j];
+      i = j;
+    }
+  }
+  table_[i] = Bucket{};
+  --table_used_;
+}
+
+PageEntry TileCache::lookup(TileId tile) const noexcept {
+  size_t b = find_bucket(tile);
+  return b == kNpos ? PageEntry{} : table_[b].entry;
+}
+
+PageEntry TileCache::access(TileId tile) noexcept {
+  PageEntry e = lookup(tile);
+  if (e.state == PageState::resident) {
+    ++hits_;
+    Slot& s = slots_[e.slot];
+    if (s.on_lru && lru_head_ != e.slot) {
+      lru_unlink(e.slot);
+      lru_push_front(e.slot);
+    }
+  } else if (e.state != PageState::constant) {
+    ++misses_;
+  }
+  return e;
+}
+
+void TileCache::set_constant(TileId tile, float value) {
+  PageEntry& e = upsert(tile);
+  if (e.state == PageState::resident) {
+    uint32_t s = e.slot;
+    if (slots_[s].pins > 0)
+      throw Error("tile cache: tile " + std::to_string(tile) + " is pinned; cannot make it constant");
+    drop_slot(s);
+  }
+  e = PageEntry{PageState::constant, kNoSlot, value, 0};
+}
+
+bool TileCache::request(TileId tile, uint16_t priority) {
+  if (lookup(tile).state != PageState::absent) return false;
+  PageEntry& e = upsert(tile);
+  e.state = PageState::requested;
+  e.priority = priority;
+  return true;
+}
+
+bool TileCache::raise_priority(TileId tile, uint16_t priority) {
+  size_t b = find_bucket(tile);
+  if (b == kNpos || table_[b].entry.state != PageState::requested || table_[b].entry.priority >= priority)
+    return false;
+  table_[b].entry.priority = priority;
+  return true;
+}
+
+void TileCache::reserve_pages(size_t pages) {
+  while ((pages + 1) * 4 > table_.size() * 3) grow();
+}
+
+void TileCache::cancel_request(TileId tile) {
+  if (lookup(tile).state == PageState::requested) erase(tile);
+}
+
+// ---------------------------------------------------------------- filling slots
+
+uint32_t TileCache::reserve(TileId tile) {
+  if (tile == kInvalidTile) throw Error("tile cache: tile id 2^64-1 is reserved");
+  uint32_t s = free_pop();
+  if (s == kNoSlot) {
+    s = lru_tail_;
+    if (s == kNoSlot)
+      throw CacheFullError("tile cache: all " + std::to_string(slot_count_) +
+                           " slots are pinned; cannot make room for tile " + std::to_string(tile));
+    erase(slots_[s].tile);  // the victim's page becomes absent
+    drop_slot(s);
+    ++evictions_;
+    s = free_pop();
+  }
+  Slot& n = slots_[s];
+  n.state = SlotState::filling;
+  n.tile = tile;
+  n.used = 0;
+  n.pins = 1;
+  ++pinned_count_;
+  return s;
+}
+
+bool TileCache::commit(uint32_t slot, uint32_t used_bytes) {
+  assert(slot < slot_count_);
+  Slot& n = slots_[slot];
+  assert(n.state == SlotState::filling && n.pins > 0);
+  if (used_bytes > slot_bytes_) {
+    const TileId tile = n.tile;
+    abort(slot);
+    throw Error("tile cache: tile " + std::to_string(tile) + " of " + std::to_string(used_bytes) +
+                " bytes exceeds the slot size " + std::to_string(slot_bytes_));
+  }
+  const PageEntry now = lookup(n.tile);
+  if (now.state == PageState::constant || now.state == PageState::resident) {
+    abort(slot);
+    return false;
+  }
+  n.used = used_bytes;
+  std::memset(pool_.data() + slot_offset(slot) + used_bytes, 0, slot_bytes_ - used_bytes);
+  n.state = SlotState::resident;
+  ++resident_count_;
+  PageEntry& e = upsert(n.tile);
+  e = PageEntry{PageState::resident, slot, 0, 0};
+  ++inserts_;
+  unpin(slot);
+  return true;
+}
+
+void TileCache::abort(uint32_t slot) {
+  Slot& n = slots_[slot];
+  assert(n.state == SlotState::filling);
+  const TileId tile = n.tile;
+  n.used = slot_bytes_;  // unknown how much the fetch wrote: clear the whole slot
+  drop_slot(slot);
+  cancel_request(tile);
+}
+
+uint32_t TileCache::insert(TileId tile, std::span<const uint8_t> bytes) {
+  if (bytes.size() > slot_bytes_)
+    throw Error("tile cache: tile " + std::to_string(tile) + " of " + std::to_string(bytes.size()) +
+                " bytes exceeds the slot size " + std::to_string(slot_bytes_));
+  uint32_t s = reserve(tile);
+  std::memcpy(slot_span(s).data(), bytes.data(), bytes.size());
+  if (!commit(s, uint32_t(bytes.size()))) return lookup(tile).slot;
+  return s;
+}
+
+// ---------------------------------------------------------------- pinning
+
+void TileCache::pin(uint32_t slot) {
+  assert(slot < slot_count_);
+  Slot& n = slots_[slot];
+  assert(n.state != SlotState::free);
+  if (n.pins++ == 0) {
+    ++pinned_count_;
+    if (n.on_lru) lru_unlink(slot);
+  }
+}
+
+void TileCache::unpin(uint32_t slot) {
+  assert(slot < slot_count_);
+  Slot& n = slots_[slot];
+  assert(n.pins > 0);
+  if (--n.pins == 0) {
+    --pinned_count_;
+    if (n.state == SlotState::resident) lru_push_front(slot);
+  }
+}
+
+bool TileCache::evict(TileId tile) {
+  PageEntry e = lookup(tile);
+  if (e.state != PageState::resident || slots_[e.slot].pins > 0) return false;
+  erase(tile);
+  drop_slot(e.slot);
+  ++evictions_;
+  return true;
+}
+
+CacheStats TileCache::stats() const {
+  CacheStats s;
+  s.hits = hits_;
+  s.misses = misses_;
+  s.evictions = evictions_;
+  s.inserts = inserts_;
+  s.resident = resident_count_;
+  s.pinned = pinned_count_;
+  s.free = free_count_;
+  return s;
+}
+
+}  // namespace st::client

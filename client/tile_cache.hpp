@@ -1,0 +1,167 @@
+// The client's tile cache: a fixed number of fixed-size slots in one flat pool, an O(1)
+// LRU slot allocator with pinning, and a page table from tile id to page state.
+//
+// Deep shadow maps §5.4 cache tiles in "a fixed number of tile slots" and resize a slot
+// on a tile fault when the incoming tile is larger. A GPU buffer cannot resize one slot,
+// so here every slot has the same size and the pack bounds every tile's encoded size
+// instead (DESIGN.md "Tiles, skip list and pack files"); a tile larger than a slot is
+// refused with st::Error, never truncated.
+//
+// Pool layout (what a renderer uploads unchanged, so offsets only, no pointers):
+//
+//   byte offset                     size         holds
+//   0                               slot_bytes   slot 0: tile bytes, then unused tail
+//   slot_bytes                      slot_bytes   slot 1
+//   ...
+//   i * slot_bytes                  slot_bytes   slot i   (i < slot_count)
+//
+// A slot's tile occupies its first used(i) bytes; the rest of the slot is zero.
+//
+// Page table: tile id -> PageState. `constant` pages carry a value that answers for the
+// whole tile (nothing to fetch); `requested` pages are on their way; `resident` pages
+// name a slot; tile ids not in the table are `absent`. The table is an open-addressing
+// hash table: lookups never allocate; only inserting new ids may grow it.
+//
+// Slots are free, filling (reserved by a fetch, pinned), or resident. Resident slots with
+// pin count 0 sit on an intrusive doubly linked LRU list over slot indices; pinning
+// removes a slot from the list, so eviction (taking the list's tail) is O(1) and never
+// touches a pinned slot. When every slot is pinned, reserve() throws CacheFullError.
+//
+// Thread safety: none. The owner (client::MapView) serializes access with its mutex.
+#pragma once
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "tiles/core/error.hpp"
+
+namespace st::client {
+
+using TileId = uint64_t;
+inline constexpr TileId kInvalidTile = ~TileId(0);  // never a valid tile id (table's empty key)
+inline constexpr uint32_t kNoSlot = ~uint32_t(0);
+
+enum class PageState : uint8_t { absent = 0, constant = 1, requested = 2, resident = 3 };
+
+struct PageEntry {
+  PageState state = PageState::absent;
+  uint32_t slot = kNoSlot;  // resident only
+  float value = 0;          // constant only
+  uint16_t priority = 0;    // requested only: the highest priority asked for
+};
+
+struct CacheStats {
+  uint64_t hits = 0;       // access() found the tile resident
+  uint64_t misses = 0;     // access() found it absent or requested
+  uint64_t evictions = 0;  // resident tiles dropped to make room
+  uint64_t inserts = 0;    // tiles made resident
+  uint32_t resident = 0, pinned = 0, free = 0;
+};
+
+// Every slot is pinned: nothing can be evicted to make room.
+class CacheFullError : public Error {
+ public:
+  using Error::Error;
+};
+
+class TileCache {
+ public:
+  // Throws st::Error if slot_count or slot_bytes is 0 or the pool would exceed 2^40 bytes.
+  TileCache(uint32_t slot_count, uint32_t slot_bytes);
+
+  // ---- the pool ----
+  uint32_t slot_count() const { return slot_count_; }
+  uint32_t slot_bytes() const { return slot_bytes_; }
+  std::span<const uint8_t> pool() const { return pool_; }
+  uint64_t slot_offset(uint32_t slot) const { return uint64_t(slot) * slot_bytes_; }
+  // The tile bytes of a resident or filling slot (the first used(slot) bytes).
+  std::span<const uint8_t> tile_bytes(uint32_t slot) const;
+  // The whole slot, writable: a fetch decompresses into it between reserve and commit.
+  std::span<uint8_t> slot_span(uint32_t slot);
+  uint32_t used(uint32_t slot) const { return slots_[slot].used; }
+  TileId slot_tile(uint32_t slot) const { return slots_[slot].tile; }
+
+  // ---- the page table ----
+  // The page's state, without counting or touching anything.
+  PageEntry lookup(TileId tile) const noexcept;
+  // The page's state for a lookup that wants the tile: counts a hit (resident) or a miss
+  // (absent or requested) and marks a resident slot most recently used.
+  PageEntry access(TileId tile) noexcept;
+  // A tile that stores nothing finer: `value` answers for all of it. Drops a resident copy.
+  void set_constant(TileId tile, float value);
+  // absent -> requested at `priority`. Returns false (and changes nothing) in any other
+  // state.
+  bool request(TileId tile, uint16_t priority = 0);
+  // A requested page asked for again at a higher priority: raises it and returns true.
+  bool raise_priority(TileId tile, uint16_t priority);
+  // Sizes the page table for `pages` entries, so that no later request() allocates.
+  void reserve_pages(size_t pages);
+  // requested -> absent (a cancelled or failed fetch). Other states are left alone.
+  void cancel_request(TileId tile);
+
+  // ---- filling a slot (two phases, so the bytes can be written outside a lock) ----
+  // Takes a free slot, else evicts the least recently used unpinned tile. The slot is
+  // pinned once and belongs to `tile`; the page stays `requested` until commit.
+  // Throws CacheFullError when every slot is pinned.
+  uint32_t reserve(TileId tile);
+  // The slot's first `used_bytes` hold the tile: the page becomes resident(slot), the slot
+  // is unpinned once and becomes most recently used. Throws st::Error if used_bytes >
+  // slot_bytes. If the page was cancelled meanwhile it still becomes resident (the bytes
+  // are good). Returns false (and frees the slot, as abort) if the page became constant
+  // or resident in another slot meanwhile.
+  bool commit(uint32_t slot, uint32_t used_bytes);
+  // Gives a reserved slot back (fetch failed): slot free, page absent.
+  void abort(uint32_t slot);
+  // reserve + copy + commit. Throws st::Error if bytes exceed a slot.
+  uint32_t insert(TileId tile, std::span<const uint8_t> bytes);
+
+  // ---- pinning and eviction ----
+  void pin(uint32_t slot);
+  void unpin(uint32_t slot);  // contract: pin_count(slot) > 0
+  uint32_t pin_count(uint32_t slot) const { return slots_[slot].pins; }
+  // Drops a resident, unpinned tile (page -> absent). Returns false otherwise.
+  bool evict(TileId tile);
+  // Least recently used unpinned resident slot (the next victim), or kNoSlot.
+  uint32_t lru_victim() const { return lru_tail_; }
+
+  CacheStats stats() const;
+
+ private:
+  enum class SlotState : uint8_t { free, filling, resident };
+  struct Slot {
+    TileId tile = kInvalidTile;
+    uint32_t used = 0, pins = 0;
+    uint32_t prev = kNoSlot, next = kNoSlot;  // LRU list (resident, unpinned) or free list
+    SlotState state = SlotState::free;
+    bool on_lru = false;
+  };
+  struct Bucket {
+    TileId key = kInvalidTile;
+    PageEntry entry;
+  };
+
+  void lru_unlink(uint32_t s);
+  void lru_push_front(uint32_t s);
+  void free_push(uint32_t s);
+  uint32_t free_pop();
+  void drop_slot(uint32_t s);  // resident/filling -> free, clears bytes
+
+  size_t find_bucket(TileId key) const noexcept;  // bucket index or npos
+  PageEntry& upsert(TileId key);
+  void erase(TileId key);
+  void grow();
+
+  uint32_t slot_count_, slot_bytes_;
+  std::vector<uint8_t> pool_;
+  std::vector<Slot> slots_;
+  uint32_t lru_head_ = kNoSlot, lru_tail_ = kNoSlot;  // head = most recently used
+  uint32_t free_head_ = kNoSlot;
+  uint32_t free_count_ = 0, pinned_count_ = 0, resident_count_ = 0;
+
+  std::vector<Bucket> table_;  // power-of-two size, linear probing, backward-shift deletion
+  size_t table_used_ = 0;
+
+  uint64_t hits_ = 0, misses_ = 0, evictions_ = 0, inserts_ = 0;
+};
+
+}  // namespace st::client

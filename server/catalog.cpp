@@ -1,0 +1,83 @@
+#include "server/catalog.hpp"
+
+#include <algorithm>
+#include <filesystem>
+
+#include "proto/names.hpp"
+#include "tiles/core/error.hpp"
+
+namespace st::server {
+namespace fs = std::filesystem;
+
+namespace {
+constexpr std::string_view kPackExt = ".pack";
+
+bool ends_with(std::string_view s, std::string_view suffix) {
+  return s.size() >= suffix.size() && s.substr(s.size() - suffix.size()) == suffix;
+}
+}  // namespace
+
+CatalogMap::CatalogMap(std::string name, std::string path)
+    : name_(std::move(name)), path_(std::move(path)) {
+  if (proto::Status s = proto::validate_map_name(name_); !s)
+    throw Error("serve: " + path_ + ": '" + name_ + "' is not a valid map name (" +
+                proto::to_string(s) + ")");
+  pack_ = PackReader::open(path_);  // validates header, skip grid and index; st::FormatError
+  const PackHeader& h = pack_->header();
+  entry_.name = name_;
+  entry_.encoding = uint8_t(h.encoding);
+  entry_.resolution_log2 = uint8_t(h.map_level);
+  entry_.skip_level = uint8_t(h.skip_level);
+  if (h.tile_count > UINT32_MAX) throw Error("serve: " + path_ + ": too many tiles");
+  entry_.tile_count = uint32_t(h.tile_count);
+  entry_.pack_bytes = pack_->file_size();
+}
+
+void Catalog::add(std::string name, std::string path) {
+  if (find(name)) throw Error("serve: two packs named '" + name + "' (" + path + ")");
+  auto map = std::make_shared<const CatalogMap>(std::move(name), std::move(path));
+  auto at = std::lower_bound(maps_.begin(), maps_.end(), map->name(),
+                             [](const auto& m, const std::string& n) { return m->name() < n; });
+  maps_.insert(at, std::move(map));
+}
+
+const CatalogMap* Catalog::find(std::string_view name) const {
+  auto at = std::lower_bound(maps_.begin(), maps_.end(), name,
+                             [](const auto& m, std::string_view n) { return m->name() < n; });
+  return at != maps_.end() && (*at)->name() == name ? at->get() : nullptr;
+}
+
+Catalog Catalog::scan(std::span<const std::string> paths,
+                      const std::function<void(const std::string&)>& warn) {
+  Catalog c;
+  for (const std::string& p : paths) {
+    std::error_code ec;
+    auto status = fs::status(p, ec);
+    if (ec || !fs::exists(status)) throw Error("serve: " + p + ": no such file or directory");
+    if (fs::is_directory(status)) {
+      std::vector<fs::path> files;
+      for (const auto& e : fs::directory_iterator(p, ec))
+        if (e.is_regular_file() && ends_with(e.path().filename().string(), kPackExt))
+          files.push_back(e.path());
+      if (ec) throw Error("serve: " + p + ": " + ec.message());
+      std::sort(files.begin(), files.end());
+      for (const auto& f : files) {
+        std::string name = f.filename().string();
+        name.resize(name.size() - kPackExt.size());
+        try {
+          c.add(name, f.string());
+        } catch (const Error& e) {
+          if (warn) warn(std::string("skipping ") + f.string() + ": " + e.what());
+        }
+      }
+    } else {
+      std::string name = fs::path(p).filename().string();
+      if (ends_with(name, kPackExt)) name.resize(name.size() - kPackExt.size());
+      c.add(name, p);
+    }
+  }
+  if (c.maps_.empty()) throw Error("serve: no packs to serve in the given paths");
+  return c;
+}
+
+}  // namespace st::server

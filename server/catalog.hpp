@@ -1,0 +1,57 @@
+// The server's catalog: the packs it serves, by map name. Built once at start from files
+// and directories given on the command line; a client can only name a catalog entry
+// (proto map-name rules: no '/', no leading '.'), never a path.
+//
+// A map's name is its file name without the ".pack" extension. Directories contribute
+// their "*.pack" files (not recursively; "*.pack.tmp" builds in progress are skipped).
+// Every pack is opened and validated up front (header, skip grid, tile index), so a
+// corrupt pack stops the server at start, not at the first request.
+//
+// Thread safety: immutable after construction; read() uses pread, so any number of
+// threads may read tiles concurrently.
+#pragma once
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "proto/messages.hpp"
+#include "tiles/core/pack_reader.hpp"
+
+namespace st::server {
+
+class CatalogMap {
+ public:
+  CatalogMap(std::string name, std::string path);  // opens and validates; st::Error
+  const std::string& name() const { return name_; }
+  const std::string& path() const { return path_; }
+  const PackReader& pack() const { return *pack_; }
+  const proto::MapEntry& entry() const { return entry_; }
+
+ private:
+  std::string name_, path_;
+  std::unique_ptr<PackReader> pack_;
+  proto::MapEntry entry_;
+};
+
+class Catalog {
+ public:
+  Catalog() = default;
+  // Files and directories; throws st::Error for a missing path, a named file that is not
+  // a valid pack or map name, a duplicate name, or an empty catalog. `warn` receives one
+  // line per skipped file in a directory (invalid name or pack).
+  static Catalog scan(std::span<const std::string> paths,
+                      const std::function<void(const std::string&)>& warn = {});
+  void add(std::string name, std::string path);  // st::Error on a duplicate or bad name
+
+  const CatalogMap* find(std::string_view name) const;
+  const std::vector<std::shared_ptr<const CatalogMap>>& maps() const { return maps_; }
+
+ private:
+  std::vector<std::shared_ptr<const CatalogMap>> maps_;  // sorted by name
+};
+
+}  // namespace st::server

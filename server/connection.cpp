@@ -1,0 +1,424 @@
+#include "server/connection.hpp"
+
+#include <algorithm>
+#include <array>
+#include <exception>
+
+#include "tiles/core/error.hpp"
+#include "tiles/core/tile_cut_grid.hpp"
+
+namespace st::server {
+
+using proto::ErrorCode;
+using proto::MessageType;
+
+namespace {
+
+constexpr size_t kReadChunk = 64 * 1024;
+
+// Handshake limits (PROTOCOL.md §6): before HelloAck only version-1 frames up to the
+// minimum frame size are accepted, whatever the server would grant later.
+proto::Limits handshake_limits(const proto::Limits& server) {
+  proto::Limits l = server;
+  l.max_frame_bytes = proto::kMinFrameBytes;
+  l.min_version = l.max_version = proto::kHandshakeVersion;
+  return l;
+}
+
+}  // namespace
+
+Connection::Connection(tcp::socket socket, ServerCore& core)
+    : socket_(std::move(socket)),
+      core_(core),
+      opt_(core.options),
+      writer_wake_(socket_.get_executor()),
+      reader_wake_(socket_.get_executor()),
+      watchdog_timer_(socket_.get_executor()),
+      limits_(handshake_limits(core.options.limits)),
+      parser_(limits_, proto::Receiver::server),
+      in_flight_(core.options.limits.max_in_flight),
+      tiles_(size_t(core.options.limits.max_in_flight) * core.options.limits.max_tiles_per_batch) {
+  accepted_ = last_read_ = last_activity_ = Clock::now();
+  writer_wake_.expires_at(Clock::time_point::max());
+  reader_wake_.expires_at(Clock::time_point::max());
+}
+
+void Connection::start() {
+  auto ex = socket_.get_executor();
+  auto self = shared_from_this();
+  asio::co_spawn(ex, reader(self), asio::detached);
+  asio::co_spawn(ex, writer(self), asio::detached);
+  asio::co_spawn(ex, watchdog(self), asio::detached);
+}
+
+void Connection::stop() {
+  asio::post(socket_.get_executor(), [self = shared_from_this()] { self->close(); });
+}
+
+void Connection::close() {
+  if (closed_) return;
+  closed_ = true;
+  error_code ignored;
+  socket_.shutdown(tcp::socket::shutdown_both, ignored);
+  socket_.close(ignored);
+  writer_wake_.cancel();
+  reader_wake_.cancel();
+  watchdog_timer_.cancel();
+}
+
+void Connection::wake_writer() { writer_wake_.cancel(); }
+
+// ---------------------------------------------------------------- reader
+
+asio::awaitable<void> Connection::reader(std::shared_ptr<Connection> /*keep alive*/) {
+  std::vector<uint8_t> buf(kReadChunk);
+  try {
+    while (!closed_ && !closing_) {
+      // Backpressure: a client that sends requests faster than it reads answers stops
+      // being read once its control queue is full (TCP then pushes back on it).
+      while (!closed_ && !closing_ && control_.size() >= opt_.max_control_frames) {
+        error_code ec;
+        reader_wake_.expires_at(Clock::time_point::max());
+        co_await reader_wake_.async_wait(asio::redirect_error(asio::use_awaitable, ec));
+      }
+      if (closed_ || closing_) break;
+      error_code ec;
+      size_t n = co_await socket_.async_read_some(asio::buffer(buf),
+                                                  asio::redirect_error(asio::use_awaitable, ec));
+      if (ec) break;  // EOF, reset, or closed by the watchdog / stop()
+      last_read_ = last_activity_ = Clock::now();
+      core_.stats.received(n);
+      std::span<const uint8_t> rest(buf.data(), n);
+      while (!rest.empty() && !closing_ && !closed_) {
+        auto r = parser_.feed(rest);
+        rest = rest.subspan(r.consumed);
+        if (r.state == proto::FrameParser::State::frame) {
+          frame_end_offset_ = parser_.stream_offset();
+          handle(parser_.take_frame());
+        } else if (r.state == proto::FrameParser::State::error) {
+          core_.stats.protocol_error();
+          fail(parser_.status().code, proto::to_string(parser_.status()));
+        }
+      }
+    }
+  } catch (const std::exception& e) {
+    core_.log(std::string("connection reader: ") + e.what());
+    close();
+  }
+  // A client that half-closes after its requests still gets its answers: only close
+  // once the writer has nothing left (closing_ tells it to finish).
+  closing_ = true;
+  wake_writer();
+}
+
+void Connection::handle(proto::Frame&& frame) {
+  const uint32_t id = frame.header.request_id;
+  proto::Message msg;
+  if (proto::Status s = proto::decode_message(frame, limits_, msg); !s) {
+    // A payload that does not decode: the peer broke the protocol (PROTOCOL.md §3).
+    core_.stats.protocol_error();
+    return fail(s.code, proto::to_string(s));
+  }
+  if (!handshaken_) {
+    if (auto* h = std::get_if<proto::Hello>(&msg)) return on_hello(frame, *h);
+    core_.stats.protocol_error();
+    return fail(ErrorCode::handshake_required,
+                std::string("expected hello, got ") + std::string(proto::to_string(frame.header.type)));
+  }
+  switch (frame.header.type) {
+    case MessageType::hello:
+      core_.stats.protocol_error();
+      return fail(ErrorCode::unexpected_type, "hello after the handshake");
+    case MessageType::error:
+      // The client gave up on the connection (PROTOCOL.md: the sender closes).
+      return close();
+    case MessageType::cancel: return on_cancel(std::get<proto::Cancel>(msg));
+    case MessageType::pong: return;  // answer to a ping we never send; harmless
+    default: break;
+  }
+  // Everything else is a request: it holds an in-flight slot until its FINAL answer.
+  core_.stats.request();
+  if (!admit(id)) return;
+  switch (frame.header.type) {
+    case MessageType::list_maps: {
+      proto::MapList list;
+      for (const auto& m : core_.catalog.maps()) {
+        if (list.maps.size() >= proto::kMaxMapsListed) break;
+        list.maps.push_back(m->entry());
+      }
+      return answer(list, id);
+    }
+    case MessageType::open_map: return on_open_map(id, std::get<proto::OpenMap>(msg));
+    case MessageType::get_tiles: return on_get_tiles(id, std::get<proto::GetTiles>(msg));
+    case MessageType::ping: {
+      proto::Pong pong;
+      pong.echo_timestamp = std::get<proto::Ping>(msg).timestamp;
+      pong.responder_timestamp = uint64_t(
+          std::chrono::duration_cast<std::chrono::nanoseconds>(Clock::now().time_since_epoch()).count());
+      return answer(pong, id);
+    }
+    case MessageType::get_stats: return on_get_stats(id);
+    default:
+      return answer_error(id, ErrorCode::unexpected_type,
+                          std::string(proto::to_string(frame.header.type)) + " is not a request");
+  }
+}
+
+bool Connection::admit(uint32_t id) {
+  proto::Status s = in_flight_.begin(id);
+  if (s) return true;
+  core_.stats.protocol_error();
+  if (s.code == ErrorCode::too_many_in_flight) {
+    // Refused as a whole; the id is not in the tracker, so nothing to release later.
+    core_.stats.error();
+    proto::ErrorMessage e{s.code, proto::to_string(s)};
+    std::vector<uint8_t> out;
+    if (proto::encode_message(e, id, proto::kFlagFinal, limits_, out)) control_.push_back({std::move(out), 0});
+    wake_writer();
+    return false;
+  }
+  fail(s.code, proto::to_string(s));  // duplicate id or id 0: the client lost track
+  return false;
+}
+
+void Connection::on_hello(const proto::Frame& f, const proto::Hello& m) {
+  std::array<uint8_t, proto::kNonceBytes> nonce{};  // v1 clients ignore it (messages.hpp)
+  proto::HelloAck ack;
+  proto::Limits negotiated;
+  proto::Status s = proto::accept_hello(m, opt_.limits, nonce, opt_.server_name, ack, negotiated);
+  if (!s) return fail(s.code, proto::to_string(s));
+  std::vector<uint8_t> out;
+  s = proto::encode_message(ack, f.header.request_id, proto::kFlagFinal, limits_, out);
+  if (!s) return fail(ErrorCode::internal, proto::to_string(s));
+  control_.push_back({std::move(out), 0});
+  limits_ = negotiated;
+  parser_.set_limits(negotiated);
+  in_flight_.set_capacity(negotiated.max_in_flight);
+  handshaken_ = true;
+  wake_writer();
+}
+
+void Connection::on_open_map(uint32_t id, const proto::OpenMap& m) {
+  const CatalogMap* map = core_.catalog.find(m.name);
+  if (!map) return answer_error(id, ErrorCode::unknown_map, "no map named '" + m.name + "'");
+  auto it = std::find(open_maps_.begin(), open_maps_.end(), map);
+  if (it == open_maps_.end()) {
+    if (open_maps_.size() >= opt_.max_open_maps)
+      return answer_error(id, ErrorCode::limit_exceeded,
+                          "more than " + std::to_string(opt_.max_open_maps) + " open maps");
+    open_maps_.push_back(map);
+    it = open_maps_.end() - 1;
+  }
+  proto::MapInfo info;
+  info.map_id = uint32_t(it - open_maps_.begin()) + 1;
+  auto h = map->pack().header_bytes();
+  auto g = map->pack().grid_bytes();
+  info.pack_header.assign(h.begin(), h.end());
+  info.skip_grid.assign(g.begin(), g.end());
+  answer(info, id);
+}
+
+void Connection::on_get_tiles(uint32_t id, const proto::GetTiles& m) {
+  if (m.map_id == 0 || m.map_id > open_maps_.size())
+    return answer_error(id, ErrorCode::unknown_map_id,
+                        "map_id " + std::to_string(m.map_id) + " was not opened on this connection");
+  const auto now = Clock::now();
+  for (const auto& t : m.tiles) {
+    PendingTile p;
+    p.request_id = id;
+    p.map_id = m.map_id;
+    p.tile = t.tile_id;
+    p.priority = t.priority;
+    p.received = now;
+    // Cannot fail: capacity is max_in_flight x max_tiles_per_batch and the decoder
+    // capped the batch; checked anyway, since the bound is the whole point.
+    if (!tiles_.push(p)) {
+      tiles_.cancel_request(id);  // the ones queued still get their answer and FINAL
+      break;
+    }
+  }
+  wake_writer();
+}
+
+void Connection::on_cancel(const proto::Cancel& m) {
+  size_t n = 0;
+  for (uint32_t r : m.request_ids) n += tiles_.cancel_request(r);
+  if (!m.tile_ids.empty()) n += tiles_.cancel_tiles(m.map_id, m.tile_ids);
+  core_.stats.tiles_cancelled(n);
+}
+
+void Connection::on_get_stats(uint32_t id) {
+  const StatsSnapshot snap = core_.stats.snapshot();
+  proto::Stats st;
+  for (auto& [name, value] : snap.named()) st.counters.push_back({name, value});
+  proto::Histogram h;
+  h.name = "latency_us";
+  for (uint32_t b = 0; b < kLatencyBuckets; ++b)
+    h.buckets.push_back({b == kLatencyBuckets - 1 ? ~uint64_t(0) : (uint64_t(1) << b) - 1,
+                         snap.latency_us[b]});
+  st.histograms.push_back(std::move(h));
+  answer(st, id);
+}
+
+void Connection::answer(const proto::Message& m, uint32_t request_id) {
+  std::vector<uint8_t> out;
+  proto::Status s = proto::encode_message(m, request_id, proto::kFlagFinal, limits_, out);
+  if (!s) return answer_error(request_id, s.code == ErrorCode::oversized_frame ? ErrorCode::limit_exceeded : s.code,
+                              "answer does not fit: " + proto::to_string(s));
+  control_.push_back({std::move(out), request_id});
+  wake_writer();
+}
+
+void Connection::answer_error(uint32_t request_id, ErrorCode code, const std::string& message) {
+  core_.stats.error();
+  std::vector<uint8_t> out;
+  std::string text = message.substr(0, proto::kMaxErrorMessageBytes);
+  for (char& c : text)
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) c = ' ';
+  proto::ErrorMessage e{code, text};
+  if (proto::encode_message(e, request_id, proto::kFlagFinal, limits_, out))
+    control_.push_back({std::move(out), request_id});
+  wake_writer();
+}
+
+void Connection::fail(ErrorCode code, const std::string& message) {
+  if (closing_) return;
+  answer_error(proto::kNoRequest, code, message);
+  closing_ = true;  // the writer sends the Error, then closes
+  wake_writer();
+}
+
+// ---------------------------------------------------------------- writer
+
+asio::awaitable<bool> Connection::write_buffers(const std::vector<asio::const_buffer>& bufs,
+                                                size_t bytes) {
+  error_code ec;
+  writing_ = true;
+  write_started_ = Clock::now();
+  co_await asio::async_write(socket_, bufs, asio::redirect_error(asio::use_awaitable, ec));
+  writing_ = false;
+  if (ec) co_return false;
+  last_activity_ = Clock::now();
+  core_.stats.sent(bytes);
+  co_return true;
+}
+
+asio::awaitable<bool> Connection::send_tile(const PoppedTile& p, std::vector<uint8_t>& stored) {
+  const uint8_t flags = p.last_of_request ? proto::kFlagFinal : 0;
+  const CatalogMap* map = open_maps_[p.tile.map_id - 1];
+  ErrorCode code = ErrorCode::ok;
+  std::string why;
+  proto::TileMeta meta;
+  if (p.tile.cancelled) {
+    code = ErrorCode::cancelled;
+    why = "cancelled";
+  } else if (auto entry = map->pack().find(p.tile.tile); !entry) {
+    code = ErrorCode::unknown_tile;
+    why = "map '" + map->name() + "' has no tile " + std::to_string(p.tile.tile);
+  } else {
+    try {
+      stored = map->pack().read_stored(p.tile.tile);  // pread + the pack index's CRC check
+      if (opt_.tile_hook) opt_.tile_hook(p.tile.tile, stored);
+      meta.tile_id = p.tile.tile;
+      meta.map_id = p.tile.map_id;
+      meta.flags = proto::kTileFlagZlib;
+      meta.uncompressed_size = entry->raw_size;
+      meta.payload_crc32 = entry->crc;  // end to end: the client checks what the builder wrote
+    } catch (const Error& e) {
+      code = ErrorCode::internal;
+      why = e.what();
+      core_.log(std::string("tile read failed: ") + e.what());
+    }
+  }
+  if (code == ErrorCode::ok) {
+    std::array<uint8_t, proto::kTileDataPrefixBytes> prefix;
+    proto::Status s = proto::encode_tile_data_prefix(meta, stored, p.tile.request_id, flags, limits_, prefix);
+    if (s) {
+      // Header + fixed fields + the stored bytes as they lie: one gathered write.
+      std::vector<asio::const_buffer> bufs{asio::buffer(prefix), asio::buffer(stored)};
+      bool ok = co_await write_buffers(bufs, prefix.size() + stored.size());
+      if (ok) {
+        core_.stats.tile_sent(stored.size());
+        core_.stats.latency(uint64_t(std::chrono::duration_cast<std::chrono::microseconds>(
+                                         Clock::now() - p.tile.received).count()));
+      }
+      co_return ok;
+    }
+    code = s.code;
+    why = proto::to_string(s);
+  }
+  if (code != ErrorCode::cancelled) core_.stats.error();
+  proto::TileError te;
+  te.tile_id = p.tile.tile;
+  te.map_id = p.tile.map_id;
+  te.code = code;
+  te.message = why.substr(0, proto::kMaxErrorMessageBytes);
+  for (char& c : te.message)
+    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) c = ' ';
+  std::vector<uint8_t> out;
+  if (!proto::encode_message(te, p.tile.request_id, flags, limits_, out)) co_return false;
+  std::vector<asio::const_buffer> bufs{asio::buffer(out)};
+  co_return co_await write_buffers(bufs, out.size());
+}
+
+asio::awaitable<void> Connection::writer(std::shared_ptr<Connection> self) {
+  std::vector<uint8_t> stored;
+  try {
+    while (!closed_) {
+      if (!control_.empty()) {
+        ControlFrame frame = std::move(control_.front());
+        control_.pop_front();
+        reader_wake_.cancel();  // room in the control queue again
+        std::vector<asio::const_buffer> bufs{asio::buffer(frame.bytes)};
+        if (!co_await write_buffers(bufs, frame.bytes.size())) break;
+        if (frame.ends_request) in_flight_.end(frame.ends_request);  // FINAL written
+        continue;
+      }
+      if (auto p = tiles_.pop()) {
+        if (p->last_of_request) in_flight_.end(p->tile.request_id);
+        if (!co_await send_tile(*p, stored)) break;
+        continue;
+      }
+      if (closing_) break;  // everything owed is written
+      error_code ec;
+      writer_wake_.expires_at(Clock::time_point::max());
+      co_await writer_wake_.async_wait(asio::redirect_error(asio::use_awaitable, ec));
+    }
+  } catch (const std::exception& e) {
+    core_.log(std::string("connection writer: ") + e.what());
+  }
+  close();
+  {
+    std::lock_guard lock(core_.mu);
+    core_.connections.erase(self);
+  }
+  core_.stats.connection_closed();
+}
+
+// ---------------------------------------------------------------- watchdog
+
+asio::awaitable<void> Connection::watchdog(std::shared_ptr<Connection> /*keep alive*/) {
+  using std::chrono::milliseconds;
+  const auto shortest = std::min({opt_.handshake_timeout, opt_.idle_timeout, opt_.read_timeout,
+                                  opt_.write_timeout});
+  const auto tick = std::clamp<milliseconds>(shortest / 8, milliseconds(2), milliseconds(250));
+  while (!closed_) {
+    error_code ec;
+    watchdog_timer_.expires_after(tick);
+    co_await watchdog_timer_.async_wait(asio::redirect_error(asio::use_awaitable, ec));
+    if (closed_) break;
+    const auto now = Clock::now();
+    const bool owed = !control_.empty() || !tiles_.empty();
+    const char* why = nullptr;
+    if (!handshaken_ && now - accepted_ > opt_.handshake_timeout) why = "handshake";
+    else if (writing_ && now - write_started_ > opt_.write_timeout) why = "write";
+    else if (mid_frame() && now - last_read_ > opt_.read_timeout) why = "read";
+    else if (!owed && !writing_ && now - last_activity_ > opt_.idle_timeout) why = "idle";
+    if (why) {
+      if (std::string(why) != "idle") core_.stats.timeout();
+      close();
+    }
+  }
+}
+
+}  // namespace st::server

@@ -1,0 +1,93 @@
+// One client connection (internal to server/; Asio http server's `connection`, with the
+// cpp20 coroutine examples' shape):
+//   reader   - reads, feeds the incremental FrameParser, handles each frame; it stops
+//              reading while the control queue is full (backpressure, bounded memory);
+//   writer   - the only coroutine that writes: drains the control queue first (handshake,
+//              map info, errors, pongs, stats, cancelled-tile answers), then the tile
+//              queue highest priority first, one gathered write per tile;
+//   watchdog - enforces the handshake, idle, read (a started frame must finish) and
+//              write timeouts by closing the socket, which ends the other two.
+// All three run on the connection's strand, so its state needs no locks.
+//
+// Limits per connection, so one slow or greedy client cannot starve the others: the
+// negotiated max frame and max in flight (excess requests get too_many_in_flight), a
+// tile queue bounded by max_in_flight x max_tiles_per_batch, a bounded control queue,
+// and the timeouts.
+#pragma once
+#include <chrono>
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <vector>
+
+#include "proto/proto.hpp"
+#include "server/asio.hpp"
+#include "server/server_core.hpp"
+#include "server/tile_queue.hpp"
+
+namespace st::server {
+
+class Connection : public std::enable_shared_from_this<Connection> {
+ public:
+  Connection(tcp::socket socket, ServerCore& core);
+  // Spawns the coroutines. The connection removes itself from core.connections at the end.
+  void start();
+  // Closes the socket from any thread (posted to the strand).
+  void stop();
+
+ private:
+  using Clock = std::chrono::steady_clock;
+
+  asio::awaitable<void> reader(std::shared_ptr<Connection> self);
+  asio::awaitable<void> writer(std::shared_ptr<Connection> self);
+  asio::awaitable<void> watchdog(std::shared_ptr<Connection> self);
+
+  void handle(proto::Frame&& frame);
+  void on_hello(const proto::Frame& f, const proto::Hello& m);
+  void on_open_map(uint32_t request_id, const proto::OpenMap& m);
+  void on_get_tiles(uint32_t request_id, const proto::GetTiles& m);
+  void on_cancel(const proto::Cancel& m);
+  void on_get_stats(uint32_t request_id);
+
+  // Queues a whole frame answering `request_id` (FINAL); the request leaves in_flight_
+  // once the frame is written.
+  void answer(const proto::Message& m, uint32_t request_id);
+  void answer_error(uint32_t request_id, proto::ErrorCode code, const std::string& message);
+  // Admits a request into in_flight_ (PROTOCOL.md §6-7): false if refused (too many:
+  // answered with Error; duplicate id: the connection fails).
+  bool admit(uint32_t request_id);
+  // Connection-level failure: Error with request id 0, then close once it is written.
+  void fail(proto::ErrorCode code, const std::string& message);
+  void close();
+  void wake_writer();
+  bool mid_frame() const { return parser_.stream_offset() > frame_end_offset_; }
+
+  // Writes one tile answer (TileData from the pack, or TileError).
+  asio::awaitable<bool> send_tile(const PoppedTile& p, std::vector<uint8_t>& scratch);
+  asio::awaitable<bool> write_buffers(const std::vector<asio::const_buffer>& bufs, size_t bytes);
+
+  tcp::socket socket_;
+  ServerCore& core_;
+  const ServerOptions& opt_;
+  asio::steady_timer writer_wake_, reader_wake_, watchdog_timer_;
+
+  proto::Limits limits_;  // handshake limits until HelloAck, then the negotiated ones
+  proto::FrameParser parser_;
+  proto::InFlight in_flight_;
+  TileQueue tiles_;
+  struct ControlFrame {
+    std::vector<uint8_t> bytes;
+    uint32_t ends_request = 0;  // in_flight_ id released once written (0: none)
+  };
+  std::deque<ControlFrame> control_;
+  std::vector<const CatalogMap*> open_maps_;  // map_id = index + 1
+
+  bool handshaken_ = false;
+  bool closing_ = false;  // write what is queued, then close
+  bool closed_ = false;
+  bool writing_ = false;
+  uint64_t frame_end_offset_ = 0;
+  Clock::time_point accepted_, last_read_, last_activity_, write_started_;
+};
+
+}  // namespace st::server

@@ -1,0 +1,230 @@
+#include "server/server.hpp"
+
+#include <condition_variable>
+#include <cstdio>
+#include <future>
+#include <thread>
+
+#include "proto/proto.hpp"
+#include "server/asio.hpp"
+#include "server/connection.hpp"
+#include "tiles/core/error.hpp"
+
+namespace st::server {
+
+void ServerCore::log(const std::string& line) const {
+  if (options.log) options.log(line);
+  else std::fprintf(stderr, "shadowtile serve: %s\n", line.c_str());
+}
+
+struct Server::Impl {
+  ServerCore core;
+  asio::io_context io;
+  // The acceptor, stats timer and signal set share one strand, so shutdown (posted to
+  // it) never races the accept loop when several I/O threads run.
+  asio::strand<asio::io_context::executor_type> control{asio::make_strand(io)};
+  tcp::acceptor acceptor{control};
+  asio::steady_timer stats_timer{control};
+  asio::signal_set signals{control};
+  std::vector<std::thread> threads;
+  uint16_t port = 0;
+
+  std::mutex state_mu;
+  std::condition_variable state_cv;
+  bool running = false, stopped = false;
+  int signal = 0;
+
+  asio::awaitable<void> accept_loop();
+  asio::awaitable<void> stats_loop();
+  void reject(tcp::socket socket);
+  void shutdown_on_io();  // runs on the io_context
+};
+
+asio::awaitable<void> Server::Impl::accept_loop() {
+  using namespace std::chrono_literals;
+  auto backoff = 10ms;
+  asio::steady_timer pause(control);
+  while (acceptor.is_open()) {
+    error_code ec;
+    // Each connection gets its own strand: its three coroutines never run concurrently.
+    tcp::socket socket = co_await acceptor.async_accept(asio::make_strand(io),
+                                                        asio::redirect_error(asio::use_awaitable, ec));
+    if (ec) {
+      if (!acceptor.is_open() || ec == asio::error::operation_aborted) break;
+      // EMFILE/ENFILE/ENOBUFS...: back off instead of spinning on the failing accept.
+      core.log("accept failed: " + ec.message() + "; retrying in " +
+               std::to_string(backoff.count()) + " ms");
+      pause.expires_after(backoff);
+      co_await pause.async_wait(asio::redirect_error(asio::use_awaitable, ec));
+      backoff = std::min(backoff * 2, std::chrono::milliseconds(1000));
+      continue;
+    }
+    backoff = 10ms;
+    error_code ignored;
+    socket.set_option(tcp::no_delay(true), ignored);
+    std::shared_ptr<Connection> conn;
+    {
+      std::lock_guard lock(core.mu);
+      if (core.stopping) break;
+      if (core.connections.size() >= core.options.max_connections) {
+        core.stats.connection_rejected();
+      } else {
+        conn = std::make_shared<Connection>(std::move(socket), core);
+        core.connections.insert(conn);
+      }
+    }
+    if (!conn) {
+      reject(std::move(socket));
+      continue;
+    }
+    core.stats.connection_opened();
+    conn->start();
+  }
+}
+
+// Over the connection limit: one Error(overloaded) frame, best effort, then close.
+void Server::Impl::reject(tcp::socket socket) {
+  auto s = std::make_shared<tcp::socket>(std::move(socket));
+  auto frame = std::make_shared<std::vector<uint8_t>>();
+  proto::ErrorMessage e{proto::ErrorCode::overloaded, "server at its connection limit"};
+  proto::Limits l;
+  (void)proto::encode_message(e, proto::kNoRequest, proto::kFlagFinal, l, *frame);
+  // Non-blocking single write: a fresh socket's send buffer always has room for ~60 bytes.
+  error_code ec;
+  s->non_blocking(true, ec);
+  asio::write(*s, asio::buffer(*frame), ec);
+  s->shutdown(tcp::socket::shutdown_both, ec);
+  s->close(ec);
+}
+
+asio::awaitable<void> Server::Impl::stats_loop() {
+  while (true) {
+    error_code ec;
+    stats_timer.expires_after(core.options.stats_interval);
+    co_await stats_timer.async_wait(asio::redirect_error(asio::use_awaitable, ec));
+    if (ec) break;
+    core.log(core.stats.snapshot().line());
+  }
+}
+
+void Server::Impl::shutdown_on_io() {
+  error_code ignored;
+  acceptor.close(ignored);
+  stats_timer.cancel();
+  signals.cancel(ignored);
+  std::vector<std::shared_ptr<Connection>> conns;
+  {
+    std::lock_guard lock(core.mu);
+    core.stopping = true;
+    conns.assign(core.connections.begin(), core.connections.end());
+  }
+  for (auto& c : conns) c->stop();
+}
+
+Server::Server(Catalog catalog, ServerOptions options) : impl_(std::make_unique<Impl>()) {
+  if (options.threads == 0) throw Error("serve: --threads must be at least 1");
+  if (proto::Status s = proto::validate(options.limits); !s)
+    throw Error("serve: bad limits: " + proto::to_string(s));
+  if (options.max_control_frames == 0 || options.max_connections == 0)
+    throw Error("serve: max_control_frames and max_connections must be > 0");
+  impl_->core.options = std::move(options);
+  impl_->core.catalog = std::move(catalog);
+}
+
+Server::~Server() { stop(); }
+
+void Server::start() {
+  Impl& d = *impl_;
+  {
+    std::lock_guard lock(d.state_mu);
+    if (d.running || d.stopped) throw Error("serve: server already started");
+  }
+  const auto& o = d.core.options;
+  error_code ec;
+  auto addr = asio::ip::make_address(o.host, ec);
+  if (ec) throw Error("serve: --listen: '" + o.host + "' is not an IP address");
+  tcp::endpoint ep(addr, o.port);
+  const std::string where = o.host + ":" + std::to_string(o.port);
+  d.acceptor.open(ep.protocol(), ec);
+  if (!ec) d.acceptor.set_option(tcp::acceptor::reuse_address(true), ec);
+  if (!ec) d.acceptor.bind(ep, ec);
+  if (!ec) d.acceptor.listen(asio::socket_base::max_listen_connections, ec);
+  if (ec) throw Error("serve: cannot listen on " + where + ": " + ec.message());
+  d.port = d.acceptor.local_endpoint().port();
+  asio::co_spawn(d.control, d.accept_loop(), asio::detached);
+  if (o.stats_interval.count() > 0) asio::co_spawn(d.control, d.stats_loop(), asio::detached);
+  {
+    std::lock_guard lock(d.state_mu);
+    d.running = true;
+  }
+  for (unsigned i = 0; i < o.threads; ++i)
+    d.threads.emplace_back([&d] {
+      try {
+        d.io.run();
+      } catch (const std::exception& e) {
+        d.core.log(std::string("I/O thread: ") + e.what());
+      }
+    });
+}
+
+void Server::stop() {
+  Impl& d = *impl_;
+  {
+    std::lock_guard lock(d.state_mu);
+    if (d.stopped) return;
+    d.stopped = true;
+    if (!d.running) return;
+  }
+  asio::post(d.control, [&d] { d.shutdown_on_io(); });
+  // Connections end their coroutines once their sockets close; run() then returns. A
+  // coroutine stuck past the grace period (it should not happen) is cut off by stop().
+  std::thread guard([&d] {
+    std::unique_lock lock(d.state_mu);
+    if (!d.state_cv.wait_for(lock, std::chrono::seconds(5), [&] { return !d.running; })) d.io.stop();
+  });
+  for (auto& t : d.threads) t.join();
+  d.threads.clear();
+  {  // Sockets must go before their io_context (they would if io.stop() cut run() short).
+    std::lock_guard lock(d.core.mu);
+    d.core.connections.clear();
+  }
+  {
+    std::lock_guard lock(d.state_mu);
+    d.running = false;
+  }
+  d.state_cv.notify_all();
+  guard.join();
+}
+
+int Server::wait_for_signal() {
+  Impl& d = *impl_;
+  {
+    std::lock_guard lock(d.state_mu);
+    if (!d.running || d.stopped) return 0;
+  }
+  std::promise<int> got;
+  auto fut = got.get_future();
+  // The signal set lives on the control strand, like everything shutdown touches.
+  asio::post(d.control, [&d, &got] {
+    {
+      std::lock_guard lock(d.core.mu);
+      if (d.core.stopping) return got.set_value(0);  // stop() came first
+    }
+    error_code ec;
+    d.signals.add(SIGINT, ec);
+    d.signals.add(SIGTERM, ec);
+    d.signals.async_wait([&d, &got](const error_code& e, int sig) {
+      got.set_value(e ? 0 : sig);
+      if (!e) d.shutdown_on_io();
+    });
+  });
+  int sig = fut.get();
+  stop();
+  return sig;
+}
+
+uint16_t Server::port() const { return impl_->port; }
+StatsSnapshot Server::stats() const { return impl_->core.stats.snapshot(); }
+const Catalog& Server::catalog() const { return impl_->core.catalog; }
+
+}  // namespace st::server

@@ -1,0 +1,74 @@
+// The shadowtile tile server (DESIGN.md "What it is"): serves the tiles of many packs over
+// the wire protocol (proto/PROTOCOL.md) with Boost.Asio.
+//
+// Shape (Asio http server example): Server owns the io_context, the acceptor and the
+// catalog; each accepted socket becomes a Connection (connection.hpp) running one reader
+// coroutine, one writer coroutine draining its queues (never two writes at once on a
+// socket), and a watchdog enforcing every timeout. Tiles are read with pread from the
+// pack and sent as the stored (zlib) bytes behind a header, in one gathered write.
+//
+// Thread safety: start()/stop()/port()/stats() may be called from any thread. The
+// tile hook runs on I/O threads.
+#pragma once
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <span>
+#include <string>
+
+#include "proto/limits.hpp"
+#include "server/catalog.hpp"
+#include "server/server_stats.hpp"
+
+namespace st::server {
+
+struct ServerOptions {
+  std::string host = "127.0.0.1";
+  uint16_t port = 7447;  // 0: an ephemeral port (see Server::port())
+  unsigned threads = 1;  // I/O threads; one beat two on 2 cores for small blobs (MACHINE.md)
+  // The most this server grants any client; the handshake takes the smaller of each pair.
+  proto::Limits limits{};
+  size_t max_connections = 1024;         // beyond: Error(overloaded) and close
+  size_t max_open_maps = 64;             // per connection
+  size_t max_control_frames = 64;        // queued non-tile answers; the reader waits beyond
+  std::chrono::milliseconds handshake_timeout{5000};  // accept -> Hello received
+  std::chrono::milliseconds idle_timeout{120000};     // no traffic and nothing owed
+  std::chrono::milliseconds read_timeout{10000};      // a started frame must complete
+  std::chrono::milliseconds write_timeout{10000};     // one write must complete
+  std::string server_name = "shadowtile-server";
+  // Periodic stats line (0: none), written through `log`.
+  std::chrono::milliseconds stats_interval{0};
+  std::function<void(const std::string&)> log;  // default: stderr
+  // Test hook: sees (and may alter) a tile's stored bytes after pread, before sending.
+  std::function<void(uint64_t tile_id, std::span<uint8_t> bytes)> tile_hook;
+};
+
+class Server {
+ public:
+  // Validates options (st::Error on bad limits or zero threads).
+  Server(Catalog catalog, ServerOptions options);
+  ~Server();  // stop()
+  Server(const Server&) = delete;
+  Server& operator=(const Server&) = delete;
+
+  // Binds and listens (st::Error naming the address on failure), then runs the I/O
+  // threads. Returns once the server accepts connections.
+  void start();
+  // Stops accepting, closes every connection, joins the I/O threads. Idempotent.
+  void stop();
+  // Blocks until stop() is called or SIGINT/SIGTERM arrives (then stops; returns the
+  // signal number, or 0 for stop()).
+  int wait_for_signal();
+
+  uint16_t port() const;  // the bound port (after start())
+  StatsSnapshot stats() const;
+  const Catalog& catalog() const;
+
+  struct Impl;
+
+ private:
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace st::server

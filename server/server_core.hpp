@@ -1,0 +1,28 @@
+// State shared by the server and its connections (internal to server/).
+#pragma once
+#include <memory>
+#include <mutex>
+#include <set>
+#include <string>
+
+#include "server/catalog.hpp"
+#include "server/server.hpp"
+#include "server/server_stats.hpp"
+
+namespace st::server {
+
+class Connection;
+
+struct ServerCore {
+  ServerOptions options;
+  Catalog catalog;
+  ServerStats stats;
+
+  std::mutex mu;  // guards connections and stopping
+  std::set<std::shared_ptr<Connection>> connections;
+  bool stopping = false;
+
+  void log(const std::string& line) const;
+};
+
+}  // namespace st::server

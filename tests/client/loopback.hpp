@@ -1,0 +1,69 @@
+// Helpers of the loopback tests: small packs built from random interval fields, an
+// in-process server on 127.0.0.1:0, bounded waits, and a raw blocking socket for
+// sending hostile bytes. Every wait is bounded so a broken build fails, never hangs.
+#pragma once
+#include <chrono>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "server/server.hpp"
+#include "tiles/core/encoding.hpp"
+#include "tiles/core/hierarchy.hpp"
+#include "tiles/core/interval.hpp"
+#include "tiles/core/pack_evaluator.hpp"
+#include "tiles/core/pack_reader.hpp"
+
+namespace st::looptest {
+
+bool small_scale();  // SHADOWTILE_TEST_SCALE=small (the asan preset)
+
+// A random field of 2^level texels a side: constant blocks (no tiles below them), noisy
+// blocks (big tiles, index tiles when tile_bytes is small), smooth slopes, lit border.
+IntervalTile random_field(uint32_t level, uint64_t seed);
+
+struct TestPack {
+  std::string path;
+  std::shared_ptr<PackReader> reader;
+  Hierarchy hierarchy;
+};
+// Builds "<tmp>/<name>.pack" from random_field(level, seed).
+TestPack build_pack(const std::string& name, uint32_t level, uint64_t seed, Encoding e, uint32_t skip,
+                    uint32_t tile_bytes);
+std::vector<Encoding> available_encodings();
+
+struct TestServer {
+  std::unique_ptr<server::Server> server;
+  uint16_t port = 0;
+  void stop() { if (server) server->stop(); }
+};
+TestServer start_server(const std::vector<std::string>& paths, server::ServerOptions o = {});
+
+// Polls `pred` every millisecond until true or `timeout`; returns its last value.
+bool wait_until(const std::function<bool()>& pred, std::chrono::milliseconds timeout = std::chrono::seconds(20));
+
+// A blocking TCP connection with receive/send timeouts (SO_RCVTIMEO/SO_SNDTIMEO).
+class RawSocket {
+ public:
+  RawSocket(uint16_t port, std::chrono::milliseconds timeout = std::chrono::seconds(5));
+  ~RawSocket();
+  RawSocket(const RawSocket&) = delete;
+  RawSocket& operator=(const RawSocket&) = delete;
+  bool send(const std::vector<uint8_t>& bytes);
+  // Reads until `n` bytes or EOF/timeout; returns what it got.
+  std::vector<uint8_t> recv(size_t n);
+  // True if the peer closed (EOF or reset) within the timeout.
+  bool wait_closed();
+  void close();
+
+ private:
+  int fd_ = -1;
+};
+
+// Frames for raw tests (version 1, handshake limits).
+std::vector<uint8_t> hello_frame(uint32_t request_id = 1);
+std::vector<uint8_t> open_map_frame(const std::string& name, uint32_t request_id);
+
+}  // namespace st::looptest
