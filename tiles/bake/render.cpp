@@ -140,11 +140,12 @@ float SceneTracer::traced(const Receiver& r, const Vec3d& offset) const {
 
 LightPoint lookup_point(const Receiver& r, const LightSpace& light, uint32_t map_level) {
   Vec3d p = r.pos;
-  if (!r.closed) {
-    // Open geometry has hi = lo: move the lookup off the surface (render.hpp).
+  {
+    // Open geometry has hi = lo; closed surfaces meet stored lo values: move the lookup
+    // off the surface (render.hpp).
     const double texel = (light.kind() == LightKind::sun ? light.extent_uv() : length(p - light.origin()) * light.extent_uv()) /
                          std::ldexp(1.0, int(map_level));
-    p = p + r.normal * (kOpenReceiverOffsetTexels * texel);
+    p = p + r.normal * ((r.closed ? kClosedReceiverOffsetTexels : kOpenReceiverOffsetTexels) * texel);
   }
   return light.to_light(p);
 }
