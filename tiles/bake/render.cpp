@@ -138,14 +138,14 @@ float SceneTracer::traced(const Receiver& r, const Vec3d& offset) const {
   return ray.tfar == -std::numeric_limits<float>::infinity() ? 0.0f : 1.0f;
 }
 
-LightPoint lookup_point(const Receiver& r, const LightSpace& light, uint32_t map_level) {
+LightPoint lookup_point(const Receiver& r, const LightSpace& light, uint32_t map_level, uint32_t pcf_radius) {
   Vec3d p = r.pos;
   {
     // Open geometry has hi = lo; closed surfaces meet stored lo values: move the lookup
     // off the surface (render.hpp).
     const double texel = (light.kind() == LightKind::sun ? light.extent_uv() : length(p - light.origin()) * light.extent_uv()) /
                          std::ldexp(1.0, int(map_level));
-    p = p + r.normal * ((r.closed ? kClosedReceiverOffsetTexels : kOpenReceiverOffsetTexels) * texel);
+    p = p + r.normal * ((r.closed ? kClosedReceiverOffsetTexels : kOpenReceiverOffsetTexels) + pcf_radius) * texel;
   }
   return light.to_light(p);
 }
@@ -154,7 +154,7 @@ float map_visibility(const Evaluator& eval, const Receiver& r, const LightSpace&
                      uint32_t level) {
   if (!r.hit || r.n_dot_l <= 0) return 0;
   const uint32_t L = eval.finest_level();
-  const LightPoint lp = lookup_point(r, light, L);
+  const LightPoint lp = lookup_point(r, light, L, pcf_radius);
   if (!(lp.u >= 0 && lp.u < 1 && lp.v >= 0 && lp.v < 1)) return 1;
   const float d = float(lp.d);
   const uint32_t lv = std::min(level, L);

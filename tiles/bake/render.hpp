@@ -71,7 +71,10 @@ class SceneTracer {
 
 // Light-space lookup point of a receiver (with the open-geometry offset); the map's
 // answer is eval.lit / pcf at these coordinates.
-LightPoint lookup_point(const Receiver& r, const LightSpace& light, uint32_t map_level);
+// PCF compares one receiver depth against (2R+1)^2 texels: on surfaces sloped to the
+// light the kernel's far texels lie in front of the receiver, so the offset grows by R
+// texels (a normal-offset form of receiver-plane bias).
+LightPoint lookup_point(const Receiver& r, const LightSpace& light, uint32_t map_level, uint32_t pcf_radius = 0);
 
 // Fraction lit of a receiver by the map: pcf_radius 0 = single tap (exact lit test),
 // else a (2r+1)^2 kernel at `level` (default: the finest). Outside the map: lit.

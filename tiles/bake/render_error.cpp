@@ -46,7 +46,12 @@ FrameTruth make_frame_truth(const SceneTracer& tracer, const Camera& camera, uin
           for (int tx = -k; tx <= k; ++tx)
             for (int s = 0; s < 4; ++s) {
               const double du = tx + ((s & 1) ? 0.25 : -0.25), dv = ty + ((s & 2) ? 0.25 : -0.25);
-              sum += tracer.traced(rec, light.axis_u() * (du * texel) + light.axis_v() * (dv * texel));
+              // Across the light's u/v, then along the light ray back onto the receiver's
+              // tangent plane: the surface the kernel's footprint covers.
+              const Vec3d off = light.axis_u() * (du * texel) + light.axis_v() * (dv * texel);
+              const Vec3d ldir = tracer.to_light(rec.pos);
+              const double t = -dot(off, rec.normal) / dot(ldir, rec.normal);
+              sum += tracer.traced(rec, off + ldir * t);
               ++count;
             }
         out[i] = float(sum / count);

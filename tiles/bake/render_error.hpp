@@ -4,8 +4,8 @@
 // light-facing receiver, the ray-traced visibility (one shadow ray) and, per PCF radius,
 // a supersampled reference: the mean ray-traced visibility over the kernel's footprint
 // ((2R+1)^2 texels of the finest map, 2x2 rays per texel, the receiver moved across the
-// light's u/v axes so each ray samples the shadow at another texel at the same depth,
-// which is what PCF approximates).
+// light's u/v axes and back along the light ray onto its tangent plane, so each ray
+// samples the lit fraction of the surface the kernel covers).
 //
 // FlatMapEvaluator is the uncompressed baseline: one float per texel of one level (the
 // midpoint of each texel's dual depth interval, so closed receivers need no bias, like
