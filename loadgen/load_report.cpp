@@ -46,6 +46,8 @@ std::string load_table(const LoadResult& r) {
   row("frames (late)", std::to_string(r.frames) + " (" + std::to_string(r.frames_late) + "), max lag " +
                            fmt("%.1f ms", r.max_lag_ms));
   row("frames with holes", std::to_string(r.frames_with_holes) + " (" + fmt("%.2f%%", 100 * r.hole_fraction()) + ")");
+  row("  of them outside cut fill time", std::to_string(r.frames_with_holes_steady) + " (" +
+                                           fmt("%.2f%%", r.frames ? 100.0 * double(r.frames_with_holes_steady) / double(r.frames) : 0) + ")");
   row("needed cells missing / needed", std::to_string(r.cells_missing) + " / " + std::to_string(r.cells_needed));
   row("tiles requested / received", std::to_string(r.map.tiles_requested) + " / " + std::to_string(r.map.tiles_received));
   row("tiles cancelled / failed", std::to_string(r.map.tiles_cancelled) + " / " + std::to_string(r.map.tiles_failed));
@@ -84,6 +86,7 @@ std::string load_json(const LoadResult& r) {
               {"slot_bytes", r.slot_bytes}, {"ground", r.world.ground}, {"top", r.world.top},
               {"footprint", {r.world.x0, r.world.z0, r.world.x1, r.world.z1}}};
   j["frames"] = {{"total", r.frames}, {"with_holes", r.frames_with_holes}, {"hole_fraction", r.hole_fraction()},
+                 {"with_holes_outside_cut_fill", r.frames_with_holes_steady},
                  {"late", r.frames_late}, {"max_lag_ms", r.max_lag_ms}, {"cells_needed", r.cells_needed},
                  {"cells_missing", r.cells_missing}};
   j["tiles"] = {{"requested", r.map.tiles_requested}, {"received", r.map.tiles_received},

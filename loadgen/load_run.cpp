@@ -48,7 +48,7 @@ struct Shared {
   std::vector<CutTrack> cuts;                                  // per camera
   std::vector<uint32_t> camera_conn;
   std::vector<double> latency_ms, cut_ms;
-  uint64_t abandoned = 0, cut_count = 0, cuts_incomplete = 0;
+  uint64_t abandoned = 0, cut_count = 0, cuts_incomplete = 0, holes_steady = 0;
   // Per-camera frame counters (summed at the end and for the series).
   std::atomic<uint64_t> frames{0}, holes{0}, late{0}, needed{0}, missing{0}, samples{0}, lookups{0};
   std::atomic<uint64_t> lookup_ns{0};
@@ -81,7 +81,8 @@ void camera_loop(uint32_t cam, const LoadOptions& o, const WorldFrame& world, cl
     prev_segment = seg;
     const ViewNeeds needs = view_needs(world, path.at(t), L, grid, o.view);
     std::vector<ViewNeeds> ahead;
-    if (o.prefetch)
+    // Poses ahead move slowly: refresh their requests kPrefetchEvery frames (and at cuts).
+    if (o.prefetch && (cut || f % kPrefetchEvery == 0))
       for (double a : kPrefetchAhead)
         if (t + a < o.duration && path.segment(t + a) == seg)
           ahead.push_back(view_needs(world, path.at(t + a), L, grid, o.view));
@@ -136,6 +137,7 @@ void camera_loop(uint32_t cam, const LoadOptions& o, const WorldFrame& world, cl
         auto [it, fresh] = pend.try_emplace(c.key() ^ (uint64_t(c.level) << 52), Pending{c, sched, sched});
         if (!fresh) it->second.last_needed = sched;
       }
+      if (!missing.empty() && !cut && !sh.cuts[cam].active) ++sh.holes_steady;
       if (cut) {
         CutTrack& ct = sh.cuts[cam];
         if (ct.active) ++sh.cuts_incomplete;
@@ -312,6 +314,7 @@ LoadResult run_load(const LoadOptions& o_in) {
   r.latency_abandoned = sh.abandoned;
   r.cut_residency_ms = std::move(sh.cut_ms);
   r.cuts = sh.cut_count;
+  r.frames_with_holes_steady = sh.holes_steady;
   r.cuts_incomplete = sh.cuts_incomplete;
   for (const CutTrack& ct : sh.cuts)
     if (ct.active) ++r.cuts_incomplete;

@@ -9,7 +9,7 @@
 // Per frame a camera (1) works out the cells its view needs (view_tiles.hpp) and asks for
 // them, nearest first, at high priority; (2) prefetches the cells of its poses
 // kPrefetchAhead seconds ahead on the same path segment at lower priority (never across a
-// cut: a real client cannot see a teleport coming); (3) checks which needed cells are not
+// cut: a real client cannot see a teleport coming), every kPrefetchEvery frames; (3) checks which needed cells are not
 // resident (a frame with holes: its lookups answered from coarser levels) and (4)
 // evaluates map.visibility at every receiver sample.
 //
@@ -43,6 +43,7 @@ struct LoadOptions {
 };
 
 inline constexpr double kPrefetchAhead[] = {0.25, 0.5, 1.0};  // seconds
+inline constexpr uint64_t kPrefetchEvery = 6;                   // frames between prefetch rounds
 
 struct SeriesPoint {
   double t = 0;                 // seconds since start
@@ -56,6 +57,9 @@ struct LoadResult {
   uint32_t connections = 0, map_level = 0, skip_level = 0, cache_slots = 0, slot_bytes = 0;
   double wall_seconds = 0;
   uint64_t frames = 0, frames_with_holes = 0, frames_late = 0;  // late: started > 1 frame after schedule
+  // Frames with holes while the camera's last cut was already fully resident (moving
+  // along the path, not filling a new view): what prefetch is meant to drive to zero.
+  uint64_t frames_with_holes_steady = 0;
   double max_lag_ms = 0;
   uint64_t cells_needed = 0, cells_missing = 0;  // summed over frames
   uint64_t samples = 0, lookups = 0;
