@@ -410,7 +410,7 @@ void RemoteMap::tile_arrived(const proto::TileMeta& meta, std::span<const uint8_
   }
   // The slot is pinned and unpublished: fill and open it without the lock.
   std::span<uint8_t> dst = cache_.slot_span(slot);
-  std::memcpy(dst.data(), raw.data(), raw.size());
+  if (!raw.empty()) std::memcpy(dst.data(), raw.data(), raw.size());
   const std::span<const uint8_t> bytes(dst.data(), raw.size());
   std::unique_ptr<Evaluator> ev;
   CutGrid g;

@@ -277,7 +277,7 @@ uint32_t TileCache::insert(TileId tile, std::span<const uint8_t> bytes) {
     throw Error("tile cache: tile " + std::to_string(tile) + " of " + std::to_string(bytes.size()) +
                 " bytes exceeds the slot size " + std::to_string(slot_bytes_));
   uint32_t s = reserve(tile);
-  std::memcpy(slot_span(s).data(), bytes.data(), bytes.size());
+  if (!bytes.empty()) std::memcpy(slot_span(s).data(), bytes.data(), bytes.size());
   if (!commit(s, uint32_t(bytes.size()))) return lookup(tile).slot;
   return s;
 }

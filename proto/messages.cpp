@@ -9,6 +9,7 @@
 
 #include "proto/byte_io.hpp"
 #include "proto/message_rules.hpp"
+#include "proto/names.hpp"
 
 namespace st::proto {
 namespace {
@@ -443,6 +444,13 @@ Status decode_payload(std::span<const std::uint8_t> p, const Limits& limits, Sta
 }
 
 // ---- frames --------------------------------------------------------------------------------
+
+ErrorMessage make_error(ErrorCode code, std::string_view text) {
+  return ErrorMessage{code == ErrorCode::ok ? ErrorCode::internal : code,
+                      sanitize_text(text, kMaxErrorMessageBytes)};
+}
+
+ErrorMessage make_error(const Status& s) { return make_error(s.code, s.detail); }
 
 bool tile_crc_matches(const TileMeta& meta, std::span<const std::uint8_t> payload) {
   return crc32(payload) == meta.payload_crc32;

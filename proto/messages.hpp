@@ -15,6 +15,7 @@
 #include <cstdint>
 #include <span>
 #include <string>
+#include <string_view>
 #include <variant>
 #include <vector>
 
@@ -75,6 +76,13 @@ struct ErrorMessage {
   std::string message;                   // free text, <= kMaxErrorMessageBytes
   bool operator==(const ErrorMessage&) const = default;
 };
+
+// An Error for `code` whose message is `text` made valid (sanitize_text): never fails to
+// encode, whatever the text (an exception's what(), a parser Status detail).
+ErrorMessage make_error(ErrorCode code, std::string_view text);
+// The Error a receiver sends (with request id 0, then closes) after a framing or decode
+// failure `s` (precondition: !s.ok()).
+ErrorMessage make_error(const Status& s);
 
 struct ListMaps {
   static constexpr MessageType kType = MessageType::list_maps;

@@ -50,4 +50,13 @@ Status validate_text(std::string_view text, std::size_t max_bytes, const char* f
   return {};
 }
 
+std::string sanitize_text(std::string_view text, std::size_t max_bytes) {
+  std::string out(text.substr(0, max_bytes));
+  for (char& c : out) {
+    const auto u = static_cast<unsigned char>(c);
+    if (u < 0x20 || u == 0x7f) c = '?';
+  }
+  return out;
+}
+
 }  // namespace st::proto

@@ -3,6 +3,7 @@
 // never name a path ("../x", "/etc", "a/b", "C:", "", hidden files, option-like names).
 #pragma once
 #include <cstddef>
+#include <string>
 #include <string_view>
 
 #include "proto/status.hpp"
@@ -22,5 +23,10 @@ bool is_valid_map_name(std::string_view name);
 // (0x00-0x1F, 0x7F) so it always prints as one line and carries no terminal escapes.
 // Bytes >= 0x80 pass (UTF-8 is not validated). Fails with invalid_field.
 Status validate_text(std::string_view text, std::size_t max_bytes, const char* field);
+
+// Makes any text valid free text: control bytes become '?', and it is cut to max_bytes
+// (at a byte boundary; a cut UTF-8 sequence is harmless since UTF-8 is not validated).
+// For forwarding exception messages (st::Error::what()) into Error frames.
+std::string sanitize_text(std::string_view text, std::size_t max_bytes);
 
 }  // namespace st::proto

@@ -14,6 +14,7 @@
 // tile queue bounded by max_in_flight x max_tiles_per_batch, a bounded control queue,
 // and the timeouts.
 #pragma once
+#include <array>
 #include <chrono>
 #include <cstdint>
 #include <deque>
@@ -62,8 +63,17 @@ class Connection : public std::enable_shared_from_this<Connection> {
   void wake_writer();
   bool mid_frame() const { return parser_.stream_offset() > frame_end_offset_; }
 
-  // Writes one tile answer (TileData from the pack, or TileError).
-  asio::awaitable<bool> send_tile(const PoppedTile& p, std::vector<uint8_t>& scratch);
+  struct TileFrame {
+    bool is_data = false;
+    std::array<uint8_t, proto::kTileDataPrefixBytes> prefix{};
+    std::vector<uint8_t> stored;  // TileData: the stored bytes
+    std::vector<uint8_t> error;   // TileError: the whole frame
+    Clock::time_point received{};
+  };
+  static constexpr size_t kTilesPerWrite = 16;
+  static constexpr size_t kBytesPerWrite = 256 * 1024;
+  // Builds one tile's answer (TileData from the pack, or TileError).
+  void prepare_tile(const PoppedTile& p, TileFrame& out);
   asio::awaitable<bool> write_buffers(const std::vector<asio::const_buffer>& bufs, size_t bytes);
 
   tcp::socket socket_;

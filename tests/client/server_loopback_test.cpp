@@ -381,3 +381,40 @@ TEST(ServerLoopback, StopEndsConnectionsAndWakesTheSignalWaiter) {
 
 }  // namespace
 }  // namespace st::client
+
+namespace st::client {
+namespace {
+
+TEST(ServerLoopback, ClientThatStopsReadingIsCutOffWithoutStarvingOthers) {
+  // Big, incompressible tiles so that the answers owed overflow the socket buffers.
+  auto p = build_pack("stalled", 9, 21, first_encoding(), 3, 1 << 20);
+  uint64_t stored = 0;
+  for (auto& t : p.reader->tiles()) stored += t.stored_size;
+  server::ServerOptions so;
+  so.write_timeout = 300ms;
+  auto srv = start_server({p.path}, so);
+  RawSocket greedy(srv.port);
+  handshake(greedy);
+  ASSERT_TRUE(greedy.send(looptest::open_map_frame("stalled", 2)));
+  ASSERT_EQ(read_frame(greedy).header.type, proto::MessageType::map_info);
+  proto::Limits l;
+  std::vector<uint8_t> out;
+  uint64_t owed = 0;
+  for (uint32_t id = 10; id < 10u + l.max_in_flight - 1u; ++id) {
+    proto::GetTiles g;
+    g.map_id = 1;
+    for (auto& t : p.reader->tiles()) g.tiles.push_back({t.id, 0});
+    ASSERT_TRUE(proto::encode_message(g, id, proto::kFlagFinal, l, out));
+    owed += stored;
+  }
+  ASSERT_GT(owed, 24u << 20) << "not enough to fill the socket buffers (tcp_wmem + tcp_rmem maxima)";
+  ASSERT_TRUE(greedy.send(out));  // ... and never read the answers
+  // Meanwhile another client is served in full.
+  good_client_still_served(srv.port, "stalled", *p.reader);
+  // The greedy one is cut off by the write timeout.
+  ASSERT_TRUE(wait_until([&] { return srv.server->stats().timeouts >= 1; }, 10s));
+  ASSERT_TRUE(wait_until([&] { return srv.server->stats().connections_open == 0; }, 10s));
+}
+
+}  // namespace
+}  // namespace st::client

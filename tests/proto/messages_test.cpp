@@ -188,6 +188,27 @@ TEST(Messages, ErrorCodesZeroAndControlCharactersAreRejected) {
   EXPECT_EQ(to_string(std::get<ErrorMessage>(m).code), "unknown");
 }
 
+TEST(Messages, MakeErrorAlwaysEncodes) {
+  static const char raw[] = "line1\nline2\x1b[0m\0tail";
+  const std::string nasty = std::string(raw, sizeof raw - 1) + std::string(3000, 'x');
+  const ErrorMessage e = make_error(ErrorCode::unknown_map, nasty);
+  EXPECT_EQ(e.code, ErrorCode::unknown_map);
+  EXPECT_EQ(e.message.size(), kMaxErrorMessageBytes);
+  EXPECT_EQ(e.message.substr(0, 12), "line1?line2?");
+  Bytes out;
+  ASSERT_TRUE(encode_payload(e, {}, out));
+  EXPECT_EQ(make_error(ErrorCode::ok, "x").code, ErrorCode::internal);
+  // From a parser failure to the Error frame a server sends before closing.
+  FrameParser p({});
+  const Bytes junk = {'G', 'E', 'T'};
+  p.feed(junk);
+  const ErrorMessage from_status = make_error(p.status());
+  EXPECT_EQ(from_status.code, ErrorCode::bad_magic);
+  EXPECT_NE(from_status.message.find("magic byte 0"), std::string::npos) << from_status.message;
+  Bytes frame;
+  EXPECT_TRUE(encode_message(from_status, kNoRequest, 0, {}, frame));
+}
+
 TEST(Messages, HelloRejectsLimitsOutsideTheHardBounds) {
   Hello h;
   Bytes out;

@@ -96,6 +96,29 @@ TEST(Pack, EveryFieldAnswersLikeTheHierarchyForEveryEncoding) {
     }
 }
 
+// Every skip level from 0 (one cell: the whole map) to L (cells are texels: no tiles), on
+// maps from 1 texel up.
+TEST(Pack, EverySkipLevelOnTinyMaps) {
+  for (Encoding e : packtest::available_encodings())
+    for (uint32_t side : {1u, 2u, 16u}) {
+      IntervalTile t = fields::city_field(side, 3);
+      Hierarchy h = build_hierarchy(t);
+      for (uint32_t k = 0; k <= h.depth; ++k)
+        for (uint32_t tile_bytes : {kMinTileBytes, kDefaultTileBytes}) {
+          const std::string what = to_string(e) + " side " + std::to_string(side) + " K " + std::to_string(k) +
+                                   " tile_bytes " + std::to_string(tile_bytes);
+          Built b = build_pack("tiny", h, e, k, tile_bytes);
+          ASSERT_NO_THROW(b.reader->verify(TileCodec::of(e).open)) << what;
+          PackEvaluator ev(b.reader);
+          EXPECT_EQ(packtest::first_difference(ev, h, packtest::exact_values(e) ? h.depth : k), "") << what;
+          EXPECT_EQ(lossless(ev, t), "") << what;
+          if (k == h.depth) {
+            EXPECT_TRUE(b.reader->tiles().empty()) << what;
+          }
+        }
+    }
+}
+
 TEST(Pack, HeaderRecordsTheBuild) {
   const auto encodings = packtest::available_encodings();
   ASSERT_FALSE(encodings.empty());
@@ -116,6 +139,10 @@ TEST(Pack, HeaderRecordsTheBuild) {
   EXPECT_EQ(b.reader->header_bytes().size(), kPackHeaderBytes);
   EXPECT_EQ(b.reader->grid_bytes().size(), CutGrid::serialized_size(2));
   EXPECT_FALSE(std::filesystem::exists(b.path + ".tmp"));
+  const std::string summary = b.reader->summary();
+  EXPECT_NE(summary.find("map level 5 (32 texels a side), skip level 2"), std::string::npos) << summary;
+  EXPECT_NE(summary.find("exit_depths"), std::string::npos) << summary;
+  EXPECT_NE(summary.find("scene = header"), std::string::npos) << summary;
   // Stored bytes are the zlib stream as it lies in the file.
   for (const TileIndexEntry& e : b.reader->tiles()) {
     std::vector<uint8_t> stored = b.reader->read_stored(e.id);

@@ -38,6 +38,7 @@
 // contraction possible. The root value is always absolute.
 #pragma once
 #include <bit>
+#include <cfloat>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -45,6 +46,12 @@
 namespace st::mhq {
 
 static_assert(std::endian::native == std::endian::little, "tree words are little-endian");
+// mmh_add must be one binary32 rounding on the encoder (which verifies with it) and the
+// reader alike: no excess precision, no value-changing optimizations.
+static_assert(FLT_EVAL_METHOD == 0, "float arithmetic must evaluate in float (MMH relative values)");
+#if defined(__FAST_MATH__)
+#error "tiles/core must not be built with -ffast-math: MMH verifies values with exact float adds"
+#endif
 
 inline constexpr uint32_t kMagicMh = 0x484D5453u;   // bytes "STMH"
 inline constexpr uint32_t kMagicMmh = 0x4D4D5453u;  // bytes "STMM"

@@ -35,10 +35,10 @@ struct Candidate {
 // Quick reject data of a candidate: the interval of its first valued descendant in
 // pre-order, relative and absolute. Every node between it and the candidate is empty,
 // so its ancestor value is the candidate's children base. The relative interval is
-// widened by 2^-20 of the magnitudes involved: float rounding of the stored number and
-// of the decoder's add can admit a little more than the exact real interval, and a
-// quick reject must never refuse what the full comparison would accept... nor need it:
-// refusing is always safe, this only keeps merges that rounding makes possible.
+// widened by 2^-20 of the magnitudes involved because the float rounding of the stored
+// number and of the decoder's add admits a little more than the exact interval. A
+// reject is always safe (only an accepted merge needs proof); the widening just keeps
+// the merges that rounding makes possible.
 struct ScanKey {
   float rel_lo, rel_hi, abs_lo, abs_hi;
 };
@@ -289,6 +289,7 @@ class Planner {
     state_[cand_of_[j]] |= kMerger;
     plan_.block_parent_levels[j] |= (1u << t_.level[j]) | (1u << t_.level[i]);
     ++stats_.merges;
+    stats_.cross_level_merges += t_.level[i] != t_.level[j];
     return true;
   }
 

@@ -38,7 +38,7 @@ struct MergeOptions {
 
 struct MergeStats {
   uint64_t candidates = 0, tests = 0, quick_rejects = 0, full_rejects = 0;
-  uint64_t merges = 0, nodes_removed = 0, absolute_values = 0;
+  uint64_t merges = 0, cross_level_merges = 0, nodes_removed = 0, absolute_values = 0;
 };
 
 EmitPlan plan_mmh(const FlatTree& t, const MergeOptions& options, MergeStats* stats = nullptr);

@@ -1,14 +1,34 @@
 #include "tiles/core/pack_evaluator.hpp"
 
+#include <atomic>
 #include <cstring>
 
 #include "tiles/core/error.hpp"
 
 namespace st {
 
+namespace {
+std::atomic<uint64_t> next_serial{0};
+
+// The last few tiles each thread used, across evaluators (keyed by serial, never by
+// address). Entries hold shared_ptrs: a tile evicted from the shared cache stays valid
+// here until replaced, so a hit needs no lock.
+struct ThreadTiles {
+  static constexpr size_t kSlots = 4;
+  uint64_t serial[kSlots] = {};
+  uint64_t id[kSlots] = {};
+  std::shared_ptr<const void> tile[kSlots];
+  size_t next = 0;
+};
+thread_local ThreadTiles thread_tiles;
+}  // namespace
+
 PackEvaluator::PackEvaluator(std::shared_ptr<const PackReader> reader, size_t cache_tiles,
                              PackReader::TileOpener open_tile)
-    : reader_(std::move(reader)), capacity_(std::max<size_t>(cache_tiles, 1)), open_tile_(std::move(open_tile)) {
+    : reader_(std::move(reader)),
+      capacity_(std::max<size_t>(cache_tiles, 1)),
+      open_tile_(std::move(open_tile)),
+      serial_(next_serial.fetch_add(1) + 1) {
   if (!open_tile_) {
     Encoding e = reader_->encoding();
     open_tile_ = [e](std::span<const uint8_t> bytes) { return open_encoded(e, bytes); };
@@ -60,6 +80,18 @@ std::shared_ptr<const PackEvaluator::Loaded> PackEvaluator::load(uint64_t id, co
   return t;
 }
 
+const PackEvaluator::Loaded& PackEvaluator::tile(uint64_t id, const GridEntry& entry) const {
+  ThreadTiles& tt = thread_tiles;
+  for (size_t i = 0; i < ThreadTiles::kSlots; ++i)
+    if (tt.id[i] == id && tt.serial[i] == serial_) return *static_cast<const Loaded*>(tt.tile[i].get());
+  std::shared_ptr<const Loaded> t = load(id, entry);
+  size_t slot = tt.next++ % ThreadTiles::kSlots;
+  tt.serial[slot] = serial_;
+  tt.id[slot] = id;
+  tt.tile[slot] = t;
+  return *t;
+}
+
 float PackEvaluator::depth(uint32_t level, uint64_t x, uint64_t y) const {
   const uint32_t map_level = reader_->map_level();
   if (level > map_level || (x >> level) || (y >> level))
@@ -75,16 +107,16 @@ float PackEvaluator::depth(uint32_t level, uint64_t x, uint64_t y) const {
   for (;;) {
     if (e.kind == EntryKind::constant || l == level) return e.value;
     const uint64_t id = make_tile_id(l, uint32_t(ex), uint32_t(ey));
-    std::shared_ptr<const Loaded> t = load(id, e);
+    const Loaded& t = tile(id, e);
     const uint32_t rel = level - l;
     const uint64_t lx = x - (ex << rel), ly = y - (ey << rel);  // texel inside the tile
-    if (e.kind == EntryKind::tile) return t->eval->depth(rel, lx, ly);
-    const uint32_t d = t->grid.levels;
-    if (rel < d) return t->grid.coarse_at(rel, lx, ly);
+    if (e.kind == EntryKind::tile) return t.eval->depth(rel, lx, ly);
+    const uint32_t d = t.grid.levels;
+    if (rel < d) return t.grid.coarse_at(rel, lx, ly);
     ex = (ex << d) + (lx >> (rel - d));
     ey = (ey << d) + (ly >> (rel - d));
     l += d;
-    e = t->grid.entry(lx >> (rel - d), ly >> (rel - d));
+    e = t.grid.entry(lx >> (rel - d), ly >> (rel - d));
   }
 }
 

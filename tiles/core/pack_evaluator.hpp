@@ -1,8 +1,9 @@
 // An Evaluator over a pack file (DESIGN.md "Tiles, skip list and pack files"): levels
 // < K from the skip grid's coarse pyramid, level K from its entries, finer levels from
 // the tiles, read, decompressed and opened on demand and kept in a small LRU cache.
-// Answers depth(l, x, y) exactly like Hierarchy::depth_at of the hierarchy that was cut,
-// with integer texel addressing up to level 20.
+// Answers depth(l, x, y) like Hierarchy::depth_at of the hierarchy that was cut (bit-exactly
+// with MH tiles; inside MMH/DAG-MH tiles what their encoding answers), with integer texel
+// addressing up to level 20 (tiles/PACK.md "Meaning").
 //
 // Thread safety: depth()/pcf() may be called from many threads (the cache is locked; a
 // tile is opened outside the lock, so two threads may open the same tile once each).
@@ -38,6 +39,8 @@ class PackEvaluator : public Evaluator {
     CutGrid grid;                      // index tiles
   };
   std::shared_ptr<const Loaded> load(uint64_t id, const GridEntry& entry) const;
+  // load() behind a tiny per-thread cache of the last tiles used (no lock on a hit).
+  const Loaded& tile(uint64_t id, const GridEntry& entry) const;
 
   std::shared_ptr<const PackReader> reader_;
   size_t capacity_;
@@ -50,6 +53,7 @@ class PackEvaluator : public Evaluator {
   };
   mutable std::unordered_map<uint64_t, Slot> cache_;
   mutable uint64_t opened_ = 0;
+  const uint64_t serial_;  // tells this evaluator's entries in the per-thread cache apart
 };
 
 }  // namespace st

@@ -156,7 +156,8 @@ RecordType parse_record(std::span<const uint8_t, kRecordBytes> b, TileRecord* ti
     tile->stored_size = load<uint32_t>(b, 16);
     tile->raw_size = load<uint32_t>(b, 20);
     tile->crc = load<uint32_t>(b, 24);
-    if (!is_valid_tile_id(tile->id) || tile->stored_size > kMaxTileBytes || tile->raw_size > kMaxTileBytes)
+    if (!is_valid_tile_id(tile->id) || tile->raw_size == 0 || tile->raw_size > kMaxTileBytes ||
+        tile->stored_size == 0 || tile->stored_size > max_stored_size(tile->raw_size))
       return RecordType::none;
     return RecordType::tile;
   }
@@ -193,7 +194,7 @@ std::vector<uint8_t> serialize_index(std::span<const TileIndexEntry> entries) {
 }
 
 std::vector<TileIndexEntry> parse_index(std::span<const uint8_t> bytes, uint64_t base_offset,
-                                        uint64_t journal_begin, uint64_t journal_end,
+                                        uint64_t journal_begin, uint64_t journal_end, uint32_t tile_bytes,
                                         const std::string& what) {
   if (bytes.size() % kIndexEntryBytes) throw FormatError(what + ": tile index size not a multiple of 32");
   std::vector<TileIndexEntry> out(bytes.size() / kIndexEntryBytes);
@@ -215,8 +216,9 @@ std::vector<TileIndexEntry> parse_index(std::span<const uint8_t> bytes, uint64_t
     if (kind != uint8_t(TileKind::encoded) && kind != uint8_t(TileKind::index)) fail(28, "bad tile kind");
     e.kind = TileKind(kind);
     if (bytes[o + 29] || load<uint16_t>(bytes, o + 30)) fail(29, "nonzero padding");
-    if (e.stored_size == 0 || e.stored_size > kMaxTileBytes || e.raw_size == 0 || e.raw_size > kMaxTileBytes)
-      fail(16, "bad tile size");
+    if (e.raw_size == 0 || e.raw_size > tile_bytes || e.stored_size == 0 || e.stored_size > max_stored_size(e.raw_size))
+      fail(16, describe_tile(e.id) + ": bad sizes (raw " + std::to_string(e.raw_size) + ", stored " +
+                   std::to_string(e.stored_size) + ", tile_bytes " + std::to_string(tile_bytes) + ")");
     if (e.offset < journal_begin + kRecordBytes || e.offset > journal_end ||
         journal_end - e.offset < e.stored_size)
       fail(8, describe_tile(e.id) + " payload [" + std::to_string(e.offset) + ", +" +
@@ -278,7 +280,7 @@ std::vector<uint8_t> zlib_compress(std::span<const uint8_t> raw, int level) {
   if (!c) throw Error("zlib: cannot allocate a compressor at level " + std::to_string(level));
   std::vector<uint8_t> out(libdeflate_zlib_compress_bound(c.get(), raw.size()));
   size_t n = libdeflate_zlib_compress(c.get(), raw.data(), raw.size(), out.data(), out.size());
-  ST_CHECK(n != 0);  // the bound guarantees room
+  ST_CHECK(n != 0 && n <= max_stored_size(raw.size()));  // libdeflate's bound guarantees both
   out.resize(n);
   return out;
 }

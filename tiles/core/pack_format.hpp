@@ -37,7 +37,9 @@ inline constexpr uint32_t kIndexEntryBytes = 32;  // one tile index entry
 inline constexpr uint32_t kTileRecordMagic = 0x43455254;  // "TREC"
 inline constexpr uint32_t kCellRecordMagic = 0x43455243;  // "CREC"
 inline constexpr uint32_t kMaxParamsBytes = 1 << 20;
-inline constexpr uint32_t kMaxTileBytes = 1u << 30;  // bound on any tile's raw/stored size
+// Upper bound on tile_bytes and on any tile's raw or stored size: a hostile index can
+// make a reader allocate at most this much per tile.
+inline constexpr uint32_t kMaxTileBytes = 64u << 20;
 
 enum class PackState : uint32_t { building = 0, complete = 1 };
 
@@ -112,11 +114,15 @@ struct TileIndexEntry {
   TileKind kind = TileKind::encoded;
 };
 std::vector<uint8_t> serialize_index(std::span<const TileIndexEntry> entries);
-// Checks sizes, kinds, ids, strict id order and that each payload lies in
-// [journal_begin, journal_end); throws st::FormatError naming the entry.
+// Checks sizes (raw <= tile_bytes, stored <= zlib's bound for it), kinds, ids, strict id
+// order and that each payload lies in [journal_begin, journal_end); throws
+// st::FormatError naming the entry.
 std::vector<TileIndexEntry> parse_index(std::span<const uint8_t> bytes, uint64_t base_offset,
-                                        uint64_t journal_begin, uint64_t journal_end,
+                                        uint64_t journal_begin, uint64_t journal_end, uint32_t tile_bytes,
                                         const std::string& what);
+// Largest zlib stream of a raw tile of `raw` bytes a pack may hold: above libdeflate's own
+// bound (5 bytes per >= 5000-byte block, plus 6 bytes of zlib header and checksum).
+inline uint64_t max_stored_size(uint64_t raw) { return raw + raw / 256 + 64; }
 
 // Build parameters blob: sorted "key=value\n" lines; keys [a-z0-9_.-]+, values without
 // newlines.

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 #include <map>
 
@@ -99,7 +100,8 @@ void PackReader::load() {
   std::vector<uint8_t> index_bytes(header_.tile_count * kIndexEntryBytes);
   read_at(header_.index_offset, index_bytes);
   if (crc32_of(index_bytes) != header_.index_crc) throw FormatError(where(header_.index_offset) + ": tile index CRC mismatch");
-  index_ = parse_index(index_bytes, header_.index_offset, header_.journal_offset, header_.grid_offset, name_);
+  index_ = parse_index(index_bytes, header_.index_offset, header_.journal_offset, header_.grid_offset,
+                       header_.tile_bytes, name_);
 
   bool any_index = std::any_of(index_.begin(), index_.end(), [](auto& e) { return e.kind == TileKind::index; });
   if (any_index != bool(header_.flags & kFeatureIndexTiles))
@@ -245,6 +247,38 @@ void PackReader::verify(const TileOpener& open_tile) const {
     for (uint32_t cx = 0; cx < side; ++cx) walk(k, cx, cy, grid_.entry(cx, cy));
   if (reached != index_.size())
     throw FormatError(name_ + ": " + std::to_string(index_.size() - reached) + " tiles the page table never reaches");
+}
+
+std::string PackReader::summary() const {
+  uint64_t raw = 0, stored = 0, index_tiles = 0;
+  uint32_t max_raw = 0;
+  for (const TileIndexEntry& e : index_) {
+    raw += e.raw_size;
+    stored += e.stored_size;
+    index_tiles += e.kind == TileKind::index;
+    max_raw = std::max(max_raw, e.raw_size);
+  }
+  std::string features;
+  const std::pair<uint32_t, const char*> names[] = {{kFeatureExitDepths, "exit_depths"}, {kFeatureHasTiles, "has_tiles"},
+                                                    {kFeatureIndexTiles, "index_tiles"}, {kFeatureDeepShadow, "deep_shadow"}};
+  for (auto [bit, n] : names)
+    if (header_.flags & bit) features += std::string(features.empty() ? "" : ",") + n;
+  char buf[160];
+  std::string out = name_ + "\n";
+  std::snprintf(buf, sizeof buf, "  version %u, encoding %s, light %s, map level %u (%llu texels a side), skip level %u\n",
+                kPackVersion, to_string(header_.encoding).c_str(), header_.light_kind == LightKind::sun ? "sun" : "spot",
+                header_.map_level, (unsigned long long)(uint64_t(1) << header_.map_level), header_.skip_level);
+  out += buf;
+  std::snprintf(buf, sizeof buf, "  features %s, scene hash %016llx, tile_bytes %u\n",
+                features.empty() ? "none" : features.c_str(), (unsigned long long)header_.scene_hash, header_.tile_bytes);
+  out += buf;
+  std::snprintf(buf, sizeof buf,
+                "  %llu tiles (%llu index), %llu raw bytes (largest %u), %llu stored; grid %llu bytes; file %llu bytes\n",
+                (unsigned long long)index_.size(), (unsigned long long)index_tiles, (unsigned long long)raw, max_raw,
+                (unsigned long long)stored, (unsigned long long)header_.grid_size, (unsigned long long)file_size());
+  out += buf;
+  for (auto& [k, v] : params_) out += "  " + k + " = " + v + "\n";
+  return out;
 }
 
 }  // namespace st

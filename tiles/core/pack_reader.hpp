@@ -63,6 +63,9 @@ class PackReader {
   void verify(const TileOpener& open_tile = {}) const;
 
   std::string where(uint64_t offset) const;  // "<name> at byte N"
+  // Multi-line human-readable summary (header fields, features, tile counts and sizes),
+  // for `shadowtile info` and logs.
+  std::string summary() const;
 
  private:
   struct Source;

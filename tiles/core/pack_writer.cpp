@@ -168,7 +168,7 @@ void PackWriter::open_existing() {
     CellRecord c;
     RecordType type = parse_record(rec, &t, &c);
     if (type == RecordType::tile) {
-      if (file_size - pos - kRecordBytes < t.stored_size) break;
+      if (t.raw_size > params_.tile_bytes || file_size - pos - kRecordBytes < t.stored_size) break;
       payload.resize(t.stored_size);
       pread_all(fd_, pos + kRecordBytes, payload, what);
       if (crc32_of(payload) != t.crc) break;

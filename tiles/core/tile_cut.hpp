@@ -13,7 +13,9 @@
 //               are constants, tiles or index tiles in turn: the page table is a sparse
 //               quadtree of tiles.
 // Every tile is named by make_tile_id(level, x, y) of its root. The pack evaluator answers
-// depth(l, x, y) exactly as Hierarchy::depth_at on the hierarchy that was cut.
+// levels down to each tile's root exactly as Hierarchy::depth_at on the hierarchy that was
+// cut, and below it what the tile's encoding answers (MH: depth_at bit-exactly; MMH and
+// DAG-MH may re-pick values inside the admissible intervals). tiles/PACK.md has it all.
 //
 // Two ways in:
 //   - in memory: cut_hierarchy(h, ...) for a whole map's hierarchy;
