@@ -1,0 +1,174 @@
+#include "loadgen/load_report.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "loadgen/png_plot.hpp"
+#include "tiles/core/error.hpp"
+
+namespace st::loadgen {
+
+namespace {
+
+std::string fmt(const char* f, double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, f, v);
+  return buf;
+}
+
+void write_text(const std::string& path, const std::string& text) {
+  std::ofstream f(path);
+  f << text;
+  if (!f) throw Error(path + ": cannot write");
+}
+
+}  // namespace
+
+std::string load_table(const LoadResult& r) {
+  const auto& o = r.options;
+  const auto& lat = r.latency_ms;
+  std::string s;
+  auto row = [&](const std::string& k, const std::string& v) {
+    char buf[256];
+    std::snprintf(buf, sizeof buf, "  %-34s %s\n", k.c_str(), v.c_str());
+    s += buf;
+  };
+  s += "load: map '" + o.map + "' path " + to_string(o.path) + "\n";
+  row("cameras / connections", std::to_string(o.cameras) + " / " + std::to_string(r.connections));
+  row("duration (s) / rate (FPS)", fmt("%.1f", o.duration) + " / " + fmt("%.0f", o.rate));
+  row("map level / skip level", std::to_string(r.map_level) + " / " + std::to_string(r.skip_level));
+  row("cache per connection", fmt("%.1f MiB", o.cache_mb) + " (" + std::to_string(r.cache_slots) + " slots of " +
+                                  std::to_string(r.slot_bytes) + " B), peak used " + std::to_string(r.peak_slots_used));
+  row("prefetch", o.prefetch ? "on" : "off");
+  row("frames (late)", std::to_string(r.frames) + " (" + std::to_string(r.frames_late) + "), max lag " +
+                           fmt("%.1f ms", r.max_lag_ms));
+  row("frames with holes", std::to_string(r.frames_with_holes) + " (" + fmt("%.2f%%", 100 * r.hole_fraction()) + ")");
+  row("  of them outside cut fill time", std::to_string(r.frames_with_holes_steady) + " (" +
+                                           fmt("%.2f%%", r.frames ? 100.0 * double(r.frames_with_holes_steady) / double(r.frames) : 0) + ")");
+  row("needed cells missing / needed", std::to_string(r.cells_missing) + " / " + std::to_string(r.cells_needed));
+  row("tiles requested / received", std::to_string(r.map.tiles_requested) + " / " + std::to_string(r.map.tiles_received));
+  row("tiles cancelled / failed", std::to_string(r.map.tiles_cancelled) + " / " + std::to_string(r.map.tiles_failed));
+  row("bytes received (tiles / wire)", fmt("%.2f MiB", double(r.map.bytes_received) / 1048576) + " / " +
+                                          fmt("%.2f MiB", double(r.client.bytes_received) / 1048576));
+  row("cache hit rate", fmt("%.2f%%", 100 * r.cache_hit_rate()) + " (evictions " + std::to_string(r.map.cache.evictions) + ")");
+  row("lookups (mean ns, mean lit)", std::to_string(r.lookups) + " (" +
+                                         fmt("%.0f", r.lookups ? r.lookup_seconds * 1e9 / double(r.lookups) : 0) +
+                                         ", " + fmt("%.3f", r.mean_visibility) + ")");
+  row("latency ms p50/p90/p99/p99.9/max",
+      fmt("%.1f", percentile_of(lat, .5)) + " / " + fmt("%.1f", percentile_of(lat, .9)) + " / " +
+          fmt("%.1f", percentile_of(lat, .99)) + " / " + fmt("%.1f", percentile_of(lat, .999)) + " / " +
+          fmt("%.1f", percentile_of(lat, 1)) + "  (" + std::to_string(lat.size()) + " cells, " +
+          std::to_string(r.latency_abandoned) + " abandoned)");
+  row("cut -> full residency ms p50/p90/max",
+      fmt("%.1f", percentile_of(r.cut_residency_ms, .5)) + " / " + fmt("%.1f", percentile_of(r.cut_residency_ms, .9)) +
+          " / " + fmt("%.1f", percentile_of(r.cut_residency_ms, 1)) + "  (" + std::to_string(r.cut_residency_ms.size()) +
+          " of " + std::to_string(r.cuts) + " cuts; " + std::to_string(r.cuts_incomplete) + " cut again first)");
+  row("errors (crc/decode/failed/proto/connect)",
+      std::to_string(r.map.crc_errors) + "/" + std::to_string(r.map.decode_errors) + "/" +
+          std::to_string(r.map.tiles_failed) + "/" + std::to_string(r.client.protocol_errors) + "/" +
+          std::to_string(r.client.connect_failures));
+  row("drained at end", r.drained ? "yes" : "no");
+  return s;
+}
+
+std::string load_json(const LoadResult& r) {
+  using nlohmann::json;
+  const auto& o = r.options;
+  json j;
+  j["options"] = {{"server", o.endpoint.host + ":" + std::to_string(o.endpoint.port)}, {"map", o.map},
+                  {"cameras", o.cameras}, {"connections", r.connections}, {"path", to_string(o.path)},
+                  {"duration_s", o.duration}, {"rate_fps", o.rate}, {"cache_mb", o.cache_mb}, {"seed", o.seed},
+                  {"prefetch", o.prefetch}, {"samples_x", o.view.samples_x}, {"samples_y", o.view.samples_y}};
+  j["map"] = {{"level", r.map_level}, {"skip_level", r.skip_level}, {"cache_slots", r.cache_slots},
+              {"slot_bytes", r.slot_bytes}, {"ground", r.world.ground}, {"top", r.world.top},
+              {"footprint", {r.world.x0, r.world.z0, r.world.x1, r.world.z1}}};
+  j["frames"] = {{"total", r.frames}, {"with_holes", r.frames_with_holes}, {"hole_fraction", r.hole_fraction()},
+                 {"with_holes_outside_cut_fill", r.frames_with_holes_steady},
+                 {"late", r.frames_late}, {"max_lag_ms", r.max_lag_ms}, {"cells_needed", r.cells_needed},
+                 {"cells_missing", r.cells_missing}};
+  j["tiles"] = {{"requested", r.map.tiles_requested}, {"received", r.map.tiles_received},
+                {"cancelled", r.map.tiles_cancelled}, {"failed", r.map.tiles_failed},
+                {"bytes_received", r.map.bytes_received}, {"wire_bytes_received", r.client.bytes_received},
+                {"wire_bytes_sent", r.client.bytes_sent}, {"queue_full", r.map.queue_full},
+                {"cache_full", r.map.cache_full}};
+  j["cache"] = {{"hits", r.map.cache.hits}, {"misses", r.map.cache.misses}, {"hit_rate", r.cache_hit_rate()},
+                {"evictions", r.map.cache.evictions}, {"inserts", r.map.cache.inserts},
+                {"peak_slots_used", r.peak_slots_used}};
+  j["lookups"] = {{"count", r.lookups}, {"seconds", r.lookup_seconds}, {"mean_visibility", r.mean_visibility}};
+  const auto& lat = r.latency_ms;
+  j["latency_ms"] = {{"count", lat.size()}, {"abandoned", r.latency_abandoned}, {"p50", percentile_of(lat, .5)},
+                     {"p90", percentile_of(lat, .9)}, {"p99", percentile_of(lat, .99)},
+                     {"p999", percentile_of(lat, .999)}, {"max", percentile_of(lat, 1)}};
+  j["cut_residency_ms"] = {{"cuts", r.cuts}, {"completed", r.cut_residency_ms.size()},
+                           {"incomplete", r.cuts_incomplete}, {"p50", percentile_of(r.cut_residency_ms, .5)},
+                           {"p90", percentile_of(r.cut_residency_ms, .9)}, {"max", percentile_of(r.cut_residency_ms, 1)},
+                           {"all", r.cut_residency_ms}};
+  j["errors"] = {{"crc", r.map.crc_errors}, {"decode", r.map.decode_errors}, {"failed", r.map.tiles_failed},
+                 {"protocol", r.client.protocol_errors}, {"connect_failures", r.client.connect_failures},
+                 {"total", r.errors()}};
+  j["drained"] = r.drained;
+  j["wall_seconds"] = r.wall_seconds;
+  json series = json::array();
+  for (const SeriesPoint& p : r.series)
+    series.push_back({p.t, p.tiles_received, p.bytes, p.frames, p.frames_with_holes});
+  j["series_columns"] = {"t_s", "tiles_received", "bytes", "frames", "frames_with_holes"};
+  j["series"] = series;
+  return j.dump(2);
+}
+
+void write_load_report(const LoadResult& r, const std::string& dir) {
+  std::filesystem::create_directories(dir);
+  write_text(dir + "/load.json", load_json(r) + "\n");
+  write_text(dir + "/load.txt", load_table(r));
+
+  // Latency histogram with log-spaced buckets (0.1 ms .. 10 s).
+  Series hist{"CELLS", series_colour(0), {}, {}, true};
+  const int buckets = 40;
+  std::vector<double> counts(buckets, 0);
+  for (double v : r.latency_ms) {
+    const double b = (std::log10(std::max(v, 0.1)) + 1) / 5 * buckets;
+    counts[size_t(std::clamp(int(b), 0, buckets - 1))] += 1;
+  }
+  for (int i = 0; i < buckets; ++i) {
+    hist.x.push_back(std::pow(10, -1 + 5.0 * (i + 0.5) / buckets));
+    hist.y.push_back(counts[size_t(i)]);
+  }
+  PlotSpec ls;
+  ls.title = "TILE LATENCY FROM SCHEDULED FRAME (P50 " + fmt("%.1f", percentile_of(r.latency_ms, .5)) + " MS, P99 " +
+             fmt("%.1f", percentile_of(r.latency_ms, .99)) + " MS)";
+  ls.x_label = "LATENCY (MS, LOG)";
+  ls.y_label = "CELLS";
+  ls.log_x = true;
+  write_plot_png(dir + "/load_latency.png", ls, {hist});
+
+  // Timeline: tiles received per second and frames with holes per second.
+  Series recv{"TILES/S", series_colour(0), {}, {}}, holes{"HOLE FRAMES/S", series_colour(1), {}, {}};
+  for (size_t i = 1; i < r.series.size(); ++i) {
+    const SeriesPoint &a = r.series[i - 1], &b = r.series[i];
+    const double dt = b.t - a.t;
+    if (!(dt > 0)) continue;
+    recv.x.push_back(b.t), recv.y.push_back(double(b.tiles_received - a.tiles_received) / dt);
+    holes.x.push_back(b.t), holes.y.push_back(double(b.frames_with_holes - a.frames_with_holes) / dt);
+  }
+  PlotSpec ts;
+  ts.title = "TILES RECEIVED AND FRAMES WITH HOLES PER SECOND";
+  ts.x_label = "TIME (S)";
+  ts.y_label = "PER SECOND";
+  write_plot_png(dir + "/load_timeline.png", ts, {recv, holes});
+
+  Series cuts{"CUTS", series_colour(2), {}, {}, true};
+  for (size_t i = 0; i < r.cut_residency_ms.size(); ++i) {
+    cuts.x.push_back(double(i));
+    cuts.y.push_back(r.cut_residency_ms[i]);
+  }
+  PlotSpec cs;
+  cs.title = "TIME TO FULL RESIDENCY AFTER EACH CAMERA CUT";
+  cs.x_label = "CUT";
+  cs.y_label = "MS";
+  write_plot_png(dir + "/load_cuts.png", cs, {cuts});
+}
+
+}  // namespace st::loadgen

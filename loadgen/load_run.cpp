@@ -1,0 +1,324 @@
+#include "loadgen/load_run.hpp"
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <memory>
+#include <mutex>
+#include <thread>
+#include <unordered_map>
+
+#include "tiles/core/error.hpp"
+
+namespace st::loadgen {
+
+using Clock = std::chrono::steady_clock;
+
+double percentile_of(std::vector<double> v, double p) {
+  if (v.empty()) return 0;
+  std::sort(v.begin(), v.end());
+  const double pos = p * double(v.size() - 1);
+  const size_t i = size_t(pos);
+  if (i + 1 >= v.size()) return v.back();
+  return v[i] + (v[i + 1] - v[i]) * (pos - double(i));
+}
+
+namespace {
+
+double ms_between(Clock::time_point a, Clock::time_point b) {
+  return std::chrono::duration<double, std::milli>(b - a).count();
+}
+
+struct Pending {
+  CellNeed cell;
+  Clock::time_point first_needed, last_needed;
+};
+
+struct CutTrack {
+  bool active = false;
+  Clock::time_point scheduled;
+  std::vector<CellNeed> cells;
+};
+
+// Everything the camera threads and the watcher share, under one mutex (touched a few
+// times per frame: the lookups themselves never take it).
+struct Shared {
+  std::mutex mu;
+  std::vector<std::unordered_map<uint64_t, Pending>> pending;  // per connection
+  std::vector<CutTrack> cuts;                                  // per camera
+  std::vector<uint32_t> camera_conn;
+  std::vector<double> latency_ms, cut_ms;
+  uint64_t abandoned = 0, cut_count = 0, cuts_incomplete = 0, holes_steady = 0;
+  // Per-camera frame counters (summed at the end and for the series).
+  std::atomic<uint64_t> frames{0}, holes{0}, late{0}, needed{0}, missing{0}, samples{0}, lookups{0};
+  std::atomic<uint64_t> lookup_ns{0};
+  std::mutex lag_mu;
+  double max_lag_ms = 0, visibility_sum = 0;
+};
+
+bool resident(const client::Map& m, const CellNeed& c) {
+  return m.region_resident(c.level, c.x0(), c.y0(), c.side(), c.side());
+}
+
+void camera_loop(uint32_t cam, const LoadOptions& o, const WorldFrame& world, client::Map map, bool alone,
+                 Clock::time_point start, Shared& sh) {
+  const CameraPath path(o.path, world, o.seed, cam);
+  const uint32_t L = map.finest_level();
+  const CutGrid& grid = map.skip_grid();
+  const uint32_t conn = sh.camera_conn[cam];
+  const uint64_t frames = uint64_t(std::floor(o.duration * o.rate));
+  uint64_t prev_segment = ~uint64_t(0);
+  for (uint64_t f = 0; f < frames; ++f) {
+    const double t = double(f) / o.rate;
+    const auto sched = start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(t));
+    std::this_thread::sleep_until(sched);
+    const auto began = Clock::now();
+    const double lag = ms_between(sched, began);
+    if (lag > 1000.0 / o.rate) sh.late.fetch_add(1, std::memory_order_relaxed);
+
+    const uint64_t seg = path.segment(t);
+    const bool cut = seg != prev_segment;
+    prev_segment = seg;
+    const ViewNeeds needs = view_needs(world, path.at(t), L, grid, o.view);
+    std::vector<ViewNeeds> ahead;
+    // Poses ahead move slowly: refresh their requests kPrefetchEvery frames (and at cuts).
+    if (o.prefetch && (cut || f % kPrefetchEvery == 0))
+      for (double a : kPrefetchAhead)
+        if (t + a < o.duration && path.segment(t + a) == seg)
+          ahead.push_back(view_needs(world, path.at(t + a), L, grid, o.view));
+
+    if (cut && alone && f > 0) {
+      // The old view is gone: drop queued and in-flight fetches outside the new one
+      // (only when no other camera shares this cache).
+      uint64_t x0 = ~uint64_t(0), y0 = ~uint64_t(0), x1 = 0, y1 = 0;
+      auto extend = [&](const std::vector<CellNeed>& cells) {
+        for (const CellNeed& c : cells) {
+          const uint32_t s = L - c.cell_level;
+          x0 = std::min(x0, c.cx << s), y0 = std::min(y0, c.cy << s);
+          x1 = std::max(x1, (c.cx + 1) << s), y1 = std::max(y1, (c.cy + 1) << s);
+        }
+      };
+      extend(needs.cells);
+      for (const ViewNeeds& a : ahead) extend(a.cells);
+      if (x1 > x0) map.cancel_outside(L, x0, y0, x1 - x0, y1 - y0);
+      else map.cancel_outside(L, 0, 0, 0, 0);
+    }
+    // Needed now: nearest first, above every prefetch.
+    for (size_t i = 0; i < needs.cells.size(); ++i) {
+      const CellNeed& c = needs.cells[i];
+      map.request_region(c.level, c.x0(), c.y0(), c.side(), c.side(), uint16_t(60000 - std::min<size_t>(i, 9999)));
+    }
+    for (size_t k = 0; k < ahead.size(); ++k)
+      for (size_t i = 0; i < ahead[k].cells.size(); ++i) {
+        const CellNeed& c = ahead[k].cells[i];
+        map.request_region(c.level, c.x0(), c.y0(), c.side(), c.side(),
+                           uint16_t(40000 - 10000 * k - std::min<size_t>(i, 9999)));
+      }
+
+    // Evaluation: which needed cells are resident, then the shadow lookups.
+    std::vector<CellNeed> missing;
+    for (const CellNeed& c : needs.cells)
+      if (!resident(map, c)) missing.push_back(c);
+    const auto t0 = Clock::now();
+    double vis = 0;
+    for (const Vec3d& p : needs.points) vis += map.visibility(p, 0);
+    const auto t1 = Clock::now();
+    sh.lookup_ns.fetch_add(uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count()),
+                           std::memory_order_relaxed);
+    sh.lookups.fetch_add(needs.points.size(), std::memory_order_relaxed);
+    sh.samples.fetch_add(needs.samples, std::memory_order_relaxed);
+    sh.needed.fetch_add(needs.cells.size(), std::memory_order_relaxed);
+    sh.missing.fetch_add(missing.size(), std::memory_order_relaxed);
+    if (!missing.empty()) sh.holes.fetch_add(1, std::memory_order_relaxed);
+    {
+      std::lock_guard lock(sh.mu);
+      auto& pend = sh.pending[conn];
+      for (const CellNeed& c : missing) {
+        auto [it, fresh] = pend.try_emplace(c.key() ^ (uint64_t(c.level) << 52), Pending{c, sched, sched});
+        if (!fresh) it->second.last_needed = sched;
+      }
+      if (!missing.empty() && !cut && !sh.cuts[cam].active) ++sh.holes_steady;
+      if (cut) {
+        CutTrack& ct = sh.cuts[cam];
+        if (ct.active) ++sh.cuts_incomplete;
+        ++sh.cut_count;
+        ct.active = true;
+        ct.scheduled = sched;
+        ct.cells = missing;
+        if (ct.cells.empty()) {
+          sh.cut_ms.push_back(ms_between(sched, Clock::now()));
+          ct.active = false;
+        }
+      }
+    }
+    {
+      std::lock_guard lock(sh.lag_mu);
+      sh.max_lag_ms = std::max(sh.max_lag_ms, lag);
+      sh.visibility_sum += vis;
+    }
+    sh.frames.fetch_add(1, std::memory_order_relaxed);
+  }
+}
+
+void add(client::MapStats& a, const client::MapStats& b) {
+  a.cache.hits += b.cache.hits, a.cache.misses += b.cache.misses;
+  a.cache.evictions += b.cache.evictions, a.cache.inserts += b.cache.inserts;
+  a.cache.resident += b.cache.resident, a.cache.pinned += b.cache.pinned, a.cache.free += b.cache.free;
+  a.tiles_requested += b.tiles_requested, a.tiles_received += b.tiles_received;
+  a.bytes_received += b.bytes_received, a.crc_errors += b.crc_errors, a.decode_errors += b.decode_errors;
+  a.tiles_failed += b.tiles_failed, a.tiles_cancelled += b.tiles_cancelled, a.cache_full += b.cache_full;
+  a.queue_full += b.queue_full, a.coarse_answers += b.coarse_answers;
+}
+
+void add(client::ClientStats& a, const client::ClientStats& b) {
+  a.connects += b.connects, a.connect_failures += b.connect_failures, a.disconnects += b.disconnects;
+  a.frames_received += b.frames_received, a.bytes_received += b.bytes_received, a.bytes_sent += b.bytes_sent;
+  a.protocol_errors += b.protocol_errors;
+}
+
+}  // namespace
+
+LoadResult run_load(const LoadOptions& o_in) {
+  LoadOptions o = o_in;
+  if (o.cameras == 0) throw Error("load: --cameras must be at least 1");
+  if (!(o.rate > 0 && o.rate <= 1000)) throw Error("load: --rate must be in (0, 1000]");
+  if (!(o.duration > 0)) throw Error("load: --duration must be positive");
+  if (!(o.cache_mb > 0)) throw Error("load: --cache-mb must be positive");
+  LoadResult r;
+  r.connections = o.connections == 0 ? o.cameras : std::clamp(o.connections, 1u, o.cameras);
+
+  // The tile bound (slot size) comes from the pack header: ask once with a probe client.
+  uint32_t tile_bytes = 0;
+  {
+    client::ClientOptions po;
+    po.cache_slots = 1;
+    client::Client probe(o.endpoint, po);
+    tile_bytes = probe.open(o.map).header().tile_bytes;
+  }
+  client::ClientOptions co;
+  co.client_name = "shadowtile-load";
+  co.cache_slots = uint32_t(std::clamp<double>(o.cache_mb * 1048576.0 / std::max(1u, tile_bytes), 1, 1 << 24));
+  std::vector<std::unique_ptr<client::Client>> clients;
+  std::vector<client::Map> maps;
+  for (uint32_t i = 0; i < r.connections; ++i) {
+    clients.push_back(std::make_unique<client::Client>(o.endpoint, co));
+    maps.push_back(clients.back()->open(o.map));
+  }
+  const client::Map& m0 = maps[0];
+  r.map_level = m0.finest_level();
+  r.skip_level = m0.skip_grid().levels;
+  r.cache_slots = co.cache_slots;
+  r.slot_bytes = m0.slot_bytes();
+  r.world = world_frame(m0.header(), m0.skip_grid());
+
+  Shared sh;
+  sh.pending.resize(r.connections);
+  sh.cuts.resize(o.cameras);
+  std::vector<uint32_t> per_conn(r.connections, 0);
+  for (uint32_t c = 0; c < o.cameras; ++c) {
+    sh.camera_conn.push_back(c % r.connections);
+    ++per_conn[c % r.connections];
+  }
+
+  const auto start = Clock::now() + std::chrono::milliseconds(20);
+  std::atomic<bool> stop{false};
+  std::thread watcher([&] {
+    auto next_sample = start;
+    while (!stop.load()) {
+      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+      const auto now = Clock::now();
+      {
+        std::lock_guard lock(sh.mu);
+        for (uint32_t c = 0; c < r.connections; ++c) {
+          auto& pend = sh.pending[c];
+          for (auto it = pend.begin(); it != pend.end();) {
+            if (resident(maps[c], it->second.cell)) {
+              sh.latency_ms.push_back(ms_between(it->second.first_needed, now));
+              it = pend.erase(it);
+            } else if (now - it->second.last_needed > std::chrono::seconds(1)) {
+              ++sh.abandoned;  // the cameras moved on before it arrived
+              it = pend.erase(it);
+            } else {
+              ++it;
+            }
+          }
+        }
+        for (uint32_t cam = 0; cam < o.cameras; ++cam) {
+          CutTrack& ct = sh.cuts[cam];
+          if (!ct.active) continue;
+          const client::Map& m = maps[sh.camera_conn[cam]];
+          std::erase_if(ct.cells, [&](const CellNeed& c) { return resident(m, c); });
+          if (ct.cells.empty()) {
+            sh.cut_ms.push_back(ms_between(ct.scheduled, now));
+            ct.active = false;
+          }
+        }
+      }
+      for (const client::Map& m : maps) {
+        const client::CacheStats cs = m.stats().cache;
+        r.peak_slots_used = std::max(r.peak_slots_used, cs.resident + cs.pinned);
+      }
+      if (now >= next_sample) {
+        SeriesPoint p;
+        p.t = std::chrono::duration<double>(now - start).count();
+        for (const client::Map& m : maps) {
+          const client::MapStats s = m.stats();
+          p.tiles_received += s.tiles_received;
+          p.bytes += s.bytes_received;
+        }
+        p.frames = sh.frames.load();
+        p.frames_with_holes = sh.holes.load();
+        r.series.push_back(p);
+        next_sample += std::chrono::milliseconds(100);
+      }
+    }
+  });
+
+  std::vector<std::thread> cams;
+  for (uint32_t c = 0; c < o.cameras; ++c)
+    cams.emplace_back(camera_loop, c, std::cref(o), std::cref(r.world), maps[sh.camera_conn[c]],
+                      per_conn[sh.camera_conn[c]] == 1, start, std::ref(sh));
+  for (auto& t : cams) t.join();
+  const auto end = Clock::now();
+  // Let the watcher record the last arrivals of the final frames' needs briefly, then
+  // stop and cancel whatever is still queued or in flight.
+  std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  stop = true;
+  watcher.join();
+  r.wall_seconds = std::chrono::duration<double>(end - start).count();
+  for (client::Map& m : maps) m.cancel_outside(r.map_level, 0, 0, 0, 0);
+  const auto drain_deadline = Clock::now() + std::chrono::seconds(5);
+  for (;;) {
+    bool all = true;
+    for (const client::Map& m : maps) {
+      const client::MapStats s = m.stats();
+      all = all && s.tiles_requested == s.tiles_received + s.tiles_cancelled + s.tiles_failed;
+    }
+    if (all || Clock::now() > drain_deadline) {
+      r.drained = all;
+      break;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+  for (const client::Map& m : maps) add(r.map, m.stats());
+  for (const auto& c : clients) add(r.client, c->stats());
+
+  r.options = o;
+  r.frames = sh.frames, r.frames_with_holes = sh.holes, r.frames_late = sh.late;
+  r.cells_needed = sh.needed, r.cells_missing = sh.missing;
+  r.samples = sh.samples, r.lookups = sh.lookups;
+  r.lookup_seconds = double(sh.lookup_ns.load()) * 1e-9;
+  r.mean_visibility = r.lookups ? sh.visibility_sum / double(r.lookups) : 0;
+  r.max_lag_ms = sh.max_lag_ms;
+  r.latency_ms = std::move(sh.latency_ms);
+  r.latency_abandoned = sh.abandoned;
+  r.cut_residency_ms = std::move(sh.cut_ms);
+  r.cuts = sh.cut_count;
+  r.frames_with_holes_steady = sh.holes_steady;
+  r.cuts_incomplete = sh.cuts_incomplete;
+  for (const CutTrack& ct : sh.cuts)
+    if (ct.active) ++r.cuts_incomplete;
+  return r;
+}
+
+}  // namespace st::loadgen

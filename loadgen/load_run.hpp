@@ -1,0 +1,97 @@
+// The load tester's runner (issue 6): N synthetic cameras over C client connections
+// (camera i uses connection i % C; cameras on one connection share its map and cache,
+// like several views of one game), each on its own frame clock.
+//
+// No coordinated omission: frame f of every camera is scheduled at start + f / rate and
+// its requests go out then whether or not earlier answers came back (request_region
+// never blocks); a frame that starts late still counts from its scheduled time.
+//
+// Per frame a camera (1) works out the cells its view needs (view_tiles.hpp) and asks for
+// them, nearest first, at high priority; (2) prefetches the cells of its poses
+// kPrefetchAhead seconds ahead on the same path segment at lower priority (never across a
+// cut: a real client cannot see a teleport coming), every kPrefetchEvery frames; (3) checks which needed cells are not
+// resident (a frame with holes: its lookups answered from coarser levels) and (4)
+// evaluates map.visibility at every receiver sample.
+//
+// Latency of a cell: from the scheduled time of the first frame that needed it while it
+// was not resident, to the moment a watcher thread (polling every millisecond) sees it
+// resident. Time to full residency after a cut: from the cut frame's scheduled time until
+// every cell that frame needed is resident.
+#pragma once
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "client/client.hpp"
+#include "loadgen/camera_path.hpp"
+#include "loadgen/view_tiles.hpp"
+
+namespace st::loadgen {
+
+struct LoadOptions {
+  client::Endpoint endpoint;
+  std::string map;
+  uint32_t cameras = 4;
+  uint32_t connections = 0;  // 0: one per camera; clamped to [1, cameras]
+  PathKind path = PathKind::flyover;
+  double duration = 10;      // seconds
+  double rate = 60;          // frames per second per camera
+  double cache_mb = 64;      // tile cache per connection
+  uint64_t seed = 1;
+  bool prefetch = true;
+  ViewOptions view;
+};
+
+inline constexpr double kPrefetchAhead[] = {0.25, 0.5, 1.0};  // seconds
+inline constexpr uint64_t kPrefetchEvery = 6;                   // frames between prefetch rounds
+
+struct SeriesPoint {
+  double t = 0;                 // seconds since start
+  uint64_t tiles_received = 0;  // cumulative, all connections
+  uint64_t frames = 0, frames_with_holes = 0;
+  uint64_t bytes = 0;
+};
+
+struct LoadResult {
+  LoadOptions options;
+  uint32_t connections = 0, map_level = 0, skip_level = 0, cache_slots = 0, slot_bytes = 0;
+  double wall_seconds = 0;
+  uint64_t frames = 0, frames_with_holes = 0, frames_late = 0;  // late: started > 1 frame after schedule
+  // Frames with holes while the camera's last cut was already fully resident (moving
+  // along the path, not filling a new view): what prefetch is meant to drive to zero.
+  uint64_t frames_with_holes_steady = 0;
+  double max_lag_ms = 0;
+  uint64_t cells_needed = 0, cells_missing = 0;  // summed over frames
+  uint64_t samples = 0, lookups = 0;
+  double lookup_seconds = 0;
+  double mean_visibility = 0;
+  client::MapStats map;        // summed over connections (after the final cancel)
+  client::ClientStats client;  // summed
+  uint32_t peak_slots_used = 0;  // most resident + pinned slots seen on any connection
+  bool drained = false;          // every sent request answered or cancelled at the end
+  std::vector<double> latency_ms;         // one per cell that became resident
+  uint64_t latency_abandoned = 0;         // needed cells no longer needed before arriving
+  std::vector<double> cut_residency_ms;   // one per completed cut
+  uint64_t cuts = 0, cuts_incomplete = 0; // cut superseded by the next or by the run's end
+  std::vector<SeriesPoint> series;        // every 100 ms
+  WorldFrame world;
+
+  uint64_t errors() const {
+    return map.crc_errors + map.decode_errors + map.tiles_failed + client.protocol_errors +
+           client.connect_failures;
+  }
+  double hole_fraction() const { return frames ? double(frames_with_holes) / double(frames) : 0; }
+  double cache_hit_rate() const {
+    const uint64_t n = map.cache.hits + map.cache.misses;
+    return n ? double(map.cache.hits) / double(n) : 0;
+  }
+};
+
+// Runs the load; throws st::Error if the map cannot be opened (server down or unknown
+// map) within the client's request timeout.
+LoadResult run_load(const LoadOptions& options);
+
+// Percentile p in [0, 1] of `v` (sorted copy; 0 for empty).
+double percentile_of(std::vector<double> v, double p);
+
+}  // namespace st::loadgen

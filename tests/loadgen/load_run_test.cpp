@@ -1,0 +1,85 @@
+// A short deterministic load run against an in-process server: the counters add up.
+#include <gtest/gtest.h>
+
+#include "load_fixture.hpp"
+#include "loadgen/load_report.hpp"
+#include "loadgen/load_run.hpp"
+
+namespace st::loadgen {
+namespace {
+
+LoadResult run(PathKind path, uint32_t cameras, uint32_t connections, double cache_mb) {
+  const auto& pack = loadtest::city_pack(11);
+  auto srv = loadtest::start_server("city", pack.path);
+  LoadOptions o;
+  o.endpoint = {"127.0.0.1", srv->port()};
+  o.map = "city";
+  o.cameras = cameras;
+  o.connections = connections;
+  o.path = path;
+  o.duration = loadtest::small_scale() ? 1.0 : 2.0;
+  o.rate = 30;
+  o.cache_mb = cache_mb;
+  o.seed = 3;
+  LoadResult r = run_load(o);
+  srv->stop();
+  return r;
+}
+
+void expect_counters_add_up(const LoadResult& r) {
+  EXPECT_EQ(r.errors(), 0u) << load_table(r);
+  EXPECT_TRUE(r.drained) << load_table(r);
+  // Every sent request was answered with the tile or cancelled; none failed.
+  EXPECT_EQ(r.map.tiles_requested, r.map.tiles_received + r.map.tiles_cancelled + r.map.tiles_failed);
+  EXPECT_EQ(r.map.tiles_failed, 0u);
+  EXPECT_GT(r.map.tiles_received, 0u);
+  EXPECT_GT(r.map.bytes_received, 0u);
+  // The cache never held more slots than its budget.
+  EXPECT_LE(r.peak_slots_used, r.cache_slots);
+  EXPECT_EQ(r.map.cache_full, 0u);
+  // Every scheduled frame ran, each camera cut at least once at its start.
+  const uint64_t per_camera = uint64_t(r.options.duration * r.options.rate);
+  EXPECT_EQ(r.frames, per_camera * r.options.cameras);
+  EXPECT_GE(r.cuts, r.options.cameras);
+  EXPECT_EQ(r.cuts, r.cut_residency_ms.size() + r.cuts_incomplete);
+  EXPECT_LE(r.frames_with_holes, r.frames);
+  EXPECT_LE(r.cells_missing, r.cells_needed);
+  EXPECT_EQ(r.lookups, r.lookups);  // counted
+  EXPECT_GT(r.lookups, 0u);
+  // JSON names the totals the table shows.
+  const std::string j = load_json(r);
+  EXPECT_NE(j.find("\"requested\": " + std::to_string(r.map.tiles_requested)), std::string::npos);
+}
+
+TEST(LoadRun, FlyoverCountersAddUp) {
+  const LoadResult r = run(PathKind::flyover, 3, 2, 64);
+  expect_counters_add_up(r);
+  EXPECT_GT(r.latency_ms.size(), 0u);
+}
+
+TEST(LoadRun, TeleportWithATinyCacheEvictsButNeverExceedsIt) {
+  const LoadResult r = run(PathKind::teleport, 2, 1, 0.5);  // 32 slots of 16 KiB
+  expect_counters_add_up(r);
+  EXPECT_EQ(r.cache_slots, 32u);
+  EXPECT_GE(r.cuts, 2u * uint64_t(r.options.duration / kTeleportSeconds));
+}
+
+TEST(LoadRun, PathsAreDeterministic) {
+  const auto& pack = loadtest::city_pack(11);
+  auto reader = PackReader::open(pack.path);
+  const WorldFrame w = world_frame(reader->header(), reader->grid());
+  EXPECT_LT(w.ground, w.top);
+  for (PathKind k : {PathKind::flyover, PathKind::orbit, PathKind::walk, PathKind::teleport}) {
+    const CameraPath a(k, w, 5, 1), b(k, w, 5, 1), c(k, w, 6, 1);
+    for (double t : {0.0, 0.4, 1.7, 5.0}) {
+      EXPECT_EQ(a.at(t).pos, b.at(t).pos);
+      EXPECT_EQ(a.at(t).target, b.at(t).target);
+    }
+    EXPECT_NE(a.at(1.7).pos, c.at(1.7).pos);
+    const ViewNeeds n = view_needs(w, a.at(0.5), reader->map_level(), reader->grid());
+    EXPECT_GT(n.points.size(), 0u) << to_string(k);
+  }
+}
+
+}  // namespace
+}  // namespace st::loadgen

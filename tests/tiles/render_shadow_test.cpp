@@ -1,0 +1,104 @@
+// The rendered view of an analytic scene (a closed cube on a closed ground slab) shaded
+// with the map matches Embree shadow rays away from shadow edges.
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+
+#include "tiles/bake/map_build.hpp"
+#include "tiles/bake/render.hpp"
+#include "tiles/bake/render_error.hpp"
+#include "tiles/bake/scene.hpp"
+#include "tiles/core/pack_evaluator.hpp"
+
+namespace st {
+namespace {
+
+// A closed axis-aligned box as one mesh (outward winding).
+void add_box(Scene& s, const std::string& name, Vec3d lo, Vec3d hi) {
+  const uint32_t base = uint32_t(s.vertices.size());
+  for (int i = 0; i < 8; ++i)
+    s.vertices.push_back({(i & 1) ? hi.x : lo.x, (i & 2) ? hi.y : lo.y, (i & 4) ? hi.z : lo.z});
+  const uint32_t quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
+  Mesh m;
+  m.name = name;
+  m.first_triangle = uint32_t(s.triangles.size());
+  for (const auto& q : quads) {
+    s.triangles.push_back({base + q[0], base + q[1], base + q[2]});
+    s.triangles.push_back({base + q[0], base + q[2], base + q[3]});
+  }
+  m.triangle_count = 12;
+  m.closed = true;
+  s.meshes.push_back(m);
+}
+
+TEST(RenderShadow, CubeOnSlabMatchesRayTracedAwayFromEdges) {
+  Scene s;
+  s.name = "cube-on-slab";
+  add_box(s, "slab", {-10, -1, -10}, {10, 0, 10});
+  add_box(s, "cube", {-2, 0, -2}, {2, 4, 2});
+  const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=40"), s.bounds());
+  const bool small = std::getenv("SHADOWTILE_TEST_SCALE") && std::string(std::getenv("SHADOWTILE_TEST_SCALE")) == "small";
+  MapBuildOptions o;
+  o.map_level = small ? 9 : 10;
+  o.encoding = Encoding::dagmh;
+  const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/render_cube_slab.pack";
+  build_map(s, light, o, path);
+  const PackEvaluator eval(std::shared_ptr<PackReader>(PackReader::open(path)), 4096);
+  const SceneTracer tracer(s, light);
+  Camera cam;
+  cam.pos = {3, 22, 4};  // from above: the shadow falls on the slab whatever the azimuth
+  cam.target = {0, 0, 0};
+  cam.fov_deg = 55;
+  const uint32_t w = small ? 160 : 320, h = small ? 90 : 180;
+  const auto rec = tracer.primary(cam, w, h);
+  uint64_t compared = 0, equal = 0, shadowed = 0;
+  for (const Receiver& r : rec) {
+    if (!r.hit || r.n_dot_l <= 0) continue;
+    // Near an edge: the 5x5 texels around the lookup disagree (2 texels either side).
+    const LightPoint lp = lookup_point(r, light, eval.finest_level());
+    const auto [x, y] = LightSpace::texel_of(eval.finest_level(), lp.u, lp.v);
+    const float k = eval.pcf(eval.finest_level(), x, y, 5, float(lp.d));
+    if (k != 0.0f && k != 1.0f) continue;
+    ++compared;
+    const float m = map_visibility(eval, r, light, 0, eval.finest_level());
+    equal += m == tracer.traced(r);
+    shadowed += m == 0;
+  }
+  ASSERT_GT(compared, uint64_t(w) * h / 4);
+  EXPECT_GT(shadowed, compared / 50) << "the view should contain the cube's shadow";
+  EXPECT_GE(double(equal), 0.995 * double(compared)) << equal << " of " << compared;
+
+  // The image path agrees with the per-receiver answers and counts what it compares.
+  RenderOptions ro;
+  ro.width = w, ro.height = h, ro.diff = true;
+  const RenderResult img = render_view(tracer, rec, eval, ro);
+  EXPECT_EQ(img.image.size(), size_t(w) * h * 3);
+  EXPECT_LE(img.differing_fraction(), 0.02);
+}
+
+TEST(RenderShadow, FlatBaselineAtFullResolutionAgreesWithThePack) {
+  Scene s;
+  s.name = "cube-on-slab";
+  add_box(s, "slab", {-10, -1, -10}, {10, 0, 10});
+  add_box(s, "cube", {-2, 0, -2}, {2, 4, 2});
+  const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=120,elevation=35"), s.bounds());
+  MapBuildOptions o;
+  o.map_level = 9;
+  o.encoding = Encoding::mh;
+  const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/render_flat_slab.pack";
+  build_map(s, light, o, path);
+  const PackEvaluator eval(std::shared_ptr<PackReader>(PackReader::open(path)), 4096);
+  const SceneTracer tracer(s, light);
+  Camera cam;
+  cam.pos = {-11, 8, 12};
+  cam.target = {0, 0, 0};
+  const FrameTruth f = make_frame_truth(tracer, cam, 160, 90, 9, {1});
+  ASSERT_GT(f.lit_facing.size(), 1000u);
+  const FrameError e = frame_error(eval, light, f, 0, 9);
+  EXPECT_LT(e.fraction(), 0.02);
+  const FrameError p = frame_error(eval, light, f, 1, 9);
+  EXPECT_LT(p.mean_abs, 0.05);
+}
+
+}  // namespace
+}  // namespace st

@@ -1,0 +1,251 @@
+#include "tiles/bake/render.hpp"
+
+#include <embree3/rtcore.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <Iex.h>
+#include <ImfChannelList.h>
+#include <ImfFrameBuffer.h>
+#include <ImfHeader.h>
+#include <ImfOutputFile.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <limits>
+
+#include "tiles/bake/png_io.hpp"
+#include "tiles/core/error.hpp"
+
+namespace st {
+
+struct SceneTracer::Impl {
+  RTCDevice device = nullptr;
+  RTCScene scene = nullptr;
+  Vec3d centre;                       // vertices are recentred (float precision far from 0)
+  std::vector<uint8_t> closed;        // per triangle
+  std::vector<Vec3d> normals;         // per triangle, outward for closed meshes
+  double scale = 1;                   // scene size, for ray offsets
+  ~Impl() {
+    if (scene) rtcReleaseScene(scene);
+    if (device) rtcReleaseDevice(device);
+  }
+};
+
+SceneTracer::SceneTracer(const Scene& scene, const LightSpace& light) : impl_(std::make_unique<Impl>()), light_(light) {
+  if (scene.triangles.empty()) throw Error("render: scene '" + scene.name + "' has no triangles");
+  const Aabb b = scene.bounds();
+  impl_->centre = b.center();
+  impl_->scale = std::max({b.extent().x, b.extent().y, b.extent().z, 1e-9});
+  impl_->device = rtcNewDevice(nullptr);
+  if (!impl_->device) throw Error("render: Embree device creation failed");
+  impl_->scene = rtcNewScene(impl_->device);
+  rtcSetSceneFlags(impl_->scene, RTC_SCENE_FLAG_ROBUST);
+  RTCGeometry g = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_TRIANGLE);
+  auto* vp = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                                         3 * sizeof(float), scene.vertices.size()));
+  for (size_t i = 0; i < scene.vertices.size(); ++i) {
+    const Vec3d v = scene.vertices[i] - impl_->centre;
+    vp[3 * i] = float(v.x), vp[3 * i + 1] = float(v.y), vp[3 * i + 2] = float(v.z);
+  }
+  auto* ip = static_cast<unsigned*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                            3 * sizeof(unsigned), scene.triangles.size()));
+  impl_->closed.assign(scene.triangles.size(), 0);
+  impl_->normals.resize(scene.triangles.size());
+  for (size_t t = 0; t < scene.triangles.size(); ++t) {
+    const auto& tri = scene.triangles[t];
+    for (int k = 0; k < 3; ++k) {
+      if (tri[k] >= scene.vertices.size()) {
+        rtcReleaseGeometry(g);
+        throw Error("render: scene '" + scene.name + "' triangle " + std::to_string(t) + " has a bad index");
+      }
+      ip[3 * t + k] = tri[k];
+    }
+    const Vec3d n = cross(scene.vertices[tri[1]] - scene.vertices[tri[0]], scene.vertices[tri[2]] - scene.vertices[tri[0]]);
+    const double len = length(n);
+    impl_->normals[t] = len > 0 ? n / len : Vec3d{0, 1, 0};
+  }
+  for (const Mesh& m : scene.meshes)
+    if (m.closed)
+      std::fill(impl_->closed.begin() + m.first_triangle, impl_->closed.begin() + m.first_triangle + m.triangle_count, 1);
+  rtcCommitGeometry(g);
+  rtcAttachGeometry(impl_->scene, g);
+  rtcReleaseGeometry(g);
+  rtcCommitScene(impl_->scene);
+  if (rtcGetDeviceError(impl_->device) != RTC_ERROR_NONE) throw Error("render: Embree scene build failed");
+}
+
+SceneTracer::~SceneTracer() = default;
+
+Vec3d SceneTracer::to_light(const Vec3d& p) const {
+  if (light_.kind() == LightKind::sun) return -light_.forward();
+  return normalize(light_.origin() - p);
+}
+
+std::vector<Receiver> SceneTracer::primary(const Camera& camera, uint32_t width, uint32_t height) const {
+  if (width == 0 || height == 0 || uint64_t(width) * height > (uint64_t(1) << 26))
+    throw Error("render: image size must be 1..67M pixels");
+  Camera cam = camera;
+  cam.aspect = double(width) / double(height);
+  const CameraBasis b = basis(cam);
+  std::vector<Receiver> out(size_t(width) * height);
+  const Vec3d o = cam.pos - impl_->centre;
+  tbb::parallel_for(tbb::blocked_range<uint32_t>(0, height), [&](const tbb::blocked_range<uint32_t>& rows) {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    for (uint32_t y = rows.begin(); y < rows.end(); ++y)
+      for (uint32_t x = 0; x < width; ++x) {
+        const Vec3d d = ray_dir(b, (x + 0.5) / width, (y + 0.5) / height);
+        RTCRayHit rh{};
+        rh.ray.org_x = float(o.x), rh.ray.org_y = float(o.y), rh.ray.org_z = float(o.z);
+        rh.ray.dir_x = float(d.x), rh.ray.dir_y = float(d.y), rh.ray.dir_z = float(d.z);
+        rh.ray.tnear = 0;
+        rh.ray.tfar = std::numeric_limits<float>::infinity();
+        rh.ray.mask = ~0u;
+        rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+        rtcIntersect1(impl_->scene, &ctx, &rh);
+        Receiver& r = out[size_t(y) * width + x];
+        if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) continue;
+        r.hit = true;
+        r.distance = rh.ray.tfar;
+        r.pos = cam.pos + d * double(rh.ray.tfar);
+        r.closed = impl_->closed[rh.hit.primID] != 0;
+        r.normal = impl_->normals[rh.hit.primID];
+        if (!r.closed && dot(r.normal, d) > 0) r.normal = -r.normal;  // open: face the camera
+        r.n_dot_l = dot(r.normal, to_light(r.pos));
+      }
+  });
+  return out;
+}
+
+float SceneTracer::traced(const Receiver& r, const Vec3d& offset) const {
+  if (!r.hit || r.n_dot_l <= 0) return 0;
+  const Vec3d p = r.pos + offset;
+  const Vec3d dir = to_light(p);
+  const Vec3d org = p - impl_->centre + r.normal * (1e-5 * impl_->scale);
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  RTCRay ray{};
+  ray.org_x = float(org.x), ray.org_y = float(org.y), ray.org_z = float(org.z);
+  ray.dir_x = float(dir.x), ray.dir_y = float(dir.y), ray.dir_z = float(dir.z);
+  ray.tnear = 0;
+  ray.tfar = light_.kind() == LightKind::sun ? std::numeric_limits<float>::infinity()
+                                              : float(length(light_.origin() - p) * (1 - 1e-6));
+  ray.mask = ~0u;
+  rtcOccluded1(impl_->scene, &ctx, &ray);
+  return ray.tfar == -std::numeric_limits<float>::infinity() ? 0.0f : 1.0f;
+}
+
+LightPoint lookup_point(const Receiver& r, const LightSpace& light, uint32_t map_level, uint32_t pcf_radius) {
+  Vec3d p = r.pos;
+  {
+    // Open geometry has hi = lo; closed surfaces meet stored lo values: move the lookup
+    // off the surface (render.hpp).
+    const double texel = (light.kind() == LightKind::sun ? light.extent_uv() : length(p - light.origin()) * light.extent_uv()) /
+                         std::ldexp(1.0, int(map_level));
+    p = p + r.normal * ((r.closed ? kClosedReceiverOffsetTexels : kOpenReceiverOffsetTexels) + pcf_radius) * texel;
+  }
+  return light.to_light(p);
+}
+
+float map_visibility(const Evaluator& eval, const Receiver& r, const LightSpace& light, uint32_t pcf_radius,
+                     uint32_t level) {
+  if (!r.hit || r.n_dot_l <= 0) return 0;
+  const uint32_t L = eval.finest_level();
+  const LightPoint lp = lookup_point(r, light, L, pcf_radius);
+  if (!(lp.u >= 0 && lp.u < 1 && lp.v >= 0 && lp.v < 1)) return 1;
+  const float d = float(lp.d);
+  const uint32_t lv = std::min(level, L);
+  const auto [x, y] = LightSpace::texel_of(lv, lp.u, lp.v);
+  if (pcf_radius == 0) return d <= eval.depth(lv, x, y) ? 1.0f : 0.0f;
+  return eval.pcf(lv, x, y, 2 * pcf_radius + 1, d);
+}
+
+RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>& rec, const Evaluator& eval,
+                         const RenderOptions& o) {
+  if (rec.size() != size_t(o.width) * o.height) throw Error("render: receiver count does not match the image size");
+  if (o.pcf_radius > (Evaluator::kMaxPcf - 1) / 2) throw Error("render: --pcf must be at most 4");
+  RenderResult res;
+  res.width = o.width, res.height = o.height;
+  const size_t n = rec.size();
+  std::vector<float> vis(n, 0), tvis;
+  using Clk = std::chrono::steady_clock;
+  auto t0 = Clk::now();
+  const uint32_t L = eval.finest_level();
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i < r.end(); ++i) vis[i] = map_visibility(eval, rec[i], tracer.light(), o.pcf_radius, L);
+  });
+  res.map_seconds = std::chrono::duration<double>(Clk::now() - t0).count();
+  if (o.diff) {
+    tvis.assign(n, 0);
+    t0 = Clk::now();
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i < r.end(); ++i) tvis[i] = tracer.traced(rec[i]);
+    });
+    res.traced_seconds = std::chrono::duration<double>(Clk::now() - t0).count();
+  }
+  auto shade = [&](const std::vector<float>& v, std::vector<float>& img) {
+    img.assign(n * 3, 0);
+    for (size_t i = 0; i < n; ++i) {
+      float* px = &img[3 * i];
+      if (!rec[i].hit) {
+        px[0] = 0.55f, px[1] = 0.7f, px[2] = 0.9f;  // sky
+        continue;
+      }
+      const double c = o.ambient + (1 - o.ambient) * std::max(0.0, rec[i].n_dot_l) * v[i];
+      const float albedo[3] = {rec[i].closed ? 0.8f : 0.6f, rec[i].closed ? 0.78f : 0.7f, rec[i].closed ? 0.72f : 0.55f};
+      for (int k = 0; k < 3; ++k) px[k] = float(albedo[k] * c);
+    }
+  };
+  shade(vis, res.image);
+  for (size_t i = 0; i < n; ++i) res.receivers += rec[i].hit && rec[i].n_dot_l > 0;
+  if (o.diff) {
+    shade(tvis, res.traced_image);
+    res.diff_image.assign(n * 3, 0);
+    for (size_t i = 0; i < n; ++i) {
+      float* px = &res.diff_image[3 * i];
+      const float g = rec[i].hit ? 0.25f + 0.25f * float(std::max(0.0, rec[i].n_dot_l)) : 0.05f;
+      px[0] = px[1] = px[2] = g;
+      if (!rec[i].hit || rec[i].n_dot_l <= 0) continue;
+      const bool map_lit = vis[i] >= 0.5f, ray_lit = tvis[i] >= 0.5f;
+      if (map_lit == ray_lit) continue;
+      ++res.differing;
+      if (ray_lit) px[0] = 1, px[1] = 0.1f, px[2] = 0.1f;  // map says shadow, rays say lit
+      else px[0] = 0.1f, px[1] = 0.3f, px[2] = 1;          // map says lit, rays say shadow
+    }
+  }
+  return res;
+}
+
+void write_rgb_exr(const std::string& path, uint32_t width, uint32_t height, const std::vector<float>& rgb) {
+  if (rgb.size() != size_t(width) * height * 3) throw Error(path + ": image buffer size mismatch");
+  const std::string tmp = path + ".tmp";
+  try {
+    Imf::Header h(static_cast<int>(width), static_cast<int>(height));
+    h.compression() = Imf::ZIP_COMPRESSION;
+    for (const char* c : {"R", "G", "B"}) h.channels().insert(c, Imf::Channel(Imf::FLOAT));
+    Imf::FrameBuffer fb;
+    const char* names[3] = {"R", "G", "B"};
+    for (int k = 0; k < 3; ++k)
+      fb.insert(names[k], Imf::Slice(Imf::FLOAT, const_cast<char*>(reinterpret_cast<const char*>(rgb.data() + k)),
+                                     3 * sizeof(float), size_t(width) * 3 * sizeof(float)));
+    Imf::OutputFile f(tmp.c_str(), h);
+    f.setFrameBuffer(fb);
+    f.writePixels(int(height));
+  } catch (const std::exception& e) {
+    std::filesystem::remove(tmp);
+    throw Error(path + ": cannot write EXR: " + e.what());
+  }
+  std::filesystem::rename(tmp, path);
+}
+
+void write_rgb_preview_png(const std::string& path, uint32_t width, uint32_t height, const std::vector<float>& rgb) {
+  std::vector<Rgb8> px(size_t(width) * height);
+  auto enc = [](float v) { return uint8_t(std::lround(255 * std::pow(std::clamp(v, 0.0f, 1.0f), 1 / 2.2f))); };
+  for (size_t i = 0; i < px.size(); ++i) px[i] = {enc(rgb[3 * i]), enc(rgb[3 * i + 1]), enc(rgb[3 * i + 2])};
+  write_png(path, width, height, px);
+}
+
+}  // namespace st

@@ -1,0 +1,109 @@
+// Rendering a camera view shaded with a shadow map (issue 6, `shadowtile render` and
+// `report`): Embree primary rays find the receivers, simple Lambert shading, and the
+// shadow term comes from any st::Evaluator (a pack, a client's tile cache) or, for
+// ground truth, from Embree shadow rays toward the light.
+//
+// Receivers and bias. The map's lit test is receiver_depth <= stored value with the
+// stored value inside the texel's dual depth interval [lo, hi] (DESIGN.md "Definitions").
+// A receiver on a light-facing CLOSED surface lies at about lo while hi is where the ray
+// leaves the object (MH §3, "dual depth"), so in principle no bias is needed. Measured
+// on the city: the bottom-up construction often stores a child's lo itself (MH §3.1 mode
+// finding), and a receiver in the far half of that texel on a sloped (relative to the
+// light) surface is deeper than the texel-centre lo: 1.9% of pixels self-shadowed with
+// no offset. So closed receivers get a small normal offset of kClosedReceiverOffsetTexels
+// (half a texel: covers surfaces up to about 45 degrees from facing the light; steeper
+// light-facing walls may still show rare acne). A receiver on OPEN
+// geometry has hi = lo = its own depth, so an unbiased test self-shadows (acne). For
+// those receivers only we offset the lookup point along the (light-facing) normal by
+// kOpenReceiverOffsetTexels texels (world size of one finest-level texel): enough to clear the surface's own depth across a texel up
+// to slopes of about 60 degrees; open surfaces thinner than that may leak light.
+// Surfaces facing away from the light (n.l <= 0) are unlit whatever the map says.
+//
+// Thread safety: a SceneTracer is built once and is const afterwards (rays may be cast
+// from many threads). Errors: st::Error (Embree failure, bad sizes, I/O).
+#pragma once
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "tiles/bake/render_camera.hpp"
+#include "tiles/bake/scene.hpp"
+#include "tiles/core/evaluator.hpp"
+#include "tiles/core/light.hpp"
+
+namespace st {
+
+inline constexpr double kOpenReceiverOffsetTexels = 1.5;
+inline constexpr double kClosedReceiverOffsetTexels = 0.5;
+
+// What a primary ray found.
+struct Receiver {
+  bool hit = false;
+  bool closed = false;  // on a closed mesh (no bias needed)
+  Vec3d pos, normal;    // normal faces the camera side for open meshes, outwards for closed
+  double distance = 0;
+  double n_dot_l = 0;   // cosine to the light (<= 0: faces away)
+};
+
+class SceneTracer {
+ public:
+  SceneTracer(const Scene& scene, const LightSpace& light);
+  ~SceneTracer();
+  SceneTracer(const SceneTracer&) = delete;
+  SceneTracer& operator=(const SceneTracer&) = delete;
+
+  // Primary rays through pixel centres, row 0 at the top (TBB-parallel over rows).
+  std::vector<Receiver> primary(const Camera& camera, uint32_t width, uint32_t height) const;
+  // Ray-traced visibility of a receiver: 1 if an Embree shadow ray toward the light
+  // reaches the light, else 0. `offset` moves the ray's start (world units; for
+  // supersampled PCF references across a kernel's footprint).
+  float traced(const Receiver& r, const Vec3d& offset = {}) const;
+  // Direction toward the light from a world point.
+  Vec3d to_light(const Vec3d& p) const;
+  const LightSpace& light() const { return light_; }
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+  LightSpace light_;
+};
+
+// Light-space lookup point of a receiver (with the open-geometry offset); the map's
+// answer is eval.lit / pcf at these coordinates.
+// PCF compares one receiver depth against (2R+1)^2 texels: on surfaces sloped to the
+// light the kernel's far texels lie in front of the receiver, so the offset grows by R
+// texels (a normal-offset form of receiver-plane bias).
+LightPoint lookup_point(const Receiver& r, const LightSpace& light, uint32_t map_level, uint32_t pcf_radius = 0);
+
+// Fraction lit of a receiver by the map: pcf_radius 0 = single tap (exact lit test),
+// else a (2r+1)^2 kernel at `level` (default: the finest). Outside the map: lit.
+float map_visibility(const Evaluator& eval, const Receiver& r, const LightSpace& light, uint32_t pcf_radius,
+                     uint32_t level);
+
+struct RenderOptions {
+  uint32_t width = 960, height = 540;
+  uint32_t pcf_radius = 0;
+  bool diff = false;       // also ray-traced shadows and a difference image
+  double ambient = 0.15;
+};
+
+struct RenderResult {
+  uint32_t width = 0, height = 0;
+  std::vector<float> image;         // RGB, shaded with the map
+  std::vector<float> traced_image;  // RGB, shaded with ray-traced shadows (diff only)
+  std::vector<float> diff_image;    // RGB: red map-shadowed/traced-lit, blue the reverse
+  uint64_t receivers = 0;           // pixels on light-facing surfaces
+  uint64_t differing = 0;           // of those, lit answers that differ (diff only)
+  double map_seconds = 0, traced_seconds = 0;
+  double differing_fraction() const { return receivers ? double(differing) / double(receivers) : 0; }
+};
+
+RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>& receivers, const Evaluator& eval,
+                         const RenderOptions& options);
+
+// RGB float EXR (channels R, G, B; ZIP) and an 8-bit PNG (clamped, sRGB-ish gamma 2.2).
+void write_rgb_exr(const std::string& path, uint32_t width, uint32_t height, const std::vector<float>& rgb);
+void write_rgb_preview_png(const std::string& path, uint32_t width, uint32_t height, const std::vector<float>& rgb);
+
+}  // namespace st

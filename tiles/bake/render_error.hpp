@@ -1,0 +1,62 @@
+// Shadow error of a map against ray-traced ground truth (issue 6, `shadowtile report`).
+//
+// A FrameTruth holds one camera frame's receivers (Embree primary rays) and, for every
+// light-facing receiver, the ray-traced visibility (one shadow ray) and, per PCF radius,
+// a supersampled reference: the mean ray-traced visibility over the kernel's footprint
+// ((2R+1)^2 texels of the finest map, 2x2 rays per texel, the receiver moved across the
+// light's u/v axes and back along the light ray onto its tangent plane, so each ray
+// samples the lit fraction of the surface the kernel covers).
+//
+// FlatMapEvaluator is the uncompressed baseline: one float per texel of one level (the
+// midpoint of each texel's dual depth interval, so closed receivers need no bias, like
+// the compressed map; open geometry gets the same normal offset as render.hpp).
+#pragma once
+#include <cstdint>
+#include <vector>
+
+#include "tiles/bake/render.hpp"
+#include "tiles/core/interval.hpp"
+
+namespace st {
+
+struct FrameTruth {
+  Camera camera;
+  uint32_t width = 0, height = 0;
+  std::vector<Receiver> receivers;
+  std::vector<uint32_t> lit_facing;          // indices of receivers with n.l > 0
+  std::vector<float> traced;                 // per lit-facing receiver: 0 or 1
+  std::vector<std::vector<float>> pcf_truth; // [radius - 1][lit-facing receiver]
+};
+
+// `map_level` sets the PCF reference's texel size; pcf_radii lists radii >= 1.
+FrameTruth make_frame_truth(const SceneTracer& tracer, const Camera& camera, uint32_t width, uint32_t height,
+                            uint32_t map_level, const std::vector<uint32_t>& pcf_radii);
+
+struct FrameError {
+  uint64_t receivers = 0, differing = 0;  // single tap: lit answers that differ
+  double mean_abs = 0;                    // PCF: mean |map - reference|
+  double seconds = 0;                     // evaluation time of the frame (one thread)
+  double fraction() const { return receivers ? double(differing) / double(receivers) : 0; }
+};
+
+// Single tap (pcf_radius 0) or PCF at `level` of `eval` against the frame's truth.
+FrameError frame_error(const Evaluator& eval, const LightSpace& light, const FrameTruth& f, uint32_t pcf_radius,
+                       uint32_t level);
+// Receivers whose single-tap answers of two evaluators differ (lossless check).
+uint64_t count_disagreements(const Evaluator& a, const Evaluator& b, const LightSpace& light, const FrameTruth& f);
+
+class FlatMapEvaluator final : public Evaluator {
+ public:
+  // Midpoints of a full level-`tile.level` interval tile (x0 = y0 = 0, side 2^level).
+  explicit FlatMapEvaluator(const IntervalTile& tile);
+  uint32_t finest_level() const override { return level_; }
+  // Coarser levels point-sample the finest (this baseline has no hierarchy).
+  float depth(uint32_t level, uint64_t x, uint64_t y) const override;
+  uint64_t bytes() const { return values_.size() * sizeof(float); }
+
+ private:
+  uint32_t level_;
+  std::vector<float> values_;
+};
+
+}  // namespace st
