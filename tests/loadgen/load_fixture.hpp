@@ -1,5 +1,6 @@
 // Shared by the loadgen tests: a small city pack and an in-process server on port 0.
 #pragma once
+#include <unistd.h>
 #include <cstdlib>
 #include <memory>
 #include <string>
@@ -28,7 +29,8 @@ inline const CityPack& city_pack(uint32_t level) {
     auto p = std::make_unique<CityPack>();
     p->scene = make_procedural("procedural:city,size=6");
     p->light = LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), p->scene.bounds());
-    p->path = std::string(SHADOWTILE_TEST_TMP) + "/loadgen_city_" + std::to_string(level) + ".pack";
+    p->path = std::string(SHADOWTILE_TEST_TMP) + "/loadgen_city_" + std::to_string(level) + "_" +
+              std::to_string(::getpid()) + ".pack";  // ctest runs tests in parallel processes
     MapBuildOptions o;
     o.map_level = level;
     o.encoding = Encoding::dagmh;
