@@ -23,7 +23,6 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <atomic>
 #include <cctype>
 #include <chrono>
 #include <cstdio>
@@ -32,7 +31,6 @@
 #include <deque>
 #include <filesystem>
 #include <fstream>
-#include <mutex>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <random>
@@ -277,7 +275,7 @@ Cell measure(const std::string& server, Driver drive, uint16_t port, const std::
   Window w;
   w.start = t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(warmup_s));
   w.stop = w.start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(seconds));
-  std::vector<ConnResult> res(size_t(conns));
+  std::vector<ConnResult> res(static_cast<size_t>(conns));
   std::vector<std::thread> th;
   for (int c = 0; c < conns; ++c)
     th.emplace_back([&, c] {
