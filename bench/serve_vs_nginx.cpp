@@ -335,7 +335,9 @@ uint16_t free_port() {
 
 class Nginx {
  public:
-  Nginx(const std::string& binary, const fs::path& dir, const fs::path& www, const std::string& workers) : dir_(dir) {
+  Nginx(const std::string& binary, const fs::path& dir, const fs::path& www, const std::string& workers,
+        const std::string& extra)
+      : dir_(dir) {
     fs::create_directories(dir / "tmp");
     port_ = free_port();
     const std::string d = dir.string();
@@ -345,7 +347,7 @@ class Nginx {
          << "events { worker_connections 1024; }\n"
          << "http {\n  access_log off;\n  sendfile on;\n  tcp_nopush off;\n  tcp_nodelay on;\n"
          << "  keepalive_requests 1000000;\n  keepalive_timeout 120s;\n"
-         << "  default_type application/octet-stream;\n"
+         << "  default_type application/octet-stream;\n  " << extra << "\n"
          << "  client_body_temp_path " << d << "/tmp/body;\n  proxy_temp_path " << d << "/tmp/proxy;\n"
          << "  fastcgi_temp_path " << d << "/tmp/fastcgi;\n  uwsgi_temp_path " << d << "/tmp/uwsgi;\n"
          << "  scgi_temp_path " << d << "/tmp/scgi;\n"
@@ -420,8 +422,9 @@ std::vector<std::string> split(const std::string& s) {
 
 int main(int argc, char** argv) {
   uint32_t level = 10, depth = 8;
+  int skip = -1;  // cut level K; default level - 5: 1024 tiles of 32x32 texels, a few KiB each
   double seconds = 3, warmup = 0.3;
-  std::string conns_arg = "1,8,64", workers_arg = "1,auto", nginx_arg, json_path = "bench-out/serve_vs_nginx.json";
+  std::string conns_arg = "1,8,64", workers_arg = "1,auto", nginx_arg, nginx_extra, json_path = "bench-out/serve_vs_nginx.json";
   for (int i = 1; i + 1 < argc; i += 2) {
     std::string k = argv[i], v = argv[i + 1];
     if (k == "--level") level = uint32_t(std::stoul(v));
@@ -431,6 +434,8 @@ int main(int argc, char** argv) {
     else if (k == "--conns") conns_arg = v;
     else if (k == "--nginx-workers") workers_arg = v;
     else if (k == "--nginx") nginx_arg = v;
+    else if (k == "--nginx-extra") nginx_extra = v;
+    else if (k == "--skip") skip = int(std::stoi(v));
     else if (k == "--json") json_path = v;
     else {
       std::fprintf(stderr, "bench_serve_vs_nginx: unknown option %s\n", k.c_str());
@@ -446,7 +451,7 @@ int main(int argc, char** argv) {
     const std::string pack = (dir / "bench.pack").string();
     CutParams cut;
     cut.map_level = level;
-    cut.skip_level = std::min<uint32_t>(level - 4, 8);
+    cut.skip_level = skip >= 0 ? uint32_t(skip) : std::min<uint32_t>(level - 5, 8);
     cut.codec = TileCodec::of(Encoding::mh);
     LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), Aabb{{-1, 0, -1}, {1, 1, 1}});
     write_pack(pack, build_hierarchy(bench_field(level)), cut, PackParams::from(light, cut));
@@ -489,7 +494,7 @@ int main(int argc, char** argv) {
     }
     if (nginx_bin) {
       for (auto& wk : split(workers_arg)) {
-        Nginx ng(*nginx_bin, dir / ("nginx_w" + wk), www, wk);
+        Nginx ng(*nginx_bin, dir / ("nginx_w" + wk), www, wk, nginx_extra);
         for (int n : conns)
           cells.push_back(measure("nginx w" + wk, run_http, ng.port(), ids, n, depth, warmup, seconds));
         ng.stop();
