@@ -4,6 +4,7 @@
 // each tile's hierarchy bottom-up, stitch the tiles' roots), timing helpers, and the
 // finest-level values of a hierarchy painted into a flat float array.
 #pragma once
+#include "tiles/core/resolution.hpp"
 #include <sys/mman.h>
 
 #include <algorithm>
@@ -47,15 +48,7 @@ inline double median(std::vector<double> v) {
   return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
 }
 
-// "4k" -> 12, "16384" -> 14, "64K" -> 16 (power of two sides only).
-inline uint32_t parse_level(std::string s) {
-  uint64_t mult = 1;
-  if (!s.empty() && (s.back() == 'k' || s.back() == 'K')) mult = 1024, s.pop_back();
-  uint64_t n = std::stoull(s) * mult;
-  if (!is_power_of_two(n) || n > (uint64_t(1) << kMaxLevel))
-    throw Error("resolution " + s + ": not a power of two <= 1M");
-  return log2_exact(n);
-}
+inline uint32_t parse_level(const std::string& s) { return parse_resolution(s); }
 
 inline std::string side_name(uint32_t level) {
   uint64_t n = uint64_t(1) << level;

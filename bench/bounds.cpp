@@ -27,6 +27,7 @@
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/scene.hpp"
 #include "tiles/core/error.hpp"
+#include "tiles/core/resolution.hpp"
 
 namespace {
 
@@ -43,16 +44,7 @@ double peak_rss_mib() {
   return double(u.ru_maxrss) / 1024.0;  // ru_maxrss is in KiB on Linux
 }
 
-uint32_t parse_level(const std::string& text) {
-  uint64_t mult = 1;
-  std::string s = text;
-  if (!s.empty() && (s.back() == 'k' || s.back() == 'K')) mult = 1024, s.pop_back();
-  else if (!s.empty() && (s.back() == 'm' || s.back() == 'M')) mult = 1 << 20, s.pop_back();
-  const uint64_t n = std::stoull(s) * mult;
-  if (!st::is_power_of_two(n) || n > (uint64_t(1) << st::kMaxLevel))
-    throw st::Error("--resolution must be a power of two up to 1m");
-  return st::log2_exact(n);
-}
+uint32_t parse_level(const std::string& text) { return st::parse_resolution(text); }
 
 struct Side {
   double wall = 0, cpu = 0;

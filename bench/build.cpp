@@ -27,21 +27,14 @@
 #include "tiles/bake/map_build.hpp"
 #include "tiles/bake/scene.hpp"
 #include "tiles/core/error.hpp"
+#include "tiles/core/resolution.hpp"
 #include "tiles/core/tile_cut.hpp"
 
 namespace {
 
 using Clock = std::chrono::steady_clock;
 
-uint32_t parse_level(std::string s) {
-  uint64_t mult = 1;
-  if (!s.empty() && (s.back() == 'k' || s.back() == 'K')) mult = 1024, s.pop_back();
-  else if (!s.empty() && (s.back() == 'm' || s.back() == 'M')) mult = 1 << 20, s.pop_back();
-  uint64_t n = std::stoull(s) * mult;
-  uint32_t l = 0;
-  while ((uint64_t(1) << l) < n) ++l;
-  return l;
-}
+uint32_t parse_level(const std::string& text) { return st::parse_resolution(text); }
 
 struct Measured {
   nlohmann::json result;

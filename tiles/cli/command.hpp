@@ -9,6 +9,8 @@
 #include <string>
 #include <vector>
 
+#include "tiles/core/resolution.hpp"
+
 namespace st::cli {
 
 // Exit codes (meaningful, documented in --help): 0 ok, 1 error (bad input, I/O),
@@ -35,7 +37,6 @@ struct ExitCode {
 };
 [[noreturn]] inline void exit_with(int code) { throw ExitCode{code}; }
 
-// "4096", "16k", "1m" (powers of two only, <= 2^20) -> level. Throws st::Error.
-uint32_t parse_resolution(const std::string& text);
+using st::parse_resolution;  // tiles/core/resolution.hpp
 
 }  // namespace st::cli
