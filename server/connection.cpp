@@ -27,9 +27,10 @@ proto::Limits handshake_limits(const proto::Limits& server) {
 
 }  // namespace
 
-Connection::Connection(tcp::socket socket, ServerCore& core)
+Connection::Connection(tcp::socket socket, ServerCore& core, asio::ip::address from)
     : socket_(std::move(socket)),
       core_(core),
+      from_(std::move(from)),
       opt_(core.options),
       writer_wake_(socket_.get_executor()),
       reader_wake_(socket_.get_executor()),
@@ -38,7 +39,7 @@ Connection::Connection(tcp::socket socket, ServerCore& core)
       parser_(limits_, proto::Receiver::server),
       in_flight_(core.options.limits.max_in_flight),
       tiles_(size_t(core.options.limits.max_in_flight) * core.options.limits.max_tiles_per_batch) {
-  accepted_ = last_read_ = last_activity_ = Clock::now();
+  accepted_ = last_read_ = last_activity_ = frame_started_ = Clock::now();
   writer_wake_.expires_at(Clock::time_point::max());
   reader_wake_.expires_at(Clock::time_point::max());
 }
@@ -88,6 +89,8 @@ asio::awaitable<void> Connection::reader(std::shared_ptr<Connection> /*keep aliv
       if (ec) break;  // EOF, reset, or closed by the watchdog / stop()
       last_read_ = last_activity_ = Clock::now();
       core_.stats.received(n);
+      const uint64_t chunk_start = parser_.stream_offset();
+      const bool was_mid_frame = mid_frame();
       std::span<const uint8_t> rest(buf.data(), n);
       while (!rest.empty() && !closing_ && !closed_) {
         auto r = parser_.feed(rest);
@@ -100,6 +103,9 @@ asio::awaitable<void> Connection::reader(std::shared_ptr<Connection> /*keep aliv
           fail(parser_.status().code, proto::to_string(parser_.status()));
         }
       }
+      // A frame that began in this chunk (none pending before it, or one completed in it
+      // and the next begun) started now; one continued from before keeps its start.
+      if (mid_frame() && (!was_mid_frame || frame_end_offset_ >= chunk_start)) frame_started_ = last_read_;
     }
   } catch (const std::exception& e) {
     core_.log(std::string("connection reader: ") + e.what());
@@ -414,6 +420,8 @@ asio::awaitable<void> Connection::writer(std::shared_ptr<Connection> self) {
   {
     std::lock_guard lock(core_.mu);
     core_.connections.erase(self);
+    if (auto it = core_.per_address.find(from_); it != core_.per_address.end() && --it->second == 0)
+      core_.per_address.erase(it);
   }
   core_.stats.connection_closed();
 }
@@ -435,7 +443,7 @@ asio::awaitable<void> Connection::watchdog(std::shared_ptr<Connection> /*keep al
     const char* why = nullptr;
     if (!handshaken_ && now - accepted_ > opt_.handshake_timeout) why = "handshake";
     else if (writing_ && now - write_started_ > opt_.write_timeout) why = "write";
-    else if (mid_frame() && now - last_read_ > opt_.read_timeout) why = "read";
+    else if (mid_frame() && now - frame_started_ > opt_.read_timeout) why = "read";
     else if (!owed && !writing_ && now - last_activity_ > opt_.idle_timeout) why = "idle";
     if (why) {
       if (std::string(why) != "idle") core_.stats.timeout();

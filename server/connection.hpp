@@ -5,7 +5,8 @@
 //   writer   - the only coroutine that writes: drains the control queue first (handshake,
 //              map info, errors, pongs, stats, cancelled-tile answers), then the tile
 //              queue highest priority first, one gathered write per tile;
-//   watchdog - enforces the handshake, idle, read (a started frame must finish) and
+//   watchdog - enforces the handshake, idle, read (a frame must finish within the read
+//              timeout of its first byte, however the bytes trickle in) and
 //              write timeouts by closing the socket, which ends the other two.
 // All three run on the connection's strand, so its state needs no locks.
 //
@@ -30,7 +31,8 @@ namespace st::server {
 
 class Connection : public std::enable_shared_from_this<Connection> {
  public:
-  Connection(tcp::socket socket, ServerCore& core);
+  // `from`: the client's address, counted in core.per_address until the end.
+  Connection(tcp::socket socket, ServerCore& core, asio::ip::address from);
   // Spawns the coroutines. The connection removes itself from core.connections at the end.
   void start();
   // Closes the socket from any thread (posted to the strand).
@@ -78,6 +80,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
 
   tcp::socket socket_;
   ServerCore& core_;
+  const asio::ip::address from_;
   const ServerOptions& opt_;
   asio::steady_timer writer_wake_, reader_wake_, watchdog_timer_;
 
@@ -98,6 +101,9 @@ class Connection : public std::enable_shared_from_this<Connection> {
   bool writing_ = false;
   uint64_t frame_end_offset_ = 0;
   Clock::time_point accepted_, last_read_, last_activity_, write_started_;
+  // When the frame being received began: a client dripping one byte a second keeps
+  // last_read_ fresh but not this, so the read timeout still cuts it off.
+  Clock::time_point frame_started_;
 };
 
 }  // namespace st::server

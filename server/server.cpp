@@ -36,7 +36,7 @@ struct Server::Impl {
 
   asio::awaitable<void> accept_loop();
   asio::awaitable<void> stats_loop();
-  void reject(tcp::socket socket);
+  void reject(tcp::socket socket, const char* why);
   void shutdown_on_io();  // runs on the io_context
 };
 
@@ -62,19 +62,26 @@ asio::awaitable<void> Server::Impl::accept_loop() {
     backoff = 10ms;
     error_code ignored;
     socket.set_option(tcp::no_delay(true), ignored);
+    const asio::ip::address from = socket.remote_endpoint(ignored).address();
     std::shared_ptr<Connection> conn;
+    const char* refused = nullptr;
     {
       std::lock_guard lock(core.mu);
       if (core.stopping) break;
+      const size_t per_address_limit = core.options.max_connections_per_address;
       if (core.connections.size() >= core.options.max_connections) {
-        core.stats.connection_rejected();
+        refused = "server at its connection limit";
+      } else if (per_address_limit && core.per_address[from] >= per_address_limit) {
+        refused = "too many connections from your address";
       } else {
-        conn = std::make_shared<Connection>(std::move(socket), core);
+        conn = std::make_shared<Connection>(std::move(socket), core, from);
         core.connections.insert(conn);
+        ++core.per_address[from];
       }
     }
     if (!conn) {
-      reject(std::move(socket));
+      core.stats.connection_rejected();
+      reject(std::move(socket), refused);
       continue;
     }
     core.stats.connection_opened();
@@ -82,11 +89,11 @@ asio::awaitable<void> Server::Impl::accept_loop() {
   }
 }
 
-// Over the connection limit: one Error(overloaded) frame, best effort, then close.
-void Server::Impl::reject(tcp::socket socket) {
+// Over a connection limit: one Error(overloaded) frame, best effort, then close.
+void Server::Impl::reject(tcp::socket socket, const char* why) {
   auto s = std::make_shared<tcp::socket>(std::move(socket));
   auto frame = std::make_shared<std::vector<uint8_t>>();
-  proto::ErrorMessage e{proto::ErrorCode::overloaded, "server at its connection limit"};
+  proto::ErrorMessage e{proto::ErrorCode::overloaded, why};
   proto::Limits l;
   (void)proto::encode_message(e, proto::kNoRequest, proto::kFlagFinal, l, *frame);
   // Non-blocking single write: a fresh socket's send buffer always has room for ~60 bytes.

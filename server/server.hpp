@@ -30,11 +30,14 @@ struct ServerOptions {
   // The most this server grants any client; the handshake takes the smaller of each pair.
   proto::Limits limits{};
   size_t max_connections = 1024;         // beyond: Error(overloaded) and close
+  // From one client address (IPv4 or IPv6): a client opening connections without end
+  // is refused at this bound while other addresses are still served (0: no bound).
+  size_t max_connections_per_address = 256;
   size_t max_open_maps = 64;             // per connection
   size_t max_control_frames = 64;        // queued non-tile answers; the reader waits beyond
   std::chrono::milliseconds handshake_timeout{5000};  // accept -> Hello received
   std::chrono::milliseconds idle_timeout{120000};     // no traffic and nothing owed
-  std::chrono::milliseconds read_timeout{10000};      // a started frame must complete
+  std::chrono::milliseconds read_timeout{10000};      // a frame must complete this long after its first byte
   std::chrono::milliseconds write_timeout{10000};     // one write must complete
   std::string server_name = "shadowtile-server";
   // Periodic stats line (0: none), written through `log`.

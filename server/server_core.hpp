@@ -1,9 +1,12 @@
 // State shared by the server and its connections (internal to server/).
 #pragma once
+#include <map>
 #include <memory>
 #include <mutex>
 #include <set>
 #include <string>
+
+#include "server/asio.hpp"
 
 #include "server/catalog.hpp"
 #include "server/server.hpp"
@@ -20,6 +23,7 @@ struct ServerCore {
 
   std::mutex mu;  // guards connections and stopping
   std::set<std::shared_ptr<Connection>> connections;
+  std::map<asio::ip::address, size_t> per_address;  // open connections by client address
   bool stopping = false;
 
   void log(const std::string& line) const;

@@ -17,6 +17,7 @@ struct ServeArgs {
   unsigned threads = 1;
   double stats_interval = 0;
   unsigned max_connections = 1024;
+  unsigned max_connections_per_address = 256;
   double idle_timeout = 120;
 };
 
@@ -55,6 +56,7 @@ void run_serve(const ServeArgs& a) {
   std::tie(o.host, o.port) = parse_listen(a.listen);
   o.threads = a.threads;
   o.max_connections = a.max_connections;
+  o.max_connections_per_address = a.max_connections_per_address;
   o.stats_interval = std::chrono::milliseconds(int64_t(a.stats_interval * 1000));
   o.idle_timeout = std::chrono::milliseconds(int64_t(a.idle_timeout * 1000));
   const size_t maps = catalog.maps().size();
@@ -81,6 +83,9 @@ Register reg{"serve", "Serve packs' tiles over TCP (the shadowtile wire protocol
       ->capture_default_str()->check(CLI::Range(0.0, 86400.0));
   sub.add_option("--max-connections", a->max_connections, "Connections served at once")
       ->capture_default_str()->check(CLI::Range(1u, 1000000u));
+  sub.add_option("--max-connections-per-address", a->max_connections_per_address,
+                 "Connections from one client address at once (0: no bound)")
+      ->capture_default_str()->check(CLI::Range(0u, 1000000u));
   sub.add_option("--idle-timeout", a->idle_timeout, "Close connections idle this many seconds")
       ->capture_default_str()->check(CLI::Range(0.1, 86400.0));
   sub.callback([a] { run_serve(*a); });
