@@ -52,6 +52,8 @@ struct Endpoint {
   uint16_t port = 7447;
 };
 
+class IoPool;  // io_pool.hpp
+
 struct ClientOptions {
   uint32_t cache_slots = 256;               // tile cache slots per map
   uint32_t max_slot_bytes = 16u << 20;      // refuse maps whose tile bound exceeds this
@@ -70,6 +72,9 @@ struct ClientOptions {
   // Opens one encoded tile (the bytes stay in their cache slot while the evaluator
   // lives). Empty: st::open_encoded(the pack's encoding).
   std::function<std::unique_ptr<Evaluator>(std::span<const uint8_t>)> open_tile;
+  // Shared I/O threads (io_pool.hpp) for processes with many connections; null: this
+  // Client's fetcher runs on a thread of its own.
+  std::shared_ptr<IoPool> io_pool;
 };
 
 struct MapStats {

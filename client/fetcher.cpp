@@ -34,7 +34,12 @@ proto::Limits handshake_limits(const ClientOptions& o) {
 }  // namespace
 
 Fetcher::Fetcher(Endpoint endpoint, ClientOptions options)
-    : endpoint_(std::move(endpoint)), options_(std::move(options)), notifier_(std::make_shared<Notifier>()) {
+    : endpoint_(std::move(endpoint)),
+      options_(std::move(options)),
+      notifier_(std::make_shared<Notifier>()),
+      pool_(options_.io_pool),
+      own_io_(pool_ ? nullptr : std::make_unique<asio::io_context>()),
+      io_(pool_ ? pool_->next() : *own_io_) {
   if (proto::Status s = proto::validate(local_limits(options_)); !s)
     throw Error("client: bad options: " + proto::to_string(s));
   if (options_.cache_slots == 0 || options_.tiles_per_request == 0 || options_.want_capacity == 0)
@@ -49,9 +54,38 @@ Fetcher::Fetcher(Endpoint endpoint, ClientOptions options)
 
 Fetcher::~Fetcher() { stop(); }
 
+void Fetcher::hold() {
+  std::lock_guard lock(live_mu_);
+  ++live_;
+}
+
+void Fetcher::release() {
+  // Notify under the lock: stop() may destroy this Fetcher as soon as it sees zero.
+  std::lock_guard lock(live_mu_);
+  if (--live_ == 0) live_cv_.notify_all();
+}
+
+void Fetcher::spawn(asio::awaitable<void> a) {
+  hold();
+  asio::co_spawn(io_, std::move(a), [this](std::exception_ptr) { release(); });
+}
+
+template <typename F>
+void Fetcher::post(F&& f) {
+  hold();
+  asio::post(io_, [this, f = std::forward<F>(f)]() mutable {
+    struct Release {
+      Fetcher* self;
+      ~Release() { self->release(); }
+    } r{this};
+    f();
+  });
+}
+
 void Fetcher::start() {
-  asio::co_spawn(io_, run(), asio::detached);
-  asio::co_spawn(io_, notifier_loop(), asio::detached);
+  spawn(run());
+  spawn(notifier_loop());
+  if (pool_) return;  // the pool's thread runs io_
   thread_ = std::thread([this] {
     try {
       io_.run();
@@ -64,12 +98,13 @@ void Fetcher::start() {
 
 void Fetcher::stop() {
   if (stopped_.exchange(true)) return;
-  asio::post(io_, [this] {
+  post([this] {
     stopping_io_ = true;
     error_code ec;
     if (socket_) socket_->close(ec);
     wake_timer_.cancel();
     backoff_timer_.cancel();
+    for (auto* t : watchdog_timers_) t->cancel();  // end now, not at the next tick
     notify_desc_.close(ec);  // ends notifier_loop
     for (auto& c : controls_) c->done(proto::ErrorMessage{ErrorCode::shutting_down, "client stopped"});
     for (auto& [id, c] : controls_sent_) c->done(proto::ErrorMessage{ErrorCode::shutting_down, "client stopped"});
@@ -86,6 +121,11 @@ void Fetcher::stop() {
     thread_.join();
     finished.set_value();
     guard.join();
+  } else if (pool_) {
+    // Coroutines end once their sockets and timers are closed (the watchdog within one
+    // tick); the pool's thread keeps running other fetchers meanwhile.
+    std::unique_lock lock(live_mu_);
+    live_cv_.wait(lock, [this] { return live_ == 0; });
   }
 }
 
@@ -115,13 +155,13 @@ proto::Message Fetcher::call(const proto::Message& request) {
     } catch (const std::future_error&) {  // already answered (stop raced an answer)
     }
   };
-  asio::post(io_, [this, c] {
+  post([this, c] {
     if (stopping_io_) return c->done(proto::ErrorMessage{ErrorCode::shutting_down, "client stopped"});
     controls_.push_back(c);
     wake();
   });
   if (future.wait_for(options_.request_timeout) != std::future_status::ready) {
-    asio::post(io_, [this, c] {  // forget it: a late answer then finds no one waiting
+    post([this, c] {  // forget it: a late answer then finds no one waiting
       std::erase(controls_, c);
       for (auto it = controls_sent_.begin(); it != controls_sent_.end(); ++it)
         if (it->second == c) {
@@ -153,7 +193,7 @@ std::shared_ptr<RemoteMap> Fetcher::open(const std::string& name) {
   // dropped, so the map is (re)opened there by the same rules as after a reconnect.
   auto registered = std::make_shared<std::promise<std::shared_ptr<RemoteMap>>>();
   auto fut = registered->get_future();
-  asio::post(io_, [this, map, registered] {
+  post([this, map, registered] {
     for (auto& s : maps_)
       if (s.map->name() == map->name()) return registered->set_value(s.map);
     maps_.push_back(MapSlot{map, 0});
@@ -250,7 +290,7 @@ asio::awaitable<bool> Fetcher::session() {
   limits_ = handshake_limits(options_);
   parser_ = std::make_unique<proto::FrameParser>(limits_, proto::Receiver::client);
   last_rx_ = Clock::now();
-  asio::co_spawn(io_, watchdog(sock, epoch), asio::detached);
+  spawn(watchdog(sock, epoch));
 
   auto fail_connect = [&] {
     std::lock_guard lock(stats_mu_);
@@ -301,7 +341,7 @@ asio::awaitable<bool> Fetcher::session() {
   controls_sent_.clear();
   for (auto& s : maps_) reopen(s);
 
-  asio::co_spawn(io_, reader(sock), asio::detached);
+  spawn(reader(sock));
 
   // The pump: the only writer on this socket.
   std::vector<WantedTile> wanted;
@@ -454,6 +494,12 @@ asio::awaitable<void> Fetcher::watchdog(std::shared_ptr<tcp::socket> sock, uint6
       std::chrono::milliseconds(250));
   const auto started = Clock::now();
   asio::steady_timer t(io_);
+  watchdog_timers_.push_back(&t);
+  struct Unlist {
+    std::vector<asio::steady_timer*>& list;
+    asio::steady_timer* t;
+    ~Unlist() { std::erase(list, t); }
+  } unlist{watchdog_timers_, &t};
   while (epoch == epoch_ && !stopping_io_) {
     error_code ec;
     t.expires_after(tick);

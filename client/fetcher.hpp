@@ -9,7 +9,10 @@
 //                answer for io_timeout while answers are owed); run() then reconnects;
 //   notifier   - reads the eventfd lookups poke when they queue a tile.
 // Everything runs on that one thread, so the session state needs no locks; API calls
-// reach it with asio::post.
+// reach it with asio::post. With ClientOptions::io_pool the io_context is one of the
+// pool's (io_pool.hpp), still run by a single thread; then stop() cannot join a thread of
+// its own, so every coroutine and posted handler is counted (live_) and stop() waits
+// until the count drops to zero before the Fetcher may be destroyed.
 #pragma once
 #include <utility>
 // <utility> before Asio (MACHINE.md pitfall with g++ 12 / Boost 1.74)
@@ -17,6 +20,7 @@
 #include <boost/asio.hpp>
 #include <boost/asio/posix/stream_descriptor.hpp>
 #include <chrono>
+#include <condition_variable>
 #include <cstdint>
 #include <deque>
 #include <functional>
@@ -26,6 +30,7 @@
 #include <vector>
 
 #include "client/client.hpp"
+#include "client/io_pool.hpp"
 #include "client/remote_map.hpp"
 #include "proto/proto.hpp"
 
@@ -80,12 +85,20 @@ class Fetcher : public std::enable_shared_from_this<Fetcher> {
   void end_session();
   void wake() { wake_timer_.cancel(); }
   uint32_t next_id();
+  // co_spawn / post on io_, counted in live_ (released when the coroutine or handler ends).
+  void spawn(asio::awaitable<void> a);
+  template <typename F>
+  void post(F&& f);
+  void hold();
+  void release();
 
   const Endpoint endpoint_;
   const ClientOptions options_;
   std::shared_ptr<Notifier> notifier_;
 
-  asio::io_context io_;
+  std::shared_ptr<IoPool> pool_;             // shared I/O threads, or null
+  std::unique_ptr<asio::io_context> own_io_;  // without a pool: run by thread_
+  asio::io_context& io_;
   asio::steady_timer wake_timer_{io_};
   asio::steady_timer backoff_timer_{io_};
   asio::posix::stream_descriptor notify_desc_{io_};
@@ -104,9 +117,13 @@ class Fetcher : public std::enable_shared_from_this<Fetcher> {
   std::vector<MapSlot> maps_;
   uint32_t last_id_ = 0;
   bool writing_ = false, stopping_io_ = false;
+  std::vector<asio::steady_timer*> watchdog_timers_;  // live watchdogs' ticks (stop() cancels them)
   Clock::time_point write_started_, last_rx_;
 
   std::atomic<bool> connected_{false}, stopped_{false};
+  std::mutex live_mu_;
+  std::condition_variable live_cv_;
+  uint64_t live_ = 0;  // coroutines and handlers not yet finished on io_
   mutable std::mutex stats_mu_;
   ClientStats stats_;
 };

@@ -43,6 +43,9 @@ std::string load_table(const LoadResult& r) {
   row("cache per connection", fmt("%.1f MiB", o.cache_mb) + " (" + std::to_string(r.cache_slots) + " slots of " +
                                   std::to_string(r.slot_bytes) + " B), peak used " + std::to_string(r.peak_slots_used));
   row("prefetch", o.prefetch ? "on" : "off");
+  row("threads: camera workers / client I/O", std::to_string(r.workers) + " / " + std::to_string(o.io_threads) +
+                                                  " (residency poll up to " + fmt("%.0f ms", r.watcher_poll_ms_max) + ")");
+  row("connects / disconnects", std::to_string(r.client.connects) + " / " + std::to_string(r.client.disconnects));
   row("frames (late)", std::to_string(r.frames) + " (" + std::to_string(r.frames_late) + "), max lag " +
                            fmt("%.1f ms", r.max_lag_ms));
   row("frames with holes", std::to_string(r.frames_with_holes) + " (" + fmt("%.2f%%", 100 * r.hole_fraction()) + ")");
@@ -81,7 +84,11 @@ std::string load_json(const LoadResult& r) {
   j["options"] = {{"server", o.endpoint.host + ":" + std::to_string(o.endpoint.port)}, {"map", o.map},
                   {"cameras", o.cameras}, {"connections", r.connections}, {"path", to_string(o.path)},
                   {"duration_s", o.duration}, {"rate_fps", o.rate}, {"cache_mb", o.cache_mb}, {"seed", o.seed},
-                  {"prefetch", o.prefetch}, {"samples_x", o.view.samples_x}, {"samples_y", o.view.samples_y}};
+                  {"prefetch", o.prefetch}, {"samples_x", o.view.samples_x}, {"samples_y", o.view.samples_y},
+                  {"workers", r.workers}, {"io_threads", o.io_threads}};
+  j["connections"] = {{"connects", r.client.connects}, {"disconnects", r.client.disconnects},
+                      {"connect_failures", r.client.connect_failures}};
+  j["watcher_poll_ms_max"] = r.watcher_poll_ms_max;
   j["map"] = {{"level", r.map_level}, {"skip_level", r.skip_level}, {"cache_slots", r.cache_slots},
               {"slot_bytes", r.slot_bytes}, {"ground", r.world.ground}, {"top", r.world.top},
               {"footprint", {r.world.x0, r.world.z0, r.world.x1, r.world.z1}}};

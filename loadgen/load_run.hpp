@@ -1,6 +1,8 @@
 // The load tester's runner (issue 6): N synthetic cameras over C client connections
 // (camera i uses connection i % C; cameras on one connection share its map and cache,
-// like several views of one game), each on its own frame clock.
+// like several views of one game), each on its own frame clock. The cameras' frames run
+// on a few worker threads and the connections' fetchers on a shared client::IoPool, so
+// 1,000 cameras on 1,000 connections are a handful of threads (the soak, LOAD.md).
 //
 // No coordinated omission: frame f of every camera is scheduled at start + f / rate and
 // its requests go out then whether or not earlier answers came back (request_region
@@ -39,6 +41,8 @@ struct LoadOptions {
   double cache_mb = 64;      // tile cache per connection
   uint64_t seed = 1;
   bool prefetch = true;
+  uint32_t workers = 0;      // camera threads (0: max(2, cores)); cameras are spread over them
+  uint32_t io_threads = 2;   // client I/O threads shared by every connection (client::IoPool)
   ViewOptions view;
 };
 
@@ -67,7 +71,9 @@ struct LoadResult {
   double mean_visibility = 0;
   client::MapStats map;        // summed over connections (after the final cancel)
   client::ClientStats client;  // summed
-  uint32_t peak_slots_used = 0;  // most resident + pinned slots seen on any connection
+  uint32_t peak_slots_used = 0;  // most resident + pinned slots seen on any connection (100 ms samples)
+  uint32_t workers = 0;          // camera threads used
+  double watcher_poll_ms_max = 0;  // coarsest residency poll (latency resolution)
   bool drained = false;          // every sent request answered or cancelled at the end
   std::vector<double> latency_ms;         // one per cell that became resident
   uint64_t latency_abandoned = 0;         // needed cells no longer needed before arriving

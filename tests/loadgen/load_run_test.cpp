@@ -1,6 +1,11 @@
 // A short deterministic load run against an in-process server: the counters add up.
 #include <gtest/gtest.h>
 
+#include <dirent.h>
+
+#include <atomic>
+#include <thread>
+
 #include "load_fixture.hpp"
 #include "loadgen/load_report.hpp"
 #include "loadgen/load_run.hpp"
@@ -8,10 +13,23 @@
 namespace st::loadgen {
 namespace {
 
-LoadResult run(PathKind path, uint32_t cameras, uint32_t connections, double cache_mb) {
+size_t thread_count() {
+  size_t n = 0;
+  if (DIR* d = ::opendir("/proc/self/task")) {
+    while (dirent* e = ::readdir(d))
+      if (e->d_name[0] != '.') ++n;
+    ::closedir(d);
+  }
+  return n;
+}
+
+LoadResult run(PathKind path, uint32_t cameras, uint32_t connections, double cache_mb, uint32_t workers = 0,
+               uint32_t io_threads = 2) {
   const auto& pack = loadtest::city_pack(11);
   auto srv = loadtest::start_server("city", pack.path);
   LoadOptions o;
+  o.workers = workers;
+  o.io_threads = io_threads;
   o.endpoint = {"127.0.0.1", srv->port()};
   o.map = "city";
   o.cameras = cameras;
@@ -62,6 +80,33 @@ TEST(LoadRun, TeleportWithATinyCacheEvictsButNeverExceedsIt) {
   expect_counters_add_up(r);
   EXPECT_EQ(r.cache_slots, 32u);
   EXPECT_GE(r.cuts, 2u * uint64_t(r.options.duration / kTeleportSeconds));
+}
+
+// Many cameras on as many connections run on a few threads (camera workers + the shared
+// client I/O pool + the watcher), not two threads per camera, and still add up.
+TEST(LoadRun, ManyConnectionsOnAFewThreads) {
+  const uint32_t n = loadtest::small_scale() ? 16 : 48;
+  (void)loadtest::city_pack(11);  // built before counting threads (the build uses a pool)
+  const size_t before = thread_count();
+  std::atomic<bool> done{false};
+  std::atomic<size_t> peak{0};
+  std::thread sampler([&] {
+    while (!done) {
+      peak = std::max(peak.load(), thread_count());
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+  });
+  const LoadResult r = run(PathKind::flyover, n, n, 0.5, 2, 1);
+  done = true;
+  sampler.join();
+  expect_counters_add_up(r);
+  EXPECT_EQ(r.connections, n);
+  EXPECT_EQ(r.workers, 2u);
+  EXPECT_EQ(r.client.connects, n);
+  EXPECT_EQ(r.client.disconnects, 0u);
+  // server (1 I/O thread + its signal/control) + sampler + 2 workers + 1 I/O + watcher
+  // + the probe client's thread + resolver helpers: far below 2 per camera.
+  EXPECT_LE(peak.load(), before + 12) << "threads before " << before;
 }
 
 TEST(LoadRun, PathsAreDeterministic) {

@@ -27,7 +27,7 @@ namespace {
 
 struct LoadArgs {
   std::string server, map, path = "flyover", report;
-  uint32_t cameras = 4, connections = 0, samples_x = 64, samples_y = 36;
+  uint32_t cameras = 4, connections = 0, samples_x = 64, samples_y = 36, workers = 0, io_threads = 2;
   double duration = 10, rate = 60, cache_mb = 64;
   uint64_t seed = 1;
   bool no_prefetch = false;
@@ -45,6 +45,8 @@ void run(const LoadArgs& a) {
   o.cache_mb = a.cache_mb;
   o.seed = a.seed;
   o.prefetch = !a.no_prefetch;
+  o.workers = a.workers;
+  o.io_threads = a.io_threads;
   o.view.samples_x = a.samples_x;
   o.view.samples_y = std::max(1u, a.samples_x * 9 / 16);
   const loadgen::LoadResult r = loadgen::run_load(o);
@@ -73,6 +75,10 @@ Register reg{"load", "Load-test a server with synthetic cameras (client library 
   sub.add_option("--seed", a->seed, "Path seed")->capture_default_str();
   sub.add_option("--samples", a->samples_x, "Screen samples across (rows: 9/16 of it)")->capture_default_str()
       ->check(CLI::Range(1u, 1024u));
+  sub.add_option("--workers", a->workers, "Camera threads (0: max(2, cores)); cameras are spread over them")
+      ->capture_default_str()->check(CLI::Range(0u, 256u));
+  sub.add_option("--io-threads", a->io_threads, "Client I/O threads shared by all connections")
+      ->capture_default_str()->check(CLI::Range(1u, 64u));
   sub.add_flag("--no-prefetch", a->no_prefetch, "Do not prefetch along the path");
   sub.callback([a] { run(*a); });
 }};
