@@ -96,8 +96,9 @@ void camera_frame(CameraRun& cam, const LoadOptions& o, const WorldFrame& world,
   cam.prev_segment = seg;
   const ViewNeeds needs = view_needs(world, path.at(t), L, grid, o.view);
   std::vector<ViewNeeds> ahead;
-  // Poses ahead move slowly: refresh their requests kPrefetchEvery frames (and at cuts).
-  if (o.prefetch && (cut || f % kPrefetchEvery == 0))
+  // Poses ahead move slowly: refresh their requests kPrefetchEvery frames (and at cuts),
+  // each camera on its own beat (a fleet of cameras does not prefetch in lockstep).
+  if (o.prefetch && (cut || (f + cam.id) % kPrefetchEvery == 0))
     for (double a : kPrefetchAhead)
       if (t + a < o.duration && path.segment(t + a) == seg)
         ahead.push_back(view_needs(world, path.at(t + a), L, grid, o.view));

@@ -11,7 +11,9 @@
 // Per frame a camera (1) works out the cells its view needs (view_tiles.hpp) and asks for
 // them, nearest first, at high priority; (2) prefetches the cells of its poses
 // kPrefetchAhead seconds ahead on the same path segment at lower priority (never across a
-// cut: a real client cannot see a teleport coming), every kPrefetchEvery frames; (3) checks which needed cells are not
+// cut: a real client cannot see a teleport coming), every kPrefetchEvery frames (camera c
+// at frames f with (f + c) % kPrefetchEvery == 0, so a fleet does not prefetch in
+// lockstep); (3) checks which needed cells are not
 // resident (a frame with holes: its lookups answered from coarser levels) and (4)
 // evaluates map.visibility at every receiver sample.
 //
