@@ -1,5 +1,8 @@
 #include "loadgen/server_watch.hpp"
 
+#include <unistd.h>
+
+#include <algorithm>
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
@@ -26,13 +29,42 @@ ProcMemory parse_proc_status(const std::string& text) {
   return m;
 }
 
-ProcMemory read_proc_memory(int pid) {
-  if (pid <= 0) return {};
-  std::ifstream f("/proc/" + std::to_string(pid) + "/status");
-  if (!f) return {};
+double parse_proc_stat_cpu(const std::string& text, double ticks_per_second) {
+  // "pid (comm) state ppid ...": comm may hold spaces and parentheses, so fields are
+  // counted after the last ')'; utime and stime are fields 14 and 15 (proc(5)).
+  const size_t close = text.rfind(')');
+  if (close == std::string::npos || ticks_per_second <= 0) return -1;
+  std::istringstream in(text.substr(close + 1));
+  std::string field;
+  unsigned long long utime = 0, stime = 0;
+  for (int i = 3; i <= 15; ++i) {
+    if (!(in >> field)) return -1;
+    if (i == 14) utime = std::strtoull(field.c_str(), nullptr, 10);
+    if (i == 15) stime = std::strtoull(field.c_str(), nullptr, 10);
+  }
+  return double(utime + stime) / ticks_per_second;
+}
+
+namespace {
+std::string slurp(const std::string& path, bool& ok) {
+  std::ifstream f(path);
+  ok = bool(f);
+  if (!ok) return {};
   std::ostringstream s;
   s << f.rdbuf();
-  return parse_proc_status(s.str());
+  return s.str();
+}
+}  // namespace
+
+ProcMemory read_proc_memory(int pid) {
+  if (pid <= 0) return {};
+  bool ok = false;
+  const std::string status = slurp("/proc/" + std::to_string(pid) + "/status", ok);
+  if (!ok) return {};
+  ProcMemory m = parse_proc_status(status);
+  const std::string stat = slurp("/proc/" + std::to_string(pid) + "/stat", ok);
+  if (ok) m.cpu_seconds = std::max(0.0, parse_proc_stat_cpu(stat, double(::sysconf(_SC_CLK_TCK))));
+  return m;
 }
 
 uint64_t ServerSample::counter(const std::string& name) const {

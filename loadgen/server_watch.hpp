@@ -18,11 +18,15 @@ struct ProcMemory {
   uint64_t rss_bytes = 0; // VmRSS
   uint64_t hwm_bytes = 0; // VmHWM (peak RSS)
   uint64_t threads = 0;   // Threads
+  double cpu_seconds = 0; // user + system time so far (/proc/PID/stat utime + stime)
 };
-// Reads /proc/PID/status; alive = false if the process is gone (never throws).
+// Reads /proc/PID/status and /proc/PID/stat; alive = false if the process is gone
+// (never throws).
 ProcMemory read_proc_memory(int pid);
 // Parses the text of a /proc/PID/status file (exposed for tests).
 ProcMemory parse_proc_status(const std::string& text);
+// utime + stime in seconds from the text of a /proc/PID/stat file; -1 if malformed.
+double parse_proc_stat_cpu(const std::string& text, double ticks_per_second);
 
 struct ServerSample {
   double t = 0;  // seconds since the watch began

@@ -108,6 +108,10 @@ def main():
         ld = [proc(s, "load", "rss_bytes") for s in steady if proc(s, "load", "rss_bytes")]
         if ld:
             fig["load_rss_mib"] = {"max": max(ld) / MIB, "end": ld[-1] / MIB}
+        for name in ("server", "load"):
+            cpu = [proc(s, name, "cpu_cores") for s in steady if proc(s, name, "cpu_cores") is not None]
+            if cpu:
+                fig[name + "_cpu_cores_mean"] = sum(cpu) / len(cpu)
         thr = [proc(s, "load", "threads") for s in steady if proc(s, "load", "threads")]
         if thr:
             fig["load_threads_max"] = max(thr)
@@ -161,16 +165,18 @@ def main():
 
     # The table over time, then the figures and the verdict.
     lines = ["soak: %s" % a.command, "",
-             "%7s %6s %9s %9s %8s %9s %11s %9s %8s" % ("t_s", "conns", "req/s", "tiles/s", "MiB/s", "p99_us",
-                                                     "server_MiB", "load_MiB", "load_thr")]
+             "%7s %6s %9s %9s %8s %9s %11s %10s %9s %8s %8s" % (
+                 "t_s", "conns", "req/s", "tiles/s", "MiB/s", "p99_us", "server_MiB", "server_cpu", "load_MiB",
+                 "load_cpu", "load_thr")]
     for s in rows:
         sr, lr, lt = proc(s, "server", "rss_bytes"), proc(s, "load", "rss_bytes"), proc(s, "load", "threads")
-        lines.append("%7.1f %6d %9.0f %9.0f %8.2f %9d %11s %9s %8s" % (
+        sc, lc = proc(s, "server", "cpu_cores"), proc(s, "load", "cpu_cores")
+        lines.append("%7.1f %6d %9.0f %9.0f %8.2f %9d %11s %10s %9s %8s %8s" % (
             s["t_s"], s["connections_open"] - 1, s["requests_per_s"], s["tiles_per_s"], s["mib_per_s"],
-            s["p99_us"], "%.1f" % (sr / MIB) if sr else "-", "%.1f" % (lr / MIB) if lr else "-",
-            lt if lt else "-"))
+            s["p99_us"], "%.1f" % (sr / MIB) if sr else "-", "%.2f" % sc if sc is not None else "-",
+            "%.1f" % (lr / MIB) if lr else "-", "%.2f" % lc if lc is not None else "-", lt if lt else "-"))
     lines.append("(conns: the server's open connections less the monitor's; p99: server latency, GetTiles receipt")
-    lines.append(" -> tile queued, of that interval, as its log2 bucket's upper bound)")
+    lines.append(" -> tile written, of that interval, as its log2 bucket's upper bound; cpu: cores busy)")
     lines.append("")
     lines.append(json.dumps({k: v for k, v in fig.items() if k not in ("checks", "notes", "verdict")}, indent=1))
     lines.append("")

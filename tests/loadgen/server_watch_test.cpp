@@ -4,6 +4,8 @@
 
 #include <unistd.h>
 
+#include <ctime>
+
 #include "client/client.hpp"
 #include "load_fixture.hpp"
 #include "loadgen/server_watch.hpp"
@@ -19,12 +21,24 @@ TEST(ServerWatch, ParsesProcStatus) {
   EXPECT_EQ(m.hwm_bytes, 200ull << 20);
   EXPECT_EQ(m.threads, 7u);
   EXPECT_FALSE(parse_proc_status("Name:\tzombie\nState:\tZ (zombie)\nThreads:\t1\n").alive);
+  const auto burn_until = std::clock() + CLOCKS_PER_SEC / 20;  // 50 ms of CPU: a few ticks
+  while (std::clock() < burn_until) {
+  }
   const ProcMemory self = read_proc_memory(::getpid());
   EXPECT_TRUE(self.alive);
   EXPECT_GT(self.rss_bytes, 0u);
   EXPECT_GE(self.hwm_bytes, self.rss_bytes);
+  EXPECT_GT(self.cpu_seconds, 0.0);
   EXPECT_FALSE(read_proc_memory(0).alive);
   EXPECT_FALSE(read_proc_memory(-5).alive);
+}
+
+TEST(ServerWatch, ParsesProcStatCpuTimes) {
+  // comm with a space and a ')' inside; utime 250, stime 50 ticks at 100 Hz = 3 s.
+  const std::string stat = "4242 (a b) c) S 1 4242 4242 0 -1 4194560 100 0 0 0 250 50 0 0 20 0 8 0 1 2 3";
+  EXPECT_DOUBLE_EQ(parse_proc_stat_cpu(stat, 100), 3.0);
+  EXPECT_EQ(parse_proc_stat_cpu("4242 (x) S 1 2", 100), -1);
+  EXPECT_EQ(parse_proc_stat_cpu("no parenthesis", 100), -1);
 }
 
 TEST(ServerWatch, HistogramQuantilesAreBucketBounds) {

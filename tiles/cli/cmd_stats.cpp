@@ -100,7 +100,7 @@ void run(const StatsArgs& a) {
   auto seconds = [&] { return std::chrono::duration<double>(Clock::now() - start).count(); };
   std::printf("%7s %6s %9s %9s %8s %9s %9s %6s", "t_s", "conns", "req/s", "tiles/s", "MiB/s", "p50_us", "p99_us",
               "errors");
-  for (const Watched& w : watched) std::printf(" %12s", (w.name + "_MiB").c_str());
+  for (const Watched& w : watched) std::printf(" %12s %8s", (w.name + "_MiB").c_str(), (w.name + "_cpu").c_str());
   std::printf("\n");
   std::fflush(stdout);
 
@@ -108,6 +108,8 @@ void run(const StatsArgs& a) {
   tr.rss_t.resize(watched.size());
   tr.rss_mib.resize(watched.size());
   std::optional<loadgen::ServerSample> prev;
+  std::vector<double> last_cpu(watched.size(), -1);
+  double last_t = 0;
   uint64_t failures = 0;
   for (uint64_t tick = 1;; ++tick) {
     const auto due = start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(a.interval * double(tick)));
@@ -160,14 +162,21 @@ void run(const StatsArgs& a) {
         tr.rss_t[i].push_back(double(j["t_s"]));
         tr.rss_mib[i].push_back(double(m.rss_bytes) / 1048576.0);
       }
+      // CPU use over the interval, in cores (1.0 = one core busy).
+      const double cpu = m.alive && last_cpu[i] >= 0 && j["t_s"].get<double>() > last_t
+                             ? (m.cpu_seconds - last_cpu[i]) / (j["t_s"].get<double>() - last_t)
+                             : 0.0;
+      last_cpu[i] = m.alive ? m.cpu_seconds : -1;
       j["proc"][w.name] = {{"pid", w.pid}, {"alive", m.alive}, {"rss_bytes", m.rss_bytes},
-                           {"hwm_bytes", m.hwm_bytes}, {"threads", m.threads}};
+                           {"hwm_bytes", m.hwm_bytes}, {"threads", m.threads}, {"cpu_seconds", m.cpu_seconds},
+                           {"cpu_cores", cpu}};
       if (!row.empty()) {
         char buf[64];
-        std::snprintf(buf, sizeof buf, " %12.1f", double(m.rss_bytes) / 1048576.0);
-        row += m.alive ? buf : "         gone";
+        std::snprintf(buf, sizeof buf, " %12.1f %8.2f", double(m.rss_bytes) / 1048576.0, cpu);
+        row += m.alive ? buf : "         gone        -";
       }
     }
+    last_t = j["t_s"].get<double>();
     if (!row.empty()) {
       std::printf("%s\n", row.c_str());
       std::fflush(stdout);
