@@ -67,6 +67,12 @@ struct ClientOptions {
   std::chrono::milliseconds backoff_initial{20};
   std::chrono::milliseconds backoff_max{2000};
   std::string client_name = "shadowtile-client";
+  // The catalog's key (proto/auth.hpp; proto::load_key_file reads one). When set, the
+  // client proves it to the server and requires the server's proof back: a server that
+  // does not ask for the key, or proves a different one, is refused. A refusal either way
+  // is final: the client stops reconnecting and open()/list_maps()/server_stats() throw
+  // st::Error saying why; maps already open keep answering from their caches.
+  std::vector<uint8_t> key;
   // Opens one encoded tile (the bytes stay in their cache slot while the evaluator
   // lives). Empty: st::open_encoded(the pack's encoding).
   std::function<std::unique_ptr<Evaluator>(std::span<const uint8_t>)> open_tile;
@@ -91,6 +97,7 @@ struct ClientStats {
   uint64_t frames_received = 0, bytes_received = 0, bytes_sent = 0;
   uint64_t protocol_errors = 0;
   bool connected = false;
+  bool refused = false;  // authentication failed (see ClientOptions::key); final
 };
 
 class RemoteMap;

@@ -98,6 +98,7 @@ ClientStats Fetcher::stats() const {
   std::lock_guard lock(stats_mu_);
   ClientStats s = stats_;
   s.connected = connected_.load();
+  s.refused = refused_.load();
   return s;
 }
 
@@ -105,6 +106,10 @@ ClientStats Fetcher::stats() const {
 
 proto::Message Fetcher::call(const proto::Message& request) {
   if (stopped_) throw Error("client: stopped");
+  if (refused_) {
+    std::lock_guard lock(stats_mu_);
+    throw Error("client: " + refusal_);
+  }
   auto promise = std::make_shared<std::promise<proto::Message>>();
   auto future = promise->get_future();
   auto c = std::make_shared<Control>();
@@ -117,6 +122,7 @@ proto::Message Fetcher::call(const proto::Message& request) {
   };
   asio::post(io_, [this, c] {
     if (stopping_io_) return c->done(proto::ErrorMessage{ErrorCode::shutting_down, "client stopped"});
+    if (refused_) return c->done(proto::ErrorMessage{ErrorCode::auth_failed, "authentication failed"});
     controls_.push_back(c);
     wake();
   });
@@ -192,7 +198,7 @@ asio::awaitable<void> Fetcher::run() {
   auto backoff = options_.backoff_initial;
   while (!stopping_io_) {
     const bool handshook = co_await session();
-    if (stopping_io_) break;
+    if (stopping_io_ || refused_) break;
     if (handshook) backoff = options_.backoff_initial;
     error_code ec;
     backoff_timer_.expires_after(backoff);
@@ -241,6 +247,54 @@ asio::awaitable<bool> Fetcher::read_frame(tcp::socket& sock, proto::Frame& out) 
   }
 }
 
+void Fetcher::refuse(const std::string& why) {
+  {
+    std::lock_guard lock(stats_mu_);
+    if (refused_) return;
+    refusal_ = why;
+    refused_ = true;
+  }
+  for (auto& c : controls_) c->done(proto::ErrorMessage{ErrorCode::auth_failed, proto::sanitize_text(why, 512)});
+  for (auto& [id, c] : controls_sent_) c->done(proto::ErrorMessage{ErrorCode::auth_failed, proto::sanitize_text(why, 512)});
+  controls_.clear();
+  controls_sent_.clear();
+}
+
+// PROTOCOL.md §11: with a key, prove it (Auth) and check the server's proof (AuthOk);
+// without one, there is nothing to do (a server wanting a key refused the Hello).
+asio::awaitable<bool> Fetcher::authenticate(tcp::socket& sock, const proto::HelloAck& ack) {
+  const bool server_wants_key = (ack.features & proto::kFeatureAuth) != 0;
+  if (options_.key.empty()) co_return true;  // check_hello_ack refused the bit unoffered
+  const std::string server = "server " + endpoint_.host + ":" + std::to_string(endpoint_.port);
+  if (!server_wants_key) {
+    refuse(server + " does not ask for the key: refusing to trust it (the client has a key)");
+    co_return false;
+  }
+  proto::Auth auth;
+  auth.client_nonce = proto::random_nonce();
+  auth.proof = proto::client_proof(options_.key, ack.nonce, auth.client_nonce);
+  std::vector<uint8_t> out;
+  const uint32_t id = next_id();
+  if (!proto::encode_message(auth, id, proto::kFlagFinal, limits_, out)) co_return false;
+  if (!co_await write(sock, out)) co_return false;
+  proto::Frame f;
+  if (!co_await read_frame(sock, f)) co_return false;
+  proto::Message m;
+  if (!proto::decode_message(f, limits_, m)) co_return false;
+  if (auto* e = std::get_if<proto::ErrorMessage>(&m)) {  // request id 0: the server closes
+    if (e->code == ErrorCode::auth_failed || e->code == ErrorCode::auth_required)
+      refuse(server + " refused the key: " + std::string(proto::to_string(e->code)) + ": " + e->message);
+    co_return false;
+  }
+  auto* ok = std::get_if<proto::AuthOk>(&m);
+  if (!ok || f.header.request_id != id) co_return false;
+  if (!proto::proofs_equal(ok->proof, proto::server_proof(options_.key, ack.nonce, auth.client_nonce))) {
+    refuse(server + " proved a different key: not the server this client was given a key for");
+    co_return false;
+  }
+  co_return true;
+}
+
 asio::awaitable<bool> Fetcher::session() {
   auto sock = std::make_shared<tcp::socket>(io_);
   socket_ = sock;
@@ -270,7 +324,8 @@ asio::awaitable<bool> Fetcher::session() {
   sock->set_option(tcp::no_delay(true), ec);
 
   // Handshake (PROTOCOL.md §5).
-  const proto::Hello hello = proto::make_hello(local_limits(options_), options_.client_name);
+  proto::Hello hello = proto::make_hello(local_limits(options_), options_.client_name);
+  if (!options_.key.empty()) hello.features |= proto::kFeatureAuth;
   std::vector<uint8_t> out;
   proto::Frame f;
   proto::HelloAck ack;
@@ -279,15 +334,27 @@ asio::awaitable<bool> Fetcher::session() {
   bool ok = bool(proto::encode_message(hello, next_id(), proto::kFlagFinal, limits_, out));
   if (ok) ok = co_await write(*sock, out);
   if (ok) ok = co_await read_frame(*sock, f);
+  if (ok && f.header.type == MessageType::error) {
+    // A server that wants a key we do not have says so in the handshake: final.
+    proto::ErrorMessage e;
+    if (proto::decode_payload(f.payload, limits_, e) &&
+        (e.code == ErrorCode::auth_required || e.code == ErrorCode::auth_failed))
+      refuse("server " + endpoint_.host + ":" + std::to_string(endpoint_.port) + " refused the connection: " +
+             std::string(proto::to_string(e.code)) + ": " + e.message);
+    ok = false;
+  }
   ok = ok && f.header.type == MessageType::hello_ack && proto::decode_payload(f.payload, limits_, ack) &&
        proto::check_hello_ack(hello, ack, negotiated);
+  if (ok) {
+    limits_ = negotiated;
+    parser_->set_limits(negotiated);
+  }
+  if (ok) ok = co_await authenticate(*sock, ack);
   if (!ok || stopping_io_) {
     fail_connect();
     end_session();
     co_return false;
   }
-  limits_ = negotiated;
-  parser_->set_limits(negotiated);
   connected_ = true;
   {
     std::lock_guard lock(stats_mu_);

@@ -78,6 +78,9 @@ class Fetcher : public std::enable_shared_from_this<Fetcher> {
   void answer_control(uint32_t request_id, proto::Message&& m);
   void reopen(MapSlot& slot);
   void end_session();
+  // Final: authentication failed one way or the other (I/O thread).
+  void refuse(const std::string& why);
+  asio::awaitable<bool> authenticate(tcp::socket& sock, const proto::HelloAck& ack);
   void wake() { wake_timer_.cancel(); }
   uint32_t next_id();
 
@@ -106,7 +109,8 @@ class Fetcher : public std::enable_shared_from_this<Fetcher> {
   bool writing_ = false, stopping_io_ = false;
   Clock::time_point write_started_, last_rx_;
 
-  std::atomic<bool> connected_{false}, stopped_{false};
+  std::atomic<bool> connected_{false}, stopped_{false}, refused_{false};
+  std::string refusal_;  // why, once refused_ (guarded by stats_mu_)
   mutable std::mutex stats_mu_;
   ClientStats stats_;
 };

@@ -16,6 +16,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "proto/limits.hpp"
 #include "server/catalog.hpp"
@@ -40,6 +41,9 @@ struct ServerOptions {
   std::chrono::milliseconds read_timeout{10000};      // a frame must complete this long after its first byte
   std::chrono::milliseconds write_timeout{10000};     // one write must complete
   std::string server_name = "shadowtile-server";
+  // The catalog's key (proto/auth.hpp): when set, a client must prove it holds the key
+  // (HMAC-SHA256 challenge-response) before it may list, open or read anything.
+  std::vector<uint8_t> key;
   // Periodic stats line (0: none), written through `log`.
   std::chrono::milliseconds stats_interval{0};
   std::function<void(const std::string&)> log;  // default: stderr

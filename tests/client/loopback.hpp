@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "proto/proto.hpp"
 #include "server/server.hpp"
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/hierarchy.hpp"
@@ -61,6 +62,15 @@ class RawSocket {
  private:
   int fd_ = -1;
 };
+
+// One frame (header + payload) read from a raw socket; ok false if none came whole.
+struct RawFrame {
+  proto::FrameHeader header;
+  std::vector<uint8_t> payload;
+  bool ok = false;
+};
+RawFrame read_frame(RawSocket& s);
+proto::ErrorCode error_code_of(const RawFrame& f);  // ok if the payload is no Error
 
 // Frames for raw tests (version 1, handshake limits).
 std::vector<uint8_t> hello_frame(uint32_t request_id = 1);

@@ -205,4 +205,25 @@ std::vector<uint8_t> open_map_frame(const std::string& name, uint32_t request_id
   return out;
 }
 
+RawFrame read_frame(RawSocket& s) {
+  RawFrame f;
+  auto h = s.recv(proto::kHeaderSize);
+  if (h.size() != proto::kHeaderSize) return f;
+  proto::Limits big;
+  big.max_frame_bytes = proto::kMaxFrameBytesCeiling;
+  if (!proto::parse_header(std::span<const uint8_t, proto::kHeaderSize>(h.data(), proto::kHeaderSize), big, f.header))
+    return f;
+  f.payload = s.recv(f.header.payload_length);
+  f.ok = f.payload.size() == f.header.payload_length;
+  return f;
+}
+
+proto::ErrorCode error_code_of(const RawFrame& f) {
+  proto::ErrorMessage e;
+  proto::Limits big;
+  big.max_frame_bytes = proto::kMaxFrameBytesCeiling;
+  if (!proto::decode_payload(f.payload, big, e)) return proto::ErrorCode::ok;
+  return e.code;
+}
+
 }  // namespace st::looptest
