@@ -48,7 +48,10 @@ bool wait_until(const std::function<bool()>& pred, std::chrono::milliseconds tim
 // A blocking TCP connection with receive/send timeouts (SO_RCVTIMEO/SO_SNDTIMEO).
 class RawSocket {
  public:
-  RawSocket(uint16_t port, std::chrono::milliseconds timeout = std::chrono::seconds(5));
+  // `source`: the local IPv4 address to connect from (any of 127.0.0.0/8 works on
+  // loopback), so a test can play clients at different addresses.
+  RawSocket(uint16_t port, std::chrono::milliseconds timeout = std::chrono::seconds(5),
+            const char* source = nullptr);
   ~RawSocket();
   RawSocket(const RawSocket&) = delete;
   RawSocket& operator=(const RawSocket&) = delete;

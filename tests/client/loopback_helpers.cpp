@@ -135,7 +135,7 @@ bool wait_until(const std::function<bool()>& pred, std::chrono::milliseconds tim
 
 // ---------------------------------------------------------------- RawSocket
 
-RawSocket::RawSocket(uint16_t port, std::chrono::milliseconds timeout) {
+RawSocket::RawSocket(uint16_t port, std::chrono::milliseconds timeout, const char* source) {
   fd_ = ::socket(AF_INET, SOCK_STREAM, 0);
   if (fd_ < 0) throw Error("socket failed");
   timeval tv{};
@@ -145,12 +145,24 @@ RawSocket::RawSocket(uint16_t port, std::chrono::milliseconds timeout) {
   ::setsockopt(fd_, SOL_SOCKET, SO_SNDTIMEO, &tv, sizeof tv);
   int one = 1;
   ::setsockopt(fd_, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+  if (source) {
+    sockaddr_in from{};
+    from.sin_family = AF_INET;
+    if (::inet_pton(AF_INET, source, &from.sin_addr) != 1 ||
+        ::bind(fd_, reinterpret_cast<sockaddr*>(&from), sizeof from) != 0) {
+      ::close(fd_);
+      throw Error(std::string("bind to ") + source + " failed: " + std::strerror(errno));
+    }
+  }
   sockaddr_in a{};
   a.sin_family = AF_INET;
   a.sin_port = htons(port);
   a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  if (::connect(fd_, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0)
-    throw Error(std::string("connect failed: ") + std::strerror(errno));
+  if (::connect(fd_, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0) {
+    const int err = errno;
+    ::close(fd_);
+    throw Error(std::string("connect failed: ") + std::strerror(err));
+  }
 }
 
 RawSocket::~RawSocket() { close(); }
