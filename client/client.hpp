@@ -73,6 +73,12 @@ struct ClientOptions {
   // is final: the client stops reconnecting and open()/list_maps()/server_stats() throw
   // st::Error saying why; maps already open keep answering from their caches.
   std::vector<uint8_t> key;
+  // TLS (server started with --tls-cert/--tls-key): the server's certificate must chain to
+  // tls_ca_file (PEM; empty: the system's trust store) and name tls_server_name (empty:
+  // the endpoint's host) in its subjectAltName. A failed handshake is retried like a
+  // failed connect; its reason appears in the timeout errors of open() and friends.
+  bool tls = false;
+  std::string tls_ca_file, tls_server_name;
   // Opens one encoded tile (the bytes stay in their cache slot while the evaluator
   // lives). Empty: st::open_encoded(the pack's encoding).
   std::function<std::unique_ptr<Evaluator>(std::span<const uint8_t>)> open_tile;

@@ -41,6 +41,18 @@ Fetcher::Fetcher(Endpoint endpoint, ClientOptions options)
     throw Error("client: cache_slots, tiles_per_request and want_capacity must be > 0");
   if (options_.backoff_initial.count() <= 0 || options_.backoff_max < options_.backoff_initial)
     throw Error("client: backoff_initial must be > 0 and <= backoff_max");
+  if (options_.tls) {
+    tls_ = std::make_unique<asio::ssl::context>(asio::ssl::context::tls_client);
+    tls_->set_options(asio::ssl::context::default_workarounds | asio::ssl::context::no_sslv2 |
+                      asio::ssl::context::no_sslv3 | asio::ssl::context::no_tlsv1 |
+                      asio::ssl::context::no_tlsv1_1);
+    tls_->set_verify_mode(asio::ssl::verify_peer);
+    error_code ec;
+    if (options_.tls_ca_file.empty()) tls_->set_default_verify_paths(ec);
+    else tls_->load_verify_file(options_.tls_ca_file, ec);
+    if (ec)
+      throw Error("client: TLS CA file '" + options_.tls_ca_file + "': " + ec.message());
+  }
   rx_.resize(kReadChunk);
   int fd = ::dup(notifier_->fd());
   if (fd < 0) throw Error("client: dup(eventfd) failed");
@@ -66,10 +78,10 @@ void Fetcher::stop() {
   if (stopped_.exchange(true)) return;
   asio::post(io_, [this] {
     stopping_io_ = true;
-    error_code ec;
-    if (socket_) socket_->close(ec);
+    if (socket_) socket_->close();
     wake_timer_.cancel();
     backoff_timer_.cancel();
+    error_code ec;
     notify_desc_.close(ec);  // ends notifier_loop
     for (auto& c : controls_) c->done(proto::ErrorMessage{ErrorCode::shutting_down, "client stopped"});
     for (auto& [id, c] : controls_sent_) c->done(proto::ErrorMessage{ErrorCode::shutting_down, "client stopped"});
@@ -135,10 +147,14 @@ proto::Message Fetcher::call(const proto::Message& request) {
           break;
         }
     });
+    std::string why;
+    if (!connected_) {
+      std::lock_guard lock(stats_mu_);
+      why = " (not connected" + (last_failure_.empty() ? std::string() : ": " + last_failure_) + ")";
+    }
     throw Error("client: no answer to " + std::string(proto::to_string(proto::type_of(request))) + " from " +
                 endpoint_.host + ":" + std::to_string(endpoint_.port) + " within " +
-                std::to_string(options_.request_timeout.count()) + " ms" +
-                (connected_ ? "" : " (not connected)"));
+                std::to_string(options_.request_timeout.count()) + " ms" + why);
   }
   proto::Message m = future.get();
   if (auto* e = std::get_if<proto::ErrorMessage>(&m))
@@ -207,11 +223,11 @@ asio::awaitable<void> Fetcher::run() {
   }
 }
 
-asio::awaitable<bool> Fetcher::write(tcp::socket& sock, const std::vector<uint8_t>& bytes) {
+asio::awaitable<bool> Fetcher::write(net::Stream& sock, const std::vector<uint8_t>& bytes) {
   error_code ec;
   writing_ = true;
   write_started_ = Clock::now();
-  co_await asio::async_write(sock, asio::buffer(bytes), asio::redirect_error(asio::use_awaitable, ec));
+  co_await sock.write(asio::buffer(bytes), ec);
   writing_ = false;
   if (ec) co_return false;
   std::lock_guard lock(stats_mu_);
@@ -219,7 +235,7 @@ asio::awaitable<bool> Fetcher::write(tcp::socket& sock, const std::vector<uint8_
   co_return true;
 }
 
-asio::awaitable<bool> Fetcher::read_frame(tcp::socket& sock, proto::Frame& out) {
+asio::awaitable<bool> Fetcher::read_frame(net::Stream& sock, proto::Frame& out) {
   for (;;) {
     if (rx_begin_ < rx_end_) {
       auto r = parser_->feed(std::span<const uint8_t>(rx_.data() + rx_begin_, rx_end_ - rx_begin_));
@@ -237,7 +253,7 @@ asio::awaitable<bool> Fetcher::read_frame(tcp::socket& sock, proto::Frame& out) 
       }
     }
     error_code ec;
-    size_t n = co_await sock.async_read_some(asio::buffer(rx_), asio::redirect_error(asio::use_awaitable, ec));
+    size_t n = co_await sock.read_some(asio::buffer(rx_), ec);
     if (ec) co_return false;
     rx_begin_ = 0;
     rx_end_ = n;
@@ -245,6 +261,11 @@ asio::awaitable<bool> Fetcher::read_frame(tcp::socket& sock, proto::Frame& out) 
     std::lock_guard lock(stats_mu_);
     stats_.bytes_received += n;
   }
+}
+
+void Fetcher::note_failure(const std::string& why) {
+  std::lock_guard lock(stats_mu_);
+  last_failure_ = why;
 }
 
 void Fetcher::refuse(const std::string& why) {
@@ -262,7 +283,7 @@ void Fetcher::refuse(const std::string& why) {
 
 // PROTOCOL.md §11: with a key, prove it (Auth) and check the server's proof (AuthOk);
 // without one, there is nothing to do (a server wanting a key refused the Hello).
-asio::awaitable<bool> Fetcher::authenticate(tcp::socket& sock, const proto::HelloAck& ack) {
+asio::awaitable<bool> Fetcher::authenticate(net::Stream& sock, const proto::HelloAck& ack) {
   const bool server_wants_key = (ack.features & proto::kFeatureAuth) != 0;
   if (options_.key.empty()) co_return true;  // check_hello_ack refused the bit unoffered
   const std::string server = "server " + endpoint_.host + ":" + std::to_string(endpoint_.port);
@@ -296,7 +317,7 @@ asio::awaitable<bool> Fetcher::authenticate(tcp::socket& sock, const proto::Hell
 }
 
 asio::awaitable<bool> Fetcher::session() {
-  auto sock = std::make_shared<tcp::socket>(io_);
+  auto sock = std::make_shared<net::Stream>(tcp::socket(io_), tls_.get());
   socket_ = sock;
   ++epoch_;
   const uint64_t epoch = epoch_;
@@ -315,13 +336,23 @@ asio::awaitable<bool> Fetcher::session() {
   tcp::resolver resolver(io_);
   auto endpoints = co_await resolver.async_resolve(endpoint_.host, std::to_string(endpoint_.port),
                                                    asio::redirect_error(asio::use_awaitable, ec));
-  if (!ec) co_await asio::async_connect(*sock, endpoints, asio::redirect_error(asio::use_awaitable, ec));
+  if (!ec) co_await asio::async_connect(sock->socket(), endpoints, asio::redirect_error(asio::use_awaitable, ec));
+  if (!ec) sock->socket().set_option(tcp::no_delay(true), ec);
+  if (!ec && sock->tls()) {
+    // TLS: SNI and the certificate checked against the CA file for the expected name.
+    const std::string& name = options_.tls_server_name.empty() ? endpoint_.host : options_.tls_server_name;
+    SSL_set_tlsext_host_name(sock->tls_stream()->native_handle(), name.c_str());
+    sock->tls_stream()->set_verify_callback(asio::ssl::host_name_verification(name));
+    co_await sock->handshake(asio::ssl::stream_base::client, ec);
+    if (ec) note_failure("TLS handshake: " + ec.message());
+  } else if (ec) {
+    note_failure(ec.message());
+  }
   if (ec || stopping_io_) {
     fail_connect();
     end_session();
     co_return false;
   }
-  sock->set_option(tcp::no_delay(true), ec);
 
   // Handshake (PROTOCOL.md §5).
   proto::Hello hello = proto::make_hello(local_limits(options_), options_.client_name);
@@ -434,8 +465,7 @@ asio::awaitable<bool> Fetcher::session() {
 }
 
 void Fetcher::end_session() {
-  error_code ec;
-  if (socket_) socket_->close(ec);
+  if (socket_) socket_->close();
   if (connected_.exchange(false)) {
     std::lock_guard lock(stats_mu_);
     ++stats_.disconnects;
@@ -447,15 +477,14 @@ void Fetcher::end_session() {
   }
 }
 
-asio::awaitable<void> Fetcher::reader(std::shared_ptr<tcp::socket> sock) {
+asio::awaitable<void> Fetcher::reader(std::shared_ptr<net::Stream> sock) {
   proto::Frame f;
   while (sock->is_open()) {
     const bool got = co_await read_frame(*sock, f);
     if (!got) break;
     handle(std::move(f));
   }
-  error_code ec;
-  sock->close(ec);
+  sock->close();
   wake();  // the pump sees the closed socket and ends the session
 }
 
@@ -479,8 +508,7 @@ void Fetcher::handle(proto::Frame&& f) {
       std::lock_guard lock(stats_mu_);
       ++stats_.protocol_errors;
     }
-    error_code ec;
-    if (socket_) socket_->close(ec);
+    if (socket_) socket_->close();
   };
   auto end_tile_request = [&] {
     if (f.header.final() && tile_requests_.erase(id)) wake();
@@ -507,15 +535,14 @@ void Fetcher::handle(proto::Frame&& f) {
   if (f.header.type == MessageType::error && (id == proto::kNoRequest || tile_requests_.count(id))) {
     // The server gave up on the connection, or refused a tile batch as a whole
     // (overloaded, shutting down): reconnect, and re-request after the backoff.
-    error_code ec;
-    if (socket_) socket_->close(ec);
+    if (socket_) socket_->close();
     return;
   }
   if (f.header.type == MessageType::ping) return;  // v1 servers do not ping
   answer_control(id, std::move(m));
 }
 
-asio::awaitable<void> Fetcher::watchdog(std::shared_ptr<tcp::socket> sock, uint64_t epoch) {
+asio::awaitable<void> Fetcher::watchdog(std::shared_ptr<net::Stream> sock, uint64_t epoch) {
   const auto tick = std::clamp<std::chrono::milliseconds>(
       std::min(options_.connect_timeout, options_.io_timeout) / 8, std::chrono::milliseconds(2),
       std::chrono::milliseconds(250));
@@ -533,7 +560,7 @@ asio::awaitable<void> Fetcher::watchdog(std::shared_ptr<tcp::socket> sock, uint6
     if (writing_ && now - write_started_ > options_.io_timeout) stuck = true;
     if (connected_ && owed && now - last_rx_ > options_.io_timeout) stuck = true;
     if (stuck) {
-      sock->close(ec);
+      sock->close();
       wake();
       break;
     }

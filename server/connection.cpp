@@ -28,13 +28,13 @@ proto::Limits handshake_limits(const proto::Limits& server) {
 }  // namespace
 
 Connection::Connection(tcp::socket socket, ServerCore& core, asio::ip::address from)
-    : socket_(std::move(socket)),
+    : stream_(std::move(socket), core.tls.get()),
       core_(core),
       from_(std::move(from)),
       opt_(core.options),
-      writer_wake_(socket_.get_executor()),
-      reader_wake_(socket_.get_executor()),
-      watchdog_timer_(socket_.get_executor()),
+      writer_wake_(stream_.get_executor()),
+      reader_wake_(stream_.get_executor()),
+      watchdog_timer_(stream_.get_executor()),
       limits_(handshake_limits(core.options.limits)),
       parser_(limits_, proto::Receiver::server),
       in_flight_(core.options.limits.max_in_flight),
@@ -46,7 +46,7 @@ Connection::Connection(tcp::socket socket, ServerCore& core, asio::ip::address f
 }
 
 void Connection::start() {
-  auto ex = socket_.get_executor();
+  auto ex = stream_.get_executor();
   auto self = shared_from_this();
   asio::co_spawn(ex, reader(self), asio::detached);
   asio::co_spawn(ex, writer(self), asio::detached);
@@ -54,15 +54,13 @@ void Connection::start() {
 }
 
 void Connection::stop() {
-  asio::post(socket_.get_executor(), [self = shared_from_this()] { self->close(); });
+  asio::post(stream_.get_executor(), [self = shared_from_this()] { self->close(); });
 }
 
 void Connection::close() {
   if (closed_) return;
   closed_ = true;
-  error_code ignored;
-  socket_.shutdown(tcp::socket::shutdown_both, ignored);
-  socket_.close(ignored);
+  stream_.close();
   writer_wake_.cancel();
   reader_wake_.cancel();
   watchdog_timer_.cancel();
@@ -75,6 +73,14 @@ void Connection::wake_writer() { writer_wake_.cancel(); }
 asio::awaitable<void> Connection::reader(std::shared_ptr<Connection> /*keep alive*/) {
   std::vector<uint8_t> buf(kReadChunk);
   try {
+    if (stream_.tls()) {  // bounded by the handshake timeout (watchdog)
+      error_code ec;
+      co_await stream_.handshake(asio::ssl::stream_base::server, ec);
+      if (ec) {
+        core_.stats.protocol_error();
+        close();
+      }
+    }
     while (!closed_ && !closing_) {
       // Backpressure: a client that sends requests faster than it reads answers stops
       // being read once its control queue is full (TCP then pushes back on it).
@@ -85,8 +91,7 @@ asio::awaitable<void> Connection::reader(std::shared_ptr<Connection> /*keep aliv
       }
       if (closed_ || closing_) break;
       error_code ec;
-      size_t n = co_await socket_.async_read_some(asio::buffer(buf),
-                                                  asio::redirect_error(asio::use_awaitable, ec));
+      size_t n = co_await stream_.read_some(asio::buffer(buf), ec);
       if (ec) break;  // EOF, reset, or closed by the watchdog / stop()
       last_read_ = last_activity_ = Clock::now();
       core_.stats.received(n);
@@ -331,7 +336,7 @@ asio::awaitable<bool> Connection::write_buffers(const std::vector<asio::const_bu
   error_code ec;
   writing_ = true;
   write_started_ = Clock::now();
-  co_await asio::async_write(socket_, bufs, asio::redirect_error(asio::use_awaitable, ec));
+  co_await stream_.write(bufs, ec);
   writing_ = false;
   if (ec) co_return false;
   last_activity_ = Clock::now();

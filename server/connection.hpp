@@ -22,6 +22,7 @@
 #include <memory>
 #include <vector>
 
+#include "client/stream.hpp"
 #include "proto/auth.hpp"
 #include "proto/proto.hpp"
 #include "server/asio.hpp"
@@ -80,7 +81,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
   void prepare_tile(const PoppedTile& p, TileFrame& out);
   asio::awaitable<bool> write_buffers(const std::vector<asio::const_buffer>& bufs, size_t bytes);
 
-  tcp::socket socket_;
+  net::Stream stream_;  // plain TCP or TLS (core.tls)
   ServerCore& core_;
   const asio::ip::address from_;
   const ServerOptions& opt_;
