@@ -69,6 +69,18 @@ struct ClientOptions {
   std::chrono::milliseconds backoff_initial{20};
   std::chrono::milliseconds backoff_max{2000};
   std::string client_name = "shadowtile-client";
+  // The catalog's key (proto/auth.hpp; proto::load_key_file reads one). When set, the
+  // client proves it to the server and requires the server's proof back: a server that
+  // does not ask for the key, or proves a different one, is refused. A refusal either way
+  // is final: the client stops reconnecting and open()/list_maps()/server_stats() throw
+  // st::Error saying why; maps already open keep answering from their caches.
+  std::vector<uint8_t> key;
+  // TLS (server started with --tls-cert/--tls-key): the server's certificate must chain to
+  // tls_ca_file (PEM; empty: the system's trust store) and name tls_server_name (empty:
+  // the endpoint's host) in its subjectAltName. A failed handshake is retried like a
+  // failed connect; its reason appears in the timeout errors of open() and friends.
+  bool tls = false;
+  std::string tls_ca_file, tls_server_name;
   // Opens one encoded tile (the bytes stay in their cache slot while the evaluator
   // lives). Empty: st::open_encoded(the pack's encoding).
   std::function<std::unique_ptr<Evaluator>(std::span<const uint8_t>)> open_tile;
@@ -96,6 +108,7 @@ struct ClientStats {
   uint64_t frames_received = 0, bytes_received = 0, bytes_sent = 0;
   uint64_t protocol_errors = 0;
   bool connected = false;
+  bool refused = false;  // authentication failed (see ClientOptions::key); final
 };
 
 class RemoteMap;

@@ -46,6 +46,18 @@ Fetcher::Fetcher(Endpoint endpoint, ClientOptions options)
     throw Error("client: cache_slots, tiles_per_request and want_capacity must be > 0");
   if (options_.backoff_initial.count() <= 0 || options_.backoff_max < options_.backoff_initial)
     throw Error("client: backoff_initial must be > 0 and <= backoff_max");
+  if (options_.tls) {
+    tls_ = std::make_unique<asio::ssl::context>(asio::ssl::context::tls_client);
+    tls_->set_options(asio::ssl::context::default_workarounds | asio::ssl::context::no_sslv2 |
+                      asio::ssl::context::no_sslv3 | asio::ssl::context::no_tlsv1 |
+                      asio::ssl::context::no_tlsv1_1);
+    tls_->set_verify_mode(asio::ssl::verify_peer);
+    error_code ec;
+    if (options_.tls_ca_file.empty()) tls_->set_default_verify_paths(ec);
+    else tls_->load_verify_file(options_.tls_ca_file, ec);
+    if (ec)
+      throw Error("client: TLS CA file '" + options_.tls_ca_file + "': " + ec.message());
+  }
   rx_.resize(kReadChunk);
   int fd = ::dup(notifier_->fd());
   if (fd < 0) throw Error("client: dup(eventfd) failed");
@@ -100,11 +112,11 @@ void Fetcher::stop() {
   if (stopped_.exchange(true)) return;
   post([this] {
     stopping_io_ = true;
-    error_code ec;
-    if (socket_) socket_->close(ec);
+    if (socket_) socket_->close();
     wake_timer_.cancel();
     backoff_timer_.cancel();
     for (auto* t : watchdog_timers_) t->cancel();  // end now, not at the next tick
+    error_code ec;
     notify_desc_.close(ec);  // ends notifier_loop
     for (auto& c : controls_) c->done(proto::ErrorMessage{ErrorCode::shutting_down, "client stopped"});
     for (auto& [id, c] : controls_sent_) c->done(proto::ErrorMessage{ErrorCode::shutting_down, "client stopped"});
@@ -122,8 +134,8 @@ void Fetcher::stop() {
     finished.set_value();
     guard.join();
   } else if (pool_) {
-    // Coroutines end once their sockets and timers are closed (the watchdog within one
-    // tick); the pool's thread keeps running other fetchers meanwhile.
+    // Coroutines end once their sockets and timers are closed (the stop handler above
+    // closes and cancels them all); the pool's thread keeps running other fetchers.
     std::unique_lock lock(live_mu_);
     live_cv_.wait(lock, [this] { return live_ == 0; });
   }
@@ -138,6 +150,7 @@ ClientStats Fetcher::stats() const {
   std::lock_guard lock(stats_mu_);
   ClientStats s = stats_;
   s.connected = connected_.load();
+  s.refused = refused_.load();
   return s;
 }
 
@@ -145,6 +158,10 @@ ClientStats Fetcher::stats() const {
 
 proto::Message Fetcher::call(const proto::Message& request) {
   if (stopped_) throw Error("client: stopped");
+  if (refused_) {
+    std::lock_guard lock(stats_mu_);
+    throw Error("client: " + refusal_);
+  }
   auto promise = std::make_shared<std::promise<proto::Message>>();
   auto future = promise->get_future();
   auto c = std::make_shared<Control>();
@@ -157,6 +174,7 @@ proto::Message Fetcher::call(const proto::Message& request) {
   };
   post([this, c] {
     if (stopping_io_) return c->done(proto::ErrorMessage{ErrorCode::shutting_down, "client stopped"});
+    if (refused_) return c->done(proto::ErrorMessage{ErrorCode::auth_failed, "authentication failed"});
     controls_.push_back(c);
     wake();
   });
@@ -169,10 +187,14 @@ proto::Message Fetcher::call(const proto::Message& request) {
           break;
         }
     });
+    std::string why;
+    if (!connected_) {
+      std::lock_guard lock(stats_mu_);
+      why = " (not connected" + (last_failure_.empty() ? std::string() : ": " + last_failure_) + ")";
+    }
     throw Error("client: no answer to " + std::string(proto::to_string(proto::type_of(request))) + " from " +
                 endpoint_.host + ":" + std::to_string(endpoint_.port) + " within " +
-                std::to_string(options_.request_timeout.count()) + " ms" +
-                (connected_ ? "" : " (not connected)"));
+                std::to_string(options_.request_timeout.count()) + " ms" + why);
   }
   proto::Message m = future.get();
   if (auto* e = std::get_if<proto::ErrorMessage>(&m))
@@ -232,7 +254,7 @@ asio::awaitable<void> Fetcher::run() {
   auto backoff = options_.backoff_initial;
   while (!stopping_io_) {
     const bool handshook = co_await session();
-    if (stopping_io_) break;
+    if (stopping_io_ || refused_) break;
     if (handshook) backoff = options_.backoff_initial;
     error_code ec;
     backoff_timer_.expires_after(backoff);
@@ -241,11 +263,11 @@ asio::awaitable<void> Fetcher::run() {
   }
 }
 
-asio::awaitable<bool> Fetcher::write(tcp::socket& sock, const std::vector<uint8_t>& bytes) {
+asio::awaitable<bool> Fetcher::write(net::Stream& sock, const std::vector<uint8_t>& bytes) {
   error_code ec;
   writing_ = true;
   write_started_ = Clock::now();
-  co_await asio::async_write(sock, asio::buffer(bytes), asio::redirect_error(asio::use_awaitable, ec));
+  co_await sock.write(asio::buffer(bytes), ec);
   writing_ = false;
   if (ec) co_return false;
   std::lock_guard lock(stats_mu_);
@@ -253,7 +275,7 @@ asio::awaitable<bool> Fetcher::write(tcp::socket& sock, const std::vector<uint8_
   co_return true;
 }
 
-asio::awaitable<bool> Fetcher::read_frame(tcp::socket& sock, proto::Frame& out) {
+asio::awaitable<bool> Fetcher::read_frame(net::Stream& sock, proto::Frame& out) {
   for (;;) {
     if (rx_begin_ < rx_end_) {
       auto r = parser_->feed(std::span<const uint8_t>(rx_.data() + rx_begin_, rx_end_ - rx_begin_));
@@ -271,7 +293,7 @@ asio::awaitable<bool> Fetcher::read_frame(tcp::socket& sock, proto::Frame& out) 
       }
     }
     error_code ec;
-    size_t n = co_await sock.async_read_some(asio::buffer(rx_), asio::redirect_error(asio::use_awaitable, ec));
+    size_t n = co_await sock.read_some(asio::buffer(rx_), ec);
     if (ec) co_return false;
     rx_begin_ = 0;
     rx_end_ = n;
@@ -281,8 +303,61 @@ asio::awaitable<bool> Fetcher::read_frame(tcp::socket& sock, proto::Frame& out) 
   }
 }
 
+void Fetcher::note_failure(const std::string& why) {
+  std::lock_guard lock(stats_mu_);
+  last_failure_ = why;
+}
+
+void Fetcher::refuse(const std::string& why) {
+  {
+    std::lock_guard lock(stats_mu_);
+    if (refused_) return;
+    refusal_ = why;
+    refused_ = true;
+  }
+  for (auto& c : controls_) c->done(proto::ErrorMessage{ErrorCode::auth_failed, proto::sanitize_text(why, 512)});
+  for (auto& [id, c] : controls_sent_) c->done(proto::ErrorMessage{ErrorCode::auth_failed, proto::sanitize_text(why, 512)});
+  controls_.clear();
+  controls_sent_.clear();
+}
+
+// PROTOCOL.md §11: with a key, prove it (Auth) and check the server's proof (AuthOk);
+// without one, there is nothing to do (a server wanting a key refused the Hello).
+asio::awaitable<bool> Fetcher::authenticate(net::Stream& sock, const proto::HelloAck& ack) {
+  const bool server_wants_key = (ack.features & proto::kFeatureAuth) != 0;
+  if (options_.key.empty()) co_return true;  // check_hello_ack refused the bit unoffered
+  const std::string server = "server " + endpoint_.host + ":" + std::to_string(endpoint_.port);
+  if (!server_wants_key) {
+    refuse(server + " does not ask for the key: refusing to trust it (the client has a key)");
+    co_return false;
+  }
+  proto::Auth auth;
+  auth.client_nonce = proto::random_nonce();
+  auth.proof = proto::client_proof(options_.key, ack.nonce, auth.client_nonce);
+  std::vector<uint8_t> out;
+  const uint32_t id = next_id();
+  if (!proto::encode_message(auth, id, proto::kFlagFinal, limits_, out)) co_return false;
+  if (!co_await write(sock, out)) co_return false;
+  proto::Frame f;
+  if (!co_await read_frame(sock, f)) co_return false;
+  proto::Message m;
+  if (!proto::decode_message(f, limits_, m)) co_return false;
+  if (auto* e = std::get_if<proto::ErrorMessage>(&m)) {  // request id 0: the server closes
+    if (e->code == ErrorCode::auth_failed || e->code == ErrorCode::auth_required)
+      refuse(server + " refused the key: " + std::string(proto::to_string(e->code)) + ": " + e->message);
+    co_return false;
+  }
+  auto* ok = std::get_if<proto::AuthOk>(&m);
+  if (!ok || f.header.request_id != id) co_return false;
+  if (!proto::proofs_equal(ok->proof, proto::server_proof(options_.key, ack.nonce, auth.client_nonce))) {
+    refuse(server + " proved a different key: not the server this client was given a key for");
+    co_return false;
+  }
+  co_return true;
+}
+
 asio::awaitable<bool> Fetcher::session() {
-  auto sock = std::make_shared<tcp::socket>(io_);
+  auto sock = std::make_shared<net::Stream>(tcp::socket(io_), tls_.get());
   socket_ = sock;
   ++epoch_;
   const uint64_t epoch = epoch_;
@@ -301,16 +376,27 @@ asio::awaitable<bool> Fetcher::session() {
   tcp::resolver resolver(io_);
   auto endpoints = co_await resolver.async_resolve(endpoint_.host, std::to_string(endpoint_.port),
                                                    asio::redirect_error(asio::use_awaitable, ec));
-  if (!ec) co_await asio::async_connect(*sock, endpoints, asio::redirect_error(asio::use_awaitable, ec));
+  if (!ec) co_await asio::async_connect(sock->socket(), endpoints, asio::redirect_error(asio::use_awaitable, ec));
+  if (!ec) sock->socket().set_option(tcp::no_delay(true), ec);
+  if (!ec && sock->tls()) {
+    // TLS: SNI and the certificate checked against the CA file for the expected name.
+    const std::string& name = options_.tls_server_name.empty() ? endpoint_.host : options_.tls_server_name;
+    SSL_set_tlsext_host_name(sock->tls_stream()->native_handle(), name.c_str());
+    sock->tls_stream()->set_verify_callback(asio::ssl::host_name_verification(name));
+    co_await sock->handshake(asio::ssl::stream_base::client, ec);
+    if (ec) note_failure("TLS handshake: " + ec.message());
+  } else if (ec) {
+    note_failure(ec.message());
+  }
   if (ec || stopping_io_) {
     fail_connect();
     end_session();
     co_return false;
   }
-  sock->set_option(tcp::no_delay(true), ec);
 
   // Handshake (PROTOCOL.md §5).
-  const proto::Hello hello = proto::make_hello(local_limits(options_), options_.client_name);
+  proto::Hello hello = proto::make_hello(local_limits(options_), options_.client_name);
+  if (!options_.key.empty()) hello.features |= proto::kFeatureAuth;
   std::vector<uint8_t> out;
   proto::Frame f;
   proto::HelloAck ack;
@@ -319,15 +405,27 @@ asio::awaitable<bool> Fetcher::session() {
   bool ok = bool(proto::encode_message(hello, next_id(), proto::kFlagFinal, limits_, out));
   if (ok) ok = co_await write(*sock, out);
   if (ok) ok = co_await read_frame(*sock, f);
+  if (ok && f.header.type == MessageType::error) {
+    // A server that wants a key we do not have says so in the handshake: final.
+    proto::ErrorMessage e;
+    if (proto::decode_payload(f.payload, limits_, e) &&
+        (e.code == ErrorCode::auth_required || e.code == ErrorCode::auth_failed))
+      refuse("server " + endpoint_.host + ":" + std::to_string(endpoint_.port) + " refused the connection: " +
+             std::string(proto::to_string(e.code)) + ": " + e.message);
+    ok = false;
+  }
   ok = ok && f.header.type == MessageType::hello_ack && proto::decode_payload(f.payload, limits_, ack) &&
        proto::check_hello_ack(hello, ack, negotiated);
+  if (ok) {
+    limits_ = negotiated;
+    parser_->set_limits(negotiated);
+  }
+  if (ok) ok = co_await authenticate(*sock, ack);
   if (!ok || stopping_io_) {
     fail_connect();
     end_session();
     co_return false;
   }
-  limits_ = negotiated;
-  parser_->set_limits(negotiated);
   connected_ = true;
   {
     std::lock_guard lock(stats_mu_);
@@ -407,8 +505,7 @@ asio::awaitable<bool> Fetcher::session() {
 }
 
 void Fetcher::end_session() {
-  error_code ec;
-  if (socket_) socket_->close(ec);
+  if (socket_) socket_->close();
   if (connected_.exchange(false)) {
     std::lock_guard lock(stats_mu_);
     ++stats_.disconnects;
@@ -420,15 +517,14 @@ void Fetcher::end_session() {
   }
 }
 
-asio::awaitable<void> Fetcher::reader(std::shared_ptr<tcp::socket> sock) {
+asio::awaitable<void> Fetcher::reader(std::shared_ptr<net::Stream> sock) {
   proto::Frame f;
   while (sock->is_open()) {
     const bool got = co_await read_frame(*sock, f);
     if (!got) break;
     handle(std::move(f));
   }
-  error_code ec;
-  sock->close(ec);
+  sock->close();
   wake();  // the pump sees the closed socket and ends the session
 }
 
@@ -452,8 +548,7 @@ void Fetcher::handle(proto::Frame&& f) {
       std::lock_guard lock(stats_mu_);
       ++stats_.protocol_errors;
     }
-    error_code ec;
-    if (socket_) socket_->close(ec);
+    if (socket_) socket_->close();
   };
   auto end_tile_request = [&] {
     if (f.header.final() && tile_requests_.erase(id)) wake();
@@ -480,15 +575,14 @@ void Fetcher::handle(proto::Frame&& f) {
   if (f.header.type == MessageType::error && (id == proto::kNoRequest || tile_requests_.count(id))) {
     // The server gave up on the connection, or refused a tile batch as a whole
     // (overloaded, shutting down): reconnect, and re-request after the backoff.
-    error_code ec;
-    if (socket_) socket_->close(ec);
+    if (socket_) socket_->close();
     return;
   }
   if (f.header.type == MessageType::ping) return;  // v1 servers do not ping
   answer_control(id, std::move(m));
 }
 
-asio::awaitable<void> Fetcher::watchdog(std::shared_ptr<tcp::socket> sock, uint64_t epoch) {
+asio::awaitable<void> Fetcher::watchdog(std::shared_ptr<net::Stream> sock, uint64_t epoch) {
   const auto tick = std::clamp<std::chrono::milliseconds>(
       std::min(options_.connect_timeout, options_.io_timeout) / 8, std::chrono::milliseconds(2),
       std::chrono::milliseconds(250));
@@ -512,7 +606,7 @@ asio::awaitable<void> Fetcher::watchdog(std::shared_ptr<tcp::socket> sock, uint6
     if (writing_ && now - write_started_ > options_.io_timeout) stuck = true;
     if (connected_ && owed && now - last_rx_ > options_.io_timeout) stuck = true;
     if (stuck) {
-      sock->close(ec);
+      sock->close();
       wake();
       break;
     }

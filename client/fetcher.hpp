@@ -31,6 +31,7 @@
 
 #include "client/client.hpp"
 #include "client/io_pool.hpp"
+#include "client/stream.hpp"
 #include "client/remote_map.hpp"
 #include "proto/proto.hpp"
 
@@ -38,6 +39,7 @@ namespace st::client {
 
 namespace asio = boost::asio;
 using tcp = asio::ip::tcp;
+using boost::system::error_code;
 
 class Fetcher : public std::enable_shared_from_this<Fetcher> {
  public:
@@ -73,16 +75,20 @@ class Fetcher : public std::enable_shared_from_this<Fetcher> {
 
   asio::awaitable<void> run();
   asio::awaitable<bool> session();  // true if the handshake succeeded
-  asio::awaitable<void> reader(std::shared_ptr<tcp::socket> sock);
-  asio::awaitable<void> watchdog(std::shared_ptr<tcp::socket> sock, uint64_t epoch);
+  asio::awaitable<void> reader(std::shared_ptr<net::Stream> sock);
+  asio::awaitable<void> watchdog(std::shared_ptr<net::Stream> sock, uint64_t epoch);
   asio::awaitable<void> notifier_loop();
-  asio::awaitable<bool> write(tcp::socket& sock, const std::vector<uint8_t>& bytes);
-  asio::awaitable<bool> read_frame(tcp::socket& sock, proto::Frame& out);
+  asio::awaitable<bool> write(net::Stream& sock, const std::vector<uint8_t>& bytes);
+  asio::awaitable<bool> read_frame(net::Stream& sock, proto::Frame& out);
 
   void handle(proto::Frame&& f);
   void answer_control(uint32_t request_id, proto::Message&& m);
   void reopen(MapSlot& slot);
   void end_session();
+  // Final: authentication failed one way or the other (I/O thread).
+  void refuse(const std::string& why);
+  void note_failure(const std::string& why);  // why the last connect failed (for messages)
+  asio::awaitable<bool> authenticate(net::Stream& sock, const proto::HelloAck& ack);
   void wake() { wake_timer_.cancel(); }
   uint32_t next_id();
   // co_spawn / post on io_, counted in live_ (released when the coroutine or handler ends).
@@ -105,7 +111,8 @@ class Fetcher : public std::enable_shared_from_this<Fetcher> {
   std::thread thread_;
 
   // I/O-thread state.
-  std::shared_ptr<tcp::socket> socket_;
+  std::unique_ptr<asio::ssl::context> tls_;  // ClientOptions::tls (outlives the streams)
+  std::shared_ptr<net::Stream> socket_;
   uint64_t epoch_ = 0;  // sessions so far
   proto::Limits limits_;
   std::unique_ptr<proto::FrameParser> parser_;
@@ -120,7 +127,9 @@ class Fetcher : public std::enable_shared_from_this<Fetcher> {
   std::vector<asio::steady_timer*> watchdog_timers_;  // live watchdogs' ticks (stop() cancels them)
   Clock::time_point write_started_, last_rx_;
 
-  std::atomic<bool> connected_{false}, stopped_{false};
+  std::atomic<bool> connected_{false}, stopped_{false}, refused_{false};
+  std::string refusal_;       // why, once refused_ (guarded by stats_mu_)
+  std::string last_failure_;  // guarded by stats_mu_
   std::mutex live_mu_;
   std::condition_variable live_cv_;
   uint64_t live_ = 0;  // coroutines and handlers not yet finished on io_

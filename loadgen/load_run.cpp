@@ -225,11 +225,13 @@ LoadResult run_load(const LoadOptions& o_in) {
   {
     client::ClientOptions po;
     po.cache_slots = 1;
+    po.key = o.key;
     client::Client probe(o.endpoint, po);
     tile_bytes = probe.open(o.map).header().tile_bytes;
   }
   client::ClientOptions co;
   co.client_name = "shadowtile-load";
+  co.key = o.key;
   co.cache_slots = uint32_t(std::clamp<double>(o.cache_mb * 1048576.0 / std::max(1u, tile_bytes), 1, 1 << 24));
   // Every connection's fetcher on a few shared I/O threads (not one thread per
   // connection: 1,000 connections stay 1,000 sockets, not 1,000 threads).

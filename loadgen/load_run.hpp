@@ -35,6 +35,7 @@ namespace st::loadgen {
 struct LoadOptions {
   client::Endpoint endpoint;
   std::string map;
+  std::vector<uint8_t> key;  // the catalog key, when the server requires one
   uint32_t cameras = 4;
   uint32_t connections = 0;  // 0: one per camera; clamped to [1, cameras]
   PathKind path = PathKind::flyover;

@@ -81,6 +81,8 @@ Status check(const ListMaps&, const Limits&) { return {}; }
 Status check(const GetStats&, const Limits&) { return {}; }
 Status check(const Ping&, const Limits&) { return {}; }
 Status check(const Pong&, const Limits&) { return {}; }
+Status check(const Auth&, const Limits&) { return {}; }
+Status check(const AuthOk&, const Limits&) { return {}; }
 
 Status check(const MapList& m, const Limits&) {
   if (m.maps.size() > kMaxMapsListed)

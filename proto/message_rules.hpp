@@ -12,6 +12,8 @@ namespace st::proto::detail {
 // ok, or the first broken rule as a typed Status naming message, field and index.
 Status check(const Hello& m, const Limits& limits);
 Status check(const HelloAck& m, const Limits& limits);
+Status check(const Auth& m, const Limits& limits);
+Status check(const AuthOk& m, const Limits& limits);
 Status check(const ErrorMessage& m, const Limits& limits);
 Status check(const ListMaps& m, const Limits& limits);
 Status check(const MapList& m, const Limits& limits);

@@ -160,6 +160,13 @@ void write(Writer& w, const Cancel& m) {
 
 void write(Writer& w, const Ping& m) { w.u64(m.timestamp); }
 
+void write(Writer& w, const Auth& m) {
+  w.bytes(m.client_nonce);
+  w.bytes(m.proof);
+}
+
+void write(Writer& w, const AuthOk& m) { w.bytes(m.proof); }
+
 void write(Writer& w, const Pong& m) {
   w.u64(m.echo_timestamp);
   w.u64(m.responder_timestamp);
@@ -219,6 +226,8 @@ ST_PROTO_ENCODE(Ping)
 ST_PROTO_ENCODE(Pong)
 ST_PROTO_ENCODE(GetStats)
 ST_PROTO_ENCODE(Stats)
+ST_PROTO_ENCODE(Auth)
+ST_PROTO_ENCODE(AuthOk)
 #undef ST_PROTO_ENCODE
 
 // ---- public decoders ---------------------------------------------------------------------
@@ -399,6 +408,21 @@ Status decode_payload(std::span<const std::uint8_t> p, const Limits&, Ping& m) {
   return r.finish();
 }
 
+Status decode_payload(std::span<const std::uint8_t> p, const Limits&, Auth& m) {
+  Reader r(p, "auth");
+  std::span<const std::uint8_t> v;
+  if (r.view(kNonceBytes, v, "client_nonce")) std::copy(v.begin(), v.end(), m.client_nonce.begin());
+  if (r.view(kProofBytes, v, "proof")) std::copy(v.begin(), v.end(), m.proof.begin());
+  return r.finish();
+}
+
+Status decode_payload(std::span<const std::uint8_t> p, const Limits&, AuthOk& m) {
+  Reader r(p, "auth_ok");
+  std::span<const std::uint8_t> v;
+  if (r.view(kProofBytes, v, "proof")) std::copy(v.begin(), v.end(), m.proof.begin());
+  return r.finish();
+}
+
 Status decode_payload(std::span<const std::uint8_t> p, const Limits&, Pong& m) {
   Reader r(p, "pong");
   r.u64(m.echo_timestamp, "echo_timestamp");
@@ -486,6 +510,8 @@ Status decode_message(const Frame& f, const Limits& limits, Message& out) {
     case MessageType::pong: return decode_into<Pong>(f, limits, out);
     case MessageType::get_stats: return decode_into<GetStats>(f, limits, out);
     case MessageType::stats: return decode_into<Stats>(f, limits, out);
+    case MessageType::auth: return decode_into<Auth>(f, limits, out);
+    case MessageType::auth_ok: return decode_into<AuthOk>(f, limits, out);
   }
   return Status::fail(ErrorCode::unknown_type,
                       "type " + std::to_string(static_cast<unsigned>(f.header.type)));

@@ -27,6 +27,13 @@
 namespace st::proto {
 
 inline constexpr std::size_t kNonceBytes = 32;          // FORMAT CONSTANT
+inline constexpr std::size_t kProofBytes = 32;          // FORMAT CONSTANT: HMAC-SHA256
+
+// Feature bits (Hello.features / HelloAck.features). FORMAT CONSTANTS.
+// kFeatureAuth: in a Hello, the client holds a key and can prove it (Auth); in a HelloAck,
+// the server requires that proof before any request (PROTOCOL.md §11).
+inline constexpr std::uint32_t kFeatureAuth = 0x0000'0001;
+inline constexpr std::uint32_t kKnownFeatures = kFeatureAuth;
 inline constexpr std::size_t kMaxMapsListed = 4096;
 inline constexpr std::size_t kMaxCounters = 1024;
 inline constexpr std::size_t kMaxHistograms = 64;
@@ -39,8 +46,8 @@ inline constexpr std::uint8_t kMaxResolutionLog2 = 30;   // DESIGN.md allows L <
 inline constexpr std::uint16_t kTileFlagZlib = 0x0001;
 
 // C->S. First frame of a connection (header version 1). Proposes a version range and the
-// limits this client accepts (see Limits). features: capability bits; none are defined
-// in version 1, unknown bits are ignored by the server.
+// limits this client accepts (see Limits). features: capability bits (kFeatureAuth);
+// unknown bits are ignored by the server.
 struct Hello {
   static constexpr MessageType kType = MessageType::hello;
   std::uint8_t min_version = kMinSupportedVersion;
@@ -54,8 +61,8 @@ struct Hello {
 };
 
 // S->C. The chosen version (the highest both speak) and limits (each <= the Hello's), and
-// a 32-byte server nonce reserved for a later challenge-response authentication (v1
-// clients ignore it; servers fill it from a CSPRNG or with zeros).
+// a 32-byte server nonce: the challenge of the Auth proof when features has kFeatureAuth
+// (then from a CSPRNG, fresh per connection); otherwise unused.
 struct HelloAck {
   static constexpr MessageType kType = MessageType::hello_ack;
   std::uint8_t version = kVersion1;
@@ -178,6 +185,25 @@ struct Cancel {
   bool operator==(const Cancel&) const = default;
 };
 
+// C->S, only when the HelloAck set kFeatureAuth, before any other request (PROTOCOL.md
+// §11): proof = HMAC-SHA256(key, "shadowtile auth v1 client" || server nonce || client_nonce).
+// Answered by AuthOk, or Error auth_failed and a close.
+struct Auth {
+  static constexpr MessageType kType = MessageType::auth;
+  std::array<std::uint8_t, kNonceBytes> client_nonce{};  // fresh per connection (CSPRNG)
+  std::array<std::uint8_t, kProofBytes> proof{};
+  bool operator==(const Auth&) const = default;
+};
+
+// S->C. The server's proof that it holds the same key, so a client never feeds a fake
+// server's tiles to its renderer: HMAC-SHA256(key, "shadowtile auth v1 server" ||
+// server nonce || client_nonce).
+struct AuthOk {
+  static constexpr MessageType kType = MessageType::auth_ok;
+  std::array<std::uint8_t, kProofBytes> proof{};
+  bool operator==(const AuthOk&) const = default;
+};
+
 struct Ping {
   static constexpr MessageType kType = MessageType::ping;
   std::uint64_t timestamp = 0;  // sender's clock, opaque to the receiver
@@ -225,7 +251,7 @@ struct Stats {
 
 using Message = std::variant<Hello, HelloAck, ErrorMessage, ListMaps, MapList, OpenMap,
                              MapInfo, GetTiles, TileData, TileError, Cancel, Ping, Pong,
-                             GetStats, Stats>;
+                             GetStats, Stats, Auth, AuthOk>;
 
 MessageType type_of(const Message& m);
 
@@ -247,6 +273,8 @@ ST_PROTO_CODEC(Ping)
 ST_PROTO_CODEC(Pong)
 ST_PROTO_CODEC(GetStats)
 ST_PROTO_CODEC(Stats)
+ST_PROTO_CODEC(Auth)
+ST_PROTO_CODEC(AuthOk)
 #undef ST_PROTO_CODEC
 
 // Appends one whole frame (header + payload) carrying `m`. Fails (out unchanged) if the

@@ -18,6 +18,7 @@
 //   their bytes, except the *_view functions, whose spans borrow the input.
 #pragma once
 
+#include "proto/auth.hpp"
 #include "proto/frame.hpp"
 #include "proto/handshake.hpp"
 #include "proto/limits.hpp"

@@ -22,6 +22,8 @@ bool is_known_type(std::uint16_t type) {
     case MessageType::pong:
     case MessageType::get_stats:
     case MessageType::stats:
+    case MessageType::auth:
+    case MessageType::auth_ok:
       return true;
   }
   return false;
@@ -35,6 +37,7 @@ Sender sender_of(MessageType type) {
     case MessageType::get_tiles:
     case MessageType::cancel:
     case MessageType::get_stats:
+    case MessageType::auth:
       return Sender::client;
     case MessageType::hello_ack:
     case MessageType::map_list:
@@ -42,6 +45,7 @@ Sender sender_of(MessageType type) {
     case MessageType::tile_data:
     case MessageType::tile_error:
     case MessageType::stats:
+    case MessageType::auth_ok:
       return Sender::server;
     case MessageType::error:
     case MessageType::ping:
@@ -68,6 +72,8 @@ std::string_view to_string(MessageType type) {
     case MessageType::pong: return "pong";
     case MessageType::get_stats: return "get_stats";
     case MessageType::stats: return "stats";
+    case MessageType::auth: return "auth";
+    case MessageType::auth_ok: return "auth_ok";
   }
   return "unknown";
 }
@@ -100,6 +106,8 @@ std::string_view to_string(ErrorCode code) {
     case ErrorCode::overloaded: return "overloaded";
     case ErrorCode::timeout: return "timeout";
     case ErrorCode::handshake_required: return "handshake_required";
+    case ErrorCode::auth_required: return "auth_required";
+    case ErrorCode::auth_failed: return "auth_failed";
   }
   return "unknown";
 }

@@ -78,6 +78,8 @@ enum class MessageType : std::uint16_t {
   pong = 0x0031,       // both
   get_stats = 0x0040,  // C->S
   stats = 0x0041,      // S->C
+  auth = 0x0050,       // C->S  proof of the catalog key (feature kFeatureAuth, §11)
+  auth_ok = 0x0051,    // S->C  the server's proof of the same key
 };
 
 // Which side may send a message type (the receiving parser rejects the other direction).
@@ -122,6 +124,8 @@ enum class ErrorCode : std::uint16_t {
   overloaded = 23,
   timeout = 24,
   handshake_required = 25,
+  auth_required = 26,  // the server needs a key: no Auth yet, or the client offered none
+  auth_failed = 27,    // the Auth proof does not match the server's key
 };
 
 std::string_view to_string(ErrorCode code);  // "bad_magic", ...; "unknown"

@@ -28,24 +28,25 @@ proto::Limits handshake_limits(const proto::Limits& server) {
 }  // namespace
 
 Connection::Connection(tcp::socket socket, ServerCore& core, asio::ip::address from)
-    : socket_(std::move(socket)),
+    : stream_(std::move(socket), core.tls.get()),
       core_(core),
       from_(std::move(from)),
       opt_(core.options),
-      writer_wake_(socket_.get_executor()),
-      reader_wake_(socket_.get_executor()),
-      watchdog_timer_(socket_.get_executor()),
+      writer_wake_(stream_.get_executor()),
+      reader_wake_(stream_.get_executor()),
+      watchdog_timer_(stream_.get_executor()),
       limits_(handshake_limits(core.options.limits)),
       parser_(limits_, proto::Receiver::server),
       in_flight_(core.options.limits.max_in_flight),
       tiles_(size_t(core.options.limits.max_in_flight) * core.options.limits.max_tiles_per_batch) {
   accepted_ = last_read_ = last_activity_ = frame_started_ = Clock::now();
+  authed_ = core.options.key.empty();
   writer_wake_.expires_at(Clock::time_point::max());
   reader_wake_.expires_at(Clock::time_point::max());
 }
 
 void Connection::start() {
-  auto ex = socket_.get_executor();
+  auto ex = stream_.get_executor();
   auto self = shared_from_this();
   asio::co_spawn(ex, reader(self), asio::detached);
   asio::co_spawn(ex, writer(self), asio::detached);
@@ -53,15 +54,13 @@ void Connection::start() {
 }
 
 void Connection::stop() {
-  asio::post(socket_.get_executor(), [self = shared_from_this()] { self->close(); });
+  asio::post(stream_.get_executor(), [self = shared_from_this()] { self->close(); });
 }
 
 void Connection::close() {
   if (closed_) return;
   closed_ = true;
-  error_code ignored;
-  socket_.shutdown(tcp::socket::shutdown_both, ignored);
-  socket_.close(ignored);
+  stream_.close();
   writer_wake_.cancel();
   reader_wake_.cancel();
   watchdog_timer_.cancel();
@@ -74,6 +73,14 @@ void Connection::wake_writer() { writer_wake_.cancel(); }
 asio::awaitable<void> Connection::reader(std::shared_ptr<Connection> /*keep alive*/) {
   std::vector<uint8_t> buf(kReadChunk);
   try {
+    if (stream_.tls()) {  // bounded by the handshake timeout (watchdog)
+      error_code ec;
+      co_await stream_.handshake(asio::ssl::stream_base::server, ec);
+      if (ec) {
+        core_.stats.protocol_error();
+        close();
+      }
+    }
     while (!closed_ && !closing_) {
       // Backpressure: a client that sends requests faster than it reads answers stops
       // being read once its control queue is full (TCP then pushes back on it).
@@ -84,8 +91,7 @@ asio::awaitable<void> Connection::reader(std::shared_ptr<Connection> /*keep aliv
       }
       if (closed_ || closing_) break;
       error_code ec;
-      size_t n = co_await socket_.async_read_some(asio::buffer(buf),
-                                                  asio::redirect_error(asio::use_awaitable, ec));
+      size_t n = co_await stream_.read_some(asio::buffer(buf), ec);
       if (ec) break;  // EOF, reset, or closed by the watchdog / stop()
       last_read_ = last_activity_ = Clock::now();
       core_.stats.received(n);
@@ -142,6 +148,11 @@ void Connection::handle(proto::Frame&& frame) {
     case MessageType::pong: return;  // answer to a ping we never send; harmless
     default: break;
   }
+  if (!authed_ && frame.header.type != MessageType::auth) {
+    // Nothing (not even whether a map exists) before the key is proven (PROTOCOL.md §11).
+    core_.stats.auth_failure();
+    return fail(ErrorCode::auth_required, "this server requires a key: send auth first");
+  }
   // Everything else is a request: it holds an in-flight slot until its FINAL answer.
   core_.stats.request();
   if (!admit(id)) return;
@@ -164,6 +175,7 @@ void Connection::handle(proto::Frame&& frame) {
       return answer(pong, id);
     }
     case MessageType::get_stats: return on_get_stats(id);
+    case MessageType::auth: return on_auth(id, std::get<proto::Auth>(msg));
     default:
       return answer_error(id, ErrorCode::unexpected_type,
                           std::string(proto::to_string(frame.header.type)) + " is not a request");
@@ -188,10 +200,15 @@ bool Connection::admit(uint32_t id) {
 }
 
 void Connection::on_hello(const proto::Frame& f, const proto::Hello& m) {
-  std::array<uint8_t, proto::kNonceBytes> nonce{};  // v1 clients ignore it (messages.hpp)
   proto::HelloAck ack;
   proto::Limits negotiated;
-  proto::Status s = proto::accept_hello(m, opt_.limits, nonce, opt_.server_name, ack, negotiated);
+  // Without a key the nonce stays zero (unused); with one it is the fresh challenge.
+  if (!opt_.key.empty()) server_nonce_ = proto::random_nonce();
+  proto::Status s = proto::accept_hello(m, opt_.limits, server_nonce_, opt_.server_name, ack, negotiated);
+  if (s && !opt_.key.empty()) {
+    s = proto::require_auth(m, ack);
+    if (!s) core_.stats.auth_failure();
+  }
   if (!s) return fail(s.code, proto::to_string(s));
   std::vector<uint8_t> out;
   s = proto::encode_message(ack, f.header.request_id, proto::kFlagFinal, limits_, out);
@@ -202,6 +219,24 @@ void Connection::on_hello(const proto::Frame& f, const proto::Hello& m) {
   in_flight_.set_capacity(negotiated.max_in_flight);
   handshaken_ = true;
   wake_writer();
+}
+
+void Connection::on_auth(uint32_t id, const proto::Auth& m) {
+  if (authed_) {
+    core_.stats.protocol_error();
+    return fail(ErrorCode::unexpected_type,
+                opt_.key.empty() ? "this server takes no key" : "already authenticated");
+  }
+  const proto::Proof want = proto::client_proof(opt_.key, server_nonce_, m.client_nonce);
+  if (!proto::proofs_equal(want, m.proof)) {
+    core_.stats.auth_failure();
+    core_.log("connection from " + from_.to_string() + " refused: wrong key");
+    return fail(ErrorCode::auth_failed, "wrong key");
+  }
+  authed_ = true;
+  proto::AuthOk ok;
+  ok.proof = proto::server_proof(opt_.key, server_nonce_, m.client_nonce);
+  answer(ok, id);
 }
 
 void Connection::on_open_map(uint32_t id, const proto::OpenMap& m) {
@@ -301,7 +336,7 @@ asio::awaitable<bool> Connection::write_buffers(const std::vector<asio::const_bu
   error_code ec;
   writing_ = true;
   write_started_ = Clock::now();
-  co_await asio::async_write(socket_, bufs, asio::redirect_error(asio::use_awaitable, ec));
+  co_await stream_.write(bufs, ec);
   writing_ = false;
   if (ec) co_return false;
   last_activity_ = Clock::now();
@@ -335,8 +370,11 @@ void Connection::prepare_tile(const PoppedTile& p, TileFrame& out) {
       meta.uncompressed_size = entry->raw_size;
       meta.payload_crc32 = entry->crc;  // end to end: the client checks what the builder wrote
     } catch (const Error& e) {
+      // Truncated or bit-flipped on disk since the server started: this tile fails alone
+      // (the client answers from the coarser level); the rest are still served.
       code = ErrorCode::internal;
-      why = e.what();
+      why = std::string("corrupt tile: ") + e.what();
+      core_.stats.tile_corrupt();
       core_.log(std::string("tile read failed: ") + e.what());
     }
   }
@@ -441,7 +479,7 @@ asio::awaitable<void> Connection::watchdog(std::shared_ptr<Connection> /*keep al
     const auto now = Clock::now();
     const bool owed = !control_.empty() || !tiles_.empty();
     const char* why = nullptr;
-    if (!handshaken_ && now - accepted_ > opt_.handshake_timeout) why = "handshake";
+    if ((!handshaken_ || !authed_) && now - accepted_ > opt_.handshake_timeout) why = "handshake";
     else if (writing_ && now - write_started_ > opt_.write_timeout) why = "write";
     else if (mid_frame() && now - frame_started_ > opt_.read_timeout) why = "read";
     else if (!owed && !writing_ && now - last_activity_ > opt_.idle_timeout) why = "idle";

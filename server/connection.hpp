@@ -22,6 +22,8 @@
 #include <memory>
 #include <vector>
 
+#include "client/stream.hpp"
+#include "proto/auth.hpp"
 #include "proto/proto.hpp"
 #include "server/asio.hpp"
 #include "server/server_core.hpp"
@@ -51,6 +53,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
   void on_get_tiles(uint32_t request_id, const proto::GetTiles& m);
   void on_cancel(const proto::Cancel& m);
   void on_get_stats(uint32_t request_id);
+  void on_auth(uint32_t request_id, const proto::Auth& m);
 
   // Queues a whole frame answering `request_id` (FINAL); the request leaves in_flight_
   // once the frame is written.
@@ -78,7 +81,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
   void prepare_tile(const PoppedTile& p, TileFrame& out);
   asio::awaitable<bool> write_buffers(const std::vector<asio::const_buffer>& bufs, size_t bytes);
 
-  tcp::socket socket_;
+  net::Stream stream_;  // plain TCP or TLS (core.tls)
   ServerCore& core_;
   const asio::ip::address from_;
   const ServerOptions& opt_;
@@ -96,6 +99,8 @@ class Connection : public std::enable_shared_from_this<Connection> {
   std::vector<const CatalogMap*> open_maps_;  // map_id = index + 1
 
   bool handshaken_ = false;
+  bool authed_ = false;  // no key configured, or the client proved it holds the key
+  proto::Nonce server_nonce_{};
   bool closing_ = false;  // write what is queued, then close
   bool closed_ = false;
   bool writing_ = false;

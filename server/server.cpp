@@ -81,7 +81,8 @@ asio::awaitable<void> Server::Impl::accept_loop() {
     }
     if (!conn) {
       core.stats.connection_rejected();
-      reject(std::move(socket), refused);
+      if (core.tls) socket.close(ignored);  // no TLS session yet: a plain Error would be garbage
+      else reject(std::move(socket), refused);
       continue;
     }
     core.stats.connection_opened();
@@ -134,6 +135,23 @@ Server::Server(Catalog catalog, ServerOptions options) : impl_(std::make_unique<
     throw Error("serve: bad limits: " + proto::to_string(s));
   if (options.max_control_frames == 0 || options.max_connections == 0)
     throw Error("serve: max_control_frames and max_connections must be > 0");
+  if (options.tls_cert_file.empty() != options.tls_key_file.empty())
+    throw Error("serve: TLS needs both --tls-cert and --tls-key");
+  if (!options.tls_cert_file.empty()) {
+    auto ctx = std::make_unique<asio::ssl::context>(asio::ssl::context::tls_server);
+    ctx->set_options(asio::ssl::context::default_workarounds | asio::ssl::context::no_sslv2 |
+                     asio::ssl::context::no_sslv3 | asio::ssl::context::no_tlsv1 |
+                     asio::ssl::context::no_tlsv1_1 | asio::ssl::context::single_dh_use);
+    error_code ec;
+    ctx->use_certificate_chain_file(options.tls_cert_file, ec);
+    if (ec) throw Error("serve: --tls-cert '" + options.tls_cert_file + "': " + ec.message());
+    ctx->use_private_key_file(options.tls_key_file, asio::ssl::context::pem, ec);
+    if (ec) throw Error("serve: --tls-key '" + options.tls_key_file + "': " + ec.message());
+    if (!SSL_CTX_check_private_key(ctx->native_handle()))
+      throw Error("serve: --tls-key '" + options.tls_key_file + "' does not match --tls-cert '" +
+                  options.tls_cert_file + "'");
+    impl_->core.tls = std::move(ctx);
+  }
   impl_->core.options = std::move(options);
   impl_->core.catalog = std::move(catalog);
 }

@@ -16,6 +16,7 @@
 #include <memory>
 #include <span>
 #include <string>
+#include <vector>
 
 #include "proto/limits.hpp"
 #include "server/catalog.hpp"
@@ -40,6 +41,12 @@ struct ServerOptions {
   std::chrono::milliseconds read_timeout{10000};      // a frame must complete this long after its first byte
   std::chrono::milliseconds write_timeout{10000};     // one write must complete
   std::string server_name = "shadowtile-server";
+  // The catalog's key (proto/auth.hpp): when set, a client must prove it holds the key
+  // (HMAC-SHA256 challenge-response) before it may list, open or read anything.
+  std::vector<uint8_t> key;
+  // TLS (Asio SSL streams, TLS 1.2 or later): both set, PEM files, or both empty (plain
+  // TCP). The key file must not be a key clients know: it is the server's private key.
+  std::string tls_cert_file, tls_key_file;
   // Periodic stats line (0: none), written through `log`.
   std::chrono::milliseconds stats_interval{0};
   std::function<void(const std::string&)> log;  // default: stderr

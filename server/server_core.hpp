@@ -8,6 +8,8 @@
 
 #include "server/asio.hpp"
 
+#include <boost/asio/ssl.hpp>
+
 #include "server/catalog.hpp"
 #include "server/server.hpp"
 #include "server/server_stats.hpp"
@@ -19,6 +21,7 @@ class Connection;
 struct ServerCore {
   ServerOptions options;
   Catalog catalog;
+  std::unique_ptr<asio::ssl::context> tls;  // null: plain TCP
   ServerStats stats;
 
   std::mutex mu;  // guards connections and stopping

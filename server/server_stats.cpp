@@ -26,6 +26,8 @@ StatsSnapshot ServerStats::snapshot() const {
   s.errors = get(errors_);
   s.protocol_errors = get(protocol_errors_);
   s.timeouts = get(timeouts_);
+  s.auth_failures = get(auth_failures_);
+  s.tiles_corrupt = get(tiles_corrupt_);
   for (uint32_t b = 0; b < kLatencyBuckets; ++b) s.latency_us[b] = get(latency_[b]);
   return s;
 }
@@ -57,7 +59,9 @@ std::vector<std::pair<std::string, uint64_t>> StatsSnapshot::named() const {
           {"protocol_errors", protocol_errors},
           {"timeouts", timeouts},
           {"latency_p50_us", latency_quantile_us(0.5)},
-          {"latency_p99_us", latency_quantile_us(0.99)}};
+          {"latency_p99_us", latency_quantile_us(0.99)},
+          {"auth_failures", auth_failures},
+          {"tiles_corrupt", tiles_corrupt}};
 }
 
 std::string StatsSnapshot::line() const {
@@ -65,7 +69,8 @@ std::string StatsSnapshot::line() const {
   std::snprintf(buf, sizeof buf,
                 "connections %llu open / %llu total (%llu rejected), requests %llu, tiles %llu "
                 "(%llu B), sent %llu B, received %llu B, cancelled %llu, errors %llu, "
-                "protocol errors %llu, timeouts %llu, latency p50 <%llu us p99 <%llu us",
+                "protocol errors %llu, timeouts %llu, latency p50 <%llu us p99 <%llu us, "
+                "auth failures %llu, corrupt tiles %llu",
                 (unsigned long long)connections_open, (unsigned long long)connections_total,
                 (unsigned long long)connections_rejected, (unsigned long long)requests,
                 (unsigned long long)tiles_sent, (unsigned long long)tile_bytes_sent,
@@ -73,7 +78,8 @@ std::string StatsSnapshot::line() const {
                 (unsigned long long)tiles_cancelled, (unsigned long long)errors,
                 (unsigned long long)protocol_errors, (unsigned long long)timeouts,
                 (unsigned long long)latency_quantile_us(0.5),
-                (unsigned long long)latency_quantile_us(0.99));
+                (unsigned long long)latency_quantile_us(0.99),
+                (unsigned long long)auth_failures, (unsigned long long)tiles_corrupt);
   return buf;
 }
 

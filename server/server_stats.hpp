@@ -23,6 +23,8 @@ struct StatsSnapshot {
   uint64_t errors = 0;          // Error / TileError frames sent
   uint64_t protocol_errors = 0; // connections closed for a malformed stream
   uint64_t timeouts = 0;
+  uint64_t auth_failures = 0;   // connections refused for a missing or wrong key
+  uint64_t tiles_corrupt = 0;   // tiles whose stored bytes failed the pack's CRC or read
   std::array<uint64_t, kLatencyBuckets> latency_us{};  // GetTiles receipt -> tile queued to send
 
   // Upper bound (us) of the bucket holding quantile q in [0,1]; 0 if no samples.
@@ -46,6 +48,8 @@ class ServerStats {
   void error() { add(errors_); }
   void protocol_error() { add(protocol_errors_); }
   void timeout() { add(timeouts_); }
+  void auth_failure() { add(auth_failures_); }
+  void tile_corrupt() { add(tiles_corrupt_); }
   void latency(uint64_t us);
 
   StatsSnapshot snapshot() const;
@@ -56,7 +60,8 @@ class ServerStats {
   }
   std::atomic<uint64_t> connections_total_{0}, connections_open_{0}, connections_rejected_{0};
   std::atomic<uint64_t> requests_{0}, tiles_sent_{0}, tile_bytes_sent_{0}, bytes_sent_{0},
-      bytes_received_{0}, tiles_cancelled_{0}, errors_{0}, protocol_errors_{0}, timeouts_{0};
+      bytes_received_{0}, tiles_cancelled_{0}, errors_{0}, protocol_errors_{0}, timeouts_{0},
+      auth_failures_{0}, tiles_corrupt_{0};
   std::array<std::atomic<uint64_t>, kLatencyBuckets> latency_{};
 };
 

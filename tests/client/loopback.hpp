@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "proto/proto.hpp"
 #include "server/server.hpp"
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/hierarchy.hpp"
@@ -47,7 +48,10 @@ bool wait_until(const std::function<bool()>& pred, std::chrono::milliseconds tim
 // A blocking TCP connection with receive/send timeouts (SO_RCVTIMEO/SO_SNDTIMEO).
 class RawSocket {
  public:
-  RawSocket(uint16_t port, std::chrono::milliseconds timeout = std::chrono::seconds(5));
+  // `source`: the local IPv4 address to connect from (any of 127.0.0.0/8 works on
+  // loopback), so a test can play clients at different addresses.
+  RawSocket(uint16_t port, std::chrono::milliseconds timeout = std::chrono::seconds(5),
+            const char* source = nullptr);
   ~RawSocket();
   RawSocket(const RawSocket&) = delete;
   RawSocket& operator=(const RawSocket&) = delete;
@@ -61,6 +65,15 @@ class RawSocket {
  private:
   int fd_ = -1;
 };
+
+// One frame (header + payload) read from a raw socket; ok false if none came whole.
+struct RawFrame {
+  proto::FrameHeader header;
+  std::vector<uint8_t> payload;
+  bool ok = false;
+};
+RawFrame read_frame(RawSocket& s);
+proto::ErrorCode error_code_of(const RawFrame& f);  // ok if the payload is no Error
 
 // Frames for raw tests (version 1, handshake limits).
 std::vector<uint8_t> hello_frame(uint32_t request_id = 1);

@@ -135,7 +135,7 @@ bool wait_until(const std::function<bool()>& pred, std::chrono::milliseconds tim
 
 // ---------------------------------------------------------------- RawSocket
 
-RawSocket::RawSocket(uint16_t port, std::chrono::milliseconds timeout) {
+RawSocket::RawSocket(uint16_t port, std::chrono::milliseconds timeout, const char* source) {
   fd_ = ::socket(AF_INET, SOCK_STREAM, 0);
   if (fd_ < 0) throw Error("socket failed");
   timeval tv{};
@@ -145,12 +145,24 @@ RawSocket::RawSocket(uint16_t port, std::chrono::milliseconds timeout) {
   ::setsockopt(fd_, SOL_SOCKET, SO_SNDTIMEO, &tv, sizeof tv);
   int one = 1;
   ::setsockopt(fd_, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+  if (source) {
+    sockaddr_in from{};
+    from.sin_family = AF_INET;
+    if (::inet_pton(AF_INET, source, &from.sin_addr) != 1 ||
+        ::bind(fd_, reinterpret_cast<sockaddr*>(&from), sizeof from) != 0) {
+      ::close(fd_);
+      throw Error(std::string("bind to ") + source + " failed: " + std::strerror(errno));
+    }
+  }
   sockaddr_in a{};
   a.sin_family = AF_INET;
   a.sin_port = htons(port);
   a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  if (::connect(fd_, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0)
-    throw Error(std::string("connect failed: ") + std::strerror(errno));
+  if (::connect(fd_, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0) {
+    const int err = errno;
+    ::close(fd_);
+    throw Error(std::string("connect failed: ") + std::strerror(err));
+  }
 }
 
 RawSocket::~RawSocket() { close(); }
@@ -203,6 +215,27 @@ std::vector<uint8_t> open_map_frame(const std::string& name, uint32_t request_id
   std::vector<uint8_t> out;
   ST_CHECK(proto::encode_message(proto::OpenMap{name}, request_id, proto::kFlagFinal, proto::Limits{}, out));
   return out;
+}
+
+RawFrame read_frame(RawSocket& s) {
+  RawFrame f;
+  auto h = s.recv(proto::kHeaderSize);
+  if (h.size() != proto::kHeaderSize) return f;
+  proto::Limits big;
+  big.max_frame_bytes = proto::kMaxFrameBytesCeiling;
+  if (!proto::parse_header(std::span<const uint8_t, proto::kHeaderSize>(h.data(), proto::kHeaderSize), big, f.header))
+    return f;
+  f.payload = s.recv(f.header.payload_length);
+  f.ok = f.payload.size() == f.header.payload_length;
+  return f;
+}
+
+proto::ErrorCode error_code_of(const RawFrame& f) {
+  proto::ErrorMessage e;
+  proto::Limits big;
+  big.max_frame_bytes = proto::kMaxFrameBytesCeiling;
+  if (!proto::decode_payload(f.payload, big, e)) return proto::ErrorCode::ok;
+  return e.code;
 }
 
 }  // namespace st::looptest

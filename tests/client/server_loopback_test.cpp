@@ -17,6 +17,9 @@ namespace {
 
 using namespace std::chrono_literals;
 using looptest::build_pack;
+using looptest::error_code_of;
+using looptest::RawFrame;
+using looptest::read_frame;
 using looptest::RawSocket;
 using looptest::start_server;
 using looptest::wait_until;
@@ -33,33 +36,6 @@ Encoding first_encoding() {
   auto e = looptest::available_encodings();
   ST_CHECK(!e.empty());
   return e[0];
-}
-
-// Reads one frame (header + payload) from a raw socket; type 0 if none came.
-struct RawFrame {
-  proto::FrameHeader header;
-  std::vector<uint8_t> payload;
-  bool ok = false;
-};
-RawFrame read_frame(RawSocket& s) {
-  RawFrame f;
-  auto h = s.recv(proto::kHeaderSize);
-  if (h.size() != proto::kHeaderSize) return f;
-  proto::Limits big;
-  big.max_frame_bytes = proto::kMaxFrameBytesCeiling;
-  if (!proto::parse_header(std::span<const uint8_t, proto::kHeaderSize>(h.data(), proto::kHeaderSize), big, f.header))
-    return f;
-  f.payload = s.recv(f.header.payload_length);
-  f.ok = f.payload.size() == f.header.payload_length;
-  return f;
-}
-
-proto::ErrorCode error_code_of(const RawFrame& f) {
-  proto::ErrorMessage e;
-  proto::Limits big;
-  big.max_frame_bytes = proto::kMaxFrameBytesCeiling;
-  if (!proto::decode_payload(f.payload, big, e)) return proto::ErrorCode::ok;
-  return e.code;
 }
 
 // A handshaken raw connection.

@@ -169,6 +169,8 @@ std::vector<Bytes> message_frames(uint64_t seed) {
       {Pong{0x0123456789abcdefull, 42}, 6},
       {GetStats{}, 8},
       {stats, 8},
+      {Auth{nonce, nonce}, 9},
+      {AuthOk{nonce}, 9},
   };
   std::vector<Bytes> out;
   for (const auto& [m, request_id] : messages) {

@@ -74,14 +74,19 @@ TEST(FrameLayout, TypeAndErrorCodeValuesAreFrozen) {
   EXPECT_EQ(static_cast<int>(MessageType::pong), 0x0031);
   EXPECT_EQ(static_cast<int>(MessageType::get_stats), 0x0040);
   EXPECT_EQ(static_cast<int>(MessageType::stats), 0x0041);
+  EXPECT_EQ(static_cast<int>(MessageType::auth), 0x0050);
+  EXPECT_EQ(static_cast<int>(MessageType::auth_ok), 0x0051);
+  EXPECT_EQ(kFeatureAuth, 1u);
   EXPECT_EQ(static_cast<int>(ErrorCode::bad_magic), 1);
   EXPECT_EQ(static_cast<int>(ErrorCode::payload_checksum), 4);
   EXPECT_EQ(static_cast<int>(ErrorCode::cancelled), 20);
   EXPECT_EQ(static_cast<int>(ErrorCode::handshake_required), 25);
+  EXPECT_EQ(static_cast<int>(ErrorCode::auth_required), 26);
+  EXPECT_EQ(static_cast<int>(ErrorCode::auth_failed), 27);
   int known = 0;
   for (unsigned t = 0; t <= 0xffff; ++t) known += is_known_type(static_cast<std::uint16_t>(t));
-  EXPECT_EQ(known, 15);
-  for (int c = 0; c <= 25; ++c) EXPECT_NE(to_string(static_cast<ErrorCode>(c)), "unknown") << c;
+  EXPECT_EQ(known, 17);
+  for (int c = 0; c <= 27; ++c) EXPECT_NE(to_string(static_cast<ErrorCode>(c)), "unknown") << c;
 }
 
 // The dumps in PROTOCOL.md §9 are these frames; if this test changes, update the spec.

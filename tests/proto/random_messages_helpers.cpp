@@ -28,7 +28,8 @@ const std::vector<MessageType>& all_types() {
       MessageType::list_maps, MessageType::map_list,  MessageType::open_map,
       MessageType::map_info,  MessageType::get_tiles, MessageType::tile_data,
       MessageType::tile_error, MessageType::cancel,   MessageType::ping,
-      MessageType::pong,      MessageType::get_stats, MessageType::stats};
+      MessageType::pong,      MessageType::get_stats, MessageType::stats,
+      MessageType::auth,      MessageType::auth_ok};
   return types;
 }
 
@@ -157,6 +158,17 @@ Message random_message(Rng& rng, MessageType type, const Limits& limits) {
     case MessageType::ping: return Ping{any64(rng)};
     case MessageType::pong: return Pong{any64(rng), any64(rng)};
     case MessageType::get_stats: return GetStats{};
+    case MessageType::auth: {
+      Auth m;
+      for (auto& b : m.client_nonce) b = static_cast<std::uint8_t>(rng());
+      for (auto& b : m.proof) b = static_cast<std::uint8_t>(rng());
+      return m;
+    }
+    case MessageType::auth_ok: {
+      AuthOk m;
+      for (auto& b : m.proof) b = static_cast<std::uint8_t>(rng());
+      return m;
+    }
     case MessageType::stats: {
       Stats m;
       std::set<std::string> names;

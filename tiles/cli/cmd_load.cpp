@@ -7,6 +7,7 @@
 #include "loadgen/load_report.hpp"
 #include "loadgen/load_run.hpp"
 #include "tiles/cli/command.hpp"
+#include "proto/auth.hpp"
 #include "tiles/core/error.hpp"
 
 namespace st::cli {
@@ -26,7 +27,7 @@ client::Endpoint parse_endpoint(const std::string& option, const std::string& te
 namespace {
 
 struct LoadArgs {
-  std::string server, map, path = "flyover", report;
+  std::string server, map, path = "flyover", report, key_file;
   uint32_t cameras = 4, connections = 0, samples_x = 64, samples_y = 36, workers = 0, io_threads = 2;
   double duration = 10, rate = 60, cache_mb = 64;
   uint64_t seed = 1;
@@ -37,6 +38,7 @@ void run(const LoadArgs& a) {
   loadgen::LoadOptions o;
   o.endpoint = parse_endpoint("--server", a.server);
   o.map = a.map;
+  if (!a.key_file.empty()) o.key = proto::load_key_file(a.key_file);
   o.cameras = a.cameras;
   o.connections = a.connections;
   o.path = loadgen::parse_path(a.path);
@@ -73,6 +75,7 @@ Register reg{"load", "Load-test a server with synthetic cameras (client library 
       ->check(CLI::Range(0.01, 65536.0));
   sub.add_option("--report", a->report, "Write load.json, load.txt and PNG plots into this folder");
   sub.add_option("--seed", a->seed, "Path seed")->capture_default_str();
+  sub.add_option("--key-file", a->key_file, "File holding the server's catalog key (hex or raw bytes)");
   sub.add_option("--samples", a->samples_x, "Screen samples across (rows: 9/16 of it)")->capture_default_str()
       ->check(CLI::Range(1u, 1024u));
   sub.add_option("--workers", a->workers, "Camera threads (0: max(2, cores)); cameras are spread over them")

@@ -11,6 +11,7 @@
 #include "loadgen/view_tiles.hpp"
 #include "tiles/bake/render.hpp"
 #include "tiles/bake/scene.hpp"
+#include "proto/auth.hpp"
 #include "tiles/cli/command.hpp"
 #include "tiles/core/error.hpp"
 #include "tiles/core/pack_evaluator.hpp"
@@ -46,7 +47,7 @@ size_t fetch_for_receivers(client::Map& map, const std::vector<Receiver>& rec, c
 namespace {
 
 struct RenderArgs {
-  std::string pack, server, map, scene, camera, size = "960x540", out, up = "y";
+  std::string pack, server, map, scene, camera, size = "960x540", out, up = "y", key_file;
   uint32_t pcf = 0;
   bool diff = false;
   double timeout = 60;
@@ -89,6 +90,7 @@ void run(const RenderArgs& a) {
   } else {
     client::ClientOptions co;
     co.client_name = "shadowtile-render";
+    if (!a.key_file.empty()) co.key = proto::load_key_file(a.key_file);
     cl = std::make_unique<client::Client>(parse_endpoint("--server", a.server), co);
     map = cl->open(a.map);
     co.cache_slots = uint32_t(std::max(16.0, a.cache_mb * 1048576.0 / std::max(1u, map.header().tile_bytes)));
@@ -130,6 +132,7 @@ Register reg{"render", "Render a camera view shaded with the map's shadows (EXR 
   auto a = std::make_shared<RenderArgs>();
   sub.add_option("pack", a->pack, "Pack file (or use --server and --map)");
   sub.add_option("--server", a->server, "Server HOST:PORT");
+  sub.add_option("--key-file", a->key_file, "With --server: file holding the catalog key");
   sub.add_option("--map", a->map, "Map name on the server");
   sub.add_option("--scene", a->scene, "Scene the map was built from (primary rays)")->required();
   sub.add_option("--up", a->up, "Up axis of a scene file: y or z")->capture_default_str();
