@@ -8,7 +8,8 @@
 //   float d = map.depth(level, x, y);
 //   st::client::MapStats s = map.stats();
 //
-// How it works: a fetcher thread owns the TCP connection (connect with retry and
+// How it works: a fetcher thread (or, with ClientOptions::io_pool, one of a few threads
+// shared by many Clients: io_pool.hpp) owns the TCP connection (connect with retry and
 // exponential backoff, handshake, reconnect on failure); it keeps up to the negotiated
 // number of GetTiles requests in flight, highest priority first, cancels requests no
 // longer wanted, checks every tile's end-to-end CRC-32 against the pack index (refetch on
