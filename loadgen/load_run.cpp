@@ -226,12 +226,18 @@ LoadResult run_load(const LoadOptions& o_in) {
     client::ClientOptions po;
     po.cache_slots = 1;
     po.key = o.key;
+    po.tls = o.tls;
+    po.tls_ca_file = o.tls_ca_file;
+    po.tls_server_name = o.tls_server_name;
     client::Client probe(o.endpoint, po);
     tile_bytes = probe.open(o.map).header().tile_bytes;
   }
   client::ClientOptions co;
   co.client_name = "shadowtile-load";
   co.key = o.key;
+  co.tls = o.tls;
+  co.tls_ca_file = o.tls_ca_file;
+  co.tls_server_name = o.tls_server_name;
   co.cache_slots = uint32_t(std::clamp<double>(o.cache_mb * 1048576.0 / std::max(1u, tile_bytes), 1, 1 << 24));
   // Every connection's fetcher on a few shared I/O threads (not one thread per
   // connection: 1,000 connections stay 1,000 sockets, not 1,000 threads).

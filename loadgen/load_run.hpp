@@ -36,6 +36,8 @@ struct LoadOptions {
   client::Endpoint endpoint;
   std::string map;
   std::vector<uint8_t> key;  // the catalog key, when the server requires one
+  bool tls = false;          // client::ClientOptions::tls and its CA file / expected name
+  std::string tls_ca_file, tls_server_name;
   uint32_t cameras = 4;
   uint32_t connections = 0;  // 0: one per camera; clamped to [1, cameras]
   PathKind path = PathKind::flyover;

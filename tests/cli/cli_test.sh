@@ -52,6 +52,32 @@ open("corrupt.pack", "wb").write(data)
 PY
 check verify-corrupt 3 "FAILED.*tile" -- "$st" verify corrupt.pack $scene --samples 100
 check truncated 1 "city|trunc|size" -- bash -c "head -c 1000 city.pack > short.pack && '$st' inspect short.pack"
+# Serving with a catalog key and TLS: the key holder trusting the certificate is served;
+# a client without the key is refused with a one-line error (exit 1), learning no map.
+openssl rand -hex 32 > catalog.key
+openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:P-256 -nodes -days 1 -subj /CN=localhost \
+  -addext "subjectAltName=DNS:localhost,IP:127.0.0.1" -keyout tls.key -out tls.crt 2>/dev/null
+"$st" serve city.pack --listen 127.0.0.1:0 --key-file catalog.key --tls-cert tls.crt --tls-key tls.key \
+  2>serve.log &
+spid=$!
+port=""
+for _ in $(seq 1 500); do
+  port=$(grep -oE "on 127\.0\.0\.1:[0-9]+" serve.log | head -1 | cut -d: -f2)
+  [[ -n "$port" ]] && break
+  sleep 0.02
+done
+if [[ -z "$port" ]]; then echo "FAIL serve-keyed: no port in serve.log"; cat serve.log; fail=1
+else
+  check serve-keyed-load 0 "frames" -- "$st" load --server 127.0.0.1:$port --map city --cameras 2 \
+    --duration 2 --rate 30 --key-file catalog.key --tls-ca tls.crt --tls-name localhost
+  check serve-no-key 1 "auth_required" -- "$st" load --server 127.0.0.1:$port --map city --cameras 1 \
+    --duration 1 --tls-ca tls.crt --tls-name localhost
+  check bad-key-file 1 "catalog.short.*at least 16" -- bash -c "echo abc > catalog.short && '$st' load \
+    --server 127.0.0.1:$port --map city --key-file catalog.short"
+fi
+kill $spid 2>/dev/null; wait $spid 2>/dev/null
+grep -q "key required, TLS" serve.log || { echo "FAIL serve-keyed: banner lacks 'key required, TLS'"; fail=1; }
+
 # Kill a build mid-way (SIGKILL: no handler runs): nothing under the final name, and the
 # same command with --resume completes it into the same pack as a one-go build.
 res=8192

@@ -47,7 +47,8 @@ size_t fetch_for_receivers(client::Map& map, const std::vector<Receiver>& rec, c
 namespace {
 
 struct RenderArgs {
-  std::string pack, server, map, scene, camera, size = "960x540", out, up = "y", key_file;
+  std::string pack, server, map, scene, camera, size = "960x540", out, up = "y", key_file, tls_ca, tls_name;
+  bool tls = false;
   uint32_t pcf = 0;
   bool diff = false;
   double timeout = 60;
@@ -91,6 +92,9 @@ void run(const RenderArgs& a) {
     client::ClientOptions co;
     co.client_name = "shadowtile-render";
     if (!a.key_file.empty()) co.key = proto::load_key_file(a.key_file);
+    co.tls = a.tls || !a.tls_ca.empty();
+    co.tls_ca_file = a.tls_ca;
+    co.tls_server_name = a.tls_name;
     cl = std::make_unique<client::Client>(parse_endpoint("--server", a.server), co);
     map = cl->open(a.map);
     co.cache_slots = uint32_t(std::max(16.0, a.cache_mb * 1048576.0 / std::max(1u, map.header().tile_bytes)));
@@ -133,6 +137,9 @@ Register reg{"render", "Render a camera view shaded with the map's shadows (EXR 
   sub.add_option("pack", a->pack, "Pack file (or use --server and --map)");
   sub.add_option("--server", a->server, "Server HOST:PORT");
   sub.add_option("--key-file", a->key_file, "With --server: file holding the catalog key");
+  sub.add_flag("--tls", a->tls, "With --server: connect over TLS");
+  sub.add_option("--tls-ca", a->tls_ca, "With --server: trust this CA certificate (PEM); implies --tls");
+  sub.add_option("--tls-name", a->tls_name, "With --server: name the certificate must carry");
   sub.add_option("--map", a->map, "Map name on the server");
   sub.add_option("--scene", a->scene, "Scene the map was built from (primary rays)")->required();
   sub.add_option("--up", a->up, "Up axis of a scene file: y or z")->capture_default_str();

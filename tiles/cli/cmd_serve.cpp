@@ -20,7 +20,7 @@ struct ServeArgs {
   unsigned max_connections = 1024;
   unsigned max_connections_per_address = 256;
   double idle_timeout = 120;
-  std::string key_file;
+  std::string key_file, tls_cert, tls_key;
 };
 
 // "HOST:PORT" or "[V6]:PORT" -> (host, port). Throws st::Error.
@@ -62,12 +62,14 @@ void run_serve(const ServeArgs& a) {
   o.stats_interval = std::chrono::milliseconds(int64_t(a.stats_interval * 1000));
   o.idle_timeout = std::chrono::milliseconds(int64_t(a.idle_timeout * 1000));
   if (!a.key_file.empty()) o.key = proto::load_key_file(a.key_file);
+  o.tls_cert_file = a.tls_cert;
+  o.tls_key_file = a.tls_key;
   const size_t maps = catalog.maps().size();
   server::Server srv(std::move(catalog), o);
   srv.start();
-  std::fprintf(stderr, "shadowtile serve: %zu map(s) on %s:%u (%u I/O thread(s)%s); Ctrl-C stops\n",
+  std::fprintf(stderr, "shadowtile serve: %zu map(s) on %s:%u (%u I/O thread(s)%s%s); Ctrl-C stops\n",
                maps, o.host.c_str(), unsigned(srv.port()), o.threads,
-               o.key.empty() ? "" : ", key required");
+               o.key.empty() ? "" : ", key required", o.tls_cert_file.empty() ? "" : ", TLS");
   for (const auto& m : srv.catalog().maps())
     std::fprintf(stderr, "  %s  L=%u K=%u tiles=%u  %s\n", m->name().c_str(),
                  unsigned(m->entry().resolution_log2), unsigned(m->entry().skip_level),
@@ -92,6 +94,8 @@ Register reg{"serve", "Serve packs' tiles over TCP (the shadowtile wire protocol
       ->capture_default_str()->check(CLI::Range(0u, 1000000u));
   sub.add_option("--key-file", a->key_file,
                  "Require clients to prove this catalog key (hex or raw bytes; HMAC-SHA256 challenge)");
+  sub.add_option("--tls-cert", a->tls_cert, "Serve over TLS with this certificate chain (PEM); needs --tls-key");
+  sub.add_option("--tls-key", a->tls_key, "The certificate's private key (PEM)");
   sub.add_option("--idle-timeout", a->idle_timeout, "Close connections idle this many seconds")
       ->capture_default_str()->check(CLI::Range(0.1, 86400.0));
   sub.callback([a] { run_serve(*a); });
