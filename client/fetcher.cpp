@@ -48,9 +48,7 @@ Fetcher::Fetcher(Endpoint endpoint, ClientOptions options)
     throw Error("client: backoff_initial must be > 0 and <= backoff_max");
   if (options_.tls) {
     tls_ = std::make_unique<asio::ssl::context>(asio::ssl::context::tls_client);
-    tls_->set_options(asio::ssl::context::default_workarounds | asio::ssl::context::no_sslv2 |
-                      asio::ssl::context::no_sslv3 | asio::ssl::context::no_tlsv1 |
-                      asio::ssl::context::no_tlsv1_1);
+    net::allow_only_tls12_and_later(*tls_);
     tls_->set_verify_mode(asio::ssl::verify_peer);
     error_code ec;
     if (options_.tls_ca_file.empty()) tls_->set_default_verify_paths(ec);

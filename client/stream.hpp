@@ -25,6 +25,13 @@ namespace asio = boost::asio;
 using tcp = asio::ip::tcp;
 using boost::system::error_code;
 
+// TLS 1.2 or later only, for both sides' contexts (the server's and the client's).
+inline void allow_only_tls12_and_later(asio::ssl::context& ctx) {
+  ctx.set_options(asio::ssl::context::default_workarounds | asio::ssl::context::no_sslv2 |
+                  asio::ssl::context::no_sslv3 | asio::ssl::context::no_tlsv1 |
+                  asio::ssl::context::no_tlsv1_1 | asio::ssl::context::single_dh_use);
+}
+
 class Stream {
  public:
   // `tls` null: plain TCP. Otherwise the context must outlive the stream.

@@ -139,9 +139,7 @@ Server::Server(Catalog catalog, ServerOptions options) : impl_(std::make_unique<
     throw Error("serve: TLS needs both --tls-cert and --tls-key");
   if (!options.tls_cert_file.empty()) {
     auto ctx = std::make_unique<asio::ssl::context>(asio::ssl::context::tls_server);
-    ctx->set_options(asio::ssl::context::default_workarounds | asio::ssl::context::no_sslv2 |
-                     asio::ssl::context::no_sslv3 | asio::ssl::context::no_tlsv1 |
-                     asio::ssl::context::no_tlsv1_1 | asio::ssl::context::single_dh_use);
+    net::allow_only_tls12_and_later(*ctx);
     error_code ec;
     ctx->use_certificate_chain_file(options.tls_cert_file, ec);
     if (ec) throw Error("serve: --tls-cert '" + options.tls_cert_file + "': " + ec.message());

@@ -27,10 +27,7 @@ using looptest::wait_until;
 const std::vector<uint8_t> kKey = proto::parse_key("5a3f0c9e81d2b7a4e6f1c3d5a7b9e0f2", "test key");
 
 ClientOptions options_with(std::vector<uint8_t> key) {
-  ClientOptions o;
-  o.backoff_initial = 5ms;
-  o.backoff_max = 100ms;
-  o.request_timeout = 20s;
+  ClientOptions o = looptest::quick_options();
   o.key = std::move(key);
   return o;
 }

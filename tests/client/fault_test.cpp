@@ -40,15 +40,12 @@ uint32_t bits(float f) {
 uint32_t test_level() { return looptest::small_scale() ? 6 : 7; }
 
 ClientOptions options_for(const looptest::TestPack& p) {
-  ClientOptions o;
-  o.backoff_initial = 5ms;
-  o.backoff_max = 100ms;
-  o.request_timeout = 20s;
+  ClientOptions o = looptest::quick_options();
   o.cache_slots = uint32_t(p.reader->tiles().size()) + 8;  // everything stays resident
   return o;
 }
 
-Encoding first_encoding() { return looptest::available_encodings().at(0); }
+using looptest::first_encoding;
 
 std::unique_ptr<server::Server> serve_on(uint16_t port, const std::string& path,
                                          server::ServerOptions so = {}) {

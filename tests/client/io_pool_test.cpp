@@ -32,10 +32,7 @@ size_t thread_count() {
 }
 
 ClientOptions pooled(std::shared_ptr<IoPool> pool) {
-  ClientOptions o;
-  o.backoff_initial = 5ms;
-  o.backoff_max = 100ms;
-  o.request_timeout = 20s;
+  ClientOptions o = looptest::quick_options();
   o.io_pool = std::move(pool);
   return o;
 }
@@ -46,11 +43,7 @@ uint64_t connections_open(Client& c) {
   return ~uint64_t(0);
 }
 
-Encoding first_encoding() {
-  auto e = looptest::available_encodings();
-  ST_CHECK(!e.empty());
-  return e[0];
-}
+using looptest::first_encoding;
 
 TEST(IoPool, RejectsBadThreadCounts) {
   EXPECT_THROW(IoPool(0), Error);

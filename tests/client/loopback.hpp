@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "client/client.hpp"
 #include "proto/proto.hpp"
 #include "server/server.hpp"
 #include "tiles/core/encoding.hpp"
@@ -33,7 +34,12 @@ struct TestPack {
 // Builds "<tmp>/<name>.pack" from random_field(level, seed).
 TestPack build_pack(const std::string& name, uint32_t level, uint64_t seed, Encoding e, uint32_t skip,
                     uint32_t tile_bytes);
-std::vector<Encoding> available_encodings();
+std::vector<Encoding> available_encodings();  // packtest::available_encodings
+Encoding first_encoding();                     // the first of them (ST_CHECK: there is one)
+
+// Client options for loopback tests: quick reconnects (5 ms doubling to 100 ms) and a
+// generous request timeout, so a slow sanitizer build fails on answers, never on time.
+client::ClientOptions quick_options();
 
 struct TestServer {
   std::unique_ptr<server::Server> server;

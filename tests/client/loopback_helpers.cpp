@@ -12,6 +12,7 @@
 
 #include "proto/proto.hpp"
 #include "tests/client/loopback.hpp"
+#include "tests/tiles/pack_test_support.hpp"
 #include "tiles/core/error.hpp"
 #include "tiles/core/mh_build.hpp"
 #include "tiles/core/pack_writer.hpp"
@@ -73,21 +74,21 @@ IntervalTile random_field(uint32_t level, uint64_t seed) {
   return t;
 }
 
-std::vector<Encoding> available_encodings() {
-  std::vector<Encoding> out;
-  Hierarchy h;
-  h.depth = 0;
-  h.levels.resize(1);
-  h.levels[0].push_back(HNode{0, 0.5f, 0.5f, 0.5f, 0, 1});
-  for (Encoding e : {Encoding::mh, Encoding::mmh, Encoding::dagmh}) {
-    try {
-      auto bytes = encode(h, e);
-      open_encoded(e, bytes);
-      out.push_back(e);
-    } catch (const Error&) {
-    }
-  }
-  return out;
+std::vector<Encoding> available_encodings() { return packtest::available_encodings(); }
+
+Encoding first_encoding() {
+  auto e = available_encodings();
+  ST_CHECK(!e.empty());
+  return e[0];
+}
+
+client::ClientOptions quick_options() {
+  using namespace std::chrono_literals;
+  client::ClientOptions o;
+  o.backoff_initial = 5ms;
+  o.backoff_max = 100ms;
+  o.request_timeout = 20s;
+  return o;
 }
 
 TestPack build_pack(const std::string& name, uint32_t level, uint64_t seed, Encoding e, uint32_t skip,

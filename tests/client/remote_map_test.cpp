@@ -24,13 +24,7 @@ using looptest::wait_until;
 uint32_t test_level() { return looptest::small_scale() ? 6 : 7; }
 uint32_t bits(float v) { return std::bit_cast<uint32_t>(v); }
 
-ClientOptions quick_options() {
-  ClientOptions o;
-  o.backoff_initial = 5ms;
-  o.backoff_max = 100ms;
-  o.request_timeout = 20s;
-  return o;
-}
+using looptest::quick_options;
 
 // "" if every texel of every level answers like `want`, else the first difference.
 std::string first_difference(const Evaluator& got, const Evaluator& want) {

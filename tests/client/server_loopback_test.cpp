@@ -24,19 +24,9 @@ using looptest::RawSocket;
 using looptest::start_server;
 using looptest::wait_until;
 
-ClientOptions quick_options() {
-  ClientOptions o;
-  o.backoff_initial = 5ms;
-  o.backoff_max = 100ms;
-  o.request_timeout = 20s;
-  return o;
-}
+using looptest::quick_options;
 
-Encoding first_encoding() {
-  auto e = looptest::available_encodings();
-  ST_CHECK(!e.empty());
-  return e[0];
-}
+using looptest::first_encoding;
 
 // A handshaken raw connection.
 void handshake(RawSocket& s) {

@@ -71,9 +71,7 @@ CertFiles make_cert(const std::string& stem) {
 }
 
 ClientOptions tls_options(const std::string& ca, const std::string& name = "localhost") {
-  ClientOptions o;
-  o.backoff_initial = 5ms;
-  o.backoff_max = 100ms;
+  ClientOptions o = looptest::quick_options();
   o.request_timeout = looptest::small_scale() ? 4s : 2s;  // failures below wait this long
   o.tls = true;
   o.tls_ca_file = ca;
