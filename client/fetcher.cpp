@@ -116,10 +116,7 @@ void Fetcher::stop() {
     for (auto* t : watchdog_timers_) t->cancel();  // end now, not at the next tick
     error_code ec;
     notify_desc_.close(ec);  // ends notifier_loop
-    for (auto& c : controls_) c->done(proto::ErrorMessage{ErrorCode::shutting_down, "client stopped"});
-    for (auto& [id, c] : controls_sent_) c->done(proto::ErrorMessage{ErrorCode::shutting_down, "client stopped"});
-    controls_.clear();
-    controls_sent_.clear();
+    fail_controls(proto::ErrorMessage{ErrorCode::shutting_down, "client stopped"});
   });
   if (thread_.joinable()) {
     // Coroutines end once their sockets and timers are closed; the guard bounds the wait.
@@ -313,8 +310,12 @@ void Fetcher::refuse(const std::string& why) {
     refusal_ = why;
     refused_ = true;
   }
-  for (auto& c : controls_) c->done(proto::ErrorMessage{ErrorCode::auth_failed, proto::sanitize_text(why, 512)});
-  for (auto& [id, c] : controls_sent_) c->done(proto::ErrorMessage{ErrorCode::auth_failed, proto::sanitize_text(why, 512)});
+  fail_controls(proto::ErrorMessage{ErrorCode::auth_failed, proto::sanitize_text(why, 512)});
+}
+
+void Fetcher::fail_controls(const proto::ErrorMessage& e) {
+  for (auto& c : controls_) c->done(proto::ErrorMessage(e));
+  for (auto& [id, c] : controls_sent_) c->done(proto::ErrorMessage(e));
   controls_.clear();
   controls_sent_.clear();
 }

@@ -87,7 +87,9 @@ class Fetcher : public std::enable_shared_from_this<Fetcher> {
   void end_session();
   // Final: authentication failed one way or the other (I/O thread).
   void refuse(const std::string& why);
-  void note_failure(const std::string& why);  // why the last connect failed (for messages)
+  void note_failure(const std::string& why);
+  // Answers every waiting API call (queued or sent) with `e` and forgets them (I/O thread).
+  void fail_controls(const proto::ErrorMessage& e);  // why the last connect failed (for messages)
   asio::awaitable<bool> authenticate(net::Stream& sock, const proto::HelloAck& ack);
   void wake() { wake_timer_.cancel(); }
   uint32_t next_id();
