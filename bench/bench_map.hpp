@@ -22,11 +22,11 @@
 
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/scene.hpp"
-#include "tiles/core/error.hpp"
-#include "tiles/core/hierarchy.hpp"
+#include "common/error.hpp"
+#include "tiles/build/hierarchy.hpp"
 #include "tiles/core/interval.hpp"
 #include "tiles/core/light.hpp"
-#include "tiles/core/mh_build.hpp"
+#include "tiles/build/mh_build.hpp"
 
 namespace st::bench {
 

@@ -26,7 +26,7 @@
 
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/scene.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 #include "tiles/core/resolution.hpp"
 
 namespace {

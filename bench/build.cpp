@@ -26,9 +26,9 @@
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/map_build.hpp"
 #include "tiles/bake/scene.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 #include "tiles/core/resolution.hpp"
-#include "tiles/core/tile_cut.hpp"
+#include "tiles/build/tile_cut.hpp"
 
 namespace {
 

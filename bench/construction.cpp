@@ -19,8 +19,8 @@
 #include <string>
 #include <vector>
 
-#include "tiles/core/error.hpp"
-#include "tiles/core/mh_build.hpp"
+#include "common/error.hpp"
+#include "tiles/build/mh_build.hpp"
 // The field generators are the tests' (one definition of "realistic" for both); the
 // bench target compiles only this file, so the helper's source is included here.
 #include "tests/tiles/interval_fields_helpers.cpp"

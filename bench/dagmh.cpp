@@ -19,10 +19,10 @@
 #include <string>
 #include <vector>
 
-#include "tiles/core/dagmh_encode.hpp"
-#include "tiles/core/encoding.hpp"
-#include "tiles/core/error.hpp"
-#include "tiles/core/mh_build.hpp"
+#include "tiles/build/dagmh_encode.hpp"
+#include "tiles/build/encode.hpp"
+#include "common/error.hpp"
+#include "tiles/build/mh_build.hpp"
 // The field generators are the tests' (bench targets compile one file).
 #include "tests/tiles/interval_fields_helpers.cpp"
 

@@ -27,7 +27,7 @@
 #include <nlohmann/json.hpp>
 
 #include "bench/bench_map.hpp"
-#include "tiles/core/encoding.hpp"
+#include "tiles/build/encode.hpp"
 
 namespace {
 

@@ -24,7 +24,7 @@
 #include <random>
 
 #include "bench/bench_map.hpp"
-#include "tiles/core/encoding.hpp"
+#include "tiles/build/encode.hpp"
 #include "tiles/core/evaluator.hpp"
 
 namespace {

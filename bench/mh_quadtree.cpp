@@ -19,10 +19,10 @@
 #include <string>
 #include <vector>
 
-#include "tiles/core/encoding.hpp"
-#include "tiles/core/mh_build.hpp"
-#include "tiles/core/mh_quadtree_layout.hpp"
-#include "tiles/core/mmh_merge.hpp"
+#include "tiles/build/encode.hpp"
+#include "tiles/build/mh_build.hpp"
+#include "tiles/build/mh_quadtree_layout.hpp"
+#include "tiles/build/mmh_merge.hpp"
 // The field generators are the tests' (one definition of "realistic" for both); the
 // bench target compiles only this file, so the helper's source is included here.
 #include "tests/tiles/interval_fields_helpers.cpp"

@@ -27,10 +27,10 @@
 #include "client/client.hpp"
 #include "proto/proto.hpp"
 #include "server/server.hpp"
-#include "tiles/core/error.hpp"
-#include "tiles/core/mh_build.hpp"
+#include "common/error.hpp"
+#include "tiles/build/mh_build.hpp"
 #include "tiles/core/pack_reader.hpp"
-#include "tiles/core/pack_writer.hpp"
+#include "tiles/build/pack_writer.hpp"
 
 using namespace st;
 using Clock = std::chrono::steady_clock;

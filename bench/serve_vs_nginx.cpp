@@ -42,10 +42,10 @@
 
 #include "proto/proto.hpp"
 #include "server/server.hpp"
-#include "tiles/core/error.hpp"
-#include "tiles/core/mh_build.hpp"
+#include "common/error.hpp"
+#include "tiles/build/mh_build.hpp"
 #include "tiles/core/pack_reader.hpp"
-#include "tiles/core/pack_writer.hpp"
+#include "tiles/build/pack_writer.hpp"
 
 using namespace st;
 namespace fs = std::filesystem;

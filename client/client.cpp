@@ -2,7 +2,7 @@
 
 #include "client/fetcher.hpp"
 #include "client/remote_map.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 #include "tiles/core/interval.hpp"
 
 namespace st::client {

@@ -6,11 +6,10 @@
 #include <boost/asio/redirect_error.hpp>
 #include <future>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st::client {
 
-using boost::system::error_code;
 using proto::ErrorCode;
 using proto::MessageType;
 

@@ -14,10 +14,8 @@
 // its own, so every coroutine and posted handler is counted (live_) and stop() waits
 // until the count drops to zero before the Fetcher may be destroyed.
 #pragma once
-#include <utility>
-// <utility> before Asio (MACHINE.md pitfall with g++ 12 / Boost 1.74)
+#include "net/asio.hpp"
 
-#include <boost/asio.hpp>
 #include <boost/asio/posix/stream_descriptor.hpp>
 #include <chrono>
 #include <condition_variable>
@@ -31,15 +29,15 @@
 
 #include "client/client.hpp"
 #include "client/io_pool.hpp"
-#include "client/stream.hpp"
+#include "net/stream.hpp"
 #include "client/remote_map.hpp"
 #include "proto/proto.hpp"
 
 namespace st::client {
 
-namespace asio = boost::asio;
-using tcp = asio::ip::tcp;
-using boost::system::error_code;
+namespace asio = net::asio;  // net/asio.hpp
+using net::error_code;
+using net::tcp;
 
 class Fetcher : public std::enable_shared_from_this<Fetcher> {
  public:

@@ -1,6 +1,6 @@
 #include "client/io_pool.hpp"
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st::client {
 

@@ -14,15 +14,15 @@
 // and joins the threads; destroy the Clients first (a Client's destructor waits until its
 // fetcher's coroutines and posted handlers have finished on the pool's thread).
 #pragma once
-#include <utility>
-// <utility> before Asio (MACHINE.md pitfall with g++ 12 / Boost 1.74)
-
 #include <atomic>
-#include <boost/asio/executor_work_guard.hpp>
-#include <boost/asio/io_context.hpp>
 #include <memory>
 #include <thread>
 #include <vector>
+
+#include "net/asio.hpp"
+
+#include <boost/asio/executor_work_guard.hpp>
+#include <boost/asio/io_context.hpp>
 
 namespace st::client {
 

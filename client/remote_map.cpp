@@ -8,7 +8,7 @@
 #include <cstring>
 
 #include "tiles/core/encoding.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 #include "tiles/core/interval.hpp"
 
 namespace st::client {

@@ -1,3 +1,4 @@
+#include "common/hash.hpp"
 #include "client/tile_cache.hpp"
 
 #include <cassert>
@@ -11,15 +12,6 @@ constexpr uint64_t kMaxPoolBytes = uint64_t(1) << 40;
 constexpr size_t kNpos = ~size_t(0);
 constexpr size_t kInitialBuckets = 64;
 
-// splitmix64 finalizer: tile ids are often small dense integers; spread them.
-inline uint64_t mix(uint64_t x) {
-  x ^= x >> 30;
-  x *= 0xbf58476d1ce4e5b9ull;
-  x ^= x >> 27;
-  x *= 0x94d049bb133111ebull;
-  x ^= x >> 31;
-  return x;
-}
 
 }  // namespace
 
@@ -108,7 +100,7 @@ void TileCache::drop_slot(uint32_t s) {
 
 size_t TileCache::find_bucket(TileId key) const noexcept {
   const size_t mask = table_.size() - 1;
-  for (size_t i = mix(key) & mask;; i = (i + 1) & mask) {
+  for (size_t i = mix64(key) & mask;; i = (i + 1) & mask) {
     if (table_[i].key == key) return i;
     if (table_[i].key == kInvalidTile) return kNpos;
   }
@@ -120,7 +112,7 @@ void TileCache::grow() {
   const size_t mask = table_.size() - 1;
   for (const Bucket& b : old) {
     if (b.key == kInvalidTile) continue;
-    size_t i = mix(b.key) & mask;
+    size_t i = mix64(b.key) & mask;
     while (table_[i].key != kInvalidTile) i = (i + 1) & mask;
     table_[i] = b;
   }
@@ -132,7 +124,7 @@ PageEntry& TileCache::upsert(TileId key) {
   if (b != kNpos) return table_[b].entry;
   if ((table_used_ + 1) * 4 > table_.size() * 3) grow();  // load factor <= 3/4
   const size_t mask = table_.size() - 1;
-  size_t i = mix(key) & mask;
+  size_t i = mix64(key) & mask;
   while (table_[i].key != kInvalidTile) i = (i + 1) & mask;
   table_[i].key = key;
   table_[i].entry = PageEntry{};
@@ -146,7 +138,7 @@ void TileCache::erase(TileId key) {
   if (i == kNpos) return;
   const size_t mask = table_.size() - 1;
   for (size_t j = (i + 1) & mask; table_[j].key != kInvalidTile; j = (j + 1) & mask) {
-    size_t home = mix(table_[j].key) & mask;
+    size_t home = mix64(table_[j].key) & mask;
     // Move j into the hole at i if its home is not cyclically within (i, j].
     bool home_in_range = (i < j) ? (home > i && home <= j) : (home > i || home <= j);
     if (!home_in_range) {

@@ -33,7 +33,7 @@
 #include <span>
 #include <vector>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st::client {
 

@@ -5,18 +5,11 @@
 #include <cstdio>
 #include <vector>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 #include "tiles/core/interval.hpp"
 
 namespace st::loadgen {
 
-uint64_t splitmix64(uint64_t& s) {
-  uint64_t z = (s += 0x9E3779B97F4A7C15ull);
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-  return z ^ (z >> 31);
-}
-double unit_random(uint64_t& s) { return double(splitmix64(s) >> 11) * 0x1p-53; }
 
 namespace {
 

@@ -19,7 +19,8 @@
 #include <cstdint>
 #include <string>
 
-#include "tiles/bake/render_camera.hpp"  // header-only: links nothing
+#include "common/hash.hpp"
+#include "tiles/core/camera.hpp"  // header-only: links nothing
 #include "tiles/core/light.hpp"
 #include "tiles/core/pack_format.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
@@ -60,7 +61,7 @@ class CameraPath {
   double phase_[4];
 };
 
-uint64_t splitmix64(uint64_t& state);
-double unit_random(uint64_t& state);  // [0, 1)
+using st::splitmix64;  // common/hash.hpp
+using st::unit_random;
 
 }  // namespace st::loadgen

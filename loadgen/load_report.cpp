@@ -7,7 +7,7 @@
 #include <nlohmann/json.hpp>
 
 #include "loadgen/png_plot.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st::loadgen {
 

@@ -9,7 +9,7 @@
 #include <unordered_map>
 
 #include "client/io_pool.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st::loadgen {
 

@@ -7,7 +7,7 @@
 #include <cstdio>
 #include <filesystem>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st::loadgen {
 

@@ -7,7 +7,7 @@
 #include <fstream>
 #include <sstream>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st::loadgen {
 

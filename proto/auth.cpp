@@ -11,7 +11,7 @@
 #include <iterator>
 #include <string_view>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st::proto {
 

@@ -14,23 +14,14 @@
 #include <type_traits>
 #include <vector>
 
+#include "common/bytes.hpp"
 #include "proto/status.hpp"
 
 namespace st::proto {
 
-template <class T>
-inline T load_le(const std::uint8_t* p) {
-  static_assert(std::is_unsigned_v<T>);
-  T v = 0;
-  for (std::size_t i = 0; i < sizeof(T); ++i) v |= T(p[i]) << (8 * i);
-  return v;
-}
-
-template <class T>
-inline void store_le(std::uint8_t* p, T v) {
-  static_assert(std::is_unsigned_v<T>);
-  for (std::size_t i = 0; i < sizeof(T); ++i) p[i] = std::uint8_t(v >> (8 * i));
-}
+// The little-endian helpers are common/bytes.hpp's (one copy for every format).
+using st::load_le;
+using st::store_le;
 
 // Appends to a byte vector. Encoders validate their content before writing, so the
 // Writer itself cannot fail.

@@ -4,7 +4,7 @@
 #include <filesystem>
 
 #include "proto/names.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st::server {
 namespace fs = std::filesystem;

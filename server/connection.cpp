@@ -4,7 +4,7 @@
 #include <array>
 #include <exception>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
 
 namespace st::server {

@@ -22,10 +22,10 @@
 #include <memory>
 #include <vector>
 
-#include "client/stream.hpp"
+#include "net/stream.hpp"
 #include "proto/auth.hpp"
 #include "proto/proto.hpp"
-#include "server/asio.hpp"
+#include "net/asio.hpp"
 #include "server/server_core.hpp"
 #include "server/tile_queue.hpp"
 

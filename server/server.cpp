@@ -6,9 +6,9 @@
 #include <thread>
 
 #include "proto/proto.hpp"
-#include "server/asio.hpp"
+#include "net/asio.hpp"
 #include "server/connection.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st::server {
 

@@ -6,7 +6,7 @@
 #include <set>
 #include <string>
 
-#include "server/asio.hpp"
+#include "net/asio.hpp"
 
 #include <boost/asio/ssl.hpp>
 
@@ -15,6 +15,10 @@
 #include "server/server_stats.hpp"
 
 namespace st::server {
+
+namespace asio = net::asio;  // net/asio.hpp
+using net::error_code;
+using net::tcp;
 
 class Connection;
 

@@ -13,10 +13,10 @@
 #include "proto/proto.hpp"
 #include "tests/client/loopback.hpp"
 #include "tests/tiles/pack_test_support.hpp"
-#include "tiles/core/error.hpp"
-#include "tiles/core/mh_build.hpp"
-#include "tiles/core/pack_writer.hpp"
-#include "tiles/core/tile_cut.hpp"
+#include "common/error.hpp"
+#include "tiles/build/mh_build.hpp"
+#include "tiles/build/pack_writer.hpp"
+#include "tiles/build/tile_cut.hpp"
 
 namespace st::looptest {
 

@@ -11,7 +11,7 @@
 
 #include "tests/fuzz/evaluator_probe.hpp"
 #include "tests/fuzz/seed_support.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
 
 std::vector<st::fuzz::Bytes> st::fuzz::seeds() {

@@ -14,7 +14,7 @@
 #include "tests/fuzz/evaluator_probe.hpp"
 #include "tests/fuzz/seed_support.hpp"
 #include "tiles/core/encoding.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_reader.hpp"
 

@@ -9,11 +9,11 @@
 #include <unistd.h>
 
 #include "proto/proto.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 #include "tiles/core/light.hpp"
-#include "tiles/core/mh_build.hpp"
-#include "tiles/core/pack_writer.hpp"
-#include "tiles/core/tile_cut.hpp"
+#include "tiles/build/mh_build.hpp"
+#include "tiles/build/pack_writer.hpp"
+#include "tiles/build/tile_cut.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
 
 namespace st::fuzz {

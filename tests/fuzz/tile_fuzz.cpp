@@ -10,7 +10,7 @@
 #include "tests/fuzz/evaluator_probe.hpp"
 #include "tests/fuzz/seed_support.hpp"
 #include "tiles/core/encoding.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 #ifndef ST_FUZZ_ENCODING
 #error "define ST_FUZZ_ENCODING to mh, mmh or dagmh"

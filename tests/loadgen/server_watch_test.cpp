@@ -9,7 +9,7 @@
 #include "client/client.hpp"
 #include "load_fixture.hpp"
 #include "loadgen/server_watch.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st::loadgen {
 namespace {

@@ -8,7 +8,7 @@
 #include <random>
 
 #include "proto/proto.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st::proto {
 namespace {

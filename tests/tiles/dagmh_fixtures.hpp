@@ -9,8 +9,8 @@
 #include <vector>
 
 #include "tests/tiles/interval_fields.hpp"
-#include "tiles/core/encoding.hpp"
-#include "tiles/core/hierarchy.hpp"
+#include "tiles/build/encode.hpp"
+#include "tiles/build/hierarchy.hpp"
 
 namespace st::dagmh_test {
 

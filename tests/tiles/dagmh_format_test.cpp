@@ -5,7 +5,7 @@
 #include <cstddef>
 
 #include "tests/tiles/dagmh_fixtures.hpp"
-#include "tiles/core/dagmh_encode.hpp"
+#include "tiles/build/dagmh_encode.hpp"
 #include "tiles/core/dagmh_format.hpp"
 
 namespace st::dagmh {
@@ -48,7 +48,7 @@ TEST(DagmhFormat, StructOffsetsArePinned) {
   EXPECT_EQ(kVersion, 1u);
 }
 
-uint32_t u32_at(const std::vector<uint8_t>& b, size_t at) { return load32(b.data() + at); }
+uint32_t u32_at(const std::vector<uint8_t>& b, size_t at) { return st::load_le<uint32_t>(b.data() + at); }
 
 TEST(DagmhFormat, EncodedBufferHasTheDrawnLayout) {
   const Hierarchy h = dagmh_test::random_hierarchy(9, 3, 0.6, 0.5, dagmh_test::mixed_interval);

@@ -9,7 +9,7 @@
 #include "tests/tiles/dagmh_fixtures.hpp"
 #include "tests/tiles/interval_fields.hpp"
 #include "tiles/core/dagmh_format.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st {
 namespace {
@@ -86,7 +86,7 @@ TEST(DagmhHostile, CorruptionsNameTheField) {
   ASSERT_GT(h.node_words, 0u) << "the test buffer needs inner nodes";
   auto with = [&](size_t at, uint32_t v) {
     auto c = b;
-    store32(c.data() + at, v);
+    st::store_le<uint32_t>(c.data() + at, v);
     return open_error(c);
   };
   EXPECT_NE(with(0, 0x12345678).find("magic at byte 0"), std::string::npos);
@@ -95,16 +95,16 @@ TEST(DagmhHostile, CorruptionsNameTheField) {
   EXPECT_NE(with(24, h.node_words + 1).find("treelet_offset at byte 56"), std::string::npos);
   EXPECT_NE(with(32, h.value_count + 32).find("chunk_count"), std::string::npos);
   EXPECT_NE(with(20, kRefInner | 1).find("root_ref"), std::string::npos);
-  const uint32_t root_flags = load32(b.data() + h.node_offset);
+  const uint32_t root_flags = st::load_le<uint32_t>(b.data() + h.node_offset);
   EXPECT_NE(with(h.node_offset, root_flags | 0x200).find("node flags"), std::string::npos);
   // The root's first child: pointing backwards (at itself) or out of range.
   const bool first_is_treelet = (root_flags >> (kNodeTreeletShift + std::countr_zero(root_flags & 0xF))) & 1;
   EXPECT_NE(with(h.node_offset + 4, first_is_treelet ? h.treelet_count : 0).find("node child reference"),
             std::string::npos);
-  const uint32_t offset0 = load32(b.data() + h.node_offset + 8);
+  const uint32_t offset0 = st::load_le<uint32_t>(b.data() + h.node_offset + 8);
   EXPECT_NE(with(h.node_offset + 8, offset0 + 1).find("node value offset"), std::string::npos);
   if (h.skip_level > 0) {
-    const uint32_t base = load32(b.data() + h.skip_offset + 8);
+    const uint32_t base = st::load_le<uint32_t>(b.data() + h.skip_offset + 8);
     EXPECT_NE(with(h.skip_offset + 8, base + 1).find("skip entry"), std::string::npos);
   }
   auto chunk = b;

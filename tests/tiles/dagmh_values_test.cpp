@@ -7,8 +7,8 @@
 #include <vector>
 
 #include "tests/tiles/interval_fields.hpp"
-#include "tiles/core/dagmh_values.hpp"
-#include "tiles/core/error.hpp"
+#include "tiles/build/dagmh_values_encode.hpp"
+#include "common/error.hpp"
 
 namespace st::dagmh {
 namespace {

@@ -9,7 +9,7 @@
 
 #include "tests/tiles/depth_bounds_reference.hpp"
 #include "tiles/bake/depth_bounds.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st {
 namespace {

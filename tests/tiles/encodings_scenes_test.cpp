@@ -6,8 +6,8 @@
 #include "interval_fields.hpp"
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/scene.hpp"
-#include "tiles/core/encoding.hpp"
-#include "tiles/core/mh_build.hpp"
+#include "tiles/build/encode.hpp"
+#include "tiles/build/mh_build.hpp"
 
 namespace st {
 namespace {

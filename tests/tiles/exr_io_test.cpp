@@ -8,7 +8,7 @@
 
 #include "tiles/bake/exr_io.hpp"
 #include "tiles/bake/png_io.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st {
 namespace {

@@ -2,7 +2,7 @@
 
 #include <cmath>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 #include "tiles/core/light.hpp"
 
 namespace st {

@@ -9,7 +9,7 @@
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/map_build.hpp"
 #include "tiles/bake/scene.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 
 namespace st {

@@ -5,7 +5,7 @@
 #include <string>
 #include <vector>
 
-#include "tiles/core/hierarchy.hpp"
+#include "tiles/build/hierarchy.hpp"
 #include "tiles/core/interval.hpp"
 
 namespace st::fields {

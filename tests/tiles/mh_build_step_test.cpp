@@ -8,8 +8,8 @@
 #include <cstring>
 
 #include "tests/tiles/interval_fields.hpp"
-#include "tiles/core/mh_internal.hpp"
-#include "tiles/core/mh_level_step.hpp"
+#include "tiles/build/mh_internal.hpp"
+#include "tiles/build/mh_level_step.hpp"
 
 namespace st::mh_detail {
 namespace {

@@ -4,8 +4,8 @@
 
 #include "tests/tiles/interval_fields.hpp"
 #include "tests/tiles/mh_build_checks.hpp"
-#include "tiles/core/error.hpp"
-#include "tiles/core/mh_build.hpp"
+#include "common/error.hpp"
+#include "tiles/build/mh_build.hpp"
 
 namespace st {
 namespace {

@@ -12,9 +12,9 @@
 #include <vector>
 
 #include "tests/tiles/mh_build_checks.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 #include "tiles/core/evaluator.hpp"
-#include "tiles/core/hierarchy.hpp"
+#include "tiles/build/hierarchy.hpp"
 #include "tiles/core/interval.hpp"
 
 namespace st::mhtest {

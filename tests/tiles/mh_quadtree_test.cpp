@@ -10,15 +10,15 @@
 
 #include "tests/tiles/interval_fields.hpp"
 #include "tests/tiles/mh_quadtree_checks.hpp"
-#include "tiles/core/encoding.hpp"
-#include "tiles/core/error.hpp"
-#include "tiles/core/mh_build.hpp"
+#include "tiles/build/encode.hpp"
+#include "common/error.hpp"
+#include "tiles/build/mh_build.hpp"
 #include "tiles/core/mh_quadtree_format.hpp"
 
 namespace st {
 namespace {
 
-using mhq::load_u32;
+
 
 HNode valued(uint64_t morton, float v, uint8_t mask = 0) {
   HNode n;
@@ -55,7 +55,7 @@ TEST(MhQuadtree, EveryFieldEverySizeMatchesTheHierarchyAtEveryLevel) {
         const auto ev = open_mh(bytes);
         ASSERT_EQ(mhtest::check_equals_hierarchy(*ev, h), "") << what;
         ASSERT_EQ(mhtest::check_lossless_all_levels(*ev, f.tile), "") << what;
-        EXPECT_EQ(load_u32(bytes.data() + mhq::kOffNodeCount), h.node_count()) << what;
+        EXPECT_EQ(st::load_le<uint32_t>(bytes.data() + mhq::kOffNodeCount), h.node_count()) << what;
       }
 }
 
@@ -71,14 +71,14 @@ TEST(MhQuadtree, HeaderAndNodeWordsArePinned) {
   EXPECT_EQ(b[5], 0);
   EXPECT_EQ(b[6], 2);  // levels
   EXPECT_EQ(b[7], 0);  // flags: inner root, absolute values
-  EXPECT_EQ(load_u32(b.data() + 8), 3u);
-  EXPECT_EQ(load_u32(b.data() + 12), 36u);
+  EXPECT_EQ(st::load_le<uint32_t>(b.data() + 8), 3u);
+  EXPECT_EQ(st::load_le<uint32_t>(b.data() + 12), 36u);
   for (size_t i = 16; i < 20; ++i) EXPECT_EQ(b[i], 0) << i;  // shifts 0, 0 and padding
   // Root: mask child0 = leaf (01), child2 = leaf (01 << 4); pad 0; block at word 2 = off 2.
-  EXPECT_EQ(load_u32(b.data() + 20), 0x00020011u);
-  EXPECT_EQ(load_u32(b.data() + 24), mhq::float_bits(0.5f));
-  EXPECT_EQ(load_u32(b.data() + 28), mhq::float_bits(0.25f));
-  EXPECT_EQ(load_u32(b.data() + 32), mhq::float_bits(0.75f));
+  EXPECT_EQ(st::load_le<uint32_t>(b.data() + 20), 0x00020011u);
+  EXPECT_EQ(st::load_le<uint32_t>(b.data() + 24), mhq::float_bits(0.5f));
+  EXPECT_EQ(st::load_le<uint32_t>(b.data() + 28), mhq::float_bits(0.25f));
+  EXPECT_EQ(st::load_le<uint32_t>(b.data() + 32), mhq::float_bits(0.75f));
 
   Hierarchy leaf_root;
   leaf_root.depth = 3;

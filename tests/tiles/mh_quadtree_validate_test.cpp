@@ -6,7 +6,7 @@
 #include <cstring>
 
 #include "tiles/core/encoding.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 #include "tiles/core/mh_quadtree_format.hpp"
 
 namespace st {

@@ -7,16 +7,16 @@
 
 #include "tests/tiles/interval_fields.hpp"
 #include "tests/tiles/mh_quadtree_checks.hpp"
-#include "tiles/core/encoding.hpp"
-#include "tiles/core/error.hpp"
-#include "tiles/core/mh_build.hpp"
+#include "tiles/build/encode.hpp"
+#include "common/error.hpp"
+#include "tiles/build/mh_build.hpp"
 #include "tiles/core/mh_quadtree_format.hpp"
-#include "tiles/core/mmh_merge.hpp"
+#include "tiles/build/mmh_merge.hpp"
 
 namespace st {
 namespace {
 
-using mhq::load_u32;
+
 
 // 64² texels, zero-width intervals, all values multiples of 2^-10 (so differences are
 // exact in float): the left half holds 8x8 blocks of one random pattern, each block
@@ -106,7 +106,7 @@ TEST(Mmh, RepeatedPatternsAtOtherDepthOffsetsMerge) {
     // The quadrants share blocks, and inside the shared blocks the shifted copies of
     // the pattern share again (nested merges): about 11x smaller.
     EXPECT_LT(mmh.size() * 6, mh.size()) << "seed " << seed << ": MH " << mh.size() << " MMH " << mmh.size();
-    EXPECT_LT(load_u32(mmh.data() + mhq::kOffNodeCount) * 6, h.node_count());
+    EXPECT_LT(st::load_le<uint32_t>(mmh.data() + mhq::kOffNodeCount) * 6, h.node_count());
     const auto ev = open_mmh(mmh);
     ASSERT_EQ(mhtest::check_within_answering_intervals(*ev, h), "");
     ASSERT_EQ(mhtest::check_lossless_all_levels(*ev, tile), "");
@@ -189,14 +189,14 @@ TEST(Mmh, HeaderAndRelativeValuesArePinned) {
   EXPECT_EQ(std::memcmp(bytes.data(), "STMM", 4), 0);
   EXPECT_EQ(bytes[6], 2);
   EXPECT_EQ(bytes[7], mhq::kFlagRelative);
-  EXPECT_EQ(load_u32(bytes.data() + 8), 3u);
-  EXPECT_EQ(load_u32(bytes.data() + 12), 36u);
+  EXPECT_EQ(st::load_le<uint32_t>(bytes.data() + 8), 3u);
+  EXPECT_EQ(st::load_le<uint32_t>(bytes.data() + 12), 36u);
   // Root word: mask 0x11, pad = absolute flag of slot 2 (bit 2 of the pad's low nibble),
   // shift 0, offset 2.
-  EXPECT_EQ(load_u32(bytes.data() + 20), 0x00020411u);
-  EXPECT_EQ(load_u32(bytes.data() + 24), mhq::float_bits(0.5f));    // the root: absolute
-  EXPECT_EQ(load_u32(bytes.data() + 28), mhq::float_bits(-0.25f));  // 0.25 relative to 0.5
-  EXPECT_EQ(load_u32(bytes.data() + 32), mhq::float_bits(1e-30f));  // absolute
+  EXPECT_EQ(st::load_le<uint32_t>(bytes.data() + 20), 0x00020411u);
+  EXPECT_EQ(st::load_le<uint32_t>(bytes.data() + 24), mhq::float_bits(0.5f));    // the root: absolute
+  EXPECT_EQ(st::load_le<uint32_t>(bytes.data() + 28), mhq::float_bits(-0.25f));  // 0.25 relative to 0.5
+  EXPECT_EQ(st::load_le<uint32_t>(bytes.data() + 32), mhq::float_bits(1e-30f));  // absolute
   const auto ev = open_mmh(bytes);
   EXPECT_EQ(ev->depth(1, 0, 0), 0.25f);
   EXPECT_EQ(ev->depth(1, 0, 1), 1e-30f);

@@ -5,7 +5,7 @@
 #include <cstring>
 
 #include "tests/tiles/interval_fields.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 #include "tiles/core/pack_format.hpp"
 
 namespace st {

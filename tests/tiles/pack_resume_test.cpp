@@ -8,11 +8,11 @@
 
 #include "tests/tiles/interval_fields.hpp"
 #include "tests/tiles/pack_test_support.hpp"
-#include "tiles/core/error.hpp"
-#include "tiles/core/mh_build.hpp"
+#include "common/error.hpp"
+#include "tiles/build/mh_build.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_reader.hpp"
-#include "tiles/core/pack_writer.hpp"
+#include "tiles/build/pack_writer.hpp"
 
 namespace st {
 namespace {

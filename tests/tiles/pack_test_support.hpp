@@ -9,11 +9,11 @@
 #include <string>
 #include <vector>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 #include "tiles/core/evaluator.hpp"
-#include "tiles/core/hierarchy.hpp"
+#include "tiles/build/hierarchy.hpp"
 #include "tiles/core/interval.hpp"
-#include "tiles/core/tile_cut.hpp"
+#include "tiles/build/tile_cut.hpp"
 
 namespace st::packtest {
 

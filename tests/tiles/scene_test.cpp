@@ -10,7 +10,7 @@
 
 #include "tiles/bake/scene.hpp"
 #include "tiles/bake/scene_mesh.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st {
 namespace {

@@ -9,9 +9,9 @@
 #include "tests/tiles/interval_fields.hpp"
 #include "tests/tiles/mh_build_checks.hpp"
 #include "tests/tiles/pack_test_support.hpp"
-#include "tiles/core/error.hpp"
-#include "tiles/core/mh_build.hpp"
-#include "tiles/core/tile_cut.hpp"
+#include "common/error.hpp"
+#include "tiles/build/mh_build.hpp"
+#include "tiles/build/tile_cut.hpp"
 
 namespace st {
 namespace {

@@ -13,7 +13,7 @@
 #include <unordered_map>
 #include <vector>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st {
 namespace {

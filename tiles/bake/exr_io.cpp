@@ -19,7 +19,7 @@
 #include <sstream>
 #include <thread>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st {
 namespace {

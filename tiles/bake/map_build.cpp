@@ -11,11 +11,11 @@
 #include <thread>
 
 #include "tiles/bake/depth_bounds.hpp"
-#include "tiles/core/error.hpp"
-#include "tiles/core/hierarchy.hpp"
+#include "common/error.hpp"
+#include "tiles/build/hierarchy.hpp"
 #include "tiles/core/pack_reader.hpp"
-#include "tiles/core/pack_writer.hpp"
-#include "tiles/core/tile_cut.hpp"
+#include "tiles/build/pack_writer.hpp"
+#include "tiles/build/tile_cut.hpp"
 
 namespace st {
 namespace {

@@ -20,7 +20,7 @@
 #include "tiles/bake/scene.hpp"
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/light.hpp"
-#include "tiles/core/mh_build.hpp"
+#include "tiles/build/mh_build.hpp"
 
 namespace st {
 

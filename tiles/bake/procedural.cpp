@@ -7,7 +7,7 @@
 #include <cmath>
 #include <limits>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st {
 namespace procedural {

@@ -12,30 +12,13 @@
 #include <string>
 #include <vector>
 
+#include "common/hash.hpp"
 #include "tiles/bake/scene_mesh.hpp"
 
 namespace st::procedural {
 
-// splitmix64 (Steele, Lea, Flood 2014): identical output on every platform and standard
-// library, unlike std::uniform_*_distribution.
-class Rng {
- public:
-  explicit Rng(uint64_t seed) : state_(seed) {}
-  uint64_t next() {
-    uint64_t z = (state_ += 0x9e3779b97f4a7c15ull);
-    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
-    z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
-    return z ^ (z >> 31);
-  }
-  double uniform() { return double(next() >> 11) * 0x1.0p-53; }  // [0, 1)
-  double uniform(double lo, double hi) { return lo + (hi - lo) * uniform(); }
-  // Integer in [lo, hi]; the modulo bias (< 2^-50 for our ranges) does not matter here.
-  int range(int lo, int hi) { return lo + int(next() % uint64_t(hi - lo + 1)); }
-  bool chance(double p) { return uniform() < p; }
-
- private:
-  uint64_t state_;
-};
+// The seeded generator of procedural scenes: common/hash.hpp (same output everywhere).
+using st::Rng;
 
 // The key=value pairs of one spec. Each generator asks for every key it knows (with a
 // default and a valid range) and then calls finish(), which rejects keys nobody asked for.

@@ -5,7 +5,7 @@
 #include <numbers>
 
 #include "tiles/bake/procedural.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st::procedural {
 

@@ -17,7 +17,7 @@
 #include <limits>
 
 #include "tiles/bake/png_io.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st {
 

@@ -27,7 +27,7 @@
 #include <string>
 #include <vector>
 
-#include "tiles/bake/render_camera.hpp"
+#include "tiles/core/camera.hpp"
 #include "tiles/bake/scene.hpp"
 #include "tiles/core/evaluator.hpp"
 #include "tiles/core/light.hpp"

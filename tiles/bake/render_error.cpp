@@ -6,7 +6,7 @@
 #include <chrono>
 #include <cmath>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st {
 

@@ -8,7 +8,7 @@
 #include <memory>
 #include <vector>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st {
 namespace {

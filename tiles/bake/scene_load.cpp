@@ -15,7 +15,7 @@
 
 #include "tiles/bake/scene_mesh.hpp"
 #include "tiles/bake/scene_quake3.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st {
 namespace {

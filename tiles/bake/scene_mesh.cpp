@@ -5,7 +5,7 @@
 #include <limits>
 #include <numeric>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st {
 namespace {

@@ -8,7 +8,7 @@
 
 #include "tiles/bake/scene_mesh.hpp"
 #include "tiles/bake/scene_zip.hpp"
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st {
 namespace {

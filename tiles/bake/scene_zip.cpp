@@ -5,7 +5,7 @@
 #include <algorithm>
 #include <cctype>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st {
 namespace {

@@ -11,6 +11,8 @@
 #include <cstdint>
 #include <cstring>
 
+#include "common/bytes.hpp"
+
 namespace st::dagmh {
 
 static_assert(std::endian::native == std::endian::little, "DAG-MH buffers are little-endian");
@@ -107,17 +109,6 @@ struct ChunkInfo {
 static_assert(sizeof(ChunkInfo) == 24);
 static_assert(offsetof(ChunkInfo, bit_offset) == 16 && offsetof(ChunkInfo, factor_bits) == 20);
 
-inline uint32_t load32(const uint8_t* p) {
-  uint32_t v;
-  std::memcpy(&v, p, 4);
-  return v;
-}
-inline uint64_t load64(const uint8_t* p) {
-  uint64_t v;
-  std::memcpy(&v, p, 8);
-  return v;
-}
-inline void store32(uint8_t* p, uint32_t v) { std::memcpy(p, &v, 4); }
 
 // Population count for the lookup paths. Without a POPCNT target (baseline x86-64)
 // std::popcount becomes a libgcc call; this inline SWAR form is several times cheaper.

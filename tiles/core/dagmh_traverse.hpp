@@ -52,7 +52,7 @@ struct View {
   Cursor descend(Cursor c, uint32_t stop, uint32_t level, uint64_t x, uint64_t y) const {
     while ((c.ref & kRefTagMask) == kRefInner && c.level < stop) {
       const uint8_t* node = nodes + size_t(c.ref & kRefIndexMask) * 4;
-      const uint32_t flags = load32(node);
+      const uint32_t flags = st::load_le<uint32_t>(node);
       if (flags & kNodeValuedBit) c.last = c.base;
       const uint32_t shift = level - c.level - 1;
       const uint32_t child = uint32_t((x >> shift) & 1) | uint32_t(((y >> shift) & 1) << 1);
@@ -65,8 +65,8 @@ struct View {
       const uint32_t below = flags & kNodeChildMask & ((1u << child) - 1);
       const uint32_t rank = uint32_t(0x4332322132212110ull >> (4 * below)) & 0xF;
       const uint8_t* entry = node + 4 + 8 * rank;
-      c.base += load32(entry + 4);
-      c.ref = load32(entry) | ((flags >> (kNodeTreeletShift + child)) & 1 ? kRefTreelet : kRefInner);
+      c.base += st::load_le<uint32_t>(entry + 4);
+      c.ref = st::load_le<uint32_t>(entry) | ((flags >> (kNodeTreeletShift + child)) & 1 ? kRefTreelet : kRefInner);
     }
     return c;
   }
@@ -74,13 +74,13 @@ struct View {
   // The value index for (x, y) of `level`, given descend(c, level, level, x, y)'s cursor.
   uint32_t finish(const Cursor& c, uint32_t level, uint64_t x, uint64_t y) const {
     const uint32_t tag = c.ref & kRefTagMask;
-    if (tag == kRefInner) return load32(nodes + size_t(c.ref & kRefIndexMask) * 4) & kNodeValuedBit ? c.base : c.last;
+    if (tag == kRefInner) return st::load_le<uint32_t>(nodes + size_t(c.ref & kRefIndexMask) * 4) & kNodeValuedBit ? c.base : c.last;
     if (tag != kRefTreelet) return c.last;
     // Alg. 1: from the deepest treelet level on the path up to the treelet root; the
     // first valued node answers, its index = base + set bits before it (depth-first).
     const uint8_t* t = treelets + size_t(c.ref & kRefIndexMask) * kTreeletBytes;
-    const uint64_t low = load64(t);
-    const uint32_t high = load32(t + 8);
+    const uint64_t low = st::load_le<uint64_t>(t);
+    const uint32_t high = st::load_le<uint32_t>(t + 8);
     const uint32_t depth = std::min<uint32_t>(level - c.level, kTreeletLevels - 1);
     uint32_t pos[kTreeletLevels] = {0, 0, 0, 0};
     for (uint32_t n = 1; n <= depth; ++n) {

@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 #include "tiles/core/interval.hpp"
 
 namespace st::dagmh {
@@ -70,7 +70,7 @@ void check_structure(const Header& h, const Sections& s, const uint8_t* base) {
   std::vector<uint32_t> starts;
   std::vector<uint8_t> is_start(words, 0);
   for (uint32_t w = 0; w < words;) {
-    const uint32_t flags = load32(nodes + 4 * size_t(w));
+    const uint32_t flags = st::load_le<uint32_t>(nodes + 4 * size_t(w));
     if (flags & ~kNodeFlagBits) fail("node flags", node_byte(w), "reserved bits set");
     const uint32_t mask = flags & kNodeChildMask;
     if (mask == 0) fail("node flags", node_byte(w), "inner node without children");
@@ -86,22 +86,22 @@ void check_structure(const Header& h, const Sections& s, const uint8_t* base) {
   std::vector<uint32_t> treelet_values(h.treelet_count);
   for (uint32_t t = 0; t < h.treelet_count; ++t) {
     const uint8_t* p = treelets + size_t(t) * kTreeletBytes;
-    if (load32(p + 8) >> (kTreeletNodes - 64))
+    if (st::load_le<uint32_t>(p + 8) >> (kTreeletNodes - 64))
       fail("treelet", s.treelets + uint64_t(t) * kTreeletBytes + 8, "bits past 85 set");
-    treelet_values[t] = uint32_t(std::popcount(load64(p)) + std::popcount(load32(p + 8)));
+    treelet_values[t] = uint32_t(std::popcount(st::load_le<uint64_t>(p)) + std::popcount(st::load_le<uint32_t>(p + 8)));
   }
   // References and value counts, children first (they lie after their parents).
   std::vector<uint32_t> count(words, 0);
   for (size_t i = starts.size(); i-- > 0;) {
     const uint32_t w = starts[i];
-    const uint32_t flags = load32(nodes + 4 * size_t(w));
+    const uint32_t flags = st::load_le<uint32_t>(nodes + 4 * size_t(w));
     uint64_t expected = (flags & kNodeValuedBit) ? 1 : 0;
     uint32_t rank = 0;
     for (uint32_t c = 0; c < 4; ++c) {
       if (!((flags >> c) & 1)) continue;
       const uint64_t at = uint64_t(w) + 1 + 2 * rank++;
-      const uint32_t ref = load32(nodes + 4 * at);
-      const uint32_t offset = load32(nodes + 4 * (at + 1));
+      const uint32_t ref = st::load_le<uint32_t>(nodes + 4 * at);
+      const uint32_t offset = st::load_le<uint32_t>(nodes + 4 * (at + 1));
       uint64_t child_count;
       if ((flags >> (kNodeTreeletShift + c)) & 1) {
         if (ref >= h.treelet_count) fail("node child reference", node_byte(at), "treelet out of range");
@@ -124,7 +124,7 @@ void check_structure(const Header& h, const Sections& s, const uint8_t* base) {
   std::vector<uint8_t> reached(words, 0), treelet_reached(h.treelet_count, 0);
   if (tag == kRefInner) {
     if (index >= words || !is_start[index]) fail("root_ref", root_field, "not a node start");
-    if (!(load32(nodes + 4 * size_t(index)) & kNodeValuedBit)) fail("root_ref", root_field, "root has no value");
+    if (!(st::load_le<uint32_t>(nodes + 4 * size_t(index)) & kNodeValuedBit)) fail("root_ref", root_field, "root has no value");
     if (count[index] != h.value_count) fail("root_ref", root_field, "root's values != value_count");
     reached[index] = 1;
   } else if (tag == kRefTreelet) {
@@ -137,11 +137,11 @@ void check_structure(const Header& h, const Sections& s, const uint8_t* base) {
   }
   for (uint32_t w : starts) {
     if (!reached[w]) fail("node", node_byte(w), "unreachable from the root");
-    const uint32_t flags = load32(nodes + 4 * size_t(w));
+    const uint32_t flags = st::load_le<uint32_t>(nodes + 4 * size_t(w));
     uint32_t rank = 0;
     for (uint32_t c = 0; c < 4; ++c) {
       if (!((flags >> c) & 1)) continue;
-      const uint32_t ref = load32(nodes + 4 * (size_t(w) + 1 + 2 * rank++));
+      const uint32_t ref = st::load_le<uint32_t>(nodes + 4 * (size_t(w) + 1 + 2 * rank++));
       ((flags >> (kNodeTreeletShift + c)) & 1 ? treelet_reached : reached)[ref] = 1;
     }
   }

@@ -5,7 +5,7 @@
 //
 // Decoder arithmetic (a format rule): the product is rounded to float, then the sum:
 //     v = float(c_l + float(c_f * float(i)))      -- two roundings, NO fused multiply-add.
-// The encoder verifies every value with exactly this function, so a decoder that fused
+// The encoder (tiles/build/dagmh_values_encode.hpp) verifies every value with exactly this function, so a decoder that fused
 // the two operations could leave an admissible interval. affine_value() forbids the
 // contraction itself (an empty asm barrier on the product) and every dagmh*.cpp is
 // compiled with -ffp-contract=off as well (tiles/CMakeLists.txt). GPU ports must do the
@@ -30,30 +30,6 @@ inline float affine_value(float c_l, float c_f, uint32_t i) {
   return c_l + product;
 }
 
-// One valued node: its admissible interval (any float in [lo, hi] is lossless) and the
-// value the hierarchy chose (used for raw fallbacks).
-struct ValueSlot {
-  float lo = 0, hi = 0, value = 0;
-};
-
-struct ValueStats {
-  uint64_t chunks = 0;
-  uint64_t base_only_chunks = 0;  // every value equals the base
-  uint64_t raw_chunks = 0;        // k = 32
-  uint64_t multipliers = 0;       // values not equal to their chunk's base
-  uint64_t multiplier_bits = 0;
-};
-
-struct EncodedValues {
-  std::vector<ChunkInfo> chunks;
-  std::vector<uint8_t> multipliers;  // multiple of 4 bytes, ends with kMultiplierPadBytes zeros
-  ValueStats stats;
-};
-
-// Encodes the values; every decoded value is verified to lie in its slot's [lo, hi]
-// (throws st::Error if a slot has lo > hi or a NaN bound: the hierarchy is broken).
-EncodedValues encode_values(std::span<const ValueSlot> slots);
-
 // Reads chunk `c` of a chunk section.
 inline ChunkInfo load_chunk(const uint8_t* chunks, uint32_t c) {
   ChunkInfo info;
@@ -67,16 +43,16 @@ inline ChunkInfo load_chunk(const uint8_t* chunks, uint32_t c) {
 inline float read_value(const uint8_t* chunks, const uint8_t* multipliers, uint32_t index) {
   const uint8_t* c = chunks + size_t(index / kChunkValues) * sizeof(ChunkInfo);
   const uint32_t bit = index % kChunkValues;
-  const uint32_t mask = load32(c + offsetof(ChunkInfo, mask));
-  if (!((mask >> bit) & 1)) return std::bit_cast<float>(load32(c + offsetof(ChunkInfo, base)));
+  const uint32_t mask = st::load_le<uint32_t>(c + offsetof(ChunkInfo, mask));
+  if (!((mask >> bit) & 1)) return std::bit_cast<float>(st::load_le<uint32_t>(c + offsetof(ChunkInfo, base)));
   const uint32_t k = c[offsetof(ChunkInfo, factor_bits)];
   const uint32_t rank = bit_count(uint64_t(mask & ((1u << bit) - 1)));
-  const uint64_t pos = uint64_t(load32(c + offsetof(ChunkInfo, bit_offset))) + uint64_t(rank) * k;
-  const uint64_t word = load64(multipliers + (pos >> 3)) >> (pos & 7);
+  const uint64_t pos = uint64_t(st::load_le<uint32_t>(c + offsetof(ChunkInfo, bit_offset))) + uint64_t(rank) * k;
+  const uint64_t word = st::load_le<uint64_t>(multipliers + (pos >> 3)) >> (pos & 7);
   const uint32_t i = uint32_t(word & ((uint64_t(1) << k) - 1));
   if (k == kRawFactorBits) return std::bit_cast<float>(i);
-  return affine_value(std::bit_cast<float>(load32(c + offsetof(ChunkInfo, c_l))),
-                      std::bit_cast<float>(load32(c + offsetof(ChunkInfo, c_f))), i);
+  return affine_value(std::bit_cast<float>(st::load_le<uint32_t>(c + offsetof(ChunkInfo, c_l))),
+                      std::bit_cast<float>(st::load_le<uint32_t>(c + offsetof(ChunkInfo, c_f))), i);
 }
 
 }  // namespace st::dagmh

@@ -2,7 +2,7 @@
 // an encoder that is linked into this build: the others answer with a clear st::Error.
 #include "tiles/core/encoding.hpp"
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st {
 
@@ -27,15 +27,6 @@ namespace {
   throw Error("encoding '" + to_string(e) + "' is not available in this build");
 }
 }  // namespace
-
-std::vector<uint8_t> encode(const Hierarchy& h, Encoding e) {
-  switch (e) {
-    case Encoding::mh: return encode_mh(h);
-    case Encoding::mmh: return encode_mmh(h);
-    case Encoding::dagmh: return encode_dagmh(h);
-  }
-  not_built(e);
-}
 
 std::unique_ptr<Evaluator> open_encoded(Encoding e, std::span<const uint8_t> bytes) {
   switch (e) {

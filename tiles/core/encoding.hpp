@@ -2,7 +2,7 @@
 // buffer with offsets, no pointers, read in place by its evaluator (the same bytes later
 // sit in a pack, on the wire and in a GPU cache slot).
 //
-// Encoders take a Hierarchy (tiles/core/hierarchy.hpp) and return the buffer. Openers
+// Encoders (tiles/build/encode.hpp) take a Hierarchy and return the buffer. Openers
 // validate the whole buffer once (every offset, count and length in range; trailing
 // bytes rejected) and throw st::FormatError naming the field and byte offset otherwise;
 // after a successful open, lookups never read out of bounds. The returned evaluator
@@ -15,7 +15,6 @@
 #include <vector>
 
 #include "tiles/core/evaluator.hpp"
-#include "tiles/core/hierarchy.hpp"
 
 namespace st {
 
@@ -24,16 +23,12 @@ enum class Encoding : uint8_t { mh = 0, mmh = 1, dagmh = 2 };  // format constan
 std::string to_string(Encoding e);
 Encoding parse_encoding(const std::string& name);  // "mh" | "mmh" | "dagmh"; throws st::Error
 
-// Per-encoding entry points (implemented in their own files).
-std::vector<uint8_t> encode_mh(const Hierarchy& h);     // MH quadtree, MH §3.2
-std::vector<uint8_t> encode_mmh(const Hierarchy& h);    // merged MH
-std::vector<uint8_t> encode_dagmh(const Hierarchy& h);  // DAG-MH 2021
+// Per-encoding openers (implemented in their own files).
 std::unique_ptr<Evaluator> open_mh(std::span<const uint8_t> bytes);     // MH and MMH buffers
 std::unique_ptr<Evaluator> open_mmh(std::span<const uint8_t> bytes);
 std::unique_ptr<Evaluator> open_dagmh(std::span<const uint8_t> bytes);
 
 // Dispatch by tag.
-std::vector<uint8_t> encode(const Hierarchy& h, Encoding e);
 std::unique_ptr<Evaluator> open_encoded(Encoding e, std::span<const uint8_t> bytes);
 
 }  // namespace st

@@ -5,7 +5,7 @@
 #include <sstream>
 #include <vector>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st {
 namespace {

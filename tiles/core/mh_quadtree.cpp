@@ -1,20 +1,19 @@
-// MH quadtree (MH §3.2): entry points declared in tiles/core/encoding.hpp. The format is
-// drawn in tiles/core/mh_quadtree_format.hpp and tiles/core/MHQUAD.md.
+// MH quadtree (MH §3.2) and MMH openers: entry points declared in tiles/core/encoding.hpp.
+// The format is drawn in tiles/core/mh_quadtree_format.hpp and tiles/core/MHQUAD.md; the
+// encoders are in tiles/build/encode.cpp.
 #include "tiles/core/encoding.hpp"
-#include "tiles/core/mh_quadtree_layout.hpp"
 #include "tiles/core/mh_quadtree_reader.hpp"
 
 namespace st {
 
-std::vector<uint8_t> encode_mh(const Hierarchy& h) {
-  const mhq::FlatTree t = mhq::flatten(h, /*need_intervals=*/false);
-  return mhq::serialize(t, mhq::EmitPlan{});
-}
-
 // Opens MH and, by its magic, MMH buffers too (encoding.hpp); open_mmh takes MMH only.
 std::unique_ptr<Evaluator> open_mh(std::span<const uint8_t> bytes) {
-  const bool mmh = bytes.size() >= 4 && mhq::load_u32(bytes.data()) == mhq::kMagicMmh;
+  const bool mmh = bytes.size() >= 4 && st::load_le<uint32_t>(bytes.data()) == mhq::kMagicMmh;
   return mhq::make_evaluator(bytes, mhq::validate(bytes, /*relative=*/mmh));
+}
+
+std::unique_ptr<Evaluator> open_mmh(std::span<const uint8_t> bytes) {
+  return mhq::make_evaluator(bytes, mhq::validate(bytes, /*relative=*/true));
 }
 
 }  // namespace st

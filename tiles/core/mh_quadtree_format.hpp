@@ -43,6 +43,8 @@
 #include <cstdint>
 #include <cstring>
 
+#include "common/bytes.hpp"
+
 namespace st::mhq {
 
 static_assert(std::endian::native == std::endian::little, "tree words are little-endian");
@@ -109,15 +111,5 @@ inline float mmh_add(float ancestor, float stored) { return ancestor + stored; }
 inline uint32_t float_bits(float f) { return std::bit_cast<uint32_t>(f); }
 inline float bits_float(uint32_t b) { return std::bit_cast<float>(b); }
 
-inline uint32_t load_u32(const uint8_t* p) {
-  uint32_t v;
-  std::memcpy(&v, p, 4);
-  return v;
-}
-inline uint16_t load_u16(const uint8_t* p) {
-  uint16_t v;
-  std::memcpy(&v, p, 2);
-  return v;
-}
 
 }  // namespace st::mhq

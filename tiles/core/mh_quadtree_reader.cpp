@@ -5,7 +5,7 @@
 #include <string>
 #include <vector>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 #include "tiles/core/interval.hpp"
 
 namespace st::mhq {
@@ -29,7 +29,7 @@ class Validator {
   void run() {
     node(0, info_.root_leaf ? kCodeLeaf : kCodeInner, 0);
     for (uint64_t w = 0; w < info_.words; ++w)
-      if (!mark_[w] && load_u32(tree_ + 4 * w) != 0) fail_at("padding", w, "non-zero word outside every node");
+      if (!mark_[w] && st::load_le<uint32_t>(tree_ + 4 * w) != 0) fail_at("padding", w, "non-zero word outside every node");
     if (!mark_[info_.words - 1]) fail_at("byte_size", info_.words - 1, "trailing bytes after the last node");
     if (nodes_ != info_.node_count)
       fail(info_.relative, "node_count", kOffNodeCount,
@@ -61,11 +61,11 @@ class Validator {
     ++nodes_;
     if (code != kCodeEmpty) {
       const uint64_t vp = code == kCodeLeaf ? p : p + 1;
-      if (!std::isfinite(bits_float(load_u32(tree_ + 4 * vp)))) fail_at("value", vp, "not a finite float");
+      if (!std::isfinite(bits_float(st::load_le<uint32_t>(tree_ + 4 * vp)))) fail_at("value", vp, "not a finite float");
     }
     if (code == kCodeLeaf) return 0;
 
-    const uint32_t w = load_u32(tree_ + 4 * p);
+    const uint32_t w = st::load_le<uint32_t>(tree_ + 4 * p);
     const uint32_t mask = word_mask(w);
     if (mask == 0) fail_at("child mask", p, "inner or empty node without children");
     if (level >= finest) fail_at("child mask", p, "children below the finest level");
@@ -175,7 +175,7 @@ class TreeEvaluator final : public Evaluator {
     bool missing = false;  // stopped because the next child is absent
   };
 
-  uint32_t word(uint64_t w) const { return load_u32(tree_ + 4 * w); }
+  uint32_t word(uint64_t w) const { return st::load_le<uint32_t>(tree_ + 4 * w); }
 
   Cursor root() const {
     Cursor c;
@@ -233,14 +233,14 @@ TreeInfo validate(std::span<const uint8_t> bytes, bool relative) {
   const uint8_t* b = bytes.data();
   if (size < kHeaderFixedSize)
     fail(relative, "header", 0, "truncated: " + std::to_string(size) + " bytes, need at least 16");
-  const uint32_t magic = load_u32(b + kOffMagic);
+  const uint32_t magic = st::load_le<uint32_t>(b + kOffMagic);
   const uint32_t want = relative ? kMagicMmh : kMagicMh;
   if (magic != want) {
     if (magic == (relative ? kMagicMh : kMagicMmh))
       fail(relative, "magic", kOffMagic, relative ? "this is an MH buffer (open_mh)" : "this is an MMH buffer (open_mmh)");
     fail(relative, "magic", kOffMagic, "not an MH/MMH buffer");
   }
-  const uint16_t version = load_u16(b + kOffVersion);
+  const uint16_t version = st::load_le<uint16_t>(b + kOffVersion);
   if (version != kVersion) fail(relative, "version", kOffVersion, "unsupported version " + std::to_string(version));
   TreeInfo info;
   info.relative = relative;
@@ -252,8 +252,8 @@ TreeInfo validate(std::span<const uint8_t> bytes, bool relative) {
   if (bool(flags & kFlagRelative) != relative)
     fail(relative, "flags", kOffFlags, "relative-values bit disagrees with the magic");
   info.root_leaf = flags & kFlagRootLeaf;
-  info.node_count = load_u32(b + kOffNodeCount);
-  const uint32_t byte_size = load_u32(b + kOffByteSize);
+  info.node_count = st::load_le<uint32_t>(b + kOffNodeCount);
+  const uint32_t byte_size = st::load_le<uint32_t>(b + kOffByteSize);
   if (byte_size != size)
     fail(relative, "byte_size", kOffByteSize,
          "header says " + std::to_string(byte_size) + " bytes, buffer has " + std::to_string(size));

@@ -3,7 +3,7 @@
 #include <atomic>
 #include <cstring>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st {
 

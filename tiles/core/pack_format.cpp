@@ -7,15 +7,12 @@
 #include <cstring>
 #include <memory>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 #include "tiles/core/interval.hpp"
-#include "tiles/core/pack_bytes.hpp"
+#include "common/bytes.hpp"
 
 namespace st {
 
-using packbytes::load;
-using packbytes::put;
-using packbytes::store;
 
 std::string hex32(uint32_t v) {
   char buf[16];
@@ -33,28 +30,28 @@ std::array<uint8_t, kPackHeaderBytes> PackHeader::serialize() const {
   std::array<uint8_t, kPackHeaderBytes> b{};
   uint8_t* p = b.data();
   std::memcpy(p, kPackMagic.data(), 8);
-  store<uint32_t>(p + 8, kPackVersion);
-  store<uint32_t>(p + 12, kPackHeaderBytes);
-  store<uint32_t>(p + 16, uint32_t(state));
-  store<uint32_t>(p + 20, flags);
+  store_le<uint32_t>(p + 8, kPackVersion);
+  store_le<uint32_t>(p + 12, kPackHeaderBytes);
+  store_le<uint32_t>(p + 16, uint32_t(state));
+  store_le<uint32_t>(p + 20, flags);
   p[24] = uint8_t(encoding);
   p[25] = uint8_t(light_kind);
   p[26] = uint8_t(map_level);
   p[27] = uint8_t(skip_level);
-  store<uint32_t>(p + 28, tile_bytes);
-  store<uint64_t>(p + 32, scene_hash);
-  for (size_t i = 0; i < 18; ++i) store<double>(p + 40 + 8 * i, light[i]);
-  store<uint64_t>(p + 184, params_offset);
-  store<uint64_t>(p + 192, params_size);
-  store<uint64_t>(p + 200, journal_offset);
-  store<uint64_t>(p + 208, grid_offset);
-  store<uint64_t>(p + 216, grid_size);
-  store<uint64_t>(p + 224, index_offset);
-  store<uint64_t>(p + 232, tile_count);
-  store<uint32_t>(p + 240, params_crc);
-  store<uint32_t>(p + 244, grid_crc);
-  store<uint32_t>(p + 248, index_crc);
-  store<uint32_t>(p + 252, crc32_of({p, 252}));
+  store_le<uint32_t>(p + 28, tile_bytes);
+  store_le<uint64_t>(p + 32, scene_hash);
+  for (size_t i = 0; i < 18; ++i) store_le<double>(p + 40 + 8 * i, light[i]);
+  store_le<uint64_t>(p + 184, params_offset);
+  store_le<uint64_t>(p + 192, params_size);
+  store_le<uint64_t>(p + 200, journal_offset);
+  store_le<uint64_t>(p + 208, grid_offset);
+  store_le<uint64_t>(p + 216, grid_size);
+  store_le<uint64_t>(p + 224, index_offset);
+  store_le<uint64_t>(p + 232, tile_count);
+  store_le<uint32_t>(p + 240, params_crc);
+  store_le<uint32_t>(p + 244, grid_crc);
+  store_le<uint32_t>(p + 248, index_crc);
+  store_le<uint32_t>(p + 252, crc32_of({p, 252}));
   return b;
 }
 
@@ -66,18 +63,18 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
     fail(b.size(), "truncated (" + std::to_string(b.size()) + " of " +
                        std::to_string(kPackHeaderBytes) + " header bytes)");
   if (!std::equal(kPackMagic.begin(), kPackMagic.end(), b.begin())) fail(0, "not a shadowtile pack (bad magic)");
-  uint32_t version = load<uint32_t>(b, 8);
+  uint32_t version = load_le<uint32_t>(b, 8);
   if (version != kPackVersion)
     fail(8, "unsupported version " + std::to_string(version) + " (this build reads " +
                 std::to_string(kPackVersion) + ")");
-  if (load<uint32_t>(b, 12) != kPackHeaderBytes) fail(12, "bad header size");
-  uint32_t stored_crc = load<uint32_t>(b, 252), crc = crc32_of(b.first(252));
+  if (load_le<uint32_t>(b, 12) != kPackHeaderBytes) fail(12, "bad header size");
+  uint32_t stored_crc = load_le<uint32_t>(b, 252), crc = crc32_of(b.first(252));
   if (stored_crc != crc) fail(252, "header CRC mismatch (stored " + hex32(stored_crc) + ", computed " + hex32(crc) + ")");
   PackHeader h;
-  uint32_t state = load<uint32_t>(b, 16);
+  uint32_t state = load_le<uint32_t>(b, 16);
   if (state > uint32_t(PackState::complete)) fail(16, "bad state " + std::to_string(state));
   h.state = PackState(state);
-  h.flags = load<uint32_t>(b, 20);
+  h.flags = load_le<uint32_t>(b, 20);
   if (h.flags & ~uint32_t(kKnownFeatures)) fail(20, "unknown feature flags " + hex32(h.flags));
   if (b[24] > uint8_t(Encoding::dagmh)) fail(24, "unknown encoding " + std::to_string(b[24]));
   h.encoding = Encoding(b[24]);
@@ -87,20 +84,20 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
   h.skip_level = b[27];
   if (h.map_level > kMaxLevel) fail(26, "map level " + std::to_string(h.map_level) + " > 20");
   if (h.skip_level > std::min(h.map_level, kMaxSkipLevel)) fail(27, "bad skip level " + std::to_string(h.skip_level));
-  h.tile_bytes = load<uint32_t>(b, 28);
+  h.tile_bytes = load_le<uint32_t>(b, 28);
   if (h.tile_bytes == 0 || h.tile_bytes > kMaxTileBytes) fail(28, "bad tile_bytes " + std::to_string(h.tile_bytes));
-  h.scene_hash = load<uint64_t>(b, 32);
-  for (size_t i = 0; i < 18; ++i) h.light[i] = load<double>(b, 40 + 8 * i);
-  h.params_offset = load<uint64_t>(b, 184);
-  h.params_size = load<uint64_t>(b, 192);
-  h.journal_offset = load<uint64_t>(b, 200);
-  h.grid_offset = load<uint64_t>(b, 208);
-  h.grid_size = load<uint64_t>(b, 216);
-  h.index_offset = load<uint64_t>(b, 224);
-  h.tile_count = load<uint64_t>(b, 232);
-  h.params_crc = load<uint32_t>(b, 240);
-  h.grid_crc = load<uint32_t>(b, 244);
-  h.index_crc = load<uint32_t>(b, 248);
+  h.scene_hash = load_le<uint64_t>(b, 32);
+  for (size_t i = 0; i < 18; ++i) h.light[i] = load_le<double>(b, 40 + 8 * i);
+  h.params_offset = load_le<uint64_t>(b, 184);
+  h.params_size = load_le<uint64_t>(b, 192);
+  h.journal_offset = load_le<uint64_t>(b, 200);
+  h.grid_offset = load_le<uint64_t>(b, 208);
+  h.grid_size = load_le<uint64_t>(b, 216);
+  h.index_offset = load_le<uint64_t>(b, 224);
+  h.tile_count = load_le<uint64_t>(b, 232);
+  h.params_crc = load_le<uint32_t>(b, 240);
+  h.grid_crc = load_le<uint32_t>(b, 244);
+  h.index_crc = load_le<uint32_t>(b, 248);
   // Section order: header, params, journal, grid, index (no overflow: each bound first).
   if (h.params_offset != kPackHeaderBytes) fail(184, "bad params offset");
   if (h.params_size > kMaxParamsBytes) fail(192, "params size " + std::to_string(h.params_size) + " too large");
@@ -121,41 +118,41 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
 
 std::array<uint8_t, kRecordBytes> TileRecord::serialize() const {
   std::array<uint8_t, kRecordBytes> b{};
-  store<uint32_t>(b.data(), kTileRecordMagic);
+  store_le<uint32_t>(b.data(), kTileRecordMagic);
   b[4] = uint8_t(kind);
-  store<uint64_t>(b.data() + 8, id);
-  store<uint32_t>(b.data() + 16, stored_size);
-  store<uint32_t>(b.data() + 20, raw_size);
-  store<uint32_t>(b.data() + 24, crc);
-  store<uint32_t>(b.data() + 28, crc32_of({b.data(), 28}));
+  store_le<uint64_t>(b.data() + 8, id);
+  store_le<uint32_t>(b.data() + 16, stored_size);
+  store_le<uint32_t>(b.data() + 20, raw_size);
+  store_le<uint32_t>(b.data() + 24, crc);
+  store_le<uint32_t>(b.data() + 28, crc32_of({b.data(), 28}));
   return b;
 }
 
 std::array<uint8_t, kRecordBytes> CellRecord::serialize() const {
   std::array<uint8_t, kRecordBytes> b{};
-  store<uint32_t>(b.data(), kCellRecordMagic);
+  store_le<uint32_t>(b.data(), kCellRecordMagic);
   b[4] = uint8_t(entry.kind);
   b[5] = entry.index_levels;
-  store<uint32_t>(b.data() + 8, cx);
-  store<uint32_t>(b.data() + 12, cy);
-  store<float>(b.data() + 16, entry.value);
-  store<float>(b.data() + 20, lo);
-  store<float>(b.data() + 24, hi);
-  store<uint32_t>(b.data() + 28, crc32_of({b.data(), 28}));
+  store_le<uint32_t>(b.data() + 8, cx);
+  store_le<uint32_t>(b.data() + 12, cy);
+  store_le<float>(b.data() + 16, entry.value);
+  store_le<float>(b.data() + 20, lo);
+  store_le<float>(b.data() + 24, hi);
+  store_le<uint32_t>(b.data() + 28, crc32_of({b.data(), 28}));
   return b;
 }
 
 RecordType parse_record(std::span<const uint8_t, kRecordBytes> b, TileRecord* tile, CellRecord* cell) {
-  if (load<uint32_t>(b, 28) != crc32_of(b.first(28))) return RecordType::none;
-  uint32_t magic = load<uint32_t>(b, 0);
+  if (load_le<uint32_t>(b, 28) != crc32_of(b.first(28))) return RecordType::none;
+  uint32_t magic = load_le<uint32_t>(b, 0);
   if (magic == kTileRecordMagic) {
     if (b[5] || b[6] || b[7]) return RecordType::none;
     if (b[4] != uint8_t(TileKind::encoded) && b[4] != uint8_t(TileKind::index)) return RecordType::none;
     tile->kind = TileKind(b[4]);
-    tile->id = load<uint64_t>(b, 8);
-    tile->stored_size = load<uint32_t>(b, 16);
-    tile->raw_size = load<uint32_t>(b, 20);
-    tile->crc = load<uint32_t>(b, 24);
+    tile->id = load_le<uint64_t>(b, 8);
+    tile->stored_size = load_le<uint32_t>(b, 16);
+    tile->raw_size = load_le<uint32_t>(b, 20);
+    tile->crc = load_le<uint32_t>(b, 24);
     if (!is_valid_tile_id(tile->id) || tile->raw_size == 0 || tile->raw_size > kMaxTileBytes ||
         tile->stored_size == 0 || tile->stored_size > max_stored_size(tile->raw_size))
       return RecordType::none;
@@ -165,11 +162,11 @@ RecordType parse_record(std::span<const uint8_t, kRecordBytes> b, TileRecord* ti
     if (b[6] || b[7] || b[4] > uint8_t(EntryKind::index)) return RecordType::none;
     cell->entry.kind = EntryKind(b[4]);
     cell->entry.index_levels = b[5];
-    cell->cx = load<uint32_t>(b, 8);
-    cell->cy = load<uint32_t>(b, 12);
-    cell->entry.value = load<float>(b, 16);
-    cell->lo = load<float>(b, 20);
-    cell->hi = load<float>(b, 24);
+    cell->cx = load_le<uint32_t>(b, 8);
+    cell->cy = load_le<uint32_t>(b, 12);
+    cell->entry.value = load_le<float>(b, 16);
+    cell->lo = load_le<float>(b, 20);
+    cell->hi = load_le<float>(b, 24);
     return RecordType::cell;
   }
   return RecordType::none;
@@ -181,14 +178,14 @@ std::vector<uint8_t> serialize_index(std::span<const TileIndexEntry> entries) {
   std::vector<uint8_t> out;
   out.reserve(entries.size() * kIndexEntryBytes);
   for (const TileIndexEntry& e : entries) {
-    put<uint64_t>(out, e.id);
-    put<uint64_t>(out, e.offset);
-    put<uint32_t>(out, e.stored_size);
-    put<uint32_t>(out, e.raw_size);
-    put<uint32_t>(out, e.crc);
-    put<uint8_t>(out, uint8_t(e.kind));
-    put<uint8_t>(out, 0);
-    put<uint16_t>(out, 0);
+    append_le<uint64_t>(out, e.id);
+    append_le<uint64_t>(out, e.offset);
+    append_le<uint32_t>(out, e.stored_size);
+    append_le<uint32_t>(out, e.raw_size);
+    append_le<uint32_t>(out, e.crc);
+    append_le<uint8_t>(out, uint8_t(e.kind));
+    append_le<uint8_t>(out, 0);
+    append_le<uint16_t>(out, 0);
   }
   return out;
 }
@@ -205,17 +202,17 @@ std::vector<TileIndexEntry> parse_index(std::span<const uint8_t> bytes, uint64_t
                         std::to_string(base_offset + o + field));
     };
     TileIndexEntry& e = out[i];
-    e.id = load<uint64_t>(bytes, o);
-    e.offset = load<uint64_t>(bytes, o + 8);
-    e.stored_size = load<uint32_t>(bytes, o + 16);
-    e.raw_size = load<uint32_t>(bytes, o + 20);
-    e.crc = load<uint32_t>(bytes, o + 24);
+    e.id = load_le<uint64_t>(bytes, o);
+    e.offset = load_le<uint64_t>(bytes, o + 8);
+    e.stored_size = load_le<uint32_t>(bytes, o + 16);
+    e.raw_size = load_le<uint32_t>(bytes, o + 20);
+    e.crc = load_le<uint32_t>(bytes, o + 24);
     uint8_t kind = bytes[o + 28];
     if (!is_valid_tile_id(e.id)) fail(0, "invalid " + describe_tile(e.id));
     if (i > 0 && e.id <= out[i - 1].id) fail(0, "ids not strictly increasing");
     if (kind != uint8_t(TileKind::encoded) && kind != uint8_t(TileKind::index)) fail(28, "bad tile kind");
     e.kind = TileKind(kind);
-    if (bytes[o + 29] || load<uint16_t>(bytes, o + 30)) fail(29, "nonzero padding");
+    if (bytes[o + 29] || load_le<uint16_t>(bytes, o + 30)) fail(29, "nonzero padding");
     if (e.raw_size == 0 || e.raw_size > tile_bytes || e.stored_size == 0 || e.stored_size > max_stored_size(e.raw_size))
       fail(16, describe_tile(e.id) + ": bad sizes (raw " + std::to_string(e.raw_size) + ", stored " +
                    std::to_string(e.stored_size) + ", tile_bytes " + std::to_string(tile_bytes) + ")");

@@ -10,7 +10,7 @@
 #include <cstring>
 #include <map>
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 
 namespace st {
 

@@ -1,6 +1,6 @@
 #include "tiles/core/resolution.hpp"
 
-#include "tiles/core/error.hpp"
+#include "common/error.hpp"
 #include "tiles/core/interval.hpp"
 
 namespace st {

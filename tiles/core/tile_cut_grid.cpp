@@ -4,15 +4,13 @@
 #include <cmath>
 #include <cstdio>
 
-#include "tiles/core/error.hpp"
-#include "tiles/core/hierarchy.hpp"
+#include "common/error.hpp"
+#include "tiles/core/morton.hpp"
 #include "tiles/core/interval.hpp"
-#include "tiles/core/pack_bytes.hpp"
+#include "common/bytes.hpp"
 
 namespace st {
 
-using packbytes::load;
-using packbytes::put;
 
 CutGrid CutGrid::constant(uint32_t k, float v) {
   CutGrid g;
@@ -26,14 +24,14 @@ std::vector<uint8_t> CutGrid::serialize() const {
   assert(coarse.size() == coarse_count(levels) && entries.size() == (size_t(1) << (2 * levels)));
   std::vector<uint8_t> out;
   out.reserve(serialized_size(levels));
-  put<uint32_t>(out, kGridMagic);
-  put<uint32_t>(out, levels);
-  for (float v : coarse) put<float>(out, v);
+  append_le<uint32_t>(out, kGridMagic);
+  append_le<uint32_t>(out, levels);
+  for (float v : coarse) append_le<float>(out, v);
   for (const GridEntry& e : entries) {
-    put<float>(out, e.value);
-    put<uint8_t>(out, uint8_t(e.kind));
-    put<uint8_t>(out, e.index_levels);
-    put<uint16_t>(out, 0);
+    append_le<float>(out, e.value);
+    append_le<uint8_t>(out, uint8_t(e.kind));
+    append_le<uint8_t>(out, e.index_levels);
+    append_le<uint16_t>(out, 0);
   }
   return out;
 }
@@ -47,8 +45,8 @@ namespace {
 CutGrid CutGrid::parse(std::span<const uint8_t> bytes, const std::string& what,
                        uint32_t max_levels) {
   if (bytes.size() < 8) grid_error(what, bytes.size(), "truncated grid header (" + std::to_string(bytes.size()) + " bytes)");
-  if (load<uint32_t>(bytes, 0) != kGridMagic) grid_error(what, 0, "bad grid magic");
-  uint32_t k = load<uint32_t>(bytes, 4);
+  if (load_le<uint32_t>(bytes, 0) != kGridMagic) grid_error(what, 0, "bad grid magic");
+  uint32_t k = load_le<uint32_t>(bytes, 4);
   if (k > max_levels) grid_error(what, 4, "grid levels " + std::to_string(k) + " > " + std::to_string(max_levels));
   size_t want = serialized_size(k);
   if (bytes.size() != want)
@@ -60,13 +58,13 @@ CutGrid CutGrid::parse(std::span<const uint8_t> bytes, const std::string& what,
   g.coarse.resize(coarse_count(k));
   size_t off = 8;
   for (float& v : g.coarse) {
-    v = load<float>(bytes, off);
+    v = load_le<float>(bytes, off);
     if (std::isnan(v)) grid_error(what, off, "NaN coarse value");
     off += 4;
   }
   g.entries.resize(size_t(1) << (2 * k));
   for (GridEntry& e : g.entries) {
-    e.value = load<float>(bytes, off);
+    e.value = load_le<float>(bytes, off);
     if (std::isnan(e.value)) grid_error(what, off, "NaN entry value");
     uint8_t kind = bytes[off + 4];
     e.index_levels = bytes[off + 5];
@@ -76,7 +74,7 @@ CutGrid CutGrid::parse(std::span<const uint8_t> bytes, const std::string& what,
                          ? e.index_levels >= 1 && e.index_levels <= kMaxIndexLevels
                          : e.index_levels == 0;
     if (!levels_ok) grid_error(what, off + 5, "bad index levels " + std::to_string(e.index_levels));
-    if (load<uint16_t>(bytes, off + 6) != 0) grid_error(what, off + 6, "nonzero entry padding");
+    if (load_le<uint16_t>(bytes, off + 6) != 0) grid_error(what, off + 6, "nonzero entry padding");
     off += kGridEntryBytes;
   }
   return g;

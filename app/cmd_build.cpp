@@ -1,0 +1,140 @@
+// shadowtile build: scene + light -> pack file (issue 4).
+#include <csignal>
+#include <cstdio>
+#include <fstream>
+#include <optional>
+
+#include "tiles/bake/map_build.hpp"
+#include "tiles/bake/scene.hpp"
+#include "app/command.hpp"
+#include "app/progress.hpp"
+#include "common/error.hpp"
+
+namespace st::cli {
+namespace {
+
+std::atomic<bool> g_cancel{false};
+extern "C" void on_sigint(int) { g_cancel = true; }
+
+TexelRegion parse_region(const std::string& text) {
+  uint64_t v[4];
+  if (std::sscanf(text.c_str(), "%lu,%lu,%lu,%lu", &v[0], &v[1], &v[2], &v[3]) != 4)
+    throw Error("--region: expected X,Y,W,H, got '" + text + "'");
+  return {v[0], v[1], v[2], v[3]};
+}
+
+struct BuildArgs {
+  std::string scene, light, resolution = "4096", encoding = "dagmh", out, report, region,
+                     construction = "bottom-up", up = "y";
+  std::optional<uint32_t> skip_level;
+  uint32_t tile_bytes = 64 * 1024;
+  int compression = 6;
+  bool resume = false, quiet = false;
+};
+
+void run(const BuildArgs& a) {
+  MapBuildOptions o;
+  o.map_level = parse_resolution(a.resolution);
+  o.encoding = parse_encoding(a.encoding);
+  o.skip_level = a.skip_level;
+  o.tile_bytes = a.tile_bytes;
+  o.resume = a.resume;
+  o.compression_level = a.compression;
+  if (a.construction == "bottom-up") o.construction = MhConstruction::bottom_up;
+  else if (a.construction == "top-down") o.construction = MhConstruction::top_down;
+  else throw Error("--construction: expected bottom-up or top-down, got '" + a.construction + "'");
+  if (!a.region.empty()) o.region = parse_region(a.region);
+  o.scene_spec = a.scene;
+  o.light_spec = a.light;
+
+  SceneOptions so;
+  so.up = a.up == "z" ? UpAxis::z : UpAxis::y;
+  Scene scene = load_scene(a.scene, so);
+  LightSpec spec = LightSpec::parse(a.light);
+  LightSpace light = LightSpace::fit(spec, scene.bounds());
+  if (!a.quiet) std::printf("%s\n", summary(scene).c_str());
+
+  Progress progress("build " + a.out, "texels");
+  if (!a.quiet)
+    o.progress = [&](uint64_t done, uint64_t total, uint64_t texels) { progress.update(done, total, texels); };
+  g_cancel = false;
+  o.cancel = &g_cancel;
+  auto old_int = std::signal(SIGINT, on_sigint);
+  auto old_term = std::signal(SIGTERM, on_sigint);
+  MapBuildReport r;
+  try {
+    r = build_map(scene, light, o, a.out);
+  } catch (...) {
+    progress.finish();
+    std::signal(SIGINT, old_int);
+    std::signal(SIGTERM, old_term);
+    if (g_cancel) {
+      std::fprintf(stderr, "shadowtile: build interrupted; '%s.tmp' kept, continue with --resume\n",
+                   a.out.c_str());
+      exit_with(kExitInterrupted);
+    }
+    throw;
+  }
+  progress.finish();
+  std::signal(SIGINT, old_int);
+  std::signal(SIGTERM, old_term);
+
+  const double res = double(uint64_t(1) << r.map_level);
+  std::printf("built %s: %.0f^2 %s, skip level %u, %llu tiles (%llu index), %.2f MiB "
+              "(%.4f%% of the raw float32 map)\n",
+              a.out.c_str(), res, r.encoding.c_str(), r.skip_level, (unsigned long long)r.tile_count,
+              (unsigned long long)r.index_tile_count, double(r.pack_bytes) / (1 << 20),
+              100.0 * double(r.pack_bytes) / (res * res * 4));
+  std::printf("  %.1f s wall, %.2f Mtexels/s, cells %llu built + %llu resumed + %llu outside region, "
+              "constant entries %.1f%%, exit depths %s, peak memory %.0f MiB\n",
+              r.wall_seconds, double(r.texels_traced) / r.wall_seconds / 1e6,
+              (unsigned long long)r.cells_built, (unsigned long long)r.cells_resumed,
+              (unsigned long long)r.cells_outside_region,
+              r.grid_entries ? 100.0 * double(r.constant_entries) / double(r.grid_entries) : 0.0,
+              r.exit_depths ? "yes" : "no (no closed mesh)", double(r.peak_rss_bytes) / (1 << 20));
+  std::printf("  thread-seconds: trace %.1f, hierarchy %.1f, cut+encode %.1f, compress+write %.1f\n",
+              r.trace_seconds, r.hierarchy_seconds, r.cut_encode_seconds, r.write_seconds);
+  if (!a.report.empty()) {
+    std::ofstream f(a.report);
+    f << r.to_json() << "\n";
+    if (!f) throw Error("--report: cannot write '" + a.report + "'");
+  }
+}
+
+void setup(CLI::App& app) {
+  auto a = std::make_shared<BuildArgs>();
+  app.footer(
+      "Example:\n  shadowtile build procedural:city --light sun:azimuth=30,elevation=50 "
+      "--resolution 64k --encoding dagmh -o city.pack --report build.json\n"
+      "Interrupted builds (Ctrl-C, kill) leave OUT.tmp; the same command with --resume continues it.");
+  app.add_option("scene", a->scene, "Scene file (any format assimp reads) or procedural:NAME[,k=v...]")
+      ->required();
+  app.add_option("--light", a->light,
+                 "sun:azimuth=DEG,elevation=DEG[,margin=F] or spot:pos=X,Y,Z,target=X,Y,Z,fov=DEG")
+      ->required();
+  app.add_option("--resolution", a->resolution, "Map side: a power of two (4096, 16k, 64k, 1m)")
+      ->capture_default_str();
+  app.add_option("--encoding", a->encoding, "Tile encoding: dagmh, mmh or mh")->capture_default_str();
+  app.add_option("--skip-level", a->skip_level,
+                 "Skip level K: the 2^K x 2^K grid fetched when a map opens (default min(ceil(L/2), 8))");
+  app.add_option("--tile-bytes", a->tile_bytes,
+                 "Bound on one tile's encoded size; larger subtrees are cut deeper into index tiles")
+      ->capture_default_str();
+  app.add_option("-o,--output", a->out, "Pack file to write (built as OUT.tmp, renamed when complete)")
+      ->required();
+  app.add_option("--report", a->report, "Write a JSON build report (stage times, sizes, histogram, memory)");
+  app.add_flag("--resume", a->resume, "Continue OUT.tmp left by an interrupted build");
+  app.add_option("--construction", a->construction, "MH construction: bottom-up or top-down (MH §3.1)")
+      ->capture_default_str();
+  app.add_option("--region", a->region,
+                 "Build only cells touching texels X,Y,W,H of the finest level (the rest constant)");
+  app.add_option("--compression", a->compression, "zlib level 0..12 (libdeflate)")->capture_default_str();
+  app.add_option("--up", a->up, "Up axis of the scene file: y (glTF) or z")->capture_default_str();
+  app.add_flag("-q,--quiet", a->quiet, "No summary or progress");
+  app.callback([a]() { run(*a); });
+}
+
+Register reg{"build", "Build a pack: depth bounds -> hierarchy -> encode -> tiles (out of core)", setup};
+
+}  // namespace
+}  // namespace st::cli

@@ -1,0 +1,90 @@
+// shadowtile inspect: what a pack holds (header, features, tiles, sizes).
+#include <cstdio>
+#include <nlohmann/json.hpp>
+
+#include "app/command.hpp"
+#include "app/pack_cli_util.hpp"
+#include "common/error.hpp"
+#include "tiles/core/pack_reader.hpp"
+
+namespace st::cli {
+namespace {
+
+struct InspectArgs {
+  std::string pack;
+  bool json = false;
+};
+
+void run(const InspectArgs& a) {
+  auto r = PackReader::open(a.pack);
+  const auto& h = r->header();
+  uint64_t constants = 0, tiles = 0, index = 0;
+  for (auto& e : r->grid().entries) constants += e.kind == EntryKind::constant;
+  uint64_t stored = 0, raw = 0, largest = 0;
+  for (auto& t : r->tiles()) {
+    (t.kind == TileKind::index ? index : tiles)++;
+    stored += t.stored_size;
+    raw += t.raw_size;
+    largest = std::max<uint64_t>(largest, t.raw_size);
+  }
+  const uint64_t side = uint64_t(1) << h.map_level;
+  const double raw_map = double(side) * double(side) * 4;
+  nlohmann::json j;
+  j["pack"] = a.pack;
+  j["format_version"] = kPackVersion;
+  j["resolution"] = side;
+  j["map_level"] = h.map_level;
+  j["skip_level"] = h.skip_level;
+  j["encoding"] = to_string(h.encoding);
+  j["light"] = r->light().spec().to_string();
+  j["light_kind"] = h.light_kind == LightKind::sun ? "sun" : "spot";
+  j["tile_bytes"] = h.tile_bytes;
+  char hash[32];
+  std::snprintf(hash, sizeof hash, "%016llx", (unsigned long long)h.scene_hash);
+  j["scene_hash"] = hash;
+  j["features"] = feature_names(h.flags);
+  j["file_bytes"] = r->file_size();
+  j["grid_entries"] = r->grid().entries.size();
+  j["constant_entries"] = constants;
+  j["encoded_tiles"] = tiles;
+  j["index_tiles"] = index;
+  j["tile_stored_bytes"] = stored;
+  j["tile_raw_bytes"] = raw;
+  j["largest_tile_raw_bytes"] = largest;
+  j["fraction_of_raw_float_map"] = double(r->file_size()) / raw_map;
+  nlohmann::json params = nlohmann::json::object();
+  for (auto& [k, v] : r->params()) params[k] = v;
+  j["build_params"] = params;
+  if (a.json) {
+    std::printf("%s\n", j.dump(2).c_str());
+    return;
+  }
+  std::printf("%s: shadowtile pack v%u\n", a.pack.c_str(), kPackVersion);
+  std::printf("  map          %llu^2 (level %u), skip level %u (%zu entries, %.1f%% constant)\n",
+              (unsigned long long)side, h.map_level, h.skip_level, r->grid().entries.size(),
+              r->grid().entries.empty() ? 0.0 : 100.0 * double(constants) / double(r->grid().entries.size()));
+  std::printf("  encoding     %s, tiles <= %u bytes\n", to_string(h.encoding).c_str(), h.tile_bytes);
+  std::printf("  light        %s\n", r->light().spec().to_string().c_str());
+  std::printf("  features     %s\n", feature_names(h.flags).c_str());
+  std::printf("  scene hash   %s\n", hash);
+  std::printf("  tiles        %llu encoded + %llu index, %.2f MiB stored (%.2f MiB raw, largest %llu B)\n",
+              (unsigned long long)tiles, (unsigned long long)index, double(stored) / (1 << 20),
+              double(raw) / (1 << 20), (unsigned long long)largest);
+  std::printf("  file         %.2f MiB = %.5f%% of the raw float32 map (%.1f GiB)\n",
+              double(r->file_size()) / (1 << 20), 100.0 * double(r->file_size()) / raw_map,
+              raw_map / double(1ull << 30));
+  for (auto& [k, v] : r->params()) std::printf("  param        %s = %s\n", k.c_str(), v.c_str());
+}
+
+void setup(CLI::App& app) {
+  auto a = std::make_shared<InspectArgs>();
+  app.footer("Example:\n  shadowtile inspect city.pack --json");
+  app.add_option("pack", a->pack, "Pack file")->required();
+  app.add_flag("--json", a->json, "Print JSON instead of a table");
+  app.callback([a]() { run(*a); });
+}
+
+Register reg{"inspect", "Show what a pack holds: header, features, tiles and sizes", setup};
+
+}  // namespace
+}  // namespace st::cli

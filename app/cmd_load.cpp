@@ -1,0 +1,97 @@
+// `shadowtile load --server HOST:PORT --map NAME --cameras N --path P --duration S ...`:
+// synthetic cameras against a running server through the client library only
+// (loadgen/load_run.hpp); prints a table, writes JSON and PNG plots with --report DIR.
+#include <cstdio>
+#include <memory>
+
+#include "loadgen/load_report.hpp"
+#include "loadgen/load_run.hpp"
+#include "app/command.hpp"
+#include "proto/auth.hpp"
+#include "common/error.hpp"
+
+namespace st::cli {
+
+// "HOST:PORT" -> endpoint; throws st::Error naming the option.
+client::Endpoint parse_endpoint(const std::string& option, const std::string& text) {
+  const auto colon = text.rfind(':');
+  if (colon == std::string::npos || colon == 0) throw Error(option + ": '" + text + "' is not HOST:PORT");
+  std::string host = text.substr(0, colon), port = text.substr(colon + 1);
+  if (host.size() > 2 && host.front() == '[' && host.back() == ']') host = host.substr(1, host.size() - 2);
+  char* end = nullptr;
+  const unsigned long p = std::strtoul(port.c_str(), &end, 10);
+  if (port.empty() || *end != 0 || p == 0 || p > 65535) throw Error(option + ": bad port in '" + text + "'");
+  return {host, uint16_t(p)};
+}
+
+namespace {
+
+struct LoadArgs {
+  std::string server, map, path = "flyover", report, key_file, tls_ca, tls_name;
+  bool tls = false;
+  uint32_t cameras = 4, connections = 0, samples_x = 64, samples_y = 36, workers = 0, io_threads = 2;
+  double duration = 10, rate = 60, cache_mb = 64;
+  uint64_t seed = 1;
+  bool no_prefetch = false;
+};
+
+void run(const LoadArgs& a) {
+  loadgen::LoadOptions o;
+  o.endpoint = parse_endpoint("--server", a.server);
+  o.map = a.map;
+  if (!a.key_file.empty()) o.key = proto::load_key_file(a.key_file);
+  o.tls = a.tls || !a.tls_ca.empty();
+  o.tls_ca_file = a.tls_ca;
+  o.tls_server_name = a.tls_name;
+  o.cameras = a.cameras;
+  o.connections = a.connections;
+  o.path = loadgen::parse_path(a.path);
+  o.duration = a.duration;
+  o.rate = a.rate;
+  o.cache_mb = a.cache_mb;
+  o.seed = a.seed;
+  o.prefetch = !a.no_prefetch;
+  o.workers = a.workers;
+  o.io_threads = a.io_threads;
+  o.view.samples_x = a.samples_x;
+  o.view.samples_y = std::max(1u, a.samples_x * 9 / 16);
+  const loadgen::LoadResult r = loadgen::run_load(o);
+  std::printf("%s", loadgen::load_table(r).c_str());
+  if (!a.report.empty()) {
+    loadgen::write_load_report(r, a.report);
+    std::printf("report: %s/load.{txt,json}, load_latency.png, load_timeline.png, load_cuts.png\n",
+                a.report.c_str());
+  }
+  if (r.errors() > 0) exit_with(kExitError);
+}
+
+Register reg{"load", "Load-test a server with synthetic cameras (client library only)", [](CLI::App& sub) {
+  auto a = std::make_shared<LoadArgs>();
+  sub.add_option("--server", a->server, "Server address HOST:PORT")->required();
+  sub.add_option("--map", a->map, "Map name on the server")->required();
+  sub.add_option("--cameras", a->cameras, "Synthetic cameras")->capture_default_str()->check(CLI::Range(1u, 4096u));
+  sub.add_option("--connections", a->connections, "Client connections shared by the cameras (0: one per camera)")
+      ->capture_default_str();
+  sub.add_option("--path", a->path, "flyover | orbit | walk | teleport")->capture_default_str();
+  sub.add_option("--duration", a->duration, "Seconds")->capture_default_str()->check(CLI::Range(0.01, 86400.0));
+  sub.add_option("--rate", a->rate, "Frames per second per camera")->capture_default_str()->check(CLI::Range(0.1, 1000.0));
+  sub.add_option("--cache-mb", a->cache_mb, "Tile cache per connection (MiB)")->capture_default_str()
+      ->check(CLI::Range(0.01, 65536.0));
+  sub.add_option("--report", a->report, "Write load.json, load.txt and PNG plots into this folder");
+  sub.add_option("--seed", a->seed, "Path seed")->capture_default_str();
+  sub.add_option("--key-file", a->key_file, "File holding the server's catalog key (hex or raw bytes)");
+  sub.add_flag("--tls", a->tls, "Connect over TLS (the system's trust store unless --tls-ca)");
+  sub.add_option("--tls-ca", a->tls_ca, "Trust this CA / self-signed certificate (PEM); implies --tls");
+  sub.add_option("--tls-name", a->tls_name, "Name the server's certificate must carry (default: the host)");
+  sub.add_option("--samples", a->samples_x, "Screen samples across (rows: 9/16 of it)")->capture_default_str()
+      ->check(CLI::Range(1u, 1024u));
+  sub.add_option("--workers", a->workers, "Camera threads (0: max(2, cores)); cameras are spread over them")
+      ->capture_default_str()->check(CLI::Range(0u, 256u));
+  sub.add_option("--io-threads", a->io_threads, "Client I/O threads shared by all connections")
+      ->capture_default_str()->check(CLI::Range(1u, 64u));
+  sub.add_flag("--no-prefetch", a->no_prefetch, "Do not prefetch along the path");
+  sub.callback([a] { run(*a); });
+}};
+
+}  // namespace
+}  // namespace st::cli

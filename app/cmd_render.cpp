@@ -1,0 +1,158 @@
+// `shadowtile render (PACK | --server HOST:PORT --map NAME) --scene SCENE --camera ...
+//  [--size WxH] [--pcf R] [--diff] -o view.exr`: the scene from a camera, Lambert-shaded
+// with the map's shadows (tiles/bake/render.hpp), as RGB float EXR and PNG; --diff also
+// ray-traces the shadows and writes where the two differ.
+#include <chrono>
+#include <cstdio>
+#include <memory>
+#include <thread>
+
+#include "client/client.hpp"
+#include "loadgen/view_tiles.hpp"
+#include "tiles/bake/render.hpp"
+#include "tiles/bake/scene.hpp"
+#include "proto/auth.hpp"
+#include "app/command.hpp"
+#include "common/error.hpp"
+#include "tiles/core/pack_evaluator.hpp"
+
+namespace st::cli {
+
+client::Endpoint parse_endpoint(const std::string& option, const std::string& text);  // cmd_load.cpp
+
+// Requests every tile the receivers' finest-level lookups need and waits (bounded) until
+// they are resident. Returns the number of cells; throws st::Error on timeout.
+size_t fetch_for_receivers(client::Map& map, const std::vector<Receiver>& rec, const LightSpace& light,
+                           std::chrono::milliseconds timeout) {
+  const uint32_t L = map.finest_level();
+  std::vector<LightPoint> pts;
+  for (const Receiver& r : rec)
+    if (r.hit && r.n_dot_l > 0) pts.push_back(lookup_point(r, light, L));
+  const auto cells = loadgen::cells_for_points(pts, L, map.skip_grid());
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  for (;;) {
+    bool all = true;
+    for (const auto& c : cells)
+      if (!map.region_resident(c.level, c.x0(), c.y0(), c.side(), c.side())) {
+        all = false;
+        map.request_region(c.level, c.x0(), c.y0(), c.side(), c.side(), 1000);
+      }
+    if (all) return cells.size();
+    if (std::chrono::steady_clock::now() > deadline)
+      throw Error("render: the view's tiles did not all arrive within " + std::to_string(timeout.count()) + " ms");
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+}
+
+namespace {
+
+struct RenderArgs {
+  std::string pack, server, map, scene, camera, size = "960x540", out, up = "y", key_file, tls_ca, tls_name;
+  bool tls = false;
+  uint32_t pcf = 0;
+  bool diff = false;
+  double timeout = 60;
+  double cache_mb = 256;
+};
+
+std::string stem(const std::string& out) {
+  const auto dot = out.rfind('.');
+  const auto slash = out.rfind('/');
+  return dot != std::string::npos && (slash == std::string::npos || dot > slash) ? out.substr(0, dot) : out;
+}
+
+void run(const RenderArgs& a) {
+  if (a.pack.empty() == (a.server.empty() || a.map.empty()))
+    throw Error("render: give either a PACK or --server HOST:PORT with --map NAME");
+  RenderOptions o;
+  if (std::sscanf(a.size.c_str(), "%ux%u", &o.width, &o.height) != 2 || o.width == 0 || o.height == 0 ||
+      o.width > 16384 || o.height > 16384)
+    throw Error("--size: expected WxH (1..16384), got '" + a.size + "'");
+  o.pcf_radius = a.pcf;
+  o.diff = a.diff;
+  const Camera cam = parse_camera(a.camera);
+  SceneOptions so;
+  so.up = a.up == "z" ? UpAxis::z : UpAxis::y;
+  const Scene scene = load_scene(a.scene, so);
+
+  std::shared_ptr<const PackReader> reader;
+  std::unique_ptr<PackEvaluator> pack_eval;
+  std::unique_ptr<client::Client> cl;
+  client::Map map;
+  const Evaluator* eval = nullptr;
+  LightSpace light;
+  uint64_t scene_hash = 0;
+  if (!a.pack.empty()) {
+    reader = PackReader::open(a.pack);
+    pack_eval = std::make_unique<PackEvaluator>(reader, 4096);
+    eval = pack_eval.get();
+    light = reader->light();
+    scene_hash = reader->header().scene_hash;
+  } else {
+    client::ClientOptions co;
+    co.client_name = "shadowtile-render";
+    if (!a.key_file.empty()) co.key = proto::load_key_file(a.key_file);
+    co.tls = a.tls || !a.tls_ca.empty();
+    co.tls_ca_file = a.tls_ca;
+    co.tls_server_name = a.tls_name;
+    cl = std::make_unique<client::Client>(parse_endpoint("--server", a.server), co);
+    map = cl->open(a.map);
+    co.cache_slots = uint32_t(std::max(16.0, a.cache_mb * 1048576.0 / std::max(1u, map.header().tile_bytes)));
+    cl = std::make_unique<client::Client>(parse_endpoint("--server", a.server), co);
+    map = cl->open(a.map);
+    eval = &map.evaluator();
+    light = LightSpace::from_array(map.header().light_kind, map.header().light);
+    scene_hash = map.header().scene_hash;
+  }
+  if (scene_hash != scene.content_hash())
+    std::fprintf(stderr, "shadowtile render: warning: scene '%s' is not the scene the map was built from\n",
+                 a.scene.c_str());
+  const SceneTracer tracer(scene, light);
+  const auto rec = tracer.primary(cam, o.width, o.height);
+  if (map.valid()) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const size_t cells = fetch_for_receivers(map, rec, light, std::chrono::milliseconds(int64_t(a.timeout * 1000)));
+    std::printf("fetched the view's %zu cell(s) in %.0f ms\n", cells,
+                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+  }
+  const RenderResult r = render_view(tracer, rec, *eval, o);
+  const std::string base = stem(a.out);
+  write_rgb_exr(a.out, r.width, r.height, r.image);
+  write_rgb_preview_png(base + ".png", r.width, r.height, r.image);
+  std::printf("rendered %ux%u (%llu lit-facing receivers), map shadows %.1f ms: %s, %s.png\n", r.width, r.height,
+              (unsigned long long)r.receivers, r.map_seconds * 1e3, a.out.c_str(), base.c_str());
+  if (o.diff) {
+    write_rgb_exr(base + "_traced.exr", r.width, r.height, r.traced_image);
+    write_rgb_preview_png(base + "_traced.png", r.width, r.height, r.traced_image);
+    write_rgb_preview_png(base + "_diff.png", r.width, r.height, r.diff_image);
+    std::printf("ray-traced shadows %.1f ms: %s_traced.{exr,png}; differences: %s_diff.png\n",
+                r.traced_seconds * 1e3, base.c_str(), base.c_str());
+    std::printf("differing pixels: %llu of %llu receivers (%.4f%%)\n", (unsigned long long)r.differing,
+                (unsigned long long)r.receivers, 100 * r.differing_fraction());
+  }
+}
+
+Register reg{"render", "Render a camera view shaded with the map's shadows (EXR + PNG)", [](CLI::App& sub) {
+  auto a = std::make_shared<RenderArgs>();
+  sub.add_option("pack", a->pack, "Pack file (or use --server and --map)");
+  sub.add_option("--server", a->server, "Server HOST:PORT");
+  sub.add_option("--key-file", a->key_file, "With --server: file holding the catalog key");
+  sub.add_flag("--tls", a->tls, "With --server: connect over TLS");
+  sub.add_option("--tls-ca", a->tls_ca, "With --server: trust this CA certificate (PEM); implies --tls");
+  sub.add_option("--tls-name", a->tls_name, "With --server: name the certificate must carry");
+  sub.add_option("--map", a->map, "Map name on the server");
+  sub.add_option("--scene", a->scene, "Scene the map was built from (primary rays)")->required();
+  sub.add_option("--up", a->up, "Up axis of a scene file: y or z")->capture_default_str();
+  sub.add_option("--camera", a->camera, "pos=X,Y,Z,target=X,Y,Z[,fov=DEG]")->required();
+  sub.add_option("--size", a->size, "Image size WxH")->capture_default_str();
+  sub.add_option("--pcf", a->pcf, "PCF radius R: (2R+1)^2 taps (0: single tap)")->capture_default_str()
+      ->check(CLI::Range(0u, 4u));
+  sub.add_flag("--diff", a->diff, "Also ray-trace shadows and write where they differ");
+  sub.add_option("--timeout", a->timeout, "Seconds to wait for the view's tiles (--server)")->capture_default_str();
+  sub.add_option("--cache-mb", a->cache_mb, "Tile cache (MiB, --server)")->capture_default_str();
+  sub.add_option("-o,--out", a->out, "Output EXR (the PNG preview goes beside it)")->required();
+  sub.callback([a] { run(*a); });
+}};
+
+}  // namespace
+}  // namespace st::cli

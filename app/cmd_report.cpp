@@ -1,0 +1,347 @@
+// `shadowtile report --scene SCENE --light SPEC [--resolution R] [--out DIR] ...`:
+// (a) shadow error against ray-traced ground truth vs evaluation time per frame, across
+//     encodings, PCF sizes and hierarchy levels, next to uncompressed float maps (full
+//     resolution; the largest that fits in the compressed map's memory; one level lower);
+// (b) error against time since a camera cut while tiles stream from an in-process server
+//     into a client (progressive refinement: coarser levels answer until tiles arrive).
+// Writes report.txt, report.json, report_error_time.png, report_refinement.png.
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <sstream>
+#include <thread>
+
+#include "client/client.hpp"
+#include "loadgen/camera_path.hpp"
+#include "loadgen/png_plot.hpp"
+#include "loadgen/view_tiles.hpp"
+#include "server/server.hpp"
+#include "tiles/bake/depth_bounds.hpp"
+#include "tiles/bake/map_build.hpp"
+#include "tiles/bake/render_error.hpp"
+#include "tiles/bake/scene.hpp"
+#include "app/command.hpp"
+#include "common/error.hpp"
+#include "tiles/core/pack_evaluator.hpp"
+
+namespace st::cli {
+namespace {
+
+using nlohmann::json;
+using Clk = std::chrono::steady_clock;
+
+struct ReportArgs {
+  std::string scene, light, resolution = "2048", out = "report-out", encodings = "mh,mmh,dagmh", size = "320x180";
+  uint32_t frames = 4;
+  std::vector<uint32_t> pcf = {1, 2};
+  double cache_mb = 64, sample_ms = 5;
+};
+
+struct Row {
+  std::string map, what;
+  uint32_t level = 0, pcf = 0;
+  uint64_t bytes = 0;
+  double error = 0;          // single tap: fraction differing; PCF: mean |diff|
+  double ms_per_frame = 0;
+};
+
+std::vector<std::string> split(const std::string& s) {
+  std::vector<std::string> v;
+  std::stringstream ss(s);
+  for (std::string x; std::getline(ss, x, ',');)
+    if (!x.empty()) v.push_back(x);
+  return v;
+}
+
+// Stored bytes a client holds for the whole map: every tile's encoded (raw) size plus the
+// skip grid: what "the same memory" means for the uncompressed baselines.
+uint64_t resident_bytes(const PackReader& r) {
+  uint64_t b = r.grid_bytes().size();
+  for (const TileIndexEntry& e : r.tiles()) b += e.raw_size;
+  return b;
+}
+
+struct RefinementPoint {
+  double ms;
+  double error;
+  size_t resident_cells;
+};
+
+// Cut to frame f's view with an empty cache; sample the error every sample_ms until all
+// needed cells are resident (then one more sample), or 60 s.
+std::vector<RefinementPoint> refinement(const std::string& pack_path, const std::string& name,
+                                        const LightSpace& light, const FrameTruth& f, double cache_mb,
+                                        double sample_ms, size_t& cells_total) {
+  server::Catalog cat;
+  cat.add(name, pack_path);
+  server::ServerOptions so;
+  so.port = 0;
+  so.log = [](const std::string&) {};
+  server::Server srv(std::move(cat), so);
+  srv.start();
+  client::ClientOptions co;
+  co.client_name = "shadowtile-report";
+  std::vector<RefinementPoint> pts;
+  {
+    auto reader = PackReader::open(pack_path);
+    co.cache_slots = uint32_t(std::max(16.0, cache_mb * 1048576.0 / std::max(1u, reader->header().tile_bytes)));
+  }
+  client::Client cl({"127.0.0.1", srv.port()}, co);
+  client::Map map = cl.open(name);
+  const uint32_t L = map.finest_level();
+  std::vector<LightPoint> lps;
+  for (uint32_t i : f.lit_facing) lps.push_back(lookup_point(f.receivers[i], light, L));
+  const auto cells = loadgen::cells_for_points(lps, L, map.skip_grid());
+  cells_total = cells.size();
+  const auto t0 = Clk::now();
+  // Nearest first: cells in order of first appearance are roughly screen order; rank by
+  // the nearest receiver instead.
+  std::vector<double> nearest(cells.size(), INFINITY);
+  {
+    std::unordered_map<uint64_t, size_t> idx;
+    for (size_t c = 0; c < cells.size(); ++c) idx[cells[c].key()] = c;
+    for (size_t i = 0; i < lps.size(); ++i) {
+      const auto one = loadgen::cells_for_points({lps[i]}, L, map.skip_grid());
+      if (!one.empty()) {
+        auto it = idx.find(one[0].key());
+        if (it != idx.end()) nearest[it->second] = std::min(nearest[it->second], f.receivers[f.lit_facing[i]].distance);
+      }
+    }
+  }
+  std::vector<size_t> order(cells.size());
+  for (size_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return nearest[a] < nearest[b]; });
+  for (size_t r = 0; r < order.size(); ++r) {
+    const auto& c = cells[order[r]];
+    map.request_region(c.level, c.x0(), c.y0(), c.side(), c.side(), uint16_t(60000 - std::min<size_t>(r, 50000)));
+  }
+  for (bool last = false;;) {
+    const double ms = std::chrono::duration<double, std::milli>(Clk::now() - t0).count();
+    size_t resident = 0;
+    for (const auto& c : cells) resident += map.region_resident(c.level, c.x0(), c.y0(), c.side(), c.side());
+    const FrameError e = frame_error(map.evaluator(), light, f, 0, L);
+    pts.push_back({ms, e.fraction(), resident});
+    if (last || ms > 60000) break;
+    last = resident == cells.size();
+    if (!last) std::this_thread::sleep_for(std::chrono::microseconds(int64_t(sample_ms * 1000)));
+  }
+  srv.stop();
+  return pts;
+}
+
+void run(const ReportArgs& a) {
+  const uint32_t L = parse_resolution(a.resolution);
+  uint32_t w = 0, h = 0;
+  if (std::sscanf(a.size.c_str(), "%ux%u", &w, &h) != 2 || w == 0 || h == 0 || w > 4096 || h > 4096)
+    throw Error("--size: expected WxH (1..4096), got '" + a.size + "'");
+  for (uint32_t r : a.pcf)
+    if (r == 0 || r > 4) throw Error("--pcf: radii must be in 1..4");
+  std::filesystem::create_directories(a.out);
+  const Scene scene = load_scene(a.scene);
+  const LightSpace light = LightSpace::fit(LightSpec::parse(a.light), scene.bounds());
+  std::printf("%s\n", summary(scene).c_str());
+
+  // Packs, one per encoding.
+  struct Built {
+    std::string enc, path;
+    std::shared_ptr<PackReader> reader;
+    uint64_t memory = 0;
+  };
+  std::vector<Built> packs;
+  for (const std::string& enc : split(a.encodings)) {
+    MapBuildOptions o;
+    o.map_level = L;
+    o.encoding = parse_encoding(enc);
+    o.scene_spec = a.scene;
+    o.light_spec = a.light;
+    Built b{enc, a.out + "/report_" + enc + ".pack", nullptr, 0};
+    const auto r = build_map(scene, light, o, b.path);
+    b.reader = PackReader::open(b.path);
+    b.memory = resident_bytes(*b.reader);
+    std::printf("built %s: %.2f MiB pack, %.2f MiB resident (%.1f s)\n", enc.c_str(), double(r.pack_bytes) / 1048576,
+                double(b.memory) / 1048576, r.wall_seconds);
+    packs.push_back(std::move(b));
+  }
+  if (packs.empty()) throw Error("--encodings: none given");
+
+  // Uncompressed baselines: full resolution, the largest that fits in the smallest
+  // compressed map's memory, and one level lower.
+  uint64_t budget = packs[0].memory;
+  for (const Built& b : packs) budget = std::min(budget, b.memory);
+  uint32_t lm = 0;
+  while (lm + 1 <= L && (uint64_t(4) << (2 * (lm + 1))) <= budget) ++lm;
+  const DepthBoundsTracer bounds(scene, light);
+  std::vector<std::pair<std::string, std::unique_ptr<FlatMapEvaluator>>> flats;
+  for (uint32_t lv : {L, lm, lm > 0 ? lm - 1 : 0}) {
+    const uint64_t side = uint64_t(1) << lv;
+    if (side * side > DepthBoundsTracer::kMaxRegionTexels) continue;
+    const IntervalTile t = bounds.trace({lv, 0, 0, uint32_t(side), uint32_t(side)});
+    std::string label = "float " + std::to_string(side) + "^2" + (lv == L ? " (full)" : lv == lm ? " (same mem)" : " (lower)");
+    if (std::none_of(flats.begin(), flats.end(), [&](const auto& f) { return f.first == label; }))
+      flats.emplace_back(label, std::make_unique<FlatMapEvaluator>(t));
+  }
+
+  // The camera path: a flyover over the map's footprint (loadgen/camera_path.hpp).
+  const loadgen::WorldFrame world = loadgen::world_frame(packs[0].reader->header(), packs[0].reader->grid());
+  const loadgen::CameraPath path(loadgen::PathKind::flyover, world, 7, 0);
+  const SceneTracer tracer(scene, light);
+  std::vector<FrameTruth> frames;
+  for (uint32_t i = 0; i < a.frames; ++i) {
+    Camera cam = path.at(3.0 * i);
+    cam.aspect = double(w) / h;
+    frames.push_back(make_frame_truth(tracer, cam, w, h, L, a.pcf));
+  }
+
+  // (a) error against evaluation time.
+  std::vector<Row> rows;
+  auto measure = [&](const std::string& map, const std::string& what, const Evaluator& eval, uint64_t bytes,
+                     uint32_t pcf, uint32_t level) {
+    Row r{map, what, level, pcf, bytes, 0, 0};
+    uint64_t n = 0, diff = 0;
+    double abs_sum = 0, secs = 0;
+    for (const FrameTruth& f : frames) {
+      const FrameError e = frame_error(eval, light, f, pcf, level);
+      n += e.receivers, diff += e.differing, abs_sum += e.mean_abs * double(e.receivers), secs += e.seconds;
+    }
+    r.error = pcf == 0 ? (n ? double(diff) / double(n) : 0) : (n ? abs_sum / double(n) : 0);
+    r.ms_per_frame = secs * 1e3 / double(frames.size());
+    rows.push_back(r);
+  };
+  std::vector<std::unique_ptr<PackEvaluator>> evals;
+  for (const Built& b : packs) {
+    evals.push_back(std::make_unique<PackEvaluator>(b.reader, 1 << 16));
+    const Evaluator& e = *evals.back();
+    measure(b.enc, "warm-up", e, b.memory, 0, L);  // opens the tiles: not timed below
+    rows.pop_back();
+    for (uint32_t lv : {L, L - 1, L - 2}) measure(b.enc, "single tap", e, b.memory, 0, lv);
+    for (uint32_t r : a.pcf) measure(b.enc, "pcf " + std::to_string(2 * r + 1) + "x" + std::to_string(2 * r + 1), e, b.memory, r, L);
+  }
+  for (const auto& [label, f] : flats) {
+    measure(label, "single tap", *f, f->bytes(), 0, f->finest_level());
+    for (uint32_t r : a.pcf)
+      measure(label, "pcf " + std::to_string(2 * r + 1) + "x" + std::to_string(2 * r + 1), *f, f->bytes(), r, f->finest_level());
+  }
+  // Lossless check: compressed (every tile resident) vs the uncompressed full map.
+  json lossless = json::object();
+  for (size_t i = 0; i < packs.size(); ++i) {
+    uint64_t n = 0;
+    for (const FrameTruth& f : frames) n += count_disagreements(*evals[i], *flats[0].second, light, f);
+    lossless[packs[i].enc] = n;
+  }
+
+  // (b) progressive refinement after a cut, per encoding, on frame 0.
+  json refine = json::object();
+  std::vector<loadgen::Series> rseries;
+  for (size_t i = 0; i < packs.size(); ++i) {
+    size_t cells = 0;
+    const auto pts = refinement(packs[i].path, "report_" + packs[i].enc, light, frames[0], a.cache_mb, a.sample_ms, cells);
+    json arr = json::array();
+    loadgen::Series s{packs[i].enc, loadgen::series_colour(i), {}, {}};
+    for (const auto& p : pts) {
+      arr.push_back({p.ms, p.error, p.resident_cells});
+      s.x.push_back(std::max(p.ms, 0.01));
+      s.y.push_back(p.error);
+    }
+    refine[packs[i].enc] = {{"cells", cells}, {"columns", {"ms", "error", "resident_cells"}}, {"points", arr},
+                            {"final_error", pts.empty() ? 0.0 : pts.back().error},
+                            {"ms_to_full", pts.empty() ? 0.0 : pts.back().ms}};
+    rseries.push_back(std::move(s));
+  }
+  json flat_lines = json::object();
+  for (size_t k = 0; k < flats.size(); ++k) {
+    const FrameError e = frame_error(*flats[k].second, light, frames[0], 0, flats[k].second->finest_level());
+    flat_lines[flats[k].first] = e.fraction();
+    if (k == 0) continue;
+    const double x_end = std::max(1.0, rseries.empty() || rseries[0].x.empty() ? 1.0 : rseries[0].x.back());
+    rseries.push_back({flats[k].first, loadgen::series_colour(4 + k), {0.01, x_end}, {e.fraction(), e.fraction()}});
+  }
+
+  // Outputs.
+  std::string table;
+  char buf[256];
+  std::snprintf(buf, sizeof buf, "%-24s %-12s %5s %10s %12s %10s\n", "map", "lookup", "level", "MiB", "error", "ms/frame");
+  table += buf;
+  for (const Row& r : rows) {
+    std::snprintf(buf, sizeof buf, "%-24s %-12s %5u %10.3f %12.6f %10.2f\n", r.map.c_str(), r.what.c_str(), r.level,
+                  double(r.bytes) / 1048576, r.error, r.ms_per_frame);
+    table += buf;
+  }
+  table += "error: single tap = fraction of lit-facing receivers whose lit answer differs from Embree shadow rays;\n"
+           "       pcf = mean |PCF - supersampled ray-traced visibility over the kernel|\n";
+  for (auto& [enc, n] : lossless.items()) {
+    std::snprintf(buf, sizeof buf, "lossless check %-6s: %llu receivers differ from the uncompressed full map\n",
+                  enc.c_str(), (unsigned long long)n.get<uint64_t>());
+    table += buf;
+  }
+  for (auto& [enc, r] : refine.items()) {
+    std::snprintf(buf, sizeof buf, "refinement %-6s: %zu cells, error %.5f at the cut -> %.5f after %.0f ms (full residency)\n",
+                  enc.c_str(), size_t(r["cells"]), double(r["points"][0][1]), double(r["final_error"]),
+                  double(r["ms_to_full"]));
+    table += buf;
+  }
+  for (auto& [label, e] : flat_lines.items()) {
+    std::snprintf(buf, sizeof buf, "frame 0 error of %-26s %.5f\n", label.c_str(), double(e));
+    table += buf;
+  }
+  std::printf("%s", table.c_str());
+  std::ofstream(a.out + "/report.txt") << table;
+
+  json j;
+  j["scene"] = a.scene, j["light"] = a.light, j["level"] = L, j["frames"] = a.frames, j["size"] = a.size;
+  j["same_memory_budget_bytes"] = budget;
+  json jr = json::array();
+  for (const Row& r : rows)
+    jr.push_back({{"map", r.map}, {"lookup", r.what}, {"level", r.level}, {"pcf_radius", r.pcf}, {"bytes", r.bytes},
+                  {"error", r.error}, {"ms_per_frame", r.ms_per_frame}});
+  j["error_vs_time"] = jr;
+  j["lossless_disagreements"] = lossless;
+  j["refinement"] = refine;
+  j["uncompressed_frame0_error"] = flat_lines;
+  std::ofstream(a.out + "/report.json") << j.dump(2) << "\n";
+
+  std::vector<loadgen::Series> es;
+  std::unordered_map<std::string, size_t> idx;
+  for (const Row& r : rows) {
+    if (r.pcf != 0) continue;
+    auto [it, fresh] = idx.try_emplace(r.map, es.size());
+    if (fresh) es.push_back({r.map, loadgen::series_colour(es.size()), {}, {}});
+    es[it->second].x.push_back(r.ms_per_frame);
+    es[it->second].y.push_back(r.error);
+  }
+  loadgen::PlotSpec ps;
+  ps.title = "SINGLE-TAP SHADOW ERROR VS EVALUATION TIME PER FRAME";
+  ps.x_label = "MS PER FRAME (ONE THREAD)";
+  ps.y_label = "FRACTION WRONG";
+  ps.y_min = 0;
+  loadgen::write_plot_png(a.out + "/report_error_time.png", ps, es);
+  loadgen::PlotSpec rs;
+  rs.title = "ERROR AFTER A CAMERA CUT WHILE TILES STREAM IN";
+  rs.x_label = "MS SINCE THE CUT (LOG)";
+  rs.y_label = "FRACTION WRONG";
+  rs.log_x = true;
+  rs.y_min = 0;
+  loadgen::write_plot_png(a.out + "/report_refinement.png", rs, rseries);
+  std::printf("report: %s/report.{txt,json}, report_error_time.png, report_refinement.png\n", a.out.c_str());
+}
+
+Register reg{"report", "Shadow error vs time: encodings, PCF, levels, uncompressed maps, refinement", [](CLI::App& sub) {
+  auto a = std::make_shared<ReportArgs>();
+  sub.add_option("--scene", a->scene, "Scene spec or file")->required();
+  sub.add_option("--light", a->light, "Light spec")->required();
+  sub.add_option("--resolution", a->resolution, "Map resolution (power of two, e.g. 2048, 4k)")->capture_default_str();
+  sub.add_option("--out", a->out, "Report folder")->capture_default_str();
+  sub.add_option("--encodings", a->encodings, "Comma-separated encodings")->capture_default_str();
+  sub.add_option("--frames", a->frames, "Camera frames along the path")->capture_default_str()->check(CLI::Range(1u, 1000u));
+  sub.add_option("--size", a->size, "Frame size WxH")->capture_default_str();
+  sub.add_option("--pcf", a->pcf, "PCF radii to measure")->capture_default_str();
+  sub.add_option("--cache-mb", a->cache_mb, "Client tile cache for the refinement run (MiB)")->capture_default_str();
+  sub.add_option("--sample-ms", a->sample_ms, "Refinement sampling period (ms)")->capture_default_str();
+  sub.callback([a] { run(*a); });
+}};
+
+}  // namespace
+}  // namespace st::cli

@@ -1,0 +1,88 @@
+#include "server/serve_command.hpp"
+
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include "common/error.hpp"
+#include "proto/auth.hpp"
+#include "server/server.hpp"
+
+namespace st::server {
+
+void add_serve_options(CLI::App& app, ServeConfig& a) {
+  app.add_option("packs", a.paths, "Pack files and/or directories of *.pack files")->required();
+  app.add_option("--listen", a.listen, "Address to listen on, HOST:PORT (port 0: ephemeral)")
+      ->capture_default_str();
+  app.add_option("--threads", a.threads, "I/O threads")->capture_default_str()->check(CLI::Range(1u, 64u));
+  app.add_option("--stats-interval", a.stats_interval, "Print counters every S seconds (0: never)")
+      ->capture_default_str()->check(CLI::Range(0.0, 86400.0));
+  app.add_option("--max-connections", a.max_connections, "Connections served at once")
+      ->capture_default_str()->check(CLI::Range(1u, 1000000u));
+  app.add_option("--max-connections-per-address", a.max_connections_per_address,
+                 "Connections from one client address at once (0: no bound)")
+      ->capture_default_str()->check(CLI::Range(0u, 1000000u));
+  app.add_option("--key-file", a.key_file,
+                 "Require clients to prove this catalog key (hex or raw bytes; HMAC-SHA256 challenge)");
+  app.add_option("--tls-cert", a.tls_cert, "Serve over TLS with this certificate chain (PEM); needs --tls-key");
+  app.add_option("--tls-key", a.tls_key, "The certificate's private key (PEM)");
+  app.add_option("--idle-timeout", a.idle_timeout, "Close connections idle this many seconds")
+      ->capture_default_str()->check(CLI::Range(0.1, 86400.0));
+}
+
+std::pair<std::string, uint16_t> parse_listen(const std::string& text) {
+  std::string host, port;
+  if (!text.empty() && text[0] == '[') {
+    auto close = text.find(']');
+    if (close == std::string::npos || close + 1 >= text.size() || text[close + 1] != ':')
+      throw Error("--listen: '" + text + "' is not [IPv6]:PORT");
+    host = text.substr(1, close - 1);
+    port = text.substr(close + 2);
+  } else {
+    auto colon = text.rfind(':');
+    if (colon == std::string::npos) throw Error("--listen: '" + text + "' is not HOST:PORT");
+    host = text.substr(0, colon);
+    port = text.substr(colon + 1);
+  }
+  size_t used = 0;
+  unsigned long p = 0;
+  try {
+    p = std::stoul(port, &used);
+  } catch (...) {
+    used = 0;
+  }
+  if (port.empty() || used != port.size() || p > 65535 || host.empty())
+    throw Error("--listen: '" + text + "' needs HOST:PORT with a port in 0..65535");
+  return {host, uint16_t(p)};
+}
+
+void run_serve(const ServeConfig& a, const char* program) {
+  auto catalog = Catalog::scan(a.paths, [program](const std::string& w) {
+    std::fprintf(stderr, "%s: warning: %s\n", program, w.c_str());
+  });
+  ServerOptions o;
+  std::tie(o.host, o.port) = parse_listen(a.listen);
+  o.threads = a.threads;
+  o.max_connections = a.max_connections;
+  o.max_connections_per_address = a.max_connections_per_address;
+  o.stats_interval = std::chrono::milliseconds(int64_t(a.stats_interval * 1000));
+  o.idle_timeout = std::chrono::milliseconds(int64_t(a.idle_timeout * 1000));
+  if (!a.key_file.empty()) o.key = proto::load_key_file(a.key_file);
+  o.tls_cert_file = a.tls_cert;
+  o.tls_key_file = a.tls_key;
+  const size_t maps = catalog.maps().size();
+  Server srv(std::move(catalog), o);
+  srv.start();
+  std::fprintf(stderr, "%s: %zu map(s) on %s:%u (%u I/O thread(s)%s%s); Ctrl-C stops\n",
+               program, maps, o.host.c_str(), unsigned(srv.port()), o.threads,
+               o.key.empty() ? "" : ", key required", o.tls_cert_file.empty() ? "" : ", TLS");
+  for (const auto& m : srv.catalog().maps())
+    std::fprintf(stderr, "  %s  L=%u K=%u tiles=%u  %s\n", m->name().c_str(),
+                 unsigned(m->entry().resolution_log2), unsigned(m->entry().skip_level),
+                 unsigned(m->entry().tile_count), m->path().c_str());
+  int sig = srv.wait_for_signal();
+  std::fprintf(stderr, "%s: %s, stopped. %s\n", program, sig ? "signal received" : "stopped",
+               srv.stats().line().c_str());
+}
+
+}  // namespace st::server

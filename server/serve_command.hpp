@@ -1,0 +1,35 @@
+// The server's command line, shared by `shadowtile-server` (server/main.cpp, what the
+// image ships) and `shadowtile serve` (app/cmd_serve.cpp): the same options, defaults and
+// messages in both.
+#pragma once
+#include <CLI/CLI.hpp>
+#include <cstdint>
+#include <string>
+#include <utility>
+#include <vector>
+
+namespace st::server {
+
+struct ServeConfig {
+  std::vector<std::string> paths;
+  std::string listen = "127.0.0.1:7447";
+  unsigned threads = 1;
+  double stats_interval = 0;
+  unsigned max_connections = 1024;
+  unsigned max_connections_per_address = 256;
+  double idle_timeout = 120;
+  std::string key_file, tls_cert, tls_key;
+};
+
+// Adds the options (and the positional pack paths) to `app`, writing into `config`.
+void add_serve_options(CLI::App& app, ServeConfig& config);
+
+// "HOST:PORT" or "[V6]:PORT" -> (host, port). Throws st::Error naming --listen.
+std::pair<std::string, uint16_t> parse_listen(const std::string& text);
+
+// Scans the packs, serves them until SIGINT/SIGTERM, then prints the final counters.
+// Progress and warnings go to stderr prefixed with `program` ("shadowtile serve").
+// Throws st::Error on bad options, unreadable packs or a port that cannot be bound.
+void run_serve(const ServeConfig& config, const char* program);
+
+}  // namespace st::server

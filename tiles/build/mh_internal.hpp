@@ -1,0 +1,33 @@
+// Private helpers shared by the MH constructions (mh_build*.cpp); not a public header.
+#pragma once
+#include <cstddef>
+#include <cstdint>
+
+#include "tiles/build/hierarchy.hpp"
+#include "tiles/core/interval.hpp"
+
+namespace st::mh_detail {
+
+// A value inside [lo, hi] (lo <= hi, both finite) that is as central as float allows.
+// The mean is taken in double: the sum of two finite floats cannot overflow there, and
+// rounding is monotone, so 0.5 * (lo + hi) rounded to double and then to float stays in
+// [lo, hi] (lo and hi are themselves representable); subnormals are exact in double.
+// lo == hi returns lo bit for bit ((lo + lo) / 2 is exact); for [-0.0, 0.0] some zero.
+// The clamp only guards against flush-to-zero modes. Branch-free: it runs per node.
+inline float safe_midpoint(float lo, float hi) {
+  float m = float(0.5 * (double(lo) + double(hi)));
+  m = m < lo ? lo : m;
+  return m > hi ? hi : m;
+}
+
+// Throws st::Error unless the tile is square, a power of two a side (<= 2^14) and its
+// data has width*height entries. Returns log2(side).
+uint32_t validate_tile_shape(const IntervalTile& tile);
+// Throws st::Error naming the first texel whose interval is not finite with lo <= hi.
+void validate_tile_values(const IntervalTile& tile);
+
+// MH §3.1 Alg. 2 (bottom-up) and Alg. 1 (top-down) on a validated tile of side 2^n.
+Hierarchy build_bottom_up(const IntervalTile& tile, uint32_t n);
+Hierarchy build_top_down(const IntervalTile& tile, uint32_t n);
+
+}  // namespace st::mh_detail

@@ -1,0 +1,310 @@
+#include "tiles/build/pack_writer.hpp"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+
+#include "common/error.hpp"
+#include "tiles/core/interval.hpp"
+
+namespace st {
+
+namespace {
+
+std::string sys_error(const std::string& what) { return what + ": " + std::strerror(errno); }
+
+void pread_all(int fd, uint64_t offset, std::span<uint8_t> out, const std::string& what) {
+  size_t done = 0;
+  while (done < out.size()) {
+    ssize_t n = ::pread(fd, out.data() + done, out.size() - done, off_t(offset + done));
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) throw Error(sys_error(what + ": read"));
+    if (n == 0) throw Error(what + ": unexpected end of file at byte " + std::to_string(offset + done));
+    done += size_t(n);
+  }
+}
+
+void fsync_dir_of(const std::string& path) {
+  size_t slash = path.rfind('/');
+  std::string dir = slash == std::string::npos ? "." : slash == 0 ? "/" : path.substr(0, slash);
+  int d = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY);
+  if (d < 0) return;  // best effort: the rename itself already happened
+  ::fsync(d);
+  ::close(d);
+}
+
+}  // namespace
+
+PackParams PackParams::from(const LightSpace& light, const CutParams& cut) {
+  PackParams p;
+  p.light_kind = light.kind();
+  p.light = light.to_array();
+  p.map_level = cut.map_level;
+  p.skip_level = cut.skip_level;
+  p.encoding = cut.codec.encoding;
+  p.tile_bytes = cut.tile_bytes;
+  return p;
+}
+
+PackWriter::PackWriter(std::string path, PackParams params) : path_(std::move(path)), params_(std::move(params)) {
+  if (params_.map_level > kMaxLevel || params_.skip_level > std::min(params_.map_level, kMaxSkipLevel))
+    throw Error(path_ + ": bad map/skip level " + std::to_string(params_.map_level) + "/" +
+                std::to_string(params_.skip_level));
+  if (params_.tile_bytes < kMinTileBytes || params_.tile_bytes > kMaxTileBytes)
+    throw Error(path_ + ": bad tile_bytes " + std::to_string(params_.tile_bytes));
+  if (params_.features & ~uint32_t(kFeatureExitDepths | kFeatureDeepShadow))
+    throw Error(path_ + ": features may only name exit_depths / deep_shadow (the rest are derived)");
+  if (params_.compression_level < 0 || params_.compression_level > 12)
+    throw Error(path_ + ": compression level outside 0..12");
+  done_.assign(size_t(1) << (2 * params_.skip_level), 0);
+}
+
+PackWriter::~PackWriter() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+PackHeader PackWriter::base_header() const {
+  PackHeader h;
+  h.state = PackState::building;
+  h.flags = params_.features;
+  h.encoding = params_.encoding;
+  h.light_kind = params_.light_kind;
+  h.map_level = params_.map_level;
+  h.skip_level = params_.skip_level;
+  h.tile_bytes = params_.tile_bytes;
+  h.scene_hash = params_.scene_hash;
+  h.light = params_.light;
+  std::vector<uint8_t> blob = serialize_params(params_.build_params);
+  h.params_offset = kPackHeaderBytes;
+  h.params_size = blob.size();
+  h.params_crc = crc32_of(blob);
+  h.journal_offset = h.params_offset + h.params_size;
+  return h;
+}
+
+void PackWriter::write_at(uint64_t offset, std::span<const uint8_t> bytes) {
+  size_t done = 0;
+  while (done < bytes.size()) {
+    ssize_t n = ::pwrite(fd_, bytes.data() + done, bytes.size() - done, off_t(offset + done));
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      failed_ = true;
+      throw Error(sys_error(tmp_path() + ": write at byte " + std::to_string(offset + done)));
+    }
+    done += size_t(n);
+  }
+}
+
+std::unique_ptr<PackWriter> PackWriter::create(const std::string& path, const PackParams& params) {
+  std::unique_ptr<PackWriter> w(new PackWriter(path, params));
+  w->open_new();
+  return w;
+}
+
+std::unique_ptr<PackWriter> PackWriter::resume(const std::string& path, const PackParams& params) {
+  std::unique_ptr<PackWriter> w(new PackWriter(path, params));
+  w->open_existing();
+  return w;
+}
+
+std::unique_ptr<PackWriter> PackWriter::create_or_resume(const std::string& path, const PackParams& params) {
+  struct stat st{};
+  if (::stat((path + ".tmp").c_str(), &st) == 0) return resume(path, params);
+  return create(path, params);
+}
+
+void PackWriter::open_new() {
+  fd_ = ::open(tmp_path().c_str(), O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd_ < 0) throw Error(sys_error(tmp_path() + ": cannot create"));
+  PackHeader h = base_header();
+  auto head = h.serialize();
+  write_at(0, head);
+  write_at(h.params_offset, serialize_params(params_.build_params));
+  end_ = h.journal_offset;
+}
+
+void PackWriter::open_existing() {
+  const std::string what = tmp_path();
+  fd_ = ::open(what.c_str(), O_RDWR | O_CLOEXEC);
+  if (fd_ < 0) throw Error(sys_error(what + ": cannot reopen for resume"));
+  struct stat st{};
+  if (::fstat(fd_, &st) != 0) throw Error(sys_error(what + ": stat"));
+  const uint64_t file_size = uint64_t(st.st_size);
+  std::array<uint8_t, kPackHeaderBytes> head{};
+  if (file_size < kPackHeaderBytes) throw Error(what + ": too short to resume (" + std::to_string(file_size) + " bytes)");
+  pread_all(fd_, 0, head, what);
+  PackHeader found = PackHeader::parse(head, what);
+  PackHeader want = base_header();
+  auto mismatch = [&](const char* field) {
+    throw Error(what + ": cannot resume: " + field + " differs from this build's parameters");
+  };
+  if (found.encoding != want.encoding) mismatch("encoding");
+  if (found.light_kind != want.light_kind || found.light != want.light) mismatch("light");
+  if (found.map_level != want.map_level) mismatch("map level");
+  if (found.skip_level != want.skip_level) mismatch("skip level");
+  if (found.tile_bytes != want.tile_bytes) mismatch("tile_bytes");
+  if (found.scene_hash != want.scene_hash) mismatch("scene hash");
+  if ((found.flags & (kFeatureExitDepths | kFeatureDeepShadow)) != want.flags) mismatch("features");
+  if (found.params_size != want.params_size || found.params_crc != want.params_crc) mismatch("build parameters");
+  std::vector<uint8_t> blob(found.params_size);
+  if (file_size < found.journal_offset) throw Error(what + ": truncated inside the build parameters");
+  pread_all(fd_, found.params_offset, blob, what);
+  if (blob != serialize_params(params_.build_params)) mismatch("build parameters");
+
+  // Replay the journal: tiles are pending until their cell's record; stop at the first
+  // torn or corrupt record and cut the file there (after the last complete cell).
+  uint64_t pos = found.journal_offset, good_end = pos;
+  std::vector<TileIndexEntry> pending;
+  std::vector<uint8_t> payload;
+  const size_t side = size_t(1) << params_.skip_level;
+  while (file_size - pos >= kRecordBytes) {
+    std::array<uint8_t, kRecordBytes> rec{};
+    pread_all(fd_, pos, rec, what);
+    TileRecord t;
+    CellRecord c;
+    RecordType type = parse_record(rec, &t, &c);
+    if (type == RecordType::tile) {
+      if (t.raw_size > params_.tile_bytes || file_size - pos - kRecordBytes < t.stored_size) break;
+      payload.resize(t.stored_size);
+      pread_all(fd_, pos + kRecordBytes, payload, what);
+      if (crc32_of(payload) != t.crc) break;
+      pending.push_back(TileIndexEntry{t.id, pos + kRecordBytes, t.stored_size, t.raw_size, t.crc, t.kind});
+      pos += kRecordBytes + t.stored_size;
+    } else if (type == RecordType::cell) {
+      if (c.cx >= side || c.cy >= side || done_[c.cy * side + c.cx]) break;
+      bool has_tile = c.entry.kind != EntryKind::constant;
+      uint64_t root_id = make_tile_id(params_.skip_level, c.cx, c.cy);
+      bool root_found = !pending.empty() && pending.back().id == root_id &&
+                        uint8_t(pending.back().kind) == uint8_t(c.entry.kind);
+      if (has_tile != root_found || (!has_tile && !pending.empty())) break;
+      done_[c.cy * side + c.cx] = 1;
+      cells_.push_back(c);
+      tiles_.insert(tiles_.end(), pending.begin(), pending.end());
+      pending.clear();
+      pos += kRecordBytes;
+      good_end = pos;
+    } else {
+      break;
+    }
+  }
+  resumed_cells_ = cells_.size();
+  truncated_bytes_ = file_size - good_end;
+  if (::ftruncate(fd_, off_t(good_end)) != 0) throw Error(sys_error(what + ": truncate the torn tail"));
+  // A .tmp that was completed but not renamed is rewritten as "building" here.
+  write_at(0, want.serialize());
+  end_ = good_end;
+}
+
+std::vector<CellRecord> PackWriter::cells() const {
+  std::lock_guard lock(mu_);
+  return cells_;
+}
+
+bool PackWriter::is_done(uint32_t cx, uint32_t cy) const {
+  std::lock_guard lock(mu_);
+  size_t side = size_t(1) << params_.skip_level;
+  return cx < side && cy < side && done_[size_t(cy) * side + cx];
+}
+
+void PackWriter::append_cell(const CutCell& cell) {
+  const size_t side = size_t(1) << params_.skip_level;
+  const std::string where = tmp_path() + ": cell (" + std::to_string(cell.cx) + ", " + std::to_string(cell.cy) + ")";
+  if (cell.cx >= side || cell.cy >= side) throw Error(where + " outside the skip grid");
+  // Compress outside the lock: this is the expensive part of appending.
+  std::vector<uint8_t> buf;
+  std::vector<TileIndexEntry> entries;
+  for (const CutTile& t : cell.tiles) {
+    if (t.raw.empty() || t.raw.size() > params_.tile_bytes)
+      throw Error(where + ": " + describe_tile(t.id) + " has " + std::to_string(t.raw.size()) +
+                  " bytes (tile_bytes " + std::to_string(params_.tile_bytes) + ")");
+    std::vector<uint8_t> stored = zlib_compress(t.raw, params_.compression_level);
+    TileRecord r{t.kind, t.id, uint32_t(stored.size()), uint32_t(t.raw.size()), crc32_of(stored)};
+    auto head = r.serialize();
+    entries.push_back(TileIndexEntry{t.id, buf.size() + kRecordBytes, r.stored_size, r.raw_size, r.crc, t.kind});
+    buf.insert(buf.end(), head.begin(), head.end());
+    buf.insert(buf.end(), stored.begin(), stored.end());
+  }
+  uint64_t root_id = make_tile_id(params_.skip_level, cell.cx, cell.cy);
+  bool has_tile = cell.entry.kind != EntryKind::constant;
+  if (has_tile != (!cell.tiles.empty() && cell.tiles.back().id == root_id &&
+                   uint8_t(cell.tiles.back().kind) == uint8_t(cell.entry.kind)))
+    throw Error(where + ": entry kind disagrees with its tiles (the cell's own tile must come last)");
+  CellRecord rec{cell.cx, cell.cy, cell.entry, cell.lo, cell.hi};
+  auto head = rec.serialize();
+  buf.insert(buf.end(), head.begin(), head.end());
+
+  std::lock_guard lock(mu_);
+  if (failed_ || finished_) throw Error(where + ": writer already failed or finished");
+  size_t i = size_t(cell.cy) * side + cell.cx;
+  if (done_[i]) throw Error(where + " appended twice");
+  write_at(end_, buf);
+  for (TileIndexEntry& e : entries) e.offset += end_;
+  end_ += buf.size();
+  tiles_.insert(tiles_.end(), entries.begin(), entries.end());
+  cells_.push_back(rec);
+  done_[i] = 1;
+}
+
+void PackWriter::finish(const CutGrid& grid) {
+  std::lock_guard lock(mu_);
+  const std::string what = tmp_path();
+  if (failed_ || finished_) throw Error(what + ": writer already failed or finished");
+  const size_t side = size_t(1) << params_.skip_level;
+  if (cells_.size() != side * side)
+    throw Error(what + ": finish with " + std::to_string(cells_.size()) + " of " + std::to_string(side * side) +
+                " cells done");
+  if (grid.levels != params_.skip_level || grid.entries.size() != side * side ||
+      grid.coarse.size() != CutGrid::coarse_count(grid.levels))
+    throw Error(what + ": skip grid does not have the skip level's shape");
+  for (const CellRecord& c : cells_) {
+    const GridEntry& e = grid.entry(c.cx, c.cy);
+    if (!(e == c.entry))
+      throw Error(what + ": skip grid entry (" + std::to_string(c.cx) + ", " + std::to_string(c.cy) +
+                  ") differs from its cell's");
+  }
+  std::sort(tiles_.begin(), tiles_.end(), [](auto& a, auto& b) { return a.id < b.id; });
+  for (size_t i = 1; i < tiles_.size(); ++i)
+    if (tiles_[i].id == tiles_[i - 1].id) throw Error(what + ": " + describe_tile(tiles_[i].id) + " appended twice");
+
+  PackHeader h = base_header();
+  bool index_tiles = std::any_of(tiles_.begin(), tiles_.end(), [](auto& t) { return t.kind == TileKind::index; });
+  h.flags |= (tiles_.empty() ? 0u : uint32_t(kFeatureHasTiles)) | (index_tiles ? uint32_t(kFeatureIndexTiles) : 0u);
+  h.grid_offset = (end_ + 7) & ~uint64_t(7);
+  std::vector<uint8_t> pad(h.grid_offset - end_, 0);
+  std::vector<uint8_t> grid_bytes = grid.serialize();
+  std::vector<uint8_t> index_bytes = serialize_index(tiles_);
+  h.grid_size = grid_bytes.size();
+  h.grid_crc = crc32_of(grid_bytes);
+  h.index_offset = h.grid_offset + h.grid_size;
+  h.tile_count = tiles_.size();
+  h.index_crc = crc32_of(index_bytes);
+  h.state = PackState::complete;
+  write_at(end_, pad);
+  write_at(h.grid_offset, grid_bytes);
+  write_at(h.index_offset, index_bytes);
+  if (::ftruncate(fd_, off_t(h.file_size())) != 0) throw Error(sys_error(what + ": truncate"));
+  // Header last: until it says "complete" the file is a resumable journal.
+  if (::fsync(fd_) != 0) throw Error(sys_error(what + ": fsync"));
+  write_at(0, h.serialize());
+  if (::fsync(fd_) != 0) throw Error(sys_error(what + ": fsync"));
+  ::close(fd_);
+  fd_ = -1;
+  if (::rename(what.c_str(), path_.c_str()) != 0) throw Error(sys_error(what + ": rename to " + path_));
+  fsync_dir_of(path_);
+  finished_ = true;
+}
+
+void write_pack(const std::string& path, const Hierarchy& h, const CutParams& cut, const PackParams& params) {
+  if (params.map_level != cut.map_level || params.skip_level != cut.skip_level ||
+      params.tile_bytes != cut.tile_bytes || params.encoding != cut.codec.encoding)
+    throw Error(path + ": pack and cut parameters disagree");
+  auto w = PackWriter::create(path, params);
+  CutGrid grid = cut_hierarchy(h, cut, [&](CutCell&& c) { w->append_cell(c); });
+  w->finish(grid);
+}
+
+}  // namespace st

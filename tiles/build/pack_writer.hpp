@@ -1,0 +1,100 @@
+// Writes a pack file (pack_format.hpp, tiles/PACK.md) cell by cell, so a map larger than
+// memory is built one level-K cell at a time, and a killed build resumes.
+//
+//   auto w = PackWriter::create_or_resume("out.pack", pack_params);   // "out.pack.tmp"
+//   TileCutter cutter(cut_params);
+//   for each cell (cx, cy) with !w->is_done(cx, cy)       // any order, any thread
+//     w->append_cell(cutter.cut_cell(cx, cy, build_hierarchy(intervals of the cell)));
+//   w->finish(cutter.coarse_grid(w->cells(), build_coarse));  // fsync + rename
+//
+// Durability: append_cell writes the cell's tile records then its cell record; a cell
+// counts as done only once its cell record is complete and its CRCs check. Nothing is
+// fsynced per cell (a crash may lose the last cells, never corrupt earlier ones: resume
+// cuts the torn tail). finish() fsyncs the file, renames it and fsyncs the directory.
+// Destroying a writer without finish() leaves the .tmp for resume.
+//
+// Thread safety: append_cell may be called concurrently (compression runs outside the
+// lock; the records of one cell are written contiguously). Errors: st::Error naming the
+// file; after an I/O error the writer refuses further appends.
+#pragma once
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "tiles/core/pack_format.hpp"
+#include "tiles/build/tile_cut.hpp"
+
+namespace st {
+
+struct PackParams {
+  LightKind light_kind = LightKind::sun;
+  std::array<double, 18> light{};  // LightSpace::to_array()
+  uint32_t map_level = 0, skip_level = 0;
+  Encoding encoding = Encoding::mh;
+  uint32_t tile_bytes = kDefaultTileBytes;
+  uint64_t scene_hash = 0;
+  uint32_t features = 0;  // what the builder knows: kFeatureExitDepths, kFeatureDeepShadow
+  PackParamList build_params;  // free-form provenance (scene path, light spec, tool version)
+  int compression_level = 6;   // libdeflate 0..12: build speed vs. file size
+
+  static PackParams from(const LightSpace& light, const CutParams& cut);
+};
+
+class PackWriter {
+ public:
+  // Starts "<path>.tmp" afresh (an old one is overwritten).
+  static std::unique_ptr<PackWriter> create(const std::string& path, const PackParams& params);
+  // Reopens "<path>.tmp" left by a killed build: checks that it was started with the same
+  // parameters (st::Error naming the field otherwise), keeps every complete cell and
+  // truncates the rest.
+  static std::unique_ptr<PackWriter> resume(const std::string& path, const PackParams& params);
+  // resume() if "<path>.tmp" exists, else create().
+  static std::unique_ptr<PackWriter> create_or_resume(const std::string& path, const PackParams& params);
+  ~PackWriter();
+  PackWriter(const PackWriter&) = delete;
+  PackWriter& operator=(const PackWriter&) = delete;
+
+  const std::string& path() const { return path_; }
+  std::string tmp_path() const { return path_ + ".tmp"; }
+  const PackParams& params() const { return params_; }
+
+  // Cells done so far (resumed ones included) and what resume found.
+  std::vector<CellRecord> cells() const;
+  bool is_done(uint32_t cx, uint32_t cy) const;
+  size_t resumed_cells() const { return resumed_cells_; }
+  uint64_t truncated_bytes() const { return truncated_bytes_; }  // torn tail cut by resume
+
+  // Compresses the cell's tiles and appends them and its cell record. Throws st::Error if
+  // the cell is out of range or already done, or a tile breaks the tile_bytes bound.
+  void append_cell(const CutCell& cell);
+
+  // Writes the skip grid (entries must equal the cells' entries) and the tile index,
+  // completes the header, fsyncs and renames "<path>.tmp" to "<path>".
+  void finish(const CutGrid& grid);
+
+ private:
+  PackWriter(std::string path, PackParams params);
+  void open_new();
+  void open_existing();
+  void write_at(uint64_t offset, std::span<const uint8_t> bytes);
+  PackHeader base_header() const;
+
+  std::string path_;
+  PackParams params_;
+  int fd_ = -1;
+  mutable std::mutex mu_;
+  uint64_t end_ = 0;  // append position
+  bool failed_ = false, finished_ = false;
+  std::vector<uint8_t> done_;  // per cell, row-major
+  std::vector<CellRecord> cells_;
+  std::vector<TileIndexEntry> tiles_;
+  size_t resumed_cells_ = 0;
+  uint64_t truncated_bytes_ = 0;
+};
+
+// Convenience for maps that fit in memory: cuts `h` (cut_hierarchy) and writes the pack.
+void write_pack(const std::string& path, const Hierarchy& h, const CutParams& cut, const PackParams& params);
+
+}  // namespace st

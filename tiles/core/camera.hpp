@@ -1,0 +1,88 @@
+// A pinhole camera in world space (+Y up), shared by `shadowtile render`, `report` and
+// the load tester's synthetic cameras. Header-only on purpose: the load tester (which
+// must not link tiles/bake: Embree, OpenEXR) includes it without linking anything.
+#pragma once
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+
+#include "common/error.hpp"
+#include "tiles/core/vec.hpp"
+
+namespace st {
+
+struct Camera {
+  Vec3d pos, target;
+  double fov_deg = 60;  // vertical field of view
+  double aspect = 16.0 / 9.0;
+};
+
+// Orthonormal basis of a camera: forward, right, up (right-handed, +Y up).
+struct CameraBasis {
+  Vec3d forward, right, up;
+  double tan_half_y = 0, tan_half_x = 0;
+};
+
+inline CameraBasis basis(const Camera& c) {
+  CameraBasis b;
+  b.forward = normalize(c.target - c.pos);
+  Vec3d up{0, 1, 0};
+  if (std::fabs(dot(b.forward, up)) > 0.999) up = {0, 0, 1};
+  b.right = normalize(cross(b.forward, up));
+  b.up = cross(b.right, b.forward);
+  b.tan_half_y = std::tan(c.fov_deg * M_PI / 360.0);
+  b.tan_half_x = b.tan_half_y * c.aspect;
+  return b;
+}
+
+// Direction of the ray through normalized screen point (sx, sy) in [0,1]^2 (row 0 top).
+inline Vec3d ray_dir(const CameraBasis& b, double sx, double sy) {
+  const double px = (2 * sx - 1) * b.tan_half_x, py = (1 - 2 * sy) * b.tan_half_y;
+  return normalize(b.forward + b.right * px + b.up * py);
+}
+
+// "pos=X,Y,Z,target=X,Y,Z[,fov=DEG]"; throws st::Error naming the field.
+inline Camera parse_camera(const std::string& text) {
+  Camera c;
+  bool pos = false, target = false;
+  size_t i = 0;
+  while (i < text.size()) {
+    const size_t eq = text.find('=', i);
+    if (eq == std::string::npos) throw Error("--camera: expected key=value in '" + text + "'");
+    const std::string key = text.substr(i, eq - i);
+    const int n = key == "fov" ? 1 : 3;
+    double v[3] = {0, 0, 0};
+    size_t p = eq + 1;
+    for (int j = 0; j < n; ++j) {
+      const size_t end = text.find(',', p);
+      const std::string num = text.substr(p, end == std::string::npos ? std::string::npos : end - p);
+      char* e = nullptr;
+      v[j] = std::strtod(num.c_str(), &e);
+      if (num.empty() || *e != 0 || !std::isfinite(v[j]))
+        throw Error("--camera: field '" + key + "' needs " + std::to_string(n) + " number(s), got '" + num + "'");
+      p = end == std::string::npos ? text.size() : end + 1;
+    }
+    if (key == "pos") c.pos = {v[0], v[1], v[2]}, pos = true;
+    else if (key == "target") c.target = {v[0], v[1], v[2]}, target = true;
+    else if (key == "fov") {
+      if (!(v[0] > 1 && v[0] < 179)) throw Error("--camera: fov must be in (1, 179) degrees");
+      c.fov_deg = v[0];
+    } else {
+      throw Error("--camera: unknown field '" + key + "' (pos, target, fov)");
+    }
+    i = p;
+  }
+  if (!pos || !target) throw Error("--camera: needs pos=X,Y,Z and target=X,Y,Z");
+  if (length(c.target - c.pos) == 0) throw Error("--camera: target equals pos");
+  return c;
+}
+
+inline std::string to_string(const Camera& c) {
+  char buf[256];
+  std::snprintf(buf, sizeof buf, "pos=%.9g,%.9g,%.9g,target=%.9g,%.9g,%.9g,fov=%.6g", c.pos.x, c.pos.y, c.pos.z,
+                c.target.x, c.target.y, c.target.z, c.fov_deg);
+  return buf;
+}
+
+}  // namespace st
