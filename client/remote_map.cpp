@@ -102,39 +102,25 @@ bool RemoteMap::want_locked(uint64_t tile, const GridEntry& e, uint16_t priority
 // The page-table walk of PackEvaluator::depth, over the cache: where a tile is missing,
 // the entry's own value answers (the node's value stands for all its descendants).
 float RemoteMap::depth_locked(uint32_t level, uint64_t x, uint64_t y) const noexcept {
-  const uint32_t map_level = header_.map_level;
-  if (level > map_level || (x >> level) || (y >> level)) return kLitDepth;  // documented: lit
-  const uint32_t k = grid_.levels;
-  if (level < k) return grid_.coarse_at(level, x, y);
-  uint32_t l = k;
-  uint64_t ex = x >> (level - k), ey = y >> (level - k);
-  GridEntry e = grid_.entry(ex, ey);
-  for (;;) {
-    if (e.kind == EntryKind::constant || l == level) return e.value;
-    const uint64_t id = make_tile_id(l, uint32_t(ex), uint32_t(ey));
-    const PageEntry p = cache_.access(id);
-    if (p.state == PageState::constant) return p.value;  // given up: coarse for good
-    if (p.state != PageState::resident) {
-      want_locked(id, e, options_.miss_priority);
-      ++stats_.coarse_answers;
-      return e.value;
-    }
-    const uint32_t rel = level - l;
-    const uint64_t lx = x - (ex << rel), ly = y - (ey << rel);
-    if (e.kind == EntryKind::tile) {
-      try {
-        return slot_eval_[p.slot]->depth(rel, lx, ly);
-      } catch (...) {  // an opened tile does not throw; if one did, stay coarse and alive
-        return e.value;
-      }
-    }
-    const CutGrid& g = slot_grid_[p.slot];
-    const uint32_t d = g.levels;
-    if (rel < d) return g.coarse_at(rel, lx, ly);
-    ex = (ex << d) + (lx >> (rel - d));
-    ey = (ey << d) + (ly >> (rel - d));
-    l += d;
-    e = g.entry(lx >> (rel - d), ly >> (rel - d));
+  if (!texel_in_map(header_.map_level, level, x, y)) return kLitDepth;  // page_table.hpp's rule
+  PageEntry page;  // the cache's answer for the last tile the walk asked about
+  auto resident_index = [&](uint64_t id, const GridEntry&) -> const CutGrid* {
+    page = cache_.access(id);
+    return page.state == PageState::resident ? &slot_grid_[page.slot] : nullptr;
+  };
+  const PageHit hit = walk_page_table(grid_, level, x, y, resident_index);
+  if (hit.kind == PageHit::Kind::value) return hit.value;
+  if (hit.kind == PageHit::Kind::tile) page = cache_.access(hit.tile);
+  if (page.state == PageState::constant) return page.value;  // given up: coarse for good
+  if (page.state != PageState::resident) {
+    want_locked(hit.tile, hit.entry, options_.miss_priority);
+    ++stats_.coarse_answers;
+    return hit.value;
+  }
+  try {
+    return slot_eval_[page.slot]->depth(hit.rel, hit.tx, hit.ty);
+  } catch (...) {  // an opened tile does not throw; if one did, stay coarse and alive
+    return hit.value;
   }
 }
 
@@ -166,36 +152,17 @@ float RemoteMap::visibility(const Vec3d& world, uint32_t pcf_radius) const noexc
 // ---------------------------------------------------------------- regions
 
 template <class Fn>
-bool RemoteMap::walk_entry(uint32_t l, uint64_t ex, uint64_t ey, const GridEntry& e, uint32_t level,
-                           uint64_t x0, uint64_t y0, uint64_t x1, uint64_t y1, Fn& fn) const {
-  if (e.kind == EntryKind::constant || level <= l) return true;  // the entry answers
-  const uint64_t id = make_tile_id(l, uint32_t(ex), uint32_t(ey));
-  const PageEntry p = cache_.lookup(id);
-  if (p.state == PageState::constant) return true;
-  if (p.state != PageState::resident) return fn(id, e);
-  if (e.kind == EntryKind::tile) return true;
-  const CutGrid& g = slot_grid_[p.slot];
-  const uint32_t d = g.levels, cl = l + d;
-  if (level <= cl) return true;
-  const uint32_t s = level - cl;
-  const uint64_t cx0 = std::max(ex << d, x0 >> s), cx1 = std::min((ex + 1) << d, ((x1 - 1) >> s) + 1);
-  const uint64_t cy0 = std::max(ey << d, y0 >> s), cy1 = std::min((ey + 1) << d, ((y1 - 1) >> s) + 1);
-  for (uint64_t cy = cy0; cy < cy1; ++cy)
-    for (uint64_t cx = cx0; cx < cx1; ++cx)
-      if (!walk_entry(cl, cx, cy, g.entry(cx - (ex << d), cy - (ey << d)), level, x0, y0, x1, y1, fn))
-        return false;
-  return true;
-}
-
-template <class Fn>
 bool RemoteMap::walk_region(uint32_t level, uint64_t x0, uint64_t y0, uint64_t x1, uint64_t y1, Fn&& fn) const {
-  const uint32_t k = grid_.levels;
-  if (level > header_.map_level || level <= k || x0 >= x1 || y0 >= y1) return true;
-  const uint32_t s = level - k;
-  for (uint64_t cy = y0 >> s; cy <= (y1 - 1) >> s; ++cy)
-    for (uint64_t cx = x0 >> s; cx <= (x1 - 1) >> s; ++cx)
-      if (!walk_entry(k, cx, cy, grid_.entry(cx, cy), level, x0, y0, x1, y1, fn)) return false;
-  return true;
+  if (level > header_.map_level) return true;
+  auto resident_index = [&](uint64_t id, const GridEntry&) -> const CutGrid* {
+    const PageEntry p = cache_.lookup(id);
+    return p.state == PageState::resident ? &slot_grid_[p.slot] : nullptr;
+  };
+  return visit_page_tiles(grid_, level, x0, y0, x1, y1, resident_index,
+                          [&](uint64_t id, const GridEntry& e, uint32_t, uint64_t, uint64_t) {
+                            const PageState state = cache_.lookup(id).state;
+                            return state == PageState::resident || state == PageState::constant || fn(id, e);
+                          });
 }
 
 namespace {

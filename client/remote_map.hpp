@@ -22,6 +22,7 @@
 #include "client/tile_cache.hpp"
 #include "proto/messages.hpp"
 #include "tiles/core/light.hpp"
+#include "tiles/core/page_table.hpp"
 #include "tiles/core/pack_format.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
 
@@ -101,9 +102,6 @@ class RemoteMap final : public Evaluator {
   // fn(tile_id, entry, page) for each non-resident one; returns false if fn did.
   template <class Fn>
   bool walk_region(uint32_t level, uint64_t x0, uint64_t y0, uint64_t x1, uint64_t y1, Fn&& fn) const;
-  template <class Fn>
-  bool walk_entry(uint32_t l, uint64_t ex, uint64_t ey, const GridEntry& e, uint32_t level,
-                  uint64_t x0, uint64_t y0, uint64_t x1, uint64_t y1, Fn& fn) const;
   void rerequest_regions_locked();
 
   const std::string name_;

@@ -4,7 +4,30 @@
 #include <cmath>
 #include <unordered_map>
 
+#include "tiles/core/page_table.hpp"
+
 namespace st::loadgen {
+
+namespace {
+// The cell that lookups at `level` (> K) of light-space point (u, v) need first, from the
+// skip grid alone (the load tester does not hold index tiles' contents): the tile the
+// page-table walk reaches, or, below an index tile of d levels, its sub-cell at K + d.
+// False when a constant entry answers.
+bool first_cell(const CutGrid& grid, uint32_t level, double u, double v, CellNeed& n) {
+  const auto [x, y] = LightSpace::texel_of(level, u, v);
+  auto no_index_tiles = [](uint64_t, const GridEntry&) -> const CutGrid* { return nullptr; };
+  const PageHit hit = walk_page_table(grid, level, x, y, no_index_tiles);
+  if (hit.kind == PageHit::Kind::value) return false;
+  const TileAddress a = tile_address(hit.tile);
+  n.cell_level = a.level, n.cx = a.x, n.cy = a.y;
+  const uint32_t below = a.level + hit.entry.index_levels;
+  if (hit.entry.kind == EntryKind::index && level > below) {
+    n.cell_level = below;
+    n.cx = x >> (level - below), n.cy = y >> (level - below);
+  }
+  return true;
+}
+}  // namespace
 
 uint32_t level_for_footprint(double extent, double footprint, uint32_t map_level) {
   if (!(footprint > 0)) return map_level;
@@ -20,16 +43,8 @@ std::vector<CellNeed> cells_for_points(const std::vector<LightPoint>& points, ui
   std::unordered_map<uint64_t, size_t> index;
   for (const LightPoint& lp : points) {
     if (!(lp.u >= 0 && lp.u < 1 && lp.v >= 0 && lp.v < 1)) continue;
-    auto [gx, gy] = LightSpace::texel_of(k, lp.u, lp.v);
-    const GridEntry& e = grid.entry(gx, gy);
-    if (e.kind == EntryKind::constant) continue;
     CellNeed n;
-    n.cell_level = k, n.cx = gx, n.cy = gy;
-    if (e.kind == EntryKind::index && level > k + e.index_levels) {
-      n.cell_level = k + e.index_levels;
-      auto [sx, sy] = LightSpace::texel_of(n.cell_level, lp.u, lp.v);
-      n.cx = sx, n.cy = sy;
-    }
+    if (!first_cell(grid, level, lp.u, lp.v, n)) continue;
     n.level = level;
     if (index.try_emplace(n.key(), out.size()).second) out.push_back(n);
   }
@@ -60,17 +75,8 @@ ViewNeeds view_needs(const WorldFrame& world, const Camera& camera, uint32_t map
       if (level <= k) continue;
       const LightPoint lp = world.light.to_light(p);
       if (!(lp.u >= 0 && lp.u < 1 && lp.v >= 0 && lp.v < 1)) continue;
-      auto [gx, gy] = LightSpace::texel_of(k, lp.u, lp.v);
-      const GridEntry& e = grid.entry(gx, gy);
-      if (e.kind == EntryKind::constant) continue;
       CellNeed n;
-      n.cell_level = k;
-      n.cx = gx, n.cy = gy;
-      if (e.kind == EntryKind::index && level > k + e.index_levels) {
-        n.cell_level = k + e.index_levels;
-        auto [sx, sy] = LightSpace::texel_of(n.cell_level, lp.u, lp.v);
-        n.cx = sx, n.cy = sy;
-      }
+      if (!first_cell(grid, level, lp.u, lp.v, n)) continue;
       n.level = std::max(level, n.cell_level);
       n.distance = t;
       auto [it, fresh] = index.try_emplace(n.key(), out.cells.size());

@@ -4,6 +4,7 @@
 #include <cstring>
 
 #include "common/error.hpp"
+#include "tiles/core/page_table.hpp"
 
 namespace st {
 
@@ -93,31 +94,12 @@ const PackEvaluator::Loaded& PackEvaluator::tile(uint64_t id, const GridEntry& e
 }
 
 float PackEvaluator::depth(uint32_t level, uint64_t x, uint64_t y) const {
-  const uint32_t map_level = reader_->map_level();
-  if (level > map_level || (x >> level) || (y >> level))
-    throw Error(reader_->name() + ": texel (" + std::to_string(x) + ", " + std::to_string(y) + ") of level " +
-                std::to_string(level) + " outside the map of level " + std::to_string(map_level));
-  const CutGrid& top = reader_->grid();
-  const uint32_t k = top.levels;
-  if (level < k) return top.coarse_at(level, x, y);
-  // Walk the page table: entry at (l, ex, ey), the node above texel (x, y) of `level`.
-  uint32_t l = k;
-  uint64_t ex = x >> (level - k), ey = y >> (level - k);
-  GridEntry e = top.entry(ex, ey);
-  for (;;) {
-    if (e.kind == EntryKind::constant || l == level) return e.value;
-    const uint64_t id = make_tile_id(l, uint32_t(ex), uint32_t(ey));
-    const Loaded& t = tile(id, e);
-    const uint32_t rel = level - l;
-    const uint64_t lx = x - (ex << rel), ly = y - (ey << rel);  // texel inside the tile
-    if (e.kind == EntryKind::tile) return t.eval->depth(rel, lx, ly);
-    const uint32_t d = t.grid.levels;
-    if (rel < d) return t.grid.coarse_at(rel, lx, ly);
-    ex = (ex << d) + (lx >> (rel - d));
-    ey = (ey << d) + (ly >> (rel - d));
-    l += d;
-    e = t.grid.entry(lx >> (rel - d), ly >> (rel - d));
-  }
+  if (!texel_in_map(reader_->map_level(), level, x, y)) return kLitDepth;  // page_table.hpp's rule
+  const PageHit hit = walk_page_table(reader_->grid(), level, x, y, [&](uint64_t id, const GridEntry& e) {
+    return &tile(id, e).grid;
+  });
+  if (hit.kind != PageHit::Kind::tile) return hit.value;
+  return tile(hit.tile, hit.entry).eval->depth(hit.rel, hit.tx, hit.ty);
 }
 
 }  // namespace st

@@ -8,7 +8,7 @@
 // Thread safety: depth()/pcf() may be called from many threads (the cache is locked; a
 // tile is opened outside the lock, so two threads may open the same tile once each).
 // Errors: a missing or corrupt tile throws st::FormatError naming the pack, tile id and
-// byte offset; a level or texel out of range throws st::Error.
+// byte offset. A texel outside the map is lit (the one rule of page_table.hpp).
 #pragma once
 #include <cstdint>
 #include <list>

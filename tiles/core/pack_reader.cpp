@@ -11,6 +11,7 @@
 #include <map>
 
 #include "common/error.hpp"
+#include "tiles/core/page_table.hpp"
 
 namespace st {
 
@@ -214,40 +215,38 @@ void PackReader::verify(const TileOpener& open_tile) const {
       throw FormatError(name_ + ": cell record (" + std::to_string(c.cx) + ", " + std::to_string(c.cy) +
                         ") repeated, out of range or disagreeing with the skip grid");
   }
-  // 3. The page table reaches every tile exactly once; every tile decodes.
+  // 3. The page table reaches every tile exactly once; every tile decodes. The walk runs
+  // one level past the finest so that entries at the finest level, which no pack may
+  // hold, are visited and refused too.
   size_t reached = 0;
   const uint32_t map_level = header_.map_level;
-  std::function<void(uint32_t, uint32_t, uint32_t, const GridEntry&)> walk =
-      [&](uint32_t level, uint32_t x, uint32_t y, const GridEntry& e) {
-        if (e.kind == EntryKind::constant) return;
-        uint64_t id = make_tile_id(level, x, y);
-        auto t = find(id);
-        if (!t || uint8_t(t->kind) != uint8_t(e.kind) || level >= map_level)
-          throw FormatError(name_ + ": " + describe_tile(id) + " is named by the page table but missing from the index");
-        ++reached;
-        if (e.kind == EntryKind::index) {
-          CutGrid g = read_index_tile(id, e);
-          for (uint32_t j = 0; j < (1u << g.levels); ++j)
-            for (uint32_t i = 0; i < (1u << g.levels); ++i)
-              walk(level + g.levels, (x << g.levels) + i, (y << g.levels) + j, g.entry(i, j));
-          return;
-        }
-        std::vector<uint8_t> raw = read_raw(id);
-        if (!open_tile) return;
-        const std::string what = name_ + ": " + describe_tile(id) + " at byte " + std::to_string(t->offset);
-        std::unique_ptr<Evaluator> ev;
-        try {
-          ev = open_tile(raw);
-        } catch (const Error& err) {
-          throw FormatError(what + ": " + err.what());
-        }
-        // (The tile's own root value may differ from its entry's: encodings that re-pick
-        // values inside the admissible intervals (MMH, DAG-MH) do; the entry answers the
-        // root's level.)
-        if (ev->finest_level() != map_level - level) throw FormatError(what + ": wrong finest level");
-      };
-  for (uint32_t cy = 0; cy < side; ++cy)
-    for (uint32_t cx = 0; cx < side; ++cx) walk(k, cx, cy, grid_.entry(cx, cy));
+  std::map<uint64_t, CutGrid> index_tiles;  // kept while the walk runs below them
+  auto index_tile = [&](uint64_t id, const GridEntry& e) -> const CutGrid* {
+    return &index_tiles.emplace(id, read_index_tile(id, e)).first->second;
+  };
+  const uint64_t past = uint64_t(1) << (map_level + 1);
+  visit_page_tiles(grid_, map_level + 1, 0, 0, past, past, index_tile,
+                   [&](uint64_t id, const GridEntry& e, uint32_t level, uint64_t, uint64_t) {
+    auto t = find(id);
+    if (!t || uint8_t(t->kind) != uint8_t(e.kind) || level >= map_level)
+      throw FormatError(name_ + ": " + describe_tile(id) + " is named by the page table but missing from the index");
+    ++reached;
+    if (e.kind == EntryKind::index) return true;
+    std::vector<uint8_t> raw = read_raw(id);
+    if (!open_tile) return true;
+    const std::string what = name_ + ": " + describe_tile(id) + " at byte " + std::to_string(t->offset);
+    std::unique_ptr<Evaluator> ev;
+    try {
+      ev = open_tile(raw);
+    } catch (const Error& err) {
+      throw FormatError(what + ": " + err.what());
+    }
+    // (The tile's own root value may differ from its entry's: encodings that re-pick
+    // values inside the admissible intervals (MMH, DAG-MH) do; the entry answers the
+    // root's level.)
+    if (ev->finest_level() != map_level - level) throw FormatError(what + ": wrong finest level");
+    return true;
+  });
   if (reached != index_.size())
     throw FormatError(name_ + ": " + std::to_string(index_.size() - reached) + " tiles the page table never reaches");
 }
