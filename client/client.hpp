@@ -39,7 +39,7 @@
 #include <string>
 #include <vector>
 
-#include "client/tile_cache.hpp"
+#include "tiles/core/tile_cache.hpp"
 #include "proto/messages.hpp"
 #include "tiles/core/evaluator.hpp"
 #include "tiles/core/pack_format.hpp"

@@ -19,7 +19,7 @@
 #include <vector>
 
 #include "client/client.hpp"
-#include "client/tile_cache.hpp"
+#include "tiles/core/tile_cache.hpp"
 #include "proto/messages.hpp"
 #include "tiles/core/light.hpp"
 #include "tiles/core/page_table.hpp"

@@ -8,7 +8,7 @@
 #include <random>
 #include <vector>
 
-#include "client/tile_cache.hpp"
+#include "tiles/core/tile_cache.hpp"
 
 namespace st::client {
 namespace {

@@ -1,7 +1,6 @@
 #include "tiles/core/pack_evaluator.hpp"
 
-#include <atomic>
-#include <cstring>
+#include <algorithm>
 
 #include "common/error.hpp"
 #include "tiles/core/page_table.hpp"
@@ -9,31 +8,26 @@
 namespace st {
 
 namespace {
-std::atomic<uint64_t> next_serial{0};
-
-// The last few tiles each thread used, across evaluators (keyed by serial, never by
-// address). Entries hold shared_ptrs: a tile evicted from the shared cache stays valid
-// here until replaced, so a hit needs no lock.
-struct ThreadTiles {
-  static constexpr size_t kSlots = 4;
-  uint64_t serial[kSlots] = {};
-  uint64_t id[kSlots] = {};
-  std::shared_ptr<const void> tile[kSlots];
-  size_t next = 0;
-};
-thread_local ThreadTiles thread_tiles;
+// Slots hold the largest raw tile of this pack (at least 1 byte: a pack may have none).
+uint32_t largest_raw_tile(const PackReader& r) {
+  uint32_t most = 1;
+  for (const TileIndexEntry& e : r.tiles()) most = std::max(most, e.raw_size);
+  return most;
+}
 }  // namespace
 
 PackEvaluator::PackEvaluator(std::shared_ptr<const PackReader> reader, size_t cache_tiles,
                              PackReader::TileOpener open_tile)
     : reader_(std::move(reader)),
-      capacity_(std::max<size_t>(cache_tiles, 1)),
       open_tile_(std::move(open_tile)),
-      serial_(next_serial.fetch_add(1) + 1) {
+      cache_(uint32_t(std::clamp<size_t>(cache_tiles, 1, 1u << 20)), largest_raw_tile(*reader_)),
+      slot_eval_(cache_.slot_count()),
+      slot_grid_(cache_.slot_count()) {
   if (!open_tile_) {
     Encoding e = reader_->encoding();
     open_tile_ = [e](std::span<const uint8_t> bytes) { return open_encoded(e, bytes); };
   }
+  cache_.reserve_pages(reader_->tiles().size());
 }
 
 uint64_t PackEvaluator::tiles_opened() const {
@@ -41,65 +35,85 @@ uint64_t PackEvaluator::tiles_opened() const {
   return opened_;
 }
 
-std::shared_ptr<const PackEvaluator::Loaded> PackEvaluator::load(uint64_t id, const GridEntry& entry) const {
-  {
-    std::lock_guard lock(mu_);
-    auto it = cache_.find(id);
-    if (it != cache_.end()) {
-      lru_.splice(lru_.begin(), lru_, it->second.pos);
-      return it->second.tile;
-    }
-  }
-  auto t = std::make_shared<Loaded>();
-  if (entry.kind == EntryKind::index) {
-    t->grid = reader_->read_index_tile(id, entry);
-  } else {
-    t->raw = reader_->read_raw(id);
-    const TileAddress a = tile_address(id);
-    const std::string what = reader_->name() + ": " + describe_tile(id);
+uint32_t PackEvaluator::resident_slot(uint64_t id, const GridEntry& entry, std::unique_lock<std::mutex>& lock) const {
+  const PageEntry page = cache_.access(id);
+  if (page.state == PageState::resident) return page.slot;
+  cache_.request(id);  // absent -> requested (already requested: another thread reads it too)
+  uint32_t slot;
+  for (;;) {  // every slot pinned by other threads' lookups: wait until one lets go
     try {
-      t->eval = open_tile_(t->raw);
-    } catch (const FormatError&) {
-      throw;
-    } catch (const Error& err) {
-      throw FormatError(what + ": " + err.what());
+      slot = cache_.reserve(id);
+      break;
+    } catch (const CacheFullError&) {
+      unpinned_.wait(lock);
     }
-    if (t->eval->finest_level() != reader_->map_level() - a.level)
-      throw FormatError(what + ": finest level " + std::to_string(t->eval->finest_level()) + ", expected " +
-                        std::to_string(reader_->map_level() - a.level));
   }
-  std::lock_guard lock(mu_);
+  const std::span<uint8_t> into = cache_.slot_span(slot);
+  lock.unlock();
+  std::unique_ptr<Evaluator> eval;
+  CutGrid grid;
+  size_t used = 0;
+  try {
+    if (entry.kind == EntryKind::index) {
+      grid = reader_->read_index_tile(id, entry);
+    } else {
+      used = reader_->read_raw_into(id, into);
+      const std::string what = reader_->name() + ": " + describe_tile(id);
+      try {
+        eval = open_tile_(into.first(used));
+      } catch (const FormatError&) {
+        throw;
+      } catch (const Error& err) {
+        throw FormatError(what + ": " + err.what());
+      }
+      const TileAddress a = tile_address(id);
+      if (eval->finest_level() != reader_->map_level() - a.level)
+        throw FormatError(what + ": finest level " + std::to_string(eval->finest_level()) + ", expected " +
+                          std::to_string(reader_->map_level() - a.level));
+    }
+  } catch (...) {
+    lock.lock();
+    cache_.abort(slot);
+    unpinned_.notify_all();
+    throw;
+  }
+  lock.lock();
   ++opened_;
-  auto it = cache_.find(id);
-  if (it != cache_.end()) return it->second.tile;  // another thread won the race
-  lru_.push_front(id);
-  cache_[id] = Slot{t, lru_.begin()};
-  while (cache_.size() > capacity_) {
-    cache_.erase(lru_.back());
-    lru_.pop_back();
-  }
-  return t;
-}
-
-const PackEvaluator::Loaded& PackEvaluator::tile(uint64_t id, const GridEntry& entry) const {
-  ThreadTiles& tt = thread_tiles;
-  for (size_t i = 0; i < ThreadTiles::kSlots; ++i)
-    if (tt.id[i] == id && tt.serial[i] == serial_) return *static_cast<const Loaded*>(tt.tile[i].get());
-  std::shared_ptr<const Loaded> t = load(id, entry);
-  size_t slot = tt.next++ % ThreadTiles::kSlots;
-  tt.serial[slot] = serial_;
-  tt.id[slot] = id;
-  tt.tile[slot] = t;
-  return *t;
+  slot_eval_[slot] = std::move(eval);
+  slot_grid_[slot] = std::move(grid);
+  const bool committed = cache_.commit(slot, uint32_t(used));
+  unpinned_.notify_all();
+  if (committed) return slot;
+  // Another thread made the tile resident meanwhile (commit gave this slot back).
+  slot_eval_[slot].reset();
+  const PageEntry now = cache_.access(id);
+  ST_CHECK(now.state == PageState::resident);
+  return now.slot;
 }
 
 float PackEvaluator::depth(uint32_t level, uint64_t x, uint64_t y) const {
   if (!texel_in_map(reader_->map_level(), level, x, y)) return kLitDepth;  // page_table.hpp's rule
+  std::unique_lock lock(mu_);
   const PageHit hit = walk_page_table(reader_->grid(), level, x, y, [&](uint64_t id, const GridEntry& e) {
-    return &tile(id, e).grid;
+    return &slot_grid_[resident_slot(id, e, lock)];
   });
   if (hit.kind != PageHit::Kind::tile) return hit.value;
-  return tile(hit.tile, hit.entry).eval->depth(hit.rel, hit.tx, hit.ty);
+  const uint32_t slot = resident_slot(hit.tile, hit.entry, lock);
+  cache_.pin(slot);  // evaluated outside the lock: nothing may evict it meanwhile
+  lock.unlock();
+  float v;
+  try {
+    v = slot_eval_[slot]->depth(hit.rel, hit.tx, hit.ty);
+  } catch (...) {
+    lock.lock();
+    cache_.unpin(slot);
+    unpinned_.notify_all();
+    throw;
+  }
+  lock.lock();
+  cache_.unpin(slot);
+  unpinned_.notify_all();
+  return v;
 }
 
 }  // namespace st

@@ -1,22 +1,28 @@
-// An Evaluator over a pack file (DESIGN.md "Tiles, skip list and pack files"): levels
-// < K from the skip grid's coarse pyramid, level K from its entries, finer levels from
-// the tiles, read, decompressed and opened on demand and kept in a small LRU cache.
-// Answers depth(l, x, y) like Hierarchy::depth_at of the hierarchy that was cut (bit-exactly
-// with MH tiles; inside MMH/DAG-MH tiles what their encoding answers), with integer texel
-// addressing up to level 20 (tiles/PACK.md "Meaning").
+// An Evaluator over a pack file: levels < K from the skip grid's coarse pyramid, level K
+// from its entries, finer levels from the tiles, read, decompressed straight into a slot
+// of a TileCache (tile_cache.hpp, the same cache the client uses) and opened there on
+// demand. The page-table walk is page_table.hpp's. Answers depth(l, x, y) like
+// Hierarchy::depth_at of the hierarchy that was cut (bit-exactly with MH tiles; inside
+// MMH/DAG-MH tiles what their encoding answers), with integer texel addressing up to
+// level 20 (tiles/PACK.md "Meaning").
 //
-// Thread safety: depth()/pcf() may be called from many threads (the cache is locked; a
-// tile is opened outside the lock, so two threads may open the same tile once each).
+// Memory: `cache_tiles` slots of the pack's largest raw tile each.
+// Thread safety: depth()/pcf() may be called from many threads. One mutex guards the
+// cache; a tile is read and opened outside it (its slot reserved and pinned meanwhile),
+// and a lookup pins the slot it evaluates, so eviction never pulls bytes from under a
+// reader. Two threads missing the same tile may each read it; one copy stays.
 // Errors: a missing or corrupt tile throws st::FormatError naming the pack, tile id and
-// byte offset. A texel outside the map is lit (the one rule of page_table.hpp).
+// byte offset (the slot is given back). A texel outside the map is lit (the one rule of
+// page_table.hpp).
 #pragma once
+#include <condition_variable>
 #include <cstdint>
-#include <list>
 #include <memory>
 #include <mutex>
-#include <unordered_map>
+#include <vector>
 
 #include "tiles/core/pack_reader.hpp"
+#include "tiles/core/tile_cache.hpp"
 
 namespace st {
 
@@ -33,27 +39,18 @@ class PackEvaluator : public Evaluator {
   uint64_t tiles_opened() const;  // cache misses so far
 
  private:
-  struct Loaded {
-    std::vector<uint8_t> raw;          // encoded tile bytes (the evaluator reads them)
-    std::unique_ptr<Evaluator> eval;   // encoded tiles
-    CutGrid grid;                      // index tiles
-  };
-  std::shared_ptr<const Loaded> load(uint64_t id, const GridEntry& entry) const;
-  // load() behind a tiny per-thread cache of the last tiles used (no lock on a hit).
-  const Loaded& tile(uint64_t id, const GridEntry& entry) const;
+  // The slot holding tile `id` (resident; read and opened first if needed). Called and
+  // returns with `lock` held; releases it while reading.
+  uint32_t resident_slot(uint64_t id, const GridEntry& entry, std::unique_lock<std::mutex>& lock) const;
 
   std::shared_ptr<const PackReader> reader_;
-  size_t capacity_;
   PackReader::TileOpener open_tile_;
   mutable std::mutex mu_;
-  mutable std::list<uint64_t> lru_;  // front = most recent
-  struct Slot {
-    std::shared_ptr<const Loaded> tile;
-    std::list<uint64_t>::iterator pos;
-  };
-  mutable std::unordered_map<uint64_t, Slot> cache_;
+  mutable std::condition_variable unpinned_;  // a slot was unpinned or given back
+  mutable TileCache cache_;
+  mutable std::vector<std::unique_ptr<Evaluator>> slot_eval_;  // encoded tiles, per slot
+  mutable std::vector<CutGrid> slot_grid_;                     // index tiles, per slot
   mutable uint64_t opened_ = 0;
-  const uint64_t serial_;  // tells this evaluator's entries in the per-thread cache apart
 };
 
 }  // namespace st

@@ -282,14 +282,13 @@ std::vector<uint8_t> zlib_compress(std::span<const uint8_t> raw, int level) {
   return out;
 }
 
-std::vector<uint8_t> zlib_decompress(std::span<const uint8_t> stored, uint32_t raw_size,
-                                     const std::string& what) {
+void zlib_decompress_into(std::span<const uint8_t> stored, std::span<uint8_t> out, const std::string& what) {
   struct Free {
     void operator()(libdeflate_decompressor* d) const { libdeflate_free_decompressor(d); }
   };
   thread_local std::unique_ptr<libdeflate_decompressor, Free> d(libdeflate_alloc_decompressor());
   if (!d) throw Error("zlib: cannot allocate a decompressor");
-  std::vector<uint8_t> out(raw_size);
+  const size_t raw_size = out.size();
   size_t in_used = 0, out_used = 0;
   libdeflate_result r = libdeflate_zlib_decompress_ex(d.get(), stored.data(), stored.size(), out.data(),
                                                       out.size(), &in_used, &out_used);
@@ -300,6 +299,12 @@ std::vector<uint8_t> zlib_decompress(std::span<const uint8_t> stored, uint32_t r
     throw FormatError(what + ": decompresses to " + std::to_string(out_used) + " bytes, recorded " +
                       std::to_string(raw_size));
   if (in_used != stored.size()) throw FormatError(what + ": trailing bytes after the zlib stream");
+}
+
+std::vector<uint8_t> zlib_decompress(std::span<const uint8_t> stored, uint32_t raw_size,
+                                     const std::string& what) {
+  std::vector<uint8_t> out(raw_size);
+  zlib_decompress_into(stored, out, what);
   return out;
 }
 

@@ -137,6 +137,9 @@ std::vector<uint8_t> zlib_compress(std::span<const uint8_t> raw, int level);
 // is malformed, has trailing bytes or decodes to another size.
 std::vector<uint8_t> zlib_decompress(std::span<const uint8_t> stored, uint32_t raw_size,
                                      const std::string& what);
+// The same into `out`, which must be exactly the recorded raw size (a cache slot's first
+// bytes): nothing is allocated and no copy follows.
+void zlib_decompress_into(std::span<const uint8_t> stored, std::span<uint8_t> out, const std::string& what);
 
 std::string hex32(uint32_t v);
 

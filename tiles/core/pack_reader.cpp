@@ -148,6 +148,17 @@ std::vector<uint8_t> PackReader::read_raw(uint64_t id) const {
                          name_ + ": " + describe_tile(id) + " at byte " + std::to_string(t->offset));
 }
 
+size_t PackReader::read_raw_into(uint64_t id, std::span<uint8_t> out) const {
+  std::vector<uint8_t> stored = read_stored(id);
+  auto t = find(id);
+  const std::string what = name_ + ": " + describe_tile(id) + " at byte " + std::to_string(t->offset);
+  if (t->raw_size > out.size())
+    throw FormatError(what + ": " + std::to_string(t->raw_size) + " raw bytes exceed the " +
+                      std::to_string(out.size()) + "-byte slot");
+  zlib_decompress_into(stored, out.first(t->raw_size), what);
+  return t->raw_size;
+}
+
 CutGrid PackReader::read_index_tile(uint64_t id, const GridEntry& parent) const {
   auto t = find(id);
   const std::string what = name_ + ": index " + describe_tile(id) + " at byte " + std::to_string(t ? t->offset : 0);

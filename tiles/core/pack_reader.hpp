@@ -52,6 +52,9 @@ class PackReader {
   std::vector<uint8_t> read_stored(uint64_t id) const;
   // Stored bytes, decompressed; the size checked against the index.
   std::vector<uint8_t> read_raw(uint64_t id) const;
+  // read_raw into the first bytes of `out` (a cache slot); returns the raw size. Throws
+  // st::FormatError if the tile's raw size exceeds out.size().
+  size_t read_raw_into(uint64_t id, std::span<uint8_t> out) const;
   // An index tile, parsed and checked against the entry that points at it.
   CutGrid read_index_tile(uint64_t id, const GridEntry& parent) const;
 

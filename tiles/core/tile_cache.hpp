@@ -1,10 +1,12 @@
-// The client's tile cache: a fixed number of fixed-size slots in one flat pool, an O(1)
-// LRU slot allocator with pinning, and a page table from tile id to page state.
+// The tile cache: a fixed number of fixed-size slots in one flat pool, an O(1) LRU slot
+// allocator with pinning, and a page table from tile id to page state. The one cache of
+// the project: the client's maps (client/remote_map.hpp) page streamed tiles into it, and
+// the pack evaluator (pack_evaluator.hpp) pages tiles read from disk.
 //
 // Deep shadow maps §5.4 cache tiles in "a fixed number of tile slots" and resize a slot
 // on a tile fault when the incoming tile is larger. A GPU buffer cannot resize one slot,
 // so here every slot has the same size and the pack bounds every tile's encoded size
-// instead (DESIGN.md "Tiles, skip list and pack files"); a tile larger than a slot is
+// instead (the pack header's tile_bytes, tiles/PACK.md); a tile larger than a slot is
 // refused with st::Error, never truncated.
 //
 // Pool layout (what a renderer uploads unchanged, so offsets only, no pointers):
@@ -27,7 +29,7 @@
 // removes a slot from the list, so eviction (taking the list's tail) is O(1) and never
 // touches a pinned slot. When every slot is pinned, reserve() throws CacheFullError.
 //
-// Thread safety: none. The owner (client::MapView) serializes access with its mutex.
+// Thread safety: none. The owner (RemoteMap, PackEvaluator) serializes access with its mutex.
 #pragma once
 #include <cstdint>
 #include <span>
@@ -35,7 +37,7 @@
 
 #include "common/error.hpp"
 
-namespace st::client {
+namespace st {
 
 using TileId = uint64_t;
 inline constexpr TileId kInvalidTile = ~TileId(0);  // never a valid tile id (table's empty key)
@@ -164,4 +166,4 @@ class TileCache {
   uint64_t hits_ = 0, misses_ = 0, evictions_ = 0, inserts_ = 0;
 };
 
-}  // namespace st::client
+}  // namespace st

@@ -1,11 +1,11 @@
 #include "common/hash.hpp"
-#include "client/tile_cache.hpp"
+#include "tiles/core/tile_cache.hpp"
 
 #include <cassert>
 #include <cstring>
 #include <string>
 
-namespace st::client {
+namespace st {
 namespace {
 
 constexpr uint64_t kMaxPoolBytes = uint64_t(1) << 40;
@@ -317,4 +317,4 @@ CacheStats TileCache::stats() const {
   return s;
 }
 
-}  // namespace st::client
+}  // namespace st
