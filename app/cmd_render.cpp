@@ -7,7 +7,7 @@
 #include <memory>
 #include <thread>
 
-#include "client/client.hpp"
+#include "client/map_access.hpp"
 #include "loadgen/view_tiles.hpp"
 #include "tiles/bake/render.hpp"
 #include "tiles/bake/scene.hpp"
@@ -28,7 +28,7 @@ size_t fetch_for_receivers(client::Map& map, const std::vector<Receiver>& rec, c
   std::vector<LightPoint> pts;
   for (const Receiver& r : rec)
     if (r.hit && r.n_dot_l > 0) pts.push_back(lookup_point(r, light, L));
-  const auto cells = loadgen::cells_for_points(pts, L, map.skip_grid());
+  const auto cells = loadgen::cells_for_points(pts, L, client::skip_grid(map));
   const auto deadline = std::chrono::steady_clock::now() + timeout;
   for (;;) {
     bool all = true;
@@ -97,12 +97,12 @@ void run(const RenderArgs& a) {
     co.tls_server_name = a.tls_name;
     cl = std::make_unique<client::Client>(parse_endpoint("--server", a.server), co);
     map = cl->open(a.map);
-    co.cache_slots = uint32_t(std::max(16.0, a.cache_mb * 1048576.0 / std::max(1u, map.header().tile_bytes)));
+    co.cache_slots = uint32_t(std::max(16.0, a.cache_mb * 1048576.0 / std::max(1u, client::pack_header(map).tile_bytes)));
     cl = std::make_unique<client::Client>(parse_endpoint("--server", a.server), co);
     map = cl->open(a.map);
-    eval = &map.evaluator();
-    light = LightSpace::from_array(map.header().light_kind, map.header().light);
-    scene_hash = map.header().scene_hash;
+    eval = &client::evaluator(map);
+    light = LightSpace::from_array(client::pack_header(map).light_kind, client::pack_header(map).light);
+    scene_hash = client::pack_header(map).scene_hash;
   }
   if (scene_hash != scene.content_hash())
     std::fprintf(stderr, "shadowtile render: warning: scene '%s' is not the scene the map was built from\n",

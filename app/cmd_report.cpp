@@ -15,7 +15,7 @@
 #include <sstream>
 #include <thread>
 
-#include "client/client.hpp"
+#include "client/map_access.hpp"
 #include "loadgen/camera_path.hpp"
 #include "loadgen/png_plot.hpp"
 #include "loadgen/view_tiles.hpp"
@@ -95,7 +95,7 @@ std::vector<RefinementPoint> refinement(const std::string& pack_path, const std:
   const uint32_t L = map.finest_level();
   std::vector<LightPoint> lps;
   for (uint32_t i : f.lit_facing) lps.push_back(lookup_point(f.receivers[i], light, L));
-  const auto cells = loadgen::cells_for_points(lps, L, map.skip_grid());
+  const auto cells = loadgen::cells_for_points(lps, L, client::skip_grid(map));
   cells_total = cells.size();
   const auto t0 = Clk::now();
   // Nearest first: cells in order of first appearance are roughly screen order; rank by
@@ -105,7 +105,7 @@ std::vector<RefinementPoint> refinement(const std::string& pack_path, const std:
     std::unordered_map<uint64_t, size_t> idx;
     for (size_t c = 0; c < cells.size(); ++c) idx[cells[c].key()] = c;
     for (size_t i = 0; i < lps.size(); ++i) {
-      const auto one = loadgen::cells_for_points({lps[i]}, L, map.skip_grid());
+      const auto one = loadgen::cells_for_points({lps[i]}, L, client::skip_grid(map));
       if (!one.empty()) {
         auto it = idx.find(one[0].key());
         if (it != idx.end()) nearest[it->second] = std::min(nearest[it->second], f.receivers[f.lit_facing[i]].distance);
@@ -123,7 +123,7 @@ std::vector<RefinementPoint> refinement(const std::string& pack_path, const std:
     const double ms = std::chrono::duration<double, std::milli>(Clk::now() - t0).count();
     size_t resident = 0;
     for (const auto& c : cells) resident += map.region_resident(c.level, c.x0(), c.y0(), c.side(), c.side());
-    const FrameError e = frame_error(map.evaluator(), light, f, 0, L);
+    const FrameError e = frame_error(client::evaluator(map), light, f, 0, L);
     pts.push_back({ms, e.fraction(), resident});
     if (last || ms > 60000) break;
     last = resident == cells.size();

@@ -13,7 +13,7 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
-#include "client/client.hpp"
+#include "client/map_access.hpp"
 #include "loadgen/png_plot.hpp"
 #include "loadgen/server_watch.hpp"
 #include "app/command.hpp"

@@ -24,7 +24,7 @@
 #include <thread>
 #include <vector>
 
-#include "client/client.hpp"
+#include "client/map_access.hpp"
 #include "proto/proto.hpp"
 #include "server/server.hpp"
 #include "common/error.hpp"

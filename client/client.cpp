@@ -1,25 +1,40 @@
-#include "client/client.hpp"
+// The public API (shadowtile/client.hpp) over the fetcher and the opened maps. This is
+// the library boundary: internal errors surface as std::runtime_error (st::Error derives
+// from it) only where the header says so.
+#include "shadowtile/client.hpp"
 
 #include "client/fetcher.hpp"
+#include "client/map_access.hpp"
 #include "client/remote_map.hpp"
 #include "common/error.hpp"
+#include "tiles/core/encoding.hpp"
 #include "tiles/core/interval.hpp"
 
 namespace st::client {
 
 // ---------------------------------------------------------------- Map
 
-namespace {
-const std::string kNoName;
-const PackHeader kNoHeader{};
-const CutGrid kNoGrid{};
-}  // namespace
+const RemoteMap& MapAccess::remote(const Map& m) {
+  if (!m.map_) throw Error("client: this Map was default-constructed (no map opened)");
+  return *m.map_;
+}
 
-const std::string& Map::name() const noexcept { return map_ ? map_->name() : kNoName; }
-const PackHeader& Map::header() const noexcept { return map_ ? map_->header() : kNoHeader; }
-const CutGrid& Map::skip_grid() const noexcept { return map_ ? map_->grid() : kNoGrid; }
+MapInfo Map::info() const {
+  MapInfo i;
+  if (!map_) return i;
+  const PackHeader& h = map_->header();
+  i.name = map_->name();
+  i.encoding = to_string(h.encoding);
+  i.finest_level = h.map_level;
+  i.skip_level = h.skip_level;
+  i.tile_bytes = h.tile_bytes;
+  i.tile_count = h.tile_count;
+  i.scene_hash = h.scene_hash;
+  i.sun = h.light_kind == LightKind::sun;
+  return i;
+}
+
 uint32_t Map::finest_level() const noexcept { return map_ ? map_->finest_level() : 0; }
-const Evaluator& Map::evaluator() const noexcept { return *map_; }
 
 float Map::depth(uint32_t level, uint64_t x, uint64_t y) const noexcept {
   return map_ ? map_->depth(level, x, y) : kLitDepth;
@@ -30,8 +45,8 @@ float Map::pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receive
 bool Map::lit(uint64_t x, uint64_t y, float receiver_depth) const noexcept {
   return receiver_depth <= depth(finest_level(), x, y);
 }
-float Map::visibility(const Vec3d& world, uint32_t pcf_radius) const noexcept {
-  return map_ ? map_->visibility(world, pcf_radius) : 1.0f;
+float Map::visibility(const WorldPoint& world, uint32_t pcf_radius) const noexcept {
+  return map_ ? map_->visibility(Vec3d{world.x, world.y, world.z}, pcf_radius) : 1.0f;
 }
 size_t Map::request_region(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, uint64_t h,
                            uint16_t priority) noexcept {
@@ -45,6 +60,14 @@ bool Map::region_resident(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, 
 }
 MapStats Map::stats() const noexcept { return map_ ? map_->stats() : MapStats{}; }
 uint32_t Map::slot_bytes() const noexcept { return map_ ? map_->slot_bytes() : 0; }
+
+// ---------------------------------------------------------------- ServerStats
+
+uint64_t ServerStats::counter(const std::string& name) const noexcept {
+  for (const Counter& c : counters)
+    if (c.name == name) return c.value;
+  return 0;
+}
 
 // ---------------------------------------------------------------- Client
 
@@ -65,18 +88,38 @@ Map Client::open(const std::string& name) {
   }
 }
 
-std::vector<proto::MapEntry> Client::list_maps() {
+std::vector<MapListing> Client::list_maps() {
   proto::Message m = fetcher_->call(proto::ListMaps{});
   auto* list = std::get_if<proto::MapList>(&m);
   if (!list) throw Error("client: list_maps: unexpected answer");
-  return std::move(list->maps);
+  std::vector<MapListing> out;
+  out.reserve(list->maps.size());
+  for (const proto::MapEntry& e : list->maps) {
+    MapListing l;
+    l.name = e.name;
+    l.encoding = e.encoding <= uint8_t(Encoding::dagmh) ? to_string(Encoding(e.encoding))
+                                                        : "encoding#" + std::to_string(e.encoding);
+    l.resolution_log2 = e.resolution_log2;
+    l.skip_level = e.skip_level;
+    l.tile_count = e.tile_count;
+    l.pack_bytes = e.pack_bytes;
+    out.push_back(std::move(l));
+  }
+  return out;
 }
 
-proto::Stats Client::server_stats() {
+ServerStats Client::server_stats() {
   proto::Message m = fetcher_->call(proto::GetStats{});
   auto* s = std::get_if<proto::Stats>(&m);
   if (!s) throw Error("client: server_stats: unexpected answer");
-  return std::move(*s);
+  ServerStats out;
+  for (const proto::Counter& c : s->counters) out.counters.push_back({c.name, c.value});
+  for (const proto::Histogram& h : s->histograms) {
+    ServerStats::Histogram oh{h.name, {}};
+    for (const proto::Bucket& b : h.buckets) oh.buckets.push_back({b.upper_bound, b.count});
+    out.histograms.push_back(std::move(oh));
+  }
+  return out;
 }
 
 bool Client::connected() const noexcept { return fetcher_->connected(); }

@@ -27,7 +27,7 @@
 #include <unordered_map>
 #include <vector>
 
-#include "client/client.hpp"
+#include "shadowtile/client.hpp"
 #include "client/io_pool.hpp"
 #include "net/stream.hpp"
 #include "client/remote_map.hpp"

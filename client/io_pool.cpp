@@ -1,5 +1,7 @@
 #include "client/io_pool.hpp"
 
+#include "shadowtile/client.hpp"
+
 #include "common/error.hpp"
 
 namespace st::client {
@@ -33,5 +35,11 @@ IoPool::~IoPool() {
 boost::asio::io_context& IoPool::next() noexcept {
   return *contexts_[next_.fetch_add(1, std::memory_order_relaxed) % contexts_.size()];
 }
+
+}  // namespace st::client
+
+namespace st::client {
+
+std::shared_ptr<IoPool> make_io_pool(unsigned threads) { return std::make_shared<IoPool>(threads); }
 
 }  // namespace st::client

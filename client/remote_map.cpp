@@ -266,7 +266,8 @@ size_t RemoteMap::cancel_outside(uint32_t level, uint64_t x0, uint64_t y0, uint6
 MapStats RemoteMap::stats() const noexcept {
   std::lock_guard lock(mu_);
   MapStats s = stats_;
-  s.cache = cache_.stats();
+  const CacheStats c = cache_.stats();
+  s.cache = CacheCounters{c.hits, c.misses, c.evictions, c.inserts, c.resident, c.pinned, c.free};
   return s;
 }
 
@@ -385,7 +386,7 @@ void RemoteMap::tile_arrived(const proto::TileMeta& meta, std::span<const uint8_
   try {
     const TileAddress a = tile_address(tile);
     if (w.entry.kind == EntryKind::tile) {
-      ev = options_.open_tile ? options_.open_tile(bytes) : open_encoded(header_.encoding, bytes);
+      ev = open_encoded(header_.encoding, bytes);
       ok = ev && ev->finest_level() == header_.map_level - a.level;
     } else {
       g = CutGrid::parse(bytes, what, kMaxIndexLevels);

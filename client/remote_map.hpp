@@ -18,7 +18,7 @@
 #include <unordered_map>
 #include <vector>
 
-#include "client/client.hpp"
+#include "shadowtile/client.hpp"
 #include "tiles/core/tile_cache.hpp"
 #include "proto/messages.hpp"
 #include "tiles/core/light.hpp"

@@ -81,7 +81,7 @@ struct CameraRun {
 void camera_frame(CameraRun& cam, const LoadOptions& o, const WorldFrame& world, Shared& sh) {
   client::Map& map = cam.map;
   const uint32_t L = map.finest_level();
-  const CutGrid& grid = map.skip_grid();
+  const CutGrid& grid = client::skip_grid(map);
   const uint32_t conn = sh.camera_conn[cam.id];
   const uint64_t f = cam.next_frame++;
   const double t = double(f) / o.rate;
@@ -137,7 +137,7 @@ void camera_frame(CameraRun& cam, const LoadOptions& o, const WorldFrame& world,
     if (!resident(map, c)) missing.push_back(c);
   const auto t0 = Clock::now();
   double vis = 0;
-  for (const Vec3d& p : needs.points) vis += map.visibility(p, 0);
+  for (const Vec3d& p : needs.points) vis += map.visibility({p.x, p.y, p.z}, 0);
   const auto t1 = Clock::now();
   sh.lookup_ns.fetch_add(uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count()),
                          std::memory_order_relaxed);
@@ -230,7 +230,7 @@ LoadResult run_load(const LoadOptions& o_in) {
     po.tls_ca_file = o.tls_ca_file;
     po.tls_server_name = o.tls_server_name;
     client::Client probe(o.endpoint, po);
-    tile_bytes = probe.open(o.map).header().tile_bytes;
+    tile_bytes = client::pack_header(probe.open(o.map)).tile_bytes;
   }
   client::ClientOptions co;
   co.client_name = "shadowtile-load";
@@ -241,7 +241,7 @@ LoadResult run_load(const LoadOptions& o_in) {
   co.cache_slots = uint32_t(std::clamp<double>(o.cache_mb * 1048576.0 / std::max(1u, tile_bytes), 1, 1 << 24));
   // Every connection's fetcher on a few shared I/O threads (not one thread per
   // connection: 1,000 connections stay 1,000 sockets, not 1,000 threads).
-  co.io_pool = std::make_shared<client::IoPool>(std::clamp(o.io_threads, 1u, 64u));
+  co.io_pool = client::make_io_pool(std::clamp(o.io_threads, 1u, 64u));
   std::vector<std::unique_ptr<client::Client>> clients;
   std::vector<client::Map> maps;
   for (uint32_t i = 0; i < r.connections; ++i) {
@@ -250,10 +250,10 @@ LoadResult run_load(const LoadOptions& o_in) {
   }
   const client::Map& m0 = maps[0];
   r.map_level = m0.finest_level();
-  r.skip_level = m0.skip_grid().levels;
+  r.skip_level = client::skip_grid(m0).levels;
   r.cache_slots = co.cache_slots;
   r.slot_bytes = m0.slot_bytes();
-  r.world = world_frame(m0.header(), m0.skip_grid());
+  r.world = world_frame(client::pack_header(m0), client::skip_grid(m0));
 
   Shared sh;
   sh.pending.resize(r.connections);

@@ -26,7 +26,7 @@
 #include <string>
 #include <vector>
 
-#include "client/client.hpp"
+#include "client/map_access.hpp"
 #include "loadgen/camera_path.hpp"
 #include "loadgen/view_tiles.hpp"
 

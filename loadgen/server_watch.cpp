@@ -72,11 +72,11 @@ uint64_t ServerSample::counter(const std::string& name) const {
   return it == counters.end() ? 0 : it->second;
 }
 
-ServerSample sample_from(const proto::Stats& stats, double t) {
+ServerSample sample_from(const client::ServerStats& stats, double t) {
   ServerSample s;
   s.t = t;
-  for (const proto::Counter& c : stats.counters) s.counters[c.name] = c.value;
-  for (const proto::Histogram& h : stats.histograms) {
+  for (const auto& c : stats.counters) s.counters[c.name] = c.value;
+  for (const auto& h : stats.histograms) {
     if (h.name != "latency_us") continue;
     for (size_t i = 0; i < h.buckets.size(); ++i) {
       if (i > 0 && h.buckets[i].upper_bound <= h.buckets[i - 1].upper_bound)

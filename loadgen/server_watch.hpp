@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "proto/messages.hpp"
+#include "shadowtile/client.hpp"
 
 namespace st::loadgen {
 
@@ -36,7 +36,7 @@ struct ServerSample {
 };
 // st::Error if the Stats message lacks the latency_us histogram or its buckets are not
 // strictly increasing.
-ServerSample sample_from(const proto::Stats& stats, double t);
+ServerSample sample_from(const client::ServerStats& stats, double t);
 
 // Quantile q in [0, 1] of a histogram: the exclusive upper bound (upper + 1) of the
 // bucket holding it; 0 when the histogram is empty.

@@ -8,7 +8,7 @@
 #include <cstring>
 #include <thread>
 
-#include "client/client.hpp"
+#include "client/map_access.hpp"
 #include "proto/proto.hpp"
 #include "tests/client/loopback.hpp"
 

@@ -14,7 +14,7 @@
 #include <fstream>
 #include <thread>
 
-#include "client/client.hpp"
+#include "client/map_access.hpp"
 #include "proto/proto.hpp"
 #include "tests/client/loopback.hpp"
 #include "tiles/core/tile_cut_grid.hpp"

@@ -8,7 +8,7 @@
 
 #include <thread>
 
-#include "client/client.hpp"
+#include "client/map_access.hpp"
 #include "client/io_pool.hpp"
 #include "tests/client/loopback.hpp"
 #include "tiles/core/pack_evaluator.hpp"

@@ -5,7 +5,7 @@
 #include <cstdlib>
 #include <new>
 
-#include "client/client.hpp"
+#include "client/map_access.hpp"
 #include "tests/client/loopback.hpp"
 
 namespace {
@@ -52,7 +52,7 @@ TEST(RemoteMapLookups, NeverAllocateWhetherTilesAreMissingOrResident) {
     o.cache_slots = uint32_t(p.reader->tiles().size()) + 4;
     Client client({"127.0.0.1", srv.port}, o);
     Map map = client.open("alloc_" + to_string(e));
-    const Evaluator& ev = map.evaluator();
+    const Evaluator& ev = client::evaluator(map);
     float sink = 0;
     auto sweep = [&] {
       for (uint32_t l = 0; l <= level; ++l)

@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "client/client.hpp"
+#include "client/map_access.hpp"
 #include "proto/proto.hpp"
 #include "server/server.hpp"
 #include "tiles/core/encoding.hpp"

@@ -10,7 +10,7 @@
 #include <set>
 #include <thread>
 
-#include "client/client.hpp"
+#include "client/map_access.hpp"
 #include "tests/client/loopback.hpp"
 
 namespace st::client {
@@ -56,7 +56,7 @@ TEST(RemoteMap, FetchesEveryTileAndAnswersBitExactlyLikeThePack) {
     ASSERT_TRUE(wait_until([&] { return map.region_resident(level, 0, 0, side, side); }))
         << map.stats().tiles_received << " of " << p.reader->tiles().size() << " tiles";
     PackEvaluator local(p.reader);
-    EXPECT_EQ(first_difference(map.evaluator(), local), "");
+    EXPECT_EQ(first_difference(client::evaluator(map), local), "");
     // PCF and the lit test over the cache equal the local ones exactly.
     for (uint64_t i = 0; i < 200; ++i) {
       uint64_t x = (i * 37) % side, y = (i * 91) % side;
@@ -144,7 +144,7 @@ TEST(RemoteMap, AnswersFromTheCoarserLevelUntilTilesArrive) {
   gate->open = true;
   map.request_region(level, 0, 0, side, side, 1);
   ASSERT_TRUE(wait_until([&] { return map.region_resident(level, 0, 0, side, side); }));
-  EXPECT_EQ(first_difference(map.evaluator(), local), "");
+  EXPECT_EQ(first_difference(client::evaluator(map), local), "");
 }
 
 TEST(RemoteMap, CorruptPayloadIsCaughtByTheCrcAndRefetched) {
@@ -168,7 +168,7 @@ TEST(RemoteMap, CorruptPayloadIsCaughtByTheCrcAndRefetched) {
   map.request_region(level, 0, 0, side, side, 3);
   ASSERT_TRUE(wait_until([&] { return map.region_resident(level, 0, 0, side, side); }));
   PackEvaluator local(p.reader);
-  EXPECT_EQ(first_difference(map.evaluator(), local), "");
+  EXPECT_EQ(first_difference(client::evaluator(map), local), "");
   const MapStats s = map.stats();
   EXPECT_EQ(s.crc_errors, p.reader->tiles().size());
   EXPECT_EQ(s.tiles_received, p.reader->tiles().size());

@@ -8,7 +8,7 @@
 #include <mutex>
 #include <thread>
 
-#include "client/client.hpp"
+#include "client/map_access.hpp"
 #include "proto/proto.hpp"
 #include "tests/client/loopback.hpp"
 
@@ -213,7 +213,7 @@ TEST(ServerLoopback, StatsAnsweredOverTheProtocol) {
   Map m = c.open("stats");
   m.request_region(6, 0, 0, 64, 64, 1);
   ASSERT_TRUE(wait_until([&] { return m.region_resident(6, 0, 0, 64, 64); }));
-  proto::Stats s = c.server_stats();
+  client::ServerStats s = c.server_stats();
   auto counter = [&](const std::string& name) -> uint64_t {
     for (auto& x : s.counters)
       if (x.name == name) return x.value;

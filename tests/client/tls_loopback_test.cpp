@@ -15,7 +15,7 @@
 #include <filesystem>
 #include <memory>
 
-#include "client/client.hpp"
+#include "client/map_access.hpp"
 #include "proto/proto.hpp"
 #include "tests/client/loopback.hpp"
 

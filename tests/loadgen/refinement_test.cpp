@@ -6,7 +6,7 @@
 #include <chrono>
 #include <thread>
 
-#include "client/client.hpp"
+#include "client/map_access.hpp"
 #include "load_fixture.hpp"
 #include "loadgen/view_tiles.hpp"
 #include "tiles/bake/render.hpp"
@@ -39,11 +39,11 @@ TEST(Refinement, ErrorEndsAtZeroOnceTheViewIsResident) {
   auto differing = [&] {
     uint64_t n = 0;
     for (const Receiver& r : rec)
-      n += map_visibility(map.evaluator(), r, pack.light, 0, L) != map_visibility(full, r, pack.light, 0, L);
+      n += map_visibility(client::evaluator(map), r, pack.light, 0, L) != map_visibility(full, r, pack.light, 0, L);
     return n;
   };
   const uint64_t at_cut = differing();  // nothing resident: skip-grid answers
-  const auto cells = loadgen::cells_for_points(pts, L, map.skip_grid());
+  const auto cells = loadgen::cells_for_points(pts, L, client::skip_grid(map));
   ASSERT_GT(cells.size(), 0u);
   for (const auto& c : cells) map.request_region(c.level, c.x0(), c.y0(), c.side(), c.side(), 100);
   const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);

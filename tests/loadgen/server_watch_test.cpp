@@ -6,7 +6,7 @@
 
 #include <ctime>
 
-#include "client/client.hpp"
+#include "client/map_access.hpp"
 #include "load_fixture.hpp"
 #include "loadgen/server_watch.hpp"
 #include "common/error.hpp"
@@ -77,7 +77,7 @@ TEST(ServerWatch, IntervalFiguresFromALiveServer) {
   EXPECT_GT(f.p99_us, 0u);
   EXPECT_EQ(f.errors, 0u);
   // A sample without the histogram is refused with a clear error.
-  proto::Stats bare;
+  client::ServerStats bare;
   bare.counters.push_back({"requests", 1});
   EXPECT_THROW(sample_from(bare, 0), Error);
   srv->stop();

@@ -1,0 +1,235 @@
+// shadowtile client library: the whole public API, in one header that includes only the
+// C++ standard library. A game links shadowtile::client and includes this file; nothing
+// of the wire protocol, the pack format, Asio, Embree, assimp or OpenEXR comes with it.
+//
+//   st::client::Client client({"127.0.0.1", 7447});
+//   st::client::Map map = client.open("city");           // header + skip grid
+//   map.request_region(level, x0, y0, w, h, priority);    // prefetch what cameras see
+//   float lit = map.visibility({x, y, z}, pcf_radius);    // 0..1, never blocks
+//   float d = map.depth(level, x, y);
+//   st::client::MapStats s = map.stats();
+//
+// What a map answers. The server holds a shadow map of 2^L x 2^L texels (L = finest
+// level) as a hierarchy: every level l <= L is itself a complete shadow map of 2^l texels
+// a side. depth(l, x, y) is the light-space depth (0 at the light's near plane, 1 at the
+// far plane) stored for texel (x, y) of level l; a receiver at light-space depth d is lit
+// there when d <= depth. Texels are integers (exact up to level 20). A texel outside the
+// map (l > L, or x, y >= 2^l) is lit: depth answers 1, PCF counts the tap lit.
+//
+// How it works. A fetcher (a thread of its own, or one of a few threads shared by many
+// Clients: make_io_pool) owns the TCP connection: it connects with retry and exponential
+// backoff, handshakes (optional key proof and TLS), keeps up to max_in_flight tile
+// requests on the wire, highest priority first, cancels requests no longer wanted,
+// checks each tile's end-to-end CRC-32, decompresses it into a slot of a fixed-size tile
+// cache (cache_slots slots of the pack's tile bound) and opens it. Lookups walk the page
+// table (skip grid, index tiles) into the cache; where a tile is not resident they answer
+// with the value of the deepest node they reached (a coarser level of the same map) and
+// queue the tile's fetch at miss_priority.
+//
+// Error model. Exceptions never escape except where stated:
+//   - Client's constructor throws std::runtime_error for bad options only; it never waits
+//     for or fails on the network (it connects in the background and keeps retrying).
+//   - open(), list_maps(), server_stats() throw std::runtime_error with a one-line message
+//     on an unknown map, a malformed answer, a refused key, or no answer within
+//     ClientOptions::request_timeout.
+//   - Map lookups (depth, pcf, lit, visibility) and request_region, cancel_outside,
+//     region_resident, stats are noexcept: they never block on the network, never
+//     allocate, never throw. A tile that cannot be had (corrupt after max_tile_retries,
+//     refused by the server) keeps answering from the coarser level for good and is
+//     counted in MapStats::tiles_failed.
+//   - A default-constructed Map is valid() == false and answers like an empty map: depth
+//     1 (lit), pcf and visibility 1, no tiles, zero stats.
+// Thread safety: every method of Client and Map may be called from any thread. A Map
+// stays valid (answering from its cache) after its Client is destroyed.
+#pragma once
+#include <chrono>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace st::client {
+
+struct Endpoint {
+  std::string host = "127.0.0.1";
+  uint16_t port = 7447;
+};
+
+// A few I/O threads shared by many Clients (a process with hundreds of connections).
+class IoPool;
+// threads in [1, 64]; throws std::runtime_error otherwise. The pool outlives the Clients
+// using it (they hold it); destroy the Clients before the last reference goes.
+std::shared_ptr<IoPool> make_io_pool(unsigned threads);
+
+struct ClientOptions {
+  uint32_t cache_slots = 256;               // tile cache slots per map
+  uint32_t max_slot_bytes = 16u << 20;      // refuse maps whose tile bound exceeds this
+  uint32_t want_capacity = 8192;            // queued (not yet sent) tile requests per map
+  uint16_t max_in_flight = 64;              // tile requests proposed in the handshake
+  uint16_t tiles_per_request = 8;           // tiles per request (small: priorities stay fresh)
+  uint32_t max_frame_bytes = 4u << 20;      // proposed in the handshake
+  uint32_t max_tile_retries = 3;            // CRC or decode failures before giving up a tile
+  uint16_t miss_priority = 1;               // priority of fetches queued by lookups
+  std::chrono::milliseconds connect_timeout{2000};
+  std::chrono::milliseconds io_timeout{10000};       // no progress with answers owed: reconnect
+  std::chrono::milliseconds request_timeout{10000};  // open(), list_maps(), server_stats()
+  std::chrono::milliseconds backoff_initial{20};
+  std::chrono::milliseconds backoff_max{2000};
+  std::string client_name = "shadowtile-client";
+  // The catalog's key (the server's --key-file; raw bytes). When set, the client proves
+  // it to the server and requires the server's proof back: a server that does not ask
+  // for the key, or proves a different one, is refused. A refusal either way is final:
+  // the client stops reconnecting and open()/list_maps()/server_stats() throw saying why;
+  // maps already open keep answering from their caches.
+  std::vector<uint8_t> key;
+  // TLS (a server started with --tls-cert/--tls-key): the server's certificate must chain
+  // to tls_ca_file (PEM; empty: the system's trust store) and name tls_server_name
+  // (empty: the endpoint's host) in its subjectAltName. A failed handshake is retried
+  // like a failed connect; its reason appears in the timeout errors of open() and friends.
+  bool tls = false;
+  std::string tls_ca_file, tls_server_name;
+  // Shared I/O threads (make_io_pool); null: this Client's fetcher has a thread of its own.
+  std::shared_ptr<IoPool> io_pool;
+};
+
+struct CacheCounters {
+  uint64_t hits = 0;       // lookups that found their tile resident
+  uint64_t misses = 0;     // lookups that found it absent or on its way
+  uint64_t evictions = 0;  // resident tiles dropped to make room
+  uint64_t inserts = 0;    // tiles made resident
+  uint32_t resident = 0, pinned = 0, free = 0;  // slots now
+};
+
+struct MapStats {
+  CacheCounters cache;
+  uint64_t tiles_requested = 0;      // tile fetches sent
+  uint64_t tiles_received = 0;       // tiles made resident
+  uint64_t bytes_received = 0;       // stored (compressed) tile bytes received
+  uint64_t crc_errors = 0;           // end-to-end CRC mismatches (each refetched)
+  uint64_t decode_errors = 0;        // zlib or tile format failures
+  uint64_t tiles_failed = 0;         // given up (retries exhausted or refused by the server)
+  uint64_t tiles_cancelled = 0;
+  uint64_t cache_full = 0;           // a tile arrived while every slot was pinned
+  uint64_t queue_full = 0;           // a wanted tile could not be queued (want_capacity)
+  uint64_t coarse_answers = 0;       // lookups answered above the level asked for
+};
+
+struct ClientStats {
+  uint64_t connects = 0, connect_failures = 0, disconnects = 0;
+  uint64_t frames_received = 0, bytes_received = 0, bytes_sent = 0;
+  uint64_t protocol_errors = 0;
+  bool connected = false;
+  bool refused = false;  // authentication failed (see ClientOptions::key); final
+};
+
+// What a map is, from its header.
+struct MapInfo {
+  std::string name;
+  std::string encoding;       // "mh", "mmh" or "dagmh"
+  uint32_t finest_level = 0;  // L: the map is 2^L texels a side
+  uint32_t skip_level = 0;    // K: the page table's dense top grid is 2^K a side
+  uint32_t tile_bytes = 0;    // bound on one tile's decoded size (a cache slot)
+  uint64_t tile_count = 0;
+  uint64_t scene_hash = 0;    // of the scene the map was built from
+  bool sun = true;            // directional light (orthographic); false: spot (perspective)
+};
+
+// One map of the server's catalog (list_maps).
+struct MapListing {
+  std::string name;
+  std::string encoding;
+  uint32_t resolution_log2 = 0;  // L
+  uint32_t skip_level = 0;       // K
+  uint32_t tile_count = 0;
+  uint64_t pack_bytes = 0;
+};
+
+// The server's counters and histograms (server_stats), as the server names them.
+struct ServerStats {
+  struct Counter {
+    std::string name;
+    uint64_t value = 0;
+  };
+  struct Bucket {
+    uint64_t upper_bound = 0;  // inclusive
+    uint64_t count = 0;
+  };
+  struct Histogram {
+    std::string name;  // with its unit ("latency_us")
+    std::vector<Bucket> buckets;
+  };
+  std::vector<Counter> counters;
+  std::vector<Histogram> histograms;
+  // The named counter's value, or 0 when the server has none of that name.
+  uint64_t counter(const std::string& name) const noexcept;
+};
+
+// A world-space point (right-handed, +Y up), in the units of the scene the map was built from.
+struct WorldPoint {
+  double x = 0, y = 0, z = 0;
+};
+
+class RemoteMap;
+struct MapAccess;
+
+// A handle to an opened map (cheap to copy; all copies share one cache).
+class Map {
+ public:
+  Map() = default;
+  bool valid() const noexcept { return bool(map_); }
+  MapInfo info() const;  // may allocate (strings); throws nothing but std::bad_alloc
+  uint32_t finest_level() const noexcept;
+
+  float depth(uint32_t level, uint64_t x, uint64_t y) const noexcept;
+  // Fraction of an r x r kernel (1 <= r <= 9) around texel (x, y) of `level` whose taps are
+  // lit for `receiver`; taps are clamped to the map's edges.
+  float pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver) const noexcept;
+  bool lit(uint64_t x, uint64_t y, float receiver_depth) const noexcept;  // at the finest level
+  // Fraction lit (0..1) of a world point: light space from the map's header, PCF over a
+  // (2 * pcf_radius + 1)^2 kernel at the finest level (pcf_radius <= 4). Points outside
+  // the light's box are lit (1).
+  float visibility(const WorldPoint& world, uint32_t pcf_radius = 0) const noexcept;
+
+  // Queues the fetch of every tile under texels [x0, x0+w) x [y0, y0+h) of `level`
+  // (clamped to the map), walking index tiles as they arrive. Larger priority = sooner.
+  // Returns the number of tiles newly queued.
+  size_t request_region(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, uint64_t h,
+                        uint16_t priority) noexcept;
+  // Cancels queued and in-flight fetches of tiles outside the region.
+  size_t cancel_outside(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, uint64_t h) noexcept;
+  // True when every tile under the region is resident (lookups there are exact).
+  bool region_resident(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, uint64_t h) const noexcept;
+
+  MapStats stats() const noexcept;
+  // The cache's slot size: slot i of the pool lies at i * slot_bytes().
+  uint32_t slot_bytes() const noexcept;
+
+ private:
+  friend class Client;
+  friend struct MapAccess;  // the library's own tools (loadgen, render) reach the internals
+  explicit Map(std::shared_ptr<RemoteMap> m) : map_(std::move(m)) {}
+  std::shared_ptr<RemoteMap> map_;
+};
+
+class Fetcher;
+
+class Client {
+ public:
+  explicit Client(Endpoint endpoint, ClientOptions options = {});
+  ~Client();
+  Client(const Client&) = delete;
+  Client& operator=(const Client&) = delete;
+
+  // Opens a map by name (waits for the connection up to request_timeout).
+  Map open(const std::string& name);
+  std::vector<MapListing> list_maps();
+  ServerStats server_stats();
+
+  bool connected() const noexcept;
+  ClientStats stats() const noexcept;
+
+ private:
+  std::shared_ptr<Fetcher> fetcher_;
+};
+
+}  // namespace st::client
