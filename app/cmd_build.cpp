@@ -9,6 +9,7 @@
 #include "app/command.hpp"
 #include "app/progress.hpp"
 #include "common/error.hpp"
+#include "tiles/core/pack_format.hpp"
 
 namespace st::cli {
 namespace {
@@ -118,7 +119,8 @@ void setup(CLI::App& app) {
   app.add_option("--skip-level", a->skip_level,
                  "Skip level K: the 2^K x 2^K grid fetched when a map opens (default min(ceil(L/2), 8))");
   app.add_option("--tile-bytes", a->tile_bytes,
-                 "Bound on one tile's encoded size; larger subtrees are cut deeper into index tiles")
+                 "Bound on one tile's encoded size, in " + tile_bytes_bounds() +
+                     "; larger subtrees are cut deeper into index tiles")
       ->capture_default_str();
   app.add_option("-o,--output", a->out, "Pack file to write (built as OUT.tmp, renamed when complete)")
       ->required();

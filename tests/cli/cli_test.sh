@@ -32,6 +32,9 @@ check bad-light 1 "elevation" -- "$st" bounds procedural:cube --light sun:azimut
 check missing-scene 1 "nosuch.obj" -- "$st" bounds nosuch.obj $light --resolution 256 -o x.exr
 check unknown-procedural 1 "teapot" -- "$st" bounds procedural:teapot $light --resolution 256 -o x.exr
 check build 0 "built city.pack" -- "$st" build $scene $light --resolution 2048 --encoding dagmh -o city.pack --report build.json -q
+# The tile bound's message names the real bounds (64 B .. 64 MiB), as --help does.
+check tile-bytes-too-big 1 "outside \[64 B, 64 MiB\]" -- "$st" build $scene $light --resolution 256 --tile-bytes 134217728 -o big.pack -q
+check tile-bytes-help 0 "64 MiB" -- "$st" build --help
 [[ -f build.json && ! -f city.pack.tmp ]] || { echo "FAIL build outputs"; fail=1; }
 check inspect 0 "exit-depths" -- "$st" inspect city.pack
 check inspect-json 0 '"encoding": "dagmh"' -- "$st" inspect city.pack --json

@@ -51,7 +51,7 @@ std::vector<uint8_t> encode(const Hierarchy& h, EncodeStats* stats, StructureHas
   const uint64_t rest = sizeof(Header) + words * 4 + uint64_t(hd.treelet_count) * kTreeletBytes +
                         uint64_t(hd.chunk_count) * sizeof(ChunkInfo) + hd.multiplier_bytes;
   // Skip list at level <= 6 (§3.7), coarser while its table would exceed 1/16 of the rest.
-  uint32_t skip = std::min(h.depth, kMaxSkipLevel);
+  uint32_t skip = std::min(h.depth, kMaxSkipListLevel);
   while (skip > 0 && skip_table_bytes(skip) * 16 > rest) --skip;
   hd.skip_level = skip;
   const uint64_t total = rest + skip_table_bytes(skip);

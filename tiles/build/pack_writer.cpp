@@ -55,7 +55,7 @@ PackWriter::PackWriter(std::string path, PackParams params) : path_(std::move(pa
     throw Error(path_ + ": bad map/skip level " + std::to_string(params_.map_level) + "/" +
                 std::to_string(params_.skip_level));
   if (params_.tile_bytes < kMinTileBytes || params_.tile_bytes > kMaxTileBytes)
-    throw Error(path_ + ": bad tile_bytes " + std::to_string(params_.tile_bytes));
+    throw Error(path_ + ": tile_bytes " + std::to_string(params_.tile_bytes) + " outside " + tile_bytes_bounds());
   if (params_.features & ~uint32_t(kFeatureExitDepths | kFeatureDeepShadow))
     throw Error(path_ + ": features may only name exit_depths / deep_shadow (the rest are derived)");
   if (params_.compression_level < 0 || params_.compression_level > 12)

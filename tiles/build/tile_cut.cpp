@@ -25,7 +25,7 @@ void CutParams::validate() const {
   if (skip_level > std::min(map_level, kMaxSkipLevel))
     throw Error("cut: skip level " + std::to_string(skip_level) + " must be <= min(map level, 10)");
   if (tile_bytes < kMinTileBytes || tile_bytes > kMaxTileBytes)
-    throw Error("cut: tile_bytes " + std::to_string(tile_bytes) + " outside [64, 2^30]");
+    throw Error("cut: tile_bytes " + std::to_string(tile_bytes) + " outside " + tile_bytes_bounds());
   if (!codec.encode || !codec.open) throw Error("cut: codec without encode/open");
 }
 

@@ -50,7 +50,6 @@ struct TileCodec {
 };
 
 inline constexpr uint32_t kDefaultTileBytes = 64 * 1024;
-inline constexpr uint32_t kMinTileBytes = 64;  // room for the smallest index tile (d = 1)
 
 // Default skip level for a map of level L: ceil(L / 2), at most 8 (a 256^2 grid of 8-byte
 // entries + the coarse pyramid = 597 KiB), so cells are <= 4096^2 texels at L = 20 and a

@@ -39,8 +39,10 @@ inline constexpr uint32_t kRawFactorBits = 32;  // "factor bits 32": the multipl
 // unaligned 8-byte load; only the bytes before them carry multipliers.
 inline constexpr uint32_t kMultiplierPadBytes = 8;
 
-// Skip list (DAG-MH §3.7): a dense 2^S x 2^S table of traversal cursors at level S.
-inline constexpr uint32_t kMaxSkipLevel = 6;
+// Skip list (DAG-MH §3.7): a dense 2^S x 2^S table of traversal cursors at level S inside
+// one tile (a format constant of the DAG-MH buffer; unrelated to the pack's skip grid K,
+// whose bound is st::kMaxSkipLevel in tile_cut_grid.hpp).
+inline constexpr uint32_t kMaxSkipListLevel = 6;
 
 // Tagged references (root, skip entries): tag in the top 2 bits, index below.
 inline constexpr uint32_t kRefTagMask = 3u << 30;
@@ -65,7 +67,7 @@ struct Header {
   uint32_t version;            //  4
   uint32_t header_bytes;       //  8 = sizeof(Header)
   uint32_t finest_level;       // 12 map is 2^finest_level a side, <= 20
-  uint32_t skip_level;         // 16 S <= min(finest_level, kMaxSkipLevel)
+  uint32_t skip_level;         // 16 S <= min(finest_level, kMaxSkipListLevel)
   uint32_t root_ref;           // 20 tagged: kRefInner | 0, or kRefTreelet | 0
   uint32_t node_words;         // 24 inner-node section length in 4-byte words
   uint32_t treelet_count;      // 28

@@ -33,7 +33,7 @@ Sections check_header(const Header& h, size_t size) {
   expect_field("total_bytes", offsetof(Header, total_bytes), h.total_bytes, size);
   expect_field("reserved", offsetof(Header, reserved), h.reserved, 0);
   if (h.finest_level > kMaxLevel) fail("finest_level", offsetof(Header, finest_level), "exceeds 20");
-  if (h.skip_level > std::min(h.finest_level, kMaxSkipLevel))
+  if (h.skip_level > std::min(h.finest_level, kMaxSkipListLevel))
     fail("skip_level", offsetof(Header, skip_level), "exceeds min(finest_level, 6)");
   if (h.node_words > kRefIndexMask) fail("node_words", offsetof(Header, node_words), "exceeds 2^30");
   if (h.treelet_count > kRefIndexMask)

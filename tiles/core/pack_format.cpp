@@ -14,6 +14,12 @@
 namespace st {
 
 
+std::string tile_bytes_bounds() {
+  char buf[48];  // (snprintf: g++ 12 warns falsely on short string concatenations here)
+  std::snprintf(buf, sizeof buf, "[%u B, %u MiB]", kMinTileBytes, kMaxTileBytes >> 20);
+  return buf;
+}
+
 std::string hex32(uint32_t v) {
   char buf[16];
   std::snprintf(buf, sizeof buf, "0x%08x", v);

@@ -40,7 +40,9 @@ inline constexpr uint32_t kMaxParamsBytes = 1 << 20;
 // Upper bound on tile_bytes and on any tile's raw or stored size: a hostile index can
 // make a reader allocate at most this much per tile.
 inline constexpr uint32_t kMaxTileBytes = 64u << 20;
-
+inline constexpr uint32_t kMinTileBytes = 64;  // room for the smallest index tile (d = 1)
+// "[64 B, 64 MiB]": the bounds as error messages and --help state them.
+std::string tile_bytes_bounds();
 enum class PackState : uint32_t { building = 0, complete = 1 };
 
 // Feature flags (header `flags`): what the pack uses, so a client can refuse what it lacks.
