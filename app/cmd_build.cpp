@@ -1,4 +1,4 @@
-// shadowtile build: scene + light -> pack file (issue 4).
+// shadowtile build: scene + light -> pack file.
 #include <csignal>
 #include <cstdio>
 #include <fstream>

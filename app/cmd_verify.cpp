@@ -1,6 +1,6 @@
 // shadowtile verify: checks a pack end to end. Every byte's checksum and every tile's
 // structure (PackReader::verify), then re-traces random texels with Embree and checks the
-// lossless invariant lo <= v <= hi on each (DESIGN.md "Lossless invariant").
+// lossless invariant lo <= v <= hi on each (ARCHITECTURE.md "Definitions").
 #include <cstdio>
 #include <vector>
 

@@ -139,7 +139,7 @@ inline TiledRun trace_and_build_tiles(const DepthBoundsTracer& tracer, uint32_t 
 }
 
 // A float array of 2^level x 2^level (row-major), backed by anonymous memory with
-// transparent huge pages requested (MACHINE.md: random reads over GiBs are ~2x faster).
+// transparent huge pages requested (ARCHITECTURE.md "Measured on the development machines": random reads over GiBs are ~2x faster).
 struct FloatMap {
   uint32_t level = 0;
   uint64_t side = 0;

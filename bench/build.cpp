@@ -1,4 +1,4 @@
-// Build benchmark (issue 4): whole builds of a scene with each encoding next to computing
+// Build benchmark: whole builds of a scene with each encoding next to computing
 // the depth bounds alone (first hit + exit depth) over the same texels, in the same run:
 // wall time, CPU time, peak memory, pack size, texels per second, and build / bounds.
 //

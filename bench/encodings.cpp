@@ -1,4 +1,4 @@
-// Encoded sizes (issue 3 part 5), shaped like DAG-MH 2021 Table 1: for each scene and map
+// Encoded sizes, shaped like DAG-MH 2021 Table 1: for each scene and map
 // side, the bytes of the MH quadtree (MH §3.2), MMH and DAG-MH next to the raw float32
 // shadow map (4 N^2 bytes: the first-hit depths `lo`, i.e. the ordinary shadow map) and
 // that raw map compressed with zstd (level 19 by default, libzstd ZSTD_compress), with

@@ -1,4 +1,4 @@
-// Lookup speed (issue 3 part 5): single taps, 3x3 and 5x5 PCF per second on each
+// Lookup speed: single taps, 3x3 and 5x5 PCF per second on each
 // encoding (MH quadtree MH §3.2/§3.3, MMH, DAG-MH §3.5) of one traced map, each as a ratio
 // to the same lookups on the uncompressed float array of the same map (the hierarchy's
 // finest-level values, huge pages requested), in the same run.

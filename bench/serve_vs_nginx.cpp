@@ -1,6 +1,6 @@
 // Our tile server against nginx serving the same stored tile bytes as static files, under
 // the same load in the same run (everything on 127.0.0.1):
-//   ours        shadowtile::server (1 I/O thread, MACHINE.md) speaking our protocol:
+//   ours        shadowtile::server (1 I/O thread, the default) speaking our protocol:
 //               GetTiles of one tile per request, TileData answers
 //   nginx wN    nginx 1.22 child process (daemon off, master_process off, N workers,
 //               sendfile, keep-alive) serving one file per tile exported with

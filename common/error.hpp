@@ -1,4 +1,4 @@
-// Errors by layer (STYLE.md): `assert` for programmer contracts, ST_CHECK for data
+// Errors by layer (ARCHITECTURE.md "Errors, bad input, numbers"): `assert` for programmer contracts, ST_CHECK for data
 // invariants that must hold in release builds, and st::Error (a one-line message naming
 // the file/field at fault) for bad user input and I/O. Library code throws st::Error;
 // only main() turns it into an exit code.

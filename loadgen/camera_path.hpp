@@ -1,9 +1,9 @@
-// Synthetic cameras for the load tester (issue 6): where the map's receivers lie in
+// Synthetic cameras for the load tester: where the map's receivers lie in
 // world space, and deterministic seeded camera paths over them.
 //
 // A pack header carries only the light space, not the scene. The world region the map
 // covers is recovered from the skip grid: every level-K entry's value is a depth inside
-// the interval of its node (DESIGN.md "Multiresolution"), so the point at that depth on
+// the interval of its node (ARCHITECTURE.md "Definitions"), so the point at that depth on
 // the entry's light ray lies on (or inside) geometry. Percentiles of those points' heights
 // give a ground height and a top; their x/z range the footprint cameras move over.
 //

@@ -1,4 +1,4 @@
-// The load tester's runner (issue 6): N synthetic cameras over C client connections
+// The load tester's runner: N synthetic cameras over C client connections
 // (camera i uses connection i % C; cameras on one connection share its map and cache,
 // like several views of one game), each on its own frame clock. The cameras' frames run
 // on a few worker threads and the connections' fetchers on a shared client::IoPool, so

@@ -1,4 +1,4 @@
-// What one camera frame needs from the map (issue 6): a grid of screen samples is cast
+// What one camera frame needs from the map: a grid of screen samples is cast
 // onto the ground plane of the WorldFrame (the receivers the frame shades), and each
 // sample picks the map level whose texel matches its pixel's footprint (finer near the
 // camera, coarser far away: the hierarchy's every level is a complete map, MH §3.3).

@@ -38,9 +38,9 @@ inline constexpr std::size_t kMaxMapsListed = 4096;
 inline constexpr std::size_t kMaxCounters = 1024;
 inline constexpr std::size_t kMaxHistograms = 64;
 inline constexpr std::size_t kMaxHistogramBuckets = 64;
-inline constexpr std::uint8_t kMaxResolutionLog2 = 30;   // DESIGN.md allows L <= 20 today
+inline constexpr std::uint8_t kMaxResolutionLog2 = 30;   // packs allow L <= 20 today (kMaxLevel)
 
-// TileData.flags bit 0: the payload is zlib format (DESIGN.md: packs store tiles already
+// TileData.flags bit 0: the payload is zlib format (packs store tiles already
 // compressed). Clear: the payload is the raw tile and uncompressed_size == its length.
 // Bits 1..15 are copied from the pack's tile index untouched (opaque to proto).
 inline constexpr std::uint16_t kTileFlagZlib = 0x0001;

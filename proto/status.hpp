@@ -1,5 +1,5 @@
 // Status: the result of every proto operation that can fail on bad input. Nothing in
-// proto throws on bad bytes (exceptions never cross the library boundary, STYLE.md
+// proto throws on bad bytes (exceptions never cross the library boundary, ARCHITECTURE.md "Errors, bad input, numbers"
 // Embree anchor); only std::bad_alloc can escape, and never because of a length read
 // off the wire (decoders cap every allocation by the bytes actually present).
 #pragma once

@@ -1,4 +1,4 @@
-// The shadowtile tile server (DESIGN.md "What it is"): serves the tiles of many packs over
+// The shadowtile tile server (ARCHITECTURE.md "What it is"): serves the tiles of many packs over
 // the wire protocol (proto/PROTOCOL.md) with Boost.Asio.
 //
 // Shape (Asio http server example): Server owns the io_context, the acceptor and the
@@ -27,7 +27,7 @@ namespace st::server {
 struct ServerOptions {
   std::string host = "127.0.0.1";
   uint16_t port = 7447;  // 0: an ephemeral port (see Server::port())
-  unsigned threads = 1;  // I/O threads; one beat two on 2 cores for small blobs (MACHINE.md)
+  unsigned threads = 1;  // I/O threads; one beat two on 2 cores for small blobs (measured)
   // The most this server grants any client; the handshake takes the smaller of each pair.
   proto::Limits limits{};
   size_t max_connections = 1024;         // beyond: Error(overloaded) and close

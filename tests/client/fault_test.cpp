@@ -1,4 +1,4 @@
-// Fault injection over loopback (issue 7 "Faults"): the server killed mid-stream and
+// Fault injection over loopback: the server killed mid-stream and
 // restarted; a pack truncated or bit-flipped on disk while it is served; a client that
 // drips one byte at a time; a client that opens connections without end. Every case ends
 // with zero lost or wrong tiles for the well-behaved clients: each texel is compared

@@ -1,4 +1,4 @@
-// TLS over loopback (client/stream.hpp; server --tls-cert/--tls-key, client tls options):
+// TLS over loopback (net/stream.hpp; server --tls-cert/--tls-key, client tls options):
 // tiles arrive bit-exactly through TLS, together with the key proof; a client that does
 // not trust the certificate, expects another name, or speaks plain TCP to a TLS server
 // (or TLS to a plain one) gets nothing; bad certificate files are clear errors. The

@@ -1,4 +1,4 @@
-// The lossless invariant on real traced scenes (issue 3 tests): cube, city, terrain and
+// The lossless invariant on real traced scenes: cube, city, terrain and
 // hairball, every encoding, both constructions, every texel; and a million random texels
 // of an 8K^2 city built tile by tile (MH §3.1 tiled construction).
 #include <gtest/gtest.h>

@@ -64,7 +64,7 @@ struct NamedField {
 // All generators above (constant = [0.25, 0.5]) at one size.
 std::vector<NamedField> all_fields(uint32_t side, uint64_t seed);
 
-// Lossless invariant (DESIGN.md): returns "" if value(i, j) lies in tile.at(i, j)
+// Lossless invariant (ARCHITECTURE.md "Definitions"): returns "" if value(i, j) lies in tile.at(i, j)
 // bit-exactly for every texel, else a one-line description of the first failure.
 std::string first_violation(const IntervalTile& tile, const std::function<float(uint32_t, uint32_t)>& value);
 

@@ -1,4 +1,4 @@
-// End-to-end map builds (issue 4): scene -> Embree bounds -> MH -> encode -> pack, then the
+// End-to-end map builds: scene -> Embree bounds -> MH -> encode -> pack, then the
 // pack is checked against a fresh trace of every texel (the lossless invariant), across
 // encodings, a killed-and-resumed build, and a region of a 2^20 map.
 #include <gtest/gtest.h>

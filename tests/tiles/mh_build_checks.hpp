@@ -1,4 +1,4 @@
-// Checks of a Hierarchy (tiles/core/hierarchy.hpp) against its contract, shared by the
+// Checks of a Hierarchy (tiles/build/hierarchy.hpp) against its contract, shared by the
 // construction tests and the encoders' tests. Each returns "" when the property holds,
 // else a one-line description of the first failure.
 #pragma once

@@ -68,7 +68,7 @@ inline std::string check_within_answering_intervals(const Evaluator& ev, const H
 }
 
 // Lossless at the finest level and every coarser level within [min lo, max hi] of the
-// texels below it (DESIGN.md "Lossless invariant", "Multiresolution").
+// texels below it (ARCHITECTURE.md "Definitions", "Multiresolution").
 inline std::string check_lossless_all_levels(const Evaluator& ev, const IntervalTile& tile) {
   const uint32_t depth = tile.level;
   if (ev.finest_level() != depth) return "finest_level differs from the tile level";

@@ -22,7 +22,7 @@ namespace {
 // hit tells at once whether it counts (MH §3.1: open geometry gives hi = lo).
 constexpr unsigned kClosedGeom = 0, kOpenGeom = 1;
 
-// Packets: 8 lanes over 2 rows x 4 columns of texels (MACHINE.md: rtcIntersect8 on
+// Packets: 8 lanes over 2 rows x 4 columns of texels (ARCHITECTURE.md "Measured on the development machines": rtcIntersect8 on
 // coherent rays is the fastest Embree 3 query here).
 constexpr unsigned kLanes = 8, kPacketW = 4, kPacketH = 2;
 

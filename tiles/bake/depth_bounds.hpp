@@ -11,7 +11,7 @@
 // Hits are processed in groups of equal t (every primitive hit at exactly that t is
 // collected in the same traversal by an intersection filter, then the next traversal
 // starts at tnear = t and excludes every primitive already processed): no epsilon steps,
-// so coplanar and touching faces are handled (MACHINE.md pitfall). Within a group a mesh
+// so coplanar and touching faces are handled (a naive epsilon loop breaks on them). Within a group a mesh
 // contributes sign(sum of its facings) in {-1, 0, +1}.
 //
 // Touching faces (a building standing on the ground slab): Embree's float t of coplanar

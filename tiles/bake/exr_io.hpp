@@ -1,4 +1,4 @@
-// Depth-interval maps as OpenEXR files (DESIGN.md: depths are float32, never quantized).
+// Depth-interval maps as OpenEXR files (ARCHITECTURE.md "Definitions": depths are float32, never quantized).
 //
 // Layout of a file written here (OpenEXR 3, lossless ZIP compression):
 //   channels   "hi", "lo"   FLOAT (32-bit), one sample per texel

@@ -1,4 +1,4 @@
-// The out-of-core, parallel map build (issue 4; DESIGN.md "Pipeline"): level-K cells
+// The out-of-core, parallel map build (ARCHITECTURE.md "Pipeline"): level-K cells
 // stream through  bounds (Embree) -> MH construction -> cut + encode -> compress -> append
 // with memory bounded by the cell size and the thread count, never by the map's
 // resolution. Cells larger than kMaxTraceSide are traced in sub-tiles whose hierarchies

@@ -49,7 +49,7 @@ std::vector<MeshSoup> make_plane(Params& p) {
   return {std::move(m)};
 }
 
-// Exit-depth cases (DESIGN.md "Depth interval"): overlapping solids (the counter reaches
+// Exit-depth cases (ARCHITECTURE.md "Definitions"): overlapping solids (the counter reaches
 // 2 inside both) and a solid nested inside another.
 std::vector<MeshSoup> make_boxes(Params& p) {
   p.finish();

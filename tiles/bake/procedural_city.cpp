@@ -1,6 +1,6 @@
 // procedural:city — the default scene: a grid of blocks on a closed ground slab. Every
 // mesh is a closed solid; together they cover the shapes that stress exit-depth tracing
-// (DESIGN.md "Depth interval"): boxes of many sizes, L-shapes (concave footprints),
+// (ARCHITECTURE.md "Definitions"): boxes of many sizes, L-shapes (concave footprints),
 // towers with setbacks (horizontal steps), thin walls, overhangs (balconies, a slab on
 // pillars, bridges between towers), courtyards (genus-1 solids) and intersecting solids
 // (balconies inside their building's mesh, bridges entering two towers).

@@ -1,10 +1,10 @@
-// Rendering a camera view shaded with a shadow map (issue 6, `shadowtile render` and
+// Rendering a camera view shaded with a shadow map (`shadowtile render` and
 // `report`): Embree primary rays find the receivers, simple Lambert shading, and the
 // shadow term comes from any st::Evaluator (a pack, a client's tile cache) or, for
 // ground truth, from Embree shadow rays toward the light.
 //
 // Receivers and bias. The map's lit test is receiver_depth <= stored value with the
-// stored value inside the texel's dual depth interval [lo, hi] (DESIGN.md "Definitions").
+// stored value inside the texel's dual depth interval [lo, hi] (ARCHITECTURE.md "Definitions").
 // A receiver on a light-facing CLOSED surface lies at about lo while hi is where the ray
 // leaves the object (MH §3, "dual depth"), so in principle no bias is needed. Measured
 // on the city: the bottom-up construction often stores a child's lo itself (MH §3.1 mode

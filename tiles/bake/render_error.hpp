@@ -1,4 +1,4 @@
-// Shadow error of a map against ray-traced ground truth (issue 6, `shadowtile report`).
+// Shadow error of a map against ray-traced ground truth (`shadowtile report`).
 //
 // A FrameTruth holds one camera frame's receivers (Embree primary rays) and, for every
 // light-facing receiver, the ray-traced visibility (one shadow ray) and, per PCF radius,

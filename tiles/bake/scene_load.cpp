@@ -118,7 +118,7 @@ Scene load_file(const std::string& path, const SceneOptions& options) {
 
   Assimp::Importer importer;
   // Validation stays on: assimp 5.2.5 crashes on some inputs (Quake 3 .bsp) without it
-  // (MACHINE.md). No JoinIdenticalVertices/FindDegenerates: welding and degenerate
+  // (seen with assimp 5.2.5). No JoinIdenticalVertices/FindDegenerates: welding and degenerate
   // removal happen in append_mesh() so they are counted and identical for all sources.
   const unsigned flags = aiProcess_Triangulate | aiProcess_ValidateDataStructure;
   const aiScene* as = nullptr;

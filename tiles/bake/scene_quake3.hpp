@@ -1,6 +1,6 @@
 // Quake 3 maps (IBSP version 46), read by our own bounds-checked parser: assimp 5.2.5's
 // Q3BSP importer never produces valid meshes (its validation fails) and reads out of
-// bounds on hostile files before validation runs (MACHINE.md), so assimp never sees them.
+// bounds on hostile files before validation runs (seen with assimp 5.2.5), so assimp never sees them.
 #pragma once
 #include <cstdint>
 #include <string>

@@ -1,5 +1,5 @@
 // DAG-MH value chunks: our reconstruction of the encoder of DAG-MH §3.3 (partly missing
-// from our copy of the paper), following DESIGN.md "Encodings":
+// from our copy of the paper), following ARCHITECTURE.md "Encodings":
 //   1. base value: the point covered by the most admissible intervals of the chunk,
 //      found by a sweep over the sorted bounds (the best point is always some lo);
 //   2. the intervals not containing the base get multipliers: the fewest factor bits k

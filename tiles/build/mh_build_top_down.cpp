@@ -13,7 +13,7 @@
 // stays empty and the decision moves to its children (whose windows are wider).
 // Invariant: every covered texel of a region contains the decision value of the region's
 // nearest valued ancestor; so values are chosen inside D = C ∩ (the intervals newly
-// covered), which keeps every level a complete map (DESIGN.md "Multiresolution").
+// covered), which keeps every level a complete map (ARCHITECTURE.md "Definitions").
 // HNode::lo/hi is that D: a subset of the node's exact admissible interval, as coarse
 // decisions are overridden by finer nodes for some of the texels they covered.
 //

@@ -1,5 +1,5 @@
 // The 2x2 level step of the bottom-up construction (MH §3.1, Alg. 2; the authors' demo,
-// DESIGN.md notes). Private to mh_build*.cpp. A portable scalar version (the reference)
+// lscandolo/Compressed-shadow-maps, QuadtreeCreation.cu). Private to mh_build*.cpp. A portable scalar version (the reference)
 // and an SSE2 one (x86-64 baseline) that tests check against each other.
 //
 // Given the four children's intervals I_c (child order, hierarchy.hpp) and `desc` (bit c

@@ -1,4 +1,4 @@
-// MMH: the MH quadtree with compatible subtrees merged (DESIGN.md "Encodings", after the
+// MMH: the MH quadtree with compatible subtrees merged (ARCHITECTURE.md "Encodings", after the
 // MH/MMH authors' public demo). Plans which subtrees share one children block and what
 // each shared node stores; mh_quadtree_layout.cpp then lays the plan out.
 //

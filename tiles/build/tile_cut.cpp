@@ -65,7 +65,7 @@ SplitResult split_hierarchy(const Hierarchy& h, uint32_t d) {
   s.grid.levels = d;
   s.grid.coarse.resize(CutGrid::coarse_count(d));
   // Dense values of levels 0..d, top-down: a node's value answers its level unless a
-  // descendant level stores its own (DESIGN.md "Multiresolution").
+  // descendant level stores its own (ARCHITECTURE.md "Definitions").
   std::vector<float> prev{h.levels[0][0].value}, cur;
   for (uint32_t j = 1; j <= d; ++j) {
     std::copy(prev.begin(), prev.end(), s.grid.coarse.begin() + CutGrid::coarse_count(j - 1));

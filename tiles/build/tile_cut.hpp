@@ -1,4 +1,4 @@
-// The cut of a hierarchy into tiles (DESIGN.md "Tiles, skip list and pack files"; MH §3.1
+// The cut of a hierarchy into tiles (ARCHITECTURE.md "Tiles, skip grid and packs"; MH §3.1
 // "Tiled construction"; DAG-MH §3.7 skip list).
 //
 // A map of level L is cut at the skip level K: a dense 2^K x 2^K grid of entries (the

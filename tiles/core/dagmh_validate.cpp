@@ -1,4 +1,4 @@
-// DAG-MH validation: hostile input is the normal case (STYLE.md). Never trusts a length:
+// DAG-MH validation: hostile input is the normal case (ARCHITECTURE.md "Rules a change must keep"). Never trusts a length:
 // every section's extent is derived from counts in 64-bit arithmetic and compared to
 // the header's offsets and to the buffer's size.
 #include "tiles/core/dagmh_validate.hpp"

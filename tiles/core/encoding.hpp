@@ -1,4 +1,4 @@
-// The encodings of a hierarchy (DESIGN.md "Encodings"): each is one self-contained byte
+// The encodings of a hierarchy (ARCHITECTURE.md "Encodings"): each is one self-contained byte
 // buffer with offsets, no pointers, read in place by its evaluator (the same bytes later
 // sit in a pack, on the wire and in a GPU cache slot).
 //

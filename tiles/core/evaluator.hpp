@@ -1,6 +1,6 @@
 // One evaluator interface for every encoding (MH quadtree, MMH, DAG-MH, packs, the
 // client's cache). Every level of the hierarchy is a complete shadow map of 2^level
-// texels a side (DESIGN.md "Multiresolution").
+// texels a side (ARCHITECTURE.md "Definitions").
 //
 // Thread safety: const methods may be called concurrently from many threads.
 // Coordinates are integer texels of the given level; callers clamp (x, y < 2^level).

@@ -1,4 +1,4 @@
-// Depth intervals: the contract every module shares (DESIGN.md "Definitions").
+// Depth intervals: the contract every module shares (ARCHITECTURE.md "Definitions").
 //
 // For each texel the ray from the light through its centre gives `lo` = first hit and
 // `hi` = where it leaves all closed objects (MH §3, voxel paper §6.1); open geometry has

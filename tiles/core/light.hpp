@@ -1,4 +1,4 @@
-// Light space (DESIGN.md "Definitions"). A directional light ("sun") uses an orthographic
+// Light space (ARCHITECTURE.md "Definitions"). A directional light ("sun") uses an orthographic
 // box fitted to the scene; a spot light a perspective frustum. A world point maps to
 // (u, v, d): u, v in [0,1) across the map, d in [0,1] linear between near and far
 // (for a spot light: linear in distance along the light axis). All math in double.

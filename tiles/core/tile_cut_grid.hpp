@@ -1,4 +1,4 @@
-// The page table of a cut hierarchy (DESIGN.md "Tiles, skip list and pack files"; DAG-MH
+// The page table of a cut hierarchy (ARCHITECTURE.md "Tiles, skip grid and packs"; DAG-MH
 // §3.7 skip list): a dense grid of entries at one level plus the values of every coarser
 // level (a mip pyramid), and the stable ids of the tiles the entries point at.
 //

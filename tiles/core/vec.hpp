@@ -1,4 +1,4 @@
-// Small double-precision vector math for transforms (DESIGN.md: transforms in double).
+// Small double-precision vector math for transforms (ARCHITECTURE.md "Definitions": transforms in double).
 #pragma once
 #include <cmath>
 
