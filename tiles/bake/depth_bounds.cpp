@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "common/error.hpp"
+#include "tiles/bake/exit_depth.hpp"
 
 namespace st {
 namespace {
@@ -22,62 +23,22 @@ namespace {
 // hit tells at once whether it counts (MH §3.1: open geometry gives hi = lo).
 constexpr unsigned kClosedGeom = 0, kOpenGeom = 1;
 
-// Packets: 8 lanes over 2 rows x 4 columns of texels (ARCHITECTURE.md "Measured on the development machines": rtcIntersect8 on
-// coherent rays is the fastest Embree 3 query here).
+// Packets: 8 lanes over 2 rows x 4 columns of texels: rtcIntersect8 on coherent rays
+// was the fastest Embree 3 query measured for these maps.
 constexpr unsigned kLanes = 8, kPacketW = 4, kPacketH = 2;
 
-// Per-ray table bounds; exceeding one makes the ray fall back to hi = lo (conservative).
-constexpr uint32_t kMaxGroup = 16;       // hits at one exactly equal t
-constexpr uint32_t kMaxDone = 48;        // primitives already processed on one ray
-constexpr uint32_t kMaxMeshes = 16;      // closed meshes one ray is inside at once
-constexpr uint32_t kMaxTraversals = 64;  // traversals per ray
-
-// Embree's float t is not exact, and neither is its box culling: a triangle whose float
-// t lies an ulp below the accepted hit can be culled in that traversal and then fall
-// below the next traversal's tnear (seen on the city: ground top vs building bottom).
-// So re-traces start kBackoff * t_range before the last group (processed primitives are
-// excluded by id, so nothing is counted twice), and after the counters reach 0 at float
-// t1 a look-ahead gathers every unprocessed closed hit in t1 +- kLookAhead * t_range
-// (wide enough for float error on big triangles); such a hit counts as touching the exit
-// (a box standing on another) only if its exact ray-plane t in double is within
-// kTouchDouble * t_range of the exit's.
-constexpr float kBackoff = 16.0f / (1 << 24);
-constexpr float kLookAhead = 1.0f / (1 << 13);
-constexpr double kTouchDouble = 1e-9;
-
-constexpr float kNoHit = std::numeric_limits<float>::infinity();
-
-// What the intersection filter gathers for one ray during one traversal: the smallest t
-// not yet processed and every primitive hit at exactly that t.
-struct LaneHits {
-  float best_t;
-  uint32_t n_group;
-  uint32_t n_done;
-  bool overflow;
-  bool window;  // look-ahead: record every unprocessed hit up to tfar, accept none
-  uint64_t group[kMaxGroup];
-  uint64_t done[kMaxDone];  // primitives of earlier groups: never counted twice
-};
-
 // Embree passes our context pointer to the filter; RTCIntersectContext must come first.
+// Each lane's counting state also holds what the filter gathers for it.
 struct FilterContext {
   RTCIntersectContext ctx;
-  LaneHits lane[kLanes];
+  ExitDepthRay lane[kLanes];
 };
 static_assert(std::is_standard_layout_v<FilterContext>);
 
-inline uint64_t hit_key(unsigned geom, unsigned prim) { return (uint64_t(geom) << 32) | prim; }
-
-inline bool contains(const uint64_t* keys, uint32_t n, uint64_t key) {
-  for (uint32_t i = 0; i < n; ++i)
-    if (keys[i] == key) return true;
-  return false;
-}
-
-// Collects the full group of hits at the smallest t: a smaller t is accepted (Embree
-// then shrinks tfar to it); an equal t is recorded and rejected, so traversal goes on
-// and reports the other primitives at that t too (Embree's depth test is t <= tfar).
-void collect_equal_t(const RTCFilterFunctionNArguments* args) {
+// Hands every candidate hit to its ray's counter, which accepts a smaller t (Embree then
+// shrinks tfar to it) and rejects the rest; an equal t is recorded on the way, and since
+// Embree's depth test is t <= tfar the other primitives at that t are reported too.
+void offer_hits(const RTCFilterFunctionNArguments* args) {
   auto* fc = reinterpret_cast<FilterContext*>(args->context);
   const unsigned n = args->N;
   for (unsigned i = 0; i < n; ++i) {
@@ -87,40 +48,11 @@ void collect_equal_t(const RTCFilterFunctionNArguments* args) {
       args->valid[i] = 0;
       continue;
     }
-    LaneHits& h = fc->lane[lane];
+    const bool closed = RTCHitN_geomID(args->hit, n, i) == kClosedGeom;
     const float t = RTCRayN_tfar(args->ray, n, i);
-    const uint64_t key = hit_key(RTCHitN_geomID(args->hit, n, i), RTCHitN_primID(args->hit, n, i));
-    if (contains(h.done, h.n_done, key)) {
-      args->valid[i] = 0;
-    } else if (h.window) {
-      if (!contains(h.group, h.n_group, key)) {
-        if (h.n_group < kMaxGroup) h.group[h.n_group++] = key;
-        else h.overflow = true;
-      }
-      args->valid[i] = 0;  // never shrink tfar: the whole window is searched
-    } else if (t < h.best_t) {
-      h.best_t = t;
-      h.group[0] = key;
-      h.n_group = 1;
-      h.overflow = false;  // accepted: tfar becomes t
-    } else {
-      if (t == h.best_t && !contains(h.group, h.n_group, key)) {
-        if (h.n_group < kMaxGroup) h.group[h.n_group++] = key;
-        else h.overflow = true;
-      }
-      args->valid[i] = 0;
-    }
+    if (!fc->lane[lane].offer(t, closed, RTCHitN_primID(args->hit, n, i))) args->valid[i] = 0;
   }
 }
-
-// Host-side counting state of one ray.
-struct LaneCount {  // plain data: trace_packet resets n_mesh and total per ray
-  uint32_t n_mesh;
-  int32_t total;
-  uint32_t mesh[kMaxMeshes];
-  int32_t count[kMaxMeshes];
-};
-
 
 }  // namespace
 
@@ -135,14 +67,7 @@ struct DepthBoundsTracer::Impl {
   Vec3d centre;
   RTCDevice device = nullptr;
   RTCScene scene = nullptr;
-  // closed prim -> (scene mesh index << 2) | facing code: one 4-byte random read per hit.
-  // Facing codes: 0 front (+1), 1 back (-1), 2 edge-on (0), 3 depends on the ray (spot).
-  std::vector<uint32_t> closed_info;
-  std::vector<Vec3d> closed_normal;   // closed prim -> geometric normal (double, outwards)
-  std::vector<double> closed_plane;   // closed prim -> dot(normal, v0 - centre)
-  // closed prim -> 1 when a closed prim of another mesh lies in the same plane facing the
-  // other way (a possible touching contact); exits through other prims need no look-ahead.
-  std::vector<uint8_t> closed_touchable;
+  ClosedFaces closed_faces;  // by primitive id of the closed geometry; planes relative to centre
   uint64_t triangles = 0;
   bool any_closed = false;
   double build_s = 0;
@@ -156,14 +81,6 @@ struct DepthBoundsTracer::Impl {
   void mark_touchable(double scene_size);
   void trace_packet(const TraceRegion& r, uint32_t px, uint32_t py, TraceMode mode,
                     IntervalTile& out, DepthBoundsStats& st) const;
-  bool apply_group(const LaneHits& h, const Vec3d& dir, LaneCount& c,
-                   uint32_t& closed_hits) const;
-  float depth_of(float t) const;
-  // Exact ray parameter of the plane of closed prim `prim` (double, recentred origin).
-  double plane_t(uint32_t prim, const Vec3d& origin_c, const Vec3d& dir) const {
-    const Vec3d& n = closed_normal[prim];
-    return (closed_plane[prim] - dot(n, origin_c)) / dot(n, dir);
-  }
 };
 
 namespace {
@@ -256,14 +173,13 @@ void DepthBoundsTracer::Impl::build(const Scene& s) {
       ip[3 * k] = t[0], ip[3 * k + 1] = t[1], ip[3 * k + 2] = t[2];
       if (closed) {
         const Vec3d& a = s.vertices[t[0]];
-        closed_normal.push_back(cross(s.vertices[t[1]] - a, s.vertices[t[2]] - a));
-        uint32_t code = 3;
+        const Vec3d normal = cross(s.vertices[t[1]] - a, s.vertices[t[2]] - a);
+        Facing facing = Facing::per_ray;
         if (light.kind() == LightKind::sun) {  // one direction for every texel ray
-          const double f = dot(closed_normal.back(), light.forward());
-          code = f < 0 ? 0 : (f > 0 ? 1 : 2);
+          const double f = dot(normal, light.forward());
+          facing = f < 0 ? Facing::front : (f > 0 ? Facing::back : Facing::edge_on);
         }
-        closed_info.push_back(tri_mesh[i] << 2 | code);
-        closed_plane.push_back(dot(closed_normal.back(), a - centre));
+        closed_faces.add(tri_mesh[i], facing, normal, dot(normal, a - centre));
       }
       ++k;
     }
@@ -272,7 +188,7 @@ void DepthBoundsTracer::Impl::build(const Scene& s) {
     rtcReleaseGeometry(g);
   }
   rtcReleaseBuffer(vbuf);
-  any_closed = !closed_info.empty();
+  any_closed = closed_faces.size() != 0;
   mark_touchable(b.empty() ? 1.0 : std::max({b.extent().x, b.extent().y, b.extent().z, 1e-300}));
   rtcCommitScene(scene);
   if (rtcGetDeviceError(device) != RTC_ERROR_NONE)
@@ -303,90 +219,41 @@ void DepthBoundsTracer::Impl::mark_touchable(double scene_size) {
     uint32_t mesh;
     int8_t orientation;
   };
-  const size_t n = closed_info.size();
+  const size_t n = closed_faces.size();
   std::vector<Key> keys(n);
   std::vector<int8_t> orient(n, 0);
   std::unordered_map<Key, std::vector<Side>, KeyHash> planes;
   planes.reserve(n / 2 + 1);
   for (size_t k = 0; k < n; ++k) {
-    const Vec3d& nn = closed_normal[k];
+    const Vec3d& nn = closed_faces.normal[k];
     const double len = length(nn);
     if (!(len > 0) || !std::isfinite(len)) continue;
     const Vec3d u = nn / len;
     const double ax = std::fabs(u.x), ay = std::fabs(u.y), az = std::fabs(u.z);
     const double major = ax >= ay && ax >= az ? u.x : (ay >= az ? u.y : u.z);
     const int8_t o = major > 0 ? 1 : -1;
-    const double d = closed_plane[k] / len * o / scene_size;
+    const double d = closed_faces.plane[k] / len * o / scene_size;
     keys[k] = {{std::llround(u.x * o * 0x1p24), std::llround(u.y * o * 0x1p24),
                 std::llround(u.z * o * 0x1p24), std::llround(d * 0x1p32)}};
     orient[k] = o;
     auto& sides = planes[keys[k]];
-    const uint32_t mesh = closed_info[k] >> 2;
+    const uint32_t mesh = closed_faces.mesh(uint32_t(k));
     bool seen = false;
     for (const Side& sd : sides) seen |= sd.mesh == mesh && sd.orientation == o;
     if (!seen && sides.size() < 8) sides.push_back({mesh, o});
   }
-  closed_touchable.assign(n, 0);
+  closed_faces.touchable.assign(n, 0);
   for (size_t k = 0; k < n; ++k) {
     if (orient[k] == 0) continue;
     const auto& sides = planes[keys[k]];
     if (sides.size() >= 8) {  // crowded plane: assume contact
-      closed_touchable[k] = 1;
+      closed_faces.touchable[k] = 1;
       continue;
     }
     for (const Side& sd : sides)
-      if (sd.mesh != closed_info[k] >> 2 && sd.orientation != orient[k]) closed_touchable[k] = 1;
+      if (sd.mesh != closed_faces.mesh(uint32_t(k)) && sd.orientation != orient[k])
+        closed_faces.touchable[k] = 1;
   }
-}
-
-float DepthBoundsTracer::Impl::depth_of(float t) const {
-  double d = light.kind() == LightKind::sun
-                 ? double(t)
-                 : (double(t) - light.near_plane()) / (light.far_plane() - light.near_plane());
-  return float(std::clamp(d, 0.0, 1.0));
-}
-
-// Applies one group of equal-t hits to a ray's per-mesh counters (MH §3; voxel §6.1).
-// Returns false when the counters can no longer be trusted; `closed_hits` receives the
-// number of closed-geometry hits in the group (open ones are ignored).
-bool DepthBoundsTracer::Impl::apply_group(const LaneHits& h, const Vec3d& dir, LaneCount& c,
-                                          uint32_t& closed_hits) const {
-  closed_hits = 0;
-  if (h.overflow) return false;
-  // Per mesh: sign of the summed facings, so two triangles of one mesh reported at a
-  // shared edge count once, and a silhouette edge (front + back) counts zero.
-  uint32_t meshes[kMaxGroup];
-  int32_t sums[kMaxGroup];
-  uint32_t n = 0;
-  for (uint32_t i = 0; i < h.n_group; ++i) {
-    if ((h.group[i] >> 32) != kClosedGeom) continue;  // open: ignored inside closed objects
-    ++closed_hits;
-    const uint32_t prim = uint32_t(h.group[i]);
-    const uint32_t info = closed_info[prim], m = info >> 2;
-    int32_t facing = (info & 3) == 0 ? 1 : ((info & 3) == 1 ? -1 : 0);
-    if ((info & 3) == 3) {
-      const double f = dot(closed_normal[prim], dir);
-      facing = f < 0 ? 1 : (f > 0 ? -1 : 0);  // against the outward normal: entering
-    }
-    uint32_t j = 0;
-    while (j < n && meshes[j] != m) ++j;
-    if (j == n) meshes[n] = m, sums[n] = 0, ++n;
-    sums[j] += facing;
-  }
-  for (uint32_t j = 0; j < n; ++j) {
-    const int32_t net = std::clamp(sums[j], -1, 1);
-    if (net == 0) continue;
-    uint32_t k = 0;
-    while (k < c.n_mesh && c.mesh[k] != meshes[j]) ++k;
-    if (k == c.n_mesh) {
-      if (net < 0 || c.n_mesh == kMaxMeshes) return false;
-      c.mesh[k] = meshes[j], c.count[k] = 0, ++c.n_mesh;
-    }
-    c.count[k] += net;
-    c.total += net;
-    if (c.count[k] < 0) return false;  // never trust a negative counter
-  }
-  return true;
 }
 
 void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, uint32_t py,
@@ -398,23 +265,18 @@ void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, ui
   rtcInitIntersectContext(&fc.ctx);
   fc.ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
   const bool counting = mode == TraceMode::bounds && any_closed;
-  fc.ctx.filter = counting ? collect_equal_t : nullptr;
+  fc.ctx.filter = counting ? offer_hits : nullptr;
 
   const bool sun = light.kind() == LightKind::sun;
   const float t_min = sun ? 0.0f : float(light.near_plane());
   const float t_max = sun ? 1.0f : float(light.far_plane());
 
-  Vec3d dirs[kLanes], origins[kLanes];
-  float lo_t[kLanes], floor_t[kLanes] = {};
   bool active[kLanes];
-  LaneCount counts[kLanes];
   uint32_t n_lanes = 0;
   for (unsigned l = 0; l < kLanes; ++l) {
     const uint32_t i = px * kPacketW + l % kPacketW, j = py * kPacketH + l / kPacketW;
     active[l] = i < r.width && j < r.height;
     valid[l] = active[l] ? -1 : 0;
-    lo_t[l] = kNoHit;
-    counts[l].n_mesh = 0, counts[l].total = 0;
     rh.ray.tnear[l] = t_min;
     rh.ray.tfar[l] = t_max;
     rh.ray.mask[l] = 0xFFFFFFFFu;
@@ -430,13 +292,10 @@ void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, ui
     ++n_lanes;
     LightRay ray = light.texel_ray(r.level, r.x0 + i, r.y0 + j);
     const Vec3d o = ray.origin - centre;
-    dirs[l] = ray.dir;
-    origins[l] = o;
     rh.ray.org_x[l] = float(o.x), rh.ray.org_y[l] = float(o.y), rh.ray.org_z[l] = float(o.z);
     rh.ray.dir_x[l] = float(ray.dir.x), rh.ray.dir_y[l] = float(ray.dir.y);
     rh.ray.dir_z[l] = float(ray.dir.z);
-    LaneHits& h = fc.lane[l];
-    h.best_t = kNoHit, h.n_group = 0, h.n_done = 0, h.overflow = false, h.window = false;
+    fc.lane[l].start(closed_faces, o, ray.dir, t_min, t_max);
   }
   if (n_lanes == 0) return;
   st.rays += n_lanes;
@@ -445,108 +304,32 @@ void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, ui
   // First traversal: lo for everyone, and the first group of hits for counting.
   rtcIntersect8(valid, scene, &fc.ctx, &rh);
   st.traversals += n_lanes;
-  float hi_t[kLanes], exit_t[kLanes];  // exit_t: float t where the counters reached 0
-  double exit_d[kLanes];               // its exact t (max over the exit group, double)
   uint32_t n_active = 0;
   for (unsigned l = 0; l < kLanes; ++l) {
-    hi_t[l] = exit_t[l] = kNoHit;
     if (!active[l]) continue;
-    if (rh.hit.geomID[l] == RTC_INVALID_GEOMETRY_ID) {
-      active[l] = false;
-      continue;
-    }
-    lo_t[l] = counting ? fc.lane[l].best_t : rh.ray.tfar[l];
-    hi_t[l] = lo_t[l];
     active[l] = false;
-    if (!counting) continue;
-    LaneHits& h = fc.lane[l];
-    uint32_t closed_hits = 0;
-    if (!apply_group(h, dirs[l], counts[l], closed_hits) || h.n_group > kMaxDone) {
-      ++st.fallbacks;  // e.g. the first closed hit is a back face: hi = lo
+    if (rh.hit.geomID[l] == RTC_INVALID_GEOMETRY_ID) continue;  // lit
+    if (!counting) {
+      fc.lane[l].take_first_hit(rh.ray.tfar[l]);
       continue;
     }
-    // Open first hit (MH §3: hi = lo) or a grazing touch that enters nothing: hi = lo.
-    if (closed_hits == 0 || counts[l].total == 0) continue;
-    for (uint32_t k = 0; k < h.n_group; ++k) h.done[h.n_done++] = h.group[k];
-    floor_t[l] = h.best_t;
-    active[l] = true;
-    ++n_active;
+    active[l] = fc.lane[l].first_traversal_done();
+    n_active += active[l];
   }
 
-  // Re-trace from tnear = the last group's t (inclusive; processed primitives are
-  // excluded by id) until every counter is back to 0 (MH §3.1 depth peeling), then one
-  // look-ahead confirms the exit or finds a touching entry (see kLookAhead).
-  const float window = kLookAhead * (t_max - t_min);
-  const float backoff = kBackoff * (t_max - t_min);
-  const double touch = kTouchDouble * (double(t_max) - t_min);
-  for (uint32_t pass = 1; n_active > 0; ++pass) {
+  // The counters' further traversals, all lanes still counting in one packet.
+  while (n_active > 0) {
     for (unsigned l = 0; l < kLanes; ++l) {
       valid[l] = active[l] ? -1 : 0;
       if (!active[l]) continue;
-      LaneHits& h = fc.lane[l];
-      h.window = exit_t[l] != kNoHit;
-      rh.ray.tnear[l] = h.window ? std::max(t_min, exit_t[l] - window)
-                                 : std::max(t_min, floor_t[l] - backoff);
-      rh.ray.tfar[l] = h.window ? std::min(t_max, exit_t[l] + window) : t_max;
+      rh.ray.tnear[l] = fc.lane[l].tnear();
+      rh.ray.tfar[l] = fc.lane[l].tfar();
       rh.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
-      h.best_t = kNoHit, h.n_group = 0, h.overflow = false;
     }
     rtcIntersect8(valid, scene, &fc.ctx, &rh);
     st.traversals += n_active;
     for (unsigned l = 0; l < kLanes; ++l) {
-      if (!active[l]) continue;
-      LaneHits& h = fc.lane[l];
-      bool trusted = h.n_done + h.n_group <= kMaxDone && !h.overflow, finished = false;
-      if (h.window) {
-        // Keep the closed hits whose exact t touches the exit; drop the rest (they lie
-        // beyond a real gap and are found again by a later pass if we go on).
-        uint32_t keep = 0;
-        for (uint32_t k = 0; k < h.n_group; ++k) {
-          if ((h.group[k] >> 32) != kClosedGeom) continue;
-          if (plane_t(uint32_t(h.group[k]), origins[l], dirs[l]) <= exit_d[l] + touch)
-            h.group[keep++] = h.group[k];
-        }
-        h.n_group = keep;
-        if (trusted && keep == 0) {
-          hi_t[l] = exit_t[l];  // confirmed: nothing touches the exit
-          finished = true;
-        }
-      } else if (h.n_group == 0) {
-        trusted = false;  // left the scene inside a closed object: do not trust it
-      }
-      if (!finished && trusted) {
-        uint32_t closed_hits = 0;
-        trusted = apply_group(h, dirs[l], counts[l], closed_hits) && pass + 1 < kMaxTraversals;
-      }
-      if (!finished && trusted) {
-        for (uint32_t k = 0; k < h.n_group; ++k) h.done[h.n_done++] = h.group[k];
-        if (h.window) {
-          // Touching entry: inside again; resume from the exit (inclusive) so window hits
-          // that did not touch are still met in order.
-          if (counts[l].total > 0) floor_t[l] = exit_t[l], exit_t[l] = kNoHit;
-        } else {
-          floor_t[l] = h.best_t;
-          if (counts[l].total == 0) {
-            bool touchable = false;
-            for (uint32_t k = 0; k < h.n_group; ++k)
-              touchable |= (h.group[k] >> 32) == kClosedGeom &&
-                           closed_touchable[uint32_t(h.group[k])] != 0;
-            if (!touchable) {  // nothing can touch this exit: no look-ahead needed
-              hi_t[l] = h.best_t;
-              active[l] = false;
-              --n_active;
-              continue;
-            }
-            exit_t[l] = h.best_t;
-            exit_d[l] = -INFINITY;
-            for (uint32_t k = 0; k < h.n_group; ++k)
-              if ((h.group[k] >> 32) == kClosedGeom)
-                exit_d[l] = std::max(exit_d[l], plane_t(uint32_t(h.group[k]), origins[l], dirs[l]));
-          }
-        }
-        continue;
-      }
-      if (!trusted) ++st.fallbacks;
+      if (!active[l] || fc.lane[l].traversal_done()) continue;
       active[l] = false;
       --n_active;
     }
@@ -555,13 +338,11 @@ void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, ui
   for (unsigned l = 0; l < kLanes; ++l) {
     const uint32_t i = px * kPacketW + l % kPacketW, j = py * kPacketH + l / kPacketW;
     if (i >= r.width || j >= r.height) continue;
-    Interval& iv = out.at(i, j);
-    if (lo_t[l] == kNoHit) {
-      iv = Interval{kLitDepth, kLitDepth};
-      continue;
-    }
-    iv.lo = depth_of(lo_t[l]);
-    iv.hi = std::max(iv.lo, depth_of(hi_t[l]));
+    const ExitDepthRay& ray = fc.lane[l];
+    const Interval iv = ray.interval(light);
+    out.at(i, j) = iv;
+    st.fallbacks += ray.fell_back();
+    if (!ray.hit()) continue;
     ++st.hits;
     if (iv.hi > iv.lo) ++st.closed;
   }

@@ -4,28 +4,10 @@
 // (LightSpace::texel_ray) gives an Interval:
 //   lo = depth of the first hit (the ordinary shadow map),
 //   hi = depth where the ray leaves all closed objects again.
-// Counting (MH §3: front faces +1, back faces -1, stop when the counter is back to 0;
-// voxel §6.1: a per-pixel counter handles intersecting closed objects): we keep one
-// counter per closed mesh, so a ray inside mesh A that crosses an edge of a nested mesh B
-// (where watertight traversal may report two triangles) can never make A look exited.
-// Hits are processed in groups of equal t (every primitive hit at exactly that t is
-// collected in the same traversal by an intersection filter, then the next traversal
-// starts at tnear = t and excludes every primitive already processed): no epsilon steps,
-// so coplanar and touching faces are handled (a naive epsilon loop breaks on them). Within a group a mesh
-// contributes sign(sum of its facings) in {-1, 0, +1}.
-//
-// Touching faces (a building standing on the ground slab): Embree's float t of coplanar
-// faces may differ by an ulp either way, and its box culling can hide a hit an ulp below
-// the accepted one. So re-traces start slightly before the last group (ids exclude what
-// was processed), and when the counters reach 0 a short look-ahead around the exit
-// gathers unprocessed closed hits; one counts as touching only when its exact ray-plane
-// t in double equals the exit's (within 1e-9 of the ray's t range).
-//
-// Conservative fallbacks (hi = lo): the first hit group holds no closed hit (open
-// geometry), any counter would go negative (e.g. inverted winding), the ray leaves the
-// scene with a counter > 0, or a bounded per-ray table overflows. Open surfaces met while
-// inside a closed object are ignored. No hit: kLitDepth sentinel [1, 1]. A scene without
-// triangles is valid and traces to [1, 1] everywhere (the caller fits the light).
+// The counting that finds hi (one counter per closed mesh, hits taken in groups of equal
+// t, touching faces, conservative fallbacks to hi = lo, no hit: the kLitDepth sentinel
+// [1, 1]) is ExitDepthRay (exit_depth.hpp); this tracer feeds it Embree's hits. A scene
+// without triangles is valid and traces to [1, 1] everywhere (the caller fits the light).
 //
 // Lossless contract: lo is the first-hit depth of the traced ray and every point of the
 // ray between lo and hi is inside a closed object (up to float32 tracing precision, and

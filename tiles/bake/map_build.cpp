@@ -1,3 +1,6 @@
+// The map build (map_build.hpp) as its stages: check the options, open or resume the
+// pack, plan the cells, run the per-cell pipeline on every hardware thread, finish the
+// pack and report its figures; build_map() strings them together.
 #include "tiles/bake/map_build.hpp"
 
 #include <sys/resource.h>
@@ -6,9 +9,13 @@
 #include <chrono>
 #include <condition_variable>
 #include <exception>
+#include <functional>
 #include <mutex>
 #include <nlohmann/json.hpp>
+#include <string>
 #include <thread>
+#include <utility>
+#include <vector>
 
 #include "tiles/bake/depth_bounds.hpp"
 #include "common/error.hpp"
@@ -29,6 +36,71 @@ double seconds_of(const std::atomic<uint64_t>& ns) { return double(ns.load()) * 
 
 bool cell_touches(const TexelRegion& r, uint64_t x0, uint64_t y0, uint64_t side) {
   return x0 < r.x + r.w && r.x < x0 + side && y0 < r.y + r.h && r.y < y0 + side;
+}
+
+// The cut the options ask for, checked, with the region checked against the map.
+CutParams checked_cut_params(const MapBuildOptions& o) {
+  if (o.map_level > kMaxLevel) throw Error("build: resolution level exceeds 20");
+  CutParams cut;
+  cut.map_level = o.map_level;
+  cut.skip_level = o.skip_level.value_or(default_skip_level(o.map_level));
+  cut.tile_bytes = o.tile_bytes;
+  cut.codec = TileCodec::of(o.encoding);
+  cut.validate();
+  if (o.region) {
+    const uint64_t R = uint64_t(1) << cut.map_level;
+    const auto& r = *o.region;
+    if (r.w == 0 || r.h == 0 || r.x >= R || r.y >= R || r.w > R - r.x || r.h > R - r.y)
+      throw Error("build: --region lies outside the " + std::to_string(R) + "^2 map");
+  }
+  return cut;
+}
+
+// What the pack records of its build: the light and cut, the scene's hash, and the
+// provenance (sorted), which a resumed build must match.
+PackParams pack_params(const Scene& scene, const LightSpace& light, const MapBuildOptions& o,
+                       const CutParams& cut, bool exit_depths) {
+  PackParams pp = PackParams::from(light, cut);
+  pp.scene_hash = scene.content_hash();
+  pp.features = exit_depths ? uint32_t(kFeatureExitDepths) : 0u;
+  pp.compression_level = o.compression_level;
+  pp.build_params = {{"construction", o.construction == MhConstruction::bottom_up ? "bottom-up" : "top-down"},
+                     {"light", o.light_spec.empty() ? light.spec().to_string() : o.light_spec},
+                     {"scene", o.scene_spec.empty() ? scene.name : o.scene_spec},
+                     {"tool", "shadowtile 0.1.0"}};
+  if (o.region)
+    pp.build_params.push_back({"region", std::to_string(o.region->x) + "," + std::to_string(o.region->y) +
+                                             "," + std::to_string(o.region->w) + "," +
+                                             std::to_string(o.region->h)});
+  std::sort(pp.build_params.begin(), pp.build_params.end());
+  return pp;
+}
+
+using CellXY = std::pair<uint32_t, uint32_t>;
+
+// The cells still to build, in Morton order (neighbouring cells share BVH nodes and cache
+// lines). Cells already in the pack are skipped; cells outside the region are appended
+// at once as constant kLitDepth and counted in `outside`.
+std::vector<CellXY> plan_cells(PackWriter& writer, const MapBuildOptions& o, uint32_t skip_level,
+                               uint64_t cell_side, uint64_t& outside) {
+  const uint64_t cells_side = uint64_t(1) << skip_level;
+  std::vector<CellXY> todo;
+  outside = 0;
+  for (uint64_t m = 0; m < cells_side * cells_side; ++m) {
+    uint32_t cx = morton_compact(m), cy = morton_compact(m >> 1);
+    if (writer.is_done(cx, cy)) continue;
+    if (o.region && !cell_touches(*o.region, cx * cell_side, cy * cell_side, cell_side)) {
+      CutCell c;
+      c.cx = cx, c.cy = cy;
+      c.entry = GridEntry{kLitDepth, EntryKind::constant, 0};
+      c.lo = c.hi = kLitDepth;
+      writer.append_cell(c);
+      ++outside;
+      continue;
+    }
+    todo.emplace_back(cx, cy);
+  }
+  return todo;
 }
 
 // Traces one level-K cell and builds its hierarchy; cells wider than kMaxTraceSide are
@@ -60,158 +132,130 @@ Hierarchy cell_hierarchy(const DepthBoundsTracer& tracer, uint32_t level, uint64
   return h;
 }
 
-}  // namespace
+// The per-cell pipeline on every hardware thread: trace -> hierarchy -> cut + encode ->
+// compress + append. Workers take the planned cells in order; the first failure, the
+// cancel flag or the stop_after_cells hook stops them all at their next cell.
+class CellWorkers {
+ public:
+  CellWorkers(const DepthBoundsTracer& tracer, const TileCutter& cutter, PackWriter& writer,
+              const MapBuildOptions& o, const std::vector<CellXY>& todo)
+      : tracer_(tracer), cutter_(cutter), writer_(writer), o_(o), todo_(todo) {}
 
-uint64_t peak_rss_bytes() {
-  rusage ru{};
-  getrusage(RUSAGE_SELF, &ru);
-  return uint64_t(ru.ru_maxrss) * 1024;
-}
-
-MapBuildReport build_map(const Scene& scene, const LightSpace& light, const MapBuildOptions& o,
-                         const std::string& out_path) {
-  const auto t_start = Clock::now();
-  if (o.map_level > kMaxLevel) throw Error("build: resolution level exceeds 20");
-  CutParams cut;
-  cut.map_level = o.map_level;
-  cut.skip_level = o.skip_level.value_or(default_skip_level(o.map_level));
-  cut.tile_bytes = o.tile_bytes;
-  cut.codec = TileCodec::of(o.encoding);
-  cut.validate();
-  const uint32_t L = cut.map_level, K = cut.skip_level;
-  const uint64_t cells_side = uint64_t(1) << K, cell_side = uint64_t(1) << (L - K);
-  if (o.region) {
-    const uint64_t R = uint64_t(1) << L;
-    const auto& r = *o.region;
-    if (r.w == 0 || r.h == 0 || r.x >= R || r.y >= R || r.w > R - r.x || r.h > R - r.y)
-      throw Error("build: --region lies outside the " + std::to_string(R) + "^2 map");
+  // Runs the workers to the end and rethrows the first failure.
+  void run() {
+    const unsigned nthreads = std::max(1u, std::thread::hardware_concurrency());
+    std::vector<std::thread> workers;
+    for (unsigned i = 0; i < nthreads; ++i) workers.emplace_back([this] { work(); });
+    for (auto& w : workers) w.join();
+    if (failure_) std::rethrow_exception(failure_);
   }
 
-  MapBuildReport rep;
-  rep.map_level = L;
-  rep.skip_level = K;
-  rep.encoding = to_string(o.encoding);
-  rep.cells_total = cells_side * cells_side;
+  // Progress so far (another thread may poll them while run() is under way).
+  uint64_t appended() const { return appended_.load(); }
+  uint64_t texels() const { return texels_.load(); }
 
-  auto t = Clock::now();
-  DepthBoundsTracer tracer(scene, light);
-  rep.bvh_seconds = since(t);
-  rep.exit_depths = tracer.traces_exit_depths();
-
-  PackParams pp = PackParams::from(light, cut);
-  pp.scene_hash = scene.content_hash();
-  pp.features = rep.exit_depths ? uint32_t(kFeatureExitDepths) : 0u;
-  pp.compression_level = o.compression_level;
-  pp.build_params = {{"construction", o.construction == MhConstruction::bottom_up ? "bottom-up" : "top-down"},
-                     {"light", o.light_spec.empty() ? light.spec().to_string() : o.light_spec},
-                     {"scene", o.scene_spec.empty() ? scene.name : o.scene_spec},
-                     {"tool", "shadowtile 0.1.0"}};
-  if (o.region)
-    pp.build_params.push_back({"region", std::to_string(o.region->x) + "," + std::to_string(o.region->y) +
-                                             "," + std::to_string(o.region->w) + "," +
-                                             std::to_string(o.region->h)});
-  std::sort(pp.build_params.begin(), pp.build_params.end());
-  auto writer = o.resume ? PackWriter::create_or_resume(out_path, pp) : PackWriter::create(out_path, pp);
-  rep.cells_resumed = writer->resumed_cells();
-  TileCutter cutter(cut);
-
-  // Cells in Morton order (neighbouring cells share BVH nodes and cache lines).
-  std::vector<std::pair<uint32_t, uint32_t>> todo;
-  uint64_t outside = 0;
-  for (uint64_t m = 0; m < rep.cells_total; ++m) {
-    uint32_t cx = morton_compact(m), cy = morton_compact(m >> 1);
-    if (writer->is_done(cx, cy)) continue;
-    if (o.region && !cell_touches(*o.region, cx * cell_side, cy * cell_side, cell_side)) {
-      CutCell c;
-      c.cx = cx, c.cy = cy;
-      c.entry = GridEntry{kLitDepth, EntryKind::constant, 0};
-      c.lo = c.hi = kLitDepth;
-      writer->append_cell(c);
-      ++outside;
-      continue;
-    }
-    todo.emplace_back(cx, cy);
+  // Cells built, texels traced and the thread-seconds of each stage.
+  void report(MapBuildReport& rep) const {
+    rep.cells_built = appended_.load();
+    rep.texels_traced = texels_.load();
+    rep.trace_seconds = seconds_of(trace_ns_);
+    rep.hierarchy_seconds = seconds_of(build_ns_);
+    rep.cut_encode_seconds = seconds_of(cut_ns_);
+    rep.write_seconds = seconds_of(write_ns_);
   }
-  rep.cells_outside_region = outside;
 
-  std::atomic<uint64_t> next{0}, appended{0}, texels{0}, trace_ns{0}, build_ns{0}, cut_ns{0}, write_ns{0};
-  std::atomic<bool> stop{false};
-  std::exception_ptr failure;
-  std::mutex failure_mu;
-  auto worker = [&]() {
+ private:
+  void work() {
     try {
       for (;;) {
-        if (stop || (o.cancel && o.cancel->load())) return;
-        uint64_t i = next++;
-        if (i >= todo.size()) return;
-        auto [cx, cy] = todo[i];
-        Hierarchy h = cell_hierarchy(tracer, L, cx * cell_side, cy * cell_side, cell_side,
-                                     o.construction, texels, trace_ns, build_ns);
-        auto tc = Clock::now();
-        CutCell cell = cutter.cut_cell(cx, cy, std::move(h));
-        add_seconds(cut_ns, since(tc));
-        tc = Clock::now();
-        writer->append_cell(cell);
-        add_seconds(write_ns, since(tc));
-        uint64_t n = ++appended;
-        if (o.stop_after_cells && n >= *o.stop_after_cells) {
-          stop = true;
-          throw Error("build interrupted after " + std::to_string(n) + " cells (test hook)");
-        }
+        if (stop_ || (o_.cancel && o_.cancel->load())) return;
+        uint64_t i = next_++;
+        if (i >= todo_.size()) return;
+        build_cell(todo_[i].first, todo_[i].second);
       }
     } catch (...) {
-      std::lock_guard lock(failure_mu);
-      if (!failure) failure = std::current_exception();
-      stop = true;
+      std::lock_guard lock(failure_mu_);
+      if (!failure_) failure_ = std::current_exception();
+      stop_ = true;
     }
-  };
+  }
 
-  std::mutex progress_mu;
-  std::condition_variable progress_cv;
-  bool finished = false;
-  std::thread progress_thread;
-  if (o.progress) {
-    progress_thread = std::thread([&]() {
-      std::unique_lock lock(progress_mu);
-      while (!progress_cv.wait_for(lock, std::chrono::milliseconds(200), [&] { return finished; }))
-        o.progress(rep.cells_total - todo.size() + appended.load(), rep.cells_total, texels.load());
+  void build_cell(uint32_t cx, uint32_t cy) {
+    const CutParams& cut = cutter_.params();
+    const uint64_t cell_side = uint64_t(1) << (cut.map_level - cut.skip_level);
+    Hierarchy h = cell_hierarchy(tracer_, cut.map_level, cx * cell_side, cy * cell_side,
+                                 cell_side, o_.construction, texels_, trace_ns_, build_ns_);
+    auto t = Clock::now();
+    CutCell cell = cutter_.cut_cell(cx, cy, std::move(h));
+    add_seconds(cut_ns_, since(t));
+    t = Clock::now();
+    writer_.append_cell(cell);
+    add_seconds(write_ns_, since(t));
+    uint64_t n = ++appended_;
+    if (o_.stop_after_cells && n >= *o_.stop_after_cells) {
+      stop_ = true;
+      throw Error("build interrupted after " + std::to_string(n) + " cells (test hook)");
+    }
+  }
+
+  const DepthBoundsTracer& tracer_;
+  const TileCutter& cutter_;
+  PackWriter& writer_;
+  const MapBuildOptions& o_;
+  const std::vector<CellXY>& todo_;
+  std::atomic<uint64_t> next_{0}, appended_{0}, texels_{0};
+  std::atomic<uint64_t> trace_ns_{0}, build_ns_{0}, cut_ns_{0}, write_ns_{0};
+  std::atomic<bool> stop_{false};
+  std::mutex failure_mu_;
+  std::exception_ptr failure_;
+};
+
+// Calls `tick` from a background thread every 200 ms until destroyed (never, if empty).
+class ProgressTicker {
+ public:
+  explicit ProgressTicker(std::function<void()> tick) : tick_(std::move(tick)) {
+    if (!tick_) return;
+    thread_ = std::thread([this] {
+      std::unique_lock lock(mu_);
+      while (!cv_.wait_for(lock, std::chrono::milliseconds(200), [this] { return finished_; }))
+        tick_();
     });
   }
-  const unsigned nthreads = std::max(1u, std::thread::hardware_concurrency());
-  std::vector<std::thread> workers;
-  for (unsigned i = 0; i < nthreads; ++i) workers.emplace_back(worker);
-  for (auto& w : workers) w.join();
-  {
-    std::lock_guard lock(progress_mu);
-    finished = true;
+  ~ProgressTicker() {
+    {
+      std::lock_guard lock(mu_);
+      finished_ = true;
+    }
+    cv_.notify_all();
+    if (thread_.joinable()) thread_.join();
   }
-  progress_cv.notify_all();
-  if (progress_thread.joinable()) progress_thread.join();
-  if (failure) std::rethrow_exception(failure);
-  if (o.cancel && o.cancel->load())
-    throw Error("build interrupted; run again with --resume to continue from " + writer->tmp_path());
+  ProgressTicker(const ProgressTicker&) = delete;
+  ProgressTicker& operator=(const ProgressTicker&) = delete;
 
-  auto tf = Clock::now();
-  const MhConstruction method = o.construction;
-  CutGrid grid = cutter.coarse_grid(writer->cells(),
+ private:
+  std::function<void()> tick_;
+  std::mutex mu_;
+  std::condition_variable cv_;
+  bool finished_ = false;
+  std::thread thread_;
+};
+
+// The skip grid over every cell (levels 0..K-1 built from the cells' root intervals with
+// the build's construction), then the index, header and rename.
+void finish_pack(PackWriter& writer, const TileCutter& cutter, MhConstruction method) {
+  CutGrid grid = cutter.coarse_grid(writer.cells(),
                                     [method](const IntervalTile& t) { return build_hierarchy(t, method); });
-  writer->finish(grid);
-  rep.finish_seconds = since(tf);
-  if (o.progress) o.progress(rep.cells_total, rep.cells_total, texels.load());
+  writer.finish(grid);
+}
 
-  rep.cells_built = appended.load();
-  rep.texels_traced = texels.load();
-  rep.trace_seconds = seconds_of(trace_ns);
-  rep.hierarchy_seconds = seconds_of(build_ns);
-  rep.cut_encode_seconds = seconds_of(cut_ns);
-  rep.write_seconds = seconds_of(write_ns);
-
-  // Figures from the finished file, as a reader sees it.
+// Figures from the finished file, as a reader sees it: sizes, entries, tiles per level
+// and a histogram of stored tile sizes.
+void report_pack_figures(const std::string& out_path, uint32_t map_level, MapBuildReport& rep) {
   auto reader = PackReader::open(out_path);
   rep.pack_bytes = reader->file_size();
   rep.grid_entries = reader->grid().entries.size();
   for (auto& e : reader->grid().entries) rep.constant_entries += e.kind == EntryKind::constant;
-  rep.stored_bytes_per_level.assign(L + 1, 0);
+  rep.stored_bytes_per_level.assign(map_level + 1, 0);
   std::vector<uint64_t> bounds;
   for (uint64_t b = 256; b <= (uint64_t(1) << 30); b *= 2) bounds.push_back(b);
   std::vector<uint64_t> counts(bounds.size(), 0);
@@ -225,6 +269,57 @@ MapBuildReport build_map(const Scene& scene, const LightSpace& light, const MapB
   }
   for (size_t k = 0; k < bounds.size(); ++k)
     if (counts[k]) rep.tile_size_histogram.emplace_back(bounds[k], counts[k]);
+}
+
+}  // namespace
+
+uint64_t peak_rss_bytes() {
+  rusage ru{};
+  getrusage(RUSAGE_SELF, &ru);
+  return uint64_t(ru.ru_maxrss) * 1024;
+}
+
+MapBuildReport build_map(const Scene& scene, const LightSpace& light, const MapBuildOptions& o,
+                         const std::string& out_path) {
+  const auto t_start = Clock::now();
+  const CutParams cut = checked_cut_params(o);
+  const uint32_t L = cut.map_level, K = cut.skip_level;
+  MapBuildReport rep;
+  rep.map_level = L;
+  rep.skip_level = K;
+  rep.encoding = to_string(o.encoding);
+  rep.cells_total = (uint64_t(1) << K) * (uint64_t(1) << K);
+
+  auto t = Clock::now();
+  DepthBoundsTracer tracer(scene, light);
+  rep.bvh_seconds = since(t);
+  rep.exit_depths = tracer.traces_exit_depths();
+
+  const PackParams pp = pack_params(scene, light, o, cut, rep.exit_depths);
+  auto writer = o.resume ? PackWriter::create_or_resume(out_path, pp) : PackWriter::create(out_path, pp);
+  rep.cells_resumed = writer->resumed_cells();
+  TileCutter cutter(cut);
+  const std::vector<CellXY> todo =
+      plan_cells(*writer, o, K, uint64_t(1) << (L - K), rep.cells_outside_region);
+
+  CellWorkers workers(tracer, cutter, *writer, o, todo);
+  {
+    const uint64_t planned_done = rep.cells_total - todo.size();
+    ProgressTicker ticker(o.progress ? std::function<void()>([&] {
+      o.progress(planned_done + workers.appended(), rep.cells_total, workers.texels());
+    }) : std::function<void()>());
+    workers.run();
+  }
+  if (o.cancel && o.cancel->load())
+    throw Error("build interrupted; run again with --resume to continue from " + writer->tmp_path());
+
+  t = Clock::now();
+  finish_pack(*writer, cutter, o.construction);
+  rep.finish_seconds = since(t);
+  if (o.progress) o.progress(rep.cells_total, rep.cells_total, workers.texels());
+
+  workers.report(rep);
+  report_pack_figures(out_path, L, rep);
   rep.wall_seconds = since(t_start);
   rep.peak_rss_bytes = peak_rss_bytes();
   return rep;

@@ -1,5 +1,5 @@
-// The out-of-core, parallel map build (ARCHITECTURE.md "Pipeline"): level-K cells
-// stream through  bounds (Embree) -> MH construction -> cut + encode -> compress -> append
+// The out-of-core, parallel map build: level-K cells stream through
+//   bounds (Embree) -> MH construction -> cut + encode -> compress -> append
 // with memory bounded by the cell size and the thread count, never by the map's
 // resolution. Cells larger than kMaxTraceSide are traced in sub-tiles whose hierarchies
 // are stitched (MH §3.1 "Tiled construction").
