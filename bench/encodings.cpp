@@ -276,7 +276,7 @@ int main(int argc, char** argv) {
           std::printf("error: %s %s %s: %s\n", r.scene.c_str(), side_name(r.level).c_str(), st::to_string(e).c_str(),
                       x.error.c_str());
 
-    std::printf("\nTargets (issue): DAG-MH <= 0.6x MMH bytes at 64K^2 on city and terrain; MH <= 0.1%% of raw at "
+    std::printf("\nTargets: DAG-MH <= 0.6x MMH bytes at 64K^2 on city and terrain; MH <= 0.1%% of raw at "
                 "64K^2 city\n");
     for (const Row& r : rows) {
       const double mh = double(r.enc.at(st::Encoding::mh).bytes), mmh = double(r.enc.at(st::Encoding::mmh).bytes),

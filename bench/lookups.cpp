@@ -263,7 +263,7 @@ int main(int argc, char** argv) {
                       {"ratio_to_float_array", vs_array}, {"ratio_to_single", vs_single}});
     }
 
-    std::printf("\nTargets (issue) against the measured figures:\n");
+    std::printf("\nTargets against the measured figures:\n");
     nlohmann::json targets = nlohmann::json::array();
     for (auto& [pname, list] : patterns) {
       (void)list;
