@@ -1,5 +1,6 @@
 // The client's network side (internal to client/): one thread running an io_context with
-//   run()      - sessions, with exponential backoff between failed ones;
+//   run()      - one session after another, with exponential backoff between them
+//                (back to the initial delay after a successful handshake);
 //   session    - connect (TCP, TLS), handshake (Hello, key proofs), then the pump;
 //   pump       - the session's only writer: control requests (OpenMap, ListMaps, GetStats),
 //                Cancels, and GetTiles batches taken highest priority first from every
