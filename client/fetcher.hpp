@@ -1,5 +1,7 @@
 // The client's network side (internal to client/): one thread running an io_context with
-//   run()      - connect with retry and exponential backoff, handshake, then a session;
+//   run()      - one session after another, with exponential backoff between them
+//                (back to the initial delay after a successful handshake);
+//   session    - connect (TCP, TLS), handshake (Hello, key proofs), then the pump;
 //   pump       - the session's only writer: control requests (OpenMap, ListMaps, GetStats),
 //                Cancels, and GetTiles batches taken highest priority first from every
 //                map while fewer than the negotiated max_in_flight are unanswered;
@@ -65,14 +67,26 @@ class Fetcher : public std::enable_shared_from_this<Fetcher> {
     std::shared_ptr<RemoteMap> map;
     uint32_t map_id = 0;  // on the current connection; 0: (re)opening
   };
-  struct TileRequest {
+  // One GetTiles in flight: whose answers they are (the tiles' own request state lives
+  // in the map's request table) and, by its count, an in-flight slot taken.
+  struct GetTilesRequest {
     RemoteMap* map;
     uint32_t map_id;
-    std::vector<uint64_t> tiles;  // not yet answered
   };
+
+  // What this client proposes in its Hello (and validates its options by).
+  static proto::Limits local_limits(const ClientOptions& o);
 
   asio::awaitable<void> run();
   asio::awaitable<bool> session();  // true if the handshake succeeded
+  asio::awaitable<bool> connect(net::Stream& sock);
+  asio::awaitable<bool> handshake(net::Stream& sock);
+  asio::awaitable<void> pump(net::Stream& sock);
+  // The pump's parts: each appends frames to `out`; false if a frame did not encode.
+  void encode_controls(std::vector<uint8_t>& out);
+  bool encode_cancels(std::vector<uint8_t>& out);
+  bool encode_tile_batches(std::vector<uint8_t>& out);
+  bool in_flight_slot_free() const;
   asio::awaitable<void> reader(std::shared_ptr<net::Stream> sock);
   asio::awaitable<void> watchdog(std::shared_ptr<net::Stream> sock, uint64_t epoch);
   asio::awaitable<void> notifier_loop();
@@ -90,6 +104,7 @@ class Fetcher : public std::enable_shared_from_this<Fetcher> {
   void fail_controls(const proto::ErrorMessage& e);  // why the last connect failed (for messages)
   asio::awaitable<bool> authenticate(net::Stream& sock, const proto::HelloAck& ack);
   void wake() { wake_timer_.cancel(); }
+  uint32_t upcoming_id() const;  // what next_id() will return
   uint32_t next_id();
   // co_spawn / post on io_, counted in live_ (released when the coroutine or handler ends).
   void spawn(asio::awaitable<void> a);
@@ -120,7 +135,7 @@ class Fetcher : public std::enable_shared_from_this<Fetcher> {
   size_t rx_begin_ = 0, rx_end_ = 0;
   std::deque<std::shared_ptr<Control>> controls_;
   std::unordered_map<uint32_t, std::shared_ptr<Control>> controls_sent_;
-  std::unordered_map<uint32_t, TileRequest> tile_requests_;
+  std::unordered_map<uint32_t, GetTilesRequest> tile_requests_;
   std::vector<MapSlot> maps_;
   uint32_t last_id_ = 0;
   bool writing_ = false, stopping_io_ = false;

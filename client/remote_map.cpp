@@ -37,11 +37,6 @@ void Notifier::clear() noexcept {
 
 namespace {
 
-// Heap order: higher priority first, then older (smaller seq) first.
-bool heap_less(const WantedTile& a, const WantedTile& b) {
-  return a.priority != b.priority ? a.priority < b.priority : a.seq > b.seq;
-}
-
 uint32_t slot_size_for(const PackHeader& h) {
   // Index tiles (CutGrids of <= kMaxIndexLevels levels) share the slots of encoded tiles.
   return std::max<uint32_t>(h.tile_bytes, uint32_t(CutGrid::serialized_size(kMaxIndexLevels)));
@@ -58,7 +53,9 @@ RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::v
       header_(PackHeader::parse(header_bytes_, "map '" + name_ + "' header")),
       grid_(CutGrid::parse(grid_bytes, "map '" + name_ + "' skip grid")),
       light_(LightSpace::from_array(header_.light_kind, header_.light)),
-      cache_(options.cache_slots, slot_size_for(header_)) {
+      cache_(options.cache_slots, slot_size_for(header_)),
+      requests_(size_t(options.want_capacity) + size_t(options.max_in_flight) * options.tiles_per_request,
+                options.want_capacity) {
   const std::string what = "map '" + name_ + "'";
   if (header_.state != PackState::complete) throw FormatError(what + ": pack is not complete");
   if (header_.map_level > kMaxLevel || grid_.levels != header_.skip_level || header_.skip_level > header_.map_level)
@@ -69,32 +66,34 @@ RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::v
                 " bytes exceed ClientOptions::max_slot_bytes " + std::to_string(options.max_slot_bytes));
   slot_eval_.resize(cache_.slot_count());
   slot_grid_.resize(cache_.slot_count());
-  heap_.reserve(options.want_capacity);
-  cache_.reserve_pages(std::min<uint64_t>(header_.tile_count, uint64_t(options.want_capacity) + cache_.slot_count() + 4096));
-  sent_.reserve(size_t(options.max_in_flight) * options.tiles_per_request);
+  // Pages are requested (one per record), resident (one per slot) or constant: sized so
+  // that requesting a page from a lookup does not grow the table.
+  cache_.reserve_pages(std::min<uint64_t>(header_.tile_count, requests_.capacity() + cache_.slot_count() + 4096));
+  cancels_.reserve(requests_.capacity());
 }
 
 // ---------------------------------------------------------------- lookups
 
 bool RemoteMap::want_locked(uint64_t tile, const GridEntry& e, uint16_t priority) const noexcept {
-  const PageEntry p = cache_.lookup(tile);
-  if (p.state == PageState::absent) {
-    if (heap_.size() >= options_.want_capacity) {
+  const PageState state = cache_.lookup(tile).state;
+  if (state == PageState::absent) {
+    RequestRecord* r = requests_.insert(tile, e, priority);
+    if (!r) {
       ++stats_.queue_full;
       return false;
     }
-    cache_.request(tile, priority);  // the page table was sized up front: no allocation
-  } else if (p.state == PageState::requested && priority > p.priority && !sent_.count(tile)) {
-    if (heap_.size() >= options_.want_capacity) {
-      ++stats_.queue_full;
+    try {
+      cache_.request(tile);  // the page table was sized up front: no allocation
+    } catch (...) {          // only a page table that had to grow and could not
+      requests_.erase(*r);
       return false;
     }
-    cache_.raise_priority(tile, priority);  // the old, lower entry is skipped when popped
+  } else if (state == PageState::requested) {
+    RequestRecord* r = requests_.find(tile);
+    if (!r || !requests_.raise(*r, priority)) return false;  // sent, or not higher
   } else {
     return false;
   }
-  heap_.push_back(WantedTile{tile, priority, next_seq_++, e});
-  std::push_heap(heap_.begin(), heap_.end(), heap_less);
   notifier_->notify();
   return true;
 }
@@ -232,33 +231,28 @@ size_t RemoteMap::cancel_outside(uint32_t level, uint64_t x0, uint64_t y0, uint6
   };
   std::lock_guard lock(mu_);
   size_t n = 0;
-  try {
-    auto keep_end = std::partition(heap_.begin(), heap_.end(), [&](const WantedTile& w) { return !outside(w.tile); });
-    for (auto it = keep_end; it != heap_.end(); ++it)
-      if (!sent_.count(it->tile) && cache_.lookup(it->tile).state == PageState::requested) {
-        cache_.cancel_request(it->tile);
-        ++n;
-      }
-    heap_.erase(keep_end, heap_.end());
-    std::make_heap(heap_.begin(), heap_.end(), heap_less);
-    for (auto& [id, w] : sent_)
-      if (outside(id) && w.seq != ~uint64_t(0)) {
-        cancels_.push_back(id);  // may allocate: an API call, not a lookup
-        w.seq = ~uint64_t(0);    // marks "Cancel sent"
-        ++n;
-      }
-    size_t kept = 0;
-    for (size_t i = 0; i < region_count_; ++i) {
-      const Region& r = regions_[i];
-      const uint32_t ru = L - r.level;
-      const bool meets = !c.empty && !((r.x1 << ru) <= fx0 || (r.x0 << ru) >= fx1 ||
-                                       (r.y1 << ru) <= fy0 || (r.y0 << ru) >= fy1);
-      if (meets) regions_[kept++] = r;
+  requests_.for_each([&](RequestRecord& r) {
+    if (!outside(r.tile)) return;
+    if (r.state == RequestState::queued) {
+      drop_locked(r);
+      ++n;
+    } else if (r.state == RequestState::sent && cancels_.size() < cancels_.capacity()) {
+      // Reserved for every record: never allocates. The answer is still owed; a tile that
+      // arrives anyway is kept (its bytes are good).
+      cancels_.push_back(r.tile);
+      r.state = RequestState::cancel_sent;
+      ++n;
     }
-    region_count_ = kept;
-  } catch (...) {
-    // Only cancels_.push_back can throw (bad_alloc): the cancel is then just not sent.
+  });
+  size_t kept = 0;
+  for (size_t i = 0; i < region_count_; ++i) {
+    const Region& r = regions_[i];
+    const uint32_t ru = L - r.level;
+    const bool meets = !c.empty && !((r.x1 << ru) <= fx0 || (r.x0 << ru) >= fx1 ||
+                                     (r.y1 << ru) <= fy0 || (r.y0 << ru) >= fy1);
+    if (meets) regions_[kept++] = r;
   }
+  region_count_ = kept;
   if (!cancels_.empty()) notifier_->notify();
   return n;
 }
@@ -273,17 +267,12 @@ MapStats RemoteMap::stats() const noexcept {
 
 // ---------------------------------------------------------------- fetcher side
 
-void RemoteMap::take_wanted(size_t max, std::vector<WantedTile>& out) {
+void RemoteMap::take_wanted(size_t max, uint32_t request_id, std::vector<proto::TileRequest>& out) {
   std::lock_guard lock(mu_);
-  while (out.size() < max && !heap_.empty()) {
-    std::pop_heap(heap_.begin(), heap_.end(), heap_less);
-    WantedTile w = heap_.back();
-    heap_.pop_back();
-    const PageEntry p = cache_.lookup(w.tile);
-    // Stale entries: answered, cancelled, already sent, or superseded by a raise.
-    if (p.state != PageState::requested || sent_.count(w.tile) || w.priority < p.priority) continue;
-    sent_.emplace(w.tile, w);
-    out.push_back(w);
+  for (size_t taken = 0; taken < max; ++taken) {
+    const RequestRecord* r = requests_.pop(request_id);
+    if (!r) break;
+    out.push_back(proto::TileRequest{r->tile, r->priority});
     ++stats_.tiles_requested;
   }
 }
@@ -296,161 +285,161 @@ void RemoteMap::take_cancels(std::vector<uint64_t>& out) {
 
 bool RemoteMap::has_work() const {
   std::lock_guard lock(mu_);
-  return !heap_.empty() || !cancels_.empty();
+  return requests_.queued() > 0 || !cancels_.empty();
 }
 
 size_t RemoteMap::sent_count() const {
   std::lock_guard lock(mu_);
-  return sent_.size();
+  return requests_.in_flight();
 }
 
-void RemoteMap::give_up_locked(uint64_t tile, float value) {
+RequestRecord* RemoteMap::sent_record_locked(uint64_t tile, uint32_t request_id) noexcept {
+  RequestRecord* r = requests_.find(tile);
+  if (!r || r->state == RequestState::queued || r->request_id != request_id) return nullptr;
+  return r;
+}
+
+void RemoteMap::drop_locked(RequestRecord& r) noexcept {
+  cache_.cancel_request(r.tile);  // requested -> absent: a later lookup may ask again
+  requests_.erase(r);
+}
+
+void RemoteMap::give_up_locked(RequestRecord& r) noexcept {
   ++stats_.tiles_failed;
-  retries_.erase(tile);
-  // A constant page: lookups answer with the entry's value and never ask again.
-  cache_.set_constant(tile, value);
+  const uint64_t tile = r.tile;
+  const float value = r.entry.value;
+  requests_.erase(r);
+  try {
+    cache_.set_constant(tile, value);  // the page exists (requested): nothing allocates
+  } catch (...) {                      // only a pinned resident page refuses, and this one is not
+    cache_.cancel_request(tile);
+  }
 }
 
-void RemoteMap::retry_or_give_up(uint64_t tile, const char* /*why*/, uint64_t MapStats::*counter) noexcept {
+void RemoteMap::retry_or_give_up(uint64_t tile, uint32_t request_id, uint64_t MapStats::*counter) noexcept {
   std::lock_guard lock(mu_);
+  retry_or_give_up_locked(tile, request_id, counter);
+}
+
+void RemoteMap::retry_or_give_up_locked(uint64_t tile, uint32_t request_id, uint64_t MapStats::*counter) noexcept {
   ++(stats_.*counter);
-  auto it = sent_.find(tile);
-  if (it == sent_.end()) return;
-  WantedTile w = it->second;
-  sent_.erase(it);
+  RequestRecord* r = sent_record_locked(tile, request_id);
+  if (!r) return;
+  // Cancelled meanwhile: nobody wants it any more, so no refetch (and no give-up either:
+  // a later want may try again from scratch).
+  if (r->state == RequestState::cancel_sent) return drop_locked(*r);
+  if (++r->retries > options_.max_tile_retries) return give_up_locked(*r);
+  // Refetch at the same priority. A slot given back (abort) left the page absent.
   try {
-    if (++retries_[tile] > options_.max_tile_retries) return give_up_locked(tile, w.entry.value);
+    cache_.request(tile);
   } catch (...) {
-    return;
+    return drop_locked(*r);
   }
-  // Refetch: the page is still `requested`; queue it again at its priority.
-  if (cache_.lookup(tile).state != PageState::requested && !cache_.request(tile, w.priority)) return;
-  if (heap_.size() >= options_.want_capacity) {
-    cache_.cancel_request(tile);
-    return;
-  }
-  w.seq = next_seq_++;
-  heap_.push_back(w);
-  std::push_heap(heap_.begin(), heap_.end(), heap_less);
+  if (!requests_.requeue(*r)) return drop_locked(*r);  // queue full: a later want asks again
   notifier_->notify();
 }
 
-void RemoteMap::tile_arrived(const proto::TileMeta& meta, std::span<const uint8_t> stored) noexcept {
+bool RemoteMap::fill_slot(uint32_t slot, const proto::TileMeta& meta, const GridEntry& entry,
+                          std::span<const uint8_t> stored, std::unique_ptr<Evaluator>& ev, CutGrid& grid) noexcept {
+  try {
+    const std::string what = "map '" + name_ + "': " + describe_tile(meta.tile_id);
+    const std::span<uint8_t> raw = cache_.slot_span(slot).first(meta.uncompressed_size);
+    if (meta.flags & proto::kTileFlagZlib) zlib_decompress_into(stored, raw, what);
+    else if (!raw.empty()) std::memcpy(raw.data(), stored.data(), raw.size());  // sizes checked by the caller
+    const TileAddress a = tile_address(meta.tile_id);
+    if (entry.kind == EntryKind::tile) {
+      ev = open_encoded(header_.encoding, raw);
+      return ev && ev->finest_level() == header_.map_level - a.level;
+    }
+    grid = CutGrid::parse(raw, what, kMaxIndexLevels);
+    return grid.levels == entry.index_levels && a.level + grid.levels <= header_.map_level &&
+           std::memcmp(&grid.coarse[0], &entry.value, sizeof(float)) == 0;
+  } catch (...) {
+    return false;
+  }
+}
+
+void RemoteMap::tile_arrived(const proto::TileMeta& meta, uint32_t request_id,
+                             std::span<const uint8_t> stored) noexcept {
   const uint64_t tile = meta.tile_id;
-  WantedTile w;
+  GridEntry entry;
   {
     std::lock_guard lock(mu_);
-    auto it = sent_.find(tile);
-    if (it == sent_.end()) return;  // not asked for (late duplicate): ignore
-    w = it->second;
+    const RequestRecord* r = sent_record_locked(tile, request_id);
+    if (!r) return;  // not asked for in this request (a late duplicate): ignore
+    entry = r->entry;
   }
   // End to end: the stored bytes must be the bytes the pack builder wrote (the frame CRC
   // only covers the hop). A mismatch is refetched.
-  if (!proto::tile_crc_matches(meta, stored)) return retry_or_give_up(tile, "crc", &MapStats::crc_errors);
-  const std::string what = "map '" + name_ + "': " + describe_tile(tile);
-  std::vector<uint8_t> raw;
-  try {
-    if (meta.uncompressed_size > cache_.slot_bytes())
-      throw FormatError(what + ": " + std::to_string(meta.uncompressed_size) + " bytes exceed the slot size");
-    if (meta.flags & proto::kTileFlagZlib) raw = zlib_decompress(stored, meta.uncompressed_size, what);
-    else if (stored.size() == meta.uncompressed_size) raw.assign(stored.begin(), stored.end());
-    else throw FormatError(what + ": raw tile size differs from uncompressed_size");
-  } catch (...) {
-    return retry_or_give_up(tile, "decode", &MapStats::decode_errors);
-  }
+  if (!proto::tile_crc_matches(meta, stored)) return retry_or_give_up(tile, request_id, &MapStats::crc_errors);
+  const bool zlib = (meta.flags & proto::kTileFlagZlib) != 0;
+  if (meta.uncompressed_size > cache_.slot_bytes() || (!zlib && stored.size() != meta.uncompressed_size))
+    return retry_or_give_up(tile, request_id, &MapStats::decode_errors);
   uint32_t slot = kNoSlot;
   {
     std::lock_guard lock(mu_);
-    const PageEntry p = cache_.lookup(tile);
-    if (p.state == PageState::resident || p.state == PageState::constant) {
-      sent_.erase(tile);
-      return;
-    }
+    RequestRecord* r = sent_record_locked(tile, request_id);
+    if (!r) return;
     try {
       slot = cache_.reserve(tile);  // evicts the least recently used unpinned tile
     } catch (...) {
       ++stats_.cache_full;
-      sent_.erase(tile);
-      cache_.cancel_request(tile);
+      drop_locked(*r);
       return;
     }
     stats_.bytes_received += stored.size();
   }
-  // The slot is pinned and unpublished: fill and open it without the lock.
-  std::span<uint8_t> dst = cache_.slot_span(slot);
-  if (!raw.empty()) std::memcpy(dst.data(), raw.data(), raw.size());
-  const std::span<const uint8_t> bytes(dst.data(), raw.size());
+  // The slot is pinned and unpublished: inflate straight into it and open it without the
+  // lock, so lookups never wait on decompression or validation.
   std::unique_ptr<Evaluator> ev;
-  CutGrid g;
-  bool ok = false;
-  try {
-    const TileAddress a = tile_address(tile);
-    if (w.entry.kind == EntryKind::tile) {
-      ev = open_encoded(header_.encoding, bytes);
-      ok = ev && ev->finest_level() == header_.map_level - a.level;
-    } else {
-      g = CutGrid::parse(bytes, what, kMaxIndexLevels);
-      ok = g.levels == w.entry.index_levels && a.level + g.levels <= header_.map_level &&
-           std::memcmp(&g.coarse[0], &w.entry.value, sizeof(float)) == 0;
-    }
-  } catch (...) {
-    ok = false;
-  }
-  bool index_arrived = false;
+  CutGrid grid;
+  const bool ok = fill_slot(slot, meta, entry, stored, ev, grid);
   {
     std::lock_guard lock(mu_);
     if (!ok) {
-      // Retried below like a CRC failure (a corrupt stream that still matched its CRC
-      // is a bad pack; after the retries the tile is given up).
+      // The slot back (free, page absent), then under the same lock the page requested
+      // again or given up, so that no lookup sees it absent in between.
       cache_.abort(slot);
-      cache_.request(tile, w.priority);
+      retry_or_give_up_locked(tile, request_id, &MapStats::decode_errors);
     } else {
       slot_eval_[slot] = std::move(ev);
-      slot_grid_[slot] = std::move(g);
-      sent_.erase(tile);
-      if (cache_.commit(slot, uint32_t(raw.size()))) {
-        ++stats_.tiles_received;
-        retries_.erase(tile);
-        index_arrived = w.entry.kind == EntryKind::index;
+      slot_grid_[slot] = std::move(grid);
+      bool committed = false;
+      try {
+        committed = cache_.commit(slot, meta.uncompressed_size);  // size checked above
+      } catch (...) {
       }
-      if (index_arrived) rerequest_regions_locked();
+      if (RequestRecord* r = sent_record_locked(tile, request_id)) requests_.erase(*r);
+      if (committed) {
+        ++stats_.tiles_received;
+        if (entry.kind == EntryKind::index) rerequest_regions_locked();
+      }
     }
   }
-  if (!ok) retry_or_give_up(tile, "open", &MapStats::decode_errors);
 }
 
-void RemoteMap::tile_refused(uint64_t tile, proto::ErrorCode code) noexcept {
+void RemoteMap::tile_refused(uint64_t tile, uint32_t request_id, proto::ErrorCode code) noexcept {
   std::lock_guard lock(mu_);
-  auto it = sent_.find(tile);
-  if (it == sent_.end()) return;
-  const float value = it->second.entry.value;
-  sent_.erase(it);
+  RequestRecord* r = sent_record_locked(tile, request_id);
+  if (!r) return;
   if (code == proto::ErrorCode::cancelled) {
     ++stats_.tiles_cancelled;
-    cache_.cancel_request(tile);
+    drop_locked(*r);
   } else {
-    give_up_locked(tile, value);
+    give_up_locked(*r);
   }
 }
 
 void RemoteMap::connection_lost() noexcept {
   std::lock_guard lock(mu_);
-  for (auto& [id, w] : sent_) {
-    const PageEntry p = cache_.lookup(id);
-    if (p.state != PageState::requested) continue;
-    if (w.seq == ~uint64_t(0) || heap_.size() >= options_.want_capacity) {  // cancelled or no room
-      cache_.cancel_request(id);
-      continue;
-    }
-    WantedTile again = w;
-    again.priority = p.priority;
-    again.seq = next_seq_++;
-    heap_.push_back(again);
-    std::push_heap(heap_.begin(), heap_.end(), heap_less);
-  }
-  sent_.clear();
+  requests_.for_each([&](RequestRecord& r) {
+    if (r.state == RequestState::queued) return;
+    // Cancelled ones are no longer wanted; the rest go back in the queue at their
+    // priority, unless it is full (a later want asks again).
+    if (r.state == RequestState::cancel_sent || !requests_.requeue(r)) drop_locked(r);
+  });
   cancels_.clear();
-  if (!heap_.empty()) notifier_->notify();
+  if (requests_.queued() > 0) notifier_->notify();
 }
 
 }  // namespace st::client

@@ -1,7 +1,8 @@
 // One opened remote map (internal to client/): the pack header and skip grid from
-// MapInfo, the tile cache with the opened tile of every resident slot, the queue of
-// wanted tiles, and the evaluator walking skip grid -> index tiles -> tiles like
-// PackEvaluator does, answering from the deepest node reached when a tile is missing.
+// MapInfo, the tile cache with the opened tile of every resident slot, the request
+// table of wanted tiles (tile_requests.hpp), and the evaluator walking skip grid ->
+// index tiles -> tiles like PackEvaluator does, answering from the deepest node reached
+// when a tile is missing.
 //
 // Locking: one mutex guards everything mutable. Lookups hold it for one walk (a few
 // hundred ns); the fetcher holds it only for O(1) bookkeeping and writes tile bytes into
@@ -15,9 +16,9 @@
 #include <mutex>
 #include <span>
 #include <string>
-#include <unordered_map>
 #include <vector>
 
+#include "client/tile_requests.hpp"
 #include "shadowtile/client.hpp"
 #include "tiles/core/tile_cache.hpp"
 #include "proto/messages.hpp"
@@ -45,14 +46,6 @@ class Notifier {
   std::atomic<bool> pending_{false};
 };
 
-// A tile the fetcher is to request, or has requested.
-struct WantedTile {
-  uint64_t tile = 0;
-  uint16_t priority = 0;
-  uint64_t seq = 0;          // FIFO among equal priorities
-  GridEntry entry;           // the page-table entry naming it (value = coarse answer)
-};
-
 class RemoteMap final : public Evaluator {
  public:
   // Parses and checks the MapInfo blobs (st::Error naming the map otherwise).
@@ -78,16 +71,19 @@ class RemoteMap final : public Evaluator {
   uint32_t slot_bytes() const { return cache_.slot_bytes(); }
 
   // ---- fetcher side ----
-  // Pops up to `max` wanted tiles (highest priority first) and records them as sent.
-  void take_wanted(size_t max, std::vector<WantedTile>& out);
+  // Appends up to `max` queued tiles (highest priority first, FIFO among equals) to
+  // `out` and records them as sent in the GetTiles `request_id`.
+  void take_wanted(size_t max, uint32_t request_id, std::vector<proto::TileRequest>& out);
   // Tiles sent but no longer wanted (cancel_outside): the fetcher sends Cancel.
   void take_cancels(std::vector<uint64_t>& out);
   bool has_work() const;
-  // A TileData: end-to-end CRC, decompress, open, publish; refetch or give up on failure.
-  void tile_arrived(const proto::TileMeta& meta, std::span<const uint8_t> stored) noexcept;
+  // A TileData answering `request_id`: end-to-end CRC, decompress into a reserved slot,
+  // open, publish; refetch or give up on failure. Answers for a tile not sent in
+  // `request_id` are ignored.
+  void tile_arrived(const proto::TileMeta& meta, uint32_t request_id, std::span<const uint8_t> stored) noexcept;
   // A TileError: cancelled -> absent again; any other code -> given up (coarse answers).
-  void tile_refused(uint64_t tile, proto::ErrorCode code) noexcept;
-  // The connection dropped: every sent tile is queued again.
+  void tile_refused(uint64_t tile, uint32_t request_id, proto::ErrorCode code) noexcept;
+  // The connection dropped: every sent tile is queued again (cancelled ones dropped).
   void connection_lost() noexcept;
   // Test hook: how many tiles are sent and unanswered.
   size_t sent_count() const;
@@ -96,8 +92,20 @@ class RemoteMap final : public Evaluator {
   float depth_locked(uint32_t level, uint64_t x, uint64_t y) const noexcept;
   // Queues `tile` (lock held). Returns true if newly queued or raised.
   bool want_locked(uint64_t tile, const GridEntry& e, uint16_t priority) const noexcept;
-  void give_up_locked(uint64_t tile, float value);
-  void retry_or_give_up(uint64_t tile, const char* why, uint64_t MapStats::*counter) noexcept;
+  // The record of `tile` if it was sent in `request_id` and not answered (lock held).
+  RequestRecord* sent_record_locked(uint64_t tile, uint32_t request_id) noexcept;
+  // Forgets the request and leaves the page absent (cancelled, or no room to retry).
+  void drop_locked(RequestRecord& r) noexcept;
+  // Forgets the request and makes the page constant: lookups answer the entry's value.
+  void give_up_locked(RequestRecord& r) noexcept;
+  // A delivery of `tile` in `request_id` failed (counted in `counter`): queue it again,
+  // or give it up after max_tile_retries.
+  void retry_or_give_up(uint64_t tile, uint32_t request_id, uint64_t MapStats::*counter) noexcept;
+  void retry_or_give_up_locked(uint64_t tile, uint32_t request_id, uint64_t MapStats::*counter) noexcept;
+  // Decompresses (or copies) `stored` into the reserved `slot` and opens it; false if the
+  // bytes do not make the tile `entry` names. Runs without the lock.
+  bool fill_slot(uint32_t slot, const proto::TileMeta& meta, const GridEntry& entry,
+                 std::span<const uint8_t> stored, std::unique_ptr<Evaluator>& ev, CutGrid& grid) noexcept;
   // Visits the tiles needed for lookups at `level` in [x0, x1) x [y0, y1) (lock held):
   // fn(tile_id, entry, page) for each non-resident one; returns false if fn did.
   template <class Fn>
@@ -116,11 +124,9 @@ class RemoteMap final : public Evaluator {
   mutable TileCache cache_;
   std::vector<std::unique_ptr<Evaluator>> slot_eval_;  // encoded tiles, per slot
   std::vector<CutGrid> slot_grid_;                     // index tiles, per slot
-  mutable std::vector<WantedTile> heap_;               // capacity want_capacity, never grows
-  mutable uint64_t next_seq_ = 0;
-  std::unordered_map<uint64_t, WantedTile> sent_;      // fetcher thread only inserts
-  std::unordered_map<uint64_t, uint32_t> retries_;
-  std::vector<uint64_t> cancels_;
+  // want_capacity queued + max_in_flight * tiles_per_request sent; never grows.
+  mutable TileRequests requests_;
+  std::vector<uint64_t> cancels_;  // reserved to the sent bound: cancel_outside never allocates
   struct Region {
     uint32_t level;
     uint64_t x0, y0, x1, y1;

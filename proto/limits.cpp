@@ -27,6 +27,13 @@ Status validate(const Limits& l) {
   return {};
 }
 
+Limits handshake_limits(const Limits& local) {
+  Limits l = local;
+  l.max_frame_bytes = kMinFrameBytes;
+  l.min_version = l.max_version = kHandshakeVersion;
+  return l;
+}
+
 Limits negotiate(const Limits& a, const Limits& b, std::uint8_t version) {
   Limits n;
   n.max_frame_bytes = std::min(a.max_frame_bytes, b.max_frame_bytes);

@@ -39,6 +39,11 @@ struct Limits {
 // ok unless a field lies outside the hard bounds above or min_version > max_version.
 Status validate(const Limits& limits);
 
+// The limits a side enforces before the handshake completes, from its own `local` ones:
+// version-1 frames of at most kMinFrameBytes (the Hello and HelloAck always fit), whatever
+// larger frames the handshake may grant afterwards. Client and server use the same rule.
+Limits handshake_limits(const Limits& local);
+
 // The limits both sides use after the handshake: the smaller of each pair, at `version`.
 Limits negotiate(const Limits& a, const Limits& b, std::uint8_t version);
 

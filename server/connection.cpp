@@ -18,15 +18,6 @@ namespace {
 // the per-connection cost low (1,000 connections: scripts/soak) without more syscalls.
 constexpr size_t kReadChunk = 16 * 1024;
 
-// Handshake limits (PROTOCOL.md §6): before HelloAck only version-1 frames up to the
-// minimum frame size are accepted, whatever the server would grant later.
-proto::Limits handshake_limits(const proto::Limits& server) {
-  proto::Limits l = server;
-  l.max_frame_bytes = proto::kMinFrameBytes;
-  l.min_version = l.max_version = proto::kHandshakeVersion;
-  return l;
-}
-
 }  // namespace
 
 Connection::Connection(tcp::socket socket, ServerCore& core, asio::ip::address from)
@@ -37,7 +28,7 @@ Connection::Connection(tcp::socket socket, ServerCore& core, asio::ip::address f
       writer_wake_(stream_.get_executor()),
       reader_wake_(stream_.get_executor()),
       watchdog_timer_(stream_.get_executor()),
-      limits_(handshake_limits(core.options.limits)),
+      limits_(proto::handshake_limits(core.options.limits)),  // until HelloAck
       parser_(limits_, proto::Receiver::server),
       in_flight_(core.options.limits.max_in_flight),
       tiles_(size_t(core.options.limits.max_in_flight) * core.options.limits.max_tiles_per_batch) {

@@ -1,11 +1,13 @@
 // Loopback tests of the client against an in-process server: every tile fetched answers
 // bit-exactly like the local PackEvaluator; a tiny cache evicts, refetches and stays
 // exact; answers before a tile arrives come from the coarser level; corrupt payloads
-// are caught by the end-to-end CRC and refetched or given up.
+// are caught by the end-to-end CRC (or, matching it, by decoding) and refetched or given
+// up.
 #include <gtest/gtest.h>
 
 #include <atomic>
 #include <bit>
+#include <filesystem>
 #include <mutex>
 #include <set>
 #include <thread>
@@ -110,6 +112,34 @@ TEST(RemoteMap, TinyCacheRandomWalkEvictsRefetchesAndStaysExact) {
   EXPECT_EQ(s.tiles_failed, 0u);
 }
 
+TEST(RemoteMap, WantCapacityBoundsTheQueueAndTheMapStillArrivesWhole) {
+  const auto encodings = looptest::available_encodings();
+  ASSERT_FALSE(encodings.empty());
+  const uint32_t level = test_level(), side = 1u << level;
+  auto p = build_pack("bounded", level, 23, encodings[0], 3, 512);
+  ClientOptions o = quick_options();
+  o.cache_slots = uint32_t(p.reader->tiles().size()) + 4;
+  o.want_capacity = 2;  // and one tile in flight: a request table of 3 records
+  o.max_in_flight = 1;
+  o.tiles_per_request = 1;
+  auto srv = start_server({p.path});
+  Client client({"127.0.0.1", srv.port}, o);
+  Map map = client.open("bounded");
+  // One call queues under one lock, so the fetcher cannot drain the queue meanwhile.
+  EXPECT_EQ(map.request_region(level, 0, 0, side, side, 1), 2u);
+  EXPECT_GT(map.stats().queue_full, 0u);
+  ASSERT_TRUE(wait_until([&] {
+    map.request_region(level, 0, 0, side, side, 1);
+    return map.region_resident(level, 0, 0, side, side);
+  }));
+  PackEvaluator local(p.reader);
+  EXPECT_EQ(first_difference(client::evaluator(map), local), "");
+  const MapStats s = map.stats();
+  EXPECT_EQ(s.tiles_received, p.reader->tiles().size());
+  EXPECT_EQ(s.tiles_requested, p.reader->tiles().size()) << "each tile asked for once";
+  EXPECT_EQ(s.tiles_failed, 0u);
+}
+
 // A server whose tile sends wait at a gate: nothing arrives until the test opens it.
 struct Gate {
   std::atomic<bool> open{false};
@@ -175,40 +205,119 @@ TEST(RemoteMap, CorruptPayloadIsCaughtByTheCrcAndRefetched) {
   EXPECT_EQ(s.tiles_failed, 0u);
 }
 
-TEST(RemoteMap, AlwaysCorruptTileIsGivenUpAndItsTexelsStayCoarse) {
+// A pack without index tiles and its first tile, which sits at the skip level.
+struct GivenUpCase {
+  looptest::TestPack pack;
+  uint32_t level, k = 3;
+  uint64_t bad = 0;
+};
+
+GivenUpCase given_up_case(const std::string& name, uint64_t seed) {
   const auto encodings = looptest::available_encodings();
-  ASSERT_FALSE(encodings.empty());
-  const uint32_t level = test_level(), side = 1u << level, k = 3;
-  auto p = build_pack("corrupt_always", level, 13, encodings[0], k, 1 << 20);  // no index tiles
-  ASSERT_FALSE(p.reader->tiles().empty());
-  const uint64_t bad = p.reader->tiles().front().id;
-  const TileAddress a = tile_address(bad);
-  ASSERT_EQ(a.level, k);
-  server::ServerOptions so;
-  so.tile_hook = [bad](uint64_t id, std::span<uint8_t> bytes) {
-    if (id == bad && !bytes.empty()) bytes[0] ^= 0x01;
-  };
-  auto srv = start_server({p.path}, so);
+  ST_CHECK(!encodings.empty());
+  GivenUpCase c;
+  c.level = test_level();
+  c.pack = build_pack(name, c.level, seed, encodings[0], c.k, 1 << 20);  // no index tiles
+  ST_CHECK(!c.pack.reader->tiles().empty());
+  c.bad = c.pack.reader->tiles().front().id;
+  ST_CHECK(tile_address(c.bad).level == c.k);
+  return c;
+}
+
+// Fetches the whole map with `max_tile_retries` 2 until every tile but c.bad arrived and
+// c.bad was given up; then its texels answer from level k and the rest exactly.
+MapStats expect_given_up(const GivenUpCase& c, uint16_t port) {
+  const uint32_t side = 1u << c.level;
+  const size_t total = c.pack.reader->tiles().size();
   ClientOptions o = quick_options();
-  o.cache_slots = uint32_t(p.reader->tiles().size()) + 4;
+  o.cache_slots = uint32_t(total) + 4;
   o.max_tile_retries = 2;
-  Client client({"127.0.0.1", srv.port}, o);
-  Map map = client.open("corrupt_always");
-  map.request_region(level, 0, 0, side, side, 3);
-  ASSERT_TRUE(wait_until([&] {
+  Client client({"127.0.0.1", port}, o);
+  Map map = client.open(std::filesystem::path(c.pack.path).stem().string());
+  map.request_region(c.level, 0, 0, side, side, 3);
+  EXPECT_TRUE(wait_until([&] {
     MapStats s = map.stats();
-    return s.tiles_failed == 1 && s.tiles_received + 1 == p.reader->tiles().size();
+    return s.tiles_failed == 1 && s.tiles_received + 1 == total;
   }));
-  EXPECT_EQ(map.stats().crc_errors, 3u);  // the first try and two retries
-  PackEvaluator local(p.reader);
-  const uint32_t s = level - k;
+  PackEvaluator local(c.pack.reader);
+  const TileAddress a = tile_address(c.bad);
+  const uint32_t s = c.level - c.k;
   for (uint64_t y = 0; y < side; ++y)
     for (uint64_t x = 0; x < side; ++x) {
       const bool under_bad = (x >> s) == a.x && (y >> s) == a.y;
-      const float want = under_bad ? local.depth(k, a.x, a.y) : local.depth(level, x, y);
-      ASSERT_EQ(bits(map.depth(level, x, y)), bits(want)) << "(" << x << ", " << y << ")";
+      const float want = under_bad ? local.depth(c.k, a.x, a.y) : local.depth(c.level, x, y);
+      if (bits(map.depth(c.level, x, y)) != bits(want)) {
+        ADD_FAILURE() << "(" << x << ", " << y << "): got " << map.depth(c.level, x, y) << ", want " << want;
+        return map.stats();
+      }
     }
-  EXPECT_EQ(map.stats().tiles_failed, 1u);  // lookups did not ask for it again
+  const MapStats after = map.stats();
+  EXPECT_EQ(after.tiles_failed, 1u);  // lookups did not ask for it again
+  return after;
+}
+
+TEST(RemoteMap, AlwaysCorruptTileIsGivenUpAndItsTexelsStayCoarse) {
+  const GivenUpCase c = given_up_case("corrupt_always", 13);
+  server::ServerOptions so;
+  so.tile_hook = [bad = c.bad](uint64_t id, std::span<uint8_t> bytes) {
+    if (id == bad && !bytes.empty()) bytes[0] ^= 0x01;
+  };
+  auto srv = start_server({c.pack.path}, so);
+  const MapStats s = expect_given_up(c, srv.port);
+  EXPECT_EQ(s.crc_errors, 3u);  // the first try and two retries
+  EXPECT_EQ(s.decode_errors, 0u);
+}
+
+// `stored` with a few bits of its last 5 bytes flipped such that its CRC-32 is unchanged
+// (CRC is linear: 40 single-bit flips span at most 32 dimensions, so some nonzero set of
+// them cancels out). The last 4 bytes are the zlib stream's Adler-32.
+std::vector<uint8_t> same_crc_other_bytes(std::vector<uint8_t> stored) {
+  ST_CHECK(stored.size() >= 5);
+  const size_t base = stored.size() - 5;
+  const uint32_t crc = crc32_of(stored);
+  auto delta_of_bit = [&](unsigned k) {
+    stored[base + k / 8] ^= uint8_t(1u << (k % 8));
+    const uint32_t d = crc32_of(stored) ^ crc;
+    stored[base + k / 8] ^= uint8_t(1u << (k % 8));
+    return d;
+  };
+  struct Row {
+    uint32_t delta = 0;
+    uint64_t bits = 0;  // which of the 40 flips make it up
+  };
+  Row basis[32];  // by highest set bit of delta
+  for (unsigned k = 0; k < 40; ++k) {
+    Row r{delta_of_bit(k), uint64_t(1) << k};
+    for (int b = 31; b >= 0 && r.delta; --b)
+      if ((r.delta >> b & 1) && basis[b].bits) r.delta ^= basis[b].delta, r.bits ^= basis[b].bits;
+    if (r.delta == 0) {
+      for (unsigned j = 0; j < 40; ++j)
+        if (r.bits >> j & 1) stored[base + j / 8] ^= uint8_t(1u << (j % 8));
+      ST_CHECK(crc32_of(stored) == crc);
+      return stored;
+    }
+    basis[31 - std::countl_zero(r.delta)] = r;
+  }
+  ST_CHECK(false);  // unreachable: 40 vectors in a 32-dimensional space are dependent
+  return stored;
+}
+
+TEST(RemoteMap, TileMatchingItsCrcButNotDecodingIsRetriedThenGivenUp) {
+  const GivenUpCase c = given_up_case("undecodable", 17);
+  const std::vector<uint8_t> good = c.pack.reader->read_stored(c.bad);
+  const std::vector<uint8_t> forged = same_crc_other_bytes(good);
+  ASSERT_NE(forged, good);
+  ASSERT_EQ(crc32_of(forged), crc32_of(good));
+  ASSERT_THROW(zlib_decompress(forged, c.pack.reader->find(c.bad)->raw_size, "forged"), Error);
+  server::ServerOptions so;
+  so.tile_hook = [bad = c.bad, forged](uint64_t id, std::span<uint8_t> bytes) {
+    if (id == bad && bytes.size() == forged.size()) std::copy(forged.begin(), forged.end(), bytes.begin());
+  };
+  auto srv = start_server({c.pack.path}, so);
+  const MapStats s = expect_given_up(c, srv.port);
+  EXPECT_EQ(s.crc_errors, 0u);      // the end-to-end CRC passed every time
+  EXPECT_EQ(s.decode_errors, 3u);   // the first try and two retries, then given up
+  EXPECT_EQ(s.cache.resident, c.pack.reader->tiles().size() - 1) << "the failed slot was given back";
 }
 
 }  // namespace

@@ -70,6 +70,22 @@ TEST(Limits, DefaultsAreValidAndBoundsAreEnforced) {
   EXPECT_EQ(choose_version(4, 9, 1, 5), 5);
 }
 
+TEST(Handshake, LimitsBeforeTheAckAreVersionOneMinimumFramesAndTheRestOfOurOwn) {
+  Limits local;
+  local.max_frame_bytes = 8 << 20;
+  local.max_in_flight = 12;
+  local.max_tiles_per_batch = 99;
+  local.min_version = 1;
+  local.max_version = 3;
+  const Limits h = handshake_limits(local);
+  EXPECT_EQ(h.max_frame_bytes, kMinFrameBytes);
+  EXPECT_EQ(h.min_version, kHandshakeVersion);
+  EXPECT_EQ(h.max_version, kHandshakeVersion);
+  EXPECT_EQ(h.max_in_flight, 12);
+  EXPECT_EQ(h.max_tiles_per_batch, 99);
+  EXPECT_TRUE(validate(h));
+}
+
 TEST(Handshake, NegotiatesTheSmallerLimitsAndTheHighestCommonVersion) {
   Limits client;
   client.max_frame_bytes = 1 << 20;

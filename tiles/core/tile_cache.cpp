@@ -178,22 +178,12 @@ void TileCache::set_constant(TileId tile, float value) {
       throw Error("tile cache: tile " + std::to_string(tile) + " is pinned; cannot make it constant");
     drop_slot(s);
   }
-  e = PageEntry{PageState::constant, kNoSlot, value, 0};
+  e = PageEntry{PageState::constant, kNoSlot, value};
 }
 
-bool TileCache::request(TileId tile, uint16_t priority) {
+bool TileCache::request(TileId tile) {
   if (lookup(tile).state != PageState::absent) return false;
-  PageEntry& e = upsert(tile);
-  e.state = PageState::requested;
-  e.priority = priority;
-  return true;
-}
-
-bool TileCache::raise_priority(TileId tile, uint16_t priority) {
-  size_t b = find_bucket(tile);
-  if (b == kNpos || table_[b].entry.state != PageState::requested || table_[b].entry.priority >= priority)
-    return false;
-  table_[b].entry.priority = priority;
+  upsert(tile).state = PageState::requested;
   return true;
 }
 
@@ -249,7 +239,7 @@ bool TileCache::commit(uint32_t slot, uint32_t used_bytes) {
   n.state = SlotState::resident;
   ++resident_count_;
   PageEntry& e = upsert(n.tile);
-  e = PageEntry{PageState::resident, slot, 0, 0};
+  e = PageEntry{PageState::resident, slot, 0};
   ++inserts_;
   unpin(slot);
   return true;

@@ -49,7 +49,6 @@ struct PageEntry {
   PageState state = PageState::absent;
   uint32_t slot = kNoSlot;  // resident only
   float value = 0;          // constant only
-  uint16_t priority = 0;    // requested only: the highest priority asked for
 };
 
 struct CacheStats {
@@ -91,11 +90,10 @@ class TileCache {
   PageEntry access(TileId tile) noexcept;
   // A tile that stores nothing finer: `value` answers for all of it. Drops a resident copy.
   void set_constant(TileId tile, float value);
-  // absent -> requested at `priority`. Returns false (and changes nothing) in any other
-  // state.
-  bool request(TileId tile, uint16_t priority = 0);
-  // A requested page asked for again at a higher priority: raises it and returns true.
-  bool raise_priority(TileId tile, uint16_t priority);
+  // absent -> requested. Returns false (and changes nothing) in any other state. The
+  // request itself (priority, retries, ...) is the owner's business: the client keeps it
+  // in its request table (client/tile_requests.hpp).
+  bool request(TileId tile);
   // Sizes the page table for `pages` entries, so that no later request() allocates.
   void reserve_pages(size_t pages);
   // requested -> absent (a cancelled or failed fetch). Other states are left alone.
