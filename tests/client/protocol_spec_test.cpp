@@ -258,6 +258,10 @@ TEST(ProtocolSpec, MapInfoOfTheDeepestSkipGridIsServed) {
   const std::string path = write_deep_grid_pack(spec_dir() / "deep.pack");
   const uint64_t grid_bytes = CutGrid::serialized_size(kMaxSkipLevel);
   ASSERT_EQ(grid_bytes, 9'786'716u);
+  // The sizes PROTOCOL.md §4.6 and §10 quote.
+  EXPECT_EQ(kPackHeaderBytes, 256u);
+  EXPECT_EQ(CutGrid::serialized_size(6), 38'236u);
+  EXPECT_EQ(CutGrid::serialized_size(8), 611'676u);
   const uint32_t need = uint32_t(proto::kHeaderSize + 12 + kPackHeaderBytes + grid_bytes);
   auto srv = start_server({path});
   EXPECT_EQ(srv.server->max_frame_bytes(), need);
