@@ -134,6 +134,9 @@ Status check(const GetTiles& m, const Limits& limits) {
 
 Status check_tile(const TileMeta& meta, std::size_t payload_size) {
   if (meta.map_id == 0) return bad("tile_data", ErrorCode::invalid_field, "map_id is 0");
+  if ((meta.flags & ~kKnownTileFlags) != 0)
+    return bad("tile_data", ErrorCode::invalid_field,
+               "flags " + std::to_string(meta.flags) + " has reserved bits (2..15) set");
   if ((meta.flags & kTileFlagZlib) == 0 && meta.uncompressed_size != payload_size)
     return bad("tile_data", ErrorCode::invalid_field,
                "raw tile (flags bit 0 clear) of " + std::to_string(payload_size) +

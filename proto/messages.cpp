@@ -348,6 +348,17 @@ bool read_meta(Reader& r, TileMeta& m, std::uint32_t& length) {
 }
 }  // namespace
 
+std::uint32_t max_client_frame_bytes(const Limits& l) {
+  // Every C->S payload (PROTOCOL.md §4): Hello 17 + name, OpenMap 1 + name, Auth 64,
+  // Ping 8, Pong 16, Error 4 + message, and the two that grow with the limits.
+  const std::uint64_t get_tiles = 8 + 10 * std::uint64_t(l.max_tiles_per_batch);
+  const std::uint64_t cancel = 8 + 4 * std::uint64_t(l.max_in_flight) + 8 * std::uint64_t(max_cancel_tiles(l));
+  const std::uint64_t payload = std::max({get_tiles, cancel, std::uint64_t(4 + kMaxErrorMessageBytes),
+                                          std::uint64_t(17 + kMaxLabelBytes)});
+  const std::uint64_t frame = std::max<std::uint64_t>(kHeaderSize + payload, kMinFrameBytes);
+  return static_cast<std::uint32_t>(std::min<std::uint64_t>(frame, l.max_frame_bytes));
+}
+
 Status decode_tile_data_view(std::span<const std::uint8_t> p, TileMeta& meta,
                              std::span<const std::uint8_t>& bytes) {
   Reader r(p, "tile_data");

@@ -32,18 +32,27 @@ inline constexpr std::size_t kProofBytes = 32;          // FORMAT CONSTANT: HMAC
 // Feature bits (Hello.features / HelloAck.features). FORMAT CONSTANTS.
 // kFeatureAuth: in a Hello, the client holds a key and can prove it (Auth); in a HelloAck,
 // the server requires that proof before any request (PROTOCOL.md §11).
+// kFeatureTileKind: in a Hello, the client wants to read a tile's kind from TileData; in a
+// HelloAck, the server sets kTileFlagIndex on every index tile it sends (PROTOCOL.md §4.8).
 inline constexpr std::uint32_t kFeatureAuth = 0x0000'0001;
-inline constexpr std::uint32_t kKnownFeatures = kFeatureAuth;
+inline constexpr std::uint32_t kFeatureTileKind = 0x0000'0002;
+inline constexpr std::uint32_t kKnownFeatures = kFeatureAuth | kFeatureTileKind;
 inline constexpr std::size_t kMaxMapsListed = 4096;
 inline constexpr std::size_t kMaxCounters = 1024;
 inline constexpr std::size_t kMaxHistograms = 64;
 inline constexpr std::size_t kMaxHistogramBuckets = 64;
-inline constexpr std::uint8_t kMaxResolutionLog2 = 30;   // packs allow L <= 20 today (kMaxLevel)
+inline constexpr std::uint8_t kMaxResolutionLog2 = 30;   // packs allow L <= 20 today
 
-// TileData.flags bit 0: the payload is zlib format (packs store tiles already
-// compressed). Clear: the payload is the raw tile and uncompressed_size == its length.
-// Bits 1..15 are copied from the pack's tile index untouched (opaque to proto).
+// TileData.flags (FORMAT CONSTANTS, PROTOCOL.md §4.8):
+//   bit 0 zlib: the payload is zlib format (packs store tiles already compressed). Clear:
+//         the payload is the raw tile and uncompressed_size == its length.
+//   bit 1 index: the tile is an index tile (pack index kind 2, a CutGrid); clear: an
+//         encoded tile of the map's encoding (kind 1). Set by servers that grant
+//         kFeatureTileKind; a server without that feature leaves it clear.
+//   bits 2..15 reserved: 0 (invalid_field otherwise).
 inline constexpr std::uint16_t kTileFlagZlib = 0x0001;
+inline constexpr std::uint16_t kTileFlagIndex = 0x0002;
+inline constexpr std::uint16_t kKnownTileFlags = kTileFlagZlib | kTileFlagIndex;
 
 // C->S. First frame of a connection (header version 1). Proposes a version range and the
 // limits this client accepts (see Limits). features: capability bits (kFeatureAuth);
@@ -295,6 +304,13 @@ Status encode_tile_data_prefix(const TileMeta& meta, std::span<const std::uint8_
                                std::uint32_t request_id, std::uint8_t flags,
                                const Limits& limits,
                                std::array<std::uint8_t, kTileDataPrefixBytes>& out);
+
+// The largest frame (header + payload) a client may send under `limits`: a Cancel naming
+// max_in_flight requests and as many tiles as its rule allows, or the handshake minimum if
+// that is larger (kMinFrameBytes <= result <= limits.max_frame_bytes unless the limits
+// themselves are below the minimum). A server may bound what it buffers from a client by
+// this instead of max_frame_bytes, which exists for the server's tiles.
+std::uint32_t max_client_frame_bytes(const Limits& limits);
 
 // Zero-copy decode for the client: `bytes` views the frame's payload.
 Status decode_tile_data_view(std::span<const std::uint8_t> payload, TileMeta& meta,

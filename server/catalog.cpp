@@ -31,6 +31,11 @@ CatalogMap::CatalogMap(std::string name, std::string path)
   if (h.tile_count > UINT32_MAX) throw Error("serve: " + path_ + ": too many tiles");
   entry_.tile_count = uint32_t(h.tile_count);
   entry_.pack_bytes = pack_->file_size();
+  for (const TileIndexEntry& t : pack_->tiles()) largest_stored_tile_ = std::max(largest_stored_tile_, t.stored_size);
+}
+
+uint64_t CatalogMap::map_info_frame_bytes() const {
+  return proto::kHeaderSize + 12 + pack_->header_bytes().size() + pack_->grid_bytes().size();
 }
 
 void Catalog::add(std::string name, std::string path) {

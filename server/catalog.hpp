@@ -2,8 +2,12 @@
 // and directories given on the command line; a client can only name a catalog entry
 // (proto map-name rules: no '/', no leading '.'), never a path.
 //
-// A map's name is its file name without the ".pack" extension. Directories contribute
-// their "*.pack" files (not recursively; "*.pack.tmp" builds in progress are skipped).
+// A map's name is its file name (the last path component) without a final ".pack"
+// extension; a file named on the command line without that extension keeps its whole file
+// name. Directories contribute their regular "*.pack" files (not recursively; "*.pack.tmp"
+// builds in progress are skipped), and a file there whose name breaks the map-name rules
+// is skipped with a warning. Names are case-sensitive; the catalog lists them sorted by
+// byte value.
 // Every pack is opened and validated up front (header, skip grid, tile index), so a
 // corrupt pack stops the server at start, not at the first request.
 //
@@ -30,11 +34,17 @@ class CatalogMap {
   const std::string& path() const { return path_; }
   const PackReader& pack() const { return *pack_; }
   const proto::MapEntry& entry() const { return entry_; }
+  // The largest stored (zlib) tile of the pack (0: none): its TileData frame needs this
+  // + 52 bytes (PROTOCOL.md §6).
+  uint32_t largest_stored_tile() const { return largest_stored_tile_; }
+  // The MapInfo frame answering OpenMap: header, map id, pack header and skip grid.
+  uint64_t map_info_frame_bytes() const;
 
  private:
   std::string name_, path_;
   std::unique_ptr<PackReader> pack_;
   proto::MapEntry entry_;
+  uint32_t largest_stored_tile_ = 0;
 };
 
 class Catalog {

@@ -34,6 +34,7 @@ Connection::Connection(tcp::socket socket, ServerCore& core, asio::ip::address f
       tiles_(size_t(core.options.limits.max_in_flight) * core.options.limits.max_tiles_per_batch) {
   accepted_ = last_read_ = last_activity_ = frame_started_ = Clock::now();
   authed_ = core.options.key.empty();
+  tls_ready_ = core.tls == nullptr;
   writer_wake_.expires_at(Clock::time_point::max());
   reader_wake_.expires_at(Clock::time_point::max());
 }
@@ -72,6 +73,8 @@ asio::awaitable<void> Connection::reader(std::shared_ptr<Connection> /*keep aliv
       if (ec) {
         core_.stats.protocol_error();
         close();
+      } else {
+        tls_ready_ = true;
       }
     }
     while (!closed_ && !closing_) {
@@ -137,7 +140,13 @@ void Connection::handle(proto::Frame&& frame) {
     case MessageType::error:
       // The client gave up on the connection (PROTOCOL.md: the sender closes).
       return close();
-    case MessageType::cancel: return on_cancel(std::get<proto::Cancel>(msg));
+    case MessageType::cancel:
+      if (id != proto::kNoRequest) {  // PROTOCOL.md §4.10: it is no request, gets no answer
+        core_.stats.protocol_error();
+        return fail(ErrorCode::invalid_field,
+                    "cancel sent with request id " + std::to_string(id) + "; it must carry request id 0");
+      }
+      return on_cancel(std::get<proto::Cancel>(msg));
     case MessageType::pong: return;  // answer to a ping we never send; harmless
     default: break;
   }
@@ -193,6 +202,10 @@ bool Connection::admit(uint32_t id) {
 }
 
 void Connection::on_hello(const proto::Frame& f, const proto::Hello& m) {
+  if (f.header.request_id == proto::kNoRequest) {  // PROTOCOL.md §5: a Hello is a request
+    core_.stats.protocol_error();
+    return fail(ErrorCode::invalid_field, "hello sent with request id 0; it needs a request id != 0");
+  }
   proto::HelloAck ack;
   proto::Limits negotiated;
   // Without a key the nonce stays zero (unused); with one it is the fresh challenge.
@@ -203,12 +216,19 @@ void Connection::on_hello(const proto::Frame& f, const proto::Hello& m) {
     if (!s) core_.stats.auth_failure();
   }
   if (!s) return fail(s.code, proto::to_string(s));
+  // This server can mark index tiles in TileData flags: granted to a client that asks.
+  ack.features |= m.features & proto::kFeatureTileKind;
+  tile_kind_ = (ack.features & proto::kFeatureTileKind) != 0;
   std::vector<uint8_t> out;
   s = proto::encode_message(ack, f.header.request_id, proto::kFlagFinal, limits_, out);
   if (!s) return fail(ErrorCode::internal, proto::to_string(s));
   control_.push_back({std::move(out), 0});
   limits_ = negotiated;
-  parser_.set_limits(negotiated);
+  // The negotiated max_frame_bytes exists for tiles (S->C); what the server buffers from
+  // the client is bounded by the largest message a client may send (PROTOCOL.md §6).
+  proto::Limits receive = negotiated;
+  receive.max_frame_bytes = proto::max_client_frame_bytes(negotiated);
+  parser_.set_limits(receive);
   in_flight_.set_capacity(negotiated.max_in_flight);
   handshaken_ = true;
   wake_writer();
@@ -303,7 +323,8 @@ void Connection::answer(const proto::Message& m, uint32_t request_id) {
   wake_writer();
 }
 
-void Connection::answer_error(uint32_t request_id, ErrorCode code, const std::string& message) {
+void Connection::answer_error(uint32_t request_id, ErrorCode code, const std::string& message,
+                              bool last) {
   core_.stats.error();
   std::vector<uint8_t> out;
   std::string text = message.substr(0, proto::kMaxErrorMessageBytes);
@@ -311,14 +332,16 @@ void Connection::answer_error(uint32_t request_id, ErrorCode code, const std::st
     if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) c = ' ';
   proto::ErrorMessage e{code, text};
   if (proto::encode_message(e, request_id, proto::kFlagFinal, limits_, out))
-    control_.push_back({std::move(out), request_id});
+    control_.push_back({std::move(out), request_id, last});
+  else if (last)
+    control_.push_back({{}, 0, true});  // cannot happen (bounded text); still close after
   wake_writer();
 }
 
 void Connection::fail(ErrorCode code, const std::string& message) {
   if (closing_) return;
-  answer_error(proto::kNoRequest, code, message);
-  closing_ = true;  // the writer sends the Error, then closes
+  answer_error(proto::kNoRequest, code, message, true);
+  closing_ = true;  // the writer sends what was queued before the Error, the Error, then closes
   wake_writer();
 }
 
@@ -360,6 +383,7 @@ void Connection::prepare_tile(const PoppedTile& p, TileFrame& out) {
       meta.tile_id = p.tile.tile;
       meta.map_id = p.tile.map_id;
       meta.flags = proto::kTileFlagZlib;
+      if (tile_kind_ && entry->kind == TileKind::index) meta.flags |= proto::kTileFlagIndex;
       meta.uncompressed_size = entry->raw_size;
       meta.payload_crc32 = entry->crc;  // end to end: the client checks what the builder wrote
     } catch (const Error& e) {
@@ -407,6 +431,7 @@ asio::awaitable<void> Connection::writer(std::shared_ptr<Connection> self) {
         std::vector<asio::const_buffer> bufs{asio::buffer(frame.bytes)};
         if (!co_await write_buffers(bufs, frame.bytes.size())) break;
         if (frame.ends_request) in_flight_.end(frame.ends_request);  // FINAL written
+        if (frame.last) break;  // a connection-level Error is the last frame (PROTOCOL.md §4.3)
         continue;
       }
       if (!tiles_.empty()) {
@@ -470,6 +495,12 @@ asio::awaitable<void> Connection::watchdog(std::shared_ptr<Connection> /*keep al
     co_await watchdog_timer_.async_wait(asio::redirect_error(asio::use_awaitable, ec));
     if (closed_) break;
     const auto now = Clock::now();
+    if (timed_out_) {
+      // Error(timeout) is queued: the writer sends it and closes; only a stuck write
+      // still needs cutting off.
+      if (writing_ && now - write_started_ > opt_.write_timeout) close();
+      continue;
+    }
     const bool owed = !control_.empty() || !tiles_.empty();
     const char* why = nullptr;
     if ((!handshaken_ || !authed_) && now - accepted_ > opt_.handshake_timeout) why = "handshake";
@@ -477,8 +508,18 @@ asio::awaitable<void> Connection::watchdog(std::shared_ptr<Connection> /*keep al
     else if (mid_frame() && now - frame_started_ > opt_.read_timeout) why = "read";
     else if (!owed && !writing_ && now - last_activity_ > opt_.idle_timeout) why = "idle";
     if (why) {
-      if (std::string(why) != "idle") core_.stats.timeout();
-      close();
+      const std::string what(why);
+      if (what != "idle") core_.stats.timeout();
+      if (what == "write" || closing_ || !tls_ready_) {
+        close();  // no way (or no point) to write an Error first
+      } else {
+        // PROTOCOL.md §4.11: the client learns why the connection ends.
+        timed_out_ = true;
+        const auto limit = what == "handshake" ? opt_.handshake_timeout
+                           : what == "read"    ? opt_.read_timeout
+                                               : opt_.idle_timeout;
+        fail(ErrorCode::timeout, what + " timeout (" + std::to_string(limit.count()) + " ms)");
+      }
     }
   }
 }

@@ -7,7 +7,10 @@
 //              queue highest priority first, one gathered write per tile;
 //   watchdog - enforces the handshake, idle, read (a frame must finish within the read
 //              timeout of its first byte, however the bytes trickle in) and
-//              write timeouts by closing the socket, which ends the other two.
+//              write timeouts. The first three queue Error(timeout) with request id 0,
+//              which the writer sends before closing (PROTOCOL.md §4.11); a write
+//              timeout, or a TLS handshake still under way, closes the socket at once.
+//              Closing the socket ends the other two coroutines.
 // All three run on the connection's strand, so its state needs no locks.
 //
 // Limits per connection, so one slow or greedy client cannot starve the others: the
@@ -58,7 +61,10 @@ class Connection : public std::enable_shared_from_this<Connection> {
   // Queues a whole frame answering `request_id` (FINAL); the request leaves in_flight_
   // once the frame is written.
   void answer(const proto::Message& m, uint32_t request_id);
-  void answer_error(uint32_t request_id, proto::ErrorCode code, const std::string& message);
+  // `last`: a connection-level Error (request id 0): the writer closes once it is written,
+  // sending nothing queued after it.
+  void answer_error(uint32_t request_id, proto::ErrorCode code, const std::string& message,
+                    bool last = false);
   // Admits a request into in_flight_ (PROTOCOL.md §6-7): false if refused (too many:
   // answered with Error; duplicate id: the connection fails).
   bool admit(uint32_t request_id);
@@ -94,11 +100,15 @@ class Connection : public std::enable_shared_from_this<Connection> {
   struct ControlFrame {
     std::vector<uint8_t> bytes;
     uint32_t ends_request = 0;  // in_flight_ id released once written (0: none)
+    bool last = false;          // a connection-level Error: close once written
   };
   std::deque<ControlFrame> control_;
   std::vector<const CatalogMap*> open_maps_;  // map_id = index + 1
 
   bool handshaken_ = false;
+  bool tls_ready_ = false;  // plain TCP, or the TLS handshake is done: frames can be written
+  bool tile_kind_ = false;  // kFeatureTileKind granted: TileData flags mark index tiles
+  bool timed_out_ = false;  // Error(timeout) queued; the writer closes after it
   bool authed_ = false;  // no key configured, or the client proved it holds the key
   proto::Nonce server_nonce_{};
   bool closing_ = false;  // write what is queued, then close

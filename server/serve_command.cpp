@@ -6,6 +6,7 @@
 
 #include "common/error.hpp"
 #include "proto/auth.hpp"
+#include "proto/limits.hpp"
 #include "server/server.hpp"
 
 namespace st::server {
@@ -28,6 +29,11 @@ void add_serve_options(CLI::App& app, ServeConfig& a) {
   app.add_option("--tls-key", a.tls_key, "The certificate's private key (PEM)");
   app.add_option("--idle-timeout", a.idle_timeout, "Close connections idle this many seconds")
       ->capture_default_str()->check(CLI::Range(0.1, 86400.0));
+  app.add_option("--max-frame-bytes", a.max_frame_bytes,
+                 "Largest frame offered to clients, in bytes (a tile needs its stored size + 52); "
+                 "0: 4 MiB, raised to fit the largest tile and map info")
+      ->capture_default_str()
+      ->check(CLI::IsMember({0u}) | CLI::Range(proto::kMinFrameBytes, proto::kMaxFrameBytesCeiling));
 }
 
 std::pair<std::string, uint16_t> parse_listen(const std::string& text) {
@@ -67,14 +73,19 @@ void run_serve(const ServeConfig& a, const char* program) {
   o.max_connections_per_address = a.max_connections_per_address;
   o.stats_interval = std::chrono::milliseconds(int64_t(a.stats_interval * 1000));
   o.idle_timeout = std::chrono::milliseconds(int64_t(a.idle_timeout * 1000));
+  if (a.max_frame_bytes != 0) {
+    o.limits.max_frame_bytes = a.max_frame_bytes;
+    o.fit_frame_to_catalog = false;
+  }
+  o.log = [program](const std::string& line) { std::fprintf(stderr, "%s: %s\n", program, line.c_str()); };
   if (!a.key_file.empty()) o.key = proto::load_key_file(a.key_file);
   o.tls_cert_file = a.tls_cert;
   o.tls_key_file = a.tls_key;
   const size_t maps = catalog.maps().size();
   Server srv(std::move(catalog), o);
   srv.start();
-  std::fprintf(stderr, "%s: %zu map(s) on %s:%u (%u I/O thread(s)%s%s); Ctrl-C stops\n",
-               program, maps, o.host.c_str(), unsigned(srv.port()), o.threads,
+  std::fprintf(stderr, "%s: %zu map(s) on %s:%u (%u I/O thread(s), max frame %u bytes%s%s); Ctrl-C stops\n",
+               program, maps, o.host.c_str(), unsigned(srv.port()), o.threads, unsigned(srv.max_frame_bytes()),
                o.key.empty() ? "" : ", key required", o.tls_cert_file.empty() ? "" : ", TLS");
   for (const auto& m : srv.catalog().maps())
     std::fprintf(stderr, "  %s  L=%u K=%u tiles=%u  %s\n", m->name().c_str(),

@@ -18,6 +18,9 @@ struct ServeConfig {
   unsigned max_connections = 1024;
   unsigned max_connections_per_address = 256;
   double idle_timeout = 120;
+  // 0: the protocol default (4 MiB), raised to fit the catalog's largest tile and map
+  // info; else this cap exactly (65536..67108864), and what exceeds it is refused.
+  uint32_t max_frame_bytes = 0;
   std::string key_file, tls_cert, tls_key;
 };
 

@@ -17,6 +17,44 @@ void ServerCore::log(const std::string& line) const {
   else std::fprintf(stderr, "shadowtile serve: %s\n", line.c_str());
 }
 
+namespace {
+
+// PROTOCOL.md §6: a tile of n stored bytes travels in a TileData frame of n + 52 bytes,
+// a map's pack header and skip grid in one MapInfo frame. Raises the offered
+// max_frame_bytes to fit the largest of these (fit_frame_to_catalog), and says what it
+// offers and what cannot be served at all.
+void fit_frame_limit(ServerCore& core) {
+  uint64_t need = 0;
+  std::string what;
+  for (const auto& m : core.catalog.maps()) {
+    if (m->largest_stored_tile() && m->largest_stored_tile() + proto::kTileDataPrefixBytes > need) {
+      need = m->largest_stored_tile() + proto::kTileDataPrefixBytes;
+      what = "the largest tile (" + std::to_string(m->largest_stored_tile()) + " bytes, map '" + m->name() + "')";
+    }
+    if (m->map_info_frame_bytes() > need) {
+      need = m->map_info_frame_bytes();
+      what = "the map info of map '" + m->name() + "'";
+    }
+  }
+  uint32_t& cap = core.options.limits.max_frame_bytes;
+  if (core.options.fit_frame_to_catalog && need > cap) {
+    cap = uint32_t(std::min<uint64_t>(need, proto::kMaxFrameBytesCeiling));
+    core.log("max_frame_bytes raised to " + std::to_string(cap) + " to fit " + what);
+  }
+  if (need <= cap) return;
+  uint64_t tiles = 0, maps = 0;
+  for (const auto& m : core.catalog.maps()) {
+    maps += m->map_info_frame_bytes() > cap;
+    for (const TileIndexEntry& t : m->pack().tiles())
+      tiles += uint64_t(t.stored_size) + proto::kTileDataPrefixBytes > cap;
+  }
+  core.log("warning: max_frame_bytes " + std::to_string(cap) + " is too small for " + std::to_string(tiles) +
+           " tile(s) (answered tile_too_large) and " + std::to_string(maps) +
+           " map(s) (open_map answered limit_exceeded); " + what + " needs " + std::to_string(need));
+}
+
+}  // namespace
+
 struct Server::Impl {
   ServerCore core;
   asio::io_context io;
@@ -152,6 +190,7 @@ Server::Server(Catalog catalog, ServerOptions options) : impl_(std::make_unique<
   }
   impl_->core.options = std::move(options);
   impl_->core.catalog = std::move(catalog);
+  fit_frame_limit(impl_->core);
 }
 
 Server::~Server() { stop(); }
@@ -247,6 +286,7 @@ int Server::wait_for_signal() {
 }
 
 uint16_t Server::port() const { return impl_->port; }
+uint32_t Server::max_frame_bytes() const { return impl_->core.options.limits.max_frame_bytes; }
 StatsSnapshot Server::stats() const { return impl_->core.stats.snapshot(); }
 const Catalog& Server::catalog() const { return impl_->core.catalog; }
 

@@ -1,4 +1,4 @@
-// The shadowtile tile server (ARCHITECTURE.md "What it is"): serves the tiles of many packs over
+// The shadowtile tile server: serves the tiles of many packs (tiles/PACK.md) over
 // the wire protocol (proto/PROTOCOL.md) with Boost.Asio.
 //
 // Shape (Asio http server example): Server owns the io_context, the acceptor and the
@@ -27,9 +27,16 @@ namespace st::server {
 struct ServerOptions {
   std::string host = "127.0.0.1";
   uint16_t port = 7447;  // 0: an ephemeral port (see Server::port())
-  unsigned threads = 1;  // I/O threads; one beat two on 2 cores for small blobs (measured)
+  unsigned threads = 1;  // I/O threads; one beat two on a 2-core machine for small blobs
   // The most this server grants any client; the handshake takes the smaller of each pair.
   proto::Limits limits{};
+  // A tile is served only if its TileData frame (stored size + 52 bytes) fits the
+  // negotiated max_frame_bytes, and a map opens only if its MapInfo frame does (PROTOCOL.md
+  // §6). true: the server raises limits.max_frame_bytes at start to fit the largest of
+  // these in its catalog (never above the protocol's 64 MiB) and logs the cap it offers.
+  // false: limits.max_frame_bytes stays as given; what cannot fit is refused
+  // (tile_too_large, limit_exceeded), and a warning at start says how much.
+  bool fit_frame_to_catalog = true;
   size_t max_connections = 1024;         // beyond: Error(overloaded) and close
   // From one client address (IPv4 or IPv6): a client opening connections without end
   // is refused at this bound while other addresses are still served (0: no bound).
@@ -72,6 +79,8 @@ class Server {
   int wait_for_signal();
 
   uint16_t port() const;  // the bound port (after start())
+  // The max_frame_bytes this server offers in every HelloAck (after fit_frame_to_catalog).
+  uint32_t max_frame_bytes() const;
   StatsSnapshot stats() const;
   const Catalog& catalog() const;
 

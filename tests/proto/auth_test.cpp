@@ -81,6 +81,24 @@ TEST(Auth, KeysParseAsHexOrRawAndBadKeysNameTheProblem) {
   EXPECT_EQ(load_key_file(path.string()).size(), 16u);
 }
 
+// The key-file rules PROTOCOL.md §11 states, edge by edge.
+TEST(Auth, KeyFileIsHexWhenEveryNonSpaceCharacterIsAHexDigitElseRaw) {
+  // Hex: whitespace anywhere is ignored, either case, an even number of digits.
+  EXPECT_EQ(parse_key("00112233 44556677\n8899AABB\tccddeeff\r\n", "k"),
+            parse_key("00112233445566778899aabbccddeeff", "k"));
+  EXPECT_EQ(parse_key("00112233445566778899aabbccddeeff", "k").size(), 16u);
+  // An odd number of hex digits is not hex: the 33 characters are the key.
+  EXPECT_EQ(parse_key("0123456789abcdef0123456789abcdef0\n", "k"),
+            bytes("0123456789abcdef0123456789abcdef0"));
+  // Raw: the bytes as they are, only trailing CR/LF dropped (leading and inner spaces,
+  // trailing spaces, stay).
+  EXPECT_EQ(parse_key("  pass phrase, 16+ bytes \r\n\n", "k"), bytes("  pass phrase, 16+ bytes "));
+  // The bounds apply to the decoded key: 16..1024 bytes.
+  EXPECT_THROW(parse_key("00112233445566778899aabbccddee", "k"), Error);  // 15 bytes of hex
+  EXPECT_EQ(parse_key(std::string(2048, 'a'), "k").size(), 1024u);         // 1024 bytes of hex
+  EXPECT_THROW(parse_key(std::string(1025, 'z'), "k"), Error);
+}
+
 TEST(Auth, AuthAndAuthOkLayoutsArePinned) {
   Auth a;
   for (std::size_t i = 0; i < kNonceBytes; ++i) a.client_nonce[i] = std::uint8_t(i);

@@ -77,6 +77,10 @@ TEST(FrameLayout, TypeAndErrorCodeValuesAreFrozen) {
   EXPECT_EQ(static_cast<int>(MessageType::auth), 0x0050);
   EXPECT_EQ(static_cast<int>(MessageType::auth_ok), 0x0051);
   EXPECT_EQ(kFeatureAuth, 1u);
+  EXPECT_EQ(kFeatureTileKind, 2u);
+  EXPECT_EQ(kTileFlagZlib, 1u);   // TileData flags (offset 12 of the payload)
+  EXPECT_EQ(kTileFlagIndex, 2u);
+  EXPECT_EQ(kKnownTileFlags, 3u);
   EXPECT_EQ(static_cast<int>(ErrorCode::bad_magic), 1);
   EXPECT_EQ(static_cast<int>(ErrorCode::payload_checksum), 4);
   EXPECT_EQ(static_cast<int>(ErrorCode::cancelled), 20);

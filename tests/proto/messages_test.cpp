@@ -322,6 +322,73 @@ TEST(Messages, TilePrefixRefusesTilesThatCannotFitTheFrame) {
             ErrorCode::invalid_field);
 }
 
+// PROTOCOL.md §4.8: bit 0 zlib, bit 1 index tile, bits 2..15 reserved (refused both ways).
+TEST(Messages, TileDataFlagsHaveTwoBitsAndTheRestIsReserved) {
+  const Limits limits;
+  TileData t;
+  t.payload = {9, 8, 7};
+  t.meta.uncompressed_size = 100;
+  t.meta.payload_crc32 = crc32(t.payload);
+  for (std::uint16_t flags : {0x0001, 0x0003}) {
+    t.meta.flags = flags;
+    Bytes f;
+    ASSERT_TRUE(encode_message(t, 1, kFlagFinal, limits, f)) << flags;
+    EXPECT_EQ(load_le<std::uint16_t>(f.data() + kHeaderSize + 12), flags);
+    TileMeta meta;
+    std::span<const std::uint8_t> bytes;
+    ASSERT_TRUE(decode_tile_data_view({f.data() + kHeaderSize, f.size() - kHeaderSize}, meta, bytes));
+    EXPECT_EQ(meta.flags, flags);
+  }
+  t.meta.flags = kTileFlagZlib;
+  Bytes good;
+  ASSERT_TRUE(encode_payload(t, limits, good));
+  for (int bit = 2; bit < 16; ++bit) {
+    t.meta.flags = std::uint16_t(kTileFlagZlib | (1u << bit));
+    Bytes out;
+    EXPECT_EQ(encode_payload(t, limits, out).code, ErrorCode::invalid_field) << bit;
+    std::array<std::uint8_t, kTileDataPrefixBytes> prefix;
+    EXPECT_EQ(encode_tile_data_prefix(t.meta, t.payload, 1, kFlagFinal, limits, prefix).code,
+              ErrorCode::invalid_field)
+        << bit;
+    Bytes bad = good;
+    store_le<std::uint16_t>(bad.data() + 12, t.meta.flags);
+    TileData d;
+    EXPECT_EQ(decode_payload(bad, limits, d).code, ErrorCode::invalid_field) << bit;
+  }
+}
+
+// The server buffers client frames only up to max_client_frame_bytes (PROTOCOL.md §6): the
+// largest message a client may legally send must fit it exactly, whatever the limits.
+TEST(Messages, MaxClientFrameBytesFitsTheLargestClientMessage) {
+  for (std::uint16_t in_flight : {1, 64, 1000, 4096})
+    for (std::uint16_t batch : {1, 256, 4096})
+      for (std::uint32_t frame : {kMinFrameBytes, 4u << 20, kMaxFrameBytesCeiling}) {
+        Limits l;
+        l.max_in_flight = in_flight;
+        l.max_tiles_per_batch = batch;
+        l.max_frame_bytes = frame;
+        const std::uint32_t bound = max_client_frame_bytes(l);
+        EXPECT_GE(bound, kMinFrameBytes);
+        EXPECT_LE(bound, frame);
+        Cancel c;
+        for (std::uint32_t i = 1; i <= in_flight; ++i) c.request_ids.push_back(i);
+        c.map_id = 1;
+        const std::size_t tiles = std::min<std::size_t>(0xffff, std::size_t(in_flight) * batch);
+        for (std::size_t i = 0; i < tiles; ++i) c.tile_ids.push_back(i);
+        GetTiles g;
+        for (std::uint16_t i = 0; i < batch; ++i) g.tiles.push_back({i, 0});
+        std::size_t largest = 0;
+        for (const Message& m : {Message(c), Message(g)}) {
+          Bytes payload;
+          ASSERT_TRUE(std::visit([&](const auto& v) { return encode_payload(v, l, payload); }, m));
+          largest = std::max(largest, kHeaderSize + payload.size());
+        }
+        // Every legal client frame that the frame limit allows passes; none needs more.
+        EXPECT_EQ(bound, std::min<std::size_t>(std::max<std::size_t>(largest, kMinFrameBytes), frame))
+            << in_flight << " " << batch << " " << frame;
+      }
+}
+
 TEST(Messages, CancelRules) {
   Bytes out;
   EXPECT_EQ(encode_payload(Cancel{}, {}, out).code, ErrorCode::invalid_field);

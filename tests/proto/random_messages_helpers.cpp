@@ -130,7 +130,7 @@ Message random_message(Rng& rng, MessageType type, const Limits& limits) {
       m.payload = random_bytes(rng, 5000);
       m.meta.tile_id = any64(rng);
       m.meta.map_id = uniform<std::uint32_t>(rng, 1, 0xffffffffu);
-      m.meta.flags = static_cast<std::uint16_t>(rng());
+      m.meta.flags = static_cast<std::uint16_t>(rng()) & kKnownTileFlags;
       m.meta.uncompressed_size = (m.meta.flags & kTileFlagZlib)
                                      ? static_cast<std::uint32_t>(rng())
                                      : static_cast<std::uint32_t>(m.payload.size());

@@ -3,6 +3,7 @@
 // pinned header offsets, offset scaling, hostile buffers.
 #include <gtest/gtest.h>
 
+#include <bit>
 #include <cfloat>
 #include <cmath>
 #include <cstring>
@@ -57,6 +58,87 @@ TEST(MhQuadtree, EveryFieldEverySizeMatchesTheHierarchyAtEveryLevel) {
         ASSERT_EQ(mhtest::check_lossless_all_levels(*ev, f.tile), "") << what;
         EXPECT_EQ(st::load_le<uint32_t>(bytes.data() + mhq::kOffNodeCount), h.node_count()) << what;
       }
+}
+
+// A lookup written from tiles/core/MHQUAD.md alone (header, tree words, block formula,
+// traversal), without the reader: from a node at level l the child slot is bit
+// `level - l - 1` of x and y. `bit_of_child_level` = false reads "bit level - l" with l
+// the current node's level instead, the off-by-one the text once invited.
+float depth_from_the_spec(std::span<const uint8_t> b, uint32_t level, uint64_t x, uint64_t y,
+                          bool bit_of_child_level = true) {
+  const uint32_t levels = b[6];
+  const uint8_t flags = b[7];
+  const size_t tree = 16 + ((levels + 3) & ~3u);
+  auto word = [&](uint64_t i) { return st::load_le<uint32_t>(b.data() + tree + 4 * i); };
+  auto as_float = [](uint32_t w) {
+    float f;
+    std::memcpy(&f, &w, 4);
+    return f;
+  };
+  if (flags & 1) return as_float(word(0));  // the root is a leaf
+  uint64_t pos = 0, value_word = 1;          // else an inner node: node word, then float
+  uint32_t code = 3;
+  for (uint32_t l = 0; l < level && code != 1; ++l) {
+    const uint32_t bit = bit_of_child_level ? level - l - 1 : level - l;
+    const uint32_t c = uint32_t((x >> bit) & 1) | uint32_t(((y >> bit) & 1) << 1);
+    const uint32_t w = word(pos), mask = w & 0xff;
+    const uint32_t child_code = (mask >> (2 * c)) & 3;
+    if (child_code == 0) break;  // no child: the last valued node answers
+    const uint32_t s = b[16 + l], off = w >> 16;
+    const uint64_t block = ((pos >> s) + off) << s;
+    pos = block + uint32_t(std::popcount(mask & ((1u << (2 * c)) - 1)));
+    code = child_code;
+    if (code == 1) value_word = pos;       // leaf: its float is its word
+    else if (code == 3) value_word = pos + 1;  // inner: node word, then float
+  }
+  return as_float(word(value_word));
+}
+
+TEST(MhQuadtree, TheSpecAloneDecodesEveryTexelAtEveryLevel) {
+  auto bits = [](float f) {
+    uint32_t u;
+    std::memcpy(&u, &f, 4);
+    return u;
+  };
+  uint64_t misread = 0, texels = 0;
+  auto check = [&](const IntervalTile& tile, const std::string& what) {
+    const auto bytes = encode_mh(build_hierarchy(tile));
+    const auto ev = open_mh(bytes);
+    const uint32_t finest = ev->finest_level();
+    for (uint32_t level = 0; level <= finest + 2; ++level)  // two levels finer than the tile too
+      for (uint64_t y = 0; y < (uint64_t(1) << level); ++y)
+        for (uint64_t x = 0; x < (uint64_t(1) << level); ++x) {
+          const float want = ev->depth(level, x, y);
+          ASSERT_EQ(bits(depth_from_the_spec(bytes, level, x, y)), bits(want))
+              << what << " level " << level << " (" << x << ", " << y << ")";
+          if (level == finest && level > 0) {
+            ++texels;
+            misread += bits(depth_from_the_spec(bytes, level, x, y, false)) != bits(want);
+          }
+          // Finer than the tile: the texel above it at the finest level answers.
+          if (level > finest) {
+            ASSERT_EQ(bits(want), bits(ev->depth(finest, x >> (level - finest), y >> (level - finest))));
+          }
+        }
+  };
+  const uint32_t side = fields::small_test_scale() ? 32 : 64;
+  for (uint32_t s = 1; s <= side; s *= 2)
+    for (auto& f : fields::all_fields(s, 3)) check(f.tile, f.name + " " + std::to_string(s));
+  // Offsets scaled at the top levels: the block formula with shifts != 0.
+  const IntervalTile big = fields::uniform_field(512, 9);
+  {
+    const auto bytes = encode_mh(build_hierarchy(big));
+    uint32_t scaled = 0;
+    for (uint32_t l = 0; l < 10; ++l) scaled += bytes[mhq::kOffShifts + l] != 0;
+    ASSERT_GT(scaled, 0u) << "expected a scaled level";
+    const auto ev = open_mh(bytes);
+    const uint32_t finest = ev->finest_level();
+    for (uint64_t i = 0; i < 20000; ++i) {
+      const uint64_t x = (i * 2654435761u) & ((1u << finest) - 1), y = (i * 40503u + 7) & ((1u << finest) - 1);
+      ASSERT_EQ(bits(depth_from_the_spec(bytes, finest, x, y)), bits(ev->depth(finest, x, y))) << x << " " << y;
+    }
+  }
+  EXPECT_GT(misread, texels / 4) << "the off-by-one reading should fail visibly";
 }
 
 TEST(MhQuadtree, HeaderAndNodeWordsArePinned) {

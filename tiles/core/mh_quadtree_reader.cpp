@@ -191,7 +191,8 @@ class TreeEvaluator final : public Evaluator {
   }
 
   // Walks toward texel (x, y) of `level` until level `until`, a leaf or a missing child;
-  // the child slot at level l comes from bit (level - l) of x and y (MH Fig. 5).
+  // from a node at level l the child slot comes from bit (level - l - 1) of x and y, i.e.
+  // bit (level - l') for the child's level l' = l + 1 (MH Fig. 5).
   void descend(Cursor& c, uint32_t level, uint64_t x, uint64_t y, uint32_t until) const {
     while (c.level < until && c.code != kCodeLeaf) {
       const uint32_t bit = level - (c.level + 1);
