@@ -97,8 +97,7 @@ std::vector<MapListing> Client::list_maps() {
   for (const proto::MapEntry& e : list->maps) {
     MapListing l;
     l.name = e.name;
-    l.encoding = e.encoding <= uint8_t(Encoding::dagmh) ? to_string(Encoding(e.encoding))
-                                                        : "encoding#" + std::to_string(e.encoding);
+    l.encoding = to_string(Encoding(e.encoding));  // names unknown tags "encoding#N"
     l.resolution_log2 = e.resolution_log2;
     l.skip_level = e.skip_level;
     l.tile_count = e.tile_count;

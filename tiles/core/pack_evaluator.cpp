@@ -35,6 +35,13 @@ uint64_t PackEvaluator::tiles_opened() const {
   return opened_;
 }
 
+void PackEvaluator::give_back(std::unique_lock<std::mutex>& lock, uint32_t slot,
+                              void (TileCache::*release)(uint32_t)) const {
+  lock.lock();
+  (cache_.*release)(slot);
+  unpinned_.notify_all();  // a lookup may be waiting for a slot to reserve
+}
+
 uint32_t PackEvaluator::resident_slot(uint64_t id, const GridEntry& entry, std::unique_lock<std::mutex>& lock) const {
   const PageEntry page = cache_.access(id);
   if (page.state == PageState::resident) return page.slot;
@@ -72,9 +79,7 @@ uint32_t PackEvaluator::resident_slot(uint64_t id, const GridEntry& entry, std::
                           std::to_string(reader_->map_level() - a.level));
     }
   } catch (...) {
-    lock.lock();
-    cache_.abort(slot);
-    unpinned_.notify_all();
+    give_back(lock, slot, &TileCache::abort);
     throw;
   }
   lock.lock();
@@ -105,14 +110,10 @@ float PackEvaluator::depth(uint32_t level, uint64_t x, uint64_t y) const {
   try {
     v = slot_eval_[slot]->depth(hit.rel, hit.tx, hit.ty);
   } catch (...) {
-    lock.lock();
-    cache_.unpin(slot);
-    unpinned_.notify_all();
+    give_back(lock, slot, &TileCache::unpin);
     throw;
   }
-  lock.lock();
-  cache_.unpin(slot);
-  unpinned_.notify_all();
+  give_back(lock, slot, &TileCache::unpin);
   return v;
 }
 

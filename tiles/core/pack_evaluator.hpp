@@ -43,6 +43,10 @@ class PackEvaluator : public Evaluator {
   // returns with `lock` held; releases it while reading.
   uint32_t resident_slot(uint64_t id, const GridEntry& entry, std::unique_lock<std::mutex>& lock) const;
 
+  // Re-takes `lock` and releases `slot` (TileCache::unpin after a lookup, ::abort after a
+  // failed read), waking lookups that wait for a slot.
+  void give_back(std::unique_lock<std::mutex>& lock, uint32_t slot, void (TileCache::*release)(uint32_t)) const;
+
   std::shared_ptr<const PackReader> reader_;
   PackReader::TileOpener open_tile_;
   mutable std::mutex mu_;
