@@ -26,7 +26,7 @@ TexelRegion parse_region(const std::string& text) {
 
 struct BuildArgs {
   std::string scene, light, resolution = "4096", encoding = "dagmh", out, report, region,
-                     construction = "bottom-up", up = "y";
+                     construction = "bottom-up", up = "y", intervals = "default";
   std::optional<uint32_t> skip_level;
   uint32_t tile_bytes = 64 * 1024;
   int compression = 6;
@@ -45,6 +45,9 @@ void run(const BuildArgs& a) {
   else if (a.construction == "top-down") o.construction = MhConstruction::top_down;
   else throw Error("--construction: expected bottom-up or top-down, got '" + a.construction + "'");
   if (!a.region.empty()) o.region = parse_region(a.region);
+  if (a.intervals == "static") o.intervals = IntervalRule::static_geometry;
+  else if (a.intervals != "default")
+    throw Error("--intervals: expected default or static, got '" + a.intervals + "'");
   o.scene_spec = a.scene;
   o.light_spec = a.light;
 
@@ -132,6 +135,10 @@ void setup(CLI::App& app) {
                  "Build only cells touching texels X,Y,W,H of the finest level (the rest constant)");
   app.add_option("--compression", a->compression, "zlib level 0..12 (libdeflate)")->capture_default_str();
   app.add_option("--up", a->up, "Up axis of the scene file: y (glTF) or z")->capture_default_str();
+  app.add_option("--intervals", a->intervals,
+                 "default: [first hit, exit of closed objects]; static: an open surface's interval also "
+                 "reaches to just below the next surface (lossless for receivers on surfaces only)")
+      ->capture_default_str();
   app.add_flag("-q,--quiet", a->quiet, "No summary or progress");
   app.callback([a]() { run(*a); });
 }

@@ -17,6 +17,7 @@ std::string feature_names(uint32_t flags) {
   add(kFeatureHasTiles, "tiles");
   add(kFeatureIndexTiles, "index-tiles");
   add(kFeatureDeepShadow, "deep-shadow");
+  add(kFeatureStaticIntervals, "static-intervals");
   return s.empty() ? "none" : s;
 }
 

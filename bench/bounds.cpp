@@ -1,6 +1,8 @@
 // Depth-bounds benchmark (MH §3.1): Mtexels/s of dual depth bounds (lo + exit depth hi)
 // next to plain first-hit rays (an ordinary shadow map: one traversal per texel) over
-// the same texels in the same run, their ratio, traversals per texel and peak memory.
+// the same texels in the same run, their ratio, traversals per texel and peak memory;
+// and the cost of the canonical depth (tiles/bake/canonical_depth.hpp): the same bounds
+// from the tracer's float t ("tracer t", the tracer before the canonical depth).
 //
 //   bench_bounds [--scene procedural:city] [--light sun:azimuth=30,elevation=50]
 //                [--resolution 16k] [--region-side 4096] [--regions N] [--quick]
@@ -128,22 +130,24 @@ int main(int argc, char** argv) {
     std::printf("map %llu^2 (level %u), %zu regions of <= %u^2, %u hardware threads\n\n",
                 (unsigned long long)side, level, regions.size(), region_side,
                 std::thread::hardware_concurrency());
-    std::printf("%-22s %7s %7s %11s %11s %7s %9s %9s\n", "region", "hit%", "closed%",
-                "bounds Mt/s", "first Mt/s", "ratio", "trav/tex", "fallback");
+    std::printf("%-22s %7s %7s %11s %11s %7s %12s %8s %9s %9s\n", "region", "hit%", "closed%",
+                "bounds Mt/s", "first Mt/s", "ratio", "tracer-t Mt/s", "canon x", "trav/tex", "fallback");
 
     nlohmann::json jr = nlohmann::json::array();
-    Side tb, tf;  // totals
+    Side tb, tf, tt;  // totals
     for (const auto& r : regions) {
       Side b = run(tracer, r, st::TraceMode::bounds);
       Side f = run(tracer, r, st::TraceMode::first_hit);
+      Side t = run(tracer, r, st::TraceMode::bounds_tracer_t);
       const double tex = double(b.stats.texels);
       char name[64];
       std::snprintf(name, sizeof name, "%llu,%llu,%u,%u", (unsigned long long)r.x0,
                     (unsigned long long)r.y0, r.width, r.height);
-      std::printf("%-22s %7.2f %7.2f %11.2f %11.2f %7.3f %9.3f %9llu\n", name,
+      std::printf("%-22s %7.2f %7.2f %11.2f %11.2f %7.3f %12.2f %8.3f %9.3f %9llu\n", name,
                   100 * double(b.stats.hits) / tex, 100 * double(b.stats.closed) / tex,
-                  tex / b.wall * 1e-6, tex / f.wall * 1e-6, b.wall / f.wall,
-                  double(b.stats.traversals) / tex, (unsigned long long)b.stats.fallbacks);
+                  tex / b.wall * 1e-6, tex / f.wall * 1e-6, b.wall / f.wall, tex / t.wall * 1e-6,
+                  b.wall / t.wall, double(b.stats.traversals) / tex,
+                  (unsigned long long)b.stats.fallbacks);
       jr.push_back({{"region", {r.x0, r.y0, r.width, r.height}},
                     {"texels", b.stats.texels},
                     {"hits", b.stats.hits},
@@ -153,18 +157,23 @@ int main(int argc, char** argv) {
                     {"bounds_wall_s", b.wall},
                     {"bounds_cpu_s", b.cpu},
                     {"first_hit_wall_s", f.wall},
-                    {"first_hit_cpu_s", f.cpu}});
+                    {"first_hit_cpu_s", f.cpu},
+                    {"tracer_t_wall_s", t.wall},
+                    {"tracer_t_cpu_s", t.cpu}});
       tb.wall += b.wall, tb.cpu += b.cpu, tb.stats += b.stats;
       tf.wall += f.wall, tf.cpu += f.cpu, tf.stats += f.stats;
+      tt.wall += t.wall, tt.cpu += t.cpu, tt.stats += t.stats;
     }
     const double tex = double(tb.stats.texels);
     const double peak = peak_rss_mib();
-    std::printf("\n%-22s %7.2f %7.2f %11.2f %11.2f %7.3f %9.3f %9llu\n", "total (wall)",
+    std::printf("\n%-22s %7.2f %7.2f %11.2f %11.2f %7.3f %12.2f %8.3f %9.3f %9llu\n", "total (wall)",
                 100 * double(tb.stats.hits) / tex, 100 * double(tb.stats.closed) / tex,
-                tex / tb.wall * 1e-6, tex / tf.wall * 1e-6, tb.wall / tf.wall,
-                double(tb.stats.traversals) / tex, (unsigned long long)tb.stats.fallbacks);
-    std::printf("%-22s %7s %7s %11.2f %11.2f %7.3f   (Mtexels per CPU second, all threads)\n",
-                "total (cpu)", "", "", tex / tb.cpu * 1e-6, tex / tf.cpu * 1e-6, tb.cpu / tf.cpu);
+                tex / tb.wall * 1e-6, tex / tf.wall * 1e-6, tb.wall / tf.wall, tex / tt.wall * 1e-6,
+                tb.wall / tt.wall, double(tb.stats.traversals) / tex,
+                (unsigned long long)tb.stats.fallbacks);
+    std::printf("%-22s %7s %7s %11.2f %11.2f %7.3f %12.2f %8.3f   (Mtexels per CPU second, all threads)\n",
+                "total (cpu)", "", "", tex / tb.cpu * 1e-6, tex / tf.cpu * 1e-6, tb.cpu / tf.cpu,
+                tex / tt.cpu * 1e-6, tb.cpu / tt.cpu);
     std::printf("bounds: %.2f Mrays/s wall, %.2f Mtraversals/s wall; peak RSS %.0f MiB\n",
                 double(tb.stats.rays) / tb.wall * 1e-6, double(tb.stats.traversals) / tb.wall * 1e-6,
                 peak);
@@ -192,6 +201,9 @@ int main(int argc, char** argv) {
           {"first_hit_mtexels_per_cpu_s", tex / tf.cpu * 1e-6},
           {"bounds_over_first_hit_time_wall", tb.wall / tf.wall},
           {"bounds_over_first_hit_time_cpu", tb.cpu / tf.cpu},
+          {"tracer_t_mtexels_per_s_wall", tex / tt.wall * 1e-6},
+          {"canonical_over_tracer_t_time_wall", tb.wall / tt.wall},
+          {"canonical_over_tracer_t_time_cpu", tb.cpu / tt.cpu},
           {"peak_rss_mib", peak},
           {"regions", jr}};
       std::ofstream(json_path) << j.dump(2) << "\n";

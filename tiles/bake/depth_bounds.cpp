@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "common/error.hpp"
+#include "tiles/bake/canonical_depth.hpp"
 #include "tiles/bake/exit_depth.hpp"
 
 namespace st {
@@ -23,15 +24,32 @@ namespace {
 // hit tells at once whether it counts (MH §3.1: open geometry gives hi = lo).
 constexpr unsigned kClosedGeom = 0, kOpenGeom = 1;
 
-// Packets: 8 lanes over 2 rows x 4 columns of texels: rtcIntersect8 on coherent rays
-// was the fastest Embree 3 query measured for these maps.
-constexpr unsigned kLanes = 8, kPacketW = 4, kPacketH = 2;
+// The widest packet (rtcIntersect16); the default is 8 lanes over 2 rows x 4 columns of
+// texels: rtcIntersect8 on coherent rays was the fastest Embree 3 query measured for
+// these maps. The other shapes exist so that tests can prove the canonical depth does not
+// depend on the batching (canonical_depth.hpp).
+constexpr unsigned kMaxLanes = 16;
+
+// What the canonical window traversal gathers per lane: the smallest canonical t of the
+// primitives hit (canonical_depth.hpp step 4) and, for the static-geometry interval, the
+// canonical t of every primitive in the window (up to kMaxWindow; more is an overflow).
+struct CanonicalLane {
+  static constexpr uint32_t kMaxWindow = 16;
+  Vec3d origin, dir;  // recentred, double
+  double min_t;
+  double t[kMaxWindow];
+  uint32_t n;
+  bool overflow;
+  void reset() { min_t = INFINITY, n = 0, overflow = false; }
+};
 
 // Embree passes our context pointer to the filter; RTCIntersectContext must come first.
 // Each lane's counting state also holds what the filter gathers for it.
 struct FilterContext {
   RTCIntersectContext ctx;
-  ExitDepthRay lane[kLanes];
+  const std::vector<CanonicalPlane>* planes;  // by geometry id, then primitive id
+  ExitDepthRay lane[kMaxLanes];
+  CanonicalLane canon[kMaxLanes];
 };
 static_assert(std::is_standard_layout_v<FilterContext>);
 
@@ -44,7 +62,7 @@ void offer_hits(const RTCFilterFunctionNArguments* args) {
   for (unsigned i = 0; i < n; ++i) {
     if (args->valid[i] == 0) continue;
     const unsigned lane = RTCRayN_id(args->ray, n, i);
-    if (lane >= kLanes) {  // never: we set every id; reject rather than index out of range
+    if (lane >= kMaxLanes) {  // never: we set every id; reject rather than index out of range
       args->valid[i] = 0;
       continue;
     }
@@ -52,6 +70,63 @@ void offer_hits(const RTCFilterFunctionNArguments* args) {
     const float t = RTCRayN_tfar(args->ray, n, i);
     if (!fc->lane[lane].offer(t, closed, RTCHitN_primID(args->hit, n, i))) args->valid[i] = 0;
   }
+}
+
+// The canonical window traversal: every hit is rejected (the traversal sees the whole
+// window) and its primitive's canonical t kept if it is the smallest so far.
+void gather_canonical(const RTCFilterFunctionNArguments* args) {
+  auto* fc = reinterpret_cast<FilterContext*>(args->context);
+  const unsigned n = args->N;
+  for (unsigned i = 0; i < n; ++i) {
+    if (args->valid[i] == 0) continue;
+    args->valid[i] = 0;
+    const unsigned lane = RTCRayN_id(args->ray, n, i);
+    const unsigned geom = RTCHitN_geomID(args->hit, n, i);
+    if (lane >= kMaxLanes || geom > kOpenGeom) continue;
+    const std::vector<CanonicalPlane>& planes = fc->planes[geom];
+    const unsigned prim = RTCHitN_primID(args->hit, n, i);
+    if (prim >= planes.size()) continue;
+    CanonicalLane& c = fc->canon[lane];
+    const double t = planes[prim].t(c.origin, c.dir, RTCRayN_tfar(args->ray, n, i));
+    c.min_t = std::min(c.min_t, t);
+    if (c.n < CanonicalLane::kMaxWindow) c.t[c.n++] = t;
+    else c.overflow = true;
+  }
+}
+
+// One Embree query over packets of N rays, through one interface: RTCRayHit4/8/16 are
+// structures of arrays; single rays (N = 1) go through rtcIntersect1 on a copy.
+struct RayHit1 {
+  struct {
+    float org_x[1], org_y[1], org_z[1], tnear[1], dir_x[1], dir_y[1], dir_z[1], time[1],
+        tfar[1];
+    unsigned mask[1], id[1], flags[1];
+  } ray;
+  struct {
+    unsigned geomID[1];
+  } hit;
+};
+void intersect(const int* valid, RTCScene scene, RTCIntersectContext* ctx, RayHit1* p) {
+  if (valid[0] == 0) return;
+  RTCRayHit rh;
+  rh.ray.org_x = p->ray.org_x[0], rh.ray.org_y = p->ray.org_y[0], rh.ray.org_z = p->ray.org_z[0];
+  rh.ray.tnear = p->ray.tnear[0], rh.ray.tfar = p->ray.tfar[0], rh.ray.time = p->ray.time[0];
+  rh.ray.dir_x = p->ray.dir_x[0], rh.ray.dir_y = p->ray.dir_y[0], rh.ray.dir_z = p->ray.dir_z[0];
+  rh.ray.mask = p->ray.mask[0], rh.ray.id = p->ray.id[0], rh.ray.flags = p->ray.flags[0];
+  rh.hit.geomID = p->hit.geomID[0];
+  rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1(scene, ctx, &rh);
+  p->ray.tfar[0] = rh.ray.tfar;
+  p->hit.geomID[0] = rh.hit.geomID;
+}
+void intersect(const int* valid, RTCScene scene, RTCIntersectContext* ctx, RTCRayHit4* p) {
+  rtcIntersect4(valid, scene, ctx, p);
+}
+void intersect(const int* valid, RTCScene scene, RTCIntersectContext* ctx, RTCRayHit8* p) {
+  rtcIntersect8(valid, scene, ctx, p);
+}
+void intersect(const int* valid, RTCScene scene, RTCIntersectContext* ctx, RTCRayHit16* p) {
+  rtcIntersect16(valid, scene, ctx, p);
 }
 
 }  // namespace
@@ -68,6 +143,7 @@ struct DepthBoundsTracer::Impl {
   RTCDevice device = nullptr;
   RTCScene scene = nullptr;
   ClosedFaces closed_faces;  // by primitive id of the closed geometry; planes relative to centre
+  std::vector<CanonicalPlane> planes[2];  // canonical planes by geometry id and primitive id
   uint64_t triangles = 0;
   bool any_closed = false;
   double build_s = 0;
@@ -79,8 +155,15 @@ struct DepthBoundsTracer::Impl {
 
   void build(const Scene& s);
   void mark_touchable(double scene_size);
+  template <class RayHit, unsigned W, unsigned H>
   void trace_packet(const TraceRegion& r, uint32_t px, uint32_t py, TraceMode mode,
                     IntervalTile& out, DepthBoundsStats& st) const;
+  template <class RayHit, unsigned kLanes>
+  void extend_static(RayHit& rh, FilterContext& fc, const bool* used, Interval* iv,
+                     DepthBoundsStats& st) const;
+  template <class RayHit, unsigned W, unsigned H>
+  void trace_rows(const TraceRegion& r, TraceMode mode, IntervalTile& tile,
+                  std::atomic<uint64_t>* progress, DepthBoundsStats& total) const;
 };
 
 namespace {
@@ -171,6 +254,9 @@ void DepthBoundsTracer::Impl::build(const Scene& s) {
       if ((is_closed[i] != 0) != closed) continue;
       const auto& t = s.triangles[i];
       ip[3 * k] = t[0], ip[3 * k + 1] = t[1], ip[3 * k + 2] = t[2];
+      planes[geom_id].push_back(CanonicalPlane::of(s.vertices[t[0]] - centre,
+                                                   s.vertices[t[1]] - centre,
+                                                   s.vertices[t[2]] - centre));
       if (closed) {
         const Vec3d& a = s.vertices[t[0]];
         const Vec3d normal = cross(s.vertices[t[1]] - a, s.vertices[t[2]] - a);
@@ -256,26 +342,31 @@ void DepthBoundsTracer::Impl::mark_touchable(double scene_size) {
   }
 }
 
+template <class RayHit, unsigned W, unsigned H>
 void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, uint32_t py,
                                            TraceMode mode, IntervalTile& out,
                                            DepthBoundsStats& st) const {
-  alignas(64) RTCRayHit8 rh;
-  alignas(32) int valid[kLanes];
+  constexpr unsigned kLanes = W * H;
+  static_assert(kLanes <= kMaxLanes);
+  alignas(64) RayHit rh;
+  alignas(64) int valid[kLanes];
   FilterContext fc;
   rtcInitIntersectContext(&fc.ctx);
   fc.ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-  const bool counting = mode == TraceMode::bounds && any_closed;
+  fc.planes = planes;
+  const bool counting = mode != TraceMode::first_hit && any_closed;
+  const bool canonical = mode == TraceMode::bounds || mode == TraceMode::static_bounds;
   fc.ctx.filter = counting ? offer_hits : nullptr;
 
   const bool sun = light.kind() == LightKind::sun;
   const float t_min = sun ? 0.0f : float(light.near_plane());
   const float t_max = sun ? 1.0f : float(light.far_plane());
 
-  bool active[kLanes];
+  bool active[kLanes], used[kLanes];
   uint32_t n_lanes = 0;
   for (unsigned l = 0; l < kLanes; ++l) {
-    const uint32_t i = px * kPacketW + l % kPacketW, j = py * kPacketH + l / kPacketW;
-    active[l] = i < r.width && j < r.height;
+    const uint32_t i = px * W + l % W, j = py * H + l / W;
+    active[l] = used[l] = i < r.width && j < r.height;
     valid[l] = active[l] ? -1 : 0;
     rh.ray.tnear[l] = t_min;
     rh.ray.tfar[l] = t_max;
@@ -296,25 +387,47 @@ void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, ui
     rh.ray.dir_x[l] = float(ray.dir.x), rh.ray.dir_y[l] = float(ray.dir.y);
     rh.ray.dir_z[l] = float(ray.dir.z);
     fc.lane[l].start(closed_faces, o, ray.dir, t_min, t_max);
+    fc.canon[l].origin = o, fc.canon[l].dir = ray.dir;
+    fc.canon[l].reset();
   }
   if (n_lanes == 0) return;
   st.rays += n_lanes;
   st.texels += n_lanes;
 
-  // First traversal: lo for everyone, and the first group of hits for counting.
-  rtcIntersect8(valid, scene, &fc.ctx, &rh);
+  // First traversal: the first hit for everyone, and the first group of hits for counting.
+  intersect(valid, scene, &fc.ctx, &rh);
   st.traversals += n_lanes;
   uint32_t n_active = 0;
+  bool any_hit = false;
   for (unsigned l = 0; l < kLanes; ++l) {
     if (!active[l]) continue;
     active[l] = false;
+    valid[l] = 0;
     if (rh.hit.geomID[l] == RTC_INVALID_GEOMETRY_ID) continue;  // lit
-    if (!counting) {
-      fc.lane[l].take_first_hit(rh.ray.tfar[l]);
-      continue;
-    }
-    active[l] = fc.lane[l].first_traversal_done();
+    if (!counting) fc.lane[l].take_first_hit(rh.ray.tfar[l]);
+    else active[l] = fc.lane[l].first_traversal_done();
     n_active += active[l];
+    any_hit = true;
+    valid[l] = -1;
+  }
+
+  // The canonical window (canonical_depth.hpp steps 1 and 4): every primitive hit within
+  // kCanonicalWindow of the first hit, its canonical t, the smallest kept.
+  if (canonical && any_hit) {
+    const float w = float(kCanonicalWindow * (double(t_max) - t_min));
+    uint32_t n_hit = 0;
+    for (unsigned l = 0; l < kLanes; ++l) {
+      if (valid[l] == 0) continue;
+      ++n_hit;
+      const float t = fc.lane[l].lo_t();
+      rh.ray.tnear[l] = std::max(t_min, t - w);
+      rh.ray.tfar[l] = std::min(t_max, t + w);
+      rh.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
+    }
+    fc.ctx.filter = gather_canonical;
+    intersect(valid, scene, &fc.ctx, &rh);
+    fc.ctx.filter = offer_hits;
+    st.traversals += n_hit;
   }
 
   // The counters' further traversals, all lanes still counting in one packet.
@@ -326,7 +439,7 @@ void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, ui
       rh.ray.tfar[l] = fc.lane[l].tfar();
       rh.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
     }
-    rtcIntersect8(valid, scene, &fc.ctx, &rh);
+    intersect(valid, scene, &fc.ctx, &rh);
     st.traversals += n_active;
     for (unsigned l = 0; l < kLanes; ++l) {
       if (!active[l] || fc.lane[l].traversal_done()) continue;
@@ -335,17 +448,135 @@ void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, ui
     }
   }
 
+  Interval iv[kLanes];
   for (unsigned l = 0; l < kLanes; ++l) {
-    const uint32_t i = px * kPacketW + l % kPacketW, j = py * kPacketH + l / kPacketW;
-    if (i >= r.width || j >= r.height) continue;
     const ExitDepthRay& ray = fc.lane[l];
-    const Interval iv = ray.interval(light);
-    out.at(i, j) = iv;
+    iv[l] = Interval{kLitDepth, kLitDepth};
+    if (!used[l]) continue;  // a lane outside the region: its state was never started
+    iv[l] = ray.interval(light);
+    if (!canonical || !ray.hit()) continue;
+    // canonical_depth.hpp steps 4 and 5. The window normally reports the first hit
+    // again; if it reported nothing, the tracer's t stands.
+    const CanonicalLane& c = fc.canon[l];
+    const double lo_t = std::isfinite(c.min_t) ? c.min_t : double(ray.lo_t());
+    iv[l].lo = iv[l].hi = canonical_depth(light, lo_t);
+    if (ray.hi_t() > ray.lo_t() && ray.exit_count() > 0) {
+      double hi_t = -INFINITY;
+      for (uint32_t k = 0; k < ray.exit_count(); ++k)
+        hi_t = std::max(hi_t, planes[kClosedGeom][ray.exit_prim(k)].t(c.origin, c.dir, ray.hi_t()));
+      iv[l].hi = std::max(iv[l].lo, canonical_depth(light, hi_t));
+    }
+  }
+  if (mode == TraceMode::static_bounds) extend_static<RayHit, kLanes>(rh, fc, used, iv, st);
+
+  for (unsigned l = 0; l < kLanes; ++l) {
+    if (!used[l]) continue;
+    const uint32_t i = px * W + l % W, j = py * H + l / W;
+    const ExitDepthRay& ray = fc.lane[l];
+    out.at(i, j) = iv[l];
     st.fallbacks += ray.fell_back();
     if (!ray.hit()) continue;
     ++st.hits;
-    if (iv.hi > iv.lo) ++st.closed;
+    if (iv[l].hi > iv[l].lo) ++st.closed;
   }
+}
+
+// The static-geometry interval (voxel paper §6.1 "static geometry"): a receiver lies on a
+// surface, never in the air between two, so a texel whose first hit is open (hi = lo) may
+// store anything up to just below the depth of the next surface along its ray. The next
+// surface is the nearest canonical depth above lo: among the first window's primitives,
+// or the first hit past the window (found by a plain traversal) and its own canonical
+// window. No surface behind: hi = 1. Closed first hits keep their exit depth; fallbacks
+// and a crowded window keep hi = lo.
+template <class RayHit, unsigned kLanes>
+void DepthBoundsTracer::Impl::extend_static(RayHit& rh, FilterContext& fc, const bool* used,
+                                            Interval* iv, DepthBoundsStats& st) const {
+  const bool sun = light.kind() == LightKind::sun;
+  const float t_min = sun ? 0.0f : float(light.near_plane());
+  const float t_max = sun ? 1.0f : float(light.far_plane());
+  const float w = float(kCanonicalWindow * (double(t_max) - t_min));
+  alignas(64) int valid[kLanes];
+  float next[kLanes];
+  uint32_t n = 0;
+  for (unsigned l = 0; l < kLanes; ++l) {
+    const ExitDepthRay& ray = fc.lane[l];
+    valid[l] = 0;
+    next[l] = INFINITY;
+    if (!used[l] || !ray.hit() || ray.fell_back() || iv[l].hi != iv[l].lo || fc.canon[l].overflow) continue;
+    const CanonicalLane& c = fc.canon[l];
+    for (uint32_t k = 0; k < c.n; ++k) {
+      const float d = canonical_depth(light, c.t[k]);
+      if (d > iv[l].lo) next[l] = std::min(next[l], d);
+    }
+    const float t0 = ray.lo_t() + w;
+    if (t0 >= t_max) continue;
+    valid[l] = -1;
+    ++n;
+    rh.ray.tnear[l] = t0;
+    rh.ray.tfar[l] = t_max;
+    rh.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
+  }
+  if (n > 0) {
+    fc.ctx.filter = nullptr;  // the plain first hit past the window
+    intersect(valid, scene, &fc.ctx, &rh);
+    st.traversals += n;
+    n = 0;
+    for (unsigned l = 0; l < kLanes; ++l) {
+      if (valid[l] == 0) continue;
+      if (rh.hit.geomID[l] == RTC_INVALID_GEOMETRY_ID) {
+        valid[l] = 0;
+        continue;
+      }
+      ++n;
+      const float t = rh.ray.tfar[l];
+      rh.ray.tnear[l] = std::max(t_min, t - w);
+      rh.ray.tfar[l] = std::min(t_max, t + w);
+      rh.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
+      fc.canon[l].reset();
+    }
+  }
+  if (n > 0) {
+    fc.ctx.filter = gather_canonical;
+    intersect(valid, scene, &fc.ctx, &rh);
+    st.traversals += n;
+    for (unsigned l = 0; l < kLanes; ++l) {
+      if (valid[l] == 0) continue;
+      const CanonicalLane& c = fc.canon[l];
+      for (uint32_t k = 0; k < c.n; ++k) {
+        const float d = canonical_depth(light, c.t[k]);
+        if (d > iv[l].lo) next[l] = std::min(next[l], d);
+      }
+    }
+  }
+  for (unsigned l = 0; l < kLanes; ++l) {
+    const ExitDepthRay& ray = fc.lane[l];
+    if (!used[l] || !ray.hit() || ray.fell_back() || iv[l].hi != iv[l].lo || fc.canon[l].overflow)
+      continue;
+    // Just below the next surface: the largest float < its depth (never below lo).
+    iv[l].hi = next[l] == INFINITY ? kLitDepth
+                                   : std::max(iv[l].lo, std::nextafter(next[l], -INFINITY));
+  }
+}
+
+template <class RayHit, unsigned W, unsigned H>
+void DepthBoundsTracer::Impl::trace_rows(const TraceRegion& r, TraceMode mode, IntervalTile& tile,
+                                         std::atomic<uint64_t>* progress,
+                                         DepthBoundsStats& total) const {
+  const uint32_t rows = (r.height + H - 1) / H;
+  const uint32_t cols = (r.width + W - 1) / W;
+  std::atomic<uint64_t> rays{0}, traversals{0}, hits{0}, closed{0}, fallbacks{0}, texels{0};
+  tbb::parallel_for(tbb::blocked_range<uint32_t>(0, rows), [&](const tbb::blocked_range<uint32_t>& br) {
+    DepthBoundsStats local;
+    for (uint32_t py = br.begin(); py != br.end(); ++py) {
+      const uint64_t before = local.texels;
+      for (uint32_t px = 0; px < cols; ++px) trace_packet<RayHit, W, H>(r, px, py, mode, tile, local);
+      if (progress) progress->fetch_add(local.texels - before, std::memory_order_relaxed);
+    }
+    rays += local.rays, traversals += local.traversals, hits += local.hits;
+    closed += local.closed, fallbacks += local.fallbacks, texels += local.texels;
+  });
+  total.texels = texels, total.rays = rays, total.traversals = traversals;
+  total.hits = hits, total.closed = closed, total.fallbacks = fallbacks;
 }
 
 DepthBoundsTracer::DepthBoundsTracer(const Scene& scene, const LightSpace& light)
@@ -377,30 +608,25 @@ void DepthBoundsTracer::check_region(const TraceRegion& r) {
 
 IntervalTile DepthBoundsTracer::trace(const TraceRegion& r, TraceMode mode,
                                       DepthBoundsStats* stats,
-                                      std::atomic<uint64_t>* progress) const {
+                                      std::atomic<uint64_t>* progress,
+                                      PacketShape packet) const {
   check_region(r);
   const auto t_start = std::chrono::steady_clock::now();
   IntervalTile tile;
   tile.level = r.level, tile.x0 = r.x0, tile.y0 = r.y0;
   tile.width = r.width, tile.height = r.height;
   tile.data.assign(size_t(r.width) * r.height, Interval{});
-  const uint32_t rows = (r.height + kPacketH - 1) / kPacketH;
-  const uint32_t cols = (r.width + kPacketW - 1) / kPacketW;
-  std::atomic<uint64_t> rays{0}, traversals{0}, hits{0}, closed{0}, fallbacks{0}, texels{0};
-  tbb::parallel_for(tbb::blocked_range<uint32_t>(0, rows), [&](const tbb::blocked_range<uint32_t>& br) {
-    DepthBoundsStats local;
-    for (uint32_t py = br.begin(); py != br.end(); ++py) {
-      const uint64_t before = local.texels;
-      for (uint32_t px = 0; px < cols; ++px) impl_->trace_packet(r, px, py, mode, tile, local);
-      if (progress) progress->fetch_add(local.texels - before, std::memory_order_relaxed);
-    }
-    rays += local.rays, traversals += local.traversals, hits += local.hits;
-    closed += local.closed, fallbacks += local.fallbacks, texels += local.texels;
-  });
+  DepthBoundsStats local;
+  switch (packet) {
+    case PacketShape::single: impl_->trace_rows<RayHit1, 1, 1>(r, mode, tile, progress, local); break;
+    case PacketShape::x4y1: impl_->trace_rows<RTCRayHit4, 4, 1>(r, mode, tile, progress, local); break;
+    case PacketShape::x4y2: impl_->trace_rows<RTCRayHit8, 4, 2>(r, mode, tile, progress, local); break;
+    case PacketShape::x8y1: impl_->trace_rows<RTCRayHit8, 8, 1>(r, mode, tile, progress, local); break;
+    case PacketShape::x4y4: impl_->trace_rows<RTCRayHit16, 4, 4>(r, mode, tile, progress, local); break;
+    case PacketShape::x16y1: impl_->trace_rows<RTCRayHit16, 16, 1>(r, mode, tile, progress, local); break;
+  }
   if (stats) {
-    *stats = DepthBoundsStats{};
-    stats->texels = texels, stats->rays = rays, stats->traversals = traversals;
-    stats->hits = hits, stats->closed = closed, stats->fallbacks = fallbacks;
+    *stats = local;
     stats->seconds =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
   }

@@ -12,8 +12,9 @@
 // Lossless contract: lo is the first-hit depth of the traced ray and every point of the
 // ray between lo and hi is inside a closed object (up to float32 tracing precision, and
 // faces touching within 1e-9 of the t range count as touching).
-// Depths: double from the float hit t (depth_of_t), then float32, clamped to [0,1] with
-// lo <= hi.
+// Depths are canonical (canonical_depth.hpp): Embree only finds the primitives; each
+// depth is the ray-plane parameter of a primitive's canonical plane in double, rounded to
+// float once, so the bounds of a texel do not depend on how it was batched.
 //
 // Precision: vertices are recentred on the scene AABB centre in double, then converted
 // to float, and texel rays are transformed the same way, so a scene offset by 1e7 traces
@@ -47,9 +48,19 @@ struct DepthBoundsStats {
 };
 
 enum class TraceMode : uint8_t {
-  bounds,     // lo and hi (hi = lo everywhere when the scene has no closed mesh)
-  first_hit,  // plain shadow map: one traversal per ray, hi = lo (benchmark baseline)
+  bounds,     // canonical lo and hi (hi = lo everywhere when the scene has no closed mesh)
+  first_hit,  // plain shadow map of the tracer's float t: one traversal per ray, hi = lo
+              // (benchmark baseline; not canonical)
+  bounds_tracer_t,  // lo and hi from the tracer's float t, as before the canonical depth
+                    // (benchmark baseline only: depends on the batching)
+  static_bounds,    // bounds, and where the first hit is open (hi = lo) hi reaches to just
+                    // below the next surface along the ray, or 1 if none (the
+                    // static-geometry interval, voxel paper §6.1; depth_bounds.cpp)
 };
+
+// How texels are batched into Embree queries. Every shape gives bit-identical canonical
+// bounds (canonical_depth.hpp); x4y2 (rtcIntersect8 on 4 x 2 texels) is the fastest.
+enum class PacketShape : uint8_t { single, x4y1, x4y2, x8y1, x4y4, x16y1 };
 
 struct TraceRegion {
   uint32_t level = 0;  // map of 2^level texels a side, level <= kMaxLevel
@@ -79,7 +90,8 @@ class DepthBoundsTracer {
   // thread may poll it). `stats`, if given, receives this call's figures.
   IntervalTile trace(const TraceRegion& region, TraceMode mode = TraceMode::bounds,
                      DepthBoundsStats* stats = nullptr,
-                     std::atomic<uint64_t>* progress = nullptr) const;
+                     std::atomic<uint64_t>* progress = nullptr,
+                     PacketShape packet = PacketShape::x4y2) const;
 
   // Checks a region against the map and the size limit (same messages as trace()).
   static void check_region(const TraceRegion& region);

@@ -114,6 +114,7 @@ bool ExitDepthRay::traversal_done() {
       bool touchable = false;
       for (uint32_t k = 0; k < n_group_; ++k)
         touchable |= is_closed(group_[k]) && faces_->touchable[uint32_t(group_[k])] != 0;
+      record_exit_group();
       if (!touchable) {  // nothing can touch this exit: no look-ahead needed
         hi_t_ = best_t_;
         return false;

@@ -154,6 +154,10 @@ class ExitDepthRay {
   float lo_t() const { return lo_t_; }  // kNoHit when nothing was hit
   float hi_t() const { return hi_t_; }
   bool fell_back() const { return fell_back_; }
+  // The closed primitives of the group where the counters reached 0 (the exit faces),
+  // valid when hi_t() > lo_t(); the tracer evaluates their canonical depth.
+  uint32_t exit_count() const { return n_exit_; }
+  uint32_t exit_prim(uint32_t k) const { return exit_[k]; }
   // The texel's depths: [kLitDepth, kLitDepth] without a hit, else both t mapped to
   // depth (depth_of_t) with lo <= hi.
   Interval interval(const LightSpace& light) const;
@@ -176,6 +180,11 @@ class ExitDepthRay {
   bool apply_group(uint32_t& closed_hits);
   void mark_group_done();
   void prepare_traversal();
+  void record_exit_group() {
+    n_exit_ = 0;
+    for (uint32_t k = 0; k < n_group_; ++k)
+      if (is_closed(group_[k])) exit_[n_exit_++] = uint32_t(group_[k]);
+  }
 
   const ClosedFaces* faces_;
   Vec3d origin_, dir_;
@@ -201,6 +210,8 @@ class ExitDepthRay {
   float floor_t_;  // t of the last group: the next traversal starts just below it
   float exit_t_;   // float t where the counters reached 0, while a look-ahead is due
   double exit_d_;  // its exact t (the largest plane t of the exit's closed hits)
+  uint32_t exit_[kMaxGroup];  // closed primitives of the exit group
+  uint32_t n_exit_;
   uint32_t traversals_;
   bool fell_back_;
   float tnear_, tfar_;
@@ -235,6 +246,7 @@ inline void ExitDepthRay::start(const ClosedFaces& faces, const Vec3d& origin, c
   floor_t_ = 0;
   exit_d_ = -INFINITY;
   traversals_ = 1;
+  n_exit_ = 0;
   fell_back_ = false;
   tnear_ = t_min;
   tfar_ = t_max;

@@ -63,11 +63,13 @@ PackParams pack_params(const Scene& scene, const LightSpace& light, const MapBui
   PackParams pp = PackParams::from(light, cut);
   pp.scene_hash = scene.content_hash();
   pp.features = exit_depths ? uint32_t(kFeatureExitDepths) : 0u;
+  if (o.intervals == IntervalRule::static_geometry) pp.features |= kFeatureStaticIntervals;
   pp.compression_level = o.compression_level;
   pp.build_params = {{"construction", o.construction == MhConstruction::bottom_up ? "bottom-up" : "top-down"},
                      {"light", o.light_spec.empty() ? light.spec().to_string() : o.light_spec},
                      {"scene", o.scene_spec.empty() ? scene.name : o.scene_spec},
                      {"tool", "shadowtile 0.1.0"}};
+  if (o.intervals == IntervalRule::static_geometry) pp.build_params.push_back({"intervals", "static"});
   if (o.region)
     pp.build_params.push_back({"region", std::to_string(o.region->x) + "," + std::to_string(o.region->y) +
                                              "," + std::to_string(o.region->w) + "," +
@@ -106,13 +108,12 @@ std::vector<CellXY> plan_cells(PackWriter& writer, const MapBuildOptions& o, uin
 // Traces one level-K cell and builds its hierarchy; cells wider than kMaxTraceSide are
 // traced in sub-tiles whose hierarchies are stitched (MH §3.1 "Tiled construction").
 Hierarchy cell_hierarchy(const DepthBoundsTracer& tracer, uint32_t level, uint64_t x0,
-                         uint64_t y0, uint64_t side, MhConstruction method,
+                         uint64_t y0, uint64_t side, MhConstruction method, TraceMode mode,
                          std::atomic<uint64_t>& texels, std::atomic<uint64_t>& trace_ns,
                          std::atomic<uint64_t>& build_ns) {
   auto trace_and_build = [&](uint64_t x, uint64_t y, uint64_t s) {
     auto t = Clock::now();
-    IntervalTile tile = tracer.trace({level, x, y, uint32_t(s), uint32_t(s)}, TraceMode::bounds,
-                                     nullptr, &texels);
+    IntervalTile tile = tracer.trace({level, x, y, uint32_t(s), uint32_t(s)}, mode, nullptr, &texels);
     add_seconds(trace_ns, since(t));
     t = Clock::now();
     Hierarchy h = build_hierarchy(tile, method);
@@ -184,7 +185,8 @@ class CellWorkers {
     const CutParams& cut = cutter_.params();
     const uint64_t cell_side = uint64_t(1) << (cut.map_level - cut.skip_level);
     Hierarchy h = cell_hierarchy(tracer_, cut.map_level, cx * cell_side, cy * cell_side,
-                                 cell_side, o_.construction, texels_, trace_ns_, build_ns_);
+                                 cell_side, o_.construction, trace_mode_of(o_.intervals), texels_, trace_ns_,
+                                 build_ns_);
     auto t = Clock::now();
     CutCell cell = cutter_.cut_cell(cx, cy, std::move(h));
     add_seconds(cut_ns_, since(t));

@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/scene.hpp"
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/light.hpp"
@@ -30,12 +31,25 @@ struct TexelRegion {
   uint64_t x = 0, y = 0, w = 0, h = 0;  // texels of the finest level
 };
 
+// Which depth interval each texel gets (ARCHITECTURE.md "Definitions").
+enum class IntervalRule : uint8_t {
+  closed_objects,   // [first hit, exit of the closed objects]; hi = lo on open geometry
+  static_geometry,  // also: an open first hit reaches to just below the next surface
+                    // (receivers lie on surfaces; pack feature static_intervals)
+};
+
+// The tracer's mode for an interval rule.
+inline TraceMode trace_mode_of(IntervalRule r) {
+  return r == IntervalRule::static_geometry ? TraceMode::static_bounds : TraceMode::bounds;
+}
+
 struct MapBuildOptions {
   uint32_t map_level = 12;
   Encoding encoding = Encoding::dagmh;
   std::optional<uint32_t> skip_level;  // default: default_skip_level(map_level)
   uint32_t tile_bytes = 64 * 1024;
   MhConstruction construction = MhConstruction::bottom_up;
+  IntervalRule intervals = IntervalRule::closed_objects;
   bool resume = false;  // continue "<out>.tmp" if present
   int compression_level = 6;
   // Build only the cells touching this region; every other cell is the constant

@@ -83,16 +83,25 @@ FrameError frame_error(const Evaluator& eval, const LightSpace& light, const Fra
   return e;
 }
 
-uint64_t count_disagreements(const Evaluator& a, const Evaluator& b, const LightSpace& light, const FrameTruth& f) {
-  uint64_t n = 0;
+Disagreements count_disagreements(const Evaluator& a, const FlatMapEvaluator& full, const LightSpace& light,
+                                  const FrameTruth& f) {
+  Disagreements n;
+  const uint32_t L = full.finest_level();
   for (uint32_t i : f.lit_facing) {
     const Receiver& r = f.receivers[i];
-    n += map_visibility(a, r, light, 0, a.finest_level()) != map_visibility(b, r, light, 0, b.finest_level());
+    if (map_visibility(a, r, light, 0, a.finest_level()) == map_visibility(full, r, light, 0, L)) continue;
+    ++n.total;
+    // The same lookup as map_visibility's: which texel, at which depth.
+    const LightPoint lp = lookup_point(r, light, L, 0);
+    const auto [x, y] = LightSpace::texel_of(L, lp.u, lp.v);
+    const Interval* iv = full.interval(x, y);
+    const float d = float(lp.d);
+    if (iv && iv->lo < d && d <= iv->hi) ++n.within_interval;
   }
   return n;
 }
 
-FlatMapEvaluator::FlatMapEvaluator(const IntervalTile& tile) : level_(tile.level) {
+FlatMapEvaluator::FlatMapEvaluator(const IntervalTile& tile, bool keep_intervals) : level_(tile.level) {
   const uint64_t side = uint64_t(1) << tile.level;
   if (tile.x0 != 0 || tile.y0 != 0 || tile.width != side || tile.height != side)
     throw Error("FlatMapEvaluator: needs the whole level-" + std::to_string(tile.level) + " map");
@@ -103,6 +112,7 @@ FlatMapEvaluator::FlatMapEvaluator(const IntervalTile& tile) : level_(tile.level
     float v = float((double(iv.lo) + double(iv.hi)) / 2);
     values_[i] = std::clamp(v, iv.lo, iv.hi);
   }
+  if (keep_intervals) intervals_ = tile.data;
 }
 
 float FlatMapEvaluator::depth(uint32_t level, uint64_t x, uint64_t y) const {

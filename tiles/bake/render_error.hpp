@@ -42,13 +42,32 @@ struct FrameError {
 // Single tap (pcf_radius 0) or PCF at `level` of `eval` against the frame's truth.
 FrameError frame_error(const Evaluator& eval, const LightSpace& light, const FrameTruth& f, uint32_t pcf_radius,
                        uint32_t level);
-// Receivers whose single-tap answers of two evaluators differ (lossless check).
-uint64_t count_disagreements(const Evaluator& a, const Evaluator& b, const LightSpace& light, const FrameTruth& f);
+class FlatMapEvaluator;
+
+// Receivers whose single-tap answers of `a` and of the uncompressed full map differ
+// (lossless check). Both maps store a value in each texel's [lo, hi], so the answers for
+// a receiver of lookup depth d can differ only where lo < d <= hi of its texel: a lookup
+// point inside (or at the far side of) a closed object as the texel-centre ray sees it,
+// where every stored value is lossless by definition. `within_interval` counts those
+// (the legitimate class; zero on open geometry, where hi = lo); `outside()` the others,
+// which the lossless invariant makes zero at full residency.
+struct Disagreements {
+  uint64_t total = 0, within_interval = 0;
+  uint64_t outside() const { return total - within_interval; }
+};
+// `full` must keep its intervals (FlatMapEvaluator(tile, true)).
+Disagreements count_disagreements(const Evaluator& a, const FlatMapEvaluator& full, const LightSpace& light,
+                                  const FrameTruth& f);
 
 class FlatMapEvaluator final : public Evaluator {
  public:
-  // Midpoints of a full level-`tile.level` interval tile (x0 = y0 = 0, side 2^level).
-  explicit FlatMapEvaluator(const IntervalTile& tile);
+  // Midpoints of a full level-`tile.level` interval tile (x0 = y0 = 0, side 2^level);
+  // `keep_intervals` also keeps each texel's [lo, hi] (twice the memory).
+  explicit FlatMapEvaluator(const IntervalTile& tile, bool keep_intervals = false);
+  // The texel's interval at the finest level; nullptr unless the intervals were kept.
+  const Interval* interval(uint64_t x, uint64_t y) const {
+    return intervals_.empty() ? nullptr : &intervals_[(y << level_) + x];
+  }
   uint32_t finest_level() const override { return level_; }
   // Coarser levels point-sample the finest (this baseline has no hierarchy).
   float depth(uint32_t level, uint64_t x, uint64_t y) const override;
@@ -57,6 +76,7 @@ class FlatMapEvaluator final : public Evaluator {
  private:
   uint32_t level_;
   std::vector<float> values_;
+  std::vector<Interval> intervals_;
 };
 
 }  // namespace st

@@ -35,7 +35,8 @@ struct PackParams {
   Encoding encoding = Encoding::mh;
   uint32_t tile_bytes = kDefaultTileBytes;
   uint64_t scene_hash = 0;
-  uint32_t features = 0;  // what the builder knows: kFeatureExitDepths, kFeatureDeepShadow
+  uint32_t features = 0;  // what the builder knows: kFeatureExitDepths, kFeatureDeepShadow,
+                          // kFeatureStaticIntervals
   PackParamList build_params;  // free-form provenance (scene path, light spec, tool version)
   int compression_level = 6;   // libdeflate 0..12: build speed vs. file size
 

@@ -51,7 +51,11 @@ enum PackFeature : uint32_t {
   kFeatureHasTiles = 1u << 1,    // at least one tile (else the skip grid answers everything)
   kFeatureIndexTiles = 1u << 2,  // some subtree was cut deeper into index tiles
   kFeatureDeepShadow = 1u << 3,  // reserved: deep-shadow data (not produced yet)
-  kKnownFeatures = 0xF,
+  // Static-geometry intervals (voxel paper §6.1): an open first hit's interval reaches to
+  // just below the next surface along the texel ray. Lossless only for receivers that lie
+  // on a surface (tiles/PACK.md); lookups are unchanged.
+  kFeatureStaticIntervals = 1u << 4,
+  kKnownFeatures = 0x1F,
 };
 
 // Header layout (offset: size field):

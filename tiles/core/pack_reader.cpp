@@ -273,7 +273,8 @@ std::string PackReader::summary() const {
   }
   std::string features;
   const std::pair<uint32_t, const char*> names[] = {{kFeatureExitDepths, "exit_depths"}, {kFeatureHasTiles, "has_tiles"},
-                                                    {kFeatureIndexTiles, "index_tiles"}, {kFeatureDeepShadow, "deep_shadow"}};
+                                                    {kFeatureIndexTiles, "index_tiles"}, {kFeatureDeepShadow, "deep_shadow"},
+                                                    {kFeatureStaticIntervals, "static_intervals"}};
   for (auto [bit, n] : names)
     if (header_.flags & bit) features += std::string(features.empty() ? "" : ",") + n;
   char buf[160];
