@@ -39,6 +39,29 @@ check tile-bytes-help 0 "64 MiB" -- "$st" build --help
 check inspect 0 "exit-depths" -- "$st" inspect city.pack
 check inspect-json 0 '"encoding": "dagmh"' -- "$st" inspect city.pack --json
 check verify 0 "OK: 20[0-9]* random texels" -- "$st" verify city.pack $scene --samples 2000
+# Every texel: the re-trace gives the build's canonical bounds bit for bit.
+check verify-all 0 "OK: every texel of the built region \(2048 x 2048 = 4194304\)" -- "$st" verify city.pack $scene --all
+# Against another scene every texel cannot hold: stops at the first 5 and names them.
+check verify-all-mismatch 3 "FAILED: 5 texels break.*max-mismatches 5" -- "$st" verify city.pack procedural:city,size=2 --all --max-mismatches 5
+# Static-geometry intervals on an open scene (one merged mesh of roofless walls and tilted
+# plates over a slab): a pack feature, checked under its contract.
+python3 - <<'PY'
+import random
+random.seed(3)
+v, f = [(0, 0, 0), (0, 0, 40), (40, 0, 40), (40, 0, 0)], [(1, 2, 3), (1, 3, 4)]
+for k in range(60):
+    x, z, w, h, t = random.uniform(2, 36), random.uniform(2, 36), random.uniform(1, 3), random.uniform(1, 6), random.uniform(-1, 1)
+    b = len(v)
+    v += [(x, h, z), (x + w, h + t, z), (x + w, h + t, z + w), (x, h, z + w), (x, 0, z), (x + w, 0, z)]
+    f += [(b + 1, b + 2, b + 3), (b + 1, b + 3, b + 4), (b + 5, b + 6, b + 2), (b + 5, b + 2, b + 1)]
+with open("open_town.obj", "w") as o:
+    o.write("o town\n" + "".join("v %g %g %g\n" % p for p in v) + "".join("f %d %d %d\n" % t for t in f))
+PY
+check build-static 0 "built static.pack" -- "$st" build open_town.obj $light --resolution 1024 --encoding mh --intervals static -o static.pack -q
+check inspect-static 0 "static-intervals" -- "$st" inspect static.pack
+check verify-static-contract 0 "static-geometry intervals: lossless for receivers that lie on surfaces" -- "$st" verify static.pack open_town.obj --all
+check verify-static 0 "OK: every texel of the built region \(1024 x 1024" -- "$st" verify static.pack open_town.obj --all
+check bad-intervals 1 "intervals: expected default or static" -- "$st" build procedural:cube $light --resolution 256 --intervals sometimes -o x.pack -q
 check export 0 "exported level 8" -- "$st" export city.pack --level 8 -o l8.exr
 check export-bad-level 1 "exceeds" -- "$st" export city.pack --level 30 -o l.exr
 # Corrupt one byte inside the first tile payload: verify must fail and name the tile.

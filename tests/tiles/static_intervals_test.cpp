@@ -113,7 +113,7 @@ TEST(StaticIntervals, BitIdenticalWhateverTheBatching) {
 TEST(StaticIntervals, PacksAreLosslessUnderTheirContractAndSmaller) {
   const Scene s = test::hazard_town();
   const LightSpace l = LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), s.bounds());
-  const uint32_t L = fields::small_test_scale() ? 8 : 11;
+  const uint32_t L = fields::small_test_scale() ? 8 : 10;
   fs::create_directories(SHADOWTILE_TEST_TMP);
   uint64_t bytes[2] = {0, 0};
   for (int k = 0; k < 2; ++k) {
