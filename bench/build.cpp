@@ -3,8 +3,12 @@
 // wall time, CPU time, peak memory, pack size, texels per second, and build / bounds.
 //
 //   bench_build [--scene procedural:city] [--light sun:azimuth=30,elevation=50]
-//               [--resolution 16k] [--encodings dagmh,mmh,mh] [--json PATH] [--out DIR]
+//               [--resolution 16k] [--encodings dagmh,mmh,mh] [--intervals default,static]
+//               [--json PATH] [--out DIR]
 //
+// --intervals lists the interval rules to build each encoding with (default: the
+// closed-object rule only; static: the static-geometry interval, map_build.hpp), so the
+// pack bytes of the two stand side by side on open scenes.
 // Each measurement runs in a forked child so that its peak memory (wait4 rusage) is its
 // own. The bounds-only pass traces the same level-K cells the build traces, on the same
 // worker threads, and throws the intervals away.
@@ -81,7 +85,8 @@ Measured in_child(Job job) {
 
 int main(int argc, char** argv) {
   std::string scene_spec = "procedural:city", light_spec = "sun:azimuth=30,elevation=50",
-              resolution = "16k", encodings = "dagmh,mmh,mh", json_path, out_dir = "/tmp";
+              resolution = "16k", encodings = "dagmh,mmh,mh", intervals = "default", json_path,
+              out_dir = "/tmp";
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
     auto next = [&]() -> std::string {
@@ -95,11 +100,12 @@ int main(int argc, char** argv) {
     else if (a == "--light") light_spec = next();
     else if (a == "--resolution") resolution = next();
     else if (a == "--encodings") encodings = next();
+    else if (a == "--intervals") intervals = next();
     else if (a == "--json") json_path = next();
     else if (a == "--out") out_dir = next();
     else {
       std::fprintf(stderr, "usage: bench_build [--scene S] [--light L] [--resolution 16k] "
-                           "[--encodings dagmh,mmh,mh] [--json PATH] [--out DIR]\n");
+                           "[--encodings dagmh,mmh,mh] [--intervals default,static] [--json PATH] [--out DIR]\n");
       return 2;
     }
   }
@@ -140,28 +146,41 @@ int main(int argc, char** argv) {
     std::printf("%-14s %9.1f %9.1f %10.2f %11s %10s %11.0f %9s %11s\n", "bounds only", bounds.wall, bounds.cpu,
                 double(texels) / bounds.wall / 1e6, "-", "-", bounds.peak_mib, "1.00", "1.00");
     rows.push_back({{"run", "bounds"}, {"wall_s", bounds.wall}, {"cpu_s", bounds.cpu}, {"peak_mib", bounds.peak_mib}});
-    std::stringstream ss(encodings);
-    std::string enc;
-    while (std::getline(ss, enc, ',')) {
-      const std::string path = out_dir + "/bench_build_" + enc + ".pack";
-      Measured m = in_child([&]() {
-        st::MapBuildOptions o;
-        o.map_level = L;
-        o.encoding = st::parse_encoding(enc);
-        st::MapBuildReport r = st::build_map(scene, light, o, path);
-        return nlohmann::json::parse(r.to_json());
-      });
-      if (m.result.contains("error")) {
-        std::printf("%-14s failed: %s\n", enc.c_str(), m.result["error"].get<std::string>().c_str());
-        continue;
+    std::vector<std::string> rules;
+    {
+      std::stringstream rs(intervals);
+      for (std::string r; std::getline(rs, r, ',');) {
+        if (r != "default" && r != "static") throw st::Error("--intervals: expected default or static, got '" + r + "'");
+        rules.push_back(r);
       }
-      double pack = m.result["pack_bytes"].get<double>();
-      std::printf("%-14s %9.1f %9.1f %10.2f %11.2f %10.5f %11.0f %9.2f %11.2f\n", ("build " + enc).c_str(), m.wall,
-                  m.cpu, double(texels) / m.wall / 1e6, pack / (1 << 20), 100.0 * pack / (double(texels) * 4),
-                  m.peak_mib, m.wall / bounds.wall, m.cpu / bounds.cpu);
-      rows.push_back({{"run", "build"}, {"encoding", enc}, {"wall_s", m.wall}, {"cpu_s", m.cpu},
-                      {"peak_mib", m.peak_mib}, {"build_over_bounds", m.wall / bounds.wall}, {"cpu_over_bounds", m.cpu / bounds.cpu}, {"report", m.result}});
-      std::remove(path.c_str());
+    }
+    for (const std::string& rule : rules) {
+      std::stringstream ss(encodings);
+      std::string enc;
+      while (std::getline(ss, enc, ',')) {
+        const std::string path = out_dir + "/bench_build_" + enc + "_" + rule + ".pack";
+        const std::string name = "build " + enc + (rule == "static" ? "/st" : "");
+        Measured m = in_child([&]() {
+          st::MapBuildOptions o;
+          o.map_level = L;
+          o.encoding = st::parse_encoding(enc);
+          if (rule == "static") o.intervals = st::IntervalRule::static_geometry;
+          st::MapBuildReport r = st::build_map(scene, light, o, path);
+          return nlohmann::json::parse(r.to_json());
+        });
+        if (m.result.contains("error")) {
+          std::printf("%-14s failed: %s\n", name.c_str(), m.result["error"].get<std::string>().c_str());
+          continue;
+        }
+        double pack = m.result["pack_bytes"].get<double>();
+        std::printf("%-14s %9.1f %9.1f %10.2f %11.2f %10.5f %11.0f %9.2f %11.2f\n", name.c_str(), m.wall,
+                    m.cpu, double(texels) / m.wall / 1e6, pack / (1 << 20), 100.0 * pack / (double(texels) * 4),
+                    m.peak_mib, m.wall / bounds.wall, m.cpu / bounds.cpu);
+        rows.push_back({{"run", "build"}, {"encoding", enc}, {"intervals", rule}, {"wall_s", m.wall},
+                        {"cpu_s", m.cpu}, {"peak_mib", m.peak_mib}, {"build_over_bounds", m.wall / bounds.wall},
+                        {"cpu_over_bounds", m.cpu / bounds.cpu}, {"report", m.result}});
+        std::remove(path.c_str());
+      }
     }
     nlohmann::json j{{"scene", scene_spec}, {"light", light_spec}, {"map_level", L}, {"skip_level", K},
                      {"texels", texels}, {"threads", std::thread::hardware_concurrency()}, {"runs", rows}};
