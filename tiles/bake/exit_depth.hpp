@@ -39,8 +39,9 @@
 // met while inside a closed object are ignored. No hit: lit (kLitDepth, [1, 1]).
 //
 // Float arithmetic: every t is the tracer's float; the t ranges of later traversals are
-// float expressions of it; only the touching test uses double. Bit-exact depths depend
-// on keeping these expressions as they are.
+// float expressions of it; only the touching test uses double. The counting decides
+// which groups are the first hit and the exit; the stored depths are then the canonical
+// depths of those primitives (canonical_depth.hpp; exit_prim() names the exit's faces).
 #pragma once
 #include <algorithm>
 #include <cmath>
