@@ -88,8 +88,19 @@ TEST(PackHostile, LightsNoBuildMakesAreRefusedAtOpen) {
   }
 }
 
-TEST(PackHostile, CoarseValuesOutsideTheDepthRangeAreRefusedAtOpen) {
+// What `verify` and `export` ask (check_depth_range) and what verify() finds anyway.
+std::string range_error(std::vector<uint8_t> bytes) {
+  try {
+    PackReader::open_memory(std::move(bytes), "hostile.pack")->check_depth_range();
+  } catch (const FormatError& e) {
+    return e.what();
+  }
+  return "(in range)";
+}
+
+TEST(PackHostile, CoarseValuesOutsideTheDepthRangeAreRefused) {
   const Built b = build_pack("sun:azimuth=30,elevation=50");
+  ASSERT_EQ(range_error(b.bytes), "(in range)");
   const uint64_t grid_at = load_le<uint64_t>(b.bytes.data() + 208), grid_size = load_le<uint64_t>(b.bytes.data() + 216);
   const size_t coarse = CutGrid::coarse_count(2);
   for (float v : {-1000.0f, 1e30f, -INFINITY, INFINITY, -1e-7f, 1.0000001f}) {
@@ -97,15 +108,18 @@ TEST(PackHostile, CoarseValuesOutsideTheDepthRangeAreRefusedAtOpen) {
     for (size_t i = 0; i < coarse; ++i) store_le<float>(bytes.data() + grid_at + 8 + 4 * i, v);
     fix_crc(bytes, 244, grid_at, grid_size);
     fix_header_crc(bytes);
-    const std::string msg = open_error(bytes);
+    EXPECT_EQ(open_error(bytes), "(opened)");  // the format carries any non-NaN float
+    const std::string msg = range_error(bytes);
     EXPECT_NE(msg.find("outside the depth range"), std::string::npos) << v << ": " << msg;
+    EXPECT_NE(open_error(bytes, true).find("hull of the intervals below"), std::string::npos) << v;
   }
-  // An entry value out of range, likewise.
+  // An entry value out of range, likewise (verify: outside its cell's interval).
   std::vector<uint8_t> bytes = b.bytes;
   store_le<float>(bytes.data() + grid_at + 8 + 4 * coarse, -1000.0f);
   fix_crc(bytes, 244, grid_at, grid_size);
   fix_header_crc(bytes);
-  EXPECT_NE(open_error(bytes).find("outside the depth range"), std::string::npos) << open_error(bytes);
+  EXPECT_NE(range_error(bytes).find("outside the depth range"), std::string::npos) << range_error(bytes);
+  EXPECT_NE(open_error(bytes, true).find("disagreeing with the skip grid"), std::string::npos) << open_error(bytes, true);
 }
 
 TEST(PackHostile, CoarseValuesOutsideTheirCellsIntervalsFailVerify) {

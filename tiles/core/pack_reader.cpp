@@ -79,9 +79,9 @@ void PackReader::read_at(uint64_t offset, std::span<uint8_t> out) const {
 
 namespace {
 
-// Depths are light-space distances in [0, 1] (kLitDepth = 1 for a ray that hits nothing):
-// a coarse or entry value outside that range is no depth any build stores.
-void check_depth_range(const CutGrid& g, const std::string& what) {
+// Every value of `g` inside the depth range [0, 1] (kLitDepth = 1 for a ray that hits
+// nothing), as every bake writes.
+void check_grid_range(const CutGrid& g, const std::string& what) {
   for (size_t i = 0; i < g.coarse.size(); ++i)
     if (!(g.coarse[i] >= 0.0f && g.coarse[i] <= kLitDepth))
       throw FormatError(what + ": coarse value " + std::to_string(i) + " is " + std::to_string(g.coarse[i]) +
@@ -136,7 +136,6 @@ void PackReader::load() {
   if (crc32_of(grid_bytes_) != header_.grid_crc) throw FormatError(where(header_.grid_offset) + ": skip grid CRC mismatch");
   grid_ = CutGrid::parse(grid_bytes_, name_ + ": skip grid at byte " + std::to_string(header_.grid_offset));
   if (grid_.levels != header_.skip_level) throw FormatError(where(header_.grid_offset) + ": skip grid levels != skip level");
-  check_depth_range(grid_, name_ + ": skip grid at byte " + std::to_string(header_.grid_offset));
 
   // Every tile has a 32-byte record in the journal before the grid, so the index cannot
   // name more tiles than that room holds. A sparse file may still claim gigabytes: the
@@ -211,7 +210,6 @@ CutGrid PackReader::read_index_tile(uint64_t id, const GridEntry& parent) const 
   const std::string what = name_ + ": index " + describe_tile(id) + " at byte " + std::to_string(t ? t->offset : 0);
   if (!t || t->kind != TileKind::index) throw FormatError(what + ": not an index tile in the tile index");
   CutGrid g = CutGrid::parse(read_raw(id), what, kMaxIndexLevels);
-  check_depth_range(g, what);
   TileAddress a = tile_address(id);
   if (g.levels != parent.index_levels || a.level + g.levels > header_.map_level)
     throw FormatError(what + ": has " + std::to_string(g.levels) + " levels, its entry says " +
@@ -309,6 +307,10 @@ void PackReader::verify(const TileOpener& open_tile) const {
   });
   if (reached != index_.size())
     throw FormatError(name_ + ": " + std::to_string(index_.size() - reached) + " tiles the page table never reaches");
+}
+
+void PackReader::check_depth_range() const {
+  check_grid_range(grid_, name_ + ": skip grid at byte " + std::to_string(header_.grid_offset));
 }
 
 void PackReader::check_coarse_levels(const std::vector<CellRecord>& cells) const {
