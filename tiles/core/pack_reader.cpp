@@ -325,9 +325,8 @@ void PackReader::check_coarse_levels(const std::vector<CellRecord>& cells) const
   std::vector<float> lo(side * side), hi(side * side);
   for (const CellRecord& c : cells) {
     const std::string what = name_ + ": cell record (" + std::to_string(c.cx) + ", " + std::to_string(c.cy) + ")";
-    if (!(c.lo >= 0.0f && c.lo <= c.hi && c.hi <= kLitDepth))
-      throw FormatError(what + ": interval [" + std::to_string(c.lo) + ", " + std::to_string(c.hi) +
-                        "] is not inside the depth range [0, 1]");
+    if (!(c.lo <= c.hi))
+      throw FormatError(what + ": interval [" + std::to_string(c.lo) + ", " + std::to_string(c.hi) + "] is empty");
     if (!(c.lo <= c.entry.value && c.entry.value <= c.hi))
       throw FormatError(what + ": entry value " + std::to_string(c.entry.value) + " lies outside its interval [" +
                         std::to_string(c.lo) + ", " + std::to_string(c.hi) + "]");
