@@ -20,6 +20,7 @@ struct ExportArgs {
 
 void run(const ExportArgs& a) {
   std::shared_ptr<const PackReader> reader = PackReader::open(a.pack);
+  reader->check_depth_range();  // coarse levels are decoded as they lie: refuse garbage
   const uint32_t level = a.level_set ? a.level : std::min<uint32_t>(reader->map_level(), 12);
   if (level > reader->map_level())
     throw Error("--level " + std::to_string(level) + " exceeds the pack's finest level " +

@@ -5,6 +5,7 @@
 #include "app/command.hpp"
 #include "app/pack_cli_util.hpp"
 #include "common/error.hpp"
+#include "common/text.hpp"
 #include "tiles/core/pack_reader.hpp"
 
 namespace st::cli {
@@ -56,7 +57,8 @@ void run(const InspectArgs& a) {
   for (auto& [k, v] : r->params()) params[k] = v;
   j["build_params"] = params;
   if (a.json) {
-    std::printf("%s\n", j.dump(2).c_str());
+    // Bytes that are not UTF-8 (a hostile pack's params) become U+FFFD instead of a throw.
+    std::printf("%s\n", j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
     return;
   }
   std::printf("%s: shadowtile pack v%u\n", a.pack.c_str(), kPackVersion);
@@ -73,7 +75,9 @@ void run(const InspectArgs& a) {
   std::printf("  file         %.2f MiB = %.5f%% of the raw float32 map (%.1f GiB)\n",
               double(r->file_size()) / (1 << 20), 100.0 * double(r->file_size()) / raw_map,
               raw_map / double(1ull << 30));
-  for (auto& [k, v] : r->params()) std::printf("  param        %s = %s\n", k.c_str(), v.c_str());
+  // Build parameters are text from the file: escaped as the JSON output escapes them.
+  for (auto& [k, v] : r->params())
+    std::printf("  param        %s = %s\n", printable_text(k).c_str(), printable_text(v).c_str());
 }
 
 void setup(CLI::App& app) {

@@ -95,6 +95,7 @@ void run(const VerifyArgs& a) {
   const Encoding enc = reader->encoding();
   try {
     reader->verify([enc](std::span<const uint8_t> b) { return open_encoded(enc, b); });
+    reader->check_depth_range();
   } catch (const FormatError& e) {
     std::printf("verify %s: FAILED structure/checksum check: %s\n", a.pack.c_str(), e.what());
     exit_with(kExitMismatch);

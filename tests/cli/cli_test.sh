@@ -77,6 +77,47 @@ data[payload + size // 2] ^= 0x40
 open("corrupt.pack", "wb").write(data)
 PY
 check verify-corrupt 3 "FAILED.*tile" -- "$st" verify corrupt.pack $scene --samples 100
+# Build parameters holding terminal controls (ESC, CR; CRCs fixed): inspect escapes them
+# as --json does, so nothing raw reaches the terminal.
+python3 - <<'PY'
+import struct, zlib
+data = bytearray(open("city.pack", "rb").read())
+params_offset, params_size = struct.unpack_from("<QQ", data, 184)
+blob = bytes(data[params_offset:params_offset + params_size])
+for line in blob.split(b"\n"):
+    key, _, value = line.partition(b"=")
+    if len(value) >= 6:
+        at = params_offset + blob.index(line) + len(key) + 1
+        data[at:at + 6] = b"\x1b[2J\r!"
+        break
+else:
+    raise SystemExit("no parameter value of 6 bytes")
+struct.pack_into("<I", data, 240, zlib.crc32(data[params_offset:params_offset + params_size]))
+struct.pack_into("<I", data, 252, zlib.crc32(data[0:252]))
+open("controls.pack", "wb").write(data)
+PY
+check inspect-controls 0 'u001b\[2J\\r' -- "$st" inspect controls.pack
+if "$st" inspect controls.pack | grep -q $'[\x1b\r]'; then echo "FAIL inspect-controls: raw control bytes printed"; fail=1; fi
+check inspect-controls-json 0 'u001b\[2J\\r' -- "$st" inspect controls.pack --json
+# A NaN light (header CRC fixed) once aborted verify inside Embree; garbage coarse levels
+# (grid CRC fixed) were exported as they lay. Both are refused when the pack is opened.
+python3 - <<'PY'
+import struct, zlib
+data = bytearray(open("city.pack", "rb").read())
+nan = bytearray(data)
+struct.pack_into("<d", nan, 40, float("nan"))
+struct.pack_into("<I", nan, 252, zlib.crc32(nan[0:252]))
+open("nan_light.pack", "wb").write(nan)
+grid_offset, grid_size = struct.unpack_from("<QQ", data, 208)
+skip = data[27]
+for i in range(((1 << (2 * skip)) - 1) // 3):
+    struct.pack_into("<f", data, grid_offset + 8 + 4 * i, -1000.0)
+struct.pack_into("<I", data, 244, zlib.crc32(data[grid_offset:grid_offset + grid_size]))
+struct.pack_into("<I", data, 252, zlib.crc32(data[0:252]))
+open("bad_coarse.pack", "wb").write(data)
+PY
+check verify-nan-light 1 "light.*not a finite number" -- "$st" verify nan_light.pack $scene --samples 100
+check export-bad-coarse 1 "outside the depth range" -- "$st" export bad_coarse.pack --level 2 -o bad.exr
 check truncated 1 "city|trunc|size" -- bash -c "head -c 1000 city.pack > short.pack && '$st' inspect short.pack"
 # Serving with a catalog key and TLS: the key holder trusting the certificate is served;
 # a client without the key is refused with a one-line error (exit 1), learning no map.

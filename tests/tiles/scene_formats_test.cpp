@@ -8,6 +8,7 @@
 #include <fstream>
 
 #include "tiles/bake/scene.hpp"
+#include "tiles/bake/scene_gltf_check.hpp"
 #include "tiles/bake/scene_export.hpp"
 #include "tiles/bake/scene_mesh.hpp"
 #include "common/error.hpp"
@@ -362,6 +363,74 @@ TEST(SceneFormats, FileWithoutSurfacesIsAClearError) {
   msg = error_of(obj);
   EXPECT_NE(msg.find("validation failed"), std::string::npos) << msg;
   EXPECT_NE(msg.find(obj), std::string::npos) << msg;
+}
+
+// ---- glTF nesting (scene_gltf_check.hpp) ---------------------------------------------
+
+// A glTF 2 file of the given node list (JSON objects), root node 0, one triangle mesh 0.
+std::string gltf_with_nodes(const std::string& nodes) {
+  std::string buffer;
+  for (float c : {0.f, 0.f, 0.f, 1.f, 0.f, 0.f, 0.f, 1.f, 0.f}) put(buffer, c);
+  return R"({"asset":{"version":"2.0"},"scene":0,"scenes":[{"nodes":[0]}],"nodes":[)" + nodes +
+         R"(],"meshes":[{"primitives":[{"attributes":{"POSITION":0},"mode":4}]}],
+"buffers":[{"byteLength":36,"uri":"data:application/octet-stream;base64,)" + base64(buffer) + R"("}],
+"bufferViews":[{"buffer":0,"byteOffset":0,"byteLength":36}],
+"accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}]})";
+}
+
+// A chain of `depth` nodes, the last holding the mesh (and `children_of_last`, if any).
+std::string gltf_chain(size_t depth, const std::string& children_of_last = "") {
+  std::string nodes;
+  for (size_t i = 0; i + 1 < depth; ++i) nodes += R"({"children":[)" + std::to_string(i + 1) + "]},";
+  nodes += R"({"mesh":0)" + (children_of_last.empty() ? "" : R"(,"children":)" + children_of_last) + "}";
+  return gltf_with_nodes(nodes);
+}
+
+// 20,000 nested nodes (a 670 KB file once crashed assimp's recursive import): a one-line
+// error naming the limit, never a crash, both as .gltf and by content under another name.
+TEST(SceneFormats, DeeplyNestedGltfIsRefusedWithAClearError) {
+  const std::string deep = gltf_chain(20000);
+  for (const char* name : {"deep.gltf", "deep_gltf.txt"}) {
+    const std::string path = tmp(name);
+    write_bytes(path, deep);
+    const std::string msg = error_of(path);
+    EXPECT_NE(msg.find("nest deeper than " + std::to_string(kMaxGltfNodeDepth)), std::string::npos) << msg;
+    EXPECT_NE(msg.find(path), std::string::npos) << msg;
+  }
+  // Binary glTF: the same JSON in a GLB container.
+  std::string glb = "glTF";
+  put<uint32_t>(glb, 2), put<uint32_t>(glb, uint32_t(20 + deep.size()));
+  put<uint32_t>(glb, uint32_t(deep.size())), glb += "JSON", glb += deep;
+  const std::string path = tmp("deep.glb");
+  write_bytes(path, glb);
+  EXPECT_NE(error_of(path).find("nest deeper"), std::string::npos) << error_of(path);
+  // JSON brackets nested past the bound (assimp's JSON parser recurses too).
+  write_bytes(tmp("brackets.gltf"), "{\"asset\":" + std::string(100000, '[') + std::string(100000, ']') + "}");
+  EXPECT_NE(error_of(tmp("brackets.gltf")).find("JSON nests deeper"), std::string::npos);
+}
+
+TEST(SceneFormats, GltfNodeGraphsThatAreNotForestsAreRefused) {
+  // A node under two parents (each path would be imported again: 2^n copies), a cycle
+  // through the root, a node its own child, a child that does not exist.
+  write_bytes(tmp("two_parents.gltf"), gltf_with_nodes(R"({"children":[1,2]},{"children":[2]},{"mesh":0})"));
+  EXPECT_NE(error_of(tmp("two_parents.gltf")).find("node 2 is the child of two nodes"), std::string::npos)
+      << error_of(tmp("two_parents.gltf"));
+  write_bytes(tmp("cycle.gltf"), gltf_chain(3, "[0]"));
+  EXPECT_NE(error_of(tmp("cycle.gltf")).find("cycle (3 nodes"), std::string::npos) << error_of(tmp("cycle.gltf"));
+  write_bytes(tmp("loop.gltf"), gltf_chain(1, "[0]"));
+  EXPECT_NE(error_of(tmp("loop.gltf")).find("cycle"), std::string::npos) << error_of(tmp("loop.gltf"));
+  write_bytes(tmp("dangling.gltf"), gltf_chain(2, "[7]"));
+  EXPECT_NE(error_of(tmp("dangling.gltf")).find("not a node"), std::string::npos) << error_of(tmp("dangling.gltf"));
+}
+
+// Right at the bound a chain still loads (the checks refuse only what is past it).
+TEST(SceneFormats, GltfChainAtTheNestingBoundLoads) {
+  const std::string path = tmp("at_bound.gltf");
+  write_bytes(path, gltf_chain(kMaxGltfNodeDepth));
+  const Scene s = load_scene(path);
+  EXPECT_EQ(s.triangles.size(), 1u);
+  write_bytes(path, gltf_chain(kMaxGltfNodeDepth + 1));
+  EXPECT_NE(error_of(path).find("nest deeper"), std::string::npos) << error_of(path);
 }
 
 }  // namespace

@@ -291,5 +291,38 @@ TEST(Quake3, TruncatedAndCorruptedFilesNeverCrash) {
   EXPECT_GT(loaded, 0u);  // flips inside unused fields (uv, colour) still load
 }
 
+// One 65x65 patch control grid shared by `faces` faces: 1,024 blocks of 128 triangles
+// each per face. 300 such faces (a 217 KB file) once made `bounds` take 4.6 GB.
+std::string shared_patch_map(int faces) {
+  std::vector<Vertex> v;
+  for (int j = 0; j < 65; ++j)
+    for (int i = 0; i < 65; ++i) v.push_back({{4.0 * i, 4.0 * j, 0.0}, {0, 0, 1}});
+  std::vector<Face> f(size_t(faces), Face{0, 2, 0, 65 * 65, 0, 0, 65, 65});
+  return bsp({{"textures/base/curve", 0}}, v, {}, f);
+}
+
+TEST(Quake3, TessellationPastTheCapIsRefusedBeforeAllocating) {
+  // One such face is an ordinary big patch: it loads, with exactly the triangles counted.
+  write_bytes(tmp("one_patch.bsp"), shared_patch_map(1));
+  const Scene one = load_scene(tmp("one_patch.bsp"), SceneOptions{UpAxis::z});
+  EXPECT_EQ(one.triangles.size(), 32u * 32 * 2 * kQuake3PatchLevel * kQuake3PatchLevel);
+  // 300 faces ask for 39 million triangles: a one-line error naming the limit.
+  const std::string big = shared_patch_map(300);
+  EXPECT_LT(big.size(), 250u * 1024);
+  write_bytes(tmp("shared_patch.bsp"), big);
+  const std::string msg = error_of(tmp("shared_patch.bsp"), SceneOptions{UpAxis::z});
+  EXPECT_NE(msg.find("too large"), std::string::npos) << msg;
+  EXPECT_NE(msg.find(std::to_string(kQuake3MaxTriangles) + " triangles"), std::string::npos) << msg;
+  // The same with polygon faces sharing one big mesh-vertex range.
+  std::vector<Vertex> v;
+  std::vector<int32_t> mv;
+  for (int i = 0; i < 1000; ++i) v.push_back({{double(i), double(i % 7), double(i % 13)}, {0, 0, 1}});
+  for (int t = 0; t < 999 * 3; ++t) mv.push_back(int32_t(t / 3 + t % 3 > 999 ? 0 : t / 3 + t % 3));
+  std::vector<Face> faces(5000, Face{0, 3, 0, 1000, 0, int32_t(mv.size())});
+  write_bytes(tmp("shared_mesh.bsp"), bsp({{"textures/base/wall", 0}}, v, mv, faces));
+  const std::string msg2 = error_of(tmp("shared_mesh.bsp"), SceneOptions{UpAxis::z});
+  EXPECT_NE(msg2.find("too large"), std::string::npos) << msg2;
+}
+
 }  // namespace
 }  // namespace st

@@ -6,13 +6,21 @@
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 
+#include <pthread.h>
+
 #include <cctype>
 #include <cmath>
+#include <exception>
 #include <filesystem>
+#include <fstream>
+#include <functional>
+#include <iterator>
+#include <string_view>
 #include <system_error>
 #include <utility>
 #include <vector>
 
+#include "tiles/bake/scene_gltf_check.hpp"
 #include "tiles/bake/scene_mesh.hpp"
 #include "tiles/bake/scene_quake3.hpp"
 #include "common/error.hpp"
@@ -105,7 +113,44 @@ MeshSoup instance(const aiMesh& mesh, const std::string& name, const Affine& wor
   return soup;
 }
 
-Scene load_file(const std::string& path, const SceneOptions& options) {
+// Stack of the thread assimp imports on (reserved, touched only as deep as it recurses).
+constexpr size_t kImportStackBytes = size_t(256) << 20;
+
+// Runs `fn` on a new thread with a stack of `bytes` and waits for it; `fn` must not throw.
+void run_with_stack(size_t bytes, const std::function<void()>& fn) {
+  pthread_attr_t attr;
+  if (pthread_attr_init(&attr) != 0) throw Error("cannot start the import thread (pthread_attr_init)");
+  pthread_attr_setstacksize(&attr, bytes);
+  pthread_t thread;
+  auto trampoline = [](void* f) -> void* {
+    (*static_cast<const std::function<void()>*>(f))();
+    return nullptr;
+  };
+  const int rc = pthread_create(&thread, &attr, trampoline, const_cast<std::function<void()>*>(&fn));
+  pthread_attr_destroy(&attr);
+  if (rc != 0) {  // no thread (address space or thread limits): import on this one
+    fn();
+    return;
+  }
+  pthread_join(thread, nullptr);
+}
+
+// glTF (by content, as assimp picks its importer by content too when the extension is not
+// its own): its nesting checked before assimp recurses over it (scene_gltf_check.hpp).
+void check_gltf_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  char head[64] = {};
+  in.read(head, sizeof head);
+  const std::string_view prefix(head, size_t(in.gcount()));
+  const size_t first = prefix.find_first_not_of(" \t\r\n\xEF\xBB\xBF");
+  if (prefix.rfind("glTF", 0) != 0 && (first == std::string_view::npos || prefix[first] != '{')) return;
+  in.clear();
+  in.seekg(0);
+  const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  check_gltf_structure(bytes, path);
+}
+
+Scene import_file(const std::string& path, const SceneOptions& options) {
   namespace fs = std::filesystem;
   std::error_code ec;
   const auto status = fs::status(path, ec);
@@ -116,6 +161,7 @@ Scene load_file(const std::string& path, const SceneOptions& options) {
   for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   if (ext == ".pk3" || ext == ".bsp") return load_quake3(path, options);
 
+  check_gltf_file(path);
   Assimp::Importer importer;
   // Validation stays on: assimp 5.2.5 crashes on some inputs (Quake 3 .bsp) without it
   // (seen with assimp 5.2.5). No JoinIdenticalVertices/FindDegenerates: welding and degenerate
@@ -169,6 +215,23 @@ Scene load_file(const std::string& path, const SceneOptions& options) {
     for (unsigned c = node->mNumChildren; c-- > 0;)
       stack.push_back({node->mChildren[c], world * Affine::from(node->mChildren[c]->mTransformation)});
   }
+  return scene;
+}
+
+// assimp imports and frees node trees (and parses XML and JSON) by recursion: the whole
+// import runs on a thread with a stack far larger than the main thread's, so nesting that
+// check_gltf_file() does not cover (other formats) needs far deeper files to exhaust it.
+Scene load_file(const std::string& path, const SceneOptions& options) {
+  Scene scene;
+  std::exception_ptr failure;
+  run_with_stack(kImportStackBytes, [&]() {
+    try {
+      scene = import_file(path, options);
+    } catch (...) {
+      failure = std::current_exception();
+    }
+  });
+  if (failure) std::rethrow_exception(failure);
   return scene;
 }
 

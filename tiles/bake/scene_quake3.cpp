@@ -157,6 +157,34 @@ void orient_face(const Bsp& bsp, size_t first, size_t count, MeshSoup& m, size_t
     for (size_t t = from; t < m.triangles.size(); ++t) std::swap(m.triangles[t][1], m.triangles[t][2]);
 }
 
+// Faces may share vertex and mesh-vertex ranges, and a patch's control grid is small
+// against its tessellation (81 vertices, 128 triangles per 3x3 block), so a small file
+// can describe a huge mesh. Counts what the loop in load_quake3_bytes() will emit, before
+// anything is allocated, and refuses maps past `max_output` triangles or vertices.
+void check_output_size(const Bsp& bsp, const std::string& where, uint64_t max_output) {
+  constexpr uint64_t level = kQuake3PatchLevel;
+  uint64_t vertices = 0, triangles = 0;
+  for (size_t f = 0; f < bsp.count[kFaces]; ++f) {
+    const size_t at = bsp.face(f);
+    const int32_t texture = bsp.i32(at), type = bsp.i32(at + 8);
+    if (type == kBillboard || !casts_shadow(bsp, texture)) continue;
+    if (type == kPatch) {  // validate(): w, h odd >= 3
+      const uint64_t blocks = uint64_t((bsp.i32(at + 96) - 1) / 2) * uint64_t((bsp.i32(at + 100) - 1) / 2);
+      vertices += blocks * (level + 1) * (level + 1);
+      triangles += blocks * 2 * level * level;
+    } else {
+      vertices += uint64_t(bsp.i32(at + 16));
+      triangles += uint64_t(bsp.i32(at + 24)) / 3;
+    }
+    if (triangles > max_output || vertices > max_output)
+      throw Error(where + ": Quake 3 map too large: faces 0.." + std::to_string(f) + " already make " +
+                  std::to_string(triangles) + " triangles and " + std::to_string(vertices) +
+                  " vertices (patches tessellated " + std::to_string(level) + "x" + std::to_string(level) +
+                  " per 3x3 block), more than the limit of " + std::to_string(max_output) + " triangles and " +
+                  std::to_string(max_output) + " vertices");
+  }
+}
+
 std::vector<uint8_t> read_all(const std::string& path) {
   std::ifstream in(path, std::ios::binary);
   if (!in) throw Error("cannot open scene file: " + path);
@@ -172,7 +200,7 @@ Scene load_quake3(const std::string& path, const SceneOptions& options, const st
 }
 
 Scene load_quake3_bytes(std::vector<uint8_t> bytes, const std::string& path, bool is_pk3,
-                        const SceneOptions& options, const std::string& member) {
+                        const SceneOptions& options, const std::string& member, uint64_t max_output) {
   std::string where = path;
   if (is_pk3) {
     const auto entries = list_zip(bytes, path, ".bsp");
@@ -193,6 +221,7 @@ Scene load_quake3_bytes(std::vector<uint8_t> bytes, const std::string& path, boo
   }
   Bsp bsp{bytes};
   validate(bsp, where);
+  check_output_size(bsp, where, max_output);
 
   std::map<int32_t, MeshSoup> by_texture;  // ordered: deterministic mesh order
   for (size_t f = 0; f < bsp.count[kFaces]; ++f) {

@@ -10,6 +10,13 @@
 
 namespace st {
 
+inline constexpr int kQuake3PatchLevel = 8;
+// The most triangles, and the most vertices, a map may emit (after skipping sky, nodraw
+// and billboards; counted before any allocation): faces may share vertex ranges and a
+// 3x3 patch block becomes 128 triangles, so without a cap a file of a few hundred KB can
+// ask for gigabytes. Real maps stay far below (hundreds of thousands of triangles).
+inline constexpr uint64_t kQuake3MaxTriangles = uint64_t(1) << 22;
+
 // Loads a .bsp file, or from a .pk3 (zip) the member `member` when given, else the first
 // member under maps/ ending in .bsp (else the first .bsp member). load_scene() accepts
 // "ARCHIVE.pk3:maps/NAME.bsp" to pick a member. One st::Mesh per texture, named after it ("untextured"
@@ -19,14 +26,16 @@ namespace st {
 // invisible (SURF_NODRAW 0x80) are skipped: they cast no shadow in the game. Each face is
 // wound so that its geometric normal agrees with its stored vertex normals. Quake 3 is
 // Z-up: pass UpAxis::z. Throws st::Error naming the file (and member) and the field at
-// fault for any structural inconsistency.
+// fault for any structural inconsistency, and for maps past kQuake3MaxTriangles
+// triangles or vertices.
 Scene load_quake3(const std::string& path, const SceneOptions& options, const std::string& member = "");
 
 // The same from bytes already in memory: a .pk3 archive when `is_pk3`, else a bare .bsp;
 // `name` stands for the file in the scene name and in error messages.
+// `max_output` bounds the triangles and the vertices the map may emit (tests and the
+// fuzz harness pass less than the default, kQuake3MaxTriangles).
 Scene load_quake3_bytes(std::vector<uint8_t> bytes, const std::string& name, bool is_pk3,
-                        const SceneOptions& options, const std::string& member = "");
-
-inline constexpr int kQuake3PatchLevel = 8;
+                        const SceneOptions& options, const std::string& member = "",
+                        uint64_t max_output = kQuake3MaxTriangles);
 
 }  // namespace st

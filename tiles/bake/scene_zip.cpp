@@ -19,7 +19,7 @@ namespace {
 //   local header: 30 bytes + name + extra; name/extra lengths +26/+28 (u16)
 constexpr size_t kEndSize = 22, kCentralSize = 46, kLocalSize = 30, kMaxComment = 65535;
 constexpr uint32_t kEndMagic = 0x06054b50u, kCentralMagic = 0x02014b50u, kLocalMagic = 0x04034b50u;
-constexpr size_t kMaxMember = size_t(1) << 30;
+constexpr size_t kMaxMember = size_t(1) << 30, kMaxDeflateRatio = 1032;
 
 uint32_t u32(const std::vector<uint8_t>& d, size_t at) {
   return uint32_t(d[at]) | uint32_t(d[at + 1]) << 8 | uint32_t(d[at + 2]) << 16 | uint32_t(d[at + 3]) << 24;
@@ -69,6 +69,16 @@ std::optional<std::vector<ZipEntry>> list_zip(const std::vector<uint8_t>& zip, c
     if (entry.data_at > zip.size() || entry.packed > zip.size() - entry.data_at)
       fail("data of '" + entry.name + "' outside the file");
     if (entry.size > kMaxMember) fail("'" + entry.name + "' claims " + std::to_string(entry.size) + " bytes");
+    // What extract_zip will allocate is checked here, against the bytes really present:
+    // a stored member is its packed bytes; deflate expands at most 1032:1 (RFC 1951: a
+    // 258-byte match per 2 bits at best); nothing else is read.
+    if (entry.method == 0 && entry.packed != entry.size)
+      fail("'" + entry.name + "' is stored with different packed and unpacked sizes");
+    if (entry.method == 8 && entry.size > kMaxDeflateRatio * entry.packed + 64)
+      fail("'" + entry.name + "' claims " + std::to_string(entry.size) + " bytes from " +
+           std::to_string(entry.packed) + " deflated bytes, more than deflate can expand to");
+    if (entry.method != 0 && entry.method != 8)
+      fail("'" + entry.name + "' uses unsupported compression method " + std::to_string(entry.method));
     out.push_back(std::move(entry));
   }
   return out;
@@ -79,16 +89,21 @@ std::vector<uint8_t> extract_zip(const std::vector<uint8_t>& zip, const std::str
     throw Error(path + ": malformed zip archive: '" + entry.name + "' " + what);
   };
   ST_CHECK(entry.data_at <= zip.size() && entry.packed <= zip.size() - entry.data_at);
+  // Checked before allocating (list_zip checks the same for the entries it returns).
+  if (entry.method != 0 && entry.method != 8) fail("uses unsupported compression method " + std::to_string(entry.method));
+  if (entry.method == 0 && entry.packed != entry.size) fail("is stored with different packed and unpacked sizes");
+  if (entry.method == 8 && entry.size > kMaxDeflateRatio * entry.packed + 64)
+    fail("claims more bytes than deflate can expand " + std::to_string(entry.packed) + " bytes to");
   std::vector<uint8_t> data(entry.size);
   if (entry.method == 0) {
-    if (entry.packed != entry.size) fail("is stored with different packed and unpacked sizes");
     std::copy_n(zip.begin() + long(entry.data_at), entry.size, data.begin());
   } else if (entry.method == 8) {
     z_stream z{};
     if (inflateInit2(&z, -MAX_WBITS) != Z_OK) fail("could not start zlib");
     z.next_in = const_cast<Bytef*>(zip.data() + entry.data_at);
     z.avail_in = static_cast<uInt>(entry.packed);
-    z.next_out = data.data();
+    uint8_t none = 0;  // zlib refuses a null output buffer, even for an empty member
+    z.next_out = data.empty() ? &none : data.data();
     z.avail_out = static_cast<uInt>(data.size());
     const int rc = inflate(&z, Z_FINISH);
     const size_t produced = z.total_out;

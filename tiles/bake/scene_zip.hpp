@@ -20,7 +20,9 @@ struct ZipEntry {
 // The entries of the archive `zip` whose lower-cased name ends with `suffix` (all if
 // empty), in central-directory order. std::nullopt if there is no end-of-central-directory
 // record (not a zip). Throws st::Error naming `path` when offsets or sizes point outside
-// the archive or a member claims more than 1 GiB.
+// the archive, a member claims more than 1 GiB or more than its packed bytes can give
+// (stored: exactly them; deflate: 1032 times them), or uses a method other than stored
+// or deflate: what extract_zip allocates is bounded by the archive's own size.
 std::optional<std::vector<ZipEntry>> list_zip(const std::vector<uint8_t>& zip, const std::string& path,
                                               const std::string& suffix);
 

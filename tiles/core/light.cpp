@@ -217,6 +217,41 @@ std::array<double, 18> LightSpace::to_array() const {
           kind_ == LightKind::sun ? spec_.margin : spec_.fov_deg};
 }
 
+std::string LightSpace::check_array(LightKind kind, const std::array<double, 18>& a) {
+  static const char* const kNames[18] = {"origin.x", "origin.y", "origin.z", "axis_u.x", "axis_u.y", "axis_u.z",
+                                         "axis_v.x", "axis_v.y", "axis_v.z", "forward.x", "forward.y", "forward.z",
+                                         "extent", "near", "far", "azimuth", "elevation", "margin/fov"};
+  auto num = [](double v) {
+    std::ostringstream os;
+    os.precision(17);
+    os << v;
+    return os.str();
+  };
+  for (size_t i = 0; i < a.size(); ++i) {
+    if (!std::isfinite(a[i])) return std::string(kNames[i]) + " is " + num(a[i]) + ", not a finite number";
+    if (std::fabs(a[i]) > kMaxLightCoordinate)
+      return std::string(kNames[i]) + " = " + num(a[i]) + " exceeds " + num(kMaxLightCoordinate);
+  }
+  const Vec3d u{a[3], a[4], a[5]}, v{a[6], a[7], a[8]}, f{a[9], a[10], a[11]};
+  constexpr double kTol = 1e-6;
+  const std::pair<const char*, Vec3d> axes[3] = {{"axis_u", u}, {"axis_v", v}, {"forward", f}};
+  for (const auto& [name, axis] : axes)
+    if (std::fabs(length(axis) - 1) > kTol) return std::string(name) + " has length " + num(length(axis)) + ", not 1";
+  if (std::fabs(dot(u, v)) > kTol || std::fabs(dot(u, f)) > kTol || std::fabs(dot(v, f)) > kTol)
+    return "axes are not orthogonal";
+  const double extent = a[12], near = a[13], far = a[14];
+  if (!(extent > 0)) return "extent " + num(extent) + " is not positive";
+  if (!(near >= 0) || !(far > near) || !(far - near > 0))
+    return "near " + num(near) + " and far " + num(far) + " do not make 0 <= near < far";
+  if (kind == LightKind::sun) {
+    if (!(a[16] > 0 && a[16] <= 90)) return "sun elevation " + num(a[16]) + " is outside (0, 90]";
+    if (!(a[17] >= 0 && a[17] < 10)) return "sun margin " + num(a[17]) + " is outside [0, 10)";
+  } else if (!(a[17] > 0 && a[17] < 170)) {
+    return "spot fov " + num(a[17]) + " is outside (0, 170)";
+  }
+  return "";
+}
+
 LightSpace LightSpace::from_array(LightKind kind, const std::array<double, 18>& a) {
   LightSpace ls;
   ls.kind_ = kind;

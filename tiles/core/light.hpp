@@ -17,6 +17,10 @@ namespace st {
 
 enum class LightKind : uint8_t { sun = 0, spot = 1 };
 
+// Bound on every coordinate and extent of a light read from a file: far above any scene
+// (float's precision at 1e18 is 1e11 units), far below float's overflow.
+inline constexpr double kMaxLightCoordinate = 1e18;
+
 // What the user asked for: `sun:azimuth=DEG,elevation=DEG[,margin=F]` or
 // `spot:pos=X,Y,Z,target=X,Y,Z,fov=DEG`. Parsing throws st::Error naming the bad field.
 struct LightSpec {
@@ -68,6 +72,13 @@ class LightSpace {
   // Serialized form: 18 doubles + kind; exact round trip.
   std::array<double, 18> to_array() const;
   static LightSpace from_array(LightKind kind, const std::array<double, 18>& a);
+  // What is wrong with a serialized light that fit() could never have made, or "" if
+  // nothing: a value that is not finite, a coordinate or extent beyond
+  // kMaxLightCoordinate (tracers convert to float, and 1e308 overflows there), axes that
+  // are not orthonormal (to 1e-6), extent <= 0, near < 0 or far <= near, and spec
+  // fields outside what LightSpec::parse accepts. Readers of untrusted packs call it
+  // before from_array (a NaN light once reached Embree's assertions).
+  static std::string check_array(LightKind kind, const std::array<double, 18>& a);
 
  private:
   LightKind kind_ = LightKind::sun;

@@ -6,11 +6,16 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <map>
 
+#include <libdeflate.h>
+
 #include "common/error.hpp"
+#include "common/text.hpp"
+#include "tiles/core/interval.hpp"
 #include "tiles/core/page_table.hpp"
 
 namespace st {
@@ -72,6 +77,35 @@ void PackReader::read_at(uint64_t offset, std::span<uint8_t> out) const {
   }
 }
 
+namespace {
+
+// Every value of `g` inside the depth range [0, 1] (kLitDepth = 1 for a ray that hits
+// nothing), as every bake writes.
+void check_grid_range(const CutGrid& g, const std::string& what) {
+  for (size_t i = 0; i < g.coarse.size(); ++i)
+    if (!(g.coarse[i] >= 0.0f && g.coarse[i] <= kLitDepth))
+      throw FormatError(what + ": coarse value " + std::to_string(i) + " is " + std::to_string(g.coarse[i]) +
+                        ", outside the depth range [0, 1]");
+  for (size_t i = 0; i < g.entries.size(); ++i)
+    if (!(g.entries[i].value >= 0.0f && g.entries[i].value <= kLitDepth))
+      throw FormatError(what + ": entry " + std::to_string(i) + " value is " + std::to_string(g.entries[i].value) +
+                        ", outside the depth range [0, 1]");
+}
+
+}  // namespace
+
+uint32_t PackReader::crc32_of_range(uint64_t offset, uint64_t size) const {
+  std::vector<uint8_t> chunk(size_t(std::min<uint64_t>(size, kChunkBytes)));
+  uint32_t crc = 0;
+  for (uint64_t done = 0; done < size;) {
+    const size_t n = size_t(std::min<uint64_t>(size - done, chunk.size()));
+    read_at(offset + done, {chunk.data(), n});
+    crc = libdeflate_crc32(crc, chunk.data(), n);
+    done += n;
+  }
+  return crc;
+}
+
 void PackReader::load() {
   const uint64_t size = src_->size;
   if (size < kPackHeaderBytes)
@@ -80,6 +114,8 @@ void PackReader::load() {
   header_bytes_.resize(kPackHeaderBytes);
   read_at(0, header_bytes_);
   header_ = PackHeader::parse(header_bytes_, name_);
+  if (const std::string why = LightSpace::check_array(header_.light_kind, header_.light); !why.empty())
+    throw FormatError(where(40) + ": header: the light is not one a build makes: " + why);
   if (header_.state != PackState::complete)
     throw FormatError(name_ + ": an unfinished build (state 'building'): resume or rebuild it");
   if (header_.grid_offset > size || header_.index_offset > size ||
@@ -101,7 +137,17 @@ void PackReader::load() {
   grid_ = CutGrid::parse(grid_bytes_, name_ + ": skip grid at byte " + std::to_string(header_.grid_offset));
   if (grid_.levels != header_.skip_level) throw FormatError(where(header_.grid_offset) + ": skip grid levels != skip level");
 
-  std::vector<uint8_t> index_bytes(header_.tile_count * kIndexEntryBytes);
+  // Every tile has a 32-byte record in the journal before the grid, so the index cannot
+  // name more tiles than that room holds. A sparse file may still claim gigabytes: the
+  // index CRC is checked in bounded chunks before the index is held in memory, so a
+  // reader allocates what the file really holds, never its apparent size at once.
+  if (header_.tile_count > (header_.grid_offset - header_.journal_offset) / kRecordBytes)
+    throw FormatError(where(232) + ": header: " + std::to_string(header_.tile_count) + " tiles cannot fit a journal of " +
+                      std::to_string(header_.grid_offset - header_.journal_offset) + " bytes");
+  const uint64_t index_size = header_.tile_count * kIndexEntryBytes;
+  if (index_size > kChunkBytes && crc32_of_range(header_.index_offset, index_size) != header_.index_crc)
+    throw FormatError(where(header_.index_offset) + ": tile index CRC mismatch");
+  std::vector<uint8_t> index_bytes(index_size);
   read_at(header_.index_offset, index_bytes);
   if (crc32_of(index_bytes) != header_.index_crc) throw FormatError(where(header_.index_offset) + ": tile index CRC mismatch");
   index_ = parse_index(index_bytes, header_.index_offset, header_.journal_offset, header_.grid_offset,
@@ -226,6 +272,7 @@ void PackReader::verify(const TileOpener& open_tile) const {
       throw FormatError(name_ + ": cell record (" + std::to_string(c.cx) + ", " + std::to_string(c.cy) +
                         ") repeated, out of range or disagreeing with the skip grid");
   }
+  check_coarse_levels(cells);
   // 3. The page table reaches every tile exactly once; every tile decodes. The walk runs
   // one level past the finest so that entries at the finest level, which no pack may
   // hold, are visited and refused too.
@@ -262,6 +309,54 @@ void PackReader::verify(const TileOpener& open_tile) const {
     throw FormatError(name_ + ": " + std::to_string(index_.size() - reached) + " tiles the page table never reaches");
 }
 
+void PackReader::check_depth_range() const {
+  check_grid_range(grid_, name_ + ": skip grid at byte " + std::to_string(header_.grid_offset));
+}
+
+void PackReader::check_coarse_levels(const std::vector<CellRecord>& cells) const {
+  // The coarse levels are a hierarchy over the cells' root intervals (MH §3.1, tiled
+  // construction): a coarse texel's value is stored by a node whose admissible interval
+  // lies inside the hull of its descendants' intervals, or inherited by a node that holds
+  // nothing of its own (then its cells carry [v, v]). So each coarse value of level l
+  // lies in [min lo, max hi] over the level-K cells below it, and each cell's entry in
+  // its own [lo, hi] (cells were checked against the grid: one record per cell).
+  const uint32_t k = header_.skip_level;
+  const size_t side = size_t(1) << k;
+  std::vector<float> lo(side * side), hi(side * side);
+  for (const CellRecord& c : cells) {
+    const std::string what = name_ + ": cell record (" + std::to_string(c.cx) + ", " + std::to_string(c.cy) + ")";
+    if (!(c.lo <= c.hi))
+      throw FormatError(what + ": interval [" + std::to_string(c.lo) + ", " + std::to_string(c.hi) + "] is empty");
+    if (!(c.lo <= c.entry.value && c.entry.value <= c.hi))
+      throw FormatError(what + ": entry value " + std::to_string(c.entry.value) + " lies outside its interval [" +
+                        std::to_string(c.lo) + ", " + std::to_string(c.hi) + "]");
+    lo[c.cy * side + c.cx] = c.lo;
+    hi[c.cy * side + c.cx] = c.hi;
+  }
+  // Hulls level by level, finest first: level j from level j + 1.
+  for (uint32_t j = k; j-- > 0;) {
+    const size_t s = size_t(1) << j;
+    std::vector<float> plo(s * s), phi(s * s);
+    for (size_t y = 0; y < s; ++y)
+      for (size_t x = 0; x < s; ++x) {
+        float a = INFINITY, b = -INFINITY;
+        for (size_t dy = 0; dy < 2; ++dy)
+          for (size_t dx = 0; dx < 2; ++dx) {
+            const size_t i = (2 * y + dy) * (2 * s) + 2 * x + dx;
+            a = std::min(a, lo[i]), b = std::max(b, hi[i]);
+          }
+        plo[y * s + x] = a, phi[y * s + x] = b;
+        const float v = grid_.coarse_at(j, x, y);
+        if (!(a <= v && v <= b))
+          throw FormatError(name_ + ": skip grid coarse value of level " + std::to_string(j) + " texel (" +
+                            std::to_string(x) + ", " + std::to_string(y) + ") is " + std::to_string(v) +
+                            ", outside [" + std::to_string(a) + ", " + std::to_string(b) +
+                            "], the hull of the intervals below it");
+      }
+    lo.swap(plo), hi.swap(phi);
+  }
+}
+
 std::string PackReader::summary() const {
   uint64_t raw = 0, stored = 0, index_tiles = 0;
   uint32_t max_raw = 0;
@@ -291,7 +386,7 @@ std::string PackReader::summary() const {
                 (unsigned long long)index_.size(), (unsigned long long)index_tiles, (unsigned long long)raw, max_raw,
                 (unsigned long long)stored, (unsigned long long)header_.grid_size, (unsigned long long)file_size());
   out += buf;
-  for (auto& [k, v] : params_) out += "  " + k + " = " + v + "\n";
+  for (auto& [k, v] : params_) out += "  " + printable_text(k) + " = " + printable_text(v) + "\n";
   return out;
 }
 

@@ -1,8 +1,9 @@
 // Reads a pack file (pack_format.hpp, tiles/PACK.md). Hostile input is the normal case:
 // open() checks the header, the section layout against the file size, the CRCs of the
 // params, skip grid and tile index, every index entry and that every skip-grid entry that
-// names a tile finds it; read_stored() checks a tile's CRC on every read; verify() checks
-// every byte of the file. Every failure is an st::FormatError naming the pack, and the
+// names a tile finds it, and refuses a light no build makes (tiles/PACK.md "Reading
+// hostile packs"); read_stored() checks a tile's CRC on every read; verify() checks every
+// byte of the file and the coarse levels against the cell intervals. Every failure is an st::FormatError naming the pack, and the
 // tile id and byte offset where there is one.
 //
 // Thread safety: all const methods may be called concurrently (reads use pread).
@@ -64,6 +65,11 @@ class PackReader {
   // opens (the encoding validates its whole buffer) with the right finest level.
   using TileOpener = std::function<std::unique_ptr<Evaluator>(std::span<const uint8_t>)>;
   void verify(const TileOpener& open_tile = {}) const;
+  // Throws st::FormatError unless every skip-grid value (coarse and entry) lies in the
+  // depth range [0, 1] that every bake writes (light-space depth, kLitDepth = 1). The
+  // format itself carries any non-NaN float (tests encode such fields), so open() and
+  // verify() do not ask this; the CLI's verify and export do.
+  void check_depth_range() const;
 
   std::string where(uint64_t offset) const;  // "<name> at byte N"
   // Multi-line human-readable summary (header fields, features, tile counts and sizes),
@@ -75,6 +81,11 @@ class PackReader {
   PackReader(std::unique_ptr<Source> src, std::string name);
   void load();
   void read_at(uint64_t offset, std::span<uint8_t> out) const;
+  // CRC-32 of [offset, offset + size), read kChunkBytes at a time.
+  uint32_t crc32_of_range(uint64_t offset, uint64_t size) const;
+  // verify(): the coarse levels and cell records against each other and the depth range.
+  void check_coarse_levels(const std::vector<CellRecord>& cells) const;
+  static constexpr uint64_t kChunkBytes = uint64_t(1) << 20;
 
   std::unique_ptr<Source> src_;
   std::string name_;
