@@ -524,9 +524,17 @@ asio::awaitable<void> Connection::writer(std::shared_ptr<Connection> self) {
             bytes += f.error.size();
           }
         }
-        core_.queued_bytes.fetch_add(bytes, std::memory_order_relaxed);
-        const bool ok = co_await write_buffers(bufs, bytes);
-        core_.queued_bytes.fetch_sub(bytes, std::memory_order_relaxed);
+        struct Held {  // the batch counts against the server's budget until written
+          std::atomic<uint64_t>& total;
+          size_t n;
+          Held(std::atomic<uint64_t>& t, size_t b) : total(t), n(b) { total.fetch_add(n, std::memory_order_relaxed); }
+          ~Held() { total.fetch_sub(n, std::memory_order_relaxed); }
+        };
+        bool ok;
+        {
+          Held held(core_.queued_bytes, bytes);
+          ok = co_await write_buffers(bufs, bytes);
+        }
         if (!ok) break;
         const auto now = Clock::now();
         for (size_t i = 0; i < n; ++i)

@@ -46,7 +46,7 @@ PendingBudget::Prefix PendingBudget::prefix_of(const asio::ip::address& a) {
 
 std::list<PendingBudget::Entry>::iterator PendingBudget::add(std::weak_ptr<Connection> c,
                                                              const asio::ip::address& from) {
-  Entry e{std::move(c), from, prefix_of(from)};
+  Entry e{std::move(c), from, prefix_of(from), std::chrono::steady_clock::now()};
   ++per_address[from];
   ++per_prefix[e.prefix];
   return order.insert(order.end(), std::move(e));
@@ -59,9 +59,11 @@ void PendingBudget::remove(std::list<Entry>::iterator it) {
 }
 
 std::shared_ptr<Connection> PendingBudget::victim_for(const asio::ip::address& from,
-                                                      const ServerOptions& o, bool total_full) {
-  // The oldest pending connection of the address with the most pending ones among those
-  // `in_scope`: the flooder pays for its flood, not the client that just arrived.
+                                                      const ServerOptions& o, bool total_full,
+                                                      std::chrono::steady_clock::time_point now) {
+  // The oldest pending connection past the grace of the address with the most pending
+  // ones among those `in_scope`: the flooder pays for its flood, not the newcomer.
+  const auto old_enough = now - o.pending_grace;
   auto evict_heaviest = [&](auto in_scope) -> std::shared_ptr<Connection> {
     const asio::ip::address* heaviest = nullptr;
     size_t most = 0;
@@ -69,8 +71,15 @@ std::shared_ptr<Connection> PendingBudget::victim_for(const asio::ip::address& f
       if (n > most && in_scope(addr)) most = n, heaviest = &addr;
     if (!heaviest) return nullptr;
     const asio::ip::address who = *heaviest;
-    for (auto it = order.begin(); it != order.end(); ++it)
+    for (auto it = order.begin(); it != order.end() && it->since <= old_enough; ++it)  // oldest first
       if (it->from == who) {
+        auto c = it->conn.lock();
+        remove(it);
+        return c;
+      }
+    // Its pending ones are all young: take the oldest past the grace in scope, if any.
+    for (auto it = order.begin(); it != order.end() && it->since <= old_enough; ++it)
+      if (in_scope(it->from)) {
         auto c = it->conn.lock();
         remove(it);
         return c;
@@ -256,7 +265,7 @@ void Server::Impl::admit(tcp::socket socket) {
     if (per_address_limit && here != core.per_address.end() && here->second >= per_address_limit) {
       refused = "too many connections from your address";
     } else {
-      victim = core.pending.victim_for(from, core.options, total_full);
+      victim = core.pending.victim_for(from, core.options, total_full, std::chrono::steady_clock::now());
       if (total_full && !victim) {
         refused = "server at its connection limit";
       } else {

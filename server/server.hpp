@@ -48,6 +48,9 @@ struct ServerOptions {
   size_t max_pending_connections = 256;
   size_t max_pending_per_address = 32;
   size_t max_pending_per_prefix = 128;   // IPv4 /24, IPv6 /64
+  // A pending connection younger than this is never evicted (an honest handshake takes
+  // a few round trips; a burst of them from one host must not evict itself).
+  std::chrono::milliseconds pending_grace{1000};
   size_t max_open_maps = 64;             // per connection
   size_t max_control_frames = 64;        // queued non-tile answers; the reader waits beyond
   size_t max_control_bytes = 1u << 20;   // ... or beyond this many bytes of them (shared MapInfo bytes not counted)

@@ -1,6 +1,7 @@
 // State shared by the server and its connections (internal to server/).
 #pragma once
 #include <array>
+#include <chrono>
 #include <atomic>
 #include <list>
 #include <map>
@@ -32,7 +33,10 @@ class Connection;
 // (IPv4 /24, IPv6 /64) and in all, and a newcomer over a budget evicts the oldest such
 // connection of the heaviest address in that scope instead of being refused: whoever
 // floods the budget evicts itself, a client that completes its handshake in a few round
-// trips gets through. Guarded by ServerCore::mu.
+// trips gets through. Only connections pending for longer than the grace (1 s) are
+// evicted, so a burst of honest clients from one host (a NAT, a load test) is not made
+// to evict itself; with no such victim the budget is soft until max_connections, where
+// the newcomer is refused. Guarded by ServerCore::mu.
 struct PendingBudget {
   using Prefix = std::array<uint8_t, 16>;
   static Prefix prefix_of(const asio::ip::address& a);
@@ -40,6 +44,7 @@ struct PendingBudget {
     std::weak_ptr<Connection> conn;
     asio::ip::address from;
     Prefix prefix;
+    std::chrono::steady_clock::time_point since;
   };
   std::list<Entry> order;  // oldest first
   std::map<asio::ip::address, size_t> per_address;
@@ -47,11 +52,11 @@ struct PendingBudget {
 
   std::list<Entry>::iterator add(std::weak_ptr<Connection> c, const asio::ip::address& from);
   void remove(std::list<Entry>::iterator it);
-  // The connection to evict so that one from `from` fits (null: none needed), by the
-  // limits in `o`; `total_full` says the server is at max_connections. Removes it from
-  // the budget.
+  // The connection to evict so that one from `from` fits (null: none needed, or none
+  // pending for at least o.pending_grace), by the limits in `o`; `total_full` says the
+  // server is at max_connections. Removes it from the budget.
   std::shared_ptr<Connection> victim_for(const asio::ip::address& from, const ServerOptions& o,
-                                         bool total_full);
+                                         bool total_full, std::chrono::steady_clock::time_point now);
 };
 
 struct ServerCore {

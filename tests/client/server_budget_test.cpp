@@ -89,6 +89,7 @@ server::ServerOptions small_budgets() {
   o.max_pending_per_address = 6;
   o.max_pending_per_prefix = 16;
   o.max_pending_connections = 24;
+  o.pending_grace = std::chrono::milliseconds(0);  // the flood below is opened in a burst
   o.log = [](const std::string&) {};
   return o;
 }
@@ -115,6 +116,29 @@ TEST(ServerBudget, IdleAfterHelloWithoutAKeyCannotFillTheServer) {
   EXPECT_GE(srv.server->stats().connections_evicted, 120u - 24u);
   // The flood's connections still open are within the pending budget.
   EXPECT_LE(srv.server->stats().connections_open, 24u + 1u);
+}
+
+TEST(ServerBudget, AnHonestBurstFromOneHostIsNotEvicted) {
+  auto p = build_pack("budget_burst", 5, 10, looptest::first_encoding(), 3, 512);
+  server::ServerOptions o = small_budgets();
+  o.pending_grace = std::chrono::seconds(30);  // every connection of the burst is young
+  o.max_connections = 200;
+  o.max_connections_per_address = 0;
+  auto srv = start_server({p.path}, o);
+  std::vector<std::unique_ptr<RawSocket>> socks;
+  auto open = looptest::hello_frame(1);
+  auto om = looptest::open_map_frame("budget_burst", 2);
+  open.insert(open.end(), om.begin(), om.end());
+  for (int i = 0; i < 100; ++i) {  // 100 at once from 127.0.0.1: 16x the per-address budget
+    socks.push_back(std::make_unique<RawSocket>(srv.port, 5s));
+    ASSERT_TRUE(socks.back()->send(open));
+  }
+  for (auto& s : socks) {
+    ASSERT_EQ(read_frame(*s).header.type, proto::MessageType::hello_ack);
+    ASSERT_EQ(read_frame(*s).header.type, proto::MessageType::map_info);
+  }
+  EXPECT_EQ(srv.server->stats().connections_evicted, 0u);
+  EXPECT_EQ(srv.server->stats().connections_open, 100u);
 }
 
 TEST(ServerBudget, AStrangerCannotClaimAPostAuthFrame) {
