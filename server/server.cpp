@@ -65,26 +65,20 @@ std::shared_ptr<Connection> PendingBudget::victim_for(const asio::ip::address& f
   // ones among those `in_scope`: the flooder pays for its flood, not the newcomer.
   const auto old_enough = now - o.pending_grace;
   auto evict_heaviest = [&](auto in_scope) -> std::shared_ptr<Connection> {
-    const asio::ip::address* heaviest = nullptr;
+    // Candidates: addresses in scope with a connection past the grace (the list is
+    // oldest first, so those are a prefix of it); the victim is the oldest connection of
+    // the candidate holding the most pending connections.
+    std::list<Entry>::iterator best = order.end();
     size_t most = 0;
-    for (const auto& [addr, n] : per_address)
-      if (n > most && in_scope(addr)) most = n, heaviest = &addr;
-    if (!heaviest) return nullptr;
-    const asio::ip::address who = *heaviest;
-    for (auto it = order.begin(); it != order.end() && it->since <= old_enough; ++it)  // oldest first
-      if (it->from == who) {
-        auto c = it->conn.lock();
-        remove(it);
-        return c;
-      }
-    // Its pending ones are all young: take the oldest past the grace in scope, if any.
-    for (auto it = order.begin(); it != order.end() && it->since <= old_enough; ++it)
-      if (in_scope(it->from)) {
-        auto c = it->conn.lock();
-        remove(it);
-        return c;
-      }
-    return nullptr;
+    for (auto it = order.begin(); it != order.end() && it->since <= old_enough; ++it) {
+      if (!in_scope(it->from)) continue;
+      const size_t n = per_address.at(it->from);
+      if (n > most) most = n, best = it;  // first seen = oldest of that address
+    }
+    if (best == order.end()) return nullptr;
+    auto c = best->conn.lock();
+    remove(best);
+    return c;
   };
   auto count = [](const auto& m, const auto& k) {
     auto it = m.find(k);
