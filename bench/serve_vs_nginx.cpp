@@ -14,7 +14,7 @@
 //   bench_serve_vs_nginx [--level 10] [--seconds 3] [--warmup 0.3] [--depth 8]
 //                        [--conns 1,8,64] [--nginx-workers 1,auto] [--nginx PATH] [--skip K]
 //                        [--nginx-extra "open_file_cache max=65536 inactive=60s;"]
-//                        [--json bench-out/serve_vs_nginx.json]
+//                        [--json bench-out/serve_vs_nginx.json] [--threads T (our I/O threads)]
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
@@ -422,7 +422,7 @@ std::vector<std::string> split(const std::string& s) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  uint32_t level = 10, depth = 8;
+  uint32_t level = 10, depth = 8, threads = 1;
   // Our server keeps the pack open; nginx keeps tile file descriptors open the same way
   // (without it, open/fstat/close per request halved nginx's rate with 1 connection).
   // --nginx-extra "" gives the plain config.
@@ -442,6 +442,7 @@ int main(int argc, char** argv) {
     else if (k == "--nginx-extra") nginx_extra = v;
     else if (k == "--skip") skip = int(std::stoi(v));
     else if (k == "--json") json_path = v;
+    else if (k == "--threads") threads = uint32_t(std::stoul(v));
     else {
       std::fprintf(stderr, "bench_serve_vs_nginx: unknown option %s\n", k.c_str());
       return 2;
@@ -489,7 +490,7 @@ int main(int argc, char** argv) {
     {
       server::ServerOptions so;
       so.port = 0;
-      so.threads = 1;
+      so.threads = threads;
       so.log = [](const std::string&) {};
       server::Server srv(server::Catalog::scan(std::vector<std::string>{pack}), so);
       srv.start();

@@ -197,14 +197,24 @@ asio::awaitable<bool> Fetcher::handshake(net::Stream& sock) {
   bool ok = bool(proto::encode_message(hello, next_id(), proto::kFlagFinal, limits_, out));
   if (ok) ok = co_await write(sock, out);
   if (ok) ok = co_await read_frame(sock, f);
-  if (!ok) co_return false;
+  if (!ok) {
+    note_failure(sock.tls() ? "the server closed the connection before its HelloAck"
+                            : "the server closed the connection before its HelloAck (a TLS server? then "
+                              "the client needs TLS too)");
+    co_return false;
+  }
   if (f.header.type == MessageType::error) {
     // A server that wants a key we do not have says so in the handshake: final.
     proto::ErrorMessage e;
-    if (proto::decode_payload(f.payload, limits_, e) &&
-        (e.code == ErrorCode::auth_required || e.code == ErrorCode::auth_failed))
-      refuse("server " + endpoint_.host + ":" + std::to_string(endpoint_.port) + " refused the connection: " +
-             std::string(proto::to_string(e.code)) + ": " + e.message);
+    if (!proto::decode_payload(f.payload, limits_, e)) {
+      note_failure("the server answered the Hello with an Error that does not decode");
+      co_return false;
+    }
+    const std::string why = "server " + endpoint_.host + ":" + std::to_string(endpoint_.port) +
+                            " refused the connection: " + std::string(proto::to_string(e.code)) + ": " +
+                            proto::sanitize_text(e.message, 512);
+    note_failure(why);  // overloaded, shutting_down, timeout: retried, and named if it lasts
+    if (e.code == ErrorCode::auth_required || e.code == ErrorCode::auth_failed) refuse(why);
     co_return false;
   }
   proto::HelloAck ack;
@@ -367,6 +377,9 @@ void Fetcher::handle(proto::Frame&& f) {
   if (f.header.type == MessageType::error && (id == proto::kNoRequest || tile_requests_.count(id))) {
     // The server gave up on the connection, or refused a tile batch as a whole
     // (overloaded, shutting down): reconnect, and re-request after the backoff.
+    if (proto::ErrorMessage* e = std::get_if<proto::ErrorMessage>(&m); e && id == proto::kNoRequest)
+      note_failure("the server closed the connection: " + std::string(proto::to_string(e->code)) + ": " +
+                   proto::sanitize_text(e->message, 512));
     if (socket_) socket_->close();
     return;
   }

@@ -151,6 +151,11 @@ Status parse_header(std::span<const std::uint8_t, kHeaderSize> bytes, const Limi
   return check_full_header(bytes, limits, Receiver::any, 0, out);
 }
 
+namespace {
+// The first allocation for a payload; beyond it the buffer doubles as bytes arrive.
+constexpr std::size_t kPayloadGrowStep = 16 * 1024;
+}  // namespace
+
 FrameParser::FrameParser(const Limits& limits, Receiver receiver)
     : limits_(limits), receiver_(receiver) {
   assert(validate(limits).ok());
@@ -194,20 +199,25 @@ FrameParser::Result FrameParser::feed(std::span<const std::uint8_t> bytes) {
     FrameHeader h;
     if (Status s = check_full_header(header_bytes_, limits_, receiver_, frame_start_, h); !s)
       return fail(s.code, std::move(s.detail), pos);
-    // Only now, with the length checked against the limit, is the payload allocated.
+    // Only now, with the length checked against the limit, is the payload allocated, and
+    // only as its bytes arrive: a header claiming megabytes that never come costs the
+    // receiver what was sent, not what was claimed.
     frame_.header = h;
-    frame_.payload.resize(h.payload_length);
+    frame_.payload.clear();
+    frame_.payload.reserve(std::min<std::size_t>(h.payload_length, kPayloadGrowStep));
     payload_have_ = 0;
     phase_ = Phase::payload;
   }
   if (phase_ == Phase::payload) {
-    const std::size_t take =
-        std::min<std::size_t>(bytes.size() - pos, frame_.payload.size() - payload_have_);
-    std::copy_n(bytes.data() + pos, take, frame_.payload.data() + payload_have_);
+    const std::size_t want = frame_.header.payload_length;
+    const std::size_t take = std::min<std::size_t>(bytes.size() - pos, want - payload_have_);
+    if (frame_.payload.capacity() < payload_have_ + take)  // doubling, capped at the claim
+      frame_.payload.reserve(std::min(want, std::max(payload_have_ + take, 2 * frame_.payload.capacity())));
+    frame_.payload.insert(frame_.payload.end(), bytes.data() + pos, bytes.data() + pos + take);
     pos += take;
     payload_have_ += take;
     stream_offset_ += take;
-    if (payload_have_ == frame_.payload.size()) {
+    if (payload_have_ == want) {
       const std::uint32_t actual = crc32(frame_.payload);
       if (actual != frame_.header.payload_crc32)
         return fail(ErrorCode::payload_checksum,

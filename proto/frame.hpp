@@ -4,7 +4,7 @@
 // The parser follows the Asio http request_parser idea: feed bytes, it answers
 // need_more / frame / error. It never trusts a length: payload_length is checked against
 // Limits::max_frame_bytes from the header alone (after the header checksum), before a
-// single payload byte is buffered, so it never holds more than max_frame_bytes.
+// payload byte is buffered; the buffer then grows only with the bytes received.
 #pragma once
 #include <array>
 #include <cstddef>

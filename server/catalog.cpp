@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <filesystem>
 
+#include "proto/frame.hpp"
 #include "proto/names.hpp"
 #include "common/error.hpp"
 
@@ -32,6 +33,24 @@ CatalogMap::CatalogMap(std::string name, std::string path)
   entry_.tile_count = uint32_t(h.tile_count);
   entry_.pack_bytes = pack_->file_size();
   for (const TileIndexEntry& t : pack_->tiles()) largest_stored_tile_ = std::max(largest_stored_tile_, t.stored_size);
+  auto tail = std::make_shared<std::vector<uint8_t>>();
+  auto put = [&](std::span<const uint8_t> b) {
+    const uint32_t n = uint32_t(b.size());
+    for (int i = 0; i < 4; ++i) tail->push_back(uint8_t(n >> (8 * i)));  // little endian (§3)
+    tail->insert(tail->end(), b.begin(), b.end());
+  };
+  put(pack_->header_bytes());
+  put(pack_->grid_bytes());
+  map_info_tail_ = std::move(tail);
+}
+
+uint32_t CatalogMap::map_info_crc(uint32_t map_id) const {
+  std::lock_guard lock(crc_mu_);
+  if (auto it = crc_by_id_.find(map_id); it != crc_by_id_.end()) return it->second;
+  const uint8_t id[4] = {uint8_t(map_id), uint8_t(map_id >> 8), uint8_t(map_id >> 16), uint8_t(map_id >> 24)};
+  const uint32_t crc = proto::crc32(*map_info_tail_, proto::crc32(id));
+  crc_by_id_.emplace(map_id, crc);
+  return crc;
 }
 
 uint64_t CatalogMap::map_info_frame_bytes() const {

@@ -16,7 +16,9 @@
 #pragma once
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <memory>
+#include <mutex>
 #include <span>
 #include <string>
 #include <string_view>
@@ -39,12 +41,22 @@ class CatalogMap {
   uint32_t largest_stored_tile() const { return largest_stored_tile_; }
   // The MapInfo frame answering OpenMap: header, map id, pack header and skip grid.
   uint64_t map_info_frame_bytes() const;
+  // The MapInfo payload after its map id (PROTOCOL.md §4.6: pack header and skip grid,
+  // each behind its u32 length), built once and shared by every answer on every
+  // connection: pipelined OpenMaps queue references to it, never copies.
+  const std::shared_ptr<const std::vector<uint8_t>>& map_info_tail() const { return map_info_tail_; }
+  // The MapInfo payload's CRC-32 for `map_id` (4 id bytes, then the tail), computed once
+  // per id (ids are 1..max_open_maps) so an OpenMap costs no pass over a big skip grid.
+  uint32_t map_info_crc(uint32_t map_id) const;
 
  private:
   std::string name_, path_;
   std::unique_ptr<PackReader> pack_;
   proto::MapEntry entry_;
   uint32_t largest_stored_tile_ = 0;
+  std::shared_ptr<const std::vector<uint8_t>> map_info_tail_;
+  mutable std::mutex crc_mu_;
+  mutable std::map<uint32_t, uint32_t> crc_by_id_;
 };
 
 class Catalog {

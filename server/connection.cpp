@@ -51,6 +51,23 @@ void Connection::stop() {
   asio::post(stream_.get_executor(), [self = shared_from_this()] { self->close(); });
 }
 
+void Connection::shut_down() {
+  asio::post(stream_.get_executor(), [self = shared_from_this()] {
+    if (self->closed_) return;
+    self->shutdown_deadline_ = Clock::now() + kShutdownGrace;
+    if (!self->tls_ready_ || self->closing_) return self->close();  // no session to speak on
+    self->fail(ErrorCode::shutting_down, "server shutting down");
+  });
+}
+
+void Connection::leave_pending() {
+  if (useful_) return;
+  useful_ = true;
+  std::lock_guard lock(core_.mu);
+  if (pending_) core_.pending.remove(pending_it_);
+  pending_ = false;
+}
+
 void Connection::close() {
   if (closed_) return;
   closed_ = true;
@@ -80,9 +97,13 @@ asio::awaitable<void> Connection::reader(std::shared_ptr<Connection> /*keep aliv
     while (!closed_ && !closing_) {
       // Backpressure: a client that sends requests faster than it reads answers stops
       // being read once its control queue is full (TCP then pushes back on it).
-      while (!closed_ && !closing_ && control_.size() >= opt_.max_control_frames) {
+      while (!closed_ && !closing_ && !may_read()) {
         error_code ec;
-        reader_wake_.expires_at(Clock::time_point::max());
+        // Woken by the writer when its own queue drains; the server-wide budget drains
+        // elsewhere, so that wait polls.
+        reader_wake_.expires_at(control_.size() >= opt_.max_control_frames || control_bytes_ >= opt_.max_control_bytes
+                                    ? Clock::time_point::max()
+                                    : Clock::now() + std::chrono::milliseconds(5));
         co_await reader_wake_.async_wait(asio::redirect_error(asio::use_awaitable, ec));
       }
       if (closed_ || closing_) break;
@@ -110,7 +131,7 @@ asio::awaitable<void> Connection::reader(std::shared_ptr<Connection> /*keep aliv
       if (mid_frame() && (!was_mid_frame || frame_end_offset_ >= chunk_start)) frame_started_ = last_read_;
     }
   } catch (const std::exception& e) {
-    core_.log(std::string("connection reader: ") + e.what());
+    core_.log_repeated("connection", std::string("connection reader: ") + e.what());
     close();
   }
   // A client that half-closes after its requests still gets its answers: only close
@@ -158,6 +179,7 @@ void Connection::handle(proto::Frame&& frame) {
   // Everything else is a request: it holds an in-flight slot until its FINAL answer.
   core_.stats.request();
   if (!admit(id)) return;
+  if (frame.header.type != MessageType::ping && frame.header.type != MessageType::auth) leave_pending();
   switch (frame.header.type) {
     case MessageType::list_maps: {
       proto::MapList list;
@@ -184,6 +206,12 @@ void Connection::handle(proto::Frame&& frame) {
   }
 }
 
+proto::Limits Connection::receive_limits() const {
+  proto::Limits receive = limits_;
+  receive.max_frame_bytes = authed_ ? proto::max_client_frame_bytes(limits_) : proto::kMinFrameBytes;
+  return receive;
+}
+
 bool Connection::admit(uint32_t id) {
   proto::Status s = in_flight_.begin(id);
   if (s) return true;
@@ -193,7 +221,7 @@ bool Connection::admit(uint32_t id) {
     core_.stats.error();
     proto::ErrorMessage e{s.code, proto::to_string(s)};
     std::vector<uint8_t> out;
-    if (proto::encode_message(e, id, proto::kFlagFinal, limits_, out)) control_.push_back({std::move(out), 0});
+    if (proto::encode_message(e, id, proto::kFlagFinal, limits_, out)) queue_control({std::move(out), 0, false, {}});
     wake_writer();
     return false;
   }
@@ -222,13 +250,13 @@ void Connection::on_hello(const proto::Frame& f, const proto::Hello& m) {
   std::vector<uint8_t> out;
   s = proto::encode_message(ack, f.header.request_id, proto::kFlagFinal, limits_, out);
   if (!s) return fail(ErrorCode::internal, proto::to_string(s));
-  control_.push_back({std::move(out), 0});
+  queue_control({std::move(out), 0, false, {}});
   limits_ = negotiated;
   // The negotiated max_frame_bytes exists for tiles (S->C); what the server buffers from
-  // the client is bounded by the largest message a client may send (PROTOCOL.md §6).
-  proto::Limits receive = negotiated;
-  receive.max_frame_bytes = proto::max_client_frame_bytes(negotiated);
-  parser_.set_limits(receive);
+  // the client is bounded by the largest message a client may send (PROTOCOL.md §6), and
+  // before the client proved it holds the key by the handshake frame limit (Auth is 64
+  // bytes): a stranger cannot make the server buffer megabytes.
+  parser_.set_limits(receive_limits());
   in_flight_.set_capacity(negotiated.max_in_flight);
   handshaken_ = true;
   wake_writer();
@@ -243,10 +271,11 @@ void Connection::on_auth(uint32_t id, const proto::Auth& m) {
   const proto::Proof want = proto::client_proof(opt_.key, server_nonce_, m.client_nonce);
   if (!proto::proofs_equal(want, m.proof)) {
     core_.stats.auth_failure();
-    core_.log("connection from " + from_.to_string() + " refused: wrong key");
+    core_.log_repeated("auth", "connection from " + from_.to_string() + " refused: wrong key");
     return fail(ErrorCode::auth_failed, "wrong key");
   }
   authed_ = true;
+  parser_.set_limits(receive_limits());  // the post-handshake limit, from the next frame
   proto::AuthOk ok;
   ok.proof = proto::server_proof(opt_.key, server_nonce_, m.client_nonce);
   answer(ok, id);
@@ -263,13 +292,44 @@ void Connection::on_open_map(uint32_t id, const proto::OpenMap& m) {
     open_maps_.push_back(map);
     it = open_maps_.end() - 1;
   }
-  proto::MapInfo info;
-  info.map_id = uint32_t(it - open_maps_.begin()) + 1;
-  auto h = map->pack().header_bytes();
-  auto g = map->pack().grid_bytes();
-  info.pack_header.assign(h.begin(), h.end());
-  info.skip_grid.assign(g.begin(), g.end());
-  answer(info, id);
+  // MapInfo (PROTOCOL.md §4.6) as a header and map id of its own followed by the
+  // catalog's shared bytes: 64 pipelined OpenMaps of a big skip grid cost 64 x 28 bytes.
+  const uint32_t map_id = uint32_t(it - open_maps_.begin()) + 1;
+  const auto& tail = map->map_info_tail();
+  std::array<uint8_t, 4> id_bytes{uint8_t(map_id), uint8_t(map_id >> 8), uint8_t(map_id >> 16),
+                                  uint8_t(map_id >> 24)};
+  const uint64_t payload = id_bytes.size() + tail->size();
+  if (payload > limits_.max_payload_bytes())  // refused before any pass over the bytes
+    return answer_error(id, ErrorCode::limit_exceeded,
+                        "answer does not fit: map_info payload of " + std::to_string(payload) +
+                            " bytes exceeds the limit " + std::to_string(limits_.max_payload_bytes()) +
+                            " (propose a larger max_frame_bytes in the Hello)");
+  proto::FrameHeader h;
+  h.flags = proto::kFlagFinal;
+  h.type = MessageType::map_info;
+  h.request_id = id;
+  h.payload_length = uint32_t(payload);
+  h.payload_crc32 = map->map_info_crc(map_id);
+  std::array<uint8_t, proto::kHeaderSize> header{};
+  proto::write_header(h, header);
+  ControlFrame f;
+  f.bytes.assign(header.begin(), header.end());
+  f.bytes.insert(f.bytes.end(), id_bytes.begin(), id_bytes.end());
+  f.ends_request = id;
+  f.shared = tail;
+  queue_control(std::move(f));
+  wake_writer();
+}
+
+void Connection::queue_control(ControlFrame f) {
+  control_bytes_ += f.bytes.size();
+  core_.queued_bytes.fetch_add(f.bytes.size(), std::memory_order_relaxed);
+  control_.push_back(std::move(f));
+}
+
+bool Connection::may_read() const {
+  return control_.size() < opt_.max_control_frames && control_bytes_ < opt_.max_control_bytes &&
+         core_.queued_bytes.load(std::memory_order_relaxed) < opt_.max_queued_bytes;
 }
 
 void Connection::on_get_tiles(uint32_t id, const proto::GetTiles& m) {
@@ -319,7 +379,7 @@ void Connection::answer(const proto::Message& m, uint32_t request_id) {
   proto::Status s = proto::encode_message(m, request_id, proto::kFlagFinal, limits_, out);
   if (!s) return answer_error(request_id, s.code == ErrorCode::oversized_frame ? ErrorCode::limit_exceeded : s.code,
                               "answer does not fit: " + proto::to_string(s));
-  control_.push_back({std::move(out), request_id});
+  queue_control({std::move(out), request_id, false, {}});
   wake_writer();
 }
 
@@ -332,9 +392,9 @@ void Connection::answer_error(uint32_t request_id, ErrorCode code, const std::st
     if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) c = ' ';
   proto::ErrorMessage e{code, text};
   if (proto::encode_message(e, request_id, proto::kFlagFinal, limits_, out))
-    control_.push_back({std::move(out), request_id, last});
+    queue_control({std::move(out), request_id, last, {}});
   else if (last)
-    control_.push_back({{}, 0, true});  // cannot happen (bounded text); still close after
+    queue_control({{}, 0, true, {}});  // cannot happen (bounded text); still close after
   wake_writer();
 }
 
@@ -392,7 +452,7 @@ void Connection::prepare_tile(const PoppedTile& p, TileFrame& out) {
       code = ErrorCode::internal;
       why = std::string("corrupt tile: ") + e.what();
       core_.stats.tile_corrupt();
-      core_.log(std::string("tile read failed: ") + e.what());
+      core_.log_repeated("tile", std::string("tile read failed: ") + e.what());
     }
   }
   if (code == ErrorCode::ok) {
@@ -427,9 +487,17 @@ asio::awaitable<void> Connection::writer(std::shared_ptr<Connection> self) {
       if (!control_.empty()) {
         ControlFrame frame = std::move(control_.front());
         control_.pop_front();
-        reader_wake_.cancel();  // room in the control queue again
         std::vector<asio::const_buffer> bufs{asio::buffer(frame.bytes)};
-        if (!co_await write_buffers(bufs, frame.bytes.size())) break;
+        size_t bytes = frame.bytes.size();
+        if (frame.shared) {
+          bufs.push_back(asio::buffer(*frame.shared));
+          bytes += frame.shared->size();
+        }
+        const bool ok = co_await write_buffers(bufs, bytes);
+        control_bytes_ -= frame.bytes.size();  // held until written: it is memory until then
+        core_.queued_bytes.fetch_sub(frame.bytes.size(), std::memory_order_relaxed);
+        reader_wake_.cancel();  // room in the control queue again
+        if (!ok) break;
         if (frame.ends_request) in_flight_.end(frame.ends_request);  // FINAL written
         if (frame.last) break;  // a connection-level Error is the last frame (PROTOCOL.md §4.3)
         continue;
@@ -439,7 +507,9 @@ asio::awaitable<void> Connection::writer(std::shared_ptr<Connection> self) {
         // priority order; bounded in count and bytes so urgent later requests wait little.
         size_t n = 0, bytes = 0;
         std::vector<asio::const_buffer> bufs;
-        while (n < kTilesPerWrite && bytes < kBytesPerWrite) {
+        // Over the server's budget of queued bytes: one tile per write until it drains.
+        const bool tight = core_.queued_bytes.load(std::memory_order_relaxed) >= opt_.max_queued_bytes;
+        while (n < (tight ? 1 : kTilesPerWrite) && bytes < kBytesPerWrite) {
           auto p = tiles_.pop();
           if (!p) break;
           if (p->last_of_request) in_flight_.end(p->tile.request_id);
@@ -454,7 +524,18 @@ asio::awaitable<void> Connection::writer(std::shared_ptr<Connection> self) {
             bytes += f.error.size();
           }
         }
-        if (!co_await write_buffers(bufs, bytes)) break;
+        struct Held {  // the batch counts against the server's budget until written
+          std::atomic<uint64_t>& total;
+          size_t n;
+          Held(std::atomic<uint64_t>& t, size_t b) : total(t), n(b) { total.fetch_add(n, std::memory_order_relaxed); }
+          ~Held() { total.fetch_sub(n, std::memory_order_relaxed); }
+        };
+        bool ok;
+        {
+          Held held(core_.queued_bytes, bytes);
+          ok = co_await write_buffers(bufs, bytes);
+        }
+        if (!ok) break;
         const auto now = Clock::now();
         for (size_t i = 0; i < n; ++i)
           if (batch[i].is_data) {
@@ -470,11 +551,17 @@ asio::awaitable<void> Connection::writer(std::shared_ptr<Connection> self) {
       co_await writer_wake_.async_wait(asio::redirect_error(asio::use_awaitable, ec));
     }
   } catch (const std::exception& e) {
-    core_.log(std::string("connection writer: ") + e.what());
+    core_.log_repeated("connection", std::string("connection writer: ") + e.what());
   }
   close();
+  core_.queued_bytes.fetch_sub(control_bytes_, std::memory_order_relaxed);  // never written
+  control_bytes_ = 0;
+  control_.clear();
   {
     std::lock_guard lock(core_.mu);
+    if (pending_) core_.pending.remove(pending_it_);
+    pending_ = false;
+    if (evicted_) --core_.evicting;
     core_.connections.erase(self);
     if (auto it = core_.per_address.find(from_); it != core_.per_address.end() && --it->second == 0)
       core_.per_address.erase(it);
@@ -495,6 +582,10 @@ asio::awaitable<void> Connection::watchdog(std::shared_ptr<Connection> /*keep al
     co_await watchdog_timer_.async_wait(asio::redirect_error(asio::use_awaitable, ec));
     if (closed_) break;
     const auto now = Clock::now();
+    if (now >= shutdown_deadline_) {  // shutting down, and the client does not read
+      close();
+      break;
+    }
     if (timed_out_) {
       // Error(timeout) is queued: the writer sends it and closes; only a stuck write
       // still needs cutting off.

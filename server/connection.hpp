@@ -42,6 +42,21 @@ class Connection : public std::enable_shared_from_this<Connection> {
   void start();
   // Closes the socket from any thread (posted to the strand).
   void stop();
+  // Server shutdown, from any thread: Error(shutting_down) after the frame being
+  // written (never mid-frame), then close; closed anyway after kShutdownGrace.
+  void shut_down();
+  static constexpr std::chrono::milliseconds kShutdownGrace{1000};
+  // Under core.mu: the connection counts in core.pending until it leaves it (its first
+  // real request after the handshake, or its end); mark_evicted: it was closed to make
+  // room and no longer counts against max_connections (core.evicting instead).
+  void enter_pending(std::list<PendingBudget::Entry>::iterator it) {
+    pending_it_ = it;
+    pending_ = true;
+  }
+  void mark_evicted() {
+    pending_ = false;
+    evicted_ = true;
+  }
 
  private:
   using Clock = std::chrono::steady_clock;
@@ -71,7 +86,12 @@ class Connection : public std::enable_shared_from_this<Connection> {
   // Connection-level failure: Error with request id 0, then close once it is written.
   void fail(proto::ErrorCode code, const std::string& message);
   void close();
+  // The first real request (not Hello, Auth, Ping): the connection leaves core.pending.
+  void leave_pending();
   void wake_writer();
+  // What the parser accepts from the client after HelloAck: the handshake frame limit
+  // until the client is authenticated, then the largest message a client may send.
+  proto::Limits receive_limits() const;
   bool mid_frame() const { return parser_.stream_offset() > frame_end_offset_; }
 
   struct TileFrame {
@@ -101,8 +121,18 @@ class Connection : public std::enable_shared_from_this<Connection> {
     std::vector<uint8_t> bytes;
     uint32_t ends_request = 0;  // in_flight_ id released once written (0: none)
     bool last = false;          // a connection-level Error: close once written
+    // Sent after `bytes`: immutable bytes shared with other answers (MapInfo's header
+    // and skip grid, CatalogMap::map_info_tail), not counted as this connection's.
+    std::shared_ptr<const std::vector<uint8_t>> shared;
   };
+  // Queues a control frame, counting its own bytes in control_bytes_ and the server's
+  // queued_bytes (the reader stops past either budget).
+  void queue_control(ControlFrame f);
+  // The reader may take more requests: room in the control queue (frames and bytes)
+  // and in the server's budget of queued bytes.
+  bool may_read() const;
   std::deque<ControlFrame> control_;
+  size_t control_bytes_ = 0;
   std::vector<const CatalogMap*> open_maps_;  // map_id = index + 1
 
   bool handshaken_ = false;
@@ -112,6 +142,11 @@ class Connection : public std::enable_shared_from_this<Connection> {
   bool authed_ = false;  // no key configured, or the client proved it holds the key
   proto::Nonce server_nonce_{};
   bool closing_ = false;  // write what is queued, then close
+  bool useful_ = false;   // left core.pending (strand-local copy of !pending_)
+  // Guarded by core.mu:
+  std::list<PendingBudget::Entry>::iterator pending_it_{};
+  bool pending_ = false, evicted_ = false;
+  Clock::time_point shutdown_deadline_ = Clock::time_point::max();
   bool closed_ = false;
   bool writing_ = false;
   uint64_t frame_end_offset_ = 0;

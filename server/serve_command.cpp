@@ -23,6 +23,13 @@ void add_serve_options(CLI::App& app, ServeConfig& a) {
   app.add_option("--max-connections-per-address", a.max_connections_per_address,
                  "Connections from one client address at once (0: no bound)")
       ->capture_default_str()->check(CLI::Range(0u, 1000000u));
+  app.add_option("--max-pending-connections", a.max_pending_connections,
+                 "Connections not yet authenticated or without a request yet, in all; past it the "
+                 "oldest of the heaviest address is closed to make room (0: no bound)")
+      ->capture_default_str()->check(CLI::Range(0u, 1000000u));
+  app.add_option("--max-pending-per-address", a.max_pending_per_address,
+                 "The same, from one client address (0: no bound)")
+      ->capture_default_str()->check(CLI::Range(0u, 1000000u));
   app.add_option("--key-file", a.key_file,
                  "Require clients to prove this catalog key (hex or raw bytes; HMAC-SHA256 challenge)");
   app.add_option("--tls-cert", a.tls_cert, "Serve over TLS with this certificate chain (PEM); needs --tls-key");
@@ -71,6 +78,8 @@ void run_serve(const ServeConfig& a, const char* program) {
   o.threads = a.threads;
   o.max_connections = a.max_connections;
   o.max_connections_per_address = a.max_connections_per_address;
+  o.max_pending_connections = a.max_pending_connections;
+  o.max_pending_per_address = a.max_pending_per_address;
   o.stats_interval = std::chrono::milliseconds(int64_t(a.stats_interval * 1000));
   o.idle_timeout = std::chrono::milliseconds(int64_t(a.idle_timeout * 1000));
   if (a.max_frame_bytes != 0) {

@@ -17,6 +17,9 @@ struct ServeConfig {
   double stats_interval = 0;
   unsigned max_connections = 1024;
   unsigned max_connections_per_address = 256;
+  // Connections not yet useful (server.hpp: before auth or their first request).
+  unsigned max_pending_connections = 256;
+  unsigned max_pending_per_address = 32;
   double idle_timeout = 120;
   // 0: the protocol default (4 MiB), raised to fit the catalog's largest tile and map
   // info; else this cap exactly (65536..67108864), and what exceeds it is refused.

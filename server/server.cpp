@@ -1,5 +1,10 @@
 #include "server/server.hpp"
 
+#include <fcntl.h>
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <cerrno>
 #include <condition_variable>
 #include <cstdio>
 #include <future>
@@ -15,6 +20,78 @@ namespace st::server {
 void ServerCore::log(const std::string& line) const {
   if (options.log) options.log(line);
   else std::fprintf(stderr, "shadowtile serve: %s\n", line.c_str());
+}
+
+void ServerCore::log_repeated(const std::string& kind, const std::string& line) {
+  if (auto out = throttle.admit(kind, line)) log(*out);
+  else stats.log_suppressed();
+}
+
+PendingBudget::Prefix PendingBudget::prefix_of(const asio::ip::address& a) {
+  Prefix p{};
+  asio::ip::address_v6 v6;
+  if (a.is_v4()) {
+    v6 = asio::ip::make_address_v6(asio::ip::v4_mapped, a.to_v4());
+  } else {
+    v6 = a.to_v6();
+  }
+  const auto bytes = v6.to_bytes();
+  if (v6.is_v4_mapped()) {  // IPv4: the /24
+    std::copy(bytes.begin(), bytes.begin() + 15, p.begin());
+  } else {  // IPv6: the /64 (one subscriber's network)
+    std::copy(bytes.begin(), bytes.begin() + 8, p.begin());
+  }
+  return p;
+}
+
+std::list<PendingBudget::Entry>::iterator PendingBudget::add(std::weak_ptr<Connection> c,
+                                                             const asio::ip::address& from) {
+  Entry e{std::move(c), from, prefix_of(from), std::chrono::steady_clock::now()};
+  ++per_address[from];
+  ++per_prefix[e.prefix];
+  return order.insert(order.end(), std::move(e));
+}
+
+void PendingBudget::remove(std::list<Entry>::iterator it) {
+  if (auto a = per_address.find(it->from); a != per_address.end() && --a->second == 0) per_address.erase(a);
+  if (auto p = per_prefix.find(it->prefix); p != per_prefix.end() && --p->second == 0) per_prefix.erase(p);
+  order.erase(it);
+}
+
+std::shared_ptr<Connection> PendingBudget::victim_for(const asio::ip::address& from,
+                                                      const ServerOptions& o, bool total_full,
+                                                      std::chrono::steady_clock::time_point now) {
+  // The oldest pending connection past the grace of the address with the most pending
+  // ones among those `in_scope`: the flooder pays for its flood, not the newcomer.
+  const auto old_enough = now - o.pending_grace;
+  auto evict_heaviest = [&](auto in_scope) -> std::shared_ptr<Connection> {
+    // Candidates: addresses in scope with a connection past the grace (the list is
+    // oldest first, so those are a prefix of it); the victim is the oldest connection of
+    // the candidate holding the most pending connections.
+    std::list<Entry>::iterator best = order.end();
+    size_t most = 0;
+    for (auto it = order.begin(); it != order.end() && it->since <= old_enough; ++it) {
+      if (!in_scope(it->from)) continue;
+      const size_t n = per_address.at(it->from);
+      if (n > most) most = n, best = it;  // first seen = oldest of that address
+    }
+    if (best == order.end()) return nullptr;
+    auto c = best->conn.lock();
+    remove(best);
+    return c;
+  };
+  auto count = [](const auto& m, const auto& k) {
+    auto it = m.find(k);
+    return it == m.end() ? size_t(0) : it->second;
+  };
+  if (o.max_pending_per_address && count(per_address, from) >= o.max_pending_per_address)
+    return evict_heaviest([&](const asio::ip::address& a) { return a == from; });
+  const Prefix prefix = prefix_of(from);
+  if (o.max_pending_per_prefix && count(per_prefix, prefix) >= o.max_pending_per_prefix)
+    return evict_heaviest([&](const asio::ip::address& a) { return prefix_of(a) == prefix; });
+  if ((o.max_pending_connections && order.size() >= o.max_pending_connections) || total_full)
+    return evict_heaviest([](const asio::ip::address&) { return true; });
+  return nullptr;
 }
 
 namespace {
@@ -66,6 +143,12 @@ struct Server::Impl {
   asio::signal_set signals{control};
   std::vector<std::thread> threads;
   uint16_t port = 0;
+  // Held open so that, out of descriptors (EMFILE), the server can still accept one
+  // client to tell it Error(overloaded) instead of leaving it hanging in the backlog.
+  int spare_fd = -1;
+  ~Impl() {
+    if (spare_fd >= 0) ::close(spare_fd);
+  }
 
   std::mutex state_mu;
   std::condition_variable state_cv;
@@ -74,9 +157,63 @@ struct Server::Impl {
 
   asio::awaitable<void> accept_loop();
   asio::awaitable<void> stats_loop();
+  // Counts a fresh socket against the budgets (evicting a pending connection if needed)
+  // and starts its Connection, or refuses it with Error(overloaded).
+  void admit(tcp::socket socket);
   void reject(tcp::socket socket, const char* why);
   void shutdown_on_io();  // runs on the io_context
+  // EMFILE: frees the spare descriptor, accepts and refuses one client, takes it back.
+  bool shed_one();  // true: one client was accepted and refused
 };
+
+// Descriptors the server needs besides its connections: the listening socket, the
+// spare, the packs, the I/O threads' epoll and eventfds, stdio, and what a library may open.
+namespace {
+
+size_t fd_reserve(const Catalog& c) { return 64 + c.maps().size(); }
+
+// Raises the soft descriptor limit to the hard one and lowers max_connections to what
+// the limit leaves after the reserve, so the server refuses clients with an Error at its
+// own limit before the kernel refuses it descriptors.
+void fit_connections_to_fd_limit(ServerCore& core) {
+  rlimit r{};
+  if (::getrlimit(RLIMIT_NOFILE, &r) != 0) return;
+  if (r.rlim_cur < r.rlim_max) {
+    rlimit want = r;
+    want.rlim_cur = r.rlim_max;
+    if (::setrlimit(RLIMIT_NOFILE, &want) == 0) r = want;
+  }
+  if (r.rlim_cur == RLIM_INFINITY) return;
+  const size_t reserve = fd_reserve(core.catalog);
+  const size_t usable = r.rlim_cur > reserve + 1 ? size_t(r.rlim_cur) - reserve : 1;
+  if (core.options.max_connections > usable) {
+    core.log("max_connections lowered from " + std::to_string(core.options.max_connections) + " to " +
+             std::to_string(usable) + " to fit the descriptor limit " + std::to_string(r.rlim_cur) +
+             " (ulimit -n) less a reserve of " + std::to_string(reserve));
+    core.options.max_connections = usable;
+  }
+}
+
+}  // namespace
+
+bool Server::Impl::shed_one() {
+  if (spare_fd < 0) return false;
+  ::close(spare_fd);
+  spare_fd = -1;
+  error_code ec;
+  tcp::socket s(io);
+  acceptor.non_blocking(true, ec);
+  acceptor.accept(s, ec);
+  error_code ignored;
+  acceptor.non_blocking(false, ignored);
+  if (!ec) {
+    core.stats.connection_rejected();
+    if (core.tls) s.close(ignored);
+    else reject(std::move(s), "server out of file descriptors");
+  }
+  spare_fd = ::open("/dev/null", O_RDONLY | O_CLOEXEC);
+  return !ec;
+}
 
 asio::awaitable<void> Server::Impl::accept_loop() {
   using namespace std::chrono_literals;
@@ -89,43 +226,66 @@ asio::awaitable<void> Server::Impl::accept_loop() {
                                                         asio::redirect_error(asio::use_awaitable, ec));
     if (ec) {
       if (!acceptor.is_open() || ec == asio::error::operation_aborted) break;
+      if ((ec.value() == EMFILE || ec.value() == ENFILE) && shed_one()) {
+        core.log_repeated("accept", "out of file descriptors (" + ec.message() +
+                                        "): refusing clients with overloaded");
+        continue;
+      }
       // EMFILE/ENFILE/ENOBUFS...: back off instead of spinning on the failing accept.
-      core.log("accept failed: " + ec.message() + "; retrying in " +
-               std::to_string(backoff.count()) + " ms");
+      core.log_repeated("accept", "accept failed: " + ec.message() + "; retrying in " +
+                                      std::to_string(backoff.count()) + " ms");
       pause.expires_after(backoff);
       co_await pause.async_wait(asio::redirect_error(asio::use_awaitable, ec));
       backoff = std::min(backoff * 2, std::chrono::milliseconds(1000));
       continue;
     }
     backoff = 10ms;
-    error_code ignored;
-    socket.set_option(tcp::no_delay(true), ignored);
-    const asio::ip::address from = socket.remote_endpoint(ignored).address();
-    std::shared_ptr<Connection> conn;
-    const char* refused = nullptr;
-    {
-      std::lock_guard lock(core.mu);
-      if (core.stopping) break;
-      const size_t per_address_limit = core.options.max_connections_per_address;
-      if (core.connections.size() >= core.options.max_connections) {
+    admit(std::move(socket));
+  }
+}
+
+void Server::Impl::admit(tcp::socket socket) {
+  error_code ignored;
+  socket.set_option(tcp::no_delay(true), ignored);
+  const asio::ip::address from = socket.remote_endpoint(ignored).address();
+  std::shared_ptr<Connection> conn, victim;
+  const char* refused = nullptr;
+  {
+    std::lock_guard lock(core.mu);
+    if (core.stopping) return;
+    const size_t per_address_limit = core.options.max_connections_per_address;
+    const auto here = core.per_address.find(from);
+    const bool total_full = core.connections.size() - core.evicting >= core.options.max_connections;
+    if (per_address_limit && here != core.per_address.end() && here->second >= per_address_limit) {
+      refused = "too many connections from your address";
+    } else {
+      victim = core.pending.victim_for(from, core.options, total_full, std::chrono::steady_clock::now());
+      if (total_full && !victim) {
         refused = "server at its connection limit";
-      } else if (per_address_limit && core.per_address[from] >= per_address_limit) {
-        refused = "too many connections from your address";
       } else {
+        if (victim) {
+          victim->mark_evicted();  // under core.mu: leaves the count of live connections
+          ++core.evicting;
+        }
         conn = std::make_shared<Connection>(std::move(socket), core, from);
         core.connections.insert(conn);
         ++core.per_address[from];
+        conn->enter_pending(core.pending.add(conn, from));
       }
     }
-    if (!conn) {
-      core.stats.connection_rejected();
-      if (core.tls) socket.close(ignored);  // no TLS session yet: a plain Error would be garbage
-      else reject(std::move(socket), refused);
-      continue;
-    }
-    core.stats.connection_opened();
-    conn->start();
   }
+  if (victim) {
+    core.stats.connection_evicted();
+    victim->stop();
+  }
+  if (!conn) {
+    core.stats.connection_rejected();
+    if (core.tls) socket.close(ignored);  // no TLS session yet: a plain Error would be garbage
+    else reject(std::move(socket), refused);
+    return;
+  }
+  core.stats.connection_opened();
+  conn->start();
 }
 
 // Over a connection limit: one Error(overloaded) frame, best effort, then close.
@@ -164,7 +324,7 @@ void Server::Impl::shutdown_on_io() {
     core.stopping = true;
     conns.assign(core.connections.begin(), core.connections.end());
   }
-  for (auto& c : conns) c->stop();
+  for (auto& c : conns) c->shut_down();
 }
 
 Server::Server(Catalog catalog, ServerOptions options) : impl_(std::make_unique<Impl>()) {
@@ -213,6 +373,8 @@ void Server::start() {
   if (!ec) d.acceptor.listen(asio::socket_base::max_listen_connections, ec);
   if (ec) throw Error("serve: cannot listen on " + where + ": " + ec.message());
   d.port = d.acceptor.local_endpoint().port();
+  fit_connections_to_fd_limit(d.core);
+  d.spare_fd = ::open("/dev/null", O_RDONLY | O_CLOEXEC);
   asio::co_spawn(d.control, d.accept_loop(), asio::detached);
   if (o.stats_interval.count() > 0) asio::co_spawn(d.control, d.stats_loop(), asio::detached);
   {

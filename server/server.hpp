@@ -41,8 +41,22 @@ struct ServerOptions {
   // From one client address (IPv4 or IPv6): a client opening connections without end
   // is refused at this bound while other addresses are still served (0: no bound).
   size_t max_connections_per_address = 256;
+  // Connections not yet useful (before auth, or before their first request after the
+  // handshake): a budget of their own, so strangers cannot hold the slots authenticated
+  // clients need. Over a budget, the oldest pending connection of the heaviest address in
+  // its scope is closed to make room (server_core.hpp, PendingBudget). 0: no bound.
+  size_t max_pending_connections = 256;
+  size_t max_pending_per_address = 32;
+  size_t max_pending_per_prefix = 128;   // IPv4 /24, IPv6 /64
+  // A pending connection younger than this is never evicted (an honest handshake takes
+  // a few round trips; a burst of them from one host must not evict itself).
+  std::chrono::milliseconds pending_grace{1000};
   size_t max_open_maps = 64;             // per connection
   size_t max_control_frames = 64;        // queued non-tile answers; the reader waits beyond
+  size_t max_control_bytes = 1u << 20;   // ... or beyond this many bytes of them (shared MapInfo bytes not counted)
+  // All connections together: answer bytes queued or being written. Beyond, readers stop
+  // taking requests and writers send one tile per write until it drains.
+  size_t max_queued_bytes = 256u << 20;
   std::chrono::milliseconds handshake_timeout{5000};  // accept -> Hello received
   std::chrono::milliseconds idle_timeout{120000};     // no traffic and nothing owed
   std::chrono::milliseconds read_timeout{10000};      // a frame must complete this long after its first byte

@@ -1,5 +1,9 @@
 // State shared by the server and its connections (internal to server/).
 #pragma once
+#include <array>
+#include <chrono>
+#include <atomic>
+#include <list>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -11,6 +15,7 @@
 #include <boost/asio/ssl.hpp>
 
 #include "server/catalog.hpp"
+#include "server/log_throttle.hpp"
 #include "server/server.hpp"
 #include "server/server_stats.hpp"
 
@@ -22,6 +27,38 @@ using net::tcp;
 
 class Connection;
 
+// The budget of connections not yet useful: accepted but not authenticated, or
+// authenticated (or keyless) without a single real request yet. They are the cheap way
+// to fill a server, so they get a small budget of their own, per address, per prefix
+// (IPv4 /24, IPv6 /64) and in all, and a newcomer over a budget evicts the oldest such
+// connection of the heaviest address in that scope instead of being refused: whoever
+// floods the budget evicts itself, a client that completes its handshake in a few round
+// trips gets through. Only connections pending for longer than the grace (1 s) are
+// evicted, so a burst of honest clients from one host (a NAT, a load test) is not made
+// to evict itself; with no such victim the budget is soft until max_connections, where
+// the newcomer is refused. Guarded by ServerCore::mu.
+struct PendingBudget {
+  using Prefix = std::array<uint8_t, 16>;
+  static Prefix prefix_of(const asio::ip::address& a);
+  struct Entry {
+    std::weak_ptr<Connection> conn;
+    asio::ip::address from;
+    Prefix prefix;
+    std::chrono::steady_clock::time_point since;
+  };
+  std::list<Entry> order;  // oldest first
+  std::map<asio::ip::address, size_t> per_address;
+  std::map<Prefix, size_t> per_prefix;
+
+  std::list<Entry>::iterator add(std::weak_ptr<Connection> c, const asio::ip::address& from);
+  void remove(std::list<Entry>::iterator it);
+  // The connection to evict so that one from `from` fits (null: none needed, or none
+  // pending for at least o.pending_grace), by the limits in `o`; `total_full` says the
+  // server is at max_connections. Removes it from the budget.
+  std::shared_ptr<Connection> victim_for(const asio::ip::address& from, const ServerOptions& o,
+                                         bool total_full, std::chrono::steady_clock::time_point now);
+};
+
 struct ServerCore {
   ServerOptions options;
   Catalog catalog;
@@ -31,9 +68,19 @@ struct ServerCore {
   std::mutex mu;  // guards connections and stopping
   std::set<std::shared_ptr<Connection>> connections;
   std::map<asio::ip::address, size_t> per_address;  // open connections by client address
+  PendingBudget pending;
+  size_t evicting = 0;
+  // Answer bytes owned by connections (control frames queued, tile bytes being written)
+  // against ServerOptions::max_queued_bytes.
+  std::atomic<uint64_t> queued_bytes{0};  // evicted, not yet closed: not counted against max_connections
   bool stopping = false;
 
+  LogThrottle throttle;
+
   void log(const std::string& line) const;
+  // A line that an attacker or a failing disk can repeat at will: rate-limited per
+  // `kind` (LogThrottle), the dropped ones counted in the stats.
+  void log_repeated(const std::string& kind, const std::string& line);
 };
 
 }  // namespace st::server

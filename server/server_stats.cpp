@@ -28,6 +28,8 @@ StatsSnapshot ServerStats::snapshot() const {
   s.timeouts = get(timeouts_);
   s.auth_failures = get(auth_failures_);
   s.tiles_corrupt = get(tiles_corrupt_);
+  s.connections_evicted = get(connections_evicted_);
+  s.log_lines_suppressed = get(log_lines_suppressed_);
   for (uint32_t b = 0; b < kLatencyBuckets; ++b) s.latency_us[b] = get(latency_[b]);
   return s;
 }
@@ -61,16 +63,18 @@ std::vector<std::pair<std::string, uint64_t>> StatsSnapshot::named() const {
           {"latency_p50_us", latency_quantile_us(0.5)},
           {"latency_p99_us", latency_quantile_us(0.99)},
           {"auth_failures", auth_failures},
-          {"tiles_corrupt", tiles_corrupt}};
+          {"tiles_corrupt", tiles_corrupt},
+          {"connections_evicted", connections_evicted},
+          {"log_lines_suppressed", log_lines_suppressed}};
 }
 
 std::string StatsSnapshot::line() const {
-  char buf[512];
+  char buf[768];
   std::snprintf(buf, sizeof buf,
                 "connections %llu open / %llu total (%llu rejected), requests %llu, tiles %llu "
                 "(%llu B), sent %llu B, received %llu B, cancelled %llu, errors %llu, "
                 "protocol errors %llu, timeouts %llu, latency p50 <%llu us p99 <%llu us, "
-                "auth failures %llu, corrupt tiles %llu",
+                "auth failures %llu, corrupt tiles %llu, evicted %llu, log lines suppressed %llu",
                 (unsigned long long)connections_open, (unsigned long long)connections_total,
                 (unsigned long long)connections_rejected, (unsigned long long)requests,
                 (unsigned long long)tiles_sent, (unsigned long long)tile_bytes_sent,
@@ -79,7 +83,8 @@ std::string StatsSnapshot::line() const {
                 (unsigned long long)protocol_errors, (unsigned long long)timeouts,
                 (unsigned long long)latency_quantile_us(0.5),
                 (unsigned long long)latency_quantile_us(0.99),
-                (unsigned long long)auth_failures, (unsigned long long)tiles_corrupt);
+                (unsigned long long)auth_failures, (unsigned long long)tiles_corrupt,
+                (unsigned long long)connections_evicted, (unsigned long long)log_lines_suppressed);
   return buf;
 }
 

@@ -25,6 +25,8 @@ struct StatsSnapshot {
   uint64_t timeouts = 0;
   uint64_t auth_failures = 0;   // connections refused for a missing or wrong key
   uint64_t tiles_corrupt = 0;   // tiles whose stored bytes failed the pack's CRC or read
+  uint64_t connections_evicted = 0;  // pending connections closed to make room (PendingBudget)
+  uint64_t log_lines_suppressed = 0; // repeated log lines not written (LogThrottle)
   std::array<uint64_t, kLatencyBuckets> latency_us{};  // GetTiles receipt -> tile queued to send
 
   // Upper bound (us) of the bucket holding quantile q in [0,1]; 0 if no samples.
@@ -50,6 +52,8 @@ class ServerStats {
   void timeout() { add(timeouts_); }
   void auth_failure() { add(auth_failures_); }
   void tile_corrupt() { add(tiles_corrupt_); }
+  void connection_evicted() { add(connections_evicted_); }
+  void log_suppressed() { add(log_lines_suppressed_); }
   void latency(uint64_t us);
 
   StatsSnapshot snapshot() const;
@@ -61,7 +65,7 @@ class ServerStats {
   std::atomic<uint64_t> connections_total_{0}, connections_open_{0}, connections_rejected_{0};
   std::atomic<uint64_t> requests_{0}, tiles_sent_{0}, tile_bytes_sent_{0}, bytes_sent_{0},
       bytes_received_{0}, tiles_cancelled_{0}, errors_{0}, protocol_errors_{0}, timeouts_{0},
-      auth_failures_{0}, tiles_corrupt_{0};
+      auth_failures_{0}, tiles_corrupt_{0}, connections_evicted_{0}, log_lines_suppressed_{0};
   std::array<std::atomic<uint64_t>, kLatencyBuckets> latency_{};
 };
 

@@ -14,6 +14,7 @@
 #include <optional>
 #include <span>
 #include <unordered_map>
+#include <vector>
 
 namespace st::server {
 
@@ -47,8 +48,10 @@ class TileQueue {
   // Tiles of `request_id` still queued.
   size_t pending(uint32_t request_id) const;
   // Marks every queued tile of the request cancelled; returns how many were newly marked.
+  // O(tiles of that request x log queue).
   size_t cancel_request(uint32_t request_id);
   // Marks the listed tiles of map `map_id` cancelled, whatever their request.
+  // O(listed tiles x log queue).
   size_t cancel_tiles(uint32_t map_id, std::span<const uint64_t> tiles);
 
  private:
@@ -61,13 +64,25 @@ class TileQueue {
       return inv_priority != o.inv_priority ? inv_priority < o.inv_priority : seq < o.seq;
     }
   };
-  template <class Pred>
-  size_t cancel_if(Pred pred);
+  // Moves the tile at `key` (a normal one) behind the cancelled ones; returns its new key.
+  Key cancel_at(std::map<Key, PendingTile>::iterator it);
+  size_t cancel_keys(std::vector<Key>& queued_normal_keys);
+  static uint64_t tile_key(uint32_t map_id, uint64_t tile) {
+    return tile * 0x9E3779B97F4A7C15ull ^ map_id;  // hashed by unordered_multimap
+  }
 
   size_t capacity_;
   uint64_t next_seq_ = 0;
   std::map<Key, PendingTile> order_;
-  std::unordered_map<uint32_t, size_t> per_request_;
+  // Cancel costs what it names, not the queue: each request's keys (popped ones go stale
+  // and are skipped; the list goes with the request's last tile), and each queued tile's
+  // key by (map, tile).
+  struct Request {
+    size_t pending = 0;
+    std::vector<Key> keys;
+  };
+  std::unordered_map<uint32_t, Request> per_request_;
+  std::unordered_multimap<uint64_t, Key> by_tile_;
 };
 
 }  // namespace st::server

@@ -518,7 +518,8 @@ TEST(ProtocolSpec, StatsNamesAreTheDocumentedOnes) {
       "connections_total", "connections_open", "connections_rejected", "requests",
       "tiles_sent",        "tile_bytes_sent",  "bytes_sent",           "bytes_received",
       "tiles_cancelled",   "errors",           "protocol_errors",      "timeouts",
-      "latency_p50_us",    "latency_p99_us",   "auth_failures",        "tiles_corrupt"};
+      "latency_p50_us",    "latency_p99_us",   "auth_failures",        "tiles_corrupt",
+      "connections_evicted", "log_lines_suppressed"};
   EXPECT_EQ(names, documented);
   auto counter = [&](const std::string& name) {
     for (const auto& c : st.counters)

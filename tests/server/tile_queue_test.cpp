@@ -65,7 +65,7 @@ TEST(TileQueue, BoundedAndCancelledTilesAnsweredFirst) {
 
 TEST(TileQueueProperty, MatchesSortedReference) {
   std::mt19937 rng(7);
-  for (int round = 0; round < 50; ++round) {
+  for (int round = 0; round < 200; ++round) {
     TileQueue q(64);
     struct Ref { bool cancelled; uint32_t prio; uint64_t seq; PendingTile t; };
     std::vector<Ref> ref;
@@ -74,6 +74,7 @@ TEST(TileQueueProperty, MatchesSortedReference) {
       uint32_t op = rng() % 10;
       if (op < 5) {
         PendingTile t = tile(1 + rng() % 4, rng() % 16, rng() % 4);
+        t.map_id = 1 + rng() % 2;
         bool ok = q.push(t);
         EXPECT_EQ(ok, ref.size() < 64);
         if (ok) ref.push_back({false, t.priority, seq++, t});
@@ -93,6 +94,19 @@ TEST(TileQueueProperty, MatchesSortedReference) {
         ref.erase(best);
         bool last = std::none_of(ref.begin(), ref.end(), [&](const Ref& r) { return r.t.request_id == req; });
         EXPECT_EQ(p->last_of_request, last);
+      } else if (rng() % 2) {  // by tile: a few ids of map 1 or 2, duplicates included
+        const uint32_t map = 1 + rng() % 2;
+        std::vector<uint64_t> ids;
+        for (uint32_t i = 0, n = rng() % 6; i < n; ++i) ids.push_back(rng() % 16);
+        std::vector<Ref*> hit;
+        for (Ref& r : ref)
+          if (r.t.map_id == map && !r.cancelled && std::find(ids.begin(), ids.end(), r.t.tile) != ids.end())
+            hit.push_back(&r);
+        std::sort(hit.begin(), hit.end(), [](const Ref* a, const Ref* b) {
+          return a->prio != b->prio ? a->prio > b->prio : a->seq < b->seq;
+        });
+        for (Ref* r : hit) r->cancelled = true, r->seq = seq++;
+        EXPECT_EQ(q.cancel_tiles(map, ids), hit.size());
       } else {
         uint32_t req = 1 + rng() % 4;
         // Newly cancelled tiles keep their relative queue order (priority, then age).

@@ -67,7 +67,9 @@ struct ClientOptions {
   uint32_t want_capacity = 8192;            // queued (not yet sent) tile requests per map
   uint16_t max_in_flight = 64;              // tile requests proposed in the handshake
   uint16_t tiles_per_request = 8;           // tiles per request (small: priorities stay fresh)
-  uint32_t max_frame_bytes = 4u << 20;      // proposed in the handshake
+  // Proposed in the handshake: the protocol's ceiling, so maps with big skip grids open
+  // (a MapInfo is 9.8 MB at skip level 10); frames are buffered as their bytes arrive.
+  uint32_t max_frame_bytes = 64u << 20;
   uint32_t max_tile_retries = 3;            // CRC or decode failures before giving up a tile
   uint16_t miss_priority = 1;               // priority of fetches queued by lookups
   std::chrono::milliseconds connect_timeout{2000};
