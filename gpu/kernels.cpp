@@ -12,6 +12,9 @@ const uint32_t kShadowPassSpv[] = {
 const uint32_t kLayoutProbeSpv[] = {
 #include "gpu/shaders/layout_probe.spv.inc"
 };
+const uint32_t kR32fSpv[] = {
+#include "gpu/shaders/r32f.spv.inc"
+};
 
 }  // namespace
 
@@ -53,7 +56,7 @@ void Kernels::create(VkContext& ctx, uint32_t sets) {
   dai.pSetLayouts = layouts.data();
   vk_check(vkAllocateDescriptorSets(d, &dai, sets_.data()), "vkAllocateDescriptorSets");
 
-  const std::span<const uint32_t> code[kKernelCount] = {kEvaluateSpv, kShadowPassSpv, kLayoutProbeSpv};
+  const std::span<const uint32_t> code[kKernelCount] = {kEvaluateSpv, kShadowPassSpv, kLayoutProbeSpv, kR32fSpv};
   for (uint32_t i = 0; i < kKernelCount; ++i) {
     VkShaderModule m = ctx.make_shader(code[i]);
     VkComputePipelineCreateInfo cpi{};

@@ -13,8 +13,9 @@
 
 namespace st::gpu {
 
-enum class Kernel : uint32_t { evaluate = 0, shadow_pass = 1, layout_probe = 2 };
-inline constexpr uint32_t kKernelCount = 3;
+// r32f: bench_gpu's baseline, the finest level as a plain float image (shaders/r32f.comp).
+enum class Kernel : uint32_t { evaluate = 0, shadow_pass = 1, layout_probe = 2, r32f = 3 };
+inline constexpr uint32_t kKernelCount = 4;
 
 class Kernels {
  public:

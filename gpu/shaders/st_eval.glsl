@@ -225,11 +225,37 @@ float st_tile_depth(uint slot, uint rel, uint x, uint y) {
 }
 
 // ---- the page-table walk (page_table.hpp walk_page_table; remote_map.cpp depth_locked) ----
-float st_depth(uint level, uint x, uint y, inout StProbe probe) {
+// Where a texel's answer lives, and the square (level l, ex, ey) of texels whose walk
+// ends the same way (same value, same tile, same absent tile): PCF taps inside it skip
+// the walk (the shared walk of MH §3.3, at the page-table level).
+struct StWalk {
+  uint kind;  // 0 value, 1 tile (decode in `slot`), 2 absent (value = the coarse answer)
+  float value;
+  uint slot, rel, l, ex, ey;
+  uint key, value_bits, kind_word;  // absent: what the feedback records
+};
+
+StWalk st_walk(uint level, uint x, uint y) {
+  StWalk w;
+  w.kind = 0u;
+  w.slot = kNoSlot;
+  w.rel = 0u;
+  w.l = level;
+  w.ex = x;
+  w.ey = y;
+  w.key = 0u;
+  w.value_bits = kLitDepthBits;
+  w.kind_word = 0u;
   const uint map_level = ST_PAGE(kPtMapLevel);
-  if (level > map_level || (x >> level) != 0u || (y >> level) != 0u) return uintBitsToFloat(kLitDepthBits);
+  if (level > map_level || (x >> level) != 0u || (y >> level) != 0u) {
+    w.value = uintBitsToFloat(kLitDepthBits);
+    return w;
+  }
   const uint k = ST_PAGE(kPtSkipLevel);
-  if (level < k) return uintBitsToFloat(ST_PAGE(ST_PAGE(kPtSkipCoarse) + st_coarse_index(level) + (y << level) + x));
+  if (level < k) {
+    w.value = uintBitsToFloat(ST_PAGE(ST_PAGE(kPtSkipCoarse) + st_coarse_index(level) + (y << level) + x));
+    return w;
+  }
   uint l = k;
   uint ex = x >> (level - k), ey = y >> (level - k);
   uint e = (ey << k) + ex;
@@ -239,18 +265,36 @@ float st_depth(uint level, uint x, uint y, inout StProbe probe) {
   uint key = e + 1u;
   for (;;) {
     const uint kind = kind_word & 0xFFu;
-    if (kind == kKindConstant || l == level) return uintBitsToFloat(value_bits);
+    w.l = l;
+    w.ex = ex;
+    w.ey = ey;
+    w.value = uintBitsToFloat(value_bits);
+    if (kind == kKindConstant || l == level) return w;
     const uint rel = level - l;
     const uint lx = x - (ex << rel), ly = y - (ey << rel);
     if (ptr == kNoSlot) {
-      st_feedback(key, l, ex, ey, value_bits, kind_word, probe);
-      return uintBitsToFloat(value_bits);
+      w.kind = 2u;
+      w.key = key;
+      w.value_bits = value_bits;
+      w.kind_word = kind_word;
+      return w;
     }
-    if (kind == kKindTile) return st_tile_depth(ptr, rel, lx, ly);
+    if (kind == kKindTile) {
+      w.kind = 1u;
+      w.slot = ptr;
+      w.rel = rel;
+      return w;
+    }
     // an index tile: a CutGrid of d levels in slot `ptr`
     const uint d = (kind_word >> 8u) & 0xFFu;
     const uint g = ptr * ST_PAGE(kPtSlotWords) + kGridHeaderWords;
-    if (rel < d) return uintBitsToFloat(ST_POOL(g + st_coarse_index(rel) + (ly << rel) + lx));
+    if (rel < d) {
+      w.l = level;
+      w.ex = x;
+      w.ey = y;
+      w.value = uintBitsToFloat(ST_POOL(g + st_coarse_index(rel) + (ly << rel) + lx));
+      return w;
+    }
     const uint cx = lx >> (rel - d), cy = ly >> (rel - d);
     const uint c = (cy << d) + cx;
     ex = (ex << d) + cx;
@@ -262,7 +306,25 @@ float st_depth(uint level, uint x, uint y, inout StProbe probe) {
     key = kFbChildKeyBit | (ptr * kChildTableWords + c);
     ptr = ST_PAGE(ST_PAGE(kPtChildSlots) + ptr * kChildTableWords + c);
   }
-  return 0.0;  // not reached
+  return w;  // not reached
+}
+
+bool st_in_walk(StWalk w, uint level, uint x, uint y) {
+  return (x >> (level - w.l)) == w.ex && (y >> (level - w.l)) == w.ey;
+}
+
+// The answer for texel (x, y) of `level` given a walk that covers it.
+float st_answer(StWalk w, uint level, uint x, uint y, inout StProbe probe) {
+  if (w.kind == 1u) {
+    const uint rel = level - w.l;
+    return st_tile_depth(w.slot, rel, x - (w.ex << rel), y - (w.ey << rel));
+  }
+  if (w.kind == 2u) st_feedback(w.key, w.l, w.ex, w.ey, w.value_bits, w.kind_word, probe);
+  return w.value;
+}
+
+float st_depth(uint level, uint x, uint y, inout StProbe probe) {
+  return st_answer(st_walk(level, x, y), level, x, y, probe);
 }
 
 uint st_pcf_tap(uint x, uint i, uint r, uint side) {
@@ -278,10 +340,14 @@ float st_pcf(uint level, uint x, uint y, uint r, float receiver, inout StProbe p
   if (level > ST_PAGE(kPtMapLevel)) return 1.0;
   const uint side = 1u << level;
   uint lit = 0u;
+  StWalk w = st_walk(level, st_pcf_tap(x, 0u, r, side), st_pcf_tap(y, 0u, r, side));
   for (uint j = 0u; j < r; ++j) {
     const uint ty = st_pcf_tap(y, j, r, side);
-    for (uint i = 0u; i < r; ++i)
-      lit += st_lit(receiver, st_depth(level, st_pcf_tap(x, i, r, side), ty, probe)) ? 1u : 0u;
+    for (uint i = 0u; i < r; ++i) {
+      const uint tx = st_pcf_tap(x, i, r, side);
+      if (!st_in_walk(w, level, tx, ty)) w = st_walk(level, tx, ty);  // else: the same walk
+      lit += st_lit(receiver, st_answer(w, level, tx, ty, probe)) ? 1u : 0u;
+    }
   }
   return uintBitsToFloat(ST_PAGE(ST_PAGE(kPtPcfTable) + (r - 1u) * kPcfTableStride + lit));
 }
