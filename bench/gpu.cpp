@@ -7,6 +7,7 @@
 //   bench_gpu [--scene procedural:city] [--light sun:azimuth=30,elevation=50] [--res 2k]
 //             [--encodings mh,mmh,dagmh] [--lookups 262144] [--reps 5] [--width 1920]
 //             [--height 1080] [--device NAME] [--out bench-out/gpu] [--json PATH]
+//             [--tile-bytes 65536] [--max-r32f-bytes 2147483648]
 //
 // The map is built once per encoding into --out (reused when present), served by an
 // in-process server on 127.0.0.1, fetched whole into a client cache and mirrored by a
@@ -41,6 +42,7 @@ struct Args {
   std::string scene = "procedural:city", light = "sun:azimuth=30,elevation=50", res = "2k";
   std::string encodings = "mh,mmh,dagmh", device, out = "bench-out/gpu", json = "bench-out/gpu.json";
   uint32_t lookups = 1u << 18, reps = 5, width = 1920, height = 1080, tile_bytes = 64 * 1024;
+  uint64_t max_r32f_bytes = 2ull << 30;
 };
 
 Args parse(int argc, char** argv) {
@@ -61,6 +63,7 @@ Args parse(int argc, char** argv) {
     else if (k == "--height") a.height = uint32_t(std::stoul(next()));
     else if (k == "--tile-bytes") a.tile_bytes = uint32_t(std::stoul(next()));
     else if (k == "--device") a.device = next();
+    else if (k == "--max-r32f-bytes") a.max_r32f_bytes = std::stoull(next());
     else if (k == "--out") a.out = next();
     else if (k == "--json") a.json = next();
     else throw Error("bench_gpu: unknown option " + k);
@@ -151,9 +154,18 @@ int main(int argc, char** argv) try {
     std::unique_ptr<gpu::R32fImage> img;
     std::string no_image;
     try {
+      // One storage buffer holds at most 4 GiB - 1 on any device (128 MiB on lavapipe):
+      // beyond --max-r32f-bytes the image is not painted at all.
+      if (side * side * 4 > a.max_r32f_bytes) throw Error("R32F image of " + std::to_string(side * side * 4) + " bytes does not fit one buffer");
       std::vector<float> values(size_t(side) * side);
-      for (uint64_t y = 0; y < side; ++y)
-        for (uint64_t x = 0; x < side; ++x) values[y * side + x] = cpu.depth(level, x, y);
+      std::vector<std::thread> painters;
+      const unsigned n = std::max(1u, std::thread::hardware_concurrency());
+      for (unsigned t = 0; t < n; ++t)
+        painters.emplace_back([&, t] {
+          for (uint64_t y = t; y < side; y += n)
+            for (uint64_t x = 0; x < side; ++x) values[y * side + x] = cpu.depth(level, x, y);
+        });
+      for (auto& t : painters) t.join();
       img = std::make_unique<gpu::R32fImage>(g.device_name(), level, values, std::max(a.lookups, a.width * a.height));
     } catch (const std::exception& e) {
       no_image = e.what();
@@ -211,7 +223,6 @@ int main(int argc, char** argv) try {
     }
     srv.stop();
   }
-  std::string device;
   report["rows"] = rows;
   std::filesystem::create_directories(std::filesystem::path(a.json).parent_path().empty() ? "." : std::filesystem::path(a.json).parent_path());
   std::ofstream(a.json) << report.dump(2) << "\n";

@@ -29,7 +29,10 @@ uint32_t align4(uint32_t n) { return (n + 3u) & ~3u; }
 
 struct GpuMap::Impl {
   struct Frame {
-    VkBufferBox staging, input, normals, output, feedback;
+    // input, normals, output: device-local (what the dispatch reads and writes); the
+    // *_host twins are host-visible and copied in the frame's command buffer.
+    VkBufferBox staging, input, normals, output, feedback, input_host, normals_host, output_host;
+    uint64_t input_bytes = 0, normals_bytes = 0;
     VkCommandBuffer cmd = VK_NULL_HANDLE;
     VkFence fence = VK_NULL_HANDLE;
     VkDescriptorSet set = VK_NULL_HANDLE;
@@ -110,7 +113,9 @@ struct GpuMap::Impl {
     VkDevice d = ctx->device();
     vkDeviceWaitIdle(d);
     for (Frame& f : frames) {
-      for (VkBufferBox* b : {&f.staging, &f.input, &f.normals, &f.output, &f.feedback}) ctx->destroy(*b);
+      for (VkBufferBox* b : {&f.staging, &f.input, &f.normals, &f.output, &f.feedback, &f.input_host, &f.normals_host,
+                             &f.output_host})
+        ctx->destroy(*b);
       if (f.fence) vkDestroyFence(d, f.fence, nullptr);
     }
     frames.clear();
@@ -198,9 +203,12 @@ struct GpuMap::Impl {
     for (uint32_t i = 0; i < opt.frames_in_flight; ++i) {
       Frame& f = frames[i];
       f.staging = ctx->make_buffer(staging, true);
-      f.input = ctx->make_buffer(in_bytes, true);
-      f.normals = ctx->make_buffer(uint64_t(opt.max_pixels) * 16, true);
-      f.output = ctx->make_buffer(out_bytes, true);
+      f.input = ctx->make_buffer(in_bytes, false);
+      f.normals = ctx->make_buffer(uint64_t(opt.max_pixels) * 16, false);
+      f.output = ctx->make_buffer(out_bytes, false);
+      f.input_host = ctx->make_buffer(in_bytes, true);
+      f.normals_host = ctx->make_buffer(uint64_t(opt.max_pixels) * 16, true);
+      f.output_host = ctx->make_buffer(out_bytes, true);
       f.feedback = ctx->make_buffer(fb_bytes, true);
       VkCommandBufferAllocateInfo cai{};
       cai.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
@@ -428,7 +436,7 @@ struct GpuMap::Impl {
     vk_check(vkBeginCommandBuffer(cmd, &bi), "vkBeginCommandBuffer");
     const uint32_t q = uint32_t(&f - frames.data()) * 2;
     if (queries) vkCmdResetQueryPool(cmd, queries, q, 2);
-    if (!pool_copies.empty() || !page_copies.empty()) {
+    if (!pool_copies.empty() || !page_copies.empty() || f.input_bytes || f.normals_bytes) {
       // Every earlier dispatch (of any frame) has finished reading before a copy writes.
       VkMemoryBarrier war{};
       war.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
@@ -440,6 +448,9 @@ struct GpuMap::Impl {
         vkCmdCopyBuffer(cmd, f.staging.buffer, pool.buffer, uint32_t(pool_copies.size()), pool_copies.data());
       if (!page_copies.empty())
         vkCmdCopyBuffer(cmd, f.staging.buffer, page.buffer, uint32_t(page_copies.size()), page_copies.data());
+      const VkBufferCopy in_copy{0, 0, f.input_bytes}, n_copy{0, 0, f.normals_bytes};
+      if (f.input_bytes) vkCmdCopyBuffer(cmd, f.input_host.buffer, f.input.buffer, 1, &in_copy);
+      if (f.normals_bytes) vkCmdCopyBuffer(cmd, f.normals_host.buffer, f.normals.buffer, 1, &n_copy);
     }
     // Copies (this frame's and the first upload's) land before the dispatch reads.
     VkMemoryBarrier raw{};
@@ -452,12 +463,22 @@ struct GpuMap::Impl {
     if (queries) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, queries, q);
     vkCmdDispatch(cmd, (invocations + L::kWorkgroupSize - 1) / L::kWorkgroupSize, 1, 1);
     if (queries) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, queries, q + 1);
-    VkMemoryBarrier host{};
-    host.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
-    host.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
-    host.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
-    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &host, 0,
-                         nullptr, 0, nullptr);
+    VkMemoryBarrier out{};
+    out.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
+    out.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
+    out.dstAccessMask = VK_ACCESS_TRANSFER_READ_BIT | VK_ACCESS_HOST_READ_BIT;
+    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                         VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &out, 0, nullptr, 0, nullptr);
+    if (invocations) {
+      const VkBufferCopy out_copy{0, 0, uint64_t(invocations) * 4};
+      vkCmdCopyBuffer(cmd, f.output.buffer, f.output_host.buffer, 1, &out_copy);
+      VkMemoryBarrier host{};
+      host.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
+      host.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+      host.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
+      vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &host, 0, nullptr, 0,
+                           nullptr);
+    }
     vk_check(vkEndCommandBuffer(cmd), "vkEndCommandBuffer");
     VkSubmitInfo si{};
     si.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
@@ -495,7 +516,9 @@ uint64_t GpuMap::submit_evaluate(std::span<const GpuQuery> queries) {
     throw GpuError("GpuMap::evaluate: " + std::to_string(queries.size()) + " queries, more than max_queries (" +
                    std::to_string(m.opt.max_queries) + ")");
   Impl::Frame& f = m.acquire();
-  auto* in = static_cast<uint32_t*>(f.input.mapped);
+  auto* in = static_cast<uint32_t*>(f.input_host.mapped);
+  f.input_bytes = queries.size() * L::kQueryWords * 4;
+  f.normals_bytes = 0;
   for (size_t i = 0; i < queries.size(); ++i) {
     const GpuQuery& q = queries[i];
     uint32_t* w = in + i * L::kQueryWords;
@@ -522,8 +545,9 @@ uint64_t GpuMap::submit_shadow_pass(const ShadowPassInput& in) {
   if (in.kernel < 1 || in.kernel > L::kMaxPcf) throw GpuError("GpuMap::submit_shadow_pass: kernel must be 1..9");
   const ShadowLight light = shadow_light(m.rm->header());
   Impl::Frame& f = m.acquire();
-  std::memcpy(f.input.mapped, in.positions.data(), pixels * 16);
-  std::memcpy(f.normals.mapped, in.normals.data(), pixels * 16);
+  std::memcpy(f.input_host.mapped, in.positions.data(), pixels * 16);
+  std::memcpy(f.normals_host.mapped, in.normals.data(), pixels * 16);
+  f.input_bytes = f.normals_bytes = pixels * 16;
   uint32_t pc[L::kPcWords] = {};
   pc[L::kPcCount] = in.width;
   pc[L::kPcHeight] = in.height;
@@ -548,7 +572,7 @@ FrameStats GpuMap::wait(uint64_t frame, std::span<float> out) {
   if (f->in_flight) m.finish(*f);
   if (out.size() < f->count)
     throw GpuError("GpuMap::wait: output of " + std::to_string(out.size()) + " floats, frame has " + std::to_string(f->count));
-  std::memcpy(out.data(), f->output.mapped, size_t(f->count) * 4);
+  std::memcpy(out.data(), f->output_host.mapped, size_t(f->count) * 4);
   f->frame = 0;  // handed out
   return f->stats;
 }
@@ -559,6 +583,7 @@ uint32_t GpuMap::sync() {
   for (uint32_t round = 0; round <= m.slot_count; ++round) {
     Impl::Frame& f = m.acquire();
     uint32_t pc[L::kPcWords] = {};
+    f.input_bytes = f.normals_bytes = 0;
     const uint64_t frame = m.submit(f, Kernel::evaluate, 0, pc);  // uploads only: no queries
     Impl::Frame* g = m.find(frame);
     m.finish(*g);
