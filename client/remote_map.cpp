@@ -98,6 +98,18 @@ bool RemoteMap::want_locked(uint64_t tile, const GridEntry& e, uint16_t priority
   return true;
 }
 
+size_t RemoteMap::want_tiles(std::span<const WantedTile> tiles) const noexcept {
+  size_t queued = 0;
+  std::lock_guard lock(mu_);
+  for (const WantedTile& w : tiles) {
+    if (!is_valid_tile_id(w.tile) || w.entry.kind == EntryKind::constant) continue;
+    const uint32_t level = uint32_t(w.tile >> kTileIdLevelShift);
+    if (level < grid_.levels || level >= header_.map_level) continue;
+    queued += want_locked(w.tile, w.entry, w.priority);
+  }
+  return queued;
+}
+
 // The page-table walk of PackEvaluator::depth, over the cache: where a tile is missing,
 // the entry's own value answers (the node's value stands for all its descendants).
 float RemoteMap::depth_locked(uint32_t level, uint64_t x, uint64_t y) const noexcept {

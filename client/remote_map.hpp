@@ -85,6 +85,22 @@ class RemoteMap final : public Evaluator {
   void tile_refused(uint64_t tile, uint32_t request_id, proto::ErrorCode code) noexcept;
   // The connection dropped: every sent tile is queued again (cancelled ones dropped).
   void connection_lost() noexcept;
+  // ---- the GPU mirror (gpu/gpu_map.cpp) ----
+  // Runs fn(const TileCache&) under the lock; fn must be quick and must not call back.
+  template <class Fn>
+  void inspect_cache(Fn&& fn) const {
+    std::lock_guard lock(mu_);
+    fn(static_cast<const TileCache&>(cache_));
+  }
+  // Tiles a GPU pass needed and found absent (its feedback): each is queued like a lookup
+  // miss, at its own priority. Ids that cannot be tiles of this map are skipped. Returns
+  // how many were newly queued or raised.
+  struct WantedTile {
+    uint64_t tile = 0;
+    GridEntry entry;
+    uint16_t priority = 1;
+  };
+  size_t want_tiles(std::span<const WantedTile> tiles) const noexcept;
   // Test hook: how many tiles are sent and unanswered.
   size_t sent_count() const;
 

@@ -7,7 +7,7 @@
 #   net         <- server, client
 #   tiles/core  <- tiles/build <- tiles/bake
 #   tiles/core  <- server, client
-#   client      <- loadgen
+#   client      <- loadgen, gpu
 #   everything  <- app (and tests/, bench/, which are not checked)
 if(NOT ROOT)
   message(FATAL_ERROR "check_layering: pass -DROOT=<repository root>")
@@ -22,10 +22,11 @@ set(allowed_tiles/bake "common;tiles/core;tiles/build;tiles/bake")
 set(allowed_server "common;proto;net;tiles/core;server")
 set(allowed_client "common;proto;net;tiles/core;client")
 set(allowed_loadgen "common;proto;tiles/core;client;loadgen")
-set(modules common proto net tiles/core tiles/build tiles/bake server client loadgen)
+set(allowed_gpu "common;tiles/core;client;gpu")
+set(modules common proto net tiles/core tiles/build tiles/bake server client loadgen gpu)
 # Every folder that holds headers a module could include: an include of any other
 # "x/..." path is not one of ours (a system or third-party header).
-set(known_roots common proto net tiles/core tiles/build tiles/bake server client loadgen app tests bench)
+set(known_roots common proto net tiles/core tiles/build tiles/bake server client loadgen gpu app tests bench)
 
 set(offences 0)
 foreach(mod ${modules})

@@ -1,0 +1,178 @@
+// `shadowtile view --server HOST:PORT --map NAME --scene SCENE [--path flyover] [--frames 24]
+//  [--fps 24] [--size 1920x1080] [--pcf 3] [--seed 1] [--device NAME] [--cache-mb 256]
+//  [--upload-mb 16] [--out view-out] [--json PATH]`: a headless viewer. It flies a load-tester
+// camera path (loadgen/camera_path.hpp) over a map streamed from `shadowtile serve`;
+// per frame, primary visibility on the CPU (Embree) into a G-buffer, the shadow pass on
+// the GPU (gpu::GpuMap) from the tiles streamed so far, Lambert shading into a PNG; the
+// GPU's feedback drives the tile requests (no region is prefetched). Prints per frame the
+// GPU pass time, tiles requested from feedback, holes (pixels answered from a coarser
+// level), residency; then a summary table, a contact sheet and JSON. Never waits for the
+// network: frames advance at --fps of simulated time whatever has arrived.
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <thread>
+
+#include "app/command.hpp"
+#include "client/map_access.hpp"
+#include "common/error.hpp"
+#include "gpu/gpu_map.hpp"
+#include "loadgen/camera_path.hpp"
+#include "tiles/bake/png_io.hpp"
+#include "tiles/bake/render.hpp"
+#include "tiles/bake/scene.hpp"
+
+namespace st::cli {
+
+client::Endpoint parse_endpoint(const std::string& option, const std::string& text);  // cmd_load.cpp
+
+namespace {
+
+struct ViewArgs {
+  std::string server, map, scene, path = "flyover", size = "1920x1080", device, out = "view-out", json, up = "y";
+  uint32_t frames = 24, pcf = 3;
+  double fps = 24, cache_mb = 256, upload_mb = 16;
+  uint64_t seed = 1;
+};
+
+void run(const ViewArgs& a) {
+  uint32_t width = 0, height = 0;
+  if (std::sscanf(a.size.c_str(), "%ux%u", &width, &height) != 2 || width == 0 || height == 0 || width > 8192 ||
+      height > 8192)
+    throw Error("--size: expected WxH (1..8192), got '" + a.size + "'");
+  if (a.frames == 0 || a.frames > 100000) throw Error("--frames: 1..100000");
+  if (a.pcf < 1 || a.pcf > 9) throw Error("--pcf: kernel side 1..9");
+  if (!(a.fps > 0)) throw Error("--fps must be > 0");
+  SceneOptions so;
+  so.up = a.up == "z" ? UpAxis::z : UpAxis::y;
+  const Scene scene = load_scene(a.scene, so);
+  client::ClientOptions co;
+  co.client_name = "shadowtile-view";
+  auto cl = std::make_unique<client::Client>(parse_endpoint("--server", a.server), co);
+  client::Map map = cl->open(a.map);
+  co.cache_slots = uint32_t(std::max(16.0, a.cache_mb * 1048576.0 / std::max(1u, client::pack_header(map).tile_bytes)));
+  co.want_capacity = std::max<uint32_t>(co.want_capacity, 4 * co.cache_slots);
+  cl = std::make_unique<client::Client>(parse_endpoint("--server", a.server), co);
+  map = cl->open(a.map);
+  const PackHeader& h = client::pack_header(map);
+  const LightSpace light = LightSpace::from_array(h.light_kind, h.light);
+  if (h.scene_hash != scene.content_hash())
+    std::fprintf(stderr, "shadowtile view: warning: scene '%s' is not the scene the map was built from\n", a.scene.c_str());
+  const loadgen::WorldFrame world = loadgen::world_frame(h, client::skip_grid(map));
+  const loadgen::CameraPath path(loadgen::parse_path(a.path), world, a.seed, 0);
+  const SceneTracer tracer(scene, light);
+
+  gpu::GpuOptions go;
+  go.device = a.device;
+  go.max_queries = 1;
+  go.max_pixels = width * height;
+  go.upload_budget_bytes = uint64_t(a.upload_mb * 1048576.0);
+  gpu::GpuMap g(map, go);
+  std::printf("device '%s', %ux%u, %u frames of path %s, cache %u slots\n", g.device_name().c_str(), width, height,
+              a.frames, a.path.c_str(), co.cache_slots);
+
+  std::filesystem::create_directories(a.out);
+  const size_t pixels = size_t(width) * height;
+  std::vector<float> pos(pixels * 4), nrm(pixels * 4), vis(pixels);
+  std::vector<Rgb8> image(pixels);
+  const uint32_t thumb = 8, tw = std::max(1u, width / thumb), th = std::max(1u, height / thumb);
+  const uint32_t cols = std::min<uint32_t>(a.frames, 6), rows = (a.frames + cols - 1) / cols;
+  std::vector<Rgb8> sheet(size_t(tw) * cols * th * rows);
+  const double texel = light.extent_uv() / double(uint64_t(1) << h.map_level);
+  nlohmann::json frames = nlohmann::json::array();
+  std::printf("%6s %10s %10s %10s %9s %9s %10s\n", "frame", "cpu ms", "gpu ms", "requested", "holes", "hole %",
+              "resident");
+  std::vector<double> gpu_ms, holes_pct;
+  for (uint32_t f = 0; f < a.frames; ++f) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const auto rec = tracer.primary(path.at(f / a.fps), width, height);
+    for (size_t p = 0; p < pixels; ++p) {
+      const Receiver& r = rec[p];
+      pos[4 * p] = float(r.pos.x), pos[4 * p + 1] = float(r.pos.y), pos[4 * p + 2] = float(r.pos.z);
+      pos[4 * p + 3] = r.hit && r.n_dot_l > 0 ? 1.0f : 0.0f;  // facing away: unlit whatever the map says
+      nrm[4 * p] = float(r.normal.x), nrm[4 * p + 1] = float(r.normal.y), nrm[4 * p + 2] = float(r.normal.z);
+    }
+    const double cpu_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    gpu::ShadowPassInput in;
+    in.positions = pos;
+    in.normals = nrm;
+    in.width = width;
+    in.height = height;
+    in.kernel = a.pcf;
+    in.normal_offset = float(kOpenReceiverOffsetTexels * texel);
+    in.neighbour_footprint = true;
+    const gpu::FrameStats fs = g.wait(g.submit_shadow_pass(in), vis);
+    for (size_t p = 0; p < pixels; ++p) {
+      const Receiver& r = rec[p];
+      const double lit = r.hit ? (r.n_dot_l > 0 ? r.n_dot_l * vis[p] : 0.0) : 1.0;
+      const double shade = r.hit ? 0.15 + 0.85 * lit : 0.6;
+      const uint8_t c = uint8_t(std::clamp(shade * 255.0, 0.0, 255.0));
+      image[p] = r.hit ? Rgb8{c, c, uint8_t(std::min(255.0, c * 0.9 + 20))} : Rgb8{140, 170, 220};
+    }
+    char name[64];
+    std::snprintf(name, sizeof(name), "/frame_%04u.png", f);
+    write_png(a.out + name, width, height, image);
+    const uint32_t cx = (f % cols) * tw, cy = (f / cols) * th;
+    for (uint32_t y = 0; y < th; ++y)
+      for (uint32_t x = 0; x < tw; ++x)
+        sheet[size_t(cy + y) * tw * cols + cx + x] = image[size_t(std::min(height - 1, y * thumb)) * width + std::min(width - 1, x * thumb)];
+    const client::MapStats ms = map.stats();
+    const double hole_pct = 100.0 * fs.holes / double(pixels);
+    gpu_ms.push_back(fs.gpu_ms);
+    holes_pct.push_back(hole_pct);
+    std::printf("%6u %10.1f %10.3f %10u %9u %8.2f%% %5u/%-5u\n", f, cpu_ms, fs.gpu_ms, fs.requested, fs.holes, hole_pct,
+                ms.cache.resident, co.cache_slots);
+    std::fflush(stdout);
+    frames.push_back({{"frame", f}, {"cpu_ms", cpu_ms}, {"gpu_ms", fs.gpu_ms}, {"requested", fs.requested},
+                      {"feedback_tiles", fs.feedback_tiles}, {"holes", fs.holes}, {"holes_pct", hole_pct},
+                      {"resident", ms.cache.resident}, {"slots_uploaded", fs.slots_uploaded},
+                      {"bytes_uploaded", fs.bytes_uploaded}, {"tiles_received", ms.tiles_received}});
+    // Simulated time: the next frame comes 1/fps later, arrivals or not.
+    std::this_thread::sleep_for(std::chrono::duration<double>(1.0 / a.fps));
+  }
+  write_png(a.out + "/contact_sheet.png", tw * cols, th * rows, sheet);
+  auto med = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return v.empty() ? 0.0 : v[v.size() / 2];
+  };
+  const gpu::GpuStats gs = g.stats();
+  std::printf("\nsummary: gpu pass median %.3f ms, max %.3f ms; holes median %.2f%%, last %.2f%%; %llu tiles uploaded "
+              "(%.1f MB), %llu requested from feedback\n",
+              med(gpu_ms), *std::max_element(gpu_ms.begin(), gpu_ms.end()), med(holes_pct), holes_pct.back(),
+              (unsigned long long)gs.slots_uploaded, gs.bytes_uploaded / 1e6, (unsigned long long)gs.feedback_requested);
+  const nlohmann::json report = {{"device", gs.device}, {"width", width}, {"height", height}, {"path", a.path},
+                                 {"pcf", a.pcf}, {"gpu_ms_median", med(gpu_ms)}, {"holes_pct_median", med(holes_pct)},
+                                 {"slots_uploaded", gs.slots_uploaded}, {"bytes_uploaded", gs.bytes_uploaded},
+                                 {"feedback_requested", gs.feedback_requested}, {"frames", frames}};
+  const std::string json = a.json.empty() ? a.out + "/view.json" : a.json;
+  std::ofstream(json) << report.dump(2) << "\n";
+  std::printf("wrote %s/frame_*.png, %s/contact_sheet.png, %s\n", a.out.c_str(), a.out.c_str(), json.c_str());
+}
+
+Register reg{"view", "Headless viewer: fly a camera path, GPU shadow pass from streamed tiles (PNG frames)",
+             [](CLI::App& sub) {
+               auto a = std::make_shared<ViewArgs>();
+               sub.add_option("--server", a->server, "Server HOST:PORT")->required();
+               sub.add_option("--map", a->map, "Map name")->required();
+               sub.add_option("--scene", a->scene, "The scene the map was built from")->required();
+               sub.add_option("--up", a->up, "Up axis of a scene file: y or z")->check(CLI::IsMember({"y", "z"}));
+               sub.add_option("--path", a->path, "Camera path: flyover, orbit, walk, teleport");
+               sub.add_option("--frames", a->frames, "Frames to render");
+               sub.add_option("--fps", a->fps, "Simulated frames per second of the path");
+               sub.add_option("--size", a->size, "WxH (default 1920x1080)");
+               sub.add_option("--pcf", a->pcf, "PCF kernel side 1..9");
+               sub.add_option("--seed", a->seed, "Camera path seed");
+               sub.add_option("--device", a->device, "Vulkan device name (default: SHADOWTILE_VK_DEVICE)");
+               sub.add_option("--cache-mb", a->cache_mb, "Tile cache size");
+               sub.add_option("--upload-mb", a->upload_mb, "GPU upload budget per frame");
+               sub.add_option("--out", a->out, "Output folder (frames, contact sheet, view.json)");
+               sub.add_option("--json", a->json, "JSON report path (default OUT/view.json)");
+               sub.callback([a] { run(*a); });
+             }};
+
+}  // namespace
+}  // namespace st::cli

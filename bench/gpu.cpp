@@ -1,0 +1,234 @@
+// GPU lookup speed: per encoding, single taps, 3x3 and 5x5 PCF per second and the shadow
+// pass over a width x height G-buffer, timed with device timestamps, each next to the same
+// work on the map's finest level as an uncompressed R32F image on the same device (where
+// it fits one storage buffer), and the upload throughput of arriving tiles (a cold mirror
+// synced from a full cache).
+//
+//   bench_gpu [--scene procedural:city] [--light sun:azimuth=30,elevation=50] [--res 2k]
+//             [--encodings mh,mmh,dagmh] [--lookups 262144] [--reps 5] [--width 1920]
+//             [--height 1080] [--device NAME] [--out bench-out/gpu] [--json PATH]
+//             [--tile-bytes 65536] [--max-r32f-bytes 2147483648]
+//
+// The map is built once per encoding into --out (reused when present), served by an
+// in-process server on 127.0.0.1, fetched whole into a client cache and mirrored by a
+// GpuMap. Queries are random finest texels; half the receivers sit on the stored depth
+// (lit), half just behind it (shadowed), so the GPU answers are checked against the R32F
+// image's (they must agree: the map is lossless). The G-buffer is a plane across the light
+// box whose receivers sit on the map's surface. Figures are medians over --reps.
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <random>
+#include <thread>
+
+#include "bench/bench_map.hpp"
+#include "client/map_access.hpp"
+#include "gpu/gpu_map.hpp"
+#include "gpu/r32f_image.hpp"
+#include "gpu/shadow_reference.hpp"
+#include "server/catalog.hpp"
+#include "server/server.hpp"
+#include "tiles/bake/map_build.hpp"
+
+namespace {
+
+using namespace st;
+using namespace st::bench;
+
+struct Args {
+  std::string scene = "procedural:city", light = "sun:azimuth=30,elevation=50", res = "2k";
+  std::string encodings = "mh,mmh,dagmh", device, out = "bench-out/gpu", json = "bench-out/gpu.json";
+  uint32_t lookups = 1u << 18, reps = 5, width = 1920, height = 1080, tile_bytes = 64 * 1024;
+  uint64_t max_r32f_bytes = 2ull << 30;
+};
+
+Args parse(int argc, char** argv) {
+  Args a;
+  for (int i = 1; i < argc; ++i) {
+    const std::string k = argv[i];
+    auto next = [&]() -> std::string {
+      if (i + 1 >= argc) throw Error("bench_gpu: " + k + " needs a value");
+      return argv[++i];
+    };
+    if (k == "--scene") a.scene = next();
+    else if (k == "--light") a.light = next();
+    else if (k == "--res") a.res = next();
+    else if (k == "--encodings") a.encodings = next();
+    else if (k == "--lookups") a.lookups = uint32_t(std::stoul(next()));
+    else if (k == "--reps") a.reps = uint32_t(std::stoul(next()));
+    else if (k == "--width") a.width = uint32_t(std::stoul(next()));
+    else if (k == "--height") a.height = uint32_t(std::stoul(next()));
+    else if (k == "--tile-bytes") a.tile_bytes = uint32_t(std::stoul(next()));
+    else if (k == "--device") a.device = next();
+    else if (k == "--max-r32f-bytes") a.max_r32f_bytes = std::stoull(next());
+    else if (k == "--out") a.out = next();
+    else if (k == "--json") a.json = next();
+    else throw Error("bench_gpu: unknown option " + k);
+  }
+  if (a.lookups == 0 || a.reps == 0 || a.width == 0 || a.height == 0) throw Error("bench_gpu: counts must be > 0");
+  return a;
+}
+
+template <class F>
+double median_ms(uint32_t reps, F&& f) {
+  std::vector<double> v;
+  for (uint32_t i = 0; i < reps; ++i) v.push_back(f());
+  return median(v);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) try {
+  const Args a = parse(argc, argv);
+  const uint32_t level = parse_level(a.res);
+  std::filesystem::create_directories(a.out);
+  const Scene scene = load_scene(a.scene);
+  const LightSpace light = LightSpace::fit(LightSpec::parse(a.light), scene.bounds());
+  nlohmann::json report = {{"scene", a.scene}, {"light", a.light}, {"resolution", side_name(level)},
+                           {"lookups", a.lookups}, {"width", a.width}, {"height", a.height}};
+  nlohmann::json rows = nlohmann::json::array();
+  std::printf("%-6s %-5s %12s %12s %8s | %10s %10s %7s | %9s %8s %6s\n", "enc", "op", "GPU Mlook/s", "R32F Mlook/s",
+              "ratio", "pass ms", "R32F ms", "ratio", "upload", "MB/s", "agree");
+  for (const std::string& name : split_list(a.encodings)) {
+    const Encoding enc = parse_encoding(name);
+    const std::string path = a.out + "/" + side_name(level) + "_" + name + ".pack";
+    if (!std::filesystem::exists(path)) {
+      MapBuildOptions o;
+      o.map_level = level;
+      o.encoding = enc;
+      o.tile_bytes = a.tile_bytes;
+      o.scene_spec = a.scene;
+      o.light_spec = a.light;
+      std::fprintf(stderr, "bench_gpu: building %s\n", path.c_str());
+      build_map(scene, light, o, path);
+    }
+    server::ServerOptions so;
+    so.host = "127.0.0.1";
+    so.port = 0;
+    so.log = [](const std::string&) {};
+    const std::vector<std::string> paths{path};
+    server::Server srv(server::Catalog::scan(paths), so);
+    srv.start();
+    client::ClientOptions co;
+    co.max_slot_bytes = 64u << 20;
+    co.request_timeout = std::chrono::milliseconds(60000);
+    uint64_t tiles = 0;
+    {
+      client::Client probe({"127.0.0.1", srv.port()}, co);
+      tiles = probe.open(std::filesystem::path(path).stem().string()).info().tile_count;
+    }
+    co.cache_slots = uint32_t(tiles + 8);
+    co.want_capacity = uint32_t(tiles + 8);
+    client::Client cl({"127.0.0.1", srv.port()}, co);
+    client::Map map = cl.open(std::filesystem::path(path).stem().string());
+    const uint64_t side = uint64_t(1) << level;
+    map.request_region(level, 0, 0, side, side, 10);
+    const auto t_end = Clock::now() + std::chrono::minutes(10);
+    while (!map.region_resident(level, 0, 0, side, side) && Clock::now() < t_end)
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    if (!map.region_resident(level, 0, 0, side, side)) throw Error("bench_gpu: the map did not arrive within 10 minutes");
+    const Evaluator& cpu = client::evaluator(map);
+
+    gpu::GpuOptions go;
+    go.device = a.device;
+    go.max_queries = a.lookups;
+    go.max_pixels = a.width * a.height;
+    go.upload_budget_bytes = 256u << 20;
+    gpu::GpuMap g(map, go);
+    const auto t0 = Clock::now();
+    g.sync();
+    const double upload_s = seconds_since(t0);
+    const gpu::GpuStats gs = g.stats();
+    const double upload_mbs = double(gs.bytes_uploaded) / 1e6 / std::max(upload_s, 1e-9);
+
+    std::mt19937_64 rng(1);
+    std::vector<gpu::GpuQuery> q(a.lookups);
+    for (auto& x : q) {
+      x.x = uint32_t(rng() % side), x.y = uint32_t(rng() % side), x.level = level;
+      const float d = cpu.depth(level, x.x, x.y);
+      x.receiver = rng() % 2 ? d : std::nextafter(d, 2.0f);
+    }
+    std::unique_ptr<gpu::R32fImage> img;
+    std::string no_image;
+    try {
+      // One storage buffer holds at most 4 GiB - 1 on any device (128 MiB on lavapipe):
+      // beyond --max-r32f-bytes the image is not painted at all.
+      if (side * side * 4 > a.max_r32f_bytes) throw Error("R32F image of " + std::to_string(side * side * 4) + " bytes does not fit one buffer");
+      std::vector<float> values(size_t(side) * side);
+      std::vector<std::thread> painters;
+      const unsigned n = std::max(1u, std::thread::hardware_concurrency());
+      for (unsigned t = 0; t < n; ++t)
+        painters.emplace_back([&, t] {
+          for (uint64_t y = t; y < side; y += n)
+            for (uint64_t x = 0; x < side; ++x) values[y * side + x] = cpu.depth(level, x, y);
+        });
+      for (auto& t : painters) t.join();
+      img = std::make_unique<gpu::R32fImage>(g.device_name(), level, values, std::max(a.lookups, a.width * a.height));
+    } catch (const std::exception& e) {
+      no_image = e.what();
+    }
+    std::vector<float> got(q.size()), want(q.size());
+    // The G-buffer: a plane across the light box, receivers on the map's surface.
+    const uint64_t pixels = uint64_t(a.width) * a.height;
+    std::vector<float> pos(pixels * 4), nrm(pixels * 4);
+    for (uint32_t y = 0; y < a.height; ++y)
+      for (uint32_t x = 0; x < a.width; ++x) {
+        const size_t p = size_t(y) * a.width + x;
+        const double u = (x + 0.5) / a.width, v = (y + 0.5) / a.height;
+        const auto t = LightSpace::texel_of(level, u, v);
+        const double d = cpu.depth(level, t[0], t[1]) * 0.999;
+        const double e = light.extent_uv(), z = light.near_plane() + d * (light.far_plane() - light.near_plane());
+        const Vec3d w = light.origin() + light.axis_u() * (u * e) + light.axis_v() * (v * e) + light.forward() * z;
+        pos[4 * p] = float(w.x), pos[4 * p + 1] = float(w.y), pos[4 * p + 2] = float(w.z), pos[4 * p + 3] = 1;
+        const Vec3d n = light.forward() * -1.0;
+        nrm[4 * p] = float(n.x), nrm[4 * p + 1] = float(n.y), nrm[4 * p + 2] = float(n.z);
+      }
+    for (uint32_t r : {1u, 3u, 5u}) {
+      for (auto& x : q) x.r = r;
+      const double gms = median_ms(a.reps, [&] { return g.evaluate(q, got).gpu_ms; });
+      double ims = 0;
+      bool agree = true;
+      if (img) {
+        ims = median_ms(a.reps, [&] { return img->evaluate(q, want); });
+        for (size_t i = 0; i < q.size(); ++i) agree &= std::bit_cast<uint32_t>(got[i]) == std::bit_cast<uint32_t>(want[i]);
+      }
+      gpu::ShadowPassInput in;
+      in.positions = pos;
+      in.normals = nrm;
+      in.width = a.width;
+      in.height = a.height;
+      in.kernel = r;
+      in.neighbour_footprint = false;
+      in.footprint = 1;
+      std::vector<float> vis(pixels), vis_img(pixels);
+      const double pms = median_ms(a.reps, [&] { return g.wait(g.submit_shadow_pass(in), vis).gpu_ms; });
+      double pims = 0;
+      if (img) {
+        pims = median_ms(a.reps, [&] { return img->shadow_pass(in, gpu::shadow_light(client::pack_header(map)), vis_img); });
+        for (size_t i = 0; i < pixels; ++i) agree &= std::bit_cast<uint32_t>(vis[i]) == std::bit_cast<uint32_t>(vis_img[i]);
+      }
+      const std::string op = r == 1 ? "tap" : std::to_string(r) + "x" + std::to_string(r);
+      const double glps = gms > 0 ? double(q.size()) / (gms * 1e3) : 0, ilps = ims > 0 ? double(q.size()) / (ims * 1e3) : 0;
+      std::printf("%-6s %-5s %12.1f %12.1f %8.2f | %10.3f %10.3f %7.2f | %7.1fMB %8.0f %6s\n", name.c_str(), op.c_str(),
+                  glps, ilps, ilps > 0 ? glps / ilps : 0, pms, pims, pims > 0 ? pms / pims : 0,
+                  double(gs.bytes_uploaded) / 1e6, upload_mbs, img ? (agree ? "yes" : "NO") : "n/a");
+      rows.push_back({{"encoding", name}, {"op", op}, {"gpu_mlookups_per_s", glps}, {"r32f_mlookups_per_s", ilps},
+                      {"gpu_ms", gms}, {"r32f_ms", ims}, {"pass_ms", pms}, {"r32f_pass_ms", pims},
+                      {"pass_vs_r32f", pims > 0 ? pms / pims : 0}, {"upload_bytes", gs.bytes_uploaded},
+                      {"upload_mb_per_s", upload_mbs}, {"slots", gs.slot_count}, {"agree_with_r32f", agree},
+                      {"r32f", img ? "yes" : no_image}});
+    }
+    srv.stop();
+  }
+  report["rows"] = rows;
+  std::filesystem::create_directories(std::filesystem::path(a.json).parent_path().empty() ? "." : std::filesystem::path(a.json).parent_path());
+  std::ofstream(a.json) << report.dump(2) << "\n";
+  std::printf("wrote %s\n", a.json.c_str());
+  return 0;
+} catch (const std::exception& e) {
+  std::fprintf(stderr, "bench_gpu: %s\n", e.what());
+  return 1;
+}

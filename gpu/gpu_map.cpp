@@ -1,0 +1,608 @@
+// GpuMap: the mirror of a client Map's tile cache on a Vulkan device and the frames that
+// read it (gpu_map.hpp says what; GPU_LAYOUT.md draws the buffers).
+#include "gpu/gpu_map.hpp"
+
+#include <algorithm>
+#include <bit>
+#include <cstring>
+#include <unordered_map>
+#include <vector>
+
+#include "client/map_access.hpp"
+#include "gpu/kernels.hpp"
+#include "gpu/layout.hpp"
+#include "gpu/shadow_reference.hpp"
+#include "gpu/vk_context.hpp"
+
+namespace st::gpu {
+
+namespace L = layout;
+
+namespace {
+
+constexpr uint32_t kGridMagicWord = 0x52475453u;  // "STGR": a serialized CutGrid (index tile)
+constexpr uint32_t kDirtyBlockWords = 64;
+
+uint32_t align4(uint32_t n) { return (n + 3u) & ~3u; }
+
+}  // namespace
+
+struct GpuMap::Impl {
+  struct Frame {
+    // input, normals, output: device-local (what the dispatch reads and writes); the
+    // *_host twins are host-visible and copied in the frame's command buffer.
+    VkBufferBox staging, input, normals, output, feedback, input_host, normals_host, output_host;
+    uint64_t input_bytes = 0, normals_bytes = 0;
+    VkCommandBuffer cmd = VK_NULL_HANDLE;
+    VkFence fence = VK_NULL_HANDLE;
+    VkDescriptorSet set = VK_NULL_HANDLE;
+    bool in_flight = false;
+    bool collected = true;
+    uint64_t frame = 0;
+    uint32_t count = 0;  // outputs
+    FrameStats stats;
+  };
+
+  client::Map map;
+  const client::RemoteMap* rm = nullptr;
+  GpuOptions opt;
+  uint32_t map_level = 0, k = 0, encoding = 0, slot_count = 0, slot_bytes = 0, slot_words = 0;
+  uint64_t pool_bytes = 0;
+  std::unique_ptr<VkContext> ctx;
+  Kernels kernels;
+  VkBufferBox pool, page;
+  VkCommandPool cmd_pool = VK_NULL_HANDLE;
+  VkQueryPool queries = VK_NULL_HANDLE;
+  std::vector<Frame> frames;
+  uint64_t next_frame = 1;
+
+  // ---- the mirror (what the device holds, as the host last recorded it) ----
+  std::vector<uint32_t> page_shadow;     // the page-table buffer's contents
+  std::vector<uint8_t> dirty;            // per kDirtyBlockWords block of page_shadow
+  std::vector<uint32_t> dirty_list;
+  std::vector<TileId> mirror_tile;       // per slot: the tile the device holds, or kInvalidTile
+  std::vector<uint8_t> slot_levels;      // per slot: index tile levels d, 0 for an encoded tile
+  std::vector<uint8_t> child_kind;       // per slot * 256: kinds of an index tile's entries
+  std::unordered_map<TileId, uint32_t> tile_slot;
+  std::vector<VkBufferCopy> pool_copies, page_copies;
+  std::vector<client::RemoteMap::WantedTile> wanted;
+  std::vector<FeedbackTile> feedback;
+  GpuStats totals;
+  uint32_t resident = 0;
+  uint32_t off_coarse = 0, off_entries = 0, off_skip_slots = 0, off_children = 0, off_pcf = 0;
+
+  Impl(client::Map m, GpuOptions o) : map(std::move(m)), opt(std::move(o)) {
+    if (!map.valid()) throw std::runtime_error("GpuMap: the Map is not open (default-constructed)");
+    rm = &client::MapAccess::remote(map);
+    if (opt.frames_in_flight < 1 || opt.frames_in_flight > 4) throw GpuError("GpuMap: frames_in_flight must be 1..4");
+    if (opt.feedback_capacity < 16 || !std::has_single_bit(opt.feedback_capacity) || opt.feedback_capacity > (1u << 20))
+      throw GpuError("GpuMap: feedback_capacity must be a power of two in 16..2^20");
+    if (opt.max_queries == 0 || opt.max_pixels == 0) throw GpuError("GpuMap: max_queries and max_pixels must be > 0");
+    const PackHeader& h = rm->header();
+    map_level = h.map_level;
+    k = rm->grid().levels;
+    encoding = uint32_t(h.encoding);
+    rm->inspect_cache([&](const TileCache& c) {
+      slot_count = c.slot_count();
+      slot_bytes = c.slot_bytes();
+    });
+    slot_words = align4(slot_bytes) / 4;
+    if (slot_count > (1u << 23)) throw GpuError("GpuMap: more than 2^23 cache slots");
+    pool_bytes = uint64_t(slot_count) * slot_words * 4;
+    ctx = std::make_unique<VkContext>(opt.device, opt.validation);
+    totals.device = ctx->device_name();
+    totals.slot_count = slot_count;
+    if (pool_bytes > ctx->properties().limits.maxStorageBufferRange)
+      throw GpuError("GpuMap: the slot pool (" + std::to_string(pool_bytes) + " bytes) exceeds device '" +
+                     ctx->device_name() + "' maxStorageBufferRange (" +
+                     std::to_string(ctx->properties().limits.maxStorageBufferRange) + "); use fewer cache slots");
+    build_page_table();
+    try {
+      create_device_objects();
+      upload_all_page_table();
+    } catch (...) {
+      release();
+      throw;
+    }
+  }
+
+  ~Impl() { release(); }
+
+  void release() noexcept {
+    if (!ctx) return;
+    VkDevice d = ctx->device();
+    vkDeviceWaitIdle(d);
+    for (Frame& f : frames) {
+      for (VkBufferBox* b : {&f.staging, &f.input, &f.normals, &f.output, &f.feedback, &f.input_host, &f.normals_host,
+                             &f.output_host})
+        ctx->destroy(*b);
+      if (f.fence) vkDestroyFence(d, f.fence, nullptr);
+    }
+    frames.clear();
+    if (queries) vkDestroyQueryPool(d, queries, nullptr);
+    queries = VK_NULL_HANDLE;
+    if (cmd_pool) vkDestroyCommandPool(d, cmd_pool, nullptr);
+    cmd_pool = VK_NULL_HANDLE;
+    kernels.destroy(*ctx);
+    ctx->destroy(pool);
+    ctx->destroy(page);
+    ctx.reset();
+  }
+
+  // ---- the page table's initial contents: header, skip grid, no slots, PCF quotients ----
+  void build_page_table() {
+    const CutGrid& g = rm->grid();
+    const uint32_t cells = 1u << (2 * k);
+    off_coarse = L::kPtHeaderWords;
+    off_entries = off_coarse + uint32_t(CutGrid::coarse_count(k));
+    off_skip_slots = off_entries + L::kEntryWords * cells;
+    off_children = off_skip_slots + cells;
+    off_pcf = off_children + slot_count * L::kChildTableWords;
+    const uint32_t words = off_pcf + L::kMaxPcf * L::kPcfTableStride;
+    page_shadow.assign(words, 0);
+    uint32_t* p = page_shadow.data();
+    p[L::kPtMagic] = L::kPageMagic;
+    p[L::kPtVersion] = L::kLayoutVersion;
+    p[L::kPtMapLevel] = map_level;
+    p[L::kPtSkipLevel] = k;
+    p[L::kPtEncoding] = encoding;
+    p[L::kPtSlotCount] = slot_count;
+    p[L::kPtSlotWords] = slot_words;
+    p[L::kPtSkipCoarse] = off_coarse;
+    p[L::kPtSkipEntries] = off_entries;
+    p[L::kPtSkipSlots] = off_skip_slots;
+    p[L::kPtChildSlots] = off_children;
+    p[L::kPtPcfTable] = off_pcf;
+    for (size_t i = 0; i < g.coarse.size(); ++i) p[off_coarse + i] = std::bit_cast<uint32_t>(g.coarse[i]);
+    for (uint32_t e = 0; e < cells; ++e) {
+      p[off_entries + 2 * e] = std::bit_cast<uint32_t>(g.entries[e].value);
+      p[off_entries + 2 * e + 1] = uint32_t(g.entries[e].kind) | uint32_t(g.entries[e].index_levels) << 8;
+    }
+    std::fill(p + off_skip_slots, p + off_pcf, L::kNoSlot);
+    // The CPU's quotient float(lit) / float(r * r) (evaluator.hpp), so the GPU never divides.
+    for (uint32_t r = 1; r <= L::kMaxPcf; ++r)
+      for (uint32_t lit = 0; lit <= r * r; ++lit)
+        p[off_pcf + (r - 1) * L::kPcfTableStride + lit] = std::bit_cast<uint32_t>(float(lit) / float(r * r));
+    dirty.assign((words + kDirtyBlockWords - 1) / kDirtyBlockWords, 0);
+    dirty_list.reserve(dirty.size());
+    mirror_tile.assign(slot_count, kInvalidTile);
+    slot_levels.assign(slot_count, 0);
+    child_kind.assign(size_t(slot_count) * L::kChildTableWords, 0);
+    tile_slot.reserve(size_t(slot_count) * 2);
+    pool_copies.reserve(slot_count);
+    page_copies.reserve(dirty.size());
+    wanted.reserve(opt.feedback_capacity);
+    feedback.reserve(opt.feedback_capacity);
+  }
+
+  void create_device_objects() {
+    VkDevice d = ctx->device();
+    pool = ctx->make_buffer(pool_bytes, false);
+    page = ctx->make_buffer(page_shadow.size() * 4, false);
+    kernels.create(*ctx, opt.frames_in_flight);
+    VkCommandPoolCreateInfo cpi{};
+    cpi.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
+    cpi.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
+    cpi.queueFamilyIndex = ctx->queue_family();
+    vk_check(vkCreateCommandPool(d, &cpi, nullptr, &cmd_pool), "vkCreateCommandPool");
+    if (ctx->timestamp_bits() > 0) {
+      VkQueryPoolCreateInfo qpi{};
+      qpi.sType = VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO;
+      qpi.queryType = VK_QUERY_TYPE_TIMESTAMP;
+      qpi.queryCount = 2 * opt.frames_in_flight;
+      vk_check(vkCreateQueryPool(d, &qpi, nullptr, &queries), "vkCreateQueryPool");
+    }
+    const uint64_t staging = opt.upload_budget_bytes + uint64_t(slot_words) * 4 + page_shadow.size() * 4;
+    const uint64_t in_bytes = std::max<uint64_t>(uint64_t(opt.max_queries) * L::kQueryWords * 4, uint64_t(opt.max_pixels) * 16);
+    const uint64_t out_bytes = uint64_t(std::max(opt.max_queries, opt.max_pixels)) * 4;
+    const uint64_t fb_bytes = (L::kFbHeaderWords + uint64_t(opt.feedback_capacity) * (1 + L::kFbRecordWords)) * 4;
+    const uint64_t range = ctx->properties().limits.maxStorageBufferRange;
+    if (in_bytes > range || out_bytes > range)
+      throw GpuError("GpuMap: max_queries / max_pixels exceed device '" + ctx->device_name() + "' maxStorageBufferRange");
+    frames.resize(opt.frames_in_flight);
+    for (uint32_t i = 0; i < opt.frames_in_flight; ++i) {
+      Frame& f = frames[i];
+      f.staging = ctx->make_buffer(staging, true);
+      f.input = ctx->make_buffer(in_bytes, false);
+      f.normals = ctx->make_buffer(uint64_t(opt.max_pixels) * 16, false);
+      f.output = ctx->make_buffer(out_bytes, false);
+      f.input_host = ctx->make_buffer(in_bytes, true);
+      f.normals_host = ctx->make_buffer(uint64_t(opt.max_pixels) * 16, true);
+      f.output_host = ctx->make_buffer(out_bytes, true);
+      f.feedback = ctx->make_buffer(fb_bytes, true);
+      VkCommandBufferAllocateInfo cai{};
+      cai.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
+      cai.commandPool = cmd_pool;
+      cai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+      cai.commandBufferCount = 1;
+      vk_check(vkAllocateCommandBuffers(d, &cai, &f.cmd), "vkAllocateCommandBuffers");
+      VkFenceCreateInfo fci{};
+      fci.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
+      vk_check(vkCreateFence(d, &fci, nullptr, &f.fence), "vkCreateFence");
+      f.set = kernels.bind(*ctx, i, {pool.buffer, page.buffer, f.input.buffer, f.normals.buffer, f.output.buffer,
+                                     f.feedback.buffer});
+    }
+  }
+
+  void upload_all_page_table() {
+    Frame& f = frames[0];
+    std::memcpy(f.staging.mapped, page_shadow.data(), page_shadow.size() * 4);
+    VkCommandBufferBeginInfo bi{};
+    bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
+    bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+    vk_check(vkBeginCommandBuffer(f.cmd, &bi), "vkBeginCommandBuffer");
+    VkBufferCopy all{0, 0, page_shadow.size() * 4};
+    vkCmdCopyBuffer(f.cmd, f.staging.buffer, page.buffer, 1, &all);
+    vkCmdFillBuffer(f.cmd, pool.buffer, 0, VK_WHOLE_SIZE, 0);
+    vk_check(vkEndCommandBuffer(f.cmd), "vkEndCommandBuffer");
+    submit_and_wait(f);
+  }
+
+  void submit_and_wait(Frame& f) {
+    VkSubmitInfo si{};
+    si.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
+    si.commandBufferCount = 1;
+    si.pCommandBuffers = &f.cmd;
+    vk_check(vkQueueSubmit(ctx->queue(), 1, &si, f.fence), "vkQueueSubmit");
+    vk_check(vkWaitForFences(ctx->device(), 1, &f.fence, VK_TRUE, UINT64_MAX), "vkWaitForFences");
+    vk_check(vkResetFences(ctx->device(), 1, &f.fence), "vkResetFences");
+  }
+
+  // ---- the mirror ----
+  void set_page_word(uint32_t w, uint32_t v) {
+    if (page_shadow[w] == v) return;
+    page_shadow[w] = v;
+    const uint32_t b = w / kDirtyBlockWords;
+    if (!dirty[b]) dirty[b] = 1, dirty_list.push_back(b);
+  }
+
+  // The page-table word that points at `tile` on the device (its parent's entry), or
+  // ~0u when the walk to it stops first (a parent index tile not on the device).
+  uint32_t pointer_word(TileId tile) const {
+    const TileAddress a = tile_address(tile);
+    if (a.level < k) return ~0u;
+    uint32_t l = k;
+    uint64_t ex = a.x >> (a.level - k), ey = a.y >> (a.level - k);
+    uint32_t word = off_skip_slots + uint32_t((ey << k) + ex);
+    uint32_t kind = page_shadow[off_entries + 2 * ((ey << k) + ex) + 1] & 0xFFu;
+    while (l < a.level) {
+      if (kind != L::kKindIndex) return ~0u;
+      const uint32_t s = page_shadow[word];
+      if (s == L::kNoSlot || mirror_tile[s] == kInvalidTile) return ~0u;
+      const uint32_t d = slot_levels[s];
+      if (d == 0 || l + d > a.level) return ~0u;
+      const uint64_t cx = a.x >> (a.level - l - d), cy = a.y >> (a.level - l - d);
+      const uint32_t c = uint32_t(((cy - (ey << d)) << d) + (cx - (ex << d)));
+      word = off_children + s * L::kChildTableWords + c;
+      kind = child_kind[size_t(s) * L::kChildTableWords + c];
+      l += d, ex = cx, ey = cy;
+    }
+    return word;
+  }
+
+  void unlink(uint32_t s) {
+    const TileId t = mirror_tile[s];
+    const uint32_t w = pointer_word(t);
+    if (w != ~0u && page_shadow[w] == s) set_page_word(w, L::kNoSlot);
+    tile_slot.erase(t);
+    mirror_tile[s] = kInvalidTile;
+    slot_levels[s] = 0;
+    --resident;
+  }
+
+  // Slot `s` now holds `tile` (bytes `b`) on the device: point its parent at it, and if it
+  // is an index tile, point its entries at those of its children the device holds.
+  void link(uint32_t s, TileId tile, std::span<const uint8_t> b) {
+    mirror_tile[s] = tile;
+    tile_slot[tile] = s;
+    ++resident;
+    uint32_t magic = 0, d = 0;
+    if (b.size() >= 8) std::memcpy(&magic, b.data(), 4), std::memcpy(&d, b.data() + 4, 4);
+    slot_levels[s] = 0;
+    if (magic == kGridMagicWord && d >= 1 && d <= kMaxIndexLevels) {
+      slot_levels[s] = uint8_t(d);
+      const TileAddress a = tile_address(tile);
+      const size_t entries = 8 + 4 * CutGrid::coarse_count(d);
+      for (uint32_t c = 0; c < (1u << (2 * d)); ++c) {
+        const uint8_t kind = entries + 8 * c + 4 < b.size() ? b[entries + 8 * c + 4] : 0;
+        child_kind[size_t(s) * L::kChildTableWords + c] = kind;
+        uint32_t ptr = L::kNoSlot;
+        if (kind != L::kKindConstant) {
+          const uint32_t cx = (a.x << d) + (c & ((1u << d) - 1)), cy = (a.y << d) + (c >> d);
+          auto it = tile_slot.find(make_tile_id(a.level + d, cx, cy));
+          if (it != tile_slot.end()) ptr = it->second;
+        }
+        set_page_word(off_children + s * L::kChildTableWords + c, ptr);
+      }
+    }
+    const uint32_t w = pointer_word(tile);
+    if (w != ~0u) set_page_word(w, s);
+  }
+
+  // Compares every slot with the cache and stages what changed into `f`'s staging
+  // buffer (tile bytes within the budget, then the dirty page-table blocks).
+  void stage_changes(Frame& f, FrameStats& fs) {
+    pool_copies.clear();
+    page_copies.clear();
+    uint64_t off = 0;
+    auto* staging = static_cast<uint8_t*>(f.staging.mapped);
+    rm->inspect_cache([&](const TileCache& c) {
+      for (uint32_t s = 0; s < slot_count; ++s) {
+        const TileId t = c.slot_tile(s);
+        TileId want = kInvalidTile;
+        if (t != kInvalidTile) {
+          const PageEntry pe = c.lookup(t);
+          if (pe.state == PageState::resident && pe.slot == s) want = t;
+        }
+        if (mirror_tile[s] == want) continue;
+        if (mirror_tile[s] != kInvalidTile) unlink(s);
+        if (want == kInvalidTile) continue;
+        const std::span<const uint8_t> b = c.tile_bytes(s);
+        const uint32_t bytes = align4(uint32_t(b.size()));
+        if (off > 0 && off + bytes > opt.upload_budget_bytes) {  // one slot always fits: no starvation
+          ++totals.slots_deferred;
+          continue;
+        }
+        std::memcpy(staging + off, b.data(), b.size());
+        std::memset(staging + off + b.size(), 0, bytes - b.size());
+        if (bytes) pool_copies.push_back({off, uint64_t(s) * slot_words * 4, bytes});
+        off += bytes;
+        link(s, want, b);
+        ++fs.slots_uploaded;
+      }
+    });
+    std::sort(dirty_list.begin(), dirty_list.end());
+    for (uint32_t blk : dirty_list) {
+      const uint32_t w0 = blk * kDirtyBlockWords;
+      const uint32_t n = std::min<uint32_t>(kDirtyBlockWords, uint32_t(page_shadow.size()) - w0);
+      std::memcpy(staging + off, page_shadow.data() + w0, n * 4);
+      page_copies.push_back({off, uint64_t(w0) * 4, uint64_t(n) * 4});
+      off += n * 4;
+      dirty[blk] = 0;
+      totals.page_words_uploaded += n;
+    }
+    dirty_list.clear();
+    fs.bytes_uploaded = off;
+    totals.slots_uploaded += fs.slots_uploaded;
+    totals.bytes_uploaded += off;
+  }
+
+  // ---- frames ----
+  Frame& acquire() {
+    Frame& f = frames[next_frame % frames.size()];
+    if (f.in_flight) finish(f);
+    return f;
+  }
+
+  void finish(Frame& f) {
+    vk_check(vkWaitForFences(ctx->device(), 1, &f.fence, VK_TRUE, UINT64_MAX), "vkWaitForFences");
+    vk_check(vkResetFences(ctx->device(), 1, &f.fence), "vkResetFences");
+    f.in_flight = false;
+    if (!f.collected) collect_feedback(f);
+  }
+
+  void collect_feedback(Frame& f) {
+    f.collected = true;
+    const auto* fb = static_cast<const uint32_t*>(f.feedback.mapped);
+    FrameStats& fs = f.stats;
+    fs.holes = fb[L::kFbHoles];
+    fs.absent_taps = fb[L::kFbAbsentTaps];
+    fs.feedback_dropped = fb[L::kFbDropped];
+    wanted.clear();
+    feedback.clear();
+    const uint32_t cap = opt.feedback_capacity;
+    for (uint32_t h = 0; h < cap; ++h) {
+      if (fb[L::kFbHeaderWords + h] == 0) continue;
+      const uint32_t* rec = fb + L::kFbHeaderWords + cap + size_t(h) * L::kFbRecordWords;
+      const uint32_t level = rec[L::kFbRecLevel], x = rec[L::kFbRecX], y = rec[L::kFbRecY];
+      if (level > map_level || (x >> level) != 0 || (y >> level) != 0) continue;
+      client::RemoteMap::WantedTile w;
+      w.tile = make_tile_id(level, x, y);
+      w.entry.value = std::bit_cast<float>(rec[L::kFbRecValue]);
+      w.entry.kind = EntryKind(rec[L::kFbRecKind] & 0xFFu);
+      w.entry.index_levels = uint8_t(rec[L::kFbRecKind] >> 8);
+      w.priority = uint16_t(std::clamp<uint32_t>(rec[L::kFbRecCount], 1, 65535));
+      wanted.push_back(w);
+      feedback.push_back({w.tile, rec[L::kFbRecCount]});
+    }
+    fs.feedback_tiles = uint32_t(wanted.size());
+    fs.requested = uint32_t(rm->want_tiles(wanted));
+    if (queries) {
+      uint64_t ts[2] = {0, 0};
+      const uint32_t q = uint32_t(&f - frames.data()) * 2;
+      if (vkGetQueryPoolResults(ctx->device(), queries, q, 2, sizeof(ts), ts, 8, VK_QUERY_RESULT_64_BIT) == VK_SUCCESS) {
+        const uint32_t bits = ctx->timestamp_bits();
+        const uint64_t mask = bits >= 64 ? ~uint64_t(0) : (uint64_t(1) << bits) - 1;
+        fs.gpu_ms = double((ts[1] - ts[0]) & mask) * ctx->properties().limits.timestampPeriod * 1e-6;
+      }
+    }
+    totals.feedback_tiles += fs.feedback_tiles;
+    totals.feedback_requested += fs.requested;
+    totals.feedback_dropped += fs.feedback_dropped;
+    totals.holes += fs.holes;
+  }
+
+  uint64_t submit(Frame& f, Kernel which, uint32_t invocations, const uint32_t (&pc)[L::kPcWords]) {
+    FrameStats fs;
+    auto* fb = static_cast<uint32_t*>(f.feedback.mapped);
+    std::memset(fb, 0, f.feedback.size);
+    fb[L::kFbCapacity] = opt.feedback_capacity;
+    stage_changes(f, fs);
+    VkCommandBuffer cmd = f.cmd;
+    vk_check(vkResetCommandBuffer(cmd, 0), "vkResetCommandBuffer");
+    VkCommandBufferBeginInfo bi{};
+    bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
+    bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+    vk_check(vkBeginCommandBuffer(cmd, &bi), "vkBeginCommandBuffer");
+    const uint32_t q = uint32_t(&f - frames.data()) * 2;
+    if (queries) vkCmdResetQueryPool(cmd, queries, q, 2);
+    if (!pool_copies.empty() || !page_copies.empty() || f.input_bytes || f.normals_bytes) {
+      // Every earlier dispatch (of any frame) has finished reading before a copy writes.
+      VkMemoryBarrier war{};
+      war.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
+      war.srcAccessMask = VK_ACCESS_SHADER_READ_BIT;
+      war.dstAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+      vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &war, 0,
+                           nullptr, 0, nullptr);
+      if (!pool_copies.empty())
+        vkCmdCopyBuffer(cmd, f.staging.buffer, pool.buffer, uint32_t(pool_copies.size()), pool_copies.data());
+      if (!page_copies.empty())
+        vkCmdCopyBuffer(cmd, f.staging.buffer, page.buffer, uint32_t(page_copies.size()), page_copies.data());
+      const VkBufferCopy in_copy{0, 0, f.input_bytes}, n_copy{0, 0, f.normals_bytes};
+      if (f.input_bytes) vkCmdCopyBuffer(cmd, f.input_host.buffer, f.input.buffer, 1, &in_copy);
+      if (f.normals_bytes) vkCmdCopyBuffer(cmd, f.normals_host.buffer, f.normals.buffer, 1, &n_copy);
+    }
+    // Copies (this frame's and the first upload's) land before the dispatch reads.
+    VkMemoryBarrier raw{};
+    raw.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
+    raw.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT | VK_ACCESS_HOST_WRITE_BIT;
+    raw.dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT;
+    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_HOST_BIT,
+                         VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &raw, 0, nullptr, 0, nullptr);
+    kernels.record(cmd, which, f.set, pc);
+    if (queries) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, queries, q);
+    vkCmdDispatch(cmd, (invocations + L::kWorkgroupSize - 1) / L::kWorkgroupSize, 1, 1);
+    if (queries) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, queries, q + 1);
+    VkMemoryBarrier out{};
+    out.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
+    out.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
+    out.dstAccessMask = VK_ACCESS_TRANSFER_READ_BIT | VK_ACCESS_HOST_READ_BIT;
+    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+                         VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &out, 0, nullptr, 0, nullptr);
+    if (invocations) {
+      const VkBufferCopy out_copy{0, 0, uint64_t(invocations) * 4};
+      vkCmdCopyBuffer(cmd, f.output.buffer, f.output_host.buffer, 1, &out_copy);
+      VkMemoryBarrier host{};
+      host.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
+      host.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+      host.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
+      vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &host, 0, nullptr, 0,
+                           nullptr);
+    }
+    vk_check(vkEndCommandBuffer(cmd), "vkEndCommandBuffer");
+    VkSubmitInfo si{};
+    si.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
+    si.commandBufferCount = 1;
+    si.pCommandBuffers = &cmd;
+    vk_check(vkQueueSubmit(ctx->queue(), 1, &si, f.fence), "vkQueueSubmit");
+    f.in_flight = true;
+    f.collected = false;
+    f.frame = next_frame++;
+    f.count = invocations;
+    fs.frame = f.frame;
+    f.stats = fs;
+    ++totals.frames;
+    return f.frame;
+  }
+
+  Frame* find(uint64_t frame) {
+    for (Frame& f : frames)
+      if (f.frame == frame && (f.in_flight || !f.collected)) return &f;
+    return nullptr;
+  }
+};
+
+GpuMap::GpuMap(client::Map map, GpuOptions options) : impl_(std::make_unique<Impl>(std::move(map), std::move(options))) {}
+GpuMap::~GpuMap() = default;
+
+FrameStats GpuMap::evaluate(std::span<const GpuQuery> queries, std::span<float> out) {
+  if (queries.size() != out.size()) throw GpuError("GpuMap::evaluate: queries and out differ in size");
+  return wait(submit_evaluate(queries), out);
+}
+
+uint64_t GpuMap::submit_evaluate(std::span<const GpuQuery> queries) {
+  Impl& m = *impl_;
+  if (queries.size() > m.opt.max_queries)
+    throw GpuError("GpuMap::evaluate: " + std::to_string(queries.size()) + " queries, more than max_queries (" +
+                   std::to_string(m.opt.max_queries) + ")");
+  Impl::Frame& f = m.acquire();
+  auto* in = static_cast<uint32_t*>(f.input_host.mapped);
+  f.input_bytes = queries.size() * L::kQueryWords * 4;
+  f.normals_bytes = 0;
+  for (size_t i = 0; i < queries.size(); ++i) {
+    const GpuQuery& q = queries[i];
+    uint32_t* w = in + i * L::kQueryWords;
+    w[L::kQueryX] = q.x;
+    w[L::kQueryY] = q.y;
+    w[L::kQueryReceiver] = std::bit_cast<uint32_t>(q.receiver);
+    w[L::kQueryFootprint] = std::bit_cast<uint32_t>(q.footprint);
+    w[L::kQueryR] = q.r;
+    w[L::kQueryLevel] = q.level;
+  }
+  uint32_t pc[L::kPcWords] = {};
+  pc[L::kPcCount] = uint32_t(queries.size());
+  return m.submit(f, Kernel::evaluate, uint32_t(queries.size()), pc);
+}
+
+uint64_t GpuMap::submit_shadow_pass(const ShadowPassInput& in) {
+  Impl& m = *impl_;
+  const uint64_t pixels = uint64_t(in.width) * in.height;
+  if (pixels == 0 || pixels > m.opt.max_pixels)
+    throw GpuError("GpuMap::submit_shadow_pass: " + std::to_string(in.width) + "x" + std::to_string(in.height) +
+                   " pixels, want 1.." + std::to_string(m.opt.max_pixels));
+  if (in.positions.size() != pixels * 4 || in.normals.size() != pixels * 4)
+    throw GpuError("GpuMap::submit_shadow_pass: positions and normals need 4 floats per pixel");
+  if (in.kernel < 1 || in.kernel > L::kMaxPcf) throw GpuError("GpuMap::submit_shadow_pass: kernel must be 1..9");
+  const ShadowLight light = shadow_light(m.rm->header());
+  Impl::Frame& f = m.acquire();
+  std::memcpy(f.input_host.mapped, in.positions.data(), pixels * 16);
+  std::memcpy(f.normals_host.mapped, in.normals.data(), pixels * 16);
+  f.input_bytes = f.normals_bytes = pixels * 16;
+  uint32_t pc[L::kPcWords] = {};
+  pc[L::kPcCount] = in.width;
+  pc[L::kPcHeight] = in.height;
+  pc[L::kPcKernel] = in.kernel;
+  pc[L::kPcFlags] = in.neighbour_footprint ? L::kFlagNeighbourFootprint : 0;
+  for (int i = 0; i < 3; ++i) {
+    pc[L::kPcOrigin + i] = std::bit_cast<uint32_t>(light.origin[i]);
+    pc[L::kPcAxisU + i] = std::bit_cast<uint32_t>(light.axis_u[i]);
+    pc[L::kPcAxisV + i] = std::bit_cast<uint32_t>(light.axis_v[i]);
+    pc[L::kPcForward + i] = std::bit_cast<uint32_t>(light.forward[i]);
+  }
+  pc[L::kPcNear] = std::bit_cast<uint32_t>(light.near_scaled);
+  pc[L::kPcNormalOffset] = std::bit_cast<uint32_t>(in.normal_offset);
+  pc[L::kPcFootprint] = std::bit_cast<uint32_t>(in.footprint);
+  return m.submit(f, Kernel::shadow_pass, uint32_t(pixels), pc);
+}
+
+FrameStats GpuMap::wait(uint64_t frame, std::span<float> out) {
+  Impl& m = *impl_;
+  Impl::Frame* f = m.find(frame);
+  if (!f) throw GpuError("GpuMap::wait: frame " + std::to_string(frame) + " is not in flight");
+  if (f->in_flight) m.finish(*f);
+  if (out.size() < f->count)
+    throw GpuError("GpuMap::wait: output of " + std::to_string(out.size()) + " floats, frame has " + std::to_string(f->count));
+  std::memcpy(out.data(), f->output_host.mapped, size_t(f->count) * 4);
+  f->frame = 0;  // handed out
+  return f->stats;
+}
+
+uint32_t GpuMap::sync() {
+  Impl& m = *impl_;
+  uint32_t uploaded = 0;
+  for (uint32_t round = 0; round <= m.slot_count; ++round) {
+    Impl::Frame& f = m.acquire();
+    uint32_t pc[L::kPcWords] = {};
+    f.input_bytes = f.normals_bytes = 0;
+    const uint64_t frame = m.submit(f, Kernel::evaluate, 0, pc);  // uploads only: no queries
+    Impl::Frame* g = m.find(frame);
+    m.finish(*g);
+    g->frame = 0;
+    uploaded += g->stats.slots_uploaded;
+    if (g->stats.slots_uploaded == 0) break;
+  }
+  return uploaded;
+}
+
+GpuStats GpuMap::stats() const {
+  GpuStats s = impl_->totals;
+  s.resident_slots = impl_->resident;
+  s.validation_messages = impl_->ctx->validation_messages();
+  return s;
+}
+
+std::span<const GpuMap::FeedbackTile> GpuMap::last_feedback() const { return impl_->feedback; }
+
+const std::string& GpuMap::device_name() const { return impl_->ctx->device_name(); }
+
+}  // namespace st::gpu

@@ -1,0 +1,37 @@
+// The compute pipelines of gpu/ (evaluate, shadow pass, layout probe) over one
+// descriptor-set layout (shaders/st_buffers.glsl), their SPIR-V compiled by glslc at build
+// time and embedded. Internal to gpu/.
+#pragma once
+#include <vulkan/vulkan.h>
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "gpu/layout.hpp"
+#include "gpu/vk_context.hpp"
+
+namespace st::gpu {
+
+// r32f: bench_gpu's baseline, the finest level as a plain float image (shaders/r32f.comp).
+enum class Kernel : uint32_t { evaluate = 0, shadow_pass = 1, layout_probe = 2, r32f = 3 };
+inline constexpr uint32_t kKernelCount = 4;
+
+class Kernels {
+ public:
+  // Pipelines plus `sets` descriptor sets.
+  void create(VkContext& ctx, uint32_t sets);
+  // Points descriptor set `i` at the six buffers, in binding order.
+  VkDescriptorSet bind(VkContext& ctx, uint32_t i, const std::array<VkBuffer, 6>& buffers);
+  void record(VkCommandBuffer cmd, Kernel k, VkDescriptorSet set, const uint32_t (&pc)[layout::kPcWords]) const;
+  void destroy(VkContext& ctx);
+
+ private:
+  VkDescriptorSetLayout set_layout_ = VK_NULL_HANDLE;
+  VkPipelineLayout pipeline_layout_ = VK_NULL_HANDLE;
+  VkDescriptorPool descriptor_pool_ = VK_NULL_HANDLE;
+  std::array<VkPipeline, kKernelCount> pipelines_{};
+  std::vector<VkDescriptorSet> sets_;
+};
+
+}  // namespace st::gpu

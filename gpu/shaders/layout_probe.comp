@@ -1,0 +1,20 @@
+#version 450
+// Writes the layout constants this shader compiles against, in a fixed order, so a test
+// compares them with the C++ side's (tests/gpu/gpu_layout_test.cpp).
+#include "st_buffers.glsl"
+
+void main() {
+  if (gl_GlobalInvocationID.x != 0u) return;
+  const uint v[] = uint[](kLayoutVersion, kPageMagic, kPtMagic, kPtVersion, kPtMapLevel, kPtSkipLevel,
+                          kPtEncoding, kPtSlotCount, kPtSlotWords, kPtSkipCoarse, kPtSkipEntries, kPtSkipSlots,
+                          kPtChildSlots, kPtPcfTable, kPtHeaderWords, kNoSlot, kChildTableWords, kEntryWords,
+                          kKindConstant, kKindTile, kKindIndex, kMaxPcf, kPcfTableStride, kMaxMapLevel,
+                          kLitDepthBits, kGridHeaderWords, kQueryWords, kQueryX, kQueryY, kQueryReceiver,
+                          kQueryFootprint, kQueryR, kQueryLevel, kLevelFromFootprint, kFbUsed, kFbDropped,
+                          kFbHoles, kFbAbsentTaps, kFbCapacity, kFbHeaderWords, kFbRecordWords, kFbRecCount,
+                          kFbRecLevel, kFbRecX, kFbRecY, kFbRecValue, kFbRecKind, kFbMaxProbes, kFbChildKeyBit,
+                          kPcCount, kPcHeight, kPcKernel, kPcFlags, kPcOrigin, kPcAxisU, kPcAxisV, kPcForward,
+                          kPcNear, kPcNormalOffset, kPcFootprint, kPcWords, kFlagNeighbourFootprint,
+                          kWorkgroupSize, kProbeWords);
+  for (uint i = 0u; i < kProbeWords; ++i) st_output[i] = uintBitsToFloat(i < v.length() ? v[i] : 0u);
+}

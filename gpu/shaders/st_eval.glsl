@@ -1,0 +1,375 @@
+// shadowtile GPU evaluators: the page-table walk over the GPU tile cache and the MH, MMH
+// and DAG-MH tile decoders, the same operations as the CPU's (tiles/core/page_table.hpp,
+// mh_quadtree_reader.cpp, dagmh_traverse.hpp, dagmh_values.hpp, client/remote_map.cpp),
+// so every answer is bit-exact with the CPU's (gpu/GPU_LAYOUT.md "Exactness").
+//
+// An engine includes this file in its own compute or fragment shader. Before including
+// it, define three accessors over its buffers (arrays of uint) and include st_layout.h:
+//   #define ST_POOL(w) my_pool[w]      // the slot pool (slot s at word s * slot_words)
+//   #define ST_PAGE(w) my_page[w]      // the page-table buffer
+//   #define ST_FB(w)   my_feedback[w]  // the feedback buffer (read-write, atomics)
+// Entry points: st_depth(level, x, y, probe), st_pcf(level, x, y, r, receiver, probe),
+// st_lookup(x, y, receiver, footprint, r, probe) (level from a footprint, MH §3.3).
+#ifndef SHADOWTILE_GPU_ST_EVAL_GLSL
+#define SHADOWTILE_GPU_ST_EVAL_GLSL
+
+// What one query or pixel needed and did not find: the last absent entry it recorded
+// (so a pixel counts once per tile) and whether any tap was answered coarsely.
+struct StProbe {
+  uint last_key;
+  bool hole;
+};
+
+StProbe st_probe() {
+  StProbe p;
+  p.last_key = 0u;
+  p.hole = false;
+  return p;
+}
+
+// ---- the lit test, in integers ----
+// receiver <= value as IEEE binary32 compares it, on the bit patterns: a device that
+// flushes subnormals in float compares (no shaderDenormPreserveFloat32) still answers
+// like the CPU. NaN on either side is not lit; -0 == +0.
+int st_order(uint b) {
+  return (b & 0x80000000u) != 0u ? -int(b & 0x7FFFFFFFu) : int(b);
+}
+bool st_lit(float receiver, float value) {
+  const uint rb = floatBitsToUint(receiver), vb = floatBitsToUint(value);
+  if ((rb & 0x7FFFFFFFu) > 0x7F800000u || (vb & 0x7FFFFFFFu) > 0x7F800000u) return false;
+  return st_order(rb) <= st_order(vb);
+}
+
+// ---- feedback (sparse virtual texturing style): absent tiles into a hash set ----
+void st_feedback(uint key, uint level, uint ex, uint ey, uint value_bits, uint kind_word, inout StProbe probe) {
+  probe.hole = true;
+  atomicAdd(ST_FB(kFbAbsentTaps), 1u);
+  if (probe.last_key == key) return;
+  probe.last_key = key;
+  const uint cap = ST_FB(kFbCapacity);
+  uint h = (key * 0x9E3779B1u) & (cap - 1u);
+  for (uint i = 0u; i < kFbMaxProbes; ++i) {
+    const uint old = atomicCompSwap(ST_FB(kFbHeaderWords + h), 0u, key);
+    const uint rec = kFbHeaderWords + cap + h * kFbRecordWords;
+    if (old == 0u) {  // this invocation claimed the key: it writes the record
+      atomicAdd(ST_FB(kFbUsed), 1u);
+      ST_FB(rec + kFbRecLevel) = level;
+      ST_FB(rec + kFbRecX) = ex;
+      ST_FB(rec + kFbRecY) = ey;
+      ST_FB(rec + kFbRecValue) = value_bits;
+      ST_FB(rec + kFbRecKind) = kind_word;
+      atomicAdd(ST_FB(rec + kFbRecCount), 1u);
+      return;
+    }
+    if (old == key) {
+      atomicAdd(ST_FB(rec + kFbRecCount), 1u);
+      return;
+    }
+    h = (h + 1u) & (cap - 1u);
+  }
+  atomicAdd(ST_FB(kFbDropped), 1u);
+}
+
+// ---- small helpers ----
+uint st_coarse_index(uint level) { return ((1u << (2u * level)) - 1u) / 3u; }
+uint st_byte(uint base_word, uint byte_offset) {
+  return (ST_POOL(base_word + (byte_offset >> 2u)) >> (8u * (byte_offset & 3u))) & 0xFFu;
+}
+
+// ---- MH and MMH tiles (MH §3.2; tiles/core/MHQUAD.md) ----
+float st_mh_depth(uint base, uint level, uint x, uint y, bool relative) {
+  level = min(level, kMaxMapLevel);
+  const uint hdr = ST_POOL(base + 1u);
+  const uint levels = (hdr >> 16u) & 0xFFu;
+  const bool root_leaf = ((hdr >> 24u) & 1u) != 0u;
+  const uint tree = base + 4u + ((levels + 3u) >> 2u);
+  uint pos = 0u;
+  uint code = root_leaf ? 1u : 3u;
+  uint val_pos = root_leaf ? 0u : 1u;
+  precise float value = uintBitsToFloat(ST_POOL(tree + val_pos));
+  uint l = 0u;
+  while (l < level && code != 1u) {
+    const uint bit = level - (l + 1u);
+    const uint slot = ((x >> bit) & 1u) | (((y >> bit) & 1u) << 1u);
+    const uint w = ST_POOL(tree + pos);
+    const uint mask = w & 0xFFu;
+    const uint child_code = (mask >> (2u * slot)) & 3u;
+    if (child_code == 0u) break;  // missing child: the last valued node answers
+    const uint shift = relative ? ((w >> 12u) & 0xFu) : st_byte(base, 16u + l);
+    const uint child = (((pos >> shift) + (w >> 16u)) << shift) + uint(bitCount(mask & ((1u << (2u * slot)) - 1u)));
+    pos = child;
+    code = child_code;
+    l += 1u;
+    if (code != 2u) {
+      const uint vp = code == 1u ? child : child + 1u;
+      if (relative) {
+        const float s = uintBitsToFloat(ST_POOL(tree + vp));
+        // mmh_add: one binary32 addition, nothing contracted into it
+        value = ((w >> (8u + slot)) & 1u) != 0u ? s : value + s;
+      } else {
+        val_pos = vp;
+      }
+    }
+  }
+  return relative ? value : uintBitsToFloat(ST_POOL(tree + val_pos));
+}
+
+// ---- DAG-MH tiles (DAG-MH §3.5 Alg. 1, §3.4 Alg. 2; tiles/core/DAGMH.md) ----
+struct StDagCursor {
+  uint ref, level, base, last;
+};
+
+float st_dag_value(uint base, uint chunks, uint mults, uint index) {
+  const uint c = chunks + (index / 32u) * 6u;
+  const uint bit = index % 32u;
+  const uint mask = ST_POOL(c + 1u);
+  if (((mask >> bit) & 1u) == 0u) return uintBitsToFloat(ST_POOL(c));
+  const uint k = ST_POOL(c + 5u) & 0xFFu;
+  const uint rank = uint(bitCount(mask & ((1u << bit) - 1u)));
+  const uint pos = ST_POOL(c + 4u) + rank * k;
+  const uint wi = pos >> 5u, s = pos & 31u;
+  uint i = ST_POOL(mults + wi) >> s;
+  if (s != 0u) i |= ST_POOL(mults + wi + 1u) << (32u - s);
+  if (k == 32u) return uintBitsToFloat(i);
+  i &= (1u << k) - 1u;
+  const float c_l = uintBitsToFloat(ST_POOL(c + 2u));
+  const float c_f = uintBitsToFloat(ST_POOL(c + 3u));
+  // affine_value: the product rounded to float, then the sum; `precise` forbids the fma
+  precise float product = c_f * float(i);
+  precise float v = c_l + product;
+  return v;
+}
+
+float st_dag_depth(uint base, uint level, uint x, uint y) {
+  const uint finest = ST_POOL(base + 3u);
+  const uint skip_level = ST_POOL(base + 4u);
+  const uint nodes = base + (ST_POOL(base + 13u) >> 2u);
+  if (level > finest) {
+    const uint sh = level - finest;
+    x >>= sh;
+    y >>= sh;
+    level = finest;
+  }
+  const uint top = (1u << level) - 1u;
+  x = min(x, top);
+  y = min(y, top);
+  StDagCursor c;
+  if (level >= skip_level) {
+    const uint sh = level - skip_level;
+    const uint e = base + (ST_POOL(base + 12u) >> 2u) + 4u * (((y >> sh) << skip_level) + (x >> sh));
+    c.ref = ST_POOL(e);
+    c.level = ST_POOL(e + 1u);
+    c.base = ST_POOL(e + 2u);
+    c.last = ST_POOL(e + 3u);
+  } else {
+    c.ref = ST_POOL(base + 5u);
+    c.level = 0u;
+    c.base = 0u;
+    c.last = 0u;
+  }
+  // descend (dagmh_traverse.hpp View::descend)
+  while ((c.ref & 0xC0000000u) == 0x40000000u && c.level < level) {
+    const uint node = nodes + (c.ref & 0x3FFFFFFFu);
+    const uint flags = ST_POOL(node);
+    if ((flags & 0x100u) != 0u) c.last = c.base;
+    const uint sh = level - c.level - 1u;
+    const uint child = ((x >> sh) & 1u) | (((y >> sh) & 1u) << 1u);
+    c.level += 1u;
+    if (((flags >> child) & 1u) == 0u) {
+      c.ref = 0u;
+      break;
+    }
+    const uint rank = uint(bitCount(flags & 0xFu & ((1u << child) - 1u)));
+    const uint entry = node + 1u + 2u * rank;
+    c.base += ST_POOL(entry + 1u);
+    c.ref = ST_POOL(entry) | (((flags >> (4u + child)) & 1u) != 0u ? 0x80000000u : 0x40000000u);
+  }
+  // finish
+  uint index = c.last;
+  const uint tag = c.ref & 0xC0000000u;
+  if (tag == 0x40000000u) {
+    index = (ST_POOL(nodes + (c.ref & 0x3FFFFFFFu)) & 0x100u) != 0u ? c.base : c.last;
+  } else if (tag == 0x80000000u) {
+    const uint t = base + (ST_POOL(base + 14u) >> 2u) + (c.ref & 0x3FFFFFFFu) * 3u;
+    const uint w0 = ST_POOL(t), w1 = ST_POOL(t + 1u), w2 = ST_POOL(t + 2u);
+    const uint depth = min(level - c.level, 3u);
+    uint p[4];
+    p[0] = 0u;
+    for (uint n = 1u; n <= depth; ++n) {
+      const uint sh = level - c.level - n;
+      const uint child = ((x >> sh) & 1u) | (((y >> sh) & 1u) << 1u);
+      const uint stride = n == 1u ? 21u : n == 2u ? 5u : 1u;
+      p[n] = p[n - 1u] + 1u + stride * child;
+    }
+    for (int n = int(depth); n >= 0; --n) {
+      const uint q = p[n];
+      const uint word = q < 32u ? w0 : q < 64u ? w1 : w2;
+      if (((word >> (q & 31u)) & 1u) == 0u) continue;
+      const uint below_mask = (1u << (q & 31u)) - 1u;
+      uint before;
+      if (q < 32u) before = uint(bitCount(w0 & below_mask));
+      else if (q < 64u) before = uint(bitCount(w0)) + uint(bitCount(w1 & below_mask));
+      else before = uint(bitCount(w0)) + uint(bitCount(w1)) + uint(bitCount(w2 & below_mask));
+      index = c.base + before;
+      break;
+    }
+  }
+  return st_dag_value(base, base + (ST_POOL(base + 15u) >> 2u), base + (ST_POOL(base + 16u) >> 2u), index);
+}
+
+float st_tile_depth(uint slot, uint rel, uint x, uint y) {
+  const uint base = slot * ST_PAGE(kPtSlotWords);
+  const uint enc = ST_PAGE(kPtEncoding);
+  if (enc == 2u) return st_dag_depth(base, rel, x, y);
+  return st_mh_depth(base, rel, x, y, enc == 1u);
+}
+
+// ---- the page-table walk (page_table.hpp walk_page_table; remote_map.cpp depth_locked) ----
+// Where a texel's answer lives, and the square (level l, ex, ey) of texels whose walk
+// ends the same way (same value, same tile, same absent tile): PCF taps inside it skip
+// the walk (the shared walk of MH §3.3, at the page-table level).
+struct StWalk {
+  uint kind;  // 0 value, 1 tile (decode in `slot`), 2 absent (value = the coarse answer)
+  float value;
+  uint slot, rel, l, ex, ey;
+  uint key, value_bits, kind_word;  // absent: what the feedback records
+};
+
+StWalk st_walk(uint level, uint x, uint y) {
+  StWalk w;
+  w.kind = 0u;
+  w.slot = kNoSlot;
+  w.rel = 0u;
+  w.l = level;
+  w.ex = x;
+  w.ey = y;
+  w.key = 0u;
+  w.value_bits = kLitDepthBits;
+  w.kind_word = 0u;
+  const uint map_level = ST_PAGE(kPtMapLevel);
+  if (level > map_level || (x >> level) != 0u || (y >> level) != 0u) {
+    w.value = uintBitsToFloat(kLitDepthBits);
+    return w;
+  }
+  const uint k = ST_PAGE(kPtSkipLevel);
+  if (level < k) {
+    w.value = uintBitsToFloat(ST_PAGE(ST_PAGE(kPtSkipCoarse) + st_coarse_index(level) + (y << level) + x));
+    return w;
+  }
+  uint l = k;
+  uint ex = x >> (level - k), ey = y >> (level - k);
+  uint e = (ey << k) + ex;
+  uint value_bits = ST_PAGE(ST_PAGE(kPtSkipEntries) + kEntryWords * e);
+  uint kind_word = ST_PAGE(ST_PAGE(kPtSkipEntries) + kEntryWords * e + 1u);
+  uint ptr = ST_PAGE(ST_PAGE(kPtSkipSlots) + e);
+  uint key = e + 1u;
+  for (;;) {
+    const uint kind = kind_word & 0xFFu;
+    w.l = l;
+    w.ex = ex;
+    w.ey = ey;
+    w.value = uintBitsToFloat(value_bits);
+    if (kind == kKindConstant || l == level) return w;
+    const uint rel = level - l;
+    const uint lx = x - (ex << rel), ly = y - (ey << rel);
+    if (ptr == kNoSlot) {
+      w.kind = 2u;
+      w.key = key;
+      w.value_bits = value_bits;
+      w.kind_word = kind_word;
+      return w;
+    }
+    if (kind == kKindTile) {
+      w.kind = 1u;
+      w.slot = ptr;
+      w.rel = rel;
+      return w;
+    }
+    // an index tile: a CutGrid of d levels in slot `ptr`
+    const uint d = (kind_word >> 8u) & 0xFFu;
+    const uint g = ptr * ST_PAGE(kPtSlotWords) + kGridHeaderWords;
+    if (rel < d) {
+      w.l = level;
+      w.ex = x;
+      w.ey = y;
+      w.value = uintBitsToFloat(ST_POOL(g + st_coarse_index(rel) + (ly << rel) + lx));
+      return w;
+    }
+    const uint cx = lx >> (rel - d), cy = ly >> (rel - d);
+    const uint c = (cy << d) + cx;
+    ex = (ex << d) + cx;
+    ey = (ey << d) + cy;
+    l += d;
+    const uint ent = g + st_coarse_index(d) + kEntryWords * c;
+    value_bits = ST_POOL(ent);
+    kind_word = ST_POOL(ent + 1u) & 0xFFFFu;
+    key = kFbChildKeyBit | (ptr * kChildTableWords + c);
+    ptr = ST_PAGE(ST_PAGE(kPtChildSlots) + ptr * kChildTableWords + c);
+  }
+  return w;  // not reached
+}
+
+bool st_in_walk(StWalk w, uint level, uint x, uint y) {
+  return (x >> (level - w.l)) == w.ex && (y >> (level - w.l)) == w.ey;
+}
+
+// The answer for texel (x, y) of `level` given a walk that covers it.
+float st_answer(StWalk w, uint level, uint x, uint y, inout StProbe probe) {
+  if (w.kind == 1u) {
+    const uint rel = level - w.l;
+    return st_tile_depth(w.slot, rel, x - (w.ex << rel), y - (w.ey << rel));
+  }
+  if (w.kind == 2u) st_feedback(w.key, w.l, w.ex, w.ey, w.value_bits, w.kind_word, probe);
+  return w.value;
+}
+
+float st_depth(uint level, uint x, uint y, inout StProbe probe) {
+  return st_answer(st_walk(level, x, y), level, x, y, probe);
+}
+
+uint st_pcf_tap(uint x, uint i, uint r, uint side) {
+  const int t = int(x) - int((r - 1u) / 2u) + int(i);
+  return t < 0 ? 0u : uint(t) >= side ? side - 1u : uint(t);
+}
+
+// r x r PCF (evaluator.hpp: lit taps / (r * r) in float, taps clamped to the map). The
+// quotient comes from a table the host filled with the CPU's division, so no GPU
+// division (not correctly rounded in Vulkan) enters the answer.
+float st_pcf(uint level, uint x, uint y, uint r, float receiver, inout StProbe probe) {
+  r = clamp(r, 1u, kMaxPcf);
+  if (level > ST_PAGE(kPtMapLevel)) return 1.0;
+  const uint side = 1u << level;
+  uint lit = 0u;
+  StWalk w = st_walk(level, st_pcf_tap(x, 0u, r, side), st_pcf_tap(y, 0u, r, side));
+  for (uint j = 0u; j < r; ++j) {
+    const uint ty = st_pcf_tap(y, j, r, side);
+    for (uint i = 0u; i < r; ++i) {
+      const uint tx = st_pcf_tap(x, i, r, side);
+      if (!st_in_walk(w, level, tx, ty)) w = st_walk(level, tx, ty);  // else: the same walk
+      lit += st_lit(receiver, st_answer(w, level, tx, ty, probe)) ? 1u : 0u;
+    }
+  }
+  return uintBitsToFloat(ST_PAGE(ST_PAGE(kPtPcfTable) + (r - 1u) * kPcfTableStride + lit));
+}
+
+// The level choice of Evaluator::pcf_footprint, the one place it is made on the GPU: the
+// level where one texel covers about `footprint` finest texels, i.e. coarser by
+// ceil(log2(footprint)) levels, computed exactly from the float's bits (equal to the
+// CPU's std::ceil(std::log2(double(footprint))) for every float footprint).
+uint st_coarser_levels(float footprint, uint finest) {
+  if (!(footprint > 1.0)) return 0u;
+  const uint b = floatBitsToUint(footprint);
+  const uint e = (b >> 23u) & 0xFFu;
+  if (e == 0xFFu) return finest;  // +inf
+  const uint c = (e - 127u) + ((b & 0x7FFFFFu) != 0u ? 1u : 0u);
+  return min(finest, c);
+}
+
+// (x, y): texel of the finest level. Level from the footprint, then r x r PCF there.
+float st_lookup(uint x, uint y, float receiver, float footprint, uint r, inout StProbe probe) {
+  const uint finest = ST_PAGE(kPtMapLevel);
+  const uint coarser = st_coarser_levels(footprint, finest);
+  return st_pcf(finest - coarser, x >> coarser, y >> coarser, r, receiver, probe);
+}
+
+#endif

@@ -1,0 +1,113 @@
+// The buffer layouts the GPU evaluators read, shared by GLSL and C++ (the way PNanoVDB.h
+// mirrors NanoVDB.h): C++ includes it for the constants and the GLSL shaders include it
+// for the same names. Drawn with sizes and offsets in gpu/GPU_LAYOUT.md; every constant
+// here is a FORMAT CONSTANT of the GPU mirror (tests/gpu/gpu_layout_test.cpp pins it, on
+// the C++ side with static_asserts and on the shader side with a probe shader that
+// writes back every constant it sees).
+//
+// All buffers are arrays of 32-bit words. Offsets are in words unless a name says bytes.
+#ifndef SHADOWTILE_GPU_ST_LAYOUT_H
+#define SHADOWTILE_GPU_ST_LAYOUT_H
+
+#ifdef __cplusplus
+#include <cstdint>
+#define ST_UINT(name, value) inline constexpr uint32_t name = value;
+namespace st::gpu::layout {
+#else
+#define ST_UINT(name, value) const uint name = value;
+#endif
+
+ST_UINT(kLayoutVersion, 1u)
+
+// ---- page-table buffer (binding kBindPage) ----
+// header words, then the skip grid's coarse values and entries, the skip grid's slot
+// pointers, one child-pointer table per slot, and the PCF quotient table.
+ST_UINT(kPageMagic, 0x50475453u)  // "STGP"
+ST_UINT(kPtMagic, 0u)
+ST_UINT(kPtVersion, 1u)
+ST_UINT(kPtMapLevel, 2u)       // L: finest level of the map
+ST_UINT(kPtSkipLevel, 3u)      // K: level of the skip grid's entries
+ST_UINT(kPtEncoding, 4u)       // 0 MH, 1 MMH, 2 DAG-MH (st::Encoding)
+ST_UINT(kPtSlotCount, 5u)
+ST_UINT(kPtSlotWords, 6u)      // slot stride in the pool, in words
+ST_UINT(kPtSkipCoarse, 7u)     // word offset: (4^K - 1) / 3 coarse values (f32)
+ST_UINT(kPtSkipEntries, 8u)    // word offset: 4^K entries, 2 words each (f32 value, kind | levels << 8)
+ST_UINT(kPtSkipSlots, 9u)      // word offset: 4^K slot pointers (kNoSlot: not on the GPU)
+ST_UINT(kPtChildSlots, 10u)    // word offset: slot_count * kChildTableWords slot pointers
+ST_UINT(kPtPcfTable, 11u)      // word offset: kMaxPcf * kPcfTableStride f32 quotients
+ST_UINT(kPtHeaderWords, 16u)
+
+ST_UINT(kNoSlot, 0xFFFFFFFFu)
+ST_UINT(kChildTableWords, 256u)  // 4^kMaxIndexLevels entries of an index tile
+ST_UINT(kEntryWords, 2u)
+ST_UINT(kKindConstant, 0u)       // st::EntryKind
+ST_UINT(kKindTile, 1u)
+ST_UINT(kKindIndex, 2u)
+ST_UINT(kMaxPcf, 9u)
+ST_UINT(kPcfTableStride, 82u)    // lit taps 0..81; entry (r - 1) * stride + lit = float(lit) / float(r * r)
+ST_UINT(kMaxMapLevel, 20u)
+ST_UINT(kLitDepthBits, 0x3F800000u)  // 1.0f
+
+// An index tile in a slot is a serialized CutGrid: magic, levels, coarse values, entries.
+ST_UINT(kGridHeaderWords, 2u)
+
+// ---- queries (binding kBindInput of evaluate.comp) ----
+ST_UINT(kQueryWords, 6u)
+ST_UINT(kQueryX, 0u)          // texel x: of `level`, or of the finest level (kLevelFromFootprint)
+ST_UINT(kQueryY, 1u)
+ST_UINT(kQueryReceiver, 2u)   // f32 light-space depth of the receiver
+ST_UINT(kQueryFootprint, 3u)  // f32 footprint in finest texels (kLevelFromFootprint only)
+ST_UINT(kQueryR, 4u)          // PCF kernel side 1..9; 0: answer the depth itself
+ST_UINT(kQueryLevel, 5u)      // explicit level, or kLevelFromFootprint
+ST_UINT(kLevelFromFootprint, 0xFFFFFFFFu)
+
+// ---- feedback buffer (binding kBindFeedback) ----
+// header words, then kFbCapacity keys (0 = empty; a hash set), then one record per key.
+ST_UINT(kFbUsed, 0u)        // keys claimed
+ST_UINT(kFbDropped, 1u)     // absent tiles that found no room (set full or probes exhausted)
+ST_UINT(kFbHoles, 2u)       // queries/pixels answered from a coarser level
+ST_UINT(kFbAbsentTaps, 3u)  // taps answered from a coarser level
+ST_UINT(kFbCapacity, 4u)    // power of two, written by the host
+ST_UINT(kFbHeaderWords, 8u)
+ST_UINT(kFbRecordWords, 6u)
+ST_UINT(kFbRecCount, 0u)      // pixels (or queries) that needed the tile
+ST_UINT(kFbRecLevel, 1u)      // the tile's root: level, x, y (its id is make_tile_id of them)
+ST_UINT(kFbRecX, 2u)
+ST_UINT(kFbRecY, 3u)
+ST_UINT(kFbRecValue, 4u)      // the page-table entry naming the tile: f32 value
+ST_UINT(kFbRecKind, 5u)       //   and kind | index_levels << 8
+ST_UINT(kFbMaxProbes, 32u)
+// Keys name the entry that points at the absent tile: skip entry e -> e + 1; entry c of
+// the index tile in slot s -> kFbChildKeyBit | (s * kChildTableWords + c).
+ST_UINT(kFbChildKeyBit, 0x80000000u)
+
+// ---- push constants (words) ----
+ST_UINT(kPcCount, 0u)       // evaluate: queries; shadow pass: width
+ST_UINT(kPcHeight, 1u)      // shadow pass: height
+ST_UINT(kPcKernel, 2u)      // shadow pass: PCF kernel side 1..9
+ST_UINT(kPcFlags, 3u)       // shadow pass: bit 0 per-pixel footprint from neighbours
+ST_UINT(kPcOrigin, 4u)      // f32 x3: the light box's near-plane corner
+ST_UINT(kPcAxisU, 7u)       // f32 x3: axis_u / extent
+ST_UINT(kPcAxisV, 10u)      // f32 x3: axis_v / extent
+ST_UINT(kPcForward, 13u)    // f32 x3: forward / (far - near)
+ST_UINT(kPcNear, 16u)       // f32: near / (far - near)
+ST_UINT(kPcNormalOffset, 17u)  // f32: world units along the normal
+ST_UINT(kPcFootprint, 18u)  // f32: footprint when bit 0 of flags is clear
+ST_UINT(kPcWords, 20u)
+ST_UINT(kFlagNeighbourFootprint, 1u)
+
+// ---- bindings (descriptor set 0) ----
+ST_UINT(kBindPool, 0u)
+ST_UINT(kBindPage, 1u)
+ST_UINT(kBindInput, 2u)     // evaluate: queries; shadow pass: positions (f32 x4 per pixel)
+ST_UINT(kBindNormals, 3u)   // shadow pass: normals (f32 x4 per pixel)
+ST_UINT(kBindOutput, 4u)    // f32 per query or pixel
+ST_UINT(kBindFeedback, 5u)
+ST_UINT(kWorkgroupSize, 64u)
+ST_UINT(kProbeWords, 64u)   // layout_probe.comp writes this many words
+
+#ifdef __cplusplus
+}  // namespace st::gpu::layout
+#endif
+#undef ST_UINT
+#endif

@@ -1,0 +1,92 @@
+#include "gpu/shadow_reference.hpp"
+
+#include <algorithm>
+#include <bit>
+#include <cfloat>
+#include <cmath>
+
+#include "tiles/core/light.hpp"
+
+static_assert(FLT_EVAL_METHOD == 0, "the shadow pass's twin must evaluate in float");
+#if defined(__FAST_MATH__)
+#error "gpu/ must not be built with -ffast-math: the CPU twin must round like the shader"
+#endif
+
+namespace st::gpu {
+
+ShadowLight shadow_light(const PackHeader& h) {
+  if (h.light_kind != LightKind::sun) throw GpuError("GpuMap: the GPU shadow pass supports sun lights only");
+  const LightSpace ls = LightSpace::from_array(h.light_kind, h.light);
+  ShadowLight l;
+  const Vec3d o = ls.origin(), u = ls.axis_u(), v = ls.axis_v(), f = ls.forward();
+  const double e = ls.extent_uv(), depth = ls.far_plane() - ls.near_plane();
+  l.origin = {float(o.x), float(o.y), float(o.z)};
+  l.axis_u = {float(u.x / e), float(u.y / e), float(u.z / e)};
+  l.axis_v = {float(v.x / e), float(v.y / e), float(v.z / e)};
+  l.forward = {float(f.x / depth), float(f.y / depth), float(f.z / depth)};
+  l.near_scaled = float(ls.near_plane() / depth);
+  return l;
+}
+
+namespace {
+
+struct Point {
+  float u, v, d;
+};
+
+bool light_point(const ShadowLight& l, const ShadowPassInput& in, size_t p, Point& out) {
+  const float* q = in.positions.data() + 4 * p;
+  const float* n = in.normals.data() + 4 * p;
+  if (q[3] == 0.0f) return false;
+  const float off = in.normal_offset;
+  float r[3];
+  for (int i = 0; i < 3; ++i) {
+    const float moved = n[i] * off;
+    r[i] = (q[i] + moved) - l.origin[i];
+  }
+  auto dot = [&](const std::array<float, 3>& a) {
+    const float x = r[0] * a[0], y = r[1] * a[1], z = r[2] * a[2];
+    const float xy = x + y;
+    return xy + z;
+  };
+  out.u = dot(l.axis_u);
+  out.v = dot(l.axis_v);
+  out.d = dot(l.forward) - l.near_scaled;
+  return true;
+}
+
+}  // namespace
+
+void shadow_pass_reference(const Evaluator& ev, const PackHeader& h, const ShadowPassInput& in, std::span<float> out) {
+  const ShadowLight l = shadow_light(h);
+  const uint32_t finest = h.map_level;
+  const float side = std::ldexp(1.0f, int(finest));
+  const size_t pixels = size_t(in.width) * in.height;
+  for (size_t p = 0; p < pixels; ++p) {
+    Point c;
+    if (!light_point(l, in, p, c) || !(c.u >= 0 && c.u < 1 && c.v >= 0 && c.v < 1 && c.d >= 0 && c.d <= 1)) {
+      out[p] = 1.0f;
+      continue;
+    }
+    const uint32_t top = (1u << finest) - 1;
+    const uint32_t x = std::min(uint32_t(std::floor(c.u * side)), top);
+    const uint32_t y = std::min(uint32_t(std::floor(c.v * side)), top);
+    float footprint = in.footprint;
+    if (in.neighbour_footprint) {
+      float f = 0;
+      Point nb;
+      const size_t px = p % in.width, py = p / in.width;
+      if (px + 1 < in.width && light_point(l, in, p + 1, nb))
+        f = std::max(f, std::max(std::fabs(nb.u - c.u), std::fabs(nb.v - c.v)));
+      if (py + 1 < in.height && light_point(l, in, p + in.width, nb))
+        f = std::max(f, std::max(std::fabs(nb.u - c.u), std::fabs(nb.v - c.v)));
+      footprint = f * side;
+    }
+    // Evaluator::pcf_footprint's level choice on the finest texel (exact: see st_eval.glsl).
+    uint32_t coarser = 0;
+    if (footprint > 1) coarser = uint32_t(std::min<double>(finest, std::ceil(std::log2(double(footprint)))));
+    out[p] = ev.pcf(finest - coarser, x >> coarser, y >> coarser, in.kernel, c.d);
+  }
+}
+
+}  // namespace st::gpu

@@ -1,0 +1,84 @@
+// The Vulkan 1.2 compute context behind GpuMap: instance (optionally with the Khronos
+// validation layer and a debug messenger that counts every error and warning), the one
+// physical device chosen by name, one compute queue, buffers and compute pipelines.
+// Internal to gpu/.
+//
+// Device choice, never by chance: the name asked for (GpuOptions::device, else the
+// environment variable SHADOWTILE_VK_DEVICE) must be a substring of exactly one device's
+// name; with no name asked for, the machine must have exactly one device. Anything else is
+// a GpuError listing the devices there are.
+//
+// Errors: every failing Vulkan call becomes a GpuError naming the call and its VkResult.
+#pragma once
+#include <vulkan/vulkan.h>
+
+#include <atomic>
+#include <cstdint>
+#include <mutex>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "gpu/gpu_map.hpp"
+
+namespace st::gpu {
+
+// Throws GpuError("Vulkan: <call> failed: <VkResult>") unless r is VK_SUCCESS.
+void vk_check(VkResult r, const char* call);
+const char* vk_result_name(VkResult r);
+
+struct VkBufferBox {
+  VkBuffer buffer = VK_NULL_HANDLE;
+  VkDeviceMemory memory = VK_NULL_HANDLE;
+  VkDeviceSize size = 0;
+  void* mapped = nullptr;  // host-visible buffers stay mapped
+  bool host_visible = false;
+};
+
+class VkContext {
+ public:
+  VkContext(const std::string& device_name, bool validation);
+  ~VkContext();
+  VkContext(const VkContext&) = delete;
+  VkContext& operator=(const VkContext&) = delete;
+
+  VkDevice device() const { return device_; }
+  VkQueue queue() const { return queue_; }
+  uint32_t queue_family() const { return family_; }
+  const std::string& device_name() const { return name_; }
+  const VkPhysicalDeviceProperties& properties() const { return props_; }
+  uint32_t timestamp_bits() const { return timestamp_bits_; }  // 0: no timestamps on the queue
+
+  // Storage buffer. `host`: host-visible and coherent, mapped (staging, readback, small
+  // inputs); else device-local where the device has such memory (the pool, the page table).
+  VkBufferBox make_buffer(VkDeviceSize size, bool host, VkBufferUsageFlags extra_usage = 0);
+  void destroy(VkBufferBox& b);
+
+  VkShaderModule make_shader(std::span<const uint32_t> spirv);
+
+  // Validation messages seen (errors and warnings) and the first one's text.
+  uint64_t validation_messages() const { return messages_.load(); }
+  std::string first_validation_message() const;
+
+ private:
+  static VKAPI_ATTR VkBool32 VKAPI_CALL on_message(VkDebugUtilsMessageSeverityFlagBitsEXT severity,
+                                                   VkDebugUtilsMessageTypeFlagsEXT types,
+                                                   const VkDebugUtilsMessengerCallbackDataEXT* data, void* self);
+  void release() noexcept;
+  uint32_t memory_type(uint32_t bits, VkMemoryPropertyFlags want, VkMemoryPropertyFlags fallback) const;
+
+  VkInstance instance_ = VK_NULL_HANDLE;
+  VkDebugUtilsMessengerEXT messenger_ = VK_NULL_HANDLE;
+  VkPhysicalDevice physical_ = VK_NULL_HANDLE;
+  VkDevice device_ = VK_NULL_HANDLE;
+  VkQueue queue_ = VK_NULL_HANDLE;
+  uint32_t family_ = 0, timestamp_bits_ = 0;
+  std::string name_;
+  VkPhysicalDeviceProperties props_{};
+  VkPhysicalDeviceMemoryProperties memory_{};
+  std::atomic<uint64_t> messages_{0};
+  mutable std::mutex message_mu_;
+  std::string first_message_;
+};
+
+}  // namespace st::gpu
