@@ -1,8 +1,9 @@
 // `shadowtile render (PACK | --server HOST:PORT --map NAME) --scene SCENE --camera ...
-//  [--size WxH] [--pcf R] [--diff] -o view.exr`: the scene from a camera, Lambert-shaded
+//  [--size WxH] [--pcf R] [--filter] [--diff] -o view.exr`: the scene from a camera, Lambert-shaded
 // with the map's shadows (tiles/bake/render.hpp), as RGB float EXR and PNG; --diff also
 // ray-traces the shadows and writes where the two differ.
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <memory>
 #include <thread>
@@ -51,6 +52,7 @@ struct RenderArgs {
   bool tls = false;
   uint32_t pcf = 0;
   bool diff = false;
+  bool filter = false;
   double timeout = 60;
   double cache_mb = 256;
 };
@@ -71,6 +73,8 @@ void run(const RenderArgs& a) {
   o.pcf_radius = a.pcf;
   o.diff = a.diff;
   const Camera cam = parse_camera(a.camera);
+  // Hierarchical filtering: one pixel's angle from the vertical field of view.
+  if (a.filter) o.pixel_angle = 2 * std::tan(cam.fov_deg * 3.14159265358979323846 / 360) / o.height;
   SceneOptions so;
   so.up = a.up == "z" ? UpAxis::z : UpAxis::y;
   const Scene scene = load_scene(a.scene, so);
@@ -147,6 +151,8 @@ Register reg{"render", "Render a camera view shaded with the map's shadows (EXR 
   sub.add_option("--size", a->size, "Image size WxH")->capture_default_str();
   sub.add_option("--pcf", a->pcf, "PCF radius R: (2R+1)^2 taps (0: single tap)")->capture_default_str()
       ->check(CLI::Range(0u, 4u));
+  sub.add_flag("--filter", a->filter,
+               "Hierarchical filtering: the level from each pixel's footprint, two levels blended (MH 2016 3.3)");
   sub.add_flag("--diff", a->diff, "Also ray-trace shadows and write where they differ");
   sub.add_option("--timeout", a->timeout, "Seconds to wait for the view's tiles (--server)")->capture_default_str();
   sub.add_option("--cache-mb", a->cache_mb, "Tile cache (MiB, --server)")->capture_default_str();

@@ -24,6 +24,7 @@
 #include "tiles/bake/scene.hpp"
 #include "common/error.hpp"
 #include "tiles/build/hierarchy.hpp"
+#include "tiles/core/evaluator.hpp"
 #include "tiles/core/interval.hpp"
 #include "tiles/core/light.hpp"
 #include "tiles/build/mh_build.hpp"
@@ -160,6 +161,23 @@ struct FloatMap {
   FloatMap& operator=(const FloatMap&) = delete;
   float at(uint64_t x, uint64_t y) const { return data[y * side + x]; }
 };
+
+// Uncompressed r x r PCF with the Evaluator::pcf semantics (taps clamped to the map).
+inline float array_pcf(const FloatMap& m, uint64_t x, uint64_t y, uint32_t r, float receiver) {
+  uint32_t lit = 0;
+  const uint64_t h = (r - 1) / 2;
+  if (x >= h && y >= h && x + (r - 1 - h) < m.side && y + (r - 1 - h) < m.side) {  // no clamping
+    const float* p = m.data + (y - h) * m.side + (x - h);
+    for (uint32_t j = 0; j < r; ++j, p += m.side)
+      for (uint32_t i = 0; i < r; ++i) lit += receiver <= p[i];
+    return float(lit) / float(r * r);
+  }
+  for (uint32_t j = 0; j < r; ++j) {
+    const float* row = m.data + st::pcf_tap(y, j, r, m.side) * m.side;
+    for (uint32_t i = 0; i < r; ++i) lit += receiver <= row[st::pcf_tap(x, i, r, m.side)];
+  }
+  return float(lit) / float(r * r);
+}
 
 // Bytes of this process's anonymous memory backed by transparent huge pages (to show
 // whether MADV_HUGEPAGE took effect), or -1 when /proc cannot tell.

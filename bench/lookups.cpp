@@ -43,22 +43,6 @@ struct Subject {
   uint64_t bytes = 0;
 };
 
-// Uncompressed r x r PCF with the Evaluator::pcf semantics (taps clamped to the map).
-inline float array_pcf(const FloatMap& m, uint64_t x, uint64_t y, uint32_t r, float receiver) {
-  uint32_t lit = 0;
-  const uint64_t h = (r - 1) / 2;
-  if (x >= h && y >= h && x + (r - 1 - h) < m.side && y + (r - 1 - h) < m.side) {  // no clamping
-    const float* p = m.data + (y - h) * m.side + (x - h);
-    for (uint32_t j = 0; j < r; ++j, p += m.side)
-      for (uint32_t i = 0; i < r; ++i) lit += receiver <= p[i];
-    return float(lit) / float(r * r);
-  }
-  for (uint32_t j = 0; j < r; ++j) {
-    const float* row = m.data + st::pcf_tap(y, j, r, m.side) * m.side;
-    for (uint32_t i = 0; i < r; ++i) lit += receiver <= row[st::pcf_tap(x, i, r, m.side)];
-  }
-  return float(lit) / float(r * r);
-}
 
 // Thread-CPU seconds for one pass of `op` over `list` (the machine may be shared with more
 // runnable threads than cores: CPU time leaves out the time this thread waited for a

@@ -3,6 +3,8 @@
 // from it) only where the header says so.
 #include "shadowtile/client.hpp"
 
+#include <algorithm>
+
 #include "client/fetcher.hpp"
 #include "client/map_access.hpp"
 #include "client/remote_map.hpp"
@@ -47,6 +49,21 @@ bool Map::lit(uint64_t x, uint64_t y, float receiver_depth) const noexcept {
 }
 float Map::visibility(const WorldPoint& world, uint32_t pcf_radius) const noexcept {
   return map_ ? map_->visibility(Vec3d{world.x, world.y, world.z}, pcf_radius) : 1.0f;
+}
+float Map::visibility_filtered(const WorldPoint& world, float footprint, uint32_t pcf_radius) const noexcept {
+  float out = 1.0f;
+  if (map_) map_->visibility_batch({&world, 1}, {&footprint, 1}, {&out, 1}, pcf_radius);
+  return out;
+}
+void Map::visibility(std::span<const WorldPoint> points, std::span<float> out, uint32_t pcf_radius) const noexcept {
+  if (map_) map_->visibility_batch(points, {}, out, pcf_radius);
+  else std::fill_n(out.begin(), std::min(points.size(), out.size()), 1.0f);
+}
+void Map::visibility_filtered(std::span<const WorldPoint> points, std::span<const float> footprints,
+                              std::span<float> out, uint32_t pcf_radius) const noexcept {
+  if (footprints.empty()) return;  // nothing to answer: the smallest span is empty
+  if (map_) map_->visibility_batch(points, footprints, out, pcf_radius);
+  else std::fill_n(out.begin(), std::min({points.size(), footprints.size(), out.size()}), 1.0f);
 }
 size_t Map::request_region(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, uint64_t h,
                            uint16_t priority) noexcept {

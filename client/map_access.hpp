@@ -13,6 +13,9 @@ namespace st::client {
 struct MapAccess {
   // The opened map behind a handle; throws st::Error for a default-constructed Map.
   static const RemoteMap& remote(const Map& m);
+  // A handle over a RemoteMap made without a Client (benchmarks and tests that fill the
+  // cache themselves through tile_arrived).
+  static Map wrap(std::shared_ptr<RemoteMap> m) { return Map(std::move(m)); }
 };
 
 inline const PackHeader& pack_header(const Map& m) { return MapAccess::remote(m).header(); }

@@ -7,8 +7,11 @@
 #include <cerrno>
 #include <cstring>
 
-#include "tiles/core/encoding.hpp"
+#include <shared_mutex>
+
 #include "common/error.hpp"
+#include "tiles/core/encoding.hpp"
+#include "tiles/core/filter_level.hpp"
 #include "tiles/core/interval.hpp"
 
 namespace st::client {
@@ -64,6 +67,7 @@ RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::v
   if (slot_size_for(header_) > options.max_slot_bytes)
     throw Error(what + ": tiles of up to " + std::to_string(header_.tile_bytes) +
                 " bytes exceed ClientOptions::max_slot_bytes " + std::to_string(options.max_slot_bytes));
+  slot_used_ = std::make_unique<std::atomic<uint32_t>[]>(cache_.slot_count());  // zero: never used
   slot_eval_.resize(cache_.slot_count());
   slot_grid_.resize(cache_.slot_count());
   // Pages are requested (one per record), resident (one per slot) or constant: sized so
@@ -110,54 +114,201 @@ size_t RemoteMap::want_tiles(std::span<const WantedTile> tiles) const noexcept {
   return queued;
 }
 
+namespace {
+size_t counter_shard() noexcept {
+  static std::atomic<unsigned> next{0};
+  thread_local const unsigned shard = next.fetch_add(1, std::memory_order_relaxed);
+  return shard;
+}
+}  // namespace
+
 // The page-table walk of PackEvaluator::depth, over the cache: where a tile is missing,
 // the entry's own value answers (the node's value stands for all its descendants).
-float RemoteMap::depth_locked(uint32_t level, uint64_t x, uint64_t y) const noexcept {
-  if (!texel_in_map(header_.map_level, level, x, y)) return kLitDepth;  // page_table.hpp's rule
+bool RemoteMap::enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc, float& value) const noexcept {
   PageEntry page;  // the cache's answer for the last tile the walk asked about
   auto resident_index = [&](uint64_t id, const GridEntry&) -> const CutGrid* {
-    page = cache_.access(id);
-    return page.state == PageState::resident ? &slot_grid_[page.slot] : nullptr;
+    page = cache_.lookup(id);
+    if (page.state != PageState::resident) return nullptr;
+    mark_used(page.slot);
+    return &slot_grid_[page.slot];
   };
   const PageHit hit = walk_page_table(grid_, level, x, y, resident_index);
-  if (hit.kind == PageHit::Kind::value) return hit.value;
-  if (hit.kind == PageHit::Kind::tile) page = cache_.access(hit.tile);
-  if (page.state == PageState::constant) return page.value;  // given up: coarse for good
-  if (page.state != PageState::resident) {
-    want_locked(hit.tile, hit.entry, options_.miss_priority);
-    ++stats_.coarse_answers;
-    return hit.value;
+  value = hit.value;
+  if (hit.kind == PageHit::Kind::value) return false;
+  if (hit.kind == PageHit::Kind::tile) page = cache_.lookup(hit.tile);
+  if (page.state == PageState::constant) {  // given up: coarse for good
+    value = page.value;
+    return false;
   }
+  if (page.state != PageState::resident) {
+    ++sc.missed;
+    ++sc.coarse;
+    bool noted = false;
+    for (size_t i = 0; i < sc.misses && !noted; ++i) noted = sc.miss_tile[i] == hit.tile;
+    if (!noted && sc.misses < LookupScratch::kMaxMisses) {
+      sc.miss_tile[sc.misses] = hit.tile;
+      sc.miss_entry[sc.misses++] = hit.entry;
+    }
+    return false;
+  }
+  mark_used(page.slot);
+  sc.ev = slot_eval_[page.slot].get();
+  sc.level = level;
+  sc.rel = hit.rel;
+  sc.x0 = x - hit.tx;
+  sc.y0 = y - hit.ty;
+  sc.side = uint64_t(1) << hit.rel;
+  return true;
+}
+
+float RemoteMap::depth_shared(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc) const noexcept {
+  if (!texel_in_map(header_.map_level, level, x, y)) return kLitDepth;  // page_table.hpp's rule
+  if (!sc.covers(level, x, y)) {
+    float value;
+    if (!enter_tile(level, x, y, sc, value)) return value;
+  }
+  ++sc.hits;
   try {
-    return slot_eval_[page.slot]->depth(hit.rel, hit.tx, hit.ty);
-  } catch (...) {  // an opened tile does not throw; if one did, stay coarse and alive
-    return hit.value;
+    return sc.ev->depth(sc.rel, x - sc.x0, y - sc.y0);
+  } catch (...) {  // an opened tile does not throw; if one did, stay lit and alive
+    return kLitDepth;
+  }
+}
+
+float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver,
+                            LookupScratch& sc) const noexcept {
+  r = std::clamp<uint32_t>(r, 1, kMaxPcf);
+  if (level > header_.map_level) return 1.0f;
+  const uint64_t side = uint64_t(1) << level;
+  if (r == 1) return receiver <= depth_shared(level, pcf_tap(x, 0, 1, side), pcf_tap(y, 0, 1, side), sc) ? 1.0f : 0.0f;
+  if (x < side && y < side) {
+    float value;
+    if (sc.covers(level, x, y) || enter_tile(level, x, y, sc, value)) {
+      // The tile clamps its taps to its own edges; that is the map's clamp exactly where
+      // the kernel stays inside the tile or leaves it only across an edge of the map.
+      const int64_t h = int64_t((r - 1) / 2), lo_x = int64_t(x) - h, lo_y = int64_t(y) - h;
+      const int64_t tx0 = int64_t(sc.x0), ty0 = int64_t(sc.y0), ts = int64_t(sc.side), s = int64_t(side);
+      const bool fits_x = (lo_x >= tx0 || tx0 == 0) && (lo_x + int64_t(r) <= tx0 + ts || tx0 + ts == s);
+      const bool fits_y = (lo_y >= ty0 || ty0 == 0) && (lo_y + int64_t(r) <= ty0 + ts || ty0 + ts == s);
+      if (fits_x && fits_y) {
+        ++sc.hits;
+        try {
+          return sc.ev->pcf(sc.rel, x - sc.x0, y - sc.y0, r, receiver);
+        } catch (...) {
+          return 1.0f;
+        }
+      }
+    }
+  }
+  // Across tile borders or missing tiles: tap by tap (taps in the current tile skip the
+  // walk), each answering like depth().
+  uint32_t lit_taps = 0;
+  for (uint32_t j = 0; j < r; ++j)
+    for (uint32_t i = 0; i < r; ++i)
+      lit_taps += receiver <= depth_shared(level, pcf_tap(x, i, r, side), pcf_tap(y, j, r, side), sc);
+  return float(lit_taps) / float(r * r);
+}
+
+void RemoteMap::finish_lookups(const LookupScratch& sc) const noexcept {
+  CounterShard& c = counters_[counter_shard() % kCounterShards];
+  if (sc.hits) c.hits.fetch_add(sc.hits, std::memory_order_relaxed);
+  if (sc.missed) c.misses.fetch_add(sc.missed, std::memory_order_relaxed);
+  if (sc.coarse) c.coarse.fetch_add(sc.coarse, std::memory_order_relaxed);
+  if (sc.misses == 0) return;
+  std::lock_guard lock(mu_);
+  for (size_t i = 0; i < sc.misses; ++i) want_locked(sc.miss_tile[i], sc.miss_entry[i], options_.miss_priority);
+}
+
+void RemoteMap::sync_lru_locked() noexcept {
+  for (uint32_t s = 0; s < cache_.slot_count(); ++s)
+    if (slot_used_[s].load(std::memory_order_relaxed) == epoch_) cache_.touch(s);
+  if (++epoch_ == 0) {  // after 2^32 evictions: start over rather than confuse old stamps
+    for (uint32_t s = 0; s < cache_.slot_count(); ++s) slot_used_[s].store(0, std::memory_order_relaxed);
+    epoch_ = 1;
   }
 }
 
 float RemoteMap::depth(uint32_t level, uint64_t x, uint64_t y) const noexcept {
-  std::lock_guard lock(mu_);
-  return depth_locked(level, x, y);
+  LookupScratch sc;
+  float d;
+  {
+    std::shared_lock lock(mu_);
+    d = depth_shared(level, x, y, sc);
+  }
+  finish_lookups(sc);
+  return d;
 }
 
 float RemoteMap::pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver) const noexcept {
-  r = std::clamp<uint32_t>(r, 1, kMaxPcf);
-  if (level > header_.map_level) return 1.0f;
-  const uint64_t side = uint64_t(1) << level;
-  uint32_t lit_taps = 0;
-  std::lock_guard lock(mu_);  // one lock for the whole kernel
-  for (uint32_t j = 0; j < r; ++j)
-    for (uint32_t i = 0; i < r; ++i)
-      lit_taps += receiver <= depth_locked(level, pcf_tap(x, i, r, side), pcf_tap(y, j, r, side));
-  return float(lit_taps) / float(r * r);
+  LookupScratch sc;
+  float v;
+  {
+    std::shared_lock lock(mu_);  // one lock for the whole kernel
+    v = pcf_shared(level, x, y, r, receiver, sc);
+  }
+  finish_lookups(sc);
+  return v;
+}
+
+void RemoteMap::pcf_batch(std::span<const PcfQuery> queries, std::span<float> out) const noexcept {
+  const size_t n = std::min(queries.size(), out.size());
+  LookupScratch sc;
+  {
+    std::shared_lock lock(mu_);
+    for (size_t i = 0; i < n; ++i) {
+      const PcfQuery& q = queries[i];
+      out[i] = pcf_shared(q.level, q.x, q.y, q.r, q.receiver, sc);
+    }
+  }
+  finish_lookups(sc);
+}
+
+float RemoteMap::visibility_shared(const WorldPoint& world, float footprint_world, uint32_t pcf_radius,
+                                   LookupScratch& sc) const noexcept {
+  const Vec3d w{world.x, world.y, world.z};
+  const LightPoint p = light_.to_light(w);
+  if (!(p.u >= 0 && p.u < 1 && p.v >= 0 && p.v < 1 && p.d >= 0 && p.d <= 1)) return 1.0f;
+  const uint32_t L = header_.map_level;
+  const uint32_t r = 2 * std::min<uint32_t>(pcf_radius, (kMaxPcf - 1) / 2) + 1;
+  const float receiver = float(p.d);
+  FilterLevels f{L, L, 0.0f};
+  if (footprint_world > 0) {
+    // One finest-level texel's side in world units at this point (a spot's grows with
+    // the distance from the eye).
+    const double texel = (light_.kind() == LightKind::sun ? light_.extent_uv()
+                                                          : length(w - light_.origin()) * light_.extent_uv()) /
+                         std::ldexp(1.0, int(L));
+    f = filter_levels(L, float(double(footprint_world) / texel));
+  }
+  const auto tf = LightSpace::texel_of(f.fine, p.u, p.v);
+  const float a = pcf_shared(f.fine, tf[0], tf[1], r, receiver, sc);
+  if (f.t == 0.0f) return a;
+  const auto tc = LightSpace::texel_of(f.coarse, p.u, p.v);
+  return filter_blend(a, pcf_shared(f.coarse, tc[0], tc[1], r, receiver, sc), f.t);
 }
 
 float RemoteMap::visibility(const Vec3d& world, uint32_t pcf_radius) const noexcept {
-  const LightPoint p = light_.to_light(world);
-  if (!(p.u >= 0 && p.u < 1 && p.v >= 0 && p.v < 1 && p.d >= 0 && p.d <= 1)) return 1.0f;
-  const uint32_t level = header_.map_level;
-  const auto t = LightSpace::texel_of(level, p.u, p.v);
-  return pcf(level, t[0], t[1], 2 * std::min<uint32_t>(pcf_radius, (kMaxPcf - 1) / 2) + 1, float(p.d));
+  LookupScratch sc;
+  float v;
+  {
+    std::shared_lock lock(mu_);
+    v = visibility_shared(WorldPoint{world.x, world.y, world.z}, 0.0f, pcf_radius, sc);
+  }
+  finish_lookups(sc);
+  return v;
+}
+
+void RemoteMap::visibility_batch(std::span<const WorldPoint> points, std::span<const float> footprints,
+                                 std::span<float> out, uint32_t pcf_radius) const noexcept {
+  size_t n = std::min(points.size(), out.size());
+  if (!footprints.empty()) n = std::min(n, footprints.size());
+  LookupScratch sc;
+  {
+    std::shared_lock lock(mu_);
+    for (size_t i = 0; i < n; ++i)
+      out[i] = visibility_shared(points[i], footprints.empty() ? 0.0f : footprints[i], pcf_radius, sc);
+  }
+  finish_lookups(sc);
 }
 
 // ---------------------------------------------------------------- regions
@@ -274,6 +425,11 @@ MapStats RemoteMap::stats() const noexcept {
   MapStats s = stats_;
   const CacheStats c = cache_.stats();
   s.cache = CacheCounters{c.hits, c.misses, c.evictions, c.inserts, c.resident, c.pinned, c.free};
+  for (const CounterShard& k : counters_) {  // lookups count here, not in the cache
+    s.cache.hits += k.hits.load(std::memory_order_relaxed);
+    s.cache.misses += k.misses.load(std::memory_order_relaxed);
+    s.coarse_answers += k.coarse.load(std::memory_order_relaxed);
+  }
   return s;
 }
 
@@ -393,7 +549,8 @@ void RemoteMap::tile_arrived(const proto::TileMeta& meta, uint32_t request_id,
     RequestRecord* r = sent_record_locked(tile, request_id);
     if (!r) return;
     try {
-      slot = cache_.reserve(tile);  // evicts the least recently used unpinned tile
+      sync_lru_locked();            // the lookups' use since the last arrival, then
+      slot = cache_.reserve(tile);  // evict the least recently used unpinned tile
     } catch (...) {
       ++stats_.cache_full;
       drop_locked(*r);

@@ -4,10 +4,20 @@
 // index tiles -> tiles like PackEvaluator does, answering from the deepest node reached
 // when a tile is missing.
 //
-// Locking: one mutex guards everything mutable. Lookups hold it for one walk (a few
-// hundred ns); the fetcher holds it only for O(1) bookkeeping and writes tile bytes into
-// a reserved (pinned, unpublished) slot outside it, so lookups never wait on the network,
-// on decompression or on tile validation.
+// Locking: one reader-writer lock (rw_lock.hpp) guards everything mutable. Lookups take
+// it shared, once per call or per batch, and change nothing the lock guards: they read the
+// page table with TileCache::lookup, count in per-thread-shard atomics, stamp the slots
+// they used with the current epoch (an atomic per slot), and note the tiles they missed
+// in a small list on their stack, queued under the exclusive lock after the shared part
+// (only when something was missed). The fetcher takes it exclusive only for O(1)
+// bookkeeping and writes tile bytes into a reserved (pinned, unpublished) slot outside
+// it, so lookups never wait on the network, on decompression or on tile validation, and
+// lookups on many threads do not wait for each other.
+//
+// LRU from stamps: before the fetcher evicts (reserve), it replays the use since the
+// last eviction: every slot stamped with the current epoch is marked most recently used,
+// then the epoch advances. Recency is therefore exact between arrivals and unordered
+// within one (slots used since the last arrival go to the front in slot order).
 #pragma once
 #include <array>
 #include <atomic>
@@ -18,6 +28,7 @@
 #include <string>
 #include <vector>
 
+#include "client/rw_lock.hpp"
 #include "client/tile_requests.hpp"
 #include "shadowtile/client.hpp"
 #include "tiles/core/tile_cache.hpp"
@@ -56,7 +67,12 @@ class RemoteMap final : public Evaluator {
   uint32_t finest_level() const override { return header_.map_level; }
   float depth(uint32_t level, uint64_t x, uint64_t y) const noexcept override;
   float pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver) const noexcept override;
+  void pcf_batch(std::span<const PcfQuery> queries, std::span<float> out) const noexcept override;
   float visibility(const Vec3d& world, uint32_t pcf_radius) const noexcept;
+  // Map::visibility's batches: min(points, out[, footprints]) answers, one shared lock.
+  // footprints: the side of each receiver's footprint in world units (0: the finest level).
+  void visibility_batch(std::span<const WorldPoint> points, std::span<const float> footprints, std::span<float> out,
+                        uint32_t pcf_radius) const noexcept;
 
   size_t request_region(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, uint64_t h,
                         uint16_t priority) noexcept;
@@ -105,7 +121,41 @@ class RemoteMap final : public Evaluator {
   size_t sent_count() const;
 
  private:
-  float depth_locked(uint32_t level, uint64_t x, uint64_t y) const noexcept;
+  // What one lookup call (single or batch) carries on its stack while it holds the lock
+  // shared: the encoded tile its last lookup ended in (consecutive lookups inside it skip
+  // the page-table walk and the hash lookup: lookups grouped by tile), the tiles it
+  // missed (queued afterwards) and its counts.
+  struct LookupScratch {
+    const Evaluator* ev = nullptr;  // the current tile (null: none)
+    uint32_t level = 0, rel = 0;    // lookup level; the tile's level relative to its root
+    uint64_t x0 = 0, y0 = 0, side = 0;  // the tile's texels at `level`: [x0, x0 + side)
+    static constexpr size_t kMaxMisses = 8;  // more distinct misses in one call: asked again later
+    std::array<uint64_t, kMaxMisses> miss_tile{};
+    std::array<GridEntry, kMaxMisses> miss_entry{};
+    size_t misses = 0;
+    uint64_t hits = 0, missed = 0, coarse = 0;
+    bool covers(uint32_t l, uint64_t x, uint64_t y) const {
+      return ev && l == level && x - x0 < side && y - y0 < side;  // unsigned: x < x0 wraps
+    }
+  };
+  // Walks (level, x, y) (in the map) under the shared lock. True: it ends in a resident
+  // encoded tile, now sc's current one. False: `value` answers (coarse when missed).
+  bool enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc, float& value) const noexcept;
+  float depth_shared(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc) const noexcept;
+  // Evaluator::pcf's answer; a kernel inside one resident tile (or crossing only the
+  // map's edges) goes through the tile's own shared-walk pcf (MH §3.3, DAG-MH §3.5).
+  float pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver,
+                   LookupScratch& sc) const noexcept;
+  float visibility_shared(const WorldPoint& world, float footprint_world, uint32_t pcf_radius,
+                          LookupScratch& sc) const noexcept;
+  // After the shared part: counts, then (exclusive) the misses queued at miss_priority.
+  void finish_lookups(const LookupScratch& sc) const noexcept;
+  void mark_used(uint32_t slot) const noexcept {
+    std::atomic<uint32_t>& a = slot_used_[slot];
+    if (a.load(std::memory_order_relaxed) != epoch_) a.store(epoch_, std::memory_order_relaxed);
+  }
+  // Replays the slots' use into the cache's LRU list (exclusive lock held): see above.
+  void sync_lru_locked() noexcept;
   // Queues `tile` (lock held). Returns true if newly queued or raised.
   bool want_locked(uint64_t tile, const GridEntry& e, uint16_t priority) const noexcept;
   // The record of `tile` if it was sent in `request_id` and not answered (lock held).
@@ -136,8 +186,15 @@ class RemoteMap final : public Evaluator {
   CutGrid grid_;
   LightSpace light_;
 
-  mutable std::mutex mu_;
+  mutable RwLock mu_;
   mutable TileCache cache_;
+  std::unique_ptr<std::atomic<uint32_t>[]> slot_used_;  // epoch of each slot's last use
+  uint32_t epoch_ = 1;                                   // written under the exclusive lock
+  struct alignas(64) CounterShard {
+    std::atomic<uint64_t> hits{0}, misses{0}, coarse{0};
+  };
+  static constexpr size_t kCounterShards = 8;  // threads pick one each: no shared cache line
+  mutable std::array<CounterShard, kCounterShards> counters_;
   std::vector<std::unique_ptr<Evaluator>> slot_eval_;  // encoded tiles, per slot
   std::vector<CutGrid> slot_grid_;                     // index tiles, per slot
   // want_capacity queued + max_in_flight * tiles_per_request sent; never grows.

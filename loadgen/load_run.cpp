@@ -135,10 +135,15 @@ void camera_frame(CameraRun& cam, const LoadOptions& o, const WorldFrame& world,
   std::vector<CellNeed> missing;
   for (const CellNeed& c : needs.cells)
     if (!resident(map, c)) missing.push_back(c);
+  // One batched call per frame, as a game would make it (client.hpp).
+  std::vector<client::WorldPoint> points(needs.points.size());
+  std::vector<float> answers(points.size());
+  for (size_t i = 0; i < points.size(); ++i) points[i] = {needs.points[i].x, needs.points[i].y, needs.points[i].z};
   const auto t0 = Clock::now();
-  double vis = 0;
-  for (const Vec3d& p : needs.points) vis += map.visibility({p.x, p.y, p.z}, 0);
+  map.visibility(points, answers, 0);
   const auto t1 = Clock::now();
+  double vis = 0;
+  for (float v : answers) vis += v;
   sh.lookup_ns.fetch_add(uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count()),
                          std::memory_order_relaxed);
   sh.lookups.fetch_add(needs.points.size(), std::memory_order_relaxed);

@@ -1,8 +1,13 @@
 #include "tiles/bake/render.hpp"
 
+#include "tiles/core/filter_level.hpp"
+
 #include <embree3/rtcore.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+
+#include <cmath>
+#include <limits>
 
 #include <Iex.h>
 #include <ImfChannelList.h>
@@ -150,6 +155,12 @@ LightPoint lookup_point(const Receiver& r, const LightSpace& light, uint32_t map
   return light.to_light(p);
 }
 
+float receiver_footprint_texels(const Receiver& r, const LightSpace& light, uint32_t map_level, double pixel_angle) {
+  const double texel = (light.kind() == LightKind::sun ? light.extent_uv() : length(r.pos - light.origin()) * light.extent_uv()) /
+                       std::ldexp(1.0, int(map_level));
+  return float(r.distance * pixel_angle / texel);
+}
+
 float map_visibility(const Evaluator& eval, const Receiver& r, const LightSpace& light, uint32_t pcf_radius,
                      uint32_t level) {
   if (!r.hit || r.n_dot_l <= 0) return 0;
@@ -174,8 +185,41 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
   using Clk = std::chrono::steady_clock;
   auto t0 = Clk::now();
   const uint32_t L = eval.finest_level();
+  // Lookups in batches (Evaluator::pcf_batch: the client's cache takes its lock and walks
+  // the top of its page table once per batch; neighbouring pixels share tiles). With
+  // pixel_angle set, each receiver asks two levels and blends them (filter_level.hpp).
+  const LightSpace& light = tracer.light();
+  const uint32_t kr = 2 * o.pcf_radius + 1;
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t i = r.begin(); i < r.end(); ++i) vis[i] = map_visibility(eval, rec[i], tracer.light(), o.pcf_radius, L);
+    std::vector<PcfQuery> queries;
+    std::vector<uint32_t> index;      // the pixel of each receiver that asks
+    std::vector<float> blend, answers;  // its trilinear weight (NaN: one level only)
+    queries.reserve(2 * r.size()), index.reserve(r.size()), blend.reserve(r.size());
+    for (size_t i = r.begin(); i < r.end(); ++i) {
+      const Receiver& rc = rec[i];
+      if (!rc.hit || rc.n_dot_l <= 0) continue;  // vis 0
+      const LightPoint lp = lookup_point(rc, light, L, o.pcf_radius);
+      if (!(lp.u >= 0 && lp.u < 1 && lp.v >= 0 && lp.v < 1)) {
+        vis[i] = 1;
+        continue;
+      }
+      FilterLevels f{L, L, 0.0f};
+      if (o.pixel_angle > 0) f = filter_levels(L, receiver_footprint_texels(rc, light, L, o.pixel_angle));
+      const auto tf = LightSpace::texel_of(f.fine, lp.u, lp.v);
+      queries.push_back({tf[0], tf[1], f.fine, kr, float(lp.d)});
+      index.push_back(uint32_t(i));
+      blend.push_back(f.t == 0.0f ? std::numeric_limits<float>::quiet_NaN() : f.t);
+      if (f.t != 0.0f) {
+        const auto tc = LightSpace::texel_of(f.coarse, lp.u, lp.v);
+        queries.push_back({tc[0], tc[1], f.coarse, kr, float(lp.d)});
+      }
+    }
+    answers.resize(queries.size());
+    eval.pcf_batch(queries, answers);
+    for (size_t k = 0, q = 0; k < index.size(); ++k) {
+      const float a = answers[q++];
+      vis[index[k]] = std::isnan(blend[k]) ? a : filter_blend(a, answers[q++], blend[k]);
+    }
   });
   res.map_seconds = std::chrono::duration<double>(Clk::now() - t0).count();
   if (o.diff) {

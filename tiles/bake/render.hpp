@@ -81,9 +81,16 @@ LightPoint lookup_point(const Receiver& r, const LightSpace& light, uint32_t map
 float map_visibility(const Evaluator& eval, const Receiver& r, const LightSpace& light, uint32_t pcf_radius,
                      uint32_t level);
 
+// The side of a receiver's pixel footprint (distance * pixel_angle, seen head-on) in
+// finest-level texels of the map at its position: the input of filter_levels.
+float receiver_footprint_texels(const Receiver& r, const LightSpace& light, uint32_t map_level, double pixel_angle);
+
 struct RenderOptions {
   uint32_t width = 960, height = 540;
   uint32_t pcf_radius = 0;
+  // Hierarchical filtering (MH §3.3): > 0, the camera's angle per pixel (radians), picks
+  // each receiver's two levels from its footprint and blends them; 0: the finest level.
+  double pixel_angle = 0;
   bool diff = false;       // also ray-traced shadows and a difference image
   double ambient = 0.15;
 };

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "tiles/core/filter_level.hpp"
 #include "tiles/core/light.hpp"
 
 namespace st {
@@ -17,14 +18,20 @@ float Evaluator::pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float r
   return float(lit_taps) / float(r * r);
 }
 
-float Evaluator::pcf_footprint(double u, double v, float receiver, double footprint,
-                               uint32_t r) const {
-  const uint32_t finest = finest_level();
-  uint32_t coarser = 0;
-  if (footprint > 1) coarser = uint32_t(std::min<double>(finest, std::ceil(std::log2(footprint))));
-  const uint32_t level = finest - coarser;
-  auto t = LightSpace::texel_of(level, u, v);
-  return pcf(level, t[0], t[1], r, receiver);
+void Evaluator::pcf_batch(std::span<const PcfQuery> queries, std::span<float> out) const {
+  for (size_t i = 0; i < queries.size(); ++i) {
+    const PcfQuery& q = queries[i];
+    out[i] = pcf(q.level, q.x, q.y, q.r, q.receiver);
+  }
+}
+
+float Evaluator::pcf_footprint(double u, double v, float receiver, float footprint, uint32_t r) const {
+  const FilterLevels f = filter_levels(finest_level(), footprint);
+  const auto tf = LightSpace::texel_of(f.fine, u, v);
+  const float a = pcf(f.fine, tf[0], tf[1], r, receiver);
+  if (f.t == 0.0f) return a;  // a + 0 * (c - a) == a: the coarse level is not needed
+  const auto tc = LightSpace::texel_of(f.coarse, u, v);
+  return filter_blend(a, pcf(f.coarse, tc[0], tc[1], r, receiver), f.t);
 }
 
 }  // namespace st

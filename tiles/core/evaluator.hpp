@@ -6,8 +6,17 @@
 // Coordinates are integer texels of the given level; callers clamp (x, y < 2^level).
 #pragma once
 #include <cstdint>
+#include <span>
 
 namespace st {
+
+// One lookup of a batch (Evaluator::pcf_batch): r = 1 is a single lit test.
+struct PcfQuery {
+  uint64_t x = 0, y = 0;  // texel of `level`
+  uint32_t level = 0;
+  uint32_t r = 1;         // kernel side, 1..kMaxPcf
+  float receiver = 0;     // light-space depth of the receiver
+};
 
 class Evaluator {
  public:
@@ -32,9 +41,17 @@ class Evaluator {
     return receiver_depth <= depth(finest_level(), x, y);
   }
 
-  // Hierarchical PCF: picks the level at which one texel covers about `footprint`
-  // finest-level texels (MH §3.3), then r x r PCF there. (u, v) in [0,1).
-  float pcf_footprint(double u, double v, float receiver, double footprint, uint32_t r) const;
+  // out[i] = pcf(q.level, q.x, q.y, q.r, q.receiver) for every query (out.size() >=
+  // queries.size()), bit for bit. The base implementation loops; an evaluator with a
+  // lock or a page table (the client's cache) overrides it to take the lock and walk the
+  // top of the page table once per batch. Consecutive queries in the same tile are cheapest.
+  virtual void pcf_batch(std::span<const PcfQuery> queries, std::span<float> out) const;
+
+  // Hierarchical PCF (MH §3.3) with trilinear blending: r x r PCF at the two levels
+  // filter_levels(finest_level(), footprint) picks for a footprint of `footprint`
+  // finest-level texels, blended by filter_blend (tiles/core/filter_level.hpp states the
+  // exact arithmetic). (u, v) in [0,1).
+  float pcf_footprint(double u, double v, float receiver, float footprint, uint32_t r) const;
 
   static constexpr uint32_t kMaxPcf = 9;
 };

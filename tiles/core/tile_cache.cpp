@@ -170,6 +170,15 @@ PageEntry TileCache::access(TileId tile) noexcept {
   return e;
 }
 
+void TileCache::touch(uint32_t slot) noexcept {
+  if (slot >= slot_count_) return;
+  const Slot& s = slots_[slot];
+  if (s.state == SlotState::resident && s.on_lru && lru_head_ != slot) {
+    lru_unlink(slot);
+    lru_push_front(slot);
+  }
+}
+
 void TileCache::set_constant(TileId tile, float value) {
   PageEntry& e = upsert(tile);
   if (e.state == PageState::resident) {

@@ -88,6 +88,9 @@ class TileCache {
   // The page's state for a lookup that wants the tile: counts a hit (resident) or a miss
   // (absent or requested) and marks a resident slot most recently used.
   PageEntry access(TileId tile) noexcept;
+  // Marks resident slot `slot` most recently used without counting anything (an owner
+  // that counts its lookups itself and replays their use in batches: RemoteMap).
+  void touch(uint32_t slot) noexcept;
   // A tile that stores nothing finer: `value` answers for all of it. Drops a resident copy.
   void set_constant(TileId tile, float value);
   // absent -> requested. Returns false (and changes nothing) in any other state. The

@@ -6,6 +6,7 @@
 //   st::client::Map map = client.open("city");           // header + skip grid
 //   map.request_region(level, x0, y0, w, h, priority);    // prefetch what cameras see
 //   float lit = map.visibility({x, y, z}, pcf_radius);    // 0..1, never blocks
+//   map.visibility(points, out, pcf_radius);              // a batch: one lock, one walk per tile
 //   float d = map.depth(level, x, y);
 //   st::client::MapStats s = map.stats();
 //
@@ -39,12 +40,17 @@
 //     counted in MapStats::tiles_failed.
 //   - A default-constructed Map is valid() == false and answers like an empty map: depth
 //     1 (lit), pcf and visibility 1, no tiles, zero stats.
-// Thread safety: every method of Client and Map may be called from any thread. A Map
+// Thread safety: every method of Client and Map may be called from any thread. Lookups on
+// many threads run at once (they share the cache's lock and change nothing another
+// lookup reads); a tile arriving holds them up only for O(1) bookkeeping, never for its
+// decompression. A lookup costs a lock and a page-table walk: call the batched overloads
+// (hundreds to thousands of points per call, neighbours next to each other) on hot paths. A Map
 // stays valid (answering from its cache) after its Client is destroyed.
 #pragma once
 #include <chrono>
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -191,6 +197,18 @@ class Map {
   // (2 * pcf_radius + 1)^2 kernel at the finest level (pcf_radius <= 4). Points outside
   // the light's box are lit (1).
   float visibility(const WorldPoint& world, uint32_t pcf_radius = 0) const noexcept;
+  // Hierarchical filtering (MH 2016 §3.3): `footprint` is the side, in world units, of
+  // the area the receiver's pixel covers; the kernel is applied at the two levels where
+  // one texel is about that size and blended trilinearly (tiles/core/filter_level.hpp
+  // states the arithmetic). footprint <= one finest texel: the finest level, as above.
+  float visibility_filtered(const WorldPoint& world, float footprint, uint32_t pcf_radius = 0) const noexcept;
+  // Batches: out[i] = visibility(points[i], pcf_radius) (or visibility_filtered(points[i],
+  // footprints[i], pcf_radius)) for i below the
+  // smallest of the spans' sizes, bit for bit, under one shared lock, with the page-table
+  // walk skipped while consecutive points stay inside one tile. Nothing allocates.
+  void visibility(std::span<const WorldPoint> points, std::span<float> out, uint32_t pcf_radius = 0) const noexcept;
+  void visibility_filtered(std::span<const WorldPoint> points, std::span<const float> footprints,
+                           std::span<float> out, uint32_t pcf_radius = 0) const noexcept;
 
   // Queues the fetch of every tile under texels [x0, x0+w) x [y0, y0+h) of `level`
   // (clamped to the map), walking index tiles as they arrive. Larger priority = sooner.

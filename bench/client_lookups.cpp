@@ -1,0 +1,406 @@
+// The lookup path a game calls: st::client::Map::visibility, single and batched, on a map
+// whose every tile is resident in the client's cache, next to the uncompressed float
+// array of the same map (the same world points, the same light-space transform, the same
+// lit test) in the same run; and `render`'s map shadows against its Embree shadow rays
+// for the demo's view.
+//
+//   bench_client_lookups [--scene city] [--light sun:azimuth=30,elevation=50] [--res 4k]
+//                        [--encodings mh,mmh,dagmh] [--tile-bytes 8192] [--lookups 262144]
+//                        [--batch 1024] [--reps 5] [--threads 1,2] [--size 960x540]
+//                        [--camera pos=-350,220,-380,target=0,0,0,fov=50] [--quick] [--json PATH]
+//
+// Each encoding's pack is built with build_map into a temporary folder, then every tile
+// is delivered to a client RemoteMap directly (RemoteMap::tile_arrived: CRC, inflate,
+// open, exactly what the fetcher does; no socket), so lookups measure the cache, not the
+// network. The float array is painted from that same map (depth of every finest texel).
+//
+// Patterns (world points at texel centres, receivers half just in front of the stored
+// value, half just behind): random = uniform texels; coherent = runs of 256 consecutive
+// texels along a row at random starts (a screen scanline in light space, roughly).
+// Subjects: "array" (to_light + texel_of + compare, or 5x5 PCF with the Evaluator::pcf
+// semantics), "single" (Map::visibility per point), "batch" (Map::visibility over spans of
+// --batch points), "filtered" (Map::visibility_filtered over the same spans, a footprint
+// of 3 finest texels: two levels blended). Kernels: single tap and 5x5 (pcf_radius 2).
+// Threads: the points split in contiguous halves; figures are wall time per lookup of
+// the whole pass (so two threads that scale show half the time), median over --reps.
+// Before timing: batch == single == array bit for bit on every point, and the client's
+// PCF (shared walk inside tiles) == the average of its single lookups on a sample.
+// --quick: 2K^2, 64K lookups, 3 reps, one render rep.
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <random>
+
+#include "bench/bench_map.hpp"
+#include "client/map_access.hpp"
+#include "tiles/bake/map_build.hpp"
+#include "tiles/bake/render.hpp"
+#include "tiles/core/camera.hpp"
+#include "tiles/core/pack_reader.hpp"
+
+namespace {
+
+using namespace st::bench;
+using st::client::WorldPoint;
+
+struct Probe {
+  WorldPoint p;
+  uint64_t x = 0, y = 0;
+};
+
+struct Encoded {
+  std::string name;
+  std::shared_ptr<st::PackReader> reader;
+  std::shared_ptr<st::client::RemoteMap> remote;
+  st::client::Map map;
+  uint64_t pack_bytes = 0, tiles = 0;
+};
+
+// Every tile of the pack into the map's cache, the way the fetcher delivers them.
+void fill_cache(st::client::RemoteMap& m, const st::PackReader& reader) {
+  const uint32_t L = reader.map_level();
+  const uint64_t side = uint64_t(1) << L;
+  uint32_t request_id = 1;
+  for (;;) {
+    m.request_region(L, 0, 0, side, side, 1);
+    std::vector<st::proto::TileRequest> want;
+    m.take_wanted(512, request_id, want);
+    if (want.empty()) break;
+    for (const auto& t : want) {
+      const st::TileIndexEntry e = *reader.find(t.tile_id);
+      st::proto::TileMeta meta;
+      meta.tile_id = t.tile_id;
+      meta.flags = st::proto::kTileFlagZlib;
+      meta.uncompressed_size = e.raw_size;
+      meta.payload_crc32 = e.crc;
+      m.tile_arrived(meta, request_id, reader.read_stored(t.tile_id));
+    }
+    ++request_id;
+  }
+  if (!m.region_resident(L, 0, 0, side, side)) throw st::Error("fill_cache: the map is not wholly resident");
+}
+
+float array_visibility(const FloatMap& m, const st::LightSpace& light, const WorldPoint& w, uint32_t radius) {
+  const st::LightPoint p = light.to_light({w.x, w.y, w.z});
+  if (!(p.u >= 0 && p.u < 1 && p.v >= 0 && p.v < 1 && p.d >= 0 && p.d <= 1)) return 1.0f;
+  const auto t = st::LightSpace::texel_of(m.level, p.u, p.v);
+  const float receiver = float(p.d);
+  if (radius == 0) return receiver <= m.at(t[0], t[1]) ? 1.0f : 0.0f;
+  return array_pcf(m, t[0], t[1], 2 * radius + 1, receiver);
+}
+
+enum class Subject { array, single, batch, filtered };
+const char* subject_name(Subject s) {
+  switch (s) {
+    case Subject::array: return "array";
+    case Subject::single: return "single";
+    case Subject::batch: return "batch";
+    case Subject::filtered: return "filtered";
+  }
+  return "?";
+}
+
+// One pass over `probes` on `threads` threads; returns wall seconds.
+double time_pass(Subject s, const Encoded& e, const FloatMap& arr, const st::LightSpace& light,
+                 const std::vector<Probe>& probes, const std::vector<WorldPoint>& points,
+                 const std::vector<float>& footprints, uint32_t radius, unsigned threads, size_t batch,
+                 std::vector<float>& out) {
+  auto work = [&](size_t begin, size_t end) {
+    switch (s) {
+      case Subject::array:
+        for (size_t i = begin; i < end; ++i) out[i] = array_visibility(arr, light, probes[i].p, radius);
+        break;
+      case Subject::single:
+        for (size_t i = begin; i < end; ++i) out[i] = e.map.visibility(probes[i].p, radius);
+        break;
+      case Subject::batch:
+        for (size_t i = begin; i < end; i += batch) {
+          const size_t n = std::min(batch, end - i);
+          e.map.visibility(std::span(points).subspan(i, n), std::span(out).subspan(i, n), radius);
+        }
+        break;
+      case Subject::filtered:
+        for (size_t i = begin; i < end; i += batch) {
+          const size_t n = std::min(batch, end - i);
+          e.map.visibility_filtered(std::span(points).subspan(i, n), std::span(footprints).subspan(i, n),
+                                    std::span(out).subspan(i, n), radius);
+        }
+        break;
+    }
+  };
+  const auto t0 = Clock::now();
+  if (threads <= 1) {
+    work(0, probes.size());
+  } else {
+    std::vector<std::thread> pool;
+    const size_t per = (probes.size() + threads - 1) / threads;
+    for (unsigned t = 0; t < threads; ++t)
+      pool.emplace_back(work, std::min(probes.size(), t * per), std::min(probes.size(), (t + 1) * per));
+    for (auto& th : pool) th.join();
+  }
+  return seconds_since(t0);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string scene_spec = "procedural:city", light_spec = "sun:azimuth=30,elevation=50", json_path;
+  std::string camera_spec = "pos=-350,220,-380,target=0,0,0,fov=50", size_spec = "960x540";
+  std::vector<std::string> enc_names{"mh", "mmh", "dagmh"};
+  std::vector<unsigned> thread_counts{1, 2};
+  uint32_t level = 12, tile_bytes = 8192;
+  size_t count = size_t(1) << 18, batch = 1024;
+  int reps = 5, render_reps = 3;
+  bool quick = false, level_given = false;
+  try {
+    for (int i = 1; i < argc; ++i) {
+      std::string a = argv[i];
+      auto next = [&]() -> std::string {
+        if (i + 1 >= argc) throw st::Error(a + " needs a value");
+        return argv[++i];
+      };
+      if (a == "--scene") scene_spec = next();
+      else if (a == "--light") light_spec = next();
+      else if (a == "--res") level = parse_level(next()), level_given = true;
+      else if (a == "--encodings") enc_names = split_list(next());
+      else if (a == "--tile-bytes") tile_bytes = uint32_t(std::stoul(next()));
+      else if (a == "--lookups") count = size_t(std::max(1024ll, std::stoll(next())));
+      else if (a == "--batch") batch = size_t(std::max(1ll, std::stoll(next())));
+      else if (a == "--reps") reps = std::max(1, std::stoi(next()));
+      else if (a == "--threads") {
+        thread_counts.clear();
+        for (const auto& t : split_list(next())) thread_counts.push_back(unsigned(std::clamp(std::stoi(t), 1, 64)));
+      } else if (a == "--size") size_spec = next();
+      else if (a == "--camera") camera_spec = next();
+      else if (a == "--quick") quick = true;
+      else if (a == "--json") json_path = next();
+      else
+        throw st::Error("usage: bench_client_lookups [--scene S] [--light L] [--res 4k] [--encodings mh,mmh,dagmh] "
+                        "[--tile-bytes N] [--lookups N] [--batch N] [--reps R] [--threads 1,2] [--size WxH] "
+                        "[--camera SPEC] [--quick] [--json PATH]");
+    }
+    if (scene_spec.find(':') == std::string::npos) scene_spec = "procedural:" + scene_spec;
+    if (quick) {
+      if (!level_given) level = 11;
+      count = std::min<size_t>(count, size_t(1) << 16);
+      reps = std::min(reps, 3);
+      render_reps = 1;
+    }
+    if (level < 9) throw st::Error("--res must be at least 512");
+    uint32_t width = 0, height = 0;
+    if (std::sscanf(size_spec.c_str(), "%ux%u", &width, &height) != 2 || width == 0 || height == 0 ||
+        width > 8192 || height > 8192)
+      throw st::Error("--size: expected WxH (at most 8192x8192), got '" + size_spec + "'");
+    const uint64_t side = uint64_t(1) << level;
+    std::printf("bench_client_lookups: %s, %s, %s^2, %zu lookups per pattern, batches of %zu, median of %d, load %.1f\n",
+                scene_spec.c_str(), light_spec.c_str(), side_name(level).c_str(), count, batch, reps, load_average());
+    std::fflush(stdout);
+
+    const st::Scene scene = st::load_scene(scene_spec);
+    const st::LightSpace light = st::LightSpace::fit(st::LightSpec::parse(light_spec), scene.bounds());
+    const std::filesystem::path dir =
+        std::filesystem::temp_directory_path() / ("bench_client_lookups." + std::to_string(getpid()));
+    std::filesystem::create_directories(dir);
+    struct RemoveDir {
+      std::filesystem::path p;
+      ~RemoveDir() {
+        std::error_code ec;
+        std::filesystem::remove_all(p, ec);
+      }
+    } remove_dir{dir};
+
+    std::vector<Encoded> encoded;
+    for (const std::string& name : enc_names) {
+      st::MapBuildOptions o;
+      o.map_level = level;
+      o.encoding = st::parse_encoding(name);
+      o.tile_bytes = tile_bytes;
+      o.scene_spec = scene_spec, o.light_spec = light_spec;
+      const std::string path = (dir / (name + ".pack")).string();
+      auto t0 = Clock::now();
+      const st::MapBuildReport rep = st::build_map(scene, light, o, path);
+      Encoded e;
+      e.name = name;
+      e.reader = st::PackReader::open(path);
+      e.pack_bytes = rep.pack_bytes;
+      e.tiles = e.reader->tiles().size();
+      st::client::ClientOptions co;
+      co.cache_slots = uint32_t(e.tiles + 16);
+      co.want_capacity = uint32_t(e.tiles + 16);
+      co.max_slot_bytes = 1u << 30;
+      const auto h = e.reader->header_bytes();
+      const auto g = e.reader->grid_bytes();
+      e.remote = std::make_shared<st::client::RemoteMap>(name, std::vector<uint8_t>(h.begin(), h.end()),
+                                                         std::vector<uint8_t>(g.begin(), g.end()), co,
+                                                         std::make_shared<st::client::Notifier>());
+      fill_cache(*e.remote, *e.reader);
+      e.map = st::client::MapAccess::wrap(e.remote);
+      std::printf("  %-6s pack %10llu bytes, %6llu tiles, built and made resident in %.1f s\n", name.c_str(),
+                  (unsigned long long)e.pack_bytes, (unsigned long long)e.tiles, seconds_since(t0));
+      std::fflush(stdout);
+      encoded.push_back(std::move(e));
+    }
+    if (encoded.empty()) throw st::Error("--encodings: none given");
+
+    // Probe positions: texel centres; receivers from the first encoding's values.
+    FloatMap arr(level);
+    auto paint = [&](const Encoded& e) {
+      for (uint64_t y = 0; y < side; ++y)
+        for (uint64_t x = 0; x < side; ++x) arr.data[y * side + x] = e.remote->depth(level, x, y);
+    };
+    paint(encoded[0]);
+    std::mt19937_64 rng(20261201);
+    auto make_probe = [&](uint64_t x, uint64_t y) {
+      const st::LightRay ray = light.texel_ray(level, x, y);
+      const double v = arr.at(x, y);
+      const double d = std::clamp((rng() & 1) ? v + 1e-4 : v - 1e-4, 0.0, 1.0);
+      const st::Vec3d w = ray.origin + ray.dir * d;
+      return Probe{{w.x, w.y, w.z}, x, y};
+    };
+    std::vector<Probe> random(count), coherent(count);
+    for (auto& p : random) p = make_probe(rng() & (side - 1), rng() & (side - 1));
+    for (size_t i = 0; i < count; i += 256) {
+      const uint64_t x0 = rng() % (side - 256), y = rng() & (side - 1);
+      for (size_t k = 0; k < 256 && i + k < count; ++k) coherent[i + k] = make_probe(x0 + k, y);
+    }
+    const double texel_world = light.extent_uv() / double(side);
+    std::vector<float> footprints(count, float(3 * texel_world));
+
+    struct Result {
+      std::string encoding, pattern, subject;
+      uint32_t radius = 0;
+      unsigned threads = 1;
+      double seconds = 0;
+    };
+    std::vector<Result> results;
+    uint64_t mismatches = 0, pcf_mismatches = 0, filtered_mismatches = 0;
+    const std::pair<const char*, const std::vector<Probe>*> patterns[] = {{"random", &random}, {"coherent", &coherent}};
+    std::vector<float> out(count), ref(count);
+    for (size_t ei = 0; ei < encoded.size(); ++ei) {
+      const Encoded& e = encoded[ei];
+      if (ei > 0) paint(e);  // the float array of this same map
+      for (auto& [pname, list] : patterns) {
+        std::vector<WorldPoint> points(list->size());
+        for (size_t i = 0; i < points.size(); ++i) points[i] = (*list)[i].p;
+        // Checks before timing.
+        for (uint32_t radius : {0u, 2u}) {
+          time_pass(Subject::array, e, arr, light, *list, points, footprints, radius, 1, batch, ref);
+          for (Subject s : {Subject::single, Subject::batch}) {
+            time_pass(s, e, arr, light, *list, points, footprints, radius, 1, batch, out);
+            for (size_t i = 0; i < count; ++i) mismatches += std::bit_cast<uint32_t>(out[i]) != std::bit_cast<uint32_t>(ref[i]);
+          }
+          time_pass(Subject::filtered, e, arr, light, *list, points, footprints, radius, 1, batch, out);
+          for (size_t i = 0; i < std::min<size_t>(count, 4096); ++i)
+            filtered_mismatches += std::bit_cast<uint32_t>(out[i]) !=
+                                   std::bit_cast<uint32_t>(e.map.visibility_filtered(points[i], footprints[i], radius));
+        }
+        for (size_t i = 0; i < std::min<size_t>(count, 4096); ++i)
+          for (uint32_t r : {3u, 5u, 9u}) {
+            const Probe& q = (*list)[i];
+            const float recv = float(light.to_light({q.p.x, q.p.y, q.p.z}).d);
+            pcf_mismatches += e.remote->pcf(level, q.x, q.y, r, recv) != e.remote->Evaluator::pcf(level, q.x, q.y, r, recv);
+          }
+        for (uint32_t radius : {0u, 2u})
+          for (unsigned threads : thread_counts) {
+            const Subject subjects[] = {Subject::array, Subject::single, Subject::batch, Subject::filtered};
+            std::vector<std::vector<double>> t(std::size(subjects));
+            for (int rep = 0; rep < reps + 1; ++rep)  // the first pass warms up
+              for (size_t s = 0; s < std::size(subjects); ++s) {
+                const double sec = time_pass(subjects[s], e, arr, light, *list, points, footprints, radius, threads, batch, out);
+                if (rep > 0) t[s].push_back(sec);
+              }
+            for (size_t s = 0; s < std::size(subjects); ++s)
+              results.push_back({e.name, pname, subject_name(subjects[s]), radius, threads, median(t[s])});
+          }
+      }
+      std::printf("  %-6s timed\n", e.name.c_str());
+      std::fflush(stdout);
+    }
+
+    auto find = [&](const std::string& enc, const std::string& p, const std::string& s, uint32_t radius, unsigned th) {
+      for (const Result& x : results)
+        if (x.encoding == enc && x.pattern == p && x.subject == s && x.radius == radius && x.threads == th) return x.seconds;
+      return 0.0;
+    };
+    std::printf("\nClient lookups, every tile resident (%s^2; ns = wall ns per lookup of the whole pass; x array = time / "
+                "the float array's, same points, kernel and threads; /single = 5x5 time / single-tap time; "
+                "x%u thr = 1-thread time / this time)\n", side_name(level).c_str(), thread_counts.back());
+    std::printf("%-6s %-9s %-6s %-8s %4s %9s %9s %8s %9s\n", "enc", "pattern", "kernel", "subject", "thr", "ns", "x array",
+                "/single", "speed-up");
+    nlohmann::json jres = nlohmann::json::array();
+    for (const Result& x : results) {
+      const double ns = 1e9 * x.seconds / double(count);
+      const double vs_array = x.seconds / find(x.encoding, x.pattern, "array", x.radius, x.threads);
+      const double vs_single = x.seconds / find(x.encoding, x.pattern, x.subject, 0, x.threads);
+      const double speedup = find(x.encoding, x.pattern, x.subject, x.radius, 1) / x.seconds;
+      std::printf("%-6s %-9s %-6s %-8s %4u %9.1f %9.2f %8.2f %9.2f\n", x.encoding.c_str(), x.pattern.c_str(),
+                  x.radius ? "5x5" : "single", x.subject.c_str(), x.threads, ns, vs_array, vs_single, speedup);
+      jres.push_back({{"encoding", x.encoding}, {"pattern", x.pattern}, {"subject", x.subject},
+                      {"kernel", 2 * x.radius + 1}, {"threads", x.threads}, {"seconds_per_pass", x.seconds},
+                      {"lookups_per_pass", count}, {"ns_per_lookup", ns}, {"ratio_to_float_array", vs_array},
+                      {"ratio_to_single", vs_single}, {"speedup_over_1_thread", speedup}});
+    }
+
+    // render's map shadows against its Embree shadow rays (RenderResult::map_seconds and
+    // traced_seconds), for the same receivers.
+    std::printf("\nrender %ux%u, %s: map shadows vs Embree shadow rays (median of %d)\n", width, height,
+                camera_spec.c_str(), render_reps);
+    const st::SceneTracer tracer(scene, light);
+    const std::vector<st::Receiver> receivers = tracer.primary(st::parse_camera(camera_spec), width, height);
+    nlohmann::json jrender = nlohmann::json::array();
+    for (const Encoded& e : encoded) {
+      st::RenderOptions ro;
+      ro.width = width, ro.height = height, ro.diff = true;
+      std::vector<double> ms, ts;
+      uint64_t recv = 0, differing = 0;
+      for (int rep = 0; rep < render_reps; ++rep) {
+        const st::RenderResult rr = st::render_view(tracer, receivers, *e.remote, ro);
+        ms.push_back(rr.map_seconds), ts.push_back(rr.traced_seconds);
+        recv = rr.receivers, differing = rr.differing;
+      }
+      const double m = median(ms), t = median(ts);
+      std::printf("  %-6s receivers %llu: map %.2f ms, rays %.2f ms, map/rays %.3f (target <= 0.2), %llu differ\n",
+                  e.name.c_str(), (unsigned long long)recv, 1e3 * m, 1e3 * t, m / t, (unsigned long long)differing);
+      jrender.push_back({{"encoding", e.name}, {"receivers", recv}, {"map_seconds", m}, {"traced_seconds", t},
+                         {"ratio_map_to_rays", m / t}, {"differing", differing}});
+    }
+
+    std::printf("\nTargets (single thread unless said; batch is the API a game calls per frame):\n");
+    nlohmann::json targets = nlohmann::json::array();
+    for (const Encoded& e : encoded)
+      for (auto& [pname, list] : patterns) {
+        (void)list;
+        const double single = find(e.name, pname, "batch", 0, 1) / find(e.name, pname, "array", 0, 1);
+        const double pcf = find(e.name, pname, "batch", 2, 1) / find(e.name, pname, "batch", 0, 1);
+        const unsigned tn = thread_counts.back();
+        const double scale = find(e.name, pname, "batch", 0, 1) / find(e.name, pname, "batch", 0, tn);
+        std::printf("  %-6s %-9s batch single tap = %.2fx array (<= 1 %s); 5x5 = %.2fx single (<= 2 %s); "
+                    "%u threads = %.2fx one (>= 1.8 %s)\n",
+                    e.name.c_str(), pname, single, single <= 1 ? "met" : "NOT met", pcf, pcf <= 2 ? "met" : "NOT met",
+                    tn, scale, scale >= 1.8 ? "met" : "NOT met");
+        targets.push_back({{"encoding", e.name}, {"pattern", pname}, {"batch_single_over_array", single},
+                           {"batch_pcf5_over_single", pcf}, {"thread_speedup", scale}, {"threads", tn}});
+      }
+    std::printf("  checks: %llu batch/single/array mismatches, %llu PCF shared-walk mismatches, %llu filtered "
+                "batch/single mismatches (load %.1f)\n",
+                (unsigned long long)mismatches, (unsigned long long)pcf_mismatches,
+                (unsigned long long)filtered_mismatches, load_average());
+
+    if (!json_path.empty()) {
+      nlohmann::json j{{"bench", "client_lookups"}, {"scene", scene_spec}, {"light", light_spec}, {"side", side},
+                       {"level", level}, {"tile_bytes", tile_bytes}, {"lookups_per_pattern", count},
+                       {"batch", batch}, {"reps", reps}, {"mismatches", mismatches},
+                       {"pcf_mismatches", pcf_mismatches}, {"filtered_mismatches", filtered_mismatches},
+                       {"load_average_end", load_average()}, {"results", jres}, {"render", jrender},
+                       {"targets", targets}};
+      for (const Encoded& e : encoded)
+        j["packs"].push_back({{"encoding", e.name}, {"bytes", e.pack_bytes}, {"tiles", e.tiles}});
+      std::ofstream f(json_path);
+      if (!(f << j.dump(2) << "\n")) throw st::Error("bench_client_lookups: cannot write " + json_path);
+    }
+    return mismatches == 0 && pcf_mismatches == 0 && filtered_mismatches == 0 ? 0 : 1;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_client_lookups: %s\n", e.what());
+    return 1;
+  }
+}

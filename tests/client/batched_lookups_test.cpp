@@ -1,0 +1,217 @@
+// The client's lookup paths agree bit for bit: batched visibility with single visibility,
+// the shared-walk PCF (a kernel inside one tile goes to the tile's own pcf) with the
+// average of single lookups (Evaluator's base pcf) on every texel, across tile borders,
+// map edges and missing tiles, for every encoding; lookups used between arrivals keep
+// their tiles (LRU from stamps); lookups on two threads while tiles arrive answer, once
+// everything is resident, exactly like the pack. Tiles are delivered straight to the
+// RemoteMap (tile_arrived), no socket.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <bit>
+#include <thread>
+
+#include "client/map_access.hpp"
+#include "client/remote_map.hpp"
+#include "tests/client/loopback.hpp"
+#include "common/hash.hpp"
+
+namespace st::client {
+namespace {
+
+uint32_t bits(float v) { return std::bit_cast<uint32_t>(v); }
+
+struct Fixture {
+  looptest::TestPack pack;
+  uint32_t level = 0;
+  std::shared_ptr<RemoteMap> map;
+  uint32_t request_id = 1;
+
+  // Delivers every queued tile once (one request id per round); returns how many.
+  size_t deliver_round(size_t max = 1u << 20) {
+    std::vector<proto::TileRequest> want;
+    map->take_wanted(max, request_id, want);
+    for (const auto& t : want) deliver(t.tile_id);
+    ++request_id;
+    return want.size();
+  }
+  void deliver(uint64_t tile) const {
+    const TileIndexEntry e = *pack.reader->find(tile);
+    proto::TileMeta m;
+    m.tile_id = tile;
+    m.flags = proto::kTileFlagZlib;
+    m.uncompressed_size = e.raw_size;
+    m.payload_crc32 = e.crc;
+    map->tile_arrived(m, request_id, pack.reader->read_stored(tile));
+  }
+  void make_all_resident() {
+    const uint64_t side = uint64_t(1) << level;
+    do map->request_region(level, 0, 0, side, side, 1);
+    while (deliver_round() > 0);
+  }
+};
+
+Fixture make_fixture(const std::string& name, Encoding e, uint32_t tile_bytes, uint32_t extra_slots = 8) {
+  Fixture f;
+  f.level = looptest::small_scale() ? 6 : 7;
+  f.pack = looptest::build_pack(name, f.level, 77, e, 3, tile_bytes);
+  ClientOptions o = looptest::quick_options();
+  o.cache_slots = uint32_t(f.pack.reader->tiles().size()) + extra_slots;
+  o.want_capacity = o.cache_slots;
+  const auto h = f.pack.reader->header_bytes();
+  const auto g = f.pack.reader->grid_bytes();
+  f.map = std::make_shared<RemoteMap>(name, std::vector<uint8_t>(h.begin(), h.end()),
+                                      std::vector<uint8_t>(g.begin(), g.end()), o, std::make_shared<Notifier>());
+  return f;
+}
+
+// Every texel of the finest and one coarser level, every kernel size: the client's pcf
+// (shared walk where the kernel fits a tile) equals the per-tap base implementation.
+std::string pcf_difference(const RemoteMap& m, uint32_t level) {
+  for (uint32_t l : {level, level - 2})
+    for (uint64_t y = 0; y < (uint64_t(1) << l); ++y)
+      for (uint64_t x = 0; x < (uint64_t(1) << l); ++x)
+        for (uint32_t r : {2u, 5u, 9u}) {
+          if (r == 9 && (x + y) % 3 != 0) continue;  // the widest kernel on a third of the texels
+          const float receiver = m.depth(l, x, y);
+          const float got = m.pcf(l, x, y, r, receiver), want = m.Evaluator::pcf(l, x, y, r, receiver);
+          if (bits(got) != bits(want))
+            return "level " + std::to_string(l) + " (" + std::to_string(x) + ", " + std::to_string(y) + ") r " +
+                   std::to_string(r) + ": " + std::to_string(got) + " vs " + std::to_string(want);
+        }
+  return "";
+}
+
+TEST(ClientLookups, SharedWalkPcfEqualsSingleLookupsAcrossBordersEdgesAndMissingTiles) {
+  for (Encoding e : looptest::available_encodings()) {
+    SCOPED_TRACE(to_string(e));
+    Fixture f = make_fixture("pcf_walk_" + to_string(e), e, 512);  // small tiles: many borders, index tiles
+    const uint64_t side = uint64_t(1) << f.level;
+    // Half the map resident: kernels straddle resident and missing tiles.
+    f.map->request_region(f.level, 0, 0, side / 2, side, 1);
+    while (f.deliver_round() > 0) f.map->request_region(f.level, 0, 0, side / 2, side, 1);
+    ASSERT_TRUE(f.map->region_resident(f.level, 0, 0, side / 2, side));
+    ASSERT_FALSE(f.map->region_resident(f.level, 0, 0, side, side));
+    EXPECT_EQ(pcf_difference(*f.map, f.level), "");
+    f.make_all_resident();
+    EXPECT_EQ(pcf_difference(*f.map, f.level), "");
+    // And the whole map answers like the pack.
+    PackEvaluator local(f.pack.reader);
+    for (uint64_t y = 0; y < side; ++y)
+      for (uint64_t x = 0; x < side; ++x)
+        ASSERT_EQ(bits(f.map->pcf(f.level, x, y, 5, 0.5f)), bits(local.pcf(f.level, x, y, 5, 0.5f)));
+  }
+}
+
+TEST(ClientLookups, BatchesAnswerLikeSingleLookupsBitForBit) {
+  Fixture f = make_fixture("batch_eq", looptest::first_encoding(), 2048);
+  const uint64_t side = uint64_t(1) << f.level;
+  f.map->request_region(f.level, 0, 0, side, side / 2, 1);
+  f.deliver_round();  // some of the map: misses are answered coarsely in both paths
+  Map map = MapAccess::wrap(f.map);
+  const LightSpace light = f.pack.reader->light();
+  std::vector<WorldPoint> points;
+  std::vector<float> footprints;
+  st::Rng rng(5);
+  for (uint64_t y = 0; y < side; y += 3)
+    for (uint64_t x = 0; x < side; ++x) {
+      const LightRay ray = light.texel_ray(f.level, x, y);
+      const Vec3d w = ray.origin + ray.dir * rng.uniform();
+      points.push_back({w.x, w.y, w.z});
+      footprints.push_back(float(light.extent_uv() / double(side)) * 8.0f * float(rng.uniform()));
+    }
+  points.push_back({1e9, 0, 0});  // outside the light's box: lit
+  footprints.push_back(1.0f);
+  for (uint32_t radius : {0u, 1u, 2u}) {
+    std::vector<float> batch(points.size()), filtered(points.size());
+    map.visibility(points, batch, radius);
+    map.visibility_filtered(points, footprints, filtered, radius);
+    for (size_t i = 0; i < points.size(); ++i) {
+      ASSERT_EQ(bits(batch[i]), bits(map.visibility(points[i], radius))) << i << " r " << radius;
+      ASSERT_EQ(bits(filtered[i]), bits(map.visibility_filtered(points[i], footprints[i], radius))) << i;
+      ASSERT_GE(filtered[i], 0.0f);
+      ASSERT_LE(filtered[i], 1.0f);
+    }
+    EXPECT_EQ(batch.back(), 1.0f);
+  }
+  // The smallest span bounds the answers; nothing past it is written.
+  std::vector<float> out(4, -1.0f);
+  map.visibility(std::span(points).first(2), out, 0);
+  EXPECT_EQ(out[2], -1.0f);
+  std::fill(out.begin(), out.end(), -1.0f);
+  map.visibility_filtered(points, std::span<const float>(), out, 0);
+  for (float v : out) EXPECT_EQ(v, -1.0f);
+  EXPECT_GT(f.map->stats().cache.hits, 0u);
+  EXPECT_GT(f.map->stats().coarse_answers, 0u);
+}
+
+TEST(ClientLookups, TilesUsedSinceTheLastArrivalAreNotTheNextVictims) {
+  Fixture f = make_fixture("lru_stamps", looptest::first_encoding(), 1 << 20);  // no index tiles
+  std::vector<uint64_t> tiles;
+  for (const TileIndexEntry& e : f.pack.reader->tiles())
+    if (tile_address(e.id).level == 3) tiles.push_back(e.id);
+  ASSERT_GE(tiles.size(), 3u);
+  // Rebuild the map with exactly two slots.
+  ClientOptions o = looptest::quick_options();
+  o.cache_slots = 2;
+  const auto h = f.pack.reader->header_bytes();
+  const auto g = f.pack.reader->grid_bytes();
+  f.map = std::make_shared<RemoteMap>("lru", std::vector<uint8_t>(h.begin(), h.end()),
+                                      std::vector<uint8_t>(g.begin(), g.end()), o, std::make_shared<Notifier>());
+  auto texel_of_tile = [&](uint64_t t) {
+    const TileAddress a = tile_address(t);
+    const uint32_t s = f.level - a.level;
+    return std::array<uint64_t, 2>{uint64_t(a.x) << s, uint64_t(a.y) << s};
+  };
+  auto want = [&](uint64_t t) {
+    const auto p = texel_of_tile(t);
+    f.map->request_region(f.level, p[0], p[1], 1, 1, 1);
+    f.deliver_round();
+  };
+  auto resident = [&](uint64_t t) {
+    const auto p = texel_of_tile(t);
+    return f.map->region_resident(f.level, p[0], p[1], 1, 1);
+  };
+  want(tiles[0]);
+  want(tiles[1]);  // tiles[0] is now the least recently used
+  const auto p0 = texel_of_tile(tiles[0]);
+  f.map->depth(f.level, p0[0], p0[1]);  // a lookup uses it: tiles[1] becomes the victim
+  want(tiles[2]);
+  EXPECT_TRUE(resident(tiles[0]));
+  EXPECT_FALSE(resident(tiles[1]));
+  EXPECT_TRUE(resident(tiles[2]));
+}
+
+TEST(ClientLookups, TwoThreadsLookUpWhileTilesArriveAndEndExact) {
+  Fixture f = make_fixture("threads", looptest::first_encoding(), 1024);
+  const uint64_t side = uint64_t(1) << f.level;
+  std::atomic<bool> done{false};
+  std::atomic<uint64_t> batches{0};
+  auto reader = [&](uint64_t seed) {
+    st::Rng rng(seed);
+    std::vector<PcfQuery> q(256);
+    std::vector<float> out(q.size());
+    while (!done.load()) {
+      for (auto& x : q)
+        x = {rng.next() % side, rng.next() % side, f.level, uint32_t(1 + rng.next() % 5), float(rng.uniform())};
+      f.map->pcf_batch(q, out);
+      for (float v : out) ASSERT_TRUE(v >= 0.0f && v <= 1.0f);
+      batches.fetch_add(1);
+    }
+  };
+  std::thread a(reader, 1), b(reader, 2);
+  f.make_all_resident();  // meanwhile, the lookups' own misses are queued too
+  while (f.deliver_round() > 0) {
+  }
+  done = true;
+  a.join();
+  b.join();
+  EXPECT_GT(batches.load(), 0u);
+  PackEvaluator local(f.pack.reader);
+  for (uint64_t y = 0; y < side; ++y)
+    for (uint64_t x = 0; x < side; ++x)
+      ASSERT_EQ(bits(f.map->depth(f.level, x, y)), bits(local.depth(f.level, x, y))) << x << ", " << y;
+}
+
+}  // namespace
+}  // namespace st::client
