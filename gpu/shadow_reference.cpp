@@ -5,6 +5,7 @@
 #include <cfloat>
 #include <cmath>
 
+#include "tiles/core/filter_level.hpp"
 #include "tiles/core/light.hpp"
 
 static_assert(FLT_EVAL_METHOD == 0, "the shadow pass's twin must evaluate in float");
@@ -82,10 +83,12 @@ void shadow_pass_reference(const Evaluator& ev, const PackHeader& h, const Shado
         f = std::max(f, std::max(std::fabs(nb.u - c.u), std::fabs(nb.v - c.v)));
       footprint = f * side;
     }
-    // Evaluator::pcf_footprint's level choice on the finest texel (exact: see st_eval.glsl).
-    uint32_t coarser = 0;
-    if (footprint > 1) coarser = uint32_t(std::min<double>(finest, std::ceil(std::log2(double(footprint)))));
-    out[p] = ev.pcf(finest - coarser, x >> coarser, y >> coarser, in.kernel, c.d);
+    // Evaluator::pcf_footprint's filtering on the finest texel (filter_level.hpp).
+    const FilterLevels f = filter_levels(finest, footprint);
+    const float a = ev.pcf(f.fine, x >> (finest - f.fine), y >> (finest - f.fine), in.kernel, c.d);
+    out[p] = f.t == 0.0f ? a
+                         : filter_blend(a, ev.pcf(f.coarse, x >> (finest - f.coarse), y >> (finest - f.coarse),
+                                                  in.kernel, c.d), f.t);
   }
 }
 

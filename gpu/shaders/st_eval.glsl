@@ -352,24 +352,38 @@ float st_pcf(uint level, uint x, uint y, uint r, float receiver, inout StProbe p
   return uintBitsToFloat(ST_PAGE(ST_PAGE(kPtPcfTable) + (r - 1u) * kPcfTableStride + lit));
 }
 
-// The level choice of Evaluator::pcf_footprint, the one place it is made on the GPU: the
-// level where one texel covers about `footprint` finest texels, i.e. coarser by
-// ceil(log2(footprint)) levels, computed exactly from the float's bits (equal to the
-// CPU's std::ceil(std::log2(double(footprint))) for every float footprint).
-uint st_coarser_levels(float footprint, uint finest) {
-  if (!(footprint > 1.0)) return 0u;
+// Hierarchical filtering, the one place the GPU makes it: the mirror of filter_levels and
+// filter_blend (tiles/core/filter_level.hpp), which Evaluator::pcf_footprint uses. The
+// footprint's exponent picks the two nearest levels by integer operations; its mantissa,
+// as a float in [1, 2) minus 1 (exact), is the weight of the coarser one; the blend is
+// a + t * (c - a), one rounding per operation (precise: never fused).
+struct StFilter {
+  uint fine, coarse;
+  float t;
+};
+StFilter st_filter_levels(float footprint, uint finest) {
+  StFilter f = StFilter(finest, finest, 0.0);
+  if (!(footprint > 1.0) || finest == 0u) return f;  // NaN, one texel or less
   const uint b = floatBitsToUint(footprint);
-  const uint e = (b >> 23u) & 0xFFu;
-  if (e == 0xFFu) return finest;  // +inf
-  const uint c = (e - 127u) + ((b & 0x7FFFFFu) != 0u ? 1u : 0u);
-  return min(finest, c);
+  const uint e = (b >> 23u) - 127u;  // footprint > 1: sign 0, e >= 0 (+inf: 128)
+  if (e >= finest) return StFilter(0u, 0u, 0.0);
+  precise float t = uintBitsToFloat((b & 0x7FFFFFu) | 0x3F800000u) - 1.0;
+  return StFilter(finest - e, finest - e - 1u, t);
 }
 
-// (x, y): texel of the finest level. Level from the footprint, then r x r PCF there.
+// (x, y): texel of the finest level. The two levels from the footprint, r x r PCF at each
+// (the texel at a coarser level is the finest one shifted), blended; t == 0: the fine
+// level alone, as on the CPU.
 float st_lookup(uint x, uint y, float receiver, float footprint, uint r, inout StProbe probe) {
   const uint finest = ST_PAGE(kPtMapLevel);
-  const uint coarser = st_coarser_levels(footprint, finest);
-  return st_pcf(finest - coarser, x >> coarser, y >> coarser, r, receiver, probe);
+  const StFilter f = st_filter_levels(footprint, finest);
+  const float a = st_pcf(f.fine, x >> (finest - f.fine), y >> (finest - f.fine), r, receiver, probe);
+  if (f.t == 0.0) return a;
+  const float c = st_pcf(f.coarse, x >> (finest - f.coarse), y >> (finest - f.coarse), r, receiver, probe);
+  precise float step = c - a;
+  precise float scaled = f.t * step;
+  precise float blended = a + scaled;
+  return blended;
 }
 
 #endif
