@@ -200,6 +200,7 @@ TEST(ClientLookups, TwoThreadsLookUpWhileTilesArriveAndEndExact) {
     }
   };
   std::thread a(reader, 1), b(reader, 2);
+  while (batches.load() < 2) std::this_thread::yield();  // lookups are under way
   f.make_all_resident();  // meanwhile, the lookups' own misses are queued too
   while (f.deliver_round() > 0) {
   }
