@@ -176,22 +176,11 @@ struct GpuMap::Impl {
   }
 
   void create_device_objects() {
-    VkDevice d = ctx->device();
     pool = ctx->make_buffer(pool_bytes, false);
     page = ctx->make_buffer(page_shadow.size() * 4, false);
     kernels.create(*ctx, opt.frames_in_flight);
-    VkCommandPoolCreateInfo cpi{};
-    cpi.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
-    cpi.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
-    cpi.queueFamilyIndex = ctx->queue_family();
-    vk_check(vkCreateCommandPool(d, &cpi, nullptr, &cmd_pool), "vkCreateCommandPool");
-    if (ctx->timestamp_bits() > 0) {
-      VkQueryPoolCreateInfo qpi{};
-      qpi.sType = VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO;
-      qpi.queryType = VK_QUERY_TYPE_TIMESTAMP;
-      qpi.queryCount = 2 * opt.frames_in_flight;
-      vk_check(vkCreateQueryPool(d, &qpi, nullptr, &queries), "vkCreateQueryPool");
-    }
+    cmd_pool = ctx->make_command_pool(true);
+    queries = ctx->make_timestamp_queries(2 * opt.frames_in_flight);
     const uint64_t staging = opt.upload_budget_bytes + uint64_t(slot_words) * 4 + page_shadow.size() * 4;
     const uint64_t in_bytes = std::max<uint64_t>(uint64_t(opt.max_queries) * L::kQueryWords * 4, uint64_t(opt.max_pixels) * 16);
     const uint64_t out_bytes = uint64_t(std::max(opt.max_queries, opt.max_pixels)) * 4;
@@ -210,15 +199,8 @@ struct GpuMap::Impl {
       f.normals_host = ctx->make_buffer(uint64_t(opt.max_pixels) * 16, true);
       f.output_host = ctx->make_buffer(out_bytes, true);
       f.feedback = ctx->make_buffer(fb_bytes, true);
-      VkCommandBufferAllocateInfo cai{};
-      cai.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
-      cai.commandPool = cmd_pool;
-      cai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
-      cai.commandBufferCount = 1;
-      vk_check(vkAllocateCommandBuffers(d, &cai, &f.cmd), "vkAllocateCommandBuffers");
-      VkFenceCreateInfo fci{};
-      fci.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
-      vk_check(vkCreateFence(d, &fci, nullptr, &f.fence), "vkCreateFence");
+      f.cmd = ctx->allocate_command_buffer(cmd_pool);
+      f.fence = ctx->make_fence();
       f.set = kernels.bind(*ctx, i, {pool.buffer, page.buffer, f.input.buffer, f.normals.buffer, f.output.buffer,
                                      f.feedback.buffer});
     }

@@ -25,17 +25,8 @@ std::vector<uint32_t> run_layout_probe(const std::string& device, bool validatio
     for (int i = 0; i < 6; ++i) bufs.push_back(ctx.make_buffer(layout::kProbeWords * 4, true));
     const VkDescriptorSet set = kernels.bind(ctx, 0, {bufs[0].buffer, bufs[1].buffer, bufs[2].buffer, bufs[3].buffer,
                                                       bufs[4].buffer, bufs[5].buffer});
-    VkCommandPoolCreateInfo cpi{};
-    cpi.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
-    cpi.queueFamilyIndex = ctx.queue_family();
-    vk_check(vkCreateCommandPool(ctx.device(), &cpi, nullptr, &pool), "vkCreateCommandPool");
-    VkCommandBufferAllocateInfo cai{};
-    cai.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
-    cai.commandPool = pool;
-    cai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
-    cai.commandBufferCount = 1;
-    VkCommandBuffer cmd = VK_NULL_HANDLE;
-    vk_check(vkAllocateCommandBuffers(ctx.device(), &cai, &cmd), "vkAllocateCommandBuffers");
+    pool = ctx.make_command_pool(false);
+    VkCommandBuffer cmd = ctx.allocate_command_buffer(pool);
     VkCommandBufferBeginInfo bi{};
     bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
     vk_check(vkBeginCommandBuffer(cmd, &bi), "vkBeginCommandBuffer");
@@ -49,9 +40,7 @@ std::vector<uint32_t> run_layout_probe(const std::string& device, bool validatio
     vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &host, 0, nullptr, 0,
                          nullptr);
     vk_check(vkEndCommandBuffer(cmd), "vkEndCommandBuffer");
-    VkFenceCreateInfo fci{};
-    fci.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
-    vk_check(vkCreateFence(ctx.device(), &fci, nullptr, &fence), "vkCreateFence");
+    fence = ctx.make_fence();
     VkSubmitInfo si{};
     si.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
     si.commandBufferCount = 1;

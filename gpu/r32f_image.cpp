@@ -44,27 +44,10 @@ struct R32fImage::Impl {
       output = ctx.make_buffer(uint64_t(max) * 4, true);
       feedback = ctx.make_buffer(64, true);
       set = kernels.bind(ctx, 0, {image.buffer, page.buffer, input.buffer, normals.buffer, output.buffer, feedback.buffer});
-      VkCommandPoolCreateInfo cpi{};
-      cpi.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
-      cpi.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
-      cpi.queueFamilyIndex = ctx.queue_family();
-      vk_check(vkCreateCommandPool(ctx.device(), &cpi, nullptr, &pool), "vkCreateCommandPool");
-      VkCommandBufferAllocateInfo cai{};
-      cai.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
-      cai.commandPool = pool;
-      cai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
-      cai.commandBufferCount = 1;
-      vk_check(vkAllocateCommandBuffers(ctx.device(), &cai, &cmd), "vkAllocateCommandBuffers");
-      VkFenceCreateInfo fci{};
-      fci.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
-      vk_check(vkCreateFence(ctx.device(), &fci, nullptr, &fence), "vkCreateFence");
-      if (ctx.timestamp_bits()) {
-        VkQueryPoolCreateInfo qpi{};
-        qpi.sType = VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO;
-        qpi.queryType = VK_QUERY_TYPE_TIMESTAMP;
-        qpi.queryCount = 2;
-        vk_check(vkCreateQueryPool(ctx.device(), &qpi, nullptr, &queries), "vkCreateQueryPool");
-      }
+      pool = ctx.make_command_pool(true);
+      cmd = ctx.allocate_command_buffer(pool);
+      fence = ctx.make_fence();
+      queries = ctx.make_timestamp_queries(2);
       // The image goes up in chunks through the (host-visible) normals buffer.
       const uint64_t chunk = normals.size;
       for (uint64_t off = 0; off < bytes; off += chunk) {

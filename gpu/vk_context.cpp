@@ -209,6 +209,46 @@ VkBufferBox VkContext::make_buffer(VkDeviceSize size, bool host, VkBufferUsageFl
   return b;
 }
 
+VkCommandPool VkContext::make_command_pool(bool resettable_buffers) {
+  VkCommandPoolCreateInfo cpi{};
+  cpi.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
+  cpi.flags = resettable_buffers ? VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT : 0;
+  cpi.queueFamilyIndex = family_;
+  VkCommandPool pool = VK_NULL_HANDLE;
+  vk_check(vkCreateCommandPool(device_, &cpi, nullptr, &pool), "vkCreateCommandPool");
+  return pool;
+}
+
+VkCommandBuffer VkContext::allocate_command_buffer(VkCommandPool pool) {
+  VkCommandBufferAllocateInfo cai{};
+  cai.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
+  cai.commandPool = pool;
+  cai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+  cai.commandBufferCount = 1;
+  VkCommandBuffer cmd = VK_NULL_HANDLE;
+  vk_check(vkAllocateCommandBuffers(device_, &cai, &cmd), "vkAllocateCommandBuffers");
+  return cmd;
+}
+
+VkFence VkContext::make_fence() {
+  VkFenceCreateInfo fci{};
+  fci.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
+  VkFence fence = VK_NULL_HANDLE;
+  vk_check(vkCreateFence(device_, &fci, nullptr, &fence), "vkCreateFence");
+  return fence;
+}
+
+VkQueryPool VkContext::make_timestamp_queries(uint32_t count) {
+  if (timestamp_bits_ == 0) return VK_NULL_HANDLE;
+  VkQueryPoolCreateInfo qpi{};
+  qpi.sType = VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO;
+  qpi.queryType = VK_QUERY_TYPE_TIMESTAMP;
+  qpi.queryCount = count;
+  VkQueryPool queries = VK_NULL_HANDLE;
+  vk_check(vkCreateQueryPool(device_, &qpi, nullptr, &queries), "vkCreateQueryPool");
+  return queries;
+}
+
 void VkContext::destroy(VkBufferBox& b) {
   if (b.mapped) vkUnmapMemory(device_, b.memory);
   if (b.buffer) vkDestroyBuffer(device_, b.buffer, nullptr);

@@ -56,6 +56,14 @@ class VkContext {
 
   VkShaderModule make_shader(std::span<const uint32_t> spirv);
 
+  // Command and sync objects on the one queue family. The caller destroys them with the
+  // matching vkDestroy* call (the pool frees its command buffers).
+  VkCommandPool make_command_pool(bool resettable_buffers);
+  VkCommandBuffer allocate_command_buffer(VkCommandPool pool);
+  VkFence make_fence();
+  // `count` timestamp queries, or VK_NULL_HANDLE when the queue has no timestamps.
+  VkQueryPool make_timestamp_queries(uint32_t count);
+
   // Validation messages seen (errors and warnings) and the first one's text.
   uint64_t validation_messages() const { return messages_.load(); }
   std::string first_validation_message() const;
