@@ -599,12 +599,22 @@ def index_page(d, command):
         for f in sorted(files):
             if f.endswith(".html") and not (root == d and f == "index.html"):
                 pages.append(os.path.relpath(os.path.join(root, f), d))
-    facts = []
+    # Each page's own verdict (the heading this script wrote at its top), answer first.
+    import re
+    rows, failed = [], 0
     for rel in pages:
-        facts.append(('<a href="%s">%s</a>' % (esc(rel), esc(rel)), ""))
-    body = "<ul>%s</ul>" % "".join('<li><a href="%s">%s</a></li>' % (esc(r), esc(r)) for r in pages)
-    page.parts.append('<section id="verdict" class="verdict info"><h2>%d pages in this report</h2>%s</section>' %
-                      (len(pages), body))
+        try:
+            with open(os.path.join(d, rel)) as f:
+                m = re.search(r'<section id="verdict" class="verdict (\w+)"><h2>(.*?)</h2>', f.read(200000), re.S)
+        except OSError:
+            m = None
+        cls, head = (m.group(1), html.unescape(m.group(2)).strip()) if m else ("info", "(no verdict)")
+        failed += cls == "fail"
+        rows.append(['<a href="%s">%s</a>' % (esc(rel), esc(rel)), '<span class="%s">%s</span>' % (cls, esc(head))])
+    ok = None if not pages else failed == 0
+    page.parts.append('<section id="verdict" class="verdict %s"><h2>%s: %d pages, %d failed</h2>%s</section>' % (
+        {True: "pass", False: "fail", None: "info"}[ok], {True: "PASS", False: "FAIL", None: "EMPTY"}[ok],
+        len(pages), failed, table(["page", "verdict"], rows)))
     views = [("view.png", "from the server's tiles"), ("view_traced.png", "ray-traced (Embree shadow rays)"),
              ("view_diff.png", "difference (red: map shadow where the rays see light)")]
     present = [(f, c) for f, c in views if os.path.exists(os.path.join(d, f))]

@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# Every kind of HTML report page, made by the real commands on a small map and opened in
+# headless Chromium (browser_check.py: sections, plots and images checked through the
+# DOM, a screenshot of each page kept under WORKDIR/report_pages/screenshots/).
+#   report_pages_test.sh PATH/TO/shadowtile SOURCE_DIR WORKDIR
+# Exit 0 pass, 1 fail, 77 skipped (no matplotlib or no Chromium: scripts/deps installs both).
+set -uo pipefail
+st="$(realpath "$1")" src="$(realpath "$2")" work="$3/report_pages"
+rm -rf "$work" && mkdir -p "$work/rep" && cd "$work"
+py=python3; [ -x /usr/bin/python3 ] && py=/usr/bin/python3
+"$py" -c "import matplotlib" 2>/dev/null || { echo "SKIP: no matplotlib for $py (scripts/deps installs python3-matplotlib)"; exit 77; }
+command -v chromium >/dev/null || { echo "SKIP: no chromium on PATH (scripts/deps installs it)"; exit 77; }
+scene="procedural:city,size=3" light="sun:azimuth=30,elevation=50"
+fail=0
+run() {  # run NAME PATTERN -- command...: the command's output must end with PATTERN's line
+  local t0=$SECONDS
+  local name="$1" pattern="$2"; shift 3
+  local out; out="$("$@" 2>&1)"
+  if ! tail -n 1 <<<"$out" | grep -qE "$pattern"; then
+    echo "FAIL $name: last line is not /$pattern/"; echo "$out" | tail -8; fail=1; return
+  fi
+  echo "ok   $name ($((SECONDS - t0)) s): $(tail -n 1 <<<"$out")"
+}
+run build '^html: rep/build\.html$' -- "$st" build $scene --light $light --resolution 512 --encoding dagmh \
+  --tile-bytes 8192 -o city.pack --report rep/build.json -q
+run report '^html: rep/quality/report\.html$' -- "$st" report --scene $scene --light $light --resolution 128 \
+  --frames 1 --size 48x27 --encodings dagmh --pcf 1 --out rep/quality
+# The soak runs the load tester too (its page lands in rep/soak/load/); a 2 s run may
+# fail its memory rule: the page must say so, the verdict itself is not checked here.
+run soak '^html: .*rep/soak/soak\.html$' -- env SHADOWTILE_BIN="$st" "$src/scripts/soak" --no-build \
+  --pack "$work/city.pack" --seconds 2 --cameras 2 --rate 30 --interval 0.5 --warmup 0 --out "$work/rep/soak"
+run render '^differing pixels' -- "$st" render city.pack --scene $scene --camera "pos=-60,50,-70,target=0,0,0,fov=50" \
+  --size 192x108 --diff -o rep/view.exr
+run index '^rep/index\.html$' -- "$py" "$src/scripts/html_report.py" index rep -o rep/index.html
+[ "$fail" -eq 0 ] || exit 1
+"$py" "$src/tests/report/browser_check.py" --shots "$work/screenshots" \
+  rep/build.html:verdict,stages,levels,tile_sizes,figures,provenance:3 \
+  rep/quality/report.html:verdict,pareto,refinement,rows,provenance:3 \
+  rep/soak/load/load.html:verdict,timeline,latency,cuts,figures,provenance:3 \
+  rep/soak/soak.html:verdict,over_time,figures,provenance:3 \
+  rep/index.html:verdict,views,provenance:3
