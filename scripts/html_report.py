@@ -439,9 +439,10 @@ def build_page(j, src, command):
     p = plt()
     cells = j.get("cells", {})
     done = cells.get("built", 0) + cells.get("resumed", 0) + cells.get("outside_region", 0)
-    ok = done == cells.get("total", done)
+    ok = done == cells["total"] if isinstance(cells.get("total"), int) else None
     page = Page("shadowtile build: %s^2 %s" % (j.get("resolution"), j.get("encoding")), command, [src])
-    page.verdict(ok, "every cell of the map built" if ok else "cells missing from the pack", [
+    page.verdict(ok, "every cell of the map built" if ok else "cells missing from the pack" if ok is False else
+                 "no cell counts in the JSON", [
         ("pack", "%s, %s tiles (%s index tiles)" % (mib(j.get("pack_bytes")), num(j.get("tiles")),
                                                     num(j.get("index_tiles")))),
         ("cells built / resumed / outside region / total", "%s / %s / %s / %s" % (
@@ -454,7 +455,8 @@ def build_page(j, src, command):
     body = ""
     if st:
         fig, ax = p.subplots(figsize=(9, 0.45 * len(st) + 1.2))
-        names = list(st)
+        order = ["bvh", "trace", "hierarchy", "cut_encode", "compress_write", "finish"]  # pipeline order
+        names = [n for n in order if n in st] + sorted(n for n in st if n not in order)
         ax.barh(names, [st[n] for n in names], color="C0")
         for i, n in enumerate(names):
             ax.annotate("%.3g s" % st[n], (st[n], i), textcoords="offset points", xytext=(3, -3), fontsize=8)
@@ -654,7 +656,7 @@ def main():
     except BadInput as e:
         print("html_report.py: %s" % e, file=sys.stderr)
         return EXIT_BAD_INPUT
-    except (KeyError, TypeError, ValueError, IndexError) as e:
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError, ZeroDivisionError) as e:
         print("html_report.py: %s: unexpected content (%s: %s)" % (a.input, type(e).__name__, e), file=sys.stderr)
         return EXIT_BAD_INPUT
     tmp = a.out + ".tmp"

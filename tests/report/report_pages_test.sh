@@ -12,26 +12,39 @@ py=python3; [ -x /usr/bin/python3 ] && py=/usr/bin/python3
 command -v chromium >/dev/null || { echo "SKIP: no chromium on PATH (scripts/deps installs it)"; exit 77; }
 scene="procedural:city,size=3" light="sun:azimuth=30,elevation=50"
 fail=0
-run() {  # run NAME PATTERN -- command...: the command's output must end with PATTERN's line
+run() {  # run NAME EXIT PATTERN -- command...: exit EXIT (any: not checked), last line /PATTERN/
   local t0=$SECONDS
-  local name="$1" pattern="$2"; shift 3
-  local out; out="$("$@" 2>&1)"
+  local name="$1" want="$2" pattern="$3"; shift 4
+  local out rc; out="$("$@" 2>&1)"; rc=$?
+  if [[ "$want" != any && "$rc" != "$want" ]]; then
+    echo "FAIL $name: exit $rc, expected $want"; echo "$out" | tail -8; fail=1; return
+  fi
   if ! tail -n 1 <<<"$out" | grep -qE "$pattern"; then
     echo "FAIL $name: last line is not /$pattern/"; echo "$out" | tail -8; fail=1; return
   fi
   echo "ok   $name ($((SECONDS - t0)) s): $(tail -n 1 <<<"$out")"
 }
-run build '^html: rep/build\.html$' -- "$st" build $scene --light $light --resolution 512 --encoding dagmh \
+run build 0 '^html: rep/build\.html$' -- "$st" build $scene --light $light --resolution 512 --encoding dagmh \
   --tile-bytes 8192 -o city.pack --report rep/build.json -q
-run report '^html: rep/quality/report\.html$' -- "$st" report --scene $scene --light $light --resolution 128 \
+run report 0 '^html: rep/quality/report\.html$' -- "$st" report --scene $scene --light $light --resolution 128 \
   --frames 1 --size 48x27 --encodings dagmh --pcf 1 --out rep/quality
-# The soak runs the load tester too (its page lands in rep/soak/load/); a 2 s run may
+# The soak runs the load tester too (its page lands in rep/soak/load/); a 1 s run may
 # fail its memory rule: the page must say so, the verdict itself is not checked here.
-run soak '^html: .*rep/soak/soak\.html$' -- env SHADOWTILE_BIN="$st" "$src/scripts/soak" --no-build \
-  --pack "$work/city.pack" --seconds 2 --cameras 2 --rate 30 --interval 0.5 --warmup 0 --out "$work/rep/soak"
-run render '^differing pixels' -- "$st" render city.pack --scene $scene --camera "pos=-60,50,-70,target=0,0,0,fov=50" \
+run soak any '^html: .*rep/soak/soak\.html$' -- env SHADOWTILE_BIN="$st" "$src/scripts/soak" --no-build \
+  --pack "$work/city.pack" --seconds 1 --cameras 2 --rate 30 --interval 0.25 --warmup 0 --out "$work/rep/soak"
+run render 0 '^differing pixels' -- "$st" render city.pack --scene $scene --camera "pos=-60,50,-70,target=0,0,0,fov=50" \
   --size 192x108 --diff -o rep/view.exr
-run index '^rep/index\.html$' -- "$py" "$src/scripts/html_report.py" index rep -o rep/index.html
+run index 0 '^rep/index\.html$' -- "$py" "$src/scripts/html_report.py" index rep -o rep/index.html
+# Bad input: exit 1 and one line naming the file and what is wrong, no page.
+echo '{"series": 3' > rep/truncated.json
+run bad-json 1 '^html_report.py: rep/truncated.json: not JSON' -- "$py" "$src/scripts/html_report.py" load \
+  rep/truncated.json -o rep/bad.html
+echo '{"error_vs_time": [{"map": "a", "error": 0.1, "ms_per_frame": 1}], "refinement": {"a": {"points": [[1]]}}}' \
+  > rep/short_row.json
+run bad-content 1 '^html_report.py: rep/short_row.json: unexpected content' -- "$py" "$src/scripts/html_report.py" \
+  report rep/short_row.json -o rep/bad.html
+[ ! -e rep/bad.html ] || { echo "FAIL bad input left a page"; fail=1; }
+rm -f rep/truncated.json rep/short_row.json
 [ "$fail" -eq 0 ] || exit 1
 "$py" "$src/tests/report/browser_check.py" --shots "$work/screenshots" \
   rep/build.html:verdict,stages,levels,tile_sizes,figures,provenance:3 \
