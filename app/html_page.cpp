@@ -2,12 +2,14 @@
 
 #include <fcntl.h>
 #include <signal.h>
+#include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -19,7 +21,6 @@ namespace st::cli {
 namespace {
 
 constexpr int kNoMatplotlib = 3;    // html_report.py's exit code when matplotlib is missing
-constexpr int kExecFailed = 127;    // the child could not start python3
 constexpr double kTimeoutSeconds = 300;
 
 // The generator: $SHADOWTILE_HTML_REPORT, the installed copy beside the executable
@@ -88,17 +89,17 @@ bool write_html_page(const std::string& kind, const std::string& input, const st
   argv.push_back(nullptr);
   std::fflush(stdout);
   std::fflush(stderr);
-  const pid_t pid = fork();
-  if (pid < 0) {
-    std::printf("html: skipped (cannot start python3)\n");
+  // posix_spawn, not fork: the commands that call this still have threads running. The
+  // generator prints the page's path; this process prints it (last) instead.
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, STDOUT_FILENO, "/dev/null", O_WRONLY, 0);
+  pid_t pid = 0;
+  const int err = posix_spawnp(&pid, argv[0], &actions, nullptr, argv.data(), environ);
+  posix_spawn_file_actions_destroy(&actions);
+  if (err != 0) {
+    std::printf("html: skipped (cannot start %s: %s)\n", argv[0], std::strerror(err));
     return false;
-  }
-  if (pid == 0) {
-    // The generator prints the page's path; this process prints it (last) instead.
-    const int null = open("/dev/null", O_WRONLY);
-    if (null >= 0) dup2(null, STDOUT_FILENO);
-    execvp(argv[0], argv.data());
-    _exit(kExecFailed);
   }
   const auto t0 = std::chrono::steady_clock::now();
   int status = 0;
@@ -124,8 +125,6 @@ bool write_html_page(const std::string& kind, const std::string& input, const st
   }
   if (rc == kNoMatplotlib)
     std::printf("html: skipped (matplotlib is missing: apt-get install python3-matplotlib)\n");
-  else if (rc == kExecFailed)
-    std::printf("html: skipped (python3 is missing)\n");
   else
     std::printf("html: not written (html_report.py exited %d; its message is above)\n", rc);
   return false;
