@@ -263,24 +263,26 @@ def load_page(j, src, command):
     page.section("timeline", "Timeline", body or "<p>no time series in the JSON</p>")
 
     curve = lat.get("percentiles", [])
+    cq = sorted(cuts.get("all", []))
     body = ""
-    if curve:
+    if curve or cq:
         n = lat.get("count", 0)
         fig, ax = p.subplots(figsize=(10, 4.5))
-        ax.plot([pct_x(q, n) for q, _ in curve], [max(v, 1e-3) for _, v in curve], marker=".", label="tile latency")
-        cq = sorted(cuts.get("all", []))
-        if cq:
-            qs = [(i + 1) / len(cq) if len(cq) > 1 else 1.0 for i in range(len(cq))]
-            ax.plot([pct_x(q - 1.0 / len(cq) if q < 1 else 1, len(cq)) for q in qs], [max(v, 1e-3) for v in cq],
+        if curve:
+            ax.plot([pct_x(q, n) for q, _ in curve], [max(v, 1e-3) for _, v in curve], marker=".",
+                    label="tile latency")
+        if cq:  # the i-th of k sorted values is the (i / (k - 1)) quantile; the last one the maximum
+            k = len(cq)
+            ax.plot([pct_x(i / (k - 1) if k > 1 else 1.0, k) for i in range(k)], [max(v, 1e-3) for v in cq],
                     marker="x", linestyle="--", label="cut to full residency")
         percentile_axes(ax, max(n, len(cq)))
         ax.set_yscale("log")
         ax.set_ylabel("milliseconds (log)")
         outside_legend(ax)
         body = figure(page, fig, "Latency by percentile: a needed cell from the frame that first needed it to its "
-                      "tile's arrival (<code>latency_ms.percentiles</code>, %s cells, %s abandoned) and a camera "
-                      "cut to every needed tile resident (<code>cut_residency_ms.all</code>)." % (
-                          n, lat.get("abandoned", 0)))
+                      "tile's arrival (<code>latency_ms.percentiles</code>, %s cells, %s abandoned%s) and a camera "
+                      "cut to every needed tile resident (<code>cut_residency_ms.all</code>, %s cuts)." % (
+                          n, lat.get("abandoned", 0), "; no cell waited in this run" if not curve else "", len(cq)))
     page.section("latency", "Latency percentiles", body or "<p>no latency percentiles in the JSON</p>")
 
     allc = cuts.get("all", [])
