@@ -151,7 +151,7 @@ def svg_of(fig):
     p = plt()
     plain_log_ticks(fig)
     buf = io.StringIO()
-    fig.savefig(buf, format="svg", bbox_inches="tight")
+    fig.savefig(buf, format="svg", bbox_inches="tight", metadata={"Date": None})
     p.close(fig)
     s = buf.getvalue()
     return s[s.index("<svg"):]

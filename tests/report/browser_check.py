@@ -1,13 +1,15 @@
 #!/usr/bin/env python3
 """browser_check.py: opens HTML report pages in headless Chromium and checks them through the DOM.
 
-    browser_check.py --shots DIR PAGE.html:SECTION,SECTION,...:MIN_FIGURES ...
+    browser_check.py --shots DIR [!]PAGE.html:SECTION,SECTION,...:MIN_FIGURES ...
+
+A page marked ! is broken on purpose: it must fail a check (so the checks can fail).
 
 One browser process for all pages, driven over the DevTools protocol on a pipe
 (--remote-debugging-pipe: NUL-terminated JSON on fds 3 and 4, so only the standard
 library is needed). For each page: every listed section id is present, at least
 MIN_FIGURES <figure>s, every figure holds a drawn <svg> (non-empty box, paths in it) or
-an <img>, every <img> loaded (naturalWidth > 0), and a full-page screenshot is kept as
+an <img>, every <img> loaded (naturalWidth > 0), nothing fetched but local files, and a full-page screenshot is kept as
 DIR/<page name>.png. Exit 0 all good, 1 a check failed (one line per failure), 77 no
 Chromium (the ctest reports a skip).
 """
@@ -38,6 +40,7 @@ CHECK_JS = r"""
               marks: s ? s.querySelectorAll('path, use, rect, line').length : 0};
     }),
     verdict: (document.querySelector('#verdict h2') || {}).textContent || null,
+    fetched: performance.getEntriesByType('resource').map(e => e.name),
   });
 })()
 """
@@ -128,6 +131,9 @@ def check_page(br, path, sections, min_figures, shots):
     for im in r["images"]:
         if im["w"] <= 0 or im["h"] <= 0:
             fails.append("%s: image %s did not load" % (name, im["src"]))
+    for u in r["fetched"]:
+        if not u.startswith("file:"):
+            fails.append("%s: fetched %s (a page must open with no network)" % (name, u))
     if not r["verdict"]:
         fails.append("%s: no verdict heading" % name)
     metrics = br.send("Page.getLayoutMetrics", {}, s)
@@ -162,11 +168,19 @@ def main():
         br = Browser(exe, profile)
         try:
             for spec in specs:
-                path, secs, n = spec.rsplit(":", 2)
+                broken = spec.startswith("!")
+                path, secs, n = spec.lstrip("!").rsplit(":", 2)
                 if not os.path.exists(path):
                     fails.append("%s: page was not written" % path)
                     continue
-                fails += check_page(br, path, [x for x in secs.split(",") if x], int(n), shots)
+                f = check_page(br, path, [x for x in secs.split(",") if x], int(n), shots)
+                if broken:
+                    print("ok   %s: broken on purpose, refused (%d findings)" % (path, len(f)) if f else
+                          "FAIL %s: broken on purpose, yet every check passed" % path)
+                    for x in f:
+                        print("       expected: " + x)
+                    f = [] if f else ["%s: the checks did not catch a broken page" % path]
+                fails += f
         finally:
             br.close()
     for f in fails:

@@ -47,9 +47,21 @@ run bad-content 1 '^html_report.py: rep/short_row.json: unexpected content' -- "
 [ ! -e rep/bad.html ] || { echo "FAIL bad input left a page"; fail=1; }
 rm -f rep/truncated.json rep/short_row.json
 [ "$fail" -eq 0 ] || exit 1
+# A page the checks must refuse: an image that is not there, an empty plot, a fetch from
+# the network, no #views section.
+mkdir -p broken
+cat > broken/broken.html <<'HTML'
+<!DOCTYPE html><html><head><title>broken</title></head><body>
+<section id="verdict"><h2>PASS</h2></section>
+<figure id="fig1"><img src="missing.png" alt="x"></figure>
+<figure id="fig2"><svg width="0" height="0"></svg></figure>
+<figure id="fig3"><img src="http://127.0.0.1:9/x.png" alt="y"></figure>
+</body></html>
+HTML
 "$py" "$src/tests/report/browser_check.py" --shots "$work/screenshots" \
   rep/build.html:verdict,stages,levels,tile_sizes,figures,provenance:3 \
   rep/quality/report.html:verdict,pareto,refinement,rows,provenance:3 \
   rep/soak/load/load.html:verdict,timeline,latency,cuts,figures,provenance:2 \
   rep/soak/soak.html:verdict,over_time,figures,provenance:3 \
-  rep/index.html:verdict,views,provenance:3
+  rep/index.html:verdict,views,provenance:3 \
+  '!broken/broken.html:verdict,views:3'
