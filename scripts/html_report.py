@@ -140,7 +140,9 @@ def plain_log_ticks(fig):
                 continue
             axis.set_major_formatter(g)
             lo, hi = sorted(lim)
-            if lo > 0 and hi / lo < 1000:  # label 2 and 5 of each decade too
+            if lo > 0 and hi / lo < 10:  # under a decade: label every minor tick
+                axis.set_minor_formatter(g)
+            elif lo > 0 and hi / lo < 1000:  # label 2 and 5 of each decade too
                 axis.set_minor_formatter(FuncFormatter(
                     lambda v, _: "%g" % v if v > 0 and round(v / 10 ** math.floor(math.log10(v)), 6) in (2, 5) else ""))
             else:
