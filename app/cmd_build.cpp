@@ -7,6 +7,7 @@
 #include "tiles/bake/map_build.hpp"
 #include "tiles/bake/scene.hpp"
 #include "app/command.hpp"
+#include "app/html_page.hpp"
 #include "app/progress.hpp"
 #include "common/error.hpp"
 #include "tiles/core/pack_format.hpp"
@@ -102,6 +103,11 @@ void run(const BuildArgs& a) {
     std::ofstream f(a.report);
     f << r.to_json() << "\n";
     if (!f) throw Error("--report: cannot write '" + a.report + "'");
+    f.close();
+    // The page beside the JSON: build.json -> build.html.
+    std::string page = a.report;
+    if (page.size() > 5 && page.compare(page.size() - 5, 5, ".json") == 0) page.resize(page.size() - 5);
+    write_html_page("build", a.report, page + ".html");
   }
 }
 
@@ -127,7 +133,7 @@ void setup(CLI::App& app) {
       ->capture_default_str();
   app.add_option("-o,--output", a->out, "Pack file to write (built as OUT.tmp, renamed when complete)")
       ->required();
-  app.add_option("--report", a->report, "Write a JSON build report (stage times, sizes, histogram, memory)");
+  app.add_option("--report", a->report, "Write a JSON build report (stage times, sizes, histogram, memory) and an HTML page beside it");
   app.add_flag("--resume", a->resume, "Continue OUT.tmp left by an interrupted build");
   app.add_option("--construction", a->construction, "MH construction: bottom-up or top-down (MH §3.1)")
       ->capture_default_str();

@@ -1,9 +1,10 @@
 // `shadowtile load --server HOST:PORT --map NAME --cameras N --path P --duration S ...`:
 // synthetic cameras against a running server through the client library only
-// (loadgen/load_run.hpp); prints a table, writes JSON and PNG plots with --report DIR.
+// (loadgen/load_run.hpp); prints a table, writes JSON and an HTML page with --report DIR.
 #include <cstdio>
 #include <memory>
 
+#include "app/html_page.hpp"
 #include "loadgen/load_report.hpp"
 #include "loadgen/load_run.hpp"
 #include "app/command.hpp"
@@ -59,8 +60,8 @@ void run(const LoadArgs& a) {
   std::printf("%s", loadgen::load_table(r).c_str());
   if (!a.report.empty()) {
     loadgen::write_load_report(r, a.report);
-    std::printf("report: %s/load.{txt,json}, load_latency.png, load_timeline.png, load_cuts.png\n",
-                a.report.c_str());
+    std::printf("report: %s/load.{txt,json}\n", a.report.c_str());
+    write_html_page("load", a.report + "/load.json", a.report + "/load.html");
   }
   if (r.errors() > 0) exit_with(kExitError);
 }
@@ -77,7 +78,7 @@ Register reg{"load", "Load-test a server with synthetic cameras (client library 
   sub.add_option("--rate", a->rate, "Frames per second per camera")->capture_default_str()->check(CLI::Range(0.1, 1000.0));
   sub.add_option("--cache-mb", a->cache_mb, "Tile cache per connection (MiB)")->capture_default_str()
       ->check(CLI::Range(0.01, 65536.0));
-  sub.add_option("--report", a->report, "Write load.json, load.txt and PNG plots into this folder");
+  sub.add_option("--report", a->report, "Write load.json, load.txt and load.html into this folder");
   sub.add_option("--seed", a->seed, "Path seed")->capture_default_str();
   sub.add_option("--key-file", a->key_file, "File holding the server's catalog key (hex or raw bytes)");
   sub.add_flag("--tls", a->tls, "Connect over TLS (the system's trust store unless --tls-ca)");

@@ -4,7 +4,7 @@
 //     resolution; the largest that fits in the compressed map's memory; one level lower);
 // (b) error against time since a camera cut while tiles stream from an in-process server
 //     into a client (progressive refinement: coarser levels answer until tiles arrive).
-// Writes report.txt, report.json, report_error_time.png, report_refinement.png.
+// Writes report.txt, report.json and report.html (scripts/html_report.py draws the plots).
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -17,7 +17,6 @@
 
 #include "client/map_access.hpp"
 #include "loadgen/camera_path.hpp"
-#include "loadgen/png_plot.hpp"
 #include "loadgen/view_tiles.hpp"
 #include "server/server.hpp"
 #include "tiles/bake/depth_bounds.hpp"
@@ -25,6 +24,7 @@
 #include "tiles/bake/render_error.hpp"
 #include "tiles/bake/scene.hpp"
 #include "app/command.hpp"
+#include "app/html_page.hpp"
 #include "common/error.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 
@@ -241,29 +241,19 @@ void run(const ReportArgs& a) {
 
   // (b) progressive refinement after a cut, per encoding, on frame 0.
   json refine = json::object();
-  std::vector<loadgen::Series> rseries;
   for (size_t i = 0; i < packs.size(); ++i) {
     size_t cells = 0;
     const auto pts = refinement(packs[i].path, "report_" + packs[i].enc, light, frames[0], a.cache_mb, a.sample_ms, cells);
     json arr = json::array();
-    loadgen::Series s{packs[i].enc, loadgen::series_colour(i), {}, {}};
-    for (const auto& p : pts) {
-      arr.push_back({p.ms, p.error, p.resident_cells});
-      s.x.push_back(std::max(p.ms, 0.01));
-      s.y.push_back(p.error);
-    }
+    for (const auto& p : pts) arr.push_back({p.ms, p.error, p.resident_cells});
     refine[packs[i].enc] = {{"cells", cells}, {"columns", {"ms", "error", "resident_cells"}}, {"points", arr},
                             {"final_error", pts.empty() ? 0.0 : pts.back().error},
                             {"ms_to_full", pts.empty() ? 0.0 : pts.back().ms}};
-    rseries.push_back(std::move(s));
   }
   json flat_lines = json::object();
   for (size_t k = 0; k < flats.size(); ++k) {
     const FrameError e = frame_error(*flats[k].second, light, frames[0], 0, flats[k].second->finest_level());
     flat_lines[flats[k].first] = e.fraction();
-    if (k == 0) continue;
-    const double x_end = std::max(1.0, rseries.empty() || rseries[0].x.empty() ? 1.0 : rseries[0].x.back());
-    rseries.push_back({flats[k].first, loadgen::series_colour(4 + k), {0.01, x_end}, {e.fraction(), e.fraction()}});
   }
 
   // Outputs.
@@ -312,29 +302,8 @@ void run(const ReportArgs& a) {
   j["uncompressed_frame0_error"] = flat_lines;
   std::ofstream(a.out + "/report.json") << j.dump(2) << "\n";
 
-  std::vector<loadgen::Series> es;
-  std::unordered_map<std::string, size_t> idx;
-  for (const Row& r : rows) {
-    if (r.pcf != 0) continue;
-    auto [it, fresh] = idx.try_emplace(r.map, es.size());
-    if (fresh) es.push_back({r.map, loadgen::series_colour(es.size()), {}, {}});
-    es[it->second].x.push_back(r.ms_per_frame);
-    es[it->second].y.push_back(r.error);
-  }
-  loadgen::PlotSpec ps;
-  ps.title = "SINGLE-TAP SHADOW ERROR VS EVALUATION TIME PER FRAME";
-  ps.x_label = "MS PER FRAME (ONE THREAD)";
-  ps.y_label = "FRACTION WRONG";
-  ps.y_min = 0;
-  loadgen::write_plot_png(a.out + "/report_error_time.png", ps, es);
-  loadgen::PlotSpec rs;
-  rs.title = "ERROR AFTER A CAMERA CUT WHILE TILES STREAM IN";
-  rs.x_label = "MS SINCE THE CUT (LOG)";
-  rs.y_label = "FRACTION WRONG";
-  rs.log_x = true;
-  rs.y_min = 0;
-  loadgen::write_plot_png(a.out + "/report_refinement.png", rs, rseries);
-  std::printf("report: %s/report.{txt,json}, report_error_time.png, report_refinement.png\n", a.out.c_str());
+  std::printf("report: %s/report.{txt,json}\n", a.out.c_str());
+  write_html_page("report", a.out + "/report.json", a.out + "/report.html");
 }
 
 Register reg{"report", "Shadow error vs time: encodings, PCF, levels, uncompressed maps, refinement", [](CLI::App& sub) {

@@ -4,7 +4,6 @@
 // /proc; prints a row per interval (connections open, requests/s, tiles/s, MiB/s,
 // latency p50/p99 of that interval, errors, RSS) and appends a JSON line per row. The
 // soak (scripts/soak, loadgen/LOAD.md) runs it next to `shadowtile load`.
-#include <cctype>
 #include <chrono>
 #include <cstdio>
 #include <fstream>
@@ -14,7 +13,6 @@
 #include <thread>
 
 #include "client/map_access.hpp"
-#include "loadgen/png_plot.hpp"
 #include "loadgen/server_watch.hpp"
 #include "app/command.hpp"
 #include "common/error.hpp"
@@ -30,43 +28,12 @@ struct StatsArgs {
   double interval = 2, duration = 0;
   std::vector<std::string> pids;  // NAME=PID
   int until_gone = 0;
-  std::string plot;  // PREFIX: PREFIX_memory.png, PREFIX_rate.png, PREFIX_latency.png
 };
 
 struct Watched {
   std::string name;
   int pid = 0;
 };
-
-// What the plots draw, one entry per answered sample.
-struct Trace {
-  std::vector<double> t, conns, rps, tps, p99_ms;
-  std::vector<std::vector<double>> rss_t, rss_mib;  // per watched process, while alive
-};
-
-void write_plots(const std::string& prefix, const std::vector<Watched>& watched, const Trace& tr) {
-  using loadgen::PlotSpec;
-  using loadgen::Series;
-  std::vector<Series> mem;
-  for (size_t i = 0; i < watched.size(); ++i)
-  {
-    std::string label = watched[i].name + " RSS";
-    for (char& ch : label) ch = char(std::toupper(static_cast<unsigned char>(ch)));  // the plot font
-    mem.push_back({label, loadgen::series_colour(i), tr.rss_t[i], tr.rss_mib[i]});
-  }
-  PlotSpec ms{"RSS OVER TIME", "T (S)", "MIB"};
-  ms.y_min = 0;
-  if (!mem.empty()) loadgen::write_plot_png(prefix + "_memory.png", ms, mem);
-  PlotSpec rs{"SERVER RATES", "T (S)", "PER SECOND"};
-  rs.y_min = 0;
-  loadgen::write_plot_png(prefix + "_rate.png", rs,
-                          {{"REQUESTS/S", loadgen::series_colour(0), tr.t, tr.rps},
-                           {"TILES/S", loadgen::series_colour(1), tr.t, tr.tps},
-                           {"CONNECTIONS OPEN", loadgen::series_colour(2), tr.t, tr.conns}});
-  PlotSpec ls{"SERVER LATENCY P99 PER INTERVAL", "T (S)", "MS (BUCKET BOUND)"};
-  ls.y_min = 0;
-  loadgen::write_plot_png(prefix + "_latency.png", ls, {{"P99", loadgen::series_colour(0), tr.t, tr.p99_ms}});
-}
 
 std::vector<Watched> parse_pids(const std::vector<std::string>& specs) {
   std::vector<Watched> out;
@@ -104,9 +71,6 @@ void run(const StatsArgs& a) {
   std::printf("\n");
   std::fflush(stdout);
 
-  Trace tr;
-  tr.rss_t.resize(watched.size());
-  tr.rss_mib.resize(watched.size());
   std::optional<loadgen::ServerSample> prev;
   std::vector<double> last_cpu(watched.size(), -1);
   double last_t = 0;
@@ -127,11 +91,6 @@ void run(const StatsArgs& a) {
                       (unsigned long long)f.p50_us, (unsigned long long)f.p99_us,
                       (unsigned long long)(f.errors + f.protocol_errors + f.timeouts));
         row = buf;
-        tr.t.push_back(f.t);
-        tr.conns.push_back(double(f.connections_open));
-        tr.rps.push_back(f.requests_per_s);
-        tr.tps.push_back(f.tiles_per_s);
-        tr.p99_ms.push_back(double(f.p99_us) / 1000.0);
         j.update({{"dt_s", f.dt},
                   {"connections_open", f.connections_open},
                   {"connections_total", f.connections_total},
@@ -158,10 +117,6 @@ void run(const StatsArgs& a) {
     for (size_t i = 0; i < watched.size(); ++i) {
       const Watched& w = watched[i];
       const loadgen::ProcMemory m = loadgen::read_proc_memory(w.pid);
-      if (m.alive) {
-        tr.rss_t[i].push_back(double(j["t_s"]));
-        tr.rss_mib[i].push_back(double(m.rss_bytes) / 1048576.0);
-      }
       // CPU use over the interval, in cores (1.0 = one core busy).
       const double cpu = m.alive && last_cpu[i] >= 0 && j["t_s"].get<double>() > last_t
                              ? (m.cpu_seconds - last_cpu[i]) / (j["t_s"].get<double>() - last_t)
@@ -188,7 +143,6 @@ void run(const StatsArgs& a) {
     const bool gone = a.until_gone > 0 && !loadgen::read_proc_memory(a.until_gone).alive;
     if (gone || (a.duration > 0 && seconds() >= a.duration)) break;
   }
-  if (!a.plot.empty() && !tr.t.empty()) write_plots(a.plot, watched, tr);
   if (failures > 0) {
     std::fprintf(stderr, "shadowtile stats: %llu sample(s) got no answer\n", (unsigned long long)failures);
     exit_with(kExitError);
@@ -205,7 +159,6 @@ Register reg{"stats", "Watch a running server's counters (and processes' memory)
   sub.add_option("--pid", a->pids, "NAME=PID: also sample that process's VmRSS/VmHWM/Threads (repeatable)");
   sub.add_option("--until-gone", a->until_gone, "Stop once this process has exited")->check(CLI::Range(1, 1 << 30));
   sub.add_option("--jsonl", a->jsonl, "Append one JSON object per sample to this file");
-  sub.add_option("--plot", a->plot, "At the end write PREFIX_memory.png, PREFIX_rate.png, PREFIX_latency.png");
   sub.callback([a] { run(*a); });
 }};
 

@@ -1,12 +1,10 @@
 #include "loadgen/load_report.hpp"
 
-#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
 
-#include "loadgen/png_plot.hpp"
 #include "common/error.hpp"
 
 namespace st::loadgen {
@@ -109,6 +107,12 @@ std::string load_json(const LoadResult& r) {
   j["latency_ms"] = {{"count", lat.size()}, {"abandoned", r.latency_abandoned}, {"p50", percentile_of(lat, .5)},
                      {"p90", percentile_of(lat, .9)}, {"p99", percentile_of(lat, .99)},
                      {"p999", percentile_of(lat, .999)}, {"max", percentile_of(lat, 1)}};
+  // The percentile curve a latency plot draws ([q, ms]; q = 1 is the maximum).
+  json curve = json::array();
+  if (!lat.empty())
+    for (double q : {0.0, 0.1, 0.25, 0.5, 0.75, 0.9, 0.95, 0.98, 0.99, 0.995, 0.999, 0.9995, 0.9999, 0.99999, 1.0})
+      curve.push_back({q, percentile_of(lat, q)});
+  j["latency_ms"]["percentiles"] = curve;
   j["cut_residency_ms"] = {{"cuts", r.cuts}, {"completed", r.cut_residency_ms.size()},
                            {"incomplete", r.cuts_incomplete}, {"p50", percentile_of(r.cut_residency_ms, .5)},
                            {"p90", percentile_of(r.cut_residency_ms, .9)}, {"max", percentile_of(r.cut_residency_ms, 1)},
@@ -130,52 +134,6 @@ void write_load_report(const LoadResult& r, const std::string& dir) {
   std::filesystem::create_directories(dir);
   write_text(dir + "/load.json", load_json(r) + "\n");
   write_text(dir + "/load.txt", load_table(r));
-
-  // Latency histogram with log-spaced buckets (0.1 ms .. 10 s).
-  Series hist{"CELLS", series_colour(0), {}, {}, true};
-  const int buckets = 40;
-  std::vector<double> counts(buckets, 0);
-  for (double v : r.latency_ms) {
-    const double b = (std::log10(std::max(v, 0.1)) + 1) / 5 * buckets;
-    counts[size_t(std::clamp(int(b), 0, buckets - 1))] += 1;
-  }
-  for (int i = 0; i < buckets; ++i) {
-    hist.x.push_back(std::pow(10, -1 + 5.0 * (i + 0.5) / buckets));
-    hist.y.push_back(counts[size_t(i)]);
-  }
-  PlotSpec ls;
-  ls.title = "TILE LATENCY FROM SCHEDULED FRAME (P50 " + fmt("%.1f", percentile_of(r.latency_ms, .5)) + " MS, P99 " +
-             fmt("%.1f", percentile_of(r.latency_ms, .99)) + " MS)";
-  ls.x_label = "LATENCY (MS, LOG)";
-  ls.y_label = "CELLS";
-  ls.log_x = true;
-  write_plot_png(dir + "/load_latency.png", ls, {hist});
-
-  // Timeline: tiles received per second and frames with holes per second.
-  Series recv{"TILES/S", series_colour(0), {}, {}}, holes{"HOLE FRAMES/S", series_colour(1), {}, {}};
-  for (size_t i = 1; i < r.series.size(); ++i) {
-    const SeriesPoint &a = r.series[i - 1], &b = r.series[i];
-    const double dt = b.t - a.t;
-    if (!(dt > 0)) continue;
-    recv.x.push_back(b.t), recv.y.push_back(double(b.tiles_received - a.tiles_received) / dt);
-    holes.x.push_back(b.t), holes.y.push_back(double(b.frames_with_holes - a.frames_with_holes) / dt);
-  }
-  PlotSpec ts;
-  ts.title = "TILES RECEIVED AND FRAMES WITH HOLES PER SECOND";
-  ts.x_label = "TIME (S)";
-  ts.y_label = "PER SECOND";
-  write_plot_png(dir + "/load_timeline.png", ts, {recv, holes});
-
-  Series cuts{"CUTS", series_colour(2), {}, {}, true};
-  for (size_t i = 0; i < r.cut_residency_ms.size(); ++i) {
-    cuts.x.push_back(double(i));
-    cuts.y.push_back(r.cut_residency_ms[i]);
-  }
-  PlotSpec cs;
-  cs.title = "TIME TO FULL RESIDENCY AFTER EACH CAMERA CUT";
-  cs.x_label = "CUT";
-  cs.y_label = "MS";
-  write_plot_png(dir + "/load_cuts.png", cs, {cuts});
 }
 
 }  // namespace st::loadgen

@@ -31,7 +31,7 @@ check bad-resolution 1 "power of two" -- "$st" bounds procedural:cube $light --r
 check bad-light 1 "elevation" -- "$st" bounds procedural:cube --light sun:azimuth=3,elevation=0 --resolution 256 -o x.exr
 check missing-scene 1 "nosuch.obj" -- "$st" bounds nosuch.obj $light --resolution 256 -o x.exr
 check unknown-procedural 1 "teapot" -- "$st" bounds procedural:teapot $light --resolution 256 -o x.exr
-check build 0 "built city.pack" -- "$st" build $scene $light --resolution 2048 --encoding dagmh -o city.pack --report build.json -q
+check build 0 "html: skipped \(SHADOWTILE_HTML=0\)" -- "$st" build $scene $light --resolution 2048 --encoding dagmh -o city.pack --report build.json -q
 # The tile bound's message names the real bounds (64 B .. 64 MiB), as --help does.
 check tile-bytes-too-big 1 "outside \[64 B, 64 MiB\]" -- "$st" build $scene $light --resolution 256 --tile-bytes 134217728 -o big.pack -q
 check tile-bytes-help 0 "64 MiB" -- "$st" build --help

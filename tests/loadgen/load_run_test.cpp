@@ -1,8 +1,10 @@
 // A short deterministic load run against an in-process server: the counters add up.
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <dirent.h>
 
+#include <algorithm>
 #include <atomic>
 #include <thread>
 
@@ -67,6 +69,20 @@ void expect_counters_add_up(const LoadResult& r) {
   // JSON names the totals the table shows.
   const std::string j = load_json(r);
   EXPECT_NE(j.find("\"requested\": " + std::to_string(r.map.tiles_requested)), std::string::npos);
+  // The percentile curve the HTML page draws: q rising from 0 to 1, latency never falling,
+  // from the fastest cell to the slowest.
+  const auto curve = nlohmann::json::parse(j)["latency_ms"]["percentiles"];
+  ASSERT_EQ(curve.empty(), r.latency_ms.empty());
+  if (!curve.empty()) {
+    EXPECT_EQ(curve.front()[0].get<double>(), 0.0);
+    EXPECT_EQ(curve.back()[0].get<double>(), 1.0);
+    EXPECT_EQ(curve.front()[1].get<double>(), *std::min_element(r.latency_ms.begin(), r.latency_ms.end()));
+    EXPECT_EQ(curve.back()[1].get<double>(), *std::max_element(r.latency_ms.begin(), r.latency_ms.end()));
+    for (size_t i = 1; i < curve.size(); ++i) {
+      EXPECT_GT(curve[i][0].get<double>(), curve[i - 1][0].get<double>());
+      EXPECT_GE(curve[i][1].get<double>(), curve[i - 1][1].get<double>());
+    }
+  }
 }
 
 TEST(LoadRun, FlyoverCountersAddUp) {
