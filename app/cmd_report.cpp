@@ -15,6 +15,7 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <optional>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <thread>
@@ -43,6 +44,8 @@ struct ReportArgs {
   uint32_t frames = 4;
   std::vector<uint32_t> pcf = {1, 2};
   double cache_mb = 64, sample_ms = 5;
+  std::optional<uint32_t> skip_level;  // the packs' K (default: the build's)
+  uint32_t tile_bytes = 64 * 1024;
 };
 
 struct Row {
@@ -101,6 +104,10 @@ std::vector<RefinementPoint> refinement(const std::string& pack_path, const std:
   for (uint32_t i : f.lit_facing) lps.push_back(lookup_point(f.receivers[i], light, L));
   const auto cells = loadgen::cells_for_points(lps, L, client::skip_grid(map));
   cells_total = cells.size();
+  // The answer at the cut itself, before any request: what the map info alone gives
+  // (the skip grid's level K). Later samples are timed from their start; tiles keep
+  // arriving while a sample evaluates the frame.
+  pts.push_back({0.0, frame_error(client::evaluator(map), light, f, 0, L).fraction(), 0});
   const auto t0 = Clk::now();
   // Requests ordered by the error they can remove: a cell's tiles change the answers of
   // the receivers that look up in it, so cells serving more receivers go first (ties:
@@ -167,6 +174,8 @@ void run(const ReportArgs& a) {
     MapBuildOptions o;
     o.map_level = L;
     o.encoding = parse_encoding(enc);
+    o.skip_level = a.skip_level;
+    o.tile_bytes = a.tile_bytes;
     o.scene_spec = a.scene;
     o.light_spec = a.light;
     Built b{enc, a.out + "/report_" + enc + ".pack", nullptr, 0};
@@ -439,6 +448,9 @@ Register reg{"report", "Shadow error vs time: encodings, PCF, levels, uncompress
   sub.add_option("--pcf", a->pcf, "PCF radii to measure")->capture_default_str();
   sub.add_option("--cache-mb", a->cache_mb, "Client tile cache for the refinement run (MiB)")->capture_default_str();
   sub.add_option("--sample-ms", a->sample_ms, "Refinement sampling period (ms)")->capture_default_str();
+  sub.add_option("--skip-level", a->skip_level, "Skip level K of the packs (as build --skip-level)");
+  sub.add_option("--tile-bytes", a->tile_bytes, "Tile size bound of the packs (as build --tile-bytes)")
+      ->capture_default_str();
   sub.callback([a] { run(*a); });
 }};
 
