@@ -2,15 +2,20 @@
 // (a) shadow error against ray-traced ground truth vs evaluation time per frame, across
 //     encodings, PCF sizes and hierarchy levels, next to uncompressed float maps (full
 //     resolution; the largest that fits in the compressed map's memory; one level lower);
+// (c) hierarchical filtering (MH 2016 §3.3, the level from each pixel's footprint, two
+//     levels blended) next to fixed-level PCF, both against the footprint reference
+//     (supersampled ray-traced visibility over the kernel scaled to the pixel);
 // (b) error against time since a camera cut while tiles stream from an in-process server
 //     into a client (progressive refinement: coarser levels answer until tiles arrive).
 // Writes report.txt, report.json and report.html (scripts/html_report.py draws the plots).
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <optional>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <thread>
@@ -39,6 +44,8 @@ struct ReportArgs {
   uint32_t frames = 4;
   std::vector<uint32_t> pcf = {1, 2};
   double cache_mb = 64, sample_ms = 5;
+  std::optional<uint32_t> skip_level;  // the packs' K (default: the build's)
+  uint32_t tile_bytes = 64 * 1024;
 };
 
 struct Row {
@@ -97,10 +104,16 @@ std::vector<RefinementPoint> refinement(const std::string& pack_path, const std:
   for (uint32_t i : f.lit_facing) lps.push_back(lookup_point(f.receivers[i], light, L));
   const auto cells = loadgen::cells_for_points(lps, L, client::skip_grid(map));
   cells_total = cells.size();
+  // The answer at the cut itself, before any request: what the map info alone gives
+  // (the skip grid's level K). Later samples are timed from their start; tiles keep
+  // arriving while a sample evaluates the frame.
+  pts.push_back({0.0, frame_error(client::evaluator(map), light, f, 0, L).fraction(), 0});
   const auto t0 = Clk::now();
-  // Nearest first: cells in order of first appearance are roughly screen order; rank by
-  // the nearest receiver instead.
+  // Requests ordered by the error they can remove: a cell's tiles change the answers of
+  // the receivers that look up in it, so cells serving more receivers go first (ties:
+  // the nearest receiver first). Cells in order of first appearance would be screen order.
   std::vector<double> nearest(cells.size(), INFINITY);
+  std::vector<uint64_t> served(cells.size(), 0);
   {
     std::unordered_map<uint64_t, size_t> idx;
     for (size_t c = 0; c < cells.size(); ++c) idx[cells[c].key()] = c;
@@ -108,13 +121,18 @@ std::vector<RefinementPoint> refinement(const std::string& pack_path, const std:
       const auto one = loadgen::cells_for_points({lps[i]}, L, client::skip_grid(map));
       if (!one.empty()) {
         auto it = idx.find(one[0].key());
-        if (it != idx.end()) nearest[it->second] = std::min(nearest[it->second], f.receivers[f.lit_facing[i]].distance);
+        if (it != idx.end()) {
+          nearest[it->second] = std::min(nearest[it->second], f.receivers[f.lit_facing[i]].distance);
+          ++served[it->second];
+        }
       }
     }
   }
   std::vector<size_t> order(cells.size());
   for (size_t i = 0; i < order.size(); ++i) order[i] = i;
-  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return nearest[a] < nearest[b]; });
+  std::sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+    return served[a] != served[b] ? served[a] > served[b] : nearest[a] < nearest[b];
+  });
   for (size_t r = 0; r < order.size(); ++r) {
     const auto& c = cells[order[r]];
     map.request_region(c.level, c.x0(), c.y0(), c.side(), c.side(), uint16_t(60000 - std::min<size_t>(r, 50000)));
@@ -156,6 +174,8 @@ void run(const ReportArgs& a) {
     MapBuildOptions o;
     o.map_level = L;
     o.encoding = parse_encoding(enc);
+    o.skip_level = a.skip_level;
+    o.tile_bytes = a.tile_bytes;
     o.scene_spec = a.scene;
     o.light_spec = a.light;
     Built b{enc, a.out + "/report_" + enc + ".pack", nullptr, 0};
@@ -195,6 +215,14 @@ void run(const ReportArgs& a) {
     cam.aspect = double(w) / h;
     frames.push_back(make_frame_truth(tracer, cam, w, h, L, a.pcf));
   }
+  // Footprint references for hierarchical filtering: single tap and every PCF radius,
+  // at the pixel angle of the frame's vertical field of view (as `render --filter`).
+  std::vector<uint32_t> filter_radii = {0};
+  for (uint32_t r : a.pcf)
+    if (std::find(filter_radii.begin(), filter_radii.end(), r) == filter_radii.end()) filter_radii.push_back(r);
+  for (FrameTruth& f : frames)
+    add_footprint_truth(tracer, f, L, filter_radii,
+                        2 * std::tan(f.camera.fov_deg * 3.14159265358979323846 / 360) / double(h));
 
   // (a) error against evaluation time.
   std::vector<Row> rows;
@@ -225,6 +253,33 @@ void run(const ReportArgs& a) {
     for (uint32_t r : a.pcf)
       measure(label, "pcf " + std::to_string(2 * r + 1) + "x" + std::to_string(2 * r + 1), *f, f->bytes(), r, f->finest_level());
   }
+  // (c) hierarchical filtering next to fixed-level PCF, against the footprint reference.
+  struct FilterRow {
+    std::string map;
+    uint32_t radius = 0;
+    uint64_t bytes = 0;
+    double fixed = 0, filtered = 0, fixed_ms = 0, filtered_ms = 0;
+  };
+  std::vector<FilterRow> filter_rows;
+  auto measure_filter = [&](const std::string& map, const Evaluator& eval, uint64_t bytes) {
+    for (uint32_t radius : filter_radii) {
+      FilterRow fr{map, radius, bytes};
+      uint64_t n = 0;
+      for (const FrameTruth& f : frames) {
+        const FrameError x = footprint_error(eval, light, f, radius, false);
+        const FrameError y = footprint_error(eval, light, f, radius, true);
+        n += x.receivers;
+        fr.fixed += x.mean_abs * double(x.receivers), fr.filtered += y.mean_abs * double(y.receivers);
+        fr.fixed_ms += x.seconds * 1e3, fr.filtered_ms += y.seconds * 1e3;
+      }
+      fr.fixed = n ? fr.fixed / double(n) : 0, fr.filtered = n ? fr.filtered / double(n) : 0;
+      fr.fixed_ms /= double(frames.size()), fr.filtered_ms /= double(frames.size());
+      filter_rows.push_back(fr);
+    }
+  };
+  for (size_t i = 0; i < packs.size(); ++i) measure_filter(packs[i].enc, *evals[i], packs[i].memory);
+  for (const auto& [label, f] : flats) measure_filter(label, *f, f->bytes());
+
   // Lossless check: compressed (every tile resident) vs the uncompressed full map.
   // Only receivers whose lookup depth lies inside their texel's [lo, hi] (inside a closed
   // object along the texel-centre ray) may differ; the rest must be 0 (render_error.hpp).
@@ -239,16 +294,25 @@ void run(const ReportArgs& a) {
     lossless[packs[i].enc] = {{"differing", n.outside()}, {"within_interval", n.within_interval}};
   }
 
-  // (b) progressive refinement after a cut, per encoding, on frame 0.
+  // (b) progressive refinement after a cut, per encoding, on frame 0, each sample next to
+  // the uncompressed map of the same memory (fully resident: the bar to stay under).
+  double same_memory_error = -1;
+  for (const auto& [label, f] : flats)
+    if (label.find("(same mem)") != std::string::npos)
+      same_memory_error = frame_error(*f, light, frames[0], 0, f->finest_level()).fraction();
   json refine = json::object();
   for (size_t i = 0; i < packs.size(); ++i) {
     size_t cells = 0;
     const auto pts = refinement(packs[i].path, "report_" + packs[i].enc, light, frames[0], a.cache_mb, a.sample_ms, cells);
     json arr = json::array();
     for (const auto& p : pts) arr.push_back({p.ms, p.error, p.resident_cells});
+    uint64_t below = 0;
+    for (const auto& p : pts) below += p.error < same_memory_error;
     refine[packs[i].enc] = {{"cells", cells}, {"columns", {"ms", "error", "resident_cells"}}, {"points", arr},
                             {"final_error", pts.empty() ? 0.0 : pts.back().error},
-                            {"ms_to_full", pts.empty() ? 0.0 : pts.back().ms}};
+                            {"ms_to_full", pts.empty() ? 0.0 : pts.back().ms},
+                            {"same_memory_float_error", same_memory_error},
+                            {"samples_below_same_memory_float", below}};
   }
   json flat_lines = json::object();
   for (size_t k = 0; k < flats.size(); ++k) {
@@ -268,6 +332,18 @@ void run(const ReportArgs& a) {
   }
   table += "error: single tap = fraction of lit-facing receivers whose lit answer differs from Embree shadow rays;\n"
            "       pcf = mean |PCF - supersampled ray-traced visibility over the kernel|\n";
+  table += "\nhierarchical filtering (level from the pixel footprint, two levels blended) vs fixed-level PCF:\n";
+  std::snprintf(buf, sizeof buf, "%-24s %-9s %12s %12s %10s %10s\n", "map", "kernel", "fixed err", "filtered err",
+                "fixed ms", "filt. ms");
+  table += buf;
+  for (const FilterRow& r : filter_rows) {
+    const std::string k = std::to_string(2 * r.radius + 1) + "x" + std::to_string(2 * r.radius + 1);
+    std::snprintf(buf, sizeof buf, "%-24s %-9s %12.6f %12.6f %10.2f %10.2f\n", r.map.c_str(), k.c_str(), r.fixed,
+                  r.filtered, r.fixed_ms, r.filtered_ms);
+    table += buf;
+  }
+  table += "error: mean |answer - ray-traced visibility supersampled over the kernel scaled to the pixel footprint|\n"
+           "       (render_error.hpp); the float baselines' coarser levels point-sample their finest level\n\n";
   for (auto& [enc, n] : lossless.items()) {
     std::snprintf(buf, sizeof buf,
                   "lossless check %-6s: %llu receivers differ from the uncompressed full map (every tile resident); "
@@ -281,6 +357,22 @@ void run(const ReportArgs& a) {
                   enc.c_str(), size_t(r["cells"]), double(r["points"][0][1]), double(r["final_error"]),
                   double(r["ms_to_full"]));
     table += buf;
+    if (same_memory_error >= 0) {
+      std::snprintf(buf, sizeof buf, "  %zu of %zu samples below the same-memory float map (%.5f); ms:error",
+                    size_t(r["samples_below_same_memory_float"]), r["points"].size(), same_memory_error);
+      table += buf;
+      // The curve itself, thinned to at most 16 samples (the first and the last kept).
+      const size_t np = r["points"].size(), step = std::max<size_t>(1, (np + 15) / 16);
+      std::vector<size_t> shown;
+      for (size_t k = 0; k < np; k += step) shown.push_back(k);
+      if (np > 0 && shown.back() != np - 1) shown.push_back(np - 1);
+      for (size_t k : shown) {
+        std::snprintf(buf, sizeof buf, " %.0f:%.4f%s", double(r["points"][k][0]), double(r["points"][k][1]),
+                      double(r["points"][k][1]) < same_memory_error ? "" : "!");
+        table += buf;
+      }
+      table += "   (! = not below)\n";
+    }
   }
   for (auto& [label, e] : flat_lines.items()) {
     std::snprintf(buf, sizeof buf, "frame 0 error of %-26s %.5f\n", label.c_str(), double(e));
@@ -298,6 +390,13 @@ void run(const ReportArgs& a) {
                   {"error", r.error}, {"ms_per_frame", r.ms_per_frame}});
   j["error_vs_time"] = jr;
   j["lossless_disagreements"] = lossless;
+  json jf = json::array();
+  for (const FilterRow& r : filter_rows)
+    jf.push_back({{"map", r.map}, {"pcf_radius", r.radius}, {"bytes", r.bytes}, {"fixed_level_error", r.fixed},
+                  {"filtered_error", r.filtered}, {"fixed_level_ms_per_frame", r.fixed_ms},
+                  {"filtered_ms_per_frame", r.filtered_ms}});
+  j["hierarchical_filtering"] = {{"reference", "ray-traced visibility supersampled over the kernel scaled to the pixel footprint"},
+                                 {"rows", jf}};
   j["refinement"] = refine;
   j["uncompressed_frame0_error"] = flat_lines;
   std::ofstream(a.out + "/report.json") << j.dump(2) << "\n";
@@ -318,6 +417,9 @@ Register reg{"report", "Shadow error vs time: encodings, PCF, levels, uncompress
   sub.add_option("--pcf", a->pcf, "PCF radii to measure")->capture_default_str();
   sub.add_option("--cache-mb", a->cache_mb, "Client tile cache for the refinement run (MiB)")->capture_default_str();
   sub.add_option("--sample-ms", a->sample_ms, "Refinement sampling period (ms)")->capture_default_str();
+  sub.add_option("--skip-level", a->skip_level, "Skip level K of the packs (as build --skip-level)");
+  sub.add_option("--tile-bytes", a->tile_bytes, "Tile size bound of the packs (as build --tile-bytes)")
+      ->capture_default_str();
   sub.callback([a] { run(*a); });
 }};
 

@@ -140,7 +140,9 @@ void camera_frame(CameraRun& cam, const LoadOptions& o, const WorldFrame& world,
   std::vector<float> answers(points.size());
   for (size_t i = 0; i < points.size(); ++i) points[i] = {needs.points[i].x, needs.points[i].y, needs.points[i].z};
   const auto t0 = Clock::now();
-  map.visibility(points, answers, 0);
+  // Filtered at each sample's footprint (MH §3.3: the level from the pixel, two levels
+  // blended), as a renderer that does not alias in the distance would ask.
+  map.visibility_filtered(points, needs.footprints, answers, 0);
   const auto t1 = Clock::now();
   double vis = 0;
   for (float v : answers) vis += v;

@@ -15,7 +15,8 @@
 // at frames f with (f + c) % kPrefetchEvery == 0, so a fleet does not prefetch in
 // lockstep); (3) checks which needed cells are not
 // resident (a frame with holes: its lookups answered from coarser levels) and (4)
-// evaluates map.visibility at every receiver sample.
+// evaluates map.visibility_filtered at every receiver sample (its pixel footprint picks
+// the levels, MH §3.3).
 //
 // Latency of a cell: from the scheduled time of the first frame that needed it while it
 // was not resident, to the moment a watcher thread (polling every millisecond) sees it

@@ -63,6 +63,7 @@ ViewNeeds view_needs(const WorldFrame& world, const Camera& camera, uint32_t map
   const uint32_t k = grid.levels;
   std::unordered_map<uint64_t, size_t> index;
   out.points.reserve(out.samples);
+  out.footprints.reserve(out.samples);
   for (uint32_t j = 0; j < o.samples_y; ++j)
     for (uint32_t i = 0; i < o.samples_x; ++i) {
       const Vec3d d = ray_dir(b, (i + 0.5) / o.samples_x, (j + 0.5) / o.samples_y);
@@ -71,6 +72,7 @@ ViewNeeds view_needs(const WorldFrame& world, const Camera& camera, uint32_t map
       if (!(t > 0) || t > max_dist) continue;
       const Vec3d p = camera.pos + d * t;
       out.points.push_back(p);
+      out.footprints.push_back(float(t * pixel_angle));
       const uint32_t level = level_for_footprint(extent, t * pixel_angle, map_level);
       if (level <= k) continue;
       const LightPoint lp = world.light.to_light(p);

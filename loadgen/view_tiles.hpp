@@ -34,6 +34,7 @@ struct CellNeed {
 
 struct ViewNeeds {
   std::vector<Vec3d> points;     // receivers (world) of the samples that hit the ground
+  std::vector<float> footprints; // per point: its pixel's side in world units (filtered lookups)
   std::vector<CellNeed> cells;   // nearest first
   uint32_t samples = 0;          // samples_x * samples_y
 };

@@ -81,6 +81,14 @@ LightPoint lookup_point(const Receiver& r, const LightSpace& light, uint32_t map
 float map_visibility(const Evaluator& eval, const Receiver& r, const LightSpace& light, uint32_t pcf_radius,
                      uint32_t level);
 
+// Hierarchical filtering of one receiver (MH §3.3): (2r+1)^2 PCF at the two levels
+// filter_levels picks for `footprint` finest-level texels, blended (filter_level.hpp);
+// the same lookup point and arithmetic as render_view's filtered path. The normal offset
+// of lookup_point is taken in texels of the finer level filtered (a coarse kernel needs
+// a coarse bias).
+float map_visibility_filtered(const Evaluator& eval, const Receiver& r, const LightSpace& light, uint32_t pcf_radius,
+                              float footprint);
+
 // The side of a receiver's pixel footprint (distance * pixel_angle, seen head-on) in
 // finest-level texels of the map at its position: the input of filter_levels.
 float receiver_footprint_texels(const Receiver& r, const LightSpace& light, uint32_t map_level, double pixel_angle);
@@ -100,6 +108,7 @@ struct RenderResult {
   std::vector<float> image;         // RGB, shaded with the map
   std::vector<float> traced_image;  // RGB, shaded with ray-traced shadows (diff only)
   std::vector<float> diff_image;    // RGB: red map-shadowed/traced-lit, blue the reverse
+  std::vector<float> visibility;    // per pixel, the map's answer (0 off light-facing surfaces)
   uint64_t receivers = 0;           // pixels on light-facing surfaces
   uint64_t differing = 0;           // of those, lit answers that differ (diff only)
   double map_seconds = 0, traced_seconds = 0;

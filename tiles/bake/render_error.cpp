@@ -10,6 +10,33 @@
 
 namespace st {
 
+namespace {
+
+// Mean ray-traced visibility over a square of `side` finest-level texels around the
+// receiver, n x n samples at the centres of an even grid: across the light's u/v axes,
+// then along the light ray back onto the receiver's tangent plane, so each ray samples
+// the lit fraction of the surface the square covers.
+float supersampled(const SceneTracer& tracer, const Receiver& rec, uint32_t map_level, double side, uint32_t n) {
+  const LightSpace& light = tracer.light();
+  // World size of a finest texel at the receiver (a spot's texels grow with distance).
+  const double texel = (light.kind() == LightKind::sun ? light.extent_uv()
+                                                         : length(rec.pos - light.origin()) * light.extent_uv()) /
+                       std::ldexp(1.0, int(map_level));
+  const Vec3d ldir = tracer.to_light(rec.pos);
+  const double ln = dot(ldir, rec.normal);
+  double sum = 0;
+  for (uint32_t j = 0; j < n; ++j)
+    for (uint32_t i = 0; i < n; ++i) {
+      const double du = side * ((i + 0.5) / n - 0.5), dv = side * ((j + 0.5) / n - 0.5);
+      const Vec3d off = light.axis_u() * (du * texel) + light.axis_v() * (dv * texel);
+      const double t = -dot(off, rec.normal) / ln;
+      sum += tracer.traced(rec, off + ldir * t);
+    }
+  return float(sum / double(n * n));
+}
+
+}  // namespace
+
 FrameTruth make_frame_truth(const SceneTracer& tracer, const Camera& camera, uint32_t width, uint32_t height,
                             uint32_t map_level, const std::vector<uint32_t>& pcf_radii) {
   FrameTruth f;
@@ -23,7 +50,6 @@ FrameTruth make_frame_truth(const SceneTracer& tracer, const Camera& camera, uin
   tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1024), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t i = r.begin(); i < r.end(); ++i) f.traced[i] = tracer.traced(f.receivers[f.lit_facing[i]]);
   });
-  const LightSpace& light = tracer.light();
   uint32_t max_r = 0;
   for (uint32_t r : pcf_radii) max_r = std::max(max_r, r);
   f.pcf_truth.resize(max_r);
@@ -33,29 +59,8 @@ FrameTruth make_frame_truth(const SceneTracer& tracer, const Camera& camera, uin
     auto& out = f.pcf_truth[radius - 1];
     out.assign(n, 0);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 256), [&](const tbb::blocked_range<size_t>& r) {
-      for (size_t i = r.begin(); i < r.end(); ++i) {
-        const Receiver& rec = f.receivers[f.lit_facing[i]];
-        // World size of a finest texel at the receiver (a spot's texels grow with distance).
-        const double texel = (light.kind() == LightKind::sun ? light.extent_uv()
-                                                               : length(rec.pos - light.origin()) * light.extent_uv()) /
-                             std::ldexp(1.0, int(map_level));
-        double sum = 0;
-        int count = 0;
-        const int k = int(radius);
-        for (int ty = -k; ty <= k; ++ty)
-          for (int tx = -k; tx <= k; ++tx)
-            for (int s = 0; s < 4; ++s) {
-              const double du = tx + ((s & 1) ? 0.25 : -0.25), dv = ty + ((s & 2) ? 0.25 : -0.25);
-              // Across the light's u/v, then along the light ray back onto the receiver's
-              // tangent plane: the surface the kernel's footprint covers.
-              const Vec3d off = light.axis_u() * (du * texel) + light.axis_v() * (dv * texel);
-              const Vec3d ldir = tracer.to_light(rec.pos);
-              const double t = -dot(off, rec.normal) / dot(ldir, rec.normal);
-              sum += tracer.traced(rec, off + ldir * t);
-              ++count;
-            }
-        out[i] = float(sum / count);
-      }
+      for (size_t i = r.begin(); i < r.end(); ++i)
+        out[i] = supersampled(tracer, f.receivers[f.lit_facing[i]], map_level, double(2 * radius + 1), 2 * (2 * radius + 1));
     });
   }
   return f;
@@ -80,6 +85,55 @@ FrameError frame_error(const Evaluator& eval, const LightSpace& light, const Fra
     for (size_t i = 0; i < vis.size(); ++i) sum += std::fabs(double(vis[i]) - double(ref[i]));
     e.mean_abs = vis.empty() ? 0 : sum / double(vis.size());
   }
+  return e;
+}
+
+void add_footprint_truth(const SceneTracer& tracer, FrameTruth& f, uint32_t map_level,
+                         const std::vector<uint32_t>& radii, double pixel_angle) {
+  if (!(pixel_angle > 0)) throw Error("report: the pixel angle must be positive");
+  const LightSpace& light = tracer.light();
+  const size_t n = f.lit_facing.size();
+  f.pixel_angle = pixel_angle;
+  f.footprint.resize(n);
+  for (size_t i = 0; i < n; ++i)
+    f.footprint[i] = receiver_footprint_texels(f.receivers[f.lit_facing[i]], light, map_level, pixel_angle);
+  uint32_t max_r = 0;
+  for (uint32_t r : radii) max_r = std::max(max_r, r);
+  if (max_r > 4) throw Error("report: PCF radius must be at most 4");
+  f.footprint_truth.resize(max_r + 1);
+  for (uint32_t radius : radii) {
+    auto& out = f.footprint_truth[radius];
+    out.assign(n, 0);
+    const uint32_t k = 2 * radius + 1;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 256), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i < r.end(); ++i) {
+        const double s = std::max(1.0, double(f.footprint[i]));
+        out[i] = supersampled(tracer, f.receivers[f.lit_facing[i]], map_level, k * s, s > 1 ? 4 * k : 2 * k);
+      }
+    });
+  }
+}
+
+FrameError footprint_error(const Evaluator& eval, const LightSpace& light, const FrameTruth& f, uint32_t radius,
+                           bool hierarchical) {
+  if (radius >= f.footprint_truth.size() || f.footprint_truth[radius].empty())
+    throw Error("report: no footprint reference for radius " + std::to_string(radius));
+  FrameError e;
+  e.receivers = f.lit_facing.size();
+  const auto& ref = f.footprint_truth[radius];
+  // The footprint was measured in texels of the reference's level; `eval` may be coarser.
+  const uint32_t L = eval.finest_level();
+  double sum = 0;
+  const auto t0 = std::chrono::steady_clock::now();
+  for (size_t i = 0; i < e.receivers; ++i) {
+    const Receiver& rec = f.receivers[f.lit_facing[i]];
+    const float fp = float(receiver_footprint_texels(rec, light, L, f.pixel_angle));
+    const float v = hierarchical ? map_visibility_filtered(eval, rec, light, radius, fp)
+                                 : map_visibility(eval, rec, light, radius, L);
+    sum += std::fabs(double(v) - double(ref[i]));
+  }
+  e.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  e.mean_abs = e.receivers ? sum / double(e.receivers) : 0;
   return e;
 }
 

@@ -7,6 +7,15 @@
 // light's u/v axes and back along the light ray onto its tangent plane, so each ray
 // samples the lit fraction of the surface the kernel covers).
 //
+// For hierarchical filtering (MH §3.3) a frame may also hold, per light-facing receiver,
+// its pixel footprint in finest-level texels (receiver_footprint_texels) and, per radius
+// R >= 0, a footprint reference: the mean ray-traced visibility over a square of
+// (2R+1) * max(1, footprint) finest texels (the kernel scaled to the pixel, what a
+// filtered lookup tries to answer), sampled on a regular grid of 2(2R+1) points a side
+// (twice as many where the footprint exceeds a texel) and projected onto the receiver's
+// tangent plane like the PCF reference. Where the footprint is at most a texel it is the
+// PCF reference above. Fixed-level PCF and filtered lookups are both measured against it.
+//
 // FlatMapEvaluator is the uncompressed baseline: one float per texel of one level (the
 // midpoint of each texel's dual depth interval, so closed receivers need no bias, like
 // the compressed map; open geometry gets the same normal offset as render.hpp).
@@ -26,11 +35,19 @@ struct FrameTruth {
   std::vector<uint32_t> lit_facing;          // indices of receivers with n.l > 0
   std::vector<float> traced;                 // per lit-facing receiver: 0 or 1
   std::vector<std::vector<float>> pcf_truth; // [radius - 1][lit-facing receiver]
+  double pixel_angle = 0;                    // add_footprint_truth's, 0 if none
+  std::vector<float> footprint;              // per lit-facing receiver, finest texels
+  std::vector<std::vector<float>> footprint_truth;  // [radius][lit-facing receiver]
 };
 
 // `map_level` sets the PCF reference's texel size; pcf_radii lists radii >= 1.
 FrameTruth make_frame_truth(const SceneTracer& tracer, const Camera& camera, uint32_t width, uint32_t height,
                             uint32_t map_level, const std::vector<uint32_t>& pcf_radii);
+
+// Adds the footprints (for `pixel_angle` radians per pixel) and the footprint references
+// for each radius in `radii` (0..4) at the map's finest level `map_level`.
+void add_footprint_truth(const SceneTracer& tracer, FrameTruth& f, uint32_t map_level,
+                         const std::vector<uint32_t>& radii, double pixel_angle);
 
 struct FrameError {
   uint64_t receivers = 0, differing = 0;  // single tap: lit answers that differ
@@ -43,6 +60,13 @@ struct FrameError {
 FrameError frame_error(const Evaluator& eval, const LightSpace& light, const FrameTruth& f, uint32_t pcf_radius,
                        uint32_t level);
 class FlatMapEvaluator;
+
+// (2R+1)^2 PCF (R = 0: one tap) of `eval` against the footprint reference of radius R:
+// `hierarchical` filters at the footprint's two levels (map_visibility_filtered), else
+// at the finest level. Footprints are rescaled to `eval`'s finest level, so a coarser
+// uncompressed baseline is filtered for the same pixels. mean_abs is the error.
+FrameError footprint_error(const Evaluator& eval, const LightSpace& light, const FrameTruth& f, uint32_t radius,
+                           bool hierarchical);
 
 // Receivers whose single-tap answers of `a` and of the uncompressed full map differ
 // (lossless check). Both maps store a value in each texel's [lo, hi], so the answers for
