@@ -11,16 +11,32 @@
 // Bytes counted are tile bytes (the stored blob) on both sides, not framing or headers.
 // Prints a table (connections x server: tiles/s, MB/s, p50/p99/p99.9 ms, ratio ours/nginx)
 // and writes JSON. Without nginx on PATH (or --nginx) it says so and measures ours only.
+// --rate-fraction F (0 < F <= 1) adds open-loop cells after the closed-loop ones: every
+// connection sends one request per interval on a fixed schedule (the total rate F x our
+// measured peak at that connection count, the same rate offered to nginx), whatever the
+// answers do (up to 64 in flight), and latency is counted from the scheduled send time,
+// so a stalled server cannot hide its queueing delay (no coordinated omission).
+// --rate R fixes the total rate (requests/s) instead.
+// "srv us/tile": the serving side's CPU time (user + system) per tile answered: ours is
+// this process's CPU less the driver threads', nginx its process's (/proc, 10 ms steps).
+// It depends far less on the machine's other load than the rates do.
+// --reps N repeats every cell N times (servers alternating) and reports the median run's
+// tiles/s and the median of each percentile.
 //   bench_serve_vs_nginx [--level 10] [--seconds 3] [--warmup 0.3] [--depth 8]
+//                        [--rate-fraction 0.5 | --rate R] [--reps 1]
 //                        [--conns 1,8,64] [--nginx-workers 1,auto] [--nginx PATH] [--skip K]
 //                        [--nginx-extra "open_file_cache max=65536 inactive=60s;"]
 //                        [--json bench-out/serve_vs_nginx.json] [--threads T (our I/O threads)]
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
+#include <poll.h>
 #include <signal.h>
+#include <sys/prctl.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
+#include <time.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -32,8 +48,11 @@
 #include <deque>
 #include <filesystem>
 #include <fstream>
+#include <functional>
+#include <iterator>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <memory>
 #include <random>
 #include <sstream>
 #include <string>
@@ -54,6 +73,32 @@ using Clock = std::chrono::steady_clock;
 namespace {
 
 double since(Clock::time_point t0, Clock::time_point t1) { return std::chrono::duration<double>(t1 - t0).count(); }
+
+double thread_cpu_s() {
+  timespec ts{};
+  ::clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + double(ts.tv_nsec) * 1e-9;
+}
+
+double process_cpu_s() {
+  rusage ru{};
+  ::getrusage(RUSAGE_SELF, &ru);
+  return double(ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) + double(ru.ru_utime.tv_usec + ru.ru_stime.tv_usec) * 1e-6;
+}
+
+// CPU seconds (user + system) of another process, from /proc (clock ticks: 10 ms steps).
+double child_cpu_s(pid_t pid) {
+  std::ifstream f("/proc/" + std::to_string(pid) + "/stat");
+  std::string stat((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+  const size_t close = stat.rfind(')');
+  if (close == std::string::npos) return 0;
+  std::istringstream rest(stat.substr(close + 2));
+  std::string field;
+  double ticks = 0;
+  for (int i = 3; i <= 15 && rest >> field; ++i)
+    if (i == 14 || i == 15) ticks += std::stod(field);
+  return ticks / double(::sysconf(_SC_CLK_TCK));
+}
 
 // Noisy blocks between smooth ones: tiles of a few KiB (the field bench_serve_loopback uses).
 IntervalTile bench_field(uint32_t level) {
@@ -114,6 +159,8 @@ size_t recv_some(int fd, std::vector<uint8_t>& buf, const char* who) {
 // What one connection measured inside the window [start, stop).
 struct ConnResult {
   uint64_t tiles = 0, bytes = 0;
+  uint64_t all_tiles = 0;    // warm-up included: what the server CPU time below paid for
+  double driver_cpu_s = 0;   // this driver thread's CPU time
   std::vector<double> latency_s;
   std::string error;
 };
@@ -123,9 +170,37 @@ struct Window {
   bool counts(Clock::time_point t) const { return t >= start && t < stop; }
 };
 
+// What one connection offers: closed loop (`depth` in flight, a new request as soon as an
+// answer is in) or open loop (interval > 0: one request every `interval` from `first`,
+// at most kMaxOpenLoopInFlight in flight).
+struct Load {
+  uint32_t depth = 1;
+  Clock::duration interval{0};
+  Clock::time_point first{};
+};
+constexpr uint32_t kMaxOpenLoopInFlight = 64;
+
+// Open loop: sends are due at `next`; the driver waits for an answer or the next due
+// send, whichever comes first. Returns false if nothing is readable yet.
+bool wait_readable(int fd, const Load& load, Clock::time_point next) {
+  if (load.interval.count() == 0) return true;  // closed loop: a blocking recv
+  const auto now = Clock::now();
+  if (next <= now) {
+    pollfd p{fd, POLLIN, 0};
+    return ::poll(&p, 1, 0) > 0;
+  }
+  const auto ns = std::chrono::duration_cast<std::chrono::nanoseconds>(next - now).count();
+  timespec ts{time_t(ns / 1000000000), long(ns % 1000000000)};
+  pollfd p{fd, POLLIN, 0};
+  return ::ppoll(&p, 1, &ts, nullptr) > 0;
+}
+
 // Our protocol: Hello, OpenMap, then GetTiles of one tile each, `depth` in flight.
-void run_ours(uint16_t port, const std::vector<uint64_t>& ids, uint32_t depth, uint32_t seed, Window w,
+void run_ours(uint16_t port, const std::vector<uint64_t>& ids, const Load& load, uint32_t seed, Window w,
               ConnResult& res) {
+  const bool open_loop = load.interval.count() > 0;
+  const uint32_t depth = open_loop ? kMaxOpenLoopInFlight : load.depth;
+  Clock::time_point next = load.first;
   int fd = connect_loopback(port);
   try {
     proto::Limits hl;
@@ -145,15 +220,18 @@ void run_ours(uint16_t port, const std::vector<uint64_t>& ids, uint32_t depth, u
       const auto now = Clock::now();
       if (now >= w.stop) break;
       out.clear();
-      while (ready && in_flight < depth) {
+      while (ready && in_flight < depth && (!open_loop || next <= now)) {
         proto::GetTiles g;
         g.map_id = 1;
         g.tiles.push_back({ids[rng() % ids.size()], 0});
         (void)proto::encode_message(g, next_id, proto::kFlagFinal, l, out);
-        sent[next_id % sent.size()] = now;
+        sent[next_id % sent.size()] = open_loop ? next : now;
         ++next_id, ++in_flight;
+        if (open_loop) next += load.interval;
       }
+      if (open_loop && ready && in_flight >= depth && next <= now) next = now + load.interval;  // overloaded: skip
       if (!out.empty()) send_all(fd, out.data(), out.size());
+      if (!wait_readable(fd, load, ready ? next : now + std::chrono::milliseconds(100))) continue;
       std::span<const uint8_t> rest(buf.data(), recv_some(fd, buf, "ours"));
       while (!rest.empty()) {
         auto r = parser.feed(rest);
@@ -166,6 +244,7 @@ void run_ours(uint16_t port, const std::vector<uint64_t>& ids, uint32_t depth, u
           case proto::MessageType::hello_ack: parser.set_limits(l); break;
           case proto::MessageType::map_info: ready = true; break;
           case proto::MessageType::tile_data:
+            ++res.all_tiles;
             if (w.counts(t)) {
               ++res.tiles;
               res.bytes += f.payload.size() - std::min<size_t>(f.payload.size(), 28);  // TileMeta: 28 B
@@ -188,8 +267,11 @@ void run_ours(uint16_t port, const std::vector<uint64_t>& ids, uint32_t depth, u
 
 // HTTP/1.1 keep-alive with pipelining: answers come back in request order, so send times
 // queue up FIFO. Parses the status line and Content-Length; skips the body.
-void run_http(uint16_t port, const std::vector<uint64_t>& ids, uint32_t depth, uint32_t seed, Window w,
+void run_http(uint16_t port, const std::vector<uint64_t>& ids, const Load& load, uint32_t seed, Window w,
               ConnResult& res) {
+  const bool open_loop = load.interval.count() > 0;
+  const uint32_t depth = open_loop ? kMaxOpenLoopInFlight : load.depth;
+  Clock::time_point next = load.first;
   int fd = connect_loopback(port);
   try {
     std::vector<uint8_t> buf(1 << 18);
@@ -200,6 +282,7 @@ void run_http(uint16_t port, const std::vector<uint64_t>& ids, uint32_t depth, u
     bool in_body = false;
     std::string out;
     auto finish = [&](Clock::time_point t) {
+      ++res.all_tiles;
       if (w.counts(t)) {
         ++res.tiles;
         res.bytes += body_size;
@@ -212,11 +295,14 @@ void run_http(uint16_t port, const std::vector<uint64_t>& ids, uint32_t depth, u
       const auto now = Clock::now();
       if (now >= w.stop) break;
       out.clear();
-      while (sent.size() < depth) {
+      while (sent.size() < depth && (!open_loop || next <= now)) {
         out += "GET /tiles/" + std::to_string(ids[rng() % ids.size()]) + " HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n";
-        sent.push_back(now);
+        sent.push_back(open_loop ? next : now);
+        if (open_loop) next += load.interval;
       }
+      if (open_loop && sent.size() >= depth && next <= now) next = now + load.interval;  // overloaded: skip
       if (!out.empty()) send_all(fd, out.data(), out.size());
+      if (!wait_readable(fd, load, next)) continue;
       const size_t n = recv_some(fd, buf, "nginx");
       size_t pos = 0;
       while (pos < n) {
@@ -258,6 +344,8 @@ void run_http(uint16_t port, const std::vector<uint64_t>& ids, uint32_t depth, u
 struct Cell {
   std::string server;
   int conns = 0;
+  double server_cpu_us_per_tile = 0;  // the server's CPU time per tile answered (0: unknown)
+  double offered_per_s = 0;  // open loop: the scheduled request rate; 0: closed loop
   double tiles_per_s = 0, mb_per_s = 0, p50_ms = 0, p99_ms = 0, p999_ms = 0;
   uint64_t tiles = 0;
 };
@@ -268,10 +356,16 @@ double pct(const std::vector<double>& sorted, double p) {
   return sorted[std::min(i, sorted.size() - 1)];
 }
 
-using Driver = void (*)(uint16_t, const std::vector<uint64_t>&, uint32_t, uint32_t, Window, ConnResult&);
+using Driver = void (*)(uint16_t, const std::vector<uint64_t>&, const Load&, uint32_t, Window, ConnResult&);
+// The serving side's CPU seconds so far; null: this process's minus the drivers' (ours
+// runs in-process).
+using CpuProbe = std::function<double()>;
 
-Cell measure(const std::string& server, Driver drive, uint16_t port, const std::vector<uint64_t>& ids, int conns,
-             uint32_t depth, double warmup_s, double seconds) {
+// rate > 0: open loop at `rate` requests/s in all, spread evenly over the connections.
+Cell measure_once(const std::string& server, Driver drive, const CpuProbe& cpu, uint16_t port,
+                  const std::vector<uint64_t>& ids, int conns, uint32_t depth, double rate, double warmup_s,
+                  double seconds) {
+  const double cpu0 = cpu ? cpu() : process_cpu_s();
   const auto t0 = Clock::now() + std::chrono::milliseconds(50);  // time for every thread to connect
   Window w;
   w.start = t0 + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(warmup_s));
@@ -281,15 +375,37 @@ Cell measure(const std::string& server, Driver drive, uint16_t port, const std::
   for (int c = 0; c < conns; ++c)
     th.emplace_back([&, c] {
       try {
-        drive(port, ids, depth, 1000u + uint32_t(c), w, res[size_t(c)]);
+        Load load;
+        load.depth = depth;
+        if (rate > 0) {
+          const double interval_s = double(conns) / rate;
+          load.interval = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(interval_s));
+          // Phases staggered over one interval: the connections do not send in bursts.
+          load.first = t0 + std::chrono::duration_cast<Clock::duration>(
+                                std::chrono::duration<double>(interval_s * double(c) / double(conns)));
+        }
+        // The open loop's sleeps end on time (the default 50 us timer slack would count
+        // as server latency).
+        ::prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
+        const double c0 = thread_cpu_s();
+        drive(port, ids, load, 1000u + uint32_t(c), w, res[size_t(c)]);
+        res[size_t(c)].driver_cpu_s = thread_cpu_s() - c0;
       } catch (const std::exception& e) {
         res[size_t(c)].error = e.what();
       }
     });
   for (auto& t : th) t.join();
+  double server_cpu = (cpu ? cpu() : process_cpu_s()) - cpu0;
+  uint64_t all_tiles = 0;
+  for (auto& r : res) {
+    all_tiles += r.all_tiles;
+    if (!cpu) server_cpu -= r.driver_cpu_s;
+  }
   Cell cell;
+  cell.server_cpu_us_per_tile = all_tiles ? std::max(0.0, server_cpu) * 1e6 / double(all_tiles) : 0;
   cell.server = server;
   cell.conns = conns;
+  cell.offered_per_s = rate;
   std::vector<double> lat;
   uint64_t bytes = 0;
   for (auto& r : res) {
@@ -305,6 +421,24 @@ Cell measure(const std::string& server, Driver drive, uint16_t port, const std::
   cell.p99_ms = pct(lat, 0.99) * 1e3;
   cell.p999_ms = pct(lat, 0.999) * 1e3;
   return cell;
+}
+
+// The median of several runs: tiles/s and MB/s of the median run by rate, each
+// percentile the median of the runs' percentiles.
+Cell median_of(std::vector<Cell> runs) {
+  auto med = [&](auto field) {
+    std::vector<double> v;
+    for (auto& r : runs) v.push_back(r.*field);
+    std::sort(v.begin(), v.end());
+    return v[v.size() / 2];
+  };
+  std::sort(runs.begin(), runs.end(), [](const Cell& a, const Cell& b) { return a.tiles_per_s < b.tiles_per_s; });
+  Cell c = runs[runs.size() / 2];
+  c.p50_ms = med(&Cell::p50_ms);
+  c.p99_ms = med(&Cell::p99_ms);
+  c.p999_ms = med(&Cell::p999_ms);
+  c.server_cpu_us_per_tile = med(&Cell::server_cpu_us_per_tile);
+  return c;
 }
 
 // ---- nginx as a child process ----
@@ -388,6 +522,7 @@ class Nginx {
   Nginx(const Nginx&) = delete;
   Nginx& operator=(const Nginx&) = delete;
   uint16_t port() const { return port_; }
+  pid_t pid() const { return pid_; }
 
   void stop() {
     if (pid_ <= 0) return;
@@ -422,7 +557,8 @@ std::vector<std::string> split(const std::string& s) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  uint32_t level = 10, depth = 8, threads = 1;
+  uint32_t level = 10, depth = 8, threads = 1, reps = 1;
+  double rate_fraction = 0, fixed_rate = 0;
   // Our server keeps the pack open; nginx keeps tile file descriptors open the same way
   // (without it, open/fstat/close per request halved nginx's rate with 1 connection).
   // --nginx-extra "" gives the plain config.
@@ -443,6 +579,9 @@ int main(int argc, char** argv) {
     else if (k == "--skip") skip = int(std::stoi(v));
     else if (k == "--json") json_path = v;
     else if (k == "--threads") threads = uint32_t(std::stoul(v));
+    else if (k == "--reps") reps = std::max<uint32_t>(1, uint32_t(std::stoul(v)));
+    else if (k == "--rate-fraction") rate_fraction = std::stod(v);
+    else if (k == "--rate") fixed_rate = std::stod(v);
     else {
       std::fprintf(stderr, "bench_serve_vs_nginx: unknown option %s\n", k.c_str());
       return 2;
@@ -486,55 +625,101 @@ int main(int argc, char** argv) {
 
     std::vector<int> conns;
     for (auto& c : split(conns_arg)) conns.push_back(std::stoi(c));
-    std::vector<Cell> cells;
-    {
-      server::ServerOptions so;
-      so.port = 0;
-      so.threads = threads;
-      so.log = [](const std::string&) {};
-      server::Server srv(server::Catalog::scan(std::vector<std::string>{pack}), so);
-      srv.start();
-      for (int n : conns) cells.push_back(measure("ours", run_ours, srv.port(), ids, n, depth, warmup, seconds));
-      srv.stop();
-      std::printf("server: %s\n", srv.stats().line().c_str());
-    }
-    if (nginx_bin) {
+    // Every server runs for the whole measurement, and each repetition measures them in
+    // turn, so a noisy stretch of the shared machine hits all of them alike.
+    server::ServerOptions so;
+    so.port = 0;
+    so.threads = threads;
+    so.log = [](const std::string&) {};
+    server::Server srv(server::Catalog::scan(std::vector<std::string>{pack}), so);
+    srv.start();
+    struct Target {
+      std::string name;
+      Driver drive;
+      CpuProbe cpu;
+      uint16_t port;
+    };
+    std::vector<Target> targets{{"ours", run_ours, nullptr, srv.port()}};
+    std::vector<std::unique_ptr<Nginx>> nginxes;
+    if (nginx_bin)
       for (auto& wk : split(workers_arg)) {
         try {
-          Nginx ng(*nginx_bin, dir / ("nginx_w" + wk), www, wk, nginx_extra);
-          for (int n : conns)
-            cells.push_back(measure("nginx w" + wk, run_http, ng.port(), ids, n, depth, warmup, seconds));
-          ng.stop();
+          nginxes.push_back(std::make_unique<Nginx>(*nginx_bin, dir / ("nginx_w" + wk), www, wk, nginx_extra));
+          const pid_t pid = nginxes.back()->pid();
+          targets.push_back({"nginx w" + wk, run_http, [pid] { return child_cpu_s(pid); }, nginxes.back()->port()});
         } catch (const Error& e) {
           std::printf("nginx w%s skipped: %s\n", wk.c_str(), e.what());
         }
       }
-    }
-
-    std::printf("\n%6s %-11s %11s %9s %8s %8s %8s %12s\n", "conns", "server", "tiles/s", "MB/s", "p50 ms",
-                "p99 ms", "p99.9 ms", "ours/this");
-    nlohmann::json rows = nlohmann::json::array();
-    for (int n : conns) {
-      const Cell* ours = nullptr;
-      for (auto& c : cells)
-        if (c.conns == n && c.server == "ours") ours = &c;
-      for (auto& c : cells) {
-        if (c.conns != n) continue;
-        const double ratio = c.tiles_per_s > 0 && ours ? ours->tiles_per_s / c.tiles_per_s : 0;
-        std::printf("%6d %-11s %11.0f %9.1f %8.3f %8.3f %8.3f %12s\n", n, c.server.c_str(), c.tiles_per_s, c.mb_per_s,
-                    c.p50_ms, c.p99_ms, c.p999_ms, &c == ours ? "-" : (std::to_string(ratio).substr(0, 5) + "x").c_str());
-        rows.push_back({{"server", c.server}, {"connections", n}, {"tiles_per_s", c.tiles_per_s},
-                        {"mb_per_s", c.mb_per_s}, {"p50_ms", c.p50_ms}, {"p99_ms", c.p99_ms},
-                        {"p999_ms", c.p999_ms}, {"tiles", c.tiles},
-                        {"ratio_ours_over_this", &c == ours ? nlohmann::json(nullptr) : nlohmann::json(ratio)}});
+    auto run_cells = [&](int n, double rate) {
+      std::vector<std::vector<Cell>> runs(targets.size());
+      for (uint32_t r = 0; r < reps; ++r)
+        for (size_t t = 0; t < targets.size(); ++t)
+          runs[t].push_back(
+              measure_once(targets[t].name, targets[t].drive, targets[t].cpu, targets[t].port, ids, n, depth, rate,
+                           warmup, seconds));
+      std::vector<Cell> out;
+      for (auto& r : runs) out.push_back(median_of(std::move(r)));
+      return out;
+    };
+    std::vector<Cell> cells, open_cells;
+    for (int n : conns)
+      for (auto& c : run_cells(n, 0)) cells.push_back(c);
+    if (rate_fraction > 0 || fixed_rate > 0)
+      for (int n : conns) {
+        double peak = 0;
+        for (auto& c : cells)
+          if (c.conns == n && c.server == "ours") peak = c.tiles_per_s;
+        const double rate = fixed_rate > 0 ? fixed_rate : rate_fraction * peak;
+        if (rate <= 0) continue;
+        for (auto& c : run_cells(n, rate)) open_cells.push_back(c);
       }
-    }
+    for (auto& ng : nginxes) ng->stop();
+    srv.stop();
+    std::printf("server: %s\n", srv.stats().line().c_str());
+
+    nlohmann::json rows = nlohmann::json::array();
+    auto table = [&](const std::vector<Cell>& cs, const char* title) {
+      if (cs.empty()) return;
+      std::printf("\n%s\n%6s %-11s %11s %11s %9s %8s %8s %8s %12s %10s\n", title, "conns", "server", "offered/s",
+                  "tiles/s", "MB/s", "p50 ms", "p99 ms", "p99.9 ms", "srv us/tile", "ours/this");
+      for (int n : conns) {
+        const Cell* ours = nullptr;
+        for (auto& c : cs)
+          if (c.conns == n && c.server == "ours") ours = &c;
+        for (auto& c : cs) {
+          if (c.conns != n) continue;
+          // Closed loop: the rate ratio; open loop (same offered rate): the p99 ratio nginx/ours.
+          const bool open = c.offered_per_s > 0;
+          double ratio = 0;
+          if (ours && &c != ours)
+            ratio = open ? (ours->p99_ms > 0 ? c.p99_ms / ours->p99_ms : 0)
+                         : (c.tiles_per_s > 0 ? ours->tiles_per_s / c.tiles_per_s : 0);
+          std::printf("%6d %-11s %11.0f %11.0f %9.1f %8.3f %8.3f %8.3f %12.2f %10s\n", n, c.server.c_str(),
+                      c.offered_per_s, c.tiles_per_s, c.mb_per_s, c.p50_ms, c.p99_ms, c.p999_ms,
+                      c.server_cpu_us_per_tile,
+                      &c == ours ? "-" : (std::to_string(ratio).substr(0, 5) + "x").c_str());
+          rows.push_back({{"server", c.server}, {"connections", n}, {"mode", open ? "open_loop" : "closed_loop"},
+                          {"offered_per_s", c.offered_per_s}, {"tiles_per_s", c.tiles_per_s},
+                          {"mb_per_s", c.mb_per_s}, {"p50_ms", c.p50_ms}, {"p99_ms", c.p99_ms},
+                          {"p999_ms", c.p999_ms}, {"tiles", c.tiles},
+                          {"server_cpu_us_per_tile", c.server_cpu_us_per_tile},
+                          {open ? "p99_this_over_ours" : "ratio_ours_over_this",
+                           &c == ours ? nlohmann::json(nullptr) : nlohmann::json(ratio)}});
+        }
+      }
+    };
+    table(cells, ("closed loop, depth " + std::to_string(depth) + ", median of " + std::to_string(reps) +
+                  " run(s); ours/this = tiles/s ratio").c_str());
+    table(open_cells, ("open loop (fixed schedule), median of " + std::to_string(reps) +
+                       " run(s); ours/this = p99 of this / p99 of ours").c_str());
     const fs::path jp(json_path);
     if (!jp.parent_path().empty()) fs::create_directories(jp.parent_path());
     nlohmann::json j = {{"benchmark", "serve_vs_nginx"}, {"level", level}, {"tiles", ids.size()},
                         {"stored_bytes", stored}, {"depth", depth}, {"seconds", seconds},
                         {"warmup_seconds", warmup}, {"nginx", nginx_bin ? *nginx_bin : ""},
-                        {"our_io_threads", 1}, {"nginx_extra", nginx_extra}, {"rows", rows}};
+                        {"our_io_threads", threads}, {"nginx_extra", nginx_extra}, {"reps", reps},
+                        {"rate_fraction", rate_fraction}, {"rate", fixed_rate}, {"rows", rows}};
     std::ofstream(json_path) << j.dump(2) << "\n";
     std::printf("wrote %s\n", json_path.c_str());
   } catch (const std::exception& e) {

@@ -37,10 +37,17 @@ Connection::Connection(tcp::socket socket, ServerCore& core, asio::ip::address f
   tls_ready_ = core.tls == nullptr;
   writer_wake_.expires_at(Clock::time_point::max());
   reader_wake_.expires_at(Clock::time_point::max());
+  batch_.resize(kTilesPerWrite);
 }
 
 void Connection::start() {
   auto ex = stream_.get_executor();
+  if (!stream_.tls()) {
+    // Synchronous sends (write_tiles_inline) return would_block instead of blocking;
+    // Asio's asynchronous operations are unaffected.
+    error_code ec;
+    stream_.socket().non_blocking(true, ec);
+  }
   auto self = shared_from_this();
   asio::co_spawn(ex, reader(self), asio::detached);
   asio::co_spawn(ex, writer(self), asio::detached);
@@ -77,7 +84,13 @@ void Connection::close() {
   watchdog_timer_.cancel();
 }
 
-void Connection::wake_writer() { writer_wake_.cancel(); }
+void Connection::wake_writer() {
+  if (in_chunk_) {
+    wake_deferred_ = true;  // the reader wakes it (or writes inline) after the chunk
+    return;
+  }
+  writer_wake_.cancel();
+}
 
 // ---------------------------------------------------------------- reader
 
@@ -115,6 +128,8 @@ asio::awaitable<void> Connection::reader(std::shared_ptr<Connection> /*keep aliv
       const uint64_t chunk_start = parser_.stream_offset();
       const bool was_mid_frame = mid_frame();
       std::span<const uint8_t> rest(buf.data(), n);
+      in_chunk_ = true;
+      wake_deferred_ = false;
       while (!rest.empty() && !closing_ && !closed_) {
         auto r = parser_.feed(rest);
         rest = rest.subspan(r.consumed);
@@ -126,6 +141,11 @@ asio::awaitable<void> Connection::reader(std::shared_ptr<Connection> /*keep aliv
           fail(parser_.status().code, proto::to_string(parser_.status()));
         }
       }
+      in_chunk_ = false;
+      if (wake_deferred_) {
+        write_tiles_inline();
+        if (closing_ || closed_ || !spill_.empty() || !control_.empty() || !tiles_.empty()) writer_wake_.cancel();
+      }
       // A frame that began in this chunk (none pending before it, or one completed in it
       // and the next begun) started now; one continued from before keeps its start.
       if (mid_frame() && (!was_mid_frame || frame_end_offset_ >= chunk_start)) frame_started_ = last_read_;
@@ -134,6 +154,7 @@ asio::awaitable<void> Connection::reader(std::shared_ptr<Connection> /*keep aliv
     core_.log_repeated("connection", std::string("connection reader: ") + e.what());
     close();
   }
+  in_chunk_ = false;
   // A client that half-closes after its requests still gets its answers: only close
   // once the writer has nothing left (closing_ tells it to finish).
   closing_ = true;
@@ -408,7 +429,7 @@ void Connection::fail(ErrorCode code, const std::string& message) {
 // ---------------------------------------------------------------- writer
 
 asio::awaitable<bool> Connection::write_buffers(const std::vector<asio::const_buffer>& bufs,
-                                                size_t bytes) {
+                                                size_t bytes, bool count) {
   error_code ec;
   writing_ = true;
   write_started_ = Clock::now();
@@ -416,8 +437,79 @@ asio::awaitable<bool> Connection::write_buffers(const std::vector<asio::const_bu
   writing_ = false;
   if (ec) co_return false;
   last_activity_ = Clock::now();
-  core_.stats.sent(bytes);
+  if (count) core_.stats.sent(bytes);
   co_return true;
+}
+
+size_t Connection::fill_batch(size_t max_tiles, size_t& bytes) {
+  size_t n = 0;
+  bytes = 0;
+  bufs_.clear();
+  while (n < max_tiles && bytes < kBytesPerWrite) {
+    auto p = tiles_.pop();
+    if (!p) break;
+    if (p->last_of_request) in_flight_.end(p->tile.request_id);
+    TileFrame& f = batch_[n++];
+    prepare_tile(*p, f);
+    if (f.is_data) {
+      bufs_.push_back(asio::buffer(f.prefix));
+      bufs_.push_back(asio::buffer(f.stored));
+      bytes += f.prefix.size() + f.stored.size();
+    } else {
+      bufs_.push_back(asio::buffer(f.error));
+      bytes += f.error.size();
+    }
+  }
+  return n;
+}
+
+void Connection::count_batch(size_t n) {
+  const auto now = Clock::now();
+  for (size_t i = 0; i < n; ++i)
+    if (batch_[i].is_data) {
+      core_.stats.tile_sent(batch_[i].stored.size());
+      core_.stats.latency(
+          uint64_t(std::chrono::duration_cast<std::chrono::microseconds>(now - batch_[i].received).count()));
+    }
+}
+
+bool Connection::write_tiles_inline() {
+  if (stream_.tls() || closed_ || closing_ || !writer_idle_ || !spill_.empty() || !control_.empty() ||
+      tiles_.empty())
+    return false;
+  const bool tight = core_.queued_bytes.load(std::memory_order_relaxed) >= opt_.max_queued_bytes;
+  size_t bytes = 0;
+  const size_t n = fill_batch(tight ? 1 : kTilesPerWrite, bytes);
+  error_code ec;
+  size_t done = 0;
+  while (done < bytes) {  // a loopback socket usually takes the whole batch at once
+    const size_t k = stream_.socket().write_some(bufs_, ec);
+    if (ec) break;
+    done += k;
+    if (done < bytes) {  // drop what went out from the front of bufs_
+      size_t skip = k;
+      auto it = bufs_.begin();
+      while (it != bufs_.end() && skip >= it->size()) skip -= it++->size();
+      bufs_.erase(bufs_.begin(), it);
+      if (!bufs_.empty()) bufs_.front() += skip;
+    }
+  }
+  if (ec && ec != asio::error::would_block && ec != asio::error::try_again) {
+    close();  // reset or broken pipe: the reader and writer end
+    return true;
+  }
+  if (done < bytes) {
+    // The socket's buffer is full: the rest of the frames begun goes first in the writer.
+    for (const auto& b : bufs_) {
+      const auto* p = static_cast<const uint8_t*>(b.data());
+      spill_.insert(spill_.end(), p, p + b.size());
+    }
+    core_.queued_bytes.fetch_add(spill_.size(), std::memory_order_relaxed);
+  }
+  last_activity_ = Clock::now();
+  core_.stats.sent(bytes);
+  count_batch(n);
+  return true;
 }
 
 // One tile's answer frame, built in `out`: TileData as prefix (header + fixed fields)
@@ -481,9 +573,18 @@ void Connection::prepare_tile(const PoppedTile& p, TileFrame& out) {
 }
 
 asio::awaitable<void> Connection::writer(std::shared_ptr<Connection> self) {
-  std::vector<TileFrame> batch(kTilesPerWrite);  // reused: buffers keep their capacity
   try {
     while (!closed_) {
+      if (!spill_.empty()) {  // the tail of an inline write: frames already begun on the wire
+        std::vector<uint8_t> tail = std::move(spill_);
+        spill_.clear();
+        std::vector<asio::const_buffer> tail_buf;
+        tail_buf.push_back(asio::buffer(tail));
+        const bool ok = co_await write_buffers(tail_buf, tail.size(), false);
+        core_.queued_bytes.fetch_sub(tail.size(), std::memory_order_relaxed);
+        if (!ok) break;
+        continue;
+      }
       if (!control_.empty()) {
         ControlFrame frame = std::move(control_.front());
         control_.pop_front();
@@ -505,25 +606,10 @@ asio::awaitable<void> Connection::writer(std::shared_ptr<Connection> self) {
       if (!tiles_.empty()) {
         // Several small tiles per gathered write (one syscall, not one per tile), still in
         // priority order; bounded in count and bytes so urgent later requests wait little.
-        size_t n = 0, bytes = 0;
-        std::vector<asio::const_buffer> bufs;
         // Over the server's budget of queued bytes: one tile per write until it drains.
         const bool tight = core_.queued_bytes.load(std::memory_order_relaxed) >= opt_.max_queued_bytes;
-        while (n < (tight ? 1 : kTilesPerWrite) && bytes < kBytesPerWrite) {
-          auto p = tiles_.pop();
-          if (!p) break;
-          if (p->last_of_request) in_flight_.end(p->tile.request_id);
-          TileFrame& f = batch[n++];
-          prepare_tile(*p, f);
-          if (f.is_data) {
-            bufs.push_back(asio::buffer(f.prefix));
-            bufs.push_back(asio::buffer(f.stored));
-            bytes += f.prefix.size() + f.stored.size();
-          } else {
-            bufs.push_back(asio::buffer(f.error));
-            bytes += f.error.size();
-          }
-        }
+        size_t bytes = 0;
+        const size_t n = fill_batch(tight ? 1 : kTilesPerWrite, bytes);
         struct Held {  // the batch counts against the server's budget until written
           std::atomic<uint64_t>& total;
           size_t n;
@@ -533,28 +619,26 @@ asio::awaitable<void> Connection::writer(std::shared_ptr<Connection> self) {
         bool ok;
         {
           Held held(core_.queued_bytes, bytes);
-          ok = co_await write_buffers(bufs, bytes);
+          ok = co_await write_buffers(bufs_, bytes);
         }
         if (!ok) break;
-        const auto now = Clock::now();
-        for (size_t i = 0; i < n; ++i)
-          if (batch[i].is_data) {
-            core_.stats.tile_sent(batch[i].stored.size());
-            core_.stats.latency(uint64_t(
-                std::chrono::duration_cast<std::chrono::microseconds>(now - batch[i].received).count()));
-          }
+        count_batch(n);
         continue;
       }
       if (closing_) break;  // everything owed is written
       error_code ec;
       writer_wake_.expires_at(Clock::time_point::max());
+      writer_idle_ = true;
       co_await writer_wake_.async_wait(asio::redirect_error(asio::use_awaitable, ec));
+      writer_idle_ = false;
     }
   } catch (const std::exception& e) {
     core_.log_repeated("connection", std::string("connection writer: ") + e.what());
   }
   close();
-  core_.queued_bytes.fetch_sub(control_bytes_, std::memory_order_relaxed);  // never written
+  writer_idle_ = false;
+  core_.queued_bytes.fetch_sub(control_bytes_ + spill_.size(), std::memory_order_relaxed);  // never written
+  spill_.clear();
   control_bytes_ = 0;
   control_.clear();
   {
@@ -592,7 +676,7 @@ asio::awaitable<void> Connection::watchdog(std::shared_ptr<Connection> /*keep al
       if (writing_ && now - write_started_ > opt_.write_timeout) close();
       continue;
     }
-    const bool owed = !control_.empty() || !tiles_.empty();
+    const bool owed = !control_.empty() || !tiles_.empty() || !spill_.empty();
     const char* why = nullptr;
     if ((!handshaken_ || !authed_) && now - accepted_ > opt_.handshake_timeout) why = "handshake";
     else if (writing_ && now - write_started_ > opt_.write_timeout) why = "write";

@@ -35,8 +35,11 @@ class Connection;
 // floods the budget evicts itself, a client that completes its handshake in a few round
 // trips gets through. Only connections pending for longer than the grace (1 s) are
 // evicted, so a burst of honest clients from one host (a NAT, a load test) is not made
-// to evict itself; with no such victim the budget is soft until max_connections, where
-// the newcomer is refused. Guarded by ServerCore::mu.
+// to evict itself; with no such victim the budget is soft until max_connections. There
+// the grace no longer shields an address over its own budget: the newcomer evicts that
+// address's oldest pending connection, however young (a flood reopened faster than the
+// grace cannot hold the server full); only with no such address is it refused.
+// Guarded by ServerCore::mu.
 struct PendingBudget {
   using Prefix = std::array<uint8_t, 16>;
   static Prefix prefix_of(const asio::ip::address& a);

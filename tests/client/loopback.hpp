@@ -62,6 +62,9 @@ class RawSocket {
   RawSocket(const RawSocket&) = delete;
   RawSocket& operator=(const RawSocket&) = delete;
   bool send(const std::vector<uint8_t>& bytes);
+  // SO_RCVBUF: a fixed, small receive buffer (no autotuning), so that a test can fill
+  // the connection with little data.
+  void set_receive_buffer(int bytes);
   // Reads until `n` bytes or EOF/timeout; returns what it got.
   std::vector<uint8_t> recv(size_t n);
   // True if the peer closed (EOF or reset) within the timeout.

@@ -168,6 +168,10 @@ RawSocket::RawSocket(uint16_t port, std::chrono::milliseconds timeout, const cha
 
 RawSocket::~RawSocket() { close(); }
 
+void RawSocket::set_receive_buffer(int bytes) {
+  ::setsockopt(fd_, SOL_SOCKET, SO_RCVBUF, &bytes, sizeof bytes);
+}
+
 void RawSocket::close() {
   if (fd_ >= 0) ::close(fd_);
   fd_ = -1;

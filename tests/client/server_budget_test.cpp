@@ -118,6 +118,22 @@ TEST(ServerBudget, IdleAfterHelloWithoutAKeyCannotFillTheServer) {
   EXPECT_LE(srv.server->stats().connections_open, 24u + 1u);
 }
 
+TEST(ServerBudget, AFloodYoungerThanTheGraceCannotHoldTheServerFull) {
+  // Every flood connection is younger than the grace, and there are more of them than
+  // max_connections: the grace shields only addresses within their budget, so the key
+  // holder still gets a slot (refused with overloaded before).
+  auto p = build_pack("budget_young", 6, 3, looptest::first_encoding(), 3, 512);
+  server::ServerOptions o = small_budgets();
+  o.pending_grace = std::chrono::seconds(30);
+  o.key = kKey;
+  auto srv = start_server({p.path}, o);
+  Flood flood;
+  flood.open(srv.port, 4, 20, false);  // 80 > max_connections 48
+  expect_served(srv.port, p, "budget_young", kKey);
+  EXPECT_GE(srv.server->stats().connections_evicted, 80u - 48u);
+  EXPECT_LE(srv.server->stats().connections_open, 48u);
+}
+
 TEST(ServerBudget, AnHonestBurstFromOneHostIsNotEvicted) {
   auto p = build_pack("budget_burst", 5, 10, looptest::first_encoding(), 3, 512);
   server::ServerOptions o = small_budgets();

@@ -382,5 +382,49 @@ TEST(ServerLoopback, ClientThatStopsReadingIsCutOffWithoutStarvingOthers) {
   ASSERT_TRUE(wait_until([&] { return srv.server->stats().connections_open == 0; }, 10s));
 }
 
+TEST(ServerLoopback, AnswersStayWholeWhenUnpipelinedRequestsFillTheSocket) {
+  // Requests sent one at a time to a client that does not read: each is answered from
+  // the reader with a non-blocking send until the socket buffers fill mid-batch; the rest
+  // of that batch (the spill) and every later answer must follow in order, frames whole.
+  auto p = build_pack("spill", 9, 21, first_encoding(), 3, 1 << 20);
+  auto srv = start_server({p.path});
+  RawSocket s(srv.port, 20s);
+  s.set_receive_buffer(64 << 10);  // with the server's send buffer (4 MiB at most): full after ~4 MiB
+  handshake(s);
+  ASSERT_TRUE(s.send(looptest::open_map_frame("spill", 2)));
+  ASSERT_EQ(read_frame(s).header.type, proto::MessageType::map_info);
+  const auto& tiles = p.reader->tiles();
+  const uint32_t per_request = 16, requests = 60;  // one inline batch each; under max_in_flight (64)
+  proto::Limits l;
+  uint64_t owed = 0;
+  for (uint32_t r = 0; r < requests; ++r) {
+    proto::GetTiles g;
+    g.map_id = 1;
+    for (uint32_t i = 0; i < per_request; ++i) {
+      const auto& t = tiles[(r * per_request + i) % tiles.size()];
+      g.tiles.push_back({t.id, 0});
+      owed += t.stored_size;
+    }
+    std::vector<uint8_t> out;
+    ASSERT_TRUE(proto::encode_message(g, 10 + r, proto::kFlagFinal, l, out));
+    ASSERT_TRUE(s.send(out));
+    std::this_thread::sleep_for(1ms);  // its own read on the server
+  }
+  ASSERT_GT(owed, 8u << 20) << "not enough to fill the socket buffers";
+  for (uint32_t r = 0; r < requests; ++r)
+    for (uint32_t i = 0; i < per_request; ++i) {
+      RawFrame f = read_frame(s);
+      ASSERT_TRUE(f.ok) << "request " << r << " tile " << i;
+      ASSERT_EQ(f.header.type, proto::MessageType::tile_data);
+      ASSERT_EQ(f.header.request_id, 10 + r);
+      ASSERT_EQ(f.header.final(), i + 1 == per_request);
+      ASSERT_EQ(proto::crc32(f.payload), f.header.payload_crc32);
+      const auto want = p.reader->read_stored(tiles[(r * per_request + i) % tiles.size()].id);
+      ASSERT_GE(f.payload.size(), want.size());
+      ASSERT_TRUE(std::equal(want.begin(), want.end(), f.payload.end() - std::ptrdiff_t(want.size())));
+    }
+  EXPECT_TRUE(wait_until([&] { return srv.server->stats().tiles_sent == uint64_t(requests) * per_request; }));
+}
+
 }  // namespace
 }  // namespace st::client
