@@ -26,7 +26,7 @@ TexelRegion parse_region(const std::string& text) {
 
 struct BuildArgs {
   std::string scene, light, resolution = "4096", encoding = "dagmh", out, report, region,
-                     construction = "bottom-up", up = "y", intervals = "default";
+                     construction = "bottom-up", up = "y", intervals = "default", shard;
   std::optional<uint32_t> skip_level;
   uint32_t tile_bytes = 64 * 1024;
   int compression = 6;
@@ -48,6 +48,7 @@ void run(const BuildArgs& a) {
   if (a.intervals == "static") o.intervals = IntervalRule::static_geometry;
   else if (a.intervals != "default")
     throw Error("--intervals: expected default or static, got '" + a.intervals + "'");
+  if (!a.shard.empty()) o.shard = BuildShard::parse(a.shard);
   o.scene_spec = a.scene;
   o.light_spec = a.light;
 
@@ -84,11 +85,18 @@ void run(const BuildArgs& a) {
   std::signal(SIGTERM, old_term);
 
   const double res = double(uint64_t(1) << r.map_level);
-  std::printf("built %s: %.0f^2 %s, skip level %u, %llu tiles (%llu index), %.2f MiB "
-              "(%.4f%% of the raw float32 map)\n",
-              a.out.c_str(), res, r.encoding.c_str(), r.skip_level, (unsigned long long)r.tile_count,
-              (unsigned long long)r.index_tile_count, double(r.pack_bytes) / (1 << 20),
-              100.0 * double(r.pack_bytes) / (res * res * 4));
+  if (o.shard)
+    std::printf("built part %s: shard %s of a %.0f^2 %s map, %llu cells (%llu resumed), %.2f MiB; "
+                "join the parts with: shadowtile merge PARTS... -o PACK\n",
+                a.out.c_str(), o.shard->to_string().c_str(), res, r.encoding.c_str(),
+                (unsigned long long)r.cells_total, (unsigned long long)r.cells_resumed,
+                double(r.pack_bytes) / (1 << 20));
+  else
+    std::printf("built %s: %.0f^2 %s, skip level %u, %llu tiles (%llu index), %.2f MiB "
+                "(%.4f%% of the raw float32 map)\n",
+                a.out.c_str(), res, r.encoding.c_str(), r.skip_level, (unsigned long long)r.tile_count,
+                (unsigned long long)r.index_tile_count, double(r.pack_bytes) / (1 << 20),
+                100.0 * double(r.pack_bytes) / (res * res * 4));
   std::printf("  %.1f s wall, %.2f Mtexels/s, cells %llu built + %llu resumed + %llu outside region, "
               "constant entries %.1f%%, exit depths %s, peak memory %.0f MiB\n",
               r.wall_seconds, double(r.texels_traced) / r.wall_seconds / 1e6,
@@ -139,6 +147,9 @@ void setup(CLI::App& app) {
                  "default: [first hit, exit of closed objects]; static: an open surface's interval also "
                  "reaches to just below the next surface (lossless for receivers on surfaces only)")
       ->capture_default_str();
+  app.add_option("--shard", a->shard,
+                 "I/N: build only shard I of N (the cells whose Z-order index is I mod N) into a part "
+                 "file at OUT; `shadowtile merge` joins the N parts into the pack");
   app.add_flag("-q,--quiet", a->quiet, "No summary or progress");
   app.callback([a]() { run(*a); });
 }

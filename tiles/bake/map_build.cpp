@@ -4,6 +4,7 @@
 #include "tiles/bake/map_build.hpp"
 
 #include <sys/resource.h>
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <chrono>
@@ -70,6 +71,7 @@ PackParams pack_params(const Scene& scene, const LightSpace& light, const MapBui
                      {"scene", o.scene_spec.empty() ? scene.name : o.scene_spec},
                      {"tool", "shadowtile 0.1.0"}};
   if (o.intervals == IntervalRule::static_geometry) pp.build_params.push_back({"intervals", "static"});
+  if (o.shard) pp.build_params.push_back({kShardParam, o.shard->to_string()});
   if (o.region)
     pp.build_params.push_back({"region", std::to_string(o.region->x) + "," + std::to_string(o.region->y) +
                                              "," + std::to_string(o.region->w) + "," +
@@ -90,6 +92,7 @@ std::vector<CellXY> plan_cells(PackWriter& writer, const MapBuildOptions& o, uin
   outside = 0;
   for (uint64_t m = 0; m < cells_side * cells_side; ++m) {
     uint32_t cx = morton_compact(m), cy = morton_compact(m >> 1);
+    if (o.shard && m % o.shard->count != o.shard->index) continue;  // BuildShard::holds
     if (writer.is_done(cx, cy)) continue;
     if (o.region && !cell_touches(*o.region, cx * cell_side, cy * cell_side, cell_side)) {
       CutCell c;
@@ -290,7 +293,7 @@ MapBuildReport build_map(const Scene& scene, const LightSpace& light, const MapB
   rep.map_level = L;
   rep.skip_level = K;
   rep.encoding = to_string(o.encoding);
-  rep.cells_total = (uint64_t(1) << K) * (uint64_t(1) << K);
+  rep.cells_total = o.shard ? o.shard->cell_count(K) : (uint64_t(1) << K) * (uint64_t(1) << K);
 
   auto t = Clock::now();
   DepthBoundsTracer tracer(scene, light);
@@ -316,12 +319,24 @@ MapBuildReport build_map(const Scene& scene, const LightSpace& light, const MapB
     throw Error("build interrupted; run again with --resume to continue from " + writer->tmp_path());
 
   t = Clock::now();
-  finish_pack(*writer, cutter, o.construction);
+  if (o.shard) {
+    if (writer->cells().size() != rep.cells_total)
+      throw Error(writer->tmp_path() + ": shard " + o.shard->to_string() + " holds " +
+                  std::to_string(writer->cells().size()) + " of its " + std::to_string(rep.cells_total) + " cells");
+    writer->finish_part();
+  } else {
+    finish_pack(*writer, cutter, o.construction);
+  }
   rep.finish_seconds = since(t);
   if (o.progress) o.progress(rep.cells_total, rep.cells_total, workers.texels());
 
   workers.report(rep);
-  report_pack_figures(out_path, L, rep);
+  if (o.shard) {
+    struct stat st{};
+    rep.pack_bytes = ::stat(out_path.c_str(), &st) == 0 ? uint64_t(st.st_size) : 0;
+  } else {
+    report_pack_figures(out_path, L, rep);
+  }
   rep.wall_seconds = since(t_start);
   rep.peak_rss_bytes = peak_rss_bytes();
   return rep;

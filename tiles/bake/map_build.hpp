@@ -22,6 +22,7 @@
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/light.hpp"
 #include "tiles/build/mh_build.hpp"
+#include "tiles/build/pack_merge.hpp"
 
 namespace st {
 
@@ -55,6 +56,9 @@ struct MapBuildOptions {
   // Build only the cells touching this region; every other cell is the constant
   // kLitDepth (a partial map: only texels inside the region are traced and lossless).
   std::optional<TexelRegion> region;
+  // Build only this shard's cells into a part file at the output path (build parameter
+  // shard=I/N, no grid or index: merge_parts() joins the parts into the pack).
+  std::optional<BuildShard> shard;
   std::string scene_spec, light_spec;  // provenance written into the pack's params
   // Called from a background thread about 5 times a second with the progress so far.
   std::function<void(uint64_t cells_done, uint64_t cells_total, uint64_t texels_done)> progress;
@@ -82,7 +86,7 @@ struct MapBuildReport {
   std::string to_json() const;
 };
 
-// Builds the pack at `out_path` (written as "<out_path>.tmp", renamed when complete).
+// Builds the pack (or with options.shard, the part file) at `out_path` (written as "<out_path>.tmp", renamed when complete).
 MapBuildReport build_map(const Scene& scene, const LightSpace& light, const MapBuildOptions& options,
                          const std::string& out_path);
 
