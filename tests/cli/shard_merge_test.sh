@@ -25,7 +25,7 @@ check() {  # check NAME EXPECTED_EXIT PATTERN -- command...
 }
 scene="procedural:city,size=3"
 base=(build "$scene" --light sun:azimuth=30,elevation=50 --encoding dagmh)
-args=("${base[@]}" --resolution 1024 -q)
+args=("${base[@]}" --resolution 512 -q)
 check one-go 0 "" -- "$st" "${args[@]}" -o one.pack
 for i in 0 1 2; do check "part-$i" 0 "" -- "$st" "${args[@]}" --shard $i/3 -o p$i.part; done
 check bad-shard 1 "shard: expected I/N" -- "$st" "${args[@]}" --shard 3/3 -o bad.part
@@ -53,7 +53,7 @@ check verify-merged 0 "OK: every texel" -- "$st" verify m.pack "$scene" --all
 check gap 1 "gap: no part holds shard 1/3" -- "$st" merge p0.part p2.part -o g.pack
 check overlap 1 "overlap: p0.part and p0.part both hold shard 0/3" -- "$st" merge p0.part p0.part p1.part p2.part -o o.pack
 check not-a-part 1 "one.pack: a complete pack, not a part file" -- "$st" merge one.pack p0.part -o n.pack
-"$st" "${base[@]}" --resolution 2048 -q --shard 1/3 -o other.part >/dev/null 2>&1
+"$st" "${base[@]}" --resolution 1024 -q --shard 1/3 -o other.part >/dev/null 2>&1
 check other-build 1 "different builds \(map level differs\)" -- "$st" merge p0.part other.part p2.part -o d.pack
 # A flipped payload byte and a truncated part: refused, naming the part.
 python3 - <<'PY'
@@ -70,7 +70,7 @@ check short-part 1 "p1-short.part: record at byte [0-9]+ is torn" -- "$st" merge
 ls ./*.tmp g.pack o.pack n.pack d.pack c.pack s.pack >/dev/null 2>&1 && { echo "FAIL a refused merge left output behind"; fail=1; }
 # A shard whose build was interrupted resumes into the same part.
 cp p1-short.part p1r.part.tmp
-check resume-shard 0 "[1-9][0-9]* resumed" -- "$st" "${base[@]}" --resolution 1024 --shard 1/3 -o p1r.part --resume
+check resume-shard 0 "[1-9][0-9]* resumed" -- "$st" "${base[@]}" --resolution 512 --shard 1/3 -o p1r.part --resume
 check merge-resumed 0 "merged" -- "$st" merge p0.part p1r.part p2.part -o r.pack
 if same r.pack one.pack; then echo "ok   resumed shard merged == one-go"
 else echo "FAIL resumed shard's merge differs from the one-go build"; fail=1; fi
