@@ -42,15 +42,15 @@ else echo "FAIL mpi pack differs from the single-process build"; fail=1; fi
 "$st" verify mpi.pack "$scene" --all >verify.log 2>&1 && echo "ok   verify --all" || { echo "FAIL verify"; tail -3 verify.log; fail=1; }
 
 # Kill rank 1 once some cells are in the journal.
-"$st" "${args[@]}" --resolution 2048 -q -o big_one.pack || exit 1
-"${mpi[@]}" "$st" "${args[@]}" --resolution 2048 --mpi -o killed.pack >killed.log 2>&1 &
+"$st" "${args[@]}" --resolution 1024 -q -o big_one.pack || exit 1
+"${mpi[@]}" "$st" "${args[@]}" --resolution 1024 --mpi -o killed.pack >killed.log 2>&1 &
 mp=$!
 rank1=""
 for _ in $(seq 1 2000); do
   for c in $(pgrep -P $mp 2>/dev/null); do
     tr '\0' '\n' <"/proc/$c/environ" 2>/dev/null | grep -qx "OMPI_COMM_WORLD_RANK=1" && rank1=$c
   done
-  [[ -n "$rank1" && -f killed.pack.tmp && $(stat -c %s killed.pack.tmp) -gt 20000 ]] && break
+  [[ -n "$rank1" && -f killed.pack.tmp && $(stat -c %s killed.pack.tmp) -gt 8000 ]] && break
   kill -0 $mp 2>/dev/null || break
   sleep 0.01
 done
@@ -65,7 +65,7 @@ else
   if [[ $rc != 0 && ! -f killed.pack && -f killed.pack.tmp ]] && grep -qiE "rank 1|signal 9|killed" killed.log; then
     echo "ok   killed rank 1: run failed (exit $rc), no pack, .tmp kept: $(grep -iE 'rank 1|signal 9' killed.log | head -1)"
   else echo "FAIL killed rank: exit $rc, pack $(ls killed.pack 2>&1)"; tail -5 killed.log; fail=1; fi
-  out=$("${mpi[@]}" "$st" "${args[@]}" --resolution 2048 --mpi --resume -o killed.pack 2>&1)
+  out=$("${mpi[@]}" "$st" "${args[@]}" --resolution 1024 --mpi --resume -o killed.pack 2>&1)
   if [[ $? == 0 ]] && grep -qE "[1-9][0-9]* resumed" <<<"$out" && same killed.pack big_one.pack; then
     echo "ok   --mpi --resume completed the pack == single-process pack"
   else echo "FAIL --mpi --resume"; echo "$out" | tail -5; fail=1; fi

@@ -150,6 +150,7 @@ class CellWorkers {
     const unsigned nthreads = std::max(1u, std::thread::hardware_concurrency());
     std::vector<std::thread> workers;
     for (unsigned i = 0; i < nthreads; ++i) workers.emplace_back([this] { work(); });
+    if (o_.remote) workers.emplace_back([this] { serve_remote(); });
     for (auto& w : workers) w.join();
     if (failure_) std::rethrow_exception(failure_);
   }
@@ -181,6 +182,33 @@ class CellWorkers {
       std::lock_guard lock(failure_mu_);
       if (!failure_) failure_ = std::current_exception();
       stop_ = true;
+    }
+  }
+
+  void fail(std::exception_ptr e) {
+    std::lock_guard lock(failure_mu_);
+    if (!failure_) failure_ = e;
+    stop_ = true;
+  }
+
+  // The other processes' share (RemoteCells): they take from the same cursor.
+  void serve_remote() {
+    try {
+      o_.remote->run(
+          [this]() -> std::optional<CellXY> {
+            if (stop_ || (o_.cancel && o_.cancel->load())) return std::nullopt;
+            uint64_t i = next_++;
+            if (i >= todo_.size()) return std::nullopt;
+            return todo_[i];
+          },
+          [this](std::span<const uint8_t> bytes) {
+            auto t = Clock::now();
+            writer_.append_cell_bytes(bytes);
+            add_seconds(write_ns_, since(t));
+            ++appended_;
+          });
+    } catch (...) {
+      fail(std::current_exception());
     }
   }
 
@@ -341,6 +369,35 @@ MapBuildReport build_map(const Scene& scene, const LightSpace& light, const MapB
   rep.peak_rss_bytes = peak_rss_bytes();
   return rep;
 }
+
+struct CellBuilder::Impl {
+  Impl(const Scene& scene, const LightSpace& light, const MapBuildOptions& o)
+      : options(o), cut(checked_cut_params(o)), tracer(scene, light), cutter(cut),
+        params(pack_params(scene, light, o, cut, tracer.traces_exit_depths())) {}
+  MapBuildOptions options;
+  CutParams cut;
+  DepthBoundsTracer tracer;
+  TileCutter cutter;
+  PackParams params;
+  mutable std::atomic<uint64_t> texels{0}, trace_ns{0}, build_ns{0};
+};
+
+CellBuilder::CellBuilder(const Scene& scene, const LightSpace& light, const MapBuildOptions& options)
+    : impl_(std::make_unique<Impl>(scene, light, options)) {}
+CellBuilder::~CellBuilder() = default;
+
+std::vector<uint8_t> CellBuilder::build(uint32_t cx, uint32_t cy) const {
+  const Impl& m = *impl_;
+  const uint64_t cells_side = uint64_t(1) << m.cut.skip_level;
+  if (cx >= cells_side || cy >= cells_side)
+    throw Error("build: cell (" + std::to_string(cx) + ", " + std::to_string(cy) + ") outside the skip grid");
+  const uint64_t side = uint64_t(1) << (m.cut.map_level - m.cut.skip_level);
+  Hierarchy h = cell_hierarchy(m.tracer, m.cut.map_level, cx * side, cy * side, side, m.options.construction,
+                               trace_mode_of(m.options.intervals), m.texels, m.trace_ns, m.build_ns);
+  return encode_cell_bytes(m.cutter.cut_cell(cx, cy, std::move(h)), m.params);
+}
+
+uint64_t CellBuilder::texels_traced() const { return impl_->texels.load(); }
 
 std::string MapBuildReport::to_json() const {
   nlohmann::json j;
