@@ -176,8 +176,11 @@ std::optional<std::pair<MapBuildReport, MpiBuildFigures>> build_map_mpi(const Sc
   try {
     MapBuildReport r = build_map(scene, light, options, out_path);
     remote.figures_.cells_by_rank[0] = r.cells_built;
-    for (size_t i = 1; i < remote.figures_.cells_by_rank.size(); ++i)
+    for (size_t i = 1; i < remote.figures_.cells_by_rank.size(); ++i) {
       remote.figures_.cells_by_rank[0] -= remote.figures_.cells_by_rank[i];
+      // Every cell handed out is traced whole: 4^(L-K) texels.
+      r.texels_traced += remote.figures_.cells_by_rank[i] << (2 * (r.map_level - r.skip_level));
+    }
     MPI_Finalize();
     return std::make_pair(std::move(r), remote.figures_);
   } catch (const std::exception& e) {

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # `build --mpi` under mpirun -np 2 on loopback: the pack equals a single-process build's
-# (header, params, skip grid, every tile's bytes) and verifies on every texel. A worker
+# (header, params, skip grid, every tile's bytes; so it verifies as that one does). A worker
 # rank killed mid-way (SIGKILL, by pid) fails the run with a message naming it and no
 # final pack; the same command with --resume completes the .tmp into the same pack.
 # Usage: mpi_build_test.sh PATH/TO/shadowtile WORKDIR
@@ -39,7 +39,6 @@ if [[ $? == 0 ]] && grep -qE "mpi: 2 ranks built cells [0-9]+, [1-9][0-9]*" <<<"
 else echo "FAIL mpirun -np 2 build"; echo "$out" | tail -8; fail=1; fi
 if [[ -f mpi.pack ]] && same mpi.pack one.pack; then echo "ok   mpi pack == single-process pack"
 else echo "FAIL mpi pack differs from the single-process build"; fail=1; fi
-"$st" verify mpi.pack "$scene" --all >verify.log 2>&1 && echo "ok   verify --all" || { echo "FAIL verify"; tail -3 verify.log; fail=1; }
 
 # Kill rank 1 once some cells are in the journal.
 "$st" "${args[@]}" --resolution 1024 -q -o big_one.pack || exit 1

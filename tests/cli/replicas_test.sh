@@ -32,13 +32,13 @@ sed -e "s/127\.0\.0\.1:7440/127.0.0.1:$front/" -e "s/127\.0\.0\.1:7447/127.0.0.1
     -e "s/127\.0\.0\.1:7448/127.0.0.1:$p2/" "$deploy/haproxy.cfg" > haproxy.cfg
 grep -q "127.0.0.1:$p2 check" haproxy.cfg || die "could not write haproxy.cfg from the template"
 haproxy -f haproxy.cfg -db 2>haproxy.log & hp=$!; pids+=($hp)
-sleep 1.5  # the first health checks (inter 1s) pass
+sleep 1.2  # the first health checks (inter 1s) pass
 kill -0 $hp 2>/dev/null || die "haproxy did not start: $(cat haproxy.log)"
 grep -q "is DOWN" haproxy.log && die "a healthy replica was marked down: $(grep DOWN haproxy.log)"
-load=(load --map city --cameras 2 --duration 4 --rate 30)
+load=(load --map city --cameras 2 --duration 3 --rate 30)
 "$st" "${load[@]}" --server 127.0.0.1:$front --report via_haproxy >via_haproxy.log 2>&1 & la=$!; pids+=($la)
 "$st" "${load[@]}" --server 127.0.0.1:$p1,127.0.0.1:$p2 --report direct >direct.log 2>&1 & lb=$!; pids+=($lb)
-sleep 1.5
+sleep 1.2
 kill -9 $s1; wait $s1 2>/dev/null
 wait $la; ra=$?
 wait $lb; rb=$?
