@@ -8,6 +8,9 @@
 #include "tiles/bake/scene.hpp"
 #include "app/command.hpp"
 #include "app/html_page.hpp"
+#ifdef SHADOWTILE_HAVE_MPI
+#include "app/build_mpi.hpp"
+#endif
 #include "app/progress.hpp"
 #include "common/error.hpp"
 #include "tiles/core/pack_format.hpp"
@@ -27,11 +30,11 @@ TexelRegion parse_region(const std::string& text) {
 
 struct BuildArgs {
   std::string scene, light, resolution = "4096", encoding = "dagmh", out, report, region,
-                     construction = "bottom-up", up = "y", intervals = "default";
+                     construction = "bottom-up", up = "y", intervals = "default", shard;
   std::optional<uint32_t> skip_level;
   uint32_t tile_bytes = 64 * 1024;
   int compression = 6;
-  bool resume = false, quiet = false;
+  bool resume = false, quiet = false, mpi = false;
 };
 
 void run(const BuildArgs& a) {
@@ -49,6 +52,15 @@ void run(const BuildArgs& a) {
   if (a.intervals == "static") o.intervals = IntervalRule::static_geometry;
   else if (a.intervals != "default")
     throw Error("--intervals: expected default or static, got '" + a.intervals + "'");
+  if (!a.shard.empty()) o.shard = BuildShard::parse(a.shard);
+  if (a.mpi && o.shard) throw Error("--mpi and --shard: choose one (a shard is one process's slice)");
+#ifdef SHADOWTILE_HAVE_MPI
+  if (a.mpi) mpi_init(nullptr, nullptr);
+  const bool quiet = a.quiet || mpi_rank() != 0;  // only rank 0 reports
+#else
+  if (a.mpi) throw Error("--mpi: this shadowtile was built without MPI (install libopenmpi-dev, reconfigure)");
+  const bool quiet = a.quiet;
+#endif
   o.scene_spec = a.scene;
   o.light_spec = a.light;
 
@@ -57,10 +69,10 @@ void run(const BuildArgs& a) {
   Scene scene = load_scene(a.scene, so);
   LightSpec spec = LightSpec::parse(a.light);
   LightSpace light = LightSpace::fit(spec, scene.bounds());
-  if (!a.quiet) std::printf("%s\n", summary(scene).c_str());
+  if (!quiet) std::printf("%s\n", summary(scene).c_str());
 
   Progress progress("build " + a.out, "texels");
-  if (!a.quiet)
+  if (!quiet)
     o.progress = [&](uint64_t done, uint64_t total, uint64_t texels) { progress.update(done, total, texels); };
   g_cancel = false;
   o.cancel = &g_cancel;
@@ -68,7 +80,21 @@ void run(const BuildArgs& a) {
   auto old_term = std::signal(SIGTERM, on_sigint);
   MapBuildReport r;
   try {
-    r = build_map(scene, light, o, a.out);
+#ifdef SHADOWTILE_HAVE_MPI
+    if (a.mpi) {
+      auto done = build_map_mpi(scene, light, o, a.out);
+      progress.finish();
+      if (!done) return;  // ranks other than 0 report nothing
+      r = std::move(done->first);
+      std::string per_rank;
+      for (size_t i = 0; i < done->second.cells_by_rank.size(); ++i)
+        per_rank += (i ? ", " : "") + std::to_string(done->second.cells_by_rank[i]);
+      if (!quiet)
+        std::printf("mpi: %d ranks built cells %s (rank 0 first); %.2f MiB of journal sent to rank 0\n",
+                    done->second.ranks, per_rank.c_str(), double(done->second.bytes_received) / (1 << 20));
+    } else
+#endif
+      r = build_map(scene, light, o, a.out);
   } catch (...) {
     progress.finish();
     std::signal(SIGINT, old_int);
@@ -85,11 +111,18 @@ void run(const BuildArgs& a) {
   std::signal(SIGTERM, old_term);
 
   const double res = double(uint64_t(1) << r.map_level);
-  std::printf("built %s: %.0f^2 %s, skip level %u, %llu tiles (%llu index), %.2f MiB "
-              "(%.4f%% of the raw float32 map)\n",
-              a.out.c_str(), res, r.encoding.c_str(), r.skip_level, (unsigned long long)r.tile_count,
-              (unsigned long long)r.index_tile_count, double(r.pack_bytes) / (1 << 20),
-              100.0 * double(r.pack_bytes) / (res * res * 4));
+  if (o.shard)
+    std::printf("built part %s: shard %s of a %.0f^2 %s map, %llu cells (%llu resumed), %.2f MiB; "
+                "join the parts with: shadowtile merge PARTS... -o PACK\n",
+                a.out.c_str(), o.shard->to_string().c_str(), res, r.encoding.c_str(),
+                (unsigned long long)r.cells_total, (unsigned long long)r.cells_resumed,
+                double(r.pack_bytes) / (1 << 20));
+  else
+    std::printf("built %s: %.0f^2 %s, skip level %u, %llu tiles (%llu index), %.2f MiB "
+                "(%.4f%% of the raw float32 map)\n",
+                a.out.c_str(), res, r.encoding.c_str(), r.skip_level, (unsigned long long)r.tile_count,
+                (unsigned long long)r.index_tile_count, double(r.pack_bytes) / (1 << 20),
+                100.0 * double(r.pack_bytes) / (res * res * 4));
   std::printf("  %.1f s wall, %.2f Mtexels/s, cells %llu built + %llu resumed + %llu outside region, "
               "constant entries %.1f%%, exit depths %s, peak memory %.0f MiB\n",
               r.wall_seconds, double(r.texels_traced) / r.wall_seconds / 1e6,
@@ -145,6 +178,12 @@ void setup(CLI::App& app) {
                  "default: [first hit, exit of closed objects]; static: an open surface's interval also "
                  "reaches to just below the next surface (lossless for receivers on surfaces only)")
       ->capture_default_str();
+  app.add_option("--shard", a->shard,
+                 "I/N: build only shard I of N (the cells whose Z-order index is I mod N) into a part "
+                 "file at OUT; `shadowtile merge` joins the N parts into the pack");
+  app.add_flag("--mpi", a->mpi,
+                "Run under mpirun: the cells spread over the ranks (dynamic scheduling), rank 0 writes "
+                "the pack; --resume continues after a rank died");
   app.add_flag("-q,--quiet", a->quiet, "No summary or progress");
   app.callback([a]() { run(*a); });
 }

@@ -38,7 +38,15 @@ struct LoadArgs {
 
 void run(const LoadArgs& a) {
   loadgen::LoadOptions o;
-  o.endpoint = parse_endpoint("--server", a.server);
+  // --server A,B,C: replicas of one server (spread over, failed over between).
+  for (size_t begin = 0;;) {
+    const size_t comma = a.server.find(',', begin);
+    client::Endpoint ep = parse_endpoint("--server", a.server.substr(begin, comma - begin));
+    if (begin == 0) o.endpoint = ep;
+    else o.replicas.push_back(ep);
+    if (comma == std::string::npos) break;
+    begin = comma + 1;
+  }
   o.map = a.map;
   if (!a.key_file.empty()) o.key = proto::load_key_file(a.key_file);
   o.tls = a.tls || !a.tls_ca.empty();
@@ -68,7 +76,10 @@ void run(const LoadArgs& a) {
 
 Register reg{"load", "Load-test a server with synthetic cameras (client library only)", [](CLI::App& sub) {
   auto a = std::make_shared<LoadArgs>();
-  sub.add_option("--server", a->server, "Server address HOST:PORT")->required();
+  sub.add_option("--server", a->server,
+                 "Server address HOST:PORT, or replicas HOST:PORT,HOST:PORT,... (connections spread over "
+                 "them and fail over when one goes away)")
+      ->required();
   sub.add_option("--map", a->map, "Map name on the server")->required();
   sub.add_option("--cameras", a->cameras, "Synthetic cameras")->capture_default_str()->check(CLI::Range(1u, 4096u));
   sub.add_option("--connections", a->connections, "Client connections shared by the cameras (0: one per camera)")

@@ -1,8 +1,10 @@
 // `shadowtile stats --server HOST:PORT [--interval S] [--duration S] [--pid NAME=PID]...
-//  [--until-gone PID] [--jsonl FILE]`: watches a running server over the wire protocol
+//  [--until-gone PID] [--jsonl FILE] [--prometheus FILE]`: watches a running server over the wire protocol
 // (GetStats every interval on one connection) and, optionally, processes' memory from
 // /proc; prints a row per interval (connections open, requests/s, tiles/s, MiB/s,
-// latency p50/p99 of that interval, errors, RSS) and appends a JSON line per row. The
+// latency p50/p99 of that interval, errors, RSS) and appends a JSON line per row; with
+// --prometheus it also rewrites a Prometheus textfile every interval
+// (loadgen/prometheus_text.hpp). The
 // soak (scripts/soak, loadgen/LOAD.md) runs it next to `shadowtile load`.
 #include <chrono>
 #include <cstdio>
@@ -13,6 +15,7 @@
 #include <thread>
 
 #include "client/map_access.hpp"
+#include "loadgen/prometheus_text.hpp"
 #include "loadgen/server_watch.hpp"
 #include "app/command.hpp"
 #include "common/error.hpp"
@@ -24,7 +27,7 @@ client::Endpoint parse_endpoint(const std::string& option, const std::string& te
 namespace {
 
 struct StatsArgs {
-  std::string server, jsonl;
+  std::string server, jsonl, prometheus;
   double interval = 2, duration = 0;
   std::vector<std::string> pids;  // NAME=PID
   int until_gone = 0;
@@ -83,6 +86,8 @@ void run(const StatsArgs& a) {
     std::string row;
     try {
       loadgen::ServerSample s = loadgen::sample_from(cl.server_stats(), seconds());
+      if (!a.prometheus.empty())
+        loadgen::write_textfile_atomically(a.prometheus, loadgen::prometheus_text(s, a.server));
       if (prev) {
         const loadgen::IntervalFigures f = loadgen::interval_between(*prev, s);
         char buf[256];
@@ -106,9 +111,12 @@ void run(const StatsArgs& a) {
                   {"timeouts", f.timeouts}});
       }
       j["counters"] = s.counters;
+      j["latency_us"] = s.latency_counts;
       prev = std::move(s);
     } catch (const Error& e) {
       ++failures;
+      if (!a.prometheus.empty())
+        loadgen::write_textfile_atomically(a.prometheus, loadgen::prometheus_down_text(a.server));
       j["stats_error"] = e.what();
       char buf[256];
       std::snprintf(buf, sizeof buf, "%7.1f  (no stats: %.180s)", seconds(), e.what());
@@ -159,6 +167,9 @@ Register reg{"stats", "Watch a running server's counters (and processes' memory)
   sub.add_option("--pid", a->pids, "NAME=PID: also sample that process's VmRSS/VmHWM/Threads (repeatable)");
   sub.add_option("--until-gone", a->until_gone, "Stop once this process has exited")->check(CLI::Range(1, 1 << 30));
   sub.add_option("--jsonl", a->jsonl, "Append one JSON object per sample to this file");
+  sub.add_option("--prometheus", a->prometheus,
+                 "Rewrite this file every interval with the server's counters and latency histogram in "
+                 "Prometheus' text format (node_exporter textfile collector: a *.prom file in its directory)");
   sub.callback([a] { run(*a); });
 }};
 

@@ -4,6 +4,7 @@
 #include "shadowtile/client.hpp"
 
 #include <algorithm>
+#include <atomic>
 
 #include "client/fetcher.hpp"
 #include "client/map_access.hpp"
@@ -89,7 +90,17 @@ uint64_t ServerStats::counter(const std::string& name) const noexcept {
 // ---------------------------------------------------------------- Client
 
 Client::Client(Endpoint endpoint, ClientOptions options)
-    : fetcher_(std::make_shared<Fetcher>(std::move(endpoint), std::move(options))) {
+    : fetcher_(std::make_shared<Fetcher>(std::vector<Endpoint>{std::move(endpoint)}, 0, std::move(options))) {
+  fetcher_->start();
+}
+
+namespace {
+// Clients of one process start at successive replicas: their connections spread evenly.
+std::atomic<size_t> g_next_replica{0};
+}  // namespace
+
+Client::Client(std::vector<Endpoint> endpoints, ClientOptions options)
+    : fetcher_(std::make_shared<Fetcher>(std::move(endpoints), g_next_replica.fetch_add(1), std::move(options))) {
   fetcher_->start();
 }
 

@@ -28,13 +28,15 @@ proto::Limits Fetcher::local_limits(const ClientOptions& o) {
   return l;
 }
 
-Fetcher::Fetcher(Endpoint endpoint, ClientOptions options)
-    : endpoint_(std::move(endpoint)),
+Fetcher::Fetcher(std::vector<Endpoint> endpoints, size_t first, ClientOptions options)
+    : endpoints_(std::move(endpoints)),
+      current_(endpoints_.empty() ? 0 : first % endpoints_.size()),
       options_(std::move(options)),
       notifier_(std::make_shared<Notifier>()),
       pool_(options_.io_pool),
       own_io_(pool_ ? nullptr : std::make_unique<asio::io_context>()),
       io_(pool_ ? pool_->next() : *own_io_) {
+  if (endpoints_.empty()) throw Error("client: no server endpoint given");
   if (proto::Status s = proto::validate(local_limits(options_)); !s)
     throw Error("client: bad options: " + proto::to_string(s));
   if (options_.cache_slots == 0 || options_.tiles_per_request == 0 || options_.want_capacity == 0)
@@ -185,7 +187,7 @@ proto::Message Fetcher::call(const proto::Message& request) {
       why = " (not connected" + (last_failure_.empty() ? std::string() : ": " + last_failure_) + ")";
     }
     throw Error("client: no answer to " + std::string(proto::to_string(proto::type_of(request))) + " from " +
-                endpoint_.host + ":" + std::to_string(endpoint_.port) + " within " +
+                endpoint_name() + " within " +
                 std::to_string(options_.request_timeout.count()) + " ms" + why);
   }
   proto::Message m = future.get();

@@ -1,6 +1,8 @@
 // The client's network side (internal to client/): one thread running an io_context with
 //   run()      - one session after another, with exponential backoff between them
-//                (back to the initial delay after a successful handshake);
+//                (back to the initial delay after a successful handshake); with several
+//                endpoints (replicas) each session after a failed or dropped one goes
+//                to the next endpoint in turn;
 //   session    - connect (TCP, TLS), handshake (Hello, key proofs), then the pump;
 //   pump       - the session's only writer: control requests (OpenMap, ListMaps, GetStats),
 //                Cancels, and GetTiles batches taken highest priority first from every
@@ -20,6 +22,7 @@
 
 #include <boost/asio/posix/stream_descriptor.hpp>
 #include <chrono>
+#include <atomic>
 #include <condition_variable>
 #include <cstdint>
 #include <deque>
@@ -43,7 +46,9 @@ using net::tcp;
 
 class Fetcher : public std::enable_shared_from_this<Fetcher> {
  public:
-  Fetcher(Endpoint endpoint, ClientOptions options);
+  // endpoints: one or more replicas serving the same packs; the first session goes to
+  // endpoints[first % size].
+  Fetcher(std::vector<Endpoint> endpoints, size_t first, ClientOptions options);
   ~Fetcher();
   void start();  // the thread (separate from the constructor: shared_from_this)
   void stop();
@@ -113,7 +118,12 @@ class Fetcher : public std::enable_shared_from_this<Fetcher> {
   void hold();
   void release();
 
-  const Endpoint endpoint_;
+  // The endpoint the current (or next) session uses; changes only on the I/O thread.
+  const Endpoint& endpoint() const { return endpoints_[current_.load() % endpoints_.size()]; }
+  std::string endpoint_name() const { return endpoint().host + ":" + std::to_string(endpoint().port); }
+
+  const std::vector<Endpoint> endpoints_;
+  std::atomic<size_t> current_{0};
   const ClientOptions options_;
   std::shared_ptr<Notifier> notifier_;
 

@@ -17,6 +17,9 @@ asio::awaitable<void> Fetcher::run() {
     const bool handshook = co_await session();
     if (stopping_io_ || refused_) break;
     if (handshook) backoff = options_.backoff_initial;
+    // The session failed or dropped: the next one goes to the next replica (what was in
+    // flight was queued again by end_session and is re-requested there).
+    if (endpoints_.size() > 1) current_ = (current_.load() + 1) % endpoints_.size();
     error_code ec;
     backoff_timer_.expires_after(backoff);
     co_await backoff_timer_.async_wait(asio::redirect_error(asio::use_awaitable, ec));
@@ -91,7 +94,7 @@ void Fetcher::fail_controls(const proto::ErrorMessage& e) {
 asio::awaitable<bool> Fetcher::authenticate(net::Stream& sock, const proto::HelloAck& ack) {
   const bool server_wants_key = (ack.features & proto::kFeatureAuth) != 0;
   if (options_.key.empty()) co_return true;  // check_hello_ack refused the bit unoffered
-  const std::string server = "server " + endpoint_.host + ":" + std::to_string(endpoint_.port);
+  const std::string server = "server " + endpoint_name();
   if (!server_wants_key) {
     refuse(server + " does not ask for the key: refusing to trust it (the client has a key)");
     co_return false;
@@ -167,7 +170,8 @@ asio::awaitable<bool> Fetcher::session() {
 asio::awaitable<bool> Fetcher::connect(net::Stream& sock) {
   error_code ec;
   tcp::resolver resolver(io_);
-  auto endpoints = co_await resolver.async_resolve(endpoint_.host, std::to_string(endpoint_.port),
+  const Endpoint ep = endpoint();
+  auto endpoints = co_await resolver.async_resolve(ep.host, std::to_string(ep.port),
                                                    asio::redirect_error(asio::use_awaitable, ec));
   if (!ec) co_await asio::async_connect(sock.socket(), endpoints, asio::redirect_error(asio::use_awaitable, ec));
   if (!ec) sock.socket().set_option(tcp::no_delay(true), ec);
@@ -176,7 +180,7 @@ asio::awaitable<bool> Fetcher::connect(net::Stream& sock) {
     co_return false;
   }
   if (!sock.tls()) co_return true;
-  const std::string& name = options_.tls_server_name.empty() ? endpoint_.host : options_.tls_server_name;
+  const std::string name = options_.tls_server_name.empty() ? ep.host : options_.tls_server_name;
   SSL_set_tlsext_host_name(sock.tls_stream()->native_handle(), name.c_str());
   sock.tls_stream()->set_verify_callback(asio::ssl::host_name_verification(name));
   co_await sock.handshake(asio::ssl::stream_base::client, ec);
@@ -210,7 +214,7 @@ asio::awaitable<bool> Fetcher::handshake(net::Stream& sock) {
       note_failure("the server answered the Hello with an Error that does not decode");
       co_return false;
     }
-    const std::string why = "server " + endpoint_.host + ":" + std::to_string(endpoint_.port) +
+    const std::string why = "server " + endpoint_name() +
                             " refused the connection: " + std::string(proto::to_string(e.code)) + ": " +
                             proto::sanitize_text(e.message, 512);
     note_failure(why);  // overloaded, shutting_down, timeout: retried, and named if it lasts

@@ -79,7 +79,9 @@ std::string load_json(const LoadResult& r) {
   using nlohmann::json;
   const auto& o = r.options;
   json j;
-  j["options"] = {{"server", o.endpoint.host + ":" + std::to_string(o.endpoint.port)}, {"map", o.map},
+  std::string server = o.endpoint.host + ":" + std::to_string(o.endpoint.port);
+  for (const auto& r2 : o.replicas) server += "," + r2.host + ":" + std::to_string(r2.port);
+  j["options"] = {{"server", server}, {"map", o.map},
                   {"cameras", o.cameras}, {"connections", r.connections}, {"path", to_string(o.path)},
                   {"duration_s", o.duration}, {"rate_fps", o.rate}, {"cache_mb", o.cache_mb}, {"seed", o.seed},
                   {"prefetch", o.prefetch}, {"samples_x", o.view.samples_x}, {"samples_y", o.view.samples_y},

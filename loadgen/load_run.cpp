@@ -26,6 +26,12 @@ double percentile_of(std::vector<double> v, double p) {
 
 namespace {
 
+std::vector<client::Endpoint> all_endpoints(const LoadOptions& o) {
+  std::vector<client::Endpoint> v{o.endpoint};
+  v.insert(v.end(), o.replicas.begin(), o.replicas.end());
+  return v;
+}
+
 double ms_between(Clock::time_point a, Clock::time_point b) {
   return std::chrono::duration<double, std::milli>(b - a).count();
 }
@@ -236,7 +242,7 @@ LoadResult run_load(const LoadOptions& o_in) {
     po.tls = o.tls;
     po.tls_ca_file = o.tls_ca_file;
     po.tls_server_name = o.tls_server_name;
-    client::Client probe(o.endpoint, po);
+    client::Client probe(all_endpoints(o), po);
     tile_bytes = client::pack_header(probe.open(o.map)).tile_bytes;
   }
   client::ClientOptions co;
@@ -252,7 +258,7 @@ LoadResult run_load(const LoadOptions& o_in) {
   std::vector<std::unique_ptr<client::Client>> clients;
   std::vector<client::Map> maps;
   for (uint32_t i = 0; i < r.connections; ++i) {
-    clients.push_back(std::make_unique<client::Client>(o.endpoint, co));
+    clients.push_back(std::make_unique<client::Client>(all_endpoints(o), co));
     maps.push_back(clients.back()->open(o.map));
   }
   const client::Map& m0 = maps[0];

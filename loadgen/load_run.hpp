@@ -35,6 +35,9 @@ namespace st::loadgen {
 
 struct LoadOptions {
   client::Endpoint endpoint;
+  // Further replicas of the same server: the clients spread over {endpoint, replicas...}
+  // and fail over between them (client.hpp, Client(std::vector<Endpoint>, ...)).
+  std::vector<client::Endpoint> replicas;
   std::string map;
   std::vector<uint8_t> key;  // the catalog key, when the server requires one
   bool tls = false;          // client::ClientOptions::tls and its CA file / expected name

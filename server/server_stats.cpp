@@ -9,6 +9,7 @@ void ServerStats::latency(uint64_t us) {
   uint32_t b = us == 0 ? 0 : uint32_t(std::bit_width(us));
   if (b >= kLatencyBuckets) b = kLatencyBuckets - 1;
   add(latency_[b]);
+  add(latency_sum_us_, us);
 }
 
 StatsSnapshot ServerStats::snapshot() const {
@@ -31,6 +32,7 @@ StatsSnapshot ServerStats::snapshot() const {
   s.connections_evicted = get(connections_evicted_);
   s.log_lines_suppressed = get(log_lines_suppressed_);
   for (uint32_t b = 0; b < kLatencyBuckets; ++b) s.latency_us[b] = get(latency_[b]);
+  s.latency_sum_us = get(latency_sum_us_);
   return s;
 }
 
@@ -65,7 +67,8 @@ std::vector<std::pair<std::string, uint64_t>> StatsSnapshot::named() const {
           {"auth_failures", auth_failures},
           {"tiles_corrupt", tiles_corrupt},
           {"connections_evicted", connections_evicted},
-          {"log_lines_suppressed", log_lines_suppressed}};
+          {"log_lines_suppressed", log_lines_suppressed},
+          {"latency_sum_us", latency_sum_us}};
 }
 
 std::string StatsSnapshot::line() const {

@@ -28,6 +28,7 @@ struct StatsSnapshot {
   uint64_t connections_evicted = 0;  // pending connections closed to make room (PendingBudget)
   uint64_t log_lines_suppressed = 0; // repeated log lines not written (LogThrottle)
   std::array<uint64_t, kLatencyBuckets> latency_us{};  // GetTiles receipt -> tile queued to send
+  uint64_t latency_sum_us = 0;  // sum of the latencies the histogram counts (Prometheus _sum)
 
   // Upper bound (us) of the bucket holding quantile q in [0,1]; 0 if no samples.
   uint64_t latency_quantile_us(double q) const;
@@ -65,7 +66,8 @@ class ServerStats {
   std::atomic<uint64_t> connections_total_{0}, connections_open_{0}, connections_rejected_{0};
   std::atomic<uint64_t> requests_{0}, tiles_sent_{0}, tile_bytes_sent_{0}, bytes_sent_{0},
       bytes_received_{0}, tiles_cancelled_{0}, errors_{0}, protocol_errors_{0}, timeouts_{0},
-      auth_failures_{0}, tiles_corrupt_{0}, connections_evicted_{0}, log_lines_suppressed_{0};
+      auth_failures_{0}, tiles_corrupt_{0}, connections_evicted_{0}, log_lines_suppressed_{0},
+      latency_sum_us_{0};
   std::array<std::atomic<uint64_t>, kLatencyBuckets> latency_{};
 };
 

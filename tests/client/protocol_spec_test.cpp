@@ -519,7 +519,7 @@ TEST(ProtocolSpec, StatsNamesAreTheDocumentedOnes) {
       "tiles_sent",        "tile_bytes_sent",  "bytes_sent",           "bytes_received",
       "tiles_cancelled",   "errors",           "protocol_errors",      "timeouts",
       "latency_p50_us",    "latency_p99_us",   "auth_failures",        "tiles_corrupt",
-      "connections_evicted", "log_lines_suppressed"};
+      "connections_evicted", "log_lines_suppressed", "latency_sum_us"};
   EXPECT_EQ(names, documented);
   auto counter = [&](const std::string& name) {
     for (const auto& c : st.counters)

@@ -4,6 +4,7 @@
 #include "tiles/bake/map_build.hpp"
 
 #include <sys/resource.h>
+#include <sys/stat.h>
 
 #include <algorithm>
 #include <chrono>
@@ -70,6 +71,7 @@ PackParams pack_params(const Scene& scene, const LightSpace& light, const MapBui
                      {"scene", o.scene_spec.empty() ? scene.name : o.scene_spec},
                      {"tool", "shadowtile 0.1.0"}};
   if (o.intervals == IntervalRule::static_geometry) pp.build_params.push_back({"intervals", "static"});
+  if (o.shard) pp.build_params.push_back({kShardParam, o.shard->to_string()});
   if (o.region)
     pp.build_params.push_back({"region", std::to_string(o.region->x) + "," + std::to_string(o.region->y) +
                                              "," + std::to_string(o.region->w) + "," +
@@ -90,6 +92,7 @@ std::vector<CellXY> plan_cells(PackWriter& writer, const MapBuildOptions& o, uin
   outside = 0;
   for (uint64_t m = 0; m < cells_side * cells_side; ++m) {
     uint32_t cx = morton_compact(m), cy = morton_compact(m >> 1);
+    if (o.shard && m % o.shard->count != o.shard->index) continue;  // BuildShard::holds
     if (writer.is_done(cx, cy)) continue;
     if (o.region && !cell_touches(*o.region, cx * cell_side, cy * cell_side, cell_side)) {
       CutCell c;
@@ -147,6 +150,7 @@ class CellWorkers {
     const unsigned nthreads = std::max(1u, std::thread::hardware_concurrency());
     std::vector<std::thread> workers;
     for (unsigned i = 0; i < nthreads; ++i) workers.emplace_back([this] { work(); });
+    if (o_.remote) workers.emplace_back([this] { serve_remote(); });
     for (auto& w : workers) w.join();
     if (failure_) std::rethrow_exception(failure_);
   }
@@ -178,6 +182,33 @@ class CellWorkers {
       std::lock_guard lock(failure_mu_);
       if (!failure_) failure_ = std::current_exception();
       stop_ = true;
+    }
+  }
+
+  void fail(std::exception_ptr e) {
+    std::lock_guard lock(failure_mu_);
+    if (!failure_) failure_ = e;
+    stop_ = true;
+  }
+
+  // The other processes' share (RemoteCells): they take from the same cursor.
+  void serve_remote() {
+    try {
+      o_.remote->run(
+          [this]() -> std::optional<CellXY> {
+            if (stop_ || (o_.cancel && o_.cancel->load())) return std::nullopt;
+            uint64_t i = next_++;
+            if (i >= todo_.size()) return std::nullopt;
+            return todo_[i];
+          },
+          [this](std::span<const uint8_t> bytes) {
+            auto t = Clock::now();
+            writer_.append_cell_bytes(bytes);
+            add_seconds(write_ns_, since(t));
+            ++appended_;
+          });
+    } catch (...) {
+      fail(std::current_exception());
     }
   }
 
@@ -290,7 +321,7 @@ MapBuildReport build_map(const Scene& scene, const LightSpace& light, const MapB
   rep.map_level = L;
   rep.skip_level = K;
   rep.encoding = to_string(o.encoding);
-  rep.cells_total = (uint64_t(1) << K) * (uint64_t(1) << K);
+  rep.cells_total = o.shard ? o.shard->cell_count(K) : (uint64_t(1) << K) * (uint64_t(1) << K);
 
   auto t = Clock::now();
   DepthBoundsTracer tracer(scene, light);
@@ -316,16 +347,57 @@ MapBuildReport build_map(const Scene& scene, const LightSpace& light, const MapB
     throw Error("build interrupted; run again with --resume to continue from " + writer->tmp_path());
 
   t = Clock::now();
-  finish_pack(*writer, cutter, o.construction);
+  if (o.shard) {
+    if (writer->cells().size() != rep.cells_total)
+      throw Error(writer->tmp_path() + ": shard " + o.shard->to_string() + " holds " +
+                  std::to_string(writer->cells().size()) + " of its " + std::to_string(rep.cells_total) + " cells");
+    writer->finish_part();
+  } else {
+    finish_pack(*writer, cutter, o.construction);
+  }
   rep.finish_seconds = since(t);
   if (o.progress) o.progress(rep.cells_total, rep.cells_total, workers.texels());
 
   workers.report(rep);
-  report_pack_figures(out_path, L, rep);
+  if (o.shard) {
+    struct stat st{};
+    rep.pack_bytes = ::stat(out_path.c_str(), &st) == 0 ? uint64_t(st.st_size) : 0;
+  } else {
+    report_pack_figures(out_path, L, rep);
+  }
   rep.wall_seconds = since(t_start);
   rep.peak_rss_bytes = peak_rss_bytes();
   return rep;
 }
+
+struct CellBuilder::Impl {
+  Impl(const Scene& scene, const LightSpace& light, const MapBuildOptions& o)
+      : options(o), cut(checked_cut_params(o)), tracer(scene, light), cutter(cut),
+        params(pack_params(scene, light, o, cut, tracer.traces_exit_depths())) {}
+  MapBuildOptions options;
+  CutParams cut;
+  DepthBoundsTracer tracer;
+  TileCutter cutter;
+  PackParams params;
+  mutable std::atomic<uint64_t> texels{0}, trace_ns{0}, build_ns{0};
+};
+
+CellBuilder::CellBuilder(const Scene& scene, const LightSpace& light, const MapBuildOptions& options)
+    : impl_(std::make_unique<Impl>(scene, light, options)) {}
+CellBuilder::~CellBuilder() = default;
+
+std::vector<uint8_t> CellBuilder::build(uint32_t cx, uint32_t cy) const {
+  const Impl& m = *impl_;
+  const uint64_t cells_side = uint64_t(1) << m.cut.skip_level;
+  if (cx >= cells_side || cy >= cells_side)
+    throw Error("build: cell (" + std::to_string(cx) + ", " + std::to_string(cy) + ") outside the skip grid");
+  const uint64_t side = uint64_t(1) << (m.cut.map_level - m.cut.skip_level);
+  Hierarchy h = cell_hierarchy(m.tracer, m.cut.map_level, cx * side, cy * side, side, m.options.construction,
+                               trace_mode_of(m.options.intervals), m.texels, m.trace_ns, m.build_ns);
+  return encode_cell_bytes(m.cutter.cut_cell(cx, cy, std::move(h)), m.params);
+}
+
+uint64_t CellBuilder::texels_traced() const { return impl_->texels.load(); }
 
 std::string MapBuildReport::to_json() const {
   nlohmann::json j;

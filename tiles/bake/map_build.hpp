@@ -13,7 +13,9 @@
 #include <atomic>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -22,6 +24,7 @@
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/light.hpp"
 #include "tiles/build/mh_build.hpp"
+#include "tiles/build/pack_merge.hpp"
 
 namespace st {
 
@@ -43,6 +46,21 @@ inline TraceMode trace_mode_of(IntervalRule r) {
   return r == IntervalRule::static_geometry ? TraceMode::static_bounds : TraceMode::bounds;
 }
 
+// A distributed build's other processes (the MPI build, app/build_mpi.cpp). build_map()
+// calls run() on a thread of its own once the cells are planned. run() takes cells with
+// `take` from the same queue the local workers draw from (whoever is free takes the next
+// cell: dynamic scheduling), has them built elsewhere (CellBuilder), hands the journal
+// bytes that come back to `append` (which checks them record by record and appends
+// them), and returns once every cell it took is appended. A throw fails the build; the
+// .tmp keeps every cell appended so far, for --resume.
+class RemoteCells {
+ public:
+  virtual ~RemoteCells() = default;
+  using Take = std::function<std::optional<std::pair<uint32_t, uint32_t>>()>;
+  using Append = std::function<void(std::span<const uint8_t>)>;
+  virtual void run(const Take& take, const Append& append) = 0;
+};
+
 struct MapBuildOptions {
   uint32_t map_level = 12;
   Encoding encoding = Encoding::dagmh;
@@ -55,6 +73,11 @@ struct MapBuildOptions {
   // Build only the cells touching this region; every other cell is the constant
   // kLitDepth (a partial map: only texels inside the region are traced and lossless).
   std::optional<TexelRegion> region;
+  // Build only this shard's cells into a part file at the output path (build parameter
+  // shard=I/N, no grid or index: merge_parts() joins the parts into the pack).
+  std::optional<BuildShard> shard;
+  // Cells built by other processes as well as this one's threads (not owned).
+  RemoteCells* remote = nullptr;
   std::string scene_spec, light_spec;  // provenance written into the pack's params
   // Called from a background thread about 5 times a second with the progress so far.
   std::function<void(uint64_t cells_done, uint64_t cells_total, uint64_t texels_done)> progress;
@@ -82,9 +105,26 @@ struct MapBuildReport {
   std::string to_json() const;
 };
 
-// Builds the pack at `out_path` (written as "<out_path>.tmp", renamed when complete).
+// Builds the pack (or with options.shard, the part file) at `out_path` (written as "<out_path>.tmp", renamed when complete).
 MapBuildReport build_map(const Scene& scene, const LightSpace& light, const MapBuildOptions& options,
                          const std::string& out_path);
+
+// One cell's journal bytes (encode_cell_bytes), built exactly as build_map() builds it:
+// the worker side of a distributed build. Construct it with the options build_map()
+// gets (shard and region do not matter here); build() may run on several threads.
+class CellBuilder {
+ public:
+  CellBuilder(const Scene& scene, const LightSpace& light, const MapBuildOptions& options);
+  ~CellBuilder();
+  CellBuilder(const CellBuilder&) = delete;
+  CellBuilder& operator=(const CellBuilder&) = delete;
+  std::vector<uint8_t> build(uint32_t cx, uint32_t cy) const;
+  uint64_t texels_traced() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 // Peak resident set size of this process so far (getrusage), in bytes.
 uint64_t peak_rss_bytes();

@@ -155,42 +155,17 @@ void PackWriter::open_existing() {
   pread_all(fd_, found.params_offset, blob, what);
   if (blob != serialize_params(params_.build_params)) mismatch("build parameters");
 
-  // Replay the journal: tiles are pending until their cell's record; stop at the first
-  // torn or corrupt record and cut the file there (after the last complete cell).
-  uint64_t pos = found.journal_offset, good_end = pos;
-  std::vector<TileIndexEntry> pending;
-  std::vector<uint8_t> payload;
+  // Replay the journal: keep every complete cell, cut the file after the last one.
   const size_t side = size_t(1) << params_.skip_level;
-  while (file_size - pos >= kRecordBytes) {
-    std::array<uint8_t, kRecordBytes> rec{};
-    pread_all(fd_, pos, rec, what);
-    TileRecord t;
-    CellRecord c;
-    RecordType type = parse_record(rec, &t, &c);
-    if (type == RecordType::tile) {
-      if (t.raw_size > params_.tile_bytes || file_size - pos - kRecordBytes < t.stored_size) break;
-      payload.resize(t.stored_size);
-      pread_all(fd_, pos + kRecordBytes, payload, what);
-      if (crc32_of(payload) != t.crc) break;
-      pending.push_back(TileIndexEntry{t.id, pos + kRecordBytes, t.stored_size, t.raw_size, t.crc, t.kind});
-      pos += kRecordBytes + t.stored_size;
-    } else if (type == RecordType::cell) {
-      if (c.cx >= side || c.cy >= side || done_[c.cy * side + c.cx]) break;
-      bool has_tile = c.entry.kind != EntryKind::constant;
-      uint64_t root_id = make_tile_id(params_.skip_level, c.cx, c.cy);
-      bool root_found = !pending.empty() && pending.back().id == root_id &&
-                        uint8_t(pending.back().kind) == uint8_t(c.entry.kind);
-      if (has_tile != root_found || (!has_tile && !pending.empty())) break;
-      done_[c.cy * side + c.cx] = 1;
-      cells_.push_back(c);
-      tiles_.insert(tiles_.end(), pending.begin(), pending.end());
-      pending.clear();
-      pos += kRecordBytes;
-      good_end = pos;
-    } else {
-      break;
-    }
-  }
+  const uint64_t good_end = replay_journal(
+      fd_, found.journal_offset, file_size, params_, what,
+      [&](const CellRecord& c, std::vector<TileIndexEntry>&& tiles, uint64_t, uint64_t) {
+        if (done_[size_t(c.cy) * side + c.cx]) return false;
+        done_[size_t(c.cy) * side + c.cx] = 1;
+        cells_.push_back(c);
+        tiles_.insert(tiles_.end(), tiles.begin(), tiles.end());
+        return true;
+      });
   resumed_cells_ = cells_.size();
   truncated_bytes_ = file_size - good_end;
   if (::ftruncate(fd_, off_t(good_end)) != 0) throw Error(sys_error(what + ": truncate the torn tail"));
@@ -212,41 +187,40 @@ bool PackWriter::is_done(uint32_t cx, uint32_t cy) const {
 
 void PackWriter::append_cell(const CutCell& cell) {
   const size_t side = size_t(1) << params_.skip_level;
-  const std::string where = tmp_path() + ": cell (" + std::to_string(cell.cx) + ", " + std::to_string(cell.cy) + ")";
-  if (cell.cx >= side || cell.cy >= side) throw Error(where + " outside the skip grid");
+  if (cell.cx >= side || cell.cy >= side)
+    throw Error(tmp_path() + ": cell (" + std::to_string(cell.cx) + ", " + std::to_string(cell.cy) +
+                ") outside the skip grid");
   // Compress outside the lock: this is the expensive part of appending.
-  std::vector<uint8_t> buf;
-  std::vector<TileIndexEntry> entries;
-  for (const CutTile& t : cell.tiles) {
-    if (t.raw.empty() || t.raw.size() > params_.tile_bytes)
-      throw Error(where + ": " + describe_tile(t.id) + " has " + std::to_string(t.raw.size()) +
-                  " bytes (tile_bytes " + std::to_string(params_.tile_bytes) + ")");
-    std::vector<uint8_t> stored = zlib_compress(t.raw, params_.compression_level);
-    TileRecord r{t.kind, t.id, uint32_t(stored.size()), uint32_t(t.raw.size()), crc32_of(stored)};
-    auto head = r.serialize();
-    entries.push_back(TileIndexEntry{t.id, buf.size() + kRecordBytes, r.stored_size, r.raw_size, r.crc, t.kind});
-    buf.insert(buf.end(), head.begin(), head.end());
-    buf.insert(buf.end(), stored.begin(), stored.end());
-  }
-  uint64_t root_id = make_tile_id(params_.skip_level, cell.cx, cell.cy);
-  bool has_tile = cell.entry.kind != EntryKind::constant;
-  if (has_tile != (!cell.tiles.empty() && cell.tiles.back().id == root_id &&
-                   uint8_t(cell.tiles.back().kind) == uint8_t(cell.entry.kind)))
-    throw Error(where + ": entry kind disagrees with its tiles (the cell's own tile must come last)");
-  CellRecord rec{cell.cx, cell.cy, cell.entry, cell.lo, cell.hi};
-  auto head = rec.serialize();
-  buf.insert(buf.end(), head.begin(), head.end());
+  append_cell_bytes(encode_cell_bytes(cell, params_));
+}
 
+void PackWriter::append_cell_bytes(std::span<const uint8_t> bytes) {
+  std::vector<TileIndexEntry> entries;
+  const CellRecord rec = parse_cell_bytes(bytes, params_, tmp_path(), entries);
+  const size_t side = size_t(1) << params_.skip_level;
   std::lock_guard lock(mu_);
+  const std::string where = tmp_path() + ": cell (" + std::to_string(rec.cx) + ", " + std::to_string(rec.cy) + ")";
   if (failed_ || finished_) throw Error(where + ": writer already failed or finished");
-  size_t i = size_t(cell.cy) * side + cell.cx;
+  size_t i = size_t(rec.cy) * side + rec.cx;
   if (done_[i]) throw Error(where + " appended twice");
-  write_at(end_, buf);
+  write_at(end_, bytes);
   for (TileIndexEntry& e : entries) e.offset += end_;
-  end_ += buf.size();
+  end_ += bytes.size();
   tiles_.insert(tiles_.end(), entries.begin(), entries.end());
   cells_.push_back(rec);
   done_[i] = 1;
+}
+
+void PackWriter::finish_part() {
+  std::lock_guard lock(mu_);
+  const std::string what = tmp_path();
+  if (failed_ || finished_) throw Error(what + ": writer already failed or finished");
+  if (::fsync(fd_) != 0) throw Error(sys_error(what + ": fsync"));
+  ::close(fd_);
+  fd_ = -1;
+  if (::rename(what.c_str(), path_.c_str()) != 0) throw Error(sys_error(what + ": rename to " + path_));
+  fsync_dir_of(path_);
+  finished_ = true;
 }
 
 void PackWriter::finish(const CutGrid& grid) {
@@ -296,6 +270,111 @@ void PackWriter::finish(const CutGrid& grid) {
   if (::rename(what.c_str(), path_.c_str()) != 0) throw Error(sys_error(what + ": rename to " + path_));
   fsync_dir_of(path_);
   finished_ = true;
+}
+
+std::vector<uint8_t> encode_cell_bytes(const CutCell& cell, const PackParams& params) {
+  const std::string where = "cell (" + std::to_string(cell.cx) + ", " + std::to_string(cell.cy) + ")";
+  std::vector<uint8_t> buf;
+  for (const CutTile& t : cell.tiles) {
+    if (t.raw.empty() || t.raw.size() > params.tile_bytes)
+      throw Error(where + ": " + describe_tile(t.id) + " has " + std::to_string(t.raw.size()) +
+                  " bytes (tile_bytes " + std::to_string(params.tile_bytes) + ")");
+    std::vector<uint8_t> stored = zlib_compress(t.raw, params.compression_level);
+    TileRecord r{t.kind, t.id, uint32_t(stored.size()), uint32_t(t.raw.size()), crc32_of(stored)};
+    auto head = r.serialize();
+    buf.insert(buf.end(), head.begin(), head.end());
+    buf.insert(buf.end(), stored.begin(), stored.end());
+  }
+  uint64_t root_id = make_tile_id(params.skip_level, cell.cx, cell.cy);
+  bool has_tile = cell.entry.kind != EntryKind::constant;
+  if (has_tile != (!cell.tiles.empty() && cell.tiles.back().id == root_id &&
+                   uint8_t(cell.tiles.back().kind) == uint8_t(cell.entry.kind)))
+    throw Error(where + ": entry kind disagrees with its tiles (the cell's own tile must come last)");
+  CellRecord rec{cell.cx, cell.cy, cell.entry, cell.lo, cell.hi};
+  auto head = rec.serialize();
+  buf.insert(buf.end(), head.begin(), head.end());
+  return buf;
+}
+
+namespace {
+
+// The checks of one cell's records, shared by replay (which stops at the first failure:
+// a torn tail) and append_cell_bytes (which refuses the span). Returns "" when `tiles`
+// and the cell record form one valid cell of `params`.
+std::string cell_problem(const CellRecord& c, const std::vector<TileIndexEntry>& tiles, const PackParams& params) {
+  const size_t side = size_t(1) << params.skip_level;
+  if (c.cx >= side || c.cy >= side) return "cell outside the skip grid";
+  bool has_tile = c.entry.kind != EntryKind::constant;
+  uint64_t root_id = make_tile_id(params.skip_level, c.cx, c.cy);
+  bool root_found = !tiles.empty() && tiles.back().id == root_id && uint8_t(tiles.back().kind) == uint8_t(c.entry.kind);
+  if (has_tile != root_found || (!has_tile && !tiles.empty()))
+    return "cell entry disagrees with its tiles (its own tile must come last)";
+  return "";
+}
+
+}  // namespace
+
+CellRecord parse_cell_bytes(std::span<const uint8_t> bytes, const PackParams& params, const std::string& what,
+                            std::vector<TileIndexEntry>& tiles) {
+  tiles.clear();
+  uint64_t pos = 0;
+  auto fail = [&](const std::string& why) -> CellRecord {
+    throw Error(what + ": cell span byte " + std::to_string(pos) + ": " + why);
+  };
+  while (bytes.size() - pos >= kRecordBytes) {
+    TileRecord t;
+    CellRecord c;
+    RecordType type = parse_record(bytes.subspan(pos).first<kRecordBytes>(), &t, &c);
+    if (type == RecordType::tile) {
+      if (t.raw_size > params.tile_bytes) return fail(describe_tile(t.id) + " exceeds tile_bytes");
+      if (bytes.size() - pos - kRecordBytes < t.stored_size) return fail(describe_tile(t.id) + " is truncated");
+      if (crc32_of(bytes.subspan(pos + kRecordBytes, t.stored_size)) != t.crc)
+        return fail(describe_tile(t.id) + " fails its CRC");
+      tiles.push_back(TileIndexEntry{t.id, pos + kRecordBytes, t.stored_size, t.raw_size, t.crc, t.kind});
+      pos += kRecordBytes + t.stored_size;
+    } else if (type == RecordType::cell) {
+      std::string problem = cell_problem(c, tiles, params);
+      if (!problem.empty()) return fail(problem);
+      pos += kRecordBytes;
+      if (pos != bytes.size()) return fail("trailing bytes after the cell record");
+      return c;
+    } else {
+      return fail("not a valid tile or cell record");
+    }
+  }
+  return fail("no cell record at the end");
+}
+
+uint64_t replay_journal(int fd, uint64_t begin, uint64_t file_size, const PackParams& params,
+                        const std::string& what, const JournalCellFn& on_cell) {
+  // Tiles are pending until their cell's record follows.
+  uint64_t pos = begin, good_end = begin;
+  std::vector<TileIndexEntry> pending;
+  std::vector<uint8_t> payload;
+  while (file_size >= pos && file_size - pos >= kRecordBytes) {
+    std::array<uint8_t, kRecordBytes> rec{};
+    pread_all(fd, pos, rec, what);
+    TileRecord t;
+    CellRecord c;
+    RecordType type = parse_record(rec, &t, &c);
+    if (type == RecordType::tile) {
+      if (t.raw_size > params.tile_bytes || file_size - pos - kRecordBytes < t.stored_size) break;
+      payload.resize(t.stored_size);
+      pread_all(fd, pos + kRecordBytes, payload, what);
+      if (crc32_of(payload) != t.crc) break;
+      pending.push_back(TileIndexEntry{t.id, pos + kRecordBytes, t.stored_size, t.raw_size, t.crc, t.kind});
+      pos += kRecordBytes + t.stored_size;
+    } else if (type == RecordType::cell) {
+      if (!cell_problem(c, pending, params).empty()) break;
+      pos += kRecordBytes;
+      if (!on_cell(c, std::move(pending), good_end, pos)) break;
+      pending.clear();
+      good_end = pos;
+    } else {
+      break;
+    }
+  }
+  return good_end;
 }
 
 void write_pack(const std::string& path, const Hierarchy& h, const CutParams& cut, const PackParams& params) {

@@ -13,13 +13,20 @@
 // cuts the torn tail). finish() fsyncs the file, renames it and fsyncs the directory.
 // Destroying a writer without finish() leaves the .tmp for resume.
 //
+// A cell's journal bytes (its tile records, payloads included, then its cell record, one
+// contiguous span: encode_cell_bytes) are also what a part file holds and what another
+// build process hands over: append_cell_bytes() checks such a span record by record
+// (CRCs, sizes, ids, the cell's own tile last) before it appends it.
+//
 // Thread safety: append_cell may be called concurrently (compression runs outside the
 // lock; the records of one cell are written contiguously). Errors: st::Error naming the
 // file; after an I/O error the writer refuses further appends.
 #pragma once
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <mutex>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -71,6 +78,14 @@ class PackWriter {
   // the cell is out of range or already done, or a tile breaks the tile_bytes bound.
   void append_cell(const CutCell& cell);
 
+  // Appends a span encode_cell_bytes() made (here or in another process), after checking
+  // every record in it; st::Error naming the cell or byte offset otherwise.
+  void append_cell_bytes(std::span<const uint8_t> bytes);
+
+  // A part file (one shard of the cells, tiles/PACK.md "Part files"): fsyncs the journal
+  // as it is (state building) and renames "<path>.tmp" to "<path>". No grid, no index.
+  void finish_part();
+
   // Writes the skip grid (entries must equal the cells' entries) and the tile index,
   // completes the header, fsyncs and renames "<path>.tmp" to "<path>".
   void finish(const CutGrid& grid);
@@ -94,6 +109,27 @@ class PackWriter {
   size_t resumed_cells_ = 0;
   uint64_t truncated_bytes_ = 0;
 };
+
+// The cell's journal bytes: each tile zlib-compressed at params.compression_level behind
+// its tile record, then the cell record. Throws st::Error if a tile breaks the tile_bytes
+// bound or the entry disagrees with the tiles. Const: call it from any thread or process.
+std::vector<uint8_t> encode_cell_bytes(const CutCell& cell, const PackParams& params);
+
+// Checks a span that holds exactly one cell's records for a pack of `params` (header and
+// payload CRCs, tile sizes within tile_bytes, the cell inside the skip grid, its own tile
+// last and of its entry's kind); fills the cell and its tiles (offsets of the payloads
+// relative to the span). Throws st::Error naming `what` and the byte offset.
+CellRecord parse_cell_bytes(std::span<const uint8_t> bytes, const PackParams& params, const std::string& what,
+                            std::vector<TileIndexEntry>& tiles);
+
+// Replays a journal read through `fd` from `begin` to `file_size`: calls `on_cell` with each
+// complete cell (its record, its tiles with absolute offsets, and the byte span
+// [span_begin, span_end) its records fill); stops at the first torn or corrupt record, or
+// when `on_cell` returns false. Returns the end of the last complete cell.
+using JournalCellFn = std::function<bool(const CellRecord& cell, std::vector<TileIndexEntry>&& tiles,
+                                         uint64_t span_begin, uint64_t span_end)>;
+uint64_t replay_journal(int fd, uint64_t begin, uint64_t file_size, const PackParams& params,
+                        const std::string& what, const JournalCellFn& on_cell);
 
 // Convenience for maps that fit in memory: cuts `h` (cut_hierarchy) and writes the pack.
 void write_pack(const std::string& path, const Hierarchy& h, const CutParams& cut, const PackParams& params);

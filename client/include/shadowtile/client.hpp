@@ -236,6 +236,12 @@ class Fetcher;
 class Client {
  public:
   explicit Client(Endpoint endpoint, ClientOptions options = {});
+  // Several replicas serving the same pack files (a map opens on a replica only if its
+  // pack header is byte-equal to the one first opened). Successive Clients of a process start at successive
+  // replicas, so their connections spread; when a connection fails or drops, the next
+  // attempt goes to the next replica, and the tiles that were in flight are requested
+  // again there. Throws st::Error if `endpoints` is empty.
+  explicit Client(std::vector<Endpoint> endpoints, ClientOptions options = {});
   ~Client();
   Client(const Client&) = delete;
   Client& operator=(const Client&) = delete;

@@ -1,0 +1,72 @@
+#!/usr/bin/env bash
+# `build --mpi` under mpirun -np 2 on loopback: the pack equals a single-process build's
+# (header, params, skip grid, every tile's bytes; so it verifies as that one does). A worker
+# rank killed mid-way (SIGKILL, by pid) fails the run with a message naming it and no
+# final pack; the same command with --resume completes the .tmp into the same pack.
+# Usage: mpi_build_test.sh PATH/TO/shadowtile WORKDIR
+set -uo pipefail
+st="$1"
+work="$2/mpi_build_test"
+rm -rf "$work" && mkdir -p "$work" && cd "$work"
+command -v mpirun >/dev/null || { echo "SKIP: mpirun is not installed (scripts/deps installs openmpi-bin)"; exit 0; }
+"$st" build --help | grep -q -- "--mpi" || { echo "SKIP: this shadowtile was configured without MPI"; exit 0; }
+mpi=(mpirun -np 2 --oversubscribe)
+[[ $(id -u) == 0 ]] && mpi+=(--allow-run-as-root)
+export OMPI_MCA_btl=self,vader,tcp OMPI_MCA_btl_tcp_if_include=lo OMPI_MCA_oob_tcp_if_include=lo
+fail=0
+same() {  # same A B: header fields, params, skip grid and every tile's bytes agree
+  python3 - "$1" "$2" <<'PY'
+import struct, sys
+def load(path):
+    d = open(path, "rb").read()
+    grid_off, grid_size, index_off, count = struct.unpack_from("<QQQQ", d, 208)
+    tiles = {}
+    for i in range(count):
+        tid, off, stored, raw, crc, kind = struct.unpack_from("<QQIIIB", d, index_off + 32 * i)
+        tiles[tid] = (raw, crc, kind, d[off:off + stored])
+    params_size, = struct.unpack_from("<Q", d, 192)
+    return d[:184], d[256:256 + params_size], d[grid_off:grid_off + grid_size], tiles
+a, b = load(sys.argv[1]), load(sys.argv[2])
+sys.exit(0 if a == b and a[3] else 1)
+PY
+}
+scene="procedural:city,size=3"
+args=(build "$scene" --light sun:azimuth=30,elevation=50 --encoding dagmh)
+"$st" "${args[@]}" --resolution 512 -q -o one.pack || exit 1
+out=$("${mpi[@]}" "$st" "${args[@]}" --resolution 512 --mpi -o mpi.pack 2>&1)
+if [[ $? == 0 ]] && grep -qE "mpi: 2 ranks built cells [0-9]+, [1-9][0-9]*" <<<"$out"; then
+  echo "ok   mpirun -np 2 build: $(grep -o 'mpi: .*' <<<"$out")"
+else echo "FAIL mpirun -np 2 build"; echo "$out" | tail -8; fail=1; fi
+if [[ -f mpi.pack ]] && same mpi.pack one.pack; then echo "ok   mpi pack == single-process pack"
+else echo "FAIL mpi pack differs from the single-process build"; fail=1; fi
+
+# Kill rank 1 once some cells are in the journal.
+"$st" "${args[@]}" --resolution 1024 -q -o big_one.pack || exit 1
+"${mpi[@]}" "$st" "${args[@]}" --resolution 1024 --mpi -o killed.pack >killed.log 2>&1 &
+mp=$!
+rank1=""
+for _ in $(seq 1 2000); do
+  for c in $(pgrep -P $mp 2>/dev/null); do
+    tr '\0' '\n' <"/proc/$c/environ" 2>/dev/null | grep -qx "OMPI_COMM_WORLD_RANK=1" && rank1=$c
+  done
+  [[ -n "$rank1" && -f killed.pack.tmp && $(stat -c %s killed.pack.tmp) -gt 8000 ]] && break
+  kill -0 $mp 2>/dev/null || break
+  sleep 0.01
+done
+if [[ -z "$rank1" ]] || ! kill -0 $mp 2>/dev/null; then
+  echo "FAIL kill-rank: rank 1 not found or the run ended before it could be killed"; fail=1
+  kill $mp 2>/dev/null; wait $mp 2>/dev/null
+else
+  kill -9 "$rank1"
+  for _ in $(seq 1 300); do kill -0 $mp 2>/dev/null || break; sleep 0.1; done
+  kill $mp 2>/dev/null
+  wait $mp; rc=$?
+  if [[ $rc != 0 && ! -f killed.pack && -f killed.pack.tmp ]] && grep -qiE "rank 1|signal 9|killed" killed.log; then
+    echo "ok   killed rank 1: run failed (exit $rc), no pack, .tmp kept: $(grep -iE 'rank 1|signal 9' killed.log | head -1)"
+  else echo "FAIL killed rank: exit $rc, pack $(ls killed.pack 2>&1)"; tail -5 killed.log; fail=1; fi
+  out=$("${mpi[@]}" "$st" "${args[@]}" --resolution 1024 --mpi --resume -o killed.pack 2>&1)
+  if [[ $? == 0 ]] && grep -qE "[1-9][0-9]* resumed" <<<"$out" && same killed.pack big_one.pack; then
+    echo "ok   --mpi --resume completed the pack == single-process pack"
+  else echo "FAIL --mpi --resume"; echo "$out" | tail -5; fail=1; fi
+fi
+exit $fail
