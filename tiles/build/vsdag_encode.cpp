@@ -92,9 +92,9 @@ class Builder {
     std::vector<uint8_t> out(total);
     uint8_t* o = out.data();
     std::memcpy(o, &h, sizeof h);
-    std::memcpy(o + h.leaf_offset, leaves_.data(), 8 * leaves_.size());
+    if (!leaves_.empty()) std::memcpy(o + h.leaf_offset, leaves_.data(), 8 * leaves_.size());
     std::memcpy(o + h.grid_offset, grid.data(), 4 * grid.size());
-    std::memcpy(o + h.node_offset, nodes_.data(), 4 * nodes_.size());
+    if (!nodes_.empty()) std::memcpy(o + h.node_offset, nodes_.data(), 4 * nodes_.size());
     return out;
   }
 
