@@ -20,7 +20,8 @@
 // --zstd-max-res R: no zstd above side R (its column shows "-"): level 19 runs at about
 // 3 MB/s on this machine, so a 16K^2 map (1 GiB raw) takes minutes per scene.
 // --quick: sides 2K only (under a minute on an idle 2-core machine).
-// The voxel shadow DAG (tiles/core/VSDAG.md, 16 depth bits) is always encoded per 4096^2
+// The voxel shadow DAG (tiles/core/VSDAG.md, --depth-bits, default 16; the voxel paper uses
+// as many as the side's) is always encoded per 4096^2
 // tile, as a pack holds it (its build keeps a tile's transitions and min-max pyramid);
 // sub-DAGs are not merged across tiles. Its size is also given against a 16-bit shadow
 // map (2 N^2 bytes), the voxel paper's reference.
@@ -32,10 +33,13 @@
 
 #include "bench/bench_map.hpp"
 #include "tiles/build/encode.hpp"
+#include "tiles/build/vsdag_encode.hpp"
 
 namespace {
 
 using namespace st::bench;
+
+uint32_t g_depth_bits = st::vsdag::kDefaultZBits;  // --depth-bits: the vsdag depth resolution
 
 const st::Encoding kEncodings[] = {st::Encoding::mh, st::Encoding::mmh, st::Encoding::dagmh};
 
@@ -106,7 +110,7 @@ Row run_one(const std::string& scene_name, const st::DepthBoundsTracer& tracer, 
           EncodingResult v;
           auto a = Clock::now();
           try {
-            v.bytes = st::encode(h, st::Encoding::vsdag).size();
+            v.bytes = st::encode_vsdag(h, st::VsdagOptions{g_depth_bits}).size();
           } catch (const std::exception& ex) {
             v.error = ex.what();
           }
@@ -217,10 +221,11 @@ int main(int argc, char** argv) {
       else if (a == "--zstd-level") zstd_level = std::stoi(next());
       else if (a == "--zstd-max-res") zstd_max = parse_level(next());
       else if (a == "--quick") quick = true;
+      else if (a == "--depth-bits") g_depth_bits = uint32_t(std::stoul(next()));
       else if (a == "--json") json_path = next();
       else
         throw st::Error("usage: bench_encodings [--scenes city,terrain,hairball] [--light L] [--min-res 4k] "
-                        "[--max-res 16k|64k] [--whole-max 16k] [--workers N] [--zstd-level 19] [--zstd-max-res R] [--quick] [--json PATH]");
+                        "[--max-res 16k|64k] [--whole-max 16k] [--workers N] [--zstd-level 19] [--zstd-max-res R] [--depth-bits 16] [--quick] [--json PATH]");
     }
     if (quick) min_level = max_level = 11;
     if (min_level > max_level) throw st::Error("--min-res is above --max-res");
@@ -271,7 +276,7 @@ int main(int argc, char** argv) {
                   b(st::Encoding::mh).c_str(), b(st::Encoding::mmh).c_str(), b(st::Encoding::dagmh).c_str(), dag / mmh,
                   100 * mh / double(r.raw_bytes), 100 * dag / double(r.raw_bytes), r.whole ? "whole" : "tiles");
     }
-    std::printf("\nVoxel shadow DAG (per 4096^2 tile, 16 depth bits) next to DAG-MH\n");
+    std::printf("\nVoxel shadow DAG (per 4096^2 tile, %u depth bits) next to DAG-MH\n", g_depth_bits);
     std::printf("%-9s %5s %11s %11s %9s %12s %10s %9s\n", "scene", "side", "DAG-MH", "VSDAG", "VS/DAG", "VS/16-bit %",
                 "VS/raw %", "enc VS s");
     for (const Row& r : rows)
