@@ -32,7 +32,7 @@ struct BuildArgs {
   std::string scene, light, resolution = "4096", encoding = "dagmh", out, report, region,
                      construction = "bottom-up", up = "y", intervals = "default", shard;
   std::optional<uint32_t> skip_level;
-  uint32_t tile_bytes = 64 * 1024;
+  uint32_t tile_bytes = 64 * 1024, depth_bits = 16;
   int compression = 6;
   bool resume = false, quiet = false, mpi = false;
 };
@@ -43,6 +43,7 @@ void run(const BuildArgs& a) {
   o.encoding = parse_encoding(a.encoding);
   o.skip_level = a.skip_level;
   o.tile_bytes = a.tile_bytes;
+  o.vsdag_z_bits = a.depth_bits;
   o.resume = a.resume;
   o.compression_level = a.compression;
   if (a.construction == "bottom-up") o.construction = MhConstruction::bottom_up;
@@ -157,7 +158,9 @@ void setup(CLI::App& app) {
       ->required();
   app.add_option("--resolution", a->resolution, "Map side: a power of two (4096, 16k, 64k, 1m)")
       ->capture_default_str();
-  app.add_option("--encoding", a->encoding, "Tile encoding: dagmh, mmh or mh")->capture_default_str();
+  app.add_option("--encoding", a->encoding, "Tile encoding: dagmh, mmh, mh or vsdag (voxel shadow DAG)")->capture_default_str();
+  app.add_option("--depth-bits", a->depth_bits, "vsdag: 2^N depth slabs per tile, N in 3..20 (exact beyond one slab of a surface)")
+      ->capture_default_str();
   app.add_option("--skip-level", a->skip_level,
                  "Skip level K: the 2^K x 2^K grid fetched when a map opens (default min(ceil(L/2), 8))");
   app.add_option("--tile-bytes", a->tile_bytes,

@@ -18,6 +18,12 @@
 // sample). Single-threaded, timed in thread-CPU seconds; each figure is the median over --reps passes,
 // and the encodings take turns inside each pass so that load changes hit all of them.
 // --quick: an 8K^2 map, 128K lookups per pattern, 3 reps.
+// The voxel shadow DAG (tiles/core/VSDAG.md) joins when the map is at most 4K^2 (it is
+// encoded whole here; packs cut it into tiles): single taps, PCF up to 17x17 by leaf
+// popcounts, and "vsdag-raster" = the same PCF visiting the leaves in raster order (the
+// voxel paper's baseline for its traversal-order saving). Its receivers on lo or just past
+// hi lie in a surface's slab, where the contract lets it differ from the array: those
+// differences are counted apart and do not fail the run.
 #include <cmath>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -26,6 +32,7 @@
 #include "bench/bench_map.hpp"
 #include "tiles/build/encode.hpp"
 #include "tiles/core/evaluator.hpp"
+#include "tiles/core/vsdag_evaluator.hpp"
 
 namespace {
 
@@ -41,6 +48,8 @@ struct Subject {
   std::string name;
   const st::Evaluator* ev = nullptr;  // null: the float array
   uint64_t bytes = 0;
+  const st::VsdagEvaluator* vs = nullptr;  // set: PCF by pcf_wide (up to 17x17)
+  bool best_order = true;
 };
 
 
@@ -59,10 +68,16 @@ double time_pass(const Subject& s, const FloatMap& map, const std::vector<Lookup
     } else {
       for (const Lookup& q : list) acc += array_pcf(map, q.x, q.y, r, q.receiver);
     }
+  } else if (r == 1 && s.vs) {
+    uint64_t lit = 0;  // one walk to the voxel (Evaluator::lit would bisect the column for depth())
+    for (const Lookup& q : list) lit += s.vs->lit_voxel(L, q.x, q.y, q.receiver);
+    acc = double(lit);
   } else if (r == 1) {
     uint64_t lit = 0;
     for (const Lookup& q : list) lit += s.ev->lit(q.x, q.y, q.receiver);
     acc = double(lit);
+  } else if (s.vs) {
+    for (const Lookup& q : list) acc += s.vs->pcf_wide(q.x, q.y, r, q.receiver, s.best_order);
   } else {
     for (const Lookup& q : list) acc += s.ev->pcf(L, q.x, q.y, r, q.receiver);
   }
@@ -178,6 +193,21 @@ int main(int argc, char** argv) {
       std::printf("  %-6s %12zu bytes, encoded in %.1f s\n", st::to_string(e).c_str(), buffers.back().size(), enc_s);
       std::fflush(stdout);
     }
+    // The voxel shadow DAG, encoded whole (at most 4K^2: its build holds the whole map's
+    // transitions and min-max pyramid).
+    std::vector<uint8_t> vs_buffer;
+    std::unique_ptr<st::VsdagEvaluator> vs;
+    if (level <= 12) {
+      auto a = Clock::now();
+      vs_buffer = st::encode(h, st::Encoding::vsdag);
+      const double enc_s = seconds_since(a);
+      vs = std::make_unique<st::VsdagEvaluator>(vs_buffer);
+      subjects.push_back({"vsdag", vs.get(), vs_buffer.size(), vs.get(), true});
+      subjects.push_back({"vsdag-raster", vs.get(), vs_buffer.size(), vs.get(), false});
+      std::printf("  %-6s %12zu bytes, encoded in %.1f s (16 depth bits)\n", "vsdag", vs_buffer.size(), enc_s);
+    } else {
+      std::printf("  vsdag: not measured above 4K^2 (whole-map encode)\n");
+    }
     h = {};
 
     // Every encoding gives the array's single-tap answer at every position (lossless).
@@ -189,6 +219,25 @@ int main(int argc, char** argv) {
       }
     std::printf("  lossless check on %zu positions x %zu encodings: %llu mismatches\n", 2 * count,
                 evaluators.size(), (unsigned long long)mismatches);
+    uint64_t vs_differ = 0, vs_pcf_mismatches = 0;
+    if (vs) {
+      for (const auto* list : {&random, &coherent})
+        for (const Lookup& q : *list) vs_differ += vs->lit(q.x, q.y, q.receiver) != (q.receiver <= map.at(q.x, q.y));
+      for (const auto* list : {&random, &coherent})
+        for (size_t i = 0; i < std::min<size_t>(count, 4096); ++i)
+          for (uint32_t r : {3u, 9u, 17u})
+            for (bool best : {true, false}) {
+              const Lookup& q = (*list)[i];
+              uint32_t lit = 0;
+              for (uint32_t j = 0; j < r; ++j)
+                for (uint32_t k = 0; k < r; ++k)
+                  lit += vs->lit_voxel(level, st::pcf_tap(q.x, k, r, side), st::pcf_tap(q.y, j, r, side), q.receiver);
+              vs_pcf_mismatches += vs->pcf_wide(q.x, q.y, r, q.receiver, best) != float(lit) / float(r * r);
+            }
+      std::printf("  vsdag: %llu of %zu single taps differ from the array (receivers in a surface's slab), "
+                  "PCF up to 17x17 vs single voxel lookups: %llu mismatches\n",
+                  (unsigned long long)vs_differ, 2 * count, (unsigned long long)vs_pcf_mismatches);
+    }
     // The encodings' shared-traversal PCF equals the average of single lookups (the
     // Evaluator base implementation) on a sample of the positions.
     uint64_t pcf_mismatches = 0;
@@ -210,14 +259,23 @@ int main(int argc, char** argv) {
     std::vector<Result> results;
     double sink = 0;
     const std::pair<const char*, const std::vector<Lookup>*> patterns[] = {{"random", &random}, {"coherent", &coherent}};
-    const uint32_t kernels[] = {1, 3, 5};
+    const uint32_t kernels[] = {1, 3, 5, 9, 17};
+    // 17x17 exceeds Evaluator::kMaxPcf: only the float array and vsdag run it; vsdag-raster
+    // only the kernels whose leaf order matters.
+    auto runs = [&](const Subject& s, uint32_t r) {
+      if (s.name == "vsdag-raster") return r >= 9;
+      return r <= st::Evaluator::kMaxPcf || !s.ev || s.vs;
+    };
     for (auto& [pname, list] : patterns)
       for (uint32_t r : kernels) {
         std::vector<std::vector<double>> t(subjects.size());
-        for (const Subject& s : subjects) time_pass(s, map, *list, r, sink);  // warm-up
+        for (const Subject& s : subjects)
+          if (runs(s, r)) time_pass(s, map, *list, r, sink);  // warm-up
         for (int rep = 0; rep < reps; ++rep)
-          for (size_t s = 0; s < subjects.size(); ++s) t[s].push_back(time_pass(subjects[s], map, *list, r, sink));
-        for (size_t s = 0; s < subjects.size(); ++s) results.push_back({pname, subjects[s].name, r, median(t[s])});
+          for (size_t s = 0; s < subjects.size(); ++s)
+            if (runs(subjects[s], r)) t[s].push_back(time_pass(subjects[s], map, *list, r, sink));
+        for (size_t s = 0; s < subjects.size(); ++s)
+          if (runs(subjects[s], r)) results.push_back({pname, subjects[s].name, r, median(t[s])});
       }
 
     auto find = [&](const std::string& p, const std::string& s, uint32_t r) {
@@ -234,7 +292,7 @@ int main(int argc, char** argv) {
     for (const Result& x : results) {
       const double per = x.seconds / double(count);
       const double vs_array = x.seconds / find(x.pattern, "float array", x.r);
-      const double vs_single = x.seconds / find(x.pattern, x.subject, 1);
+      const double vs_single = x.seconds / find(x.pattern, x.subject == "vsdag-raster" ? "vsdag" : x.subject, 1);
       uint64_t bytes = 0;
       for (const Subject& s : subjects)
         if (s.name == x.subject) bytes = s.bytes;
@@ -262,18 +320,33 @@ int main(int argc, char** argv) {
         targets.push_back({{"target", "pcf5_over_single<=6"}, {"pattern", pname}, {"encoding", e}, {"value", pcf}});
       }
     }
+    if (vs)
+      for (auto& [pname, list] : patterns) {
+        (void)list;
+        const double r17 = find(pname, "vsdag", 17) / find(pname, "vsdag", 1);
+        std::printf("  %-9s vsdag 17x17 PCF = %.2fx a single tap (voxel paper: at most 4.5) %s\n", pname, r17,
+                    r17 <= 4.5 ? "met" : "NOT met");
+        targets.push_back({{"target", "vsdag_pcf17_over_single<=4.5"}, {"pattern", pname}, {"value", r17}});
+        for (uint32_t r : {9u, 17u}) {
+          const double saving = 1 - find(pname, "vsdag", r) / find(pname, "vsdag-raster", r);
+          std::printf("  %-9s vsdag %ux%u leaf visit order saves %.1f%% over raster order (paper: 7.5-26.6%%)\n", pname,
+                      r, r, 100 * saving);
+          targets.push_back({{"target", "vsdag_order_saving"}, {"pattern", pname}, {"kernel", r}, {"value", saving}});
+        }
+      }
     std::printf("  (sink %.0f, load %.1f)\n", sink, load_average());
 
     if (!json_path.empty()) {
       nlohmann::json j{{"bench", "lookups"}, {"scene", scene_spec}, {"light", light_spec}, {"side", side},
                        {"level", level}, {"lookups_per_pattern", count}, {"reps", reps},
-                       {"lossless_mismatches", mismatches}, {"pcf_mismatches", pcf_mismatches}, {"anon_huge_mib", huge_mib}, {"load_average_end", load_average()},
+                       {"lossless_mismatches", mismatches}, {"pcf_mismatches", pcf_mismatches},
+                       {"vsdag_taps_differing", vs_differ}, {"vsdag_pcf_mismatches", vs_pcf_mismatches}, {"anon_huge_mib", huge_mib}, {"load_average_end", load_average()},
                        {"build", {{"trace_s", run.trace_s}, {"bottom_up_s", run.bottom_up_s}, {"stitch_s", stitch_s}}},
                        {"results", jres}, {"targets", targets}};
       std::ofstream out(json_path);
       if (!(out << j.dump(2) << "\n")) throw st::Error("bench_lookups: cannot write " + json_path);
     }
-    return mismatches == 0 && pcf_mismatches == 0 ? 0 : 1;
+    return mismatches == 0 && pcf_mismatches == 0 && vs_pcf_mismatches == 0 ? 0 : 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_lookups: %s\n", e.what());
     return 1;

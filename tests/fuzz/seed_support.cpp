@@ -96,7 +96,7 @@ std::vector<Bytes> pack_files(uint64_t seed) {
   std::filesystem::create_directories(dir);
   std::vector<Bytes> out;
   int n = 0;
-  for (Encoding e : {Encoding::mh, Encoding::mmh, Encoding::dagmh})
+  for (Encoding e : {Encoding::mh, Encoding::mmh, Encoding::dagmh, Encoding::vsdag})
     for (uint32_t level : {2u, 3u, 5u})
       for (uint32_t tile_bytes : {kDefaultTileBytes, 256u}) {
         const FieldKind kind = FieldKind(n % kFieldKinds);

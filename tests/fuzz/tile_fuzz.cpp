@@ -1,5 +1,5 @@
 // libFuzzer harness for one tile decoder, chosen at compile time by ST_FUZZ_ENCODING
-// (mh, mmh or dagmh; tests/fuzz/CMakeLists.txt builds one executable per encoding).
+// (mh, mmh, dagmh or vsdag; tests/fuzz/CMakeLists.txt builds one executable per encoding).
 // Input: the encoded tile buffer, exactly as it lies in a pack (after decompression).
 // Contract (encoding.hpp): the opener validates the whole buffer or throws
 // st::FormatError; a buffer it accepts must then answer every lookup without reading
@@ -13,7 +13,7 @@
 #include "common/error.hpp"
 
 #ifndef ST_FUZZ_ENCODING
-#error "define ST_FUZZ_ENCODING to mh, mmh or dagmh"
+#error "define ST_FUZZ_ENCODING to mh, mmh, dagmh or vsdag"
 #endif
 #define ST_FUZZ_STR2(x) #x
 #define ST_FUZZ_STR(x) ST_FUZZ_STR2(x)

@@ -24,6 +24,7 @@
 #include "tiles/core/pack_reader.hpp"
 #include "tiles/build/pack_writer.hpp"
 #include "tiles/build/tile_cut.hpp"
+#include "tiles/build/vsdag_encode.hpp"
 
 namespace st {
 namespace {
@@ -47,6 +48,11 @@ CutParams checked_cut_params(const MapBuildOptions& o) {
   cut.skip_level = o.skip_level.value_or(default_skip_level(o.map_level));
   cut.tile_bytes = o.tile_bytes;
   cut.codec = TileCodec::of(o.encoding);
+  if (o.encoding == Encoding::vsdag) {
+    const VsdagOptions vo{o.vsdag_z_bits};
+    if (vo.z_bits < vsdag::kMinZBits || vo.z_bits > vsdag::kMaxZBits) throw Error("build: --depth-bits must be 3..20");
+    cut.codec.encode = [vo](const Hierarchy& h) { return encode_vsdag(h, vo); };
+  }
   cut.validate();
   if (o.region) {
     const uint64_t R = uint64_t(1) << cut.map_level;

@@ -64,6 +64,7 @@ class RemoteCells {
 struct MapBuildOptions {
   uint32_t map_level = 12;
   Encoding encoding = Encoding::dagmh;
+  uint32_t vsdag_z_bits = 16;  // vsdag only: 2^z depth slabs per tile (tiles/core/VSDAG.md), 3..20
   std::optional<uint32_t> skip_level;  // default: default_skip_level(map_level)
   uint32_t tile_bytes = 64 * 1024;
   MhConstruction construction = MhConstruction::bottom_up;

@@ -5,6 +5,7 @@
 #include "common/error.hpp"
 #include "tiles/build/mh_quadtree_layout.hpp"
 #include "tiles/build/mmh_merge.hpp"
+#include "tiles/build/vsdag_encode.hpp"
 
 namespace st {
 
@@ -23,6 +24,7 @@ std::vector<uint8_t> encode(const Hierarchy& h, Encoding e) {
     case Encoding::mh: return encode_mh(h);
     case Encoding::mmh: return encode_mmh(h);
     case Encoding::dagmh: return encode_dagmh(h);
+    case Encoding::vsdag: return encode_vsdag(h, VsdagOptions{});
   }
   throw Error("encoding '" + to_string(e) + "' is not available in this build");
 }

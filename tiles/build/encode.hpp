@@ -14,8 +14,10 @@ namespace st {
 std::vector<uint8_t> encode_mh(const Hierarchy& h);     // MH quadtree, MH §3.2
 std::vector<uint8_t> encode_mmh(const Hierarchy& h);    // merged MH (mmh_merge.hpp)
 std::vector<uint8_t> encode_dagmh(const Hierarchy& h);  // DAG-MH 2021 (dagmh_encode.hpp)
+// Voxel shadow DAG (vsdag_encode.hpp) at the default depth resolution; encode_vsdag(h,
+// VsdagOptions) takes another.
 
-// Dispatch by tag.
+// Dispatch by tag (vsdag at its default depth resolution).
 std::vector<uint8_t> encode(const Hierarchy& h, Encoding e);
 
 }  // namespace st

@@ -11,6 +11,7 @@ std::string to_string(Encoding e) {
     case Encoding::mh: return "mh";
     case Encoding::mmh: return "mmh";
     case Encoding::dagmh: return "dagmh";
+    case Encoding::vsdag: return "vsdag";
   }
   return "encoding#" + std::to_string(int(e));
 }
@@ -19,7 +20,8 @@ Encoding parse_encoding(const std::string& name) {
   if (name == "mh") return Encoding::mh;
   if (name == "mmh") return Encoding::mmh;
   if (name == "dagmh") return Encoding::dagmh;
-  throw Error("unknown encoding '" + name + "' (expected mh, mmh or dagmh)");
+  if (name == "vsdag") return Encoding::vsdag;
+  throw Error("unknown encoding '" + name + "' (expected mh, mmh, dagmh or vsdag)");
 }
 
 namespace {
@@ -33,6 +35,7 @@ std::unique_ptr<Evaluator> open_encoded(Encoding e, std::span<const uint8_t> byt
     case Encoding::mh: return open_mh(bytes);
     case Encoding::mmh: return open_mmh(bytes);
     case Encoding::dagmh: return open_dagmh(bytes);
+    case Encoding::vsdag: return open_vsdag(bytes);
   }
   not_built(e);
 }

@@ -18,15 +18,17 @@
 
 namespace st {
 
-enum class Encoding : uint8_t { mh = 0, mmh = 1, dagmh = 2 };  // format constant: packs store it
+enum class Encoding : uint8_t { mh = 0, mmh = 1, dagmh = 2, vsdag = 3 };  // format constant: packs store it
+inline constexpr Encoding kLastEncoding = Encoding::vsdag;
 
 std::string to_string(Encoding e);
-Encoding parse_encoding(const std::string& name);  // "mh" | "mmh" | "dagmh"; throws st::Error
+Encoding parse_encoding(const std::string& name);  // "mh" | "mmh" | "dagmh" | "vsdag"; throws st::Error
 
 // Per-encoding openers (implemented in their own files).
 std::unique_ptr<Evaluator> open_mh(std::span<const uint8_t> bytes);     // MH and MMH buffers
 std::unique_ptr<Evaluator> open_mmh(std::span<const uint8_t> bytes);
 std::unique_ptr<Evaluator> open_dagmh(std::span<const uint8_t> bytes);
+std::unique_ptr<Evaluator> open_vsdag(std::span<const uint8_t> bytes);  // voxel shadow DAG (VSDAG.md)
 
 // Dispatch by tag.
 std::unique_ptr<Evaluator> open_encoded(Encoding e, std::span<const uint8_t> bytes);

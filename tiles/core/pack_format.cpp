@@ -82,7 +82,9 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
   h.state = PackState(state);
   h.flags = load_le<uint32_t>(b, 20);
   if (h.flags & ~uint32_t(kKnownFeatures)) fail(20, "unknown feature flags " + hex32(h.flags));
-  if (b[24] > uint8_t(Encoding::dagmh)) fail(24, "unknown encoding " + std::to_string(b[24]));
+  if (b[24] > uint8_t(kLastEncoding))
+    fail(24, "unknown encoding " + std::to_string(b[24]) + " (this build reads 0-" + std::to_string(int(kLastEncoding)) +
+                 ": mh, mmh, dagmh, vsdag; written by a newer shadowtile?)");
   h.encoding = Encoding(b[24]);
   if (b[25] > uint8_t(LightKind::spot)) fail(25, "unknown light kind " + std::to_string(b[25]));
   h.light_kind = LightKind(b[25]);
