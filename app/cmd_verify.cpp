@@ -2,7 +2,9 @@
 // structure (PackReader::verify), then re-traces random texels (or, with --all, every
 // texel of the built region) with Embree and checks the lossless invariant lo <= v <= hi
 // on each (ARCHITECTURE.md "Definitions"). The re-trace gives the same canonical bounds
-// as the build whatever its batching (tiles/bake/canonical_depth.hpp).
+// as the build whatever its batching (tiles/bake/canonical_depth.hpp). A vsdag pack is
+// checked against its own exactness contract instead (tiles/core/VSDAG.md: exact beyond
+// one depth slab of lo and hi), at the depth resolution its build recorded.
 #include <algorithm>
 #include <atomic>
 #include <cstdio>
@@ -19,6 +21,7 @@
 #include "app/progress.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_format.hpp"
+#include "tiles/core/vsdag_format.hpp"
 
 namespace st::cli {
 namespace {
@@ -31,12 +34,44 @@ struct VerifyArgs {
   uint64_t max_mismatches = 10;
 };
 
+// What a stored value must satisfy against the re-traced interval: the lossless
+// invariant lo <= v <= hi, or for vsdag tiles their slab contract.
+struct Contract {
+  uint32_t vsdag_z_bits = 0;  // 0: the lossless invariant
+  bool holds(const Interval& iv, float v) const {
+    return vsdag_z_bits ? vsdag::depth_within_contract(iv.lo, iv.hi, v, vsdag_z_bits) : iv.lo <= v && v <= iv.hi;
+  }
+  std::string within() const {
+    return vsdag_z_bits ? "within one of 2^" + std::to_string(vsdag_z_bits) + " depth slabs of [lo, hi] (vsdag contract)"
+                        : "within [lo, hi]";
+  }
+  std::string name() const {
+    return vsdag_z_bits ? "the vsdag contract (within one of 2^" + std::to_string(vsdag_z_bits) + " depth slabs of [lo, hi])"
+                        : "the lossless invariant";
+  }
+};
+
+Contract contract_of(const PackReader& reader) {
+  Contract c;
+  if (reader.encoding() != Encoding::vsdag) return c;
+  for (const auto& [k, v] : reader.params())
+    if (k == "depth_bits") {
+      char* end = nullptr;
+      const unsigned long z = std::strtoul(v.c_str(), &end, 10);
+      if (end == v.c_str() || *end != 0 || z < vsdag::kMinZBits || z > vsdag::kMaxZBits)
+        throw Error("verify: the pack's build parameter depth_bits='" + v + "' is not a vsdag depth resolution (3..20)");
+      c.vsdag_z_bits = uint32_t(z);
+      return c;
+    }
+  throw Error("verify: this vsdag pack records no depth_bits build parameter, so its contract cannot be checked");
+}
+
 // --all: every texel of the built region, traced in chunks of kChunk^2 texels (the tracer
 // parallelises each chunk), each chunk's texels checked on every hardware thread; stops
 // after `max_mismatches` mismatches and prints their coordinates. Returns the number of
 // mismatches found; `checked` receives the texels checked.
 uint64_t verify_every_texel(const VerifyArgs& a, const DepthBoundsTracer& tracer, TraceMode mode,
-                            const PackEvaluator& eval, uint32_t L, const Rect& region,
+                            const Contract& contract, const PackEvaluator& eval, uint32_t L, const Rect& region,
                             uint64_t& checked) {
   constexpr uint64_t kChunk = 1024;
   const uint64_t total = region.w * region.h;
@@ -66,7 +101,7 @@ uint64_t verify_every_texel(const VerifyArgs& a, const DepthBoundsTracer& tracer
               bad = a.max_mismatches;
               return;
             }
-            if (iv.lo <= v && v <= iv.hi) continue;
+            if (contract.holds(iv, v)) continue;
             std::lock_guard lock(print);
             if (bad >= a.max_mismatches) return;
             std::printf("mismatch: texel (%llu, %llu) of level %u: stored %.9g outside [%.9g, %.9g]\n",
@@ -119,21 +154,23 @@ void run(const VerifyArgs& a) {
   const TraceMode mode = static_intervals ? TraceMode::static_bounds : TraceMode::bounds;
   if (static_intervals)
     std::printf("verify: static-geometry intervals: lossless for receivers that lie on surfaces\n");
+  const Contract contract = contract_of(*reader);
+  if (contract.vsdag_z_bits) std::printf("verify: checking %s\n", contract.name().c_str());
 
   if (a.all) {
     uint64_t checked = 0;
-    const uint64_t bad = verify_every_texel(a, tracer, mode, eval, L, region, checked);
+    const uint64_t bad = verify_every_texel(a, tracer, mode, contract, eval, L, region, checked);
     if (bad) {
-      std::printf("verify %s: FAILED: %llu texels break the lossless invariant (stopped after %llu of "
+      std::printf("verify %s: FAILED: %llu texels break %s (stopped after %llu of "
                   "%llu texels; --max-mismatches %llu)\n",
-                  a.pack.c_str(), (unsigned long long)bad, (unsigned long long)checked,
+                  a.pack.c_str(), (unsigned long long)bad, contract.name().c_str(), (unsigned long long)checked,
                   (unsigned long long)(region.w * region.h), (unsigned long long)a.max_mismatches);
       exit_with(kExitMismatch);
     }
     std::printf("verify %s: OK: every texel of the built region (%llu x %llu = %llu) re-traced, every "
-                "one within [lo, hi]\n",
+                "one %s\n",
                 a.pack.c_str(), (unsigned long long)region.w, (unsigned long long)region.h,
-                (unsigned long long)checked);
+                (unsigned long long)checked, contract.within().c_str());
     return;
   }
 
@@ -159,7 +196,7 @@ void run(const VerifyArgs& a) {
           exit_with(kExitMismatch);
         }
         ++checked;
-        if (!(iv.lo <= v && v <= iv.hi)) {
+        if (!contract.holds(iv, v)) {
           if (bad < a.show)
             std::printf("mismatch: texel (%llu, %llu) of level %u: stored %.9g outside [%.9g, %.9g]\n",
                         (unsigned long long)(x0 + i), (unsigned long long)(y0 + j), L, v, iv.lo, iv.hi);
@@ -168,12 +205,12 @@ void run(const VerifyArgs& a) {
       }
   }
   if (bad) {
-    std::printf("verify %s: FAILED: %llu of %llu sampled texels break the lossless invariant\n",
-                a.pack.c_str(), (unsigned long long)bad, (unsigned long long)checked);
+    std::printf("verify %s: FAILED: %llu of %llu sampled texels break %s\n", a.pack.c_str(),
+                (unsigned long long)bad, (unsigned long long)checked, contract.name().c_str());
     exit_with(kExitMismatch);
   }
-  std::printf("verify %s: OK: %llu random texels re-traced, every one within [lo, hi]\n", a.pack.c_str(),
-              (unsigned long long)checked);
+  std::printf("verify %s: OK: %llu random texels re-traced, every one %s\n", a.pack.c_str(),
+              (unsigned long long)checked, contract.within().c_str());
 }
 
 void setup(CLI::App& app) {

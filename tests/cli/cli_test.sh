@@ -61,6 +61,11 @@ check build-static 0 "built static.pack" -- "$st" build open_town.obj $light --r
 check inspect-static 0 "static-intervals" -- "$st" inspect static.pack
 check verify-static-contract 0 "static-geometry intervals: lossless for receivers that lie on surfaces" -- "$st" verify static.pack open_town.obj --all
 check verify-static 0 "OK: every texel of the built region \(1024 x 1024" -- "$st" verify static.pack open_town.obj --all
+# A vsdag pack is checked against its slab contract at the depth resolution it recorded.
+check build-vsdag 0 "built vsdag.pack" -- "$st" build $scene $light --resolution 512 --encoding vsdag --depth-bits 10 -o vsdag.pack -q
+check inspect-vsdag 0 '"depth_bits": "10"' -- "$st" inspect vsdag.pack --json
+check verify-vsdag 0 "every one within one of 2\^10 depth slabs of \[lo, hi\] \(vsdag contract\)" -- "$st" verify vsdag.pack $scene --all
+check verify-vsdag-mismatch 3 "FAILED: 3 texels break the vsdag contract" -- "$st" verify vsdag.pack procedural:city,size=2 --all --max-mismatches 3
 check bad-intervals 1 "intervals: expected default or static" -- "$st" build procedural:cube $light --resolution 256 --intervals sometimes -o x.pack -q
 check export 0 "exported level 8" -- "$st" export city.pack --level 8 -o l8.exr
 check export-bad-level 1 "exceeds" -- "$st" export city.pack --level 30 -o l.exr

@@ -78,6 +78,8 @@ PackParams pack_params(const Scene& scene, const LightSpace& light, const MapBui
                      {"tool", "shadowtile 0.1.0"}};
   if (o.intervals == IntervalRule::static_geometry) pp.build_params.push_back({"intervals", "static"});
   if (o.shard) pp.build_params.push_back({kShardParam, o.shard->to_string()});
+  // The depth resolution of vsdag tiles: what `verify` checks their contract against.
+  if (o.encoding == Encoding::vsdag) pp.build_params.push_back({"depth_bits", std::to_string(o.vsdag_z_bits)});
   if (o.region)
     pp.build_params.push_back({"region", std::to_string(o.region->x) + "," + std::to_string(o.region->y) +
                                              "," + std::to_string(o.region->w) + "," +

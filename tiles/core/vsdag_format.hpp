@@ -7,6 +7,8 @@
 // Every constant marked "format constant" is part of the on-disk layout: changing one
 // changes kVersion.
 #pragma once
+#include <algorithm>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 
@@ -127,5 +129,19 @@ inline int32_t receiver_slab(float r, uint32_t z_bits) {
 
 // Leaf bit of texel (x, y) inside its 8x8 leaf (§6.2: the last three bits of x and y).
 inline uint32_t leaf_bit(uint64_t x, uint64_t y) { return uint32_t((y & 7) * 8 + (x & 7)); }
+
+// The exactness contract (VSDAG.md "Exactness contract") as a check on a decoded depth
+// value `d`, whose lit test `r <= d` answers as the voxels do, for a texel whose true
+// interval is [lo, hi]: every receiver in a slab before lo's is lit, every receiver in a
+// slab after hi's is shadowed. `shadowtile verify` checks vsdag packs with it.
+inline bool depth_within_contract(float lo, float hi, float d, uint32_t z_bits) {
+  const double scale = double(1u << z_bits);
+  const double first_of_lo = std::floor(std::clamp(double(lo), 0.0, 1.0) * scale) / scale;
+  const double past_hi = (std::floor(std::clamp(double(hi), 0.0, 1.0) * scale) + 1) / scale;
+  // Exact in float: multiples of a power of two no finer than 2^-20.
+  if (first_of_lo > 0 && !(d >= std::nextafter(float(first_of_lo), -1.0f))) return false;
+  if (past_hi < 1 && !(double(d) < past_hi)) return false;  // the last slab holds r = 1 too
+  return true;
+}
 
 }  // namespace st::vsdag
