@@ -24,6 +24,7 @@
 #include <cstdint>
 #include <memory>
 #include <mutex>
+#include <shared_mutex>
 #include <span>
 #include <string>
 #include <vector>
@@ -102,10 +103,12 @@ class RemoteMap final : public Evaluator {
   // The connection dropped: every sent tile is queued again (cancelled ones dropped).
   void connection_lost() noexcept;
   // ---- the GPU mirror (gpu/gpu_map.cpp) ----
-  // Runs fn(const TileCache&) under the lock; fn must be quick and must not call back.
+  // Runs fn(const TileCache&) under the lock taken shared, like a lookup (fn only reads,
+  // so lookups on other threads go on meanwhile and only tile arrivals wait); fn must be
+  // quick and must not call back into this map.
   template <class Fn>
   void inspect_cache(Fn&& fn) const {
-    std::lock_guard lock(mu_);
+    std::shared_lock lock(mu_);
     fn(static_cast<const TileCache&>(cache_));
   }
   // Tiles a GPU pass needed and found absent (its feedback): each is queued like a lookup
