@@ -6,21 +6,7 @@ set -uo pipefail
 st="$1"
 work="$2/cli_test"
 rm -rf "$work" && mkdir -p "$work" && cd "$work"
-fail=0
-check() {  # check NAME EXPECTED_EXIT PATTERN -- command...
-  local name="$1" want="$2" pattern="$3"
-  shift 4
-  local out rc
-  out="$("$@" 2>&1)"
-  rc=$?
-  if [[ "$rc" != "$want" ]]; then
-    echo "FAIL $name: exit $rc, expected $want"; echo "$out" | tail -5; fail=1; return
-  fi
-  if [[ -n "$pattern" ]] && ! grep -qE "$pattern" <<<"$out"; then
-    echo "FAIL $name: output lacks /$pattern/"; echo "$out" | tail -5; fail=1; return
-  fi
-  echo "ok   $name"
-}
+source "$(dirname "${BASH_SOURCE[0]}")/check.sh"
 light="--light sun:azimuth=30,elevation=50"
 scene="procedural:city,size=3"
 check help 0 "bounds" -- "$st" --help
@@ -174,19 +160,7 @@ else
   check one-go 0 "built" -- "$st" "${kargs[@]}" -o onego.pack
   # Cells land in the journal in completion order, so offsets differ run to run; what
   # must match is every tile's bytes, the skip grid and the header's fields.
-  if [[ ! -f killed.pack.tmp ]] && python3 - killed.pack onego.pack <<'PY'
-import struct, sys
-def load(path):
-    d = open(path, "rb").read()
-    grid_off, grid_size, index_off, count = struct.unpack_from("<QQQQ", d, 208)
-    tiles = {}
-    for i in range(count):
-        tid, off, stored, raw, crc, kind = struct.unpack_from("<QQIIIB", d, index_off + 32 * i)
-        tiles[tid] = (raw, crc, kind, d[off:off + stored])
-    return d[:184], d[grid_off:grid_off + grid_size], tiles
-a, b = load(sys.argv[1]), load(sys.argv[2])
-sys.exit(0 if a == b and a[2] else 1)
-PY
+  if [[ ! -f killed.pack.tmp ]] && same_pack killed.pack onego.pack --ignore-params
   then echo "ok   resumed == one-go (same header fields, skip grid and tile bytes)"
   else echo "FAIL resumed pack differs from the one-go build"; fail=1; fi
   check verify-resumed 0 "OK" -- "$st" verify killed.pack "$scene" --samples 500

@@ -13,23 +13,7 @@ command -v mpirun >/dev/null || { echo "SKIP: mpirun is not installed (scripts/d
 mpi=(mpirun -np 2 --oversubscribe)
 [[ $(id -u) == 0 ]] && mpi+=(--allow-run-as-root)
 export OMPI_MCA_btl=self,vader,tcp OMPI_MCA_btl_tcp_if_include=lo OMPI_MCA_oob_tcp_if_include=lo
-fail=0
-same() {  # same A B: header fields, params, skip grid and every tile's bytes agree
-  python3 - "$1" "$2" <<'PY'
-import struct, sys
-def load(path):
-    d = open(path, "rb").read()
-    grid_off, grid_size, index_off, count = struct.unpack_from("<QQQQ", d, 208)
-    tiles = {}
-    for i in range(count):
-        tid, off, stored, raw, crc, kind = struct.unpack_from("<QQIIIB", d, index_off + 32 * i)
-        tiles[tid] = (raw, crc, kind, d[off:off + stored])
-    params_size, = struct.unpack_from("<Q", d, 192)
-    return d[:184], d[256:256 + params_size], d[grid_off:grid_off + grid_size], tiles
-a, b = load(sys.argv[1]), load(sys.argv[2])
-sys.exit(0 if a == b and a[3] else 1)
-PY
-}
+source "$(dirname "${BASH_SOURCE[0]}")/check.sh"
 scene="procedural:city,size=3"
 args=(build "$scene" --light sun:azimuth=30,elevation=50 --encoding dagmh)
 "$st" "${args[@]}" --resolution 512 -q -o one.pack || exit 1
@@ -37,7 +21,7 @@ out=$("${mpi[@]}" "$st" "${args[@]}" --resolution 512 --mpi -o mpi.pack 2>&1)
 if [[ $? == 0 ]] && grep -qE "mpi: 2 ranks built cells [0-9]+, [1-9][0-9]*" <<<"$out"; then
   echo "ok   mpirun -np 2 build: $(grep -o 'mpi: .*' <<<"$out")"
 else echo "FAIL mpirun -np 2 build"; echo "$out" | tail -8; fail=1; fi
-if [[ -f mpi.pack ]] && same mpi.pack one.pack; then echo "ok   mpi pack == single-process pack"
+if [[ -f mpi.pack ]] && same_pack mpi.pack one.pack; then echo "ok   mpi pack == single-process pack"
 else echo "FAIL mpi pack differs from the single-process build"; fail=1; fi
 
 # Kill rank 1 once some cells are in the journal.
@@ -65,7 +49,7 @@ else
     echo "ok   killed rank 1: run failed (exit $rc), no pack, .tmp kept: $(grep -iE 'rank 1|signal 9' killed.log | head -1)"
   else echo "FAIL killed rank: exit $rc, pack $(ls killed.pack 2>&1)"; tail -5 killed.log; fail=1; fi
   out=$("${mpi[@]}" "$st" "${args[@]}" --resolution 1024 --mpi --resume -o killed.pack 2>&1)
-  if [[ $? == 0 ]] && grep -qE "[1-9][0-9]* resumed" <<<"$out" && same killed.pack big_one.pack; then
+  if [[ $? == 0 ]] && grep -qE "[1-9][0-9]* resumed" <<<"$out" && same_pack killed.pack big_one.pack; then
     echo "ok   --mpi --resume completed the pack == single-process pack"
   else echo "FAIL --mpi --resume"; echo "$out" | tail -5; fail=1; fi
 fi

@@ -8,21 +8,7 @@ set -uo pipefail
 st="$1"
 work="$2/shard_merge_test"
 rm -rf "$work" && mkdir -p "$work" && cd "$work"
-fail=0
-check() {  # check NAME EXPECTED_EXIT PATTERN -- command...
-  local name="$1" want="$2" pattern="$3"
-  shift 4
-  local out rc
-  out="$("$@" 2>&1)"
-  rc=$?
-  if [[ "$rc" != "$want" ]]; then
-    echo "FAIL $name: exit $rc, expected $want"; echo "$out" | tail -5; fail=1; return
-  fi
-  if [[ -n "$pattern" ]] && ! grep -qE "$pattern" <<<"$out"; then
-    echo "FAIL $name: output lacks /$pattern/"; echo "$out" | tail -5; fail=1; return
-  fi
-  echo "ok   $name"
-}
+source "$(dirname "${BASH_SOURCE[0]}")/check.sh"
 scene="procedural:city,size=3"
 base=(build "$scene" --light sun:azimuth=30,elevation=50 --encoding dagmh)
 args=("${base[@]}" --resolution 512 -q)
@@ -31,23 +17,7 @@ for i in 0 1 2; do check "part-$i" 0 "" -- "$st" "${args[@]}" --shard $i/3 -o p$
 check bad-shard 1 "shard: expected I/N" -- "$st" "${args[@]}" --shard 3/3 -o bad.part
 check part-not-servable 1 "" -- "$st" inspect p0.part
 check merge 0 "merged m.pack: 3 shards, 1024 cells" -- "$st" merge p2.part p0.part p1.part -o m.pack
-same() {  # same A B: header fields, skip grid and every tile's bytes agree
-  python3 - "$1" "$2" <<'PY'
-import struct, sys
-def load(path):
-    d = open(path, "rb").read()
-    grid_off, grid_size, index_off, count = struct.unpack_from("<QQQQ", d, 208)
-    tiles = {}
-    for i in range(count):
-        tid, off, stored, raw, crc, kind = struct.unpack_from("<QQIIIB", d, index_off + 32 * i)
-        tiles[tid] = (raw, crc, kind, d[off:off + stored])
-    params_size, = struct.unpack_from("<Q", d, 192)
-    return d[:184], d[256:256 + params_size], d[grid_off:grid_off + grid_size], tiles
-a, b = load(sys.argv[1]), load(sys.argv[2])
-sys.exit(0 if a == b and a[3] else 1)
-PY
-}
-if same m.pack one.pack; then echo "ok   merged == one-go (header, params, skip grid, tile bytes)"
+if same_pack m.pack one.pack; then echo "ok   merged == one-go (header, params, skip grid, tile bytes)"
 else echo "FAIL merged pack differs from the one-go build"; fail=1; fi
 check verify-merged 0 "OK: every texel" -- "$st" verify m.pack "$scene" --all
 check gap 1 "gap: no part holds shard 1/3" -- "$st" merge p0.part p2.part -o g.pack
@@ -72,6 +42,6 @@ ls ./*.tmp g.pack o.pack n.pack d.pack c.pack s.pack >/dev/null 2>&1 && { echo "
 cp p1-short.part p1r.part.tmp
 check resume-shard 0 "[1-9][0-9]* resumed" -- "$st" "${base[@]}" --resolution 512 --shard 1/3 -o p1r.part --resume
 check merge-resumed 0 "merged" -- "$st" merge p0.part p1r.part p2.part -o r.pack
-if same r.pack one.pack; then echo "ok   resumed shard merged == one-go"
+if same_pack r.pack one.pack; then echo "ok   resumed shard merged == one-go"
 else echo "FAIL resumed shard's merge differs from the one-go build"; fail=1; fi
 exit $fail
