@@ -77,18 +77,29 @@ TEST(RenderShadow, CubeOnSlabMatchesRayTracedAwayFromEdges) {
   EXPECT_LE(img.differing_fraction(), 0.02);
 }
 
-TEST(RenderShadow, FlatBaselineAtFullResolutionAgreesWithThePack) {
+// A 4-unit cube on a 20-unit slab: the scene of the pack-based tests below.
+Scene cube_on_slab() {
   Scene s;
   s.name = "cube-on-slab";
   add_box(s, "slab", {-10, -1, -10}, {10, 0, 10});
   add_box(s, "cube", {-2, 0, -2}, {2, 4, 2});
-  const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=120,elevation=35"), s.bounds());
+  return s;
+}
+
+// An MH pack of level 9 of `s` under `light`, built into the test folder as NAME.pack.
+std::shared_ptr<PackReader> mh_level9_pack(const Scene& s, const LightSpace& light, const std::string& name) {
   MapBuildOptions o;
   o.map_level = 9;
   o.encoding = Encoding::mh;
-  const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/render_flat_slab.pack";
+  const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/" + name + ".pack";
   build_map(s, light, o, path);
-  const PackEvaluator eval(std::shared_ptr<PackReader>(PackReader::open(path)), 4096);
+  return std::shared_ptr<PackReader>(PackReader::open(path));
+}
+
+TEST(RenderShadow, FlatBaselineAtFullResolutionAgreesWithThePack) {
+  const Scene s = cube_on_slab();
+  const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=120,elevation=35"), s.bounds());
+  const PackEvaluator eval(mh_level9_pack(s, light, "render_flat_slab"), 4096);
   const SceneTracer tracer(s, light);
   Camera cam;
   cam.pos = {-11, 8, 12};
@@ -105,17 +116,9 @@ TEST(RenderShadow, FlatBaselineAtFullResolutionAgreesWithThePack) {
 // where a pixel covers at most a texel; the per-receiver filtered lookup is render's
 // (bit for bit); with pixels of several texels its error stays near fixed-level PCF's.
 TEST(RenderShadow, FootprintReferenceAndHierarchicalFiltering) {
-  Scene s;
-  s.name = "cube-on-slab";
-  add_box(s, "slab", {-10, -1, -10}, {10, 0, 10});
-  add_box(s, "cube", {-2, 0, -2}, {2, 4, 2});
+  const Scene s = cube_on_slab();
   const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=120,elevation=35"), s.bounds());
-  MapBuildOptions o;
-  o.map_level = 9;
-  o.encoding = Encoding::mh;
-  const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/render_footprint_slab.pack";
-  build_map(s, light, o, path);
-  const PackEvaluator eval(std::shared_ptr<PackReader>(PackReader::open(path)), 4096);
+  const PackEvaluator eval(mh_level9_pack(s, light, "render_footprint_slab"), 4096);
   const SceneTracer tracer(s, light);
   const uint32_t w = 120, h = 68;
   Camera near_cam;

@@ -211,16 +211,21 @@ void PackWriter::append_cell_bytes(std::span<const uint8_t> bytes) {
   done_[i] = 1;
 }
 
-void PackWriter::finish_part() {
-  std::lock_guard lock(mu_);
-  const std::string what = tmp_path();
-  if (failed_ || finished_) throw Error(what + ": writer already failed or finished");
-  if (::fsync(fd_) != 0) throw Error(sys_error(what + ": fsync"));
+// The synced journal `what` becomes path_: closed, renamed, the directory synced.
+void PackWriter::publish(const std::string& what) {
   ::close(fd_);
   fd_ = -1;
   if (::rename(what.c_str(), path_.c_str()) != 0) throw Error(sys_error(what + ": rename to " + path_));
   fsync_dir_of(path_);
   finished_ = true;
+}
+
+void PackWriter::finish_part() {
+  std::lock_guard lock(mu_);
+  const std::string what = tmp_path();
+  if (failed_ || finished_) throw Error(what + ": writer already failed or finished");
+  if (::fsync(fd_) != 0) throw Error(sys_error(what + ": fsync"));
+  publish(what);
 }
 
 void PackWriter::finish(const CutGrid& grid) {
@@ -265,11 +270,7 @@ void PackWriter::finish(const CutGrid& grid) {
   if (::fsync(fd_) != 0) throw Error(sys_error(what + ": fsync"));
   write_at(0, h.serialize());
   if (::fsync(fd_) != 0) throw Error(sys_error(what + ": fsync"));
-  ::close(fd_);
-  fd_ = -1;
-  if (::rename(what.c_str(), path_.c_str()) != 0) throw Error(sys_error(what + ": rename to " + path_));
-  fsync_dir_of(path_);
-  finished_ = true;
+  publish(what);
 }
 
 std::vector<uint8_t> encode_cell_bytes(const CutCell& cell, const PackParams& params) {

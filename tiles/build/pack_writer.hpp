@@ -91,6 +91,7 @@ class PackWriter {
   void finish(const CutGrid& grid);
 
  private:
+  void publish(const std::string& what);  // under mu_, after the last fsync
   PackWriter(std::string path, PackParams params);
   void open_new();
   void open_existing();
