@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "tiles/bake/partial.hpp"
 #include "tiles/core/vec.hpp"
 
 namespace st {
@@ -18,6 +19,12 @@ struct Mesh {
   // from the mesh itself (never trusted from the file). Closed meshes are oriented
   // outwards (flipped at load if their signed volume is negative).
   bool closed = false;
+  // Partial occluders (partial.hpp): the fraction of light let through at each crossing,
+  // per channel; {0, 0, 0} is opaque (the default).
+  Rgb transmit{0, 0, 0};
+  int32_t alpha_texture = -1;  // index into Scene::alpha_textures; -1: none
+  // A partial mesh is left out of the opaque map and carried by deep tiles.
+  bool partial() const { return alpha_texture >= 0 || transmit != Rgb{0, 0, 0}; }
 };
 
 struct SceneStats {
@@ -30,11 +37,18 @@ struct Scene {
   std::vector<Vec3d> vertices;                 // world space, double
   std::vector<std::array<uint32_t, 3>> triangles;
   std::vector<Mesh> meshes;                    // partition the triangles, in order
+  // Texture coordinates per triangle corner: empty, or one entry per triangle when some
+  // mesh is alpha-tested.
+  std::vector<std::array<Vec2f, 3>> triangle_uv;
+  std::vector<AlphaTexture> alpha_textures;
+  std::vector<Volume> volumes;
   SceneStats stats;
 
   Aabb bounds() const;
   size_t closed_triangle_count() const;
   bool any_closed() const;
+  // Whether any mesh is partial or any volume is present (a deep map is needed).
+  bool any_partial() const;
   // Stable 64-bit hash of the geometry (for pack headers).
   uint64_t content_hash() const;
 };
@@ -74,6 +88,10 @@ Scene load_scene(const std::string& spec, const SceneOptions& options = {});
 //   hairball seed=1 count=256 segments=96 sides=6     closed thin tubes, one mesh each
 // Unknown names or keys and malformed or out-of-range values throw st::Error.
 Scene make_procedural(const std::string& spec);
+
+// The scene without its partial meshes and volumes (what the opaque map is built from);
+// the scene itself when it has none.
+Scene opaque_part(const Scene& scene);
 
 // One paragraph for CLIs: triangles, vertices, meshes, closed meshes and triangles,
 // dropped degenerates, flipped meshes and the bounds.
