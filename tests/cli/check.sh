@@ -3,6 +3,8 @@
 # the exit code differs or the output lacks the extended regex PATTERN ("" for any).
 # same_pack A B [--ignore-params]: the packs hold the same header fields, params, skip
 # grid and tile bytes (same_pack.py).
+# port_of LOG: waits up to 10 s for a server's banner ("... on 127.0.0.1:PORT") in LOG and
+# prints PORT (nothing when it never came).
 fail=0
 check() {
   local name="$1" want="$2" pattern="$3"
@@ -19,3 +21,11 @@ check() {
   echo "ok   $name"
 }
 same_pack() { python3 "$(dirname "${BASH_SOURCE[0]}")/same_pack.py" "$@"; }
+port_of() {
+  local p
+  for _ in $(seq 1 500); do
+    p=$(grep -oE "on 127\.0\.0\.1:[0-9]+" "$1" 2>/dev/null | head -1 | cut -d: -f2)
+    [[ -n "$p" ]] && { echo "$p"; return; }
+    sleep 0.02
+  done
+}

@@ -118,12 +118,7 @@ openssl req -x509 -newkey ec -pkeyopt ec_paramgen_curve:P-256 -nodes -days 1 -su
 "$st" serve city.pack --listen 127.0.0.1:0 --key-file catalog.key --tls-cert tls.crt --tls-key tls.key \
   2>serve.log &
 spid=$!
-port=""
-for _ in $(seq 1 500); do
-  port=$(grep -oE "on 127\.0\.0\.1:[0-9]+" serve.log | head -1 | cut -d: -f2)
-  [[ -n "$port" ]] && break
-  sleep 0.02
-done
+port=$(port_of serve.log)
 if [[ -z "$port" ]]; then echo "FAIL serve-keyed: no port in serve.log"; cat serve.log; fail=1
 else
   check serve-keyed-load 0 "frames" -- "$st" load --server 127.0.0.1:$port --map city --cameras 2 \

@@ -5,6 +5,7 @@
 # sample (the --jsonl line). With the server gone the file says shadowtile_server_up 0.
 # Usage: prometheus_test.sh PATH/TO/shadowtile WORKDIR
 set -uo pipefail
+source "$(dirname "${BASH_SOURCE[0]}")/check.sh"
 st="$1"
 work="$2/prometheus_test"
 rm -rf "$work" && mkdir -p "$work" && cd "$work"
@@ -16,12 +17,7 @@ fi
 "$st" serve city.pack --listen 127.0.0.1:0 2>serve.log &
 spid=$!
 trap 'kill $spid 2>/dev/null; wait $spid 2>/dev/null' EXIT
-port=""
-for _ in $(seq 1 500); do
-  port=$(grep -oE "on 127\.0\.0\.1:[0-9]+" serve.log | head -1 | cut -d: -f2)
-  [[ -n "$port" ]] && break
-  sleep 0.02
-done
+port=$(port_of serve.log)
 [[ -n "$port" ]] || { echo "FAIL: no port in serve.log"; cat serve.log; exit 1; }
 "$st" load --server 127.0.0.1:$port --map city --cameras 2 --duration 1 --rate 30 >load.log 2>&1 \
   || { echo "FAIL: load run"; tail -5 load.log; exit 1; }

@@ -7,6 +7,7 @@
 # over (a disconnect), and HAProxy's check marks the dead replica DOWN. Every process the
 # test starts is stopped by pid. Usage: replicas_test.sh shadowtile shadowtile-server DEPLOY_DIR WORKDIR
 set -uo pipefail
+source "$(dirname "${BASH_SOURCE[0]}")/check.sh"
 st="$1" srv="$2" deploy="$3"
 work="$4/replicas_test"
 rm -rf "$work" && mkdir -p "$work" && cd "$work"
@@ -16,13 +17,6 @@ cleanup() { for p in "${pids[@]}"; do kill "$p" 2>/dev/null; wait "$p" 2>/dev/nu
 trap cleanup EXIT
 die() { echo "FAIL $*"; exit 1; }
 "$st" build procedural:city,size=3 --light sun:azimuth=30,elevation=50 --resolution 512 -o city.pack -q || die build
-port_of() {  # port_of LOG: the port a server printed in its banner
-  for _ in $(seq 1 500); do
-    local p; p=$(grep -oE "on 127\.0\.0\.1:[0-9]+" "$1" | head -1 | cut -d: -f2)
-    [[ -n "$p" ]] && { echo "$p"; return; }
-    sleep 0.02
-  done
-}
 "$srv" city.pack --listen 127.0.0.1:0 2>s1.log & s1=$!; pids+=($s1)
 "$srv" city.pack --listen 127.0.0.1:0 2>s2.log & s2=$!; pids+=($s2)
 p1=$(port_of s1.log); p2=$(port_of s2.log)
