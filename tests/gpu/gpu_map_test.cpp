@@ -130,6 +130,21 @@ TEST(GpuMap, EveryTexelOfEveryEncodingAnswersBitExactlyLikeTheCpu) {
   }
 }
 
+// The voxel shadow DAG (not among the hierarchy encodings available_encodings names):
+// its depths are the columns' transitions (VSDAG.md "Depth values"), so the GPU's walk to
+// each voxel and bisection must give the CPU's bits, and PCF the CPU's popcount.
+TEST(GpuMap, EveryTexelOfAVsdagMapAnswersBitExactlyLikeTheCpu) {
+  Served s = serve("gpu_exact_vsdag", Encoding::vsdag, 4);
+  ASSERT_TRUE(fetch_all(s.map));
+  GpuMap g(s.map, gputest::options());
+  EXPECT_EQ(g.sync(), s.map.stats().cache.resident);
+  expect_bit_exact(g, s.map, 13);
+  const GpuStats st = g.stats();
+  EXPECT_EQ(st.feedback_tiles, 0u);
+  EXPECT_EQ(st.holes, 0u);
+  EXPECT_EQ(st.validation_messages, 0u);
+}
+
 // The tiles the CPU's page-table walk over the same cache finds absent for each texel.
 std::map<uint64_t, uint32_t> absent_tiles(const client::Map& map, const std::vector<GpuQuery>& q) {
   const client::RemoteMap& rm = client::MapAccess::remote(map);
