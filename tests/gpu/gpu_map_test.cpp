@@ -142,6 +142,7 @@ TEST(GpuMap, EveryTexelOfAVsdagMapAnswersBitExactlyLikeTheCpu) {
   GpuMap g(s.map, gputest::options());
   EXPECT_EQ(g.sync(), s.map.stats().cache.resident);
   expect_bit_exact(g, s.map, 13);
+  const GpuStats st = g.stats();
   EXPECT_EQ(st.feedback_tiles, 0u);
   EXPECT_EQ(st.holes, 0u);
   EXPECT_EQ(st.validation_messages, 0u);
