@@ -82,8 +82,6 @@ struct GpuMap::Impl {
     map_level = h.map_level;
     k = rm->grid().levels;
     encoding = uint32_t(h.encoding);
-    if (h.encoding == Encoding::vsdag)
-      throw GpuError("GpuMap: the pack's encoding vsdag has no GPU evaluator yet (use the CPU client lookups)");
     rm->inspect_cache([&](const TileCache& c) {
       slot_count = c.slot_count();
       slot_bytes = c.slot_bytes();

@@ -9,6 +9,7 @@
 #include "gpu/shaders/st_layout.h"
 #include "tiles/core/dagmh_format.hpp"
 #include "tiles/core/encoding.hpp"
+#include "tiles/core/vsdag_format.hpp"
 #include "tiles/core/mh_quadtree_format.hpp"
 #include "tiles/core/tile_cache.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
@@ -24,7 +25,15 @@ static_assert(layout::kMaxPcf == Evaluator::kMaxPcf);
 static_assert(layout::kPcfTableStride == layout::kMaxPcf * layout::kMaxPcf + 1);
 static_assert(layout::kMaxMapLevel == mhq::kMaxLevels - 1);
 static_assert(layout::kGridHeaderWords * 4 == 8);  // magic + levels before a CutGrid's coarse values
-static_assert(uint32_t(Encoding::mh) == 0 && uint32_t(Encoding::mmh) == 1 && uint32_t(Encoding::dagmh) == 2);
+static_assert(uint32_t(Encoding::mh) == 0 && uint32_t(Encoding::mmh) == 1 && uint32_t(Encoding::dagmh) == 2 &&
+              uint32_t(Encoding::vsdag) == 3);
+// st_vsdag_lit / st_vsdag_depth (st_eval.glsl) read these header words and constants.
+static_assert(offsetof(vsdag::Header, xy_bits) == 3 * 4 && offsetof(vsdag::Header, z_bits) == 4 * 4 &&
+              offsetof(vsdag::Header, grid_xy_bits) == 5 * 4 && offsetof(vsdag::Header, grid_z_bits) == 6 * 4 &&
+              offsetof(vsdag::Header, leaf_offset) == 10 * 4 && offsetof(vsdag::Header, grid_offset) == 11 * 4 &&
+              offsetof(vsdag::Header, node_offset) == 12 * 4);
+static_assert(vsdag::kLeafXyBits == 3 && vsdag::kZNodeBits == 3 && vsdag::kStateShift == 30 &&
+              vsdag::kShadow == 0 && vsdag::kLit == 1 && vsdag::kMixed == 2 && vsdag::kMaxZBits <= 20);
 static_assert(layout::kLevelFromFootprint == kLevelFromFootprint);
 static_assert(layout::kPcWords * 4 <= 128, "push constants: Vulkan guarantees 128 bytes");
 static_assert(layout::kFbRecordWords == 6 && layout::kFbHeaderWords >= 5);

@@ -1,5 +1,5 @@
 // shadowtile GPU evaluators: the page-table walk over the GPU tile cache and the MH, MMH
-// and DAG-MH tile decoders, the same operations as the CPU's (tiles/core/page_table.hpp,
+// DAG-MH and voxel shadow DAG tile decoders, the same operations as the CPU's (tiles/core/page_table.hpp,
 // mh_quadtree_reader.cpp, dagmh_traverse.hpp, dagmh_values.hpp, client/remote_map.cpp),
 // so every answer is bit-exact with the CPU's (gpu/GPU_LAYOUT.md "Exactness").
 //
@@ -217,9 +217,80 @@ float st_dag_depth(uint base, uint level, uint x, uint y) {
   return st_dag_value(base, base + (ST_POOL(base + 15u) >> 2u), base + (ST_POOL(base + 16u) >> 2u), index);
 }
 
+// ---- voxel shadow DAG tiles (voxelized shadows 2014 §4, §6.2; tiles/core/VSDAG.md) ----
+// The mirror of vsdag::View::lit, first_shadow_slab and VsdagEvaluator::depth over header
+// words 3..6 (xy_bits, z_bits, grid_xy_bits, grid_z_bits) and 10..12 (byte offsets of the
+// leaves, grid and nodes). The inner splits are recomputed top down as vsdag::Shape::of
+// does: the axis with more splits left splits alone, equal counts split both.
+uint st_vsdag_ref_slot(uint mask, uint c) {
+  const uint mixed = (mask >> 1u) & ~mask & 0x5555u;
+  return uint(bitCount(mixed & ((1u << (2u * c)) - 1u)));
+}
+
+bool st_vsdag_lit(uint base, uint x, uint y, uint k) {
+  const uint xy_bits = ST_POOL(base + 3u), z_bits = ST_POOL(base + 4u);
+  const uint gx = ST_POOL(base + 5u), gz = ST_POOL(base + 6u);
+  const uint padded = max(xy_bits, 3u);
+  const uint leaves = base + (ST_POOL(base + 10u) >> 2u);
+  const uint grid = base + (ST_POOL(base + 11u) >> 2u);
+  const uint nodes = base + (ST_POOL(base + 12u) >> 2u);
+  const uint xs = padded - gx, zs = z_bits - gz;
+  const uint cell = ST_POOL(grid + (((k >> zs) << (2u * gx)) | ((y >> xs) << gx) | (x >> xs)));
+  if ((cell >> 30u) != 2u) return (cell >> 30u) == 1u;
+  uint w = cell & 0x3FFFFFFFu;
+  uint a = xs - 3u, b = zs - 3u;  // splits left below the grid
+  while (a > 0u || b > 0u) {
+    const bool split_xy = a >= b, split_z = b >= a;
+    uint c = 0u;
+    if (split_xy) {
+      a -= 1u;
+      c |= ((x >> (3u + a)) & 1u) | (((y >> (3u + a)) & 1u) << 1u);
+    }
+    if (split_z) {
+      b -= 1u;
+      c |= ((k >> (3u + b)) & 1u) << 2u;
+    }
+    const uint mask = ST_POOL(nodes + w), s = (mask >> (2u * c)) & 3u;
+    if (s != 2u) return s == 1u;
+    w = ST_POOL(nodes + w + 1u + st_vsdag_ref_slot(mask, c));
+  }
+  const uint mask = ST_POOL(nodes + w), c = k & 7u, s = (mask >> (2u * c)) & 3u;
+  if (s != 2u) return s == 1u;
+  const uint leaf = ST_POOL(nodes + w + 1u + st_vsdag_ref_slot(mask, c));
+  const uint bit = (y & 7u) * 8u + (x & 7u);
+  return ((ST_POOL(leaves + 2u * leaf + (bit >> 5u)) >> (bit & 31u)) & 1u) != 0u;
+}
+
+float st_vsdag_depth(uint base, uint level, uint x, uint y) {
+  const uint finest = ST_POOL(base + 3u), z_bits = ST_POOL(base + 4u);
+  if (level > finest) {
+    const uint sh = level - finest;
+    x = sh >= 32u ? 0u : x >> sh;
+    y = sh >= 32u ? 0u : y >> sh;
+    level = finest;
+  }
+  const uint top = (1u << level) - 1u;
+  x = min(x, top) << (finest - level);
+  y = min(y, top) << (finest - level);
+  // first_shadow_slab: bisection over the column
+  const uint slabs = 1u << z_bits;
+  uint a = 0u, b = slabs;
+  while (a < b) {
+    const uint m = a + (b - a) / 2u;
+    if (st_vsdag_lit(base, x, y, m)) a = m + 1u;
+    else b = m;
+  }
+  if (a >= slabs) return uintBitsToFloat(kLitDepthBits);
+  if (a == 0u) return uintBitsToFloat(0x80000001u);  // nextafter(0, -1): -denorm_min
+  // f / 2^z_bits is exact (a power-of-two scale, f < 2^20); its predecessor is one bit below
+  precise float q = float(a) * uintBitsToFloat((127u - z_bits) << 23u);
+  return uintBitsToFloat(floatBitsToUint(q) - 1u);
+}
+
 float st_tile_depth(uint slot, uint rel, uint x, uint y) {
   const uint base = slot * ST_PAGE(kPtSlotWords);
   const uint enc = ST_PAGE(kPtEncoding);
+  if (enc == 3u) return st_vsdag_depth(base, rel, x, y);
   if (enc == 2u) return st_dag_depth(base, rel, x, y);
   return st_mh_depth(base, rel, x, y, enc == 1u);
 }

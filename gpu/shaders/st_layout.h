@@ -27,7 +27,7 @@ ST_UINT(kPtMagic, 0u)
 ST_UINT(kPtVersion, 1u)
 ST_UINT(kPtMapLevel, 2u)       // L: finest level of the map
 ST_UINT(kPtSkipLevel, 3u)      // K: level of the skip grid's entries
-ST_UINT(kPtEncoding, 4u)       // 0 MH, 1 MMH, 2 DAG-MH (st::Encoding)
+ST_UINT(kPtEncoding, 4u)       // 0 MH, 1 MMH, 2 DAG-MH, 3 vsdag (st::Encoding)
 ST_UINT(kPtSlotCount, 5u)
 ST_UINT(kPtSlotWords, 6u)      // slot stride in the pool, in words
 ST_UINT(kPtSkipCoarse, 7u)     // word offset: (4^K - 1) / 3 coarse values (f32)

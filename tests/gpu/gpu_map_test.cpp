@@ -36,9 +36,10 @@ struct Served {
   client::Map map;
 };
 
-Served serve(const std::string& name, Encoding e, uint32_t slots_extra, uint32_t fixed_slots = 0) {
+Served serve(const std::string& name, Encoding e, uint32_t slots_extra, uint32_t fixed_slots = 0,
+             uint32_t tile_bytes = 512) {
   Served s;
-  s.pack = build_pack(name, test_level(), 7, e, 2, 512);
+  s.pack = build_pack(name, test_level(), 7, e, 2, tile_bytes);
   s.server = start_server({s.pack.path});
   client::ClientOptions o = looptest::quick_options();
   o.cache_slots = fixed_slots ? fixed_slots : uint32_t(s.pack.reader->tiles().size()) + slots_extra;
@@ -128,6 +129,23 @@ TEST(GpuMap, EveryTexelOfEveryEncodingAnswersBitExactlyLikeTheCpu) {
     EXPECT_EQ(st.holes, 0u);
     EXPECT_EQ(st.validation_messages, 0u);
   }
+}
+
+// The voxel shadow DAG (not among the hierarchy encodings available_encodings names):
+// its depths are the columns' transitions (VSDAG.md "Depth values"), so the GPU's walk to
+// each voxel and bisection must give the CPU's bits, and PCF the CPU's popcount. Tiles of
+// 16 KiB: under a 512-byte bound the cut's index tiles answer every texel from their
+// coarse values and no vsdag tile would be decoded (a shader answering 0.5 passed then).
+TEST(GpuMap, EveryTexelOfAVsdagMapAnswersBitExactlyLikeTheCpu) {
+  Served s = serve("gpu_exact_vsdag", Encoding::vsdag, 4, 0, 1u << 14);
+  ASSERT_TRUE(fetch_all(s.map));
+  GpuMap g(s.map, gputest::options());
+  EXPECT_EQ(g.sync(), s.map.stats().cache.resident);
+  expect_bit_exact(g, s.map, 13);
+  const GpuStats st = g.stats();
+  EXPECT_EQ(st.feedback_tiles, 0u);
+  EXPECT_EQ(st.holes, 0u);
+  EXPECT_EQ(st.validation_messages, 0u);
 }
 
 // The tiles the CPU's page-table walk over the same cache finds absent for each texel.
