@@ -73,8 +73,7 @@ bool clip(const Aabb& box, const Vec3d& o, const Vec3d& d, double t0, double t1,
   a = t0;
   b = t1;
   for (int k = 0; k < 3; ++k) {
-    const double lo = k == 0 ? box.lo.x : (k == 1 ? box.lo.y : box.lo.z);
-    const double hi = k == 0 ? box.hi.x : (k == 1 ? box.hi.y : box.hi.z);
+    const double lo = box.lo[k], hi = box.hi[k];
     if (d[k] == 0) {
       if (o[k] < lo || o[k] > hi) return false;
       continue;
@@ -87,15 +86,14 @@ bool clip(const Aabb& box, const Vec3d& o, const Vec3d& d, double t0, double t1,
   return a < b;
 }
 
-}  // namespace
-
-void Volume::march(const Vec3d& origin, const Vec3d& dir, double t0, double t1,
-                   std::vector<Step>& out) const {
-  out.clear();
+// The steps of march(), handed to `step(t, tau)` one by one (no allocation).
+template <class Step>
+void march_steps(const Volume& vol, const Vec3d& origin, const Vec3d& dir, double t0, double t1,
+                 Step&& step) {
   double a, b;
-  if (density.empty() || !clip(bounds, origin, dir, t0, t1, a, b)) return;
-  const Vec3d e = bounds.extent();
-  const double voxel = std::min({e.x / nx, e.y / ny, e.z / nz});
+  if (vol.density.empty() || !clip(vol.bounds, origin, dir, t0, t1, a, b)) return;
+  const Vec3d e = vol.bounds.extent();
+  const double voxel = std::min({e.x / vol.nx, e.y / vol.ny, e.z / vol.nz});
   const double speed = length(dir);
   if (!(speed > 0)) return;
   const double max_dt = 0.5 * voxel / speed;
@@ -103,21 +101,28 @@ void Volume::march(const Vec3d& origin, const Vec3d& dir, double t0, double t1,
   const uint64_t n = std::clamp<uint64_t>(steps, 1, 1u << 20);
   const double dt = (b - a) / double(n);
   Rgb tau{0, 0, 0};
-  out.reserve(n + 1);
-  out.push_back({a, tau});
+  step(a, tau);
   for (uint64_t i = 0; i < n; ++i) {
     const double tm = a + (double(i) + 0.5) * dt;
-    const double rho = density_at(origin + dir * tm) * dt * speed;
-    for (int c = 0; c < 3; ++c) tau[c] += float(rho * sigma[c]);
-    out.push_back({i + 1 == n ? b : a + double(i + 1) * dt, tau});
+    const double rho = vol.density_at(origin + dir * tm) * dt * speed;
+    for (int c = 0; c < 3; ++c) tau[c] += float(rho * vol.sigma[c]);
+    step(i + 1 == n ? b : a + double(i + 1) * dt, tau);
   }
+}
+
+}  // namespace
+
+void Volume::march(const Vec3d& origin, const Vec3d& dir, double t0, double t1,
+                   std::vector<Step>& out) const {
+  out.clear();
+  march_steps(*this, origin, dir, t0, t1, [&](double t, const Rgb& tau) { out.push_back({t, tau}); });
 }
 
 Rgb Volume::optical_depth(const Vec3d& origin, const Vec3d& dir, double t0,
                           double t1) const {
-  std::vector<Step> steps;
-  march(origin, dir, t0, t1, steps);
-  return steps.empty() ? Rgb{0, 0, 0} : steps.back().tau;
+  Rgb last{0, 0, 0};
+  march_steps(*this, origin, dir, t0, t1, [&](double, const Rgb& tau) { last = tau; });
+  return last;
 }
 
 }  // namespace st

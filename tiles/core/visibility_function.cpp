@@ -101,6 +101,18 @@ VisibilityFunction compress(const VisibilityFunction& in, double epsilon) {
   V3 lo{-INFINITY, -INFINITY, -INFINITY}, hi{0, 0, 0};
   size_t last = 0;  // last input vertex inside the current segment
   size_t j = 1;
+  // Ends the segment at input vertex `last`, on the middle slope of the cone (its upper
+  // bound while the cone is still open below); returns that vertex's depth.
+  auto close_segment = [&] {
+    const double ze = vs[last].depth;
+    V3 te;
+    for (int c = 0; c < 3; ++c) {
+      const double s = std::isfinite(lo[c]) ? 0.5 * (lo[c] + hi[c]) : hi[c];
+      te[c] = t0[c] + s * (ze - z0);
+    }
+    emit(ze, te);
+    return ze;
+  };
   while (j < vs.size()) {
     const double zj = vs[j].depth;
     const V3 tj = value_d(vs[j]);
@@ -131,28 +143,14 @@ VisibilityFunction compress(const VisibilityFunction& in, double epsilon) {
       last = j++;
       continue;
     }
-    const double ze = vs[last].depth;
-    V3 te;
-    for (int c = 0; c < 3; ++c) {
-      const double s = std::isfinite(lo[c]) ? 0.5 * (lo[c] + hi[c]) : hi[c];
-      te[c] = t0[c] + s * (ze - z0);
-    }
-    emit(ze, te);
+    const double ze = close_segment();
     z0 = ze;
     t0 = value_d(out.vertices.back());
     lo = {-INFINITY, -INFINITY, -INFINITY}, hi = {0, 0, 0};
     // Re-test vertex j against the new origin (no ++j).
     last = 0;
   }
-  if (last != 0) {
-    const double ze = vs[last].depth;
-    V3 te;
-    for (int c = 0; c < 3; ++c) {
-      const double s = std::isfinite(lo[c]) ? 0.5 * (lo[c] + hi[c]) : hi[c];
-      te[c] = t0[c] + s * (ze - z0);
-    }
-    emit(ze, te);
-  }
+  if (last != 0) close_segment();
   return out;
 }
 
