@@ -16,6 +16,15 @@ bool AlphaTexture::solid(float u, float v) const {
   return alpha[size_t(y) * width + x] >= cutoff * 255.0f;
 }
 
+void AlphaTexture::validate() const {
+  if (width == 0 || height == 0 || alpha.size() != size_t(width) * height)
+    throw Error("alpha texture '" + name + "': " + std::to_string(width) + "x" +
+                std::to_string(height) + " does not match " + std::to_string(alpha.size()) +
+                " texels");
+  if (!(cutoff >= 0 && cutoff <= 1))
+    throw Error("alpha texture '" + name + "': cutoff is not in [0, 1]");
+}
+
 void Volume::validate() const {
   if (bounds.empty() || !is_finite(bounds.lo) || !is_finite(bounds.hi))
     throw Error("volume '" + name + "': empty or non-finite bounds");

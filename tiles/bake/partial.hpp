@@ -32,7 +32,11 @@ struct AlphaTexture {
   float cutoff = 0.5f;
 
   // Nearest texel, coordinates wrapped (repeat) into [0, 1). Non-finite -> not solid.
+  // Requires validate() to have passed.
   bool solid(float u, float v) const;
+  // Throws st::Error naming the texture when it is empty, its size disagrees with
+  // width * height, or the cutoff is not in [0, 1].
+  void validate() const;
 };
 
 // A participating medium on a regular grid over `bounds` (world space): the density at
