@@ -266,7 +266,10 @@ struct GpuMap::Impl {
     const TileId t = mirror_tile[s];
     const uint32_t w = pointer_word(t);
     if (w != ~0u && page_shadow[w] == s) set_page_word(w, L::kNoSlot);
-    tile_slot.erase(t);
+    // The cache may already have moved the tile to another slot that this pass linked
+    // first (slots are compared in index order): that mapping must survive, or an index
+    // tile linked later would not find its child and answer coarser than the CPU.
+    if (auto it = tile_slot.find(t); it != tile_slot.end() && it->second == s) tile_slot.erase(it);
     mirror_tile[s] = kInvalidTile;
     slot_levels[s] = 0;
     --resident;

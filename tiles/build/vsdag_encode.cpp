@@ -63,6 +63,7 @@ class Builder {
           mx_[g][size_t(y) * w + x] = std::max({mx_[g - 1][a], mx_[g - 1][a + 1], mx_[g - 1][b], mx_[g - 1][b + 1]});
         }
     }
+    build_sorted_blocks();
   }
 
   std::vector<uint8_t> run() {
@@ -98,12 +99,21 @@ class Builder {
     return out;
   }
 
-  // Every column of the buffer must have the transition intended for it.
+  // Every column of the buffer must turn from lit to shadowed at the transition intended
+  // for it: slab t - 1 lit and slab t shadowed, read back through the validating opener
+  // and the readers' own walk. (Two walks per column, where the readers' bisection
+  // first_shadow_slab takes z_bits + 1; on the columns this builder writes, lit above one
+  // transition and shadowed below, the two checks are equivalent.)
   void verify(std::span<const uint8_t> bytes) const {
     const VsdagEvaluator ev(bytes);
+    const View& v = ev.view();
     const uint32_t side = 1u << s_.xy_bits, ps = 1u << s_.padded_xy_bits;
     for (uint32_t y = 0; y < side; ++y)
-      for (uint32_t x = 0; x < side; ++x) ST_CHECK(ev.view().first_shadow_slab(x, y) == t_[size_t(y) * ps + x]);
+      for (uint32_t x = 0; x < side; ++x) {
+        const uint32_t t = t_[size_t(y) * ps + x];
+        ST_CHECK(t == 0 || v.lit(x, y, t - 1));
+        ST_CHECK(t == v.slabs() || !v.lit(x, y, t));
+      }
   }
 
  private:
@@ -115,9 +125,67 @@ class Builder {
     return kMixed;
   }
 
+  // Every block the nodes cover (8x8 texels and up) with its columns' transitions sorted,
+  // block-contiguous: level g holds the blocks of 2^g x 2^g texels, block (bx, by) at
+  // [(by * w + bx) << 2g, +4^g). Built by merging the four children of each block.
+  void build_sorted_blocks() {
+    const uint32_t p = s_.padded_xy_bits, ps = 1u << p;
+    sorted_.assign(p + 1, {});
+    for (uint32_t g = kLeafXyBits; g <= p; ++g) {
+      const uint32_t w = ps >> g, n = 1u << (2 * g);
+      std::vector<uint32_t>& out = sorted_[g];
+      out.resize(size_t(ps) * ps);
+      for (uint32_t by = 0; by < w; ++by)
+        for (uint32_t bx = 0; bx < w; ++bx) {
+          uint32_t* dst = out.data() + ((size_t(by) * w + bx) << (2 * g));
+          if (g == kLeafXyBits) {
+            for (uint32_t yy = 0; yy < 8; ++yy)
+              std::copy_n(t_.begin() + size_t((by << g) + yy) * ps + (bx << g), 8, dst + 8 * yy);
+            std::sort(dst, dst + n);
+            continue;
+          }
+          const std::vector<uint32_t>& in = sorted_[g - 1];
+          const uint32_t cw = w * 2, q = n / 4;
+          auto child = [&](uint32_t dx, uint32_t dy) { return in.data() + ((size_t(2 * by + dy) * cw + 2 * bx + dx) << (2 * (g - 1))); };
+          scratch_.resize(n);
+          std::merge(child(0, 0), child(0, 0) + q, child(1, 0), child(1, 0) + q, scratch_.begin());
+          std::merge(child(0, 1), child(0, 1) + q, child(1, 1), child(1, 1) + q, scratch_.begin() + 2 * q);
+          std::merge(scratch_.begin(), scratch_.begin() + 2 * q, scratch_.begin() + 2 * q, scratch_.end(), dst);
+        }
+    }
+  }
+
+  // A block whose columns have no transition strictly inside (z0, z0 + 2^zlog) holds the
+  // same voxels at every depth of that range: lit exactly in the columns whose
+  // transition lies above z0. Its subtree at a given level depends only on which
+  // columns those are, i.e. on how many (the set is the top `lit` of the sorted
+  // transitions); returns false when some transition lies inside.
+  bool depth_uniform(uint32_t x0, uint32_t y0, uint32_t xlog, uint32_t z0, uint32_t zlog, uint32_t& lit) const {
+    const uint32_t w = 1u << (s_.padded_xy_bits - xlog), n = 1u << (2 * xlog);
+    const uint32_t* v = sorted_[xlog].data() + ((size_t(y0 >> xlog) * w + (x0 >> xlog)) << (2 * xlog));
+    const uint32_t* above = std::upper_bound(v, v + n, z0);
+    lit = uint32_t(v + n - above);
+    return above == v + n || *above >= z0 + (1u << zlog);
+  }
+
   // The node at inner level i (i == levels: the z-node) covering the given mixed block;
-  // returns its word offset, shared with an identical earlier node.
+  // returns its word offset, shared with an identical earlier node. Depth-uniform blocks
+  // (depth_uniform) are memoized by (level, block, lit columns): without that the build
+  // visits every node along each column's whole undefined-to-shadow span, although the
+  // merge leaves one node per pattern.
   uint32_t build(uint32_t i, uint32_t x0, uint32_t y0, uint32_t xlog, uint32_t z0, uint32_t zlog) {
+    uint32_t lit = 0;
+    const bool uniform = depth_uniform(x0, y0, xlog, z0, zlog, lit);
+    const UniformKey key{(uint64_t(y0) << 32) | x0, (uint64_t(lit) << 8) | i};
+    if (uniform) {
+      if (const auto it = uniform_.find(key); it != uniform_.end()) return it->second;
+    }
+    const uint32_t at = build_node(i, x0, y0, xlog, z0, zlog);
+    if (uniform) uniform_.emplace(key, at);
+    return at;
+  }
+
+  uint32_t build_node(uint32_t i, uint32_t x0, uint32_t y0, uint32_t xlog, uint32_t z0, uint32_t zlog) {
     uint32_t words[9];
     uint32_t mask = 0, count = 1;
     if (i == s_.levels) {  // 8 slabs of 8x8 leaves (§5 layout)
@@ -170,8 +238,19 @@ class Builder {
     return at;
   }
 
+  struct UniformKey {
+    uint64_t block, lit_level;
+    bool operator==(const UniformKey&) const = default;
+  };
+  struct UniformKeyHash {
+    size_t operator()(const UniformKey& k) const { return size_t(mix64(k.block ^ mix64(k.lit_level))); }
+  };
+
   Shape s_;
   std::vector<uint32_t> t_;
+  std::vector<std::vector<uint32_t>> sorted_;  // build_sorted_blocks
+  std::vector<uint32_t> scratch_;
+  std::unordered_map<UniformKey, uint32_t, UniformKeyHash> uniform_;
   std::vector<std::vector<uint32_t>> mn_, mx_;
   std::vector<uint32_t> nodes_;
   std::vector<uint64_t> leaves_;

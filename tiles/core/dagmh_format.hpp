@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <cstring>
 
+#include "common/bit_count.hpp"
 #include "common/bytes.hpp"
 
 namespace st::dagmh {
@@ -111,19 +112,6 @@ struct ChunkInfo {
 static_assert(sizeof(ChunkInfo) == 24);
 static_assert(offsetof(ChunkInfo, bit_offset) == 16 && offsetof(ChunkInfo, factor_bits) == 20);
 
-
-// Population count for the lookup paths. Without a POPCNT target (baseline x86-64)
-// std::popcount becomes a libgcc call; this inline SWAR form is several times cheaper.
-inline uint32_t bit_count(uint64_t x) {
-#if defined(__POPCNT__) || !(defined(__x86_64__) || defined(__i386__))
-  return uint32_t(std::popcount(x));
-#else
-  x = x - ((x >> 1) & 0x5555555555555555ull);
-  x = (x & 0x3333333333333333ull) + ((x >> 2) & 0x3333333333333333ull);
-  x = (x + (x >> 4)) & 0x0F0F0F0F0F0F0F0Full;
-  return uint32_t((x * 0x0101010101010101ull) >> 56);
-#endif
-}
 
 inline constexpr size_t align4(size_t n) { return (n + 3) & ~size_t(3); }
 

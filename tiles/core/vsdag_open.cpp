@@ -157,7 +157,7 @@ float VsdagEvaluator::pcf_wide(uint64_t x, uint64_t y, uint32_t r, float receive
     const uint64_t row = ((uint64_t(2) << cb) - 1) & ~((uint64_t(1) << ca) - 1);
     uint64_t mask = 0;
     for (uint32_t q = ra; q <= rb; ++q) mask |= row << (8 * q);
-    lit += uint32_t(std::popcount(w.state == kLit ? mask : mask & w.leaf));
+    lit += bit_count(w.state == kLit ? mask : mask & w.leaf);
   }
   return float(lit) / float(r * r);
 }

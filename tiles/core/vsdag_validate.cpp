@@ -71,7 +71,7 @@ View validate(std::span<const uint8_t> bytes) {
     if (mask >> 16) fail("node mask", node_at(w), "bits 16-31 are not zero");
     for (uint32_t c = 0; c < 8; ++c)
       if (((mask >> (2 * c)) & 3) == 3) fail("node mask", node_at(w), "child state 3 is undefined");
-    const uint64_t size = 1 + uint64_t(std::popcount(mixed_bits(mask)));
+    const uint64_t size = 1 + uint64_t(bit_count(mixed_bits(mask)));
     if (w + size > h.node_words) fail("node", node_at(w), "references run past the node section");
     level_of[w] = kUnreached;
     w += uint32_t(size);

@@ -8,6 +8,7 @@
 #include <cstring>
 #include <span>
 
+#include "common/bit_count.hpp"
 #include "tiles/core/vsdag_format.hpp"
 
 namespace st::vsdag {
@@ -15,7 +16,7 @@ namespace st::vsdag {
 // Mixed children before slot c of a mask (their references follow the mask in slot order).
 inline uint32_t mixed_bits(uint32_t mask) { return (mask >> 1) & ~mask & 0x5555u; }
 inline uint32_t ref_slot(uint32_t mask, uint32_t c) {
-  return uint32_t(std::popcount(mixed_bits(mask) & ((1u << (2 * c)) - 1)));
+  return bit_count(mixed_bits(mask) & ((1u << (2 * c)) - 1));
 }
 
 struct View {
