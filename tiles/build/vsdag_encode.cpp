@@ -63,7 +63,6 @@ class Builder {
           mx_[g][size_t(y) * w + x] = std::max({mx_[g - 1][a], mx_[g - 1][a + 1], mx_[g - 1][b], mx_[g - 1][b + 1]});
         }
     }
-    build_sorted_blocks();
   }
 
   std::vector<uint8_t> run() {
@@ -125,47 +124,27 @@ class Builder {
     return kMixed;
   }
 
-  // Every block the nodes cover (8x8 texels and up) with its columns' transitions sorted,
-  // block-contiguous: level g holds the blocks of 2^g x 2^g texels, block (bx, by) at
-  // [(by * w + bx) << 2g, +4^g). Built by merging the four children of each block.
-  void build_sorted_blocks() {
-    const uint32_t p = s_.padded_xy_bits, ps = 1u << p;
-    sorted_.assign(p + 1, {});
-    for (uint32_t g = kLeafXyBits; g <= p; ++g) {
-      const uint32_t w = ps >> g, n = 1u << (2 * g);
-      std::vector<uint32_t>& out = sorted_[g];
-      out.resize(size_t(ps) * ps);
-      for (uint32_t by = 0; by < w; ++by)
-        for (uint32_t bx = 0; bx < w; ++bx) {
-          uint32_t* dst = out.data() + ((size_t(by) * w + bx) << (2 * g));
-          if (g == kLeafXyBits) {
-            for (uint32_t yy = 0; yy < 8; ++yy)
-              std::copy_n(t_.begin() + size_t((by << g) + yy) * ps + (bx << g), 8, dst + 8 * yy);
-            std::sort(dst, dst + n);
-            continue;
-          }
-          const std::vector<uint32_t>& in = sorted_[g - 1];
-          const uint32_t cw = w * 2, q = n / 4;
-          auto child = [&](uint32_t dx, uint32_t dy) { return in.data() + ((size_t(2 * by + dy) * cw + 2 * bx + dx) << (2 * (g - 1))); };
-          scratch_.resize(n);
-          std::merge(child(0, 0), child(0, 0) + q, child(1, 0), child(1, 0) + q, scratch_.begin());
-          std::merge(child(0, 1), child(0, 1) + q, child(1, 1), child(1, 1) + q, scratch_.begin() + 2 * q);
-          std::merge(scratch_.begin(), scratch_.begin() + 2 * q, scratch_.begin() + 2 * q, scratch_.end(), dst);
-        }
-    }
+  // The smallest transition above z0 among the columns of block (x, y) of pyramid level
+  // g (kNone if none), by descending the min-max pyramid: a sub-block entirely at or
+  // below z0 holds none, one entirely above offers its minimum, and a sub-block whose
+  // minimum cannot beat the best found so far is skipped.
+  static constexpr uint32_t kNone = UINT32_MAX;
+  uint32_t next_above(uint32_t g, uint32_t x, uint32_t y, uint32_t z0, uint32_t best) const {
+    const size_t i = size_t(y) * (1u << (s_.padded_xy_bits - g)) + x;
+    if (mx_[g][i] <= z0 || mn_[g][i] >= best) return best;
+    if (mn_[g][i] > z0) return mn_[g][i];
+    for (uint32_t c = 0; c < 4; ++c) best = next_above(g - 1, 2 * x + (c & 1), 2 * y + (c >> 1), z0, best);
+    return best;
   }
 
   // A block whose columns have no transition strictly inside (z0, z0 + 2^zlog) holds the
   // same voxels at every depth of that range: lit exactly in the columns whose
-  // transition lies above z0. Its subtree at a given level depends only on which
-  // columns those are, i.e. on how many (the set is the top `lit` of the sorted
-  // transitions); returns false when some transition lies inside.
-  bool depth_uniform(uint32_t x0, uint32_t y0, uint32_t xlog, uint32_t z0, uint32_t zlog, uint32_t& lit) const {
-    const uint32_t w = 1u << (s_.padded_xy_bits - xlog), n = 1u << (2 * xlog);
-    const uint32_t* v = sorted_[xlog].data() + ((size_t(y0 >> xlog) * w + (x0 >> xlog)) << (2 * xlog));
-    const uint32_t* above = std::upper_bound(v, v + n, z0);
-    lit = uint32_t(v + n - above);
-    return above == v + n || *above >= z0 + (1u << zlog);
+  // transition lies above z0, i.e. those at or above the smallest such transition
+  // (`above`). Its subtree at a given level depends only on that set, so (level, block,
+  // above) names it; returns false when some transition lies inside.
+  bool depth_uniform(uint32_t x0, uint32_t y0, uint32_t xlog, uint32_t z0, uint32_t zlog, uint32_t& above) const {
+    above = next_above(xlog, x0 >> xlog, y0 >> xlog, z0, kNone);
+    return above == kNone || above >= z0 + (1u << zlog);
   }
 
   // The node at inner level i (i == levels: the z-node) covering the given mixed block;
@@ -174,9 +153,9 @@ class Builder {
   // visits every node along each column's whole undefined-to-shadow span, although the
   // merge leaves one node per pattern.
   uint32_t build(uint32_t i, uint32_t x0, uint32_t y0, uint32_t xlog, uint32_t z0, uint32_t zlog) {
-    uint32_t lit = 0;
-    const bool uniform = depth_uniform(x0, y0, xlog, z0, zlog, lit);
-    const UniformKey key{(uint64_t(y0) << 32) | x0, (uint64_t(lit) << 8) | i};
+    uint32_t above = 0;
+    const bool uniform = depth_uniform(x0, y0, xlog, z0, zlog, above);
+    const UniformKey key{(uint64_t(y0) << 32) | x0, (uint64_t(above) << 8) | i};
     if (uniform) {
       if (const auto it = uniform_.find(key); it != uniform_.end()) return it->second;
     }
@@ -239,17 +218,15 @@ class Builder {
   }
 
   struct UniformKey {
-    uint64_t block, lit_level;
+    uint64_t block, above_level;
     bool operator==(const UniformKey&) const = default;
   };
   struct UniformKeyHash {
-    size_t operator()(const UniformKey& k) const { return size_t(mix64(k.block ^ mix64(k.lit_level))); }
+    size_t operator()(const UniformKey& k) const { return size_t(mix64(k.block ^ mix64(k.above_level))); }
   };
 
   Shape s_;
   std::vector<uint32_t> t_;
-  std::vector<std::vector<uint32_t>> sorted_;  // build_sorted_blocks
-  std::vector<uint32_t> scratch_;
   std::unordered_map<UniformKey, uint32_t, UniformKeyHash> uniform_;
   std::vector<std::vector<uint32_t>> mn_, mx_;
   std::vector<uint32_t> nodes_;
