@@ -138,6 +138,7 @@ Scene make_procedural(const std::string& spec) {
   const Vec3d offset{p.real("ox", 0.0, -1e30, 1e30), p.real("oy", 0.0, -1e30, 1e30),
                      p.real("oz", 0.0, -1e30, 1e30)};
   std::vector<MeshSoup> meshes;
+  PartialExtras extras;
   if (name == "cube")
     meshes = make_cube(p);
   else if (name == "sphere")
@@ -152,9 +153,13 @@ Scene make_procedural(const std::string& spec) {
     meshes = make_terrain(p);
   else if (name == "hairball")
     meshes = make_hairball(p);
+  else if (name == "forest")
+    meshes = make_forest(p, extras);
+  else if (name == "smoke")
+    meshes = make_smoke(p, extras);
   else
     throw Error("procedural scene '" + spec + "': unknown name '" + name +
-                "' (known: cube, sphere, plane, boxes, city, terrain, hairball)");
+                "' (known: cube, sphere, plane, boxes, city, terrain, hairball, forest, smoke)");
 
   Scene scene;
   scene.name = spec;
@@ -164,6 +169,13 @@ Scene make_procedural(const std::string& spec) {
     if (scale != 1.0 || !(offset == Vec3d{}))
       for (auto& v : m.vertices) v = v * scale + offset;
     append_mesh(scene, std::move(m));
+  }
+  scene.alpha_textures = std::move(extras.textures);
+  for (Volume& v : extras.volumes) {
+    // Density stays per unit of world length: a scaled cloud is thicker.
+    v.bounds.lo = v.bounds.lo * scale + offset;
+    v.bounds.hi = v.bounds.hi * scale + offset;
+    scene.volumes.push_back(std::move(v));
   }
   return scene;
 }
