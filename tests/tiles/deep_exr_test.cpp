@@ -36,6 +36,17 @@ TEST(DeepExr, RoundTripKeepsEveryFunction) {
       non_empty += !in.functions[i].vertices.empty();
     }
     EXPECT_GT(non_empty, 0u) << spec;
+    // OpenEXR's own compositing of the monochrome file gives 1 - V behind everything.
+    if (in.functions[0].monochrome && back.functions[0].monochrome) {
+      const std::vector<float> alpha = composite_deep_exr_alpha(path);
+      ASSERT_EQ(alpha.size(), in.functions.size());
+      float most = 0;
+      for (size_t i = 0; i < alpha.size(); ++i) {
+        EXPECT_NEAR(alpha[i], 1 - in.functions[i].eval(2.0f)[0], 1e-4) << spec << " " << i;
+        most = std::max(most, alpha[i]);
+      }
+      EXPECT_GT(most, 0.05f) << spec;
+    }
   }
 }
 

@@ -2,6 +2,8 @@
 #include "tiles/bake/deep_exr.hpp"
 
 #include <ImfChannelList.h>
+#include <ImfCompositeDeepScanLine.h>
+#include <ImfFrameBuffer.h>
 #include <ImfDeepFrameBuffer.h>
 #include <ImfDeepScanLineInputFile.h>
 #include <ImfDeepScanLineOutputFile.h>
@@ -235,6 +237,32 @@ DeepRegion read_deep_exr(const std::string& path) {
     throw FormatError(path + ": reading the deep EXR failed: " + e.what());
   }
   return out;
+}
+
+std::vector<float> composite_deep_exr_alpha(const std::string& path) {
+  try {
+    Imf::DeepScanLineInputFile in(path.c_str());
+    if (!in.header().channels().findChannel("A"))
+      throw FormatError(path + ": a coloured deep EXR has no A channel to composite");
+    const auto dw = in.header().dataWindow();
+    if (dw.min.x != 0 || dw.min.y != 0 || dw.max.x < 0 || dw.max.y < 0 ||
+        uint64_t(dw.max.x) >= kMaxSide || uint64_t(dw.max.y) >= kMaxSide)
+      throw FormatError(path + ": data window is empty, too large or not at (0, 0)");
+    const size_t w = size_t(dw.max.x) + 1, h = size_t(dw.max.y) + 1;
+    std::vector<float> alpha(w * h, 0.0f);
+    Imf::CompositeDeepScanLine comp;
+    comp.addSource(&in);
+    Imf::FrameBuffer fb;
+    fb.insert("A", Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(alpha.data()), sizeof(float),
+                              sizeof(float) * w));
+    comp.setFrameBuffer(fb);
+    comp.readPixels(0, int(h) - 1);
+    return alpha;
+  } catch (const FormatError&) {
+    throw;
+  } catch (const std::exception& e) {
+    throw FormatError(path + ": compositing the deep EXR failed: " + e.what());
+  }
 }
 
 }  // namespace st

@@ -36,4 +36,9 @@ inline constexpr uint64_t kMaxDeepExrSamples = uint64_t(1) << 28;  // read-side 
 void write_deep_exr(const std::string& path, const DeepRegion& region, double epsilon = -1);
 DeepRegion read_deep_exr(const std::string& path);
 
+// What a compositor sees: OpenEXR's own deep compositing (Imf::CompositeDeepScanLine)
+// flattens a monochrome file to one alpha per texel, row-major; it should equal 1 - V
+// behind the last sample. Throws st::FormatError for a coloured or unreadable file.
+std::vector<float> composite_deep_exr_alpha(const std::string& path);
+
 }  // namespace st
