@@ -399,7 +399,7 @@ VisibilityFunction texel_function(uint32_t level, uint64_t x, uint64_t y,
   ptrs.reserve(samples.size());
   for (const auto& f : samples) ptrs.push_back(&f);
   const std::vector<double> w(samples.size(), 1.0);
-  VisibilityFunction avg = average(ptrs, w);
+  VisibilityFunction avg = average_sweep(ptrs, w);  // DSM 2000 §5.1
   if (!compress_it) return avg;
   return compress(avg, o.effective_epsilon());
 }

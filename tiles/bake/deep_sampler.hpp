@@ -16,8 +16,8 @@
 // Pixel filter: a box over the texel (every sample weight 1/N; §3.1 leaves the filter
 // free). With a box, the average of a 2x2 block of texels is exactly the box-filtered
 // texel of the next coarser level, so mip levels built by averaging (§5.3) are the same
-// filter at every level. Samples are combined exactly with average() and then
-// compressed with compress(f, epsilon) (§3.3).
+// filter at every level. Samples are combined exactly by the sweep of §5.1
+// (average_sweep) and then compressed with compress(f, epsilon) (§3.3).
 //
 // Only partial meshes (Mesh::partial()) and volumes are seen: opaque casters are the
 // opaque map's (opaque_part()), and a receiver's light is the product of the two.
