@@ -9,6 +9,8 @@
 
 #include "common/error.hpp"
 #include "tiles/bake/scene_mesh.hpp"
+#include "tiles/build/deep_encode.hpp"
+#include "tiles/core/deep_tile.hpp"
 
 namespace st {
 namespace {
@@ -59,6 +61,56 @@ TEST(DeepSampler, TwoThinSlabsGiveTheAnalyticSteps) {
   ASSERT_EQ(one.vertices.size(), 4u);
   EXPECT_EQ(one.eval(one.vertices[0].depth)[0], 1.0f);
   EXPECT_EQ(one.eval_after(one.vertices[0].depth)[0], 0.5f);
+}
+
+TEST(DeepSampler, PartialCoverageIsTheCoveredFractionOfTheTexel) {
+  // A card blocking all light whose edge at world x = 0.3 crosses a
+  // texel: the texel's value behind it is the uncovered fraction (§3.1, Figure 3b),
+  // within one stratum of the 8 x 8 jittered grid.
+  Scene s;
+  s.name = "edge";
+  append_mesh(s, MeshSoup{"card", {{-4, 0, -4}, {-4, 0, 4}, {0.3, 0, 4}, {0.3, 0, -4}}, {{0, 1, 2}, {0, 2, 3}}});
+  append_mesh(s, quad("far", -1, 5, {1, 1, 1}));  // widens the light box, lets all light through
+  const LightSpace light = overhead(s);
+  // The card blocks all light through a solid alpha texture (what makes it partial).
+  s.triangle_uv.assign(s.triangles.size(), {});
+  s.alpha_textures.push_back(AlphaTexture{"solid", 1, 1, {255}, 0.5f});
+  s.meshes[0].alpha_texture = 0;
+  const DeepSampler sampler(s, light);
+  const uint32_t level = 3, res = 1u << level;
+  const LightPoint e = light.to_light({0.3, 0, 0.5}), in = light.to_light({-1, 0, 0.5});
+  const bool along_u = std::fabs(in.u - e.u) > std::fabs(in.v - e.v);
+  const double w = along_u ? e.u : e.v;  // the edge's coordinate across it
+  const auto [tx, ty] = LightSpace::texel_of(level, e.u, e.v);
+  const double lo = double(along_u ? tx : ty) / res;
+  const double covered_below = (w - lo) * res;  // fraction of the texel below the edge
+  const bool card_below = (along_u ? in.u - e.u : in.v - e.v) < 0;
+  const double expect = card_below ? 1 - covered_below : covered_below;
+  DeepSampleOptions o;
+  o.samples_per_side = 8;
+  o.epsilon = 0;
+  const VisibilityFunction f = sampler.texel(level, tx, ty, o, false);
+  EXPECT_NEAR(f.eval_after(float(e.d + 1e-3))[0], expect, 1.0 / 8 + 1e-6);
+  EXPECT_GT(f.eval_after(float(e.d + 1e-3))[0], 0.0f);
+  EXPECT_LT(f.eval_after(float(e.d + 1e-3))[0], 1.0f);
+}
+
+TEST(DeepSampler, SpotLightDepthsAreTheLightsDepths) {
+  Scene s;
+  s.name = "spot";
+  append_mesh(s, quad("top", 1, 5, {0.5f, 0.5f, 0.5f}));
+  append_mesh(s, quad("bottom", 0, 5, {0.5f, 0.5f, 0.5f}));
+  const LightSpace light =
+      LightSpace::fit(LightSpec::parse("spot:pos=0.3,6,0.2,target=0,0,0,fov=60"), s.bounds());
+  const DeepSampler sampler(s, light);
+  for (const Vec3d& p : {Vec3d{0.5, 1, -0.7}, Vec3d{-1, 0, 1.5}}) {
+    const LightPoint lp = light.to_light(p);
+    const VisibilityFunction f = sampler.ray_function(lp.u, lp.v);
+    ASSERT_GE(f.vertices.size(), 2u);
+    bool found = false;
+    for (const VisVertex& v : f.vertices) found = found || std::fabs(v.depth - lp.d) < 1e-5;
+    EXPECT_TRUE(found) << "no step at the light depth " << lp.d << " of the surface point";
+  }
 }
 
 TEST(DeepSampler, AlphaTextureBlocksWhereSolid) {
@@ -154,6 +206,33 @@ TEST(DeepSampler, CompressionStaysWithinEpsilonOnEveryTexel) {
     // Deterministic: one texel alone equals the same texel of the region.
     EXPECT_EQ(sampler.texel(level, 1, 1, o), packed.at(1, 1)) << spec;
   }
+}
+
+TEST(DeepSampler, AnEncodedTileAnswersLikeTheSampledFunctions) {
+  // A sampled 8 x 8 block of semi-transparent hair as one deep tile: mip 0 answers the
+  // sampler's compressed functions (to the unorm16 rounding), mip 1 the average of four
+  // uncompressed texels within the tile's bound.
+  const Scene s = make_procedural("procedural:hairball,count=16,segments=30,transmit=0.5");
+  const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=40,elevation=60"), s.bounds());
+  const DeepSampler sampler(s, light);
+  DeepSampleOptions o;
+  o.samples_per_side = 2;
+  o.epsilon = 0.02;
+  const TraceRegion r{5, 12, 12, 8, 8};
+  const DeepRegion raw = sampler.trace(r, o, nullptr, false);
+  const DeepRegion packed = sampler.trace(r, o);
+  const std::vector<uint8_t> bytes = encode_deep_tile(packed.functions, 3, o.epsilon);
+  const DeepTileView v = DeepTileView::open(bytes);
+  for (uint32_t j = 0; j < 8; ++j)
+    for (uint32_t i = 0; i < 8; ++i) {
+      EXPECT_LE(max_difference(v.function(i, j, 0), packed.at(i, j)), deep::kQuantisation + 1e-6);
+      if (i % 2 || j % 2) continue;
+      const VisibilityFunction* kids[4] = {&raw.at(i, j), &raw.at(i + 1, j), &raw.at(i, j + 1),
+                                           &raw.at(i + 1, j + 1)};
+      const double w[4] = {1, 1, 1, 1};
+      EXPECT_LE(max_difference(v.function(i / 2, j / 2, 1), average(kids, w)),
+                o.epsilon * 1.5 + deep::kQuantisation + 1e-6);
+    }
 }
 
 TEST(DeepSampler, RefusesBadOptionsAndScenes) {
