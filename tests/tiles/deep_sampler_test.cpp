@@ -208,6 +208,34 @@ TEST(DeepSampler, CompressionStaysWithinEpsilonOnEveryTexel) {
   }
 }
 
+TEST(DeepSampler, StiffFunctionsStayWithinEpsilon) {
+  // Thousands of steps (1000 stacked sheets letting 99.5% through), near-total opacity in
+  // a thin slab (a dense volume) behind them: every texel of a small map stays within
+  // epsilon after compression, and compression removes most vertices.
+  Scene s;
+  s.name = "stiff";
+  for (int k = 0; k < 1000; ++k) append_mesh(s, quad("sheet", 1 + 0.001 * k, 3, {0.995f, 0.995f, 0.995f}));
+  Volume v;
+  v.name = "dense";
+  v.bounds.extend({-3, 0.4, -3});
+  v.bounds.extend({3, 0.45, 3});
+  v.nx = v.nz = 4, v.ny = 2;
+  v.density.assign(32, 400.0f);
+  s.volumes.push_back(v);
+  const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=10,elevation=80"), s.bounds());
+  const DeepSampler sampler(s, light);
+  DeepSampleOptions o;
+  o.samples_per_side = 2;
+  o.epsilon = 0.01;
+  DeepSampleStats st;
+  const DeepRegion raw = sampler.trace({2, 0, 0, 4, 4}, o, nullptr, false);
+  const DeepRegion packed = sampler.trace({2, 0, 0, 4, 4}, o, &st);
+  EXPECT_GT(st.vertices_in, 16u * 2000);
+  EXPECT_LT(st.vertices_out * 20, st.vertices_in);
+  for (size_t i = 0; i < raw.functions.size(); ++i)
+    EXPECT_LE(max_difference(raw.functions[i], packed.functions[i]), o.epsilon + 1e-6) << i;
+}
+
 TEST(DeepSampler, AnEncodedTileAnswersLikeTheSampledFunctions) {
   // A sampled 8 x 8 block of semi-transparent hair as one deep tile: mip 0 answers the
   // sampler's compressed functions (to the unorm16 rounding), mip 1 the average of four
