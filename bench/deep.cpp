@@ -4,8 +4,9 @@
 // map is sampled and encoded as one deep tile (mips included). Per row: vertices per
 // non-empty texel before and after compression, the tile's bytes, sampling time, lookup
 // time (point and trilinear, ns), and the error of mip-0 lookups against a reference
-// texel of 32 x 32 = 1024 samples (uncompressed) at random depths. The last table fits
-// vertices per texel against N (the paper finds O(N^1/4) for smooth functions).
+// texel of 32 x 32 = 1024 samples (uncompressed) at random depths; a fit of vertices per
+// texel against N (the paper finds O(N^1/4) for smooth functions); and for the leaves
+// the opaque alternative of DSM 2000 Figure 6: a finer depth map with PCF.
 //
 //   bench_deep [--quick] [--json PATH]
 #include <algorithm>
@@ -141,6 +142,60 @@ int main(int argc, char** argv) {
                       {"trace_seconds", trace_s}, {"point_lookup_ns", point_ns},
                       {"trilinear_lookup_ns", tri_ns}, {"max_error", max_err},
                       {"mean_error", sum_err / double(n_err)}});
+    }
+    // DSM 2000 Figure 6 in our setting, for the alpha-tested leaves (each sample's
+    // function is one step to 0, so an opaque depth map represents it exactly): a depth
+    // map s times finer than the deep map, filtered with s x s PCF per deep texel (the
+    // same number of samples as a deep map of N = s^2), its bytes and lookup time, and
+    // its error against the same reference texels.
+    if (name == "leaves") {
+      for (uint32_t s : sides) {
+        const uint32_t fine = side * s;
+        std::vector<float> depth(size_t(fine) * fine, 1.0f);
+        const double inv = std::ldexp(1.0, -int(level)) / s;
+        for (uint32_t j = 0; j < fine; ++j)
+          for (uint32_t i = 0; i < fine; ++i) {
+            const st::VisibilityFunction f =
+                sampler.ray_function(double(x0) / (1u << level) + (i + 0.5) * inv,
+                                     double(y0) / (1u << level) + (j + 0.5) * inv);
+            for (const st::VisVertex& v : f.vertices)
+              if (f.eval_after(v.depth)[0] < 0.5f) {
+                depth[size_t(j) * fine + i] = v.depth;
+                break;
+              }
+          }
+        std::uniform_real_distribution<double> u(0, 1);
+        auto pcf = [&](uint32_t ti, uint32_t tj, float z) {
+          uint32_t lit = 0;
+          for (uint32_t b = 0; b < s; ++b)
+            for (uint32_t a = 0; a < s; ++a) lit += z <= depth[size_t(tj * s + b) * fine + ti * s + a];
+          return float(lit) / float(s * s);
+        };
+        double max_err = 0, sum_err = 0;
+        uint64_t n_err = 0;
+        for (const Probe& pr : probes)
+          for (int k = 0; k < 64; ++k) {
+            const float z = float(u(rng));
+            const double e = std::fabs(double(pcf(pr.i, pr.j, z)) - pr.ref.eval(z)[0]);
+            max_err = std::max(max_err, e), sum_err += e, ++n_err;
+          }
+        const int lookups = 1 << 18;
+        std::vector<std::array<double, 3>> at(4096);
+        for (auto& p : at) p = {u(rng), u(rng), u(rng)};
+        float sink = 0;
+        const double t1 = now();
+        for (int k = 0; k < lookups; ++k) {
+          const auto& p = at[size_t(k) & 4095];
+          sink += pcf(uint32_t(p[0] * side), uint32_t(p[1] * side), float(p[2]));
+        }
+        const double ns = (now() - t1) / lookups * 1e9;
+        const size_t bytes = depth.size() * sizeof(float);
+        std::printf("%-7s opaque depth map %ux finer, %ux%u PCF: %9zu bytes, %7.1f ns a lookup, "
+                    "max err %.4f, mean err %.5f%s\n",
+                    name.c_str(), s, s, s, bytes, ns, max_err, sum_err / double(n_err), sink < 0 ? " " : "");
+        rows.push_back({{"scene", name}, {"opaque_pcf_side", s}, {"samples", s * s}, {"bytes", bytes},
+                        {"lookup_ns", ns}, {"max_error", max_err}, {"mean_error", sum_err / double(n_err)}});
+      }
     }
     // Least-squares slope of log(vertices) against log(N).
     if (log_n.size() >= 2) {
