@@ -1,5 +1,6 @@
 // make_procedural: spec parsing, the common scale/offset keys and the small test scenes
-// (cube, sphere, plane, boxes). The big scenes live in procedural_{city,terrain,hairball}.cpp.
+// (cube, sphere, plane, boxes). The big scenes live in procedural_{city,terrain,hairball}.cpp,
+// the partial occluders (forest, smoke) in procedural_partial.cpp.
 #include "tiles/bake/procedural.hpp"
 
 #include <algorithm>
