@@ -1,7 +1,11 @@
-// shadowtile export: decodes a region of any level of a pack back to an image.
+// shadowtile export: decodes a region of any level of a pack back to an image; with
+// --deep, samples a scene's partial occluders into a deep shadow map (DSM 2000 §3.1-§3.3)
+// and writes it as a deep scanline OpenEXR (tiles/bake/deep_exr.hpp).
+#include <chrono>
 #include <cstdio>
 #include <thread>
 
+#include "tiles/bake/deep_exr.hpp"
 #include "tiles/bake/exr_io.hpp"
 #include "tiles/bake/png_io.hpp"
 #include "app/command.hpp"
@@ -16,9 +20,60 @@ struct ExportArgs {
   std::string pack, region, out;
   uint32_t level = 0;
   bool level_set = false;
+  // --deep
+  bool deep = false;
+  std::string light, up = "y";
+  uint32_t samples = 4;
+  double epsilon = -1;
+  uint64_t seed = 1;
 };
 
+constexpr uint64_t kMaxDeepRegion = uint64_t(1024) * 1024;  // functions held in memory
+
+void run_deep(const ExportArgs& a) {
+  if (a.light.empty()) throw Error("export --deep: --light is required");
+  const LightSpec spec = LightSpec::parse(a.light);
+  SceneOptions so;
+  if (a.up == "z") so.up = UpAxis::z;
+  else if (a.up != "y") throw Error("--up: expected y or z, got '" + a.up + "'");
+  const uint32_t level = a.level_set ? a.level : 8;
+  if (level > kMaxLevel) throw Error("--level " + std::to_string(level) + " exceeds " + std::to_string(kMaxLevel));
+  const uint64_t side = uint64_t(1) << level;
+  Rect r{0, 0, side, side};
+  if (!a.region.empty()) r = parse_rect("--region", a.region);
+  if (r.w == 0 || r.h == 0 || r.x >= side || r.y >= side || r.w > side - r.x || r.h > side - r.y)
+    throw Error("--region lies outside the " + std::to_string(side) + "^2 map of level " +
+                std::to_string(level));
+  if (r.w * r.h > kMaxDeepRegion)
+    throw Error("export --deep: region " + std::to_string(r.w) + "x" + std::to_string(r.h) +
+                " exceeds 1024^2 texels; pass a smaller --region or a coarser --level");
+  const Scene scene = load_scene(a.pack, so);
+  if (!scene.any_partial())
+    throw Error("export --deep: scene '" + a.pack +
+                "' has no partial occluder (no transmittance, alpha texture or volume): "
+                "its shadows are all in the opaque map");
+  // The light is fitted to the whole scene, as `build` fits the opaque map's.
+  const LightSpace light = LightSpace::fit(spec, scene.bounds());
+  const DeepSampler sampler(scene, light);
+  DeepSampleOptions o;
+  o.samples_per_side = a.samples;
+  o.epsilon = a.epsilon;
+  o.seed = a.seed;
+  DeepSampleStats st;
+  const DeepRegion deep = sampler.trace({level, r.x, r.y, uint32_t(r.w), uint32_t(r.h)}, o, &st);
+  write_deep_exr(a.out, deep, o.effective_epsilon());
+  std::printf("exported deep level %u region %llu,%llu,%llux%llu of %s to %s: %llu rays, "
+              "%.2f vertices per texel (%.2f before compression at epsilon %.4g), %llu of %llu "
+              "texels monochrome, %.2f s\n",
+              level, (unsigned long long)r.x, (unsigned long long)r.y, (unsigned long long)r.w,
+              (unsigned long long)r.h, a.pack.c_str(), a.out.c_str(), (unsigned long long)st.rays,
+              double(st.vertices_out) / double(st.texels), double(st.vertices_in) / double(st.texels),
+              o.effective_epsilon(), (unsigned long long)st.monochrome,
+              (unsigned long long)st.texels, st.seconds);
+}
+
 void run(const ExportArgs& a) {
+  if (a.deep) return run_deep(a);
   std::shared_ptr<const PackReader> reader = PackReader::open(a.pack);
   reader->check_depth_range();  // coarse levels are decoded as they lie: refuse garbage
   const uint32_t level = a.level_set ? a.level : std::min<uint32_t>(reader->map_level(), 12);
@@ -74,8 +129,18 @@ void run(const ExportArgs& a) {
 void setup(CLI::App& app) {
   auto a = std::make_shared<ExportArgs>();
   app.footer("Example:\n  shadowtile export city.pack --level 12 -o city_l12.exr\n"
-             "  shadowtile export city.pack --level 16 --region 30000,30000,2048,2048 -o detail.exr");
-  app.add_option("pack", a->pack, "Pack file")->required();
+             "  shadowtile export city.pack --level 16 --region 30000,30000,2048,2048 -o detail.exr\n"
+             "  shadowtile export --deep procedural:forest --light sun:azimuth=30,elevation=50 --level 8 -o forest_deep.exr");
+  app.add_option("pack", a->pack, "Pack file (with --deep: a scene file or procedural:NAME)")->required();
+  app.add_flag("--deep", a->deep,
+               "Sample the scene's partial occluders (transmittance, alpha textures, volumes) "
+               "into a deep shadow map and write a deep scanline EXR (Z, ZBack, A or AR/AG/AB); "
+               "default --level 8");
+  app.add_option("--light", a->light, "With --deep: the light, as for build");
+  app.add_option("--samples", a->samples, "With --deep: jittered samples per texel side (N = S^2, 1..64; default 4)");
+  app.add_option("--epsilon", a->epsilon, "With --deep: compression bound (default 0.25 / sqrt(N), DSM 2000 §4)");
+  app.add_option("--seed", a->seed, "With --deep: jitter seed (default 1)");
+  app.add_option("--up", a->up, "With --deep: up axis of a scene file, y (default) or z");
   app.add_option("--level", a->level, "Level to decode (each level is a complete map; default min(L, 12))")
       ->each([a](const std::string&) { a->level_set = true; });
   app.add_option("--region", a->region, "X,Y,W,H in texels of that level (default: the whole level)");

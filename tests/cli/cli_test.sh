@@ -55,6 +55,10 @@ check verify-vsdag-mismatch 3 "FAILED: 3 texels break the vsdag contract" -- "$s
 check bad-intervals 1 "intervals: expected default or static" -- "$st" build procedural:cube $light --resolution 256 --intervals sometimes -o x.pack -q
 check export 0 "exported level 8" -- "$st" export city.pack --level 8 -o l8.exr
 check export-bad-level 1 "exceeds" -- "$st" export city.pack --level 30 -o l.exr
+# Deep shadow maps of partial occluders: a deep scanline EXR; a scene without any is refused.
+check export-deep 0 "exported deep level 5 region 0,0,32x32" -- "$st" export --deep procedural:forest,trees=2,leaves=50,size=8,translucency=0.5 $light --level 5 --samples 2 -o deep.exr
+[[ -f deep.exr ]] || { echo "FAIL export --deep output missing"; fail=1; }
+check export-deep-opaque 1 "has no partial occluder" -- "$st" export --deep procedural:cube $light --level 4 -o d.exr
 # Corrupt one byte inside the first tile payload: verify must fail and name the tile.
 python3 - <<'PY'
 import struct

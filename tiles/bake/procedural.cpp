@@ -1,5 +1,6 @@
 // make_procedural: spec parsing, the common scale/offset keys and the small test scenes
-// (cube, sphere, plane, boxes). The big scenes live in procedural_{city,terrain,hairball}.cpp.
+// (cube, sphere, plane, boxes). The big scenes live in procedural_{city,terrain,hairball}.cpp,
+// the partial occluders (forest, smoke) in procedural_partial.cpp.
 #include "tiles/bake/procedural.hpp"
 
 #include <algorithm>
@@ -138,6 +139,7 @@ Scene make_procedural(const std::string& spec) {
   const Vec3d offset{p.real("ox", 0.0, -1e30, 1e30), p.real("oy", 0.0, -1e30, 1e30),
                      p.real("oz", 0.0, -1e30, 1e30)};
   std::vector<MeshSoup> meshes;
+  PartialExtras extras;
   if (name == "cube")
     meshes = make_cube(p);
   else if (name == "sphere")
@@ -152,9 +154,13 @@ Scene make_procedural(const std::string& spec) {
     meshes = make_terrain(p);
   else if (name == "hairball")
     meshes = make_hairball(p);
+  else if (name == "forest")
+    meshes = make_forest(p, extras);
+  else if (name == "smoke")
+    meshes = make_smoke(p, extras);
   else
     throw Error("procedural scene '" + spec + "': unknown name '" + name +
-                "' (known: cube, sphere, plane, boxes, city, terrain, hairball)");
+                "' (known: cube, sphere, plane, boxes, city, terrain, hairball, forest, smoke)");
 
   Scene scene;
   scene.name = spec;
@@ -164,6 +170,13 @@ Scene make_procedural(const std::string& spec) {
     if (scale != 1.0 || !(offset == Vec3d{}))
       for (auto& v : m.vertices) v = v * scale + offset;
     append_mesh(scene, std::move(m));
+  }
+  scene.alpha_textures = std::move(extras.textures);
+  for (Volume& v : extras.volumes) {
+    // Density stays per unit of world length: a scaled cloud is thicker.
+    v.bounds.lo = v.bounds.lo * scale + offset;
+    v.bounds.hi = v.bounds.hi * scale + offset;
+    scene.volumes.push_back(std::move(v));
   }
   return scene;
 }

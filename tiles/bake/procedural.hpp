@@ -92,4 +92,13 @@ std::vector<MeshSoup> make_city(Params& p);
 std::vector<MeshSoup> make_terrain(Params& p);
 std::vector<MeshSoup> make_hairball(Params& p);
 
+// What a scene of partial occluders holds besides meshes (procedural_partial.cpp); the
+// caller applies scale and offset to volume bounds too.
+struct PartialExtras {
+  std::vector<AlphaTexture> textures;
+  std::vector<Volume> volumes;
+};
+std::vector<MeshSoup> make_forest(Params& p, PartialExtras& extras);
+std::vector<MeshSoup> make_smoke(Params& p, PartialExtras& extras);
+
 }  // namespace st::procedural

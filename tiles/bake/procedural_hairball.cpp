@@ -4,7 +4,9 @@
 //
 // Keys: seed (default 1), count (tubes, default 256), segments (steps per tube, default
 // 96), sides (cross-section polygon, default 6). Each tube is its own closed mesh of
-// 2 sides (segments + 1) triangles.
+// 2 sides (segments + 1) triangles. transmit (default 0: opaque) makes every tube a
+// partial occluder letting that fraction of the light through at each crossing (grey):
+// the semi-transparent hair of the deep shadow map paper (DSM 2000 §6).
 #include <cmath>
 
 #include "tiles/bake/procedural.hpp"
@@ -33,6 +35,7 @@ std::vector<MeshSoup> make_hairball(Params& p) {
   const int count = static_cast<int>(p.integer("count", 256, 1, 100000));
   const int segments = static_cast<int>(p.integer("segments", 96, 1, 100000));
   const int sides = static_cast<int>(p.integer("sides", 6, 3, 64));
+  const float transmit = float(p.real("transmit", 0.0, 0.0, 1.0));
   p.finish();
 
   Rng rng(seed);
@@ -54,6 +57,7 @@ std::vector<MeshSoup> make_hairball(Params& p) {
     const double radius = rng.uniform(0.02, 0.06);
     out.push_back({"tube_" + std::to_string(t), {}, {}});
     add_tube(out.back(), path, radius, sides);
+    out.back().transmit = {transmit, transmit, transmit};
   }
   return out;
 }

@@ -85,7 +85,14 @@ Scene load_scene(const std::string& spec, const SceneOptions& options = {});
 //   boxes    (none)             box_a and box_b intersect; inner is nested in outer
 //   city     seed=1 size=14 block=60   closed buildings on a closed ground slab
 //   terrain  seed=1 size=256 extent=1000 height=150   closed solid heightfield
-//   hairball seed=1 count=256 segments=96 sides=6     closed thin tubes, one mesh each
+//   hairball seed=1 count=256 segments=96 sides=6 transmit=0
+//            closed thin tubes, one mesh each; transmit > 0: semi-transparent hair
+//   forest   seed=1 trees=9 leaves=300 size=30 translucency=0
+//            trunks (closed boxes) on a ground quad, and per tree one mesh of leaf cards
+//            alpha-tested through a procedural leaf texture; translucency > 0 lets
+//            (0.3, 1, 0.2) x translucency of the light through a solid leaf (coloured)
+//   smoke    seed=1 res=32 size=10 density=1 sigma=1
+//            a ground quad under a density-grid plume of res^3 voxels (Volume)
 // Unknown names or keys and malformed or out-of-range values throw st::Error.
 Scene make_procedural(const std::string& spec);
 

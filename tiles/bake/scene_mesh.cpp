@@ -140,8 +140,17 @@ void append_mesh(Scene& scene, MeshSoup mesh) {
         throw Error(scene.name + ": mesh '" + mesh.name + "' has a non-finite (NaN or Inf) vertex " +
                     std::to_string(i));
     }
+  if (!mesh.uv.empty() && mesh.uv.size() != mesh.triangles.size())
+    throw Error(scene.name + ": mesh '" + mesh.name + "' has " + std::to_string(mesh.uv.size()) +
+                " UV triangles for " + std::to_string(mesh.triangles.size()) + " triangles");
   std::vector<Vec3d> verts = weld(mesh.vertices, mesh.triangles);
   size_t before = mesh.triangles.size();
+  if (!mesh.uv.empty()) {  // drop the UVs of degenerate triangles in lockstep
+    size_t k = 0;
+    for (size_t i = 0; i < mesh.triangles.size(); ++i)
+      if (!degenerate(verts, mesh.triangles[i])) mesh.uv[k++] = mesh.uv[i];
+    mesh.uv.resize(k);
+  }
   std::erase_if(mesh.triangles, [&](const Triangle& t) { return degenerate(verts, t); });
   scene.stats.degenerate_dropped += before - mesh.triangles.size();
   if (mesh.triangles.size() != before) verts = weld(verts, mesh.triangles);  // drop orphans
@@ -151,6 +160,7 @@ void append_mesh(Scene& scene, MeshSoup mesh) {
   out.closed = is_closed_surface(mesh.triangles);
   if (out.closed && signed_volume(verts, mesh.triangles) < 0.0) {
     for (auto& t : mesh.triangles) std::swap(t[1], t[2]);
+    for (auto& uv : mesh.uv) std::swap(uv[1], uv[2]);
     ++scene.stats.meshes_flipped;
   }
   constexpr size_t kMax = std::numeric_limits<uint32_t>::max();
@@ -159,6 +169,13 @@ void append_mesh(Scene& scene, MeshSoup mesh) {
   const uint32_t base = static_cast<uint32_t>(scene.vertices.size());
   out.first_triangle = static_cast<uint32_t>(scene.triangles.size());
   out.triangle_count = static_cast<uint32_t>(mesh.triangles.size());
+  out.transmit = mesh.transmit;
+  out.alpha_texture = mesh.alpha_texture;
+  if (!mesh.uv.empty() || !scene.triangle_uv.empty()) {
+    scene.triangle_uv.resize(scene.triangles.size());
+    if (mesh.uv.empty()) mesh.uv.resize(mesh.triangles.size());
+    scene.triangle_uv.insert(scene.triangle_uv.end(), mesh.uv.begin(), mesh.uv.end());
+  }
   scene.vertices.insert(scene.vertices.end(), verts.begin(), verts.end());
   for (auto& t : mesh.triangles) scene.triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
   scene.meshes.push_back(std::move(out));

@@ -19,6 +19,12 @@ struct MeshSoup {
   std::string name;
   std::vector<Vec3d> vertices;
   std::vector<Triangle> triangles;
+  // Partial occluders (partial.hpp), copied onto the st::Mesh: per-channel transmittance,
+  // the alpha texture's index in the scene, and texture coordinates per triangle corner
+  // (empty, or one entry per triangle; they follow the triangles through step 3).
+  Rgb transmit{0, 0, 0};
+  int32_t alpha_texture = -1;
+  std::vector<std::array<Vec2f, 3>> uv{};
 };
 
 // Appends `mesh` to `scene` as one st::Mesh, in this order:
@@ -30,7 +36,8 @@ struct MeshSoup {
 //   4. closed = is_closed_surface(...) on the welded triangles;
 //   5. a closed mesh with negative signed_volume has all triangles reversed
 //      (scene.stats.meshes_flipped).
-// Only referenced vertices are kept. Throws st::Error if the scene would exceed 2^32-1
+// Scene::triangle_uv is kept one entry per triangle once any mesh brings UVs (meshes
+// without UVs get zeros). Only referenced vertices are kept. Throws st::Error if the scene would exceed 2^32-1
 // vertices or triangles. A mesh left with no triangle is still appended (count 0).
 void append_mesh(Scene& scene, MeshSoup mesh);
 

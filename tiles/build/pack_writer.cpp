@@ -56,8 +56,9 @@ PackWriter::PackWriter(std::string path, PackParams params) : path_(std::move(pa
                 std::to_string(params_.skip_level));
   if (params_.tile_bytes < kMinTileBytes || params_.tile_bytes > kMaxTileBytes)
     throw Error(path_ + ": tile_bytes " + std::to_string(params_.tile_bytes) + " outside " + tile_bytes_bounds());
-  if (params_.features & ~uint32_t(kFeatureExitDepths | kFeatureDeepShadow | kFeatureStaticIntervals))
-    throw Error(path_ + ": features may only name exit_depths / deep_shadow / static_intervals (the rest are derived)");
+  if (params_.features & ~uint32_t(kFeatureExitDepths | kFeatureStaticIntervals))
+    throw Error(path_ + ": features may only name exit_depths / static_intervals (the rest are derived; "
+                "deep_shadow is reserved: packs carry no deep tiles yet)");
   if (params_.compression_level < 0 || params_.compression_level > 12)
     throw Error(path_ + ": compression level outside 0..12");
   done_.assign(size_t(1) << (2 * params_.skip_level), 0);

@@ -82,6 +82,10 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
   h.state = PackState(state);
   h.flags = load_le<uint32_t>(b, 20);
   if (h.flags & ~uint32_t(kKnownFeatures)) fail(20, "unknown feature flags " + hex32(h.flags));
+  // Reserved for deep tiles (tiles/core/DEEP.md), which no pack carries yet: a pack that
+  // claims them is refused rather than served without its partial occluders.
+  if (h.flags & uint32_t(kFeatureDeepShadow))
+    fail(20, "feature deep_shadow: this reader does not read deep tiles (a newer writer's pack?)");
   if (b[24] > uint8_t(kLastEncoding))
     fail(24, "unknown encoding " + std::to_string(b[24]) + " (this build reads 0-" + std::to_string(int(kLastEncoding)) +
                  ": mh, mmh, dagmh, vsdag; written by a newer shadowtile?)");

@@ -193,6 +193,79 @@ VisibilityFunction average(std::span<const VisibilityFunction* const> in,
   return out;
 }
 
+VisibilityFunction average_sweep(std::span<const VisibilityFunction* const> in,
+                                 std::span<const double> weights) {
+  if (in.size() != weights.size() || in.empty())
+    throw Error("deep average: one weight per function, at least one function");
+  double sum = 0;
+  for (double w : weights) {
+    if (!(w >= 0) || !std::isfinite(w)) throw Error("deep average: a weight is not >= 0");
+    sum += w;
+  }
+  if (!(sum > 0)) throw Error("deep average: the weights sum to 0");
+  struct Event {
+    float depth;
+    uint32_t k, first, last;  // function, its first and last vertex at this depth
+  };
+  std::vector<Event> events;
+  VisibilityFunction out;
+  V3 value{0, 0, 0}, slope{0, 0, 0};
+  for (size_t k = 0; k < in.size(); ++k) {
+    const auto& vs = in[k]->vertices;
+    out.monochrome = out.monochrome && in[k]->monochrome;
+    const double w = weights[k] / sum;
+    const V3 v0 = vs.empty() ? V3{1, 1, 1} : value_d(vs[0]);
+    for (int c = 0; c < 3; ++c) value[c] += w * v0[c];
+    for (size_t i = 0; i < vs.size();) {
+      size_t j = i;
+      while (j + 1 < vs.size() && vs[j + 1].depth == vs[i].depth) ++j;
+      events.push_back({vs[i].depth, uint32_t(k), uint32_t(i), uint32_t(j)});
+      i = j + 1;
+    }
+  }
+  std::sort(events.begin(), events.end(), [](const Event& a, const Event& b) {
+    return a.depth < b.depth || (a.depth == b.depth && a.k < b.k);
+  });
+  auto seg_slope = [&](const std::vector<VisVertex>& vs, size_t a) {  // segment a -> a + 1
+    V3 s{0, 0, 0};
+    if (a + 1 >= vs.size()) return s;
+    const double dz = double(vs[a + 1].depth) - double(vs[a].depth);
+    if (!(dz > 0)) return s;
+    for (int c = 0; c < 3; ++c) s[c] = (double(vs[a + 1].t[c]) - double(vs[a].t[c])) / dz;
+    return s;
+  };
+  auto push = [&](float z, const V3& t) {
+    VisVertex v;
+    v.depth = z;
+    for (int c = 0; c < 3; ++c) v.t[c] = float(std::clamp(t[c], 0.0, 1.0));
+    if (!out.vertices.empty())
+      for (int c = 0; c < 3; ++c) v.t[c] = std::min(v.t[c], out.vertices.back().t[c]);
+    if (out.monochrome) v.t[1] = v.t[2] = v.t[0];
+    out.vertices.push_back(v);
+  };
+  double z_prev = events.empty() ? 0.0 : double(events[0].depth);
+  for (size_t e = 0; e < events.size();) {
+    const float z = events[e].depth;
+    for (int c = 0; c < 3; ++c) value[c] += slope[c] * (double(z) - z_prev);
+    z_prev = z;
+    const V3 before = value;
+    for (; e < events.size() && events[e].depth == z; ++e) {
+      const Event& ev = events[e];
+      const auto& vs = in[ev.k]->vertices;
+      const double w = weights[ev.k] / sum;
+      const V3 old_s = ev.first > 0 ? seg_slope(vs, ev.first - 1) : V3{0, 0, 0};
+      const V3 new_s = seg_slope(vs, ev.last);
+      for (int c = 0; c < 3; ++c) {
+        value[c] += w * (double(vs[ev.last].t[c]) - double(vs[ev.first].t[c]));
+        slope[c] += w * (new_s[c] - old_s[c]);
+      }
+    }
+    push(z, before);
+    if (value != before) push(z, value);
+  }
+  return out;
+}
+
 double max_difference(const VisibilityFunction& a, const VisibilityFunction& b) {
   double worst = 0;
   auto at = [&](double z) {

@@ -57,6 +57,12 @@ VisibilityFunction compress(const VisibilityFunction& in, double epsilon);
 VisibilityFunction average(std::span<const VisibilityFunction* const> in,
                            std::span<const double> weights);
 
+// The same average by the sweep of DSM 2000 §5.1: every input vertex visited once in
+// depth order, the running value and slope updated per vertex (O(M log M) for M input
+// vertices instead of average()'s O(M n)). Equal to average() up to rounding (1e-9).
+VisibilityFunction average_sweep(std::span<const VisibilityFunction* const> in,
+                                 std::span<const double> weights);
+
 // The largest |a - b| over all depths and channels (both sides of every vertex of either).
 double max_difference(const VisibilityFunction& a, const VisibilityFunction& b);
 

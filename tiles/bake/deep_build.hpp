@@ -1,0 +1,35 @@
+// The deep tiles of a whole map (DSM 2000 §5.4): level L cut into tiles of 2^side_bits
+// texels a side, each sampled (deep_sampler.hpp) and encoded with its mips
+// (deep_encode.hpp). A tile whose every function is empty (no partial occluder along any
+// of its rays) is not stored, so a scene without partial occluders has no deep data.
+// Tiles are built one at a time (memory: one tile's functions); the result is sorted
+// by (ty, tx).
+#pragma once
+#include <cstdint>
+#include <vector>
+
+#include "tiles/bake/deep_sampler.hpp"
+#include "tiles/build/deep_encode.hpp"
+
+namespace st {
+
+struct DeepTileBytes {
+  uint32_t tx = 0, ty = 0;
+  std::vector<uint8_t> bytes;
+};
+
+struct DeepMapBuild {
+  uint32_t level = 0, side_bits = 0;
+  std::vector<DeepTileBytes> tiles;
+  DeepSampleStats sampling;
+  uint64_t bytes = 0;          // all tiles
+  uint64_t empty_tiles = 0;    // not stored
+};
+
+// Throws st::Error for side_bits above the level or deep::kMaxSideBits, a map of more
+// than 2^20 tiles, or a tile over max_tile_bytes (raise epsilon or shrink the tiles).
+DeepMapBuild build_deep_tiles(const DeepSampler& sampler, uint32_t level, uint32_t side_bits,
+                              const DeepSampleOptions& options,
+                              uint64_t max_tile_bytes = uint64_t(64) << 20);
+
+}  // namespace st
