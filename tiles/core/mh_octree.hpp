@@ -1,0 +1,58 @@
+// Reader of MH octree buffers (MH 2016 §4; layout: mh_octree_format.hpp, MHOCT.md): one
+// full validation pass at open, then lookups that read only validated words.
+//
+// Thread safety: a MhOctree is immutable after open; lookups are const, noexcept, never
+// allocate, and may run concurrently. The buffer is borrowed: the caller keeps it alive.
+#pragma once
+#include <cstdint>
+#include <span>
+
+#include "tiles/core/interval.hpp"
+#include "tiles/core/mh_octree_format.hpp"
+
+namespace st {
+
+class MhOctree {
+ public:
+  // Validates the whole buffer: header fields, every node reached from the root once (in
+  // bounds, no overlap, only the child slots the level's geometry splits, no children at
+  // the finest level, offsets strictly forward, finite floats), zero padding, no trailing
+  // bytes, node count. Throws st::FormatError("MH octree: <field> at byte <offset>: ...").
+  static MhOctree open(std::span<const uint8_t> bytes);
+
+  const moct::Geometry& geometry() const { return geo_; }
+  uint32_t xy_level() const { return geo_.n; }  // slices are 2^xy_level a side
+  uint32_t slices() const { return slices_; }   // N; w in [0, N)
+  uint32_t node_count() const { return node_count_; }
+  size_t byte_size() const { return bytes_.size(); }
+
+  // Depth of texel (x, y) of the level-`level` map of slice w (MH §3.2 traversal in 3D,
+  // lazy value fetch). Every level is a complete map (multiresolution); a level above
+  // xy_level() answers like depth(x >> s, y >> s, w, xy_level()), s = level - xy_level().
+  // Outside the stack (w >= slices(), x or y >= 2^level, level > kMaxLevel) the texel is
+  // lit: kLitDepth (ARCHITECTURE.md "Out of range").
+  float depth(uint64_t x, uint64_t y, uint32_t w, uint32_t level) const noexcept;
+
+  // The walk, for lookups that share it among samples (stack_lookup.hpp). A cursor stands
+  // on a node; `val` is the word of the last valued node's float on its path.
+  struct Cursor {
+    uint64_t pos = 0, val = 0;
+    uint32_t code = 0;   // the node's own 2-bit kind (moct::kCodeLeaf / Empty / Inner)
+    uint32_t level = 0;  // octree level
+  };
+  Cursor root() const noexcept;
+  // The cursor's child in `slot` (0..7); false where the slot holds no child.
+  bool child(const Cursor& c, uint32_t slot, Cursor& out) const noexcept;
+  float value(const Cursor& c) const noexcept;
+
+ private:
+  uint32_t word(uint64_t w) const noexcept;
+  std::span<const uint8_t> bytes_;
+  const uint8_t* tree_ = nullptr;
+  moct::Geometry geo_{};
+  uint32_t slices_ = 0, node_count_ = 0;
+  bool root_leaf_ = false;
+  uint8_t shift_[moct::kMaxLevels] = {};
+};
+
+}  // namespace st
