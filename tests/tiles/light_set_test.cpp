@@ -31,6 +31,19 @@ TEST(LightSet, SunPathSamplesAreLinearInTimeAndEachFitted) {
   EXPECT_DOUBLE_EQ(back[2].elevation_deg, 45);
   // Each sample's light space is its own sun's: the forward axis follows the angles.
   EXPECT_GT(length(set.samples[0].forward() - set.samples[4].forward()), 0.5);
+  // One box size and depth range for every slice; below the zenith the frame is fit()'s.
+  for (const LightSpace& ls : set.samples) {
+    EXPECT_EQ(ls.extent_uv(), set.samples[0].extent_uv());
+    EXPECT_EQ(ls.far_plane(), set.samples[0].far_plane());
+  }
+  const LightSpace alone = LightSpace::fit(set.samples[2].spec(), unit_box());
+  EXPECT_NEAR(dot(alone.axis_u(), set.samples[2].axis_u()), 1.0, 1e-12);
+  // Through the zenith region the frame turns smoothly (fit() switches its helper axis).
+  auto steep = LightSet::fit(LightSetSpec::parse("sun-path:azimuth=10..40,elevation=30..90,samples=31"), unit_box());
+  for (uint32_t w = 1; w < steep.size(); ++w) {
+    EXPECT_GT(dot(steep.samples[w].axis_u(), steep.samples[w - 1].axis_u()), 0.99) << w;
+    EXPECT_GT(dot(steep.samples[w].axis_v(), steep.samples[w - 1].axis_v()), 0.99) << w;
+  }
   // Round trip through the text form.
   EXPECT_EQ(LightSetSpec::parse(spec.to_string()).sample_specs().size(), 5u);
 }
@@ -65,7 +78,13 @@ TEST(LightSet, AreaSamplesFollowTheHilbertCurveOnTheRectangle) {
   // N not a power of four: spread along the curve, all distinct.
   auto odd = LightSetSpec::parse("area:pos=0,10,0,target=0,0,0,size=1,1,samples=5").sample_specs();
   for (size_t w = 1; w < odd.size(); ++w) EXPECT_NE(odd[w].pos, odd[w - 1].pos);
-  EXPECT_EQ(LightSet::fit(spec, unit_box()).size(), 16u);
+  const LightSet fitted = LightSet::fit(spec, unit_box());
+  ASSERT_EQ(fitted.size(), 16u);
+  for (const LightSpace& ls : fitted.samples) {
+    EXPECT_EQ(ls.near_plane(), fitted.samples[0].near_plane());
+    EXPECT_EQ(ls.far_plane(), fitted.samples[0].far_plane());
+    EXPECT_EQ(ls.forward(), fitted.samples[0].forward());
+  }
 }
 
 TEST(LightSet, BadSetsGetOneClearLine) {

@@ -1,5 +1,7 @@
 #include "tiles/core/light_set.hpp"
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <sstream>
 #include <tuple>
@@ -220,17 +222,80 @@ std::vector<LightSpec> LightSetSpec::sample_specs() const {
   return out;
 }
 
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// A sun path's samples share one frame rule and one box size (see light_set.hpp "Frames").
+std::vector<LightSpace> fit_sun_path(const std::vector<LightSpec>& specs, const Aabb& b) {
+  struct Frame {
+    Vec3d u, v, f;
+    double uc, vc, fc;
+  };
+  std::vector<Frame> frames;
+  double side = 0, depth = 0;
+  for (const LightSpec& s : specs) {
+    const double az = s.azimuth_deg * kPi / 180, el = s.elevation_deg * kPi / 180;
+    Frame fr;
+    fr.f = normalize(Vec3d{-std::cos(el) * std::sin(az), -std::sin(el), -std::cos(el) * std::cos(az)});
+    fr.u = Vec3d{-std::cos(az), 0, std::sin(az)};  // LightSpace::fit's u below ~64 degrees
+    fr.v = cross(fr.f, fr.u);
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int i = 0; i < 8; ++i) {
+      const Vec3d c{(i & 1) ? b.hi.x : b.lo.x, (i & 2) ? b.hi.y : b.lo.y, (i & 4) ? b.hi.z : b.lo.z};
+      const double p[3] = {dot(c, fr.u), dot(c, fr.v), dot(c, fr.f)};
+      for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[a]), hi[a] = std::max(hi[a], p[a]);
+    }
+    side = std::max({side, hi[0] - lo[0], hi[1] - lo[1]});
+    depth = std::max(depth, hi[2] - lo[2]);
+    fr.uc = 0.5 * (lo[0] + hi[0]), fr.vc = 0.5 * (lo[1] + hi[1]), fr.fc = 0.5 * (lo[2] + hi[2]);
+    frames.push_back(fr);
+  }
+  const double m = specs.empty() ? 0 : specs[0].margin;
+  side *= 1 + 2 * m, depth *= 1 + 2 * m;
+  if (!(side > 0) || !(depth > 0) || !std::isfinite(side) || !std::isfinite(depth))
+    throw Error("light set: zero-extent light box (the scene is flat or a point seen from the sun)");
+  std::vector<LightSpace> out;
+  for (size_t w = 0; w < frames.size(); ++w) {
+    const Frame& fr = frames[w];
+    const Vec3d o = fr.u * (fr.uc - side / 2) + fr.v * (fr.vc - side / 2) + fr.f * (fr.fc - depth / 2);
+    const std::array<double, 18> a = {o.x, o.y, o.z, fr.u.x, fr.u.y, fr.u.z, fr.v.x, fr.v.y, fr.v.z,
+                                      fr.f.x, fr.f.y, fr.f.z, side, 0, depth, specs[w].azimuth_deg,
+                                      specs[w].elevation_deg, m};
+    const std::string bad = LightSpace::check_array(LightKind::sun, a);
+    if (!bad.empty()) throw Error("light set sample " + std::to_string(w) + " (" + specs[w].to_string() + "): " + bad);
+    out.push_back(LightSpace::from_array(LightKind::sun, a));
+  }
+  return out;
+}
+
+}  // namespace
+
 LightSet LightSet::fit(const LightSetSpec& spec, const Aabb& bounds) {
+  if (bounds.empty()) throw Error("light: the scene has no geometry to fit the light to");
   LightSet set;
   set.spec = spec;
   const std::vector<LightSpec> specs = spec.sample_specs();
+  if (spec.kind == LightSetKind::sun_path) {
+    set.samples = fit_sun_path(specs, bounds);
+    return set;
+  }
   set.samples.reserve(specs.size());
+  double near = INFINITY, far = 0;
   for (size_t w = 0; w < specs.size(); ++w) {
     try {
       set.samples.push_back(LightSpace::fit(specs[w], bounds));
     } catch (const Error& e) {
       throw Error("light set sample " + std::to_string(w) + " (" + specs[w].to_string() + "): " + e.what());
     }
+    near = std::min(near, set.samples.back().near_plane()), far = std::max(far, set.samples.back().far_plane());
+  }
+  // One depth range for every sample, so a surface keeps nearly the same depth from slice
+  // to slice.
+  for (LightSpace& ls : set.samples) {
+    std::array<double, 18> a = ls.to_array();
+    a[13] = near, a[14] = far;
+    ls = LightSpace::from_array(LightKind::spot, a);
   }
   return set;
 }

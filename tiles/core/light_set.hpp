@@ -22,6 +22,16 @@
 //       uniformly within J times its cell (seeded by S, default 1: the same set every run);
 //       J = 0 (default) takes cell centres. fov as for spot lights (default 60).
 //
+// Frames (why the slices of a stack line up: the octree compresses what neighbouring
+// slices share, MH §4). A sun path's samples all take u = the horizontal axis normal to the
+// azimuth (LightSpace::fit's own choice below about 64 degrees of elevation, but without
+// its switch of helper axis near the zenith, so the image never turns between two
+// samples), v = forward x u, and one box size and depth range: the largest any sample needs,
+// each box centred on the scene. An area light's samples share the spot basis and one
+// near/far range (the union of the samples' fits). Texel size and depth scale are thus the
+// same in every slice; what remains is the geometry's own motion (an orthographic sun
+// turning by an angle a shifts a point at distance r from the box centre by about a * r).
+//
 // Bounds: 1 <= N <= kMaxLightSamples. Every number finite, sizes > 0, coordinates within
 // kMaxLightCoordinate. A light set the build cannot represent (more samples than the stack
 // may hold) is refused here, before anything is traced.
