@@ -3,9 +3,10 @@
 // time-interpolated lookup and per soft-shadow sample.
 //
 //   bench_stacks [--res 256] [--city-samples 32] [--hair-samples 64] [--lookups 20000]
-//                [--reps 3] [--case city|hairball|all] [--json PATH]
+//                [--reps 3] [--case city|city-hour|hairball|all] [--json PATH]
 //
-// Cases: procedural:city under a day's sun path (azimuth 100..260, elevation 25..65) and
+// Cases: procedural:city under a day's sun path (azimuth 100..260, elevation 25..65), the
+// same city under an hour of it (azimuth 170..185, elevation 50..52), and
 // procedural:hairball under a 4 m x 4 m area light 25 m above it (Hilbert-ordered,
 // jitter 0.5). Each slice is traced with Embree (DepthBoundsTracer), then
 //   octree: build_octree + encode_octree of the whole stack;
@@ -254,6 +255,10 @@ int main(int argc, char** argv) {
     if (which == "all" || which == "city")
       cases.push_back({"city", "procedural:city",
                        "sun-path:azimuth=100..260,elevation=25..65,samples=" + std::to_string(city_n)});
+    // An hour of the same sun: neighbouring slices differ by a fraction of a degree.
+    if (which == "all" || which == "city-hour")
+      cases.push_back({"city-hour", "procedural:city",
+                       "sun-path:azimuth=170..185,elevation=50..52,samples=" + std::to_string(city_n)});
     if (which == "all" || which == "hairball")
       cases.push_back({"hairball", "procedural:hairball",
                        "area:pos=0,25,0,target=0,0,0,size=4,4,samples=" + std::to_string(hair_n) + ",jitter=0.5"});

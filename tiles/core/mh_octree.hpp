@@ -53,6 +53,10 @@ class MhOctree {
   uint32_t slices_ = 0, node_count_ = 0;
   bool root_leaf_ = false;
   uint8_t shift_[moct::kMaxLevels] = {};
+  // Per level l (the step to l + 1): whether it halves x, y / w, the x, y resolution bits
+  // of level l + 1, and the bit of a full-resolution w it reads.
+  bool split_xy_[moct::kMaxLevels] = {}, split_w_[moct::kMaxLevels] = {};
+  uint8_t xy_next_[moct::kMaxLevels] = {}, w_shift_[moct::kMaxLevels] = {};
 };
 
 }  // namespace st

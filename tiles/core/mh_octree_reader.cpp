@@ -119,6 +119,11 @@ MhOctree MhOctree::open(std::span<const uint8_t> bytes) {
   if (nodes != t.node_count_)
     fail("node_count", kOffNodeCount,
          "header says " + std::to_string(t.node_count_) + ", the tree holds " + std::to_string(nodes));
+  for (uint32_t l = 0; l + 1 < levels; ++l) {
+    t.split_xy_[l] = t.geo_.splits_xy(l), t.split_w_[l] = t.geo_.splits_w(l);
+    t.xy_next_[l] = uint8_t(t.geo_.xy_bits(l + 1));
+    t.w_shift_[l] = uint8_t(t.geo_.k - t.geo_.w_bits(l + 1));
+  }
   t.bytes_ = bytes;
   t.tree_ = b + tree_off;
   return t;
@@ -156,22 +161,23 @@ float MhOctree::depth(uint64_t x, uint64_t y, uint32_t w, uint32_t level) const 
     level = geo_.n;
   }
   // MH Fig. 5 in 3D: the slot's x, y bits are those of the child's x, y resolution, its w
-  // bit that of the child's w resolution (w is given at the finest, 2^k).
+  // bit that of the child's w resolution (w is given at the finest, 2^k). The per-level
+  // constants come from tables filled at open.
   const uint32_t target = geo_.level_of_xy(level);
-  Cursor c = root();
-  while (c.level < target) {
-    const uint32_t l = c.level;
-    uint32_t slot = 0;
-    if (geo_.splits_xy(l)) {
-      const uint32_t b = level - geo_.xy_bits(l + 1);
-      slot = uint32_t((x >> b) & 1) | uint32_t((y >> b) & 1) << 1;
-    }
-    if (geo_.splits_w(l)) slot |= uint32_t((w >> (geo_.k - geo_.w_bits(l + 1))) & 1) << 2;
-    Cursor next;
-    if (!child(c, slot, next)) break;
-    c = next;
+  uint64_t pos = 0, val = root_leaf_ ? 0 : 1;
+  uint32_t code = root_leaf_ ? kCodeLeaf : kCodeInner;
+  for (uint32_t l = 0; l < target && code != kCodeLeaf; ++l) {
+    const uint32_t b = level - xy_next_[l];
+    uint32_t slot = split_xy_[l] ? uint32_t((x >> b) & 1) | uint32_t((y >> b) & 1) << 1 : 0u;
+    if (split_w_[l]) slot |= uint32_t((w >> w_shift_[l]) & 1) << 2;
+    const uint32_t word_p = word(pos);
+    const uint32_t mask = word_mask(word_p);
+    code = child_code(mask, slot);
+    if (!code) break;
+    pos = block_start(pos, shift_[l], word_offset(word_p)) + child_skip(mask, slot);
+    if (code != kCodeEmpty) val = code == kCodeLeaf ? pos : pos + 1;
   }
-  return value(c);
+  return bits_float(word(val));
 }
 
 }  // namespace st

@@ -40,6 +40,20 @@ uint32_t shared_walk(const MhOctree& t, const MhOctree::Cursor& c, Scratch& s, u
     uint32_t sl = sxy ? ((s.x[w] >> bxy) & 1u) | ((s.y[w] >> bxy) & 1u) << 1 : 0u;
     return sw ? sl | ((w >> bw) & 1u) << 2 : sl;
   };
+  if (e - b == 1) {  // one sample left: its own walk, without partitioning
+    const uint32_t w = s.idx[b];
+    MhOctree::Cursor cur = c, next;
+    while (cur.code != moct::kCodeLeaf && cur.level < g.depth()) {
+      const uint32_t cl = cur.level;
+      const uint32_t bb = g.splits_xy(cl) ? g.n - g.xy_bits(cl + 1) : 0;
+      uint32_t sl = g.splits_xy(cl) ? ((s.x[w] >> bb) & 1u) | ((s.y[w] >> bb) & 1u) << 1 : 0u;
+      if (g.splits_w(cl)) sl |= ((w >> (g.k - g.w_bits(cl + 1))) & 1u) << 2;
+      if (!t.child(cur, sl, next)) break;
+      cur = next;
+      ++s.visited;
+    }
+    return s.r[w] <= t.value(cur) ? 1u : 0u;
+  }
   uint32_t count[moct::kSlots] = {};
   for (uint32_t i = b; i < e; ++i) ++count[slot(s.idx[i])];
   uint32_t start[moct::kSlots], at = b;
