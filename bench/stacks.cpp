@@ -19,10 +19,11 @@
 //   soft shared  : StackLookup::soft_visibility(p) (one shared walk for all N samples)
 //   soft indep.  : StackLookup::soft_visibility_independent(p) (N octree walks)
 //   soft 2D      : N 2D evaluator lit tests (N separate quadtrees)
-// Times are medians over --reps of wall time per lookup; the table also gives each
+// Times are medians over --reps of thread CPU time per lookup; the table also gives each
 // against the 2D single lookup measured in the same run.
 #include <algorithm>
 #include <chrono>
+#include <ctime>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -47,13 +48,21 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
+// Thread CPU time: the machine is shared (load average above 10 on 2 cores at times), and
+// wall time there measures the scheduler more than the lookups.
+double thread_cpu_s() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+
 template <class F>
 double median_ns(int reps, size_t count, F&& body) {
   std::vector<double> t;
   for (int r = 0; r < reps; ++r) {
-    const auto t0 = Clock::now();
+    const double t0 = thread_cpu_s();
     body();
-    t.push_back(since(t0) * 1e9 / double(count));
+    t.push_back((thread_cpu_s() - t0) * 1e9 / double(count));
   }
   std::sort(t.begin(), t.end());
   return t[t.size() / 2];
