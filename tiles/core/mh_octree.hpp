@@ -33,6 +33,22 @@ class MhOctree {
   // lit: kLitDepth (ARCHITECTURE.md "Out of range").
   float depth(uint64_t x, uint64_t y, uint32_t w, uint32_t level) const noexcept;
 
+  // Walks to finest texels one after another, each starting from the deepest node its
+  // path shares with the previous walk's (MH §3.3's lowest common node and last-sample
+  // cache, carried over w): coherent texel sequences, such as one point's samples in
+  // trajectory or Hilbert order, read only the nodes where their paths part.
+  struct Path {
+    uint64_t pos[moct::kMaxLevels] = {}, val[moct::kMaxLevels] = {};
+    uint32_t code[moct::kMaxLevels] = {};
+    uint32_t reached = 0;  // level of the last node of the previous walk
+    uint64_t x = 0, y = 0;
+    uint32_t w = 0;
+    bool valid = false;    // false: the next walk starts at the root
+    uint64_t steps = 0;    // nodes stepped into, summed over walks (benchmark figure)
+  };
+  // depth(x, y, w, xy_level()) for w < slices(), x, y < 2^xy_level() (not checked).
+  float depth_along(Path& p, uint64_t x, uint64_t y, uint32_t w) const noexcept;
+
   // The walk, for lookups that share it among samples (stack_lookup.hpp). A cursor stands
   // on a node; `val` is the word of the last valued node's float on its path.
   struct Cursor {

@@ -9,72 +9,7 @@
 namespace st {
 namespace {
 
-// Per-thread working set of one soft_visibility call: each sample's texel and receiver
-// depth, and the sample order the shared walk partitions by child slot.
-struct Scratch {
-  uint32_t x[kMaxLightSamples], y[kMaxLightSamples];
-  float r[kMaxLightSamples];
-  uint16_t idx[kMaxLightSamples], tmp[kMaxLightSamples];
-  uint64_t visited = 0;
-};
-thread_local Scratch t_scratch;
-
-static_assert(kMaxLightSamples <= 65536, "sample indices are 16-bit");
-
-uint32_t count_lit(const Scratch& s, uint32_t b, uint32_t e, float v) {
-  uint32_t lit = 0;
-  for (uint32_t i = b; i < e; ++i) lit += s.r[s.idx[i]] <= v;
-  return lit;
-}
-
-// Samples idx[b..e) all lie under cursor c. Split them by the child slot each one's path
-// takes; a slot without a child, or a leaf, answers its samples with the value in force.
-uint32_t shared_walk(const MhOctree& t, const MhOctree::Cursor& c, Scratch& s, uint32_t b, uint32_t e) {
-  ++s.visited;
-  const moct::Geometry& g = t.geometry();
-  if (c.code == moct::kCodeLeaf || c.level == g.depth()) return count_lit(s, b, e, t.value(c));
-  const uint32_t l = c.level;
-  const bool sxy = g.splits_xy(l), sw = g.splits_w(l);
-  const uint32_t bxy = sxy ? g.n - g.xy_bits(l + 1) : 0, bw = sw ? g.k - g.w_bits(l + 1) : 0;
-  auto slot = [&](uint32_t w) {
-    uint32_t sl = sxy ? ((s.x[w] >> bxy) & 1u) | ((s.y[w] >> bxy) & 1u) << 1 : 0u;
-    return sw ? sl | ((w >> bw) & 1u) << 2 : sl;
-  };
-  if (e - b == 1) {  // one sample left: its own walk, without partitioning
-    const uint32_t w = s.idx[b];
-    MhOctree::Cursor cur = c, next;
-    while (cur.code != moct::kCodeLeaf && cur.level < g.depth()) {
-      const uint32_t cl = cur.level;
-      const uint32_t bb = g.splits_xy(cl) ? g.n - g.xy_bits(cl + 1) : 0;
-      uint32_t sl = g.splits_xy(cl) ? ((s.x[w] >> bb) & 1u) | ((s.y[w] >> bb) & 1u) << 1 : 0u;
-      if (g.splits_w(cl)) sl |= ((w >> (g.k - g.w_bits(cl + 1))) & 1u) << 2;
-      if (!t.child(cur, sl, next)) break;
-      cur = next;
-      ++s.visited;
-    }
-    return s.r[w] <= t.value(cur) ? 1u : 0u;
-  }
-  uint32_t count[moct::kSlots] = {};
-  for (uint32_t i = b; i < e; ++i) ++count[slot(s.idx[i])];
-  uint32_t start[moct::kSlots], at = b;
-  for (uint32_t c8 = 0; c8 < moct::kSlots; ++c8) start[c8] = at, at += count[c8];
-  if (count[slot(s.idx[b])] != e - b) {  // more than one slot: partition (stable)
-    uint32_t put[moct::kSlots];
-    std::copy(start, start + moct::kSlots, put);
-    for (uint32_t i = b; i < e; ++i) s.tmp[put[slot(s.idx[i])]++] = s.idx[i];
-    std::copy(s.tmp + b, s.tmp + e, s.idx + b);
-  }
-  uint32_t lit = 0;
-  for (uint32_t c8 = 0; c8 < moct::kSlots; ++c8) {
-    if (!count[c8]) continue;
-    MhOctree::Cursor next;
-    if (t.child(c, c8, next))
-      lit += shared_walk(t, next, s, start[c8], start[c8] + count[c8]);
-    else
-      lit += count_lit(s, start[c8], start[c8] + count[c8], t.value(c));
-  }
-  return lit;
-}
+thread_local uint64_t t_visited = 0;
 
 }  // namespace
 
@@ -103,16 +38,16 @@ float StackLookup::visibility(const Vec3d& p, double time) const noexcept {
 }
 
 float StackLookup::soft_visibility(const Vec3d& p) const noexcept {
-  Scratch& s = t_scratch;
   const uint32_t n = tree_.slices(), level = tree_.xy_level();
+  MhOctree::Path path;
+  uint32_t lit_samples = 0;
   for (uint32_t w = 0; w < n; ++w) {
     const LightPoint lp = lights_.samples[w].to_light(p);
     const auto t = LightSpace::texel_of(level, lp.u, lp.v);
-    s.x[w] = uint32_t(t[0]), s.y[w] = uint32_t(t[1]), s.r[w] = float(lp.d), s.idx[w] = uint16_t(w);
+    lit_samples += float(lp.d) <= tree_.depth_along(path, t[0], t[1], w);
   }
-  s.visited = 0;
-  const uint32_t lit = shared_walk(tree_, tree_.root(), s, 0, n);
-  return float(lit) / float(n);
+  t_visited = path.steps + 1;  // and the root
+  return float(lit_samples) / float(n);
 }
 
 float StackLookup::soft_visibility_independent(const Vec3d& p) const noexcept {
@@ -121,6 +56,6 @@ float StackLookup::soft_visibility_independent(const Vec3d& p) const noexcept {
   return float(lit_samples) / float(tree_.slices());
 }
 
-uint64_t StackLookup::last_nodes_visited() noexcept { return t_scratch.visited; }
+uint64_t StackLookup::last_nodes_visited() noexcept { return t_visited; }
 
 }  // namespace st

@@ -13,14 +13,15 @@
 //   blends linearly, so a sun moving through time never pops. An area light's "time" is
 //   just its Hilbert order.
 // - soft_visibility(p): the fraction of the N samples that are lit, exactly
-//   (lit samples) / N in float, equal to the average of lit(p, w) over w (tested). It walks
-//   the octree once for all samples together (MH §3.3's shared walk carried to w): at each
-//   node the samples are split by child slot, and where a slot holds no child (or the node
-//   is a leaf) the node's value answers every sample under it with one read, so coherent
-//   regions cost one walk for many samples.
+//   (lit samples) / N in float, equal to the average of lit(p, w) over w (tested). The
+//   samples share the walk (MhOctree::depth_along): each starts from the deepest node its
+//   path has in common with the previous sample's (MH §3.3's lowest common node and
+//   last-sample cache, carried over w). Neighbouring samples (trajectory or Hilbert order)
+//   are neighbouring slices, and where a node (a leaf, or a node without the child the path
+//   needs) answers for all the w under it, the next samples are answered by that node
+//   without reading anything new.
 //
-// Thread safety: const lookups; noexcept, no allocation (soft_visibility uses a
-// thread-local scratch of kMaxLightSamples entries). The octree and the light set are
+// Thread safety: const lookups; noexcept, no allocation. The octree and the light set are
 // borrowed and must outlive the lookup.
 #pragma once
 #include <cstdint>
