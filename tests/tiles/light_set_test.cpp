@@ -122,6 +122,13 @@ TEST(LightSet, BadSetsGetOneClearLine) {
   EXPECT_TRUE(LightSetSpec::names_light_set("sun-path:azimuth=1"));
   EXPECT_TRUE(LightSetSpec::names_light_set("area:pos=1,2,3"));
   EXPECT_FALSE(LightSetSpec::names_light_set("sun:azimuth=1,elevation=2"));
+  // A single-light reader names the light set instead of calling it unknown.
+  try {
+    LightSpec::parse("sun-path:azimuth=0..90,elevation=10..20,samples=4");
+    ADD_FAILURE() << "a single light accepted a light set";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("light set"), std::string::npos) << e.what();
+  }
 }
 
 TEST(LightSet, HilbertCurveVisitsEveryCellWithUnitSteps) {
