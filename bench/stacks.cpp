@@ -3,7 +3,7 @@
 // time-interpolated lookup and per soft-shadow sample.
 //
 //   bench_stacks [--res 256] [--city-samples 32] [--hair-samples 64] [--lookups 20000]
-//                [--reps 3] [--case city|city-hour|hairball|all] [--json PATH]
+//                [--reps 3] [--case city|city-hour|hairball|all] [--hair-jitter 0.5] [--json PATH]
 //
 // Cases: procedural:city under a day's sun path (azimuth 100..260, elevation 25..65), the
 // same city under an hour of it (azimuth 170..185, elevation 50..52), and
@@ -242,6 +242,7 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps)
 int main(int argc, char** argv) {
   try {
     uint32_t level = 8, city_n = 32, hair_n = 64;
+    std::string hair_jitter = "0.5";
     size_t lookups = 20000;
     int reps = 3;
     std::string which = "all", json_path = "build/bench_stacks.json";
@@ -255,6 +256,7 @@ int main(int argc, char** argv) {
       else if (a == "--city-samples") city_n = uint32_t(std::stoul(next()));
       else if (a == "--hair-samples") hair_n = uint32_t(std::stoul(next()));
       else if (a == "--lookups") lookups = std::stoul(next());
+      else if (a == "--hair-jitter") hair_jitter = next();
       else if (a == "--reps") reps = std::max(1, std::stoi(next()));
       else if (a == "--case") which = next();
       else if (a == "--json") json_path = next();
@@ -270,7 +272,7 @@ int main(int argc, char** argv) {
                        "sun-path:azimuth=170..185,elevation=50..52,samples=" + std::to_string(city_n)});
     if (which == "all" || which == "hairball")
       cases.push_back({"hairball", "procedural:hairball",
-                       "area:pos=0,25,0,target=0,0,0,size=4,4,samples=" + std::to_string(hair_n) + ",jitter=0.5"});
+                       "area:pos=0,25,0,target=0,0,0,size=4,4,samples=" + std::to_string(hair_n) + ",jitter=" + hair_jitter});
     nlohmann::json out = nlohmann::json::array();
     for (const Case& c : cases) out.push_back(run_case(c, level, lookups, reps));
     std::ofstream(json_path) << out.dump(2) << "\n";
