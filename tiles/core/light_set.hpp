@@ -7,7 +7,7 @@
 //   sun-path:azimuth=A0..A1,elevation=E0..E1,samples=N[,margin=F]
 //       A sun moving along a path known in advance (MH §4 "varying light positions"):
 //       sample w (w = 0..N-1) is `sun:azimuth=A,elevation=E` with A and E linear in
-//       t_w = w / (N - 1) (t_0 = 0 when N = 1), each fitted to the scene on its own.
+//       t_w = w / (N - 1) (t_0 = 0 when N = 1), in the frames described below.
 //       A0..A1 may run either way (a sun turning west or east) but spans at most 360
 //       degrees; E0..E1 may rise or set, both ends in (0, 90]. A single angle `A` means A..A.
 //
@@ -25,7 +25,7 @@
 // Frames (why the slices of a stack line up: the octree compresses what neighbouring
 // slices share, MH §4). A sun path's samples all take u = the horizontal axis normal to the
 // azimuth (LightSpace::fit's own choice below about 64 degrees of elevation, but without
-// its switch of helper axis near the zenith, so the image never turns between two
+// its switch of helper axis near the zenith, so the frame never jumps between two
 // samples), v = forward x u, and one box size and depth range: the largest any sample needs,
 // each box centred on the scene. An area light's samples share the spot basis and one
 // near/far range (the union of the samples' fits). Texel size and depth scale are thus the
@@ -74,7 +74,7 @@ struct LightSet {
   LightSetSpec spec;
   std::vector<LightSpace> samples;
 
-  // Fits every sample to the scene bounds (LightSpace::fit); throws st::Error naming the
+  // Fits every sample to the scene bounds in the frames above; throws st::Error naming the
   // sample that cannot be fitted.
   static LightSet fit(const LightSetSpec& spec, const Aabb& bounds);
   uint32_t size() const { return uint32_t(samples.size()); }
