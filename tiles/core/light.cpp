@@ -50,6 +50,9 @@ LightSpec LightSpec::parse(const std::string& text) {
   } else if (kind == "spot") {
     s.kind = LightKind::spot;
   } else {
+    if (kind == "sun-path" || kind == "area")
+      throw Error("--light: '" + kind + ":' is a light set for shadow-map stacks (tiles/core/light_set.hpp); this command "
+                  "builds one light's map (sun:... or spot:...)");
     throw Error("--light: unknown light kind '" + kind + "' (expected sun:... or spot:...)");
   }
   // Split on commas; a key=value starts a new field, bare numbers continue a vector.

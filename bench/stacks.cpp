@@ -1,0 +1,285 @@
+// Shadow-map stacks (MH 2016 §4, Tables 4-5) side by side with N independent 2D MH
+// quadtrees of the same samples: bytes, build time, and lookup time per slice, per
+// time-interpolated lookup and per soft-shadow sample.
+//
+//   bench_stacks [--res 256] [--city-samples 32] [--hair-samples 64] [--lookups 20000]
+//                [--reps 3] [--case city|city-hour|hairball|all] [--hair-jitter 0.5] [--json PATH]
+//
+// Cases: procedural:city under a day's sun path (azimuth 100..260, elevation 25..65), the
+// same city under an hour of it (azimuth 170..185, elevation 50..52), and
+// procedural:hairball under a 4 m x 4 m area light 25 m above it (Hilbert-ordered,
+// jitter 0.5). Each slice is traced with Embree (DepthBoundsTracer), then
+//   octree: build_octree + encode_octree of the whole stack;
+//   2D:     build_hierarchy + encode_mh of every slice (what N separate packs would hold).
+// Lookups run on receivers that lie on visible surfaces of sample 0 (its depth map's first
+// hits, nudged 1e-4 towards the light), in one loop per kind over the same points:
+//   2D lit       : project into slice w's light, MH evaluator lit test (w random)
+//   octree lit   : StackLookup::lit(p, w), the same points and slices
+//   time interp. : StackLookup::visibility(p, t), t random (two slices blended)
+//   soft shared  : StackLookup::soft_visibility(p) (one shared walk for all N samples)
+//   soft indep.  : StackLookup::soft_visibility_independent(p) (N octree walks)
+//   soft 2D      : N 2D evaluator lit tests (N separate quadtrees)
+// Times are medians over --reps of thread CPU time per lookup; the table also gives each
+// against the 2D single lookup measured in the same run.
+#include <algorithm>
+#include <chrono>
+#include <ctime>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "common/error.hpp"
+#include "common/hash.hpp"
+#include "tiles/bake/depth_bounds.hpp"
+#include "tiles/bake/scene.hpp"
+#include "tiles/build/encode.hpp"
+#include "tiles/build/mh_build.hpp"
+#include "tiles/build/mh_octree_encode.hpp"
+#include "tiles/core/encoding.hpp"
+#include "tiles/core/resolution.hpp"
+#include "tiles/core/stack_lookup.hpp"
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+// Thread CPU time: the machine is shared (load average above 10 on 2 cores at times), and
+// wall time there measures the scheduler more than the lookups.
+double thread_cpu_s() {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+
+template <class F>
+double median_ns(int reps, size_t count, F&& body) {
+  std::vector<double> t;
+  for (int r = 0; r < reps; ++r) {
+    const double t0 = thread_cpu_s();
+    body();
+    t.push_back((thread_cpu_s() - t0) * 1e9 / double(count));
+  }
+  std::sort(t.begin(), t.end());
+  return t[t.size() / 2];
+}
+
+volatile float g_sink = 0;
+
+struct Case {
+  std::string name, scene, light;
+};
+
+nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps) {
+  std::printf("\n== %s: %s, %s, %u^2 per slice\n", c.name.c_str(), c.scene.c_str(), c.light.c_str(), 1u << level);
+  std::fflush(stdout);
+  const st::Scene scene = st::load_scene(c.scene);
+  const st::LightSet set = st::LightSet::fit(st::LightSetSpec::parse(c.light), scene.bounds());
+  const uint32_t n = set.size();
+  const uint32_t side = 1u << level;
+
+  // Trace every slice.
+  auto t0 = Clock::now();
+  st::IntervalStack stack{level, n, {}};
+  stack.data.reserve(size_t(side) * side * n);
+  for (uint32_t w = 0; w < n; ++w) {
+    st::DepthBoundsTracer tracer(scene, set.samples[w]);
+    const st::IntervalTile t = tracer.trace({level, 0, 0, side, side});
+    stack.data.insert(stack.data.end(), t.data.begin(), t.data.end());
+  }
+  const double trace_s = since(t0);
+
+  // The octree.
+  t0 = Clock::now();
+  const st::OctHierarchy oh = st::build_octree(stack);
+  const double oct_build_s = since(t0);
+  t0 = Clock::now();
+  const std::vector<uint8_t> oct = st::encode_octree(oh);
+  const double oct_encode_s = since(t0);
+
+  // N independent quadtrees.
+  std::vector<std::vector<uint8_t>> mh(n);
+  size_t mh_bytes = 0, mh_nodes = 0;
+  double mh_build_s = 0, mh_encode_s = 0;
+  for (uint32_t w = 0; w < n; ++w) {
+    st::IntervalTile tile;
+    tile.level = level;
+    tile.width = tile.height = side;
+    tile.data.assign(stack.data.begin() + ptrdiff_t(size_t(w) * side * side),
+                     stack.data.begin() + ptrdiff_t(size_t(w + 1) * side * side));
+    t0 = Clock::now();
+    const st::Hierarchy h = st::build_hierarchy(tile);
+    mh_build_s += since(t0);
+    t0 = Clock::now();
+    mh[w] = st::encode_mh(h);
+    mh_encode_s += since(t0);
+    mh_bytes += mh[w].size();
+    mh_nodes += h.node_count();
+  }
+
+  const st::MhOctree tree = st::MhOctree::open(oct);
+  const st::StackLookup look(tree, set);
+  std::vector<std::unique_ptr<st::Evaluator>> ev;
+  for (const auto& b : mh) ev.push_back(st::open_mh(b));
+
+  // Receivers on surfaces seen by sample 0, each with a random slice and time.
+  st::Rng rng(7);
+  std::vector<st::Vec3d> pts;
+  std::vector<uint32_t> ws;
+  std::vector<double> times;
+  while (pts.size() < lookups) {
+    const uint64_t x = rng.next() % side, y = rng.next() % side;
+    const st::Interval iv = stack.at(x, y, 0);
+    if (iv.lo >= st::kLitDepth) continue;
+    const st::LightSpace& ls = set.samples[0];
+    const st::LightRay ray = ls.texel_ray(level, x, y);
+    const double d = std::max(0.0, double(iv.lo) - 1e-4);
+    const double t = ls.kind() == st::LightKind::sun ? d : ls.near_plane() + d * (ls.far_plane() - ls.near_plane());
+    pts.push_back(ray.origin + ray.dir * t);
+    ws.push_back(uint32_t(rng.next() % n));
+    times.push_back(rng.uniform());
+  }
+  const size_t m = pts.size();
+  auto lit2d = [&](const st::Vec3d& p, uint32_t w) {
+    const st::LightPoint lp = set.samples[w].to_light(p);
+    const auto t = st::LightSpace::texel_of(level, lp.u, lp.v);
+    return ev[w]->lit(t[0], t[1], float(lp.d));
+  };
+  // Sanity: the shared walk equals N walks, and every lit test equals the uncompressed
+  // map's where the receiver is outside the texel's object interval (lossless contract).
+  size_t soft_pen = 0;
+  for (size_t i = 0; i < std::min<size_t>(m, 500); ++i) {
+    for (uint32_t w = 0; w < n; ++w) {
+      const st::LightPoint lp = set.samples[w].to_light(pts[i]);
+      const auto t = st::LightSpace::texel_of(level, lp.u, lp.v);
+      const st::Interval iv = stack.at(t[0], t[1], w);
+      const float r = float(lp.d);
+      if (r > iv.lo && r <= iv.hi) continue;
+      if (look.lit(pts[i], w) != (r <= iv.lo) || lit2d(pts[i], w) != (r <= iv.lo))
+        throw st::Error("bench: a lit test differs from the uncompressed map's");
+    }
+    const float s = look.soft_visibility(pts[i]);
+    if (s != look.soft_visibility_independent(pts[i])) throw st::Error("bench: shared and separate walks differ");
+    soft_pen += s > 0 && s < 1;
+  }
+
+  float acc = 0;
+  const double ns_2d = median_ns(reps, m, [&] { for (size_t i = 0; i < m; ++i) acc += lit2d(pts[i], ws[i]); });
+  const double ns_oct = median_ns(reps, m, [&] { for (size_t i = 0; i < m; ++i) acc += look.lit(pts[i], ws[i]); });
+  const double ns_time = median_ns(reps, m, [&] { for (size_t i = 0; i < m; ++i) acc += look.visibility(pts[i], times[i]); });
+  const size_t ms = std::max<size_t>(1, m / 8);  // soft lookups cost N times more: fewer points
+  uint64_t visited = 0;
+  const double ns_soft = median_ns(reps, ms, [&] {
+    visited = 0;
+    for (size_t i = 0; i < ms; ++i) acc += look.soft_visibility(pts[i]), visited += st::StackLookup::last_nodes_visited();
+  });
+  const double ns_indep = median_ns(reps, ms, [&] { for (size_t i = 0; i < ms; ++i) acc += look.soft_visibility_independent(pts[i]); });
+  const double ns_soft2d = median_ns(reps, ms, [&] {
+    for (size_t i = 0; i < ms; ++i) {
+      uint32_t lit = 0;
+      for (uint32_t w = 0; w < n; ++w) lit += lit2d(pts[i], w);
+      acc += float(lit) / float(n);
+    }
+  });
+  g_sink = acc;
+
+  const double raw = double(stack.data.size()) * 4;  // float32 depth per texel per slice
+  std::printf("slices %u, octree levels %u (xy %u, w %u), samples 0-499 in penumbra: %zu\n", n, oh.geo.levels(), oh.geo.n,
+              oh.geo.k, soft_pen);
+  std::printf("%-26s %14s %14s %10s\n", "", "octree", "N x 2D MH", "oct/2D");
+  std::printf("%-26s %14zu %14zu %10.3f\n", "bytes", oct.size(), mh_bytes, double(oct.size()) / double(mh_bytes));
+  std::printf("%-26s %14zu %14zu %10.3f\n", "nodes", oh.node_count(), mh_nodes, double(oh.node_count()) / double(mh_nodes));
+  std::printf("%-26s %14.3f %14.3f %10.3f\n", "build s (hierarchy)", oct_build_s, mh_build_s, oct_build_s / mh_build_s);
+  std::printf("%-26s %14.3f %14.3f %10.3f\n", "encode s", oct_encode_s, mh_encode_s, oct_encode_s / mh_encode_s);
+  std::printf("raw float32 stack %.1f MiB (octree %.3f%% of it); tracing %.2f s for %u slices\n", raw / 1048576.0,
+              100.0 * double(oct.size()) / raw, trace_s, n);
+  std::printf("%-34s %10s %12s\n", "lookup (median ns)", "ns", "x 2D lookup");
+  auto row = [&](const char* what, double ns) { std::printf("%-34s %10.1f %12.2f\n", what, ns, ns / ns_2d); };
+  row("2D lit (one slice)", ns_2d);
+  row("octree lit (one slice)", ns_oct);
+  row("visibility(p, time)", ns_time);
+  row("soft, shared walk (all N)", ns_soft);
+  row("soft, N octree walks", ns_indep);
+  row("soft, N 2D lookups", ns_soft2d);
+  std::printf("soft per sample: shared %.1f ns, N octree walks %.1f ns, 2D %.1f ns; shared walk nodes per point %.1f\n",
+              ns_soft / n, ns_indep / n, ns_soft2d / n, double(visited) / double(ms));
+
+  return {{"case", c.name},
+          {"scene", c.scene},
+          {"light", c.light},
+          {"resolution", side},
+          {"slices", n},
+          {"octree_bytes", oct.size()},
+          {"mh2d_bytes", mh_bytes},
+          {"bytes_ratio", double(oct.size()) / double(mh_bytes)},
+          {"octree_nodes", oh.node_count()},
+          {"mh2d_nodes", mh_nodes},
+          {"raw_bytes", raw},
+          {"trace_s", trace_s},
+          {"octree_build_s", oct_build_s},
+          {"octree_encode_s", oct_encode_s},
+          {"mh2d_build_s", mh_build_s},
+          {"mh2d_encode_s", mh_encode_s},
+          {"lookups", m},
+          {"soft_lookups", ms},
+          {"ns_2d_lit", ns_2d},
+          {"ns_octree_lit", ns_oct},
+          {"ns_visibility_time", ns_time},
+          {"ns_soft_shared", ns_soft},
+          {"ns_soft_octree_walks", ns_indep},
+          {"ns_soft_2d", ns_soft2d},
+          {"soft_shared_over_2d_lit", ns_soft / ns_2d},
+          {"time_over_2d_lit", ns_time / ns_2d},
+          {"soft_nodes_per_point", double(visited) / double(ms)}};
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    uint32_t level = 8, city_n = 32, hair_n = 64;
+    std::string hair_jitter = "0.5";
+    size_t lookups = 20000;
+    int reps = 3;
+    std::string which = "all", json_path = "build/bench_stacks.json";
+    for (int i = 1; i < argc; ++i) {
+      const std::string a = argv[i];
+      auto next = [&]() -> std::string {
+        if (i + 1 >= argc) throw st::Error(a + " needs a value");
+        return argv[++i];
+      };
+      if (a == "--res") level = st::parse_resolution(next());
+      else if (a == "--city-samples") city_n = uint32_t(std::stoul(next()));
+      else if (a == "--hair-samples") hair_n = uint32_t(std::stoul(next()));
+      else if (a == "--lookups") lookups = std::stoul(next());
+      else if (a == "--hair-jitter") hair_jitter = next();
+      else if (a == "--reps") reps = std::max(1, std::stoi(next()));
+      else if (a == "--case") which = next();
+      else if (a == "--json") json_path = next();
+      else throw st::Error("unknown option " + a);
+    }
+    std::vector<Case> cases;
+    if (which == "all" || which == "city")
+      cases.push_back({"city", "procedural:city",
+                       "sun-path:azimuth=100..260,elevation=25..65,samples=" + std::to_string(city_n)});
+    // An hour of the same sun: neighbouring slices differ by a fraction of a degree.
+    if (which == "all" || which == "city-hour")
+      cases.push_back({"city-hour", "procedural:city",
+                       "sun-path:azimuth=170..185,elevation=50..52,samples=" + std::to_string(city_n)});
+    if (which == "all" || which == "hairball")
+      cases.push_back({"hairball", "procedural:hairball",
+                       "area:pos=0,25,0,target=0,0,0,size=4,4,samples=" + std::to_string(hair_n) + ",jitter=" + hair_jitter});
+    nlohmann::json out = nlohmann::json::array();
+    for (const Case& c : cases) out.push_back(run_case(c, level, lookups, reps));
+    std::ofstream(json_path) << out.dump(2) << "\n";
+    std::printf("\nwrote %s\n", json_path.c_str());
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_stacks: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,82 @@
+// libFuzzer harness for the MH octree reader (tiles/core/mh_octree.hpp, MHOCT.md).
+// Input: an encoded octree buffer. Contract: MhOctree::open validates the whole buffer
+// or throws st::FormatError; a buffer it accepts must answer depth() at every level and
+// slice (in range or not) without reading out of bounds, deterministically, and the
+// shared soft-shadow walk (stack_lookup.hpp) must equal independent lookups on it.
+#include <span>
+
+#include "common/error.hpp"
+#include "common/hash.hpp"
+#include "tests/fuzz/evaluator_probe.hpp"
+#include "tests/fuzz/fuzz_harness.hpp"
+#include "tiles/build/mh_octree_encode.hpp"
+#include "tiles/core/mh_octree.hpp"
+#include "tiles/core/stack_lookup.hpp"
+
+namespace {
+
+// Small stacks of each shape: cubic, shallower and deeper than wide, N not a power of
+// two; random intervals and slowly sliding ones (coherent along w).
+st::IntervalStack seed_stack(uint32_t level, uint32_t slices, uint64_t seed, bool coherent) {
+  st::IntervalStack s{level, slices, {}};
+  s.data.resize(size_t(s.side() * s.side()) * slices);
+  st::Rng rng(seed);
+  for (uint32_t w = 0; w < slices; ++w)
+    for (uint64_t y = 0; y < s.side(); ++y)
+      for (uint64_t x = 0; x < s.side(); ++x) {
+        float a = float(rng.uniform()), b = float(rng.uniform());
+        if (coherent) a = (x + w / 2 < s.side() / 2 && y > s.side() / 3) ? 0.3f : 0.8f, b = a + 0.05f;
+        s.at(x, y, w) = {std::min(a, b), std::max(a, b)};
+      }
+  return s;
+}
+
+}  // namespace
+
+std::vector<st::fuzz::Bytes> st::fuzz::seeds() {
+  std::vector<Bytes> out;
+  const std::pair<uint32_t, uint32_t> shapes[] = {{0, 1}, {1, 2}, {2, 4}, {3, 3}, {3, 8}, {1, 8}, {4, 2}, {4, 5}};
+  uint64_t seed = 1;
+  for (auto [level, slices] : shapes)
+    for (bool coherent : {false, true}) out.push_back(encode_octree(build_octree(seed_stack(level, slices, seed++, coherent))));
+  return out;
+}
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  const std::vector<std::uint8_t> bytes(data, data + size);  // exact size: ASan sees overreads
+  st::MhOctree tree;
+  try {
+    tree = st::MhOctree::open(std::span<const std::uint8_t>(bytes.data(), bytes.size()));
+  } catch (const st::FormatError&) {
+    return 0;
+  }
+  st::fuzz::note_accepted();
+  const uint64_t h = st::fuzz::input_hash(data, size);
+  const uint32_t n = tree.xy_level();
+  for (uint32_t q = 0; q <= std::min(n + 1, 20u); ++q) {
+    const uint64_t side = uint64_t(1) << q;
+    for (uint32_t i = 0; i < 8; ++i) {
+      const uint64_t x = (i & 1) ? side - 1 : (h >> (4 * i)) % side, y = (i & 2) ? side - 1 : (h >> (4 * i + 2)) % side;
+      const uint32_t w = (i & 4) ? tree.slices() - 1 : uint32_t((h >> (3 * i)) % (tree.slices() + 1));
+      const float v = tree.depth(x, y, w, q);
+      FUZZ_CHECK(std::bit_cast<uint32_t>(v) == std::bit_cast<uint32_t>(tree.depth(x, y, w, q)));
+      if (w >= tree.slices()) FUZZ_CHECK(v == st::kLitDepth);
+    }
+  }
+  // The shared walk against independent ones, with suns fitted to a unit box.
+  if (tree.slices() <= 64) {
+    st::LightSetSpec spec = st::LightSetSpec::parse("sun-path:azimuth=0..90,elevation=30..60,samples=" +
+                                                    std::to_string(tree.slices()));
+    st::Aabb box;
+    box.extend({-1, -1, -1});
+    box.extend({1, 1, 1});
+    const st::LightSet set = st::LightSet::fit(spec, box);
+    const st::StackLookup look(tree, set);
+    st::Rng rng(h);
+    for (int i = 0; i < 4; ++i) {
+      const st::Vec3d p{rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-1, 1)};
+      FUZZ_CHECK(look.soft_visibility(p) == look.soft_visibility_independent(p));
+    }
+  }
+  return 0;
+}

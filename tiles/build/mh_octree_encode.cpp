@@ -1,0 +1,198 @@
+// The MH octree encoder: flatten, lay out depth-first (a node's children block follows
+// the blocks of its earlier siblings' subtrees, so offsets shrink level by level), find
+// per-level shifts that make every offset fit 16 bits, then write the words.
+#include "tiles/build/mh_octree_encode.hpp"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <cstring>
+#include <string>
+
+#include "common/error.hpp"
+
+namespace st {
+namespace {
+
+using namespace moct;
+
+struct Flat {
+  std::vector<uint32_t> first_child;
+  std::vector<uint8_t> mask, level, valued;
+  std::vector<float> value;
+  size_t size() const { return mask.size(); }
+  uint32_t kind(uint32_t n) const { return valued[n] ? (mask[n] ? kCodeInner : kCodeLeaf) : kCodeEmpty; }
+  uint32_t code_mask(uint32_t n) const {
+    uint32_t m = 0, c = first_child[n];
+    for (uint32_t slot = 0; slot < kSlots; ++slot)
+      if (mask[n] >> slot & 1u) m |= kind(c++) << (2 * slot);
+    return m;
+  }
+};
+
+[[noreturn]] void bad(uint32_t l, size_t j, const std::string& what) {
+  throw Error("octree hierarchy: level " + std::to_string(l) + " node " + std::to_string(j) + ": " + what);
+}
+
+uint32_t step_bits(const Geometry& g, uint32_t l) { return (g.splits_xy(l) ? 2u : 0u) + (g.splits_w(l) ? 1u : 0u); }
+
+Flat flatten(const OctHierarchy& h) {
+  const Geometry& g = h.geo;
+  if (g.n > kMaxXyLevel || g.k > kMaxWLevel) throw Error("octree hierarchy: geometry out of range");
+  if (h.slices < 1 || h.slices > (1u << g.k) || (g.k > 0 && h.slices <= (1u << (g.k - 1))))
+    throw Error("octree hierarchy: " + std::to_string(h.slices) + " slices do not pad to 2^" + std::to_string(g.k));
+  if (h.levels.size() != g.levels()) throw Error("octree hierarchy: wrong number of levels");
+  if (h.levels[0].size() != 1 || !h.levels[0][0].has_value) throw Error("octree hierarchy: level 0 must hold a valued root");
+  size_t total = 0;
+  for (const auto& lv : h.levels) total += lv.size();
+  if (total >= (size_t(1) << 31)) throw Error("octree hierarchy: too many nodes for one buffer");
+  Flat t;
+  t.first_child.resize(total), t.mask.resize(total), t.level.resize(total), t.valued.resize(total),
+      t.value.resize(total);
+  uint32_t n = 0;
+  for (uint32_t l = 0; l < h.levels.size(); ++l) {
+    const auto& lv = h.levels[l];
+    const uint32_t next_begin = n + uint32_t(lv.size());
+    size_t next = 0;
+    for (size_t j = 0; j < lv.size(); ++j, ++n) {
+      const OctNode& node = lv[j];
+      if (j && lv[j - 1].code >= node.code) bad(l, j, "codes not increasing");
+      if (node.child_mask & ~g.slot_set(l)) bad(l, j, "a child in a slot this level does not split");
+      if (!node.has_value && !node.child_mask) bad(l, j, "neither valued nor with children");
+      if (node.has_value && !std::isfinite(node.value)) bad(l, j, "value is not finite");
+      t.first_child[n] = next_begin + uint32_t(next);
+      t.mask[n] = node.child_mask;
+      t.level[n] = uint8_t(l);
+      t.valued[n] = node.has_value;
+      t.value[n] = node.value;
+      for (uint32_t c = 0; c < kSlots; ++c) {
+        if (!(node.child_mask >> c & 1u)) continue;
+        const uint64_t want = (node.code << step_bits(g, l)) | (g.splits_xy(l) ? c : c >> 2);
+        if (l + 1 >= h.levels.size() || next >= h.levels[l + 1].size() || h.levels[l + 1][next].code != want)
+          bad(l, j, "child " + std::to_string(c) + " is not at the expected code");
+        ++next;
+      }
+    }
+    if (l + 1 < h.levels.size() && next != h.levels[l + 1].size()) bad(l + 1, next, "node has no parent");
+  }
+  return t;
+}
+
+struct Pass {
+  std::vector<uint32_t> pos, block;
+  uint64_t words = 0, padding = 0;
+  std::array<uint64_t, kMaxLevels> max_off{};
+  bool fits = true, too_big = false;
+};
+
+void layout(const Flat& t, const std::array<uint8_t, kMaxLevels>& sh, Pass& out) {
+  out.pos.assign(t.size(), 0);
+  out.block.assign(t.size(), 0);
+  out.max_off.fill(0);
+  out.fits = true, out.too_big = false, out.padding = 0;
+  uint64_t w = code_words(t.kind(0));
+  std::vector<uint32_t> stack{0};
+  while (!stack.empty()) {
+    const uint32_t n = stack.back();
+    stack.pop_back();
+    if (!t.mask[n]) continue;
+    const uint32_t s = sh[t.level[n]];
+    const uint64_t align = uint64_t(1) << s;
+    const uint64_t start = (w + align - 1) & ~(align - 1);
+    out.padding += start - w;
+    w = start;
+    if (w >= kMaxBytes / 4) {
+      out.too_big = true;
+      out.words = w;
+      return;
+    }
+    out.block[n] = uint32_t(w);
+    const uint64_t off = (w >> s) - (uint64_t(out.pos[n]) >> s);
+    out.max_off[t.level[n]] = std::max(out.max_off[t.level[n]], off);
+    const uint32_t c0 = t.first_child[n], cn = uint32_t(std::popcount(unsigned(t.mask[n])));
+    for (uint32_t c = c0; c < c0 + cn; ++c) {
+      out.pos[c] = uint32_t(w);
+      w += code_words(t.kind(c));
+    }
+    for (uint32_t c = c0 + cn; c-- > c0;)
+      if (t.mask[c]) stack.push_back(c);
+  }
+  out.words = w;
+  if (w > (kMaxBytes - tree_offset(kMaxLevels)) / 4) out.too_big = true;
+  for (uint64_t m : out.max_off) out.fits = out.fits && m <= kMaxOffset;
+}
+
+[[noreturn]] void too_big(uint64_t words) {
+  throw Error("MH octree: stack too large for one buffer (" + std::to_string(words * 4) +
+              " tree bytes exceed the 32-bit byte_size); cut it into smaller stacks");
+}
+
+void put_u32(std::vector<uint8_t>& b, size_t off, uint32_t v) { std::memcpy(b.data() + off, &v, 4); }
+
+}  // namespace
+
+std::vector<uint8_t> encode_octree(const OctHierarchy& h, OctEncodeStats* stats) {
+  const Flat t = flatten(h);
+  const uint32_t L = h.geo.depth();
+  std::array<uint8_t, kMaxLevels> sh{};
+  Pass pass, trial;
+  // The smallest shifts that fit (raise each overflowing level by what its overflow
+  // needs, lay out again), then one step either way on every scaled level, keeping the
+  // smallest buffer (as the MH quadtree encoder, MHQUAD.md "Offsets and the scale search").
+  for (;;) {
+    layout(t, sh, pass);
+    if (pass.too_big) too_big(pass.words);
+    if (pass.fits) break;
+    for (uint32_t l = 0; l < L; ++l) {
+      if (pass.max_off[l] <= kMaxOffset) continue;
+      const uint32_t raise = std::max<uint32_t>(1, uint32_t(std::bit_width((pass.max_off[l] - 1) / kMaxOffset)));
+      if (sh[l] + raise > kMaxShift) too_big(pass.words);
+      sh[l] = uint8_t(sh[l] + raise);
+    }
+  }
+  for (uint32_t l = 0; l < L; ++l) {
+    if (sh[l] == 0) continue;
+    for (int d : {-1, 1}) {
+      auto cand = sh;
+      cand[l] = uint8_t(int(sh[l]) + d);
+      if (cand[l] > kMaxShift) continue;
+      layout(t, cand, trial);
+      if (!trial.too_big && trial.fits && trial.words < pass.words) std::swap(pass, trial), sh = cand;
+    }
+  }
+  const uint32_t levels = h.geo.levels();
+  const size_t tree_off = tree_offset(levels);
+  const uint64_t byte_size = tree_off + pass.words * 4;
+  std::vector<uint8_t> out(byte_size, 0);
+  put_u32(out, kOffMagic, kMagic);
+  const uint16_t version = kVersion, slices = uint16_t(h.slices);
+  std::memcpy(out.data() + kOffVersion, &version, 2);
+  out[kOffXyLevel] = uint8_t(h.geo.n);
+  out[kOffWLevel] = uint8_t(h.geo.k);
+  std::memcpy(out.data() + kOffSlices, &slices, 2);
+  out[kOffFlags] = t.mask[0] ? 0 : kFlagRootLeaf;
+  put_u32(out, kOffNodeCount, uint32_t(t.size()));
+  put_u32(out, kOffByteSize, uint32_t(byte_size));
+  for (uint32_t l = 0; l < levels; ++l) out[kOffShifts + l] = sh[l];
+  for (uint32_t n = 0; n < t.size(); ++n) {
+    const size_t at = tree_off + size_t(pass.pos[n]) * 4;
+    const uint32_t kind = t.kind(n);
+    if (kind == kCodeLeaf) {
+      put_u32(out, at, float_bits(t.value[n]));
+      continue;
+    }
+    const uint32_t s = sh[t.level[n]];
+    const uint32_t off = uint32_t((uint64_t(pass.block[n]) >> s) - (uint64_t(pass.pos[n]) >> s));
+    put_u32(out, at, node_word(t.code_mask(n), off));
+    if (kind == kCodeInner) put_u32(out, at + 4, float_bits(t.value[n]));
+  }
+  if (stats) {
+    stats->shift = sh;
+    stats->words = pass.words;
+    stats->padding_words = pass.padding;
+    stats->nodes = uint32_t(t.size());
+  }
+  return out;
+}
+
+}  // namespace st

@@ -1,0 +1,307 @@
+#include "tiles/core/light_set.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <sstream>
+#include <tuple>
+#include <utility>
+#include <vector>
+
+#include "common/error.hpp"
+#include "common/hash.hpp"
+
+namespace st {
+namespace {
+
+[[noreturn]] void fail(const std::string& kind, const std::string& what) {
+  throw Error("--light " + kind + ": " + what);
+}
+
+double number(const std::string& kind, const std::string& key, const std::string& s) {
+  size_t used = 0;
+  double v = 0;
+  try {
+    v = std::stod(s, &used);
+  } catch (...) {
+    used = 0;
+  }
+  if (s.empty() || used != s.size() || !std::isfinite(v))
+    fail(kind, "'" + key + "' needs a finite number, got '" + s + "'");
+  if (std::fabs(v) > kMaxLightCoordinate) fail(kind, "'" + key + "' = " + s + " is out of range");
+  return v;
+}
+
+// "A0..A1" or "A" (then A..A).
+std::pair<double, double> range(const std::string& kind, const std::string& key, const std::string& s) {
+  const size_t dots = s.find("..");
+  if (dots == std::string::npos) {
+    const double v = number(kind, key, s);
+    return {v, v};
+  }
+  return {number(kind, key, s.substr(0, dots)), number(kind, key, s.substr(dots + 2))};
+}
+
+using Fields = std::vector<std::pair<std::string, std::vector<std::string>>>;
+
+// Comma-separated key=value fields; bare numbers continue the previous field (vectors).
+Fields split_fields(const std::string& kind, const std::string& rest) {
+  Fields fields;
+  std::stringstream ss(rest);
+  std::string tok;
+  while (std::getline(ss, tok, ',')) {
+    const auto eq = tok.find('=');
+    if (eq != std::string::npos) {
+      const std::string key = tok.substr(0, eq);
+      for (const auto& f : fields)
+        if (f.first == key) fail(kind, "field '" + key + "' given twice");
+      fields.push_back({key, {tok.substr(eq + 1)}});
+    } else if (!fields.empty()) {
+      fields.back().second.push_back(tok);
+    } else {
+      fail(kind, "expected key=value, got '" + tok + "'");
+    }
+  }
+  return fields;
+}
+
+uint32_t sample_count(const std::string& kind, const std::string& s) {
+  const double v = number(kind, "samples", s);
+  if (v != std::floor(v) || v < 1 || v > kMaxLightSamples)
+    fail(kind, "samples must be an integer in 1.." + std::to_string(kMaxLightSamples) + ", got '" + s + "'");
+  return uint32_t(v);
+}
+
+}  // namespace
+
+bool LightSetSpec::names_light_set(const std::string& text) {
+  return text.rfind("sun-path:", 0) == 0 || text.rfind("area:", 0) == 0;
+}
+
+LightSetSpec LightSetSpec::parse(const std::string& text) {
+  LightSetSpec s;
+  const auto colon = text.find(':');
+  const std::string kind = text.substr(0, colon);
+  const std::string rest = colon == std::string::npos ? "" : text.substr(colon + 1);
+  if (kind == "sun-path") {
+    s.kind = LightSetKind::sun_path;
+  } else if (kind == "area") {
+    s.kind = LightSetKind::area;
+  } else {
+    throw Error("--light: unknown light set '" + kind + "' (expected sun-path:... or area:...)");
+  }
+  bool have_samples = false, have_az = false, have_el = false, have_pos = false, have_target = false,
+       have_size = false;
+  for (const auto& field : split_fields(kind, rest)) {
+    const std::string& key = field.first;
+    const auto& vals = field.second;
+    auto one = [&]() -> const std::string& {
+      if (vals.size() != 1) fail(kind, "'" + key + "' takes one value");
+      return vals[0];
+    };
+    auto vec = [&]() {
+      if (vals.size() != 3) fail(kind, "'" + key + "' needs X,Y,Z");
+      return Vec3d{number(kind, key, vals[0]), number(kind, key, vals[1]), number(kind, key, vals[2])};
+    };
+    if (key == "samples") {
+      s.samples = sample_count(kind, one()), have_samples = true;
+    } else if (s.kind == LightSetKind::sun_path && key == "azimuth") {
+      std::tie(s.azimuth0_deg, s.azimuth1_deg) = range(kind, key, one()), have_az = true;
+    } else if (s.kind == LightSetKind::sun_path && key == "elevation") {
+      std::tie(s.elevation0_deg, s.elevation1_deg) = range(kind, key, one()), have_el = true;
+    } else if (s.kind == LightSetKind::sun_path && key == "margin") {
+      s.margin = number(kind, key, one());
+    } else if (s.kind == LightSetKind::area && key == "pos") {
+      s.pos = vec(), have_pos = true;
+    } else if (s.kind == LightSetKind::area && key == "target") {
+      s.target = vec(), have_target = true;
+    } else if (s.kind == LightSetKind::area && key == "size") {
+      if (vals.size() != 2) fail(kind, "'size' needs W,H");
+      s.width = number(kind, key, vals[0]), s.height = number(kind, key, vals[1]), have_size = true;
+    } else if (s.kind == LightSetKind::area && key == "fov") {
+      s.fov_deg = number(kind, key, one());
+    } else if (s.kind == LightSetKind::area && key == "jitter") {
+      s.jitter = number(kind, key, one());
+    } else if (s.kind == LightSetKind::area && key == "seed") {
+      const double v = number(kind, key, one());
+      if (v != std::floor(v) || v < 0 || v > 9007199254740992.0) fail(kind, "seed must be an integer >= 0");
+      s.seed = uint64_t(v);
+    } else {
+      fail(kind, "unknown field '" + key + "'");
+    }
+  }
+  if (!have_samples) fail(kind, "needs samples=N");
+  if (s.kind == LightSetKind::sun_path) {
+    if (!have_az || !have_el) fail(kind, "needs azimuth=A0..A1,elevation=E0..E1");
+    if (std::fabs(s.azimuth1_deg - s.azimuth0_deg) > 360) fail(kind, "azimuth range spans more than 360 degrees");
+    for (double e : {s.elevation0_deg, s.elevation1_deg})
+      if (!(e > 0 && e <= 90)) fail(kind, "elevation " + std::to_string(e) + " is outside (0, 90] degrees");
+    if (!(s.margin >= 0 && s.margin < 10)) fail(kind, "margin must be in [0, 10)");
+  } else {
+    if (!have_pos || !have_target || !have_size) fail(kind, "needs pos=X,Y,Z,target=X,Y,Z,size=W,H");
+    if (length(s.target - s.pos) == 0) fail(kind, "pos and target coincide");
+    if (!(s.width > 0 && s.height > 0)) fail(kind, "size W,H must both be > 0");
+    if (!(s.fov_deg > 0 && s.fov_deg < 170)) fail(kind, "fov must be in (0, 170)");
+    if (!(s.jitter >= 0 && s.jitter <= 1)) fail(kind, "jitter must be in [0, 1]");
+  }
+  return s;
+}
+
+std::string LightSetSpec::to_string() const {
+  std::ostringstream os;
+  os.precision(17);
+  if (kind == LightSetKind::sun_path) {
+    os << "sun-path:azimuth=" << azimuth0_deg << ".." << azimuth1_deg << ",elevation=" << elevation0_deg << ".."
+       << elevation1_deg << ",samples=" << samples << ",margin=" << margin;
+  } else {
+    os << "area:pos=" << pos.x << ',' << pos.y << ',' << pos.z << ",target=" << target.x << ',' << target.y << ','
+       << target.z << ",size=" << width << ',' << height << ",samples=" << samples << ",fov=" << fov_deg
+       << ",jitter=" << jitter << ",seed=" << seed;
+  }
+  return os.str();
+}
+
+void hilbert_cell(uint32_t order, uint64_t d, uint32_t& x, uint32_t& y) {
+  // The classic iterative mapping: two bits of d per level, rotating the quadrant.
+  uint64_t rx = 0, ry = 0, t = d, cx = 0, cy = 0;
+  for (uint64_t s = 1; s < (uint64_t(1) << order); s *= 2) {
+    rx = 1 & (t / 2);
+    ry = 1 & (t ^ rx);
+    if (ry == 0) {
+      if (rx == 1) cx = s - 1 - cx, cy = s - 1 - cy;
+      std::swap(cx, cy);
+    }
+    cx += s * rx;
+    cy += s * ry;
+    t /= 4;
+  }
+  x = uint32_t(cx), y = uint32_t(cy);
+}
+
+std::vector<LightSpec> LightSetSpec::sample_specs() const {
+  std::vector<LightSpec> out;
+  out.reserve(samples);
+  if (kind == LightSetKind::sun_path) {
+    for (uint32_t w = 0; w < samples; ++w) {
+      const double t = samples == 1 ? 0.0 : double(w) / double(samples - 1);
+      LightSpec s;
+      s.kind = LightKind::sun;
+      s.azimuth_deg = azimuth0_deg + t * (azimuth1_deg - azimuth0_deg);
+      s.elevation_deg = elevation0_deg + t * (elevation1_deg - elevation0_deg);
+      s.margin = margin;
+      out.push_back(s);
+    }
+    return out;
+  }
+  // The rectangle's axes: those of the spot light pos -> target (LightSpace's basis).
+  LightSpec centre;
+  centre.kind = LightKind::spot;
+  centre.pos = pos, centre.target = target, centre.fov_deg = fov_deg;
+  Aabb probe;
+  probe.extend(target);  // any box in front of the light fits
+  const LightSpace axes = LightSpace::fit(centre, probe);
+  uint32_t order = 0;
+  while ((uint64_t(1) << (2 * order)) < samples) ++order;
+  const uint64_t cells = uint64_t(1) << (2 * order), side = uint64_t(1) << order;
+  Rng rng(seed);
+  for (uint32_t w = 0; w < samples; ++w) {
+    // N points evenly along the curve of 4^order >= N cells: gaps of fewer than 4 cells.
+    const uint64_t d = (2 * uint64_t(w) + 1) * cells / (2 * uint64_t(samples));
+    uint32_t hx = 0, hy = 0;
+    hilbert_cell(order, d, hx, hy);
+    const double jx = jitter > 0 ? jitter * (rng.uniform() - 0.5) : 0.0;
+    const double jy = jitter > 0 ? jitter * (rng.uniform() - 0.5) : 0.0;
+    const double fx = (double(hx) + 0.5 + jx) / double(side) - 0.5;
+    const double fy = (double(hy) + 0.5 + jy) / double(side) - 0.5;
+    const Vec3d offset = axes.axis_u() * (fx * width) + axes.axis_v() * (fy * height);
+    LightSpec s = centre;
+    s.pos = pos + offset;
+    s.target = target + offset;
+    out.push_back(s);
+  }
+  return out;
+}
+
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// A sun path's samples share one frame rule and one box size (see light_set.hpp "Frames").
+std::vector<LightSpace> fit_sun_path(const std::vector<LightSpec>& specs, const Aabb& b) {
+  struct Frame {
+    Vec3d u, v, f;
+    double uc, vc, fc;
+  };
+  std::vector<Frame> frames;
+  double side = 0, depth = 0;
+  for (const LightSpec& s : specs) {
+    const double az = s.azimuth_deg * kPi / 180, el = s.elevation_deg * kPi / 180;
+    Frame fr;
+    fr.f = normalize(Vec3d{-std::cos(el) * std::sin(az), -std::sin(el), -std::cos(el) * std::cos(az)});
+    fr.u = Vec3d{-std::cos(az), 0, std::sin(az)};  // LightSpace::fit's u below ~64 degrees
+    fr.v = cross(fr.f, fr.u);
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int i = 0; i < 8; ++i) {
+      const Vec3d c{(i & 1) ? b.hi.x : b.lo.x, (i & 2) ? b.hi.y : b.lo.y, (i & 4) ? b.hi.z : b.lo.z};
+      const double p[3] = {dot(c, fr.u), dot(c, fr.v), dot(c, fr.f)};
+      for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], p[a]), hi[a] = std::max(hi[a], p[a]);
+    }
+    side = std::max({side, hi[0] - lo[0], hi[1] - lo[1]});
+    depth = std::max(depth, hi[2] - lo[2]);
+    fr.uc = 0.5 * (lo[0] + hi[0]), fr.vc = 0.5 * (lo[1] + hi[1]), fr.fc = 0.5 * (lo[2] + hi[2]);
+    frames.push_back(fr);
+  }
+  const double m = specs.empty() ? 0 : specs[0].margin;
+  side *= 1 + 2 * m, depth *= 1 + 2 * m;
+  if (!(side > 0) || !(depth > 0) || !std::isfinite(side) || !std::isfinite(depth))
+    throw Error("light set: zero-extent light box (the scene is flat or a point seen from the sun)");
+  std::vector<LightSpace> out;
+  for (size_t w = 0; w < frames.size(); ++w) {
+    const Frame& fr = frames[w];
+    const Vec3d o = fr.u * (fr.uc - side / 2) + fr.v * (fr.vc - side / 2) + fr.f * (fr.fc - depth / 2);
+    const std::array<double, 18> a = {o.x, o.y, o.z, fr.u.x, fr.u.y, fr.u.z, fr.v.x, fr.v.y, fr.v.z,
+                                      fr.f.x, fr.f.y, fr.f.z, side, 0, depth, specs[w].azimuth_deg,
+                                      specs[w].elevation_deg, m};
+    const std::string bad = LightSpace::check_array(LightKind::sun, a);
+    if (!bad.empty()) throw Error("light set sample " + std::to_string(w) + " (" + specs[w].to_string() + "): " + bad);
+    out.push_back(LightSpace::from_array(LightKind::sun, a));
+  }
+  return out;
+}
+
+}  // namespace
+
+LightSet LightSet::fit(const LightSetSpec& spec, const Aabb& bounds) {
+  if (bounds.empty()) throw Error("light: the scene has no geometry to fit the light to");
+  LightSet set;
+  set.spec = spec;
+  const std::vector<LightSpec> specs = spec.sample_specs();
+  if (spec.kind == LightSetKind::sun_path) {
+    set.samples = fit_sun_path(specs, bounds);
+    return set;
+  }
+  set.samples.reserve(specs.size());
+  double near = INFINITY, far = 0;
+  for (size_t w = 0; w < specs.size(); ++w) {
+    try {
+      set.samples.push_back(LightSpace::fit(specs[w], bounds));
+    } catch (const Error& e) {
+      throw Error("light set sample " + std::to_string(w) + " (" + specs[w].to_string() + "): " + e.what());
+    }
+    near = std::min(near, set.samples.back().near_plane()), far = std::max(far, set.samples.back().far_plane());
+  }
+  // One depth range for every sample, so a surface keeps nearly the same depth from slice
+  // to slice.
+  for (LightSpace& ls : set.samples) {
+    std::array<double, 18> a = ls.to_array();
+    a[13] = near, a[14] = far;
+    ls = LightSpace::from_array(LightKind::spot, a);
+  }
+  return set;
+}
+
+double LightSet::time_of(uint32_t w) const {
+  return samples.size() <= 1 ? 0.0 : double(w) / double(samples.size() - 1);
+}
+
+}  // namespace st

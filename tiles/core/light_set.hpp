@@ -1,0 +1,89 @@
+// Light sets: the N light samples of a shadow-map stack (MH 2016 §4, Fig. 7). Slice w of
+// the stack is the shadow map of sample w; texel (x, y) of slice w is the ray of sample w
+// through that texel (each sample has its own LightSpace, light.hpp).
+//
+// Syntax (one `--light` argument; LightSetSpec::parse throws st::Error naming the field):
+//
+//   sun-path:azimuth=A0..A1,elevation=E0..E1,samples=N[,margin=F]
+//       A sun moving along a path known in advance (MH §4 "varying light positions"):
+//       sample w (w = 0..N-1) is `sun:azimuth=A,elevation=E` with A and E linear in
+//       t_w = w / (N - 1) (t_0 = 0 when N = 1), in the frames described below.
+//       A0..A1 may run either way (a sun turning west or east) but spans at most 360
+//       degrees; E0..E1 may rise or set, both ends in (0, 90]. A single angle `A` means A..A.
+//
+//   area:pos=X,Y,Z,target=X,Y,Z,size=W,H,samples=N[,fov=DEG][,jitter=J][,seed=S]
+//       A W x H rectangle centred on pos, facing target (its axes are the spot light's
+//       u and v axes of pos -> target). Sample w is a spot light at a point of the
+//       rectangle looking along the same axis (its target moves with it, so every sample
+//       shares one basis and neighbouring slices stay coherent). The points are the cells
+//       of a 2^g x 2^g grid (the smallest with 4^g >= N) taken in Hilbert-curve order
+//       (MH §4 after Ritschel et al. 2007), N of them spread evenly along the curve, so
+//       consecutive slices are neighbouring points. jitter J in [0, 1] moves each point
+//       uniformly within J times its cell (seeded by S, default 1: the same set every run);
+//       J = 0 (default) takes cell centres. fov as for spot lights (default 60).
+//
+// Frames (why the slices of a stack line up: the octree compresses what neighbouring
+// slices share, MH §4). A sun path's samples all take u = the horizontal axis normal to the
+// azimuth (LightSpace::fit's own choice below about 64 degrees of elevation, but without
+// its switch of helper axis near the zenith, so the frame never jumps between two
+// samples), v = forward x u, and one box size and depth range: the largest any sample needs,
+// each box centred on the scene. An area light's samples share the spot basis and one
+// near/far range (the union of the samples' fits). Texel size and depth scale are thus the
+// same in every slice; what remains is the geometry's own motion (an orthographic sun
+// turning by an angle a shifts a point at distance r from the box centre by about a * r).
+//
+// Bounds: 1 <= N <= kMaxLightSamples. Every number finite, sizes > 0, coordinates within
+// kMaxLightCoordinate. A light set the build cannot represent (more samples than the stack
+// may hold) is refused here, before anything is traced.
+#pragma once
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "tiles/core/light.hpp"
+
+namespace st {
+
+// The most samples a stack holds: the stack's w axis is padded to 2^12 (MHOCT.md).
+inline constexpr uint32_t kMaxLightSamples = 4096;
+
+enum class LightSetKind : uint8_t { sun_path = 0, area = 1 };
+
+struct LightSetSpec {
+  LightSetKind kind = LightSetKind::sun_path;
+  uint32_t samples = 1;
+  // sun-path
+  double azimuth0_deg = 0, azimuth1_deg = 0, elevation0_deg = 45, elevation1_deg = 45, margin = 0.01;
+  // area
+  Vec3d pos{}, target{};
+  double width = 1, height = 1, fov_deg = 60, jitter = 0;
+  uint64_t seed = 1;
+
+  // True when `text` names a light set (starts with "sun-path:" or "area:"), so a caller
+  // can route `--light` to LightSpec::parse or here.
+  static bool names_light_set(const std::string& text);
+  static LightSetSpec parse(const std::string& text);
+  std::string to_string() const;
+
+  // The N per-sample light specs, in slice order (sun-path: sun specs; area: spot specs).
+  std::vector<LightSpec> sample_specs() const;
+};
+
+// The fitted set: one LightSpace per slice.
+struct LightSet {
+  LightSetSpec spec;
+  std::vector<LightSpace> samples;
+
+  // Fits every sample to the scene bounds in the frames above; throws st::Error naming the
+  // sample that cannot be fitted.
+  static LightSet fit(const LightSetSpec& spec, const Aabb& bounds);
+  uint32_t size() const { return uint32_t(samples.size()); }
+  // The time of slice w in [0, 1]: w / (N - 1), 0 for N = 1 (visibility(point, time)).
+  double time_of(uint32_t w) const;
+};
+
+// Point d (0 <= d < 4^order) of the Hilbert curve over a 2^order x 2^order grid: its cell
+// (x, y). Consecutive d are edge-neighbouring cells.
+void hilbert_cell(uint32_t order, uint64_t d, uint32_t& x, uint32_t& y);
+
+}  // namespace st

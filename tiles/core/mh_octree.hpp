@@ -1,0 +1,78 @@
+// Reader of MH octree buffers (MH 2016 §4; layout: mh_octree_format.hpp, MHOCT.md): one
+// full validation pass at open, then lookups that read only validated words.
+//
+// Thread safety: a MhOctree is immutable after open; lookups are const, noexcept, never
+// allocate, and may run concurrently. The buffer is borrowed: the caller keeps it alive.
+#pragma once
+#include <cstdint>
+#include <span>
+
+#include "tiles/core/interval.hpp"
+#include "tiles/core/mh_octree_format.hpp"
+
+namespace st {
+
+class MhOctree {
+ public:
+  // Validates the whole buffer: header fields, every node reached from the root once (in
+  // bounds, no overlap, only the child slots the level's geometry splits, no children at
+  // the finest level, offsets strictly forward, finite floats), zero padding, no trailing
+  // bytes, node count. Throws st::FormatError("MH octree: <field> at byte <offset>: ...").
+  static MhOctree open(std::span<const uint8_t> bytes);
+
+  const moct::Geometry& geometry() const { return geo_; }
+  uint32_t xy_level() const { return geo_.n; }  // slices are 2^xy_level a side
+  uint32_t slices() const { return slices_; }   // N; w in [0, N)
+  uint32_t node_count() const { return node_count_; }
+  size_t byte_size() const { return bytes_.size(); }
+
+  // Depth of texel (x, y) of the level-`level` map of slice w (MH §3.2 traversal in 3D,
+  // lazy value fetch). Every level is a complete map (multiresolution); a level above
+  // xy_level() answers like depth(x >> s, y >> s, w, xy_level()), s = level - xy_level().
+  // Outside the stack (w >= slices(), x or y >= 2^level, level > kMaxLevel) the texel is
+  // lit: kLitDepth (ARCHITECTURE.md "Out of range").
+  float depth(uint64_t x, uint64_t y, uint32_t w, uint32_t level) const noexcept;
+
+  // Walks to finest texels one after another, each starting from the deepest node its
+  // path shares with the previous walk's (MH §3.3's lowest common node and last-sample
+  // cache, carried over w): coherent texel sequences, such as one point's samples in
+  // trajectory or Hilbert order, read only the nodes where their paths part.
+  struct Path {
+    uint64_t pos[moct::kMaxLevels] = {}, val[moct::kMaxLevels] = {};
+    uint32_t code[moct::kMaxLevels] = {};
+    uint32_t reached = 0;  // level of the last node of the previous walk
+    uint64_t x = 0, y = 0;
+    uint32_t w = 0;
+    bool valid = false;    // false: the next walk starts at the root
+    uint64_t steps = 0;    // nodes stepped into, summed over walks (benchmark figure)
+  };
+  // depth(x, y, w, xy_level()) for w < slices(), x, y < 2^xy_level() (not checked).
+  float depth_along(Path& p, uint64_t x, uint64_t y, uint32_t w) const noexcept;
+
+  // The walk, for lookups that share it among samples (stack_lookup.hpp). A cursor stands
+  // on a node; `val` is the word of the last valued node's float on its path.
+  struct Cursor {
+    uint64_t pos = 0, val = 0;
+    uint32_t code = 0;   // the node's own 2-bit kind (moct::kCodeLeaf / Empty / Inner)
+    uint32_t level = 0;  // octree level
+  };
+  Cursor root() const noexcept;
+  // The cursor's child in `slot` (0..7); false where the slot holds no child.
+  bool child(const Cursor& c, uint32_t slot, Cursor& out) const noexcept;
+  float value(const Cursor& c) const noexcept;
+
+ private:
+  uint32_t word(uint64_t w) const noexcept;
+  std::span<const uint8_t> bytes_;
+  const uint8_t* tree_ = nullptr;
+  moct::Geometry geo_{};
+  uint32_t slices_ = 0, node_count_ = 0;
+  bool root_leaf_ = false;
+  uint8_t shift_[moct::kMaxLevels] = {};
+  // Per level l (the step to l + 1): whether it halves x, y / w, the x, y resolution bits
+  // of level l + 1, and the bit of a full-resolution w it reads.
+  bool split_xy_[moct::kMaxLevels] = {}, split_w_[moct::kMaxLevels] = {};
+  uint8_t xy_next_[moct::kMaxLevels] = {}, w_shift_[moct::kMaxLevels] = {};
+};
+
+}  // namespace st

@@ -1,0 +1,104 @@
+// Byte layout and level geometry of the MH octree: a shadow-map stack (MH 2016 §4) as
+// one flat buffer. Shared by the builder (tiles/build/mh_octree_build.*), the encoder
+// (tiles/build/mh_octree_encode.*) and the reader (mh_octree_reader.*). The drawing with
+// an example is tiles/core/MHOCT.md; every constant here is a format constant: changing
+// one changes the bytes, so bump kVersion.
+//
+//   offset  size  field
+//   0       4     magic       "STOC", bytes in that order
+//   4       2     version     kVersion
+//   6       1     xy_level    n: slices are 2^n texels a side (0..20)
+//   7       1     w_level     k: the stack is padded to 2^k slices (0..12)
+//   8       2     slices      N real slices: 2^(k-1) < N <= 2^k (N = 1 when k = 0)
+//   10      1     flags       bit0: root is a leaf (1 tree word); other bits zero
+//   11      1     reserved    zero
+//   12      4     node_count  nodes in the tree
+//   16      4     byte_size   whole buffer, header included (== the span's size)
+//   20      L     shift[l]    l = 0..L-1, L = max(n, k) + 1 levels: log2 of the child-offset
+//                             scale of parents at level l (<= 15)
+//   20+L    pad   zero bytes up to a multiple of 4
+//   T       4*W   tree        T = 20 + round_up(L, 4); W little-endian words; root at word 0
+//
+// Tree words: leaf = [float]; empty = [node word]; inner = [node word][float].
+//   node word bits 0-15 : child mask, 2 bits per child slot c (0..7) at bits 2c..2c+1:
+//                         00 none, 01 leaf, 10 empty, 11 inner (popcount = size in words)
+//             bits 16-31: child offset `off` (1..65535) in units of 2^shift[level] words
+//   The children block of a node at word p starts at ((p >> s) + off) << s; child slot c
+//   lies popcount(mask & ((1 << 2c) - 1)) words in. With 16-bit masks a node word has no
+//   pad byte (MH §4: octree nodes are 4-byte aligned by default).
+#pragma once
+#include <bit>
+#include <cstddef>
+#include <cstdint>
+
+namespace st::moct {
+
+static_assert(std::endian::native == std::endian::little, "tree words are little-endian");
+
+inline constexpr uint32_t kMagic = 0x434F5453u;  // bytes "STOC"
+inline constexpr uint16_t kVersion = 1;
+inline constexpr uint32_t kMaxXyLevel = 20;  // kMaxLevel (interval.hpp)
+inline constexpr uint32_t kMaxWLevel = 12;   // 4096 slices (kMaxLightSamples)
+inline constexpr uint32_t kMaxLevels = 21;   // max(n, k) + 1
+
+inline constexpr size_t kOffMagic = 0, kOffVersion = 4, kOffXyLevel = 6, kOffWLevel = 7, kOffSlices = 8,
+                        kOffFlags = 10, kOffReserved = 11, kOffNodeCount = 12, kOffByteSize = 16, kOffShifts = 20;
+inline constexpr size_t kHeaderFixedSize = 20;
+inline constexpr uint8_t kFlagRootLeaf = 1, kFlagsKnown = 1;
+
+inline constexpr uint32_t kCodeNone = 0, kCodeLeaf = 1, kCodeEmpty = 2, kCodeInner = 3;
+inline constexpr uint32_t kSlots = 8;  // child slot c = cx | cy << 1 | cw << 2
+inline constexpr uint32_t kMaxOffset = 0xFFFF;
+inline constexpr uint32_t kMaxShift = 15;
+inline constexpr uint64_t kMaxBytes = 0xFFFFFFFCull;
+
+inline constexpr size_t tree_offset(uint32_t levels) { return kHeaderFixedSize + ((size_t(levels) + 3) & ~size_t(3)); }
+inline constexpr uint32_t code_words(uint32_t code) { return code == kCodeInner ? 2 : code != 0; }
+inline uint32_t word_mask(uint32_t w) { return w & 0xFFFFu; }
+inline uint32_t word_offset(uint32_t w) { return w >> 16; }
+inline uint32_t node_word(uint32_t mask, uint32_t off) { return mask | (off << 16); }
+inline uint32_t child_code(uint32_t mask, uint32_t slot) { return (mask >> (2 * slot)) & 3u; }
+// Bit count of a 16-bit mask without a library call (the build has no -mpopcnt).
+inline uint32_t popcount16(uint32_t m) {
+  m = m - ((m >> 1) & 0x5555u);
+  m = (m & 0x3333u) + ((m >> 2) & 0x3333u);
+  m = (m + (m >> 4)) & 0x0F0Fu;
+  return (m + (m >> 8)) & 0x1Fu;
+}
+inline uint32_t child_skip(uint32_t mask, uint32_t slot) { return popcount16(mask & ((1u << (2 * slot)) - 1u)); }
+inline uint64_t block_start(uint64_t parent_word, uint32_t shift, uint32_t off) {
+  return ((parent_word >> shift) + off) << shift;
+}
+
+// Level geometry of a stack of 2^k slices of 2^n x 2^n texels (MH §4 "non-cubic image
+// stacks"). The paper pads the stack to a cube with placeholder slices of interval
+// [0, 1]; a placeholder contains every depth, so it is covered wherever it meets real
+// slices and never stored. The cube's coarse levels therefore only ever hold children
+// in the real corner, and this geometry stores exactly that: the octree has
+// L = max(n, k) levels below the root; the finest min(n, k) steps halve x, y and w
+// together (8 child slots), the steps above them halve only the longer axis (x and y:
+// slots with cw = 0; w: slots with cx = cy = 0), so level l is a grid of
+// 2^xy_bits(l) x 2^xy_bits(l) x 2^w_bits(l) nodes. Slots an axis does not split at a
+// level are never present (the validator refuses them).
+struct Geometry {
+  uint32_t n = 0, k = 0;
+  constexpr uint32_t depth() const { return n > k ? n : k; }
+  constexpr uint32_t levels() const { return depth() + 1; }
+  constexpr uint32_t xy_bits(uint32_t l) const { return l + n >= depth() ? l + n - depth() : 0; }
+  constexpr uint32_t w_bits(uint32_t l) const { return l + k >= depth() ? l + k - depth() : 0; }
+  // Whether the step from level l to l + 1 halves x and y / w.
+  constexpr bool splits_xy(uint32_t l) const { return l + n >= depth(); }
+  constexpr bool splits_w(uint32_t l) const { return l + k >= depth(); }
+  // The child slots a node of level l may use (bit c: slot c).
+  constexpr uint32_t slot_set(uint32_t l) const {
+    const uint32_t xy = splits_xy(l) ? 0x0Fu : 0x01u;
+    return splits_w(l) ? (xy | xy << 4) : xy;
+  }
+  // The octree level whose x, y resolution is 2^q (q <= n).
+  constexpr uint32_t level_of_xy(uint32_t q) const { return q + depth() - n; }
+};
+
+inline uint32_t float_bits(float f) { return std::bit_cast<uint32_t>(f); }
+inline float bits_float(uint32_t b) { return std::bit_cast<float>(b); }
+
+}  // namespace st::moct

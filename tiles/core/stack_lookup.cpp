@@ -1,0 +1,61 @@
+#include "tiles/core/stack_lookup.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+#include "common/error.hpp"
+
+namespace st {
+namespace {
+
+thread_local uint64_t t_visited = 0;
+
+}  // namespace
+
+StackLookup::StackLookup(const MhOctree& octree, const LightSet& lights) : tree_(octree), lights_(lights) {
+  if (lights.size() != octree.slices())
+    throw Error("stack lookup: the light set has " + std::to_string(lights.size()) + " samples, the octree " +
+                std::to_string(octree.slices()) + " slices");
+}
+
+bool StackLookup::lit(const Vec3d& p, uint32_t w) const noexcept {
+  if (w >= tree_.slices()) return true;
+  const LightPoint lp = lights_.samples[w].to_light(p);
+  const auto t = LightSpace::texel_of(tree_.xy_level(), lp.u, lp.v);
+  return float(lp.d) <= tree_.depth(t[0], t[1], w, tree_.xy_level());
+}
+
+float StackLookup::visibility(const Vec3d& p, double time) const noexcept {
+  const uint32_t n = tree_.slices();
+  const double s = std::clamp(std::isnan(time) ? 0.0 : time, 0.0, 1.0) * double(n - 1);
+  const double near = std::nearbyint(s);
+  if (std::fabs(s - near) <= 1e-9) return lit(p, uint32_t(near)) ? 1.0f : 0.0f;
+  const uint32_t a = uint32_t(std::floor(s));
+  const float f = float(s - double(a));
+  const float la = lit(p, a) ? 1.0f : 0.0f, lb = lit(p, a + 1) ? 1.0f : 0.0f;
+  return la + f * (lb - la);
+}
+
+float StackLookup::soft_visibility(const Vec3d& p) const noexcept {
+  const uint32_t n = tree_.slices(), level = tree_.xy_level();
+  MhOctree::Path path;
+  uint32_t lit_samples = 0;
+  for (uint32_t w = 0; w < n; ++w) {
+    const LightPoint lp = lights_.samples[w].to_light(p);
+    const auto t = LightSpace::texel_of(level, lp.u, lp.v);
+    lit_samples += float(lp.d) <= tree_.depth_along(path, t[0], t[1], w);
+  }
+  t_visited = path.steps + 1;  // and the root
+  return float(lit_samples) / float(n);
+}
+
+float StackLookup::soft_visibility_independent(const Vec3d& p) const noexcept {
+  uint32_t lit_samples = 0;
+  for (uint32_t w = 0; w < tree_.slices(); ++w) lit_samples += lit(p, w);
+  return float(lit_samples) / float(tree_.slices());
+}
+
+uint64_t StackLookup::last_nodes_visited() noexcept { return t_visited; }
+
+}  // namespace st

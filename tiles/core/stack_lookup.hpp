@@ -1,0 +1,53 @@
+// Lookups in a shadow-map stack (MH 2016 §4): a world point against the slices of an
+// MhOctree, each slice in its own sample's light space (LightSet).
+//
+// Contract:
+// - lit(p, w): the lit test of slice w at the finest level (receiver depth r of p in
+//   sample w's light space, rounded to float once; lit iff r <= depth), (u, v) clamped
+//   to the map as in the 2D evaluator. Lossless: for a receiver outside every object it
+//   is the test of the uncompressed map of sample w (ARCHITECTURE.md "Lossless invariant").
+// - visibility(p, time): time in [0, 1] (clamped; NaN reads as 0) runs over the samples,
+//   sample w at time w / (N - 1) (LightSet::time_of). With s = time * (N - 1), a = floor(s),
+//   f = s - a: (1 - f) * lit(p, a) + f * lit(p, a + 1). Exact at the samples: where s is
+//   within 1e-9 of an integer w, the result is lit(p, w) alone (0 or 1). Between samples it
+//   blends linearly, so a sun moving through time never pops. An area light's "time" is
+//   just its Hilbert order.
+// - soft_visibility(p): the fraction of the N samples that are lit, exactly
+//   (lit samples) / N in float, equal to the average of lit(p, w) over w (tested). The
+//   samples share the walk (MhOctree::depth_along): each starts from the deepest node its
+//   path has in common with the previous sample's (MH §3.3's lowest common node and
+//   last-sample cache, carried over w). Neighbouring samples (trajectory or Hilbert order)
+//   are neighbouring slices, and where a node (a leaf, or a node without the child the path
+//   needs) answers for all the w under it, the next samples are answered by that node
+//   without reading anything new.
+//
+// Thread safety: const lookups; noexcept, no allocation. The octree and the light set are
+// borrowed and must outlive the lookup.
+#pragma once
+#include <cstdint>
+
+#include "tiles/core/light_set.hpp"
+#include "tiles/core/mh_octree.hpp"
+
+namespace st {
+
+class StackLookup {
+ public:
+  // Throws st::Error when the light set's sample count differs from the octree's slices.
+  StackLookup(const MhOctree& octree, const LightSet& lights);
+
+  bool lit(const Vec3d& p, uint32_t w) const noexcept;
+  float visibility(const Vec3d& p, double time) const noexcept;
+  float soft_visibility(const Vec3d& p) const noexcept;
+  // The same fraction from N independent walks (the reference and the benchmark's baseline).
+  float soft_visibility_independent(const Vec3d& p) const noexcept;
+
+  // Tree nodes the last soft_visibility call on this thread visited (benchmark figure).
+  static uint64_t last_nodes_visited() noexcept;
+
+ private:
+  const MhOctree& tree_;
+  const LightSet& lights_;
+};
+
+}  // namespace st
