@@ -453,8 +453,8 @@ size_t Connection::fill_batch(size_t max_tiles, size_t& bytes) {
     prepare_tile(*p, f);
     if (f.is_data) {
       bufs_.push_back(asio::buffer(f.prefix));
-      bufs_.push_back(asio::buffer(f.stored));
-      bytes += f.prefix.size() + f.stored.size();
+      bufs_.push_back(asio::buffer(*f.stored));
+      bytes += f.prefix.size() + f.stored->size();
     } else {
       bufs_.push_back(asio::buffer(f.error));
       bytes += f.error.size();
@@ -467,9 +467,10 @@ void Connection::count_batch(size_t n) {
   const auto now = Clock::now();
   for (size_t i = 0; i < n; ++i)
     if (batch_[i].is_data) {
-      core_.stats.tile_sent(batch_[i].stored.size());
+      core_.stats.tile_sent(batch_[i].stored->size());
       core_.stats.latency(
           uint64_t(std::chrono::duration_cast<std::chrono::microseconds>(now - batch_[i].received).count()));
+      batch_[i].stored.reset();
     }
 }
 
@@ -512,6 +513,21 @@ bool Connection::write_tiles_inline() {
   return true;
 }
 
+// A tile's stored bytes: from the payload cache, or read from the pack (pread, then the
+// pack index's CRC check: st::Error on a mismatch) and cached. The test hook sees (and may
+// alter) a private copy of every read, so with a hook nothing is cached.
+PayloadCache::Bytes Connection::load_stored(const CatalogMap& map, uint64_t tile) {
+  if (!opt_.tile_hook) {
+    if (auto hit = core_.payloads.find(&map, tile)) return hit;
+    auto bytes = std::make_shared<const std::vector<uint8_t>>(map.pack().read_stored(tile));
+    core_.payloads.insert(&map, tile, bytes);
+    return bytes;
+  }
+  auto bytes = std::make_shared<std::vector<uint8_t>>(map.pack().read_stored(tile));
+  opt_.tile_hook(tile, *bytes);
+  return bytes;
+}
+
 // One tile's answer frame, built in `out`: TileData as prefix (header + fixed fields)
 // followed by the stored bytes as they lie in the pack, or a TileError frame.
 void Connection::prepare_tile(const PoppedTile& p, TileFrame& out) {
@@ -530,8 +546,7 @@ void Connection::prepare_tile(const PoppedTile& p, TileFrame& out) {
     why = "map '" + map->name() + "' has no tile " + std::to_string(p.tile.tile);
   } else {
     try {
-      out.stored = map->pack().read_stored(p.tile.tile);  // pread + the pack index's CRC check
-      if (opt_.tile_hook) opt_.tile_hook(p.tile.tile, out.stored);
+      out.stored = load_stored(*map, p.tile.tile);
       meta.tile_id = p.tile.tile;
       meta.map_id = p.tile.map_id;
       meta.flags = proto::kTileFlagZlib;
@@ -548,7 +563,7 @@ void Connection::prepare_tile(const PoppedTile& p, TileFrame& out) {
     }
   }
   if (code == ErrorCode::ok) {
-    proto::Status s = proto::encode_tile_data_prefix(meta, out.stored, p.tile.request_id, flags, limits_, out.prefix);
+    proto::Status s = proto::encode_tile_data_prefix(meta, *out.stored, p.tile.request_id, flags, limits_, out.prefix);
     if (s) {
       out.is_data = true;
       out.received = p.tile.received;
@@ -557,6 +572,7 @@ void Connection::prepare_tile(const PoppedTile& p, TileFrame& out) {
     code = s.code;
     why = proto::to_string(s);
   }
+  out.stored.reset();
   if (code != ErrorCode::cancelled) core_.stats.error();
   proto::TileError te;
   te.tile_id = p.tile.tile;
@@ -649,6 +665,8 @@ asio::awaitable<void> Connection::writer(std::shared_ptr<Connection> self) {
     core_.connections.erase(self);
     if (auto it = core_.per_address.find(from_); it != core_.per_address.end() && --it->second == 0)
       core_.per_address.erase(it);
+    if (auto it = core_.per_prefix.find(PendingBudget::prefix_of(from_)); it != core_.per_prefix.end() && --it->second == 0)
+      core_.per_prefix.erase(it);
   }
   core_.stats.connection_closed();
 }

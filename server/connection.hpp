@@ -97,7 +97,9 @@ class Connection : public std::enable_shared_from_this<Connection> {
   struct TileFrame {
     bool is_data = false;
     std::array<uint8_t, proto::kTileDataPrefixBytes> prefix{};
-    std::vector<uint8_t> stored;  // TileData: the stored bytes
+    // TileData: the stored bytes, shared with the server's payload cache (or this
+    // frame's own, read past the cache); released once written.
+    PayloadCache::Bytes stored;
     std::vector<uint8_t> error;   // TileError: the whole frame
     Clock::time_point received{};
   };
@@ -105,10 +107,12 @@ class Connection : public std::enable_shared_from_this<Connection> {
   static constexpr size_t kBytesPerWrite = 256 * 1024;
   // Builds one tile's answer (TileData from the pack, or TileError).
   void prepare_tile(const PoppedTile& p, TileFrame& out);
+  PayloadCache::Bytes load_stored(const CatalogMap& map, uint64_t tile);
   // Pops up to `max_tiles` tiles (and kBytesPerWrite) into batch_ and bufs_, in priority
   // order, ending the requests whose FINAL tile is among them; returns the count.
   size_t fill_batch(size_t max_tiles, size_t& bytes);
-  // Counts the first n frames of batch_ as sent (tiles, latency).
+  // Counts the first n frames of batch_ as sent (tiles, latency) and lets go of their
+  // payloads (an evicted cache entry is freed once no write references it).
   void count_batch(size_t n);
   // The reader's fast path (plain TCP, writer idle, only tiles owed): writes one batch
   // with a non-blocking gathered send right after the request that asked for it, instead

@@ -167,6 +167,7 @@ struct Server::Impl {
   std::mutex state_mu;
   std::condition_variable state_cv;
   bool running = false, stopped = false;
+  size_t threads_done = 0;  // I/O threads whose run() returned
   int signal = 0;
 
   asio::awaitable<void> accept_loop();
@@ -286,10 +287,15 @@ void Server::Impl::admit(tcp::socket socket) {
     std::lock_guard lock(core.mu);
     if (core.stopping) return;
     const size_t per_address_limit = core.options.max_connections_per_address;
+    const size_t per_prefix_limit = core.options.max_connections_per_prefix;
     const auto here = core.per_address.find(from);
+    const PendingBudget::Prefix prefix = PendingBudget::prefix_of(from);
+    const auto network = core.per_prefix.find(prefix);
     const bool total_full = core.connections.size() - core.evicting >= core.options.max_connections;
     if (per_address_limit && here != core.per_address.end() && here->second >= per_address_limit) {
       refused = "too many connections from your address";
+    } else if (per_prefix_limit && network != core.per_prefix.end() && network->second >= per_prefix_limit) {
+      refused = "too many connections from your network";
     } else {
       victim = core.pending.victim_for(from, core.options, total_full, std::chrono::steady_clock::now());
       if (total_full && !victim) {
@@ -302,6 +308,7 @@ void Server::Impl::admit(tcp::socket socket) {
         conn = std::make_shared<Connection>(std::move(socket), core, from);
         core.connections.insert(conn);
         ++core.per_address[from];
+        ++core.per_prefix[prefix];
         conn->enter_pending(core.pending.add(conn, from));
       }
     }
@@ -381,6 +388,7 @@ Server::Server(Catalog catalog, ServerOptions options) {
                   options.tls_cert_file + "'");
     impl_->core.tls = std::move(ctx);
   }
+  impl_->core.payloads.set_budget(options.tile_cache_bytes);
   impl_->core.options = std::move(options);
   impl_->core.catalog = std::move(catalog);
   fit_frame_limit(impl_->core);
@@ -421,6 +429,11 @@ void Server::start() {
       } catch (const std::exception& e) {
         d.core.log(std::string("I/O thread: ") + e.what());
       }
+      {
+        std::lock_guard lock(d.state_mu);
+        ++d.threads_done;
+      }
+      d.state_cv.notify_all();
     });
 }
 
@@ -434,23 +447,20 @@ void Server::stop() {
   }
   asio::post(d.control, [&d] { d.shutdown_on_io(); });
   // Connections end their coroutines once their sockets close; run() then returns. A
-  // coroutine stuck past the grace period (it should not happen) is cut off by stop().
-  std::thread guard([&d] {
+  // coroutine stuck past the grace period (it should not happen) is cut off by io.stop().
+  {
     std::unique_lock lock(d.state_mu);
-    if (!d.state_cv.wait_for(lock, std::chrono::seconds(5), [&] { return !d.running; })) d.io.stop();
-  });
+    if (!d.state_cv.wait_for(lock, std::chrono::seconds(5), [&] { return d.threads_done == d.core.options.threads; }))
+      d.io.stop();
+  }
   for (auto& t : d.threads) t.join();
   d.threads.clear();
   {  // Sockets must go before their io_context (they would if io.stop() cut run() short).
     std::lock_guard lock(d.core.mu);
     d.core.connections.clear();
   }
-  {
-    std::lock_guard lock(d.state_mu);
-    d.running = false;
-  }
-  d.state_cv.notify_all();
-  guard.join();
+  std::lock_guard lock(d.state_mu);
+  d.running = false;
 }
 
 int Server::wait_for_signal() {
