@@ -5,6 +5,7 @@
 #include <exception>
 
 #include "common/error.hpp"
+#include "proto/tile_prefix.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
 
 namespace st::server {
@@ -563,7 +564,14 @@ void Connection::prepare_tile(const PoppedTile& p, TileFrame& out) {
     }
   }
   if (code == ErrorCode::ok) {
-    proto::Status s = proto::encode_tile_data_prefix(meta, *out.stored, p.tile.request_id, flags, limits_, out.prefix);
+    // Bytes checked against the pack index's CRC (cache or read): the frame's payload
+    // CRC is combined from it, not recomputed over the bytes; bytes a test hook may have
+    // altered are summed as they are.
+    proto::Status s =
+        opt_.tile_hook
+            ? proto::encode_tile_data_prefix(meta, *out.stored, p.tile.request_id, flags, limits_, out.prefix)
+            : proto::encode_tile_data_prefix(meta, uint32_t(out.stored->size()), meta.payload_crc32,
+                                             p.tile.request_id, flags, limits_, out.prefix);
     if (s) {
       out.is_data = true;
       out.received = p.tile.received;
