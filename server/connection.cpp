@@ -19,6 +19,14 @@ namespace {
 // the per-connection cost low (1,000 connections: scripts/soak) without more syscalls.
 constexpr size_t kReadChunk = 16 * 1024;
 
+// The tile's entry in a pack's tile index (sorted by id; PackReader::find's search, but
+// giving the position, which addresses the payload cache); null if absent.
+const TileIndexEntry* find_tile(const std::vector<TileIndexEntry>& index, uint64_t id) {
+  auto it = std::lower_bound(index.begin(), index.end(), id,
+                             [](const TileIndexEntry& e, uint64_t v) { return e.id < v; });
+  return it == index.end() || it->id != id ? nullptr : &*it;
+}
+
 }  // namespace
 
 Connection::Connection(tcp::socket socket, ServerCore& core, asio::ip::address from)
@@ -304,14 +312,16 @@ void Connection::on_auth(uint32_t id, const proto::Auth& m) {
 }
 
 void Connection::on_open_map(uint32_t id, const proto::OpenMap& m) {
-  const CatalogMap* map = core_.catalog.find(m.name);
-  if (!map) return answer_error(id, ErrorCode::unknown_map, "no map named '" + m.name + "'");
+  const size_t index = core_.catalog.index_of(m.name);
+  if (index == Catalog::npos) return answer_error(id, ErrorCode::unknown_map, "no map named '" + m.name + "'");
+  const CatalogMap* map = core_.catalog.maps()[index].get();
   auto it = std::find(open_maps_.begin(), open_maps_.end(), map);
   if (it == open_maps_.end()) {
     if (open_maps_.size() >= opt_.max_open_maps)
       return answer_error(id, ErrorCode::limit_exceeded,
                           "more than " + std::to_string(opt_.max_open_maps) + " open maps");
     open_maps_.push_back(map);
+    open_map_index_.push_back(uint32_t(index));
     it = open_maps_.end() - 1;
   }
   // MapInfo (PROTOCOL.md §4.6) as a header and map id of its own followed by the
@@ -517,15 +527,16 @@ bool Connection::write_tiles_inline() {
 // A tile's stored bytes: from the payload cache, or read from the pack (pread, then the
 // pack index's CRC check: st::Error on a mismatch) and cached. The test hook sees (and may
 // alter) a private copy of every read, so with a hook nothing is cached.
-PayloadCache::Bytes Connection::load_stored(const CatalogMap& map, uint64_t tile) {
+PayloadCache::Bytes Connection::load_stored(const CatalogMap& map, uint32_t map_index,
+                                            const TileIndexEntry& entry, uint32_t pos) {
   if (!opt_.tile_hook) {
-    if (auto hit = core_.payloads.find(&map, tile)) return hit;
-    auto bytes = std::make_shared<const std::vector<uint8_t>>(map.pack().read_stored(tile));
-    core_.payloads.insert(&map, tile, bytes);
+    if (auto hit = core_.payloads.find(map_index, pos)) return hit;
+    auto bytes = std::make_shared<const std::vector<uint8_t>>(map.pack().read_stored(entry.id));
+    core_.payloads.insert(map_index, pos, bytes);
     return bytes;
   }
-  auto bytes = std::make_shared<std::vector<uint8_t>>(map.pack().read_stored(tile));
-  opt_.tile_hook(tile, *bytes);
+  auto bytes = std::make_shared<std::vector<uint8_t>>(map.pack().read_stored(entry.id));
+  opt_.tile_hook(entry.id, *bytes);
   return bytes;
 }
 
@@ -542,12 +553,13 @@ void Connection::prepare_tile(const PoppedTile& p, TileFrame& out) {
   if (p.tile.cancelled) {
     code = ErrorCode::cancelled;
     why = "cancelled";
-  } else if (auto entry = map->pack().find(p.tile.tile); !entry) {
+  } else if (const TileIndexEntry* entry = find_tile(map->pack().tiles(), p.tile.tile); !entry) {
     code = ErrorCode::unknown_tile;
     why = "map '" + map->name() + "' has no tile " + std::to_string(p.tile.tile);
   } else {
     try {
-      out.stored = load_stored(*map, p.tile.tile);
+      out.stored = load_stored(*map, open_map_index_[p.tile.map_id - 1], *entry,
+                               uint32_t(entry - map->pack().tiles().data()));
       meta.tile_id = p.tile.tile;
       meta.map_id = p.tile.map_id;
       meta.flags = proto::kTileFlagZlib;

@@ -107,7 +107,10 @@ class Connection : public std::enable_shared_from_this<Connection> {
   static constexpr size_t kBytesPerWrite = 256 * 1024;
   // Builds one tile's answer (TileData from the pack, or TileError).
   void prepare_tile(const PoppedTile& p, TileFrame& out);
-  PayloadCache::Bytes load_stored(const CatalogMap& map, uint64_t tile);
+  // The stored bytes of the tile at `pos` in the pack's tile index of catalog map
+  // `map_index` (st::Error if they do not match the index).
+  PayloadCache::Bytes load_stored(const CatalogMap& map, uint32_t map_index, const TileIndexEntry& entry,
+                                  uint32_t pos);
   // Pops up to `max_tiles` tiles (and kBytesPerWrite) into batch_ and bufs_, in priority
   // order, ending the requests whose FINAL tile is among them; returns the count.
   size_t fill_batch(size_t max_tiles, size_t& bytes);
@@ -156,6 +159,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
   std::deque<ControlFrame> control_;
   size_t control_bytes_ = 0;
   std::vector<const CatalogMap*> open_maps_;  // map_id = index + 1
+  std::vector<uint32_t> open_map_index_;      // ... and their catalog positions
 
   bool handshaken_ = false;
   bool tls_ready_ = false;  // plain TCP, or the TLS handshake is done: frames can be written

@@ -2,41 +2,85 @@
 
 namespace st::server {
 
-void PayloadCache::set_budget(size_t budget_bytes) {
+void PayloadCache::configure(size_t budget_bytes, std::span<const size_t> tiles_per_map) {
   std::lock_guard lock(mu_);
   budget_ = budget_bytes;
-  index_.clear();
-  lru_.clear();
   bytes_ = 0;
-}
-
-PayloadCache::Bytes PayloadCache::find(const void* map, uint64_t tile) {
-  std::lock_guard lock(mu_);
-  auto it = index_.find(Key{map, tile});
-  if (it == index_.end()) {
-    ++misses_;
-    return nullptr;
+  hand_ = 0;
+  ring_.clear();
+  holes_.clear();
+  maps_.clear();
+  maps_.resize(tiles_per_map.size());
+  for (size_t m = 0; m < maps_.size(); ++m) {
+    maps_[m].tiles = tiles_per_map[m];
+    maps_[m].pages.resize((tiles_per_map[m] + kPageSlots - 1) / kPageSlots);
   }
-  ++hits_;
-  if (it->second != lru_.begin()) lru_.splice(lru_.begin(), lru_, it->second);
-  return it->second->bytes;
 }
 
-void PayloadCache::insert(const void* map, uint64_t tile, Bytes bytes) {
+PayloadCache::Bytes PayloadCache::find(uint32_t map, uint32_t tile) {
+  std::lock_guard lock(mu_);
+  if (map < maps_.size() && tile < maps_[map].tiles)
+    if (Page* page = maps_[map].pages[tile / kPageSlots].get())
+      if (Slot& s = page->slots[tile % kPageSlots]; s.bytes) {
+        ++hits_;
+        s.referenced = true;
+        return s.bytes;
+      }
+  ++misses_;
+  return nullptr;
+}
+
+bool PayloadCache::evict_one() {
+  if (ring_.size() == holes_.size()) return false;  // nothing cached
+  for (;; ++hand_) {
+    if (hand_ >= ring_.size()) hand_ = 0;
+    Resident& r = ring_[hand_];
+    if (r.map == kHole) continue;
+    auto& page = maps_[r.map].pages[r.tile / kPageSlots];
+    Slot& s = page->slots[r.tile % kPageSlots];
+    if (s.referenced) {  // second chance
+      s.referenced = false;
+      continue;
+    }
+    bytes_ -= cost_of(s.bytes);
+    s.bytes.reset();  // a write still holding it keeps it alive until it ends
+    if (--page->resident == 0) {
+      page.reset();
+      bytes_ -= sizeof(Page);
+    }
+    // The hole stays where the victim was: the next insertion fills it, so a new
+    // payload is the last one the hand reaches (a full round before its first test).
+    r.map = kHole;
+    holes_.push_back(hand_++);
+    return true;
+  }
+}
+
+void PayloadCache::insert(uint32_t map, uint32_t tile, Bytes bytes) {
   if (!bytes) return;
-  const size_t cost = bytes->size() + kEntryOverhead;
+  const size_t cost = cost_of(bytes);
   std::lock_guard lock(mu_);
-  if (budget_ == 0 || cost > budget_ / kMaxEntryShare) return;
-  const Key key{map, tile};
-  if (index_.count(key)) return;
-  while (!lru_.empty() && bytes_ + cost > budget_) {
-    const Entry& victim = lru_.back();
-    bytes_ -= victim.cost;
-    index_.erase(victim.key);
-    lru_.pop_back();  // the payload lives on while a write still references it
+  if (map >= maps_.size() || tile >= maps_[map].tiles) return;
+  if (budget_ < sizeof(Page) || cost > budget_ / kMaxEntryShare) return;
+  auto& page = maps_[map].pages[tile / kPageSlots];
+  if (page && page->slots[tile % kPageSlots].bytes) return;
+  // Room for the payload, and for its page if that is not held (evicting may free it).
+  while (bytes_ + cost + (page ? 0 : sizeof(Page)) > budget_)
+    if (!evict_one()) return;
+  if (!page) {
+    page = std::make_unique<Page>();
+    bytes_ += sizeof(Page);
   }
-  lru_.push_front(Entry{key, std::move(bytes), cost});
-  index_.emplace(key, lru_.begin());
+  Slot& s = page->slots[tile % kPageSlots];
+  s.bytes = std::move(bytes);
+  s.referenced = false;
+  ++page->resident;
+  if (holes_.empty()) {
+    ring_.push_back({map, tile});
+  } else {
+    ring_[holes_.back()] = {map, tile};
+    holes_.pop_back();
+  }
   bytes_ += cost;
 }
 
@@ -47,7 +91,7 @@ size_t PayloadCache::bytes() const {
 
 size_t PayloadCache::entries() const {
   std::lock_guard lock(mu_);
-  return lru_.size();
+  return ring_.size() - holes_.size();
 }
 
 uint64_t PayloadCache::hits() const {

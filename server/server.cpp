@@ -388,9 +388,11 @@ Server::Server(Catalog catalog, ServerOptions options) {
                   options.tls_cert_file + "'");
     impl_->core.tls = std::move(ctx);
   }
-  impl_->core.payloads.set_budget(options.tile_cache_bytes);
   impl_->core.options = std::move(options);
   impl_->core.catalog = std::move(catalog);
+  std::vector<size_t> tiles;
+  for (const auto& m : impl_->core.catalog.maps()) tiles.push_back(m->pack().tiles().size());
+  impl_->core.payloads.configure(impl_->core.options.tile_cache_bytes, tiles);
   fit_frame_limit(impl_->core);
 }
 
