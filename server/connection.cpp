@@ -76,12 +76,16 @@ void Connection::shut_down() {
   });
 }
 
-void Connection::leave_pending() {
-  if (useful_) return;
-  useful_ = true;
+bool Connection::leave_pending() {
+  if (useful_) return true;
   std::lock_guard lock(core_.mu);
+  size_t& n = core_.useful_per_prefix[PendingBudget::prefix_of(from_)];
+  if (opt_.max_connections_per_prefix && n >= opt_.max_connections_per_prefix) return false;
+  ++n;
+  useful_ = true;
   if (pending_) core_.pending.remove(pending_it_);
   pending_ = false;
+  return true;
 }
 
 void Connection::close() {
@@ -208,8 +212,11 @@ void Connection::handle(proto::Frame&& frame) {
   }
   // Everything else is a request: it holds an in-flight slot until its FINAL answer.
   core_.stats.request();
+  if (frame.header.type != MessageType::ping && frame.header.type != MessageType::auth && !leave_pending()) {
+    core_.stats.connection_rejected();
+    return fail(ErrorCode::overloaded, "too many connections from your network");
+  }
   if (!admit(id)) return;
-  if (frame.header.type != MessageType::ping && frame.header.type != MessageType::auth) leave_pending();
   switch (frame.header.type) {
     case MessageType::list_maps: {
       proto::MapList list;
@@ -685,8 +692,10 @@ asio::awaitable<void> Connection::writer(std::shared_ptr<Connection> self) {
     core_.connections.erase(self);
     if (auto it = core_.per_address.find(from_); it != core_.per_address.end() && --it->second == 0)
       core_.per_address.erase(it);
-    if (auto it = core_.per_prefix.find(PendingBudget::prefix_of(from_)); it != core_.per_prefix.end() && --it->second == 0)
-      core_.per_prefix.erase(it);
+    if (useful_)
+      if (auto it = core_.useful_per_prefix.find(PendingBudget::prefix_of(from_));
+          it != core_.useful_per_prefix.end() && --it->second == 0)
+        core_.useful_per_prefix.erase(it);
   }
   core_.stats.connection_closed();
 }

@@ -86,8 +86,10 @@ class Connection : public std::enable_shared_from_this<Connection> {
   // Connection-level failure: Error with request id 0, then close once it is written.
   void fail(proto::ErrorCode code, const std::string& message);
   void close();
-  // The first real request (not Hello, Auth, Ping): the connection leaves core.pending.
-  void leave_pending();
+  // The first real request (not Hello, Auth, Ping): the connection leaves core.pending
+  // and counts in core.useful_per_prefix; false (nothing changed) if its network is at
+  // max_connections_per_prefix.
+  bool leave_pending();
   void wake_writer();
   // What the parser accepts from the client after HelloAck: the handshake frame limit
   // until the client is authenticated, then the largest message a client may send.
@@ -168,7 +170,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
   bool authed_ = false;  // no key configured, or the client proved it holds the key
   proto::Nonce server_nonce_{};
   bool closing_ = false;  // write what is queued, then close
-  bool useful_ = false;   // left core.pending (strand-local copy of !pending_)
+  bool useful_ = false;   // left core.pending (strand-local copy of !pending_), counted in useful_per_prefix
   // Guarded by core.mu:
   std::list<PendingBudget::Entry>::iterator pending_it_{};
   bool pending_ = false, evicted_ = false;

@@ -287,15 +287,10 @@ void Server::Impl::admit(tcp::socket socket) {
     std::lock_guard lock(core.mu);
     if (core.stopping) return;
     const size_t per_address_limit = core.options.max_connections_per_address;
-    const size_t per_prefix_limit = core.options.max_connections_per_prefix;
     const auto here = core.per_address.find(from);
-    const PendingBudget::Prefix prefix = PendingBudget::prefix_of(from);
-    const auto network = core.per_prefix.find(prefix);
     const bool total_full = core.connections.size() - core.evicting >= core.options.max_connections;
     if (per_address_limit && here != core.per_address.end() && here->second >= per_address_limit) {
       refused = "too many connections from your address";
-    } else if (per_prefix_limit && network != core.per_prefix.end() && network->second >= per_prefix_limit) {
-      refused = "too many connections from your network";
     } else {
       victim = core.pending.victim_for(from, core.options, total_full, std::chrono::steady_clock::now());
       if (total_full && !victim) {
@@ -308,7 +303,6 @@ void Server::Impl::admit(tcp::socket socket) {
         conn = std::make_shared<Connection>(std::move(socket), core, from);
         core.connections.insert(conn);
         ++core.per_address[from];
-        ++core.per_prefix[prefix];
         conn->enter_pending(core.pending.add(conn, from));
       }
     }

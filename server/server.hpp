@@ -41,8 +41,10 @@ struct ServerOptions {
   // From one client address (IPv4 or IPv6): a client opening connections without end
   // is refused at this bound while other addresses are still served (0: no bound).
   size_t max_connections_per_address = 256;
-  // From one network (IPv4 /24, IPv6 /64), every connection counted (pending or useful):
-  // a few addresses of one network cannot take the whole server (0: no bound).
+  // Useful connections (past the pending budget below: they made a real request) from
+  // one network (IPv4 /24, IPv6 /64): a few addresses of one network cannot take the
+  // whole server. The request that would exceed it gets Error(overloaded) and a close
+  // (0: no bound). Pending connections count against the pending budgets instead.
   size_t max_connections_per_prefix = 512;
   // Connections not yet useful (before auth, or before their first request after the
   // handshake): a budget of their own, so strangers cannot hold the slots authenticated

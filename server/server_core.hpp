@@ -74,7 +74,9 @@ struct ServerCore {
   std::mutex mu;  // guards connections and stopping
   std::set<std::shared_ptr<Connection>> connections;
   std::map<asio::ip::address, size_t> per_address;  // open connections by client address
-  std::map<PendingBudget::Prefix, size_t> per_prefix;  // ... and by its /24 or /64
+  // Useful connections (past PendingBudget: their first real request) by the client's
+  // /24 or /64, against ServerOptions::max_connections_per_prefix.
+  std::map<PendingBudget::Prefix, size_t> useful_per_prefix;
   PendingBudget pending;
   size_t evicting = 0;
   // Answer bytes owned by connections (control frames queued, tile bytes being written)
