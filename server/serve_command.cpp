@@ -24,7 +24,8 @@ void add_serve_options(CLI::App& app, ServeConfig& a) {
                  "Connections from one client address at once (0: no bound)")
       ->capture_default_str()->check(CLI::Range(0u, 1000000u));
   app.add_option("--max-connections-per-prefix", a.max_connections_per_prefix,
-                 "Connections from one network (IPv4 /24, IPv6 /64) at once (0: no bound)")
+                 "Connections that made a request, from one network (IPv4 /24, IPv6 /64) at once; the request "
+                 "over it gets Error(overloaded) (0: no bound)")
       ->capture_default_str()->check(CLI::Range(0u, 1000000u));
   app.add_option("--tile-cache-mib", a.tile_cache_mib,
                  "Memory for stored tiles shared by all clients, read and CRC-checked once (0: no cache)")
