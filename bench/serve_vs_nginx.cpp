@@ -27,6 +27,7 @@
 //                        [--conns 1,8,64] [--nginx-workers 1,auto] [--nginx PATH] [--skip K]
 //                        [--nginx-extra "open_file_cache max=65536 inactive=60s;"]
 //                        [--json bench-out/serve_vs_nginx.json] [--threads T (our I/O threads)]
+//                        [--tile-cache-mib M (our payload cache; 0: pread + CRC per tile)]
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
@@ -559,6 +560,7 @@ std::vector<std::string> split(const std::string& s) {
 int main(int argc, char** argv) {
   uint32_t level = 10, depth = 8, threads = 1, reps = 1;
   double rate_fraction = 0, fixed_rate = 0;
+  double tile_cache_mib = 64;  // our server's payload cache (0: pread and CRC per tile)
   // Our server keeps the pack open; nginx keeps tile file descriptors open the same way
   // (without it, open/fstat/close per request halved nginx's rate with 1 connection).
   // --nginx-extra "" gives the plain config.
@@ -582,6 +584,7 @@ int main(int argc, char** argv) {
     else if (k == "--reps") reps = std::max<uint32_t>(1, uint32_t(std::stoul(v)));
     else if (k == "--rate-fraction") rate_fraction = std::stod(v);
     else if (k == "--rate") fixed_rate = std::stod(v);
+    else if (k == "--tile-cache-mib") tile_cache_mib = std::stod(v);
     else {
       std::fprintf(stderr, "bench_serve_vs_nginx: unknown option %s\n", k.c_str());
       return 2;
@@ -630,6 +633,7 @@ int main(int argc, char** argv) {
     server::ServerOptions so;
     so.port = 0;
     so.threads = threads;
+    so.tile_cache_bytes = size_t(tile_cache_mib * 1048576.0);
     so.log = [](const std::string&) {};
     server::Server srv(server::Catalog::scan(std::vector<std::string>{pack}), so);
     srv.start();
@@ -718,7 +722,7 @@ int main(int argc, char** argv) {
     nlohmann::json j = {{"benchmark", "serve_vs_nginx"}, {"level", level}, {"tiles", ids.size()},
                         {"stored_bytes", stored}, {"depth", depth}, {"seconds", seconds},
                         {"warmup_seconds", warmup}, {"nginx", nginx_bin ? *nginx_bin : ""},
-                        {"our_io_threads", threads}, {"nginx_extra", nginx_extra}, {"reps", reps},
+                        {"our_io_threads", threads}, {"our_tile_cache_mib", tile_cache_mib}, {"nginx_extra", nginx_extra}, {"reps", reps},
                         {"rate_fraction", rate_fraction}, {"rate", fixed_rate}, {"rows", rows}};
     std::ofstream(json_path) << j.dump(2) << "\n";
     std::printf("wrote %s\n", json_path.c_str());

@@ -10,6 +10,7 @@
 #include "proto/byte_io.hpp"
 #include "proto/message_rules.hpp"
 #include "proto/names.hpp"
+#include "proto/tile_prefix.hpp"
 
 namespace st::proto {
 namespace {
@@ -547,6 +548,82 @@ Status encode_tile_data_prefix(const TileMeta& meta, std::span<const std::uint8_
   if (Status s = make_header(MessageType::tile_data, flags, request_id, parts, limits, header);
       !s)
     return s;
+  std::copy(header.begin(), header.end(), out.begin());
+  std::copy(fixed.begin(), fixed.end(), out.begin() + kHeaderSize);
+  return {};
+}
+
+}  // namespace st::proto
+
+namespace st::proto {
+namespace {
+
+// GF(2) polynomial arithmetic modulo the reflected CRC-32 polynomial (zlib 1.2.12's
+// crc32.c: multmodp, x2nmodp): a * b modulo p, bit 31 being x^0.
+std::uint32_t mult_mod_p(std::uint32_t a, std::uint32_t b) {
+  std::uint32_t m = 1u << 31, p = 0;
+  for (;;) {
+    if (a & m) {
+      p ^= b;
+      if ((a & (m - 1)) == 0) break;
+    }
+    m >>= 1;
+    b = b & 1 ? (b >> 1) ^ 0xedb88320u : b >> 1;
+  }
+  return p;
+}
+
+// x^(2^k) modulo p for k = 0..31.
+const std::array<std::uint32_t, 32>& x2n_table() {
+  static const std::array<std::uint32_t, 32> t = [] {
+    std::array<std::uint32_t, 32> r{};
+    std::uint32_t p = 1u << 30;  // x^1
+    for (auto& e : r) {
+      e = p;
+      p = mult_mod_p(p, p);
+    }
+    return r;
+  }();
+  return t;
+}
+
+}  // namespace
+
+std::uint32_t crc32_combine(std::uint32_t crc_a, std::uint32_t crc_b, std::uint64_t len_b) {
+  // crc(A||B) = crc(A) * x^(8 len_b) + crc(B) (the pre- and post-conditioning cancel).
+  std::uint32_t p = 1u << 31;  // x^0
+  unsigned k = 3;              // x^(8n) = x^(2^3 n)
+  for (std::uint64_t n = len_b; n; n >>= 1, ++k)
+    if (n & 1) p = mult_mod_p(x2n_table()[k & 31], p);
+  return mult_mod_p(p, crc_a) ^ crc_b;
+}
+
+Status encode_tile_data_prefix(const TileMeta& meta, std::uint32_t tile_size, std::uint32_t tile_crc32,
+                               std::uint32_t request_id, std::uint8_t flags, const Limits& limits,
+                               std::array<std::uint8_t, kTileDataPrefixBytes>& out) {
+  if (Status s = check_tile(meta, tile_size); !s) return s;
+  if (std::uint64_t(tile_size) + kTileMetaBytes > limits.max_payload_bytes())
+    return Status::fail(ErrorCode::tile_too_large,
+                        "tile " + std::to_string(meta.tile_id) + " of " + std::to_string(tile_size) +
+                            " bytes does not fit max_frame_bytes " + std::to_string(limits.max_frame_bytes));
+  if ((flags & ~kKnownFlags) != 0)
+    return Status::fail(ErrorCode::bad_flags, "flags have reserved bits set");
+  std::array<std::uint8_t, kTileMetaBytes> fixed{};
+  {
+    std::vector<std::uint8_t> buf;
+    buf.reserve(kTileMetaBytes);
+    Writer w(buf);
+    write_meta(w, meta, tile_size);
+    std::copy(buf.begin(), buf.end(), fixed.begin());
+  }
+  FrameHeader h;
+  h.flags = flags;
+  h.type = MessageType::tile_data;
+  h.request_id = request_id;
+  h.payload_length = std::uint32_t(kTileMetaBytes + tile_size);
+  h.payload_crc32 = crc32_combine(crc32(fixed), tile_crc32, tile_size);
+  std::array<std::uint8_t, kHeaderSize> header{};
+  write_header(h, header);
   std::copy(header.begin(), header.end(), out.begin());
   std::copy(fixed.begin(), fixed.end(), out.begin() + kHeaderSize);
   return {};

@@ -66,9 +66,14 @@ void Catalog::add(std::string name, std::string path) {
 }
 
 const CatalogMap* Catalog::find(std::string_view name) const {
+  const size_t i = index_of(name);
+  return i == npos ? nullptr : maps_[i].get();
+}
+
+size_t Catalog::index_of(std::string_view name) const {
   auto at = std::lower_bound(maps_.begin(), maps_.end(), name,
                              [](const auto& m, std::string_view n) { return m->name() < n; });
-  return at != maps_.end() && (*at)->name() == name ? at->get() : nullptr;
+  return at != maps_.end() && (*at)->name() == name ? size_t(at - maps_.begin()) : npos;
 }
 
 Catalog Catalog::scan(std::span<const std::string> paths,

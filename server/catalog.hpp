@@ -70,6 +70,9 @@ class Catalog {
   void add(std::string name, std::string path);  // st::Error on a duplicate or bad name
 
   const CatalogMap* find(std::string_view name) const;
+  // The map's position in maps() (its index in the server's payload cache); npos if none.
+  static constexpr size_t npos = size_t(-1);
+  size_t index_of(std::string_view name) const;
   const std::vector<std::shared_ptr<const CatalogMap>>& maps() const { return maps_; }
 
  private:

@@ -5,6 +5,7 @@
 #include <exception>
 
 #include "common/error.hpp"
+#include "proto/tile_prefix.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
 
 namespace st::server {
@@ -17,6 +18,14 @@ namespace {
 // Requests are small frames (GetTiles of a few hundred bytes), so 16 KiB per read keeps
 // the per-connection cost low (1,000 connections: scripts/soak) without more syscalls.
 constexpr size_t kReadChunk = 16 * 1024;
+
+// The tile's entry in a pack's tile index (sorted by id; PackReader::find's search, but
+// giving the position, which addresses the payload cache); null if absent.
+const TileIndexEntry* find_tile(const std::vector<TileIndexEntry>& index, uint64_t id) {
+  auto it = std::lower_bound(index.begin(), index.end(), id,
+                             [](const TileIndexEntry& e, uint64_t v) { return e.id < v; });
+  return it == index.end() || it->id != id ? nullptr : &*it;
+}
 
 }  // namespace
 
@@ -67,12 +76,16 @@ void Connection::shut_down() {
   });
 }
 
-void Connection::leave_pending() {
-  if (useful_) return;
-  useful_ = true;
+bool Connection::leave_pending() {
+  if (useful_) return true;
   std::lock_guard lock(core_.mu);
+  size_t& n = core_.useful_per_prefix[PendingBudget::prefix_of(from_)];
+  if (opt_.max_connections_per_prefix && n >= opt_.max_connections_per_prefix) return false;
+  ++n;
+  useful_ = true;
   if (pending_) core_.pending.remove(pending_it_);
   pending_ = false;
+  return true;
 }
 
 void Connection::close() {
@@ -199,8 +212,11 @@ void Connection::handle(proto::Frame&& frame) {
   }
   // Everything else is a request: it holds an in-flight slot until its FINAL answer.
   core_.stats.request();
+  if (frame.header.type != MessageType::ping && frame.header.type != MessageType::auth && !leave_pending()) {
+    core_.stats.connection_rejected();
+    return fail(ErrorCode::overloaded, "too many connections from your network");
+  }
   if (!admit(id)) return;
-  if (frame.header.type != MessageType::ping && frame.header.type != MessageType::auth) leave_pending();
   switch (frame.header.type) {
     case MessageType::list_maps: {
       proto::MapList list;
@@ -303,14 +319,16 @@ void Connection::on_auth(uint32_t id, const proto::Auth& m) {
 }
 
 void Connection::on_open_map(uint32_t id, const proto::OpenMap& m) {
-  const CatalogMap* map = core_.catalog.find(m.name);
-  if (!map) return answer_error(id, ErrorCode::unknown_map, "no map named '" + m.name + "'");
+  const size_t index = core_.catalog.index_of(m.name);
+  if (index == Catalog::npos) return answer_error(id, ErrorCode::unknown_map, "no map named '" + m.name + "'");
+  const CatalogMap* map = core_.catalog.maps()[index].get();
   auto it = std::find(open_maps_.begin(), open_maps_.end(), map);
   if (it == open_maps_.end()) {
     if (open_maps_.size() >= opt_.max_open_maps)
       return answer_error(id, ErrorCode::limit_exceeded,
                           "more than " + std::to_string(opt_.max_open_maps) + " open maps");
     open_maps_.push_back(map);
+    open_map_index_.push_back(uint32_t(index));
     it = open_maps_.end() - 1;
   }
   // MapInfo (PROTOCOL.md §4.6) as a header and map id of its own followed by the
@@ -453,8 +471,8 @@ size_t Connection::fill_batch(size_t max_tiles, size_t& bytes) {
     prepare_tile(*p, f);
     if (f.is_data) {
       bufs_.push_back(asio::buffer(f.prefix));
-      bufs_.push_back(asio::buffer(f.stored));
-      bytes += f.prefix.size() + f.stored.size();
+      bufs_.push_back(asio::buffer(*f.stored));
+      bytes += f.prefix.size() + f.stored->size();
     } else {
       bufs_.push_back(asio::buffer(f.error));
       bytes += f.error.size();
@@ -467,9 +485,10 @@ void Connection::count_batch(size_t n) {
   const auto now = Clock::now();
   for (size_t i = 0; i < n; ++i)
     if (batch_[i].is_data) {
-      core_.stats.tile_sent(batch_[i].stored.size());
+      core_.stats.tile_sent(batch_[i].stored->size());
       core_.stats.latency(
           uint64_t(std::chrono::duration_cast<std::chrono::microseconds>(now - batch_[i].received).count()));
+      batch_[i].stored.reset();
     }
 }
 
@@ -512,6 +531,22 @@ bool Connection::write_tiles_inline() {
   return true;
 }
 
+// A tile's stored bytes: from the payload cache, or read from the pack (pread, then the
+// pack index's CRC check: st::Error on a mismatch) and cached. The test hook sees (and may
+// alter) a private copy of every read, so with a hook nothing is cached.
+PayloadCache::Bytes Connection::load_stored(const CatalogMap& map, uint32_t map_index,
+                                            const TileIndexEntry& entry, uint32_t pos) {
+  if (!opt_.tile_hook) {
+    if (auto hit = core_.payloads.find(map_index, pos)) return hit;
+    auto bytes = std::make_shared<const std::vector<uint8_t>>(map.pack().read_stored(entry.id));
+    core_.payloads.insert(map_index, pos, bytes);
+    return bytes;
+  }
+  auto bytes = std::make_shared<std::vector<uint8_t>>(map.pack().read_stored(entry.id));
+  opt_.tile_hook(entry.id, *bytes);
+  return bytes;
+}
+
 // One tile's answer frame, built in `out`: TileData as prefix (header + fixed fields)
 // followed by the stored bytes as they lie in the pack, or a TileError frame.
 void Connection::prepare_tile(const PoppedTile& p, TileFrame& out) {
@@ -525,13 +560,13 @@ void Connection::prepare_tile(const PoppedTile& p, TileFrame& out) {
   if (p.tile.cancelled) {
     code = ErrorCode::cancelled;
     why = "cancelled";
-  } else if (auto entry = map->pack().find(p.tile.tile); !entry) {
+  } else if (const TileIndexEntry* entry = find_tile(map->pack().tiles(), p.tile.tile); !entry) {
     code = ErrorCode::unknown_tile;
     why = "map '" + map->name() + "' has no tile " + std::to_string(p.tile.tile);
   } else {
     try {
-      out.stored = map->pack().read_stored(p.tile.tile);  // pread + the pack index's CRC check
-      if (opt_.tile_hook) opt_.tile_hook(p.tile.tile, out.stored);
+      out.stored = load_stored(*map, open_map_index_[p.tile.map_id - 1], *entry,
+                               uint32_t(entry - map->pack().tiles().data()));
       meta.tile_id = p.tile.tile;
       meta.map_id = p.tile.map_id;
       meta.flags = proto::kTileFlagZlib;
@@ -548,7 +583,14 @@ void Connection::prepare_tile(const PoppedTile& p, TileFrame& out) {
     }
   }
   if (code == ErrorCode::ok) {
-    proto::Status s = proto::encode_tile_data_prefix(meta, out.stored, p.tile.request_id, flags, limits_, out.prefix);
+    // Bytes checked against the pack index's CRC (cache or read): the frame's payload
+    // CRC is combined from it, not recomputed over the bytes; bytes a test hook may have
+    // altered are summed as they are.
+    proto::Status s =
+        opt_.tile_hook
+            ? proto::encode_tile_data_prefix(meta, *out.stored, p.tile.request_id, flags, limits_, out.prefix)
+            : proto::encode_tile_data_prefix(meta, uint32_t(out.stored->size()), meta.payload_crc32,
+                                             p.tile.request_id, flags, limits_, out.prefix);
     if (s) {
       out.is_data = true;
       out.received = p.tile.received;
@@ -557,6 +599,7 @@ void Connection::prepare_tile(const PoppedTile& p, TileFrame& out) {
     code = s.code;
     why = proto::to_string(s);
   }
+  out.stored.reset();
   if (code != ErrorCode::cancelled) core_.stats.error();
   proto::TileError te;
   te.tile_id = p.tile.tile;
@@ -649,6 +692,10 @@ asio::awaitable<void> Connection::writer(std::shared_ptr<Connection> self) {
     core_.connections.erase(self);
     if (auto it = core_.per_address.find(from_); it != core_.per_address.end() && --it->second == 0)
       core_.per_address.erase(it);
+    if (useful_)
+      if (auto it = core_.useful_per_prefix.find(PendingBudget::prefix_of(from_));
+          it != core_.useful_per_prefix.end() && --it->second == 0)
+        core_.useful_per_prefix.erase(it);
   }
   core_.stats.connection_closed();
 }

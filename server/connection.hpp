@@ -86,8 +86,10 @@ class Connection : public std::enable_shared_from_this<Connection> {
   // Connection-level failure: Error with request id 0, then close once it is written.
   void fail(proto::ErrorCode code, const std::string& message);
   void close();
-  // The first real request (not Hello, Auth, Ping): the connection leaves core.pending.
-  void leave_pending();
+  // The first real request (not Hello, Auth, Ping): the connection leaves core.pending
+  // and counts in core.useful_per_prefix; false (nothing changed) if its network is at
+  // max_connections_per_prefix.
+  bool leave_pending();
   void wake_writer();
   // What the parser accepts from the client after HelloAck: the handshake frame limit
   // until the client is authenticated, then the largest message a client may send.
@@ -97,7 +99,9 @@ class Connection : public std::enable_shared_from_this<Connection> {
   struct TileFrame {
     bool is_data = false;
     std::array<uint8_t, proto::kTileDataPrefixBytes> prefix{};
-    std::vector<uint8_t> stored;  // TileData: the stored bytes
+    // TileData: the stored bytes, shared with the server's payload cache (or this
+    // frame's own, read past the cache); released once written.
+    PayloadCache::Bytes stored;
     std::vector<uint8_t> error;   // TileError: the whole frame
     Clock::time_point received{};
   };
@@ -105,10 +109,15 @@ class Connection : public std::enable_shared_from_this<Connection> {
   static constexpr size_t kBytesPerWrite = 256 * 1024;
   // Builds one tile's answer (TileData from the pack, or TileError).
   void prepare_tile(const PoppedTile& p, TileFrame& out);
+  // The stored bytes of the tile at `pos` in the pack's tile index of catalog map
+  // `map_index` (st::Error if they do not match the index).
+  PayloadCache::Bytes load_stored(const CatalogMap& map, uint32_t map_index, const TileIndexEntry& entry,
+                                  uint32_t pos);
   // Pops up to `max_tiles` tiles (and kBytesPerWrite) into batch_ and bufs_, in priority
   // order, ending the requests whose FINAL tile is among them; returns the count.
   size_t fill_batch(size_t max_tiles, size_t& bytes);
-  // Counts the first n frames of batch_ as sent (tiles, latency).
+  // Counts the first n frames of batch_ as sent (tiles, latency) and lets go of their
+  // payloads (an evicted cache entry is freed once no write references it).
   void count_batch(size_t n);
   // The reader's fast path (plain TCP, writer idle, only tiles owed): writes one batch
   // with a non-blocking gathered send right after the request that asked for it, instead
@@ -152,6 +161,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
   std::deque<ControlFrame> control_;
   size_t control_bytes_ = 0;
   std::vector<const CatalogMap*> open_maps_;  // map_id = index + 1
+  std::vector<uint32_t> open_map_index_;      // ... and their catalog positions
 
   bool handshaken_ = false;
   bool tls_ready_ = false;  // plain TCP, or the TLS handshake is done: frames can be written
@@ -160,7 +170,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
   bool authed_ = false;  // no key configured, or the client proved it holds the key
   proto::Nonce server_nonce_{};
   bool closing_ = false;  // write what is queued, then close
-  bool useful_ = false;   // left core.pending (strand-local copy of !pending_)
+  bool useful_ = false;   // left core.pending (strand-local copy of !pending_), counted in useful_per_prefix
   // Guarded by core.mu:
   std::list<PendingBudget::Entry>::iterator pending_it_{};
   bool pending_ = false, evicted_ = false;

@@ -23,6 +23,13 @@ void add_serve_options(CLI::App& app, ServeConfig& a) {
   app.add_option("--max-connections-per-address", a.max_connections_per_address,
                  "Connections from one client address at once (0: no bound)")
       ->capture_default_str()->check(CLI::Range(0u, 1000000u));
+  app.add_option("--max-connections-per-prefix", a.max_connections_per_prefix,
+                 "Connections that made a request, from one network (IPv4 /24, IPv6 /64) at once; the request "
+                 "over it gets Error(overloaded) (0: no bound)")
+      ->capture_default_str()->check(CLI::Range(0u, 1000000u));
+  app.add_option("--tile-cache-mib", a.tile_cache_mib,
+                 "Memory for stored tiles shared by all clients, read and CRC-checked once (0: no cache)")
+      ->capture_default_str()->check(CLI::Range(0.0, 1048576.0));
   app.add_option("--max-pending-connections", a.max_pending_connections,
                  "Connections not yet authenticated or without a request yet, in all; past it the "
                  "oldest of the heaviest address is closed to make room (0: no bound)")
@@ -78,6 +85,8 @@ void run_serve(const ServeConfig& a, const char* program) {
   o.threads = a.threads;
   o.max_connections = a.max_connections;
   o.max_connections_per_address = a.max_connections_per_address;
+  o.max_connections_per_prefix = a.max_connections_per_prefix;
+  o.tile_cache_bytes = size_t(a.tile_cache_mib * 1048576.0);
   o.max_pending_connections = a.max_pending_connections;
   o.max_pending_per_address = a.max_pending_per_address;
   o.stats_interval = std::chrono::milliseconds(int64_t(a.stats_interval * 1000));

@@ -17,10 +17,12 @@ struct ServeConfig {
   double stats_interval = 0;
   unsigned max_connections = 1024;
   unsigned max_connections_per_address = 256;
+  unsigned max_connections_per_prefix = 512;  // IPv4 /24, IPv6 /64
   // Connections not yet useful (server.hpp: before auth or their first request).
   unsigned max_pending_connections = 256;
   unsigned max_pending_per_address = 32;
   double idle_timeout = 120;
+  double tile_cache_mib = 64;  // server.hpp: ServerOptions::tile_cache_bytes
   // 0: the protocol default (4 MiB), raised to fit the catalog's largest tile and map
   // info; else this cap exactly (65536..67108864), and what exceeds it is refused.
   uint32_t max_frame_bytes = 0;

@@ -167,6 +167,7 @@ struct Server::Impl {
   std::mutex state_mu;
   std::condition_variable state_cv;
   bool running = false, stopped = false;
+  size_t threads_done = 0;  // I/O threads whose run() returned
   int signal = 0;
 
   asio::awaitable<void> accept_loop();
@@ -383,6 +384,9 @@ Server::Server(Catalog catalog, ServerOptions options) {
   }
   impl_->core.options = std::move(options);
   impl_->core.catalog = std::move(catalog);
+  std::vector<size_t> tiles;
+  for (const auto& m : impl_->core.catalog.maps()) tiles.push_back(m->pack().tiles().size());
+  impl_->core.payloads.configure(impl_->core.options.tile_cache_bytes, tiles);
   fit_frame_limit(impl_->core);
 }
 
@@ -421,6 +425,11 @@ void Server::start() {
       } catch (const std::exception& e) {
         d.core.log(std::string("I/O thread: ") + e.what());
       }
+      {
+        std::lock_guard lock(d.state_mu);
+        ++d.threads_done;
+      }
+      d.state_cv.notify_all();
     });
 }
 
@@ -434,23 +443,20 @@ void Server::stop() {
   }
   asio::post(d.control, [&d] { d.shutdown_on_io(); });
   // Connections end their coroutines once their sockets close; run() then returns. A
-  // coroutine stuck past the grace period (it should not happen) is cut off by stop().
-  std::thread guard([&d] {
+  // coroutine stuck past the grace period (it should not happen) is cut off by io.stop().
+  {
     std::unique_lock lock(d.state_mu);
-    if (!d.state_cv.wait_for(lock, std::chrono::seconds(5), [&] { return !d.running; })) d.io.stop();
-  });
+    if (!d.state_cv.wait_for(lock, std::chrono::seconds(5), [&] { return d.threads_done == d.core.options.threads; }))
+      d.io.stop();
+  }
   for (auto& t : d.threads) t.join();
   d.threads.clear();
   {  // Sockets must go before their io_context (they would if io.stop() cut run() short).
     std::lock_guard lock(d.core.mu);
     d.core.connections.clear();
   }
-  {
-    std::lock_guard lock(d.state_mu);
-    d.running = false;
-  }
-  d.state_cv.notify_all();
-  guard.join();
+  std::lock_guard lock(d.state_mu);
+  d.running = false;
 }
 
 int Server::wait_for_signal() {

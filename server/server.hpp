@@ -41,6 +41,11 @@ struct ServerOptions {
   // From one client address (IPv4 or IPv6): a client opening connections without end
   // is refused at this bound while other addresses are still served (0: no bound).
   size_t max_connections_per_address = 256;
+  // Useful connections (past the pending budget below: they made a real request) from
+  // one network (IPv4 /24, IPv6 /64): a few addresses of one network cannot take the
+  // whole server. The request that would exceed it gets Error(overloaded) and a close
+  // (0: no bound). Pending connections count against the pending budgets instead.
+  size_t max_connections_per_prefix = 512;
   // Connections not yet useful (before auth, or before their first request after the
   // handshake): a budget of their own, so strangers cannot hold the slots authenticated
   // clients need. Over a budget, the oldest pending connection of the heaviest address in
@@ -57,6 +62,11 @@ struct ServerOptions {
   // All connections together: answer bytes queued or being written. Beyond, readers stop
   // taking requests and writers send one tile per write until it drains.
   size_t max_queued_bytes = 256u << 20;
+  // Stored tile bytes kept in memory, shared by all connections (payload_cache.hpp): a
+  // tile is read from disk and CRC-checked once, then sent from memory until evicted
+  // (least recently used first). Bounded by this budget; a tile over 1/16 of it is never
+  // kept. 0: no cache (every tile read and checked on every request).
+  size_t tile_cache_bytes = 64u << 20;
   std::chrono::milliseconds handshake_timeout{5000};  // accept -> Hello received
   std::chrono::milliseconds idle_timeout{120000};     // no traffic and nothing owed
   std::chrono::milliseconds read_timeout{10000};      // a frame must complete this long after its first byte

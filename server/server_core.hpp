@@ -16,6 +16,7 @@
 
 #include "server/catalog.hpp"
 #include "server/log_throttle.hpp"
+#include "server/payload_cache.hpp"
 #include "server/server.hpp"
 #include "server/server_stats.hpp"
 
@@ -67,10 +68,15 @@ struct ServerCore {
   Catalog catalog;
   std::unique_ptr<asio::ssl::context> tls;  // null: plain TCP
   ServerStats stats;
+  // Verified stored tile bytes shared by every connection (options.tile_cache_bytes).
+  PayloadCache payloads;
 
   std::mutex mu;  // guards connections and stopping
   std::set<std::shared_ptr<Connection>> connections;
   std::map<asio::ip::address, size_t> per_address;  // open connections by client address
+  // Useful connections (past PendingBudget: their first real request) by the client's
+  // /24 or /64, against ServerOptions::max_connections_per_prefix.
+  std::map<PendingBudget::Prefix, size_t> useful_per_prefix;
   PendingBudget pending;
   size_t evicting = 0;
   // Answer bytes owned by connections (control frames queued, tile bytes being written)

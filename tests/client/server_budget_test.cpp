@@ -157,6 +157,52 @@ TEST(ServerBudget, AnHonestBurstFromOneHostIsNotEvicted) {
   EXPECT_EQ(srv.server->stats().connections_open, 100u);
 }
 
+// Useful connections (they opened a map) from several addresses of one /24 are bounded
+// by the network's budget, not only each address's: 127.0.0.2-3 fill 127.0.0.0/24's 6,
+// a third address's OpenMap gets Error(overloaded) and a close, while another /24
+// (127.0.1.x) is still served; a network's connection that closes makes room for the
+// next. Pending connections (a Hello, nothing else) do not count against it.
+TEST(ServerBudget, UsefulConnectionsAreBoundedPerNetwork) {
+  auto p = build_pack("budget_prefix", 5, 9, looptest::first_encoding(), 3, 512);
+  server::ServerOptions o;
+  o.max_connections = 64;
+  o.max_connections_per_address = 3;
+  o.max_connections_per_prefix = 6;
+  o.log = [](const std::string&) {};
+  auto srv = start_server({p.path}, o);
+  auto open = looptest::hello_frame(1);
+  auto om = looptest::open_map_frame("budget_prefix", 2);
+  open.insert(open.end(), om.begin(), om.end());
+  // A fresh connection from `from` that opens the map: the socket if served, null if
+  // refused with Error(overloaded) (at accept, or answering the OpenMap).
+  auto connect = [&](const char* from) {
+    auto s = std::make_unique<RawSocket>(srv.port, 5s, from);
+    EXPECT_TRUE(s->send(open));
+    RawFrame f = read_frame(*s);
+    if (f.header.type == proto::MessageType::hello_ack) f = read_frame(*s);
+    if (f.header.type == proto::MessageType::map_info) return s;
+    EXPECT_EQ(error_code_of(f), proto::ErrorCode::overloaded);
+    return std::unique_ptr<RawSocket>();
+  };
+  RawSocket idle(srv.port, 5s, "127.0.0.5");  // pending: not counted against the network
+  ASSERT_TRUE(idle.send(looptest::hello_frame(1)));
+  ASSERT_EQ(read_frame(idle).header.type, proto::MessageType::hello_ack);
+  std::vector<std::unique_ptr<RawSocket>> held;
+  for (const char* from : {"127.0.0.2", "127.0.0.3"})
+    for (int i = 0; i < 3; ++i) {
+      held.push_back(connect(from));
+      ASSERT_TRUE(held.back()) << from << " #" << i;
+    }
+  EXPECT_FALSE(connect("127.0.0.4")) << "a third address of a full /24";
+  EXPECT_FALSE(connect("127.0.0.3")) << "an address at its own bound";
+  auto other = connect("127.0.1.2");
+  EXPECT_TRUE(other) << "another /24";
+  EXPECT_EQ(srv.server->stats().connections_rejected, 2u);
+  held.pop_back();  // one of 127.0.0.3's closes: the network has room again
+  ASSERT_TRUE(wait_until([&] { return srv.server->stats().connections_open == 6 + 1; }));
+  EXPECT_TRUE(connect("127.0.0.4"));
+}
+
 TEST(ServerBudget, AStrangerCannotClaimAPostAuthFrame) {
   auto p = build_pack("budget_preauth", 5, 5, looptest::first_encoding(), 3, 512);
   server::ServerOptions o;
