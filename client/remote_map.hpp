@@ -132,11 +132,31 @@ class RemoteMap final : public Evaluator {
     const Evaluator* ev = nullptr;  // the current tile (null: none)
     uint32_t level = 0, rel = 0;    // lookup level; the tile's level relative to its root
     uint64_t x0 = 0, y0 = 0, side = 0;  // the tile's texels at `level`: [x0, x0 + side)
+    // The last answer's region (Evaluator::DepthRegion, page_table.hpp PageHit): texels of
+    // `rlevel` sharing (x >> rshift, y >> rshift) with (rx, ry) get `rvalue` without a walk
+    // (the last-sample cache of MH 2016 §3.3, across tiles and page-table entries alike).
+    enum class Counted : uint8_t { none, hit, coarse };
+    uint32_t rlevel = ~0u, rshift = 0;
+    uint64_t rx = 0, ry = 0;
+    float rvalue = 0;
+    Counted rcount = Counted::none;
     static constexpr size_t kMaxMisses = 8;  // more distinct misses in one call: asked again later
     std::array<uint64_t, kMaxMisses> miss_tile{};
     std::array<GridEntry, kMaxMisses> miss_entry{};
     size_t misses = 0;
     uint64_t hits = 0, missed = 0, coarse = 0;
+    bool in_region(uint32_t l, uint64_t x, uint64_t y) const {
+      return l == rlevel && ((x ^ rx) >> rshift) == 0 && ((y ^ ry) >> rshift) == 0;
+    }
+    void set_region(uint32_t l, uint64_t x, uint64_t y, uint32_t shift, float value, Counted c) {
+      rlevel = l, rx = x, ry = y, rshift = shift, rvalue = value, rcount = c;
+    }
+    // The region's answer, counted like the lookup that made it.
+    float region_answer() {
+      if (rcount == Counted::hit) ++hits;
+      else if (rcount == Counted::coarse) ++missed, ++coarse;
+      return rvalue;
+    }
     bool covers(uint32_t l, uint64_t x, uint64_t y) const {
       return ev && l == level && x - x0 < side && y - y0 < side;  // unsigned: x < x0 wraps
     }
@@ -151,6 +171,9 @@ class RemoteMap final : public Evaluator {
                    LookupScratch& sc) const noexcept;
   float visibility_shared(const WorldPoint& world, float footprint_world, uint32_t pcf_radius,
                           LookupScratch& sc) const noexcept;
+  // The same from the point's light-space position `p` (LightSpace::to_light of `w`).
+  float visibility_at(const LightPoint& p, const Vec3d& w, float footprint_world, uint32_t pcf_radius,
+                      LookupScratch& sc) const noexcept;
   // After the shared part: counts, then (exclusive) the misses queued at miss_priority.
   void finish_lookups(const LookupScratch& sc) const noexcept;
   void mark_used(uint32_t slot) const noexcept {

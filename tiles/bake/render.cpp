@@ -17,6 +17,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <ctime>
 #include <cmath>
 #include <filesystem>
 #include <limits>
@@ -143,6 +144,14 @@ float SceneTracer::traced(const Receiver& r, const Vec3d& offset) const {
   return ray.tfar == -std::numeric_limits<float>::infinity() ? 0.0f : 1.0f;
 }
 
+namespace {
+double process_cpu_seconds() {
+  timespec ts;
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+}  // namespace
+
 LightPoint lookup_point(const Receiver& r, const LightSpace& light, uint32_t map_level, uint32_t pcf_radius) {
   Vec3d p = r.pos;
   {
@@ -196,6 +205,7 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
   std::vector<float> vis(n, 0), tvis;
   using Clk = std::chrono::steady_clock;
   auto t0 = Clk::now();
+  double c0 = process_cpu_seconds();
   const uint32_t L = eval.finest_level();
   // Lookups in batches (Evaluator::pcf_batch: the client's cache takes its lock and walks
   // the top of its page table once per batch; neighbouring pixels share tiles). With
@@ -235,13 +245,16 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
     }
   });
   res.map_seconds = std::chrono::duration<double>(Clk::now() - t0).count();
+  res.map_cpu_seconds = process_cpu_seconds() - c0;
   if (o.diff) {
     tvis.assign(n, 0);
     t0 = Clk::now();
+    c0 = process_cpu_seconds();
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
       for (size_t i = r.begin(); i < r.end(); ++i) tvis[i] = tracer.traced(rec[i]);
     });
     res.traced_seconds = std::chrono::duration<double>(Clk::now() - t0).count();
+    res.traced_cpu_seconds = process_cpu_seconds() - c0;
   }
   auto shade = [&](const std::vector<float>& v, std::vector<float>& img) {
     img.assign(n * 3, 0);
