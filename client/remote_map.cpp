@@ -168,8 +168,8 @@ bool RemoteMap::enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch
 }
 
 float RemoteMap::depth_shared(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc) const noexcept {
-  // A region lies in the map (rshift <= rlevel), so this test comes first.
-  if (sc.in_region(level, x, y)) return sc.region_answer();
+  // A region lies in the map, so this test comes first.
+  if (const LookupScratch::Region* g = sc.find(level, x, y)) return sc.answer(*g);
   if (!texel_in_map(header_.map_level, level, x, y)) return kLitDepth;  // page_table.hpp's rule
   if (!sc.covers(level, x, y)) {
     float value;
@@ -182,7 +182,6 @@ float RemoteMap::depth_shared(uint32_t level, uint64_t x, uint64_t y, LookupScra
     sc.set_region(level, x, y, r.shift, r.value, LookupScratch::Counted::hit);
     return r.value;
   } catch (...) {  // an opened tile does not throw; if one did, stay lit and alive
-    sc.rlevel = ~0u;
     return kLitDepth;
   }
 }
@@ -193,41 +192,51 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
   if (level > header_.map_level) return 1.0f;
   const uint64_t side = uint64_t(1) << level;
   if (r == 1) return receiver <= depth_shared(level, pcf_tap(x, 0, 1, side), pcf_tap(y, 0, 1, side), sc) ? 1.0f : 0.0f;
-  // A kernel inside the last answer's region: every tap gets its value, so the fraction
-  // is exactly 1 or 0 (the region is an aligned square: its corners decide). Failing
-  // that, the centre tap's region (one walk) often holds the next kernels along a row.
+  // A kernel inside one region: every tap gets its value, so the fraction is exactly 1
+  // or 0 (a region is an aligned square: its corners decide). Failing that, the centre
+  // tap's region (one walk) often holds the next kernels along a row.
   const uint64_t kx0 = pcf_tap(x, 0, r, side), kx1 = pcf_tap(x, r - 1, r, side);
   const uint64_t ky0 = pcf_tap(y, 0, r, side), ky1 = pcf_tap(y, r - 1, r, side);
   for (int attempt = 0; attempt < 2; ++attempt) {
-    if (sc.in_region(level, kx0, ky0) && sc.in_region(level, kx1, ky1))
-      return receiver <= sc.region_answer() ? 1.0f : 0.0f;
+    const LookupScratch::Region* g = sc.find(level, kx0, ky0);
+    if (g && g->holds(level, kx1, ky1)) return receiver <= sc.answer(*g) ? 1.0f : 0.0f;
     if (attempt == 0) depth_shared(level, pcf_tap(x, (r - 1) / 2, r, side), pcf_tap(y, (r - 1) / 2, r, side), sc);
   }
-  if (x < side && y < side) {
-    float value;
-    if (sc.covers(level, x, y) || enter_tile(level, x, y, sc, value)) {
-      // The tile clamps its taps to its own edges; that is the map's clamp exactly where
-      // the kernel stays inside the tile or leaves it only across an edge of the map.
-      const int64_t h = int64_t((r - 1) / 2), lo_x = int64_t(x) - h, lo_y = int64_t(y) - h;
-      const int64_t tx0 = int64_t(sc.x0), ty0 = int64_t(sc.y0), ts = int64_t(sc.side), s = int64_t(side);
-      const bool fits_x = (lo_x >= tx0 || tx0 == 0) && (lo_x + int64_t(r) <= tx0 + ts || tx0 + ts == s);
-      const bool fits_y = (lo_y >= ty0 || ty0 == 0) && (lo_y + int64_t(r) <= ty0 + ts || ty0 + ts == s);
-      if (fits_x && fits_y) {
-        ++sc.hits;
-        try {
-          return sc.ev->pcf(sc.rel, x - sc.x0, y - sc.y0, r, receiver);
-        } catch (...) {
-          return 1.0f;
-        }
+  // Where the centre's region is its texel alone (fine detail), few taps would share
+  // regions: a kernel inside the centre's tile (or leaving it only across the map's
+  // edges, where the tile's clamp is the map's) runs the tile's own shared walk (MH §3.3
+  // Fig. 5, DAG-MH §3.5) instead.
+  const LookupScratch::Region& centre = sc.regions[sc.last];
+  if (x < side && y < side && centre.holds(level, x, y) && centre.shift == 0 && sc.covers(level, x, y)) {
+    const int64_t h = int64_t((r - 1) / 2), lo_x = int64_t(x) - h, lo_y = int64_t(y) - h;
+    const int64_t tx0 = int64_t(sc.x0), ty0 = int64_t(sc.y0), ts = int64_t(sc.side), s = int64_t(side);
+    const bool fits_x = (lo_x >= tx0 || tx0 == 0) && (lo_x + int64_t(r) <= tx0 + ts || tx0 + ts == s);
+    const bool fits_y = (lo_y >= ty0 || ty0 == 0) && (lo_y + int64_t(r) <= ty0 + ts || ty0 + ts == s);
+    if (fits_x && fits_y) {
+      try {
+        return sc.ev->pcf(sc.rel, x - sc.x0, y - sc.y0, r, receiver);
+      } catch (...) {
+        return 1.0f;
       }
     }
   }
-  // Across tile borders or missing tiles: tap by tap (taps in the current tile skip the
-  // walk), each answering like depth().
+  // Row by row: the taps of a row that one region holds take its answer together, each
+  // region found among the kept ones or by one walk (which keeps it). Every tap answers
+  // like depth(), so the fraction equals the base class's exactly.
   uint32_t lit_taps = 0;
-  for (uint32_t j = 0; j < r; ++j)
-    for (uint32_t i = 0; i < r; ++i)
-      lit_taps += receiver <= depth_shared(level, pcf_tap(x, i, r, side), pcf_tap(y, j, r, side), sc);
+  for (uint32_t j = 0; j < r; ++j) {
+    const uint64_t ty = pcf_tap(y, j, r, side);
+    for (uint32_t i = 0; i < r;) {
+      const uint64_t tx = pcf_tap(x, i, r, side);
+      const float v = depth_shared(level, tx, ty, sc);
+      const LookupScratch::Region& g = sc.regions[sc.last];
+      uint32_t n = 1;
+      if (g.holds(level, tx, ty))
+        while (i + n < r && g.holds(level, pcf_tap(x, i + n, r, side), ty)) ++n;
+      lit_taps += receiver <= v ? n : 0;
+      i += n;
+    }
+  }
   return float(lit_taps) / float(r * r);
 }
 

@@ -46,7 +46,9 @@ TEST(DepthRegion, EveryTexelOfTheRegionSharesTheAnswer) {
                   << "level " << level << " region " << x0 << "," << y0 << " shift " << r.shift << " texel " << x0 + i
                   << "," << y0 + j;
         }
-      if (f.name == "constant" || f.name == "city") EXPECT_GT(wide, 0u) << "no region wider than a texel";
+      if (f.name == "constant" || f.name == "city") {
+        EXPECT_GT(wide, 0u) << "no region wider than a texel";
+      }
     }
   }
 }
