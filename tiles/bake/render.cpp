@@ -157,8 +157,9 @@ LightPoint lookup_point(const Receiver& r, const LightSpace& light, uint32_t map
   {
     // Open geometry has hi = lo; closed surfaces meet stored lo values: move the lookup
     // off the surface (render.hpp).
+    // 2^level exactly, as ldexp would give it, without the library call.
     const double texel = (light.kind() == LightKind::sun ? light.extent_uv() : length(p - light.origin()) * light.extent_uv()) /
-                         std::ldexp(1.0, int(map_level));
+                         double(uint64_t(1) << map_level);
     p = p + r.normal * ((r.closed ? kClosedReceiverOffsetTexels : kOpenReceiverOffsetTexels) + pcf_radius) * texel;
   }
   return light.to_light(p);
@@ -228,8 +229,10 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
         vis[i] = 1;
         continue;
       }
-      const auto tf = LightSpace::texel_of(f.fine, lp.u, lp.v);
-      queries.push_back({tf[0], tf[1], f.fine, kr, float(lp.d)});
+      // (u, v) in [0, 1): u * 2^level is exact and below 2^level, so truncating it is
+      // LightSpace::texel_of's floor, without its library calls.
+      const double fine_side = double(uint64_t(1) << f.fine);
+      queries.push_back({uint64_t(lp.u * fine_side), uint64_t(lp.v * fine_side), f.fine, kr, float(lp.d)});
       index.push_back(uint32_t(i));
       blend.push_back(f.t == 0.0f ? std::numeric_limits<float>::quiet_NaN() : f.t);
       if (f.t != 0.0f) {
