@@ -206,8 +206,8 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
   // regions: a kernel inside the centre's tile (or leaving it only across the map's
   // edges, where the tile's clamp is the map's) runs the tile's own shared walk (MH §3.3
   // Fig. 5, DAG-MH §3.5) instead.
-  const LookupScratch::Region& centre = sc.regions[sc.last];
-  if (x < side && y < side && centre.holds(level, x, y) && centre.shift == 0 && sc.covers(level, x, y)) {
+  const LookupScratch::Region* centre = sc.last_region();
+  if (x < side && y < side && centre && centre->holds(level, x, y) && centre->shift == 0 && sc.covers(level, x, y)) {
     const int64_t h = int64_t((r - 1) / 2), lo_x = int64_t(x) - h, lo_y = int64_t(y) - h;
     const int64_t tx0 = int64_t(sc.x0), ty0 = int64_t(sc.y0), ts = int64_t(sc.side), s = int64_t(side);
     const bool fits_x = (lo_x >= tx0 || tx0 == 0) && (lo_x + int64_t(r) <= tx0 + ts || tx0 + ts == s);
@@ -229,10 +229,10 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
     for (uint32_t i = 0; i < r;) {
       const uint64_t tx = pcf_tap(x, i, r, side);
       const float v = depth_shared(level, tx, ty, sc);
-      const LookupScratch::Region& g = sc.regions[sc.last];
+      const LookupScratch::Region* g = sc.last_region();
       uint32_t n = 1;
-      if (g.holds(level, tx, ty))
-        while (i + n < r && g.holds(level, pcf_tap(x, i + n, r, side), ty)) ++n;
+      if (g && g->holds(level, tx, ty))
+        while (i + n < r && g->holds(level, pcf_tap(x, i + n, r, side), ty)) ++n;
       lit_taps += receiver <= v ? n : 0;
       i += n;
     }

@@ -19,6 +19,7 @@
 // then the epoch advances. Recency is therefore exact between arrivals and unordered
 // within one (slots used since the last arrival go to the front in slot order).
 #pragma once
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <cstdint>
@@ -138,18 +139,18 @@ class RemoteMap final : public Evaluator {
     // alike). A few are kept, so that a PCF kernel's rows and a batch going back and
     // forth between neighbours find theirs; the one answered last is tried first.
     enum class Counted : uint8_t { none, hit, coarse };
-    struct Region {
-      uint32_t level = ~0u, shift = 0;
-      uint64_t x = 0, y = 0;
-      float value = 0;
-      Counted counted = Counted::none;
+    struct Region {  // no initializers: a call's scratch starts with none kept, for free
+      uint32_t level, shift;
+      uint64_t x, y;
+      float value;
+      Counted counted;
       bool holds(uint32_t l, uint64_t tx, uint64_t ty) const {
         return l == level && ((tx ^ x) >> shift) == 0 && ((ty ^ y) >> shift) == 0;
       }
     };
     static constexpr uint32_t kRegions = 8;
-    std::array<Region, kRegions> regions{};
-    uint32_t last = 0, next = 0;  // the region answered last; the one replaced next
+    std::array<Region, kRegions> regions;  // the first `used` are kept
+    uint32_t used = 0, last = 0, next = 0;  // how many; the one answered last; the one replaced next
     static constexpr size_t kMaxMisses = 8;  // more distinct misses in one call: asked again later
     std::array<uint64_t, kMaxMisses> miss_tile{};
     std::array<GridEntry, kMaxMisses> miss_entry{};
@@ -158,8 +159,9 @@ class RemoteMap final : public Evaluator {
     // The kept region holding texel (l, x, y), now the last one, or null. A region lies in
     // the map (shift <= level), so a texel it holds is in the map.
     const Region* find(uint32_t l, uint64_t tx, uint64_t ty) {
+      if (used == 0) return nullptr;
       if (regions[last].holds(l, tx, ty)) return &regions[last];
-      for (uint32_t i = 0; i < kRegions; ++i)
+      for (uint32_t i = 0; i < used; ++i)
         if (regions[i].holds(l, tx, ty)) {
           last = i;
           return &regions[i];
@@ -170,7 +172,9 @@ class RemoteMap final : public Evaluator {
       regions[next] = Region{l, shift, tx, ty, value, c};
       last = next;
       next = (next + 1) % kRegions;
+      used = std::min(used + 1, kRegions);
     }
+    const Region* last_region() const { return used ? &regions[last] : nullptr; }
     // A region's answer, counted like the lookup that made it.
     float answer(const Region& g) {
       if (g.counted == Counted::hit) ++hits;
