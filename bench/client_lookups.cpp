@@ -7,7 +7,8 @@
 //   bench_client_lookups [--scene city] [--light sun:azimuth=30,elevation=50] [--res 4k]
 //                        [--encodings mh,mmh,dagmh] [--tile-bytes 8192] [--lookups 262144]
 //                        [--batch 1024] [--reps 5] [--threads 1,2] [--size 960x540]
-//                        [--camera pos=-350,220,-380,target=0,0,0,fov=50] [--quick] [--json PATH]
+//                        [--camera pos=-350,220,-380,target=0,0,0,fov=50] [--clock cpu|wall] [--quick]
+//                        [--json PATH]
 //
 // Each encoding's pack is built with build_map into a temporary folder, then every tile
 // is delivered to a client RemoteMap directly (RemoteMap::tile_arrived: CRC, inflate,
@@ -22,7 +23,10 @@
 // --batch points), "filtered" (Map::visibility_filtered over the same spans, a footprint
 // of 3 finest texels: two levels blended). Kernels: single tap and 5x5 (pcf_radius 2).
 // Threads: the points split in contiguous halves; figures are wall time per lookup of
-// the whole pass (so two threads that scale show half the time), median over --reps.
+// the whole pass (so two threads that scale show half the time) and the threads' CPU time
+// per lookup, medians over --reps. Cost ratios (x array, /single, the targets) use CPU
+// time unless --clock wall: on a shared machine other processes inflate wall time much
+// more than the CPU time a pass itself spends; thread speed-ups use wall time.
 // Before timing: batch == single == array bit for bit on every point, and the client's
 // PCF (shared walk inside tiles) == the average of its single lookups on a sample.
 // --quick: 2K^2, 64K lookups, 3 reps, one render rep.
@@ -100,12 +104,18 @@ const char* subject_name(Subject s) {
   return "?";
 }
 
-// One pass over `probes` on `threads` threads; returns wall seconds.
-double time_pass(Subject s, const Encoded& e, const FloatMap& arr, const st::LightSpace& light,
+struct PassTime {
+  double wall = 0, cpu = 0;  // cpu: the threads' CPU seconds, summed
+};
+
+// One pass over `probes` on `threads` threads.
+PassTime time_pass(Subject s, const Encoded& e, const FloatMap& arr, const st::LightSpace& light,
                  const std::vector<Probe>& probes, const std::vector<WorldPoint>& points,
                  const std::vector<float>& footprints, uint32_t radius, unsigned threads, size_t batch,
                  std::vector<float>& out) {
+  std::atomic<double> cpu{0};
   auto work = [&](size_t begin, size_t end) {
+    const double c0 = thread_cpu_now();
     switch (s) {
       case Subject::array:
         for (size_t i = begin; i < end; ++i) out[i] = array_visibility(arr, light, probes[i].p, radius);
@@ -127,6 +137,7 @@ double time_pass(Subject s, const Encoded& e, const FloatMap& arr, const st::Lig
         }
         break;
     }
+    cpu.fetch_add(thread_cpu_now() - c0);
   };
   const auto t0 = Clock::now();
   if (threads <= 1) {
@@ -138,7 +149,7 @@ double time_pass(Subject s, const Encoded& e, const FloatMap& arr, const st::Lig
       pool.emplace_back(work, std::min(probes.size(), t * per), std::min(probes.size(), (t + 1) * per));
     for (auto& th : pool) th.join();
   }
-  return seconds_since(t0);
+  return {seconds_since(t0), cpu.load()};
 }
 
 }  // namespace
@@ -151,7 +162,7 @@ int main(int argc, char** argv) {
   uint32_t level = 12, tile_bytes = 8192;
   size_t count = size_t(1) << 18, batch = 1024;
   int reps = 5, render_reps = 3;
-  bool quick = false, level_given = false;
+  bool quick = false, level_given = false, use_cpu = true;
   try {
     for (int i = 1; i < argc; ++i) {
       std::string a = argv[i];
@@ -174,10 +185,15 @@ int main(int argc, char** argv) {
       else if (a == "--camera") camera_spec = next();
       else if (a == "--quick") quick = true;
       else if (a == "--json") json_path = next();
+      else if (a == "--clock") {
+        const std::string c = next();
+        if (c != "cpu" && c != "wall") throw st::Error("--clock: expected cpu or wall, got '" + c + "'");
+        use_cpu = c == "cpu";
+      }
       else
         throw st::Error("usage: bench_client_lookups [--scene S] [--light L] [--res 4k] [--encodings mh,mmh,dagmh] "
                         "[--tile-bytes N] [--lookups N] [--batch N] [--reps R] [--threads 1,2] [--size WxH] "
-                        "[--camera SPEC] [--quick] [--json PATH]");
+                        "[--camera SPEC] [--clock cpu|wall] [--quick] [--json PATH]");
     }
     if (scene_spec.find(':') == std::string::npos) scene_spec = "procedural:" + scene_spec;
     if (quick) {
@@ -270,7 +286,7 @@ int main(int argc, char** argv) {
       std::string encoding, pattern, subject;
       uint32_t radius = 0;
       unsigned threads = 1;
-      double seconds = 0;
+      double seconds = 0, cpu = 0;  // medians: wall and summed thread CPU seconds per pass
     };
     std::vector<Result> results;
     uint64_t mismatches = 0, pcf_mismatches = 0, filtered_mismatches = 0;
@@ -303,41 +319,54 @@ int main(int argc, char** argv) {
         for (uint32_t radius : {0u, 2u})
           for (unsigned threads : thread_counts) {
             const Subject subjects[] = {Subject::array, Subject::single, Subject::batch, Subject::filtered};
-            std::vector<std::vector<double>> t(std::size(subjects));
+            std::vector<std::vector<double>> t(std::size(subjects)), c(std::size(subjects));
             for (int rep = 0; rep < reps + 1; ++rep)  // the first pass warms up
               for (size_t s = 0; s < std::size(subjects); ++s) {
-                const double sec = time_pass(subjects[s], e, arr, light, *list, points, footprints, radius, threads, batch, out);
-                if (rep > 0) t[s].push_back(sec);
+                const PassTime pt = time_pass(subjects[s], e, arr, light, *list, points, footprints, radius, threads, batch, out);
+                if (rep > 0) t[s].push_back(pt.wall), c[s].push_back(pt.cpu);
               }
             for (size_t s = 0; s < std::size(subjects); ++s)
-              results.push_back({e.name, pname, subject_name(subjects[s]), radius, threads, median(t[s])});
+              results.push_back({e.name, pname, subject_name(subjects[s]), radius, threads, median(t[s]), median(c[s])});
           }
       }
       std::printf("  %-6s timed\n", e.name.c_str());
       std::fflush(stdout);
     }
 
-    auto find = [&](const std::string& enc, const std::string& p, const std::string& s, uint32_t radius, unsigned th) {
+    // Cost ratios from CPU time (--clock cpu, the default: a pass's summed thread CPU
+    // seconds, which other processes on a busy machine inflate far less than wall time)
+    // or wall time; thread speed-ups always from wall time.
+    auto find_in = [&](bool cpu_time, const std::string& enc, const std::string& p, const std::string& s,
+                       uint32_t radius, unsigned th) {
       for (const Result& x : results)
-        if (x.encoding == enc && x.pattern == p && x.subject == s && x.radius == radius && x.threads == th) return x.seconds;
+        if (x.encoding == enc && x.pattern == p && x.subject == s && x.radius == radius && x.threads == th)
+          return cpu_time ? x.cpu : x.seconds;
       return 0.0;
     };
-    std::printf("\nClient lookups, every tile resident (%s^2; ns = wall ns per lookup of the whole pass; x array = time / "
-                "the float array's, same points, kernel and threads; /single = 5x5 time / single-tap time; "
-                "x%u thr = 1-thread time / this time)\n", side_name(level).c_str(), thread_counts.back());
-    std::printf("%-6s %-9s %-6s %-8s %4s %9s %9s %8s %9s\n", "enc", "pattern", "kernel", "subject", "thr", "ns", "x array",
-                "/single", "speed-up");
+    auto find = [&](const std::string& enc, const std::string& p, const std::string& s, uint32_t radius, unsigned th) {
+      return find_in(use_cpu, enc, p, s, radius, th);
+    };
+    auto find_wall = [&](const std::string& enc, const std::string& p, const std::string& s, uint32_t radius,
+                         unsigned th) { return find_in(false, enc, p, s, radius, th); };
+    std::printf("\nClient lookups, every tile resident (%s^2; ns = wall ns per lookup of the whole pass; cpu ns = "
+                "thread CPU ns per lookup; x array = %s time / the float array's, same points, kernel and threads; "
+                "/single = 5x5 time / single-tap time; speed-up = 1-thread wall time / this wall time)\n",
+                side_name(level).c_str(), use_cpu ? "CPU" : "wall");
+    std::printf("%-6s %-9s %-6s %-8s %4s %9s %9s %9s %8s %9s\n", "enc", "pattern", "kernel", "subject", "thr", "ns",
+                "cpu ns", "x array", "/single", "speed-up");
     nlohmann::json jres = nlohmann::json::array();
     for (const Result& x : results) {
-      const double ns = 1e9 * x.seconds / double(count);
-      const double vs_array = x.seconds / find(x.encoding, x.pattern, "array", x.radius, x.threads);
-      const double vs_single = x.seconds / find(x.encoding, x.pattern, x.subject, 0, x.threads);
-      const double speedup = find(x.encoding, x.pattern, x.subject, x.radius, 1) / x.seconds;
-      std::printf("%-6s %-9s %-6s %-8s %4u %9.1f %9.2f %8.2f %9.2f\n", x.encoding.c_str(), x.pattern.c_str(),
-                  x.radius ? "5x5" : "single", x.subject.c_str(), x.threads, ns, vs_array, vs_single, speedup);
+      const double ns = 1e9 * x.seconds / double(count), cpu_ns = 1e9 * x.cpu / double(count);
+      const double mine = use_cpu ? x.cpu : x.seconds;
+      const double vs_array = mine / find(x.encoding, x.pattern, "array", x.radius, x.threads);
+      const double vs_single = mine / find(x.encoding, x.pattern, x.subject, 0, x.threads);
+      const double speedup = find_wall(x.encoding, x.pattern, x.subject, x.radius, 1) / x.seconds;
+      std::printf("%-6s %-9s %-6s %-8s %4u %9.1f %9.1f %9.2f %8.2f %9.2f\n", x.encoding.c_str(), x.pattern.c_str(),
+                  x.radius ? "5x5" : "single", x.subject.c_str(), x.threads, ns, cpu_ns, vs_array, vs_single, speedup);
       jres.push_back({{"encoding", x.encoding}, {"pattern", x.pattern}, {"subject", x.subject},
                       {"kernel", 2 * x.radius + 1}, {"threads", x.threads}, {"seconds_per_pass", x.seconds},
-                      {"lookups_per_pass", count}, {"ns_per_lookup", ns}, {"ratio_to_float_array", vs_array},
+                      {"cpu_seconds_per_pass", x.cpu}, {"lookups_per_pass", count}, {"ns_per_lookup", ns},
+                      {"cpu_ns_per_lookup", cpu_ns}, {"ratio_to_float_array", vs_array},
                       {"ratio_to_single", vs_single}, {"speedup_over_1_thread", speedup}});
     }
 
@@ -351,18 +380,23 @@ int main(int argc, char** argv) {
     for (const Encoded& e : encoded) {
       st::RenderOptions ro;
       ro.width = width, ro.height = height, ro.diff = true;
-      std::vector<double> ms, ts;
+      std::vector<double> ms, ts, mc, tc;
       uint64_t recv = 0, differing = 0;
       for (int rep = 0; rep < render_reps; ++rep) {
         const st::RenderResult rr = st::render_view(tracer, receivers, *e.remote, ro);
         ms.push_back(rr.map_seconds), ts.push_back(rr.traced_seconds);
+        mc.push_back(rr.map_cpu_seconds), tc.push_back(rr.traced_cpu_seconds);
         recv = rr.receivers, differing = rr.differing;
       }
-      const double m = median(ms), t = median(ts);
-      std::printf("  %-6s receivers %llu: map %.2f ms, rays %.2f ms, map/rays %.3f (target <= 0.2), %llu differ\n",
-                  e.name.c_str(), (unsigned long long)recv, 1e3 * m, 1e3 * t, m / t, (unsigned long long)differing);
+      const double m = median(ms), t = median(ts), m_cpu = median(mc), t_cpu = median(tc);
+      const double ratio = use_cpu ? m_cpu / t_cpu : m / t;
+      std::printf("  %-6s receivers %llu: map %.2f ms (cpu %.2f), rays %.2f ms (cpu %.2f), map/rays %.3f %s "
+                  "(target <= 0.2), %llu differ\n",
+                  e.name.c_str(), (unsigned long long)recv, 1e3 * m, 1e3 * m_cpu, 1e3 * t, 1e3 * t_cpu, ratio,
+                  use_cpu ? "cpu" : "wall", (unsigned long long)differing);
       jrender.push_back({{"encoding", e.name}, {"receivers", recv}, {"map_seconds", m}, {"traced_seconds", t},
-                         {"ratio_map_to_rays", m / t}, {"differing", differing}});
+                         {"map_cpu_seconds", m_cpu}, {"traced_cpu_seconds", t_cpu}, {"ratio_map_to_rays", ratio},
+                         {"differing", differing}});
     }
 
     std::printf("\nTargets (single thread unless said; batch is the API a game calls per frame):\n");
@@ -373,7 +407,7 @@ int main(int argc, char** argv) {
         const double single = find(e.name, pname, "batch", 0, 1) / find(e.name, pname, "array", 0, 1);
         const double pcf = find(e.name, pname, "batch", 2, 1) / find(e.name, pname, "batch", 0, 1);
         const unsigned tn = thread_counts.back();
-        const double scale = find(e.name, pname, "batch", 0, 1) / find(e.name, pname, "batch", 0, tn);
+        const double scale = find_wall(e.name, pname, "batch", 0, 1) / find_wall(e.name, pname, "batch", 0, tn);
         std::printf("  %-6s %-9s batch single tap = %.2fx array (<= 1 %s); 5x5 = %.2fx single (<= 2 %s); "
                     "%u threads = %.2fx one (>= 1.8 %s)\n",
                     e.name.c_str(), pname, single, single <= 1 ? "met" : "NOT met", pcf, pcf <= 2 ? "met" : "NOT met",
@@ -389,7 +423,7 @@ int main(int argc, char** argv) {
     if (!json_path.empty()) {
       nlohmann::json j{{"bench", "client_lookups"}, {"scene", scene_spec}, {"light", light_spec}, {"side", side},
                        {"level", level}, {"tile_bytes", tile_bytes}, {"lookups_per_pattern", count},
-                       {"batch", batch}, {"reps", reps}, {"mismatches", mismatches},
+                       {"batch", batch}, {"reps", reps}, {"clock", use_cpu ? "cpu" : "wall"}, {"mismatches", mismatches},
                        {"pcf_mismatches", pcf_mismatches}, {"filtered_mismatches", filtered_mismatches},
                        {"load_average_end", load_average()}, {"results", jres}, {"render", jrender},
                        {"targets", targets}};

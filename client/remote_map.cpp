@@ -134,13 +134,19 @@ bool RemoteMap::enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch
   };
   const PageHit hit = walk_page_table(grid_, level, x, y, resident_index);
   value = hit.value;
-  if (hit.kind == PageHit::Kind::value) return false;
+  if (hit.kind == PageHit::Kind::value) {
+    sc.set_region(level, x, y, hit.region_shift, value, LookupScratch::Counted::none);
+    return false;
+  }
   if (hit.kind == PageHit::Kind::tile) page = cache_.lookup(hit.tile);
   if (page.state == PageState::constant) {  // given up: coarse for good
     value = page.value;
+    sc.set_region(level, x, y, hit.region_shift, value, LookupScratch::Counted::none);
     return false;
   }
   if (page.state != PageState::resident) {
+    // The entry's value answers for its whole node while the tile is away.
+    sc.set_region(level, x, y, hit.region_shift, value, LookupScratch::Counted::coarse);
     ++sc.missed;
     ++sc.coarse;
     bool noted = false;
@@ -162,6 +168,8 @@ bool RemoteMap::enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch
 }
 
 float RemoteMap::depth_shared(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc) const noexcept {
+  // A region lies in the map, so this test comes first.
+  if (const LookupScratch::Region* g = sc.find(level, x, y)) return sc.answer(*g);
   if (!texel_in_map(header_.map_level, level, x, y)) return kLitDepth;  // page_table.hpp's rule
   if (!sc.covers(level, x, y)) {
     float value;
@@ -169,7 +177,10 @@ float RemoteMap::depth_shared(uint32_t level, uint64_t x, uint64_t y, LookupScra
   }
   ++sc.hits;
   try {
-    return sc.ev->depth(sc.rel, x - sc.x0, y - sc.y0);
+    const DepthRegion r = sc.ev->depth_region(sc.rel, x - sc.x0, y - sc.y0);
+    // The tile is aligned to its side (>= the region's), so the region holds in map texels.
+    sc.set_region(level, x, y, r.shift, r.value, LookupScratch::Counted::hit);
+    return r.value;
   } catch (...) {  // an opened tile does not throw; if one did, stay lit and alive
     return kLitDepth;
   }
@@ -181,31 +192,51 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
   if (level > header_.map_level) return 1.0f;
   const uint64_t side = uint64_t(1) << level;
   if (r == 1) return receiver <= depth_shared(level, pcf_tap(x, 0, 1, side), pcf_tap(y, 0, 1, side), sc) ? 1.0f : 0.0f;
-  if (x < side && y < side) {
-    float value;
-    if (sc.covers(level, x, y) || enter_tile(level, x, y, sc, value)) {
-      // The tile clamps its taps to its own edges; that is the map's clamp exactly where
-      // the kernel stays inside the tile or leaves it only across an edge of the map.
-      const int64_t h = int64_t((r - 1) / 2), lo_x = int64_t(x) - h, lo_y = int64_t(y) - h;
-      const int64_t tx0 = int64_t(sc.x0), ty0 = int64_t(sc.y0), ts = int64_t(sc.side), s = int64_t(side);
-      const bool fits_x = (lo_x >= tx0 || tx0 == 0) && (lo_x + int64_t(r) <= tx0 + ts || tx0 + ts == s);
-      const bool fits_y = (lo_y >= ty0 || ty0 == 0) && (lo_y + int64_t(r) <= ty0 + ts || ty0 + ts == s);
-      if (fits_x && fits_y) {
-        ++sc.hits;
-        try {
-          return sc.ev->pcf(sc.rel, x - sc.x0, y - sc.y0, r, receiver);
-        } catch (...) {
-          return 1.0f;
-        }
+  // A kernel inside one region: every tap gets its value, so the fraction is exactly 1
+  // or 0 (a region is an aligned square: its corners decide). Failing that, the centre
+  // tap's region (one walk) often holds the next kernels along a row.
+  const uint64_t kx0 = pcf_tap(x, 0, r, side), kx1 = pcf_tap(x, r - 1, r, side);
+  const uint64_t ky0 = pcf_tap(y, 0, r, side), ky1 = pcf_tap(y, r - 1, r, side);
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    const LookupScratch::Region* g = sc.find(level, kx0, ky0);
+    if (g && g->holds(level, kx1, ky1)) return receiver <= sc.answer(*g) ? 1.0f : 0.0f;
+    if (attempt == 0) depth_shared(level, pcf_tap(x, (r - 1) / 2, r, side), pcf_tap(y, (r - 1) / 2, r, side), sc);
+  }
+  // Where the centre's region is its texel alone (fine detail), few taps would share
+  // regions: a kernel inside the centre's tile (or leaving it only across the map's
+  // edges, where the tile's clamp is the map's) runs the tile's own shared walk (MH §3.3
+  // Fig. 5, DAG-MH §3.5) instead.
+  const LookupScratch::Region* centre = sc.last_region();
+  if (x < side && y < side && centre && centre->holds(level, x, y) && centre->shift == 0 && sc.covers(level, x, y)) {
+    const int64_t h = int64_t((r - 1) / 2), lo_x = int64_t(x) - h, lo_y = int64_t(y) - h;
+    const int64_t tx0 = int64_t(sc.x0), ty0 = int64_t(sc.y0), ts = int64_t(sc.side), s = int64_t(side);
+    const bool fits_x = (lo_x >= tx0 || tx0 == 0) && (lo_x + int64_t(r) <= tx0 + ts || tx0 + ts == s);
+    const bool fits_y = (lo_y >= ty0 || ty0 == 0) && (lo_y + int64_t(r) <= ty0 + ts || ty0 + ts == s);
+    if (fits_x && fits_y) {
+      try {
+        return sc.ev->pcf(sc.rel, x - sc.x0, y - sc.y0, r, receiver);
+      } catch (...) {
+        return 1.0f;
       }
     }
   }
-  // Across tile borders or missing tiles: tap by tap (taps in the current tile skip the
-  // walk), each answering like depth().
+  // Row by row: the taps of a row that one region holds take its answer together, each
+  // region found among the kept ones or by one walk (which keeps it). Every tap answers
+  // like depth(), so the fraction equals the base class's exactly.
   uint32_t lit_taps = 0;
-  for (uint32_t j = 0; j < r; ++j)
-    for (uint32_t i = 0; i < r; ++i)
-      lit_taps += receiver <= depth_shared(level, pcf_tap(x, i, r, side), pcf_tap(y, j, r, side), sc);
+  for (uint32_t j = 0; j < r; ++j) {
+    const uint64_t ty = pcf_tap(y, j, r, side);
+    for (uint32_t i = 0; i < r;) {
+      const uint64_t tx = pcf_tap(x, i, r, side);
+      const float v = depth_shared(level, tx, ty, sc);
+      const LookupScratch::Region* g = sc.last_region();
+      uint32_t n = 1;
+      if (g && g->holds(level, tx, ty))
+        while (i + n < r && g->holds(level, pcf_tap(x, i + n, r, side), ty)) ++n;
+      lit_taps += receiver <= v ? n : 0;
+      i += n;
+    }
+  }
   return float(lit_taps) / float(r * r);
 }
 
@@ -263,10 +294,41 @@ void RemoteMap::pcf_batch(std::span<const PcfQuery> queries, std::span<float> ou
   finish_lookups(sc);
 }
 
+namespace {
+
+// The texel of (u, v) in [0, 1)^2 at `level`: LightSpace::texel_of's answer (u * 2^level
+// is exact and below 2^level, and truncating a non-negative double is its floor) without
+// its two library floor calls and ldexp.
+std::array<uint64_t, 2> texel_in_unit(uint32_t level, double u, double v) {
+  const double r = double(uint64_t(1) << level);
+  return {uint64_t(u * r), uint64_t(v * r)};
+}
+
+// LightSpace::to_light of a sun for a chunk of points, operation for operation (so the
+// same IEEE doubles), as loops over arrays that the compiler vectorizes: a batch pays for
+// its divisions two at a time.
+constexpr size_t kTransformChunk = 64;
+void sun_to_light_chunk(const LightSpace& light, const WorldPoint* w, size_t n, double* u, double* v, double* d) {
+  const Vec3d o = light.origin(), au = light.axis_u(), av = light.axis_v(), f = light.forward();
+  const double e = light.extent_uv(), near = light.near_plane(), depth = light.far_plane() - light.near_plane();
+  for (size_t i = 0; i < n; ++i) {
+    const double rx = w[i].x - o.x, ry = w[i].y - o.y, rz = w[i].z - o.z;
+    u[i] = (rx * au.x + ry * au.y + rz * au.z) / e;
+    v[i] = (rx * av.x + ry * av.y + rz * av.z) / e;
+    d[i] = ((rx * f.x + ry * f.y + rz * f.z) - near) / depth;
+  }
+}
+
+}  // namespace
+
 float RemoteMap::visibility_shared(const WorldPoint& world, float footprint_world, uint32_t pcf_radius,
                                    LookupScratch& sc) const noexcept {
   const Vec3d w{world.x, world.y, world.z};
-  const LightPoint p = light_.to_light(w);
+  return visibility_at(light_.to_light(w), w, footprint_world, pcf_radius, sc);
+}
+
+float RemoteMap::visibility_at(const LightPoint& p, const Vec3d& w, float footprint_world, uint32_t pcf_radius,
+                               LookupScratch& sc) const noexcept {
   if (!(p.u >= 0 && p.u < 1 && p.v >= 0 && p.v < 1 && p.d >= 0 && p.d <= 1)) return 1.0f;
   const uint32_t L = header_.map_level;
   const uint32_t r = 2 * std::min<uint32_t>(pcf_radius, (kMaxPcf - 1) / 2) + 1;
@@ -280,10 +342,10 @@ float RemoteMap::visibility_shared(const WorldPoint& world, float footprint_worl
                          std::ldexp(1.0, int(L));
     f = filter_levels(L, float(double(footprint_world) / texel));
   }
-  const auto tf = LightSpace::texel_of(f.fine, p.u, p.v);
+  const auto tf = texel_in_unit(f.fine, p.u, p.v);
   const float a = pcf_shared(f.fine, tf[0], tf[1], r, receiver, sc);
   if (f.t == 0.0f) return a;
-  const auto tc = LightSpace::texel_of(f.coarse, p.u, p.v);
+  const auto tc = texel_in_unit(f.coarse, p.u, p.v);
   return filter_blend(a, pcf_shared(f.coarse, tc[0], tc[1], r, receiver, sc), f.t);
 }
 
@@ -303,10 +365,19 @@ void RemoteMap::visibility_batch(std::span<const WorldPoint> points, std::span<c
   size_t n = std::min(points.size(), out.size());
   if (!footprints.empty()) n = std::min(n, footprints.size());
   LookupScratch sc;
+  const bool sun = light_.kind() == LightKind::sun;
+  double u[kTransformChunk], v[kTransformChunk], d[kTransformChunk];
   {
     std::shared_lock lock(mu_);
-    for (size_t i = 0; i < n; ++i)
-      out[i] = visibility_shared(points[i], footprints.empty() ? 0.0f : footprints[i], pcf_radius, sc);
+    for (size_t i0 = 0; i0 < n; i0 += kTransformChunk) {
+      const size_t m = std::min(kTransformChunk, n - i0);
+      if (sun) sun_to_light_chunk(light_, points.data() + i0, m, u, v, d);
+      for (size_t k = 0, i = i0; k < m; ++k, ++i) {
+        const Vec3d w{points[i].x, points[i].y, points[i].z};
+        out[i] = visibility_at(sun ? LightPoint{u[k], v[k], d[k]} : light_.to_light(w), w,
+                               footprints.empty() ? 0.0f : footprints[i], pcf_radius, sc);
+      }
+    }
   }
   finish_lookups(sc);
 }

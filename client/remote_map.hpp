@@ -19,6 +19,7 @@
 // then the epoch advances. Recency is therefore exact between arrivals and unordered
 // within one (slots used since the last arrival go to the front in slot order).
 #pragma once
+#include <algorithm>
 #include <array>
 #include <atomic>
 #include <cstdint>
@@ -132,11 +133,54 @@ class RemoteMap final : public Evaluator {
     const Evaluator* ev = nullptr;  // the current tile (null: none)
     uint32_t level = 0, rel = 0;    // lookup level; the tile's level relative to its root
     uint64_t x0 = 0, y0 = 0, side = 0;  // the tile's texels at `level`: [x0, x0 + side)
+    // The last answers' regions (Evaluator::DepthRegion, page_table.hpp PageHit): texels
+    // of `level` sharing (x >> shift, y >> shift) with the region's get its value without
+    // a walk (the last-sample cache of MH 2016 §3.3, across tiles and page-table entries
+    // alike). A few are kept, so that a PCF kernel's rows and a batch going back and
+    // forth between neighbours find theirs; the one answered last is tried first.
+    enum class Counted : uint8_t { none, hit, coarse };
+    struct Region {  // no initializers: a call's scratch starts with none kept, for free
+      uint32_t level, shift;
+      uint64_t x, y;
+      float value;
+      Counted counted;
+      bool holds(uint32_t l, uint64_t tx, uint64_t ty) const {
+        return l == level && ((tx ^ x) >> shift) == 0 && ((ty ^ y) >> shift) == 0;
+      }
+    };
+    static constexpr uint32_t kRegions = 8;
+    std::array<Region, kRegions> regions;  // the first `used` are kept
+    uint32_t used = 0, last = 0, next = 0;  // how many; the one answered last; the one replaced next
     static constexpr size_t kMaxMisses = 8;  // more distinct misses in one call: asked again later
     std::array<uint64_t, kMaxMisses> miss_tile{};
     std::array<GridEntry, kMaxMisses> miss_entry{};
     size_t misses = 0;
     uint64_t hits = 0, missed = 0, coarse = 0;
+    // The kept region holding texel (l, x, y), now the last one, or null. A region lies in
+    // the map (shift <= level), so a texel it holds is in the map.
+    const Region* find(uint32_t l, uint64_t tx, uint64_t ty) {
+      if (used == 0) return nullptr;
+      if (regions[last].holds(l, tx, ty)) return &regions[last];
+      for (uint32_t i = 0; i < used; ++i)
+        if (regions[i].holds(l, tx, ty)) {
+          last = i;
+          return &regions[i];
+        }
+      return nullptr;
+    }
+    void set_region(uint32_t l, uint64_t tx, uint64_t ty, uint32_t shift, float value, Counted c) {
+      regions[next] = Region{l, shift, tx, ty, value, c};
+      last = next;
+      next = (next + 1) % kRegions;
+      used = std::min(used + 1, kRegions);
+    }
+    const Region* last_region() const { return used ? &regions[last] : nullptr; }
+    // A region's answer, counted like the lookup that made it.
+    float answer(const Region& g) {
+      if (g.counted == Counted::hit) ++hits;
+      else if (g.counted == Counted::coarse) ++missed, ++coarse;
+      return g.value;
+    }
     bool covers(uint32_t l, uint64_t x, uint64_t y) const {
       return ev && l == level && x - x0 < side && y - y0 < side;  // unsigned: x < x0 wraps
     }
@@ -145,12 +189,18 @@ class RemoteMap final : public Evaluator {
   // encoded tile, now sc's current one. False: `value` answers (coarse when missed).
   bool enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc, float& value) const noexcept;
   float depth_shared(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc) const noexcept;
-  // Evaluator::pcf's answer; a kernel inside one resident tile (or crossing only the
-  // map's edges) goes through the tile's own shared-walk pcf (MH §3.3, DAG-MH §3.5).
+  // Evaluator::pcf's answer, from the kept regions: a kernel inside one answers at once;
+  // in fine detail a kernel inside one resident tile (or crossing only the map's edges)
+  // goes through the tile's own shared-walk pcf (MH §3.3, DAG-MH §3.5); others row by
+  // row, the taps of a row that one region holds together (MH §3.3's last-sample cache,
+  // across tile borders and missing tiles alike).
   float pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver,
                    LookupScratch& sc) const noexcept;
   float visibility_shared(const WorldPoint& world, float footprint_world, uint32_t pcf_radius,
                           LookupScratch& sc) const noexcept;
+  // The same from the point's light-space position `p` (LightSpace::to_light of `w`).
+  float visibility_at(const LightPoint& p, const Vec3d& w, float footprint_world, uint32_t pcf_radius,
+                      LookupScratch& sc) const noexcept;
   // After the shared part: counts, then (exclusive) the misses queued at miss_priority.
   void finish_lookups(const LookupScratch& sc) const noexcept;
   void mark_used(uint32_t slot) const noexcept {

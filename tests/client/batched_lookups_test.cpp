@@ -66,8 +66,24 @@ Fixture make_fixture(const std::string& name, Encoding e, uint32_t tile_bytes, u
 }
 
 // Every texel of the finest and one coarser level, every kernel size: the client's pcf
-// (shared walk where the kernel fits a tile) equals the per-tap base implementation.
+// (shared walk where the kernel fits a tile) equals the per-tap base implementation, and
+// so does one batch of them all in scan order (where the last answer's region carries
+// from query to query and across tiles).
 std::string pcf_difference(const RemoteMap& m, uint32_t level) {
+  for (uint32_t l : {level, level - 2}) {
+    std::vector<PcfQuery> queries;
+    for (uint64_t y = 0; y < (uint64_t(1) << l); ++y)
+      for (uint64_t x = 0; x < (uint64_t(1) << l); ++x)
+        for (uint32_t r : {1u, 3u, 5u}) queries.push_back({x, y, l, r, m.depth(l, x, (y + x % 3) & ((1u << l) - 1))});
+    std::vector<float> got(queries.size());
+    m.pcf_batch(queries, got);
+    for (size_t i = 0; i < queries.size(); ++i) {
+      const PcfQuery& q = queries[i];
+      if (bits(got[i]) != bits(m.Evaluator::pcf(q.level, q.x, q.y, q.r, q.receiver)))
+        return "batch: level " + std::to_string(l) + " (" + std::to_string(q.x) + ", " + std::to_string(q.y) +
+               ") r " + std::to_string(q.r);
+    }
+  }
   for (uint32_t l : {level, level - 2})
     for (uint64_t y = 0; y < (uint64_t(1) << l); ++y)
       for (uint64_t x = 0; x < (uint64_t(1) << l); ++x)

@@ -17,6 +17,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <ctime>
 #include <cmath>
 #include <filesystem>
 #include <limits>
@@ -143,13 +144,22 @@ float SceneTracer::traced(const Receiver& r, const Vec3d& offset) const {
   return ray.tfar == -std::numeric_limits<float>::infinity() ? 0.0f : 1.0f;
 }
 
+namespace {
+double process_cpu_seconds() {
+  timespec ts;
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
+}
+}  // namespace
+
 LightPoint lookup_point(const Receiver& r, const LightSpace& light, uint32_t map_level, uint32_t pcf_radius) {
   Vec3d p = r.pos;
   {
     // Open geometry has hi = lo; closed surfaces meet stored lo values: move the lookup
     // off the surface (render.hpp).
+    // 2^level exactly, as ldexp would give it, without the library call.
     const double texel = (light.kind() == LightKind::sun ? light.extent_uv() : length(p - light.origin()) * light.extent_uv()) /
-                         std::ldexp(1.0, int(map_level));
+                         double(uint64_t(1) << map_level);
     p = p + r.normal * ((r.closed ? kClosedReceiverOffsetTexels : kOpenReceiverOffsetTexels) + pcf_radius) * texel;
   }
   return light.to_light(p);
@@ -196,6 +206,7 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
   std::vector<float> vis(n, 0), tvis;
   using Clk = std::chrono::steady_clock;
   auto t0 = Clk::now();
+  double c0 = process_cpu_seconds();
   const uint32_t L = eval.finest_level();
   // Lookups in batches (Evaluator::pcf_batch: the client's cache takes its lock and walks
   // the top of its page table once per batch; neighbouring pixels share tiles). With
@@ -218,8 +229,10 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
         vis[i] = 1;
         continue;
       }
-      const auto tf = LightSpace::texel_of(f.fine, lp.u, lp.v);
-      queries.push_back({tf[0], tf[1], f.fine, kr, float(lp.d)});
+      // (u, v) in [0, 1): u * 2^level is exact and below 2^level, so truncating it is
+      // LightSpace::texel_of's floor, without its library calls.
+      const double fine_side = double(uint64_t(1) << f.fine);
+      queries.push_back({uint64_t(lp.u * fine_side), uint64_t(lp.v * fine_side), f.fine, kr, float(lp.d)});
       index.push_back(uint32_t(i));
       blend.push_back(f.t == 0.0f ? std::numeric_limits<float>::quiet_NaN() : f.t);
       if (f.t != 0.0f) {
@@ -235,13 +248,16 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
     }
   });
   res.map_seconds = std::chrono::duration<double>(Clk::now() - t0).count();
+  res.map_cpu_seconds = process_cpu_seconds() - c0;
   if (o.diff) {
     tvis.assign(n, 0);
     t0 = Clk::now();
+    c0 = process_cpu_seconds();
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
       for (size_t i = r.begin(); i < r.end(); ++i) tvis[i] = tracer.traced(rec[i]);
     });
     res.traced_seconds = std::chrono::duration<double>(Clk::now() - t0).count();
+    res.traced_cpu_seconds = process_cpu_seconds() - c0;
   }
   auto shade = [&](const std::vector<float>& v, std::vector<float>& img) {
     img.assign(n * 3, 0);

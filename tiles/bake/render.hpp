@@ -112,6 +112,9 @@ struct RenderResult {
   uint64_t receivers = 0;           // pixels on light-facing surfaces
   uint64_t differing = 0;           // of those, lit answers that differ (diff only)
   double map_seconds = 0, traced_seconds = 0;
+  // The same phases in the process's CPU seconds (all threads): on a busy machine a
+  // steadier measure of what each costs than the wall times above.
+  double map_cpu_seconds = 0, traced_cpu_seconds = 0;
   double differing_fraction() const { return receivers ? double(differing) / double(receivers) : 0; }
 };
 

@@ -1,8 +1,10 @@
 // DAG-MH evaluator over a validated buffer: single lookups start at the skip table
 // (§3.7); PCF walks once to the lowest common node of the kernel (MH §3.3, Fig. 5) and
 // then resumes each tap from the last tap's final cursor when that lies on the tap's
-// path, else from the common node (DAG-MH §3.5 "cache the last node traversed").
-// Every tap runs the same walk as depth() from a cursor on its own path, so it reaches
+// path, else from the common node (DAG-MH §3.5 "cache the last node traversed"), and a
+// tap inside the region of texels sharing the last walked tap's answer
+// (View::finish_region) takes that answer without a walk. depth_region reports that
+// region to callers that cache across lookups (the client). Every tap runs the same walk as depth() from a cursor on its own path, so it reaches
 // the same value index: pcf equals the average of single lookups exactly.
 #include <algorithm>
 #include <memory>
@@ -22,6 +24,14 @@ class DagmhEvaluator final : public Evaluator {
   float depth(uint32_t level, uint64_t x, uint64_t y) const override {
     clamp(level, x, y);
     return v_.value(v_.lookup_index(level, x, y));
+  }
+
+  DepthRegion depth_region(uint32_t level, uint64_t x, uint64_t y) const override {
+    if (!texel_in_tile(level, x, y)) return {depth(level, x, y), 0};
+    const dagmh::Cursor c = v_.descend(v_.start(level, level, x, y), level, level, x, y);
+    uint32_t shift = 0;
+    const uint32_t index = v_.finish_region(c, level, x, y, shift);
+    return {v_.value(index), shift};
   }
 
   float pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver) const override {
@@ -46,23 +56,37 @@ class DagmhEvaluator final : public Evaluator {
     uint32_t cached_index[16];
     float cached_value[16];
     std::fill(cached_index, cached_index + 16, ~0u);
+    // The region of texels sharing the last tap's answer (finish_region): taps inside it
+    // are answered without a walk (MH §3.3's last-sample cache).
+    uint32_t region_shift = 64, region_lit = 0;
+    uint64_t region_x = 0, region_y = 0;
     uint32_t lit = 0;
     for (uint32_t j = 0; j < r; ++j)
       for (uint32_t i = 0; i < r; ++i) {
+        if (region_shift < 64 && (tx[i] >> region_shift) == region_x && (ty[j] >> region_shift) == region_y) {
+          lit += region_lit;
+          continue;
+        }
         const uint32_t shift = level - cache.level;
         const bool on_path = (tx[i] >> shift) == (cache_x >> shift) && (ty[j] >> shift) == (cache_y >> shift);
         const dagmh::Cursor c = v_.descend(on_path ? cache : from_skip ? v_.skip_entry(level, tx[i], ty[j]) : lca,
                                            level, level, tx[i], ty[j]);
-        const uint32_t index = v_.finish(c, level, tx[i], ty[j]);
+        const uint32_t index = v_.finish_region(c, level, tx[i], ty[j], region_shift);
         const uint32_t slot = index & 15;
         if (cached_index[slot] != index) cached_index[slot] = index, cached_value[slot] = v_.value(index);
-        lit += receiver <= cached_value[slot];
+        region_lit = receiver <= cached_value[slot];
+        lit += region_lit;
+        region_x = tx[i] >> region_shift, region_y = ty[j] >> region_shift;
         cache = c, cache_x = tx[i], cache_y = ty[j];
       }
     return float(lit) / float(r * r);
   }
 
  private:
+  bool texel_in_tile(uint32_t level, uint64_t x, uint64_t y) const {
+    return level <= v_.finest_level && (x >> level) == 0 && (y >> level) == 0;
+  }
+
   // Levels finer than the map answer like the finest level; coordinates are clamped to
   // the map (callers should not rely on either).
   void clamp(uint32_t& level, uint64_t& x, uint64_t& y) const {

@@ -21,6 +21,27 @@
 
 namespace st::dagmh {
 
+// Nodes in the subtree of a treelet node at treelet level n (itself included).
+inline constexpr uint32_t kTreeletSubtree[kTreeletLevels] = {85, 21, 5, 1};
+
+inline bool treelet_bit(uint64_t low, uint32_t high, uint32_t p) {
+  return p < 64 ? (low >> p) & 1 : (high >> (p - 64)) & 1;
+}
+// Set bits of the 85-bit treelet bitmap before position p.
+inline uint32_t treelet_rank(uint64_t low, uint32_t high, uint32_t p) {
+  return p < 64 ? bit_count(uint64_t(low & ((uint64_t(1) << p) - 1)))
+                : bit_count(uint64_t(low)) + bit_count(uint64_t(high & ((1u << (p - 64)) - 1)));
+}
+// Whether any of the bitmap's bits [from, to) is set (to <= 85).
+inline bool treelet_any(uint64_t low, uint32_t high, uint32_t from, uint32_t to) {
+  auto bits = [](uint32_t a, uint32_t b) -> uint64_t {  // mask of bits [a, b), a < b <= 64
+    return (b >= 64 ? ~uint64_t(0) : (uint64_t(1) << b) - 1) & ~((uint64_t(1) << a) - 1);
+  };
+  if (from < std::min(to, 64u) && (low & bits(from, std::min(to, 64u)))) return true;
+  const uint32_t hf = from > 64 ? from - 64 : 0, ht = to > 64 ? to - 64 : 0;
+  return hf < ht && (uint64_t(high) & bits(hf, ht));
+}
+
 struct View {
   const uint8_t* skip = nullptr;
   const uint8_t* nodes = nullptr;
@@ -98,6 +119,43 @@ struct View {
       return c.base + before;
     }
     return c.last;
+  }
+
+  // finish() and the square of texels of `level` that share its answer, as a shift
+  // (DepthRegion): below a missing child, every texel; in a treelet, the shallowest node
+  // on the path, at or below the one that answered, with no set bit strictly inside its
+  // subtree (no texel under it can find a deeper value), or the treelet's deepest node on
+  // the path when the query level lies below the treelet (its subtree ends there).
+  uint32_t finish_region(const Cursor& c, uint32_t level, uint64_t x, uint64_t y, uint32_t& shift) const {
+    const uint32_t tag = c.ref & kRefTagMask;
+    if (tag == kRefInner) {  // stopped at an inner node of `level` itself
+      shift = 0;
+      return finish(c, level, x, y);
+    }
+    if (tag != kRefTreelet) {  // the missing child at c.level
+      shift = level - c.level;
+      return c.last;
+    }
+    const uint8_t* t = treelets + size_t(c.ref & kRefIndexMask) * kTreeletBytes;
+    const uint64_t low = st::load_le<uint64_t>(t);
+    const uint32_t high = st::load_le<uint32_t>(t + 8);
+    const uint32_t depth = std::min<uint32_t>(level - c.level, kTreeletLevels - 1);
+    uint32_t pos[kTreeletLevels] = {0, 0, 0, 0};
+    for (uint32_t n = 1; n <= depth; ++n) {
+      const uint32_t s = level - c.level - n;
+      const uint32_t child = uint32_t((x >> s) & 1) | uint32_t(((y >> s) & 1) << 1);
+      pos[n] = pos[n - 1] + 1 + kTreeletStride[n - 1] * child;
+    }
+    uint32_t index = c.last, m = 0;
+    for (uint32_t n = depth + 1; n-- > 0;)
+      if (treelet_bit(low, high, pos[n])) {
+        index = c.base + treelet_rank(low, high, pos[n]);
+        m = n;
+        break;
+      }
+    while (m < depth && treelet_any(low, high, pos[m] + 1, pos[m] + kTreeletSubtree[m])) ++m;
+    shift = level - c.level - m;
+    return index;
   }
 
   float value(uint32_t index) const { return read_value(chunks, multipliers, index); }

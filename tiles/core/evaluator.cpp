@@ -18,6 +18,8 @@ float Evaluator::pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float r
   return float(lit_taps) / float(r * r);
 }
 
+DepthRegion Evaluator::depth_region(uint32_t level, uint64_t x, uint64_t y) const { return {depth(level, x, y), 0}; }
+
 void Evaluator::pcf_batch(std::span<const PcfQuery> queries, std::span<float> out) const {
   for (size_t i = 0; i < queries.size(); ++i) {
     const PcfQuery& q = queries[i];

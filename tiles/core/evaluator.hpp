@@ -18,6 +18,17 @@ struct PcfQuery {
   float receiver = 0;     // light-space depth of the receiver
 };
 
+// A texel's value and the aligned square of texels around it that share it: every texel
+// (x', y') of the same level with (x' >> shift, y' >> shift) == (x >> shift, y >> shift)
+// answers `value` bit for bit. It is the node where the lookup's walk ended (a leaf, a
+// missing child, a node with nothing valued below it), so a caller that keeps the last
+// region skips the walk for the lookups that fall in it (MH 2016 §3.3's last-sample cache,
+// DAG-MH 2021 §3.5).
+struct DepthRegion {
+  float value = 0;
+  uint32_t shift = 0;  // 0: the texel alone; never more than the level
+};
+
 class Evaluator {
  public:
   virtual ~Evaluator() = default;
@@ -35,6 +46,11 @@ class Evaluator {
   // does r*r independent lookups; encodings override it with traversal shared down to
   // the lowest common node (MH §3.3, Fig. 5).
   virtual float pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver) const;
+
+  // depth(level, x, y) and the region of texels that share it (DepthRegion), for
+  // level <= finest_level() and x, y < 2^level. The base implementation answers the texel
+  // alone (shift 0); the tree encodings report the node their walk ended at.
+  virtual DepthRegion depth_region(uint32_t level, uint64_t x, uint64_t y) const;
 
   // Lit test at full resolution: receiver_depth <= stored value.
   bool lit(uint64_t x, uint64_t y, float receiver_depth) const {

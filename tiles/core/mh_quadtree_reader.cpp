@@ -120,6 +120,15 @@ class TreeEvaluator final : public Evaluator {
     return value(c);
   }
 
+  // The node the walk ended at: every texel under a leaf (or under the missing child)
+  // takes the same path and gets the same value (the last-sample cache of MH §3.3).
+  DepthRegion depth_region(uint32_t level, uint64_t x, uint64_t y) const override {
+    level = std::min(level, kMaxLevel);
+    Cursor c = root();
+    descend(c, level, x, y, level);
+    return {value(c), level - (c.missing ? c.level + 1 : c.level)};
+  }
+
   // MH §3.3, Fig. 5: the taps share the root path down to the lowest common node of the
   // kernel's corner texels; each tap continues from there, and a tap whose texel lies in
   // the region where the previous tap's walk stopped reuses its answer (the last-sample

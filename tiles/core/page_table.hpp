@@ -45,6 +45,10 @@ struct PageHit {
   GridEntry entry;          // tile/absent: the page-table entry naming the tile
   uint32_t rel = 0;         // tile: `level` relative to the tile's root
   uint64_t tx = 0, ty = 0;  // tile: the texel inside the tile, at relative level `rel`
+  // The texels of `level` sharing (x >> region_shift, y >> region_shift) get this same
+  // hit: `value` (for a tile, the coarse answer while it is not at hand) answers for the
+  // whole node of the entry the walk stopped at.
+  uint32_t region_shift = 0;
 };
 
 // Walks texel (level, x, y), which must satisfy texel_in_map(map_level, ...), where the
@@ -64,6 +68,7 @@ PageHit walk_page_table(const CutGrid& skip, uint32_t level, uint64_t x, uint64_
   GridEntry e = skip.entry(ex, ey);
   for (;;) {
     hit.value = e.value;
+    hit.region_shift = level - l;
     if (e.kind == EntryKind::constant || l == level) return hit;
     hit.tile = make_tile_id(l, uint32_t(ex), uint32_t(ey));
     hit.entry = e;
@@ -82,6 +87,7 @@ PageHit walk_page_table(const CutGrid& skip, uint32_t level, uint64_t x, uint64_
     const uint32_t d = g->levels;
     if (rel < d) {
       hit.value = g->coarse_at(rel, lx, ly);
+      hit.region_shift = 0;
       return hit;
     }
     ex = (ex << d) + (lx >> (rel - d));
