@@ -39,6 +39,11 @@ struct EdgeSetup {
 
 struct TriSetup {
   EdgeSetup e[3];               // a -> b, b -> c, c -> a in the scene's winding
+  // The sign every covered texel's edges share: the three exact edge values add up to
+  // d . ((b - a) x (c - a)), independent of o, so a covered texel (all three definition
+  // signs equal) has this sign whenever that sum exceeds the edges' bounds; 0 where the
+  // sum is too small to tell (then no span culling).
+  double sigma;
   double nx, ny, nz, pd, den;   // canonical plane (canonical_depth.hpp): n, n . a, n . dir
   std::array<double, 4> box;    // light-space u0, v0, u1, v1 of the scene vertices
   uint32_t tri;                 // scene triangle index
@@ -88,6 +93,7 @@ struct Scratch {
 struct RasterBounds::Impl {
   LightSpace light;
   Vec3d centre, dir;
+  Vec3d o_round;  // bound on |computed texel origin - its exact affine value|, per axis
   std::vector<Vec3d> v;                       // recentred vertices
   std::vector<std::array<uint32_t, 3>> tri;   // scene triangles
   std::vector<uint32_t> mesh;                 // mesh of each triangle
@@ -146,6 +152,7 @@ RasterBounds::Impl::Impl(const Scene& scene, const LightSpace& l) : light(l) {
       closed[t] = me.closed ? 1 : 0;
     }
   }
+  any_closed = std::find(closed.begin(), closed.end(), 1) != closed.end();  // as the tracer
   dir = light.texel_ray(0, 0, 0).dir;  // the sun's rays share one direction
   // Every texel centre of every level <= kMaxLevel lies in the hull of the level-20
   // corner texels' centres; the origin is affine in the centre up to a few roundings.
@@ -157,6 +164,16 @@ RasterBounds::Impl::Impl(const Scene& scene, const LightSpace& l) : light(l) {
       o_max = {std::max(o_max.x, o.x), std::max(o_max.y, o.y), std::max(o_max.z, o.z)};
     }
   o_max = o_max * (1 + 0x1p-30) + Vec3d{0x1p-1000, 0x1p-1000, 0x1p-1000};
+  {
+    // How far a computed texel origin can be from the exact affine function of the texel
+    // centre: a few roundings of the magnitudes texel_ray adds (its origin, the steps
+    // across the map, forward * near) and of the recentring; 2^-40 of them is a thousand
+    // times more than that.
+    Vec3d g = abs3(centre) + o_max * 4 + abs3(light.forward() * light.near_plane());
+    for (uint64_t y : {uint64_t(0), last})
+      for (uint64_t x : {uint64_t(0), last}) g = g + abs3(light.texel_ray(kMaxLevel, x, y).origin);
+    o_round = g * 0x1p-40;
+  }
 
   setups.reserve(nt);
   for (uint32_t t = 0; t < nt; ++t) {
@@ -170,6 +187,13 @@ RasterBounds::Impl::Impl(const Scene& scene, const LightSpace& l) : light(l) {
     s.e[0] = edge_setup(a, bb, dir, o_max);
     s.e[1] = edge_setup(bb, c, dir, o_max);
     s.e[2] = edge_setup(c, a, dir, o_max);
+    {
+      const double sum = dot(dir, cross(bb - a, c - a));
+      const double sum_bound =
+          0x1p-47 * dot(abs3(dir), cross_abs(abs3(bb) + abs3(a), abs3(c) + abs3(a))) + 0x1p-1000;
+      const double margin = sum_bound + s.e[0].bound + s.e[1].bound + s.e[2].bound;
+      s.sigma = sum > margin ? 1 : (sum < -margin ? -1 : 0);
+    }
     s.nx = plane.n.x, s.ny = plane.n.y, s.nz = plane.n.z, s.pd = plane.d, s.den = den;
     s.box = {INFINITY, INFINITY, -INFINITY, -INFINITY};
     for (uint32_t k = 0; k < 3; ++k) {
@@ -181,7 +205,6 @@ RasterBounds::Impl::Impl(const Scene& scene, const LightSpace& l) : light(l) {
           s.box[1] <= 1 + kGridMargin))
       continue;  // outside the map
     s.tri = t, s.mesh = mesh[t], s.closed = closed[t] != 0;
-    any_closed |= s.closed;
     setups.push_back(s);
   }
 
@@ -260,18 +283,35 @@ void RasterBounds::Impl::tile(const TraceRegion& r, const Candidate* cand, const
                               DepthBoundsStats& st) const {
   Scratch& s = scratch.local();
   const uint32_t tw = std::min(kTile, r.width - bi), th = std::min(kTile, r.height - bj);
-  for (uint32_t j = 0; j < th; ++j)
-    for (uint32_t i = 0; i < tw; ++i) {
-      const Vec3d o = light.texel_ray(r.level, r.x0 + bi + i, r.y0 + bj + j).origin - centre;
-      const uint32_t k = j * kTile + i;
-      s.ox[k] = o.x, s.oy[k] = o.y, s.oz[k] = o.z;
+  // The texel origins, operation for operation as LightSpace::texel_ray computes them
+  // (origin + axis_u (u E) + axis_v (v E) + forward near, then - centre), with the
+  // column and row terms computed once per tile; the reference test pins the equality.
+  {
+    const double inv = std::ldexp(1.0, -int(r.level)), E = light.extent_uv();
+    const Vec3d org = light.origin(), au = light.axis_u(), av = light.axis_v();
+    const Vec3d fn = light.forward() * light.near_plane();
+    Vec3d col[kTile];
+    for (uint32_t i = 0; i < tw; ++i) col[i] = au * ((double(r.x0 + bi + i) + 0.5) * inv * E);
+    for (uint32_t j = 0; j < th; ++j) {
+      const Vec3d row = av * ((double(r.y0 + bj + j) + 0.5) * inv * E);
+      for (uint32_t i = 0; i < tw; ++i) {
+        const Vec3d o = org + col[i] + row + fn - centre;
+        const uint32_t k = j * kTile + i;
+        s.ox[k] = o.x, s.oy[k] = o.y, s.oz[k] = o.z;
+      }
     }
+  }
   bool lists = false;
   for (size_t c = 0; c < n; ++c) lists |= setups[cand[ids[c]].setup].closed;
   for (uint32_t k = 0; k < kTileTexels; ++k) {
     s.nearest[k] = INFINITY;
     if (lists) s.frags[k].clear();
   }
+  // The origin steps of one texel along x and y (spans below).
+  const Vec3d o00{s.ox[0], s.oy[0], s.oz[0]};
+  const Vec3d du = light.texel_ray(r.level, r.x0 + bi + 1, r.y0 + bj).origin - centre - o00;
+  const Vec3d dv = light.texel_ray(r.level, r.x0 + bi, r.y0 + bj + 1).origin - centre - o00;
+  const Vec3d adu = abs3(du), adv = abs3(dv);
   uint64_t tests = 0;
   for (size_t c = 0; c < n; ++c) {
     const Candidate& cd = cand[ids[c]];
@@ -280,8 +320,42 @@ void RasterBounds::Impl::tile(const TraceRegion& r, const Candidate* cand, const
     const int32_t i1 = std::min<int32_t>(cd.x1, int32_t(bi + tw - 1)) - int32_t(bi);
     const int32_t j0 = std::max<int32_t>(cd.y0, int32_t(bj)) - int32_t(bj);
     const int32_t j1 = std::min<int32_t>(cd.y1, int32_t(bj + th - 1)) - int32_t(bj);
-    for (int32_t j = j0; j <= j1; ++j)
-      for (int32_t i = i0; i <= i1; ++i) {
+    // Row spans: each edge's value is affine in the texel (up to the rounding of the
+    // origins), so along a row the texels where sigma * value may reach -bound form an
+    // interval. A texel outside it has sigma * fast value < -bound on some edge: that
+    // edge's definition sign is -sigma, and a covered texel's signs all equal sigma.
+    // The margin covers the bound twice, the origins' rounding, the products' rounding
+    // and one texel step; the division's rounding is covered by one texel each side.
+    double e0[3] = {}, su[3] = {}, sv[3] = {}, marg[3] = {};
+    // Small boxes are cheaper to test texel by texel than to cull.
+    const bool spans = T.sigma != 0 && (i1 - i0 + 1) * (j1 - j0 + 1) > 16;
+    if (spans)
+      for (int k = 0; k < 3; ++k) {
+        const EdgeSetup& E = T.e[k];
+        const Vec3d an{std::fabs(E.nx), std::fabs(E.ny), std::fabs(E.nz)};
+        e0[k] = E.c + (o00.x * E.nx + o00.y * E.ny + o00.z * E.nz);
+        su[k] = du.x * E.nx + du.y * E.ny + du.z * E.nz;
+        sv[k] = dv.x * E.nx + dv.y * E.ny + dv.z * E.nz;
+        const double step = dot(adu, an) + dot(adv, an);
+        marg[k] = 2 * E.bound + 64 * dot(o_round, an) + 2 * step +
+                  0x1p-40 * (std::fabs(e0[k]) + 2 * kTile * step);
+      }
+    for (int32_t j = j0; j <= j1; ++j) {
+      double xs = i0, xe = i1;
+      if (spans)
+        for (int k = 0; k < 3 && xs <= xe; ++k) {
+          const double a = T.sigma * (e0[k] + j * sv[k]) + marg[k], b = T.sigma * su[k];
+          if (b == 0) {
+            if (a < 0) xe = xs - 1;
+          } else if (b > 0) {
+            xs = std::max(xs, std::ceil(-a / b) - 1);
+          } else {
+            xe = std::min(xe, std::floor(-a / b) + 1);
+          }
+        }
+      if (!(xs <= xe)) continue;
+      const int32_t is = int32_t(xs), ie = int32_t(xe);
+      for (int32_t i = is; i <= ie; ++i) {
         const uint32_t k = uint32_t(j) * kTile + uint32_t(i);
         const double ox = s.ox[k], oy = s.oy[k], oz = s.oz[k];
         ++tests;
@@ -308,6 +382,7 @@ void RasterBounds::Impl::tile(const TraceRegion& r, const Candidate* cand, const
         if (lists) s.frags[k].push_back(CanonicalHit{t, T.tri, T.mesh, int8_t(facing), T.closed});
         else s.nearest[k] = std::min(s.nearest[k], t);
       }
+    }
   }
   st.traversals += tests;
   for (uint32_t j = 0; j < th; ++j)
