@@ -10,6 +10,8 @@
 #include <cmath>
 #include <string>
 #include <vector>
+#include <cstdio>
+#include <cstdlib>
 
 #include "common/error.hpp"
 #include "tiles/bake/canonical_coverage.hpp"
@@ -175,15 +177,17 @@ RasterBounds::Impl::Impl(const Scene& scene, const LightSpace& l) : light(l) {
     o_round = g * 0x1p-40;
   }
 
-  setups.reserve(nt);
-  for (uint32_t t = 0; t < nt; ++t) {
+  // Per triangle in parallel (kept[t] says whether it can be hit), then compacted.
+  std::vector<TriSetup> all(nt);
+  std::vector<uint8_t> kept(nt, 0);
+  tbb::parallel_for(uint32_t(0), uint32_t(nt), [&](uint32_t t) {
     const Vec3d& a = v[tri[t][0]];
     const Vec3d& bb = v[tri[t][1]];
     const Vec3d& c = v[tri[t][2]];
     const CanonicalPlane plane = CanonicalPlane::of(a, bb, c);
     const double den = dot(plane.n, dir);
-    if (den == 0) continue;  // the ray lies in the plane: never a hit (CanonicalPlane::t)
-    TriSetup s;
+    if (den == 0) return;  // the ray lies in the plane: never a hit (CanonicalPlane::t)
+    TriSetup& s = all[t];
     s.e[0] = edge_setup(a, bb, dir, o_max);
     s.e[1] = edge_setup(bb, c, dir, o_max);
     s.e[2] = edge_setup(c, a, dir, o_max);
@@ -203,10 +207,14 @@ RasterBounds::Impl::Impl(const Scene& scene, const LightSpace& l) : light(l) {
     }
     if (!(s.box[2] >= -kGridMargin && s.box[3] >= -kGridMargin && s.box[0] <= 1 + kGridMargin &&
           s.box[1] <= 1 + kGridMargin))
-      continue;  // outside the map
+      return;  // outside the map
     s.tri = t, s.mesh = mesh[t], s.closed = closed[t] != 0;
-    setups.push_back(s);
-  }
+    kept[t] = 1;
+  });
+  setups.reserve(nt);
+  for (size_t t = 0; t < nt; ++t)
+    if (kept[t]) setups.push_back(all[t]);
+  std::vector<TriSetup>().swap(all);
 
   // The grid: about two setups per cell, at most 1024 cells a side.
   while (grid_side < 1024 && uint64_t(grid_side) * grid_side * 2 < setups.size()) grid_side *= 2;
@@ -242,6 +250,7 @@ RasterBounds::Impl::Impl(const Scene& scene, const LightSpace& l) : light(l) {
     }
   }
   setup_s = std::chrono::duration<double>(Clock::now() - t0).count();
+  if (std::getenv("RB_DEBUG")) std::fprintf(stderr, "setups %zu big %zu grid %u items %zu setup %.3f\n", setups.size(), big.size(), grid_side, grid_items.size(), setup_s);
 }
 
 std::vector<Candidate> RasterBounds::Impl::candidates(const TraceRegion& r) const {
