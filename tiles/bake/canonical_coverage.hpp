@@ -109,7 +109,10 @@ namespace canonical_detail {
 // beyond: canonical_interval() allocates nothing for the common handful of meshes per ray.
 class MeshCounts {
  public:
-  using Entry = std::pair<uint32_t, int32_t>;
+  struct Entry {
+    uint32_t first;  // mesh
+    int32_t second;  // count
+  };
   static constexpr size_t kInline = 16;
   void clear() { n_ = 0, heap_.clear(); }
   Entry* begin() { return n_ <= kInline ? inline_ : heap_.data(); }
@@ -120,17 +123,17 @@ class MeshCounts {
   }
   Entry* add(uint32_t mesh, int32_t count) {
     if (n_ < kInline) {
-      inline_[n_] = {mesh, count};
+      inline_[n_] = Entry{mesh, count};
     } else {
       if (n_ == kInline) heap_.assign(inline_, inline_ + kInline);
-      heap_.push_back({mesh, count});
+      heap_.push_back(Entry{mesh, count});
     }
     ++n_;
     return end() - 1;
   }
 
  private:
-  Entry inline_[kInline];
+  Entry inline_[kInline];  // the first n_ are set (not initialised beyond: no per-call cost)
   std::vector<Entry> heap_;
   size_t n_ = 0;
 };

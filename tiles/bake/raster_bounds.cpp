@@ -10,8 +10,6 @@
 #include <cmath>
 #include <string>
 #include <vector>
-#include <cstdio>
-#include <cstdlib>
 
 #include "common/error.hpp"
 #include "tiles/bake/canonical_coverage.hpp"
@@ -250,7 +248,6 @@ RasterBounds::Impl::Impl(const Scene& scene, const LightSpace& l) : light(l) {
     }
   }
   setup_s = std::chrono::duration<double>(Clock::now() - t0).count();
-  if (std::getenv("RB_DEBUG")) std::fprintf(stderr, "setups %zu big %zu grid %u items %zu setup %.3f\n", setups.size(), big.size(), grid_side, grid_items.size(), setup_s);
 }
 
 std::vector<Candidate> RasterBounds::Impl::candidates(const TraceRegion& r) const {
@@ -400,8 +397,19 @@ void RasterBounds::Impl::tile(const TraceRegion& r, const Candidate* cand, const
       CanonicalResult res;
       if (lists) {
         auto& f = s.frags[k];
-        std::sort(f.begin(), f.end());
-        res = canonical_interval(f.data(), f.size(), 1.0);
+        if (f.size() == 2) {
+          if (f[1] < f[0]) std::swap(f[0], f[1]);
+        } else if (f.size() > 2) {
+          std::sort(f.begin(), f.end());
+        }
+        // The commonest closed case, as canonical_interval() ends it: one mesh entered
+        // at t0 and left at t1 > t0.
+        if (f.size() == 2 && f[0].closed && f[1].closed && f[0].mesh == f[1].mesh && f[0].facing < 0 &&
+            f[1].facing > 0 && f[0].t < f[1].t) {
+          res.lo_t = f[0].t, res.hi_t = f[1].t;
+        } else {
+          res = canonical_interval(f.data(), f.size(), 1.0);
+        }
       } else if (s.nearest[k] < INFINITY) {
         res.lo_t = res.hi_t = s.nearest[k];
       }
