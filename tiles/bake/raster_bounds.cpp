@@ -75,6 +75,47 @@ EdgeSetup edge_setup(const Vec3d& a, const Vec3d& b, const Vec3d& d, const Vec3d
   return e;
 }
 
+// Classification of a run of texels against a triangle's edges: kOutside, the facing
+// (+1 or -1) where every fast edge value is beyond its bound, or kUnsure where the
+// definition itself must decide (canonical_cover).
+constexpr int8_t kOutside = 0, kUnsure = 2;
+
+// sigma != 0: a texel is covered only with all three signs equal to sigma, so it is
+// outside as soon as one sigma * value is below -bound; a straight-line loop over the
+// run (no data-dependent branches) that the compiler vectorizes.
+void classify_oriented(const TriSetup& T, const double* ox, const double* oy, const double* oz, int n,
+                       int8_t* cls) {
+  double c[3], nx[3], ny[3], nz[3], b[3];
+  for (int k = 0; k < 3; ++k)  // sigma * (c + o . n) = sigma c + o . (sigma n), exactly
+    c[k] = T.sigma * T.e[k].c, nx[k] = T.sigma * T.e[k].nx, ny[k] = T.sigma * T.e[k].ny,
+    nz[k] = T.sigma * T.e[k].nz, b[k] = T.e[k].bound;
+  const int8_t facing = int8_t(T.sigma);
+  for (int i = 0; i < n; ++i) {
+    const double a0 = c[0] + (ox[i] * nx[0] + oy[i] * ny[0] + oz[i] * nz[0]);
+    const double a1 = c[1] + (ox[i] * nx[1] + oy[i] * ny[1] + oz[i] * nz[1]);
+    const double a2 = c[2] + (ox[i] * nx[2] + oy[i] * ny[2] + oz[i] * nz[2]);
+    const bool in = (a0 > b[0]) & (a1 > b[1]) & (a2 > b[2]);
+    const bool out = (a0 < -b[0]) | (a1 < -b[1]) | (a2 < -b[2]);
+    cls[i] = out ? kOutside : (in ? facing : kUnsure);
+  }
+}
+
+// sigma == 0 (edge-on or tiny triangles): either orientation may be covered.
+void classify_any(const TriSetup& T, const double* ox, const double* oy, const double* oz, int n,
+                  int8_t* cls) {
+  for (int i = 0; i < n; ++i) {
+    int sg[3];
+    for (int k = 0; k < 3; ++k) {
+      const EdgeSetup& E = T.e[k];
+      const double val = E.c + (ox[i] * E.nx + oy[i] * E.ny + oz[i] * E.nz);
+      sg[k] = val > E.bound ? 1 : (val < -E.bound ? -1 : 0);
+    }
+    const bool pos = sg[0] > 0 || sg[1] > 0 || sg[2] > 0, neg = sg[0] < 0 || sg[1] < 0 || sg[2] < 0;
+    const bool sure = sg[0] != 0 && sg[1] != 0 && sg[2] != 0;
+    cls[i] = pos && neg ? kOutside : (sure ? int8_t(sg[0]) : kUnsure);
+  }
+}
+
 struct Candidate {
   uint32_t setup;              // index into setups
   int32_t x0, y0, x1, y1;      // texel box inside the region, inclusive
@@ -209,10 +250,11 @@ RasterBounds::Impl::Impl(const Scene& scene, const LightSpace& l) : light(l) {
     s.tri = t, s.mesh = mesh[t], s.closed = closed[t] != 0;
     kept[t] = 1;
   });
-  setups.reserve(nt);
+  size_t n_kept = 0;  // compacted in place: no second copy at the peak
   for (size_t t = 0; t < nt; ++t)
-    if (kept[t]) setups.push_back(all[t]);
-  std::vector<TriSetup>().swap(all);
+    if (kept[t]) all[n_kept++] = all[t];
+  all.resize(n_kept);
+  setups = std::move(all);
 
   // The grid: about two setups per cell, at most 1024 cells a side.
   while (grid_side < 1024 && uint64_t(grid_side) * grid_side * 2 < setups.size()) grid_side *= 2;
@@ -361,25 +403,20 @@ void RasterBounds::Impl::tile(const TraceRegion& r, const Candidate* cand, const
         }
       if (!(xs <= xe)) continue;
       const int32_t is = int32_t(xs), ie = int32_t(xe);
-      for (int32_t i = is; i <= ie; ++i) {
-        const uint32_t k = uint32_t(j) * kTile + uint32_t(i);
+      const uint32_t row = uint32_t(j) * kTile + uint32_t(is);
+      const int n_row = ie - is + 1;
+      tests += uint64_t(n_row);
+      int8_t cls[kTile];
+      if (T.sigma != 0) classify_oriented(T, s.ox + row, s.oy + row, s.oz + row, n_row, cls);
+      else classify_any(T, s.ox + row, s.oy + row, s.oz + row, n_row, cls);
+      for (int q = 0; q < n_row; ++q) {
+        if (cls[q] == kOutside) continue;
+        const uint32_t k = row + uint32_t(q);
         const double ox = s.ox[k], oy = s.oy[k], oz = s.oz[k];
-        ++tests;
-        int sg[3];
-        bool sure = true, out_of = false;
-        for (int e = 0; e < 3 && !out_of; ++e) {
-          const EdgeSetup& E = T.e[e];
-          const double val = E.c + (ox * E.nx + oy * E.ny + oz * E.nz);
-          sg[e] = val > E.bound ? 1 : (val < -E.bound ? -1 : 0);
-          sure &= sg[e] != 0;
-          for (int q = 0; q < e; ++q) out_of |= sg[q] != 0 && sg[e] != 0 && sg[q] != sg[e];
-        }
-        if (out_of) continue;
-        int facing = sg[0];
-        if (!sure) {
-          const Vec3d o{ox, oy, oz};
+        int facing = cls[q];
+        if (facing == kUnsure) {
           const auto& tv = tri[T.tri];
-          facing = canonical_cover(CoverageRay::of(o, dir), v[tv[0]], v[tv[1]], v[tv[2]]);
+          facing = canonical_cover(CoverageRay::of(Vec3d{ox, oy, oz}, dir), v[tv[0]], v[tv[1]], v[tv[2]]);
           if (facing == 0) continue;
         }
         // CanonicalPlane::t, operation for operation.
