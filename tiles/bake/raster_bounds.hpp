@@ -12,9 +12,12 @@
 //   - per region: the grid gives the candidate triangles, each is binned to the 16 x 16
 //     texel tiles its conservative texel box touches; a tile with nothing in its
 //     light-space prism stays lit ([1, 1]) without per-texel work;
-//   - per tile (TBB): the texel origins once, then each triangle visits only the texels
-//     of its box; an edge whose fast value lies beyond the bound has the definition's
-//     sign, otherwise the texel is decided by the definition itself (canonical_cover);
+//   - per tile (TBB): the texel origins once (as LightSpace::texel_ray computes them),
+//     then each triangle visits only the row spans of its box where its edge values,
+//     affine in the texel, may still admit coverage (the sign a covered texel's edges
+//     share is known per triangle), classified by a branch-free loop; an edge whose fast
+//     value lies beyond the bound has the definition's sign, otherwise the texel is
+//     decided by the definition itself (canonical_cover);
 //     covered texels append (t, triangle) to per-texel fragment lists held in per-thread
 //     scratch (nothing is allocated per texel once the scratch has grown), which are
 //     sorted and reduced by canonical_interval(). A tile without closed triangles keeps
