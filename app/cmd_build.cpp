@@ -30,7 +30,8 @@ TexelRegion parse_region(const std::string& text) {
 
 struct BuildArgs {
   std::string scene, light, resolution = "4096", encoding = "dagmh", out, report, region,
-                     construction = "bottom-up", up = "y", intervals = "default", shard;
+                     construction = "bottom-up", up = "y", intervals = "default", shard,
+              builder = "auto";
   std::optional<uint32_t> skip_level;
   uint32_t tile_bytes = 64 * 1024, depth_bits = 16;
   int compression = 6;
@@ -53,6 +54,7 @@ void run(const BuildArgs& a) {
   if (a.intervals == "static") o.intervals = IntervalRule::static_geometry;
   else if (a.intervals != "default")
     throw Error("--intervals: expected default or static, got '" + a.intervals + "'");
+  o.builder = parse_bounds_builder(a.builder);
   if (!a.shard.empty()) o.shard = BuildShard::parse(a.shard);
   if (a.mpi && o.shard) throw Error("--mpi and --shard: choose one (a shard is one process's slice)");
 #ifdef SHADOWTILE_HAVE_MPI
@@ -131,6 +133,9 @@ void run(const BuildArgs& a) {
               (unsigned long long)r.cells_outside_region,
               r.grid_entries ? 100.0 * double(r.constant_entries) / double(r.grid_entries) : 0.0,
               r.exit_depths ? "yes" : "no (no closed mesh)", double(r.peak_rss_bytes) / (1 << 20));
+  std::printf("  bounds by %s (%s)\n", r.builder.c_str(),
+              r.builder == "raster" ? "light-space rasterizer of the canonical coverage"
+                                    : "Embree tracer; the rasterizer handles sun lights with the default intervals");
   std::printf("  thread-seconds: trace %.1f, hierarchy %.1f, cut+encode %.1f, compress+write %.1f\n",
               r.trace_seconds, r.hierarchy_seconds, r.cut_encode_seconds, r.write_seconds);
   if (!a.report.empty()) {
@@ -187,6 +192,10 @@ void setup(CLI::App& app) {
   app.add_flag("--mpi", a->mpi,
                 "Run under mpirun: the cells spread over the ranks (dynamic scheduling), rank 0 writes "
                 "the pack; --resume continues after a rank died");
+  app.add_option("--builder", a->builder,
+                 "Depth bounds producer: raster (light-space rasterizer; sun lights, default intervals), "
+                 "embree (ray tracer; every light), or auto (raster where it applies)")
+      ->capture_default_str();
   app.add_flag("-q,--quiet", a->quiet, "No summary or progress");
   app.callback([a]() { run(*a); });
 }

@@ -1,6 +1,7 @@
 // shadowtile verify: checks a pack end to end. Every byte's checksum and every tile's
 // structure (PackReader::verify), then re-traces random texels (or, with --all, every
-// texel of the built region) with Embree and checks the lossless invariant lo <= v <= hi
+// texel of the built region) with the builder the pack records (the light-space
+// rasterizer or Embree; --builder overrides) and checks the lossless invariant lo <= v <= hi
 // on each (ARCHITECTURE.md "Definitions"). The re-trace gives the same canonical bounds
 // as the build whatever its batching (tiles/bake/canonical_depth.hpp). A vsdag pack is
 // checked against its own exactness contract instead (tiles/core/VSDAG.md: exact beyond
@@ -8,12 +9,16 @@
 #include <algorithm>
 #include <atomic>
 #include <cstdio>
+#include <functional>
+#include <memory>
 #include <mutex>
 #include <thread>
 #include <vector>
 
 #include "common/hash.hpp"
 #include "tiles/bake/depth_bounds.hpp"
+#include "tiles/bake/map_build.hpp"
+#include "tiles/bake/raster_bounds.hpp"
 #include "tiles/bake/scene.hpp"
 #include "app/command.hpp"
 #include "app/pack_cli_util.hpp"
@@ -27,7 +32,7 @@ namespace st::cli {
 namespace {
 
 struct VerifyArgs {
-  std::string pack, scene, up = "y";
+  std::string pack, scene, up = "y", builder = "pack";
   uint64_t samples = 1000000, seed = 1;
   uint32_t show = 10;
   bool all = false;
@@ -70,7 +75,9 @@ Contract contract_of(const PackReader& reader) {
 // parallelises each chunk), each chunk's texels checked on every hardware thread; stops
 // after `max_mismatches` mismatches and prints their coordinates. Returns the number of
 // mismatches found; `checked` receives the texels checked.
-uint64_t verify_every_texel(const VerifyArgs& a, const DepthBoundsTracer& tracer, TraceMode mode,
+using TraceFn = std::function<IntervalTile(const TraceRegion&)>;
+
+uint64_t verify_every_texel(const VerifyArgs& a, const TraceFn& trace,
                             const Contract& contract, const PackEvaluator& eval, uint32_t L, const Rect& region,
                             uint64_t& checked) {
   constexpr uint64_t kChunk = 1024;
@@ -85,7 +92,7 @@ uint64_t verify_every_texel(const VerifyArgs& a, const DepthBoundsTracer& tracer
     for (uint64_t cx = region.x; cx < region.x + region.w && bad < a.max_mismatches; cx += kChunk) {
       const uint32_t w = uint32_t(std::min(kChunk, region.x + region.w - cx));
       const uint32_t h = uint32_t(std::min(kChunk, region.y + region.h - cy));
-      const IntervalTile t = tracer.trace({L, cx, cy, w, h}, mode);
+      const IntervalTile t = trace({L, cx, cy, w, h});
       auto check_rows = [&](uint32_t first) {
         for (uint32_t j = first; j < h && bad < a.max_mismatches; j += threads)
           for (uint32_t i = 0; i < w; ++i) {
@@ -144,7 +151,6 @@ void run(const VerifyArgs& a) {
   if (scene.content_hash() != reader->header().scene_hash)
     std::printf("warning: the scene's hash differs from the one the pack was built from\n");
   const LightSpace light = reader->light();
-  DepthBoundsTracer tracer(scene, light);
   PackEvaluator eval(reader, 1024);
   const uint32_t L = reader->map_level();
   const Rect region = built_region(*reader);
@@ -155,11 +161,30 @@ void run(const VerifyArgs& a) {
   if (static_intervals)
     std::printf("verify: static-geometry intervals: lossless for receivers that lie on surfaces\n");
   const Contract contract = contract_of(*reader);
+  // Re-trace with the builder the pack was built with (its build parameter `builder`;
+  // packs from before it were built by Embree), or the one --builder names.
+  std::string recorded = "embree";
+  for (const auto& [k, v] : reader->params())
+    if (k == "builder") recorded = v;
+  const BoundsBuilder builder = resolve_builder(
+      parse_bounds_builder(a.builder == "pack" ? recorded : a.builder), light,
+      static_intervals ? IntervalRule::static_geometry : IntervalRule::closed_objects);
+  std::unique_ptr<RasterBounds> raster;
+  std::unique_ptr<DepthBoundsTracer> tracer;
+  TraceFn trace;
+  if (builder == BoundsBuilder::raster) {
+    raster = std::make_unique<RasterBounds>(scene, light);
+    trace = [&](const TraceRegion& r) { return raster->trace(r); };
+  } else {
+    tracer = std::make_unique<DepthBoundsTracer>(scene, light);
+    trace = [&](const TraceRegion& r) { return tracer->trace(r, mode); };
+  }
+  std::printf("verify: re-tracing with the %s builder\n", to_string(builder));
   if (contract.vsdag_z_bits) std::printf("verify: checking %s\n", contract.name().c_str());
 
   if (a.all) {
     uint64_t checked = 0;
-    const uint64_t bad = verify_every_texel(a, tracer, mode, contract, eval, L, region, checked);
+    const uint64_t bad = verify_every_texel(a, trace, contract, eval, L, region, checked);
     if (bad) {
       std::printf("verify %s: FAILED: %llu texels break %s (stopped after %llu of "
                   "%llu texels; --max-mismatches %llu)\n",
@@ -183,7 +208,7 @@ void run(const VerifyArgs& a) {
     uint32_t bh = uint32_t(std::min<uint64_t>(kBlock, region.h));
     uint64_t x0 = region.x + splitmix64(rng) % (region.w - bw + 1);
     uint64_t y0 = region.y + splitmix64(rng) % (region.h - bh + 1);
-    IntervalTile t = tracer.trace({L, x0, y0, bw, bh}, mode);
+    IntervalTile t = trace({L, x0, y0, bw, bh});
     for (uint32_t j = 0; j < bh; ++j)
       for (uint32_t i = 0; i < bw; ++i) {
         const Interval iv = t.at(i, j);
@@ -223,6 +248,9 @@ void setup(CLI::App& app) {
   app.add_option("--samples", a->samples, "Random texels to re-trace")->capture_default_str();
   app.add_option("--seed", a->seed, "Seed of the sample positions")->capture_default_str();
   app.add_option("--show", a->show, "Mismatches to print")->capture_default_str();
+  app.add_option("--builder", a->builder,
+                 "Re-trace with: pack (the builder the pack records), raster, embree or auto")
+      ->capture_default_str();
   app.add_flag("--all", a->all, "Re-trace every texel of the built region instead of samples");
   app.add_option("--max-mismatches", a->max_mismatches,
                  "With --all: stop after this many mismatches")

@@ -1,23 +1,29 @@
-// Build benchmark: whole builds of a scene with each encoding next to computing
-// the depth bounds alone (first hit + exit depth) over the same texels, in the same run:
-// wall time, CPU time, peak memory, pack size, texels per second, and build / bounds.
+// Build benchmark: the depth bounds alone with each builder (the Embree tracer and the
+// light-space rasterizer, raster_bounds.hpp) over the same texels, then whole builds with
+// each builder and encoding, at one or more resolutions, in the same run: wall time, CPU
+// time, peak memory, pack size, texels per second, the thread-seconds of each build stage,
+// and how time grows with the texel count (the slope of log time against log texels
+// between successive resolutions: 1.0 is linear in texels).
 //
 //   bench_build [--scene procedural:city] [--light sun:azimuth=30,elevation=50]
-//               [--resolution 16k] [--encodings dagmh,mmh,mh] [--intervals default,static]
-//               [--json PATH] [--out DIR]
+//               [--resolutions 4k,16k] [--encodings dagmh] [--builders raster,embree]
+//               [--intervals default,static] [--json PATH] [--out DIR]
 //
+// --resolution R is --resolutions R. 64k is an option (the tracer takes minutes there).
 // --intervals lists the interval rules to build each encoding with (default: the
 // closed-object rule only; static: the static-geometry interval, map_build.hpp), so the
-// pack bytes of the two stand side by side on open scenes.
+// pack bytes of the two stand side by side on open scenes; the rasterizer builds only
+// the default rule with a sun (the tracer does the rest).
 // Each measurement runs in a forked child so that its peak memory (wait4 rusage) is its
-// own. The bounds-only pass traces the same level-K cells the build traces, on the same
-// worker threads, and throws the intervals away.
+// own. The bounds-only passes trace the same level-K cells the build traces, on the same
+// worker threads, and throw the intervals away.
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -29,6 +35,7 @@
 
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/map_build.hpp"
+#include "tiles/bake/raster_bounds.hpp"
 #include "tiles/bake/scene.hpp"
 #include "common/error.hpp"
 #include "tiles/core/resolution.hpp"
@@ -81,12 +88,42 @@ Measured in_child(Job job) {
   return m;
 }
 
+// The same cells build_map traces, on as many threads, with `trace` (region -> discard).
+template <class Trace>
+double bounds_pass(uint32_t L, uint32_t K, Trace trace) {
+  const uint64_t cells = uint64_t(1) << K, side = uint64_t(1) << (L - K);
+  const uint64_t sub = std::min<uint64_t>(side, st::kMaxTraceSide), per = side / sub;
+  std::atomic<uint64_t> next{0};
+  const uint64_t total = cells * cells * per * per;
+  auto t0 = Clock::now();
+  auto work = [&]() {
+    for (uint64_t i; (i = next++) < total;) {
+      uint64_t c = i / (per * per), s = i % (per * per);
+      uint64_t cx = st::morton_compact(c), cy = st::morton_compact(c >> 1);
+      trace(st::TraceRegion{L, cx * side + (s % per) * sub, cy * side + (s / per) * sub, uint32_t(sub),
+                            uint32_t(sub)});
+    }
+  };
+  std::vector<std::thread> ts;
+  for (unsigned k = 0; k < std::max(1u, std::thread::hardware_concurrency()); ++k) ts.emplace_back(work);
+  for (auto& t : ts) t.join();
+  return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+std::vector<std::string> split(const std::string& text) {
+  std::vector<std::string> out;
+  std::stringstream ss(text);
+  for (std::string item; std::getline(ss, item, ',');)
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
   std::string scene_spec = "procedural:city", light_spec = "sun:azimuth=30,elevation=50",
-              resolution = "16k", encodings = "dagmh,mmh,mh", intervals = "default", json_path,
-              out_dir = "/tmp";
+              resolutions = "4k,16k", encodings = "dagmh", builders = "raster,embree",
+              intervals = "default", json_path, out_dir = "/tmp";
   for (int i = 1; i < argc; ++i) {
     std::string a = argv[i];
     auto next = [&]() -> std::string {
@@ -98,92 +135,136 @@ int main(int argc, char** argv) {
     };
     if (a == "--scene") scene_spec = next();
     else if (a == "--light") light_spec = next();
-    else if (a == "--resolution") resolution = next();
+    else if (a == "--resolution" || a == "--resolutions") resolutions = next();
     else if (a == "--encodings") encodings = next();
+    else if (a == "--builders") builders = next();
     else if (a == "--intervals") intervals = next();
     else if (a == "--json") json_path = next();
     else if (a == "--out") out_dir = next();
     else {
-      std::fprintf(stderr, "usage: bench_build [--scene S] [--light L] [--resolution 16k] "
-                           "[--encodings dagmh,mmh,mh] [--intervals default,static] [--json PATH] [--out DIR]\n");
+      std::fprintf(stderr, "usage: bench_build [--scene S] [--light L] [--resolutions 4k,16k] "
+                           "[--encodings dagmh,mmh,mh] [--builders raster,embree] [--intervals default,static] "
+                           "[--json PATH] [--out DIR]\n");
       return 2;
     }
   }
   try {
-    const uint32_t L = parse_level(resolution);
-    const uint32_t K = st::default_skip_level(L);
     st::Scene scene = st::load_scene(scene_spec);
     st::LightSpace light = st::LightSpace::fit(st::LightSpec::parse(light_spec), scene.bounds());
-    const uint64_t texels = uint64_t(1) << (2 * L);
-
-    // Bounds alone: the same cells, the same number of worker threads as build_map.
-    Measured bounds = in_child([&]() {
-      st::DepthBoundsTracer tracer(scene, light);
-      const uint64_t cells = uint64_t(1) << K, side = uint64_t(1) << (L - K);
-      const uint64_t sub = std::min<uint64_t>(side, st::kMaxTraceSide), per = side / sub;
-      std::atomic<uint64_t> next{0};
-      const uint64_t total = cells * cells * per * per;
-      auto t0 = Clock::now();
-      auto work = [&]() {
-        for (uint64_t i; (i = next++) < total;) {
-          uint64_t c = i / (per * per), s = i % (per * per);
-          uint64_t cx = st::morton_compact(c), cy = st::morton_compact(c >> 1);
-          tracer.trace({L, cx * side + (s % per) * sub, cy * side + (s / per) * sub, uint32_t(sub), uint32_t(sub)});
-        }
-      };
-      std::vector<std::thread> ts;
-      for (unsigned k = 0; k < std::max(1u, std::thread::hardware_concurrency()); ++k) ts.emplace_back(work);
-      for (auto& t : ts) t.join();
-      return nlohmann::json{{"seconds", std::chrono::duration<double>(Clock::now() - t0).count()}};
-    });
+    const bool sun = light.kind() == st::LightKind::sun;
+    std::vector<std::string> rules = split(intervals), builder_list = split(builders);
+    for (const std::string& r : rules)
+      if (r != "default" && r != "static") throw st::Error("--intervals: expected default or static, got '" + r + "'");
+    for (const std::string& b : builder_list)
+      if (b != "raster" && b != "embree") throw st::Error("--builders: expected raster or embree, got '" + b + "'");
+    std::vector<uint32_t> levels;
+    for (const std::string& r : split(resolutions)) levels.push_back(parse_level(r));
+    if (levels.empty()) throw st::Error("--resolutions: none given");
 
     nlohmann::json rows = nlohmann::json::array();
-    std::printf("bench_build: %s, %s, %llu^2 (level %u, skip level %u), %u threads\n", scene_spec.c_str(),
-                light_spec.c_str(), (unsigned long long)(uint64_t(1) << L), L, K,
-                std::thread::hardware_concurrency());
-    std::printf("%-14s %9s %9s %10s %11s %10s %11s %9s %11s\n", "run", "wall s", "cpu s", "Mtexels/s",
-                "pack MiB", "% of raw", "peak MiB", "/bounds", "cpu/bounds");
-    std::printf("%-14s %9.1f %9.1f %10.2f %11s %10s %11.0f %9s %11s\n", "bounds only", bounds.wall, bounds.cpu,
-                double(texels) / bounds.wall / 1e6, "-", "-", bounds.peak_mib, "1.00", "1.00");
-    rows.push_back({{"run", "bounds"}, {"wall_s", bounds.wall}, {"cpu_s", bounds.cpu}, {"peak_mib", bounds.peak_mib}});
-    std::vector<std::string> rules;
-    {
-      std::stringstream rs(intervals);
-      for (std::string r; std::getline(rs, r, ',');) {
-        if (r != "default" && r != "static") throw st::Error("--intervals: expected default or static, got '" + r + "'");
-        rules.push_back(r);
-      }
-    }
-    for (const std::string& rule : rules) {
-      std::stringstream ss(encodings);
-      std::string enc;
-      while (std::getline(ss, enc, ',')) {
-        const std::string path = out_dir + "/bench_build_" + enc + "_" + rule + ".pack";
-        const std::string name = "build " + enc + (rule == "static" ? "/st" : "");
+    // Seconds of each run name at each level, for the slopes.
+    std::vector<std::pair<std::string, std::vector<std::pair<uint32_t, double>>>> series;
+    auto record = [&](const std::string& name, uint32_t L, double s) {
+      for (auto& [n, v] : series)
+        if (n == name) return v.push_back({L, s});
+      series.push_back({name, {{L, s}}});
+    };
+    for (const uint32_t L : levels) {
+      const uint32_t K = st::default_skip_level(L);
+      const uint64_t texels = uint64_t(1) << (2 * L);
+      std::printf("bench_build: %s, %s, %llu^2 (level %u, skip level %u), %u threads\n", scene_spec.c_str(),
+                  light_spec.c_str(), (unsigned long long)(uint64_t(1) << L), L, K,
+                  std::thread::hardware_concurrency());
+      std::printf("%-20s %8s %8s %10s %9s %9s %8s %8s %7s %7s %7s %7s\n", "run", "wall s", "cpu s", "Mtexels/s",
+                  "pack MiB", "% of raw", "peak MiB", "/tracer", "trace", "hier", "cut+enc", "write");
+      // Bounds alone with each builder.
+      double tracer_wall = 0;
+      for (const std::string& b : {std::string("embree"), std::string("raster")}) {
+        if (b == "raster" && !sun) continue;
         Measured m = in_child([&]() {
-          st::MapBuildOptions o;
-          o.map_level = L;
-          o.encoding = st::parse_encoding(enc);
-          if (rule == "static") o.intervals = st::IntervalRule::static_geometry;
-          st::MapBuildReport r = st::build_map(scene, light, o, path);
-          return nlohmann::json::parse(r.to_json());
+          double setup = 0, s = 0;
+          std::atomic<uint64_t> tests{0}, hits{0}, closed{0};
+          if (b == "embree") {
+            st::DepthBoundsTracer tracer(scene, light);
+            setup = tracer.build_seconds();
+            s = bounds_pass(L, K, [&](const st::TraceRegion& r) { tracer.trace(r); });
+          } else {
+            st::RasterBounds raster(scene, light);
+            setup = raster.setup_seconds();
+            s = bounds_pass(L, K, [&](const st::TraceRegion& r) {
+              st::DepthBoundsStats st;
+              raster.trace(r, &st);
+              tests += st.traversals, hits += st.hits, closed += st.closed;
+            });
+          }
+          return nlohmann::json{{"seconds", s}, {"setup_seconds", setup},
+                                {"triangle_texel_tests_per_texel", double(tests) / double(texels)},
+                                {"hit_fraction", double(hits) / double(texels)},
+                                {"closed_fraction", double(closed) / double(texels)}};
         });
         if (m.result.contains("error")) {
-          std::printf("%-14s failed: %s\n", name.c_str(), m.result["error"].get<std::string>().c_str());
+          std::printf("%-20s failed: %s\n", ("bounds " + b).c_str(), m.result["error"].get<std::string>().c_str());
           continue;
         }
-        double pack = m.result["pack_bytes"].get<double>();
-        std::printf("%-14s %9.1f %9.1f %10.2f %11.2f %10.5f %11.0f %9.2f %11.2f\n", name.c_str(), m.wall,
-                    m.cpu, double(texels) / m.wall / 1e6, pack / (1 << 20), 100.0 * pack / (double(texels) * 4),
-                    m.peak_mib, m.wall / bounds.wall, m.cpu / bounds.cpu);
-        rows.push_back({{"run", "build"}, {"encoding", enc}, {"intervals", rule}, {"wall_s", m.wall},
-                        {"cpu_s", m.cpu}, {"peak_mib", m.peak_mib}, {"build_over_bounds", m.wall / bounds.wall},
-                        {"cpu_over_bounds", m.cpu / bounds.cpu}, {"report", m.result}});
-        std::remove(path.c_str());
+        if (b == "embree") tracer_wall = m.wall;
+        const std::string name = "bounds " + b;
+        std::printf("%-20s %8.2f %8.2f %10.2f %9s %9s %8.0f %8.2f %7.2f %7s %7s %7s\n", name.c_str(), m.wall, m.cpu,
+                    double(texels) / m.wall / 1e6, "-", "-", m.peak_mib, tracer_wall > 0 ? m.wall / tracer_wall : 0.0,
+                    m.result["seconds"].get<double>(), "-", "-", "-");
+        rows.push_back({{"run", "bounds"}, {"builder", b}, {"map_level", L}, {"texels", texels},
+                        {"wall_s", m.wall}, {"cpu_s", m.cpu}, {"peak_mib", m.peak_mib},
+                        {"mtexels_per_s", double(texels) / m.wall / 1e6},
+                        {"over_tracer", tracer_wall > 0 ? m.wall / tracer_wall : 0.0}, {"detail", m.result}});
+        record(name, L, m.wall);
       }
+      for (const std::string& rule : rules)
+        for (const std::string& enc : split(encodings))
+          for (const std::string& b : builder_list) {
+            if (b == "raster" && (!sun || rule == "static")) continue;
+            const std::string path = out_dir + "/bench_build_" + enc + "_" + rule + "_" + b + ".pack";
+            const std::string name = "build " + enc + (rule == "static" ? "/st " : " ") + b;
+            Measured m = in_child([&]() {
+              st::MapBuildOptions o;
+              o.map_level = L;
+              o.encoding = st::parse_encoding(enc);
+              o.builder = b == "raster" ? st::BoundsBuilder::raster : st::BoundsBuilder::embree;
+              if (rule == "static") o.intervals = st::IntervalRule::static_geometry;
+              st::MapBuildReport r = st::build_map(scene, light, o, path);
+              return nlohmann::json::parse(r.to_json());
+            });
+            std::remove(path.c_str());
+            if (m.result.contains("error")) {
+              std::printf("%-20s failed: %s\n", name.c_str(), m.result["error"].get<std::string>().c_str());
+              continue;
+            }
+            const double pack = m.result["pack_bytes"].get<double>();
+            const auto& stages = m.result["stage_thread_seconds"];
+            std::printf("%-20s %8.2f %8.2f %10.2f %9.2f %9.5f %8.0f %8.2f %7.2f %7.2f %7.2f %7.2f\n", name.c_str(),
+                        m.wall, m.cpu, double(texels) / m.wall / 1e6, pack / (1 << 20),
+                        100.0 * pack / (double(texels) * 4), m.peak_mib, tracer_wall > 0 ? m.wall / tracer_wall : 0.0,
+                        stages["trace"].get<double>(), stages["hierarchy"].get<double>(),
+                        stages["cut_encode"].get<double>(), stages["compress_write"].get<double>());
+            rows.push_back({{"run", "build"}, {"builder", b}, {"encoding", enc}, {"intervals", rule},
+                            {"map_level", L}, {"texels", texels}, {"wall_s", m.wall}, {"cpu_s", m.cpu},
+                            {"peak_mib", m.peak_mib}, {"mtexels_per_s", double(texels) / m.wall / 1e6},
+                            {"over_tracer", tracer_wall > 0 ? m.wall / tracer_wall : 0.0}, {"report", m.result}});
+            record(name, L, m.wall);
+          }
     }
-    nlohmann::json j{{"scene", scene_spec}, {"light", light_spec}, {"map_level", L}, {"skip_level", K},
-                     {"texels", texels}, {"threads", std::thread::hardware_concurrency()}, {"runs", rows}};
+    // How time grows: d log(time) / d log(texels) between successive resolutions.
+    nlohmann::json slopes = nlohmann::json::array();
+    if (levels.size() > 1) std::printf("slope of log time against log texels (1.0: linear in texels)\n");
+    for (const auto& [name, v] : series)
+      for (size_t k = 1; k < v.size(); ++k) {
+        const double dl = std::log(double(uint64_t(1) << (2 * v[k].first))) -
+                          std::log(double(uint64_t(1) << (2 * v[k - 1].first)));
+        if (dl == 0 || v[k - 1].second <= 0) continue;
+        const double slope = std::log(v[k].second / v[k - 1].second) / dl;
+        std::printf("  %-20s level %u -> %u: %.2f\n", name.c_str(), v[k - 1].first, v[k].first, slope);
+        slopes.push_back({{"run", name}, {"from_level", v[k - 1].first}, {"to_level", v[k].first}, {"slope", slope}});
+      }
+    nlohmann::json j{{"scene", scene_spec}, {"light", light_spec}, {"levels", levels},
+                     {"threads", std::thread::hardware_concurrency()}, {"runs", rows}, {"slopes", slopes}};
     if (!json_path.empty()) std::ofstream(json_path) << j.dump(2) << "\n";
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_build: error: %s\n", e.what());

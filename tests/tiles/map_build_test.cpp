@@ -1,5 +1,5 @@
-// End-to-end map builds: scene -> Embree bounds -> MH -> encode -> pack, then the
-// pack is checked against a fresh trace of every texel (the lossless invariant), across
+// End-to-end map builds: scene -> depth bounds (the rasterizer, the default for a sun)
+// -> MH -> encode -> pack, then the pack is checked against a fresh trace of every texel (the lossless invariant), across
 // encodings, a killed-and-resumed build, and a region of a 2^20 map.
 #include <gtest/gtest.h>
 
@@ -8,6 +8,7 @@
 #include "interval_fields.hpp"
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/map_build.hpp"
+#include "tiles/bake/raster_bounds.hpp"
 #include "tiles/bake/scene.hpp"
 #include "common/error.hpp"
 #include "tiles/core/pack_evaluator.hpp"
@@ -69,7 +70,7 @@ TEST_P(MapBuildEncodings, EveryTexelOfTheBuiltPackIsLossless) {
   EXPECT_EQ(r.cells_built, 256u);
   EXPECT_TRUE(r.exit_depths);
   EXPECT_FALSE(fs::exists(path + ".tmp"));
-  DepthBoundsTracer tracer(b.scene, b.light);
+  RasterBounds tracer(b.scene, b.light);  // the builder a sun build uses by default
   IntervalTile truth = tracer.trace({L, 0, 0, 1u << L, 1u << L});
   PackEvaluator eval(PackReader::open(path));
   expect_lossless(eval, truth);
@@ -90,7 +91,7 @@ TEST(MapBuild, SmallTileBoundCutsDeeperAndStaysLossless) {
   const std::string path = tmp_path("mb_small_tiles.pack");
   MapBuildReport r = build_map(b.scene, b.light, o, path);
   EXPECT_GT(r.index_tile_count, 0u);
-  DepthBoundsTracer tracer(b.scene, b.light);
+  RasterBounds tracer(b.scene, b.light);  // the builder a sun build uses by default
   PackEvaluator eval(PackReader::open(path));
   expect_lossless(eval, tracer.trace({L, 0, 0, 1u << L, 1u << L}));
 }
@@ -139,7 +140,7 @@ TEST(MapBuild, RegionOfAMillionTexelMapIsExactAtTheFarCorner) {
   EXPECT_EQ(r.cells_built, 1u);
   EXPECT_EQ(r.cells_outside_region, (uint64_t(1) << 18) - 1);
   PackEvaluator eval(PackReader::open(path));
-  DepthBoundsTracer tracer(b.scene, b.light);
+  RasterBounds tracer(b.scene, b.light);  // the builder a sun build uses by default
   IntervalTile truth = tracer.trace({L, R - 64, R - 64, 64, 64});
   for (uint32_t j = 0; j < 64; ++j)
     for (uint32_t i = 0; i < 64; ++i) {

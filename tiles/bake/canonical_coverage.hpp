@@ -29,6 +29,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 #include "tiles/bake/canonical_depth.hpp"
@@ -103,28 +104,61 @@ struct CanonicalResult {
   bool fell_back = false;
 };
 
-// (lo, hi) of a sorted hit list; `range` is the ray's t range (t_max - t_min).
-inline CanonicalResult canonical_interval(const std::vector<CanonicalHit>& hits, double range) {
+namespace canonical_detail {
+// (mesh, count) pairs in insertion order, inline up to kInline entries and on the heap
+// beyond: canonical_interval() allocates nothing for the common handful of meshes per ray.
+class MeshCounts {
+ public:
+  struct Entry {
+    uint32_t first;  // mesh
+    int32_t second;  // count
+  };
+  static constexpr size_t kInline = 16;
+  void clear() { n_ = 0, heap_.clear(); }
+  Entry* begin() { return n_ <= kInline ? inline_ : heap_.data(); }
+  Entry* end() { return begin() + n_; }
+  Entry* find(uint32_t mesh) {
+    Entry* e = std::find_if(begin(), end(), [&](const Entry& c) { return c.first == mesh; });
+    return e == end() ? nullptr : e;
+  }
+  Entry* add(uint32_t mesh, int32_t count) {
+    if (n_ < kInline) {
+      inline_[n_] = Entry{mesh, count};
+    } else {
+      if (n_ == kInline) heap_.assign(inline_, inline_ + kInline);
+      heap_.push_back(Entry{mesh, count});
+    }
+    ++n_;
+    return end() - 1;
+  }
+
+ private:
+  Entry inline_[kInline];  // the first n_ are set (not initialised beyond: no per-call cost)
+  std::vector<Entry> heap_;
+  size_t n_ = 0;
+};
+}  // namespace canonical_detail
+
+// (lo, hi) of a hit list sorted by (t, tri); `range` is the ray's t range (t_max - t_min).
+inline CanonicalResult canonical_interval(const CanonicalHit* hits, size_t n, double range) {
   CanonicalResult r;
-  if (hits.empty()) return r;
+  if (n == 0) return r;
   r.lo_t = r.hi_t = hits[0].t;
   if (!hits[0].closed) return r;
   const double touch = ExitDepthRay::kTouchDouble * range;
-  std::vector<std::pair<uint32_t, int32_t>> counters;  // mesh, count
+  canonical_detail::MeshCounts counters, group;  // counters: mesh -> count
   int32_t total = 0;
   size_t i = 0;
   bool entered = false;
-  while (i < hits.size()) {
+  while (i < n) {
     size_t j = i;
-    while (j < hits.size() && hits[j].t == hits[i].t) ++j;
+    while (j < n && hits[j].t == hits[i].t) ++j;
     // Per mesh: the sign of the sum of its closed facings in this group (entering +1).
-    std::vector<std::pair<uint32_t, int32_t>> group;
+    group.clear();
     for (size_t k = i; k < j; ++k) {
       if (!hits[k].closed) continue;
-      auto it = std::find_if(group.begin(), group.end(),
-                             [&](const auto& g) { return g.first == hits[k].mesh; });
-      if (it == group.end()) group.push_back({hits[k].mesh, -hits[k].facing});
-      else it->second -= hits[k].facing;
+      if (auto* g = group.find(hits[k].mesh)) g->second -= hits[k].facing;
+      else group.add(hits[k].mesh, -hits[k].facing);
     }
     if (entered && total == 0) {
       // Counters at 0 after group ending at hits[i-1]: go on only through a touching face.
@@ -135,15 +169,11 @@ inline CanonicalResult canonical_interval(const std::vector<CanonicalHit>& hits,
     for (const auto& g : group) {
       const int32_t s = (g.second > 0) - (g.second < 0);
       if (s == 0) continue;
-      auto it = std::find_if(counters.begin(), counters.end(),
-                             [&](const auto& c) { return c.first == g.first; });
-      if (it == counters.end()) {
-        counters.push_back({g.first, 0});
-        it = counters.end() - 1;
-      }
-      it->second += s;
+      auto* c = counters.find(g.first);
+      if (!c) c = counters.add(g.first, 0);
+      c->second += s;
       total += s;
-      if (it->second < 0) {
+      if (c->second < 0) {
         r.hi_t = r.lo_t;
         r.fell_back = true;
         return r;
@@ -161,6 +191,10 @@ inline CanonicalResult canonical_interval(const std::vector<CanonicalHit>& hits,
     r.fell_back = true;
   }
   return r;
+}
+
+inline CanonicalResult canonical_interval(const std::vector<CanonicalHit>& hits, double range) {
+  return canonical_interval(hits.data(), hits.size(), range);
 }
 
 inline Interval canonical_depths(const LightSpace& light, const CanonicalResult& r) {

@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "tiles/bake/depth_bounds.hpp"
+#include "tiles/bake/raster_bounds.hpp"
 #include "common/error.hpp"
 #include "tiles/build/hierarchy.hpp"
 #include "tiles/core/pack_reader.hpp"
@@ -63,16 +64,38 @@ CutParams checked_cut_params(const MapBuildOptions& o) {
   return cut;
 }
 
+// The bounds producer of a build (MapBuildOptions::builder, resolved).
+class CellBounds {
+ public:
+  CellBounds(const Scene& scene, const LightSpace& light, const MapBuildOptions& o)
+      : builder_(resolve_builder(o.builder, light, o.intervals)), mode_(trace_mode_of(o.intervals)) {
+    if (builder_ == BoundsBuilder::raster) raster_ = std::make_unique<RasterBounds>(scene, light);
+    else tracer_ = std::make_unique<DepthBoundsTracer>(scene, light);
+  }
+  BoundsBuilder builder() const { return builder_; }
+  bool exit_depths() const { return raster_ ? raster_->traces_exit_depths() : tracer_->traces_exit_depths(); }
+  IntervalTile trace(const TraceRegion& r, std::atomic<uint64_t>* progress) const {
+    return raster_ ? raster_->trace(r, nullptr, progress) : tracer_->trace(r, mode_, nullptr, progress);
+  }
+
+ private:
+  BoundsBuilder builder_;
+  TraceMode mode_;
+  std::unique_ptr<RasterBounds> raster_;
+  std::unique_ptr<DepthBoundsTracer> tracer_;
+};
+
 // What the pack records of its build: the light and cut, the scene's hash, and the
 // provenance (sorted), which a resumed build must match.
 PackParams pack_params(const Scene& scene, const LightSpace& light, const MapBuildOptions& o,
-                       const CutParams& cut, bool exit_depths) {
+                       const CutParams& cut, bool exit_depths, BoundsBuilder builder) {
   PackParams pp = PackParams::from(light, cut);
   pp.scene_hash = scene.content_hash();
   pp.features = exit_depths ? uint32_t(kFeatureExitDepths) : 0u;
   if (o.intervals == IntervalRule::static_geometry) pp.features |= kFeatureStaticIntervals;
   pp.compression_level = o.compression_level;
-  pp.build_params = {{"construction", o.construction == MhConstruction::bottom_up ? "bottom-up" : "top-down"},
+  pp.build_params = {{"builder", to_string(builder)},
+                     {"construction", o.construction == MhConstruction::bottom_up ? "bottom-up" : "top-down"},
                      {"light", o.light_spec.empty() ? light.spec().to_string() : o.light_spec},
                      {"scene", o.scene_spec.empty() ? scene.name : o.scene_spec},
                      {"tool", "shadowtile 0.1.0"}};
@@ -118,13 +141,13 @@ std::vector<CellXY> plan_cells(PackWriter& writer, const MapBuildOptions& o, uin
 
 // Traces one level-K cell and builds its hierarchy; cells wider than kMaxTraceSide are
 // traced in sub-tiles whose hierarchies are stitched (MH §3.1 "Tiled construction").
-Hierarchy cell_hierarchy(const DepthBoundsTracer& tracer, uint32_t level, uint64_t x0,
-                         uint64_t y0, uint64_t side, MhConstruction method, TraceMode mode,
+Hierarchy cell_hierarchy(const CellBounds& bounds, uint32_t level, uint64_t x0,
+                         uint64_t y0, uint64_t side, MhConstruction method,
                          std::atomic<uint64_t>& texels, std::atomic<uint64_t>& trace_ns,
                          std::atomic<uint64_t>& build_ns) {
   auto trace_and_build = [&](uint64_t x, uint64_t y, uint64_t s) {
     auto t = Clock::now();
-    IntervalTile tile = tracer.trace({level, x, y, uint32_t(s), uint32_t(s)}, mode, nullptr, &texels);
+    IntervalTile tile = bounds.trace({level, x, y, uint32_t(s), uint32_t(s)}, &texels);
     add_seconds(trace_ns, since(t));
     t = Clock::now();
     Hierarchy h = build_hierarchy(tile, method);
@@ -149,9 +172,9 @@ Hierarchy cell_hierarchy(const DepthBoundsTracer& tracer, uint32_t level, uint64
 // cancel flag or the stop_after_cells hook stops them all at their next cell.
 class CellWorkers {
  public:
-  CellWorkers(const DepthBoundsTracer& tracer, const TileCutter& cutter, PackWriter& writer,
+  CellWorkers(const CellBounds& bounds, const TileCutter& cutter, PackWriter& writer,
               const MapBuildOptions& o, const std::vector<CellXY>& todo)
-      : tracer_(tracer), cutter_(cutter), writer_(writer), o_(o), todo_(todo) {}
+      : bounds_(bounds), cutter_(cutter), writer_(writer), o_(o), todo_(todo) {}
 
   // Runs the workers to the end and rethrows the first failure.
   void run() {
@@ -223,8 +246,8 @@ class CellWorkers {
   void build_cell(uint32_t cx, uint32_t cy) {
     const CutParams& cut = cutter_.params();
     const uint64_t cell_side = uint64_t(1) << (cut.map_level - cut.skip_level);
-    Hierarchy h = cell_hierarchy(tracer_, cut.map_level, cx * cell_side, cy * cell_side,
-                                 cell_side, o_.construction, trace_mode_of(o_.intervals), texels_, trace_ns_,
+    Hierarchy h = cell_hierarchy(bounds_, cut.map_level, cx * cell_side, cy * cell_side,
+                                 cell_side, o_.construction, texels_, trace_ns_,
                                  build_ns_);
     auto t = Clock::now();
     CutCell cell = cutter_.cut_cell(cx, cy, std::move(h));
@@ -239,7 +262,7 @@ class CellWorkers {
     }
   }
 
-  const DepthBoundsTracer& tracer_;
+  const CellBounds& bounds_;
   const TileCutter& cutter_;
   PackWriter& writer_;
   const MapBuildOptions& o_;
@@ -314,6 +337,33 @@ void report_pack_figures(const std::string& out_path, uint32_t map_level, MapBui
 
 }  // namespace
 
+const char* to_string(BoundsBuilder b) {
+  switch (b) {
+    case BoundsBuilder::automatic: return "auto";
+    case BoundsBuilder::raster: return "raster";
+    case BoundsBuilder::embree: return "embree";
+  }
+  return "?";
+}
+
+BoundsBuilder parse_bounds_builder(const std::string& text) {
+  if (text == "auto") return BoundsBuilder::automatic;
+  if (text == "raster") return BoundsBuilder::raster;
+  if (text == "embree") return BoundsBuilder::embree;
+  throw Error("--builder: expected raster, embree or auto, got '" + text + "'");
+}
+
+BoundsBuilder resolve_builder(BoundsBuilder b, const LightSpace& light, IntervalRule rule) {
+  const bool applies = light.kind() == LightKind::sun && rule == IntervalRule::closed_objects;
+  if (b == BoundsBuilder::automatic) return applies ? BoundsBuilder::raster : BoundsBuilder::embree;
+  if (b == BoundsBuilder::raster && !applies)
+    throw Error(light.kind() != LightKind::sun
+                    ? "--builder raster: the rasterizer handles sun lights only; use --builder embree for a spot light"
+                    : "--builder raster: the rasterizer builds the default interval rule only; use --builder embree "
+                      "with --intervals static");
+  return b;
+}
+
 uint64_t peak_rss_bytes() {
   rusage ru{};
   getrusage(RUSAGE_SELF, &ru);
@@ -332,18 +382,19 @@ MapBuildReport build_map(const Scene& scene, const LightSpace& light, const MapB
   rep.cells_total = o.shard ? o.shard->cell_count(K) : (uint64_t(1) << K) * (uint64_t(1) << K);
 
   auto t = Clock::now();
-  DepthBoundsTracer tracer(scene, light);
+  const CellBounds bounds(scene, light, o);
   rep.bvh_seconds = since(t);
-  rep.exit_depths = tracer.traces_exit_depths();
+  rep.exit_depths = bounds.exit_depths();
+  rep.builder = to_string(bounds.builder());
 
-  const PackParams pp = pack_params(scene, light, o, cut, rep.exit_depths);
+  const PackParams pp = pack_params(scene, light, o, cut, rep.exit_depths, bounds.builder());
   auto writer = o.resume ? PackWriter::create_or_resume(out_path, pp) : PackWriter::create(out_path, pp);
   rep.cells_resumed = writer->resumed_cells();
   TileCutter cutter(cut);
   const std::vector<CellXY> todo =
       plan_cells(*writer, o, K, uint64_t(1) << (L - K), rep.cells_outside_region);
 
-  CellWorkers workers(tracer, cutter, *writer, o, todo);
+  CellWorkers workers(bounds, cutter, *writer, o, todo);
   {
     const uint64_t planned_done = rep.cells_total - todo.size();
     ProgressTicker ticker(o.progress ? std::function<void()>([&] {
@@ -380,11 +431,11 @@ MapBuildReport build_map(const Scene& scene, const LightSpace& light, const MapB
 
 struct CellBuilder::Impl {
   Impl(const Scene& scene, const LightSpace& light, const MapBuildOptions& o)
-      : options(o), cut(checked_cut_params(o)), tracer(scene, light), cutter(cut),
-        params(pack_params(scene, light, o, cut, tracer.traces_exit_depths())) {}
+      : options(o), cut(checked_cut_params(o)), bounds(scene, light, o), cutter(cut),
+        params(pack_params(scene, light, o, cut, bounds.exit_depths(), bounds.builder())) {}
   MapBuildOptions options;
   CutParams cut;
-  DepthBoundsTracer tracer;
+  CellBounds bounds;
   TileCutter cutter;
   PackParams params;
   mutable std::atomic<uint64_t> texels{0}, trace_ns{0}, build_ns{0};
@@ -400,8 +451,8 @@ std::vector<uint8_t> CellBuilder::build(uint32_t cx, uint32_t cy) const {
   if (cx >= cells_side || cy >= cells_side)
     throw Error("build: cell (" + std::to_string(cx) + ", " + std::to_string(cy) + ") outside the skip grid");
   const uint64_t side = uint64_t(1) << (m.cut.map_level - m.cut.skip_level);
-  Hierarchy h = cell_hierarchy(m.tracer, m.cut.map_level, cx * side, cy * side, side, m.options.construction,
-                               trace_mode_of(m.options.intervals), m.texels, m.trace_ns, m.build_ns);
+  Hierarchy h = cell_hierarchy(m.bounds, m.cut.map_level, cx * side, cy * side, side, m.options.construction,
+                               m.texels, m.trace_ns, m.build_ns);
   return encode_cell_bytes(m.cutter.cut_cell(cx, cy, std::move(h)), m.params);
 }
 
@@ -413,6 +464,7 @@ std::string MapBuildReport::to_json() const {
   j["resolution"] = uint64_t(1) << map_level;
   j["skip_level"] = skip_level;
   j["encoding"] = encoding;
+  j["builder"] = builder;
   j["cells"] = {{"total", cells_total}, {"built", cells_built}, {"resumed", cells_resumed},
                 {"outside_region", cells_outside_region}};
   j["texels_traced"] = texels_traced;

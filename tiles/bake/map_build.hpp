@@ -1,5 +1,5 @@
 // The out-of-core, parallel map build: level-K cells stream through
-//   bounds (Embree) -> MH construction -> cut + encode -> compress -> append
+//   bounds (rasterizer or Embree) -> MH construction -> cut + encode -> compress -> append
 // with memory bounded by the cell size and the thread count, never by the map's
 // resolution. Cells larger than kMaxTraceSide are traced in sub-tiles whose hierarchies
 // are stitched (MH §3.1 "Tiled construction").
@@ -41,6 +41,21 @@ enum class IntervalRule : uint8_t {
                     // (receivers lie on surfaces; pack feature static_intervals)
 };
 
+// Which producer computes the depth bounds. Both evaluate the canonical depth
+// (canonical_depth.hpp); the rasterizer also evaluates the canonical coverage
+// (canonical_coverage.hpp) where Embree decides coverage in float, so the two can differ
+// on a texel whose ray passes within float error of a triangle edge (ARCHITECTURE.md).
+enum class BoundsBuilder : uint8_t {
+  automatic,  // raster where it applies (a sun and the closed-object rule), else embree
+  raster,     // the light-space rasterizer (raster_bounds.hpp)
+  embree,     // the Embree tracer (depth_bounds.hpp): every light and interval rule
+};
+const char* to_string(BoundsBuilder b);  // "auto", "raster", "embree"
+BoundsBuilder parse_bounds_builder(const std::string& text);  // st::Error naming the text
+// The builder a build uses: automatic resolved; raster where it does not apply is an
+// st::Error saying why.
+BoundsBuilder resolve_builder(BoundsBuilder b, const LightSpace& light, IntervalRule rule);
+
 // The tracer's mode for an interval rule.
 inline TraceMode trace_mode_of(IntervalRule r) {
   return r == IntervalRule::static_geometry ? TraceMode::static_bounds : TraceMode::bounds;
@@ -69,6 +84,7 @@ struct MapBuildOptions {
   uint32_t tile_bytes = 64 * 1024;
   MhConstruction construction = MhConstruction::bottom_up;
   IntervalRule intervals = IntervalRule::closed_objects;
+  BoundsBuilder builder = BoundsBuilder::automatic;  // recorded in the pack's build params
   bool resume = false;  // continue "<out>.tmp" if present
   int compression_level = 6;
   // Build only the cells touching this region; every other cell is the constant
@@ -91,6 +107,7 @@ struct MapBuildOptions {
 struct MapBuildReport {
   uint32_t map_level = 0, skip_level = 0;
   std::string encoding;
+  std::string builder;  // "raster" or "embree"
   uint64_t cells_total = 0, cells_built = 0, cells_resumed = 0, cells_outside_region = 0;
   uint64_t texels_traced = 0;
   bool exit_depths = false;

@@ -1,76 +1,498 @@
+// The light-space rasterizer of canonical depth bounds: see raster_bounds.hpp.
 #include "tiles/bake/raster_bounds.hpp"
 
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
+#include <chrono>
 #include <cmath>
+#include <string>
+#include <vector>
 
 #include "common/error.hpp"
 #include "tiles/bake/canonical_coverage.hpp"
 
 namespace st {
+namespace {
 
-RasterBounds::RasterBounds(const Scene& scene, const LightSpace& light) : light_(light) {
-  if (light.kind() != LightKind::sun)
-    throw Error("raster builder: only sun lights are supported (use the tracer)");
-  const Aabb b = scene.bounds();
-  centre_ = b.empty() ? Vec3d{0, 0, 0}
-                      : Vec3d{(b.lo.x + b.hi.x) / 2, (b.lo.y + b.hi.y) / 2, (b.lo.z + b.hi.z) / 2};
-  v_.reserve(scene.vertices.size());
-  for (const Vec3d& p : scene.vertices) v_.push_back(p - centre_);
-  tri_ = scene.triangles;
-  mesh_.assign(tri_.size(), 0);
-  closed_.assign(tri_.size(), 0);
-  for (uint32_t m = 0; m < scene.meshes.size(); ++m) {
-    const Mesh& mesh = scene.meshes[m];
-    for (uint32_t t = mesh.first_triangle; t < mesh.first_triangle + mesh.triangle_count; ++t) {
-      mesh_[t] = m;
-      closed_[t] = mesh.closed ? 1 : 0;
-    }
-  }
-  box_.resize(tri_.size());
-  for (size_t t = 0; t < tri_.size(); ++t) {
-    std::array<double, 4> bx{INFINITY, INFINITY, -INFINITY, -INFINITY};
-    for (uint32_t k = 0; k < 3; ++k) {
-      const LightPoint lp = light.to_light(scene.vertices[tri_[t][k]]);
-      bx[0] = std::min(bx[0], lp.u);
-      bx[1] = std::min(bx[1], lp.v);
-      bx[2] = std::max(bx[2], lp.u);
-      bx[3] = std::max(bx[3], lp.v);
-    }
-    box_[t] = bx;
+using Clock = std::chrono::steady_clock;
+
+constexpr uint32_t kTile = RasterBounds::kTile;
+constexpr uint32_t kTileTexels = kTile * kTile;
+// A triangle whose grown box spans more grid cells than this is kept in a list that every
+// region checks instead (ground slabs, sky-wide quads): the grid stays O(triangles).
+constexpr uint64_t kMaxGridCellsPerTriangle = 64;
+// Margin of a triangle's grid box in light space (u, v): four level-20 texels, more than
+// the one texel (plus half a texel for the centre) of the texel boxes it must contain.
+constexpr double kGridMargin = 0x1p-18;
+
+// The directed edge a -> b of a triangle on a ray of origin o and the sun's direction d:
+// d . ((a - o) x (b - o)) = d . (a x b) + o . ((a - b) x d) = c + o . n exactly. `bound`
+// covers both the rounding of this fast form and that of the definition's own double
+// evaluation (canonical_edge_sign) for every texel origin of the map, so a fast value
+// beyond +-bound has the definition's sign; within it the definition decides.
+struct EdgeSetup {
+  double c, nx, ny, nz, bound;
+};
+
+struct TriSetup {
+  EdgeSetup e[3];               // a -> b, b -> c, c -> a in the scene's winding
+  // The sign every covered texel's edges share: the three exact edge values add up to
+  // d . ((b - a) x (c - a)), independent of o, so a covered texel (all three definition
+  // signs equal) has this sign whenever that sum exceeds the edges' bounds; 0 where the
+  // sum is too small to tell (then no span culling).
+  double sigma;
+  double nx, ny, nz, pd, den;   // canonical plane (canonical_depth.hpp): n, n . a, n . dir
+  std::array<double, 4> box;    // light-space u0, v0, u1, v1 of the scene vertices
+  uint32_t tri;                 // scene triangle index
+  uint32_t mesh;
+  bool closed;
+};
+
+Vec3d abs3(const Vec3d& v) { return {std::fabs(v.x), std::fabs(v.y), std::fabs(v.z)}; }
+// |x| x |y| with every product's magnitude added: bounds each component of x' x y' for
+// |x'| <= |x|, |y'| <= |y| componentwise.
+Vec3d cross_abs(const Vec3d& x, const Vec3d& y) {
+  return {x.y * y.z + x.z * y.y, x.z * y.x + x.x * y.z, x.x * y.y + x.y * y.x};
+}
+
+// `o_max`: componentwise bound on |texel origin - centre| over the whole map.
+EdgeSetup edge_setup(const Vec3d& a, const Vec3d& b, const Vec3d& d, const Vec3d& o_max) {
+  EdgeSetup e;
+  e.c = dot(d, cross(a, b));
+  const Vec3d n = cross(a - b, d);
+  e.nx = n.x, e.ny = n.y, e.nz = n.z;
+  const Vec3d A = abs3(a), B = abs3(b), D = abs3(d);
+  const double m_c = dot(D, cross_abs(A, B));          // terms of c
+  const double m_n = dot(o_max, cross_abs(A + B, D));  // terms of o . n
+  const double m_def = dot(D, cross_abs(A + o_max, B + o_max));  // terms of the definition
+  // Each form is a sum of triple products after at most 8 roundings (about 8u and 7u
+  // of its terms); 64u leaves room for the rounding of the bound itself. The absolute
+  // term covers underflow; an overflowing bound is +inf (the definition always decides).
+  e.bound = 0x1p-47 * (m_c + m_n + m_def) + 0x1p-1000;
+  return e;
+}
+
+// Classification of a run of texels against a triangle's edges: kOutside, the facing
+// (+1 or -1) where every fast edge value is beyond its bound, or kUnsure where the
+// definition itself must decide (canonical_cover).
+constexpr int8_t kOutside = 0, kUnsure = 2;
+
+// sigma != 0: a texel is covered only with all three signs equal to sigma, so it is
+// outside as soon as one sigma * value is below -bound; a straight-line loop over the
+// run (no data-dependent branches) that the compiler vectorizes.
+void classify_oriented(const TriSetup& T, const double* ox, const double* oy, const double* oz, int n,
+                       int8_t* cls) {
+  double c[3], nx[3], ny[3], nz[3], b[3];
+  for (int k = 0; k < 3; ++k)  // sigma * (c + o . n) = sigma c + o . (sigma n), exactly
+    c[k] = T.sigma * T.e[k].c, nx[k] = T.sigma * T.e[k].nx, ny[k] = T.sigma * T.e[k].ny,
+    nz[k] = T.sigma * T.e[k].nz, b[k] = T.e[k].bound;
+  const int8_t facing = int8_t(T.sigma);
+  for (int i = 0; i < n; ++i) {
+    const double a0 = c[0] + (ox[i] * nx[0] + oy[i] * ny[0] + oz[i] * nz[0]);
+    const double a1 = c[1] + (ox[i] * nx[1] + oy[i] * ny[1] + oz[i] * nz[1]);
+    const double a2 = c[2] + (ox[i] * nx[2] + oy[i] * ny[2] + oz[i] * nz[2]);
+    const bool in = (a0 > b[0]) & (a1 > b[1]) & (a2 > b[2]);
+    const bool out = (a0 < -b[0]) | (a1 < -b[1]) | (a2 < -b[2]);
+    cls[i] = out ? kOutside : (in ? facing : kUnsure);
   }
 }
 
-Interval RasterBounds::texel(uint32_t level, uint64_t x, uint64_t y, const uint32_t* cand,
-                             size_t n) const {
-  const LightRay ray = light_.texel_ray(level, x, y);
-  const Vec3d o = ray.origin - centre_;
+// sigma == 0 (edge-on or tiny triangles): either orientation may be covered.
+void classify_any(const TriSetup& T, const double* ox, const double* oy, const double* oz, int n,
+                  int8_t* cls) {
+  for (int i = 0; i < n; ++i) {
+    int sg[3];
+    for (int k = 0; k < 3; ++k) {
+      const EdgeSetup& E = T.e[k];
+      const double val = E.c + (ox[i] * E.nx + oy[i] * E.ny + oz[i] * E.nz);
+      sg[k] = val > E.bound ? 1 : (val < -E.bound ? -1 : 0);
+    }
+    const bool pos = sg[0] > 0 || sg[1] > 0 || sg[2] > 0, neg = sg[0] < 0 || sg[1] < 0 || sg[2] < 0;
+    const bool sure = sg[0] != 0 && sg[1] != 0 && sg[2] != 0;
+    cls[i] = pos && neg ? kOutside : (sure ? int8_t(sg[0]) : kUnsure);
+  }
+}
+
+struct Candidate {
+  uint32_t setup;              // index into setups
+  int32_t x0, y0, x1, y1;      // texel box inside the region, inclusive
+};
+
+// Per-thread scratch for one tile: texel origins and fragment lists (their capacity is
+// kept from tile to tile, so nothing is allocated per texel once warm).
+struct Scratch {
+  double ox[kTileTexels], oy[kTileTexels], oz[kTileTexels];
+  double nearest[kTileTexels];
+  std::vector<CanonicalHit> frags[kTileTexels];
+};
+
+}  // namespace
+
+struct RasterBounds::Impl {
+  LightSpace light;
+  Vec3d centre, dir;
+  Vec3d o_round;  // bound on |computed texel origin - its exact affine value|, per axis
+  std::vector<Vec3d> v;                       // recentred vertices
+  std::vector<std::array<uint32_t, 3>> tri;   // scene triangles
+  std::vector<uint32_t> mesh;                 // mesh of each triangle
+  std::vector<uint8_t> closed;                // 1 when its mesh is closed
+  std::vector<TriSetup> setups;               // triangles a texel ray can hit
+  bool any_closed = false;
+  double setup_s = 0;
+  // Uniform grid over light space [0, 1)^2 of the setups' grown boxes.
+  uint32_t grid_side = 1;
+  std::vector<uint32_t> grid_start, grid_items, big;
+  std::vector<std::array<uint32_t, 2>> grid_first;  // per setup: first grid cell (gx, gy)
+  mutable tbb::enumerable_thread_specific<Scratch> scratch;
+
+  Impl(const Scene& scene, const LightSpace& l);
+  std::array<int64_t, 4> grid_range(double u0, double v0, double u1, double v1) const {
+    auto cell = [&](double w) {
+      const double f = std::floor(w * grid_side);
+      return int64_t(std::clamp(f, 0.0, double(grid_side - 1)));
+    };
+    return {cell(u0), cell(v0), cell(u1), cell(v1)};
+  }
+  std::vector<Candidate> candidates(const TraceRegion& r) const;
+  void tile(const TraceRegion& r, const Candidate* cand, const uint32_t* ids, size_t n,
+            uint32_t bi, uint32_t bj, IntervalTile& out, DepthBoundsStats& st) const;
+  Interval texel_reference(uint32_t level, uint64_t x, uint64_t y) const;
+};
+
+RasterBounds::Impl::Impl(const Scene& scene, const LightSpace& l) : light(l) {
+  const auto t0 = Clock::now();
+  if (light.kind() != LightKind::sun)
+    throw Error("raster builder: only sun lights are supported (use the tracer)");
+  const size_t nv = scene.vertices.size(), nt = scene.triangles.size();
+  if (nt >= (size_t(1) << 32)) throw Error("raster builder: scene '" + scene.name + "' has too many triangles");
+  for (size_t i = 0; i < nt; ++i)
+    for (uint32_t k : scene.triangles[i])
+      if (k >= nv)
+        throw Error("raster builder: scene '" + scene.name + "' triangle " + std::to_string(i) +
+                    " references vertex " + std::to_string(k) + " of " + std::to_string(nv));
+  for (size_t k = 0; k < nv; ++k)
+    if (!is_finite(scene.vertices[k]))
+      throw Error("raster builder: scene '" + scene.name + "' vertex " + std::to_string(k) + " is not finite");
+  const Aabb b = scene.bounds();
+  centre = b.empty() ? Vec3d{0, 0, 0} : b.center();
+  v.reserve(nv);
+  for (const Vec3d& p : scene.vertices) v.push_back(p - centre);
+  tri = scene.triangles;
+  mesh.assign(nt, 0);
+  closed.assign(nt, 0);
+  for (uint32_t m = 0; m < scene.meshes.size(); ++m) {
+    const Mesh& me = scene.meshes[m];
+    if (uint64_t(me.first_triangle) + me.triangle_count > nt)
+      throw Error("raster builder: scene '" + scene.name + "' mesh " + std::to_string(m) +
+                  " references triangles past the end");
+    for (uint32_t t = me.first_triangle; t < me.first_triangle + me.triangle_count; ++t) {
+      mesh[t] = m;
+      closed[t] = me.closed ? 1 : 0;
+    }
+  }
+  any_closed = std::find(closed.begin(), closed.end(), 1) != closed.end();  // as the tracer
+  dir = light.texel_ray(0, 0, 0).dir;  // the sun's rays share one direction
+  // Every texel centre of every level <= kMaxLevel lies in the hull of the level-20
+  // corner texels' centres; the origin is affine in the centre up to a few roundings.
+  Vec3d o_max{0, 0, 0};
+  const uint64_t last = (uint64_t(1) << kMaxLevel) - 1;
+  for (uint64_t y : {uint64_t(0), last})
+    for (uint64_t x : {uint64_t(0), last}) {
+      const Vec3d o = abs3(light.texel_ray(kMaxLevel, x, y).origin - centre);
+      o_max = {std::max(o_max.x, o.x), std::max(o_max.y, o.y), std::max(o_max.z, o.z)};
+    }
+  o_max = o_max * (1 + 0x1p-30) + Vec3d{0x1p-1000, 0x1p-1000, 0x1p-1000};
+  {
+    // How far a computed texel origin can be from the exact affine function of the texel
+    // centre: a few roundings of the magnitudes texel_ray adds (its origin, the steps
+    // across the map, forward * near) and of the recentring; 2^-40 of them is a thousand
+    // times more than that.
+    Vec3d g = abs3(centre) + o_max * 4 + abs3(light.forward() * light.near_plane());
+    for (uint64_t y : {uint64_t(0), last})
+      for (uint64_t x : {uint64_t(0), last}) g = g + abs3(light.texel_ray(kMaxLevel, x, y).origin);
+    o_round = g * 0x1p-40;
+  }
+
+  // Per triangle in parallel (kept[t] says whether it can be hit), then compacted.
+  std::vector<TriSetup> all(nt);
+  std::vector<uint8_t> kept(nt, 0);
+  tbb::parallel_for(uint32_t(0), uint32_t(nt), [&](uint32_t t) {
+    const Vec3d& a = v[tri[t][0]];
+    const Vec3d& bb = v[tri[t][1]];
+    const Vec3d& c = v[tri[t][2]];
+    const CanonicalPlane plane = CanonicalPlane::of(a, bb, c);
+    const double den = dot(plane.n, dir);
+    if (den == 0) return;  // the ray lies in the plane: never a hit (CanonicalPlane::t)
+    TriSetup& s = all[t];
+    s.e[0] = edge_setup(a, bb, dir, o_max);
+    s.e[1] = edge_setup(bb, c, dir, o_max);
+    s.e[2] = edge_setup(c, a, dir, o_max);
+    {
+      const double sum = dot(dir, cross(bb - a, c - a));
+      const double sum_bound =
+          0x1p-47 * dot(abs3(dir), cross_abs(abs3(bb) + abs3(a), abs3(c) + abs3(a))) + 0x1p-1000;
+      const double margin = sum_bound + s.e[0].bound + s.e[1].bound + s.e[2].bound;
+      s.sigma = sum > margin ? 1 : (sum < -margin ? -1 : 0);
+    }
+    s.nx = plane.n.x, s.ny = plane.n.y, s.nz = plane.n.z, s.pd = plane.d, s.den = den;
+    s.box = {INFINITY, INFINITY, -INFINITY, -INFINITY};
+    for (uint32_t k = 0; k < 3; ++k) {
+      const LightPoint lp = light.to_light(scene.vertices[tri[t][k]]);
+      s.box[0] = std::min(s.box[0], lp.u), s.box[1] = std::min(s.box[1], lp.v);
+      s.box[2] = std::max(s.box[2], lp.u), s.box[3] = std::max(s.box[3], lp.v);
+    }
+    if (!(s.box[2] >= -kGridMargin && s.box[3] >= -kGridMargin && s.box[0] <= 1 + kGridMargin &&
+          s.box[1] <= 1 + kGridMargin))
+      return;  // outside the map
+    s.tri = t, s.mesh = mesh[t], s.closed = closed[t] != 0;
+    kept[t] = 1;
+  });
+  size_t n_kept = 0;  // compacted in place: no second copy at the peak
+  for (size_t t = 0; t < nt; ++t)
+    if (kept[t]) all[n_kept++] = all[t];
+  all.resize(n_kept);
+  setups = std::move(all);
+
+  // The grid: about two setups per cell, at most 1024 cells a side.
+  while (grid_side < 1024 && uint64_t(grid_side) * grid_side * 2 < setups.size()) grid_side *= 2;
+  const size_t cells = size_t(grid_side) * grid_side;
+  grid_start.assign(cells + 1, 0);
+  grid_first.resize(setups.size());
+  std::vector<uint8_t> is_big(setups.size(), 0);
+  std::vector<uint32_t> cursor;
+  for (int pass = 0; pass < 2; ++pass) {
+    for (uint32_t s = 0; s < setups.size(); ++s) {
+      const auto& bx = setups[s].box;
+      const auto g = grid_range(bx[0] - kGridMargin, bx[1] - kGridMargin, bx[2] + kGridMargin,
+                                bx[3] + kGridMargin);
+      if (pass == 0) {
+        grid_first[s] = {uint32_t(g[0]), uint32_t(g[1])};
+        if (uint64_t(g[2] - g[0] + 1) * uint64_t(g[3] - g[1] + 1) > kMaxGridCellsPerTriangle) {
+          is_big[s] = 1;
+          big.push_back(s);
+        }
+      }
+      if (is_big[s]) continue;
+      for (int64_t gy = g[1]; gy <= g[3]; ++gy)
+        for (int64_t gx = g[0]; gx <= g[2]; ++gx) {
+          const size_t cell = size_t(gy) * grid_side + size_t(gx);
+          if (pass == 0) ++grid_start[cell + 1];
+          else grid_items[cursor[cell]++] = s;
+        }
+    }
+    if (pass == 0) {
+      for (size_t c = 0; c < cells; ++c) grid_start[c + 1] += grid_start[c];
+      grid_items.resize(grid_start[cells]);
+      cursor.assign(grid_start.begin(), grid_start.end() - 1);
+    }
+  }
+  setup_s = std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+std::vector<Candidate> RasterBounds::Impl::candidates(const TraceRegion& r) const {
+  const double side = std::ldexp(1.0, int(r.level));
+  std::vector<Candidate> out;
+  auto consider = [&](uint32_t s) {
+    const auto& bx = setups[s].box;
+    // Texel x is a candidate when its centre (x + 0.5) / side may lie in the box: one
+    // texel of margin on each side (raster_bounds.hpp).
+    const double x0 = std::floor(bx[0] * side - 0.5) - 1 - double(r.x0);
+    const double y0 = std::floor(bx[1] * side - 0.5) - 1 - double(r.y0);
+    const double x1 = std::ceil(bx[2] * side - 0.5) + 1 - double(r.x0);
+    const double y1 = std::ceil(bx[3] * side - 0.5) + 1 - double(r.y0);
+    if (!(x1 >= 0 && y1 >= 0 && x0 < r.width && y0 < r.height)) return;
+    out.push_back(Candidate{s, int32_t(std::max(0.0, x0)), int32_t(std::max(0.0, y0)),
+                            int32_t(std::min(double(r.width - 1), x1)),
+                            int32_t(std::min(double(r.height - 1), y1))});
+  };
+  for (uint32_t s : big) consider(s);
+  const auto g = grid_range(double(r.x0) / side, double(r.y0) / side,
+                            double(r.x0 + r.width) / side, double(r.y0 + r.height) / side);
+  for (int64_t gy = g[1]; gy <= g[3]; ++gy)
+    for (int64_t gx = g[0]; gx <= g[2]; ++gx) {
+      const size_t cell = size_t(gy) * grid_side + size_t(gx);
+      for (uint32_t k = grid_start[cell]; k < grid_start[cell + 1]; ++k) {
+        const uint32_t s = grid_items[k];
+        // Once per region: in the first cell both the region's and the box's ranges share.
+        if (int64_t(std::max<uint32_t>(grid_first[s][0], uint32_t(g[0]))) != gx ||
+            int64_t(std::max<uint32_t>(grid_first[s][1], uint32_t(g[1]))) != gy)
+          continue;
+        consider(s);
+      }
+    }
+  return out;
+}
+
+void RasterBounds::Impl::tile(const TraceRegion& r, const Candidate* cand, const uint32_t* ids,
+                              size_t n, uint32_t bi, uint32_t bj, IntervalTile& out,
+                              DepthBoundsStats& st) const {
+  Scratch& s = scratch.local();
+  const uint32_t tw = std::min(kTile, r.width - bi), th = std::min(kTile, r.height - bj);
+  // The texel origins, operation for operation as LightSpace::texel_ray computes them
+  // (origin + axis_u (u E) + axis_v (v E) + forward near, then - centre), with the
+  // column and row terms computed once per tile; the reference test pins the equality.
+  {
+    const double inv = std::ldexp(1.0, -int(r.level)), E = light.extent_uv();
+    const Vec3d org = light.origin(), au = light.axis_u(), av = light.axis_v();
+    const Vec3d fn = light.forward() * light.near_plane();
+    Vec3d col[kTile];
+    for (uint32_t i = 0; i < tw; ++i) col[i] = au * ((double(r.x0 + bi + i) + 0.5) * inv * E);
+    for (uint32_t j = 0; j < th; ++j) {
+      const Vec3d row = av * ((double(r.y0 + bj + j) + 0.5) * inv * E);
+      for (uint32_t i = 0; i < tw; ++i) {
+        const Vec3d o = org + col[i] + row + fn - centre;
+        const uint32_t k = j * kTile + i;
+        s.ox[k] = o.x, s.oy[k] = o.y, s.oz[k] = o.z;
+      }
+    }
+  }
+  bool lists = false;
+  for (size_t c = 0; c < n; ++c) lists |= setups[cand[ids[c]].setup].closed;
+  for (uint32_t k = 0; k < kTileTexels; ++k) {
+    s.nearest[k] = INFINITY;
+    if (lists) s.frags[k].clear();
+  }
+  // The origin steps of one texel along x and y (spans below).
+  const Vec3d o00{s.ox[0], s.oy[0], s.oz[0]};
+  const Vec3d du = light.texel_ray(r.level, r.x0 + bi + 1, r.y0 + bj).origin - centre - o00;
+  const Vec3d dv = light.texel_ray(r.level, r.x0 + bi, r.y0 + bj + 1).origin - centre - o00;
+  const Vec3d adu = abs3(du), adv = abs3(dv);
+  uint64_t tests = 0;
+  for (size_t c = 0; c < n; ++c) {
+    const Candidate& cd = cand[ids[c]];
+    const TriSetup& T = setups[cd.setup];
+    const int32_t i0 = std::max<int32_t>(cd.x0, int32_t(bi)) - int32_t(bi);
+    const int32_t i1 = std::min<int32_t>(cd.x1, int32_t(bi + tw - 1)) - int32_t(bi);
+    const int32_t j0 = std::max<int32_t>(cd.y0, int32_t(bj)) - int32_t(bj);
+    const int32_t j1 = std::min<int32_t>(cd.y1, int32_t(bj + th - 1)) - int32_t(bj);
+    // Row spans: each edge's value is affine in the texel (up to the rounding of the
+    // origins), so along a row the texels where sigma * value may reach -bound form an
+    // interval. A texel outside it has sigma * fast value < -bound on some edge: that
+    // edge's definition sign is -sigma, and a covered texel's signs all equal sigma.
+    // The margin covers the bound twice, the origins' rounding, the products' rounding
+    // and one texel step; the division's rounding is covered by one texel each side.
+    double e0[3] = {}, su[3] = {}, sv[3] = {}, marg[3] = {};
+    // Small boxes are cheaper to test texel by texel than to cull.
+    const bool spans = T.sigma != 0 && (i1 - i0 + 1) * (j1 - j0 + 1) > 16;
+    if (spans)
+      for (int k = 0; k < 3; ++k) {
+        const EdgeSetup& E = T.e[k];
+        const Vec3d an{std::fabs(E.nx), std::fabs(E.ny), std::fabs(E.nz)};
+        e0[k] = E.c + (o00.x * E.nx + o00.y * E.ny + o00.z * E.nz);
+        su[k] = du.x * E.nx + du.y * E.ny + du.z * E.nz;
+        sv[k] = dv.x * E.nx + dv.y * E.ny + dv.z * E.nz;
+        const double step = dot(adu, an) + dot(adv, an);
+        marg[k] = 2 * E.bound + 64 * dot(o_round, an) + 2 * step +
+                  0x1p-40 * (std::fabs(e0[k]) + 2 * kTile * step);
+      }
+    for (int32_t j = j0; j <= j1; ++j) {
+      double xs = i0, xe = i1;
+      if (spans)
+        for (int k = 0; k < 3 && xs <= xe; ++k) {
+          const double a = T.sigma * (e0[k] + j * sv[k]) + marg[k], b = T.sigma * su[k];
+          if (b == 0) {
+            if (a < 0) xe = xs - 1;
+          } else if (b > 0) {
+            xs = std::max(xs, std::ceil(-a / b) - 1);
+          } else {
+            xe = std::min(xe, std::floor(-a / b) + 1);
+          }
+        }
+      if (!(xs <= xe)) continue;
+      const int32_t is = int32_t(xs), ie = int32_t(xe);
+      const uint32_t row = uint32_t(j) * kTile + uint32_t(is);
+      const int n_row = ie - is + 1;
+      tests += uint64_t(n_row);
+      int8_t cls[kTile];
+      if (T.sigma != 0) classify_oriented(T, s.ox + row, s.oy + row, s.oz + row, n_row, cls);
+      else classify_any(T, s.ox + row, s.oy + row, s.oz + row, n_row, cls);
+      for (int q = 0; q < n_row; ++q) {
+        if (cls[q] == kOutside) continue;
+        const uint32_t k = row + uint32_t(q);
+        const double ox = s.ox[k], oy = s.oy[k], oz = s.oz[k];
+        int facing = cls[q];
+        if (facing == kUnsure) {
+          const auto& tv = tri[T.tri];
+          facing = canonical_cover(CoverageRay::of(Vec3d{ox, oy, oz}, dir), v[tv[0]], v[tv[1]], v[tv[2]]);
+          if (facing == 0) continue;
+        }
+        // CanonicalPlane::t, operation for operation.
+        const double t = (T.pd - (T.nx * ox + T.ny * oy + T.nz * oz)) / T.den;
+        if (!std::isfinite(t) || t < 0 || t > 1) continue;
+        if (lists) s.frags[k].push_back(CanonicalHit{t, T.tri, T.mesh, int8_t(facing), T.closed});
+        else s.nearest[k] = std::min(s.nearest[k], t);
+      }
+    }
+  }
+  st.traversals += tests;
+  for (uint32_t j = 0; j < th; ++j)
+    for (uint32_t i = 0; i < tw; ++i) {
+      const uint32_t k = j * kTile + i;
+      CanonicalResult res;
+      if (lists) {
+        auto& f = s.frags[k];
+        if (f.size() == 2) {
+          if (f[1] < f[0]) std::swap(f[0], f[1]);
+        } else if (f.size() > 2) {
+          std::sort(f.begin(), f.end());
+        }
+        // The commonest closed case, as canonical_interval() ends it: one mesh entered
+        // at t0 and left at t1 > t0.
+        if (f.size() == 2 && f[0].closed && f[1].closed && f[0].mesh == f[1].mesh && f[0].facing < 0 &&
+            f[1].facing > 0 && f[0].t < f[1].t) {
+          res.lo_t = f[0].t, res.hi_t = f[1].t;
+        } else {
+          res = canonical_interval(f.data(), f.size(), 1.0);
+        }
+      } else if (s.nearest[k] < INFINITY) {
+        res.lo_t = res.hi_t = s.nearest[k];
+      }
+      const Interval iv = canonical_depths(light, res);
+      out.at(bi + i, bj + j) = iv;
+      st.hits += res.lo_t < INFINITY;
+      st.closed += iv.hi > iv.lo;
+      st.fallbacks += res.fell_back;
+    }
+}
+
+Interval RasterBounds::Impl::texel_reference(uint32_t level, uint64_t x, uint64_t y) const {
+  const LightRay ray = light.texel_ray(level, x, y);
+  const Vec3d o = ray.origin - centre;
   const CoverageRay r = CoverageRay::of(o, ray.dir);
   std::vector<CanonicalHit> hits;
-  for (size_t k = 0; k < n; ++k) {
-    const uint32_t t = cand[k];
-    const Vec3d& a = v_[tri_[t][0]];
-    const Vec3d& b = v_[tri_[t][1]];
-    const Vec3d& c = v_[tri_[t][2]];
+  for (uint32_t t = 0; t < tri.size(); ++t) {
+    const Vec3d& a = v[tri[t][0]];
+    const Vec3d& b = v[tri[t][1]];
+    const Vec3d& c = v[tri[t][2]];
     const int f = canonical_cover(r, a, b, c);
     if (f == 0) continue;
     const double tp = CanonicalPlane::of(a, b, c).t(o, ray.dir, NAN);
     if (!std::isfinite(tp) || tp < 0 || tp > 1) continue;
-    hits.push_back(CanonicalHit{tp, t, mesh_[t], int8_t(f), closed_[t] != 0});
+    hits.push_back(CanonicalHit{tp, t, mesh[t], int8_t(f), closed[t] != 0});
   }
   std::sort(hits.begin(), hits.end());
-  return canonical_depths(light_, canonical_interval(hits, 1.0));
+  return canonical_depths(light, canonical_interval(hits, 1.0));
 }
+
+RasterBounds::RasterBounds(const Scene& scene, const LightSpace& light)
+    : impl_(std::make_unique<Impl>(scene, light)) {}
+RasterBounds::~RasterBounds() = default;
+
+bool RasterBounds::traces_exit_depths() const { return impl_->any_closed; }
+double RasterBounds::setup_seconds() const { return impl_->setup_s; }
+uint64_t RasterBounds::triangle_count() const { return impl_->tri.size(); }
 
 Interval RasterBounds::brute_force_texel(uint32_t level, uint64_t x, uint64_t y) const {
-  std::vector<uint32_t> all(tri_.size());
-  for (uint32_t t = 0; t < all.size(); ++t) all[t] = t;
-  return texel(level, x, y, all.data(), all.size());
+  return impl_->texel_reference(level, x, y);
 }
 
-IntervalTile RasterBounds::trace(const TraceRegion& region) const {
+IntervalTile RasterBounds::trace(const TraceRegion& region, DepthBoundsStats* stats,
+                                 std::atomic<uint64_t>* progress) const {
   DepthBoundsTracer::check_region(region);
+  const auto t_start = Clock::now();
   IntervalTile out;
   out.level = region.level;
   out.x0 = region.x0;
@@ -78,32 +500,52 @@ IntervalTile RasterBounds::trace(const TraceRegion& region) const {
   out.width = region.width;
   out.height = region.height;
   out.data.assign(size_t(region.width) * region.height, Interval{kLitDepth, kLitDepth});
-  const double side = std::ldexp(1.0, int(region.level));
   const uint32_t tx = (region.width + kTile - 1) / kTile, ty = (region.height + kTile - 1) / kTile;
-  // Bin: a triangle goes to every tile its box, grown by one texel, touches.
-  std::vector<std::vector<uint32_t>> bins(size_t(tx) * ty);
-  for (uint32_t t = 0; t < tri_.size(); ++t) {
-    const auto& bx = box_[t];
-    const double x0 = std::floor(bx[0] * side) - 1 - double(region.x0);
-    const double y0 = std::floor(bx[1] * side) - 1 - double(region.y0);
-    const double x1 = std::ceil(bx[2] * side) + 1 - double(region.x0);
-    const double y1 = std::ceil(bx[3] * side) + 1 - double(region.y0);
-    if (!(x1 >= 0 && y1 >= 0 && x0 < region.width && y0 < region.height)) continue;
-    const uint32_t i0 = uint32_t(std::max(0.0, x0)) / kTile;
-    const uint32_t j0 = uint32_t(std::max(0.0, y0)) / kTile;
-    const uint32_t i1 = uint32_t(std::min(double(region.width - 1), x1)) / kTile;
-    const uint32_t j1 = uint32_t(std::min(double(region.height - 1), y1)) / kTile;
-    for (uint32_t j = j0; j <= j1; ++j)
-      for (uint32_t i = i0; i <= i1; ++i) bins[size_t(j) * tx + i].push_back(t);
+  const std::vector<Candidate> cand = impl_->candidates(region);
+  // Bin (counting sort): a candidate goes to every tile its texel box touches.
+  std::vector<uint32_t> start(size_t(tx) * ty + 1, 0), cursor, ids;
+  for (int pass = 0; pass < 2; ++pass) {
+    for (uint32_t c = 0; c < cand.size(); ++c)
+      for (int32_t j = cand[c].y0 / int32_t(kTile); j <= cand[c].y1 / int32_t(kTile); ++j)
+        for (int32_t i = cand[c].x0 / int32_t(kTile); i <= cand[c].x1 / int32_t(kTile); ++i) {
+          const size_t b = size_t(j) * tx + size_t(i);
+          if (pass == 0) ++start[b + 1];
+          else ids[cursor[b]++] = c;
+        }
+    if (pass == 0) {
+      for (size_t b = 0; b + 1 < start.size(); ++b) start[b + 1] += start[b];
+      ids.resize(start.back());
+      cursor.assign(start.begin(), start.end() - 1);
+    }
   }
-  tbb::parallel_for(size_t(0), bins.size(), [&](size_t b) {
-    const auto& bin = bins[b];
-    if (bin.empty()) return;  // nothing in the tile's prism: lit, no per-texel work
+  auto bin_begin = [&](size_t b) { return size_t(start[b]); };
+  auto bin_end = [&](size_t b) { return size_t(start[b + 1]); };
+  std::atomic<uint64_t> hits{0}, closed{0}, fallbacks{0}, tests{0};
+  uint64_t empty_texels = 0;
+  for (size_t b = 0; b + 1 < start.size(); ++b)
+    if (bin_begin(b) == bin_end(b)) {
+      const uint32_t bi = uint32_t(b % tx) * kTile, bj = uint32_t(b / tx) * kTile;
+      empty_texels += uint64_t(std::min(kTile, region.width - bi)) * std::min(kTile, region.height - bj);
+    }
+  if (progress && empty_texels) progress->fetch_add(empty_texels, std::memory_order_relaxed);
+  tbb::parallel_for(size_t(0), size_t(tx) * ty, [&](size_t b) {
+    const size_t first = bin_begin(b), n = bin_end(b) - first;
+    if (n == 0) return;  // nothing in the tile's prism: lit, no per-texel work
     const uint32_t bi = uint32_t(b % tx) * kTile, bj = uint32_t(b / tx) * kTile;
-    for (uint32_t j = bj; j < std::min(bj + kTile, region.height); ++j)
-      for (uint32_t i = bi; i < std::min(bi + kTile, region.width); ++i)
-        out.at(i, j) = texel(region.level, region.x0 + i, region.y0 + j, bin.data(), bin.size());
+    DepthBoundsStats local;
+    impl_->tile(region, cand.data(), ids.data() + first, n, bi, bj, out, local);
+    hits += local.hits, closed += local.closed, fallbacks += local.fallbacks;
+    tests += local.traversals;
+    if (progress)
+      progress->fetch_add(uint64_t(std::min(kTile, region.width - bi)) * std::min(kTile, region.height - bj),
+                          std::memory_order_relaxed);
   });
+  if (stats) {
+    *stats = DepthBoundsStats{};
+    stats->texels = stats->rays = uint64_t(region.width) * region.height;
+    stats->traversals = tests, stats->hits = hits, stats->closed = closed, stats->fallbacks = fallbacks;
+    stats->seconds = std::chrono::duration<double>(Clock::now() - t_start).count();
+  }
   return out;
 }
 

@@ -1,17 +1,39 @@
-// A light-space rasterizer of canonical depth bounds (MH §3.1; GPU construction MH §5):
-// triangles are binned to screen tiles of texels by a conservative light-space box, and
-// on every texel a triangle may cover the canonical coverage predicate and the canonical
-// hit-list -> (lo, hi) function (canonical_coverage.hpp) are evaluated. Its output is a
-// function of (scene, light, level, x, y) alone, so any region shape gives bit-identical
-// bounds and any evaluator of the same definition agrees bit for bit.
+// A light-space rasterizer of canonical depth bounds (MH §3.1; the GPU construction of
+// MH §5 bins and rasterizes the same way): its output is the canonical coverage and
+// hit-list -> (lo, hi) function of canonical_coverage.hpp on every texel, bit for bit,
+// so any region shape gives the same bits and any evaluator of the definition agrees.
 //
-// Scope: sun lights (parallel texel rays); a spot light is refused with st::Error.
-// Vertices and rays are recentred on the scene AABB centre in double.
-// Thread safety: trace() is const; it parallelises over tiles with TBB.
+// How (raster_bounds.cpp):
+//   - once, at construction: per triangle the recentred double vertices, the canonical
+//     plane, the three directed edges' Plücker coefficients (edge value = C + o . N,
+//     affine in the ray origin o for the sun's fixed direction) with a bound on how far
+//     that fast value and the definition's own double evaluation can both be from the
+//     exact value; and a uniform grid over light space (u, v) of the triangles' boxes;
+//   - per region: the grid gives the candidate triangles, each is binned to the 16 x 16
+//     texel tiles its conservative texel box touches; a tile with nothing in its
+//     light-space prism stays lit ([1, 1]) without per-texel work;
+//   - per tile (TBB): the texel origins once (as LightSpace::texel_ray computes them),
+//     then each triangle visits only the row spans of its box where its edge values,
+//     affine in the texel, may still admit coverage (the sign a covered texel's edges
+//     share is known per triangle), classified by a branch-free loop; an edge whose fast
+//     value lies beyond the bound has the definition's sign, otherwise the texel is
+//     decided by the definition itself (canonical_cover);
+//     covered texels append (t, triangle) to per-texel fragment lists held in per-thread
+//     scratch (nothing is allocated per texel once the scratch has grown), which are
+//     sorted and reduced by canonical_interval(). A tile without closed triangles keeps
+//     only the nearest hit.
+//
+// Scope: sun lights (parallel texel rays) and the closed-object interval rule; a spot
+// light is refused with st::Error (the Embree tracer handles it).
+// Assumption shared with every binning rasterizer: the definition's double evaluation
+// never covers a texel centre more than a texel outside the triangle's light-space box
+// (it would take edges shorter than about 1e-9 of the scene at level 20).
+// Thread safety: trace() is const and may run concurrently; it parallelises over tiles.
+// Errors: st::Error for bad indices, non-finite vertices, spot lights, bad regions.
 #pragma once
-#include <array>
+#include <atomic>
 #include <cstdint>
-#include <vector>
+#include <memory>
 
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/scene.hpp"
@@ -25,22 +47,27 @@ class RasterBounds {
   static constexpr uint32_t kTile = 16;  // texels a side of a binning tile
 
   RasterBounds(const Scene& scene, const LightSpace& light);
+  ~RasterBounds();
+  RasterBounds(const RasterBounds&) = delete;
+  RasterBounds& operator=(const RasterBounds&) = delete;
+
+  // False when the scene has no closed mesh (hi = lo everywhere).
+  bool traces_exit_depths() const;
+  double setup_seconds() const;  // the per-triangle setup and the grid
+  uint64_t triangle_count() const;
 
   // Bounds of a region (same limits and messages as DepthBoundsTracer::check_region).
-  IntervalTile trace(const TraceRegion& region) const;
-  // Reference: the same definition on one texel with every triangle as a candidate.
+  // `progress`, if given, gets the finished texels added as tiles complete; `stats` this
+  // call's figures (rays = texels; traversals counts triangle-texel tests).
+  IntervalTile trace(const TraceRegion& region, DepthBoundsStats* stats = nullptr,
+                     std::atomic<uint64_t>* progress = nullptr) const;
+  // Reference: the same definition on one texel with every triangle as a candidate,
+  // straight from canonical_coverage.hpp (no setup, no bounds, no binning).
   Interval brute_force_texel(uint32_t level, uint64_t x, uint64_t y) const;
 
  private:
-  Interval texel(uint32_t level, uint64_t x, uint64_t y, const uint32_t* cand, size_t n) const;
-
-  LightSpace light_;
-  Vec3d centre_;
-  std::vector<Vec3d> v_;                       // recentred vertices
-  std::vector<std::array<uint32_t, 3>> tri_;   // triangle vertex indices
-  std::vector<uint32_t> mesh_;                 // mesh of each triangle
-  std::vector<uint8_t> closed_;                // 1 when its mesh is closed
-  std::vector<std::array<double, 4>> box_;     // light-space u0, v0, u1, v1
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
 };
 
 }  // namespace st
