@@ -154,9 +154,9 @@ VisibilityFunction compress(const VisibilityFunction& in, double epsilon) {
   return out;
 }
 
-VisibilityFunction average(std::span<const VisibilityFunction* const> in,
-                           std::span<const double> weights) {
-  if (in.size() != weights.size() || in.empty())
+// The checks average() and average_sweep() share; returns the weights' sum.
+static double checked_weight_sum(size_t functions, std::span<const double> weights) {
+  if (functions != weights.size() || functions == 0)
     throw Error("deep average: one weight per function, at least one function");
   double sum = 0;
   for (double w : weights) {
@@ -164,6 +164,12 @@ VisibilityFunction average(std::span<const VisibilityFunction* const> in,
     sum += w;
   }
   if (!(sum > 0)) throw Error("deep average: the weights sum to 0");
+  return sum;
+}
+
+VisibilityFunction average(std::span<const VisibilityFunction* const> in,
+                           std::span<const double> weights) {
+  const double sum = checked_weight_sum(in.size(), weights);
   VisibilityFunction out;
   std::vector<float> depths;
   for (const VisibilityFunction* f : in) {
@@ -195,14 +201,7 @@ VisibilityFunction average(std::span<const VisibilityFunction* const> in,
 
 VisibilityFunction average_sweep(std::span<const VisibilityFunction* const> in,
                                  std::span<const double> weights) {
-  if (in.size() != weights.size() || in.empty())
-    throw Error("deep average: one weight per function, at least one function");
-  double sum = 0;
-  for (double w : weights) {
-    if (!(w >= 0) || !std::isfinite(w)) throw Error("deep average: a weight is not >= 0");
-    sum += w;
-  }
-  if (!(sum > 0)) throw Error("deep average: the weights sum to 0");
+  const double sum = checked_weight_sum(in.size(), weights);
   struct Event {
     float depth;
     uint32_t k, first, last;  // function, its first and last vertex at this depth
