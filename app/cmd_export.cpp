@@ -16,6 +16,17 @@
 namespace st::cli {
 namespace {
 
+// --region (default: the whole map) checked against the map of `level`.
+Rect region_of(const std::string& region, uint32_t level) {
+  const uint64_t side = uint64_t(1) << level;
+  Rect r{0, 0, side, side};
+  if (!region.empty()) r = parse_rect("--region", region);
+  if (r.w == 0 || r.h == 0 || r.x >= side || r.y >= side || r.w > side - r.x || r.h > side - r.y)
+    throw Error("--region lies outside the " + std::to_string(side) + "^2 map of level " +
+                std::to_string(level));
+  return r;
+}
+
 struct ExportArgs {
   std::string pack, region, out;
   uint32_t level = 0;
@@ -38,12 +49,7 @@ void run_deep(const ExportArgs& a) {
   else if (a.up != "y") throw Error("--up: expected y or z, got '" + a.up + "'");
   const uint32_t level = a.level_set ? a.level : 8;
   if (level > kMaxLevel) throw Error("--level " + std::to_string(level) + " exceeds " + std::to_string(kMaxLevel));
-  const uint64_t side = uint64_t(1) << level;
-  Rect r{0, 0, side, side};
-  if (!a.region.empty()) r = parse_rect("--region", a.region);
-  if (r.w == 0 || r.h == 0 || r.x >= side || r.y >= side || r.w > side - r.x || r.h > side - r.y)
-    throw Error("--region lies outside the " + std::to_string(side) + "^2 map of level " +
-                std::to_string(level));
+  const Rect r = region_of(a.region, level);
   if (r.w * r.h > kMaxDeepRegion)
     throw Error("export --deep: region " + std::to_string(r.w) + "x" + std::to_string(r.h) +
                 " exceeds 1024^2 texels; pass a smaller --region or a coarser --level");
@@ -80,12 +86,7 @@ void run(const ExportArgs& a) {
   if (level > reader->map_level())
     throw Error("--level " + std::to_string(level) + " exceeds the pack's finest level " +
                 std::to_string(reader->map_level()));
-  const uint64_t side = uint64_t(1) << level;
-  Rect r{0, 0, side, side};
-  if (!a.region.empty()) r = parse_rect("--region", a.region);
-  if (r.w == 0 || r.h == 0 || r.x >= side || r.y >= side || r.w > side - r.x || r.h > side - r.y)
-    throw Error("--region lies outside the " + std::to_string(side) + "^2 map of level " +
-                std::to_string(level));
+  const Rect r = region_of(a.region, level);
   if (r.w * r.h > uint64_t(8192) * 8192)
     throw Error("export: region " + std::to_string(r.w) + "x" + std::to_string(r.h) +
                 " exceeds 8192^2 texels; pass a smaller --region or a coarser --level");
