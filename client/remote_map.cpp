@@ -197,11 +197,50 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
   // tap's region (one walk) often holds the next kernels along a row.
   const uint64_t kx0 = pcf_tap(x, 0, r, side), kx1 = pcf_tap(x, r - 1, r, side);
   const uint64_t ky0 = pcf_tap(y, 0, r, side), ky1 = pcf_tap(y, r - 1, r, side);
+  LookupScratch::Taps& w = sc.taps[level & 1];
+  const bool same_rows = w.r == r && w.level == level && w.y == y;
+  // A window on this kernel's rows and every tap `value` (a kernel inside one region).
+  auto keep_uniform = [&](float value) {
+    w.level = level, w.r = r, w.y = y;
+    for (uint32_t i = 0; i < r; ++i) w.col[i] = pcf_tap(x, i, r, side);
+    std::fill_n(w.depth.begin(), r * r, value);
+  };
   for (int attempt = 0; attempt < 2; ++attempt) {
     const LookupScratch::Region* g = sc.find(level, kx0, ky0);
-    if (g && g->holds(level, kx1, ky1)) return receiver <= sc.answer(*g) ? 1.0f : 0.0f;
-    if (attempt == 0) depth_shared(level, pcf_tap(x, (r - 1) / 2, r, side), pcf_tap(y, (r - 1) / 2, r, side), sc);
+    if (g && g->holds(level, kx1, ky1)) {
+      const float value = sc.answer(*g);
+      keep_uniform(value);
+      return receiver <= value ? 1.0f : 0.0f;
+    }
+    if (attempt == 1) break;
+    if (same_rows) {
+      // Along a row of kernels: the columns the last kernel had are kept, the new ones
+      // read tap by tap (each through the kept regions, so a column inside one region
+      // costs one walk at most). Every tap's depth is depth()'s, so the count is exact.
+      std::array<uint64_t, kMaxPcf> col;
+      std::array<float, kMaxPcf * kMaxPcf> depth;
+      for (uint32_t i = 0; i < r; ++i) {
+        const uint64_t tx = pcf_tap(x, i, r, side);
+        col[i] = tx;
+        uint32_t j = 0;
+        while (j < r && w.col[j] != tx) ++j;
+        if (j < r) {
+          std::copy_n(w.depth.begin() + j * r, r, depth.begin() + i * r);
+        } else {
+          for (uint32_t k = 0; k < r; ++k) depth[i * r + k] = depth_shared(level, tx, pcf_tap(y, k, r, side), sc);
+        }
+      }
+      uint32_t lit_taps = 0;
+      for (uint32_t t = 0; t < r * r; ++t) lit_taps += receiver <= depth[t] ? 1u : 0u;
+      w.col = col;
+      std::copy_n(depth.begin(), r * r, w.depth.begin());
+      return float(lit_taps) / float(r * r);
+    }
+    depth_shared(level, pcf_tap(x, (r - 1) / 2, r, side), pcf_tap(y, (r - 1) / 2, r, side), sc);
   }
+  // A new row of kernels: the next kernel on it fills the window (above).
+  w.level = level, w.r = r, w.y = y;
+  std::fill_n(w.col.begin(), r, ~uint64_t(0));
   // Where the centre's region is its texel alone (fine detail), few taps would share
   // regions: a kernel inside the centre's tile (or leaving it only across the map's
   // edges, where the tile's clamp is the map's) runs the tile's own shared walk (MH §3.3
