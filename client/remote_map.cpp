@@ -202,7 +202,13 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
   // A window on this kernel's rows and every tap `value` (a kernel inside one region).
   auto keep_uniform = [&](float value) {
     w.level = level, w.r = r, w.y = y;
-    for (uint32_t i = 0; i < r; ++i) w.col[i] = pcf_tap(x, i, r, side);
+    std::fill_n(w.col.begin(), r, ~uint64_t(0));
+    uint32_t slot = uint32_t(kx0 % r);  // column tx in slot tx % r, as below
+    for (uint32_t i = 0; i < r; ++i) {
+      const uint64_t tx = pcf_tap(x, i, r, side);
+      w.col[slot] = tx;
+      if (i + 1 < r && pcf_tap(x, i + 1, r, side) != tx) slot = slot + 1 == r ? 0 : slot + 1;
+    }
     std::fill_n(w.depth.begin(), r * r, value);
   };
   for (int attempt = 0; attempt < 2; ++attempt) {
@@ -214,26 +220,24 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
     }
     if (attempt == 1) break;
     if (same_rows) {
-      // Along a row of kernels: the columns the last kernel had are kept, the new ones
-      // read tap by tap (each through the kept regions, so a column inside one region
-      // costs one walk at most). Every tap's depth is depth()'s, so the count is exact.
-      std::array<uint64_t, kMaxPcf> col;
-      std::array<float, kMaxPcf * kMaxPcf> depth;
+      // Along a row of kernels: column tx lives in slot tx % r (a kernel's r columns are
+      // consecutive, or repeat at a clamped edge, so they never share a slot), the
+      // columns the last kernels had are kept there, the new ones read tap by tap (each
+      // through the kept regions, so a column inside one region costs one walk at most).
+      // Every tap's depth is depth()'s, so the count is exact.
+      uint32_t lit_taps = 0;
+      uint32_t slot = uint32_t(kx0 % r);
+      uint64_t prev = kx0;
       for (uint32_t i = 0; i < r; ++i) {
         const uint64_t tx = pcf_tap(x, i, r, side);
-        col[i] = tx;
-        uint32_t j = 0;
-        while (j < r && w.col[j] != tx) ++j;
-        if (j < r) {
-          std::copy_n(w.depth.begin() + j * r, r, depth.begin() + i * r);
-        } else {
-          for (uint32_t k = 0; k < r; ++k) depth[i * r + k] = depth_shared(level, tx, pcf_tap(y, k, r, side), sc);
+        if (tx != prev) slot = slot + 1 == r ? 0 : slot + 1, prev = tx;
+        float* col = w.depth.data() + slot * r;
+        if (w.col[slot] != tx) {
+          w.col[slot] = tx;
+          for (uint32_t k = 0; k < r; ++k) col[k] = depth_shared(level, tx, pcf_tap(y, k, r, side), sc);
         }
+        for (uint32_t k = 0; k < r; ++k) lit_taps += receiver <= col[k] ? 1u : 0u;
       }
-      uint32_t lit_taps = 0;
-      for (uint32_t t = 0; t < r * r; ++t) lit_taps += receiver <= depth[t] ? 1u : 0u;
-      w.col = col;
-      std::copy_n(depth.begin(), r * r, w.depth.begin());
       return float(lit_taps) / float(r * r);
     }
     depth_shared(level, pcf_tap(x, (r - 1) / 2, r, side), pcf_tap(y, (r - 1) / 2, r, side), sc);
