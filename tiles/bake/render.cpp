@@ -211,69 +211,33 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
   // Lookups in batches (Evaluator::pcf_batch: the client's cache takes its lock and walks
   // the top of its page table once per batch; neighbouring pixels share tiles). With
   // pixel_angle set, each receiver asks two levels and blends them (filter_level.hpp).
-  // Per chunk of pixels: the lit receivers listed, their levels, then (sun) the normal
-  // offset and the light transform as flat loops over the chunk (the operations of
-  // lookup_point and LightSpace::to_light, in their order: the same doubles), then one
-  // batch of queries.
   const LightSpace& light = tracer.light();
   const uint32_t kr = 2 * o.pcf_radius + 1;
-  const bool sun = light.kind() == LightKind::sun;
-  const Vec3d lo = light.origin(), au = light.axis_u(), av = light.axis_v(), lf = light.forward();
-  const double extent = light.extent_uv(), near = light.near_plane(), depth_range = light.far_plane() - near;
-  const double offset_closed = kClosedReceiverOffsetTexels + o.pcf_radius;
-  const double offset_open = kOpenReceiverOffsetTexels + o.pcf_radius;
-  constexpr size_t kChunk = 4096;
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, kChunk), [&](const tbb::blocked_range<size_t>& r) {
-    const size_t m = r.size();
-    std::vector<uint32_t> lit;          // the receivers that ask, then the pixel of each query's receiver
-    std::vector<FilterLevels> levels;   // per lit receiver
-    std::vector<double> u(m), v(m), d(m);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
     std::vector<PcfQuery> queries;
-    std::vector<float> blend, answers;  // trilinear weight per asking receiver (NaN: one level only)
-    std::vector<uint32_t> index;
-    lit.reserve(m), levels.reserve(m), queries.reserve(2 * m), index.reserve(m), blend.reserve(m);
-    for (size_t i = r.begin(); i < r.end(); ++i)
-      if (rec[i].hit && rec[i].n_dot_l > 0) lit.push_back(uint32_t(i));  // others: vis 0
-    const size_t k_lit = lit.size();
-    for (size_t k = 0; k < k_lit; ++k)
-      levels.push_back(o.pixel_angle > 0 ? filter_levels(L, receiver_footprint_texels(rec[lit[k]], light, L, o.pixel_angle))
-                                         : FilterLevels{L, L, 0.0f});
-    if (sun) {
-      // lookup_point for a sun: texel = extent / 2^fine; p = pos + normal * offset * texel.
-      for (size_t k = 0; k < k_lit; ++k) {
-        const Receiver& rc = rec[lit[k]];
-        const double texel = extent / double(uint64_t(1) << levels[k].fine);
-        const double off = rc.closed ? offset_closed : offset_open;
-        const double px = rc.pos.x + rc.normal.x * off * texel;
-        const double py = rc.pos.y + rc.normal.y * off * texel;
-        const double pz = rc.pos.z + rc.normal.z * off * texel;
-        const double rx = px - lo.x, ry = py - lo.y, rz = pz - lo.z;
-        u[k] = (rx * au.x + ry * au.y + rz * au.z) / extent;
-        v[k] = (rx * av.x + ry * av.y + rz * av.z) / extent;
-        d[k] = ((rx * lf.x + ry * lf.y + rz * lf.z) - near) / depth_range;
-      }
-    } else {
-      for (size_t k = 0; k < k_lit; ++k) {
-        const LightPoint lp = lookup_point(rec[lit[k]], light, levels[k].fine, o.pcf_radius);
-        u[k] = lp.u, v[k] = lp.v, d[k] = lp.d;
-      }
-    }
-    for (size_t k = 0; k < k_lit; ++k) {
-      const size_t i = lit[k];
-      if (!(u[k] >= 0 && u[k] < 1 && v[k] >= 0 && v[k] < 1)) {
+    std::vector<uint32_t> index;      // the pixel of each receiver that asks
+    std::vector<float> blend, answers;  // its trilinear weight (NaN: one level only)
+    queries.reserve(2 * r.size()), index.reserve(r.size()), blend.reserve(r.size());
+    for (size_t i = r.begin(); i < r.end(); ++i) {
+      const Receiver& rc = rec[i];
+      if (!rc.hit || rc.n_dot_l <= 0) continue;  // vis 0
+      FilterLevels f{L, L, 0.0f};
+      if (o.pixel_angle > 0) f = filter_levels(L, receiver_footprint_texels(rc, light, L, o.pixel_angle));
+      // The normal offset in texels of the level filtered (map_visibility_filtered).
+      const LightPoint lp = lookup_point(rc, light, f.fine, o.pcf_radius);
+      if (!(lp.u >= 0 && lp.u < 1 && lp.v >= 0 && lp.v < 1)) {
         vis[i] = 1;
         continue;
       }
-      const FilterLevels f = levels[k];
       // (u, v) in [0, 1): u * 2^level is exact and below 2^level, so truncating it is
       // LightSpace::texel_of's floor, without its library calls.
       const double fine_side = double(uint64_t(1) << f.fine);
-      queries.push_back({uint64_t(u[k] * fine_side), uint64_t(v[k] * fine_side), f.fine, kr, float(d[k])});
+      queries.push_back({uint64_t(lp.u * fine_side), uint64_t(lp.v * fine_side), f.fine, kr, float(lp.d)});
       index.push_back(uint32_t(i));
       blend.push_back(f.t == 0.0f ? std::numeric_limits<float>::quiet_NaN() : f.t);
       if (f.t != 0.0f) {
-        const auto tc = LightSpace::texel_of(f.coarse, u[k], v[k]);
-        queries.push_back({tc[0], tc[1], f.coarse, kr, float(d[k])});
+        const auto tc = LightSpace::texel_of(f.coarse, lp.u, lp.v);
+        queries.push_back({tc[0], tc[1], f.coarse, kr, float(lp.d)});
       }
     }
     answers.resize(queries.size());
