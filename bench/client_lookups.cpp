@@ -6,7 +6,7 @@
 //
 //   bench_client_lookups [--scene city] [--light sun:azimuth=30,elevation=50] [--res 4k]
 //                        [--encodings mh,mmh,dagmh] [--tile-bytes 8192] [--lookups 262144]
-//                        [--batch 1024] [--reps 5] [--threads 1,2] [--size 960x540]
+//                        [--batch 1024] [--reps 5] [--render-reps 3] [--threads 1,2] [--size 960x540]
 //                        [--camera pos=-350,220,-380,target=0,0,0,fov=50] [--clock cpu|wall] [--quick]
 //                        [--json PATH]
 //
@@ -162,7 +162,7 @@ int main(int argc, char** argv) {
   uint32_t level = 12, tile_bytes = 8192;
   size_t count = size_t(1) << 18, batch = 1024;
   int reps = 5, render_reps = 3;
-  bool quick = false, level_given = false, use_cpu = true;
+  bool quick = false, level_given = false, use_cpu = true, render_reps_given = false;
   try {
     for (int i = 1; i < argc; ++i) {
       std::string a = argv[i];
@@ -178,6 +178,7 @@ int main(int argc, char** argv) {
       else if (a == "--lookups") count = size_t(std::max(1024ll, std::stoll(next())));
       else if (a == "--batch") batch = size_t(std::max(1ll, std::stoll(next())));
       else if (a == "--reps") reps = std::max(1, std::stoi(next()));
+      else if (a == "--render-reps") render_reps = std::max(1, std::stoi(next())), render_reps_given = true;
       else if (a == "--threads") {
         thread_counts.clear();
         for (const auto& t : split_list(next())) thread_counts.push_back(unsigned(std::clamp(std::stoi(t), 1, 64)));
@@ -192,7 +193,8 @@ int main(int argc, char** argv) {
       }
       else
         throw st::Error("usage: bench_client_lookups [--scene S] [--light L] [--res 4k] [--encodings mh,mmh,dagmh] "
-                        "[--tile-bytes N] [--lookups N] [--batch N] [--reps R] [--threads 1,2] [--size WxH] "
+                        "[--tile-bytes N] [--lookups N] [--batch N] [--reps R] [--render-reps R] [--threads 1,2] "
+                        "[--size WxH] "
                         "[--camera SPEC] [--clock cpu|wall] [--quick] [--json PATH]");
     }
     if (scene_spec.find(':') == std::string::npos) scene_spec = "procedural:" + scene_spec;
@@ -200,7 +202,7 @@ int main(int argc, char** argv) {
       if (!level_given) level = 11;
       count = std::min<size_t>(count, size_t(1) << 16);
       reps = std::min(reps, 3);
-      render_reps = 1;
+      if (!render_reps_given) render_reps = 1;
     }
     if (level < 9) throw st::Error("--res must be at least 512");
     uint32_t width = 0, height = 0;

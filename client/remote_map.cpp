@@ -197,11 +197,54 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
   // tap's region (one walk) often holds the next kernels along a row.
   const uint64_t kx0 = pcf_tap(x, 0, r, side), kx1 = pcf_tap(x, r - 1, r, side);
   const uint64_t ky0 = pcf_tap(y, 0, r, side), ky1 = pcf_tap(y, r - 1, r, side);
+  LookupScratch::Taps& w = sc.taps[level & 1];
+  const bool same_rows = w.r == r && w.level == level && w.y == y;
+  // A window on this kernel's rows and every tap `value` (a kernel inside one region).
+  auto keep_uniform = [&](float value) {
+    w.level = level, w.r = r, w.y = y;
+    std::fill_n(w.col.begin(), r, ~uint64_t(0));
+    uint32_t slot = uint32_t(kx0 % r);  // column tx in slot tx % r, as below
+    for (uint32_t i = 0; i < r; ++i) {
+      const uint64_t tx = pcf_tap(x, i, r, side);
+      w.col[slot] = tx;
+      if (i + 1 < r && pcf_tap(x, i + 1, r, side) != tx) slot = slot + 1 == r ? 0 : slot + 1;
+    }
+    std::fill_n(w.depth.begin(), r * r, value);
+  };
   for (int attempt = 0; attempt < 2; ++attempt) {
     const LookupScratch::Region* g = sc.find(level, kx0, ky0);
-    if (g && g->holds(level, kx1, ky1)) return receiver <= sc.answer(*g) ? 1.0f : 0.0f;
-    if (attempt == 0) depth_shared(level, pcf_tap(x, (r - 1) / 2, r, side), pcf_tap(y, (r - 1) / 2, r, side), sc);
+    if (g && g->holds(level, kx1, ky1)) {
+      const float value = sc.answer(*g);
+      keep_uniform(value);
+      return receiver <= value ? 1.0f : 0.0f;
+    }
+    if (attempt == 1) break;
+    if (same_rows) {
+      // Along a row of kernels: column tx lives in slot tx % r (a kernel's r columns are
+      // consecutive, or repeat at a clamped edge, so they never share a slot), the
+      // columns the last kernels had are kept there, the new ones read tap by tap (each
+      // through the kept regions, so a column inside one region costs one walk at most).
+      // Every tap's depth is depth()'s, so the count is exact.
+      uint32_t lit_taps = 0;
+      uint32_t slot = uint32_t(kx0 % r);
+      uint64_t prev = kx0;
+      for (uint32_t i = 0; i < r; ++i) {
+        const uint64_t tx = pcf_tap(x, i, r, side);
+        if (tx != prev) slot = slot + 1 == r ? 0 : slot + 1, prev = tx;
+        float* col = w.depth.data() + slot * r;
+        if (w.col[slot] != tx) {
+          w.col[slot] = tx;
+          for (uint32_t k = 0; k < r; ++k) col[k] = depth_shared(level, tx, pcf_tap(y, k, r, side), sc);
+        }
+        for (uint32_t k = 0; k < r; ++k) lit_taps += receiver <= col[k] ? 1u : 0u;
+      }
+      return float(lit_taps) / float(r * r);
+    }
+    depth_shared(level, pcf_tap(x, (r - 1) / 2, r, side), pcf_tap(y, (r - 1) / 2, r, side), sc);
   }
+  // A new row of kernels: the next kernel on it fills the window (above).
+  w.level = level, w.r = r, w.y = y;
+  std::fill_n(w.col.begin(), r, ~uint64_t(0));
   // Where the centre's region is its texel alone (fine detail), few taps would share
   // regions: a kernel inside the centre's tile (or leaving it only across the map's
   // edges, where the tile's clamp is the map's) runs the tile's own shared walk (MH §3.3

@@ -151,6 +151,18 @@ class RemoteMap final : public Evaluator {
     static constexpr uint32_t kRegions = 8;
     std::array<Region, kRegions> regions;  // the first `used` are kept
     uint32_t used = 0, last = 0, next = 0;  // how many; the one answered last; the one replaced next
+    // The tap depths of the last kernels (pcf_shared), one window per level parity (a
+    // filtered lookup alternates two adjacent levels): a kernel on the same row of taps
+    // reuses the columns it shares with the last one and reads only its new ones, so a
+    // kernel sliding along a row reads r taps, not r * r (the depths are the map's, exact
+    // while the lock is held). r == 0: no window yet.
+    struct Taps {
+      uint32_t level, r = 0;
+      uint64_t y;                               // the kernel's centre row: same y, same rows
+      std::array<uint64_t, kMaxPcf> col;        // each column's tap x (~0: none)
+      std::array<float, kMaxPcf * kMaxPcf> depth;  // [column * r + row]
+    };
+    std::array<Taps, 2> taps;
     static constexpr size_t kMaxMisses = 8;  // more distinct misses in one call: asked again later
     std::array<uint64_t, kMaxMisses> miss_tile{};
     std::array<GridEntry, kMaxMisses> miss_entry{};

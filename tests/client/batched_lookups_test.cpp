@@ -84,6 +84,24 @@ std::string pcf_difference(const RemoteMap& m, uint32_t level) {
                ") r " + std::to_string(q.r);
     }
   }
+  // One kernel size per batch, rows in scan order: each kernel shares all columns but one
+  // with the last (the client's tap window), across tile borders, missing tiles and the
+  // map's clamped edges; the widest on every fifth row.
+  for (uint32_t l : {level, level - 2})
+    for (uint32_t r : {2u, 5u, 9u}) {
+      std::vector<PcfQuery> queries;
+      for (uint64_t y = 0; y < (uint64_t(1) << l); y += r == 9 ? 5 : 1)
+        for (uint64_t x = 0; x < (uint64_t(1) << l); ++x)
+          queries.push_back({x, y, l, r, m.depth(l, x, (y + x % 3) & ((1u << l) - 1))});
+      std::vector<float> got(queries.size());
+      m.pcf_batch(queries, got);
+      for (size_t i = 0; i < queries.size(); ++i) {
+        const PcfQuery& q = queries[i];
+        if (bits(got[i]) != bits(m.Evaluator::pcf(q.level, q.x, q.y, q.r, q.receiver)))
+          return "row batch: level " + std::to_string(l) + " (" + std::to_string(q.x) + ", " + std::to_string(q.y) +
+                 ") r " + std::to_string(q.r);
+      }
+    }
   for (uint32_t l : {level, level - 2})
     for (uint64_t y = 0; y < (uint64_t(1) << l); ++y)
       for (uint64_t x = 0; x < (uint64_t(1) << l); ++x)
