@@ -123,7 +123,15 @@ struct Candidate {
 
 // Per-thread scratch for one tile: texel origins and fragment lists (their capacity is
 // kept from tile to tile, so nothing is allocated per texel once warm).
+// A candidate of the skip test (RasterSkip): its t range over the tile's texel centres
+// (conservative) and whether it covers every texel centre of the tile, or none.
+struct SkipInfo {
+  uint32_t setup;
+  double tmin, tmax;
+};
+
 struct Scratch {
+  std::vector<SkipInfo> others, fronts, backs;  // skip_tile()
   double ox[kTileTexels], oy[kTileTexels], oz[kTileTexels];
   double nearest[kTileTexels];
   std::vector<CanonicalHit> frags[kTileTexels];
@@ -147,6 +155,8 @@ struct RasterBounds::Impl {
   std::vector<uint32_t> grid_start, grid_items, big;
   std::vector<std::array<uint32_t, 2>> grid_first;  // per setup: first grid cell (gx, gy)
   mutable tbb::enumerable_thread_specific<Scratch> scratch;
+  RasterSkip skip = RasterSkip::exact;
+  mutable std::atomic<uint64_t> skipped{0};
 
   Impl(const Scene& scene, const LightSpace& l);
   std::array<int64_t, 4> grid_range(double u0, double v0, double u1, double v1) const {
@@ -159,6 +169,8 @@ struct RasterBounds::Impl {
   std::vector<Candidate> candidates(const TraceRegion& r) const;
   void tile(const TraceRegion& r, const Candidate* cand, const uint32_t* ids, size_t n,
             uint32_t bi, uint32_t bj, IntervalTile& out, DepthBoundsStats& st) const;
+  bool skip_tile(const Candidate* cand, const uint32_t* ids, size_t n, uint32_t bi, uint32_t bj,
+                 uint32_t tw, uint32_t th, Scratch& s, IntervalTile& out, DepthBoundsStats& st) const;
   Interval texel_reference(uint32_t level, uint64_t x, uint64_t y) const;
 };
 
@@ -349,6 +361,10 @@ void RasterBounds::Impl::tile(const TraceRegion& r, const Candidate* cand, const
       }
     }
   }
+  if (skip != RasterSkip::off && any_closed && skip_tile(cand, ids, n, bi, bj, tw, th, s, out, st)) {
+    skipped.fetch_add(uint64_t(tw) * th, std::memory_order_relaxed);
+    return;
+  }
   bool lists = false;
   for (size_t c = 0; c < n; ++c) lists |= setups[cand[ids[c]].setup].closed;
   for (uint32_t k = 0; k < kTileTexels; ++k) {
@@ -458,6 +474,110 @@ void RasterBounds::Impl::tile(const TraceRegion& r, const Candidate* cand, const
     }
 }
 
+// The skip test (RasterSkip, raster_bounds.hpp). Soundness, per claim:
+//  - edge signs: the exact edge value c + o . n is affine in the exact texel origin, itself
+//    affine in the texel index, so over the tile's texel centres it lies between its values
+//    at the four corner texels. A corner's fast value beyond 2 bound + the origins'
+//    rounding (as the row spans' margin) gives every texel centre of the tile the
+//    definition's sign: `covers` (all three edges, sigma's side) or `misses` (one edge on
+//    the other side at all four corners). Triangles with sigma == 0 are never either.
+//  - depths: t = (pd - n . o) / den is affine in o too, so the corner values, padded by
+//    the rounding of that expression and of the origins, bound every texel's t.
+//  - the hit list: non-candidates never cover a tile texel (binning); a candidate that
+//    misses is not in it; so a texel's list is F (entering, t in [0, 1]), B (leaving, same
+//    closed mesh, t strictly after F's), open hits strictly after F (ignored while inside,
+//    or after the exit), closed hits beyond B by more than the touching window (the run
+//    ends before them): canonical_interval() gives exactly lo_t = t_F, hi_t = t_B.
+bool RasterBounds::Impl::skip_tile(const Candidate* cand, const uint32_t* ids, size_t n, uint32_t bi,
+                                   uint32_t bj, uint32_t tw, uint32_t th, Scratch& s, IntervalTile& out,
+                                   DepthBoundsStats& st) const {
+  const uint32_t corner[4] = {0, tw - 1, (th - 1) * kTile, (th - 1) * kTile + tw - 1};
+  constexpr uint32_t kNone = UINT32_MAX;
+  SkipInfo F{kNone, 0, 0}, B{kNone, 0, 0};
+  s.others.clear();
+  auto& fronts = s.fronts;  // covering front / back faces of closed meshes
+  auto& backs = s.backs;
+  fronts.clear(), backs.clear();
+  for (size_t c = 0; c < n; ++c) {
+    const uint32_t si = cand[ids[c]].setup;
+    const TriSetup& T = setups[si];
+    bool covers = T.sigma != 0, misses = false;
+    for (int k = 0; k < 3; ++k) {
+      const EdgeSetup& E = T.e[k];
+      const Vec3d an{std::fabs(E.nx), std::fabs(E.ny), std::fabs(E.nz)};
+      const double m0 = 2 * E.bound + 64 * dot(o_round, an);
+      bool all_in = true, all_out = T.sigma != 0;
+      for (uint32_t q : corner) {
+        const double val = T.sigma * (E.c + (s.ox[q] * E.nx + s.oy[q] * E.ny + s.oz[q] * E.nz));
+        const double m = m0 + 0x1p-40 * std::fabs(val);
+        all_in &= val > m;
+        all_out &= val < -m;
+      }
+      covers &= all_in;
+      misses |= all_out;
+    }
+    if (misses) continue;
+    // t over the tile: corner values, padded.
+    double tmin = INFINITY, tmax = -INFINITY, mag = std::fabs(T.pd);
+    const Vec3d an{std::fabs(T.nx), std::fabs(T.ny), std::fabs(T.nz)};
+    double extra = 0;
+    for (uint32_t q : corner) {
+      const double t = (T.pd - (T.nx * s.ox[q] + T.ny * s.oy[q] + T.nz * s.oz[q])) / T.den;
+      tmin = std::min(tmin, t), tmax = std::max(tmax, t);
+      extra = std::max(extra, an.x * std::fabs(s.ox[q]) + an.y * std::fabs(s.oy[q]) + an.z * std::fabs(s.oz[q]));
+    }
+    const double pad = ((mag + extra) * 0x1p-44 + 64 * dot(an, o_round)) / std::fabs(T.den) +
+                       0x1p-44 * std::max(std::fabs(tmin), std::fabs(tmax)) + 0x1p-1000;
+    if (!std::isfinite(tmin) || !std::isfinite(tmax) || !std::isfinite(pad)) return false;
+    const SkipInfo info{si, tmin - pad, tmax + pad};
+    if (covers && T.closed) (T.sigma < 0 ? fronts : backs).push_back(info);
+    else s.others.push_back(info);
+  }
+  // F: the nearest covering front face; B: the nearest covering back face of its mesh after it.
+  for (const SkipInfo& f : fronts)
+    if (F.setup == kNone || f.tmin < F.tmin) F = f;
+  if (F.setup == kNone || !(F.tmin >= 0)) return false;
+  const uint32_t mesh_f = setups[F.setup].mesh;
+  for (const SkipInfo& b : backs)
+    if (setups[b.setup].mesh == mesh_f && b.tmin > F.tmax && (B.setup == kNone || b.tmin < B.tmin)) B = b;
+  if (B.setup == kNone || !(B.tmax <= 1)) return false;
+  for (const SkipInfo& f : fronts)
+    if (f.setup != F.setup) s.others.push_back(f);
+  for (const SkipInfo& b : backs)
+    if (b.setup != B.setup) s.others.push_back(b);
+  const double touch = ExitDepthRay::kTouchDouble * 1.0;  // canonical_interval(..., 1.0)
+  const double beyond = B.tmax + touch + 0x1p-40 * (std::fabs(B.tmax) + touch);
+  for (const SkipInfo& o : s.others) {
+    if (setups[o.setup].closed ? !(o.tmin > beyond) : !(o.tmin > F.tmax)) return false;
+  }
+  const TriSetup& TF = setups[F.setup];
+  const TriSetup& TB = setups[B.setup];
+  if (skip == RasterSkip::narrow) {
+    const float a = canonical_depth(light, F.tmax), b = canonical_depth(light, B.tmin);
+    if (a <= b) {
+      for (uint32_t j = 0; j < th; ++j)
+        for (uint32_t i = 0; i < tw; ++i) out.at(bi + i, bj + j) = Interval{a, b};
+      const uint64_t texels = uint64_t(tw) * th;
+      st.hits += texels;
+      st.closed += a < b ? texels : 0;
+      return true;
+    }
+  }
+  for (uint32_t j = 0; j < th; ++j)
+    for (uint32_t i = 0; i < tw; ++i) {
+      const uint32_t k = j * kTile + i;
+      const double ox = s.ox[k], oy = s.oy[k], oz = s.oz[k];
+      CanonicalResult res;  // CanonicalPlane::t, operation for operation (as tile())
+      res.lo_t = (TF.pd - (TF.nx * ox + TF.ny * oy + TF.nz * oz)) / TF.den;
+      res.hi_t = (TB.pd - (TB.nx * ox + TB.ny * oy + TB.nz * oz)) / TB.den;
+      const Interval iv = canonical_depths(light, res);
+      out.at(bi + i, bj + j) = iv;
+      st.hits += 1;
+      st.closed += iv.hi > iv.lo;
+    }
+  return true;
+}
+
 Interval RasterBounds::Impl::texel_reference(uint32_t level, uint64_t x, uint64_t y) const {
   const LightRay ray = light.texel_ray(level, x, y);
   const Vec3d o = ray.origin - centre;
@@ -477,8 +597,28 @@ Interval RasterBounds::Impl::texel_reference(uint32_t level, uint64_t x, uint64_
   return canonical_depths(light, canonical_interval(hits, 1.0));
 }
 
-RasterBounds::RasterBounds(const Scene& scene, const LightSpace& light)
-    : impl_(std::make_unique<Impl>(scene, light)) {}
+const char* to_string(RasterSkip s) {
+  switch (s) {
+    case RasterSkip::off: return "off";
+    case RasterSkip::exact: return "exact";
+    case RasterSkip::narrow: return "narrow";
+  }
+  return "?";
+}
+
+RasterSkip parse_raster_skip(const std::string& text) {
+  if (text == "off") return RasterSkip::off;
+  if (text == "exact") return RasterSkip::exact;
+  if (text == "narrow") return RasterSkip::narrow;
+  throw Error("--skip: expected off, exact or narrow, got '" + text + "'");
+}
+
+RasterBounds::RasterBounds(const Scene& scene, const LightSpace& light, RasterSkip skip)
+    : impl_(std::make_unique<Impl>(scene, light)) {
+  impl_->skip = skip;
+}
+RasterSkip RasterBounds::skip() const { return impl_->skip; }
+uint64_t RasterBounds::skipped_texels() const { return impl_->skipped.load(); }
 RasterBounds::~RasterBounds() = default;
 
 bool RasterBounds::traces_exit_depths() const { return impl_->any_closed; }

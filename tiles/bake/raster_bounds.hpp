@@ -34,6 +34,7 @@
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <string>
 
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/scene.hpp"
@@ -42,11 +43,28 @@
 
 namespace st {
 
+// Per-tile skip of the coverage work (MH 2016 §3.1; voxel shadows 2014 §6.1, closed
+// objects): a binning tile whose candidates prove that every texel's canonical hit list is
+// exactly (F entering, B leaving) of one closed mesh, with every other candidate provably
+// missing the tile or lying beyond (open: behind F; closed: beyond B's exit and its touching
+// window), gets its texels without edge tests or fragment lists:
+//   exact:  (lo, hi) from F's and B's canonical planes per texel, operation for operation as
+//           the full path computes them: the same bits as `off`;
+//   narrow: one interval [a, b] for the whole tile, a = F's largest depth over the tile and
+//           b = B's smallest (conservative over the tile's texel centres), where a <= b;
+//           else as exact. [a, b] lies inside every texel's true (lo, hi), so a hierarchy
+//           built from it keeps the lossless invariant against the true intervals, but the
+//           stored intervals are narrower than the definition's (the pack records it).
+//   off:    every tile through the full coverage path.
+enum class RasterSkip { off, exact, narrow };
+const char* to_string(RasterSkip s);                  // "off", "exact", "narrow"
+RasterSkip parse_raster_skip(const std::string& text);  // st::Error naming the text
+
 class RasterBounds {
  public:
   static constexpr uint32_t kTile = 16;  // texels a side of a binning tile
 
-  RasterBounds(const Scene& scene, const LightSpace& light);
+  RasterBounds(const Scene& scene, const LightSpace& light, RasterSkip skip = RasterSkip::exact);
   ~RasterBounds();
   RasterBounds(const RasterBounds&) = delete;
   RasterBounds& operator=(const RasterBounds&) = delete;
@@ -55,6 +73,9 @@ class RasterBounds {
   bool traces_exit_depths() const;
   double setup_seconds() const;  // the per-triangle setup and the grid
   uint64_t triangle_count() const;
+  RasterSkip skip() const;
+  // Texels filled by the skip path over every trace() call so far (all threads).
+  uint64_t skipped_texels() const;
 
   // Bounds of a region (same limits and messages as DepthBoundsTracer::check_region).
   // `progress`, if given, gets the finished texels added as tiles complete; `stats` this
