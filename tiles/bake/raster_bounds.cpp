@@ -127,8 +127,18 @@ struct Candidate {
 // (conservative) and whether it covers every texel centre of the tile, or none.
 struct SkipInfo {
   uint32_t setup;
-  double tmin, tmax;
+  double tmin, tmax;  // over the tile, padded
+  double t[4], pad;   // at the four corner texels, and how far any texel's t is from affine
 };
+// Whether b's t exceeds a's by more than `gap` at every texel of the tile: b - a is affine
+// in the texel origin too, so its corner values (less both pads) bound it from below.
+bool after(const SkipInfo& a, const SkipInfo& b, double gap) {
+  for (int q = 0; q < 4; ++q) {
+    const double d = b.t[q] - a.t[q];
+    if (!(d - (a.pad + b.pad) - 0x1p-44 * (std::fabs(b.t[q]) + std::fabs(a.t[q])) > gap)) return false;
+  }
+  return true;
+}
 
 struct Scratch {
   std::vector<SkipInfo> others, fronts, backs;  // skip_tile()
@@ -493,7 +503,7 @@ bool RasterBounds::Impl::skip_tile(const Candidate* cand, const uint32_t* ids, s
                                    DepthBoundsStats& st) const {
   const uint32_t corner[4] = {0, tw - 1, (th - 1) * kTile, (th - 1) * kTile + tw - 1};
   constexpr uint32_t kNone = UINT32_MAX;
-  SkipInfo F{kNone, 0, 0}, B{kNone, 0, 0};
+  SkipInfo F{kNone, 0, 0, {}, 0}, B{kNone, 0, 0, {}, 0};
   s.others.clear();
   auto& fronts = s.fronts;  // covering front / back faces of closed meshes
   auto& backs = s.backs;
@@ -521,15 +531,18 @@ bool RasterBounds::Impl::skip_tile(const Candidate* cand, const uint32_t* ids, s
     double tmin = INFINITY, tmax = -INFINITY, mag = std::fabs(T.pd);
     const Vec3d an{std::fabs(T.nx), std::fabs(T.ny), std::fabs(T.nz)};
     double extra = 0;
-    for (uint32_t q : corner) {
+    SkipInfo info{si, 0, 0, {}, 0};
+    for (int ci = 0; ci < 4; ++ci) {
+      const uint32_t q = corner[ci];
       const double t = (T.pd - (T.nx * s.ox[q] + T.ny * s.oy[q] + T.nz * s.oz[q])) / T.den;
+      info.t[ci] = t;
       tmin = std::min(tmin, t), tmax = std::max(tmax, t);
       extra = std::max(extra, an.x * std::fabs(s.ox[q]) + an.y * std::fabs(s.oy[q]) + an.z * std::fabs(s.oz[q]));
     }
     const double pad = ((mag + extra) * 0x1p-44 + 64 * dot(an, o_round)) / std::fabs(T.den) +
                        0x1p-44 * std::max(std::fabs(tmin), std::fabs(tmax)) + 0x1p-1000;
     if (!std::isfinite(tmin) || !std::isfinite(tmax) || !std::isfinite(pad)) return false;
-    const SkipInfo info{si, tmin - pad, tmax + pad};
+    info.tmin = tmin - pad, info.tmax = tmax + pad, info.pad = pad;
     if (covers && T.closed) (T.sigma < 0 ? fronts : backs).push_back(info);
     else s.others.push_back(info);
   }
@@ -539,16 +552,15 @@ bool RasterBounds::Impl::skip_tile(const Candidate* cand, const uint32_t* ids, s
   if (F.setup == kNone || !(F.tmin >= 0)) return false;
   const uint32_t mesh_f = setups[F.setup].mesh;
   for (const SkipInfo& b : backs)
-    if (setups[b.setup].mesh == mesh_f && b.tmin > F.tmax && (B.setup == kNone || b.tmin < B.tmin)) B = b;
+    if (setups[b.setup].mesh == mesh_f && after(F, b, 0) && (B.setup == kNone || b.tmin < B.tmin)) B = b;
   if (B.setup == kNone || !(B.tmax <= 1)) return false;
   for (const SkipInfo& f : fronts)
     if (f.setup != F.setup) s.others.push_back(f);
   for (const SkipInfo& b : backs)
     if (b.setup != B.setup) s.others.push_back(b);
   const double touch = ExitDepthRay::kTouchDouble * 1.0;  // canonical_interval(..., 1.0)
-  const double beyond = B.tmax + touch + 0x1p-40 * (std::fabs(B.tmax) + touch);
   for (const SkipInfo& o : s.others) {
-    if (setups[o.setup].closed ? !(o.tmin > beyond) : !(o.tmin > F.tmax)) return false;
+    if (setups[o.setup].closed ? !after(B, o, touch * (1 + 0x1p-40)) : !after(F, o, 0)) return false;
   }
   const TriSetup& TF = setups[F.setup];
   const TriSetup& TB = setups[B.setup];
