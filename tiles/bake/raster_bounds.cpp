@@ -142,6 +142,8 @@ bool after(const SkipInfo& a, const SkipInfo& b, double gap) {
 
 struct Scratch {
   std::vector<SkipInfo> others, fronts, backs;  // skip_tile()
+  std::vector<uint32_t> cover;  // skip_tile(): the setups covering every texel centre of the tile
+  bool known = false;           // skip_tile(): every candidate covers the whole tile or misses it
   double ox[kTileTexels], oy[kTileTexels], oz[kTileTexels];
   double nearest[kTileTexels];
   std::vector<CanonicalHit> frags[kTileTexels];
@@ -371,7 +373,8 @@ void RasterBounds::Impl::tile(const TraceRegion& r, const Candidate* cand, const
       }
     }
   }
-  if (skip != RasterSkip::off && any_closed && skip_tile(cand, ids, n, bi, bj, tw, th, s, out, st)) {
+  s.known = false;
+  if (skip != RasterSkip::off && skip_tile(cand, ids, n, bi, bj, tw, th, s, out, st)) {
     skipped.fetch_add(uint64_t(tw) * th, std::memory_order_relaxed);
     return;
   }
@@ -387,7 +390,25 @@ void RasterBounds::Impl::tile(const TraceRegion& r, const Candidate* cand, const
   const Vec3d dv = light.texel_ray(r.level, r.x0 + bi, r.y0 + bj + 1).origin - centre - o00;
   const Vec3d adu = abs3(du), adv = abs3(dv);
   uint64_t tests = 0;
-  for (size_t c = 0; c < n; ++c) {
+  if (s.known) {
+    // Every candidate covers every texel centre of the tile (facing sigma) or none: the hit
+    // lists without edge tests, each t as below, then the same reduction.
+    skipped.fetch_add(uint64_t(tw) * th, std::memory_order_relaxed);
+    for (uint32_t j = 0; j < th; ++j)
+      for (uint32_t i = 0; i < tw; ++i) {
+        const uint32_t k = j * kTile + i;
+        const double ox = s.ox[k], oy = s.oy[k], oz = s.oz[k];
+        for (const uint32_t si : s.cover) {
+          const TriSetup& T = setups[si];
+          // CanonicalPlane::t, operation for operation (as below).
+          const double t = (T.pd - (T.nx * ox + T.ny * oy + T.nz * oz)) / T.den;
+          if (!std::isfinite(t) || t < 0 || t > 1) continue;
+          if (lists) s.frags[k].push_back(CanonicalHit{t, T.tri, T.mesh, int8_t(T.sigma), T.closed});
+          else s.nearest[k] = std::min(s.nearest[k], t);
+        }
+      }
+  }
+  for (size_t c = 0; c < (s.known ? 0 : n); ++c) {
     const Candidate& cd = cand[ids[c]];
     const TriSetup& T = setups[cd.setup];
     const int32_t i0 = std::max<int32_t>(cd.x0, int32_t(bi)) - int32_t(bi);
@@ -494,10 +515,14 @@ void RasterBounds::Impl::tile(const TraceRegion& r, const Candidate* cand, const
 //  - depths: t = (pd - n . o) / den is affine in o too, so the corner values, padded by
 //    the rounding of that expression and of the origins, bound every texel's t.
 //  - the hit list: non-candidates never cover a tile texel (binning); a candidate that
-//    misses is not in it; so a texel's list is F (entering, t in [0, 1]), B (leaving, same
-//    closed mesh, t strictly after F's), open hits strictly after F (ignored while inside,
-//    or after the exit), closed hits beyond B by more than the touching window (the run
-//    ends before them): canonical_interval() gives exactly lo_t = t_F, hi_t = t_B.
+//    misses is not in it. When every candidate covers or misses (s.known), a texel's list
+//    is the covering ones whose t lies in [0, 1], each facing sigma: tile() builds it
+//    without edge tests and reduces it as always (the same bits as the full path).
+//  - narrow: the list is F (entering, t in [0, 1]), B (leaving, same closed mesh, t after
+//    F's at every texel), open hits after F (ignored while inside, or after the exit),
+//    closed hits beyond B by more than the touching window (the run ends before them):
+//    canonical_interval() gives lo_t = t_F, hi_t = t_B, and [a, b] lies inside.
+// Returns true when it filled the tile (narrow); else sets s.known and s.cover.
 bool RasterBounds::Impl::skip_tile(const Candidate* cand, const uint32_t* ids, size_t n, uint32_t bi,
                                    uint32_t bj, uint32_t tw, uint32_t th, Scratch& s, IntervalTile& out,
                                    DepthBoundsStats& st) const {
@@ -507,7 +532,8 @@ bool RasterBounds::Impl::skip_tile(const Candidate* cand, const uint32_t* ids, s
   s.others.clear();
   auto& fronts = s.fronts;  // covering front / back faces of closed meshes
   auto& backs = s.backs;
-  fronts.clear(), backs.clear();
+  fronts.clear(), backs.clear(), s.cover.clear();
+  bool partial = false;
   for (size_t c = 0; c < n; ++c) {
     const uint32_t si = cand[ids[c]].setup;
     const TriSetup& T = setups[si];
@@ -527,6 +553,8 @@ bool RasterBounds::Impl::skip_tile(const Candidate* cand, const uint32_t* ids, s
       misses |= all_out;
     }
     if (misses) continue;
+    if (covers) s.cover.push_back(si);
+    else partial = true;
     // t over the tile: corner values, padded.
     double tmin = INFINITY, tmax = -INFINITY, mag = std::fabs(T.pd);
     const Vec3d an{std::fabs(T.nx), std::fabs(T.ny), std::fabs(T.nz)};
@@ -541,11 +569,16 @@ bool RasterBounds::Impl::skip_tile(const Candidate* cand, const uint32_t* ids, s
     }
     const double pad = ((mag + extra) * 0x1p-44 + 64 * dot(an, o_round)) / std::fabs(T.den) +
                        0x1p-44 * std::max(std::fabs(tmin), std::fabs(tmax)) + 0x1p-1000;
-    if (!std::isfinite(tmin) || !std::isfinite(tmax) || !std::isfinite(pad)) return false;
+    if (!std::isfinite(tmin) || !std::isfinite(tmax) || !std::isfinite(pad)) {
+      partial = true;
+      break;
+    }
     info.tmin = tmin - pad, info.tmax = tmax + pad, info.pad = pad;
     if (covers && T.closed) (T.sigma < 0 ? fronts : backs).push_back(info);
     else s.others.push_back(info);
   }
+  s.known = !partial;
+  if (skip != RasterSkip::narrow || !any_closed) return false;
   // F: the nearest covering front face; B: the nearest covering back face of its mesh after it.
   for (const SkipInfo& f : fronts)
     if (F.setup == kNone || f.tmin < F.tmin) F = f;
@@ -562,31 +595,13 @@ bool RasterBounds::Impl::skip_tile(const Candidate* cand, const uint32_t* ids, s
   for (const SkipInfo& o : s.others) {
     if (setups[o.setup].closed ? !after(B, o, touch * (1 + 0x1p-40)) : !after(F, o, 0)) return false;
   }
-  const TriSetup& TF = setups[F.setup];
-  const TriSetup& TB = setups[B.setup];
-  if (skip == RasterSkip::narrow) {
-    const float a = canonical_depth(light, F.tmax), b = canonical_depth(light, B.tmin);
-    if (a <= b) {
-      for (uint32_t j = 0; j < th; ++j)
-        for (uint32_t i = 0; i < tw; ++i) out.at(bi + i, bj + j) = Interval{a, b};
-      const uint64_t texels = uint64_t(tw) * th;
-      st.hits += texels;
-      st.closed += a < b ? texels : 0;
-      return true;
-    }
-  }
+  const float a = canonical_depth(light, F.tmax), b = canonical_depth(light, B.tmin);
+  if (!(a <= b)) return false;
   for (uint32_t j = 0; j < th; ++j)
-    for (uint32_t i = 0; i < tw; ++i) {
-      const uint32_t k = j * kTile + i;
-      const double ox = s.ox[k], oy = s.oy[k], oz = s.oz[k];
-      CanonicalResult res;  // CanonicalPlane::t, operation for operation (as tile())
-      res.lo_t = (TF.pd - (TF.nx * ox + TF.ny * oy + TF.nz * oz)) / TF.den;
-      res.hi_t = (TB.pd - (TB.nx * ox + TB.ny * oy + TB.nz * oz)) / TB.den;
-      const Interval iv = canonical_depths(light, res);
-      out.at(bi + i, bj + j) = iv;
-      st.hits += 1;
-      st.closed += iv.hi > iv.lo;
-    }
+    for (uint32_t i = 0; i < tw; ++i) out.at(bi + i, bj + j) = Interval{a, b};
+  const uint64_t texels = uint64_t(tw) * th;
+  st.hits += texels;
+  st.closed += a < b ? texels : 0;
   return true;
 }
 

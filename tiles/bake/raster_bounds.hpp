@@ -44,17 +44,21 @@
 namespace st {
 
 // Per-tile skip of the coverage work (MH 2016 §3.1; voxel shadows 2014 §6.1, closed
-// objects): a binning tile whose candidates prove that every texel's canonical hit list is
-// exactly (F entering, B leaving) of one closed mesh, with every other candidate provably
-// missing the tile or lying beyond (open: behind F; closed: beyond B's exit and its touching
-// window), gets its texels without edge tests or fragment lists:
-//   exact:  (lo, hi) from F's and B's canonical planes per texel, operation for operation as
-//           the full path computes them: the same bits as `off`;
-//   narrow: one interval [a, b] for the whole tile, a = F's largest depth over the tile and
-//           b = B's smallest (conservative over the tile's texel centres), where a <= b;
-//           else as exact. [a, b] lies inside every texel's true (lo, hi), so a hierarchy
-//           built from it keeps the lossless invariant against the true intervals, but the
-//           stored intervals are narrower than the definition's (the pack records it).
+// objects). Edge values and plane depths are affine in the texel origin, so their values
+// at a binning tile's four corner texels (with the error bounds) decide, for the whole
+// tile, whether a candidate covers every texel centre, misses every one, or neither:
+//   exact:  a tile whose every candidate covers it or misses it (inside one surface, or a
+//           stack of them: roofs, walls, slabs, flat terrain, open or closed) builds each
+//           texel's hit list from the covering triangles' planes without edge tests and
+//           reduces it as the full path does: the same bits as `off`;
+//   narrow: also, a tile whose hit lists are provably exactly (F entering, B leaving) of
+//           one closed mesh, every other candidate missing the tile or lying beyond (open:
+//           after F; closed: beyond B's exit and its touching window), gets one interval
+//           [a, b]: a = F's largest depth over the tile, b = B's smallest (conservative),
+//           when a <= b (else as exact). [a, b] lies inside every texel's true (lo, hi), so
+//           a hierarchy built from it keeps the lossless invariant against the true
+//           intervals, but stored intervals may differ from an unnarrowed build's (the pack
+//           records intervals_narrowed=yes). Open geometry is never narrowed.
 //   off:    every tile through the full coverage path.
 enum class RasterSkip { off, exact, narrow };
 const char* to_string(RasterSkip s);                  // "off", "exact", "narrow"
