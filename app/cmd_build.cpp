@@ -197,7 +197,7 @@ void setup(CLI::App& app) {
                  "Depth bounds producer: raster (light-space rasterizer; sun lights, default intervals), "
                  "embree (ray tracer; every light), or auto (raster where it applies)")
       ->capture_default_str();
-  app.add_option("--skip", a->skip,
+  app.add_option("--raster-skip", a->skip,
                  "Rasterizer tiles covered by one closed object's entry and exit: exact (their intervals "
                  "from the two planes, the same bits as off), narrow (one sub-interval per tile: lossless, "
                  "recorded as intervals_narrowed=yes) or off (every texel through the coverage tests)")

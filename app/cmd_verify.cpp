@@ -183,7 +183,7 @@ void run(const VerifyArgs& a) {
   std::printf("verify: re-tracing with the %s builder\n", to_string(builder));
   for (const auto& [k, v] : reader->params())
     if (k == "intervals_narrowed" && v == "yes")
-      std::printf("verify: built with narrowed intervals (--skip narrow): stored values are checked "
+      std::printf("verify: built with narrowed intervals (--raster-skip narrow): stored values are checked "
                   "against the true intervals; its answers may differ from an unnarrowed build's "
                   "only where both are lossless\n");
   if (contract.vsdag_z_bits) std::printf("verify: checking %s\n", contract.name().c_str());

@@ -637,7 +637,7 @@ RasterSkip parse_raster_skip(const std::string& text) {
   if (text == "off") return RasterSkip::off;
   if (text == "exact") return RasterSkip::exact;
   if (text == "narrow") return RasterSkip::narrow;
-  throw Error("--skip: expected off, exact or narrow, got '" + text + "'");
+  throw Error("--raster-skip: expected off, exact or narrow, got '" + text + "'");
 }
 
 RasterBounds::RasterBounds(const Scene& scene, const LightSpace& light, RasterSkip skip)
