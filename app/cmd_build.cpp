@@ -31,7 +31,7 @@ TexelRegion parse_region(const std::string& text) {
 struct BuildArgs {
   std::string scene, light, resolution = "4096", encoding = "dagmh", out, report, region,
                      construction = "bottom-up", up = "y", intervals = "default", shard,
-              builder = "auto";
+              builder = "auto", skip = "exact";
   std::optional<uint32_t> skip_level;
   uint32_t tile_bytes = 64 * 1024, depth_bits = 16;
   int compression = 6;
@@ -55,6 +55,7 @@ void run(const BuildArgs& a) {
   else if (a.intervals != "default")
     throw Error("--intervals: expected default or static, got '" + a.intervals + "'");
   o.builder = parse_bounds_builder(a.builder);
+  o.raster_skip = parse_raster_skip(a.skip);
   if (!a.shard.empty()) o.shard = BuildShard::parse(a.shard);
   if (a.mpi && o.shard) throw Error("--mpi and --shard: choose one (a shard is one process's slice)");
 #ifdef SHADOWTILE_HAVE_MPI
@@ -195,6 +196,11 @@ void setup(CLI::App& app) {
   app.add_option("--builder", a->builder,
                  "Depth bounds producer: raster (light-space rasterizer; sun lights, default intervals), "
                  "embree (ray tracer; every light), or auto (raster where it applies)")
+      ->capture_default_str();
+  app.add_option("--raster-skip", a->skip,
+                 "Rasterizer tiles covered by one closed object's entry and exit: exact (their intervals "
+                 "from the two planes, the same bits as off), narrow (one sub-interval per tile: lossless, "
+                 "recorded as intervals_narrowed=yes) or off (every texel through the coverage tests)")
       ->capture_default_str();
   app.add_flag("-q,--quiet", a->quiet, "No summary or progress");
   app.callback([a]() { run(*a); });

@@ -7,6 +7,8 @@
 //
 //   bench_build [--scene procedural:city] [--light sun:azimuth=30,elevation=50]
 //               [--resolutions 4k,16k] [--encodings dagmh] [--builders raster,embree]
+//               (builders: raster = the rasterizer with its per-tile skip, exact; raster-off
+//               without it; raster-narrow with narrowed intervals in skipped tiles; embree)
 //               [--intervals default,static] [--json PATH] [--out DIR]
 //
 // --resolution R is --resolutions R. 64k is an option (the tracer takes minutes there).
@@ -156,7 +158,18 @@ int main(int argc, char** argv) {
     for (const std::string& r : rules)
       if (r != "default" && r != "static") throw st::Error("--intervals: expected default or static, got '" + r + "'");
     for (const std::string& b : builder_list)
-      if (b != "raster" && b != "embree") throw st::Error("--builders: expected raster or embree, got '" + b + "'");
+      if (b != "raster" && b != "raster-off" && b != "raster-narrow" && b != "embree")
+        throw st::Error("--builders: expected raster, raster-off, raster-narrow or embree, got '" + b + "'");
+    // raster: the rasterizer with its default per-tile skip (exact); raster-off: without
+    // the skip; raster-narrow: with narrowed intervals in skipped tiles.
+    auto skip_of = [](const std::string& b) {
+      return b == "raster-off" ? st::RasterSkip::off
+                               : (b == "raster-narrow" ? st::RasterSkip::narrow : st::RasterSkip::exact);
+    };
+    std::vector<std::string> bounds_list{"embree"};
+    for (const std::string& b : builder_list)
+      if (b != "embree") bounds_list.push_back(b);
+    if (bounds_list.size() == 1) bounds_list.push_back("raster");
     std::vector<uint32_t> levels;
     for (const std::string& r : split(resolutions)) levels.push_back(parse_level(r));
     if (levels.empty()) throw st::Error("--resolutions: none given");
@@ -179,28 +192,30 @@ int main(int argc, char** argv) {
                   "pack MiB", "% of raw", "peak MiB", "/tracer", "trace", "hier", "cut+enc", "write");
       // Bounds alone with each builder.
       double tracer_wall = 0;
-      for (const std::string& b : {std::string("embree"), std::string("raster")}) {
-        if (b == "raster" && !sun) continue;
+      for (const std::string& b : bounds_list) {
+        if (b != "embree" && !sun) continue;
         Measured m = in_child([&]() {
           double setup = 0, s = 0;
-          std::atomic<uint64_t> tests{0}, hits{0}, closed{0};
+          std::atomic<uint64_t> tests{0}, hits{0}, closed{0}, skipped{0};
           if (b == "embree") {
             st::DepthBoundsTracer tracer(scene, light);
             setup = tracer.build_seconds();
             s = bounds_pass(L, K, [&](const st::TraceRegion& r) { tracer.trace(r); });
           } else {
-            st::RasterBounds raster(scene, light);
+            st::RasterBounds raster(scene, light, skip_of(b));
             setup = raster.setup_seconds();
             s = bounds_pass(L, K, [&](const st::TraceRegion& r) {
               st::DepthBoundsStats st;
               raster.trace(r, &st);
               tests += st.traversals, hits += st.hits, closed += st.closed;
             });
+            skipped = raster.skipped_texels();
           }
           return nlohmann::json{{"seconds", s}, {"setup_seconds", setup},
                                 {"triangle_texel_tests_per_texel", double(tests) / double(texels)},
                                 {"hit_fraction", double(hits) / double(texels)},
-                                {"closed_fraction", double(closed) / double(texels)}};
+                                {"closed_fraction", double(closed) / double(texels)},
+                                {"skipped_fraction", double(skipped) / double(texels)}};
         });
         if (m.result.contains("error")) {
           std::printf("%-20s failed: %s\n", ("bounds " + b).c_str(), m.result["error"].get<std::string>().c_str());
@@ -211,6 +226,10 @@ int main(int argc, char** argv) {
         std::printf("%-20s %8.2f %8.2f %10.2f %9s %9s %8.0f %8.2f %7.2f %7s %7s %7s\n", name.c_str(), m.wall, m.cpu,
                     double(texels) / m.wall / 1e6, "-", "-", m.peak_mib, tracer_wall > 0 ? m.wall / tracer_wall : 0.0,
                     m.result["seconds"].get<double>(), "-", "-", "-");
+        if (b != "embree")
+          std::printf("%-20s skipped %.1f%% of texels, %.2f triangle-texel tests per texel\n", "",
+                      100 * m.result["skipped_fraction"].get<double>(),
+                      m.result["triangle_texel_tests_per_texel"].get<double>());
         rows.push_back({{"run", "bounds"}, {"builder", b}, {"map_level", L}, {"texels", texels},
                         {"wall_s", m.wall}, {"cpu_s", m.cpu}, {"peak_mib", m.peak_mib},
                         {"mtexels_per_s", double(texels) / m.wall / 1e6},
@@ -220,14 +239,15 @@ int main(int argc, char** argv) {
       for (const std::string& rule : rules)
         for (const std::string& enc : split(encodings))
           for (const std::string& b : builder_list) {
-            if (b == "raster" && (!sun || rule == "static")) continue;
+            if (b != "embree" && (!sun || rule == "static")) continue;
             const std::string path = out_dir + "/bench_build_" + enc + "_" + rule + "_" + b + ".pack";
             const std::string name = "build " + enc + (rule == "static" ? "/st " : " ") + b;
             Measured m = in_child([&]() {
               st::MapBuildOptions o;
               o.map_level = L;
               o.encoding = st::parse_encoding(enc);
-              o.builder = b == "raster" ? st::BoundsBuilder::raster : st::BoundsBuilder::embree;
+              o.builder = b != "embree" ? st::BoundsBuilder::raster : st::BoundsBuilder::embree;
+              o.raster_skip = skip_of(b);
               if (rule == "static") o.intervals = st::IntervalRule::static_geometry;
               st::MapBuildReport r = st::build_map(scene, light, o, path);
               return nlohmann::json::parse(r.to_json());

@@ -69,7 +69,7 @@ class CellBounds {
  public:
   CellBounds(const Scene& scene, const LightSpace& light, const MapBuildOptions& o)
       : builder_(resolve_builder(o.builder, light, o.intervals)), mode_(trace_mode_of(o.intervals)) {
-    if (builder_ == BoundsBuilder::raster) raster_ = std::make_unique<RasterBounds>(scene, light);
+    if (builder_ == BoundsBuilder::raster) raster_ = std::make_unique<RasterBounds>(scene, light, o.raster_skip);
     else tracer_ = std::make_unique<DepthBoundsTracer>(scene, light);
   }
   BoundsBuilder builder() const { return builder_; }
@@ -100,6 +100,10 @@ PackParams pack_params(const Scene& scene, const LightSpace& light, const MapBui
                      {"scene", o.scene_spec.empty() ? scene.name : o.scene_spec},
                      {"tool", "shadowtile 0.1.0"}};
   if (o.intervals == IntervalRule::static_geometry) pp.build_params.push_back({"intervals", "static"});
+  // Stored values lie in sub-intervals of the definition's (RasterSkip::narrow): still
+  // lossless against the true intervals, but not bit-identical to a build without it.
+  if (builder == BoundsBuilder::raster && o.raster_skip == RasterSkip::narrow)
+    pp.build_params.push_back({"intervals_narrowed", "yes"});
   if (o.shard) pp.build_params.push_back({kShardParam, o.shard->to_string()});
   // The depth resolution of vsdag tiles: what `verify` checks their contract against.
   if (o.encoding == Encoding::vsdag) pp.build_params.push_back({"depth_bits", std::to_string(o.vsdag_z_bits)});

@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "tiles/bake/depth_bounds.hpp"
+#include "tiles/bake/raster_bounds.hpp"
 #include "tiles/bake/scene.hpp"
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/light.hpp"
@@ -85,6 +86,9 @@ struct MapBuildOptions {
   MhConstruction construction = MhConstruction::bottom_up;
   IntervalRule intervals = IntervalRule::closed_objects;
   BoundsBuilder builder = BoundsBuilder::automatic;  // recorded in the pack's build params
+  // The rasterizer's per-tile skip (raster_bounds.hpp): exact keeps the definition's bits;
+  // narrow stores sub-intervals of the true ones (build parameter intervals_narrowed=yes).
+  RasterSkip raster_skip = RasterSkip::exact;
   bool resume = false;  // continue "<out>.tmp" if present
   int compression_level = 6;
   // Build only the cells touching this region; every other cell is the constant

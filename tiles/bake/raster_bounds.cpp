@@ -123,7 +123,27 @@ struct Candidate {
 
 // Per-thread scratch for one tile: texel origins and fragment lists (their capacity is
 // kept from tile to tile, so nothing is allocated per texel once warm).
+// A candidate of the skip test (RasterSkip): its t range over the tile's texel centres
+// (conservative) and whether it covers every texel centre of the tile, or none.
+struct SkipInfo {
+  uint32_t setup;
+  double tmin, tmax;  // over the tile, padded
+  double t[4], pad;   // at the four corner texels, and how far any texel's t is from affine
+};
+// Whether b's t exceeds a's by more than `gap` at every texel of the tile: b - a is affine
+// in the texel origin too, so its corner values (less both pads) bound it from below.
+bool after(const SkipInfo& a, const SkipInfo& b, double gap) {
+  for (int q = 0; q < 4; ++q) {
+    const double d = b.t[q] - a.t[q];
+    if (!(d - (a.pad + b.pad) - 0x1p-44 * (std::fabs(b.t[q]) + std::fabs(a.t[q])) > gap)) return false;
+  }
+  return true;
+}
+
 struct Scratch {
+  std::vector<SkipInfo> others, fronts, backs;  // skip_tile()
+  std::vector<uint32_t> cover;  // skip_tile(): the setups covering every texel centre of the tile
+  bool known = false;           // skip_tile(): every candidate covers the whole tile or misses it
   double ox[kTileTexels], oy[kTileTexels], oz[kTileTexels];
   double nearest[kTileTexels];
   std::vector<CanonicalHit> frags[kTileTexels];
@@ -147,6 +167,8 @@ struct RasterBounds::Impl {
   std::vector<uint32_t> grid_start, grid_items, big;
   std::vector<std::array<uint32_t, 2>> grid_first;  // per setup: first grid cell (gx, gy)
   mutable tbb::enumerable_thread_specific<Scratch> scratch;
+  RasterSkip skip = RasterSkip::exact;
+  mutable std::atomic<uint64_t> skipped{0};
 
   Impl(const Scene& scene, const LightSpace& l);
   std::array<int64_t, 4> grid_range(double u0, double v0, double u1, double v1) const {
@@ -159,6 +181,8 @@ struct RasterBounds::Impl {
   std::vector<Candidate> candidates(const TraceRegion& r) const;
   void tile(const TraceRegion& r, const Candidate* cand, const uint32_t* ids, size_t n,
             uint32_t bi, uint32_t bj, IntervalTile& out, DepthBoundsStats& st) const;
+  bool skip_tile(const Candidate* cand, const uint32_t* ids, size_t n, uint32_t bi, uint32_t bj,
+                 uint32_t tw, uint32_t th, Scratch& s, IntervalTile& out, DepthBoundsStats& st) const;
   Interval texel_reference(uint32_t level, uint64_t x, uint64_t y) const;
 };
 
@@ -349,6 +373,11 @@ void RasterBounds::Impl::tile(const TraceRegion& r, const Candidate* cand, const
       }
     }
   }
+  s.known = false;
+  if (skip != RasterSkip::off && skip_tile(cand, ids, n, bi, bj, tw, th, s, out, st)) {
+    skipped.fetch_add(uint64_t(tw) * th, std::memory_order_relaxed);
+    return;
+  }
   bool lists = false;
   for (size_t c = 0; c < n; ++c) lists |= setups[cand[ids[c]].setup].closed;
   for (uint32_t k = 0; k < kTileTexels; ++k) {
@@ -361,7 +390,25 @@ void RasterBounds::Impl::tile(const TraceRegion& r, const Candidate* cand, const
   const Vec3d dv = light.texel_ray(r.level, r.x0 + bi, r.y0 + bj + 1).origin - centre - o00;
   const Vec3d adu = abs3(du), adv = abs3(dv);
   uint64_t tests = 0;
-  for (size_t c = 0; c < n; ++c) {
+  if (s.known) {
+    // Every candidate covers every texel centre of the tile (facing sigma) or none: the hit
+    // lists without edge tests, each t as below, then the same reduction.
+    skipped.fetch_add(uint64_t(tw) * th, std::memory_order_relaxed);
+    for (uint32_t j = 0; j < th; ++j)
+      for (uint32_t i = 0; i < tw; ++i) {
+        const uint32_t k = j * kTile + i;
+        const double ox = s.ox[k], oy = s.oy[k], oz = s.oz[k];
+        for (const uint32_t si : s.cover) {
+          const TriSetup& T = setups[si];
+          // CanonicalPlane::t, operation for operation (as below).
+          const double t = (T.pd - (T.nx * ox + T.ny * oy + T.nz * oz)) / T.den;
+          if (!std::isfinite(t) || t < 0 || t > 1) continue;
+          if (lists) s.frags[k].push_back(CanonicalHit{t, T.tri, T.mesh, int8_t(T.sigma), T.closed});
+          else s.nearest[k] = std::min(s.nearest[k], t);
+        }
+      }
+  }
+  for (size_t c = 0; c < (s.known ? 0 : n); ++c) {
     const Candidate& cd = cand[ids[c]];
     const TriSetup& T = setups[cd.setup];
     const int32_t i0 = std::max<int32_t>(cd.x0, int32_t(bi)) - int32_t(bi);
@@ -458,6 +505,106 @@ void RasterBounds::Impl::tile(const TraceRegion& r, const Candidate* cand, const
     }
 }
 
+// The skip test (RasterSkip, raster_bounds.hpp). Soundness, per claim:
+//  - edge signs: the exact edge value c + o . n is affine in the exact texel origin, itself
+//    affine in the texel index, so over the tile's texel centres it lies between its values
+//    at the four corner texels. A corner's fast value beyond 2 bound + the origins'
+//    rounding (as the row spans' margin) gives every texel centre of the tile the
+//    definition's sign: `covers` (all three edges, sigma's side) or `misses` (one edge on
+//    the other side at all four corners). Triangles with sigma == 0 are never either.
+//  - depths: t = (pd - n . o) / den is affine in o too, so the corner values, padded by
+//    the rounding of that expression and of the origins, bound every texel's t.
+//  - the hit list: non-candidates never cover a tile texel (binning); a candidate that
+//    misses is not in it. When every candidate covers or misses (s.known), a texel's list
+//    is the covering ones whose t lies in [0, 1], each facing sigma: tile() builds it
+//    without edge tests and reduces it as always (the same bits as the full path).
+//  - narrow: the list is F (entering, t in [0, 1]), B (leaving, same closed mesh, t after
+//    F's at every texel), open hits after F (ignored while inside, or after the exit),
+//    closed hits beyond B by more than the touching window (the run ends before them):
+//    canonical_interval() gives lo_t = t_F, hi_t = t_B, and [a, b] lies inside.
+// Returns true when it filled the tile (narrow); else sets s.known and s.cover.
+bool RasterBounds::Impl::skip_tile(const Candidate* cand, const uint32_t* ids, size_t n, uint32_t bi,
+                                   uint32_t bj, uint32_t tw, uint32_t th, Scratch& s, IntervalTile& out,
+                                   DepthBoundsStats& st) const {
+  const uint32_t corner[4] = {0, tw - 1, (th - 1) * kTile, (th - 1) * kTile + tw - 1};
+  constexpr uint32_t kNone = UINT32_MAX;
+  SkipInfo F{kNone, 0, 0, {}, 0}, B{kNone, 0, 0, {}, 0};
+  s.others.clear();
+  auto& fronts = s.fronts;  // covering front / back faces of closed meshes
+  auto& backs = s.backs;
+  fronts.clear(), backs.clear(), s.cover.clear();
+  bool partial = false;
+  for (size_t c = 0; c < n; ++c) {
+    const uint32_t si = cand[ids[c]].setup;
+    const TriSetup& T = setups[si];
+    bool covers = T.sigma != 0, misses = false;
+    for (int k = 0; k < 3; ++k) {
+      const EdgeSetup& E = T.e[k];
+      const Vec3d an{std::fabs(E.nx), std::fabs(E.ny), std::fabs(E.nz)};
+      const double m0 = 2 * E.bound + 64 * dot(o_round, an);
+      bool all_in = true, all_out = T.sigma != 0;
+      for (uint32_t q : corner) {
+        const double val = T.sigma * (E.c + (s.ox[q] * E.nx + s.oy[q] * E.ny + s.oz[q] * E.nz));
+        const double m = m0 + 0x1p-40 * std::fabs(val);
+        all_in &= val > m;
+        all_out &= val < -m;
+      }
+      covers &= all_in;
+      misses |= all_out;
+    }
+    if (misses) continue;
+    if (covers) s.cover.push_back(si);
+    else partial = true;
+    // t over the tile: corner values, padded.
+    double tmin = INFINITY, tmax = -INFINITY, mag = std::fabs(T.pd);
+    const Vec3d an{std::fabs(T.nx), std::fabs(T.ny), std::fabs(T.nz)};
+    double extra = 0;
+    SkipInfo info{si, 0, 0, {}, 0};
+    for (int ci = 0; ci < 4; ++ci) {
+      const uint32_t q = corner[ci];
+      const double t = (T.pd - (T.nx * s.ox[q] + T.ny * s.oy[q] + T.nz * s.oz[q])) / T.den;
+      info.t[ci] = t;
+      tmin = std::min(tmin, t), tmax = std::max(tmax, t);
+      extra = std::max(extra, an.x * std::fabs(s.ox[q]) + an.y * std::fabs(s.oy[q]) + an.z * std::fabs(s.oz[q]));
+    }
+    const double pad = ((mag + extra) * 0x1p-44 + 64 * dot(an, o_round)) / std::fabs(T.den) +
+                       0x1p-44 * std::max(std::fabs(tmin), std::fabs(tmax)) + 0x1p-1000;
+    if (!std::isfinite(tmin) || !std::isfinite(tmax) || !std::isfinite(pad)) {
+      partial = true;
+      break;
+    }
+    info.tmin = tmin - pad, info.tmax = tmax + pad, info.pad = pad;
+    if (covers && T.closed) (T.sigma < 0 ? fronts : backs).push_back(info);
+    else s.others.push_back(info);
+  }
+  s.known = !partial;
+  if (skip != RasterSkip::narrow || !any_closed) return false;
+  // F: the nearest covering front face; B: the nearest covering back face of its mesh after it.
+  for (const SkipInfo& f : fronts)
+    if (F.setup == kNone || f.tmin < F.tmin) F = f;
+  if (F.setup == kNone || !(F.tmin >= 0)) return false;
+  const uint32_t mesh_f = setups[F.setup].mesh;
+  for (const SkipInfo& b : backs)
+    if (setups[b.setup].mesh == mesh_f && after(F, b, 0) && (B.setup == kNone || b.tmin < B.tmin)) B = b;
+  if (B.setup == kNone || !(B.tmax <= 1)) return false;
+  for (const SkipInfo& f : fronts)
+    if (f.setup != F.setup) s.others.push_back(f);
+  for (const SkipInfo& b : backs)
+    if (b.setup != B.setup) s.others.push_back(b);
+  const double touch = ExitDepthRay::kTouchDouble * 1.0;  // canonical_interval(..., 1.0)
+  for (const SkipInfo& o : s.others) {
+    if (setups[o.setup].closed ? !after(B, o, touch * (1 + 0x1p-40)) : !after(F, o, 0)) return false;
+  }
+  const float a = canonical_depth(light, F.tmax), b = canonical_depth(light, B.tmin);
+  if (!(a <= b)) return false;
+  for (uint32_t j = 0; j < th; ++j)
+    for (uint32_t i = 0; i < tw; ++i) out.at(bi + i, bj + j) = Interval{a, b};
+  const uint64_t texels = uint64_t(tw) * th;
+  st.hits += texels;
+  st.closed += a < b ? texels : 0;
+  return true;
+}
+
 Interval RasterBounds::Impl::texel_reference(uint32_t level, uint64_t x, uint64_t y) const {
   const LightRay ray = light.texel_ray(level, x, y);
   const Vec3d o = ray.origin - centre;
@@ -477,8 +624,28 @@ Interval RasterBounds::Impl::texel_reference(uint32_t level, uint64_t x, uint64_
   return canonical_depths(light, canonical_interval(hits, 1.0));
 }
 
-RasterBounds::RasterBounds(const Scene& scene, const LightSpace& light)
-    : impl_(std::make_unique<Impl>(scene, light)) {}
+const char* to_string(RasterSkip s) {
+  switch (s) {
+    case RasterSkip::off: return "off";
+    case RasterSkip::exact: return "exact";
+    case RasterSkip::narrow: return "narrow";
+  }
+  return "?";
+}
+
+RasterSkip parse_raster_skip(const std::string& text) {
+  if (text == "off") return RasterSkip::off;
+  if (text == "exact") return RasterSkip::exact;
+  if (text == "narrow") return RasterSkip::narrow;
+  throw Error("--raster-skip: expected off, exact or narrow, got '" + text + "'");
+}
+
+RasterBounds::RasterBounds(const Scene& scene, const LightSpace& light, RasterSkip skip)
+    : impl_(std::make_unique<Impl>(scene, light)) {
+  impl_->skip = skip;
+}
+RasterSkip RasterBounds::skip() const { return impl_->skip; }
+uint64_t RasterBounds::skipped_texels() const { return impl_->skipped.load(); }
 RasterBounds::~RasterBounds() = default;
 
 bool RasterBounds::traces_exit_depths() const { return impl_->any_closed; }

@@ -34,6 +34,7 @@
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <string>
 
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/scene.hpp"
@@ -42,11 +43,32 @@
 
 namespace st {
 
+// Per-tile skip of the coverage work (MH 2016 §3.1; voxel shadows 2014 §6.1, closed
+// objects). Edge values and plane depths are affine in the texel origin, so their values
+// at a binning tile's four corner texels (with the error bounds) decide, for the whole
+// tile, whether a candidate covers every texel centre, misses every one, or neither:
+//   exact:  a tile whose every candidate covers it or misses it (inside one surface, or a
+//           stack of them: roofs, walls, slabs, flat terrain, open or closed) builds each
+//           texel's hit list from the covering triangles' planes without edge tests and
+//           reduces it as the full path does: the same bits as `off`;
+//   narrow: also, a tile whose hit lists are provably exactly (F entering, B leaving) of
+//           one closed mesh, every other candidate missing the tile or lying beyond (open:
+//           after F; closed: beyond B's exit and its touching window), gets one interval
+//           [a, b]: a = F's largest depth over the tile, b = B's smallest (conservative),
+//           when a <= b (else as exact). [a, b] lies inside every texel's true (lo, hi), so
+//           a hierarchy built from it keeps the lossless invariant against the true
+//           intervals, but stored intervals may differ from an unnarrowed build's (the pack
+//           records intervals_narrowed=yes). Open geometry is never narrowed.
+//   off:    every tile through the full coverage path.
+enum class RasterSkip { off, exact, narrow };
+const char* to_string(RasterSkip s);                  // "off", "exact", "narrow"
+RasterSkip parse_raster_skip(const std::string& text);  // st::Error naming the text
+
 class RasterBounds {
  public:
   static constexpr uint32_t kTile = 16;  // texels a side of a binning tile
 
-  RasterBounds(const Scene& scene, const LightSpace& light);
+  RasterBounds(const Scene& scene, const LightSpace& light, RasterSkip skip = RasterSkip::exact);
   ~RasterBounds();
   RasterBounds(const RasterBounds&) = delete;
   RasterBounds& operator=(const RasterBounds&) = delete;
@@ -55,6 +77,9 @@ class RasterBounds {
   bool traces_exit_depths() const;
   double setup_seconds() const;  // the per-triangle setup and the grid
   uint64_t triangle_count() const;
+  RasterSkip skip() const;
+  // Texels filled by the skip path over every trace() call so far (all threads).
+  uint64_t skipped_texels() const;
 
   // Bounds of a region (same limits and messages as DepthBoundsTracer::check_region).
   // `progress`, if given, gets the finished texels added as tiles complete; `stats` this

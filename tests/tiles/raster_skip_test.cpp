@@ -1,0 +1,101 @@
+// The rasterizer's per-tile skip (RasterSkip, tiles/bake/raster_bounds.hpp): on closed
+// scenes (city, sphere, hairball), open soups, terrain and under a grazing sun, the exact
+// skip gives the same bits as the full coverage path on every texel; the narrow skip gives
+// sub-intervals of the true ones; and a pack built with narrowed intervals records it and
+// keeps the lossless invariant against the true intervals on every texel.
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <filesystem>
+
+#include "interval_fields.hpp"
+#include "tests/tiles/hazard_scenes.hpp"
+#include "tiles/bake/map_build.hpp"
+#include "tiles/bake/raster_bounds.hpp"
+#include "tiles/core/pack_evaluator.hpp"
+
+namespace st {
+namespace {
+
+bool same_bits(const Interval& a, const Interval& b) {
+  return std::memcmp(&a.lo, &b.lo, sizeof(float)) == 0 && std::memcmp(&a.hi, &b.hi, sizeof(float)) == 0;
+}
+
+struct SkipCase {
+  Scene scene;
+  const char* sun;
+};
+
+std::vector<SkipCase> cases() {
+  return {{make_procedural("procedural:city,size=2"), "sun:azimuth=30,elevation=50"},
+          {make_procedural("procedural:city,size=2"), "sun:azimuth=77,elevation=0.5"},  // grazing
+          {make_procedural("procedural:sphere,segments=24"), "sun:azimuth=200,elevation=70"},
+          {make_procedural("procedural:cube"), "sun:azimuth=200,elevation=89.99"},  // narrowed
+          {make_procedural("procedural:hairball,count=8,segments=12"), "sun:azimuth=30,elevation=50"},
+          {test::rotated_terrain(), "sun:azimuth=120,elevation=20"},
+          {test::all_open(test::hazard_town()), "sun:azimuth=30,elevation=50"}};
+}
+
+TEST(RasterSkip, ExactEqualsTheFullPathAndNarrowLiesInside) {
+  const uint32_t L = fields::small_test_scale() ? 7 : 9, side = 1u << L;
+  uint64_t skipped_closed = 0, narrowed_closed = 0;
+  for (const SkipCase& c : cases()) {
+    const LightSpace light = LightSpace::fit(LightSpec::parse(c.sun), c.scene.bounds());
+    const TraceRegion all{L, 0, 0, side, side};
+    const RasterBounds off(c.scene, light, RasterSkip::off), exact(c.scene, light, RasterSkip::exact),
+        narrow(c.scene, light, RasterSkip::narrow);
+    const IntervalTile truth = off.trace(all), e = exact.trace(all), n = narrow.trace(all);
+    EXPECT_EQ(off.skipped_texels(), 0u);
+    uint64_t narrowed = 0;
+    for (size_t k = 0; k < truth.data.size(); ++k) {
+      ASSERT_TRUE(same_bits(truth.data[k], e.data[k]))
+          << c.scene.name << " " << c.sun << " texel " << k % side << "," << k / side;
+      const Interval t = truth.data[k], v = n.data[k];
+      ASSERT_TRUE(t.lo <= v.lo && v.lo <= v.hi && v.hi <= t.hi)
+          << c.scene.name << " " << c.sun << " texel " << k % side << "," << k / side << ": narrow [" << v.lo
+          << ", " << v.hi << "] true [" << t.lo << ", " << t.hi << "]";
+      narrowed += !same_bits(t, v);
+    }
+    // Open geometry (hi = lo) is never narrowed.
+    if (!exact.traces_exit_depths()) {
+      EXPECT_EQ(narrowed, 0u) << c.scene.name;
+    } else {
+      skipped_closed += exact.skipped_texels(), narrowed_closed += narrowed;
+    }
+  }
+  EXPECT_GT(skipped_closed, 0u) << "the skip never applied";
+  EXPECT_GT(narrowed_closed, 0u) << "narrowing never applied";
+}
+
+// A pack built with --skip narrow: every texel's value lies in the true interval (what
+// `verify --all` checks), and the pack says its intervals were narrowed.
+TEST(RasterSkip, NarrowedPackIsLosslessAgainstTheTrueIntervals) {
+  namespace fs = std::filesystem;
+  const uint32_t L = fields::small_test_scale() ? 7 : 9;
+  fs::create_directories(SHADOWTILE_TEST_TMP);
+  int k = 0;
+  for (const SkipCase& c : cases()) {
+    const LightSpace light = LightSpace::fit(LightSpec::parse(c.sun), c.scene.bounds());
+    MapBuildOptions o;
+    o.map_level = L;
+    o.skip_level = L - 4;
+    o.encoding = Encoding::dagmh;
+    o.builder = BoundsBuilder::raster;
+    o.raster_skip = RasterSkip::narrow;
+    const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/raster_skip_" + std::to_string(k++) + ".pack";
+    build_map(c.scene, light, o, path);
+    const IntervalTile truth =
+        RasterBounds(c.scene, light, RasterSkip::off).trace(TraceRegion{L, 0, 0, 1u << L, 1u << L});
+    std::shared_ptr<const PackReader> reader = PackReader::open(path);
+    bool recorded = false;
+    for (const auto& [key, v] : reader->params()) recorded |= key == "intervals_narrowed" && v == "yes";
+    EXPECT_TRUE(recorded) << c.scene.name;
+    PackEvaluator eval(reader);
+    EXPECT_EQ(fields::first_violation(truth, [&](uint32_t i, uint32_t j) { return eval.depth(L, i, j); }), "")
+        << c.scene.name << " " << c.sun;
+    fs::remove(path);
+  }
+}
+
+}  // namespace
+}  // namespace st
