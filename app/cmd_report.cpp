@@ -31,6 +31,7 @@
 #include "app/command.hpp"
 #include "app/html_page.hpp"
 #include "common/error.hpp"
+#include "tiles/core/map_preview.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 
 namespace st::cli {
@@ -65,7 +66,8 @@ std::vector<std::string> split(const std::string& s) {
 }
 
 // Stored bytes a client holds for the whole map: every tile's encoded (raw) size plus the
-// skip grid: what "the same memory" means for the uncompressed baselines.
+// skip grid and the map preview (grid_bytes holds both): what "the same memory" means for
+// the uncompressed baselines.
 uint64_t resident_bytes(const PackReader& r) {
   uint64_t b = r.grid_bytes().size();
   for (const TileIndexEntry& e : r.tiles()) b += e.raw_size;
@@ -105,7 +107,7 @@ std::vector<RefinementPoint> refinement(const std::string& pack_path, const std:
   const auto cells = loadgen::cells_for_points(lps, L, client::skip_grid(map));
   cells_total = cells.size();
   // The answer at the cut itself, before any request: what the map info alone gives
-  // (the skip grid's level K). Later samples are timed from their start; tiles keep
+  // (the skip grid's level K and the map preview's levels K+1 .. K+p below it). Later samples are timed from their start; tiles keep
   // arriving while a sample evaluates the frame.
   pts.push_back({0.0, frame_error(client::evaluator(map), light, f, 0, L).fraction(), 0});
   const auto t0 = Clk::now();
@@ -312,6 +314,8 @@ void run(const ReportArgs& a) {
                             {"final_error", pts.empty() ? 0.0 : pts.back().error},
                             {"ms_to_full", pts.empty() ? 0.0 : pts.back().ms},
                             {"same_memory_float_error", same_memory_error},
+                            {"preview_levels", packs[i].reader->preview().levels()},
+                            {"preview_bytes", packs[i].reader->preview().serialized_size()},
                             {"samples_below_same_memory_float", below}};
   }
   json flat_lines = json::object();
@@ -353,9 +357,11 @@ void run(const ReportArgs& a) {
     table += buf;
   }
   for (auto& [enc, r] : refine.items()) {
-    std::snprintf(buf, sizeof buf, "refinement %-6s: %zu cells, error %.5f at the cut -> %.5f after %.0f ms (full residency)\n",
-                  enc.c_str(), size_t(r["cells"]), double(r["points"][0][1]), double(r["final_error"]),
-                  double(r["ms_to_full"]));
+    std::snprintf(buf, sizeof buf,
+                  "refinement %-6s: %zu cells, error %.5f at the cut (map preview: %u levels, %.1f KiB) -> %.5f after "
+                  "%.0f ms (full residency)\n",
+                  enc.c_str(), size_t(r["cells"]), double(r["points"][0][1]), unsigned(r["preview_levels"]),
+                  double(r["preview_bytes"]) / 1024, double(r["final_error"]), double(r["ms_to_full"]));
     table += buf;
     if (same_memory_error >= 0) {
       std::snprintf(buf, sizeof buf, "  %zu of %zu samples below the same-memory float map (%.5f); ms:error",

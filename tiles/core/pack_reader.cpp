@@ -1,5 +1,7 @@
 #include "tiles/core/pack_reader.hpp"
 
+#include "tiles/core/map_preview.hpp"
+
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -134,8 +136,16 @@ void PackReader::load() {
   grid_bytes_.resize(header_.grid_size);
   read_at(header_.grid_offset, grid_bytes_);
   if (crc32_of(grid_bytes_) != header_.grid_crc) throw FormatError(where(header_.grid_offset) + ": skip grid CRC mismatch");
-  grid_ = CutGrid::parse(grid_bytes_, name_ + ": skip grid at byte " + std::to_string(header_.grid_offset));
-  if (grid_.levels != header_.skip_level) throw FormatError(where(header_.grid_offset) + ": skip grid levels != skip level");
+  {
+    // The skip grid, then the map preview (the header checked the section's size).
+    const size_t g = CutGrid::serialized_size(header_.skip_level);
+    const std::span<const uint8_t> section(grid_bytes_);
+    grid_ = CutGrid::parse(section.first(g), name_ + ": skip grid at byte " + std::to_string(header_.grid_offset));
+    if (grid_.levels != header_.skip_level)
+      throw FormatError(where(header_.grid_offset) + ": skip grid levels != skip level");
+    preview_ = std::make_shared<MapPreview>(MapPreview::parse(
+        section.subspan(g), grid_, header_.map_level, name_ + " (byte " + std::to_string(header_.grid_offset + g) + ")"));
+  }
 
   // Every tile has a 32-byte record in the journal before the grid, so the index cannot
   // name more tiles than that room holds. A sparse file may still claim gigabytes: the
