@@ -6,6 +6,8 @@
 
 #include <array>
 #include <cstring>
+#include <fstream>
+#include <iterator>
 #include <limits>
 
 #include "common/bytes.hpp"
@@ -128,6 +130,30 @@ TEST(MapPreview, BytesArePinnedAndHostileOnesRefused) {
     const float nan = std::numeric_limits<float>::quiet_NaN();
     std::memcpy(x.data() + 16 + 8 * m.cells(), &nan, 4);
     refused(x, "NaN value");
+  }
+}
+
+TEST(MapPreview, VerifyRefusesAPreviewThatDiffersFromTheTiles) {
+  const IntervalTile t = fields::city_field(16, 3);
+  const auto r = build("preview_verify", build_hierarchy(t), Encoding::mh, 1, 1 << 16, 2);
+  ASSERT_GT(r->preview().stored_values(), 0u);
+  EXPECT_NO_THROW(r->verify(TileCodec::of(Encoding::mh).open));
+  std::ifstream in(r->name(), std::ios::binary);  // the pack's path
+  std::vector<uint8_t> b((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  ASSERT_EQ(b.size(), r->file_size());
+  const uint64_t grid_at = r->header().grid_offset, grid_size = r->header().grid_size;
+  const uint64_t value_at = grid_at + CutGrid::serialized_size(1) + 16 + 8 * r->preview().cells();
+  store_le<float>(b.data() + value_at, load_le<float>(b.data() + value_at) + 0.125f);  // still a valid float
+  PackHeader h = r->header();
+  h.grid_crc = crc32_of(std::span<const uint8_t>(b.data() + grid_at, grid_size));
+  const auto head = h.serialize();
+  std::copy(head.begin(), head.end(), b.begin());
+  const auto bad = PackReader::open_memory(std::move(b), "bad_preview.pack");  // every CRC right
+  try {
+    bad->verify(TileCodec::of(Encoding::mh).open);
+    ADD_FAILURE() << "verify accepted a preview that differs from the tiles";
+  } catch (const FormatError& e) {
+    EXPECT_NE(std::string(e.what()).find("map preview differs"), std::string::npos) << e.what();
   }
 }
 

@@ -317,6 +317,27 @@ void PackReader::verify(const TileOpener& open_tile) const {
   });
   if (reached != index_.size())
     throw FormatError(name_ + ": " + std::to_string(index_.size() - reached) + " tiles the page table never reaches");
+  // 4. The map preview holds exactly what the tiles answer at its levels (rebuilt from
+  // them with the same levels and compared byte for byte).
+  if (!open_tile || preview_->levels() == 0) return;
+  std::map<uint64_t, std::pair<std::vector<uint8_t>, std::unique_ptr<Evaluator>>> opened;
+  auto depth = [&](uint32_t level, uint64_t x, uint64_t y) -> float {
+    const PageHit hit = walk_page_table(grid_, level, x, y, index_tile);
+    if (hit.kind != PageHit::Kind::tile) return hit.value;
+    auto it = opened.find(hit.tile);
+    if (it == opened.end()) {
+      if (opened.size() > 64) opened.clear();  // build() asks cell by cell
+      std::vector<uint8_t> raw = read_raw(hit.tile);
+      std::unique_ptr<Evaluator> ev = open_tile(raw);
+      it = opened.emplace(hit.tile, std::make_pair(std::move(raw), std::move(ev))).first;
+    }
+    return it->second.second->depth(hit.rel, hit.tx, hit.ty);
+  };
+  const std::vector<uint8_t> want = MapPreview::build(grid_, preview_->levels(), depth).serialize();
+  const uint64_t at = header_.grid_offset + CutGrid::serialized_size(header_.skip_level);
+  if (!std::equal(want.begin(), want.end(), grid_bytes_.begin() + long(CutGrid::serialized_size(header_.skip_level)),
+                  grid_bytes_.end()))
+    throw FormatError(where(at) + ": map preview differs from what the tiles answer at its levels");
 }
 
 void PackReader::check_depth_range() const {
