@@ -417,6 +417,10 @@ std::string PackReader::summary() const {
                 (unsigned long long)index_.size(), (unsigned long long)index_tiles, (unsigned long long)raw, max_raw,
                 (unsigned long long)stored, (unsigned long long)header_.grid_size, (unsigned long long)file_size());
   out += buf;
+  std::snprintf(buf, sizeof buf, "  map preview: %u levels below K, %zu cells, %zu values, %llu bytes (in the grid)\n",
+                preview_->levels(), preview_->cells(), preview_->stored_values(),
+                (unsigned long long)preview_->serialized_size());
+  out += buf;
   for (auto& [k, v] : params_) out += "  " + printable_text(k) + " = " + printable_text(v) + "\n";
   return out;
 }
