@@ -56,6 +56,16 @@ std::string first_difference(const PackReader& r) {
           return nullptr;
         });
         const float got = r.preview().coarse_answer(k, hit, level, x, y);
+        if (hit.kind != PageHit::Kind::value) {  // the whole region shares the answer: check its first texel
+          const uint32_t sh = r.preview().coarse_region_shift(k, hit, level);
+          const uint64_t x0 = (x >> sh) << sh, y0 = (y >> sh) << sh;
+          const PageHit h0 = walk_page_table(r.grid(), level, x0, y0, [](uint64_t, const GridEntry&) -> const CutGrid* {
+            return nullptr;
+          });
+          if (bits(r.preview().coarse_answer(k, h0, level, x0, y0)) != bits(got))
+            return "region of level " + std::to_string(level) + " (" + std::to_string(x) + ", " + std::to_string(y) +
+                   ") shift " + std::to_string(sh) + " does not share its answer";
+        }
         const float want = full.depth(at, x >> (level - at), y >> (level - at));
         if (bits(got) != bits(want))
           return "level " + std::to_string(level) + " (" + std::to_string(x) + ", " + std::to_string(y) + "): " +

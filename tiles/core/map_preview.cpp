@@ -166,4 +166,12 @@ float MapPreview::coarse_answer(uint32_t k, const PageHit& hit, uint32_t level, 
   return value(ex, ey, j, lx, ly, hit.value);
 }
 
+uint32_t MapPreview::coarse_region_shift(uint32_t k, const PageHit& hit, uint32_t level) const noexcept {
+  const uint32_t reached = uint32_t(hit.tile >> kTileIdLevelShift);
+  const uint32_t whole = level - std::min(level, reached);
+  if (p_ == 0 || level <= k) return whole;
+  const uint32_t j = std::min(level - k, p_);
+  return k + j <= reached ? whole : level - (k + j);
+}
+
 }  // namespace st

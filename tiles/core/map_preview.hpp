@@ -82,6 +82,11 @@ class MapPreview {
   // at level min(level, k + p) when that is finer than the entry the walk reached, else
   // the entry's value (hit.value).
   float coarse_answer(uint32_t k, const PageHit& hit, uint32_t level, uint64_t x, uint64_t y) const noexcept;
+  // For a walk that ended at a tile not at hand (hit.kind tile or absent): the shift s
+  // such that every texel of `level` sharing (x >> s, y >> s) gets the same
+  // coarse_answer: the preview node's square where the preview answers, else the
+  // reached entry's (level - its level).
+  uint32_t coarse_region_shift(uint32_t k, const PageHit& hit, uint32_t level) const noexcept;
 
  private:
   uint32_t p_ = 0, k_ = 0;
