@@ -6,6 +6,7 @@
 #include "app/pack_cli_util.hpp"
 #include "common/error.hpp"
 #include "common/text.hpp"
+#include "tiles/core/map_preview.hpp"
 #include "tiles/core/pack_reader.hpp"
 
 namespace st::cli {
@@ -53,6 +54,8 @@ void run(const InspectArgs& a) {
   j["tile_raw_bytes"] = raw;
   j["largest_tile_raw_bytes"] = largest;
   j["fraction_of_raw_float_map"] = double(r->file_size()) / raw_map;
+  j["preview_levels"] = r->preview().levels();
+  j["preview_bytes"] = r->preview().serialized_size();
   nlohmann::json params = nlohmann::json::object();
   for (auto& [k, v] : r->params()) params[k] = v;
   j["build_params"] = params;
@@ -72,6 +75,8 @@ void run(const InspectArgs& a) {
   std::printf("  tiles        %llu encoded + %llu index, %.2f MiB stored (%.2f MiB raw, largest %llu B)\n",
               (unsigned long long)tiles, (unsigned long long)index, double(stored) / (1 << 20),
               double(raw) / (1 << 20), (unsigned long long)largest);
+  std::printf("  map preview  %u levels below K (to level %u), %.1f KiB in the map info\n", r->preview().levels(),
+              h.skip_level + r->preview().levels(), double(r->preview().serialized_size()) / 1024);
   std::printf("  file         %.2f MiB = %.5f%% of the raw float32 map (%.1f GiB)\n",
               double(r->file_size()) / (1 << 20), 100.0 * double(r->file_size()) / raw_map,
               raw_map / double(1ull << 30));

@@ -31,7 +31,9 @@
 #include "app/command.hpp"
 #include "app/html_page.hpp"
 #include "common/error.hpp"
+#include "tiles/core/map_preview.hpp"
 #include "tiles/core/pack_evaluator.hpp"
+#include "tiles/core/page_table.hpp"
 
 namespace st::cli {
 namespace {
@@ -65,12 +67,33 @@ std::vector<std::string> split(const std::string& s) {
 }
 
 // Stored bytes a client holds for the whole map: every tile's encoded (raw) size plus the
-// skip grid: what "the same memory" means for the uncompressed baselines.
+// skip grid and the map preview (grid_bytes holds both): what "the same memory" means for
+// the uncompressed baselines.
 uint64_t resident_bytes(const PackReader& r) {
   uint64_t b = r.grid_bytes().size();
   for (const TileIndexEntry& e : r.tiles()) b += e.raw_size;
   return b;
 }
+
+// What a client answers from the map info alone, with no tile at hand: the skip grid and,
+// with `preview`, the map preview (MapPreview::coarse_answer, what RemoteMap answers on a
+// miss). Deterministic, unlike the curve's first sample, during which the tiles its own
+// misses asked for may already arrive.
+class MapInfoEvaluator final : public Evaluator {
+ public:
+  MapInfoEvaluator(const PackReader& r, bool preview) : r_(r), preview_(preview) {}
+  uint32_t finest_level() const override { return r_.map_level(); }
+  float depth(uint32_t level, uint64_t x, uint64_t y) const override {
+    if (!texel_in_map(r_.map_level(), level, x, y)) return kLitDepth;
+    const PageHit hit = walk_page_table(r_.grid(), level, x, y,
+                                        [](uint64_t, const GridEntry&) -> const CutGrid* { return nullptr; });
+    return preview_ ? r_.preview().coarse_answer(r_.skip_level(), hit, level, x, y) : hit.value;
+  }
+
+ private:
+  const PackReader& r_;
+  bool preview_;
+};
 
 struct RefinementPoint {
   double ms;
@@ -105,7 +128,7 @@ std::vector<RefinementPoint> refinement(const std::string& pack_path, const std:
   const auto cells = loadgen::cells_for_points(lps, L, client::skip_grid(map));
   cells_total = cells.size();
   // The answer at the cut itself, before any request: what the map info alone gives
-  // (the skip grid's level K). Later samples are timed from their start; tiles keep
+  // (the skip grid's level K and the map preview's levels K+1 .. K+p below it). Later samples are timed from their start; tiles keep
   // arriving while a sample evaluates the frame.
   pts.push_back({0.0, frame_error(client::evaluator(map), light, f, 0, L).fraction(), 0});
   const auto t0 = Clk::now();
@@ -308,10 +331,17 @@ void run(const ReportArgs& a) {
     for (const auto& p : pts) arr.push_back({p.ms, p.error, p.resident_cells});
     uint64_t below = 0;
     for (const auto& p : pts) below += p.error < same_memory_error;
+    const uint32_t L = packs[i].reader->map_level();
+    const double grid_only = frame_error(MapInfoEvaluator(*packs[i].reader, false), light, frames[0], 0, L).fraction();
+    const double with_preview = frame_error(MapInfoEvaluator(*packs[i].reader, true), light, frames[0], 0, L).fraction();
     refine[packs[i].enc] = {{"cells", cells}, {"columns", {"ms", "error", "resident_cells"}}, {"points", arr},
                             {"final_error", pts.empty() ? 0.0 : pts.back().error},
                             {"ms_to_full", pts.empty() ? 0.0 : pts.back().ms},
                             {"same_memory_float_error", same_memory_error},
+                            {"map_info_error", with_preview},
+                            {"skip_grid_only_error", grid_only},
+                            {"preview_levels", packs[i].reader->preview().levels()},
+                            {"preview_bytes", packs[i].reader->preview().serialized_size()},
                             {"samples_below_same_memory_float", below}};
   }
   json flat_lines = json::object();
@@ -353,9 +383,14 @@ void run(const ReportArgs& a) {
     table += buf;
   }
   for (auto& [enc, r] : refine.items()) {
-    std::snprintf(buf, sizeof buf, "refinement %-6s: %zu cells, error %.5f at the cut -> %.5f after %.0f ms (full residency)\n",
-                  enc.c_str(), size_t(r["cells"]), double(r["points"][0][1]), double(r["final_error"]),
-                  double(r["ms_to_full"]));
+    std::snprintf(buf, sizeof buf,
+                  "refinement %-6s: %zu cells, error %.5f at the cut (map preview: %u levels, %.1f KiB) -> %.5f after "
+                  "%.0f ms (full residency)\n",
+                  enc.c_str(), size_t(r["cells"]), double(r["points"][0][1]), unsigned(r["preview_levels"]),
+                  double(r["preview_bytes"]) / 1024, double(r["final_error"]), double(r["ms_to_full"]));
+    table += buf;
+    std::snprintf(buf, sizeof buf, "  map info alone (no tile): %.5f with the map preview, %.5f from the skip grid only\n",
+                  double(r["map_info_error"]), double(r["skip_grid_only_error"]));
     table += buf;
     if (same_memory_error >= 0) {
       std::snprintf(buf, sizeof buf, "  %zu of %zu samples below the same-memory float map (%.5f); ms:error",

@@ -54,7 +54,11 @@ RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::v
       notifier_(std::move(notifier)),
       header_bytes_(std::move(header_bytes)),
       header_(PackHeader::parse(header_bytes_, "map '" + name_ + "' header")),
-      grid_(CutGrid::parse(grid_bytes, "map '" + name_ + "' skip grid")),
+      grid_(CutGrid::parse(std::span<const uint8_t>(grid_bytes).first(
+                               std::min(grid_bytes.size(), CutGrid::serialized_size(header_.skip_level))),
+                           "map '" + name_ + "' skip grid")),
+      preview_(MapPreview::parse(std::span<const uint8_t>(grid_bytes).subspan(CutGrid::serialized_size(grid_.levels)), grid_,
+                                 header_.map_level, "map '" + name_ + "'")),
       light_(LightSpace::from_array(header_.light_kind, header_.light)),
       cache_(options.cache_slots, slot_size_for(header_)),
       requests_(size_t(options.want_capacity) + size_t(options.max_in_flight) * options.tiles_per_request,
@@ -145,8 +149,10 @@ bool RemoteMap::enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch
     return false;
   }
   if (page.state != PageState::resident) {
-    // The entry's value answers for its whole node while the tile is away.
-    sc.set_region(level, x, y, hit.region_shift, value, LookupScratch::Counted::coarse);
+    value = preview_.coarse_answer(grid_.levels, hit, level, x, y);  // the map preview's finer node
+    // That answer holds for the whole preview node (or the entry's node) while the tile is away.
+    sc.set_region(level, x, y, preview_.coarse_region_shift(grid_.levels, hit, level), value,
+                  LookupScratch::Counted::coarse);
     ++sc.missed;
     ++sc.coarse;
     bool noted = false;

@@ -36,6 +36,7 @@
 #include "tiles/core/tile_cache.hpp"
 #include "proto/messages.hpp"
 #include "tiles/core/light.hpp"
+#include "tiles/core/map_preview.hpp"
 #include "tiles/core/page_table.hpp"
 #include "tiles/core/pack_format.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
@@ -85,6 +86,7 @@ class RemoteMap final : public Evaluator {
   const std::string& name() const { return name_; }
   const PackHeader& header() const { return header_; }
   const CutGrid& grid() const { return grid_; }
+  const MapPreview& preview() const { return preview_; }
   const std::vector<uint8_t>& header_bytes() const { return header_bytes_; }
   uint32_t slot_bytes() const { return cache_.slot_bytes(); }
 
@@ -249,6 +251,7 @@ class RemoteMap final : public Evaluator {
   std::vector<uint8_t> header_bytes_;
   PackHeader header_;
   CutGrid grid_;
+  MapPreview preview_;  // after the skip grid in MapInfo: answers where a tile is missing
   LightSpace light_;
 
   mutable RwLock mu_;

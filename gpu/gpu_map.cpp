@@ -138,7 +138,14 @@ struct GpuMap::Impl {
     off_skip_slots = off_entries + L::kEntryWords * cells;
     off_children = off_skip_slots + cells;
     off_pcf = off_children + slot_count * L::kChildTableWords;
-    const uint32_t words = off_pcf + L::kMaxPcf * L::kPcfTableStride;
+    // The map preview (tiles/core/map_preview.hpp): answers where a tile is absent.
+    const MapPreview& pv = rm->preview();
+    const uint32_t pv_words = uint32_t(MapPreview::words(pv.levels()));
+    const uint32_t off_preview = off_pcf + L::kMaxPcf * L::kPcfTableStride;
+    const uint32_t pv_cells = off_preview + L::kPvHeaderWords + cells;
+    const uint32_t pv_cell_words = L::kPvCellHeaderWords + 2 * pv_words;
+    const uint32_t pv_values = pv_cells + uint32_t(pv.cells()) * pv_cell_words;
+    const uint32_t words = pv_values + uint32_t(pv.values().size());
     page_shadow.assign(words, 0);
     uint32_t* p = page_shadow.data();
     p[L::kPtMagic] = L::kPageMagic;
@@ -153,6 +160,23 @@ struct GpuMap::Impl {
     p[L::kPtSkipSlots] = off_skip_slots;
     p[L::kPtChildSlots] = off_children;
     p[L::kPtPcfTable] = off_pcf;
+    p[L::kPtPreview] = off_preview;
+    p[off_preview + L::kPvLevels] = pv.levels();
+    p[off_preview + L::kPvMaskWords] = pv_words;
+    p[off_preview + L::kPvCells] = pv_cells;
+    p[off_preview + L::kPvValues] = pv_values;
+    std::copy(pv.ordinals().begin(), pv.ordinals().end(), p + off_preview + L::kPvHeaderWords);
+    for (size_t c = 0; c < pv.cells(); ++c) {
+      uint32_t* r = p + pv_cells + c * pv_cell_words;
+      r[0] = pv.bases()[c];
+      r[1] = std::bit_cast<uint32_t>(pv.entry_values()[c]);
+      for (uint32_t i = 0; i < pv_words; ++i) {
+        const uint64_t m = pv.masks()[c * pv_words + i];
+        r[L::kPvCellHeaderWords + 2 * i] = uint32_t(m);
+        r[L::kPvCellHeaderWords + 2 * i + 1] = uint32_t(m >> 32);
+      }
+    }
+    for (size_t i = 0; i < pv.values().size(); ++i) p[pv_values + i] = std::bit_cast<uint32_t>(pv.values()[i]);
     for (size_t i = 0; i < g.coarse.size(); ++i) p[off_coarse + i] = std::bit_cast<uint32_t>(g.coarse[i]);
     for (uint32_t e = 0; e < cells; ++e) {
       p[off_entries + 2 * e] = std::bit_cast<uint32_t>(g.entries[e].value);

@@ -342,8 +342,13 @@ def report_page(j, src, command):
         "%s %s" % (k, v) for k, v in differ.items()) or "not measured")]
     for enc, r in j.get("refinement", {}).items():
         if isinstance(r, dict) and r.get("points"):
-            facts.append(("refinement %s" % enc, "error %s at the cut -> %s after %s ms" % (
-                num(r["points"][0][1]), num(r.get("final_error")), num(r.get("ms_to_full")))))
+            below = r.get("samples_below_same_memory_float")
+            facts.append(("refinement %s" % enc, "error %s at the cut%s -> %s after %s ms%s" % (
+                num(r["points"][0][1]),
+                " (map preview %s KiB)" % num(r["preview_bytes"] / 1024.0) if "preview_bytes" in r else "",
+                num(r.get("final_error")), num(r.get("ms_to_full")),
+                "; %s of %d samples below the same-memory float map" % (below, len(r["points"]))
+                if below is not None else "")))
     single = [r for r in rows if r.get("pcf_radius", 0) == 0]
     if single:
         b = min(single, key=lambda r: (r.get("error", 1), r.get("ms_per_frame", 0)))

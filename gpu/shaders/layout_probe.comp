@@ -7,7 +7,8 @@ void main() {
   if (gl_GlobalInvocationID.x != 0u) return;
   const uint v[] = uint[](kLayoutVersion, kPageMagic, kPtMagic, kPtVersion, kPtMapLevel, kPtSkipLevel,
                           kPtEncoding, kPtSlotCount, kPtSlotWords, kPtSkipCoarse, kPtSkipEntries, kPtSkipSlots,
-                          kPtChildSlots, kPtPcfTable, kPtHeaderWords, kNoSlot, kChildTableWords, kEntryWords,
+                          kPtChildSlots, kPtPcfTable, kPtPreview, kPvLevels, kPvMaskWords, kPvCells, kPvValues,
+                          kPvHeaderWords, kPvCellHeaderWords, kPtHeaderWords, kNoSlot, kChildTableWords, kEntryWords,
                           kKindConstant, kKindTile, kKindIndex, kMaxPcf, kPcfTableStride, kMaxMapLevel,
                           kLitDepthBits, kGridHeaderWords, kQueryWords, kQueryX, kQueryY, kQueryReceiver,
                           kQueryFootprint, kQueryR, kQueryLevel, kLevelFromFootprint, kFbUsed, kFbDropped,

@@ -380,6 +380,37 @@ StWalk st_walk(uint level, uint x, uint y) {
   return w;  // not reached
 }
 
+// The map preview's answer (tiles/core/map_preview.hpp MapPreview::coarse_answer) for
+// texel (x, y) of `level` whose walk reached an absent tile at level `reached` with the
+// entry value `fallback`: the preview's node at level min(level, K + p) when that is
+// finer, the deepest stored node on its path (else the skip-grid entry's value).
+float st_preview(uint level, uint x, uint y, uint reached, float fallback) {
+  const uint pv = ST_PAGE(kPtPreview);
+  const uint k = ST_PAGE(kPtSkipLevel);
+  const uint p = ST_PAGE(pv + kPvLevels);
+  if (p == 0u || level <= k) return fallback;
+  uint j = min(level - k, p);
+  if (k + j <= reached) return fallback;
+  const uint s = level - k;
+  const uint ex = x >> s, ey = y >> s;
+  const uint o = ST_PAGE(pv + kPvHeaderWords + (ey << k) + ex);
+  if (o == kNoSlot) return fallback;
+  const uint rec = ST_PAGE(pv + kPvCells) + o * (kPvCellHeaderWords + 2u * ST_PAGE(pv + kPvMaskWords));
+  uint lx = (x >> (s - j)) - (ex << j), ly = (y >> (s - j)) - (ey << j);
+  for (; j >= 1u; --j) {
+    const uint b = ((1u << (2u * j)) - 4u) / 3u + (ly << j) + lx;
+    const uint word = ST_PAGE(rec + kPvCellHeaderWords + (b >> 5u));
+    if (((word >> (b & 31u)) & 1u) != 0u) {
+      uint rank = uint(bitCount(word & ((1u << (b & 31u)) - 1u)));
+      for (uint i = 0u; i < (b >> 5u); ++i) rank += uint(bitCount(ST_PAGE(rec + kPvCellHeaderWords + i)));
+      return uintBitsToFloat(ST_PAGE(ST_PAGE(pv + kPvValues) + ST_PAGE(rec) + rank));
+    }
+    lx >>= 1u;
+    ly >>= 1u;
+  }
+  return uintBitsToFloat(ST_PAGE(rec + 1u));
+}
+
 bool st_in_walk(StWalk w, uint level, uint x, uint y) {
   return (x >> (level - w.l)) == w.ex && (y >> (level - w.l)) == w.ey;
 }
@@ -390,7 +421,10 @@ float st_answer(StWalk w, uint level, uint x, uint y, inout StProbe probe) {
     const uint rel = level - w.l;
     return st_tile_depth(w.slot, rel, x - (w.ex << rel), y - (w.ey << rel));
   }
-  if (w.kind == 2u) st_feedback(w.key, w.l, w.ex, w.ey, w.value_bits, w.kind_word, probe);
+  if (w.kind == 2u) {
+    st_feedback(w.key, w.l, w.ex, w.ey, w.value_bits, w.kind_word, probe);
+    return st_preview(level, x, y, w.l, w.value);
+  }
   return w.value;
 }
 

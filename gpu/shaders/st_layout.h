@@ -17,7 +17,7 @@ namespace st::gpu::layout {
 #define ST_UINT(name, value) const uint name = value;
 #endif
 
-ST_UINT(kLayoutVersion, 1u)
+ST_UINT(kLayoutVersion, 2u)  // 2: the map preview (kPtPreview)
 
 // ---- page-table buffer (binding kBindPage) ----
 // header words, then the skip grid's coarse values and entries, the skip grid's slot
@@ -35,7 +35,19 @@ ST_UINT(kPtSkipEntries, 8u)    // word offset: 4^K entries, 2 words each (f32 va
 ST_UINT(kPtSkipSlots, 9u)      // word offset: 4^K slot pointers (kNoSlot: not on the GPU)
 ST_UINT(kPtChildSlots, 10u)    // word offset: slot_count * kChildTableWords slot pointers
 ST_UINT(kPtPcfTable, 11u)      // word offset: kMaxPcf * kPcfTableStride f32 quotients
+ST_UINT(kPtPreview, 12u)       // word offset: the map preview (kPv* header, then its arrays)
 ST_UINT(kPtHeaderWords, 16u)
+
+// The map preview block (tiles/core/map_preview.hpp), at word kPtPreview: a header, then
+// one ordinal per skip-grid entry (kNoSlot: constant), per cell kPvCellHeaderWords words
+// (first value's index, the entry's value) and 2 * mask_words mask words (each u64 mask
+// word as its low then high half), then the stored values (f32).
+ST_UINT(kPvLevels, 0u)          // p: preview levels below K (0: none)
+ST_UINT(kPvMaskWords, 1u)       // u64 mask words per cell
+ST_UINT(kPvCells, 2u)           // word offset of the cell records
+ST_UINT(kPvValues, 3u)          // word offset of the values
+ST_UINT(kPvHeaderWords, 4u)     // the ordinals follow
+ST_UINT(kPvCellHeaderWords, 2u)
 
 ST_UINT(kNoSlot, 0xFFFFFFFFu)
 ST_UINT(kChildTableWords, 256u)  // 4^kMaxIndexLevels entries of an index tile
@@ -104,7 +116,7 @@ ST_UINT(kBindNormals, 3u)   // shadow pass: normals (f32 x4 per pixel)
 ST_UINT(kBindOutput, 4u)    // f32 per query or pixel
 ST_UINT(kBindFeedback, 5u)
 ST_UINT(kWorkgroupSize, 64u)
-ST_UINT(kProbeWords, 64u)   // layout_probe.comp writes this many words
+ST_UINT(kProbeWords, 80u)   // layout_probe.comp writes this many words
 
 #ifdef __cplusplus
 }  // namespace st::gpu::layout

@@ -17,6 +17,7 @@
 #include "server/catalog.hpp"
 #include "tests/client/loopback.hpp"
 #include "tiles/build/pack_writer.hpp"
+#include "tiles/core/map_preview.hpp"
 #include "tiles/core/pack_format.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
 
@@ -65,6 +66,7 @@ SyntheticPack write_synthetic_pack(const fs::path& path, Bytes encoded) {
   PackParams pp = PackParams::from(
       LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), Aabb{{-1, 0, -1}, {1, 1, 1}}), cut);
   pp.compression_level = 1;
+  pp.preview_levels = 0;  // its tiles are random bytes: nothing the map preview could decode
   auto w = PackWriter::create(out.path, pp);
   CutGrid grid = CutGrid::constant(1, 0.5f);
   for (uint32_t cy = 0; cy < 2; ++cy)
@@ -101,7 +103,10 @@ std::string write_deep_grid_pack(const fs::path& path) {
   h.light_kind = light.kind();
   h.light = light.to_array();
   const Bytes params = serialize_params({});
-  const Bytes grid = CutGrid::constant(k, 0.5f).serialize();
+  const CutGrid cut_grid = CutGrid::constant(k, 0.5f);
+  Bytes grid = cut_grid.serialize();  // then its map preview: no cells (every entry constant)
+  const Bytes preview = MapPreview::build(cut_grid, 0, [](uint32_t, uint64_t, uint64_t) { return 0.5f; }).serialize();
+  grid.insert(grid.end(), preview.begin(), preview.end());
   h.params_offset = kPackHeaderBytes;
   h.params_size = params.size();
   h.journal_offset = h.params_offset + h.params_size;
@@ -262,7 +267,7 @@ TEST(ProtocolSpec, MapInfoOfTheDeepestSkipGridIsServed) {
   EXPECT_EQ(kPackHeaderBytes, 256u);
   EXPECT_EQ(CutGrid::serialized_size(6), 38'236u);
   EXPECT_EQ(CutGrid::serialized_size(8), 611'676u);
-  const uint32_t need = uint32_t(proto::kHeaderSize + 12 + kPackHeaderBytes + grid_bytes);
+  const uint32_t need = uint32_t(proto::kHeaderSize + 12 + kPackHeaderBytes + grid_bytes + kPreviewHeaderBytes);
   auto srv = start_server({path});
   EXPECT_EQ(srv.server->max_frame_bytes(), need);
   {

@@ -14,6 +14,7 @@
 
 #include "client/map_access.hpp"
 #include "tests/client/loopback.hpp"
+#include "tiles/core/map_preview.hpp"
 
 namespace st::client {
 namespace {
@@ -160,12 +161,15 @@ TEST(RemoteMap, AnswersFromTheCoarserLevelUntilTilesArrive) {
   Client client({"127.0.0.1", srv.port}, quick_options());
   Map map = client.open("coarse");
   PackEvaluator local(p.reader);
-  // Nothing resident: every level answers, levels < K exactly, finer levels with the
-  // value of their skip-grid entry (the level-K node above them).
+  // Nothing resident: every level answers, levels <= K + p exactly (the skip grid, then
+  // the map preview's p levels), finer levels with the value of the level-(K + p) node
+  // above them.
+  const uint32_t kp = k + p.reader->preview().levels();
+  ASSERT_GT(kp, k);
   for (uint32_t l = 0; l <= level; ++l)
     for (uint64_t y = 0; y < (uint64_t(1) << l); ++y)
       for (uint64_t x = 0; x < (uint64_t(1) << l); ++x) {
-        const float want = l <= k ? local.depth(l, x, y) : local.depth(k, x >> (l - k), y >> (l - k));
+        const float want = l <= kp ? local.depth(l, x, y) : local.depth(kp, x >> (l - kp), y >> (l - kp));
         ASSERT_EQ(bits(map.depth(l, x, y)), bits(want)) << "level " << l << " (" << x << ", " << y << ")";
       }
   EXPECT_GT(map.stats().coarse_answers, 0u);

@@ -7,6 +7,9 @@
 // then a PackEvaluator answers lookups at every level and PCF (evaluator_probe.hpp).
 // Every rejection must be an st::FormatError (the reader's documented error for corrupt
 // data); anything else escaping, a crash or a sanitizer report is a finding.
+#include <algorithm>
+#include <cmath>
+#include <cstring>
 #include <span>
 
 #include "proto/byte_io.hpp"
@@ -14,6 +17,7 @@
 #include "tests/fuzz/evaluator_probe.hpp"
 #include "tests/fuzz/seed_support.hpp"
 #include "tiles/core/encoding.hpp"
+#include "tiles/core/map_preview.hpp"
 #include "common/error.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_reader.hpp"
@@ -101,6 +105,26 @@ void probe_tiles(const st::PackReader& reader, uint64_t hash) {
   }
 }
 
+// The map preview as a client with no tile uses it: every answer is a number, and in a
+// verified pack it equals the full pack's answer at level min(level, K + p).
+void probe_preview(const st::PackReader& reader, const st::PackEvaluator& ev, bool verified, uint64_t hash) {
+  const uint32_t k = reader.skip_level(), top = reader.map_level(), p = reader.preview().levels();
+  for (uint32_t i = 0; i < 32; ++i) {
+    hash = hash * 6364136223846793005ull + 1442695040888963407ull;
+    const uint32_t level = k + uint32_t((hash >> 33) % (top - k + 1));
+    const uint64_t mask = (uint64_t(1) << level) - 1, x = (hash >> 7) & mask, y = (hash >> 29) & mask;
+    const st::PageHit hit = st::walk_page_table(reader.grid(), level, x, y,
+                                                [](uint64_t, const st::GridEntry&) -> const st::CutGrid* { return nullptr; });
+    const float got = reader.preview().coarse_answer(k, hit, level, x, y);
+    FUZZ_CHECK(!std::isnan(got));
+    if (verified) {
+      const uint32_t at = std::min(level, k + p);
+      const float want = ev.depth(at, x >> (level - at), y >> (level - at));
+      FUZZ_CHECK(std::memcmp(&got, &want, sizeof got) == 0);
+    }
+  }
+}
+
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
@@ -128,6 +152,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   try {
     st::PackEvaluator ev(reader, 4);
     st::fuzz::probe_evaluator(ev, hash);
+    probe_preview(*reader, ev, verified, hash);
   } catch (const st::FormatError&) {
     // A pack that verify() accepted must answer every lookup.
     FUZZ_CHECK(!verified);

@@ -15,7 +15,8 @@ TEST(GpuLayout, TheShaderSeesEveryConstantTheCppSideSees) {
   const std::vector<uint32_t> want = {
       L::kLayoutVersion, L::kPageMagic, L::kPtMagic, L::kPtVersion, L::kPtMapLevel, L::kPtSkipLevel,
       L::kPtEncoding, L::kPtSlotCount, L::kPtSlotWords, L::kPtSkipCoarse, L::kPtSkipEntries, L::kPtSkipSlots,
-      L::kPtChildSlots, L::kPtPcfTable, L::kPtHeaderWords, L::kNoSlot, L::kChildTableWords, L::kEntryWords,
+      L::kPtChildSlots, L::kPtPcfTable, L::kPtPreview, L::kPvLevels, L::kPvMaskWords, L::kPvCells,
+      L::kPvValues, L::kPvHeaderWords, L::kPvCellHeaderWords, L::kPtHeaderWords, L::kNoSlot, L::kChildTableWords, L::kEntryWords,
       L::kKindConstant, L::kKindTile, L::kKindIndex, L::kMaxPcf, L::kPcfTableStride, L::kMaxMapLevel,
       L::kLitDepthBits, L::kGridHeaderWords, L::kQueryWords, L::kQueryX, L::kQueryY, L::kQueryReceiver,
       L::kQueryFootprint, L::kQueryR, L::kQueryLevel, L::kLevelFromFootprint, L::kFbUsed, L::kFbDropped,

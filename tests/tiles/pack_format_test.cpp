@@ -6,6 +6,7 @@
 
 #include "tests/tiles/interval_fields.hpp"
 #include "common/error.hpp"
+#include "tiles/core/map_preview.hpp"
 #include "tiles/core/pack_format.hpp"
 
 namespace st {
@@ -35,7 +36,7 @@ PackHeader sample_header() {
   h.params_size = 10;
   h.journal_offset = 266;
   h.grid_offset = 1000;
-  h.grid_size = CutGrid::serialized_size(6);
+  h.grid_size = CutGrid::serialized_size(6) + kPreviewHeaderBytes;  // skip grid + an empty map preview
   h.index_offset = h.grid_offset + h.grid_size;
   h.tile_count = 3;
   h.params_crc = 0x11111111;
@@ -49,7 +50,7 @@ TEST(PackFormat, HeaderOffsetsArePinned) {
   auto b = h.serialize();
   const uint8_t* p = b.data();
   EXPECT_EQ(std::memcmp(p, "STPACK\r\n", 8), 0);
-  EXPECT_EQ(at<uint32_t>(p, 8), 1u);
+  EXPECT_EQ(at<uint32_t>(p, 8), 2u);  // version 2: the map preview follows the skip grid
   EXPECT_EQ(at<uint32_t>(p, 12), 256u);
   EXPECT_EQ(at<uint32_t>(p, 16), 1u);
   EXPECT_EQ(at<uint32_t>(p, 20), 3u);
@@ -100,6 +101,8 @@ TEST(PackFormat, HeaderRefusesEveryBadField) {
       resigned([](PackHeader& h) { h.journal_offset = 300; }),
       resigned([](PackHeader& h) { h.grid_offset = 1001; }),
       resigned([](PackHeader& h) { h.grid_size += 8; }),
+      resigned([](PackHeader& h) { h.grid_size -= 1, h.index_offset -= 1; }),  // no room for the map preview
+      resigned([](PackHeader& h) { h.grid_size += kMaxPreviewBytes, h.index_offset += kMaxPreviewBytes; }),
       resigned([](PackHeader& h) { h.index_offset += 8; }),
       resigned([](PackHeader& h) { h.tile_count = ~uint64_t(0) / 2; }),
       resigned([](PackHeader& h) { h.tile_count = 0; }),  // has_tiles flag disagrees

@@ -12,6 +12,7 @@
 #include "tests/tiles/pack_test_support.hpp"
 #include "common/error.hpp"
 #include "tiles/build/mh_build.hpp"
+#include "tiles/core/map_preview.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_reader.hpp"
 #include "tiles/build/pack_writer.hpp"
@@ -137,7 +138,8 @@ TEST(Pack, HeaderRecordsTheBuild) {
   PackParamList want = {{"light", "sun:azimuth=30,elevation=50"}, {"scene", "header"}};
   EXPECT_EQ(b.reader->params(), want);
   EXPECT_EQ(b.reader->header_bytes().size(), kPackHeaderBytes);
-  EXPECT_EQ(b.reader->grid_bytes().size(), CutGrid::serialized_size(2));
+  // The grid section: the skip grid, then the map preview (tiles/PACK.md "Map preview").
+  EXPECT_EQ(b.reader->grid_bytes().size(), CutGrid::serialized_size(2) + b.reader->preview().serialized_size());
   EXPECT_FALSE(std::filesystem::exists(b.path + ".tmp"));
   const std::string summary = b.reader->summary();
   EXPECT_NE(summary.find("map level 5 (32 texels a side), skip level 2"), std::string::npos) << summary;

@@ -7,9 +7,13 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
+#include <unordered_map>
 
 #include "common/error.hpp"
 #include "tiles/core/interval.hpp"
+#include "tiles/core/encoding.hpp"
+#include "tiles/core/map_preview.hpp"
+#include "tiles/core/page_table.hpp"
 
 namespace st {
 
@@ -256,6 +260,8 @@ void PackWriter::finish(const CutGrid& grid) {
   h.grid_offset = (end_ + 7) & ~uint64_t(7);
   std::vector<uint8_t> pad(h.grid_offset - end_, 0);
   std::vector<uint8_t> grid_bytes = grid.serialize();
+  const std::vector<uint8_t> preview = preview_bytes(grid);
+  grid_bytes.insert(grid_bytes.end(), preview.begin(), preview.end());
   std::vector<uint8_t> index_bytes = serialize_index(tiles_);
   h.grid_size = grid_bytes.size();
   h.grid_crc = crc32_of(grid_bytes);
@@ -272,6 +278,44 @@ void PackWriter::finish(const CutGrid& grid) {
   write_at(0, h.serialize());
   if (::fsync(fd_) != 0) throw Error(sys_error(what + ": fsync"));
   publish(what);
+}
+
+std::vector<uint8_t> PackWriter::preview_bytes(const CutGrid& grid) const {
+  const std::string what = tmp_path();
+  // The full pack's answer at (level, x, y) under a non-constant entry: the page-table
+  // walk over the journal's tiles, read back and opened (a few at a time: build() asks
+  // cell by cell).
+  struct Open {
+    std::vector<uint8_t> raw;
+    std::unique_ptr<Evaluator> ev;
+    CutGrid grid;
+  };
+  std::unordered_map<uint64_t, Open> open;
+  auto tile = [&](uint64_t id) -> Open& {
+    auto it = open.find(id);
+    if (it != open.end()) return it->second;
+    if (open.size() > 64) open.clear();
+    auto t = std::lower_bound(tiles_.begin(), tiles_.end(), id, [](const TileIndexEntry& e, uint64_t i) { return e.id < i; });
+    if (t == tiles_.end() || t->id != id) throw Error(what + ": map preview: " + describe_tile(id) + " is not in the journal");
+    std::vector<uint8_t> stored(t->stored_size);
+    pread_all(fd_, t->offset, stored, what);
+    Open o;
+    o.raw = zlib_decompress(stored, t->raw_size, what + ": " + describe_tile(id));
+    if (t->kind == TileKind::encoded) o.ev = open_encoded(params_.encoding, o.raw);
+    else o.grid = CutGrid::parse(o.raw, what + ": " + describe_tile(id), kMaxIndexLevels);
+    return open.emplace(id, std::move(o)).first->second;
+  };
+  auto depth = [&](uint32_t level, uint64_t x, uint64_t y) -> float {
+    const PageHit hit = walk_page_table(grid, level, x, y, [&](uint64_t id, const GridEntry&) { return &tile(id).grid; });
+    if (hit.kind != PageHit::Kind::tile) return hit.value;
+    return tile(hit.tile).ev->depth(hit.rel, hit.tx, hit.ty);
+  };
+  uint32_t p = std::min(params_.preview_levels,
+                        std::min(kMaxPreviewLevels, params_.map_level - params_.skip_level));
+  for (;; --p) {
+    MapPreview m = MapPreview::build(grid, p, depth);
+    if (p == 0 || m.serialized_size() <= std::min(params_.preview_max_bytes, kMaxPreviewBytes)) return m.serialize();
+  }
 }
 
 std::vector<uint8_t> encode_cell_bytes(const CutCell& cell, const PackParams& params) {

@@ -35,6 +35,9 @@
 
 namespace st {
 
+inline constexpr uint32_t kDefaultPreviewLevels = 3;
+inline constexpr uint64_t kDefaultPreviewMaxBytes = 4ull << 20;
+
 struct PackParams {
   LightKind light_kind = LightKind::sun;
   std::array<double, 18> light{};  // LightSpace::to_array()
@@ -46,6 +49,10 @@ struct PackParams {
                           // kFeatureStaticIntervals
   PackParamList build_params;  // free-form provenance (scene path, light spec, tool version)
   int compression_level = 6;   // libdeflate 0..12: build speed vs. file size
+  // The map preview (tiles/PACK.md "Map preview"): levels K+1 .. K+p below the skip grid,
+  // p = min(preview_levels, L - K), one level fewer while it exceeds preview_max_bytes.
+  uint32_t preview_levels = kDefaultPreviewLevels;
+  uint64_t preview_max_bytes = kDefaultPreviewMaxBytes;
 
   static PackParams from(const LightSpace& light, const CutParams& cut);
 };
@@ -86,8 +93,9 @@ class PackWriter {
   // as it is (state building) and renames "<path>.tmp" to "<path>". No grid, no index.
   void finish_part();
 
-  // Writes the skip grid (entries must equal the cells' entries) and the tile index,
-  // completes the header, fsyncs and renames "<path>.tmp" to "<path>".
+  // Writes the skip grid (entries must equal the cells' entries), the map preview (read
+  // back from the journal's tiles) and the tile index, completes the header, fsyncs and
+  // renames "<path>.tmp" to "<path>".
   void finish(const CutGrid& grid);
 
  private:
@@ -97,6 +105,7 @@ class PackWriter {
   void open_existing();
   void write_at(uint64_t offset, std::span<const uint8_t> bytes);
   PackHeader base_header() const;
+  std::vector<uint8_t> preview_bytes(const CutGrid& grid) const;  // under mu_, tiles_ sorted
 
   std::string path_;
   PackParams params_;

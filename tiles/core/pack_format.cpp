@@ -1,5 +1,7 @@
 #include "tiles/core/pack_format.hpp"
 
+#include "tiles/core/map_preview.hpp"
+
 #include <libdeflate.h>
 
 #include <algorithm>
@@ -71,8 +73,8 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
   if (!std::equal(kPackMagic.begin(), kPackMagic.end(), b.begin())) fail(0, "not a shadowtile pack (bad magic)");
   uint32_t version = load_le<uint32_t>(b, 8);
   if (version != kPackVersion)
-    fail(8, "unsupported version " + std::to_string(version) + " (this build reads " +
-                std::to_string(kPackVersion) + ")");
+    fail(8, "unsupported version " + std::to_string(version) + " (this build reads " + std::to_string(kPackVersion) +
+                (version < kPackVersion ? "; version 1 packs carry no map preview: rebuild the pack)" : ")"));
   if (load_le<uint32_t>(b, 12) != kPackHeaderBytes) fail(12, "bad header size");
   uint32_t stored_crc = load_le<uint32_t>(b, 252), crc = crc32_of(b.first(252));
   if (stored_crc != crc) fail(252, "header CRC mismatch (stored " + hex32(stored_crc) + ", computed " + hex32(crc) + ")");
@@ -117,7 +119,11 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
   if (h.state == PackState::complete) {
     const uint64_t limit = uint64_t(1) << 56;
     if (h.grid_offset < h.journal_offset || h.grid_offset > limit || h.grid_offset % 8) fail(208, "bad grid offset");
-    if (h.grid_size != CutGrid::serialized_size(h.skip_level)) fail(216, "grid size does not match the skip level");
+    // The skip grid, then the map preview (map_preview.hpp): at least its header, at most its bound.
+    const uint64_t grid = CutGrid::serialized_size(h.skip_level);
+    if (h.grid_size < grid + kPreviewHeaderBytes || h.grid_size > grid + kMaxPreviewBytes)
+      fail(216, "grid section size " + std::to_string(h.grid_size) + " does not fit the skip level's grid (" +
+                    std::to_string(grid) + " bytes) and a map preview");
     if (h.index_offset != h.grid_offset + h.grid_size) fail(224, "bad index offset");
     if (h.tile_count > limit / kIndexEntryBytes) fail(232, "tile count too large");
     bool has_tiles = h.tile_count > 0;

@@ -1,4 +1,4 @@
-// The pack file format, version 1 (tiles/PACK.md draws it in full; pack_format_test pins
+// The pack file format, version 2 (tiles/PACK.md draws it in full; pack_format_test pins
 // every offset). All integers little-endian; every byte a reader uses is covered by a
 // CRC-32 (zlib polynomial, libdeflate_crc32).
 //
@@ -7,7 +7,8 @@
 //   journal             appended in build order: tile records (32-byte header + stored
 //                       payload) and cell records (32 bytes, one per finished level-K cell)
 //   zero padding        to a multiple of 8
-//   skip grid           CutGrid bytes (tile_cut_grid.hpp) of K levels (grid_crc)
+//   skip grid           CutGrid bytes (tile_cut_grid.hpp) of K levels, then the map
+//                       preview (map_preview.hpp): grid_size covers both (grid_crc)
 //   tile index          tile_count * 32-byte TileIndexEntry sorted by id (index_crc)
 //   end of file         == index_offset + 32 * tile_count (trailing bytes are rejected)
 //
@@ -30,7 +31,7 @@ namespace st {
 
 // Format constants.
 inline constexpr std::array<uint8_t, 8> kPackMagic = {'S', 'T', 'P', 'A', 'C', 'K', '\r', '\n'};
-inline constexpr uint32_t kPackVersion = 1;
+inline constexpr uint32_t kPackVersion = 2;  // 2: the map preview follows the skip grid
 inline constexpr uint32_t kPackHeaderBytes = 256;
 inline constexpr uint32_t kRecordBytes = 32;      // tile and cell record headers
 inline constexpr uint32_t kIndexEntryBytes = 32;  // one tile index entry

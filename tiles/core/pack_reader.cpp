@@ -1,5 +1,7 @@
 #include "tiles/core/pack_reader.hpp"
 
+#include "tiles/core/map_preview.hpp"
+
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -134,8 +136,16 @@ void PackReader::load() {
   grid_bytes_.resize(header_.grid_size);
   read_at(header_.grid_offset, grid_bytes_);
   if (crc32_of(grid_bytes_) != header_.grid_crc) throw FormatError(where(header_.grid_offset) + ": skip grid CRC mismatch");
-  grid_ = CutGrid::parse(grid_bytes_, name_ + ": skip grid at byte " + std::to_string(header_.grid_offset));
-  if (grid_.levels != header_.skip_level) throw FormatError(where(header_.grid_offset) + ": skip grid levels != skip level");
+  {
+    // The skip grid, then the map preview (the header checked the section's size).
+    const size_t g = CutGrid::serialized_size(header_.skip_level);
+    const std::span<const uint8_t> section(grid_bytes_);
+    grid_ = CutGrid::parse(section.first(g), name_ + ": skip grid at byte " + std::to_string(header_.grid_offset));
+    if (grid_.levels != header_.skip_level)
+      throw FormatError(where(header_.grid_offset) + ": skip grid levels != skip level");
+    preview_ = std::make_shared<MapPreview>(MapPreview::parse(
+        section.subspan(g), grid_, header_.map_level, name_ + " (byte " + std::to_string(header_.grid_offset + g) + ")"));
+  }
 
   // Every tile has a 32-byte record in the journal before the grid, so the index cannot
   // name more tiles than that room holds. A sparse file may still claim gigabytes: the
@@ -307,6 +317,27 @@ void PackReader::verify(const TileOpener& open_tile) const {
   });
   if (reached != index_.size())
     throw FormatError(name_ + ": " + std::to_string(index_.size() - reached) + " tiles the page table never reaches");
+  // 4. The map preview holds exactly what the tiles answer at its levels (rebuilt from
+  // them with the same levels and compared byte for byte).
+  if (!open_tile || preview_->levels() == 0) return;
+  std::map<uint64_t, std::pair<std::vector<uint8_t>, std::unique_ptr<Evaluator>>> opened;
+  auto depth = [&](uint32_t level, uint64_t x, uint64_t y) -> float {
+    const PageHit hit = walk_page_table(grid_, level, x, y, index_tile);
+    if (hit.kind != PageHit::Kind::tile) return hit.value;
+    auto it = opened.find(hit.tile);
+    if (it == opened.end()) {
+      if (opened.size() > 64) opened.clear();  // build() asks cell by cell
+      std::vector<uint8_t> raw = read_raw(hit.tile);
+      std::unique_ptr<Evaluator> ev = open_tile(raw);
+      it = opened.emplace(hit.tile, std::make_pair(std::move(raw), std::move(ev))).first;
+    }
+    return it->second.second->depth(hit.rel, hit.tx, hit.ty);
+  };
+  const std::vector<uint8_t> want = MapPreview::build(grid_, preview_->levels(), depth).serialize();
+  const uint64_t at = header_.grid_offset + CutGrid::serialized_size(header_.skip_level);
+  if (!std::equal(want.begin(), want.end(), grid_bytes_.begin() + long(CutGrid::serialized_size(header_.skip_level)),
+                  grid_bytes_.end()))
+    throw FormatError(where(at) + ": map preview differs from what the tiles answer at its levels");
 }
 
 void PackReader::check_depth_range() const {
@@ -385,6 +416,10 @@ std::string PackReader::summary() const {
                 "  %llu tiles (%llu index), %llu raw bytes (largest %u), %llu stored; grid %llu bytes; file %llu bytes\n",
                 (unsigned long long)index_.size(), (unsigned long long)index_tiles, (unsigned long long)raw, max_raw,
                 (unsigned long long)stored, (unsigned long long)header_.grid_size, (unsigned long long)file_size());
+  out += buf;
+  std::snprintf(buf, sizeof buf, "  map preview: %u levels below K, %zu cells, %zu values, %llu bytes (in the grid)\n",
+                preview_->levels(), preview_->cells(), preview_->stored_values(),
+                (unsigned long long)preview_->serialized_size());
   out += buf;
   for (auto& [k, v] : params_) out += "  " + printable_text(k) + " = " + printable_text(v) + "\n";
   return out;

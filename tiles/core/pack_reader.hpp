@@ -23,6 +23,8 @@
 
 namespace st {
 
+class MapPreview;
+
 class PackReader {
  public:
   static std::unique_ptr<PackReader> open(const std::string& path);
@@ -40,9 +42,11 @@ class PackReader {
   LightSpace light() const { return LightSpace::from_array(header_.light_kind, header_.light); }
   const PackParamList& params() const { return params_; }
   const CutGrid& grid() const { return grid_; }
+  // The map preview that follows the skip grid (map_preview.hpp).
+  const MapPreview& preview() const { return *preview_; }
   uint64_t file_size() const { return header_.file_size(); }
 
-  // Raw blobs a server sends as they lie.
+  // Raw blobs a server sends as they lie (grid_bytes: the skip grid and the map preview).
   std::span<const uint8_t> header_bytes() const { return header_bytes_; }
   std::span<const uint8_t> grid_bytes() const { return grid_bytes_; }
 
@@ -93,6 +97,7 @@ class PackReader {
   std::vector<uint8_t> header_bytes_, grid_bytes_;
   PackParamList params_;
   CutGrid grid_;
+  std::shared_ptr<const MapPreview> preview_;
   std::vector<TileIndexEntry> index_;
 };
 

@@ -24,8 +24,9 @@
 // checks each tile's end-to-end CRC-32, decompresses it into a slot of a fixed-size tile
 // cache (cache_slots slots of the pack's tile bound) and opens it. Lookups walk the page
 // table (skip grid, index tiles) into the cache; where a tile is not resident they answer
-// with the value of the deepest node they reached (a coarser level of the same map) and
-// queue the tile's fetch at miss_priority.
+// from a coarser level of the same map (the map preview's node at level K + p that came
+// with the skip grid, else the deepest node they reached) and queue the tile's fetch at
+// miss_priority.
 //
 // Error model. Exceptions never escape except where stated:
 //   - Client's constructor throws std::runtime_error for bad options only; it never waits
