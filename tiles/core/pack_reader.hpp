@@ -23,6 +23,8 @@
 
 namespace st {
 
+struct StackGrid;
+
 class PackReader {
  public:
   static std::unique_ptr<PackReader> open(const std::string& path);
@@ -40,6 +42,9 @@ class PackReader {
   LightSpace light() const { return LightSpace::from_array(header_.light_kind, header_.light); }
   const PackParamList& params() const { return params_; }
   const CutGrid& grid() const { return grid_; }
+  // A stack pack's grid (kFeatureStack; tiles/PACK.md "Stack packs"), else nullptr; then
+  // grid() is empty and every tile is an MH octree buffer (mh_octree.hpp).
+  const StackGrid* stack() const { return stack_.get(); }
   uint64_t file_size() const { return header_.file_size(); }
 
   // Raw blobs a server sends as they lie.
@@ -85,6 +90,12 @@ class PackReader {
   uint32_t crc32_of_range(uint64_t offset, uint64_t size) const;
   // verify(): the coarse levels and cell records against each other and the depth range.
   void check_coarse_levels(const std::vector<CellRecord>& cells) const;
+  // load() / verify() of a stack pack (pack_reader_stack.cpp).
+  void load_stack();
+  void check_stack_index() const;
+  void verify_stack() const;
+  void check_stack_range() const;
+  std::string stack_summary() const;
   static constexpr uint64_t kChunkBytes = uint64_t(1) << 20;
 
   std::unique_ptr<Source> src_;
@@ -93,6 +104,7 @@ class PackReader {
   std::vector<uint8_t> header_bytes_, grid_bytes_;
   PackParamList params_;
   CutGrid grid_;
+  std::unique_ptr<StackGrid> stack_;
   std::vector<TileIndexEntry> index_;
 };
 
