@@ -12,6 +12,8 @@
 #include "app/build_mpi.hpp"
 #endif
 #include "app/progress.hpp"
+#include "app/stack_cli.hpp"
+#include "tiles/core/light_set.hpp"
 #include "common/error.hpp"
 #include "tiles/core/pack_format.hpp"
 
@@ -39,6 +41,12 @@ struct BuildArgs {
 };
 
 void run(const BuildArgs& a) {
+  if (LightSetSpec::names_light_set(a.light)) {  // a stack (app/stack_cli.cpp)
+    if (a.resume || a.mpi || !a.shard.empty() || !a.region.empty())
+      throw Error("build: --resume, --mpi, --shard and --region are not supported for light sets (stack packs)");
+    return run_stack_build({a.scene, a.light, a.resolution, a.out, a.up, a.skip_level, a.tile_bytes, a.compression,
+                            a.quiet});
+  }
   MapBuildOptions o;
   o.map_level = parse_resolution(a.resolution);
   o.encoding = parse_encoding(a.encoding);

@@ -10,6 +10,8 @@
 #include "tiles/bake/png_io.hpp"
 #include "app/command.hpp"
 #include "app/pack_cli_util.hpp"
+#include "app/stack_cli.hpp"
+#include "tiles/core/stack_grid.hpp"
 #include "common/error.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 
@@ -37,6 +39,7 @@ struct ExportArgs {
   uint32_t samples = 4;
   double epsilon = -1;
   uint64_t seed = 1;
+  std::optional<uint32_t> slice;  // stack packs
 };
 
 constexpr uint64_t kMaxDeepRegion = uint64_t(1024) * 1024;  // functions held in memory
@@ -80,7 +83,10 @@ void run_deep(const ExportArgs& a) {
 
 void run(const ExportArgs& a) {
   if (a.deep) return run_deep(a);
+  if (a.slice) return export_stack_slice(a.pack, *a.slice, a.level_set ? std::optional(a.level) : std::nullopt, a.out);
   std::shared_ptr<const PackReader> reader = PackReader::open(a.pack);
+  if (reader->stack()) throw Error("export: '" + a.pack + "' is a stack pack: pass --slice W (0.." +
+                                   std::to_string(reader->stack()->slices - 1) + ")");
   reader->check_depth_range();  // coarse levels are decoded as they lie: refuse garbage
   const uint32_t level = a.level_set ? a.level : std::min<uint32_t>(reader->map_level(), 12);
   if (level > reader->map_level())
@@ -144,6 +150,7 @@ void setup(CLI::App& app) {
   app.add_option("--up", a->up, "With --deep: up axis of a scene file, y (default) or z");
   app.add_option("--level", a->level, "Level to decode (each level is a complete map; default min(L, 12))")
       ->each([a](const std::string&) { a->level_set = true; });
+  app.add_option("--slice", a->slice, "Stack packs: the slice W (light sample) to export");
   app.add_option("--region", a->region, "X,Y,W,H in texels of that level (default: the whole level)");
   app.add_option("-o,--output", a->out, "EXR to write (a PNG preview is written beside it)")->required();
   app.callback([a]() { run(*a); });

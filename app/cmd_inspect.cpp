@@ -3,6 +3,7 @@
 #include <nlohmann/json.hpp>
 
 #include "app/command.hpp"
+#include "app/stack_cli.hpp"
 #include "app/pack_cli_util.hpp"
 #include "common/error.hpp"
 #include "common/text.hpp"
@@ -59,6 +60,7 @@ void run(const InspectArgs& a) {
   nlohmann::json params = nlohmann::json::object();
   for (auto& [k, v] : r->params()) params[k] = v;
   j["build_params"] = params;
+  if (r->stack()) inspect_stack(*r, j, false);
   if (a.json) {
     // Bytes that are not UTF-8 (a hostile pack's params) become U+FFFD instead of a throw.
     std::printf("%s\n", j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
@@ -80,6 +82,7 @@ void run(const InspectArgs& a) {
   std::printf("  file         %.2f MiB = %.5f%% of the raw float32 map (%.1f GiB)\n",
               double(r->file_size()) / (1 << 20), 100.0 * double(r->file_size()) / raw_map,
               raw_map / double(1ull << 30));
+  if (r->stack()) inspect_stack(*r, j, true);
   // Build parameters are text from the file: escaped as the JSON output escapes them.
   for (auto& [k, v] : r->params())
     std::printf("  param        %s = %s\n", printable_text(k).c_str(), printable_text(v).c_str());

@@ -24,6 +24,7 @@
 #include "app/pack_cli_util.hpp"
 #include "common/error.hpp"
 #include "app/progress.hpp"
+#include "app/stack_cli.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_format.hpp"
 #include "tiles/core/vsdag_format.hpp"
@@ -134,6 +135,7 @@ uint64_t verify_every_texel(const VerifyArgs& a, const TraceFn& trace,
 
 void run(const VerifyArgs& a) {
   std::shared_ptr<const PackReader> reader = PackReader::open(a.pack);
+  if (reader->stack()) return verify_stack_pack(a.pack, a.scene, a.up, a.max_mismatches);
   const Encoding enc = reader->encoding();
   try {
     reader->verify([enc](std::span<const uint8_t> b) { return open_encoded(enc, b); });

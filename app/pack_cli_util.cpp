@@ -14,6 +14,7 @@ std::string feature_names(uint32_t flags) {
     s.append(name);
   };
   add(kFeatureExitDepths, "exit-depths");
+  add(kFeatureStack, "stack");
   add(kFeatureHasTiles, "tiles");
   add(kFeatureIndexTiles, "index-tiles");
   add(kFeatureDeepShadow, "deep-shadow");

@@ -76,6 +76,24 @@ size_t Map::cancel_outside(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w,
 bool Map::region_resident(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, uint64_t h) const noexcept {
   return map_ ? map_->region_resident(level, x0, y0, w, h) : false;
 }
+uint32_t Map::slices() const noexcept {
+  return map_ && map_->stack_grid() ? map_->stack_grid()->slices : 0;
+}
+float Map::time_visibility(const WorldPoint& world, double time) const noexcept {
+  return map_ ? map_->stack_visibility({world.x, world.y, world.z}, time) : 1.0f;
+}
+float Map::soft_visibility(const WorldPoint& world) const noexcept {
+  return map_ ? map_->stack_soft_visibility({world.x, world.y, world.z}) : 1.0f;
+}
+float Map::slice_depth(uint32_t slice, uint32_t level, uint64_t x, uint64_t y) const noexcept {
+  return map_ ? map_->stack_depth(slice, level, x, y) : 1.0f;
+}
+size_t Map::request_slices(uint32_t w0, uint32_t w1, uint16_t priority) noexcept {
+  return map_ ? map_->request_slices(w0, w1, priority) : 0;
+}
+bool Map::slices_resident(uint32_t w0, uint32_t w1) const noexcept {
+  return map_ ? map_->slices_resident(w0, w1) : true;
+}
 MapStats Map::stats() const noexcept { return map_ ? map_->stats() : MapStats{}; }
 uint32_t Map::slot_bytes() const noexcept { return map_ ? map_->slot_bytes() : 0; }
 

@@ -54,18 +54,24 @@ RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::v
       notifier_(std::move(notifier)),
       header_bytes_(std::move(header_bytes)),
       header_(PackHeader::parse(header_bytes_, "map '" + name_ + "' header")),
-      grid_(CutGrid::parse(std::span<const uint8_t>(grid_bytes).first(
-                               std::min(grid_bytes.size(), CutGrid::serialized_size(header_.skip_level))),
-                           "map '" + name_ + "' skip grid")),
-      preview_(MapPreview::parse(std::span<const uint8_t>(grid_bytes).subspan(CutGrid::serialized_size(grid_.levels)), grid_,
-                                 header_.map_level, "map '" + name_ + "'")),
+      grid_(header_.flags & kFeatureStack
+                ? CutGrid::constant(0, kLitDepth)
+                : CutGrid::parse(std::span<const uint8_t>(grid_bytes).first(
+                                     std::min(grid_bytes.size(), CutGrid::serialized_size(header_.skip_level))),
+                                 "map '" + name_ + "' skip grid")),
+      // A stack pack's grid section is its stack grid (remote_stack.cpp): no map preview.
+      preview_(header_.flags & kFeatureStack
+                   ? MapPreview()
+                   : MapPreview::parse(std::span<const uint8_t>(grid_bytes).subspan(CutGrid::serialized_size(grid_.levels)),
+                                       grid_, header_.map_level, "map '" + name_ + "'")),
       light_(LightSpace::from_array(header_.light_kind, header_.light)),
       cache_(options.cache_slots, slot_size_for(header_)),
       requests_(size_t(options.want_capacity) + size_t(options.max_in_flight) * options.tiles_per_request,
                 options.want_capacity) {
   const std::string what = "map '" + name_ + "'";
   if (header_.state != PackState::complete) throw FormatError(what + ": pack is not complete");
-  if (header_.map_level > kMaxLevel || grid_.levels != header_.skip_level || header_.skip_level > header_.map_level)
+  if (header_.flags & kFeatureStack) open_stack(grid_bytes);
+  else if (header_.map_level > kMaxLevel || grid_.levels != header_.skip_level || header_.skip_level > header_.map_level)
     throw FormatError(what + ": skip grid has " + std::to_string(grid_.levels) + " levels, header says K=" +
                       std::to_string(header_.skip_level) + " L=" + std::to_string(header_.map_level));
   if (slot_size_for(header_) > options.max_slot_bytes)
@@ -635,6 +641,10 @@ bool RemoteMap::fill_slot(uint32_t slot, const proto::TileMeta& meta, const Grid
     if (meta.flags & proto::kTileFlagZlib) zlib_decompress_into(stored, raw, what);
     else if (!raw.empty()) std::memcpy(raw.data(), stored.data(), raw.size());  // sizes checked by the caller
     const TileAddress a = tile_address(meta.tile_id);
+    if (stack_grid_) {  // an MH octree of one stack cell (remote_stack.cpp)
+      ev = open_stack_tile(*stack_grid_, meta.tile_id, raw);
+      return bool(ev);
+    }
     if (entry.kind == EntryKind::tile) {
       ev = open_encoded(header_.encoding, raw);
       return ev && ev->finest_level() == header_.map_level - a.level;

@@ -40,6 +40,7 @@
 #include "tiles/core/page_table.hpp"
 #include "tiles/core/pack_format.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
+#include "tiles/core/stack_map.hpp"
 
 namespace st::client {
 
@@ -89,6 +90,16 @@ class RemoteMap final : public Evaluator {
   const MapPreview& preview() const { return preview_; }
   const std::vector<uint8_t>& header_bytes() const { return header_bytes_; }
   uint32_t slot_bytes() const { return cache_.slot_bytes(); }
+
+  // Stack maps (a pack with the stack feature; remote_stack.cpp). The 2D lookups above
+  // answer lit everywhere on them (their page table is one constant entry).
+  bool is_stack() const { return bool(stack_grid_); }
+  const StackGrid* stack_grid() const { return stack_grid_.get(); }
+  float stack_visibility(const Vec3d& world, double time) const noexcept;
+  float stack_soft_visibility(const Vec3d& world) const noexcept;
+  float stack_depth(uint32_t slice, uint32_t level, uint64_t x, uint64_t y) const noexcept;
+  size_t request_slices(uint32_t w0, uint32_t w1, uint16_t priority) noexcept;
+  bool slices_resident(uint32_t w0, uint32_t w1) const noexcept;
 
   // ---- fetcher side ----
   // Appends up to `max` queued tiles (highest priority first, FIFO among equals) to
@@ -244,6 +255,13 @@ class RemoteMap final : public Evaluator {
   template <class Fn>
   bool walk_region(uint32_t level, uint64_t x0, uint64_t y0, uint64_t x1, uint64_t y1, Fn&& fn) const;
   void rerequest_regions_locked();
+  // Stack lookups: the StackMap's tile source reads the cache (shared lock held) and
+  // notes misses in a per-thread scratch; they are wanted once the lock is dropped.
+  const MhOctree* stack_tile(uint64_t cell) const noexcept;
+  void open_stack(const std::vector<uint8_t>& grid_bytes);  // the constructor's, for stack packs
+  static std::unique_ptr<Evaluator> open_stack_tile(const StackGrid& g, uint64_t id, std::span<uint8_t> raw);
+  template <class Fn>
+  auto stack_lookup(Fn&& fn) const noexcept;
 
   const std::string name_;
   const ClientOptions options_;
@@ -253,6 +271,8 @@ class RemoteMap final : public Evaluator {
   CutGrid grid_;
   MapPreview preview_;  // after the skip grid in MapInfo: answers where a tile is missing
   LightSpace light_;
+  std::unique_ptr<StackGrid> stack_grid_;
+  std::unique_ptr<StackMap> stack_map_;
 
   mutable RwLock mu_;
   mutable TileCache cache_;

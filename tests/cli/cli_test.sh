@@ -24,6 +24,14 @@ check tile-bytes-help 0 "64 MiB" -- "$st" build --help
 [[ -f build.json && ! -f city.pack.tmp ]] || { echo "FAIL build outputs"; fail=1; }
 check inspect 0 "exit-depths" -- "$st" inspect city.pack
 check inspect-json 0 '"encoding": "dagmh"' -- "$st" inspect city.pack --json
+# Stack packs (a light set): build, inspect, verify every texel of every slice, export a slice.
+stackl="--light sun-path:azimuth=170..185,elevation=50..52,samples=4"
+check stack-build 0 "stack of 4 slices of 128\^2" -- "$st" build $scene $stackl --resolution 128 --tile-bytes 4096 -o stack.pack -q
+check stack-inspect 0 "light set    sun-path" -- "$st" inspect stack.pack
+check stack-verify 0 "every texel of all 4 slices" -- "$st" verify stack.pack $scene
+check stack-export 0 "exported slice 2 level 6" -- "$st" export stack.pack --slice 2 --level 6 -o slice.exr
+check stack-export-noslice 1 "stack pack: pass --slice" -- "$st" export stack.pack -o x.exr
+check stack-too-big 1 "exceeds the 2\^28 texels" -- "$st" build $scene --light sun-path:azimuth=1..2,elevation=50,samples=64 --resolution 4096 -o x.pack -q
 check verify 0 "OK: 20[0-9]* random texels" -- "$st" verify city.pack $scene --samples 2000
 # Every texel: the re-trace gives the build's canonical bounds bit for bit.
 check verify-all 0 "OK: every texel of the built region \(2048 x 2048 = 4194304\)" -- "$st" verify city.pack $scene --all

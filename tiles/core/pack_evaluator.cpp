@@ -23,6 +23,9 @@ PackEvaluator::PackEvaluator(std::shared_ptr<const PackReader> reader, size_t ca
       cache_(uint32_t(std::clamp<size_t>(cache_tiles, 1, 1u << 20)), largest_raw_tile(*reader_)),
       slot_eval_(cache_.slot_count()),
       slot_grid_(cache_.slot_count()) {
+  // A stack pack has no 2D skip grid: its lookups are StackMap's (stack_map.hpp).
+  if (reader_->stack())
+    throw Error(reader_->name() + ": a stack pack (feature stack): look it up by slice, time or light sample, not as one map");
   if (!open_tile_) {
     Encoding e = reader_->encoding();
     open_tile_ = [e](std::span<const uint8_t> bytes) { return open_encoded(e, bytes); };

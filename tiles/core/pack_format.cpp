@@ -97,7 +97,8 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
   h.map_level = b[26];
   h.skip_level = b[27];
   if (h.map_level > kMaxLevel) fail(26, "map level " + std::to_string(h.map_level) + " > 20");
-  if (h.skip_level > std::min(h.map_level, kMaxSkipLevel)) fail(27, "bad skip level " + std::to_string(h.skip_level));
+  const bool stack = h.flags & uint32_t(kFeatureStack);  // K is an octree level (StackGrid checks it)
+  if (stack ? h.skip_level > kMaxLevel + 12 : h.skip_level > std::min(h.map_level, kMaxSkipLevel)) fail(27, "bad skip level " + std::to_string(h.skip_level));
   h.tile_bytes = load_le<uint32_t>(b, 28);
   if (h.tile_bytes == 0 || h.tile_bytes > kMaxTileBytes) fail(28, "bad tile_bytes " + std::to_string(h.tile_bytes));
   h.scene_hash = load_le<uint64_t>(b, 32);
@@ -119,11 +120,15 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
   if (h.state == PackState::complete) {
     const uint64_t limit = uint64_t(1) << 56;
     if (h.grid_offset < h.journal_offset || h.grid_offset > limit || h.grid_offset % 8) fail(208, "bad grid offset");
-    // The skip grid, then the map preview (map_preview.hpp): at least its header, at most its bound.
-    const uint64_t grid = CutGrid::serialized_size(h.skip_level);
-    if (h.grid_size < grid + kPreviewHeaderBytes || h.grid_size > grid + kMaxPreviewBytes)
-      fail(216, "grid section size " + std::to_string(h.grid_size) + " does not fit the skip level's grid (" +
-                    std::to_string(grid) + " bytes) and a map preview");
+    if (stack) {
+      if (h.grid_size > (uint64_t(1) << 30)) fail(216, "stack grid size too large");
+    } else {
+      // The skip grid, then the map preview (map_preview.hpp): at least its header, at most its bound.
+      const uint64_t grid = CutGrid::serialized_size(h.skip_level);
+      if (h.grid_size < grid + kPreviewHeaderBytes || h.grid_size > grid + kMaxPreviewBytes)
+        fail(216, "grid section size " + std::to_string(h.grid_size) + " does not fit the skip level's grid (" +
+                      std::to_string(grid) + " bytes) and a map preview");
+    }
     if (h.index_offset != h.grid_offset + h.grid_size) fail(224, "bad index offset");
     if (h.tile_count > limit / kIndexEntryBytes) fail(232, "tile count too large");
     bool has_tiles = h.tile_count > 0;

@@ -56,7 +56,10 @@ enum PackFeature : uint32_t {
   // just below the next surface along the texel ray. Lossless only for receivers that lie
   // on a surface (tiles/PACK.md); lookups are unchanged.
   kFeatureStaticIntervals = 1u << 4,
-  kKnownFeatures = 0x1F,
+  // A shadow-map stack (tiles/PACK.md "Stack packs"): the grid section is a StackGrid
+  // (stack_grid.hpp) and every tile an MH octree buffer of one level-K cell's subtree.
+  kFeatureStack = 1u << 5,
+  kKnownFeatures = 0x3F,
 };
 
 // Header layout (offset: size field):

@@ -19,6 +19,7 @@
 #include "common/text.hpp"
 #include "tiles/core/interval.hpp"
 #include "tiles/core/page_table.hpp"
+#include "tiles/core/stack_grid.hpp"
 
 namespace st {
 
@@ -136,7 +137,10 @@ void PackReader::load() {
   grid_bytes_.resize(header_.grid_size);
   read_at(header_.grid_offset, grid_bytes_);
   if (crc32_of(grid_bytes_) != header_.grid_crc) throw FormatError(where(header_.grid_offset) + ": skip grid CRC mismatch");
-  {
+  if (header_.flags & kFeatureStack) {
+    load_stack();
+    preview_ = std::make_shared<MapPreview>();  // a stack pack's grid section is its stack grid
+  } else {
     // The skip grid, then the map preview (the header checked the section's size).
     const size_t g = CutGrid::serialized_size(header_.skip_level);
     const std::span<const uint8_t> section(grid_bytes_);
@@ -162,6 +166,7 @@ void PackReader::load() {
   if (crc32_of(index_bytes) != header_.index_crc) throw FormatError(where(header_.index_offset) + ": tile index CRC mismatch");
   index_ = parse_index(index_bytes, header_.index_offset, header_.journal_offset, header_.grid_offset,
                        header_.tile_bytes, name_);
+  if (stack_) return check_stack_index();
 
   bool any_index = std::any_of(index_.begin(), index_.end(), [](auto& e) { return e.kind == TileKind::index; });
   if (any_index != bool(header_.flags & kFeatureIndexTiles))
@@ -270,6 +275,10 @@ void PackReader::verify(const TileOpener& open_tile) const {
       throw FormatError(name_ + ": " + describe_tile(e.id) + " at byte " + std::to_string(e.offset) +
                         ": index entry disagrees with its journal record");
   }
+  if (stack_) {
+    if (!cells.empty()) throw FormatError(name_ + ": a stack pack's journal holds cell records");
+    return verify_stack();
+  }
   // 2. Cells: each exactly once, agreeing with the skip grid.
   const uint32_t k = header_.skip_level;
   const size_t side = size_t(1) << k;
@@ -341,6 +350,7 @@ void PackReader::verify(const TileOpener& open_tile) const {
 }
 
 void PackReader::check_depth_range() const {
+  if (stack_) return check_stack_range();
   check_grid_range(grid_, name_ + ": skip grid at byte " + std::to_string(header_.grid_offset));
 }
 
@@ -400,7 +410,8 @@ std::string PackReader::summary() const {
   std::string features;
   const std::pair<uint32_t, const char*> names[] = {{kFeatureExitDepths, "exit_depths"}, {kFeatureHasTiles, "has_tiles"},
                                                     {kFeatureIndexTiles, "index_tiles"}, {kFeatureDeepShadow, "deep_shadow"},
-                                                    {kFeatureStaticIntervals, "static_intervals"}};
+                                                    {kFeatureStaticIntervals, "static_intervals"},
+                                                    {kFeatureStack, "stack"}};
   for (auto [bit, n] : names)
     if (header_.flags & bit) features += std::string(features.empty() ? "" : ",") + n;
   char buf[160];
@@ -417,10 +428,14 @@ std::string PackReader::summary() const {
                 (unsigned long long)index_.size(), (unsigned long long)index_tiles, (unsigned long long)raw, max_raw,
                 (unsigned long long)stored, (unsigned long long)header_.grid_size, (unsigned long long)file_size());
   out += buf;
-  std::snprintf(buf, sizeof buf, "  map preview: %u levels below K, %zu cells, %zu values, %llu bytes (in the grid)\n",
-                preview_->levels(), preview_->cells(), preview_->stored_values(),
-                (unsigned long long)preview_->serialized_size());
-  out += buf;
+  if (stack_) {
+    out += stack_summary();
+  } else {
+    std::snprintf(buf, sizeof buf, "  map preview: %u levels below K, %zu cells, %zu values, %llu bytes (in the grid)\n",
+                  preview_->levels(), preview_->cells(), preview_->stored_values(),
+                  (unsigned long long)preview_->serialized_size());
+    out += buf;
+  }
   for (auto& [k, v] : params_) out += "  " + printable_text(k) + " = " + printable_text(v) + "\n";
   return out;
 }

@@ -24,6 +24,7 @@
 namespace st {
 
 class MapPreview;
+struct StackGrid;
 
 class PackReader {
  public:
@@ -44,6 +45,9 @@ class PackReader {
   const CutGrid& grid() const { return grid_; }
   // The map preview that follows the skip grid (map_preview.hpp).
   const MapPreview& preview() const { return *preview_; }
+  // A stack pack's grid (kFeatureStack; tiles/PACK.md "Stack packs"), else nullptr; then
+  // grid() is empty and every tile is an MH octree buffer (mh_octree.hpp).
+  const StackGrid* stack() const { return stack_.get(); }
   uint64_t file_size() const { return header_.file_size(); }
 
   // Raw blobs a server sends as they lie (grid_bytes: the skip grid and the map preview).
@@ -89,6 +93,12 @@ class PackReader {
   uint32_t crc32_of_range(uint64_t offset, uint64_t size) const;
   // verify(): the coarse levels and cell records against each other and the depth range.
   void check_coarse_levels(const std::vector<CellRecord>& cells) const;
+  // load() / verify() of a stack pack (pack_reader_stack.cpp).
+  void load_stack();
+  void check_stack_index() const;
+  void verify_stack() const;
+  void check_stack_range() const;
+  std::string stack_summary() const;
   static constexpr uint64_t kChunkBytes = uint64_t(1) << 20;
 
   std::unique_ptr<Source> src_;
@@ -98,6 +108,7 @@ class PackReader {
   PackParamList params_;
   CutGrid grid_;
   std::shared_ptr<const MapPreview> preview_;
+  std::unique_ptr<StackGrid> stack_;
   std::vector<TileIndexEntry> index_;
 };
 

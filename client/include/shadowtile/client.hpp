@@ -221,6 +221,24 @@ class Map {
   // True when every tile under the region is resident (lookups there are exact).
   bool region_resident(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, uint64_t h) const noexcept;
 
+  // Stack maps: packs built with a light set (`build --light sun-path:...` or `area:...`,
+  // MH 2016 §4): N shadow maps, one per light sample (slice w = sample w). On a stack map
+  // the 2D lookups above answer lit; on a 2D map the ones below do (slices() == 0).
+  // Contract (tiles/core/stack_lookup.hpp): time_visibility(p, t), t in [0, 1] (clamped,
+  // NaN as 0), sample w at t = w / (N - 1), is exactly the sample's lit test at the
+  // samples and blends the two nearest linearly between them (no pop as the sun moves);
+  // soft_visibility(p) is the fraction of the N samples that are lit (an area light's
+  // soft shadow). Where a tile is not resident the cell's coarser value answers and the
+  // tile is queued at miss_priority; request_slices prefetches the tiles of slices
+  // [w0, w1] (the next ones a day-night cycle needs) and slices_resident says when the
+  // answers there are exact. noexcept, no allocation, as the 2D lookups.
+  uint32_t slices() const noexcept;
+  float time_visibility(const WorldPoint& world, double time) const noexcept;
+  float soft_visibility(const WorldPoint& world) const noexcept;
+  float slice_depth(uint32_t slice, uint32_t level, uint64_t x, uint64_t y) const noexcept;
+  size_t request_slices(uint32_t w0, uint32_t w1, uint16_t priority) noexcept;
+  bool slices_resident(uint32_t w0, uint32_t w1) const noexcept;
+
   MapStats stats() const noexcept;
   // The cache's slot size: slot i of the pool lies at i * slot_bytes().
   uint32_t slot_bytes() const noexcept;

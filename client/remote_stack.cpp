@@ -1,0 +1,140 @@
+// RemoteMap for stack packs (tiles/PACK.md "Stack packs"): the stack grid arrives as the
+// map's skip grid, tiles are MH octrees of level-K cells (tiles/core/MHOCT.md) fetched,
+// cached and retried like any tile; lookups go through StackMap, whose absent tiles
+// answer the cell's level-K value (coarser while tiles stream) and queue the fetch.
+#include <mutex>
+#include <shared_mutex>
+
+#include "client/remote_map.hpp"
+#include "common/error.hpp"
+
+namespace st::client {
+namespace {
+
+class StackTileEvaluator final : public Evaluator {
+ public:
+  explicit StackTileEvaluator(const MhOctree& t) : tree(t) {}
+  uint32_t finest_level() const override { return tree.xy_level(); }
+  float depth(uint32_t level, uint64_t x, uint64_t y) const override { return tree.depth(x, y, 0, level); }
+  MhOctree tree;
+};
+
+struct Misses {
+  static constexpr size_t kMax = 8;  // more distinct misses in one call: asked again later
+  uint64_t cell[kMax] = {};
+  size_t count = 0;
+};
+thread_local Misses t_misses;
+
+}  // namespace
+
+void RemoteMap::open_stack(const std::vector<uint8_t>& grid_bytes) {
+  stack_grid_ = std::make_unique<StackGrid>(StackGrid::parse(grid_bytes, "map '" + name_ + "'"));
+  const StackGrid& g = *stack_grid_;
+  if (g.skip_level != header_.skip_level || g.geo.n != header_.map_level)
+    throw FormatError("map '" + name_ + "': stack grid disagrees with the header's levels");
+  stack_map_ = std::make_unique<StackMap>(g, [this](uint64_t cell) { return stack_tile(cell); });
+}
+
+std::unique_ptr<Evaluator> RemoteMap::open_stack_tile(const StackGrid& g, uint64_t id, std::span<uint8_t> raw) {
+  uint64_t cell = 0;
+  if (!g.cell_of(id, cell) || g.entries[cell].kind != 1) return nullptr;
+  const MhOctree t = MhOctree::open(raw);  // validates the whole buffer; throws FormatError
+  const uint32_t K = g.skip_level;
+  if (t.geometry().n != g.geo.n - g.geo.xy_bits(K) || t.geometry().k != g.geo.k - g.geo.w_bits(K)) return nullptr;
+  return std::make_unique<StackTileEvaluator>(t);
+}
+
+const MhOctree* RemoteMap::stack_tile(uint64_t cell) const noexcept {
+  const uint64_t id = stack_grid_->tile_id(cell);
+  const PageEntry page = cache_.lookup(id);
+  if (page.state == PageState::resident) {
+    mark_used(page.slot);
+    return &static_cast<const StackTileEvaluator*>(slot_eval_[page.slot].get())->tree;
+  }
+  if (page.state != PageState::constant) {  // constant: given up, the coarse value for good
+    Misses& m = t_misses;
+    bool noted = false;
+    for (size_t i = 0; i < m.count && !noted; ++i) noted = m.cell[i] == cell;
+    if (!noted && m.count < Misses::kMax) m.cell[m.count++] = cell;
+  }
+  return nullptr;
+}
+
+template <class Fn>
+auto RemoteMap::stack_lookup(Fn&& fn) const noexcept {
+  t_misses.count = 0;
+  decltype(fn(*stack_map_)) r;
+  {
+    std::shared_lock lock(mu_);
+    r = fn(*stack_map_);
+  }
+  if (t_misses.count) {
+    std::lock_guard lock(mu_);
+    for (size_t i = 0; i < t_misses.count; ++i) {
+      const uint64_t cell = t_misses.cell[i];
+      want_locked(stack_grid_->tile_id(cell), GridEntry{stack_grid_->entries[cell].value, EntryKind::tile, 0},
+                  options_.miss_priority);
+    }
+  }
+  return r;
+}
+
+float RemoteMap::stack_visibility(const Vec3d& world, double time) const noexcept {
+  if (!stack_map_) return 1.0f;
+  return stack_lookup([&](const StackMap& m) { return m.visibility(world, time); });
+}
+
+float RemoteMap::stack_soft_visibility(const Vec3d& world) const noexcept {
+  if (!stack_map_) return 1.0f;
+  return stack_lookup([&](const StackMap& m) { return m.soft_visibility(world); });
+}
+
+float RemoteMap::stack_depth(uint32_t slice, uint32_t level, uint64_t x, uint64_t y) const noexcept {
+  if (!stack_map_) return kLitDepth;
+  return stack_lookup([&](const StackMap& m) { return m.depth(x, y, slice, level); });
+}
+
+namespace {
+
+// The slices [first, last] cell `cell` of grid g covers.
+void cell_slices(const StackGrid& g, uint64_t cell, uint64_t& first, uint64_t& last) {
+  const uint32_t K = g.skip_level;
+  const uint64_t cw = cell >> (2 * g.geo.xy_bits(K));
+  const uint32_t sw = g.geo.k - g.geo.w_bits(K);
+  first = cw << sw;
+  last = ((cw + 1) << sw) - 1;
+}
+
+}  // namespace
+
+size_t RemoteMap::request_slices(uint32_t w0, uint32_t w1, uint16_t priority) noexcept {
+  if (!stack_grid_) return 0;
+  const StackGrid& g = *stack_grid_;
+  size_t queued = 0;
+  std::lock_guard lock(mu_);
+  for (uint64_t cell = 0; cell < g.entries.size(); ++cell) {
+    if (g.entries[cell].kind != 1) continue;
+    uint64_t first, last;
+    cell_slices(g, cell, first, last);
+    if (last < w0 || first > w1) continue;
+    queued += want_locked(g.tile_id(cell), GridEntry{g.entries[cell].value, EntryKind::tile, 0}, priority);
+  }
+  return queued;
+}
+
+bool RemoteMap::slices_resident(uint32_t w0, uint32_t w1) const noexcept {
+  if (!stack_grid_) return true;
+  const StackGrid& g = *stack_grid_;
+  std::shared_lock lock(mu_);
+  for (uint64_t cell = 0; cell < g.entries.size(); ++cell) {
+    if (g.entries[cell].kind != 1) continue;
+    uint64_t first, last;
+    cell_slices(g, cell, first, last);
+    if (last < w0 || first > w1) continue;
+    if (cache_.lookup(g.tile_id(cell)).state != PageState::resident) return false;
+  }
+  return true;
+}
+
+}  // namespace st::client

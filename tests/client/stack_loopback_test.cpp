@@ -1,0 +1,93 @@
+// A stack pack (tiles/PACK.md "Stack packs") served by the unchanged server: the client's
+// Map opens it, streams its octree tiles by id, and once they are resident answers
+// time_visibility / soft_visibility / slice_depth exactly as the local pack does; before
+// that it answers the coarser level-K values, and its 2D lookups answer lit.
+#include <gtest/gtest.h>
+
+#include "tests/client/loopback.hpp"
+#include "tiles/build/stack_pack.hpp"
+#include "tiles/core/light_set.hpp"
+#include "tiles/core/stack_map.hpp"
+
+namespace st {
+namespace {
+
+using client::Client;
+using client::Map;
+
+// Boxes' shadows sliding slowly with w over a ground at 0.8: coherent slices.
+IntervalStack sliding_stack(uint32_t level, uint32_t slices) {
+  const uint64_t side = uint64_t(1) << level;
+  IntervalStack s{level, slices, std::vector<Interval>(side * side * slices, Interval{0.8f, 0.8f})};
+  for (uint32_t w = 0; w < slices; ++w)
+    for (int b = 0; b < 3; ++b) {
+      const uint64_t x0 = (7 + 17 * b + w) % (side - 12), y0 = (5 + 23 * b) % (side - 12);
+      for (uint64_t y = y0; y < y0 + 10; ++y)
+        for (uint64_t x = x0; x < x0 + 10; ++x) s.at(x, y, w) = {0.2f + 0.1f * float(b), 0.35f + 0.1f * float(b)};
+    }
+  return s;
+}
+
+TEST(StackLoopback, ServedStackAnswersLikeTheLocalPack) {
+  const uint32_t slices = 10;
+  const IntervalStack s = sliding_stack(looptest::small_scale() ? 5 : 6, slices);
+  StackCut cut = cut_stack(build_octree(s), std::nullopt, 512);
+  Aabb box;
+  box.extend({-10, 0, -10});
+  box.extend({10, 5, 10});
+  const LightSet set = LightSet::fit(
+      LightSetSpec::parse("sun-path:azimuth=150..200,elevation=40..60,samples=" + std::to_string(slices)), box);
+  cut.grid.light_kind = set.samples[0].kind();
+  for (const LightSpace& l : set.samples) cut.grid.lights.push_back(l.to_array());
+  cut.grid.spec = set.spec.to_string();
+  const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/stackmap.pack";
+  StackPackParams p;
+  p.tile_bytes = 512;
+  write_stack_pack(path, cut, p);
+  ASSERT_GT(cut.tiles.size(), 4u);
+
+  const auto reader = PackReader::open(path);
+  const ResidentStack local(*reader);
+  auto srv = looptest::start_server({path});
+  Client c({"127.0.0.1", srv.port}, looptest::quick_options());
+  Map m = c.open("stackmap");
+  ASSERT_EQ(m.slices(), slices);
+
+  uint64_t rng = 99;
+  auto next = [&] {
+    rng = rng * 6364136223846793005ull + 1442695040888963407ull;
+    return double(rng >> 11) / double(1ull << 53);
+  };
+  std::vector<Vec3d> points;
+  for (int i = 0; i < 300; ++i) points.push_back({-10 + 20 * next(), 5 * next(), -10 + 20 * next()});
+  // While tiles stream (each miss queues its tile), a slice depth is either the coarser
+  // level-K value or already the exact one: never missing, never anything else.
+  const StackMap coarse(*reader->stack(), [](uint64_t) -> const MhOctree* { return nullptr; });
+  const uint32_t n = reader->stack()->geo.n;
+  int coarse_answers = 0;
+  for (uint64_t y = 0; y < (uint64_t(1) << n); ++y) {
+    const float v = m.slice_depth(3, n, y, y), c = coarse.depth(y, y, 3, n), e = local.map().depth(y, y, 3, n);
+    EXPECT_TRUE(v == c || v == e) << "texel " << y;
+    coarse_answers += v == c && c != e;
+  }
+  EXPECT_GT(coarse_answers, 0);  // the first lookup of a cell found no tile
+
+  EXPECT_GT(m.request_slices(0, slices - 1, 10), 0u);
+  ASSERT_TRUE(looptest::wait_until([&] { return m.slices_resident(0, slices - 1); }));
+  for (const Vec3d& q : points) {
+    const client::WorldPoint wp{q.x, q.y, q.z};
+    const double t = next();
+    EXPECT_EQ(m.time_visibility(wp, t), local.map().visibility(q, t));
+    EXPECT_EQ(m.soft_visibility(wp), local.map().soft_visibility(q));
+    EXPECT_EQ(m.visibility(wp), 1.0f);  // the 2D lookup of a stack map: lit
+  }
+  for (uint32_t w = 0; w < slices; w += 3)
+    for (uint32_t level = 0; level <= n; level += 2)
+      for (uint64_t y = 0; y < (uint64_t(1) << level); y += 3)
+        for (uint64_t x = 0; x < (uint64_t(1) << level); x += 3)
+          ASSERT_EQ(m.slice_depth(w, level, x, y), local.map().depth(x, y, w, level));
+  srv.stop();
+}
+
+}  // namespace
+}  // namespace st

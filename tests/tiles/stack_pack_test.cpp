@@ -1,0 +1,215 @@
+// Stack packs (tiles/PACK.md "Stack packs"): the cut of a stack's octree at a skip level
+// in (x, y, w) answers every level of every slice exactly as the uncut octree, tiles stay
+// under the byte bound, the pack opens and verifies, lookups equal StackLookup's, absent
+// tiles answer the coarser level-K value, and hostile grids are refused.
+#include <gtest/gtest.h>
+
+#include <cstring>
+#include <fstream>
+
+#include "common/error.hpp"
+#include "tests/test_tmp.hpp"
+#include "tests/tiles/stack_fixtures.hpp"
+#include "tiles/build/mh_octree_encode.hpp"
+#include "tiles/build/stack_pack.hpp"
+#include "tiles/core/pack_evaluator.hpp"
+#include "tiles/core/pack_reader.hpp"
+#include "tiles/core/stack_lookup.hpp"
+#include "tiles/core/stack_map.hpp"
+
+namespace st {
+namespace {
+
+Aabb box() {
+  Aabb b;
+  b.extend({-10, 0, -10});
+  b.extend({10, 5, 10});
+  return b;
+}
+
+LightSet lights(uint32_t n) {
+  return LightSet::fit(LightSetSpec::parse("sun-path:azimuth=150..200,elevation=40..60,samples=" + std::to_string(n)),
+                       box());
+}
+
+std::string write(const OctHierarchy& h, const LightSet& set, std::optional<uint32_t> k, uint32_t tile_bytes,
+                  const std::string& name, StackCut* out = nullptr) {
+  StackCut cut = cut_stack(h, k, tile_bytes);
+  cut.grid.light_kind = set.samples[0].kind();
+  for (const LightSpace& l : set.samples) cut.grid.lights.push_back(l.to_array());
+  cut.grid.spec = set.spec.to_string();
+  StackPackParams p;
+  p.tile_bytes = tile_bytes;
+  p.build_params = {{"light", cut.grid.spec}};
+  const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/" + name;
+  write_stack_pack(path, cut, p);
+  if (out) *out = std::move(cut);
+  return path;
+}
+
+// Every level of every slice through the pack equals the uncut octree's depth_at.
+void expect_same_as_octree(const OctHierarchy& h, const StackMap& m) {
+  const moct::Geometry& g = h.geo;
+  for (uint32_t level = 0; level <= g.n; ++level) {
+    const uint32_t T = g.level_of_xy(level);
+    for (uint32_t w = 0; w < h.slices; ++w)
+      for (uint64_t y = 0; y < (uint64_t(1) << level); ++y)
+        for (uint64_t x = 0; x < (uint64_t(1) << level); ++x)
+          ASSERT_EQ(m.depth(x, y, w, level), h.depth_at(T, x, y, w >> (g.k - g.w_bits(T))))
+              << "level " << level << " texel (" << x << ", " << y << ") slice " << w;
+  }
+}
+
+TEST(StackPack, CutAnswersEveryLevelOfEverySliceLikeTheOctree) {
+  struct Case {
+    IntervalStack s;
+    std::optional<uint32_t> k;
+    uint32_t tile_bytes;
+  };
+  const Case cases[] = {
+      {stacks::coherent_stack(5, 12, 3), std::nullopt, 64 * 1024},  // n > k, default K
+      {stacks::coherent_stack(5, 12, 4), 1, 256},                   // bound forces a deeper K
+      {stacks::random_stack(2, 40, 5), std::nullopt, 1024},         // k > n
+      {stacks::random_stack(3, 1, 6), 0, 64 * 1024},                // one slice, one cell
+  };
+  int i = 0;
+  for (const Case& c : cases) {
+    SCOPED_TRACE(i);
+    const OctHierarchy h = build_octree(c.s);
+    const LightSet set = lights(c.s.slices);
+    StackCut cut;
+    const std::string path = write(h, set, c.k, c.tile_bytes, "stack" + std::to_string(i++) + ".pack", &cut);
+    EXPECT_LE(cut.max_tile_bytes, c.tile_bytes);
+    if (c.k) {
+      EXPECT_GE(cut.grid.skip_level, *c.k);
+    }
+    auto reader = PackReader::open(path);
+    ASSERT_NE(reader->stack(), nullptr);
+    EXPECT_TRUE(reader->header().flags & kFeatureStack);
+    EXPECT_EQ(reader->stack()->slices, c.s.slices);
+    EXPECT_EQ(reader->stack()->spec, set.spec.to_string());
+    EXPECT_NO_THROW(reader->verify());
+    EXPECT_NO_THROW(reader->check_depth_range());
+    const ResidentStack rs(*reader);
+    expect_same_as_octree(h, rs.map());
+    EXPECT_EQ(stacks::first_violation(c.s, [&](uint64_t x, uint64_t y, uint32_t w) {
+                return rs.map().depth(x, y, w, c.s.level);
+              }),
+              "");
+    // A 2D reader refuses it in one line rather than walking a grid it does not have.
+    EXPECT_THROW(PackEvaluator(std::shared_ptr<const PackReader>(std::move(reader)), 4), Error);
+  }
+}
+
+TEST(StackPack, LookupsMatchTheWholeOctreeAndAbsentTilesAnswerCoarser) {
+  const IntervalStack s = stacks::coherent_stack(5, 9, 7);
+  const OctHierarchy h = build_octree(s);
+  const LightSet set = lights(9);
+  const std::vector<uint8_t> whole = encode_octree(h);
+  const MhOctree tree = MhOctree::open(whole);
+  const StackLookup ref(tree, set);
+  auto reader = PackReader::open(write(h, set, 2, 512, "lookups.pack"));
+  const ResidentStack rs(*reader);
+  const StackMap none(*reader->stack(), [](uint64_t) -> const MhOctree* { return nullptr; });
+  uint64_t rng = 12345;
+  auto next = [&] {
+    rng = rng * 6364136223846793005ull + 1442695040888963407ull;
+    return double(rng >> 11) / double(1ull << 53);
+  };
+  const uint32_t K = reader->stack()->skip_level;
+  bool any_inexact = false;
+  for (int i = 0; i < 500; ++i) {
+    const Vec3d p{-10 + 20 * next(), 5 * next(), -10 + 20 * next()};
+    const double t = next();
+    bool exact = true;
+    EXPECT_EQ(rs.map().visibility(p, t, &exact), ref.visibility(p, t));
+    EXPECT_EQ(rs.map().soft_visibility(p, &exact), ref.soft_visibility(p));
+    EXPECT_TRUE(exact);
+    bool none_exact = true;
+    (void)none.soft_visibility(p, &none_exact);
+    any_inexact |= !none_exact;
+    for (uint32_t w = 0; w < 9; w += 4) {
+      EXPECT_EQ(rs.map().lit(p, w), ref.lit(p, w));
+      uint64_t x, y;
+      float d;
+      none.texel(p, w, x, y, d);
+      const moct::Geometry& g = h.geo;
+      const uint32_t sx = g.n - g.xy_bits(K);
+      EXPECT_EQ(none.depth(x, y, w, g.n), h.depth_at(K, x >> sx, y >> sx, w >> (g.k - g.w_bits(K))));
+    }
+  }
+  EXPECT_TRUE(any_inexact);
+}
+
+TEST(StackPack, GridLayoutIsPinned) {
+  // Two 2x2 slices (n = 1, k = 1), cut at K = 1: one coarse value, 8 entries.
+  IntervalStack s{1, 2, std::vector<Interval>(8, Interval{0.5f, 0.5f})};
+  s.at(0, 0, 0) = {0.25f, 0.25f};
+  const OctHierarchy h = build_octree(s);
+  const LightSet set = lights(2);
+  StackCut cut = cut_stack(h, 1, 1024);
+  cut.grid.lights = {set.samples[0].to_array(), set.samples[1].to_array()};
+  cut.grid.spec = "abcde";
+  const std::vector<uint8_t> b = cut.grid.serialize();
+  ASSERT_EQ(b.size(), StackGrid::serialized_size(h.geo, 2, 1, 5));
+  ASSERT_EQ(b.size(), 24u + 288 + 8 + 4 + 64);
+  EXPECT_EQ(std::string(b.begin(), b.begin() + 4), "STSG");
+  EXPECT_EQ(b[4], 1);
+  EXPECT_EQ(b[8], 1);   // xy_level
+  EXPECT_EQ(b[9], 1);   // w_level
+  EXPECT_EQ(b[10], 1);  // skip level
+  EXPECT_EQ(b[11], 0);  // sun
+  EXPECT_EQ(b[12], 2);  // slices
+  EXPECT_EQ(b[16], 5);  // spec size
+  double d;
+  std::memcpy(&d, b.data() + 24 + 144, 8);
+  EXPECT_EQ(d, set.samples[1].to_array()[0]);
+  EXPECT_EQ(std::string(b.begin() + 312, b.begin() + 317), "abcde");
+  EXPECT_EQ(b[317] | b[318] | b[319], 0);
+  float v;
+  std::memcpy(&v, b.data() + 320, 4);
+  EXPECT_EQ(v, 0.5f);  // level 0
+  std::memcpy(&v, b.data() + 324, 4);  // entry (0, 0, 0): the leaf 0.25
+  EXPECT_EQ(v, 0.25f);
+  std::memcpy(&v, b.data() + 324 + 8 * 7, 4);  // entry (1, 1, 1)
+  EXPECT_EQ(v, 0.5f);
+  EXPECT_EQ(b[324 + 4], 0);  // constant: K is the finest level
+  EXPECT_EQ(StackGrid::parse(b, "t").entries, cut.grid.entries);
+}
+
+TEST(StackPack, HostileGridsAndTilesAreRefused) {
+  const IntervalStack s = stacks::random_stack(2, 3, 9);
+  const OctHierarchy h = build_octree(s);
+  const LightSet set = lights(3);
+  StackCut cut;
+  const std::string path = write(h, set, 1, 1024, "hostile.pack", &cut);
+  const std::vector<uint8_t> grid = cut.grid.serialize();
+  for (size_t n = 0; n < grid.size(); ++n)
+    EXPECT_THROW(StackGrid::parse(std::span(grid).first(n), "t"), FormatError) << n;
+  for (size_t i = 0; i < grid.size(); i += 3) {
+    std::vector<uint8_t> bad = grid;
+    bad[i] ^= 0x5A;
+    try {
+      const StackGrid g = StackGrid::parse(bad, "t");
+      EXPECT_EQ(g.entries.size(), g.cells(g.skip_level));  // what parses is consistent
+    } catch (const FormatError&) {
+    }
+  }
+  // Any flipped byte of the file: open or verify refuses it (CRCs, then the octree check).
+  std::ifstream f(path, std::ios::binary);
+  const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(f)), {});
+  for (size_t i = 0; i < bytes.size(); i += 7) {
+    std::vector<uint8_t> bad = bytes;
+    bad[i] ^= 0x10;
+    EXPECT_THROW(
+        {
+          auto r = PackReader::open_memory(bad, "bad");
+          r->verify();
+        },
+        FormatError)
+        << "byte " << i;
+  }
+}
+
+}  // namespace
+}  // namespace st

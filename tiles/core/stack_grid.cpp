@@ -1,0 +1,119 @@
+#include "tiles/core/stack_grid.hpp"
+
+#include <cmath>
+#include <cstring>
+
+#include "common/bytes.hpp"
+#include "common/error.hpp"
+
+namespace st {
+
+uint64_t StackGrid::tile_id(uint64_t cell) const {
+  const uint32_t b = 2 * geo.xy_bits(skip_level) + geo.w_bits(skip_level);
+  return (uint64_t((b + 1) / 2) << 58) | cell;
+}
+
+bool StackGrid::cell_of(uint64_t id, uint64_t& cell) const {
+  const uint32_t b = 2 * geo.xy_bits(skip_level) + geo.w_bits(skip_level);
+  if ((id >> 58) != (b + 1) / 2) return false;
+  cell = id & ((uint64_t(1) << 58) - 1);
+  return cell < entries.size();
+}
+
+uint64_t StackGrid::serialized_size(const moct::Geometry& geo, uint32_t slices, uint32_t skip_level,
+                                    size_t spec_size) {
+  StackGrid g;
+  g.geo = geo;
+  uint64_t coarse = 0;
+  for (uint32_t l = 0; l < skip_level; ++l) coarse += g.cells(l);
+  return kStackGridFixedBytes + 144ull * slices + ((spec_size + 3) & ~size_t(3)) + 4 * coarse +
+         8 * g.cells(skip_level);
+}
+
+std::vector<uint8_t> StackGrid::serialize() const {
+  std::vector<uint8_t> out;
+  out.reserve(serialized_size(geo, slices, skip_level, spec.size()));
+  append_le<uint32_t>(out, kStackGridMagic);
+  append_le<uint32_t>(out, kStackGridVersion);
+  out.push_back(uint8_t(geo.n));
+  out.push_back(uint8_t(geo.k));
+  out.push_back(uint8_t(skip_level));
+  out.push_back(uint8_t(light_kind));
+  append_le<uint32_t>(out, slices);
+  append_le<uint32_t>(out, uint32_t(spec.size()));
+  append_le<uint32_t>(out, 0);
+  for (const auto& l : lights)
+    for (double d : l) append_le<uint64_t>(out, std::bit_cast<uint64_t>(d));
+  out.insert(out.end(), spec.begin(), spec.end());
+  while (out.size() % 4) out.push_back(0);
+  for (const auto& lv : coarse)
+    for (float v : lv) append_le<uint32_t>(out, std::bit_cast<uint32_t>(v));
+  for (const StackEntry& e : entries) {
+    append_le<uint32_t>(out, std::bit_cast<uint32_t>(e.value));
+    out.push_back(e.kind);
+    out.push_back(0);
+    append_le<uint16_t>(out, 0);
+  }
+  return out;
+}
+
+StackGrid StackGrid::parse(std::span<const uint8_t> b, const std::string& what) {
+  auto fail = [&](size_t off, const std::string& msg) {
+    throw FormatError(what + ": stack grid " + msg + " at byte " + std::to_string(off));
+  };
+  if (b.size() < kStackGridFixedBytes) fail(0, "truncated (" + std::to_string(b.size()) + " bytes)");
+  if (load_le<uint32_t>(b, 0) != kStackGridMagic) fail(0, "bad magic");
+  if (load_le<uint32_t>(b, 4) != kStackGridVersion) fail(4, "unsupported version");
+  StackGrid g;
+  g.geo.n = b[8];
+  g.geo.k = b[9];
+  g.skip_level = b[10];
+  if (g.geo.n > moct::kMaxXyLevel) fail(8, "xy_level above 20");
+  if (g.geo.k > moct::kMaxWLevel) fail(9, "w_level above 12");
+  if (g.skip_level > g.geo.depth()) fail(10, "skip level below the finest octree level");
+  if (b[11] > 1) fail(11, "bad light kind");
+  g.light_kind = LightKind(b[11]);
+  g.slices = load_le<uint32_t>(b, 12);
+  const uint32_t k = g.geo.k;
+  if (g.slices == 0 || g.slices > (1u << k) || (k > 0 && g.slices <= (1u << (k - 1))))
+    fail(12, "slice count does not pad to 2^w_level");
+  const uint32_t spec_size = load_le<uint32_t>(b, 16);
+  if (spec_size > kStackMaxSpecBytes) fail(16, "spec longer than 4096 bytes");
+  if (load_le<uint32_t>(b, 20) != 0) fail(20, "nonzero reserved field");
+  if (g.cells(g.skip_level) > kStackMaxCells) fail(10, "more than 2^22 cells at the skip level");
+  const uint64_t size = serialized_size(g.geo, g.slices, g.skip_level, spec_size);
+  if (b.size() != size) fail(0, "size " + std::to_string(b.size()) + " != " + std::to_string(size));
+  size_t o = kStackGridFixedBytes;
+  g.lights.resize(g.slices);
+  for (uint32_t w = 0; w < g.slices; ++w) {
+    for (int i = 0; i < 18; ++i, o += 8) g.lights[w][i] = std::bit_cast<double>(load_le<uint64_t>(b, o));
+    const std::string bad = LightSpace::check_array(g.light_kind, g.lights[w]);
+    if (!bad.empty()) fail(o - 144, "light of slice " + std::to_string(w) + ": " + bad);
+  }
+  g.spec.assign(reinterpret_cast<const char*>(b.data() + o), spec_size);
+  if (g.spec.find('\0') != std::string::npos) fail(o, "NUL in the spec");
+  o += spec_size;
+  for (; o % 4; ++o)
+    if (b[o]) fail(o, "nonzero padding");
+  g.coarse.resize(g.skip_level);
+  for (uint32_t l = 0; l < g.skip_level; ++l) {
+    g.coarse[l].resize(g.cells(l));
+    for (float& v : g.coarse[l]) {
+      v = std::bit_cast<float>(load_le<uint32_t>(b, o));
+      if (std::isnan(v)) fail(o, "NaN value");
+      o += 4;
+    }
+  }
+  g.entries.resize(g.cells(g.skip_level));
+  for (StackEntry& e : g.entries) {
+    e.value = std::bit_cast<float>(load_le<uint32_t>(b, o));
+    if (std::isnan(e.value)) fail(o, "NaN value");
+    e.kind = b[o + 4];
+    if (e.kind > 1) fail(o + 4, "bad entry kind");
+    if (b[o + 5] || load_le<uint16_t>(b, o + 6)) fail(o + 5, "nonzero entry padding");
+    o += 8;
+  }
+  return g;
+}
+
+}  // namespace st

@@ -1,0 +1,107 @@
+#include "tiles/core/stack_map.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "tiles/core/interval.hpp"
+
+namespace st {
+
+StackMap::StackMap(const StackGrid& grid, TileSource tile) : grid_(grid), tile_(std::move(tile)) {
+  lights_.reserve(grid.slices);
+  for (uint32_t w = 0; w < grid.slices; ++w) lights_.push_back(grid.light(w));
+}
+
+uint64_t StackMap::cell_of(uint64_t x, uint64_t y, uint32_t w) const {
+  const moct::Geometry& g = grid_.geo;
+  const uint32_t K = grid_.skip_level;
+  const uint32_t sx = g.n - g.xy_bits(K), sw = g.k - g.w_bits(K);
+  return grid_.index(K, x >> sx, y >> sx, w >> sw);
+}
+
+float StackMap::depth(uint64_t x, uint64_t y, uint32_t w, uint32_t level, bool* exact) const {
+  const moct::Geometry& g = grid_.geo;
+  if (level > g.n || w >= grid_.slices || (x >> level) || (y >> level)) return kLitDepth;
+  const uint32_t K = grid_.skip_level;
+  const uint32_t T = g.level_of_xy(level);  // octree level with 2^level texels a side
+  const uint32_t a = g.xy_bits(std::min(T, K)), b = g.w_bits(std::min(T, K));
+  const uint64_t cx = x >> (level - a), cy = y >> (level - a), cw = uint64_t(w) >> (g.k - b);
+  if (T < K) return grid_.coarse[T][grid_.index(T, cx, cy, cw)];
+  const uint64_t cell = grid_.index(K, cx, cy, cw);
+  const StackEntry& e = grid_.entries[cell];
+  if (e.kind == 0 || T == K) return e.value;
+  const MhOctree* t = tile_(cell);
+  if (!t) {
+    if (exact) *exact = false;
+    return e.value;
+  }
+  const uint32_t rel = level - a;  // the tile's own x, y level
+  return t->depth(x - (cx << rel), y - (cy << rel), uint32_t(w - (cw << (g.k - b))), rel);
+}
+
+void StackMap::texel(const Vec3d& p, uint32_t w, uint64_t& x, uint64_t& y, float& d) const {
+  const LightPoint lp = lights_[w].to_light(p);
+  const auto t = LightSpace::texel_of(grid_.geo.n, lp.u, lp.v);
+  x = t[0];
+  y = t[1];
+  d = float(lp.d);
+}
+
+bool StackMap::lit(const Vec3d& p, uint32_t w, bool* exact) const {
+  if (w >= grid_.slices) return true;
+  uint64_t x, y;
+  float d;
+  texel(p, w, x, y, d);
+  return d <= depth(x, y, w, grid_.geo.n, exact);
+}
+
+float StackMap::visibility(const Vec3d& p, double time, bool* exact) const {
+  const uint32_t n = grid_.slices;
+  const double s = std::clamp(std::isnan(time) ? 0.0 : time, 0.0, 1.0) * double(n - 1);
+  const double near = std::nearbyint(s);
+  if (std::fabs(s - near) <= 1e-9) return lit(p, uint32_t(near), exact) ? 1.0f : 0.0f;
+  const uint32_t a = uint32_t(std::floor(s));
+  const float f = float(s - double(a));
+  const float la = lit(p, a, exact) ? 1.0f : 0.0f, lb = lit(p, a + 1, exact) ? 1.0f : 0.0f;
+  return la + f * (lb - la);
+}
+
+float StackMap::soft_visibility(const Vec3d& p, bool* exact) const {
+  uint32_t lit_samples = 0;
+  for (uint32_t w = 0; w < grid_.slices; ++w) lit_samples += lit(p, w, exact);
+  return float(lit_samples) / float(grid_.slices);
+}
+
+}  // namespace st
+
+#include "common/error.hpp"
+#include "tiles/core/pack_reader.hpp"
+
+namespace st {
+
+ResidentStack::ResidentStack(const PackReader& pack) {
+  const StackGrid* g = pack.stack();
+  if (!g) throw Error(pack.name() + ": not a stack pack (no stack feature)");
+  for (const TileIndexEntry& e : pack.tiles()) {
+    uint64_t cell = 0;
+    if (!g->cell_of(e.id, cell)) throw FormatError(pack.name() + ": " + describe_tile(e.id) + " names no stack cell");
+    cells_.push_back(cell);
+    buffers_.push_back(pack.read_raw(e.id));
+    bytes_ += buffers_.back().size();
+  }
+  trees_.reserve(buffers_.size());
+  for (size_t i = 0; i < buffers_.size(); ++i) {
+    try {
+      trees_.push_back(MhOctree::open(buffers_[i]));
+    } catch (const Error& err) {
+      throw FormatError(pack.name() + ": " + describe_tile(pack.tiles()[i].id) + ": " + err.what());
+    }
+  }
+  // Ids sort as cells do (one level), so cells_ is sorted.
+  map_ = std::make_unique<StackMap>(*g, [this](uint64_t cell) -> const MhOctree* {
+    auto it = std::lower_bound(cells_.begin(), cells_.end(), cell);
+    return it != cells_.end() && *it == cell ? &trees_[size_t(it - cells_.begin())] : nullptr;
+  });
+}
+
+}  // namespace st

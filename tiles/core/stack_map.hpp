@@ -1,0 +1,71 @@
+// Lookups in a stack pack (tiles/PACK.md "Stack packs"): a StackGrid (the octree's top
+// levels and the level-K cells) plus the cells' tiles, each an MH octree buffer of the
+// cell's subtree (MHOCT.md). The same contract as StackLookup (stack_lookup.hpp) for
+// lit / visibility(p, time) / soft_visibility(p); where a cell's tile is not resident
+// (still streaming) the cell's entry value answers, which is the level-K map of the
+// stack: coarser, never missing.
+//
+// Thread safety: const lookups; the grid and whatever `tile` returns are borrowed.
+#pragma once
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <vector>
+
+#include "tiles/core/light.hpp"
+#include "tiles/core/mh_octree.hpp"
+#include "tiles/core/stack_grid.hpp"
+
+namespace st {
+
+class StackMap {
+ public:
+  // The octree of cell i (its dense index at the skip level), or nullptr while absent.
+  using TileSource = std::function<const MhOctree*(uint64_t cell)>;
+  StackMap(const StackGrid& grid, TileSource tile);
+
+  const StackGrid& grid() const { return grid_; }
+  uint32_t slices() const { return grid_.slices; }
+  uint32_t xy_level() const { return grid_.geo.n; }
+
+  // Texel (x, y) of the level-`level` map of slice w (level <= n; x, y < 2^level).
+  // Out of range: kLitDepth. `exact` (if given) is cleared when an absent tile answered.
+  float depth(uint64_t x, uint64_t y, uint32_t w, uint32_t level, bool* exact = nullptr) const;
+  // The cell (dense index) that texel (x, y, w) of the finest level lies in.
+  uint64_t cell_of(uint64_t x, uint64_t y, uint32_t w) const;
+  // Finest texel of point p in slice w, and its receiver depth (rounded to float).
+  void texel(const Vec3d& p, uint32_t w, uint64_t& x, uint64_t& y, float& d) const;
+
+  bool lit(const Vec3d& p, uint32_t w, bool* exact = nullptr) const;
+  float visibility(const Vec3d& p, double time, bool* exact = nullptr) const;
+  float soft_visibility(const Vec3d& p, bool* exact = nullptr) const;
+
+ private:
+  const StackGrid& grid_;
+  TileSource tile_;
+  std::vector<LightSpace> lights_;
+};
+
+}  // namespace st
+
+namespace st {
+
+class PackReader;
+
+// Every tile of a stack pack read, inflated and opened (verify, export, tests, a local
+// client map): lookups never miss a tile. Throws st::FormatError on a bad tile.
+class ResidentStack {
+ public:
+  explicit ResidentStack(const PackReader& pack);
+  const StackMap& map() const { return *map_; }
+  uint64_t tile_bytes() const { return bytes_; }
+
+ private:
+  std::vector<uint64_t> cells_;  // sorted
+  std::vector<std::vector<uint8_t>> buffers_;
+  std::vector<MhOctree> trees_;
+  std::unique_ptr<StackMap> map_;
+  uint64_t bytes_ = 0;
+};
+
+}  // namespace st
