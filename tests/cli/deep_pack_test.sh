@@ -12,13 +12,13 @@ work="$2/deep_pack_test"
 rm -rf "$work" && mkdir -p "$work" && cd "$work"
 source "$(dirname "${BASH_SOURCE[0]}")/check.sh"
 hair="procedural:hairball,count=16,segments=24,transmit=0.5"
-args=(build "$hair" --light sun:azimuth=40,elevation=60 --resolution 128 --encoding mh --tile-bytes 16384
+args=(build "$hair" --light sun:azimuth=40,elevation=60 --resolution 128 --encoding mh
       --deep-level 6 --deep-tile 8 --deep-samples 2)
-check build-hair 0 "deep: 64\^2 texels" -- "$st" "${args[@]}" -o hair.pack
+check build-hair 0 "deep: 64\^2 texels" -- "$st" "${args[@]}" --tile-bytes 16384 -o hair.pack
 check inspect-deep 0 "deep +64\^2 \(level 6\), [1-9][0-9]* of 64 tiles of 8\^2" -- "$st" inspect hair.pack
 check inspect-json 0 "\"deep\"" -- "$st" inspect hair.pack --json
 check verify-deep 0 "deep map: 256 texels sampled afresh" -- "$st" verify hair.pack "$hair" --samples 2000
-check shard-refused 1 "partial occluders" -- "$st" "${args[@]}" --shard 0/2 -o part.pack
+check shard-refused 1 "partial occluders" -- "$st" "${args[@]}" --tile-bytes 16384 --shard 0/2 -o part.pack
 check tiny-tiles 1 "over 256 bytes" -- "$st" "${args[@]}" --tile-bytes 256 -o tiny.pack
 check build-boxes 0 "" -- "$st" build procedural:boxes --light sun:azimuth=40,elevation=60 --resolution 128 -q -o boxes.pack
 check inspect-boxes 0 "" -- "$st" inspect boxes.pack
