@@ -1,9 +1,11 @@
 // shadowtile build: scene + light -> pack file.
+#include <bit>
 #include <csignal>
 #include <cstdio>
 #include <fstream>
 #include <optional>
 
+#include "tiles/bake/deep_build.hpp"
 #include "tiles/bake/map_build.hpp"
 #include "tiles/bake/scene.hpp"
 #include "app/command.hpp"
@@ -38,7 +40,34 @@ struct BuildArgs {
   uint32_t tile_bytes = 64 * 1024, depth_bits = 16;
   int compression = 6;
   bool resume = false, quiet = false, mpi = false;
+  // Deep tiles (scenes with partial occluders): level (default min(L, 9)), tile side,
+  // samples per texel side, epsilon (negative: 0.25 / samples, DSM 2000 §4).
+  std::optional<uint32_t> deep_level;
+  uint32_t deep_tile = 16, deep_samples = 4;
+  double deep_epsilon = -1;
 };
+
+// The deep tiles of a scene's partial occluders (DSM 2000), traced before the opaque map
+// so that a bad option fails early; the pack gets them through before_finish.
+std::optional<DeepMapBuild> build_deep_part(const BuildArgs& a, const Scene& scene, const LightSpace& light,
+                                            uint32_t map_level, bool quiet) {
+  if (!scene.any_partial()) return std::nullopt;
+  if (!a.shard.empty() || a.mpi)
+    throw Error("--shard/--mpi: this scene has partial occluders, whose deep tiles a sharded build does not make yet");
+  if (a.deep_tile < 1 || a.deep_tile > 256 || (a.deep_tile & (a.deep_tile - 1)))
+    throw Error("--deep-tile: a power of two in 1..256, got " + std::to_string(a.deep_tile));
+  const uint32_t level = a.deep_level.value_or(std::min(map_level, 9u));
+  DeepSampleOptions so;
+  so.samples_per_side = a.deep_samples;
+  so.epsilon = a.deep_epsilon;
+  DeepSampler sampler(scene, light);
+  DeepMapBuild d = build_deep_tiles(sampler, level, uint32_t(std::countr_zero(a.deep_tile)), so, a.tile_bytes);
+  if (!quiet)
+    std::printf("deep: %u^2 texels (%u^2 samples each), %zu tiles of %u^2 (%llu empty), %.1f KiB, epsilon %g, %.1f s\n",
+                1u << level, a.deep_samples, d.tiles.size(), a.deep_tile, (unsigned long long)d.empty_tiles,
+                double(d.bytes) / 1024, so.effective_epsilon(), d.sampling.seconds);
+  return d;
+}
 
 void run(const BuildArgs& a) {
   if (LightSetSpec::names_light_set(a.light)) {  // a stack (app/stack_cli.cpp)
@@ -82,6 +111,12 @@ void run(const BuildArgs& a) {
   LightSpec spec = LightSpec::parse(a.light);
   LightSpace light = LightSpace::fit(spec, scene.bounds());
   if (!quiet) std::printf("%s\n", summary(scene).c_str());
+  const std::optional<DeepMapBuild> deep = build_deep_part(a, scene, light, o.map_level, quiet);
+  if (deep) {
+    scene = opaque_part(scene);  // the opaque map holds the opaque casters alone
+    const double eps = DeepSampleOptions{a.deep_samples, 1, a.deep_epsilon}.effective_epsilon();
+    o.before_finish = [&deep, eps, &a](PackWriter& w) { append_deep_map(w, *deep, eps, a.deep_samples); };
+  }
 
   Progress progress("build " + a.out, "texels");
   if (!quiet)
@@ -210,6 +245,13 @@ void setup(CLI::App& app) {
                  "from the two planes, the same bits as off), narrow (one sub-interval per tile: lossless, "
                  "recorded as intervals_narrowed=yes) or off (every texel through the coverage tests)")
       ->capture_default_str();
+  app.add_option("--deep-level", a->deep_level,
+                 "Scenes with partial occluders: the deep map is 2^N texels a side (default min(L, 9))");
+  app.add_option("--deep-tile", a->deep_tile, "Deep tile side in texels, a power of two <= 256")->capture_default_str();
+  app.add_option("--deep-samples", a->deep_samples, "Deep map: jittered samples per texel side (1..64)")
+      ->capture_default_str();
+  app.add_option("--deep-epsilon", a->deep_epsilon,
+                 "Deep map: compression bound on transmittance (default 0.25 / samples, DSM 2000 §4)");
   app.add_flag("-q,--quiet", a->quiet, "No summary or progress");
   app.callback([a]() { run(*a); });
 }

@@ -23,8 +23,12 @@ void run(const InspectArgs& a) {
   const auto& h = r->header();
   uint64_t constants = 0, tiles = 0, index = 0;
   for (auto& e : r->grid().entries) constants += e.kind == EntryKind::constant;
-  uint64_t stored = 0, raw = 0, largest = 0;
+  uint64_t stored = 0, raw = 0, largest = 0, deep_tiles = 0, deep_stored = 0, deep_raw = 0;
   for (auto& t : r->tiles()) {
+    if (is_deep_id(t.id)) {  // the deep part (tiles/PACK.md "Deep tiles"), shown apart
+      deep_tiles += t.kind == TileKind::deep, deep_stored += t.stored_size, deep_raw += t.raw_size;
+      continue;
+    }
     (t.kind == TileKind::index ? index : tiles)++;
     stored += t.stored_size;
     raw += t.raw_size;
@@ -61,6 +65,20 @@ void run(const InspectArgs& a) {
   for (auto& [k, v] : r->params()) params[k] = v;
   j["build_params"] = params;
   if (r->stack()) inspect_stack(*r, j, false);
+  const DeepDirectory* dd = r->deep_directory();
+  if (dd) {
+    nlohmann::json d;
+    d["level"] = dd->level;
+    d["resolution"] = uint64_t(1) << dd->level;
+    d["tile_side"] = 1u << dd->side_bits;
+    d["tiles"] = deep_tiles;
+    d["tiles_possible"] = uint64_t(dd->tiles_per_side()) * dd->tiles_per_side();
+    d["epsilon"] = dd->epsilon;
+    d["samples_per_side"] = dd->samples_per_side;
+    d["stored_bytes"] = deep_stored;
+    d["raw_bytes"] = deep_raw;
+    j["deep"] = d;
+  }
   if (a.json) {
     // Bytes that are not UTF-8 (a hostile pack's params) become U+FFFD instead of a throw.
     std::printf("%s\n", j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace).c_str());
@@ -79,6 +97,13 @@ void run(const InspectArgs& a) {
               double(raw) / (1 << 20), (unsigned long long)largest);
   std::printf("  map preview  %u levels below K (to level %u), %.1f KiB in the map info\n", r->preview().levels(),
               h.skip_level + r->preview().levels(), double(r->preview().serialized_size()) / 1024);
+  if (dd)
+    std::printf("  deep         %llu^2 (level %u), %llu of %llu tiles of %u^2 stored, epsilon %g, %u^2 samples a "
+                "texel, %.2f MiB stored (%.2f MiB raw)\n",
+                (unsigned long long)(uint64_t(1) << dd->level), dd->level, (unsigned long long)deep_tiles,
+                (unsigned long long)(uint64_t(dd->tiles_per_side()) * dd->tiles_per_side()), 1u << dd->side_bits,
+                double(dd->epsilon), dd->samples_per_side, double(deep_stored) / (1 << 20),
+                double(deep_raw) / (1 << 20));
   std::printf("  file         %.2f MiB = %.5f%% of the raw float32 map (%.1f GiB)\n",
               double(r->file_size()) / (1 << 20), 100.0 * double(r->file_size()) / raw_map,
               raw_map / double(1ull << 30));

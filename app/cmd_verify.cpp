@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "common/hash.hpp"
+#include "tiles/bake/deep_sampler.hpp"
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/map_build.hpp"
 #include "tiles/bake/raster_bounds.hpp"
@@ -25,6 +26,7 @@
 #include "common/error.hpp"
 #include "app/progress.hpp"
 #include "app/stack_cli.hpp"
+#include "tiles/core/deep_pack.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_format.hpp"
 #include "tiles/core/vsdag_format.hpp"
@@ -133,6 +135,54 @@ uint64_t verify_every_texel(const VerifyArgs& a, const TraceFn& trace,
   return bad;
 }
 
+// The deep part (tiles/PACK.md "Deep tiles"): `count` random texels of the deep map,
+// half in stored tiles, sampled afresh (the build's samples and seed, uncompressed) and
+// compared with the stored mip-0 function: within the directory's epsilon plus the
+// unorm16 rounding. Returns the texels beyond it.
+uint64_t verify_deep(const VerifyArgs& a, const PackReader& reader, const Scene& scene, uint64_t count) {
+  const auto deep = PackDeepMap::load(reader);
+  const DeepDirectory& dir = deep->directory();
+  DeepSampler sampler(scene, reader.light());
+  DeepSampleOptions o;
+  o.samples_per_side = dir.samples_per_side;
+  o.epsilon = dir.epsilon;
+  const double bound = double(dir.epsilon) + deep::kQuantisation + 1e-6;
+  std::vector<std::pair<uint32_t, uint32_t>> stored;
+  for (uint32_t ty = 0; ty < dir.tiles_per_side(); ++ty)
+    for (uint32_t tx = 0; tx < dir.tiles_per_side(); ++tx)
+      if (dir.has(tx, ty)) stored.emplace_back(tx, ty);
+  uint64_t rng = a.seed ^ 0xdeeb, bad = 0;
+  double worst = 0;
+  const uint32_t side = 1u << dir.side_bits, n = 1u << dir.level;
+  for (uint64_t i = 0; i < count; ++i) {
+    uint32_t x, y;
+    if (i % 2 == 0) {
+      const auto [tx, ty] = stored[splitmix64(rng) % stored.size()];
+      x = tx * side + uint32_t(splitmix64(rng) % side), y = ty * side + uint32_t(splitmix64(rng) % side);
+    } else {
+      x = uint32_t(splitmix64(rng) % n), y = uint32_t(splitmix64(rng) % n);
+    }
+    const VisibilityFunction fresh = sampler.texel(dir.level, x, y, o, false);
+    const uint32_t tx = x >> dir.side_bits, ty = y >> dir.side_bits;
+    VisibilityFunction kept;  // empty (1 everywhere) where no tile is stored
+    if (dir.has(tx, ty)) {
+      const std::vector<uint8_t> raw = reader.read_raw(dir.tile_id(tx, ty));
+      kept = DeepTileView::open(raw).function(x - tx * side, y - ty * side, 0);
+    }
+    const double d = max_difference(kept, fresh);
+    worst = std::max(worst, d);
+    if (d > bound) {
+      if (bad < a.show)
+        std::printf("mismatch: deep texel (%u, %u) of level %u differs from a fresh sample by %.6f > %.6f\n", x, y,
+                    dir.level, d, bound);
+      ++bad;
+    }
+  }
+  std::printf("verify: deep map: %llu texels sampled afresh, largest difference %.6f (bound %.6f)\n",
+              (unsigned long long)count, worst, bound);
+  return bad;
+}
+
 void run(const VerifyArgs& a) {
   std::shared_ptr<const PackReader> reader = PackReader::open(a.pack);
   if (reader->stack()) return verify_stack_pack(a.pack, a.scene, a.up, a.max_mismatches);
@@ -150,6 +200,14 @@ void run(const VerifyArgs& a) {
   SceneOptions so;
   so.up = a.up == "z" ? UpAxis::z : UpAxis::y;
   Scene scene = load_scene(a.scene, so);
+  if (reader->deep_directory()) {
+    // The deep part against the scene's partial occluders; the opaque map against the rest.
+    if (verify_deep(a, *reader, scene, std::min<uint64_t>(a.samples, 256))) {
+      std::printf("verify %s: FAILED: deep texels beyond the deep map's bound\n", a.pack.c_str());
+      exit_with(kExitMismatch);
+    }
+    scene = opaque_part(scene);
+  }
   if (scene.content_hash() != reader->header().scene_hash)
     std::printf("warning: the scene's hash differs from the one the pack was built from\n");
   const LightSpace light = reader->light();

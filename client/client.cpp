@@ -94,6 +94,25 @@ size_t Map::request_slices(uint32_t w0, uint32_t w1, uint16_t priority) noexcept
 bool Map::slices_resident(uint32_t w0, uint32_t w1) const noexcept {
   return map_ ? map_->slices_resident(w0, w1) : true;
 }
+bool Map::has_deep() const noexcept { return map_ && map_->deep(); }
+Transmittance Map::transmittance(const WorldPoint& world) const noexcept { return transmittance_filtered(world, 0); }
+Transmittance Map::transmittance_filtered(const WorldPoint& world, float footprint) const noexcept {
+  if (!map_ || !map_->deep()) return {};
+  const LightSpace& l = map_->light();
+  const Vec3d w{world.x, world.y, world.z};
+  const LightPoint p = l.to_light(w);
+  // The footprint in map units: world units over the light's image-plane extent there (a
+  // spot's grows with the distance from the eye), as visibility_filtered.
+  double width = 0;
+  if (footprint > 0)
+    width = double(footprint) /
+            (l.kind() == LightKind::sun ? l.extent_uv() : length(w - l.origin()) * l.extent_uv());
+  const auto t = map_->deep()->lookup(p.u, p.v, float(p.d), width);
+  return {t[0], t[1], t[2]};
+}
+bool Map::deep_resident(double u0, double v0, double u1, double v1) const noexcept {
+  return map_ && map_->deep() && map_->deep()->resident(u0, v0, u1, v1);
+}
 MapStats Map::stats() const noexcept { return map_ ? map_->stats() : MapStats{}; }
 uint32_t Map::slot_bytes() const noexcept { return map_ ? map_->slot_bytes() : 0; }
 

@@ -84,6 +84,9 @@ RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::v
   // that requesting a page from a lookup does not grow the table.
   cache_.reserve_pages(std::min<uint64_t>(header_.tile_count, requests_.capacity() + cache_.slot_count() + 4096));
   cancels_.reserve(requests_.capacity());
+  if (header_.flags & kFeatureDeepShadow)  // the deep part (deep_part.hpp): its own small cache
+    deep_ = std::make_unique<DeepPart>(name_, header_.tile_bytes, options.cache_slots, options.max_tile_retries,
+                                       std::max<uint16_t>(options.miss_priority, 1), notifier_);
 }
 
 // ---------------------------------------------------------------- lookups
@@ -562,6 +565,11 @@ MapStats RemoteMap::stats() const noexcept {
 // ---------------------------------------------------------------- fetcher side
 
 void RemoteMap::take_wanted(size_t max, uint32_t request_id, std::vector<proto::TileRequest>& out) {
+  if (deep_) {  // the deep part's wants first (few: its directory, then the tiles lookups missed)
+    const size_t before = out.size();
+    deep_->take_wanted(max, request_id, out);
+    max -= out.size() - before;
+  }
   std::lock_guard lock(mu_);
   for (size_t taken = 0; taken < max; ++taken) {
     const RequestRecord* r = requests_.pop(request_id);
@@ -578,6 +586,7 @@ void RemoteMap::take_cancels(std::vector<uint64_t>& out) {
 }
 
 bool RemoteMap::has_work() const {
+  if (deep_ && deep_->has_work()) return true;
   std::lock_guard lock(mu_);
   return requests_.queued() > 0 || !cancels_.empty();
 }
@@ -660,6 +669,10 @@ bool RemoteMap::fill_slot(uint32_t slot, const proto::TileMeta& meta, const Grid
 void RemoteMap::tile_arrived(const proto::TileMeta& meta, uint32_t request_id,
                              std::span<const uint8_t> stored) noexcept {
   const uint64_t tile = meta.tile_id;
+  if (is_deep_id(tile)) {
+    if (deep_) deep_->tile_arrived(meta, request_id, stored);
+    return;
+  }
   GridEntry entry;
   {
     std::lock_guard lock(mu_);
@@ -718,6 +731,10 @@ void RemoteMap::tile_arrived(const proto::TileMeta& meta, uint32_t request_id,
 }
 
 void RemoteMap::tile_refused(uint64_t tile, uint32_t request_id, proto::ErrorCode code) noexcept {
+  if (is_deep_id(tile)) {
+    if (deep_) deep_->tile_refused(tile, request_id, code);
+    return;
+  }
   std::lock_guard lock(mu_);
   RequestRecord* r = sent_record_locked(tile, request_id);
   if (!r) return;
@@ -730,6 +747,7 @@ void RemoteMap::tile_refused(uint64_t tile, uint32_t request_id, proto::ErrorCod
 }
 
 void RemoteMap::connection_lost() noexcept {
+  if (deep_) deep_->connection_lost();
   std::lock_guard lock(mu_);
   requests_.for_each([&](RequestRecord& r) {
     if (r.state == RequestState::queued) return;

@@ -30,6 +30,7 @@
 #include <string>
 #include <vector>
 
+#include "client/deep_part.hpp"
 #include "client/rw_lock.hpp"
 #include "client/tile_requests.hpp"
 #include "shadowtile/client.hpp"
@@ -90,6 +91,9 @@ class RemoteMap final : public Evaluator {
   const MapPreview& preview() const { return preview_; }
   const std::vector<uint8_t>& header_bytes() const { return header_bytes_; }
   uint32_t slot_bytes() const { return cache_.slot_bytes(); }
+  const LightSpace& light() const { return light_; }
+  // The deep part (partial occluders) of a pack with the deep_shadow feature, else null.
+  const DeepPart* deep() const { return deep_.get(); }
 
   // Stack maps (a pack with the stack feature; remote_stack.cpp). The 2D lookups above
   // answer lit everywhere on them (their page table is one constant entry).
@@ -297,6 +301,7 @@ class RemoteMap final : public Evaluator {
   std::array<Region, kMaxRegions> regions_{};
   size_t region_count_ = 0;
   mutable MapStats stats_;
+  std::unique_ptr<DeepPart> deep_;
 };
 
 }  // namespace st::client

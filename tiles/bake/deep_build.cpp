@@ -2,7 +2,9 @@
 #include "tiles/bake/deep_build.hpp"
 
 #include "common/error.hpp"
+#include "tiles/build/pack_writer.hpp"
 #include "tiles/core/deep_format.hpp"
+#include "tiles/core/deep_pack.hpp"
 
 namespace st {
 
@@ -43,6 +45,16 @@ DeepMapBuild build_deep_tiles(const DeepSampler& sampler, uint32_t level, uint32
       out.tiles.push_back(std::move(tile));
     }
   return out;
+}
+
+void append_deep_map(PackWriter& writer, const DeepMapBuild& map, double epsilon, uint32_t samples_per_side) {
+  if (map.tiles.empty()) return;
+  DeepDirectory dir = DeepDirectory::make(map.level, map.side_bits, float(epsilon), samples_per_side);
+  for (const DeepTileBytes& t : map.tiles) {
+    dir.set(t.tx, t.ty);
+    writer.append_deep_tile(dir.tile_id(t.tx, t.ty), TileKind::deep, t.bytes);
+  }
+  writer.append_deep_tile(kDeepDirectoryId, TileKind::deep_directory, dir.serialize());
 }
 
 }  // namespace st

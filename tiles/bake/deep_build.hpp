@@ -32,4 +32,13 @@ DeepMapBuild build_deep_tiles(const DeepSampler& sampler, uint32_t level, uint32
                               const DeepSampleOptions& options,
                               uint64_t max_tile_bytes = uint64_t(64) << 20);
 
+class PackWriter;
+
+// Appends the deep map to a pack (tiles/PACK.md "Deep tiles"): each tile as a deep tile
+// record, then the deep directory (deep_pack.hpp) naming them. `epsilon` and
+// `samples_per_side` are the build's (the directory records them). Nothing is appended
+// for a map without tiles (no partial occluder: the pack stays as it was). st::Error if
+// a tile or the directory exceeds the pack's tile_bytes.
+void append_deep_map(PackWriter& writer, const DeepMapBuild& map, double epsilon, uint32_t samples_per_side);
+
 }  // namespace st

@@ -328,6 +328,7 @@ void report_pack_figures(const std::string& out_path, uint32_t map_level, MapBui
   for (uint64_t b = 256; b <= (uint64_t(1) << 30); b *= 2) bounds.push_back(b);
   std::vector<uint64_t> counts(bounds.size(), 0);
   for (auto& e : reader->tiles()) {
+    if (is_deep_id(e.id)) continue;  // the deep part (deep_pack.hpp): not the opaque map's
     ++rep.tile_count;
     rep.index_tile_count += e.kind == TileKind::index;
     rep.stored_bytes_per_level[tile_address(e.id).level] += e.stored_size;
@@ -416,6 +417,7 @@ MapBuildReport build_map(const Scene& scene, const LightSpace& light, const MapB
                   std::to_string(writer->cells().size()) + " of its " + std::to_string(rep.cells_total) + " cells");
     writer->finish_part();
   } else {
+    if (o.before_finish) o.before_finish(*writer);
     finish_pack(*writer, cutter, o.construction);
   }
   rep.finish_seconds = since(t);

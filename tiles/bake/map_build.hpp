@@ -69,6 +69,8 @@ inline TraceMode trace_mode_of(IntervalRule r) {
 // bytes that come back to `append` (which checks them record by record and appends
 // them), and returns once every cell it took is appended. A throw fails the build; the
 // .tmp keeps every cell appended so far, for --resume.
+class PackWriter;
+
 class RemoteCells {
  public:
   virtual ~RemoteCells() = default;
@@ -102,6 +104,9 @@ struct MapBuildOptions {
   std::string scene_spec, light_spec;  // provenance written into the pack's params
   // Called from a background thread about 5 times a second with the progress so far.
   std::function<void(uint64_t cells_done, uint64_t cells_total, uint64_t texels_done)> progress;
+  // Called once every cell is appended, before the skip grid and index are written (not
+  // for part files): appends the deep tiles (deep_build.hpp, append_deep_map).
+  std::function<void(PackWriter&)> before_finish;
   // Test hook: stop (throw st::Error "interrupted") after this many cells were appended.
   std::optional<uint64_t> stop_after_cells;
   // Set from another thread (e.g. SIGINT) to stop at the next cell; "<out>.tmp" remains.

@@ -61,8 +61,8 @@ PackWriter::PackWriter(std::string path, PackParams params) : path_(std::move(pa
   if (params_.tile_bytes < kMinTileBytes || params_.tile_bytes > kMaxTileBytes)
     throw Error(path_ + ": tile_bytes " + std::to_string(params_.tile_bytes) + " outside " + tile_bytes_bounds());
   if (params_.features & ~uint32_t(kFeatureExitDepths | kFeatureStaticIntervals))
-    throw Error(path_ + ": features may only name exit_depths / static_intervals (the rest are derived; "
-                "deep_shadow is reserved: packs carry no deep tiles yet)");
+    throw Error(path_ + ": features may only name exit_depths / static_intervals (the rest are derived: "
+                "deep_shadow from append_deep_tile)");
   if (params_.compression_level < 0 || params_.compression_level > 12)
     throw Error(path_ + ": compression level outside 0..12");
   done_.assign(size_t(1) << (2 * params_.skip_level), 0);
@@ -216,6 +216,25 @@ void PackWriter::append_cell_bytes(std::span<const uint8_t> bytes) {
   done_[i] = 1;
 }
 
+void PackWriter::append_deep_tile(uint64_t id, TileKind kind, std::span<const uint8_t> raw) {
+  const std::string where = tmp_path() + ": " + describe_tile(id);
+  if ((kind != TileKind::deep && kind != TileKind::deep_directory) || !id_fits_kind(id, kind))
+    throw Error(where + ": not a deep tile id of kind " + std::to_string(int(kind)));
+  if (raw.empty() || raw.size() > params_.tile_bytes)
+    throw Error(where + " has " + std::to_string(raw.size()) + " bytes (tile_bytes " +
+                std::to_string(params_.tile_bytes) + "): raise --tile-bytes or the deep epsilon, or shrink the deep tiles");
+  std::vector<uint8_t> stored = zlib_compress(raw, params_.compression_level);
+  TileRecord r{kind, id, uint32_t(stored.size()), uint32_t(raw.size()), crc32_of(stored)};
+  auto head = r.serialize();
+  std::lock_guard lock(mu_);
+  if (failed_ || finished_) throw Error(where + ": writer already failed or finished");
+  if (cells_.size() != done_.size()) throw Error(where + ": deep tiles go after the last cell");
+  write_at(end_, head);
+  write_at(end_ + kRecordBytes, stored);
+  tiles_.push_back(TileIndexEntry{id, end_ + kRecordBytes, r.stored_size, r.raw_size, r.crc, kind});
+  end_ += kRecordBytes + stored.size();
+}
+
 // The synced journal `what` becomes path_: closed, renamed, the directory synced.
 void PackWriter::publish(const std::string& what) {
   ::close(fd_);
@@ -255,6 +274,10 @@ void PackWriter::finish(const CutGrid& grid) {
     if (tiles_[i].id == tiles_[i - 1].id) throw Error(what + ": " + describe_tile(tiles_[i].id) + " appended twice");
 
   PackHeader h = base_header();
+  const bool deep_tiles = std::any_of(tiles_.begin(), tiles_.end(), [](auto& t) { return t.kind == TileKind::deep; });
+  const bool deep_dir = !tiles_.empty() && tiles_.back().kind == TileKind::deep_directory;  // sorted: the last id
+  if (deep_tiles != deep_dir) throw Error(what + ": deep tiles need a deep directory and a directory needs tiles");
+  if (deep_dir) h.flags |= kFeatureDeepShadow;
   bool index_tiles = std::any_of(tiles_.begin(), tiles_.end(), [](auto& t) { return t.kind == TileKind::index; });
   h.flags |= (tiles_.empty() ? 0u : uint32_t(kFeatureHasTiles)) | (index_tiles ? uint32_t(kFeatureIndexTiles) : 0u);
   h.grid_offset = (end_ + 7) & ~uint64_t(7);
@@ -355,6 +378,8 @@ std::string cell_problem(const CellRecord& c, const std::vector<TileIndexEntry>&
   bool root_found = !tiles.empty() && tiles.back().id == root_id && uint8_t(tiles.back().kind) == uint8_t(c.entry.kind);
   if (has_tile != root_found || (!has_tile && !tiles.empty()))
     return "cell entry disagrees with its tiles (its own tile must come last)";
+  for (const TileIndexEntry& t : tiles)
+    if (t.kind != TileKind::encoded && t.kind != TileKind::index) return "a deep tile among a cell's records";
   return "";
 }
 

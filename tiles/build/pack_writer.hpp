@@ -89,6 +89,14 @@ class PackWriter {
   // every record in it; st::Error naming the cell or byte offset otherwise.
   void append_cell_bytes(std::span<const uint8_t> bytes);
 
+  // A deep tile or the deep directory (tiles/PACK.md "Deep tiles", deep_pack.hpp), once
+  // every cell is done and before finish(): `kind` deep or deep_directory with an id that
+  // fits it (id_fits_kind), 1..tile_bytes raw bytes, compressed like any tile. finish()
+  // sets the deep_shadow feature when they are there (the directory is then required).
+  // Not journalled for resume: records after the last cell record are a torn tail to
+  // replay, so a resumed build appends them again. st::Error otherwise.
+  void append_deep_tile(uint64_t id, TileKind kind, std::span<const uint8_t> raw);
+
   // A part file (one shard of the cells, tiles/PACK.md "Part files"): fsyncs the journal
   // as it is (state building) and renames "<path>.tmp" to "<path>". No grid, no index.
   void finish_part();

@@ -84,10 +84,7 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
   h.state = PackState(state);
   h.flags = load_le<uint32_t>(b, 20);
   if (h.flags & ~uint32_t(kKnownFeatures)) fail(20, "unknown feature flags " + hex32(h.flags));
-  // Reserved for deep tiles (tiles/core/DEEP.md), which no pack carries yet: a pack that
-  // claims them is refused rather than served without its partial occluders.
-  if (h.flags & uint32_t(kFeatureDeepShadow))
-    fail(20, "feature deep_shadow: this reader does not read deep tiles (a newer writer's pack?)");
+  // deep_shadow (bit 3) is read: PackReader checks the deep directory and tiles.
   if (b[24] > uint8_t(kLastEncoding))
     fail(24, "unknown encoding " + std::to_string(b[24]) + " (this build reads 0-" + std::to_string(int(kLastEncoding)) +
                  ": mh, mmh, dagmh, vsdag; written by a newer shadowtile?)");
@@ -170,13 +167,13 @@ RecordType parse_record(std::span<const uint8_t, kRecordBytes> b, TileRecord* ti
   uint32_t magic = load_le<uint32_t>(b, 0);
   if (magic == kTileRecordMagic) {
     if (b[5] || b[6] || b[7]) return RecordType::none;
-    if (b[4] != uint8_t(TileKind::encoded) && b[4] != uint8_t(TileKind::index)) return RecordType::none;
+    if (b[4] < uint8_t(TileKind::encoded) || b[4] > uint8_t(TileKind::deep_directory)) return RecordType::none;
     tile->kind = TileKind(b[4]);
     tile->id = load_le<uint64_t>(b, 8);
     tile->stored_size = load_le<uint32_t>(b, 16);
     tile->raw_size = load_le<uint32_t>(b, 20);
     tile->crc = load_le<uint32_t>(b, 24);
-    if (!is_valid_tile_id(tile->id) || tile->raw_size == 0 || tile->raw_size > kMaxTileBytes ||
+    if (!id_fits_kind(tile->id, tile->kind) || tile->raw_size == 0 || tile->raw_size > kMaxTileBytes ||
         tile->stored_size == 0 || tile->stored_size > max_stored_size(tile->raw_size))
       return RecordType::none;
     return RecordType::tile;
@@ -193,6 +190,22 @@ RecordType parse_record(std::span<const uint8_t, kRecordBytes> b, TileRecord* ti
     return RecordType::cell;
   }
   return RecordType::none;
+}
+
+// ---- deep ids --------------------------------------------------------------------------
+
+bool is_valid_deep_id(uint64_t id) {
+  return id == kDeepDirectoryId || (is_deep_id(id) && is_valid_tile_id(id & ~kDeepTileIdBit));
+}
+
+bool id_fits_kind(uint64_t id, TileKind kind) {
+  switch (kind) {
+    case TileKind::encoded:
+    case TileKind::index: return is_valid_tile_id(id);
+    case TileKind::deep: return id != kDeepDirectoryId && is_valid_deep_id(id);
+    case TileKind::deep_directory: return id == kDeepDirectoryId;
+  }
+  return false;
 }
 
 // ---- tile index -----------------------------------------------------------------------
@@ -231,10 +244,11 @@ std::vector<TileIndexEntry> parse_index(std::span<const uint8_t> bytes, uint64_t
     e.raw_size = load_le<uint32_t>(bytes, o + 20);
     e.crc = load_le<uint32_t>(bytes, o + 24);
     uint8_t kind = bytes[o + 28];
-    if (!is_valid_tile_id(e.id)) fail(0, "invalid " + describe_tile(e.id));
+    if (!is_valid_tile_id(e.id) && !is_valid_deep_id(e.id)) fail(0, "invalid " + describe_tile(e.id));
     if (i > 0 && e.id <= out[i - 1].id) fail(0, "ids not strictly increasing");
-    if (kind != uint8_t(TileKind::encoded) && kind != uint8_t(TileKind::index)) fail(28, "bad tile kind");
+    if (kind < uint8_t(TileKind::encoded) || kind > uint8_t(TileKind::deep_directory)) fail(28, "bad tile kind");
     e.kind = TileKind(kind);
+    if (!id_fits_kind(e.id, e.kind)) fail(28, "tile kind " + std::to_string(kind) + " does not fit " + describe_tile(e.id));
     if (bytes[o + 29] || load_le<uint16_t>(bytes, o + 30)) fail(29, "nonzero padding");
     if (e.raw_size == 0 || e.raw_size > tile_bytes || e.stored_size == 0 || e.stored_size > max_stored_size(e.raw_size))
       fail(16, describe_tile(e.id) + ": bad sizes (raw " + std::to_string(e.raw_size) + ", stored " +

@@ -51,7 +51,10 @@ enum PackFeature : uint32_t {
   kFeatureExitDepths = 1u << 0,  // intervals traced exit depths (closed geometry); else hi = lo
   kFeatureHasTiles = 1u << 1,    // at least one tile (else the skip grid answers everything)
   kFeatureIndexTiles = 1u << 2,  // some subtree was cut deeper into index tiles
-  kFeatureDeepShadow = 1u << 3,  // reserved: deep-shadow data (not produced yet)
+  // Deep shadow tiles (tiles/core/DEEP.md) for the partial occluders: a deep directory
+  // and deep tiles in the tile index (kinds 3 and 4, ids with kDeepTileIdBit). Set by
+  // the writer iff it appended them.
+  kFeatureDeepShadow = 1u << 3,
   // Static-geometry intervals (voxel paper §6.1): an open first hit's interval reaches to
   // just below the next surface along the texel ray. Lossless only for receivers that lie
   // on a surface (tiles/PACK.md); lookups are unchanged.
@@ -88,7 +91,24 @@ struct PackHeader {
   uint64_t file_size() const { return index_offset + tile_count * kIndexEntryBytes; }
 };
 
-enum class TileKind : uint8_t { encoded = 1, index = 2 };  // == EntryKind::tile / ::index
+// encoded / index == EntryKind::tile / ::index. deep: a deep tile (DEEP.md) of the deep
+// map; deep_directory: the deep map's directory (deep_pack.hpp). The skip grid never
+// names the deep kinds: their ids carry kDeepTileIdBit (PACK.md "Deep tiles").
+enum class TileKind : uint8_t { encoded = 1, index = 2, deep = 3, deep_directory = 4 };
+
+// Deep ids: bit 63 set, then the same level (bits 62..58) and morton code as a tile id
+// (tile_cut_grid.hpp) of the deep tile's root node in the deep map's own level
+// hierarchy. No opaque id has bit 63 (levels <= 20). The directory has the one id whose
+// level field is 31, which no tile has.
+inline constexpr uint64_t kDeepTileIdBit = uint64_t(1) << 63;
+inline constexpr uint64_t kDeepDirectoryId = kDeepTileIdBit | (uint64_t(31) << 58);
+inline bool is_deep_id(uint64_t id) { return (id & kDeepTileIdBit) != 0; }
+// True for a valid deep tile id (kind deep) or the directory id.
+bool is_valid_deep_id(uint64_t id);
+// Whether a tile record or index entry may pair this id with this kind: encoded and index
+// with valid opaque ids, deep with valid deep tile ids, deep_directory with
+// kDeepDirectoryId alone.
+bool id_fits_kind(uint64_t id, TileKind kind);
 
 // Tile record header in the journal (offset: size): 0:4 magic "TREC"  4:1 kind  5:3 zero
 // 8:8 id  16:4 stored_size  20:4 raw_size  24:4 payload_crc  28:4 header_crc (of 0..27).

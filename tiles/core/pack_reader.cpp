@@ -168,6 +168,7 @@ void PackReader::load() {
                        header_.tile_bytes, name_);
   if (stack_) return check_stack_index();
 
+  load_deep();
   bool any_index = std::any_of(index_.begin(), index_.end(), [](auto& e) { return e.kind == TileKind::index; });
   if (any_index != bool(header_.flags & kFeatureIndexTiles))
     throw FormatError(where(20) + ": index_tiles flag disagrees with the tile index");
@@ -182,6 +183,29 @@ void PackReader::load() {
         throw FormatError(name_ + ": skip grid entry (" + std::to_string(cx) + ", " + std::to_string(cy) + ") names " +
                           describe_tile(id) + ", which the tile index lacks or holds with another kind");
     }
+}
+
+void PackReader::load_deep() {
+  // Deep ids sort after every opaque id (bit 63): the deep part is the index's tail.
+  const auto first_deep = std::find_if(index_.begin(), index_.end(), [](auto& e) { return is_deep_id(e.id); });
+  const bool flag = header_.flags & kFeatureDeepShadow;
+  if (!flag) {
+    if (first_deep != index_.end())
+      throw FormatError(name_ + ": " + describe_tile(first_deep->id) + " in a pack without the deep_shadow feature");
+    return;
+  }
+  if (index_.empty() || index_.back().id != kDeepDirectoryId)
+    throw FormatError(where(20) + ": feature deep_shadow, but the tile index has no deep directory");
+  deep_ = DeepDirectory::parse(read_raw(kDeepDirectoryId), name_ + ": " + describe_tile(kDeepDirectoryId));
+  const uint64_t tiles = uint64_t(index_.end() - first_deep) - 1;
+  if (tiles != deep_->tile_count())
+    throw FormatError(name_ + ": the deep directory lists " + std::to_string(deep_->tile_count()) +
+                      " deep tiles, the tile index holds " + std::to_string(tiles));
+  for (auto it = first_deep; it + 1 != index_.end(); ++it) {
+    const TileAddress a = tile_address(it->id & ~kDeepTileIdBit);
+    if (a.level != deep_->tiles_per_side_bits() || !deep_->has(a.x, a.y))
+      throw FormatError(name_ + ": " + describe_tile(it->id) + " is not in the deep directory");
+  }
 }
 
 std::optional<TileIndexEntry> PackReader::find(uint64_t id) const {
@@ -324,9 +348,20 @@ void PackReader::verify(const TileOpener& open_tile) const {
     if (ev->finest_level() != map_level - level) throw FormatError(what + ": wrong finest level");
     return true;
   });
-  if (reached != index_.size())
-    throw FormatError(name_ + ": " + std::to_string(index_.size() - reached) + " tiles the page table never reaches");
-  // 4. The map preview holds exactly what the tiles answer at its levels (rebuilt from
+  const size_t opaque = size_t(std::count_if(index_.begin(), index_.end(), [](auto& e) { return !is_deep_id(e.id); }));
+  if (reached != opaque)
+    throw FormatError(name_ + ": " + std::to_string(opaque - reached) + " tiles the page table never reaches");
+  // 4. Deep tiles (load_deep matched them to the directory): each opens, of its side.
+  for (const TileIndexEntry& e : index_) {
+    if (e.kind != TileKind::deep) continue;
+    const std::string what = name_ + ": " + describe_tile(e.id) + " at byte " + std::to_string(e.offset);
+    const std::vector<uint8_t> raw = read_raw(e.id);
+    const DeepTileView v = DeepTileView::open(raw, what);
+    if (v.side_bits() != deep_->side_bits)
+      throw FormatError(what + ": side 2^" + std::to_string(v.side_bits()) + ", the directory says 2^" +
+                        std::to_string(deep_->side_bits));
+  }
+  // 5. The map preview holds exactly what the tiles answer at its levels (rebuilt from
   // them with the same levels and compared byte for byte).
   if (!open_tile || preview_->levels() == 0) return;
   std::map<uint64_t, std::pair<std::vector<uint8_t>, std::unique_ptr<Evaluator>>> opened;
@@ -414,7 +449,7 @@ std::string PackReader::summary() const {
                                                     {kFeatureStack, "stack"}};
   for (auto [bit, n] : names)
     if (header_.flags & bit) features += std::string(features.empty() ? "" : ",") + n;
-  char buf[160];
+  char buf[320];
   std::string out = name_ + "\n";
   std::snprintf(buf, sizeof buf, "  version %u, encoding %s, light %s, map level %u (%llu texels a side), skip level %u\n",
                 kPackVersion, to_string(header_.encoding).c_str(), header_.light_kind == LightKind::sun ? "sun" : "spot",
@@ -434,6 +469,20 @@ std::string PackReader::summary() const {
     std::snprintf(buf, sizeof buf, "  map preview: %u levels below K, %zu cells, %zu values, %llu bytes (in the grid)\n",
                   preview_->levels(), preview_->cells(), preview_->stored_values(),
                   (unsigned long long)preview_->serialized_size());
+    out += buf;
+  }
+  if (deep_) {
+    uint64_t draw = 0, dstored = 0;
+    for (const TileIndexEntry& e : index_)
+      if (is_deep_id(e.id)) draw += e.raw_size, dstored += e.stored_size;
+    std::snprintf(buf, sizeof buf,
+                  "  deep map: level %u (%llu texels a side), tiles of %u texels a side, %llu of %llu stored, "
+                  "epsilon %g, %u^2 samples a texel; %llu raw bytes, %llu stored (directory included)\n",
+                  deep_->level, (unsigned long long)(uint64_t(1) << deep_->level), 1u << deep_->side_bits,
+                  (unsigned long long)deep_->tile_count(),
+                  (unsigned long long)(uint64_t(deep_->tiles_per_side()) * deep_->tiles_per_side()),
+                  double(deep_->epsilon), deep_->samples_per_side, (unsigned long long)draw,
+                  (unsigned long long)dstored);
     out += buf;
   }
   for (auto& [k, v] : params_) out += "  " + printable_text(k) + " = " + printable_text(v) + "\n";

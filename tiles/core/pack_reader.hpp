@@ -17,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "tiles/core/deep_pack.hpp"
 #include "tiles/core/evaluator.hpp"
 #include "tiles/core/pack_format.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
@@ -55,6 +56,9 @@ class PackReader {
   std::span<const uint8_t> grid_bytes() const { return grid_bytes_; }
 
   const std::vector<TileIndexEntry>& tiles() const { return index_; }
+  // The deep directory (deep_pack.hpp) of a pack with the deep_shadow feature, checked
+  // against the index at open (its deep tiles are exactly the bitmap's); else null.
+  const DeepDirectory* deep_directory() const { return deep_ ? &*deep_ : nullptr; }
   std::optional<TileIndexEntry> find(uint64_t id) const;
   // The tile's stored (zlib) bytes, CRC checked; throws st::FormatError if the id is
   // unknown or the bytes are corrupt.
@@ -70,7 +74,8 @@ class PackReader {
   // Checks the whole file: every journal record, every tile's CRC, size and zlib stream,
   // every index tile, that the page table reaches every tile exactly once, that every
   // cell record agrees with the skip grid and, with `open_tile`, that every encoded tile
-  // opens (the encoding validates its whole buffer) with the right finest level.
+  // opens (the encoding validates its whole buffer) with the right finest level; every
+  // deep tile opens (DeepTileView validates it) with the directory's side.
   using TileOpener = std::function<std::unique_ptr<Evaluator>(std::span<const uint8_t>)>;
   void verify(const TileOpener& open_tile = {}) const;
   // Throws st::FormatError unless every skip-grid value (coarse and entry) lies in the
@@ -88,6 +93,7 @@ class PackReader {
   struct Source;
   PackReader(std::unique_ptr<Source> src, std::string name);
   void load();
+  void load_deep();  // the deep directory against the index (deep_shadow feature)
   void read_at(uint64_t offset, std::span<uint8_t> out) const;
   // CRC-32 of [offset, offset + size), read kChunkBytes at a time.
   uint32_t crc32_of_range(uint64_t offset, uint64_t size) const;
@@ -110,6 +116,7 @@ class PackReader {
   std::shared_ptr<const MapPreview> preview_;
   std::unique_ptr<StackGrid> stack_;
   std::vector<TileIndexEntry> index_;
+  std::optional<DeepDirectory> deep_;
 };
 
 }  // namespace st

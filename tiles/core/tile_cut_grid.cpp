@@ -104,7 +104,16 @@ TileAddress tile_address(uint64_t id) {
 
 std::string describe_tile(uint64_t id) {
   char buf[96];
-  if (!is_valid_tile_id(id)) {
+  // Deep ids (pack_format.hpp, kDeepTileIdBit): bit 63 over an opaque-style id, or the
+  // deep directory (level field 31).
+  const uint64_t deep_bit = uint64_t(1) << 63;
+  if ((id & deep_bit) && (id >> kTileIdLevelShift) == 63 && (id << 6) == 0) {
+    std::snprintf(buf, sizeof buf, "deep directory 0x%016llx", (unsigned long long)id);
+  } else if ((id & deep_bit) && is_valid_tile_id(id & ~deep_bit)) {
+    TileAddress a = tile_address(id & ~deep_bit);
+    std::snprintf(buf, sizeof buf, "deep tile 0x%016llx (level %u, x %u, y %u)", (unsigned long long)id, a.level,
+                  a.x, a.y);
+  } else if (!is_valid_tile_id(id)) {
     std::snprintf(buf, sizeof buf, "tile 0x%016llx (invalid id)", (unsigned long long)id);
   } else {
     TileAddress a = tile_address(id);

@@ -178,6 +178,12 @@ struct WorldPoint {
   double x = 0, y = 0, z = 0;
 };
 
+// Per-channel transmittance (1: nothing partial between the light and the point).
+struct Transmittance {
+  float r = 1, g = 1, b = 1;
+  bool operator==(const Transmittance&) const = default;
+};
+
 class RemoteMap;
 struct MapAccess;
 
@@ -210,6 +216,22 @@ class Map {
   void visibility(std::span<const WorldPoint> points, std::span<float> out, uint32_t pcf_radius = 0) const noexcept;
   void visibility_filtered(std::span<const WorldPoint> points, std::span<const float> footprints,
                            std::span<float> out, uint32_t pcf_radius = 0) const noexcept;
+
+  // Partial occluders (semi-transparent surfaces, alpha-tested cards, volumes), held in the
+  // pack's deep shadow map (Lokovic and Veach 2000) next to the opaque map: the light
+  // reaching a point is visibility(...) times transmittance(...), per channel.
+  // has_deep(): the map has a deep part (else transmittance is always 1). A point no deep
+  // tile covers answers 1; so does a point whose deep tile is not resident yet (its fetch
+  // is queued, at miss_priority; the partial shadow appears once it arrives). The
+  // filtered form averages over a footprint `footprint` world units wide with the deep
+  // tile's mip levels (DSM 2000 §3.4, §5.3). Never blocks; never throws.
+  bool has_deep() const noexcept;
+  Transmittance transmittance(const WorldPoint& world) const noexcept;
+  Transmittance transmittance_filtered(const WorldPoint& world, float footprint) const noexcept;
+  // True once the deep directory arrived and every deep tile under the light-space
+  // rectangle [u0, u1) x [v0, v1) (map units, 0..1: the light's image plane) is resident
+  // (tests, prefetch loops); queues the missing ones. False for a map without a deep part.
+  bool deep_resident(double u0, double v0, double u1, double v1) const noexcept;
 
   // Queues the fetch of every tile under texels [x0, x0+w) x [y0, y0+h) of `level`
   // (clamped to the map), walking index tiles as they arrive. Larger priority = sooner.

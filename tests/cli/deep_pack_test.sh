@@ -1,0 +1,27 @@
+#!/usr/bin/env bash
+# Packs with a deep part (tiles/PACK.md "Deep tiles"): a scene with partial occluders
+# builds its opaque map and its deep tiles into one pack (feature deep_shadow), which
+# inspect shows and verify checks (structure, the opaque map re-traced against the
+# opaque casters, deep texels sampled afresh); a resumed build gives the same pack; a
+# sharded build of such a scene is refused; a scene without partial occluders gets no
+# deep part.
+# Usage: deep_pack_test.sh PATH/TO/shadowtile WORKDIR
+set -uo pipefail
+st="$1"
+work="$2/deep_pack_test"
+rm -rf "$work" && mkdir -p "$work" && cd "$work"
+source "$(dirname "${BASH_SOURCE[0]}")/check.sh"
+hair="procedural:hairball,count=16,segments=24,transmit=0.5"
+args=(build "$hair" --light sun:azimuth=40,elevation=60 --resolution 128 --encoding mh
+      --deep-level 6 --deep-tile 8 --deep-samples 2)
+check build-hair 0 "deep: 64\^2 texels" -- "$st" "${args[@]}" --tile-bytes 16384 -o hair.pack
+check inspect-deep 0 "deep +64\^2 \(level 6\), [1-9][0-9]* of 64 tiles of 8\^2" -- "$st" inspect hair.pack
+check inspect-json 0 "\"deep\"" -- "$st" inspect hair.pack --json
+check verify-deep 0 "deep map: 256 texels sampled afresh" -- "$st" verify hair.pack "$hair" --samples 2000
+check shard-refused 1 "partial occluders" -- "$st" "${args[@]}" --tile-bytes 16384 --shard 0/2 -o part.pack
+check tiny-tiles 1 "over 256 bytes" -- "$st" "${args[@]}" --tile-bytes 256 -o tiny.pack
+check build-boxes 0 "" -- "$st" build procedural:boxes --light sun:azimuth=40,elevation=60 --resolution 128 -q -o boxes.pack
+check inspect-boxes 0 "" -- "$st" inspect boxes.pack
+if "$st" inspect boxes.pack | grep -q "deep "; then echo "FAIL a scene without partial occluders has a deep part"; fail=1
+else echo "ok   no deep part without partial occluders"; fi
+exit $fail
