@@ -180,6 +180,9 @@ void run(const BuildArgs& a) {
   std::printf("  bounds by %s (%s)\n", r.builder.c_str(),
               r.builder == "raster" ? "light-space rasterizer of the canonical coverage"
                                     : "Embree tracer; the rasterizer handles sun lights with the default intervals");
+  if (r.texels_in_regions)
+    std::printf("  regions: %.4g texels proven by their corners (no per-texel work), %.4g traced (%.3f%% of the map)\n",
+                double(r.texels_in_regions), double(r.texels_traced), 100.0 * double(r.texels_traced) / (res * res));
   std::printf("  thread-seconds: trace %.1f, hierarchy %.1f, cut+encode %.1f, compress+write %.1f\n",
               r.trace_seconds, r.hierarchy_seconds, r.cut_encode_seconds, r.write_seconds);
   if (!a.report.empty()) {
@@ -243,7 +246,9 @@ void setup(CLI::App& app) {
   app.add_option("--raster-skip", a->skip,
                  "Rasterizer tiles covered by one closed object's entry and exit: exact (their intervals "
                  "from the two planes, the same bits as off), narrow (one sub-interval per tile: lossless, "
-                 "recorded as intervals_narrowed=yes) or off (every texel through the coverage tests)")
+                 "recorded as intervals_narrowed=yes), regions (narrow, and whole quadtree regions of a cell "
+                 "proven by their corners become one node: work follows the edges between surfaces, not "
+                 "the texel count; for the largest maps) or off (every texel through the coverage tests)")
       ->capture_default_str();
   app.add_option("--deep-level", a->deep_level,
                  "Scenes with partial occluders: the deep map is 2^N texels a side (default min(L, 9))");

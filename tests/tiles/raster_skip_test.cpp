@@ -2,11 +2,14 @@
 // scenes (city, sphere, hairball), open soups, terrain and under a grazing sun, the exact
 // skip gives the same bits as the full coverage path on every texel; the narrow skip gives
 // sub-intervals of the true ones; and a pack built with narrowed intervals records it and
-// keeps the lossless invariant against the true intervals on every texel.
+// keeps the lossless invariant against the true intervals on every texel. Whole regions
+// (RasterSkip::regions): an interval a region's corners prove lies inside every texel's
+// true interval, and a pack built top-down over such regions is lossless on every texel.
 #include <gtest/gtest.h>
 
 #include <cstring>
 #include <filesystem>
+#include <optional>
 
 #include "interval_fields.hpp"
 #include "tests/tiles/hazard_scenes.hpp"
@@ -95,6 +98,74 @@ TEST(RasterSkip, NarrowedPackIsLosslessAgainstTheTrueIntervals) {
         << c.scene.name << " " << c.sun;
     fs::remove(path);
   }
+}
+
+
+// Every aligned square of every size (down to 4 texels) whose corners prove an interval:
+// it lies inside the true interval of every texel of the square.
+TEST(RasterSkip, ProvenRegionsLieInsideEveryTexelsInterval) {
+  const uint32_t L = fields::small_test_scale() ? 7 : 8, side = 1u << L;
+  uint64_t proven_closed = 0, proven_lit = 0;
+  for (const SkipCase& c : cases()) {
+    const LightSpace light = LightSpace::fit(LightSpec::parse(c.sun), c.scene.bounds());
+    const RasterBounds off(c.scene, light, RasterSkip::off), regions(c.scene, light, RasterSkip::regions);
+    const IntervalTile truth = off.trace(TraceRegion{L, 0, 0, side, side});
+    for (uint32_t s = side; s >= 4; s /= 2)
+      for (uint32_t y0 = 0; y0 < side; y0 += s)
+        for (uint32_t x0 = 0; x0 < side; x0 += s) {
+          const std::optional<Interval> iv = regions.region_interval(L, x0, y0, s);
+          if (!iv) continue;
+          (iv->lo == kLitDepth && iv->hi == kLitDepth ? proven_lit : proven_closed) += uint64_t(s) * s;
+          for (uint32_t y = y0; y < y0 + s; ++y)
+            for (uint32_t x = x0; x < x0 + s; ++x) {
+              const Interval t = truth.at(x, y);
+              ASSERT_TRUE(t.lo <= iv->lo && iv->lo <= iv->hi && iv->hi <= t.hi)
+                  << c.scene.name << " " << c.sun << " region " << x0 << "," << y0 << " side " << s << " texel "
+                  << x << "," << y << ": proven [" << iv->lo << ", " << iv->hi << "] true [" << t.lo << ", " << t.hi
+                  << "]";
+            }
+        }
+  }
+  EXPECT_GT(proven_closed, 0u) << "no closed region was ever proven";
+  EXPECT_GT(proven_lit, 0u) << "no empty region was ever proven";
+  EXPECT_THROW(RasterBounds(cases()[0].scene,
+                            LightSpace::fit(LightSpec::parse(cases()[0].sun), cases()[0].scene.bounds()))
+                   .region_interval(4, 8, 0, 16),
+               Error);
+}
+
+// A pack built top-down over proven regions (cells of 128^2 texels: regions split from
+// 128 down to 64 before tracing) is lossless on every texel and records narrowed intervals.
+TEST(RasterSkip, RegionsPackIsLosslessOnEveryTexel) {
+  namespace fs = std::filesystem;
+  const uint32_t L = fields::small_test_scale() ? 8 : 9;
+  fs::create_directories(SHADOWTILE_TEST_TMP);
+  int k = 0;
+  uint64_t in_regions = 0;
+  for (const SkipCase& c : cases()) {
+    const LightSpace light = LightSpace::fit(LightSpec::parse(c.sun), c.scene.bounds());
+    MapBuildOptions o;
+    o.map_level = L;
+    o.skip_level = L - 7;
+    o.encoding = k % 2 ? Encoding::mh : Encoding::dagmh;
+    o.builder = BoundsBuilder::raster;
+    o.raster_skip = RasterSkip::regions;
+    const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/raster_regions_" + std::to_string(k++) + ".pack";
+    const MapBuildReport rep = build_map(c.scene, light, o, path);
+    in_regions += rep.texels_in_regions;
+    EXPECT_EQ(rep.texels_in_regions + rep.texels_traced, uint64_t(1) << (2 * L)) << c.scene.name;
+    const IntervalTile truth =
+        RasterBounds(c.scene, light, RasterSkip::off).trace(TraceRegion{L, 0, 0, 1u << L, 1u << L});
+    std::shared_ptr<const PackReader> reader = PackReader::open(path);
+    bool recorded = false;
+    for (const auto& [key, v] : reader->params()) recorded |= key == "intervals_narrowed" && v == "yes";
+    EXPECT_TRUE(recorded) << c.scene.name;
+    PackEvaluator eval(reader);
+    EXPECT_EQ(fields::first_violation(truth, [&](uint32_t i, uint32_t j) { return eval.depth(L, i, j); }), "")
+        << c.scene.name << " " << c.sun;
+    fs::remove(path);
+  }
+  EXPECT_GT(in_regions, 0u) << "no region was ever proven during a build";
 }
 
 }  // namespace

@@ -77,6 +77,10 @@ class CellBounds {
   IntervalTile trace(const TraceRegion& r, std::atomic<uint64_t>* progress) const {
     return raster_ ? raster_->trace(r, nullptr, progress) : tracer_->trace(r, mode_, nullptr, progress);
   }
+  // The rasterizer when it skips whole regions (RasterSkip::regions), else nullptr.
+  const RasterBounds* regions() const {
+    return raster_ && raster_->skip() == RasterSkip::regions ? raster_.get() : nullptr;
+  }
 
  private:
   BoundsBuilder builder_;
@@ -102,7 +106,7 @@ PackParams pack_params(const Scene& scene, const LightSpace& light, const MapBui
   if (o.intervals == IntervalRule::static_geometry) pp.build_params.push_back({"intervals", "static"});
   // Stored values lie in sub-intervals of the definition's (RasterSkip::narrow): still
   // lossless against the true intervals, but not bit-identical to a build without it.
-  if (builder == BoundsBuilder::raster && o.raster_skip == RasterSkip::narrow)
+  if (builder == BoundsBuilder::raster && (o.raster_skip == RasterSkip::narrow || o.raster_skip == RasterSkip::regions))
     pp.build_params.push_back({"intervals_narrowed", "yes"});
   if (o.shard) pp.build_params.push_back({kShardParam, o.shard->to_string()});
   // The depth resolution of vsdag tiles: what `verify` checks their contract against.
@@ -143,12 +147,65 @@ std::vector<CellXY> plan_cells(PackWriter& writer, const MapBuildOptions& o, uin
   return todo;
 }
 
+// The hierarchy of a square of 2^depth texels a side that all admit `iv`: one valued
+// leaf root, its value chosen as the construction chooses it for a texel of that interval.
+Hierarchy uniform_hierarchy(const Interval& iv, uint32_t depth, MhConstruction method) {
+  IntervalTile one;
+  one.width = one.height = 1;
+  one.data = {iv};
+  Hierarchy h = build_hierarchy(one, method);
+  h.depth = depth;
+  h.levels.resize(size_t(depth) + 1);
+  return h;
+}
+
+// Top-down over square regions (RasterSkip::regions): a region whose corners prove one
+// interval for all its texels (RasterBounds::region_interval) is one leaf; any other
+// splits in four down to kRegionLeafSide, whose texels are rasterized; the four
+// children's hierarchies are stitched (MH §3.1 "Tiled construction": each child's root
+// interval is the intersection of, or a window inside, its texels' intervals). Work
+// grows with the regions the proof fails on, along edges between surfaces.
+Hierarchy region_hierarchy(const RasterBounds& raster, const CellBounds& bounds, uint32_t level, uint64_t x0,
+                           uint64_t y0, uint64_t side, MhConstruction method, std::atomic<uint64_t>& texels,
+                           std::atomic<uint64_t>& skipped, std::atomic<uint64_t>& trace_ns,
+                           std::atomic<uint64_t>& build_ns) {
+  auto t = Clock::now();
+  const std::optional<Interval> iv = raster.region_interval(level, x0, y0, side);
+  add_seconds(trace_ns, since(t));
+  if (iv) {
+    skipped.fetch_add(side * side, std::memory_order_relaxed);
+    return uniform_hierarchy(*iv, log2_exact(side), method);
+  }
+  if (side <= kRegionLeafSide) {
+    t = Clock::now();
+    IntervalTile tile = bounds.trace({level, x0, y0, uint32_t(side), uint32_t(side)}, &texels);
+    add_seconds(trace_ns, since(t));
+    t = Clock::now();
+    Hierarchy h = build_hierarchy(tile, method);
+    add_seconds(build_ns, since(t));
+    return h;
+  }
+  const uint64_t half = side / 2;
+  std::vector<Hierarchy> parts;
+  parts.reserve(4);
+  for (uint64_t j = 0; j < 2; ++j)
+    for (uint64_t i = 0; i < 2; ++i)
+      parts.push_back(region_hierarchy(raster, bounds, level, x0 + i * half, y0 + j * half, half, method, texels,
+                                       skipped, trace_ns, build_ns));
+  t = Clock::now();
+  Hierarchy h = stitch_tiles(std::move(parts), 1, method);
+  add_seconds(build_ns, since(t));
+  return h;
+}
+
 // Traces one level-K cell and builds its hierarchy; cells wider than kMaxTraceSide are
 // traced in sub-tiles whose hierarchies are stitched (MH §3.1 "Tiled construction").
 Hierarchy cell_hierarchy(const CellBounds& bounds, uint32_t level, uint64_t x0,
                          uint64_t y0, uint64_t side, MhConstruction method,
-                         std::atomic<uint64_t>& texels, std::atomic<uint64_t>& trace_ns,
-                         std::atomic<uint64_t>& build_ns) {
+                         std::atomic<uint64_t>& texels, std::atomic<uint64_t>& skipped,
+                         std::atomic<uint64_t>& trace_ns, std::atomic<uint64_t>& build_ns) {
+  if (const RasterBounds* raster = bounds.regions())
+    return region_hierarchy(*raster, bounds, level, x0, y0, side, method, texels, skipped, trace_ns, build_ns);
   auto trace_and_build = [&](uint64_t x, uint64_t y, uint64_t s) {
     auto t = Clock::now();
     IntervalTile tile = bounds.trace({level, x, y, uint32_t(s), uint32_t(s)}, &texels);
@@ -192,12 +249,13 @@ class CellWorkers {
 
   // Progress so far (another thread may poll them while run() is under way).
   uint64_t appended() const { return appended_.load(); }
-  uint64_t texels() const { return texels_.load(); }
+  uint64_t texels() const { return texels_.load() + skipped_.load(); }
 
   // Cells built, texels traced and the thread-seconds of each stage.
   void report(MapBuildReport& rep) const {
     rep.cells_built = appended_.load();
     rep.texels_traced = texels_.load();
+    rep.texels_in_regions = skipped_.load();
     rep.trace_seconds = seconds_of(trace_ns_);
     rep.hierarchy_seconds = seconds_of(build_ns_);
     rep.cut_encode_seconds = seconds_of(cut_ns_);
@@ -251,7 +309,7 @@ class CellWorkers {
     const CutParams& cut = cutter_.params();
     const uint64_t cell_side = uint64_t(1) << (cut.map_level - cut.skip_level);
     Hierarchy h = cell_hierarchy(bounds_, cut.map_level, cx * cell_side, cy * cell_side,
-                                 cell_side, o_.construction, texels_, trace_ns_,
+                                 cell_side, o_.construction, texels_, skipped_, trace_ns_,
                                  build_ns_);
     auto t = Clock::now();
     CutCell cell = cutter_.cut_cell(cx, cy, std::move(h));
@@ -271,7 +329,7 @@ class CellWorkers {
   PackWriter& writer_;
   const MapBuildOptions& o_;
   const std::vector<CellXY>& todo_;
-  std::atomic<uint64_t> next_{0}, appended_{0}, texels_{0};
+  std::atomic<uint64_t> next_{0}, appended_{0}, texels_{0}, skipped_{0};
   std::atomic<uint64_t> trace_ns_{0}, build_ns_{0}, cut_ns_{0}, write_ns_{0};
   std::atomic<bool> stop_{false};
   std::mutex failure_mu_;
@@ -444,7 +502,7 @@ struct CellBuilder::Impl {
   CellBounds bounds;
   TileCutter cutter;
   PackParams params;
-  mutable std::atomic<uint64_t> texels{0}, trace_ns{0}, build_ns{0};
+  mutable std::atomic<uint64_t> texels{0}, skipped{0}, trace_ns{0}, build_ns{0};
 };
 
 CellBuilder::CellBuilder(const Scene& scene, const LightSpace& light, const MapBuildOptions& options)
@@ -458,7 +516,7 @@ std::vector<uint8_t> CellBuilder::build(uint32_t cx, uint32_t cy) const {
     throw Error("build: cell (" + std::to_string(cx) + ", " + std::to_string(cy) + ") outside the skip grid");
   const uint64_t side = uint64_t(1) << (m.cut.map_level - m.cut.skip_level);
   Hierarchy h = cell_hierarchy(m.bounds, m.cut.map_level, cx * side, cy * side, side, m.options.construction,
-                               m.texels, m.trace_ns, m.build_ns);
+                               m.texels, m.skipped, m.trace_ns, m.build_ns);
   return encode_cell_bytes(m.cutter.cut_cell(cx, cy, std::move(h)), m.params);
 }
 
@@ -474,6 +532,7 @@ std::string MapBuildReport::to_json() const {
   j["cells"] = {{"total", cells_total}, {"built", cells_built}, {"resumed", cells_resumed},
                 {"outside_region", cells_outside_region}};
   j["texels_traced"] = texels_traced;
+  j["texels_in_regions"] = texels_in_regions;
   j["exit_depths"] = exit_depths;
   j["wall_seconds"] = wall_seconds;
   j["stage_thread_seconds"] = {{"bvh", bvh_seconds},           {"trace", trace_seconds},

@@ -30,6 +30,9 @@
 namespace st {
 
 inline constexpr uint32_t kMaxTraceSide = 4096;  // largest square traced in one call
+// RasterSkip::regions: regions not proven by their corners split down to this side, then
+// are rasterized texel by texel.
+inline constexpr uint64_t kRegionLeafSide = 64;
 
 struct TexelRegion {
   uint64_t x = 0, y = 0, w = 0, h = 0;  // texels of the finest level
@@ -119,6 +122,7 @@ struct MapBuildReport {
   std::string builder;  // "raster" or "embree"
   uint64_t cells_total = 0, cells_built = 0, cells_resumed = 0, cells_outside_region = 0;
   uint64_t texels_traced = 0;
+  uint64_t texels_in_regions = 0;  // RasterSkip::regions: texels answered by proven regions, not traced
   bool exit_depths = false;
   double wall_seconds = 0;
   // Thread-seconds per stage (summed over workers).

@@ -5,6 +5,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <optional>
 #include <array>
 #include <chrono>
 #include <cmath>
@@ -140,8 +141,14 @@ bool after(const SkipInfo& a, const SkipInfo& b, double gap) {
   return true;
 }
 
+// The origins of the four corner texels of a tile or region, (x0, y0), (x1, y0), (x0, y1), (x1, y1).
+struct Corners {
+  double ox[4], oy[4], oz[4];
+};
+
 struct Scratch {
   std::vector<SkipInfo> others, fronts, backs;  // skip_tile()
+  std::vector<uint32_t> setup_ids;              // classify()'s candidates
   std::vector<uint32_t> cover;  // skip_tile(): the setups covering every texel centre of the tile
   bool known = false;           // skip_tile(): every candidate covers the whole tile or misses it
   double ox[kTileTexels], oy[kTileTexels], oz[kTileTexels];
@@ -183,6 +190,11 @@ struct RasterBounds::Impl {
             uint32_t bi, uint32_t bj, IntervalTile& out, DepthBoundsStats& st) const;
   bool skip_tile(const Candidate* cand, const uint32_t* ids, size_t n, uint32_t bi, uint32_t bj,
                  uint32_t tw, uint32_t th, Scratch& s, IntervalTile& out, DepthBoundsStats& st) const;
+  // The skip test on the four corner texels' origins of a tile or region, over the setups
+  // `ids` (every triangle that may cover one of its texel centres): sets s.known and
+  // s.cover; with `narrow`, true and `iv` when the narrow test proves one interval.
+  bool classify(const Corners& c, const std::vector<uint32_t>& ids, bool narrow, Scratch& s, Interval& iv) const;
+  std::optional<Interval> region_interval(uint32_t level, uint64_t x0, uint64_t y0, uint64_t side) const;
   Interval texel_reference(uint32_t level, uint64_t x, uint64_t y) const;
 };
 
@@ -527,6 +539,22 @@ bool RasterBounds::Impl::skip_tile(const Candidate* cand, const uint32_t* ids, s
                                    uint32_t bj, uint32_t tw, uint32_t th, Scratch& s, IntervalTile& out,
                                    DepthBoundsStats& st) const {
   const uint32_t corner[4] = {0, tw - 1, (th - 1) * kTile, (th - 1) * kTile + tw - 1};
+  Corners c;
+  for (int q = 0; q < 4; ++q) c.ox[q] = s.ox[corner[q]], c.oy[q] = s.oy[corner[q]], c.oz[q] = s.oz[corner[q]];
+  s.setup_ids.clear();
+  for (size_t k = 0; k < n; ++k) s.setup_ids.push_back(cand[ids[k]].setup);
+  Interval iv;
+  if (!classify(c, s.setup_ids, skip == RasterSkip::narrow || skip == RasterSkip::regions, s, iv)) return false;
+  for (uint32_t j = 0; j < th; ++j)
+    for (uint32_t i = 0; i < tw; ++i) out.at(bi + i, bj + j) = iv;
+  const uint64_t texels = uint64_t(tw) * th;
+  st.hits += texels;
+  st.closed += iv.lo < iv.hi ? texels : 0;
+  return true;
+}
+
+bool RasterBounds::Impl::classify(const Corners& c, const std::vector<uint32_t>& ids, bool narrow, Scratch& s,
+                                  Interval& iv) const {
   constexpr uint32_t kNone = UINT32_MAX;
   SkipInfo F{kNone, 0, 0, {}, 0}, B{kNone, 0, 0, {}, 0};
   s.others.clear();
@@ -534,8 +562,7 @@ bool RasterBounds::Impl::skip_tile(const Candidate* cand, const uint32_t* ids, s
   auto& backs = s.backs;
   fronts.clear(), backs.clear(), s.cover.clear();
   bool partial = false;
-  for (size_t c = 0; c < n; ++c) {
-    const uint32_t si = cand[ids[c]].setup;
+  for (const uint32_t si : ids) {
     const TriSetup& T = setups[si];
     bool covers = T.sigma != 0, misses = false;
     for (int k = 0; k < 3; ++k) {
@@ -543,8 +570,8 @@ bool RasterBounds::Impl::skip_tile(const Candidate* cand, const uint32_t* ids, s
       const Vec3d an{std::fabs(E.nx), std::fabs(E.ny), std::fabs(E.nz)};
       const double m0 = 2 * E.bound + 64 * dot(o_round, an);
       bool all_in = true, all_out = T.sigma != 0;
-      for (uint32_t q : corner) {
-        const double val = T.sigma * (E.c + (s.ox[q] * E.nx + s.oy[q] * E.ny + s.oz[q] * E.nz));
+      for (int q = 0; q < 4; ++q) {
+        const double val = T.sigma * (E.c + (c.ox[q] * E.nx + c.oy[q] * E.ny + c.oz[q] * E.nz));
         const double m = m0 + 0x1p-40 * std::fabs(val);
         all_in &= val > m;
         all_out &= val < -m;
@@ -560,12 +587,11 @@ bool RasterBounds::Impl::skip_tile(const Candidate* cand, const uint32_t* ids, s
     const Vec3d an{std::fabs(T.nx), std::fabs(T.ny), std::fabs(T.nz)};
     double extra = 0;
     SkipInfo info{si, 0, 0, {}, 0};
-    for (int ci = 0; ci < 4; ++ci) {
-      const uint32_t q = corner[ci];
-      const double t = (T.pd - (T.nx * s.ox[q] + T.ny * s.oy[q] + T.nz * s.oz[q])) / T.den;
-      info.t[ci] = t;
+    for (int q = 0; q < 4; ++q) {
+      const double t = (T.pd - (T.nx * c.ox[q] + T.ny * c.oy[q] + T.nz * c.oz[q])) / T.den;
+      info.t[q] = t;
       tmin = std::min(tmin, t), tmax = std::max(tmax, t);
-      extra = std::max(extra, an.x * std::fabs(s.ox[q]) + an.y * std::fabs(s.oy[q]) + an.z * std::fabs(s.oz[q]));
+      extra = std::max(extra, an.x * std::fabs(c.ox[q]) + an.y * std::fabs(c.oy[q]) + an.z * std::fabs(c.oz[q]));
     }
     const double pad = ((mag + extra) * 0x1p-44 + 64 * dot(an, o_round)) / std::fabs(T.den) +
                        0x1p-44 * std::max(std::fabs(tmin), std::fabs(tmax)) + 0x1p-1000;
@@ -578,7 +604,7 @@ bool RasterBounds::Impl::skip_tile(const Candidate* cand, const uint32_t* ids, s
     else s.others.push_back(info);
   }
   s.known = !partial;
-  if (skip != RasterSkip::narrow || !any_closed) return false;
+  if (!narrow || !any_closed) return false;
   // F: the nearest covering front face; B: the nearest covering back face of its mesh after it.
   for (const SkipInfo& f : fronts)
     if (F.setup == kNone || f.tmin < F.tmin) F = f;
@@ -597,12 +623,33 @@ bool RasterBounds::Impl::skip_tile(const Candidate* cand, const uint32_t* ids, s
   }
   const float a = canonical_depth(light, F.tmax), b = canonical_depth(light, B.tmin);
   if (!(a <= b)) return false;
-  for (uint32_t j = 0; j < th; ++j)
-    for (uint32_t i = 0; i < tw; ++i) out.at(bi + i, bj + j) = Interval{a, b};
-  const uint64_t texels = uint64_t(tw) * th;
-  st.hits += texels;
-  st.closed += a < b ? texels : 0;
+  iv = Interval{a, b};
   return true;
+}
+
+std::optional<Interval> RasterBounds::Impl::region_interval(uint32_t level, uint64_t x0, uint64_t y0,
+                                                            uint64_t side) const {
+  const std::vector<Candidate> cand = candidates({level, x0, y0, uint32_t(side), uint32_t(side)});
+  Scratch& s = scratch.local();
+  s.setup_ids.clear();
+  for (const Candidate& cd : cand) s.setup_ids.push_back(cd.setup);
+  // The corner texels' origins, operation for operation as tile() computes them.
+  Corners c;
+  {
+    const double inv = std::ldexp(1.0, -int(level)), E = light.extent_uv();
+    const Vec3d org = light.origin(), au = light.axis_u(), av = light.axis_v();
+    const Vec3d fn = light.forward() * light.near_plane();
+    const uint64_t xs[4] = {x0, x0 + side - 1, x0, x0 + side - 1}, ys[4] = {y0, y0, y0 + side - 1, y0 + side - 1};
+    for (int q = 0; q < 4; ++q) {
+      const Vec3d o = org + au * ((double(xs[q]) + 0.5) * inv * E) + av * ((double(ys[q]) + 0.5) * inv * E) + fn - centre;
+      c.ox[q] = o.x, c.oy[q] = o.y, c.oz[q] = o.z;
+    }
+  }
+  Interval iv;
+  if (classify(c, s.setup_ids, true, s, iv)) return iv;
+  // Every candidate misses every texel centre: nothing is hit, every texel is lit.
+  if (s.known && s.cover.empty()) return Interval{kLitDepth, kLitDepth};
+  return std::nullopt;
 }
 
 Interval RasterBounds::Impl::texel_reference(uint32_t level, uint64_t x, uint64_t y) const {
@@ -629,6 +676,7 @@ const char* to_string(RasterSkip s) {
     case RasterSkip::off: return "off";
     case RasterSkip::exact: return "exact";
     case RasterSkip::narrow: return "narrow";
+    case RasterSkip::regions: return "regions";
   }
   return "?";
 }
@@ -637,7 +685,8 @@ RasterSkip parse_raster_skip(const std::string& text) {
   if (text == "off") return RasterSkip::off;
   if (text == "exact") return RasterSkip::exact;
   if (text == "narrow") return RasterSkip::narrow;
-  throw Error("--raster-skip: expected off, exact or narrow, got '" + text + "'");
+  if (text == "regions") return RasterSkip::regions;
+  throw Error("--raster-skip: expected off, exact, narrow or regions, got '" + text + "'");
 }
 
 RasterBounds::RasterBounds(const Scene& scene, const LightSpace& light, RasterSkip skip)
@@ -651,6 +700,15 @@ RasterBounds::~RasterBounds() = default;
 bool RasterBounds::traces_exit_depths() const { return impl_->any_closed; }
 double RasterBounds::setup_seconds() const { return impl_->setup_s; }
 uint64_t RasterBounds::triangle_count() const { return impl_->tri.size(); }
+
+std::optional<Interval> RasterBounds::region_interval(uint32_t level, uint64_t x0, uint64_t y0,
+                                                      uint64_t side) const {
+  if (level > kMaxLevel || side == 0 || x0 >= (uint64_t(1) << level) || y0 >= (uint64_t(1) << level) ||
+      side > (uint64_t(1) << level) - std::max(x0, y0))
+    throw Error("raster builder: region " + std::to_string(x0) + "," + std::to_string(y0) + " of side " +
+                std::to_string(side) + " leaves the level-" + std::to_string(level) + " map");
+  return impl_->region_interval(level, x0, y0, side);
+}
 
 Interval RasterBounds::brute_force_texel(uint32_t level, uint64_t x, uint64_t y) const {
   return impl_->texel_reference(level, x, y);

@@ -34,6 +34,7 @@
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "tiles/bake/depth_bounds.hpp"
@@ -59,9 +60,15 @@ namespace st {
 //           a hierarchy built from it keeps the lossless invariant against the true
 //           intervals, but stored intervals may differ from an unnarrowed build's (the pack
 //           records intervals_narrowed=yes). Open geometry is never narrowed.
+//   regions: narrow, and a build (map_build.hpp) builds each cell's hierarchy top-down
+//           over square regions: a region that region_interval() proves (all lit, or
+//           one closed mesh's F and B) becomes one node without per-texel work, any other
+//           splits in four down to kRegionLeafSide, rasterized as under narrow. Work then
+//           grows with the length of the edges between surfaces in light space, not the
+//           texel count; intervals are narrowed as under narrow.
 //   off:    every tile through the full coverage path.
-enum class RasterSkip { off, exact, narrow };
-const char* to_string(RasterSkip s);                  // "off", "exact", "narrow"
+enum class RasterSkip { off, exact, narrow, regions };
+const char* to_string(RasterSkip s);                  // "off", "exact", "narrow", "regions"
 RasterSkip parse_raster_skip(const std::string& text);  // st::Error naming the text
 
 class RasterBounds {
@@ -86,6 +93,16 @@ class RasterBounds {
   // call's figures (rays = texels; traversals counts triangle-texel tests).
   IntervalTile trace(const TraceRegion& region, DepthBoundsStats* stats = nullptr,
                      std::atomic<uint64_t>* progress = nullptr) const;
+  // One interval inside every texel's true (lo, hi) over the square region of `side`
+  // texels at (x0, y0) of `level`, when the region's four corner texels prove it (the
+  // narrow test above, on the region instead of a binning tile; the coverage and depth
+  // arguments hold on any square of texel centres): [1, 1] where every triangle misses
+  // every texel centre (all lit: exactly the definition's interval), else the narrow
+  // [a, b] of one closed mesh's entry F and exit B. std::nullopt when neither is proven.
+  // Costs one candidate gathering and a corner test per candidate, no per-texel work:
+  // what lets a build skip whole regions (MapBuildOptions::raster_skip == regions).
+  std::optional<Interval> region_interval(uint32_t level, uint64_t x0, uint64_t y0, uint64_t side) const;
+
   // Reference: the same definition on one texel with every triangle as a candidate,
   // straight from canonical_coverage.hpp (no setup, no bounds, no binning).
   Interval brute_force_texel(uint32_t level, uint64_t x, uint64_t y) const;
