@@ -146,8 +146,30 @@ struct Corners {
   double ox[4], oy[4], oz[4];
 };
 
+// A candidate that does not miss the whole tile or region (classify()).
+struct Live {
+  SkipInfo info;
+  int8_t sigma;
+  bool closed;
+  uint32_t mesh;
+};
+// The non-missing candidates of one closed mesh facing one way, as one surface (classify()):
+// per corner the smallest and largest of their planes' t, and the largest pad.
+struct Patch {
+  double lo[4], hi[4], pad = 0, tmin = 0, tmax = 0;
+};
+// Directed edge by its endpoints' positions (make_patch()).
+struct DirEdge {
+  Vec3d a, b;
+  uint32_t member;
+  int k;
+};
+
 struct Scratch {
   std::vector<SkipInfo> others, fronts, backs;  // skip_tile()
+  std::vector<Live> live;                       // classify()
+  std::vector<uint32_t> members;                // make_patch()
+  std::vector<DirEdge> edges;                   // make_patch()
   std::vector<uint32_t> setup_ids;              // classify()'s candidates
   std::vector<uint32_t> cover;  // skip_tile(): the setups covering every texel centre of the tile
   bool known = false;           // skip_tile(): every candidate covers the whole tile or misses it
@@ -195,6 +217,8 @@ struct RasterBounds::Impl {
   // s.cover; with `narrow`, true and `iv` when the narrow test proves one interval.
   bool classify(const Corners& c, const std::vector<uint32_t>& ids, bool narrow, Scratch& s, Interval& iv) const;
   std::optional<Interval> region_interval(uint32_t level, uint64_t x0, uint64_t y0, uint64_t side) const;
+  bool make_patch(const Corners& c, Scratch& s, uint32_t mesh, int8_t sigma, Patch& p) const;
+  bool classify_patches(const Corners& c, Scratch& s, Interval& iv) const;
   Interval texel_reference(uint32_t level, uint64_t x, uint64_t y) const;
 };
 
@@ -533,7 +557,9 @@ void RasterBounds::Impl::tile(const TraceRegion& r, const Candidate* cand, const
 //  - narrow: the list is F (entering, t in [0, 1]), B (leaving, same closed mesh, t after
 //    F's at every texel), open hits after F (ignored while inside, or after the exit),
 //    closed hits beyond B by more than the touching window (the run ends before them):
-//    canonical_interval() gives lo_t = t_F, hi_t = t_B, and [a, b] lies inside.
+//    canonical_interval() gives lo_t = t_F, hi_t = t_B, and [a, b] lies inside; or with
+//    one touching mesh (G entering after F, its B2 leaving after G), hi_t = t_B or t_B2,
+//    both >= t_B (see classify()).
 // Returns true when it filled the tile (narrow); else sets s.known and s.cover.
 bool RasterBounds::Impl::skip_tile(const Candidate* cand, const uint32_t* ids, size_t n, uint32_t bi,
                                    uint32_t bj, uint32_t tw, uint32_t th, Scratch& s, IntervalTile& out,
@@ -560,8 +586,8 @@ bool RasterBounds::Impl::classify(const Corners& c, const std::vector<uint32_t>&
   s.others.clear();
   auto& fronts = s.fronts;  // covering front / back faces of closed meshes
   auto& backs = s.backs;
-  fronts.clear(), backs.clear(), s.cover.clear();
-  bool partial = false;
+  fronts.clear(), backs.clear(), s.cover.clear(), s.live.clear();
+  bool partial = false, unbounded = false;
   for (const uint32_t si : ids) {
     const TriSetup& T = setups[si];
     bool covers = T.sigma != 0, misses = false;
@@ -596,15 +622,17 @@ bool RasterBounds::Impl::classify(const Corners& c, const std::vector<uint32_t>&
     const double pad = ((mag + extra) * 0x1p-44 + 64 * dot(an, o_round)) / std::fabs(T.den) +
                        0x1p-44 * std::max(std::fabs(tmin), std::fabs(tmax)) + 0x1p-1000;
     if (!std::isfinite(tmin) || !std::isfinite(tmax) || !std::isfinite(pad)) {
-      partial = true;
+      partial = true, unbounded = true;
       break;
     }
     info.tmin = tmin - pad, info.tmax = tmax + pad, info.pad = pad;
+    s.live.push_back(Live{info, int8_t(T.sigma), T.closed, T.mesh});
     if (covers && T.closed) (T.sigma < 0 ? fronts : backs).push_back(info);
     else s.others.push_back(info);
   }
   s.known = !partial;
-  if (!narrow || !any_closed) return false;
+  if (!narrow || !any_closed || unbounded) return false;
+  if (classify_patches(c, s, iv)) return true;
   // F: the nearest covering front face; B: the nearest covering back face of its mesh after it.
   for (const SkipInfo& f : fronts)
     if (F.setup == kNone || f.tmin < F.tmin) F = f;
@@ -613,13 +641,177 @@ bool RasterBounds::Impl::classify(const Corners& c, const std::vector<uint32_t>&
   for (const SkipInfo& b : backs)
     if (setups[b.setup].mesh == mesh_f && after(F, b, 0) && (B.setup == kNone || b.tmin < B.tmin)) B = b;
   if (B.setup == kNone || !(B.tmax <= 1)) return false;
-  for (const SkipInfo& f : fronts)
-    if (f.setup != F.setup) s.others.push_back(f);
-  for (const SkipInfo& b : backs)
-    if (b.setup != B.setup) s.others.push_back(b);
   const double touch = ExitDepthRay::kTouchDouble * 1.0;  // canonical_interval(..., 1.0)
+  const double gap = touch * (1 + 0x1p-40);
+  // A second closed mesh whose covering front face G is not provably beyond B's touching
+  // window (a building standing on the ground slab: its floor and the slab's top
+  // coincide): allowed when G lies after F and its own covering back face B2 after G
+  // (nearest such). Whatever the order of B and G at a texel (B first, G first, or one
+  // group of equal t), the counters never go negative and reach 0 at B or at B2, so hi is
+  // t_B or t_B2 > t_B: b below still bounds it. Everything else closed must then lie
+  // beyond both exits' touching windows.
+  SkipInfo G{kNone, 0, 0, {}, 0}, B2{kNone, 0, 0, {}, 0};
+  for (const SkipInfo& f : fronts)
+    if (f.setup != F.setup && setups[f.setup].mesh != mesh_f && !after(B, f, gap) && after(F, f, 0) &&
+        (G.setup == kNone || f.tmin < G.tmin))
+      G = f;
+  if (G.setup != kNone) {
+    const uint32_t mesh_g = setups[G.setup].mesh;
+    for (const SkipInfo& b : backs)
+      if (setups[b.setup].mesh == mesh_g && after(G, b, 0) && (B2.setup == kNone || b.tmin < B2.tmin)) B2 = b;
+    if (B2.setup == kNone || !(B2.tmax <= 1)) return false;
+  }
+  for (const SkipInfo& f : fronts)
+    if (f.setup != F.setup && f.setup != G.setup) s.others.push_back(f);
+  for (const SkipInfo& b : backs)
+    if (b.setup != B.setup && b.setup != B2.setup) s.others.push_back(b);
   for (const SkipInfo& o : s.others) {
-    if (setups[o.setup].closed ? !after(B, o, touch * (1 + 0x1p-40)) : !after(F, o, 0)) return false;
+    if (setups[o.setup].closed ? !after(B, o, gap) || (B2.setup != kNone && !after(B2, o, gap)) : !after(F, o, 0))
+      return false;
+  }
+  const float a = canonical_depth(light, F.tmax), b = canonical_depth(light, B.tmin);
+  if (!(a <= b)) return false;
+  iv = Interval{a, b};
+  return true;
+}
+
+// Whether b's t exceeds a's by more than `gap` at every texel: a's largest and b's smallest
+// plane values are convex and concave in the texel, so their difference is smallest at a
+// corner (the pads bound each plane's rounding).
+bool after(const Patch& a, const Patch& b, double gap) {
+  for (int q = 0; q < 4; ++q) {
+    const double d = b.lo[q] - a.hi[q];
+    if (!(d - (a.pad + b.pad) - 0x1p-44 * (std::fabs(b.lo[q]) + std::fabs(a.hi[q])) > gap)) return false;
+  }
+  return true;
+}
+Patch patch_of(const SkipInfo& i) {
+  Patch p;
+  for (int q = 0; q < 4; ++q) p.lo[q] = p.hi[q] = i.t[q];
+  p.pad = i.pad, p.tmin = i.tmin, p.tmax = i.tmax;
+  return p;
+}
+
+// The live candidates of closed mesh `mesh` facing `sigma` as one surface: true when every
+// texel centre of the tile or region is covered by exactly one of them. Proof: (1) every
+// directed edge of a member is unique and either meets its reverse in exactly one other
+// member (an interior edge: one member on each side) or has the whole region strictly on
+// one side of its line (corner values beyond the bounds), so no boundary of the members'
+// union crosses the region and the number of members covering a point is the same all
+// over it (the members all face one way); (2) at some corner that number is decided and
+// is 1. Points on interior edges and vertices are covered once by the definition's
+// tie-breaking (canonical_coverage.hpp: watertight, never twice).
+bool RasterBounds::Impl::make_patch(const Corners& c, Scratch& s, uint32_t mesh, int8_t sigma, Patch& p) const {
+  s.members.clear();
+  for (uint32_t i = 0; i < s.live.size(); ++i) {
+    const Live& l = s.live[i];
+    if (!l.closed || l.mesh != mesh) continue;
+    if (l.sigma == 0) return false;  // an edge-on member of the mesh: neither side
+    if (l.sigma == sigma) s.members.push_back(i);
+  }
+  if (s.members.empty()) return false;
+  s.edges.clear();
+  for (uint32_t m : s.members) {
+    const auto& tv = tri[setups[s.live[m].info.setup].tri];
+    for (int k = 0; k < 3; ++k) s.edges.push_back(DirEdge{v[tv[k]], v[tv[(k + 1) % 3]], m, k});
+  }
+  auto less = [](const Vec3d& a, const Vec3d& b) {
+    if (a.x != b.x) return a.x < b.x;
+    if (a.y != b.y) return a.y < b.y;
+    return a.z < b.z;
+  };
+  auto edge_less = [&](const DirEdge& e, const DirEdge& f) {
+    if (less(e.a, f.a)) return true;
+    if (less(f.a, e.a)) return false;
+    return less(e.b, f.b);
+  };
+  std::sort(s.edges.begin(), s.edges.end(), edge_less);
+  auto same = [](const Vec3d& a, const Vec3d& b) { return a.x == b.x && a.y == b.y && a.z == b.z; };
+  for (size_t i = 0; i < s.edges.size(); ++i) {
+    const DirEdge& e = s.edges[i];
+    if (i + 1 < s.edges.size() && same(s.edges[i + 1].a, e.a) && same(s.edges[i + 1].b, e.b)) return false;
+    if (i > 0 && same(s.edges[i - 1].a, e.a) && same(s.edges[i - 1].b, e.b)) return false;
+    const DirEdge rev{e.b, e.a, 0, 0};
+    auto it = std::lower_bound(s.edges.begin(), s.edges.end(), rev, edge_less);
+    if (it != s.edges.end() && same(it->a, e.b) && same(it->b, e.a)) continue;  // interior (unique: above)
+    // A boundary edge: the region strictly on one side of its line.
+    const EdgeSetup& E = setups[s.live[e.member].info.setup].e[e.k];
+    const Vec3d an{std::fabs(E.nx), std::fabs(E.ny), std::fabs(E.nz)};
+    const double m0 = 2 * E.bound + 64 * dot(o_round, an);
+    bool pos = true, neg = true;
+    for (int q = 0; q < 4; ++q) {
+      const double val = E.c + (c.ox[q] * E.nx + c.oy[q] * E.ny + c.oz[q] * E.nz);
+      const double m = m0 + 0x1p-40 * std::fabs(val);
+      pos &= val > m;
+      neg &= val < -m;
+    }
+    if (!pos && !neg) return false;
+  }
+  bool once = false;
+  for (int q = 0; q < 4 && !once; ++q) {
+    int count = 0;
+    bool unsure = false;
+    for (uint32_t mi : s.members) {
+      const TriSetup& T = setups[s.live[mi].info.setup];
+      int in = 0;
+      bool out = false;
+      for (int k = 0; k < 3; ++k) {
+        const EdgeSetup& E = T.e[k];
+        const Vec3d an{std::fabs(E.nx), std::fabs(E.ny), std::fabs(E.nz)};
+        const double val = sigma * (E.c + (c.ox[q] * E.nx + c.oy[q] * E.ny + c.oz[q] * E.nz));
+        const double m = 2 * E.bound + 64 * dot(o_round, an) + 0x1p-40 * std::fabs(val);
+        if (val < -m) out = true;
+        else if (val > m) ++in;
+      }
+      if (out) continue;
+      if (in == 3) ++count;
+      else unsure = true;
+    }
+    once = !unsure && count == 1;
+  }
+  if (!once) return false;
+  for (int q = 0; q < 4; ++q) p.lo[q] = INFINITY, p.hi[q] = -INFINITY;
+  p.pad = 0, p.tmin = INFINITY, p.tmax = -INFINITY;
+  for (uint32_t mi : s.members) {
+    const SkipInfo& i = s.live[mi].info;
+    for (int q = 0; q < 4; ++q) p.lo[q] = std::min(p.lo[q], i.t[q]), p.hi[q] = std::max(p.hi[q], i.t[q]);
+    p.pad = std::max(p.pad, i.pad), p.tmin = std::min(p.tmin, i.tmin), p.tmax = std::max(p.tmax, i.tmax);
+  }
+  return true;
+}
+
+// The narrow test over surfaces (patches) instead of single triangles: one closed mesh's
+// front patch F and back patch B, each covering every texel centre exactly once, with F
+// before B everywhere; optionally a second closed mesh touching B (G, B2 as in classify());
+// every other live candidate beyond: closed ones beyond the exits' touching windows, open
+// ones after F. Each texel's hit list then holds one F, one B (and one G, one B2) in the
+// orders classify() reasons about, so [largest F t, smallest B t] lies inside its interval.
+bool RasterBounds::Impl::classify_patches(const Corners& c, Scratch& s, Interval& iv) const {
+  constexpr uint32_t kNone = UINT32_MAX;
+  uint32_t mesh_f = kNone;
+  double first = INFINITY;
+  for (const Live& l : s.live)
+    if (l.closed && l.sigma < 0 && l.info.tmin < first) first = l.info.tmin, mesh_f = l.mesh;
+  if (mesh_f == kNone) return false;
+  Patch F, B;
+  if (!make_patch(c, s, mesh_f, -1, F) || !make_patch(c, s, mesh_f, +1, B)) return false;
+  if (!(F.tmin >= 0) || !(B.tmax <= 1) || !after(F, B, 0)) return false;
+  const double gap = ExitDepthRay::kTouchDouble * 1.0 * (1 + 0x1p-40);  // canonical_interval(..., 1.0)
+  uint32_t mesh_g = kNone;
+  for (const Live& l : s.live) {
+    if (!l.closed || l.mesh == mesh_f || l.sigma >= 0 || after(B, patch_of(l.info), gap)) continue;
+    if (mesh_g != kNone && mesh_g != l.mesh) return false;
+    mesh_g = l.mesh;
+  }
+  Patch G, B2;
+  if (mesh_g != kNone) {
+    if (!make_patch(c, s, mesh_g, -1, G) || !make_patch(c, s, mesh_g, +1, B2)) return false;
+    if (!after(F, G, 0) || !after(G, B2, 0) || !(B2.tmax <= 1)) return false;
+  }
+  for (const Live& l : s.live) {
+    if (l.closed && (l.mesh == mesh_f || l.mesh == mesh_g)) continue;
+    const Patch o = patch_of(l.info);
+    if (l.closed ? !after(B, o, gap) || (mesh_g != kNone && !after(B2, o, gap)) : !after(F, o, 0)) return false;
   }
   const float a = canonical_depth(light, F.tmax), b = canonical_depth(light, B.tmin);
   if (!(a <= b)) return false;
