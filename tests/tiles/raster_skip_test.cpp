@@ -24,6 +24,38 @@ bool same_bits(const Interval& a, const Interval& b) {
   return std::memcmp(&a.lo, &b.lo, sizeof(float)) == 0 && std::memcmp(&a.hi, &b.hi, sizeof(float)) == 0;
 }
 
+// Closed boxes with every face split into n x n quads (so that surfaces are many
+// triangles): a ground slab, a slab floating above it (an overhang: the ground shows
+// beside and under it), a tower standing on the ground (its floor touches the slab's top),
+// and two boxes intersecting each other. Coordinates are multiples of 1/8, so shared
+// corners and edges have exactly equal positions.
+Scene closed_stack() {
+  test::HazardBuilder b("closed_stack");
+  auto box = [&](const std::string& name, Vec3d lo, Vec3d hi, int n) {
+    b.mesh(name, true);
+    const Vec3d d = hi - lo;
+    const Vec3d X{d.x, 0, 0}, Y{0, d.y, 0}, Z{0, 0, d.z};
+    // (origin, U, V) with U x V outwards.
+    const Vec3d faces[6][3] = {{lo, Z, Y},
+                               {{hi.x, lo.y, lo.z}, Y, Z},
+                               {lo, X, Z},
+                               {{lo.x, hi.y, lo.z}, Z, X},
+                               {lo, Y, X},
+                               {{lo.x, lo.y, hi.z}, X, Y}};
+    for (const auto& f : faces) {
+      auto at = [&](int i, int j) { return f[0] + f[1] * (double(i) / n) + f[2] * (double(j) / n); };
+      for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) b.quad(at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
+    }
+  };
+  box("ground", {0, -0.5, 0}, {8, 0, 8}, 4);
+  box("floating", {2, 2, 2}, {5, 2.5, 5}, 4);
+  box("tower", {5.5, 0, 5.5}, {7, 3, 7}, 2);
+  box("cross_a", {0.5, 0, 5}, {2.5, 1, 6.5}, 2);
+  box("cross_b", {2, 0, 5.5}, {3, 1.5, 7}, 2);
+  return b.take();
+}
+
 struct SkipCase {
   Scene scene;
   const char* sun;
@@ -36,7 +68,10 @@ std::vector<SkipCase> cases() {
           {make_procedural("procedural:cube"), "sun:azimuth=200,elevation=89.99"},  // narrowed
           {make_procedural("procedural:hairball,count=8,segments=12"), "sun:azimuth=30,elevation=50"},
           {test::rotated_terrain(), "sun:azimuth=120,elevation=20"},
-          {test::all_open(test::hazard_town()), "sun:azimuth=30,elevation=50"}};
+          {test::all_open(test::hazard_town()), "sun:azimuth=30,elevation=50"},
+          {closed_stack(), "sun:azimuth=150,elevation=35"},
+          {closed_stack(), "sun:azimuth=20,elevation=70"},
+          {closed_stack(), "sun:azimuth=250,elevation=8"}};
 }
 
 TEST(RasterSkip, ExactEqualsTheFullPathAndNarrowLiesInside) {
