@@ -40,6 +40,8 @@ struct VerifyArgs {
   uint32_t show = 10;
   bool all = false;
   uint64_t max_mismatches = 10;
+  uint64_t cells = 0;          // --all --cells N: N random aligned squares instead of the whole region
+  uint32_t cell_side = 256;
 };
 
 // What a stored value must satisfy against the re-traced interval: the lossless
@@ -80,9 +82,10 @@ Contract contract_of(const PackReader& reader) {
 // mismatches found; `checked` receives the texels checked.
 using TraceFn = std::function<IntervalTile(const TraceRegion&)>;
 
+// `progress` counts from `done_before` towards `grand_total` (several regions share one bar).
 uint64_t verify_every_texel(const VerifyArgs& a, const TraceFn& trace,
                             const Contract& contract, const PackEvaluator& eval, uint32_t L, const Rect& region,
-                            uint64_t& checked) {
+                            uint64_t& checked, Progress& progress, uint64_t done_before, uint64_t grand_total) {
   constexpr uint64_t kChunk = 1024;
   const uint64_t total = region.w * region.h;
   const unsigned threads = std::max(1u, std::thread::hardware_concurrency());
@@ -90,7 +93,6 @@ uint64_t verify_every_texel(const VerifyArgs& a, const TraceFn& trace,
   std::mutex print;
   std::string read_error;
   checked = 0;
-  Progress progress("verify", "texels");
   for (uint64_t cy = region.y; cy < region.y + region.h && bad < a.max_mismatches; cy += kChunk)
     for (uint64_t cx = region.x; cx < region.x + region.w && bad < a.max_mismatches; cx += kChunk) {
       const uint32_t w = uint32_t(std::min(kChunk, region.x + region.w - cx));
@@ -125,9 +127,9 @@ uint64_t verify_every_texel(const VerifyArgs& a, const TraceFn& trace,
       check_rows(0);
       for (auto& th : pool) th.join();
       checked += uint64_t(w) * h;
-      progress.update(checked, total, checked);
+      progress.update(done_before + checked, grand_total, done_before + checked);
     }
-  progress.finish();
+  (void)total;
   if (!read_error.empty()) {
     std::printf("verify: FAILED reading %s\n", read_error.c_str());
     exit_with(kExitMismatch);
@@ -248,9 +250,40 @@ void run(const VerifyArgs& a) {
                   "only where both are lossless\n");
   if (contract.vsdag_z_bits) std::printf("verify: checking %s\n", contract.name().c_str());
 
+  if (a.all && a.cells) {
+    // Every texel of `cells` random squares of cell_side^2, aligned to their side, inside
+    // the built region (seeded: --seed).
+    const uint64_t s = a.cell_side;
+    if (s == 0 || (s & (s - 1)) || s > region.w || s > region.h)
+      throw Error("verify: --cell-side " + std::to_string(s) + " must be a power of two no larger than the built region (" +
+                  std::to_string(region.w) + " x " + std::to_string(region.h) + ")");
+    const uint64_t nx = region.w / s, ny = region.h / s;
+    uint64_t rng = a.seed, checked = 0, bad = 0;
+    Progress progress("verify", "texels");
+    for (uint64_t c = 0; c < a.cells && bad < a.max_mismatches; ++c) {
+      const Rect sq{region.x + (splitmix64(rng) % nx) * s, region.y + (splitmix64(rng) % ny) * s, s, s};
+      uint64_t n = 0;
+      bad += verify_every_texel(a, trace, contract, eval, L, sq, n, progress, checked, a.cells * s * s);
+      checked += n;
+    }
+    progress.finish();
+    if (bad) {
+      std::printf("verify %s: FAILED: %llu texels break %s (stopped after %llu texels of %llu squares of %llu^2)\n",
+                  a.pack.c_str(), (unsigned long long)bad, contract.name().c_str(), (unsigned long long)checked,
+                  (unsigned long long)a.cells, (unsigned long long)s);
+      exit_with(kExitMismatch);
+    }
+    std::printf("verify %s: OK: every texel of %llu random %llu^2 squares (%llu texels) re-traced, every one %s\n",
+                a.pack.c_str(), (unsigned long long)a.cells, (unsigned long long)s, (unsigned long long)checked,
+                contract.within().c_str());
+    return;
+  }
   if (a.all) {
     uint64_t checked = 0;
-    const uint64_t bad = verify_every_texel(a, trace, contract, eval, L, region, checked);
+    Progress progress("verify", "texels");
+    const uint64_t bad =
+        verify_every_texel(a, trace, contract, eval, L, region, checked, progress, 0, region.w * region.h);
+    progress.finish();
     if (bad) {
       std::printf("verify %s: FAILED: %llu texels break %s (stopped after %llu of "
                   "%llu texels; --max-mismatches %llu)\n",
@@ -308,7 +341,8 @@ void setup(CLI::App& app) {
   auto a = std::make_shared<VerifyArgs>();
   app.footer("Exit code 3 when a checksum, a tile or a texel fails.\nExample:\n"
              "  shadowtile verify city.pack procedural:city --samples 1000000\n"
-             "  shadowtile verify city.pack procedural:city --all");
+             "  shadowtile verify city.pack procedural:city --all\n"
+             "  shadowtile verify city.pack procedural:city --all --cells 2000 --cell-side 256");
   app.add_option("pack", a->pack, "Pack file")->required();
   app.add_option("scene", a->scene, "The scene the pack was built from")->required();
   app.add_option("--samples", a->samples, "Random texels to re-trace")->capture_default_str();
@@ -322,6 +356,11 @@ void setup(CLI::App& app) {
                  "With --all: stop after this many mismatches")
       ->capture_default_str()
       ->check(CLI::Range(uint64_t(1), uint64_t(1) << 40));
+  app.add_option("--cells", a->cells,
+                 "With --all: re-trace every texel of this many random aligned squares of the built region "
+                 "(--cell-side) instead of all of it (maps too large to re-trace whole)");
+  app.add_option("--cell-side", a->cell_side, "With --cells: the squares' side in texels, a power of two")
+      ->capture_default_str();
   app.add_option("--up", a->up, "Up axis of the scene file: y or z")->capture_default_str();
   app.callback([a]() { run(*a); });
 }
