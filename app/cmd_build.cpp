@@ -22,6 +22,9 @@
 namespace st::cli {
 namespace {
 
+// --raster-skip auto picks regions from this map level (131072^2) up.
+constexpr uint32_t kAutoRegionsLevel = 17;
+
 std::atomic<bool> g_cancel{false};
 extern "C" void on_sigint(int) { g_cancel = true; }
 
@@ -35,7 +38,7 @@ TexelRegion parse_region(const std::string& text) {
 struct BuildArgs {
   std::string scene, light, resolution = "4096", encoding = "dagmh", out, report, region,
                      construction = "bottom-up", up = "y", intervals = "default", shard,
-              builder = "auto", skip = "exact";
+              builder = "auto", skip = "auto";
   std::optional<uint32_t> skip_level;
   uint32_t tile_bytes = 64 * 1024, depth_bits = 16;
   int compression = 6;
@@ -92,7 +95,10 @@ void run(const BuildArgs& a) {
   else if (a.intervals != "default")
     throw Error("--intervals: expected default or static, got '" + a.intervals + "'");
   o.builder = parse_bounds_builder(a.builder);
-  o.raster_skip = parse_raster_skip(a.skip);
+  // auto: whole proven regions (regions) from 128K^2 up, where tracing every texel takes
+  // hours; below, the exact per-tile skip (the definition's bits on every texel).
+  o.raster_skip = a.skip == "auto" ? (o.map_level >= kAutoRegionsLevel ? RasterSkip::regions : RasterSkip::exact)
+                                   : parse_raster_skip(a.skip);
   if (!a.shard.empty()) o.shard = BuildShard::parse(a.shard);
   if (a.mpi && o.shard) throw Error("--mpi and --shard: choose one (a shard is one process's slice)");
 #ifdef SHADOWTILE_HAVE_MPI
@@ -178,7 +184,9 @@ void run(const BuildArgs& a) {
               r.grid_entries ? 100.0 * double(r.constant_entries) / double(r.grid_entries) : 0.0,
               r.exit_depths ? "yes" : "no (no closed mesh)", double(r.peak_rss_bytes) / (1 << 20));
   std::printf("  bounds by %s (%s)\n", r.builder.c_str(),
-              r.builder == "raster" ? "light-space rasterizer of the canonical coverage"
+              r.builder == "raster" ? ("light-space rasterizer of the canonical coverage, skip " +
+                                       std::string(to_string(o.raster_skip)))
+                                          .c_str()
                                     : "Embree tracer; the rasterizer handles sun lights with the default intervals");
   if (r.texels_in_regions)
     std::printf("  regions: %.4g texels proven by their corners (no per-texel work), %.4g traced (%.3f%% of the map)\n",
@@ -248,7 +256,8 @@ void setup(CLI::App& app) {
                  "from the two planes, the same bits as off), narrow (one sub-interval per tile: lossless, "
                  "recorded as intervals_narrowed=yes), regions (narrow, and whole quadtree regions of a cell "
                  "proven by their corners become one node: work follows the edges between surfaces, not "
-                 "the texel count; for the largest maps) or off (every texel through the coverage tests)")
+                 "the texel count; for the largest maps), off (every texel through the coverage tests) or auto "
+                 "(regions from 128K^2 up, else exact)")
       ->capture_default_str();
   app.add_option("--deep-level", a->deep_level,
                  "Scenes with partial occluders: the deep map is 2^N texels a side (default min(L, 9))");
