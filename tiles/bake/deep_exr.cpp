@@ -11,6 +11,7 @@
 #include <ImfIntAttribute.h>
 #include <ImfPartType.h>
 #include <ImfStringAttribute.h>
+#include <ImfTestFile.h>
 
 #include <algorithm>
 #include <bit>
@@ -145,6 +146,10 @@ void write_deep_exr(const std::string& path, const DeepRegion& region, const Dee
 DeepRegion read_deep_exr(const std::string& path, DeepExrInfo* info, uint64_t max_texels) {
   auto fail = [&](const std::string& why) -> void { throw FormatError(path + ": " + why); };
   DeepRegion out;
+  bool tiled = false, is_deep = false, multi = false;
+  if (Imf::isOpenExrFile(path.c_str(), tiled, is_deep, multi) && (!is_deep || tiled))
+    fail(std::string("a ") + (is_deep ? "deep tiled" : "flat (not deep)") +
+         " OpenEXR image; a deep shadow map is read from a deep scanline EXR (as `shadowtile export --deep` writes)");
   try {
     Imf::DeepScanLineInputFile in(path.c_str());
     const Imf::Header& h = in.header();
