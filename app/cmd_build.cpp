@@ -6,6 +6,7 @@
 #include <optional>
 
 #include "tiles/bake/deep_build.hpp"
+#include "tiles/bake/deep_exr.hpp"
 #include "tiles/bake/map_build.hpp"
 #include "tiles/bake/scene.hpp"
 #include "app/command.hpp"
@@ -48,17 +49,88 @@ struct BuildArgs {
   std::optional<uint32_t> deep_level;
   uint32_t deep_tile = 16, deep_samples = 4;
   double deep_epsilon = -1;
+  std::string deep_from;  // a deep OpenEXR to take the deep map from instead of sampling
 };
+
+// What the pack's deep directory records of the deep map.
+struct DeepPart {
+  DeepMapBuild map;
+  double epsilon = 0;
+  uint32_t samples_per_side = 1;
+};
+
+// Functions held in memory when a deep map is read from a deep EXR (4096^2 texels).
+constexpr uint64_t kMaxDeepFromTexels = uint64_t(4096) * 4096;
+
+void check_deep_tile(const BuildArgs& a) {
+  if (a.deep_tile < 1 || a.deep_tile > 256 || (a.deep_tile & (a.deep_tile - 1)))
+    throw Error("--deep-tile: a power of two in 1..256, got " + std::to_string(a.deep_tile));
+}
+
+std::string hex64(uint64_t v) {
+  char buf[20];
+  std::snprintf(buf, sizeof buf, "%016llx", (unsigned long long)v);
+  return buf;
+}
+
+// --deep-from FILE: the deep map read from a deep OpenEXR (deep_exr.hpp), as `export
+// --deep` writes it or another tool's tidy deep image of a whole map, instead of sampling
+// the scene. The file must hold a whole level; when it records its light and scene they
+// must be this build's. Its functions are kept as they are when it records their bound
+// (epsilon), else compressed with --deep-epsilon (default 0.25 / --deep-samples); an
+// explicit --deep-epsilon always compresses them again (the bounds add up).
+DeepPart deep_from_exr(const BuildArgs& a, const Scene& scene, const LightSpec& spec, bool quiet) {
+  if (!a.shard.empty() || a.mpi)
+    throw Error("--deep-from with --shard/--mpi: a sharded build does not carry a deep part yet");
+  check_deep_tile(a);
+  DeepExrInfo info;
+  const DeepRegion map = read_deep_exr(a.deep_from, &info, kMaxDeepFromTexels);
+  const TraceRegion& r = map.region;
+  const uint64_t side = uint64_t(1) << r.level;
+  if (r.x0 != 0 || r.y0 != 0 || r.width != side || r.height != side)
+    throw Error("--deep-from " + a.deep_from + ": holds texels " + std::to_string(r.x0) + "," + std::to_string(r.y0) +
+                " " + std::to_string(r.width) + "x" + std::to_string(r.height) + " of level " +
+                std::to_string(r.level) + ", not the whole " + std::to_string(side) +
+                "^2 map (export it without --region)");
+  if (a.deep_level && *a.deep_level != r.level)
+    throw Error("--deep-from " + a.deep_from + ": its map is level " + std::to_string(r.level) +
+                ", --deep-level says " + std::to_string(*a.deep_level));
+  if (!info.light.empty() && info.light != spec.to_string())
+    throw Error("--deep-from " + a.deep_from + ": exported for light '" + info.light + "', this build's light is '" +
+                spec.to_string() + "'");
+  if (!info.scene_hash.empty() && info.scene_hash != hex64(scene.content_hash()))
+    throw Error("--deep-from " + a.deep_from + ": exported from another scene (content hash " + info.scene_hash +
+                ", this scene's " + hex64(scene.content_hash()) + ")");
+  const double base = std::max(info.epsilon, 0.0);
+  double recompress = -1;
+  if (a.deep_epsilon >= 0) recompress = a.deep_epsilon;
+  else if (info.epsilon < 0) recompress = DeepSampleOptions{a.deep_samples, 1, -1}.effective_epsilon();
+  DeepPart p;
+  p.epsilon = base + std::max(recompress, 0.0);
+  p.samples_per_side = info.samples_per_side ? info.samples_per_side : a.deep_samples;
+  try {
+    p.map = deep_tiles_from_functions(map, uint32_t(std::countr_zero(a.deep_tile)), recompress, p.epsilon,
+                                      a.tile_bytes);
+  } catch (const Error& e) {
+    throw Error("--deep-from " + a.deep_from + ": " + e.what());
+  }
+  if (!quiet)
+    std::printf("deep: from %s, %llu^2 texels, %zu tiles of %u^2 (%llu empty), %.1f KiB, epsilon %g%s\n",
+                a.deep_from.c_str(), (unsigned long long)side, p.map.tiles.size(), a.deep_tile,
+                (unsigned long long)p.map.empty_tiles, double(p.map.bytes) / 1024, p.epsilon,
+                recompress >= 0 ? " (recompressed)" : "");
+  return p;
+}
 
 // The deep tiles of a scene's partial occluders (DSM 2000), traced before the opaque map
 // so that a bad option fails early; the pack gets them through before_finish.
-std::optional<DeepMapBuild> build_deep_part(const BuildArgs& a, const Scene& scene, const LightSpace& light,
-                                            uint32_t map_level, bool quiet) {
+std::optional<DeepPart> build_deep_part(const BuildArgs& a, const Scene& scene, const LightSpec& spec,
+                                        const LightSpace& light, uint32_t map_level, bool quiet) {
+  if (!a.deep_from.empty()) return deep_from_exr(a, scene, spec, quiet);
   if (!scene.any_partial()) return std::nullopt;
   if (!a.shard.empty() || a.mpi)
     throw Error("--shard/--mpi: this scene has partial occluders, whose deep tiles a sharded build does not make yet");
-  if (a.deep_tile < 1 || a.deep_tile > 256 || (a.deep_tile & (a.deep_tile - 1)))
-    throw Error("--deep-tile: a power of two in 1..256, got " + std::to_string(a.deep_tile));
+  check_deep_tile(a);
   const uint32_t level = a.deep_level.value_or(std::min(map_level, 9u));
   DeepSampleOptions so;
   so.samples_per_side = a.deep_samples;
@@ -69,7 +141,7 @@ std::optional<DeepMapBuild> build_deep_part(const BuildArgs& a, const Scene& sce
     std::printf("deep: %u^2 texels (%u^2 samples each), %zu tiles of %u^2 (%llu empty), %.1f KiB, epsilon %g, %.1f s\n",
                 1u << level, a.deep_samples, d.tiles.size(), a.deep_tile, (unsigned long long)d.empty_tiles,
                 double(d.bytes) / 1024, so.effective_epsilon(), d.sampling.seconds);
-  return d;
+  return DeepPart{std::move(d), so.effective_epsilon(), a.deep_samples};
 }
 
 void run(const BuildArgs& a) {
@@ -117,11 +189,10 @@ void run(const BuildArgs& a) {
   LightSpec spec = LightSpec::parse(a.light);
   LightSpace light = LightSpace::fit(spec, scene.bounds());
   if (!quiet) std::printf("%s\n", summary(scene).c_str());
-  const std::optional<DeepMapBuild> deep = build_deep_part(a, scene, light, o.map_level, quiet);
+  const std::optional<DeepPart> deep = build_deep_part(a, scene, spec, light, o.map_level, quiet);
   if (deep) {
     scene = opaque_part(scene);  // the opaque map holds the opaque casters alone
-    const double eps = DeepSampleOptions{a.deep_samples, 1, a.deep_epsilon}.effective_epsilon();
-    o.before_finish = [&deep, eps, &a](PackWriter& w) { append_deep_map(w, *deep, eps, a.deep_samples); };
+    o.before_finish = [&deep](PackWriter& w) { append_deep_map(w, deep->map, deep->epsilon, deep->samples_per_side); };
   }
 
   Progress progress("build " + a.out, "texels");
@@ -266,6 +337,10 @@ void setup(CLI::App& app) {
       ->capture_default_str();
   app.add_option("--deep-epsilon", a->deep_epsilon,
                  "Deep map: compression bound on transmittance (default 0.25 / samples, DSM 2000 §4)");
+  app.add_option("--deep-from", a->deep_from,
+                 "Take the deep map from this deep OpenEXR (as `export --deep` writes, or another tool's tidy "
+                 "deep image of a whole map in this light's depth) instead of sampling the scene; the opaque "
+                 "map is still built from the scene's opaque meshes");
   app.add_flag("-q,--quiet", a->quiet, "No summary or progress");
   app.callback([a]() { run(*a); });
 }

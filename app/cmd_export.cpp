@@ -70,7 +70,14 @@ void run_deep(const ExportArgs& a) {
   o.seed = a.seed;
   DeepSampleStats st;
   const DeepRegion deep = sampler.trace({level, r.x, r.y, uint32_t(r.w), uint32_t(r.h)}, o, &st);
-  write_deep_exr(a.out, deep, o.effective_epsilon());
+  DeepExrInfo info;  // what `build --deep-from` checks the file against
+  info.epsilon = o.effective_epsilon();
+  info.samples_per_side = o.samples_per_side;
+  info.light = spec.to_string();
+  char hash[20];
+  std::snprintf(hash, sizeof hash, "%016llx", (unsigned long long)scene.content_hash());
+  info.scene_hash = hash;
+  write_deep_exr(a.out, deep, info);
   std::printf("exported deep level %u region %llu,%llu,%llux%llu of %s to %s: %llu rays, "
               "%.2f vertices per texel (%.2f before compression at epsilon %.4g), %llu of %llu "
               "texels monochrome, %.2f s\n",
@@ -137,7 +144,9 @@ void setup(CLI::App& app) {
   auto a = std::make_shared<ExportArgs>();
   app.footer("Example:\n  shadowtile export city.pack --level 12 -o city_l12.exr\n"
              "  shadowtile export city.pack --level 16 --region 30000,30000,2048,2048 -o detail.exr\n"
-             "  shadowtile export --deep procedural:forest --light sun:azimuth=30,elevation=50 --level 8 -o forest_deep.exr");
+             "  shadowtile export --deep procedural:forest --light sun:azimuth=30,elevation=50 --level 8 -o forest_deep.exr\n"
+             "  (then: shadowtile build procedural:forest --light sun:azimuth=30,elevation=50 --deep-from forest_deep.exr "
+             "-o forest.pack)");
   app.add_option("pack", a->pack, "Pack file (with --deep: a scene file or procedural:NAME)")->required();
   app.add_flag("--deep", a->deep,
                "Sample the scene's partial occluders (transmittance, alpha textures, volumes) "

@@ -32,6 +32,17 @@ DeepMapBuild build_deep_tiles(const DeepSampler& sampler, uint32_t level, uint32
                               const DeepSampleOptions& options,
                               uint64_t max_tile_bytes = uint64_t(64) << 20);
 
+// The same tiles from functions already made, e.g. read from a deep OpenEXR
+// (deep_exr.hpp): `map` must hold the whole of its level (x0 = y0 = 0, 2^level a side,
+// every function passing check(), depths in [0, 1]). recompress_epsilon >= 0 first
+// compresses every function with that bound (§3.3); negative keeps them as they are.
+// encode_epsilon is the mip-0 bound the mips are recompressed against (deep_encode.hpp).
+// Memory: the map itself plus one tile. st::Error (one line, naming the texel or tile)
+// for a partial region, a depth outside [0, 1], an invalid function or a tile over
+// max_tile_bytes. sampling.vertices_in / vertices_out count before and after.
+DeepMapBuild deep_tiles_from_functions(const DeepRegion& map, uint32_t side_bits, double recompress_epsilon,
+                                       double encode_epsilon, uint64_t max_tile_bytes = uint64_t(64) << 20);
+
 class PackWriter;
 
 // Appends the deep map to a pack (tiles/PACK.md "Deep tiles"): each tile as a deep tile

@@ -11,9 +11,12 @@
 #include <ImfIntAttribute.h>
 #include <ImfPartType.h>
 #include <ImfStringAttribute.h>
+#include <ImfTestFile.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdlib>
 #include <cstdio>
 #include <filesystem>
 
@@ -27,6 +30,9 @@ constexpr const char* kAttrLevel = "shadowtile.level";
 constexpr const char* kAttrX0 = "shadowtile.x0";
 constexpr const char* kAttrY0 = "shadowtile.y0";
 constexpr const char* kAttrEpsilon = "shadowtile.epsilon";
+constexpr const char* kAttrSamples = "shadowtile.samples";
+constexpr const char* kAttrLight = "shadowtile.light";
+constexpr const char* kAttrScene = "shadowtile.scene";
 constexpr uint64_t kMaxSide = 16384;
 
 struct Sample {
@@ -55,6 +61,13 @@ const char* const kColour[3] = {"AR", "AG", "AB"};
 }  // namespace
 
 void write_deep_exr(const std::string& path, const DeepRegion& region, double epsilon) {
+  DeepExrInfo info;
+  info.epsilon = epsilon;
+  write_deep_exr(path, region, info);
+}
+
+void write_deep_exr(const std::string& path, const DeepRegion& region, const DeepExrInfo& info) {
+  const double epsilon = info.epsilon;
   const TraceRegion& r = region.region;
   if (r.width == 0 || r.height == 0 || r.width > kMaxSide || r.height > kMaxSide ||
       region.functions.size() != size_t(r.width) * r.height)
@@ -97,6 +110,9 @@ void write_deep_exr(const std::string& path, const DeepRegion& region, double ep
     std::snprintf(buf, sizeof buf, "%.9g", epsilon);
     h.insert(kAttrEpsilon, Imf::StringAttribute(buf));
   }
+  if (info.samples_per_side > 0) h.insert(kAttrSamples, Imf::IntAttribute(int(info.samples_per_side)));
+  if (!info.light.empty()) h.insert(kAttrLight, Imf::StringAttribute(info.light));
+  if (!info.scene_hash.empty()) h.insert(kAttrScene, Imf::StringAttribute(info.scene_hash));
   const size_t xs = sizeof(char*), ys = xs * r.width;
   Imf::DeepFrameBuffer fb;
   fb.insertSampleCountSlice(Imf::Slice(Imf::UINT, reinterpret_cast<char*>(counts.data()),
@@ -127,15 +143,21 @@ void write_deep_exr(const std::string& path, const DeepRegion& region, double ep
   }
 }
 
-DeepRegion read_deep_exr(const std::string& path) {
+DeepRegion read_deep_exr(const std::string& path, DeepExrInfo* info, uint64_t max_texels) {
   auto fail = [&](const std::string& why) -> void { throw FormatError(path + ": " + why); };
   DeepRegion out;
+  bool tiled = false, is_deep = false, multi = false;
+  if (Imf::isOpenExrFile(path.c_str(), tiled, is_deep, multi) && (!is_deep || tiled))
+    fail(std::string("a ") + (is_deep ? "deep tiled" : "flat (not deep)") +
+         " OpenEXR image; a deep shadow map is read from a deep scanline EXR (as `shadowtile export --deep` writes)");
   try {
     Imf::DeepScanLineInputFile in(path.c_str());
     const Imf::Header& h = in.header();
     const auto* deep = h.findTypedAttribute<Imf::IntAttribute>(kAttrDeep);
-    if (!deep || deep->value() != kDeepExrFormatVersion)
-      fail("not a shadowtile deep EXR (attribute shadowtile.deep missing or not 1)");
+    if (deep && deep->value() != kDeepExrFormatVersion)
+      fail("shadowtile deep EXR version " + std::to_string(deep->value()) + " (this reader knows " +
+           std::to_string(kDeepExrFormatVersion) + ")");
+    const bool foreign = deep == nullptr;  // another tool's deep image
     auto int_attr = [&](const char* name) {
       const auto* a = h.findTypedAttribute<Imf::IntAttribute>(name);
       if (!a || a->value() < 0) fail(std::string("missing or negative int attribute ") + name);
@@ -145,24 +167,54 @@ DeepRegion read_deep_exr(const std::string& path) {
     if (dw.min.x != 0 || dw.min.y != 0) fail("data window does not start at (0, 0)");
     const uint64_t w = uint64_t(int64_t(dw.max.x) + 1), hh = uint64_t(int64_t(dw.max.y) + 1);
     if (w == 0 || hh == 0 || w > kMaxSide || hh > kMaxSide) fail("data window is empty or too large");
+    if (w * hh > max_texels)
+      fail("data window of " + std::to_string(w) + "x" + std::to_string(hh) + " texels exceeds " +
+           std::to_string(max_texels));
     TraceRegion& r = out.region;
-    r.level = uint32_t(std::min<uint64_t>(int_attr(kAttrLevel), 99));
-    r.x0 = int_attr(kAttrX0), r.y0 = int_attr(kAttrY0);
+    if (foreign) {  // the whole map of the level its square, power-of-two window gives
+      if (w != hh || (w & (w - 1)) != 0)
+        fail("data window " + std::to_string(w) + "x" + std::to_string(hh) +
+             " is not a square power of two (a deep EXR without shadowtile attributes must hold a whole map)");
+      r.level = uint32_t(std::countr_zero(w));
+      r.x0 = r.y0 = 0;
+    } else {
+      r.level = uint32_t(std::min<uint64_t>(int_attr(kAttrLevel), 99));
+      r.x0 = int_attr(kAttrX0), r.y0 = int_attr(kAttrY0);
+    }
     r.width = uint32_t(w), r.height = uint32_t(hh);
+    if (info) {
+      *info = {};
+      if (const auto* a = h.findTypedAttribute<Imf::StringAttribute>(kAttrEpsilon)) {
+        char* end = nullptr;
+        const double e = std::strtod(a->value().c_str(), &end);
+        if (end == a->value().c_str() || *end != 0 || !(e >= 0 && e <= 1)) fail("shadowtile.epsilon is not a number in [0, 1]");
+        info->epsilon = e;
+      }
+      if (const auto* a = h.findTypedAttribute<Imf::IntAttribute>(kAttrSamples)) {
+        if (a->value() < 1 || a->value() > 64) fail("shadowtile.samples is not in 1..64");
+        info->samples_per_side = uint32_t(a->value());
+      }
+      if (const auto* a = h.findTypedAttribute<Imf::StringAttribute>(kAttrLight)) info->light = a->value();
+      if (const auto* a = h.findTypedAttribute<Imf::StringAttribute>(kAttrScene)) info->scene_hash = a->value();
+      info->foreign = foreign;
+    }
     if (r.level > kMaxLevel || r.x0 + w > (uint64_t(1) << r.level) || r.y0 + hh > (uint64_t(1) << r.level))
       fail("region lies outside its level's map");
     const Imf::ChannelList& ch = h.channels();
-    auto need = [&](const char* name) {
+    auto need = [&](const char* name, bool half_too) {
       const Imf::Channel* c = ch.findChannel(name);
-      if (!c || c->type != Imf::FLOAT) fail(std::string("channel ") + name + " missing or not FLOAT");
+      if (!c || !(c->type == Imf::FLOAT || (half_too && c->type == Imf::HALF)))
+        fail(std::string("channel ") + name + " missing or not " + (half_too ? "FLOAT or HALF" : "FLOAT"));
     };
-    need("Z");
-    need("ZBack");
+    need("Z", false);
+    // ZBack may be absent: every sample is then a point sample (OpenEXR's rule).
+    const bool has_back = ch.findChannel("ZBack") != nullptr;
+    if (has_back) need("ZBack", false);
     const bool colour = ch.findChannel("A") == nullptr;
     if (colour)
-      for (const char* c : kColour) need(c);
+      for (const char* c : kColour) need(c, true);
     else
-      need("A");
+      need("A", true);
     const size_t n = size_t(w) * hh;
     std::vector<unsigned> counts(n);
     Imf::DeepFrameBuffer fb;
@@ -187,7 +239,8 @@ DeepRegion read_deep_exr(const std::string& path) {
     }
     const size_t xs = sizeof(char*), ys = xs * w;
     fb.insert("Z", Imf::DeepSlice(Imf::FLOAT, reinterpret_cast<char*>(z.data()), xs, ys, sizeof(Sample)));
-    fb.insert("ZBack", Imf::DeepSlice(Imf::FLOAT, reinterpret_cast<char*>(zb.data()), xs, ys, sizeof(Sample)));
+    if (has_back)
+      fb.insert("ZBack", Imf::DeepSlice(Imf::FLOAT, reinterpret_cast<char*>(zb.data()), xs, ys, sizeof(Sample)));
     if (colour)
       for (int c = 0; c < 3; ++c)
         fb.insert(kColour[c], Imf::DeepSlice(Imf::FLOAT, reinterpret_cast<char*>(a[c].data()), xs, ys,
@@ -220,6 +273,7 @@ DeepRegion read_deep_exr(const std::string& path) {
       for (unsigned k = 0; k < counts[i]; ++k, ++at) {
         Sample s = samples[at];
         if (!colour) s.a[1] = s.a[2] = s.a[0];
+        if (!has_back) s.zb = s.z;
         if (!std::isfinite(s.z) || !std::isfinite(s.zb) || s.zb < s.z || s.z < last)
           fail("texel " + std::to_string(i) + ": samples unsorted, overlapping or not finite");
         for (float al : s.a)

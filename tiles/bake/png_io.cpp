@@ -65,6 +65,73 @@ std::vector<Rgb8> read_png(const std::string& path, uint32_t& width, uint32_t& h
   return pixels;
 }
 
+namespace {
+
+// Finishes a png_image whose header was read: decodes it as grey + alpha.
+PngPlanes finish_planes(png_image& image, const std::string& name, uint64_t max_texels) {
+  if (image.width == 0 || image.height == 0 || uint64_t(image.width) * image.height > max_texels) {
+    const std::string size = std::to_string(image.width) + "x" + std::to_string(image.height);
+    png_image_free(&image);
+    throw FormatError(name + ": PNG of " + size + " texels is empty or larger than " +
+                      std::to_string(max_texels) + " texels");
+  }
+  PngPlanes out;
+  out.width = image.width;
+  out.height = image.height;
+  out.has_alpha = (image.format & PNG_FORMAT_FLAG_ALPHA) != 0;
+  image.format = PNG_FORMAT_GA;
+  std::vector<uint8_t> ga(size_t(image.width) * image.height * 2);
+  if (!png_image_finish_read(&image, nullptr, ga.data(), int32_t(image.width) * 2, nullptr)) {
+    std::string msg = image.message;
+    png_image_free(&image);
+    throw FormatError(name + ": cannot decode the PNG: " + msg);
+  }
+  const size_t n = size_t(out.width) * out.height;
+  out.grey.resize(n);
+  out.alpha.resize(n);
+  for (size_t i = 0; i < n; ++i) out.grey[i] = ga[2 * i], out.alpha[i] = ga[2 * i + 1];
+  return out;
+}
+
+}  // namespace
+
+PngPlanes read_png_planes(const std::string& path, uint64_t max_texels) {
+  png_image image;
+  std::memset(&image, 0, sizeof image);
+  image.version = PNG_IMAGE_VERSION;
+  if (!png_image_begin_read_from_file(&image, path.c_str()))
+    throw FormatError(path + ": cannot read the PNG: " + image.message);
+  return finish_planes(image, path, max_texels);
+}
+
+PngPlanes read_png_planes(const void* data, size_t size, const std::string& name,
+                          uint64_t max_texels) {
+  png_image image;
+  std::memset(&image, 0, sizeof image);
+  image.version = PNG_IMAGE_VERSION;
+  if (!png_image_begin_read_from_memory(&image, data, size))
+    throw FormatError(name + ": cannot read the PNG: " + image.message);
+  return finish_planes(image, name, max_texels);
+}
+
+void write_png_grey_alpha(const std::string& path, uint32_t width, uint32_t height,
+                          const std::vector<uint8_t>& ga) {
+  if (width == 0 || height == 0 || ga.size() != size_t(width) * height * 2)
+    throw Error(path + ": grey + alpha PNG data does not match " + std::to_string(width) + "x" +
+                std::to_string(height));
+  png_image image;
+  std::memset(&image, 0, sizeof image);
+  image.version = PNG_IMAGE_VERSION;
+  image.width = width;
+  image.height = height;
+  image.format = PNG_FORMAT_GA;
+  if (!png_image_write_to_file(&image, path.c_str(), 0, ga.data(), int32_t(width) * 2, nullptr)) {
+    std::string msg = image.message;
+    png_image_free(&image);
+    throw Error(path + ": writing the PNG failed: " + msg);
+  }
+}
+
 std::vector<Rgb8> depth_preview(const IntervalTile& tile, uint32_t max_side, uint32_t& width,
                                 uint32_t& height) {
   if (tile.width == 0 || tile.height == 0 || max_side == 0)

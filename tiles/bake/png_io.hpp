@@ -30,6 +30,24 @@ void write_png(const std::string& path, uint32_t width, uint32_t height,
 // Reads an 8-bit RGB or grey PNG back (tests and tools). Throws st::FormatError.
 std::vector<Rgb8> read_png(const std::string& path, uint32_t& width, uint32_t& height);
 
+// One 8-bit plane of a PNG (any PNG colour type and depth, converted by libpng): its
+// alpha, and its grey level (sRGB colour turned to grey by libpng); `has_alpha` says
+// whether the file carries alpha (an alpha channel or tRNS), else alpha is all 255.
+// Rows are as stored (row 0 at the top). Images over max_texels are refused before
+// anything is decoded (memory stays bounded). Throws st::FormatError naming `name`.
+struct PngPlanes {
+  uint32_t width = 0, height = 0;
+  bool has_alpha = false;
+  std::vector<uint8_t> grey, alpha;  // width * height each
+};
+PngPlanes read_png_planes(const std::string& path, uint64_t max_texels);
+// The same from bytes in memory (a texture embedded in a scene file).
+PngPlanes read_png_planes(const void* data, size_t size, const std::string& name,
+                          uint64_t max_texels);
+// Writes an 8-bit grey + alpha PNG (tests and tools); `ga` is width * height pairs.
+void write_png_grey_alpha(const std::string& path, uint32_t width, uint32_t height,
+                          const std::vector<uint8_t>& ga);
+
 // The preview image of `tile` (point-sampled to at most max_side a side).
 std::vector<Rgb8> depth_preview(const IntervalTile& tile, uint32_t max_side, uint32_t& width,
                                 uint32_t& height);

@@ -1,7 +1,9 @@
 // load_scene: "procedural:..." specs or any file assimp 5.2 reads, flattened into one
 // world-space triangle soup in double (node transforms applied, +Y up). Every mesh goes
 // through append_mesh() (scene_mesh.hpp), which decides closedness from the triangles
-// themselves: nothing a file claims about its geometry is trusted.
+// themselves: nothing a file claims about its geometry is trusted. Materials that let
+// light through (opacity, transparency, alpha maps) make partial meshes
+// (scene_materials.hpp).
 #include <assimp/Importer.hpp>
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
@@ -21,6 +23,7 @@
 #include <vector>
 
 #include "tiles/bake/scene_gltf_check.hpp"
+#include "tiles/bake/scene_materials.hpp"
 #include "tiles/bake/scene_mesh.hpp"
 #include "tiles/bake/scene_quake3.hpp"
 #include "common/error.hpp"
@@ -94,9 +97,19 @@ bool has_triangles(const aiMesh& mesh) {
   return false;
 }
 
-MeshSoup instance(const aiMesh& mesh, const std::string& name, const Affine& world) {
+MeshSoup instance(const aiMesh& mesh, const std::string& name, const Affine& world,
+                  const MaterialPartial& material, const std::string& path) {
   MeshSoup soup;
   soup.name = name;
+  soup.transmit = material.transmit;
+  soup.alpha_texture = material.alpha_texture;
+  const aiVector3D* uv = nullptr;
+  if (material.alpha_texture >= 0) {
+    if (material.uv_channel >= AI_MAX_NUMBER_OF_TEXTURECOORDS || !mesh.mTextureCoords[material.uv_channel])
+      throw Error(path + ": mesh '" + name + "' is alpha-tested but has no texture coordinates (channel " +
+                  std::to_string(material.uv_channel) + ")");
+    uv = mesh.mTextureCoords[material.uv_channel];
+  }
   soup.vertices.reserve(mesh.mNumVertices);
   for (unsigned v = 0; v < mesh.mNumVertices; ++v) soup.vertices.push_back(world.apply(mesh.mVertices[v]));
   // A mirroring transform turns the winding inside out; undo it so that front faces stay
@@ -109,6 +122,12 @@ MeshSoup instance(const aiMesh& mesh, const std::string& name, const Affine& wor
     Triangle t{face.mIndices[0], face.mIndices[1], face.mIndices[2]};
     if (mirrored) std::swap(t[1], t[2]);
     soup.triangles.push_back(t);
+    if (uv) {
+      std::array<Vec2f, 3> c;
+      for (int k = 0; k < 3; ++k)  // a bad index is refused by append_mesh()
+        c[k] = t[k] < mesh.mNumVertices ? Vec2f{uv[t[k]].x, uv[t[k]].y} : Vec2f{};
+      soup.uv.push_back(c);
+    }
   }
   return soup;
 }
@@ -187,6 +206,7 @@ Scene import_file(const std::string& path, const SceneOptions& options) {
 
   Scene scene;
   scene.name = path;
+  FileMaterials materials(*as, path);  // partial occluders (scene_materials.hpp)
   const Affine root = options.up == UpAxis::z ? z_up_to_y_up() : Affine{};
   std::vector<unsigned> uses(as->mNumMeshes, 0);
   {
@@ -210,7 +230,8 @@ Scene import_file(const std::string& path, const SceneOptions& options) {
       if (index >= as->mNumMeshes) throw Error(path + ": node '" + node->mName.C_Str() + "' references a missing mesh");
       const aiMesh& mesh = *as->mMeshes[index];
       if (!has_triangles(mesh)) continue;  // point clouds and line sets carry no surface
-      append_mesh(scene, instance(mesh, mesh_name(mesh, *node, index, uses[index] > 1), world));
+      const std::string name = mesh_name(mesh, *node, index, uses[index] > 1);
+      append_mesh(scene, instance(mesh, name, world, materials.get(mesh.mMaterialIndex, scene), path));
     }
     for (unsigned c = node->mNumChildren; c-- > 0;)
       stack.push_back({node->mChildren[c], world * Affine::from(node->mChildren[c]->mTransformation)});
