@@ -37,6 +37,7 @@
 #include <vector>
 
 #include "common/error.hpp"
+#include "bench/dagmh_dict_figures.hpp"
 #include "tiles/build/dagmh_dictionary.hpp"
 #include "tiles/core/dagmh_validate.hpp"
 #include "tiles/core/encoding.hpp"
@@ -240,14 +241,9 @@ int main(int argc, char** argv) {
       j["net_saving_all"] = total;
 
       // The dictionary itself.
-      const auto shared = st::dagmh::share_across_tiles(raw_tiles);
-      uint64_t zlib_before = 0, zlib_after = 0;
-      for (size_t t = 0; t < raw_tiles.size(); ++t) {
-        zlib_before += st::zlib_compress(raw_tiles[t], 6).size();
-        zlib_after += st::zlib_compress(shared.tiles[t], 6).size();
-      }
-      const uint64_t dict_raw = shared.dictionary.size();
-      const uint64_t dict_zlib = dict_raw ? st::zlib_compress(shared.dictionary, 6).size() : 0;
+      st::dagmh::SharedTiles shared;
+      const st::bench::DictFigures f = st::bench::dict_figures(raw_tiles, &shared);
+      const uint64_t dict_raw = f.dict_raw;
       uint64_t mmh_raw = 0, mmh_zlib = 0;
       if (!mmh_packs.empty()) {
         const auto m = st::PackReader::open(mmh_packs[pi]);
@@ -270,13 +266,13 @@ int main(int argc, char** argv) {
       }
       const std::string name = path.substr(path.rfind('/') + 1);
       nlohmann::json d{{"pack", name},
-                       {"tiles_rewritten", shared.tiles_rewritten},
-                       {"raw_before", shared.bytes_before},
-                       {"raw_after", shared.bytes_after},
-                       {"dictionary_raw", dict_raw},
-                       {"zlib_before", zlib_before},
-                       {"zlib_after", zlib_after},
-                       {"dictionary_zlib", dict_zlib},
+                       {"tiles_rewritten", f.tiles_rewritten},
+                       {"raw_before", f.raw_before},
+                       {"raw_after", f.raw_after},
+                       {"dictionary_raw", f.dict_raw},
+                       {"zlib_before", f.zlib_before},
+                       {"zlib_after", f.zlib_after},
+                       {"dictionary_zlib", f.dict_zlib},
                        {"mmh_raw", mmh_raw},
                        {"mmh_zlib", mmh_zlib},
                        {"texels_checked", checked}};
