@@ -144,8 +144,8 @@ SharedTiles share_across_tiles(const std::vector<std::vector<uint8_t>>& tiles, u
   }
 
   // Rewrite each tile that uses the dictionary: its own nodes and treelets keep their
-  // order (children still lie after parents), references are remapped, the skip table's
-  // cursors keep their levels and value indices, values are copied as they are.
+  // order (children still lie after parents), references are remapped, values are copied
+  // as they are, and the skip table is walked anew over the rewritten DAG.
   out.tiles.resize(tiles.size());
   for (uint32_t ti = 0; ti < tiles.size(); ++ti) {
     const auto& buf = tiles[ti];
@@ -189,7 +189,14 @@ SharedTiles share_across_tiles(const std::vector<std::vector<uint8_t>>& tiles, u
     nh.node_words = local_words;
     nh.treelet_count = local_treelets;
     nh.root_ref = tagged(h.root_ref);
-    const uint32_t skip_bytes = h.node_offset - h.skip_offset;
+    // The skip level by the encoder's rule (§3.7, dagmh_encode.cpp): at most the tile's
+    // own, lowered while the table would exceed 1/16 of the rest of the smaller buffer.
+    const uint64_t rest = sizeof(Header) + uint64_t(local_words) * 4 + uint64_t(local_treelets) * kTreeletBytes +
+                          uint64_t(h.chunk_count) * sizeof(ChunkInfo) + h.multiplier_bytes;
+    uint32_t skip = h.skip_level;
+    while (skip > 0 && (uint64_t(1) << (2 * skip)) * kSkipEntryBytes * 16 > rest) --skip;
+    nh.skip_level = skip;
+    const uint32_t skip_bytes = uint32_t((uint64_t(1) << (2 * skip)) * kSkipEntryBytes);
     nh.node_offset = nh.skip_offset + skip_bytes;
     nh.treelet_offset = nh.node_offset + local_words * 4;
     nh.chunk_offset = nh.treelet_offset + local_treelets * kTreeletBytes;
@@ -197,12 +204,6 @@ SharedTiles share_across_tiles(const std::vector<std::vector<uint8_t>>& tiles, u
     nh.total_bytes = nh.multiplier_offset + h.multiplier_bytes;
     std::vector<uint8_t> o(nh.total_bytes, 0);
     std::memcpy(o.data(), &nh, sizeof nh);
-    for (uint32_t e = 0; e < skip_bytes / sizeof(Cursor); ++e) {
-      Cursor c;
-      std::memcpy(&c, buf.data() + h.skip_offset + e * sizeof(Cursor), sizeof c);
-      c.ref = tagged(c.ref);
-      std::memcpy(o.data() + nh.skip_offset + e * sizeof(Cursor), &c, sizeof c);
-    }
     for (size_t k = 0; k < p.starts.size(); ++k) {
       if (new_word[k] == ~0u) continue;
       const uint8_t* src = buf.data() + h.node_offset + size_t(p.starts[k]) * 4;
@@ -222,6 +223,27 @@ SharedTiles share_across_tiles(const std::vector<std::vector<uint8_t>>& tiles, u
         std::memcpy(o.data() + nh.treelet_offset + size_t(new_treelet[t]) * kTreeletBytes,
                     buf.data() + h.treelet_offset + size_t(t) * kTreeletBytes, kTreeletBytes);
     std::memcpy(o.data() + nh.chunk_offset, buf.data() + h.chunk_offset, size_t(nh.total_bytes - nh.chunk_offset));
+    // The skip table: one cursor per texel of level `skip`, by walking the rewritten DAG.
+    View view;
+    view.skip = o.data() + nh.skip_offset;
+    view.nodes = o.data() + nh.node_offset;
+    view.treelets = o.data() + nh.treelet_offset;
+    view.chunks = o.data() + nh.chunk_offset;
+    view.multipliers = o.data() + nh.multiplier_offset;
+    view.finest_level = nh.finest_level;
+    view.skip_level = skip;
+    view.root_ref = nh.root_ref;
+    view.value_count = nh.value_count;
+    view.dict_node_words = dict->node_words();
+    view.dict_treelet_count = dict->treelet_count();
+    view.dict_nodes = dict->nodes();
+    view.dict_treelets = dict->treelets();
+    const uint64_t side = uint64_t(1) << skip;
+    for (uint64_t y = 0; y < side; ++y)
+      for (uint64_t x = 0; x < side; ++x) {
+        const Cursor c = view.descend(view.root(), skip, skip, x, y);
+        std::memcpy(o.data() + nh.skip_offset + (y * side + x) * sizeof(Cursor), &c, sizeof c);
+      }
     validate(o, dict.get());  // a malformed rewrite never leaves this function
     out.bytes_after += o.size();
     ++out.tiles_rewritten;
