@@ -277,18 +277,18 @@ int main(int argc, char** argv) {
                         100.0 * pack / (double(texels) * 4), m.peak_mib, tracer_wall > 0 ? m.wall / tracer_wall : 0.0,
                         stages["trace"].get<double>(), stages["hierarchy"].get<double>(),
                         stages["cut_encode"].get<double>(), stages["compress_write"].get<double>());
-            if (!dict.is_null())
-              std::printf("%-20s with a pack dictionary: pack %.2f MiB (x%.3f), tiles raw %.2f -> %.2f MiB "
-                          "(dictionary %.1f KiB raw, %.1f KiB zlib)\n",
-                          "", dict["pack_bytes_with"].get<double>() / (1 << 20), dict["pack_bytes_with"].get<double>() / pack,
-                          dict["tiles_raw"].get<double>() / (1 << 20), dict["tiles_raw_with"].get<double>() / (1 << 20),
-                          dict["dictionary_raw"].get<double>() / 1024, dict["dictionary_zlib"].get<double>() / 1024);
             rows.push_back({{"run", "build"}, {"builder", b}, {"encoding", enc}, {"intervals", rule},
                             {"map_level", L}, {"texels", texels}, {"wall_s", m.wall}, {"cpu_s", m.cpu},
                             {"peak_mib", m.peak_mib}, {"mtexels_per_s", double(texels) / m.wall / 1e6},
                             {"over_tracer", tracer_wall > 0 ? m.wall / tracer_wall : 0.0}, {"report", m.result},
                             {"dagmh_dictionary", dict}});
             record(name, L, m.wall);
+            if (!dict.is_null())
+              std::printf("%-20s with a pack dictionary: pack %.2f MiB (x%.3f), tiles raw %.2f -> %.2f MiB "
+                          "(dictionary %.1f KiB raw, %.1f KiB zlib)\n",
+                          "", dict["pack_bytes_with"].get<double>() / (1 << 20), dict["pack_bytes_with"].get<double>() / pack,
+                          dict["tiles_raw"].get<double>() / (1 << 20), dict["tiles_raw_with"].get<double>() / (1 << 20),
+                          dict["dictionary_raw"].get<double>() / 1024, dict["dictionary_zlib"].get<double>() / 1024);
           }
     }
     // How time grows: d log(time) / d log(texels) between successive resolutions.
