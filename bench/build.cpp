@@ -17,6 +17,10 @@
 // closed-object rule only; static: the static-geometry interval, map_build.hpp), so the
 // pack bytes of the two stand side by side on open scenes; the rasterizer builds only
 // the default rule with a sun (the tracer does the rest).
+// Each DAG-MH build is followed by a line with the same pack's tiles sharing their common
+// subtrees through a pack dictionary (tiles/build/dagmh_dictionary.hpp, not timed): pack
+// bytes with the tiles' zlib streams replaced by the rewritten tiles' plus the
+// dictionary's, and the tiles' raw bytes (what a client caches) with the dictionary's.
 // Each measurement runs in a forked child so that its peak memory (wait4 rusage) is its
 // own. The bounds-only passes trace the same level-K cells the build traces, on the same
 // worker threads, and throw the intervals away.
@@ -36,6 +40,7 @@
 #include <thread>
 #include <vector>
 
+#include "bench/dagmh_dict_figures.hpp"
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/map_build.hpp"
 #include "tiles/bake/raster_bounds.hpp"
@@ -258,6 +263,14 @@ int main(int argc, char** argv) {
               st::MapBuildReport r = st::build_map(scene, light, o, path);
               return nlohmann::json::parse(r.to_json());
             });
+            // DAG-MH: the same pack's tiles with a pack dictionary (dagmh_dictionary.hpp).
+            nlohmann::json dict;
+            if (enc == "dagmh" && !m.result.contains("error")) {
+              const st::bench::DictFigures f = st::bench::dict_figures(st::bench::encoded_tiles_of(path));
+              dict = {{"tiles_raw", f.raw_before}, {"tiles_raw_with", f.raw_with()}, {"dictionary_raw", f.dict_raw},
+                      {"tiles_zlib", f.zlib_before}, {"tiles_zlib_with", f.zlib_with()}, {"dictionary_zlib", f.dict_zlib},
+                      {"pack_bytes_with", m.result["pack_bytes"].get<double>() - double(f.zlib_before) + double(f.zlib_with())}};
+            }
             std::remove(path.c_str());
             if (m.result.contains("error")) {
               std::printf("%-20s failed: %s\n", name.c_str(), m.result["error"].get<std::string>().c_str());
@@ -276,8 +289,15 @@ int main(int argc, char** argv) {
             rows.push_back({{"run", "build"}, {"builder", b}, {"encoding", enc}, {"intervals", rule},
                             {"map_level", L}, {"texels", texels}, {"wall_s", m.wall}, {"cpu_s", m.cpu},
                             {"peak_mib", m.peak_mib}, {"mtexels_per_s", double(texels) / m.wall / 1e6},
-                            {"over_tracer", tracer_wall > 0 ? m.wall / tracer_wall : 0.0}, {"report", m.result}});
+                            {"over_tracer", tracer_wall > 0 ? m.wall / tracer_wall : 0.0}, {"report", m.result},
+                            {"dagmh_dictionary", dict}});
             record(name, L, m.wall);
+            if (!dict.is_null())
+              std::printf("%-20s with a pack dictionary: pack %.2f MiB (x%.3f), tiles raw %.2f -> %.2f MiB "
+                          "(dictionary %.1f KiB raw, %.1f KiB zlib)\n",
+                          "", dict["pack_bytes_with"].get<double>() / (1 << 20), dict["pack_bytes_with"].get<double>() / pack,
+                          dict["tiles_raw"].get<double>() / (1 << 20), dict["tiles_raw_with"].get<double>() / (1 << 20),
+                          dict["dictionary_raw"].get<double>() / 1024, dict["dictionary_zlib"].get<double>() / 1024);
           }
     }
     // How time grows: d log(time) / d log(texels) between successive resolutions.

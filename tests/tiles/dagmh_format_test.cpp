@@ -30,7 +30,7 @@ TEST(DagmhFormat, StructOffsetsArePinned) {
   EXPECT_EQ(offsetof(Header, treelet_offset), 56u);
   EXPECT_EQ(offsetof(Header, chunk_offset), 60u);
   EXPECT_EQ(offsetof(Header, multiplier_offset), 64u);
-  EXPECT_EQ(offsetof(Header, reserved), 68u);
+  EXPECT_EQ(offsetof(Header, dictionary_crc), 68u);
   EXPECT_EQ(sizeof(Cursor), 16u);
   EXPECT_EQ(offsetof(Cursor, ref), 0u);
   EXPECT_EQ(offsetof(Cursor, level), 4u);
@@ -46,6 +46,19 @@ TEST(DagmhFormat, StructOffsetsArePinned) {
   EXPECT_EQ(kTreeletBytes, 12u);
   EXPECT_EQ(kMagic, 0x484D4744u);
   EXPECT_EQ(kVersion, 1u);
+  EXPECT_EQ(kVersionDictionary, 2u);
+  // The pack dictionary (DAGMH.md "Dictionary").
+  EXPECT_EQ(sizeof(DictHeader), 32u);
+  EXPECT_EQ(offsetof(DictHeader, magic), 0u);
+  EXPECT_EQ(offsetof(DictHeader, version), 4u);
+  EXPECT_EQ(offsetof(DictHeader, header_bytes), 8u);
+  EXPECT_EQ(offsetof(DictHeader, node_words), 12u);
+  EXPECT_EQ(offsetof(DictHeader, treelet_count), 16u);
+  EXPECT_EQ(offsetof(DictHeader, total_bytes), 20u);
+  EXPECT_EQ(offsetof(DictHeader, node_offset), 24u);
+  EXPECT_EQ(offsetof(DictHeader, treelet_offset), 28u);
+  EXPECT_EQ(kDictMagic, 0x444D4744u);
+  EXPECT_EQ(kDictVersion, 1u);
 }
 
 uint32_t u32_at(const std::vector<uint8_t>& b, size_t at) { return st::load_le<uint32_t>(b.data() + at); }

@@ -20,6 +20,10 @@ static_assert(std::endian::native == std::endian::little, "DAG-MH buffers are li
 
 inline constexpr uint32_t kMagic = 0x484D4744u;  // the bytes "DGMH"
 inline constexpr uint32_t kVersion = 1;
+// Version 2: a tile whose references may name nodes and treelets of a pack-wide
+// dictionary (DictHeader below; DAGMH.md "Dictionary"); header field 68 then holds the
+// dictionary's CRC-32. Version 1 tiles never reference one (field 68 is zero).
+inline constexpr uint32_t kVersionDictionary = 2;
 
 // Treelets: subtrees of height <= 3 (4 levels) stored as a full 4-level quadtree bitmap
 // in depth-first order, 1 + 4 + 16 + 64 = 85 bits in 3 words (DAG-MH §3.2, Alg. 1).
@@ -81,10 +85,34 @@ struct Header {
   uint32_t treelet_offset;     // 56
   uint32_t chunk_offset;       // 60
   uint32_t multiplier_offset;  // 64
-  uint32_t reserved;           // 68 = 0
+  uint32_t dictionary_crc;     // 68 version 1: 0; version 2: CRC-32 of the dictionary it references
 };
 static_assert(sizeof(Header) == 72);
 static_assert(offsetof(Header, root_ref) == 20 && offsetof(Header, multiplier_offset) == 64);
+
+// Pack-wide dictionary (DAG-MH §3.1 applied across tiles; DAGMH.md "Dictionary"): the
+// inner nodes and treelets that occur in two or more tiles, stored once. Same node and
+// treelet formats as a tile's; its references are its own (word offsets into its node
+// section, its treelet numbers) and never leave it. A version-2 tile addresses
+// [the dictionary's nodes | its own] as one space, so the dictionary's references mean
+// the same in every tile: inner index i < D (the dictionary's node_words) is the
+// dictionary's word i, else the tile's word i - D; treelet t < T (the dictionary's
+// treelet_count) the dictionary's, else the tile's t - T.
+// Layout: header (32 B) | nodes (node_words x 4 B) | treelets (treelet_count x 12 B).
+inline constexpr uint32_t kDictMagic = 0x444D4744u;  // the bytes "DGMD"
+inline constexpr uint32_t kDictVersion = 1;
+struct DictHeader {
+  uint32_t magic;           //  0
+  uint32_t version;         //  4
+  uint32_t header_bytes;    //  8 = 32
+  uint32_t node_words;      // 12 < 2^30
+  uint32_t treelet_count;   // 16 < 2^30
+  uint32_t total_bytes;     // 20 the buffer's length
+  uint32_t node_offset;     // 24 = 32
+  uint32_t treelet_offset;  // 28 = node_offset + 4 * node_words
+};
+static_assert(sizeof(DictHeader) == 32);
+static_assert(offsetof(DictHeader, treelet_count) == 16 && offsetof(DictHeader, treelet_offset) == 28);
 
 // A traversal cursor; also the skip-table entry. `ref` is the node where traversal
 // resumes (at `level`, its own value not yet applied), `base` the depth-first index of

@@ -17,7 +17,8 @@ namespace {
 
 class DagmhEvaluator final : public Evaluator {
  public:
-  explicit DagmhEvaluator(const dagmh::View& view) : v_(view) {}
+  DagmhEvaluator(const dagmh::View& view, std::shared_ptr<const dagmh::Dictionary> dict)
+      : v_(view), dict_(std::move(dict)) {}
 
   uint32_t finest_level() const override { return v_.finest_level; }
 
@@ -100,12 +101,18 @@ class DagmhEvaluator final : public Evaluator {
   }
 
   dagmh::View v_;
+  std::shared_ptr<const dagmh::Dictionary> dict_;  // kept alive while the view points into it
 };
 
 }  // namespace
 
 std::unique_ptr<Evaluator> open_dagmh(std::span<const uint8_t> bytes) {
-  return std::make_unique<DagmhEvaluator>(dagmh::validate(bytes));
+  return std::make_unique<DagmhEvaluator>(dagmh::validate(bytes), nullptr);
+}
+
+std::unique_ptr<Evaluator> open_dagmh(std::span<const uint8_t> bytes, std::shared_ptr<const dagmh::Dictionary> dict) {
+  const dagmh::View view = dagmh::validate(bytes, dict.get());
+  return std::make_unique<DagmhEvaluator>(view, std::move(dict));
 }
 
 }  // namespace st

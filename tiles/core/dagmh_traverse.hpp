@@ -49,6 +49,21 @@ struct View {
   const uint8_t* chunks = nullptr;
   const uint8_t* multipliers = nullptr;
   uint32_t finest_level = 0, skip_level = 0, root_ref = 0, value_count = 0;
+  // A version-2 tile (DAGMH.md "Dictionary"): references below the dictionary's node
+  // words / treelet count name the dictionary's, the others the tile's own, offset by
+  // them. Version 1 keeps the zeros (every reference is the tile's own).
+  uint32_t dict_node_words = 0, dict_treelet_count = 0;
+  const uint8_t* dict_nodes = nullptr;
+  const uint8_t* dict_treelets = nullptr;
+
+  // The inner node / treelet with this reference index (no allocation, one compare).
+  const uint8_t* node_at(uint32_t index) const {
+    return index < dict_node_words ? dict_nodes + size_t(index) * 4 : nodes + size_t(index - dict_node_words) * 4;
+  }
+  const uint8_t* treelet_at(uint32_t index) const {
+    return index < dict_treelet_count ? dict_treelets + size_t(index) * kTreeletBytes
+                                      : treelets + size_t(index - dict_treelet_count) * kTreeletBytes;
+  }
 
   Cursor root() const { return {root_ref, 0, 0, 0}; }
 
@@ -72,7 +87,7 @@ struct View {
   // child (ref = kRefNone, level = the missing child's level).
   Cursor descend(Cursor c, uint32_t stop, uint32_t level, uint64_t x, uint64_t y) const {
     while ((c.ref & kRefTagMask) == kRefInner && c.level < stop) {
-      const uint8_t* node = nodes + size_t(c.ref & kRefIndexMask) * 4;
+      const uint8_t* node = node_at(c.ref & kRefIndexMask);
       const uint32_t flags = st::load_le<uint32_t>(node);
       if (flags & kNodeValuedBit) c.last = c.base;
       const uint32_t shift = level - c.level - 1;
@@ -95,11 +110,11 @@ struct View {
   // The value index for (x, y) of `level`, given descend(c, level, level, x, y)'s cursor.
   uint32_t finish(const Cursor& c, uint32_t level, uint64_t x, uint64_t y) const {
     const uint32_t tag = c.ref & kRefTagMask;
-    if (tag == kRefInner) return st::load_le<uint32_t>(nodes + size_t(c.ref & kRefIndexMask) * 4) & kNodeValuedBit ? c.base : c.last;
+    if (tag == kRefInner) return st::load_le<uint32_t>(node_at(c.ref & kRefIndexMask)) & kNodeValuedBit ? c.base : c.last;
     if (tag != kRefTreelet) return c.last;
     // Alg. 1: from the deepest treelet level on the path up to the treelet root; the
     // first valued node answers, its index = base + set bits before it (depth-first).
-    const uint8_t* t = treelets + size_t(c.ref & kRefIndexMask) * kTreeletBytes;
+    const uint8_t* t = treelet_at(c.ref & kRefIndexMask);
     const uint64_t low = st::load_le<uint64_t>(t);
     const uint32_t high = st::load_le<uint32_t>(t + 8);
     const uint32_t depth = std::min<uint32_t>(level - c.level, kTreeletLevels - 1);
@@ -136,7 +151,7 @@ struct View {
       shift = level - c.level;
       return c.last;
     }
-    const uint8_t* t = treelets + size_t(c.ref & kRefIndexMask) * kTreeletBytes;
+    const uint8_t* t = treelet_at(c.ref & kRefIndexMask);
     const uint64_t low = st::load_le<uint64_t>(t);
     const uint32_t high = st::load_le<uint32_t>(t + 8);
     const uint32_t depth = std::min<uint32_t>(level - c.level, kTreeletLevels - 1);

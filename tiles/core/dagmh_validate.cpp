@@ -9,6 +9,7 @@
 
 #include "common/error.hpp"
 #include "tiles/core/interval.hpp"
+#include "tiles/core/pack_format.hpp"
 
 namespace st::dagmh {
 namespace {
@@ -28,10 +29,12 @@ struct Sections {
 
 Sections check_header(const Header& h, size_t size) {
   expect_field("magic", offsetof(Header, magic), h.magic, kMagic);
-  expect_field("version", offsetof(Header, version), h.version, kVersion);
+  if (h.version != kVersion && h.version != kVersionDictionary)
+    fail("version", offsetof(Header, version),
+         "is " + std::to_string(h.version) + ", this reader knows 1 and 2 (with a pack dictionary)");
   expect_field("header_bytes", offsetof(Header, header_bytes), h.header_bytes, sizeof(Header));
   expect_field("total_bytes", offsetof(Header, total_bytes), h.total_bytes, size);
-  expect_field("reserved", offsetof(Header, reserved), h.reserved, 0);
+  if (h.version == kVersion) expect_field("dictionary_crc", offsetof(Header, dictionary_crc), h.dictionary_crc, 0);
   if (h.finest_level > kMaxLevel) fail("finest_level", offsetof(Header, finest_level), "exceeds 20");
   if (h.skip_level > std::min(h.finest_level, kMaxSkipListLevel))
     fail("skip_level", offsetof(Header, skip_level), "exceeds min(finest_level, 6)");
@@ -63,10 +66,12 @@ Sections check_header(const Header& h, size_t size) {
 }
 
 // Inner nodes and treelets: extents, references, value counts, reachability.
-void check_structure(const Header& h, const Sections& s, const uint8_t* base) {
+void check_structure(const Header& h, const Sections& s, const uint8_t* base, const Dictionary* dict) {
   const uint8_t* nodes = base + s.nodes;
   const uint32_t words = h.node_words;
   auto node_byte = [&](uint64_t w) { return s.nodes + 4 * w; };
+  // Version 2: references below D / T are the dictionary's, the rest the tile's offset by them.
+  const uint32_t D = dict ? dict->node_words() : 0, T = dict ? dict->treelet_count() : 0;
   std::vector<uint32_t> starts;
   std::vector<uint8_t> is_start(words, 0);
   for (uint32_t w = 0; w < words;) {
@@ -104,12 +109,17 @@ void check_structure(const Header& h, const Sections& s, const uint8_t* base) {
       const uint32_t offset = st::load_le<uint32_t>(nodes + 4 * (at + 1));
       uint64_t child_count;
       if ((flags >> (kNodeTreeletShift + c)) & 1) {
-        if (ref >= h.treelet_count) fail("node child reference", node_byte(at), "treelet out of range");
-        child_count = treelet_values[ref];
+        if (ref < T) child_count = dict->treelet_values(ref);
+        else if (ref - T < h.treelet_count) child_count = treelet_values[ref - T];
+        else fail("node child reference", node_byte(at), "treelet out of range");
+      } else if (ref < D) {  // the dictionary's node
+        child_count = dict->node_values(ref);
+        if (child_count == 0) fail("node child reference", node_byte(at), "not a dictionary node's start");
       } else {
-        if (ref <= w || ref >= words || !is_start[ref])
+        const uint32_t local = ref - D;
+        if (local <= w || local >= words || !is_start[local])
           fail("node child reference", node_byte(at), "not a later node's start");
-        child_count = count[ref];
+        child_count = count[local];
       }
       if (offset != expected) fail("node value offset", node_byte(at + 1), "disagrees with the value counts");
       expected += child_count;
@@ -122,16 +132,25 @@ void check_structure(const Header& h, const Sections& s, const uint8_t* base) {
   const uint32_t tag = h.root_ref & kRefTagMask, index = h.root_ref & kRefIndexMask;
   const uint32_t root_field = offsetof(Header, root_ref);
   std::vector<uint8_t> reached(words, 0), treelet_reached(h.treelet_count, 0);
-  if (tag == kRefInner) {
-    if (index >= words || !is_start[index]) fail("root_ref", root_field, "not a node start");
-    if (!(st::load_le<uint32_t>(nodes + 4 * size_t(index)) & kNodeValuedBit)) fail("root_ref", root_field, "root has no value");
-    if (count[index] != h.value_count) fail("root_ref", root_field, "root's values != value_count");
-    reached[index] = 1;
+  if (tag == kRefInner && index < D) {  // the whole structure is shared
+    if (dict->node_values(index) == 0) fail("root_ref", root_field, "not a dictionary node's start");
+    if (!(st::load_le<uint32_t>(dict->nodes() + 4 * size_t(index)) & kNodeValuedBit)) fail("root_ref", root_field, "root has no value");
+    if (dict->node_values(index) != h.value_count) fail("root_ref", root_field, "root's values != value_count");
+  } else if (tag == kRefInner) {
+    const uint32_t local = index - D;
+    if (local >= words || !is_start[local]) fail("root_ref", root_field, "not a node start");
+    if (!(st::load_le<uint32_t>(nodes + 4 * size_t(local)) & kNodeValuedBit)) fail("root_ref", root_field, "root has no value");
+    if (count[local] != h.value_count) fail("root_ref", root_field, "root's values != value_count");
+    reached[local] = 1;
+  } else if (tag == kRefTreelet && index < T) {
+    if (!(dict->treelets()[size_t(index) * kTreeletBytes] & 1)) fail("root_ref", root_field, "root has no value");
+    if (dict->treelet_values(index) != h.value_count) fail("root_ref", root_field, "root's values != value_count");
   } else if (tag == kRefTreelet) {
-    if (index >= h.treelet_count) fail("root_ref", root_field, "treelet out of range");
-    if (!(treelets[size_t(index) * kTreeletBytes] & 1)) fail("root_ref", root_field, "root has no value");
-    if (treelet_values[index] != h.value_count) fail("root_ref", root_field, "root's values != value_count");
-    treelet_reached[index] = 1;
+    const uint32_t local = index - T;
+    if (local >= h.treelet_count) fail("root_ref", root_field, "treelet out of range");
+    if (!(treelets[size_t(local) * kTreeletBytes] & 1)) fail("root_ref", root_field, "root has no value");
+    if (treelet_values[local] != h.value_count) fail("root_ref", root_field, "root's values != value_count");
+    treelet_reached[local] = 1;
   } else {
     fail("root_ref", root_field, "bad tag");
   }
@@ -142,7 +161,9 @@ void check_structure(const Header& h, const Sections& s, const uint8_t* base) {
     for (uint32_t c = 0; c < 4; ++c) {
       if (!((flags >> c) & 1)) continue;
       const uint32_t ref = st::load_le<uint32_t>(nodes + 4 * (size_t(w) + 1 + 2 * rank++));
-      ((flags >> (kNodeTreeletShift + c)) & 1 ? treelet_reached : reached)[ref] = 1;
+      const bool treelet = (flags >> (kNodeTreeletShift + c)) & 1;
+      const uint32_t below = treelet ? T : D;  // the dictionary's (checked above) below it
+      if (ref >= below) (treelet ? treelet_reached : reached)[ref - below] = 1;
     }
   }
   for (uint32_t t = 0; t < h.treelet_count; ++t)
@@ -178,14 +199,24 @@ void check_skip_table(const Header& h, const Sections& s, const View& view) {
 
 }  // namespace
 
-View validate(std::span<const uint8_t> bytes) {
+View validate(std::span<const uint8_t> bytes, const Dictionary* dict) {
   if (bytes.size() < sizeof(Header))
     fail("header", 0, "buffer of " + std::to_string(bytes.size()) + " bytes is shorter than the header");
   Header h;
   std::memcpy(&h, bytes.data(), sizeof(Header));
   const Sections s = check_header(h, bytes.size());
   const uint8_t* base = bytes.data();
-  check_structure(h, s, base);
+  if (h.version == kVersion) {
+    dict = nullptr;
+  } else {
+    if (!dict) fail("version", offsetof(Header, version), "2: the tile references a pack dictionary and none was given");
+    if (dict->crc() != h.dictionary_crc)
+      fail("dictionary_crc", offsetof(Header, dictionary_crc), "does not match the dictionary given");
+    if (uint64_t(h.node_words) + dict->node_words() > kRefIndexMask ||
+        uint64_t(h.treelet_count) + dict->treelet_count() > kRefIndexMask)
+      fail("node_words", offsetof(Header, node_words), "with the dictionary's, exceeds 2^30");
+  }
+  check_structure(h, s, base, dict);
   check_chunks(h, s, base);
   View view;
   view.skip = base + s.skip;
@@ -197,8 +228,95 @@ View validate(std::span<const uint8_t> bytes) {
   view.skip_level = h.skip_level;
   view.root_ref = h.root_ref;
   view.value_count = h.value_count;
+  if (dict) {
+    view.dict_node_words = dict->node_words();
+    view.dict_treelet_count = dict->treelet_count();
+    view.dict_nodes = dict->nodes();
+    view.dict_treelets = dict->treelets();
+  }
   check_skip_table(h, s, view);
   return view;
+}
+
+uint32_t Dictionary::treelet_values(uint32_t t) const {
+  const uint8_t* p = treelets() + size_t(t) * kTreeletBytes;
+  return uint32_t(std::popcount(st::load_le<uint64_t>(p)) + std::popcount(st::load_le<uint32_t>(p + 8)));
+}
+
+std::shared_ptr<const Dictionary> Dictionary::open(std::vector<uint8_t> bytes) {
+  auto bad = [](const std::string& field, uint64_t offset, const std::string& what) {
+    throw FormatError("dagmh dictionary: " + field + " at byte " + std::to_string(offset) + ": " + what);
+  };
+  if (bytes.size() < sizeof(DictHeader))
+    bad("header", 0, "buffer of " + std::to_string(bytes.size()) + " bytes is shorter than the header");
+  DictHeader h;
+  std::memcpy(&h, bytes.data(), sizeof h);
+  auto expect = [&](const char* name, uint32_t offset, uint64_t value, uint64_t want) {
+    if (value != want) bad(name, offset, "is " + std::to_string(value) + ", expected " + std::to_string(want));
+  };
+  expect("magic", offsetof(DictHeader, magic), h.magic, kDictMagic);
+  expect("version", offsetof(DictHeader, version), h.version, kDictVersion);
+  expect("header_bytes", offsetof(DictHeader, header_bytes), h.header_bytes, sizeof(DictHeader));
+  if (h.node_words > kRefIndexMask) bad("node_words", offsetof(DictHeader, node_words), "exceeds 2^30");
+  if (h.treelet_count > kRefIndexMask) bad("treelet_count", offsetof(DictHeader, treelet_count), "exceeds 2^30");
+  const uint64_t treelet_at = sizeof(DictHeader) + uint64_t(h.node_words) * 4;
+  const uint64_t end = treelet_at + uint64_t(h.treelet_count) * kTreeletBytes;
+  expect("node_offset", offsetof(DictHeader, node_offset), h.node_offset, sizeof(DictHeader));
+  expect("treelet_offset", offsetof(DictHeader, treelet_offset), h.treelet_offset, treelet_at);
+  expect("total_bytes", offsetof(DictHeader, total_bytes), h.total_bytes, end);
+  if (end != bytes.size())
+    bad("sections", end, "end at byte " + std::to_string(end) + " but the buffer has " + std::to_string(bytes.size()) + " bytes");
+  auto d = std::make_shared<Dictionary>();
+  d->node_words_ = h.node_words;
+  d->treelet_count_ = h.treelet_count;
+  d->bytes_ = std::move(bytes);
+  const uint8_t* nodes = d->nodes();
+  for (uint32_t t = 0; t < h.treelet_count; ++t)
+    if (st::load_le<uint32_t>(d->treelets() + size_t(t) * kTreeletBytes + 8) >> (kTreeletNodes - 64))
+      bad("treelet", treelet_at + uint64_t(t) * kTreeletBytes + 8, "bits past 85 set");
+  std::vector<uint32_t> starts;
+  for (uint32_t w = 0; w < h.node_words;) {
+    const uint32_t flags = st::load_le<uint32_t>(nodes + 4 * size_t(w));
+    const uint64_t at = sizeof(DictHeader) + 4 * uint64_t(w);
+    const uint32_t mask = flags & kNodeChildMask;
+    if (flags & ~kNodeFlagBits) bad("node flags", at, "reserved bits set");
+    if (mask == 0) bad("node flags", at, "inner node without children");
+    if ((flags >> kNodeTreeletShift) & ~mask & 0xF) bad("node flags", at, "treelet bit for an absent child");
+    if (uint64_t(w) + dagmh::node_words(flags) > h.node_words) bad("node", at, "overruns the node section");
+    starts.push_back(w);
+    w += dagmh::node_words(flags);
+  }
+  // Value counts, children first (they lie after their parents): a start's count is >= 1,
+  // every other word's 0, so node_values() also tells node starts.
+  d->values_.assign(h.node_words, 0);
+  for (size_t i = starts.size(); i-- > 0;) {
+    const uint32_t w = starts[i];
+    const uint32_t flags = st::load_le<uint32_t>(nodes + 4 * size_t(w));
+    uint64_t expected = (flags & kNodeValuedBit) ? 1 : 0;
+    uint32_t rank = 0;
+    for (uint32_t c = 0; c < 4; ++c) {
+      if (!((flags >> c) & 1)) continue;
+      const uint64_t word = uint64_t(w) + 1 + 2 * rank++;
+      const uint64_t at = sizeof(DictHeader) + 4 * word;
+      const uint32_t ref = st::load_le<uint32_t>(nodes + 4 * word);
+      uint64_t child;
+      if ((flags >> (kNodeTreeletShift + c)) & 1) {
+        if (ref >= h.treelet_count) bad("node child reference", at, "treelet out of range");
+        child = d->treelet_values(ref);
+      } else {
+        if (ref <= w || ref >= h.node_words || d->values_[ref] == 0) bad("node child reference", at, "not a later node's start");
+        child = d->values_[ref];
+      }
+      if (child == 0) bad("node child reference", at, "subtree without values");
+      if (st::load_le<uint32_t>(nodes + 4 * (word + 1)) != expected)
+        bad("node value offset", at + 4, "disagrees with the value counts");
+      expected += child;
+    }
+    if (expected > 0xFFFFFFFFull) bad("node", sizeof(DictHeader) + 4 * uint64_t(w), "more than 2^32 values");
+    d->values_[w] = uint32_t(expected);
+  }
+  d->crc_ = crc32_of(d->bytes_);
+  return d;
 }
 
 }  // namespace st::dagmh
