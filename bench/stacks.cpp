@@ -39,6 +39,7 @@
 #include "tiles/build/encode.hpp"
 #include "tiles/build/mh_build.hpp"
 #include "tiles/build/mh_octree_encode.hpp"
+#include "tiles/build/mh_octree_share.hpp"
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/resolution.hpp"
 #include "tiles/core/stack_lookup.hpp"
@@ -100,6 +101,9 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps)
   t0 = Clock::now();
   const std::vector<uint8_t> oct = st::encode_octree(oh);
   const double oct_encode_s = since(t0);
+  t0 = Clock::now();
+  const st::OctreeSharing share = st::measure_octree_sharing(oh);
+  const double share_s = since(t0);
 
   // N independent quadtrees.
   std::vector<std::vector<uint8_t>> mh(n);
@@ -197,6 +201,15 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps)
   std::printf("%-26s %14.3f %14.3f %10.3f\n", "encode s", oct_encode_s, mh_encode_s, oct_encode_s / mh_encode_s);
   std::printf("raw float32 stack %.1f MiB (octree %.3f%% of it); tracing %.2f s for %u slices\n", raw / 1048576.0,
               100.0 * double(oct.size()) / raw, trace_s, n);
+  std::printf("sharing (%.1f s): %llu nodes, %llu distinct subtrees (%.3f); %llu children blocks, %llu distinct;\n"
+              "  words %llu, every distinct subtree once %llu (%.3f), every distinct block once %llu (%.3f);\n"
+              "  %llu distinct subtrees with children occur 2+ times, the largest %llu words\n",
+              share_s, (unsigned long long)share.nodes, (unsigned long long)share.unique_subtrees,
+              double(share.unique_subtrees) / double(share.nodes), (unsigned long long)share.blocks,
+              (unsigned long long)share.unique_blocks, (unsigned long long)share.words,
+              (unsigned long long)share.dag_words, double(share.dag_words) / double(share.words),
+              (unsigned long long)share.block_dag_words, double(share.block_dag_words) / double(share.words),
+              (unsigned long long)share.repeated_inner, (unsigned long long)share.largest_repeated_words);
   std::printf("%-34s %10s %12s\n", "lookup (median ns)", "ns", "x 2D lookup");
   auto row = [&](const char* what, double ns) { std::printf("%-34s %10.1f %12.2f\n", what, ns, ns / ns_2d); };
   row("2D lit (one slice)", ns_2d);
@@ -234,7 +247,17 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps)
           {"ns_soft_2d", ns_soft2d},
           {"soft_shared_over_2d_lit", ns_soft / ns_2d},
           {"time_over_2d_lit", ns_time / ns_2d},
-          {"soft_nodes_per_point", double(visited) / double(ms)}};
+          {"soft_nodes_per_point", double(visited) / double(ms)},
+          {"sharing",
+           {{"nodes", share.nodes},
+            {"distinct_subtrees", share.unique_subtrees},
+            {"blocks", share.blocks},
+            {"distinct_blocks", share.unique_blocks},
+            {"words", share.words},
+            {"dag_words", share.dag_words},
+            {"block_dag_words", share.block_dag_words},
+            {"repeated_inner_subtrees", share.repeated_inner},
+            {"largest_repeated_words", share.largest_repeated_words}}}};
 }
 
 }  // namespace
