@@ -17,6 +17,8 @@
 //   octree lit   : StackLookup::lit(p, w), the same points and slices
 //   time interp. : StackLookup::visibility(p, t), t random (two slices blended)
 //   soft shared  : StackLookup::soft_visibility(p) (one shared walk for all N samples)
+//   soft bounded : StackLookup::soft_visibility_bounded(p) (each walk stops where the
+//                  node's value bounds decide it; StackBounds made once, timed apart)
 //   soft indep.  : StackLookup::soft_visibility_independent(p) (N octree walks)
 //   soft 2D      : N 2D evaluator lit tests (N separate quadtrees)
 // Times are medians over --reps of thread CPU time per lookup; the table also gives each
@@ -181,6 +183,18 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps)
     visited = 0;
     for (size_t i = 0; i < ms; ++i) acc += look.soft_visibility(pts[i]), visited += st::StackLookup::last_nodes_visited();
   });
+  t0 = Clock::now();
+  const st::StackBounds sbounds(tree);
+  const double bounds_s = since(t0);
+  uint64_t visited_b = 0;
+  const double ns_bounded = median_ns(reps, ms, [&] {
+    visited_b = 0;
+    for (size_t i = 0; i < ms; ++i)
+      acc += look.soft_visibility_bounded(pts[i], sbounds), visited_b += st::StackLookup::last_nodes_visited();
+  });
+  for (size_t i = 0; i < std::min<size_t>(ms, 500); ++i)
+    if (look.soft_visibility_bounded(pts[i], sbounds) != look.soft_visibility(pts[i]))
+      throw st::Error("bench: the bounded soft lookup differs");
   const double ns_indep = median_ns(reps, ms, [&] { for (size_t i = 0; i < ms; ++i) acc += look.soft_visibility_independent(pts[i]); });
   const double ns_soft2d = median_ns(reps, ms, [&] {
     for (size_t i = 0; i < ms; ++i) {
@@ -216,10 +230,13 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps)
   row("octree lit (one slice)", ns_oct);
   row("visibility(p, time)", ns_time);
   row("soft, shared walk (all N)", ns_soft);
+  row("soft, bounded early stop (all N)", ns_bounded);
   row("soft, N octree walks", ns_indep);
   row("soft, N 2D lookups", ns_soft2d);
   std::printf("soft per sample: shared %.1f ns, N octree walks %.1f ns, 2D %.1f ns; shared walk nodes per point %.1f\n",
               ns_soft / n, ns_indep / n, ns_soft2d / n, double(visited) / double(ms));
+  std::printf("bounded early stop: %.1f ns per sample, nodes per point %.1f; bounds %.2f s, %zu bytes\n",
+              ns_bounded / n, double(visited_b) / double(ms), bounds_s, sbounds.bytes());
 
   return {{"case", c.name},
           {"scene", c.scene},
@@ -248,6 +265,10 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps)
           {"soft_shared_over_2d_lit", ns_soft / ns_2d},
           {"time_over_2d_lit", ns_time / ns_2d},
           {"soft_nodes_per_point", double(visited) / double(ms)},
+          {"ns_soft_bounded", ns_bounded},
+          {"soft_bounded_nodes_per_point", double(visited_b) / double(ms)},
+          {"bounds_s", bounds_s},
+          {"bounds_bytes", sbounds.bytes()},
           {"sharing",
            {{"nodes", share.nodes},
             {"distinct_subtrees", share.unique_subtrees},
