@@ -34,7 +34,24 @@ struct LoadArgs {
   double duration = 10, rate = 60, cache_mb = 64;
   uint64_t seed = 1;
   bool no_prefetch = false;
+  std::string time, time_sweep;
+  bool soft = false;
 };
+
+// "T" -> [T, T]; "A..B" -> [A, B]; each in [0, 1]. Throws st::Error naming the option.
+void parse_time_range(const std::string& option, const std::string& text, double& a, double& b) {
+  auto number = [&](const std::string& s) {
+    char* end = nullptr;
+    const double v = std::strtod(s.c_str(), &end);
+    if (s.empty() || *end != 0 || !(v >= 0 && v <= 1))
+      throw Error(option + ": '" + text + "': expected a time in [0, 1]" +
+                  (option == "--time-sweep" ? std::string(" or A..B") : std::string()));
+    return v;
+  };
+  const auto dots = text.find("..");
+  if (dots == std::string::npos) a = b = number(text);
+  else a = number(text.substr(0, dots)), b = number(text.substr(dots + 2));
+}
 
 void run(const LoadArgs& a) {
   loadgen::LoadOptions o;
@@ -64,6 +81,14 @@ void run(const LoadArgs& a) {
   o.io_threads = a.io_threads;
   o.view.samples_x = a.samples_x;
   o.view.samples_y = std::max(1u, a.samples_x * 9 / 16);
+  if (!a.time.empty() && !a.time_sweep.empty()) throw Error("load: give --time or --time-sweep, not both");
+  if (!a.time.empty()) parse_time_range("--time", a.time, o.time0, o.time1);
+  if (!a.time_sweep.empty()) {
+    if (a.time_sweep.find("..") == std::string::npos) throw Error("--time-sweep: expected A..B, got '" + a.time_sweep + "'");
+    parse_time_range("--time-sweep", a.time_sweep, o.time0, o.time1);
+  }
+  if (a.soft && !(a.time.empty() && a.time_sweep.empty())) throw Error("load: --soft reads every slice: no --time");
+  o.soft = a.soft;
   const loadgen::LoadResult r = loadgen::run_load(o);
   std::printf("%s", loadgen::load_table(r).c_str());
   if (!a.report.empty()) {
@@ -102,6 +127,11 @@ Register reg{"load", "Load-test a server with synthetic cameras (client library 
   sub.add_option("--io-threads", a->io_threads, "Client I/O threads shared by all connections")
       ->capture_default_str()->check(CLI::Range(1u, 64u));
   sub.add_flag("--no-prefetch", a->no_prefetch, "Do not prefetch along the path");
+  sub.add_option("--time", a->time, "Stack maps: the light set's time T in [0, 1] (slices blended; default 0)");
+  sub.add_option("--time-sweep", a->time_sweep,
+                 "Stack maps: time A..B swept over the run (the slices around the current time requested, the "
+                 "next ones prefetched)");
+  sub.add_flag("--soft", a->soft, "Stack maps: soft shadows, the average over every slice (area lights)");
   sub.callback([a] { run(*a); });
 }};
 

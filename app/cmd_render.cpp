@@ -1,11 +1,14 @@
 // `shadowtile render (PACK | --server HOST:PORT --map NAME) --scene SCENE --camera ...
-//  [--size WxH] [--pcf R] [--filter] [--diff] -o view.exr`: the scene from a camera, Lambert-shaded
-// with the map's shadows (tiles/bake/render.hpp), as RGB float EXR and PNG; --diff also
-// ray-traces the shadows and writes where the two differ.
+//  [--size WxH] [--pcf R] [--filter] [--diff] [--time T | --soft] -o view.exr`: the scene from a
+// camera, Lambert-shaded with the map's shadows (tiles/bake/render.hpp), as RGB float EXR and
+// PNG; --diff also ray-traces the shadows and writes where the two differ. A stack pack (a
+// light set) is drawn at --time T (the two nearest slices blended) or --soft (the average
+// over every sample), and --diff traces the same samples with the same weights.
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <optional>
 #include <thread>
 
 #include "client/map_access.hpp"
@@ -16,6 +19,8 @@
 #include "app/command.hpp"
 #include "common/error.hpp"
 #include "tiles/core/pack_evaluator.hpp"
+#include "tiles/core/pack_reader.hpp"
+#include "tiles/core/stack_map.hpp"
 
 namespace st::cli {
 
@@ -55,6 +60,8 @@ struct RenderArgs {
   bool filter = false;
   double timeout = 60;
   double cache_mb = 256;
+  std::optional<double> time;
+  bool soft = false;
 };
 
 std::string stem(const std::string& out) {
@@ -63,9 +70,91 @@ std::string stem(const std::string& out) {
   return dot != std::string::npos && (slash == std::string::npos || dot > slash) ? out.substr(0, dot) : out;
 }
 
+void write_outputs(const RenderArgs& a, const RenderResult& r) {
+  const std::string base = stem(a.out);
+  write_rgb_exr(a.out, r.width, r.height, r.image);
+  write_rgb_preview_png(base + ".png", r.width, r.height, r.image);
+  std::printf("rendered %ux%u (%llu lit-facing receivers), map shadows %.1f ms: %s, %s.png\n", r.width, r.height,
+              (unsigned long long)r.receivers, r.map_seconds * 1e3, a.out.c_str(), base.c_str());
+  if (a.diff) {
+    write_rgb_exr(base + "_traced.exr", r.width, r.height, r.traced_image);
+    write_rgb_preview_png(base + "_traced.png", r.width, r.height, r.traced_image);
+    write_rgb_preview_png(base + "_diff.png", r.width, r.height, r.diff_image);
+    std::printf("ray-traced shadows %.1f ms: %s_traced.{exr,png}; differences: %s_diff.png\n",
+                r.traced_seconds * 1e3, base.c_str(), base.c_str());
+    std::printf("differing pixels: %llu of %llu receivers (%.4f%%)\n", (unsigned long long)r.differing,
+                (unsigned long long)r.receivers, 100 * r.differing_fraction());
+  }
+}
+
+// A stack pack (local or served): the view at --time T or --soft (render_stack_view).
+void run_stack(const RenderArgs& a, const RenderOptions& ro, const Camera& cam, const Scene& scene,
+               const PackReader* reader, client::Map* map) {
+  if (a.soft && a.time) throw Error("render: give --time T or --soft, not both");
+  const StackGrid& g = reader ? *reader->stack() : *client::MapAccess::remote(*map).stack_grid();
+  std::vector<LightSpace> samples;
+  for (uint32_t w = 0; w < g.slices; ++w) samples.push_back(g.light(w));
+  const double time = a.time.value_or(0.0);
+  // The slices read, and the sample that shades (n.l) and sizes the normal offset.
+  const uint32_t n = g.slices;
+  const double s = std::clamp(time, 0.0, 1.0) * double(n - 1);
+  const uint32_t w0 = a.soft ? 0 : uint32_t(std::floor(s)), w1 = a.soft ? n - 1 : std::min(n - 1, uint32_t(std::ceil(s)));
+  const LightSpace& shading = samples[a.soft ? n / 2 : uint32_t(std::nearbyint(s))];
+  const SceneTracer tracer(scene, shading);
+  const auto rec = tracer.primary(cam, ro.width, ro.height);
+  StackRenderOptions o;
+  o.width = ro.width, o.height = ro.height, o.pcf_radius = ro.pcf_radius, o.pixel_angle = ro.pixel_angle;
+  o.diff = ro.diff, o.soft = a.soft, o.time = time;
+  std::unique_ptr<ResidentStack> rs;
+  StackMapLookups vis;
+  if (reader) {
+    rs = std::make_unique<ResidentStack>(*reader);
+    const StackMap& m = rs->map();
+    if (a.soft) vis.all = [&m, &o](const Vec3d& p, float fp) { return m.soft_visibility_filtered(p, o.pcf_radius, fp); };
+    else vis.all = [&m, &o](const Vec3d& p, float fp) { return m.visibility_filtered(p, o.time, o.pcf_radius, fp); };
+    vis.sample = [&m, &o](const Vec3d& p, uint32_t w, float fp) { return m.filtered(p, w, o.pcf_radius, fp); };
+  } else {
+    const auto t0 = std::chrono::steady_clock::now();
+    const auto deadline = t0 + std::chrono::milliseconds(int64_t(a.timeout * 1000));
+    map->request_slices(w0, w1, 1000);
+    while (!map->slices_resident(w0, w1)) {
+      if (std::chrono::steady_clock::now() > deadline)
+        throw Error("render: slices " + std::to_string(w0) + ".." + std::to_string(w1) + " did not all arrive within " +
+                    std::to_string(int64_t(a.timeout * 1000)) + " ms");
+      map->request_slices(w0, w1, 1000);
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    std::printf("fetched slices %u..%u in %.0f ms\n", w0, w1,
+                std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    const client::Map& m = *map;
+    if (a.soft)
+      vis.all = [&m, &o](const Vec3d& p, float fp) {
+        return m.soft_visibility_filtered({p.x, p.y, p.z}, fp, o.pcf_radius);
+      };
+    else
+      vis.all = [&m, &o](const Vec3d& p, float fp) {
+        return m.time_visibility_filtered({p.x, p.y, p.z}, o.time, fp, o.pcf_radius);
+      };
+    // One sample: the time lookup at the sample's own time is exactly that slice.
+    vis.sample = [&m, &o, n](const Vec3d& p, uint32_t w, float fp) {
+      return m.time_visibility_filtered({p.x, p.y, p.z}, n > 1 ? double(w) / double(n - 1) : 0.0, fp, o.pcf_radius);
+    };
+  }
+  std::printf("stack of %u slices: %s\n", n,
+              a.soft ? "soft shadows, every sample averaged"
+                     : (w0 == w1 ? "time " + std::to_string(time) + ", slice " + std::to_string(w0)
+                                 : "time " + std::to_string(time) + ", slices " + std::to_string(w0) + " and " +
+                                       std::to_string(w1) + " blended")
+                           .c_str());
+  const RenderResult r = render_stack_view(tracer, rec, samples, g.geo.n, vis, o);
+  write_outputs(a, r);
+  if (a.diff) std::printf("mean |map - traced| over the receivers: %.4f\n", r.mean_abs_difference);
+}
+
 void run(const RenderArgs& a) {
   if (a.pack.empty() == (a.server.empty() || a.map.empty()))
     throw Error("render: give either a PACK or --server HOST:PORT with --map NAME");
+  if (a.time && !(*a.time >= 0 && *a.time <= 1)) throw Error("--time: expected a time in [0, 1]");
   RenderOptions o;
   if (std::sscanf(a.size.c_str(), "%ux%u", &o.width, &o.height) != 2 || o.width == 0 || o.height == 0 ||
       o.width > 16384 || o.height > 16384)
@@ -88,6 +177,12 @@ void run(const RenderArgs& a) {
   uint64_t scene_hash = 0;
   if (!a.pack.empty()) {
     reader = PackReader::open(a.pack);
+    if (reader->stack()) {
+      if (reader->header().scene_hash != scene.content_hash())
+        std::fprintf(stderr, "shadowtile render: warning: scene '%s' is not the scene the map was built from\n",
+                     a.scene.c_str());
+      return run_stack(a, o, cam, scene, reader.get(), nullptr);
+    }
     pack_eval = std::make_unique<PackEvaluator>(reader, 4096);
     eval = pack_eval.get();
     light = reader->light();
@@ -104,10 +199,17 @@ void run(const RenderArgs& a) {
     co.cache_slots = uint32_t(std::max(16.0, a.cache_mb * 1048576.0 / std::max(1u, client::pack_header(map).tile_bytes)));
     cl = std::make_unique<client::Client>(parse_endpoint("--server", a.server), co);
     map = cl->open(a.map);
+    if (map.slices()) {
+      if (client::pack_header(map).scene_hash != scene.content_hash())
+        std::fprintf(stderr, "shadowtile render: warning: scene '%s' is not the scene the map was built from\n",
+                     a.scene.c_str());
+      return run_stack(a, o, cam, scene, nullptr, &map);
+    }
     eval = &client::evaluator(map);
     light = LightSpace::from_array(client::pack_header(map).light_kind, client::pack_header(map).light);
     scene_hash = client::pack_header(map).scene_hash;
   }
+  if (a.time || a.soft) throw Error("render: --time and --soft need a stack pack (built with a light set)");
   if (scene_hash != scene.content_hash())
     std::fprintf(stderr, "shadowtile render: warning: scene '%s' is not the scene the map was built from\n",
                  a.scene.c_str());
@@ -120,20 +222,7 @@ void run(const RenderArgs& a) {
                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
   }
   const RenderResult r = render_view(tracer, rec, *eval, o);
-  const std::string base = stem(a.out);
-  write_rgb_exr(a.out, r.width, r.height, r.image);
-  write_rgb_preview_png(base + ".png", r.width, r.height, r.image);
-  std::printf("rendered %ux%u (%llu lit-facing receivers), map shadows %.1f ms: %s, %s.png\n", r.width, r.height,
-              (unsigned long long)r.receivers, r.map_seconds * 1e3, a.out.c_str(), base.c_str());
-  if (o.diff) {
-    write_rgb_exr(base + "_traced.exr", r.width, r.height, r.traced_image);
-    write_rgb_preview_png(base + "_traced.png", r.width, r.height, r.traced_image);
-    write_rgb_preview_png(base + "_diff.png", r.width, r.height, r.diff_image);
-    std::printf("ray-traced shadows %.1f ms: %s_traced.{exr,png}; differences: %s_diff.png\n",
-                r.traced_seconds * 1e3, base.c_str(), base.c_str());
-    std::printf("differing pixels: %llu of %llu receivers (%.4f%%)\n", (unsigned long long)r.differing,
-                (unsigned long long)r.receivers, 100 * r.differing_fraction());
-  }
+  write_outputs(a, r);
 }
 
 Register reg{"render", "Render a camera view shaded with the map's shadows (EXR + PNG)", [](CLI::App& sub) {
@@ -154,6 +243,9 @@ Register reg{"render", "Render a camera view shaded with the map's shadows (EXR 
   sub.add_flag("--filter", a->filter,
                "Hierarchical filtering: the level from each pixel's footprint, two levels blended (MH 2016 3.3)");
   sub.add_flag("--diff", a->diff, "Also ray-trace shadows and write where they differ");
+  sub.add_option("--time", a->time,
+                 "Stack packs: the light set's time in [0, 1] (sample w at w / (N - 1); the two nearest blended)");
+  sub.add_flag("--soft", a->soft, "Stack packs: soft shadows, the fraction of the light set's samples that are lit");
   sub.add_option("--timeout", a->timeout, "Seconds to wait for the view's tiles (--server)")->capture_default_str();
   sub.add_option("--cache-mb", a->cache_mb, "Tile cache (MiB, --server)")->capture_default_str();
   sub.add_option("-o,--out", a->out, "Output EXR (the PNG preview goes beside it)")->required();

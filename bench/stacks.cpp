@@ -17,6 +17,8 @@
 //   octree lit   : StackLookup::lit(p, w), the same points and slices
 //   time interp. : StackLookup::visibility(p, t), t random (two slices blended)
 //   soft shared  : StackLookup::soft_visibility(p) (one shared walk for all N samples)
+//   soft bounded : StackLookup::soft_visibility_bounded(p) (each walk stops where the
+//                  node's value bounds decide it; StackBounds made once, timed apart)
 //   soft indep.  : StackLookup::soft_visibility_independent(p) (N octree walks)
 //   soft 2D      : N 2D evaluator lit tests (N separate quadtrees)
 // Times are medians over --reps of thread CPU time per lookup; the table also gives each
@@ -39,6 +41,7 @@
 #include "tiles/build/encode.hpp"
 #include "tiles/build/mh_build.hpp"
 #include "tiles/build/mh_octree_encode.hpp"
+#include "tiles/build/mh_octree_share.hpp"
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/resolution.hpp"
 #include "tiles/core/stack_lookup.hpp"
@@ -100,6 +103,9 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps)
   t0 = Clock::now();
   const std::vector<uint8_t> oct = st::encode_octree(oh);
   const double oct_encode_s = since(t0);
+  t0 = Clock::now();
+  const st::OctreeSharing share = st::measure_octree_sharing(oh);
+  const double share_s = since(t0);
 
   // N independent quadtrees.
   std::vector<std::vector<uint8_t>> mh(n);
@@ -177,6 +183,18 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps)
     visited = 0;
     for (size_t i = 0; i < ms; ++i) acc += look.soft_visibility(pts[i]), visited += st::StackLookup::last_nodes_visited();
   });
+  t0 = Clock::now();
+  const st::StackBounds sbounds(tree);
+  const double bounds_s = since(t0);
+  uint64_t visited_b = 0;
+  const double ns_bounded = median_ns(reps, ms, [&] {
+    visited_b = 0;
+    for (size_t i = 0; i < ms; ++i)
+      acc += look.soft_visibility_bounded(pts[i], sbounds), visited_b += st::StackLookup::last_nodes_visited();
+  });
+  for (size_t i = 0; i < std::min<size_t>(ms, 500); ++i)
+    if (look.soft_visibility_bounded(pts[i], sbounds) != look.soft_visibility(pts[i]))
+      throw st::Error("bench: the bounded soft lookup differs");
   const double ns_indep = median_ns(reps, ms, [&] { for (size_t i = 0; i < ms; ++i) acc += look.soft_visibility_independent(pts[i]); });
   const double ns_soft2d = median_ns(reps, ms, [&] {
     for (size_t i = 0; i < ms; ++i) {
@@ -197,16 +215,28 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps)
   std::printf("%-26s %14.3f %14.3f %10.3f\n", "encode s", oct_encode_s, mh_encode_s, oct_encode_s / mh_encode_s);
   std::printf("raw float32 stack %.1f MiB (octree %.3f%% of it); tracing %.2f s for %u slices\n", raw / 1048576.0,
               100.0 * double(oct.size()) / raw, trace_s, n);
+  std::printf("sharing (%.1f s): %llu nodes, %llu distinct subtrees (%.3f); %llu children blocks, %llu distinct;\n"
+              "  words %llu, every distinct subtree once %llu (%.3f), every distinct block once %llu (%.3f);\n"
+              "  %llu distinct subtrees with children occur 2+ times, the largest %llu words\n",
+              share_s, (unsigned long long)share.nodes, (unsigned long long)share.unique_subtrees,
+              double(share.unique_subtrees) / double(share.nodes), (unsigned long long)share.blocks,
+              (unsigned long long)share.unique_blocks, (unsigned long long)share.words,
+              (unsigned long long)share.dag_words, double(share.dag_words) / double(share.words),
+              (unsigned long long)share.block_dag_words, double(share.block_dag_words) / double(share.words),
+              (unsigned long long)share.repeated_inner, (unsigned long long)share.largest_repeated_words);
   std::printf("%-34s %10s %12s\n", "lookup (median ns)", "ns", "x 2D lookup");
   auto row = [&](const char* what, double ns) { std::printf("%-34s %10.1f %12.2f\n", what, ns, ns / ns_2d); };
   row("2D lit (one slice)", ns_2d);
   row("octree lit (one slice)", ns_oct);
   row("visibility(p, time)", ns_time);
   row("soft, shared walk (all N)", ns_soft);
+  row("soft, bounded early stop (all N)", ns_bounded);
   row("soft, N octree walks", ns_indep);
   row("soft, N 2D lookups", ns_soft2d);
   std::printf("soft per sample: shared %.1f ns, N octree walks %.1f ns, 2D %.1f ns; shared walk nodes per point %.1f\n",
               ns_soft / n, ns_indep / n, ns_soft2d / n, double(visited) / double(ms));
+  std::printf("bounded early stop: %.1f ns per sample, nodes per point %.1f; bounds %.2f s, %zu bytes\n",
+              ns_bounded / n, double(visited_b) / double(ms), bounds_s, sbounds.bytes());
 
   return {{"case", c.name},
           {"scene", c.scene},
@@ -234,7 +264,21 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps)
           {"ns_soft_2d", ns_soft2d},
           {"soft_shared_over_2d_lit", ns_soft / ns_2d},
           {"time_over_2d_lit", ns_time / ns_2d},
-          {"soft_nodes_per_point", double(visited) / double(ms)}};
+          {"soft_nodes_per_point", double(visited) / double(ms)},
+          {"ns_soft_bounded", ns_bounded},
+          {"soft_bounded_nodes_per_point", double(visited_b) / double(ms)},
+          {"bounds_s", bounds_s},
+          {"bounds_bytes", sbounds.bytes()},
+          {"sharing",
+           {{"nodes", share.nodes},
+            {"distinct_subtrees", share.unique_subtrees},
+            {"blocks", share.blocks},
+            {"distinct_blocks", share.unique_blocks},
+            {"words", share.words},
+            {"dag_words", share.dag_words},
+            {"block_dag_words", share.block_dag_words},
+            {"repeated_inner_subtrees", share.repeated_inner},
+            {"largest_repeated_words", share.largest_repeated_words}}}};
 }
 
 }  // namespace

@@ -79,11 +79,18 @@ bool Map::region_resident(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, 
 uint32_t Map::slices() const noexcept {
   return map_ && map_->stack_grid() ? map_->stack_grid()->slices : 0;
 }
-float Map::time_visibility(const WorldPoint& world, double time) const noexcept {
-  return map_ ? map_->stack_visibility({world.x, world.y, world.z}, time) : 1.0f;
+float Map::time_visibility(const WorldPoint& world, double time, uint32_t pcf_radius) const noexcept {
+  return map_ ? map_->stack_visibility({world.x, world.y, world.z}, time, pcf_radius) : 1.0f;
 }
-float Map::soft_visibility(const WorldPoint& world) const noexcept {
-  return map_ ? map_->stack_soft_visibility({world.x, world.y, world.z}) : 1.0f;
+float Map::time_visibility_filtered(const WorldPoint& world, double time, float footprint,
+                                    uint32_t pcf_radius) const noexcept {
+  return map_ ? map_->stack_visibility({world.x, world.y, world.z}, time, pcf_radius, footprint) : 1.0f;
+}
+float Map::soft_visibility(const WorldPoint& world, uint32_t pcf_radius) const noexcept {
+  return map_ ? map_->stack_soft_visibility({world.x, world.y, world.z}, pcf_radius) : 1.0f;
+}
+float Map::soft_visibility_filtered(const WorldPoint& world, float footprint, uint32_t pcf_radius) const noexcept {
+  return map_ ? map_->stack_soft_visibility({world.x, world.y, world.z}, pcf_radius, footprint) : 1.0f;
 }
 float Map::slice_depth(uint32_t slice, uint32_t level, uint64_t x, uint64_t y) const noexcept {
   return map_ ? map_->stack_depth(slice, level, x, y) : 1.0f;

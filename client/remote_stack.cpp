@@ -80,14 +80,18 @@ auto RemoteMap::stack_lookup(Fn&& fn) const noexcept {
   return r;
 }
 
-float RemoteMap::stack_visibility(const Vec3d& world, double time) const noexcept {
+float RemoteMap::stack_visibility(const Vec3d& world, double time, uint32_t pcf_radius, float footprint) const noexcept {
   if (!stack_map_) return 1.0f;
-  return stack_lookup([&](const StackMap& m) { return m.visibility(world, time); });
+  if (pcf_radius == 0 && !(footprint > 0))
+    return stack_lookup([&](const StackMap& m) { return m.visibility(world, time); });
+  return stack_lookup([&](const StackMap& m) { return m.visibility_filtered(world, time, pcf_radius, footprint); });
 }
 
-float RemoteMap::stack_soft_visibility(const Vec3d& world) const noexcept {
+float RemoteMap::stack_soft_visibility(const Vec3d& world, uint32_t pcf_radius, float footprint) const noexcept {
   if (!stack_map_) return 1.0f;
-  return stack_lookup([&](const StackMap& m) { return m.soft_visibility(world); });
+  if (pcf_radius == 0 && !(footprint > 0))
+    return stack_lookup([&](const StackMap& m) { return m.soft_visibility(world); });
+  return stack_lookup([&](const StackMap& m) { return m.soft_visibility_filtered(world, pcf_radius, footprint); });
 }
 
 float RemoteMap::stack_depth(uint32_t slice, uint32_t level, uint64_t x, uint64_t y) const noexcept {

@@ -38,6 +38,12 @@ std::string load_table(const LoadResult& r) {
   row("cameras / connections", std::to_string(o.cameras) + " / " + std::to_string(r.connections));
   row("duration (s) / rate (FPS)", fmt("%.1f", o.duration) + " / " + fmt("%.0f", o.rate));
   row("map level / skip level", std::to_string(r.map_level) + " / " + std::to_string(r.skip_level));
+  if (r.slices)
+    row("stack: slices / time", std::to_string(r.slices) + " / " +
+                                    (o.soft ? std::string("soft (every slice)")
+                                     : o.time0 == o.time1 ? fmt("%.3f", o.time0)
+                                                          : fmt("%.3f", o.time0) + ".." + fmt("%.3f", o.time1) + " swept") +
+                                    " (needed cells are slices)");
   row("cache per connection", fmt("%.1f MiB", o.cache_mb) + " (" + std::to_string(r.cache_slots) + " slots of " +
                                   std::to_string(r.slot_bytes) + " B), peak used " + std::to_string(r.peak_slots_used));
   row("prefetch", o.prefetch ? "on" : "off");
@@ -89,6 +95,7 @@ std::string load_json(const LoadResult& r) {
   j["connections"] = {{"connects", r.client.connects}, {"disconnects", r.client.disconnects},
                       {"connect_failures", r.client.connect_failures}};
   j["watcher_poll_ms_max"] = r.watcher_poll_ms_max;
+  if (r.slices) j["stack"] = {{"slices", r.slices}, {"time0", o.time0}, {"time1", o.time1}, {"soft", o.soft}};
   j["map"] = {{"level", r.map_level}, {"skip_level", r.skip_level}, {"cache_slots", r.cache_slots},
               {"slot_bytes", r.slot_bytes}, {"ground", r.world.ground}, {"top", r.world.top},
               {"footprint", {r.world.x0, r.world.z0, r.world.x1, r.world.z1}}};

@@ -10,10 +10,26 @@
 
 #include "client/io_pool.hpp"
 #include "common/error.hpp"
+#include "tiles/core/stack_grid.hpp"
 
 namespace st::loadgen {
 
 using Clock = std::chrono::steady_clock;
+
+void time_slices(double time, uint32_t slices, uint32_t& first, uint32_t& last) {
+  if (slices == 0) {
+    first = last = 0;
+    return;
+  }
+  const double s = std::clamp(std::isnan(time) ? 0.0 : time, 0.0, 1.0) * double(slices - 1);
+  const double near = std::nearbyint(s);
+  if (std::fabs(s - near) <= 1e-9) {
+    first = last = uint32_t(near);
+    return;
+  }
+  first = uint32_t(std::floor(s));
+  last = std::min(first + 1, slices - 1);
+}
 
 double percentile_of(std::vector<double> v, double p) {
   if (v.empty()) return 0;
@@ -30,6 +46,10 @@ std::vector<client::Endpoint> all_endpoints(const LoadOptions& o) {
   std::vector<client::Endpoint> v{o.endpoint};
   v.insert(v.end(), o.replicas.begin(), o.replicas.end());
   return v;
+}
+
+double time_at(const LoadOptions& o, double t) {
+  return o.time0 + (o.time1 - o.time0) * std::clamp(t / o.duration, 0.0, 1.0);
 }
 
 double ms_between(Clock::time_point a, Clock::time_point b) {
@@ -63,8 +83,33 @@ struct Shared {
   double max_lag_ms = 0, visibility_sum = 0;
 };
 
+// A stack map's need is one slice: cell_level kSliceNeed, cx the slice.
+constexpr uint32_t kSliceNeed = 63;
+
 bool resident(const client::Map& m, const CellNeed& c) {
+  if (c.cell_level == kSliceNeed) return m.slices_resident(uint32_t(c.cx), uint32_t(c.cx));
   return m.region_resident(c.level, c.x0(), c.y0(), c.side(), c.side());
+}
+
+CellNeed slice_need(uint32_t w) {
+  CellNeed c;
+  c.level = c.cell_level = kSliceNeed;
+  c.cx = w;
+  return c;
+}
+
+// A stack map's world frame: the level-a map of slice 0 (a <= the skip level's x, y
+// resolution, so no tile is read) in place of the 2D skip grid.
+WorldFrame stack_world_frame(const client::Map& m) {
+  const StackGrid& g = *client::MapAccess::remote(m).stack_grid();
+  const uint32_t a = std::min<uint32_t>(g.geo.xy_bits(g.skip_level), 7);
+  CutGrid grid = CutGrid::constant(a, kLitDepth);
+  for (uint64_t y = 0; y < (uint64_t(1) << a); ++y)
+    for (uint64_t x = 0; x < (uint64_t(1) << a); ++x) grid.entry(x, y).value = m.slice_depth(0, a, x, y);
+  PackHeader h = client::pack_header(m);
+  h.light_kind = g.light_kind;
+  h.light = g.lights[0];
+  return world_frame(h, grid);
 }
 
 // One camera's frame clock and path state. Workers (a few threads, not one per camera)
@@ -100,16 +145,33 @@ void camera_frame(CameraRun& cam, const LoadOptions& o, const WorldFrame& world,
   const uint64_t seg = path.segment(t);
   const bool cut = seg != cam.prev_segment;
   cam.prev_segment = seg;
-  const ViewNeeds needs = view_needs(world, path.at(t), L, grid, o.view);
+  ViewNeeds needs = view_needs(world, path.at(t), L, grid, o.view);
+  const uint32_t slices = map.slices();
+  const double time = time_at(o, t);
+  if (slices) {
+    // A stack map: the slices around the camera's time now, then (prefetch) those around
+    // its time ahead; the view's 2D cells mean nothing here.
+    uint32_t w0 = 0, w1 = slices - 1;
+    if (!o.soft) time_slices(time, slices, w0, w1);
+    needs.cells.clear();
+    for (uint32_t w = w0; w <= w1; ++w) needs.cells.push_back(slice_need(w));
+    map.request_slices(w0, w1, 60000);
+    if (o.prefetch && !o.soft && (cut || (f + cam.id) % kPrefetchEvery == 0))
+      for (size_t k = 0; k < std::size(kPrefetchAhead); ++k) {
+        uint32_t a0, a1;
+        time_slices(time_at(o, t + kPrefetchAhead[k]), slices, a0, a1);
+        map.request_slices(a0, a1, uint16_t(40000 - 10000 * k));
+      }
+  }
   std::vector<ViewNeeds> ahead;
   // Poses ahead move slowly: refresh their requests kPrefetchEvery frames (and at cuts),
   // each camera on its own beat (a fleet of cameras does not prefetch in lockstep).
-  if (o.prefetch && (cut || (f + cam.id) % kPrefetchEvery == 0))
+  if (!slices && o.prefetch && (cut || (f + cam.id) % kPrefetchEvery == 0))
     for (double a : kPrefetchAhead)
       if (t + a < o.duration && path.segment(t + a) == seg)
         ahead.push_back(view_needs(world, path.at(t + a), L, grid, o.view));
 
-  if (cut && cam.alone && f > 0) {
+  if (!slices && cut && cam.alone && f > 0) {
     // The old view is gone: drop queued and in-flight fetches outside the new one
     // (only when no other camera shares this cache).
     uint64_t x0 = ~uint64_t(0), y0 = ~uint64_t(0), x1 = 0, y1 = 0;
@@ -126,7 +188,7 @@ void camera_frame(CameraRun& cam, const LoadOptions& o, const WorldFrame& world,
     else map.cancel_outside(L, 0, 0, 0, 0);
   }
   // Needed now: nearest first, above every prefetch.
-  for (size_t i = 0; i < needs.cells.size(); ++i) {
+  for (size_t i = 0; i < needs.cells.size() && !slices; ++i) {
     const CellNeed& c = needs.cells[i];
     map.request_region(c.level, c.x0(), c.y0(), c.side(), c.side(), uint16_t(60000 - std::min<size_t>(i, 9999)));
   }
@@ -148,7 +210,13 @@ void camera_frame(CameraRun& cam, const LoadOptions& o, const WorldFrame& world,
   const auto t0 = Clock::now();
   // Filtered at each sample's footprint (MH §3.3: the level from the pixel, two levels
   // blended), as a renderer that does not alias in the distance would ask.
-  map.visibility_filtered(points, needs.footprints, answers, 0);
+  if (!slices) {
+    map.visibility_filtered(points, needs.footprints, answers, 0);
+  } else {
+    for (size_t i = 0; i < points.size(); ++i)
+      answers[i] = o.soft ? map.soft_visibility_filtered(points[i], needs.footprints[i])
+                          : map.time_visibility_filtered(points[i], time, needs.footprints[i]);
+  }
   const auto t1 = Clock::now();
   double vis = 0;
   for (float v : answers) vis += v;
@@ -230,6 +298,8 @@ LoadResult run_load(const LoadOptions& o_in) {
   if (!(o.rate > 0 && o.rate <= 1000)) throw Error("load: --rate must be in (0, 1000]");
   if (!(o.duration > 0)) throw Error("load: --duration must be positive");
   if (!(o.cache_mb > 0)) throw Error("load: --cache-mb must be positive");
+  if (!(o.time0 >= 0 && o.time0 <= 1 && o.time1 >= 0 && o.time1 <= 1))
+    throw Error("load: --time / --time-sweep must lie in [0, 1]");
   LoadResult r;
   r.connections = o.connections == 0 ? o.cameras : std::clamp(o.connections, 1u, o.cameras);
 
@@ -266,7 +336,9 @@ LoadResult run_load(const LoadOptions& o_in) {
   r.skip_level = client::skip_grid(m0).levels;
   r.cache_slots = co.cache_slots;
   r.slot_bytes = m0.slot_bytes();
-  r.world = world_frame(client::pack_header(m0), client::skip_grid(m0));
+  r.slices = m0.slices();
+  if (r.slices) r.skip_level = client::MapAccess::remote(m0).stack_grid()->skip_level;
+  r.world = r.slices ? stack_world_frame(m0) : world_frame(client::pack_header(m0), client::skip_grid(m0));
 
   Shared sh;
   sh.pending.resize(r.connections);

@@ -53,7 +53,20 @@ struct LoadOptions {
   uint32_t workers = 0;      // camera threads (0: max(2, cores)); cameras are spread over them
   uint32_t io_threads = 2;   // client I/O threads shared by every connection (client::IoPool)
   ViewOptions view;
+  // Stack maps (a pack with a light set, MH 2016 §4; ignored on 2D maps): each camera's
+  // time runs from time0 at the start to time1 at `duration` (time0 == time1: a fixed
+  // --time); per frame it asks request_slices for the two slices around its time (and,
+  // when prefetching, those around its time kPrefetchAhead seconds on), a frame whose
+  // slices are not all resident has holes, and the lookups are
+  // time_visibility_filtered(point, time, footprint). soft: every slice is needed and the
+  // lookups are soft_visibility_filtered (an area light's soft shadow).
+  double time0 = 0, time1 = 0;
+  bool soft = false;
 };
+
+// The slices [first, last] a stack lookup at `time` reads (StackMap::visibility:
+// s = time * (N - 1); the two around s, one at a sample).
+void time_slices(double time, uint32_t slices, uint32_t& first, uint32_t& last);
 
 inline constexpr double kPrefetchAhead[] = {0.25, 0.5, 1.0};  // seconds
 inline constexpr uint64_t kPrefetchEvery = 6;                   // frames between prefetch rounds
@@ -68,6 +81,7 @@ struct SeriesPoint {
 struct LoadResult {
   LoadOptions options;
   uint32_t connections = 0, map_level = 0, skip_level = 0, cache_slots = 0, slot_bytes = 0;
+  uint32_t slices = 0;  // a stack map's N (0: a 2D map); its cells in the table count slices
   double wall_seconds = 0;
   uint64_t frames = 0, frames_with_holes = 0, frames_late = 0;  // late: started > 1 frame after schedule
   // Frames with holes while the camera's last cut was already fully resident (moving

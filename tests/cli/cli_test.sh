@@ -31,6 +31,19 @@ check stack-inspect 0 "light set    sun-path" -- "$st" inspect stack.pack
 check stack-verify 0 "every texel of all 4 slices" -- "$st" verify stack.pack $scene
 check stack-export 0 "exported slice 2 level 6" -- "$st" export stack.pack --slice 2 --level 6 -o slice.exr
 check stack-export-noslice 1 "stack pack: pass --slice" -- "$st" export stack.pack -o x.exr
+# A stack pack drawn at a time (two slices blended) and soft (every sample averaged), each
+# against rays traced toward the same samples with the same weights: under 1% of the
+# receivers may differ.
+scam="--camera pos=60,40,60,target=0,0,0 --size 96x54"
+check stack-render-time 0 "slices 1 and 2 blended" -- "$st" render stack.pack --scene $scene $scam --time 0.5 -o st.exr
+check stack-render-time-diff 0 "differing pixels: [0-9]+ of [1-9][0-9]+ receivers \(0\.[0-9]+%\)" -- \
+  "$st" render stack.pack --scene $scene $scam --time 0.4 --diff -o st.exr
+check stack-render-soft-diff 0 "differing pixels: [0-9]+ of [1-9][0-9]+ receivers \(0\.[0-9]+%\)" -- \
+  "$st" render stack.pack --scene $scene $scam --soft --pcf 1 --filter --diff -o ss.exr
+[[ -f ss.png && -f ss_traced.png && -f ss_diff.png ]] || { echo "FAIL stack-render outputs missing"; fail=1; }
+check stack-render-both 1 "not both" -- "$st" render stack.pack --scene $scene $scam --time 0.5 --soft -o x.exr
+check stack-render-bad-time 1 "time: expected a time in \[0, 1\]" -- \
+  "$st" render stack.pack --scene $scene $scam --time 1.5 -o x.exr
 check stack-too-big 1 "exceeds the 2\^28 texels" -- "$st" build $scene --light sun-path:azimuth=1..2,elevation=50,samples=64 --resolution 4096 -o x.pack -q
 check verify 0 "OK: 20[0-9]* random texels" -- "$st" verify city.pack $scene --samples 2000
 # Every texel: the re-trace gives the build's canonical bounds bit for bit.
@@ -146,6 +159,25 @@ else
 fi
 kill $spid 2>/dev/null; wait $spid 2>/dev/null
 grep -q "key required, TLS" serve.log || { echo "FAIL serve-keyed: banner lacks 'key required, TLS'"; fail=1; }
+# A stack pack served: the load tester sweeps the time (the slices around it requested as
+# it advances) or reads every slice (--soft); render draws it from the server.
+"$st" serve stack.pack --listen 127.0.0.1:0 2>serve_stack.log &
+spid=$!
+port=$(port_of serve_stack.log)
+if [[ -z "$port" ]]; then echo "FAIL serve-stack: no port in serve_stack.log"; cat serve_stack.log; fail=1
+else
+  check stack-load-sweep 0 "stack: slices / time +4 / 0.000..1.000 swept" -- "$st" load --server 127.0.0.1:$port \
+    --map stack --cameras 2 --duration 1 --rate 30 --time-sweep 0..1
+  check stack-load-soft 0 "soft \(every slice\)" -- "$st" load --server 127.0.0.1:$port --map stack --cameras 1 \
+    --duration 0.5 --rate 30 --soft
+  check stack-load-bad-sweep 1 "time-sweep: '0.2..3': expected a time in \[0, 1\]" -- "$st" load \
+    --server 127.0.0.1:$port --map stack --time-sweep 0.2..3
+  check stack-render-served 0 "differing pixels: [0-9]+ of [1-9][0-9]+ receivers \(0\.[0-9]+%\)" -- \
+    "$st" render --server 127.0.0.1:$port --map stack --scene $scene $scam --time 0.5 --diff -o sr.exr
+fi
+kill $spid 2>/dev/null; wait $spid 2>/dev/null
+check render-time-on-2d 1 "time and --soft need a stack pack" -- \
+  "$st" render city.pack --scene $scene $scam --time 0.5 -o x.exr
 
 # Kill a build mid-way (SIGKILL: no handler runs): nothing under the final name, and the
 # same command with --resume completes it into the same pack as a one-go build.

@@ -80,6 +80,13 @@ TEST(StackLoopback, ServedStackAnswersLikeTheLocalPack) {
     EXPECT_EQ(m.time_visibility(wp, t), local.map().visibility(q, t));
     EXPECT_EQ(m.soft_visibility(wp), local.map().soft_visibility(q));
     EXPECT_EQ(m.visibility(wp), 1.0f);  // the 2D lookup of a stack map: lit
+    // PCF and the footprint level: the local pack's answers; no footprint, no kernel: the
+    // single tap.
+    const float fp = float(3 * next());
+    EXPECT_EQ(m.time_visibility_filtered(wp, t, fp, 1), local.map().visibility_filtered(q, t, 1, fp));
+    EXPECT_EQ(m.soft_visibility_filtered(wp, fp, 2), local.map().soft_visibility_filtered(q, 2, fp));
+    EXPECT_EQ(m.time_visibility(wp, t, 1), local.map().visibility_filtered(q, t, 1, 0));
+    EXPECT_EQ(m.time_visibility_filtered(wp, t, 0), m.time_visibility(wp, t));
   }
   for (uint32_t w = 0; w < slices; w += 3)
     for (uint32_t level = 0; level <= n; level += 2)

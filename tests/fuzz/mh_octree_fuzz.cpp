@@ -72,10 +72,12 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     box.extend({1, 1, 1});
     const st::LightSet set = st::LightSet::fit(spec, box);
     const st::StackLookup look(tree, set);
+    const st::StackBounds bounds(tree);
     st::Rng rng(h);
     for (int i = 0; i < 4; ++i) {
       const st::Vec3d p{rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-1, 1)};
       FUZZ_CHECK(look.soft_visibility(p) == look.soft_visibility_independent(p));
+      FUZZ_CHECK(look.soft_visibility_bounded(p, bounds) == look.soft_visibility_independent(p));
     }
   }
   return 0;

@@ -94,6 +94,7 @@ TEST(StackLookup, SoftVisibilityEqualsIndependentLookupsAndSharesTheWalk) {
   const Built b = build("procedural:hairball,count=12", "area:pos=2,14,1,target=0,0,0,size=3,3,samples=16,jitter=0.5", level);
   const MhOctree tree = MhOctree::open(b.bytes);
   const StackLookup look(tree, b.set);
+  const StackBounds bounds(tree);
   Rng rng(2);
   uint64_t shared_nodes = 0, separate_nodes = 0, penumbra = 0;
   for (int i = 0; i < 2000; ++i) {
@@ -101,6 +102,7 @@ TEST(StackLookup, SoftVisibilityEqualsIndependentLookupsAndSharesTheWalk) {
     const float soft = look.soft_visibility(p);
     shared_nodes += StackLookup::last_nodes_visited();
     ASSERT_EQ(soft, look.soft_visibility_independent(p)) << "point " << i;
+    ASSERT_EQ(soft, look.soft_visibility_bounded(p, bounds)) << "point " << i;  // the early stop
     penumbra += soft > 0 && soft < 1;
     for (uint32_t w = 0; w < b.set.size(); ++w) {
       const LightPoint lp = b.set.samples[w].to_light(p);

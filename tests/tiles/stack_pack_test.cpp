@@ -12,6 +12,8 @@
 #include "tests/tiles/stack_fixtures.hpp"
 #include "tiles/build/mh_octree_encode.hpp"
 #include "tiles/build/stack_pack.hpp"
+#include "tiles/core/evaluator.hpp"
+#include "tiles/core/filter_level.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_reader.hpp"
 #include "tiles/core/stack_lookup.hpp"
@@ -209,6 +211,70 @@ TEST(StackPack, HostileGridsAndTilesAreRefused) {
         FormatError)
         << "byte " << i;
   }
+}
+
+}  // namespace
+}  // namespace st
+
+namespace st {
+namespace {
+
+// PCF and the footprint level on stacks (StackMap::filtered and the _filtered forms): the
+// single tap equals lit bit for bit; a kernel equals its taps counted through depth(); a
+// footprint picks filter_levels' two levels and blends them; the time blend and the soft
+// average are taken of those answers.
+TEST(StackPack, PcfAndFootprintLevelAsIn2D) {
+  const IntervalStack s = stacks::coherent_stack(5, 6, 9);
+  const OctHierarchy h = build_octree(s);
+  const LightSet set = lights(s.slices);
+  auto reader = PackReader::open(write(h, set, std::nullopt, 1024, "filtered.pack"));
+  const ResidentStack rs(*reader);
+  const StackMap& m = rs.map();
+  const uint32_t n = m.xy_level();
+  uint64_t rng = 777;
+  auto next = [&] {
+    rng = rng * 6364136223846793005ull + 1442695040888963407ull;
+    return double(rng >> 11) / double(1ull << 53);
+  };
+  uint32_t partial = 0;
+  for (int i = 0; i < 300; ++i) {
+    const Vec3d p{-10 + 20 * next(), 5 * next(), -10 + 20 * next()};
+    const uint32_t w = uint32_t(next() * s.slices);
+    const double t = next();
+    ASSERT_EQ(m.filtered(p, w, 0, 0), m.lit(p, w) ? 1.0f : 0.0f);
+    ASSERT_EQ(m.visibility_filtered(p, t, 0, 0), m.visibility(p, t));
+    ASSERT_EQ(m.soft_visibility_filtered(p, 0, 0), m.soft_visibility(p));
+    // A 3x3 kernel: its taps, clamped to the slice, counted through depth().
+    uint64_t x, y;
+    float d;
+    m.texel(p, w, x, y, d);
+    uint32_t lit = 0;
+    for (uint32_t j = 0; j < 3; ++j)
+      for (uint32_t k = 0; k < 3; ++k)
+        lit += d <= m.depth(pcf_tap(x, k, 3, uint64_t(1) << n), pcf_tap(y, j, 3, uint64_t(1) << n), w, n);
+    const float pcf = m.filtered(p, w, 1, 0);
+    ASSERT_EQ(pcf, float(lit) / 9.0f);
+    partial += pcf > 0 && pcf < 1;
+    // A footprint of about 2.5 finest texels (a sun's texel is extent_uv / 2^n world
+    // units): levels n - 1 and n - 2, blended by about 0.25.
+    const LightSpace& ls = m.grid().light(w);
+    const double texel = ls.extent_uv() / double(uint64_t(1) << n);
+    const LightPoint lp = ls.to_light(p);
+    auto tap = [&](uint32_t level) {
+      const auto tt = LightSpace::texel_of(level, lp.u, lp.v);
+      return float(lp.d) <= m.depth(tt[0], tt[1], w, level) ? 1.0f : 0.0f;
+    };
+    const float fp = float(2.5 * texel);
+    const FilterLevels f = filter_levels(n, float(double(fp) / texel));
+    ASSERT_EQ(f.fine, n - 1);
+    ASSERT_NEAR(f.t, 0.25f, 1e-5f);
+    ASSERT_EQ(m.filtered(p, w, 0, fp), filter_blend(tap(n - 1), tap(n - 2), f.t));
+    // The whole slice or more: level 0, one tap.
+    ASSERT_EQ(m.filtered(p, w, 0, float(1e6 * texel)), tap(0));
+    const float v = m.visibility_filtered(p, t, 1, fp);
+    ASSERT_TRUE(v >= 0 && v <= 1);
+  }
+  EXPECT_GT(partial, 0u);  // some kernels straddle a shadow edge
 }
 
 }  // namespace

@@ -145,6 +145,32 @@ float SceneTracer::traced(const Receiver& r, const Vec3d& offset) const {
 }
 
 namespace {
+Vec3d toward(const LightSpace& light, const Vec3d& p) {
+  return light.kind() == LightKind::sun ? -light.forward() : normalize(light.origin() - p);
+}
+}  // namespace
+
+bool faces(const Receiver& r, const LightSpace& light) { return r.hit && dot(r.normal, toward(light, r.pos)) > 0; }
+
+float SceneTracer::traced_toward(const Receiver& r, const LightSpace& light) const {
+  if (!r.hit || r.n_dot_l <= 0) return 0;
+  const Vec3d dir = toward(light, r.pos);
+  if (dot(r.normal, dir) <= 0) return 0;  // facing away from this sample
+  const Vec3d org = r.pos - impl_->centre + r.normal * (1e-5 * impl_->scale);
+  RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  RTCRay ray{};
+  ray.org_x = float(org.x), ray.org_y = float(org.y), ray.org_z = float(org.z);
+  ray.dir_x = float(dir.x), ray.dir_y = float(dir.y), ray.dir_z = float(dir.z);
+  ray.tnear = 0;
+  ray.tfar = light.kind() == LightKind::sun ? std::numeric_limits<float>::infinity()
+                                             : float(length(light.origin() - r.pos) * (1 - 1e-6));
+  ray.mask = ~0u;
+  rtcOccluded1(impl_->scene, &ctx, &ray);
+  return ray.tfar == -std::numeric_limits<float>::infinity() ? 0.0f : 1.0f;
+}
+
+namespace {
 double process_cpu_seconds() {
   timespec ts;
   clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
@@ -288,6 +314,131 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
       if (ray_lit) px[0] = 1, px[1] = 0.1f, px[2] = 0.1f;  // map says shadow, rays say lit
       else px[0] = 0.1f, px[1] = 0.3f, px[2] = 1;          // map says lit, rays say shadow
     }
+  }
+  res.visibility = std::move(vis);
+  return res;
+}
+
+namespace {
+
+// render_view's shading: sky, ambient + Lambert times visibility.
+void shade_image(const std::vector<Receiver>& rec, const std::vector<float>& v, double ambient, std::vector<float>& img) {
+  const size_t n = rec.size();
+  img.assign(n * 3, 0);
+  for (size_t i = 0; i < n; ++i) {
+    float* px = &img[3 * i];
+    if (!rec[i].hit) {
+      px[0] = 0.55f, px[1] = 0.7f, px[2] = 0.9f;  // sky
+      continue;
+    }
+    const double c = ambient + (1 - ambient) * std::max(0.0, rec[i].n_dot_l) * v[i];
+    const float albedo[3] = {rec[i].closed ? 0.8f : 0.6f, rec[i].closed ? 0.78f : 0.7f, rec[i].closed ? 0.72f : 0.55f};
+    for (int k = 0; k < 3; ++k) px[k] = float(albedo[k] * c);
+  }
+}
+
+}  // namespace
+
+RenderResult render_stack_view(const SceneTracer& tracer, const std::vector<Receiver>& rec,
+                               const std::vector<LightSpace>& samples, uint32_t L, const StackMapLookups& map,
+                               const StackRenderOptions& o) {
+  if (rec.size() != size_t(o.width) * o.height) throw Error("render: receiver count does not match the image size");
+  if (samples.empty()) throw Error("render: the light set has no samples");
+  if (o.pcf_radius > (Evaluator::kMaxPcf - 1) / 2) throw Error("render: --pcf must be at most 4");
+  RenderResult res;
+  res.width = o.width, res.height = o.height;
+  const size_t n = rec.size();
+  const LightSpace& light = tracer.light();
+  std::vector<float> vis(n, 0), tvis;
+  // The samples read and their weights (StackMap::visibility's a and f).
+  const uint32_t ns = uint32_t(samples.size());
+  const double s = std::clamp(std::isnan(o.time) ? 0.0 : o.time, 0.0, 1.0) * double(ns - 1);
+  const bool at_sample = std::fabs(s - std::nearbyint(s)) <= 1e-9;
+  const uint32_t a = at_sample ? uint32_t(std::nearbyint(s)) : uint32_t(std::floor(s));
+  const float f = float(s - double(a));
+  const uint32_t w0 = o.soft ? 0 : a, w1 = o.soft ? ns - 1 : at_sample ? a : a + 1;
+  using Clk = std::chrono::steady_clock;
+  auto t0 = Clk::now();
+  double c0 = process_cpu_seconds();
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1024), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i < r.end(); ++i) {
+      const Receiver& rc = rec[i];
+      if (!rc.hit || rc.n_dot_l <= 0) continue;  // vis 0
+      uint32_t level = L;
+      float footprint = 0;
+      if (o.pixel_angle > 0) {
+        level = filter_levels(L, receiver_footprint_texels(rc, light, L, o.pixel_angle)).fine;
+        footprint = float(rc.distance * o.pixel_angle);
+      }
+      // lookup_point's normal offset, kept in world space (each sample projects it).
+      const double texel = (light.kind() == LightKind::sun ? light.extent_uv()
+                                                           : length(rc.pos - light.origin()) * light.extent_uv()) /
+                           double(uint64_t(1) << level);
+      const Vec3d p =
+          rc.pos + rc.normal * ((rc.closed ? kClosedReceiverOffsetTexels : kOpenReceiverOffsetTexels) + o.pcf_radius) * texel;
+      bool all_face = true;
+      for (uint32_t w = w0; w <= w1 && all_face; ++w) all_face = faces(rc, samples[w]);
+      if (all_face) {
+        vis[i] = map.all(p, footprint);
+        continue;
+      }
+      auto one = [&](uint32_t w) { return faces(rc, samples[w]) ? map.sample(p, w, footprint) : 0.0f; };
+      if (o.soft) {
+        float sum = 0;
+        for (uint32_t w = 0; w < ns; ++w) sum += one(w);
+        vis[i] = sum / float(ns);
+      } else if (at_sample) {
+        vis[i] = one(a);
+      } else {
+        const float va = one(a), vb = one(a + 1);
+        vis[i] = va + f * (vb - va);
+      }
+    }
+  });
+  res.map_seconds = std::chrono::duration<double>(Clk::now() - t0).count();
+  res.map_cpu_seconds = process_cpu_seconds() - c0;
+  if (o.diff) {
+    tvis.assign(n, 0);
+    t0 = Clk::now();
+    c0 = process_cpu_seconds();
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 256), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i < r.end(); ++i) {
+        if (o.soft) {
+          float sum = 0;
+          for (uint32_t w = 0; w < ns; ++w) sum += tracer.traced_toward(rec[i], samples[w]);
+          tvis[i] = sum / float(ns);
+        } else if (at_sample) {
+          tvis[i] = tracer.traced_toward(rec[i], samples[a]);
+        } else {
+          const float ta = tracer.traced_toward(rec[i], samples[a]), tb = tracer.traced_toward(rec[i], samples[a + 1]);
+          tvis[i] = ta + f * (tb - ta);
+        }
+      }
+    });
+    res.traced_seconds = std::chrono::duration<double>(Clk::now() - t0).count();
+    res.traced_cpu_seconds = process_cpu_seconds() - c0;
+  }
+  shade_image(rec, vis, o.ambient, res.image);
+  for (size_t i = 0; i < n; ++i) res.receivers += rec[i].hit && rec[i].n_dot_l > 0;
+  if (o.diff) {
+    shade_image(rec, tvis, o.ambient, res.traced_image);
+    res.diff_image.assign(n * 3, 0);
+    double abs_sum = 0;
+    for (size_t i = 0; i < n; ++i) {
+      float* px = &res.diff_image[3 * i];
+      const float g = rec[i].hit ? 0.25f + 0.25f * float(std::max(0.0, rec[i].n_dot_l)) : 0.05f;
+      px[0] = px[1] = px[2] = g;
+      if (!rec[i].hit || rec[i].n_dot_l <= 0) continue;
+      const float d = vis[i] - tvis[i];
+      abs_sum += std::fabs(d);
+      res.differing += (vis[i] >= 0.5f) != (tvis[i] >= 0.5f);
+      if (d == 0) continue;
+      const float m = std::min(1.0f, std::fabs(d));
+      // Red: the map darker than the rays; blue: lighter (by how much, not only where).
+      if (d < 0) px[0] = g + (1 - g) * m, px[1] = g * (1 - m), px[2] = g * (1 - m);
+      else px[0] = g * (1 - m), px[1] = g + (0.3f - g) * m, px[2] = g + (1 - g) * m;
+    }
+    res.mean_abs_difference = res.receivers ? abs_sum / double(res.receivers) : 0;
   }
   res.visibility = std::move(vis);
   return res;

@@ -23,6 +23,7 @@
 // from many threads). Errors: st::Error (Embree failure, bad sizes, I/O).
 #pragma once
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -59,6 +60,9 @@ class SceneTracer {
   // reaches the light, else 0. `offset` moves the ray's start (world units; for
   // supersampled PCF references across a kernel's footprint).
   float traced(const Receiver& r, const Vec3d& offset = {}) const;
+  // The same shadow ray toward another light (a sample of a light set: stack packs);
+  // 0 off surfaces facing away from this tracer's light, as traced().
+  float traced_toward(const Receiver& r, const LightSpace& light) const;
   // Direction toward the light from a world point.
   Vec3d to_light(const Vec3d& p) const;
   const LightSpace& light() const { return light_; }
@@ -116,10 +120,46 @@ struct RenderResult {
   // steadier measure of what each costs than the wall times above.
   double map_cpu_seconds = 0, traced_cpu_seconds = 0;
   double differing_fraction() const { return receivers ? double(differing) / double(receivers) : 0; }
+  double mean_abs_difference = 0;   // over the receivers, |map - traced| (diff only)
 };
 
 RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>& receivers, const Evaluator& eval,
                          const RenderOptions& options);
+
+// Stack packs (MH 2016 §4): the view under a light set, at a time or soft. `samples` are
+// the set's light spaces (slice w = sample w); the tracer's own light shades (n.l, the
+// light-facing test) and sizes the receivers' normal offset, as in render_view (the
+// caller passes the sample nearest the time, or the middle sample for soft shadows).
+// `map.all(p, footprint)` is the map's answer at the world lookup point p (the receiver
+// moved along its normal as lookup_point does), footprint the pixel's side in world units
+// (0 without --filter): a StackMap's visibility_filtered / soft_visibility_filtered or the
+// client's time_visibility_filtered / soft_visibility_filtered; `map.sample(p, w,
+// footprint)` the same for sample w alone. A sample whose light the receiver faces away
+// from is unlit whatever the map says (as render_view's n.l <= 0 for one light): where
+// every sample read faces the receiver, map.all answers; elsewhere the render combines
+// map.sample answers with those samples at 0 (the same blend, the same sum / N). With
+// diff, the traced image uses the same samples and weights: at time t,
+// (1 - f) * ray(a) + f * ray(a + 1) with StackMap::visibility's a and f (one ray at a
+// sample); soft, the mean of N rays (0 toward a sample the receiver faces away from). A
+// pixel differs when the two answers fall on opposite sides of 0.5.
+struct StackRenderOptions {
+  uint32_t width = 960, height = 540;
+  uint32_t pcf_radius = 0;
+  double pixel_angle = 0;
+  bool soft = false;  // else `time`
+  double time = 0;
+  bool diff = false;
+  double ambient = 0.15;
+};
+struct StackMapLookups {
+  std::function<float(const Vec3d& p, float footprint_world)> all;
+  std::function<float(const Vec3d& p, uint32_t w, float footprint_world)> sample;
+};
+RenderResult render_stack_view(const SceneTracer& tracer, const std::vector<Receiver>& receivers,
+                               const std::vector<LightSpace>& samples, uint32_t map_level,
+                               const StackMapLookups& map, const StackRenderOptions& options);
+// Whether a receiver faces a light (n.l > 0 toward it).
+bool faces(const Receiver& r, const LightSpace& light);
 
 // RGB float EXR (channels R, G, B; ZIP) and an 8-bit PNG (clamped, sRGB-ish gamma 2.2).
 void write_rgb_exr(const std::string& path, uint32_t width, uint32_t height, const std::vector<float>& rgb);

@@ -13,6 +13,29 @@ thread_local uint64_t t_visited = 0;
 
 }  // namespace
 
+namespace {
+
+StackBounds::Range fill_bounds(const MhOctree& t, const MhOctree::Cursor& c, std::vector<StackBounds::Range>& out) {
+  const float v = t.value(c);
+  StackBounds::Range r{v, v};
+  MhOctree::Cursor ch;
+  for (uint32_t slot = 0; slot < moct::kSlots; ++slot)
+    if (t.child(c, slot, ch)) {
+      const StackBounds::Range b = fill_bounds(t, ch, out);
+      r.lo = std::min(r.lo, b.lo), r.hi = std::max(r.hi, b.hi);
+    }
+  out[c.pos] = r;
+  return r;
+}
+
+}  // namespace
+
+StackBounds::StackBounds(const MhOctree& octree) {
+  const size_t words = (octree.byte_size() - moct::tree_offset(octree.geometry().levels())) / 4;
+  range_.assign(std::max<size_t>(words, 1), {});
+  fill_bounds(octree, octree.root(), range_);  // recursion depth <= kMaxLevels
+}
+
 StackLookup::StackLookup(const MhOctree& octree, const LightSet& lights) : tree_(octree), lights_(lights) {
   if (lights.size() != octree.slices())
     throw Error("stack lookup: the light set has " + std::to_string(lights.size()) + " samples, the octree " +
@@ -54,6 +77,43 @@ float StackLookup::soft_visibility_independent(const Vec3d& p) const noexcept {
   uint32_t lit_samples = 0;
   for (uint32_t w = 0; w < tree_.slices(); ++w) lit_samples += lit(p, w);
   return float(lit_samples) / float(tree_.slices());
+}
+
+float StackLookup::soft_visibility_bounded(const Vec3d& p, const StackBounds& bounds) const noexcept {
+  const moct::Geometry& g = tree_.geometry();
+  const uint32_t n = tree_.slices(), L = g.depth();
+  uint32_t lit_samples = 0;
+  uint64_t steps = 0;
+  for (uint32_t w = 0; w < n; ++w) {
+    const LightPoint lp = lights_.samples[w].to_light(p);
+    const auto t = LightSpace::texel_of(g.n, lp.u, lp.v);
+    const float d = float(lp.d);
+    MhOctree::Cursor c = tree_.root(), next;
+    for (;;) {
+      const StackBounds::Range& r = bounds.at(c.pos);
+      if (d <= r.lo) {
+        ++lit_samples;
+        break;
+      }
+      if (d > r.hi) break;
+      uint32_t slot = 0;
+      if (c.level < L) {
+        if (g.splits_xy(c.level)) {
+          const uint32_t b = g.n - g.xy_bits(c.level + 1);
+          slot = uint32_t((t[0] >> b) & 1) | uint32_t((t[1] >> b) & 1) << 1;
+        }
+        if (g.splits_w(c.level)) slot |= uint32_t((w >> (g.k - g.w_bits(c.level + 1))) & 1) << 2;
+      }
+      if (c.level >= L || !tree_.child(c, slot, next)) {
+        lit_samples += d <= tree_.value(c);
+        break;
+      }
+      c = next;
+      ++steps;
+    }
+  }
+  t_visited = steps + n;
+  return float(lit_samples) / float(n);
 }
 
 uint64_t StackLookup::last_nodes_visited() noexcept { return t_visited; }

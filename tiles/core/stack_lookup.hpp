@@ -25,11 +25,30 @@
 // borrowed and must outlive the lookup.
 #pragma once
 #include <cstdint>
+#include <vector>
 
 #include "tiles/core/light_set.hpp"
 #include "tiles/core/mh_octree.hpp"
 
 namespace st {
+
+// Per-node bounds of the depths the texels under an octree node can read (the node's own
+// or inherited value, and every value below it), computed by one walk when made: 8 bytes
+// per tree word, not stored in the format. They let a lookup stop at the first node
+// where a receiver depth lies at or below every such value (lit) or above all of them
+// (shadowed): StackLookup::soft_visibility_bounded. Throws nothing but std::bad_alloc.
+class StackBounds {
+ public:
+  explicit StackBounds(const MhOctree& octree);
+  struct Range {
+    float lo = 0, hi = 0;
+  };
+  const Range& at(uint64_t word) const { return range_[word]; }
+  size_t bytes() const { return range_.size() * sizeof(Range); }
+
+ private:
+  std::vector<Range> range_;  // by the node's first word
+};
 
 class StackLookup {
  public:
@@ -41,6 +60,10 @@ class StackLookup {
   float soft_visibility(const Vec3d& p) const noexcept;
   // The same fraction from N independent walks (the reference and the benchmark's baseline).
   float soft_visibility_independent(const Vec3d& p) const noexcept;
+  // The same fraction again, each sample's walk stopping at the first node whose bounds
+  // decide its lit test (`bounds` made from this lookup's octree). Equal to
+  // soft_visibility bit for bit (tested): d <= lo <= the texel's value, or d > hi >= it.
+  float soft_visibility_bounded(const Vec3d& p, const StackBounds& bounds) const noexcept;
 
   // Tree nodes the last soft_visibility call on this thread visited (benchmark figure).
   static uint64_t last_nodes_visited() noexcept;

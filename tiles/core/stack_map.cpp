@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "tiles/core/evaluator.hpp"
+#include "tiles/core/filter_level.hpp"
 #include "tiles/core/interval.hpp"
 
 namespace st {
@@ -70,6 +72,53 @@ float StackMap::soft_visibility(const Vec3d& p, bool* exact) const {
   uint32_t lit_samples = 0;
   for (uint32_t w = 0; w < grid_.slices; ++w) lit_samples += lit(p, w, exact);
   return float(lit_samples) / float(grid_.slices);
+}
+
+float StackMap::filtered(const Vec3d& p, uint32_t w, uint32_t pcf_radius, float footprint, bool* exact) const {
+  if (w >= grid_.slices) return 1.0f;
+  const uint32_t n = grid_.geo.n;
+  const LightSpace& ls = lights_[w];
+  const LightPoint lp = ls.to_light(p);
+  const float d = float(lp.d);
+  const uint32_t r = 2 * std::min<uint32_t>(pcf_radius, (Evaluator::kMaxPcf - 1) / 2) + 1;
+  FilterLevels f{n, n, 0.0f};
+  if (footprint > 0) {
+    // One finest texel's side in world units at p (a spot's grows with the distance).
+    const double texel = (ls.kind() == LightKind::sun ? ls.extent_uv() : length(p - ls.origin()) * ls.extent_uv()) /
+                         std::ldexp(1.0, int(n));
+    f = filter_levels(n, float(double(footprint) / texel));
+  }
+  auto kernel = [&](uint32_t level) {
+    const auto t = LightSpace::texel_of(level, lp.u, lp.v);
+    if (r == 1) return d <= depth(t[0], t[1], w, level, exact) ? 1.0f : 0.0f;
+    const uint64_t side = uint64_t(1) << level;
+    uint32_t lit_taps = 0;
+    for (uint32_t j = 0; j < r; ++j)
+      for (uint32_t i = 0; i < r; ++i)
+        lit_taps += d <= depth(pcf_tap(t[0], i, r, side), pcf_tap(t[1], j, r, side), w, level, exact);
+    return float(lit_taps) / float(r * r);
+  };
+  const float a = kernel(f.fine);
+  if (f.t == 0.0f) return a;
+  return filter_blend(a, kernel(f.coarse), f.t);
+}
+
+float StackMap::visibility_filtered(const Vec3d& p, double time, uint32_t pcf_radius, float footprint,
+                                    bool* exact) const {
+  const uint32_t n = grid_.slices;
+  const double s = std::clamp(std::isnan(time) ? 0.0 : time, 0.0, 1.0) * double(n - 1);
+  const double near = std::nearbyint(s);
+  if (std::fabs(s - near) <= 1e-9) return filtered(p, uint32_t(near), pcf_radius, footprint, exact);
+  const uint32_t a = uint32_t(std::floor(s));
+  const float f = float(s - double(a));
+  const float va = filtered(p, a, pcf_radius, footprint, exact), vb = filtered(p, a + 1, pcf_radius, footprint, exact);
+  return va + f * (vb - va);
+}
+
+float StackMap::soft_visibility_filtered(const Vec3d& p, uint32_t pcf_radius, float footprint, bool* exact) const {
+  float sum = 0;
+  for (uint32_t w = 0; w < grid_.slices; ++w) sum += filtered(p, w, pcf_radius, footprint, exact);
+  return sum / float(grid_.slices);
 }
 
 }  // namespace st

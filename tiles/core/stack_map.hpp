@@ -40,6 +40,20 @@ class StackMap {
   float visibility(const Vec3d& p, double time, bool* exact = nullptr) const;
   float soft_visibility(const Vec3d& p, bool* exact = nullptr) const;
 
+  // PCF and the footprint level, as the 2D lookups (Evaluator::pcf / pcf_footprint,
+  // filter_level.hpp): the fraction of the r x r kernel (r = 2 * pcf_radius + 1,
+  // pcf_radius <= 4, taps clamped to the slice's edges) around p's texel in slice w whose
+  // taps are lit for p's receiver depth; with footprint > 0 (world units: the side of the
+  // receiver's pixel footprint) at the two levels where one texel of slice w is about that
+  // wide, blended trilinearly (filter_levels, filter_blend). pcf_radius 0 with footprint
+  // <= one finest texel is lit(p, w) exactly (1 or 0).
+  float filtered(const Vec3d& p, uint32_t w, uint32_t pcf_radius, float footprint, bool* exact = nullptr) const;
+  // visibility / soft_visibility with filtered() in place of lit(): the same time blend
+  // (exact at the samples) and the same average over the N samples (sum in float / N).
+  float visibility_filtered(const Vec3d& p, double time, uint32_t pcf_radius, float footprint,
+                            bool* exact = nullptr) const;
+  float soft_visibility_filtered(const Vec3d& p, uint32_t pcf_radius, float footprint, bool* exact = nullptr) const;
+
  private:
   const StackGrid& grid_;
   TileSource tile_;

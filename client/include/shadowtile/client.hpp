@@ -254,9 +254,18 @@ class Map {
   // tile is queued at miss_priority; request_slices prefetches the tiles of slices
   // [w0, w1] (the next ones a day-night cycle needs) and slices_resident says when the
   // answers there are exact. noexcept, no allocation, as the 2D lookups.
+  // PCF and footprint level as in 2D (visibility / visibility_filtered above): each
+  // sample's answer is the fraction of a (2 * pcf_radius + 1)^2 kernel of its slice
+  // (pcf_radius <= 4), and with the _filtered forms at the two levels of the slice where
+  // one texel is about `footprint` world units wide, blended; the time blend and the
+  // average over samples are then taken of those fractions. pcf_radius 0 with no
+  // footprint is the single-tap lookup, bit for bit.
   uint32_t slices() const noexcept;
-  float time_visibility(const WorldPoint& world, double time) const noexcept;
-  float soft_visibility(const WorldPoint& world) const noexcept;
+  float time_visibility(const WorldPoint& world, double time, uint32_t pcf_radius = 0) const noexcept;
+  float time_visibility_filtered(const WorldPoint& world, double time, float footprint,
+                                 uint32_t pcf_radius = 0) const noexcept;
+  float soft_visibility(const WorldPoint& world, uint32_t pcf_radius = 0) const noexcept;
+  float soft_visibility_filtered(const WorldPoint& world, float footprint, uint32_t pcf_radius = 0) const noexcept;
   float slice_depth(uint32_t slice, uint32_t level, uint64_t x, uint64_t y) const noexcept;
   size_t request_slices(uint32_t w0, uint32_t w1, uint16_t priority) noexcept;
   bool slices_resident(uint32_t w0, uint32_t w1) const noexcept;

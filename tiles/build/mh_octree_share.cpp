@@ -1,0 +1,88 @@
+#include "tiles/build/mh_octree_share.hpp"
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <unordered_map>
+#include <vector>
+
+namespace st {
+namespace {
+
+// A subtree: kind, value bits, slot mask and its children's subtree ids (slot order).
+// A block: the same without the node's own value and kind.
+using Key = std::array<uint32_t, 10>;
+
+struct KeyHash {
+  size_t operator()(const Key& k) const noexcept {
+    uint64_t h = 0x9E3779B97F4A7C15ull;
+    for (uint32_t v : k) h = (h ^ v) * 0xff51afd7ed558ccdull, h ^= h >> 32;
+    return size_t(h);
+  }
+};
+
+uint32_t own_words(const OctNode& n) { return n.has_value && n.child_mask ? 2 : 1; }
+
+}  // namespace
+
+OctreeSharing measure_octree_sharing(const OctHierarchy& h) {
+  OctreeSharing s;
+  std::unordered_map<Key, uint32_t, KeyHash> subtree_ids, block_ids;
+  std::vector<uint64_t> subtree_words;  // per subtree id: words of the whole subtree
+  std::vector<uint32_t> occurrences;    // per subtree id
+  std::vector<uint8_t> has_children;    // per subtree id
+  std::vector<uint8_t> own;             // per subtree id: the node's own words
+  std::vector<uint32_t> below, here;    // ids of the nodes of level l + 1, of level l
+  for (size_t l = h.levels.size(); l-- > 0;) {
+    const std::vector<OctNode>& level = h.levels[l];
+    here.assign(level.size(), 0);
+    size_t next = 0;
+    for (size_t j = 0; j < level.size(); ++j) {
+      const OctNode& n = level[j];
+      Key block{};
+      block[0] = n.child_mask;
+      uint64_t words = own_words(n), slot = 0;
+      for (uint32_t c = 0; c < 8; ++c)
+        if (n.child_mask >> c & 1) {
+          const uint32_t id = below[next++];
+          block[2 + slot++] = id + 1;  // 0: no child
+          words += subtree_words[id];
+        }
+      Key key = block;
+      key[1] = n.has_value ? std::bit_cast<uint32_t>(n.value) : 0;
+      key[0] |= uint32_t(n.has_value) << 8;
+      auto [it, fresh] = subtree_ids.try_emplace(key, uint32_t(subtree_words.size()));
+      if (fresh) {
+        subtree_words.push_back(words);
+        occurrences.push_back(0);
+        has_children.push_back(n.child_mask != 0);
+        own.push_back(uint8_t(own_words(n)));
+        s.dag_words += own_words(n);
+      }
+      ++occurrences[it->second];
+      here[j] = it->second;
+      ++s.nodes;
+      s.words += own_words(n);
+      if (n.child_mask) {
+        ++s.blocks;
+        if (block_ids.try_emplace(block, uint32_t(block_ids.size())).second) {
+          // A new block: its children's own words (their blocks are counted as blocks).
+          for (uint32_t i = 0; i < slot; ++i) s.block_dag_words += own[block[2 + i] - 1];
+        }
+      }
+    }
+    below.swap(here);
+  }
+  // Block-shared words: the root, plus every distinct block's children once.
+  if (!h.levels.empty() && !h.levels[0].empty()) s.block_dag_words += own_words(h.levels[0][0]);
+  for (size_t id = 0; id < occurrences.size(); ++id)
+    if (occurrences[id] > 1 && has_children[id]) {
+      ++s.repeated_inner;
+      s.largest_repeated_words = std::max(s.largest_repeated_words, subtree_words[id]);
+    }
+  s.unique_subtrees = subtree_words.size();
+  s.unique_blocks = block_ids.size();
+  return s;
+}
+
+}  // namespace st
