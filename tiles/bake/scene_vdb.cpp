@@ -1,0 +1,227 @@
+// load_vdb_volume: one float grid of an OpenVDB file as a dense st::Volume (the rules are
+// in scene_volumes.hpp). The only file of the project that includes OpenVDB; without it
+// (SHADOWTILE_OPENVDB=OFF) every .vdb scene fails with one line saying so.
+#include "tiles/bake/scene_volumes.hpp"
+
+#ifdef SHADOWTILE_HAVE_OPENVDB
+#include <openvdb/io/File.h>
+#include <openvdb/openvdb.h>
+#endif
+
+#include <algorithm>
+#include <cmath>
+#include <exception>
+#include <filesystem>
+#include <mutex>
+#include <new>
+#include <system_error>
+
+#include "common/error.hpp"
+#include "common/text.hpp"
+
+namespace st {
+
+#ifndef SHADOWTILE_HAVE_OPENVDB
+
+bool vdb_supported() { return false; }
+
+Volume load_vdb_volume(const std::string& path, const VdbOptions&) {
+  throw Error(path + ": this shadowtile was built without OpenVDB (install libopenvdb-dev, "
+                     "reconfigure with SHADOWTILE_OPENVDB=ON)");
+}
+
+#else
+
+bool vdb_supported() { return true; }
+
+namespace {
+
+// Where one axis of the output (world, +Y up) comes from: the grid's world axis `src`,
+// negated when `sign` < 0 (UpAxis::z turns (x, y, z) into (x, z, -y), like mesh files).
+struct AxisMap {
+  int src[3];
+  double sign[3];
+};
+AxisMap axis_map(UpAxis up) {
+  if (up == UpAxis::z) return {{0, 2, 1}, {1, 1, -1}};
+  return {{0, 1, 2}, {1, 1, 1}};
+}
+
+std::string coord_text(const openvdb::Coord& c) {
+  return "(" + std::to_string(c.x()) + ", " + std::to_string(c.y()) + ", " + std::to_string(c.z()) + ")";
+}
+
+// Voxels of a box [lo, hi] (inclusive), saturating instead of overflowing.
+uint64_t box_voxels(const openvdb::Coord& lo, const openvdb::Coord& hi) {
+  uint64_t n = 1;
+  for (int k = 0; k < 3; ++k) {
+    if (hi[k] < lo[k]) return 0;
+    const uint64_t d = uint64_t(int64_t(hi[k]) - int64_t(lo[k]) + 1);
+    n = n > UINT64_MAX / d ? UINT64_MAX : n * d;
+  }
+  return n;
+}
+
+[[noreturn]] void fail(const std::string& where, const std::string& what) {
+  throw Error(where + ": " + what);
+}
+
+void check_budget(const std::string& where, uint64_t voxels, const openvdb::Coord& lo,
+                  const openvdb::Coord& hi, uint64_t budget, const char* from) {
+  if (voxels > budget)
+    fail(where, "active bounding box " + coord_text(lo) + " .. " + coord_text(hi) + " (" + from +
+                    ") holds " + std::to_string(voxels) + " voxels, over the dense budget of " +
+                    std::to_string(budget) + " (max_voxels=N raises it up to " +
+                    std::to_string(kVdbMaxVoxels) + ")");
+}
+
+Volume read_grid(const std::string& path, const VdbOptions& o) {
+  const std::string where = "vdb '" + printable_text(path) + "' grid '" + printable_text(o.grid) + "'";
+  {
+    std::error_code ec;
+    const auto status = std::filesystem::status(path, ec);
+    if (ec || !std::filesystem::exists(status)) throw Error("scene file not found: " + printable_text(path));
+    if (!std::filesystem::is_regular_file(status))
+      throw Error("scene path is not a regular file: " + printable_text(path));
+  }
+  static std::once_flag once;
+  std::call_once(once, [] { openvdb::initialize(); });
+
+  openvdb::io::File file(path);
+  file.open(false);  // no delayed loading: the whole grid is read here, not mapped lazily
+  if (!file.hasGrid(o.grid)) {
+    std::string names;
+    int listed = 0;
+    for (auto it = file.beginName(); it != file.endName() && listed < 8; ++it, ++listed)
+      names += (names.empty() ? "" : ", ") + printable_text(it.gridName());
+    fail(where, "no such grid in the file (grids: " + (names.empty() ? "none" : names) + "); pick one with grid=NAME");
+  }
+  // Type, class, transform and the writer's statistics, before any voxel is read.
+  const openvdb::GridBase::Ptr meta = file.readGridMetadata(o.grid);
+  if (!meta->isType<openvdb::FloatGrid>())
+    fail(where, "is a grid of " + printable_text(meta->valueType()) + ", not float (a density grid is a FloatGrid)");
+  if (meta->getGridClass() == openvdb::GRID_LEVEL_SET)
+    fail(where, "is a level set (a signed distance), not a density (fog volume) grid");
+  const openvdb::math::MapBase::ConstPtr map = meta->transform().baseMap();
+  if (!map->isLinear())
+    fail(where, "has a non-linear (" + map->type() + ", e.g. frustum) transform; only scale + translate grids are read");
+  const openvdb::math::Mat4d m = map->getAffineMap()->getMat4();
+  // OpenVDB maps row vectors: world_k = sum_i index_i m(i, k) + m(3, k).
+  double scale[3], shift[3], largest = 0;
+  for (int k = 0; k < 3; ++k) {
+    scale[k] = m(k, k), shift[k] = m(3, k);
+    largest = std::max(largest, std::fabs(scale[k]));
+    if (!std::isfinite(scale[k]) || scale[k] == 0 || !std::isfinite(shift[k]))
+      fail(where, "its transform has a zero or non-finite voxel size or translation");
+  }
+  for (int i = 0; i < 3; ++i)
+    for (int k = 0; k < 3; ++k)
+      if (i != k && !(std::fabs(m(i, k)) <= 1e-9 * largest))
+        fail(where, "its transform rotates or shears the index axes; only axis-aligned (scale + "
+                    "translate) grids are read: resample it axis-aligned");
+  {
+    using V3 = openvdb::Vec3IMetadata;
+    const auto lo = meta->getMetadata<V3>(openvdb::GridBase::META_FILE_BBOX_MIN);
+    const auto hi = meta->getMetadata<V3>(openvdb::GridBase::META_FILE_BBOX_MAX);
+    if (lo && hi) {
+      const openvdb::Coord a(lo->value()), b(hi->value());
+      check_budget(where, box_voxels(a, b), a, b, o.max_voxels, "from the file's statistics");
+    }
+    const auto bytes = meta->getMetadata<openvdb::Int64Metadata>(openvdb::GridBase::META_FILE_MEM_BYTES);
+    // The sparse grid of a box within the budget takes no more than the dense one plus
+    // its topology; a file that says otherwise is refused before it is read.
+    const uint64_t sparse_limit = 8 * o.max_voxels + (uint64_t(64) << 20);
+    if (bytes && (bytes->value() < 0 || uint64_t(bytes->value()) > sparse_limit))
+      fail(where, "the file says the grid takes " + std::to_string(bytes->value()) +
+                      " bytes in memory, over " + std::to_string(sparse_limit) + " for max_voxels=" +
+                      std::to_string(o.max_voxels));
+  }
+
+  const openvdb::FloatGrid::Ptr grid = openvdb::gridPtrCast<openvdb::FloatGrid>(file.readGrid(o.grid));
+  file.close();
+  if (!grid) fail(where, "is not a float grid");
+  const openvdb::CoordBBox box = grid->evalActiveVoxelBoundingBox();
+  if (box.empty()) fail(where, "has no active voxels");
+  const uint64_t voxels = box_voxels(box.min(), box.max());
+  check_budget(where, voxels, box.min(), box.max(), o.max_voxels, "of the grid read");
+
+  const AxisMap am = axis_map(o.up);
+  Volume v;
+  v.name = path + ":" + o.grid;
+  const double sigma = o.sigma;
+  v.sigma = {float(sigma), float(sigma), float(sigma)};
+  uint32_t n[3];
+  double coef[3], lo[3], hi[3];  // output axis a: world = coef[a] * index[src] + ...
+  for (int a = 0; a < 3; ++a) {
+    const int s = am.src[a];
+    n[a] = uint32_t(int64_t(box.max()[s]) - int64_t(box.min()[s]) + 1);
+    coef[a] = am.sign[a] * scale[s];
+    const double e0 = am.sign[a] * (scale[s] * (box.min()[s] - 0.5) + shift[s]);
+    const double e1 = am.sign[a] * (scale[s] * (box.max()[s] + 0.5) + shift[s]);
+    lo[a] = std::min(e0, e1);
+    hi[a] = std::max(e0, e1);
+  }
+  v.bounds.lo = {lo[0], lo[1], lo[2]};
+  v.bounds.hi = {hi[0], hi[1], hi[2]};
+  if (!is_finite(v.bounds.lo) || !is_finite(v.bounds.hi))
+    fail(where, "its world bounds are not finite");
+  v.nx = n[0], v.ny = n[1], v.nz = n[2];
+  v.density.assign(voxels, 0.0f);
+  // Dense position of index voxel ijk along output axis a (increasing with world).
+  auto dense = [&](const openvdb::Coord& ijk) {
+    size_t c[3];
+    for (int a = 0; a < 3; ++a) {
+      const int s = am.src[a];
+      c[a] = coef[a] > 0 ? size_t(int64_t(ijk[s]) - box.min()[s]) : size_t(int64_t(box.max()[s]) - ijk[s]);
+    }
+    return (c[2] * v.ny + c[1]) * v.nx + c[0];
+  };
+  auto put = [&](const openvdb::Coord& ijk, float value) {
+    const double d = double(value) * o.scale;
+    if (!std::isfinite(d) || d < 0 || d > 3.4e38)
+      fail(where, "voxel " + coord_text(ijk) + " has density " + std::to_string(value) +
+                      " (times scale " + std::to_string(o.scale) + "): not finite or negative");
+    v.density[dense(ijk)] = float(d);
+  };
+  for (auto it = grid->cbeginValueOn(); it; ++it) {
+    if (it.isVoxelValue()) {
+      put(it.getCoord(), *it);
+      continue;
+    }
+    // An active tile: every voxel of it (inside the active box, so within the budget).
+    const openvdb::CoordBBox t = it.getBoundingBox();
+    for (int z = t.min().z(); z <= t.max().z(); ++z)
+      for (int y = t.min().y(); y <= t.max().y(); ++y)
+        for (int x = t.min().x(); x <= t.max().x(); ++x) put(openvdb::Coord(x, y, z), *it);
+  }
+  return v;
+}
+
+}  // namespace
+
+Volume load_vdb_volume(const std::string& path, const VdbOptions& o) {
+  if (o.max_voxels == 0 || o.max_voxels > kVdbMaxVoxels)
+    throw Error("vdb '" + printable_text(path) + "': max_voxels must be in [1, " + std::to_string(kVdbMaxVoxels) + "]");
+  if (!(o.scale >= 0) || !std::isfinite(o.scale) || !(o.sigma >= 0) || !std::isfinite(o.sigma))
+    throw Error("vdb '" + printable_text(path) + "': scale and sigma must be finite and >= 0");
+  try {
+    return read_grid(path, o);
+  } catch (const Error&) {
+    throw;
+  } catch (const std::bad_alloc&) {
+    throw Error("vdb '" + printable_text(path) + "' grid '" + printable_text(o.grid) +
+                "': out of memory while reading it");
+  } catch (const std::exception& e) {
+    // OpenVDB's own errors (IoError on a truncated or foreign file, a bad compression
+    // stream, an unknown grid type): one line.
+    std::string why = e.what();
+    for (char& c : why)
+      if (c == '\n' || c == '\r') c = ' ';
+    throw Error("vdb '" + printable_text(path) + "' grid '" + printable_text(o.grid) +
+                "': cannot read it: " + printable_text(why));
+  }
+}
+
+#endif
+
+}  // namespace st
