@@ -12,6 +12,7 @@
 #include <cmath>
 #include <exception>
 #include <filesystem>
+#include <fstream>
 #include <mutex>
 #include <new>
 #include <system_error>
@@ -75,6 +76,125 @@ void check_budget(const std::string& where, uint64_t voxels, const openvdb::Coor
                     std::to_string(kVdbMaxVoxels) + ")");
 }
 
+// The structure of a .vdb file up to each grid's topology, checked before OpenVDB reads
+// it: OpenVDB's reader trusts every length it reads (a flipped string length makes it
+// allocate gigabytes) and reads a truncated grid without complaint (the missing bytes
+// become whatever the failed stream left). The layout (OpenVDB io/Archive, format
+// versions 222-224):
+//   int64 magic "VDB ", uint32 version, uint32 library major, minor, uint8 has offsets,
+//   36 ASCII bytes of UUID, the file's metadata map, int32 grid count, then per grid:
+//   descriptor (string unique name, string type, string instance parent, int64 grid,
+//   block and end offsets), at the grid offset: uint32 compression, the grid's metadata
+//   map, the transform (string map type, then its values), topology, and at the block
+//   offset the voxel buffers up to the end offset, where the next descriptor starts.
+//   A string is a uint32 length and its bytes; a metadata map an int32 count of (string
+//   name, string type, int32 size, size bytes).
+// Every length is checked against the bytes left, every offset against the file's size
+// and its predecessor; a grid that ends past the end of the file is a truncated file.
+// What lies inside a grid's topology and buffers is left to OpenVDB (its decompressors
+// check their sizes; its node counts are trusted, bounded by the file only loosely).
+class VdbStructure {
+ public:
+  VdbStructure(const std::string& path, const std::string& where) : where_(where), in_(path, std::ios::binary) {
+    std::error_code ec;
+    size_ = std::filesystem::file_size(path, ec);
+    if (ec || !in_) fail(where_, "cannot open it");
+  }
+
+  void check() {
+    if (size_ < 8 || u64() != 0x56444220u) fail(where_, "not a VDB file (no \"VDB \" magic number)");
+    const uint32_t version = u32();
+    if (version < 222 || version > openvdb::OPENVDB_FILE_VERSION)
+      fail(where_, "VDB file format version " + std::to_string(version) + " (this reader takes 222 to " +
+                       std::to_string(openvdb::OPENVDB_FILE_VERSION) + ": re-save it with OpenVDB 4 or later)");
+    u32(), u32();  // library version
+    if (u8() != 1) fail(where_, "the file has no grid offsets (written as a stream): re-save it as a file");
+    skip(36, "UUID");
+    meta_map("file metadata");
+    const int32_t grids = i32();
+    if (grids < 0 || uint64_t(grids) > left() / 40) fail(where_, "bad grid count " + std::to_string(grids));
+    for (int32_t g = 0; g < grids; ++g) {
+      const std::string what = "grid descriptor " + std::to_string(g);
+      string(what + " name");
+      string(what + " type");
+      const bool instance = !string(what + " instance parent").empty();
+      const int64_t grid = i64(), block = i64(), end = i64();
+      const int64_t size = int64_t(size_);
+      if (grid != int64_t(pos_) || end < grid || (!instance && (block < grid || block > end)))
+        fail(where_, what + ": inconsistent offsets (grid " + std::to_string(grid) + ", blocks " +
+                         std::to_string(block) + ", end " + std::to_string(end) + ")");
+      if (end > size)
+        fail(where_, "truncated: " + what + " ends at byte " + std::to_string(end) + " of a " +
+                         std::to_string(size_) + "-byte file");
+      u32();  // compression flags
+      meta_map(what + " metadata");
+      const std::string map = string(what + " transform type");
+      if (map.size() > 64) fail(where_, what + ": implausible transform type");
+      seek(uint64_t(end));
+    }
+  }
+
+ private:
+  uint64_t left() const { return size_ - pos_; }
+  void need(uint64_t n, const std::string& what) {
+    if (n > left())
+      fail(where_, "truncated or corrupt: " + what + " needs " + std::to_string(n) + " bytes at offset " +
+                       std::to_string(pos_) + ", " + std::to_string(left()) + " left");
+  }
+  void read(void* p, uint64_t n, const std::string& what) {
+    need(n, what);
+    in_.read(static_cast<char*>(p), std::streamsize(n));
+    if (!in_) fail(where_, "cannot read " + what + " at offset " + std::to_string(pos_));
+    pos_ += n;
+  }
+  template <class T>
+  T value(const char* what) {
+    T v{};
+    read(&v, sizeof v, what);
+    return v;
+  }
+  uint64_t u64() { return value<uint64_t>("header"); }
+  int64_t i64() { return value<int64_t>("offset"); }
+  uint32_t u32() { return value<uint32_t>("header"); }
+  int32_t i32() { return value<int32_t>("count"); }
+  uint8_t u8() { return value<uint8_t>("flag"); }
+  void seek(uint64_t to) {
+    in_.seekg(std::streamoff(to));
+    if (!in_) fail(where_, "cannot seek to offset " + std::to_string(to));
+    pos_ = to;
+  }
+  void skip(uint64_t n, const std::string& what) {
+    need(n, what);
+    seek(pos_ + n);
+  }
+  std::string string(const std::string& what) {
+    const uint32_t n = value<uint32_t>("string length");
+    need(n, what);
+    if (n > 4096) {  // names and type names: only metadata values may be long
+      skip(n, what);
+      return std::string(4097, ' ');
+    }
+    std::string s(n, '\0');
+    read(s.data(), n, what);
+    return s;
+  }
+  void meta_map(const std::string& what) {
+    const int32_t n = value<int32_t>("metadata count");
+    if (n < 0 || uint64_t(n) > left() / 12) fail(where_, what + ": bad entry count " + std::to_string(n));
+    for (int32_t i = 0; i < n; ++i) {
+      if (string(what + " name").size() > 4096 || string(what + " type").size() > 4096)
+        fail(where_, what + ": implausible entry name");
+      const int32_t bytes = value<int32_t>("metadata size");
+      if (bytes < 0) fail(where_, what + ": negative value size");
+      skip(uint64_t(bytes), what + " value");
+    }
+  }
+
+  std::string where_;
+  std::ifstream in_;
+  uint64_t size_ = 0, pos_ = 0;
+};
+
 Volume read_grid(const std::string& path, const VdbOptions& o) {
   const std::string where = "vdb '" + printable_text(path) + "' grid '" + printable_text(o.grid) + "'";
   {
@@ -84,6 +204,7 @@ Volume read_grid(const std::string& path, const VdbOptions& o) {
     if (!std::filesystem::is_regular_file(status))
       throw Error("scene path is not a regular file: " + printable_text(path));
   }
+  VdbStructure(path, where).check();
   static std::once_flag once;
   std::call_once(once, [] { openvdb::initialize(); });
 
