@@ -43,7 +43,7 @@ TEST(DeepVdbLoopback, VolumePackAnswersAlikeOverTheWire) {
   const auto local = PackDeepMap::load(*pack);
   ASSERT_NE(local, nullptr);
 
-  looptest::TestServer srv = start_server({path});
+  looptest::TestServer srv = looptest::start_server({path});
   Client c({"127.0.0.1", srv.port}, looptest::quick_options());
   Map m = c.open("vdb_loop");
   ASSERT_TRUE(m.has_deep());
