@@ -111,9 +111,9 @@ Volume fog_layer(const Aabb& footprint, const FogOptions& o) {
   const double thick = o.top - o.bottom;
   uint32_t n = o.cells;
   if (n == 0) {
-    // Cells at most H / 32 thick (height fog) and of optical depth at most 0.2 across.
+    // Cells at most H / 8 thick (height fog) and of optical depth at most 0.2 across.
     double want = std::ceil(thick * o.density / 0.2);
-    if (o.height > 0) want = std::max(want, std::ceil(thick / (o.height / 32)));
+    if (o.height > 0) want = std::max(want, std::ceil(thick / (o.height / 8)));
     n = uint32_t(std::clamp(want, 1.0, double(kFogMaxCells)));
   }
   Volume v;

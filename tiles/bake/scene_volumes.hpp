@@ -33,11 +33,15 @@
 //   - every failure (missing or truncated file, not a .vdb, a grid not there, another
 //     value type, a level set, a bad transform, too big, a bad value) is one st::Error
 //     line naming the file and grid.
-// Fog (fog_layer): a 1 x n x 1 grid (constant across x and z, trilinear in y), its n
-// chosen so that a cell is at most H / 32 (the linear interpolation of exp is then within
-// 0.05% of it) and its optical depth at most 0.2, so a march's half-cell step (Volume::
-// march) takes tau at most 0.1 and exp(-tau) between steps is within 0.0013 of the line
-// between them; at most kFogMaxCells cells.
+// Fog (fog_layer): a 1 x n x 1 grid (constant across x and z, linear in y between cell
+// centres, constant in the half cells at the bottom and top), its n chosen so that a cell
+// is at most H / 8 thick (the line between two cell centres is then within
+// (1/8)^2 / 8 = 0.2% of exp above it) and of optical depth at most 0.2, so a march's
+// half-cell step (Volume::march) takes tau at most 0.1 and exp(-tau) between steps is
+// within 0.0013 of the line between them; at most kFogMaxCells cells. The march still
+// steps every half cell along the whole ray (the volume's cost is the length of the ray
+// in cells, as for any grid): integrating it analytically would need a Volume that is
+// not a grid.
 #pragma once
 #include <cstdint>
 #include <string>
