@@ -1,11 +1,13 @@
 // Volumes from scene specs (scene_volumes.hpp): OpenVDB density grids and the fog layer.
 // Each volume's deep map is checked against the analytic transmittance exp(-sigma * rho *
 // length) within the sampler's and the compression's bounds, and every hostile .vdb
-// (truncated, foreign, without the grid, another value type, a level set, a rotated or
-// frustum transform, a huge box, bad values) gives one st::Error line.
+// (truncated, foreign, flipped bytes, a bomb of a node count, without the grid, another
+// value type, a level set, a rotated or frustum transform, a huge box, bad values) gives
+// one st::Error line.
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 
@@ -182,6 +184,19 @@ TEST(SceneVdb, HostileFilesGiveOneClearLine) {
     } catch (const Error& e) {
       EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos) << i;
     }
+  }
+  // A root child count past what the topology's bytes can hold (a memory bomb for a
+  // reader that trusts it): after the map's name, its 144 bytes of values, the buffer
+  // count and the background.
+  {
+    const size_t map = bytes.find("UniformScaleTranslateMap");
+    ASSERT_NE(map, std::string::npos);
+    std::string bad = bytes;
+    const uint32_t children = 0x7fffffff;
+    std::memcpy(&bad[map + 24 + 144 + 8 + 4], &children, 4);
+    const std::string p = tmp("bomb.vdb");
+    std::ofstream(p, std::ios::binary).write(bad.data(), std::streamsize(bad.size()));
+    EXPECT_NE(load_error(p).find("corrupt topology (0 root tiles and 2147483647 root children"), std::string::npos);
   }
   const std::string text = tmp("text.vdb");
   std::ofstream(text) << "not a vdb file\n";

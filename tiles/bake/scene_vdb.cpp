@@ -91,8 +91,11 @@ void check_budget(const std::string& where, uint64_t voxels, const openvdb::Coor
 //   name, string type, int32 size, size bytes).
 // Every length is checked against the bytes left, every offset against the file's size
 // and its predecessor; a grid that ends past the end of the file is a truncated file.
-// What lies inside a grid's topology and buffers is left to OpenVDB (its decompressors
-// check their sizes; its node counts are trusted, bounded by the file only loosely).
+// Inside a float grid, the root's tile and child counts are checked against the bytes
+// of topology; the rest of the topology and the buffers are left to OpenVDB (its
+// decompressors check their sizes; each node's children are bounded by the masks it
+// read, so memory stays within a few dozen times the file's size unless the stream
+// fails mid-topology, where OpenVDB keeps going on whatever its buffers held).
 class VdbStructure {
  public:
   VdbStructure(const std::string& path, const std::string& where) : where_(where), in_(path, std::ios::binary) {
@@ -116,7 +119,7 @@ class VdbStructure {
     for (int32_t g = 0; g < grids; ++g) {
       const std::string what = "grid descriptor " + std::to_string(g);
       string(what + " name");
-      string(what + " type");
+      const std::string type = string(what + " type");
       const bool instance = !string(what + " instance parent").empty();
       const int64_t grid = i64(), block = i64(), end = i64();
       const int64_t size = int64_t(size_);
@@ -130,11 +133,31 @@ class VdbStructure {
       meta_map(what + " metadata");
       const std::string map = string(what + " transform type");
       if (map.size() > 64) fail(where_, what + ": implausible transform type");
+      if (type == "Tree_float_5_4_3" && !instance) root_counts(map, uint64_t(block), what);
       seek(uint64_t(end));
     }
   }
 
  private:
+  // A float tree's root (after a linear map's values): int32 buffer count, float
+  // background, uint32 tile and child counts. Each tile takes 17 bytes of topology and each
+  // child at least its two 4096-byte node masks, so both counts are bounded by the bytes
+  // before the buffers; beyond the root every node's children are bounded by masks it
+  // read from the file.
+  void root_counts(const std::string& map, uint64_t block, const std::string& what) {
+    uint64_t values = 0;
+    if (map == "AffineMap" || map == "UnitaryMap") values = 128;
+    else if (map == "ScaleMap" || map == "UniformScaleMap") values = 120;
+    else if (map == "ScaleTranslateMap" || map == "UniformScaleTranslateMap") values = 144;
+    else if (map == "TranslationMap") values = 24;
+    else return;  // frustum or unknown: refused before its topology is read
+    skip(values + 4 + 4, what + " transform");
+    const uint32_t tiles = value<uint32_t>("tile count"), children = value<uint32_t>("child count");
+    const uint64_t topology = block > pos_ ? block - pos_ : 0;
+    if (uint64_t(tiles) * 17 + uint64_t(children) * 8204 > topology)
+      fail(where_, what + ": corrupt topology (" + std::to_string(tiles) + " root tiles and " +
+                       std::to_string(children) + " root children in " + std::to_string(topology) + " bytes)");
+  }
   uint64_t left() const { return size_ - pos_; }
   void need(uint64_t n, const std::string& what) {
     if (n > left())
