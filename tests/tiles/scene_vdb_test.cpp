@@ -38,6 +38,7 @@ std::string load_error(const std::string& spec, const SceneOptions& so = {}) {
 // The deep map of `s` at `level` (2 x 2 samples per texel, epsilon 0.01).
 struct Deep {
   LightSpace light;
+  DeepMapBuild build;  // the map views its tiles' bytes
   DeepMap map;
   static constexpr double kEpsilon = 0.01;
   Deep(const Scene& s, const std::string& light_spec, uint32_t level)
@@ -45,8 +46,8 @@ struct Deep {
     DeepSampleOptions o;
     o.samples_per_side = 2;
     o.epsilon = kEpsilon;
-    const DeepMapBuild b = build_deep_tiles(DeepSampler(s, light), level, 3, o);
-    for (const DeepTileBytes& t : b.tiles) map.add_tile(t.tx, t.ty, t.bytes);
+    build = build_deep_tiles(DeepSampler(s, light), level, 3, o);
+    for (const DeepTileBytes& t : build.tiles) map.add_tile(t.tx, t.ty, t.bytes);
   }
   // Transmittance behind world point p (at the far end of its light ray).
   float behind(const Vec3d& p) const {
