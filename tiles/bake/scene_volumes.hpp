@@ -30,6 +30,9 @@
 //     statistics (OpenVDB writes the bounding box with each grid), then from the grid read.
 //     The grid itself is read whole by OpenVDB first (its sparse size, about the file's
 //     uncompressed size);
+//   - hostile files: the file's structure (every length and offset up to each grid's
+//     topology, truncation, a float root's node counts) is checked before OpenVDB reads
+//     it (scene_vdb.cpp says what is left to OpenVDB);
 //   - every failure (missing or truncated file, not a .vdb, a grid not there, another
 //     value type, a level set, a bad transform, too big, a bad value) is one st::Error
 //     line naming the file and grid.
