@@ -4,7 +4,7 @@
 # inspect shows and verify checks (structure, the opaque map re-traced against the
 # opaque casters, deep texels sampled afresh); a resumed build gives the same pack; a
 # sharded build of such a scene is refused; a scene without partial occluders gets no
-# deep part. `build --deep-from` takes the deep map from the deep EXR `export --deep`
+# deep part; a fog layer added to a scene spec builds and verifies. `build --deep-from` takes the deep map from the deep EXR `export --deep`
 # wrote (verify then checks it against fresh samples) and refuses a file made for
 # another light, a part of a map, another level or a file that is not deep.
 # Usage: deep_pack_test.sh PATH/TO/shadowtile WORKDIR
@@ -24,6 +24,14 @@ check shard-refused 1 "partial occluders" -- "$st" "${args[@]}" --tile-bytes 163
 check tiny-tiles 1 "over 256 bytes" -- "$st" "${args[@]}" --tile-bytes 256 -o tiny.pack
 check build-boxes 0 "" -- "$st" build procedural:boxes --light sun:azimuth=40,elevation=60 --resolution 128 -q -o boxes.pack
 check inspect-boxes 0 "" -- "$st" inspect boxes.pack
+# Volumes in the scene spec: a fog layer over the boxes builds and verifies like any deep
+# scene (the spec is the scene); a missing .vdb is one line.
+fog="procedural:boxes+fog:density=0.2,height=1"
+check build-fog 0 "volume 'fog' 1x32x1 voxels" -- "$st" build "$fog" --light sun:azimuth=40,elevation=60 \
+  --resolution 64 --deep-level 5 --deep-tile 8 --deep-samples 2 -o fog.pack
+check verify-fog 0 "deep map: 256 texels sampled afresh" -- "$st" verify fog.pack "$fog" --samples 500
+check vdb-missing 1 "scene file not found: nothing.vdb" -- "$st" build "procedural:plane+vdb:nothing.vdb" \
+  --light sun:azimuth=40,elevation=60 --resolution 64 -o none.pack
 if "$st" inspect boxes.pack | grep -q "deep "; then echo "FAIL a scene without partial occluders has a deep part"; fail=1
 else echo "ok   no deep part without partial occluders"; fi
 light=sun:azimuth=40,elevation=60

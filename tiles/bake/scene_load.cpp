@@ -26,6 +26,7 @@
 #include "tiles/bake/scene_materials.hpp"
 #include "tiles/bake/scene_mesh.hpp"
 #include "tiles/bake/scene_quake3.hpp"
+#include "tiles/bake/scene_volumes.hpp"
 #include "common/error.hpp"
 
 namespace st {
@@ -259,11 +260,20 @@ Scene load_file(const std::string& path, const SceneOptions& options) {
 }  // namespace
 
 Scene load_scene(const std::string& spec, const SceneOptions& options) {
+  // "BASE+vdb:...+fog:..." adds volumes to BASE; "vdb:..." and "*.vdb" are volumes alone
+  // (scene_volumes.hpp).
+  if (const size_t plus = volume_suffix(spec); plus != std::string::npos) {
+    Scene scene = load_scene(spec.substr(0, plus), options);
+    add_spec_volumes(scene, spec.substr(plus), options.up);
+    return scene;
+  }
+  if (spec.rfind("vdb:", 0) == 0) return load_vdb_scene(spec, options.up);
   // Procedural scenes are generated +Y up; options.up only describes file sources.
   if (spec.rfind("procedural:", 0) == 0) return make_procedural(spec);
   // "ARCHIVE.pk3:maps/NAME.bsp" picks one map of a pack (when no file has that name).
   std::string lower = spec;
   for (char& c : lower) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  if (lower.size() > 4 && lower.compare(lower.size() - 4, 4, ".vdb") == 0) return load_vdb_scene(spec, options.up);
   const size_t pk3 = lower.find(".pk3:");
   if (pk3 != std::string::npos && !std::filesystem::exists(spec)) {
     const std::string archive = spec.substr(0, pk3 + 4), member = spec.substr(pk3 + 5);

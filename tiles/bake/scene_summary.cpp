@@ -23,7 +23,11 @@ std::string summary(const Scene& scene) {
                 scene.closed_triangle_count(),
                 static_cast<unsigned long long>(scene.stats.degenerate_dropped),
                 static_cast<unsigned long long>(scene.stats.meshes_flipped), box);
-  return "scene '" + scene.name + "': " + text;
+  std::string volumes;
+  for (const Volume& v : scene.volumes)
+    volumes += ", volume '" + v.name + "' " + std::to_string(v.nx) + "x" + std::to_string(v.ny) + "x" +
+               std::to_string(v.nz) + " voxels";
+  return "scene '" + scene.name + "': " + text + volumes;
 }
 
 }  // namespace st
