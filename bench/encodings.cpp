@@ -106,6 +106,7 @@ Row run_one(const std::string& scene_name, bool static_rule, const BoundsSource&
   const uint32_t grid_level = level > 12 ? level - 12 : 0, grid = 1u << grid_level;
   std::vector<st::Hierarchy> tiles(row.whole ? size_t(grid) * grid : 0);
   std::vector<st::Interval> roots(size_t(grid) * grid);
+  uint32_t tiles_done = 0;  // per-tile mode, under mu
   auto t0 = Clock::now();
   TiledRun run = trace_and_build_tiles(
       tracer, level, workers,
@@ -154,6 +155,12 @@ Row run_one(const std::string& scene_name, bool static_rule, const BoundsSource&
           row.enc[e].bytes += r2.bytes, row.enc[e].seconds += r2.seconds;
           if (!r2.error.empty()) row.enc[e].error = r2.error;
         }
+        // Progress of a long per-tile run (stderr): running sums over the tiles so far.
+        if (++tiles_done % 16 == 0)
+          std::fprintf(stderr, "  %s %s^2: %u of %u tiles, %.0f s, DAG-MH %llu B, vsdag %llu B so far (load %.1f)\n",
+                       scene_name.c_str(), side_name(level).c_str(), tiles_done, grid * grid, seconds_since(t0),
+                       (unsigned long long)row.enc[st::Encoding::dagmh].bytes, (unsigned long long)row.vsdag.bytes,
+                       load_average());
       });
   row.tiles = uint64_t(grid) * grid;
   row.trace_s = run.trace_s, row.zstd_s = run.per_tile_s, row.bottom_up_s = run.bottom_up_s;
