@@ -19,7 +19,7 @@
 // vsdag table names the contract that applies (tiles/core/VSDAG.md "Exactness contract").
 // An all-closed scene gets the default row only (the static rule changes nothing there).
 // --builder: where the bounds come from (bench_map.hpp BoundsSource): embree (default,
-// either rule) or raster (the light-space rasterizer: sun, default rule only; faster).
+// either rule) or raster (the light-space rasterizer: sun, default rule only).
 // Maps are built tile by tile (MH §3.1 "Tiled construction"): 4096^2 tiles are traced
 // with DepthBoundsTracer and built bottom-up, zstd compresses each tile's raw floats on
 // its own (so "zstd" is the sum over 4096^2 chunks, each compressed independently), and
