@@ -354,7 +354,9 @@ def report_page(j, src, command):
         b = min(single, key=lambda r: (r.get("error", 1), r.get("ms_per_frame", 0)))
         facts.append(("lowest single-tap error", "%s (%s, level %s): %s at %s ms/frame" % (
             b.get("map"), b.get("lookup"), b.get("level"), num(b.get("error")), num(b.get("ms_per_frame")))))
-    page.verdict(ok, "compressed maps answer as the uncompressed full map" if ok else
+    contract = " (vsdag: within its slab contract)" if any(
+        isinstance(v, dict) and "within_slab" in v for v in lossless.values()) else ""
+    page.verdict(ok, "compressed maps answer as the uncompressed full map" + contract if ok else
                  "compressed and uncompressed maps disagree" if ok is False else "", facts)
 
     # Error vs time: one panel per error metric (every numeric row field named error*),
