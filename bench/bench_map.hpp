@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "tiles/bake/depth_bounds.hpp"
+#include "tiles/bake/raster_bounds.hpp"
 #include "tiles/bake/scene.hpp"
 #include "common/error.hpp"
 #include "tiles/build/hierarchy.hpp"
@@ -88,12 +89,46 @@ struct TiledRun {
   double wall_s = 0;
 };
 
+// Where a bench map's depth bounds come from: the Embree tracer (`--builder embree`, either
+// interval rule) or the light-space rasterizer (`--builder raster`: sun lights and the
+// closed-object rule only, as map_build's resolve_builder; same canonical bounds up to
+// the few texels ARCHITECTURE.md "Canonical coverage" counts). `static_rule`: the
+// static-geometry interval (an open first hit reaches to just below the next surface;
+// voxel shadows 2014 §6.1), Embree only.
+class BoundsSource {
+ public:
+  BoundsSource(const Scene& scene, const LightSpace& light, const std::string& builder, bool static_rule)
+      : mode_(static_rule ? TraceMode::static_bounds : TraceMode::bounds) {
+    if (builder == "raster") {
+      if (static_rule) throw Error("--builder raster builds the closed-object rule only; use --builder embree");
+      raster_ = std::make_unique<RasterBounds>(scene, light);
+    } else if (builder == "embree") {
+      tracer_ = std::make_unique<DepthBoundsTracer>(scene, light);
+    } else {
+      throw Error("--builder: expected embree or raster, got '" + builder + "'");
+    }
+  }
+  IntervalTile trace(const TraceRegion& r) const { return raster_ ? raster_->trace(r) : tracer_->trace(r, mode_); }
+  bool traces_exit_depths() const { return raster_ ? raster_->traces_exit_depths() : tracer_->traces_exit_depths(); }
+  uint64_t triangle_count() const { return raster_ ? raster_->triangle_count() : tracer_->triangle_count(); }
+  double setup_seconds() const { return raster_ ? raster_->setup_seconds() : tracer_->build_seconds(); }
+
+ private:
+  std::unique_ptr<DepthBoundsTracer> tracer_;
+  std::unique_ptr<RasterBounds> raster_;
+  TraceMode mode_;
+};
+
+// True when some triangle of the scene is in an open mesh (the static-geometry rule
+// changes its intervals; on an all-closed scene it changes nothing).
+inline bool has_open_mesh(const Scene& s) { return s.closed_triangle_count() < s.triangles.size(); }
+
 // Traces the map tile by tile (row-major tiles of min(2^L, 4096)^2 texels) with `workers`
 // threads, each of which also runs `per_tile` (after the trace, with the tile's intervals)
 // and the bottom-up construction; `built` receives each tile's hierarchy (from the worker
 // thread, tiles in any order). The tracer parallelises each call itself (TBB), so on a
 // 2-core machine one worker is best.
-inline TiledRun trace_and_build_tiles(const DepthBoundsTracer& tracer, uint32_t map_level, unsigned workers,
+inline TiledRun trace_and_build_tiles(const BoundsSource& tracer, uint32_t map_level, unsigned workers,
                                       const std::function<void(const TileJob&)>& per_tile,
                                       const std::function<void(uint32_t index, Hierarchy&&)>& built) {
   TiledRun run;

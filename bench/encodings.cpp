@@ -4,10 +4,22 @@
 // that raw map compressed with zstd (level 19 by default, libzstd ZSTD_compress), with
 // the ratios DAG-MH/MMH and MH/raw, and the construction time per stage.
 //
-//   bench_encodings [--scenes city,terrain,hairball] [--light sun:azimuth=30,elevation=50]
+//   bench_encodings [--scenes city,terrain,hairball,soup] [--light sun:azimuth=30,elevation=50]
 //                   [--min-res 4k] [--max-res 16k] [--quick] [--workers 1]
 //                   [--zstd-level 19] [--zstd-max-res 64k] [--whole-max 16k] [--json PATH]
+//                   [--builder embree|raster] [--intervals default,static] [--depth-bits 16]
 //
+// Scenes: procedural names (city, terrain and hairball are all closed; soup is one open
+// mesh with duplicate, sliver and overlapping faces) or any load_scene spec. A scene with
+// an open mesh gets a row per interval rule in --intervals: "default" (the closed-object
+// rule: an open first hit has hi = lo) and "static" (the static-geometry rule of voxel
+// shadows 2014 §6.1, row "NAME/st": an open first hit reaches to just below the next
+// surface, so answers are exact for receivers on surfaces only; ARCHITECTURE.md
+// "Depth interval"). Every encoding of a row is built from the same intervals, and the
+// vsdag table names the contract that applies (tiles/core/VSDAG.md "Exactness contract").
+// An all-closed scene gets the default row only (the static rule changes nothing there).
+// --builder: where the bounds come from (bench_map.hpp BoundsSource): embree (default,
+// either rule) or raster (the light-space rasterizer: sun, default rule only).
 // Maps are built tile by tile (MH §3.1 "Tiled construction"): 4096^2 tiles are traced
 // with DepthBoundsTracer and built bottom-up, zstd compresses each tile's raw floats on
 // its own (so "zstd" is the sum over 4096^2 chunks, each compressed independently), and
@@ -56,6 +68,7 @@ struct EncodingResult {
 
 struct Row {
   std::string scene;
+  bool static_rule = false;  // the static-geometry interval rule (row "NAME/st")
   uint32_t level = 0;
   bool whole = true;  // whole-map encode (else per-tile subtrees + coarse top)
   bool zstd = true;   // zstd_bytes measured
@@ -89,10 +102,11 @@ st::IntervalTile root_grid(const std::vector<st::Interval>& roots, uint32_t grid
   return g;
 }
 
-Row run_one(const std::string& scene_name, const st::DepthBoundsTracer& tracer, uint32_t level, unsigned workers,
+Row run_one(const std::string& scene_name, bool static_rule, const BoundsSource& tracer, uint32_t level, unsigned workers,
             int zstd_level, uint32_t zstd_max, uint32_t whole_max) {
   Row row;
   row.scene = scene_name;
+  row.static_rule = static_rule;
   row.level = level;
   row.whole = level <= whole_max;
   row.zstd = level <= zstd_max;
@@ -101,6 +115,7 @@ Row run_one(const std::string& scene_name, const st::DepthBoundsTracer& tracer, 
   const uint32_t grid_level = level > 12 ? level - 12 : 0, grid = 1u << grid_level;
   std::vector<st::Hierarchy> tiles(row.whole ? size_t(grid) * grid : 0);
   std::vector<st::Interval> roots(size_t(grid) * grid);
+  uint32_t tiles_done = 0;  // per-tile mode, under mu
   auto t0 = Clock::now();
   TiledRun run = trace_and_build_tiles(
       tracer, level, workers,
@@ -155,6 +170,12 @@ Row run_one(const std::string& scene_name, const st::DepthBoundsTracer& tracer, 
           row.enc[e].bytes += r2.bytes, row.enc[e].seconds += r2.seconds;
           if (!r2.error.empty()) row.enc[e].error = r2.error;
         }
+        // Progress of a long per-tile run (stderr): running sums over the tiles so far.
+        if (++tiles_done % 16 == 0)
+          std::fprintf(stderr, "  %s %s^2: %u of %u tiles, %.0f s, DAG-MH %llu B, vsdag %llu B so far (load %.1f)\n",
+                       scene_name.c_str(), side_name(level).c_str(), tiles_done, grid * grid, seconds_since(t0),
+                       (unsigned long long)row.enc[st::Encoding::dagmh].bytes, (unsigned long long)row.vsdag.bytes,
+                       load_average());
       });
   row.tiles = uint64_t(grid) * grid;
   row.trace_s = run.trace_s, row.zstd_s = run.per_tile_s, row.bottom_up_s = run.bottom_up_s;
@@ -201,7 +222,7 @@ Row run_one(const std::string& scene_name, const st::DepthBoundsTracer& tracer, 
 }
 
 // Top-down (Alg. 1) next to bottom-up (Alg. 2) on one 4096^2 tile of the map: the centre one.
-std::pair<double, double> time_constructions(const st::DepthBoundsTracer& tracer, uint32_t level) {
+std::pair<double, double> time_constructions(const BoundsSource& tracer, uint32_t level) {
   const uint32_t side = uint32_t(std::min<uint64_t>(uint64_t(1) << level, kTileSide));
   const uint64_t c = ((uint64_t(1) << level) - side) / 2;
   st::IntervalTile t = tracer.trace({level, c, c, side, side});
@@ -224,7 +245,8 @@ std::string fmt_bytes(uint64_t b) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string scenes = "city,terrain,hairball", light_spec = "sun:azimuth=30,elevation=50", json_path;
+  std::string scenes = "city,terrain,hairball,soup", light_spec = "sun:azimuth=30,elevation=50", json_path;
+  std::string builder = "embree", rules = "default,static";
   uint32_t min_level = 12, max_level = 14, whole_max = 14, zstd_max = st::kMaxLevel;
   unsigned workers = 1;
   int zstd_level = 19;
@@ -247,39 +269,58 @@ int main(int argc, char** argv) {
       else if (a == "--quick") quick = true;
       else if (a == "--depth-bits") g_depth_bits = uint32_t(std::stoul(next()));
       else if (a == "--json") json_path = next();
+      else if (a == "--builder") builder = next();
+      else if (a == "--intervals") rules = next();
       else
-        throw st::Error("usage: bench_encodings [--scenes city,terrain,hairball] [--light L] [--min-res 4k] "
-                        "[--max-res 16k|64k] [--whole-max 16k] [--workers N] [--zstd-level 19] [--zstd-max-res R] [--depth-bits 16] [--quick] [--json PATH]");
+        throw st::Error("usage: bench_encodings [--scenes city,terrain,hairball,soup] [--light L] [--min-res 4k] "
+                        "[--max-res 16k|64k] [--whole-max 16k] [--workers N] [--zstd-level 19] [--zstd-max-res R] "
+                        "[--depth-bits 16] [--builder embree|raster] [--intervals default,static] [--quick] [--json PATH]");
     }
+    for (const std::string& r : split_list(rules))
+      if (r != "default" && r != "static") throw st::Error("--intervals: expected default or static, got '" + r + "'");
+    if (builder != "embree" && builder != "raster")
+      throw st::Error("--builder: expected embree or raster, got '" + builder + "'");
     if (quick) min_level = max_level = 11;
     if (min_level > max_level) throw st::Error("--min-res is above --max-res");
 
-    std::printf("bench_encodings: light %s, zstd level %d on 4096^2 chunks of the raw map, %u worker(s), %u cores, "
-                "load %.1f\n",
-                light_spec.c_str(), zstd_level, workers, std::thread::hardware_concurrency(), load_average());
+    std::printf("bench_encodings: light %s, bounds from %s, zstd level %d on 4096^2 chunks of the raw map, "
+                "%u worker(s), %u cores, load %.1f\n",
+                light_spec.c_str(), builder.c_str(), zstd_level, workers, std::thread::hardware_concurrency(),
+                load_average());
     std::vector<Row> rows;
     nlohmann::json scene_info = nlohmann::json::array();
     for (const std::string& name : split_list(scenes)) {
       const std::string spec = name.find(':') == std::string::npos ? "procedural:" + name : name;
       st::Scene scene = st::load_scene(spec);
       st::LightSpace light = st::LightSpace::fit(st::LightSpec::parse(light_spec), scene.bounds());
-      st::DepthBoundsTracer tracer(scene, light);
-      auto [bu_s, td_s] = time_constructions(tracer, std::min<uint32_t>(max_level, 12));
-      scene_info.push_back({{"scene", spec}, {"triangles", tracer.triangle_count()},
-                            {"exit_depths", tracer.traces_exit_depths()}, {"bvh_s", tracer.build_seconds()},
-                            {"tile_bottom_up_s", bu_s}, {"tile_top_down_s", td_s},
-                            {"tile_side", std::min<uint64_t>(uint64_t(1) << std::min<uint32_t>(max_level, 12), kTileSide)}});
-      std::printf("  %s: %llu triangles, exit depths %s; one %s^2 tile: bottom-up %.2f s, top-down %.2f s\n",
-                  spec.c_str(), (unsigned long long)tracer.triangle_count(), tracer.traces_exit_depths() ? "yes" : "no",
-                  side_name(std::min<uint32_t>(max_level, 12)).c_str(), bu_s, td_s);
-      std::fflush(stdout);
-      for (uint32_t level = min_level; level <= max_level; level += 2) {
-        Row r = run_one(name, tracer, level, workers, zstd_level, zstd_max, whole_max);
-        if (level == std::min<uint32_t>(max_level, 12)) r.top_down_s = td_s;
-        rows.push_back(r);
-        std::printf("  %s %s^2 done in %.1f s (load %.1f)\n", name.c_str(), side_name(level).c_str(), r.wall_s,
-                    load_average());
+      const bool open = has_open_mesh(scene);
+      for (const std::string& rule : split_list(rules)) {
+        const bool static_rule = rule == "static";
+        if (static_rule && !open) continue;  // identical to the default rule on all-closed scenes
+        const std::string label = name + (static_rule ? "/st" : "");
+        BoundsSource tracer(scene, light, static_rule ? "embree" : builder, static_rule);
+        auto [bu_s, td_s] = time_constructions(tracer, std::min<uint32_t>(max_level, 12));
+        scene_info.push_back({{"scene", spec}, {"label", label}, {"intervals", rule},
+                              {"builder", static_rule ? "embree" : builder}, {"triangles", tracer.triangle_count()},
+                              {"closed_triangles", scene.closed_triangle_count()},
+                              {"exit_depths", tracer.traces_exit_depths()}, {"setup_s", tracer.setup_seconds()},
+                              {"tile_bottom_up_s", bu_s}, {"tile_top_down_s", td_s},
+                              {"tile_side", std::min<uint64_t>(uint64_t(1) << std::min<uint32_t>(max_level, 12), kTileSide)}});
+        std::printf("  %s (%s intervals, %s): %llu triangles (%zu in closed meshes), exit depths %s; one %s^2 tile: "
+                    "bottom-up %.2f s, top-down %.2f s\n",
+                    spec.c_str(), rule.c_str(), static_rule ? "embree" : builder.c_str(),
+                    (unsigned long long)tracer.triangle_count(), scene.closed_triangle_count(),
+                    tracer.traces_exit_depths() ? "yes" : "no", side_name(std::min<uint32_t>(max_level, 12)).c_str(),
+                    bu_s, td_s);
         std::fflush(stdout);
+        for (uint32_t level = min_level; level <= max_level; level += 2) {
+          Row r = run_one(label, static_rule, tracer, level, workers, zstd_level, zstd_max, whole_max);
+          if (level == std::min<uint32_t>(max_level, 12)) r.top_down_s = td_s;
+          rows.push_back(r);
+          std::printf("  %s %s^2 done in %.1f s (load %.1f)\n", label.c_str(), side_name(level).c_str(), r.wall_s,
+                      load_average());
+          std::fflush(stdout);
+        }
       }
     }
 
@@ -307,16 +348,19 @@ int main(int argc, char** argv) {
                   r.whole ? "whole" : "tiles");
     }
     std::printf("\nVoxel shadow DAG (per 4096^2 tile, %u depth bits) next to DAG-MH\n", g_depth_bits);
-    std::printf("%-9s %5s %11s %11s %9s %12s %10s %9s\n", "scene", "side", "DAG-MH", "VSDAG", "VS/DAG", "VS/16-bit %",
-                "VS/raw %", "enc VS s");
+    std::printf("%-9s %5s %11s %11s %9s %12s %10s %9s  %s\n", "scene", "side", "DAG-MH", "VSDAG", "VS/DAG", "VS/16-bit %",
+                "VS/raw %", "enc VS s", "contract");
     for (const Row& r : rows)
-      std::printf("%-9s %5s %11s %11s %9.3f %12.4f %10.4f %9.2f\n", r.scene.c_str(), side_name(r.level).c_str(),
+      std::printf("%-9s %5s %11s %11s %9.3f %12.4f %10.4f %9.2f  %s\n", r.scene.c_str(), side_name(r.level).c_str(),
                   fmt_bytes(r.enc.at(st::Encoding::dagmh).bytes).c_str(),
                   r.vsdag.error.empty() ? fmt_bytes(r.vsdag.bytes).c_str() : "error",
                   double(r.vsdag.bytes) / double(r.enc.at(st::Encoding::dagmh).bytes),
                   100 * double(r.vsdag.bytes) / double(r.raw_bytes / 2), 100 * double(r.vsdag.bytes) / double(r.raw_bytes),
-                  r.vsdag.seconds);
-    std::printf("(voxel paper, all-closed scenes with the closed-object rule: 0.04-0.07%% of a 16-bit map at 256K^2)\n");
+                  r.vsdag.seconds, r.static_rule ? "static" : "closed");
+    std::printf("(voxel paper, all-closed scenes with the closed-object rule: 0.04-0.07%% of a 16-bit map at 256K^2)\n"
+                "contract (VSDAG.md): closed = exact for every receiver outside the slabs of lo and hi, lo..hi the\n"
+                "  closed-object interval (hi = lo on open surfaces); static = the same on the static-geometry\n"
+                "  interval, so exact only for receivers on surfaces (an open surface's hi reaches the next one)\n");
     for (const Row& r : rows)
       if (!r.vsdag.error.empty())
         std::printf("error: %s %s vsdag: %s\n", r.scene.c_str(), side_name(r.level).c_str(), r.vsdag.error.c_str());
@@ -375,7 +419,7 @@ int main(int argc, char** argv) {
         const double mh = double(r.enc.at(st::Encoding::mh).bytes), mmh = double(r.enc.at(st::Encoding::mmh).bytes),
                      dag = double(r.enc.at(st::Encoding::dagmh).bytes);
         enc["vsdag_per_tile"] = {{"bytes", r.vsdag.bytes}, {"encode_s", r.vsdag.seconds}, {"error", r.vsdag.error}};
-        j["results"].push_back({{"scene", r.scene}, {"side", uint64_t(1) << r.level}, {"level", r.level},
+        j["results"].push_back({{"scene", r.scene}, {"intervals", r.static_rule ? "static" : "default"}, {"side", uint64_t(1) << r.level}, {"level", r.level},
                                 {"mode", r.whole ? "whole" : "tiles"}, {"tiles", r.tiles},
                                 {"raw_bytes", r.raw_bytes},
                                 {"zstd_bytes", r.zstd ? nlohmann::json(r.zstd_bytes) : nlohmann::json(nullptr)}, {"encodings", enc},

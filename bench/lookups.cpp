@@ -5,6 +5,12 @@
 //
 //   bench_lookups [--scene city] [--light sun:azimuth=30,elevation=50] [--res 16k]
 //                 [--lookups 1048576] [--reps 5] [--quick] [--workers 1] [--json PATH]
+//                 [--builder embree|raster] [--intervals default|static]
+//
+// --intervals static: the static-geometry interval rule (voxel shadows 2014 §6.1; Embree
+// only), for open scenes such as procedural:soup: an open first hit's hi reaches to just
+// below the next surface. The receivers below (lo, just past hi) then lie on surfaces,
+// which is what that rule answers exactly. --builder as bench_encodings (bench_map.hpp).
 //
 // Access patterns, precomputed once and shared by every encoding:
 //   random:   uniformly random texels of the finest level;
@@ -90,6 +96,7 @@ double time_pass(const Subject& s, const FloatMap& map, const std::vector<Lookup
 
 int main(int argc, char** argv) {
   std::string scene_spec = "procedural:city", light_spec = "sun:azimuth=30,elevation=50", json_path;
+  std::string builder = "embree", rule = "default";
   uint32_t level = 14;
   size_t count = size_t(1) << 20;
   int reps = 5;
@@ -110,10 +117,14 @@ int main(int argc, char** argv) {
       else if (a == "--workers") workers = unsigned(std::max(1, std::stoi(next())));
       else if (a == "--quick") quick = true;
       else if (a == "--json") json_path = next();
+      else if (a == "--builder") builder = next();
+      else if (a == "--intervals") rule = next();
       else
         throw st::Error("usage: bench_lookups [--scene S] [--light L] [--res 16k] [--lookups N] [--reps R] "
-                        "[--quick] [--workers N] [--json PATH]");
+                        "[--quick] [--workers N] [--builder embree|raster] [--intervals default|static] [--json PATH]");
     }
+    if (rule != "default" && rule != "static")
+      throw st::Error("--intervals: expected default or static, got '" + rule + "'");
     if (scene_spec.find(':') == std::string::npos) scene_spec = "procedural:" + scene_spec;
     if (quick) {
       if (!level_given) level = 13;
@@ -122,8 +133,10 @@ int main(int argc, char** argv) {
     }
     if (level < 9) throw st::Error("--res must be at least 512");
     const uint64_t side = uint64_t(1) << level;
-    std::printf("bench_lookups: %s, %s, %s^2, %zu lookups per pattern, median of %d, load %.1f\n",
-                scene_spec.c_str(), light_spec.c_str(), side_name(level).c_str(), count, reps, load_average());
+    std::printf("bench_lookups: %s, %s, %s^2, %s intervals, bounds from %s, %zu lookups per pattern, median of %d, "
+                "load %.1f\n",
+                scene_spec.c_str(), light_spec.c_str(), side_name(level).c_str(), rule.c_str(), builder.c_str(), count,
+                reps, load_average());
     std::fflush(stdout);
 
     // Positions first (the receivers are filled in while the tiles are traced).
@@ -147,7 +160,11 @@ int main(int argc, char** argv) {
 
     st::Scene scene = st::load_scene(scene_spec);
     st::LightSpace light = st::LightSpace::fit(st::LightSpec::parse(light_spec), scene.bounds());
-    st::DepthBoundsTracer tracer(scene, light);
+    const BoundsSource tracer(scene, light, builder, rule == "static");
+    std::printf("  %llu triangles, %zu in closed meshes; vsdag contract: %s\n",
+                (unsigned long long)tracer.triangle_count(), scene.closed_triangle_count(),
+                rule == "static" ? "static-geometry intervals (exact for receivers on surfaces)"
+                                 : "closed-object intervals (hi = lo on open surfaces)");
     std::vector<st::Hierarchy> tiles(size_t(grid) * grid);
     std::mutex mu;
     TiledRun run = trace_and_build_tiles(
@@ -337,7 +354,8 @@ int main(int argc, char** argv) {
     std::printf("  (sink %.0f, load %.1f)\n", sink, load_average());
 
     if (!json_path.empty()) {
-      nlohmann::json j{{"bench", "lookups"}, {"scene", scene_spec}, {"light", light_spec}, {"side", side},
+      nlohmann::json j{{"bench", "lookups"}, {"scene", scene_spec}, {"light", light_spec}, {"intervals", rule},
+                       {"builder", builder}, {"side", side},
                        {"level", level}, {"lookups_per_pattern", count}, {"reps", reps},
                        {"lossless_mismatches", mismatches}, {"pcf_mismatches", pcf_mismatches},
                        {"vsdag_taps_differing", vs_differ}, {"vsdag_pcf_mismatches", vs_pcf_mismatches}, {"anon_huge_mib", huge_mib}, {"load_average_end", load_average()},

@@ -338,7 +338,7 @@ def report_page(j, src, command):
     ok = all(v == 0 for v in differ.values()) if differ else None
     page = Page("shadowtile report: %s, %s, %s^2 (level %s)" % (j.get("scene"), j.get("light"),
                                                                2 ** j.get("level", 0), j.get("level")), command, [src])
-    facts = [("lossless check: receivers differing from the full float map", ", ".join(
+    facts = [("lossless check (vsdag: its slab contract): receivers differing from the full float map", ", ".join(
         "%s %s" % (k, v) for k, v in differ.items()) or "not measured")]
     for enc, r in j.get("refinement", {}).items():
         if isinstance(r, dict) and r.get("points"):
@@ -354,7 +354,9 @@ def report_page(j, src, command):
         b = min(single, key=lambda r: (r.get("error", 1), r.get("ms_per_frame", 0)))
         facts.append(("lowest single-tap error", "%s (%s, level %s): %s at %s ms/frame" % (
             b.get("map"), b.get("lookup"), b.get("level"), num(b.get("error")), num(b.get("ms_per_frame")))))
-    page.verdict(ok, "compressed maps answer as the uncompressed full map" if ok else
+    contract = " (vsdag: within its slab contract)" if any(
+        isinstance(v, dict) and "within_slab" in v for v in lossless.values()) else ""
+    page.verdict(ok, "compressed maps answer as the uncompressed full map" + contract if ok else
                  "compressed and uncompressed maps disagree" if ok is False else "", facts)
 
     # Error vs time: one panel per error metric (every numeric row field named error*),
@@ -436,8 +438,9 @@ def report_page(j, src, command):
     keys = list(dict.fromkeys(k for r in rows for k in r))
     page.section("rows", "All measurements", table(keys, [[num(r.get(k, "")) if k != "bytes" else mib(r.get(k))
                                                            for k in keys] for r in rows]) +
-                 table(["encoding", "differing", "within interval"],
-                       [[esc(k), num(v.get("differing")), num(v.get("within_interval"))]
+                 table(["encoding", "differing", "within interval", "within slab (vsdag)"],
+                       [[esc(k), num(v.get("differing")), num(v.get("within_interval")),
+                         num(v.get("within_slab", ""))]
                         for k, v in lossless.items() if isinstance(v, dict)]))
     return page
 

@@ -2,10 +2,12 @@
 // orientation, degenerate removal, welding), independent of any file format.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <map>
 #include <numbers>
 
 #include "tiles/bake/scene.hpp"
@@ -115,6 +117,32 @@ TEST(ProceduralScene, PlaneIsOpen) {
   const auto& t = s.triangles[0];
   const Vec3d n = cross(s.vertices[t[1]] - s.vertices[t[0]], s.vertices[t[2]] - s.vertices[t[0]]);
   EXPECT_GT(n.y, 0);
+}
+
+// procedural:soup is one open mesh carrying the hazards of merged real assets.
+TEST(ProceduralScene, SoupIsOpenWithDuplicateSliverAndOverlappingFaces) {
+  const Scene s = load_scene("procedural:soup,count=40,size=100");
+  ASSERT_EQ(s.meshes.size(), 1u);
+  EXPECT_FALSE(s.any_closed());
+  EXPECT_EQ(s.stats.degenerate_dropped, 0u);
+  std::map<std::array<uint32_t, 3>, int> seen;
+  size_t duplicates = 0, slivers = 0, patches = 0;
+  for (const auto& t : s.triangles) {
+    std::array<uint32_t, 3> k = t;
+    std::sort(k.begin(), k.end());
+    duplicates += seen[k]++ > 0;
+    const Vec3d a = s.vertices[t[0]], b = s.vertices[t[1]], c = s.vertices[t[2]];
+    const double area2 = length(cross(b - a, c - a));
+    const double longest = std::max({length(b - a), length(c - b), length(a - c)});
+    slivers += area2 / (longest * longest) < 1e-3;  // height under 0.1% of the longest edge
+    patches += a.y == 5e-4 && b.y == 5e-4 && c.y == 5e-4;  // just above the ground quad
+  }
+  EXPECT_EQ(duplicates, 2u * 6 * 14) << "every third building's 6 roof faces twice more";
+  EXPECT_GE(slivers, 40u);
+  EXPECT_GT(patches, 0u);
+  EXPECT_EQ(s.content_hash(), load_scene("procedural:soup,count=40,size=100").content_hash());
+  EXPECT_NE(s.content_hash(), load_scene("procedural:soup,count=40,size=100,seed=2").content_hash());
+  EXPECT_NE(error_of([] { load_scene("procedural:soup,leaves=3"); }).find("unknown key 'leaves'"), std::string::npos);
 }
 
 TEST(ProceduralScene, CubeGeometryAndVolume) {

@@ -15,6 +15,7 @@
 #include "tiles/bake/map_build.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_format.hpp"
+#include "tiles/core/vsdag_format.hpp"
 
 namespace st {
 namespace {
@@ -134,6 +135,45 @@ TEST(StaticIntervals, PacksAreLosslessUnderTheirContractAndSmaller) {
     fs::remove(path);
   }
   EXPECT_LT(bytes[1], bytes[0]) << "static intervals merge more on open geometry";
+}
+
+// The voxel shadow DAG on an open soup (procedural:soup: duplicate, sliver and
+// overlapping faces) under both rules: every texel's depth keeps the slab contract
+// (VSDAG.md) against that rule's intervals, and the static rule's undefined region
+// behind open first hits makes the pack smaller.
+TEST(StaticIntervals, VsdagPacksOnOpenSoupKeepTheirContractAndShrink) {
+  const Scene s = load_scene("procedural:soup,count=60,size=120");
+  ASSERT_EQ(s.closed_triangle_count(), 0u);
+  const LightSpace l = LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), s.bounds());
+  const uint32_t L = fields::small_test_scale() ? 8 : 9, z = 12;
+  fs::create_directories(SHADOWTILE_TEST_TMP);
+  uint64_t bytes[2] = {0, 0};
+  DepthBoundsTracer tracer(s, l);
+  for (int k = 0; k < 2; ++k) {
+    MapBuildOptions o;
+    o.map_level = L;
+    o.encoding = Encoding::vsdag;
+    o.vsdag_z_bits = z;
+    o.skip_level = 4;
+    o.intervals = k ? IntervalRule::static_geometry : IntervalRule::closed_objects;
+    const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/static_vsdag_" + std::to_string(k) + ".pack";
+    bytes[k] = build_map(s, l, o, path).pack_bytes;
+    PackEvaluator eval(std::shared_ptr<const PackReader>(PackReader::open(path)));
+    const IntervalTile truth = tracer.trace({L, 0, 0, 1u << L, 1u << L}, trace_mode_of(o.intervals));
+    uint64_t bad = 0, wider = 0, hits = 0;
+    for (uint32_t j = 0; j < truth.height; ++j)
+      for (uint32_t i = 0; i < truth.width; ++i) {
+        const Interval& iv = truth.at(i, j);
+        bad += !vsdag::depth_within_contract(iv.lo, iv.hi, eval.depth(L, i, j), z);
+        wider += iv.hi > iv.lo;
+        hits += iv.lo < kLitDepth;
+      }
+    EXPECT_EQ(bad, 0u) << (k ? "static" : "default") << " rule";
+    if (k) EXPECT_GT(wider, hits * 9 / 10) << "the static rule opens most open first hits";
+    else EXPECT_EQ(wider, 0u) << "open geometry has hi = lo";
+    fs::remove(path);
+  }
+  EXPECT_LT(bytes[1], bytes[0]) << "static intervals need fewer voxels on open geometry";
 }
 
 }  // namespace

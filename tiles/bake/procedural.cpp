@@ -154,13 +154,15 @@ Scene make_procedural(const std::string& spec) {
     meshes = make_terrain(p);
   else if (name == "hairball")
     meshes = make_hairball(p);
+  else if (name == "soup")
+    meshes = make_soup(p);
   else if (name == "forest")
     meshes = make_forest(p, extras);
   else if (name == "smoke")
     meshes = make_smoke(p, extras);
   else
     throw Error("procedural scene '" + spec + "': unknown name '" + name +
-                "' (known: cube, sphere, plane, boxes, city, terrain, hairball, forest, smoke)");
+                "' (known: cube, sphere, plane, boxes, city, terrain, hairball, soup, forest, smoke)");
 
   Scene scene;
   scene.name = spec;

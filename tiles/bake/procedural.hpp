@@ -91,6 +91,8 @@ void add_uv_sphere(MeshSoup& m, const Vec3d& centre, double radius, int segments
 std::vector<MeshSoup> make_city(Params& p);
 std::vector<MeshSoup> make_terrain(Params& p);
 std::vector<MeshSoup> make_hairball(Params& p);
+// Open geometry with duplicate, sliver and overlapping faces (procedural_soup.cpp).
+std::vector<MeshSoup> make_soup(Params& p);
 
 // What a scene of partial occluders holds besides meshes (procedural_partial.cpp); the
 // caller applies scale and offset to volume bounds too.

@@ -3,10 +3,12 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 
 #include "common/error.hpp"
+#include "tiles/core/vsdag_format.hpp"
 
 namespace st {
 
@@ -138,7 +140,7 @@ FrameError footprint_error(const Evaluator& eval, const LightSpace& light, const
 }
 
 Disagreements count_disagreements(const Evaluator& a, const FlatMapEvaluator& full, const LightSpace& light,
-                                  const FrameTruth& f) {
+                                  const FrameTruth& f, uint32_t slab_bits) {
   Disagreements n;
   const uint32_t L = full.finest_level();
   for (uint32_t i : f.lit_facing) {
@@ -150,7 +152,18 @@ Disagreements count_disagreements(const Evaluator& a, const FlatMapEvaluator& fu
     const auto [x, y] = LightSpace::texel_of(L, lp.u, lp.v);
     const Interval* iv = full.interval(x, y);
     const float d = float(lp.d);
-    if (iv && iv->lo < d && d <= iv->hi) ++n.within_interval;
+    if (iv && iv->lo < d && d <= iv->hi) {
+      ++n.within_interval;
+    } else if (iv && slab_bits > 0) {
+      // The contract's exact cases: before the slab of lo (lit), after the slab of hi
+      // (shadowed); anything else is the slab of a surface.
+      const double scale = double(uint64_t(1) << slab_bits);
+      const int32_t rs = vsdag::receiver_slab(d, slab_bits);
+      const double k = rs == vsdag::kReceiverLit ? -1.0 : rs == vsdag::kReceiverShadowed ? scale + 1 : double(rs);
+      const double klo = std::floor(std::clamp(double(iv->lo), 0.0, 1.0) * scale),
+                   khi = std::floor(std::clamp(double(iv->hi), 0.0, 1.0) * scale);
+      if (!((d < iv->lo && k < klo) || (d > iv->hi && k > khi))) ++n.within_slab;
+    }
   }
   return n;
 }

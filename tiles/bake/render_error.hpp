@@ -75,13 +75,17 @@ FrameError footprint_error(const Evaluator& eval, const LightSpace& light, const
 // where every stored value is lossless by definition. `within_interval` counts those
 // (the legitimate class; zero on open geometry, where hi = lo); `outside()` the others,
 // which the lossless invariant makes zero at full residency.
+// `slab_bits` > 0: `a` is a voxel shadow DAG of 2^slab_bits depth slabs, whose contract
+// (tiles/core/VSDAG.md "Exactness contract") also lets it differ where d lies in the slab
+// of the texel's lo or hi (vsdag::receiver_slab); `within_slab` counts those apart from
+// `within_interval`, and `outside()` the rest, which its contract makes zero.
 struct Disagreements {
-  uint64_t total = 0, within_interval = 0;
-  uint64_t outside() const { return total - within_interval; }
+  uint64_t total = 0, within_interval = 0, within_slab = 0;
+  uint64_t outside() const { return total - within_interval - within_slab; }
 };
 // `full` must keep its intervals (FlatMapEvaluator(tile, true)).
 Disagreements count_disagreements(const Evaluator& a, const FlatMapEvaluator& full, const LightSpace& light,
-                                  const FrameTruth& f);
+                                  const FrameTruth& f, uint32_t slab_bits = 0);
 
 class FlatMapEvaluator final : public Evaluator {
  public:

@@ -93,7 +93,7 @@ Scene load_scene(const std::string& spec, const SceneOptions& options = {});
 //            (0.3, 1, 0.2) x translucency of the light through a solid leaf (coloured)
 //   smoke    seed=1 res=32 size=10 density=1 sigma=1
 //            a ground quad under a density-grid plume of res^3 voxels (Volume)
-// Unknown names or keys and malformed or out-of-range values throw st::Error.
+//   soup     seed=1 count=2500 size=400  one open mesh, dup/sliver/overlap faces; bad names/keys throw
 Scene make_procedural(const std::string& spec);
 
 // The scene without its partial meshes and volumes (what the opaque map is built from);
