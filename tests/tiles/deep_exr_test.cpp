@@ -124,7 +124,8 @@ TEST(DeepExr, TilesFromAnExportedFileAnswerAsSampling) {
   }
   EXPECT_GT(partial, 20);
   // Recompressed with another bound: within it of the file's functions.
-  const DeepMap c = map_of(deep_tiles_from_functions(back, 2, 0.05, 0.07));
+  const DeepMapBuild recompressed = deep_tiles_from_functions(back, 2, 0.05, 0.07);  // the map views its bytes
+  const DeepMap c = map_of(recompressed);
   for (int i = 0; i < 500; ++i) {
     const double u = u01(rng), v = u01(rng);
     const auto z = float(u01(rng));
