@@ -105,36 +105,41 @@ TEST(RasterSkip, ExactEqualsTheFullPathAndNarrowLiesInside) {
   EXPECT_GT(narrowed_closed, 0u) << "narrowing never applied";
 }
 
-// A pack built with --skip narrow: every texel's value lies in the true interval (what
-// `verify --all` checks), and the pack says its intervals were narrowed.
-TEST(RasterSkip, NarrowedPackIsLosslessAgainstTheTrueIntervals) {
-  namespace fs = std::filesystem;
-  const uint32_t L = fields::small_test_scale() ? 7 : 9;
-  fs::create_directories(SHADOWTILE_TEST_TMP);
-  int k = 0;
-  for (const SkipCase& c : cases()) {
-    const LightSpace light = LightSpace::fit(LightSpec::parse(c.sun), c.scene.bounds());
-    MapBuildOptions o;
-    o.map_level = L;
-    o.skip_level = L - 4;
-    o.encoding = Encoding::dagmh;
-    o.builder = BoundsBuilder::raster;
-    o.raster_skip = RasterSkip::narrow;
-    const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/raster_skip_" + std::to_string(k++) + ".pack";
-    build_map(c.scene, light, o, path);
-    const IntervalTile truth =
-        RasterBounds(c.scene, light, RasterSkip::off).trace(TraceRegion{L, 0, 0, 1u << L, 1u << L});
-    std::shared_ptr<const PackReader> reader = PackReader::open(path);
-    bool recorded = false;
-    for (const auto& [key, v] : reader->params()) recorded |= key == "intervals_narrowed" && v == "yes";
-    EXPECT_TRUE(recorded) << c.scene.name;
-    PackEvaluator eval(reader);
-    EXPECT_EQ(fields::first_violation(truth, [&](uint32_t i, uint32_t j) { return eval.depth(L, i, j); }), "")
-        << c.scene.name << " " << c.sun;
-    fs::remove(path);
-  }
+// Builds case `c` at level L with the rasterizer's `skip`, checks that the pack records
+// narrowed intervals and that every texel's value lies in its true interval (what
+// `verify --all` checks); returns the build's report.
+MapBuildReport build_and_check_lossless(const SkipCase& c, uint32_t L, uint32_t skip_level, Encoding enc,
+                                        RasterSkip skip, const std::string& name) {
+  const LightSpace light = LightSpace::fit(LightSpec::parse(c.sun), c.scene.bounds());
+  MapBuildOptions o;
+  o.map_level = L;
+  o.skip_level = skip_level;
+  o.encoding = enc;
+  o.builder = BoundsBuilder::raster;
+  o.raster_skip = skip;
+  std::filesystem::create_directories(SHADOWTILE_TEST_TMP);
+  const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/" + name + ".pack";
+  const MapBuildReport rep = build_map(c.scene, light, o, path);
+  const IntervalTile truth =
+      RasterBounds(c.scene, light, RasterSkip::off).trace(TraceRegion{L, 0, 0, 1u << L, 1u << L});
+  std::shared_ptr<const PackReader> reader = PackReader::open(path);
+  bool recorded = false;
+  for (const auto& [key, v] : reader->params()) recorded |= key == "intervals_narrowed" && v == "yes";
+  EXPECT_TRUE(recorded) << c.scene.name;
+  PackEvaluator eval(reader);
+  EXPECT_EQ(fields::first_violation(truth, [&](uint32_t i, uint32_t j) { return eval.depth(L, i, j); }), "")
+      << c.scene.name << " " << c.sun;
+  std::filesystem::remove(path);
+  return rep;
 }
 
+// A pack built with --raster-skip narrow is lossless against the true intervals.
+TEST(RasterSkip, NarrowedPackIsLosslessAgainstTheTrueIntervals) {
+  const uint32_t L = fields::small_test_scale() ? 7 : 9;
+  int k = 0;
+  for (const SkipCase& c : cases())
+    build_and_check_lossless(c, L, L - 4, Encoding::dagmh, RasterSkip::narrow, "raster_skip_" + std::to_string(k++));
+}
 
 // Every aligned square of every size (down to 4 texels) whose corners prove an interval:
 // it lies inside the true interval of every texel of the square.
@@ -172,33 +177,15 @@ TEST(RasterSkip, ProvenRegionsLieInsideEveryTexelsInterval) {
 // A pack built top-down over proven regions (cells of 128^2 texels: regions split from
 // 128 down to 64 before tracing) is lossless on every texel and records narrowed intervals.
 TEST(RasterSkip, RegionsPackIsLosslessOnEveryTexel) {
-  namespace fs = std::filesystem;
   const uint32_t L = fields::small_test_scale() ? 8 : 9;
-  fs::create_directories(SHADOWTILE_TEST_TMP);
   int k = 0;
   uint64_t in_regions = 0;
   for (const SkipCase& c : cases()) {
-    const LightSpace light = LightSpace::fit(LightSpec::parse(c.sun), c.scene.bounds());
-    MapBuildOptions o;
-    o.map_level = L;
-    o.skip_level = L - 7;
-    o.encoding = k % 2 ? Encoding::mh : Encoding::dagmh;
-    o.builder = BoundsBuilder::raster;
-    o.raster_skip = RasterSkip::regions;
-    const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/raster_regions_" + std::to_string(k++) + ".pack";
-    const MapBuildReport rep = build_map(c.scene, light, o, path);
+    const MapBuildReport rep = build_and_check_lossless(c, L, L - 7, k % 2 ? Encoding::mh : Encoding::dagmh,
+                                                        RasterSkip::regions, "raster_regions_" + std::to_string(k));
+    ++k;
     in_regions += rep.texels_in_regions;
     EXPECT_EQ(rep.texels_in_regions + rep.texels_traced, uint64_t(1) << (2 * L)) << c.scene.name;
-    const IntervalTile truth =
-        RasterBounds(c.scene, light, RasterSkip::off).trace(TraceRegion{L, 0, 0, 1u << L, 1u << L});
-    std::shared_ptr<const PackReader> reader = PackReader::open(path);
-    bool recorded = false;
-    for (const auto& [key, v] : reader->params()) recorded |= key == "intervals_narrowed" && v == "yes";
-    EXPECT_TRUE(recorded) << c.scene.name;
-    PackEvaluator eval(reader);
-    EXPECT_EQ(fields::first_violation(truth, [&](uint32_t i, uint32_t j) { return eval.depth(L, i, j); }), "")
-        << c.scene.name << " " << c.sun;
-    fs::remove(path);
   }
   EXPECT_GT(in_regions, 0u) << "no region was ever proven during a build";
 }

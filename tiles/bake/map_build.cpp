@@ -147,6 +147,20 @@ std::vector<CellXY> plan_cells(PackWriter& writer, const MapBuildOptions& o, uin
   return todo;
 }
 
+// Traces a square of `side` texels and builds its hierarchy, adding the texels traced and
+// each stage's time to the counters.
+Hierarchy traced_hierarchy(const CellBounds& bounds, uint32_t level, uint64_t x0, uint64_t y0, uint64_t side,
+                           MhConstruction method, std::atomic<uint64_t>& texels, std::atomic<uint64_t>& trace_ns,
+                           std::atomic<uint64_t>& build_ns) {
+  auto t = Clock::now();
+  IntervalTile tile = bounds.trace({level, x0, y0, uint32_t(side), uint32_t(side)}, &texels);
+  add_seconds(trace_ns, since(t));
+  t = Clock::now();
+  Hierarchy h = build_hierarchy(tile, method);
+  add_seconds(build_ns, since(t));
+  return h;
+}
+
 // The hierarchy of a square of 2^depth texels a side that all admit `iv`: one valued
 // leaf root, its value chosen as the construction chooses it for a texel of that interval.
 Hierarchy uniform_hierarchy(const Interval& iv, uint32_t depth, MhConstruction method) {
@@ -176,15 +190,7 @@ Hierarchy region_hierarchy(const RasterBounds& raster, const CellBounds& bounds,
     skipped.fetch_add(side * side, std::memory_order_relaxed);
     return uniform_hierarchy(*iv, log2_exact(side), method);
   }
-  if (side <= kRegionLeafSide) {
-    t = Clock::now();
-    IntervalTile tile = bounds.trace({level, x0, y0, uint32_t(side), uint32_t(side)}, &texels);
-    add_seconds(trace_ns, since(t));
-    t = Clock::now();
-    Hierarchy h = build_hierarchy(tile, method);
-    add_seconds(build_ns, since(t));
-    return h;
-  }
+  if (side <= kRegionLeafSide) return traced_hierarchy(bounds, level, x0, y0, side, method, texels, trace_ns, build_ns);
   const uint64_t half = side / 2;
   std::vector<Hierarchy> parts;
   parts.reserve(4);
@@ -207,13 +213,7 @@ Hierarchy cell_hierarchy(const CellBounds& bounds, uint32_t level, uint64_t x0,
   if (const RasterBounds* raster = bounds.regions())
     return region_hierarchy(*raster, bounds, level, x0, y0, side, method, texels, skipped, trace_ns, build_ns);
   auto trace_and_build = [&](uint64_t x, uint64_t y, uint64_t s) {
-    auto t = Clock::now();
-    IntervalTile tile = bounds.trace({level, x, y, uint32_t(s), uint32_t(s)}, &texels);
-    add_seconds(trace_ns, since(t));
-    t = Clock::now();
-    Hierarchy h = build_hierarchy(tile, method);
-    add_seconds(build_ns, since(t));
-    return h;
+    return traced_hierarchy(bounds, level, x, y, s, method, texels, trace_ns, build_ns);
   };
   if (side <= kMaxTraceSide) return trace_and_build(x0, y0, side);
   const uint64_t n = side / kMaxTraceSide;
