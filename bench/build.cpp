@@ -31,6 +31,7 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -181,6 +182,9 @@ int main(int argc, char** argv) {
     for (const std::string& b : builder_list)
       if (b != "embree") bounds_list.push_back(b);
     if (bounds_list.size() == 1) bounds_list.push_back("raster");
+    std::error_code ec;  // the packs' folder: made if missing
+    std::filesystem::create_directories(out_dir, ec);
+    if (ec) throw st::Error("--out: cannot create '" + out_dir + "': " + ec.message());
     std::vector<uint32_t> levels;
     for (const std::string& r : split(resolutions)) levels.push_back(parse_level(r));
     if (levels.empty()) throw st::Error("--resolutions: none given");
