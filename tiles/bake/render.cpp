@@ -126,22 +126,30 @@ std::vector<Receiver> SceneTracer::primary(const Camera& camera, uint32_t width,
   return out;
 }
 
-float SceneTracer::traced(const Receiver& r, const Vec3d& offset) const {
-  if (!r.hit || r.n_dot_l <= 0) return 0;
-  const Vec3d p = r.pos + offset;
-  const Vec3d dir = to_light(p);
-  const Vec3d org = p - impl_->centre + r.normal * (1e-5 * impl_->scale);
+namespace {
+// 1 when the shadow ray from `org` (recentred) along `dir` reaches the light (a sun: no
+// end; a spot: just short of its origin, seen from the receiver at `p`), else 0.
+float lit_along(RTCScene scene, const Vec3d& org, const Vec3d& dir, const LightSpace& light, const Vec3d& p) {
   RTCIntersectContext ctx;
   rtcInitIntersectContext(&ctx);
   RTCRay ray{};
   ray.org_x = float(org.x), ray.org_y = float(org.y), ray.org_z = float(org.z);
   ray.dir_x = float(dir.x), ray.dir_y = float(dir.y), ray.dir_z = float(dir.z);
   ray.tnear = 0;
-  ray.tfar = light_.kind() == LightKind::sun ? std::numeric_limits<float>::infinity()
-                                              : float(length(light_.origin() - p) * (1 - 1e-6));
+  ray.tfar = light.kind() == LightKind::sun ? std::numeric_limits<float>::infinity()
+                                             : float(length(light.origin() - p) * (1 - 1e-6));
   ray.mask = ~0u;
-  rtcOccluded1(impl_->scene, &ctx, &ray);
+  rtcOccluded1(scene, &ctx, &ray);
   return ray.tfar == -std::numeric_limits<float>::infinity() ? 0.0f : 1.0f;
+}
+}  // namespace
+
+float SceneTracer::traced(const Receiver& r, const Vec3d& offset) const {
+  if (!r.hit || r.n_dot_l <= 0) return 0;
+  const Vec3d p = r.pos + offset;
+  const Vec3d dir = to_light(p);
+  const Vec3d org = p - impl_->centre + r.normal * (1e-5 * impl_->scale);
+  return lit_along(impl_->scene, org, dir, light_, p);
 }
 
 namespace {
@@ -157,17 +165,7 @@ float SceneTracer::traced_toward(const Receiver& r, const LightSpace& light) con
   const Vec3d dir = toward(light, r.pos);
   if (dot(r.normal, dir) <= 0) return 0;  // facing away from this sample
   const Vec3d org = r.pos - impl_->centre + r.normal * (1e-5 * impl_->scale);
-  RTCIntersectContext ctx;
-  rtcInitIntersectContext(&ctx);
-  RTCRay ray{};
-  ray.org_x = float(org.x), ray.org_y = float(org.y), ray.org_z = float(org.z);
-  ray.dir_x = float(dir.x), ray.dir_y = float(dir.y), ray.dir_z = float(dir.z);
-  ray.tnear = 0;
-  ray.tfar = light.kind() == LightKind::sun ? std::numeric_limits<float>::infinity()
-                                             : float(length(light.origin() - r.pos) * (1 - 1e-6));
-  ray.mask = ~0u;
-  rtcOccluded1(impl_->scene, &ctx, &ray);
-  return ray.tfar == -std::numeric_limits<float>::infinity() ? 0.0f : 1.0f;
+  return lit_along(impl_->scene, org, dir, light, r.pos);
 }
 
 namespace {
