@@ -26,7 +26,7 @@
 //                        [--rate-fraction 0.5 | --rate R] [--reps 1]
 //                        [--conns 1,8,64] [--nginx-workers 1,auto] [--nginx PATH] [--skip K]
 //                        [--nginx-extra "open_file_cache max=65536 inactive=60s;"]
-//                        [--json bench-out/serve_vs_nginx.json] [--threads T (our I/O threads)]
+//                        [--json bench-out/serve_vs_nginx.json] [--threads T (our I/O threads)] [--busy-poll-us U]
 //                        [--tile-cache-mib M (our payload cache; 0: pread + CRC per tile)]
 #include <arpa/inet.h>
 #include <netinet/in.h>
@@ -558,7 +558,7 @@ std::vector<std::string> split(const std::string& s) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  uint32_t level = 10, depth = 8, threads = 1, reps = 1;
+  uint32_t level = 10, depth = 8, threads = 1, reps = 1, busy_poll_us = 0;
   double rate_fraction = 0, fixed_rate = 0;
   double tile_cache_mib = 64;  // our server's payload cache (0: pread and CRC per tile)
   // Our server keeps the pack open; nginx keeps tile file descriptors open the same way
@@ -581,6 +581,7 @@ int main(int argc, char** argv) {
     else if (k == "--skip") skip = int(std::stoi(v));
     else if (k == "--json") json_path = v;
     else if (k == "--threads") threads = uint32_t(std::stoul(v));
+    else if (k == "--busy-poll-us") busy_poll_us = uint32_t(std::stoul(v));
     else if (k == "--reps") reps = std::max<uint32_t>(1, uint32_t(std::stoul(v)));
     else if (k == "--rate-fraction") rate_fraction = std::stod(v);
     else if (k == "--rate") fixed_rate = std::stod(v);
@@ -633,6 +634,7 @@ int main(int argc, char** argv) {
     server::ServerOptions so;
     so.port = 0;
     so.threads = threads;
+    so.busy_poll = std::chrono::microseconds(busy_poll_us);
     so.tile_cache_bytes = size_t(tile_cache_mib * 1048576.0);
     so.log = [](const std::string&) {};
     server::Server srv(server::Catalog::scan(std::vector<std::string>{pack}), so);
@@ -722,7 +724,7 @@ int main(int argc, char** argv) {
     nlohmann::json j = {{"benchmark", "serve_vs_nginx"}, {"level", level}, {"tiles", ids.size()},
                         {"stored_bytes", stored}, {"depth", depth}, {"seconds", seconds},
                         {"warmup_seconds", warmup}, {"nginx", nginx_bin ? *nginx_bin : ""},
-                        {"our_io_threads", threads}, {"our_tile_cache_mib", tile_cache_mib}, {"nginx_extra", nginx_extra}, {"reps", reps},
+                        {"our_io_threads", threads}, {"our_busy_poll_us", busy_poll_us}, {"our_tile_cache_mib", tile_cache_mib}, {"nginx_extra", nginx_extra}, {"reps", reps},
                         {"rate_fraction", rate_fraction}, {"rate", fixed_rate}, {"rows", rows}};
     std::ofstream(json_path) << j.dump(2) << "\n";
     std::printf("wrote %s\n", json_path.c_str());

@@ -16,6 +16,10 @@ void add_serve_options(CLI::App& app, ServeConfig& a) {
   app.add_option("--listen", a.listen, "Address to listen on, HOST:PORT (port 0: ephemeral)")
       ->capture_default_str();
   app.add_option("--threads", a.threads, "I/O threads")->capture_default_str()->check(CLI::Range(1u, 64u));
+  app.add_option("--busy-poll-us", a.busy_poll_us,
+                 "Low latency: each I/O thread polls this many microseconds after its last event before "
+                 "it sleeps (uses up to a core per thread while clients are active; 0: sleep at once)")
+      ->capture_default_str()->check(CLI::Range(0u, 1000000u));
   app.add_option("--stats-interval", a.stats_interval, "Print counters every S seconds (0: never)")
       ->capture_default_str()->check(CLI::Range(0.0, 86400.0));
   app.add_option("--max-connections", a.max_connections, "Connections served at once")
@@ -83,6 +87,7 @@ void run_serve(const ServeConfig& a, const char* program) {
   ServerOptions o;
   std::tie(o.host, o.port) = parse_listen(a.listen);
   o.threads = a.threads;
+  o.busy_poll = std::chrono::microseconds(a.busy_poll_us);
   o.max_connections = a.max_connections;
   o.max_connections_per_address = a.max_connections_per_address;
   o.max_connections_per_prefix = a.max_connections_per_prefix;

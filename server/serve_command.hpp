@@ -14,6 +14,7 @@ struct ServeConfig {
   std::vector<std::string> paths;
   std::string listen = "127.0.0.1:7447";
   unsigned threads = 1;
+  unsigned busy_poll_us = 0;
   double stats_interval = 0;
   unsigned max_connections = 1024;
   unsigned max_connections_per_address = 256;

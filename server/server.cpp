@@ -140,6 +140,29 @@ void fit_frame_limit(ServerCore& core) {
            " map(s) (open_map answered limit_exceeded); " + what + " needs " + std::to_string(need));
 }
 
+// Runs `io` until it stops. With a busy-poll window, the thread keeps running ready
+// handlers and polling the reactor without blocking until nothing has happened for
+// `window`, and only then blocks for the next event (one handler), so back-to-back
+// requests on a connection never pay a thread wake-up.
+void run_io(asio::io_context& io, std::chrono::microseconds window) {
+  if (window.count() <= 0) {
+    io.run();
+    return;
+  }
+  using Clock = std::chrono::steady_clock;
+  auto last = Clock::now();
+  while (!io.stopped()) {
+    if (io.poll() > 0) {
+      last = Clock::now();
+      continue;
+    }
+    if (io.stopped()) break;
+    if (Clock::now() - last < window) continue;
+    io.run_one();  // blocks until one handler ran (or the context stopped)
+    last = Clock::now();
+  }
+}
+
 }  // namespace
 
 struct Server::Impl {
@@ -421,7 +444,7 @@ void Server::start() {
   for (unsigned i = 0; i < o.threads; ++i)
     d.threads.emplace_back([&d] {
       try {
-        d.io.run();
+        run_io(d.io, d.core.options.busy_poll);
       } catch (const std::exception& e) {
         d.core.log(std::string("I/O thread: ") + e.what());
       }

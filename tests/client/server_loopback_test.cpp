@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <mutex>
 #include <thread>
+#include <ctime>
 
 #include "client/map_access.hpp"
 #include "proto/proto.hpp"
@@ -343,6 +344,41 @@ TEST(ServerLoopback, StopEndsConnectionsAndWakesTheSignalWaiter) {
   // The map keeps answering (coarsely) without a server.
   EXPECT_NO_THROW((void)m.depth(5, 1, 1));
   srv.server->stop();  // idempotent
+}
+
+// The low-latency mode (I/O threads poll before they sleep) serves the same bytes, lets
+// the threads sleep once clients go quiet, and still stops promptly.
+TEST(ServerLoopback, BusyPollingServesTheMapAndStops) {
+  auto p = build_pack("busypoll", 6, 9, first_encoding(), 2, 1024);
+  server::ServerOptions so;
+  so.busy_poll = std::chrono::microseconds(200);
+  so.threads = 2;
+  auto srv = start_server({p.path}, so);
+  {
+    Client c({"127.0.0.1", srv.port}, quick_options());
+    Map m = c.open("busypoll");
+    const uint32_t level = m.finest_level(), side = 1u << level;
+    m.request_region(level, 0, 0, side, side, 1);
+    ASSERT_TRUE(wait_until([&] { return m.region_resident(level, 0, 0, side, side); }));
+    EXPECT_EQ(m.stats().tiles_received, p.reader->tiles().size());
+    PackEvaluator local(p.reader);
+    for (uint64_t i = 0; i < 256; ++i) {
+      const uint64_t x = (i * 37) % side, y = (i * 91) % side;
+      EXPECT_EQ(m.depth(level, x, y), local.depth(level, x, y));
+    }
+  }
+  // Quiet now: the I/O threads must be asleep in the reactor, not spinning. The
+  // process's CPU time over 300 ms of silence stays far below the wall time.
+  std::this_thread::sleep_for(50ms);
+  timespec a{}, b{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &a);
+  std::this_thread::sleep_for(300ms);
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &b);
+  const double cpu_s = double(b.tv_sec - a.tv_sec) + double(b.tv_nsec - a.tv_nsec) * 1e-9;
+  EXPECT_LT(cpu_s, 0.15) << "the polling threads kept spinning with no client";
+  const auto t0 = std::chrono::steady_clock::now();
+  srv.server->stop();
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 3s);
 }
 
 }  // namespace
