@@ -13,22 +13,20 @@ namespace st {
 
 static_assert(sizeof(Rgb8) == 3, "Rgb8 rows are handed to libpng as packed RGB bytes");
 
-void write_png(const std::string& path, uint32_t width, uint32_t height,
-               const std::vector<Rgb8>& pixels) {
-  if (width == 0 || height == 0 || width > (1u << 20) || height > (1u << 20))
-    throw Error(path + ": PNG size " + std::to_string(width) + "x" + std::to_string(height) +
-                " is empty or too large");
-  if (pixels.size() != size_t(width) * height)
-    throw Error(path + ": PNG pixel count does not match " + std::to_string(width) + "x" +
-                std::to_string(height));
+namespace {
+
+// Writes `width` x `height` pixels of `format` (channels bytes each) to path + ".tmp" and
+// renames it into place, so a failed write never leaves a partial PNG under `path`.
+void write_png_file(const std::string& path, uint32_t width, uint32_t height, uint32_t format, uint32_t channels,
+                    const void* data) {
   png_image image;
   std::memset(&image, 0, sizeof image);
   image.version = PNG_IMAGE_VERSION;
   image.width = width;
   image.height = height;
-  image.format = PNG_FORMAT_RGB;
+  image.format = format;
   const std::string tmp = path + ".tmp";
-  if (!png_image_write_to_file(&image, tmp.c_str(), 0, pixels.data(), int32_t(width) * 3, nullptr)) {
+  if (!png_image_write_to_file(&image, tmp.c_str(), 0, data, int32_t(width * channels), nullptr)) {
     std::string msg = image.message;
     png_image_free(&image);
     std::error_code ec;
@@ -41,6 +39,19 @@ void write_png(const std::string& path, uint32_t width, uint32_t height,
     std::filesystem::remove(tmp, ec);
     throw Error(path + ": cannot rename the finished PNG into place: " + ec.message());
   }
+}
+
+}  // namespace
+
+void write_png(const std::string& path, uint32_t width, uint32_t height,
+               const std::vector<Rgb8>& pixels) {
+  if (width == 0 || height == 0 || width > (1u << 20) || height > (1u << 20))
+    throw Error(path + ": PNG size " + std::to_string(width) + "x" + std::to_string(height) +
+                " is empty or too large");
+  if (pixels.size() != size_t(width) * height)
+    throw Error(path + ": PNG pixel count does not match " + std::to_string(width) + "x" +
+                std::to_string(height));
+  write_png_file(path, width, height, PNG_FORMAT_RGB, 3, pixels.data());
 }
 
 std::vector<Rgb8> read_png(const std::string& path, uint32_t& width, uint32_t& height) {
@@ -116,20 +127,11 @@ PngPlanes read_png_planes(const void* data, size_t size, const std::string& name
 
 void write_png_grey_alpha(const std::string& path, uint32_t width, uint32_t height,
                           const std::vector<uint8_t>& ga) {
-  if (width == 0 || height == 0 || ga.size() != size_t(width) * height * 2)
+  if (width == 0 || height == 0 || width > (1u << 20) || height > (1u << 20) ||
+      ga.size() != size_t(width) * height * 2)
     throw Error(path + ": grey + alpha PNG data does not match " + std::to_string(width) + "x" +
                 std::to_string(height));
-  png_image image;
-  std::memset(&image, 0, sizeof image);
-  image.version = PNG_IMAGE_VERSION;
-  image.width = width;
-  image.height = height;
-  image.format = PNG_FORMAT_GA;
-  if (!png_image_write_to_file(&image, path.c_str(), 0, ga.data(), int32_t(width) * 2, nullptr)) {
-    std::string msg = image.message;
-    png_image_free(&image);
-    throw Error(path + ": writing the PNG failed: " + msg);
-  }
+  write_png_file(path, width, height, PNG_FORMAT_GA, 2, ga.data());
 }
 
 std::vector<Rgb8> depth_preview(const IntervalTile& tile, uint32_t max_side, uint32_t& width,

@@ -220,6 +220,26 @@ float map_visibility_filtered(const Evaluator& eval, const Receiver& r, const Li
   return eval.pcf_footprint(lp.u, lp.v, float(lp.d), footprint, 2 * pcf_radius + 1);
 }
 
+namespace {
+
+// The shading of render_view and render_stack_view: sky, ambient + Lambert times visibility.
+void shade_image(const std::vector<Receiver>& rec, const std::vector<float>& v, double ambient, std::vector<float>& img) {
+  const size_t n = rec.size();
+  img.assign(n * 3, 0);
+  for (size_t i = 0; i < n; ++i) {
+    float* px = &img[3 * i];
+    if (!rec[i].hit) {
+      px[0] = 0.55f, px[1] = 0.7f, px[2] = 0.9f;  // sky
+      continue;
+    }
+    const double c = ambient + (1 - ambient) * std::max(0.0, rec[i].n_dot_l) * v[i];
+    const float albedo[3] = {rec[i].closed ? 0.8f : 0.6f, rec[i].closed ? 0.78f : 0.7f, rec[i].closed ? 0.72f : 0.55f};
+    for (int k = 0; k < 3; ++k) px[k] = float(albedo[k] * c);
+  }
+}
+
+}  // namespace
+
 RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>& rec, const Evaluator& eval,
                          const RenderOptions& o) {
   if (rec.size() != size_t(o.width) * o.height) throw Error("render: receiver count does not match the image size");
@@ -283,23 +303,10 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
     res.traced_seconds = std::chrono::duration<double>(Clk::now() - t0).count();
     res.traced_cpu_seconds = process_cpu_seconds() - c0;
   }
-  auto shade = [&](const std::vector<float>& v, std::vector<float>& img) {
-    img.assign(n * 3, 0);
-    for (size_t i = 0; i < n; ++i) {
-      float* px = &img[3 * i];
-      if (!rec[i].hit) {
-        px[0] = 0.55f, px[1] = 0.7f, px[2] = 0.9f;  // sky
-        continue;
-      }
-      const double c = o.ambient + (1 - o.ambient) * std::max(0.0, rec[i].n_dot_l) * v[i];
-      const float albedo[3] = {rec[i].closed ? 0.8f : 0.6f, rec[i].closed ? 0.78f : 0.7f, rec[i].closed ? 0.72f : 0.55f};
-      for (int k = 0; k < 3; ++k) px[k] = float(albedo[k] * c);
-    }
-  };
-  shade(vis, res.image);
+  shade_image(rec, vis, o.ambient, res.image);
   for (size_t i = 0; i < n; ++i) res.receivers += rec[i].hit && rec[i].n_dot_l > 0;
   if (o.diff) {
-    shade(tvis, res.traced_image);
+    shade_image(rec, tvis, o.ambient, res.traced_image);
     res.diff_image.assign(n * 3, 0);
     for (size_t i = 0; i < n; ++i) {
       float* px = &res.diff_image[3 * i];
@@ -316,26 +323,6 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
   res.visibility = std::move(vis);
   return res;
 }
-
-namespace {
-
-// render_view's shading: sky, ambient + Lambert times visibility.
-void shade_image(const std::vector<Receiver>& rec, const std::vector<float>& v, double ambient, std::vector<float>& img) {
-  const size_t n = rec.size();
-  img.assign(n * 3, 0);
-  for (size_t i = 0; i < n; ++i) {
-    float* px = &img[3 * i];
-    if (!rec[i].hit) {
-      px[0] = 0.55f, px[1] = 0.7f, px[2] = 0.9f;  // sky
-      continue;
-    }
-    const double c = ambient + (1 - ambient) * std::max(0.0, rec[i].n_dot_l) * v[i];
-    const float albedo[3] = {rec[i].closed ? 0.8f : 0.6f, rec[i].closed ? 0.78f : 0.7f, rec[i].closed ? 0.72f : 0.55f};
-    for (int k = 0; k < 3; ++k) px[k] = float(albedo[k] * c);
-  }
-}
-
-}  // namespace
 
 RenderResult render_stack_view(const SceneTracer& tracer, const std::vector<Receiver>& rec,
                                const std::vector<LightSpace>& samples, uint32_t L, const StackMapLookups& map,
