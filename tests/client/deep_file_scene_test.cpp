@@ -10,6 +10,7 @@
 #include <random>
 
 #include "client/map_access.hpp"
+#include "tests/client/deep_pack_fixture.hpp"
 #include "tests/client/loopback.hpp"
 #include "tiles/bake/deep_build.hpp"
 #include "tiles/bake/map_build.hpp"
@@ -39,20 +40,11 @@ TEST(DeepFileScene, ClientAnswersWhatTheSamplerMakesOfTheFilesMaterials) {
   const Scene s = load_scene(write_scene(dir));
   ASSERT_TRUE(s.any_partial());
   const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=20,elevation=70"), s.bounds());
-  const DeepSampler sampler(s, light);
-  DeepSampleOptions so;
-  so.samples_per_side = 2;
-  so.epsilon = 0.02;
-  constexpr uint32_t kLevel = 5;
-  const DeepMapBuild deep = build_deep_tiles(sampler, kLevel, 2, so, 8192);
+  const DeepSampleOptions so = looptest::deep_options(0.02);
   const std::string path = dir + "/s.pack";
-  MapBuildOptions o;
-  o.map_level = 5;
-  o.skip_level = 2;
-  o.encoding = looptest::first_encoding();
-  o.tile_bytes = 8192;
-  o.before_finish = [&](PackWriter& w) { append_deep_map(w, deep, so.epsilon, so.samples_per_side); };
-  build_map(opaque_part(s), light, o, path);
+  constexpr uint32_t kLevel = looptest::kDeepLevel;
+  const DeepMapBuild deep = looptest::build_deep_pack(s, light, so, path);
+  const DeepSampler sampler(s, light);
 
   looptest::TestServer srv = looptest::start_server({path});
   Client c({"127.0.0.1", srv.port}, looptest::quick_options());

@@ -7,6 +7,7 @@
 #include <random>
 
 #include "client/map_access.hpp"
+#include "tests/client/deep_pack_fixture.hpp"
 #include "tests/client/loopback.hpp"
 #include "tiles/bake/deep_build.hpp"
 #include "tiles/bake/map_build.hpp"
@@ -23,19 +24,10 @@ using looptest::wait_until;
 TEST(DeepLoopback, SameAnswersFromThePackAndOverTheWire) {
   const Scene s = make_procedural("procedural:hairball,count=12,segments=24,transmit=0.5");
   const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=40,elevation=60"), s.bounds());
-  DeepSampleOptions so;
-  so.samples_per_side = 2;
-  so.epsilon = 0.02;
-  const DeepMapBuild deep = build_deep_tiles(DeepSampler(s, light), 5, 2, so, 8192);
-  ASSERT_GT(deep.tiles.size(), 1u);
+  const DeepSampleOptions so = looptest::deep_options(0.02);
   const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/deep_loop.pack";
-  MapBuildOptions o;
-  o.map_level = 5;
-  o.skip_level = 2;
-  o.encoding = looptest::first_encoding();
-  o.tile_bytes = 8192;
-  o.before_finish = [&](PackWriter& w) { append_deep_map(w, deep, so.epsilon, so.samples_per_side); };
-  build_map(opaque_part(s), light, o, path);
+  const DeepMapBuild deep = looptest::build_deep_pack(s, light, so, path);
+  ASSERT_GT(deep.tiles.size(), 1u);
   const auto pack = PackReader::open(path);
   const auto local = PackDeepMap::load(*pack);
   ASSERT_NE(local, nullptr);

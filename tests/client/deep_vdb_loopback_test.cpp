@@ -7,6 +7,7 @@
 #include <random>
 
 #include "client/map_access.hpp"
+#include "tests/client/deep_pack_fixture.hpp"
 #include "tests/client/loopback.hpp"
 #include "tiles/bake/deep_build.hpp"
 #include "tiles/bake/map_build.hpp"
@@ -26,19 +27,11 @@ TEST(DeepVdbLoopback, VolumePackAnswersAlikeOverTheWire) {
   const Scene s = load_scene(vdb);
   ASSERT_TRUE(s.triangles.empty());
   const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=10,elevation=70"), s.bounds());
-  DeepSampleOptions so;
-  so.samples_per_side = 2;
-  so.epsilon = 0.01;
-  const DeepMapBuild deep = build_deep_tiles(DeepSampler(s, light), 5, 2, so, 8192);
-  ASSERT_GT(deep.tiles.size(), 1u);
   const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/vdb_loop.pack";
-  MapBuildOptions o;
-  o.map_level = 5;
-  o.skip_level = 2;
-  o.encoding = looptest::first_encoding();
-  o.tile_bytes = 8192;
-  o.before_finish = [&](PackWriter& w) { append_deep_map(w, deep, so.epsilon, so.samples_per_side); };
-  build_map(opaque_part(s), light, o, path);  // nothing opaque: an all-lit depth map
+  // Nothing opaque: an all-lit depth map.
+  const DeepSampleOptions so = looptest::deep_options(0.01);
+  const DeepMapBuild deep = looptest::build_deep_pack(s, light, so, path);
+  ASSERT_GT(deep.tiles.size(), 1u);
   const auto pack = PackReader::open(path);
   const auto local = PackDeepMap::load(*pack);
   ASSERT_NE(local, nullptr);
