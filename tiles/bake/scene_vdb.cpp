@@ -8,14 +8,25 @@
 #include <openvdb/openvdb.h>
 #endif
 
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/mman.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <cerrno>
+#include <chrono>
 #include <cmath>
+#include <cstring>
 #include <exception>
 #include <filesystem>
 #include <fstream>
 #include <mutex>
 #include <new>
 #include <system_error>
+#include <thread>
 
 #include "common/error.hpp"
 #include "common/text.hpp"
@@ -218,16 +229,9 @@ class VdbStructure {
   uint64_t size_ = 0, pos_ = 0;
 };
 
-Volume read_grid(const std::string& path, const VdbOptions& o) {
-  const std::string where = "vdb '" + printable_text(path) + "' grid '" + printable_text(o.grid) + "'";
-  {
-    std::error_code ec;
-    const auto status = std::filesystem::status(path, ec);
-    if (ec || !std::filesystem::exists(status)) throw Error("scene file not found: " + printable_text(path));
-    if (!std::filesystem::is_regular_file(status))
-      throw Error("scene path is not a regular file: " + printable_text(path));
-  }
-  VdbStructure(path, where).check();
+// What OpenVDB makes of the file (after VdbStructure passed): the grid made dense. Runs
+// in the reader's child process (read_isolated).
+Volume read_openvdb(const std::string& path, const VdbOptions& o, const std::string& where) {
   static std::once_flag once;
   std::call_once(once, [] { openvdb::initialize(); });
 
@@ -341,6 +345,164 @@ Volume read_grid(const std::string& path, const VdbOptions& o) {
   return v;
 }
 
+// The child's answer, in memory shared with the parent, followed by the densities.
+struct ChildAnswer {
+  uint32_t status = 0;  // kAnswer*
+  uint32_t n[3] = {0, 0, 0};
+  double lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};
+  char message[1024] = {};
+};
+constexpr uint32_t kAnswerNone = 0, kAnswerVolume = 1, kAnswerError = 2;
+constexpr size_t kDensityOffset = (sizeof(ChildAnswer) + 63) / 64 * 64;
+constexpr auto kReaderTimeout = std::chrono::seconds(600);
+
+#if defined(__SANITIZE_ADDRESS__)
+constexpr bool kAddressSanitizer = true;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+constexpr bool kAddressSanitizer = true;
+#else
+constexpr bool kAddressSanitizer = false;
+#endif
+#else
+constexpr bool kAddressSanitizer = false;
+#endif
+
+// The child's virtual memory now (from /proc/self/statm), 0 if unknown.
+uint64_t address_space_bytes() {
+  std::ifstream statm("/proc/self/statm");
+  uint64_t pages = 0;
+  if (!(statm >> pages)) return 0;
+  return pages * uint64_t(::sysconf(_SC_PAGESIZE));
+}
+
+void put_message(ChildAnswer& a, const std::string& text) {
+  const size_t n = std::min(text.size(), sizeof a.message - 1);
+  std::memcpy(a.message, text.data(), n);
+  a.message[n] = '\0';
+  a.status = kAnswerError;
+}
+
+// The child: reads the grid with OpenVDB and leaves the answer in `shared`. Never
+// returns (it must not unwind into the parent's stack).
+[[noreturn]] void child_read(const std::string& path, const VdbOptions& o, const std::string& where,
+                             void* shared) {
+  auto& answer = *static_cast<ChildAnswer*>(shared);
+  // OpenVDB warns on stderr about what it reads ("multi-buffer trees ..."); the parent
+  // reports in one line instead.
+  const int devnull = ::open("/dev/null", O_WRONLY | O_CLOEXEC);
+  if (devnull >= 0) ::dup2(devnull, 2);
+  const rlimit no_core{0, 0};  // a crash here is reported by the parent, not dumped
+  ::setrlimit(RLIMIT_CORE, &no_core);
+  // Memory: the sparse grid (checked against 8 x max_voxels + 64 MiB from the file's
+  // statistics when it has them), the dense copy and OpenVDB's buffers, with room; a
+  // file that makes OpenVDB allocate past this fails with "out of memory" instead of
+  // taking the machine. (Not under ASan, which reserves terabytes of shadow memory.)
+  if (!kAddressSanitizer) {
+    const uint64_t now = address_space_bytes();
+    if (now > 0) {
+      const uint64_t limit = now + (uint64_t(1) << 30) + 16 * o.max_voxels;
+      const rlimit r{rlim_t(limit), rlim_t(limit)};
+      ::setrlimit(RLIMIT_AS, &r);
+    }
+  }
+  try {
+    const Volume v = read_openvdb(path, o, where);
+    answer.n[0] = v.nx, answer.n[1] = v.ny, answer.n[2] = v.nz;
+    answer.lo[0] = v.bounds.lo.x, answer.lo[1] = v.bounds.lo.y, answer.lo[2] = v.bounds.lo.z;
+    answer.hi[0] = v.bounds.hi.x, answer.hi[1] = v.bounds.hi.y, answer.hi[2] = v.bounds.hi.z;
+    std::memcpy(static_cast<char*>(shared) + kDensityOffset, v.density.data(), v.density.size() * sizeof(float));
+    answer.status = kAnswerVolume;
+    ::_exit(0);
+  } catch (const Error& e) {
+    put_message(answer, e.what());
+  } catch (const std::bad_alloc&) {
+    put_message(answer, where + ": out of memory while reading it (the reader's limit is " +
+                            std::to_string(((uint64_t(1) << 30) + 16 * o.max_voxels) >> 20) +
+                            " MiB above its start, from max_voxels)");
+  } catch (const std::exception& e) {
+    // OpenVDB's own errors (IoError on a truncated or foreign file, a bad compression
+    // stream, an unknown grid type): one line.
+    std::string why = e.what();
+    for (char& c : why)
+      if (c == '\n' || c == '\r') c = ' ';
+    put_message(answer, where + ": cannot read it: " + printable_text(why));
+  } catch (...) {
+    put_message(answer, where + ": cannot read it (an unknown error in OpenVDB)");
+  }
+  ::_exit(1);
+}
+
+// OpenVDB trusts what it reads beyond the structure VdbStructure checks (a voxel
+// buffer's compressed size becomes an allocation; a corrupt topology corrupts its heap:
+// both found by tests/fuzz/scene_vdb_fuzz.cpp), so it reads in a child process with a
+// memory limit and a timeout, and hands the dense grid back through shared memory. A
+// file that crashes it, exhausts the limit or hangs it is one line of error here.
+Volume read_isolated(const std::string& path, const VdbOptions& o, const std::string& where) {
+  const size_t bytes = kDensityOffset + size_t(o.max_voxels) * sizeof(float);
+  void* shared = ::mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS | MAP_NORESERVE, -1, 0);
+  if (shared == MAP_FAILED) fail(where, std::string("cannot map memory for the reader: ") + std::strerror(errno));
+  struct Unmap {
+    void* p;
+    size_t n;
+    ~Unmap() { ::munmap(p, n); }
+  } unmap{shared, bytes};
+  new (shared) ChildAnswer();
+  std::fflush(nullptr);  // nothing buffered is written twice
+  const pid_t pid = ::fork();
+  if (pid < 0) fail(where, std::string("cannot start the reader: ") + std::strerror(errno));
+  if (pid == 0) child_read(path, o, where, shared);
+  int status = 0;
+  const auto deadline = std::chrono::steady_clock::now() + kReaderTimeout;
+  auto pause = std::chrono::microseconds(50);
+  for (;;) {
+    const pid_t r = ::waitpid(pid, &status, WNOHANG);
+    if (r == pid) break;
+    if (r < 0 && errno != EINTR) fail(where, std::string("lost the reader: ") + std::strerror(errno));
+    if (std::chrono::steady_clock::now() > deadline) {
+      ::kill(pid, SIGKILL);
+      ::waitpid(pid, &status, 0);
+      fail(where, "OpenVDB did not finish reading it within " + std::to_string(kReaderTimeout.count()) + " s");
+    }
+    std::this_thread::sleep_for(pause);
+    pause = std::min(pause * 2, std::chrono::microseconds(20000));
+  }
+  const auto& answer = *static_cast<const ChildAnswer*>(shared);
+  if (WIFSIGNALED(status))
+    fail(where, "OpenVDB crashed reading it (signal " + std::to_string(WTERMSIG(status)) +
+                    "): a corrupt or hostile file");
+  if (answer.status == kAnswerError) {
+    std::string m(answer.message, strnlen(answer.message, sizeof answer.message));
+    throw Error(m);
+  }
+  if (!WIFEXITED(status) || WEXITSTATUS(status) != 0 || answer.status != kAnswerVolume)
+    fail(where, "the reader ended without an answer (exit status " + std::to_string(status) + ")");
+  Volume v;
+  v.name = path + ":" + o.grid;
+  v.sigma = {float(o.sigma), float(o.sigma), float(o.sigma)};
+  v.nx = answer.n[0], v.ny = answer.n[1], v.nz = answer.n[2];
+  const uint64_t voxels = uint64_t(v.nx) * v.ny * v.nz;
+  if (voxels == 0 || voxels > o.max_voxels) fail(where, "the reader answered an impossible grid size");
+  v.bounds.lo = {answer.lo[0], answer.lo[1], answer.lo[2]};
+  v.bounds.hi = {answer.hi[0], answer.hi[1], answer.hi[2]};
+  const auto* d = reinterpret_cast<const float*>(static_cast<const char*>(shared) + kDensityOffset);
+  v.density.assign(d, d + voxels);
+  return v;
+}
+
+Volume read_grid(const std::string& path, const VdbOptions& o) {
+  const std::string where = "vdb '" + printable_text(path) + "' grid '" + printable_text(o.grid) + "'";
+  {
+    std::error_code ec;
+    const auto status = std::filesystem::status(path, ec);
+    if (ec || !std::filesystem::exists(status)) throw Error("scene file not found: " + printable_text(path));
+    if (!std::filesystem::is_regular_file(status))
+      throw Error("scene path is not a regular file: " + printable_text(path));
+  }
+  VdbStructure(path, where).check();
+  return read_isolated(path, o, where);
+}
+
 }  // namespace
 
 Volume load_vdb_volume(const std::string& path, const VdbOptions& o) {
@@ -350,19 +512,9 @@ Volume load_vdb_volume(const std::string& path, const VdbOptions& o) {
     throw Error("vdb '" + printable_text(path) + "': scale and sigma must be finite and >= 0");
   try {
     return read_grid(path, o);
-  } catch (const Error&) {
-    throw;
   } catch (const std::bad_alloc&) {
     throw Error("vdb '" + printable_text(path) + "' grid '" + printable_text(o.grid) +
                 "': out of memory while reading it");
-  } catch (const std::exception& e) {
-    // OpenVDB's own errors (IoError on a truncated or foreign file, a bad compression
-    // stream, an unknown grid type): one line.
-    std::string why = e.what();
-    for (char& c : why)
-      if (c == '\n' || c == '\r') c = ' ';
-    throw Error("vdb '" + printable_text(path) + "' grid '" + printable_text(o.grid) +
-                "': cannot read it: " + printable_text(why));
   }
 }
 

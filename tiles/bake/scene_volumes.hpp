@@ -32,7 +32,10 @@
 //     uncompressed size);
 //   - hostile files: the file's structure (every length and offset up to each grid's
 //     topology, truncation, a float root's node counts) is checked before OpenVDB reads
-//     it (scene_vdb.cpp says what is left to OpenVDB);
+//     it (scene_vdb.cpp says what is left to OpenVDB), and OpenVDB reads in a child
+//     process with a memory limit and a timeout (it crashes or allocates whatever a
+//     voxel buffer's length says on some corrupt files), so that a crash there is one
+//     line of error too;
 //   - every failure (missing or truncated file, not a .vdb, a grid not there, another
 //     value type, a level set, a bad transform, too big, a bad value) is one st::Error
 //     line naming the file and grid.
