@@ -15,6 +15,7 @@
 
 #include "gpu/gpu_map.hpp"
 #include "tiles/core/evaluator.hpp"
+#include "tiles/core/light.hpp"
 #include "tiles/core/pack_format.hpp"
 
 namespace st::gpu {
@@ -24,9 +25,25 @@ struct ShadowLight {
   float near_scaled = 0;
 };
 
-// The float light of a pack's header. Throws GpuError for a spot light (the GPU shadow
-// pass supports suns only).
+// The float light of a pack's header, or of one light space. Throws GpuError for a spot
+// light (the GPU shadow pass supports suns only).
 ShadowLight shadow_light(const PackHeader& h);
+ShadowLight shadow_light(const LightSpace& ls);
+
+// A stack pass's time (ShadowPassInput::time) as StackMap::visibility takes it: with
+// s = clamp(time, 0, 1) * (N - 1), a sample's own time (s within 1e-9 of an integer w)
+// reads slice w alone (a == b == w, f == 0); else slices a = floor(s) and b = a + 1 are
+// blended with f = float(s - a).
+struct StackTime {
+  uint32_t a = 0, b = 0;
+  float f = 0;
+};
+StackTime stack_time(uint32_t slices, double time);
+
+// The CPU twin of a stack map's shadow pass: the same float operations per slice as
+// shaders/stack_shadow_pass.comp, depths from Map::slice_depth (the Map's cache, the same
+// state the GpuMap mirrors). Throws GpuError for a map that is not a stack of suns.
+void stack_shadow_pass_reference(const client::Map& map, const ShadowPassInput& in, std::span<float> out);
 
 // The CPU twin of the shadow pass over `ev` (the Map's evaluator, the same cache state).
 void shadow_pass_reference(const Evaluator& ev, const PackHeader& h, const ShadowPassInput& in, std::span<float> out);

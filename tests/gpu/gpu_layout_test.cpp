@@ -24,7 +24,8 @@ TEST(GpuLayout, TheShaderSeesEveryConstantTheCppSideSees) {
       L::kFbRecLevel, L::kFbRecX, L::kFbRecY, L::kFbRecValue, L::kFbRecKind, L::kFbMaxProbes, L::kFbChildKeyBit,
       L::kPcCount, L::kPcHeight, L::kPcKernel, L::kPcFlags, L::kPcOrigin, L::kPcAxisU, L::kPcAxisV, L::kPcForward,
       L::kPcNear, L::kPcNormalOffset, L::kPcFootprint, L::kPcWords, L::kFlagNeighbourFootprint,
-      L::kWorkgroupSize, L::kProbeWords};
+      L::kWorkgroupSize, L::kProbeWords,
+      L::kPtStack, L::kStXyLevel, L::kStWLevel, L::kStSlices, L::kStSkipLevel, L::kStEntries, L::kStCellSlots, L::kStLights, L::kStHeaderWords, L::kStLightWords, L::kMaxStackCells, L::kSqWords, L::kSqX, L::kSqY, L::kSqSlice, L::kSqLevel, L::kSqReceiver, L::kSqFootprint, L::kSqR, L::kFbStackKeyBit, L::kPcSliceA, L::kPcSliceB, L::kPcTimeWeight};
   ASSERT_LE(want.size(), L::kProbeWords);
   uint64_t messages = 0;
   const std::vector<uint32_t> got = run_layout_probe(gputest::device(), true, &messages);
