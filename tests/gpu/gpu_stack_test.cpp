@@ -8,8 +8,11 @@
 #include <gtest/gtest.h>
 
 #include <bit>
+#include <cmath>
+#include <map>
 #include <random>
 #include <set>
+#include <thread>
 
 #include "client/map_access.hpp"
 #include "gpu/shadow_reference.hpp"
@@ -157,6 +160,149 @@ TEST(GpuStack, EveryTexelOfEverySliceAnswersBitExactlyLikeTheCpu) {
   }
   EXPECT_EQ(bad, 0u);
   EXPECT_GT(fractional, 100u);  // the kernels straddle shadow edges
+  EXPECT_EQ(g.stats().validation_messages, 0u);
+}
+
+bool cell_resident(const client::Map& map, uint64_t tile) {
+  bool r = false;
+  client::MapAccess::remote(map).inspect_cache(
+      [&](const TileCache& c) { r = c.lookup(tile).state == PageState::resident; });
+  return r;
+}
+
+TEST(GpuStack, AbsentCellsAnswerTheirLevelKValueAndFeedbackNamesExactlyThem) {
+  ServedStack s = serve_stack("gpu_stack_absent");
+  ASSERT_GT(s.map.request_slices(0, kSlices / 2 - 1, 10), 0u);
+  ASSERT_TRUE(looptest::wait_until([&] { return s.map.slices_resident(0, kSlices / 2 - 1); }));
+  s.server.stop();
+  GpuMap g(s.map, gputest::options());
+  g.sync();
+  const StackGrid& grid = *client::MapAccess::remote(s.map).stack_grid();
+  const uint32_t n = grid.geo.n;
+  EXPECT_EQ(compare_every_texel(g, s.map, n), "");
+  // Every finest texel of the later slices: the cells they fall in that are tiles and not
+  // resident are exactly the feedback, each with the number of queries in it.
+  const StackMap cells(grid, [](uint64_t) -> const MhOctree* { return nullptr; });
+  std::vector<GpuStackQuery> q;
+  std::map<uint64_t, uint32_t> want;
+  for (uint32_t w = kSlices / 2 - 1; w < kSlices; ++w)
+    for (uint32_t y = 0; y < (1u << n); ++y)
+      for (uint32_t x = 0; x < (1u << n); ++x) {
+        q.push_back({x, y, w, n, 0, 1, 0});
+        const uint64_t cell = cells.cell_of(x, y, w);
+        if (grid.entries[cell].kind == 1 && !cell_resident(s.map, grid.tile_id(cell))) ++want[grid.tile_id(cell)];
+      }
+  ASSERT_FALSE(want.empty());
+  std::vector<float> out(q.size());
+  const FrameStats fs = g.evaluate(q, out);
+  std::map<uint64_t, uint32_t> got;
+  for (const GpuMap::FeedbackTile& t : g.last_feedback()) got[t.tile] = t.pixels;
+  EXPECT_EQ(got, want);
+  uint32_t holes = 0;
+  for (const auto& [tile, count] : want) holes += count;
+  EXPECT_EQ(fs.holes, holes);
+  EXPECT_EQ(fs.feedback_tiles, want.size());
+  EXPECT_EQ(g.stats().validation_messages, 0u);
+}
+
+// A G-buffer over the light sets' box: a wavy surface, a margin outside the box, a few
+// background pixels, normals up.
+struct GBuffer {
+  uint32_t width = 64, height = 48;
+  std::vector<float> pos, nrm;
+  GBuffer() : pos(size_t(width) * height * 4), nrm(pos.size()) {
+    for (uint32_t y = 0; y < height; ++y)
+      for (uint32_t x = 0; x < width; ++x) {
+        const size_t p = size_t(y) * width + x;
+        const double wx = -11 + 22.0 * (x + 0.5) / width, wz = -11 + 22.0 * (y + 0.5) / height;
+        pos[4 * p] = float(wx);
+        pos[4 * p + 1] = float(2.5 + 2.4 * std::sin(0.7 * wx) * std::cos(0.5 * wz));
+        pos[4 * p + 2] = float(wz);
+        pos[4 * p + 3] = (x * 7 + y * 3) % 31 == 0 ? 0.0f : 1.0f;
+        nrm[4 * p + 1] = 1.0f;
+      }
+  }
+  ShadowPassInput input(double time, uint32_t kernel) const {
+    ShadowPassInput in;
+    in.positions = pos;
+    in.normals = nrm;
+    in.width = width;
+    in.height = height;
+    in.kernel = kernel;
+    in.normal_offset = 0.01f;
+    in.neighbour_footprint = kernel != 5;
+    in.footprint = 2.5f;
+    in.time = time;
+    return in;
+  }
+};
+
+TEST(GpuStack, ShadowPassAtSampleTimesAndBetweenEqualsItsCpuTwin) {
+  ServedStack s = serve_stack("gpu_stack_pass");
+  ASSERT_GT(s.map.request_slices(0, kSlices / 2 - 1, 10), 0u);  // the later slices stay absent
+  ASSERT_TRUE(looptest::wait_until([&] { return s.map.slices_resident(0, kSlices / 2 - 1); }));
+  s.server.stop();
+  GpuMap g(s.map, gputest::options());
+  const GBuffer gb;
+  size_t lit = 0, shadow = 0, between = 0;
+  for (double time : {0.0, 2.0 / 9.0, 0.2, 0.43, 0.5, 0.61, 1.0})
+    for (uint32_t kernel : {1u, 3u, 5u}) {
+      SCOPED_TRACE("time " + std::to_string(time) + " kernel " + std::to_string(kernel));
+      const ShadowPassInput in = gb.input(time, kernel);
+      std::vector<float> got(size_t(gb.width) * gb.height), want(got.size());
+      const FrameStats fs = g.wait(g.submit_shadow_pass(in), got);
+      stack_shadow_pass_reference(s.map, in, want);
+      size_t bad = 0;
+      for (size_t i = 0; i < got.size(); ++i) {
+        if (bits(got[i]) != bits(want[i]) && bad++ == 0)
+          ADD_FAILURE() << "pixel " << i << ": gpu " << got[i] << ", cpu " << want[i];
+        lit += want[i] == 1.0f, shadow += want[i] == 0.0f, between += want[i] > 0.0f && want[i] < 1.0f;
+      }
+      EXPECT_EQ(bad, 0u);
+      // The last slices are absent: a pass that reads them answers coarsely and says so.
+      const StackTime t = stack_time(kSlices, time);
+      if (s.map.slices_resident(t.a, t.b)) {
+        EXPECT_EQ(fs.holes, 0u);
+      }
+      if (t.b == kSlices - 1) {
+        EXPECT_GT(fs.holes, 0u);
+      }
+      if (kernel == 1 && t.a == t.b) {  // a sample's time, one tap: that slice alone, 0 or 1
+        for (float v : want) EXPECT_TRUE(v == 0.0f || v == 1.0f) << v;
+      }
+    }
+  EXPECT_GT(lit, 1000u);
+  EXPECT_GT(shadow, 1000u);
+  EXPECT_GT(between, 100u);
+  EXPECT_EQ(g.stats().validation_messages, 0u);
+}
+
+TEST(GpuStack, ShadowPassFeedbackStreamsTheCellsItNeedsUntilNoHoleIsLeft) {
+  ServedStack s = serve_stack("gpu_stack_feedback");
+  GpuMap g(s.map, gputest::options());
+  const GBuffer gb;
+  std::vector<float> vis(size_t(gb.width) * gb.height);
+  const ShadowPassInput in = gb.input(0.5, 3);  // slices 4 and 5
+  const FrameStats first = g.wait(g.submit_shadow_pass(in), vis);
+  EXPECT_GT(first.holes, 0u);
+  EXPECT_GT(first.feedback_tiles, 0u);
+  EXPECT_EQ(first.requested, first.feedback_tiles);
+  const StackGrid& grid = *client::MapAccess::remote(s.map).stack_grid();
+  const uint32_t sw = grid.geo.k - grid.geo.w_bits(grid.skip_level);  // slices per cell: 2^sw
+  for (const GpuMap::FeedbackTile& t : g.last_feedback()) {
+    uint64_t cell = 0;
+    ASSERT_TRUE(grid.cell_of(t.tile, cell));
+    const uint64_t cw = cell >> (2 * grid.geo.xy_bits(grid.skip_level));
+    EXPECT_TRUE((cw << sw) <= 5 && 4 <= ((cw + 1) << sw) - 1) << "cell " << cell << " holds no slice 4 or 5";
+  }
+  FrameStats fs = first;
+  for (int frame = 0; frame < 2000 && fs.holes > 0; ++frame) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    fs = g.wait(g.submit_shadow_pass(in), vis);
+  }
+  EXPECT_EQ(fs.holes, 0u);
+  EXPECT_GT(g.stats().slots_uploaded, 0u);
+  EXPECT_FALSE(s.map.slices_resident(0, 1));  // nothing asked for slices 0 and 1
   EXPECT_EQ(g.stats().validation_messages, 0u);
 }
 
