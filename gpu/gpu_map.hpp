@@ -99,6 +99,16 @@ struct ShadowPassInput {
   double time = 0;
 };
 
+// A stack pass's time (ShadowPassInput::time) as StackMap::visibility takes it: with
+// s = clamp(time, 0, 1) * (N - 1), a sample's own time (s within 1e-9 of an integer w)
+// reads slice w alone (a == b == w, f == 0); else slices a = floor(s) and b = a + 1 are
+// blended with f = float(s - a): va + f * (vb - va).
+struct StackTime {
+  uint32_t a = 0, b = 0;
+  float f = 0;
+};
+StackTime stack_time(uint32_t slices, double time);
+
 struct FrameStats {
   uint64_t frame = 0;
   double gpu_ms = 0;             // the dispatch, from device timestamps (0 if unsupported)

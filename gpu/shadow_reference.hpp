@@ -30,16 +30,6 @@ struct ShadowLight {
 ShadowLight shadow_light(const PackHeader& h);
 ShadowLight shadow_light(const LightSpace& ls);
 
-// A stack pass's time (ShadowPassInput::time) as StackMap::visibility takes it: with
-// s = clamp(time, 0, 1) * (N - 1), a sample's own time (s within 1e-9 of an integer w)
-// reads slice w alone (a == b == w, f == 0); else slices a = floor(s) and b = a + 1 are
-// blended with f = float(s - a).
-struct StackTime {
-  uint32_t a = 0, b = 0;
-  float f = 0;
-};
-StackTime stack_time(uint32_t slices, double time);
-
 // The CPU twin of a stack map's shadow pass: the same float operations per slice as
 // shaders/stack_shadow_pass.comp, depths from Map::slice_depth (the Map's cache, the same
 // state the GpuMap mirrors). Throws GpuError for a map that is not a stack of suns.
