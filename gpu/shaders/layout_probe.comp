@@ -17,6 +17,9 @@ void main() {
                           kPcCount, kPcHeight, kPcKernel, kPcFlags, kPcOrigin, kPcAxisU, kPcAxisV, kPcForward,
                           kPcNear, kPcNormalOffset, kPcFootprint, kPcWords, kFlagNeighbourFootprint,
                           kWorkgroupSize, kProbeWords,
-                          kPtStack, kStXyLevel, kStWLevel, kStSlices, kStSkipLevel, kStEntries, kStCellSlots, kStLights, kStHeaderWords, kStLightWords, kMaxStackCells, kSqWords, kSqX, kSqY, kSqSlice, kSqLevel, kSqReceiver, kSqFootprint, kSqR, kFbStackKeyBit, kPcSliceA, kPcSliceB, kPcTimeWeight);
+                          kPtStack, kStXyLevel, kStWLevel, kStSlices, kStSkipLevel, kStEntries, kStCellSlots,
+                          kStLights, kStHeaderWords, kStLightWords, kMaxStackCells, kSqWords, kSqX, kSqY, kSqSlice,
+                          kSqLevel, kSqReceiver, kSqFootprint, kSqR, kFbStackKeyBit, kPcSliceA, kPcSliceB,
+                          kPcTimeWeight);
   for (uint i = 0u; i < kProbeWords; ++i) st_output[i] = uintBitsToFloat(i < v.length() ? v[i] : 0u);
 }
