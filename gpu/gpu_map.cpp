@@ -219,6 +219,9 @@ struct GpuMap::Impl {
     const uint64_t range = ctx->properties().limits.maxStorageBufferRange;
     if (in_bytes > range || out_bytes > range)
       throw GpuError("GpuMap: max_queries / max_pixels exceed device '" + ctx->device_name() + "' maxStorageBufferRange");
+    if (page_shadow.size() * 4 > range)
+      throw GpuError("GpuMap: the page table (" + std::to_string(page_shadow.size() * 4) + " bytes) exceeds device '" +
+                     ctx->device_name() + "' maxStorageBufferRange");
     frames.resize(opt.frames_in_flight);
     for (uint32_t i = 0; i < opt.frames_in_flight; ++i) {
       Frame& f = frames[i];

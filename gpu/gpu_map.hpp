@@ -24,6 +24,11 @@
 // Answers are bit-exact with the CPU's (Map::depth, Map::pcf, pcf_footprint) for the
 // same cache contents; GPU_LAYOUT.md "Exactness" says how.
 //
+// Stack maps (Map::slices() > 0: shadow-map stacks, a moving sun) use the same mirror: the
+// page table carries the stack grid and one light per slice (GPU_LAYOUT.md "The stack
+// block"), evaluate() takes GpuStackQuery (bit-exact with Map::slice_depth and the same
+// kernels per slice), and the shadow pass answers at ShadowPassInput::time.
+//
 // Errors: the constructor throws GpuError when no Vulkan device is there or the one asked
 // for is not (one line naming the devices present), or a Vulkan call fails (naming the
 // call). The CPU path (the Map itself) is never affected. Not thread-safe: one thread
