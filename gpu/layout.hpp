@@ -39,7 +39,7 @@ static_assert(vsdag::kLeafXyBits == 3 && vsdag::kZNodeBits == 3 && vsdag::kState
 static_assert(layout::kLevelFromFootprint == kLevelFromFootprint);
 static_assert(layout::kPcWords * 4 <= 128, "push constants: Vulkan guarantees 128 bytes");
 static_assert(layout::kFbRecordWords == 6 && layout::kFbHeaderWords >= 5);
-static_assert(layout::kPtHeaderWords > layout::kPtPcfTable);
+static_assert(layout::kPtHeaderWords > layout::kPtPcfTable && layout::kPtHeaderWords > layout::kPtStack);
 // What st_eval.glsl reads of the tile formats, by word:
 static_assert(dagmh::kTreeletWords == 3 && sizeof(dagmh::ChunkInfo) == 6 * 4 && sizeof(dagmh::Cursor) == 4 * 4);
 static_assert(offsetof(dagmh::Header, finest_level) == 3 * 4 && offsetof(dagmh::Header, skip_level) == 4 * 4 &&

@@ -36,7 +36,7 @@ ST_UINT(kPtSkipSlots, 9u)      // word offset: 4^K slot pointers (kNoSlot: not o
 ST_UINT(kPtChildSlots, 10u)    // word offset: slot_count * kChildTableWords slot pointers
 ST_UINT(kPtPcfTable, 11u)      // word offset: kMaxPcf * kPcfTableStride f32 quotients
 ST_UINT(kPtPreview, 12u)       // word offset: the map preview (kPv* header, then its arrays)
-ST_UINT(kPtStack, 13u)         // word offset: the stack block (kSt*) of a stack map; 0 for a 2D map
+ST_UINT(kPtStack, 14u)         // word offset: the stack block (kSt*) of a stack map; 0 for a 2D map
 ST_UINT(kPtHeaderWords, 16u)
 
 // The map preview block (tiles/core/map_preview.hpp), at word kPtPreview: a header, then

@@ -53,7 +53,7 @@ TEST(GpuLayout, CppStructuresMatchTheWordOffsetsTheShaderUses) {
 // offsets, then the K coarse-level offsets (the header's 8 words, then K words).
 TEST(GpuLayout, StackBlockHeaderWordsAreWhereTheDrawingPutsThem) {
   namespace L = layout;
-  EXPECT_EQ(L::kPtStack, 13u);
+  EXPECT_EQ(L::kPtStack, 14u);
   EXPECT_EQ(L::kStXyLevel, 0u);
   EXPECT_EQ(L::kStWLevel, 1u);
   EXPECT_EQ(L::kStSlices, 2u);
