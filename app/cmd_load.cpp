@@ -25,19 +25,6 @@ client::Endpoint parse_endpoint(const std::string& option, const std::string& te
   return {host, uint16_t(p)};
 }
 
-namespace {
-
-struct LoadArgs {
-  std::string server, map, path = "flyover", report, key_file, tls_ca, tls_name;
-  bool tls = false;
-  uint32_t cameras = 4, connections = 0, samples_x = 64, samples_y = 36, workers = 0, io_threads = 2;
-  double duration = 10, rate = 60, cache_mb = 64;
-  uint64_t seed = 1;
-  bool no_prefetch = false;
-  std::string time, time_sweep;
-  bool soft = false;
-};
-
 // "T" -> [T, T]; "A..B" -> [A, B]; each in [0, 1]. Throws st::Error naming the option.
 void parse_time_range(const std::string& option, const std::string& text, double& a, double& b) {
   auto number = [&](const std::string& s) {
@@ -52,6 +39,19 @@ void parse_time_range(const std::string& option, const std::string& text, double
   if (dots == std::string::npos) a = b = number(text);
   else a = number(text.substr(0, dots)), b = number(text.substr(dots + 2));
 }
+
+namespace {
+
+struct LoadArgs {
+  std::string server, map, path = "flyover", report, key_file, tls_ca, tls_name;
+  bool tls = false;
+  uint32_t cameras = 4, connections = 0, samples_x = 64, samples_y = 36, workers = 0, io_threads = 2;
+  double duration = 10, rate = 60, cache_mb = 64;
+  uint64_t seed = 1;
+  bool no_prefetch = false;
+  std::string time, time_sweep;
+  bool soft = false;
+};
 
 void run(const LoadArgs& a) {
   loadgen::LoadOptions o;

@@ -1,6 +1,6 @@
 // `shadowtile view --server HOST:PORT --map NAME --scene SCENE [--path flyover] [--frames 24]
 //  [--fps 24] [--size 1920x1080] [--pcf 3] [--seed 1] [--device NAME] [--cache-mb 256]
-//  [--upload-mb 16] [--out view-out] [--json PATH]`: a headless viewer. It flies a load-tester
+//  [--upload-mb 16] [--time T | --time-sweep A..B] [--out view-out] [--json PATH]`: a headless viewer. It flies a load-tester
 // camera path (loadgen/camera_path.hpp) over a map streamed from `shadowtile serve`;
 // per frame, primary visibility on the CPU (Embree) into a G-buffer, the shadow pass on
 // the GPU (gpu::GpuMap) from the tiles streamed so far, Lambert shading into a PNG; the
@@ -8,6 +8,13 @@
 // GPU pass time, tiles requested from feedback, holes (pixels answered from a coarser
 // level), residency; then a summary table, a contact sheet and JSON. Never waits for the
 // network: frames advance at --fps of simulated time whatever has arrived.
+//
+// A stack map (a pack built with a light set, `--light sun-path:...`) is drawn at the light
+// set's time: --time T for every frame, or --time-sweep A..B from A at the first frame to B
+// at the last (the sun moves while the camera flies). The GPU pass blends the two nearest
+// slices (gpu::ShadowPassInput::time), the shading follows the sun between them, and each
+// frame also asks for the slices the next frame's time reads (at a low priority, under
+// the feedback's), so a sweep finds its next slice on its way.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -22,6 +29,8 @@
 #include "common/error.hpp"
 #include "gpu/gpu_map.hpp"
 #include "loadgen/camera_path.hpp"
+#include "loadgen/load_run.hpp"
+#include "tiles/core/stack_grid.hpp"
 #include "tiles/bake/png_io.hpp"
 #include "tiles/bake/render.hpp"
 #include "tiles/bake/scene.hpp"
@@ -29,11 +38,13 @@
 namespace st::cli {
 
 client::Endpoint parse_endpoint(const std::string& option, const std::string& text);  // cmd_load.cpp
+void parse_time_range(const std::string& option, const std::string& text, double& a, double& b);  // cmd_load.cpp
 
 namespace {
 
 struct ViewArgs {
   std::string server, map, scene, path = "flyover", size = "1920x1080", device, out = "view-out", json, up = "y";
+  std::string time, time_sweep;
   uint32_t frames = 24, pcf = 3;
   double fps = 24, cache_mb = 256, upload_mb = 16;
   uint64_t seed = 1;
@@ -47,6 +58,13 @@ void run(const ViewArgs& a) {
   if (a.frames == 0 || a.frames > 100000) throw Error("--frames: 1..100000");
   if (a.pcf < 1 || a.pcf > 9) throw Error("--pcf: kernel side 1..9");
   if (!(a.fps > 0)) throw Error("--fps must be > 0");
+  if (!a.time.empty() && !a.time_sweep.empty()) throw Error("view: give --time or --time-sweep, not both");
+  double time0 = 0, time1 = 0;
+  if (!a.time.empty()) parse_time_range("--time", a.time, time0, time1);
+  if (!a.time_sweep.empty()) {
+    if (a.time_sweep.find("..") == std::string::npos) throw Error("--time-sweep: expected A..B, got '" + a.time_sweep + "'");
+    parse_time_range("--time-sweep", a.time_sweep, time0, time1);
+  }
   SceneOptions so;
   so.up = a.up == "z" ? UpAxis::z : UpAxis::y;
   const Scene scene = load_scene(a.scene, so);
@@ -59,10 +77,17 @@ void run(const ViewArgs& a) {
   cl = std::make_unique<client::Client>(parse_endpoint("--server", a.server), co);
   map = cl->open(a.map);
   const PackHeader& h = client::pack_header(map);
-  const LightSpace light = LightSpace::from_array(h.light_kind, h.light);
+  const LightSpace light = LightSpace::from_array(h.light_kind, h.light);  // a stack's: slice 0's
   if (h.scene_hash != scene.content_hash())
     std::fprintf(stderr, "shadowtile view: warning: scene '%s' is not the scene the map was built from\n", a.scene.c_str());
-  const loadgen::WorldFrame world = loadgen::world_frame(h, client::skip_grid(map));
+  const StackGrid* stack = client::MapAccess::remote(map).stack_grid();
+  if (!stack && !(a.time.empty() && a.time_sweep.empty()))
+    throw Error("view: --time and --time-sweep need a stack map (a pack built with --light sun-path:...)");
+  if (stack && stack->light_kind != LightKind::sun)
+    throw Error("view: the GPU shadow pass supports suns only; map '" + a.map + "' is a stack of '" + stack->spec + "'");
+  std::vector<LightSpace> samples;
+  for (uint32_t w = 0; stack && w < stack->slices; ++w) samples.push_back(stack->light(w));
+  const loadgen::WorldFrame world = stack ? loadgen::stack_world_frame(map) : loadgen::world_frame(h, client::skip_grid(map));
   const loadgen::CameraPath path(loadgen::parse_path(a.path), world, a.seed, 0);
   const SceneTracer tracer(scene, light);
 
@@ -74,6 +99,14 @@ void run(const ViewArgs& a) {
   gpu::GpuMap g(map, go);
   std::printf("device '%s', %ux%u, %u frames of path %s, cache %u slots\n", g.device_name().c_str(), width, height,
               a.frames, a.path.c_str(), co.cache_slots);
+  if (stack)
+    std::printf("stack of %u slices (%s), time %s\n", stack->slices, stack->spec.c_str(),
+                a.time_sweep.empty() ? std::to_string(time0).c_str()
+                                     : (std::to_string(time0) + ".." + std::to_string(time1) + " swept").c_str());
+  // The light set's time of frame f (a sweep: A at the first frame, B at the last).
+  auto time_of = [&](uint32_t f) {
+    return a.frames > 1 ? time0 + (time1 - time0) * double(std::min(f, a.frames - 1)) / double(a.frames - 1) : time0;
+  };
 
   std::filesystem::create_directories(a.out);
   const size_t pixels = size_t(width) * height;
@@ -84,12 +117,23 @@ void run(const ViewArgs& a) {
   std::vector<Rgb8> sheet(size_t(tw) * cols * th * rows);
   const double texel = light.extent_uv() / double(uint64_t(1) << h.map_level);
   nlohmann::json frames = nlohmann::json::array();
-  std::printf("%6s %10s %10s %10s %9s %9s %10s\n", "frame", "cpu ms", "gpu ms", "requested", "holes", "hole %",
-              "resident");
+  std::printf("%6s %10s %10s %10s %9s %9s %10s%s\n", "frame", "cpu ms", "gpu ms", "requested", "holes", "hole %",
+              "resident", stack ? "     time" : "");
   std::vector<double> gpu_ms, holes_pct;
   for (uint32_t f = 0; f < a.frames; ++f) {
     const auto t0 = std::chrono::steady_clock::now();
-    const auto rec = tracer.primary(path.at(f / a.fps), width, height);
+    auto rec = tracer.primary(path.at(f / a.fps), width, height);
+    const double time = time_of(f);
+    if (stack) {
+      // The sun between the two slices the pass blends: shading follows it (n.l).
+      const gpu::StackTime st = gpu::stack_time(stack->slices, time);
+      const Vec3d fa = samples[st.a].forward(), fb = samples[st.b].forward();
+      const Vec3d to_sun = normalize(fa * -(1.0 - double(st.f)) + fb * -double(st.f));
+      for (Receiver& r : rec) r.n_dot_l = dot(r.normal, to_sun);
+      // Ask for the slices the next frame's time reads, under the feedback's priorities.
+      const gpu::StackTime next = gpu::stack_time(stack->slices, time_of(f + 1));
+      if (next.a != st.a || next.b != st.b) map.request_slices(next.a, next.b, 1);
+    }
     for (size_t p = 0; p < pixels; ++p) {
       const Receiver& r = rec[p];
       pos[4 * p] = float(r.pos.x), pos[4 * p + 1] = float(r.pos.y), pos[4 * p + 2] = float(r.pos.z);
@@ -105,6 +149,7 @@ void run(const ViewArgs& a) {
     in.kernel = a.pcf;
     in.normal_offset = float(kOpenReceiverOffsetTexels * texel);
     in.neighbour_footprint = true;
+    in.time = time;
     const gpu::FrameStats fs = g.wait(g.submit_shadow_pass(in), vis);
     for (size_t p = 0; p < pixels; ++p) {
       const Receiver& r = rec[p];
@@ -124,13 +169,16 @@ void run(const ViewArgs& a) {
     const double hole_pct = 100.0 * fs.holes / double(pixels);
     gpu_ms.push_back(fs.gpu_ms);
     holes_pct.push_back(hole_pct);
-    std::printf("%6u %10.1f %10.3f %10u %9u %8.2f%% %5u/%-5u\n", f, cpu_ms, fs.gpu_ms, fs.requested, fs.holes, hole_pct,
+    std::printf("%6u %10.1f %10.3f %10u %9u %8.2f%% %5u/%-5u", f, cpu_ms, fs.gpu_ms, fs.requested, fs.holes, hole_pct,
                 ms.cache.resident, co.cache_slots);
+    if (stack) std::printf(" %8.4f", time);
+    std::printf("\n");
     std::fflush(stdout);
     frames.push_back({{"frame", f}, {"cpu_ms", cpu_ms}, {"gpu_ms", fs.gpu_ms}, {"requested", fs.requested},
                       {"feedback_tiles", fs.feedback_tiles}, {"holes", fs.holes}, {"holes_pct", hole_pct},
                       {"resident", ms.cache.resident}, {"slots_uploaded", fs.slots_uploaded},
                       {"bytes_uploaded", fs.bytes_uploaded}, {"tiles_received", ms.tiles_received}});
+    if (stack) frames.back()["time"] = time;
     // Simulated time: the next frame comes 1/fps later, arrivals or not.
     std::this_thread::sleep_for(std::chrono::duration<double>(1.0 / a.fps));
   }
@@ -144,10 +192,11 @@ void run(const ViewArgs& a) {
               "(%.1f MB), %llu requested from feedback\n",
               med(gpu_ms), *std::max_element(gpu_ms.begin(), gpu_ms.end()), med(holes_pct), holes_pct.back(),
               (unsigned long long)gs.slots_uploaded, gs.bytes_uploaded / 1e6, (unsigned long long)gs.feedback_requested);
-  const nlohmann::json report = {{"device", gs.device}, {"width", width}, {"height", height}, {"path", a.path},
+  nlohmann::json report = {{"device", gs.device}, {"width", width}, {"height", height}, {"path", a.path},
                                  {"pcf", a.pcf}, {"gpu_ms_median", med(gpu_ms)}, {"holes_pct_median", med(holes_pct)},
                                  {"slots_uploaded", gs.slots_uploaded}, {"bytes_uploaded", gs.bytes_uploaded},
                                  {"feedback_requested", gs.feedback_requested}, {"frames", frames}};
+  if (stack) report["stack"] = {{"slices", stack->slices}, {"spec", stack->spec}, {"time0", time0}, {"time1", time1}};
   const std::string json = a.json.empty() ? a.out + "/view.json" : a.json;
   std::ofstream(json) << report.dump(2) << "\n";
   std::printf("wrote %s/frame_*.png, %s/contact_sheet.png, %s\n", a.out.c_str(), a.out.c_str(), json.c_str());
@@ -169,6 +218,10 @@ Register reg{"view", "Headless viewer: fly a camera path, GPU shadow pass from s
                sub.add_option("--device", a->device, "Vulkan device name (default: SHADOWTILE_VK_DEVICE)");
                sub.add_option("--cache-mb", a->cache_mb, "Tile cache size");
                sub.add_option("--upload-mb", a->upload_mb, "GPU upload budget per frame");
+               sub.add_option("--time", a->time,
+                              "Stack maps: the light set's time T in [0, 1] (slices blended; default 0)");
+               sub.add_option("--time-sweep", a->time_sweep,
+                              "Stack maps: time A..B swept over the frames (the sun moves while the camera flies)");
                sub.add_option("--out", a->out, "Output folder (frames, contact sheet, view.json)");
                sub.add_option("--json", a->json, "JSON report path (default OUT/view.json)");
                sub.callback([a] { run(*a); });

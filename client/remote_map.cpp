@@ -119,6 +119,12 @@ size_t RemoteMap::want_tiles(std::span<const WantedTile> tiles) const noexcept {
   size_t queued = 0;
   std::lock_guard lock(mu_);
   for (const WantedTile& w : tiles) {
+    if (stack_grid_) {  // a stack map's tiles are its cells' (remote_stack.cpp)
+      uint64_t cell = 0;
+      if (!stack_grid_->cell_of(w.tile, cell) || stack_grid_->entries[cell].kind != 1) continue;
+      queued += want_locked(w.tile, GridEntry{stack_grid_->entries[cell].value, EntryKind::tile, 0}, w.priority);
+      continue;
+    }
     if (!is_valid_tile_id(w.tile) || w.entry.kind == EntryKind::constant) continue;
     const uint32_t level = uint32_t(w.tile >> kTileIdLevelShift);
     if (level < grid_.levels || level >= header_.map_level) continue;

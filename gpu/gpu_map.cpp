@@ -13,6 +13,7 @@
 #include "gpu/layout.hpp"
 #include "gpu/shadow_reference.hpp"
 #include "gpu/vk_context.hpp"
+#include "tiles/core/stack_grid.hpp"
 
 namespace st::gpu {
 
@@ -45,6 +46,7 @@ struct GpuMap::Impl {
 
   client::Map map;
   const client::RemoteMap* rm = nullptr;
+  const StackGrid* sg = nullptr;  // a stack map's grid (remote_stack.cpp), else null
   GpuOptions opt;
   uint32_t map_level = 0, k = 0, encoding = 0, slot_count = 0, slot_bytes = 0, slot_words = 0;
   uint64_t pool_bytes = 0;
@@ -70,10 +72,12 @@ struct GpuMap::Impl {
   GpuStats totals;
   uint32_t resident = 0;
   uint32_t off_coarse = 0, off_entries = 0, off_skip_slots = 0, off_children = 0, off_pcf = 0;
+  uint32_t off_stack = 0, off_cell_slots = 0;  // stack maps: the stack block, its slot pointers
 
   Impl(client::Map m, GpuOptions o) : map(std::move(m)), opt(std::move(o)) {
     if (!map.valid()) throw std::runtime_error("GpuMap: the Map is not open (default-constructed)");
     rm = &client::MapAccess::remote(map);
+    sg = rm->stack_grid();
     if (opt.frames_in_flight < 1 || opt.frames_in_flight > 4) throw GpuError("GpuMap: frames_in_flight must be 1..4");
     if (opt.feedback_capacity < 16 || !std::has_single_bit(opt.feedback_capacity) || opt.feedback_capacity > (1u << 20))
       throw GpuError("GpuMap: feedback_capacity must be a power of two in 16..2^20");
@@ -145,7 +149,8 @@ struct GpuMap::Impl {
     const uint32_t pv_cells = off_preview + L::kPvHeaderWords + cells;
     const uint32_t pv_cell_words = L::kPvCellHeaderWords + 2 * pv_words;
     const uint32_t pv_values = pv_cells + uint32_t(pv.cells()) * pv_cell_words;
-    const uint32_t words = pv_values + uint32_t(pv.values().size());
+    const uint32_t pv_end = pv_values + uint32_t(pv.values().size());
+    const uint32_t words = pv_end + stack_words();
     page_shadow.assign(words, 0);
     uint32_t* p = page_shadow.data();
     p[L::kPtMagic] = L::kPageMagic;
@@ -187,6 +192,7 @@ struct GpuMap::Impl {
     for (uint32_t r = 1; r <= L::kMaxPcf; ++r)
       for (uint32_t lit = 0; lit <= r * r; ++lit)
         p[off_pcf + (r - 1) * L::kPcfTableStride + lit] = std::bit_cast<uint32_t>(float(lit) / float(r * r));
+    if (sg) build_stack_block(pv_end);
     dirty.assign((words + kDirtyBlockWords - 1) / kDirtyBlockWords, 0);
     dirty_list.reserve(dirty.size());
     mirror_tile.assign(slot_count, kInvalidTile);
@@ -206,12 +212,16 @@ struct GpuMap::Impl {
     cmd_pool = ctx->make_command_pool(true);
     queries = ctx->make_timestamp_queries(2 * opt.frames_in_flight);
     const uint64_t staging = opt.upload_budget_bytes + uint64_t(slot_words) * 4 + page_shadow.size() * 4;
-    const uint64_t in_bytes = std::max<uint64_t>(uint64_t(opt.max_queries) * L::kQueryWords * 4, uint64_t(opt.max_pixels) * 16);
+    const uint64_t query_words = sg ? L::kSqWords : L::kQueryWords;
+    const uint64_t in_bytes = std::max<uint64_t>(uint64_t(opt.max_queries) * query_words * 4, uint64_t(opt.max_pixels) * 16);
     const uint64_t out_bytes = uint64_t(std::max(opt.max_queries, opt.max_pixels)) * 4;
     const uint64_t fb_bytes = (L::kFbHeaderWords + uint64_t(opt.feedback_capacity) * (1 + L::kFbRecordWords)) * 4;
     const uint64_t range = ctx->properties().limits.maxStorageBufferRange;
     if (in_bytes > range || out_bytes > range)
       throw GpuError("GpuMap: max_queries / max_pixels exceed device '" + ctx->device_name() + "' maxStorageBufferRange");
+    if (page_shadow.size() * 4 > range)
+      throw GpuError("GpuMap: the page table (" + std::to_string(page_shadow.size() * 4) + " bytes) exceeds device '" +
+                     ctx->device_name() + "' maxStorageBufferRange");
     frames.resize(opt.frames_in_flight);
     for (uint32_t i = 0; i < opt.frames_in_flight; ++i) {
       Frame& f = frames[i];
@@ -227,6 +237,56 @@ struct GpuMap::Impl {
       f.fence = ctx->make_fence();
       f.set = kernels.bind(*ctx, i, {pool.buffer, page.buffer, f.input.buffer, f.normals.buffer, f.output.buffer,
                                      f.feedback.buffer});
+    }
+  }
+
+  // ---- the stack block (stack maps; GPU_LAYOUT.md "The stack block") ----
+  uint32_t stack_words() const {
+    if (!sg) return 0;
+    const StackGrid& g = *sg;
+    const uint32_t K = g.skip_level;
+    uint64_t words = L::kStHeaderWords + K;
+    for (uint32_t l = 0; l < K; ++l) words += g.cells(l);
+    words += (L::kEntryWords + 1) * g.entries.size() + uint64_t(L::kStLightWords) * g.slices;
+    if (g.entries.size() > L::kMaxStackCells || words > (uint64_t(1) << 28))
+      throw GpuError("GpuMap: the stack grid (" + std::to_string(g.entries.size()) + " cells) is too large");
+    return uint32_t(words);
+  }
+
+  void build_stack_block(uint32_t at) {
+    const StackGrid& g = *sg;
+    const uint32_t K = g.skip_level;
+    uint32_t* p = page_shadow.data();
+    off_stack = at;
+    p[L::kPtStack] = at;
+    uint32_t* h = p + at;
+    h[L::kStXyLevel] = g.geo.n;
+    h[L::kStWLevel] = g.geo.k;
+    h[L::kStSlices] = g.slices;
+    h[L::kStSkipLevel] = K;
+    uint32_t o = at + L::kStHeaderWords + K;
+    for (uint32_t l = 0; l < K; ++l) {
+      h[L::kStHeaderWords + l] = o;
+      for (float v : g.coarse[l]) p[o++] = std::bit_cast<uint32_t>(v);
+    }
+    h[L::kStEntries] = o;
+    for (const StackEntry& e : g.entries) {
+      p[o++] = std::bit_cast<uint32_t>(e.value);
+      p[o++] = e.kind;
+    }
+    h[L::kStCellSlots] = off_cell_slots = o;
+    for (size_t c = 0; c < g.entries.size(); ++c) p[o++] = L::kNoSlot;
+    h[L::kStLights] = o;
+    for (uint32_t w = 0; w < g.slices; ++w, o += L::kStLightWords) {
+      if (g.light_kind != LightKind::sun) continue;  // the shadow pass refuses spot lights
+      const ShadowLight sl = shadow_light(g.light(w));
+      for (int i = 0; i < 3; ++i) {
+        p[o + i] = std::bit_cast<uint32_t>(sl.origin[i]);
+        p[o + 3 + i] = std::bit_cast<uint32_t>(sl.axis_u[i]);
+        p[o + 6 + i] = std::bit_cast<uint32_t>(sl.axis_v[i]);
+        p[o + 9 + i] = std::bit_cast<uint32_t>(sl.forward[i]);
+      }
+      p[o + 12] = std::bit_cast<uint32_t>(sl.near_scaled);
     }
   }
 
@@ -265,6 +325,10 @@ struct GpuMap::Impl {
   // The page-table word that points at `tile` on the device (its parent's entry), or
   // ~0u when the walk to it stops first (a parent index tile not on the device).
   uint32_t pointer_word(TileId tile) const {
+    if (sg) {  // a stack cell's tile: the cell's slot pointer
+      uint64_t cell = 0;
+      return sg->cell_of(tile, cell) ? off_cell_slots + uint32_t(cell) : ~0u;
+    }
     const TileAddress a = tile_address(tile);
     if (a.level < k) return ~0u;
     uint32_t l = k;
@@ -401,12 +465,19 @@ struct GpuMap::Impl {
     feedback.clear();
     const uint32_t cap = opt.feedback_capacity;
     for (uint32_t h = 0; h < cap; ++h) {
-      if (fb[L::kFbHeaderWords + h] == 0) continue;
+      const uint32_t key = fb[L::kFbHeaderWords + h];
+      if (key == 0) continue;
       const uint32_t* rec = fb + L::kFbHeaderWords + cap + size_t(h) * L::kFbRecordWords;
       const uint32_t level = rec[L::kFbRecLevel], x = rec[L::kFbRecX], y = rec[L::kFbRecY];
-      if (level > map_level || (x >> level) != 0 || (y >> level) != 0) continue;
       client::RemoteMap::WantedTile w;
-      w.tile = make_tile_id(level, x, y);
+      if (sg) {  // an absent stack cell: kFbStackKeyBit | cell
+        const uint32_t cell = key & ~L::kFbStackKeyBit;
+        if ((key & L::kFbChildKeyBit) || !(key & L::kFbStackKeyBit) || cell >= sg->entries.size()) continue;
+        w.tile = sg->tile_id(cell);
+      } else {
+        if (level > map_level || (x >> level) != 0 || (y >> level) != 0) continue;
+        w.tile = make_tile_id(level, x, y);
+      }
       w.entry.value = std::bit_cast<float>(rec[L::kFbRecValue]);
       w.entry.kind = EntryKind(rec[L::kFbRecKind] & 0xFFu);
       w.entry.index_levels = uint8_t(rec[L::kFbRecKind] >> 8);
@@ -543,6 +614,37 @@ uint64_t GpuMap::submit_evaluate(std::span<const GpuQuery> queries) {
   return m.submit(f, Kernel::evaluate, uint32_t(queries.size()), pc);
 }
 
+FrameStats GpuMap::evaluate(std::span<const GpuStackQuery> queries, std::span<float> out) {
+  if (queries.size() != out.size()) throw GpuError("GpuMap::evaluate: queries and out differ in size");
+  return wait(submit_evaluate(queries), out);
+}
+
+uint64_t GpuMap::submit_evaluate(std::span<const GpuStackQuery> queries) {
+  Impl& m = *impl_;
+  if (!m.sg) throw GpuError("GpuMap::evaluate: stack queries on a map that is not a stack");
+  if (queries.size() > m.opt.max_queries)
+    throw GpuError("GpuMap::evaluate: " + std::to_string(queries.size()) + " queries, more than max_queries (" +
+                   std::to_string(m.opt.max_queries) + ")");
+  Impl::Frame& f = m.acquire();
+  auto* in = static_cast<uint32_t*>(f.input_host.mapped);
+  f.input_bytes = queries.size() * L::kSqWords * 4;
+  f.normals_bytes = 0;
+  for (size_t i = 0; i < queries.size(); ++i) {
+    const GpuStackQuery& q = queries[i];
+    uint32_t* w = in + i * L::kSqWords;
+    w[L::kSqX] = q.x;
+    w[L::kSqY] = q.y;
+    w[L::kSqSlice] = q.slice;
+    w[L::kSqLevel] = q.level;
+    w[L::kSqReceiver] = std::bit_cast<uint32_t>(q.receiver);
+    w[L::kSqFootprint] = std::bit_cast<uint32_t>(q.footprint);
+    w[L::kSqR] = q.r;
+  }
+  uint32_t pc[L::kPcWords] = {};
+  pc[L::kPcCount] = uint32_t(queries.size());
+  return m.submit(f, Kernel::stack_evaluate, uint32_t(queries.size()), pc);
+}
+
 uint64_t GpuMap::submit_shadow_pass(const ShadowPassInput& in) {
   Impl& m = *impl_;
   const uint64_t pixels = uint64_t(in.width) * in.height;
@@ -552,6 +654,27 @@ uint64_t GpuMap::submit_shadow_pass(const ShadowPassInput& in) {
   if (in.positions.size() != pixels * 4 || in.normals.size() != pixels * 4)
     throw GpuError("GpuMap::submit_shadow_pass: positions and normals need 4 floats per pixel");
   if (in.kernel < 1 || in.kernel > L::kMaxPcf) throw GpuError("GpuMap::submit_shadow_pass: kernel must be 1..9");
+  if (m.sg) {
+    if (m.sg->light_kind != LightKind::sun)
+      throw GpuError("GpuMap: the GPU shadow pass supports sun lights only (this stack's light set is '" + m.sg->spec +
+                     "')");
+    const StackTime t = stack_time(m.sg->slices, in.time);
+    Impl::Frame& f = m.acquire();
+    std::memcpy(f.input_host.mapped, in.positions.data(), pixels * 16);
+    std::memcpy(f.normals_host.mapped, in.normals.data(), pixels * 16);
+    f.input_bytes = f.normals_bytes = pixels * 16;
+    uint32_t pc[L::kPcWords] = {};
+    pc[L::kPcCount] = in.width;
+    pc[L::kPcHeight] = in.height;
+    pc[L::kPcKernel] = in.kernel;
+    pc[L::kPcFlags] = in.neighbour_footprint ? L::kFlagNeighbourFootprint : 0;
+    pc[L::kPcSliceA] = t.a;
+    pc[L::kPcSliceB] = t.b;
+    pc[L::kPcTimeWeight] = std::bit_cast<uint32_t>(t.f);
+    pc[L::kPcNormalOffset] = std::bit_cast<uint32_t>(in.normal_offset);
+    pc[L::kPcFootprint] = std::bit_cast<uint32_t>(in.footprint);
+    return m.submit(f, Kernel::stack_shadow_pass, uint32_t(pixels), pc);
+  }
   const ShadowLight light = shadow_light(m.rm->header());
   Impl::Frame& f = m.acquire();
   std::memcpy(f.input_host.mapped, in.positions.data(), pixels * 16);
@@ -613,5 +736,7 @@ GpuStats GpuMap::stats() const {
 std::span<const GpuMap::FeedbackTile> GpuMap::last_feedback() const { return impl_->feedback; }
 
 const std::string& GpuMap::device_name() const { return impl_->ctx->device_name(); }
+
+bool GpuMap::is_stack() const { return impl_->sg != nullptr; }
 
 }  // namespace st::gpu

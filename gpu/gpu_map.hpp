@@ -24,6 +24,11 @@
 // Answers are bit-exact with the CPU's (Map::depth, Map::pcf, pcf_footprint) for the
 // same cache contents; GPU_LAYOUT.md "Exactness" says how.
 //
+// Stack maps (Map::slices() > 0: shadow-map stacks, a moving sun) use the same mirror: the
+// page table carries the stack grid and one light per slice (GPU_LAYOUT.md "The stack
+// block"), evaluate() takes GpuStackQuery (bit-exact with Map::slice_depth and the same
+// kernels per slice), and the shadow pass answers at ShadowPassInput::time.
+//
 // Errors: the constructor throws GpuError when no Vulkan device is there or the one asked
 // for is not (one line naming the devices present), or a Vulkan call fails (naming the
 // call). The CPU path (the Map itself) is never affected. Not thread-safe: one thread
@@ -68,6 +73,19 @@ struct GpuQuery {
 };
 inline constexpr uint32_t kLevelFromFootprint = 0xFFFFFFFFu;
 
+// One query of evaluate() on a stack map (Map::slices() > 0): the same as GpuQuery in
+// slice `slice` of the stack. r == 0: the depth of texel (x, y) of `level` (Map::slice_depth);
+// else r x r PCF (1..9) at `level`, or at the level the footprint picks (kLevelFromFootprint,
+// (x, y) a texel of the finest level), as StackMap::filtered filters one slice.
+struct GpuStackQuery {
+  uint32_t x = 0, y = 0;
+  uint32_t slice = 0;
+  uint32_t level = 0;
+  float receiver = 0;
+  float footprint = 1;
+  uint32_t r = 0;
+};
+
 // The G-buffer of a shadow pass: per pixel a world position (x, y, z, w; w == 0: no
 // surface, visibility 1) and a normal (x, y, z, unused), row-major, width * height each.
 // The receiver is offset by normal_offset world units along the normal. The footprint
@@ -79,7 +97,22 @@ struct ShadowPassInput {
   float normal_offset = 0;
   bool neighbour_footprint = true;
   float footprint = 1;
+  // Stack maps only: the light set's time in [0, 1] (clamped; NaN reads as 0), sample w at
+  // w / (N - 1). Each of the two nearest slices is filtered in its own light space as a
+  // 2D map's pass filters its one; they are blended va + f * (vb - va) (exact at a
+  // sample's time: that slice alone), StackLookup::visibility's contract.
+  double time = 0;
 };
+
+// A stack pass's time (ShadowPassInput::time) as StackMap::visibility takes it: with
+// s = clamp(time, 0, 1) * (N - 1), a sample's own time (s within 1e-9 of an integer w)
+// reads slice w alone (a == b == w, f == 0); else slices a = floor(s) and b = a + 1 are
+// blended with f = float(s - a): va + f * (vb - va).
+struct StackTime {
+  uint32_t a = 0, b = 0;
+  float f = 0;
+};
+StackTime stack_time(uint32_t slices, double time);
 
 struct FrameStats {
   uint64_t frame = 0;
@@ -118,8 +151,12 @@ class GpuMap {
   FrameStats evaluate(std::span<const GpuQuery> queries, std::span<float> out);
   // The same, asynchronous: returns the frame number for wait().
   uint64_t submit_evaluate(std::span<const GpuQuery> queries);
+  // Stack maps: queries in slices of the stack. Throws GpuError on a 2D map.
+  FrameStats evaluate(std::span<const GpuStackQuery> queries, std::span<float> out);
+  uint64_t submit_evaluate(std::span<const GpuStackQuery> queries);
   // Submits a shadow pass (width * height <= max_pixels) and returns its frame number;
-  // waits only when every ring slot is still in flight.
+  // waits only when every ring slot is still in flight. On a stack map, the pass answers
+  // at `in.time` from the stack's tiles (absent cells: the level-K value, and feedback).
   uint64_t submit_shadow_pass(const ShadowPassInput& in);
   // Waits for `frame`, copies its visibility image into `out` (width * height floats) and
   // hands its feedback to the Map. Throws GpuError for a frame not in flight.
@@ -137,6 +174,7 @@ class GpuMap {
   };
   std::span<const FeedbackTile> last_feedback() const;
   const std::string& device_name() const;
+  bool is_stack() const;  // a map of a stack pack: its tiles are MH octree cells
 
  private:
   struct Impl;

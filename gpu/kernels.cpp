@@ -15,6 +15,12 @@ const uint32_t kLayoutProbeSpv[] = {
 const uint32_t kR32fSpv[] = {
 #include "gpu/shaders/r32f.spv.inc"
 };
+const uint32_t kStackEvaluateSpv[] = {
+#include "gpu/shaders/stack_evaluate.spv.inc"
+};
+const uint32_t kStackShadowPassSpv[] = {
+#include "gpu/shaders/stack_shadow_pass.spv.inc"
+};
 
 }  // namespace
 
@@ -56,7 +62,8 @@ void Kernels::create(VkContext& ctx, uint32_t sets) {
   dai.pSetLayouts = layouts.data();
   vk_check(vkAllocateDescriptorSets(d, &dai, sets_.data()), "vkAllocateDescriptorSets");
 
-  const std::span<const uint32_t> code[kKernelCount] = {kEvaluateSpv, kShadowPassSpv, kLayoutProbeSpv, kR32fSpv};
+  const std::span<const uint32_t> code[kKernelCount] = {kEvaluateSpv, kShadowPassSpv, kLayoutProbeSpv,
+                                                           kR32fSpv,     kStackEvaluateSpv, kStackShadowPassSpv};
   for (uint32_t i = 0; i < kKernelCount; ++i) {
     VkShaderModule m = ctx.make_shader(code[i]);
     VkComputePipelineCreateInfo cpi{};

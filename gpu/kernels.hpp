@@ -14,8 +14,16 @@
 namespace st::gpu {
 
 // r32f: bench_gpu's baseline, the finest level as a plain float image (shaders/r32f.comp).
-enum class Kernel : uint32_t { evaluate = 0, shadow_pass = 1, layout_probe = 2, r32f = 3 };
-inline constexpr uint32_t kKernelCount = 4;
+// stack_*: the same two for stack maps (shaders/st_stack.glsl).
+enum class Kernel : uint32_t {
+  evaluate = 0,
+  shadow_pass = 1,
+  layout_probe = 2,
+  r32f = 3,
+  stack_evaluate = 4,
+  stack_shadow_pass = 5
+};
+inline constexpr uint32_t kKernelCount = 6;
 
 class Kernels {
  public:

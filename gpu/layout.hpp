@@ -10,7 +10,9 @@
 #include "tiles/core/dagmh_format.hpp"
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/vsdag_format.hpp"
+#include "tiles/core/mh_octree_format.hpp"
 #include "tiles/core/mh_quadtree_format.hpp"
+#include "tiles/core/stack_grid.hpp"
 #include "tiles/core/tile_cache.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
 
@@ -37,7 +39,7 @@ static_assert(vsdag::kLeafXyBits == 3 && vsdag::kZNodeBits == 3 && vsdag::kState
 static_assert(layout::kLevelFromFootprint == kLevelFromFootprint);
 static_assert(layout::kPcWords * 4 <= 128, "push constants: Vulkan guarantees 128 bytes");
 static_assert(layout::kFbRecordWords == 6 && layout::kFbHeaderWords >= 5);
-static_assert(layout::kPtHeaderWords > layout::kPtPcfTable);
+static_assert(layout::kPtHeaderWords > layout::kPtPcfTable && layout::kPtHeaderWords > layout::kPtStack);
 // What st_eval.glsl reads of the tile formats, by word:
 static_assert(dagmh::kTreeletWords == 3 && sizeof(dagmh::ChunkInfo) == 6 * 4 && sizeof(dagmh::Cursor) == 4 * 4);
 static_assert(offsetof(dagmh::Header, finest_level) == 3 * 4 && offsetof(dagmh::Header, skip_level) == 4 * 4 &&
@@ -52,5 +54,23 @@ static_assert(dagmh::kRefInner == 0x40000000u && dagmh::kRefTreelet == 0x8000000
 static_assert(mhq::kOffLevels == 6 && mhq::kOffFlags == 7 && mhq::kOffShifts == 16 && mhq::kFlagRootLeaf == 1 &&
               mhq::kCodeLeaf == 1 && mhq::kCodeEmpty == 2 && mhq::kCodeInner == 3);
 static_assert(mhq::tree_offset(1) == 16 + 4 && mhq::tree_offset(21) == 16 + 24);
+// What st_stack.glsl reads of the MH octree (MHOCT.md): word 1 = version | n << 16 | k << 24,
+// word 2 = slices | flags << 16, the shifts from byte 20, the tree at 20 + round_up(L + 1, 4).
+static_assert(moct::kOffVersion == 4 && moct::kOffXyLevel == 6 && moct::kOffWLevel == 7 && moct::kOffSlices == 8 &&
+              moct::kOffFlags == 10 && moct::kOffShifts == 20 && moct::kFlagRootLeaf == 1);
+static_assert(moct::kCodeLeaf == 1 && moct::kCodeEmpty == 2 && moct::kCodeInner == 3 && moct::kMaxLevels == 21);
+static_assert(moct::tree_offset(1) == 20 + 4 && moct::tree_offset(21) == 20 + 24);
+static_assert(layout::kMaxStackCells == kStackMaxCells);
+static_assert(layout::kStLightWords >= 13 && layout::kStHeaderWords > layout::kStLights);
+// A stack query is GpuStackQuery word for word; the stack pass's push constants sit where
+// the 2D pass keeps its light (which a stack keeps per slice in the stack block).
+static_assert(sizeof(GpuStackQuery) == layout::kSqWords * 4 && offsetof(GpuStackQuery, x) == layout::kSqX * 4 &&
+              offsetof(GpuStackQuery, y) == layout::kSqY * 4 && offsetof(GpuStackQuery, slice) == layout::kSqSlice * 4 &&
+              offsetof(GpuStackQuery, level) == layout::kSqLevel * 4 &&
+              offsetof(GpuStackQuery, receiver) == layout::kSqReceiver * 4 &&
+              offsetof(GpuStackQuery, footprint) == layout::kSqFootprint * 4 && offsetof(GpuStackQuery, r) == layout::kSqR * 4);
+static_assert(layout::kPcSliceA >= layout::kPcOrigin && layout::kPcTimeWeight < layout::kPcNear &&
+              layout::kPcTimeWeight < layout::kPcWords);
+static_assert((layout::kFbStackKeyBit & layout::kFbChildKeyBit) == 0 && layout::kMaxStackCells <= layout::kFbStackKeyBit);
 
 }  // namespace st::gpu

@@ -5,8 +5,10 @@
 #include <cfloat>
 #include <cmath>
 
+#include "client/map_access.hpp"
 #include "tiles/core/filter_level.hpp"
 #include "tiles/core/light.hpp"
+#include "tiles/core/stack_grid.hpp"
 
 static_assert(FLT_EVAL_METHOD == 0, "the shadow pass's twin must evaluate in float");
 #if defined(__FAST_MATH__)
@@ -17,7 +19,11 @@ namespace st::gpu {
 
 ShadowLight shadow_light(const PackHeader& h) {
   if (h.light_kind != LightKind::sun) throw GpuError("GpuMap: the GPU shadow pass supports sun lights only");
-  const LightSpace ls = LightSpace::from_array(h.light_kind, h.light);
+  return shadow_light(LightSpace::from_array(h.light_kind, h.light));
+}
+
+ShadowLight shadow_light(const LightSpace& ls) {
+  if (ls.kind() != LightKind::sun) throw GpuError("GpuMap: the GPU shadow pass supports sun lights only");
   ShadowLight l;
   const Vec3d o = ls.origin(), u = ls.axis_u(), v = ls.axis_v(), f = ls.forward();
   const double e = ls.extent_uv(), depth = ls.far_plane() - ls.near_plane();
@@ -89,6 +95,67 @@ void shadow_pass_reference(const Evaluator& ev, const PackHeader& h, const Shado
     out[p] = f.t == 0.0f ? a
                          : filter_blend(a, ev.pcf(f.coarse, x >> (finest - f.coarse), y >> (finest - f.coarse),
                                                   in.kernel, c.d), f.t);
+  }
+}
+
+StackTime stack_time(uint32_t slices, double time) {
+  StackTime t;
+  if (slices <= 1) return t;
+  const double s = std::clamp(std::isnan(time) ? 0.0 : time, 0.0, 1.0) * double(slices - 1);
+  const double near = std::nearbyint(s);
+  if (std::fabs(s - near) <= 1e-9) {
+    t.a = t.b = uint32_t(near);
+    return t;
+  }
+  t.a = uint32_t(std::floor(s));
+  t.b = t.a + 1;
+  t.f = float(s - double(t.a));
+  return t;
+}
+
+void stack_shadow_pass_reference(const client::Map& map, const ShadowPassInput& in, std::span<float> out) {
+  const StackGrid* g = client::MapAccess::remote(map).stack_grid();
+  if (!g) throw GpuError("stack_shadow_pass_reference: not a stack map");
+  const uint32_t finest = g->geo.n;
+  const float side = std::ldexp(1.0f, int(finest));
+  const uint32_t top = (1u << finest) - 1;
+  const uint32_t r = std::clamp<uint32_t>(in.kernel, 1, Evaluator::kMaxPcf);
+  // r x r PCF in slice w at `level` (st_stack_pcf): lit taps / (r * r), taps clamped.
+  auto pcf = [&](uint32_t w, uint32_t level, uint32_t x, uint32_t y, float d) {
+    const uint64_t s = uint64_t(1) << level;
+    uint32_t lit = 0;
+    for (uint32_t j = 0; j < r; ++j)
+      for (uint32_t i = 0; i < r; ++i)
+        lit += d <= map.slice_depth(w, level, pcf_tap(x, i, r, s), pcf_tap(y, j, r, s));
+    return float(lit) / float(r * r);
+  };
+  auto slice = [&](size_t p, uint32_t w) {
+    const ShadowLight l = shadow_light(g->light(w));
+    Point c;
+    if (!light_point(l, in, p, c) || !(c.u >= 0 && c.u < 1 && c.v >= 0 && c.v < 1 && c.d >= 0 && c.d <= 1))
+      return 1.0f;
+    const uint32_t x = std::min(uint32_t(std::floor(c.u * side)), top);
+    const uint32_t y = std::min(uint32_t(std::floor(c.v * side)), top);
+    float footprint = in.footprint;
+    if (in.neighbour_footprint) {
+      float f = 0;
+      Point nb;
+      const size_t px = p % in.width, py = p / in.width;
+      if (px + 1 < in.width && light_point(l, in, p + 1, nb))
+        f = std::max(f, std::max(std::fabs(nb.u - c.u), std::fabs(nb.v - c.v)));
+      if (py + 1 < in.height && light_point(l, in, p + in.width, nb))
+        f = std::max(f, std::max(std::fabs(nb.u - c.u), std::fabs(nb.v - c.v)));
+      footprint = f * side;
+    }
+    const FilterLevels f = filter_levels(finest, footprint);
+    const float a = pcf(w, f.fine, x >> (finest - f.fine), y >> (finest - f.fine), c.d);
+    return f.t == 0.0f ? a : filter_blend(a, pcf(w, f.coarse, x >> (finest - f.coarse), y >> (finest - f.coarse), c.d), f.t);
+  };
+  const StackTime t = stack_time(g->slices, in.time);
+  const size_t pixels = size_t(in.width) * in.height;
+  for (size_t p = 0; p < pixels; ++p) {
+    const float va = slice(p, t.a);
+    out[p] = t.a == t.b ? va : va + t.f * (slice(p, t.b) - va);
   }
 }
 

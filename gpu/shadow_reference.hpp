@@ -15,6 +15,7 @@
 
 #include "gpu/gpu_map.hpp"
 #include "tiles/core/evaluator.hpp"
+#include "tiles/core/light.hpp"
 #include "tiles/core/pack_format.hpp"
 
 namespace st::gpu {
@@ -24,9 +25,15 @@ struct ShadowLight {
   float near_scaled = 0;
 };
 
-// The float light of a pack's header. Throws GpuError for a spot light (the GPU shadow
-// pass supports suns only).
+// The float light of a pack's header, or of one light space. Throws GpuError for a spot
+// light (the GPU shadow pass supports suns only).
 ShadowLight shadow_light(const PackHeader& h);
+ShadowLight shadow_light(const LightSpace& ls);
+
+// The CPU twin of a stack map's shadow pass: the same float operations per slice as
+// shaders/stack_shadow_pass.comp, depths from Map::slice_depth (the Map's cache, the same
+// state the GpuMap mirrors). Throws GpuError for a map that is not a stack of suns.
+void stack_shadow_pass_reference(const client::Map& map, const ShadowPassInput& in, std::span<float> out);
 
 // The CPU twin of the shadow pass over `ev` (the Map's evaluator, the same cache state).
 void shadow_pass_reference(const Evaluator& ev, const PackHeader& h, const ShadowPassInput& in, std::span<float> out);

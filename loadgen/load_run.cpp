@@ -98,8 +98,8 @@ CellNeed slice_need(uint32_t w) {
   return c;
 }
 
-// A stack map's world frame: the level-a map of slice 0 (a <= the skip level's x, y
-// resolution, so no tile is read) in place of the 2D skip grid.
+}  // namespace
+
 WorldFrame stack_world_frame(const client::Map& m) {
   const StackGrid& g = *client::MapAccess::remote(m).stack_grid();
   const uint32_t a = std::min<uint32_t>(g.geo.xy_bits(g.skip_level), 7);
@@ -111,6 +111,8 @@ WorldFrame stack_world_frame(const client::Map& m) {
   h.light = g.lights[0];
   return world_frame(h, grid);
 }
+
+namespace {
 
 // One camera's frame clock and path state. Workers (a few threads, not one per camera)
 // run the frames of their cameras in schedule order.

@@ -67,6 +67,9 @@ struct LoadOptions {
 // The slices [first, last] a stack lookup at `time` reads (StackMap::visibility:
 // s = time * (N - 1); the two around s, one at a sample).
 void time_slices(double time, uint32_t slices, uint32_t& first, uint32_t& last);
+// A stack map's world frame (camera paths over it): the level-a map of slice 0 (a <= the
+// skip level's x, y resolution, so no tile is read) in place of the 2D skip grid.
+WorldFrame stack_world_frame(const client::Map& m);
 
 inline constexpr double kPrefetchAhead[] = {0.25, 0.5, 1.0};  // seconds
 inline constexpr uint64_t kPrefetchEvery = 6;                   // frames between prefetch rounds

@@ -16,6 +16,10 @@ void main() {
                           kFbRecLevel, kFbRecX, kFbRecY, kFbRecValue, kFbRecKind, kFbMaxProbes, kFbChildKeyBit,
                           kPcCount, kPcHeight, kPcKernel, kPcFlags, kPcOrigin, kPcAxisU, kPcAxisV, kPcForward,
                           kPcNear, kPcNormalOffset, kPcFootprint, kPcWords, kFlagNeighbourFootprint,
-                          kWorkgroupSize, kProbeWords);
+                          kWorkgroupSize, kProbeWords,
+                          kPtStack, kStXyLevel, kStWLevel, kStSlices, kStSkipLevel, kStEntries, kStCellSlots,
+                          kStLights, kStHeaderWords, kStLightWords, kMaxStackCells, kSqWords, kSqX, kSqY, kSqSlice,
+                          kSqLevel, kSqReceiver, kSqFootprint, kSqR, kFbStackKeyBit, kPcSliceA, kPcSliceB,
+                          kPcTimeWeight);
   for (uint i = 0u; i < kProbeWords; ++i) st_output[i] = uintBitsToFloat(i < v.length() ? v[i] : 0u);
 }

@@ -17,7 +17,7 @@ namespace st::gpu::layout {
 #define ST_UINT(name, value) const uint name = value;
 #endif
 
-ST_UINT(kLayoutVersion, 2u)  // 2: the map preview (kPtPreview)
+ST_UINT(kLayoutVersion, 3u)  // 2: the map preview (kPtPreview); 3: the stack block (kPtStack)
 
 // ---- page-table buffer (binding kBindPage) ----
 // header words, then the skip grid's coarse values and entries, the skip grid's slot
@@ -36,6 +36,7 @@ ST_UINT(kPtSkipSlots, 9u)      // word offset: 4^K slot pointers (kNoSlot: not o
 ST_UINT(kPtChildSlots, 10u)    // word offset: slot_count * kChildTableWords slot pointers
 ST_UINT(kPtPcfTable, 11u)      // word offset: kMaxPcf * kPcfTableStride f32 quotients
 ST_UINT(kPtPreview, 12u)       // word offset: the map preview (kPv* header, then its arrays)
+ST_UINT(kPtStack, 14u)         // word offset: the stack block (kSt*) of a stack map; 0 for a 2D map
 ST_UINT(kPtHeaderWords, 16u)
 
 // The map preview block (tiles/core/map_preview.hpp), at word kPtPreview: a header, then
@@ -62,6 +63,33 @@ ST_UINT(kLitDepthBits, 0x3F800000u)  // 1.0f
 
 // An index tile in a slot is a serialized CutGrid: magic, levels, coarse values, entries.
 ST_UINT(kGridHeaderWords, 2u)
+
+// The stack block (a map of a stack pack: tiles/PACK.md "Stack packs", tiles/core/MHOCT.md),
+// at word kPtStack: a header, then K words (the word offset of octree level l's coarse
+// values, l < K), then the coarse values (f32; level l holds 4^a(l) 2^b(l) values in
+// (w, y, x) row-major order), the level-K cells' entries (kEntryWords each: f32 value,
+// kind 0 constant / 1 tile), one slot pointer per cell (kNoSlot: not on the GPU), and one
+// float32 sun light space per slice (kStLightWords each, the order of kPcOrigin..kPcNear).
+ST_UINT(kStXyLevel, 0u)         // n: slices are 2^n texels a side
+ST_UINT(kStWLevel, 1u)          // k: 2^(k-1) < N <= 2^k
+ST_UINT(kStSlices, 2u)          // N
+ST_UINT(kStSkipLevel, 3u)       // K: the octree level of the cells
+ST_UINT(kStEntries, 4u)         // word offset of the cells' entries
+ST_UINT(kStCellSlots, 5u)       // word offset of the cells' slot pointers
+ST_UINT(kStLights, 6u)          // word offset of the slices' light spaces
+ST_UINT(kStHeaderWords, 8u)     // then the K coarse-level offsets
+ST_UINT(kStLightWords, 16u)     // origin, axis_u, axis_v, forward (f32 x3 each), near (f32), 3 zero
+ST_UINT(kMaxStackCells, 0x400000u)  // kStackMaxCells: cells < 2^22
+
+// ---- stack queries (binding kBindInput of stack_evaluate.comp) ----
+ST_UINT(kSqWords, 7u)
+ST_UINT(kSqX, 0u)             // texel x: of `level`, or of the finest level (kLevelFromFootprint)
+ST_UINT(kSqY, 1u)
+ST_UINT(kSqSlice, 2u)         // w
+ST_UINT(kSqLevel, 3u)         // explicit level, or kLevelFromFootprint
+ST_UINT(kSqReceiver, 4u)      // f32 light-space depth of the receiver in slice w
+ST_UINT(kSqFootprint, 5u)     // f32 footprint in finest texels (kLevelFromFootprint only)
+ST_UINT(kSqR, 6u)             // PCF kernel side 1..9; 0: answer the depth itself
 
 // ---- queries (binding kBindInput of evaluate.comp) ----
 ST_UINT(kQueryWords, 6u)
@@ -92,6 +120,8 @@ ST_UINT(kFbMaxProbes, 32u)
 // Keys name the entry that points at the absent tile: skip entry e -> e + 1; entry c of
 // the index tile in slot s -> kFbChildKeyBit | (s * kChildTableWords + c).
 ST_UINT(kFbChildKeyBit, 0x80000000u)
+// A stack map's absent cell c -> kFbStackKeyBit | c (record: level K, x c, y 0).
+ST_UINT(kFbStackKeyBit, 0x40000000u)
 
 // ---- push constants (words) ----
 ST_UINT(kPcCount, 0u)       // evaluate: queries; shadow pass: width
@@ -105,6 +135,11 @@ ST_UINT(kPcForward, 13u)    // f32 x3: forward / (far - near)
 ST_UINT(kPcNear, 16u)       // f32: near / (far - near)
 ST_UINT(kPcNormalOffset, 17u)  // f32: world units along the normal
 ST_UINT(kPcFootprint, 18u)  // f32: footprint when bit 0 of flags is clear
+// The stack shadow pass reads its light spaces per slice from the stack block; in place of
+// the light it takes the two slices and the time blend's weight (GpuMap::submit_shadow_pass).
+ST_UINT(kPcSliceA, 4u)      // slice a = floor(time * (N - 1))
+ST_UINT(kPcSliceB, 5u)      // slice a + 1, or a when the time is a sample's (answer: slice a alone)
+ST_UINT(kPcTimeWeight, 6u)  // f32 f = time * (N - 1) - a, rounded once: va + f * (vb - va)
 ST_UINT(kPcWords, 20u)
 ST_UINT(kFlagNeighbourFootprint, 1u)
 
@@ -116,7 +151,7 @@ ST_UINT(kBindNormals, 3u)   // shadow pass: normals (f32 x4 per pixel)
 ST_UINT(kBindOutput, 4u)    // f32 per query or pixel
 ST_UINT(kBindFeedback, 5u)
 ST_UINT(kWorkgroupSize, 64u)
-ST_UINT(kProbeWords, 80u)   // layout_probe.comp writes this many words
+ST_UINT(kProbeWords, 128u)  // layout_probe.comp writes this many words
 
 #ifdef __cplusplus
 }  // namespace st::gpu::layout

@@ -161,7 +161,7 @@ kill $spid 2>/dev/null; wait $spid 2>/dev/null
 grep -q "key required, TLS" serve.log || { echo "FAIL serve-keyed: banner lacks 'key required, TLS'"; fail=1; }
 # A stack pack served: the load tester sweeps the time (the slices around it requested as
 # it advances) or reads every slice (--soft); render draws it from the server.
-"$st" serve stack.pack --listen 127.0.0.1:0 2>serve_stack.log &
+"$st" serve stack.pack city.pack --listen 127.0.0.1:0 2>serve_stack.log &
 spid=$!
 port=$(port_of serve_stack.log)
 if [[ -z "$port" ]]; then echo "FAIL serve-stack: no port in serve_stack.log"; cat serve_stack.log; fail=1
@@ -174,6 +174,20 @@ else
     --server 127.0.0.1:$port --map stack --time-sweep 0.2..3
   check stack-render-served 0 "differing pixels: [0-9]+ of [1-9][0-9]+ receivers \(0\.[0-9]+%\)" -- \
     "$st" render --server 127.0.0.1:$port --map stack --scene $scene $scam --time 0.5 --diff -o sr.exr
+  # The headless viewer (GPU builds; lavapipe, a CPU Vulkan device): the sun sweeps over the
+  # frames while the camera flies, the GPU pass blending the two slices around each time.
+  # Mesa leaks at exit, so LeakSanitizer is off for these runs (ASan and UBSan stay on).
+  lvp=/usr/share/vulkan/icd.d/lvp_icd.x86_64.json
+  if "$st" view --help >/dev/null 2>&1 && [[ -f $lvp ]]; then
+    venv=(env VK_ICD_FILENAMES=$lvp "ASAN_OPTIONS=${ASAN_OPTIONS:+$ASAN_OPTIONS:}detect_leaks=0")
+    vargs=(view --server 127.0.0.1:$port --scene $scene --frames 3 --fps 30 --size 64x36 --device llvmpipe --cache-mb 4)
+    check stack-view-sweep 0 "stack of 4 slices .* swept" -- "${venv[@]}" "$st" "${vargs[@]}" --map stack \
+      --time-sweep 0..1 --out view_stack
+    grep -q '"time1": 1.0' view_stack/view.json 2>/dev/null || { echo "FAIL stack-view-sweep: no time in view.json"; fail=1; }
+    check stack-view-bad-sweep 1 "time-sweep: expected A..B, got '0.5'" -- "${venv[@]}" "$st" "${vargs[@]}" \
+      --map stack --time-sweep 0.5
+    check view-time-on-2d 1 "need a stack map" -- "${venv[@]}" "$st" "${vargs[@]}" --map city --time 0.5
+  fi
 fi
 kill $spid 2>/dev/null; wait $spid 2>/dev/null
 check render-time-on-2d 1 "time and --soft need a stack pack" -- \

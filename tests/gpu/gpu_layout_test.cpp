@@ -24,7 +24,11 @@ TEST(GpuLayout, TheShaderSeesEveryConstantTheCppSideSees) {
       L::kFbRecLevel, L::kFbRecX, L::kFbRecY, L::kFbRecValue, L::kFbRecKind, L::kFbMaxProbes, L::kFbChildKeyBit,
       L::kPcCount, L::kPcHeight, L::kPcKernel, L::kPcFlags, L::kPcOrigin, L::kPcAxisU, L::kPcAxisV, L::kPcForward,
       L::kPcNear, L::kPcNormalOffset, L::kPcFootprint, L::kPcWords, L::kFlagNeighbourFootprint,
-      L::kWorkgroupSize, L::kProbeWords};
+      L::kWorkgroupSize, L::kProbeWords,
+      L::kPtStack, L::kStXyLevel, L::kStWLevel, L::kStSlices, L::kStSkipLevel, L::kStEntries, L::kStCellSlots,
+      L::kStLights, L::kStHeaderWords, L::kStLightWords, L::kMaxStackCells, L::kSqWords, L::kSqX, L::kSqY,
+      L::kSqSlice, L::kSqLevel, L::kSqReceiver, L::kSqFootprint, L::kSqR, L::kFbStackKeyBit, L::kPcSliceA,
+      L::kPcSliceB, L::kPcTimeWeight};
   ASSERT_LE(want.size(), L::kProbeWords);
   uint64_t messages = 0;
   const std::vector<uint32_t> got = run_layout_probe(gputest::device(), true, &messages);
@@ -41,6 +45,29 @@ TEST(GpuLayout, CppStructuresMatchTheWordOffsetsTheShaderUses) {
   EXPECT_EQ(sizeof(dagmh::ChunkInfo), 24u);
   EXPECT_EQ(CutGrid::serialized_size(2), 8u + 4u * 5u + 8u * 16u);  // header, coarse, entries
   EXPECT_EQ(sizeof(GpuQuery), layout::kQueryWords * 4u);
+  EXPECT_EQ(sizeof(GpuStackQuery), layout::kSqWords * 4u);
+  EXPECT_EQ(moct::tree_offset(moct::Geometry{6, 4}.levels()), 28u);  // 20 + round_up(7, 4): st_oct_depth's tree word 7
+}
+
+// The stack block of a GpuMap's page table, as GPU_LAYOUT.md draws it: header word
+// offsets, then the K coarse-level offsets (the header's 8 words, then K words).
+TEST(GpuLayout, StackBlockHeaderWordsAreWhereTheDrawingPutsThem) {
+  namespace L = layout;
+  EXPECT_EQ(L::kPtStack, 14u);
+  EXPECT_EQ(L::kStXyLevel, 0u);
+  EXPECT_EQ(L::kStWLevel, 1u);
+  EXPECT_EQ(L::kStSlices, 2u);
+  EXPECT_EQ(L::kStSkipLevel, 3u);
+  EXPECT_EQ(L::kStEntries, 4u);
+  EXPECT_EQ(L::kStCellSlots, 5u);
+  EXPECT_EQ(L::kStLights, 6u);
+  EXPECT_EQ(L::kStHeaderWords, 8u);
+  EXPECT_EQ(L::kStLightWords, 16u);
+  EXPECT_EQ(L::kSqWords, 7u);
+  EXPECT_EQ(L::kFbStackKeyBit, 0x40000000u);
+  EXPECT_EQ(L::kPcSliceA, 4u);
+  EXPECT_EQ(L::kPcSliceB, 5u);
+  EXPECT_EQ(L::kPcTimeWeight, 6u);
 }
 
 }  // namespace

@@ -322,6 +322,10 @@ TEST(GpuMap, ShadowPassEqualsItsCpuTwinBitForBit) {
     EXPECT_GT(shadow + lit, 0u);
     EXPECT_GT(fs.holes, 0u);  // half the map is absent
   }
+  // Stack queries on a 2D map: one clear error, and the map is no stack.
+  EXPECT_FALSE(g.is_stack());
+  std::vector<float> one(1);
+  EXPECT_THROW(g.evaluate(std::vector<GpuStackQuery>(1), one), GpuError);
   EXPECT_EQ(g.stats().validation_messages, 0u);
 }
 

@@ -1,0 +1,108 @@
+// shadowtile GPU evaluators for stack maps (shadow-map stacks, MH 2016 §4): the MH octree
+// tile decoder and the walk of the stack block (the octree's top K levels and the level-K
+// cells, gpu/GPU_LAYOUT.md "The stack block"), the same operations as the CPU's
+// MhOctree::depth (tiles/core/mh_octree_reader.cpp) and StackMap::depth
+// (tiles/core/stack_map.cpp), so every answer is bit-exact with the CPU's.
+//
+// Include after st_eval.glsl (it uses StProbe, st_lit, st_feedback, st_filter_levels and
+// st_pcf_tap). Entry points: st_oct_depth(base, x, y, w, level) (one tile),
+// st_stack_depth(x, y, w, level, probe), st_stack_pcf(level, x, y, w, r, receiver, probe),
+// st_stack_lookup(x, y, w, receiver, footprint, r, probe) (level from a footprint).
+#ifndef SHADOWTILE_GPU_ST_STACK_GLSL
+#define SHADOWTILE_GPU_ST_STACK_GLSL
+
+// ---- MH octree tiles (tiles/core/MHOCT.md) ----
+// Texel (x, y) of the level-`level` map of slice w of the octree at pool word `base`
+// (level <= its xy_level n, x, y < 2^level, w < its slices: the caller checks, as
+// StackMap::depth does before it asks a tile). Header words: 1 = version | n << 16 |
+// k << 24; 2 = slices | flags << 16; bytes 20.. the per-level shifts; the tree follows at
+// byte 20 + round_up(max(n, k) + 1, 4).
+uint st_oct_xy_bits(uint l, uint n, uint depth) { return l + n >= depth ? l + n - depth : 0u; }
+
+float st_oct_depth(uint base, uint x, uint y, uint w, uint level) {
+  const uint h1 = ST_POOL(base + 1u), h2 = ST_POOL(base + 2u);
+  const uint n = (h1 >> 16u) & 0xFFu, k = h1 >> 24u;
+  const bool root_leaf = ((h2 >> 16u) & 1u) != 0u;
+  const uint depth = max(n, k);
+  const uint tree = base + 5u + ((depth + 4u) >> 2u);  // 20 bytes + round_up(depth + 1, 4)
+  const uint target = level + depth - n;              // Geometry::level_of_xy
+  uint pos = 0u;
+  uint val = root_leaf ? 0u : 1u;
+  uint code = root_leaf ? 1u : 3u;
+  for (uint l = 0u; l < target && code != 1u; ++l) {
+    uint slot = 0u;
+    if (l + n >= depth) {  // the step halves x and y: their bits at the child's resolution
+      const uint b = level - st_oct_xy_bits(l + 1u, n, depth);
+      slot = ((x >> b) & 1u) | (((y >> b) & 1u) << 1u);
+    }
+    if (l + k >= depth) slot |= ((w >> (k - st_oct_xy_bits(l + 1u, k, depth))) & 1u) << 2u;  // halves w
+    const uint word = ST_POOL(tree + pos);
+    const uint mask = word & 0xFFFFu;
+    code = (mask >> (2u * slot)) & 3u;
+    if (code == 0u) break;  // missing child: the last valued node answers
+    const uint shift = st_byte(base, 20u + l);
+    pos = (((pos >> shift) + (word >> 16u)) << shift) + uint(bitCount(mask & ((1u << (2u * slot)) - 1u)));
+    if (code != 2u) val = code == 1u ? pos : pos + 1u;
+  }
+  return uintBitsToFloat(ST_POOL(tree + val));
+}
+
+// ---- the stack block's walk (StackMap::depth over the GPU's copy of the cache) ----
+// Texel (x, y) of the level-`level` map of slice w. Out of range: lit. Levels above K
+// read the dense coarse values; a constant cell, or level K itself, its entry's value; a
+// cell whose tile is not on the GPU answers its entry's value (the level-K map: coarser,
+// never missing) and is recorded in the feedback.
+float st_stack_depth(uint x, uint y, uint w, uint level, inout StProbe probe) {
+  const uint blk = ST_PAGE(kPtStack);
+  const uint n = ST_PAGE(blk + kStXyLevel), k = ST_PAGE(blk + kStWLevel);
+  if (level > n || w >= ST_PAGE(blk + kStSlices) || (x >> level) != 0u || (y >> level) != 0u)
+    return uintBitsToFloat(kLitDepthBits);
+  const uint K = ST_PAGE(blk + kStSkipLevel);
+  const uint depth = max(n, k);
+  const uint T = level + depth - n;  // the octree level with 2^level texels a side
+  const uint TK = min(T, K);
+  const uint a = st_oct_xy_bits(TK, n, depth), b = st_oct_xy_bits(TK, k, depth);
+  const uint cx = x >> (level - a), cy = y >> (level - a), cw = w >> (k - b);
+  const uint index = (((cw << a) + cy) << a) + cx;
+  if (T < K) return uintBitsToFloat(ST_PAGE(ST_PAGE(blk + kStHeaderWords + T) + index));
+  const uint e = ST_PAGE(blk + kStEntries) + kEntryWords * index;
+  const uint value_bits = ST_PAGE(e), kind = ST_PAGE(e + 1u) & 0xFFu;
+  if (kind == kKindConstant || T == K) return uintBitsToFloat(value_bits);
+  const uint slot = ST_PAGE(ST_PAGE(blk + kStCellSlots) + index);
+  if (slot == kNoSlot) {
+    st_feedback(kFbStackKeyBit | index, K, index, 0u, value_bits, kKindTile, probe);
+    return uintBitsToFloat(value_bits);
+  }
+  const uint rel = level - a;  // the tile's own x, y level
+  return st_oct_depth(slot * ST_PAGE(kPtSlotWords), x - (cx << rel), y - (cy << rel), w - (cw << (k - b)), rel);
+}
+
+// r x r PCF in slice w (StackMap::filtered's kernel: lit taps / (r * r), taps clamped to
+// the slice's edges; the quotient from the host's table, as st_pcf).
+float st_stack_pcf(uint level, uint x, uint y, uint w, uint r, float receiver, inout StProbe probe) {
+  r = clamp(r, 1u, kMaxPcf);
+  const uint side = 1u << min(level, 31u);
+  uint lit = 0u;
+  for (uint j = 0u; j < r; ++j)
+    for (uint i = 0u; i < r; ++i)
+      lit += st_lit(receiver, st_stack_depth(st_pcf_tap(x, i, r, side), st_pcf_tap(y, j, r, side), w, level, probe))
+                 ? 1u : 0u;
+  return uintBitsToFloat(ST_PAGE(ST_PAGE(kPtPcfTable) + (r - 1u) * kPcfTableStride + lit));
+}
+
+// (x, y): texel of slice w's finest level; the two levels from the footprint (in finest
+// texels), r x r PCF at each, blended (a + t * (c - a), each step rounded once) as
+// st_lookup does for 2D maps.
+float st_stack_lookup(uint x, uint y, uint w, float receiver, float footprint, uint r, inout StProbe probe) {
+  const uint finest = ST_PAGE(ST_PAGE(kPtStack) + kStXyLevel);
+  const StFilter f = st_filter_levels(footprint, finest);
+  const float a = st_stack_pcf(f.fine, x >> (finest - f.fine), y >> (finest - f.fine), w, r, receiver, probe);
+  if (f.t == 0.0) return a;
+  const float c = st_stack_pcf(f.coarse, x >> (finest - f.coarse), y >> (finest - f.coarse), w, r, receiver, probe);
+  precise float step = c - a;
+  precise float scaled = f.t * step;
+  precise float blended = a + scaled;
+  return blended;
+}
+
+#endif

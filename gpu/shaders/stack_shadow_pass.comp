@@ -1,0 +1,80 @@
+#version 450
+// The shadow pass of a stack map (GpuMap::submit_shadow_pass with ShadowPassInput::time):
+// world positions (and normals) of a G-buffer -> visibility at a time of the light set,
+// the two nearest slices blended (StackLookup::visibility's contract: exact at the
+// samples, va + f * (vb - va) between). Each slice's sun light space in float32 comes from
+// the stack block; per slice the same operations as the 2D pass (shadow_pass.comp) and as
+// the CPU twin gpu::stack_shadow_pass_reference (gpu/shadow_reference.cpp).
+#include "st_buffers.glsl"
+
+#include "st_stack.glsl"
+
+float st_light_word(uint base, uint i) { return uintBitsToFloat(st_page_words[base + i]); }
+
+// Light-space (u, v, d) of pixel p in the light whose kStLightWords words start at `lb`.
+bool st_stack_light_point(uint p, uint lb, out float u, out float v, out float d) {
+  const uint b = 4u * p;
+  u = 0.0;
+  v = 0.0;
+  d = 0.0;
+  if (uintBitsToFloat(st_input_words[b + 3u]) == 0.0) return false;
+  const float off = uintBitsToFloat(st_pc.w[kPcNormalOffset]);
+  precise float rx = uintBitsToFloat(st_input_words[b]) + uintBitsToFloat(st_normal_words[b]) * off;
+  precise float ry = uintBitsToFloat(st_input_words[b + 1u]) + uintBitsToFloat(st_normal_words[b + 1u]) * off;
+  precise float rz = uintBitsToFloat(st_input_words[b + 2u]) + uintBitsToFloat(st_normal_words[b + 2u]) * off;
+  rx = rx - st_light_word(lb, 0u);
+  ry = ry - st_light_word(lb, 1u);
+  rz = rz - st_light_word(lb, 2u);
+  precise float pu = rx * st_light_word(lb, 3u) + ry * st_light_word(lb, 4u) + rz * st_light_word(lb, 5u);
+  precise float pv = rx * st_light_word(lb, 6u) + ry * st_light_word(lb, 7u) + rz * st_light_word(lb, 8u);
+  precise float pd = rx * st_light_word(lb, 9u) + ry * st_light_word(lb, 10u) + rz * st_light_word(lb, 11u);
+  pd = pd - st_light_word(lb, 12u);
+  u = pu;
+  v = pv;
+  d = pd;
+  return true;
+}
+
+// Visibility of pixel p in slice w: outside the slice's light box lit, else the footprint
+// (from the neighbours, in the slice's finest texels) and st_stack_lookup.
+float st_slice_visibility(uint p, uint w, inout StProbe probe) {
+  const uint width = st_pc.w[kPcCount], height = st_pc.w[kPcHeight];
+  const uint blk = st_page_words[kPtStack];
+  const uint lb = st_page_words[blk + kStLights] + w * kStLightWords;
+  float u, v, d;
+  if (!st_stack_light_point(p, lb, u, v, d) || !(u >= 0.0 && u < 1.0 && v >= 0.0 && v < 1.0 && d >= 0.0 && d <= 1.0))
+    return 1.0;
+  const uint finest = st_page_words[blk + kStXyLevel];
+  const float side = uintBitsToFloat((127u + finest) << 23u);  // 2^finest, exact
+  precise float fu = floor(u * side), fv = floor(v * side);
+  const uint x = min(uint(fu), (1u << finest) - 1u), y = min(uint(fv), (1u << finest) - 1u);
+  float footprint = uintBitsToFloat(st_pc.w[kPcFootprint]);
+  if ((st_pc.w[kPcFlags] & kFlagNeighbourFootprint) != 0u) {
+    precise float f = 0.0;
+    float nu, nv, nd;
+    const uint px = p % width, py = p / width;
+    if (px + 1u < width && st_stack_light_point(p + 1u, lb, nu, nv, nd)) f = max(f, max(abs(nu - u), abs(nv - v)));
+    if (py + 1u < height && st_stack_light_point(p + width, lb, nu, nv, nd)) f = max(f, max(abs(nu - u), abs(nv - v)));
+    footprint = f * side;
+  }
+  return st_stack_lookup(x, y, w, d, footprint, st_pc.w[kPcKernel], probe);
+}
+
+void main() {
+  const uint p = gl_GlobalInvocationID.x;
+  if (p >= st_pc.w[kPcCount] * st_pc.w[kPcHeight]) return;
+  const uint wa = st_pc.w[kPcSliceA], wb = st_pc.w[kPcSliceB];
+  StProbe probe = st_probe();
+  const float va = st_slice_visibility(p, wa, probe);
+  float answer = va;
+  if (wb != wa) {
+    const float vb = st_slice_visibility(p, wb, probe);
+    const float f = uintBitsToFloat(st_pc.w[kPcTimeWeight]);
+    precise float step = vb - va;
+    precise float scaled = f * step;
+    precise float blended = va + scaled;
+    answer = blended;
+  }
+  st_output[p] = answer;
+  if (probe.hole) atomicAdd(st_fb_words[kFbHoles], 1u);
+}

@@ -1,0 +1,310 @@
+// GpuMap on a stack map (shadow-map stacks, MH 2016 §4) over a loopback server: every texel
+// of every level of every slice answers bit for bit like the Map's CPU lookup
+// (Map::slice_depth), with every tile resident and with cells absent (the level-K value,
+// and feedback naming exactly the absent cells); PCF and the footprint's level per slice;
+// the shadow pass at sample times and between equals its CPU twin; its feedback queues the
+// cells the pass needed, and once they arrive the pass has no holes. The validation layer
+// is on throughout and must stay silent.
+#include <gtest/gtest.h>
+
+#include <bit>
+#include <cmath>
+#include <map>
+#include <random>
+#include <set>
+#include <thread>
+
+#include "client/map_access.hpp"
+#include "gpu/shadow_reference.hpp"
+#include "tests/client/loopback.hpp"
+#include "tests/gpu/gpu_test_util.hpp"
+#include "tiles/build/stack_pack.hpp"
+#include "tiles/core/filter_level.hpp"
+#include "tiles/core/light_set.hpp"
+#include "tiles/core/stack_map.hpp"
+
+namespace st::gpu {
+namespace {
+
+uint32_t bits(float v) { return std::bit_cast<uint32_t>(v); }
+
+// Boxes' shadows sliding with w over a ground at 0.8 (coherent slices), as the stack
+// loopback test builds them.
+IntervalStack sliding_stack(uint32_t level, uint32_t slices) {
+  const uint64_t side = uint64_t(1) << level;
+  IntervalStack s{level, slices, std::vector<Interval>(side * side * slices, Interval{0.8f, 0.8f})};
+  for (uint32_t w = 0; w < slices; ++w)
+    for (int b = 0; b < 3; ++b) {
+      const uint64_t x0 = (7 + 17 * b + w) % (side - 12), y0 = (5 + 23 * b) % (side - 12);
+      for (uint64_t y = y0; y < y0 + 10; ++y)
+        for (uint64_t x = x0; x < x0 + 10; ++x) s.at(x, y, w) = {0.2f + 0.1f * float(b), 0.35f + 0.1f * float(b)};
+    }
+  return s;
+}
+
+struct ServedStack {
+  std::string path;
+  size_t tiles = 0;
+  looptest::TestServer server;
+  std::unique_ptr<client::Client> client;
+  client::Map map;
+};
+
+constexpr uint32_t kSlices = 10;
+
+ServedStack serve_stack(const std::string& name) {
+  ServedStack s;
+  const IntervalStack is = sliding_stack(looptest::small_scale() ? 5 : 6, kSlices);
+  StackCut cut = cut_stack(build_octree(is), std::nullopt, 512);
+  Aabb box;
+  box.extend({-10, 0, -10});
+  box.extend({10, 5, 10});
+  const LightSet set = LightSet::fit(
+      LightSetSpec::parse("sun-path:azimuth=150..200,elevation=40..60,samples=" + std::to_string(kSlices)), box);
+  cut.grid.light_kind = set.samples[0].kind();
+  for (const LightSpace& l : set.samples) cut.grid.lights.push_back(l.to_array());
+  cut.grid.spec = set.spec.to_string();
+  s.path = std::string(SHADOWTILE_TEST_TMP) + "/" + name + ".pack";
+  StackPackParams p;
+  p.tile_bytes = 512;
+  write_stack_pack(s.path, cut, p);
+  s.tiles = cut.tiles.size();
+  s.server = looptest::start_server({s.path});
+  client::ClientOptions o = looptest::quick_options();
+  o.cache_slots = uint32_t(s.tiles) + 4;
+  s.client = std::make_unique<client::Client>(client::Endpoint{"127.0.0.1", s.server.port}, o);
+  s.map = s.client->open(name);
+  return s;
+}
+
+std::string describe(const GpuStackQuery& q) {
+  return "slice " + std::to_string(q.slice) + " level " + std::to_string(q.level) + " x " + std::to_string(q.x) +
+         " y " + std::to_string(q.y) + " r " + std::to_string(q.r);
+}
+
+// Every texel (and one past the edge) of every level up to n + 1, of every slice and one
+// past the last: GPU depths against Map::slice_depth. Returns "" or the first difference.
+std::string compare_every_texel(GpuMap& g, const client::Map& map, uint32_t n) {
+  size_t bad = 0;
+  std::string first;
+  for (uint32_t w = 0; w <= kSlices; ++w) {
+    std::vector<GpuStackQuery> q;
+    for (uint32_t l = 0; l <= n + 1; ++l)
+      for (uint32_t y = 0; y <= (1u << l); ++y)
+        for (uint32_t x = 0; x <= (1u << l); ++x) q.push_back({x, y, w, l, 0, 1, 0});
+    std::vector<float> out(q.size());
+    g.evaluate(q, out);
+    for (size_t i = 0; i < q.size(); ++i) {
+      const float want = map.slice_depth(q[i].slice, q[i].level, q[i].x, q[i].y);
+      if (bits(out[i]) == bits(want)) continue;
+      if (bad++ == 0) first = describe(q[i]) + ": gpu " + std::to_string(out[i]) + ", cpu " + std::to_string(want);
+    }
+  }
+  return bad ? std::to_string(bad) + " differ; first: " + first : "";
+}
+
+TEST(GpuStack, EveryTexelOfEverySliceAnswersBitExactlyLikeTheCpu) {
+  ServedStack s = serve_stack("gpu_stack_all");
+  ASSERT_GT(s.tiles, 4u);
+  ASSERT_EQ(s.map.slices(), kSlices);
+  ASSERT_GT(s.map.request_slices(0, kSlices - 1, 10), 0u);
+  ASSERT_TRUE(looptest::wait_until([&] { return s.map.slices_resident(0, kSlices - 1); }));
+  s.server.stop();
+  GpuMap g(s.map, gputest::options());
+  EXPECT_TRUE(g.is_stack());
+  EXPECT_EQ(g.sync(), s.tiles);
+  const StackGrid& grid = *client::MapAccess::remote(s.map).stack_grid();
+  const uint32_t n = grid.geo.n;
+  EXPECT_EQ(compare_every_texel(g, s.map, n), "");
+
+  // r x r PCF at a level and through the footprint's level, per slice, with random
+  // receivers: against the same kernel over Map::slice_depth (StackMap::filtered's).
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<float> depth01(0.1f, 0.9f), fp(-1.0f, 7.0f);
+  std::vector<GpuStackQuery> q;
+  for (int i = 0; i < 6000; ++i) {
+    GpuStackQuery a;
+    a.slice = uint32_t(rng() % kSlices);
+    a.x = uint32_t(rng() % (1u << n));
+    a.y = uint32_t(rng() % (1u << n));
+    a.receiver = depth01(rng);
+    a.r = uint32_t(1 + rng() % 9);
+    if (i % 2) a.level = kLevelFromFootprint, a.footprint = std::exp2(fp(rng));
+    else a.level = n - uint32_t(rng() % 3), a.x >>= n - a.level, a.y >>= n - a.level;
+    q.push_back(a);
+  }
+  std::vector<float> out(q.size());
+  g.evaluate(q, out);
+  auto pcf = [&](const GpuStackQuery& a, uint32_t level, uint32_t x, uint32_t y) {
+    const uint64_t side = uint64_t(1) << level;
+    uint32_t lit = 0;
+    for (uint32_t j = 0; j < a.r; ++j)
+      for (uint32_t i = 0; i < a.r; ++i)
+        lit += a.receiver <= s.map.slice_depth(a.slice, level, pcf_tap(x, i, a.r, side), pcf_tap(y, j, a.r, side));
+    return float(lit) / float(a.r * a.r);
+  };
+  size_t bad = 0, fractional = 0;
+  for (size_t i = 0; i < q.size(); ++i) {
+    const GpuStackQuery& a = q[i];
+    float want;
+    if (a.level != kLevelFromFootprint) {
+      want = pcf(a, a.level, a.x, a.y);
+    } else {
+      const FilterLevels f = filter_levels(n, a.footprint);
+      want = pcf(a, f.fine, a.x >> (n - f.fine), a.y >> (n - f.fine));
+      if (f.t != 0.0f) want = filter_blend(want, pcf(a, f.coarse, a.x >> (n - f.coarse), a.y >> (n - f.coarse)), f.t);
+    }
+    fractional += want > 0.0f && want < 1.0f;
+    if (bits(out[i]) != bits(want) && bad++ == 0)
+      ADD_FAILURE() << describe(a) << ": gpu " << out[i] << ", cpu " << want;
+  }
+  EXPECT_EQ(bad, 0u);
+  EXPECT_GT(fractional, 100u);  // the kernels straddle shadow edges
+  EXPECT_EQ(g.stats().validation_messages, 0u);
+}
+
+bool cell_resident(const client::Map& map, uint64_t tile) {
+  bool r = false;
+  client::MapAccess::remote(map).inspect_cache(
+      [&](const TileCache& c) { r = c.lookup(tile).state == PageState::resident; });
+  return r;
+}
+
+TEST(GpuStack, AbsentCellsAnswerTheirLevelKValueAndFeedbackNamesExactlyThem) {
+  ServedStack s = serve_stack("gpu_stack_absent");
+  ASSERT_GT(s.map.request_slices(0, kSlices / 2 - 1, 10), 0u);
+  ASSERT_TRUE(looptest::wait_until([&] { return s.map.slices_resident(0, kSlices / 2 - 1); }));
+  s.server.stop();
+  GpuMap g(s.map, gputest::options());
+  g.sync();
+  const StackGrid& grid = *client::MapAccess::remote(s.map).stack_grid();
+  const uint32_t n = grid.geo.n;
+  EXPECT_EQ(compare_every_texel(g, s.map, n), "");
+  // Every finest texel of the later slices: the cells they fall in that are tiles and not
+  // resident are exactly the feedback, each with the number of queries in it.
+  const StackMap cells(grid, [](uint64_t) -> const MhOctree* { return nullptr; });
+  std::vector<GpuStackQuery> q;
+  std::map<uint64_t, uint32_t> want;
+  for (uint32_t w = kSlices / 2 - 1; w < kSlices; ++w)
+    for (uint32_t y = 0; y < (1u << n); ++y)
+      for (uint32_t x = 0; x < (1u << n); ++x) {
+        q.push_back({x, y, w, n, 0, 1, 0});
+        const uint64_t cell = cells.cell_of(x, y, w);
+        if (grid.entries[cell].kind == 1 && !cell_resident(s.map, grid.tile_id(cell))) ++want[grid.tile_id(cell)];
+      }
+  ASSERT_FALSE(want.empty());
+  std::vector<float> out(q.size());
+  const FrameStats fs = g.evaluate(q, out);
+  std::map<uint64_t, uint32_t> got;
+  for (const GpuMap::FeedbackTile& t : g.last_feedback()) got[t.tile] = t.pixels;
+  EXPECT_EQ(got, want);
+  uint32_t holes = 0;
+  for (const auto& [tile, count] : want) holes += count;
+  EXPECT_EQ(fs.holes, holes);
+  EXPECT_EQ(fs.feedback_tiles, want.size());
+  EXPECT_EQ(g.stats().validation_messages, 0u);
+}
+
+// A G-buffer over the light sets' box: a wavy surface, a margin outside the box, a few
+// background pixels, normals up.
+struct GBuffer {
+  uint32_t width = 64, height = 48;
+  std::vector<float> pos, nrm;
+  GBuffer() : pos(size_t(width) * height * 4), nrm(pos.size()) {
+    for (uint32_t y = 0; y < height; ++y)
+      for (uint32_t x = 0; x < width; ++x) {
+        const size_t p = size_t(y) * width + x;
+        const double wx = -11 + 22.0 * (x + 0.5) / width, wz = -11 + 22.0 * (y + 0.5) / height;
+        pos[4 * p] = float(wx);
+        pos[4 * p + 1] = float(2.5 + 2.4 * std::sin(0.7 * wx) * std::cos(0.5 * wz));
+        pos[4 * p + 2] = float(wz);
+        pos[4 * p + 3] = (x * 7 + y * 3) % 31 == 0 ? 0.0f : 1.0f;
+        nrm[4 * p + 1] = 1.0f;
+      }
+  }
+  ShadowPassInput input(double time, uint32_t kernel) const {
+    ShadowPassInput in;
+    in.positions = pos;
+    in.normals = nrm;
+    in.width = width;
+    in.height = height;
+    in.kernel = kernel;
+    in.normal_offset = 0.01f;
+    in.neighbour_footprint = kernel != 5;
+    in.footprint = 2.5f;
+    in.time = time;
+    return in;
+  }
+};
+
+TEST(GpuStack, ShadowPassAtSampleTimesAndBetweenEqualsItsCpuTwin) {
+  ServedStack s = serve_stack("gpu_stack_pass");
+  ASSERT_GT(s.map.request_slices(0, kSlices / 2 - 1, 10), 0u);  // the later slices stay absent
+  ASSERT_TRUE(looptest::wait_until([&] { return s.map.slices_resident(0, kSlices / 2 - 1); }));
+  s.server.stop();
+  GpuMap g(s.map, gputest::options());
+  const GBuffer gb;
+  size_t lit = 0, shadow = 0, between = 0;
+  for (double time : {0.0, 2.0 / 9.0, 0.2, 0.43, 0.5, 0.61, 1.0})
+    for (uint32_t kernel : {1u, 3u, 5u}) {
+      SCOPED_TRACE("time " + std::to_string(time) + " kernel " + std::to_string(kernel));
+      const ShadowPassInput in = gb.input(time, kernel);
+      std::vector<float> got(size_t(gb.width) * gb.height), want(got.size());
+      const FrameStats fs = g.wait(g.submit_shadow_pass(in), got);
+      stack_shadow_pass_reference(s.map, in, want);
+      size_t bad = 0;
+      for (size_t i = 0; i < got.size(); ++i) {
+        if (bits(got[i]) != bits(want[i]) && bad++ == 0)
+          ADD_FAILURE() << "pixel " << i << ": gpu " << got[i] << ", cpu " << want[i];
+        lit += want[i] == 1.0f, shadow += want[i] == 0.0f, between += want[i] > 0.0f && want[i] < 1.0f;
+      }
+      EXPECT_EQ(bad, 0u);
+      // The last slices are absent: a pass that reads them answers coarsely and says so.
+      const StackTime t = stack_time(kSlices, time);
+      if (s.map.slices_resident(t.a, t.b)) {
+        EXPECT_EQ(fs.holes, 0u);
+      }
+      if (t.b == kSlices - 1) {
+        EXPECT_GT(fs.holes, 0u);
+      }
+      if (kernel == 1 && t.a == t.b) {  // a sample's time, one tap: that slice alone, 0 or 1
+        for (float v : want) EXPECT_TRUE(v == 0.0f || v == 1.0f) << v;
+      }
+    }
+  EXPECT_GT(lit, 1000u);
+  EXPECT_GT(shadow, 1000u);
+  EXPECT_GT(between, 100u);
+  EXPECT_EQ(g.stats().validation_messages, 0u);
+}
+
+TEST(GpuStack, ShadowPassFeedbackStreamsTheCellsItNeedsUntilNoHoleIsLeft) {
+  ServedStack s = serve_stack("gpu_stack_feedback");
+  GpuMap g(s.map, gputest::options());
+  const GBuffer gb;
+  std::vector<float> vis(size_t(gb.width) * gb.height);
+  const ShadowPassInput in = gb.input(0.5, 3);  // slices 4 and 5
+  const FrameStats first = g.wait(g.submit_shadow_pass(in), vis);
+  EXPECT_GT(first.holes, 0u);
+  EXPECT_GT(first.feedback_tiles, 0u);
+  EXPECT_EQ(first.requested, first.feedback_tiles);
+  const StackGrid& grid = *client::MapAccess::remote(s.map).stack_grid();
+  const uint32_t sw = grid.geo.k - grid.geo.w_bits(grid.skip_level);  // slices per cell: 2^sw
+  for (const GpuMap::FeedbackTile& t : g.last_feedback()) {
+    uint64_t cell = 0;
+    ASSERT_TRUE(grid.cell_of(t.tile, cell));
+    const uint64_t cw = cell >> (2 * grid.geo.xy_bits(grid.skip_level));
+    EXPECT_TRUE((cw << sw) <= 5 && 4 <= ((cw + 1) << sw) - 1) << "cell " << cell << " holds no slice 4 or 5";
+  }
+  FrameStats fs = first;
+  for (int frame = 0; frame < 2000 && fs.holes > 0; ++frame) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    fs = g.wait(g.submit_shadow_pass(in), vis);
+  }
+  EXPECT_EQ(fs.holes, 0u);
+  EXPECT_GT(g.stats().slots_uploaded, 0u);
+  EXPECT_FALSE(s.map.slices_resident(0, 1));  // nothing asked for slices 0 and 1
+  EXPECT_EQ(g.stats().validation_messages, 0u);
+}
+
+}  // namespace
+}  // namespace st::gpu
