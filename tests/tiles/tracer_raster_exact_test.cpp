@@ -8,6 +8,8 @@
 // evaluated with every triangle as a candidate.
 #include <gtest/gtest.h>
 
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 
@@ -171,6 +173,56 @@ TEST(TracerRasterExact, PacksOfEitherBuilderHoldTheSameTiles) {
     const uint32_t side = 1u << L;
     for (uint32_t y = 0; y < side; y += 3)
       for (uint32_t x = 0; x < side; x += 3) ASSERT_EQ(pr.depth(L, x, y), pe.depth(L, x, y)) << c.name;
+  }
+}
+
+}  // namespace
+}  // namespace st
+
+namespace st {
+namespace {
+
+// The one-off full check (ARCHITECTURE.md "Canonical coverage"), by hand:
+//   SHADOWTILE_EXACT_LEVEL=11 build/release/tests/tiles_tests --gtest_also_run_disabled_tests
+//     --gtest_filter='TracerRasterExact.DISABLED_FullSize'
+// prints, per scene, the texels where the two builders differ at 2^level squared.
+TEST(TracerRasterExact, DISABLED_FullSize) {
+  const char* env = std::getenv("SHADOWTILE_EXACT_LEVEL");
+  const uint32_t L = env ? uint32_t(std::atoi(env)) : 11, side = 1u << L;
+  std::vector<Case> v;
+  v.push_back({"procedural:city", make_procedural("procedural:city"), kSun});
+  v.push_back({"procedural:hairball", make_procedural("procedural:hairball"), kSun});
+  v.push_back({"procedural:soup", make_procedural("procedural:soup"), kSun});
+  v.push_back({"procedural:terrain", make_procedural("procedural:terrain"), kSun});
+  v.push_back({"rotated terrain", test::rotated_terrain(), kSun});
+  v.push_back({"open hazard town", test::all_open(test::hazard_town()), kSun});
+  v.push_back({"open hazard town, grazing", test::all_open(test::hazard_town()), "sun:azimuth=77,elevation=0.5"});
+  v.push_back({"hazard town, grazing", test::hazard_town(), "sun:azimuth=77,elevation=0.5"});
+  v.push_back({"open city", test::all_open(make_procedural("procedural:city")), kSun});
+  v.push_back({"procedural:city, grazing", make_procedural("procedural:city"), "sun:azimuth=77,elevation=0.5"});
+  v.push_back({"procedural:city, steep", make_procedural("procedural:city"), "sun:azimuth=200,elevation=89.99"});
+  v.push_back({"procedural:city, overhead", make_procedural("procedural:city"), "sun:azimuth=0,elevation=90"});
+  for (const Case& c : v) {
+    const LightSpace light = LightSpace::fit(LightSpec::parse(c.light), c.scene.bounds());
+    const RasterBounds raster(c.scene, light);
+    const DepthBoundsTracer tracer(c.scene, light);
+    uint64_t differ = 0, hits = 0, closed = 0;
+    const uint32_t step = std::min(side, 4096u);
+    for (uint32_t y0 = 0; y0 < side; y0 += step)
+      for (uint32_t x0 = 0; x0 < side; x0 += step) {
+        const IntervalTile a = raster.trace({L, x0, y0, step, step});
+        const IntervalTile b = tracer.trace({L, x0, y0, step, step});
+        for (size_t k = 0; k < a.data.size(); ++k) {
+          differ += !same_bits(a.data[k], b.data[k]);
+          hits += a.data[k].lo < kLitDepth;
+          closed += a.data[k].hi > a.data[k].lo;
+        }
+      }
+    std::printf("%-28s %-32s %u^2: %llu texels differ (%llu hit, %llu closed), %llu of %llu triangles wide\n",
+                c.name.c_str(), c.light, side, (unsigned long long)differ, (unsigned long long)hits,
+                (unsigned long long)closed, (unsigned long long)tracer.wide_candidates(),
+                (unsigned long long)tracer.triangle_count());
+    EXPECT_EQ(differ, 0u) << c.name;
   }
 }
 

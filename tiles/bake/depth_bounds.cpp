@@ -127,10 +127,11 @@ void intersect(const int* valid, RTCScene scene, RTCIntersectContext* ctx, RTCRa
 // traversed segment [0, inf); the box is widened by 2^-18 of the coordinates involved,
 // far more than the float rounding of the ray's origin and direction (2^-24), and the
 // scene is built robust (conservative box tests). A triangle whose k_i add up to more
-// than 1/4 (nearly edge-on, or a sliver below about 1e-7 of the scene) gets a box every
-// texel ray crosses: all of light space (sun: the near-plane map square; spot: the light
-// position with the scene). The callback also rejects nothing the definition accepts:
-// it is the definition.
+// than 1/4 (nearly edge-on, or a sliver below about 1e-7 of the scene): under a sun, the
+// box of a slab around its plane that holds every covered ray (slab_box; a wall under an
+// overhead sun); under a spot light, a box every texel ray crosses (the light position
+// with the scene). The callback then rejects nothing the definition accepts: it is the
+// definition.
 namespace {
 
 struct CoverageData {
@@ -141,7 +142,8 @@ struct CoverageData {
   std::vector<uint32_t> mesh;               // by scene triangle
   std::vector<uint8_t> closed;              // by scene triangle
   std::vector<RTCBounds> box;               // by user primitive
-  uint64_t wide = 0;                        // primitives with the light-wide box
+  uint64_t wide = 0;                        // primitives with the light-wide box (spot)
+  uint64_t slab = 0;                        // primitives with a slab box (sun)
   double shift = 1;                         // S: parameter units before the texel origin
 };
 
@@ -232,6 +234,73 @@ std::optional<Aabb> grown_box(const Vec3d (&p)[3], bool sun, const Vec3d& d, con
   }
   if (!is_finite(box.lo) || !is_finite(box.hi)) return std::nullopt;
   return box;
+}
+
+double comp(const Vec3d& v, int k) { return k == 0 ? v.x : (k == 1 ? v.y : v.z); }
+
+// Sun, a triangle the grown box cannot confine (nearly edge-on to the sun, or a sliver):
+// a covered ray has s e_i >= -B_i for each edge and the e_i add up to D = d . n, so
+// |e_i| <= C = |D| + sum B_i. On the exact ray through any of its points P, e_i is the
+// affine a . P + b with a = d x (q1 - q0), b = d . (q0 x q1) (edge q0 -> q1), the same
+// for every point of the line: the ray lies in the slab |a . P + b| <= C of one edge (the
+// one with the largest a), and its points at t in [0, 1] in `vol`, the box of the light
+// volume. Returns the box of that slab within `vol` (per axis, the range the slab allows
+// over the box's other two axes), nullopt where the slab misses `vol` (never covered).
+// C carries the rounding of a, b and of these ranges, generously.
+std::optional<Aabb> slab_box(const Vec3d (&p)[3], const Vec3d& d, const Aabb& vol) {
+  const Vec3d P_max{std::max(std::fabs(vol.lo.x), std::fabs(vol.hi.x)),
+                    std::max(std::fabs(vol.lo.y), std::fabs(vol.hi.y)),
+                    std::max(std::fabs(vol.lo.z), std::fabs(vol.hi.z))};
+  const Vec3d n = cross(p[1] - p[0], p[2] - p[0]);
+  double C = std::fabs(dot(d, n)) +
+             0x1p-47 * dot(abs3(d), cross_abs(abs3(p[1]) + abs3(p[0]), abs3(p[2]) + abs3(p[0])));
+  int best = 0;
+  double best_len = -1;
+  for (int i = 0; i < 3; ++i) {
+    const Vec3d& q0 = p[(i + 1) % 3];
+    const Vec3d& q1 = p[(i + 2) % 3];
+    // B_i for any origin in `vol` (which holds every texel origin).
+    C += 0x1p-47 * dot(abs3(d), cross_abs(abs3(q0) + P_max, abs3(q1) + P_max));
+    const double len = sum3(abs3(cross(d, q1 - q0)));
+    if (len > best_len) best_len = len, best = i;
+  }
+  const Vec3d& q0 = p[(best + 1) % 3];
+  const Vec3d& q1 = p[(best + 2) % 3];
+  const Vec3d a = cross(d, q1 - q0);
+  const double b = dot(d, cross(q0, q1));
+  // The rounding of a and b against the exact affine function over `vol`.
+  C += 0x1p-45 * (dot(abs3(d), cross_abs(abs3(q0), abs3(q1))) +
+                  dot(P_max, cross_abs(abs3(d), abs3(q0) + abs3(q1))));
+  C *= 1 + 0x1p-30;
+  if (!std::isfinite(C) || !is_finite(a) || !std::isfinite(b)) return Aabb{vol};
+  const double slack = 0x1p-40 * (dot(abs3(a), P_max) + std::fabs(b) + C) + 0x1p-1000;
+  Aabb out;
+  double lo_o[3], hi_o[3];
+  for (int k = 0; k < 3; ++k) {
+    double m = 0, M = 0;
+    for (int j = 0; j < 3; ++j) {
+      if (j == k) continue;
+      const double x0 = comp(a, j) * comp(vol.lo, j), x1 = comp(a, j) * comp(vol.hi, j);
+      m += std::min(x0, x1), M += std::max(x0, x1);
+    }
+    const double ak = comp(a, k);
+    double lo = comp(vol.lo, k), hi = comp(vol.hi, k);
+    if (ak == 0) {
+      if (m > C - b + slack || M < -C - b - slack) return std::nullopt;
+    } else {
+      const double x1 = (C - b - m + slack) / ak, x2 = (-C - b - M - slack) / ak;
+      double upper = ak > 0 ? x1 : x2, lower = ak > 0 ? x2 : x1;
+      upper += std::fabs(upper) * 0x1p-40 + 0x1p-1000;
+      lower -= std::fabs(lower) * 0x1p-40 + 0x1p-1000;
+      if (std::isfinite(upper)) hi = std::min(hi, upper);
+      if (std::isfinite(lower)) lo = std::max(lo, lower);
+      if (!(lo <= hi)) return std::nullopt;
+    }
+    lo_o[k] = lo, hi_o[k] = hi;
+  }
+  out.lo = {lo_o[0], lo_o[1], lo_o[2]};
+  out.hi = {hi_o[0], hi_o[1], hi_o[2]};
+  return out;
 }
 
 // Outward rounding to float.
@@ -457,13 +526,15 @@ void DepthBoundsTracer::Impl::build_coverage(const Scene& s, const std::vector<u
   const Vec3d o_spot = light.origin() - centre;
   // A box every texel ray crosses: sun, the near-plane map square (the origins); spot,
   // the light position (the origin) with the scene.
-  Aabb wide;
-  for (const Vec3d& c : corner) wide.extend(c);
+  Aabb wide, volume;  // volume: the box of the sun's light volume (t in [0, 1])
+  for (const Vec3d& c : corner) wide.extend(c), volume.extend(c), volume.extend(c + d_sun);
   if (!sun)
     for (const Vec3d& q : cd.v) wide.extend(q);
+  volume.lo = volume.lo - abs3(volume.lo) * 0x1p-30 - o_max * 0x1p-30;
+  volume.hi = volume.hi + abs3(volume.hi) * 0x1p-30 + o_max * 0x1p-30;
 
   std::vector<Aabb> boxes(nt);
-  std::vector<uint8_t> kind(nt, 0);  // 0: never hit, 1: grown box, 2: wide
+  std::vector<uint8_t> kind(nt, 0);  // 0: never hit, 1: grown box, 2: wide, 3: slab box
   tbb::parallel_for(size_t(0), nt, [&](size_t t) {
     const Vec3d p[3] = {cd.v[cd.tri[t][0]], cd.v[cd.tri[t][1]], cd.v[cd.tri[t][2]]};
     cd.plane[t] = CanonicalPlane::of(p[0], p[1], p[2]);
@@ -473,8 +544,11 @@ void DepthBoundsTracer::Impl::build_coverage(const Scene& s, const std::vector<u
     if (auto b = grown_box(p, sun, d_sun, o_spot, o_max)) {
       boxes[t] = *b;
       kind[t] = 1;
-    } else {
+    } else if (!sun) {
       kind[t] = 2;
+    } else if (auto sb = slab_box(p, d_sun, volume)) {
+      boxes[t] = *sb;  // crossed by its rays within the light volume (t in [0, 1])
+      kind[t] = 3;
     }
   });
   // S: every point of a grown box lies at ray parameter >= -S + 1 (sun: depth along the
@@ -507,8 +581,9 @@ void DepthBoundsTracer::Impl::build_coverage(const Scene& s, const std::vector<u
   for (size_t t = 0; t < nt; ++t) {
     if (kind[t] == 0) continue;
     cd.prim_tri.push_back(uint32_t(t));
-    cd.box.push_back(kind[t] == 1 ? widen(boxes[t]) : wide_bounds);
+    cd.box.push_back(kind[t] == 2 ? wide_bounds : widen(boxes[t]));
     cd.wide += kind[t] == 2;
+    cd.slab += kind[t] == 3;
   }
 
   cover_scene = rtcNewScene(device);
@@ -809,7 +884,7 @@ DepthBoundsTracer::~DepthBoundsTracer() = default;
 bool DepthBoundsTracer::traces_exit_depths() const { return impl_->any_closed; }
 double DepthBoundsTracer::build_seconds() const { return impl_->build_s; }
 uint64_t DepthBoundsTracer::triangle_count() const { return impl_->triangles; }
-uint64_t DepthBoundsTracer::wide_candidates() const { return impl_->cover.wide; }
+uint64_t DepthBoundsTracer::wide_candidates() const { return impl_->cover.wide + impl_->cover.slab; }
 
 void DepthBoundsTracer::check_region(const TraceRegion& r) {
   if (r.level > kMaxLevel)

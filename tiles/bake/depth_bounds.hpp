@@ -18,7 +18,8 @@
 // evaluates the same definition, so the two builders agree bit for bit on every texel,
 // and any batching (packet shape, region) gives the same bits. A triangle so thin or so
 // nearly edge-on that the bound cannot confine it (its edge errors add up to a quarter
-// of its projected area) becomes a candidate of every ray instead (wide_candidates()).
+// of its projected area) gets a wider box instead (wide_candidates(): under a sun, a slab
+// around its plane; under a spot light, every ray).
 //
 // The baseline modes (first_hit, bounds_tracer_t) trace Embree's float triangles with the
 // exit counting of exit_depth.hpp, as before the canonical coverage; their scene is built
@@ -91,7 +92,7 @@ class DepthBoundsTracer {
   bool traces_exit_depths() const;
   double build_seconds() const;
   uint64_t triangle_count() const;
-  // Triangles that are candidates of every ray (see above): none in well-formed scenes.
+  // Triangles with a wider box than their own grown one (see above).
   uint64_t wide_candidates() const;
 
   // Traces a rectangular region of the level-`region.level` map. Throws st::Error when
