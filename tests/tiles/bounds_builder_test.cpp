@@ -1,10 +1,9 @@
 // The two depth-bounds builders of a map build (map_build.hpp BoundsBuilder): packs built
 // with the light-space rasterizer and with the Embree tracer are each lossless against a
 // fresh trace by their own builder on every texel, on a city, terrain, a hairball, open
-// soups and under a grazing sun; the two builders' (lo, hi) agree on all but a few
-// texels, and on each of those the rasterizer equals the canonical definition evaluated
-// with every triangle (the tracer decides coverage in float). The builder is recorded in
-// the pack, and the choice follows the light.
+// soups and under a grazing sun, and the two builders' (lo, hi) are equal on every texel
+// (both evaluate the canonical coverage; tracer_raster_exact_test.cpp has more scenes).
+// The builder is recorded in the pack, and the choice follows the light.
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -50,8 +49,7 @@ void check_scene(const Scene& scene, const char* sun) {
       const Interval ref = raster.brute_force_texel(L, x, y);
       EXPECT_TRUE(ref.lo == a.lo && ref.hi == a.hi) << scene.name << " " << sun << " texel " << x << "," << y;
     }
-  // Float coverage differs from the canonical one only within float error of an edge.
-  EXPECT_LE(differ, uint64_t(side) * side / 200) << scene.name << " " << sun;
+  EXPECT_EQ(differ, 0u) << scene.name << " " << sun;
 
   for (BoundsBuilder b : {BoundsBuilder::raster, BoundsBuilder::embree}) {
     MapBuildOptions o;
@@ -70,7 +68,7 @@ void check_scene(const Scene& scene, const char* sun) {
   }
 }
 
-TEST(BoundsBuilder, BothBuildersGiveLosslessPacksAndAgreeButForFloatCoverage) {
+TEST(BoundsBuilder, BothBuildersGiveLosslessPacksAndAgreeOnEveryTexel) {
   check_scene(make_procedural("procedural:city,size=3,seed=5"), "sun:azimuth=30,elevation=50");
   check_scene(test::rotated_terrain(), "sun:azimuth=30,elevation=50");
   check_scene(make_procedural("procedural:hairball,count=8,segments=12"), "sun:azimuth=30,elevation=50");

@@ -7,9 +7,10 @@
 // last bits depend on the SIMD kernel that happened to run.
 //
 // Definition (ARCHITECTURE.md "Definitions" points here):
-//   1. Primitives. The ray tracer only *finds* primitives: the triangles it reports as
-//      hit within a window of +- kWindow * (t range) around its first-hit t (for lo) or
-//      the exit group the exit counting ends on (for hi; exit_depth.hpp).
+//   1. Primitives. Which triangles a texel ray hits is the canonical coverage of
+//      canonical_coverage.hpp (signed Plücker edge tests in double); every builder (the
+//      Embree tracer, the light-space rasterizer) evaluates it, so none depends on a
+//      float triangle test.
 //   2. Plane. Each triangle's plane is computed in double from its three scene
 //      vertices, recentred on the scene AABB centre (p - centre, double), taken in
 //      lexicographic (x, y, z) order: n = (b - a) x (c - a), d = n . a. A duplicate,
@@ -17,16 +18,13 @@
 //      plane.
 //   3. Parameter. t = (d - n . o) / (n . dir) in double, with o = ray origin - centre
 //      and dir the texel ray's direction (LightSpace::texel_ray, double). A ray in the
-//      plane (n . dir == 0) or a non-finite quotient uses the tracer's float t.
-//   4. Selection. lo takes the smallest t of the primitives found (ties need no rule:
-//      equal t give equal depths); hi the largest t of the exit group's closed faces.
+//      plane (n . dir == 0) or a non-finite quotient is no hit.
+//   4. Selection. lo takes the smallest t of the hit list, hi the t where the exit
+//      counting of canonical_interval() ends (canonical_coverage.hpp).
 //   5. Depth. Sun: d = t; spot: d = (t - near) / (far - near), in double, clamped to
 //      [0, 1], rounded to float once. hi = max(lo, hi).
-// The only thing left to the tracer is which primitives it reports: a ray passing
-// within an ulp of a shared edge or vertex may see one triangle of a pair in one batch
-// and the other in another, and only then can the depths differ (by the rounding of two
-// planes that meet at that edge). Tests pin bit-identity across batchings on open soups,
-// terrain, coplanar overlaps, grazing and steep suns and spot lights.
+// Tests pin bit-identity across batchings on open soups, terrain, coplanar overlaps,
+// grazing and steep suns and spot lights, and between the two builders.
 #pragma once
 #include <algorithm>
 #include <array>
@@ -57,19 +55,14 @@ struct CanonicalPlane {
     return p;
   }
 
-  // The ray parameter of the plane; `fallback` (the tracer's t) when the ray lies in
-  // the plane or the quotient is not finite.
+  // The ray parameter of the plane; `fallback` (NaN for the definition: no hit) when the
+  // ray lies in the plane or the quotient is not finite.
   double t(const Vec3d& origin, const Vec3d& dir, double fallback) const {
     const double den = dot(n, dir);
     const double t = (d - dot(n, origin)) / den;
     return den != 0 && std::isfinite(t) ? t : fallback;
   }
 };
-
-// The window around the tracer's first-hit t in which primitives are gathered for lo, as
-// a fraction of the ray's t range: far wider than the float error of the tracer's t, even
-// for faces seen at a grazing angle.
-constexpr double kCanonicalWindow = 1.0 / (1 << 12);
 
 // Step 5 of the definition.
 inline float canonical_depth(const LightSpace& light, double t) {

@@ -6,14 +6,19 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <limits>
+#include <mutex>
+#include <optional>
 #include <string>
+#include <type_traits>
 #include <unordered_map>
 #include <vector>
 
 #include "common/error.hpp"
+#include "tiles/bake/canonical_coverage.hpp"
 #include "tiles/bake/canonical_depth.hpp"
 #include "tiles/bake/exit_depth.hpp"
 
@@ -30,26 +35,11 @@ constexpr unsigned kClosedGeom = 0, kOpenGeom = 1;
 // depend on the batching (canonical_depth.hpp).
 constexpr unsigned kMaxLanes = 16;
 
-// What the canonical window traversal gathers per lane: the smallest canonical t of the
-// primitives hit (canonical_depth.hpp step 4) and, for the static-geometry interval, the
-// canonical t of every primitive in the window (up to kMaxWindow; more is an overflow).
-struct CanonicalLane {
-  static constexpr uint32_t kMaxWindow = 16;
-  Vec3d origin, dir;  // recentred, double
-  double min_t;
-  double t[kMaxWindow];
-  uint32_t n;
-  bool overflow;
-  void reset() { min_t = INFINITY, n = 0, overflow = false; }
-};
-
 // Embree passes our context pointer to the filter; RTCIntersectContext must come first.
 // Each lane's counting state also holds what the filter gathers for it.
 struct FilterContext {
   RTCIntersectContext ctx;
-  const std::vector<CanonicalPlane>* planes;  // by geometry id, then primitive id
   ExitDepthRay lane[kMaxLanes];
-  CanonicalLane canon[kMaxLanes];
 };
 static_assert(std::is_standard_layout_v<FilterContext>);
 
@@ -69,28 +59,6 @@ void offer_hits(const RTCFilterFunctionNArguments* args) {
     const bool closed = RTCHitN_geomID(args->hit, n, i) == kClosedGeom;
     const float t = RTCRayN_tfar(args->ray, n, i);
     if (!fc->lane[lane].offer(t, closed, RTCHitN_primID(args->hit, n, i))) args->valid[i] = 0;
-  }
-}
-
-// The canonical window traversal: every hit is rejected (the traversal sees the whole
-// window) and its primitive's canonical t kept if it is the smallest so far.
-void gather_canonical(const RTCFilterFunctionNArguments* args) {
-  auto* fc = reinterpret_cast<FilterContext*>(args->context);
-  const unsigned n = args->N;
-  for (unsigned i = 0; i < n; ++i) {
-    if (args->valid[i] == 0) continue;
-    args->valid[i] = 0;
-    const unsigned lane = RTCRayN_id(args->ray, n, i);
-    const unsigned geom = RTCHitN_geomID(args->hit, n, i);
-    if (lane >= kMaxLanes || geom > kOpenGeom) continue;
-    const std::vector<CanonicalPlane>& planes = fc->planes[geom];
-    const unsigned prim = RTCHitN_primID(args->hit, n, i);
-    if (prim >= planes.size()) continue;
-    CanonicalLane& c = fc->canon[lane];
-    const double t = planes[prim].t(c.origin, c.dir, RTCRayN_tfar(args->ray, n, i));
-    c.min_t = std::min(c.min_t, t);
-    if (c.n < CanonicalLane::kMaxWindow) c.t[c.n++] = t;
-    else c.overflow = true;
   }
 }
 
@@ -131,6 +99,228 @@ void intersect(const int* valid, RTCScene scene, RTCIntersectContext* ctx, RTCRa
 
 }  // namespace
 
+// ---------------------------------------------------------------------------------------
+// Canonical coverage with Embree as the candidate finder (canonical_coverage.hpp).
+//
+// Each triangle that can ever be hit (its canonical plane is not parallel to every texel
+// ray) is an Embree user primitive whose box provably contains a point of every texel
+// ray the definition covers (coverage_box below); the intersect callback runs the
+// definition (canonical_cover, the canonical plane's t) and appends hits without
+// accepting any, so one traversal of the whole line visits every candidate. The sorted,
+// deduplicated hit list then goes through canonical_interval(): the same function of the
+// same list as the rasterizer, hence the same bits.
+//
+// Why the boxes are a superset. For the exact ray (o, d) (the double values the
+// definition takes) and a triangle P0 P1 P2, the three exact oriented edge values e_i
+// (edge opposite P_i) add up to d . n with n = (P1 - P0) x (P2 - P0), and l_i = e_i / (d . n)
+// are the barycentric coordinates of the point X where the ray meets the triangle's
+// plane. The definition's double value of e_i is within B_i of the exact one (the same
+// bound as the rasterizer's edge setup: 2^-47 of the magnitudes of its terms), so a
+// covered ray (three equal signs s) has s e_i >= -B_i for each i, and a zero resolved by
+// perturbation has |e_i| <= B_i too. Let k_i = B_i / |d . n| (sun: one d; spot: with
+// |d|inf t = |X - o|inf and (d . n) t = h = (P0 - o) . n, k_i <= K_i |X - o|inf / |h|).
+// When the k_i add up to at most 1/4: s = sign(d . n) (the opposite needs sum k >= 1/2),
+// and l_i >= -2 k_i, so X lies in the triangle grown about each vertex
+//   X_k = P_k + sum_{i != k} 2 k_i (P_k - P_i)   (k = 0, 1, 2),
+// whose box therefore holds X, a point of the ray. Embree's float ray starts S parameter
+// units before the texel origin (o - S d), far enough that every such X lies on the
+// traversed segment [0, inf); the box is widened by 2^-18 of the coordinates involved,
+// far more than the float rounding of the ray's origin and direction (2^-24), and the
+// scene is built robust (conservative box tests). A triangle whose k_i add up to more
+// than 1/4 (nearly edge-on, or a sliver below about 1e-7 of the scene): under a sun, the
+// box of a slab around its plane that holds every covered ray (slab_box; a wall under an
+// overhead sun); under a spot light, a box every texel ray crosses (the light position
+// with the scene). The callback then rejects nothing the definition accepts: it is the
+// definition.
+namespace {
+
+struct CoverageData {
+  std::vector<Vec3d> v;                     // recentred vertices (double)
+  std::vector<std::array<uint32_t, 3>> tri;  // scene triangles
+  std::vector<uint32_t> prim_tri;           // user primitive -> scene triangle
+  std::vector<CanonicalPlane> plane;        // by scene triangle
+  std::vector<uint32_t> mesh;               // by scene triangle
+  std::vector<uint8_t> closed;              // by scene triangle
+  std::vector<RTCBounds> box;               // by user primitive
+  uint64_t wide = 0;                        // primitives with the light-wide box (spot)
+  uint64_t slab = 0;                        // primitives with a slab box (sun)
+  double shift = 1;                         // S: parameter units before the texel origin
+};
+
+struct CoverageContext {
+  RTCIntersectContext ctx;  // first: Embree hands our pointer back
+  const CoverageData* data;
+  double t_lo, t_hi;  // the accepted canonical t range
+  CoverageRay ray[kMaxLanes];
+  std::vector<CanonicalHit>* hits[kMaxLanes];
+};
+static_assert(std::is_standard_layout_v<CoverageContext>);
+
+// The definition on one candidate for every valid lane; never accepts (traversal goes on).
+void cover_candidate(const RTCIntersectFunctionNArguments* args) {
+  const auto* cc = reinterpret_cast<const CoverageContext*>(args->context);
+  const CoverageData& cd = *cc->data;
+  if (args->primID >= cd.prim_tri.size()) return;
+  const uint32_t t = cd.prim_tri[args->primID];
+  const Vec3d& a = cd.v[cd.tri[t][0]];
+  const Vec3d& b = cd.v[cd.tri[t][1]];
+  const Vec3d& c = cd.v[cd.tri[t][2]];
+  RTCRayN* rays = RTCRayHitN_RayN(args->rayhit, args->N);
+  for (unsigned i = 0; i < args->N; ++i) {
+    if (args->valid[i] == 0) continue;
+    const unsigned lane = RTCRayN_id(rays, args->N, i);
+    if (lane >= kMaxLanes) continue;
+    const CoverageRay& r = cc->ray[lane];
+    const int f = canonical_cover(r, a, b, c);
+    if (f == 0) continue;
+    const double tp = cd.plane[t].t(r.o, r.d, NAN);
+    if (!(tp >= cc->t_lo && tp <= cc->t_hi)) continue;  // also a non-finite t
+    cc->hits[lane]->push_back(CanonicalHit{tp, t, cd.mesh[t], int8_t(f), cd.closed[t] != 0});
+  }
+}
+
+// Per thread, the hit list of each lane of a packet (kept: no allocation per texel).
+std::vector<CanonicalHit>* lane_hits() {
+  thread_local std::vector<CanonicalHit> hits[kMaxLanes];
+  return hits;
+}
+
+void coverage_bounds(const RTCBoundsFunctionArguments* args) {
+  const auto* cd = static_cast<const CoverageData*>(args->geometryUserPtr);
+  *args->bounds_o = cd->box[args->primID];
+}
+
+Vec3d abs3(const Vec3d& v) { return {std::fabs(v.x), std::fabs(v.y), std::fabs(v.z)}; }
+Vec3d cross_abs(const Vec3d& x, const Vec3d& y) {
+  return {x.y * y.z + x.z * y.y, x.z * y.x + x.x * y.z, x.x * y.y + x.y * y.x};
+}
+double max3(const Vec3d& v) { return std::max({v.x, v.y, v.z}); }
+double sum3(const Vec3d& v) { return v.x + v.y + v.z; }
+
+// The grown triangle's box (see above), or nullopt where the k_i add up to more than 1/4.
+// Sun: `d` the rays' direction, `o_max` the componentwise bound of |texel origin| over
+// the map. Spot: `d` unused, `o` the rays' common origin (o_max = |o|).
+std::optional<Aabb> grown_box(const Vec3d (&p)[3], bool sun, const Vec3d& d, const Vec3d& o,
+                              const Vec3d& o_max) {
+  const Vec3d n = cross(p[1] - p[0], p[2] - p[0]);
+  const Vec3d n_mag = cross_abs(abs3(p[1]) + abs3(p[0]), abs3(p[2]) + abs3(p[0]));
+  double K[3];
+  for (int i = 0; i < 3; ++i) {  // edge opposite p[i]
+    const Vec3d P = abs3(p[(i + 1) % 3]) + o_max, Q = abs3(p[(i + 2) % 3]) + o_max;
+    K[i] = 0x1p-47 * (sun ? dot(abs3(d), cross_abs(P, Q)) : sum3(cross_abs(P, Q))) + 0x1p-1000;
+  }
+  double denom, scale;  // k_i = K_i * scale / denom
+  if (sun) {
+    const double s = dot(d, n);
+    denom = std::fabs(s) - (0x1p-47 * dot(abs3(d), n_mag) + 0x1p-1000);
+    scale = 1;
+  } else {
+    const double h = dot(p[0] - o, n);
+    denom = std::fabs(h) - (0x1p-47 * dot(abs3(p[0]) + o_max, n_mag) + 0x1p-1000);
+    scale = 0;
+    for (const Vec3d& q : p) scale = std::max(scale, max3(abs3(q - o)));
+    scale *= 1 + 0x1p-40;
+  }
+  if (!(denom > 0)) return std::nullopt;
+  double k[3], sum = 0;
+  for (int i = 0; i < 3; ++i) sum += k[i] = K[i] * scale / denom * (1 + 0x1p-40);
+  if (!(sum <= 0.25)) return std::nullopt;
+  Aabb box;
+  for (int j = 0; j < 3; ++j) {
+    Vec3d x = p[j];
+    for (int i = 0; i < 3; ++i)
+      if (i != j) x = x + (p[j] - p[i]) * (2 * k[i]);
+    box.extend(x);
+  }
+  if (!is_finite(box.lo) || !is_finite(box.hi)) return std::nullopt;
+  return box;
+}
+
+double comp(const Vec3d& v, int k) { return k == 0 ? v.x : (k == 1 ? v.y : v.z); }
+
+// Sun, a triangle the grown box cannot confine (nearly edge-on to the sun, or a sliver):
+// a covered ray has s e_i >= -B_i for each edge and the e_i add up to D = d . n, so
+// |e_i| <= C = |D| + sum B_i. On the exact ray through any of its points P, e_i is the
+// affine a . P + b with a = d x (q1 - q0), b = d . (q0 x q1) (edge q0 -> q1), the same
+// for every point of the line: the ray lies in the slab |a . P + b| <= C of one edge (the
+// one with the largest a), and its points at t in [0, 1] in `vol`, the box of the light
+// volume. Returns the box of that slab within `vol` (per axis, the range the slab allows
+// over the box's other two axes), nullopt where the slab misses `vol` (never covered).
+// C carries the rounding of a, b and of these ranges, generously.
+std::optional<Aabb> slab_box(const Vec3d (&p)[3], const Vec3d& d, const Aabb& vol) {
+  const Vec3d P_max{std::max(std::fabs(vol.lo.x), std::fabs(vol.hi.x)),
+                    std::max(std::fabs(vol.lo.y), std::fabs(vol.hi.y)),
+                    std::max(std::fabs(vol.lo.z), std::fabs(vol.hi.z))};
+  const Vec3d n = cross(p[1] - p[0], p[2] - p[0]);
+  double C = std::fabs(dot(d, n)) +
+             0x1p-47 * dot(abs3(d), cross_abs(abs3(p[1]) + abs3(p[0]), abs3(p[2]) + abs3(p[0])));
+  int best = 0;
+  double best_len = -1;
+  for (int i = 0; i < 3; ++i) {
+    const Vec3d& q0 = p[(i + 1) % 3];
+    const Vec3d& q1 = p[(i + 2) % 3];
+    // B_i for any origin in `vol` (which holds every texel origin).
+    C += 0x1p-47 * dot(abs3(d), cross_abs(abs3(q0) + P_max, abs3(q1) + P_max));
+    const double len = sum3(abs3(cross(d, q1 - q0)));
+    if (len > best_len) best_len = len, best = i;
+  }
+  const Vec3d& q0 = p[(best + 1) % 3];
+  const Vec3d& q1 = p[(best + 2) % 3];
+  const Vec3d a = cross(d, q1 - q0);
+  const double b = dot(d, cross(q0, q1));
+  // The rounding of a and b against the exact affine function over `vol`.
+  C += 0x1p-45 * (dot(abs3(d), cross_abs(abs3(q0), abs3(q1))) +
+                  dot(P_max, cross_abs(abs3(d), abs3(q0) + abs3(q1))));
+  C *= 1 + 0x1p-30;
+  if (!std::isfinite(C) || !is_finite(a) || !std::isfinite(b)) return Aabb{vol};
+  const double slack = 0x1p-40 * (dot(abs3(a), P_max) + std::fabs(b) + C) + 0x1p-1000;
+  Aabb out;
+  double lo_o[3], hi_o[3];
+  for (int k = 0; k < 3; ++k) {
+    double m = 0, M = 0;
+    for (int j = 0; j < 3; ++j) {
+      if (j == k) continue;
+      const double x0 = comp(a, j) * comp(vol.lo, j), x1 = comp(a, j) * comp(vol.hi, j);
+      m += std::min(x0, x1), M += std::max(x0, x1);
+    }
+    const double ak = comp(a, k);
+    double lo = comp(vol.lo, k), hi = comp(vol.hi, k);
+    if (ak == 0) {
+      if (m > C - b + slack || M < -C - b - slack) return std::nullopt;
+    } else {
+      const double x1 = (C - b - m + slack) / ak, x2 = (-C - b - M - slack) / ak;
+      double upper = ak > 0 ? x1 : x2, lower = ak > 0 ? x2 : x1;
+      upper += std::fabs(upper) * 0x1p-40 + 0x1p-1000;
+      lower -= std::fabs(lower) * 0x1p-40 + 0x1p-1000;
+      if (std::isfinite(upper)) hi = std::min(hi, upper);
+      if (std::isfinite(lower)) lo = std::max(lo, lower);
+      if (!(lo <= hi)) return std::nullopt;
+    }
+    lo_o[k] = lo, hi_o[k] = hi;
+  }
+  out.lo = {lo_o[0], lo_o[1], lo_o[2]};
+  out.hi = {hi_o[0], hi_o[1], hi_o[2]};
+  return out;
+}
+
+// Outward rounding to float.
+RTCBounds to_bounds(const Aabb& b) {
+  auto down = [](double x) {
+    float f = float(x);
+    return double(f) > x ? std::nextafter(f, -INFINITY) : f;
+  };
+  auto up = [](double x) {
+    float f = float(x);
+    return double(f) < x ? std::nextafter(f, INFINITY) : f;
+  };
+  RTCBounds r;
+  r.lower_x = down(b.lo.x), r.lower_y = down(b.lo.y), r.lower_z = down(b.lo.z);
+  r.upper_x = up(b.hi.x), r.upper_y = up(b.hi.y), r.upper_z = up(b.hi.z);
+  return r;
+}
+
+}  // namespace
+
 DepthBoundsStats& DepthBoundsStats::operator+=(const DepthBoundsStats& o) {
   texels += o.texels, rays += o.rays, traversals += o.traversals, hits += o.hits;
   closed += o.closed, fallbacks += o.fallbacks, seconds += o.seconds;
@@ -141,26 +331,34 @@ struct DepthBoundsTracer::Impl {
   LightSpace light;
   Vec3d centre;
   RTCDevice device = nullptr;
+  RTCScene cover_scene = nullptr;  // canonical coverage: user primitives (bounds modes)
+  CoverageData cover;
+  // The float triangle scene of the baseline modes (first_hit, bounds_tracer_t), built on
+  // first use: no memory or build time for the canonical modes.
+  std::once_flag triangles_once;
   RTCScene scene = nullptr;
   ClosedFaces closed_faces;  // by primitive id of the closed geometry; planes relative to centre
-  std::vector<CanonicalPlane> planes[2];  // canonical planes by geometry id and primitive id
   uint64_t triangles = 0;
   bool any_closed = false;
   double build_s = 0;
 
   ~Impl() {
     if (scene) rtcReleaseScene(scene);
+    if (cover_scene) rtcReleaseScene(cover_scene);
     if (device) rtcReleaseDevice(device);
   }
 
   void build(const Scene& s);
+  void build_coverage(const Scene& s, const std::vector<uint8_t>& is_closed,
+                      const std::vector<uint32_t>& tri_mesh);
+  void build_triangles();
   void mark_touchable(double scene_size);
   template <class RayHit, unsigned W, unsigned H>
   void trace_packet(const TraceRegion& r, uint32_t px, uint32_t py, TraceMode mode,
                     IntervalTile& out, DepthBoundsStats& st) const;
-  template <class RayHit, unsigned kLanes>
-  void extend_static(RayHit& rh, FilterContext& fc, const bool* used, Interval* iv,
-                     DepthBoundsStats& st) const;
+  template <class RayHit, unsigned W, unsigned H>
+  void trace_packet_canonical(const TraceRegion& r, uint32_t px, uint32_t py, TraceMode mode,
+                              IntervalTile& out, DepthBoundsStats& st) const;
   template <class RayHit, unsigned W, unsigned H>
   void trace_rows(const TraceRegion& r, TraceMode mode, IntervalTile& tile,
                   std::atomic<uint64_t>* progress, DepthBoundsStats& total) const;
@@ -213,23 +411,32 @@ void DepthBoundsTracer::Impl::build(const Scene& s) {
   Aabb b = s.bounds();
   centre = b.empty() ? Vec3d{} : b.center();
   triangles = nt;
+  any_closed = std::find(is_closed.begin(), is_closed.end(), 1) != is_closed.end();
 
   device = rtcNewDevice(nullptr);
   if (!device) throw Error("embree: cannot create a device: " + embree_error(nullptr));
+  build_coverage(s, is_closed, tri_mesh);
+  build_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+}
+
+// The baseline modes' scene: Embree's float triangles, closed and open in two geometries
+// (MH §3.1: open geometry gives hi = lo), from the coverage data's recentred vertices.
+void DepthBoundsTracer::Impl::build_triangles() {
+  const CoverageData& cd = cover;
+  const size_t nv = cd.v.size(), nt = cd.tri.size();
   scene = rtcNewScene(device);
   // Robust: watertight edges between neighbouring triangles (a ray through a shared edge
   // must not slip between them, or the counter would miss a face).
   rtcSetSceneFlags(scene, RTCSceneFlags(RTC_SCENE_FLAG_ROBUST |
                                         RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION));
   rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_MEDIUM);
-
   // One shared vertex buffer, recentred in double then rounded to float. Embree reads 16
   // bytes per vertex, so pad the end by one float.
   RTCBuffer vbuf = rtcNewBuffer(device, nv * 3 * sizeof(float) + sizeof(float));
   if (!vbuf) throw Error("embree: cannot allocate the vertex buffer: " + embree_error(device));
   auto* vp = static_cast<float*>(rtcGetBufferData(vbuf));
   for (size_t i = 0; i < nv; ++i) {
-    Vec3d p = s.vertices[i] - centre;
+    const Vec3d& p = cd.v[i];
     vp[3 * i] = float(p.x), vp[3 * i + 1] = float(p.y), vp[3 * i + 2] = float(p.z);
   }
   vp[3 * nv] = 0;
@@ -237,7 +444,7 @@ void DepthBoundsTracer::Impl::build(const Scene& s) {
   for (unsigned geom_id : {kClosedGeom, kOpenGeom}) {
     const bool closed = geom_id == kClosedGeom;
     size_t count = 0;
-    for (size_t i = 0; i < nt; ++i) count += (is_closed[i] != 0) == closed;
+    for (size_t i = 0; i < nt; ++i) count += (cd.closed[i] != 0) == closed;
     if (count == 0) continue;
     RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
     rtcSetGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, vbuf, 0,
@@ -251,21 +458,18 @@ void DepthBoundsTracer::Impl::build(const Scene& s) {
     }
     size_t k = 0;
     for (size_t i = 0; i < nt; ++i) {
-      if ((is_closed[i] != 0) != closed) continue;
-      const auto& t = s.triangles[i];
+      if ((cd.closed[i] != 0) != closed) continue;
+      const auto& t = cd.tri[i];
       ip[3 * k] = t[0], ip[3 * k + 1] = t[1], ip[3 * k + 2] = t[2];
-      planes[geom_id].push_back(CanonicalPlane::of(s.vertices[t[0]] - centre,
-                                                   s.vertices[t[1]] - centre,
-                                                   s.vertices[t[2]] - centre));
       if (closed) {
-        const Vec3d& a = s.vertices[t[0]];
-        const Vec3d normal = cross(s.vertices[t[1]] - a, s.vertices[t[2]] - a);
+        const Vec3d& a = cd.v[t[0]];
+        const Vec3d normal = cross(cd.v[t[1]] - a, cd.v[t[2]] - a);
         Facing facing = Facing::per_ray;
         if (light.kind() == LightKind::sun) {  // one direction for every texel ray
           const double f = dot(normal, light.forward());
           facing = f < 0 ? Facing::front : (f > 0 ? Facing::back : Facing::edge_on);
         }
-        closed_faces.add(tri_mesh[i], facing, normal, dot(normal, a - centre));
+        closed_faces.add(cd.mesh[i], facing, normal, dot(normal, a));
       }
       ++k;
     }
@@ -274,12 +478,213 @@ void DepthBoundsTracer::Impl::build(const Scene& s) {
     rtcReleaseGeometry(g);
   }
   rtcReleaseBuffer(vbuf);
-  any_closed = closed_faces.size() != 0;
+  Aabb b;
+  for (const Vec3d& p : cd.v) b.extend(p);
   mark_touchable(b.empty() ? 1.0 : std::max({b.extent().x, b.extent().y, b.extent().z, 1e-300}));
   rtcCommitScene(scene);
   if (rtcGetDeviceError(device) != RTC_ERROR_NONE)
-    throw Error("embree: building the scene '" + s.name + "' failed: " + embree_error(device));
-  build_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t_start).count();
+    throw Error("embree: building the triangle scene failed: " + embree_error(device));
+}
+
+void DepthBoundsTracer::Impl::build_coverage(const Scene& s, const std::vector<uint8_t>& is_closed,
+                                             const std::vector<uint32_t>& tri_mesh) {
+  CoverageData& cd = cover;
+  const size_t nv = s.vertices.size(), nt = s.triangles.size();
+  cd.v.resize(nv);
+  for (size_t i = 0; i < nv; ++i) cd.v[i] = s.vertices[i] - centre;
+  cd.tri = s.triangles;
+  cd.mesh = tri_mesh;
+  cd.closed = is_closed;
+  cd.plane.resize(nt);
+  const bool sun = light.kind() == LightKind::sun;
+  const double E = light.extent_uv();
+  // The texel rays' extremes: every texel centre lies inside the map square (u, v in
+  // [0, 1]), origins and directions are affine in it.
+  Vec3d corner[4], o_max{0, 0, 0};
+  double d_max = 0;  // bound on |d|inf over the texel rays
+  for (int c = 0; c < 4; ++c) {
+    const double u = c & 1, v = c >> 1;
+    if (sun) {
+      corner[c] = light.origin() + light.axis_u() * (u * E) + light.axis_v() * (v * E) +
+                  light.forward() * light.near_plane() - centre;
+      d_max = max3(abs3(light.texel_ray(0, 0, 0).dir));
+    } else {
+      corner[c] = light.origin() - centre;
+      d_max = std::max(d_max, max3(abs3(light.forward() + light.axis_u() * ((u - 0.5) * E) +
+                                        light.axis_v() * ((v - 0.5) * E))));
+    }
+    const Vec3d a = abs3(corner[c]);
+    o_max = {std::max(o_max.x, a.x), std::max(o_max.y, a.y), std::max(o_max.z, a.z)};
+  }
+  {  // the rounding of texel_ray and of the recentring, generously
+    const double g = max3(abs3(light.origin())) + max3(abs3(centre)) + max3(o_max) + E * 4 +
+                     std::fabs(light.near_plane());
+    o_max = o_max * (1 + 0x1p-30) + Vec3d{1, 1, 1} * (g * 0x1p-40 + 0x1p-1000);
+  }
+  d_max *= 1 + 0x1p-30;
+  const Vec3d d_sun = light.texel_ray(0, 0, 0).dir;
+  const Vec3d o_spot = light.origin() - centre;
+  // A box every texel ray crosses: sun, the near-plane map square (the origins); spot,
+  // the light position (the origin) with the scene.
+  Aabb wide, volume;  // volume: the box of the sun's light volume (t in [0, 1])
+  for (const Vec3d& c : corner) wide.extend(c), volume.extend(c), volume.extend(c + d_sun);
+  if (!sun)
+    for (const Vec3d& q : cd.v) wide.extend(q);
+  volume.lo = volume.lo - abs3(volume.lo) * 0x1p-30 - o_max * 0x1p-30;
+  volume.hi = volume.hi + abs3(volume.hi) * 0x1p-30 + o_max * 0x1p-30;
+
+  std::vector<Aabb> boxes(nt);
+  std::vector<uint8_t> kind(nt, 0);  // 0: never hit, 1: grown box, 2: wide, 3: slab box
+  tbb::parallel_for(size_t(0), nt, [&](size_t t) {
+    const Vec3d p[3] = {cd.v[cd.tri[t][0]], cd.v[cd.tri[t][1]], cd.v[cd.tri[t][2]]};
+    cd.plane[t] = CanonicalPlane::of(p[0], p[1], p[2]);
+    const Vec3d& n = cd.plane[t].n;
+    if (n.x == 0 && n.y == 0 && n.z == 0) return;      // every ray in the plane: no t
+    if (sun && dot(n, d_sun) == 0) return;             // the sun's rays lie in the plane
+    if (auto b = grown_box(p, sun, d_sun, o_spot, o_max)) {
+      boxes[t] = *b;
+      kind[t] = 1;
+    } else if (!sun) {
+      kind[t] = 2;
+    } else if (auto sb = slab_box(p, d_sun, volume)) {
+      boxes[t] = *sb;  // crossed by its rays within the light volume (t in [0, 1])
+      kind[t] = 3;
+    }
+  });
+  // S: every point of a grown box lies at ray parameter >= -S + 1 (sun: depth along the
+  // light's forward axis; spot: |t| <= |X - o|2 / |d|2 with |d|2 >= 1).
+  double shift = 1;
+  for (size_t t = 0; t < nt; ++t) {
+    if (kind[t] != 1) continue;
+    for (int c = 0; c < 8; ++c) {
+      const Vec3d x{c & 1 ? boxes[t].hi.x : boxes[t].lo.x, c & 2 ? boxes[t].hi.y : boxes[t].lo.y,
+                    c & 4 ? boxes[t].hi.z : boxes[t].lo.z};
+      if (sun) {
+        const double tx = dot(x - corner[0], light.forward()) / dot(d_sun, light.forward());
+        shift = std::max(shift, 1 - tx);
+      } else {
+        shift = std::max(shift, 1 + 2 * length(x - o_spot));
+      }
+    }
+  }
+  cd.shift = shift = shift * (1 + 0x1p-20);
+  // Float ray error at a point X: 2^-24 (2 |o - S d|inf + |X|inf); 2^-18 is 32 times that.
+  const double o_far = max3(o_max) + shift * d_max;
+  auto widen = [&](const Aabb& b) {
+    const double m = 0x1p-18 * (2 * o_far + std::max(max3(abs3(b.lo)), max3(abs3(b.hi))));
+    Aabb w = b;
+    w.lo = w.lo - Vec3d{m, m, m};
+    w.hi = w.hi + Vec3d{m, m, m};
+    return to_bounds(w);
+  };
+  const RTCBounds wide_bounds = widen(wide);
+  for (size_t t = 0; t < nt; ++t) {
+    if (kind[t] == 0) continue;
+    cd.prim_tri.push_back(uint32_t(t));
+    cd.box.push_back(kind[t] == 2 ? wide_bounds : widen(boxes[t]));
+    cd.wide += kind[t] == 2;
+    cd.slab += kind[t] == 3;
+  }
+
+  cover_scene = rtcNewScene(device);
+  rtcSetSceneFlags(cover_scene, RTC_SCENE_FLAG_ROBUST);
+  rtcSetSceneBuildQuality(cover_scene, RTC_BUILD_QUALITY_MEDIUM);
+  if (!cd.prim_tri.empty()) {
+    RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER);
+    rtcSetGeometryUserPrimitiveCount(g, unsigned(cd.prim_tri.size()));
+    rtcSetGeometryUserData(g, &cd);
+    rtcSetGeometryBoundsFunction(g, coverage_bounds, &cd);
+    rtcSetGeometryIntersectFunction(g, cover_candidate);
+    rtcCommitGeometry(g);
+    rtcAttachGeometry(cover_scene, g);
+    rtcReleaseGeometry(g);
+  }
+  rtcCommitScene(cover_scene);
+  if (rtcGetDeviceError(device) != RTC_ERROR_NONE)
+    throw Error("embree: building the coverage scene of '" + s.name + "' failed: " + embree_error(device));
+}
+
+template <class RayHit, unsigned W, unsigned H>
+void DepthBoundsTracer::Impl::trace_packet_canonical(const TraceRegion& r, uint32_t px, uint32_t py,
+                                                     TraceMode mode, IntervalTile& out,
+                                                     DepthBoundsStats& st) const {
+  constexpr unsigned kLanes = W * H;
+  static_assert(kLanes <= kMaxLanes);
+  alignas(64) RayHit rh;
+  alignas(64) int valid[kLanes];
+  CoverageContext cc;
+  rtcInitIntersectContext(&cc.ctx);
+  cc.ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  cc.data = &cover;
+  const bool sun = light.kind() == LightKind::sun;
+  cc.t_lo = sun ? 0.0 : light.near_plane();
+  cc.t_hi = sun ? 1.0 : light.far_plane();
+  std::vector<CanonicalHit>* hits = lane_hits();
+  bool used[kLanes];
+  uint32_t n_lanes = 0;
+  for (unsigned l = 0; l < kLanes; ++l) {
+    const uint32_t i = px * W + l % W, j = py * H + l / W;
+    used[l] = i < r.width && j < r.height;
+    valid[l] = used[l] ? -1 : 0;
+    rh.ray.tnear[l] = 0;
+    rh.ray.tfar[l] = INFINITY;
+    rh.ray.mask[l] = 0xFFFFFFFFu;
+    rh.ray.id[l] = l;
+    rh.ray.flags[l] = 0;
+    rh.ray.time[l] = 0;
+    rh.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
+    hits[l].clear();
+    cc.hits[l] = &hits[l];
+    if (!used[l]) {
+      rh.ray.org_x[l] = rh.ray.org_y[l] = rh.ray.org_z[l] = 0;
+      rh.ray.dir_x[l] = rh.ray.dir_y[l] = 0, rh.ray.dir_z[l] = 1;
+      continue;
+    }
+    ++n_lanes;
+    const LightRay ray = light.texel_ray(r.level, r.x0 + i, r.y0 + j);
+    const Vec3d o = ray.origin - centre;
+    cc.ray[l] = CoverageRay::of(o, ray.dir);
+    const Vec3d start = o - ray.dir * cover.shift;
+    rh.ray.org_x[l] = float(start.x), rh.ray.org_y[l] = float(start.y), rh.ray.org_z[l] = float(start.z);
+    rh.ray.dir_x[l] = float(ray.dir.x), rh.ray.dir_y[l] = float(ray.dir.y);
+    rh.ray.dir_z[l] = float(ray.dir.z);
+  }
+  if (n_lanes == 0) return;
+  st.rays += n_lanes;
+  st.texels += n_lanes;
+  intersect(valid, cover_scene, &cc.ctx, &rh);
+  st.traversals += n_lanes;
+
+  const double range = cc.t_hi - cc.t_lo;
+  for (unsigned l = 0; l < kLanes; ++l) {
+    if (!used[l]) continue;
+    std::vector<CanonicalHit>& h = hits[l];
+    std::sort(h.begin(), h.end());
+    // A primitive referenced from two leaves is reported twice: equal (t, tri), adjacent.
+    h.erase(std::unique(h.begin(), h.end(),
+                        [](const CanonicalHit& x, const CanonicalHit& y) { return x.t == y.t && x.tri == y.tri; }),
+            h.end());
+    const CanonicalResult res = canonical_interval(h, range);
+    Interval iv = canonical_depths(light, res);
+    if (mode == TraceMode::static_bounds && !h.empty() && !res.fell_back && iv.hi == iv.lo) {
+      // The static-geometry interval: up to just below the next surface along the ray.
+      float next = INFINITY;
+      for (const CanonicalHit& x : h) {
+        const float dpt = canonical_depth(light, x.t);
+        if (dpt > iv.lo) {
+          next = dpt;
+          break;
+        }
+      }
+      iv.hi = next == INFINITY ? kLitDepth : std::max(iv.lo, std::nextafter(next, -INFINITY));
+    }
+    const uint32_t i = px * W + l % W, j = py * H + l / W;
+    out.at(i, j) = iv;
+    st.fallbacks += res.fell_back;
+    if (h.empty()) continue;
+    ++st.hits;
+    if (iv.hi > iv.lo) ++st.closed;
+  }
 }
 
 // Coplanar, oppositely facing closed prims of different meshes (a box standing on
@@ -353,9 +758,7 @@ void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, ui
   FilterContext fc;
   rtcInitIntersectContext(&fc.ctx);
   fc.ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-  fc.planes = planes;
   const bool counting = mode != TraceMode::first_hit && any_closed;
-  const bool canonical = mode == TraceMode::bounds || mode == TraceMode::static_bounds;
   fc.ctx.filter = counting ? offer_hits : nullptr;
 
   const bool sun = light.kind() == LightKind::sun;
@@ -387,8 +790,6 @@ void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, ui
     rh.ray.dir_x[l] = float(ray.dir.x), rh.ray.dir_y[l] = float(ray.dir.y);
     rh.ray.dir_z[l] = float(ray.dir.z);
     fc.lane[l].start(closed_faces, o, ray.dir, t_min, t_max);
-    fc.canon[l].origin = o, fc.canon[l].dir = ray.dir;
-    fc.canon[l].reset();
   }
   if (n_lanes == 0) return;
   st.rays += n_lanes;
@@ -398,7 +799,6 @@ void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, ui
   intersect(valid, scene, &fc.ctx, &rh);
   st.traversals += n_lanes;
   uint32_t n_active = 0;
-  bool any_hit = false;
   for (unsigned l = 0; l < kLanes; ++l) {
     if (!active[l]) continue;
     active[l] = false;
@@ -407,27 +807,7 @@ void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, ui
     if (!counting) fc.lane[l].take_first_hit(rh.ray.tfar[l]);
     else active[l] = fc.lane[l].first_traversal_done();
     n_active += active[l];
-    any_hit = true;
     valid[l] = -1;
-  }
-
-  // The canonical window (canonical_depth.hpp steps 1 and 4): every primitive hit within
-  // kCanonicalWindow of the first hit, its canonical t, the smallest kept.
-  if (canonical && any_hit) {
-    const float w = float(kCanonicalWindow * (double(t_max) - t_min));
-    uint32_t n_hit = 0;
-    for (unsigned l = 0; l < kLanes; ++l) {
-      if (valid[l] == 0) continue;
-      ++n_hit;
-      const float t = fc.lane[l].lo_t();
-      rh.ray.tnear[l] = std::max(t_min, t - w);
-      rh.ray.tfar[l] = std::min(t_max, t + w);
-      rh.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
-    }
-    fc.ctx.filter = gather_canonical;
-    intersect(valid, scene, &fc.ctx, &rh);
-    fc.ctx.filter = offer_hits;
-    st.traversals += n_hit;
   }
 
   // The counters' further traversals, all lanes still counting in one packet.
@@ -454,20 +834,7 @@ void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, ui
     iv[l] = Interval{kLitDepth, kLitDepth};
     if (!used[l]) continue;  // a lane outside the region: its state was never started
     iv[l] = ray.interval(light);
-    if (!canonical || !ray.hit()) continue;
-    // canonical_depth.hpp steps 4 and 5. The window normally reports the first hit
-    // again; if it reported nothing, the tracer's t stands.
-    const CanonicalLane& c = fc.canon[l];
-    const double lo_t = std::isfinite(c.min_t) ? c.min_t : double(ray.lo_t());
-    iv[l].lo = iv[l].hi = canonical_depth(light, lo_t);
-    if (ray.hi_t() > ray.lo_t() && ray.exit_count() > 0) {
-      double hi_t = -INFINITY;
-      for (uint32_t k = 0; k < ray.exit_count(); ++k)
-        hi_t = std::max(hi_t, planes[kClosedGeom][ray.exit_prim(k)].t(c.origin, c.dir, ray.hi_t()));
-      iv[l].hi = std::max(iv[l].lo, canonical_depth(light, hi_t));
-    }
   }
-  if (mode == TraceMode::static_bounds) extend_static<RayHit, kLanes>(rh, fc, used, iv, st);
 
   for (unsigned l = 0; l < kLanes; ++l) {
     if (!used[l]) continue;
@@ -481,83 +848,6 @@ void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, ui
   }
 }
 
-// The static-geometry interval (voxel paper §6.1 "static geometry"): a receiver lies on a
-// surface, never in the air between two, so a texel whose first hit is open (hi = lo) may
-// store anything up to just below the depth of the next surface along its ray. The next
-// surface is the nearest canonical depth above lo: among the first window's primitives,
-// or the first hit past the window (found by a plain traversal) and its own canonical
-// window. No surface behind: hi = 1. Closed first hits keep their exit depth; fallbacks
-// and a crowded window keep hi = lo.
-template <class RayHit, unsigned kLanes>
-void DepthBoundsTracer::Impl::extend_static(RayHit& rh, FilterContext& fc, const bool* used,
-                                            Interval* iv, DepthBoundsStats& st) const {
-  const bool sun = light.kind() == LightKind::sun;
-  const float t_min = sun ? 0.0f : float(light.near_plane());
-  const float t_max = sun ? 1.0f : float(light.far_plane());
-  const float w = float(kCanonicalWindow * (double(t_max) - t_min));
-  alignas(64) int valid[kLanes];
-  float next[kLanes];
-  uint32_t n = 0;
-  for (unsigned l = 0; l < kLanes; ++l) {
-    const ExitDepthRay& ray = fc.lane[l];
-    valid[l] = 0;
-    next[l] = INFINITY;
-    if (!used[l] || !ray.hit() || ray.fell_back() || iv[l].hi != iv[l].lo || fc.canon[l].overflow) continue;
-    const CanonicalLane& c = fc.canon[l];
-    for (uint32_t k = 0; k < c.n; ++k) {
-      const float d = canonical_depth(light, c.t[k]);
-      if (d > iv[l].lo) next[l] = std::min(next[l], d);
-    }
-    const float t0 = ray.lo_t() + w;
-    if (t0 >= t_max) continue;
-    valid[l] = -1;
-    ++n;
-    rh.ray.tnear[l] = t0;
-    rh.ray.tfar[l] = t_max;
-    rh.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
-  }
-  if (n > 0) {
-    fc.ctx.filter = nullptr;  // the plain first hit past the window
-    intersect(valid, scene, &fc.ctx, &rh);
-    st.traversals += n;
-    n = 0;
-    for (unsigned l = 0; l < kLanes; ++l) {
-      if (valid[l] == 0) continue;
-      if (rh.hit.geomID[l] == RTC_INVALID_GEOMETRY_ID) {
-        valid[l] = 0;
-        continue;
-      }
-      ++n;
-      const float t = rh.ray.tfar[l];
-      rh.ray.tnear[l] = std::max(t_min, t - w);
-      rh.ray.tfar[l] = std::min(t_max, t + w);
-      rh.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
-      fc.canon[l].reset();
-    }
-  }
-  if (n > 0) {
-    fc.ctx.filter = gather_canonical;
-    intersect(valid, scene, &fc.ctx, &rh);
-    st.traversals += n;
-    for (unsigned l = 0; l < kLanes; ++l) {
-      if (valid[l] == 0) continue;
-      const CanonicalLane& c = fc.canon[l];
-      for (uint32_t k = 0; k < c.n; ++k) {
-        const float d = canonical_depth(light, c.t[k]);
-        if (d > iv[l].lo) next[l] = std::min(next[l], d);
-      }
-    }
-  }
-  for (unsigned l = 0; l < kLanes; ++l) {
-    const ExitDepthRay& ray = fc.lane[l];
-    if (!used[l] || !ray.hit() || ray.fell_back() || iv[l].hi != iv[l].lo || fc.canon[l].overflow)
-      continue;
-    // Just below the next surface: the largest float < its depth (never below lo).
-    iv[l].hi = next[l] == INFINITY ? kLitDepth
-                                   : std::max(iv[l].lo, std::nextafter(next[l], -INFINITY));
-  }
-}
-
 template <class RayHit, unsigned W, unsigned H>
 void DepthBoundsTracer::Impl::trace_rows(const TraceRegion& r, TraceMode mode, IntervalTile& tile,
                                          std::atomic<uint64_t>* progress,
@@ -565,11 +855,15 @@ void DepthBoundsTracer::Impl::trace_rows(const TraceRegion& r, TraceMode mode, I
   const uint32_t rows = (r.height + H - 1) / H;
   const uint32_t cols = (r.width + W - 1) / W;
   std::atomic<uint64_t> rays{0}, traversals{0}, hits{0}, closed{0}, fallbacks{0}, texels{0};
+  const bool canonical = mode == TraceMode::bounds || mode == TraceMode::static_bounds;
   tbb::parallel_for(tbb::blocked_range<uint32_t>(0, rows), [&](const tbb::blocked_range<uint32_t>& br) {
     DepthBoundsStats local;
     for (uint32_t py = br.begin(); py != br.end(); ++py) {
       const uint64_t before = local.texels;
-      for (uint32_t px = 0; px < cols; ++px) trace_packet<RayHit, W, H>(r, px, py, mode, tile, local);
+      for (uint32_t px = 0; px < cols; ++px) {
+        if (canonical) trace_packet_canonical<RayHit, W, H>(r, px, py, mode, tile, local);
+        else trace_packet<RayHit, W, H>(r, px, py, mode, tile, local);
+      }
       if (progress) progress->fetch_add(local.texels - before, std::memory_order_relaxed);
     }
     rays += local.rays, traversals += local.traversals, hits += local.hits;
@@ -590,6 +884,7 @@ DepthBoundsTracer::~DepthBoundsTracer() = default;
 bool DepthBoundsTracer::traces_exit_depths() const { return impl_->any_closed; }
 double DepthBoundsTracer::build_seconds() const { return impl_->build_s; }
 uint64_t DepthBoundsTracer::triangle_count() const { return impl_->triangles; }
+uint64_t DepthBoundsTracer::wide_candidates() const { return impl_->cover.wide + impl_->cover.slab; }
 
 void DepthBoundsTracer::check_region(const TraceRegion& r) {
   if (r.level > kMaxLevel)
@@ -616,6 +911,8 @@ IntervalTile DepthBoundsTracer::trace(const TraceRegion& r, TraceMode mode,
   tile.level = r.level, tile.x0 = r.x0, tile.y0 = r.y0;
   tile.width = r.width, tile.height = r.height;
   tile.data.assign(size_t(r.width) * r.height, Interval{});
+  if (mode == TraceMode::first_hit || mode == TraceMode::bounds_tracer_t)
+    std::call_once(impl_->triangles_once, [&] { impl_->build_triangles(); });
   DepthBoundsStats local;
   switch (packet) {
     case PacketShape::single: impl_->trace_rows<RayHit1, 1, 1>(r, mode, tile, progress, local); break;

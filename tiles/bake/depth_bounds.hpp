@@ -4,21 +4,30 @@
 // (LightSpace::texel_ray) gives an Interval:
 //   lo = depth of the first hit (the ordinary shadow map),
 //   hi = depth where the ray leaves all closed objects again.
-// The counting that finds hi (one counter per closed mesh, hits taken in groups of equal
-// t, touching faces, conservative fallbacks to hi = lo, no hit: the kLitDepth sentinel
-// [1, 1]) is ExitDepthRay (exit_depth.hpp); this tracer feeds it Embree's hits. A scene
-// without triangles is valid and traces to [1, 1] everywhere (the caller fits the light).
+// A scene without triangles is valid and traces to [1, 1] everywhere (the caller fits the
+// light).
 //
-// Lossless contract: lo is the first-hit depth of the traced ray and every point of the
-// ray between lo and hi is inside a closed object (up to float32 tracing precision, and
-// faces touching within 1e-9 of the t range count as touching).
-// Depths are canonical (canonical_depth.hpp): Embree only finds the primitives; each
-// depth is the ray-plane parameter of a primitive's canonical plane in double, rounded to
-// float once, so the bounds of a texel do not depend on how it was batched.
+// Definition: (lo, hi) are the canonical coverage and hit list of canonical_coverage.hpp
+// (which triangles a texel ray hits, decided in double by signed Plücker edge tests; the
+// sorted hit list reduced by exit counting per closed mesh) with the canonical depth of
+// canonical_depth.hpp, hits taken with t in [0, 1] (sun) or [near, far] (spot). Embree
+// only finds candidates: every triangle is a user primitive whose box provably holds a
+// point of every texel ray the definition covers (depth_bounds.cpp states the bound), the
+// intersect callback runs the definition and never accepts, so one traversal of the whole
+// ray sees every candidate. The light-space rasterizer (raster_bounds.hpp, sun lights)
+// evaluates the same definition, so the two builders agree bit for bit on every texel,
+// and any batching (packet shape, region) gives the same bits. A triangle so thin or so
+// nearly edge-on that the bound cannot confine it (its edge errors add up to a quarter
+// of its projected area) gets a wider box instead (wide_candidates(): under a sun, a slab
+// around its plane; under a spot light, every ray).
 //
-// Precision: vertices are recentred on the scene AABB centre in double, then converted
-// to float, and texel rays are transformed the same way, so a scene offset by 1e7 traces
-// like the same scene at the origin.
+// The baseline modes (first_hit, bounds_tracer_t) trace Embree's float triangles with the
+// exit counting of exit_depth.hpp, as before the canonical coverage; their scene is built
+// on first use.
+//
+// Precision: vertices are recentred on the scene AABB centre in double, and texel rays
+// are transformed the same way, so a scene offset by 1e7 traces like the same scene at
+// the origin.
 //
 // Thread safety: the constructor builds the Embree scene once; trace() is const and may
 // be called concurrently from several threads (each call also parallelises internally
@@ -53,9 +62,9 @@ enum class TraceMode : uint8_t {
               // (benchmark baseline; not canonical)
   bounds_tracer_t,  // lo and hi from the tracer's float t, as before the canonical depth
                     // (benchmark baseline only: depends on the batching)
-  static_bounds,    // bounds, and where the first hit is open (hi = lo) hi reaches to just
-                    // below the next surface along the ray, or 1 if none (the
-                    // static-geometry interval, voxel paper §6.1; depth_bounds.cpp)
+  static_bounds,    // bounds, and where the first hit is open (hi = lo, no fallback) hi
+                    // reaches to just below the next depth of the canonical hit list above
+                    // lo, or 1 if none (the static-geometry interval, voxel paper §6.1)
 };
 
 // How texels are batched into Embree queries. Every shape gives bit-identical canonical
@@ -73,7 +82,7 @@ class DepthBoundsTracer {
   // The largest region one call traces (8192^2 texels: 512 MiB of intervals).
   static constexpr uint64_t kMaxRegionTexels = uint64_t(8192) * 8192;
 
-  // Builds the Embree scene (robust, watertight triangles). Throws st::Error.
+  // Builds the Embree scene of candidate boxes. Throws st::Error.
   DepthBoundsTracer(const Scene& scene, const LightSpace& light);
   ~DepthBoundsTracer();
   DepthBoundsTracer(const DepthBoundsTracer&) = delete;
@@ -83,6 +92,8 @@ class DepthBoundsTracer {
   bool traces_exit_depths() const;
   double build_seconds() const;
   uint64_t triangle_count() const;
+  // Triangles with a wider box than their own grown one (see above).
+  uint64_t wide_candidates() const;
 
   // Traces a rectangular region of the level-`region.level` map. Throws st::Error when
   // the region is empty, leaves the map or exceeds kMaxRegionTexels. If `progress` is
