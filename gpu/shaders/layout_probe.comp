@@ -16,6 +16,7 @@ void main() {
                           kFbRecLevel, kFbRecX, kFbRecY, kFbRecValue, kFbRecKind, kFbMaxProbes, kFbChildKeyBit,
                           kPcCount, kPcHeight, kPcKernel, kPcFlags, kPcOrigin, kPcAxisU, kPcAxisV, kPcForward,
                           kPcNear, kPcNormalOffset, kPcFootprint, kPcWords, kFlagNeighbourFootprint,
-                          kWorkgroupSize, kProbeWords);
+                          kWorkgroupSize, kProbeWords, kPtDictionary, kDictNodeWords, kDictTreeletCount,
+                          kDictHeaderWords);
   for (uint i = 0u; i < kProbeWords; ++i) st_output[i] = uintBitsToFloat(i < v.length() ? v[i] : 0u);
 }

@@ -24,7 +24,8 @@ TEST(GpuLayout, TheShaderSeesEveryConstantTheCppSideSees) {
       L::kFbRecLevel, L::kFbRecX, L::kFbRecY, L::kFbRecValue, L::kFbRecKind, L::kFbMaxProbes, L::kFbChildKeyBit,
       L::kPcCount, L::kPcHeight, L::kPcKernel, L::kPcFlags, L::kPcOrigin, L::kPcAxisU, L::kPcAxisV, L::kPcForward,
       L::kPcNear, L::kPcNormalOffset, L::kPcFootprint, L::kPcWords, L::kFlagNeighbourFootprint,
-      L::kWorkgroupSize, L::kProbeWords};
+      L::kWorkgroupSize, L::kProbeWords, L::kPtDictionary, L::kDictNodeWords, L::kDictTreeletCount,
+      L::kDictHeaderWords};
   ASSERT_LE(want.size(), L::kProbeWords);
   uint64_t messages = 0;
   const std::vector<uint32_t> got = run_layout_probe(gputest::device(), true, &messages);

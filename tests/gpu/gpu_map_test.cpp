@@ -16,6 +16,9 @@
 #include "gpu/shadow_reference.hpp"
 #include "tests/client/loopback.hpp"
 #include "tests/gpu/gpu_test_util.hpp"
+#include "tiles/bake/map_build.hpp"
+#include "tiles/bake/scene.hpp"
+#include "tiles/core/dagmh_validate.hpp"
 #include "tiles/core/light.hpp"
 #include "tiles/core/page_table.hpp"
 
@@ -144,6 +147,37 @@ TEST(GpuMap, EveryTexelOfAVsdagMapAnswersBitExactlyLikeTheCpu) {
   expect_bit_exact(g, s.map, 13);
   const GpuStats st = g.stats();
   EXPECT_EQ(st.feedback_tiles, 0u);
+  EXPECT_EQ(st.holes, 0u);
+  EXPECT_EQ(st.validation_messages, 0u);
+}
+
+// A pack with the DAG-MH dictionary (tiles/PACK.md "DAG-MH dictionary"): the dictionary
+// rides in the page table, version-2 tiles resolve references below its size there, and
+// every answer stays the CPU's bits.
+TEST(GpuMap, EveryTexelOfADictionaryPackAnswersBitExactlyLikeTheCpu) {
+  const Scene scene = make_procedural("procedural:city");
+  const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/gpu_dict.pack";
+  MapBuildOptions o;
+  o.map_level = test_level() + 1;
+  o.skip_level = 3;
+  o.encoding = Encoding::dagmh;
+  o.tile_bytes = 1024;  // small tiles: many, sharing subtrees
+  o.dagmh_dictionary = true;
+  const MapBuildReport r =
+      build_map(scene, LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), scene.bounds()), o, path);
+  ASSERT_GT(r.dictionary_bytes, 0u) << r.dictionary_skipped;
+  ASSERT_GT(r.dictionary_tiles_rewritten, 0u);
+  looptest::TestServer srv = start_server({path});
+  client::ClientOptions co = looptest::quick_options();
+  co.cache_slots = uint32_t(PackReader::open(path)->tiles().size()) + 32;
+  client::Client c({"127.0.0.1", srv.port}, co);
+  client::Map map = c.open("gpu_dict");
+  ASSERT_NE(client::MapAccess::remote(map).dictionary(), nullptr);
+  ASSERT_TRUE(fetch_all(map));
+  GpuMap g(map, gputest::options());
+  EXPECT_EQ(g.sync(), map.stats().cache.resident);
+  expect_bit_exact(g, map, 17);
+  const GpuStats st = g.stats();
   EXPECT_EQ(st.holes, 0u);
   EXPECT_EQ(st.validation_messages, 0u);
 }
