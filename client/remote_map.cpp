@@ -60,17 +60,12 @@ std::shared_ptr<const dagmh::Dictionary> dictionary_of(const PackHeader& h, std:
 }
 
 // cache_slots is the map's tile memory: the dictionary, resident for the map's life,
-// takes the slots its bytes fill (rounded up). A dictionary that would take more than
-// half of them leaves too little cache to be worth opening.
-uint32_t slots_for(const ClientOptions& o, const PackHeader& h, const dagmh::Dictionary* dict, const std::string& name) {
+// takes the slots its bytes fill (rounded up); one slot always remains (a probe that
+// opens a map with one slot, or a dictionary larger than the whole budget, still works).
+uint32_t slots_for(const ClientOptions& o, const PackHeader& h, const dagmh::Dictionary* dict) {
   if (!dict) return o.cache_slots;
   const uint64_t slot = slot_size_for(h), taken = (dict->memory_bytes() + slot - 1) / slot;
-  if (2 * taken > o.cache_slots)
-    throw Error("map '" + name + "': its DAG-MH dictionary (" + std::to_string(dict->memory_bytes()) +
-                " bytes resident) would take " + std::to_string(taken) + " of the " + std::to_string(o.cache_slots) +
-                " cache slots of " + std::to_string(slot) + " bytes: raise ClientOptions::cache_slots to at least " +
-                std::to_string(2 * taken));
-  return uint32_t(o.cache_slots - taken);
+  return uint32_t(std::max<uint64_t>(1, o.cache_slots > taken ? o.cache_slots - taken : 1));
 }
 
 }  // namespace
@@ -94,7 +89,7 @@ RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::v
                                        "map '" + name_ + "'")),
       dictionary_(dictionary_of(header_, grid_bytes, name_)),
       light_(LightSpace::from_array(header_.light_kind, header_.light)),
-      cache_(slots_for(options, header_, dictionary_.get(), name_), slot_size_for(header_)),
+      cache_(slots_for(options, header_, dictionary_.get()), slot_size_for(header_)),
       requests_(size_t(options.want_capacity) + size_t(options.max_in_flight) * options.tiles_per_request,
                 options.want_capacity) {
   const std::string what = "map '" + name_ + "'";

@@ -16,8 +16,9 @@
 #include "gpu/shadow_reference.hpp"
 #include "tests/client/loopback.hpp"
 #include "tests/gpu/gpu_test_util.hpp"
-#include "tiles/bake/map_build.hpp"
-#include "tiles/bake/scene.hpp"
+#include "tiles/build/mh_build.hpp"
+#include "tiles/build/pack_writer.hpp"
+#include "tiles/core/dagmh_format.hpp"
 #include "tiles/core/dagmh_validate.hpp"
 #include "tiles/core/light.hpp"
 #include "tiles/core/page_table.hpp"
@@ -155,21 +156,28 @@ TEST(GpuMap, EveryTexelOfAVsdagMapAnswersBitExactlyLikeTheCpu) {
 // rides in the page table, version-2 tiles resolve references below its size there, and
 // every answer stays the CPU's bits.
 TEST(GpuMap, EveryTexelOfADictionaryPackAnswersBitExactlyLikeTheCpu) {
-  const Scene scene = make_procedural("procedural:city");
+  // The loopback tests' random field in small DAG-MH tiles (serve()'s pack), written with
+  // the dictionary: many tiles share treelets and small subtrees.
   const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/gpu_dict.pack";
-  MapBuildOptions o;
-  o.map_level = test_level() + 1;
-  o.skip_level = 3;
-  o.encoding = Encoding::dagmh;
-  o.tile_bytes = 1024;  // small tiles: many, sharing subtrees
-  o.dagmh_dictionary = true;
-  const MapBuildReport r =
-      build_map(scene, LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), scene.bounds()), o, path);
-  ASSERT_GT(r.dictionary_bytes, 0u) << r.dictionary_skipped;
-  ASSERT_GT(r.dictionary_tiles_rewritten, 0u);
+  const Hierarchy h = build_hierarchy(looptest::random_field(test_level(), 7));
+  CutParams cut;
+  cut.map_level = test_level();
+  cut.skip_level = 2;
+  cut.tile_bytes = 512;
+  cut.codec = TileCodec::of(Encoding::dagmh);
+  PackParams pp = PackParams::from(
+      LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), Aabb{{-10, 0, -10}, {10, 5, 10}}), cut);
+  pp.dagmh_dictionary = true;
+  write_pack(path, h, cut, pp);
+  const auto pack = PackReader::open(path);
+  ASSERT_NE(pack->dictionary(), nullptr);
+  size_t v2 = 0;
+  for (const TileIndexEntry& t : pack->tiles())
+    if (t.kind == TileKind::encoded) v2 += pack->read_raw(t.id)[4] == dagmh::kVersionDictionary;
+  ASSERT_GT(v2, 0u);
   looptest::TestServer srv = start_server({path});
   client::ClientOptions co = looptest::quick_options();
-  co.cache_slots = uint32_t(PackReader::open(path)->tiles().size()) + 32;
+  co.cache_slots = uint32_t(pack->tiles().size()) + 32;
   client::Client c({"127.0.0.1", srv.port}, co);
   client::Map map = c.open("gpu_dict");
   ASSERT_NE(client::MapAccess::remote(map).dictionary(), nullptr);
