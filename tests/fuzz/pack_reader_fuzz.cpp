@@ -2,8 +2,8 @@
 // byte 0 is a control byte (bit 0: first rewrite every CRC the mutated bytes' own
 // offsets and sizes delimit; without it the fuzzer rarely gets past the CRCs into the
 // parsers behind them), the rest a whole pack file. Flow: PackReader::open_memory; for the first tiles of the index
-// read_raw (CRC, zlib, size checks), open encoded tiles with the pack's encoding and
-// probe them, parse index tiles with read_index_tile; verify() with the real opener;
+// read_raw (CRC, zlib, size checks), open encoded tiles with the pack's encoding (and its
+// DAG-MH dictionary, whose section CRC is repaired too) and probe them, parse index tiles with read_index_tile; verify() with the real opener;
 // then a PackEvaluator answers lookups at every level and PCF (evaluator_probe.hpp).
 // Every rejection must be an st::FormatError (the reader's documented error for corrupt
 // data); anything else escaping, a crash or a sanitizer report is a finding.
@@ -43,14 +43,13 @@ uint32_t crc_of(const std::vector<uint8_t>& b, uint64_t off, uint64_t len) {
   return crc32({b.data() + off, size_t(len)});
 }
 
-// The DAG-MH dictionary section (pack_dictionary.hpp) ends the grid section: its CRC
-// field, found from the section's end (its size field names where it starts), is
-// rewritten over its bytes when the feature bit is set and the fields line up.
+// The DAG-MH dictionary section (pack_dictionary.hpp) ends the grid section: the first
+// "STDD" header (at a 4-byte step) whose size field reaches exactly the section's end
+// gets its CRC field rewritten over its bytes, when the feature bit is set.
 void repair_dictionary_crc(std::vector<uint8_t>& b, uint64_t grid_off, uint64_t grid_size) {
   if (!(load_le<uint32_t>(&b[20]) & st::kFeatureDagmhDictionary)) return;
   if (grid_off > b.size() || grid_size > b.size() - grid_off) return;
   const uint64_t end = grid_off + grid_size;
-  // Scan back for the section header whose size reaches exactly the end.
   for (uint64_t at = grid_off; at + st::kPackDictionaryHeaderBytes <= end; at += 4) {
     if (load_le<uint32_t>(&b[at]) != st::kPackDictionaryMagic) continue;
     const uint64_t n = load_le<uint32_t>(&b[at + 4]);
