@@ -354,7 +354,7 @@ void setup(CLI::App& app) {
   app.add_option("--dagmh-dictionary", a->dagmh_dictionary,
                  "dagmh: on (default) moves subtrees found in two or more tiles into one pack-wide dictionary "
                  "that clients fetch once with the skip grid (smaller tiles, same answers); off keeps every tile "
-                 "self-contained (GpuMap needs that)")
+                 "self-contained")
       ->capture_default_str();
   app.add_flag("-q,--quiet", a->quiet, "No summary or progress");
   app.callback([a]() { run(*a); });
