@@ -56,7 +56,7 @@ GridSectionParts grid_parts(const PackHeader& h, std::span<const uint8_t> grid_b
 std::shared_ptr<const dagmh::Dictionary> dictionary_of(const PackHeader& h, std::span<const uint8_t> grid_bytes,
                                                        const std::string& name) {
   if (!(h.flags & kFeatureDagmhDictionary)) return nullptr;
-  return open_pack_dictionary(grid_parts(h, grid_bytes, name).dictionary, "map '" + name + "': DAG-MH dictionary");
+  return open_pack_dictionary(grid_parts(h, grid_bytes, name), "map '" + name + "': DAG-MH dictionary");
 }
 
 // cache_slots is the map's tile memory: the dictionary, resident for the map's life,

@@ -40,7 +40,7 @@ ST_UINT(kPtDictionary, 13u)    // word offset: the pack's DAG-MH dictionary (kDi
 ST_UINT(kPtHeaderWords, 16u)
 
 // The DAG-MH dictionary block (tiles/core/DAGMH.md "Dictionary"), at word kPtDictionary:
-// the dictionary buffer as it came in MapInfo, word for word: its 8-word header (D node
+// the dictionary buffer MapInfo carries (inflated), word for word: its 8-word header (D node
 // words at kDictNodeWords, T treelets at kDictTreeletCount), D node words, 3 T treelet
 // words. A version-2 tile's inner reference i < D is the dictionary's node word i, else
 // its own word i - D; a treelet t < T the dictionary's, else its own t - T.

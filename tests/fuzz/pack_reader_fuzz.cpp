@@ -44,7 +44,7 @@ uint32_t crc_of(const std::vector<uint8_t>& b, uint64_t off, uint64_t len) {
 }
 
 // The DAG-MH dictionary section (pack_dictionary.hpp) ends the grid section: the first
-// "STDD" header (at a 4-byte step) whose size field reaches exactly the section's end
+// "STDD" header (at a 4-byte step) whose stored size reaches exactly the section's end
 // gets its CRC field rewritten over its bytes, when the feature bit is set.
 void repair_dictionary_crc(std::vector<uint8_t>& b, uint64_t grid_off, uint64_t grid_size) {
   if (!(load_le<uint32_t>(&b[20]) & st::kFeatureDagmhDictionary)) return;
@@ -52,9 +52,9 @@ void repair_dictionary_crc(std::vector<uint8_t>& b, uint64_t grid_off, uint64_t 
   const uint64_t end = grid_off + grid_size;
   for (uint64_t at = grid_off; at + st::kPackDictionaryHeaderBytes <= end; at += 4) {
     if (load_le<uint32_t>(&b[at]) != st::kPackDictionaryMagic) continue;
-    const uint64_t n = load_le<uint32_t>(&b[at + 4]);
+    const uint64_t n = load_le<uint32_t>(&b[at + 8]);
     if (at + st::kPackDictionaryHeaderBytes + n != end) continue;
-    store_le<uint32_t>(&b[at + 8], crc_of(b, at + st::kPackDictionaryHeaderBytes, n));
+    store_le<uint32_t>(&b[at + 12], crc_of(b, at + st::kPackDictionaryHeaderBytes, n));
     return;
   }
 }

@@ -113,38 +113,52 @@ TEST(PackDictionary, SectionOffsetsArePinned) {
   const size_t skip = CutGrid::serialized_size(s.cut.skip_level), preview = on->preview().serialized_size();
   const size_t d = skip + preview;
   const std::span<const uint8_t> dict = on->dictionary()->bytes();
-  ASSERT_EQ(g.size(), d + 16 + dict.size());  // the section ends the grid section
+  const uint32_t stored = load_le<uint32_t>(g.data() + d + 8);
+  ASSERT_EQ(g.size(), d + 16 + stored);  // the section ends the grid section
   EXPECT_EQ(std::memcmp(g.data() + d, "STDD", 4), 0);
   EXPECT_EQ(load_le<uint32_t>(g.data() + d + 4), dict.size());
-  EXPECT_EQ(load_le<uint32_t>(g.data() + d + 8), crc32_of(dict));
-  EXPECT_EQ(load_le<uint32_t>(g.data() + d + 8), on->dictionary()->crc());
-  EXPECT_EQ(load_le<uint32_t>(g.data() + d + 12), 0u);
-  EXPECT_TRUE(std::equal(dict.begin(), dict.end(), g.begin() + long(d + 16)));
-  EXPECT_EQ(std::memcmp(g.data() + d + 16, "DGMD", 4), 0);
+  EXPECT_LT(stored, dict.size());  // a zlib stream of it
+  EXPECT_EQ(load_le<uint32_t>(g.data() + d + 12), crc32_of(g.subspan(d + 16, stored)));
+  EXPECT_EQ(zlib_decompress(g.subspan(d + 16, stored), uint32_t(dict.size()), "x"),
+            std::vector<uint8_t>(dict.begin(), dict.end()));
+  EXPECT_EQ(std::memcmp(dict.data(), "DGMD", 4), 0);
   const GridSectionParts parts = split_grid_section(g, s.cut.skip_level, true, "x");
   EXPECT_EQ(parts.skip_grid.size(), skip);
   EXPECT_EQ(parts.preview.size(), preview);
   EXPECT_EQ(parts.dictionary.data(), g.data() + d + 16);
+  EXPECT_EQ(parts.dictionary_raw, dict.size());
   // The header admits the feature on DAG-MH packs alone.
   PackHeader h = on->header();
   h.encoding = Encoding::mmh;
   EXPECT_THROW(PackHeader::parse(h.serialize(), "x.pack"), FormatError);
 }
 
-// Byte offsets in a pack file of the dictionary section and the grid CRC's coverage.
-struct Layout {
-  uint64_t grid_offset, grid_size, section;  // section: the "STDD" header's file offset
-};
-Layout layout_of(const PackReader& r) {
+// `good` (a pack file) with its grid section's dictionary section replaced by one holding
+// `raw` (any bytes), every CRC and offset after it made to match.
+std::vector<uint8_t> with_dictionary(const std::vector<uint8_t>& good, const PackReader& r, std::span<const uint8_t> raw) {
   const PackHeader& h = r.header();
-  return {h.grid_offset, h.grid_size, h.grid_offset + h.grid_size - 16 - r.dictionary()->bytes().size()};
+  const uint64_t section = h.grid_offset + CutGrid::serialized_size(h.skip_level) + r.preview().serialized_size();
+  std::vector<uint8_t> b(good.begin(), good.begin() + long(section));
+  const std::vector<uint8_t> d = dictionary_section(raw, 6);
+  b.insert(b.end(), d.begin(), d.end());
+  const uint64_t grid_size = b.size() - h.grid_offset;
+  b.insert(b.end(), good.begin() + long(h.index_offset), good.end());
+  store_le<uint64_t>(b.data() + 216, grid_size);
+  store_le<uint64_t>(b.data() + 224, h.grid_offset + grid_size);
+  store_le<uint32_t>(b.data() + 244, crc32_of({b.data() + h.grid_offset, size_t(grid_size)}));
+  store_le<uint32_t>(b.data() + 252, crc32_of({b.data(), 252}));
+  return b;
 }
-void resign(std::vector<uint8_t>& b, const Layout& l, bool section_crc) {
-  if (section_crc) {
-    const uint32_t n = load_le<uint32_t>(b.data() + l.section + 4);
-    store_le<uint32_t>(b.data() + l.section + 8, crc32_of({b.data() + l.section + 16, n}));
-  }
-  store_le<uint32_t>(b.data() + 244, crc32_of({b.data() + l.grid_offset, size_t(l.grid_size)}));
+
+// The section header's file offset.
+uint64_t section_of(const PackReader& r) {
+  const PackHeader& h = r.header();
+  return h.grid_offset + CutGrid::serialized_size(h.skip_level) + r.preview().serialized_size();
+}
+
+void resign(std::vector<uint8_t>& b, const PackReader& r) {
+  const PackHeader& h = r.header();
+  store_le<uint32_t>(b.data() + 244, crc32_of({b.data() + h.grid_offset, size_t(h.grid_size)}));
   store_le<uint32_t>(b.data() + 252, crc32_of({b.data(), 252}));
 }
 
@@ -165,50 +179,59 @@ TEST(PackDictionary, CorruptDictionaryIsRefusedInOneLine) {
   const DictSetup s = make_setup();
   const auto on = write(s, "dict_corrupt.pack", true);
   const std::vector<uint8_t> good = slurp(on->name());
-  const Layout l = layout_of(*on);
-  const uint64_t dict = l.section + 16;  // the DGMD header; its nodes follow at +32
+  const uint64_t sec = section_of(*on);
+  const std::span<const uint8_t> raw = on->dictionary()->bytes();
   auto open = [](std::vector<uint8_t> b) { return PackReader::open_memory(std::move(b), "bad.pack"); };
   ASSERT_NO_THROW(open(good));
-  {  // a flipped byte the section CRC catches (grid CRC made to match)
+  ASSERT_NO_THROW(open(with_dictionary(good, *on, raw)));
+  {  // a flipped stored byte the section CRC catches (grid CRC made to match)
     auto b = good;
-    b[dict + 40] ^= 0x10;
-    resign(b, l, false);
+    b[sec + 20] ^= 0x10;
+    resign(b, *on);
     expect_refused([&] { open(b); }, "DAG-MH dictionary CRC mismatch");
   }
-  {  // every CRC right, a child reference out of range
+  {  // the stored size disagreeing with the section
     auto b = good;
-    ASSERT_GT(on->dictionary()->node_words(), 0u);
-    store_le<uint32_t>(b.data() + dict + 32 + 4, 0x3FFFFFF0u);
-    resign(b, l, true);
-    expect_refused([&] { open(b); }, "dagmh dictionary:");
-  }
-  {  // every CRC right, the size field disagreeing with the section
-    auto b = good;
-    store_le<uint32_t>(b.data() + l.section + 4, load_le<uint32_t>(b.data() + l.section + 4) - 4);
-    resign(b, l, false);
+    store_le<uint32_t>(b.data() + sec + 8, load_le<uint32_t>(b.data() + sec + 8) - 1);
+    resign(b, *on);
     expect_refused([&] { open(b); }, "DAG-MH dictionary size");
+  }
+  {  // the raw size disagreeing with what the stream inflates to
+    auto b = good;
+    store_le<uint32_t>(b.data() + sec + 4, load_le<uint32_t>(b.data() + sec + 4) + 4);
+    resign(b, *on);
+    expect_refused([&] { open(b); }, "DAG-MH dictionary");
+  }
+  {  // every CRC right, a child reference out of range
+    ASSERT_GT(on->dictionary()->node_words(), 0u);
+    std::vector<uint8_t> d(raw.begin(), raw.end());
+    store_le<uint32_t>(d.data() + 32 + 4, 0x3FFFFFF0u);
+    expect_refused([&] { open(with_dictionary(good, *on, d)); }, "dagmh dictionary:");
+  }
+  {  // every CRC right, a truncated dictionary
+    std::vector<uint8_t> d(raw.begin(), raw.end() - 12);
+    expect_refused([&] { open(with_dictionary(good, *on, d)); }, "dagmh dictionary:");
   }
   {  // the feature bit cleared: the grid section no longer parses
     auto b = good;
     store_le<uint32_t>(b.data() + 20, load_le<uint32_t>(b.data() + 20) & ~uint32_t(kFeatureDagmhDictionary));
-    resign(b, l, false);
+    resign(b, *on);
     EXPECT_THROW(open(b), FormatError);
   }
   if (on->dictionary()->treelet_count() > 0) {
     // A valid dictionary, but not the one the tiles were written against: the pack opens,
     // every version-2 tile is refused by its dictionary CRC (verify, lookups).
-    auto b = good;
-    const uint64_t treelet = dict + 32 + 4ull * on->dictionary()->node_words();
+    std::vector<uint8_t> d(raw.begin(), raw.end());
+    const uint64_t treelet = 32 + 4ull * on->dictionary()->node_words();
     // Move one set bit of treelet 0 to a clear position: the same value count, so the
     // dictionary still validates, but its CRC is no longer the one the tiles name.
-    uint64_t w = load_le<uint32_t>(b.data() + treelet) | uint64_t(load_le<uint32_t>(b.data() + treelet + 4)) << 32;
+    uint64_t w = load_le<uint32_t>(d.data() + treelet) | uint64_t(load_le<uint32_t>(d.data() + treelet + 4)) << 32;
     ASSERT_NE(w, 0u);
     ASSERT_NE(w, ~uint64_t(0));
     w ^= (uint64_t(1) << std::countr_zero(w)) | (uint64_t(1) << std::countr_one(w));
-    store_le<uint32_t>(b.data() + treelet, uint32_t(w));
-    store_le<uint32_t>(b.data() + treelet + 4, uint32_t(w >> 32));
-    resign(b, l, true);
-    std::shared_ptr<const PackReader> r = open(b);
+    store_le<uint32_t>(d.data() + treelet, uint32_t(w));
+    store_le<uint32_t>(d.data() + treelet + 4, uint32_t(w >> 32));
+    std::shared_ptr<const PackReader> r = open(with_dictionary(good, *on, d));
     expect_refused([&] { r->verify(r->tile_opener()); }, "dictionary_crc");
     PackEvaluator ev(r, 8);
     bool refused = false;

@@ -182,7 +182,7 @@ bool PackWriter::finish_with_dictionary(PackHeader h, const std::vector<uint8_t>
     h.grid_offset = (f.end + 7) & ~uint64_t(7);
     f.append(std::vector<uint8_t>(h.grid_offset - f.end, 0));
     std::vector<uint8_t> grid_bytes = grid_and_preview;
-    const std::vector<uint8_t> dict = dictionary_section(shared.dictionary);
+    const std::vector<uint8_t> dict = dictionary_section(shared.dictionary, params_.compression_level);
     grid_bytes.insert(grid_bytes.end(), dict.begin(), dict.end());
     const std::vector<uint8_t> index_bytes = serialize_index(index);
     h.grid_size = grid_bytes.size();

@@ -29,41 +29,45 @@ GridSectionParts split_grid_section(std::span<const uint8_t> section, uint32_t s
   if (levels > kMaxPreviewLevels) fail(g + 4, "map preview levels " + std::to_string(levels) + " > " + std::to_string(kMaxPreviewLevels));
   const uint64_t preview = kPreviewHeaderBytes + 8ull * MapPreview::words(levels) * cells + 4ull * values;
   const uint64_t rest = section.size() - g;
-  if (preview > kMaxPreviewBytes || preview > rest || rest - preview < kPackDictionaryHeaderBytes + kMinPackDictionaryBytes)
+  if (preview > kMaxPreviewBytes || preview > rest || rest - preview <= kPackDictionaryHeaderBytes)
     fail(g, "the map preview (" + std::to_string(preview) + " bytes) leaves no room for the DAG-MH dictionary the "
             "header's feature dagmh_dictionary announces");
   parts.preview = section.subspan(g, preview);
   const uint64_t d = g + preview;
   const uint8_t* h = section.data() + d;
   if (load_le<uint32_t>(h) != kPackDictionaryMagic) fail(d, "DAG-MH dictionary section: bad magic (want \"STDD\")");
-  const uint32_t bytes = load_le<uint32_t>(h + 4), crc = load_le<uint32_t>(h + 8);
-  if (bytes < kMinPackDictionaryBytes || bytes > kMaxPackDictionaryBytes)
-    fail(d + 4, "DAG-MH dictionary of " + std::to_string(bytes) + " bytes outside [32, " +
+  const uint32_t raw = load_le<uint32_t>(h + 4), stored = load_le<uint32_t>(h + 8), crc = load_le<uint32_t>(h + 12);
+  if (raw < kMinPackDictionaryBytes || raw > kMaxPackDictionaryBytes)
+    fail(d + 4, "DAG-MH dictionary of " + std::to_string(raw) + " bytes outside [32, " +
                     std::to_string(kMaxPackDictionaryBytes) + "]");
-  if (uint64_t(bytes) != rest - preview - kPackDictionaryHeaderBytes)
-    fail(d + 4, "DAG-MH dictionary size " + std::to_string(bytes) + " disagrees with the grid section, which leaves " +
+  if (stored == 0 || stored > max_stored_size(raw))
+    fail(d + 8, "DAG-MH dictionary stored in " + std::to_string(stored) + " bytes, more than a zlib stream of " +
+                    std::to_string(raw) + " bytes takes");
+  if (uint64_t(stored) != rest - preview - kPackDictionaryHeaderBytes)
+    fail(d + 8, "DAG-MH dictionary size " + std::to_string(stored) + " disagrees with the grid section, which leaves " +
                     std::to_string(rest - preview - kPackDictionaryHeaderBytes) + " bytes for it");
-  if (load_le<uint32_t>(h + 12) != 0) fail(d + 12, "DAG-MH dictionary section: nonzero padding");
-  parts.dictionary = section.subspan(d + kPackDictionaryHeaderBytes, bytes);
+  parts.dictionary = section.subspan(d + kPackDictionaryHeaderBytes, stored);
+  parts.dictionary_raw = raw;
   const uint32_t actual = crc32_of(parts.dictionary);
   if (actual != crc)
-    fail(d + 8, "DAG-MH dictionary CRC mismatch (stored " + hex32(crc) + ", data " + hex32(actual) + ")");
+    fail(d + 12, "DAG-MH dictionary CRC mismatch (stored " + hex32(crc) + ", data " + hex32(actual) + ")");
   return parts;
 }
 
-std::vector<uint8_t> dictionary_section(std::span<const uint8_t> dictionary) {
-  std::vector<uint8_t> out(kPackDictionaryHeaderBytes + dictionary.size(), 0);
+std::vector<uint8_t> dictionary_section(std::span<const uint8_t> dictionary, int compression_level) {
+  const std::vector<uint8_t> stored = zlib_compress(dictionary, compression_level);
+  std::vector<uint8_t> out(kPackDictionaryHeaderBytes + stored.size(), 0);
   store_le<uint32_t>(out.data(), kPackDictionaryMagic);
   store_le<uint32_t>(out.data() + 4, uint32_t(dictionary.size()));
-  store_le<uint32_t>(out.data() + 8, crc32_of(dictionary));
-  if (!dictionary.empty()) std::copy(dictionary.begin(), dictionary.end(), out.begin() + kPackDictionaryHeaderBytes);
+  store_le<uint32_t>(out.data() + 8, uint32_t(stored.size()));
+  store_le<uint32_t>(out.data() + 12, crc32_of(stored));
+  std::copy(stored.begin(), stored.end(), out.begin() + kPackDictionaryHeaderBytes);
   return out;
 }
 
-std::shared_ptr<const dagmh::Dictionary> open_pack_dictionary(std::span<const uint8_t> dictionary,
-                                                              const std::string& what) {
+std::shared_ptr<const dagmh::Dictionary> open_pack_dictionary(const GridSectionParts& parts, const std::string& what) {
   try {
-    return dagmh::Dictionary::open(std::vector<uint8_t>(dictionary.begin(), dictionary.end()));
+    return dagmh::Dictionary::open(zlib_decompress(parts.dictionary, parts.dictionary_raw, "zlib stream"));
   } catch (const Error& e) {
     throw FormatError(what + ": " + e.what());
   }

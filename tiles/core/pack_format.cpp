@@ -128,8 +128,9 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
       // With the DAG-MH dictionary (pack_dictionary.hpp) its section follows the preview.
       const bool dict = h.flags & uint32_t(kFeatureDagmhDictionary);
       const uint64_t grid = CutGrid::serialized_size(h.skip_level);
-      const uint64_t least = grid + kPreviewHeaderBytes + (dict ? kPackDictionaryHeaderBytes + kMinPackDictionaryBytes : 0);
-      const uint64_t most = grid + kMaxPreviewBytes + (dict ? kPackDictionaryHeaderBytes + kMaxPackDictionaryBytes : 0);
+      const uint64_t least = grid + kPreviewHeaderBytes + (dict ? kPackDictionaryHeaderBytes + 1 : 0);
+      const uint64_t most =
+          grid + kMaxPreviewBytes + (dict ? kPackDictionaryHeaderBytes + max_stored_size(kMaxPackDictionaryBytes) : 0);
       if (h.grid_size < least || h.grid_size > most)
         fail(216, "grid section size " + std::to_string(h.grid_size) + " does not fit the skip level's grid (" +
                       std::to_string(grid) + " bytes) and a map preview" + (dict ? " and a DAG-MH dictionary" : ""));

@@ -156,8 +156,8 @@ void PackReader::load() {
         parts.preview, grid_, header_.map_level, name_ + " (byte " + std::to_string(header_.grid_offset + g) + ")"));
     if (has_dict)
       dictionary_ = open_pack_dictionary(
-          parts.dictionary, where(header_.grid_offset + uint64_t(parts.dictionary.data() - grid_bytes_.data())) +
-                                ": DAG-MH dictionary");
+          parts, where(header_.grid_offset + uint64_t(parts.dictionary.data() - grid_bytes_.data())) +
+                     ": DAG-MH dictionary");
   }
 
   // Every tile has a 32-byte record in the journal before the grid, so the index cannot
