@@ -50,6 +50,7 @@ struct BuildArgs {
   uint32_t deep_tile = 16, deep_samples = 4;
   double deep_epsilon = -1;
   std::string deep_from;  // a deep OpenEXR to take the deep map from instead of sampling
+  std::string dagmh_dictionary = "on";  // tiles/PACK.md "DAG-MH dictionary"
 };
 
 // What the pack's deep directory records of the deep map.
@@ -171,6 +172,9 @@ void run(const BuildArgs& a) {
   // hours; below, the exact per-tile skip (the definition's bits on every texel).
   o.raster_skip = a.skip == "auto" ? (o.map_level >= kAutoRegionsLevel ? RasterSkip::regions : RasterSkip::exact)
                                    : parse_raster_skip(a.skip);
+  if (a.dagmh_dictionary != "on" && a.dagmh_dictionary != "off")
+    throw Error("--dagmh-dictionary: expected on or off, got '" + a.dagmh_dictionary + "'");
+  o.dagmh_dictionary = a.dagmh_dictionary == "on" && o.encoding == Encoding::dagmh;
   if (!a.shard.empty()) o.shard = BuildShard::parse(a.shard);
   if (a.mpi && o.shard) throw Error("--mpi and --shard: choose one (a shard is one process's slice)");
 #ifdef SHADOWTILE_HAVE_MPI
@@ -262,6 +266,12 @@ void run(const BuildArgs& a) {
   if (r.texels_in_regions)
     std::printf("  regions: %.4g texels proven by their corners (no per-texel work), %.4g traced (%.3f%% of the map)\n",
                 double(r.texels_in_regions), double(r.texels_traced), 100.0 * double(r.texels_traced) / (res * res));
+  if (r.dictionary_bytes)
+    std::printf("  DAG-MH dictionary: %.1f KiB shared by the tiles, %llu tiles rewritten, tiles' raw bytes %.2f -> %.2f MiB\n",
+                double(r.dictionary_bytes) / 1024, (unsigned long long)r.dictionary_tiles_rewritten,
+                double(r.dictionary_raw_before) / (1 << 20), double(r.dictionary_raw_after) / (1 << 20));
+  else if (!r.dictionary_skipped.empty())
+    std::printf("  DAG-MH dictionary: none (%s)\n", r.dictionary_skipped.c_str());
   std::printf("  thread-seconds: trace %.1f, hierarchy %.1f, cut+encode %.1f, compress+write %.1f\n",
               r.trace_seconds, r.hierarchy_seconds, r.cut_encode_seconds, r.write_seconds);
   if (!a.report.empty()) {
@@ -341,6 +351,11 @@ void setup(CLI::App& app) {
                  "Take the deep map from this deep OpenEXR (as `export --deep` writes, or another tool's tidy "
                  "deep image of a whole map in this light's depth) instead of sampling the scene; the opaque "
                  "map is still built from the scene's opaque meshes");
+  app.add_option("--dagmh-dictionary", a->dagmh_dictionary,
+                 "dagmh: on (default) moves subtrees found in two or more tiles into one pack-wide dictionary "
+                 "that clients fetch once with the skip grid (smaller tiles, same answers); off keeps every tile "
+                 "self-contained")
+      ->capture_default_str();
   app.add_flag("-q,--quiet", a->quiet, "No summary or progress");
   app.callback([a]() { run(*a); });
 }

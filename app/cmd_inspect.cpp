@@ -8,6 +8,7 @@
 #include "common/error.hpp"
 #include "common/text.hpp"
 #include "tiles/core/map_preview.hpp"
+#include "tiles/core/pack_dictionary.hpp"
 #include "tiles/core/pack_reader.hpp"
 
 namespace st::cli {
@@ -65,6 +66,17 @@ void run(const InspectArgs& a) {
   for (auto& [k, v] : r->params()) params[k] = v;
   j["build_params"] = params;
   if (r->stack()) inspect_stack(*r, j, false);
+  DictionaryCounts dict;
+  if (r->dictionary()) {  // tiles/PACK.md "DAG-MH dictionary"
+    dict = count_dictionary(*r->dictionary());
+    nlohmann::json d;
+    d["bytes"] = dict.bytes;
+    d["inner_nodes"] = dict.nodes;
+    d["node_words"] = dict.node_words;
+    d["treelets"] = dict.treelets;
+    d["crc32"] = hex32(dict.crc);
+    j["dagmh_dictionary"] = d;
+  }
   const DeepDirectory* dd = r->deep_directory();
   if (dd) {
     nlohmann::json d;
@@ -97,6 +109,11 @@ void run(const InspectArgs& a) {
               double(raw) / (1 << 20), (unsigned long long)largest);
   std::printf("  map preview  %u levels below K (to level %u), %.1f KiB in the map info\n", r->preview().levels(),
               h.skip_level + r->preview().levels(), double(r->preview().serialized_size()) / 1024);
+  if (r->dictionary())
+    std::printf("  dictionary   DAG-MH, %.1f KiB in the map info: %llu inner nodes (%llu words), %llu treelets, "
+                "CRC %s\n",
+                double(dict.bytes) / 1024, (unsigned long long)dict.nodes, (unsigned long long)dict.node_words,
+                (unsigned long long)dict.treelets, hex32(dict.crc).c_str());
   if (dd)
     std::printf("  deep         %llu^2 (level %u), %llu of %llu tiles of %u^2 stored, epsilon %g, %u^2 samples a "
                 "texel, %.2f MiB stored (%.2f MiB raw)\n",

@@ -2,6 +2,7 @@
 #include <cstdio>
 
 #include "app/command.hpp"
+#include "common/error.hpp"
 #include "tiles/build/pack_merge.hpp"
 
 namespace st::cli {
@@ -11,14 +12,20 @@ struct MergeArgs {
   std::vector<std::string> parts;
   std::string out;
   bool quiet = false;
+  std::string dagmh_dictionary = "on";
 };
 
 void run(const MergeArgs& a) {
-  MergeReport r = merge_parts(a.parts, a.out);
-  if (!a.quiet)
+  if (a.dagmh_dictionary != "on" && a.dagmh_dictionary != "off")
+    throw Error("--dagmh-dictionary: expected on or off, got '" + a.dagmh_dictionary + "'");
+  MergeReport r = merge_parts(a.parts, a.out, a.dagmh_dictionary == "on");
+  if (!a.quiet) {
     std::printf("merged %s: %u shards, %llu cells, %llu tiles, %.2f MiB of journal copied\n", a.out.c_str(),
                 r.shard_count, (unsigned long long)r.cells, (unsigned long long)r.tiles,
                 double(r.bytes_copied) / (1 << 20));
+    if (r.dictionary_bytes)
+      std::printf("  DAG-MH dictionary rebuilt over every part's tiles: %.1f KiB\n", double(r.dictionary_bytes) / 1024);
+  }
 }
 
 void setup(CLI::App& app) {
@@ -32,6 +39,10 @@ void setup(CLI::App& app) {
   app.add_option("parts", a->parts, "Part files written by build --shard I/N (all N of them)")->required();
   app.add_option("-o,--output", a->out, "Pack file to write (built as OUT.tmp, renamed when complete)")
       ->required();
+  app.add_option("--dagmh-dictionary", a->dagmh_dictionary,
+                 "dagmh parts: on (default, as build) builds the pack-wide dictionary over all the parts' tiles; "
+                 "off keeps every tile self-contained (match the one-go build's choice)")
+      ->capture_default_str();
   app.add_flag("-q,--quiet", a->quiet, "No summary");
   app.callback([a]() { run(*a); });
 }

@@ -188,9 +188,8 @@ uint64_t verify_deep(const VerifyArgs& a, const PackReader& reader, const Scene&
 void run(const VerifyArgs& a) {
   std::shared_ptr<const PackReader> reader = PackReader::open(a.pack);
   if (reader->stack()) return verify_stack_pack(a.pack, a.scene, a.up, a.max_mismatches);
-  const Encoding enc = reader->encoding();
   try {
-    reader->verify([enc](std::span<const uint8_t> b) { return open_encoded(enc, b); });
+    reader->verify(reader->tile_opener());  // with the pack's DAG-MH dictionary, if any
     reader->check_depth_range();
   } catch (const FormatError& e) {
     std::printf("verify %s: FAILED structure/checksum check: %s\n", a.pack.c_str(), e.what());

@@ -19,6 +19,7 @@ std::string feature_names(uint32_t flags) {
   add(kFeatureIndexTiles, "index-tiles");
   add(kFeatureDeepShadow, "deep-shadow");
   add(kFeatureStaticIntervals, "static-intervals");
+  add(kFeatureDagmhDictionary, "dagmh-dictionary");
   return s.empty() ? "none" : s;
 }
 

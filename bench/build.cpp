@@ -6,7 +6,7 @@
 // between successive resolutions: 1.0 is linear in texels).
 //
 //   bench_build [--scene procedural:city] [--light sun:azimuth=30,elevation=50]
-//               [--resolutions 4k,16k] [--encodings dagmh] [--builders raster,embree]
+//               [--resolutions 4k,16k] [--encodings dagmh,dagmh+dict,mmh] [--builders raster,embree]
 //               (builders: raster = the rasterizer with its per-tile skip, exact; raster-off
 //               without it; raster-narrow with narrowed intervals in skipped tiles;
 //               raster-regions top-down over regions proven by their corners; embree)
@@ -17,10 +17,12 @@
 // closed-object rule only; static: the static-geometry interval, map_build.hpp), so the
 // pack bytes of the two stand side by side on open scenes; the rasterizer builds only
 // the default rule with a sun (the tracer does the rest).
-// Each DAG-MH build is followed by a line with the same pack's tiles sharing their common
-// subtrees through a pack dictionary (tiles/build/dagmh_dictionary.hpp, not timed): pack
-// bytes with the tiles' zlib streams replaced by the rewritten tiles' plus the
-// dictionary's, and the tiles' raw bytes (what a client caches) with the dictionary's.
+// Encoding `dagmh` builds without the pack dictionary, `dagmh+dict` with it (the build's
+// own finish pass, timed with the build; tiles/PACK.md "DAG-MH dictionary"), so the two
+// pack sizes stand side by side with MMH's. Each plain DAG-MH build is also followed by a
+// line estimating the dictionary from its tiles (tiles/build/dagmh_dictionary.hpp, not
+// timed): pack bytes with the tiles' zlib streams replaced by the rewritten tiles' plus
+// the dictionary's, and the tiles' raw bytes (what a client caches) with the dictionary's.
 // Each measurement runs in a forked child so that its peak memory (wait4 rusage) is its
 // own. The bounds-only passes trace the same level-K cells the build traces, on the same
 // worker threads, and throw the intervals away.
@@ -152,7 +154,7 @@ int main(int argc, char** argv) {
     else if (a == "--out") out_dir = next();
     else {
       std::fprintf(stderr, "usage: bench_build [--scene S] [--light L] [--resolutions 4k,16k] "
-                           "[--encodings dagmh,mmh,mh] [--builders raster,embree] [--intervals default,static] "
+                           "[--encodings dagmh,dagmh+dict,mmh,mh] [--builders raster,embree] [--intervals default,static] "
                            "[--json PATH] [--out DIR]\n");
       return 2;
     }
@@ -260,7 +262,8 @@ int main(int argc, char** argv) {
             Measured m = in_child([&]() {
               st::MapBuildOptions o;
               o.map_level = L;
-              o.encoding = st::parse_encoding(enc);
+              o.dagmh_dictionary = enc == "dagmh+dict";
+              o.encoding = st::parse_encoding(o.dagmh_dictionary ? "dagmh" : enc);
               o.builder = b != "embree" ? st::BoundsBuilder::raster : st::BoundsBuilder::embree;
               o.raster_skip = skip_of(b);
               if (rule == "static") o.intervals = st::IntervalRule::static_geometry;
@@ -287,6 +290,14 @@ int main(int argc, char** argv) {
                         100.0 * pack / (double(texels) * 4), m.peak_mib, tracer_wall > 0 ? m.wall / tracer_wall : 0.0,
                         stages["trace"].get<double>(), stages["hierarchy"].get<double>(),
                         stages["cut_encode"].get<double>(), stages["compress_write"].get<double>());
+            if (m.result.contains("dagmh_dictionary")) {
+              const auto& d = m.result["dagmh_dictionary"];
+              std::printf("%-20s pack dictionary %.1f KiB, %llu tiles rewritten, tiles raw %.2f -> %.2f MiB%s\n", "",
+                          d["bytes"].get<double>() / 1024, (unsigned long long)d["tiles_rewritten"].get<uint64_t>(),
+                          d["tile_raw_bytes_before"].get<double>() / (1 << 20),
+                          d["tile_raw_bytes_after"].get<double>() / (1 << 20),
+                          d["skipped"].get<std::string>().empty() ? "" : (" (none: " + d["skipped"].get<std::string>() + ")").c_str());
+            }
             if (m.result.value("texels_in_regions", 0.0) > 0)
               std::printf("%-20s %.3f%% of texels traced, the rest in proven regions\n", "",
                           100.0 * m.result["texels_traced"].get<double>() / double(texels));

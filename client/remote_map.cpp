@@ -10,7 +10,9 @@
 #include <shared_mutex>
 
 #include "common/error.hpp"
+#include "tiles/core/dagmh_validate.hpp"
 #include "tiles/core/encoding.hpp"
+#include "tiles/core/pack_dictionary.hpp"
 #include "tiles/core/filter_level.hpp"
 #include "tiles/core/interval.hpp"
 
@@ -45,6 +47,27 @@ uint32_t slot_size_for(const PackHeader& h) {
   return std::max<uint32_t>(h.tile_bytes, uint32_t(CutGrid::serialized_size(kMaxIndexLevels)));
 }
 
+// The grid section's parts (pack_dictionary.hpp); a stack pack's section is its stack grid.
+GridSectionParts grid_parts(const PackHeader& h, std::span<const uint8_t> grid_bytes, const std::string& name) {
+  return split_grid_section(grid_bytes, h.skip_level, h.flags & kFeatureDagmhDictionary,
+                            "map '" + name + "': grid section");
+}
+
+std::shared_ptr<const dagmh::Dictionary> dictionary_of(const PackHeader& h, std::span<const uint8_t> grid_bytes,
+                                                       const std::string& name) {
+  if (!(h.flags & kFeatureDagmhDictionary)) return nullptr;
+  return open_pack_dictionary(grid_parts(h, grid_bytes, name), "map '" + name + "': DAG-MH dictionary");
+}
+
+// cache_slots is the map's tile memory: the dictionary, resident for the map's life,
+// takes the slots its bytes fill (rounded up); one slot always remains (a probe that
+// opens a map with one slot, or a dictionary larger than the whole budget, still works).
+uint32_t slots_for(const ClientOptions& o, const PackHeader& h, const dagmh::Dictionary* dict) {
+  if (!dict) return o.cache_slots;
+  const uint64_t slot = slot_size_for(h), taken = (dict->memory_bytes() + slot - 1) / slot;
+  return uint32_t(std::max<uint64_t>(1, o.cache_slots > taken ? o.cache_slots - taken : 1));
+}
+
 }  // namespace
 
 RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::vector<uint8_t> grid_bytes,
@@ -62,10 +85,11 @@ RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::v
       // A stack pack's grid section is its stack grid (remote_stack.cpp): no map preview.
       preview_(header_.flags & kFeatureStack
                    ? MapPreview()
-                   : MapPreview::parse(std::span<const uint8_t>(grid_bytes).subspan(CutGrid::serialized_size(grid_.levels)),
-                                       grid_, header_.map_level, "map '" + name_ + "'")),
+                   : MapPreview::parse(grid_parts(header_, grid_bytes, name_).preview, grid_, header_.map_level,
+                                       "map '" + name_ + "'")),
+      dictionary_(dictionary_of(header_, grid_bytes, name_)),
       light_(LightSpace::from_array(header_.light_kind, header_.light)),
-      cache_(options.cache_slots, slot_size_for(header_)),
+      cache_(slots_for(options, header_, dictionary_.get()), slot_size_for(header_)),
       requests_(size_t(options.want_capacity) + size_t(options.max_in_flight) * options.tiles_per_request,
                 options.want_capacity) {
   const std::string what = "map '" + name_ + "'";
@@ -558,6 +582,7 @@ size_t RemoteMap::cancel_outside(uint32_t level, uint64_t x0, uint64_t y0, uint6
 MapStats RemoteMap::stats() const noexcept {
   std::lock_guard lock(mu_);
   MapStats s = stats_;
+  s.dictionary_bytes = dictionary_ ? dictionary_->memory_bytes() : 0;
   const CacheStats c = cache_.stats();
   s.cache = CacheCounters{c.hits, c.misses, c.evictions, c.inserts, c.resident, c.pinned, c.free};
   for (const CounterShard& k : counters_) {  // lookups count here, not in the cache
@@ -661,7 +686,7 @@ bool RemoteMap::fill_slot(uint32_t slot, const proto::TileMeta& meta, const Grid
       return bool(ev);
     }
     if (entry.kind == EntryKind::tile) {
-      ev = open_encoded(header_.encoding, raw);
+      ev = open_pack_tile(header_.encoding, raw, dictionary_);  // v2 DAG-MH tiles through the dictionary
       return ev && ev->finest_level() == header_.map_level - a.level;
     }
     grid = CutGrid::parse(raw, what, kMaxIndexLevels);

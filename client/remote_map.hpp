@@ -43,6 +43,10 @@
 #include "tiles/core/tile_cut_grid.hpp"
 #include "tiles/core/stack_map.hpp"
 
+namespace st::dagmh {
+class Dictionary;
+}
+
 namespace st::client {
 
 // Wakes the fetcher from any thread without allocating or blocking (an eventfd; the
@@ -89,6 +93,8 @@ class RemoteMap final : public Evaluator {
   const PackHeader& header() const { return header_; }
   const CutGrid& grid() const { return grid_; }
   const MapPreview& preview() const { return preview_; }
+  // The DAG-MH dictionary v2 tiles reference (null: none); GpuMap uploads it once.
+  const std::shared_ptr<const dagmh::Dictionary>& dictionary() const { return dictionary_; }
   const std::vector<uint8_t>& header_bytes() const { return header_bytes_; }
   uint32_t slot_bytes() const { return cache_.slot_bytes(); }
   const LightSpace& light() const { return light_; }
@@ -274,6 +280,9 @@ class RemoteMap final : public Evaluator {
   PackHeader header_;
   CutGrid grid_;
   MapPreview preview_;  // after the skip grid in MapInfo: answers where a tile is missing
+  // The pack's DAG-MH dictionary (after the preview in MapInfo; tiles/PACK.md "DAG-MH
+  // dictionary"): resident for the map's life, its bytes taken from the cache's slots.
+  std::shared_ptr<const dagmh::Dictionary> dictionary_;
   LightSpace light_;
   std::unique_ptr<StackGrid> stack_grid_;
   std::unique_ptr<StackMap> stack_map_;

@@ -13,6 +13,7 @@
 #include "gpu/layout.hpp"
 #include "gpu/shadow_reference.hpp"
 #include "gpu/vk_context.hpp"
+#include "tiles/core/dagmh_validate.hpp"
 #include "tiles/core/stack_grid.hpp"
 
 namespace st::gpu {
@@ -149,10 +150,18 @@ struct GpuMap::Impl {
     const uint32_t pv_cells = off_preview + L::kPvHeaderWords + cells;
     const uint32_t pv_cell_words = L::kPvCellHeaderWords + 2 * pv_words;
     const uint32_t pv_values = pv_cells + uint32_t(pv.cells()) * pv_cell_words;
-    const uint32_t pv_end = pv_values + uint32_t(pv.values().size());
+    // The pack's DAG-MH dictionary, word for word, uploaded once with the page table
+    // (version-2 tiles reference it: st_dag_depth).
+    const dagmh::Dictionary* dict = rm->dictionary().get();
+    const uint32_t off_dict = pv_values + uint32_t(pv.values().size());
+    const uint32_t pv_end = off_dict + (dict ? uint32_t(dict->bytes().size() / 4) : 0u);  // then the stack block
     const uint32_t words = pv_end + stack_words();
     page_shadow.assign(words, 0);
     uint32_t* p = page_shadow.data();
+    if (dict) {
+      std::memcpy(p + off_dict, dict->bytes().data(), dict->bytes().size());  // little-endian words
+      p[L::kPtDictionary] = off_dict;
+    }
     p[L::kPtMagic] = L::kPageMagic;
     p[L::kPtVersion] = L::kLayoutVersion;
     p[L::kPtMapLevel] = map_level;
@@ -220,8 +229,9 @@ struct GpuMap::Impl {
     if (in_bytes > range || out_bytes > range)
       throw GpuError("GpuMap: max_queries / max_pixels exceed device '" + ctx->device_name() + "' maxStorageBufferRange");
     if (page_shadow.size() * 4 > range)
-      throw GpuError("GpuMap: the page table (" + std::to_string(page_shadow.size() * 4) + " bytes) exceeds device '" +
-                     ctx->device_name() + "' maxStorageBufferRange");
+      throw GpuError("GpuMap: the page table (" + std::to_string(page_shadow.size() * 4) +
+                     " bytes: skip grid, map preview, DAG-MH dictionary) exceeds device '" + ctx->device_name() +
+                     "' maxStorageBufferRange");
     frames.resize(opt.frames_in_flight);
     for (uint32_t i = 0; i < opt.frames_in_flight; ++i) {
       Frame& f = frames[i];

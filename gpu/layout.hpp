@@ -40,6 +40,12 @@ static_assert(layout::kLevelFromFootprint == kLevelFromFootprint);
 static_assert(layout::kPcWords * 4 <= 128, "push constants: Vulkan guarantees 128 bytes");
 static_assert(layout::kFbRecordWords == 6 && layout::kFbHeaderWords >= 5);
 static_assert(layout::kPtHeaderWords > layout::kPtPcfTable && layout::kPtHeaderWords > layout::kPtStack);
+static_assert(layout::kPtHeaderWords > layout::kPtDictionary && layout::kPtDictionary > layout::kPtPreview);
+// The dictionary block is the DGMD buffer word for word (dagmh_format.hpp DictHeader).
+static_assert(offsetof(dagmh::DictHeader, node_words) == layout::kDictNodeWords * 4 &&
+              offsetof(dagmh::DictHeader, treelet_count) == layout::kDictTreeletCount * 4 &&
+              sizeof(dagmh::DictHeader) == layout::kDictHeaderWords * 4);
+static_assert(offsetof(dagmh::Header, version) == 1 * 4 && dagmh::kVersionDictionary == 2);
 // What st_eval.glsl reads of the tile formats, by word:
 static_assert(dagmh::kTreeletWords == 3 && sizeof(dagmh::ChunkInfo) == 6 * 4 && sizeof(dagmh::Cursor) == 4 * 4);
 static_assert(offsetof(dagmh::Header, finest_level) == 3 * 4 && offsetof(dagmh::Header, skip_level) == 4 * 4 &&

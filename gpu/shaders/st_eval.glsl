@@ -140,10 +140,42 @@ float st_dag_value(uint base, uint chunks, uint mults, uint index) {
   return v;
 }
 
+// Version 2 tiles (tiles/core/DAGMH.md "Dictionary") address [the pack dictionary's
+// nodes | their own] as one space, and likewise treelets: index i < D (T) reads the
+// dictionary block in the page table (kPtDictionary), else the tile's own i - D (t - T),
+// the compare View::node_at / treelet_at make. A node lies wholly on one side, so its
+// words n + k are on the side of n. Version 1 tiles have D = T = 0.
+struct StDagSpace {
+  uint nodes, treelets;    // the tile's sections (pool words)
+  uint dnodes, dtreelets;  // the dictionary's (page-table words)
+  uint d, t;               // D node words, T treelets
+};
+
+uint st_dag_node_word(StDagSpace s, uint i) {
+  return i < s.d ? ST_PAGE(s.dnodes + i) : ST_POOL(s.nodes + (i - s.d));
+}
+
+uint st_dag_treelet_word(StDagSpace s, uint t, uint w) {
+  return t < s.t ? ST_PAGE(s.dtreelets + t * 3u + w) : ST_POOL(s.treelets + (t - s.t) * 3u + w);
+}
+
 float st_dag_depth(uint base, uint level, uint x, uint y) {
   const uint finest = ST_POOL(base + 3u);
   const uint skip_level = ST_POOL(base + 4u);
-  const uint nodes = base + (ST_POOL(base + 13u) >> 2u);
+  StDagSpace sp;
+  sp.nodes = base + (ST_POOL(base + 13u) >> 2u);
+  sp.treelets = base + (ST_POOL(base + 14u) >> 2u);
+  sp.d = 0u;
+  sp.t = 0u;
+  sp.dnodes = 0u;
+  sp.dtreelets = 0u;
+  if (ST_POOL(base + 1u) == 2u) {  // version 2: opened by the client against the dictionary GpuMap uploaded
+    const uint dict = ST_PAGE(kPtDictionary);
+    sp.d = ST_PAGE(dict + kDictNodeWords);
+    sp.t = ST_PAGE(dict + kDictTreeletCount);
+    sp.dnodes = dict + kDictHeaderWords;
+    sp.dtreelets = sp.dnodes + sp.d;
+  }
   if (level > finest) {
     const uint sh = level - finest;
     x >>= sh;
@@ -169,8 +201,8 @@ float st_dag_depth(uint base, uint level, uint x, uint y) {
   }
   // descend (dagmh_traverse.hpp View::descend)
   while ((c.ref & 0xC0000000u) == 0x40000000u && c.level < level) {
-    const uint node = nodes + (c.ref & 0x3FFFFFFFu);
-    const uint flags = ST_POOL(node);
+    const uint node = c.ref & 0x3FFFFFFFu;
+    const uint flags = st_dag_node_word(sp, node);
     if ((flags & 0x100u) != 0u) c.last = c.base;
     const uint sh = level - c.level - 1u;
     const uint child = ((x >> sh) & 1u) | (((y >> sh) & 1u) << 1u);
@@ -181,17 +213,18 @@ float st_dag_depth(uint base, uint level, uint x, uint y) {
     }
     const uint rank = uint(bitCount(flags & 0xFu & ((1u << child) - 1u)));
     const uint entry = node + 1u + 2u * rank;
-    c.base += ST_POOL(entry + 1u);
-    c.ref = ST_POOL(entry) | (((flags >> (4u + child)) & 1u) != 0u ? 0x80000000u : 0x40000000u);
+    c.base += st_dag_node_word(sp, entry + 1u);
+    c.ref = st_dag_node_word(sp, entry) | (((flags >> (4u + child)) & 1u) != 0u ? 0x80000000u : 0x40000000u);
   }
   // finish
   uint index = c.last;
   const uint tag = c.ref & 0xC0000000u;
   if (tag == 0x40000000u) {
-    index = (ST_POOL(nodes + (c.ref & 0x3FFFFFFFu)) & 0x100u) != 0u ? c.base : c.last;
+    index = (st_dag_node_word(sp, c.ref & 0x3FFFFFFFu) & 0x100u) != 0u ? c.base : c.last;
   } else if (tag == 0x80000000u) {
-    const uint t = base + (ST_POOL(base + 14u) >> 2u) + (c.ref & 0x3FFFFFFFu) * 3u;
-    const uint w0 = ST_POOL(t), w1 = ST_POOL(t + 1u), w2 = ST_POOL(t + 2u);
+    const uint t = c.ref & 0x3FFFFFFFu;
+    const uint w0 = st_dag_treelet_word(sp, t, 0u), w1 = st_dag_treelet_word(sp, t, 1u),
+               w2 = st_dag_treelet_word(sp, t, 2u);
     const uint depth = min(level - c.level, 3u);
     uint p[4];
     p[0] = 0u;

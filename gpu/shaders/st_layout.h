@@ -17,7 +17,7 @@ namespace st::gpu::layout {
 #define ST_UINT(name, value) const uint name = value;
 #endif
 
-ST_UINT(kLayoutVersion, 3u)  // 2: the map preview (kPtPreview); 3: the stack block (kPtStack)
+ST_UINT(kLayoutVersion, 4u)  // 2: the map preview (kPtPreview); 3: the stack block (kPtStack); 4: the DAG-MH dictionary (kPtDictionary)
 
 // ---- page-table buffer (binding kBindPage) ----
 // header words, then the skip grid's coarse values and entries, the skip grid's slot
@@ -36,8 +36,18 @@ ST_UINT(kPtSkipSlots, 9u)      // word offset: 4^K slot pointers (kNoSlot: not o
 ST_UINT(kPtChildSlots, 10u)    // word offset: slot_count * kChildTableWords slot pointers
 ST_UINT(kPtPcfTable, 11u)      // word offset: kMaxPcf * kPcfTableStride f32 quotients
 ST_UINT(kPtPreview, 12u)       // word offset: the map preview (kPv* header, then its arrays)
+ST_UINT(kPtDictionary, 13u)    // word offset: the pack's DAG-MH dictionary (kDict*), 0: none
 ST_UINT(kPtStack, 14u)         // word offset: the stack block (kSt*) of a stack map; 0 for a 2D map
 ST_UINT(kPtHeaderWords, 16u)
+
+// The DAG-MH dictionary block (tiles/core/DAGMH.md "Dictionary"), at word kPtDictionary:
+// the dictionary buffer MapInfo carries (inflated), word for word: its 8-word header (D node
+// words at kDictNodeWords, T treelets at kDictTreeletCount), D node words, 3 T treelet
+// words. A version-2 tile's inner reference i < D is the dictionary's node word i, else
+// its own word i - D; a treelet t < T the dictionary's, else its own t - T.
+ST_UINT(kDictNodeWords, 3u)
+ST_UINT(kDictTreeletCount, 4u)
+ST_UINT(kDictHeaderWords, 8u)
 
 // The map preview block (tiles/core/map_preview.hpp), at word kPtPreview: a header, then
 // one ordinal per skip-grid entry (kNoSlot: constant), per cell kPvCellHeaderWords words

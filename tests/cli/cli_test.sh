@@ -24,6 +24,9 @@ check tile-bytes-help 0 "64 MiB" -- "$st" build --help
 [[ -f build.json && ! -f city.pack.tmp ]] || { echo "FAIL build outputs"; fail=1; }
 check inspect 0 "exit-depths" -- "$st" inspect city.pack
 check inspect-json 0 '"encoding": "dagmh"' -- "$st" inspect city.pack --json
+# DAG-MH builds carry the pack dictionary by default (tiles/PACK.md "DAG-MH dictionary").
+check inspect-dictionary 0 "dictionary   DAG-MH, .* inner nodes" -- "$st" inspect city.pack
+check bad-dictionary-option 1 "dagmh-dictionary: expected on or off" -- "$st" build $scene $light --resolution 256 --dagmh-dictionary maybe -o x.pack -q
 # Stack packs (a light set): build, inspect, verify every texel of every slice, export a slice.
 stackl="--light sun-path:azimuth=170..185,elevation=50..52,samples=4"
 check stack-build 0 "stack of 4 slices of 128\^2" -- "$st" build $scene $stackl --resolution 128 --tile-bytes 4096 -o stack.pack -q

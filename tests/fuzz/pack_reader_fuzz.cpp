@@ -2,8 +2,8 @@
 // byte 0 is a control byte (bit 0: first rewrite every CRC the mutated bytes' own
 // offsets and sizes delimit; without it the fuzzer rarely gets past the CRCs into the
 // parsers behind them), the rest a whole pack file. Flow: PackReader::open_memory; for the first tiles of the index
-// read_raw (CRC, zlib, size checks), open encoded tiles with the pack's encoding and
-// probe them, parse index tiles with read_index_tile; verify() with the real opener;
+// read_raw (CRC, zlib, size checks), open encoded tiles with the pack's encoding (and its
+// DAG-MH dictionary, whose section CRC is repaired too) and probe them, parse index tiles with read_index_tile; verify() with the real opener;
 // then a PackEvaluator answers lookups at every level and PCF (evaluator_probe.hpp).
 // Every rejection must be an st::FormatError (the reader's documented error for corrupt
 // data); anything else escaping, a crash or a sanitizer report is a finding.
@@ -18,6 +18,7 @@
 #include "tests/fuzz/seed_support.hpp"
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/map_preview.hpp"
+#include "tiles/core/pack_dictionary.hpp"
 #include "common/error.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_reader.hpp"
@@ -40,6 +41,22 @@ using st::proto::store_le;
 uint32_t crc_of(const std::vector<uint8_t>& b, uint64_t off, uint64_t len) {
   if (off > b.size() || len > b.size() - off) return 0;
   return crc32({b.data() + off, size_t(len)});
+}
+
+// The DAG-MH dictionary section (pack_dictionary.hpp) ends the grid section: the first
+// "STDD" header (at a 4-byte step) whose stored size reaches exactly the section's end
+// gets its CRC field rewritten over its bytes, when the feature bit is set.
+void repair_dictionary_crc(std::vector<uint8_t>& b, uint64_t grid_off, uint64_t grid_size) {
+  if (!(load_le<uint32_t>(&b[20]) & st::kFeatureDagmhDictionary)) return;
+  if (grid_off > b.size() || grid_size > b.size() - grid_off) return;
+  const uint64_t end = grid_off + grid_size;
+  for (uint64_t at = grid_off; at + st::kPackDictionaryHeaderBytes <= end; at += 4) {
+    if (load_le<uint32_t>(&b[at]) != st::kPackDictionaryMagic) continue;
+    const uint64_t n = load_le<uint32_t>(&b[at + 8]);
+    if (at + st::kPackDictionaryHeaderBytes + n != end) continue;
+    store_le<uint32_t>(&b[at + 12], crc_of(b, at + st::kPackDictionaryHeaderBytes, n));
+    return;
+  }
 }
 
 // Rewrites the CRCs of a pack (pack_format.hpp layout) from its own offsets and sizes,
@@ -74,6 +91,7 @@ void repair_crcs(std::vector<uint8_t>& b) {
     store_le<uint32_t>(&b[248], crc_of(b, index_off, tiles * st::kIndexEntryBytes));
   }
   store_le<uint32_t>(&b[240], crc_of(b, params_off, params_size));
+  repair_dictionary_crc(b, grid_off, grid_size);
   store_le<uint32_t>(&b[244], crc_of(b, grid_off, grid_size));
   store_le<uint32_t>(&b[252], crc32({b.data(), 252}));
 }
@@ -86,7 +104,7 @@ void probe_tiles(const st::PackReader& reader, uint64_t hash) {
       if (t.kind == st::TileKind::encoded) {
         const std::vector<uint8_t> raw = reader.read_raw(t.id);
         FUZZ_CHECK(raw.size() == t.raw_size);
-        auto ev = st::open_encoded(reader.encoding(), raw);
+        auto ev = reader.open_tile(raw);  // with the pack's DAG-MH dictionary, if any
         st::fuzz::probe_evaluator(*ev, hash, 8);
       } else {
         // The parent entry is not at hand here: try each depth an index tile may have
@@ -144,7 +162,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   probe_tiles(*reader, hash);
   bool verified = true;
   try {
-    reader->verify([&](std::span<const uint8_t> b) { return st::open_encoded(reader->encoding(), b); });
+    reader->verify(reader->tile_opener());
   } catch (const st::FormatError&) {
     verified = false;
   }

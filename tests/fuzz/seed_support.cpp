@@ -109,6 +109,8 @@ std::vector<Bytes> pack_files(uint64_t seed) {
         PackParams pp = PackParams::from(seed_light(), cut);
         pp.scene_hash = 0x5eed0000u + uint64_t(n);
         pp.build_params = {{"scene", "fuzz_seed"}, {"seed", std::to_string(n)}};
+        // Small DAG-MH tiles share subtrees: those packs carry the pack dictionary.
+        pp.dagmh_dictionary = e == Encoding::dagmh && tile_bytes == 256u;
         const std::string path = (dir / ("seed" + std::to_string(n++) + ".pack")).string();
         write_pack(path, h, cut, pp);
         out.push_back(read_whole_file(path));

@@ -16,6 +16,10 @@
 #include "gpu/shadow_reference.hpp"
 #include "tests/client/loopback.hpp"
 #include "tests/gpu/gpu_test_util.hpp"
+#include "tiles/build/mh_build.hpp"
+#include "tiles/build/pack_writer.hpp"
+#include "tiles/core/dagmh_format.hpp"
+#include "tiles/core/dagmh_validate.hpp"
 #include "tiles/core/light.hpp"
 #include "tiles/core/page_table.hpp"
 
@@ -144,6 +148,44 @@ TEST(GpuMap, EveryTexelOfAVsdagMapAnswersBitExactlyLikeTheCpu) {
   expect_bit_exact(g, s.map, 13);
   const GpuStats st = g.stats();
   EXPECT_EQ(st.feedback_tiles, 0u);
+  EXPECT_EQ(st.holes, 0u);
+  EXPECT_EQ(st.validation_messages, 0u);
+}
+
+// A pack with the DAG-MH dictionary (tiles/PACK.md "DAG-MH dictionary"): the dictionary
+// rides in the page table, version-2 tiles resolve references below its size there, and
+// every answer stays the CPU's bits.
+TEST(GpuMap, EveryTexelOfADictionaryPackAnswersBitExactlyLikeTheCpu) {
+  // The loopback tests' random field in small DAG-MH tiles (serve()'s pack), written with
+  // the dictionary: many tiles share treelets and small subtrees.
+  const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/gpu_dict.pack";
+  const Hierarchy h = build_hierarchy(looptest::random_field(test_level(), 7));
+  CutParams cut;
+  cut.map_level = test_level();
+  cut.skip_level = 2;
+  cut.tile_bytes = 512;
+  cut.codec = TileCodec::of(Encoding::dagmh);
+  PackParams pp = PackParams::from(
+      LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), Aabb{{-10, 0, -10}, {10, 5, 10}}), cut);
+  pp.dagmh_dictionary = true;
+  write_pack(path, h, cut, pp);
+  const auto pack = PackReader::open(path);
+  ASSERT_NE(pack->dictionary(), nullptr);
+  size_t v2 = 0;
+  for (const TileIndexEntry& t : pack->tiles())
+    if (t.kind == TileKind::encoded) v2 += pack->read_raw(t.id)[4] == dagmh::kVersionDictionary;
+  ASSERT_GT(v2, 0u);
+  looptest::TestServer srv = start_server({path});
+  client::ClientOptions co = looptest::quick_options();
+  co.cache_slots = uint32_t(pack->tiles().size()) + 32;
+  client::Client c({"127.0.0.1", srv.port}, co);
+  client::Map map = c.open("gpu_dict");
+  ASSERT_NE(client::MapAccess::remote(map).dictionary(), nullptr);
+  ASSERT_TRUE(fetch_all(map));
+  GpuMap g(map, gputest::options());
+  EXPECT_EQ(g.sync(), map.stats().cache.resident);
+  expect_bit_exact(g, map, 17);
+  const GpuStats st = g.stats();
   EXPECT_EQ(st.holes, 0u);
   EXPECT_EQ(st.validation_messages, 0u);
 }

@@ -5,6 +5,7 @@
 #include <cstring>
 
 #include "tests/tiles/interval_fields.hpp"
+#include "common/bytes.hpp"
 #include "common/error.hpp"
 #include "tiles/core/map_preview.hpp"
 #include "tiles/core/pack_format.hpp"
@@ -106,7 +107,17 @@ TEST(PackFormat, HeaderRefusesEveryBadField) {
       resigned([](PackHeader& h) { h.index_offset += 8; }),
       resigned([](PackHeader& h) { h.tile_count = ~uint64_t(0) / 2; }),
       resigned([](PackHeader& h) { h.tile_count = 0; }),  // has_tiles flag disagrees
+      // The DAG-MH dictionary (bit 6): on DAG-MH packs only, and its section needs room.
+      resigned([](PackHeader& h) { h.flags |= kFeatureDagmhDictionary; }),
+      resigned([](PackHeader& h) { h.flags |= kFeatureDagmhDictionary, h.encoding = Encoding::mmh, h.grid_size += 64, h.index_offset += 64; }),
   };
+  {  // with room for a section, the bit is accepted on a DAG-MH pack
+    PackHeader h = sample_header();
+    h.flags |= kFeatureDagmhDictionary;
+    h.grid_size += 64, h.index_offset += 64;
+    EXPECT_EQ(PackHeader::parse(h.serialize(), "x.pack").flags, h.flags);
+    EXPECT_EQ(load_le<uint32_t>(h.serialize().data() + 20), 0x43u);  // exit_depths | has_tiles | bit 6
+  }
   for (size_t i = 0; i < cases.size(); ++i) {
     try {
       PackHeader::parse(cases[i], "x.pack");

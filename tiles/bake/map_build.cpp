@@ -98,6 +98,7 @@ PackParams pack_params(const Scene& scene, const LightSpace& light, const MapBui
   pp.features = exit_depths ? uint32_t(kFeatureExitDepths) : 0u;
   if (o.intervals == IntervalRule::static_geometry) pp.features |= kFeatureStaticIntervals;
   pp.compression_level = o.compression_level;
+  pp.dagmh_dictionary = o.dagmh_dictionary && o.encoding == Encoding::dagmh;
   pp.build_params = {{"builder", to_string(builder)},
                      {"construction", o.construction == MhConstruction::bottom_up ? "bottom-up" : "top-down"},
                      {"light", o.light_spec.empty() ? light.spec().to_string() : o.light_spec},
@@ -477,6 +478,10 @@ MapBuildReport build_map(const Scene& scene, const LightSpace& light, const MapB
   } else {
     if (o.before_finish) o.before_finish(*writer);
     finish_pack(*writer, cutter, o.construction);
+    const DictionaryOutcome& d = writer->dictionary_outcome();
+    rep.dictionary_bytes = d.bytes, rep.dictionary_tiles_rewritten = d.tiles_rewritten;
+    rep.dictionary_raw_before = d.raw_before, rep.dictionary_raw_after = d.raw_after;
+    rep.dictionary_skipped = d.skipped;
   }
   rep.finish_seconds = since(t);
   if (o.progress) o.progress(rep.cells_total, rep.cells_total, workers.texels());
@@ -551,6 +556,12 @@ std::string MapBuildReport::to_json() const {
   for (auto& [b, c] : tile_size_histogram) hist.push_back({{"max_bytes", b}, {"tiles", c}});
   j["tile_size_histogram"] = hist;
   j["peak_rss_bytes"] = peak_rss_bytes;
+  if (dictionary_bytes || !dictionary_skipped.empty())
+    j["dagmh_dictionary"] = {{"bytes", dictionary_bytes},
+                             {"tiles_rewritten", dictionary_tiles_rewritten},
+                             {"tile_raw_bytes_before", dictionary_raw_before},
+                             {"tile_raw_bytes_after", dictionary_raw_after},
+                             {"skipped", dictionary_skipped}};
   j["texels_per_second"] = wall_seconds > 0 ? double(texels_traced) / wall_seconds : 0.0;
   return j.dump(2);
 }

@@ -96,6 +96,9 @@ struct MapBuildOptions {
   RasterSkip raster_skip = RasterSkip::exact;
   bool resume = false;  // continue "<out>.tmp" if present
   int compression_level = 6;
+  // DAG-MH: finish with the pack-wide dictionary of shared subtrees (PackParams::
+  // dagmh_dictionary; tiles/PACK.md "DAG-MH dictionary"). The CLI turns it on by default.
+  bool dagmh_dictionary = false;
   // Build only the cells touching this region; every other cell is the constant
   // kLitDepth (a partial map: only texels inside the region are traced and lossless).
   std::optional<TexelRegion> region;
@@ -133,6 +136,9 @@ struct MapBuildReport {
   std::vector<uint64_t> stored_bytes_per_level;      // by tile root level
   std::vector<std::pair<uint64_t, uint64_t>> tile_size_histogram;  // (upper bound bytes, count)
   uint64_t peak_rss_bytes = 0;
+  // The DAG-MH dictionary (PackWriter::dictionary_outcome): bytes 0 = none written.
+  uint64_t dictionary_bytes = 0, dictionary_tiles_rewritten = 0, dictionary_raw_before = 0, dictionary_raw_after = 0;
+  std::string dictionary_skipped;  // why none was written although asked
   std::string to_json() const;
 };
 

@@ -179,7 +179,7 @@ MergeReport copy_and_finish(const std::vector<const Part*>& by_shard, const Pack
 
 }  // namespace
 
-MergeReport merge_parts(std::span<const std::string> part_paths, const std::string& out_path) {
+MergeReport merge_parts(std::span<const std::string> part_paths, const std::string& out_path, bool dagmh_dictionary) {
   if (part_paths.empty()) throw Error("merge: no part files given");
   std::vector<std::unique_ptr<Part>> parts;
   for (const std::string& path : part_paths) parts.push_back(open_part(path));
@@ -204,10 +204,13 @@ MergeReport merge_parts(std::span<const std::string> part_paths, const std::stri
                 (n_missing > 8 ? " (and " + std::to_string(n_missing - 8) + " more)" : "") + " of " +
                 std::to_string(N));
 
-  const PackParams& pp = first.params;
+  PackParams pp = first.params;
+  pp.dagmh_dictionary = dagmh_dictionary && pp.encoding == Encoding::dagmh;
   auto writer = PackWriter::create(out_path, pp);
   try {
-    return copy_and_finish(by_shard, pp, *writer);
+    MergeReport rep = copy_and_finish(by_shard, pp, *writer);
+    rep.dictionary_bytes = writer->dictionary_outcome().bytes;
+    return rep;
   } catch (...) {
     ::unlink(writer->tmp_path().c_str());  // a refused merge leaves nothing behind
     throw;

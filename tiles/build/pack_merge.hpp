@@ -38,6 +38,7 @@ inline constexpr const char* kShardParam = "shard";
 struct MergeReport {
   uint32_t shard_count = 0;
   uint64_t cells = 0, tiles = 0, bytes_copied = 0;
+  uint64_t dictionary_bytes = 0;  // the DAG-MH dictionary rebuilt over all parts' tiles (0: none)
 };
 
 // Joins part files into `out_path` (written as "<out_path>.tmp", renamed when complete):
@@ -45,6 +46,11 @@ struct MergeReport {
 // and build parameters. Tile payloads are copied as they are stored (every CRC checked on
 // the way); the coarse levels are built over the cells' root intervals with the build's
 // construction, so the result equals a single-process build's pack tile for tile.
-MergeReport merge_parts(std::span<const std::string> part_paths, const std::string& out_path);
+// Parts never carry a DAG-MH dictionary (it spans every shard's tiles): with
+// `dagmh_dictionary` (DAG-MH parts only) the merge builds it over all the tiles as a
+// single build's finish does (PackParams::dagmh_dictionary), so the pack still equals
+// the one-go build made with the same choice.
+MergeReport merge_parts(std::span<const std::string> part_paths, const std::string& out_path,
+                        bool dagmh_dictionary = false);
 
 }  // namespace st

@@ -285,6 +285,7 @@ void PackWriter::finish(const CutGrid& grid) {
   std::vector<uint8_t> grid_bytes = grid.serialize();
   const std::vector<uint8_t> preview = preview_bytes(grid);
   grid_bytes.insert(grid_bytes.end(), preview.begin(), preview.end());
+  if (params_.dagmh_dictionary && finish_with_dictionary(h, grid_bytes)) return;
   std::vector<uint8_t> index_bytes = serialize_index(tiles_);
   h.grid_size = grid_bytes.size();
   h.grid_crc = crc32_of(grid_bytes);

@@ -37,6 +37,9 @@ namespace st {
 
 inline constexpr uint32_t kDefaultPreviewLevels = 3;
 inline constexpr uint64_t kDefaultPreviewMaxBytes = 4ull << 20;
+// The DAG-MH dictionary pass holds every encoded tile's raw bytes and a key per node:
+// above this many raw tile bytes finish() writes no dictionary (and says why).
+inline constexpr uint64_t kDefaultDictionaryMaxInputBytes = 512ull << 20;
 
 struct PackParams {
   LightKind light_kind = LightKind::sun;
@@ -53,8 +56,22 @@ struct PackParams {
   // p = min(preview_levels, L - K), one level fewer while it exceeds preview_max_bytes.
   uint32_t preview_levels = kDefaultPreviewLevels;
   uint64_t preview_max_bytes = kDefaultPreviewMaxBytes;
+  // DAG-MH only: finish() moves every subtree found in two or more tiles into one
+  // pack-wide dictionary and rewrites the tiles that use it as version 2 (tiles/PACK.md
+  // "DAG-MH dictionary"); answers stay bit-identical. Not a resume parameter: the journal
+  // always holds the tiles as encoded.
+  bool dagmh_dictionary = false;
+  uint64_t dictionary_max_input_bytes = kDefaultDictionaryMaxInputBytes;
 
   static PackParams from(const LightSpace& light, const CutParams& cut);
+};
+
+// What finish() did about the DAG-MH dictionary (PackParams::dagmh_dictionary).
+struct DictionaryOutcome {
+  uint64_t bytes = 0;  // the dictionary written (0: none)
+  uint64_t tiles = 0, tiles_rewritten = 0, raw_before = 0, raw_after = 0;  // encoded tiles' raw bytes
+  uint32_t min_tiles = 0;  // subtrees shared by at least this many tiles (2, more if it had to shrink)
+  std::string skipped;     // why none was written although asked; "" otherwise
 };
 
 class PackWriter {
@@ -104,7 +121,13 @@ class PackWriter {
   // Writes the skip grid (entries must equal the cells' entries), the map preview (read
   // back from the journal's tiles) and the tile index, completes the header, fsyncs and
   // renames "<path>.tmp" to "<path>".
+  // With PackParams::dagmh_dictionary (and something shared) the pack is written afresh
+  // as "<path>.dict.tmp" instead: the journal copied cell by cell with the rewritten tiles
+  // in place of their records, then grid (with the dictionary) and index; it is renamed
+  // to "<path>" and only then "<path>.tmp" removed, so a build killed meanwhile still
+  // resumes from its untouched journal.
   void finish(const CutGrid& grid);
+  const DictionaryOutcome& dictionary_outcome() const { return dictionary_; }
 
  private:
   void publish(const std::string& what);  // under mu_, after the last fsync
@@ -114,6 +137,10 @@ class PackWriter {
   void write_at(uint64_t offset, std::span<const uint8_t> bytes);
   PackHeader base_header() const;
   std::vector<uint8_t> preview_bytes(const CutGrid& grid) const;  // under mu_, tiles_ sorted
+  // finish()'s dictionary path (pack_writer_dictionary.cpp), under mu_ with tiles_ sorted
+  // and `h` complete but for the grid and index: false (dictionary_.skipped says why)
+  // when no dictionary applies and finish() goes on as usual.
+  bool finish_with_dictionary(PackHeader h, const std::vector<uint8_t>& grid_and_preview);
 
   std::string path_;
   PackParams params_;
@@ -126,6 +153,7 @@ class PackWriter {
   std::vector<TileIndexEntry> tiles_;
   size_t resumed_cells_ = 0;
   uint64_t truncated_bytes_ = 0;
+  DictionaryOutcome dictionary_;
 };
 
 // The cell's journal bytes: each tile zlib-compressed at params.compression_level behind

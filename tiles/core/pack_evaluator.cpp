@@ -26,10 +26,7 @@ PackEvaluator::PackEvaluator(std::shared_ptr<const PackReader> reader, size_t ca
   // A stack pack has no 2D skip grid: its lookups are StackMap's (stack_map.hpp).
   if (reader_->stack())
     throw Error(reader_->name() + ": a stack pack (feature stack): look it up by slice, time or light sample, not as one map");
-  if (!open_tile_) {
-    Encoding e = reader_->encoding();
-    open_tile_ = [e](std::span<const uint8_t> bytes) { return open_encoded(e, bytes); };
-  }
+  if (!open_tile_) open_tile_ = reader_->tile_opener();  // with the pack's DAG-MH dictionary, if any
   cache_.reserve_pages(reader_->tiles().size());
 }
 

@@ -28,7 +28,7 @@ namespace st {
 
 class PackEvaluator : public Evaluator {
  public:
-  // `open_tile` opens one encoded tile's bytes; empty: open_encoded(reader's encoding).
+  // `open_tile` opens one encoded tile's bytes; empty: the reader's tile_opener().
   explicit PackEvaluator(std::shared_ptr<const PackReader> reader, size_t cache_tiles = 256,
                          PackReader::TileOpener open_tile = {});
 

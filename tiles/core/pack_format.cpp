@@ -1,6 +1,7 @@
 #include "tiles/core/pack_format.hpp"
 
 #include "tiles/core/map_preview.hpp"
+#include "tiles/core/pack_dictionary.hpp"
 
 #include <libdeflate.h>
 
@@ -95,6 +96,9 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
   h.skip_level = b[27];
   if (h.map_level > kMaxLevel) fail(26, "map level " + std::to_string(h.map_level) + " > 20");
   const bool stack = h.flags & uint32_t(kFeatureStack);  // K is an octree level (StackGrid checks it)
+  if ((h.flags & uint32_t(kFeatureDagmhDictionary)) && (stack || h.encoding != Encoding::dagmh))
+    fail(20, "feature dagmh_dictionary on a pack whose tiles are not DAG-MH (encoding " + to_string(h.encoding) +
+                 (stack ? ", a stack" : "") + ")");
   if (stack ? h.skip_level > kMaxLevel + 12 : h.skip_level > std::min(h.map_level, kMaxSkipLevel)) fail(27, "bad skip level " + std::to_string(h.skip_level));
   h.tile_bytes = load_le<uint32_t>(b, 28);
   if (h.tile_bytes == 0 || h.tile_bytes > kMaxTileBytes) fail(28, "bad tile_bytes " + std::to_string(h.tile_bytes));
@@ -121,10 +125,15 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
       if (h.grid_size > (uint64_t(1) << 30)) fail(216, "stack grid size too large");
     } else {
       // The skip grid, then the map preview (map_preview.hpp): at least its header, at most its bound.
+      // With the DAG-MH dictionary (pack_dictionary.hpp) its section follows the preview.
+      const bool dict = h.flags & uint32_t(kFeatureDagmhDictionary);
       const uint64_t grid = CutGrid::serialized_size(h.skip_level);
-      if (h.grid_size < grid + kPreviewHeaderBytes || h.grid_size > grid + kMaxPreviewBytes)
+      const uint64_t least = grid + kPreviewHeaderBytes + (dict ? kPackDictionaryHeaderBytes + 1 : 0);
+      const uint64_t most =
+          grid + kMaxPreviewBytes + (dict ? kPackDictionaryHeaderBytes + max_stored_size(kMaxPackDictionaryBytes) : 0);
+      if (h.grid_size < least || h.grid_size > most)
         fail(216, "grid section size " + std::to_string(h.grid_size) + " does not fit the skip level's grid (" +
-                      std::to_string(grid) + " bytes) and a map preview");
+                      std::to_string(grid) + " bytes) and a map preview" + (dict ? " and a DAG-MH dictionary" : ""));
     }
     if (h.index_offset != h.grid_offset + h.grid_size) fail(224, "bad index offset");
     if (h.tile_count > limit / kIndexEntryBytes) fail(232, "tile count too large");

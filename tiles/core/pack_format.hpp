@@ -8,7 +8,9 @@
 //                       payload) and cell records (32 bytes, one per finished level-K cell)
 //   zero padding        to a multiple of 8
 //   skip grid           CutGrid bytes (tile_cut_grid.hpp) of K levels, then the map
-//                       preview (map_preview.hpp): grid_size covers both (grid_crc)
+//                       preview (map_preview.hpp), then with the feature dagmh_dictionary
+//                       the DAG-MH dictionary (pack_dictionary.hpp): grid_size covers
+//                       them all (grid_crc)
 //   tile index          tile_count * 32-byte TileIndexEntry sorted by id (index_crc)
 //   end of file         == index_offset + 32 * tile_count (trailing bytes are rejected)
 //
@@ -62,7 +64,11 @@ enum PackFeature : uint32_t {
   // A shadow-map stack (tiles/PACK.md "Stack packs"): the grid section is a StackGrid
   // (stack_grid.hpp) and every tile an MH octree buffer of one level-K cell's subtree.
   kFeatureStack = 1u << 5,
-  kKnownFeatures = 0x3F,
+  // A DAG-MH pack whose grid section ends with a pack-wide dictionary of shared subtrees
+  // (pack_dictionary.hpp, tiles/PACK.md "DAG-MH dictionary"); its encoded tiles may be
+  // DAG-MH version 2, which reference it. Only with encoding dagmh, never with stack.
+  kFeatureDagmhDictionary = 1u << 6,
+  kKnownFeatures = 0x7F,
 };
 
 // Header layout (offset: size field):

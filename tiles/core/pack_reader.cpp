@@ -1,6 +1,8 @@
 #include "tiles/core/pack_reader.hpp"
 
 #include "tiles/core/map_preview.hpp"
+#include "tiles/core/pack_dictionary.hpp"
+#include "tiles/core/dagmh_validate.hpp"
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -141,14 +143,21 @@ void PackReader::load() {
     load_stack();
     preview_ = std::make_shared<MapPreview>();  // a stack pack's grid section is its stack grid
   } else {
-    // The skip grid, then the map preview (the header checked the section's size).
+    // The skip grid, the map preview, the DAG-MH dictionary if any (the header checked the
+    // section's size).
     const size_t g = CutGrid::serialized_size(header_.skip_level);
-    const std::span<const uint8_t> section(grid_bytes_);
-    grid_ = CutGrid::parse(section.first(g), name_ + ": skip grid at byte " + std::to_string(header_.grid_offset));
+    const bool has_dict = header_.flags & kFeatureDagmhDictionary;
+    const GridSectionParts parts =
+        split_grid_section(grid_bytes_, header_.skip_level, has_dict, name_ + ": grid section", header_.grid_offset);
+    grid_ = CutGrid::parse(parts.skip_grid, name_ + ": skip grid at byte " + std::to_string(header_.grid_offset));
     if (grid_.levels != header_.skip_level)
       throw FormatError(where(header_.grid_offset) + ": skip grid levels != skip level");
     preview_ = std::make_shared<MapPreview>(MapPreview::parse(
-        section.subspan(g), grid_, header_.map_level, name_ + " (byte " + std::to_string(header_.grid_offset + g) + ")"));
+        parts.preview, grid_, header_.map_level, name_ + " (byte " + std::to_string(header_.grid_offset + g) + ")"));
+    if (has_dict)
+      dictionary_ = open_pack_dictionary(
+          parts, where(header_.grid_offset + uint64_t(parts.dictionary.data() - grid_bytes_.data())) +
+                     ": DAG-MH dictionary");
   }
 
   // Every tile has a 32-byte record in the journal before the grid, so the index cannot
@@ -212,6 +221,14 @@ std::optional<TileIndexEntry> PackReader::find(uint64_t id) const {
   auto it = std::lower_bound(index_.begin(), index_.end(), id, [](const TileIndexEntry& e, uint64_t v) { return e.id < v; });
   if (it == index_.end() || it->id != id) return std::nullopt;
   return *it;
+}
+
+std::unique_ptr<Evaluator> PackReader::open_tile(std::span<const uint8_t> raw) const {
+  return open_pack_tile(header_.encoding, raw, dictionary_);
+}
+
+PackReader::TileOpener PackReader::tile_opener() const {
+  return [e = header_.encoding, d = dictionary_](std::span<const uint8_t> raw) { return open_pack_tile(e, raw, d); };
 }
 
 std::vector<uint8_t> PackReader::read_stored(uint64_t id) const {
@@ -379,8 +396,8 @@ void PackReader::verify(const TileOpener& open_tile) const {
   };
   const std::vector<uint8_t> want = MapPreview::build(grid_, preview_->levels(), depth).serialize();
   const uint64_t at = header_.grid_offset + CutGrid::serialized_size(header_.skip_level);
-  if (!std::equal(want.begin(), want.end(), grid_bytes_.begin() + long(CutGrid::serialized_size(header_.skip_level)),
-                  grid_bytes_.end()))
+  const auto preview_begin = grid_bytes_.begin() + long(CutGrid::serialized_size(header_.skip_level));
+  if (!std::equal(want.begin(), want.end(), preview_begin, preview_begin + long(preview_->serialized_size())))
     throw FormatError(where(at) + ": map preview differs from what the tiles answer at its levels");
 }
 
@@ -446,7 +463,8 @@ std::string PackReader::summary() const {
   const std::pair<uint32_t, const char*> names[] = {{kFeatureExitDepths, "exit_depths"}, {kFeatureHasTiles, "has_tiles"},
                                                     {kFeatureIndexTiles, "index_tiles"}, {kFeatureDeepShadow, "deep_shadow"},
                                                     {kFeatureStaticIntervals, "static_intervals"},
-                                                    {kFeatureStack, "stack"}};
+                                                    {kFeatureStack, "stack"},
+                                                    {kFeatureDagmhDictionary, "dagmh_dictionary"}};
   for (auto [bit, n] : names)
     if (header_.flags & bit) features += std::string(features.empty() ? "" : ",") + n;
   char buf[320];
@@ -469,6 +487,15 @@ std::string PackReader::summary() const {
     std::snprintf(buf, sizeof buf, "  map preview: %u levels below K, %zu cells, %zu values, %llu bytes (in the grid)\n",
                   preview_->levels(), preview_->cells(), preview_->stored_values(),
                   (unsigned long long)preview_->serialized_size());
+    out += buf;
+  }
+  if (dictionary_) {
+    const DictionaryCounts c = count_dictionary(*dictionary_);
+    std::snprintf(buf, sizeof buf,
+                  "  DAG-MH dictionary: %llu bytes (in the grid), %llu inner nodes (%llu words), %llu treelets, "
+                  "CRC %08x\n",
+                  (unsigned long long)c.bytes, (unsigned long long)c.nodes, (unsigned long long)c.node_words,
+                  (unsigned long long)c.treelets, c.crc);
     out += buf;
   }
   if (deep_) {

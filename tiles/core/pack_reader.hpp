@@ -26,6 +26,9 @@ namespace st {
 
 class MapPreview;
 struct StackGrid;
+namespace dagmh {
+class Dictionary;
+}
 
 class PackReader {
  public:
@@ -46,12 +49,19 @@ class PackReader {
   const CutGrid& grid() const { return grid_; }
   // The map preview that follows the skip grid (map_preview.hpp).
   const MapPreview& preview() const { return *preview_; }
+  // The pack-wide DAG-MH dictionary (feature dagmh_dictionary; pack_dictionary.hpp),
+  // validated at open, else null. Encoded tiles open with it: open_tile().
+  const std::shared_ptr<const dagmh::Dictionary>& dictionary() const { return dictionary_; }
+  // Opens an encoded tile's raw bytes in this pack's encoding (with its dictionary):
+  // what every reader of tiles calls. open_encoded alone refuses version-2 DAG-MH tiles.
+  std::unique_ptr<Evaluator> open_tile(std::span<const uint8_t> raw) const;
   // A stack pack's grid (kFeatureStack; tiles/PACK.md "Stack packs"), else nullptr; then
   // grid() is empty and every tile is an MH octree buffer (mh_octree.hpp).
   const StackGrid* stack() const { return stack_.get(); }
   uint64_t file_size() const { return header_.file_size(); }
 
-  // Raw blobs a server sends as they lie (grid_bytes: the skip grid and the map preview).
+  // Raw blobs a server sends as they lie (grid_bytes: the skip grid, the map preview and
+  // the DAG-MH dictionary if any).
   std::span<const uint8_t> header_bytes() const { return header_bytes_; }
   std::span<const uint8_t> grid_bytes() const { return grid_bytes_; }
 
@@ -78,6 +88,8 @@ class PackReader {
   // deep tile opens (DeepTileView validates it) with the directory's side.
   using TileOpener = std::function<std::unique_ptr<Evaluator>(std::span<const uint8_t>)>;
   void verify(const TileOpener& open_tile = {}) const;
+  // open_tile() as a TileOpener (it holds the dictionary, not this reader).
+  TileOpener tile_opener() const;
   // Throws st::FormatError unless every skip-grid value (coarse and entry) lies in the
   // depth range [0, 1] that every bake writes (light-space depth, kLitDepth = 1). The
   // format itself carries any non-NaN float (tests encode such fields), so open() and
@@ -114,6 +126,7 @@ class PackReader {
   PackParamList params_;
   CutGrid grid_;
   std::shared_ptr<const MapPreview> preview_;
+  std::shared_ptr<const dagmh::Dictionary> dictionary_;
   std::unique_ptr<StackGrid> stack_;
   std::vector<TileIndexEntry> index_;
   std::optional<DeepDirectory> deep_;

@@ -121,6 +121,9 @@ struct MapStats {
   uint64_t cache_full = 0;           // a tile arrived while every slot was pinned
   uint64_t queue_full = 0;           // a wanted tile could not be queued (want_capacity)
   uint64_t coarse_answers = 0;       // lookups answered above the level asked for
+  // A DAG-MH pack's shared dictionary, fetched with the map and resident for its life;
+  // its bytes come out of cache_slots (the slots it fills are not made; one always is).
+  uint64_t dictionary_bytes = 0;
 };
 
 struct ClientStats {
