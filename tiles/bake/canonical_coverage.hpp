@@ -49,6 +49,49 @@ inline bool lex_less(const Vec3d& p, const Vec3d& q) {
 inline int sgn(double v) { return (v > 0) - (v < 0); }
 }  // namespace canonical_detail
 
+namespace canonical_detail {
+inline Vec3d abs3(const Vec3d& v) { return {std::fabs(v.x), std::fabs(v.y), std::fabs(v.z)}; }
+// |x| x |y| with every product's magnitude added: bounds each component of x' x y' for
+// |x'| <= |x|, |y'| <= |y| componentwise.
+inline Vec3d cross_abs(const Vec3d& x, const Vec3d& y) {
+  return {x.y * y.z + x.z * y.y, x.z * y.x + x.x * y.z, x.x * y.y + x.y * y.x};
+}
+}  // namespace canonical_detail
+
+// The directed edge a -> b of a triangle on a ray of origin o and a fixed direction d (a
+// sun): d . ((a - o) x (b - o)) = d . (a x b) + o . ((a - b) x d) = c + o . n exactly.
+// `bound` covers both the rounding of this fast form (value()) and that of the
+// definition's own double evaluation (canonical_edge_sign) for every origin with
+// |o| <= o_max componentwise, so a fast value beyond +-bound has the definition's sign;
+// within it the definition decides.
+struct CanonicalEdgeFast {
+  double c, nx, ny, nz, bound;
+
+  static CanonicalEdgeFast of(const Vec3d& a, const Vec3d& b, const Vec3d& d, const Vec3d& o_max) {
+    using canonical_detail::abs3;
+    using canonical_detail::cross_abs;
+    CanonicalEdgeFast e;
+    e.c = dot(d, cross(a, b));
+    const Vec3d n = cross(a - b, d);
+    e.nx = n.x, e.ny = n.y, e.nz = n.z;
+    const Vec3d A = abs3(a), B = abs3(b), D = abs3(d);
+    const double m_c = dot(D, cross_abs(A, B));                    // terms of c
+    const double m_n = dot(o_max, cross_abs(A + B, D));            // terms of o . n
+    const double m_def = dot(D, cross_abs(A + o_max, B + o_max));  // terms of the definition
+    // Each form is a sum of triple products after at most 8 roundings (about 8u and 7u
+    // of its terms); 64u leaves room for the rounding of the bound itself. The absolute
+    // term covers underflow; an overflowing bound is +inf (the definition always decides).
+    e.bound = 0x1p-47 * (m_c + m_n + m_def) + 0x1p-1000;
+    return e;
+  }
+  double value(const Vec3d& o) const { return c + (o.x * nx + o.y * ny + o.z * nz); }
+  // +1 or -1: the definition's sign; 0: within the bound (the definition decides).
+  int sure_sign(const Vec3d& o) const {
+    const double v = value(o);
+    return v > bound ? 1 : (v < -bound ? -1 : 0);
+  }
+};
+
 // The perturbation directions of a ray: a function of d alone.
 struct CoverageRay {
   Vec3d o, d, g1, g2;

@@ -141,6 +141,8 @@ struct CoverageData {
   std::vector<CanonicalPlane> plane;        // by scene triangle
   std::vector<uint32_t> mesh;               // by scene triangle
   std::vector<uint8_t> closed;              // by scene triangle
+  // Sun: the fast edge forms (a -> b, b -> c, c -> a) by scene triangle; empty for a spot.
+  std::vector<std::array<CanonicalEdgeFast, 3>> fast;
   std::vector<RTCBounds> box;               // by user primitive
   uint64_t wide = 0;                        // primitives with the light-wide box (spot)
   uint64_t slab = 0;                        // primitives with a slab box (sun)
@@ -165,13 +167,21 @@ void cover_candidate(const RTCIntersectFunctionNArguments* args) {
   const Vec3d& a = cd.v[cd.tri[t][0]];
   const Vec3d& b = cd.v[cd.tri[t][1]];
   const Vec3d& c = cd.v[cd.tri[t][2]];
+  const std::array<CanonicalEdgeFast, 3>* fast = cd.fast.empty() ? nullptr : &cd.fast[t];
   RTCRayN* rays = RTCRayHitN_RayN(args->rayhit, args->N);
   for (unsigned i = 0; i < args->N; ++i) {
     if (args->valid[i] == 0) continue;
     const unsigned lane = RTCRayN_id(rays, args->N, i);
     if (lane >= kMaxLanes) continue;
     const CoverageRay& r = cc->ray[lane];
-    const int f = canonical_cover(r, a, b, c);
+    int f;
+    if (fast) {  // the rasterizer's shortcut: definite fast signs are the definition's
+      const int s0 = (*fast)[0].sure_sign(r.o), s1 = (*fast)[1].sure_sign(r.o), s2 = (*fast)[2].sure_sign(r.o);
+      if (s0 * s1 < 0 || s1 * s2 < 0 || s0 * s2 < 0) continue;
+      f = s0 != 0 && s0 == s1 && s1 == s2 ? s0 : canonical_cover(r, a, b, c);
+    } else {
+      f = canonical_cover(r, a, b, c);
+    }
     if (f == 0) continue;
     const double tp = cd.plane[t].t(r.o, r.d, NAN);
     if (!(tp >= cc->t_lo && tp <= cc->t_hi)) continue;  // also a non-finite t
@@ -190,10 +200,8 @@ void coverage_bounds(const RTCBoundsFunctionArguments* args) {
   *args->bounds_o = cd->box[args->primID];
 }
 
-Vec3d abs3(const Vec3d& v) { return {std::fabs(v.x), std::fabs(v.y), std::fabs(v.z)}; }
-Vec3d cross_abs(const Vec3d& x, const Vec3d& y) {
-  return {x.y * y.z + x.z * y.y, x.z * y.x + x.x * y.z, x.x * y.y + x.y * y.x};
-}
+using canonical_detail::abs3;
+using canonical_detail::cross_abs;
 double max3(const Vec3d& v) { return std::max({v.x, v.y, v.z}); }
 double sum3(const Vec3d& v) { return v.x + v.y + v.z; }
 
@@ -533,12 +541,16 @@ void DepthBoundsTracer::Impl::build_coverage(const Scene& s, const std::vector<u
   volume.lo = volume.lo - abs3(volume.lo) * 0x1p-30 - o_max * 0x1p-30;
   volume.hi = volume.hi + abs3(volume.hi) * 0x1p-30 + o_max * 0x1p-30;
 
+  if (sun) cd.fast.resize(nt);
   std::vector<Aabb> boxes(nt);
   std::vector<uint8_t> kind(nt, 0);  // 0: never hit, 1: grown box, 2: wide, 3: slab box
   tbb::parallel_for(size_t(0), nt, [&](size_t t) {
     const Vec3d p[3] = {cd.v[cd.tri[t][0]], cd.v[cd.tri[t][1]], cd.v[cd.tri[t][2]]};
     cd.plane[t] = CanonicalPlane::of(p[0], p[1], p[2]);
     const Vec3d& n = cd.plane[t].n;
+    if (sun)
+      cd.fast[t] = {CanonicalEdgeFast::of(p[0], p[1], d_sun, o_max), CanonicalEdgeFast::of(p[1], p[2], d_sun, o_max),
+                    CanonicalEdgeFast::of(p[2], p[0], d_sun, o_max)};
     if (n.x == 0 && n.y == 0 && n.z == 0) return;      // every ray in the plane: no t
     if (sun && dot(n, d_sun) == 0) return;             // the sun's rays lie in the plane
     if (auto b = grown_box(p, sun, d_sun, o_spot, o_max)) {

@@ -29,14 +29,8 @@ constexpr uint64_t kMaxGridCellsPerTriangle = 64;
 // the one texel (plus half a texel for the centre) of the texel boxes it must contain.
 constexpr double kGridMargin = 0x1p-18;
 
-// The directed edge a -> b of a triangle on a ray of origin o and the sun's direction d:
-// d . ((a - o) x (b - o)) = d . (a x b) + o . ((a - b) x d) = c + o . n exactly. `bound`
-// covers both the rounding of this fast form and that of the definition's own double
-// evaluation (canonical_edge_sign) for every texel origin of the map, so a fast value
-// beyond +-bound has the definition's sign; within it the definition decides.
-struct EdgeSetup {
-  double c, nx, ny, nz, bound;
-};
+// The fast form of a directed edge's value under the sun (canonical_coverage.hpp).
+using EdgeSetup = CanonicalEdgeFast;
 
 struct TriSetup {
   EdgeSetup e[3];               // a -> b, b -> c, c -> a in the scene's winding
@@ -52,28 +46,11 @@ struct TriSetup {
   bool closed;
 };
 
-Vec3d abs3(const Vec3d& v) { return {std::fabs(v.x), std::fabs(v.y), std::fabs(v.z)}; }
-// |x| x |y| with every product's magnitude added: bounds each component of x' x y' for
-// |x'| <= |x|, |y'| <= |y| componentwise.
-Vec3d cross_abs(const Vec3d& x, const Vec3d& y) {
-  return {x.y * y.z + x.z * y.y, x.z * y.x + x.x * y.z, x.x * y.y + x.y * y.x};
-}
+using canonical_detail::abs3;
+using canonical_detail::cross_abs;
 
-// `o_max`: componentwise bound on |texel origin - centre| over the whole map.
 EdgeSetup edge_setup(const Vec3d& a, const Vec3d& b, const Vec3d& d, const Vec3d& o_max) {
-  EdgeSetup e;
-  e.c = dot(d, cross(a, b));
-  const Vec3d n = cross(a - b, d);
-  e.nx = n.x, e.ny = n.y, e.nz = n.z;
-  const Vec3d A = abs3(a), B = abs3(b), D = abs3(d);
-  const double m_c = dot(D, cross_abs(A, B));          // terms of c
-  const double m_n = dot(o_max, cross_abs(A + B, D));  // terms of o . n
-  const double m_def = dot(D, cross_abs(A + o_max, B + o_max));  // terms of the definition
-  // Each form is a sum of triple products after at most 8 roundings (about 8u and 7u
-  // of its terms); 64u leaves room for the rounding of the bound itself. The absolute
-  // term covers underflow; an overflowing bound is +inf (the definition always decides).
-  e.bound = 0x1p-47 * (m_c + m_n + m_def) + 0x1p-1000;
-  return e;
+  return CanonicalEdgeFast::of(a, b, d, o_max);
 }
 
 // Classification of a run of texels against a triangle's edges: kOutside, the facing
