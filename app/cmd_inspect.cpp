@@ -67,10 +67,15 @@ void run(const InspectArgs& a) {
   j["build_params"] = params;
   if (r->stack()) inspect_stack(*r, j, false);
   DictionaryCounts dict;
+  uint64_t dict_stored = 0;
   if (r->dictionary()) {  // tiles/PACK.md "DAG-MH dictionary"
     dict = count_dictionary(*r->dictionary());
+    // Stored as a zlib stream at the end of the grid section, after the preview.
+    dict_stored = h.grid_size - CutGrid::serialized_size(h.skip_level) - r->preview().serialized_size() -
+                  kPackDictionaryHeaderBytes;
     nlohmann::json d;
     d["bytes"] = dict.bytes;
+    d["stored_bytes"] = dict_stored;
     d["inner_nodes"] = dict.nodes;
     d["node_words"] = dict.node_words;
     d["treelets"] = dict.treelets;
@@ -110,9 +115,10 @@ void run(const InspectArgs& a) {
   std::printf("  map preview  %u levels below K (to level %u), %.1f KiB in the map info\n", r->preview().levels(),
               h.skip_level + r->preview().levels(), double(r->preview().serialized_size()) / 1024);
   if (r->dictionary())
-    std::printf("  dictionary   DAG-MH, %.1f KiB in the map info: %llu inner nodes (%llu words), %llu treelets, "
-                "CRC %s\n",
-                double(dict.bytes) / 1024, (unsigned long long)dict.nodes, (unsigned long long)dict.node_words,
+    std::printf("  dictionary   DAG-MH, %.1f KiB (%.1f KiB stored in the map info): %llu inner nodes (%llu words), "
+                "%llu treelets, CRC %s\n",
+                double(dict.bytes) / 1024, double(dict_stored) / 1024, (unsigned long long)dict.nodes,
+                (unsigned long long)dict.node_words,
                 (unsigned long long)dict.treelets, hex32(dict.crc).c_str());
   if (dd)
     std::printf("  deep         %llu^2 (level %u), %llu of %llu tiles of %u^2 stored, epsilon %g, %u^2 samples a "
