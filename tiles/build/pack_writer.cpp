@@ -10,6 +10,7 @@
 #include <unordered_map>
 
 #include "common/error.hpp"
+#include "tiles/build/pack_file_io.hpp"
 #include "tiles/core/interval.hpp"
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/map_preview.hpp"
@@ -19,27 +20,9 @@ namespace st {
 
 namespace {
 
-std::string sys_error(const std::string& what) { return what + ": " + std::strerror(errno); }
-
-void pread_all(int fd, uint64_t offset, std::span<uint8_t> out, const std::string& what) {
-  size_t done = 0;
-  while (done < out.size()) {
-    ssize_t n = ::pread(fd, out.data() + done, out.size() - done, off_t(offset + done));
-    if (n < 0 && errno == EINTR) continue;
-    if (n < 0) throw Error(sys_error(what + ": read"));
-    if (n == 0) throw Error(what + ": unexpected end of file at byte " + std::to_string(offset + done));
-    done += size_t(n);
-  }
-}
-
-void fsync_dir_of(const std::string& path) {
-  size_t slash = path.rfind('/');
-  std::string dir = slash == std::string::npos ? "." : slash == 0 ? "/" : path.substr(0, slash);
-  int d = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY);
-  if (d < 0) return;  // best effort: the rename itself already happened
-  ::fsync(d);
-  ::close(d);
-}
+using pack_io::fsync_dir_of;
+using pack_io::pread_all;
+using pack_io::sys_error;
 
 }  // namespace
 
@@ -92,15 +75,11 @@ PackHeader PackWriter::base_header() const {
 }
 
 void PackWriter::write_at(uint64_t offset, std::span<const uint8_t> bytes) {
-  size_t done = 0;
-  while (done < bytes.size()) {
-    ssize_t n = ::pwrite(fd_, bytes.data() + done, bytes.size() - done, off_t(offset + done));
-    if (n < 0 && errno == EINTR) continue;
-    if (n <= 0) {
-      failed_ = true;
-      throw Error(sys_error(tmp_path() + ": write at byte " + std::to_string(offset + done)));
-    }
-    done += size_t(n);
+  try {
+    pack_io::pwrite_all(fd_, offset, bytes, tmp_path());
+  } catch (const Error&) {
+    failed_ = true;
+    throw;
   }
 }
 

@@ -19,6 +19,7 @@
 #include <unordered_map>
 
 #include "common/error.hpp"
+#include "tiles/build/pack_file_io.hpp"
 #include "tiles/build/dagmh_dictionary.hpp"
 #include "tiles/core/pack_dictionary.hpp"
 
@@ -26,18 +27,7 @@ namespace st {
 
 namespace {
 
-std::string sys_error(const std::string& what) { return what + ": " + std::strerror(errno); }
-
-void read_exact(int fd, uint64_t offset, std::span<uint8_t> out, const std::string& what) {
-  size_t done = 0;
-  while (done < out.size()) {
-    ssize_t n = ::pread(fd, out.data() + done, out.size() - done, off_t(offset + done));
-    if (n < 0 && errno == EINTR) continue;
-    if (n < 0) throw Error(sys_error(what + ": read"));
-    if (n == 0) throw Error(what + ": unexpected end of file at byte " + std::to_string(offset + done));
-    done += size_t(n);
-  }
-}
+using pack_io::sys_error;
 
 // The new file: appends at `end`, closes on destruction unless kept.
 struct OutFile {
@@ -51,15 +41,7 @@ struct OutFile {
   ~OutFile() {
     if (fd >= 0) ::close(fd);
   }
-  void write_at(uint64_t offset, std::span<const uint8_t> bytes) {
-    size_t done = 0;
-    while (done < bytes.size()) {
-      ssize_t n = ::pwrite(fd, bytes.data() + done, bytes.size() - done, off_t(offset + done));
-      if (n < 0 && errno == EINTR) continue;
-      if (n <= 0) throw Error(sys_error(path + ": write at byte " + std::to_string(offset + done)));
-      done += size_t(n);
-    }
-  }
+  void write_at(uint64_t offset, std::span<const uint8_t> bytes) { pack_io::pwrite_all(fd, offset, bytes, path); }
   void append(std::span<const uint8_t> bytes) {
     write_at(end, bytes);
     end += bytes.size();
@@ -97,7 +79,7 @@ bool PackWriter::finish_with_dictionary(PackHeader h, const std::vector<uint8_t>
   for (size_t k = 0; k < which.size(); ++k) {
     const TileIndexEntry& t = tiles_[which[k]];
     std::vector<uint8_t> stored(t.stored_size);
-    read_exact(fd_, t.offset, stored, what);
+    pack_io::pread_all(fd_, t.offset, stored, what);
     if (crc32_of(stored) != t.crc) throw Error(what + ": " + describe_tile(t.id) + " fails its CRC on the read back");
     raw[k] = zlib_decompress(stored, t.raw_size, what + ": " + describe_tile(t.id));
   }
@@ -140,7 +122,7 @@ bool PackWriter::finish_with_dictionary(PackHeader h, const std::vector<uint8_t>
     std::vector<uint8_t> span;
     auto copy_record = [&](const TileIndexEntry& t) {
       span.resize(kRecordBytes + t.stored_size);
-      read_exact(fd_, t.offset - kRecordBytes, span, what);
+      pack_io::pread_all(fd_, t.offset - kRecordBytes, span, what);
       index.push_back(t);
       index.back().offset = f.end + kRecordBytes;
       f.append(span);
@@ -162,7 +144,7 @@ bool PackWriter::finish_with_dictionary(PackHeader h, const std::vector<uint8_t>
                        f.append(stored);
                      }
                      std::array<uint8_t, kRecordBytes> cell{};
-                     read_exact(fd_, span_end - kRecordBytes, cell, what);
+                     pack_io::pread_all(fd_, span_end - kRecordBytes, cell, what);
                      f.append(cell);
                      ++cells;
                      return true;
@@ -209,12 +191,7 @@ bool PackWriter::finish_with_dictionary(PackHeader h, const std::vector<uint8_t>
   ::close(fd_);
   fd_ = -1;
   ::unlink(what.c_str());
-  const size_t slash = path_.rfind('/');
-  const std::string dir = slash == std::string::npos ? "." : slash == 0 ? "/" : path_.substr(0, slash);
-  if (int d = ::open(dir.c_str(), O_RDONLY | O_DIRECTORY); d >= 0) {
-    ::fsync(d);
-    ::close(d);
-  }
+  pack_io::fsync_dir_of(path_);
   finished_ = true;
   return true;
 }
