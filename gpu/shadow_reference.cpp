@@ -62,39 +62,54 @@ bool light_point(const ShadowLight& l, const ShadowPassInput& in, size_t p, Poin
   return true;
 }
 
+// Pixel p's light-space point and its finest texel (x, y), and the footprint the pass
+// filters with (the shader's st_neighbour_footprint when asked); false where the pixel
+// has no receiver or its point lies outside the map (the pass answers lit).
+struct Texel {
+  Point c;
+  uint32_t x, y;
+  float footprint;
+};
+bool pixel_texel(const ShadowLight& l, const ShadowPassInput& in, size_t p, uint32_t finest, Texel& t) {
+  Point& c = t.c;
+  if (!light_point(l, in, p, c) || !(c.u >= 0 && c.u < 1 && c.v >= 0 && c.v < 1 && c.d >= 0 && c.d <= 1))
+    return false;
+  const float side = std::ldexp(1.0f, int(finest));
+  const uint32_t top = (1u << finest) - 1;
+  t.x = std::min(uint32_t(std::floor(c.u * side)), top);
+  t.y = std::min(uint32_t(std::floor(c.v * side)), top);
+  t.footprint = in.footprint;
+  if (in.neighbour_footprint) {
+    float f = 0;
+    Point nb;
+    const size_t px = p % in.width, py = p / in.width;
+    if (px + 1 < in.width && light_point(l, in, p + 1, nb))
+      f = std::max(f, std::max(std::fabs(nb.u - c.u), std::fabs(nb.v - c.v)));
+    if (py + 1 < in.height && light_point(l, in, p + in.width, nb))
+      f = std::max(f, std::max(std::fabs(nb.u - c.u), std::fabs(nb.v - c.v)));
+    t.footprint = f * side;
+  }
+  return true;
+}
+
 }  // namespace
 
 void shadow_pass_reference(const Evaluator& ev, const PackHeader& h, const ShadowPassInput& in, std::span<float> out) {
   const ShadowLight l = shadow_light(h);
   const uint32_t finest = h.map_level;
-  const float side = std::ldexp(1.0f, int(finest));
   const size_t pixels = size_t(in.width) * in.height;
   for (size_t p = 0; p < pixels; ++p) {
-    Point c;
-    if (!light_point(l, in, p, c) || !(c.u >= 0 && c.u < 1 && c.v >= 0 && c.v < 1 && c.d >= 0 && c.d <= 1)) {
+    Texel t;
+    if (!pixel_texel(l, in, p, finest, t)) {
       out[p] = 1.0f;
       continue;
     }
-    const uint32_t top = (1u << finest) - 1;
-    const uint32_t x = std::min(uint32_t(std::floor(c.u * side)), top);
-    const uint32_t y = std::min(uint32_t(std::floor(c.v * side)), top);
-    float footprint = in.footprint;
-    if (in.neighbour_footprint) {
-      float f = 0;
-      Point nb;
-      const size_t px = p % in.width, py = p / in.width;
-      if (px + 1 < in.width && light_point(l, in, p + 1, nb))
-        f = std::max(f, std::max(std::fabs(nb.u - c.u), std::fabs(nb.v - c.v)));
-      if (py + 1 < in.height && light_point(l, in, p + in.width, nb))
-        f = std::max(f, std::max(std::fabs(nb.u - c.u), std::fabs(nb.v - c.v)));
-      footprint = f * side;
-    }
     // Evaluator::pcf_footprint's filtering on the finest texel (filter_level.hpp).
-    const FilterLevels f = filter_levels(finest, footprint);
-    const float a = ev.pcf(f.fine, x >> (finest - f.fine), y >> (finest - f.fine), in.kernel, c.d);
+    const FilterLevels f = filter_levels(finest, t.footprint);
+    const float a = ev.pcf(f.fine, t.x >> (finest - f.fine), t.y >> (finest - f.fine), in.kernel, t.c.d);
     out[p] = f.t == 0.0f ? a
-                         : filter_blend(a, ev.pcf(f.coarse, x >> (finest - f.coarse), y >> (finest - f.coarse),
-                                                  in.kernel, c.d), f.t);
+                         : filter_blend(a, ev.pcf(f.coarse, t.x >> (finest - f.coarse), t.y >> (finest - f.coarse),
+                                                  in.kernel, t.c.d), f.t);
   }
 }
 
@@ -117,8 +132,6 @@ void stack_shadow_pass_reference(const client::Map& map, const ShadowPassInput& 
   const StackGrid* g = client::MapAccess::remote(map).stack_grid();
   if (!g) throw GpuError("stack_shadow_pass_reference: not a stack map");
   const uint32_t finest = g->geo.n;
-  const float side = std::ldexp(1.0f, int(finest));
-  const uint32_t top = (1u << finest) - 1;
   const uint32_t r = std::clamp<uint32_t>(in.kernel, 1, Evaluator::kMaxPcf);
   // r x r PCF in slice w at `level` (st_stack_pcf): lit taps / (r * r), taps clamped.
   auto pcf = [&](uint32_t w, uint32_t level, uint32_t x, uint32_t y, float d) {
@@ -130,26 +143,13 @@ void stack_shadow_pass_reference(const client::Map& map, const ShadowPassInput& 
     return float(lit) / float(r * r);
   };
   auto slice = [&](size_t p, uint32_t w) {
-    const ShadowLight l = shadow_light(g->light(w));
-    Point c;
-    if (!light_point(l, in, p, c) || !(c.u >= 0 && c.u < 1 && c.v >= 0 && c.v < 1 && c.d >= 0 && c.d <= 1))
-      return 1.0f;
-    const uint32_t x = std::min(uint32_t(std::floor(c.u * side)), top);
-    const uint32_t y = std::min(uint32_t(std::floor(c.v * side)), top);
-    float footprint = in.footprint;
-    if (in.neighbour_footprint) {
-      float f = 0;
-      Point nb;
-      const size_t px = p % in.width, py = p / in.width;
-      if (px + 1 < in.width && light_point(l, in, p + 1, nb))
-        f = std::max(f, std::max(std::fabs(nb.u - c.u), std::fabs(nb.v - c.v)));
-      if (py + 1 < in.height && light_point(l, in, p + in.width, nb))
-        f = std::max(f, std::max(std::fabs(nb.u - c.u), std::fabs(nb.v - c.v)));
-      footprint = f * side;
-    }
-    const FilterLevels f = filter_levels(finest, footprint);
-    const float a = pcf(w, f.fine, x >> (finest - f.fine), y >> (finest - f.fine), c.d);
-    return f.t == 0.0f ? a : filter_blend(a, pcf(w, f.coarse, x >> (finest - f.coarse), y >> (finest - f.coarse), c.d), f.t);
+    Texel t;
+    if (!pixel_texel(shadow_light(g->light(w)), in, p, finest, t)) return 1.0f;
+    const FilterLevels f = filter_levels(finest, t.footprint);
+    const float a = pcf(w, f.fine, t.x >> (finest - f.fine), t.y >> (finest - f.fine), t.c.d);
+    return f.t == 0.0f
+               ? a
+               : filter_blend(a, pcf(w, f.coarse, t.x >> (finest - f.coarse), t.y >> (finest - f.coarse), t.c.d), f.t);
   };
   const StackTime t = stack_time(g->slices, in.time);
   const size_t pixels = size_t(in.width) * in.height;
