@@ -23,8 +23,8 @@ double since(std::chrono::steady_clock::time_point t0) {
 // Embree tracer for a perspective sample.
 class SliceTracer {
  public:
-  SliceTracer(const Scene& scene, const LightSpace& light) {
-    if (light.kind() == LightKind::sun)
+  SliceTracer(const Scene& scene, const LightSpace& light, bool embree_only = false) {
+    if (light.kind() == LightKind::sun && !embree_only)
       raster_ = std::make_unique<RasterBounds>(scene, light, RasterSkip::exact);
     else
       embree_ = std::make_unique<DepthBoundsTracer>(scene, light);
@@ -42,7 +42,7 @@ class SliceTracer {
 
 std::string trace_stack_to_spill(const Scene& scene, const LightSet& set, StackSpill& spill, bool* exit_depths,
                                  const std::function<void(uint32_t, uint32_t)>& progress,
-                                 const std::function<void(uint32_t, const IntervalTile&)>& slice) {
+                                 const std::function<void(uint32_t, const IntervalTile&)>& slice, bool embree_only) {
   const uint32_t n = set.size();
   const uint32_t level = spill.geo().n;
   const uint64_t side = spill.side(), bs = spill.block_side();
@@ -53,7 +53,7 @@ std::string trace_stack_to_spill(const Scene& scene, const LightSet& set, StackS
     throw Error("build: whole slices of " + std::to_string(side) + "^2 texels exceed one trace call");
   std::string by;
   for (uint32_t w = 0; w < n; ++w) {
-    const SliceTracer tracer(scene, set.samples[w]);
+    const SliceTracer tracer(scene, set.samples[w], embree_only);
     by = tracer.name();
     if (exit_depths) *exit_depths = tracer.exit_depths();
     for (uint64_t y0 = 0; y0 < side; y0 += rows) {

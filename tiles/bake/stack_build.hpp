@@ -54,10 +54,12 @@ StackBuildReport build_stack_pack(const Scene& scene, const LightSetSpec& spec, 
 
 // Traces slice w of `set` at `level` into `spill` (full-width strips of whole blocks), the
 // rasterizer for sun samples, Embree otherwise. `slice` (if given) also gets each whole
-// slice (one slice in memory: a benchmark's 2D comparison). Returns "raster" or "embree".
+// slice (one slice in memory: a benchmark's 2D comparison). `embree_only`: Embree for
+// every sample (the benchmark's before/after). Returns "raster" or "embree".
 std::string trace_stack_to_spill(const Scene& scene, const LightSet& set, StackSpill& spill, bool* exit_depths = nullptr,
                                  const std::function<void(uint32_t, uint32_t)>& progress = {},
-                                 const std::function<void(uint32_t w, const IntervalTile&)>& slice = {});
+                                 const std::function<void(uint32_t w, const IntervalTile&)>& slice = {},
+                                 bool embree_only = false);
 
 // The N slices of level `level` of a light set, traced into memory (tests, small
 // benchmarks): at most kMaxResidentStackTexels texels.
