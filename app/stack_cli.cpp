@@ -68,10 +68,13 @@ void verify_stack_pack(const std::string& pack, const std::string& scene_spec, c
   if (double(side) * double(side) * g.slices > double(kMaxResidentStackTexels))
     throw Error("verify: the stack's " + std::to_string(g.slices) + " slices of " + std::to_string(side) +
                 "^2 exceed the 2^28 texels verify re-traces");
+  // Re-trace with the builder the pack records (packs from before it: Embree).
+  std::string builder = "embree";
+  for (const auto& [k, v] : reader->params())
+    if (k == "builder") builder = v;
   uint64_t bad = 0, checked = 0;
   for (uint32_t w = 0; w < g.slices; ++w) {
-    DepthBoundsTracer tracer(scene, g.light(w));
-    const IntervalTile t = tracer.trace({n, 0, 0, uint32_t(side), uint32_t(side)});
+    const IntervalTile t = trace_slice(scene, g.light(w), {n, 0, 0, uint32_t(side), uint32_t(side)}, builder != "raster");
     for (uint64_t y = 0; y < side; ++y)
       for (uint64_t x = 0; x < side; ++x) {
         const Interval iv = t.data[y * side + x];

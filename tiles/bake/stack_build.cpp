@@ -40,6 +40,10 @@ class SliceTracer {
 
 }  // namespace
 
+IntervalTile trace_slice(const Scene& scene, const LightSpace& light, const TraceRegion& region, bool embree) {
+  return SliceTracer(scene, light, embree).trace(region);
+}
+
 std::string trace_stack_to_spill(const Scene& scene, const LightSet& set, StackSpill& spill, bool* exit_depths,
                                  const std::function<void(uint32_t, uint32_t)>& progress,
                                  const std::function<void(uint32_t, const IntervalTile&)>& slice, bool embree_only) {
@@ -135,6 +139,7 @@ StackBuildReport build_stack_pack(const Scene& scene, const LightSetSpec& spec, 
   pp.compression_level = o.compression_level;
   pp.build_params = {{"light", o.light_spec.empty() ? spec.to_string() : o.light_spec},
                      {"scene", o.scene_spec.empty() ? scene.name : o.scene_spec},
+                     {"builder", r.bounds_by},
                      {"slices", std::to_string(set.size())},
                      {"tool", "shadowtile 0.1.0"}};
   std::sort(pp.build_params.begin(), pp.build_params.end());

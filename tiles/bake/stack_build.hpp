@@ -17,6 +17,7 @@
 #include <optional>
 #include <string>
 
+#include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/scene.hpp"
 #include "tiles/build/mh_octree_build.hpp"
 #include "tiles/build/stack_blocked.hpp"
@@ -60,6 +61,11 @@ std::string trace_stack_to_spill(const Scene& scene, const LightSet& set, StackS
                                  const std::function<void(uint32_t, uint32_t)>& progress = {},
                                  const std::function<void(uint32_t w, const IntervalTile&)>& slice = {},
                                  bool embree_only = false);
+
+// One slice's bounds of a region as a stack build traces it: the rasterizer for a sun
+// sample, Embree for a spot or when `embree` (a pack recorded as built by Embree; the two
+// may differ in edge texels, so `verify` re-traces with the recorded builder).
+IntervalTile trace_slice(const Scene& scene, const LightSpace& light, const TraceRegion& region, bool embree = false);
 
 // The N slices of level `level` of a light set, traced into memory (tests, small
 // benchmarks): at most kMaxResidentStackTexels texels.
