@@ -92,6 +92,10 @@ TEST(StackBlocked, SameGridTilesAndPackAsTheOneShotBuild) {
   const IntervalStack r = stacks::random_stack(5, 6, 5);
   EXPECT_GT(expect_blocked_equals_one_shot(r, std::nullopt, 200, "random 32^2 x 6, 200-byte tiles"),
             default_stack_skip_level(build_octree(r).geo));
+  // Two levels deeper (3 -> 5): one probing pass finds it.
+  const IntervalStack r2 = stacks::random_stack(6, 4, 6);
+  EXPECT_EQ(expect_blocked_equals_one_shot(r2, std::nullopt, 100, "random 64^2 x 4, 100-byte tiles"),
+            default_stack_skip_level(build_octree(r2).geo) + 2);
 }
 
 TEST(StackBlocked, SpillRefusesRowsOffTheBlockLayout) {

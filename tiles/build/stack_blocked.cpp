@@ -155,7 +155,9 @@ void BlockedStackCut::run(const StackSpill& spill, uint32_t K, uint32_t tile_byt
                   " cells, above the 2^22 a stack grid holds; raise --tile-bytes");
     if (::ftruncate(fd_, 0) != 0) throw Error("stack cut: cannot truncate '" + path_ + "'");
     tiles_.clear();
+    const double earlier = st.reduce_seconds;
     st = BlockedCutStats{};
+    st.reduce_seconds = earlier;
     auto t0 = std::chrono::steady_clock::now();
     std::vector<Interval> iv(grid.cells(B), Interval{-FLT_MAX, FLT_MAX});
     std::vector<uint8_t> mask(grid.cells(B), 0);
@@ -163,45 +165,78 @@ void BlockedStackCut::run(const StackSpill& spill, uint32_t K, uint32_t tile_byt
     for (uint32_t l = B + 1; l <= K; ++l) fine[l].assign(grid.cells(l), std::numeric_limits<float>::quiet_NaN());
     uint64_t largest = 0, largest_cell = 0, at = 0;
     const uint32_t rel = K - B;
-    for (uint64_t bw = 0; bw < nwB && bw * spill.block_slices() < spill.slices() && largest <= tile_bytes; ++bw)
-      for (uint64_t by = 0; by < nxB && largest <= tile_bytes; ++by)
-        for (uint64_t bx = 0; bx < nxB && largest <= tile_bytes; ++bx) {
+    // Past the tile bound the rest of this pass only probes: each remaining block (and
+    // the one that failed) finds the shallowest cut >= `need` its own cells fit, so one
+    // more pass at the deepest of those replaces a pass per level (that pass checks every
+    // block again, so the result is cut_stack's whichever way the sizes go).
+    bool probing = false;
+    uint32_t need = K;
+    auto block_fits = [&](const OctHierarchy& sub, uint32_t Kp, uint64_t bx, uint64_t by, uint64_t bw, uint64_t& size,
+                          uint64_t& cell) {
+      const uint32_t r = Kp - B, da = g.xy_bits(Kp) - g.xy_bits(B), dw = g.w_bits(Kp) - g.w_bits(B);
+      std::vector<size_t> cursor(sub.geo.depth() + 1, 0);
+      size = 0;
+      for (const OctNode& cr : sub.levels[r]) {
+        if (!cr.child_mask) continue;
+        const uint64_t bytes = encode_octree(cell_subtree(sub, r, cr, 0.0f, cursor)).size();
+        if (bytes <= size) continue;
+        uint64_t x, y, w;
+        oct_coords(sub.geo, r, cr.code, x, y, w);
+        size = bytes, cell = grid.index(Kp, (bx << da) + x, (by << da) + y, (bw << dw) + w);
+      }
+      return size <= tile_bytes;
+    };
+    auto too_big = [&](uint64_t cell, uint64_t size) {
+      return Error("stack cut: cell " + std::to_string(cell) + " encodes to " + std::to_string(size) +
+                   " bytes, above --tile-bytes " + std::to_string(tile_bytes) + " even one level above the leaves");
+    };
+    for (uint64_t bw = 0; bw < nwB && bw * spill.block_slices() < spill.slices(); ++bw)
+      for (uint64_t by = 0; by < nxB; ++by)
+        for (uint64_t bx = 0; bx < nxB; ++bx) {
           const OctHierarchy sub = build_octree(spill.read_block(bx, by, bw), kB);
-          ++st.blocks;
-          st.octree_nodes += sub.node_count() - 1;
-          st.max_block_nodes = std::max<uint64_t>(st.max_block_nodes, sub.node_count());
-          const OctNode& root = sub.levels[0][0];
-          const uint64_t code = oct_code(g, B, bx, by, bw);
-          iv[code] = Interval{root.lo, root.hi};
-          mask[code] = root.child_mask;
-          for (uint32_t j = 1; j <= rel; ++j) {
-            const uint32_t l = B + j, da = g.xy_bits(l) - g.xy_bits(B), dw = g.w_bits(l) - g.w_bits(B);
-            for (const OctNode& nd : sub.levels[j]) {
-              if (!nd.has_value) continue;
-              uint64_t x, y, w;
-              oct_coords(sub.geo, j, nd.code, x, y, w);
-              fine[l][grid.index(l, (bx << da) + x, (by << da) + y, (bw << dw) + w)] = nd.value;
+          if (!probing) {
+            ++st.blocks;
+            st.octree_nodes += sub.node_count() - 1;
+            st.max_block_nodes = std::max<uint64_t>(st.max_block_nodes, sub.node_count());
+            const OctNode& root = sub.levels[0][0];
+            const uint64_t code = oct_code(g, B, bx, by, bw);
+            iv[code] = Interval{root.lo, root.hi};
+            mask[code] = root.child_mask;
+            for (uint32_t j = 1; j <= rel; ++j) {
+              const uint32_t l = B + j, da = g.xy_bits(l) - g.xy_bits(B), dw = g.w_bits(l) - g.w_bits(B);
+              for (const OctNode& nd : sub.levels[j]) {
+                if (!nd.has_value) continue;
+                uint64_t x, y, w;
+                oct_coords(sub.geo, j, nd.code, x, y, w);
+                fine[l][grid.index(l, (bx << da) + x, (by << da) + y, (bw << dw) + w)] = nd.value;
+              }
             }
+            const uint32_t da = g.xy_bits(K) - g.xy_bits(B), dw = g.w_bits(K) - g.w_bits(B);
+            std::vector<size_t> cursor(sub.geo.depth() + 1, 0);
+            for (const OctNode& cr : sub.levels[rel]) {
+              if (!cr.child_mask) continue;
+              uint64_t x, y, w;
+              oct_coords(sub.geo, rel, cr.code, x, y, w);
+              const uint64_t cell = grid.index(K, (bx << da) + x, (by << da) + y, (bw << dw) + w);
+              const std::vector<uint8_t> bytes = encode_octree(cell_subtree(sub, rel, cr, 0.0f, cursor));
+              write_all(fd_, bytes.data(), bytes.size(), at, path_);
+              tiles_.push_back({cell, at, uint32_t(bytes.size())});
+              at += bytes.size();
+              if (bytes.size() > largest) largest = bytes.size(), largest_cell = cell;
+            }
+            if (largest <= tile_bytes) continue;
+            if (K + 1 >= L) throw too_big(largest_cell, largest);
+            probing = true, need = K + 1;
           }
-          const uint32_t da = g.xy_bits(K) - g.xy_bits(B), dw = g.w_bits(K) - g.w_bits(B);
-          std::vector<size_t> cursor(sub.geo.depth() + 1, 0);
-          for (const OctNode& cr : sub.levels[rel]) {
-            if (!cr.child_mask) continue;
-            uint64_t x, y, w;
-            oct_coords(sub.geo, rel, cr.code, x, y, w);
-            const uint64_t cell = grid.index(K, (bx << da) + x, (by << da) + y, (bw << dw) + w);
-            const std::vector<uint8_t> bytes = encode_octree(cell_subtree(sub, rel, cr, 0.0f, cursor));
-            write_all(fd_, bytes.data(), bytes.size(), at, path_);
-            tiles_.push_back({cell, at, uint32_t(bytes.size())});
-            at += bytes.size();
-            if (bytes.size() > largest) largest = bytes.size(), largest_cell = cell;
+          uint64_t size = 0, cell = 0;
+          while (!block_fits(sub, need, bx, by, bw, size, cell)) {
+            if (need + 1 >= L) throw too_big(cell, size);
+            ++need;
           }
         }
-    st.reduce_seconds = since(t0);
-    if (largest > tile_bytes) {
-      if (K + 1 >= L)
-        throw Error("stack cut: cell " + std::to_string(largest_cell) + " encodes to " + std::to_string(largest) +
-                    " bytes, above --tile-bytes " + std::to_string(tile_bytes) + " even one level above the leaves");
+    st.reduce_seconds += since(t0);
+    if (probing) {
+      K = need - 1;  // the loop's ++K
       continue;
     }
     t0 = std::chrono::steady_clock::now();
