@@ -98,6 +98,26 @@ TEST(StackBlocked, SameGridTilesAndPackAsTheOneShotBuild) {
             default_stack_skip_level(build_octree(r2).geo) + 2);
 }
 
+TEST(StackBlocked, SpillRegionsAndRowsLandOnTheSameTexels) {
+  const IntervalStack s = stacks::random_stack(4, 2, 8);
+  StackSpill spill(tmp("regions.spill"), 4, 2, 2);  // blocks of 4 x 4 texels
+  spill.write_rows(1, 0, 16, std::span<const Interval>(s.data.data() + 256, 256));
+  for (uint64_t y0 = 0; y0 < 16; y0 += 8)
+    for (uint64_t x0 = 0; x0 < 16; x0 += 8) {
+      std::vector<Interval> part;
+      for (uint64_t y = y0; y < y0 + 8; ++y)
+        for (uint64_t x = x0; x < x0 + 8; ++x) part.push_back(s.at(x, y, 0));
+      spill.write_region(0, x0, y0, 8, 8, part);
+    }
+  for (uint32_t w = 0; w < 2; ++w)
+    for (uint64_t y = 0; y < 16; ++y)
+      for (uint64_t x = 0; x < 16; ++x) {
+        const Interval a = spill.texel(x, y, w), b = s.at(x, y, w);
+        ASSERT_TRUE(a.lo == b.lo && a.hi == b.hi) << x << ", " << y << ", " << w;
+      }
+  EXPECT_THROW(spill.write_region(0, 2, 0, 4, 4, std::vector<Interval>(16)), Error);
+}
+
 TEST(StackBlocked, SpillRefusesRowsOffTheBlockLayout) {
   StackSpill spill(tmp("bad.spill"), 4, 2, 2);  // blocks of 4 x 4 texels
   std::vector<Interval> rows(16 * 2, Interval{0.5f, 0.5f});

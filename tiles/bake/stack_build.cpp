@@ -51,8 +51,12 @@ std::string trace_stack_to_spill(const Scene& scene, const LightSet& set, StackS
   const uint32_t level = spill.geo().n;
   const uint64_t side = spill.side(), bs = spill.block_side();
   if (n != spill.slices()) throw Error("build: the spill holds " + std::to_string(spill.slices()) + " slices, not " + std::to_string(n));
-  // Strips of whole block rows, about 2^22 texels (32 MiB of intervals) each.
-  const uint64_t rows = slice ? side : std::max<uint64_t>(bs, std::min<uint64_t>(side, ((uint64_t(1) << 22) / side) / bs * bs));
+  // Regions of whole blocks, about 2^22 texels (32 MiB of intervals) each: full-width
+  // strips, or (a block row above 2^22 texels) one block row cut across.
+  const uint64_t budget = uint64_t(1) << 22;
+  const uint64_t cols = slice ? side : std::max<uint64_t>(bs, std::min<uint64_t>(side, budget / bs / bs * bs));
+  const uint64_t rows = slice || cols < side ? (slice ? side : bs)
+                                             : std::max<uint64_t>(bs, std::min<uint64_t>(side, budget / side / bs * bs));
   if (slice && side * side > DepthBoundsTracer::kMaxRegionTexels)
     throw Error("build: whole slices of " + std::to_string(side) + "^2 texels exceed one trace call");
   std::string by;
@@ -60,11 +64,12 @@ std::string trace_stack_to_spill(const Scene& scene, const LightSet& set, StackS
     const SliceTracer tracer(scene, set.samples[w], embree_only);
     by = tracer.name();
     if (exit_depths) *exit_depths = tracer.exit_depths();
-    for (uint64_t y0 = 0; y0 < side; y0 += rows) {
-      const IntervalTile t = tracer.trace({level, 0, y0, uint32_t(side), uint32_t(rows)});
-      spill.write_rows(w, y0, rows, t.data);
-      if (slice) slice(w, t);
-    }
+    for (uint64_t y0 = 0; y0 < side; y0 += rows)
+      for (uint64_t x0 = 0; x0 < side; x0 += cols) {
+        const IntervalTile t = tracer.trace({level, x0, y0, uint32_t(cols), uint32_t(rows)});
+        spill.write_region(w, x0, y0, cols, rows, t.data);
+        if (slice) slice(w, t);
+      }
     if (progress) progress(w + 1, n);
   }
   return by;

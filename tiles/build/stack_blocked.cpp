@@ -87,17 +87,20 @@ uint64_t StackSpill::offset(uint64_t x, uint64_t y, uint64_t w) const {
   return sizeof(Interval) * (((c * bw_ + w % bw_) * bs_ + y % bs_) * bs_ + x % bs_);
 }
 
-void StackSpill::write_rows(uint32_t w, uint64_t y0, uint64_t rows, std::span<const Interval> data) {
+void StackSpill::write_region(uint32_t w, uint64_t x0, uint64_t y0, uint64_t width, uint64_t rows,
+                              std::span<const Interval> data) {
   const uint64_t s = side();
-  if (w >= slices_ || y0 % bs_ || rows % bs_ || y0 + rows > s || data.size() != rows * s)
-    throw Error("stack spill: rows " + std::to_string(y0) + "+" + std::to_string(rows) + " of slice " +
-                std::to_string(w) + " do not fit the block layout");
+  if (w >= slices_ || x0 % bs_ || y0 % bs_ || width % bs_ || rows % bs_ || x0 + width > s || y0 + rows > s ||
+      data.size() != rows * width)
+    throw Error("stack spill: region (" + std::to_string(x0) + ", " + std::to_string(y0) + ") " +
+                std::to_string(width) + " x " + std::to_string(rows) + " of slice " + std::to_string(w) +
+                " does not fit the block layout");
   std::vector<Interval> buf(bs_ * bs_);
   for (uint64_t by = 0; by < rows; by += bs_)
-    for (uint64_t bx = 0; bx < s; bx += bs_) {
+    for (uint64_t bx = 0; bx < width; bx += bs_) {
       for (uint64_t y = 0; y < bs_; ++y)
-        std::memcpy(&buf[y * bs_], &data[(by + y) * s + bx], bs_ * sizeof(Interval));
-      write_all(fd_, buf.data(), buf.size() * sizeof(Interval), offset(bx, y0 + by, w), path_);
+        std::memcpy(&buf[y * bs_], &data[(by + y) * width + bx], bs_ * sizeof(Interval));
+      write_all(fd_, buf.data(), buf.size() * sizeof(Interval), offset(x0 + bx, y0 + by, w), path_);
     }
 }
 

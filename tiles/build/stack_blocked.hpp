@@ -52,7 +52,13 @@ class StackSpill {
 
   // Full-width rows y0 .. y0 + rows - 1 of slice w (data: rows x side, row-major); y0 and
   // rows are multiples of block_side().
-  void write_rows(uint32_t w, uint64_t y0, uint64_t rows, std::span<const Interval> data);
+  void write_rows(uint32_t w, uint64_t y0, uint64_t rows, std::span<const Interval> data) {
+    write_region(w, 0, y0, side(), rows, data);
+  }
+  // The region [x0, x0 + width) x [y0, y0 + rows) of slice w (data: rows x width,
+  // row-major); x0, y0, width and rows are multiples of block_side().
+  void write_region(uint32_t w, uint64_t x0, uint64_t y0, uint64_t width, uint64_t rows,
+                    std::span<const Interval> data);
   // Block (bx, by, bw) of level B: its real slices (>= 1, else throws), local coordinates.
   IntervalStack read_block(uint64_t bx, uint64_t by, uint64_t bw) const;
   Interval texel(uint64_t x, uint64_t y, uint32_t w) const;
