@@ -4,10 +4,10 @@
 // light's perspective samples), builds the stack's octree (MH 2016 §4), cuts it at a skip
 // level in (x, y, w) and writes a stack pack (tiles/PACK.md "Stack packs").
 //
-// Out of core (tiles/build/stack_blocked.hpp): each slice is traced in strips and
+// Out of core (tiles/build/stack_blocked.hpp): each slice is traced in regions and
 // spilled to a file next to the output in blocks of the octree; the blocks are read back
-// and reduced one at a time and the tiles streamed into the pack, so memory is one slice
-// strip, one block (2^24 texels) and the octree's top levels, whatever N x R^2. The spill
+// and reduced one at a time and the tiles streamed into the pack, so memory is one traced
+// region, one block (2^24 texels) and the octree's top levels, whatever N x R^2. The spill
 // needs 8 bytes per texel per slice on disk for the build's duration (checked first).
 // Limits: slices up to 2^16 a side, kMaxStackTexels texels in all.
 #pragma once
@@ -53,7 +53,7 @@ struct StackBuildReport {
 StackBuildReport build_stack_pack(const Scene& scene, const LightSetSpec& spec, const StackBuildOptions& o,
                                   const std::string& out);
 
-// Traces slice w of `set` at `level` into `spill` (full-width strips of whole blocks), the
+// Traces every slice of `set` into `spill` (block-aligned regions of about 2^22 texels), the
 // rasterizer for sun samples, Embree otherwise. `slice` (if given) also gets each whole
 // slice (one slice in memory: a benchmark's 2D comparison). `embree_only`: Embree for
 // every sample (the benchmark's before/after). Returns "raster" or "embree".
