@@ -37,9 +37,11 @@ void run_stack_build(const StackBuildArgs& a) {
               a.out.c_str(), r.slices, side, r.skip_level, (unsigned long long)r.cells, (unsigned long long)r.tiles,
               (unsigned long long)r.max_tile_bytes, double(r.pack_bytes) / (1 << 20),
               100.0 * double(r.pack_bytes) / (side * side * 4 * r.slices));
-  std::printf("  trace %.1f s, octree %.1f s (%llu nodes), cut+encode %.1f s, write %.1f s; exit depths %s\n",
-              r.trace_seconds, r.octree_seconds, (unsigned long long)r.octree_nodes, r.cut_seconds, r.write_seconds,
-              r.exit_depths ? "yes" : "no (no closed mesh)");
+  std::printf("  trace %.1f s (%s), octree+encode %.1f s (%llu nodes, %llu blocks of level %u), top+patch %.1f s, "
+              "write %.1f s; exit depths %s; spilled %.1f MiB\n",
+              r.trace_seconds, r.bounds_by.c_str(), r.octree_seconds, (unsigned long long)r.octree_nodes,
+              (unsigned long long)r.blocks, r.block_level, r.cut_seconds, r.write_seconds,
+              r.exit_depths ? "yes" : "no (no closed mesh)", double(r.spill_bytes) / (1 << 20));
 }
 
 void verify_stack_pack(const std::string& pack, const std::string& scene_spec, const std::string& up,
@@ -63,13 +65,16 @@ void verify_stack_pack(const std::string& pack, const std::string& scene_spec, c
   const ResidentStack rs(*reader);
   const uint32_t n = g.geo.n;
   const uint64_t side = uint64_t(1) << n;
-  if (double(side) * double(side) * g.slices > double(kMaxStackTexels))
+  if (double(side) * double(side) * g.slices > double(kMaxResidentStackTexels))
     throw Error("verify: the stack's " + std::to_string(g.slices) + " slices of " + std::to_string(side) +
                 "^2 exceed the 2^28 texels verify re-traces");
+  // Re-trace with the builder the pack records (packs from before it: Embree).
+  std::string builder = "embree";
+  for (const auto& [k, v] : reader->params())
+    if (k == "builder") builder = v;
   uint64_t bad = 0, checked = 0;
   for (uint32_t w = 0; w < g.slices; ++w) {
-    DepthBoundsTracer tracer(scene, g.light(w));
-    const IntervalTile t = tracer.trace({n, 0, 0, uint32_t(side), uint32_t(side)});
+    const IntervalTile t = trace_slice(scene, g.light(w), {n, 0, 0, uint32_t(side), uint32_t(side)}, builder != "raster");
     for (uint64_t y = 0; y < side; ++y)
       for (uint64_t x = 0; x < side; ++x) {
         const Interval iv = t.data[y * side + x];

@@ -4,11 +4,17 @@
 //
 //   bench_stacks [--res 256] [--city-samples 32] [--hair-samples 64] [--lookups 20000]
 //                [--reps 3] [--case city|city-hour|hairball|all] [--hair-jitter 0.5] [--json PATH]
+//                [--mode auto|whole|blocked] [--tracer auto|embree] [--spill-dir /tmp]
+//
+// --mode whole (the default below 4K^2 per slice) holds the stack in memory and builds
+// one octree buffer; --mode blocked (from 4K^2) spills and builds the pack's cut out of
+// core (run_case_blocked below). Peak RSS is printed (getrusage).
 //
 // Cases: procedural:city under a day's sun path (azimuth 100..260, elevation 25..65), the
 // same city under an hour of it (azimuth 170..185, elevation 50..52), and
 // procedural:hairball under a 4 m x 4 m area light 25 m above it (Hilbert-ordered,
-// jitter 0.5). Each slice is traced with Embree (DepthBoundsTracer), then
+// jitter 0.5). Each slice is traced by trace_stack (the light-space rasterizer for sun
+// samples, Embree for the area light's; --tracer embree: Embree for all), then
 //   octree: build_octree + encode_octree of the whole stack;
 //   2D:     build_hierarchy + encode_mh of every slice (what N separate packs would hold).
 // Lookups run on receivers that lie on visible surfaces of sample 0 (its depth map's first
@@ -23,6 +29,8 @@
 //   soft 2D      : N 2D evaluator lit tests (N separate quadtrees)
 // Times are medians over --reps of thread CPU time per lookup; the table also gives each
 // against the 2D single lookup measured in the same run.
+#include <sys/resource.h>
+
 #include <algorithm>
 #include <chrono>
 #include <ctime>
@@ -38,6 +46,10 @@
 #include "common/hash.hpp"
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/scene.hpp"
+#include "tiles/bake/stack_build.hpp"
+#include "tiles/build/stack_blocked.hpp"
+#include "tiles/build/stack_pack.hpp"
+#include "tiles/core/stack_map.hpp"
 #include "tiles/build/encode.hpp"
 #include "tiles/build/mh_build.hpp"
 #include "tiles/build/mh_octree_encode.hpp"
@@ -73,11 +85,17 @@ double median_ns(int reps, size_t count, F&& body) {
 
 volatile float g_sink = 0;
 
+double peak_rss_mib() {
+  rusage ru{};
+  getrusage(RUSAGE_SELF, &ru);
+  return double(ru.ru_maxrss) / 1024.0;
+}
+
 struct Case {
   std::string name, scene, light;
 };
 
-nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps) {
+nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps, bool embree_only) {
   std::printf("\n== %s: %s, %s, %u^2 per slice\n", c.name.c_str(), c.scene.c_str(), c.light.c_str(), 1u << level);
   std::fflush(stdout);
   const st::Scene scene = st::load_scene(c.scene);
@@ -88,11 +106,15 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps)
   // Trace every slice.
   auto t0 = Clock::now();
   st::IntervalStack stack{level, n, {}};
-  stack.data.reserve(size_t(side) * side * n);
-  for (uint32_t w = 0; w < n; ++w) {
-    st::DepthBoundsTracer tracer(scene, set.samples[w]);
-    const st::IntervalTile t = tracer.trace({level, 0, 0, side, side});
-    stack.data.insert(stack.data.end(), t.data.begin(), t.data.end());
+  if (embree_only) {
+    stack.data.reserve(size_t(side) * side * n);
+    for (uint32_t w = 0; w < n; ++w) {
+      st::DepthBoundsTracer tracer(scene, set.samples[w]);
+      const st::IntervalTile t = tracer.trace({level, 0, 0, side, side});
+      stack.data.insert(stack.data.end(), t.data.begin(), t.data.end());
+    }
+  } else {
+    stack = st::trace_stack(scene, set, level);  // the rasterizer for sun samples
   }
   const double trace_s = since(t0);
 
@@ -235,6 +257,7 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps)
   row("soft, N 2D lookups", ns_soft2d);
   std::printf("soft per sample: shared %.1f ns, N octree walks %.1f ns, 2D %.1f ns; shared walk nodes per point %.1f\n",
               ns_soft / n, ns_indep / n, ns_soft2d / n, double(visited) / double(ms));
+  std::printf("peak RSS %.0f MiB\n", peak_rss_mib());
   std::printf("bounded early stop: %.1f ns per sample, nodes per point %.1f; bounds %.2f s, %zu bytes\n",
               ns_bounded / n, double(visited_b) / double(ms), bounds_s, sbounds.bytes());
 
@@ -250,6 +273,8 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps)
           {"mh2d_nodes", mh_nodes},
           {"raw_bytes", raw},
           {"trace_s", trace_s},
+          {"tracer", embree_only ? "embree" : "auto"},
+          {"peak_rss_mib", peak_rss_mib()},
           {"octree_build_s", oct_build_s},
           {"octree_encode_s", oct_encode_s},
           {"mh2d_build_s", mh_build_s},
@@ -281,6 +306,206 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps)
             {"largest_repeated_words", share.largest_repeated_words}}}};
 }
 
+
+// Out-of-core mode (--blocked, the default from 4K^2 per slice): the slices are traced
+// (rasterizer for suns, Embree for the area light; --tracer embree forces Embree) into a
+// spill file in octree blocks and reduced block by block into the stack pack's cut
+// (tiles/build/stack_blocked.hpp); "octree bytes" are then the pack's raw octree tiles plus
+// its grid (the cut at skip level K), and the octree lookups go through StackMap over the
+// resident tiles (what a client holding the whole pack does). The N 2D quadtrees are built
+// from each slice as it is traced (one slice in memory at a time).
+nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, int reps, bool embree_only,
+                                const std::string& spill_dir) {
+  std::printf("\n== %s (blocked): %s, %s, %u^2 per slice\n", c.name.c_str(), c.scene.c_str(), c.light.c_str(), 1u << level);
+  std::fflush(stdout);
+  const st::Scene scene = st::load_scene(c.scene);
+  const st::LightSet set = st::LightSet::fit(st::LightSetSpec::parse(c.light), scene.bounds());
+  const uint32_t n = set.size();
+  const uint64_t side = uint64_t(1) << level;
+  uint32_t k = 0;
+  while ((1u << k) < n) ++k;
+  const st::moct::Geometry g{level, k};
+  const uint32_t K = st::default_stack_skip_level(g);
+  const uint32_t B = st::stack_block_level(g, K, st::kStackBlockTexels);
+  const std::string spill_path = spill_dir + "/bench_stacks_" + std::to_string(::getpid()) + ".spill";
+  st::StackSpill spill(spill_path, level, n, B);
+
+  // Trace (and the 2D quadtrees of each slice, and receivers from slice 0).
+  std::vector<std::vector<uint8_t>> mh(n);
+  size_t mh_bytes = 0, mh_nodes = 0;
+  double mh_build_s = 0, mh_encode_s = 0, hook_s = 0;
+  st::Rng rng(7);
+  std::vector<st::Vec3d> pts;
+  std::vector<uint32_t> ws;
+  std::vector<double> times;
+  auto t0 = Clock::now();
+  const std::string by = st::trace_stack_to_spill(
+      scene, set, spill, nullptr, {},
+      [&](uint32_t w, const st::IntervalTile& tile) {
+        const auto h0 = Clock::now();
+        if (w == 0) {
+          size_t tries = 0;
+          while (pts.size() < lookups && tries++ < lookups * 1000) {
+            const uint64_t x = rng.next() % side, y = rng.next() % side;
+            const st::Interval iv = tile.data[y * side + x];
+            if (iv.lo >= st::kLitDepth) continue;
+            const st::LightSpace& ls = set.samples[0];
+            const st::LightRay ray = ls.texel_ray(level, x, y);
+            const double d = std::max(0.0, double(iv.lo) - 1e-4);
+            const double t = ls.kind() == st::LightKind::sun ? d : ls.near_plane() + d * (ls.far_plane() - ls.near_plane());
+            pts.push_back(ray.origin + ray.dir * t);
+            ws.push_back(uint32_t(rng.next() % n));
+            times.push_back(rng.uniform());
+          }
+        }
+        auto b0 = Clock::now();
+        const st::Hierarchy h = st::build_hierarchy(tile);
+        mh_build_s += since(b0);
+        b0 = Clock::now();
+        mh[w] = st::encode_mh(h);
+        mh_encode_s += since(b0);
+        mh_bytes += mh[w].size();
+        mh_nodes += h.node_count();
+        hook_s += since(h0);
+        std::printf("  slice %u/%u traced (%.0f s)\r", w + 1, n, since(t0));
+        std::fflush(stdout);
+      },
+      embree_only);
+  const double trace_s = since(t0) - hook_s;
+  std::printf("\n");
+  const double rss_trace = peak_rss_mib();
+
+  // The blocked octree and its cut.
+  t0 = Clock::now();
+  st::BlockedCutStats bst;
+  st::BlockedStackCut cut(spill, K, 64 * 1024, spill_path + ".tiles", &bst);
+  const double oct_s = since(t0);
+  const double rss_build = peak_rss_mib();
+  cut.grid.light_kind = set.samples[0].kind();
+  for (const st::LightSpace& l : set.samples) cut.grid.lights.push_back(l.to_array());
+  cut.grid.spec = set.spec.to_string();
+  const size_t grid_bytes = cut.grid.serialize().size();
+  const size_t oct_bytes = cut.tile_bytes_total + grid_bytes;
+
+  // Resident tiles and the pack lookups.
+  std::vector<uint64_t> cells;
+  std::vector<std::vector<uint8_t>> bufs;
+  std::vector<st::MhOctree> trees;
+  for (size_t i = 0; i < cut.tile_count(); ++i) {
+    auto [cell, b] = cut.tile(i);
+    cells.push_back(cell);
+    bufs.push_back(std::move(b));
+  }
+  trees.reserve(bufs.size());
+  for (const auto& b : bufs) trees.push_back(st::MhOctree::open(b));
+  const st::StackMap map(cut.grid, [&](uint64_t cell) -> const st::MhOctree* {
+    auto it = std::lower_bound(cells.begin(), cells.end(), cell);
+    return it != cells.end() && *it == cell ? &trees[size_t(it - cells.begin())] : nullptr;
+  });
+  std::vector<std::unique_ptr<st::Evaluator>> ev;
+  for (const auto& b : mh) ev.push_back(st::open_mh(b));
+
+  const size_t m = pts.size();
+  auto lit2d = [&](const st::Vec3d& p, uint32_t w) {
+    const st::LightPoint lp = set.samples[w].to_light(p);
+    const auto t = st::LightSpace::texel_of(level, lp.u, lp.v);
+    return ev[w]->lit(t[0], t[1], float(lp.d));
+  };
+  // Sanity: every lit test equals the uncompressed map's (read back from the spill) where
+  // the receiver is outside the texel's object interval.
+  for (size_t i = 0; i < std::min<size_t>(m, 200); ++i)
+    for (uint32_t w = 0; w < n; ++w) {
+      uint64_t x = 0, y = 0;
+      float r = 0;
+      map.texel(pts[i], w, x, y, r);
+      const st::Interval iv = spill.texel(x, y, w);
+      if (r > iv.lo && r <= iv.hi) continue;
+      if (map.lit(pts[i], w) != (r <= iv.lo) || lit2d(pts[i], w) != (r <= iv.lo))
+        throw st::Error("bench: a lit test differs from the uncompressed map's");
+    }
+  float acc = 0;
+  const double ns_2d = median_ns(reps, m, [&] { for (size_t i = 0; i < m; ++i) acc += lit2d(pts[i], ws[i]); });
+  const double ns_oct = median_ns(reps, m, [&] { for (size_t i = 0; i < m; ++i) acc += map.lit(pts[i], ws[i]); });
+  const double ns_time = median_ns(reps, m, [&] { for (size_t i = 0; i < m; ++i) acc += map.visibility(pts[i], times[i]); });
+  const size_t ms = std::max<size_t>(1, m / 8);
+  const double ns_soft = median_ns(reps, ms, [&] { for (size_t i = 0; i < ms; ++i) acc += map.soft_visibility(pts[i]); });
+  const double ns_soft_sep = median_ns(reps, ms, [&] {
+    for (size_t i = 0; i < ms; ++i) {
+      uint32_t lit = 0;
+      for (uint32_t w = 0; w < n; ++w) lit += map.lit(pts[i], w);
+      acc += float(lit) / float(n);
+    }
+  });
+  for (size_t i = 0; i < std::min<size_t>(ms, 200); ++i) {
+    uint32_t lit = 0;
+    for (uint32_t w = 0; w < n; ++w) lit += map.lit(pts[i], w);
+    if (map.soft_visibility(pts[i]) != float(lit) / float(n)) throw st::Error("bench: the pack's soft lookup differs");
+  }
+  const double ns_soft2d = median_ns(reps, ms, [&] {
+    for (size_t i = 0; i < ms; ++i) {
+      uint32_t lit = 0;
+      for (uint32_t w = 0; w < n; ++w) lit += lit2d(pts[i], w);
+      acc += float(lit) / float(n);
+    }
+  });
+  g_sink = acc;
+  const double rss_end = peak_rss_mib();
+  const double raw = double(side * side) * n * 4;
+  std::printf("slices %u, octree levels %u (xy %u, w %u), skip level %u, block level %u (%llu blocks), bounds by %s\n", n,
+              g.levels(), g.n, g.k, cut.grid.skip_level, B, (unsigned long long)bst.blocks, by.c_str());
+  std::printf("%-26s %14s %14s %10s\n", "", "octree (cut)", "N x 2D MH", "oct/2D");
+  std::printf("%-26s %14zu %14zu %10.3f\n", "bytes", oct_bytes, mh_bytes, double(oct_bytes) / double(mh_bytes));
+  std::printf("%-26s %14llu %14zu\n", "nodes", (unsigned long long)bst.octree_nodes, mh_nodes);
+  std::printf("%-26s %14.3f %14.3f\n", "build+encode s", oct_s, mh_build_s + mh_encode_s);
+  std::printf("tiles %zu (%llu bytes, largest %llu), grid %zu bytes; raw float32 stack %.1f MiB; tracing %.2f s\n",
+              cut.tile_count(), (unsigned long long)cut.tile_bytes_total, (unsigned long long)cut.max_tile_bytes,
+              grid_bytes, raw / 1048576.0, trace_s);
+  std::printf("peak RSS: after tracing (and the 2D builds) %.0f MiB, after the blocked build %.0f MiB, at the end %.0f MiB\n",
+              rss_trace, rss_build, rss_end);
+  std::printf("%-34s %10s %12s\n", "lookup (median ns)", "ns", "x 2D lookup");
+  auto row = [&](const char* what, double ns) { std::printf("%-34s %10.1f %12.2f\n", what, ns, ns / ns_2d); };
+  row("2D lit (one slice)", ns_2d);
+  row("pack lit (one slice)", ns_oct);
+  row("pack visibility(p, time)", ns_time);
+  row("pack soft (all N, shared walk)", ns_soft);
+  row("pack soft, N lit() lookups", ns_soft_sep);
+  row("soft, N 2D lookups", ns_soft2d);
+  std::printf("soft per sample: pack %.1f ns (N lit() %.1f ns), 2D %.1f ns\n", ns_soft / n, ns_soft_sep / n, ns_soft2d / n);
+  return {{"case", c.name},
+          {"mode", "blocked"},
+          {"scene", c.scene},
+          {"light", c.light},
+          {"resolution", side},
+          {"slices", n},
+          {"bounds_by", by},
+          {"octree_bytes", oct_bytes},
+          {"octree_tile_bytes", cut.tile_bytes_total},
+          {"grid_bytes", grid_bytes},
+          {"skip_level", cut.grid.skip_level},
+          {"block_level", B},
+          {"blocks", bst.blocks},
+          {"mh2d_bytes", mh_bytes},
+          {"bytes_ratio", double(oct_bytes) / double(mh_bytes)},
+          {"octree_nodes", bst.octree_nodes},
+          {"mh2d_nodes", mh_nodes},
+          {"raw_bytes", raw},
+          {"trace_s", trace_s},
+          {"octree_build_encode_s", oct_s},
+          {"mh2d_build_s", mh_build_s},
+          {"mh2d_encode_s", mh_encode_s},
+          {"lookups", m},
+          {"soft_lookups", ms},
+          {"ns_2d_lit", ns_2d},
+          {"ns_pack_lit", ns_oct},
+          {"ns_pack_visibility_time", ns_time},
+          {"ns_pack_soft", ns_soft},
+          {"ns_pack_soft_separate", ns_soft_sep},
+          {"ns_soft_2d", ns_soft2d},
+          {"peak_rss_mib_trace", rss_trace},
+          {"peak_rss_mib_build", rss_build},
+          {"peak_rss_mib_end", rss_end}};
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -289,7 +514,7 @@ int main(int argc, char** argv) {
     std::string hair_jitter = "0.5";
     size_t lookups = 20000;
     int reps = 3;
-    std::string which = "all", json_path = "build/bench_stacks.json";
+    std::string which = "all", json_path = "build/bench_stacks.json", mode = "auto", tracer = "auto", spill_dir = "/tmp";
     for (int i = 1; i < argc; ++i) {
       const std::string a = argv[i];
       auto next = [&]() -> std::string {
@@ -304,6 +529,9 @@ int main(int argc, char** argv) {
       else if (a == "--reps") reps = std::max(1, std::stoi(next()));
       else if (a == "--case") which = next();
       else if (a == "--json") json_path = next();
+      else if (a == "--mode") mode = next();
+      else if (a == "--tracer") tracer = next();
+      else if (a == "--spill-dir") spill_dir = next();
       else throw st::Error("unknown option " + a);
     }
     std::vector<Case> cases;
@@ -318,7 +546,12 @@ int main(int argc, char** argv) {
       cases.push_back({"hairball", "procedural:hairball",
                        "area:pos=0,25,0,target=0,0,0,size=4,4,samples=" + std::to_string(hair_n) + ",jitter=" + hair_jitter});
     nlohmann::json out = nlohmann::json::array();
-    for (const Case& c : cases) out.push_back(run_case(c, level, lookups, reps));
+    if (mode != "auto" && mode != "whole" && mode != "blocked") throw st::Error("--mode: expected auto, whole or blocked");
+    if (tracer != "auto" && tracer != "embree") throw st::Error("--tracer: expected auto or embree");
+    const bool blocked = mode == "blocked" || (mode == "auto" && level >= 12);
+    for (const Case& c : cases)
+      out.push_back(blocked ? run_case_blocked(c, level, lookups, reps, tracer == "embree", spill_dir)
+                            : run_case(c, level, lookups, reps, tracer == "embree"));
     std::ofstream(json_path) << out.dump(2) << "\n";
     std::printf("\nwrote %s\n", json_path.c_str());
   } catch (const std::exception& e) {

@@ -4,6 +4,7 @@
 // tiles answer the coarser level-K value, and hostile grids are refused.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstring>
 #include <fstream>
 
@@ -275,6 +276,57 @@ TEST(StackPack, PcfAndFootprintLevelAsIn2D) {
     ASSERT_TRUE(v >= 0 && v <= 1);
   }
   EXPECT_GT(partial, 0u);  // some kernels straddle a shadow edge
+}
+
+}  // namespace
+}  // namespace st
+
+namespace st {
+namespace {
+
+// The soft lookup's shared walk within a cell equals N separate lit() calls, with every
+// tile resident or every other cell's tile absent, at a coarse and at a fine cut.
+TEST(StackPack, SoftVisibilitySharedWalkEqualsSeparateLookups) {
+  const IntervalStack s = stacks::coherent_stack(5, 13, 3);
+  const OctHierarchy h = build_octree(s);
+  const LightSet set = lights(13);
+  for (uint32_t K : {1u, 3u}) {
+    auto reader = PackReader::open(write(h, set, K, 1 << 20, "soft" + std::to_string(K) + ".pack"));
+    const StackGrid& grid = *reader->stack();
+    std::vector<uint64_t> cells;
+    std::vector<std::vector<uint8_t>> bufs;
+    for (const TileIndexEntry& e : reader->tiles()) {
+      uint64_t cell = 0;
+      ASSERT_TRUE(grid.cell_of(e.id, cell));
+      cells.push_back(cell);
+      bufs.push_back(reader->read_raw(e.id));
+    }
+    std::vector<MhOctree> trees;
+    for (const auto& b : bufs) trees.push_back(MhOctree::open(b));
+    auto source = [&](bool every_other) {
+      return [&, every_other](uint64_t cell) -> const MhOctree* {
+        const auto it = std::lower_bound(cells.begin(), cells.end(), cell);
+        if (it == cells.end() || *it != cell || (every_other && (it - cells.begin()) % 2)) return nullptr;
+        return &trees[size_t(it - cells.begin())];
+      };
+    };
+    const StackMap full(grid, source(false)), half(grid, source(true));
+    uint64_t rng = 99 + K;
+    auto next = [&] {
+      rng = rng * 6364136223846793005ull + 1442695040888963407ull;
+      return double(rng >> 11) / double(1ull << 53);
+    };
+    for (int i = 0; i < 300; ++i) {
+      const Vec3d p{-10 + 20 * next(), 5 * next(), -10 + 20 * next()};
+      for (const StackMap* m : {&full, &half}) {
+        uint32_t lit = 0;
+        bool exact_lit = true, exact_soft = true;
+        for (uint32_t w = 0; w < 13; ++w) lit += m->lit(p, w, &exact_lit);
+        ASSERT_EQ(m->soft_visibility(p, &exact_soft), float(lit) / 13.0f) << "K " << K << " point " << i;
+        ASSERT_EQ(exact_soft, exact_lit);
+      }
+    }
+  }
 }
 
 }  // namespace

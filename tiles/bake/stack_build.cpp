@@ -1,10 +1,15 @@
 #include "tiles/bake/stack_build.hpp"
 
+#include <sys/statvfs.h>
+
 #include <algorithm>
 #include <chrono>
+#include <filesystem>
+#include <memory>
 
 #include "common/error.hpp"
 #include "tiles/bake/depth_bounds.hpp"
+#include "tiles/bake/raster_bounds.hpp"
 #include "tiles/build/stack_pack.hpp"
 
 namespace st {
@@ -14,20 +19,74 @@ double since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
+// One sample's bounds: the rasterizer (skip exact: the canonical bits) for a sun, the
+// Embree tracer for a perspective sample.
+class SliceTracer {
+ public:
+  SliceTracer(const Scene& scene, const LightSpace& light, bool embree_only = false) {
+    if (light.kind() == LightKind::sun && !embree_only)
+      raster_ = std::make_unique<RasterBounds>(scene, light, RasterSkip::exact);
+    else
+      embree_ = std::make_unique<DepthBoundsTracer>(scene, light);
+  }
+  IntervalTile trace(const TraceRegion& r) const { return raster_ ? raster_->trace(r) : embree_->trace(r); }
+  bool exit_depths() const { return raster_ ? raster_->traces_exit_depths() : embree_->traces_exit_depths(); }
+  const char* name() const { return raster_ ? "raster" : "embree"; }
+
+ private:
+  std::unique_ptr<RasterBounds> raster_;
+  std::unique_ptr<DepthBoundsTracer> embree_;
+};
+
 }  // namespace
+
+IntervalTile trace_slice(const Scene& scene, const LightSpace& light, const TraceRegion& region, bool embree) {
+  return SliceTracer(scene, light, embree).trace(region);
+}
+
+std::string trace_stack_to_spill(const Scene& scene, const LightSet& set, StackSpill& spill, bool* exit_depths,
+                                 const std::function<void(uint32_t, uint32_t)>& progress,
+                                 const std::function<void(uint32_t, const IntervalTile&)>& slice, bool embree_only) {
+  const uint32_t n = set.size();
+  const uint32_t level = spill.geo().n;
+  const uint64_t side = spill.side(), bs = spill.block_side();
+  if (n != spill.slices()) throw Error("build: the spill holds " + std::to_string(spill.slices()) + " slices, not " + std::to_string(n));
+  // Regions of whole blocks, about 2^22 texels (32 MiB of intervals) each: full-width
+  // strips, or (a block row above 2^22 texels) one block row cut across.
+  const uint64_t budget = uint64_t(1) << 22;
+  const uint64_t cols = slice ? side : std::max<uint64_t>(bs, std::min<uint64_t>(side, budget / bs / bs * bs));
+  const uint64_t rows = slice || cols < side ? (slice ? side : bs)
+                                             : std::max<uint64_t>(bs, std::min<uint64_t>(side, budget / side / bs * bs));
+  if (slice && side * side > DepthBoundsTracer::kMaxRegionTexels)
+    throw Error("build: whole slices of " + std::to_string(side) + "^2 texels exceed one trace call");
+  std::string by;
+  for (uint32_t w = 0; w < n; ++w) {
+    const SliceTracer tracer(scene, set.samples[w], embree_only);
+    by = tracer.name();
+    if (exit_depths) *exit_depths = tracer.exit_depths();
+    for (uint64_t y0 = 0; y0 < side; y0 += rows)
+      for (uint64_t x0 = 0; x0 < side; x0 += cols) {
+        const IntervalTile t = tracer.trace({level, x0, y0, uint32_t(cols), uint32_t(rows)});
+        spill.write_region(w, x0, y0, cols, rows, t.data);
+        if (slice) slice(w, t);
+      }
+    if (progress) progress(w + 1, n);
+  }
+  return by;
+}
 
 IntervalStack trace_stack(const Scene& scene, const LightSet& set, uint32_t level, bool* exit_depths,
                           const std::function<void(uint32_t, uint32_t)>& progress) {
   const uint32_t n = set.size();
   const uint64_t side = uint64_t(1) << level;
-  if (level > 13 || double(n) * double(side) * double(side) > double(kMaxStackTexels))
+  if (level > 13 || double(n) * double(side) * double(side) > double(kMaxResidentStackTexels))
     throw Error("build: a stack of " + std::to_string(n) + " slices of " + std::to_string(side) + "^2 texels exceeds " +
-                "the 2^28 texels (2 GiB of intervals) a whole-stack build holds; lower --resolution or samples=");
+                "the 2^28 texels (2 GiB of intervals) an in-memory stack holds; lower --resolution or samples=");
   IntervalStack stack{level, n, {}};
   stack.data.reserve(size_t(side * side) * n);
   for (uint32_t w = 0; w < n; ++w) {
-    DepthBoundsTracer tracer(scene, set.samples[w]);
-    if (exit_depths) *exit_depths = tracer.traces_exit_depths();
+    const SliceTracer tracer(scene, set.samples[w]);
+    if (exit_depths) *exit_depths = tracer.exit_depths();
     const IntervalTile t = tracer.trace({level, 0, 0, uint32_t(side), uint32_t(side)});
     stack.data.insert(stack.data.end(), t.data.begin(), t.data.end());
     if (progress) progress(w + 1, n);
@@ -39,17 +98,41 @@ StackBuildReport build_stack_pack(const Scene& scene, const LightSetSpec& spec, 
                                   const std::string& out) {
   StackBuildReport r;
   const LightSet set = LightSet::fit(spec, scene.bounds());
+  const uint32_t n = set.size();
+  const uint64_t side = uint64_t(1) << o.map_level;
+  if (o.map_level > 16 || double(n) * double(side) * double(side) > double(kMaxStackTexels))
+    throw Error("build: a stack of " + std::to_string(n) + " slices of " + std::to_string(side) + "^2 texels exceeds " +
+                "the 2^34 texels (slices up to 65536^2) a stack build spills; lower --resolution or samples=");
+  uint32_t k = 0;
+  while ((1u << k) < n) ++k;
+  const moct::Geometry g{o.map_level, k};
+  const uint32_t K = o.skip_level.value_or(default_stack_skip_level(g));
+  if (K > g.depth())
+    throw Error("build: skip level " + std::to_string(K) + " exceeds the octree depth " + std::to_string(g.depth()));
+  const uint32_t B = stack_block_level(g, K, o.block_texels);
+  std::string dir = o.spill_dir;
+  if (dir.empty()) {
+    dir = std::filesystem::path(out).parent_path().string();
+    if (dir.empty()) dir = ".";
+  }
+  const std::string spill_path = (std::filesystem::path(dir) / (std::filesystem::path(out).filename().string() + ".spill")).string();
+  r.spill_bytes = side * side * n * sizeof(Interval);
+  struct statvfs fs {};
+  if (::statvfs(dir.c_str(), &fs) == 0 && double(fs.f_bavail) * double(fs.f_frsize) < double(r.spill_bytes) * 1.05)
+    throw Error("build: the stack's spill needs " + std::to_string(r.spill_bytes >> 20) + " MiB in '" + dir + "', " +
+                std::to_string((uint64_t(fs.f_bavail) * fs.f_frsize) >> 20) + " MiB free");
+  StackSpill spill(spill_path, o.map_level, n, B);
   auto t0 = std::chrono::steady_clock::now();
-  IntervalStack stack = trace_stack(scene, set, o.map_level, &r.exit_depths, o.progress);
+  r.bounds_by = trace_stack_to_spill(scene, set, spill, &r.exit_depths, o.progress);
   r.trace_seconds = since(t0);
   t0 = std::chrono::steady_clock::now();
-  const OctHierarchy h = build_octree(stack);
-  stack.data = {};
-  r.octree_seconds = since(t0);
-  r.octree_nodes = h.node_count();
-  t0 = std::chrono::steady_clock::now();
-  StackCut cut = cut_stack(h, o.skip_level, o.tile_bytes);
-  r.cut_seconds = since(t0);
+  BlockedCutStats bst;
+  BlockedStackCut cut(spill, K, o.tile_bytes, spill_path + ".tiles", &bst);
+  r.octree_seconds = bst.reduce_seconds;
+  r.cut_seconds = bst.patch_seconds;
+  r.octree_nodes = bst.octree_nodes;
+  r.blocks = bst.blocks;
+  r.block_level = B;
   cut.grid.light_kind = set.samples[0].kind();
   for (const LightSpace& l : set.samples) cut.grid.lights.push_back(l.to_array());
   cut.grid.spec = spec.to_string();
@@ -61,17 +144,18 @@ StackBuildReport build_stack_pack(const Scene& scene, const LightSetSpec& spec, 
   pp.compression_level = o.compression_level;
   pp.build_params = {{"light", o.light_spec.empty() ? spec.to_string() : o.light_spec},
                      {"scene", o.scene_spec.empty() ? scene.name : o.scene_spec},
+                     {"builder", r.bounds_by},
                      {"slices", std::to_string(set.size())},
                      {"tool", "shadowtile 0.1.0"}};
   std::sort(pp.build_params.begin(), pp.build_params.end());
   t0 = std::chrono::steady_clock::now();
-  r.pack_bytes = write_stack_pack(out, cut, pp);
+  r.pack_bytes = write_stack_pack(out, cut.grid, cut.tile_count(), [&](size_t i) { return cut.tile(i); }, pp);
   r.write_seconds = since(t0);
   r.slices = set.size();
   r.map_level = o.map_level;
   r.skip_level = cut.grid.skip_level;
   r.cells = cut.grid.entries.size();
-  r.tiles = cut.tiles.size();
+  r.tiles = cut.tile_count();
   r.max_tile_bytes = cut.max_tile_bytes;
   return r;
 }

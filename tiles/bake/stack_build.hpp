@@ -1,12 +1,15 @@
 // `shadowtile build` for a light set (tiles/core/light_set.hpp): traces every sample's
-// slice with the DepthBoundsTracer in that sample's light space, builds the stack's
-// octree (MH 2016 §4), cuts it at a skip level in (x, y, w) and writes a stack pack
-// (tiles/PACK.md "Stack packs").
+// slice in that sample's light space (the light-space rasterizer for sun samples, which
+// gives the canonical bounds bit for bit; the Embree DepthBoundsTracer for the area
+// light's perspective samples), builds the stack's octree (MH 2016 §4), cuts it at a skip
+// level in (x, y, w) and writes a stack pack (tiles/PACK.md "Stack packs").
 //
-// Whole-stack, in memory: the N slices' intervals (8 bytes a texel) and the octree are
-// held at once, so the build refuses stacks above kMaxStackTexels texels (N x R^2, 2 GiB
-// of intervals), naming the figures; out-of-core construction per skip cell, as the 2D
-// build does, is not done yet.
+// Out of core (tiles/build/stack_blocked.hpp): each slice is traced in regions and
+// spilled to a file next to the output in blocks of the octree; the blocks are read back
+// and reduced one at a time and the tiles streamed into the pack, so memory is one traced
+// region, one block (2^24 texels) and the octree's top levels, whatever N x R^2. The spill
+// needs 8 bytes per texel per slice on disk for the build's duration (checked first).
+// Limits: slices up to 2^16 a side, kMaxStackTexels texels in all.
 #pragma once
 #include <atomic>
 #include <cstdint>
@@ -14,13 +17,18 @@
 #include <optional>
 #include <string>
 
+#include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/scene.hpp"
 #include "tiles/build/mh_octree_build.hpp"
+#include "tiles/build/stack_blocked.hpp"
 #include "tiles/core/light_set.hpp"
 
 namespace st {
 
-inline constexpr uint64_t kMaxStackTexels = uint64_t(1) << 28;
+// The blocked build's limit: 2^34 texels (N x R^2; 128 GiB of spilled intervals).
+inline constexpr uint64_t kMaxStackTexels = uint64_t(1) << 34;
+// trace_stack's (whole stack in memory): 2^28 texels, 2 GiB of intervals.
+inline constexpr uint64_t kMaxResidentStackTexels = uint64_t(1) << 28;
 
 struct StackBuildOptions {
   uint32_t map_level = 10;  // slices are 2^map_level a side
@@ -29,21 +37,38 @@ struct StackBuildOptions {
   int compression_level = 6;
   std::string scene_spec, light_spec;
   std::function<void(uint32_t done, uint32_t total)> progress;  // slices traced
+  uint64_t block_texels = kStackBlockTexels;
+  std::string spill_dir;  // default: the output's directory
 };
 
 struct StackBuildReport {
-  uint32_t slices = 0, map_level = 0, skip_level = 0;
-  uint64_t cells = 0, tiles = 0, max_tile_bytes = 0, octree_nodes = 0, pack_bytes = 0;
+  uint32_t slices = 0, map_level = 0, skip_level = 0, block_level = 0;
+  uint64_t cells = 0, tiles = 0, max_tile_bytes = 0, octree_nodes = 0, pack_bytes = 0, spill_bytes = 0, blocks = 0;
   double trace_seconds = 0, octree_seconds = 0, cut_seconds = 0, write_seconds = 0;
   bool exit_depths = false;
+  std::string bounds_by;  // "raster" (sun samples) or "embree"
 };
 
 // Throws st::Error (one line) for a stack it cannot hold or trace.
 StackBuildReport build_stack_pack(const Scene& scene, const LightSetSpec& spec, const StackBuildOptions& o,
                                   const std::string& out);
 
-// The N slices of level `level` of a light set, traced (tests, verify): the fitted set
-// and the stack. Same limit.
+// Traces every slice of `set` into `spill` (block-aligned regions of about 2^22 texels), the
+// rasterizer for sun samples, Embree otherwise. `slice` (if given) also gets each whole
+// slice (one slice in memory: a benchmark's 2D comparison). `embree_only`: Embree for
+// every sample (the benchmark's before/after). Returns "raster" or "embree".
+std::string trace_stack_to_spill(const Scene& scene, const LightSet& set, StackSpill& spill, bool* exit_depths = nullptr,
+                                 const std::function<void(uint32_t, uint32_t)>& progress = {},
+                                 const std::function<void(uint32_t w, const IntervalTile&)>& slice = {},
+                                 bool embree_only = false);
+
+// One slice's bounds of a region as a stack build traces it: the rasterizer for a sun
+// sample, Embree for a spot or when `embree` (a pack recorded as built by Embree; the two
+// may differ in edge texels, so `verify` re-traces with the recorded builder).
+IntervalTile trace_slice(const Scene& scene, const LightSpace& light, const TraceRegion& region, bool embree = false);
+
+// The N slices of level `level` of a light set, traced into memory (tests, small
+// benchmarks): at most kMaxResidentStackTexels texels.
 IntervalStack trace_stack(const Scene& scene, const LightSet& set, uint32_t level, bool* exit_depths = nullptr,
                           const std::function<void(uint32_t, uint32_t)>& progress = {});
 

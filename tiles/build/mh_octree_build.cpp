@@ -92,13 +92,13 @@ Interval texel(const IntervalStack& s, uint64_t x, uint64_t y, uint64_t w) {
   return s.at(x, y, w);
 }
 
-void validate_stack(const IntervalStack& s) {
+void validate_stack(const IntervalStack& s, uint32_t k) {
   if (s.level > kMaxSliceLevel)
     throw Error("build_octree: slices of 2^" + std::to_string(s.level) + " texels a side exceed 2^" +
                 std::to_string(kMaxSliceLevel));
-  if (s.slices < 1 || s.slices > (1u << moct::kMaxWLevel))
+  if (k > moct::kMaxWLevel || s.slices < 1 || s.slices > (1u << k))
     throw Error("build_octree: " + std::to_string(s.slices) + " slices, expected 1.." +
-                std::to_string(1u << moct::kMaxWLevel));
+                std::to_string(1u << std::min<uint32_t>(k, moct::kMaxWLevel)));
   const size_t want = size_t(s.side() * s.side()) * s.slices;
   if (s.data.size() != want)
     throw Error("build_octree: the stack holds " + std::to_string(s.data.size()) + " intervals, expected " +
@@ -174,10 +174,11 @@ float OctHierarchy::depth_at(uint32_t l, uint64_t x, uint64_t y, uint64_t w) con
   return v;
 }
 
-OctHierarchy build_octree(const IntervalStack& stack) {
-  validate_stack(stack);
+OctHierarchy build_octree(const IntervalStack& stack, std::optional<uint32_t> w_level) {
   uint32_t k = 0;
-  while ((1u << k) < stack.slices) ++k;
+  while (k < 31 && (1u << k) < stack.slices) ++k;
+  if (w_level) k = *w_level;
+  validate_stack(stack, k);
   OctHierarchy h;
   h.geo = moct::Geometry{stack.level, k};
   h.slices = stack.slices;
@@ -260,6 +261,59 @@ OctHierarchy build_octree(const IntervalStack& stack) {
     }
   }
   return h;
+}
+
+std::vector<std::vector<float>> octree_top_values(const moct::Geometry& g, uint32_t lb, const std::vector<Interval>& iv,
+                                                  const std::vector<uint8_t>& child_mask, size_t* present_nodes) {
+  const size_t nb = size_t(1) << (2 * g.xy_bits(lb) + g.w_bits(lb));
+  if (lb > g.depth() || iv.size() != nb || child_mask.size() != nb)
+    throw Error("octree_top_values: level " + std::to_string(lb) + " needs " + std::to_string(nb) + " nodes");
+  // lo/hi/present (child mask)/valued (mask of valued children) per level, code order.
+  std::vector<std::vector<float>> lo(lb + 1), hi(lb + 1);
+  std::vector<std::vector<uint8_t>> present(lb + 1), valued(lb + 1);
+  lo[lb].resize(nb), hi[lb].resize(nb), present[lb] = child_mask, valued[lb].assign(nb, 0);
+  for (size_t i = 0; i < nb; ++i) lo[lb][i] = iv[i].lo, hi[lb][i] = iv[i].hi;
+  for (uint32_t l = lb; l-- > 0;) {
+    const uint32_t a = step_bits(g, l), slots = g.slot_set(l);
+    const size_t count = size_t(1) << (2 * g.xy_bits(l) + g.w_bits(l));
+    lo[l].resize(count), hi[l].resize(count), present[l].resize(count), valued[l].resize(count);
+    float clo[8] = {}, chi[8] = {};
+    for (size_t m = 0; m < count; ++m) {
+      uint32_t desc = 0;
+      for (uint32_t comp = 0; comp < (1u << a); ++comp) {
+        const size_t i = (m << a) + comp;
+        const uint32_t c = slot_of(g, l, comp);
+        clo[c] = lo[l + 1][i], chi[c] = hi[l + 1][i];
+        desc |= uint32_t(present[l + 1][i] != 0) << c;
+      }
+      const Step s = level_step(clo, chi, slots, desc);
+      lo[l][m] = s.lo, hi[l][m] = s.hi, present[l][m] = s.present, valued[l][m] = s.valued;
+    }
+  }
+  // Top-down: the root is valued; a child is valued iff its parent is present and its
+  // slot is in the parent's valued mask (build_octree's emission); others inherit.
+  std::vector<std::vector<float>> v(lb + 1);
+  std::vector<std::vector<uint8_t>> is_present(lb + 1);
+  v[0] = {mh_detail::safe_midpoint(lo[0][0], hi[0][0])};
+  is_present[0] = {1};
+  for (uint32_t l = 1; l <= lb; ++l) {
+    const uint32_t a = step_bits(g, l - 1);
+    const size_t count = lo[l].size();
+    v[l].resize(count), is_present[l].assign(count, 0);
+    for (size_t i = 0; i < count; ++i) {
+      const size_t p = i >> a;
+      const uint32_t c = slot_of(g, l - 1, uint32_t(i & ((size_t(1) << a) - 1)));
+      const bool here = is_present[l - 1][p] && (present[l - 1][p] >> c & 1);
+      is_present[l][i] = here;
+      v[l][i] = here && (valued[l - 1][p] >> c & 1) ? mh_detail::safe_midpoint(lo[l][i], hi[l][i]) : v[l - 1][p];
+    }
+  }
+  if (present_nodes) {
+    *present_nodes = 0;
+    for (uint32_t l = 0; l < lb; ++l)
+      for (uint8_t b : is_present[l]) *present_nodes += b;
+  }
+  return v;
 }
 
 }  // namespace st

@@ -23,6 +23,7 @@
 #pragma once
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 #include "tiles/core/interval.hpp"
@@ -70,6 +71,21 @@ void oct_coords(const moct::Geometry& g, uint32_t l, uint64_t code, uint64_t& x,
 // with lo <= hi). Throws st::Error naming the texel and slice of a bad interval, or the
 // bad shape. The result satisfies the lossless invariant on every texel of every slice:
 // depth_at(L, x, y, w) lies in the texel's interval (L = geo.depth()).
-OctHierarchy build_octree(const IntervalStack& stack);
+//
+// `w_level` (blocked builds, tiles/build/stack_blocked.hpp): pad to 2^w_level slices
+// instead of the smallest power of two >= slices (slices <= 2^w_level), so the result is
+// the subtree of one node of a larger stack whose slices past `slices` are placeholders.
+OctHierarchy build_octree(const IntervalStack& stack, std::optional<uint32_t> w_level = std::nullopt);
+
+// The levels 0..lb of an octree whose level-lb nodes are known (a blocked build): `iv[c]`
+// and `child_mask[c]` are the interval and child mask of the level-lb node of code c as
+// build_octree gives its subtree's root (a node wholly in the padding: the placeholder
+// interval [-FLT_MAX, FLT_MAX] and mask 0). Runs the same level steps as build_octree
+// above level lb and returns, per level 0..lb and code, the value of the deepest valued
+// node on the path to it (the value a lookup stopping there answers); `present_nodes`
+// gets the count of stored nodes at levels 0..lb-1.
+std::vector<std::vector<float>> octree_top_values(const moct::Geometry& g, uint32_t lb, const std::vector<Interval>& iv,
+                                                  const std::vector<uint8_t>& child_mask,
+                                                  size_t* present_nodes = nullptr);
 
 }  // namespace st

@@ -1,6 +1,8 @@
 #include "tiles/build/stack_pack.hpp"
 
 #include <algorithm>
+#include <array>
+#include <span>
 #include <cstdio>
 #include <fstream>
 
@@ -73,26 +75,7 @@ StackCut cut_stack(const OctHierarchy& h, std::optional<uint32_t> skip_level, ui
       oct_coords(g, K, root.code, x, y, w);
       const uint64_t cell = sg.index(K, x, y, w);
       sg.entries[cell].kind = 1;
-      OctHierarchy sub;
-      sub.geo = moct::Geometry{g.n - g.xy_bits(K), g.k - g.w_bits(K)};
-      sub.slices = 1u << sub.geo.k;
-      sub.levels.resize(L - K + 1);
-      OctNode r = root;
-      r.code = 0;
-      if (!r.has_value) r.value = r.lo = r.hi = vals[K][cell], r.has_value = 1;
-      sub.levels[0].push_back(r);
-      uint32_t bits = 0;
-      for (uint32_t l = K + 1; l <= L; ++l) {
-        bits += step_bits(g, l - 1);
-        const auto& lv = h.levels[l];
-        size_t& c = cursor[l];
-        while (c < lv.size() && (lv[c].code >> bits) < root.code) ++c;
-        for (; c < lv.size() && (lv[c].code >> bits) == root.code; ++c) {
-          OctNode nd = lv[c];
-          nd.code &= (uint64_t(1) << bits) - 1;
-          sub.levels[l - K].push_back(nd);
-        }
-      }
+      const OctHierarchy sub = cell_subtree(h, K, root, vals[K][cell], cursor);
       cut.tiles.emplace_back(cell, encode_octree(sub));
       if (cut.tiles.back().second.size() > largest) largest = cut.tiles.back().second.size(), largest_cell = cell;
     }
@@ -105,14 +88,46 @@ StackCut cut_stack(const OctHierarchy& h, std::optional<uint32_t> skip_level, ui
   }
 }
 
+OctHierarchy cell_subtree(const OctHierarchy& h, uint32_t K, const OctNode& root, float inherited,
+                          std::vector<size_t>& cursor) {
+  const moct::Geometry& g = h.geo;
+  const uint32_t L = g.depth();
+  OctHierarchy sub;
+  sub.geo = moct::Geometry{g.n - g.xy_bits(K), g.k - g.w_bits(K)};
+  sub.slices = 1u << sub.geo.k;
+  sub.levels.resize(L - K + 1);
+  OctNode r = root;
+  r.code = 0;
+  if (!r.has_value) r.value = r.lo = r.hi = inherited, r.has_value = 1;
+  sub.levels[0].push_back(r);
+  uint32_t bits = 0;
+  for (uint32_t l = K + 1; l <= L; ++l) {
+    bits += step_bits(g, l - 1);
+    const auto& lv = h.levels[l];
+    size_t& c = cursor[l];
+    while (c < lv.size() && (lv[c].code >> bits) < root.code) ++c;
+    for (; c < lv.size() && (lv[c].code >> bits) == root.code; ++c) {
+      OctNode nd = lv[c];
+      nd.code &= (uint64_t(1) << bits) - 1;
+      sub.levels[l - K].push_back(nd);
+    }
+  }
+  return sub;
+}
+
 uint64_t write_stack_pack(const std::string& path, const StackCut& cut, const StackPackParams& p) {
+  return write_stack_pack(path, cut.grid, cut.tiles.size(), [&](size_t i) { return cut.tiles[i]; }, p);
+}
+
+uint64_t write_stack_pack(const std::string& path, const StackGrid& sg, size_t count,
+                          const std::function<std::pair<uint64_t, std::vector<uint8_t>>(size_t)>& tile,
+                          const StackPackParams& p) {
   if (p.tile_bytes < kMinTileBytes || p.tile_bytes > kMaxTileBytes)
     throw Error("stack pack: tile_bytes " + std::to_string(p.tile_bytes) + " outside " + tile_bytes_bounds());
-  const StackGrid& sg = cut.grid;
   if (sg.lights.size() != sg.slices) throw Error("stack pack: the grid has no light per slice");
   PackHeader h;
   h.state = PackState::complete;
-  h.flags = p.flags | kFeatureStack | (cut.tiles.empty() ? 0u : uint32_t(kFeatureHasTiles));
+  h.flags = p.flags | kFeatureStack | (count == 0 ? 0u : uint32_t(kFeatureHasTiles));
   h.encoding = Encoding::mh;
   h.light_kind = sg.light_kind;
   h.map_level = sg.geo.n;
@@ -125,9 +140,18 @@ uint64_t write_stack_pack(const std::string& path, const StackCut& cut, const St
   h.params_size = params.size();
   h.params_crc = crc32_of(params);
   h.journal_offset = h.params_offset + h.params_size;
-  std::vector<uint8_t> journal;
+  const std::string tmp = path + ".tmp";
+  std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
+  auto put = [&](std::span<const uint8_t> b) {
+    f.write(reinterpret_cast<const char*>(b.data()), std::streamsize(b.size()));
+  };
+  const std::array<uint8_t, kPackHeaderBytes> blank{};
+  put(blank);
+  put(params);
   std::vector<TileIndexEntry> index;
-  for (const auto& [cell, raw] : cut.tiles) {
+  uint64_t journal = 0;
+  for (size_t i = 0; i < count; ++i) {
+    const auto [cell, raw] = tile(i);
     TileRecord r;
     r.kind = TileKind::encoded;
     r.id = sg.tile_id(cell);
@@ -136,31 +160,31 @@ uint64_t write_stack_pack(const std::string& path, const StackCut& cut, const St
     r.raw_size = uint32_t(raw.size());
     r.crc = crc32_of(stored);
     const auto rec = r.serialize();
-    journal.insert(journal.end(), rec.begin(), rec.end());
-    index.push_back({r.id, h.journal_offset + journal.size(), r.stored_size, r.raw_size, r.crc, TileKind::encoded});
-    journal.insert(journal.end(), stored.begin(), stored.end());
+    put(rec);
+    journal += rec.size();
+    index.push_back({r.id, h.journal_offset + journal, r.stored_size, r.raw_size, r.crc, TileKind::encoded});
+    put(stored);
+    journal += stored.size();
   }
-  while ((h.journal_offset + journal.size()) % 8) journal.push_back(0);
+  const std::array<uint8_t, 8> zeros{};
+  const uint64_t pad = (8 - (h.journal_offset + journal) % 8) % 8;
+  put(std::span<const uint8_t>(zeros.data(), pad));
+  journal += pad;
   const std::vector<uint8_t> grid = sg.serialize();
   const std::vector<uint8_t> idx = serialize_index(index);
-  h.grid_offset = h.journal_offset + journal.size();
+  h.grid_offset = h.journal_offset + journal;
   h.grid_size = grid.size();
   h.grid_crc = crc32_of(grid);
   h.index_offset = h.grid_offset + h.grid_size;
   h.tile_count = index.size();
   h.index_crc = crc32_of(idx);
+  put(grid);
+  put(idx);
   const auto head = h.serialize();
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
-    f.write(reinterpret_cast<const char*>(head.data()), head.size());
-    f.write(reinterpret_cast<const char*>(params.data()), std::streamsize(params.size()));
-    f.write(reinterpret_cast<const char*>(journal.data()), std::streamsize(journal.size()));
-    f.write(reinterpret_cast<const char*>(grid.data()), std::streamsize(grid.size()));
-    f.write(reinterpret_cast<const char*>(idx.data()), std::streamsize(idx.size()));
-    f.close();
-    if (!f) throw Error("stack pack: cannot write '" + tmp + "'");
-  }
+  f.seekp(0);
+  put(head);
+  f.close();
+  if (!f) throw Error("stack pack: cannot write '" + tmp + "'");
   if (std::rename(tmp.c_str(), path.c_str()) != 0) throw Error("stack pack: cannot rename '" + tmp + "' to '" + path + "'");
   return h.file_size();
 }

@@ -4,6 +4,7 @@
 // `stack` feature.
 #pragma once
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -30,6 +31,13 @@ uint32_t default_stack_skip_level(const moct::Geometry& g);
 // leaves or kStackMaxCells cells; past that it throws st::Error naming the largest tile.
 StackCut cut_stack(const OctHierarchy& h, std::optional<uint32_t> skip_level, uint32_t tile_bytes);
 
+// The subtree below `root` (a node of level K of `h` with children) as a hierarchy of its
+// own, root made valued with `inherited` when it is empty: what cut_stack encodes for a
+// cell. `cursor` (L + 1 zeros at first) carries the scan of h's levels between calls made
+// in increasing code order.
+OctHierarchy cell_subtree(const OctHierarchy& h, uint32_t K, const OctNode& root, float inherited,
+                          std::vector<size_t>& cursor);
+
 struct StackPackParams {
   uint32_t tile_bytes = 64 * 1024;
   uint32_t flags = 0;  // extra features (exit_depths)
@@ -40,5 +48,11 @@ struct StackPackParams {
 
 // Writes the pack as `path`.tmp, then renames it to `path`. Returns the file size.
 uint64_t write_stack_pack(const std::string& path, const StackCut& cut, const StackPackParams& p);
+
+// The same pack streamed: `tile(i)` gives the i-th (cell, octree buffer) of `count`, in
+// increasing cell order; one tile is held at a time (blocked builds). Same bytes.
+uint64_t write_stack_pack(const std::string& path, const StackGrid& grid, size_t count,
+                          const std::function<std::pair<uint64_t, std::vector<uint8_t>>(size_t)>& tile,
+                          const StackPackParams& p);
 
 }  // namespace st

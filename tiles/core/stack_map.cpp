@@ -69,8 +69,37 @@ float StackMap::visibility(const Vec3d& p, double time, bool* exact) const {
 }
 
 float StackMap::soft_visibility(const Vec3d& p, bool* exact) const {
+  // depth(x, y, w, n) per sample, but consecutive samples whose texels fall in the same
+  // cell share one tile walk (MhOctree::depth_along: each starts from the deepest node
+  // its path shares with the previous one) and one tile fetch.
+  const moct::Geometry& g = grid_.geo;
+  const uint32_t n = g.n, K = grid_.skip_level;
+  const uint32_t sx = n - g.xy_bits(K), sw = g.k - g.w_bits(K);
+  const bool leaves_at_k = g.depth() == K;
+  MhOctree::Path path;
+  uint64_t path_cell = ~uint64_t(0);
+  const MhOctree* tile = nullptr;
   uint32_t lit_samples = 0;
-  for (uint32_t w = 0; w < grid_.slices; ++w) lit_samples += lit(p, w, exact);
+  for (uint32_t w = 0; w < grid_.slices; ++w) {
+    uint64_t x, y;
+    float d;
+    texel(p, w, x, y, d);
+    float v = kLitDepth;
+    if (!(x >> n) && !(y >> n)) {
+      const uint64_t cx = x >> sx, cy = y >> sx, cw = uint64_t(w) >> sw;
+      const uint64_t cell = grid_.index(K, cx, cy, cw);
+      const StackEntry& e = grid_.entries[cell];
+      v = e.value;
+      if (e.kind != 0 && !leaves_at_k) {
+        if (cell != path_cell) path_cell = cell, tile = tile_(cell), path = MhOctree::Path{};
+        if (tile)
+          v = tile->depth_along(path, x - (cx << sx), y - (cy << sx), uint32_t(w - (cw << sw)));
+        else if (exact)
+          *exact = false;
+      }
+    }
+    lit_samples += d <= v;
+  }
   return float(lit_samples) / float(grid_.slices);
 }
 

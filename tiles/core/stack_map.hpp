@@ -38,6 +38,8 @@ class StackMap {
 
   bool lit(const Vec3d& p, uint32_t w, bool* exact = nullptr) const;
   float visibility(const Vec3d& p, double time, bool* exact = nullptr) const;
+  // The N samples' lit tests averaged; consecutive samples in one cell share the tile
+  // walk (equal to N lit() calls bit for bit, tested).
   float soft_visibility(const Vec3d& p, bool* exact = nullptr) const;
 
   // PCF and the footprint level, as the 2D lookups (Evaluator::pcf / pcf_footprint,
