@@ -60,6 +60,15 @@
 
 namespace {
 
+// The world point just in front of the first surface `lo` of texel (x, y) of light `ls`:
+// a receiver on that surface, lit in that slice.
+st::Vec3d receiver_point(const st::LightSpace& ls, uint32_t level, uint64_t x, uint64_t y, float lo) {
+  const st::LightRay ray = ls.texel_ray(level, x, y);
+  const double d = std::max(0.0, double(lo) - 1e-4);
+  const double t = ls.kind() == st::LightKind::sun ? d : ls.near_plane() + d * (ls.far_plane() - ls.near_plane());
+  return ray.origin + ray.dir * t;
+}
+
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
@@ -163,11 +172,7 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
     const uint64_t x = rng.next() % side, y = rng.next() % side;
     const st::Interval iv = stack.at(x, y, 0);
     if (iv.lo >= st::kLitDepth) continue;
-    const st::LightSpace& ls = set.samples[0];
-    const st::LightRay ray = ls.texel_ray(level, x, y);
-    const double d = std::max(0.0, double(iv.lo) - 1e-4);
-    const double t = ls.kind() == st::LightKind::sun ? d : ls.near_plane() + d * (ls.far_plane() - ls.near_plane());
-    pts.push_back(ray.origin + ray.dir * t);
+    pts.push_back(receiver_point(set.samples[0], level, x, y, iv.lo));
     ws.push_back(uint32_t(rng.next() % n));
     times.push_back(rng.uniform());
   }
@@ -349,11 +354,7 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
             const uint64_t x = rng.next() % side, y = rng.next() % side;
             const st::Interval iv = tile.data[y * side + x];
             if (iv.lo >= st::kLitDepth) continue;
-            const st::LightSpace& ls = set.samples[0];
-            const st::LightRay ray = ls.texel_ray(level, x, y);
-            const double d = std::max(0.0, double(iv.lo) - 1e-4);
-            const double t = ls.kind() == st::LightKind::sun ? d : ls.near_plane() + d * (ls.far_plane() - ls.near_plane());
-            pts.push_back(ray.origin + ray.dir * t);
+            pts.push_back(receiver_point(set.samples[0], level, x, y, iv.lo));
             ws.push_back(uint32_t(rng.next() % n));
             times.push_back(rng.uniform());
           }

@@ -451,6 +451,22 @@ struct GpuMap::Impl {
   }
 
   // ---- frames ----
+  // One evaluate batch: `words` input words per query, written by fill(query, words).
+  template <class Query, class Fill>
+  uint64_t submit_queries(std::span<const Query> queries, uint32_t words, Kernel kernel, Fill fill) {
+    if (queries.size() > opt.max_queries)
+      throw GpuError("GpuMap::evaluate: " + std::to_string(queries.size()) + " queries, more than max_queries (" +
+                     std::to_string(opt.max_queries) + ")");
+    Frame& f = acquire();
+    auto* in = static_cast<uint32_t*>(f.input_host.mapped);
+    f.input_bytes = queries.size() * words * 4;
+    f.normals_bytes = 0;
+    for (size_t i = 0; i < queries.size(); ++i) fill(queries[i], in + i * words);
+    uint32_t pc[L::kPcWords] = {};
+    pc[L::kPcCount] = uint32_t(queries.size());
+    return submit(f, kernel, uint32_t(queries.size()), pc);
+  }
+
   Frame& acquire() {
     Frame& f = frames[next_frame % frames.size()];
     if (f.in_flight) finish(f);
@@ -601,27 +617,14 @@ FrameStats GpuMap::evaluate(std::span<const GpuQuery> queries, std::span<float> 
 }
 
 uint64_t GpuMap::submit_evaluate(std::span<const GpuQuery> queries) {
-  Impl& m = *impl_;
-  if (queries.size() > m.opt.max_queries)
-    throw GpuError("GpuMap::evaluate: " + std::to_string(queries.size()) + " queries, more than max_queries (" +
-                   std::to_string(m.opt.max_queries) + ")");
-  Impl::Frame& f = m.acquire();
-  auto* in = static_cast<uint32_t*>(f.input_host.mapped);
-  f.input_bytes = queries.size() * L::kQueryWords * 4;
-  f.normals_bytes = 0;
-  for (size_t i = 0; i < queries.size(); ++i) {
-    const GpuQuery& q = queries[i];
-    uint32_t* w = in + i * L::kQueryWords;
+  return impl_->submit_queries(queries, L::kQueryWords, Kernel::evaluate, [](const GpuQuery& q, uint32_t* w) {
     w[L::kQueryX] = q.x;
     w[L::kQueryY] = q.y;
     w[L::kQueryReceiver] = std::bit_cast<uint32_t>(q.receiver);
     w[L::kQueryFootprint] = std::bit_cast<uint32_t>(q.footprint);
     w[L::kQueryR] = q.r;
     w[L::kQueryLevel] = q.level;
-  }
-  uint32_t pc[L::kPcWords] = {};
-  pc[L::kPcCount] = uint32_t(queries.size());
-  return m.submit(f, Kernel::evaluate, uint32_t(queries.size()), pc);
+  });
 }
 
 FrameStats GpuMap::evaluate(std::span<const GpuStackQuery> queries, std::span<float> out) {
@@ -630,18 +633,8 @@ FrameStats GpuMap::evaluate(std::span<const GpuStackQuery> queries, std::span<fl
 }
 
 uint64_t GpuMap::submit_evaluate(std::span<const GpuStackQuery> queries) {
-  Impl& m = *impl_;
-  if (!m.sg) throw GpuError("GpuMap::evaluate: stack queries on a map that is not a stack");
-  if (queries.size() > m.opt.max_queries)
-    throw GpuError("GpuMap::evaluate: " + std::to_string(queries.size()) + " queries, more than max_queries (" +
-                   std::to_string(m.opt.max_queries) + ")");
-  Impl::Frame& f = m.acquire();
-  auto* in = static_cast<uint32_t*>(f.input_host.mapped);
-  f.input_bytes = queries.size() * L::kSqWords * 4;
-  f.normals_bytes = 0;
-  for (size_t i = 0; i < queries.size(); ++i) {
-    const GpuStackQuery& q = queries[i];
-    uint32_t* w = in + i * L::kSqWords;
+  if (!impl_->sg) throw GpuError("GpuMap::evaluate: stack queries on a map that is not a stack");
+  return impl_->submit_queries(queries, L::kSqWords, Kernel::stack_evaluate, [](const GpuStackQuery& q, uint32_t* w) {
     w[L::kSqX] = q.x;
     w[L::kSqY] = q.y;
     w[L::kSqSlice] = q.slice;
@@ -649,10 +642,7 @@ uint64_t GpuMap::submit_evaluate(std::span<const GpuStackQuery> queries) {
     w[L::kSqReceiver] = std::bit_cast<uint32_t>(q.receiver);
     w[L::kSqFootprint] = std::bit_cast<uint32_t>(q.footprint);
     w[L::kSqR] = q.r;
-  }
-  uint32_t pc[L::kPcWords] = {};
-  pc[L::kPcCount] = uint32_t(queries.size());
-  return m.submit(f, Kernel::stack_evaluate, uint32_t(queries.size()), pc);
+  });
 }
 
 uint64_t GpuMap::submit_shadow_pass(const ShadowPassInput& in) {
