@@ -5,6 +5,11 @@
 //   bench_stacks [--res 256] [--city-samples 32] [--hair-samples 64] [--lookups 20000]
 //                [--reps 3] [--case city|city-hour|hairball|all] [--hair-jitter 0.5] [--json PATH]
 //                [--mode auto|whole|blocked] [--tracer auto|embree] [--spill-dir /tmp]
+//                [--frame ground|ortho|both]
+//
+// --frame: the sun paths' frame (light_set.hpp "Frames"): ground (the default, the
+// oblique ground-aligned frame), ortho (an orthographic box per sample), or both (each
+// sun case twice in one run, ortho first, for side-by-side ratios).
 //
 // --mode whole (the default below 4K^2 per slice) holds the stack in memory and builds
 // one octree buffer; --mode blocked (from 4K^2) spills and builds the pack's cut out of
@@ -65,7 +70,7 @@ namespace {
 st::Vec3d receiver_point(const st::LightSpace& ls, uint32_t level, uint64_t x, uint64_t y, float lo) {
   const st::LightRay ray = ls.texel_ray(level, x, y);
   const double d = std::max(0.0, double(lo) - 1e-4);
-  const double t = ls.kind() == st::LightKind::sun ? d : ls.near_plane() + d * (ls.far_plane() - ls.near_plane());
+  const double t = ls.parallel() ? d : ls.near_plane() + d * (ls.far_plane() - ls.near_plane());
   return ray.origin + ray.dir * t;
 }
 
@@ -515,7 +520,8 @@ int main(int argc, char** argv) {
     std::string hair_jitter = "0.5";
     size_t lookups = 20000;
     int reps = 3;
-    std::string which = "all", json_path = "build/bench_stacks.json", mode = "auto", tracer = "auto", spill_dir = "/tmp";
+    std::string which = "all", json_path = "build/bench_stacks.json", mode = "auto", tracer = "auto", spill_dir = "/tmp",
+                frame = "ground";
     for (int i = 1; i < argc; ++i) {
       const std::string a = argv[i];
       auto next = [&]() -> std::string {
@@ -533,16 +539,24 @@ int main(int argc, char** argv) {
       else if (a == "--mode") mode = next();
       else if (a == "--tracer") tracer = next();
       else if (a == "--spill-dir") spill_dir = next();
+      else if (a == "--frame") frame = next();
       else throw st::Error("unknown option " + a);
     }
+    if (frame != "ground" && frame != "ortho" && frame != "both") throw st::Error("--frame: expected ground, ortho or both");
+    std::vector<std::string> frames;
+    if (frame != "ground") frames.push_back("ortho");
+    if (frame != "ortho") frames.push_back("ground");
     std::vector<Case> cases;
-    if (which == "all" || which == "city")
-      cases.push_back({"city", "procedural:city",
-                       "sun-path:azimuth=100..260,elevation=25..65,samples=" + std::to_string(city_n)});
-    // An hour of the same sun: neighbouring slices differ by a fraction of a degree.
-    if (which == "all" || which == "city-hour")
-      cases.push_back({"city-hour", "procedural:city",
-                       "sun-path:azimuth=170..185,elevation=50..52,samples=" + std::to_string(city_n)});
+    for (const std::string& f : frames) {
+      const std::string tag = f == "ground" ? "" : "-ortho";
+      if (which == "all" || which == "city")
+        cases.push_back({"city" + tag, "procedural:city",
+                         "sun-path:azimuth=100..260,elevation=25..65,samples=" + std::to_string(city_n) + ",frame=" + f});
+      // An hour of the same sun: neighbouring slices differ by a fraction of a degree.
+      if (which == "all" || which == "city-hour")
+        cases.push_back({"city-hour" + tag, "procedural:city",
+                         "sun-path:azimuth=170..185,elevation=50..52,samples=" + std::to_string(city_n) + ",frame=" + f});
+    }
     if (which == "all" || which == "hairball")
       cases.push_back({"hairball", "procedural:hairball",
                        "area:pos=0,25,0,target=0,0,0,size=4,4,samples=" + std::to_string(hair_n) + ",jitter=" + hair_jitter});

@@ -17,7 +17,7 @@ Aabb unit_box() {
 }
 
 TEST(LightSet, SunPathSamplesAreLinearInTimeAndEachFitted) {
-  auto spec = LightSetSpec::parse("sun-path:azimuth=90..270,elevation=20..60,samples=5");
+  auto spec = LightSetSpec::parse("sun-path:azimuth=90..270,elevation=20..60,samples=5,frame=ortho");
   ASSERT_EQ(spec.kind, LightSetKind::sun_path);
   auto set = LightSet::fit(spec, unit_box());
   ASSERT_EQ(set.size(), 5u);
@@ -39,7 +39,7 @@ TEST(LightSet, SunPathSamplesAreLinearInTimeAndEachFitted) {
   const LightSpace alone = LightSpace::fit(set.samples[2].spec(), unit_box());
   EXPECT_NEAR(dot(alone.axis_u(), set.samples[2].axis_u()), 1.0, 1e-12);
   // Through the zenith region the frame turns smoothly (fit() switches its helper axis).
-  auto steep = LightSet::fit(LightSetSpec::parse("sun-path:azimuth=10..40,elevation=30..90,samples=31"), unit_box());
+  auto steep = LightSet::fit(LightSetSpec::parse("sun-path:azimuth=10..40,elevation=30..90,samples=31,frame=ortho"), unit_box());
   for (uint32_t w = 1; w < steep.size(); ++w) {
     EXPECT_GT(dot(steep.samples[w].axis_u(), steep.samples[w - 1].axis_u()), 0.99) << w;
     EXPECT_GT(dot(steep.samples[w].axis_v(), steep.samples[w - 1].axis_v()), 0.99) << w;

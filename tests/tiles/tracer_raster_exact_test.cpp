@@ -4,8 +4,10 @@
 // bit for bit on every texel, on a closed city, rotated terrain, a hairball, open soups
 // (procedural:soup, the open hazard town, the open city) and under a grazing sun. Packs
 // built by either builder from the same scene are then the same tiles, byte for byte.
-// The rasterizer is sun-only; a spot light's tracer is compared with the definition
-// evaluated with every triangle as a candidate.
+// Sun-path samples in the ground frame (a sheared, oblique map: light_set.hpp "Frames")
+// are compared too, at a low and a high elevation. The rasterizer is sun-only; a spot
+// light's tracer is compared with the definition evaluated with every triangle as a
+// candidate.
 #include <gtest/gtest.h>
 
 #include <cstdio>
@@ -19,6 +21,7 @@
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/map_build.hpp"
 #include "tiles/bake/raster_bounds.hpp"
+#include "tiles/core/light_set.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_reader.hpp"
 
@@ -51,13 +54,28 @@ std::vector<Case> cases() {
   v.push_back({"open_city", test::all_open(make_procedural("procedural:city,size=2,seed=5")), kSun});
   v.push_back({"grazing_hazard_town", test::hazard_town(), "sun:azimuth=77,elevation=0.5"});
   v.push_back({"grazing_open_town", test::all_open(test::hazard_town()), "sun:azimuth=77,elevation=0.5"});
+  // Ground frame: the last sample of each path (sun-path: strings, light_of below).
+  v.push_back({"ground_city", make_procedural("procedural:city,size=3,seed=5"),
+               "sun-path:azimuth=100..130,elevation=60..50,samples=2"});
+  v.push_back({"ground_low_hazard_town", test::hazard_town(), "sun-path:azimuth=200..243,elevation=30..9,samples=2"});
+  v.push_back({"ground_high_open_town", test::all_open(test::hazard_town()),
+               "sun-path:azimuth=10..77,elevation=70..88,samples=2"});
+  v.push_back({"ground_hairball", make_procedural("procedural:hairball,count=8,segments=12"),
+               "sun-path:azimuth=300..320,elevation=35,samples=2"});
   return v;
+}
+
+// A single sun, or the last sample of a sun-path set (its ground frame).
+LightSpace light_of(const Case& c) {
+  if (!LightSetSpec::names_light_set(c.light)) return LightSpace::fit(LightSpec::parse(c.light), c.scene.bounds());
+  const LightSet set = LightSet::fit(LightSetSpec::parse(c.light), c.scene.bounds());
+  return set.samples.back();
 }
 
 TEST(TracerRasterExact, EqualOnEveryTexel) {
   const uint32_t L = test_level(), side = 1u << L;
   for (const Case& c : cases()) {
-    const LightSpace light = LightSpace::fit(LightSpec::parse(c.light), c.scene.bounds());
+    const LightSpace light = light_of(c);
     const RasterBounds raster(c.scene, light);
     const DepthBoundsTracer tracer(c.scene, light);
     const IntervalTile a = raster.trace({L, 0, 0, side, side});
@@ -92,7 +110,7 @@ TEST(TracerRasterExact, EqualOnEveryTexel) {
 Interval definition(const Scene& s, const LightSpace& light, uint32_t level, uint64_t x, uint64_t y) {
   const Aabb box = s.bounds();
   const Vec3d centre = box.empty() ? Vec3d{0, 0, 0} : box.center();
-  const bool sun = light.kind() == LightKind::sun;
+  const bool sun = light.parallel();
   const double t0 = sun ? 0.0 : light.near_plane(), t1 = sun ? 1.0 : light.far_plane();
   std::vector<uint32_t> mesh(s.triangles.size(), 0);
   std::vector<uint8_t> closed(s.triangles.size(), 0);

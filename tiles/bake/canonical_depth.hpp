@@ -66,7 +66,7 @@ struct CanonicalPlane {
 
 // Step 5 of the definition.
 inline float canonical_depth(const LightSpace& light, double t) {
-  const double d = light.kind() == LightKind::sun
+  const double d = light.parallel()
                        ? t
                        : (t - light.near_plane()) / (light.far_plane() - light.near_plane());
   return float(std::clamp(d, 0.0, 1.0));

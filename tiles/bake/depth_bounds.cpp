@@ -132,6 +132,21 @@ void intersect(const int* valid, RTCScene scene, RTCIntersectContext* ctx, RTCRa
 // overhead sun); under a spot light, a box every texel ray crosses (the light position
 // with the scene). The callback then rejects nothing the definition accepts: it is the
 // definition.
+//
+// The ground frame (LightKind::sun_ground, a sheared map). Its texel rays share one
+// direction d = g (far - near) (g = forward / (forward . n), n = axis_u x axis_v) and
+// their origins o = origin + axis_u (u E) + axis_v (v E) + g near lie in one plane
+// normal to n, not to d. Nothing above uses d . (o - o') = 0: the edge bounds B_i, the
+// grown triangle and the slab need only the one direction d and a componentwise bound
+// o_max on the origins (the map square's four corners; the origins are affine in the
+// texel centre, so they lie in the hull of the corners, up to texel_ray's rounding,
+// which is bounded with |g near| in place of |near|), and the light volume box holds the
+// parallelepiped of the rays at t in [0, 1] (the corners and the corners + d). What
+// changes is how far before a texel origin a box point can lie: the ray parameter of a
+// point X on the ray through o is (X - o) . n / (d . n), the same for every origin of the
+// plane, so S is measured along n (LightSpace::depth_axis) instead of the forward axis.
+// With that, every covered ray still meets its triangle's box on the traversed segment,
+// and the argument holds word for word.
 namespace {
 
 struct CoverageData {
@@ -473,7 +488,7 @@ void DepthBoundsTracer::Impl::build_triangles() {
         const Vec3d& a = cd.v[t[0]];
         const Vec3d normal = cross(cd.v[t[1]] - a, cd.v[t[2]] - a);
         Facing facing = Facing::per_ray;
-        if (light.kind() == LightKind::sun) {  // one direction for every texel ray
+        if (light.parallel()) {  // one direction for every texel ray
           const double f = dot(normal, light.forward());
           facing = f < 0 ? Facing::front : (f > 0 ? Facing::back : Facing::edge_on);
         }
@@ -504,7 +519,7 @@ void DepthBoundsTracer::Impl::build_coverage(const Scene& s, const std::vector<u
   cd.mesh = tri_mesh;
   cd.closed = is_closed;
   cd.plane.resize(nt);
-  const bool sun = light.kind() == LightKind::sun;
+  const bool sun = light.parallel();
   const double E = light.extent_uv();
   // The texel rays' extremes: every texel centre lies inside the map square (u, v in
   // [0, 1]), origins and directions are affine in it.
@@ -514,7 +529,7 @@ void DepthBoundsTracer::Impl::build_coverage(const Scene& s, const std::vector<u
     const double u = c & 1, v = c >> 1;
     if (sun) {
       corner[c] = light.origin() + light.axis_u() * (u * E) + light.axis_v() * (v * E) +
-                  light.forward() * light.near_plane() - centre;
+                  light.ray_axis() * light.near_plane() - centre;
       d_max = max3(abs3(light.texel_ray(0, 0, 0).dir));
     } else {
       corner[c] = light.origin() - centre;
@@ -526,7 +541,7 @@ void DepthBoundsTracer::Impl::build_coverage(const Scene& s, const std::vector<u
   }
   {  // the rounding of texel_ray and of the recentring, generously
     const double g = max3(abs3(light.origin())) + max3(abs3(centre)) + max3(o_max) + E * 4 +
-                     std::fabs(light.near_plane());
+                     std::max(std::fabs(light.near_plane()), max3(abs3(light.ray_axis() * light.near_plane())));
     o_max = o_max * (1 + 0x1p-30) + Vec3d{1, 1, 1} * (g * 0x1p-40 + 0x1p-1000);
   }
   d_max *= 1 + 0x1p-30;
@@ -564,7 +579,7 @@ void DepthBoundsTracer::Impl::build_coverage(const Scene& s, const std::vector<u
     }
   });
   // S: every point of a grown box lies at ray parameter >= -S + 1 (sun: depth along the
-  // light's forward axis; spot: |t| <= |X - o|2 / |d|2 with |d|2 >= 1).
+  // light's depth axis, forward or the ground frame's n: the texel origins' plane normal; spot: |t| <= |X - o|2 / |d|2 with |d|2 >= 1).
   double shift = 1;
   for (size_t t = 0; t < nt; ++t) {
     if (kind[t] != 1) continue;
@@ -572,7 +587,7 @@ void DepthBoundsTracer::Impl::build_coverage(const Scene& s, const std::vector<u
       const Vec3d x{c & 1 ? boxes[t].hi.x : boxes[t].lo.x, c & 2 ? boxes[t].hi.y : boxes[t].lo.y,
                     c & 4 ? boxes[t].hi.z : boxes[t].lo.z};
       if (sun) {
-        const double tx = dot(x - corner[0], light.forward()) / dot(d_sun, light.forward());
+        const double tx = dot(x - corner[0], light.depth_axis()) / dot(d_sun, light.depth_axis());
         shift = std::max(shift, 1 - tx);
       } else {
         shift = std::max(shift, 1 + 2 * length(x - o_spot));
@@ -628,7 +643,7 @@ void DepthBoundsTracer::Impl::trace_packet_canonical(const TraceRegion& r, uint3
   rtcInitIntersectContext(&cc.ctx);
   cc.ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
   cc.data = &cover;
-  const bool sun = light.kind() == LightKind::sun;
+  const bool sun = light.parallel();
   cc.t_lo = sun ? 0.0 : light.near_plane();
   cc.t_hi = sun ? 1.0 : light.far_plane();
   std::vector<CanonicalHit>* hits = lane_hits();
@@ -773,7 +788,7 @@ void DepthBoundsTracer::Impl::trace_packet(const TraceRegion& r, uint32_t px, ui
   const bool counting = mode != TraceMode::first_hit && any_closed;
   fc.ctx.filter = counting ? offer_hits : nullptr;
 
-  const bool sun = light.kind() == LightKind::sun;
+  const bool sun = light.parallel();
   const float t_min = sun ? 0.0f : float(light.near_plane());
   const float t_max = sun ? 1.0f : float(light.far_plane());
 

@@ -218,10 +218,10 @@ class ExitDepthRay {
   float tnear_, tfar_;
 };
 
-// Depth of ray parameter t: t itself under a sun, (t - near) / (far - near) under a spot,
+// Depth of ray parameter t: t itself under a sun (either frame), (t - near) / (far - near) under a spot,
 // in double, clamped to [0, 1], then float.
 inline float depth_of_t(const LightSpace& light, float t) {
-  double d = light.kind() == LightKind::sun
+  double d = light.parallel()
                  ? double(t)
                  : (double(t) - light.near_plane()) / (light.far_plane() - light.near_plane());
   return float(std::clamp(d, 0.0, 1.0));

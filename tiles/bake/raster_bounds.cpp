@@ -201,7 +201,7 @@ struct RasterBounds::Impl {
 
 RasterBounds::Impl::Impl(const Scene& scene, const LightSpace& l) : light(l) {
   const auto t0 = Clock::now();
-  if (light.kind() != LightKind::sun)
+  if (!light.parallel())
     throw Error("raster builder: only sun lights are supported (use the tracer)");
   const size_t nv = scene.vertices.size(), nt = scene.triangles.size();
   if (nt >= (size_t(1) << 32)) throw Error("raster builder: scene '" + scene.name + "' has too many triangles");
@@ -245,9 +245,9 @@ RasterBounds::Impl::Impl(const Scene& scene, const LightSpace& l) : light(l) {
   {
     // How far a computed texel origin can be from the exact affine function of the texel
     // centre: a few roundings of the magnitudes texel_ray adds (its origin, the steps
-    // across the map, forward * near) and of the recentring; 2^-40 of them is a thousand
+    // across the map, ray_axis * near: forward, or the ground frame's sheared axis) and of the recentring; 2^-40 of them is a thousand
     // times more than that.
-    Vec3d g = abs3(centre) + o_max * 4 + abs3(light.forward() * light.near_plane());
+    Vec3d g = abs3(centre) + o_max * 4 + abs3(light.ray_axis() * light.near_plane());
     for (uint64_t y : {uint64_t(0), last})
       for (uint64_t x : {uint64_t(0), last}) g = g + abs3(light.texel_ray(kMaxLevel, x, y).origin);
     o_round = g * 0x1p-40;
@@ -369,12 +369,12 @@ void RasterBounds::Impl::tile(const TraceRegion& r, const Candidate* cand, const
   Scratch& s = scratch.local();
   const uint32_t tw = std::min(kTile, r.width - bi), th = std::min(kTile, r.height - bj);
   // The texel origins, operation for operation as LightSpace::texel_ray computes them
-  // (origin + axis_u (u E) + axis_v (v E) + forward near, then - centre), with the
+  // (origin + axis_u (u E) + axis_v (v E) + ray_axis near, then - centre), with the
   // column and row terms computed once per tile; the reference test pins the equality.
   {
     const double inv = std::ldexp(1.0, -int(r.level)), E = light.extent_uv();
     const Vec3d org = light.origin(), au = light.axis_u(), av = light.axis_v();
-    const Vec3d fn = light.forward() * light.near_plane();
+    const Vec3d fn = light.ray_axis() * light.near_plane();
     Vec3d col[kTile];
     for (uint32_t i = 0; i < tw; ++i) col[i] = au * ((double(r.x0 + bi + i) + 0.5) * inv * E);
     for (uint32_t j = 0; j < th; ++j) {
@@ -807,7 +807,7 @@ std::optional<Interval> RasterBounds::Impl::region_interval(uint32_t level, uint
   {
     const double inv = std::ldexp(1.0, -int(level)), E = light.extent_uv();
     const Vec3d org = light.origin(), au = light.axis_u(), av = light.axis_v();
-    const Vec3d fn = light.forward() * light.near_plane();
+    const Vec3d fn = light.ray_axis() * light.near_plane();
     const uint64_t xs[4] = {x0, x0 + side - 1, x0, x0 + side - 1}, ys[4] = {y0, y0, y0 + side - 1, y0 + side - 1};
     for (int q = 0; q < 4; ++q) {
       const Vec3d o = org + au * ((double(xs[q]) + 0.5) * inv * E) + av * ((double(ys[q]) + 0.5) * inv * E) + fn - centre;

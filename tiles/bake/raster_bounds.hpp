@@ -23,7 +23,8 @@
 //     sorted and reduced by canonical_interval(). A tile without closed triangles keeps
 //     only the nearest hit.
 //
-// Scope: sun lights (parallel texel rays) and the closed-object interval rule; a spot
+// Scope: sun lights (parallel texel rays: orthographic or the ground frame's sheared
+// map, whose origins are affine in the texel too) and the closed-object interval rule; a spot
 // light is refused with st::Error (the Embree tracer handles it).
 // Assumption shared with every binning rasterizer: the definition's double evaluation
 // never covers a texel centre more than a texel outside the triangle's light-space box

@@ -24,7 +24,7 @@ double since(std::chrono::steady_clock::time_point t0) {
 class SliceTracer {
  public:
   SliceTracer(const Scene& scene, const LightSpace& light, bool embree_only = false) {
-    if (light.kind() == LightKind::sun && !embree_only)
+    if (light.parallel() && !embree_only)
       raster_ = std::make_unique<RasterBounds>(scene, light, RasterSkip::exact);
     else
       embree_ = std::make_unique<DepthBoundsTracer>(scene, light);

@@ -122,6 +122,8 @@ std::string LightSpec::to_string() const {
 
 LightSpace LightSpace::fit(const LightSpec& spec, const Aabb& b) {
   if (b.empty()) throw Error("light: the scene has no geometry to fit the light to");
+  if (spec.kind == LightKind::sun_ground)
+    throw Error("light: a ground-frame sun is fitted per light set (LightSet::fit), not alone");
   LightSpace ls;
   ls.kind_ = spec.kind;
   ls.spec_ = spec;
@@ -174,6 +176,7 @@ LightSpace LightSpace::fit(const LightSpec& spec, const Aabb& b) {
 
 LightPoint LightSpace::to_light(const Vec3d& p) const {
   Vec3d r = p - origin_;
+  if (kind_ == LightKind::sun_ground) return to_light_ground(r);
   if (kind_ == LightKind::sun) {
     return {dot(r, axis_u_) / extent_uv_, dot(r, axis_v_) / extent_uv_,
             (dot(r, forward_) - near_) / (far_ - near_)};
@@ -187,10 +190,11 @@ LightPoint LightSpace::to_light(const Vec3d& p) const {
 LightRay LightSpace::texel_ray(uint32_t level, uint64_t x, uint64_t y) const {
   const double inv = std::ldexp(1.0, -int(level));
   const double u = (double(x) + 0.5) * inv, v = (double(y) + 0.5) * inv;
-  if (kind_ == LightKind::sun) {
-    Vec3d o = origin_ + axis_u_ * (u * extent_uv_) + axis_v_ * (v * extent_uv_) +
-              forward_ * near_;
-    return {o, forward_ * (far_ - near_)};
+  if (kind_ == LightKind::sun || kind_ == LightKind::sun_ground) {
+    // sun_ground: the same operations with ray_axis() for forward (light.hpp).
+    const Vec3d ax = ray_axis();
+    Vec3d o = origin_ + axis_u_ * (u * extent_uv_) + axis_v_ * (v * extent_uv_) + ax * near_;
+    return {o, ax * (far_ - near_)};
   }
   // Spot: direction with unit forward component, so t is the distance along the axis.
   Vec3d d = forward_ + axis_u_ * ((u - 0.5) * extent_uv_) + axis_v_ * ((v - 0.5) * extent_uv_);
@@ -198,7 +202,7 @@ LightRay LightSpace::texel_ray(uint32_t level, uint64_t x, uint64_t y) const {
 }
 
 double LightSpace::depth_of_t(const LightRay&, double t) const {
-  if (kind_ == LightKind::sun) return t;
+  if (parallel()) return t;
   return (t - near_) / (far_ - near_);
 }
 
@@ -217,7 +221,7 @@ std::array<double, 18> LightSpace::to_array() const {
   return {origin_.x, origin_.y, origin_.z, axis_u_.x, axis_u_.y, axis_u_.z,
           axis_v_.x, axis_v_.y, axis_v_.z, forward_.x, forward_.y, forward_.z,
           extent_uv_, near_, far_, spec_.azimuth_deg, spec_.elevation_deg,
-          kind_ == LightKind::sun ? spec_.margin : spec_.fov_deg};
+          parallel() ? spec_.margin : spec_.fov_deg};
 }
 
 std::string LightSpace::check_array(LightKind kind, const std::array<double, 18>& a) {
@@ -230,11 +234,14 @@ std::string LightSpace::check_array(LightKind kind, const std::array<double, 18>
     os << v;
     return os.str();
   };
+  if (kind != LightKind::sun && kind != LightKind::spot && kind != LightKind::sun_ground)
+    return "unknown light kind " + std::to_string(int(kind)) + " (this build reads 0 sun, 1 spot, 2 sun_ground)";
   for (size_t i = 0; i < a.size(); ++i) {
     if (!std::isfinite(a[i])) return std::string(kNames[i]) + " is " + num(a[i]) + ", not a finite number";
     if (std::fabs(a[i]) > kMaxLightCoordinate)
       return std::string(kNames[i]) + " = " + num(a[i]) + " exceeds " + num(kMaxLightCoordinate);
   }
+  if (kind == LightKind::sun_ground) return check_ground_array(a);
   const Vec3d u{a[3], a[4], a[5]}, v{a[6], a[7], a[8]}, f{a[9], a[10], a[11]};
   constexpr double kTol = 1e-6;
   const std::pair<const char*, Vec3d> axes[3] = {{"axis_u", u}, {"axis_v", v}, {"forward", f}};
@@ -265,10 +272,11 @@ LightSpace LightSpace::from_array(LightKind kind, const std::array<double, 18>& 
   ls.extent_uv_ = a[12];
   ls.near_ = a[13];
   ls.far_ = a[14];
-  ls.spec_.kind = kind;
+  ls.spec_.kind = kind == LightKind::sun_ground ? LightKind::sun : kind;
   ls.spec_.azimuth_deg = a[15];
   ls.spec_.elevation_deg = a[16];
-  if (kind == LightKind::sun) {
+  if (kind == LightKind::sun_ground) ls.derive_ground();
+  if (kind == LightKind::sun || kind == LightKind::sun_ground) {
     ls.spec_.margin = a[17];
   } else {
     ls.spec_.fov_deg = a[17];
@@ -276,6 +284,68 @@ LightSpace LightSpace::from_array(LightKind kind, const std::array<double, 18>& 
     ls.spec_.target = ls.origin_ + ls.forward_;
   }
   return ls;
+}
+
+// ---- The ground frame (LightKind::sun_ground) ----
+//
+// With n = axis_u x axis_v (unit, pointing away from the sun: forward . n > 0) and
+// g = forward / (forward . n) (the ray step per unit of depth distance, g . n = 1), a
+// world point p, r = p - origin, z = r . n, lies on the ray through the reference-plane
+// point q = p - g z, so
+//   u = (r . axis_u - (g . axis_u) z) / E,  v = (r . axis_v - (g . axis_v) z) / E,
+//   d = (z - near) / (far - near),
+// affine in p (rows axis_u - ku n, axis_v - kv n, n: the dual basis of axis_u, axis_v, g).
+// texel_ray inverts it: origin + axis_u (u E) + axis_v (v E) + g near, direction
+// g (far - near), so t == d.
+
+const char* light_kind_name(LightKind kind) {
+  switch (kind) {
+    case LightKind::sun: return "sun";
+    case LightKind::spot: return "spot";
+    case LightKind::sun_ground: return "sun_ground";
+  }
+  return "unknown";
+}
+
+void LightSpace::derive_ground() {
+  depth_axis_ = cross(axis_u_, axis_v_);
+  ray_axis_ = forward_ * (1.0 / dot(forward_, depth_axis_));
+  ku_ = dot(ray_axis_, axis_u_);
+  kv_ = dot(ray_axis_, axis_v_);
+}
+
+LightPoint LightSpace::to_light_ground(const Vec3d& r) const {
+  const double z = dot(r, depth_axis_);
+  return {(dot(r, axis_u_) - ku_ * z) / extent_uv_, (dot(r, axis_v_) - kv_ * z) / extent_uv_,
+          (z - near_) / (far_ - near_)};
+}
+
+std::string LightSpace::check_ground_array(const std::array<double, 18>& a) {
+  auto num = [](double v) {
+    std::ostringstream os;
+    os.precision(17);
+    os << v;
+    return os.str();
+  };
+  const Vec3d u{a[3], a[4], a[5]}, v{a[6], a[7], a[8]}, f{a[9], a[10], a[11]};
+  constexpr double kTol = 1e-6;
+  const std::pair<const char*, Vec3d> axes[3] = {{"axis_u", u}, {"axis_v", v}, {"forward", f}};
+  for (const auto& [name, axis] : axes)
+    if (std::fabs(length(axis) - 1) > kTol)
+      return std::string("ground frame: ") + name + " has length " + num(length(axis)) + ", not 1";
+  if (std::fabs(dot(u, v)) > kTol) return "ground frame: axis_u and axis_v are not orthogonal";
+  const double sine = dot(f, cross(u, v));
+  if (!(sine >= kMinGroundSine))
+    return "ground frame: the sun's ray meets the reference plane at sine " + num(sine) + ", below " +
+           num(kMinGroundSine) + " (about 1 degree) or from the wrong side";
+  const double extent = a[12], near = a[13], far = a[14];
+  if (!(extent > 0)) return "ground frame: extent " + num(extent) + " is not positive";
+  if (!(far > near) || !(far - near > 0)) return "ground frame: near " + num(near) + " is not below far " + num(far);
+  if (!((far - near) / sine <= kMaxLightCoordinate) || !(std::fabs(near) / sine <= kMaxLightCoordinate))
+    return "ground frame: the rays' reach exceeds " + num(kMaxLightCoordinate);
+  if (!(a[16] > 0 && a[16] <= 90)) return "sun elevation " + num(a[16]) + " is outside (0, 90]";
+  if (!(a[17] >= 0 && a[17] < 10)) return "sun margin " + num(a[17]) + " is outside [0, 10)";
+  return "";
 }
 
 }  // namespace st

@@ -15,7 +15,16 @@
 
 namespace st {
 
-enum class LightKind : uint8_t { sun = 0, spot = 1 };
+// sun_ground (a sun-path sample's ground-aligned frame, light_set.hpp "Frames"): texel
+// (u, v) indexes a fixed square on a reference plane spanned by axis_u and axis_v (the
+// scene's ground), the texel ray runs along the sun's direction `forward` through that
+// point, and depth is linear along the ray, measured along n = axis_u x axis_v (down):
+// d = ((p - origin) . n - near) / (far - near), the same in every slice for a world
+// point. The world -> light map is affine (an oblique projection); rays share one
+// direction and t == d, as for an orthographic sun.
+enum class LightKind : uint8_t { sun = 0, spot = 1, sun_ground = 2 };
+// "sun", "spot", "sun_ground" ("unknown" for any other value).
+const char* light_kind_name(LightKind kind);
 
 // Bound on every coordinate and extent of a light read from a file: far above any scene
 // (float's precision at 1e18 is 1e11 units), far below float's overflow.
@@ -57,11 +66,28 @@ class LightSpace {
   LightRay texel_ray(uint32_t level, uint64_t x, uint64_t y) const;
   // Depth of the point at parameter t on a texel ray (sun: d = t).
   double depth_of_t(const LightRay& ray, double t) const;
+  // Ground frame (LightKind::sun_ground) and what every parallel-ray light shares.
+  // True for sun and sun_ground: every texel ray has one direction and t == d.
+  bool parallel() const { return kind_ == LightKind::sun || kind_ == LightKind::sun_ground; }
+  // The ray direction per unit of depth distance: sun, spot: forward; sun_ground:
+  // forward / (forward . n), whose component along n is 1. texel_ray's origin is
+  // origin + axis_u (u E) + axis_v (v E) + ray_axis() * near for both parallel kinds.
+  Vec3d ray_axis() const { return kind_ == LightKind::sun_ground ? ray_axis_ : forward_; }
+  // The unit axis along which depth distance is measured: sun, spot: forward;
+  // sun_ground: n = axis_u x axis_v (texel origins all lie in one plane normal to it).
+  Vec3d depth_axis() const { return kind_ == LightKind::sun_ground ? depth_axis_ : forward_; }
+  // sun_ground: the smallest sine of the angle between the sun's ray and the reference
+  // plane that check_array accepts (about 1 degree; a ray this shallow crosses ~57 times
+  // the slab's height horizontally).
+  static constexpr double kMinGroundSine = 0.0174524064372835;  // sin(1 degree)
+
   // Integer texel containing (u, v) at `level`, clamped to the map.
   static std::array<uint64_t, 2> texel_of(uint32_t level, double u, double v);
 
   // Basis and extents, for serialization in pack headers.
-  Vec3d origin() const { return origin_; }  // sun: corner of the near plane; spot: eye
+  // sun: corner of the near plane; spot: eye; sun_ground: corner of the square on the
+  // reference plane (near and far are then signed distances along n from that plane).
+  Vec3d origin() const { return origin_; }
   Vec3d axis_u() const { return axis_u_; }
   Vec3d axis_v() const { return axis_v_; }
   Vec3d forward() const { return forward_; }
@@ -76,7 +102,11 @@ class LightSpace {
   // nothing: a value that is not finite, a coordinate or extent beyond
   // kMaxLightCoordinate (tracers convert to float, and 1e308 overflows there), axes that
   // are not orthonormal (to 1e-6), extent <= 0, near < 0 or far <= near, and spec
-  // fields outside what LightSpec::parse accepts. Readers of untrusted packs call it
+  // fields outside what LightSpec::parse accepts; sun_ground (on its own terms): axis_u,
+  // axis_v unit and orthogonal, forward unit with forward . (axis_u x axis_v) >=
+  // kMinGroundSine, extent > 0, near < far (either may be negative), the ray's reach
+  // (far - near) / sine within kMaxLightCoordinate, sun elevation and margin as for sun.
+  // Any other kind is refused ("unknown light kind"). Readers of untrusted packs call it
   // before from_array (a NaN light once reached Embree's assertions).
   static std::string check_array(LightKind kind, const std::array<double, 18>& a);
 
@@ -86,6 +116,12 @@ class LightSpace {
   Vec3d origin_{}, axis_u_{1, 0, 0}, axis_v_{0, 0, 1}, forward_{0, -1, 0};
   double extent_uv_ = 1;    // sun: box side; spot: tan(fov/2) * 2 (image plane at 1)
   double near_ = 0, far_ = 1;
+  void derive_ground();
+  LightPoint to_light_ground(const Vec3d& r) const;
+  static std::string check_ground_array(const std::array<double, 18>& a);
+  // sun_ground only (derived from the axes in from_array, so a round trip is exact).
+  Vec3d ray_axis_{0, -1, 0}, depth_axis_{0, -1, 0};
+  double ku_ = 0, kv_ = 0;  // ray_axis . axis_u, ray_axis . axis_v
 };
 
 }  // namespace st

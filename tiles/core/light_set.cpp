@@ -111,6 +111,10 @@ LightSetSpec LightSetSpec::parse(const std::string& text) {
       std::tie(s.elevation0_deg, s.elevation1_deg) = range(kind, key, one()), have_el = true;
     } else if (s.kind == LightSetKind::sun_path && key == "margin") {
       s.margin = number(kind, key, one());
+    } else if (s.kind == LightSetKind::sun_path && key == "frame") {
+      if (one() == "ground") s.frame = SunFrame::ground;
+      else if (one() == "ortho") s.frame = SunFrame::ortho;
+      else fail(kind, "frame must be ground or ortho, got '" + one() + "'");
     } else if (s.kind == LightSetKind::area && key == "pos") {
       s.pos = vec(), have_pos = true;
     } else if (s.kind == LightSetKind::area && key == "target") {
@@ -152,7 +156,8 @@ std::string LightSetSpec::to_string() const {
   os.precision(17);
   if (kind == LightSetKind::sun_path) {
     os << "sun-path:azimuth=" << azimuth0_deg << ".." << azimuth1_deg << ",elevation=" << elevation0_deg << ".."
-       << elevation1_deg << ",samples=" << samples << ",margin=" << margin;
+       << elevation1_deg << ",samples=" << samples << ",margin=" << margin
+       << ",frame=" << (frame == SunFrame::ground ? "ground" : "ortho");
   } else {
     os << "area:pos=" << pos.x << ',' << pos.y << ',' << pos.z << ",target=" << target.x << ',' << target.y << ','
        << target.z << ",size=" << width << ',' << height << ",samples=" << samples << ",fov=" << fov_deg
@@ -269,6 +274,53 @@ std::vector<LightSpace> fit_sun_path(const std::vector<LightSpec>& specs, const 
   return out;
 }
 
+// frame=ground (light_set.hpp "Frames"): one square on the ground plane for every sample.
+std::vector<LightSpace> fit_sun_ground(const std::vector<LightSpec>& specs, const Aabb& b) {
+  const double m = specs.empty() ? 0 : specs[0].margin;
+  const Vec3d ext = b.extent();
+  const double H = ext.y, width = std::max(ext.x, ext.z);
+  const double pad = m * std::max(H, 1e-3 * width);
+  const Vec3d axis_u{1, 0, 0}, axis_v{0, 0, 1};  // n = u x v = (0, -1, 0): down
+  const double near = -H - pad, far = pad;      // signed distance below the ground plane
+  if (!(far > near) || !std::isfinite(H) || !std::isfinite(width) || !(std::max(width, H) > 0))
+    throw Error("light set: zero-extent light slab (the scene is a point, or flat with margin=0)");
+  double lo_x = INFINITY, hi_x = -INFINITY, lo_z = INFINITY, hi_z = -INFINITY;
+  for (const LightSpec& s : specs) {
+    const double az = s.azimuth_deg * kPi / 180, el = s.elevation_deg * kPi / 180;
+    const Vec3d f = normalize(Vec3d{-std::cos(el) * std::sin(az), -std::sin(el), -std::cos(el) * std::cos(az)});
+    const double gx = f.x / -f.y, gz = f.z / -f.y;  // the ray's step per unit of descent
+    for (int i = 0; i < 8; ++i) {
+      const Vec3d c{(i & 1) ? b.hi.x : b.lo.x, (i & 2) ? b.hi.y : b.lo.y, (i & 4) ? b.hi.z : b.lo.z};
+      const double h = c.y - b.lo.y;  // height above the ground plane
+      const double x = c.x + gx * h, z = c.z + gz * h;
+      lo_x = std::min(lo_x, x), hi_x = std::max(hi_x, x), lo_z = std::min(lo_z, z), hi_z = std::max(hi_z, z);
+    }
+  }
+  const double side = std::max({hi_x - lo_x, hi_z - lo_z, 1e-3 * std::max(width, H)}) * (1 + 2 * m);
+  const double scene = std::max(width, H) * (1 + 2 * m);
+  if (!std::isfinite(side) || side > kMaxGroundStretch * scene) {
+    std::ostringstream os;
+    os.precision(3);
+    os << "--light sun-path: frame=ground: the lowest sun stretches the ground square to " << side / scene
+       << " times the scene (limit " << kMaxGroundStretch
+       << "); raise the lowest elevation or use frame=ortho";
+    throw Error(os.str());
+  }
+  const Vec3d o{0.5 * (lo_x + hi_x) - side / 2, b.lo.y, 0.5 * (lo_z + hi_z) - side / 2};
+  std::vector<LightSpace> out;
+  for (size_t w = 0; w < specs.size(); ++w) {
+    const double az = specs[w].azimuth_deg * kPi / 180, el = specs[w].elevation_deg * kPi / 180;
+    const Vec3d f = normalize(Vec3d{-std::cos(el) * std::sin(az), -std::sin(el), -std::cos(el) * std::cos(az)});
+    const std::array<double, 18> a = {o.x,      o.y,      o.z,  axis_u.x, axis_u.y, axis_u.z, axis_v.x, axis_v.y,
+                                      axis_v.z, f.x,      f.y,  f.z,      side,     near,     far,
+                                      specs[w].azimuth_deg, specs[w].elevation_deg, m};
+    const std::string bad = LightSpace::check_array(LightKind::sun_ground, a);
+    if (!bad.empty()) throw Error("light set sample " + std::to_string(w) + " (" + specs[w].to_string() + "): " + bad);
+    out.push_back(LightSpace::from_array(LightKind::sun_ground, a));
+  }
+  return out;
+}
+
 }  // namespace
 
 LightSet LightSet::fit(const LightSetSpec& spec, const Aabb& bounds) {
@@ -277,7 +329,7 @@ LightSet LightSet::fit(const LightSetSpec& spec, const Aabb& bounds) {
   set.spec = spec;
   const std::vector<LightSpec> specs = spec.sample_specs();
   if (spec.kind == LightSetKind::sun_path) {
-    set.samples = fit_sun_path(specs, bounds);
+    set.samples = spec.frame == SunFrame::ground ? fit_sun_ground(specs, bounds) : fit_sun_path(specs, bounds);
     return set;
   }
   set.samples.reserve(specs.size());

@@ -4,12 +4,14 @@
 //
 // Syntax (one `--light` argument; LightSetSpec::parse throws st::Error naming the field):
 //
-//   sun-path:azimuth=A0..A1,elevation=E0..E1,samples=N[,margin=F]
+//   sun-path:azimuth=A0..A1,elevation=E0..E1,samples=N[,margin=F][,frame=ground|ortho]
 //       A sun moving along a path known in advance (MH §4 "varying light positions"):
 //       sample w (w = 0..N-1) is `sun:azimuth=A,elevation=E` with A and E linear in
 //       t_w = w / (N - 1) (t_0 = 0 when N = 1), in the frames described below.
 //       A0..A1 may run either way (a sun turning west or east) but spans at most 360
 //       degrees; E0..E1 may rise or set, both ends in (0, 90]. A single angle `A` means A..A.
+//       frame=ground (the default) gives every sample the ground-aligned (oblique) frame,
+//       frame=ortho an orthographic box perpendicular to its own direction (below).
 //
 //   area:pos=X,Y,Z,target=X,Y,Z,size=W,H,samples=N[,fov=DEG][,jitter=J][,seed=S]
 //       A W x H rectangle centred on pos, facing target (its axes are the spot light's
@@ -23,7 +25,29 @@
 //       J = 0 (default) takes cell centres. fov as for spot lights (default 60).
 //
 // Frames (why the slices of a stack line up: the octree compresses what neighbouring
-// slices share, MH §4). A sun path's samples all take u = the horizontal axis normal to the
+// slices share, MH §4).
+//
+// frame=ground (LightKind::sun_ground, light.hpp): texel (u, v) of every slice indexes one
+// fixed square on the scene box's bottom plane y = lo.y (the ground; +Y is up), with
+// world-aligned axes u = +X, v = +Z. The ray of texel (u, v) in slice w runs along sample
+// w's sun direction through that ground point; depth is linear along it and defined by
+// height: d = (top - y) / (top - bottom) with top = hi.y + m H, bottom = lo.y - m H
+// (H = hi.y - lo.y, m the margin; a flat scene pads by m times a thousandth of its
+// width). So a world point has the same depth in every slice and a point on the ground
+// the same texel in every slice: only what stands above the ground moves between slices,
+// by (height) x (the change of the sun's horizontal offset cot(E)) instead of angle x r
+// for every point. The square is the union over the samples of the scene box projected
+// along each sample's direction onto the ground, grown by the margin (1 + 2m) and made
+// square about its centre. Cost: a sample at elevation E stretches the square by
+// H cot(E) along its azimuth, so the texels per metre on the ground fall by
+// W / (W + H cot E) against a map of the box's width W alone (city, 25 degrees: H cot E
+// = 2.1 H); a sun this low also projects each texel into a longer strip on vertical
+// faces. Refused (st::Error, before anything is traced): a square wider than
+// kMaxGroundStretch times the scene's largest extent (a sun near the horizon over a
+// tall scene: use frame=ortho or raise the lowest elevation); checked per sample, a ray
+// within about 1 degree of the ground (LightSpace::kMinGroundSine).
+//
+// frame=ortho: a sun path's samples all take u = the horizontal axis normal to the
 // azimuth (LightSpace::fit's own choice below about 64 degrees of elevation, but without
 // its switch of helper axis near the zenith, so the frame never jumps between two
 // samples), v = forward x u, and one box size and depth range: the largest any sample needs,
@@ -48,12 +72,18 @@ namespace st {
 inline constexpr uint32_t kMaxLightSamples = 4096;
 
 enum class LightSetKind : uint8_t { sun_path = 0, area = 1 };
+enum class SunFrame : uint8_t { ground = 0, ortho = 1 };  // sun-path frame= ("Frames" above)
+
+// frame=ground: the largest ground square, in multiples of the scene box's largest
+// extent (with the margin), that a sun path may need.
+inline constexpr double kMaxGroundStretch = 8;
 
 struct LightSetSpec {
   LightSetKind kind = LightSetKind::sun_path;
   uint32_t samples = 1;
   // sun-path
   double azimuth0_deg = 0, azimuth1_deg = 0, elevation0_deg = 45, elevation1_deg = 45, margin = 0.01;
+  SunFrame frame = SunFrame::ground;
   // area
   Vec3d pos{}, target{};
   double width = 1, height = 1, fov_deg = 60, jitter = 0;
