@@ -83,7 +83,7 @@ void run(const ViewArgs& a) {
   const StackGrid* stack = client::MapAccess::remote(map).stack_grid();
   if (!stack && !(a.time.empty() && a.time_sweep.empty()))
     throw Error("view: --time and --time-sweep need a stack map (a pack built with --light sun-path:...)");
-  if (stack && stack->light_kind != LightKind::sun)
+  if (stack && stack->light_kind != LightKind::sun && stack->light_kind != LightKind::sun_ground)
     throw Error("view: the GPU shadow pass supports suns only; map '" + a.map + "' is a stack of '" + stack->spec + "'");
   std::vector<LightSpace> samples;
   for (uint32_t w = 0; stack && w < stack->slices; ++w) samples.push_back(stack->light(w));

@@ -33,7 +33,7 @@ MapInfo Map::info() const {
   i.tile_bytes = h.tile_bytes;
   i.tile_count = h.tile_count;
   i.scene_hash = h.scene_hash;
-  i.sun = h.light_kind == LightKind::sun;
+  i.sun = h.light_kind == LightKind::sun || h.light_kind == LightKind::sun_ground;
   return i;
 }
 
@@ -113,7 +113,7 @@ Transmittance Map::transmittance_filtered(const WorldPoint& world, float footpri
   double width = 0;
   if (footprint > 0)
     width = double(footprint) /
-            (l.kind() == LightKind::sun ? l.extent_uv() : length(w - l.origin()) * l.extent_uv());
+            (l.parallel() ? l.extent_uv() : length(w - l.origin()) * l.extent_uv());
   const auto t = map_->deep()->lookup(p.u, p.v, float(p.d), width);
   return {t[0], t[1], t[2]};
 }

@@ -392,7 +392,7 @@ std::array<uint64_t, 2> texel_in_unit(uint32_t level, double u, double v) {
   return {uint64_t(u * r), uint64_t(v * r)};
 }
 
-// LightSpace::to_light of a sun for a chunk of points, operation for operation (so the
+// LightSpace::to_light of an orthographic sun for a chunk of points, operation for operation (so the
 // same IEEE doubles), as loops over arrays that the compiler vectorizes: a batch pays for
 // its divisions two at a time.
 constexpr size_t kTransformChunk = 64;
@@ -425,7 +425,7 @@ float RemoteMap::visibility_at(const LightPoint& p, const Vec3d& w, float footpr
   if (footprint_world > 0) {
     // One finest-level texel's side in world units at this point (a spot's grows with
     // the distance from the eye).
-    const double texel = (light_.kind() == LightKind::sun ? light_.extent_uv()
+    const double texel = (light_.parallel() ? light_.extent_uv()
                                                           : length(w - light_.origin()) * light_.extent_uv()) /
                          std::ldexp(1.0, int(L));
     f = filter_levels(L, float(double(footprint_world) / texel));

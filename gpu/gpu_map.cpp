@@ -288,7 +288,7 @@ struct GpuMap::Impl {
     for (size_t c = 0; c < g.entries.size(); ++c) p[o++] = L::kNoSlot;
     h[L::kStLights] = o;
     for (uint32_t w = 0; w < g.slices; ++w, o += L::kStLightWords) {
-      if (g.light_kind != LightKind::sun) continue;  // the shadow pass refuses spot lights
+      if (g.light_kind != LightKind::sun && g.light_kind != LightKind::sun_ground) continue;  // spot: refused
       const ShadowLight sl = shadow_light(g.light(w));
       for (int i = 0; i < 3; ++i) {
         p[o + i] = std::bit_cast<uint32_t>(sl.origin[i]);
@@ -655,7 +655,7 @@ uint64_t GpuMap::submit_shadow_pass(const ShadowPassInput& in) {
     throw GpuError("GpuMap::submit_shadow_pass: positions and normals need 4 floats per pixel");
   if (in.kernel < 1 || in.kernel > L::kMaxPcf) throw GpuError("GpuMap::submit_shadow_pass: kernel must be 1..9");
   if (m.sg) {
-    if (m.sg->light_kind != LightKind::sun)
+    if (m.sg->light_kind != LightKind::sun && m.sg->light_kind != LightKind::sun_ground)
       throw GpuError("GpuMap: the GPU shadow pass supports sun lights only (this stack's light set is '" + m.sg->spec +
                      "')");
     const StackTime t = stack_time(m.sg->slices, in.time);

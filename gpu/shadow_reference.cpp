@@ -18,11 +18,13 @@ static_assert(FLT_EVAL_METHOD == 0, "the shadow pass's twin must evaluate in flo
 namespace st::gpu {
 
 ShadowLight shadow_light(const PackHeader& h) {
-  if (h.light_kind != LightKind::sun) throw GpuError("GpuMap: the GPU shadow pass supports sun lights only");
+  if (h.light_kind != LightKind::sun && h.light_kind != LightKind::sun_ground)
+    throw GpuError("GpuMap: the GPU shadow pass supports sun lights only");
   return shadow_light(LightSpace::from_array(h.light_kind, h.light));
 }
 
 ShadowLight shadow_light(const LightSpace& ls) {
+  if (ls.kind() == LightKind::sun_ground) return ground_shadow_light(ls);
   if (ls.kind() != LightKind::sun) throw GpuError("GpuMap: the GPU shadow pass supports sun lights only");
   ShadowLight l;
   const Vec3d o = ls.origin(), u = ls.axis_u(), v = ls.axis_v(), f = ls.forward();
@@ -31,6 +33,22 @@ ShadowLight shadow_light(const LightSpace& ls) {
   l.axis_u = {float(u.x / e), float(u.y / e), float(u.z / e)};
   l.axis_v = {float(v.x / e), float(v.y / e), float(v.z / e)};
   l.forward = {float(f.x / depth), float(f.y / depth), float(f.z / depth)};
+  l.near_scaled = float(ls.near_plane() / depth);
+  return l;
+}
+
+// The ground frame (LightKind::sun_ground): the rows of its affine world -> light map
+// (light.cpp), the dual basis of axis_u, axis_v and the ray axis g, each rounded once:
+// au = (axis_u - (g . axis_u) n) / E, av likewise, fw = n / (far - near).
+ShadowLight ground_shadow_light(const LightSpace& ls) {
+  ShadowLight l;
+  const Vec3d o = ls.origin(), n = ls.depth_axis(), g = ls.ray_axis();
+  const Vec3d u = ls.axis_u() - n * dot(g, ls.axis_u()), v = ls.axis_v() - n * dot(g, ls.axis_v());
+  const double e = ls.extent_uv(), depth = ls.far_plane() - ls.near_plane();
+  l.origin = {float(o.x), float(o.y), float(o.z)};
+  l.axis_u = {float(u.x / e), float(u.y / e), float(u.z / e)};
+  l.axis_v = {float(v.x / e), float(v.y / e), float(v.z / e)};
+  l.forward = {float(n.x / depth), float(n.y / depth), float(n.z / depth)};
   l.near_scaled = float(ls.near_plane() / depth);
   return l;
 }

@@ -7,6 +7,9 @@
 //   v = ... av,   d = (r . fw) - near_scaled        fw = forward / (far - near)
 //   outside u, v in [0, 1), d in [0, 1]: lit (1); else texel floor(u * 2^L), and
 //   footprint = max over the right and lower neighbours of max(|du|, |dv|) * 2^L.
+// A sun path's ground frame (LightKind::sun_ground) fills the same words with the rows
+// of its sheared (oblique) map: au, av and fw are then the dual basis of the ground axes
+// and the sun's ray axis (shadow_light below), the same formulas in the shader.
 // Float positions lose precision far from the light box's origin; engines that need
 // more keep positions camera-relative (a documented limit, GPU_LAYOUT.md).
 #pragma once
@@ -29,6 +32,7 @@ struct ShadowLight {
 // light (the GPU shadow pass supports suns only).
 ShadowLight shadow_light(const PackHeader& h);
 ShadowLight shadow_light(const LightSpace& ls);
+ShadowLight ground_shadow_light(const LightSpace& ls);
 
 // The CPU twin of a stack map's shadow pass: the same float operations per slice as
 // shaders/stack_shadow_pass.comp, depths from Map::slice_depth (the Map's cache, the same

@@ -33,7 +33,7 @@ WorldFrame world_frame(const PackHeader& header, const CutGrid& grid) {
       if (!(v < kLitDepth) || !(v >= 0)) continue;  // no hit: nothing there
       const LightRay r = w.light.texel_ray(k, x, y);
       // Inverse of LightSpace::depth_of_t (sun: d = t; spot: linear between near/far).
-      const double t = w.light.kind() == LightKind::sun
+      const double t = w.light.parallel()
                            ? double(v)
                            : w.light.near_plane() + double(v) * (w.light.far_plane() - w.light.near_plane());
       const Vec3d p = r.origin + r.dir * t;

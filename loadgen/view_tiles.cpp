@@ -59,7 +59,7 @@ ViewNeeds view_needs(const WorldFrame& world, const Camera& camera, uint32_t map
   const double max_dist = o.max_distance > 0 ? o.max_distance : 1.5 * world.span();
   const double pixel_angle = 2 * b.tan_half_x / std::max(1.0, o.display_width);
   // World size of the map: a sun's box side; a spot's footprint span (approximate).
-  const double extent = world.light.kind() == LightKind::sun ? world.light.extent_uv() : world.span();
+  const double extent = world.light.parallel() ? world.light.extent_uv() : world.span();
   const uint32_t k = grid.levels;
   std::unordered_map<uint64_t, size_t> index;
   out.points.reserve(out.samples);

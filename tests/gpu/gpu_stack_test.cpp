@@ -52,7 +52,8 @@ struct ServedStack {
 
 constexpr uint32_t kSlices = 10;
 
-ServedStack serve_stack(const std::string& name) {
+// frame: the sun path's frame (light_set.hpp "Frames"; ground is the default).
+ServedStack serve_stack(const std::string& name, const std::string& frame = "ground") {
   ServedStack s;
   const IntervalStack is = sliding_stack(looptest::small_scale() ? 5 : 6, kSlices);
   StackCut cut = cut_stack(build_octree(is), std::nullopt, 512);
@@ -60,7 +61,9 @@ ServedStack serve_stack(const std::string& name) {
   box.extend({-10, 0, -10});
   box.extend({10, 5, 10});
   const LightSet set = LightSet::fit(
-      LightSetSpec::parse("sun-path:azimuth=150..200,elevation=40..60,samples=" + std::to_string(kSlices)), box);
+      LightSetSpec::parse("sun-path:azimuth=150..200,elevation=40..60,samples=" + std::to_string(kSlices) +
+                          ",frame=" + frame),
+      box);
   cut.grid.light_kind = set.samples[0].kind();
   for (const LightSpace& l : set.samples) cut.grid.lights.push_back(l.to_array());
   cut.grid.spec = set.spec.to_string();
@@ -237,8 +240,13 @@ struct GBuffer {
   }
 };
 
+// Both frames: the orthographic sun's and the ground frame's sheared light transform.
 TEST(GpuStack, ShadowPassAtSampleTimesAndBetweenEqualsItsCpuTwin) {
-  ServedStack s = serve_stack("gpu_stack_pass");
+  for (const std::string frame : {"ortho", "ground"}) {
+  SCOPED_TRACE("frame=" + frame);
+  ServedStack s = serve_stack("gpu_stack_pass_" + frame, frame);
+  ASSERT_EQ(client::MapAccess::remote(s.map).stack_grid()->light_kind,
+            frame == "ground" ? LightKind::sun_ground : LightKind::sun);
   ASSERT_GT(s.map.request_slices(0, kSlices / 2 - 1, 10), 0u);  // the later slices stay absent
   ASSERT_TRUE(looptest::wait_until([&] { return s.map.slices_resident(0, kSlices / 2 - 1); }));
   s.server.stop();
@@ -275,6 +283,7 @@ TEST(GpuStack, ShadowPassAtSampleTimesAndBetweenEqualsItsCpuTwin) {
   EXPECT_GT(shadow, 1000u);
   EXPECT_GT(between, 100u);
   EXPECT_EQ(g.stats().validation_messages, 0u);
+  }
 }
 
 TEST(GpuStack, ShadowPassFeedbackStreamsTheCellsItNeedsUntilNoHoleIsLeft) {

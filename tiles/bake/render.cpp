@@ -86,7 +86,7 @@ SceneTracer::SceneTracer(const Scene& scene, const LightSpace& light) : impl_(st
 SceneTracer::~SceneTracer() = default;
 
 Vec3d SceneTracer::to_light(const Vec3d& p) const {
-  if (light_.kind() == LightKind::sun) return -light_.forward();
+  if (light_.parallel()) return -light_.forward();
   return normalize(light_.origin() - p);
 }
 
@@ -136,7 +136,7 @@ float lit_along(RTCScene scene, const Vec3d& org, const Vec3d& dir, const LightS
   ray.org_x = float(org.x), ray.org_y = float(org.y), ray.org_z = float(org.z);
   ray.dir_x = float(dir.x), ray.dir_y = float(dir.y), ray.dir_z = float(dir.z);
   ray.tnear = 0;
-  ray.tfar = light.kind() == LightKind::sun ? std::numeric_limits<float>::infinity()
+  ray.tfar = light.parallel() ? std::numeric_limits<float>::infinity()
                                              : float(length(light.origin() - p) * (1 - 1e-6));
   ray.mask = ~0u;
   rtcOccluded1(scene, &ctx, &ray);
@@ -154,7 +154,7 @@ float SceneTracer::traced(const Receiver& r, const Vec3d& offset) const {
 
 namespace {
 Vec3d toward(const LightSpace& light, const Vec3d& p) {
-  return light.kind() == LightKind::sun ? -light.forward() : normalize(light.origin() - p);
+  return light.parallel() ? -light.forward() : normalize(light.origin() - p);
 }
 }  // namespace
 
@@ -182,7 +182,7 @@ LightPoint lookup_point(const Receiver& r, const LightSpace& light, uint32_t map
     // Open geometry has hi = lo; closed surfaces meet stored lo values: move the lookup
     // off the surface (render.hpp).
     // 2^level exactly, as ldexp would give it, without the library call.
-    const double texel = (light.kind() == LightKind::sun ? light.extent_uv() : length(p - light.origin()) * light.extent_uv()) /
+    const double texel = (light.parallel() ? light.extent_uv() : length(p - light.origin()) * light.extent_uv()) /
                          double(uint64_t(1) << map_level);
     p = p + r.normal * ((r.closed ? kClosedReceiverOffsetTexels : kOpenReceiverOffsetTexels) + pcf_radius) * texel;
   }
@@ -190,7 +190,7 @@ LightPoint lookup_point(const Receiver& r, const LightSpace& light, uint32_t map
 }
 
 float receiver_footprint_texels(const Receiver& r, const LightSpace& light, uint32_t map_level, double pixel_angle) {
-  const double texel = (light.kind() == LightKind::sun ? light.extent_uv() : length(r.pos - light.origin()) * light.extent_uv()) /
+  const double texel = (light.parallel() ? light.extent_uv() : length(r.pos - light.origin()) * light.extent_uv()) /
                        std::ldexp(1.0, int(map_level));
   return float(r.distance * pixel_angle / texel);
 }
@@ -356,7 +356,7 @@ RenderResult render_stack_view(const SceneTracer& tracer, const std::vector<Rece
         footprint = float(rc.distance * o.pixel_angle);
       }
       // lookup_point's normal offset, kept in world space (each sample projects it).
-      const double texel = (light.kind() == LightKind::sun ? light.extent_uv()
+      const double texel = (light.parallel() ? light.extent_uv()
                                                            : length(rc.pos - light.origin()) * light.extent_uv()) /
                            double(uint64_t(1) << level);
       const Vec3d p =
