@@ -151,6 +151,7 @@ TEST(StackPack, GridLayoutIsPinned) {
   const OctHierarchy h = build_octree(s);
   const LightSet set = lights(2);
   StackCut cut = cut_stack(h, 1, 1024);
+  cut.grid.light_kind = set.samples[0].kind();  // a sun path's ground frame
   cut.grid.lights = {set.samples[0].to_array(), set.samples[1].to_array()};
   cut.grid.spec = "abcde";
   const std::vector<uint8_t> b = cut.grid.serialize();
@@ -161,7 +162,7 @@ TEST(StackPack, GridLayoutIsPinned) {
   EXPECT_EQ(b[8], 1);   // xy_level
   EXPECT_EQ(b[9], 1);   // w_level
   EXPECT_EQ(b[10], 1);  // skip level
-  EXPECT_EQ(b[11], 0);  // sun
+  EXPECT_EQ(b[11], 2);  // sun_ground
   EXPECT_EQ(b[12], 2);  // slices
   EXPECT_EQ(b[16], 5);  // spec size
   double d;

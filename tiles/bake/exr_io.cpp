@@ -40,7 +40,7 @@ void use_threads() {
 }
 
 std::string encode_light_space(const LightSpace& ls) {
-  std::string out = ls.kind() == LightKind::sun ? "sun" : "spot";
+  std::string out = light_kind_name(ls.kind());
   char buf[40];
   for (double v : ls.to_array()) {
     std::snprintf(buf, sizeof buf, " %.17g", v);
@@ -53,7 +53,7 @@ LightSpace decode_light_space(const std::string& path, const std::string& text) 
   std::istringstream is(text);
   std::string kind;
   is >> kind;
-  if (kind != "sun" && kind != "spot")
+  if (kind != "sun" && kind != "spot" && kind != "sun_ground")
     throw FormatError(path + ": attribute " + kAttrLightSpace + ": unknown light kind '" + kind + "'");
   std::array<double, 18> a{};
   for (size_t i = 0; i < a.size(); ++i) {
@@ -68,7 +68,11 @@ LightSpace decode_light_space(const std::string& path, const std::string& text) 
   std::string extra;
   if (is >> extra)
     throw FormatError(path + ": attribute " + kAttrLightSpace + ": trailing data '" + extra + "'");
-  return LightSpace::from_array(kind == "sun" ? LightKind::sun : LightKind::spot, a);
+  const LightKind k = kind == "sun" ? LightKind::sun : (kind == "spot" ? LightKind::spot : LightKind::sun_ground);
+  if (k == LightKind::sun_ground)  // its derived axes divide by the ray's sine: validate first
+    if (const std::string why = LightSpace::check_array(k, a); !why.empty())
+      throw FormatError(path + ": attribute " + kAttrLightSpace + ": " + why);
+  return LightSpace::from_array(k, a);
 }
 
 Imf::FrameBuffer interval_frame_buffer(IntervalTile& tile) {

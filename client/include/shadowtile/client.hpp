@@ -143,7 +143,7 @@ struct MapInfo {
   uint32_t tile_bytes = 0;    // bound on one tile's decoded size (a cache slot)
   uint64_t tile_count = 0;
   uint64_t scene_hash = 0;    // of the scene the map was built from
-  bool sun = true;            // directional light (orthographic); false: spot (perspective)
+  bool sun = true;            // directional light (orthographic, or a sun path's ground frame); false: spot (perspective)
 };
 
 // One map of the server's catalog (list_maps).
