@@ -113,7 +113,8 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
   std::printf("\n== %s: %s, %s, %u^2 per slice\n", c.name.c_str(), c.scene.c_str(), c.light.c_str(), 1u << level);
   std::fflush(stdout);
   const st::Scene scene = st::load_scene(c.scene);
-  const st::LightSet set = st::LightSet::fit(st::LightSetSpec::parse(c.light), scene.bounds());
+  const st::LightSet set = st::fit_light_set(scene, st::LightSetSpec::parse(c.light));
+  std::printf("fitted light set: %s\n", set.spec.to_string().c_str());
   const uint32_t n = set.size();
   const uint32_t side = 1u << level;
 
@@ -329,7 +330,8 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
   std::printf("\n== %s (blocked): %s, %s, %u^2 per slice\n", c.name.c_str(), c.scene.c_str(), c.light.c_str(), 1u << level);
   std::fflush(stdout);
   const st::Scene scene = st::load_scene(c.scene);
-  const st::LightSet set = st::LightSet::fit(st::LightSetSpec::parse(c.light), scene.bounds());
+  const st::LightSet set = st::fit_light_set(scene, st::LightSetSpec::parse(c.light));
+  std::printf("fitted light set: %s\n", set.spec.to_string().c_str());
   const uint32_t n = set.size();
   const uint64_t side = uint64_t(1) << level;
   uint32_t k = 0;

@@ -11,6 +11,7 @@
 #include "common/error.hpp"
 #include "common/hash.hpp"
 #include "tests/tiles/stack_fixtures.hpp"
+#include "tiles/bake/stack_build.hpp"
 #include "tiles/build/mh_octree_encode.hpp"
 #include "tiles/core/light_set.hpp"
 #include "tiles/core/mh_octree.hpp"
@@ -123,6 +124,28 @@ TEST(GroundFrame, SerializationRoundTripsAndBadArraysAreRefused) {
   }
   EXPECT_NE(LightSpace::check_array(LightKind(7), a).find("unknown light kind 7"), std::string::npos);
   EXPECT_STREQ(light_kind_name(LightKind::sun_ground), "sun_ground");
+}
+
+// ground=Y moves the reference plane: points at that height keep their texel; a scene's
+// ground is its largest up-facing level (the city's streets at 0, not its slab's bottom).
+TEST(GroundFrame, GroundHeightFromTheSpecOrTheScene) {
+  const LightSet set = ground_set("sun-path:azimuth=100..260,elevation=25..65,samples=5,ground=4");
+  EXPECT_NE(set.spec.to_string().find("ground=4"), std::string::npos);
+  Rng rng(4);
+  for (int i = 0; i < 50; ++i) {
+    const Vec3d p{rng.uniform(-20, 25), 4, rng.uniform(-15, 30)};
+    const LightPoint a = set.samples[0].to_light(p), b = set.samples[4].to_light(p);
+    EXPECT_NEAR(a.u, b.u, 1e-12);
+    EXPECT_NEAR(a.v, b.v, 1e-12);
+  }
+  EXPECT_THROW(ground_set("sun-path:azimuth=1,elevation=40,samples=2,ground=40"), Error);  // above the box
+  EXPECT_THROW(LightSetSpec::parse("sun-path:azimuth=1,elevation=40,samples=2,ground=1,frame=ortho"), Error);
+  const Scene city = make_procedural("procedural:city,size=2");
+  EXPECT_EQ(scene_ground_height(city), 0.0);
+  EXPECT_LT(city.bounds().lo.y, 0.0);
+  const LightSet fitted = fit_light_set(city, LightSetSpec::parse("sun-path:azimuth=100..260,elevation=25..65,samples=2"));
+  EXPECT_EQ(fitted.samples[0].origin().y, 0.0);
+  EXPECT_NE(fitted.spec.to_string().find("ground=0"), std::string::npos);
 }
 
 TEST(GroundFrame, FrameFieldAndTheStretchLimit) {

@@ -48,7 +48,7 @@ IntervalStack coherent_stack(uint32_t level, uint32_t slices, uint64_t seed) {
 }
 
 LightSet fitted_set(const std::string& scene, const std::string& light_set) {
-  return LightSet::fit(LightSetSpec::parse(light_set), load_scene(scene).bounds());
+  return fit_light_set(load_scene(scene), LightSetSpec::parse(light_set));  // as a stack build fits
 }
 
 IntervalStack traced_stack(const std::string& scene_spec, const LightSet& set, uint32_t level) {

@@ -4,7 +4,10 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <filesystem>
+#include <limits>
+#include <map>
 #include <memory>
 
 #include "common/error.hpp"
@@ -94,10 +97,37 @@ IntervalStack trace_stack(const Scene& scene, const LightSet& set, uint32_t leve
   return stack;
 }
 
-StackBuildReport build_stack_pack(const Scene& scene, const LightSetSpec& spec, const StackBuildOptions& o,
+double scene_ground_height(const Scene& scene) {
+  const Aabb b = scene.bounds();
+  if (b.empty()) return std::numeric_limits<double>::quiet_NaN();
+  std::map<double, double> area;  // height -> horizontal up-facing area there
+  for (const auto& t : scene.triangles) {
+    const Vec3d& a = scene.vertices[t[0]];
+    const Vec3d& p = scene.vertices[t[1]];
+    const Vec3d& c = scene.vertices[t[2]];
+    if (a.y != p.y || a.y != c.y) continue;
+    const Vec3d n = cross(p - a, c - a);
+    if (!(n.y > 0)) continue;  // facing down (or degenerate)
+    area[a.y] += 0.5 * n.y;
+  }
+  double best = std::numeric_limits<double>::quiet_NaN(), best_area = 0;
+  for (const auto& [y, s] : area)
+    if (s > best_area) best = y, best_area = s;
+  const Vec3d e = b.extent();
+  return best_area >= 0.25 * e.x * e.z ? best : std::numeric_limits<double>::quiet_NaN();
+}
+
+LightSet fit_light_set(const Scene& scene, LightSetSpec spec) {
+  if (spec.kind == LightSetKind::sun_path && spec.frame == SunFrame::ground && std::isnan(spec.ground))
+    spec.ground = scene_ground_height(scene);
+  return LightSet::fit(spec, scene.bounds());
+}
+
+StackBuildReport build_stack_pack(const Scene& scene, const LightSetSpec& spec_in, const StackBuildOptions& o,
                                   const std::string& out) {
   StackBuildReport r;
-  const LightSet set = LightSet::fit(spec, scene.bounds());
+  const LightSet set = fit_light_set(scene, spec_in);
+  const LightSetSpec& spec = set.spec;
   const uint32_t n = set.size();
   const uint64_t side = uint64_t(1) << o.map_level;
   if (o.map_level > 16 || double(n) * double(side) * double(side) > double(kMaxStackTexels))

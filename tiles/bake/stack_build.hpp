@@ -49,6 +49,16 @@ struct StackBuildReport {
   std::string bounds_by;  // "raster" (sun samples) or "embree"
 };
 
+// The scene's ground for a sun path's ground frame (light_set.hpp "Frames"): the height
+// of its largest total area of horizontal up-facing triangles (all three vertices at one
+// height), when that area is at least a quarter of the scene box's horizontal extent;
+// NaN otherwise (the frame then takes the box's bottom).
+double scene_ground_height(const Scene& scene);
+// LightSet::fit of `spec` to the scene, with ground=Y resolved from the scene
+// (scene_ground_height) when a ground-frame sun path leaves it unset; the returned set's
+// spec records it. What a stack build and the benchmark fit.
+LightSet fit_light_set(const Scene& scene, LightSetSpec spec);
+
 // Throws st::Error (one line) for a stack it cannot hold or trace.
 StackBuildReport build_stack_pack(const Scene& scene, const LightSetSpec& spec, const StackBuildOptions& o,
                                   const std::string& out);

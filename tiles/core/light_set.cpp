@@ -111,6 +111,8 @@ LightSetSpec LightSetSpec::parse(const std::string& text) {
       std::tie(s.elevation0_deg, s.elevation1_deg) = range(kind, key, one()), have_el = true;
     } else if (s.kind == LightSetKind::sun_path && key == "margin") {
       s.margin = number(kind, key, one());
+    } else if (s.kind == LightSetKind::sun_path && key == "ground") {
+      s.ground = number(kind, key, one());
     } else if (s.kind == LightSetKind::sun_path && key == "frame") {
       if (one() == "ground") s.frame = SunFrame::ground;
       else if (one() == "ortho") s.frame = SunFrame::ortho;
@@ -141,6 +143,7 @@ LightSetSpec LightSetSpec::parse(const std::string& text) {
     for (double e : {s.elevation0_deg, s.elevation1_deg})
       if (!(e > 0 && e <= 90)) fail(kind, "elevation " + std::to_string(e) + " is outside (0, 90] degrees");
     if (!(s.margin >= 0 && s.margin < 10)) fail(kind, "margin must be in [0, 10)");
+    if (!std::isnan(s.ground) && s.frame != SunFrame::ground) fail(kind, "ground=Y needs frame=ground");
   } else {
     if (!have_pos || !have_target || !have_size) fail(kind, "needs pos=X,Y,Z,target=X,Y,Z,size=W,H");
     if (length(s.target - s.pos) == 0) fail(kind, "pos and target coincide");
@@ -158,6 +161,7 @@ std::string LightSetSpec::to_string() const {
     os << "sun-path:azimuth=" << azimuth0_deg << ".." << azimuth1_deg << ",elevation=" << elevation0_deg << ".."
        << elevation1_deg << ",samples=" << samples << ",margin=" << margin
        << ",frame=" << (frame == SunFrame::ground ? "ground" : "ortho");
+    if (!std::isnan(ground)) os << ",ground=" << ground;
   } else {
     os << "area:pos=" << pos.x << ',' << pos.y << ',' << pos.z << ",target=" << target.x << ',' << target.y << ','
        << target.z << ",size=" << width << ',' << height << ",samples=" << samples << ",fov=" << fov_deg
@@ -275,13 +279,18 @@ std::vector<LightSpace> fit_sun_path(const std::vector<LightSpec>& specs, const 
 }
 
 // frame=ground (light_set.hpp "Frames"): one square on the ground plane for every sample.
-std::vector<LightSpace> fit_sun_ground(const std::vector<LightSpec>& specs, const Aabb& b) {
+std::vector<LightSpace> fit_sun_ground(const std::vector<LightSpec>& specs, const Aabb& b, double ground_y) {
   const double m = specs.empty() ? 0 : specs[0].margin;
   const Vec3d ext = b.extent();
   const double H = ext.y, width = std::max(ext.x, ext.z);
   const double pad = m * std::max(H, 1e-3 * width);
+  const double ground = std::isnan(ground_y) ? b.lo.y : ground_y;
+  if (!(ground >= b.lo.y && ground <= b.hi.y))
+    throw Error("--light sun-path: ground=" + std::to_string(ground) + " lies outside the scene's heights " +
+                std::to_string(b.lo.y) + ".." + std::to_string(b.hi.y));
   const Vec3d axis_u{1, 0, 0}, axis_v{0, 0, 1};  // n = u x v = (0, -1, 0): down
-  const double near = -H - pad, far = pad;      // signed distance below the ground plane
+  // Signed distances below the reference plane: the box's top (and margin) to its bottom.
+  const double near = -(b.hi.y - ground) - pad, far = (ground - b.lo.y) + pad;
   if (!(far > near) || !std::isfinite(H) || !std::isfinite(width) || !(std::max(width, H) > 0))
     throw Error("light set: zero-extent light slab (the scene is a point, or flat with margin=0)");
   double lo_x = INFINITY, hi_x = -INFINITY, lo_z = INFINITY, hi_z = -INFINITY;
@@ -291,7 +300,7 @@ std::vector<LightSpace> fit_sun_ground(const std::vector<LightSpec>& specs, cons
     const double gx = f.x / -f.y, gz = f.z / -f.y;  // the ray's step per unit of descent
     for (int i = 0; i < 8; ++i) {
       const Vec3d c{(i & 1) ? b.hi.x : b.lo.x, (i & 2) ? b.hi.y : b.lo.y, (i & 4) ? b.hi.z : b.lo.z};
-      const double h = c.y - b.lo.y;  // height above the ground plane
+      const double h = c.y - ground;  // height above the reference plane (negative below)
       const double x = c.x + gx * h, z = c.z + gz * h;
       lo_x = std::min(lo_x, x), hi_x = std::max(hi_x, x), lo_z = std::min(lo_z, z), hi_z = std::max(hi_z, z);
     }
@@ -306,7 +315,7 @@ std::vector<LightSpace> fit_sun_ground(const std::vector<LightSpec>& specs, cons
        << "); raise the lowest elevation or use frame=ortho";
     throw Error(os.str());
   }
-  const Vec3d o{0.5 * (lo_x + hi_x) - side / 2, b.lo.y, 0.5 * (lo_z + hi_z) - side / 2};
+  const Vec3d o{0.5 * (lo_x + hi_x) - side / 2, ground, 0.5 * (lo_z + hi_z) - side / 2};
   std::vector<LightSpace> out;
   for (size_t w = 0; w < specs.size(); ++w) {
     const double az = specs[w].azimuth_deg * kPi / 180, el = specs[w].elevation_deg * kPi / 180;
@@ -329,7 +338,8 @@ LightSet LightSet::fit(const LightSetSpec& spec, const Aabb& bounds) {
   set.spec = spec;
   const std::vector<LightSpec> specs = spec.sample_specs();
   if (spec.kind == LightSetKind::sun_path) {
-    set.samples = spec.frame == SunFrame::ground ? fit_sun_ground(specs, bounds) : fit_sun_path(specs, bounds);
+    set.samples =
+        spec.frame == SunFrame::ground ? fit_sun_ground(specs, bounds, spec.ground) : fit_sun_path(specs, bounds);
     return set;
   }
   set.samples.reserve(specs.size());

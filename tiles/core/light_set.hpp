@@ -4,7 +4,7 @@
 //
 // Syntax (one `--light` argument; LightSetSpec::parse throws st::Error naming the field):
 //
-//   sun-path:azimuth=A0..A1,elevation=E0..E1,samples=N[,margin=F][,frame=ground|ortho]
+//   sun-path:azimuth=A0..A1,elevation=E0..E1,samples=N[,margin=F][,frame=ground|ortho][,ground=Y]
 //       A sun moving along a path known in advance (MH §4 "varying light positions"):
 //       sample w (w = 0..N-1) is `sun:azimuth=A,elevation=E` with A and E linear in
 //       t_w = w / (N - 1) (t_0 = 0 when N = 1), in the frames described below.
@@ -12,6 +12,11 @@
 //       degrees; E0..E1 may rise or set, both ends in (0, 90]. A single angle `A` means A..A.
 //       frame=ground (the default) gives every sample the ground-aligned (oblique) frame,
 //       frame=ortho an orthographic box perpendicular to its own direction (below).
+//       ground=Y (frame=ground only) puts the reference plane at height Y, inside the
+//       scene's box; unset, LightSet::fit takes the box's bottom and a build from a scene
+//       (fit_light_set, tiles/bake/stack_build.hpp) the scene's ground: the height of its
+//       largest horizontal up-facing area (the city's street level, not its slab's bottom),
+//       recorded in the pack's spec as ground=Y.
 //
 //   area:pos=X,Y,Z,target=X,Y,Z,size=W,H,samples=N[,fov=DEG][,jitter=J][,seed=S]
 //       A W x H rectangle centred on pos, facing target (its axes are the spot light's
@@ -28,7 +33,8 @@
 // slices share, MH §4).
 //
 // frame=ground (LightKind::sun_ground, light.hpp): texel (u, v) of every slice indexes one
-// fixed square on the scene box's bottom plane y = lo.y (the ground; +Y is up), with
+// fixed square on a horizontal reference plane y = Y (the ground: ground=Y, or the scene
+// box's bottom plane lo.y; +Y is up), with
 // world-aligned axes u = +X, v = +Z. The ray of texel (u, v) in slice w runs along sample
 // w's sun direction through that ground point; depth is linear along it and defined by
 // height: d = (top - y) / (top - bottom) with top = hi.y + m H, bottom = lo.y - m H
@@ -61,6 +67,7 @@
 // may hold) is refused here, before anything is traced.
 #pragma once
 #include <cstdint>
+#include <limits>
 #include <string>
 #include <vector>
 
@@ -84,6 +91,7 @@ struct LightSetSpec {
   // sun-path
   double azimuth0_deg = 0, azimuth1_deg = 0, elevation0_deg = 45, elevation1_deg = 45, margin = 0.01;
   SunFrame frame = SunFrame::ground;
+  double ground = std::numeric_limits<double>::quiet_NaN();  // ground=Y; NaN: unset
   // area
   Vec3d pos{}, target{};
   double width = 1, height = 1, fov_deg = 60, jitter = 0;
