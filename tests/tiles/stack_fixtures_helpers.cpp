@@ -5,6 +5,7 @@
 #include "tests/tiles/stack_fixtures.hpp"
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/scene.hpp"
+#include "tiles/bake/stack_build.hpp"
 
 namespace st::stacks {
 
