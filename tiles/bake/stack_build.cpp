@@ -118,9 +118,26 @@ double scene_ground_height(const Scene& scene) {
 }
 
 LightSet fit_light_set(const Scene& scene, LightSetSpec spec) {
-  if (spec.kind == LightSetKind::sun_path && spec.frame == SunFrame::ground && std::isnan(spec.ground))
-    spec.ground = scene_ground_height(scene);
-  return LightSet::fit(spec, scene.bounds());
+  if (spec.kind != LightSetKind::sun_path || spec.frame != SunFrame::ground) return LightSet::fit(spec, scene.bounds());
+  if (std::isnan(spec.ground)) spec.ground = scene_ground_height(scene);
+  // A hull of the geometry, conservative: per height band of the box, the box of the
+  // vertices in it, its corners at the band's two heights (so the square covers every
+  // vertex's projection; triangles project into the hull of their vertices').
+  const Aabb b = scene.bounds();
+  constexpr int kBands = 64;
+  const double h = b.extent().y;
+  std::vector<Aabb> band(kBands);
+  for (const Vec3d& p : scene.vertices) {
+    const int k = h > 0 ? std::clamp(int((p.y - b.lo.y) / h * kBands), 0, kBands - 1) : 0;
+    band[size_t(k)].extend(p);
+  }
+  std::vector<Vec3d> extent;
+  for (const Aabb& a : band) {
+    if (a.empty()) continue;
+    for (int c = 0; c < 8; ++c)
+      extent.push_back({(c & 1) ? a.hi.x : a.lo.x, (c & 2) ? a.hi.y : a.lo.y, (c & 4) ? a.hi.z : a.lo.z});
+  }
+  return LightSet::fit(spec, b, extent);
 }
 
 StackBuildReport build_stack_pack(const Scene& scene, const LightSetSpec& spec_in, const StackBuildOptions& o,

@@ -279,7 +279,8 @@ std::vector<LightSpace> fit_sun_path(const std::vector<LightSpec>& specs, const 
 }
 
 // frame=ground (light_set.hpp "Frames"): one square on the ground plane for every sample.
-std::vector<LightSpace> fit_sun_ground(const std::vector<LightSpec>& specs, const Aabb& b, double ground_y) {
+std::vector<LightSpace> fit_sun_ground(const std::vector<LightSpec>& specs, const Aabb& b, double ground_y,
+                                       const std::vector<Vec3d>& extent) {
   const double m = specs.empty() ? 0 : specs[0].margin;
   const Vec3d ext = b.extent();
   const double H = ext.y, width = std::max(ext.x, ext.z);
@@ -298,8 +299,11 @@ std::vector<LightSpace> fit_sun_ground(const std::vector<LightSpec>& specs, cons
     const double az = s.azimuth_deg * kPi / 180, el = s.elevation_deg * kPi / 180;
     const Vec3d f = normalize(Vec3d{-std::cos(el) * std::sin(az), -std::sin(el), -std::cos(el) * std::cos(az)});
     const double gx = f.x / -f.y, gz = f.z / -f.y;  // the ray's step per unit of descent
-    for (int i = 0; i < 8; ++i) {
-      const Vec3d c{(i & 1) ? b.hi.x : b.lo.x, (i & 2) ? b.hi.y : b.lo.y, (i & 4) ? b.hi.z : b.lo.z};
+    const size_t count = extent.empty() ? 8 : extent.size();
+    for (size_t i = 0; i < count; ++i) {
+      const Vec3d c = extent.empty() ? Vec3d{(i & 1) ? b.hi.x : b.lo.x, (i & 2) ? b.hi.y : b.lo.y,
+                                             (i & 4) ? b.hi.z : b.lo.z}
+                                     : extent[i];
       const double h = c.y - ground;  // height above the reference plane (negative below)
       const double x = c.x + gx * h, z = c.z + gz * h;
       lo_x = std::min(lo_x, x), hi_x = std::max(hi_x, x), lo_z = std::min(lo_z, z), hi_z = std::max(hi_z, z);
@@ -332,14 +336,20 @@ std::vector<LightSpace> fit_sun_ground(const std::vector<LightSpec>& specs, cons
 
 }  // namespace
 
-LightSet LightSet::fit(const LightSetSpec& spec, const Aabb& bounds) {
+LightSet LightSet::fit(const LightSetSpec& spec, const Aabb& bounds) { return fit(spec, bounds, {}); }
+
+LightSet LightSet::fit(const LightSetSpec& spec, const Aabb& bounds, const std::vector<Vec3d>& extent) {
+  for (const Vec3d& p : extent)
+    if (!(p.x >= bounds.lo.x && p.x <= bounds.hi.x && p.y >= bounds.lo.y && p.y <= bounds.hi.y &&
+          p.z >= bounds.lo.z && p.z <= bounds.hi.z))
+      throw Error("light set: an extent point lies outside the scene's box");
   if (bounds.empty()) throw Error("light: the scene has no geometry to fit the light to");
   LightSet set;
   set.spec = spec;
   const std::vector<LightSpec> specs = spec.sample_specs();
   if (spec.kind == LightSetKind::sun_path) {
     set.samples =
-        spec.frame == SunFrame::ground ? fit_sun_ground(specs, bounds, spec.ground) : fit_sun_path(specs, bounds);
+        spec.frame == SunFrame::ground ? fit_sun_ground(specs, bounds, spec.ground, extent) : fit_sun_path(specs, bounds);
     return set;
   }
   set.samples.reserve(specs.size());

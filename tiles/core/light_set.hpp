@@ -42,9 +42,10 @@
 // width). So a world point has the same depth in every slice and a point on the ground
 // the same texel in every slice: only what stands above the ground moves between slices,
 // by (height) x (the change of the sun's horizontal offset cot(E)) instead of angle x r
-// for every point. The square is the union over the samples of the scene box projected
-// along each sample's direction onto the ground, grown by the margin (1 + 2m) and made
-// square about its centre. Cost: a sample at elevation E stretches the square by
+// for every point. The square is the union over the samples of the scene box (or, from a
+// scene, a hull of its geometry: LightSet::fit's `extent`) projected along each sample's
+// direction onto the ground, grown by the margin (1 + 2m) and made square about its
+// centre. Cost: a sample at elevation E stretches the square by
 // H cot(E) along its azimuth, so the texels per metre on the ground fall by
 // W / (W + H cot E) against a map of the box's width W alone (city, 25 degrees: H cot E
 // = 2.1 H); a sun this low also projects each texel into a longer strip on vertical
@@ -115,6 +116,11 @@ struct LightSet {
   // Fits every sample to the scene bounds in the frames above; throws st::Error naming the
   // sample that cannot be fitted.
   static LightSet fit(const LightSetSpec& spec, const Aabb& bounds);
+  // The same, where the ground frame's square covers the projections of `extent` (points
+  // inside `bounds` whose convex hull holds the scene's geometry; empty: the box's
+  // corners) instead of the whole box: the air above the box's upper corners needs no
+  // texels (fit_light_set passes a conservative hull per height band).
+  static LightSet fit(const LightSetSpec& spec, const Aabb& bounds, const std::vector<Vec3d>& extent);
   uint32_t size() const { return uint32_t(samples.size()); }
   // The time of slice w in [0, 1]: w / (N - 1), 0 for N = 1 (visibility(point, time)).
   double time_of(uint32_t w) const;
