@@ -15,6 +15,7 @@
 #include "tiles/build/mh_octree_encode.hpp"
 #include "tiles/core/light_set.hpp"
 #include "tiles/core/mh_octree.hpp"
+#include "tiles/core/stack_lookup.hpp"
 
 namespace st {
 namespace {
@@ -182,6 +183,31 @@ TEST(GroundFrame, TracedStackIsLosslessOnEveryTexelOfEverySlice) {
               return tree.depth(x, y, w, level);
             }),
             "");
+  // The soft lookup's shared transform (GroundTransforms) is to_light bit for bit, and the
+  // shared walk equals independent lookups; receivers on the ground read one texel.
+  const GroundTransforms gt(set.samples);
+  ASSERT_TRUE(gt.valid());
+  const StackLookup look(tree, set);
+  const Aabb b = load_scene(scene).bounds();
+  Rng rng(5);
+  uint64_t ground_nodes = 0;
+  for (int i = 0; i < 400; ++i) {
+    const bool on_ground = i % 2 == 0;
+    const Vec3d p{rng.uniform(b.lo.x, b.hi.x), on_ground ? 0.0 : rng.uniform(b.lo.y, b.hi.y), rng.uniform(b.lo.z, b.hi.z)};
+    const GroundTransforms::Point pt = gt.point(p);
+    for (uint32_t w = 0; w < set.size(); ++w) {
+      const LightPoint lp = set.samples[w].to_light(p);
+      ASSERT_EQ(gt.texel(level, pt, w), LightSpace::texel_of(level, lp.u, lp.v)) << i << " " << w;
+      ASSERT_EQ(pt.d, float(lp.d));
+      if (on_ground) {
+        ASSERT_EQ(gt.texel(level, pt, w), gt.texel(level, pt, 0));
+      }
+    }
+    ASSERT_EQ(look.soft_visibility(p), look.soft_visibility_independent(p)) << i;
+    if (on_ground) ground_nodes += StackLookup::last_nodes_visited();
+  }
+  // One full walk and then only the w steps: under 3 nodes per sample on average.
+  EXPECT_LT(ground_nodes, 200u * 3 * set.size());
   uint64_t hit = 0;
   for (uint32_t w = 0; w < stack.slices; ++w)
     for (uint64_t y = 0; y < stack.side(); ++y)

@@ -36,7 +36,8 @@ StackBounds::StackBounds(const MhOctree& octree) {
   fill_bounds(octree, octree.root(), range_);  // recursion depth <= kMaxLevels
 }
 
-StackLookup::StackLookup(const MhOctree& octree, const LightSet& lights) : tree_(octree), lights_(lights) {
+StackLookup::StackLookup(const MhOctree& octree, const LightSet& lights)
+    : tree_(octree), lights_(lights), ground_(lights.samples) {
   if (lights.size() != octree.slices())
     throw Error("stack lookup: the light set has " + std::to_string(lights.size()) + " samples, the octree " +
                 std::to_string(octree.slices()) + " slices");
@@ -64,6 +65,19 @@ float StackLookup::soft_visibility(const Vec3d& p) const noexcept {
   const uint32_t n = tree_.slices(), level = tree_.xy_level();
   MhOctree::Path path;
   uint32_t lit_samples = 0;
+  if (ground_.valid()) {
+    // A ground-frame sun path: the point's depth is every slice's and its offsets are
+    // computed once (GroundTransforms); a receiver on the ground reads one (x, y) in every
+    // slice, so consecutive walks share all but the w steps, and a leaf that answers for
+    // a run of slices answers them without a step.
+    const GroundTransforms::Point pt = ground_.point(p);
+    for (uint32_t w = 0; w < n; ++w) {
+      const auto t = ground_.texel(level, pt, w);
+      lit_samples += pt.d <= tree_.depth_along(path, t[0], t[1], w);
+    }
+    t_visited = path.steps + 1;
+    return float(lit_samples) / float(n);
+  }
   for (uint32_t w = 0; w < n; ++w) {
     const LightPoint lp = lights_.samples[w].to_light(p);
     const auto t = LightSpace::texel_of(level, lp.u, lp.v);

@@ -71,6 +71,7 @@ class StackLookup {
  private:
   const MhOctree& tree_;
   const LightSet& lights_;
+  GroundTransforms ground_;  // valid for a ground-frame sun path: one transform per point
 };
 
 }  // namespace st

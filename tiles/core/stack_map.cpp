@@ -12,6 +12,7 @@ namespace st {
 StackMap::StackMap(const StackGrid& grid, TileSource tile) : grid_(grid), tile_(std::move(tile)) {
   lights_.reserve(grid.slices);
   for (uint32_t w = 0; w < grid.slices; ++w) lights_.push_back(grid.light(w));
+  ground_ = GroundTransforms(lights_);
 }
 
 uint64_t StackMap::cell_of(uint64_t x, uint64_t y, uint32_t w) const {
@@ -76,6 +77,10 @@ float StackMap::soft_visibility(const Vec3d& p, bool* exact) const {
   const uint32_t n = g.n, K = grid_.skip_level;
   const uint32_t sx = n - g.xy_bits(K), sw = g.k - g.w_bits(K);
   const bool leaves_at_k = g.depth() == K;
+  // A ground-frame sun path: one transform per point (GroundTransforms), the same texel in
+  // every slice for a receiver on the ground.
+  const bool ground = ground_.valid();
+  const GroundTransforms::Point pt = ground ? ground_.point(p) : GroundTransforms::Point{};
   MhOctree::Path path;
   uint64_t path_cell = ~uint64_t(0);
   const MhOctree* tile = nullptr;
@@ -83,7 +88,12 @@ float StackMap::soft_visibility(const Vec3d& p, bool* exact) const {
   for (uint32_t w = 0; w < grid_.slices; ++w) {
     uint64_t x, y;
     float d;
-    texel(p, w, x, y, d);
+    if (ground) {
+      const auto t = ground_.texel(n, pt, w);
+      x = t[0], y = t[1], d = pt.d;
+    } else {
+      texel(p, w, x, y, d);
+    }
     float v = kLitDepth;
     if (!(x >> n) && !(y >> n)) {
       const uint64_t cx = x >> sx, cy = y >> sx, cw = uint64_t(w) >> sw;

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "tiles/core/light.hpp"
+#include "tiles/core/light_set.hpp"
 #include "tiles/core/mh_octree.hpp"
 #include "tiles/core/stack_grid.hpp"
 
@@ -60,6 +61,7 @@ class StackMap {
   const StackGrid& grid_;
   TileSource tile_;
   std::vector<LightSpace> lights_;
+  GroundTransforms ground_;  // valid for a ground-frame sun path (soft_visibility)
 };
 
 }  // namespace st
