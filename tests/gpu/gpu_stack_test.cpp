@@ -275,7 +275,10 @@ TEST(GpuStack, ShadowPassAtSampleTimesAndBetweenEqualsItsCpuTwin) {
       if (t.b == kSlices - 1) {
         EXPECT_GT(fs.holes, 0u);
       }
-      if (kernel == 1 && t.a == t.b) {  // a sample's time, one tap: that slice alone, 0 or 1
+      // A sample's time, one tap: that slice alone, 0 or 1, where the footprint stays within
+      // a texel. The ground frame's oblique map stretches this sloped G-buffer's pixels
+      // over more texels (u, v shear with height), so its footprint blends two levels.
+      if (kernel == 1 && t.a == t.b && frame == "ortho") {
         for (float v : want) EXPECT_TRUE(v == 0.0f || v == 1.0f) << v;
       }
     }
@@ -287,7 +290,9 @@ TEST(GpuStack, ShadowPassAtSampleTimesAndBetweenEqualsItsCpuTwin) {
 }
 
 TEST(GpuStack, ShadowPassFeedbackStreamsTheCellsItNeedsUntilNoHoleIsLeft) {
-  ServedStack s = serve_stack("gpu_stack_feedback");
+  // The orthographic frame: its square is wide enough that this G-buffer leaves some of
+  // slices 0-1's cells untouched (the ground frame's tighter square puts it over every cell).
+  ServedStack s = serve_stack("gpu_stack_feedback", "ortho");
   GpuMap g(s.map, gputest::options());
   const GBuffer gb;
   std::vector<float> vis(size_t(gb.width) * gb.height);
