@@ -110,6 +110,9 @@ TEST(PackFormat, HeaderRefusesEveryBadField) {
       // The DAG-MH dictionary (bit 6): on DAG-MH packs only, and its section needs room.
       resigned([](PackHeader& h) { h.flags |= kFeatureDagmhDictionary; }),
       resigned([](PackHeader& h) { h.flags |= kFeatureDagmhDictionary, h.encoding = Encoding::mmh, h.grid_size += 64, h.index_offset += 64; }),
+      // A ground-frame light (kind 2) belongs to stack packs only; kind 9 is unknown.
+      resigned([](PackHeader& h) { h.light_kind = LightKind::sun_ground; }),
+      resigned([](PackHeader& h) { h.light_kind = LightKind(9); }),
   };
   {  // with room for a section, the bit is accepted on a DAG-MH pack
     PackHeader h = sample_header();
