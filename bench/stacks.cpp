@@ -115,6 +115,8 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
   const st::Scene scene = st::load_scene(c.scene);
   const st::LightSet set = st::fit_light_set(scene, st::LightSetSpec::parse(c.light));
   std::printf("fitted light set: %s\n", set.spec.to_string().c_str());
+  std::printf("map square (slice 0): %.1f m a side, a texel %.3f m; frame %s\n", set.samples[0].extent_uv(),
+              set.samples[0].extent_uv() / double(uint64_t(1) << level), st::light_kind_name(set.samples[0].kind()));
   const uint32_t n = set.size();
   const uint32_t side = 1u << level;
 
@@ -332,6 +334,8 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
   const st::Scene scene = st::load_scene(c.scene);
   const st::LightSet set = st::fit_light_set(scene, st::LightSetSpec::parse(c.light));
   std::printf("fitted light set: %s\n", set.spec.to_string().c_str());
+  std::printf("map square (slice 0): %.1f m a side, a texel %.3f m; frame %s\n", set.samples[0].extent_uv(),
+              set.samples[0].extent_uv() / double(uint64_t(1) << level), st::light_kind_name(set.samples[0].kind()));
   const uint32_t n = set.size();
   const uint64_t side = uint64_t(1) << level;
   uint32_t k = 0;
