@@ -48,6 +48,9 @@ check stack-render-both 1 "not both" -- "$st" render stack.pack --scene $scene $
 check stack-render-bad-time 1 "time: expected a time in \[0, 1\]" -- \
   "$st" render stack.pack --scene $scene $scam --time 1.5 -o x.exr
 check stack-too-big 1 "exceeds the 2\^34 texels" -- "$st" build $scene --light sun-path:azimuth=1..2,elevation=50,samples=64 --resolution 64k -o x.pack -q
+# A sun near the horizon over the city: the ground frame's square would be huge (refused
+# before tracing); the orthographic frame takes it.
+check stack-ground-stretch 1 "frame=ground: the lowest sun stretches the ground square" -- "$st" build $scene --light sun-path:azimuth=1..2,elevation=1..2,samples=2 --resolution 64 -o x.pack -q
 check verify 0 "OK: 20[0-9]* random texels" -- "$st" verify city.pack $scene --samples 2000
 # Every texel: the re-trace gives the build's canonical bounds bit for bit.
 check verify-all 0 "OK: every texel of the built region \(2048 x 2048 = 4194304\)" -- "$st" verify city.pack $scene --all
