@@ -372,12 +372,49 @@ float RemoteMap::pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float r
 void RemoteMap::pcf_batch(std::span<const PcfQuery> queries, std::span<float> out) const noexcept {
   const size_t n = std::min(queries.size(), out.size());
   LookupScratch sc;
+  // Single taps inside the current tile are collected, in its texels, and answered by the
+  // tile's own batch: its walks resume from the last walk's path and keep their regions
+  // (tiles/core/tap_batch.hpp), so a screen-coherent batch steps a level or two per tap.
+  // A tap outside the tile that a kept region answers does not end the run; any other
+  // lookup does, first (while sc.ev is still the run's tile).
+  constexpr size_t kRun = 256;
+  PcfQuery run[kRun];
+  uint32_t run_at[kRun];
+  float run_out[kRun];
+  size_t run_n = 0;
+  auto flush = [&] {
+    if (run_n == 0) return;
+    try {
+      sc.ev->pcf_batch(std::span<const PcfQuery>(run, run_n), std::span<float>(run_out, run_n));
+    } catch (...) {  // an opened tile does not throw; if one did, stay lit and alive
+      std::fill_n(run_out, run_n, 1.0f);
+    }
+    for (size_t k = 0; k < run_n; ++k) out[run_at[k]] = run_out[k];
+    sc.hits += run_n;
+    run_n = 0;
+  };
   {
     std::shared_lock lock(mu_);
     for (size_t i = 0; i < n; ++i) {
       const PcfQuery& q = queries[i];
+      if (q.r <= 1 && q.level <= header_.map_level) {
+        const uint64_t top = (uint64_t(1) << q.level) - 1;  // pcf_tap's clamp of one tap
+        const uint64_t x = std::min(q.x, top), y = std::min(q.y, top);
+        if (sc.covers(q.level, x, y)) {
+          run[run_n] = PcfQuery{x - sc.x0, y - sc.y0, sc.rel, 1, q.receiver};
+          run_at[run_n++] = uint32_t(i);
+          if (run_n == kRun) flush();
+          continue;
+        }
+        if (const LookupScratch::Region* g = sc.find(q.level, x, y)) {
+          out[i] = q.receiver <= sc.answer(*g) ? 1.0f : 0.0f;
+          continue;
+        }
+      }
+      flush();
       out[i] = pcf_shared(q.level, q.x, q.y, q.r, q.receiver, sc);
     }
+    flush();
   }
   finish_lookups(sc);
 }

@@ -119,6 +119,9 @@ struct RenderResult {
   // The same phases in the process's CPU seconds (all threads): on a busy machine a
   // steadier measure of what each costs than the wall times above.
   double map_cpu_seconds = 0, traced_cpu_seconds = 0;
+  // Gathering the light-facing receivers from the G-buffer into the compact list both
+  // timed passes read (neither pass's time includes it).
+  double gather_seconds = 0, gather_cpu_seconds = 0;
   double differing_fraction() const { return receivers ? double(differing) / double(receivers) : 0; }
   double mean_abs_difference = 0;   // over the receivers, |map - traced| (diff only)
 };
