@@ -244,6 +244,16 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
   const uint64_t ky0 = pcf_tap(y, 0, r, side), ky1 = pcf_tap(y, r - 1, r, side);
   LookupScratch::Taps& w = sc.taps[level & 1];
   const bool same_rows = w.r == r && w.level == level && w.y == y;
+  // Whether the kernel around (x, y) (in the map) lies inside sc's current tile, or leaves
+  // it only across the map's edges (where the tile's clamp is the map's).
+  auto kernel_in_tile = [&] {
+    if (!sc.covers(level, x, y)) return false;
+    const int64_t h = int64_t((r - 1) / 2), lo_x = int64_t(x) - h, lo_y = int64_t(y) - h;
+    const int64_t tx0 = int64_t(sc.x0), ty0 = int64_t(sc.y0), ts = int64_t(sc.side), s = int64_t(side);
+    const bool fits_x = (lo_x >= tx0 || tx0 == 0) && (lo_x + int64_t(r) <= tx0 + ts || tx0 + ts == s);
+    const bool fits_y = (lo_y >= ty0 || ty0 == 0) && (lo_y + int64_t(r) <= ty0 + ts || ty0 + ts == s);
+    return fits_x && fits_y;
+  };
   // A window on this kernel's rows and every tap `value` (a kernel inside one region).
   auto keep_uniform = [&](float value) {
     w.level = level, w.r = r, w.y = y;
@@ -285,29 +295,28 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
       }
       return float(lit_taps) / float(r * r);
     }
+    // Not on the last kernels' rows: enter the centre's tile (no walk); a kernel inside it
+    // goes straight to the tile's shared walk (below), which ends as soon as one node
+    // holds the kernel. Else the centre's region (one walk) and the corners again.
+    if (x < side && y < side) {
+      float value;
+      if (!sc.covers(level, x, y) && !enter_tile(level, x, y, sc, value)) continue;  // its region is kept
+      if (kernel_in_tile()) {
+        ++sc.hits;
+        w.level = level, w.r = r, w.y = y;
+        std::fill_n(w.col.begin(), r, ~uint64_t(0));
+        try {
+          return sc.ev->pcf(sc.rel, x - sc.x0, y - sc.y0, r, receiver);
+        } catch (...) {
+          return 1.0f;
+        }
+      }
+    }
     depth_shared(level, pcf_tap(x, (r - 1) / 2, r, side), pcf_tap(y, (r - 1) / 2, r, side), sc);
   }
   // A new row of kernels: the next kernel on it fills the window (above).
   w.level = level, w.r = r, w.y = y;
   std::fill_n(w.col.begin(), r, ~uint64_t(0));
-  // Where the centre's region is its texel alone (fine detail), few taps would share
-  // regions: a kernel inside the centre's tile (or leaving it only across the map's
-  // edges, where the tile's clamp is the map's) runs the tile's own shared walk (MH §3.3
-  // Fig. 5, DAG-MH §3.5) instead.
-  const LookupScratch::Region* centre = sc.last_region();
-  if (x < side && y < side && centre && centre->holds(level, x, y) && centre->shift == 0 && sc.covers(level, x, y)) {
-    const int64_t h = int64_t((r - 1) / 2), lo_x = int64_t(x) - h, lo_y = int64_t(y) - h;
-    const int64_t tx0 = int64_t(sc.x0), ty0 = int64_t(sc.y0), ts = int64_t(sc.side), s = int64_t(side);
-    const bool fits_x = (lo_x >= tx0 || tx0 == 0) && (lo_x + int64_t(r) <= tx0 + ts || tx0 + ts == s);
-    const bool fits_y = (lo_y >= ty0 || ty0 == 0) && (lo_y + int64_t(r) <= ty0 + ts || ty0 + ts == s);
-    if (fits_x && fits_y) {
-      try {
-        return sc.ev->pcf(sc.rel, x - sc.x0, y - sc.y0, r, receiver);
-      } catch (...) {
-        return 1.0f;
-      }
-    }
-  }
   // Row by row: the taps of a row that one region holds take its answer together, each
   // region found among the kept ones or by one walk (which keeps it). Every tap answers
   // like depth(), so the fraction equals the base class's exactly.
