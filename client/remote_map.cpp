@@ -283,21 +283,36 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
       uint32_t lit_taps = 0;
       uint32_t slot = uint32_t(kx0 % r);
       uint64_t prev = kx0;
+      // Away from the map's left and right edges the kernel's r columns fill all r slots:
+      // its taps are the whole window, counted in one branch-free pass.
+      const bool interior = kx1 - kx0 == r - 1;
       for (uint32_t i = 0; i < r; ++i) {
         const uint64_t tx = pcf_tap(x, i, r, side);
         if (tx != prev) slot = slot + 1 == r ? 0 : slot + 1, prev = tx;
         float* col = w.depth.data() + slot * r;
         if (w.col[slot] != tx) {
           w.col[slot] = tx;
-          for (uint32_t k = 0; k < r; ++k) col[k] = depth_shared(level, tx, pcf_tap(y, k, r, side), sc);
+          // The column's taps that one region holds take its value together.
+          for (uint32_t k = 0; k < r;) {
+            const uint64_t ty = pcf_tap(y, k, r, side);
+            const float v = depth_shared(level, tx, ty, sc);
+            col[k++] = v;
+            const LookupScratch::Region* g = sc.last_region();
+            if (g && g->holds(level, tx, ty))
+              while (k < r && g->holds(level, tx, pcf_tap(y, k, r, side))) col[k++] = v;
+          }
         }
-        for (uint32_t k = 0; k < r; ++k) lit_taps += receiver <= col[k] ? 1u : 0u;
+        if (!interior)
+          for (uint32_t k = 0; k < r; ++k) lit_taps += receiver <= col[k] ? 1u : 0u;
       }
+      if (interior)
+        for (uint32_t k = 0; k < r * r; ++k) lit_taps += receiver <= w.depth[k] ? 1u : 0u;
       return float(lit_taps) / float(r * r);
     }
     // Not on the last kernels' rows: enter the centre's tile (no walk); a kernel inside it
-    // goes straight to the tile's shared walk (below), which ends as soon as one node
-    // holds the kernel. Else the centre's region (one walk) and the corners again.
+    // goes straight to the tile's own shared-walk pcf (MH §3.3 Fig. 5, DAG-MH §3.5), which
+    // stops early where one node holds the kernel. Else the centre's region (one walk)
+    // and the corners again.
     if (x < side && y < side) {
       float value;
       if (!sc.covers(level, x, y) && !enter_tile(level, x, y, sc, value)) continue;  // its region is kept
