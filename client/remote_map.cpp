@@ -396,49 +396,80 @@ float RemoteMap::pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float r
 void RemoteMap::pcf_batch(std::span<const PcfQuery> queries, std::span<float> out) const noexcept {
   const size_t n = std::min(queries.size(), out.size());
   LookupScratch sc;
-  // Single taps inside the current tile are collected, in its texels, and answered by the
-  // tile's own batch: its walks resume from the last walk's path and keep their regions
-  // (tiles/core/tap_batch.hpp), so a screen-coherent batch steps a level or two per tap.
-  // A tap outside the tile that a kept region answers does not end the run; any other
-  // lookup does, first (while sc.ev is still the run's tile).
-  constexpr size_t kRun = 256;
-  PcfQuery run[kRun];
-  uint32_t run_at[kRun];
-  float run_out[kRun];
-  size_t run_n = 0;
-  auto flush = [&] {
-    if (run_n == 0) return;
-    try {
-      sc.ev->pcf_batch(std::span<const PcfQuery>(run, run_n), std::span<float>(run_out, run_n));
-    } catch (...) {  // an opened tile does not throw; if one did, stay lit and alive
-      std::fill_n(run_out, run_n, 1.0f);
+  // Single taps are collected per tile, in its texels, in up to kBins tiles at once (a
+  // screen tile's taps often straddle a tile border), and each tile's run is answered by
+  // the tile's own batch: its walks resume from the last walk's path and keep their
+  // regions (tiles/core/tap_batch.hpp), so a screen-coherent batch steps a level or two
+  // per tap. A tap in no collecting tile is answered by a kept region, or enters its tile
+  // (the page-table walk only), which takes over the bin least recently opened.
+  constexpr size_t kRun = 64, kBins = 4;
+  struct Bin {
+    const Evaluator* ev = nullptr;
+    uint32_t level = 0, rel = 0;
+    uint64_t x0 = 0, y0 = 0, side = 0;
+    size_t n = 0;
+    PcfQuery q[kRun];
+    uint32_t at[kRun];
+    float got[kRun];
+    bool covers(uint32_t l, uint64_t x, uint64_t y) const {
+      return ev && l == level && x - x0 < side && y - y0 < side;  // unsigned: x < x0 wraps
     }
-    for (size_t k = 0; k < run_n; ++k) out[run_at[k]] = run_out[k];
-    sc.hits += run_n;
-    run_n = 0;
+  };
+  Bin bins[kBins];
+  size_t next_bin = 0;
+  auto flush = [&](Bin& b) {
+    if (b.n == 0) return;
+    try {
+      b.ev->pcf_batch(std::span<const PcfQuery>(b.q, b.n), std::span<float>(b.got, b.n));
+    } catch (...) {  // an opened tile does not throw; if one did, stay lit and alive
+      std::fill_n(b.got, b.n, 1.0f);
+    }
+    for (size_t k = 0; k < b.n; ++k) out[b.at[k]] = b.got[k];
+    sc.hits += b.n;
+    b.n = 0;
+  };
+  auto add = [&](Bin& b, uint64_t x, uint64_t y, float receiver, size_t i) {
+    b.q[b.n] = PcfQuery{x - b.x0, y - b.y0, b.rel, 1, receiver};
+    b.at[b.n++] = uint32_t(i);
+    if (b.n == kRun) flush(b);
   };
   {
     std::shared_lock lock(mu_);
+    size_t last = 0;  // the bin the last tap went to
     for (size_t i = 0; i < n; ++i) {
       const PcfQuery& q = queries[i];
-      if (q.r <= 1 && q.level <= header_.map_level) {
-        const uint64_t top = (uint64_t(1) << q.level) - 1;  // pcf_tap's clamp of one tap
-        const uint64_t x = std::min(q.x, top), y = std::min(q.y, top);
-        if (sc.covers(q.level, x, y)) {
-          run[run_n] = PcfQuery{x - sc.x0, y - sc.y0, sc.rel, 1, q.receiver};
-          run_at[run_n++] = uint32_t(i);
-          if (run_n == kRun) flush();
-          continue;
-        }
-        if (const LookupScratch::Region* g = sc.find(q.level, x, y)) {
-          out[i] = q.receiver <= sc.answer(*g) ? 1.0f : 0.0f;
-          continue;
-        }
+      if (q.r > 1 || q.level > header_.map_level) {
+        out[i] = pcf_shared(q.level, q.x, q.y, q.r, q.receiver, sc);
+        continue;
       }
-      flush();
-      out[i] = pcf_shared(q.level, q.x, q.y, q.r, q.receiver, sc);
+      const uint64_t top = (uint64_t(1) << q.level) - 1;  // pcf_tap's clamp of one tap
+      const uint64_t x = std::min(q.x, top), y = std::min(q.y, top);
+      if (bins[last].covers(q.level, x, y)) {
+        add(bins[last], x, y, q.receiver, i);
+        continue;
+      }
+      size_t b = 0;
+      while (b < kBins && !bins[b].covers(q.level, x, y)) ++b;
+      if (b < kBins) {
+        add(bins[last = b], x, y, q.receiver, i);
+        continue;
+      }
+      if (const LookupScratch::Region* g = sc.find(q.level, x, y)) {
+        out[i] = q.receiver <= sc.answer(*g) ? 1.0f : 0.0f;
+        continue;
+      }
+      float value;
+      if (!enter_tile(q.level, x, y, sc, value)) {  // a page-table value: its region is kept
+        out[i] = q.receiver <= value ? 1.0f : 0.0f;
+        continue;
+      }
+      Bin& nb = bins[last = next_bin];
+      next_bin = (next_bin + 1) % kBins;
+      flush(nb);
+      nb.ev = sc.ev, nb.level = sc.level, nb.rel = sc.rel, nb.x0 = sc.x0, nb.y0 = sc.y0, nb.side = sc.side;
+      add(nb, x, y, q.receiver, i);
     }
-    flush();
+    for (Bin& b : bins) flush(b);
   }
   finish_lookups(sc);
 }
