@@ -224,7 +224,7 @@ namespace {
 
 // lookup_point (the offset p + normal * k * texel) and a sun's LightSpace::to_light for
 // n receivers, operation for operation in the same order (so the same IEEE doubles:
-// contraction is off, see filter_level.hpp), as branch-free loops over arrays.
+// contraction is off, see filter_level.hpp), in one loop without calls or branches.
 void sun_lookup_chunk(const LightSpace& light, uint32_t level, uint32_t pcf_radius, const Receiver* rc, size_t n,
                       double* u, double* v, double* d) {
   const Vec3d org = light.origin(), au = light.axis_u(), av = light.axis_v(), fw = light.forward();
@@ -276,7 +276,7 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
   // whole G-buffer (gather_seconds says what that costs). The list goes by screen tiles
   // of kGatherTile^2 pixels, so that consecutive receivers are neighbours in both
   // directions (for the map: more answers from the last walks' regions and resumed walks;
-  // for the rays: coherent traversals).
+  // the rays read the same list in the same order).
   auto t0 = Clk::now();
   double c0 = process_cpu_seconds();
   constexpr uint32_t kGatherTile = 8;
@@ -310,31 +310,31 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
     PcfQuery queries[2 * kChunk];
     uint32_t index[kChunk];  // the receiver of each query (its first, with a blend)
     float blend[kChunk], answers[2 * kChunk];  // trilinear weight (NaN: one level only)
-    for (size_t c0 = r.begin(); c0 < r.end(); c0 += kChunk) {
-      const size_t c1 = std::min(r.end(), c0 + kChunk);
+    for (size_t b0 = r.begin(); b0 < r.end(); b0 += kChunk) {
+      const size_t b1 = std::min(r.end(), b0 + kChunk);
       size_t nq = 0, ni = 0;
       if (sun_fast) {
         // A sun at the finest level: lookup_point and LightSpace::to_light operation for
-        // operation (the same IEEE doubles), in a loop over the chunk the compiler
-        // vectorizes (sun_lookup_chunk).
+        // operation (the same IEEE doubles), in one tight loop over the chunk
+        // (sun_lookup_chunk), then the in-map test and the texels.
         double u[kChunk], v[kChunk], d[kChunk];
-        sun_lookup_chunk(light, L, o.pcf_radius, fr.data() + c0, c1 - c0, u, v, d);
+        sun_lookup_chunk(light, L, o.pcf_radius, fr.data() + b0, b1 - b0, u, v, d);
         const double side = double(uint64_t(1) << L);
-        for (size_t k = 0; k < c1 - c0; ++k) {
+        for (size_t k = 0; k < b1 - b0; ++k) {
           if (!(u[k] >= 0 && u[k] < 1 && v[k] >= 0 && v[k] < 1)) {
-            fvis[c0 + k] = 1;
+            fvis[b0 + k] = 1;
             continue;
           }
           // (u, v) in [0, 1): u * 2^level is exact and below 2^level, so truncating it is
           // LightSpace::texel_of's floor, without its library calls.
           queries[nq++] = {uint64_t(u[k] * side), uint64_t(v[k] * side), L, kr, float(d[k])};
-          index[ni++] = uint32_t(c0 + k);
+          index[ni++] = uint32_t(b0 + k);
         }
         eval.pcf_batch(std::span<const PcfQuery>(queries, nq), std::span<float>(answers, nq));
         for (size_t k = 0; k < ni; ++k) fvis[index[k]] = answers[k];
         continue;
       }
-      for (size_t i = c0; i < c1; ++i) {
+      for (size_t i = b0; i < b1; ++i) {
         const Receiver& rc = fr[i];
         FilterLevels f{L, L, 0.0f};
         if (o.pixel_angle > 0) f = filter_levels(L, receiver_footprint_texels(rc, light, L, o.pixel_angle));
