@@ -29,7 +29,8 @@
 // more than the CPU time a pass itself spends; thread speed-ups use wall time.
 // Before timing: batch == single == array bit for bit on every point, and the client's
 // PCF (shared walk inside tiles) == the average of its single lookups on a sample.
-// --quick: 2K^2, 64K lookups, 3 reps, one render rep.
+// --quick: 2K^2, 64K lookups, 3 reps, one render rep. --render-only: only the render
+// comparison (for profiling it).
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -162,7 +163,7 @@ int main(int argc, char** argv) {
   uint32_t level = 12, tile_bytes = 8192;
   size_t count = size_t(1) << 18, batch = 1024;
   int reps = 5, render_reps = 3;
-  bool quick = false, level_given = false, use_cpu = true, render_reps_given = false;
+  bool quick = false, level_given = false, use_cpu = true, render_reps_given = false, render_only = false;
   try {
     for (int i = 1; i < argc; ++i) {
       std::string a = argv[i];
@@ -185,6 +186,7 @@ int main(int argc, char** argv) {
       } else if (a == "--size") size_spec = next();
       else if (a == "--camera") camera_spec = next();
       else if (a == "--quick") quick = true;
+      else if (a == "--render-only") render_only = true;
       else if (a == "--json") json_path = next();
       else if (a == "--clock") {
         const std::string c = next();
@@ -195,7 +197,7 @@ int main(int argc, char** argv) {
         throw st::Error("usage: bench_client_lookups [--scene S] [--light L] [--res 4k] [--encodings mh,mmh,dagmh] "
                         "[--tile-bytes N] [--lookups N] [--batch N] [--reps R] [--render-reps R] [--threads 1,2] "
                         "[--size WxH] "
-                        "[--camera SPEC] [--clock cpu|wall] [--quick] [--json PATH]");
+                        "[--camera SPEC] [--clock cpu|wall] [--quick] [--render-only] [--json PATH]");
     }
     if (scene_spec.find(':') == std::string::npos) scene_spec = "procedural:" + scene_spec;
     if (quick) {
@@ -266,7 +268,7 @@ int main(int argc, char** argv) {
       for (uint64_t y = 0; y < side; ++y)
         for (uint64_t x = 0; x < side; ++x) arr.data[y * side + x] = e.remote->depth(level, x, y);
     };
-    paint(encoded[0]);
+    if (!render_only) paint(encoded[0]);
     std::mt19937_64 rng(20261201);
     auto make_probe = [&](uint64_t x, uint64_t y) {
       const st::LightRay ray = light.texel_ray(level, x, y);
@@ -291,10 +293,10 @@ int main(int argc, char** argv) {
       double seconds = 0, cpu = 0;  // medians: wall and summed thread CPU seconds per pass
     };
     std::vector<Result> results;
-    uint64_t mismatches = 0, pcf_mismatches = 0, filtered_mismatches = 0;
+    uint64_t mismatches = 0, pcf_mismatches = 0, filtered_mismatches = 0, render_mismatches = 0;
     const std::pair<const char*, const std::vector<Probe>*> patterns[] = {{"random", &random}, {"coherent", &coherent}};
     std::vector<float> out(count), ref(count);
-    for (size_t ei = 0; ei < encoded.size(); ++ei) {
+    for (size_t ei = 0; ei < (render_only ? 0 : encoded.size()); ++ei) {
       const Encoded& e = encoded[ei];
       if (ei > 0) paint(e);  // the float array of this same map
       for (auto& [pname, list] : patterns) {
@@ -382,29 +384,41 @@ int main(int argc, char** argv) {
     for (const Encoded& e : encoded) {
       st::RenderOptions ro;
       ro.width = width, ro.height = height, ro.diff = true;
-      std::vector<double> ms, ts, mc, tc;
+      std::vector<double> ms, ts, mc, tc, gs, gc;
       uint64_t recv = 0, differing = 0;
       for (int rep = 0; rep < render_reps; ++rep) {
         const st::RenderResult rr = st::render_view(tracer, receivers, *e.remote, ro);
+        gs.push_back(rr.gather_seconds), gc.push_back(rr.gather_cpu_seconds);
         ms.push_back(rr.map_seconds), ts.push_back(rr.traced_seconds);
         mc.push_back(rr.map_cpu_seconds), tc.push_back(rr.traced_cpu_seconds);
         recv = rr.receivers, differing = rr.differing;
       }
+      // The render's answers, bit for bit those of one map_visibility per receiver (the
+      // single-lookup path) on the same map.
+      {
+        const st::RenderResult rr = st::render_view(tracer, receivers, *e.remote, ro);
+        for (size_t i = 0; i < receivers.size(); ++i)
+          render_mismatches += std::bit_cast<uint32_t>(rr.visibility[i]) !=
+                               std::bit_cast<uint32_t>(st::map_visibility(*e.remote, receivers[i], light, 0, level));
+      }
       const double m = median(ms), t = median(ts), m_cpu = median(mc), t_cpu = median(tc);
+      // The G-buffer gather (RenderResult::gather_seconds): before both passes, in neither.
+      const double g = median(gs), g_cpu = median(gc);
       const double ratio = use_cpu ? m_cpu / t_cpu : m / t;
       std::printf("  %-6s receivers %llu: map %.2f ms (cpu %.2f), rays %.2f ms (cpu %.2f), map/rays %.3f %s "
-                  "(target <= 0.2), %llu differ\n",
+                  "(target <= 0.2), %llu differ; gather %.2f ms (cpu %.2f), in neither pass\n",
                   e.name.c_str(), (unsigned long long)recv, 1e3 * m, 1e3 * m_cpu, 1e3 * t, 1e3 * t_cpu, ratio,
-                  use_cpu ? "cpu" : "wall", (unsigned long long)differing);
+                  use_cpu ? "cpu" : "wall", (unsigned long long)differing, 1e3 * g, 1e3 * g_cpu);
       jrender.push_back({{"encoding", e.name}, {"receivers", recv}, {"map_seconds", m}, {"traced_seconds", t},
                          {"map_cpu_seconds", m_cpu}, {"traced_cpu_seconds", t_cpu}, {"ratio_map_to_rays", ratio},
-                         {"differing", differing}});
+                         {"differing", differing}, {"gather_seconds", g}, {"gather_cpu_seconds", g_cpu}});
     }
 
     std::printf("\nTargets (single thread unless said; batch is the API a game calls per frame):\n");
     nlohmann::json targets = nlohmann::json::array();
-    for (const Encoded& e : encoded)
+    for (size_t ei = 0; ei < (render_only ? 0 : encoded.size()); ++ei)
       for (auto& [pname, list] : patterns) {
+        const Encoded& e = encoded[ei];
         (void)list;
         const double single = find(e.name, pname, "batch", 0, 1) / find(e.name, pname, "array", 0, 1);
         const double pcf = find(e.name, pname, "batch", 2, 1) / find(e.name, pname, "batch", 0, 1);
@@ -418,15 +432,16 @@ int main(int argc, char** argv) {
                            {"batch_pcf5_over_single", pcf}, {"thread_speedup", scale}, {"threads", tn}});
       }
     std::printf("  checks: %llu batch/single/array mismatches, %llu PCF shared-walk mismatches, %llu filtered "
-                "batch/single mismatches (load %.1f)\n",
+                "batch/single mismatches, %llu render/map_visibility mismatches (load %.1f)\n",
                 (unsigned long long)mismatches, (unsigned long long)pcf_mismatches,
-                (unsigned long long)filtered_mismatches, load_average());
+                (unsigned long long)filtered_mismatches, (unsigned long long)render_mismatches, load_average());
 
     if (!json_path.empty()) {
       nlohmann::json j{{"bench", "client_lookups"}, {"scene", scene_spec}, {"light", light_spec}, {"side", side},
                        {"level", level}, {"tile_bytes", tile_bytes}, {"lookups_per_pattern", count},
                        {"batch", batch}, {"reps", reps}, {"clock", use_cpu ? "cpu" : "wall"}, {"mismatches", mismatches},
                        {"pcf_mismatches", pcf_mismatches}, {"filtered_mismatches", filtered_mismatches},
+                       {"render_mismatches", render_mismatches},
                        {"load_average_end", load_average()}, {"results", jres}, {"render", jrender},
                        {"targets", targets}};
       for (const Encoded& e : encoded)
@@ -434,7 +449,7 @@ int main(int argc, char** argv) {
       std::ofstream f(json_path);
       if (!(f << j.dump(2) << "\n")) throw st::Error("bench_client_lookups: cannot write " + json_path);
     }
-    return mismatches == 0 && pcf_mismatches == 0 && filtered_mismatches == 0 ? 0 : 1;
+    return mismatches == 0 && pcf_mismatches == 0 && filtered_mismatches == 0 && render_mismatches == 0 ? 0 : 1;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_client_lookups: %s\n", e.what());
     return 1;

@@ -244,6 +244,16 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
   const uint64_t ky0 = pcf_tap(y, 0, r, side), ky1 = pcf_tap(y, r - 1, r, side);
   LookupScratch::Taps& w = sc.taps[level & 1];
   const bool same_rows = w.r == r && w.level == level && w.y == y;
+  // Whether the kernel around (x, y) (in the map) lies inside sc's current tile, or leaves
+  // it only across the map's edges (where the tile's clamp is the map's).
+  auto kernel_in_tile = [&] {
+    if (!sc.covers(level, x, y)) return false;
+    const int64_t h = int64_t((r - 1) / 2), lo_x = int64_t(x) - h, lo_y = int64_t(y) - h;
+    const int64_t tx0 = int64_t(sc.x0), ty0 = int64_t(sc.y0), ts = int64_t(sc.side), s = int64_t(side);
+    const bool fits_x = (lo_x >= tx0 || tx0 == 0) && (lo_x + int64_t(r) <= tx0 + ts || tx0 + ts == s);
+    const bool fits_y = (lo_y >= ty0 || ty0 == 0) && (lo_y + int64_t(r) <= ty0 + ts || ty0 + ts == s);
+    return fits_x && fits_y;
+  };
   // A window on this kernel's rows and every tap `value` (a kernel inside one region).
   auto keep_uniform = [&](float value) {
     w.level = level, w.r = r, w.y = y;
@@ -273,41 +283,55 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
       uint32_t lit_taps = 0;
       uint32_t slot = uint32_t(kx0 % r);
       uint64_t prev = kx0;
+      // Away from the map's left and right edges the kernel's r columns fill all r slots:
+      // its taps are the whole window, counted in one branch-free pass.
+      const bool interior = kx1 - kx0 == r - 1;
       for (uint32_t i = 0; i < r; ++i) {
         const uint64_t tx = pcf_tap(x, i, r, side);
         if (tx != prev) slot = slot + 1 == r ? 0 : slot + 1, prev = tx;
         float* col = w.depth.data() + slot * r;
         if (w.col[slot] != tx) {
           w.col[slot] = tx;
-          for (uint32_t k = 0; k < r; ++k) col[k] = depth_shared(level, tx, pcf_tap(y, k, r, side), sc);
+          // The column's taps that one region holds take its value together.
+          for (uint32_t k = 0; k < r;) {
+            const uint64_t ty = pcf_tap(y, k, r, side);
+            const float v = depth_shared(level, tx, ty, sc);
+            col[k++] = v;
+            const LookupScratch::Region* g = sc.last_region();
+            if (g && g->holds(level, tx, ty))
+              while (k < r && g->holds(level, tx, pcf_tap(y, k, r, side))) col[k++] = v;
+          }
         }
-        for (uint32_t k = 0; k < r; ++k) lit_taps += receiver <= col[k] ? 1u : 0u;
+        if (!interior)
+          for (uint32_t k = 0; k < r; ++k) lit_taps += receiver <= col[k] ? 1u : 0u;
       }
+      if (interior)
+        for (uint32_t k = 0; k < r * r; ++k) lit_taps += receiver <= w.depth[k] ? 1u : 0u;
       return float(lit_taps) / float(r * r);
+    }
+    // Not on the last kernels' rows: enter the centre's tile (no walk); a kernel inside it
+    // goes straight to the tile's own shared-walk pcf (MH §3.3 Fig. 5, DAG-MH §3.5), which
+    // stops early where one node holds the kernel. Else the centre's region (one walk)
+    // and the corners again.
+    if (x < side && y < side) {
+      float value;
+      if (!sc.covers(level, x, y) && !enter_tile(level, x, y, sc, value)) continue;  // its region is kept
+      if (kernel_in_tile()) {
+        ++sc.hits;
+        w.level = level, w.r = r, w.y = y;
+        std::fill_n(w.col.begin(), r, ~uint64_t(0));
+        try {
+          return sc.ev->pcf(sc.rel, x - sc.x0, y - sc.y0, r, receiver);
+        } catch (...) {
+          return 1.0f;
+        }
+      }
     }
     depth_shared(level, pcf_tap(x, (r - 1) / 2, r, side), pcf_tap(y, (r - 1) / 2, r, side), sc);
   }
   // A new row of kernels: the next kernel on it fills the window (above).
   w.level = level, w.r = r, w.y = y;
   std::fill_n(w.col.begin(), r, ~uint64_t(0));
-  // Where the centre's region is its texel alone (fine detail), few taps would share
-  // regions: a kernel inside the centre's tile (or leaving it only across the map's
-  // edges, where the tile's clamp is the map's) runs the tile's own shared walk (MH §3.3
-  // Fig. 5, DAG-MH §3.5) instead.
-  const LookupScratch::Region* centre = sc.last_region();
-  if (x < side && y < side && centre && centre->holds(level, x, y) && centre->shift == 0 && sc.covers(level, x, y)) {
-    const int64_t h = int64_t((r - 1) / 2), lo_x = int64_t(x) - h, lo_y = int64_t(y) - h;
-    const int64_t tx0 = int64_t(sc.x0), ty0 = int64_t(sc.y0), ts = int64_t(sc.side), s = int64_t(side);
-    const bool fits_x = (lo_x >= tx0 || tx0 == 0) && (lo_x + int64_t(r) <= tx0 + ts || tx0 + ts == s);
-    const bool fits_y = (lo_y >= ty0 || ty0 == 0) && (lo_y + int64_t(r) <= ty0 + ts || ty0 + ts == s);
-    if (fits_x && fits_y) {
-      try {
-        return sc.ev->pcf(sc.rel, x - sc.x0, y - sc.y0, r, receiver);
-      } catch (...) {
-        return 1.0f;
-      }
-    }
-  }
   // Row by row: the taps of a row that one region holds take its answer together, each
   // region found among the kept ones or by one walk (which keeps it). Every tap answers
   // like depth(), so the fraction equals the base class's exactly.
@@ -372,12 +396,80 @@ float RemoteMap::pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float r
 void RemoteMap::pcf_batch(std::span<const PcfQuery> queries, std::span<float> out) const noexcept {
   const size_t n = std::min(queries.size(), out.size());
   LookupScratch sc;
+  // Single taps are collected per tile, in its texels, in up to kBins tiles at once (a
+  // screen tile's taps often straddle a tile border), and each tile's run is answered by
+  // the tile's own batch: its walks resume from the last walk's path and keep their
+  // regions (tiles/core/tap_batch.hpp), so a screen-coherent batch steps a level or two
+  // per tap. A tap in no collecting tile is answered by a kept region, or enters its tile
+  // (the page-table walk only), which takes over the bin least recently opened.
+  constexpr size_t kRun = 64, kBins = 4;
+  struct Bin {
+    const Evaluator* ev = nullptr;
+    uint32_t level = 0, rel = 0;
+    uint64_t x0 = 0, y0 = 0, side = 0;
+    size_t n = 0;
+    PcfQuery q[kRun];
+    uint32_t at[kRun];
+    float got[kRun];
+    bool covers(uint32_t l, uint64_t x, uint64_t y) const {
+      return ev && l == level && x - x0 < side && y - y0 < side;  // unsigned: x < x0 wraps
+    }
+  };
+  Bin bins[kBins];
+  size_t next_bin = 0;
+  auto flush = [&](Bin& b) {
+    if (b.n == 0) return;
+    try {
+      b.ev->pcf_batch(std::span<const PcfQuery>(b.q, b.n), std::span<float>(b.got, b.n));
+    } catch (...) {  // an opened tile does not throw; if one did, stay lit and alive
+      std::fill_n(b.got, b.n, 1.0f);
+    }
+    for (size_t k = 0; k < b.n; ++k) out[b.at[k]] = b.got[k];
+    sc.hits += b.n;
+    b.n = 0;
+  };
+  auto add = [&](Bin& b, uint64_t x, uint64_t y, float receiver, size_t i) {
+    b.q[b.n] = PcfQuery{x - b.x0, y - b.y0, b.rel, 1, receiver};
+    b.at[b.n++] = uint32_t(i);
+    if (b.n == kRun) flush(b);
+  };
   {
     std::shared_lock lock(mu_);
+    size_t last = 0;  // the bin the last tap went to
     for (size_t i = 0; i < n; ++i) {
       const PcfQuery& q = queries[i];
-      out[i] = pcf_shared(q.level, q.x, q.y, q.r, q.receiver, sc);
+      if (q.r > 1 || q.level > header_.map_level) {
+        out[i] = pcf_shared(q.level, q.x, q.y, q.r, q.receiver, sc);
+        continue;
+      }
+      const uint64_t top = (uint64_t(1) << q.level) - 1;  // pcf_tap's clamp of one tap
+      const uint64_t x = std::min(q.x, top), y = std::min(q.y, top);
+      if (bins[last].covers(q.level, x, y)) {
+        add(bins[last], x, y, q.receiver, i);
+        continue;
+      }
+      size_t b = 0;
+      while (b < kBins && !bins[b].covers(q.level, x, y)) ++b;
+      if (b < kBins) {
+        add(bins[last = b], x, y, q.receiver, i);
+        continue;
+      }
+      if (const LookupScratch::Region* g = sc.find(q.level, x, y)) {
+        out[i] = q.receiver <= sc.answer(*g) ? 1.0f : 0.0f;
+        continue;
+      }
+      float value;
+      if (!enter_tile(q.level, x, y, sc, value)) {  // a page-table value: its region is kept
+        out[i] = q.receiver <= value ? 1.0f : 0.0f;
+        continue;
+      }
+      Bin& nb = bins[last = next_bin];
+      next_bin = (next_bin + 1) % kBins;
+      flush(nb);
+      nb.ev = sc.ev, nb.level = sc.level, nb.rel = sc.rel, nb.x0 = sc.x0, nb.y0 = sc.y0, nb.side = sc.side;
+      add(nb, x, y, q.receiver, i);
     }
+    for (Bin& b : bins) flush(b);
   }
   finish_lookups(sc);
 }

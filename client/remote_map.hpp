@@ -225,10 +225,11 @@ class RemoteMap final : public Evaluator {
   bool enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc, float& value) const noexcept;
   float depth_shared(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc) const noexcept;
   // Evaluator::pcf's answer, from the kept regions: a kernel inside one answers at once;
-  // in fine detail a kernel inside one resident tile (or crossing only the map's edges)
-  // goes through the tile's own shared-walk pcf (MH §3.3, DAG-MH §3.5); others row by
-  // row, the taps of a row that one region holds together (MH §3.3's last-sample cache,
-  // across tile borders and missing tiles alike).
+  // one on the last kernels' rows reads only its new columns (the tap window); another
+  // inside one resident tile (or crossing only the map's edges) goes through the tile's
+  // own shared-walk pcf (MH §3.3, DAG-MH §3.5); others row by row, the taps of a row that
+  // one region holds together (MH §3.3's last-sample cache, across tile borders and
+  // missing tiles alike).
   float pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver,
                    LookupScratch& sc) const noexcept;
   float visibility_shared(const WorldPoint& world, float footprint_world, uint32_t pcf_radius,

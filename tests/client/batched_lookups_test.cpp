@@ -86,9 +86,10 @@ std::string pcf_difference(const RemoteMap& m, uint32_t level) {
   }
   // One kernel size per batch, rows in scan order: each kernel shares all columns but one
   // with the last (the client's tap window), across tile borders, missing tiles and the
-  // map's clamped edges; the widest on every fifth row.
+  // map's clamped edges; the widest on every fifth row. Single taps in scan order go to
+  // each tile's own batch in runs (tiles/core/tap_batch.hpp).
   for (uint32_t l : {level, level - 2})
-    for (uint32_t r : {2u, 5u, 9u}) {
+    for (uint32_t r : {1u, 2u, 5u, 9u}) {
       std::vector<PcfQuery> queries;
       for (uint64_t y = 0; y < (uint64_t(1) << l); y += r == 9 ? 5 : 1)
         for (uint64_t x = 0; x < (uint64_t(1) << l); ++x)

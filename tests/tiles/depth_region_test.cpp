@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <cmath>
 #include <vector>
 
 #include "interval_fields.hpp"
@@ -49,6 +50,45 @@ TEST(DepthRegion, EveryTexelOfTheRegionSharesTheAnswer) {
       if (f.name == "constant" || f.name == "city") {
         EXPECT_GT(wide, 0u) << "no region wider than a texel";
       }
+    }
+  }
+}
+
+// pcf_batch's single taps (tiles/core/tap_batch.hpp: kept regions, walks resumed from the
+// last walk's path) answer like pcf(), bit for bit: rows in scan order, a zigzag, random
+// texels and levels, coordinates past the edge (clamped), a level finer than the tree and
+// wider kernels in between.
+TEST(DepthRegion, BatchedSingleTapsAnswerLikePcf) {
+  const uint32_t L = fields::small_test_scale() ? 6 : 7, side = 1u << L;
+  for (const fields::NamedField& f : fields::all_fields(side, 20261204)) {
+    const Hierarchy h = build_hierarchy(f.tile);
+    for (Encoding e : {Encoding::mh, Encoding::mmh, Encoding::dagmh}) {
+      SCOPED_TRACE(f.name + " " + to_string(e));
+      const std::vector<uint8_t> bytes = encode(h, e);  // the evaluator reads them in place
+      const auto eval = open_encoded(e, bytes);
+      fields::Rng rng(uint64_t(e) + 7);
+      std::vector<PcfQuery> q;
+      auto receiver = [&](uint32_t level, uint64_t x, uint64_t y) {
+        const uint64_t top = (uint64_t(1) << std::min(level, L)) - 1;
+        const float d = eval->depth(std::min(level, L), std::min(x, top), std::min(y, top));
+        return rng.next() & 1 ? d : std::nextafter(d, 2.0f);
+      };
+      for (uint32_t level : {L, L - 1, L - 3})
+        for (uint64_t y = 0; y < (uint64_t(1) << level); y += 3)
+          for (uint64_t k = 0; k < (uint64_t(1) << level); ++k) {
+            const uint64_t x = (y / 3) & 1 ? (uint64_t(1) << level) - 1 - k : k;  // zigzag
+            q.push_back({x, y, level, 1, receiver(level, x, y)});
+          }
+      for (uint32_t k = 0; k < 2000; ++k) {
+        const uint32_t level = uint32_t(rng.next() % (L + 2));  // L + 1: finer than the tree
+        const uint64_t x = rng.next() % ((uint64_t(1) << level) + 3), y = rng.next() % ((uint64_t(1) << level) + 3);
+        q.push_back({x, y, level, k % 7 == 0 ? 3u : k % 11 == 0 ? 0u : 1u, receiver(level, x, y)});
+      }
+      std::vector<float> got(q.size());
+      eval->pcf_batch(q, got);
+      for (size_t i = 0; i < q.size(); ++i)
+        ASSERT_EQ(bits(got[i]), bits(eval->pcf(q[i].level, q[i].x, q[i].y, q[i].r, q[i].receiver)))
+            << "query " << i << ": level " << q[i].level << " at " << q[i].x << "," << q[i].y << " r " << q[i].r;
     }
   }
 }

@@ -2,6 +2,8 @@
 // with the map matches Embree shadow rays away from shadow edges.
 #include <gtest/gtest.h>
 
+#include <bit>
+
 #include <cmath>
 #include <cstdlib>
 
@@ -75,6 +77,15 @@ TEST(RenderShadow, CubeOnSlabMatchesRayTracedAwayFromEdges) {
   const RenderResult img = render_view(tracer, rec, eval, ro);
   EXPECT_EQ(img.image.size(), size_t(w) * h * 3);
   EXPECT_LE(img.differing_fraction(), 0.02);
+  // Bit for bit (the sun's chunked transform and the batched lookups), single tap and 5x5.
+  for (uint32_t radius : {0u, 2u}) {
+    ro.pcf_radius = radius, ro.diff = false;
+    const RenderResult v = render_view(tracer, rec, eval, ro);
+    for (size_t i = 0; i < rec.size(); ++i)
+      ASSERT_EQ(std::bit_cast<uint32_t>(v.visibility[i]),
+                std::bit_cast<uint32_t>(map_visibility(eval, rec[i], light, radius, eval.finest_level())))
+          << "pixel " << i << " radius " << radius;
+  }
 }
 
 // A 4-unit cube on a 20-unit slab: the scene of the pack-based tests below.

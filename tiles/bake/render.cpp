@@ -222,6 +222,27 @@ float map_visibility_filtered(const Evaluator& eval, const Receiver& r, const Li
 
 namespace {
 
+// lookup_point (the offset p + normal * k * texel) and a sun's LightSpace::to_light for
+// n receivers, operation for operation in the same order (so the same IEEE doubles:
+// contraction is off, see filter_level.hpp), in one loop without calls or branches.
+void sun_lookup_chunk(const LightSpace& light, uint32_t level, uint32_t pcf_radius, const Receiver* rc, size_t n,
+                      double* u, double* v, double* d) {
+  const Vec3d org = light.origin(), au = light.axis_u(), av = light.axis_v(), fw = light.forward();
+  const double e = light.extent_uv(), near = light.near_plane(), depth = light.far_plane() - light.near_plane();
+  const double texel = light.extent_uv() / double(uint64_t(1) << level);
+  const double k_closed = kClosedReceiverOffsetTexels + pcf_radius, k_open = kOpenReceiverOffsetTexels + pcf_radius;
+  for (size_t i = 0; i < n; ++i) {
+    const Receiver& r = rc[i];
+    const double k = r.closed ? k_closed : k_open;
+    const double rx = (r.pos.x + r.normal.x * k * texel) - org.x;
+    const double ry = (r.pos.y + r.normal.y * k * texel) - org.y;
+    const double rz = (r.pos.z + r.normal.z * k * texel) - org.z;
+    u[i] = (rx * au.x + ry * au.y + rz * au.z) / e;
+    v[i] = (rx * av.x + ry * av.y + rz * av.z) / e;
+    d[i] = ((rx * fw.x + ry * fw.y + rz * fw.z) - near) / depth;
+  }
+}
+
 // The shading of render_view and render_stack_view: sky, ambient + Lambert times visibility.
 void shade_image(const std::vector<Receiver>& rec, const std::vector<float>& v, double ambient, std::vector<float>& img) {
   const size_t n = rec.size();
@@ -249,60 +270,111 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
   const size_t n = rec.size();
   std::vector<float> vis(n, 0), tvis;
   using Clk = std::chrono::steady_clock;
+  // The receivers both passes answer, the light-facing ones (the others stay at 0),
+  // gathered into one compact list before either pass is timed: the map and the rays are
+  // timed over the same receivers read the same way, and neither pays for reading the
+  // whole G-buffer (gather_seconds says what that costs). The list goes by screen tiles
+  // of kGatherTile^2 pixels, so that consecutive receivers are neighbours in both
+  // directions (for the map: more answers from the last walks' regions and resumed walks;
+  // the rays read the same list in the same order).
   auto t0 = Clk::now();
   double c0 = process_cpu_seconds();
+  constexpr uint32_t kGatherTile = 8;
+  std::vector<uint32_t> facing;
+  facing.reserve(n);
+  for (uint32_t ty = 0; ty < o.height; ty += kGatherTile)
+    for (uint32_t tx = 0; tx < o.width; tx += kGatherTile)
+      for (uint32_t y = ty; y < std::min(o.height, ty + kGatherTile); ++y)
+        for (uint32_t x = tx; x < std::min(o.width, tx + kGatherTile); ++x) {
+          const size_t i = size_t(y) * o.width + x;
+          if (rec[i].hit && rec[i].n_dot_l > 0) facing.push_back(uint32_t(i));
+        }
+  std::vector<Receiver> fr(facing.size());
+  for (size_t k = 0; k < facing.size(); ++k) fr[k] = rec[facing[k]];
+  const size_t m = fr.size();
+  std::vector<float> fvis(m, 0), ftvis;
+  res.gather_seconds = std::chrono::duration<double>(Clk::now() - t0).count();
+  res.gather_cpu_seconds = process_cpu_seconds() - c0;
+  t0 = Clk::now();
+  c0 = process_cpu_seconds();
   const uint32_t L = eval.finest_level();
   // Lookups in batches (Evaluator::pcf_batch: the client's cache takes its lock and walks
   // the top of its page table once per batch; neighbouring pixels share tiles). With
   // pixel_angle set, each receiver asks two levels and blends them (filter_level.hpp).
   const LightSpace& light = tracer.light();
   const uint32_t kr = 2 * o.pcf_radius + 1;
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
-    std::vector<PcfQuery> queries;
-    std::vector<uint32_t> index;      // the pixel of each receiver that asks
-    std::vector<float> blend, answers;  // its trilinear weight (NaN: one level only)
-    queries.reserve(2 * r.size()), index.reserve(r.size()), blend.reserve(r.size());
-    for (size_t i = r.begin(); i < r.end(); ++i) {
-      const Receiver& rc = rec[i];
-      if (!rc.hit || rc.n_dot_l <= 0) continue;  // vis 0
-      FilterLevels f{L, L, 0.0f};
-      if (o.pixel_angle > 0) f = filter_levels(L, receiver_footprint_texels(rc, light, L, o.pixel_angle));
-      // The normal offset in texels of the level filtered (map_visibility_filtered).
-      const LightPoint lp = lookup_point(rc, light, f.fine, o.pcf_radius);
-      if (!(lp.u >= 0 && lp.u < 1 && lp.v >= 0 && lp.v < 1)) {
-        vis[i] = 1;
+  const bool sun_fast = light.kind() == LightKind::sun && !(o.pixel_angle > 0);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, m, 4096), [&](const tbb::blocked_range<size_t>& r) {
+    // Sub-chunks of kChunk receivers on the stack: nothing allocated per pass.
+    constexpr size_t kChunk = 256;
+    PcfQuery queries[2 * kChunk];
+    uint32_t index[kChunk];  // the receiver of each query (its first, with a blend)
+    float blend[kChunk], answers[2 * kChunk];  // trilinear weight (NaN: one level only)
+    for (size_t b0 = r.begin(); b0 < r.end(); b0 += kChunk) {
+      const size_t b1 = std::min(r.end(), b0 + kChunk);
+      size_t nq = 0, ni = 0;
+      if (sun_fast) {
+        // A sun at the finest level: lookup_point and LightSpace::to_light operation for
+        // operation (the same IEEE doubles), in one tight loop over the chunk
+        // (sun_lookup_chunk), then the in-map test and the texels.
+        double u[kChunk], v[kChunk], d[kChunk];
+        sun_lookup_chunk(light, L, o.pcf_radius, fr.data() + b0, b1 - b0, u, v, d);
+        const double side = double(uint64_t(1) << L);
+        for (size_t k = 0; k < b1 - b0; ++k) {
+          if (!(u[k] >= 0 && u[k] < 1 && v[k] >= 0 && v[k] < 1)) {
+            fvis[b0 + k] = 1;
+            continue;
+          }
+          // (u, v) in [0, 1): u * 2^level is exact and below 2^level, so truncating it is
+          // LightSpace::texel_of's floor, without its library calls.
+          queries[nq++] = {uint64_t(u[k] * side), uint64_t(v[k] * side), L, kr, float(d[k])};
+          index[ni++] = uint32_t(b0 + k);
+        }
+        eval.pcf_batch(std::span<const PcfQuery>(queries, nq), std::span<float>(answers, nq));
+        for (size_t k = 0; k < ni; ++k) fvis[index[k]] = answers[k];
         continue;
       }
-      // (u, v) in [0, 1): u * 2^level is exact and below 2^level, so truncating it is
-      // LightSpace::texel_of's floor, without its library calls.
-      const double fine_side = double(uint64_t(1) << f.fine);
-      queries.push_back({uint64_t(lp.u * fine_side), uint64_t(lp.v * fine_side), f.fine, kr, float(lp.d)});
-      index.push_back(uint32_t(i));
-      blend.push_back(f.t == 0.0f ? std::numeric_limits<float>::quiet_NaN() : f.t);
-      if (f.t != 0.0f) {
-        const auto tc = LightSpace::texel_of(f.coarse, lp.u, lp.v);
-        queries.push_back({tc[0], tc[1], f.coarse, kr, float(lp.d)});
+      for (size_t i = b0; i < b1; ++i) {
+        const Receiver& rc = fr[i];
+        FilterLevels f{L, L, 0.0f};
+        if (o.pixel_angle > 0) f = filter_levels(L, receiver_footprint_texels(rc, light, L, o.pixel_angle));
+        // The normal offset in texels of the level filtered (map_visibility_filtered).
+        const LightPoint lp = lookup_point(rc, light, f.fine, o.pcf_radius);
+        if (!(lp.u >= 0 && lp.u < 1 && lp.v >= 0 && lp.v < 1)) {
+          fvis[i] = 1;
+          continue;
+        }
+        const double fine_side = double(uint64_t(1) << f.fine);
+        queries[nq++] = {uint64_t(lp.u * fine_side), uint64_t(lp.v * fine_side), f.fine, kr, float(lp.d)};
+        blend[ni] = f.t == 0.0f ? std::numeric_limits<float>::quiet_NaN() : f.t;
+        index[ni++] = uint32_t(i);
+        if (f.t != 0.0f) {
+          const auto tc = LightSpace::texel_of(f.coarse, lp.u, lp.v);
+          queries[nq++] = {tc[0], tc[1], f.coarse, kr, float(lp.d)};
+        }
       }
-    }
-    answers.resize(queries.size());
-    eval.pcf_batch(queries, answers);
-    for (size_t k = 0, q = 0; k < index.size(); ++k) {
-      const float a = answers[q++];
-      vis[index[k]] = std::isnan(blend[k]) ? a : filter_blend(a, answers[q++], blend[k]);
+      eval.pcf_batch(std::span<const PcfQuery>(queries, nq), std::span<float>(answers, nq));
+      for (size_t k = 0, q = 0; k < ni; ++k) {
+        const float a = answers[q++];
+        fvis[index[k]] = std::isnan(blend[k]) ? a : filter_blend(a, answers[q++], blend[k]);
+      }
     }
   });
   res.map_seconds = std::chrono::duration<double>(Clk::now() - t0).count();
   res.map_cpu_seconds = process_cpu_seconds() - c0;
   if (o.diff) {
-    tvis.assign(n, 0);
+    ftvis.assign(m, 0);
     t0 = Clk::now();
     c0 = process_cpu_seconds();
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
-      for (size_t i = r.begin(); i < r.end(); ++i) tvis[i] = tracer.traced(rec[i]);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, m, 4096), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i < r.end(); ++i) ftvis[i] = tracer.traced(fr[i]);
     });
     res.traced_seconds = std::chrono::duration<double>(Clk::now() - t0).count();
     res.traced_cpu_seconds = process_cpu_seconds() - c0;
+    tvis.assign(n, 0);
+    for (size_t k = 0; k < m; ++k) tvis[facing[k]] = ftvis[k];
   }
+  for (size_t k = 0; k < m; ++k) vis[facing[k]] = fvis[k];
   shade_image(rec, vis, o.ambient, res.image);
   for (size_t i = 0; i < n; ++i) res.receivers += rec[i].hit && rec[i].n_dot_l > 0;
   if (o.diff) {

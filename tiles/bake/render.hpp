@@ -117,8 +117,13 @@ struct RenderResult {
   uint64_t differing = 0;           // of those, lit answers that differ (diff only)
   double map_seconds = 0, traced_seconds = 0;
   // The same phases in the process's CPU seconds (all threads): on a busy machine a
-  // steadier measure of what each costs than the wall times above.
+  // steadier measure of what each costs than the wall times above. Both passes answer the
+  // same gathered list of light-facing receivers (in 8x8-pixel screen tiles), with the
+  // same threads and grain; neither includes the gather.
   double map_cpu_seconds = 0, traced_cpu_seconds = 0;
+  // Gathering the light-facing receivers from the G-buffer into the compact list both
+  // timed passes read (neither pass's time includes it).
+  double gather_seconds = 0, gather_cpu_seconds = 0;
   double differing_fraction() const { return receivers ? double(differing) / double(receivers) : 0; }
   double mean_abs_difference = 0;   // over the receivers, |map - traced| (diff only)
 };

@@ -11,6 +11,7 @@
 
 #include "tiles/core/dagmh_validate.hpp"
 #include "tiles/core/encoding.hpp"
+#include "tiles/core/tap_batch.hpp"
 
 namespace st {
 namespace {
@@ -33,6 +34,35 @@ class DagmhEvaluator final : public Evaluator {
     uint32_t shift = 0;
     const uint32_t index = v_.finish_region(c, level, x, y, shift);
     return {v_.value(index), shift};
+  }
+
+  // Single taps through kept regions and walks resumed from the last walk's path
+  // (tap_batch.hpp): a resumed walk starts at a cursor the same walk from the skip table
+  // passes (the path above the highest differing bit), so it ends at the same index.
+  void pcf_batch(std::span<const PcfQuery> queries, std::span<float> out) const override {
+    WalkPath<dagmh::Cursor> path;
+    single_tap_batch(*this, queries, out, [&](uint32_t level, uint64_t x, uint64_t y) -> DepthRegion {
+      if (level >= std::size(path.at)) return depth_region(level, x, y);
+      dagmh::Cursor c;
+      uint32_t from = 0;
+      if (path.resume(level, x, y, from)) {
+        c = path.at[from];
+        path.hi = from;
+      } else {
+        c = v_.start(level, level, x, y);
+        path.lo = path.hi = c.level;
+        path.at[c.level] = c;
+      }
+      while ((c.ref & dagmh::kRefTagMask) == dagmh::kRefInner && c.level < level) {
+        c = v_.descend(c, c.level + 1, level, x, y);  // one level: descend's own step
+        path.at[c.level] = c;
+        path.hi = c.level;
+      }
+      path.level = level, path.x = x, path.y = y;
+      uint32_t shift = 0;
+      const uint32_t index = v_.finish_region(c, level, x, y, shift);
+      return {v_.value(index), shift};
+    });
   }
 
   float pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver) const override {

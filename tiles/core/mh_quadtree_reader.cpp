@@ -7,6 +7,7 @@
 
 #include "common/error.hpp"
 #include "tiles/core/interval.hpp"
+#include "tiles/core/tap_batch.hpp"
 
 namespace st::mhq {
 namespace {
@@ -127,6 +128,36 @@ class TreeEvaluator final : public Evaluator {
     Cursor c = root();
     descend(c, level, x, y, level);
     return {value(c), level - (c.missing ? c.level + 1 : c.level)};
+  }
+
+  // Single taps through kept regions and walks resumed from the last walk's path
+  // (tap_batch.hpp). A cursor that found its next child missing is not kept (its flag
+  // belongs to the old texel's child), only the nodes the walk entered.
+  void pcf_batch(std::span<const PcfQuery> queries, std::span<float> out) const override {
+    WalkPath<Cursor> path;
+    single_tap_batch(*this, queries, out, [&](uint32_t level, uint64_t x, uint64_t y) -> DepthRegion {
+      if (level > kMaxLevel) return depth_region(level, x, y);
+      Cursor c;
+      uint32_t from = 0;
+      if (path.resume(level, x, y, from)) {
+        c = path.at[from];
+        path.hi = from;
+      } else {
+        c = root();
+        path.lo = path.hi = 0;
+        path.at[0] = c;
+      }
+      while (c.level < level && c.code != kCodeLeaf) {
+        Cursor step = c;
+        descend(step, level, x, y, c.level + 1);  // one level: descend's own step
+        c = step;
+        if (c.missing) break;
+        path.at[c.level] = c;
+        path.hi = c.level;
+      }
+      path.level = level, path.x = x, path.y = y;
+      return {value(c), level - (c.missing ? c.level + 1 : c.level)};
+    });
   }
 
   // MH §3.3, Fig. 5: the taps share the root path down to the lowest common node of the

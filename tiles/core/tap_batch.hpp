@@ -1,0 +1,89 @@
+// Single taps of an Evaluator::pcf_batch answered inside one encoded tree (an MH, MMH or
+// DAG-MH tile; the client hands a resident tile the runs of its batch that fall in it).
+// Two savings over one depth() walk per tap, both exact:
+//  - a tap inside the region of one of the last few answers (Evaluator::DepthRegion: the
+//    node where that walk ended) takes its value without a walk (MH 2016 §3.3's
+//    last-sample cache);
+//  - a walk resumes from the deepest node of the previous walk that lies on its own path
+//    (the nodes above the highest bit in which the two texels differ), as MH 2016 §3.3
+//    Fig. 5 shares the root path among a kernel's taps and DAG-MH 2021 §3.5 caches the
+//    last node traversed: a screen-coherent batch steps a level or two per tap, not the
+//    whole tree.
+// Every tap runs the same walk as depth() from a node on its own path, so out[i] equals
+// pcf(level, x, y, 1, receiver) bit for bit (tests/tiles/tap_batch_test.cpp). Queries
+// with r > 1, or a level finer than the tree, go to pcf() itself. No allocation.
+#pragma once
+#include <algorithm>
+#include <cstdint>
+#include <span>
+
+#include "tiles/core/evaluator.hpp"
+
+namespace st {
+
+// The walker's path: Cursor of each level of the last walk, levels [lo, hi] valid.
+template <class Cursor, uint32_t kLevels = 33>
+struct WalkPath {
+  Cursor at[kLevels];
+  uint32_t lo = 1, hi = 0, level = 0;  // lo > hi: empty
+  uint64_t x = 0, y = 0;
+  // The deepest kept level on (x, y)'s path at `level` (false: none, start afresh).
+  bool resume(uint32_t lv, uint64_t tx, uint64_t ty, uint32_t& out) const {
+    if (lo > hi || lv != level) return false;
+    const uint64_t diff = (tx ^ x) | (ty ^ y);
+    const uint32_t width = diff ? 64u - uint32_t(__builtin_clzll(diff)) : 0u;
+    if (width > lv) return false;
+    const uint32_t l = std::min(lv - width, hi);
+    if (l < lo) return false;
+    out = l;
+    return true;
+  }
+};
+
+// walk(level, x, y) -> DepthRegion: depth_region's answer for x, y < 2^level, level <=
+// ev.finest_level() (the walker keeps its own WalkPath).
+template <class Walk>
+void single_tap_batch(const Evaluator& ev, std::span<const PcfQuery> queries, std::span<float> out, Walk&& walk) {
+  const size_t n = std::min(queries.size(), out.size());
+  const uint32_t finest = ev.finest_level();
+  struct Kept {
+    uint32_t level, shift;
+    uint64_t x, y;  // texel >> shift
+    float value;
+  };
+  constexpr uint32_t kKept = 4;
+  Kept kept[kKept];
+  uint32_t used = 0, next = 0, last = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const PcfQuery& q = queries[i];
+    if (q.r > 1 || q.level > finest) {
+      out[i] = ev.pcf(q.level, q.x, q.y, q.r, q.receiver);
+      continue;
+    }
+    const uint64_t top = (uint64_t(1) << q.level) - 1;  // pcf_tap's clamp of a 1-tap kernel
+    const uint64_t x = std::min(q.x, top), y = std::min(q.y, top);
+    const Kept* hit = nullptr;
+    if (used) {
+      const Kept& k = kept[last];
+      if (k.level == q.level && (x >> k.shift) == k.x && (y >> k.shift) == k.y) hit = &k;
+      for (uint32_t j = 0; !hit && j < used; ++j) {
+        const Kept& g = kept[j];
+        if (g.level == q.level && (x >> g.shift) == g.x && (y >> g.shift) == g.y) hit = &g, last = j;
+      }
+    }
+    float value;
+    if (hit) {
+      value = hit->value;
+    } else {
+      const DepthRegion r = walk(q.level, x, y);
+      value = r.value;
+      kept[next] = Kept{q.level, r.shift, x >> r.shift, y >> r.shift, r.value};
+      last = next;
+      next = next + 1 == kKept ? 0 : next + 1;
+      used = std::min(used + 1, kKept);
+    }
+    out[i] = q.receiver <= value ? 1.0f : 0.0f;
+  }
+}
+
+}  // namespace st
