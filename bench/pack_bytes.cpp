@@ -45,7 +45,8 @@ nlohmann::json measure(const std::string& path) {
   const uint64_t cells_and_pad = journal - records - payload;
   const uint64_t grid = st::CutGrid::serialized_size(h.skip_level);
   const uint64_t preview = reader->preview().serialized_size();
-  const uint64_t dict = h.grid_size - grid - preview;
+  const uint64_t dict = reader->grid_bytes().size() - grid - preview;  // the dictionary section (zlib inside)
+  const bool compressed = h.flags & st::kFeatureCompressedGrid;
   const uint64_t index = h.tile_count * st::kIndexEntryBytes;
   std::printf("%s: %llu bytes, %llu tiles, encoding %u, K = %u\n", path.c_str(), (unsigned long long)file,
               (unsigned long long)h.tile_count, unsigned(h.encoding), unsigned(h.skip_level));
@@ -53,14 +54,20 @@ nlohmann::json measure(const std::string& path) {
   row("tile records (32 B each)", records, file);
   row("tile payloads (zlib)", payload, file);
   row("cell records + padding", cells_and_pad, file);
-  row("skip grid", grid, file);
-  row("map preview", preview, file);
-  row("dagmh dictionary (stored)", dict, file);
+  if (compressed) {
+    row("grid section (one zlib stream)", h.grid_size, file);
+    std::printf("  %-34s %12llu / %llu / %llu\n", "  inflated: skip grid / preview / dict", (unsigned long long)grid,
+                (unsigned long long)preview, (unsigned long long)dict);
+  } else {
+    row("skip grid", grid, file);
+    row("map preview", preview, file);
+    row("dagmh dictionary (stored)", dict, file);
+  }
   row("tile index (32 B each)", index, file);
   std::printf("  tiles raw %llu, stored/raw %.3f\n", (unsigned long long)tile_raw, double(payload) / double(tile_raw));
   nlohmann::json out = {{"pack", path},           {"file", file},        {"tiles", h.tile_count},
                         {"header_params", h.journal_offset}, {"tile_records", records}, {"payloads", payload},
-                        {"cell_records", cells_and_pad}, {"skip_grid", grid}, {"preview", preview},
+                        {"cell_records", cells_and_pad}, {"grid_section_stored", h.grid_size}, {"skip_grid", grid}, {"preview", preview},
                         {"dictionary", dict},     {"index", index},      {"tiles_raw", tile_raw}};
   if (h.encoding != st::Encoding::dagmh) return out;
   Part parts[6] = {{"header"}, {"skip table"}, {"inner nodes"}, {"treelets"}, {"chunk infos"}, {"multipliers"}};
