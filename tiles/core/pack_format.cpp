@@ -128,7 +128,6 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
   h.skip_level = b[27];
   if (h.map_level > kMaxLevel) fail(26, "map level " + std::to_string(h.map_level) + " > 20");
   const bool stack = h.flags & uint32_t(kFeatureStack);  // K is an octree level (StackGrid checks it)
-  if (stack && (h.flags & uint32_t(kFeatureCompressedGrid))) fail(20, "feature compressed_grid on a stack pack");
   if ((h.flags & uint32_t(kFeatureDagmhDictionary)) && (stack || h.encoding != Encoding::dagmh))
     fail(20, "feature dagmh_dictionary on a pack whose tiles are not DAG-MH (encoding " + to_string(h.encoding) +
                  (stack ? ", a stack" : "") + ")");
@@ -155,6 +154,7 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
     const uint64_t limit = uint64_t(1) << 56;
     if (h.grid_offset < h.journal_offset || h.grid_offset > limit || h.grid_offset % 8) fail(208, "bad grid offset");
     if (stack) {
+      if (h.flags & uint32_t(kFeatureCompressedGrid)) fail(20, "feature compressed_grid on a stack pack");
       if (h.grid_size > (uint64_t(1) << 30)) fail(216, "stack grid size too large");
     } else {
       // The skip grid, then the map preview (map_preview.hpp): at least its header, at most its bound.
