@@ -70,8 +70,8 @@ void run(const InspectArgs& a) {
   uint64_t dict_stored = 0;
   if (r->dictionary()) {  // tiles/PACK.md "DAG-MH dictionary"
     dict = count_dictionary(*r->dictionary());
-    // Stored as a zlib stream at the end of the grid section, after the preview.
-    dict_stored = h.grid_size - CutGrid::serialized_size(h.skip_level) - r->preview().serialized_size() -
+    // Stored as a zlib stream at the end of the (inflated) grid section, after the preview.
+    dict_stored = r->grid_bytes().size() - CutGrid::serialized_size(h.skip_level) - r->preview().serialized_size() -
                   kPackDictionaryHeaderBytes;
     nlohmann::json d;
     d["bytes"] = dict.bytes;

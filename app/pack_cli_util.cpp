@@ -20,6 +20,7 @@ std::string feature_names(uint32_t flags) {
   add(kFeatureDeepShadow, "deep-shadow");
   add(kFeatureStaticIntervals, "static-intervals");
   add(kFeatureDagmhDictionary, "dagmh-dictionary");
+  add(kFeatureCompressedGrid, "compressed-grid");
   return s.empty() ? "none" : s;
 }
 

@@ -109,16 +109,16 @@ struct Analysis {
 
   void add_tile(std::span<const uint8_t> buf, uint32_t tile) {
     const View view = validate(buf);
-    Header h;
-    std::memcpy(&h, buf.data(), sizeof h);
+    const Header h = load_header(buf.data());
+    const Sections s = sections_of(h, buf.size());
     ++tiles;
     raw_bytes += buf.size();
     header += sizeof(Header);
-    skip += h.node_offset - h.skip_offset;
+    skip += s.nodes - s.skip;
     nodes += uint64_t(h.node_words) * 4;
     treelets += uint64_t(h.treelet_count) * kTreeletBytes;
-    chunks += uint64_t(h.chunk_count) * sizeof(ChunkInfo);
-    multipliers += h.multiplier_bytes;
+    chunks += uint64_t(s.chunk_count) * sizeof(ChunkInfo);
+    multipliers += s.end - s.multipliers;
     values += h.value_count;
     // Treelets: bitmap bytes.
     std::vector<uint32_t> treelet_id(h.treelet_count);
@@ -150,9 +150,9 @@ struct Analysis {
       bump(node_tile_bytes, node_id[starts[k]], bytes);
     }
     // Value chunks: info without its bit offset, plus the multiplier bits.
-    for (uint32_t c = 0; c < h.chunk_count; ++c) {
+    for (uint32_t c = 0; c < s.chunk_count; ++c) {
       const ChunkInfo info = load_chunk(view.chunks, c);
-      const uint32_t k = info.factor_bits, n = uint32_t(std::popcount(info.mask));
+      const uint32_t k = info.factor_bits(), n = uint32_t(std::popcount(info.mask));
       std::string key;
       key.append(reinterpret_cast<const char*>(&info.base), 4);
       key.append(reinterpret_cast<const char*>(&info.mask), 4);
@@ -160,7 +160,7 @@ struct Analysis {
       key.append(reinterpret_cast<const char*>(&info.c_f), 4);
       key.push_back(char(k));
       for (uint32_t j = 0; j < n; ++j) {
-        const uint64_t pos = uint64_t(info.bit_offset) + uint64_t(j) * k;
+        const uint64_t pos = uint64_t(info.bit_offset()) + uint64_t(j) * k;
         const uint64_t word = st::load_le<uint64_t>(view.multipliers + (pos >> 3)) >> (pos & 7);
         const uint32_t i = k == 0 ? 0 : uint32_t(word & ((uint64_t(1) << k) - 1));
         key.append(reinterpret_cast<const char*>(&i), 4);

@@ -151,7 +151,7 @@ struct GpuMap::Impl {
     const uint32_t pv_cell_words = L::kPvCellHeaderWords + 2 * pv_words;
     const uint32_t pv_values = pv_cells + uint32_t(pv.cells()) * pv_cell_words;
     // The pack's DAG-MH dictionary, word for word, uploaded once with the page table
-    // (version-2 tiles reference it: st_dag_depth).
+    // (tiles with the dictionary flag reference it: st_dag_depth).
     const dagmh::Dictionary* dict = rm->dictionary().get();
     const uint32_t off_dict = pv_values + uint32_t(pv.values().size());
     const uint32_t pv_end = off_dict + (dict ? uint32_t(dict->bytes().size() / 4) : 0u);  // then the stack block

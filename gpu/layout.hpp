@@ -45,16 +45,19 @@ static_assert(layout::kPtHeaderWords > layout::kPtDictionary && layout::kPtDicti
 static_assert(offsetof(dagmh::DictHeader, node_words) == layout::kDictNodeWords * 4 &&
               offsetof(dagmh::DictHeader, treelet_count) == layout::kDictTreeletCount * 4 &&
               sizeof(dagmh::DictHeader) == layout::kDictHeaderWords * 4);
-static_assert(offsetof(dagmh::Header, version) == 1 * 4 && dagmh::kVersionDictionary == 2);
-// What st_eval.glsl reads of the tile formats, by word:
-static_assert(dagmh::kTreeletWords == 3 && sizeof(dagmh::ChunkInfo) == 6 * 4 && sizeof(dagmh::Cursor) == 4 * 4);
-static_assert(offsetof(dagmh::Header, finest_level) == 3 * 4 && offsetof(dagmh::Header, skip_level) == 4 * 4 &&
-              offsetof(dagmh::Header, root_ref) == 5 * 4 && offsetof(dagmh::Header, skip_offset) == 12 * 4 &&
-              offsetof(dagmh::Header, node_offset) == 13 * 4 && offsetof(dagmh::Header, treelet_offset) == 14 * 4 &&
-              offsetof(dagmh::Header, chunk_offset) == 15 * 4 && offsetof(dagmh::Header, multiplier_offset) == 16 * 4);
+static_assert(offsetof(dagmh::Header, version) == 1 * 4 && dagmh::kFlagDictionary == 1);
+// What st_eval.glsl reads of the tile formats, by word: the header's word 2 holds
+// finest_level, skip_level and flags in bytes 0..2; the sections follow from the counts
+// (dagmh::sections_of).
+static_assert(dagmh::kTreeletWords == 3 && sizeof(dagmh::ChunkInfo) == 5 * 4 && sizeof(dagmh::Cursor) == 4 * 4 &&
+              sizeof(dagmh::Header) == 8 * 4 && dagmh::kChunkValues == 32);
+static_assert(offsetof(dagmh::Header, finest_level) == 2 * 4 && offsetof(dagmh::Header, skip_level) == 2 * 4 + 1 &&
+              offsetof(dagmh::Header, flags) == 2 * 4 + 2 && offsetof(dagmh::Header, root_ref) == 3 * 4 &&
+              offsetof(dagmh::Header, node_words) == 4 * 4 && offsetof(dagmh::Header, treelet_count) == 5 * 4 &&
+              offsetof(dagmh::Header, value_count) == 6 * 4);
 static_assert(offsetof(dagmh::ChunkInfo, base) == 0 && offsetof(dagmh::ChunkInfo, mask) == 4 &&
               offsetof(dagmh::ChunkInfo, c_l) == 8 && offsetof(dagmh::ChunkInfo, c_f) == 12 &&
-              offsetof(dagmh::ChunkInfo, bit_offset) == 16 && offsetof(dagmh::ChunkInfo, factor_bits) == 20);
+              offsetof(dagmh::ChunkInfo, packed) == 16 && dagmh::kBitOffsetBits == 27 && dagmh::kRawFactorCode == 31);
 static_assert(dagmh::kRefInner == 0x40000000u && dagmh::kRefTreelet == 0x80000000u && dagmh::kNodeValuedBit == 0x100u &&
               dagmh::kNodeTreeletShift == 4 && dagmh::kTreeletStride[0] == 21 && dagmh::kTreeletStride[1] == 5);
 static_assert(mhq::kOffLevels == 6 && mhq::kOffFlags == 7 && mhq::kOffShifts == 16 && mhq::kFlagRootLeaf == 1 &&

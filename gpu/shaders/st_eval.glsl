@@ -120,13 +120,15 @@ struct StDagCursor {
 };
 
 float st_dag_value(uint base, uint chunks, uint mults, uint index) {
-  const uint c = chunks + (index / 32u) * 6u;
+  const uint c = chunks + (index / 32u) * 5u;
   const uint bit = index % 32u;
   const uint mask = ST_POOL(c + 1u);
   if (((mask >> bit) & 1u) == 0u) return uintBitsToFloat(ST_POOL(c));
-  const uint k = ST_POOL(c + 5u) & 0xFFu;
+  const uint packed = ST_POOL(c + 4u);
+  const uint code = packed >> 27u;
+  const uint k = code == 31u ? 32u : code;
   const uint rank = uint(bitCount(mask & ((1u << bit) - 1u)));
-  const uint pos = ST_POOL(c + 4u) + rank * k;
+  const uint pos = (packed & 0x7FFFFFFu) + rank * k;
   const uint wi = pos >> 5u, s = pos & 31u;
   uint i = ST_POOL(mults + wi) >> s;
   if (s != 0u) i |= ST_POOL(mults + wi + 1u) << (32u - s);
@@ -140,11 +142,11 @@ float st_dag_value(uint base, uint chunks, uint mults, uint index) {
   return v;
 }
 
-// Version 2 tiles (tiles/core/DAGMH.md "Dictionary") address [the pack dictionary's
+// Tiles with the dictionary flag (tiles/core/DAGMH.md "Dictionary") address [the pack dictionary's
 // nodes | their own] as one space, and likewise treelets: index i < D (T) reads the
 // dictionary block in the page table (kPtDictionary), else the tile's own i - D (t - T),
 // the compare View::node_at / treelet_at make. A node lies wholly on one side, so its
-// words n + k are on the side of n. Version 1 tiles have D = T = 0.
+// words n + k are on the side of n. Tiles without the flag have D = T = 0.
 struct StDagSpace {
   uint nodes, treelets;    // the tile's sections (pool words)
   uint dnodes, dtreelets;  // the dictionary's (page-table words)
@@ -160,16 +162,22 @@ uint st_dag_treelet_word(StDagSpace s, uint t, uint w) {
 }
 
 float st_dag_depth(uint base, uint level, uint x, uint y) {
-  const uint finest = ST_POOL(base + 3u);
-  const uint skip_level = ST_POOL(base + 4u);
+  // Header version 3 (DAGMH.md): word 2 = finest_level | skip_level << 8 | flags << 16;
+  // the sections follow from the counts (dagmh::sections_of).
+  const uint w2 = ST_POOL(base + 2u);
+  const uint finest = w2 & 0xFFu;
+  const uint skip_level = (w2 >> 8u) & 0xFFu;
+  const uint skip_words = base + 8u;
   StDagSpace sp;
-  sp.nodes = base + (ST_POOL(base + 13u) >> 2u);
-  sp.treelets = base + (ST_POOL(base + 14u) >> 2u);
+  sp.nodes = skip_words + (skip_level == 0u ? 0u : 4u << (2u * skip_level));  // S = 0: no table
+  sp.treelets = sp.nodes + ST_POOL(base + 4u);
+  const uint chunk_words = sp.treelets + 3u * ST_POOL(base + 5u);
+  const uint mult_words = chunk_words + 5u * ((ST_POOL(base + 6u) + 31u) / 32u);
   sp.d = 0u;
   sp.t = 0u;
   sp.dnodes = 0u;
   sp.dtreelets = 0u;
-  if (ST_POOL(base + 1u) == 2u) {  // version 2: opened by the client against the dictionary GpuMap uploaded
+  if (((w2 >> 16u) & 1u) != 0u) {  // flag dictionary: opened by the client against the dictionary GpuMap uploaded
     const uint dict = ST_PAGE(kPtDictionary);
     sp.d = ST_PAGE(dict + kDictNodeWords);
     sp.t = ST_PAGE(dict + kDictTreeletCount);
@@ -186,15 +194,15 @@ float st_dag_depth(uint base, uint level, uint x, uint y) {
   x = min(x, top);
   y = min(y, top);
   StDagCursor c;
-  if (level >= skip_level) {
+  if (skip_level > 0u && level >= skip_level) {
     const uint sh = level - skip_level;
-    const uint e = base + (ST_POOL(base + 12u) >> 2u) + 4u * (((y >> sh) << skip_level) + (x >> sh));
+    const uint e = skip_words + 4u * (((y >> sh) << skip_level) + (x >> sh));
     c.ref = ST_POOL(e);
     c.level = ST_POOL(e + 1u);
     c.base = ST_POOL(e + 2u);
     c.last = ST_POOL(e + 3u);
   } else {
-    c.ref = ST_POOL(base + 5u);
+    c.ref = ST_POOL(base + 3u);
     c.level = 0u;
     c.base = 0u;
     c.last = 0u;
@@ -247,7 +255,7 @@ float st_dag_depth(uint base, uint level, uint x, uint y) {
       break;
     }
   }
-  return st_dag_value(base, base + (ST_POOL(base + 15u) >> 2u), base + (ST_POOL(base + 16u) >> 2u), index);
+  return st_dag_value(base, chunk_words, mult_words, index);
 }
 
 // ---- voxel shadow DAG tiles (voxelized shadows 2014 §4, §6.2; tiles/core/VSDAG.md) ----

@@ -134,11 +134,19 @@ nan = bytearray(data)
 struct.pack_into("<d", nan, 40, float("nan"))
 struct.pack_into("<I", nan, 252, zlib.crc32(nan[0:252]))
 open("nan_light.pack", "wb").write(nan)
-grid_offset, grid_size = struct.unpack_from("<QQ", data, 208)
+grid_offset, grid_size, index_offset = struct.unpack_from("<QQQ", data, 208)
 skip = data[27]
+compressed = struct.unpack_from("<I", data, 20)[0] & (1 << 7)  # feature compressed_grid: "STGZ", size, zlib
+grid = data[grid_offset:grid_offset + grid_size]
+if compressed:
+    grid = bytearray(zlib.decompress(bytes(grid[8:])))
 for i in range(((1 << (2 * skip)) - 1) // 3):
-    struct.pack_into("<f", data, grid_offset + 8 + 4 * i, -1000.0)
-struct.pack_into("<I", data, 244, zlib.crc32(data[grid_offset:grid_offset + grid_size]))
+    struct.pack_into("<f", grid, 8 + 4 * i, -1000.0)
+if compressed:
+    grid = bytearray(struct.pack("<II", 0x5A475453, len(grid)) + zlib.compress(bytes(grid)))
+data = data[:grid_offset] + grid + data[index_offset:]
+struct.pack_into("<QQ", data, 216, len(grid), grid_offset + len(grid))
+struct.pack_into("<I", data, 244, zlib.crc32(grid))
 struct.pack_into("<I", data, 252, zlib.crc32(data[0:252]))
 open("bad_coarse.pack", "wb").write(data)
 PY

@@ -1,6 +1,6 @@
 // The pack-wide DAG-MH dictionary over the wire (loopback, in-process server): MapInfo
 // carries it with the skip grid, the client keeps it resident (its bytes taken from the
-// cache's slots, always leaving one) and decodes version-2 tiles with it, answering every
+// cache's slots, always leaving one) and decodes the tiles flagged for it with it, answering every
 // texel exactly as the same build without a dictionary answers locally.
 #include <gtest/gtest.h>
 

@@ -41,9 +41,9 @@ TEST(GpuLayout, TheShaderSeesEveryConstantTheCppSideSees) {
 
 // The page-table offsets and the tile structures the shader reads by word.
 TEST(GpuLayout, CppStructuresMatchTheWordOffsetsTheShaderUses) {
-  EXPECT_EQ(sizeof(dagmh::Header), 72u);
-  EXPECT_EQ(offsetof(dagmh::Header, multiplier_offset), 64u);
-  EXPECT_EQ(sizeof(dagmh::ChunkInfo), 24u);
+  EXPECT_EQ(sizeof(dagmh::Header), 32u);
+  EXPECT_EQ(offsetof(dagmh::Header, value_count), 24u);
+  EXPECT_EQ(sizeof(dagmh::ChunkInfo), 20u);
   EXPECT_EQ(CutGrid::serialized_size(2), 8u + 4u * 5u + 8u * 16u);  // header, coarse, entries
   EXPECT_EQ(sizeof(GpuQuery), layout::kQueryWords * 4u);
   EXPECT_EQ(sizeof(GpuStackQuery), layout::kSqWords * 4u);

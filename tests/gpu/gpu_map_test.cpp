@@ -153,7 +153,7 @@ TEST(GpuMap, EveryTexelOfAVsdagMapAnswersBitExactlyLikeTheCpu) {
 }
 
 // A pack with the DAG-MH dictionary (tiles/PACK.md "DAG-MH dictionary"): the dictionary
-// rides in the page table, version-2 tiles resolve references below its size there, and
+// rides in the page table, tiles flagged for it resolve references below its size there, and
 // every answer stays the CPU's bits.
 TEST(GpuMap, EveryTexelOfADictionaryPackAnswersBitExactlyLikeTheCpu) {
   // The loopback tests' random field in small DAG-MH tiles (serve()'s pack), written with
@@ -173,7 +173,7 @@ TEST(GpuMap, EveryTexelOfADictionaryPackAnswersBitExactlyLikeTheCpu) {
   ASSERT_NE(pack->dictionary(), nullptr);
   size_t v2 = 0;
   for (const TileIndexEntry& t : pack->tiles())
-    if (t.kind == TileKind::encoded) v2 += pack->read_raw(t.id)[4] == dagmh::kVersionDictionary;
+    if (t.kind == TileKind::encoded) v2 += (pack->read_raw(t.id)[10] & dagmh::kFlagDictionary) != 0;
   ASSERT_GT(v2, 0u);
   looptest::TestServer srv = start_server({path});
   client::ClientOptions co = looptest::quick_options();

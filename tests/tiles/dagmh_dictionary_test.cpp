@@ -102,8 +102,9 @@ TEST(DagmhDictionary, LayoutIsTheDrawnOne) {
   EXPECT_EQ(d.size(), 32u + 4 * words + 12 * treelets);
   const auto dict = dagmh::Dictionary::open(d);
   for (const auto& t : shared.tiles) {
-    const uint32_t version = st::load_le<uint32_t>(t.data() + 4);
-    EXPECT_EQ(st::load_le<uint32_t>(t.data() + 68), version == 2 ? dict->crc() : 0u);
+    EXPECT_EQ(st::load_le<uint32_t>(t.data() + 4), dagmh::kVersion);
+    const bool flagged = t[10] & dagmh::kFlagDictionary;
+    EXPECT_EQ(st::load_le<uint32_t>(t.data() + 28), flagged ? dict->crc() : 0u);
   }
 }
 
@@ -112,18 +113,18 @@ TEST(DagmhDictionary, TilesNeedTheirOwnDictionary) {
   const auto other = dagmh::share_across_tiles(tile_set(9));
   const auto dict = dagmh::Dictionary::open(other.dictionary);
   for (const auto& t : shared.tiles) {
-    if (st::load_le<uint32_t>(t.data() + 4) != 2) continue;
-    EXPECT_NE(open_error(t, nullptr).find("version at byte 4: 2: the tile references a pack dictionary"),
+    if (!(t[10] & dagmh::kFlagDictionary)) continue;
+    EXPECT_NE(open_error(t, nullptr).find("flags at byte 10: the tile references a pack dictionary"),
               std::string::npos)
         << open_error(t, nullptr);
     EXPECT_NE(open_error(t, dict).find("dictionary_crc"), std::string::npos);
   }
-  // A version-1 tile opens with or without one.
+  // A tile without the flag opens with or without one.
   EXPECT_EQ(open_error(tile_set(5)[0], dict), "");
   // Versions the reader does not know name themselves.
   auto t = shared.tiles[0];
-  st::store_le<uint32_t>(t.data() + 4, 3);
-  EXPECT_NE(open_error(t, dict).find("version at byte 4: is 3"), std::string::npos) << open_error(t, dict);
+  st::store_le<uint32_t>(t.data() + 4, 4);
+  EXPECT_NE(open_error(t, dict).find("version at byte 4: is 4"), std::string::npos) << open_error(t, dict);
 }
 
 TEST(DagmhDictionary, HostileDictionariesAndTiles) {
@@ -150,7 +151,7 @@ TEST(DagmhDictionary, HostileDictionariesAndTiles) {
       continue;
     }
     for (auto t : shared.tiles) {
-      if (st::load_le<uint32_t>(t.data() + 4) == 2) st::store_le<uint32_t>(t.data() + 68, dict->crc());
+      if (t[10] & dagmh::kFlagDictionary) st::store_le<uint32_t>(t.data() + 28, dict->crc());
       try {
         sink += exercise(*open_dagmh(t, dict));
       } catch (const FormatError&) {

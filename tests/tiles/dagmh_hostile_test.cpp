@@ -51,7 +51,9 @@ TEST(DagmhHostile, EveryTruncationIsRejected) {
   }
   auto longer = b;
   longer.push_back(0);
-  EXPECT_NE(open_error(longer).find("total_bytes"), std::string::npos);
+  EXPECT_NE(open_error(longer).find("multipliers at byte"), std::string::npos) << open_error(longer);
+  longer.insert(longer.end(), {0, 0, 0});  // whole words of trailing zeros, too
+  EXPECT_NE(open_error(longer).find("(no trailing bytes)"), std::string::npos) << open_error(longer);
 }
 
 TEST(DagmhHostile, RandomBitFlipsAreRejectedOrHarmless) {
@@ -81,38 +83,54 @@ TEST(DagmhHostile, RandomBitFlipsAreRejectedOrHarmless) {
 TEST(DagmhHostile, CorruptionsNameTheField) {
   using namespace dagmh;
   const auto b = small_buffer();
-  Header h;
-  std::memcpy(&h, b.data(), sizeof h);
+  const Header h = load_header(b.data());
+  const Sections s = sections_of(h, b.size());
   ASSERT_GT(h.node_words, 0u) << "the test buffer needs inner nodes";
   auto with = [&](size_t at, uint32_t v) {
     auto c = b;
     st::store_le<uint32_t>(c.data() + at, v);
     return open_error(c);
   };
+  auto with_byte = [&](size_t at, uint8_t v) {
+    auto c = b;
+    c[at] = v;
+    return open_error(c);
+  };
   EXPECT_NE(with(0, 0x12345678).find("magic at byte 0"), std::string::npos);
-  EXPECT_NE(with(4, 2).find("version at byte 4"), std::string::npos);
-  EXPECT_NE(with(16, 7).find("skip_level"), std::string::npos);
-  EXPECT_NE(with(24, h.node_words + 1).find("treelet_offset at byte 56"), std::string::npos);
-  EXPECT_NE(with(32, h.value_count + 32).find("chunk_count"), std::string::npos);
-  EXPECT_NE(with(20, kRefInner | 1).find("root_ref"), std::string::npos);
-  const uint32_t root_flags = st::load_le<uint32_t>(b.data() + h.node_offset);
-  EXPECT_NE(with(h.node_offset, root_flags | 0x200).find("node flags"), std::string::npos);
+  EXPECT_NE(with(4, 4).find("version at byte 4"), std::string::npos);
+  // Tiles of the layout before version 3 are refused, naming their version.
+  EXPECT_NE(with(4, 1).find("version at byte 4: is 1: a DAG-MH tile of the layout before version 3"), std::string::npos);
+  EXPECT_NE(with(4, 2).find("version at byte 4: is 2"), std::string::npos);
+  EXPECT_NE(with_byte(9, 7).find("skip_level"), std::string::npos);
+  EXPECT_NE(with_byte(10, 2).find("flags at byte 10"), std::string::npos);
+  EXPECT_NE(with_byte(10, 1).find("flags at byte 10: the tile references a pack dictionary"), std::string::npos);
+  EXPECT_NE(with_byte(11, 1).find("reserved at byte 11"), std::string::npos);
+  EXPECT_NE(with(28, 5).find("dictionary_crc at byte 28"), std::string::npos);
+  // Counts that need more bytes than the buffer has, or leave a ragged multiplier section.
+  EXPECT_NE(with(16, h.node_words + (1u << 20)).find("sections at byte"), std::string::npos);
+  EXPECT_NE(with(16, h.node_words + 1), "");
+  EXPECT_NE(with(24, h.value_count + 32 * 1000).find("sections"), std::string::npos);
+  EXPECT_NE(with(12, kRefInner | 1).find("root_ref"), std::string::npos);
+  const uint32_t root_flags = st::load_le<uint32_t>(b.data() + s.nodes);
+  EXPECT_NE(with(s.nodes, root_flags | 0x200).find("node flags"), std::string::npos);
   // The root's first child: pointing backwards (at itself) or out of range.
   const bool first_is_treelet = (root_flags >> (kNodeTreeletShift + std::countr_zero(root_flags & 0xF))) & 1;
-  EXPECT_NE(with(h.node_offset + 4, first_is_treelet ? h.treelet_count : 0).find("node child reference"),
+  EXPECT_NE(with(s.nodes + 4, first_is_treelet ? h.treelet_count : 0).find("node child reference"),
             std::string::npos);
-  const uint32_t offset0 = st::load_le<uint32_t>(b.data() + h.node_offset + 8);
-  EXPECT_NE(with(h.node_offset + 8, offset0 + 1).find("node value offset"), std::string::npos);
+  const uint32_t offset0 = st::load_le<uint32_t>(b.data() + s.nodes + 8);
+  EXPECT_NE(with(s.nodes + 8, offset0 + 1).find("node value offset"), std::string::npos);
   if (h.skip_level > 0) {
-    const uint32_t base = st::load_le<uint32_t>(b.data() + h.skip_offset + 8);
-    EXPECT_NE(with(h.skip_offset + 8, base + 1).find("skip entry"), std::string::npos);
+    const uint32_t base = st::load_le<uint32_t>(b.data() + s.skip + 8);
+    EXPECT_NE(with(s.skip + 8, base + 1).find("skip entry"), std::string::npos);
   }
-  auto chunk = b;
-  chunk[h.chunk_offset + offsetof(ChunkInfo, factor_bits)] = 25;
-  EXPECT_NE(open_error(chunk).find("chunk factor_bits at byte " + std::to_string(h.chunk_offset + 20)),
+  const uint32_t packed = st::load_le<uint32_t>(b.data() + s.chunks + 16);
+  EXPECT_NE(with(s.chunks + 16, (packed & kBitOffsetMask) | 25u << 27)
+                .find("chunk factor code at byte " + std::to_string(s.chunks + 16)),
             std::string::npos);
-  EXPECT_NE(with(h.chunk_offset + 16, h.multiplier_bytes * 8).find("chunk bit_offset"), std::string::npos);
-  EXPECT_NE(with(h.treelet_offset + 8, 1u << 31).find("treelet"), std::string::npos);
+  EXPECT_NE(with(s.chunks + 16, (packed & ~kBitOffsetMask) | uint32_t(s.end - s.multipliers) * 8)
+                .find("chunk bit_offset"),
+            std::string::npos);
+  EXPECT_NE(with(s.treelets + 8, 1u << 31).find("treelet"), std::string::npos);
 }
 
 }  // namespace

@@ -90,7 +90,7 @@ TEST(DagmhValues, BaseCoversTheMostIntervalsAndFewestBitsAreUsed) {
   const ChunkInfo& c = e.chunks[0];
   EXPECT_TRUE(0.25f + 0.019f <= c.base && c.base <= 0.4f);
   EXPECT_EQ(c.mask, 0xFFFu << 20);
-  EXPECT_EQ(c.factor_bits, 6);  // 33 steps of 1/64 (the grid's power of two) need 6 bits
+  EXPECT_EQ(c.factor_bits(), 6u);  // 33 steps of 1/64 (the grid's power of two) need 6 bits
   EXPECT_EQ(first_outside(slots, e), "");
 }
 
@@ -103,7 +103,7 @@ TEST(DagmhValues, UniformChunksNeedNoMultipliersAndTwoClustersNeedZeroBits) {
   for (int i = 0; i < 32; ++i)
     two.push_back(i % 3 ? ValueSlot{0.1f, 0.2f, 0.15f} : ValueSlot{0.7f + 0.001f * float(i), 0.9f, 0.8f});
   e = encode_values(two);
-  EXPECT_EQ(e.chunks[0].factor_bits, 0);
+  EXPECT_EQ(e.chunks[0].factor_bits(), 0u);
   EXPECT_EQ(first_outside(two, e), "");
 }
 
@@ -115,7 +115,7 @@ TEST(DagmhValues, ScatteredPointsFallBackToRawFloats) {
     slots.push_back({p, p, p});
   }
   const auto e = encode_values(slots);
-  EXPECT_EQ(e.chunks[0].factor_bits, kRawFactorBits);
+  EXPECT_EQ(e.chunks[0].factor_bits(), kRawFactorBits);
   EXPECT_EQ(first_outside(slots, e), "");
   for (uint32_t i = 0; i < 32; ++i) EXPECT_EQ(decode(e, i), slots[i].lo);
 }

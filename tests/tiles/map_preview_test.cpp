@@ -37,6 +37,7 @@ std::shared_ptr<PackReader> build(const std::string& name, const Hierarchy& h, E
   PackParams pp = PackParams::from(light, cut);
   pp.features = kFeatureExitDepths;
   pp.preview_levels = preview_levels;
+  pp.compress_grid = false;  // VerifyRefusesAPreviewThatDiffersFromTheTiles patches the section in place
   const std::string path = packtest::temp_path(name + ".pack");
   write_pack(path, h, cut, pp);
   return std::shared_ptr<PackReader>(PackReader::open(path));

@@ -33,7 +33,7 @@ struct Built {
   std::vector<uint8_t> bytes;
 };
 
-Built build_pack(const std::string& light) {
+Built build_pack(const std::string& light, bool compress_grid = false) {
   Built b{fields::city_field(32, 4), {}};
   CutParams cut;
   cut.map_level = 5;
@@ -42,6 +42,7 @@ Built build_pack(const std::string& light) {
   cut.codec = TileCodec::of(packtest::available_encodings().at(0));
   PackParams pp = PackParams::from(LightSpace::fit(LightSpec::parse(light), Aabb{{0, 0, 0}, {1, 1, 1}}), cut);
   pp.build_params = {{"scene", "hostile"}};
+  pp.compress_grid = compress_grid;  // off: the tests below patch the grid section in place
   const std::string path = packtest::temp_path("hostile.pack");
   write_pack(path, build_hierarchy(b.field), cut, pp);
   std::ifstream f(path, std::ios::binary);
@@ -63,6 +64,39 @@ std::string open_error(std::vector<uint8_t> bytes, bool verify = false) {
     return e.what();
   }
   return "(opened)";
+}
+
+// The compressed grid section (tiles/PACK.md "Compressed grid section"): what every build
+// writes; a wrong magic, an inflated size out of bounds or disagreeing with the stream, and
+// a corrupt stream are refused in one line, every CRC right.
+TEST(PackHostile, CompressedGridSectionIsCheckedBeforeItIsInflated) {
+  const Built b = build_pack("sun:azimuth=30,elevation=50", true);
+  ASSERT_EQ(open_error(b.bytes), "(opened)");
+  const uint32_t flags = load_le<uint32_t>(b.bytes.data() + 20);
+  ASSERT_TRUE(flags & kFeatureCompressedGrid);
+  const uint64_t grid_at = load_le<uint64_t>(b.bytes.data() + 208), grid_size = load_le<uint64_t>(b.bytes.data() + 216);
+  const auto reader = PackReader::open_memory(b.bytes, "hostile.pack");
+  const uint32_t raw = uint32_t(reader->grid_bytes().size());
+  EXPECT_EQ(load_le<uint32_t>(b.bytes.data() + grid_at), kCompressedGridMagic);
+  EXPECT_EQ(load_le<uint32_t>(b.bytes.data() + grid_at + 4), raw);
+  EXPECT_LT(grid_size, raw);  // the grid and preview deflate
+  auto patched = [&](uint64_t at, uint32_t v) {
+    std::vector<uint8_t> bytes = b.bytes;
+    store_le<uint32_t>(bytes.data() + at, v);
+    fix_crc(bytes, 244, grid_at, grid_size);
+    fix_header_crc(bytes);
+    return open_error(bytes);
+  };
+  EXPECT_NE(patched(grid_at, 0x12345678).find("compressed grid section: bad magic"), std::string::npos);
+  EXPECT_NE(patched(grid_at + 4, 7).find("inflated size 7 outside"), std::string::npos);
+  EXPECT_NE(patched(grid_at + 4, 0xFFFFFFF0u).find("outside"), std::string::npos);
+  EXPECT_NE(patched(grid_at + 4, raw - 1).find("compressed grid section"), std::string::npos);
+  EXPECT_NE(patched(grid_at + grid_size - 4, 0).find("compressed grid section"), std::string::npos);  // adler-32
+  // Without the flag the same bytes are no raw grid section either.
+  std::vector<uint8_t> bytes = b.bytes;
+  store_le<uint32_t>(bytes.data() + 20, flags & ~uint32_t(kFeatureCompressedGrid));
+  fix_header_crc(bytes);
+  EXPECT_NE(open_error(bytes), "(opened)");
 }
 
 TEST(PackHostile, LightsNoBuildMakesAreRefusedAtOpen) {

@@ -26,6 +26,7 @@ struct CanonNode {
 
 struct TileParse {
   Header h{};
+  Sections s{};
   std::vector<uint32_t> starts;         // node start words, in order
   std::vector<uint32_t> node_canon;     // canonical id per start
   std::unordered_map<uint32_t, uint32_t> start_index;  // word -> index in starts
@@ -47,8 +48,10 @@ SharedTiles share_across_tiles(const std::vector<std::vector<uint8_t>>& tiles, u
     const auto& buf = tiles[ti];
     const View view = validate(buf);
     TileParse& p = parsed[ti];
-    std::memcpy(&p.h, buf.data(), sizeof(Header));
-    if (p.h.version != kVersion) throw Error("dagmh dictionary: tile " + std::to_string(ti) + " is not version 1");
+    p.h = load_header(buf.data());
+    p.s = sections_of(p.h, buf.size());
+    if (p.h.flags & kFlagDictionary)
+      throw Error("dagmh dictionary: tile " + std::to_string(ti) + " already references a dictionary");
     p.treelet_canon.resize(p.h.treelet_count);
     for (uint32_t t = 0; t < p.h.treelet_count; ++t) {
       std::array<uint32_t, kTreeletWords> bits;
@@ -151,6 +154,7 @@ SharedTiles share_across_tiles(const std::vector<std::vector<uint8_t>>& tiles, u
     const auto& buf = tiles[ti];
     const TileParse& p = parsed[ti];
     const Header& h = p.h;
+    const Sections& hs = p.s;
     out.bytes_before += buf.size();
     bool uses = false;
     for (uint32_t c : p.node_canon) uses |= dict_node_word[c] != ~0u;
@@ -165,7 +169,7 @@ SharedTiles share_across_tiles(const std::vector<std::vector<uint8_t>>& tiles, u
     for (size_t k = 0; k < p.starts.size(); ++k)
       if (dict_node_word[p.node_canon[k]] == ~0u) {
         new_word[k] = local_words;
-        local_words += node_words(st::load_le<uint32_t>(buf.data() + h.node_offset + size_t(p.starts[k]) * 4));
+        local_words += node_words(st::load_le<uint32_t>(buf.data() + hs.nodes + size_t(p.starts[k]) * 4));
       }
     for (uint32_t t = 0; t < h.treelet_count; ++t)
       if (dict_treelet[p.treelet_canon[t]] == ~0u) new_treelet[t] = local_treelets++;
@@ -184,30 +188,27 @@ SharedTiles share_across_tiles(const std::vector<std::vector<uint8_t>>& tiles, u
       return ref;
     };
     Header nh = h;
-    nh.version = kVersionDictionary;
+    nh.flags = kFlagDictionary;
     nh.dictionary_crc = dict->crc();
     nh.node_words = local_words;
     nh.treelet_count = local_treelets;
     nh.root_ref = tagged(h.root_ref);
     // The skip level by the encoder's rule (§3.7, dagmh_encode.cpp): at most the tile's
     // own, lowered while the table would exceed 1/16 of the rest of the smaller buffer.
-    const uint64_t rest = sizeof(Header) + uint64_t(local_words) * 4 + uint64_t(local_treelets) * kTreeletBytes +
-                          uint64_t(h.chunk_count) * sizeof(ChunkInfo) + h.multiplier_bytes;
+    const uint64_t multiplier_bytes = hs.end - hs.multipliers;
+    nh.skip_level = 0;
+    const uint64_t rest = sections_of(nh, 0).multipliers + multiplier_bytes;
     uint32_t skip = h.skip_level;
-    while (skip > 0 && (uint64_t(1) << (2 * skip)) * kSkipEntryBytes * 16 > rest) --skip;
-    nh.skip_level = skip;
-    const uint32_t skip_bytes = uint32_t((uint64_t(1) << (2 * skip)) * kSkipEntryBytes);
-    nh.node_offset = nh.skip_offset + skip_bytes;
-    nh.treelet_offset = nh.node_offset + local_words * 4;
-    nh.chunk_offset = nh.treelet_offset + local_treelets * kTreeletBytes;
-    nh.multiplier_offset = nh.chunk_offset + h.chunk_count * uint32_t(sizeof(ChunkInfo));
-    nh.total_bytes = nh.multiplier_offset + h.multiplier_bytes;
-    std::vector<uint8_t> o(nh.total_bytes, 0);
+    while (skip > 0 && skip_table_entries(skip) * kSkipEntryBytes * 16 > rest) --skip;
+    nh.skip_level = uint8_t(skip);
+    Sections ns = sections_of(nh, 0);
+    ns.end = ns.multipliers + multiplier_bytes;
+    std::vector<uint8_t> o(ns.end, 0);
     std::memcpy(o.data(), &nh, sizeof nh);
     for (size_t k = 0; k < p.starts.size(); ++k) {
       if (new_word[k] == ~0u) continue;
-      const uint8_t* src = buf.data() + h.node_offset + size_t(p.starts[k]) * 4;
-      uint8_t* dst = o.data() + nh.node_offset + size_t(new_word[k]) * 4;
+      const uint8_t* src = buf.data() + hs.nodes + size_t(p.starts[k]) * 4;
+      uint8_t* dst = o.data() + ns.nodes + size_t(new_word[k]) * 4;
       const uint32_t flags = st::load_le<uint32_t>(src);
       std::memcpy(dst, src, size_t(node_words(flags)) * 4);
       uint32_t rank = 0;
@@ -220,16 +221,16 @@ SharedTiles share_across_tiles(const std::vector<std::vector<uint8_t>>& tiles, u
     }
     for (uint32_t t = 0; t < h.treelet_count; ++t)
       if (new_treelet[t] != ~0u)
-        std::memcpy(o.data() + nh.treelet_offset + size_t(new_treelet[t]) * kTreeletBytes,
-                    buf.data() + h.treelet_offset + size_t(t) * kTreeletBytes, kTreeletBytes);
-    std::memcpy(o.data() + nh.chunk_offset, buf.data() + h.chunk_offset, size_t(nh.total_bytes - nh.chunk_offset));
+        std::memcpy(o.data() + ns.treelets + size_t(new_treelet[t]) * kTreeletBytes,
+                    buf.data() + hs.treelets + size_t(t) * kTreeletBytes, kTreeletBytes);
+    std::memcpy(o.data() + ns.chunks, buf.data() + hs.chunks, size_t(ns.end - ns.chunks));
     // The skip table: one cursor per texel of level `skip`, by walking the rewritten DAG.
     View view;
-    view.skip = o.data() + nh.skip_offset;
-    view.nodes = o.data() + nh.node_offset;
-    view.treelets = o.data() + nh.treelet_offset;
-    view.chunks = o.data() + nh.chunk_offset;
-    view.multipliers = o.data() + nh.multiplier_offset;
+    view.skip = o.data() + ns.skip;
+    view.nodes = o.data() + ns.nodes;
+    view.treelets = o.data() + ns.treelets;
+    view.chunks = o.data() + ns.chunks;
+    view.multipliers = o.data() + ns.multipliers;
     view.finest_level = nh.finest_level;
     view.skip_level = skip;
     view.root_ref = nh.root_ref;
@@ -238,11 +239,11 @@ SharedTiles share_across_tiles(const std::vector<std::vector<uint8_t>>& tiles, u
     view.dict_treelet_count = dict->treelet_count();
     view.dict_nodes = dict->nodes();
     view.dict_treelets = dict->treelets();
-    const uint64_t side = uint64_t(1) << skip;
+    const uint64_t side = skip == 0 ? 0 : uint64_t(1) << skip;  // S = 0: no table
     for (uint64_t y = 0; y < side; ++y)
       for (uint64_t x = 0; x < side; ++x) {
         const Cursor c = view.descend(view.root(), skip, skip, x, y);
-        std::memcpy(o.data() + nh.skip_offset + (y * side + x) * sizeof(Cursor), &c, sizeof c);
+        std::memcpy(o.data() + ns.skip + (y * side + x) * sizeof(Cursor), &c, sizeof c);
       }
     validate(o, dict.get());  // a malformed rewrite never leaves this function
     out.bytes_after += o.size();

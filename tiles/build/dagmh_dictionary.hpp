@@ -15,14 +15,14 @@ namespace st::dagmh {
 
 struct SharedTiles {
   std::vector<uint8_t> dictionary;          // DictHeader buffer; empty if nothing is shared
-  std::vector<std::vector<uint8_t>> tiles;  // same order; unchanged (version 1) where they share nothing
+  std::vector<std::vector<uint8_t>> tiles;  // same order; unchanged (no dictionary flag) where they share nothing
   uint64_t bytes_before = 0, bytes_after = 0;  // the tiles' raw bytes (dictionary not included)
   uint64_t tiles_rewritten = 0, dict_nodes = 0, dict_treelets = 0;
 };
 
-// Builds the dictionary of `tiles` (version 1 DAG-MH buffers; each is validated) and the
+// Builds the dictionary of `tiles` (DAG-MH buffers without the dictionary flag; each is validated) and the
 // rewritten tiles; every rewritten tile is validated against the dictionary before it is
-// returned. min_tiles >= 2. Throws st::Error on a malformed tile or one already version 2.
+// returned. min_tiles >= 2. Throws st::Error on a malformed tile or one already flagged.
 SharedTiles share_across_tiles(const std::vector<std::vector<uint8_t>>& tiles, uint32_t min_tiles = 2);
 
 }  // namespace st::dagmh

@@ -13,7 +13,7 @@
 namespace st::dagmh {
 namespace {
 
-uint64_t skip_table_bytes(uint32_t level) { return (uint64_t(1) << (2 * level)) * kSkipEntryBytes; }
+uint64_t skip_table_bytes(uint32_t level) { return skip_table_entries(level) * kSkipEntryBytes; }
 
 }  // namespace
 
@@ -41,35 +41,29 @@ std::vector<uint8_t> encode(const Hierarchy& h, EncodeStats* stats, StructureHas
   Header hd{};
   hd.magic = kMagic;
   hd.version = kVersion;
-  hd.header_bytes = sizeof(Header);
-  hd.finest_level = h.depth;
+  hd.finest_level = uint8_t(h.depth);
   hd.node_words = uint32_t(words);
   hd.treelet_count = uint32_t(dag.treelets.size());
   hd.value_count = uint32_t(dag.values.size());
-  hd.chunk_count = uint32_t(values.chunks.size());
-  hd.multiplier_bytes = uint32_t(values.multipliers.size());
-  const uint64_t rest = sizeof(Header) + words * 4 + uint64_t(hd.treelet_count) * kTreeletBytes +
-                        uint64_t(hd.chunk_count) * sizeof(ChunkInfo) + hd.multiplier_bytes;
+  hd.root_ref = (dag.root & kRefTagMask) == kRefInner ? kRefInner | word_of[dag.root & kRefIndexMask] : dag.root;
+  const uint64_t multiplier_bytes = values.multipliers.size();
   // Skip list at level <= 6 (§3.7), coarser while its table would exceed 1/16 of the rest.
+  const uint64_t rest = sections_of(hd, 0).multipliers + multiplier_bytes;
   uint32_t skip = std::min(h.depth, kMaxSkipListLevel);
   while (skip > 0 && skip_table_bytes(skip) * 16 > rest) --skip;
-  hd.skip_level = skip;
-  const uint64_t total = rest + skip_table_bytes(skip);
+  hd.skip_level = uint8_t(skip);
+  Sections sec = sections_of(hd, 0);
+  const uint64_t total = sec.multipliers + multiplier_bytes;
   if (total > 0xFFFFFFFFull) throw Error("dagmh: encoded buffer exceeds 4 GiB");
-  hd.total_bytes = uint32_t(total);
-  hd.skip_offset = sizeof(Header);
-  hd.node_offset = hd.skip_offset + uint32_t(skip_table_bytes(skip));
-  hd.treelet_offset = hd.node_offset + hd.node_words * 4;
-  hd.chunk_offset = hd.treelet_offset + hd.treelet_count * kTreeletBytes;
-  hd.multiplier_offset = hd.chunk_offset + hd.chunk_count * uint32_t(sizeof(ChunkInfo));
-  hd.root_ref = (dag.root & kRefTagMask) == kRefInner ? kRefInner | word_of[dag.root & kRefIndexMask]
-                                                      : dag.root;
+  sec.end = total;
 
   std::vector<uint8_t> out(total, 0);
   std::memcpy(out.data(), &hd, sizeof(Header));
+  const size_t node_offset = sec.nodes, treelet_offset = sec.treelets, chunk_offset = sec.chunks,
+               multiplier_offset = sec.multipliers, skip_offset = sec.skip;
   for (uint32_t id : order) {
     const InnerNode& n = dag.inner[id];
-    uint8_t* p = out.data() + hd.node_offset + size_t(word_of[id]) * 4;
+    uint8_t* p = out.data() + node_offset + size_t(word_of[id]) * 4;
     st::store_le<uint32_t>(p, n.flags);
     uint32_t rank = 0;
     for (uint32_t c = 0; c < 4; ++c) {
@@ -82,27 +76,27 @@ std::vector<uint8_t> encode(const Hierarchy& h, EncodeStats* stats, StructureHas
   }
   for (size_t t = 0; t < dag.treelets.size(); ++t)
     for (uint32_t w = 0; w < kTreeletWords; ++w)
-      st::store_le<uint32_t>(out.data() + hd.treelet_offset + t * kTreeletBytes + w * 4, dag.treelets[t][w]);
+      st::store_le<uint32_t>(out.data() + treelet_offset + t * kTreeletBytes + w * 4, dag.treelets[t][w]);
   if (!values.chunks.empty())
-    std::memcpy(out.data() + hd.chunk_offset, values.chunks.data(), values.chunks.size() * sizeof(ChunkInfo));
-  std::memcpy(out.data() + hd.multiplier_offset, values.multipliers.data(), values.multipliers.size());
+    std::memcpy(out.data() + chunk_offset, values.chunks.data(), values.chunks.size() * sizeof(ChunkInfo));
+  std::memcpy(out.data() + multiplier_offset, values.multipliers.data(), values.multipliers.size());
 
   // The skip table: one cursor per texel of level `skip`, by walking the written DAG.
   View view;
-  view.skip = out.data() + hd.skip_offset;
-  view.nodes = out.data() + hd.node_offset;
-  view.treelets = out.data() + hd.treelet_offset;
-  view.chunks = out.data() + hd.chunk_offset;
-  view.multipliers = out.data() + hd.multiplier_offset;
+  view.skip = out.data() + skip_offset;
+  view.nodes = out.data() + node_offset;
+  view.treelets = out.data() + treelet_offset;
+  view.chunks = out.data() + chunk_offset;
+  view.multipliers = out.data() + multiplier_offset;
   view.finest_level = hd.finest_level;
   view.skip_level = skip;
   view.root_ref = hd.root_ref;
   view.value_count = hd.value_count;
-  const uint64_t side = uint64_t(1) << skip;
+  const uint64_t side = skip == 0 ? 0 : uint64_t(1) << skip;  // S = 0: no table
   for (uint64_t y = 0; y < side; ++y)
     for (uint64_t x = 0; x < side; ++x) {
       const Cursor c = view.descend(view.root(), skip, skip, x, y);
-      std::memcpy(out.data() + hd.skip_offset + (y * side + x) * sizeof(Cursor), &c, sizeof(Cursor));
+      std::memcpy(out.data() + skip_offset + (y * side + x) * sizeof(Cursor), &c, sizeof(Cursor));
     }
 
   if (stats) {
@@ -116,8 +110,8 @@ std::vector<uint8_t> encode(const Hierarchy& h, EncodeStats* stats, StructureHas
     stats->skip_bytes = skip_table_bytes(skip);
     stats->node_bytes = words * 4;
     stats->treelet_bytes = uint64_t(hd.treelet_count) * kTreeletBytes;
-    stats->chunk_bytes = uint64_t(hd.chunk_count) * sizeof(ChunkInfo);
-    stats->multiplier_bytes = hd.multiplier_bytes;
+    stats->chunk_bytes = uint64_t(sec.chunk_count) * sizeof(ChunkInfo);
+    stats->multiplier_bytes = multiplier_bytes;
     stats->total_bytes = total;
     stats->values = values.stats;
   }

@@ -177,11 +177,11 @@ EncodedValues encode_values(std::span<const ValueSlot> slots) {
         f.mult.push_back(std::bit_cast<uint32_t>(s.lo <= s.value && s.value <= s.hi ? s.value : s.lo));
       }
     }
-    if (writer.bits() + uint64_t(f.mult.size()) * f.k > std::numeric_limits<uint32_t>::max())
-      throw Error("dagmh: multiplier section exceeds 2^32 bits");
+    // The chunk info holds the first multiplier's bit offset in 27 bits (16 MiB of
+    // multipliers; a tile cut deeper holds fewer).
+    if (writer.bits() > kBitOffsetMask) throw Error("dagmh: multiplier section exceeds 2^27 bits");
     info.c_l = f.c_l, info.c_f = f.c_f;
-    info.factor_bits = uint8_t(f.k);
-    info.bit_offset = uint32_t(writer.bits());
+    info.packed = pack_factor(uint32_t(writer.bits()), f.k);
     for (uint32_t m : f.mult) writer.put(m, f.k);
     out.chunks.push_back(info);
     ++out.stats.chunks;

@@ -266,6 +266,11 @@ void PackWriter::finish(const CutGrid& grid) {
   grid_bytes.insert(grid_bytes.end(), preview.begin(), preview.end());
   if (params_.dagmh_dictionary && finish_with_dictionary(h, grid_bytes)) return;
   std::vector<uint8_t> index_bytes = serialize_index(tiles_);
+  // Stored as one zlib stream (tiles/PACK.md "Compressed grid section").
+  if (params_.compress_grid) {
+    h.flags |= kFeatureCompressedGrid;
+    grid_bytes = compress_grid_section(grid_bytes, params_.compression_level);
+  }
   h.grid_size = grid_bytes.size();
   h.grid_crc = crc32_of(grid_bytes);
   h.index_offset = h.grid_offset + h.grid_size;

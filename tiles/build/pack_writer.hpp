@@ -62,6 +62,9 @@ struct PackParams {
   // always holds the tiles as encoded.
   bool dagmh_dictionary = false;
   uint64_t dictionary_max_input_bytes = kDefaultDictionaryMaxInputBytes;
+  // Store the grid section as one zlib stream (feature compressed_grid, tiles/PACK.md
+  // "Compressed grid section"); off writes it raw (tests that patch its bytes in place).
+  bool compress_grid = true;
 
   static PackParams from(const LightSpace& light, const CutParams& cut);
 };

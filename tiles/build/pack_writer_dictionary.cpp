@@ -167,6 +167,10 @@ bool PackWriter::finish_with_dictionary(PackHeader h, const std::vector<uint8_t>
     const std::vector<uint8_t> dict = dictionary_section(shared.dictionary, params_.compression_level);
     grid_bytes.insert(grid_bytes.end(), dict.begin(), dict.end());
     const std::vector<uint8_t> index_bytes = serialize_index(index);
+    if (params_.compress_grid) {  // stored as one zlib stream (tiles/PACK.md "Compressed grid section")
+      h.flags |= kFeatureCompressedGrid;
+      grid_bytes = compress_grid_section(grid_bytes, params_.compression_level);
+    }
     h.grid_size = grid_bytes.size();
     h.grid_crc = crc32_of(grid_bytes);
     h.index_offset = h.grid_offset + h.grid_size;

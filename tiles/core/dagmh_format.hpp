@@ -19,11 +19,13 @@ namespace st::dagmh {
 static_assert(std::endian::native == std::endian::little, "DAG-MH buffers are little-endian");
 
 inline constexpr uint32_t kMagic = 0x484D4744u;  // the bytes "DGMH"
-inline constexpr uint32_t kVersion = 1;
-// Version 2: a tile whose references may name nodes and treelets of a pack-wide
-// dictionary (DictHeader below; DAGMH.md "Dictionary"); header field 68 then holds the
-// dictionary's CRC-32. Version 1 tiles never reference one (field 68 is zero).
-inline constexpr uint32_t kVersionDictionary = 2;
+// Version 3: a 32-byte header without the fields its counts imply (DAGMH.md "Header"), and
+// 20-byte chunk infos. Versions 1 and 2 (a 72-byte header with every section offset,
+// 24-byte chunk infos; 2 = referencing a pack dictionary) are refused, naming the version.
+inline constexpr uint32_t kVersion = 3;
+// Header flag bit 0: the tile's references may name nodes and treelets of a pack-wide
+// dictionary (DictHeader below; DAGMH.md "Dictionary"), whose CRC-32 is `dictionary_crc`.
+inline constexpr uint8_t kFlagDictionary = 1;
 
 // Treelets: subtrees of height <= 3 (4 levels) stored as a full 4-level quadtree bitmap
 // in depth-first order, 1 + 4 + 16 + 64 = 85 bits in 3 words (DAG-MH §3.2, Alg. 1).
@@ -67,33 +69,30 @@ inline constexpr uint32_t node_words(uint32_t flags) {
   return 1 + 2 * uint32_t(std::popcount(flags & kNodeChildMask));
 }
 
+// The header (32 bytes). Every section's offset and length follows from the counts and the
+// buffer's length (sections_of below): skip table at 32, then inner nodes, treelets,
+// chunk infos, multipliers (the rest of the buffer).
 struct Header {
-  uint32_t magic;              //  0
-  uint32_t version;            //  4
-  uint32_t header_bytes;       //  8 = sizeof(Header)
-  uint32_t finest_level;       // 12 map is 2^finest_level a side, <= 20
-  uint32_t skip_level;         // 16 S <= min(finest_level, kMaxSkipListLevel)
-  uint32_t root_ref;           // 20 tagged: kRefInner | 0, or kRefTreelet | 0
-  uint32_t node_words;         // 24 inner-node section length in 4-byte words
-  uint32_t treelet_count;      // 28
-  uint32_t value_count;        // 32 values in depth-first order
-  uint32_t chunk_count;        // 36 = ceil(value_count / 32)
-  uint32_t multiplier_bytes;   // 40 multiple of 4, >= kMultiplierPadBytes
-  uint32_t total_bytes;        // 44 = the buffer's length
-  uint32_t skip_offset;        // 48 byte offsets of the sections, in this order
-  uint32_t node_offset;        // 52
-  uint32_t treelet_offset;     // 56
-  uint32_t chunk_offset;       // 60
-  uint32_t multiplier_offset;  // 64
-  uint32_t dictionary_crc;     // 68 version 1: 0; version 2: CRC-32 of the dictionary it references
+  uint32_t magic;           //  0
+  uint32_t version;         //  4 = kVersion
+  uint8_t finest_level;     //  8 map is 2^finest_level a side, <= 20
+  uint8_t skip_level;       //  9 S <= min(finest_level, kMaxSkipListLevel)
+  uint8_t flags;            // 10 bit 0 kFlagDictionary; the others zero
+  uint8_t reserved;         // 11 zero
+  uint32_t root_ref;        // 12 tagged: kRefInner | word, or kRefTreelet | number
+  uint32_t node_words;      // 16 inner-node section length in 4-byte words
+  uint32_t treelet_count;   // 20
+  uint32_t value_count;     // 24 values in depth-first order, >= 1
+  uint32_t dictionary_crc;  // 28 flag clear: 0; set: CRC-32 of the dictionary it references
 };
-static_assert(sizeof(Header) == 72);
-static_assert(offsetof(Header, root_ref) == 20 && offsetof(Header, multiplier_offset) == 64);
+static_assert(sizeof(Header) == 32);
+static_assert(offsetof(Header, finest_level) == 8 && offsetof(Header, flags) == 10 &&
+              offsetof(Header, root_ref) == 12 && offsetof(Header, dictionary_crc) == 28);
 
 // Pack-wide dictionary (DAG-MH §3.1 applied across tiles; DAGMH.md "Dictionary"): the
 // inner nodes and treelets that occur in two or more tiles, stored once. Same node and
 // treelet formats as a tile's; its references are its own (word offsets into its node
-// section, its treelet numbers) and never leave it. A version-2 tile addresses
+// section, its treelet numbers) and never leave it. A tile with kFlagDictionary addresses
 // [the dictionary's nodes | its own] as one space, so the dictionary's references mean
 // the same in every tile: inner index i < D (the dictionary's node_words) is the
 // dictionary's word i, else the tile's word i - D; treelet t < T (the dictionary's
@@ -126,20 +125,60 @@ struct Cursor {
 static_assert(sizeof(Cursor) == 16);
 inline constexpr uint32_t kSkipEntryBytes = sizeof(Cursor);
 
-// Per-chunk info (DAG-MH §3.4 Fig. 4). mask bit j set: value j of the chunk is stored as
-// a multiplier (Alg. 2 "exists"); clear: it equals `base`.
+// Per-chunk info (DAG-MH §3.4 Fig. 4), 20 bytes. mask bit j set: value j of the chunk is
+// stored as a multiplier (Alg. 2 "exists"); clear: it equals `base`. Word 16 packs the
+// first multiplier's bit offset (bits 0..26) and the factor code (bits 27..31): k for
+// k = 0..24, kRawFactorCode for raw float32 bits (k = 32); codes 25..30 are invalid.
+inline constexpr uint32_t kBitOffsetBits = 27;
+inline constexpr uint32_t kBitOffsetMask = (1u << kBitOffsetBits) - 1;
+inline constexpr uint32_t kRawFactorCode = 31;
 struct ChunkInfo {
-  float base;            //  0 representative value
-  uint32_t mask;         //  4
-  float c_l;             //  8 value = c_l + c_f * i (no fma, see dagmh_values.hpp)
-  float c_f;             // 12
-  uint32_t bit_offset;   // 16 first multiplier, in bits from the multiplier section start
-  uint8_t factor_bits;   // 20 k in 0..24, or 32 = raw float bits
-  uint8_t pad[3];        // 21 zero
+  float base;       //  0 representative value
+  uint32_t mask;    //  4
+  float c_l;        //  8 value = c_l + c_f * i (no fma, see dagmh_values.hpp)
+  float c_f;        // 12
+  uint32_t packed;  // 16 bit_offset | factor code << 27
+  uint32_t bit_offset() const { return packed & kBitOffsetMask; }
+  uint32_t factor_code() const { return packed >> kBitOffsetBits; }
+  // k: 0..24, or 32 (raw); only meaningful for a valid code.
+  uint32_t factor_bits() const { return factor_code() == kRawFactorCode ? kRawFactorBits : factor_code(); }
 };
-static_assert(sizeof(ChunkInfo) == 24);
-static_assert(offsetof(ChunkInfo, bit_offset) == 16 && offsetof(ChunkInfo, factor_bits) == 20);
+static_assert(sizeof(ChunkInfo) == 20);
+static_assert(offsetof(ChunkInfo, c_f) == 12 && offsetof(ChunkInfo, packed) == 16);
+inline uint32_t pack_factor(uint32_t bit_offset, uint32_t k) {
+  return bit_offset | ((k == kRawFactorBits ? kRawFactorCode : k) << kBitOffsetBits);
+}
 
+// The skip table holds 4^S cursors for S >= 1 and none for S = 0 (its one entry would be
+// the root cursor, which the header's root_ref already gives).
+inline uint64_t skip_table_entries(uint32_t skip_level) {
+  return skip_level == 0 ? 0 : uint64_t(1) << (2 * (skip_level & 15));
+}
+
+// Section offsets and lengths implied by a header and the buffer's length. The validator
+// checks the counts first (so these do not overflow); the encoder and the dictionary
+// rewrite lay buffers out with it.
+struct Sections {
+  uint64_t skip, nodes, treelets, chunks, multipliers, end;
+  uint32_t chunk_count;
+};
+inline Sections sections_of(const Header& h, uint64_t total_bytes) {
+  Sections s;
+  s.chunk_count = uint32_t((uint64_t(h.value_count) + kChunkValues - 1) / kChunkValues);
+  s.skip = sizeof(Header);
+  s.nodes = s.skip + skip_table_entries(h.skip_level) * sizeof(Cursor);
+  s.treelets = s.nodes + uint64_t(h.node_words) * 4;
+  s.chunks = s.treelets + uint64_t(h.treelet_count) * kTreeletBytes;
+  s.multipliers = s.chunks + uint64_t(s.chunk_count) * sizeof(ChunkInfo);
+  s.end = total_bytes;
+  return s;
+}
+// The header of a buffer (unchecked: validate() checks it).
+inline Header load_header(const uint8_t* bytes) {
+  Header h;
+  std::memcpy(&h, bytes, sizeof h);
+  return h;
+}
 
 inline constexpr size_t align4(size_t n) { return (n + 3) & ~size_t(3); }
 

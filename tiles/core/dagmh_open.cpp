@@ -77,7 +77,7 @@ class DagmhEvaluator final : public Evaluator {
     const uint32_t common = level - uint32_t(differ ? 64 - __builtin_clzll(differ) : 0);
     // A common node above the skip level is a worse start than each tap's own skip entry
     // (§3.7): then the taps start where depth() starts.
-    const bool from_skip = common < v_.skip_level && level >= v_.skip_level;
+    const bool from_skip = common < v_.skip_level && level >= v_.skip_level;  // never with S = 0 (no table)
     const dagmh::Cursor lca =
         from_skip ? v_.skip_entry(level, tx[0], ty[0])
                   : v_.descend(v_.start(common, level, tx[0], ty[0]), common, level, tx[0], ty[0]);

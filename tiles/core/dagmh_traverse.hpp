@@ -49,9 +49,9 @@ struct View {
   const uint8_t* chunks = nullptr;
   const uint8_t* multipliers = nullptr;
   uint32_t finest_level = 0, skip_level = 0, root_ref = 0, value_count = 0;
-  // A version-2 tile (DAGMH.md "Dictionary"): references below the dictionary's node
+  // A tile with kFlagDictionary (DAGMH.md "Dictionary"): references below the dictionary's node
   // words / treelet count name the dictionary's, the others the tile's own, offset by
-  // them. Version 1 keeps the zeros (every reference is the tile's own).
+  // them. Without the flag they stay zero (every reference is the tile's own).
   uint32_t dict_node_words = 0, dict_treelet_count = 0;
   const uint8_t* dict_nodes = nullptr;
   const uint8_t* dict_treelets = nullptr;
@@ -79,7 +79,7 @@ struct View {
   // Cheapest valid start for a walk to a node of level `stop` on the path to (x, y) at
   // `level`: the skip table when stop >= skip_level, else the root.
   Cursor start(uint32_t stop, uint32_t level, uint64_t x, uint64_t y) const {
-    return stop >= skip_level ? skip_entry(level, x, y) : root();
+    return skip_level > 0 && stop >= skip_level ? skip_entry(level, x, y) : root();
   }
 
   // Walks inner nodes from `c` towards (x, y) of `level` and stops at the first of: an

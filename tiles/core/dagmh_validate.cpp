@@ -23,45 +23,33 @@ void expect_field(const char* name, uint32_t offset, uint64_t value, uint64_t ex
     fail(name, offset, "is " + std::to_string(value) + ", expected " + std::to_string(expected));
 }
 
-struct Sections {
-  uint64_t skip, nodes, treelets, chunks, multipliers, end;
-};
-
 Sections check_header(const Header& h, size_t size) {
   expect_field("magic", offsetof(Header, magic), h.magic, kMagic);
-  if (h.version != kVersion && h.version != kVersionDictionary)
+  if (h.version == 1 || h.version == 2)
     fail("version", offsetof(Header, version),
-         "is " + std::to_string(h.version) + ", this reader knows 1 and 2 (with a pack dictionary)");
-  expect_field("header_bytes", offsetof(Header, header_bytes), h.header_bytes, sizeof(Header));
-  expect_field("total_bytes", offsetof(Header, total_bytes), h.total_bytes, size);
-  if (h.version == kVersion) expect_field("dictionary_crc", offsetof(Header, dictionary_crc), h.dictionary_crc, 0);
+         "is " + std::to_string(h.version) +
+             ": a DAG-MH tile of the layout before version 3 (72-byte header, 24-byte chunk infos), which this "
+             "reader no longer reads; rebuild the pack");
+  if (h.version != kVersion)
+    fail("version", offsetof(Header, version), "is " + std::to_string(h.version) + ", this reader knows 3");
+  if (h.flags & ~kFlagDictionary) fail("flags", offsetof(Header, flags), "reserved bits set");
+  expect_field("reserved", offsetof(Header, reserved), h.reserved, 0);
+  if (!(h.flags & kFlagDictionary)) expect_field("dictionary_crc", offsetof(Header, dictionary_crc), h.dictionary_crc, 0);
   if (h.finest_level > kMaxLevel) fail("finest_level", offsetof(Header, finest_level), "exceeds 20");
-  if (h.skip_level > std::min(h.finest_level, kMaxSkipListLevel))
+  if (h.skip_level > std::min<uint32_t>(h.finest_level, kMaxSkipListLevel))
     fail("skip_level", offsetof(Header, skip_level), "exceeds min(finest_level, 6)");
   if (h.node_words > kRefIndexMask) fail("node_words", offsetof(Header, node_words), "exceeds 2^30");
   if (h.treelet_count > kRefIndexMask)
     fail("treelet_count", offsetof(Header, treelet_count), "exceeds 2^30");
   if (h.value_count == 0) fail("value_count", offsetof(Header, value_count), "is zero (the root has a value)");
-  expect_field("chunk_count", offsetof(Header, chunk_count), h.chunk_count,
-               (uint64_t(h.value_count) + kChunkValues - 1) / kChunkValues);
-  if (h.multiplier_bytes % 4 != 0 || h.multiplier_bytes < kMultiplierPadBytes)
-    fail("multiplier_bytes", offsetof(Header, multiplier_bytes), "not a multiple of 4 of at least 8");
-  Sections s;
-  s.skip = sizeof(Header);
-  s.nodes = s.skip + (uint64_t(1) << (2 * h.skip_level)) * kSkipEntryBytes;
-  s.treelets = s.nodes + uint64_t(h.node_words) * 4;
-  s.chunks = s.treelets + uint64_t(h.treelet_count) * kTreeletBytes;
-  s.multipliers = s.chunks + uint64_t(h.chunk_count) * sizeof(ChunkInfo);
-  s.end = s.multipliers + h.multiplier_bytes;
-  expect_field("skip_offset", offsetof(Header, skip_offset), h.skip_offset, s.skip);
-  expect_field("node_offset", offsetof(Header, node_offset), h.node_offset, s.nodes);
-  expect_field("treelet_offset", offsetof(Header, treelet_offset), h.treelet_offset, s.treelets);
-  expect_field("chunk_offset", offsetof(Header, chunk_offset), h.chunk_offset, s.chunks);
-  expect_field("multiplier_offset", offsetof(Header, multiplier_offset), h.multiplier_offset,
-               s.multipliers);
-  if (s.end != size)
-    fail("sections", s.end, "end at byte " + std::to_string(s.end) + " but the buffer has " +
-                                std::to_string(size) + " bytes");
+  const Sections s = sections_of(h, size);
+  // The multiplier section is the rest of the buffer: a multiple of 4 of at least 8 bytes.
+  if (s.multipliers + kMultiplierPadBytes > size)
+    fail("sections", s.multipliers,
+         "the counts need " + std::to_string(s.multipliers + kMultiplierPadBytes) + " bytes but the buffer has " +
+             std::to_string(size));
+  if ((size - s.multipliers) % 4 != 0)
+    fail("multipliers", s.multipliers, "section of " + std::to_string(size - s.multipliers) + " bytes is not a multiple of 4");
   return s;
 }
 
@@ -70,7 +58,7 @@ void check_structure(const Header& h, const Sections& s, const uint8_t* base, co
   const uint8_t* nodes = base + s.nodes;
   const uint32_t words = h.node_words;
   auto node_byte = [&](uint64_t w) { return s.nodes + 4 * w; };
-  // Version 2: references below D / T are the dictionary's, the rest the tile's offset by them.
+  // Flag dictionary: references below D / T are the dictionary's, the rest the tile's offset by them.
   const uint32_t D = dict ? dict->node_words() : 0, T = dict ? dict->treelet_count() : 0;
   std::vector<uint32_t> starts;
   std::vector<uint8_t> is_start(words, 0);
@@ -171,22 +159,33 @@ void check_structure(const Header& h, const Sections& s, const uint8_t* base, co
 }
 
 void check_chunks(const Header& h, const Sections& s, const uint8_t* base) {
-  const uint64_t usable_bits = uint64_t(h.multiplier_bytes - kMultiplierPadBytes) * 8;
-  for (uint32_t c = 0; c < h.chunk_count; ++c) {
+  const uint64_t usable_bits = (s.end - s.multipliers - kMultiplierPadBytes) * 8;
+  uint64_t last_bit = 0;
+  for (uint32_t c = 0; c < s.chunk_count; ++c) {
     const uint64_t at = s.chunks + uint64_t(c) * sizeof(ChunkInfo);
     const ChunkInfo info = load_chunk(base + s.chunks, c);
-    if (info.pad[0] | info.pad[1] | info.pad[2]) fail("chunk pad", at + 21, "not zero");
-    const uint32_t k = info.factor_bits;
-    if (k > kMaxFactorBits && k != kRawFactorBits) fail("chunk factor_bits", at + 20, "not 0..24 or 32");
+    const uint32_t code = info.factor_code();
+    if (code > kMaxFactorBits && code != kRawFactorCode)
+      fail("chunk factor code", at + offsetof(ChunkInfo, packed), "not 0..24 or 31 (raw)");
+    const uint32_t k = info.factor_bits();
     const uint64_t in_chunk = std::min<uint64_t>(kChunkValues, uint64_t(h.value_count) - uint64_t(c) * kChunkValues);
     if (in_chunk < kChunkValues && (info.mask >> in_chunk) != 0)
       fail("chunk mask", at + 4, "bits set past the last value");
-    const uint64_t end = uint64_t(info.bit_offset) + uint64_t(std::popcount(info.mask)) * k;
-    if (end > usable_bits) fail("chunk bit_offset", at + 16, "multipliers run past the multiplier section");
+    const uint64_t end = uint64_t(info.bit_offset()) + uint64_t(std::popcount(info.mask)) * k;
+    if (end > usable_bits) fail("chunk bit_offset", at + offsetof(ChunkInfo, packed), "multipliers run past the multiplier section");
+    last_bit = std::max(last_bit, end);
   }
+  // The section is exactly what the multipliers need (whole words) plus the zero padding:
+  // the buffer has no trailing bytes.
+  const uint64_t need = align4((last_bit + 7) / 8) + kMultiplierPadBytes;
+  if (s.end - s.multipliers != need)
+    fail("multipliers", s.multipliers,
+         "section of " + std::to_string(s.end - s.multipliers) + " bytes, the chunks need " + std::to_string(need) +
+             " (no trailing bytes)");
 }
 
 void check_skip_table(const Header& h, const Sections& s, const View& view) {
+  if (h.skip_level == 0) return;  // no table: lookups start at the root
   const uint64_t side = uint64_t(1) << h.skip_level;
   for (uint64_t y = 0; y < side; ++y)
     for (uint64_t x = 0; x < side; ++x) {
@@ -202,14 +201,13 @@ void check_skip_table(const Header& h, const Sections& s, const View& view) {
 View validate(std::span<const uint8_t> bytes, const Dictionary* dict) {
   if (bytes.size() < sizeof(Header))
     fail("header", 0, "buffer of " + std::to_string(bytes.size()) + " bytes is shorter than the header");
-  Header h;
-  std::memcpy(&h, bytes.data(), sizeof(Header));
+  const Header h = load_header(bytes.data());
   const Sections s = check_header(h, bytes.size());
   const uint8_t* base = bytes.data();
-  if (h.version == kVersion) {
+  if (!(h.flags & kFlagDictionary)) {
     dict = nullptr;
   } else {
-    if (!dict) fail("version", offsetof(Header, version), "2: the tile references a pack dictionary and none was given");
+    if (!dict) fail("flags", offsetof(Header, flags), "the tile references a pack dictionary and none was given");
     if (dict->crc() != h.dictionary_crc)
       fail("dictionary_crc", offsetof(Header, dictionary_crc), "does not match the dictionary given");
     if (uint64_t(h.node_words) + dict->node_words() > kRefIndexMask ||

@@ -18,9 +18,9 @@ namespace st::dagmh {
 // skip table (recomputed from the DAG), and rejects trailing bytes. Throws
 // st::FormatError("dagmh: <field> at byte <offset>: <what>") on the first violation.
 //
-// A version-2 tile (references into a pack dictionary) needs `dict`, the dictionary whose
+// A tile with kFlagDictionary (references into a pack dictionary) needs `dict`, the dictionary whose
 // CRC-32 its header names; its references must then be the tile's own nodes and treelets
-// or the dictionary's (node starts, in range). Version 1 ignores `dict`.
+// or the dictionary's (node starts, in range). A tile without the flag ignores `dict`.
 class Dictionary;
 View validate(std::span<const uint8_t> bytes, const Dictionary* dict = nullptr);
 
@@ -55,6 +55,6 @@ class Dictionary {
 
 namespace st {
 // open_dagmh (encoding.hpp) for a tile that may reference a pack dictionary: validated
-// against `dict` (null: version 1 tiles only); the evaluator keeps `dict` alive.
+// against `dict` (null: tiles without the dictionary flag only); the evaluator keeps `dict` alive.
 std::unique_ptr<Evaluator> open_dagmh(std::span<const uint8_t> bytes, std::shared_ptr<const dagmh::Dictionary> dict);
 }  // namespace st

@@ -38,16 +38,18 @@ inline ChunkInfo load_chunk(const uint8_t* chunks, uint32_t c) {
 }
 
 // Value `index` (Alg. 2). Preconditions, established by open_dagmh's validation: the
-// chunk exists, its factor_bits is 0..24 or 32, and its multipliers end before the
+// chunk exists, its factor code is 0..24 or 31 (raw), and its multipliers end before the
 // multiplier section's zero padding, so the 8-byte load stays in the buffer.
 inline float read_value(const uint8_t* chunks, const uint8_t* multipliers, uint32_t index) {
   const uint8_t* c = chunks + size_t(index / kChunkValues) * sizeof(ChunkInfo);
   const uint32_t bit = index % kChunkValues;
   const uint32_t mask = st::load_le<uint32_t>(c + offsetof(ChunkInfo, mask));
   if (!((mask >> bit) & 1)) return std::bit_cast<float>(st::load_le<uint32_t>(c + offsetof(ChunkInfo, base)));
-  const uint32_t k = c[offsetof(ChunkInfo, factor_bits)];
+  const uint32_t packed = st::load_le<uint32_t>(c + offsetof(ChunkInfo, packed));
+  const uint32_t code = packed >> kBitOffsetBits;
+  const uint32_t k = code == kRawFactorCode ? kRawFactorBits : code;
   const uint32_t rank = bit_count(uint64_t(mask & ((1u << bit) - 1)));
-  const uint64_t pos = uint64_t(st::load_le<uint32_t>(c + offsetof(ChunkInfo, bit_offset))) + uint64_t(rank) * k;
+  const uint64_t pos = uint64_t(packed & kBitOffsetMask) + uint64_t(rank) * k;
   const uint64_t word = st::load_le<uint64_t>(multipliers + (pos >> 3)) >> (pos & 7);
   const uint32_t i = uint32_t(word & ((uint64_t(1) << k) - 1));
   if (k == kRawFactorBits) return std::bit_cast<float>(i);

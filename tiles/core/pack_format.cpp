@@ -23,6 +23,38 @@ std::string tile_bytes_bounds() {
   return buf;
 }
 
+std::pair<uint64_t, uint64_t> grid_section_bounds(uint32_t skip_level, bool dict) {
+  const uint64_t grid = CutGrid::serialized_size(skip_level);
+  return {grid + kPreviewHeaderBytes + (dict ? kPackDictionaryHeaderBytes + 1 : 0),
+          grid + kMaxPreviewBytes + (dict ? kPackDictionaryHeaderBytes + max_stored_size(kMaxPackDictionaryBytes) : 0)};
+}
+
+std::vector<uint8_t> compress_grid_section(std::span<const uint8_t> raw, int level) {
+  if (raw.size() > 0xFFFFFFFFull) throw Error("grid section of " + std::to_string(raw.size()) + " bytes exceeds 4 GiB");
+  const std::vector<uint8_t> z = zlib_compress(raw, level);
+  std::vector<uint8_t> out(kCompressedGridHeaderBytes + z.size());
+  store_le<uint32_t>(out.data(), kCompressedGridMagic);
+  store_le<uint32_t>(out.data() + 4, uint32_t(raw.size()));
+  std::copy(z.begin(), z.end(), out.begin() + kCompressedGridHeaderBytes);
+  return out;
+}
+
+std::vector<uint8_t> inflate_grid_section(std::span<const uint8_t> stored, uint64_t least, uint64_t most,
+                                          const std::string& what) {
+  if (stored.size() < kCompressedGridHeaderBytes + 1)
+    throw FormatError(what + ": compressed grid section of " + std::to_string(stored.size()) + " bytes is too short");
+  if (load_le<uint32_t>(stored.data()) != kCompressedGridMagic)
+    throw FormatError(what + ": compressed grid section: bad magic " + hex32(load_le<uint32_t>(stored.data())));
+  const uint32_t raw = load_le<uint32_t>(stored.data() + 4);
+  if (raw < least || raw > most)
+    throw FormatError(what + ": compressed grid section: inflated size " + std::to_string(raw) + " outside [" +
+                      std::to_string(least) + ", " + std::to_string(most) + "]");
+  if (stored.size() - kCompressedGridHeaderBytes > max_stored_size(raw))
+    throw FormatError(what + ": compressed grid section: " + std::to_string(stored.size()) + " stored bytes for " +
+                      std::to_string(raw) + " inflated");
+  return zlib_decompress(stored.subspan(kCompressedGridHeaderBytes), raw, what + ": compressed grid section");
+}
+
 std::string hex32(uint32_t v) {
   char buf[16];
   std::snprintf(buf, sizeof buf, "0x%08x", v);
@@ -124,18 +156,23 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
     const uint64_t limit = uint64_t(1) << 56;
     if (h.grid_offset < h.journal_offset || h.grid_offset > limit || h.grid_offset % 8) fail(208, "bad grid offset");
     if (stack) {
+      if (h.flags & uint32_t(kFeatureCompressedGrid)) fail(20, "feature compressed_grid on a stack pack");
       if (h.grid_size > (uint64_t(1) << 30)) fail(216, "stack grid size too large");
     } else {
       // The skip grid, then the map preview (map_preview.hpp): at least its header, at most its bound.
       // With the DAG-MH dictionary (pack_dictionary.hpp) its section follows the preview.
       const bool dict = h.flags & uint32_t(kFeatureDagmhDictionary);
-      const uint64_t grid = CutGrid::serialized_size(h.skip_level);
-      const uint64_t least = grid + kPreviewHeaderBytes + (dict ? kPackDictionaryHeaderBytes + 1 : 0);
-      const uint64_t most =
-          grid + kMaxPreviewBytes + (dict ? kPackDictionaryHeaderBytes + max_stored_size(kMaxPackDictionaryBytes) : 0);
-      if (h.grid_size < least || h.grid_size > most)
+      const auto [least, most] = grid_section_bounds(h.skip_level, dict);
+      if (h.flags & uint32_t(kFeatureCompressedGrid)) {
+        // Stored: the 8-byte header and a zlib stream of the section (inflated at open).
+        if (h.grid_size < kCompressedGridHeaderBytes + 1 || h.grid_size > kCompressedGridHeaderBytes + max_stored_size(most))
+          fail(216, "compressed grid section size " + std::to_string(h.grid_size) + " does not fit the skip level's grid (" +
+                        std::to_string(CutGrid::serialized_size(h.skip_level)) + " bytes inflated)");
+      } else if (h.grid_size < least || h.grid_size > most) {
         fail(216, "grid section size " + std::to_string(h.grid_size) + " does not fit the skip level's grid (" +
-                      std::to_string(grid) + " bytes) and a map preview" + (dict ? " and a DAG-MH dictionary" : ""));
+                      std::to_string(CutGrid::serialized_size(h.skip_level)) + " bytes) and a map preview" +
+                      (dict ? " and a DAG-MH dictionary" : ""));
+      }
     }
     if (h.index_offset != h.grid_offset + h.grid_size) fail(224, "bad index offset");
     if (h.tile_count > limit / kIndexEntryBytes) fail(232, "tile count too large");

@@ -68,7 +68,11 @@ enum PackFeature : uint32_t {
   // (pack_dictionary.hpp, tiles/PACK.md "DAG-MH dictionary"); its encoded tiles may be
   // DAG-MH version 2, which reference it. Only with encoding dagmh, never with stack.
   kFeatureDagmhDictionary = 1u << 6,
-  kKnownFeatures = 0x7F,
+  // The grid section (skip grid, map preview, DAG-MH dictionary) is stored as one zlib
+  // stream behind an 8-byte header (tiles/PACK.md "Compressed grid section"); readers
+  // inflate it at open and hand out the inflated section. Never with stack.
+  kFeatureCompressedGrid = 1u << 7,
+  kKnownFeatures = 0xFF,
 };
 
 // Header layout (offset: size field):
@@ -178,5 +182,17 @@ std::vector<uint8_t> zlib_decompress(std::span<const uint8_t> stored, uint32_t r
 void zlib_decompress_into(std::span<const uint8_t> stored, std::span<uint8_t> out, const std::string& what);
 
 std::string hex32(uint32_t v);
+
+// Compressed grid section (kFeatureCompressedGrid): "STGZ", u32 R = the inflated section's
+// bytes, then a zlib stream of exactly R bytes.
+inline constexpr uint32_t kCompressedGridMagic = 0x5A475453;  // "STGZ"
+inline constexpr uint32_t kCompressedGridHeaderBytes = 8;
+std::vector<uint8_t> compress_grid_section(std::span<const uint8_t> raw, int level);
+// Inflates a stored section whose R must lie in [least, most]; throws st::FormatError
+// naming `what` (and the field) otherwise, before allocating R bytes.
+std::vector<uint8_t> inflate_grid_section(std::span<const uint8_t> stored, uint64_t least, uint64_t most,
+                                          const std::string& what);
+// The bounds [least, most] on a (non-stack) pack's inflated grid section.
+std::pair<uint64_t, uint64_t> grid_section_bounds(uint32_t skip_level, bool dictionary);
 
 }  // namespace st

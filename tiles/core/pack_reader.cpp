@@ -139,6 +139,10 @@ void PackReader::load() {
   grid_bytes_.resize(header_.grid_size);
   read_at(header_.grid_offset, grid_bytes_);
   if (crc32_of(grid_bytes_) != header_.grid_crc) throw FormatError(where(header_.grid_offset) + ": skip grid CRC mismatch");
+  if (header_.flags & kFeatureCompressedGrid) {  // tiles/PACK.md "Compressed grid section"; never a stack
+    const auto [least, most] = grid_section_bounds(header_.skip_level, header_.flags & kFeatureDagmhDictionary);
+    grid_bytes_ = inflate_grid_section(grid_bytes_, least, most, where(header_.grid_offset));
+  }
   if (header_.flags & kFeatureStack) {
     load_stack();
     preview_ = std::make_shared<MapPreview>();  // a stack pack's grid section is its stack grid
