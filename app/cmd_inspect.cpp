@@ -45,7 +45,7 @@ void run(const InspectArgs& a) {
   j["skip_level"] = h.skip_level;
   j["encoding"] = to_string(h.encoding);
   j["light"] = r->light().spec().to_string();
-  j["light_kind"] = h.light_kind == LightKind::sun ? "sun" : "spot";
+  j["light_kind"] = light_kind_name(h.light_kind);
   j["tile_bytes"] = h.tile_bytes;
   char hash[32];
   std::snprintf(hash, sizeof hash, "%016llx", (unsigned long long)h.scene_hash);

@@ -40,7 +40,7 @@ void use_threads() {
 }
 
 std::string encode_light_space(const LightSpace& ls) {
-  std::string out = ls.kind() == LightKind::sun ? "sun" : "spot";
+  std::string out = light_kind_name(ls.kind());
   char buf[40];
   for (double v : ls.to_array()) {
     std::snprintf(buf, sizeof buf, " %.17g", v);
@@ -53,7 +53,10 @@ LightSpace decode_light_space(const std::string& path, const std::string& text) 
   std::istringstream is(text);
   std::string kind;
   is >> kind;
-  if (kind != "sun" && kind != "spot")
+  LightKind lk = LightKind::sun;
+  if (kind == "spot") lk = LightKind::spot;
+  else if (kind == "spot-window") lk = LightKind::spot_window;
+  else if (kind != "sun")
     throw FormatError(path + ": attribute " + kAttrLightSpace + ": unknown light kind '" + kind + "'");
   std::array<double, 18> a{};
   for (size_t i = 0; i < a.size(); ++i) {
@@ -68,7 +71,9 @@ LightSpace decode_light_space(const std::string& path, const std::string& text) 
   std::string extra;
   if (is >> extra)
     throw FormatError(path + ": attribute " + kAttrLightSpace + ": trailing data '" + extra + "'");
-  return LightSpace::from_array(kind == "sun" ? LightKind::sun : LightKind::spot, a);
+  if (const std::string bad = LightSpace::check_array(lk, a); !bad.empty())
+    throw FormatError(path + ": attribute " + kAttrLightSpace + ": " + bad);
+  return LightSpace::from_array(lk, a);
 }
 
 Imf::FrameBuffer interval_frame_buffer(IntervalTile& tile) {

@@ -122,6 +122,11 @@ LightSetSpec LightSetSpec::parse(const std::string& text) {
       s.fov_deg = number(kind, key, one());
     } else if (s.kind == LightSetKind::area && key == "jitter") {
       s.jitter = number(kind, key, one());
+    } else if (s.kind == LightSetKind::area && key == "frame") {
+      const std::string& f = one();
+      if (f == "window") s.frame = AreaFrame::window;
+      else if (f == "translate") s.frame = AreaFrame::translate;
+      else fail(kind, "frame must be window or translate, got '" + f + "'");
     } else if (s.kind == LightSetKind::area && key == "seed") {
       const double v = number(kind, key, one());
       if (v != std::floor(v) || v < 0 || v > 9007199254740992.0) fail(kind, "seed must be an integer >= 0");
@@ -156,7 +161,7 @@ std::string LightSetSpec::to_string() const {
   } else {
     os << "area:pos=" << pos.x << ',' << pos.y << ',' << pos.z << ",target=" << target.x << ',' << target.y << ','
        << target.z << ",size=" << width << ',' << height << ",samples=" << samples << ",fov=" << fov_deg
-       << ",jitter=" << jitter << ",seed=" << seed;
+       << ",jitter=" << jitter << ",seed=" << seed << ",frame=" << (frame == AreaFrame::window ? "window" : "translate");
   }
   return os.str();
 }
@@ -269,6 +274,60 @@ std::vector<LightSpace> fit_sun_path(const std::vector<LightSpec>& specs, const 
   return out;
 }
 
+// An area light's samples in the window frame (light_set.hpp "Frames"): the translate
+// frame's fits give near/far (z along the shared axis is the same from every point of
+// the rectangle); each sample then takes the shift that centres the window on target and
+// the one grown extent.
+std::vector<LightSpace> fit_area_window(const LightSetSpec& set, const std::vector<LightSpec>& specs, const Aabb& b) {
+  std::vector<LightSpace> fits;
+  fits.reserve(specs.size());
+  double near = INFINITY, far = 0;
+  for (size_t w = 0; w < specs.size(); ++w) {
+    try {
+      fits.push_back(LightSpace::fit(specs[w], b));
+    } catch (const Error& e) {
+      throw Error("light set sample " + std::to_string(w) + " (" + specs[w].to_string() + "): " + e.what());
+    }
+    near = std::min(near, fits.back().near_plane()), far = std::max(far, fits.back().far_plane());
+  }
+  // One basis for every sample, bit for bit: the centred spot's (each translated spot's
+  // normalize(target - pos) may differ from it in the last bit).
+  LightSpec centre = specs[0];
+  centre.pos = set.pos, centre.target = set.target;
+  const LightSpace first = LightSpace::fit(centre, b);
+  const Vec3d U = first.axis_u(), V = first.axis_v(), F = first.forward();
+  const double D = dot(set.target - set.pos, F);
+  double offset = 0;  // max |o_u|, |o_v| over the samples
+  std::vector<std::array<double, 2>> shift(specs.size());
+  for (size_t w = 0; w < specs.size(); ++w) {
+    const Vec3d r = set.target - specs[w].pos;  // the window's centre seen from the sample
+    const double z = dot(r, F);
+    shift[w] = {dot(r, U) / z, dot(r, V) / z};
+    const Vec3d o = specs[w].pos - set.pos;
+    offset = std::max({offset, std::fabs(dot(o, U)), std::fabs(dot(o, V))});
+  }
+  const double grow = offset * std::max(std::fabs(1 / D - 1 / near), std::fabs(1 / D - 1 / far));
+  const double extent = first.extent_uv() + 2 * grow;
+  const double fov = 2 * std::atan(extent / 2) * 180 / kPi;
+  if (!(D > 0) || !std::isfinite(extent) || !(fov < 170))
+    throw Error("light set " + set.to_string() + ": the window frame needs a field of view of " + std::to_string(fov) +
+                " degrees (above 170: the scene reaches too close to the light for the rectangle's size); use "
+                "frame=translate");
+  std::vector<LightSpace> out;
+  out.reserve(specs.size());
+  for (size_t w = 0; w < specs.size(); ++w) {
+    std::array<double, 18> a = fits[w].to_array();
+    const double basis[9] = {U.x, U.y, U.z, V.x, V.y, V.z, F.x, F.y, F.z};
+    for (int i = 0; i < 9; ++i) a[3 + i] = basis[i];
+    a[12] = extent, a[13] = near, a[14] = far;
+    a[15] = shift[w][0], a[16] = shift[w][1], a[17] = fov;
+    const std::string bad = LightSpace::check_array(LightKind::spot_window, a);
+    if (!bad.empty()) throw Error("light set sample " + std::to_string(w) + " (" + specs[w].to_string() + "): " + bad);
+    out.push_back(LightSpace::from_array(LightKind::spot_window, a));
+  }
+  return out;
+}
+
 }  // namespace
 
 LightSet LightSet::fit(const LightSetSpec& spec, const Aabb& bounds) {
@@ -278,6 +337,10 @@ LightSet LightSet::fit(const LightSetSpec& spec, const Aabb& bounds) {
   const std::vector<LightSpec> specs = spec.sample_specs();
   if (spec.kind == LightSetKind::sun_path) {
     set.samples = fit_sun_path(specs, bounds);
+    return set;
+  }
+  if (spec.frame == AreaFrame::window) {
+    set.samples = fit_area_window(spec, specs, bounds);
     return set;
   }
   set.samples.reserve(specs.size());

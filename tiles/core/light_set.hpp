@@ -12,10 +12,11 @@
 //       degrees; E0..E1 may rise or set, both ends in (0, 90]. A single angle `A` means A..A.
 //
 //   area:pos=X,Y,Z,target=X,Y,Z,size=W,H,samples=N[,fov=DEG][,jitter=J][,seed=S]
+//        [,frame=window|translate]
 //       A W x H rectangle centred on pos, facing target (its axes are the spot light's
-//       u and v axes of pos -> target). Sample w is a spot light at a point of the
-//       rectangle looking along the same axis (its target moves with it, so every sample
-//       shares one basis and neighbouring slices stay coherent). The points are the cells
+//       u and v axes of pos -> target). Sample w is a light at a point of the rectangle
+//       looking along the same axis (every sample shares one basis), in the frame below
+//       ("Frames": window, the default, or translate). The points are the cells
 //       of a 2^g x 2^g grid (the smallest with 4^g >= N) taken in Hilbert-curve order
 //       (MH §4 after Ritschel et al. 2007), N of them spread evenly along the curve, so
 //       consecutive slices are neighbouring points. jitter J in [0, 1] moves each point
@@ -31,6 +32,28 @@
 // near/far range (the union of the samples' fits). Texel size and depth scale are thus the
 // same in every slice; what remains is the geometry's own motion (an orthographic sun
 // turning by an angle a shifts a point at distance r from the box centre by about a * r).
+//
+// Area light frames. The reference plane is the plane through `target` perpendicular to
+// the axis pos -> target, at distance D from the rectangle (the rectangle is parallel to
+// it, so every sample is at distance D).
+//   frame=window (default; LightKind::spot_window): every sample's frustum passes through
+//       one shared window on the reference plane, centred on target. Sample w at offset
+//       (o_u, o_v) from pos is a spot at its point with the basis of pos -> target and its
+//       principal point shifted to the window's centre, (c_u, c_v) = the image-plane
+//       coordinates of target seen from the sample (= (-o_u, -o_v) / D), and one extent E
+//       for every sample: E = 2 tan(fov / 2) (the centred spot's) grown by
+//       2 max_w max(|o_u|, |o_v|) max(|1/D - 1/near|, |1/D - 1/far|), so that every
+//       sample's frustum through the window holds the centred spot's frustum between near
+//       and far. A point on the reference plane lands on the same (u, v) in every slice
+//       (u = dot(p - pos, axis_u) / (D E) + 0.5, whatever the sample); a point at distance
+//       z moves between two samples by their offset times |1/z - 1/D| / E of the image
+//       (the translate frame: offset / (z E)), so receivers near the plane read nearly one
+//       (x, y) in every slice. A growth beyond a 170-degree field of view (the scene
+//       reaching up to the light) is refused with a clear error: use frame=translate.
+//   frame=translate (LightKind::spot): sample w is the spot light pos -> target translated
+//       with its point (its target moves with it), extent E = 2 tan(fov / 2); the whole
+//       image shifts by offset / z between samples.
+// Depth in both: the spot's (linear in distance along the axis, one near/far for the set).
 //
 // Bounds: 1 <= N <= kMaxLightSamples. Every number finite, sizes > 0, coordinates within
 // kMaxLightCoordinate. A light set the build cannot represent (more samples than the stack
@@ -48,6 +71,8 @@ namespace st {
 inline constexpr uint32_t kMaxLightSamples = 4096;
 
 enum class LightSetKind : uint8_t { sun_path = 0, area = 1 };
+// An area light's sample frames (see "Frames" above).
+enum class AreaFrame : uint8_t { window = 0, translate = 1 };
 
 struct LightSetSpec {
   LightSetKind kind = LightSetKind::sun_path;
@@ -58,6 +83,7 @@ struct LightSetSpec {
   Vec3d pos{}, target{};
   double width = 1, height = 1, fov_deg = 60, jitter = 0;
   uint64_t seed = 1;
+  AreaFrame frame = AreaFrame::window;
 
   // True when `text` names a light set (starts with "sun-path:" or "area:"), so a caller
   // can route `--light` to LightSpec::parse or here.
@@ -65,7 +91,8 @@ struct LightSetSpec {
   static LightSetSpec parse(const std::string& text);
   std::string to_string() const;
 
-  // The N per-sample light specs, in slice order (sun-path: sun specs; area: spot specs).
+  // The N per-sample light specs, in slice order (sun-path: sun specs; area: the
+  // translate frame's spot specs, whose pos is the sample's point whatever the frame).
   std::vector<LightSpec> sample_specs() const;
 };
 

@@ -90,7 +90,7 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
     fail(24, "unknown encoding " + std::to_string(b[24]) + " (this build reads 0-" + std::to_string(int(kLastEncoding)) +
                  ": mh, mmh, dagmh, vsdag; written by a newer shadowtile?)");
   h.encoding = Encoding(b[24]);
-  if (b[25] > uint8_t(LightKind::spot)) fail(25, "unknown light kind " + std::to_string(b[25]));
+  if (!light_kind_known(b[25])) fail(25, "unknown light kind " + std::to_string(b[25]));
   h.light_kind = LightKind(b[25]);
   h.map_level = b[26];
   h.skip_level = b[27];

@@ -470,7 +470,7 @@ std::string PackReader::summary() const {
   char buf[320];
   std::string out = name_ + "\n";
   std::snprintf(buf, sizeof buf, "  version %u, encoding %s, light %s, map level %u (%llu texels a side), skip level %u\n",
-                kPackVersion, to_string(header_.encoding).c_str(), header_.light_kind == LightKind::sun ? "sun" : "spot",
+                kPackVersion, to_string(header_.encoding).c_str(), light_kind_name(header_.light_kind),
                 header_.map_level, (unsigned long long)(uint64_t(1) << header_.map_level), header_.skip_level);
   out += buf;
   std::snprintf(buf, sizeof buf, "  features %s, scene hash %016llx, tile_bytes %u\n",
