@@ -297,17 +297,82 @@ std::vector<LightSpace> fit_area_window(const LightSetSpec& set, const std::vect
   const LightSpace first = LightSpace::fit(centre, b);
   const Vec3d U = first.axis_u(), V = first.axis_v(), F = first.forward();
   const double D = dot(set.target - set.pos, F);
-  double offset = 0;  // max |o_u|, |o_v| over the samples
   std::vector<std::array<double, 2>> shift(specs.size());
   for (size_t w = 0; w < specs.size(); ++w) {
     const Vec3d r = set.target - specs[w].pos;  // the window's centre seen from the sample
     const double z = dot(r, F);
     shift[w] = {dot(r, U) / z, dot(r, V) / z};
-    const Vec3d o = specs[w].pos - set.pos;
-    offset = std::max({offset, std::fabs(dot(o, U)), std::fabs(dot(o, V))});
   }
-  const double grow = offset * std::max(std::fabs(1 / D - 1 / near), std::fabs(1 / D - 1 / far));
-  const double extent = first.extent_uv() + 2 * grow;
+  // The part of the scene the centred spot sees: the scene box clipped to its frustum
+  // between near and far, two convex polytopes. Each sample's image coordinate minus its
+  // shift is linear-fractional in the point (positive denominator z), so its largest
+  // magnitude over that intersection is at one of its vertices; every vertex lies on a
+  // face of one polytope inside the other, so clipping each one's six faces by the other's
+  // six half-spaces finds them all.
+  using Poly = std::vector<Vec3d>;
+  struct Half {
+    Vec3d n;
+    double c;  // inside: dot(n, p) + c >= 0
+  };
+  auto clip = [](Poly poly, const std::vector<Half>& hs) {
+    for (const Half& h : hs) {  // Sutherland-Hodgman
+      Poly next;
+      for (size_t j = 0; j < poly.size(); ++j) {
+        const Vec3d& p = poly[j];
+        const Vec3d& q = poly[(j + 1) % poly.size()];
+        const double fp = dot(h.n, p) + h.c, fq = dot(h.n, q) + h.c;
+        if (fp >= 0) next.push_back(p);
+        if ((fp >= 0) != (fq >= 0)) next.push_back(p + (q - p) * (fp / (fp - fq)));
+      }
+      poly = std::move(next);
+    }
+    return poly;
+  };
+  // The box's faces and half-spaces.
+  std::vector<Poly> faces;
+  std::vector<Half> box_h;
+  const double lo[3] = {b.lo.x, b.lo.y, b.lo.z}, hi[3] = {b.hi.x, b.hi.y, b.hi.z};
+  for (int face = 0; face < 6; ++face) {
+    const int axis = face / 2, a1 = (axis + 1) % 3, a2 = (axis + 2) % 3;
+    Poly poly;
+    for (int i : {0, 1, 3, 2}) {  // around the face
+      double q[3];
+      q[axis] = face % 2 ? hi[axis] : lo[axis];
+      q[a1] = i & 1 ? hi[a1] : lo[a1];
+      q[a2] = i & 2 ? hi[a2] : lo[a2];
+      poly.push_back({q[0], q[1], q[2]});
+    }
+    faces.push_back(poly);
+    double e[3] = {0, 0, 0};
+    e[axis] = face % 2 ? -1 : 1;
+    box_h.push_back({{e[0], e[1], e[2]}, face % 2 ? hi[axis] : -lo[axis]});
+  }
+  // The centred spot's frustum between near and far: corners and half-spaces.
+  const double h0 = first.extent_uv() / 2;
+  Vec3d corner[8];
+  for (int i = 0; i < 8; ++i) {
+    const double z = i & 4 ? far : near;
+    corner[i] = set.pos + (F + U * (i & 1 ? h0 : -h0) + V * (i & 2 ? h0 : -h0)) * z;
+  }
+  const int quads[6][4] = {{0, 1, 3, 2}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 3, 7, 6}, {0, 2, 6, 4}, {1, 3, 7, 5}};
+  std::vector<Half> frustum_h;
+  for (const Vec3d& n : {F * h0 - U, F * h0 + U, F * h0 - V, F * h0 + V}) frustum_h.push_back({n, -dot(n, set.pos)});
+  frustum_h.push_back({F, -dot(F, set.pos) - near});
+  frustum_h.push_back({-F, dot(F, set.pos) + far});
+  std::vector<Vec3d> vertices;
+  for (const Poly& f : faces)
+    for (const Vec3d& p : clip(f, frustum_h)) vertices.push_back(p);
+  for (const auto& q : quads)
+    for (const Vec3d& p : clip({corner[q[0]], corner[q[1]], corner[q[2]], corner[q[3]]}, box_h)) vertices.push_back(p);
+  double need = h0;
+  for (const Vec3d& p : vertices)
+    for (size_t w = 0; w < specs.size(); ++w) {
+      const Vec3d r = p - specs[w].pos;
+      const double z = dot(r, F);
+      need = std::max({need, std::fabs(dot(r, U) / z - shift[w][0]), std::fabs(dot(r, V) / z - shift[w][1])});
+    }
+  // A margin far above the rounding of these quotients.
+  const double extent = std::max(first.extent_uv(), 2 * need * (1 + 1e-9));
   const double fov = 2 * std::atan(extent / 2) * 180 / kPi;
   if (!(D > 0) || !std::isfinite(extent) || !(fov < 170))
     throw Error("light set " + set.to_string() + ": the window frame needs a field of view of " + std::to_string(fov) +

@@ -41,15 +41,17 @@
 //       (o_u, o_v) from pos is a spot at its point with the basis of pos -> target and its
 //       principal point shifted to the window's centre, (c_u, c_v) = the image-plane
 //       coordinates of target seen from the sample (= (-o_u, -o_v) / D), and one extent E
-//       for every sample: E = 2 tan(fov / 2) (the centred spot's) grown by
-//       2 max_w max(|o_u|, |o_v|) max(|1/D - 1/near|, |1/D - 1/far|), so that every
-//       sample's frustum through the window holds the centred spot's frustum between near
-//       and far. A point on the reference plane lands on the same (u, v) in every slice
+//       for every sample: E = 2 tan(fov / 2) (the centred spot's), grown where needed so
+//       that every sample's frustum through the window holds what the centred spot sees
+//       of the scene box between near and far (that box clipped to its frustum; the
+//       largest |image coordinate - shift| over the clipped part's vertices, exact since
+//       the coordinate is linear-fractional in the point). A point on the reference plane lands on the same (u, v) in every slice
 //       (u = dot(p - pos, axis_u) / (D E) + 0.5, whatever the sample); a point at distance
 //       z moves between two samples by their offset times |1/z - 1/D| / E of the image
 //       (the translate frame: offset / (z E)), so receivers near the plane read nearly one
-//       (x, y) in every slice. A growth beyond a 170-degree field of view (the scene
-//       reaching up to the light) is refused with a clear error: use frame=translate.
+//       (x, y) in every slice. A growth beyond a 170-degree field of view (the seen part
+//       of the scene reaching up to the light) is refused with a clear error: use
+//       frame=translate.
 //   frame=translate (LightKind::spot): sample w is the spot light pos -> target translated
 //       with its point (its target moves with it), extent E = 2 tan(fov / 2); the whole
 //       image shifts by offset / z between samples.
