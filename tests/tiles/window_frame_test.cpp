@@ -9,7 +9,6 @@
 #include "common/error.hpp"
 #include "common/hash.hpp"
 #include "tests/tiles/stack_fixtures.hpp"
-#include "tiles/bake/scene.hpp"
 #include "tiles/build/mh_octree_encode.hpp"
 #include "tiles/core/mh_octree.hpp"
 
