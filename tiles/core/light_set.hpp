@@ -29,7 +29,7 @@
 // its switch of helper axis near the zenith, so the frame never jumps between two
 // samples), v = forward x u, and one box size and depth range: the largest any sample needs,
 // each box centred on the scene. An area light's samples share the spot basis and one
-// near/far range (the union of the samples' fits). Texel size and depth scale are thus the
+// near/far range (the union of the samples' fits), in one of the two frames below. Texel size and depth scale are thus the
 // same in every slice; what remains is the geometry's own motion (an orthographic sun
 // turning by an angle a shifts a point at distance r from the box centre by about a * r).
 //
@@ -45,8 +45,9 @@
 //       that every sample's frustum through the window holds what the centred spot sees
 //       of the scene box between near and far (that box clipped to its frustum; the
 //       largest |image coordinate - shift| over the clipped part's vertices, exact since
-//       the coordinate is linear-fractional in the point). A point on the reference plane lands on the same (u, v) in every slice
-//       (u = dot(p - pos, axis_u) / (D E) + 0.5, whatever the sample); a point at distance
+//       the coordinate is linear-fractional in the point). A point on the reference plane
+//       lands on the same (u, v) in every slice (u = dot(p - pos, axis_u) / (D E) + 0.5,
+//       whatever the sample; up to rounding); a point at distance
 //       z moves between two samples by their offset times |1/z - 1/D| / E of the image
 //       (the translate frame: offset / (z E)), so receivers near the plane read nearly one
 //       (x, y) in every slice. A growth beyond a 170-degree field of view (the seen part
@@ -59,7 +60,8 @@
 //
 // Bounds: 1 <= N <= kMaxLightSamples. Every number finite, sizes > 0, coordinates within
 // kMaxLightCoordinate. A light set the build cannot represent (more samples than the stack
-// may hold) is refused here, before anything is traced.
+// may hold, a window frame wider than 170 degrees) is refused here, before anything is
+// traced.
 #pragma once
 #include <cstdint>
 #include <string>
