@@ -5,11 +5,12 @@
 //   bench_stacks [--res 256] [--city-samples 32] [--hair-samples 64] [--lookups 20000]
 //                [--reps 3] [--case city|city-hour|hairball|all] [--hair-jitter 0.5] [--json PATH]
 //                [--mode auto|whole|blocked] [--tracer auto|embree] [--spill-dir /tmp]
-//                [--frame ground|ortho|both]
+//                [--frame ground|ortho|both] [--hair-frame window|translate|both]
 //
 // --frame: the sun paths' frame (light_set.hpp "Frames"): ground (the default, the
 // oblique ground-aligned frame), ortho (an orthographic box per sample), or both (each
-// sun case twice in one run, ortho first, for side-by-side ratios).
+// sun case twice in one run, ortho first, for side-by-side ratios). --hair-frame: the
+// area light's frame, window (the default) or translate, or both.
 //
 // --mode whole (the default below 4K^2 per slice) holds the stack in memory and builds
 // one octree buffer; --mode blocked (from 4K^2) spills and builds the pack's cut out of
@@ -18,7 +19,9 @@
 // Cases: procedural:city under a day's sun path (azimuth 100..260, elevation 25..65), the
 // same city under an hour of it (azimuth 170..185, elevation 50..52), and
 // procedural:hairball under a 4 m x 4 m area light 25 m above it (Hilbert-ordered,
-// jitter 0.5). Each slice is traced by trace_stack (the light-space rasterizer for sun
+// jitter 0.5) in the area light's window frame (light_set.hpp "Frames"; --hair-frame
+// translate: the translated spots of before, both: the two cases side by side in one run,
+// "hairball" and "hairball-translate"). Each slice is traced by trace_stack (the light-space rasterizer for sun
 // samples, Embree for the area light's; --tracer embree: Embree for all), then
 //   octree: build_octree + encode_octree of the whole stack;
 //   2D:     build_hierarchy + encode_mh of every slice (what N separate packs would hold).
@@ -523,7 +526,7 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
 int main(int argc, char** argv) {
   try {
     uint32_t level = 8, city_n = 32, hair_n = 64;
-    std::string hair_jitter = "0.5";
+    std::string hair_jitter = "0.5", hair_frame = "window";
     size_t lookups = 20000;
     int reps = 3;
     std::string which = "all", json_path = "build/bench_stacks.json", mode = "auto", tracer = "auto", spill_dir = "/tmp",
@@ -539,6 +542,7 @@ int main(int argc, char** argv) {
       else if (a == "--hair-samples") hair_n = uint32_t(std::stoul(next()));
       else if (a == "--lookups") lookups = std::stoul(next());
       else if (a == "--hair-jitter") hair_jitter = next();
+      else if (a == "--hair-frame") hair_frame = next();
       else if (a == "--reps") reps = std::max(1, std::stoi(next()));
       else if (a == "--case") which = next();
       else if (a == "--json") json_path = next();
@@ -563,9 +567,13 @@ int main(int argc, char** argv) {
         cases.push_back({"city-hour" + tag, "procedural:city",
                          "sun-path:azimuth=170..185,elevation=50..52,samples=" + std::to_string(city_n) + ",frame=" + f});
     }
-    if (which == "all" || which == "hairball")
-      cases.push_back({"hairball", "procedural:hairball",
-                       "area:pos=0,25,0,target=0,0,0,size=4,4,samples=" + std::to_string(hair_n) + ",jitter=" + hair_jitter});
+    if (hair_frame != "window" && hair_frame != "translate" && hair_frame != "both")
+      throw st::Error("--hair-frame: expected window, translate or both");
+    for (const char* hf : {"window", "translate"})
+      if ((which == "all" || which == "hairball") && (hair_frame == hf || hair_frame == "both"))
+        cases.push_back({std::string(hf) == "window" ? "hairball" : "hairball-translate", "procedural:hairball",
+                         "area:pos=0,25,0,target=0,0,0,size=4,4,samples=" + std::to_string(hair_n) +
+                             ",jitter=" + hair_jitter + ",frame=" + hf});
     nlohmann::json out = nlohmann::json::array();
     if (mode != "auto" && mode != "whole" && mode != "blocked") throw st::Error("--mode: expected auto, whole or blocked");
     if (tracer != "auto" && tracer != "embree") throw st::Error("--tracer: expected auto or embree");

@@ -47,6 +47,17 @@ check stack-render-soft-diff 0 "differing pixels: [0-9]+ of [1-9][0-9]+ receiver
 check stack-render-both 1 "not both" -- "$st" render stack.pack --scene $scene $scam --time 0.5 --soft -o x.exr
 check stack-render-bad-time 1 "time: expected a time in \[0, 1\]" -- \
   "$st" render stack.pack --scene $scene $scam --time 1.5 -o x.exr
+# An area light's stack in its default window frame (windowed spots): inspect names the
+# frame, verify re-traces every texel of every slice, a slice exports, soft shadows render.
+hair="procedural:hairball,count=12"
+areal="--light area:pos=2,20,1,target=0,0,0,size=4,4,samples=4"
+check area-build 0 "stack of 4 slices of 64\^2" -- "$st" build $hair $areal --resolution 64 --tile-bytes 4096 -o area.pack -q
+check area-inspect 0 "light        spot-window:" -- "$st" inspect area.pack
+check area-verify 0 "every texel of all 4 slices" -- "$st" verify area.pack $hair
+check area-export 0 "exported slice 3 level 5" -- "$st" export area.pack --slice 3 --level 5 -o aslice.exr
+check area-render-soft 0 "differing pixels: [0-9]+ of [1-9][0-9]+ receivers" -- \
+  "$st" render area.pack --scene $hair --camera pos=3,3,3,target=0,0,0 --size 96x54 --soft --diff -o as.exr
+check area-window-refused 1 "use frame=translate" -- "$st" build $scene --light area:pos=20,60,10,target=0,0,0,size=8,8,samples=4 --resolution 64 -o x.pack -q
 check stack-too-big 1 "exceeds the 2\^34 texels" -- "$st" build $scene --light sun-path:azimuth=1..2,elevation=50,samples=64 --resolution 64k -o x.pack -q
 # A sun near the horizon over the city: the ground frame's square would be huge (refused
 # before tracing); the orthographic frame takes it.

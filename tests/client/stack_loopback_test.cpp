@@ -28,19 +28,20 @@ IntervalStack sliding_stack(uint32_t level, uint32_t slices) {
   return s;
 }
 
-TEST(StackLoopback, ServedStackAnswersLikeTheLocalPack) {
+// `light_set` gives the slices' transforms (the stack itself is synthetic); `name` the
+// pack's file and map name.
+void served_stack_answers_like_local(const std::string& light_set, const std::string& name) {
   const uint32_t slices = 10;
   const IntervalStack s = sliding_stack(looptest::small_scale() ? 5 : 6, slices);
   StackCut cut = cut_stack(build_octree(s), std::nullopt, 512);
   Aabb box;
   box.extend({-10, 0, -10});
   box.extend({10, 5, 10});
-  const LightSet set = LightSet::fit(
-      LightSetSpec::parse("sun-path:azimuth=150..200,elevation=40..60,samples=" + std::to_string(slices)), box);
+  const LightSet set = LightSet::fit(LightSetSpec::parse(light_set + ",samples=" + std::to_string(slices)), box);
   cut.grid.light_kind = set.samples[0].kind();
   for (const LightSpace& l : set.samples) cut.grid.lights.push_back(l.to_array());
   cut.grid.spec = set.spec.to_string();
-  const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/stackmap.pack";
+  const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/" + name + ".pack";
   StackPackParams p;
   p.tile_bytes = 512;
   write_stack_pack(path, cut, p);
@@ -50,7 +51,7 @@ TEST(StackLoopback, ServedStackAnswersLikeTheLocalPack) {
   const ResidentStack local(*reader);
   auto srv = looptest::start_server({path});
   Client c({"127.0.0.1", srv.port}, looptest::quick_options());
-  Map m = c.open("stackmap");
+  Map m = c.open(name);
   ASSERT_EQ(m.slices(), slices);
 
   uint64_t rng = 99;
@@ -94,6 +95,16 @@ TEST(StackLoopback, ServedStackAnswersLikeTheLocalPack) {
         for (uint64_t x = 0; x < (uint64_t(1) << level); x += 3)
           ASSERT_EQ(m.slice_depth(w, level, x, y), local.map().depth(x, y, w, level));
   srv.stop();
+}
+
+TEST(StackLoopback, ServedStackAnswersLikeTheLocalPack) {
+  served_stack_answers_like_local("sun-path:azimuth=150..200,elevation=40..60", "stackmap");
+}
+
+// An area light's samples in the window frame (windowed spots): the client transforms
+// each slice's points as the local pack does.
+TEST(StackLoopback, ServedWindowFrameAreaStackAnswersLikeTheLocalPack) {
+  served_stack_answers_like_local("area:pos=1,30,2,target=0,0,0,size=4,4,jitter=0.5", "stackarea");
 }
 
 }  // namespace

@@ -124,7 +124,7 @@ TEST(GroundFrame, SerializationRoundTripsAndBadArraysAreRefused) {
     EXPECT_NE(LightSpace::check_array(LightKind::sun_ground, bad).find("orthogonal"), std::string::npos);
   }
   EXPECT_NE(LightSpace::check_array(LightKind(7), a).find("unknown light kind 7"), std::string::npos);
-  EXPECT_STREQ(light_kind_name(LightKind::sun_ground), "sun_ground");
+  EXPECT_STREQ(light_kind_name(LightKind::sun_ground), "sun-ground");
 }
 
 // ground=Y moves the reference plane: points at that height keep their texel; a scene's
@@ -150,10 +150,10 @@ TEST(GroundFrame, GroundHeightFromTheSpecOrTheScene) {
 }
 
 TEST(GroundFrame, FrameFieldAndTheStretchLimit) {
-  EXPECT_EQ(LightSetSpec::parse("sun-path:azimuth=1,elevation=40,samples=2").frame, SunFrame::ground);
+  EXPECT_EQ(LightSetSpec::parse("sun-path:azimuth=1,elevation=40,samples=2").sun_frame, SunFrame::ground);
   const LightSetSpec o = LightSetSpec::parse("sun-path:azimuth=1,elevation=40,samples=2,frame=ortho");
-  EXPECT_EQ(o.frame, SunFrame::ortho);
-  EXPECT_EQ(LightSetSpec::parse(o.to_string()).frame, SunFrame::ortho);
+  EXPECT_EQ(o.sun_frame, SunFrame::ortho);
+  EXPECT_EQ(LightSetSpec::parse(o.to_string()).sun_frame, SunFrame::ortho);
   EXPECT_THROW(LightSetSpec::parse("sun-path:azimuth=1,elevation=40,samples=2,frame=tilted"), Error);
   // A tall narrow scene under a sun near the horizon: the square would be huge.
   Aabb tower;

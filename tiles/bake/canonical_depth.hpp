@@ -21,7 +21,7 @@
 //      plane (n . dir == 0) or a non-finite quotient is no hit.
 //   4. Selection. lo takes the smallest t of the hit list, hi the t where the exit
 //      counting of canonical_interval() ends (canonical_coverage.hpp).
-//   5. Depth. Sun: d = t; spot: d = (t - near) / (far - near), in double, clamped to
+//   5. Depth. Sun: d = t; spot (and windowed spot): d = (t - near) / (far - near), in double, clamped to
 //      [0, 1], rounded to float once. hi = max(lo, hi).
 // Tests pin bit-identity across batchings on open soups, terrain, coplanar overlaps,
 // grazing and steep suns and spot lights, and between the two builders.

@@ -125,9 +125,7 @@ struct DeepSampler::Impl {
                       light.forward() * light.near_plane();
       return {o, light.forward() * (light.far_plane() - light.near_plane()), 0.0, 1.0};
     }
-    const Vec3d d = light.forward() + light.axis_u() * ((u - 0.5) * e) +
-                    light.axis_v() * ((v - 0.5) * e);
-    return {light.origin(), d, light.near_plane(), light.far_plane()};
+    return {light.origin(), light.perspective_dir(u, v), light.near_plane(), light.far_plane()};
   }
   double depth_of(double t) const {
     if (light.kind() == LightKind::sun) return t;

@@ -147,6 +147,12 @@ void intersect(const int* valid, RTCScene scene, RTCIntersectContext* ctx, RTCRa
 // plane, so S is measured along n (LightSpace::depth_axis) instead of the forward axis.
 // With that, every covered ray still meets its triangle's box on the traversed segment,
 // and the argument holds word for word.
+//
+// A windowed spot (LightKind::spot_window, an area light sample's sheared frame) is a
+// spot for all of this: its texel rays still share one origin and have a unit forward
+// component (|d|2 >= 1), and nothing above uses where on the image plane they point; only
+// the bound |d|inf over the map (d_max, for the float ray error) takes the shift, through
+// LightSpace::perspective_dir at the map's corners (d is affine in u, v).
 namespace {
 
 struct CoverageData {
@@ -533,8 +539,7 @@ void DepthBoundsTracer::Impl::build_coverage(const Scene& s, const std::vector<u
       d_max = max3(abs3(light.texel_ray(0, 0, 0).dir));
     } else {
       corner[c] = light.origin() - centre;
-      d_max = std::max(d_max, max3(abs3(light.forward() + light.axis_u() * ((u - 0.5) * E) +
-                                        light.axis_v() * ((v - 0.5) * E))));
+      d_max = std::max(d_max, max3(abs3(light.perspective_dir(u, v))));  // a window's shift included
     }
     const Vec3d a = abs3(corner[c]);
     o_max = {std::max(o_max.x, a.x), std::max(o_max.y, a.y), std::max(o_max.z, a.z)};

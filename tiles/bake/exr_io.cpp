@@ -53,7 +53,11 @@ LightSpace decode_light_space(const std::string& path, const std::string& text) 
   std::istringstream is(text);
   std::string kind;
   is >> kind;
-  if (kind != "sun" && kind != "spot" && kind != "sun_ground")
+  LightKind lk = LightKind::sun;
+  if (kind == "spot") lk = LightKind::spot;
+  else if (kind == "sun_ground" || kind == "sun-ground") lk = LightKind::sun_ground;
+  else if (kind == "spot-window") lk = LightKind::spot_window;
+  else if (kind != "sun")
     throw FormatError(path + ": attribute " + kAttrLightSpace + ": unknown light kind '" + kind + "'");
   std::array<double, 18> a{};
   for (size_t i = 0; i < a.size(); ++i) {
@@ -68,11 +72,9 @@ LightSpace decode_light_space(const std::string& path, const std::string& text) 
   std::string extra;
   if (is >> extra)
     throw FormatError(path + ": attribute " + kAttrLightSpace + ": trailing data '" + extra + "'");
-  const LightKind k = kind == "sun" ? LightKind::sun : (kind == "spot" ? LightKind::spot : LightKind::sun_ground);
-  if (k == LightKind::sun_ground)  // its derived axes divide by the ray's sine: validate first
-    if (const std::string why = LightSpace::check_array(k, a); !why.empty())
-      throw FormatError(path + ": attribute " + kAttrLightSpace + ": " + why);
-  return LightSpace::from_array(k, a);
+  if (const std::string bad = LightSpace::check_array(lk, a); !bad.empty())
+    throw FormatError(path + ": attribute " + kAttrLightSpace + ": " + bad);
+  return LightSpace::from_array(lk, a);
 }
 
 Imf::FrameBuffer interval_frame_buffer(IntervalTile& tile) {

@@ -118,7 +118,7 @@ double scene_ground_height(const Scene& scene) {
 }
 
 LightSet fit_light_set(const Scene& scene, LightSetSpec spec) {
-  if (spec.kind != LightSetKind::sun_path || spec.frame != SunFrame::ground) return LightSet::fit(spec, scene.bounds());
+  if (spec.kind != LightSetKind::sun_path || spec.sun_frame != SunFrame::ground) return LightSet::fit(spec, scene.bounds());
   if (std::isnan(spec.ground)) spec.ground = scene_ground_height(scene);
   // A hull of the geometry, conservative: per height band of the box, the box of the
   // vertices in it, its corners at the band's two heights (so the square covers every

@@ -40,6 +40,21 @@ void make_basis(const Vec3d& f, Vec3d& u, Vec3d& v) {
 
 }  // namespace
 
+bool light_kind_known(uint8_t kind) {
+  return kind == uint8_t(LightKind::sun) || kind == uint8_t(LightKind::spot) || kind == uint8_t(LightKind::sun_ground) ||
+         kind == uint8_t(LightKind::spot_window);
+}
+
+const char* light_kind_name(LightKind kind) {
+  switch (kind) {
+    case LightKind::sun: return "sun";
+    case LightKind::spot: return "spot";
+    case LightKind::sun_ground: return "sun-ground";
+    case LightKind::spot_window: return "spot-window";
+  }
+  return "unknown";
+}
+
 LightSpec LightSpec::parse(const std::string& text) {
   LightSpec s;
   auto colon = text.find(':');
@@ -50,6 +65,8 @@ LightSpec LightSpec::parse(const std::string& text) {
   } else if (kind == "spot") {
     s.kind = LightKind::spot;
   } else {
+    if (kind == "spot-window")
+      throw Error("--light: 'spot-window:' is the frame of an area light set's samples (area:...), not a light of its own");
     if (kind == "sun-path" || kind == "area")
       throw Error("--light: '" + kind + ":' is a light set for shadow-map stacks (tiles/core/light_set.hpp); this command "
                   "builds one light's map (sun:... or spot:...)");
@@ -114,8 +131,9 @@ std::string LightSpec::to_string() const {
   if (kind == LightKind::sun) {
     os << "sun:azimuth=" << azimuth_deg << ",elevation=" << elevation_deg << ",margin=" << margin;
   } else {
-    os << "spot:pos=" << pos.x << ',' << pos.y << ',' << pos.z << ",target=" << target.x << ','
-       << target.y << ',' << target.z << ",fov=" << fov_deg;
+    os << (kind == LightKind::spot_window ? "spot-window:pos=" : "spot:pos=") << pos.x << ',' << pos.y << ','
+       << pos.z << ",target=" << target.x << ',' << target.y << ',' << target.z << ",fov=" << fov_deg;
+    if (kind == LightKind::spot_window) os << ",shift=" << shift_u << ',' << shift_v;
   }
   return os.str();
 }
@@ -182,6 +200,11 @@ LightPoint LightSpace::to_light(const Vec3d& p) const {
             (dot(r, forward_) - near_) / (far_ - near_)};
   }
   double z = dot(r, forward_);
+  if (kind_ == LightKind::spot_window) {  // the sheared image plane (light.hpp)
+    const double u = (dot(r, axis_u_) / z - spec_.shift_u) / extent_uv_ + 0.5;
+    const double v = (dot(r, axis_v_) / z - spec_.shift_v) / extent_uv_ + 0.5;
+    return {u, v, (z - near_) / (far_ - near_)};
+  }
   double u = dot(r, axis_u_) / (z * extent_uv_) + 0.5;
   double v = dot(r, axis_v_) / (z * extent_uv_) + 0.5;
   return {u, v, (z - near_) / (far_ - near_)};
@@ -197,8 +220,14 @@ LightRay LightSpace::texel_ray(uint32_t level, uint64_t x, uint64_t y) const {
     return {o, ax * (far_ - near_)};
   }
   // Spot: direction with unit forward component, so t is the distance along the axis.
-  Vec3d d = forward_ + axis_u_ * ((u - 0.5) * extent_uv_) + axis_v_ * ((v - 0.5) * extent_uv_);
-  return {origin_, d};
+  return {origin_, perspective_dir(u, v)};
+}
+
+Vec3d LightSpace::perspective_dir(double u, double v) const {
+  if (kind_ == LightKind::spot_window)
+    return forward_ + axis_u_ * ((u - 0.5) * extent_uv_ + spec_.shift_u) +
+           axis_v_ * ((v - 0.5) * extent_uv_ + spec_.shift_v);
+  return forward_ + axis_u_ * ((u - 0.5) * extent_uv_) + axis_v_ * ((v - 0.5) * extent_uv_);
 }
 
 double LightSpace::depth_of_t(const LightRay&, double t) const {
@@ -220,22 +249,25 @@ std::array<uint64_t, 2> LightSpace::texel_of(uint32_t level, double u, double v)
 std::array<double, 18> LightSpace::to_array() const {
   return {origin_.x, origin_.y, origin_.z, axis_u_.x, axis_u_.y, axis_u_.z,
           axis_v_.x, axis_v_.y, axis_v_.z, forward_.x, forward_.y, forward_.z,
-          extent_uv_, near_, far_, spec_.azimuth_deg, spec_.elevation_deg,
+          extent_uv_, near_, far_,
+          kind_ == LightKind::spot_window ? spec_.shift_u : spec_.azimuth_deg,
+          kind_ == LightKind::spot_window ? spec_.shift_v : spec_.elevation_deg,
           parallel() ? spec_.margin : spec_.fov_deg};
 }
 
 std::string LightSpace::check_array(LightKind kind, const std::array<double, 18>& a) {
   static const char* const kNames[18] = {"origin.x", "origin.y", "origin.z", "axis_u.x", "axis_u.y", "axis_u.z",
                                          "axis_v.x", "axis_v.y", "axis_v.z", "forward.x", "forward.y", "forward.z",
-                                         "extent", "near", "far", "azimuth", "elevation", "margin/fov"};
+                                         "extent", "near", "far", "azimuth/c_u", "elevation/c_v", "margin/fov"};
   auto num = [](double v) {
     std::ostringstream os;
     os.precision(17);
     os << v;
     return os.str();
   };
-  if (kind != LightKind::sun && kind != LightKind::spot && kind != LightKind::sun_ground)
-    return "unknown light kind " + std::to_string(int(kind)) + " (this build reads 0 sun, 1 spot, 2 sun_ground)";
+  if (!light_kind_known(uint8_t(kind)))
+    return "unknown light kind " + std::to_string(int(kind)) +
+           " (this build reads 0 sun, 1 spot, 2 sun-ground, 3 spot-window)";
   for (size_t i = 0; i < a.size(); ++i) {
     if (!std::isfinite(a[i])) return std::string(kNames[i]) + " is " + num(a[i]) + ", not a finite number";
     if (std::fabs(a[i]) > kMaxLightCoordinate)
@@ -259,6 +291,11 @@ std::string LightSpace::check_array(LightKind kind, const std::array<double, 18>
   } else if (!(a[17] > 0 && a[17] < 170)) {
     return "spot fov " + num(a[17]) + " is outside (0, 170)";
   }
+  if (kind == LightKind::spot_window)
+    for (int i : {15, 16})
+      if (!(std::fabs(a[i]) <= kMaxWindowShift))
+        return std::string("window shift ") + (i == 15 ? "c_u" : "c_v") + " = " + num(a[i]) + " exceeds " +
+               num(kMaxWindowShift);
   return "";
 }
 
@@ -273,8 +310,13 @@ LightSpace LightSpace::from_array(LightKind kind, const std::array<double, 18>& 
   ls.near_ = a[13];
   ls.far_ = a[14];
   ls.spec_.kind = kind == LightKind::sun_ground ? LightKind::sun : kind;
-  ls.spec_.azimuth_deg = a[15];
-  ls.spec_.elevation_deg = a[16];
+  if (kind == LightKind::spot_window) {
+    ls.spec_.shift_u = a[15];
+    ls.spec_.shift_v = a[16];
+  } else {
+    ls.spec_.azimuth_deg = a[15];
+    ls.spec_.elevation_deg = a[16];
+  }
   if (kind == LightKind::sun_ground) ls.derive_ground();
   if (kind == LightKind::sun || kind == LightKind::sun_ground) {
     ls.spec_.margin = a[17];
@@ -297,15 +339,6 @@ LightSpace LightSpace::from_array(LightKind kind, const std::array<double, 18>& 
 // affine in p (rows axis_u - ku n, axis_v - kv n, n: the dual basis of axis_u, axis_v, g).
 // texel_ray inverts it: origin + axis_u (u E) + axis_v (v E) + g near, direction
 // g (far - near), so t == d.
-
-const char* light_kind_name(LightKind kind) {
-  switch (kind) {
-    case LightKind::sun: return "sun";
-    case LightKind::spot: return "spot";
-    case LightKind::sun_ground: return "sun_ground";
-  }
-  return "unknown";
-}
 
 void LightSpace::derive_ground() {
   depth_axis_ = cross(axis_u_, axis_v_);

@@ -3,6 +3,14 @@
 // (u, v, d): u, v in [0,1) across the map, d in [0,1] linear between near and far
 // (for a spot light: linear in distance along the light axis). All math in double.
 //
+// A windowed spot (LightKind::spot_window, the frame of an area light's samples,
+// light_set.hpp "Frames") is a spot whose image plane is sheared: its principal point is
+// shifted by (c_u, c_v) in image-plane units (the plane at distance 1 along forward), so
+//   u = (dot(p - o, axis_u) / dot(p - o, forward) - c_u) / extent + 0.5   (likewise v)
+// and texel (x, y)'s ray has direction forward + axis_u ((u - 0.5) extent + c_u) +
+// axis_v ((v - 0.5) extent + c_v): still one origin and a unit forward component, so depth
+// is the spot's (linear in distance along the axis between near and far).
+//
 // Texel (x, y) of a map of level L (R = 2^L) covers [x/R, (x+1)/R) x [y/R, (y+1)/R); its
 // ray goes through the texel centre. Lookups use integer texel coordinates computed in
 // double, so maps up to 2^20 a side are addressed exactly.
@@ -22,9 +30,18 @@ namespace st {
 // d = ((p - origin) . n - near) / (far - near), the same in every slice for a world
 // point. The world -> light map is affine (an oblique projection); rays share one
 // direction and t == d, as for an orthographic sun.
-enum class LightKind : uint8_t { sun = 0, spot = 1, sun_ground = 2 };
-// "sun", "spot", "sun_ground" ("unknown" for any other value).
+// spot_window (an area-light sample's windowed frame, light_set.hpp "Frames"): a spot
+// whose principal point is shifted by (c_u, c_v) on its image plane, so every sample of
+// the set sees one shared window on the reference plane.
+enum class LightKind : uint8_t { sun = 0, spot = 1, sun_ground = 2, spot_window = 3 };
+
+// Light kinds this build reads from files (pack headers, stack grids, EXR attributes), and
+// their names ("sun", "spot", "sun-ground", "spot-window"; "unknown" otherwise).
+bool light_kind_known(uint8_t kind);
 const char* light_kind_name(LightKind kind);
+// The bound check_array puts on a windowed spot's shift (c_u, c_v): the window's centre
+// within about 89 degrees of the axis.
+inline constexpr double kMaxWindowShift = 64;
 
 // Bound on every coordinate and extent of a light read from a file: far above any scene
 // (float's precision at 1e18 is 1e11 units), far below float's overflow.
@@ -32,11 +49,14 @@ inline constexpr double kMaxLightCoordinate = 1e18;
 
 // What the user asked for: `sun:azimuth=DEG,elevation=DEG[,margin=F]` or
 // `spot:pos=X,Y,Z,target=X,Y,Z,fov=DEG`. Parsing throws st::Error naming the bad field.
+// A spot_window is never parsed: area light sets make it (light_set.hpp); fit() takes it
+// as a spot with the given shift.
 struct LightSpec {
   LightKind kind = LightKind::sun;
   double azimuth_deg = 30, elevation_deg = 50, margin = 0.01;  // sun
   Vec3d pos{}, target{};                                      // spot
   double fov_deg = 60;                                        // spot, full angle
+  double shift_u = 0, shift_v = 0;                            // spot_window: (c_u, c_v)
   static LightSpec parse(const std::string& text);
   std::string to_string() const;
 };
@@ -94,8 +114,15 @@ class LightSpace {
   double extent_uv() const { return extent_uv_; }  // sun: side of the square box
   double near_plane() const { return near_; }
   double far_plane() const { return far_; }
+  // spot_window: the principal point's shift (c_u, c_v); {0, 0} for the other kinds.
+  std::array<double, 2> window_shift() const { return {spec_.shift_u, spec_.shift_v}; }
+  // The ray direction through image point (u, v) of a perspective light (spot or
+  // spot_window): unit forward component. What texel_ray returns at texel centres.
+  Vec3d perspective_dir(double u, double v) const;
 
-  // Serialized form: 18 doubles + kind; exact round trip.
+  // Serialized form: 18 doubles + kind; exact round trip. Slots: origin 0-2, axis_u 3-5,
+  // axis_v 6-8, forward 9-11, extent 12, near 13, far 14, then sun: azimuth, elevation,
+  // margin; spot: azimuth, elevation (unused), fov; spot_window: c_u, c_v, fov.
   std::array<double, 18> to_array() const;
   static LightSpace from_array(LightKind kind, const std::array<double, 18>& a);
   // What is wrong with a serialized light that fit() could never have made, or "" if
@@ -105,8 +132,9 @@ class LightSpace {
   // fields outside what LightSpec::parse accepts; sun_ground (on its own terms): axis_u,
   // axis_v unit and orthogonal, forward unit with forward . (axis_u x axis_v) >=
   // kMinGroundSine, extent > 0, near < far (either may be negative), the ray's reach
-  // (far - near) / sine within kMaxLightCoordinate, sun elevation and margin as for sun.
-  // Any other kind is refused ("unknown light kind"). Readers of untrusted packs call it
+  // (far - near) / sine within kMaxLightCoordinate, sun elevation and margin as for sun;
+  // spot_window: |c_u|, |c_v| above kMaxWindowShift. Any other kind is refused
+  // ("unknown light kind"). Readers of untrusted packs call it
   // before from_array (a NaN light once reached Embree's assertions).
   static std::string check_array(LightKind kind, const std::array<double, 18>& a);
 

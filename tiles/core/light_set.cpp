@@ -114,8 +114,8 @@ LightSetSpec LightSetSpec::parse(const std::string& text) {
     } else if (s.kind == LightSetKind::sun_path && key == "ground") {
       s.ground = number(kind, key, one());
     } else if (s.kind == LightSetKind::sun_path && key == "frame") {
-      if (one() == "ground") s.frame = SunFrame::ground;
-      else if (one() == "ortho") s.frame = SunFrame::ortho;
+      if (one() == "ground") s.sun_frame = SunFrame::ground;
+      else if (one() == "ortho") s.sun_frame = SunFrame::ortho;
       else fail(kind, "frame must be ground or ortho, got '" + one() + "'");
     } else if (s.kind == LightSetKind::area && key == "pos") {
       s.pos = vec(), have_pos = true;
@@ -128,6 +128,11 @@ LightSetSpec LightSetSpec::parse(const std::string& text) {
       s.fov_deg = number(kind, key, one());
     } else if (s.kind == LightSetKind::area && key == "jitter") {
       s.jitter = number(kind, key, one());
+    } else if (s.kind == LightSetKind::area && key == "frame") {
+      const std::string& f = one();
+      if (f == "window") s.area_frame = AreaFrame::window;
+      else if (f == "translate") s.area_frame = AreaFrame::translate;
+      else fail(kind, "frame must be window or translate, got '" + f + "'");
     } else if (s.kind == LightSetKind::area && key == "seed") {
       const double v = number(kind, key, one());
       if (v != std::floor(v) || v < 0 || v > 9007199254740992.0) fail(kind, "seed must be an integer >= 0");
@@ -143,7 +148,7 @@ LightSetSpec LightSetSpec::parse(const std::string& text) {
     for (double e : {s.elevation0_deg, s.elevation1_deg})
       if (!(e > 0 && e <= 90)) fail(kind, "elevation " + std::to_string(e) + " is outside (0, 90] degrees");
     if (!(s.margin >= 0 && s.margin < 10)) fail(kind, "margin must be in [0, 10)");
-    if (!std::isnan(s.ground) && s.frame != SunFrame::ground) fail(kind, "ground=Y needs frame=ground");
+    if (!std::isnan(s.ground) && s.sun_frame != SunFrame::ground) fail(kind, "ground=Y needs frame=ground");
   } else {
     if (!have_pos || !have_target || !have_size) fail(kind, "needs pos=X,Y,Z,target=X,Y,Z,size=W,H");
     if (length(s.target - s.pos) == 0) fail(kind, "pos and target coincide");
@@ -160,12 +165,12 @@ std::string LightSetSpec::to_string() const {
   if (kind == LightSetKind::sun_path) {
     os << "sun-path:azimuth=" << azimuth0_deg << ".." << azimuth1_deg << ",elevation=" << elevation0_deg << ".."
        << elevation1_deg << ",samples=" << samples << ",margin=" << margin
-       << ",frame=" << (frame == SunFrame::ground ? "ground" : "ortho");
+       << ",frame=" << (sun_frame == SunFrame::ground ? "ground" : "ortho");
     if (!std::isnan(ground)) os << ",ground=" << ground;
   } else {
     os << "area:pos=" << pos.x << ',' << pos.y << ',' << pos.z << ",target=" << target.x << ',' << target.y << ','
        << target.z << ",size=" << width << ',' << height << ",samples=" << samples << ",fov=" << fov_deg
-       << ",jitter=" << jitter << ",seed=" << seed;
+       << ",jitter=" << jitter << ",seed=" << seed << ",frame=" << (area_frame == AreaFrame::window ? "window" : "translate");
   }
   return os.str();
 }
@@ -334,6 +339,125 @@ std::vector<LightSpace> fit_sun_ground(const std::vector<LightSpec>& specs, cons
   return out;
 }
 
+// An area light's samples in the window frame (light_set.hpp "Frames"): the translate
+// frame's fits give near/far (z along the shared axis is the same from every point of
+// the rectangle); each sample then takes the shift that centres the window on target and
+// the one grown extent.
+std::vector<LightSpace> fit_area_window(const LightSetSpec& set, const std::vector<LightSpec>& specs, const Aabb& b) {
+  std::vector<LightSpace> fits;
+  fits.reserve(specs.size());
+  double near = INFINITY, far = 0;
+  for (size_t w = 0; w < specs.size(); ++w) {
+    try {
+      fits.push_back(LightSpace::fit(specs[w], b));
+    } catch (const Error& e) {
+      throw Error("light set sample " + std::to_string(w) + " (" + specs[w].to_string() + "): " + e.what());
+    }
+    near = std::min(near, fits.back().near_plane()), far = std::max(far, fits.back().far_plane());
+  }
+  // One basis for every sample, bit for bit: the centred spot's (each translated spot's
+  // normalize(target - pos) may differ from it in the last bit).
+  LightSpec centre = specs[0];
+  centre.pos = set.pos, centre.target = set.target;
+  const LightSpace first = LightSpace::fit(centre, b);
+  const Vec3d U = first.axis_u(), V = first.axis_v(), F = first.forward();
+  const double D = dot(set.target - set.pos, F);
+  std::vector<std::array<double, 2>> shift(specs.size());
+  for (size_t w = 0; w < specs.size(); ++w) {
+    const Vec3d r = set.target - specs[w].pos;  // the window's centre seen from the sample
+    const double z = dot(r, F);
+    shift[w] = {dot(r, U) / z, dot(r, V) / z};
+  }
+  // The part of the scene the centred spot sees: the scene box clipped to its frustum
+  // between near and far, two convex polytopes. Each sample's image coordinate minus its
+  // shift is linear-fractional in the point (positive denominator z), so its largest
+  // magnitude over that intersection is at one of its vertices; every vertex lies on a
+  // face of one polytope inside the other, so clipping each one's six faces by the other's
+  // six half-spaces finds them all.
+  using Poly = std::vector<Vec3d>;
+  struct Half {
+    Vec3d n;
+    double c;  // inside: dot(n, p) + c >= 0
+  };
+  auto clip = [](Poly poly, const std::vector<Half>& hs) {
+    for (const Half& h : hs) {  // Sutherland-Hodgman
+      Poly next;
+      for (size_t j = 0; j < poly.size(); ++j) {
+        const Vec3d& p = poly[j];
+        const Vec3d& q = poly[(j + 1) % poly.size()];
+        const double fp = dot(h.n, p) + h.c, fq = dot(h.n, q) + h.c;
+        if (fp >= 0) next.push_back(p);
+        if ((fp >= 0) != (fq >= 0)) next.push_back(p + (q - p) * (fp / (fp - fq)));
+      }
+      poly = std::move(next);
+    }
+    return poly;
+  };
+  // The box's faces and half-spaces.
+  std::vector<Poly> faces;
+  std::vector<Half> box_h;
+  const double lo[3] = {b.lo.x, b.lo.y, b.lo.z}, hi[3] = {b.hi.x, b.hi.y, b.hi.z};
+  for (int face = 0; face < 6; ++face) {
+    const int axis = face / 2, a1 = (axis + 1) % 3, a2 = (axis + 2) % 3;
+    Poly poly;
+    for (int i : {0, 1, 3, 2}) {  // around the face
+      double q[3];
+      q[axis] = face % 2 ? hi[axis] : lo[axis];
+      q[a1] = i & 1 ? hi[a1] : lo[a1];
+      q[a2] = i & 2 ? hi[a2] : lo[a2];
+      poly.push_back({q[0], q[1], q[2]});
+    }
+    faces.push_back(poly);
+    double e[3] = {0, 0, 0};
+    e[axis] = face % 2 ? -1 : 1;
+    box_h.push_back({{e[0], e[1], e[2]}, face % 2 ? hi[axis] : -lo[axis]});
+  }
+  // The centred spot's frustum between near and far: corners and half-spaces.
+  const double h0 = first.extent_uv() / 2;
+  Vec3d corner[8];
+  for (int i = 0; i < 8; ++i) {
+    const double z = i & 4 ? far : near;
+    corner[i] = set.pos + (F + U * (i & 1 ? h0 : -h0) + V * (i & 2 ? h0 : -h0)) * z;
+  }
+  const int quads[6][4] = {{0, 1, 3, 2}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 3, 7, 6}, {0, 2, 6, 4}, {1, 3, 7, 5}};
+  std::vector<Half> frustum_h;
+  for (const Vec3d& n : {F * h0 - U, F * h0 + U, F * h0 - V, F * h0 + V}) frustum_h.push_back({n, -dot(n, set.pos)});
+  frustum_h.push_back({F, -dot(F, set.pos) - near});
+  frustum_h.push_back({-F, dot(F, set.pos) + far});
+  std::vector<Vec3d> vertices;
+  for (const Poly& f : faces)
+    for (const Vec3d& p : clip(f, frustum_h)) vertices.push_back(p);
+  for (const auto& q : quads)
+    for (const Vec3d& p : clip({corner[q[0]], corner[q[1]], corner[q[2]], corner[q[3]]}, box_h)) vertices.push_back(p);
+  double need = h0;
+  for (const Vec3d& p : vertices)
+    for (size_t w = 0; w < specs.size(); ++w) {
+      const Vec3d r = p - specs[w].pos;
+      const double z = dot(r, F);
+      need = std::max({need, std::fabs(dot(r, U) / z - shift[w][0]), std::fabs(dot(r, V) / z - shift[w][1])});
+    }
+  // A margin far above the rounding of these quotients.
+  const double extent = std::max(first.extent_uv(), 2 * need * (1 + 1e-9));
+  const double fov = 2 * std::atan(extent / 2) * 180 / kPi;
+  if (!(D > 0) || !std::isfinite(extent) || !(fov < 170))
+    throw Error("light set " + set.to_string() + ": the window frame needs a field of view of " + std::to_string(fov) +
+                " degrees (above 170: the scene reaches too close to the light for the rectangle's size); use "
+                "frame=translate");
+  std::vector<LightSpace> out;
+  out.reserve(specs.size());
+  for (size_t w = 0; w < specs.size(); ++w) {
+    std::array<double, 18> a = fits[w].to_array();
+    const double basis[9] = {U.x, U.y, U.z, V.x, V.y, V.z, F.x, F.y, F.z};
+    for (int i = 0; i < 9; ++i) a[3 + i] = basis[i];
+    a[12] = extent, a[13] = near, a[14] = far;
+    a[15] = shift[w][0], a[16] = shift[w][1], a[17] = fov;
+    const std::string bad = LightSpace::check_array(LightKind::spot_window, a);
+    if (!bad.empty()) throw Error("light set sample " + std::to_string(w) + " (" + specs[w].to_string() + "): " + bad);
+    out.push_back(LightSpace::from_array(LightKind::spot_window, a));
+  }
+  return out;
+}
+
 }  // namespace
 
 LightSet LightSet::fit(const LightSetSpec& spec, const Aabb& bounds) { return fit(spec, bounds, {}); }
@@ -349,7 +473,11 @@ LightSet LightSet::fit(const LightSetSpec& spec, const Aabb& bounds, const std::
   const std::vector<LightSpec> specs = spec.sample_specs();
   if (spec.kind == LightSetKind::sun_path) {
     set.samples =
-        spec.frame == SunFrame::ground ? fit_sun_ground(specs, bounds, spec.ground, extent) : fit_sun_path(specs, bounds);
+        spec.sun_frame == SunFrame::ground ? fit_sun_ground(specs, bounds, spec.ground, extent) : fit_sun_path(specs, bounds);
+    return set;
+  }
+  if (spec.area_frame == AreaFrame::window) {
+    set.samples = fit_area_window(spec, specs, bounds);
     return set;
   }
   set.samples.reserve(specs.size());

@@ -19,10 +19,11 @@
 //       recorded in the pack's spec as ground=Y.
 //
 //   area:pos=X,Y,Z,target=X,Y,Z,size=W,H,samples=N[,fov=DEG][,jitter=J][,seed=S]
+//        [,frame=window|translate]
 //       A W x H rectangle centred on pos, facing target (its axes are the spot light's
-//       u and v axes of pos -> target). Sample w is a spot light at a point of the
-//       rectangle looking along the same axis (its target moves with it, so every sample
-//       shares one basis and neighbouring slices stay coherent). The points are the cells
+//       u and v axes of pos -> target). Sample w is a light at a point of the rectangle
+//       looking along the same axis (every sample shares one basis), in the frame below
+//       ("Frames": window, the default, or translate). The points are the cells
 //       of a 2^g x 2^g grid (the smallest with 4^g >= N) taken in Hilbert-curve order
 //       (MH §4 after Ritschel et al. 2007), N of them spread evenly along the curve, so
 //       consecutive slices are neighbouring points. jitter J in [0, 1] moves each point
@@ -59,13 +60,39 @@
 // its switch of helper axis near the zenith, so the frame never jumps between two
 // samples), v = forward x u, and one box size and depth range: the largest any sample needs,
 // each box centred on the scene. An area light's samples share the spot basis and one
-// near/far range (the union of the samples' fits). Texel size and depth scale are thus the
+// near/far range (the union of the samples' fits), in one of the two frames below. Texel size and depth scale are thus the
 // same in every slice; what remains is the geometry's own motion (an orthographic sun
 // turning by an angle a shifts a point at distance r from the box centre by about a * r).
 //
+// Area light frames. The reference plane is the plane through `target` perpendicular to
+// the axis pos -> target, at distance D from the rectangle (the rectangle is parallel to
+// it, so every sample is at distance D).
+//   frame=window (default; LightKind::spot_window): every sample's frustum passes through
+//       one shared window on the reference plane, centred on target. Sample w at offset
+//       (o_u, o_v) from pos is a spot at its point with the basis of pos -> target and its
+//       principal point shifted to the window's centre, (c_u, c_v) = the image-plane
+//       coordinates of target seen from the sample (= (-o_u, -o_v) / D), and one extent E
+//       for every sample: E = 2 tan(fov / 2) (the centred spot's), grown where needed so
+//       that every sample's frustum through the window holds what the centred spot sees
+//       of the scene box between near and far (that box clipped to its frustum; the
+//       largest |image coordinate - shift| over the clipped part's vertices, exact since
+//       the coordinate is linear-fractional in the point). A point on the reference plane
+//       lands on the same (u, v) in every slice (u = dot(p - pos, axis_u) / (D E) + 0.5,
+//       whatever the sample; up to rounding); a point at distance
+//       z moves between two samples by their offset times |1/z - 1/D| / E of the image
+//       (the translate frame: offset / (z E)), so receivers near the plane read nearly one
+//       (x, y) in every slice. A growth beyond a 170-degree field of view (the seen part
+//       of the scene reaching up to the light) is refused with a clear error: use
+//       frame=translate.
+//   frame=translate (LightKind::spot): sample w is the spot light pos -> target translated
+//       with its point (its target moves with it), extent E = 2 tan(fov / 2); the whole
+//       image shifts by offset / z between samples.
+// Depth in both: the spot's (linear in distance along the axis, one near/far for the set).
+//
 // Bounds: 1 <= N <= kMaxLightSamples. Every number finite, sizes > 0, coordinates within
 // kMaxLightCoordinate. A light set the build cannot represent (more samples than the stack
-// may hold) is refused here, before anything is traced.
+// may hold, a window frame wider than 170 degrees) is refused here, before anything is
+// traced.
 #pragma once
 #include <array>
 #include <cstdint>
@@ -82,6 +109,8 @@ inline constexpr uint32_t kMaxLightSamples = 4096;
 
 enum class LightSetKind : uint8_t { sun_path = 0, area = 1 };
 enum class SunFrame : uint8_t { ground = 0, ortho = 1 };  // sun-path frame= ("Frames" above)
+// An area light's sample frames (see "Area light frames" above).
+enum class AreaFrame : uint8_t { window = 0, translate = 1 };
 
 // frame=ground: the largest ground square, in multiples of the scene box's largest
 // extent (with the margin), that a sun path may need.
@@ -92,12 +121,13 @@ struct LightSetSpec {
   uint32_t samples = 1;
   // sun-path
   double azimuth0_deg = 0, azimuth1_deg = 0, elevation0_deg = 45, elevation1_deg = 45, margin = 0.01;
-  SunFrame frame = SunFrame::ground;
+  SunFrame sun_frame = SunFrame::ground;
   double ground = std::numeric_limits<double>::quiet_NaN();  // ground=Y; NaN: unset
   // area
   Vec3d pos{}, target{};
   double width = 1, height = 1, fov_deg = 60, jitter = 0;
   uint64_t seed = 1;
+  AreaFrame area_frame = AreaFrame::window;
 
   // True when `text` names a light set (starts with "sun-path:" or "area:"), so a caller
   // can route `--light` to LightSpec::parse or here.
@@ -105,7 +135,8 @@ struct LightSetSpec {
   static LightSetSpec parse(const std::string& text);
   std::string to_string() const;
 
-  // The N per-sample light specs, in slice order (sun-path: sun specs; area: spot specs).
+  // The N per-sample light specs, in slice order (sun-path: sun specs; area: the
+  // translate frame's spot specs, whose pos is the sample's point whatever the frame).
   std::vector<LightSpec> sample_specs() const;
 };
 

@@ -122,14 +122,15 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
     fail(24, "unknown encoding " + std::to_string(b[24]) + " (this build reads 0-" + std::to_string(int(kLastEncoding)) +
                  ": mh, mmh, dagmh, vsdag; written by a newer shadowtile?)");
   h.encoding = Encoding(b[24]);
-  if (b[25] > uint8_t(LightKind::sun_ground)) fail(25, "unknown light kind " + std::to_string(b[25]));
+  if (!light_kind_known(b[25])) fail(25, "unknown light kind " + std::to_string(b[25]));
   h.light_kind = LightKind(b[25]);
   h.map_level = b[26];
   h.skip_level = b[27];
   if (h.map_level > kMaxLevel) fail(26, "map level " + std::to_string(h.map_level) + " > 20");
   const bool stack = h.flags & uint32_t(kFeatureStack);  // K is an octree level (StackGrid checks it)
-  if (h.light_kind == LightKind::sun_ground && !stack)
-    fail(25, "light kind 2 (sun_ground) on a pack without the stack feature");
+  if ((h.light_kind == LightKind::sun_ground || h.light_kind == LightKind::spot_window) && !stack)
+    fail(25, "light kind " + std::to_string(b[25]) + " (" + light_kind_name(h.light_kind) +
+                 ", a light set's sample frame) on a pack without the stack feature");
   if ((h.flags & uint32_t(kFeatureDagmhDictionary)) && (stack || h.encoding != Encoding::dagmh))
     fail(20, "feature dagmh_dictionary on a pack whose tiles are not DAG-MH (encoding " + to_string(h.encoding) +
                  (stack ? ", a stack" : "") + ")");

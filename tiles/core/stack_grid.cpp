@@ -71,7 +71,7 @@ StackGrid StackGrid::parse(std::span<const uint8_t> b, const std::string& what) 
   if (g.geo.n > moct::kMaxXyLevel) fail(8, "xy_level above 20");
   if (g.geo.k > moct::kMaxWLevel) fail(9, "w_level above 12");
   if (g.skip_level > g.geo.depth()) fail(10, "skip level below the finest octree level");
-  if (b[11] > uint8_t(LightKind::sun_ground)) fail(11, "unknown light kind " + std::to_string(b[11]));
+  if (!light_kind_known(b[11])) fail(11, "unknown light kind " + std::to_string(b[11]));
   g.light_kind = LightKind(b[11]);
   g.slices = load_le<uint32_t>(b, 12);
   const uint32_t k = g.geo.k;

@@ -10,7 +10,7 @@
 //   8   1      xy_level n (slices 2^n a side, <= 20)
 //   9   1      w_level k (2^(k-1) < N <= 2^k, <= 12)
 //   10  1      skip_level K (octree level of the cells, <= max(n, k))
-//   11  1      light_kind of every sample (0 sun, 1 spot, 2 sun_ground)
+//   11  1      light_kind of every sample (0 sun, 1 spot, 2 sun_ground, 3 spot_window)
 //   12  4      slices N
 //   16  4      spec_size S (<= 4096): the light set's spec text
 //   20  4      zero
