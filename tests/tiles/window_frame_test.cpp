@@ -111,9 +111,12 @@ TEST(WindowFrame, SerializationRoundTripsAndBadArraysAreRefused) {
   refused(bad, LightKind::spot_window, "window shift c_v");
   bad = a, bad[17] = 175;
   refused(bad, LightKind::spot_window, "fov");
-  refused(a, LightKind(2), "unknown light kind 2");
+  refused(a, LightKind(4), "unknown light kind 4");
   refused(a, LightKind(9), "unknown light kind 9");
-  EXPECT_FALSE(light_kind_known(2));
+  // A windowed spot's array read as a ground-frame sun is refused on the ground frame's terms.
+  EXPECT_FALSE(LightSpace::check_array(LightKind::sun_ground, a).empty());
+  EXPECT_FALSE(light_kind_known(4));
+  EXPECT_TRUE(light_kind_known(2));
   EXPECT_TRUE(light_kind_known(3));
   // The frame is chosen by name; a window no spot can hold is refused with one line.
   EXPECT_EQ(LightSet::fit(LightSetSpec::parse(std::string(kLight) + ",frame=translate"), box()).samples[0].kind(),
