@@ -17,17 +17,11 @@ static_assert(FLT_EVAL_METHOD == 0, "the shadow pass's twin must evaluate in flo
 
 namespace st::gpu {
 
-ShadowLight shadow_light(const PackHeader& h) {
-  if (h.light_kind != LightKind::sun && h.light_kind != LightKind::sun_ground)
-    throw GpuError("GpuMap: the GPU shadow pass supports sun lights only");
-  return shadow_light(LightSpace::from_array(h.light_kind, h.light));
-}
-
-ShadowLight shadow_light(const LightSpace& ls) {
-  if (ls.kind() == LightKind::sun_ground) return ground_shadow_light(ls);
-  if (ls.kind() != LightKind::sun) throw GpuError("GpuMap: the GPU shadow pass supports sun lights only");
+// The float32 rows of an affine world -> light map: u = (p - origin) . u_row / E, likewise
+// v, d = (p - origin) . d_row / (far - near) - near / (far - near); each rounded once.
+static ShadowLight light_rows(const LightSpace& ls, const Vec3d& u, const Vec3d& v, const Vec3d& f) {
   ShadowLight l;
-  const Vec3d o = ls.origin(), u = ls.axis_u(), v = ls.axis_v(), f = ls.forward();
+  const Vec3d o = ls.origin();
   const double e = ls.extent_uv(), depth = ls.far_plane() - ls.near_plane();
   l.origin = {float(o.x), float(o.y), float(o.z)};
   l.axis_u = {float(u.x / e), float(u.y / e), float(u.z / e)};
@@ -37,20 +31,24 @@ ShadowLight shadow_light(const LightSpace& ls) {
   return l;
 }
 
+ShadowLight shadow_light(const PackHeader& h) {
+  if (h.light_kind != LightKind::sun && h.light_kind != LightKind::sun_ground)
+    throw GpuError("GpuMap: the GPU shadow pass supports sun lights only");
+  return shadow_light(LightSpace::from_array(h.light_kind, h.light));
+}
+
+ShadowLight shadow_light(const LightSpace& ls) {
+  if (ls.kind() == LightKind::sun_ground) return ground_shadow_light(ls);
+  if (ls.kind() != LightKind::sun) throw GpuError("GpuMap: the GPU shadow pass supports sun lights only");
+  return light_rows(ls, ls.axis_u(), ls.axis_v(), ls.forward());
+}
+
 // The ground frame (LightKind::sun_ground): the rows of its affine world -> light map
 // (light.cpp), the dual basis of axis_u, axis_v and the ray axis g, each rounded once:
 // au = (axis_u - (g . axis_u) n) / E, av likewise, fw = n / (far - near).
 ShadowLight ground_shadow_light(const LightSpace& ls) {
-  ShadowLight l;
-  const Vec3d o = ls.origin(), n = ls.depth_axis(), g = ls.ray_axis();
-  const Vec3d u = ls.axis_u() - n * dot(g, ls.axis_u()), v = ls.axis_v() - n * dot(g, ls.axis_v());
-  const double e = ls.extent_uv(), depth = ls.far_plane() - ls.near_plane();
-  l.origin = {float(o.x), float(o.y), float(o.z)};
-  l.axis_u = {float(u.x / e), float(u.y / e), float(u.z / e)};
-  l.axis_v = {float(v.x / e), float(v.y / e), float(v.z / e)};
-  l.forward = {float(n.x / depth), float(n.y / depth), float(n.z / depth)};
-  l.near_scaled = float(ls.near_plane() / depth);
-  return l;
+  const Vec3d n = ls.depth_axis(), g = ls.ray_axis();
+  return light_rows(ls, ls.axis_u() - n * dot(g, ls.axis_u()), ls.axis_v() - n * dot(g, ls.axis_v()), n);
 }
 
 namespace {
