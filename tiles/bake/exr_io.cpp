@@ -53,12 +53,12 @@ LightSpace decode_light_space(const std::string& path, const std::string& text) 
   std::istringstream is(text);
   std::string kind;
   is >> kind;
-  LightKind lk = LightKind::sun;
-  if (kind == "spot") lk = LightKind::spot;
-  else if (kind == "sun_ground" || kind == "sun-ground") lk = LightKind::sun_ground;
-  else if (kind == "spot-window") lk = LightKind::spot_window;
-  else if (kind != "sun")
+  // The names light_kind_name gives the kinds this build knows (the encoder writes them).
+  uint8_t code = 0;
+  while (light_kind_known(code) && kind != light_kind_name(LightKind(code))) ++code;
+  if (!light_kind_known(code))
     throw FormatError(path + ": attribute " + kAttrLightSpace + ": unknown light kind '" + kind + "'");
+  const LightKind lk = LightKind(code);
   std::array<double, 18> a{};
   for (size_t i = 0; i < a.size(); ++i) {
     std::string tok;
