@@ -417,15 +417,19 @@ TEST(ProtocolSpec, TimeoutsSendErrorTimeoutBeforeClosing) {
     EXPECT_LT(waited, 4s) << what;
     EXPECT_TRUE(s.wait_closed()) << what;
   };
+  // Each clock starts before the event that starts the server's timer (the connect, the Hello),
+  // never after its answer: the server may arm its timer before our read returns.
   {  // Connected, never says Hello.
+    const auto t0 = std::chrono::steady_clock::now();
     RawSocket s(srv.port);
-    expect_timeout(s, std::chrono::steady_clock::now(), "handshake");
+    expect_timeout(s, t0, "handshake");
   }
   {  // Handshaken, then silent with nothing owed.
     RawSocket s(srv.port);
+    const auto t0 = std::chrono::steady_clock::now();
     ASSERT_TRUE(s.send(hello(1)));
     ASSERT_EQ(read_frame(s).header.type, MessageType::hello_ack);
-    expect_timeout(s, std::chrono::steady_clock::now(), "idle");
+    expect_timeout(s, t0, "idle");
   }
   {  // Half a frame, then nothing: the read timeout counts from the frame's first byte.
     RawSocket s(srv.port);
