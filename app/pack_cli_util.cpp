@@ -21,6 +21,7 @@ std::string feature_names(uint32_t flags) {
   add(kFeatureStaticIntervals, "static-intervals");
   add(kFeatureDagmhDictionary, "dagmh-dictionary");
   add(kFeatureCompressedGrid, "compressed-grid");
+  add(kFeaturePayloadsOnly, "payloads-only");
   return s.empty() ? "none" : s;
 }
 

@@ -1,5 +1,5 @@
 // Where a pack's bytes go (tiles/PACK.md): the container's sections (header, params,
-// journal tile records and payloads, cell records, skip grid, map preview, DAG-MH
+// journal tile records and payloads, cell records (none in a payloads-only pack), skip grid, map preview, DAG-MH
 // dictionary, tile index) and, for DAG-MH tiles, the sections inside them
 // (tiles/core/DAGMH.md: header, skip table, inner nodes, treelets, chunk infos,
 // multipliers), raw and as stored. A section's stored share is its marginal cost: the
@@ -36,8 +36,9 @@ nlohmann::json measure(const std::string& path) {
   const st::PackHeader& h = reader->header();
   const uint64_t file = reader->file_size();
   uint64_t records = 0, payload = 0, tile_raw = 0, encoded_tiles = 0;
+  const bool payloads_only = h.flags & st::kFeaturePayloadsOnly;  // no journal records (tiles/PACK.md)
   for (const auto& e : reader->tiles()) {
-    records += st::kRecordBytes;
+    records += payloads_only ? 0 : st::kRecordBytes;
     payload += e.stored_size;
     tile_raw += e.raw_size;
   }

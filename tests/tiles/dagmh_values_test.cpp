@@ -98,6 +98,7 @@ TEST(DagmhValues, UniformChunksNeedNoMultipliersAndTwoClustersNeedZeroBits) {
   std::vector<ValueSlot> same(32, ValueSlot{0.2f, 0.6f, 0.4f});
   auto e = encode_values(same);
   EXPECT_EQ(e.chunks[0].mask, 0u);
+  EXPECT_EQ(e.chunks[0].base, 0.5f);  // the roundest float of [0.2, 0.6] (the bytes deflate best)
   EXPECT_EQ(e.stats.multipliers, 0u);
   std::vector<ValueSlot> two;
   for (int i = 0; i < 32; ++i)

@@ -57,7 +57,7 @@ std::shared_ptr<const PackReader> write(const DictSetup& s, const std::string& n
   pp.dagmh_dictionary = dictionary;
   write_pack(path, s.h, s.cut, pp);
   EXPECT_FALSE(std::filesystem::exists(path + ".tmp"));
-  EXPECT_FALSE(std::filesystem::exists(path + ".dict.tmp"));
+  EXPECT_FALSE(std::filesystem::exists(path + ".final.tmp"));
   return PackReader::open(path);
 }
 
@@ -261,13 +261,13 @@ TEST(PackDictionary, ResumedAndMergedBuildsWriteTheSamePack) {
     EXPECT_GT(w->dictionary_outcome().tiles_rewritten, 0u);
   }
   const std::vector<uint8_t> want = slurp(ref);
-  // Killed halfway; a stale "<name>.dict.tmp" of an earlier finish lies around.
+  // Killed halfway; a stale "<name>.final.tmp" of an earlier finish lies around.
   const std::string path = packtest::temp_path("dict_resume.pack");
   {
     auto w = PackWriter::create(path, s.pack);
     for (size_t i = 0; i < cells.size() / 2; ++i) w->append_cell(cells[i]);
   }
-  std::ofstream(path + ".dict.tmp") << "half a pack";
+  std::ofstream(path + ".final.tmp") << "half a pack";
   {
     auto w = PackWriter::resume(path, s.pack);
     for (const CutCell& c : cells)
@@ -276,7 +276,7 @@ TEST(PackDictionary, ResumedAndMergedBuildsWriteTheSamePack) {
   }
   EXPECT_EQ(slurp(path), want);
   EXPECT_FALSE(std::filesystem::exists(path + ".tmp"));
-  EXPECT_FALSE(std::filesystem::exists(path + ".dict.tmp"));
+  EXPECT_FALSE(std::filesystem::exists(path + ".final.tmp"));
 
   // Two part files merged with the dictionary rebuilt: the same grid section (dictionary
   // included) and the same tiles as the one-go build.

@@ -183,6 +183,23 @@ TEST(PackFormat, RecordOffsetsArePinnedAndTornRecordsRefused) {
   }
 }
 
+TEST(PackFormat, PayloadsOnlyIndexMustTileTheJournal) {
+  // Feature payloads_only: payloads back to back from the journal's start in index
+  // order, ending less than 8 bytes (the padding) before the grid.
+  std::vector<TileIndexEntry> e = {{make_tile_id(2, 1, 1), 300, 10, 20, 1, TileKind::encoded},
+                                   {make_tile_id(3, 0, 0), 310, 30, 40, 2, TileKind::index}};
+  EXPECT_EQ(parse_index(serialize_index(e), 9000, 300, 340, 65536, "x.pack", true).size(), 2u);
+  EXPECT_EQ(parse_index(serialize_index(e), 9000, 300, 347, 65536, "x.pack", true).size(), 2u);
+  EXPECT_THROW(parse_index(serialize_index(e), 9000, 300, 348, 65536, "x.pack", true), FormatError);  // a gap at the end
+  EXPECT_THROW(parse_index(serialize_index(e), 9000, 300, 340, 65536, "x.pack"), FormatError);  // no room for records
+  e[1].offset = 311;  // a gap between
+  EXPECT_THROW(parse_index(serialize_index(e), 9000, 300, 341, 65536, "x.pack", true), FormatError);
+  e[1].offset = 305;  // overlapping
+  EXPECT_THROW(parse_index(serialize_index(e), 9000, 300, 340, 65536, "x.pack", true), FormatError);
+  e[0].offset = 301, e[1].offset = 311;  // not at the journal's start
+  EXPECT_THROW(parse_index(serialize_index(e), 9000, 300, 341, 65536, "x.pack", true), FormatError);
+}
+
 TEST(PackFormat, IndexOffsetsArePinnedAndEntriesChecked) {
   std::vector<TileIndexEntry> e = {{make_tile_id(2, 1, 1), 400, 10, 20, 0xabcdef01, TileKind::encoded},
                                    {make_tile_id(3, 0, 0), 500, 30, 40, 7, TileKind::index}};

@@ -145,6 +145,13 @@ TEST(Pack, HeaderRecordsTheBuild) {
   EXPECT_NE(summary.find("map level 5 (32 texels a side), skip level 2"), std::string::npos) << summary;
   EXPECT_NE(summary.find("exit_depths"), std::string::npos) << summary;
   EXPECT_NE(summary.find("scene = header"), std::string::npos) << summary;
+  // A finished pack holds the payloads alone, back to back in id order (tiles/PACK.md
+  // "Payloads only"): no journal record is left.
+  EXPECT_TRUE(hd.flags & kFeaturePayloadsOnly);
+  uint64_t next = hd.journal_offset;
+  for (const TileIndexEntry& e : b.reader->tiles()) EXPECT_EQ(e.offset, next), next = e.offset + e.stored_size;
+  EXPECT_LT(hd.grid_offset - next, 8u);
+  b.reader->verify(b.reader->tile_opener());
   // Stored bytes are the zlib stream as it lies in the file.
   for (const TileIndexEntry& e : b.reader->tiles()) {
     std::vector<uint8_t> stored = b.reader->read_stored(e.id);

@@ -5,12 +5,17 @@
 //   2. the intervals not containing the base get multipliers: the fewest factor bits k
 //      and a step c_f such that each contains c_l + c_f * i for an integer i < 2^k;
 //   3. otherwise raw float32 bits (k = 32).
+// Where an interval leaves a choice (the base, a k = 0 chunk's c_l, a raw value, the step
+// among those that verify) the encoder takes the value whose bytes deflate best: the
+// previous chunk's base or the roundest float (most trailing zero bits), a power-of-two
+// step first. Any point of the intervals is lossless; the format is unchanged.
 // Every value is checked with the decoder's exact float arithmetic (affine_value, no
 // fma), and the packed chunks are decoded once more at the end: a value outside its
 // interval is a bug and stops the encoder (ST_CHECK), never a silently lossy map.
 #include "tiles/build/dagmh_values_encode.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -25,22 +30,40 @@ struct Span {
   bool contains(float v) const { return lo <= v && v <= hi; }
 };
 
-// Step 1: the sweep. #intervals containing t = #(lo <= t) - #(hi < t).
-float sweep_base(std::span<const ValueSlot> slots) {
+// The float in [a, b] (a <= b, no NaN) with the most trailing zero bits: 0 if the
+// interval holds it, else the common high bits of the ends' bit patterns (monotone in
+// the value for each sign) with every lower bit clear. Any point of an admissible
+// interval is lossless (MH 2016 §3.1), and round values deflate better.
+float roundest_in(float a, float b) {
+  if (a <= 0.0f && 0.0f <= b) return 0.0f;
+  if (b < 0.0f) return -roundest_in(-b, -a);
+  const uint32_t lo = std::bit_cast<uint32_t>(a), hi = std::bit_cast<uint32_t>(b);
+  if (lo == hi) return a;
+  const int m = 31 - std::countl_zero(lo ^ hi);  // highest differing bit: set in hi
+  return std::bit_cast<float>((hi >> m) << m);
+}
+
+// Step 1: the sweep. #intervals containing t = #(lo <= t) - #(hi < t). The best count is
+// reached at some lo, los[i], and holds on all of [los[i], the smallest hi >= los[i]]
+// (every interval holding los[i] holds that whole range): the base is `prev` (the
+// previous chunk's base, so the bytes repeat) if it lies there, else the roundest float
+// there.
+float sweep_base(std::span<const ValueSlot> slots, float prev) {
   float los[kChunkValues], his[kChunkValues];
   const size_t n = slots.size();
   for (size_t j = 0; j < n; ++j) los[j] = slots[j].lo, his[j] = slots[j].hi;
   std::sort(los, los + n);
   std::sort(his, his + n);
-  float best = los[0];
+  float best = los[0], best_end = los[0];
   size_t best_count = 0, below = 0;
   for (size_t i = 0; i < n; ++i) {
     if (i + 1 < n && !(los[i] < los[i + 1])) continue;  // last of a run of equal lo
     while (below < n && his[below] < los[i]) ++below;
     const size_t count = i + 1 - below;
-    if (count > best_count) best_count = count, best = los[i];
+    if (count > best_count) best_count = count, best = los[i], best_end = his[below];
   }
-  return best;
+  if (best <= prev && prev <= best_end) return prev;
+  return roundest_in(best, best_end);
 }
 
 // Multiplier for `s` in progression (c_l, c_f) with i <= top, if some i lands in s.
@@ -85,9 +108,13 @@ Factors fit_factors(std::span<const Span> rest) {
   float max_lo = -std::numeric_limits<float>::infinity();
   float min_hi = std::numeric_limits<float>::infinity();
   for (const Span& s : rest) max_lo = std::max(max_lo, s.lo), min_hi = std::min(min_hi, s.hi);
-  if (max_lo <= min_hi && try_progression(rest, max_lo, 0.0f, 0, f.mult)) {
-    f.c_l = max_lo, f.k = 0;  // all remaining intervals share a point
-    return f;
+  if (max_lo <= min_hi) {  // all remaining intervals share [max_lo, min_hi]: k = 0
+    const float c_l = roundest_in(max_lo, min_hi);
+    for (float c : {c_l, max_lo})
+      if (try_progression(rest, c, 0.0f, 0, f.mult)) {
+        f.c_l = c, f.k = 0;
+        return f;
+      }
   }
   const float c_l = min_hi;
   const double span = double(max_lo) - double(c_l);
@@ -100,7 +127,7 @@ Factors fit_factors(std::span<const Span> rest) {
     int e = 0;
     const double m = std::frexp(s0, &e);  // s0 = m * 2^e, m in [0.5, 1)
     const float pow2 = m == 0.5 ? float(s0) : float(std::ldexp(1.0, e));
-    for (float c_f : {up, up * (1.0f + 0x1p-20f), pow2}) {
+    for (float c_f : {pow2, up, up * (1.0f + 0x1p-20f)}) {  // the round step first: it deflates better
       if (try_progression(rest, c_l, c_f, k, out.mult)) {
         out.c_l = c_l, out.c_f = c_f, out.k = k;
         return true;
@@ -159,7 +186,7 @@ EncodedValues encode_values(std::span<const ValueSlot> slots) {
   for (size_t first = 0; first < slots.size(); first += kChunkValues) {
     auto chunk = slots.subspan(first, std::min<size_t>(kChunkValues, slots.size() - first));
     ChunkInfo info{};
-    info.base = sweep_base(chunk);
+    info.base = sweep_base(chunk, out.chunks.empty() ? 0.0f : out.chunks.back().base);
     rest.clear();
     for (size_t j = 0; j < chunk.size(); ++j) {
       if (Span{chunk[j].lo, chunk[j].hi}.contains(info.base)) continue;
@@ -174,7 +201,7 @@ EncodedValues encode_values(std::span<const ValueSlot> slots) {
       for (size_t j = 0; j < chunk.size(); ++j) {
         if (!((info.mask >> j) & 1)) continue;
         const ValueSlot& s = chunk[j];
-        f.mult.push_back(std::bit_cast<uint32_t>(s.lo <= s.value && s.value <= s.hi ? s.value : s.lo));
+        f.mult.push_back(std::bit_cast<uint32_t>(roundest_in(s.lo, s.hi)));
       }
     }
     // The chunk info holds the first multiplier's bit offset in 27 bits (16 MiB of

@@ -15,6 +15,7 @@
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/map_preview.hpp"
 #include "tiles/core/page_table.hpp"
+#include "tiles/core/pack_dictionary.hpp"
 
 namespace st {
 
@@ -259,33 +260,111 @@ void PackWriter::finish(const CutGrid& grid) {
   if (deep_dir) h.flags |= kFeatureDeepShadow;
   bool index_tiles = std::any_of(tiles_.begin(), tiles_.end(), [](auto& t) { return t.kind == TileKind::index; });
   h.flags |= (tiles_.empty() ? 0u : uint32_t(kFeatureHasTiles)) | (index_tiles ? uint32_t(kFeatureIndexTiles) : 0u);
-  h.grid_offset = (end_ + 7) & ~uint64_t(7);
-  std::vector<uint8_t> pad(h.grid_offset - end_, 0);
   std::vector<uint8_t> grid_bytes = grid.serialize();
   const std::vector<uint8_t> preview = preview_bytes(grid);
   grid_bytes.insert(grid_bytes.end(), preview.begin(), preview.end());
-  if (params_.dagmh_dictionary && finish_with_dictionary(h, grid_bytes)) return;
-  std::vector<uint8_t> index_bytes = serialize_index(tiles_);
-  // Stored as one zlib stream (tiles/PACK.md "Compressed grid section").
-  if (params_.compress_grid) {
-    h.flags |= kFeatureCompressedGrid;
-    grid_bytes = compress_grid_section(grid_bytes, params_.compression_level);
+  RewrittenTiles rewritten;
+  if (params_.dagmh_dictionary) {
+    const std::vector<uint8_t> dict = share_dictionary(rewritten);
+    if (!dict.empty()) {
+      h.flags |= kFeatureDagmhDictionary;
+      const std::vector<uint8_t> section = dictionary_section(dict, params_.compression_level);
+      grid_bytes.insert(grid_bytes.end(), section.begin(), section.end());
+    }
   }
-  h.grid_size = grid_bytes.size();
-  h.grid_crc = crc32_of(grid_bytes);
-  h.index_offset = h.grid_offset + h.grid_size;
-  h.tile_count = tiles_.size();
-  h.index_crc = crc32_of(index_bytes);
-  h.state = PackState::complete;
-  write_at(end_, pad);
-  write_at(h.grid_offset, grid_bytes);
-  write_at(h.index_offset, index_bytes);
-  if (::ftruncate(fd_, off_t(h.file_size())) != 0) throw Error(sys_error(what + ": truncate"));
-  // Header last: until it says "complete" the file is a resumable journal.
-  if (::fsync(fd_) != 0) throw Error(sys_error(what + ": fsync"));
-  write_at(0, h.serialize());
-  if (::fsync(fd_) != 0) throw Error(sys_error(what + ": fsync"));
-  publish(what);
+  write_finished(h, std::move(grid_bytes), rewritten);
+}
+
+namespace {
+
+// The new file: appends at `end`, closes on destruction unless kept.
+struct OutFile {
+  std::string path;
+  int fd = -1;
+  uint64_t end = 0;
+  explicit OutFile(std::string p) : path(std::move(p)) {
+    fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (fd < 0) throw Error(sys_error(path + ": cannot create"));
+  }
+  ~OutFile() {
+    if (fd >= 0) ::close(fd);
+  }
+  void write_at(uint64_t offset, std::span<const uint8_t> bytes) { pack_io::pwrite_all(fd, offset, bytes, path); }
+  void append(std::span<const uint8_t> bytes) {
+    write_at(end, bytes);
+    end += bytes.size();
+  }
+  void sync() {
+    if (::fsync(fd) != 0) throw Error(sys_error(path + ": fsync"));
+  }
+};
+
+}  // namespace
+
+void PackWriter::write_finished(PackHeader h, std::vector<uint8_t> grid_bytes, const RewrittenTiles& rewritten) {
+  const std::string what = tmp_path();
+  OutFile f(path_ + ".final.tmp");
+  try {
+    f.write_at(0, base_header().serialize());  // state building until the end
+    f.write_at(h.params_offset, serialize_params(params_.build_params));
+    f.end = h.journal_offset;
+    // The payloads alone, in id order (tiles_ is sorted): tiles/PACK.md "Payloads only".
+    std::vector<TileIndexEntry> index;
+    index.reserve(tiles_.size());
+    std::vector<uint8_t> stored;
+    auto next = rewritten.begin();
+    for (const TileIndexEntry& t : tiles_) {
+      TileIndexEntry e = t;
+      if (next != rewritten.end() && next->first == t.id) {
+        stored = zlib_compress(next->second, params_.compression_level);
+        e.raw_size = uint32_t(next->second.size());
+        ++next;
+      } else {
+        stored.resize(t.stored_size);
+        pread_all(fd_, t.offset, stored, what);
+        if (crc32_of(stored) != t.crc) throw Error(what + ": " + describe_tile(t.id) + " fails its CRC on the read back");
+      }
+      e.offset = f.end;
+      e.stored_size = uint32_t(stored.size());
+      e.crc = crc32_of(stored);
+      index.push_back(e);
+      f.append(stored);
+    }
+    if (next != rewritten.end()) throw Error(what + ": a rewritten tile is not in the journal");
+    h.flags |= kFeaturePayloadsOnly;
+    h.grid_offset = (f.end + 7) & ~uint64_t(7);
+    f.append(std::vector<uint8_t>(h.grid_offset - f.end, 0));
+    if (params_.compress_grid) {  // stored as one zlib stream (tiles/PACK.md "Compressed grid section")
+      h.flags |= kFeatureCompressedGrid;
+      grid_bytes = compress_grid_section(grid_bytes, params_.compression_level);
+    }
+    const std::vector<uint8_t> index_bytes = serialize_index(index);
+    h.grid_size = grid_bytes.size();
+    h.grid_crc = crc32_of(grid_bytes);
+    h.index_offset = h.grid_offset + h.grid_size;
+    h.tile_count = index.size();
+    h.index_crc = crc32_of(index_bytes);
+    h.state = PackState::complete;
+    f.append(grid_bytes);
+    f.append(index_bytes);
+    if (::ftruncate(f.fd, off_t(h.file_size())) != 0) throw Error(sys_error(f.path + ": truncate"));
+    f.sync();
+    f.write_at(0, h.serialize());  // header last
+    f.sync();
+  } catch (...) {
+    ::unlink(f.path.c_str());  // the journal in .tmp is untouched: resume or finish again
+    throw;
+  }
+  ::close(f.fd);
+  f.fd = -1;
+  if (::rename(f.path.c_str(), path_.c_str()) != 0) throw Error(sys_error(f.path + ": rename to " + path_));
+  // The pack is in place: the journal it came from goes (a build killed before this line
+  // leaves both; resuming that .tmp writes the same pack again).
+  ::close(fd_);
+  fd_ = -1;
+  ::unlink(what.c_str());
+  fsync_dir_of(path_);
+  finished_ = true;
 }
 
 std::vector<uint8_t> PackWriter::preview_bytes(const CutGrid& grid) const {

@@ -121,14 +121,13 @@ class PackWriter {
   // as it is (state building) and renames "<path>.tmp" to "<path>". No grid, no index.
   void finish_part();
 
-  // Writes the skip grid (entries must equal the cells' entries), the map preview (read
-  // back from the journal's tiles) and the tile index, completes the header, fsyncs and
-  // renames "<path>.tmp" to "<path>".
-  // With PackParams::dagmh_dictionary (and something shared) the pack is written afresh
-  // as "<path>.dict.tmp" instead: the journal copied cell by cell with the rewritten tiles
-  // in place of their records, then grid (with the dictionary) and index; it is renamed
-  // to "<path>" and only then "<path>.tmp" removed, so a build killed meanwhile still
-  // resumes from its untouched journal.
+  // Writes the finished pack (feature payloads_only, tiles/PACK.md "Payloads only") afresh
+  // as "<path>.final.tmp": header and params, every tile's stored payload back to back in
+  // id order (no journal records; with PackParams::dagmh_dictionary and something shared,
+  // the rewritten tiles in place of theirs), the skip grid (entries must equal the cells'
+  // entries), the map preview (read back from the journal's tiles), the dictionary, the
+  // tile index; fsyncs it, renames it to "<path>" and only then removes "<path>.tmp", so
+  // a build killed meanwhile still resumes from its untouched journal.
   void finish(const CutGrid& grid);
   const DictionaryOutcome& dictionary_outcome() const { return dictionary_; }
 
@@ -140,10 +139,13 @@ class PackWriter {
   void write_at(uint64_t offset, std::span<const uint8_t> bytes);
   PackHeader base_header() const;
   std::vector<uint8_t> preview_bytes(const CutGrid& grid) const;  // under mu_, tiles_ sorted
-  // finish()'s dictionary path (pack_writer_dictionary.cpp), under mu_ with tiles_ sorted
-  // and `h` complete but for the grid and index: false (dictionary_.skipped says why)
-  // when no dictionary applies and finish() goes on as usual.
-  bool finish_with_dictionary(PackHeader h, const std::vector<uint8_t>& grid_and_preview);
+  // finish()'s dictionary pass (pack_writer_dictionary.cpp), under mu_ with tiles_ sorted:
+  // the dictionary's raw bytes and in `rewritten` (sorted by id) the tiles that reference
+  // it; empty (dictionary_.skipped says why) when none applies.
+  using RewrittenTiles = std::vector<std::pair<uint64_t, std::vector<uint8_t>>>;
+  std::vector<uint8_t> share_dictionary(RewrittenTiles& rewritten);
+  // finish()'s file: `h` complete but for the offsets, sizes and CRCs it fills.
+  void write_finished(PackHeader h, std::vector<uint8_t> grid_bytes, const RewrittenTiles& rewritten);
 
   std::string path_;
   PackParams params_;

@@ -158,6 +158,7 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
     if (h.grid_offset < h.journal_offset || h.grid_offset > limit || h.grid_offset % 8) fail(208, "bad grid offset");
     if (stack) {
       if (h.flags & uint32_t(kFeatureCompressedGrid)) fail(20, "feature compressed_grid on a stack pack");
+      if (h.flags & uint32_t(kFeaturePayloadsOnly)) fail(20, "feature payloads_only on a stack pack");
       if (h.grid_size > (uint64_t(1) << 30)) fail(216, "stack grid size too large");
     } else {
       // The skip grid, then the map preview (map_preview.hpp): at least its header, at most its bound.
@@ -277,9 +278,10 @@ std::vector<uint8_t> serialize_index(std::span<const TileIndexEntry> entries) {
 
 std::vector<TileIndexEntry> parse_index(std::span<const uint8_t> bytes, uint64_t base_offset,
                                         uint64_t journal_begin, uint64_t journal_end, uint32_t tile_bytes,
-                                        const std::string& what) {
+                                        const std::string& what, bool payloads_only) {
   if (bytes.size() % kIndexEntryBytes) throw FormatError(what + ": tile index size not a multiple of 32");
   std::vector<TileIndexEntry> out(bytes.size() / kIndexEntryBytes);
+  uint64_t next = journal_begin;  // payloads_only: where entry i's payload must start
   for (size_t i = 0; i < out.size(); ++i) {
     size_t o = i * kIndexEntryBytes;
     auto fail = [&](size_t field, const std::string& msg) {
@@ -302,11 +304,20 @@ std::vector<TileIndexEntry> parse_index(std::span<const uint8_t> bytes, uint64_t
     if (e.raw_size == 0 || e.raw_size > tile_bytes || e.stored_size == 0 || e.stored_size > max_stored_size(e.raw_size))
       fail(16, describe_tile(e.id) + ": bad sizes (raw " + std::to_string(e.raw_size) + ", stored " +
                    std::to_string(e.stored_size) + ", tile_bytes " + std::to_string(tile_bytes) + ")");
-    if (e.offset < journal_begin + kRecordBytes || e.offset > journal_end ||
+    if (e.offset < journal_begin + (payloads_only ? 0 : kRecordBytes) || e.offset > journal_end ||
         journal_end - e.offset < e.stored_size)
       fail(8, describe_tile(e.id) + " payload [" + std::to_string(e.offset) + ", +" +
                   std::to_string(e.stored_size) + ") outside the journal");
+    if (payloads_only) {
+      if (e.offset != next)
+        fail(8, describe_tile(e.id) + " payload at " + std::to_string(e.offset) + ", not right after the previous one (" +
+                    std::to_string(next) + "): a payloads-only pack stores them back to back in index order");
+      next = e.offset + e.stored_size;
+    }
   }
+  if (payloads_only && journal_end - next >= 8)
+    throw FormatError(what + ": the tile payloads end at byte " + std::to_string(next) + ", " +
+                      std::to_string(journal_end - next) + " bytes before the grid section (a payloads-only pack pads < 8)");
   return out;
 }
 

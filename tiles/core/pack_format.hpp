@@ -72,7 +72,14 @@ enum PackFeature : uint32_t {
   // stream behind an 8-byte header (tiles/PACK.md "Compressed grid section"); readers
   // inflate it at open and hand out the inflated section. Never with stack.
   kFeatureCompressedGrid = 1u << 7,
-  kKnownFeatures = 0xFF,
+  // A finished pack without the build journal's records (tiles/PACK.md "Payloads only"):
+  // the section from journal_offset to the padding before the grid holds the tiles'
+  // stored payloads alone, back to back in tile index (id) order, so entry i's offset is
+  // journal_offset + the stored sizes of entries 0..i-1. The journal's tile and cell
+  // records live only in the "<name>.tmp" journal and in part files (resume, merge).
+  // Every build, resume and merge writes it; never with stack.
+  kFeaturePayloadsOnly = 1u << 8,
+  kKnownFeatures = 0x1FF,
 };
 
 // Header layout (offset: size field):
@@ -155,11 +162,16 @@ struct TileIndexEntry {
 };
 std::vector<uint8_t> serialize_index(std::span<const TileIndexEntry> entries);
 // Checks sizes (raw <= tile_bytes, stored <= zlib's bound for it), kinds, ids, strict id
-// order and that each payload lies in [journal_begin, journal_end); throws
-// st::FormatError naming the entry.
+// order and that each payload lies in [journal_begin, journal_end) behind room for its
+// 32-byte record; with `payloads_only` (kFeaturePayloadsOnly) instead that the payloads
+// follow each other from journal_begin in index order with no gap, ending less than 8
+// bytes (the padding) before journal_end. Throws st::FormatError naming the entry.
 std::vector<TileIndexEntry> parse_index(std::span<const uint8_t> bytes, uint64_t base_offset,
                                         uint64_t journal_begin, uint64_t journal_end, uint32_t tile_bytes,
-                                        const std::string& what);
+                                        const std::string& what, bool payloads_only = false);
+// The fewest bytes a tile's stored zlib stream takes (2-byte header, a deflate block of at
+// least one byte, 4-byte Adler-32): bounds how many tiles a payloads-only journal holds.
+inline constexpr uint32_t kMinStoredBytes = 8;
 // Largest zlib stream of a raw tile of `raw` bytes a pack may hold: above libdeflate's own
 // bound (5 bytes per >= 5000-byte block, plus 6 bytes of zlib header and checksum).
 inline uint64_t max_stored_size(uint64_t raw) { return raw + raw / 256 + 64; }

@@ -168,7 +168,9 @@ void PackReader::load() {
   // name more tiles than that room holds. A sparse file may still claim gigabytes: the
   // index CRC is checked in bounded chunks before the index is held in memory, so a
   // reader allocates what the file really holds, never its apparent size at once.
-  if (header_.tile_count > (header_.grid_offset - header_.journal_offset) / kRecordBytes)
+  // (Payloads only: every tile's zlib stream takes at least kMinStoredBytes.)
+  const bool payloads_only = header_.flags & kFeaturePayloadsOnly;
+  if (header_.tile_count > (header_.grid_offset - header_.journal_offset) / (payloads_only ? kMinStoredBytes : kRecordBytes))
     throw FormatError(where(232) + ": header: " + std::to_string(header_.tile_count) + " tiles cannot fit a journal of " +
                       std::to_string(header_.grid_offset - header_.journal_offset) + " bytes");
   const uint64_t index_size = header_.tile_count * kIndexEntryBytes;
@@ -178,7 +180,7 @@ void PackReader::load() {
   read_at(header_.index_offset, index_bytes);
   if (crc32_of(index_bytes) != header_.index_crc) throw FormatError(where(header_.index_offset) + ": tile index CRC mismatch");
   index_ = parse_index(index_bytes, header_.index_offset, header_.journal_offset, header_.grid_offset,
-                       header_.tile_bytes, name_);
+                       header_.tile_bytes, name_, payloads_only);
   if (stack_) return check_stack_index();
 
   load_deep();
@@ -280,6 +282,19 @@ CutGrid PackReader::read_index_tile(uint64_t id, const GridEntry& parent) const 
 }
 
 void PackReader::verify(const TileOpener& open_tile) const {
+  if (header_.flags & kFeaturePayloadsOnly) {
+    // 1. No journal records: the payloads fill the section back to back (parse_index
+    // checked it), then < 8 zero bytes of padding. The cell records' intervals stayed in
+    // the build's journal, so the coarse levels are not checked against them here
+    // (`shadowtile verify PACK SCENE` re-traces the map instead).
+    const uint64_t end = index_.empty() ? header_.journal_offset : index_.back().offset + index_.back().stored_size;
+    std::vector<uint8_t> pad(header_.grid_offset - end);
+    read_at(end, pad);
+    if (std::any_of(pad.begin(), pad.end(), [](uint8_t b) { return b != 0; }))
+      throw FormatError(where(end) + ": nonzero padding before the skip grid");
+    for (const TileIndexEntry& e : index_) read_stored(e.id);  // every CRC
+    return verify_tiles(open_tile);
+  }
   // 1. The journal: a clean sequence of records, then < 8 zero bytes of padding.
   std::map<uint64_t, TileRecord> records;  // payload offset -> record
   std::vector<CellRecord> cells;
@@ -337,6 +352,10 @@ void PackReader::verify(const TileOpener& open_tile) const {
                         ") repeated, out of range or disagreeing with the skip grid");
   }
   check_coarse_levels(cells);
+  verify_tiles(open_tile);
+}
+
+void PackReader::verify_tiles(const TileOpener& open_tile) const {
   // 3. The page table reaches every tile exactly once; every tile decodes. The walk runs
   // one level past the finest so that entries at the finest level, which no pack may
   // hold, are visited and refused too.
@@ -468,7 +487,9 @@ std::string PackReader::summary() const {
                                                     {kFeatureIndexTiles, "index_tiles"}, {kFeatureDeepShadow, "deep_shadow"},
                                                     {kFeatureStaticIntervals, "static_intervals"},
                                                     {kFeatureStack, "stack"},
-                                                    {kFeatureDagmhDictionary, "dagmh_dictionary"}};
+                                                    {kFeatureDagmhDictionary, "dagmh_dictionary"},
+                                                    {kFeatureCompressedGrid, "compressed_grid"},
+                                                    {kFeaturePayloadsOnly, "payloads_only"}};
   for (auto [bit, n] : names)
     if (header_.flags & bit) features += std::string(features.empty() ? "" : ",") + n;
   char buf[320];

@@ -111,6 +111,8 @@ class PackReader {
   uint32_t crc32_of_range(uint64_t offset, uint64_t size) const;
   // verify(): the coarse levels and cell records against each other and the depth range.
   void check_coarse_levels(const std::vector<CellRecord>& cells) const;
+  // verify() past the journal: page table, tiles, deep tiles, map preview.
+  void verify_tiles(const TileOpener& open_tile) const;
   // load() / verify() of a stack pack (pack_reader_stack.cpp).
   void load_stack();
   void check_stack_index() const;
