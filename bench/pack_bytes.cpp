@@ -48,7 +48,7 @@ nlohmann::json measure(const std::string& path) {
   const uint64_t preview = reader->preview().serialized_size();
   const uint64_t dict = reader->grid_bytes().size() - grid - preview;  // the dictionary section (zlib inside)
   const bool compressed = h.flags & st::kFeatureCompressedGrid;
-  const uint64_t index = h.tile_count * st::kIndexEntryBytes;
+  const uint64_t index = payloads_only ? file - h.index_offset : h.tile_count * st::kIndexEntryBytes;  // compact: the rest
   std::printf("%s: %llu bytes, %llu tiles, encoding %u, K = %u\n", path.c_str(), (unsigned long long)file,
               (unsigned long long)h.tile_count, unsigned(h.encoding), unsigned(h.skip_level));
   row("header + params", h.journal_offset, file);
@@ -64,7 +64,7 @@ nlohmann::json measure(const std::string& path) {
     row("map preview", preview, file);
     row("dagmh dictionary (stored)", dict, file);
   }
-  row("tile index (32 B each)", index, file);
+  row(payloads_only ? "tile index (compact)" : "tile index (32 B each)", index, file);
   std::printf("  tiles raw %llu, stored/raw %.3f\n", (unsigned long long)tile_raw, double(payload) / double(tile_raw));
   nlohmann::json out = {{"pack", path},           {"file", file},        {"tiles", h.tile_count},
                         {"header_params", h.journal_offset}, {"tile_records", records}, {"payloads", payload},

@@ -103,13 +103,19 @@ check export-deep 0 "exported deep level 5 region 0,0,32x32" -- "$st" export --d
 check export-deep-opaque 1 "has no partial occluder" -- "$st" export --deep procedural:cube $light --level 4 -o d.exr
 # Corrupt one byte inside the first tile payload: verify must fail and name the tile.
 python3 - <<'PY'
-import struct
+import struct, zlib
 data = bytearray(open("city.pack", "rb").read())
-# Header: index_offset at 224, tile_count at 232 (tiles/PACK.md); first index entry's
-# payload offset at +8, stored size at +16.
+# Header: journal_offset at 200, index_offset at 224, tile_count at 232 (tiles/PACK.md).
 index_offset, tile_count = struct.unpack_from("<QQ", data, 224)
 assert tile_count > 0
-payload, size = struct.unpack_from("<QI", data, index_offset + 8)
+if struct.unpack_from("<I", data, 20)[0] & (1 << 8):
+    # Feature payloads_only: the first payload starts the journal section; the compact
+    # index ("STIZ", size, zlib of the columns) holds its stored size after the n ids.
+    payload = struct.unpack_from("<Q", data, 200)[0]
+    size = struct.unpack_from("<I", zlib.decompress(bytes(data[index_offset + 8:])), 8 * tile_count)[0]
+else:
+    # The plain index: the first entry's payload offset at +8, stored size at +16.
+    payload, size = struct.unpack_from("<QI", data, index_offset + 8)
 data[payload + size // 2] ^= 0x40
 open("corrupt.pack", "wb").write(data)
 PY

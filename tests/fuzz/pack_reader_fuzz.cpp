@@ -60,8 +60,9 @@ void repair_dictionary_crc(std::vector<uint8_t>& b, uint64_t grid_off, uint64_t 
 }
 
 // Rewrites the CRCs of a pack (pack_format.hpp layout) from its own offsets and sizes,
-// bounds-checked, innermost first: journal record payloads and headers, index entries,
-// then the params/grid/index CRCs and the header CRC.
+// bounds-checked, innermost first: journal record payloads and headers, index entries
+// (a payloads-only pack's compact index inflated, its CRC column rewritten, deflated
+// again), then the params/grid/index CRCs and the header CRC.
 void repair_crcs(std::vector<uint8_t>& b) {
   if (b.size() < st::kPackHeaderBytes) return;
   const uint64_t params_off = load_le<uint64_t>(&b[184]), params_size = load_le<uint64_t>(&b[192]);
@@ -83,7 +84,29 @@ void repair_crcs(std::vector<uint8_t>& b) {
       break;
     }
   }
-  if (index_off <= b.size() && tiles <= (b.size() - index_off) / st::kIndexEntryBytes) {
+  const bool compact = load_le<uint32_t>(&b[20]) & st::kFeaturePayloadsOnly;
+  if (compact && index_off <= b.size() && b.size() - index_off >= st::kCompactIndexHeaderBytes &&
+      tiles <= (b.size() - index_off) * 8) {
+    // The compact index (tiles/PACK.md "Payloads only"): inflate its columns, rewrite the
+    // CRC column over the implied payloads, deflate it again; its CRC covers the rest.
+    try {
+      const std::span<const uint8_t> z(b.data() + index_off + st::kCompactIndexHeaderBytes,
+                                       b.size() - index_off - st::kCompactIndexHeaderBytes);
+      std::vector<uint8_t> cols = st::zlib_decompress(z, uint32_t(tiles * st::kCompactIndexEntryBytes), "fuzz");
+      uint64_t off = journal;
+      for (uint64_t i = 0; i < tiles; ++i) {
+        const uint32_t stored = load_le<uint32_t>(&cols[8 * tiles + 4 * i]);
+        store_le<uint32_t>(&cols[16 * tiles + 4 * i], crc_of(b, off, stored));
+        off += stored;
+      }
+      const std::vector<uint8_t> nz = st::zlib_compress(cols, 6);
+      b.resize(index_off + st::kCompactIndexHeaderBytes);
+      store_le<uint32_t>(&b[index_off + 4], uint32_t(nz.size()));
+      b.insert(b.end(), nz.begin(), nz.end());
+    } catch (const st::Error&) {
+    }
+    store_le<uint32_t>(&b[248], crc_of(b, index_off, b.size() - index_off));
+  } else if (index_off <= b.size() && tiles <= (b.size() - index_off) / st::kIndexEntryBytes) {
     for (uint64_t i = 0; i < tiles; ++i) {
       uint8_t* e = &b[index_off + i * st::kIndexEntryBytes];
       store_le<uint32_t>(e + 24, crc_of(b, load_le<uint64_t>(e + 8), load_le<uint32_t>(e + 16)));

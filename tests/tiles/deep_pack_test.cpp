@@ -158,17 +158,25 @@ TEST(DeepPack, ReaderRefusesInconsistentDeepData) {
   std::vector<uint8_t> b = good;
   store_le<uint32_t>(b.data() + 20, load_le<uint32_t>(b, 20) & ~uint32_t(kFeatureDeepShadow));
   refuses(b, "deep tiles without the feature");
-  // Index entry kinds swapped to opaque on a deep id (index CRC fixed).
-  b = good;
+  // Index entry kinds swapped to opaque on a deep id (the compact index rewritten, its
+  // CRC fixed: tiles/PACK.md "Payloads only").
   const PackHeader h = PackHeader::parse({good.data(), 256}, "h");
-  const uint64_t last = h.index_offset + (h.tile_count - 1) * 32;
-  b[last + 28] = uint8_t(TileKind::encoded);
-  store_le<uint32_t>(b.data() + 248, crc32_of({b.data() + h.index_offset, h.tile_count * 32}));
-  refuses(b, "directory entry of kind encoded");
+  ASSERT_TRUE(h.flags & kFeaturePayloadsOnly);
+  const std::vector<TileIndexEntry> entries = PackReader::open_memory(good, "good.pack")->tiles();
+  auto with_index = [&](const std::vector<TileIndexEntry>& e) {
+    std::vector<uint8_t> out(good.begin(), good.begin() + long(h.index_offset));
+    const std::vector<uint8_t> index = serialize_compact_index(e, 6);
+    out.insert(out.end(), index.begin(), index.end());
+    store_le<uint32_t>(out.data() + 248, crc32_of(index));
+    return out;
+  };
+  std::vector<TileIndexEntry> e = entries;
+  e.back().kind = TileKind::encoded;
+  refuses(with_index(e), "directory entry of kind encoded");
   // A deep tile the directory does not list (level 1, not D - b = 2; ids stay sorted).
-  b = good;
-  store_le<uint64_t>(b.data() + last - 32, kDeepTileIdBit | make_tile_id(1, 0, 0));
-  store_le<uint32_t>(b.data() + 248, crc32_of({b.data() + h.index_offset, h.tile_count * 32}));
+  e = entries;
+  e[e.size() - 2].id = kDeepTileIdBit | make_tile_id(1, 0, 0);
+  b = with_index(e);
   refuses(b, "deep tile outside the directory");
 }
 

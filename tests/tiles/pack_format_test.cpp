@@ -198,6 +198,33 @@ TEST(PackFormat, PayloadsOnlyIndexMustTileTheJournal) {
   EXPECT_THROW(parse_index(serialize_index(e), 9000, 300, 340, 65536, "x.pack", true), FormatError);
   e[0].offset = 301, e[1].offset = 311;  // not at the journal's start
   EXPECT_THROW(parse_index(serialize_index(e), 9000, 300, 341, 65536, "x.pack", true), FormatError);
+
+  // The compact index: "STIZ", the stream's size, a zlib stream of the 21-byte columns;
+  // offsets implied. Round trip, then hostile sections.
+  e[0].offset = 300, e[1].offset = 310;
+  const std::vector<uint8_t> c = serialize_compact_index(e, 6);
+  EXPECT_EQ(at<uint32_t>(c.data(), 0), kCompactIndexMagic);
+  EXPECT_EQ(std::memcmp(c.data(), "STIZ", 4), 0);
+  EXPECT_EQ(at<uint32_t>(c.data(), 4), c.size() - 8);
+  const std::vector<uint8_t> cols = zlib_decompress({c.data() + 8, c.size() - 8}, 42, "cols");
+  EXPECT_EQ(at<uint64_t>(cols.data(), 8), e[1].id - e[0].id);  // ids as deltas
+  EXPECT_EQ(at<uint32_t>(cols.data(), 16 + 4), 30u);             // stored sizes
+  EXPECT_EQ(at<uint32_t>(cols.data(), 24 + 4), 40u);             // raw sizes
+  EXPECT_EQ(at<uint32_t>(cols.data(), 32 + 4), 2u);              // CRCs
+  EXPECT_EQ(cols[41], 2);                                        // kinds
+  const auto back = parse_compact_index(c, 2, 9000, 300, 340, 65536, "x.pack");
+  ASSERT_EQ(back.size(), 2u);
+  EXPECT_EQ(serialize_index(back), serialize_index(e));
+  EXPECT_THROW(parse_compact_index(c, 3, 9000, 300, 340, 65536, "x.pack"), FormatError);  // another count
+  EXPECT_THROW(parse_compact_index(c, 2, 9000, 300, 360, 65536, "x.pack"), FormatError);  // payloads short of the grid
+  std::vector<uint8_t> bad = c;
+  bad.push_back(0);  // a byte past the stream
+  EXPECT_THROW(parse_compact_index(bad, 2, 9000, 300, 340, 65536, "x.pack"), FormatError);
+  bad = c;
+  bad[0] ^= 1;
+  EXPECT_THROW(parse_compact_index(bad, 2, 9000, 300, 340, 65536, "x.pack"), FormatError);
+  EXPECT_THROW(parse_compact_index({c.data(), 7}, 2, 9000, 300, 340, 65536, "x.pack"), FormatError);
+  EXPECT_THROW(parse_compact_index(c, uint64_t(1) << 40, 9000, 300, 340, 65536, "x.pack"), FormatError);
 }
 
 TEST(PackFormat, IndexOffsetsArePinnedAndEntriesChecked) {

@@ -338,7 +338,7 @@ void PackWriter::write_finished(PackHeader h, std::vector<uint8_t> grid_bytes, c
       h.flags |= kFeatureCompressedGrid;
       grid_bytes = compress_grid_section(grid_bytes, params_.compression_level);
     }
-    const std::vector<uint8_t> index_bytes = serialize_index(index);
+    const std::vector<uint8_t> index_bytes = serialize_compact_index(index, params_.compression_level);
     h.grid_size = grid_bytes.size();
     h.grid_crc = crc32_of(grid_bytes);
     h.index_offset = h.grid_offset + h.grid_size;
@@ -347,7 +347,7 @@ void PackWriter::write_finished(PackHeader h, std::vector<uint8_t> grid_bytes, c
     h.state = PackState::complete;
     f.append(grid_bytes);
     f.append(index_bytes);
-    if (::ftruncate(f.fd, off_t(h.file_size())) != 0) throw Error(sys_error(f.path + ": truncate"));
+    if (::ftruncate(f.fd, off_t(f.end)) != 0) throw Error(sys_error(f.path + ": truncate"));
     f.sync();
     f.write_at(0, h.serialize());  // header last
     f.sync();

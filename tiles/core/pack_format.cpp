@@ -321,6 +321,67 @@ std::vector<TileIndexEntry> parse_index(std::span<const uint8_t> bytes, uint64_t
   return out;
 }
 
+std::vector<uint8_t> serialize_compact_index(std::span<const TileIndexEntry> entries, int level) {
+  const size_t n = entries.size();
+  std::vector<uint8_t> cols(n * kCompactIndexEntryBytes);
+  uint8_t* p = cols.data();
+  uint64_t prev = 0;
+  for (size_t i = 0; i < n; ++i) store_le<uint64_t>(p + 8 * i, entries[i].id - prev), prev = entries[i].id;
+  p += 8 * n;
+  for (size_t i = 0; i < n; ++i) store_le<uint32_t>(p + 4 * i, entries[i].stored_size);
+  p += 4 * n;
+  for (size_t i = 0; i < n; ++i) store_le<uint32_t>(p + 4 * i, entries[i].raw_size);
+  p += 4 * n;
+  for (size_t i = 0; i < n; ++i) store_le<uint32_t>(p + 4 * i, entries[i].crc);
+  p += 4 * n;
+  for (size_t i = 0; i < n; ++i) p[i] = uint8_t(entries[i].kind);
+  const std::vector<uint8_t> z = zlib_compress(cols, level);
+  if (z.size() > 0xFFFFFFFFull) throw Error("tile index of " + std::to_string(n) + " entries exceeds 4 GiB stored");
+  std::vector<uint8_t> out(kCompactIndexHeaderBytes + z.size());
+  store_le<uint32_t>(out.data(), kCompactIndexMagic);
+  store_le<uint32_t>(out.data() + 4, uint32_t(z.size()));
+  std::copy(z.begin(), z.end(), out.begin() + kCompactIndexHeaderBytes);
+  return out;
+}
+
+std::vector<TileIndexEntry> parse_compact_index(std::span<const uint8_t> section, uint64_t tile_count,
+                                                uint64_t base_offset, uint64_t journal_begin, uint64_t journal_end,
+                                                uint32_t tile_bytes, const std::string& what) {
+  const std::string at = what + ": compact tile index at byte " + std::to_string(base_offset);
+  if (section.size() < kCompactIndexHeaderBytes)
+    throw FormatError(at + ": " + std::to_string(section.size()) + " bytes, too short for its header");
+  if (load_le<uint32_t>(section.data()) != kCompactIndexMagic)
+    throw FormatError(at + ": bad magic " + hex32(load_le<uint32_t>(section.data())));
+  const uint64_t stored = load_le<uint32_t>(section.data() + 4);
+  if (stored != section.size() - kCompactIndexHeaderBytes)
+    throw FormatError(at + ": stream size " + std::to_string(stored) + " (byte " + std::to_string(base_offset + 4) +
+                      ") but the section holds " + std::to_string(section.size() - kCompactIndexHeaderBytes) +
+                      " bytes to the end of the file");
+  if (tile_count > 0xFFFFFFFFull / kCompactIndexEntryBytes || stored == 0 ||
+      stored > max_stored_size(tile_count * kCompactIndexEntryBytes))
+    throw FormatError(at + ": " + std::to_string(stored) + " stored bytes do not fit " + std::to_string(tile_count) +
+                      " tiles");
+  const uint64_t n = tile_count;
+  const std::vector<uint8_t> cols =
+      zlib_decompress(section.subspan(kCompactIndexHeaderBytes), uint32_t(n * kCompactIndexEntryBytes), at);
+  // The entries as serialize_index lays them out, offsets implied; parse_index checks them.
+  std::vector<TileIndexEntry> entries(n);
+  const uint8_t* p = cols.data();
+  uint64_t id = 0, offset = journal_begin;
+  for (uint64_t i = 0; i < n; ++i) {
+    TileIndexEntry& e = entries[i];
+    e.id = id += load_le<uint64_t>(p + 8 * i);
+    e.stored_size = load_le<uint32_t>(p + 8 * n + 4 * i);
+    e.raw_size = load_le<uint32_t>(p + 12 * n + 4 * i);
+    e.crc = load_le<uint32_t>(p + 16 * n + 4 * i);
+    e.offset = offset;
+    offset += e.stored_size;
+  }
+  std::vector<uint8_t> plain = serialize_index(entries);
+  for (uint64_t i = 0; i < n; ++i) plain[i * kIndexEntryBytes + 28] = p[20 * n + i];  // kinds as stored
+  return parse_index(plain, base_offset, journal_begin, journal_end, tile_bytes, at, true);
+}
+
 // ---- params ---------------------------------------------------------------------------
 
 namespace {

@@ -75,9 +75,11 @@ enum PackFeature : uint32_t {
   // A finished pack without the build journal's records (tiles/PACK.md "Payloads only"):
   // the section from journal_offset to the padding before the grid holds the tiles'
   // stored payloads alone, back to back in tile index (id) order, so entry i's offset is
-  // journal_offset + the stored sizes of entries 0..i-1. The journal's tile and cell
-  // records live only in the "<name>.tmp" journal and in part files (resume, merge).
-  // Every build, resume and merge writes it; never with stack.
+  // journal_offset + the stored sizes of entries 0..i-1, and the tile index is stored
+  // compact (serialize_compact_index: a zlib stream of its columns, offsets implied), so
+  // the file ends where that stream does. The journal's tile and cell records live only in
+  // the "<name>.tmp" journal and in part files (resume, merge). Every build, resume and
+  // merge writes it; never with stack.
   kFeaturePayloadsOnly = 1u << 8,
   kKnownFeatures = 0x1FF,
 };
@@ -105,6 +107,7 @@ struct PackHeader {
   std::array<uint8_t, kPackHeaderBytes> serialize() const;  // computes header_crc
   // Checks magic, version, size, header CRC, enums and levels; `what` names the file.
   static PackHeader parse(std::span<const uint8_t> bytes, const std::string& what);
+  // With the plain tile index; a payloads-only pack ends where its compact index does.
   uint64_t file_size() const { return index_offset + tile_count * kIndexEntryBytes; }
 };
 
@@ -169,6 +172,21 @@ std::vector<uint8_t> serialize_index(std::span<const TileIndexEntry> entries);
 std::vector<TileIndexEntry> parse_index(std::span<const uint8_t> bytes, uint64_t base_offset,
                                         uint64_t journal_begin, uint64_t journal_end, uint32_t tile_bytes,
                                         const std::string& what, bool payloads_only = false);
+// Compact tile index (kFeaturePayloadsOnly; tiles/PACK.md "Payloads only"): 0:4 magic
+// "STIZ"  4:4 S  8:S a zlib stream inflating to exactly 21 n bytes (n = tile_count), the
+// entries column by column: ids as u64 deltas (the first from 0), stored sizes, raw sizes,
+// CRCs (u32 each), kinds (u8). Offsets are implied: payloads back to back from the
+// journal's start. The section is the rest of the file (8 + S bytes; index_crc covers it).
+inline constexpr uint32_t kCompactIndexMagic = 0x5A495453;  // "STIZ"
+inline constexpr uint32_t kCompactIndexHeaderBytes = 8;
+inline constexpr uint32_t kCompactIndexEntryBytes = 21;
+std::vector<uint8_t> serialize_compact_index(std::span<const TileIndexEntry> entries, int level);
+// Inflates the section (its sizes checked against tile_count before allocating), rebuilds
+// the entries with their implied offsets and checks them as parse_index(payloads_only)
+// does. Throws st::FormatError naming `what` and the field.
+std::vector<TileIndexEntry> parse_compact_index(std::span<const uint8_t> section, uint64_t tile_count,
+                                                uint64_t base_offset, uint64_t journal_begin, uint64_t journal_end,
+                                                uint32_t tile_bytes, const std::string& what);
 // The fewest bytes a tile's stored zlib stream takes (2-byte header, a deflate block of at
 // least one byte, 4-byte Adler-32): bounds how many tiles a payloads-only journal holds.
 inline constexpr uint32_t kMinStoredBytes = 8;

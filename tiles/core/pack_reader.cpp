@@ -119,15 +119,19 @@ void PackReader::load() {
   header_bytes_.resize(kPackHeaderBytes);
   read_at(0, header_bytes_);
   header_ = PackHeader::parse(header_bytes_, name_);
+  file_size_ = size;
   if (const std::string why = LightSpace::check_array(header_.light_kind, header_.light); !why.empty())
     throw FormatError(where(40) + ": header: the light is not one a build makes: " + why);
   if (header_.state != PackState::complete)
     throw FormatError(name_ + ": an unfinished build (state 'building'): resume or rebuild it");
+  // A payloads-only pack's compact index is the rest of the file (its header names its size).
+  const bool payloads_only = header_.flags & kFeaturePayloadsOnly;
   if (header_.grid_offset > size || header_.index_offset > size ||
-      (size - header_.index_offset) / kIndexEntryBytes < header_.tile_count)
-    throw FormatError(name_ + ": truncated: the header needs " + std::to_string(header_.file_size()) +
+      (!payloads_only && (size - header_.index_offset) / kIndexEntryBytes < header_.tile_count))
+    throw FormatError(name_ + ": truncated: the header needs " +
+                      std::to_string(payloads_only ? header_.index_offset : header_.file_size()) +
                       " bytes, the file has " + std::to_string(size));
-  if (size != header_.file_size())
+  if (!payloads_only && size != header_.file_size())
     throw FormatError(name_ + ": " + std::to_string(size - header_.file_size()) + " trailing bytes after the tile index at byte " +
                       std::to_string(header_.file_size()));
 
@@ -169,18 +173,22 @@ void PackReader::load() {
   // index CRC is checked in bounded chunks before the index is held in memory, so a
   // reader allocates what the file really holds, never its apparent size at once.
   // (Payloads only: every tile's zlib stream takes at least kMinStoredBytes.)
-  const bool payloads_only = header_.flags & kFeaturePayloadsOnly;
   if (header_.tile_count > (header_.grid_offset - header_.journal_offset) / (payloads_only ? kMinStoredBytes : kRecordBytes))
     throw FormatError(where(232) + ": header: " + std::to_string(header_.tile_count) + " tiles cannot fit a journal of " +
                       std::to_string(header_.grid_offset - header_.journal_offset) + " bytes");
-  const uint64_t index_size = header_.tile_count * kIndexEntryBytes;
+  const uint64_t index_size = payloads_only ? size - header_.index_offset : header_.tile_count * kIndexEntryBytes;
   if (index_size > kChunkBytes && crc32_of_range(header_.index_offset, index_size) != header_.index_crc)
     throw FormatError(where(header_.index_offset) + ": tile index CRC mismatch");
+  if (payloads_only && index_size > kCompactIndexHeaderBytes + max_stored_size(header_.tile_count * kCompactIndexEntryBytes))
+    throw FormatError(where(header_.index_offset) + ": compact tile index of " + std::to_string(index_size) +
+                      " bytes is larger than " + std::to_string(header_.tile_count) + " tiles can need");
   std::vector<uint8_t> index_bytes(index_size);
   read_at(header_.index_offset, index_bytes);
   if (crc32_of(index_bytes) != header_.index_crc) throw FormatError(where(header_.index_offset) + ": tile index CRC mismatch");
-  index_ = parse_index(index_bytes, header_.index_offset, header_.journal_offset, header_.grid_offset,
-                       header_.tile_bytes, name_, payloads_only);
+  index_ = payloads_only ? parse_compact_index(index_bytes, header_.tile_count, header_.index_offset,
+                                               header_.journal_offset, header_.grid_offset, header_.tile_bytes, name_)
+                        : parse_index(index_bytes, header_.index_offset, header_.journal_offset, header_.grid_offset,
+                                      header_.tile_bytes, name_);
   if (stack_) return check_stack_index();
 
   load_deep();

@@ -58,7 +58,7 @@ class PackReader {
   // A stack pack's grid (kFeatureStack; tiles/PACK.md "Stack packs"), else nullptr; then
   // grid() is empty and every tile is an MH octree buffer (mh_octree.hpp).
   const StackGrid* stack() const { return stack_.get(); }
-  uint64_t file_size() const { return header_.file_size(); }
+  uint64_t file_size() const { return file_size_; }
 
   // Raw blobs a server sends as they lie (grid_bytes: the skip grid, the map preview and
   // the DAG-MH dictionary if any).
@@ -124,6 +124,7 @@ class PackReader {
   std::unique_ptr<Source> src_;
   std::string name_;
   PackHeader header_;
+  uint64_t file_size_ = 0;  // the whole file (a payloads-only pack ends with its compact index)
   std::vector<uint8_t> header_bytes_, grid_bytes_;
   PackParamList params_;
   CutGrid grid_;
