@@ -33,7 +33,9 @@ struct Built {
   std::vector<uint8_t> bytes;
 };
 
-Built build_pack(const std::string& light, bool compress_grid = false) {
+// journal_records: the layout before feature payloads_only, whose cell records verify()
+// checks the coarse levels against.
+Built build_pack(const std::string& light, bool compress_grid = false, bool journal_records = false) {
   Built b{fields::city_field(32, 4), {}};
   CutParams cut;
   cut.map_level = 5;
@@ -43,6 +45,7 @@ Built build_pack(const std::string& light, bool compress_grid = false) {
   PackParams pp = PackParams::from(LightSpace::fit(LightSpec::parse(light), Aabb{{0, 0, 0}, {1, 1, 1}}), cut);
   pp.build_params = {{"scene", "hostile"}};
   pp.compress_grid = compress_grid;  // off: the tests below patch the grid section in place
+  pp.journal_records = journal_records;
   const std::string path = packtest::temp_path("hostile.pack");
   write_pack(path, build_hierarchy(b.field), cut, pp);
   std::ifstream f(path, std::ios::binary);
@@ -133,7 +136,7 @@ std::string range_error(std::vector<uint8_t> bytes) {
 }
 
 TEST(PackHostile, CoarseValuesOutsideTheDepthRangeAreRefused) {
-  const Built b = build_pack("sun:azimuth=30,elevation=50");
+  const Built b = build_pack("sun:azimuth=30,elevation=50", false, true);
   ASSERT_EQ(range_error(b.bytes), "(in range)");
   const uint64_t grid_at = load_le<uint64_t>(b.bytes.data() + 208), grid_size = load_le<uint64_t>(b.bytes.data() + 216);
   const size_t coarse = CutGrid::coarse_count(2);
@@ -157,7 +160,8 @@ TEST(PackHostile, CoarseValuesOutsideTheDepthRangeAreRefused) {
 }
 
 TEST(PackHostile, CoarseValuesOutsideTheirCellsIntervalsFailVerify) {
-  const Built b = build_pack("sun:azimuth=30,elevation=50");
+  // Packs with journal records (old layout; payloads-only packs keep no intervals).
+  const Built b = build_pack("sun:azimuth=30,elevation=50", false, true);
   float min_lo = INFINITY;
   for (const Interval& iv : b.field.data) min_lo = std::min(min_lo, iv.lo);
   ASSERT_GT(min_lo, 0.0f);  // so 0 lies below every interval of the map
@@ -183,7 +187,7 @@ long max_rss_kib() {
 // A sparse file whose header claims gigabytes (it takes a few KB on disk): refused
 // without holding the claimed size in memory.
 TEST(PackHostile, SparsePacksClaimingGigabytesAreRefusedWithoutAllocatingThem) {
-  const Built b = build_pack("sun:azimuth=30,elevation=50");
+  const Built b = build_pack("sun:azimuth=30,elevation=50", false, true);  // the plain index
   const uint64_t journal_at = load_le<uint64_t>(b.bytes.data() + 200), grid_at = load_le<uint64_t>(b.bytes.data() + 208);
   const uint64_t grid_size = load_le<uint64_t>(b.bytes.data() + 216);
   const uint64_t index_at = load_le<uint64_t>(b.bytes.data() + 224);
@@ -227,6 +231,23 @@ TEST(PackHostile, SparsePacksClaimingGigabytesAreRefusedWithoutAllocatingThem) {
     store_le<uint64_t>(head.data() + 232, tiles);
     fix_header_crc(head);
     const std::string path = write_sparse("sparse_journal.pack", head, new_grid, grid, new_index + tiles * kIndexEntryBytes);
+    try {
+      PackReader::open(path);
+      ADD_FAILURE() << "opened";
+    } catch (const FormatError& e) {
+      EXPECT_NE(std::string(e.what()).find("tile index CRC mismatch"), std::string::npos) << e.what();
+    }
+    std::filesystem::remove(path);
+  }
+  // 3. A payloads-only pack whose compact index claims a 256 MiB stream of holes: the CRC,
+  // read in chunks, fails before anything that size is held.
+  {
+    const Built c = build_pack("sun:azimuth=30,elevation=50");
+    const uint64_t at = load_le<uint64_t>(c.bytes.data() + 224);
+    ASSERT_TRUE(load_le<uint32_t>(c.bytes.data() + 20) & kFeaturePayloadsOnly);
+    std::vector<uint8_t> head(c.bytes.begin(), c.bytes.begin() + long(at + kCompactIndexHeaderBytes));
+    store_le<uint32_t>(head.data() + at + 4, uint32_t(quarter_gib - 1));
+    const std::string path = write_sparse("sparse_compact.pack", head, head.size(), {}, at + 8 + quarter_gib - 1);
     try {
       PackReader::open(path);
       ADD_FAILURE() << "opened";

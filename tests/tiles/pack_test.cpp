@@ -149,7 +149,10 @@ TEST(Pack, HeaderRecordsTheBuild) {
   // "Payloads only"): no journal record is left.
   EXPECT_TRUE(hd.flags & kFeaturePayloadsOnly);
   uint64_t next = hd.journal_offset;
-  for (const TileIndexEntry& e : b.reader->tiles()) EXPECT_EQ(e.offset, next), next = e.offset + e.stored_size;
+  for (const TileIndexEntry& e : b.reader->tiles()) {
+    EXPECT_EQ(e.offset, next);
+    next = e.offset + e.stored_size;
+  }
   EXPECT_LT(hd.grid_offset - next, 8u);
   b.reader->verify(b.reader->tile_opener());
   // Stored bytes are the zlib stream as it lies in the file.

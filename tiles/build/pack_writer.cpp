@@ -272,7 +272,34 @@ void PackWriter::finish(const CutGrid& grid) {
       grid_bytes.insert(grid_bytes.end(), section.begin(), section.end());
     }
   }
+  if (params_.journal_records) return finish_with_records(h, std::move(grid_bytes), rewritten);
   write_finished(h, std::move(grid_bytes), rewritten);
+}
+
+void PackWriter::finish_with_records(PackHeader h, std::vector<uint8_t> grid_bytes, const RewrittenTiles& rewritten) {
+  const std::string what = tmp_path();
+  if (!rewritten.empty()) throw Error(what + ": journal_records cannot keep tiles the DAG-MH dictionary rewrote");
+  // In place: the journal as it is, padding, grid, the plain index, the header last.
+  h.grid_offset = (end_ + 7) & ~uint64_t(7);
+  write_at(end_, std::vector<uint8_t>(h.grid_offset - end_, 0));
+  if (params_.compress_grid) {
+    h.flags |= kFeatureCompressedGrid;
+    grid_bytes = compress_grid_section(grid_bytes, params_.compression_level);
+  }
+  const std::vector<uint8_t> index_bytes = serialize_index(tiles_);
+  h.grid_size = grid_bytes.size();
+  h.grid_crc = crc32_of(grid_bytes);
+  h.index_offset = h.grid_offset + h.grid_size;
+  h.tile_count = tiles_.size();
+  h.index_crc = crc32_of(index_bytes);
+  h.state = PackState::complete;
+  write_at(h.grid_offset, grid_bytes);
+  write_at(h.index_offset, index_bytes);
+  if (::ftruncate(fd_, off_t(h.file_size())) != 0) throw Error(sys_error(what + ": truncate"));
+  if (::fsync(fd_) != 0) throw Error(sys_error(what + ": fsync"));
+  write_at(0, h.serialize());  // until it says "complete" the file is a resumable journal
+  if (::fsync(fd_) != 0) throw Error(sys_error(what + ": fsync"));
+  publish(what);
 }
 
 namespace {

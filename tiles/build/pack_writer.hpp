@@ -65,6 +65,10 @@ struct PackParams {
   // Store the grid section as one zlib stream (feature compressed_grid, tiles/PACK.md
   // "Compressed grid section"); off writes it raw (tests that patch its bytes in place).
   bool compress_grid = true;
+  // Keep the build journal's records in the finished pack (the layout before feature
+  // payloads_only, with the plain tile index): tests of verify()'s cell-record checks.
+  // Not with a DAG-MH dictionary that rewrites tiles (finish() throws).
+  bool journal_records = false;
 
   static PackParams from(const LightSpace& light, const CutParams& cut);
 };
@@ -146,6 +150,8 @@ class PackWriter {
   std::vector<uint8_t> share_dictionary(RewrittenTiles& rewritten);
   // finish()'s file: `h` complete but for the offsets, sizes and CRCs it fills.
   void write_finished(PackHeader h, std::vector<uint8_t> grid_bytes, const RewrittenTiles& rewritten);
+  // PackParams::journal_records: the old layout, finished in place.
+  void finish_with_records(PackHeader h, std::vector<uint8_t> grid_bytes, const RewrittenTiles& rewritten);
 
   std::string path_;
   PackParams params_;

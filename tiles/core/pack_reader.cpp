@@ -131,7 +131,21 @@ void PackReader::load() {
     throw FormatError(name_ + ": truncated: the header needs " +
                       std::to_string(payloads_only ? header_.index_offset : header_.file_size()) +
                       " bytes, the file has " + std::to_string(size));
-  if (!payloads_only && size != header_.file_size())
+  if (payloads_only) {  // the compact index's header names where the file ends
+    std::array<uint8_t, kCompactIndexHeaderBytes> head{};
+    if (size - header_.index_offset < head.size())
+      throw FormatError(name_ + ": truncated: the compact tile index at byte " + std::to_string(header_.index_offset) +
+                        " needs its 8-byte header");
+    read_at(header_.index_offset, head);
+    const uint64_t end = header_.index_offset + head.size() + (uint64_t(head[4]) | uint64_t(head[5]) << 8 |
+                                                                uint64_t(head[6]) << 16 | uint64_t(head[7]) << 24);
+    if (size < end)
+      throw FormatError(name_ + ": truncated: the compact tile index ends at byte " + std::to_string(end) +
+                        ", the file has " + std::to_string(size));
+    if (size > end)
+      throw FormatError(name_ + ": " + std::to_string(size - end) + " trailing bytes after the compact tile index at byte " +
+                        std::to_string(end));
+  } else if (size != header_.file_size())
     throw FormatError(name_ + ": " + std::to_string(size - header_.file_size()) + " trailing bytes after the tile index at byte " +
                       std::to_string(header_.file_size()));
 
