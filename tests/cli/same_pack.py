@@ -4,14 +4,30 @@ Cells land in a build's journal in completion order, so tile offsets may differ 
 builds; what must match is what each tile holds."""
 import struct
 import sys
+import zlib
+
+
+def entries(d, index_off, count):
+    """(id, offset, stored, raw, crc, kind) per tile: the plain index, or with feature
+    payloads_only (bit 8) the compact one ("STIZ", size, zlib of the columns; offsets
+    implied from the journal's start)."""
+    if not struct.unpack_from("<I", d, 20)[0] & (1 << 8):
+        return [struct.unpack_from("<QQIIIB", d, index_off + 32 * i) for i in range(count)]
+    c = zlib.decompress(d[index_off + 8:])
+    n, out, tid, off = count, [], 0, struct.unpack_from("<Q", d, 200)[0]
+    for i in range(n):
+        tid += struct.unpack_from("<Q", c, 8 * i)[0]
+        stored, raw, crc = (struct.unpack_from("<I", c, o * n + 4 * i)[0] for o in (8, 12, 16))
+        out.append((tid, off, stored, raw, crc, c[20 * n + i]))
+        off += stored
+    return out
 
 
 def load(path, with_params):
     d = open(path, "rb").read()
     grid_off, grid_size, index_off, count = struct.unpack_from("<QQQQ", d, 208)
     tiles = {}
-    for i in range(count):
-        tid, off, stored, raw, crc, kind = struct.unpack_from("<QQIIIB", d, index_off + 32 * i)
+    for tid, off, stored, raw, crc, kind in entries(d, index_off, count):
         tiles[tid] = (raw, crc, kind, d[off:off + stored])
     params_size, = struct.unpack_from("<Q", d, 192)
     params = d[256:256 + params_size] if with_params else b""
