@@ -11,13 +11,17 @@
 //                       preview (map_preview.hpp), then with the feature dagmh_dictionary
 //                       the DAG-MH dictionary (pack_dictionary.hpp): grid_size covers
 //                       them all (grid_crc)
-//   tile index          tile_count * 32-byte TileIndexEntry sorted by id (index_crc)
-//   end of file         == index_offset + 32 * tile_count (trailing bytes are rejected)
+//   tile index          tile_count * 32-byte TileIndexEntry sorted by id (index_crc); in a
+//                       finished pack (kFeaturePayloadsOnly) the journal holds the payloads
+//                       alone and the index is compact (serialize_compact_index)
+//   end of file         == index_offset + 32 * tile_count, or the compact index's end
+//                       (trailing bytes are rejected)
 //
 // While a build runs the file is "<name>.tmp" with state = building and only the header,
-// params and journal; finish() appends grid + index, rewrites the header (state complete),
-// fsyncs and renames. Resume re-reads the journal: each record carries its own CRCs, so a
-// torn tail is found and cut off at the last complete cell record.
+// params and journal; finish() writes the finished pack afresh (payloads only, grid,
+// compact index, header last), fsyncs it and renames it into place. Resume re-reads the
+// journal: each record carries its own CRCs, so a torn tail is found and cut off at the
+// last complete cell record.
 #pragma once
 #include <array>
 #include <cstdint>
