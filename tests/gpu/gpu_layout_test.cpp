@@ -29,7 +29,7 @@ TEST(GpuLayout, TheShaderSeesEveryConstantTheCppSideSees) {
       L::kPtStack, L::kStXyLevel, L::kStWLevel, L::kStSlices, L::kStSkipLevel, L::kStEntries, L::kStCellSlots,
       L::kStLights, L::kStHeaderWords, L::kStLightWords, L::kMaxStackCells, L::kSqWords, L::kSqX, L::kSqY,
       L::kSqSlice, L::kSqLevel, L::kSqReceiver, L::kSqFootprint, L::kSqR, L::kFbStackKeyBit, L::kPcSliceA,
-      L::kPcSliceB, L::kPcTimeWeight};
+      L::kPcSliceB, L::kPcTimeWeight, L::kStLightCentreU, L::kStLightCentreV, L::kStLightProjection, L::kFlagSoft};
   ASSERT_LE(want.size(), L::kProbeWords);
   uint64_t messages = 0;
   const std::vector<uint32_t> got = run_layout_probe(gputest::device(), true, &messages);
@@ -69,6 +69,10 @@ TEST(GpuLayout, StackBlockHeaderWordsAreWhereTheDrawingPutsThem) {
   EXPECT_EQ(L::kPcSliceA, 4u);
   EXPECT_EQ(L::kPcSliceB, 5u);
   EXPECT_EQ(L::kPcTimeWeight, 6u);
+  EXPECT_EQ(L::kStLightCentreU, 13u);
+  EXPECT_EQ(L::kStLightCentreV, 14u);
+  EXPECT_EQ(L::kStLightProjection, 15u);
+  EXPECT_EQ(L::kFlagSoft, 2u);
 }
 
 }  // namespace

@@ -52,7 +52,14 @@ struct ServedStack {
 
 constexpr uint32_t kSlices = 10;
 
-// frame: the sun path's frame (light_set.hpp "Frames"; ground is the default).
+// An area light over the G-buffer's box (light_set.hpp "area"): 10 Hilbert-ordered points
+// of a 6 x 4 rectangle, frame window (spot_window samples) or translate (spots).
+std::string area_spec(const std::string& frame) {
+  return "area:pos=4,28,6,target=0,0,0,size=6,4,samples=" + std::to_string(kSlices) + ",fov=50,frame=" + frame;
+}
+
+// frame: the sun path's frame (light_set.hpp "Frames"; ground is the default); or a whole
+// light set spec (area_spec).
 ServedStack serve_stack(const std::string& name, const std::string& frame = "ground") {
   ServedStack s;
   const IntervalStack is = sliding_stack(looptest::small_scale() ? 5 : 6, kSlices);
@@ -61,8 +68,10 @@ ServedStack serve_stack(const std::string& name, const std::string& frame = "gro
   box.extend({-10, 0, -10});
   box.extend({10, 5, 10});
   const LightSet set = LightSet::fit(
-      LightSetSpec::parse("sun-path:azimuth=150..200,elevation=40..60,samples=" + std::to_string(kSlices) +
-                          ",frame=" + frame),
+      LightSetSpec::parse(frame.find(':') != std::string::npos
+                              ? frame
+                              : "sun-path:azimuth=150..200,elevation=40..60,samples=" + std::to_string(kSlices) +
+                                    ",frame=" + frame),
       box);
   cut.grid.light_kind = set.samples[0].kind();
   for (const LightSpace& l : set.samples) cut.grid.lights.push_back(l.to_array());
@@ -77,6 +86,16 @@ ServedStack serve_stack(const std::string& name, const std::string& frame = "gro
   o.cache_slots = uint32_t(s.tiles) + 4;
   s.client = std::make_unique<client::Client>(client::Endpoint{"127.0.0.1", s.server.port}, o);
   s.map = s.client->open(name);
+  return s;
+}
+
+// serve_stack with slices 0..last resident and the server stopped: the cache then stays
+// as it is, so a GPU pass and its CPU twin read the same tiles.
+ServedStack serve_frozen(const std::string& name, const std::string& frame, uint32_t last) {
+  ServedStack s = serve_stack(name, frame);
+  if (s.map.request_slices(0, last, 10) == 0) ADD_FAILURE() << "nothing to prefetch";
+  if (!looptest::wait_until([&] { return s.map.slices_resident(0, last); })) ADD_FAILURE() << "prefetch timed out";
+  s.server.stop();
   return s;
 }
 
@@ -225,7 +244,7 @@ struct GBuffer {
         nrm[4 * p + 1] = 1.0f;
       }
   }
-  ShadowPassInput input(double time, uint32_t kernel) const {
+  ShadowPassInput input(double time, uint32_t kernel, bool soft = false) const {
     ShadowPassInput in;
     in.positions = pos;
     in.normals = nrm;
@@ -236,9 +255,27 @@ struct GBuffer {
     in.neighbour_footprint = kernel != 5;
     in.footprint = 2.5f;
     in.time = time;
+    in.soft = soft;
     return in;
   }
 };
+
+// Every pixel of the pass against its CPU twin, bit for bit. Returns the mismatches and
+// adds the answers' classes (lit, shadowed, in between) to `tally`.
+size_t pass_against_twin(GpuMap& g, const client::Map& map, const ShadowPassInput& in, FrameStats& fs,
+                         std::array<size_t, 3>& tally) {
+  std::vector<float> got(size_t(in.width) * in.height), want(got.size());
+  fs = g.wait(g.submit_shadow_pass(in), got);
+  stack_shadow_pass_reference(map, in, want);
+  size_t bad = 0;
+  for (size_t i = 0; i < got.size(); ++i) {
+    if (bits(got[i]) != bits(want[i]) && bad++ == 0)
+      ADD_FAILURE() << "pixel " << i << ": gpu " << got[i] << " (" << bits(got[i]) << "), cpu " << want[i] << " ("
+                    << bits(want[i]) << ")";
+    ++tally[want[i] == 1.0f ? 0 : want[i] == 0.0f ? 1 : 2];
+  }
+  return bad;
+}
 
 // Both frames: the orthographic sun's and the ground frame's sheared light transform.
 TEST(GpuStack, ShadowPassAtSampleTimesAndBetweenEqualsItsCpuTwin) {
@@ -318,6 +355,89 @@ TEST(GpuStack, ShadowPassFeedbackStreamsTheCellsItNeedsUntilNoHoleIsLeft) {
   EXPECT_GT(g.stats().slots_uploaded, 0u);
   EXPECT_FALSE(s.map.slices_resident(0, 1));  // nothing asked for slices 0 and 1
   EXPECT_EQ(g.stats().validation_messages, 0u);
+}
+
+// The soft pass (ShadowPassInput::soft: the average over all N = 10 slices, each in its
+// own light space, sum in slice order then / N) equals its CPU twin on every pixel, with
+// the later slices' cells absent (their level-K values, fed back) and once all are
+// resident; the twin agrees with the client's own soft lookup (Map::soft_visibility) on
+// nearly every pixel (they differ only where the float light transform and the double
+// one pick different texels, or outside the light box, which the pass calls lit).
+TEST(GpuStack, SoftPassEqualsItsCpuTwinAndTheClientsSoftLookup) {
+  std::array<size_t, 3> tally{};
+  FrameStats fs;
+  const GBuffer gb;
+  {
+    ServedStack s = serve_frozen("gpu_stack_soft_half", "ortho", kSlices / 2 - 1);
+    GpuMap g(s.map, gputest::options());
+    for (uint32_t kernel : {1u, 3u, 5u}) {
+      SCOPED_TRACE("kernel " + std::to_string(kernel));
+      EXPECT_EQ(pass_against_twin(g, s.map, gb.input(0, kernel, true), fs, tally), 0u);
+      EXPECT_GT(fs.holes, 0u);  // slices 5..9 absent: their level-K values, fed back
+      EXPECT_GT(fs.feedback_tiles, 0u);
+    }
+    EXPECT_EQ(g.stats().validation_messages, 0u);
+  }
+  EXPECT_GT(tally[0], 500u);
+  EXPECT_GT(tally[2], 500u);  // a soft shadow: most shadowed pixels see some samples
+  ServedStack s = serve_frozen("gpu_stack_soft_all", "ortho", kSlices - 1);
+  GpuMap g(s.map, gputest::options());
+  EXPECT_EQ(pass_against_twin(g, s.map, gb.input(0, 3, true), fs, tally), 0u);
+  EXPECT_EQ(fs.holes, 0u);
+  EXPECT_EQ(g.stats().validation_messages, 0u);
+  // One tap at the finest level: the twin's soft value against the client's soft lookup.
+  ShadowPassInput in = gb.input(0, 1, true);
+  in.neighbour_footprint = false;
+  in.footprint = 0.5f;
+  std::vector<float> twin(size_t(gb.width) * gb.height);
+  stack_shadow_pass_reference(s.map, in, twin);
+  size_t compared = 0, same = 0;
+  for (size_t p = 0; p < twin.size(); ++p) {
+    const float* q = gb.pos.data() + 4 * p;
+    if (q[3] == 0.0f || std::fabs(q[0]) > 8.0f || std::fabs(q[2]) > 8.0f) continue;
+    const client::WorldPoint w{double(q[0]), double(q[1] + gb.nrm[4 * p + 1] * in.normal_offset), double(q[2])};
+    ++compared;
+    same += twin[p] == s.map.soft_visibility(w);
+  }
+  EXPECT_GT(compared, 1000u);
+  EXPECT_GE(double(same), 0.97 * double(compared)) << same << " of " << compared;
+  EXPECT_EQ(g.stats().validation_messages, 0u);
+}
+
+// An area light's stack (perspective samples: frame=window, LightKind::spot_window, and
+// frame=translate, LightKind::spot): the time pass at samples and between, and the soft
+// pass, equal their CPU twins on every pixel, with absent cells and without.
+TEST(GpuStack, AreaLightStackPassesEqualTheirCpuTwins) {
+  for (const std::string frame : {"window", "translate"}) {
+    SCOPED_TRACE("frame=" + frame);
+    std::array<size_t, 3> tally{};
+    FrameStats fs;
+    const GBuffer gb;
+    for (uint32_t last : {kSlices / 2 - 1, kSlices - 1}) {
+      ServedStack s = serve_frozen("gpu_stack_area_" + frame + std::to_string(last), area_spec(frame), last);
+      ASSERT_EQ(client::MapAccess::remote(s.map).stack_grid()->light_kind,
+                frame == "window" ? LightKind::spot_window : LightKind::spot);
+      GpuMap g(s.map, gputest::options());
+      for (double time : {0.0, 1.0 / 9.0, 0.37, 0.8}) {
+        SCOPED_TRACE("time " + std::to_string(time) + " last " + std::to_string(last));
+        EXPECT_EQ(pass_against_twin(g, s.map, gb.input(time, 3), fs, tally), 0u);
+        if (stack_time(kSlices, time).b > last) {
+          EXPECT_GT(fs.holes, 0u);
+        } else {
+          EXPECT_EQ(fs.holes, 0u);
+        }
+      }
+      for (uint32_t kernel : {1u, 5u}) {
+        SCOPED_TRACE("soft, kernel " + std::to_string(kernel) + " last " + std::to_string(last));
+        EXPECT_EQ(pass_against_twin(g, s.map, gb.input(0, kernel, true), fs, tally), 0u);
+        EXPECT_EQ(fs.holes > 0, last < kSlices - 1);
+      }
+      EXPECT_EQ(g.stats().validation_messages, 0u);
+    }
+    EXPECT_GT(tally[0], 1000u);
+    EXPECT_GT(tally[1], 100u);
+    EXPECT_GT(tally[2], 300u);
+  }
 }
 
 }  // namespace
