@@ -7,7 +7,8 @@
 // Include after st_eval.glsl (it uses StProbe, st_lit, st_feedback, st_filter_levels and
 // st_pcf_tap). Entry points: st_oct_depth(base, x, y, w, level) (one tile),
 // st_stack_depth(x, y, w, level, probe), st_stack_pcf(level, x, y, w, r, receiver, probe),
-// st_stack_lookup(x, y, w, receiver, footprint, r, probe) (level from a footprint).
+// st_stack_lookup(x, y, w, receiver, footprint, r, probe) (level from a footprint), and
+// st_fdiv(a, b) (a / b rounded as the CPU's float division, for the passes' divides).
 #ifndef SHADOWTILE_GPU_ST_STACK_GLSL
 #define SHADOWTILE_GPU_ST_STACK_GLSL
 
