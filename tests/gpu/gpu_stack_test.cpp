@@ -406,19 +406,22 @@ TEST(GpuStack, SoftPassEqualsItsCpuTwinAndTheClientsSoftLookup) {
 
 // An area light's stack (perspective samples: frame=window, LightKind::spot_window, and
 // frame=translate, LightKind::spot): the time pass at samples and between, and the soft
-// pass, equal their CPU twins on every pixel, with absent cells and without.
+// pass, equal their CPU twins on every pixel, with absent cells (window) and without
+// (translate).
 TEST(GpuStack, AreaLightStackPassesEqualTheirCpuTwins) {
   for (const std::string frame : {"window", "translate"}) {
     SCOPED_TRACE("frame=" + frame);
     std::array<size_t, 3> tally{};
     FrameStats fs;
     const GBuffer gb;
-    for (uint32_t last : {kSlices / 2 - 1, kSlices - 1}) {
+    {
+      // The window frame with the later slices absent, the translate frame all resident.
+      const uint32_t last = frame == "window" ? kSlices / 2 - 1 : kSlices - 1;
       ServedStack s = serve_frozen("gpu_stack_area_" + frame + std::to_string(last), area_spec(frame), last);
       ASSERT_EQ(client::MapAccess::remote(s.map).stack_grid()->light_kind,
                 frame == "window" ? LightKind::spot_window : LightKind::spot);
       GpuMap g(s.map, gputest::options());
-      for (double time : {0.0, 1.0 / 9.0, 0.37, 0.8}) {
+      for (double time : {0.0, 0.37, 0.8}) {
         SCOPED_TRACE("time " + std::to_string(time) + " last " + std::to_string(last));
         EXPECT_EQ(pass_against_twin(g, s.map, gb.input(time, 3), fs, tally), 0u);
         if (stack_time(kSlices, time).b > last) {
@@ -427,9 +430,9 @@ TEST(GpuStack, AreaLightStackPassesEqualTheirCpuTwins) {
           EXPECT_EQ(fs.holes, 0u);
         }
       }
-      for (uint32_t kernel : {1u, 5u}) {
-        SCOPED_TRACE("soft, kernel " + std::to_string(kernel) + " last " + std::to_string(last));
-        EXPECT_EQ(pass_against_twin(g, s.map, gb.input(0, kernel, true), fs, tally), 0u);
+      {
+        SCOPED_TRACE("soft, last " + std::to_string(last));
+        EXPECT_EQ(pass_against_twin(g, s.map, gb.input(0, 3, true), fs, tally), 0u);
         EXPECT_EQ(fs.holes > 0, last < kSlices - 1);
       }
       EXPECT_EQ(g.stats().validation_messages, 0u);
