@@ -79,7 +79,8 @@ ST_UINT(kGridHeaderWords, 2u)
 // values, l < K), then the coarse values (f32; level l holds 4^a(l) 2^b(l) values in
 // (w, y, x) row-major order), the level-K cells' entries (kEntryWords each: f32 value,
 // kind 0 constant / 1 tile), one slot pointer per cell (kNoSlot: not on the GPU), and one
-// float32 sun light space per slice (kStLightWords each, the order of kPcOrigin..kPcNear).
+// float32 light space per slice (kStLightWords each: the order of kPcOrigin..kPcNear, then
+// a perspective light's centre and the projection word; GPU_LAYOUT.md "The stack block").
 ST_UINT(kStXyLevel, 0u)         // n: slices are 2^n texels a side
 ST_UINT(kStWLevel, 1u)          // k: 2^(k-1) < N <= 2^k
 ST_UINT(kStSlices, 2u)          // N
