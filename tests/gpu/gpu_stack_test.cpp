@@ -401,6 +401,19 @@ TEST(GpuStack, SoftPassEqualsItsCpuTwinAndTheClientsSoftLookup) {
       EXPECT_EQ(pass_against_twin(g, s.map, gb.input(0, kernel, true), fs, tally), 0u);
       EXPECT_GT(fs.holes, 0u);  // slices 5..9 absent: their level-K values, fed back
       EXPECT_GT(fs.feedback_tiles, 0u);
+      if (kernel == 1) {
+        EXPECT_EQ(fs.requested, fs.feedback_tiles);  // queued on the Map
+      }
+      // Every cell fed back holds absent slices (5..9) and is not resident.
+      const StackGrid& grid = *client::MapAccess::remote(s.map).stack_grid();
+      const uint32_t sw = grid.geo.k - grid.geo.w_bits(grid.skip_level);
+      for (const GpuMap::FeedbackTile& t : g.last_feedback()) {
+        uint64_t cell = 0;
+        ASSERT_TRUE(grid.cell_of(t.tile, cell));
+        const uint64_t cw = cell >> (2 * grid.geo.xy_bits(grid.skip_level));
+        EXPECT_GE(((cw + 1) << sw) - 1, kSlices / 2) << "cell " << cell;
+        EXPECT_FALSE(cell_resident(s.map, t.tile));
+      }
     }
     EXPECT_EQ(g.stats().validation_messages, 0u);
   }
