@@ -3,8 +3,10 @@
 // (Map::slice_depth), with every tile resident and with cells absent (the level-K value,
 // and feedback naming exactly the absent cells); PCF and the footprint's level per slice;
 // the shadow pass at sample times and between equals its CPU twin; its feedback queues the
-// cells the pass needed, and once they arrive the pass has no holes. The validation layer
-// is on throughout and must stay silent.
+// cells the pass needed, and once they arrive the pass has no holes; the soft pass (every
+// slice averaged) equals its twin too, and the twin the client's soft lookup; an area
+// light's stack (perspective samples, both frames) passes at times and soft equal their
+// twins. The validation layer is on throughout and must stay silent.
 #include <gtest/gtest.h>
 
 #include <bit>
