@@ -1,8 +1,8 @@
 // `shadowtile view --server HOST:PORT --map NAME --scene SCENE [--path flyover] [--frames 24]
 //  [--fps 24] [--size 1920x1080] [--pcf 3] [--seed 1] [--device NAME] [--cache-mb 256]
-//  [--upload-mb 16] [--time T | --time-sweep A..B | --soft] [--out view-out] [--json PATH]`: a headless viewer. It flies a load-tester
-// camera path (loadgen/camera_path.hpp) over a map streamed from `shadowtile serve`;
-// per frame, primary visibility on the CPU (Embree) into a G-buffer, the shadow pass on
+//  [--upload-mb 16] [--time T | --time-sweep A..B | --soft] [--out view-out] [--json PATH]`:
+// a headless viewer. It flies a load-tester camera path (loadgen/camera_path.hpp) over a
+// map streamed from `shadowtile serve`; per frame, primary visibility on the CPU (Embree) into a G-buffer, the shadow pass on
 // the GPU (gpu::GpuMap) from the tiles streamed so far, Lambert shading into a PNG; the
 // GPU's feedback drives the tile requests (no region is prefetched). Prints per frame the
 // GPU pass time, tiles requested from feedback, holes (pixels answered from a coarser
@@ -96,7 +96,8 @@ void run(const ViewArgs& a) {
   // a spot's mean position (an area light's samples are points of its rectangle).
   auto to_light = [&](const std::vector<std::pair<uint32_t, double>>& ws, const Vec3d& p) {
     Vec3d acc{0, 0, 0};
-    for (const auto& [w, k] : ws) acc = acc + (samples[w].parallel() ? samples[w].forward() * -k : samples[w].origin() * k);
+    for (const auto& [w, k] : ws)
+      acc = acc + (samples[w].parallel() ? samples[w].forward() * -k : samples[w].origin() * k);
     return normalize(samples[ws[0].first].parallel() ? acc : acc - p);
   };
   std::vector<std::pair<uint32_t, double>> all_samples;
