@@ -1,20 +1,23 @@
 // `shadowtile view --server HOST:PORT --map NAME --scene SCENE [--path flyover] [--frames 24]
 //  [--fps 24] [--size 1920x1080] [--pcf 3] [--seed 1] [--device NAME] [--cache-mb 256]
-//  [--upload-mb 16] [--time T | --time-sweep A..B] [--out view-out] [--json PATH]`: a headless viewer. It flies a load-tester
-// camera path (loadgen/camera_path.hpp) over a map streamed from `shadowtile serve`;
-// per frame, primary visibility on the CPU (Embree) into a G-buffer, the shadow pass on
+//  [--upload-mb 16] [--time T | --time-sweep A..B | --soft] [--out view-out] [--json PATH]`:
+// a headless viewer. It flies a load-tester camera path (loadgen/camera_path.hpp) over a
+// map streamed from `shadowtile serve`; per frame, primary visibility on the CPU (Embree) into a G-buffer, the shadow pass on
 // the GPU (gpu::GpuMap) from the tiles streamed so far, Lambert shading into a PNG; the
 // GPU's feedback drives the tile requests (no region is prefetched). Prints per frame the
 // GPU pass time, tiles requested from feedback, holes (pixels answered from a coarser
 // level), residency; then a summary table, a contact sheet and JSON. Never waits for the
 // network: frames advance at --fps of simulated time whatever has arrived.
 //
-// A stack map (a pack built with a light set, `--light sun-path:...`) is drawn at the light
-// set's time: --time T for every frame, or --time-sweep A..B from A at the first frame to B
-// at the last (the sun moves while the camera flies). The GPU pass blends the two nearest
-// slices (gpu::ShadowPassInput::time), the shading follows the sun between them, and each
-// frame also asks for the slices the next frame's time reads (at a low priority, under
-// the feedback's), so a sweep finds its next slice on its way.
+// A stack map (a pack built with a light set, `--light sun-path:...` or `area:...`) is drawn
+// at the light set's time: --time T for every frame, or --time-sweep A..B from A at the
+// first frame to B at the last (the sun moves while the camera flies). The GPU pass blends
+// the two nearest slices (gpu::ShadowPassInput::time), the shading follows the light
+// between them, and each frame also asks for the slices the next frame's time reads (at a
+// low priority, under the feedback's), so a sweep finds its next slice on its way. With
+// --soft the pass averages all N samples (gpu::ShadowPassInput::soft: an area light's soft
+// shadow, or a day's mean sun), shaded toward the samples' mean light; the feedback
+// streams the cells of every slice. Area lights' samples are perspective (spots).
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -45,6 +48,7 @@ namespace {
 struct ViewArgs {
   std::string server, map, scene, path = "flyover", size = "1920x1080", device, out = "view-out", json, up = "y";
   std::string time, time_sweep;
+  bool soft = false;
   uint32_t frames = 24, pcf = 3;
   double fps = 24, cache_mb = 256, upload_mb = 16;
   uint64_t seed = 1;
@@ -58,7 +62,7 @@ void run(const ViewArgs& a) {
   if (a.frames == 0 || a.frames > 100000) throw Error("--frames: 1..100000");
   if (a.pcf < 1 || a.pcf > 9) throw Error("--pcf: kernel side 1..9");
   if (!(a.fps > 0)) throw Error("--fps must be > 0");
-  if (!a.time.empty() && !a.time_sweep.empty()) throw Error("view: give --time or --time-sweep, not both");
+  if (!a.time.empty() + !a.time_sweep.empty() + a.soft > 1) throw Error("view: give one of --time, --time-sweep, --soft");
   double time0 = 0, time1 = 0;
   if (!a.time.empty()) parse_time_range("--time", a.time, time0, time1);
   if (!a.time_sweep.empty()) {
@@ -81,12 +85,23 @@ void run(const ViewArgs& a) {
   if (h.scene_hash != scene.content_hash())
     std::fprintf(stderr, "shadowtile view: warning: scene '%s' is not the scene the map was built from\n", a.scene.c_str());
   const StackGrid* stack = client::MapAccess::remote(map).stack_grid();
-  if (!stack && !(a.time.empty() && a.time_sweep.empty()))
-    throw Error("view: --time and --time-sweep need a stack map (a pack built with --light sun-path:...)");
-  if (stack && stack->light_kind != LightKind::sun && stack->light_kind != LightKind::sun_ground)
-    throw Error("view: the GPU shadow pass supports suns only; map '" + a.map + "' is a stack of '" + stack->spec + "'");
+  if (!stack && !(a.time.empty() && a.time_sweep.empty() && !a.soft))
+    throw Error("view: --time, --time-sweep and --soft need a stack map (a pack built with --light sun-path:... or "
+                "area:...)");
+  if (!stack && !light.parallel())
+    throw Error("view: the GPU shadow pass of a 2D map supports suns only; map '" + a.map + "' has a spot light");
   std::vector<LightSpace> samples;
   for (uint32_t w = 0; stack && w < stack->slices; ++w) samples.push_back(stack->light(w));
+  // Shading toward a light between samples (weights per sample): a sun's mean direction, or
+  // a spot's mean position (an area light's samples are points of its rectangle).
+  auto to_light = [&](const std::vector<std::pair<uint32_t, double>>& ws, const Vec3d& p) {
+    Vec3d acc{0, 0, 0};
+    for (const auto& [w, k] : ws)
+      acc = acc + (samples[w].parallel() ? samples[w].forward() * -k : samples[w].origin() * k);
+    return normalize(samples[ws[0].first].parallel() ? acc : acc - p);
+  };
+  std::vector<std::pair<uint32_t, double>> all_samples;
+  for (uint32_t w = 0; w < samples.size(); ++w) all_samples.push_back({w, 1.0 / double(samples.size())});
   const loadgen::WorldFrame world = stack ? loadgen::stack_world_frame(map) : loadgen::world_frame(h, client::skip_grid(map));
   const loadgen::CameraPath path(loadgen::parse_path(a.path), world, a.seed, 0);
   const SceneTracer tracer(scene, light);
@@ -100,9 +115,10 @@ void run(const ViewArgs& a) {
   std::printf("device '%s', %ux%u, %u frames of path %s, cache %u slots\n", g.device_name().c_str(), width, height,
               a.frames, a.path.c_str(), co.cache_slots);
   if (stack)
-    std::printf("stack of %u slices (%s), time %s\n", stack->slices, stack->spec.c_str(),
-                a.time_sweep.empty() ? std::to_string(time0).c_str()
-                                     : (std::to_string(time0) + ".." + std::to_string(time1) + " swept").c_str());
+    std::printf("stack of %u slices (%s), %s\n", stack->slices, stack->spec.c_str(),
+                a.soft                 ? "soft (every sample averaged)"
+                : a.time_sweep.empty() ? ("time " + std::to_string(time0)).c_str()
+                                       : ("time " + std::to_string(time0) + ".." + std::to_string(time1) + " swept").c_str());
   // The light set's time of frame f (a sweep: A at the first frame, B at the last).
   auto time_of = [&](uint32_t f) {
     return a.frames > 1 ? time0 + (time1 - time0) * double(std::min(f, a.frames - 1)) / double(a.frames - 1) : time0;
@@ -115,21 +131,24 @@ void run(const ViewArgs& a) {
   const uint32_t thumb = 8, tw = std::max(1u, width / thumb), th = std::max(1u, height / thumb);
   const uint32_t cols = std::min<uint32_t>(a.frames, 6), rows = (a.frames + cols - 1) / cols;
   std::vector<Rgb8> sheet(size_t(tw) * cols * th * rows);
-  const double texel = light.extent_uv() / double(uint64_t(1) << h.map_level);
+  // One finest texel in world units (a spot's at the world's centre).
+  const double texel = (light.parallel() ? light.extent_uv() : length(world.centre() - light.origin()) * light.extent_uv()) /
+                       double(uint64_t(1) << h.map_level);
   nlohmann::json frames = nlohmann::json::array();
   std::printf("%6s %10s %10s %10s %9s %9s %10s%s\n", "frame", "cpu ms", "gpu ms", "requested", "holes", "hole %",
-              "resident", stack ? "     time" : "");
+              "resident", stack && !a.soft ? "     time" : "");
   std::vector<double> gpu_ms, holes_pct;
   for (uint32_t f = 0; f < a.frames; ++f) {
     const auto t0 = std::chrono::steady_clock::now();
     auto rec = tracer.primary(path.at(f / a.fps), width, height);
     const double time = time_of(f);
-    if (stack) {
-      // The sun between the two slices the pass blends: shading follows it (n.l).
+    if (stack && a.soft) {
+      for (Receiver& r : rec) r.n_dot_l = dot(r.normal, to_light(all_samples, r.pos));
+    } else if (stack) {
+      // The light between the two slices the pass blends: shading follows it (n.l).
       const gpu::StackTime st = gpu::stack_time(stack->slices, time);
-      const Vec3d fa = samples[st.a].forward(), fb = samples[st.b].forward();
-      const Vec3d to_sun = normalize(fa * -(1.0 - double(st.f)) + fb * -double(st.f));
-      for (Receiver& r : rec) r.n_dot_l = dot(r.normal, to_sun);
+      const std::vector<std::pair<uint32_t, double>> ws = {{st.a, 1.0 - double(st.f)}, {st.b, double(st.f)}};
+      for (Receiver& r : rec) r.n_dot_l = dot(r.normal, to_light(ws, r.pos));
       // Ask for the slices the next frame's time reads, under the feedback's priorities.
       const gpu::StackTime next = gpu::stack_time(stack->slices, time_of(f + 1));
       if (next.a != st.a || next.b != st.b) map.request_slices(next.a, next.b, 1);
@@ -150,6 +169,7 @@ void run(const ViewArgs& a) {
     in.normal_offset = float(kOpenReceiverOffsetTexels * texel);
     in.neighbour_footprint = true;
     in.time = time;
+    in.soft = a.soft;
     const gpu::FrameStats fs = g.wait(g.submit_shadow_pass(in), vis);
     for (size_t p = 0; p < pixels; ++p) {
       const Receiver& r = rec[p];
@@ -171,14 +191,14 @@ void run(const ViewArgs& a) {
     holes_pct.push_back(hole_pct);
     std::printf("%6u %10.1f %10.3f %10u %9u %8.2f%% %5u/%-5u", f, cpu_ms, fs.gpu_ms, fs.requested, fs.holes, hole_pct,
                 ms.cache.resident, co.cache_slots);
-    if (stack) std::printf(" %8.4f", time);
+    if (stack && !a.soft) std::printf(" %8.4f", time);
     std::printf("\n");
     std::fflush(stdout);
     frames.push_back({{"frame", f}, {"cpu_ms", cpu_ms}, {"gpu_ms", fs.gpu_ms}, {"requested", fs.requested},
                       {"feedback_tiles", fs.feedback_tiles}, {"holes", fs.holes}, {"holes_pct", hole_pct},
                       {"resident", ms.cache.resident}, {"slots_uploaded", fs.slots_uploaded},
                       {"bytes_uploaded", fs.bytes_uploaded}, {"tiles_received", ms.tiles_received}});
-    if (stack) frames.back()["time"] = time;
+    if (stack && !a.soft) frames.back()["time"] = time;
     // Simulated time: the next frame comes 1/fps later, arrivals or not.
     std::this_thread::sleep_for(std::chrono::duration<double>(1.0 / a.fps));
   }
@@ -196,7 +216,8 @@ void run(const ViewArgs& a) {
                                  {"pcf", a.pcf}, {"gpu_ms_median", med(gpu_ms)}, {"holes_pct_median", med(holes_pct)},
                                  {"slots_uploaded", gs.slots_uploaded}, {"bytes_uploaded", gs.bytes_uploaded},
                                  {"feedback_requested", gs.feedback_requested}, {"frames", frames}};
-  if (stack) report["stack"] = {{"slices", stack->slices}, {"spec", stack->spec}, {"time0", time0}, {"time1", time1}};
+  if (stack)
+    report["stack"] = {{"slices", stack->slices}, {"spec", stack->spec}, {"soft", a.soft}, {"time0", time0}, {"time1", time1}};
   const std::string json = a.json.empty() ? a.out + "/view.json" : a.json;
   std::ofstream(json) << report.dump(2) << "\n";
   std::printf("wrote %s/frame_*.png, %s/contact_sheet.png, %s\n", a.out.c_str(), a.out.c_str(), json.c_str());
@@ -222,6 +243,8 @@ Register reg{"view", "Headless viewer: fly a camera path, GPU shadow pass from s
                               "Stack maps: the light set's time T in [0, 1] (slices blended; default 0)");
                sub.add_option("--time-sweep", a->time_sweep,
                               "Stack maps: time A..B swept over the frames (the sun moves while the camera flies)");
+               sub.add_flag("--soft", a->soft,
+                            "Stack maps: the soft shadow, every sample of the light set averaged (area lights)");
                sub.add_option("--out", a->out, "Output folder (frames, contact sheet, view.json)");
                sub.add_option("--json", a->json, "JSON report path (default OUT/view.json)");
                sub.callback([a] { run(*a); });

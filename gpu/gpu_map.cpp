@@ -288,8 +288,7 @@ struct GpuMap::Impl {
     for (size_t c = 0; c < g.entries.size(); ++c) p[o++] = L::kNoSlot;
     h[L::kStLights] = o;
     for (uint32_t w = 0; w < g.slices; ++w, o += L::kStLightWords) {
-      if (g.light_kind != LightKind::sun && g.light_kind != LightKind::sun_ground) continue;  // spot: refused
-      const ShadowLight sl = shadow_light(g.light(w));
+      const ShadowLight sl = shadow_light(g.light(w));  // any kind (perspective: spots)
       for (int i = 0; i < 3; ++i) {
         p[o + i] = std::bit_cast<uint32_t>(sl.origin[i]);
         p[o + 3 + i] = std::bit_cast<uint32_t>(sl.axis_u[i]);
@@ -297,6 +296,9 @@ struct GpuMap::Impl {
         p[o + 9 + i] = std::bit_cast<uint32_t>(sl.forward[i]);
       }
       p[o + 12] = std::bit_cast<uint32_t>(sl.near_scaled);
+      p[o + L::kStLightCentreU] = std::bit_cast<uint32_t>(sl.centre_u);
+      p[o + L::kStLightCentreV] = std::bit_cast<uint32_t>(sl.centre_v);
+      p[o + L::kStLightProjection] = sl.perspective ? 1u : 0u;
     }
   }
 
@@ -655,10 +657,7 @@ uint64_t GpuMap::submit_shadow_pass(const ShadowPassInput& in) {
     throw GpuError("GpuMap::submit_shadow_pass: positions and normals need 4 floats per pixel");
   if (in.kernel < 1 || in.kernel > L::kMaxPcf) throw GpuError("GpuMap::submit_shadow_pass: kernel must be 1..9");
   if (m.sg) {
-    if (m.sg->light_kind != LightKind::sun && m.sg->light_kind != LightKind::sun_ground)
-      throw GpuError("GpuMap: the GPU shadow pass supports sun lights only (this stack's light set is '" + m.sg->spec +
-                     "')");
-    const StackTime t = stack_time(m.sg->slices, in.time);
+    const StackTime t = in.soft ? StackTime{} : stack_time(m.sg->slices, in.time);
     Impl::Frame& f = m.acquire();
     std::memcpy(f.input_host.mapped, in.positions.data(), pixels * 16);
     std::memcpy(f.normals_host.mapped, in.normals.data(), pixels * 16);
@@ -667,7 +666,7 @@ uint64_t GpuMap::submit_shadow_pass(const ShadowPassInput& in) {
     pc[L::kPcCount] = in.width;
     pc[L::kPcHeight] = in.height;
     pc[L::kPcKernel] = in.kernel;
-    pc[L::kPcFlags] = in.neighbour_footprint ? L::kFlagNeighbourFootprint : 0;
+    pc[L::kPcFlags] = (in.neighbour_footprint ? L::kFlagNeighbourFootprint : 0) | (in.soft ? L::kFlagSoft : 0);
     pc[L::kPcSliceA] = t.a;
     pc[L::kPcSliceB] = t.b;
     pc[L::kPcTimeWeight] = std::bit_cast<uint32_t>(t.f);
@@ -675,6 +674,7 @@ uint64_t GpuMap::submit_shadow_pass(const ShadowPassInput& in) {
     pc[L::kPcFootprint] = std::bit_cast<uint32_t>(in.footprint);
     return m.submit(f, Kernel::stack_shadow_pass, uint32_t(pixels), pc);
   }
+  if (in.soft) throw GpuError("GpuMap::submit_shadow_pass: a soft pass needs a stack map (a pack built with a light set)");
   const ShadowLight light = shadow_light(m.rm->header());
   Impl::Frame& f = m.acquire();
   std::memcpy(f.input_host.mapped, in.positions.data(), pixels * 16);

@@ -27,7 +27,9 @@
 // Stack maps (Map::slices() > 0: shadow-map stacks, a moving sun) use the same mirror: the
 // page table carries the stack grid and one light per slice (GPU_LAYOUT.md "The stack
 // block"), evaluate() takes GpuStackQuery (bit-exact with Map::slice_depth and the same
-// kernels per slice), and the shadow pass answers at ShadowPassInput::time.
+// kernels per slice), and the shadow pass answers at ShadowPassInput::time, or the soft
+// shadow over all slices (ShadowPassInput::soft), for suns and area lights (perspective
+// samples) alike.
 //
 // Errors: the constructor throws GpuError when no Vulkan device is there or the one asked
 // for is not (one line naming the devices present), or a Vulkan call fails (naming the
@@ -102,6 +104,10 @@ struct ShadowPassInput {
   // 2D map's pass filters its one; they are blended va + f * (vb - va) (exact at a
   // sample's time: that slice alone), StackLookup::visibility's contract.
   double time = 0;
+  // Stack maps only: the soft shadow instead, the average over all N slices (time unused):
+  // each slice filtered in its own light space as above, summed in slice order in float,
+  // divided by N (StackMap::soft_visibility_filtered's order; gpu/shadow_reference.hpp).
+  bool soft = false;
 };
 
 // A stack pass's time (ShadowPassInput::time) as StackMap::visibility takes it: with
@@ -156,7 +162,9 @@ class GpuMap {
   uint64_t submit_evaluate(std::span<const GpuStackQuery> queries);
   // Submits a shadow pass (width * height <= max_pixels) and returns its frame number;
   // waits only when every ring slot is still in flight. On a stack map, the pass answers
-  // at `in.time` from the stack's tiles (absent cells: the level-K value, and feedback).
+  // at `in.time`, or the soft shadow with `in.soft`, from the stack's tiles (absent cells:
+  // the level-K value, and feedback). A 2D map's pass supports suns only (GpuError);
+  // `in.soft` on a 2D map is a GpuError.
   uint64_t submit_shadow_pass(const ShadowPassInput& in);
   // Waits for `frame`, copies its visibility image into `out` (width * height floats) and
   // hands its feedback to the Map. Throws GpuError for a frame not in flight.

@@ -1,18 +1,25 @@
 #include "gpu/layout_probe.hpp"
 
+#include <algorithm>
 #include <cstring>
 
 #include "gpu/kernels.hpp"
 
 namespace st::gpu {
 
-std::vector<uint32_t> run_layout_probe(const std::string& device, bool validation, uint64_t* validation_messages) {
+namespace {
+
+// One dispatch of layout_probe.comp: `input` in binding 2, push-constant count `count`,
+// returns `out_words` words of binding 4.
+std::vector<uint32_t> run_probe(const std::string& device, bool validation, std::span<const uint32_t> input,
+                                uint32_t count, size_t out_words, uint64_t* validation_messages) {
   VkContext ctx(device, validation);
   Kernels kernels;
   std::vector<VkBufferBox> bufs;
   VkCommandPool pool = VK_NULL_HANDLE;
   VkFence fence = VK_NULL_HANDLE;
-  std::vector<uint32_t> out(layout::kProbeWords, 0);
+  std::vector<uint32_t> out(out_words, 0);
+  const size_t words = std::max({size_t(layout::kProbeWords), input.size(), out_words});
   auto cleanup = [&] {
     vkDeviceWaitIdle(ctx.device());
     if (fence) vkDestroyFence(ctx.device(), fence, nullptr);
@@ -22,7 +29,9 @@ std::vector<uint32_t> run_layout_probe(const std::string& device, bool validatio
   };
   try {
     kernels.create(ctx, 1);
-    for (int i = 0; i < 6; ++i) bufs.push_back(ctx.make_buffer(layout::kProbeWords * 4, true));
+    for (int i = 0; i < 6; ++i) bufs.push_back(ctx.make_buffer(words * 4, true));
+    std::memset(bufs[2].mapped, 0, words * 4);
+    if (!input.empty()) std::memcpy(bufs[2].mapped, input.data(), input.size() * 4);
     const VkDescriptorSet set = kernels.bind(ctx, 0, {bufs[0].buffer, bufs[1].buffer, bufs[2].buffer, bufs[3].buffer,
                                                       bufs[4].buffer, bufs[5].buffer});
     pool = ctx.make_command_pool(false);
@@ -30,9 +39,10 @@ std::vector<uint32_t> run_layout_probe(const std::string& device, bool validatio
     VkCommandBufferBeginInfo bi{};
     bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
     vk_check(vkBeginCommandBuffer(cmd, &bi), "vkBeginCommandBuffer");
-    const uint32_t pc[layout::kPcWords] = {};
+    uint32_t pc[layout::kPcWords] = {};
+    pc[layout::kPcCount] = count;
     kernels.record(cmd, Kernel::layout_probe, set, pc);
-    vkCmdDispatch(cmd, 1, 1, 1);
+    vkCmdDispatch(cmd, std::max(1u, (count + layout::kWorkgroupSize - 1) / layout::kWorkgroupSize), 1, 1);
     VkMemoryBarrier host{};
     host.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
     host.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
@@ -55,6 +65,21 @@ std::vector<uint32_t> run_layout_probe(const std::string& device, bool validatio
   cleanup();
   if (validation_messages) *validation_messages = ctx.validation_messages();
   return out;
+}
+
+}  // namespace
+
+std::vector<uint32_t> run_layout_probe(const std::string& device, bool validation, uint64_t* validation_messages) {
+  return run_probe(device, validation, {}, 0, layout::kProbeWords, validation_messages);
+}
+
+std::vector<uint32_t> run_fdiv_probe(const std::string& device, bool validation, std::span<const uint32_t> a,
+                                     std::span<const uint32_t> b, uint64_t* validation_messages) {
+  if (a.size() != b.size() || a.empty() || a.size() > (size_t(1) << 22))
+    throw GpuError("run_fdiv_probe: want 1..2^22 pairs of equal counts");
+  std::vector<uint32_t> input(2 * a.size());
+  for (size_t i = 0; i < a.size(); ++i) input[2 * i] = a[i], input[2 * i + 1] = b[i];
+  return run_probe(device, validation, input, uint32_t(a.size()), a.size(), validation_messages);
 }
 
 }  // namespace st::gpu

@@ -1,13 +1,20 @@
 // Runs shaders/layout_probe.comp on the named device and returns the layout constants the
 // shader was compiled against, in the order the probe writes them (layout::kProbeWords
-// words). For the layout test. Throws GpuError like GpuMap's constructor.
+// words). For the layout test. Throws GpuError like GpuMap's constructor (and
+// run_fdiv_probe also for a or b of different sizes or more than 2^22 pairs).
 #pragma once
 #include <cstdint>
+#include <span>
 #include <string>
 #include <vector>
 
 namespace st::gpu {
 
 std::vector<uint32_t> run_layout_probe(const std::string& device, bool validation, uint64_t* validation_messages);
+
+// The same shader's other mode: the bits of st_fdiv(a[i], b[i]) (shaders/st_stack.glsl, the
+// passes' division rounded as the CPU's) for each pair, on the device. For the tests.
+std::vector<uint32_t> run_fdiv_probe(const std::string& device, bool validation, std::span<const uint32_t> a,
+                                     std::span<const uint32_t> b, uint64_t* validation_messages);
 
 }  // namespace st::gpu

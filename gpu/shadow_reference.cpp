@@ -4,6 +4,7 @@
 #include <bit>
 #include <cfloat>
 #include <cmath>
+#include <vector>
 
 #include "client/map_access.hpp"
 #include "tiles/core/filter_level.hpp"
@@ -37,9 +38,32 @@ ShadowLight shadow_light(const PackHeader& h) {
   return shadow_light(LightSpace::from_array(h.light_kind, h.light));
 }
 
+// A perspective light (spot, spot_window): the rows scaled so that x / z needs no
+// further scale (au = axis_u / (E (far - near)), fw = forward / (far - near)) and d = z -
+// near', and the image centre as an offset (hpp).
+static ShadowLight perspective_rows(const LightSpace& ls) {
+  ShadowLight l = light_rows(ls, ls.forward(), ls.forward(), ls.forward());
+  const double e = ls.extent_uv(), depth = ls.far_plane() - ls.near_plane();
+  const Vec3d u = ls.axis_u(), v = ls.axis_v();
+  l.axis_u = {float(u.x / (e * depth)), float(u.y / (e * depth)), float(u.z / (e * depth))};
+  l.axis_v = {float(v.x / (e * depth)), float(v.y / (e * depth)), float(v.z / (e * depth))};
+  const std::array<double, 2> c = ls.window_shift();
+  l.centre_u = float(0.5 - c[0] / e);
+  l.centre_v = float(0.5 - c[1] / e);
+  l.perspective = true;
+  return l;
+}
+
 ShadowLight shadow_light(const LightSpace& ls) {
-  if (ls.kind() == LightKind::sun_ground) return ground_shadow_light(ls);
-  if (ls.kind() != LightKind::sun) throw GpuError("GpuMap: the GPU shadow pass supports sun lights only");
+  switch (ls.kind()) {
+    case LightKind::sun_ground:
+      return ground_shadow_light(ls);
+    case LightKind::spot:
+    case LightKind::spot_window:
+      return perspective_rows(ls);
+    case LightKind::sun:
+      break;
+  }
   return light_rows(ls, ls.axis_u(), ls.axis_v(), ls.forward());
 }
 
@@ -74,7 +98,13 @@ bool light_point(const ShadowLight& l, const ShadowPassInput& in, size_t p, Poin
   };
   out.u = dot(l.axis_u);
   out.v = dot(l.axis_v);
-  out.d = dot(l.forward) - l.near_scaled;
+  const float z = dot(l.forward);
+  if (l.perspective) {
+    const float qu = out.u / z, qv = out.v / z;
+    out.u = qu + l.centre_u;
+    out.v = qv + l.centre_v;
+  }
+  out.d = z - l.near_scaled;
   return true;
 }
 
@@ -158,17 +188,27 @@ void stack_shadow_pass_reference(const client::Map& map, const ShadowPassInput& 
         lit += d <= map.slice_depth(w, level, pcf_tap(x, i, r, s), pcf_tap(y, j, r, s));
     return float(lit) / float(r * r);
   };
+  std::vector<ShadowLight> lights;
+  for (uint32_t w = 0; w < g->slices; ++w) lights.push_back(shadow_light(g->light(w)));
   auto slice = [&](size_t p, uint32_t w) {
     Texel t;
-    if (!pixel_texel(shadow_light(g->light(w)), in, p, finest, t)) return 1.0f;
+    if (!pixel_texel(lights[w], in, p, finest, t)) return 1.0f;
     const FilterLevels f = filter_levels(finest, t.footprint);
     const float a = pcf(w, f.fine, t.x >> (finest - f.fine), t.y >> (finest - f.fine), t.c.d);
     return f.t == 0.0f
                ? a
                : filter_blend(a, pcf(w, f.coarse, t.x >> (finest - f.coarse), t.y >> (finest - f.coarse), t.c.d), f.t);
   };
-  const StackTime t = stack_time(g->slices, in.time);
   const size_t pixels = size_t(in.width) * in.height;
+  if (in.soft) {
+    for (size_t p = 0; p < pixels; ++p) {
+      float sum = 0;
+      for (uint32_t w = 0; w < g->slices; ++w) sum = sum + slice(p, w);
+      out[p] = sum / float(g->slices);
+    }
+    return;
+  }
+  const StackTime t = stack_time(g->slices, in.time);
   for (size_t p = 0; p < pixels; ++p) {
     const float va = slice(p, t.a);
     out[p] = t.a == t.b ? va : va + t.f * (slice(p, t.b) - va);

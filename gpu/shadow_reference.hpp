@@ -23,20 +23,38 @@
 
 namespace st::gpu {
 
+// A perspective light (a spot, or an area light's sample: LightKind::spot, spot_window)
+// in a stack pass, as an engine's shader projects (the stack block's light words,
+// GPU_LAYOUT.md "The stack block"):
+//   r as above; x = r . au, y = r . av, z = r . fw       au = axis_u / (E (far - near)),
+//   u = x / z + cu,  v = y / z + cv,  d = z - near_scaled   av likewise, fw = forward / (far - near)
+//   cu = 0.5 - c_u / E, cv = 0.5 - c_v / E (c: a spot_window's shift; 0 for a spot), each
+//   rounded once from double; every product, sum and the quotient rounded once (the
+//   shader divides in integers, st_fdiv, since Vulkan's division may be off by 2.5 ulp).
+// The same box test, texel and neighbour footprint follow. z <= 0 (behind the light) gives
+// d < 0 (near > 0) or a quotient that fails the box test: lit, on both sides.
 struct ShadowLight {
   std::array<float, 3> origin{}, axis_u{}, axis_v{}, forward{};
   float near_scaled = 0;
+  float centre_u = 0, centre_v = 0;  // perspective only
+  bool perspective = false;
 };
 
-// The float light of a pack's header, or of one light space. Throws GpuError for a spot
-// light (the GPU shadow pass supports suns only).
+// The float light of a pack's header (suns only: the 2D pass refuses spots, GpuError), or
+// of one light space (any kind; sun_ground: ground_shadow_light; spot, spot_window:
+// perspective rows as drawn above).
 ShadowLight shadow_light(const PackHeader& h);
 ShadowLight shadow_light(const LightSpace& ls);
 ShadowLight ground_shadow_light(const LightSpace& ls);
 
 // The CPU twin of a stack map's shadow pass: the same float operations per slice as
 // shaders/stack_shadow_pass.comp, depths from Map::slice_depth (the Map's cache, the same
-// state the GpuMap mirrors). Throws GpuError for a map that is not a stack of suns.
+// state the GpuMap mirrors). Any light kind of a stack (suns, ground-frame suns, spots and
+// an area light's windowed spots). At in.time, or with in.soft the average over the N
+// slices: sum = 0; for w = 0..N-1: sum = sum + v_w (float, one rounding per add); then
+// sum / float(N), one rounding: StackMap::soft_visibility_filtered's order, with v_w each
+// slice's filtered value in the pass's float light and footprint. Throws GpuError for a
+// map that is not a stack.
 void stack_shadow_pass_reference(const client::Map& map, const ShadowPassInput& in, std::span<float> out);
 
 // The CPU twin of the shadow pass over `ev` (the Map's evaluator, the same cache state).

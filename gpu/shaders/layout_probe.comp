@@ -1,9 +1,19 @@
 #version 450
 // Writes the layout constants this shader compiles against, in a fixed order, so a test
 // compares them with the C++ side's (tests/gpu/gpu_layout_test.cpp).
+// With a count in push-constant word kPcCount it probes st_fdiv instead: invocation i
+// writes st_fdiv(a, b) of input words 2i and 2i + 1 to output word i (the division test).
 #include "st_buffers.glsl"
 
+#include "st_stack.glsl"
+
 void main() {
+  const uint count = st_pc.w[kPcCount];
+  if (count != 0u) {
+    const uint i = gl_GlobalInvocationID.x;
+    if (i < count) st_output[i] = st_fdiv(uintBitsToFloat(st_input_words[2u * i]), uintBitsToFloat(st_input_words[2u * i + 1u]));
+    return;
+  }
   if (gl_GlobalInvocationID.x != 0u) return;
   const uint v[] = uint[](kLayoutVersion, kPageMagic, kPtMagic, kPtVersion, kPtMapLevel, kPtSkipLevel,
                           kPtEncoding, kPtSlotCount, kPtSlotWords, kPtSkipCoarse, kPtSkipEntries, kPtSkipSlots,
@@ -21,6 +31,6 @@ void main() {
                           kPtStack, kStXyLevel, kStWLevel, kStSlices, kStSkipLevel, kStEntries, kStCellSlots,
                           kStLights, kStHeaderWords, kStLightWords, kMaxStackCells, kSqWords, kSqX, kSqY, kSqSlice,
                           kSqLevel, kSqReceiver, kSqFootprint, kSqR, kFbStackKeyBit, kPcSliceA, kPcSliceB,
-                          kPcTimeWeight);
+                          kPcTimeWeight, kStLightCentreU, kStLightCentreV, kStLightProjection, kFlagSoft);
   for (uint i = 0u; i < kProbeWords; ++i) st_output[i] = uintBitsToFloat(i < v.length() ? v[i] : 0u);
 }

@@ -79,7 +79,8 @@ ST_UINT(kGridHeaderWords, 2u)
 // values, l < K), then the coarse values (f32; level l holds 4^a(l) 2^b(l) values in
 // (w, y, x) row-major order), the level-K cells' entries (kEntryWords each: f32 value,
 // kind 0 constant / 1 tile), one slot pointer per cell (kNoSlot: not on the GPU), and one
-// float32 sun light space per slice (kStLightWords each, the order of kPcOrigin..kPcNear).
+// float32 light space per slice (kStLightWords each: the order of kPcOrigin..kPcNear, then
+// a perspective light's centre and the projection word; GPU_LAYOUT.md "The stack block").
 ST_UINT(kStXyLevel, 0u)         // n: slices are 2^n texels a side
 ST_UINT(kStWLevel, 1u)          // k: 2^(k-1) < N <= 2^k
 ST_UINT(kStSlices, 2u)          // N
@@ -88,7 +89,10 @@ ST_UINT(kStEntries, 4u)         // word offset of the cells' entries
 ST_UINT(kStCellSlots, 5u)       // word offset of the cells' slot pointers
 ST_UINT(kStLights, 6u)          // word offset of the slices' light spaces
 ST_UINT(kStHeaderWords, 8u)     // then the K coarse-level offsets
-ST_UINT(kStLightWords, 16u)     // origin, axis_u, axis_v, forward (f32 x3 each), near (f32), 3 zero
+ST_UINT(kStLightWords, 16u)     // origin, axis_u, axis_v, forward (f32 x3 each), near (f32), then:
+ST_UINT(kStLightCentreU, 13u)   // f32: perspective lights: u = x / z + this (0 for an affine light)
+ST_UINT(kStLightCentreV, 14u)   // f32: likewise v
+ST_UINT(kStLightProjection, 15u)  // 0: affine (u = x, v = y), 1: perspective (x / z, y / z)
 ST_UINT(kMaxStackCells, 0x400000u)  // kStackMaxCells: cells < 2^22
 
 // ---- stack queries (binding kBindInput of stack_evaluate.comp) ----
@@ -152,6 +156,7 @@ ST_UINT(kPcSliceB, 5u)      // slice a + 1, or a when the time is a sample's (an
 ST_UINT(kPcTimeWeight, 6u)  // f32 f = time * (N - 1) - a, rounded once: va + f * (vb - va)
 ST_UINT(kPcWords, 20u)
 ST_UINT(kFlagNeighbourFootprint, 1u)
+ST_UINT(kFlagSoft, 2u)      // stack shadow pass: the average over all N slices (slices a, b unused)
 
 // ---- bindings (descriptor set 0) ----
 ST_UINT(kBindPool, 0u)

@@ -2,9 +2,11 @@
 // The shadow pass of a stack map (GpuMap::submit_shadow_pass with ShadowPassInput::time):
 // world positions (and normals) of a G-buffer -> visibility at a time of the light set,
 // the two nearest slices blended (StackLookup::visibility's contract: exact at the
-// samples, va + f * (vb - va) between). Each slice's sun light space in float32 comes from
-// the stack block; per slice the same operations as the 2D pass (shadow_pass.comp) and as
-// the CPU twin gpu::stack_shadow_pass_reference (gpu/shadow_reference.cpp).
+// samples, va + f * (vb - va) between), or with kFlagSoft the soft shadow: the average
+// over all N slices (sum in slice order, then / N). Each slice's light space in float32
+// comes from the stack block (a sun's affine rows, or a spot's rows and the perspective
+// divide); per slice the same operations as the 2D pass (shadow_pass.comp) and as the CPU
+// twin gpu::stack_shadow_pass_reference (gpu/shadow_reference.cpp).
 #include "st_buffers.glsl"
 
 #include "st_stack.glsl"
@@ -27,8 +29,12 @@ bool st_stack_light_point(uint p, uint lb, out float u, out float v, out float d
   rz = rz - st_light_word(lb, 2u);
   precise float pu = rx * st_light_word(lb, 3u) + ry * st_light_word(lb, 4u) + rz * st_light_word(lb, 5u);
   precise float pv = rx * st_light_word(lb, 6u) + ry * st_light_word(lb, 7u) + rz * st_light_word(lb, 8u);
-  precise float pd = rx * st_light_word(lb, 9u) + ry * st_light_word(lb, 10u) + rz * st_light_word(lb, 11u);
-  pd = pd - st_light_word(lb, 12u);
+  precise float pz = rx * st_light_word(lb, 9u) + ry * st_light_word(lb, 10u) + rz * st_light_word(lb, 11u);
+  if (st_page_words[lb + kStLightProjection] != 0u) {  // perspective: the divide, rounded as the CPU's
+    pu = st_fdiv(pu, pz) + st_light_word(lb, kStLightCentreU);
+    pv = st_fdiv(pv, pz) + st_light_word(lb, kStLightCentreV);
+  }
+  precise float pd = pz - st_light_word(lb, 12u);
   u = pu;
   v = pv;
   d = pd;
@@ -63,8 +69,18 @@ float st_slice_visibility(uint p, uint w, inout StProbe probe) {
 void main() {
   const uint p = gl_GlobalInvocationID.x;
   if (p >= st_pc.w[kPcCount] * st_pc.w[kPcHeight]) return;
-  const uint wa = st_pc.w[kPcSliceA], wb = st_pc.w[kPcSliceB];
   StProbe probe = st_probe();
+  if ((st_pc.w[kPcFlags] & kFlagSoft) != 0u) {
+    // The soft pass: every slice in order, summed in float (one rounding per add), then
+    // divided by N (rounded once): StackMap::soft_visibility_filtered's average.
+    const uint slices = st_page_words[st_page_words[kPtStack] + kStSlices];
+    precise float sum = 0.0;
+    for (uint w = 0u; w < slices; ++w) sum = sum + st_slice_visibility(p, w, probe);
+    st_output[p] = st_fdiv(sum, float(slices));
+    if (probe.hole) atomicAdd(st_fb_words[kFbHoles], 1u);
+    return;
+  }
+  const uint wa = st_pc.w[kPcSliceA], wb = st_pc.w[kPcSliceB];
   const float va = st_slice_visibility(p, wa, probe);
   float answer = va;
   if (wb != wa) {

@@ -57,6 +57,9 @@ check area-verify 0 "every texel of all 4 slices" -- "$st" verify area.pack $hai
 check area-export 0 "exported slice 3 level 5" -- "$st" export area.pack --slice 3 --level 5 -o aslice.exr
 check area-render-soft 0 "differing pixels: [0-9]+ of [1-9][0-9]+ receivers" -- \
   "$st" render area.pack --scene $hair --camera pos=3,3,3,target=0,0,0 --size 96x54 --soft --diff -o as.exr
+# An area light over the city (viewed below: the GPU soft pass over perspective samples).
+check area-city-build 0 "stack of 4 slices of 64\^2" -- "$st" build $scene \
+  --light area:pos=60,250,40,target=0,0,0,size=40,40,samples=4,fov=70 --resolution 64 --tile-bytes 4096 -o areacity.pack -q
 check area-window-refused 1 "use frame=translate" -- "$st" build $scene --light area:pos=20,60,10,target=0,0,0,size=8,8,samples=4 --resolution 64 -o x.pack -q
 check stack-too-big 1 "exceeds the 2\^34 texels" -- "$st" build $scene --light sun-path:azimuth=1..2,elevation=50,samples=64 --resolution 64k -o x.pack -q
 # A sun near the horizon over the city: the ground frame's square would be huge (refused
@@ -192,7 +195,7 @@ kill $spid 2>/dev/null; wait $spid 2>/dev/null
 grep -q "key required, TLS" serve.log || { echo "FAIL serve-keyed: banner lacks 'key required, TLS'"; fail=1; }
 # A stack pack served: the load tester sweeps the time (the slices around it requested as
 # it advances) or reads every slice (--soft); render draws it from the server.
-"$st" serve stack.pack city.pack --listen 127.0.0.1:0 2>serve_stack.log &
+"$st" serve stack.pack city.pack areacity.pack --listen 127.0.0.1:0 2>serve_stack.log &
 spid=$!
 port=$(port_of serve_stack.log)
 if [[ -z "$port" ]]; then echo "FAIL serve-stack: no port in serve_stack.log"; cat serve_stack.log; fail=1
@@ -218,6 +221,14 @@ else
     check stack-view-bad-sweep 1 "time-sweep: expected A..B, got '0.5'" -- "${venv[@]}" "$st" "${vargs[@]}" \
       --map stack --time-sweep 0.5
     check view-time-on-2d 1 "need a stack map" -- "${venv[@]}" "$st" "${vargs[@]}" --map city --time 0.5
+    # The soft pass: every sample averaged on the GPU, for the sun path and the area light
+    # (perspective samples).
+    check stack-view-soft 0 "soft \(every sample averaged\)" -- "${venv[@]}" "$st" "${vargs[@]}" --map stack --soft \
+      --out view_soft
+    check area-view-soft 0 "[1-9][0-9]* requested from feedback" -- "${venv[@]}" "$st" "${vargs[@]}" --map areacity \
+      --soft --out view_area
+    check view-soft-and-time 1 "one of --time, --time-sweep, --soft" -- "${venv[@]}" "$st" "${vargs[@]}" --map stack \
+      --soft --time 0.5
   fi
 fi
 kill $spid 2>/dev/null; wait $spid 2>/dev/null

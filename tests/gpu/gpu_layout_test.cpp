@@ -3,6 +3,10 @@
 // constant it sees, and each must equal the C++ value (a stale or diverging header fails).
 #include <gtest/gtest.h>
 
+#include <bit>
+#include <cmath>
+#include <random>
+
 #include "gpu/layout.hpp"
 #include "gpu/layout_probe.hpp"
 #include "tests/gpu/gpu_test_util.hpp"
@@ -29,7 +33,7 @@ TEST(GpuLayout, TheShaderSeesEveryConstantTheCppSideSees) {
       L::kPtStack, L::kStXyLevel, L::kStWLevel, L::kStSlices, L::kStSkipLevel, L::kStEntries, L::kStCellSlots,
       L::kStLights, L::kStHeaderWords, L::kStLightWords, L::kMaxStackCells, L::kSqWords, L::kSqX, L::kSqY,
       L::kSqSlice, L::kSqLevel, L::kSqReceiver, L::kSqFootprint, L::kSqR, L::kFbStackKeyBit, L::kPcSliceA,
-      L::kPcSliceB, L::kPcTimeWeight};
+      L::kPcSliceB, L::kPcTimeWeight, L::kStLightCentreU, L::kStLightCentreV, L::kStLightProjection, L::kFlagSoft};
   ASSERT_LE(want.size(), L::kProbeWords);
   uint64_t messages = 0;
   const std::vector<uint32_t> got = run_layout_probe(gputest::device(), true, &messages);
@@ -69,6 +73,48 @@ TEST(GpuLayout, StackBlockHeaderWordsAreWhereTheDrawingPutsThem) {
   EXPECT_EQ(L::kPcSliceA, 4u);
   EXPECT_EQ(L::kPcSliceB, 5u);
   EXPECT_EQ(L::kPcTimeWeight, 6u);
+  EXPECT_EQ(L::kStLightCentreU, 13u);
+  EXPECT_EQ(L::kStLightCentreV, 14u);
+  EXPECT_EQ(L::kStLightProjection, 15u);
+  EXPECT_EQ(L::kFlagSoft, 2u);
+}
+
+// st_fdiv (shaders/st_stack.glsl), the division of the stack passes' perspective divide
+// and soft average, on the device: every quotient has the bits of the CPU's float
+// division (IEEE 754, round to nearest even; a NaN quotient only needs to be a NaN), over
+// random bit patterns (every exponent: subnormals, infinities, NaNs), near-equal
+// significands, subnormal quotients, the passes' own operands (PCF sums over slice
+// counts, light-space coordinates over depths) and the special values against each other.
+TEST(GpuLayout, StFdivRoundsLikeTheCpusFloatDivision) {
+  std::vector<uint32_t> a, b;
+  auto add = [&](float x, float y) { a.push_back(std::bit_cast<uint32_t>(x)), b.push_back(std::bit_cast<uint32_t>(y)); };
+  std::mt19937 rng(7);
+  for (int i = 0; i < 60000; ++i) a.push_back(rng()), b.push_back(rng());
+  for (int i = 0; i < 20000; ++i) {
+    const uint32_t x = rng();
+    a.push_back(x), b.push_back((x & 0xFF800000u) | (rng() & 0x7FFFFFu));  // quotients near 1
+    a.push_back(rng() & 0x80FFFFFFu), b.push_back(0x5E000000u | (rng() & 0x807FFFFFu));  // subnormal quotients
+  }
+  for (uint32_t n = 1; n <= 256; ++n)
+    for (uint32_t lit = 0; lit <= 81; lit += 3) add(float(lit) / 81.0f * float(n) / 3.0f, float(n));
+  std::uniform_real_distribution<float> coord(-2.0f, 2.0f), depth(-0.1f, 1.5f);
+  for (int i = 0; i < 20000; ++i) add(coord(rng), depth(rng));
+  const uint32_t special[] = {0u, 0x80000000u, 0x7F800000u, 0xFF800000u, 0x7FC00000u, 1u, 0x807FFFFFu,
+                              0x00800000u, 0x7F7FFFFFu, 0x3F800000u, 0xBF800000u, 0x00400000u, 0x34000000u};
+  for (uint32_t x : special)
+    for (uint32_t y : special) a.push_back(x), b.push_back(y);
+  uint64_t messages = 0;
+  const std::vector<uint32_t> got = run_fdiv_probe(gputest::device(), true, a, b, &messages);
+  ASSERT_EQ(got.size(), a.size());
+  size_t bad = 0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    const float want = std::bit_cast<float>(a[i]) / std::bit_cast<float>(b[i]);
+    const bool same = std::isnan(want) ? std::isnan(std::bit_cast<float>(got[i])) : std::bit_cast<uint32_t>(want) == got[i];
+    if (!same && bad++ < 5)
+      ADD_FAILURE() << std::hex << a[i] << " / " << b[i] << ": gpu " << got[i] << ", cpu " << std::bit_cast<uint32_t>(want);
+  }
+  EXPECT_EQ(bad, 0u);
+  EXPECT_EQ(messages, 0u);
 }
 
 }  // namespace

@@ -3,8 +3,10 @@
 // (Map::slice_depth), with every tile resident and with cells absent (the level-K value,
 // and feedback naming exactly the absent cells); PCF and the footprint's level per slice;
 // the shadow pass at sample times and between equals its CPU twin; its feedback queues the
-// cells the pass needed, and once they arrive the pass has no holes. The validation layer
-// is on throughout and must stay silent.
+// cells the pass needed, and once they arrive the pass has no holes; the soft pass (every
+// slice averaged) equals its twin too, and the twin the client's soft lookup; an area
+// light's stack (perspective samples, both frames) passes at times and soft equal their
+// twins. The validation layer is on throughout and must stay silent.
 #include <gtest/gtest.h>
 
 #include <bit>
@@ -52,7 +54,14 @@ struct ServedStack {
 
 constexpr uint32_t kSlices = 10;
 
-// frame: the sun path's frame (light_set.hpp "Frames"; ground is the default).
+// An area light over the G-buffer's box (light_set.hpp "area"): 10 Hilbert-ordered points
+// of a 6 x 4 rectangle, frame window (spot_window samples) or translate (spots).
+std::string area_spec(const std::string& frame) {
+  return "area:pos=4,28,6,target=0,0,0,size=6,4,samples=" + std::to_string(kSlices) + ",fov=50,frame=" + frame;
+}
+
+// frame: the sun path's frame (light_set.hpp "Frames"; ground is the default); or a whole
+// light set spec (area_spec).
 ServedStack serve_stack(const std::string& name, const std::string& frame = "ground") {
   ServedStack s;
   const IntervalStack is = sliding_stack(looptest::small_scale() ? 5 : 6, kSlices);
@@ -61,8 +70,10 @@ ServedStack serve_stack(const std::string& name, const std::string& frame = "gro
   box.extend({-10, 0, -10});
   box.extend({10, 5, 10});
   const LightSet set = LightSet::fit(
-      LightSetSpec::parse("sun-path:azimuth=150..200,elevation=40..60,samples=" + std::to_string(kSlices) +
-                          ",frame=" + frame),
+      LightSetSpec::parse(frame.find(':') != std::string::npos
+                              ? frame
+                              : "sun-path:azimuth=150..200,elevation=40..60,samples=" + std::to_string(kSlices) +
+                                    ",frame=" + frame),
       box);
   cut.grid.light_kind = set.samples[0].kind();
   for (const LightSpace& l : set.samples) cut.grid.lights.push_back(l.to_array());
@@ -77,6 +88,16 @@ ServedStack serve_stack(const std::string& name, const std::string& frame = "gro
   o.cache_slots = uint32_t(s.tiles) + 4;
   s.client = std::make_unique<client::Client>(client::Endpoint{"127.0.0.1", s.server.port}, o);
   s.map = s.client->open(name);
+  return s;
+}
+
+// serve_stack with slices 0..last resident and the server stopped: the cache then stays
+// as it is, so a GPU pass and its CPU twin read the same tiles.
+ServedStack serve_frozen(const std::string& name, const std::string& frame, uint32_t last) {
+  ServedStack s = serve_stack(name, frame);
+  if (s.map.request_slices(0, last, 10) == 0) ADD_FAILURE() << "nothing to prefetch";
+  if (!looptest::wait_until([&] { return s.map.slices_resident(0, last); })) ADD_FAILURE() << "prefetch timed out";
+  s.server.stop();
   return s;
 }
 
@@ -225,7 +246,7 @@ struct GBuffer {
         nrm[4 * p + 1] = 1.0f;
       }
   }
-  ShadowPassInput input(double time, uint32_t kernel) const {
+  ShadowPassInput input(double time, uint32_t kernel, bool soft = false) const {
     ShadowPassInput in;
     in.positions = pos;
     in.normals = nrm;
@@ -236,9 +257,27 @@ struct GBuffer {
     in.neighbour_footprint = kernel != 5;
     in.footprint = 2.5f;
     in.time = time;
+    in.soft = soft;
     return in;
   }
 };
+
+// Every pixel of the pass against its CPU twin, bit for bit. Returns the mismatches and
+// adds the answers' classes (lit, shadowed, in between) to `tally`.
+size_t pass_against_twin(GpuMap& g, const client::Map& map, const ShadowPassInput& in, FrameStats& fs,
+                         std::array<size_t, 3>& tally) {
+  std::vector<float> got(size_t(in.width) * in.height), want(got.size());
+  fs = g.wait(g.submit_shadow_pass(in), got);
+  stack_shadow_pass_reference(map, in, want);
+  size_t bad = 0;
+  for (size_t i = 0; i < got.size(); ++i) {
+    if (bits(got[i]) != bits(want[i]) && bad++ == 0)
+      ADD_FAILURE() << "pixel " << i << ": gpu " << got[i] << " (" << bits(got[i]) << "), cpu " << want[i] << " ("
+                    << bits(want[i]) << ")";
+    ++tally[want[i] == 1.0f ? 0 : want[i] == 0.0f ? 1 : 2];
+  }
+  return bad;
+}
 
 // Both frames: the orthographic sun's and the ground frame's sheared light transform.
 TEST(GpuStack, ShadowPassAtSampleTimesAndBetweenEqualsItsCpuTwin) {
@@ -318,6 +357,117 @@ TEST(GpuStack, ShadowPassFeedbackStreamsTheCellsItNeedsUntilNoHoleIsLeft) {
   EXPECT_GT(g.stats().slots_uploaded, 0u);
   EXPECT_FALSE(s.map.slices_resident(0, 1));  // nothing asked for slices 0 and 1
   EXPECT_EQ(g.stats().validation_messages, 0u);
+}
+
+// One tap at the finest level (no neighbour footprint, footprint half a texel): the CPU
+// twin's soft value against the client's own soft lookup (Map::soft_visibility, double
+// light transform) at the same receivers (moved along the normal as the pass moves them),
+// inside the box every slice's light covers. They can differ only where the float32
+// transform and the double one pick different texels or round the receiver's depth
+// apart (none of the 1515 receivers here did, for the sun path and the area light).
+void expect_twin_agrees_with_client_soft(const client::Map& map, const GBuffer& gb) {
+  ShadowPassInput in = gb.input(0, 1, true);
+  in.neighbour_footprint = false;
+  in.footprint = 0.5f;
+  std::vector<float> twin(size_t(gb.width) * gb.height);
+  stack_shadow_pass_reference(map, in, twin);
+  size_t compared = 0, same = 0, fractional = 0;
+  for (size_t p = 0; p < twin.size(); ++p) {
+    const float* q = gb.pos.data() + 4 * p;
+    if (q[3] == 0.0f || std::fabs(q[0]) > 8.0f || std::fabs(q[2]) > 8.0f) continue;
+    const client::WorldPoint w{double(q[0]), double(q[1] + gb.nrm[4 * p + 1] * in.normal_offset), double(q[2])};
+    ++compared;
+    same += twin[p] == map.soft_visibility(w);
+    fractional += twin[p] > 0.0f && twin[p] < 1.0f;
+  }
+  EXPECT_GT(compared, 1000u);
+  EXPECT_GT(fractional, 100u);
+  EXPECT_GE(double(same), 0.99 * double(compared)) << same << " of " << compared;
+}
+
+// The soft pass (ShadowPassInput::soft: the average over all N = 10 slices, each in its
+// own light space, sum in slice order then / N) equals its CPU twin on every pixel, with
+// the later slices' cells absent (their level-K values, fed back) and once all are
+// resident; the twin agrees with the client's own soft lookup (Map::soft_visibility) on
+// nearly every pixel (they differ only where the float light transform and the double
+// one pick different texels, or outside the light box, which the pass calls lit).
+TEST(GpuStack, SoftPassEqualsItsCpuTwinAndTheClientsSoftLookup) {
+  std::array<size_t, 3> tally{};
+  FrameStats fs;
+  const GBuffer gb;
+  {
+    ServedStack s = serve_frozen("gpu_stack_soft_half", "ortho", kSlices / 2 - 1);
+    GpuMap g(s.map, gputest::options());
+    for (uint32_t kernel : {1u, 3u, 5u}) {
+      SCOPED_TRACE("kernel " + std::to_string(kernel));
+      EXPECT_EQ(pass_against_twin(g, s.map, gb.input(0, kernel, true), fs, tally), 0u);
+      EXPECT_GT(fs.holes, 0u);  // slices 5..9 absent: their level-K values, fed back
+      EXPECT_GT(fs.feedback_tiles, 0u);
+      if (kernel == 1) {
+        EXPECT_EQ(fs.requested, fs.feedback_tiles);  // queued on the Map
+      }
+      // Every cell fed back holds absent slices (5..9) and is not resident.
+      const StackGrid& grid = *client::MapAccess::remote(s.map).stack_grid();
+      const uint32_t sw = grid.geo.k - grid.geo.w_bits(grid.skip_level);
+      for (const GpuMap::FeedbackTile& t : g.last_feedback()) {
+        uint64_t cell = 0;
+        ASSERT_TRUE(grid.cell_of(t.tile, cell));
+        const uint64_t cw = cell >> (2 * grid.geo.xy_bits(grid.skip_level));
+        EXPECT_GE(((cw + 1) << sw) - 1, kSlices / 2) << "cell " << cell;
+        EXPECT_FALSE(cell_resident(s.map, t.tile));
+      }
+    }
+    EXPECT_EQ(g.stats().validation_messages, 0u);
+  }
+  EXPECT_GT(tally[0], 500u);
+  EXPECT_GT(tally[2], 500u);  // a soft shadow: most shadowed pixels see some samples
+  ServedStack s = serve_frozen("gpu_stack_soft_all", "ortho", kSlices - 1);
+  GpuMap g(s.map, gputest::options());
+  EXPECT_EQ(pass_against_twin(g, s.map, gb.input(0, 3, true), fs, tally), 0u);
+  EXPECT_EQ(fs.holes, 0u);
+  EXPECT_EQ(g.stats().validation_messages, 0u);
+  expect_twin_agrees_with_client_soft(s.map, gb);
+  EXPECT_EQ(g.stats().validation_messages, 0u);
+}
+
+// An area light's stack (perspective samples: frame=window, LightKind::spot_window, and
+// frame=translate, LightKind::spot): the time pass at samples and between, and the soft
+// pass, equal their CPU twins on every pixel, with absent cells (window) and without
+// (translate).
+TEST(GpuStack, AreaLightStackPassesEqualTheirCpuTwins) {
+  for (const std::string frame : {"window", "translate"}) {
+    SCOPED_TRACE("frame=" + frame);
+    std::array<size_t, 3> tally{};
+    FrameStats fs;
+    const GBuffer gb;
+    {
+      // The window frame with the later slices absent, the translate frame all resident.
+      const uint32_t last = frame == "window" ? kSlices / 2 - 1 : kSlices - 1;
+      ServedStack s = serve_frozen("gpu_stack_area_" + frame + std::to_string(last), area_spec(frame), last);
+      ASSERT_EQ(client::MapAccess::remote(s.map).stack_grid()->light_kind,
+                frame == "window" ? LightKind::spot_window : LightKind::spot);
+      GpuMap g(s.map, gputest::options());
+      for (double time : {0.0, 0.37, 0.8}) {
+        SCOPED_TRACE("time " + std::to_string(time) + " last " + std::to_string(last));
+        EXPECT_EQ(pass_against_twin(g, s.map, gb.input(time, 3), fs, tally), 0u);
+        if (stack_time(kSlices, time).b > last) {
+          EXPECT_GT(fs.holes, 0u);
+        } else {
+          EXPECT_EQ(fs.holes, 0u);
+        }
+      }
+      {
+        SCOPED_TRACE("soft, last " + std::to_string(last));
+        EXPECT_EQ(pass_against_twin(g, s.map, gb.input(0, 3, true), fs, tally), 0u);
+        EXPECT_EQ(fs.holes > 0, last < kSlices - 1);
+      }
+      if (last == kSlices - 1) expect_twin_agrees_with_client_soft(s.map, gb);
+      EXPECT_EQ(g.stats().validation_messages, 0u);
+    }
+    EXPECT_GT(tally[0], 1000u);
+    EXPECT_GT(tally[1], 100u);
+    EXPECT_GT(tally[2], 300u);
+  }
 }
 
 }  // namespace
