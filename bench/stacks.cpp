@@ -31,6 +31,8 @@
 //   octree lit   : StackLookup::lit(p, w), the same points and slices
 //   time interp. : StackLookup::visibility(p, t), t random (two slices blended)
 //   soft shared  : StackLookup::soft_visibility(p) (one shared walk for all N samples)
+//   soft batched : StackLookup::soft_visibility(points, out) over the same points, the
+//                  shared walks of kWalkLanes points interleaved (walk_interleave.hpp)
 //   soft bounded : StackLookup::soft_visibility_bounded(p) (each walk stops where the
 //                  node's value bounds decide it; StackBounds made once, timed apart)
 //   soft indep.  : StackLookup::soft_visibility_independent(p) (N octree walks)
@@ -221,6 +223,16 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
     visited = 0;
     for (size_t i = 0; i < ms; ++i) acc += look.soft_visibility(pts[i]), visited += st::StackLookup::last_nodes_visited();
   });
+  // The batched soft lookup over the same points (walks of kWalkLanes points interleaved).
+  std::vector<float> batch_out(ms);
+  uint64_t visited_batch = 0;
+  const double ns_batch = median_ns(reps, ms, [&] {
+    look.soft_visibility(std::span<const st::Vec3d>(pts.data(), ms), batch_out);
+    visited_batch = st::StackLookup::last_nodes_visited();
+    for (float v : batch_out) acc += v;
+  });
+  for (size_t i = 0; i < ms; ++i)
+    if (batch_out[i] != look.soft_visibility(pts[i])) throw st::Error("bench: the batched soft lookup differs");
   t0 = Clock::now();
   const st::StackBounds sbounds(tree);
   const double bounds_s = since(t0);
@@ -268,11 +280,14 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
   row("octree lit (one slice)", ns_oct);
   row("visibility(p, time)", ns_time);
   row("soft, shared walk (all N)", ns_soft);
+  row("soft, batched interleaved (all N)", ns_batch);
   row("soft, bounded early stop (all N)", ns_bounded);
   row("soft, N octree walks", ns_indep);
   row("soft, N 2D lookups", ns_soft2d);
-  std::printf("soft per sample: shared %.1f ns, N octree walks %.1f ns, 2D %.1f ns; shared walk nodes per point %.1f\n",
-              ns_soft / n, ns_indep / n, ns_soft2d / n, double(visited) / double(ms));
+  std::printf("soft per sample: shared %.1f ns, batched %.1f ns, N octree walks %.1f ns, 2D %.1f ns; shared walk nodes per "
+              "point %.1f (batched %.1f)\n",
+              ns_soft / n, ns_batch / n, ns_indep / n, ns_soft2d / n, double(visited) / double(ms),
+              double(visited_batch) / double(ms));
   std::printf("peak RSS %.0f MiB\n", peak_rss_mib());
   std::printf("bounded early stop: %.1f ns per sample, nodes per point %.1f; bounds %.2f s, %zu bytes\n",
               ns_bounded / n, double(visited_b) / double(ms), bounds_s, sbounds.bytes());
@@ -304,6 +319,9 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
           {"ns_soft_octree_walks", ns_indep},
           {"ns_soft_2d", ns_soft2d},
           {"soft_shared_over_2d_lit", ns_soft / ns_2d},
+          {"ns_soft_batched", ns_batch},
+          {"soft_batched_over_2d_lit", ns_batch / ns_2d},
+          {"soft_batched_nodes_per_point", double(visited_batch) / double(ms)},
           {"time_over_2d_lit", ns_time / ns_2d},
           {"soft_nodes_per_point", double(visited) / double(ms)},
           {"ns_soft_bounded", ns_bounded},
@@ -444,6 +462,13 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
   const double ns_time = median_ns(reps, m, [&] { for (size_t i = 0; i < m; ++i) acc += map.visibility(pts[i], times[i]); });
   const size_t ms = std::max<size_t>(1, m / 8);
   const double ns_soft = median_ns(reps, ms, [&] { for (size_t i = 0; i < ms; ++i) acc += map.soft_visibility(pts[i]); });
+  std::vector<float> batch_out(ms);
+  const double ns_batch = median_ns(reps, ms, [&] {
+    map.soft_visibility(std::span<const st::Vec3d>(pts.data(), ms), batch_out);
+    for (float v : batch_out) acc += v;
+  });
+  for (size_t i = 0; i < ms; ++i)
+    if (batch_out[i] != map.soft_visibility(pts[i])) throw st::Error("bench: the pack's batched soft lookup differs");
   const double ns_soft_sep = median_ns(reps, ms, [&] {
     for (size_t i = 0; i < ms; ++i) {
       uint32_t lit = 0;
@@ -483,9 +508,11 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
   row("pack lit (one slice)", ns_oct);
   row("pack visibility(p, time)", ns_time);
   row("pack soft (all N, shared walk)", ns_soft);
+  row("pack soft, batched interleaved", ns_batch);
   row("pack soft, N lit() lookups", ns_soft_sep);
   row("soft, N 2D lookups", ns_soft2d);
-  std::printf("soft per sample: pack %.1f ns (N lit() %.1f ns), 2D %.1f ns\n", ns_soft / n, ns_soft_sep / n, ns_soft2d / n);
+  std::printf("soft per sample: pack %.1f ns, batched %.1f ns (N lit() %.1f ns), 2D %.1f ns\n", ns_soft / n, ns_batch / n,
+              ns_soft_sep / n, ns_soft2d / n);
   return {{"case", c.name},
           {"mode", "blocked"},
           {"scene", c.scene},
@@ -515,6 +542,7 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
           {"ns_pack_visibility_time", ns_time},
           {"ns_pack_soft", ns_soft},
           {"ns_pack_soft_separate", ns_soft_sep},
+          {"ns_pack_soft_batched", ns_batch},
           {"ns_soft_2d", ns_soft2d},
           {"peak_rss_mib_trace", rss_trace},
           {"peak_rss_mib_build", rss_build},

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <span>
 
+#include "common/bytes.hpp"
 #include "tiles/core/interval.hpp"
 #include "tiles/core/mh_octree_format.hpp"
 
@@ -49,6 +50,36 @@ class MhOctree {
   // depth(x, y, w, xy_level()) for w < slices(), x, y < 2^xy_level() (not checked).
   float depth_along(Path& p, uint64_t x, uint64_t y, uint32_t w) const noexcept;
 
+  // depth_along in resumable steps, so that the walks of many points can be interleaved
+  // and their cache misses overlap (the batched soft lookups of StackLookup and StackMap):
+  // along_begin starts the walk to (x, y, w) from the lowest common node with the path's
+  // previous walk; along_step takes one node down and returns true while the walk goes on,
+  // the new node's word then at along_next(p), which a caller prefetches before it steps
+  // other walks; once along_step returns false, along_value is the answer. Begin, steps and
+  // value answer as depth_along does and leave the path as it does, bit for bit (tested).
+  // Same preconditions as depth_along.
+  void along_begin(Path& p, uint64_t x, uint64_t y, uint32_t w) const noexcept;
+  bool along_step(Path& p) const noexcept {
+    const uint32_t l = p.reached;
+    if (l >= geo_.depth() || p.code[l] == moct::kCodeLeaf) return false;
+    const uint32_t b = geo_.n - xy_next_[l];
+    uint32_t slot = split_xy_[l] ? uint32_t((p.x >> b) & 1) | uint32_t((p.y >> b) & 1) << 1 : 0u;
+    if (split_w_[l]) slot |= uint32_t((p.w >> w_shift_[l]) & 1) << 2;
+    const uint32_t word_p = word_inline(p.pos[l]);
+    const uint32_t mask = moct::word_mask(word_p);
+    const uint32_t cc = moct::child_code(mask, slot);
+    if (!cc) return false;
+    const uint64_t pos = moct::block_start(p.pos[l], shift_[l], moct::word_offset(word_p)) + moct::child_skip(mask, slot);
+    p.pos[l + 1] = pos;
+    p.val[l + 1] = cc == moct::kCodeEmpty ? p.val[l] : (cc == moct::kCodeLeaf ? pos : pos + 1);
+    p.code[l + 1] = cc;
+    p.reached = l + 1;
+    ++p.steps;
+    return true;
+  }
+  float along_value(const Path& p) const noexcept { return moct::bits_float(word_inline(p.val[p.reached])); }
+  const void* along_next(const Path& p) const noexcept { return tree_ + 4 * p.pos[p.reached]; }
+
   // The walk, for lookups that share it among samples (stack_lookup.hpp). A cursor stands
   // on a node; `val` is the word of the last valued node's float on its path.
   struct Cursor {
@@ -63,6 +94,7 @@ class MhOctree {
 
  private:
   uint32_t word(uint64_t w) const noexcept;
+  uint32_t word_inline(uint64_t w) const noexcept { return st::load_le<uint32_t>(tree_ + 4 * w); }
   std::span<const uint8_t> bytes_;
   const uint8_t* tree_ = nullptr;
   moct::Geometry geo_{};

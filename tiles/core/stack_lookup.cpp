@@ -1,10 +1,12 @@
 #include "tiles/core/stack_lookup.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <string>
 
 #include "common/error.hpp"
+#include "tiles/core/walk_interleave.hpp"
 
 namespace st {
 namespace {
@@ -85,6 +87,62 @@ float StackLookup::soft_visibility(const Vec3d& p) const noexcept {
   }
   t_visited = path.steps + 1;  // and the root
   return float(lit_samples) / float(n);
+}
+
+void StackLookup::soft_visibility(std::span<const Vec3d> points, std::span<float> out) const noexcept {
+  const uint32_t n = tree_.slices(), level = tree_.xy_level();
+  const bool ground = ground_.valid();
+  struct Lane {
+    MhOctree::Path path;
+    GroundTransforms::Point pt{};
+    size_t i = 0;
+    uint32_t w = 0, lit = 0;
+    float d = 0;
+    bool walking = false;
+  };
+  uint64_t visited = 0;
+  auto start = [&](Lane& ln, size_t i) {
+    ln.path.valid = false;
+    ln.path.steps = 0;
+    ln.i = i, ln.w = 0, ln.lit = 0, ln.walking = false;
+    if (ground) ln.pt = ground_.point(points[i]);
+  };
+  // One point's soft_visibility (the loops above) as a resumable job: each sample begins a
+  // shared walk, and a step into a node on another cache line prefetches it and yields.
+  auto run = [&](Lane& ln) {
+    for (;;) {
+      if (!ln.walking) {
+        if (ln.w == n) {
+          out[ln.i] = float(ln.lit) / float(n);
+          visited += ln.path.steps + 1;
+          return false;
+        }
+        std::array<uint64_t, 2> t;
+        if (ground) {
+          t = ground_.texel(level, ln.pt, ln.w);
+          ln.d = ln.pt.d;
+        } else {
+          const LightPoint lp = lights_.samples[ln.w].to_light(points[ln.i]);
+          t = LightSpace::texel_of(level, lp.u, lp.v);
+          ln.d = float(lp.d);
+        }
+        tree_.along_begin(ln.path, t[0], t[1], ln.w);
+        ln.walking = true;
+      }
+      const uintptr_t line = cache_line(tree_.along_next(ln.path));
+      if (tree_.along_step(ln.path)) {
+        const void* next = tree_.along_next(ln.path);
+        if (cache_line(next) == line) continue;
+        __builtin_prefetch(next);
+        return true;
+      }
+      ln.lit += ln.d <= tree_.along_value(ln.path);
+      ln.walking = false;
+      ++ln.w;
+    }
+  };
+  run_interleaved<Lane>(std::min(points.size(), out.size()), start, run);
+  t_visited = visited;
 }
 
 float StackLookup::soft_visibility_independent(const Vec3d& p) const noexcept {
