@@ -32,7 +32,9 @@
 //   time interp. : StackLookup::visibility(p, t), t random (two slices blended)
 //   soft shared  : StackLookup::soft_visibility(p) (one shared walk for all N samples)
 //   soft batched : StackLookup::soft_visibility(points, out) over the same points, the
-//                  shared walks of kWalkLanes points interleaved (walk_interleave.hpp)
+//                  shared walks of kWalkLanes points interleaved (walk_interleave.hpp);
+//                  both soft lookups again over 32 points cycled (cache-hot: the floor
+//                  without memory stalls), and the batched walks' prefetches per sample
 //   soft bounded : StackLookup::soft_visibility_bounded(p) (each walk stops where the
 //                  node's value bounds decide it; StackBounds made once, timed apart)
 //   soft indep.  : StackLookup::soft_visibility_independent(p) (N octree walks)
@@ -231,8 +233,23 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
     visited_batch = st::StackLookup::last_nodes_visited();
     for (float v : batch_out) acc += v;
   });
+  const uint64_t lines_batch = st::StackLookup::last_lines_prefetched();
   for (size_t i = 0; i < ms; ++i)
     if (batch_out[i] != look.soft_visibility(pts[i])) throw st::Error("bench: the batched soft lookup differs");
+  // The compute floor: the same lookups over 32 points cycled (their nodes, a few hundred
+  // KB, stay in L2), so that what the full set costs more is the wait for memory.
+  const size_t hot_n = std::min<size_t>(32, ms);
+  std::vector<st::Vec3d> hot(ms);
+  for (size_t i = 0; i < ms; ++i) hot[i] = pts[i % hot_n];
+  uint64_t visited_hot = 0;
+  const double ns_soft_hot = median_ns(reps, ms, [&] {
+    visited_hot = 0;
+    for (size_t i = 0; i < ms; ++i) acc += look.soft_visibility(hot[i]), visited_hot += st::StackLookup::last_nodes_visited();
+  });
+  const double ns_batch_hot = median_ns(reps, ms, [&] {
+    look.soft_visibility(hot, batch_out);
+    for (float v : batch_out) acc += v;
+  });
   t0 = Clock::now();
   const st::StackBounds sbounds(tree);
   const double bounds_s = since(t0);
@@ -288,6 +305,10 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
               "point %.1f (batched %.1f)\n",
               ns_soft / n, ns_batch / n, ns_indep / n, ns_soft2d / n, double(visited) / double(ms),
               double(visited_batch) / double(ms));
+  std::printf("soft per sample, breakdown: shared %.1f ns (cache-hot floor %.1f), batched %.1f ns (floor %.1f); "
+              "%.2f nodes and %.2f new cache lines (prefetches) per sample; the 32 hot points %.1f nodes per point\n",
+              ns_soft / n, ns_soft_hot / n, ns_batch / n, ns_batch_hot / n, double(visited) / double(ms) / n,
+              double(lines_batch) / double(ms) / n, double(visited_hot) / double(ms));
   std::printf("peak RSS %.0f MiB\n", peak_rss_mib());
   std::printf("bounded early stop: %.1f ns per sample, nodes per point %.1f; bounds %.2f s, %zu bytes\n",
               ns_bounded / n, double(visited_b) / double(ms), bounds_s, sbounds.bytes());
@@ -322,6 +343,10 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
           {"ns_soft_batched", ns_batch},
           {"soft_batched_over_2d_lit", ns_batch / ns_2d},
           {"soft_batched_nodes_per_point", double(visited_batch) / double(ms)},
+          {"soft_batched_lines_per_sample", double(lines_batch) / double(ms) / n},
+          {"ns_soft_shared_hot", ns_soft_hot},
+          {"ns_soft_batched_hot", ns_batch_hot},
+          {"soft_hot_nodes_per_point", double(visited_hot) / double(ms)},
           {"time_over_2d_lit", ns_time / ns_2d},
           {"soft_nodes_per_point", double(visited) / double(ms)},
           {"ns_soft_bounded", ns_bounded},

@@ -11,7 +11,7 @@
 namespace st {
 namespace {
 
-thread_local uint64_t t_visited = 0;
+thread_local uint64_t t_visited = 0, t_prefetched = 0;
 
 }  // namespace
 
@@ -100,7 +100,7 @@ void StackLookup::soft_visibility(std::span<const Vec3d> points, std::span<float
     float d = 0;
     bool walking = false;
   };
-  uint64_t visited = 0;
+  uint64_t visited = 0, prefetched = 0;
   auto start = [&](Lane& ln, size_t i) {
     ln.path.valid = false;
     ln.path.steps = 0;
@@ -134,6 +134,7 @@ void StackLookup::soft_visibility(std::span<const Vec3d> points, std::span<float
         const void* next = tree_.along_next(ln.path);
         if (cache_line(next) == line) continue;
         __builtin_prefetch(next);
+        ++prefetched;
         return true;
       }
       ln.lit += ln.d <= tree_.along_value(ln.path);
@@ -143,6 +144,7 @@ void StackLookup::soft_visibility(std::span<const Vec3d> points, std::span<float
   };
   run_interleaved<Lane>(std::min(points.size(), out.size()), start, run);
   t_visited = visited;
+  t_prefetched = prefetched;
 }
 
 float StackLookup::soft_visibility_independent(const Vec3d& p) const noexcept {
@@ -189,5 +191,6 @@ float StackLookup::soft_visibility_bounded(const Vec3d& p, const StackBounds& bo
 }
 
 uint64_t StackLookup::last_nodes_visited() noexcept { return t_visited; }
+uint64_t StackLookup::last_lines_prefetched() noexcept { return t_prefetched; }
 
 }  // namespace st

@@ -74,6 +74,10 @@ class StackLookup {
   // Tree nodes the last soft_visibility call on this thread visited (benchmark figure; a
   // batch: summed over its points).
   static uint64_t last_nodes_visited() noexcept;
+  // Steps of the last batched soft_visibility call on this thread into a node on a cache
+  // line other than its parent's: the prefetches it issued, the misses it can have had
+  // in the tree (benchmark figure).
+  static uint64_t last_lines_prefetched() noexcept;
 
  private:
   const MhOctree& tree_;
