@@ -182,23 +182,6 @@ float MhOctree::depth(uint64_t x, uint64_t y, uint32_t w, uint32_t level) const 
   return bits_float(word(val));
 }
 
-void MhOctree::along_begin(Path& p, uint64_t x, uint64_t y, uint32_t w) const noexcept {
-  uint32_t start = 0;
-  if (p.valid) {  // as depth_along
-    const uint32_t L = geo_.depth();
-    const uint32_t hx = uint32_t(std::bit_width((x ^ p.x) | (y ^ p.y)));
-    const uint32_t hw = uint32_t(std::bit_width(uint32_t(w ^ p.w)));
-    start = std::min({L - std::min(L, hx), L - std::min(L, hw), p.reached});
-  } else {
-    p.pos[0] = 0;
-    p.val[0] = root_leaf_ ? 0 : 1;
-    p.code[0] = root_leaf_ ? kCodeLeaf : kCodeInner;
-  }
-  p.reached = start;
-  p.x = x, p.y = y, p.w = w;
-  p.valid = true;
-}
-
 float MhOctree::depth_along(Path& p, uint64_t x, uint64_t y, uint32_t w) const noexcept {
   const uint32_t L = geo_.depth();
   uint32_t start = 0;

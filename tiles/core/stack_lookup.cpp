@@ -94,6 +94,7 @@ void StackLookup::soft_visibility(std::span<const Vec3d> points, std::span<float
   const bool ground = ground_.valid();
   struct Lane {
     MhOctree::Path path;
+    MhOctree::Walk walk;
     GroundTransforms::Point pt{};
     size_t i = 0;
     uint32_t w = 0, lit = 0;
@@ -110,36 +111,44 @@ void StackLookup::soft_visibility(std::span<const Vec3d> points, std::span<float
   // One point's soft_visibility (the loops above) as a resumable job: each sample begins a
   // shared walk, and a step into a node on another cache line prefetches it and yields.
   auto run = [&](Lane& ln) {
+    // The lane's scalars live in registers while it runs and go back at a yield.
+    MhOctree::Path& path = ln.path;
+    uint32_t w = ln.w, lit = ln.lit;
+    float d = ln.d;
+    bool walking = ln.walking;
+    MhOctree::Walk k = ln.walk;
     for (;;) {
-      if (!ln.walking) {
-        if (ln.w == n) {
-          out[ln.i] = float(ln.lit) / float(n);
-          visited += ln.path.steps + 1;
-          return false;
+      if (walking) {
+        for (;;) {
+          const uintptr_t line = cache_line(tree_.along_next(k));
+          if (!tree_.along_step(path, k)) break;
+          const void* next = tree_.along_next(k);
+          if (cache_line(next) != line) {
+            __builtin_prefetch(next);
+            ++prefetched;
+            ln.w = w, ln.lit = lit, ln.d = d, ln.walking = true, ln.walk = k;
+            return true;
+          }
         }
-        std::array<uint64_t, 2> t;
-        if (ground) {
-          t = ground_.texel(level, ln.pt, ln.w);
-          ln.d = ln.pt.d;
-        } else {
-          const LightPoint lp = lights_.samples[ln.w].to_light(points[ln.i]);
-          t = LightSpace::texel_of(level, lp.u, lp.v);
-          ln.d = float(lp.d);
-        }
-        tree_.along_begin(ln.path, t[0], t[1], ln.w);
-        ln.walking = true;
+        lit += d <= tree_.along_value(k);
+        ++w;
       }
-      const uintptr_t line = cache_line(tree_.along_next(ln.path));
-      if (tree_.along_step(ln.path)) {
-        const void* next = tree_.along_next(ln.path);
-        if (cache_line(next) == line) continue;
-        __builtin_prefetch(next);
-        ++prefetched;
-        return true;
+      if (w == n) {
+        out[ln.i] = float(lit) / float(n);
+        visited += path.steps + 1;
+        return false;
       }
-      ln.lit += ln.d <= tree_.along_value(ln.path);
-      ln.walking = false;
-      ++ln.w;
+      std::array<uint64_t, 2> t;
+      if (ground) {
+        t = ground_.texel(level, ln.pt, w);
+        d = ln.pt.d;
+      } else {
+        const LightPoint lp = lights_.samples[w].to_light(points[ln.i]);
+        t = LightSpace::texel_of(level, lp.u, lp.v);
+        d = float(lp.d);
+      }
+      k = tree_.along_begin(path, t[0], t[1], w);
+      walking = true;
     }
   };
   run_interleaved<Lane>(std::min(points.size(), out.size()), start, run);

@@ -124,6 +124,7 @@ void StackMap::soft_visibility(std::span<const Vec3d> points, std::span<float> o
   const bool ground = ground_.valid();
   struct Lane {
     MhOctree::Path path;
+    MhOctree::Walk walk;
     GroundTransforms::Point pt{};
     const MhOctree* tile = nullptr;
     uint64_t path_cell = 0;
@@ -138,51 +139,58 @@ void StackMap::soft_visibility(std::span<const Vec3d> points, std::span<float> o
     if (ground) ln.pt = ground_.point(points[i]);
   };
   auto run = [&](Lane& ln) {
+    // The lane's scalars live in registers while it runs and go back at a yield.
+    MhOctree::Path& path = ln.path;
+    uint32_t w = ln.w, lit = ln.lit;
+    float d = ln.d;
+    bool walking = ln.walking;
+    MhOctree::Walk k = ln.walk;
     for (;;) {
-      if (!ln.walking) {
-        if (ln.w == slices) {
-          out[ln.i] = float(ln.lit) / float(slices);
-          return false;
-        }
-        uint64_t x, y;
-        if (ground) {
-          const auto t = ground_.texel(n, ln.pt, ln.w);
-          x = t[0], y = t[1], ln.d = ln.pt.d;
-        } else {
-          texel(points[ln.i], ln.w, x, y, ln.d);
-        }
-        float v = kLitDepth;
-        if (!(x >> n) && !(y >> n)) {
-          const uint64_t cx = x >> sx, cy = y >> sx, cw = uint64_t(ln.w) >> sw;
-          const uint64_t cell = grid_.index(K, cx, cy, cw);
-          const StackEntry& e = grid_.entries[cell];
-          v = e.value;
-          if (e.kind != 0 && !leaves_at_k) {
-            if (cell != ln.path_cell) ln.path_cell = cell, ln.tile = tile_(cell), ln.path.valid = false;
-            if (ln.tile) {
-              ln.tile->along_begin(ln.path, x - (cx << sx), y - (cy << sx), uint32_t(ln.w - (cw << sw)));
-              ln.walking = true;
-            } else if (exact) {
-              *exact = false;
-            }
+      if (walking) {
+        const MhOctree& tile = *ln.tile;
+        for (;;) {
+          const uintptr_t line = cache_line(tile.along_next(k));
+          if (!tile.along_step(path, k)) break;
+          const void* next = tile.along_next(k);
+          if (cache_line(next) != line) {
+            __builtin_prefetch(next);
+            ln.w = w, ln.lit = lit, ln.d = d, ln.walking = true, ln.walk = k;
+            return true;
           }
         }
-        if (!ln.walking) {
-          ln.lit += ln.d <= v;
-          ++ln.w;
-          continue;
+        lit += d <= tile.along_value(k);
+        ++w;
+        walking = false;
+      }
+      if (w == slices) {
+        out[ln.i] = float(lit) / float(slices);
+        return false;
+      }
+      uint64_t x, y;
+      if (ground) {
+        const auto t = ground_.texel(n, ln.pt, w);
+        x = t[0], y = t[1], d = ln.pt.d;
+      } else {
+        texel(points[ln.i], w, x, y, d);
+      }
+      float v = kLitDepth;
+      if (!(x >> n) && !(y >> n)) {
+        const uint64_t cx = x >> sx, cy = y >> sx, cw = uint64_t(w) >> sw;
+        const uint64_t cell = grid_.index(K, cx, cy, cw);
+        const StackEntry& e = grid_.entries[cell];
+        v = e.value;
+        if (e.kind != 0 && !leaves_at_k) {
+          if (cell != ln.path_cell) ln.path_cell = cell, ln.tile = tile_(cell), path.valid = false;
+          if (ln.tile) {
+            k = ln.tile->along_begin(path, x - (cx << sx), y - (cy << sx), uint32_t(w - (cw << sw)));
+            walking = true;
+            continue;
+          }
+          if (exact) *exact = false;
         }
       }
-      const uintptr_t line = cache_line(ln.tile->along_next(ln.path));
-      if (ln.tile->along_step(ln.path)) {
-        const void* next = ln.tile->along_next(ln.path);
-        if (cache_line(next) == line) continue;
-        __builtin_prefetch(next);
-        return true;
-      }
-      ln.lit += ln.d <= ln.tile->along_value(ln.path);
-      ln.walking = false;
-      ++ln.w;
+      lit += d <= v;
+      ++w;
     }
   };
   run_interleaved<Lane>(std::min(points.size(), out.size()), start, run);
