@@ -31,12 +31,17 @@
 //   octree lit   : StackLookup::lit(p, w), the same points and slices
 //   time interp. : StackLookup::visibility(p, t), t random (two slices blended)
 //   soft shared  : StackLookup::soft_visibility(p) (one shared walk for all N samples)
+//   soft batched : StackLookup::soft_visibility(points, out) over the same points, the
+//                  shared walks of kWalkLanes points interleaved (walk_interleave.hpp);
+//                  both soft lookups again over 32 points cycled (cache-hot: the floor
+//                  without memory stalls), and the batched walks' prefetches per sample
 //   soft bounded : StackLookup::soft_visibility_bounded(p) (each walk stops where the
 //                  node's value bounds decide it; StackBounds made once, timed apart)
 //   soft indep.  : StackLookup::soft_visibility_independent(p) (N octree walks)
 //   soft 2D      : N 2D evaluator lit tests (N separate quadtrees)
-// Times are medians over --reps of thread CPU time per lookup; the table also gives each
-// against the 2D single lookup measured in the same run.
+// Times are medians over --reps rounds of thread CPU time per lookup, every kind timed once
+// per round in turn (side by side: the machine's load falls on all alike); the table also
+// gives each against the 2D single lookup measured in the same rounds.
 #include <sys/resource.h>
 
 #include <algorithm>
@@ -45,6 +50,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <functional>
 #include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
@@ -88,17 +94,37 @@ double thread_cpu_s() {
   return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
 }
 
-template <class F>
-double median_ns(int reps, size_t count, F&& body) {
-  std::vector<double> t;
-  for (int r = 0; r < reps; ++r) {
-    const double t0 = thread_cpu_s();
-    body();
-    t.push_back((thread_cpu_s() - t0) * 1e9 / double(count));
+// Lookup kinds timed side by side: each round runs every kind once, in turn, so that a
+// change in the shared machine's load falls on all of them alike; each kind's figure is
+// its median over the rounds (thread CPU time per lookup).
+class SideBySide {
+ public:
+  template <class F>
+  void add(double& result, size_t count, F body) {
+    kinds_.push_back({&result, count, std::function<void()>(std::move(body)), {}});
   }
-  std::sort(t.begin(), t.end());
-  return t[t.size() / 2];
-}
+  void run(int reps) {
+    for (int r = 0; r < reps; ++r)
+      for (Kind& k : kinds_) {
+        const double t0 = thread_cpu_s();
+        k.body();
+        k.t.push_back((thread_cpu_s() - t0) * 1e9 / double(k.count));
+      }
+    for (Kind& k : kinds_) {
+      std::sort(k.t.begin(), k.t.end());
+      *k.result = k.t[k.t.size() / 2];
+    }
+  }
+
+ private:
+  struct Kind {
+    double* result;
+    size_t count;
+    std::function<void()> body;
+    std::vector<double> t;
+  };
+  std::vector<Kind> kinds_;
+};
 
 volatile float g_sink = 0;
 
@@ -212,35 +238,62 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
   }
 
   float acc = 0;
-  const double ns_2d = median_ns(reps, m, [&] { for (size_t i = 0; i < m; ++i) acc += lit2d(pts[i], ws[i]); });
-  const double ns_oct = median_ns(reps, m, [&] { for (size_t i = 0; i < m; ++i) acc += look.lit(pts[i], ws[i]); });
-  const double ns_time = median_ns(reps, m, [&] { for (size_t i = 0; i < m; ++i) acc += look.visibility(pts[i], times[i]); });
   const size_t ms = std::max<size_t>(1, m / 8);  // soft lookups cost N times more: fewer points
-  uint64_t visited = 0;
-  const double ns_soft = median_ns(reps, ms, [&] {
-    visited = 0;
-    for (size_t i = 0; i < ms; ++i) acc += look.soft_visibility(pts[i]), visited += st::StackLookup::last_nodes_visited();
-  });
   t0 = Clock::now();
   const st::StackBounds sbounds(tree);
   const double bounds_s = since(t0);
-  uint64_t visited_b = 0;
-  const double ns_bounded = median_ns(reps, ms, [&] {
+  // The compute floor: the soft lookups again over 32 points cycled (their nodes, a few
+  // hundred KB, stay in L2), so that what the full set costs more is the wait for memory.
+  const size_t hot_n = std::min<size_t>(32, ms);
+  std::vector<st::Vec3d> hot(ms);
+  for (size_t i = 0; i < ms; ++i) hot[i] = pts[i % hot_n];
+  std::vector<float> batch_out(ms);
+  double ns_2d = 0, ns_oct = 0, ns_time = 0, ns_soft = 0, ns_batch = 0, ns_soft_hot = 0, ns_batch_hot = 0, ns_bounded = 0,
+         ns_indep = 0, ns_soft2d = 0;
+  uint64_t visited = 0, visited_batch = 0, lines_batch = 0, visited_hot = 0, visited_b = 0;
+  SideBySide timing;
+  timing.add(ns_2d, m, [&] { for (size_t i = 0; i < m; ++i) acc += lit2d(pts[i], ws[i]); });
+  timing.add(ns_oct, m, [&] { for (size_t i = 0; i < m; ++i) acc += look.lit(pts[i], ws[i]); });
+  timing.add(ns_time, m, [&] { for (size_t i = 0; i < m; ++i) acc += look.visibility(pts[i], times[i]); });
+  timing.add(ns_soft, ms, [&] {
+    visited = 0;
+    for (size_t i = 0; i < ms; ++i) acc += look.soft_visibility(pts[i]), visited += st::StackLookup::last_nodes_visited();
+  });
+  // The batched soft lookup over the same points (walks of kWalkLanes points interleaved).
+  timing.add(ns_batch, ms, [&] {
+    look.soft_visibility(std::span<const st::Vec3d>(pts.data(), ms), batch_out);
+    visited_batch = st::StackLookup::last_nodes_visited();
+    lines_batch = st::StackLookup::last_lines_prefetched();
+    for (float v : batch_out) acc += v;
+  });
+  timing.add(ns_soft_hot, ms, [&] {
+    visited_hot = 0;
+    for (size_t i = 0; i < ms; ++i) acc += look.soft_visibility(hot[i]), visited_hot += st::StackLookup::last_nodes_visited();
+  });
+  timing.add(ns_batch_hot, ms, [&] {
+    look.soft_visibility(hot, batch_out);
+    for (float v : batch_out) acc += v;
+  });
+  timing.add(ns_bounded, ms, [&] {
     visited_b = 0;
     for (size_t i = 0; i < ms; ++i)
       acc += look.soft_visibility_bounded(pts[i], sbounds), visited_b += st::StackLookup::last_nodes_visited();
   });
-  for (size_t i = 0; i < std::min<size_t>(ms, 500); ++i)
-    if (look.soft_visibility_bounded(pts[i], sbounds) != look.soft_visibility(pts[i]))
-      throw st::Error("bench: the bounded soft lookup differs");
-  const double ns_indep = median_ns(reps, ms, [&] { for (size_t i = 0; i < ms; ++i) acc += look.soft_visibility_independent(pts[i]); });
-  const double ns_soft2d = median_ns(reps, ms, [&] {
+  timing.add(ns_indep, ms, [&] { for (size_t i = 0; i < ms; ++i) acc += look.soft_visibility_independent(pts[i]); });
+  timing.add(ns_soft2d, ms, [&] {
     for (size_t i = 0; i < ms; ++i) {
       uint32_t lit = 0;
       for (uint32_t w = 0; w < n; ++w) lit += lit2d(pts[i], w);
       acc += float(lit) / float(n);
     }
   });
+  timing.run(reps);
+  look.soft_visibility(std::span<const st::Vec3d>(pts.data(), ms), batch_out);
+  for (size_t i = 0; i < ms; ++i)
+    if (batch_out[i] != look.soft_visibility(pts[i])) throw st::Error("bench: the batched soft lookup differs");
+  for (size_t i = 0; i < std::min<size_t>(ms, 500); ++i)
+    if (look.soft_visibility_bounded(pts[i], sbounds) != look.soft_visibility(pts[i]))
+      throw st::Error("bench: the bounded soft lookup differs");
   g_sink = acc;
 
   const double raw = double(stack.data.size()) * 4;  // float32 depth per texel per slice
@@ -268,11 +321,18 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
   row("octree lit (one slice)", ns_oct);
   row("visibility(p, time)", ns_time);
   row("soft, shared walk (all N)", ns_soft);
+  row("soft, batched interleaved (all N)", ns_batch);
   row("soft, bounded early stop (all N)", ns_bounded);
   row("soft, N octree walks", ns_indep);
   row("soft, N 2D lookups", ns_soft2d);
-  std::printf("soft per sample: shared %.1f ns, N octree walks %.1f ns, 2D %.1f ns; shared walk nodes per point %.1f\n",
-              ns_soft / n, ns_indep / n, ns_soft2d / n, double(visited) / double(ms));
+  std::printf("soft per sample: shared %.1f ns, batched %.1f ns, N octree walks %.1f ns, 2D %.1f ns; shared walk nodes per "
+              "point %.1f (batched %.1f)\n",
+              ns_soft / n, ns_batch / n, ns_indep / n, ns_soft2d / n, double(visited) / double(ms),
+              double(visited_batch) / double(ms));
+  std::printf("soft per sample, breakdown: shared %.1f ns (cache-hot floor %.1f), batched %.1f ns (floor %.1f); "
+              "%.2f nodes and %.2f new cache lines (prefetches) per sample; the 32 hot points %.1f nodes per point\n",
+              ns_soft / n, ns_soft_hot / n, ns_batch / n, ns_batch_hot / n, double(visited) / double(ms) / n,
+              double(lines_batch) / double(ms) / n, double(visited_hot) / double(ms));
   std::printf("peak RSS %.0f MiB\n", peak_rss_mib());
   std::printf("bounded early stop: %.1f ns per sample, nodes per point %.1f; bounds %.2f s, %zu bytes\n",
               ns_bounded / n, double(visited_b) / double(ms), bounds_s, sbounds.bytes());
@@ -304,6 +364,13 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
           {"ns_soft_octree_walks", ns_indep},
           {"ns_soft_2d", ns_soft2d},
           {"soft_shared_over_2d_lit", ns_soft / ns_2d},
+          {"ns_soft_batched", ns_batch},
+          {"soft_batched_over_2d_lit", ns_batch / ns_2d},
+          {"soft_batched_nodes_per_point", double(visited_batch) / double(ms)},
+          {"soft_batched_lines_per_sample", double(lines_batch) / double(ms) / n},
+          {"ns_soft_shared_hot", ns_soft_hot},
+          {"ns_soft_batched_hot", ns_batch_hot},
+          {"soft_hot_nodes_per_point", double(visited_hot) / double(ms)},
           {"time_over_2d_lit", ns_time / ns_2d},
           {"soft_nodes_per_point", double(visited) / double(ms)},
           {"ns_soft_bounded", ns_bounded},
@@ -439,30 +506,41 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
         throw st::Error("bench: a lit test differs from the uncompressed map's");
     }
   float acc = 0;
-  const double ns_2d = median_ns(reps, m, [&] { for (size_t i = 0; i < m; ++i) acc += lit2d(pts[i], ws[i]); });
-  const double ns_oct = median_ns(reps, m, [&] { for (size_t i = 0; i < m; ++i) acc += map.lit(pts[i], ws[i]); });
-  const double ns_time = median_ns(reps, m, [&] { for (size_t i = 0; i < m; ++i) acc += map.visibility(pts[i], times[i]); });
   const size_t ms = std::max<size_t>(1, m / 8);
-  const double ns_soft = median_ns(reps, ms, [&] { for (size_t i = 0; i < ms; ++i) acc += map.soft_visibility(pts[i]); });
-  const double ns_soft_sep = median_ns(reps, ms, [&] {
+  std::vector<float> batch_out(ms);
+  double ns_2d = 0, ns_oct = 0, ns_time = 0, ns_soft = 0, ns_batch = 0, ns_soft_sep = 0, ns_soft2d = 0;
+  SideBySide timing;
+  timing.add(ns_2d, m, [&] { for (size_t i = 0; i < m; ++i) acc += lit2d(pts[i], ws[i]); });
+  timing.add(ns_oct, m, [&] { for (size_t i = 0; i < m; ++i) acc += map.lit(pts[i], ws[i]); });
+  timing.add(ns_time, m, [&] { for (size_t i = 0; i < m; ++i) acc += map.visibility(pts[i], times[i]); });
+  timing.add(ns_soft, ms, [&] { for (size_t i = 0; i < ms; ++i) acc += map.soft_visibility(pts[i]); });
+  timing.add(ns_batch, ms, [&] {
+    map.soft_visibility(std::span<const st::Vec3d>(pts.data(), ms), batch_out);
+    for (float v : batch_out) acc += v;
+  });
+  timing.add(ns_soft_sep, ms, [&] {
     for (size_t i = 0; i < ms; ++i) {
       uint32_t lit = 0;
       for (uint32_t w = 0; w < n; ++w) lit += map.lit(pts[i], w);
       acc += float(lit) / float(n);
     }
   });
-  for (size_t i = 0; i < std::min<size_t>(ms, 200); ++i) {
-    uint32_t lit = 0;
-    for (uint32_t w = 0; w < n; ++w) lit += map.lit(pts[i], w);
-    if (map.soft_visibility(pts[i]) != float(lit) / float(n)) throw st::Error("bench: the pack's soft lookup differs");
-  }
-  const double ns_soft2d = median_ns(reps, ms, [&] {
+  timing.add(ns_soft2d, ms, [&] {
     for (size_t i = 0; i < ms; ++i) {
       uint32_t lit = 0;
       for (uint32_t w = 0; w < n; ++w) lit += lit2d(pts[i], w);
       acc += float(lit) / float(n);
     }
   });
+  timing.run(reps);
+  map.soft_visibility(std::span<const st::Vec3d>(pts.data(), ms), batch_out);
+  for (size_t i = 0; i < ms; ++i)
+    if (batch_out[i] != map.soft_visibility(pts[i])) throw st::Error("bench: the pack's batched soft lookup differs");
+  for (size_t i = 0; i < std::min<size_t>(ms, 200); ++i) {
+    uint32_t lit = 0;
+    for (uint32_t w = 0; w < n; ++w) lit += map.lit(pts[i], w);
+    if (map.soft_visibility(pts[i]) != float(lit) / float(n)) throw st::Error("bench: the pack's soft lookup differs");
+  }
   g_sink = acc;
   const double rss_end = peak_rss_mib();
   const double raw = double(side * side) * n * 4;
@@ -483,9 +561,11 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
   row("pack lit (one slice)", ns_oct);
   row("pack visibility(p, time)", ns_time);
   row("pack soft (all N, shared walk)", ns_soft);
+  row("pack soft, batched interleaved", ns_batch);
   row("pack soft, N lit() lookups", ns_soft_sep);
   row("soft, N 2D lookups", ns_soft2d);
-  std::printf("soft per sample: pack %.1f ns (N lit() %.1f ns), 2D %.1f ns\n", ns_soft / n, ns_soft_sep / n, ns_soft2d / n);
+  std::printf("soft per sample: pack %.1f ns, batched %.1f ns (N lit() %.1f ns), 2D %.1f ns\n", ns_soft / n, ns_batch / n,
+              ns_soft_sep / n, ns_soft2d / n);
   return {{"case", c.name},
           {"mode", "blocked"},
           {"scene", c.scene},
@@ -515,6 +595,7 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
           {"ns_pack_visibility_time", ns_time},
           {"ns_pack_soft", ns_soft},
           {"ns_pack_soft_separate", ns_soft_sep},
+          {"ns_pack_soft_batched", ns_batch},
           {"ns_soft_2d", ns_soft2d},
           {"peak_rss_mib_trace", rss_trace},
           {"peak_rss_mib_build", rss_build},

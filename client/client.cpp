@@ -89,6 +89,10 @@ float Map::time_visibility_filtered(const WorldPoint& world, double time, float 
 float Map::soft_visibility(const WorldPoint& world, uint32_t pcf_radius) const noexcept {
   return map_ ? map_->stack_soft_visibility({world.x, world.y, world.z}, pcf_radius) : 1.0f;
 }
+void Map::soft_visibility(std::span<const WorldPoint> points, std::span<float> out, uint32_t pcf_radius) const noexcept {
+  if (map_) map_->stack_soft_visibility_batch(points, out, pcf_radius);
+  else std::fill_n(out.begin(), std::min(points.size(), out.size()), 1.0f);
+}
 float Map::soft_visibility_filtered(const WorldPoint& world, float footprint, uint32_t pcf_radius) const noexcept {
   return map_ ? map_->stack_soft_visibility({world.x, world.y, world.z}, pcf_radius, footprint) : 1.0f;
 }

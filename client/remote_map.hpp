@@ -107,6 +107,9 @@ class RemoteMap final : public Evaluator {
   const StackGrid* stack_grid() const { return stack_grid_.get(); }
   float stack_visibility(const Vec3d& world, double time, uint32_t pcf_radius = 0, float footprint = 0) const noexcept;
   float stack_soft_visibility(const Vec3d& world, uint32_t pcf_radius = 0, float footprint = 0) const noexcept;
+  // stack_soft_visibility of each point (pcf_radius 0: StackMap's batched, interleaved walks).
+  void stack_soft_visibility_batch(std::span<const WorldPoint> points, std::span<float> out,
+                                   uint32_t pcf_radius) const noexcept;
   float stack_depth(uint32_t slice, uint32_t level, uint64_t x, uint64_t y) const noexcept;
   size_t request_slices(uint32_t w0, uint32_t w1, uint16_t priority) noexcept;
   bool slices_resident(uint32_t w0, uint32_t w1) const noexcept;

@@ -2,6 +2,7 @@
 // map's skip grid, tiles are MH octrees of level-K cells (tiles/core/MHOCT.md) fetched,
 // cached and retried like any tile; lookups go through StackMap, whose absent tiles
 // answer the cell's level-K value (coarser while tiles stream) and queue the fetch.
+#include <algorithm>
 #include <mutex>
 #include <shared_mutex>
 
@@ -92,6 +93,26 @@ float RemoteMap::stack_soft_visibility(const Vec3d& world, uint32_t pcf_radius, 
   if (pcf_radius == 0 && !(footprint > 0))
     return stack_lookup([&](const StackMap& m) { return m.soft_visibility(world); });
   return stack_lookup([&](const StackMap& m) { return m.soft_visibility_filtered(world, pcf_radius, footprint); });
+}
+
+void RemoteMap::stack_soft_visibility_batch(std::span<const WorldPoint> points, std::span<float> out,
+                                            uint32_t pcf_radius) const noexcept {
+  const size_t count = std::min(points.size(), out.size());
+  if (!stack_map_ || pcf_radius != 0) {
+    for (size_t i = 0; i < count; ++i) out[i] = stack_soft_visibility({points[i].x, points[i].y, points[i].z}, pcf_radius);
+    return;
+  }
+  // Chunks bound the stack buffer and how long one call holds the shared lock.
+  constexpr size_t kChunk = 256;
+  Vec3d p[kChunk];
+  for (size_t b = 0; b < count; b += kChunk) {
+    const size_t m = std::min(kChunk, count - b);
+    for (size_t i = 0; i < m; ++i) p[i] = {points[b + i].x, points[b + i].y, points[b + i].z};
+    stack_lookup([&](const StackMap& sm) {
+      sm.soft_visibility(std::span<const Vec3d>(p, m), out.subspan(b, m));
+      return 0;
+    });
+  }
 }
 
 float RemoteMap::stack_depth(uint32_t slice, uint32_t level, uint64_t x, uint64_t y) const noexcept {

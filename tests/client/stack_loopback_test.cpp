@@ -89,6 +89,17 @@ void served_stack_answers_like_local(const std::string& light_set, const std::st
     EXPECT_EQ(m.time_visibility(wp, t, 1), local.map().visibility_filtered(q, t, 1, 0));
     EXPECT_EQ(m.time_visibility_filtered(wp, t, 0), m.time_visibility(wp, t));
   }
+  {  // the batched soft lookup (interleaved walks; PCF: per point)
+    std::vector<client::WorldPoint> wps;
+    for (const Vec3d& q : points) wps.push_back({q.x, q.y, q.z});
+    std::vector<float> out(wps.size()), out_pcf(wps.size());
+    m.soft_visibility(wps, out);
+    m.soft_visibility(wps, out_pcf, 1);
+    for (size_t i = 0; i < wps.size(); ++i) {
+      EXPECT_EQ(out[i], local.map().soft_visibility(points[i]));
+      EXPECT_EQ(out_pcf[i], m.soft_visibility(wps[i], 1));
+    }
+  }
   for (uint32_t w = 0; w < slices; w += 3)
     for (uint32_t level = 0; level <= n; level += 2)
       for (uint64_t y = 0; y < (uint64_t(1) << level); y += 3)

@@ -74,11 +74,16 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     const st::StackLookup look(tree, set);
     const st::StackBounds bounds(tree);
     st::Rng rng(h);
+    st::Vec3d pts[20];
+    for (st::Vec3d& p : pts) p = {rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-1, 1)};
     for (int i = 0; i < 4; ++i) {
-      const st::Vec3d p{rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-1, 1)};
+      const st::Vec3d& p = pts[i];
       FUZZ_CHECK(look.soft_visibility(p) == look.soft_visibility_independent(p));
       FUZZ_CHECK(look.soft_visibility_bounded(p, bounds) == look.soft_visibility_independent(p));
     }
+    float batch[20];
+    look.soft_visibility(pts, batch);  // more points than lanes: the interleaved walks
+    for (int i = 0; i < 20; ++i) FUZZ_CHECK(batch[i] == look.soft_visibility(pts[i]));
   }
   return 0;
 }

@@ -206,6 +206,14 @@ TEST(GroundFrame, TracedStackIsLosslessOnEveryTexelOfEverySlice) {
     ASSERT_EQ(look.soft_visibility(p), look.soft_visibility_independent(p)) << i;
     if (on_ground) ground_nodes += StackLookup::last_nodes_visited();
   }
+  {  // the batched lookup (interleaved walks, the ground frame's shared transform)
+    std::vector<Vec3d> pts;
+    for (int i = 0; i < 200; ++i)
+      pts.push_back({rng.uniform(b.lo.x, b.hi.x), i % 2 ? 0.0 : rng.uniform(b.lo.y, b.hi.y), rng.uniform(b.lo.z, b.hi.z)});
+    std::vector<float> out(pts.size());
+    look.soft_visibility(pts, out);
+    for (size_t i = 0; i < pts.size(); ++i) ASSERT_EQ(out[i], look.soft_visibility(pts[i])) << i;
+  }
   // One full walk and then only the w steps: under 3 nodes per sample on average.
   EXPECT_LT(ground_nodes, 200u * 3 * set.size());
   uint64_t hit = 0;

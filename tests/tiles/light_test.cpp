@@ -1,8 +1,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <vector>
 
 #include "common/error.hpp"
+#include "common/hash.hpp"
 #include "tiles/core/light.hpp"
 
 namespace st {
@@ -82,6 +84,32 @@ TEST(LightSpace, SerializedFormRoundTripsExactly) {
   auto ls = LightSpace::fit(LightSpec::parse("sun:azimuth=12.5,elevation=33"), unit_box());
   auto back = LightSpace::from_array(ls.kind(), ls.to_array());
   EXPECT_EQ(back.to_array(), ls.to_array());
+}
+
+}  // namespace
+}  // namespace st
+
+namespace st {
+namespace {
+
+// texel_of is floor(u * 2^level) clamped to the map (computed without a floor call): the
+// definition on edges, NaN, infinities, signed zero and random values.
+TEST(LightSpace, TexelOfIsTheClampedFloor) {
+  auto reference = [](uint32_t level, double w) -> uint64_t {
+    const double r = std::ldexp(1.0, int(level)), f = std::floor(w * r);
+    if (!(f >= 0)) return 0;
+    return f >= r ? uint64_t(r) - 1 : uint64_t(f);
+  };
+  std::vector<double> ws = {0.0, -0.0, 1.0, -1e-300, 1e-300, 0.5, 1.0 - 1e-16, 1.0 + 1e-16, 2.0, -3.5,
+                            std::nan(""), INFINITY, -INFINITY, std::nextafter(1.0, 0.0)};
+  Rng rng(3);
+  for (int i = 0; i < 2000; ++i) ws.push_back(rng.uniform(-0.25, 1.25));
+  for (uint32_t level : {0u, 1u, 7u, 10u, 20u, 40u})
+    for (double w : ws) {
+      const auto t = LightSpace::texel_of(level, w, 1.0 - w);
+      ASSERT_EQ(t[0], reference(level, w)) << level << " " << w;
+      ASSERT_EQ(t[1], reference(level, 1.0 - w)) << level << " " << w;
+    }
 }
 
 }  // namespace

@@ -1,7 +1,7 @@
 // Lookups in a shadow-map stack (tiles/core/stack_lookup.hpp): the lit test of every
 // slice equals the uncompressed map's outside objects, visibility by time is exact at
 // the samples and blends between them, the shared soft-shadow walk equals N independent
-// lookups bit for bit and visits fewer nodes.
+// lookups bit for bit and visits fewer nodes, and so does the batched (interleaved) one.
 #include <gtest/gtest.h>
 
 #include "common/error.hpp"
@@ -10,6 +10,7 @@
 #include "tiles/bake/scene.hpp"
 #include "tiles/build/mh_octree_encode.hpp"
 #include "tiles/core/stack_lookup.hpp"
+#include "tiles/core/walk_interleave.hpp"
 
 namespace st {
 namespace {
@@ -111,6 +112,16 @@ TEST(StackLookup, SoftVisibilityEqualsIndependentLookupsAndSharesTheWalk) {
     }
   }
   EXPECT_GT(penumbra, 100u) << "the area light casts penumbrae";
+  // The batched lookup (interleaved walks) answers each point as the single one does, for
+  // batches shorter and longer than the lanes in flight, and stops at the shorter span.
+  std::vector<Vec3d> pts;
+  for (int i = 0; i < 300; ++i) pts.push_back(random_point(rng, b.bounds));
+  for (size_t count : {size_t(1), size_t(kWalkLanes - 1), pts.size()}) {
+    std::vector<float> out(count + 1, -1.0f);
+    look.soft_visibility(std::span<const Vec3d>(pts.data(), count), out);
+    for (size_t i = 0; i < count; ++i) ASSERT_EQ(out[i], look.soft_visibility(pts[i])) << count << " " << i;
+    EXPECT_EQ(out[count], -1.0f) << "written past the points";
+  }
   EXPECT_LT(shared_nodes * 2, separate_nodes) << "the shared walk visits under half the nodes of 16 separate walks";
   // A light set of another size is refused.
   const LightSet other = stacks::fitted_set("procedural:hairball,count=12", "area:pos=2,14,1,target=0,0,0,size=3,3,samples=8");

@@ -317,8 +317,10 @@ TEST(StackPack, SoftVisibilitySharedWalkEqualsSeparateLookups) {
       rng = rng * 6364136223846793005ull + 1442695040888963407ull;
       return double(rng >> 11) / double(1ull << 53);
     };
+    std::vector<Vec3d> pts;
     for (int i = 0; i < 300; ++i) {
       const Vec3d p{-10 + 20 * next(), 5 * next(), -10 + 20 * next()};
+      pts.push_back(p);
       for (const StackMap* m : {&full, &half}) {
         uint32_t lit = 0;
         bool exact_lit = true, exact_soft = true;
@@ -326,6 +328,15 @@ TEST(StackPack, SoftVisibilitySharedWalkEqualsSeparateLookups) {
         ASSERT_EQ(m->soft_visibility(p, &exact_soft), float(lit) / 13.0f) << "K " << K << " point " << i;
         ASSERT_EQ(exact_soft, exact_lit);
       }
+    }
+    // The batched lookup (interleaved walks): the same answers, and inexact where a tile
+    // was absent.
+    for (const StackMap* m : {&full, &half}) {
+      std::vector<float> out(pts.size());
+      bool exact = true, exact_single = true;
+      m->soft_visibility(pts, out, &exact);
+      for (size_t i = 0; i < pts.size(); ++i) ASSERT_EQ(out[i], m->soft_visibility(pts[i], &exact_single)) << "K " << K << " " << i;
+      EXPECT_EQ(exact, exact_single);
     }
   }
 }

@@ -236,12 +236,16 @@ double LightSpace::depth_of_t(const LightRay&, double t) const {
 }
 
 std::array<uint64_t, 2> LightSpace::texel_of(uint32_t level, double u, double v) {
-  const double r = std::ldexp(1.0, int(level));
+  // floor(w * r) clamped to [0, r - 1] (w * r is exact: r is a power of two), without the
+  // floor call (every soft-shadow sample takes this path): r is an integer, so
+  // floor(x) >= r iff x >= r and floor(x) >= 0 iff x >= 0 (NaN: 0), and for 0 <= x < r
+  // the conversion's truncation is the floor.
+  const double r = level < 64 ? double(uint64_t(1) << level) : std::ldexp(1.0, int(level));
   auto cell = [&](double w) -> uint64_t {
-    double f = std::floor(w * r);  // exact: r is a power of two
-    if (!(f >= 0)) return 0;
-    if (f >= r) return uint64_t(r) - 1;
-    return uint64_t(f);
+    const double x = w * r;
+    if (!(x >= 0)) return 0;
+    if (x >= r) return uint64_t(r) - 1;
+    return uint64_t(x);
   };
   return {cell(u), cell(v)};
 }

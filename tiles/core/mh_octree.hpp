@@ -4,9 +4,12 @@
 // Thread safety: a MhOctree is immutable after open; lookups are const, noexcept, never
 // allocate, and may run concurrently. The buffer is borrowed: the caller keeps it alive.
 #pragma once
+#include <algorithm>
+#include <bit>
 #include <cstdint>
 #include <span>
 
+#include "common/bytes.hpp"
 #include "tiles/core/interval.hpp"
 #include "tiles/core/mh_octree_format.hpp"
 
@@ -49,6 +52,58 @@ class MhOctree {
   // depth(x, y, w, xy_level()) for w < slices(), x, y < 2^xy_level() (not checked).
   float depth_along(Path& p, uint64_t x, uint64_t y, uint32_t w) const noexcept;
 
+  // depth_along in resumable steps, so that the walks of many points can be interleaved
+  // and their cache misses overlap (the batched soft lookups of StackLookup and StackMap):
+  // along_begin starts the walk to (x, y, w) from the lowest common node with the path's
+  // previous walk and returns its cursor; along_step takes one node down, recording it in
+  // the path, and returns true while the walk goes on, the new node's word then at
+  // along_next(k), which a caller prefetches before it steps other walks; once along_step
+  // returns false, along_value(k) is the answer. Begin, steps and value answer as
+  // depth_along does and leave the path as it does, bit for bit (tested). The cursor is a
+  // value the caller keeps in registers. Same preconditions as depth_along.
+  struct Walk {
+    uint64_t pos = 0, val = 0;
+    uint32_t code = 0, level = 0;
+  };
+  Walk along_begin(Path& p, uint64_t x, uint64_t y, uint32_t w) const noexcept {
+    uint32_t start = 0;
+    if (p.valid) {  // as depth_along
+      const uint32_t L = geo_.depth();
+      const uint32_t hx = uint32_t(std::bit_width((x ^ p.x) | (y ^ p.y)));
+      const uint32_t hw = uint32_t(std::bit_width(uint32_t(w ^ p.w)));
+      start = std::min({L - std::min(L, hx), L - std::min(L, hw), p.reached});
+    } else {
+      p.pos[0] = 0;
+      p.val[0] = root_leaf_ ? 0 : 1;
+      p.code[0] = root_leaf_ ? moct::kCodeLeaf : moct::kCodeInner;
+    }
+    p.reached = start;
+    p.x = x, p.y = y, p.w = w;
+    p.valid = true;
+    return {p.pos[start], p.val[start], p.code[start], start};
+  }
+  bool along_step(Path& p, Walk& k) const noexcept {
+    const uint32_t l = k.level;
+    if (l >= geo_.depth() || k.code == moct::kCodeLeaf) return false;
+    const uint32_t b = geo_.n - xy_next_[l];
+    uint32_t slot = split_xy_[l] ? uint32_t((p.x >> b) & 1) | uint32_t((p.y >> b) & 1) << 1 : 0u;
+    if (split_w_[l]) slot |= uint32_t((p.w >> w_shift_[l]) & 1) << 2;
+    const uint32_t word_p = word_inline(k.pos);
+    const uint32_t mask = moct::word_mask(word_p);
+    const uint32_t cc = moct::child_code(mask, slot);
+    if (!cc) return false;
+    k.pos = moct::block_start(k.pos, shift_[l], moct::word_offset(word_p)) + moct::child_skip(mask, slot);
+    if (cc != moct::kCodeEmpty) k.val = cc == moct::kCodeLeaf ? k.pos : k.pos + 1;
+    k.code = cc;
+    k.level = l + 1;
+    p.pos[l + 1] = k.pos, p.val[l + 1] = k.val, p.code[l + 1] = cc;
+    p.reached = l + 1;
+    ++p.steps;
+    return true;
+  }
+  float along_value(const Walk& k) const noexcept { return moct::bits_float(word_inline(k.val)); }
+  const void* along_next(const Walk& k) const noexcept { return tree_ + 4 * k.pos; }
+
   // The walk, for lookups that share it among samples (stack_lookup.hpp). A cursor stands
   // on a node; `val` is the word of the last valued node's float on its path.
   struct Cursor {
@@ -63,6 +118,7 @@ class MhOctree {
 
  private:
   uint32_t word(uint64_t w) const noexcept;
+  uint32_t word_inline(uint64_t w) const noexcept { return st::load_le<uint32_t>(tree_ + 4 * w); }
   std::span<const uint8_t> bytes_;
   const uint8_t* tree_ = nullptr;
   moct::Geometry geo_{};

@@ -1,15 +1,17 @@
 #include "tiles/core/stack_lookup.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <string>
 
 #include "common/error.hpp"
+#include "tiles/core/walk_interleave.hpp"
 
 namespace st {
 namespace {
 
-thread_local uint64_t t_visited = 0;
+thread_local uint64_t t_visited = 0, t_prefetched = 0;
 
 }  // namespace
 
@@ -87,6 +89,73 @@ float StackLookup::soft_visibility(const Vec3d& p) const noexcept {
   return float(lit_samples) / float(n);
 }
 
+void StackLookup::soft_visibility(std::span<const Vec3d> points, std::span<float> out) const noexcept {
+  const uint32_t n = tree_.slices(), level = tree_.xy_level();
+  const bool ground = ground_.valid();
+  struct Lane {
+    MhOctree::Path path;
+    MhOctree::Walk walk;
+    GroundTransforms::Point pt{};
+    size_t i = 0;
+    uint32_t w = 0, lit = 0;
+    float d = 0;
+    bool walking = false;
+  };
+  uint64_t visited = 0, prefetched = 0;
+  auto start = [&](Lane& ln, size_t i) {
+    ln.path.valid = false;
+    ln.path.steps = 0;
+    ln.i = i, ln.w = 0, ln.lit = 0, ln.walking = false;
+    if (ground) ln.pt = ground_.point(points[i]);
+  };
+  // One point's soft_visibility (the loops above) as a resumable job: each sample begins a
+  // shared walk, and a step into a node on another cache line prefetches it and yields.
+  auto run = [&](Lane& ln) {
+    // The lane's scalars live in registers while it runs and go back at a yield.
+    MhOctree::Path& path = ln.path;
+    uint32_t w = ln.w, lit = ln.lit;
+    float d = ln.d;
+    bool walking = ln.walking;
+    MhOctree::Walk k = ln.walk;
+    for (;;) {
+      if (walking) {
+        for (;;) {
+          const uintptr_t line = cache_line(tree_.along_next(k));
+          if (!tree_.along_step(path, k)) break;
+          const void* next = tree_.along_next(k);
+          if (cache_line(next) != line) {
+            __builtin_prefetch(next);
+            ++prefetched;
+            ln.w = w, ln.lit = lit, ln.d = d, ln.walking = true, ln.walk = k;
+            return true;
+          }
+        }
+        lit += d <= tree_.along_value(k);
+        ++w;
+      }
+      if (w == n) {
+        out[ln.i] = float(lit) / float(n);
+        visited += path.steps + 1;
+        return false;
+      }
+      std::array<uint64_t, 2> t;
+      if (ground) {
+        t = ground_.texel(level, ln.pt, w);
+        d = ln.pt.d;
+      } else {
+        const LightPoint lp = lights_.samples[w].to_light(points[ln.i]);
+        t = LightSpace::texel_of(level, lp.u, lp.v);
+        d = float(lp.d);
+      }
+      k = tree_.along_begin(path, t[0], t[1], w);
+      walking = true;
+    }
+  };
+  run_interleaved<Lane>(std::min(points.size(), out.size()), start, run);
+  t_visited = visited;
+  t_prefetched = prefetched;
+}
+
 float StackLookup::soft_visibility_independent(const Vec3d& p) const noexcept {
   uint32_t lit_samples = 0;
   for (uint32_t w = 0; w < tree_.slices(); ++w) lit_samples += lit(p, w);
@@ -131,5 +200,6 @@ float StackLookup::soft_visibility_bounded(const Vec3d& p, const StackBounds& bo
 }
 
 uint64_t StackLookup::last_nodes_visited() noexcept { return t_visited; }
+uint64_t StackLookup::last_lines_prefetched() noexcept { return t_prefetched; }
 
 }  // namespace st

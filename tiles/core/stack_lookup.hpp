@@ -25,6 +25,7 @@
 // borrowed and must outlive the lookup.
 #pragma once
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "tiles/core/light_set.hpp"
@@ -58,6 +59,11 @@ class StackLookup {
   bool lit(const Vec3d& p, uint32_t w) const noexcept;
   float visibility(const Vec3d& p, double time) const noexcept;
   float soft_visibility(const Vec3d& p) const noexcept;
+  // out[i] = soft_visibility(points[i]) for i < min(points.size(), out.size()), bit for bit
+  // (tested, fuzzed): each point's shared walk as above, the walks of up to kWalkLanes
+  // points interleaved so that their cache misses overlap (walk_interleave.hpp). A batch
+  // of a frame's receivers is where a soft lookup pays least per point.
+  void soft_visibility(std::span<const Vec3d> points, std::span<float> out) const noexcept;
   // The same fraction from N independent walks (the reference and the benchmark's baseline).
   float soft_visibility_independent(const Vec3d& p) const noexcept;
   // The same fraction again, each sample's walk stopping at the first node whose bounds
@@ -65,8 +71,13 @@ class StackLookup {
   // soft_visibility bit for bit (tested): d <= lo <= the texel's value, or d > hi >= it.
   float soft_visibility_bounded(const Vec3d& p, const StackBounds& bounds) const noexcept;
 
-  // Tree nodes the last soft_visibility call on this thread visited (benchmark figure).
+  // Tree nodes the last soft_visibility call on this thread visited (benchmark figure; a
+  // batch: summed over its points).
   static uint64_t last_nodes_visited() noexcept;
+  // Steps of the last batched soft_visibility call on this thread into a node on a cache
+  // line other than its parent's: the prefetches it issued, the misses it can have had
+  // in the tree (benchmark figure).
+  static uint64_t last_lines_prefetched() noexcept;
 
  private:
   const MhOctree& tree_;

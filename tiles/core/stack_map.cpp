@@ -6,6 +6,7 @@
 #include "tiles/core/evaluator.hpp"
 #include "tiles/core/filter_level.hpp"
 #include "tiles/core/interval.hpp"
+#include "tiles/core/walk_interleave.hpp"
 
 namespace st {
 
@@ -111,6 +112,88 @@ float StackMap::soft_visibility(const Vec3d& p, bool* exact) const {
     lit_samples += d <= v;
   }
   return float(lit_samples) / float(grid_.slices);
+}
+
+void StackMap::soft_visibility(std::span<const Vec3d> points, std::span<float> out, bool* exact) const {
+  // soft_visibility(p) above as a resumable job per point (walk_interleave.hpp): the same
+  // texels, cells, tile fetches and shared walks in the same order, so the same answers.
+  const moct::Geometry& g = grid_.geo;
+  const uint32_t n = g.n, K = grid_.skip_level, slices = grid_.slices;
+  const uint32_t sx = n - g.xy_bits(K), sw = g.k - g.w_bits(K);
+  const bool leaves_at_k = g.depth() == K;
+  const bool ground = ground_.valid();
+  struct Lane {
+    MhOctree::Path path;
+    MhOctree::Walk walk;
+    GroundTransforms::Point pt{};
+    const MhOctree* tile = nullptr;
+    uint64_t path_cell = 0;
+    size_t i = 0;
+    uint32_t w = 0, lit = 0;
+    float d = 0;
+    bool walking = false;
+  };
+  auto start = [&](Lane& ln, size_t i) {
+    ln.path_cell = ~uint64_t(0), ln.tile = nullptr;
+    ln.i = i, ln.w = 0, ln.lit = 0, ln.walking = false;
+    if (ground) ln.pt = ground_.point(points[i]);
+  };
+  auto run = [&](Lane& ln) {
+    // The lane's scalars live in registers while it runs and go back at a yield.
+    MhOctree::Path& path = ln.path;
+    uint32_t w = ln.w, lit = ln.lit;
+    float d = ln.d;
+    bool walking = ln.walking;
+    MhOctree::Walk k = ln.walk;
+    for (;;) {
+      if (walking) {
+        const MhOctree& tile = *ln.tile;
+        for (;;) {
+          const uintptr_t line = cache_line(tile.along_next(k));
+          if (!tile.along_step(path, k)) break;
+          const void* next = tile.along_next(k);
+          if (cache_line(next) != line) {
+            __builtin_prefetch(next);
+            ln.w = w, ln.lit = lit, ln.d = d, ln.walking = true, ln.walk = k;
+            return true;
+          }
+        }
+        lit += d <= tile.along_value(k);
+        ++w;
+        walking = false;
+      }
+      if (w == slices) {
+        out[ln.i] = float(lit) / float(slices);
+        return false;
+      }
+      uint64_t x, y;
+      if (ground) {
+        const auto t = ground_.texel(n, ln.pt, w);
+        x = t[0], y = t[1], d = ln.pt.d;
+      } else {
+        texel(points[ln.i], w, x, y, d);
+      }
+      float v = kLitDepth;
+      if (!(x >> n) && !(y >> n)) {
+        const uint64_t cx = x >> sx, cy = y >> sx, cw = uint64_t(w) >> sw;
+        const uint64_t cell = grid_.index(K, cx, cy, cw);
+        const StackEntry& e = grid_.entries[cell];
+        v = e.value;
+        if (e.kind != 0 && !leaves_at_k) {
+          if (cell != ln.path_cell) ln.path_cell = cell, ln.tile = tile_(cell), path.valid = false;
+          if (ln.tile) {
+            k = ln.tile->along_begin(path, x - (cx << sx), y - (cy << sx), uint32_t(w - (cw << sw)));
+            walking = true;
+            continue;
+          }
+          if (exact) *exact = false;
+        }
+      }
+      lit += d <= v;
+      ++w;
+    }
+  };
+  run_interleaved<Lane>(std::min(points.size(), out.size()), start, run);
 }
 
 float StackMap::filtered(const Vec3d& p, uint32_t w, uint32_t pcf_radius, float footprint, bool* exact) const {

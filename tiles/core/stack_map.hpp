@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <span>
 #include <vector>
 
 #include "tiles/core/light.hpp"
@@ -42,6 +43,10 @@ class StackMap {
   // The N samples' lit tests averaged; consecutive samples in one cell share the tile
   // walk (equal to N lit() calls bit for bit, tested).
   float soft_visibility(const Vec3d& p, bool* exact = nullptr) const;
+  // out[i] = soft_visibility(points[i]) for i < min(points.size(), out.size()), bit for bit
+  // (tested): the walks of up to kWalkLanes points interleaved so that their cache misses
+  // overlap (walk_interleave.hpp). `exact` is cleared when an absent tile answered any.
+  void soft_visibility(std::span<const Vec3d> points, std::span<float> out, bool* exact = nullptr) const;
 
   // PCF and the footprint level, as the 2D lookups (Evaluator::pcf / pcf_footprint,
   // filter_level.hpp): the fraction of the r x r kernel (r = 2 * pcf_radius + 1,

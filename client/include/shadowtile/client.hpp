@@ -269,6 +269,11 @@ class Map {
                                  uint32_t pcf_radius = 0) const noexcept;
   float soft_visibility(const WorldPoint& world, uint32_t pcf_radius = 0) const noexcept;
   float soft_visibility_filtered(const WorldPoint& world, float footprint, uint32_t pcf_radius = 0) const noexcept;
+  // out[i] = soft_visibility(points[i], pcf_radius) for i < min(points.size(), out.size()),
+  // bit for bit. With pcf_radius 0 the walks of several points are interleaved so that
+  // their cache misses overlap: a frame's receivers in one call cost several times less
+  // per point than one call each (tiles/core/MHOCT.md "Batched soft lookups").
+  void soft_visibility(std::span<const WorldPoint> points, std::span<float> out, uint32_t pcf_radius = 0) const noexcept;
   float slice_depth(uint32_t slice, uint32_t level, uint64_t x, uint64_t y) const noexcept;
   size_t request_slices(uint32_t w0, uint32_t w1, uint16_t priority) noexcept;
   bool slices_resident(uint32_t w0, uint32_t w1) const noexcept;
