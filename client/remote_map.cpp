@@ -294,17 +294,25 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
         if (tx != prev) slot = slot + 1 == r ? 0 : slot + 1, prev = tx;
         float* col = w.depth.data() + slot * r;
         if (w.col[slot] != tx && w_rows && sc.win && sc.covers(level, tx, ky0) && sc.covers(level, tx, ky1)) {
-          // The column inside the current tile: one kept region holding it gives all its
-          // taps; else its r taps in one window walk (shared down to their lowest common
-          // node, each node once), whose region is kept when one node holds the column.
+          // The column inside the current tile: from the columns fetched ahead, or one kept
+          // region holding it gives all its taps; else it and the next columns up to
+          // kAhead (inside the tile) in one window walk (shared down to their lowest
+          // common node, each node once), whose region is kept when one node holds them.
           w.col[slot] = tx;
-          const LookupScratch::Region* g = sc.find(level, tx, ky0);
-          if (g && g->holds(level, tx, ky1)) {
+          LookupScratch::Ahead& a = sc.ahead;
+          const LookupScratch::Region* g = nullptr;
+          if (a.n && a.level == level && a.r == r && a.y0 == ky0 && tx - a.x0 < a.n) {
+            std::copy_n(a.depth + (tx - a.x0) * r, r, col);
+          } else if ((g = sc.find(level, tx, ky0)) && g->holds(level, tx, ky1)) {
             std::fill_n(col, r, sc.answer(*g));
           } else {
             ++sc.hits;
-            const uint32_t shift = sc.win->depth_window(sc.rel, tx - sc.x0, ky0 - sc.y0, 1, r, col);
-            if (((ky0 ^ ky1) >> shift) == 0) sc.set_region(level, tx, ky0, shift, col[0], LookupScratch::Counted::hit);
+            const uint32_t n = uint32_t(std::min<uint64_t>(LookupScratch::kAhead, sc.x0 + sc.side - tx));
+            const uint32_t shift = sc.win->depth_window(sc.rel, tx - sc.x0, ky0 - sc.y0, n, r, a.depth);
+            a.level = level, a.r = r, a.n = n, a.x0 = tx, a.y0 = ky0;
+            std::copy_n(a.depth, r, col);
+            if ((((tx ^ (tx + n - 1)) | (ky0 ^ ky1)) >> shift) == 0)
+              sc.set_region(level, tx, ky0, shift, col[0], LookupScratch::Counted::hit);
           }
         } else if (w.col[slot] != tx) {
           w.col[slot] = tx;

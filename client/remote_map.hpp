@@ -189,6 +189,15 @@ class RemoteMap final : public Evaluator {
     };
     std::array<Taps, 2> taps;
     float window[kMaxPcf * kMaxPcf];  // a window walk's answer (no initializer: filled before read)
+    // The columns a kernel sliding right along a row reads next, fetched kAhead at a time
+    // in one window walk (the walk to their common node shared by kAhead kernels):
+    // columns [x0, x0 + n) of rows [y0, y0 + r) of `level`, depth[(x - x0) * r + row].
+    static constexpr uint32_t kAhead = 8;
+    struct Ahead {
+      uint32_t level, r, n = 0;  // n == 0: none
+      uint64_t x0, y0;
+      float depth[kAhead * kMaxPcf];
+    } ahead;
     static constexpr size_t kMaxMisses = 8;  // more distinct misses in one call: asked again later
     std::array<uint64_t, kMaxMisses> miss_tile{};
     std::array<GridEntry, kMaxMisses> miss_entry{};
