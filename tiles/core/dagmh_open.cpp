@@ -136,8 +136,15 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths {
         window_put(value_of(c.last, vs), ax, ay, bx, by, x0, y0, h, out);  // below a missing child
         return;
       }
-      for (uint64_t x = ax; x <= bx; ++x)
-        for (uint64_t y = ay; y <= by; ++y) out[(x - x0) * h + (y - y0)] = value_of(v_.finish(c, level, x, y), vs);
+      if ((c.ref & dagmh::kRefTagMask) == dagmh::kRefInner) {  // an inner node of `level`: one texel
+        for (uint64_t x = ax; x <= bx; ++x)
+          for (uint64_t y = ay; y <= by; ++y) out[(x - x0) * h + (y - y0)] = value_of(v_.finish(c, level, x, y), vs);
+        return;
+      }
+      const uint8_t* t = v_.treelet_at(c.ref & dagmh::kRefIndexMask);
+      const Treelet tr{c, st::load_le<uint64_t>(t), st::load_le<uint32_t>(t + 8),
+                       std::min<uint32_t>(level - c.level, dagmh::kTreeletLevels - 1), level};
+      fill_treelet(tr, 0, 0, c.last, ax, ay, bx, by, x0, y0, h, out, vs);
       return;
     }
     const uint64_t half = uint64_t(1) << (level - c.level - 1);
@@ -148,6 +155,34 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths {
       if (cx0 > cx1 || cy0 > cy1) continue;
       // One step toward the part's first texel: the child in this slot.
       fill(v_.descend(c, c.level + 1, level, cx0, cy0), level, cx0, cy0, cx1, cy1, x0, y0, h, out, vs);
+    }
+  }
+
+  // A treelet a window walk reached (View::finish's Alg. 1, depth first): a texel's
+  // answer is the deepest set bit on its path down to treelet level `depth`, else the
+  // cursor's `last`.
+  struct Treelet {
+    dagmh::Cursor c;
+    uint64_t low;
+    uint32_t high, depth, level;
+  };
+  // The part [ax, bx] x [ay, by] of the window under the treelet node at treelet level n,
+  // bit position p; `index` answers when no deeper set bit does. Where no bit is set
+  // strictly inside the node's subtree (or at treelet level `depth`), it answers the part.
+  void fill_treelet(const Treelet& tr, uint32_t n, uint32_t p, uint32_t index, uint64_t ax, uint64_t ay, uint64_t bx,
+                    uint64_t by, uint64_t x0, uint64_t y0, uint32_t h, float* out, Values& vs) const {
+    if (dagmh::treelet_bit(tr.low, tr.high, p)) index = tr.c.base + dagmh::treelet_rank(tr.low, tr.high, p);
+    if (n == tr.depth || !dagmh::treelet_any(tr.low, tr.high, p + 1, p + dagmh::kTreeletSubtree[n])) {
+      window_put(value_of(index, vs), ax, ay, bx, by, x0, y0, h, out);
+      return;
+    }
+    const uint64_t half = uint64_t(1) << (tr.level - tr.c.level - n - 1);
+    const uint64_t mx = (ax & ~(2 * half - 1)) + half, my = (ay & ~(2 * half - 1)) + half;
+    for (uint32_t slot = 0; slot < 4; ++slot) {
+      const uint64_t cx0 = slot & 1u ? std::max(ax, mx) : ax, cx1 = slot & 1u ? bx : std::min(bx, mx - 1);
+      const uint64_t cy0 = slot & 2u ? std::max(ay, my) : ay, cy1 = slot & 2u ? by : std::min(by, my - 1);
+      if (cx0 > cx1 || cy0 > cy1) continue;
+      fill_treelet(tr, n + 1, p + 1 + dagmh::kTreeletStride[n] * slot, index, cx0, cy0, cx1, cy1, x0, y0, h, out, vs);
     }
   }
 
