@@ -351,9 +351,8 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
           if ((((kx0 ^ kx1) | (ky0 ^ ky1)) >> shift) == 0)
             sc.set_region(level, kx0, ky0, shift, sc.window[0], LookupScratch::Counted::hit);
           uint32_t lit_taps = 0;
-          for (uint32_t i = 0; i < r; ++i) {
-            const uint32_t slot = uint32_t((kx0 + i) % r);
-            w.col[slot] = kx0 + i;
+          for (uint32_t i = 0, slot = uint32_t(kx0 % r); i < r; ++i, slot = slot + 1 == r ? 0 : slot + 1) {
+            w.col[slot] = kx0 + i;  // column tx in slot tx % r
             std::copy_n(sc.window + i * r, r, w.depth.data() + slot * r);
           }
           for (uint32_t k = 0; k < r * r; ++k) lit_taps += receiver <= sc.window[k] ? 1u : 0u;
