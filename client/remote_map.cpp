@@ -343,21 +343,6 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
       if (kernel_in_tile()) {
         ++sc.hits;
         w.level = level, w.r = r, w.y = y;
-        if (sc.win && kx1 - kx0 == r - 1 && ky1 - ky0 == r - 1) {
-          // Away from the map's edges: the kernel's r x r window in one window walk
-          // (MH §3.3 Fig. 5, each node once), kept as the tap window, so the next
-          // kernels along the row read only their new columns.
-          const uint32_t shift = sc.win->depth_window(sc.rel, kx0 - sc.x0, ky0 - sc.y0, r, r, sc.window);
-          if ((((kx0 ^ kx1) | (ky0 ^ ky1)) >> shift) == 0)
-            sc.set_region(level, kx0, ky0, shift, sc.window[0], LookupScratch::Counted::hit);
-          uint32_t lit_taps = 0;
-          for (uint32_t i = 0, slot = uint32_t(kx0 % r); i < r; ++i, slot = slot + 1 == r ? 0 : slot + 1) {
-            w.col[slot] = kx0 + i;  // column tx in slot tx % r
-            std::copy_n(sc.window + i * r, r, w.depth.data() + slot * r);
-          }
-          for (uint32_t k = 0; k < r * r; ++k) lit_taps += receiver <= sc.window[k] ? 1u : 0u;
-          return float(lit_taps) / float(r * r);
-        }
         std::fill_n(w.col.begin(), r, ~uint64_t(0));
         try {
           return sc.ev->pcf(sc.rel, x - sc.x0, y - sc.y0, r, receiver);

@@ -188,7 +188,6 @@ class RemoteMap final : public Evaluator {
       std::array<float, kMaxPcf * kMaxPcf> depth;  // [column * r + row]
     };
     std::array<Taps, 2> taps;
-    float window[kMaxPcf * kMaxPcf];  // a window walk's answer (no initializer: filled before read)
     // The columns a kernel sliding right along a row reads next, fetched kAhead at a time
     // in one window walk (the walk to their common node shared by kAhead kernels):
     // columns [x0, x0 + n) of rows [y0, y0 + r) of `level`, depth[(x - x0) * r + row].

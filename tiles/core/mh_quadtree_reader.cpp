@@ -161,22 +161,46 @@ class TreeEvaluator final : public Evaluator, public WindowDepths {
   }
 
   // MH §3.3, Fig. 5: the taps share the root path down to the lowest common node of the
-  // kernel's corner texels, and below it every node the kernel overlaps is walked once
-  // (depth_window); a clamped kernel at the map's edge reads its edge texels again. Same
-  // values as depth(), so the result equals the average of single lookups.
+  // kernel's corner texels; each tap continues from there, and a tap whose texel lies in
+  // the region where the previous tap's walk stopped reuses its answer (the last-sample
+  // cache). Same walks as depth(), so the result equals the average of single lookups.
   float pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver) const override {
     r = std::clamp<uint32_t>(r, 1, kMaxPcf);
     level = std::min(level, kMaxLevel);
     const uint64_t side = uint64_t(1) << level;
     const uint64_t x0 = pcf_tap(x, 0, r, side), x1 = pcf_tap(x, r - 1, r, side);
     const uint64_t y0 = pcf_tap(y, 0, r, side), y1 = pcf_tap(y, r - 1, r, side);
-    const uint32_t w = uint32_t(x1 - x0 + 1), h = uint32_t(y1 - y0 + 1);
-    float win[kMaxPcf * kMaxPcf];
-    depth_window(level, x0, y0, w, h, win);
+    const uint64_t diff = (x0 ^ x1) | (y0 ^ y1);
+    const uint32_t common = level - uint32_t(std::bit_width(diff));
+    Cursor base = root();
+    descend(base, level, x0, y0, common);
     uint32_t lit = 0;
-    for (uint32_t i = 0; i < r; ++i) {
-      const float* col = win + (pcf_tap(x, i, r, side) - x0) * h;
-      for (uint32_t j = 0; j < r; ++j) lit += receiver <= col[pcf_tap(y, j, r, side) - y0] ? 1u : 0u;
+    if (base.missing || base.code == kCodeLeaf || base.level == level) {
+      lit = receiver <= value(base) ? r * r : 0;
+    } else {
+      bool cached = false;
+      uint32_t cache_shift = 0, cache_lit = 0;
+      uint64_t cache_x = 0, cache_y = 0;
+      for (uint32_t j = 0; j < r; ++j) {
+        const uint64_t ty = pcf_tap(y, j, r, side);
+        for (uint32_t i = 0; i < r; ++i) {
+          const uint64_t tx = pcf_tap(x, i, r, side);
+          if (cached && (tx >> cache_shift) == cache_x && (ty >> cache_shift) == cache_y) {
+            lit += cache_lit;
+            continue;
+          }
+          Cursor c = base;
+          descend(c, level, tx, ty, level);
+          cache_lit = receiver <= value(c) ? 1 : 0;
+          lit += cache_lit;
+          // Every texel under the node where the walk ended (or under the missing child)
+          // takes the same path and gets the same value.
+          cache_shift = level - (c.missing ? c.level + 1 : c.level);
+          cache_x = tx >> cache_shift;
+          cache_y = ty >> cache_shift;
+          cached = true;
+        }
+      }
     }
     return float(lit) / float(r * r);
   }
