@@ -103,6 +103,7 @@ RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::v
                 " bytes exceed ClientOptions::max_slot_bytes " + std::to_string(options.max_slot_bytes));
   slot_used_ = std::make_unique<std::atomic<uint32_t>[]>(cache_.slot_count());  // zero: never used
   slot_eval_.resize(cache_.slot_count());
+  slot_window_.resize(cache_.slot_count());
   slot_grid_.resize(cache_.slot_count());
   // Pages are requested (one per record), resident (one per slot) or constant: sized so
   // that requesting a page from a lookup does not grow the table.
@@ -204,6 +205,7 @@ bool RemoteMap::enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch
   }
   mark_used(page.slot);
   sc.ev = slot_eval_[page.slot].get();
+  sc.win = slot_window_[page.slot];
   sc.level = level;
   sc.rel = hit.rel;
   sc.x0 = x - hit.tx;
@@ -286,11 +288,33 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
       // Away from the map's left and right edges the kernel's r columns fill all r slots:
       // its taps are the whole window, counted in one branch-free pass.
       const bool interior = kx1 - kx0 == r - 1;
+      const bool w_rows = ky1 - ky0 == r - 1;  // the rows are r consecutive texels (not at an edge)
       for (uint32_t i = 0; i < r; ++i) {
         const uint64_t tx = pcf_tap(x, i, r, side);
         if (tx != prev) slot = slot + 1 == r ? 0 : slot + 1, prev = tx;
         float* col = w.depth.data() + slot * r;
-        if (w.col[slot] != tx) {
+        if (w.col[slot] != tx && w_rows && sc.win && sc.covers(level, tx, ky0) && sc.covers(level, tx, ky1)) {
+          // The column inside the current tile: from the columns fetched ahead, or one kept
+          // region holding it gives all its taps; else it and the next columns up to
+          // kAhead (inside the tile) in one window walk (shared down to their lowest
+          // common node, each node once), whose region is kept when one node holds them.
+          w.col[slot] = tx;
+          LookupScratch::Ahead& a = sc.ahead;
+          const LookupScratch::Region* g = nullptr;
+          if (a.n && a.level == level && a.r == r && a.y0 == ky0 && tx - a.x0 < a.n) {
+            std::copy_n(a.depth + (tx - a.x0) * r, r, col);
+          } else if ((g = sc.find(level, tx, ky0)) && g->holds(level, tx, ky1)) {
+            std::fill_n(col, r, sc.answer(*g));
+          } else {
+            ++sc.hits;
+            const uint32_t n = uint32_t(std::min<uint64_t>(LookupScratch::kAhead, sc.x0 + sc.side - tx));
+            const uint32_t shift = sc.win->depth_window(sc.rel, tx - sc.x0, ky0 - sc.y0, n, r, a.depth);
+            a.level = level, a.r = r, a.n = n, a.x0 = tx, a.y0 = ky0;
+            std::copy_n(a.depth, r, col);
+            if ((((tx ^ (tx + n - 1)) | (ky0 ^ ky1)) >> shift) == 0)
+              sc.set_region(level, tx, ky0, shift, col[0], LookupScratch::Counted::hit);
+          }
+        } else if (w.col[slot] != tx) {
           w.col[slot] = tx;
           // The column's taps that one region holds take its value together.
           for (uint32_t k = 0; k < r;) {
@@ -838,6 +862,7 @@ void RemoteMap::tile_arrived(const proto::TileMeta& meta, uint32_t request_id,
       retry_or_give_up_locked(tile, request_id, &MapStats::decode_errors);
     } else {
       slot_eval_[slot] = std::move(ev);
+      slot_window_[slot] = dynamic_cast<const WindowDepths*>(slot_eval_[slot].get());
       slot_grid_[slot] = std::move(grid);
       bool committed = false;
       try {

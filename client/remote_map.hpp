@@ -42,6 +42,7 @@
 #include "tiles/core/pack_format.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
 #include "tiles/core/stack_map.hpp"
+#include "tiles/core/tap_batch.hpp"
 
 namespace st::dagmh {
 class Dictionary;
@@ -157,6 +158,7 @@ class RemoteMap final : public Evaluator {
   // missed (queued afterwards) and its counts.
   struct LookupScratch {
     const Evaluator* ev = nullptr;  // the current tile (null: none)
+    const WindowDepths* win = nullptr;  // the current tile's window walk (null: it has none)
     uint32_t level = 0, rel = 0;    // lookup level; the tile's level relative to its root
     uint64_t x0 = 0, y0 = 0, side = 0;  // the tile's texels at `level`: [x0, x0 + side)
     // The last answers' regions (Evaluator::DepthRegion, page_table.hpp PageHit): texels
@@ -189,6 +191,15 @@ class RemoteMap final : public Evaluator {
       std::array<float, kMaxPcf * kMaxPcf> depth;  // [column * r + row]
     };
     std::array<Taps, 2> taps;
+    // The columns a kernel sliding right along a row reads next, fetched kAhead at a time
+    // in one window walk (the walk to their common node shared by kAhead kernels):
+    // columns [x0, x0 + n) of rows [y0, y0 + r) of `level`, depth[(x - x0) * r + row].
+    static constexpr uint32_t kAhead = 8;
+    struct Ahead {
+      uint32_t level, r, n = 0;  // n == 0: none
+      uint64_t x0, y0;
+      float depth[kAhead * kMaxPcf];
+    } ahead;
     static constexpr size_t kMaxMisses = 8;  // more distinct misses in one call: asked again later
     std::array<uint64_t, kMaxMisses> miss_tile{};
     std::array<GridEntry, kMaxMisses> miss_entry{};
@@ -301,6 +312,7 @@ class RemoteMap final : public Evaluator {
   static constexpr size_t kCounterShards = 8;  // threads pick one each: no shared cache line
   mutable std::array<CounterShard, kCounterShards> counters_;
   std::vector<std::unique_ptr<Evaluator>> slot_eval_;  // encoded tiles, per slot
+  std::vector<const WindowDepths*> slot_window_;       // slot_eval_'s window walk, or null
   std::vector<CutGrid> slot_grid_;                     // index tiles, per slot
   // want_capacity queued + max_in_flight * tiles_per_request sent; never grows.
   mutable TileRequests requests_;

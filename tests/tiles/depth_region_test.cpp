@@ -12,6 +12,7 @@
 #include "interval_fields.hpp"
 #include "tiles/build/encode.hpp"
 #include "tiles/build/mh_build.hpp"
+#include "tiles/core/tap_batch.hpp"
 
 namespace st {
 namespace {
@@ -89,6 +90,55 @@ TEST(DepthRegion, BatchedSingleTapsAnswerLikePcf) {
       for (size_t i = 0; i < q.size(); ++i)
         ASSERT_EQ(bits(got[i]), bits(eval->pcf(q[i].level, q[i].x, q[i].y, q[i].r, q[i].receiver)))
             << "query " << i << ": level " << q[i].level << " at " << q[i].x << "," << q[i].y << " r " << q[i].r;
+    }
+  }
+}
+
+// WindowDepths (tiles/core/tap_batch.hpp): every texel of a window walk's rectangle gets
+// depth()'s bits, for rectangles of 1..9 texels a side anywhere (corners, straddling the
+// quadrants of every level), at every level; the region it reports holds out[0] for the
+// whole rectangle; and pcf (which counts its taps from a window walk) equals the count of
+// depth() taps, at the map's clamped edges too.
+TEST(DepthRegion, WindowWalkAnswersLikeDepth) {
+  const uint32_t L = fields::small_test_scale() ? 6 : 7;
+  for (const fields::NamedField& f : fields::all_fields(1u << L, 20261205)) {
+    const Hierarchy h = build_hierarchy(f.tile);
+    for (Encoding e : {Encoding::mh, Encoding::mmh, Encoding::dagmh}) {
+      SCOPED_TRACE(f.name + " " + to_string(e));
+      const std::vector<uint8_t> bytes = encode(h, e);
+      const auto eval = open_encoded(e, bytes);
+      const auto* win = dynamic_cast<const WindowDepths*>(eval.get());
+      ASSERT_NE(win, nullptr);
+      fields::Rng rng(uint64_t(e) + 11);
+      for (uint32_t k = 0; k < 600; ++k) {
+        const uint32_t level = uint32_t(rng.next() % (L + 1));
+        const uint64_t n = uint64_t(1) << level;
+        const uint32_t w = uint32_t(std::min<uint64_t>(n, 1 + rng.next() % Evaluator::kMaxPcf));
+        const uint32_t hh = uint32_t(std::min<uint64_t>(n, 1 + rng.next() % Evaluator::kMaxPcf));
+        const uint64_t x0 = rng.next() % (n - w + 1), y0 = rng.next() % (n - hh + 1);
+        float out[Evaluator::kMaxPcf * Evaluator::kMaxPcf];
+        const uint32_t shift = win->depth_window(level, x0, y0, w, hh, out);
+        ASSERT_LE(shift, level);
+        for (uint32_t i = 0; i < w; ++i)
+          for (uint32_t j = 0; j < hh; ++j)
+            ASSERT_EQ(bits(out[i * hh + j]), bits(eval->depth(level, x0 + i, y0 + j)))
+                << "level " << level << " window " << x0 << "," << y0 << " " << w << "x" << hh << " texel +" << i << ",+"
+                << j;
+        const uint64_t s = uint64_t(1) << shift, rx = x0 & ~(s - 1), ry = y0 & ~(s - 1);
+        if (((x0 ^ (x0 + w - 1)) | (y0 ^ (y0 + hh - 1))) >> shift == 0) {
+          for (uint64_t t : {uint64_t(0), s / 2, s - 1})
+            ASSERT_EQ(bits(eval->depth(level, rx + t, ry + (s - 1 - t))), bits(out[0])) << "region shift " << shift;
+        }
+        const uint32_t r = 1 + 2 * uint32_t(rng.next() % 5);
+        const uint64_t cx = rng.next() % n, cy = rng.next() % n;
+        const float recv = eval->depth(level, cx, cy);
+        uint32_t lit = 0;
+        for (uint32_t j = 0; j < r; ++j)
+          for (uint32_t i = 0; i < r; ++i)
+            lit += recv <= eval->depth(level, pcf_tap(cx, i, r, n), pcf_tap(cy, j, r, n)) ? 1u : 0u;
+        ASSERT_EQ(bits(eval->pcf(level, cx, cy, r, recv)), bits(float(lit) / float(r * r)))
+            << "pcf r " << r << " level " << level << " at " << cx << "," << cy;
+      }
     }
   }
 }

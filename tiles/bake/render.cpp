@@ -9,6 +9,10 @@
 #include <cmath>
 #include <limits>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 #include <Iex.h>
 #include <ImfChannelList.h>
 #include <ImfFrameBuffer.h>
@@ -225,13 +229,42 @@ namespace {
 // lookup_point (the offset p + normal * k * texel) and a sun's LightSpace::to_light for
 // n receivers, operation for operation in the same order (so the same IEEE doubles:
 // contraction is off, see filter_level.hpp), in one loop without calls or branches.
+// With SSE2 (every x86-64) two receivers at a time: packed IEEE double arithmetic gives
+// each lane exactly the scalar result, and the three divisions per receiver (the loop's
+// cost) go two to an instruction.
 void sun_lookup_chunk(const LightSpace& light, uint32_t level, uint32_t pcf_radius, const Receiver* rc, size_t n,
                       double* u, double* v, double* d) {
   const Vec3d org = light.origin(), au = light.axis_u(), av = light.axis_v(), fw = light.forward();
   const double e = light.extent_uv(), near = light.near_plane(), depth = light.far_plane() - light.near_plane();
   const double texel = light.extent_uv() / double(uint64_t(1) << level);
   const double k_closed = kClosedReceiverOffsetTexels + pcf_radius, k_open = kOpenReceiverOffsetTexels + pcf_radius;
-  for (size_t i = 0; i < n; ++i) {
+  size_t i = 0;
+#if defined(__SSE2__)
+  const __m128d t2 = _mm_set1_pd(texel), e2 = _mm_set1_pd(e), near2 = _mm_set1_pd(near), depth2 = _mm_set1_pd(depth);
+  const __m128d ox = _mm_set1_pd(org.x), oy = _mm_set1_pd(org.y), oz = _mm_set1_pd(org.z);
+  const __m128d aux = _mm_set1_pd(au.x), auy = _mm_set1_pd(au.y), auz = _mm_set1_pd(au.z);
+  const __m128d avx = _mm_set1_pd(av.x), avy = _mm_set1_pd(av.y), avz = _mm_set1_pd(av.z);
+  const __m128d fwx = _mm_set1_pd(fw.x), fwy = _mm_set1_pd(fw.y), fwz = _mm_set1_pd(fw.z);
+  for (; i + 2 <= n; i += 2) {
+    const Receiver& a = rc[i];
+    const Receiver& b = rc[i + 1];
+    const __m128d k = _mm_set_pd(b.closed ? k_closed : k_open, a.closed ? k_closed : k_open);
+    // (pos + normal * k * texel) - org, left to right as in the scalar loop below.
+    const __m128d rx = _mm_sub_pd(
+        _mm_add_pd(_mm_set_pd(b.pos.x, a.pos.x), _mm_mul_pd(_mm_mul_pd(_mm_set_pd(b.normal.x, a.normal.x), k), t2)), ox);
+    const __m128d ry = _mm_sub_pd(
+        _mm_add_pd(_mm_set_pd(b.pos.y, a.pos.y), _mm_mul_pd(_mm_mul_pd(_mm_set_pd(b.normal.y, a.normal.y), k), t2)), oy);
+    const __m128d rz = _mm_sub_pd(
+        _mm_add_pd(_mm_set_pd(b.pos.z, a.pos.z), _mm_mul_pd(_mm_mul_pd(_mm_set_pd(b.normal.z, a.normal.z), k), t2)), oz);
+    auto dot = [&](__m128d x, __m128d y, __m128d z) {
+      return _mm_add_pd(_mm_add_pd(_mm_mul_pd(rx, x), _mm_mul_pd(ry, y)), _mm_mul_pd(rz, z));
+    };
+    _mm_storeu_pd(u + i, _mm_div_pd(dot(aux, auy, auz), e2));
+    _mm_storeu_pd(v + i, _mm_div_pd(dot(avx, avy, avz), e2));
+    _mm_storeu_pd(d + i, _mm_div_pd(_mm_sub_pd(dot(fwx, fwy, fwz), near2), depth2));
+  }
+#endif
+  for (; i < n; ++i) {
     const Receiver& r = rc[i];
     const double k = r.closed ? k_closed : k_open;
     const double rx = (r.pos.x + r.normal.x * k * texel) - org.x;

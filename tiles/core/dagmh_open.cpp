@@ -16,7 +16,7 @@
 namespace st {
 namespace {
 
-class DagmhEvaluator final : public Evaluator {
+class DagmhEvaluator final : public Evaluator, public WindowDepths {
  public:
   DagmhEvaluator(const dagmh::View& view, std::shared_ptr<const dagmh::Dictionary> dict)
       : v_(view), dict_(std::move(dict)) {}
@@ -65,55 +65,127 @@ class DagmhEvaluator final : public Evaluator {
     });
   }
 
+  // The kernel's window of distinct texels in one window walk (depth_window: the walk to
+  // the lowest common node, then each node over the window once), its taps counted from
+  // it (a clamped kernel at the map's edge reads its edge texels again).
   float pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver) const override {
     r = std::clamp<uint32_t>(r, 1, kMaxPcf);
     clamp(level, x, y);
     const uint64_t side = uint64_t(1) << level;
-    uint64_t tx[kMaxPcf], ty[kMaxPcf];
-    for (uint32_t i = 0; i < r; ++i) tx[i] = pcf_tap(x, i, r, side), ty[i] = pcf_tap(y, i, r, side);
-    // Lowest common node: the taps agree on every coordinate bit above the highest bit
-    // in which the kernel's extreme corners differ (MH Fig. 5).
-    const uint64_t differ = (tx[0] ^ tx[r - 1]) | (ty[0] ^ ty[r - 1]);
-    const uint32_t common = level - uint32_t(differ ? 64 - __builtin_clzll(differ) : 0);
-    // A common node above the skip level is a worse start than each tap's own skip entry
-    // (§3.7): then the taps start where depth() starts.
-    const bool from_skip = common < v_.skip_level && level >= v_.skip_level;  // never with S = 0 (no table)
-    const dagmh::Cursor lca =
-        from_skip ? v_.skip_entry(level, tx[0], ty[0])
-                  : v_.descend(v_.start(common, level, tx[0], ty[0]), common, level, tx[0], ty[0]);
-    dagmh::Cursor cache = lca;
-    uint64_t cache_x = tx[0], cache_y = ty[0];
-    // Taps of a kernel often share a value (a coarse node): decode each index once.
-    uint32_t cached_index[16];
-    float cached_value[16];
-    std::fill(cached_index, cached_index + 16, ~0u);
-    // The region of texels sharing the last tap's answer (finish_region): taps inside it
-    // are answered without a walk (MH §3.3's last-sample cache).
-    uint32_t region_shift = 64, region_lit = 0;
-    uint64_t region_x = 0, region_y = 0;
+    const uint64_t x0 = pcf_tap(x, 0, r, side), x1 = pcf_tap(x, r - 1, r, side);
+    const uint64_t y0 = pcf_tap(y, 0, r, side), y1 = pcf_tap(y, r - 1, r, side);
+    const uint32_t w = uint32_t(x1 - x0 + 1), h = uint32_t(y1 - y0 + 1);
+    float win[kMaxPcf * kMaxPcf];
+    depth_window(level, x0, y0, w, h, win);
     uint32_t lit = 0;
-    for (uint32_t j = 0; j < r; ++j)
-      for (uint32_t i = 0; i < r; ++i) {
-        if (region_shift < 64 && (tx[i] >> region_shift) == region_x && (ty[j] >> region_shift) == region_y) {
-          lit += region_lit;
-          continue;
-        }
-        const uint32_t shift = level - cache.level;
-        const bool on_path = (tx[i] >> shift) == (cache_x >> shift) && (ty[j] >> shift) == (cache_y >> shift);
-        const dagmh::Cursor c = v_.descend(on_path ? cache : from_skip ? v_.skip_entry(level, tx[i], ty[j]) : lca,
-                                           level, level, tx[i], ty[j]);
-        const uint32_t index = v_.finish_region(c, level, tx[i], ty[j], region_shift);
-        const uint32_t slot = index & 15;
-        if (cached_index[slot] != index) cached_index[slot] = index, cached_value[slot] = v_.value(index);
-        region_lit = receiver <= cached_value[slot];
-        lit += region_lit;
-        region_x = tx[i] >> region_shift, region_y = ty[j] >> region_shift;
-        cache = c, cache_x = tx[i], cache_y = ty[j];
-      }
+    for (uint32_t i = 0; i < r; ++i) {
+      const float* col = win + (pcf_tap(x, i, r, side) - x0) * h;
+      for (uint32_t j = 0; j < r; ++j) lit += receiver <= col[pcf_tap(y, j, r, side) - y0] ? 1u : 0u;
+    }
     return float(lit) / float(r * r);
   }
 
+  // WindowDepths (tap_batch.hpp). The lowest common node of the rectangle's corners (MH
+  // Fig. 5); when that lies above the skip level (§3.7), each skip cell the rectangle
+  // overlaps starts at its own entry, where depth() starts. Below it, every inner node
+  // over the rectangle is stepped into once (descend's own step), and where depth()'s
+  // walk ends (a treelet, a missing child, an inner node of `level`) each texel's index
+  // comes from finish(), so each texel gets depth()'s value index.
+  uint32_t depth_window(uint32_t level, uint64_t x0, uint64_t y0, uint32_t w, uint32_t h,
+                        float* out) const override {
+    const uint64_t x1 = x0 + w - 1, y1 = y0 + h - 1;
+    const uint64_t differ = (x0 ^ x1) | (y0 ^ y1);
+    const uint32_t common = level - uint32_t(differ ? 64 - __builtin_clzll(differ) : 0);
+    Values values;
+    if (common < v_.skip_level && level >= v_.skip_level) {  // never with S = 0 (no table)
+      const uint32_t cs = level - v_.skip_level;
+      for (uint64_t cy = y0 >> cs; cy <= y1 >> cs; ++cy)
+        for (uint64_t cx = x0 >> cs; cx <= x1 >> cs; ++cx) {
+          const uint64_t ax = std::max(x0, cx << cs), bx = std::min(x1, ((cx + 1) << cs) - 1);
+          const uint64_t ay = std::max(y0, cy << cs), by = std::min(y1, ((cy + 1) << cs) - 1);
+          fill(v_.skip_entry(level, ax, ay), level, ax, ay, bx, by, x0, y0, h, out, values);
+        }
+      return 0;
+    }
+    const dagmh::Cursor base = v_.descend(v_.start(common, level, x0, y0), common, level, x0, y0);
+    fill(base, level, x0, y0, x1, y1, x0, y0, h, out, values);
+    // A missing child: every texel below it answers c.last (finish_region's rule).
+    return (base.ref & dagmh::kRefTagMask) != dagmh::kRefInner && (base.ref & dagmh::kRefTagMask) != dagmh::kRefTreelet
+               ? level - base.level
+               : 0;
+  }
+
  private:
+  // Taps of a window often share a value (a coarse node): each index decoded once.
+  struct Values {
+    uint32_t index[16];
+    float value[16];
+    Values() { std::fill(index, index + 16, ~0u); }
+  };
+  float value_of(uint32_t index, Values& vs) const {
+    const uint32_t slot = index & 15;
+    if (vs.index[slot] != index) vs.index[slot] = index, vs.value[slot] = v_.value(index);
+    return vs.value[slot];
+  }
+
+  // depth_window below c, a cursor on the path of every texel of [ax, bx] x [ay, by].
+  void fill(const dagmh::Cursor& c, uint32_t level, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by, uint64_t x0,
+            uint64_t y0, uint32_t h, float* out, Values& vs) const {
+    if ((c.ref & dagmh::kRefTagMask) != dagmh::kRefInner || c.level >= level) {
+      if ((c.ref & dagmh::kRefTagMask) != dagmh::kRefInner && (c.ref & dagmh::kRefTagMask) != dagmh::kRefTreelet) {
+        window_put(value_of(c.last, vs), ax, ay, bx, by, x0, y0, h, out);  // below a missing child
+        return;
+      }
+      if ((c.ref & dagmh::kRefTagMask) == dagmh::kRefInner) {  // an inner node of `level`: one texel
+        for (uint64_t x = ax; x <= bx; ++x)
+          for (uint64_t y = ay; y <= by; ++y) out[(x - x0) * h + (y - y0)] = value_of(v_.finish(c, level, x, y), vs);
+        return;
+      }
+      const uint8_t* t = v_.treelet_at(c.ref & dagmh::kRefIndexMask);
+      const Treelet tr{c, st::load_le<uint64_t>(t), st::load_le<uint32_t>(t + 8),
+                       std::min<uint32_t>(level - c.level, dagmh::kTreeletLevels - 1), level};
+      fill_treelet(tr, 0, 0, c.last, ax, ay, bx, by, x0, y0, h, out, vs);
+      return;
+    }
+    const uint64_t half = uint64_t(1) << (level - c.level - 1);
+    const uint64_t mx = (ax & ~(2 * half - 1)) + half, my = (ay & ~(2 * half - 1)) + half;
+    for (uint32_t slot = 0; slot < 4; ++slot) {
+      const uint64_t cx0 = slot & 1u ? std::max(ax, mx) : ax, cx1 = slot & 1u ? bx : std::min(bx, mx - 1);
+      const uint64_t cy0 = slot & 2u ? std::max(ay, my) : ay, cy1 = slot & 2u ? by : std::min(by, my - 1);
+      if (cx0 > cx1 || cy0 > cy1) continue;
+      // One step toward the part's first texel: the child in this slot.
+      fill(v_.descend(c, c.level + 1, level, cx0, cy0), level, cx0, cy0, cx1, cy1, x0, y0, h, out, vs);
+    }
+  }
+
+  // A treelet a window walk reached (View::finish's Alg. 1, depth first): a texel's
+  // answer is the deepest set bit on its path down to treelet level `depth`, else the
+  // cursor's `last`.
+  struct Treelet {
+    dagmh::Cursor c;
+    uint64_t low;
+    uint32_t high, depth, level;
+  };
+  // The part [ax, bx] x [ay, by] of the window under the treelet node at treelet level n,
+  // bit position p; `index` answers when no deeper set bit does. Where no bit is set
+  // strictly inside the node's subtree (or at treelet level `depth`), it answers the part.
+  void fill_treelet(const Treelet& tr, uint32_t n, uint32_t p, uint32_t index, uint64_t ax, uint64_t ay, uint64_t bx,
+                    uint64_t by, uint64_t x0, uint64_t y0, uint32_t h, float* out, Values& vs) const {
+    if (dagmh::treelet_bit(tr.low, tr.high, p)) index = tr.c.base + dagmh::treelet_rank(tr.low, tr.high, p);
+    if (n == tr.depth || !dagmh::treelet_any(tr.low, tr.high, p + 1, p + dagmh::kTreeletSubtree[n])) {
+      window_put(value_of(index, vs), ax, ay, bx, by, x0, y0, h, out);
+      return;
+    }
+    const uint64_t half = uint64_t(1) << (tr.level - tr.c.level - n - 1);
+    const uint64_t mx = (ax & ~(2 * half - 1)) + half, my = (ay & ~(2 * half - 1)) + half;
+    for (uint32_t slot = 0; slot < 4; ++slot) {
+      const uint64_t cx0 = slot & 1u ? std::max(ax, mx) : ax, cx1 = slot & 1u ? bx : std::min(bx, mx - 1);
+      const uint64_t cy0 = slot & 2u ? std::max(ay, my) : ay, cy1 = slot & 2u ? by : std::min(by, my - 1);
+      if (cx0 > cx1 || cy0 > cy1) continue;
+      fill_treelet(tr, n + 1, p + 1 + dagmh::kTreeletStride[n] * slot, index, cx0, cy0, cx1, cy1, x0, y0, h, out, vs);
+    }
+  }
+
   bool texel_in_tile(uint32_t level, uint64_t x, uint64_t y) const {
     return level <= v_.finest_level && (x >> level) == 0 && (y >> level) == 0;
   }

@@ -106,7 +106,7 @@ class Validator {
 // the word of the last valued node and reads the float once at the end. MMH must sum the
 // relative values along the path, so it reads each valued node it passes.
 template <bool kRelative>
-class TreeEvaluator final : public Evaluator {
+class TreeEvaluator final : public Evaluator, public WindowDepths {
  public:
   TreeEvaluator(std::span<const uint8_t> bytes, const TreeInfo& info)
       : tree_(bytes.data() + info.tree_offset), finest_(info.levels - 1), root_leaf_(info.root_leaf),
@@ -205,6 +205,20 @@ class TreeEvaluator final : public Evaluator {
     return float(lit) / float(r * r);
   }
 
+  // WindowDepths (tap_batch.hpp): the walk to the rectangle's lowest common node, then
+  // every node below it that overlaps the rectangle once, depth first.
+  uint32_t depth_window(uint32_t level, uint64_t x0, uint64_t y0, uint32_t w, uint32_t h,
+                        float* out) const override {
+    level = std::min(level, kMaxLevel);
+    const uint64_t x1 = x0 + w - 1, y1 = y0 + h - 1;
+    const uint32_t common = level - uint32_t(std::bit_width((x0 ^ x1) | (y0 ^ y1)));
+    Cursor base = root();
+    descend(base, level, x0, y0, common);
+    fill(base, level, x0, y0, x1, y1, x0, y0, h, out);
+    if (base.missing) return level - (base.level + 1);
+    return base.code == kCodeLeaf ? level - base.level : 0;
+  }
+
  private:
   struct Cursor {
     uint64_t pos = 0;      // word of the current node
@@ -230,6 +244,27 @@ class TreeEvaluator final : public Evaluator {
     return bits_float(word(c.val_pos));
   }
 
+  // The child in `slot` (code != 0) of the inner or empty node at c, whose word is w.
+  Cursor child(const Cursor& c, uint32_t w, uint32_t slot, uint32_t code) const {
+    const uint32_t mask = word_mask(w);
+    const uint32_t shift = kRelative ? word_shift(w) : shift_[c.level];
+    const uint64_t at = block_start(c.pos, shift, word_offset(w)) + child_skip(mask, slot);
+    Cursor n = c;
+    n.pos = at;
+    n.code = code;
+    n.level += 1;
+    if (code != kCodeEmpty) {
+      const uint64_t vp = code == kCodeLeaf ? at : at + 1;
+      if constexpr (kRelative) {
+        const float s = bits_float(word(vp));
+        n.value = (word_abs_flags(w) >> slot & 1u) ? s : mmh_add(c.value, s);
+      } else {
+        n.val_pos = vp;
+      }
+    }
+    return n;
+  }
+
   // Walks toward texel (x, y) of `level` until level `until`, a leaf or a missing child;
   // from a node at level l the child slot comes from bit (level - l - 1) of x and y, i.e.
   // bit (level - l') for the child's level l' = l + 1 (MH Fig. 5).
@@ -238,26 +273,41 @@ class TreeEvaluator final : public Evaluator {
       const uint32_t bit = level - (c.level + 1);
       const uint32_t slot = uint32_t((x >> bit) & 1u) | uint32_t(((y >> bit) & 1u) << 1);
       const uint32_t w = word(c.pos);
-      const uint32_t mask = word_mask(w);
-      const uint32_t code = child_code(mask, slot);
+      const uint32_t code = child_code(word_mask(w), slot);
       if (!code) {
         c.missing = true;
         return;
       }
-      const uint32_t shift = kRelative ? word_shift(w) : shift_[c.level];
-      const uint64_t child = block_start(c.pos, shift, word_offset(w)) + child_skip(mask, slot);
-      c.pos = child;
-      c.code = code;
-      c.level += 1;
-      if (code != kCodeEmpty) {
-        const uint64_t vp = code == kCodeLeaf ? child : child + 1;
-        if constexpr (kRelative) {
-          const float s = bits_float(word(vp));
-          c.value = (word_abs_flags(w) >> slot & 1u) ? s : mmh_add(c.value, s);
-        } else {
-          c.val_pos = vp;
-        }
+      c = child(c, w, slot, code);
+    }
+  }
+
+  // depth_window below c, a node on the path of every texel of [ax, bx] x [ay, by] (all
+  // inside its square): where depth()'s walk would stop (a leaf, a missing child, the
+  // level itself) its value covers the part of the rectangle under it; else each child
+  // that overlaps the rectangle, with its part. The recursion is at most 21 deep.
+  void fill(const Cursor& c, uint32_t level, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by, uint64_t x0,
+            uint64_t y0, uint32_t h, float* out) const {
+    if (c.missing || c.code == kCodeLeaf || c.level >= level) {
+      window_put(value(c), ax, ay, bx, by, x0, y0, h, out);
+      return;
+    }
+    const uint32_t bit = level - (c.level + 1);
+    const uint32_t w = word(c.pos);
+    const uint32_t mask = word_mask(w);
+    // The node's square is 2^(bit+1) texels, aligned; its children split it at `mid`.
+    const uint64_t half = uint64_t(1) << bit;
+    const uint64_t mx = (ax & ~(2 * half - 1)) + half, my = (ay & ~(2 * half - 1)) + half;
+    for (uint32_t slot = 0; slot < 4; ++slot) {
+      const uint64_t cx0 = slot & 1u ? std::max(ax, mx) : ax, cx1 = slot & 1u ? bx : std::min(bx, mx - 1);
+      const uint64_t cy0 = slot & 2u ? std::max(ay, my) : ay, cy1 = slot & 2u ? by : std::min(by, my - 1);
+      if (cx0 > cx1 || cy0 > cy1) continue;
+      const uint32_t code = child_code(mask, slot);
+      if (!code) {  // depth() stops here: the last valued node's value (c's)
+        window_put(value(c), cx0, cy0, cx1, cy1, x0, y0, h, out);
+        continue;
       }
+      fill(child(c, w, slot, code), level, cx0, cy0, cx1, cy1, x0, y0, h, out);
     }
   }
 

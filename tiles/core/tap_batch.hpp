@@ -21,6 +21,34 @@
 
 namespace st {
 
+// The depths of a rectangle of texels of one encoded tree (an MH, MMH or DAG-MH tile),
+// each node that overlaps it walked once: one walk to the rectangle's lowest common node,
+// then depth first through the children that overlap it (MH 2016 §3.3 Fig. 5's shared
+// root path, carried down the whole subtree), so a 5x5 PCF window costs about one walk
+// plus the few nodes below the common one, not 25 walks. Every texel gets the value the
+// walk of depth(level, x, y) ends at, bit for bit (tests/tiles/depth_region_test.cpp).
+// out[(x - x0) * h + (y - y0)] (column-major: a PCF window of columns), for 1 <= w, h <=
+// kMaxPcf and x0 + w, y0 + h <= 2^level, level <= finest_level(). Returns a region shift
+// (DepthRegion): when the walk to the common node already stopped (a leaf, a missing
+// child), every texel sharing (x0 >> shift, y0 >> shift) answers out[0]; else 0, which
+// holds the whole rectangle only when it is one texel. No allocation. The client finds
+// it on a tile's evaluator once, when the tile arrives.
+class WindowDepths {
+ public:
+  virtual uint32_t depth_window(uint32_t level, uint64_t x0, uint64_t y0, uint32_t w, uint32_t h,
+                                float* out) const = 0;
+
+ protected:
+  ~WindowDepths() = default;
+};
+
+// Writes `value` over the texels [ax, bx] x [ay, by] of depth_window's output.
+inline void window_put(float value, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by, uint64_t x0, uint64_t y0,
+                       uint32_t h, float* out) {
+  for (uint64_t x = ax; x <= bx; ++x)
+    for (uint64_t y = ay; y <= by; ++y) out[(x - x0) * h + (y - y0)] = value;
+}
+
 // The walker's path: Cursor of each level of the last walk, levels [lo, hi] valid.
 template <class Cursor, uint32_t kLevels = 33>
 struct WalkPath {
