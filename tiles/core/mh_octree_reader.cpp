@@ -183,39 +183,13 @@ float MhOctree::depth(uint64_t x, uint64_t y, uint32_t w, uint32_t level) const 
 }
 
 float MhOctree::depth_along(Path& p, uint64_t x, uint64_t y, uint32_t w) const noexcept {
-  const uint32_t L = geo_.depth();
-  uint32_t start = 0;
-  if (p.valid) {
-    // Nodes of level l agree iff x, y agree above bit n - xy_bits(l) and w above bit
-    // k - w_bits(l): that holds up to level L - (highest differing bit + 1).
-    const uint32_t hx = uint32_t(std::bit_width((x ^ p.x) | (y ^ p.y)));
-    const uint32_t hw = uint32_t(std::bit_width(uint32_t(w ^ p.w)));
-    start = std::min({L - std::min(L, hx), L - std::min(L, hw), p.reached});
-  } else {
-    p.pos[0] = 0;
-    p.val[0] = root_leaf_ ? 0 : 1;
-    p.code[0] = root_leaf_ ? kCodeLeaf : kCodeInner;
+  // The resumable walk (mh_octree.hpp) run to its end: along_begin restarts at the deepest
+  // node the previous walk shares (nodes of level l agree iff x, y agree above bit
+  // n - xy_bits(l) and w above bit k - w_bits(l)), along_step takes one step.
+  Walk k = along_begin(p, x, y, w);
+  while (along_step(p, k)) {
   }
-  uint64_t pos = p.pos[start], val = p.val[start];
-  uint32_t code = p.code[start], l = start;
-  for (; l < L && code != kCodeLeaf; ++l) {
-    const uint32_t b = geo_.n - xy_next_[l];
-    uint32_t slot = split_xy_[l] ? uint32_t((x >> b) & 1) | uint32_t((y >> b) & 1) << 1 : 0u;
-    if (split_w_[l]) slot |= uint32_t((w >> w_shift_[l]) & 1) << 2;
-    const uint32_t word_p = word(pos);
-    const uint32_t mask = word_mask(word_p);
-    const uint32_t cc = child_code(mask, slot);
-    if (!cc) break;
-    pos = block_start(pos, shift_[l], word_offset(word_p)) + child_skip(mask, slot);
-    if (cc != kCodeEmpty) val = cc == kCodeLeaf ? pos : pos + 1;
-    code = cc;
-    p.pos[l + 1] = pos, p.val[l + 1] = val, p.code[l + 1] = code;
-    ++p.steps;
-  }
-  p.reached = l;
-  p.x = x, p.y = y, p.w = w;
-  p.valid = true;
-  return bits_float(word(val));
+  return along_value(k);
 }
 
 }  // namespace st

@@ -119,16 +119,10 @@ void StackLookup::soft_visibility(std::span<const Vec3d> points, std::span<float
     MhOctree::Walk k = ln.walk;
     for (;;) {
       if (walking) {
-        for (;;) {
-          const uintptr_t line = cache_line(tree_.along_next(k));
-          if (!tree_.along_step(path, k)) break;
-          const void* next = tree_.along_next(k);
-          if (cache_line(next) != line) {
-            __builtin_prefetch(next);
-            ++prefetched;
-            ln.w = w, ln.lit = lit, ln.d = d, ln.walking = true, ln.walk = k;
-            return true;
-          }
+        if (step_until_new_line(tree_, path, k)) {
+          ++prefetched;
+          ln.w = w, ln.lit = lit, ln.d = d, ln.walking = true, ln.walk = k;
+          return true;
         }
         lit += d <= tree_.along_value(k);
         ++w;

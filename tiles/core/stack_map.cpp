@@ -148,15 +148,9 @@ void StackMap::soft_visibility(std::span<const Vec3d> points, std::span<float> o
     for (;;) {
       if (walking) {
         const MhOctree& tile = *ln.tile;
-        for (;;) {
-          const uintptr_t line = cache_line(tile.along_next(k));
-          if (!tile.along_step(path, k)) break;
-          const void* next = tile.along_next(k);
-          if (cache_line(next) != line) {
-            __builtin_prefetch(next);
-            ln.w = w, ln.lit = lit, ln.d = d, ln.walking = true, ln.walk = k;
-            return true;
-          }
+        if (step_until_new_line(tile, path, k)) {
+          ln.w = w, ln.lit = lit, ln.d = d, ln.walking = true, ln.walk = k;
+          return true;
         }
         lit += d <= tile.along_value(k);
         ++w;

@@ -44,4 +44,20 @@ void run_interleaved(size_t count, Start&& start, Run&& run) {
 // The cache line of an address (64-byte lines, x86-64 and most ARM cores).
 inline uintptr_t cache_line(const void* p) { return reinterpret_cast<uintptr_t>(p) >> 6; }
 
+// Steps a resumable walk (a tree with along_next / along_step, as MhOctree) until it ends
+// (false: along_value answers) or steps onto a node on another cache line than the one it
+// stood on (true: that node is prefetched and the caller's lane yields).
+template <class Tree, class Path, class Walk>
+bool step_until_new_line(const Tree& tree, Path& path, Walk& k) noexcept {
+  for (;;) {
+    const uintptr_t line = cache_line(tree.along_next(k));
+    if (!tree.along_step(path, k)) return false;
+    const void* next = tree.along_next(k);
+    if (cache_line(next) != line) {
+      __builtin_prefetch(next);
+      return true;
+    }
+  }
+}
+
 }  // namespace st
