@@ -418,8 +418,17 @@ float RemoteMap::pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float r
 }
 
 void RemoteMap::pcf_batch(std::span<const PcfQuery> queries, std::span<float> out) const noexcept {
-  const size_t n = std::min(queries.size(), out.size());
   LookupScratch sc;
+  {
+    std::shared_lock lock(mu_);
+    pcf_batch_shared(queries, out, sc);
+  }
+  finish_lookups(sc);
+}
+
+void RemoteMap::pcf_batch_shared(std::span<const PcfQuery> queries, std::span<float> out,
+                                 LookupScratch& sc) const noexcept {
+  const size_t n = std::min(queries.size(), out.size());
   // Single taps are collected per tile, in its texels, in up to kBins tiles at once (a
   // screen tile's taps often straddle a tile border), and each tile's run is answered by
   // the tile's own batch: its walks resume from the last walk's path and keep their
@@ -458,7 +467,6 @@ void RemoteMap::pcf_batch(std::span<const PcfQuery> queries, std::span<float> ou
     if (b.n == kRun) flush(b);
   };
   {
-    std::shared_lock lock(mu_);
     size_t last = 0;  // the bin the last tap went to
     for (size_t i = 0; i < n; ++i) {
       const PcfQuery& q = queries[i];
@@ -495,7 +503,6 @@ void RemoteMap::pcf_batch(std::span<const PcfQuery> queries, std::span<float> ou
     }
     for (Bin& b : bins) flush(b);
   }
-  finish_lookups(sc);
 }
 
 namespace {
@@ -571,7 +578,39 @@ void RemoteMap::visibility_batch(std::span<const WorldPoint> points, std::span<c
   LookupScratch sc;
   const bool sun = light_.kind() == LightKind::sun;
   double u[kTransformChunk], v[kTransformChunk], d[kTransformChunk];
-  {
+  if (footprints.empty() && pcf_radius == 0) {
+    // Single taps at the finest level: visibility_at's answer (outside the light box lit,
+    // else one tap of the finest level), with the taps in the box answered by
+    // pcf_batch_shared, so a coherent batch walks each tile's taps in one run.
+    const uint32_t L = header_.map_level;
+    constexpr size_t kQueries = 4 * kTransformChunk;
+    PcfQuery queries[kQueries];
+    uint32_t at[kQueries];
+    float got[kQueries];
+    std::shared_lock lock(mu_);
+    for (size_t i0 = 0; i0 < n; i0 += kQueries) {
+      const size_t m = std::min(kQueries, n - i0);
+      size_t nq = 0;
+      for (size_t c0 = 0; c0 < m; c0 += kTransformChunk) {
+        const size_t mc = std::min(kTransformChunk, m - c0);
+        if (sun) sun_to_light_chunk(light_, points.data() + i0 + c0, mc, u, v, d);
+        for (size_t k = 0; k < mc; ++k) {
+          const size_t i = i0 + c0 + k;
+          const LightPoint p =
+              sun ? LightPoint{u[k], v[k], d[k]} : light_.to_light(Vec3d{points[i].x, points[i].y, points[i].z});
+          if (!(p.u >= 0 && p.u < 1 && p.v >= 0 && p.v < 1 && p.d >= 0 && p.d <= 1)) {
+            out[i] = 1.0f;
+            continue;
+          }
+          const auto t = texel_in_unit(L, p.u, p.v);
+          queries[nq] = PcfQuery{t[0], t[1], L, 1, float(p.d)};
+          at[nq++] = uint32_t(i - i0);
+        }
+      }
+      pcf_batch_shared(std::span<const PcfQuery>(queries, nq), std::span<float>(got, nq), sc);
+      for (size_t q = 0; q < nq; ++q) out[i0 + at[q]] = got[q];
+    }
+  } else {
     std::shared_lock lock(mu_);
     for (size_t i0 = 0; i0 < n; i0 += kTransformChunk) {
       const size_t m = std::min(kTransformChunk, n - i0);

@@ -244,6 +244,8 @@ class RemoteMap final : public Evaluator {
   // own shared-walk pcf (MH §3.3, DAG-MH §3.5); others row by row, the taps of a row that
   // one region holds together (MH §3.3's last-sample cache, across tile borders and
   // missing tiles alike).
+  // pcf_batch's body, under a lock the caller holds.
+  void pcf_batch_shared(std::span<const PcfQuery> queries, std::span<float> out, LookupScratch& sc) const noexcept;
   float pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver,
                    LookupScratch& sc) const noexcept;
   float visibility_shared(const WorldPoint& world, float footprint_world, uint32_t pcf_radius,
