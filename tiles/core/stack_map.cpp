@@ -51,6 +51,26 @@ void StackMap::texel(const Vec3d& p, uint32_t w, uint64_t& x, uint64_t& y, float
   d = float(lp.d);
 }
 
+void StackMap::sample_texel(const Vec3d& p, const GroundTransforms::Point& pt, uint32_t w, uint64_t& x,
+                            uint64_t& y, float& d) const {
+  if (ground_.valid()) {
+    const auto t = ground_.texel(grid_.geo.n, pt, w);
+    x = t[0], y = t[1], d = pt.d;
+  } else {
+    texel(p, w, x, y, d);
+  }
+}
+
+StackMap::CellTexel StackMap::cell_texel(uint64_t x, uint64_t y, uint32_t w) const {
+  const moct::Geometry& g = grid_.geo;
+  if ((x >> g.n) || (y >> g.n)) return {kLitDepth, false, 0, 0, 0, 0};
+  const uint32_t K = grid_.skip_level, sx = g.n - g.xy_bits(K), sw = g.k - g.w_bits(K);
+  const uint64_t cell = grid_.index(K, x >> sx, y >> sx, uint64_t(w) >> sw);
+  const StackEntry& e = grid_.entries[cell];
+  const uint64_t xy_mask = (uint64_t(1) << sx) - 1;
+  return {e.value, e.kind != 0 && g.depth() != K, cell, x & xy_mask, y & xy_mask, w & ((uint32_t(1) << sw) - 1)};
+}
+
 bool StackMap::lit(const Vec3d& p, uint32_t w, bool* exact) const {
   if (w >= grid_.slices) return true;
   uint64_t x, y;
@@ -73,15 +93,10 @@ float StackMap::visibility(const Vec3d& p, double time, bool* exact) const {
 float StackMap::soft_visibility(const Vec3d& p, bool* exact) const {
   // depth(x, y, w, n) per sample, but consecutive samples whose texels fall in the same
   // cell share one tile walk (MhOctree::depth_along: each starts from the deepest node
-  // its path shares with the previous one) and one tile fetch.
-  const moct::Geometry& g = grid_.geo;
-  const uint32_t n = g.n, K = grid_.skip_level;
-  const uint32_t sx = n - g.xy_bits(K), sw = g.k - g.w_bits(K);
-  const bool leaves_at_k = g.depth() == K;
-  // A ground-frame sun path: one transform per point (GroundTransforms), the same texel in
-  // every slice for a receiver on the ground.
-  const bool ground = ground_.valid();
-  const GroundTransforms::Point pt = ground ? ground_.point(p) : GroundTransforms::Point{};
+  // its path shares with the previous one) and one tile fetch. A ground-frame sun path
+  // takes one transform per point (GroundTransforms): the same texel in every slice for a
+  // receiver on the ground.
+  const GroundTransforms::Point pt = ground_.valid() ? ground_.point(p) : GroundTransforms::Point{};
   MhOctree::Path path;
   uint64_t path_cell = ~uint64_t(0);
   const MhOctree* tile = nullptr;
@@ -89,25 +104,15 @@ float StackMap::soft_visibility(const Vec3d& p, bool* exact) const {
   for (uint32_t w = 0; w < grid_.slices; ++w) {
     uint64_t x, y;
     float d;
-    if (ground) {
-      const auto t = ground_.texel(n, pt, w);
-      x = t[0], y = t[1], d = pt.d;
-    } else {
-      texel(p, w, x, y, d);
-    }
-    float v = kLitDepth;
-    if (!(x >> n) && !(y >> n)) {
-      const uint64_t cx = x >> sx, cy = y >> sx, cw = uint64_t(w) >> sw;
-      const uint64_t cell = grid_.index(K, cx, cy, cw);
-      const StackEntry& e = grid_.entries[cell];
-      v = e.value;
-      if (e.kind != 0 && !leaves_at_k) {
-        if (cell != path_cell) path_cell = cell, tile = tile_(cell), path = MhOctree::Path{};
-        if (tile)
-          v = tile->depth_along(path, x - (cx << sx), y - (cy << sx), uint32_t(w - (cw << sw)));
-        else if (exact)
-          *exact = false;
-      }
+    sample_texel(p, pt, w, x, y, d);
+    const CellTexel c = cell_texel(x, y, w);
+    float v = c.value;
+    if (c.tiled) {
+      if (c.cell != path_cell) path_cell = c.cell, tile = tile_(c.cell), path = MhOctree::Path{};
+      if (tile)
+        v = tile->depth_along(path, c.lx, c.ly, c.lw);
+      else if (exact)
+        *exact = false;
     }
     lit_samples += d <= v;
   }
@@ -117,10 +122,7 @@ float StackMap::soft_visibility(const Vec3d& p, bool* exact) const {
 void StackMap::soft_visibility(std::span<const Vec3d> points, std::span<float> out, bool* exact) const {
   // soft_visibility(p) above as a resumable job per point (walk_interleave.hpp): the same
   // texels, cells, tile fetches and shared walks in the same order, so the same answers.
-  const moct::Geometry& g = grid_.geo;
-  const uint32_t n = g.n, K = grid_.skip_level, slices = grid_.slices;
-  const uint32_t sx = n - g.xy_bits(K), sw = g.k - g.w_bits(K);
-  const bool leaves_at_k = g.depth() == K;
+  const uint32_t slices = grid_.slices;
   const bool ground = ground_.valid();
   struct Lane {
     MhOctree::Path path;
@@ -161,29 +163,18 @@ void StackMap::soft_visibility(std::span<const Vec3d> points, std::span<float> o
         return false;
       }
       uint64_t x, y;
-      if (ground) {
-        const auto t = ground_.texel(n, ln.pt, w);
-        x = t[0], y = t[1], d = ln.pt.d;
-      } else {
-        texel(points[ln.i], w, x, y, d);
-      }
-      float v = kLitDepth;
-      if (!(x >> n) && !(y >> n)) {
-        const uint64_t cx = x >> sx, cy = y >> sx, cw = uint64_t(w) >> sw;
-        const uint64_t cell = grid_.index(K, cx, cy, cw);
-        const StackEntry& e = grid_.entries[cell];
-        v = e.value;
-        if (e.kind != 0 && !leaves_at_k) {
-          if (cell != ln.path_cell) ln.path_cell = cell, ln.tile = tile_(cell), path.valid = false;
-          if (ln.tile) {
-            k = ln.tile->along_begin(path, x - (cx << sx), y - (cy << sx), uint32_t(w - (cw << sw)));
-            walking = true;
-            continue;
-          }
-          if (exact) *exact = false;
+      sample_texel(points[ln.i], ln.pt, w, x, y, d);
+      const CellTexel c = cell_texel(x, y, w);
+      if (c.tiled) {
+        if (c.cell != ln.path_cell) ln.path_cell = c.cell, ln.tile = tile_(c.cell), path.valid = false;
+        if (ln.tile) {
+          k = ln.tile->along_begin(path, c.lx, c.ly, c.lw);
+          walking = true;
+          continue;
         }
+        if (exact) *exact = false;
       }
-      lit += d <= v;
+      lit += d <= c.value;
       ++w;
     }
   };

@@ -63,6 +63,22 @@ class StackMap {
   float soft_visibility_filtered(const Vec3d& p, uint32_t pcf_radius, float footprint, bool* exact = nullptr) const;
 
  private:
+  // The soft lookups' per-sample steps, shared by the single and batched forms.
+  // Sample w's finest texel and receiver depth of a point (pt: its ground transform, used
+  // when ground_ is valid).
+  void sample_texel(const Vec3d& p, const GroundTransforms::Point& pt, uint32_t w, uint64_t& x, uint64_t& y,
+                    float& d) const;
+  // Where texel (x, y) of slice w (finest level) is answered: `value` (lit outside the
+  // slice; a cell's level-K entry) unless `tiled`, when the tile of level-K cell `cell`
+  // holds it at the tile's own texel (lx, ly, lw).
+  struct CellTexel {
+    float value;
+    bool tiled;
+    uint64_t cell, lx, ly;
+    uint32_t lw;
+  };
+  CellTexel cell_texel(uint64_t x, uint64_t y, uint32_t w) const;
+
   const StackGrid& grid_;
   TileSource tile_;
   std::vector<LightSpace> lights_;
