@@ -276,23 +276,36 @@ void PackWriter::finish(const CutGrid& grid) {
   write_finished(h, std::move(grid_bytes), rewritten);
 }
 
+namespace {
+
+// The header of a complete pack whose tile data ends at `end`: the grid section 8-aligned
+// after it (compressed first when the params say so), the index right after the grid.
+// Returns the zero padding to write between `end` and the grid.
+std::vector<uint8_t> seal_header(PackHeader& h, const PackParams& params, uint64_t end,
+                                 std::vector<uint8_t>& grid_bytes, std::span<const uint8_t> index_bytes,
+                                 uint64_t tile_count) {
+  h.grid_offset = (end + 7) & ~uint64_t(7);
+  if (params.compress_grid) {  // stored as one zlib stream (tiles/PACK.md "Compressed grid section")
+    h.flags |= kFeatureCompressedGrid;
+    grid_bytes = compress_grid_section(grid_bytes, params.compression_level);
+  }
+  h.grid_size = grid_bytes.size();
+  h.grid_crc = crc32_of(grid_bytes);
+  h.index_offset = h.grid_offset + h.grid_size;
+  h.tile_count = tile_count;
+  h.index_crc = crc32_of(index_bytes);
+  h.state = PackState::complete;
+  return std::vector<uint8_t>(h.grid_offset - end, 0);
+}
+
+}  // namespace
+
 void PackWriter::finish_with_records(PackHeader h, std::vector<uint8_t> grid_bytes, const RewrittenTiles& rewritten) {
   const std::string what = tmp_path();
   if (!rewritten.empty()) throw Error(what + ": journal_records cannot keep tiles the DAG-MH dictionary rewrote");
   // In place: the journal as it is, padding, grid, the plain index, the header last.
-  h.grid_offset = (end_ + 7) & ~uint64_t(7);
-  write_at(end_, std::vector<uint8_t>(h.grid_offset - end_, 0));
-  if (params_.compress_grid) {
-    h.flags |= kFeatureCompressedGrid;
-    grid_bytes = compress_grid_section(grid_bytes, params_.compression_level);
-  }
   const std::vector<uint8_t> index_bytes = serialize_index(tiles_);
-  h.grid_size = grid_bytes.size();
-  h.grid_crc = crc32_of(grid_bytes);
-  h.index_offset = h.grid_offset + h.grid_size;
-  h.tile_count = tiles_.size();
-  h.index_crc = crc32_of(index_bytes);
-  h.state = PackState::complete;
+  write_at(end_, seal_header(h, params_, end_, grid_bytes, index_bytes, tiles_.size()));
   write_at(h.grid_offset, grid_bytes);
   write_at(h.index_offset, index_bytes);
   if (::ftruncate(fd_, off_t(h.file_size())) != 0) throw Error(sys_error(what + ": truncate"));
@@ -359,19 +372,8 @@ void PackWriter::write_finished(PackHeader h, std::vector<uint8_t> grid_bytes, c
     }
     if (next != rewritten.end()) throw Error(what + ": a rewritten tile is not in the journal");
     h.flags |= kFeaturePayloadsOnly;
-    h.grid_offset = (f.end + 7) & ~uint64_t(7);
-    f.append(std::vector<uint8_t>(h.grid_offset - f.end, 0));
-    if (params_.compress_grid) {  // stored as one zlib stream (tiles/PACK.md "Compressed grid section")
-      h.flags |= kFeatureCompressedGrid;
-      grid_bytes = compress_grid_section(grid_bytes, params_.compression_level);
-    }
     const std::vector<uint8_t> index_bytes = serialize_compact_index(index, params_.compression_level);
-    h.grid_size = grid_bytes.size();
-    h.grid_crc = crc32_of(grid_bytes);
-    h.index_offset = h.grid_offset + h.grid_size;
-    h.tile_count = index.size();
-    h.index_crc = crc32_of(index_bytes);
-    h.state = PackState::complete;
+    f.append(seal_header(h, params_, f.end, grid_bytes, index_bytes, index.size()));
     f.append(grid_bytes);
     f.append(index_bytes);
     if (::ftruncate(f.fd, off_t(f.end)) != 0) throw Error(sys_error(f.path + ": truncate"));
