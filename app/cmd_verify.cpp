@@ -26,6 +26,7 @@
 #include "common/error.hpp"
 #include "app/progress.hpp"
 #include "app/stack_cli.hpp"
+#include "tiles/core/coarse_hulls.hpp"
 #include "tiles/core/deep_pack.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_format.hpp"
@@ -82,10 +83,39 @@ Contract contract_of(const PackReader& reader) {
 // mismatches found; `checked` receives the texels checked.
 using TraceFn = std::function<IntervalTile(const TraceRegion&)>;
 
+// The re-traced intervals' hulls per skip-grid cell, for the check of the skip grid's
+// entries and coarse levels (coarse_hulls.hpp): a finished pack keeps no cell intervals,
+// so --all recomputes them from the texels it traces anyway. A cell counts once every
+// one of its texels was traced.
+struct TracedHulls {
+  CellHulls hulls;
+  std::vector<uint64_t> texels;  // traced texels per cell
+  uint32_t shift;                // log2 of a cell's side in texels: L - K
+  TracedHulls(uint32_t k, uint32_t L) : hulls(k), texels(size_t(1) << (2 * k), 0), shift(L - k) {}
+  void add(const IntervalTile& t, uint64_t x0, uint64_t y0, uint32_t w, uint32_t h) {
+    const size_t side = hulls.side();
+    for (uint32_t j = 0; j < h; ++j)
+      for (uint32_t i = 0; i < w; ++i) {
+        const Interval iv = t.at(i, j);
+        const size_t c = size_t((y0 + j) >> shift) * side + size_t((x0 + i) >> shift);
+        hulls.lo[c] = std::min(hulls.lo[c], iv.lo);
+        hulls.hi[c] = std::max(hulls.hi[c], iv.hi);
+        ++texels[c];
+      }
+  }
+  const CellHulls& finish() {
+    const uint64_t full = uint64_t(1) << (2 * shift);
+    // >=: --cells squares may repeat; they are used only when they cover whole cells.
+    for (size_t c = 0; c < texels.size(); ++c) hulls.known[c] = texels[c] >= full;
+    return hulls;
+  }
+};
+
 // `progress` counts from `done_before` towards `grand_total` (several regions share one bar).
 uint64_t verify_every_texel(const VerifyArgs& a, const TraceFn& trace,
                             const Contract& contract, const PackEvaluator& eval, uint32_t L, const Rect& region,
-                            uint64_t& checked, Progress& progress, uint64_t done_before, uint64_t grand_total) {
+                            uint64_t& checked, Progress& progress, uint64_t done_before, uint64_t grand_total,
+                            TracedHulls* hulls) {
   constexpr uint64_t kChunk = 1024;
   const uint64_t total = region.w * region.h;
   const unsigned threads = std::max(1u, std::thread::hardware_concurrency());
@@ -126,6 +156,7 @@ uint64_t verify_every_texel(const VerifyArgs& a, const TraceFn& trace,
       for (unsigned k = 1; k < threads; ++k) pool.emplace_back(check_rows, k);
       check_rows(0);
       for (auto& th : pool) th.join();
+      if (hulls) hulls->add(t, cx, cy, w, h);
       checked += uint64_t(w) * h;
       progress.update(done_before + checked, grand_total, done_before + checked);
     }
@@ -249,6 +280,23 @@ void run(const VerifyArgs& a) {
                   "only where both are lossless\n");
   if (contract.vsdag_z_bits) std::printf("verify: checking %s\n", contract.name().c_str());
 
+  // The skip grid's entries and coarse levels against the hulls of the re-traced texels
+  // (the vsdag contract quantises depths, so its grid is not held to the intervals).
+  std::unique_ptr<TracedHulls> hulls;
+  if (a.all && !contract.vsdag_z_bits) hulls = std::make_unique<TracedHulls>(reader->grid().levels, L);
+  auto check_grid = [&] {
+    if (!hulls) return;
+    try {
+      const uint64_t n = check_coarse_hulls(reader->grid(), hulls->finish(), a.pack);
+      std::printf("verify: %llu skip grid values (cell entries and coarse levels over fully re-traced cells) lie "
+                  "in the hulls of the intervals below them\n",
+                  (unsigned long long)n);
+    } catch (const FormatError& e) {
+      std::printf("verify %s: FAILED: %s\n", a.pack.c_str(), e.what());
+      exit_with(kExitMismatch);
+    }
+  };
+
   if (a.all && a.cells) {
     // Every texel of `cells` random squares of cell_side^2, aligned to their side, inside
     // the built region (seeded: --seed).
@@ -257,12 +305,13 @@ void run(const VerifyArgs& a) {
       throw Error("verify: --cell-side " + std::to_string(s) + " must be a power of two no larger than the built region (" +
                   std::to_string(region.w) + " x " + std::to_string(region.h) + ")");
     const uint64_t nx = region.w / s, ny = region.h / s;
+    if (hulls && s < (uint64_t(1) << hulls->shift)) hulls.reset();  // squares smaller than a cell
     uint64_t rng = a.seed, checked = 0, bad = 0;
     Progress progress("verify", "texels");
     for (uint64_t c = 0; c < a.cells && bad < a.max_mismatches; ++c) {
       const Rect sq{region.x + (splitmix64(rng) % nx) * s, region.y + (splitmix64(rng) % ny) * s, s, s};
       uint64_t n = 0;
-      bad += verify_every_texel(a, trace, contract, eval, L, sq, n, progress, checked, a.cells * s * s);
+      bad += verify_every_texel(a, trace, contract, eval, L, sq, n, progress, checked, a.cells * s * s, hulls.get());
       checked += n;
     }
     progress.finish();
@@ -272,6 +321,7 @@ void run(const VerifyArgs& a) {
                   (unsigned long long)a.cells, (unsigned long long)s);
       exit_with(kExitMismatch);
     }
+    check_grid();
     std::printf("verify %s: OK: every texel of %llu random %llu^2 squares (%llu texels) re-traced, every one %s\n",
                 a.pack.c_str(), (unsigned long long)a.cells, (unsigned long long)s, (unsigned long long)checked,
                 contract.within().c_str());
@@ -281,7 +331,7 @@ void run(const VerifyArgs& a) {
     uint64_t checked = 0;
     Progress progress("verify", "texels");
     const uint64_t bad =
-        verify_every_texel(a, trace, contract, eval, L, region, checked, progress, 0, region.w * region.h);
+        verify_every_texel(a, trace, contract, eval, L, region, checked, progress, 0, region.w * region.h, hulls.get());
     progress.finish();
     if (bad) {
       std::printf("verify %s: FAILED: %llu texels break %s (stopped after %llu of "
@@ -290,6 +340,7 @@ void run(const VerifyArgs& a) {
                   (unsigned long long)(region.w * region.h), (unsigned long long)a.max_mismatches);
       exit_with(kExitMismatch);
     }
+    check_grid();
     std::printf("verify %s: OK: every texel of the built region (%llu x %llu = %llu) re-traced, every "
                 "one %s\n",
                 a.pack.c_str(), (unsigned long long)region.w, (unsigned long long)region.h,

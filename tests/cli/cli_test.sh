@@ -68,9 +68,13 @@ check stack-ground-stretch 1 "frame=ground: the lowest sun stretches the ground 
 check verify 0 "OK: 20[0-9]* random texels" -- "$st" verify city.pack $scene --samples 2000
 # Every texel: the re-trace gives the build's canonical bounds bit for bit.
 check verify-all 0 "OK: every texel of the built region \(2048 x 2048 = 4194304\)" -- "$st" verify city.pack $scene --all
+# ... and the skip grid (4096 cells at K = 6, 1365 coarse values) against those texels'
+# hulls: a finished pack keeps no cell intervals of its own.
+check verify-all-grid 0 "^verify: 5461 skip grid values .* lie in the hulls" -- "$st" verify city.pack $scene --all
 # A regions build (whole regions proven by their corners) and every texel of random squares.
 check build-regions 0 "regions: .* texels proven by their corners" -- "$st" build $scene $light --resolution 2048 --skip-level 3 --encoding dagmh --raster-skip regions -o regions.pack
 check verify-cells 0 "OK: every texel of 40 random 64\^2 squares \(163840 texels\)" -- "$st" verify regions.pack $scene --all --cells 40 --cell-side 64
+check verify-cells-grid 0 "^verify: [1-3] skip grid values" -- "$st" verify regions.pack $scene --all --cells 3 --cell-side 256
 check verify-cells-side 1 "cell-side 48 must be a power of two" -- "$st" verify regions.pack $scene --all --cells 4 --cell-side 48
 # Against another scene every texel cannot hold: stops at the first 5 and names them.
 check verify-all-mismatch 3 "FAILED: 5 texels break.*max-mismatches 5" -- "$st" verify city.pack procedural:city,size=2 --all --max-mismatches 5

@@ -1,4 +1,5 @@
 #include "tiles/core/pack_reader.hpp"
+#include "tiles/core/coarse_hulls.hpp"
 
 #include "tiles/core/map_preview.hpp"
 #include "tiles/core/pack_dictionary.hpp"
@@ -452,15 +453,10 @@ void PackReader::check_depth_range() const {
 }
 
 void PackReader::check_coarse_levels(const std::vector<CellRecord>& cells) const {
-  // The coarse levels are a hierarchy over the cells' root intervals (MH §3.1, tiled
-  // construction): a coarse texel's value is stored by a node whose admissible interval
-  // lies inside the hull of its descendants' intervals, or inherited by a node that holds
-  // nothing of its own (then its cells carry [v, v]). So each coarse value of level l
-  // lies in [min lo, max hi] over the level-K cells below it, and each cell's entry in
-  // its own [lo, hi] (cells were checked against the grid: one record per cell).
-  const uint32_t k = header_.skip_level;
-  const size_t side = size_t(1) << k;
-  std::vector<float> lo(side * side), hi(side * side);
+  // Each cell's entry lies in its own record's interval (cells were checked against the
+  // grid: one record per cell); the coarse levels lie in the hulls of the records below
+  // them (coarse_hulls.hpp).
+  CellHulls hulls(header_.skip_level);
   for (const CellRecord& c : cells) {
     const std::string what = name_ + ": cell record (" + std::to_string(c.cx) + ", " + std::to_string(c.cy) + ")";
     if (!(c.lo <= c.hi))
@@ -468,31 +464,9 @@ void PackReader::check_coarse_levels(const std::vector<CellRecord>& cells) const
     if (!(c.lo <= c.entry.value && c.entry.value <= c.hi))
       throw FormatError(what + ": entry value " + std::to_string(c.entry.value) + " lies outside its interval [" +
                         std::to_string(c.lo) + ", " + std::to_string(c.hi) + "]");
-    lo[c.cy * side + c.cx] = c.lo;
-    hi[c.cy * side + c.cx] = c.hi;
+    hulls.set(c.cx, c.cy, c.lo, c.hi);
   }
-  // Hulls level by level, finest first: level j from level j + 1.
-  for (uint32_t j = k; j-- > 0;) {
-    const size_t s = size_t(1) << j;
-    std::vector<float> plo(s * s), phi(s * s);
-    for (size_t y = 0; y < s; ++y)
-      for (size_t x = 0; x < s; ++x) {
-        float a = INFINITY, b = -INFINITY;
-        for (size_t dy = 0; dy < 2; ++dy)
-          for (size_t dx = 0; dx < 2; ++dx) {
-            const size_t i = (2 * y + dy) * (2 * s) + 2 * x + dx;
-            a = std::min(a, lo[i]), b = std::max(b, hi[i]);
-          }
-        plo[y * s + x] = a, phi[y * s + x] = b;
-        const float v = grid_.coarse_at(j, x, y);
-        if (!(a <= v && v <= b))
-          throw FormatError(name_ + ": skip grid coarse value of level " + std::to_string(j) + " texel (" +
-                            std::to_string(x) + ", " + std::to_string(y) + ") is " + std::to_string(v) +
-                            ", outside [" + std::to_string(a) + ", " + std::to_string(b) +
-                            "], the hull of the intervals below it");
-      }
-    lo.swap(plo), hi.swap(phi);
-  }
+  check_coarse_hulls(grid_, hulls, name_);
 }
 
 std::string PackReader::summary() const {
