@@ -70,7 +70,7 @@ void main() {
   const uint p = gl_GlobalInvocationID.x;
   if (p >= st_pc.w[kPcCount] * st_pc.w[kPcHeight]) return;
   StProbe probe = st_probe();
-  st_oct_path_reset(true);  // every tile walk resumes from the previous one's path
+  st_oct_path_reset((st_pc.w[kPcFlags] & kFlagResumeWalks) != 0u);  // tile walks resume from the last one's path
   if ((st_pc.w[kPcFlags] & kFlagSoft) != 0u) {
     // The soft pass: every slice in order, summed in float (one rounding per add), then
     // divided by N (rounded once): StackMap::soft_visibility_filtered's average.

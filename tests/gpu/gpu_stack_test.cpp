@@ -441,7 +441,8 @@ TEST(GpuStack, SoftPassEqualsItsCpuTwinAndTheClientsSoftLookup) {
 // the ground plane the same texel in every slice, so its soft pass walks differ in w only
 // (the resumed level is set by w's bits); above the ground the texel moves with the slice
 // (set by x, y's bits too). Slices 7..9 absent: walks in resident tiles interleave with
-// absent cells. With one tap and 3 x 3 PCF the pass equals its CPU twin on every pixel.
+// absent cells. With one tap and 3 x 3 PCF the pass equals its CPU twin on every pixel,
+// and so it does with resume_walks off (every walk from the tile's root).
 // The reference plane is at y = 1.5, where the plane's depth (about 0.7) lies between the
 // sliding boxes' (0.2-0.55) and the stack's ground (0.8), so the boxes' shadows slide over
 // it.
@@ -455,9 +456,10 @@ TEST(GpuStack, SoftPassResumedWalksOnAndAboveTheGroundEqualTheCpuTwin) {
   GpuMap g(s.map, gputest::options());
   std::array<size_t, 3> tally{}, ground{};  // classes of all pixels, of the ground's
   FrameStats fs;
-  for (uint32_t kernel : {1u, 3u}) {
-    SCOPED_TRACE("kernel " + std::to_string(kernel));
+  for (const auto& [kernel, resume] : {std::pair{1u, true}, std::pair{3u, true}, std::pair{3u, false}}) {
+    SCOPED_TRACE("kernel " + std::to_string(kernel) + (resume ? "" : ", walks from the root"));
     ShadowPassInput in = gb.input(0, kernel, true);
+    in.resume_walks = resume;
     in.normal_offset = 0.0f;  // the ground pixels stay on the plane
     EXPECT_EQ(pass_against_twin(g, s.map, in, fs, tally), 0u);
     EXPECT_GT(fs.holes, 0u);
