@@ -6,6 +6,8 @@
 //
 // Include after st_eval.glsl (it uses StProbe, st_lit, st_feedback, st_filter_levels and
 // st_pcf_tap). Entry points: st_oct_depth(base, x, y, w, level) (one tile),
+// st_oct_depth_resumed (the same answer, the walk resumed from the invocation's previous
+// walk in that tile; st_oct_path_reset(resume) first, which also makes st_stack_depth use it),
 // st_stack_depth(x, y, w, level, probe), st_stack_pcf(level, x, y, w, r, receiver, probe),
 // st_stack_lookup(x, y, w, receiver, footprint, r, probe) (level from a footprint), and
 // st_fdiv(a, b) (a / b rounded as the CPU's float division, for the passes' divides).
