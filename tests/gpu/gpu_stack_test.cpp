@@ -470,8 +470,8 @@ TEST(GpuStack, SoftPassResumedWalksOnAndAboveTheGroundEqualTheCpuTwin) {
         ++ground[twin[p] == 1.0f ? 0 : twin[p] == 0.0f ? 1 : 2];
   }
   EXPECT_GT(tally[0], 500u);
-  EXPECT_GT(tally[2], 200u);
-  EXPECT_GT(ground[2], 100u);  // on the ground, shadows slide over a fixed texel with w
+  EXPECT_GT(tally[2], 1000u);
+  EXPECT_GT(ground[2], 500u);  // on the ground, shadows slide over a fixed texel with w
   EXPECT_EQ(g.stats().validation_messages, 0u);
 }
 
