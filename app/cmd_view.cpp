@@ -1,6 +1,6 @@
 // `shadowtile view --server HOST:PORT --map NAME --scene SCENE [--path flyover] [--frames 24]
 //  [--fps 24] [--size 1920x1080] [--pcf 3] [--seed 1] [--device NAME] [--cache-mb 256]
-//  [--upload-mb 16] [--time T | --time-sweep A..B | --soft] [--out view-out] [--json PATH]`:
+//  [--upload-mb 16] [--time T | --time-sweep A..B | --soft] [--full-walks] [--out view-out] [--json PATH]`:
 // a headless viewer. It flies a load-tester camera path (loadgen/camera_path.hpp) over a
 // map streamed from `shadowtile serve`; per frame, primary visibility on the CPU (Embree) into a G-buffer, the shadow pass on
 // the GPU (gpu::GpuMap) from the tiles streamed so far, Lambert shading into a PNG; the
@@ -18,6 +18,8 @@
 // --soft the pass averages all N samples (gpu::ShadowPassInput::soft: an area light's soft
 // shadow, or a day's mean sun), shaded toward the samples' mean light; the feedback
 // streams the cells of every slice. Area lights' samples are perspective (spots).
+// --full-walks walks every tile from its root (gpu::ShadowPassInput::resume_walks = false),
+// to compare with the resumed walks on a device.
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -48,7 +50,7 @@ namespace {
 struct ViewArgs {
   std::string server, map, scene, path = "flyover", size = "1920x1080", device, out = "view-out", json, up = "y";
   std::string time, time_sweep;
-  bool soft = false;
+  bool soft = false, full_walks = false;
   uint32_t frames = 24, pcf = 3;
   double fps = 24, cache_mb = 256, upload_mb = 16;
   uint64_t seed = 1;
@@ -170,6 +172,7 @@ void run(const ViewArgs& a) {
     in.neighbour_footprint = true;
     in.time = time;
     in.soft = a.soft;
+    in.resume_walks = !a.full_walks;
     const gpu::FrameStats fs = g.wait(g.submit_shadow_pass(in), vis);
     for (size_t p = 0; p < pixels; ++p) {
       const Receiver& r = rec[p];
@@ -217,7 +220,7 @@ void run(const ViewArgs& a) {
                                  {"slots_uploaded", gs.slots_uploaded}, {"bytes_uploaded", gs.bytes_uploaded},
                                  {"feedback_requested", gs.feedback_requested}, {"frames", frames}};
   if (stack)
-    report["stack"] = {{"slices", stack->slices}, {"spec", stack->spec}, {"soft", a.soft}, {"time0", time0}, {"time1", time1}};
+    report["stack"] = {{"slices", stack->slices}, {"spec", stack->spec}, {"soft", a.soft}, {"resume_walks", !a.full_walks}, {"time0", time0}, {"time1", time1}};
   const std::string json = a.json.empty() ? a.out + "/view.json" : a.json;
   std::ofstream(json) << report.dump(2) << "\n";
   std::printf("wrote %s/frame_*.png, %s/contact_sheet.png, %s\n", a.out.c_str(), a.out.c_str(), json.c_str());
@@ -245,6 +248,8 @@ Register reg{"view", "Headless viewer: fly a camera path, GPU shadow pass from s
                               "Stack maps: time A..B swept over the frames (the sun moves while the camera flies)");
                sub.add_flag("--soft", a->soft,
                             "Stack maps: the soft shadow, every sample of the light set averaged (area lights)");
+               sub.add_flag("--full-walks", a->full_walks,
+                            "Stack maps: walk each tile from its root (no resumed walks; for comparisons)");
                sub.add_option("--out", a->out, "Output folder (frames, contact sheet, view.json)");
                sub.add_option("--json", a->json, "JSON report path (default OUT/view.json)");
                sub.callback([a] { run(*a); });

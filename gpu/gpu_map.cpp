@@ -666,7 +666,8 @@ uint64_t GpuMap::submit_shadow_pass(const ShadowPassInput& in) {
     pc[L::kPcCount] = in.width;
     pc[L::kPcHeight] = in.height;
     pc[L::kPcKernel] = in.kernel;
-    pc[L::kPcFlags] = (in.neighbour_footprint ? L::kFlagNeighbourFootprint : 0) | (in.soft ? L::kFlagSoft : 0);
+    pc[L::kPcFlags] = (in.neighbour_footprint ? L::kFlagNeighbourFootprint : 0) | (in.soft ? L::kFlagSoft : 0) |
+                      (in.resume_walks ? L::kFlagResumeWalks : 0);
     pc[L::kPcSliceA] = t.a;
     pc[L::kPcSliceB] = t.b;
     pc[L::kPcTimeWeight] = std::bit_cast<uint32_t>(t.f);

@@ -108,6 +108,12 @@ struct ShadowPassInput {
   // each slice filtered in its own light space as above, summed in slice order in float,
   // divided by N (StackMap::soft_visibility_filtered's order; gpu/shadow_reference.hpp).
   bool soft = false;
+  // Stack maps only: each walk in a tile starts from the deepest node its path shares with
+  // the pixel's previous walk in that tile (MH 2016 §3.3's last-sample cache carried over
+  // w: consecutive slices, PCF taps and the footprint's two levels), as the CPU's shared
+  // walk (MhOctree::along_begin) does; false walks each from the tile's root. The answers
+  // are the same bits either way (GPU_LAYOUT.md "The stack block": what each costs).
+  bool resume_walks = true;
 };
 
 // A stack pass's time (ShadowPassInput::time) as StackMap::visibility takes it: with

@@ -73,7 +73,8 @@ static_assert(layout::kMaxStackCells == kStackMaxCells);
 static_assert(layout::kStLightWords >= 13 && layout::kStHeaderWords > layout::kStLights);
 static_assert(layout::kStLightCentreU == 13 && layout::kStLightCentreV == 14 &&
               layout::kStLightProjection == 15 && layout::kStLightProjection < layout::kStLightWords);
-static_assert((layout::kFlagSoft & layout::kFlagNeighbourFootprint) == 0);
+static_assert((layout::kFlagSoft & layout::kFlagNeighbourFootprint) == 0 &&
+              (layout::kFlagResumeWalks & (layout::kFlagSoft | layout::kFlagNeighbourFootprint)) == 0);
 // A stack query is GpuStackQuery word for word; the stack pass's push constants sit where
 // the 2D pass keeps its light (which a stack keeps per slice in the stack block).
 static_assert(sizeof(GpuStackQuery) == layout::kSqWords * 4 && offsetof(GpuStackQuery, x) == layout::kSqX * 4 &&

@@ -31,6 +31,7 @@ void main() {
                           kPtStack, kStXyLevel, kStWLevel, kStSlices, kStSkipLevel, kStEntries, kStCellSlots,
                           kStLights, kStHeaderWords, kStLightWords, kMaxStackCells, kSqWords, kSqX, kSqY, kSqSlice,
                           kSqLevel, kSqReceiver, kSqFootprint, kSqR, kFbStackKeyBit, kPcSliceA, kPcSliceB,
-                          kPcTimeWeight, kStLightCentreU, kStLightCentreV, kStLightProjection, kFlagSoft);
+                          kPcTimeWeight, kStLightCentreU, kStLightCentreV, kStLightProjection, kFlagSoft,
+                          kFlagResumeWalks);
   for (uint i = 0u; i < kProbeWords; ++i) st_output[i] = uintBitsToFloat(i < v.length() ? v[i] : 0u);
 }

@@ -157,6 +157,7 @@ ST_UINT(kPcTimeWeight, 6u)  // f32 f = time * (N - 1) - a, rounded once: va + f 
 ST_UINT(kPcWords, 20u)
 ST_UINT(kFlagNeighbourFootprint, 1u)
 ST_UINT(kFlagSoft, 2u)      // stack shadow pass: the average over all N slices (slices a, b unused)
+ST_UINT(kFlagResumeWalks, 4u)  // stack shadow pass: tile walks resume from the previous walk's path
 
 // ---- bindings (descriptor set 0) ----
 ST_UINT(kBindPool, 0u)

@@ -6,6 +6,8 @@
 //
 // Include after st_eval.glsl (it uses StProbe, st_lit, st_feedback, st_filter_levels and
 // st_pcf_tap). Entry points: st_oct_depth(base, x, y, w, level) (one tile),
+// st_oct_depth_resumed (the same answer, the walk resumed from the invocation's previous
+// walk in that tile; st_oct_path_reset(resume) first, which also makes st_stack_depth use it),
 // st_stack_depth(x, y, w, level, probe), st_stack_pcf(level, x, y, w, r, receiver, probe),
 // st_stack_lookup(x, y, w, receiver, footprint, r, probe) (level from a footprint), and
 // st_fdiv(a, b) (a / b rounded as the CPU's float division, for the passes' divides).
@@ -94,6 +96,77 @@ float st_oct_depth(uint base, uint x, uint y, uint w, uint level) {
   return uintBitsToFloat(ST_POOL(tree + val));
 }
 
+// ---- resumed walks (MH 2016 §3.3's last-sample cache, carried over w) ----
+// st_oct_depth_resumed answers as st_oct_depth, but starts from the deepest node its path
+// shares with the previous resumed walk in the same tile, as MhOctree::along_begin does on
+// the CPU: nodes of level l lie on both paths iff the finest-texel x, y agree above bit
+// D - l and w above bit D - l (D = max(n, k) of the tile; the tile's geometry makes both
+// thresholds the same), so the walk restarts at level min(D - bit_width(x ^ x'),
+// D - bit_width(w ^ w'), where the previous walk ended, its own target). A walk to a
+// coarser level compares its texel's first finest descendant (the nodes above its target
+// are the same). The path is per invocation (private variables): a pass that walks many
+// coherent texels (a soft pass's slices in order, a PCF kernel's taps) reads only the
+// nodes where consecutive paths part. st_oct_path_reset(resume) forgets the path and
+// says whether st_stack_depth resumes (off until a kernel turns it on).
+const uint kStOctPathLevels = 21u;  // moct::kMaxLevels: octree levels 0..20 of a tile
+const uint kStOctPathLeaf = 0x80000000u;  // st_oct_path_val's flag: the node is a leaf
+uint st_oct_path_base = kNoSlot;  // pool word of the tile the previous walk read; kNoSlot: none
+uint st_oct_path_x, st_oct_path_y, st_oct_path_w, st_oct_path_reached;
+uint st_oct_path_pos[kStOctPathLevels];  // per level: the node's tree word
+uint st_oct_path_val[kStOctPathLevels];  // the last valued node's float word, | kStOctPathLeaf
+bool st_oct_resume = false;  // st_stack_depth walks tiles with st_oct_depth_resumed
+
+void st_oct_path_reset(bool resume) {
+  st_oct_path_base = kNoSlot;
+  st_oct_resume = resume;
+}
+
+float st_oct_depth_resumed(uint base, uint x, uint y, uint w, uint level) {
+  const uint h1 = ST_POOL(base + 1u);
+  const uint n = (h1 >> 16u) & 0xFFu, k = h1 >> 24u;
+  const uint depth = max(n, k);
+  const uint tree = base + 5u + ((depth + 4u) >> 2u);
+  const uint target = level + depth - n;
+  const uint fx = x << (n - level), fy = y << (n - level);  // level <= n
+  uint l = 0u;
+  if (st_oct_path_base == base) {
+    const uint hx = uint(findMSB((fx ^ st_oct_path_x) | (fy ^ st_oct_path_y)) + 1);
+    const uint hw = uint(findMSB(w ^ st_oct_path_w) + 1);
+    l = min(min(depth - min(depth, hx), depth - min(depth, hw)), min(st_oct_path_reached, target));
+  } else {
+    const bool root_leaf = ((ST_POOL(base + 2u) >> 16u) & 1u) != 0u;
+    st_oct_path_pos[0] = 0u;
+    st_oct_path_val[0] = root_leaf ? kStOctPathLeaf : 1u;
+  }
+  uint pos = st_oct_path_pos[l];
+  uint val = st_oct_path_val[l];
+  uint code = (val & kStOctPathLeaf) != 0u ? 1u : 3u;  // only "leaf or not" matters here
+  val &= ~kStOctPathLeaf;
+  for (; l < target && code != 1u; ++l) {
+    uint slot = 0u;
+    if (l + n >= depth) {
+      const uint b = level - st_oct_xy_bits(l + 1u, n, depth);
+      slot = ((x >> b) & 1u) | (((y >> b) & 1u) << 1u);
+    }
+    if (l + k >= depth) slot |= ((w >> (k - st_oct_xy_bits(l + 1u, k, depth))) & 1u) << 2u;
+    const uint word = ST_POOL(tree + pos);
+    const uint mask = word & 0xFFFFu;
+    code = (mask >> (2u * slot)) & 3u;
+    if (code == 0u) break;  // missing child: the walk ends at level l
+    const uint shift = st_byte(base, 20u + l);
+    pos = (((pos >> shift) + (word >> 16u)) << shift) + uint(bitCount(mask & ((1u << (2u * slot)) - 1u)));
+    if (code != 2u) val = code == 1u ? pos : pos + 1u;
+    st_oct_path_pos[l + 1u] = pos;
+    st_oct_path_val[l + 1u] = code == 1u ? val | kStOctPathLeaf : val;
+  }
+  st_oct_path_base = base;
+  st_oct_path_x = fx;
+  st_oct_path_y = fy;
+  st_oct_path_w = w;
+  st_oct_path_reached = l;
+  return uintBitsToFloat(ST_POOL(tree + val));
+}
+
 // ---- the stack block's walk (StackMap::depth over the GPU's copy of the cache) ----
 // Texel (x, y) of the level-`level` map of slice w. Out of range: lit. Levels above K
 // read the dense coarse values; a constant cell, or level K itself, its entry's value; a
@@ -121,7 +194,8 @@ float st_stack_depth(uint x, uint y, uint w, uint level, inout StProbe probe) {
     return uintBitsToFloat(value_bits);
   }
   const uint rel = level - a;  // the tile's own x, y level
-  return st_oct_depth(slot * ST_PAGE(kPtSlotWords), x - (cx << rel), y - (cy << rel), w - (cw << (k - b)), rel);
+  const uint tile = slot * ST_PAGE(kPtSlotWords), tx = x - (cx << rel), ty = y - (cy << rel), tw = w - (cw << (k - b));
+  return st_oct_resume ? st_oct_depth_resumed(tile, tx, ty, tw, rel) : st_oct_depth(tile, tx, ty, tw, rel);
 }
 
 // r x r PCF in slice w (StackMap::filtered's kernel: lit taps / (r * r), taps clamped to

@@ -6,7 +6,9 @@
 // over all N slices (sum in slice order, then / N). Each slice's light space in float32
 // comes from the stack block (a sun's affine rows, or a spot's rows and the perspective
 // divide); per slice the same operations as the 2D pass (shadow_pass.comp) and as the CPU
-// twin gpu::stack_shadow_pass_reference (gpu/shadow_reference.cpp).
+// twin gpu::stack_shadow_pass_reference (gpu/shadow_reference.cpp). With kFlagResumeWalks
+// every tile walk resumes from the pixel's previous walk in that tile (st_oct_depth_resumed:
+// consecutive PCF taps, levels and slices share the top of their paths); same answers.
 #include "st_buffers.glsl"
 
 #include "st_stack.glsl"
@@ -70,6 +72,7 @@ void main() {
   const uint p = gl_GlobalInvocationID.x;
   if (p >= st_pc.w[kPcCount] * st_pc.w[kPcHeight]) return;
   StProbe probe = st_probe();
+  st_oct_path_reset((st_pc.w[kPcFlags] & kFlagResumeWalks) != 0u);  // tile walks resume from the last one's path
   if ((st_pc.w[kPcFlags] & kFlagSoft) != 0u) {
     // The soft pass: every slice in order, summed in float (one rounding per add), then
     // divided by N (rounded once): StackMap::soft_visibility_filtered's average.

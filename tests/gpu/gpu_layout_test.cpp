@@ -33,7 +33,8 @@ TEST(GpuLayout, TheShaderSeesEveryConstantTheCppSideSees) {
       L::kPtStack, L::kStXyLevel, L::kStWLevel, L::kStSlices, L::kStSkipLevel, L::kStEntries, L::kStCellSlots,
       L::kStLights, L::kStHeaderWords, L::kStLightWords, L::kMaxStackCells, L::kSqWords, L::kSqX, L::kSqY,
       L::kSqSlice, L::kSqLevel, L::kSqReceiver, L::kSqFootprint, L::kSqR, L::kFbStackKeyBit, L::kPcSliceA,
-      L::kPcSliceB, L::kPcTimeWeight, L::kStLightCentreU, L::kStLightCentreV, L::kStLightProjection, L::kFlagSoft};
+      L::kPcSliceB, L::kPcTimeWeight, L::kStLightCentreU, L::kStLightCentreV, L::kStLightProjection, L::kFlagSoft,
+      L::kFlagResumeWalks};
   ASSERT_LE(want.size(), L::kProbeWords);
   uint64_t messages = 0;
   const std::vector<uint32_t> got = run_layout_probe(gputest::device(), true, &messages);
@@ -77,6 +78,7 @@ TEST(GpuLayout, StackBlockHeaderWordsAreWhereTheDrawingPutsThem) {
   EXPECT_EQ(L::kStLightCentreV, 14u);
   EXPECT_EQ(L::kStLightProjection, 15u);
   EXPECT_EQ(L::kFlagSoft, 2u);
+  EXPECT_EQ(L::kFlagResumeWalks, 4u);
 }
 
 // st_fdiv (shaders/st_stack.glsl), the division of the stack passes' perspective divide

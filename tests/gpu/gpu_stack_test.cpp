@@ -246,6 +246,12 @@ struct GBuffer {
         nrm[4 * p + 1] = 1.0f;
       }
   }
+  // Moves 8 x 8 blocks in a checkerboard onto the plane y = `ground`.
+  void ground_checkers(float ground) {
+    for (uint32_t y = 0; y < height; ++y)
+      for (uint32_t x = 0; x < width; ++x)
+        if (((x >> 3) + (y >> 3)) % 2 == 0) pos[4 * (size_t(y) * width + x) + 1] = ground;
+  }
   ShadowPassInput input(double time, uint32_t kernel, bool soft = false) const {
     ShadowPassInput in;
     in.positions = pos;
@@ -427,6 +433,45 @@ TEST(GpuStack, SoftPassEqualsItsCpuTwinAndTheClientsSoftLookup) {
   EXPECT_EQ(fs.holes, 0u);
   EXPECT_EQ(g.stats().validation_messages, 0u);
   expect_twin_agrees_with_client_soft(s.map, gb);
+  EXPECT_EQ(g.stats().validation_messages, 0u);
+}
+
+// The passes resume each tile walk from the previous walk's path (st_oct_depth_resumed,
+// MH §3.3's last-sample cache carried over w). A ground-frame sun path gives a receiver on
+// the ground plane the same texel in every slice, so its soft pass walks differ in w only
+// (the resumed level is set by w's bits); above the ground the texel moves with the slice
+// (set by x, y's bits too). Slices 7..9 absent: walks in resident tiles interleave with
+// absent cells. With one tap and 3 x 3 PCF the pass equals its CPU twin on every pixel,
+// and so it does with resume_walks off (every walk from the tile's root).
+// The reference plane is at y = 1.5, where the plane's depth (about 0.7) lies between the
+// sliding boxes' (0.2-0.55) and the stack's ground (0.8), so the boxes' shadows slide over
+// it.
+TEST(GpuStack, SoftPassResumedWalksOnAndAboveTheGroundEqualTheCpuTwin) {
+  GBuffer gb;
+  gb.ground_checkers(1.5f);
+  ServedStack s = serve_frozen("gpu_stack_soft_ground",
+                               "sun-path:azimuth=150..200,elevation=40..60,samples=" + std::to_string(kSlices) +
+                                   ",frame=ground,ground=1.5",
+                               kSlices - 4);
+  GpuMap g(s.map, gputest::options());
+  std::array<size_t, 3> tally{}, ground{};  // classes of all pixels, of the ground's
+  FrameStats fs;
+  for (const auto& [kernel, resume] : {std::pair{1u, true}, std::pair{3u, true}, std::pair{3u, false}}) {
+    SCOPED_TRACE("kernel " + std::to_string(kernel) + (resume ? "" : ", walks from the root"));
+    ShadowPassInput in = gb.input(0, kernel, true);
+    in.resume_walks = resume;
+    in.normal_offset = 0.0f;  // the ground pixels stay on the plane
+    EXPECT_EQ(pass_against_twin(g, s.map, in, fs, tally), 0u);
+    EXPECT_GT(fs.holes, 0u);
+    std::vector<float> twin(size_t(gb.width) * gb.height);
+    stack_shadow_pass_reference(s.map, in, twin);
+    for (size_t p = 0; p < twin.size(); ++p)
+      if (gb.pos[4 * p + 3] != 0.0f && gb.pos[4 * p + 1] == 1.5f)
+        ++ground[twin[p] == 1.0f ? 0 : twin[p] == 0.0f ? 1 : 2];
+  }
+  EXPECT_GT(tally[0], 500u);
+  EXPECT_GT(tally[2], 1000u);
+  EXPECT_GT(ground[2], 500u);  // on the ground, shadows slide over a fixed texel with w
   EXPECT_EQ(g.stats().validation_messages, 0u);
 }
 
