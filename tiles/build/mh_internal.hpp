@@ -1,5 +1,6 @@
 // Private helpers shared by the MH constructions (mh_build*.cpp); not a public header.
 #pragma once
+#include <bit>
 #include <cstddef>
 #include <cstdint>
 
@@ -18,6 +19,20 @@ inline float safe_midpoint(float lo, float hi) {
   float m = float(0.5 * (double(lo) + double(hi)));
   m = m < lo ? lo : m;
   return m > hi ? hi : m;
+}
+
+// The float in [lo, hi] (lo <= hi, no NaN) with the most trailing zero bits: 0 if the
+// interval holds it, else the common high bits of the ends' bit patterns (monotone in the
+// value for each sign) with every lower bit clear; lo == hi returns lo. Any point of an
+// admissible interval is lossless (MH 2016 §3.1); the roundest one makes nearly equal
+// subtrees equal (the octree's shared blocks, MHOCT.md "Value choice").
+inline float roundest_in(float lo, float hi) {
+  if (lo <= 0.0f && 0.0f <= hi) return 0.0f;
+  if (hi < 0.0f) return -roundest_in(-hi, -lo);
+  const uint32_t a = std::bit_cast<uint32_t>(lo), b = std::bit_cast<uint32_t>(hi);
+  if (a == b) return lo;
+  const int m = 31 - std::countl_zero(a ^ b);  // the highest differing bit: set in b
+  return std::bit_cast<float>((b >> m) << m);
 }
 
 // Throws st::Error unless the tile is square, a power of two a side (<= 2^14) and its
