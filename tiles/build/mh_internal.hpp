@@ -35,6 +35,18 @@ inline float roundest_in(float lo, float hi) {
   return std::bit_cast<float>((b >> m) << m);
 }
 
+// The roundest float (roundest_in) of the middle half of [lo, hi]: a canonical value that
+// still keeps a quarter of the interval on either side, as the midpoint keeps half, for
+// receivers that lie within a surface's interval (the octree's values, MHOCT.md "Value
+// choice"). lo == hi returns lo.
+inline float central_roundest(float lo, float hi) {
+  const double a = double(lo), b = double(hi), q = 0.25 * (b - a);
+  float l = float(a + q), h = float(b - q);  // rounding is monotone: lo <= l <= h <= hi
+  l = l < lo ? lo : l;
+  h = h > hi ? hi : h;
+  return l <= h ? roundest_in(l, h) : safe_midpoint(lo, hi);
+}
+
 // Throws st::Error unless the tile is square, a power of two a side (<= 2^14) and its
 // data has width*height entries. Returns log2(side).
 uint32_t validate_tile_shape(const IntervalTile& tile);
