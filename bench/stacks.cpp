@@ -170,7 +170,8 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
   const st::OctHierarchy oh = st::build_octree(stack);
   const double oct_build_s = since(t0);
   t0 = Clock::now();
-  const std::vector<uint8_t> oct = st::encode_octree(oh);
+  st::OctEncodeStats oct_stats;
+  const std::vector<uint8_t> oct = st::encode_octree(oh, &oct_stats);
   const double oct_encode_s = since(t0);
   t0 = Clock::now();
   const st::OctreeSharing share = st::measure_octree_sharing(oh);
@@ -339,6 +340,11 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
               (unsigned long long)share.dag_words, double(share.dag_words) / double(share.words),
               (unsigned long long)share.block_dag_words, double(share.block_dag_words) / double(share.words),
               (unsigned long long)share.repeated_inner, (unsigned long long)share.largest_repeated_words);
+  std::printf("encoded: %llu words (%.3f of the tree's), %u nodes stored, %llu shared blocks, %llu padding words; shifts",
+              (unsigned long long)oct_stats.words, double(oct_stats.words) / double(share.words), oct_stats.nodes,
+              (unsigned long long)oct_stats.shared_blocks, (unsigned long long)oct_stats.padding_words);
+  for (uint32_t l = 0; l < oh.geo.levels(); ++l) std::printf(" %u", unsigned(oct_stats.shift[l]));
+  std::printf("\n");
   std::printf("value choice (roundest float in each node's interval): distinct blocks %llu, every distinct block once "
               "%llu words (%.3f)\n",
               (unsigned long long)share_round.unique_blocks, (unsigned long long)share_round.block_dag_words,
@@ -423,6 +429,9 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
             {"repeated_inner_subtrees", share.repeated_inner},
             {"largest_repeated_words", share.largest_repeated_words},
             {"block_dag_words_roundest", share_round.block_dag_words},
+            {"encoded_words", oct_stats.words},
+            {"shared_blocks", oct_stats.shared_blocks},
+            {"padding_words", oct_stats.padding_words},
             {"hybrid_words", hybrid_words},
             {"quad_words", quad_total_words}}},
           {"mmh2d_bytes", mmh_bytes},
