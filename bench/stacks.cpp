@@ -340,9 +340,10 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
               (unsigned long long)share.dag_words, double(share.dag_words) / double(share.words),
               (unsigned long long)share.block_dag_words, double(share.block_dag_words) / double(share.words),
               (unsigned long long)share.repeated_inner, (unsigned long long)share.largest_repeated_words);
-  std::printf("encoded: %llu words (%.3f of the tree's), %u nodes stored, %llu shared blocks, %llu padding words; shifts",
+  std::printf("encoded: %llu words (%.3f of the tree's), %u nodes stored, %llu shared blocks (%llu more out of reach), %llu padding words; shifts",
               (unsigned long long)oct_stats.words, double(oct_stats.words) / double(share.words), oct_stats.nodes,
-              (unsigned long long)oct_stats.shared_blocks, (unsigned long long)oct_stats.padding_words);
+              (unsigned long long)oct_stats.shared_blocks, (unsigned long long)oct_stats.out_of_reach,
+              (unsigned long long)oct_stats.padding_words);
   for (uint32_t l = 0; l < oh.geo.levels(); ++l) std::printf(" %u", unsigned(oct_stats.shift[l]));
   std::printf("\n");
   std::printf("value choice (roundest float in each node's interval): distinct blocks %llu, every distinct block once "
@@ -431,6 +432,7 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
             {"block_dag_words_roundest", share_round.block_dag_words},
             {"encoded_words", oct_stats.words},
             {"shared_blocks", oct_stats.shared_blocks},
+            {"shared_out_of_reach", oct_stats.out_of_reach},
             {"padding_words", oct_stats.padding_words},
             {"hybrid_words", hybrid_words},
             {"quad_words", quad_total_words}}},

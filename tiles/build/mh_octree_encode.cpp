@@ -114,7 +114,7 @@ struct Pass {
   std::vector<uint32_t> pos, block;
   std::vector<uint8_t> stored, shared;  // per node: written; its block is a back-reference
   std::vector<uint32_t> last;           // per block id: the latest copy laid out (0: none)
-  uint64_t words = 0, padding = 0, shared_blocks = 0;
+  uint64_t words = 0, padding = 0, shared_blocks = 0, out_of_reach = 0;
   uint32_t nodes = 0;
   std::array<uint64_t, kMaxLevels> max_off{};
   bool fits = true, too_big = false;
@@ -128,7 +128,7 @@ void layout(const Flat& t, const std::vector<uint32_t>& block_id, uint32_t ids, 
   out.shared.assign(t.size(), 0);
   out.last.assign(ids, 0);
   out.max_off.fill(0);
-  out.fits = true, out.too_big = false, out.padding = 0, out.shared_blocks = 0;
+  out.fits = true, out.too_big = false, out.padding = 0, out.shared_blocks = 0, out.out_of_reach = 0;
   out.stored[0] = 1, out.nodes = 1;
   uint64_t w = code_words(t.kind(0));
   std::vector<uint32_t> stack{0};
@@ -147,6 +147,7 @@ void layout(const Flat& t, const std::vector<uint32_t>& block_id, uint32_t ids, 
         ++out.shared_blocks;
         continue;
       }
+      ++out.out_of_reach;
     }
     const uint64_t align = uint64_t(1) << s;
     const uint64_t start = (w + align - 1) & ~(align - 1);
@@ -249,6 +250,7 @@ std::vector<uint8_t> encode_octree(const OctHierarchy& h, OctEncodeStats* stats)
     stats->padding_words = pass.padding;
     stats->nodes = pass.nodes;
     stats->shared_blocks = pass.shared_blocks;
+    stats->out_of_reach = pass.out_of_reach;
   }
   return out;
 }

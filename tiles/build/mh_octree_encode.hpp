@@ -17,7 +17,8 @@ struct OctEncodeStats {
   std::array<uint8_t, moct::kMaxLevels> shift{};  // chosen per-level log2 scales
   uint64_t words = 0, padding_words = 0;
   uint32_t nodes = 0;        // nodes stored
-  uint64_t shared_blocks = 0;  // back-references
+  uint64_t shared_blocks = 0;  // nodes whose block is shared
+  uint64_t out_of_reach = 0;   // nodes with an equal block laid out earlier, beyond the offset's reach
 };
 
 // Checks the hierarchy's shape (level count, sorted codes, masks naming the next level's
