@@ -5,7 +5,13 @@
 //   bench_stacks [--res 256] [--city-samples 32] [--hair-samples 64] [--lookups 20000]
 //                [--reps 3] [--case city|city-hour|hairball|all] [--hair-jitter 0.5] [--json PATH]
 //                [--mode auto|whole|blocked] [--tracer auto|embree] [--spill-dir /tmp]
-//                [--frame ground|ortho|both] [--hair-frame window|translate|both]
+//                [--frame ground|ortho|both] [--hair-frame window|translate|both] [--all-2d]
+//
+// --all-2d (whole mode): every slice also encoded as MMH and DAG-MH, the smaller 2D
+// encodings, so the octree is set against the best of them too ("best 2D" line). Every
+// whole-mode run also prints the encoder's stats (shared blocks, format version 2), the
+// sharing measure with the roundest values, and the cost model of anisotropic splits
+// (mh_octree_share.hpp `hybrid_octree_quad_words`, "hybrid model" line).
 //
 // --frame: the sun paths' frame (light_set.hpp "Frames"): ground (the default, the
 // oblique ground-aligned frame), ortho (an orthographic box per sample), or both (each
