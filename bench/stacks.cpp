@@ -5,7 +5,13 @@
 //   bench_stacks [--res 256] [--city-samples 32] [--hair-samples 64] [--lookups 20000]
 //                [--reps 3] [--case city|city-hour|hairball|all] [--hair-jitter 0.5] [--json PATH]
 //                [--mode auto|whole|blocked] [--tracer auto|embree] [--spill-dir /tmp]
-//                [--frame ground|ortho|both] [--hair-frame window|translate|both]
+//                [--frame ground|ortho|both] [--hair-frame window|translate|both] [--all-2d]
+//
+// --all-2d (whole mode): every slice also encoded as MMH and DAG-MH, the smaller 2D
+// encodings, so the octree is set against the best of them too ("best 2D" line). Every
+// whole-mode run also prints the encoder's stats (shared blocks, format version 2), the
+// sharing measure with the roundest values, and the cost model of anisotropic splits
+// (mh_octree_share.hpp `hybrid_octree_quad_words`, "hybrid model" line).
 //
 // --frame: the sun paths' frame (light_set.hpp "Frames"): ground (the default, the
 // oblique ground-aligned frame), ortho (an orthographic box per sample), or both (each
@@ -127,6 +133,7 @@ class SideBySide {
 };
 
 volatile float g_sink = 0;
+bool g_all_2d = false;  // --all-2d
 
 double peak_rss_mib() {
   rusage ru{};
@@ -169,15 +176,18 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
   const st::OctHierarchy oh = st::build_octree(stack);
   const double oct_build_s = since(t0);
   t0 = Clock::now();
-  const std::vector<uint8_t> oct = st::encode_octree(oh);
+  st::OctEncodeStats oct_stats;
+  const std::vector<uint8_t> oct = st::encode_octree(oh, &oct_stats);
   const double oct_encode_s = since(t0);
   t0 = Clock::now();
   const st::OctreeSharing share = st::measure_octree_sharing(oh);
   const double share_s = since(t0);
 
-  // N independent quadtrees.
+  // N independent quadtrees (with --all-2d also N MMH and N DAG-MH buffers: the best 2D
+  // encoding of the same slices).
   std::vector<std::vector<uint8_t>> mh(n);
-  size_t mh_bytes = 0, mh_nodes = 0;
+  std::vector<st::QuadSubtreeWords> quad_words(n);
+  size_t mh_bytes = 0, mh_nodes = 0, mmh_bytes = 0, dagmh_bytes = 0;
   double mh_build_s = 0, mh_encode_s = 0;
   for (uint32_t w = 0; w < n; ++w) {
     st::IntervalTile tile;
@@ -193,7 +203,28 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
     mh_encode_s += since(t0);
     mh_bytes += mh[w].size();
     mh_nodes += h.node_count();
+    if (g_all_2d) mmh_bytes += st::encode_mmh(h).size(), dagmh_bytes += st::encode_dagmh(h).size();
+    // Per node: its subtree's words (STOC / MH quadtree sizes), for the hybrid cost model.
+    const auto first = h.first_child_index();
+    std::vector<std::vector<uint32_t>> sub(h.levels.size());
+    for (size_t l = h.levels.size(); l-- > 0;) {
+      sub[l].resize(h.levels[l].size());
+      for (size_t j = 0; j < h.levels[l].size(); ++j) {
+        const st::HNode& hn = h.levels[l][j];
+        uint32_t words = hn.has_value && hn.child_mask ? 2 : 1;
+        for (uint32_t c = 0; c < uint32_t(__builtin_popcount(hn.child_mask)); ++c) words += sub[l + 1][first[l][j] + c];
+        sub[l][j] = words;
+      }
+    }
+    quad_words[w].levels.resize(h.levels.size());
+    for (size_t l = 0; l < h.levels.size(); ++l)
+      for (size_t j = 0; j < h.levels[l].size(); ++j) quad_words[w].levels[l].push_back({h.levels[l][j].morton, sub[l][j]});
   }
+  const st::OctreeSharing share_round = st::measure_octree_sharing(oh, true);
+  const uint64_t hybrid_words = st::hybrid_octree_quad_words(oh, quad_words);
+  uint64_t quad_total_words = 0;
+  for (const auto& q : quad_words) quad_total_words += q.levels[0][0].second;
+  quad_words.clear();
 
   const st::MhOctree tree = st::MhOctree::open(oct);
   const st::StackLookup look(tree, set);
@@ -315,6 +346,23 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
               (unsigned long long)share.dag_words, double(share.dag_words) / double(share.words),
               (unsigned long long)share.block_dag_words, double(share.block_dag_words) / double(share.words),
               (unsigned long long)share.repeated_inner, (unsigned long long)share.largest_repeated_words);
+  std::printf("encoded: %llu words (%.3f of the tree's), %u nodes stored, %llu shared blocks (%llu more out of reach), %llu padding words; shifts",
+              (unsigned long long)oct_stats.words, double(oct_stats.words) / double(share.words), oct_stats.nodes,
+              (unsigned long long)oct_stats.shared_blocks, (unsigned long long)oct_stats.out_of_reach,
+              (unsigned long long)oct_stats.padding_words);
+  for (uint32_t l = 0; l < oh.geo.levels(); ++l) std::printf(" %u", unsigned(oct_stats.shift[l]));
+  std::printf("\n");
+  std::printf("value choice (roundest float in each node's interval): distinct blocks %llu, every distinct block once "
+              "%llu words (%.3f)\n",
+              (unsigned long long)share_round.unique_blocks, (unsigned long long)share_round.block_dag_words,
+              double(share_round.block_dag_words) / double(share_round.words));
+  std::printf("hybrid model (per region: octree or the quadtrees): %llu words (%.3f of the octree's, %.3f of the N "
+              "quadtrees' %llu)\n",
+              (unsigned long long)hybrid_words, double(hybrid_words) / double(share.words),
+              double(hybrid_words) / double(quad_total_words), (unsigned long long)quad_total_words);
+  if (g_all_2d)
+    std::printf("best 2D: N x MH %zu, N x MMH %zu, N x DAG-MH %zu bytes; octree / best %.3f\n", mh_bytes, mmh_bytes,
+                dagmh_bytes, double(oct.size()) / double(std::min({mh_bytes, mmh_bytes, dagmh_bytes})));
   std::printf("%-34s %10s %12s\n", "lookup (median ns)", "ns", "x 2D lookup");
   auto row = [&](const char* what, double ns) { std::printf("%-34s %10.1f %12.2f\n", what, ns, ns / ns_2d); };
   row("2D lit (one slice)", ns_2d);
@@ -386,7 +434,16 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
             {"dag_words", share.dag_words},
             {"block_dag_words", share.block_dag_words},
             {"repeated_inner_subtrees", share.repeated_inner},
-            {"largest_repeated_words", share.largest_repeated_words}}}};
+            {"largest_repeated_words", share.largest_repeated_words},
+            {"block_dag_words_roundest", share_round.block_dag_words},
+            {"encoded_words", oct_stats.words},
+            {"shared_blocks", oct_stats.shared_blocks},
+            {"shared_out_of_reach", oct_stats.out_of_reach},
+            {"padding_words", oct_stats.padding_words},
+            {"hybrid_words", hybrid_words},
+            {"quad_words", quad_total_words}}},
+          {"mmh2d_bytes", mmh_bytes},
+          {"dagmh2d_bytes", dagmh_bytes}};
 }
 
 
@@ -631,6 +688,7 @@ int main(int argc, char** argv) {
       else if (a == "--tracer") tracer = next();
       else if (a == "--spill-dir") spill_dir = next();
       else if (a == "--frame") frame = next();
+      else if (a == "--all-2d") g_all_2d = true;
       else throw st::Error("unknown option " + a);
     }
     if (frame != "ground" && frame != "ortho" && frame != "both") throw st::Error("--frame: expected ground, ortho or both");

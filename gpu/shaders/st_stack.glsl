@@ -90,7 +90,9 @@ float st_oct_depth(uint base, uint x, uint y, uint w, uint level) {
     code = (mask >> (2u * slot)) & 3u;
     if (code == 0u) break;  // missing child: the last valued node answers
     const uint shift = st_byte(base, 20u + l);
-    pos = (((pos >> shift) + (word >> 16u)) << shift) + uint(bitCount(mask & ((1u << (2u * slot)) - 1u)));
+    // off: a signed 16-bit number (version 2: negative = a back-reference to an earlier
+    // equal block); uint arithmetic wraps as the CPU's block_start does.
+    pos = (((pos >> shift) + uint(int(word) >> 16)) << shift) + uint(bitCount(mask & ((1u << (2u * slot)) - 1u)));
     if (code != 2u) val = code == 1u ? pos : pos + 1u;
   }
   return uintBitsToFloat(ST_POOL(tree + val));

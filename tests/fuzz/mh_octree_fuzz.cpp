@@ -2,7 +2,8 @@
 // Input: an encoded octree buffer. Contract: MhOctree::open validates the whole buffer
 // or throws st::FormatError; a buffer it accepts must answer depth() at every level and
 // slice (in range or not) without reading out of bounds, deterministically, and the
-// shared soft-shadow walk (stack_lookup.hpp) must equal independent lookups on it.
+// shared soft-shadow walk (stack_lookup.hpp) must equal independent lookups on it (also
+// where blocks are shared: nodes reached through more than one parent).
 #include <span>
 
 #include "common/error.hpp"
@@ -39,6 +40,12 @@ std::vector<st::fuzz::Bytes> st::fuzz::seeds() {
   uint64_t seed = 1;
   for (auto [level, slices] : shapes)
     for (bool coherent : {false, true}) out.push_back(encode_octree(build_octree(seed_stack(level, slices, seed++, coherent))));
+  // A 4x4 pattern repeated over 16x16 slices: shared blocks (version 2), backward and forward.
+  st::IntervalStack periodic = seed_stack(4, 3, 99, false);
+  for (uint32_t w = 0; w < 3; ++w)
+    for (uint64_t y = 0; y < 16; ++y)
+      for (uint64_t x = 0; x < 16; ++x) periodic.at(x, y, w) = periodic.at(x % 4, y % 4, 0);
+  out.push_back(encode_octree(build_octree(periodic)));
   return out;
 }
 

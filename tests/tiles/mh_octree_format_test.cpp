@@ -34,7 +34,7 @@ TEST(MhOctreeFormat, ExampleBufferIsPinnedByteForByte) {
     std::memcpy(b, &v, 4);
     return std::vector<uint8_t>(b, b + 4);
   };
-  std::vector<uint8_t> want = {'S', 'T', 'O', 'C', 1, 0, 1, 1, 2, 0, 0, 0, 3, 0, 0, 0, 40, 0, 0, 0,
+  std::vector<uint8_t> want = {'S', 'T', 'O', 'C', 2, 0, 1, 1, 2, 0, 0, 0, 3, 0, 0, 0, 40, 0, 0, 0,
                                0, 0, 0, 0,                // shifts of levels 0, 1; padding
                                0x01, 0x04, 0x02, 0x00};  // root: slot 0 leaf, slot 5 leaf; off 2
   for (float v : {0.5f, 0.25f, 0.75f})
@@ -49,15 +49,52 @@ TEST(MhOctreeFormat, ExampleBufferIsPinnedByteForByte) {
   EXPECT_EQ(t.depth(2, 0, 0, 1), kLitDepth);
 }
 
+// MHOCT.md's shared-block example: one 4x4 slice, all 0.5 but texels (0, 0) and (2, 0)
+// (0.25): quadrants 0 and 1 hold equal children, stored once (44 bytes, not 48).
+TEST(MhOctreeFormat, SharedBlockExampleIsPinnedByteForByte) {
+  IntervalStack s{2, 1, std::vector<Interval>(16, Interval{0.5f, 0.5f})};
+  s.at(0, 0, 0) = s.at(2, 0, 0) = {0.25f, 0.25f};
+  OctEncodeStats st;
+  const std::vector<uint8_t> bytes = encode_octree(build_octree(s), &st);
+  const std::vector<uint8_t> want = {'S', 'T', 'O', 'C', 2, 0, 2, 0, 1, 0, 0, 0, 4, 0, 0, 0, 44, 0, 0, 0,
+                                     0, 0, 0, 0,              // shifts of levels 0..2; padding
+                                     0x0A, 0x00, 0x02, 0x00,  // root: slots 0, 1 empty; off 2
+                                     0x00, 0x00, 0x00, 0x3F,  // root value 0.5
+                                     0x01, 0x00, 0x02, 0x00,  // quadrant 0: slot 0 leaf, its block at word 4
+                                     0x01, 0x00, 0x01, 0x00,  // quadrant 1: the same block (word 3 + 1)
+                                     0x00, 0x00, 0x80, 0x3E};  // the shared leaf 0.25
+  EXPECT_EQ(bytes, want);
+  EXPECT_EQ(st.shared_blocks, 1u);
+  const MhOctree t = MhOctree::open(bytes);
+  EXPECT_EQ(t.node_count(), 4u);
+  for (uint64_t y = 0; y < 4; ++y)
+    for (uint64_t x = 0; x < 4; ++x) EXPECT_EQ(t.depth(x, y, 0, 2), (y == 0 && (x == 0 || x == 2)) ? 0.25f : 0.5f);
+  // Hostile shared blocks: a reference to words that are not yet nodes is a claim that
+  // overlaps (quadrant 1 naming its own word), or to a node of another level (the root's
+  // block at level 1 for level-2 children), or before the tree.
+  auto refused = [&](size_t word, uint16_t off, const char* what) {
+    std::vector<uint8_t> b = bytes;
+    std::memcpy(b.data() + 24 + 4 * word + 2, &off, 2);
+    EXPECT_THROW(MhOctree::open(b), FormatError) << what;
+  };
+  refused(3, 0, "offset zero");
+  refused(3, 0xFFFF, "quadrant 1 naming word 2 (quadrant 0, a level-1 node) as its level-2 children");
+  refused(3, 0x8000, "a block before the tree");
+  refused(2, 3, "quadrant 0's block at word 5, past the end");
+  refused(2, 1, "quadrant 0 naming word 3 (quadrant 1, not yet a validated leaf)");
+}
+
 TEST(MhOctreeFormat, DecodesLikeTheHierarchyOnEveryTexelSliceAndLevel) {
   const std::pair<uint32_t, uint32_t> shapes[] = {{4, 8}, {5, 3}, {2, 12}, {3, 1}, {0, 5}};
   for (auto [level, slices] : shapes) {
     SCOPED_TRACE(std::to_string(level) + " " + std::to_string(slices));
     for (const IntervalStack& s : {stacks::random_stack(level, slices, 5), stacks::coherent_stack(level, slices, 5)}) {
       const OctHierarchy h = build_octree(s);
-      const std::vector<uint8_t> bytes = encode_octree(h);
+      OctEncodeStats st;
+      const std::vector<uint8_t> bytes = encode_octree(h, &st);
       const MhOctree t = MhOctree::open(bytes);
-      EXPECT_EQ(t.node_count(), h.node_count());
+      EXPECT_EQ(t.node_count(), st.nodes);
+      EXPECT_LE(t.node_count(), h.node_count());  // nodes under a shared block are stored once
       EXPECT_EQ(stacks::first_violation(s, [&](uint64_t x, uint64_t y, uint64_t w) {
                   return t.depth(x, y, uint32_t(w), level);
                 }), "");
@@ -119,7 +156,13 @@ TEST(MhOctreeFormat, HostileBuffersAreRefused) {
     return b;
   };
   expect_refused(patched(0, 'X'), "magic");
-  expect_refused(patched(4, 2), "version");
+  expect_refused(patched(4, 3), "version");
+  try {
+    MhOctree::open(patched(4, 1));
+    ADD_FAILURE() << "accepted version 1";
+  } catch (const FormatError& e) {
+    EXPECT_NE(std::string(e.what()).find("version 1"), std::string::npos) << e.what();
+  }
   expect_refused(patched(6, 21), "xy_level");
   expect_refused(patched(7, 13), "w_level");
   expect_refused(patched(8, 9), "slices beyond the padding");

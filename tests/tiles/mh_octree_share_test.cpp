@@ -3,7 +3,9 @@
 #include <gtest/gtest.h>
 
 #include "tests/tiles/stack_fixtures.hpp"
+#include "tiles/build/mh_octree_encode.hpp"
 #include "tiles/build/mh_octree_share.hpp"
+#include "tiles/core/mh_octree.hpp"
 
 namespace st {
 namespace {
@@ -44,6 +46,25 @@ TEST(OctreeSharing, RepeatedHalfIsStoredOnce) {
   EXPECT_GE(s.repeated_inner, 1u);
   EXPECT_GE(2 * s.largest_repeated_words + 2, s.words);  // each half is one repeated subtree
   EXPECT_LE(2 * s.block_dag_words, s.words + 4);
+}
+
+TEST(OctreeSharing, EncoderStoresTheRepeatedHalfOnce) {
+  // The same stack encoded (format version 2): the second half's blocks point at the
+  // first half's, the buffer holds the measure's words (everything is within reach), and
+  // every texel of every slice still decodes losslessly.
+  IntervalStack st = stacks::random_stack(2, 8, 5);
+  const size_t half = st.data.size() / 2;
+  std::copy(st.data.begin(), st.data.begin() + ptrdiff_t(half), st.data.begin() + ptrdiff_t(half));
+  const OctHierarchy h = build_octree(st);
+  const OctreeSharing s = measure_octree_sharing(h);
+  OctEncodeStats es;
+  const std::vector<uint8_t> bytes = encode_octree(h, &es);
+  EXPECT_GE(es.shared_blocks, 1u);
+  EXPECT_EQ(es.out_of_reach, 0u);
+  EXPECT_EQ(es.words, s.block_dag_words);
+  const MhOctree t = MhOctree::open(bytes);
+  EXPECT_EQ(stacks::first_violation(st, [&](uint64_t x, uint64_t y, uint64_t w) { return t.depth(x, y, uint32_t(w), 2); }),
+            "");
 }
 
 }  // namespace

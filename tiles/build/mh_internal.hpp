@@ -1,5 +1,6 @@
 // Private helpers shared by the MH constructions (mh_build*.cpp); not a public header.
 #pragma once
+#include <bit>
 #include <cstddef>
 #include <cstdint>
 
@@ -18,6 +19,32 @@ inline float safe_midpoint(float lo, float hi) {
   float m = float(0.5 * (double(lo) + double(hi)));
   m = m < lo ? lo : m;
   return m > hi ? hi : m;
+}
+
+// The float in [lo, hi] (lo <= hi, no NaN) with the most trailing zero bits: 0 if the
+// interval holds it, else the common high bits of the ends' bit patterns (monotone in the
+// value for each sign) with every lower bit clear; lo == hi returns lo. Any point of an
+// admissible interval is lossless (MH 2016 §3.1); the roundest one makes nearly equal
+// subtrees equal (the octree's shared blocks, MHOCT.md "Value choice").
+inline float roundest_in(float lo, float hi) {
+  if (lo <= 0.0f && 0.0f <= hi) return 0.0f;
+  if (hi < 0.0f) return -roundest_in(-hi, -lo);
+  const uint32_t a = std::bit_cast<uint32_t>(lo), b = std::bit_cast<uint32_t>(hi);
+  if (a == b) return lo;
+  const int m = 31 - std::countl_zero(a ^ b);  // the highest differing bit: set in b
+  return std::bit_cast<float>((b >> m) << m);
+}
+
+// The roundest float (roundest_in) of the middle half of [lo, hi]: a canonical value that
+// still keeps a quarter of the interval on either side, as the midpoint keeps half, for
+// receivers that lie within a surface's interval (the octree's values, MHOCT.md "Value
+// choice"). lo == hi returns lo.
+inline float central_roundest(float lo, float hi) {
+  const double a = double(lo), b = double(hi), q = 0.25 * (b - a);
+  float l = float(a + q), h = float(b - q);  // rounding is monotone: lo <= l <= h <= hi
+  l = l < lo ? lo : l;
+  h = h > hi ? hi : h;
+  return l <= h ? roundest_in(l, h) : safe_midpoint(lo, hi);
 }
 
 // Throws st::Error unless the tile is square, a power of two a side (<= 2^14) and its

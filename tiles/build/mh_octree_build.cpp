@@ -187,7 +187,7 @@ OctHierarchy build_octree(const IntervalStack& stack, std::optional<uint32_t> w_
   h.levels.resize(L + 1);
   if (L == 0) {
     const Interval& t = stack.data[0];
-    h.levels[0].push_back(OctNode{0, mh_detail::safe_midpoint(t.lo, t.hi), t.lo, t.hi, 0, 1});
+    h.levels[0].push_back(OctNode{0, mh_detail::central_roundest(t.lo, t.hi), t.lo, t.hi, 0, 1});
     return h;
   }
   Dense d(g);
@@ -227,7 +227,7 @@ OctHierarchy build_octree(const IntervalStack& stack, std::optional<uint32_t> w_
   // Emit present nodes level by level, parents in code order and children in slot order,
   // which keeps every level sorted by code.
   h.levels[0].push_back(
-      OctNode{0, mh_detail::safe_midpoint(d.lo[0], d.hi[0]), d.lo[0], d.hi[0], d.present[0], 1});
+      OctNode{0, mh_detail::central_roundest(d.lo[0], d.hi[0]), d.lo[0], d.hi[0], d.present[0], 1});
   for (uint32_t l = 1; l <= L; ++l) {
     const auto& parents = h.levels[l - 1];
     auto& nodes = h.levels[l];
@@ -247,7 +247,7 @@ OctHierarchy build_octree(const IntervalStack& stack, std::optional<uint32_t> w_
           const size_t i = d.base[l] + code;
           if (vmask >> c & 1)
             nodes.push_back(
-                OctNode{code, mh_detail::safe_midpoint(d.lo[i], d.hi[i]), d.lo[i], d.hi[i], d.present[i], 1});
+                OctNode{code, mh_detail::central_roundest(d.lo[i], d.hi[i]), d.lo[i], d.hi[i], d.present[i], 1});
           else
             nodes.push_back(OctNode{code, 0, 0, 0, d.present[i], 0});
         } else {
@@ -255,7 +255,7 @@ OctHierarchy build_octree(const IntervalStack& stack, std::optional<uint32_t> w_
           child_coords(g, pl, c, x, y, w);
           ST_CHECK(w < stack.slices);  // placeholders are always covered
           const Interval& t = stack.at(x, y, w);
-          nodes.push_back(OctNode{code, mh_detail::safe_midpoint(t.lo, t.hi), t.lo, t.hi, 0, 1});
+          nodes.push_back(OctNode{code, mh_detail::central_roundest(t.lo, t.hi), t.lo, t.hi, 0, 1});
         }
       }
     }
@@ -294,7 +294,7 @@ std::vector<std::vector<float>> octree_top_values(const moct::Geometry& g, uint3
   // slot is in the parent's valued mask (build_octree's emission); others inherit.
   std::vector<std::vector<float>> v(lb + 1);
   std::vector<std::vector<uint8_t>> is_present(lb + 1);
-  v[0] = {mh_detail::safe_midpoint(lo[0][0], hi[0][0])};
+  v[0] = {mh_detail::central_roundest(lo[0][0], hi[0][0])};
   is_present[0] = {1};
   for (uint32_t l = 1; l <= lb; ++l) {
     const uint32_t a = step_bits(g, l - 1);
@@ -305,7 +305,7 @@ std::vector<std::vector<float>> octree_top_values(const moct::Geometry& g, uint3
       const uint32_t c = slot_of(g, l - 1, uint32_t(i & ((size_t(1) << a) - 1)));
       const bool here = is_present[l - 1][p] && (present[l - 1][p] >> c & 1);
       is_present[l][i] = here;
-      v[l][i] = here && (valued[l - 1][p] >> c & 1) ? mh_detail::safe_midpoint(lo[l][i], hi[l][i]) : v[l - 1][p];
+      v[l][i] = here && (valued[l - 1][p] >> c & 1) ? mh_detail::central_roundest(lo[l][i], hi[l][i]) : v[l - 1][p];
     }
   }
   if (present_nodes) {

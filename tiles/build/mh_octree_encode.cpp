@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstring>
 #include <string>
+#include <unordered_map>
 
 #include "common/error.hpp"
 
@@ -78,18 +79,57 @@ Flat flatten(const OctHierarchy& h) {
   return t;
 }
 
+// Block ids: two nodes of one level get one id iff their children are equal all the way
+// down (kinds, values, slots). Subtrees are hash-consed bottom-up; keys hold ids, never
+// hashes alone.
+using Key = std::array<uint32_t, 11>;
+struct KeyHash {
+  size_t operator()(const Key& k) const noexcept {
+    uint64_t h = 0x9E3779B97F4A7C15ull;
+    for (uint32_t v : k) h = (h ^ v) * 0xff51afd7ed558ccdull, h ^= h >> 32;
+    return size_t(h);
+  }
+};
+
+// block_id[n] for nodes with children (0 for the others); returns the number of ids.
+uint32_t block_ids(const Flat& t, std::vector<uint32_t>& block_id) {
+  std::unordered_map<Key, uint32_t, KeyHash> subtrees, blocks;
+  std::vector<uint32_t> sub(t.size(), 0);
+  block_id.assign(t.size(), 0);
+  for (uint32_t n = uint32_t(t.size()); n-- > 0;) {
+    Key block{};
+    block[0] = t.mask[n] | uint32_t(t.level[n]) << 8;
+    const uint32_t c0 = t.first_child[n], cn = uint32_t(std::popcount(unsigned(t.mask[n])));
+    for (uint32_t i = 0; i < cn; ++i) block[3 + i] = sub[c0 + i] + 1;
+    Key key = block;
+    key[1] = t.valued[n] ? 1u : 0u;
+    key[2] = t.valued[n] ? float_bits(t.value[n]) : 0u;
+    sub[n] = subtrees.try_emplace(key, uint32_t(subtrees.size())).first->second;
+    if (cn) block_id[n] = blocks.try_emplace(block, uint32_t(blocks.size()) + 1).first->second;
+  }
+  return uint32_t(blocks.size()) + 1;
+}
+
 struct Pass {
   std::vector<uint32_t> pos, block;
-  uint64_t words = 0, padding = 0;
+  std::vector<uint8_t> stored, shared;  // per node: written; its block is a back-reference
+  std::vector<uint32_t> last;           // per block id: the latest copy laid out (0: none)
+  uint64_t words = 0, padding = 0, shared_blocks = 0, out_of_reach = 0;
+  uint32_t nodes = 0;
   std::array<uint64_t, kMaxLevels> max_off{};
   bool fits = true, too_big = false;
 };
 
-void layout(const Flat& t, const std::array<uint8_t, kMaxLevels>& sh, Pass& out) {
+void layout(const Flat& t, const std::vector<uint32_t>& block_id, uint32_t ids, const std::array<uint8_t, kMaxLevels>& sh,
+            Pass& out) {
   out.pos.assign(t.size(), 0);
   out.block.assign(t.size(), 0);
+  out.stored.assign(t.size(), 0);
+  out.shared.assign(t.size(), 0);
+  out.last.assign(ids, 0);
   out.max_off.fill(0);
-  out.fits = true, out.too_big = false, out.padding = 0;
+  out.fits = true, out.too_big = false, out.padding = 0, out.shared_blocks = 0, out.out_of_reach = 0;
+  out.stored[0] = 1, out.nodes = 1;
   uint64_t w = code_words(t.kind(0));
   std::vector<uint32_t> stack{0};
   while (!stack.empty()) {
@@ -97,6 +137,18 @@ void layout(const Flat& t, const std::array<uint8_t, kMaxLevels>& sh, Pass& out)
     stack.pop_back();
     if (!t.mask[n]) continue;
     const uint32_t s = sh[t.level[n]];
+    // The latest copy of an equal block (laid out earlier, so its nodes are validated
+    // before this one is reached), if the signed offset reaches it: blocks of one level
+    // share its alignment, so the copy's start is a multiple of 2^s.
+    if (const uint32_t copy = out.last[block_id[n]]) {
+      const int64_t d = int64_t(uint64_t(copy) >> s) - int64_t(uint64_t(out.pos[n]) >> s);
+      if (d != 0 && d >= -int64_t(kMaxBackOffset) && d <= int64_t(kMaxOffset)) {
+        out.block[n] = copy, out.shared[n] = 1;
+        ++out.shared_blocks;
+        continue;
+      }
+      ++out.out_of_reach;
+    }
     const uint64_t align = uint64_t(1) << s;
     const uint64_t start = (w + align - 1) & ~(align - 1);
     out.padding += start - w;
@@ -107,11 +159,14 @@ void layout(const Flat& t, const std::array<uint8_t, kMaxLevels>& sh, Pass& out)
       return;
     }
     out.block[n] = uint32_t(w);
+    out.last[block_id[n]] = uint32_t(w);
     const uint64_t off = (w >> s) - (uint64_t(out.pos[n]) >> s);
     out.max_off[t.level[n]] = std::max(out.max_off[t.level[n]], off);
     const uint32_t c0 = t.first_child[n], cn = uint32_t(std::popcount(unsigned(t.mask[n])));
     for (uint32_t c = c0; c < c0 + cn; ++c) {
       out.pos[c] = uint32_t(w);
+      out.stored[c] = 1;
+      ++out.nodes;
       w += code_words(t.kind(c));
     }
     for (uint32_t c = c0 + cn; c-- > c0;)
@@ -133,6 +188,8 @@ void put_u32(std::vector<uint8_t>& b, size_t off, uint32_t v) { std::memcpy(b.da
 
 std::vector<uint8_t> encode_octree(const OctHierarchy& h, OctEncodeStats* stats) {
   const Flat t = flatten(h);
+  std::vector<uint32_t> block_id;
+  const uint32_t ids = block_ids(t, block_id);
   const uint32_t L = h.geo.depth();
   std::array<uint8_t, kMaxLevels> sh{};
   Pass pass, trial;
@@ -140,7 +197,7 @@ std::vector<uint8_t> encode_octree(const OctHierarchy& h, OctEncodeStats* stats)
   // needs, lay out again), then one step either way on every scaled level, keeping the
   // smallest buffer (as the MH quadtree encoder, MHQUAD.md "Offsets and the scale search").
   for (;;) {
-    layout(t, sh, pass);
+    layout(t, block_id, ids, sh, pass);
     if (pass.too_big) too_big(pass.words);
     if (pass.fits) break;
     for (uint32_t l = 0; l < L; ++l) {
@@ -156,7 +213,7 @@ std::vector<uint8_t> encode_octree(const OctHierarchy& h, OctEncodeStats* stats)
       auto cand = sh;
       cand[l] = uint8_t(int(sh[l]) + d);
       if (cand[l] > kMaxShift) continue;
-      layout(t, cand, trial);
+      layout(t, block_id, ids, cand, trial);
       if (!trial.too_big && trial.fits && trial.words < pass.words) std::swap(pass, trial), sh = cand;
     }
   }
@@ -171,10 +228,11 @@ std::vector<uint8_t> encode_octree(const OctHierarchy& h, OctEncodeStats* stats)
   out[kOffWLevel] = uint8_t(h.geo.k);
   std::memcpy(out.data() + kOffSlices, &slices, 2);
   out[kOffFlags] = t.mask[0] ? 0 : kFlagRootLeaf;
-  put_u32(out, kOffNodeCount, uint32_t(t.size()));
+  put_u32(out, kOffNodeCount, pass.nodes);
   put_u32(out, kOffByteSize, uint32_t(byte_size));
   for (uint32_t l = 0; l < levels; ++l) out[kOffShifts + l] = sh[l];
   for (uint32_t n = 0; n < t.size(); ++n) {
+    if (!pass.stored[n]) continue;  // inside a subtree stored once for an earlier node
     const size_t at = tree_off + size_t(pass.pos[n]) * 4;
     const uint32_t kind = t.kind(n);
     if (kind == kCodeLeaf) {
@@ -182,7 +240,7 @@ std::vector<uint8_t> encode_octree(const OctHierarchy& h, OctEncodeStats* stats)
       continue;
     }
     const uint32_t s = sh[t.level[n]];
-    const uint32_t off = uint32_t((uint64_t(pass.block[n]) >> s) - (uint64_t(pass.pos[n]) >> s));
+    const int32_t off = int32_t(int64_t(uint64_t(pass.block[n]) >> s) - int64_t(uint64_t(pass.pos[n]) >> s));
     put_u32(out, at, node_word(t.code_mask(n), off));
     if (kind == kCodeInner) put_u32(out, at + 4, float_bits(t.value[n]));
   }
@@ -190,7 +248,9 @@ std::vector<uint8_t> encode_octree(const OctHierarchy& h, OctEncodeStats* stats)
     stats->shift = sh;
     stats->words = pass.words;
     stats->padding_words = pass.padding;
-    stats->nodes = uint32_t(t.size());
+    stats->nodes = pass.nodes;
+    stats->shared_blocks = pass.shared_blocks;
+    stats->out_of_reach = pass.out_of_reach;
   }
   return out;
 }

@@ -1,6 +1,9 @@
 // Encoder of the MH octree (tiles/core/mh_octree_format.hpp, MHOCT.md): an OctHierarchy
 // laid out depth-first in one flat buffer with 16-bit child offsets scaled per level
-// (MH §3.2 after Lefebvre & Hoppe 2007, carried to octrees by MH §4).
+// (MH §3.2 after Lefebvre & Hoppe 2007, carried to octrees by MH §4). A node whose
+// children block equals one already laid out for another node of its level (the same
+// children all the way down, compared exactly by hash-consed ids) points back at that
+// block instead of storing it again, where the signed offset reaches (DAG-MH style).
 #pragma once
 #include <array>
 #include <cstdint>
@@ -13,7 +16,9 @@ namespace st {
 struct OctEncodeStats {
   std::array<uint8_t, moct::kMaxLevels> shift{};  // chosen per-level log2 scales
   uint64_t words = 0, padding_words = 0;
-  uint32_t nodes = 0;
+  uint32_t nodes = 0;        // nodes stored
+  uint64_t shared_blocks = 0;  // nodes whose block is shared
+  uint64_t out_of_reach = 0;   // nodes with an equal block laid out earlier, beyond the offset's reach
 };
 
 // Checks the hierarchy's shape (level count, sorted codes, masks naming the next level's

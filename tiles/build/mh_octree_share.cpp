@@ -1,5 +1,7 @@
 #include "tiles/build/mh_octree_share.hpp"
 
+#include "tiles/build/mh_internal.hpp"
+
 #include <algorithm>
 #include <array>
 #include <bit>
@@ -25,7 +27,7 @@ uint32_t own_words(const OctNode& n) { return n.has_value && n.child_mask ? 2 : 
 
 }  // namespace
 
-OctreeSharing measure_octree_sharing(const OctHierarchy& h) {
+OctreeSharing measure_octree_sharing(const OctHierarchy& h, bool roundest) {
   OctreeSharing s;
   std::unordered_map<Key, uint32_t, KeyHash> subtree_ids, block_ids;
   std::vector<uint64_t> subtree_words;  // per subtree id: words of the whole subtree
@@ -49,7 +51,7 @@ OctreeSharing measure_octree_sharing(const OctHierarchy& h) {
           words += subtree_words[id];
         }
       Key key = block;
-      key[1] = n.has_value ? std::bit_cast<uint32_t>(n.value) : 0;
+      key[1] = n.has_value ? std::bit_cast<uint32_t>(roundest ? mh_detail::roundest_in(n.lo, n.hi) : n.value) : 0;
       key[0] |= uint32_t(n.has_value) << 8;
       auto [it, fresh] = subtree_ids.try_emplace(key, uint32_t(subtree_words.size()));
       if (fresh) {
@@ -83,6 +85,39 @@ OctreeSharing measure_octree_sharing(const OctHierarchy& h) {
   s.unique_subtrees = subtree_words.size();
   s.unique_blocks = block_ids.size();
   return s;
+}
+
+
+uint64_t hybrid_octree_quad_words(const OctHierarchy& h, const std::vector<QuadSubtreeWords>& quad_words) {
+  const moct::Geometry& g = h.geo;
+  auto quad = [&](uint32_t w, uint32_t a, uint64_t x, uint64_t y) -> uint64_t {
+    if (w >= quad_words.size() || a >= quad_words[w].levels.size()) return 0;
+    const auto& lv = quad_words[w].levels[a];
+    uint64_t m = 0;
+    for (uint32_t b = 0; b < a; ++b) m |= ((x >> b & 1) << (2 * b)) | ((y >> b & 1) << (2 * b + 1));
+    auto it = std::lower_bound(lv.begin(), lv.end(), std::pair<uint64_t, uint32_t>{m, 0});
+    return it != lv.end() && it->first == m ? it->second : 0;
+  };
+  std::vector<uint64_t> below, here;
+  for (size_t l = h.levels.size(); l-- > 0;) {
+    const std::vector<OctNode>& level = h.levels[l];
+    here.assign(level.size(), 0);
+    const uint32_t a = g.xy_bits(uint32_t(l)), wb = g.w_bits(uint32_t(l));
+    const uint32_t span = 1u << (g.k - wb);
+    size_t next = 0;
+    for (size_t j = 0; j < level.size(); ++j) {
+      const OctNode& n = level[j];
+      uint64_t oct = own_words(n);
+      for (uint32_t m = n.child_mask; m; m &= m - 1) oct += below[next++];
+      uint64_t x = 0, y = 0, w = 0;
+      oct_coords(g, uint32_t(l), n.code, x, y, w);
+      uint64_t q = span - 1;
+      for (uint32_t s = 0; s < span; ++s) q += quad(uint32_t(w * span + s), a, x, y);
+      here[j] = std::min(oct, q);
+    }
+    below.swap(here);
+  }
+  return below.empty() ? 0 : below[0];
 }
 
 }  // namespace st

@@ -15,6 +15,9 @@
 #pragma once
 #include <cstdint>
 
+#include <utility>
+#include <vector>
+
 #include "tiles/build/mh_octree_build.hpp"
 
 namespace st {
@@ -27,6 +30,21 @@ struct OctreeSharing {
   uint64_t largest_repeated_words = 0;  // words of the largest subtree that occurs 2+ times
 };
 
-OctreeSharing measure_octree_sharing(const OctHierarchy& h);
+// `roundest`: every valued node's value replaced by the roundest float of its interval
+// (the most trailing zero bits; any point of the interval is lossless, MH 2016 §3.1), the
+// value choice that makes nearly equal subtrees equal.
+OctreeSharing measure_octree_sharing(const OctHierarchy& h, bool roundest = false);
+
+// Cost model of a per-region choice between the octree and separate quadtrees (what an
+// octree with anisotropic splits could reach at best where the slices disagree): bottom-up
+// over the octree's present nodes, best(node) = min(own words + sum of best(children),
+// the words of the N quadtrees' subtrees over the node's (x, y) cell in its slices, plus
+// W - 1 words of w splits). `quad_words[w]` maps (level, morton) of slice w's quadtree to
+// its subtree's words (STOC sizes: leaf 1, empty 1, inner 2; an absent quadtree cell
+// costs nothing, as if it inherited from the octree above: an optimistic model).
+struct QuadSubtreeWords {
+  std::vector<std::vector<std::pair<uint64_t, uint32_t>>> levels;  // per level: (morton, words), sorted
+};
+uint64_t hybrid_octree_quad_words(const OctHierarchy& h, const std::vector<QuadSubtreeWords>& quad_words);
 
 }  // namespace st

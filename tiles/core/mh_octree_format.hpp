@@ -22,7 +22,13 @@
 // Tree words: leaf = [float]; empty = [node word]; inner = [node word][float].
 //   node word bits 0-15 : child mask, 2 bits per child slot c (0..7) at bits 2c..2c+1:
 //                         00 none, 01 leaf, 10 empty, 11 inner (popcount = size in words)
-//             bits 16-31: child offset `off` (1..65535) in units of 2^shift[level] words
+//             bits 16-31: child offset `off`, a signed 16-bit number (two's complement,
+//                         -32768..32767, non-zero) in units of 2^shift[level] words. The
+//                         block it names is either the node's own children block (after
+//                         the node) or, version 2, a block of equal children stored
+//                         earlier in the depth-first order for another node of the same
+//                         level (a shared block: identical subtrees stored once, DAG-MH
+//                         style), before or after the node
 //   The children block of a node at word p starts at ((p >> s) + off) << s; child slot c
 //   lies popcount(mask & ((1 << 2c) - 1)) words in. With 16-bit masks a node word has no
 //   pad byte (MH §4: octree nodes are 4-byte aligned by default).
@@ -36,7 +42,7 @@ namespace st::moct {
 static_assert(std::endian::native == std::endian::little, "tree words are little-endian");
 
 inline constexpr uint32_t kMagic = 0x434F5453u;  // bytes "STOC"
-inline constexpr uint16_t kVersion = 1;
+inline constexpr uint16_t kVersion = 2;  // 1: forward offsets only (no longer read)
 inline constexpr uint32_t kMaxXyLevel = 20;  // kMaxLevel (interval.hpp)
 inline constexpr uint32_t kMaxWLevel = 12;   // 4096 slices (kMaxLightSamples)
 inline constexpr uint32_t kMaxLevels = 21;   // max(n, k) + 1
@@ -48,15 +54,16 @@ inline constexpr uint8_t kFlagRootLeaf = 1, kFlagsKnown = 1;
 
 inline constexpr uint32_t kCodeNone = 0, kCodeLeaf = 1, kCodeEmpty = 2, kCodeInner = 3;
 inline constexpr uint32_t kSlots = 8;  // child slot c = cx | cy << 1 | cw << 2
-inline constexpr uint32_t kMaxOffset = 0xFFFF;
+inline constexpr uint32_t kMaxOffset = 0x7FFF;      // the largest offset forward
+inline constexpr uint32_t kMaxBackOffset = 0x8000;  // the largest backward (off = -32768)
 inline constexpr uint32_t kMaxShift = 15;
 inline constexpr uint64_t kMaxBytes = 0xFFFFFFFCull;
 
 inline constexpr size_t tree_offset(uint32_t levels) { return kHeaderFixedSize + ((size_t(levels) + 3) & ~size_t(3)); }
 inline constexpr uint32_t code_words(uint32_t code) { return code == kCodeInner ? 2 : code != 0; }
 inline uint32_t word_mask(uint32_t w) { return w & 0xFFFFu; }
-inline uint32_t word_offset(uint32_t w) { return w >> 16; }
-inline uint32_t node_word(uint32_t mask, uint32_t off) { return mask | (off << 16); }
+inline int32_t word_offset(uint32_t w) { return int32_t(int16_t(uint16_t(w >> 16))); }
+inline uint32_t node_word(uint32_t mask, int32_t off) { return mask | (uint32_t(uint16_t(int16_t(off))) << 16); }
 inline uint32_t child_code(uint32_t mask, uint32_t slot) { return (mask >> (2 * slot)) & 3u; }
 // Bit count of a 16-bit mask without a library call (the build has no -mpopcnt).
 inline uint32_t popcount16(uint32_t m) {
@@ -66,8 +73,10 @@ inline uint32_t popcount16(uint32_t m) {
   return (m + (m >> 8)) & 0x1Fu;
 }
 inline uint32_t child_skip(uint32_t mask, uint32_t slot) { return popcount16(mask & ((1u << (2 * slot)) - 1u)); }
-inline uint64_t block_start(uint64_t parent_word, uint32_t shift, uint32_t off) {
-  return ((parent_word >> shift) + off) << shift;
+// For a validated tree the result lies in the buffer (an offset never reaches before
+// word 0: the validator checks it).
+inline uint64_t block_start(uint64_t parent_word, uint32_t shift, int32_t off) {
+  return ((parent_word >> shift) + uint64_t(int64_t(off))) << shift;
 }
 
 // Level geometry of a stack of 2^k slices of 2^n x 2^n texels (MH §4 "non-cubic image

@@ -19,8 +19,15 @@ using namespace moct;
   throw FormatError(std::string("MH octree: ") + field + " at byte " + std::to_string(byte) + ": " + what);
 }
 
-// Walks every node reachable from the root once; marks catch overlaps and nodes reached
-// twice (the octree is a tree).
+// Walks every node stored in the tree once, depth first in slot order (the encoder's
+// layout order). A node's offset names a block: if the block's first child word is not
+// yet a node, the node claims the block (its children are validated here; marks catch
+// overlaps and words claimed twice); if it is, the block is shared, accepted only where
+// every child the node's mask names is already a validated node of that kind one level
+// down. A node of level l + 1 is validated, with its whole subtree, before any node of
+// level l that is not its ancestor is visited (only ancestors are on the recursion's
+// path), so a shared block reads only validated words; and every step goes one level
+// down, so no walk can loop.
 class Validator {
  public:
   Validator(const uint8_t* tree, uint64_t words, size_t tree_offset, const Geometry& geo, const uint8_t* shift)
@@ -35,6 +42,11 @@ class Validator {
   }
 
  private:
+  // mark_[w]: 0 no node; a node's first word: its code | (level + 1) << 3; an inner
+  // node's second word: kSecond.
+  static constexpr uint8_t kSecond = 4;
+  static uint8_t first_mark(uint32_t code, uint32_t level) { return uint8_t(code | (level + 1) << 3); }
+
   [[noreturn]] void fail_at(const char* field, uint64_t word, const std::string& what) const {
     fail(field, tree_offset_ + 4 * word, what);
   }
@@ -43,8 +55,8 @@ class Validator {
     const uint32_t size = code_words(code);
     if (p + size > words_) fail_at("node", p, "extends past the end of the buffer");
     if (mark_[p] || (size == 2 && mark_[p + 1])) fail_at("node", p, "reached twice or overlaps another node");
-    mark_[p] = 1;
-    if (size == 2) mark_[p + 1] = 1;
+    mark_[p] = first_mark(code, level);
+    if (size == 2) mark_[p + 1] = kSecond;
     ++nodes_;
     if (code != kCodeEmpty) {
       const uint64_t vp = code == kCodeLeaf ? p : p + 1;
@@ -60,11 +72,23 @@ class Validator {
       if (child_code(mask, s)) used |= 1u << s;
     if (used & ~geo_.slot_set(level))
       fail_at("child mask", p, "a child in a slot level " + std::to_string(level) + " does not split");
-    const uint32_t off = word_offset(w);
-    if (off == 0) fail_at("child offset", p, "zero (offsets point strictly forward)");
-    const uint64_t block = block_start(p, shift_[level], off);
+    const int32_t off = word_offset(w);
+    if (off == 0) fail_at("child offset", p, "zero");
+    const uint64_t block = block_start(p, shift_[level], off);  // wraps to a huge value before word 0
+    if (block >= words_ || block + popcount16(mask) > words_)
+      fail_at("child offset", p, "children block outside the tree");
+    if (mark_[block]) {  // a shared block: validated nodes of the kinds the mask names
+      for (uint32_t s = 0; s < kSlots; ++s)
+        if (const uint32_t cc = child_code(mask, s)) {
+          const uint64_t c = block + child_skip(mask, s);
+          if (mark_[c] != first_mark(cc, level + 1))
+            fail_at("child offset", p,
+                    "shared block: word " + std::to_string(c) + " is not a validated node of the child's kind at level " +
+                        std::to_string(level + 1));
+        }
+      return;
+    }
     if (block < p + size) fail_at("child offset", p, "children block overlaps its parent");
-    if (block + popcount16(mask) > words_) fail_at("child offset", p, "children block past the end of the buffer");
     for (uint32_t s = 0; s < kSlots; ++s)
       if (const uint32_t cc = child_code(mask, s)) node(block + child_skip(mask, s), cc, level + 1);
   }
@@ -86,6 +110,9 @@ MhOctree MhOctree::open(std::span<const uint8_t> bytes) {
   if (size < kHeaderFixedSize) fail("header", 0, "truncated: " + std::to_string(size) + " bytes, need at least 20");
   if (st::load_le<uint32_t>(b + kOffMagic) != kMagic) fail("magic", kOffMagic, "not an MH octree buffer");
   const uint16_t version = st::load_le<uint16_t>(b + kOffVersion);
+  if (version == 1)
+    fail("version", kOffVersion,
+         "version 1 (forward offsets only) is no longer read; this reader reads version 2: rebuild the stack");
   if (version != kVersion) fail("version", kOffVersion, "unsupported version " + std::to_string(version));
   MhOctree t;
   t.geo_.n = b[kOffXyLevel];

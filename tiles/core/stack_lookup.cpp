@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include "common/error.hpp"
@@ -17,16 +18,22 @@ thread_local uint64_t t_visited = 0, t_prefetched = 0;
 
 namespace {
 
-StackBounds::Range fill_bounds(const MhOctree& t, const MhOctree::Cursor& c, std::vector<StackBounds::Range>& out) {
-  const float v = t.value(c);
-  StackBounds::Range r{v, v};
+// Bounds of the values stored in a node's subtree (its own if valued, and every value
+// below), once per stored node: a node reached twice (a shared block) has one answer, so
+// the walk is linear in the tree's words whatever the sharing.
+StackBounds::Range fill_bounds(const MhOctree& t, const MhOctree::Cursor& c, std::vector<StackBounds::Range>& out,
+                               std::vector<uint8_t>& done) {
+  if (done[c.pos]) return out[c.pos];
+  StackBounds::Range r{std::numeric_limits<float>::infinity(), -std::numeric_limits<float>::infinity()};
+  if (c.code != moct::kCodeEmpty) r.lo = r.hi = t.value(c);
   MhOctree::Cursor ch;
   for (uint32_t slot = 0; slot < moct::kSlots; ++slot)
     if (t.child(c, slot, ch)) {
-      const StackBounds::Range b = fill_bounds(t, ch, out);
+      const StackBounds::Range b = fill_bounds(t, ch, out, done);
       r.lo = std::min(r.lo, b.lo), r.hi = std::max(r.hi, b.hi);
     }
   out[c.pos] = r;
+  done[c.pos] = 1;
   return r;
 }
 
@@ -35,7 +42,8 @@ StackBounds::Range fill_bounds(const MhOctree& t, const MhOctree::Cursor& c, std
 StackBounds::StackBounds(const MhOctree& octree) {
   const size_t words = (octree.byte_size() - moct::tree_offset(octree.geometry().levels())) / 4;
   range_.assign(std::max<size_t>(words, 1), {});
-  fill_bounds(octree, octree.root(), range_);  // recursion depth <= kMaxLevels
+  std::vector<uint8_t> done(range_.size(), 0);
+  fill_bounds(octree, octree.root(), range_, done);  // recursion depth <= kMaxLevels
 }
 
 StackLookup::StackLookup(const MhOctree& octree, const LightSet& lights)
@@ -167,7 +175,11 @@ float StackLookup::soft_visibility_bounded(const Vec3d& p, const StackBounds& bo
     const float d = float(lp.d);
     MhOctree::Cursor c = tree_.root(), next;
     for (;;) {
-      const StackBounds::Range& r = bounds.at(c.pos);
+      StackBounds::Range r = bounds.at(c.pos);
+      if (c.code == moct::kCodeEmpty) {  // its texels may read the inherited value
+        const float v = tree_.value(c);
+        r.lo = std::min(r.lo, v), r.hi = std::max(r.hi, v);
+      }
       if (d <= r.lo) {
         ++lit_samples;
         break;

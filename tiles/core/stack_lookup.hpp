@@ -33,8 +33,9 @@
 
 namespace st {
 
-// Per-node bounds of the depths the texels under an octree node can read (the node's own
-// or inherited value, and every value below it), computed by one walk when made: 8 bytes
+// Per-node bounds of the values stored in an octree node's subtree (its own value if it
+// has one, and every value below; an empty node's texels may also read the value it
+// inherits, which the lookup adds), computed by one walk when made: 8 bytes
 // per tree word, not stored in the format. They let a lookup stop at the first node
 // where a receiver depth lies at or below every such value (lit) or above all of them
 // (shadowed): StackLookup::soft_visibility_bounded. Throws nothing but std::bad_alloc.
