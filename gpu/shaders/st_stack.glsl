@@ -156,7 +156,8 @@ float st_oct_depth_resumed(uint base, uint x, uint y, uint w, uint level) {
     code = (mask >> (2u * slot)) & 3u;
     if (code == 0u) break;  // missing child: the walk ends at level l
     const uint shift = st_byte(base, 20u + l);
-    pos = (((pos >> shift) + (word >> 16u)) << shift) + uint(bitCount(mask & ((1u << (2u * slot)) - 1u)));
+    // off: signed, as in st_oct_depth (an earlier equal block when negative).
+    pos = (((pos >> shift) + uint(int(word) >> 16)) << shift) + uint(bitCount(mask & ((1u << (2u * slot)) - 1u)));
     if (code != 2u) val = code == 1u ? pos : pos + 1u;
     st_oct_path_pos[l + 1u] = pos;
     st_oct_path_val[l + 1u] = code == 1u ? val | kStOctPathLeaf : val;
