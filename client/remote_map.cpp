@@ -6,9 +6,6 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
-#if defined(__SSE2__)
-#include <emmintrin.h>
-#endif
 
 #include <shared_mutex>
 
@@ -169,26 +166,6 @@ size_t counter_shard() noexcept {
   return shard;
 }
 }  // namespace
-
-uint32_t RemoteMap::LookupScratch::holding(uint32_t kx, uint32_t ky) const {
-  static_assert(kRegions == 8);
-#if defined(__SSE2__)
-  const __m128i x = _mm_set1_epi32(int(kx)), y = _mm_set1_epi32(int(ky)), zero = _mm_setzero_si128();
-  auto half = [&](size_t at) {
-    const __m128i kx4 = _mm_load_si128(reinterpret_cast<const __m128i*>(key_x.data() + at));
-    const __m128i ky4 = _mm_load_si128(reinterpret_cast<const __m128i*>(key_y.data() + at));
-    const __m128i m4 = _mm_load_si128(reinterpret_cast<const __m128i*>(key_mask.data() + at));
-    const __m128i d = _mm_and_si128(_mm_or_si128(_mm_xor_si128(x, kx4), _mm_xor_si128(y, ky4)), m4);
-    return uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(d, zero))));
-  };
-  return half(0) | half(4) << 4;
-#else
-  uint32_t m = 0;
-  for (uint32_t i = 0; i < kRegions; ++i)
-    m |= uint32_t((((kx ^ key_x[i]) | (ky ^ key_y[i])) & key_mask[i]) == 0) << i;
-  return m;
-#endif
-}
 
 // The page-table walk of PackEvaluator::depth, over the cache: where a tile is missing,
 // the entry's own value answers (the node's value stands for all its descendants).
@@ -525,7 +502,7 @@ void RemoteMap::pcf_batch_shared(std::span<const PcfQuery> queries, std::span<fl
       out[i] = q.receiver <= g_value ? 1.0f : 0.0f;
       continue;
     }
-    if (const LookupScratch::Region* g = sc.find(q.level, x, y)) {  // another kept region
+    if (const LookupScratch::Region* g = sc.find_other(q.level, x, y)) {  // another kept region
       take(*g);
       ++counted[uint8_t(g_counted)];
       out[i] = q.receiver <= g_value ? 1.0f : 0.0f;

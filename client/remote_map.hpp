@@ -29,6 +29,9 @@
 #include <span>
 #include <string>
 #include <vector>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "client/deep_part.hpp"
 #include "client/rw_lock.hpp"
@@ -220,14 +223,36 @@ class RemoteMap final : public Evaluator {
     const Region* find(uint32_t l, uint64_t tx, uint64_t ty) {
       if (used == 0) return nullptr;
       if (regions[last].holds(l, tx, ty)) return &regions[last];
+      return find_other(l, tx, ty);
+    }
+    // find, the last one's region already tried.
+    const Region* find_other(uint32_t l, uint64_t tx, uint64_t ty) {
       if (((tx | ty) >> 24) != 0 || l > 254) return nullptr;  // outside every map: no region holds it
       const uint32_t m = holding(uint32_t(tx) | l << 24, uint32_t(ty));
       if (m == 0) return nullptr;
       last = uint32_t(__builtin_ctz(m));  // any holding region answers the same (the same texel's value)
       return &regions[last];
     }
-    // Bit i set: region i holds the texel of keys (kx, ky) (remote_map.cpp).
-    uint32_t holding(uint32_t kx, uint32_t ky) const;
+    // Bit i set: region i holds the texel of keys (kx, ky).
+    uint32_t holding(uint32_t kx, uint32_t ky) const {
+      static_assert(kRegions == 8);
+#if defined(__SSE2__)
+      const __m128i x = _mm_set1_epi32(int(kx)), y = _mm_set1_epi32(int(ky)), zero = _mm_setzero_si128();
+      auto half = [&](size_t at) {
+        const __m128i kx4 = _mm_load_si128(reinterpret_cast<const __m128i*>(key_x.data() + at));
+        const __m128i ky4 = _mm_load_si128(reinterpret_cast<const __m128i*>(key_y.data() + at));
+        const __m128i m4 = _mm_load_si128(reinterpret_cast<const __m128i*>(key_mask.data() + at));
+        const __m128i d = _mm_and_si128(_mm_or_si128(_mm_xor_si128(x, kx4), _mm_xor_si128(y, ky4)), m4);
+        return uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(d, zero))));
+      };
+      return half(0) | half(4) << 4;
+#else
+      uint32_t m = 0;
+      for (uint32_t i = 0; i < kRegions; ++i)
+        m |= uint32_t((((kx ^ key_x[i]) | (ky ^ key_y[i])) & key_mask[i]) == 0) << i;
+      return m;
+#endif
+    }
     void set_region(uint32_t l, uint64_t tx, uint64_t ty, uint32_t shift, float value, Counted c) {
       regions[next] = Region{l, shift, tx, ty, value, c};
       key_x[next] = uint32_t(tx) | l << 24;  // regions are set for texels of the map (< 2^20)
