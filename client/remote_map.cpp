@@ -167,6 +167,24 @@ size_t counter_shard() noexcept {
 }
 }  // namespace
 
+namespace {
+// How many of depth[0, n) the receiver lies at or in front of (receiver <= depth), four
+// at a time with SSE2 (the same IEEE comparison as the scalar test, NaN never lit).
+uint32_t count_lit(const float* depth, uint32_t n, float receiver) {
+  uint32_t k = 0, lit = 0;
+#if defined(__SSE2__)
+  const __m128 rv = _mm_set1_ps(receiver);
+  __m128i acc = _mm_setzero_si128();  // each lane counts down by one per lit tap (the mask is -1)
+  for (; k + 4 <= n; k += 4) acc = _mm_sub_epi32(acc, _mm_castps_si128(_mm_cmple_ps(rv, _mm_loadu_ps(depth + k))));
+  alignas(16) uint32_t lanes[4];
+  _mm_store_si128(reinterpret_cast<__m128i*>(lanes), acc);
+  lit = lanes[0] + lanes[1] + lanes[2] + lanes[3];
+#endif
+  for (; k < n; ++k) lit += receiver <= depth[k] ? 1u : 0u;
+  return lit;
+}
+}  // namespace
+
 // The page-table walk of PackEvaluator::depth, over the cache: where a tile is missing,
 // the entry's own value answers (the node's value stands for all its descendants).
 bool RemoteMap::enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc, float& value) const noexcept {
@@ -280,9 +298,7 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
     if (read_column(kx1, w.depth.data() + slot * r)) {
       w.col[slot] = kx1;
       w.slide = x + 1;
-      uint32_t lit_taps = 0;
-      for (uint32_t k = 0; k < r * r; ++k) lit_taps += receiver <= w.depth[k] ? 1u : 0u;
-      return float(lit_taps) / float(r * r);
+      return float(count_lit(w.depth.data(), r * r, receiver)) / float(r * r);
     }
   }
   w.slide = ~uint64_t(0);  // set again below where the window ends up holding the kernel
@@ -355,7 +371,7 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
           for (uint32_t k = 0; k < r; ++k) lit_taps += receiver <= col[k] ? 1u : 0u;
       }
       if (interior) {
-        for (uint32_t k = 0; k < r * r; ++k) lit_taps += receiver <= w.depth[k] ? 1u : 0u;
+        lit_taps = count_lit(w.depth.data(), r * r, receiver);
         if (w_rows) w.slide = x + 1;
       }
       return float(lit_taps) / float(r * r);
