@@ -294,10 +294,11 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
   // Sliding right along a row by one texel, away from the map's edges: the window holds
   // this kernel's first r - 1 columns (column tx in slot tx % r); read its last, count.
   if (same_rows && w.slide == x && interior && w_rows) {
-    const uint32_t slot = uint32_t(kx1 % r);
+    const uint32_t slot = w.slide_slot;  // kx1 % r without a division
     if (read_column(kx1, w.depth.data() + slot * r)) {
       w.col[slot] = kx1;
       w.slide = x + 1;
+      w.slide_slot = slot + 1 == r ? 0 : slot + 1;
       return float(count_lit(w.depth.data(), r * r, receiver)) / float(r * r);
     }
   }
@@ -323,7 +324,7 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
       if (i + 1 < r && pcf_tap(x, i + 1, r, side) != tx) slot = slot + 1 == r ? 0 : slot + 1;
     }
     std::fill_n(w.depth.begin(), r * r, value);
-    if (interior && w_rows) w.slide = x + 1;
+    if (interior && w_rows) w.slide = x + 1, w.slide_slot = uint32_t((kx1 + 1) % r);
   };
   for (int attempt = 0; attempt < 2; ++attempt) {
     const LookupScratch::Region* g = sc.find(level, kx0, ky0);
@@ -372,7 +373,7 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
       }
       if (interior) {
         lit_taps = count_lit(w.depth.data(), r * r, receiver);
-        if (w_rows) w.slide = x + 1;
+        if (w_rows) w.slide = x + 1, w.slide_slot = uint32_t((kx1 + 1) % r);
       }
       return float(lit_taps) / float(r * r);
     }

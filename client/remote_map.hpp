@@ -200,6 +200,7 @@ class RemoteMap final : public Evaluator {
       // The centre x of a kernel whose first r - 1 columns the window holds (the last
       // kernel was interior and this one's left neighbour; ~0: none): it reads one column.
       uint64_t slide = ~uint64_t(0);
+      uint32_t slide_slot;  // then the slot of its new column ((slide + (r - 1) / 2) % r, kept)
       std::array<uint64_t, kMaxPcf> col;        // each column's tap x (~0: none)
       std::array<float, kMaxPcf * kMaxPcf> depth;  // [column * r + row]
     };
