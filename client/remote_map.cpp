@@ -104,6 +104,7 @@ RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::v
   slot_used_ = std::make_unique<std::atomic<uint32_t>[]>(cache_.slot_count());  // zero: never used
   slot_eval_.resize(cache_.slot_count());
   slot_window_.resize(cache_.slot_count());
+  slot_walks_.resize(cache_.slot_count());
   slot_grid_.resize(cache_.slot_count());
   // Pages are requested (one per record), resident (one per slot) or constant: sized so
   // that requesting a page from a lookup does not grow the table.
@@ -166,6 +167,24 @@ size_t counter_shard() noexcept {
 }
 }  // namespace
 
+namespace {
+// How many of depth[0, n) the receiver lies at or in front of (receiver <= depth), four
+// at a time with SSE2 (the same IEEE comparison as the scalar test, NaN never lit).
+uint32_t count_lit(const float* depth, uint32_t n, float receiver) {
+  uint32_t k = 0, lit = 0;
+#if defined(__SSE2__)
+  const __m128 rv = _mm_set1_ps(receiver);
+  __m128i acc = _mm_setzero_si128();  // each lane counts down by one per lit tap (the mask is -1)
+  for (; k + 4 <= n; k += 4) acc = _mm_sub_epi32(acc, _mm_castps_si128(_mm_cmple_ps(rv, _mm_loadu_ps(depth + k))));
+  alignas(16) uint32_t lanes[4];
+  _mm_store_si128(reinterpret_cast<__m128i*>(lanes), acc);
+  lit = lanes[0] + lanes[1] + lanes[2] + lanes[3];
+#endif
+  for (; k < n; ++k) lit += receiver <= depth[k] ? 1u : 0u;
+  return lit;
+}
+}  // namespace
+
 // The page-table walk of PackEvaluator::depth, over the cache: where a tile is missing,
 // the entry's own value answers (the node's value stands for all its descendants).
 bool RemoteMap::enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc, float& value) const noexcept {
@@ -206,6 +225,7 @@ bool RemoteMap::enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch
   mark_used(page.slot);
   sc.ev = slot_eval_[page.slot].get();
   sc.win = slot_window_[page.slot];
+  sc.walks = slot_walks_[page.slot];
   sc.level = level;
   sc.rel = hit.rel;
   sc.x0 = x - hit.tx;
@@ -246,6 +266,43 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
   const uint64_t ky0 = pcf_tap(y, 0, r, side), ky1 = pcf_tap(y, r - 1, r, side);
   LookupScratch::Taps& w = sc.taps[level & 1];
   const bool same_rows = w.r == r && w.level == level && w.y == y;
+  const bool interior = kx1 - kx0 == r - 1, w_rows = ky1 - ky0 == r - 1;  // r consecutive columns, rows
+  // The column tx (inside the kernel's rows ky0..ky1, consecutive) into `col` without a
+  // per-tap walk: from the columns fetched ahead, one kept region holding it, or (inside
+  // the current tile) a window walk of it and the next columns up to kAhead, whose region
+  // is kept when one node holds them. False: none of these (the caller reads it tap by tap).
+  auto read_column = [&](uint64_t tx, float* col) {
+    LookupScratch::Ahead& a = sc.ahead;
+    if (a.n && a.level == level && a.r == r && a.y0 == ky0 && tx - a.x0 < a.n) {
+      std::copy_n(a.depth + (tx - a.x0) * r, r, col);
+      return true;
+    }
+    if (const LookupScratch::Region* g = sc.find(level, tx, ky0); g && g->holds(level, tx, ky1)) {
+      std::fill_n(col, r, sc.answer(*g));
+      return true;
+    }
+    if (!sc.win || !sc.covers(level, tx, ky0) || !sc.covers(level, tx, ky1)) return false;
+    ++sc.hits;
+    const uint32_t n = uint32_t(std::min<uint64_t>(LookupScratch::kAhead, sc.x0 + sc.side - tx));
+    const uint32_t shift = sc.win->depth_window(sc.rel, tx - sc.x0, ky0 - sc.y0, n, r, a.depth);
+    a.level = level, a.r = r, a.n = n, a.x0 = tx, a.y0 = ky0;
+    std::copy_n(a.depth, r, col);
+    if ((((tx ^ (tx + n - 1)) | (ky0 ^ ky1)) >> shift) == 0)
+      sc.set_region(level, tx, ky0, shift, col[0], LookupScratch::Counted::hit);
+    return true;
+  };
+  // Sliding right along a row by one texel, away from the map's edges: the window holds
+  // this kernel's first r - 1 columns (column tx in slot tx % r); read its last, count.
+  if (same_rows && w.slide == x && interior && w_rows) {
+    const uint32_t slot = w.slide_slot;  // kx1 % r without a division
+    if (read_column(kx1, w.depth.data() + slot * r)) {
+      w.col[slot] = kx1;
+      w.slide = x + 1;
+      w.slide_slot = slot + 1 == r ? 0 : slot + 1;
+      return float(count_lit(w.depth.data(), r * r, receiver)) / float(r * r);
+    }
+  }
+  w.slide = ~uint64_t(0);  // set again below where the window ends up holding the kernel
   // Whether the kernel around (x, y) (in the map) lies inside sc's current tile, or leaves
   // it only across the map's edges (where the tile's clamp is the map's).
   auto kernel_in_tile = [&] {
@@ -267,6 +324,7 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
       if (i + 1 < r && pcf_tap(x, i + 1, r, side) != tx) slot = slot + 1 == r ? 0 : slot + 1;
     }
     std::fill_n(w.depth.begin(), r * r, value);
+    if (interior && w_rows) w.slide = x + 1, w.slide_slot = uint32_t((kx1 + 1) % r);
   };
   for (int attempt = 0; attempt < 2; ++attempt) {
     const LookupScratch::Region* g = sc.find(level, kx0, ky0);
@@ -287,8 +345,6 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
       uint64_t prev = kx0;
       // Away from the map's left and right edges the kernel's r columns fill all r slots:
       // its taps are the whole window, counted in one branch-free pass.
-      const bool interior = kx1 - kx0 == r - 1;
-      const bool w_rows = ky1 - ky0 == r - 1;  // the rows are r consecutive texels (not at an edge)
       for (uint32_t i = 0; i < r; ++i) {
         const uint64_t tx = pcf_tap(x, i, r, side);
         if (tx != prev) slot = slot + 1 == r ? 0 : slot + 1, prev = tx;
@@ -299,21 +355,7 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
           // kAhead (inside the tile) in one window walk (shared down to their lowest
           // common node, each node once), whose region is kept when one node holds them.
           w.col[slot] = tx;
-          LookupScratch::Ahead& a = sc.ahead;
-          const LookupScratch::Region* g = nullptr;
-          if (a.n && a.level == level && a.r == r && a.y0 == ky0 && tx - a.x0 < a.n) {
-            std::copy_n(a.depth + (tx - a.x0) * r, r, col);
-          } else if ((g = sc.find(level, tx, ky0)) && g->holds(level, tx, ky1)) {
-            std::fill_n(col, r, sc.answer(*g));
-          } else {
-            ++sc.hits;
-            const uint32_t n = uint32_t(std::min<uint64_t>(LookupScratch::kAhead, sc.x0 + sc.side - tx));
-            const uint32_t shift = sc.win->depth_window(sc.rel, tx - sc.x0, ky0 - sc.y0, n, r, a.depth);
-            a.level = level, a.r = r, a.n = n, a.x0 = tx, a.y0 = ky0;
-            std::copy_n(a.depth, r, col);
-            if ((((tx ^ (tx + n - 1)) | (ky0 ^ ky1)) >> shift) == 0)
-              sc.set_region(level, tx, ky0, shift, col[0], LookupScratch::Counted::hit);
-          }
+          read_column(tx, col);
         } else if (w.col[slot] != tx) {
           w.col[slot] = tx;
           // The column's taps that one region holds take its value together.
@@ -329,8 +371,10 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
         if (!interior)
           for (uint32_t k = 0; k < r; ++k) lit_taps += receiver <= col[k] ? 1u : 0u;
       }
-      if (interior)
-        for (uint32_t k = 0; k < r * r; ++k) lit_taps += receiver <= w.depth[k] ? 1u : 0u;
+      if (interior) {
+        lit_taps = count_lit(w.depth.data(), r * r, receiver);
+        if (w_rows) w.slide = x + 1, w.slide_slot = uint32_t((kx1 + 1) % r);
+      }
       return float(lit_taps) / float(r * r);
     }
     // Not on the last kernels' rows: enter the centre's tile (no walk); a kernel inside it
@@ -429,80 +473,96 @@ void RemoteMap::pcf_batch(std::span<const PcfQuery> queries, std::span<float> ou
 void RemoteMap::pcf_batch_shared(std::span<const PcfQuery> queries, std::span<float> out,
                                  LookupScratch& sc) const noexcept {
   const size_t n = std::min(queries.size(), out.size());
-  // Single taps are collected per tile, in its texels, in up to kBins tiles at once (a
-  // screen tile's taps often straddle a tile border), and each tile's run is answered by
-  // the tile's own batch: its walks resume from the last walk's path and keep their
-  // regions (tiles/core/tap_batch.hpp), so a screen-coherent batch steps a level or two
-  // per tap. A tap in no collecting tile is answered by a kept region, or enters its tile
-  // (the page-table walk only), which takes over the bin least recently opened.
-  constexpr size_t kRun = 64, kBins = 4;
-  struct Bin {
-    const Evaluator* ev = nullptr;
-    uint32_t level = 0, rel = 0;
-    uint64_t x0 = 0, y0 = 0, side = 0;
-    size_t n = 0;
-    PcfQuery q[kRun];
-    uint32_t at[kRun];
-    float got[kRun];
+  const uint32_t map_level = header_.map_level;
+  // Single taps, one tight loop (MH 2016 §3.3's last-sample cache, across tiles and
+  // page-table entries alike): a tap in the region of the last answer costs one test; one
+  // in another kept region a few; the others walk their tile from the last walk's path
+  // there (TapWalks, tap_batch.hpp: a screen-coherent batch steps a level or two per
+  // tap), the tile found among the last few walked (a screen tile's taps often straddle a
+  // tile border) or entered through the page table. Every walk's region is kept.
+  constexpr size_t kTiles = 4;
+  struct Tile {
+    const Evaluator* ev;
+    const TapWalks* walks;  // null: depth_region, not resumed
+    uint32_t level, rel;
+    uint64_t x0, y0, side;
     bool covers(uint32_t l, uint64_t x, uint64_t y) const {
-      return ev && l == level && x - x0 < side && y - y0 < side;  // unsigned: x < x0 wraps
+      return l == level && x - x0 < side && y - y0 < side;  // unsigned: x < x0 wraps
     }
   };
-  Bin bins[kBins];
-  size_t next_bin = 0;
-  auto flush = [&](Bin& b) {
-    if (b.n == 0) return;
-    try {
-      b.ev->pcf_batch(std::span<const PcfQuery>(b.q, b.n), std::span<float>(b.got, b.n));
-    } catch (...) {  // an opened tile does not throw; if one did, stay lit and alive
-      std::fill_n(b.got, b.n, 1.0f);
-    }
-    for (size_t k = 0; k < b.n; ++k) out[b.at[k]] = b.got[k];
-    sc.hits += b.n;
-    b.n = 0;
+  Tile tiles[kTiles];
+  TapPath paths[kTiles];  // tiles[k]'s last walk
+  size_t used_tiles = 0, cur = 0, next_tile = 0;
+  // The last answer's region, in registers (level ~0: none); its answers counted by kind.
+  using Counted = LookupScratch::Counted;
+  uint32_t g_level = ~0u, g_shift = 0;
+  uint64_t g_x = 0, g_y = 0;
+  float g_value = 0;
+  Counted g_counted = Counted::none;
+  uint64_t counted[3] = {0, 0, 0};  // by Counted
+  auto take = [&](const LookupScratch::Region& g) {
+    g_level = g.level, g_shift = g.shift, g_x = g.x, g_y = g.y, g_value = g.value, g_counted = g.counted;
   };
-  auto add = [&](Bin& b, uint64_t x, uint64_t y, float receiver, size_t i) {
-    b.q[b.n] = PcfQuery{x - b.x0, y - b.y0, b.rel, 1, receiver};
-    b.at[b.n++] = uint32_t(i);
-    if (b.n == kRun) flush(b);
-  };
-  {
-    size_t last = 0;  // the bin the last tap went to
-    for (size_t i = 0; i < n; ++i) {
-      const PcfQuery& q = queries[i];
-      if (q.r > 1 || q.level > header_.map_level) {
-        out[i] = pcf_shared(q.level, q.x, q.y, q.r, q.receiver, sc);
-        continue;
-      }
-      const uint64_t top = (uint64_t(1) << q.level) - 1;  // pcf_tap's clamp of one tap
-      const uint64_t x = std::min(q.x, top), y = std::min(q.y, top);
-      if (bins[last].covers(q.level, x, y)) {
-        add(bins[last], x, y, q.receiver, i);
-        continue;
-      }
-      size_t b = 0;
-      while (b < kBins && !bins[b].covers(q.level, x, y)) ++b;
-      if (b < kBins) {
-        add(bins[last = b], x, y, q.receiver, i);
-        continue;
-      }
-      if (const LookupScratch::Region* g = sc.find(q.level, x, y)) {
-        out[i] = q.receiver <= sc.answer(*g) ? 1.0f : 0.0f;
-        continue;
-      }
-      float value;
-      if (!enter_tile(q.level, x, y, sc, value)) {  // a page-table value: its region is kept
-        out[i] = q.receiver <= value ? 1.0f : 0.0f;
-        continue;
-      }
-      Bin& nb = bins[last = next_bin];
-      next_bin = (next_bin + 1) % kBins;
-      flush(nb);
-      nb.ev = sc.ev, nb.level = sc.level, nb.rel = sc.rel, nb.x0 = sc.x0, nb.y0 = sc.y0, nb.side = sc.side;
-      add(nb, x, y, q.receiver, i);
+  if (sc.used) take(sc.regions[sc.last]);
+  uint64_t walked = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const PcfQuery& q = queries[i];
+    if (q.r > 1 || q.level > map_level) {
+      out[i] = pcf_shared(q.level, q.x, q.y, q.r, q.receiver, sc);
+      if (sc.used) take(sc.regions[sc.last]);
+      continue;
     }
-    for (Bin& b : bins) flush(b);
+    const uint64_t top = (uint64_t(1) << q.level) - 1;  // pcf_tap's clamp of one tap
+    const uint64_t x = std::min(q.x, top), y = std::min(q.y, top);
+    if (q.level == g_level && (((x ^ g_x) | (y ^ g_y)) >> g_shift) == 0) {
+      ++counted[uint8_t(g_counted)];
+      out[i] = q.receiver <= g_value ? 1.0f : 0.0f;
+      continue;
+    }
+    if (const LookupScratch::Region* g = sc.find_other(q.level, x, y)) {  // another kept region
+      take(*g);
+      ++counted[uint8_t(g_counted)];
+      out[i] = q.receiver <= g_value ? 1.0f : 0.0f;
+      continue;
+    }
+    size_t t = cur;
+    if (!(used_tiles && tiles[t].covers(q.level, x, y))) {
+      t = 0;
+      while (t < used_tiles && !tiles[t].covers(q.level, x, y)) ++t;
+      if (t == used_tiles) {
+        float value;
+        if (!enter_tile(q.level, x, y, sc, value)) {  // a page-table value: its region is kept
+          take(sc.regions[sc.last]);
+          out[i] = q.receiver <= value ? 1.0f : 0.0f;
+          continue;
+        }
+        t = used_tiles < kTiles ? used_tiles++ : next_tile;
+        next_tile = (t + 1) % kTiles;
+        tiles[t] = Tile{sc.ev, sc.walks, sc.level, sc.rel, sc.x0, sc.y0, sc.side};
+        paths[t].owner = nullptr;  // a new tile: its path starts empty
+      }
+      cur = t;
+    }
+    const Tile& tl = tiles[t];
+    DepthRegion r;
+    if (tl.walks) {
+      r = tl.walks->walk_tap(tl.rel, x - tl.x0, y - tl.y0, paths[t]);
+    } else {
+      try {
+        r = tl.ev->depth_region(tl.rel, x - tl.x0, y - tl.y0);
+      } catch (...) {  // an opened tile does not throw; if one did, stay lit and alive
+        r = DepthRegion{kLitDepth, 0};
+      }
+    }
+    ++walked;
+    // The tile is aligned to its side (>= the region's), so the region holds in map texels.
+    sc.set_region(q.level, x, y, r.shift, r.value, Counted::hit);
+    g_level = q.level, g_shift = r.shift, g_x = x, g_y = y, g_value = r.value, g_counted = Counted::hit;
+    out[i] = q.receiver <= r.value ? 1.0f : 0.0f;
   }
+  sc.hits += walked + counted[uint8_t(Counted::hit)];
+  sc.missed += counted[uint8_t(Counted::coarse)];
+  sc.coarse += counted[uint8_t(Counted::coarse)];
 }
 
 namespace {
@@ -902,6 +962,7 @@ void RemoteMap::tile_arrived(const proto::TileMeta& meta, uint32_t request_id,
     } else {
       slot_eval_[slot] = std::move(ev);
       slot_window_[slot] = dynamic_cast<const WindowDepths*>(slot_eval_[slot].get());
+      slot_walks_[slot] = dynamic_cast<const TapWalks*>(slot_eval_[slot].get());
       slot_grid_[slot] = std::move(grid);
       bool committed = false;
       try {

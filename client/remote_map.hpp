@@ -29,6 +29,9 @@
 #include <span>
 #include <string>
 #include <vector>
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
 
 #include "client/deep_part.hpp"
 #include "client/rw_lock.hpp"
@@ -159,6 +162,7 @@ class RemoteMap final : public Evaluator {
   struct LookupScratch {
     const Evaluator* ev = nullptr;  // the current tile (null: none)
     const WindowDepths* win = nullptr;  // the current tile's window walk (null: it has none)
+    const TapWalks* walks = nullptr;    // the current tile's resumable single taps (null: none)
     uint32_t level = 0, rel = 0;    // lookup level; the tile's level relative to its root
     uint64_t x0 = 0, y0 = 0, side = 0;  // the tile's texels at `level`: [x0, x0 + side)
     // The last answers' regions (Evaluator::DepthRegion, page_table.hpp PageHit): texels
@@ -179,6 +183,12 @@ class RemoteMap final : public Evaluator {
     static constexpr uint32_t kRegions = 8;
     std::array<Region, kRegions> regions;  // the first `used` are kept
     uint32_t used = 0, last = 0, next = 0;  // how many; the one answered last; the one replaced next
+    // The regions again as 32-bit keys, for find's branch-free scan of all of them at once
+    // (levels <= 20, so a texel fits in 24 bits and the level in the top 8 of key_x): a
+    // texel's keys kx, ky are held by region i when ((kx ^ key_x[i]) | (ky ^ key_y[i])) &
+    // key_mask[i] is 0. A slot not kept has key_x ~0 (level 255), which no texel matches.
+    alignas(16) std::array<uint32_t, kRegions> key_x{~0u, ~0u, ~0u, ~0u, ~0u, ~0u, ~0u, ~0u};
+    alignas(16) std::array<uint32_t, kRegions> key_y{}, key_mask{~0u, ~0u, ~0u, ~0u, ~0u, ~0u, ~0u, ~0u};
     // The tap depths of the last kernels (pcf_shared), one window per level parity (a
     // filtered lookup alternates two adjacent levels): a kernel on the same row of taps
     // reuses the columns it shares with the last one and reads only its new ones, so a
@@ -187,6 +197,10 @@ class RemoteMap final : public Evaluator {
     struct Taps {
       uint32_t level, r = 0;
       uint64_t y;                               // the kernel's centre row: same y, same rows
+      // The centre x of a kernel whose first r - 1 columns the window holds (the last
+      // kernel was interior and this one's left neighbour; ~0: none): it reads one column.
+      uint64_t slide = ~uint64_t(0);
+      uint32_t slide_slot;  // then the slot of its new column ((slide + (r - 1) / 2) % r, kept)
       std::array<uint64_t, kMaxPcf> col;        // each column's tap x (~0: none)
       std::array<float, kMaxPcf * kMaxPcf> depth;  // [column * r + row]
     };
@@ -210,15 +224,41 @@ class RemoteMap final : public Evaluator {
     const Region* find(uint32_t l, uint64_t tx, uint64_t ty) {
       if (used == 0) return nullptr;
       if (regions[last].holds(l, tx, ty)) return &regions[last];
-      for (uint32_t i = 0; i < used; ++i)
-        if (regions[i].holds(l, tx, ty)) {
-          last = i;
-          return &regions[i];
-        }
-      return nullptr;
+      return find_other(l, tx, ty);
+    }
+    // find, the last one's region already tried.
+    const Region* find_other(uint32_t l, uint64_t tx, uint64_t ty) {
+      if (((tx | ty) >> 24) != 0 || l > 254) return nullptr;  // outside every map: no region holds it
+      const uint32_t m = holding(uint32_t(tx) | l << 24, uint32_t(ty));
+      if (m == 0) return nullptr;
+      last = uint32_t(__builtin_ctz(m));  // any holding region answers the same (the same texel's value)
+      return &regions[last];
+    }
+    // Bit i set: region i holds the texel of keys (kx, ky).
+    uint32_t holding(uint32_t kx, uint32_t ky) const {
+      static_assert(kRegions == 8);
+#if defined(__SSE2__)
+      const __m128i x = _mm_set1_epi32(int(kx)), y = _mm_set1_epi32(int(ky)), zero = _mm_setzero_si128();
+      auto half = [&](size_t at) {
+        const __m128i kx4 = _mm_load_si128(reinterpret_cast<const __m128i*>(key_x.data() + at));
+        const __m128i ky4 = _mm_load_si128(reinterpret_cast<const __m128i*>(key_y.data() + at));
+        const __m128i m4 = _mm_load_si128(reinterpret_cast<const __m128i*>(key_mask.data() + at));
+        const __m128i d = _mm_and_si128(_mm_or_si128(_mm_xor_si128(x, kx4), _mm_xor_si128(y, ky4)), m4);
+        return uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(d, zero))));
+      };
+      return half(0) | half(4) << 4;
+#else
+      uint32_t m = 0;
+      for (uint32_t i = 0; i < kRegions; ++i)
+        m |= uint32_t((((kx ^ key_x[i]) | (ky ^ key_y[i])) & key_mask[i]) == 0) << i;
+      return m;
+#endif
     }
     void set_region(uint32_t l, uint64_t tx, uint64_t ty, uint32_t shift, float value, Counted c) {
       regions[next] = Region{l, shift, tx, ty, value, c};
+      key_x[next] = uint32_t(tx) | l << 24;  // regions are set for texels of the map (< 2^20)
+      key_y[next] = uint32_t(ty);
+      key_mask[next] = ~((1u << shift) - 1u);
       last = next;
       next = (next + 1) % kRegions;
       used = std::min(used + 1, kRegions);
@@ -315,6 +355,7 @@ class RemoteMap final : public Evaluator {
   mutable std::array<CounterShard, kCounterShards> counters_;
   std::vector<std::unique_ptr<Evaluator>> slot_eval_;  // encoded tiles, per slot
   std::vector<const WindowDepths*> slot_window_;       // slot_eval_'s window walk, or null
+  std::vector<const TapWalks*> slot_walks_;            // slot_eval_'s resumable single taps, or null
   std::vector<CutGrid> slot_grid_;                     // index tiles, per slot
   // want_capacity queued + max_in_flight * tiles_per_request sent; never grows.
   mutable TileRequests requests_;

@@ -94,6 +94,43 @@ TEST(DepthRegion, BatchedSingleTapsAnswerLikePcf) {
   }
 }
 
+// TapWalks::walk_tap (tiles/core/tap_batch.hpp: one resumed walk, the path kept by the
+// caller) gives depth_region's answer and region bit for bit, with one path switched
+// between two trees (a new owner starts afresh) and walks in scan order, zigzag and at
+// random texels and levels (resumed, restarted).
+TEST(DepthRegion, ResumedSingleWalksAnswerLikeDepthRegion) {
+  const uint32_t L = fields::small_test_scale() ? 6 : 7, side = 1u << L;
+  for (const fields::NamedField& f : fields::all_fields(side, 20261205)) {
+    const Hierarchy h = build_hierarchy(f.tile);
+    for (Encoding e : {Encoding::mh, Encoding::mmh, Encoding::dagmh}) {
+      SCOPED_TRACE(f.name + " " + to_string(e));
+      const std::vector<uint8_t> bytes = encode(h, e);
+      const auto a = open_encoded(e, bytes), b = open_encoded(e, bytes);
+      const TapWalks* wa = dynamic_cast<const TapWalks*>(a.get());
+      const TapWalks* wb = dynamic_cast<const TapWalks*>(b.get());
+      ASSERT_TRUE(wa && wb);
+      fields::Rng rng(uint64_t(e) + 11);
+      TapPath path;
+      auto check = [&](uint32_t level, uint64_t x, uint64_t y) {
+        const bool first = rng.next() % 5 != 0;  // now and then the other tree, same path
+        const DepthRegion got = (first ? wa : wb)->walk_tap(level, x, y, path);
+        const DepthRegion want = a->depth_region(level, x, y);
+        ASSERT_EQ(bits(got.value), bits(want.value)) << "level " << level << " at " << x << "," << y;
+        ASSERT_EQ(got.shift, want.shift) << "level " << level << " at " << x << "," << y;
+      };
+      for (uint32_t level : {L, L - 2})
+        for (uint64_t y = 0; y < (uint64_t(1) << level); y += 2)
+          for (uint64_t k = 0; k < (uint64_t(1) << level); ++k)
+            ASSERT_NO_FATAL_FAILURE(check(level, (y / 2) & 1 ? (uint64_t(1) << level) - 1 - k : k, y));
+      for (uint32_t k = 0; k < 2000; ++k) {
+        const uint32_t level = uint32_t(rng.next() % (L + 1));
+        ASSERT_NO_FATAL_FAILURE(check(level, rng.next() & ((uint64_t(1) << level) - 1),
+                                      rng.next() & ((uint64_t(1) << level) - 1)));
+      }
+    }
+  }
+}
+
 // WindowDepths (tiles/core/tap_batch.hpp): every texel of a window walk's rectangle gets
 // depth()'s bits, for rectangles of 1..9 texels a side anywhere (corners, straddling the
 // quadrants of every level), at every level; the region it reports holds out[0] for the

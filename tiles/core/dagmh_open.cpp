@@ -16,7 +16,7 @@
 namespace st {
 namespace {
 
-class DagmhEvaluator final : public Evaluator, public WindowDepths {
+class DagmhEvaluator final : public Evaluator, public WindowDepths, public TapWalks {
  public:
   DagmhEvaluator(const dagmh::View& view, std::shared_ptr<const dagmh::Dictionary> dict)
       : v_(view), dict_(std::move(dict)) {}
@@ -41,28 +41,36 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths {
   // passes (the path above the highest differing bit), so it ends at the same index.
   void pcf_batch(std::span<const PcfQuery> queries, std::span<float> out) const override {
     WalkPath<dagmh::Cursor> path;
-    single_tap_batch(*this, queries, out, [&](uint32_t level, uint64_t x, uint64_t y) -> DepthRegion {
-      if (level >= std::size(path.at)) return depth_region(level, x, y);
-      dagmh::Cursor c;
-      uint32_t from = 0;
-      if (path.resume(level, x, y, from)) {
-        c = path.at[from];
-        path.hi = from;
-      } else {
-        c = v_.start(level, level, x, y);
-        path.lo = path.hi = c.level;
-        path.at[c.level] = c;
-      }
-      while ((c.ref & dagmh::kRefTagMask) == dagmh::kRefInner && c.level < level) {
-        c = v_.descend(c, c.level + 1, level, x, y);  // one level: descend's own step
-        path.at[c.level] = c;
-        path.hi = c.level;
-      }
-      path.level = level, path.x = x, path.y = y;
-      uint32_t shift = 0;
-      const uint32_t index = v_.finish_region(c, level, x, y, shift);
-      return {v_.value(index), shift};
-    });
+    single_tap_batch(*this, queries, out,
+                     [&](uint32_t level, uint64_t x, uint64_t y) { return walk_resumed(path, level, x, y); });
+  }
+
+  // TapWalks (tap_batch.hpp): the same walk, its path kept by the caller.
+  DepthRegion walk_tap(uint32_t level, uint64_t x, uint64_t y, TapPath& path) const noexcept override {
+    return walk_resumed(tap_path<WalkPath<dagmh::Cursor>>(path, this), level, x, y);
+  }
+
+  DepthRegion walk_resumed(WalkPath<dagmh::Cursor>& path, uint32_t level, uint64_t x, uint64_t y) const {
+    if (level >= std::size(path.at)) return depth_region(level, x, y);
+    dagmh::Cursor c;
+    uint32_t from = 0;
+    if (path.resume(level, x, y, from)) {
+      c = path.at[from];
+      path.hi = from;
+    } else {
+      c = v_.start(level, level, x, y);
+      path.lo = path.hi = c.level;
+      path.at[c.level] = c;
+    }
+    while ((c.ref & dagmh::kRefTagMask) == dagmh::kRefInner && c.level < level) {
+      c = v_.descend(c, c.level + 1, level, x, y);  // one level: descend's own step
+      path.at[c.level] = c;
+      path.hi = c.level;
+    }
+    path.level = level, path.x = x, path.y = y;
+    uint32_t shift = 0;
+    const uint32_t index = v_.finish_region(c, level, x, y, shift);
+    return {v_.value(index), shift};
   }
 
   // The kernel's window of distinct texels in one window walk (depth_window: the walk to

@@ -106,7 +106,7 @@ class Validator {
 // the word of the last valued node and reads the float once at the end. MMH must sum the
 // relative values along the path, so it reads each valued node it passes.
 template <bool kRelative>
-class TreeEvaluator final : public Evaluator, public WindowDepths {
+class TreeEvaluator final : public Evaluator, public WindowDepths, public TapWalks {
  public:
   TreeEvaluator(std::span<const uint8_t> bytes, const TreeInfo& info)
       : tree_(bytes.data() + info.tree_offset), finest_(info.levels - 1), root_leaf_(info.root_leaf),
@@ -131,33 +131,16 @@ class TreeEvaluator final : public Evaluator, public WindowDepths {
   }
 
   // Single taps through kept regions and walks resumed from the last walk's path
-  // (tap_batch.hpp). A cursor that found its next child missing is not kept (its flag
-  // belongs to the old texel's child), only the nodes the walk entered.
+  // (tap_batch.hpp).
   void pcf_batch(std::span<const PcfQuery> queries, std::span<float> out) const override {
     WalkPath<Cursor> path;
-    single_tap_batch(*this, queries, out, [&](uint32_t level, uint64_t x, uint64_t y) -> DepthRegion {
-      if (level > kMaxLevel) return depth_region(level, x, y);
-      Cursor c;
-      uint32_t from = 0;
-      if (path.resume(level, x, y, from)) {
-        c = path.at[from];
-        path.hi = from;
-      } else {
-        c = root();
-        path.lo = path.hi = 0;
-        path.at[0] = c;
-      }
-      while (c.level < level && c.code != kCodeLeaf) {
-        Cursor step = c;
-        descend(step, level, x, y, c.level + 1);  // one level: descend's own step
-        c = step;
-        if (c.missing) break;
-        path.at[c.level] = c;
-        path.hi = c.level;
-      }
-      path.level = level, path.x = x, path.y = y;
-      return {value(c), level - (c.missing ? c.level + 1 : c.level)};
-    });
+    single_tap_batch(*this, queries, out,
+                     [&](uint32_t level, uint64_t x, uint64_t y) { return walk_resumed(path, level, x, y); });
+  }
+
+  // TapWalks (tap_batch.hpp): the same walk, its path kept by the caller.
+  DepthRegion walk_tap(uint32_t level, uint64_t x, uint64_t y, TapPath& path) const noexcept override {
+    return walk_resumed(tap_path<WalkPath<Cursor>>(path, this), level, x, y);
   }
 
   // MH §3.3, Fig. 5: the taps share the root path down to the lowest common node of the
@@ -230,6 +213,33 @@ class TreeEvaluator final : public Evaluator, public WindowDepths {
   };
 
   uint32_t word(uint64_t w) const { return st::load_le<uint32_t>(tree_ + 4 * w); }
+
+  // depth_region's answer, the walk resumed from the deepest node of `path` (the last
+  // walk) on this texel's path. A cursor that found its next child missing is not kept
+  // (its flag belongs to the old texel's child), only the nodes the walk entered.
+  DepthRegion walk_resumed(WalkPath<Cursor>& path, uint32_t level, uint64_t x, uint64_t y) const {
+    if (level > kMaxLevel) return depth_region(level, x, y);
+    Cursor c;
+    uint32_t from = 0;
+    if (path.resume(level, x, y, from)) {
+      c = path.at[from];
+      path.hi = from;
+    } else {
+      c = root();
+      path.lo = path.hi = 0;
+      path.at[0] = c;
+    }
+    while (c.level < level && c.code != kCodeLeaf) {
+      Cursor step = c;
+      descend(step, level, x, y, c.level + 1);  // one level: descend's own step
+      c = step;
+      if (c.missing) break;
+      path.at[c.level] = c;
+      path.hi = c.level;
+    }
+    path.level = level, path.x = x, path.y = y;
+    return {value(c), level - (c.missing ? c.level + 1 : c.level)};
+  }
 
   Cursor root() const {
     Cursor c;

@@ -15,7 +15,9 @@
 #pragma once
 #include <algorithm>
 #include <cstdint>
+#include <new>
 #include <span>
+#include <type_traits>
 
 #include "tiles/core/evaluator.hpp"
 
@@ -52,7 +54,13 @@ inline void window_put(float value, uint64_t ax, uint64_t ay, uint64_t bx, uint6
 // The walker's path: Cursor of each level of the last walk, levels [lo, hi] valid.
 template <class Cursor, uint32_t kLevels = 33>
 struct WalkPath {
-  Cursor at[kLevels];
+  static_assert(std::is_trivially_copyable_v<Cursor> && std::is_trivially_destructible_v<Cursor>);
+  // Not initialized (a level is written before it is read: [lo, hi] only), so a path on
+  // the stack costs nothing for a batch of one tap.
+  union {
+    Cursor at[kLevels];
+  };
+  WalkPath() {}
   uint32_t lo = 1, hi = 0, level = 0;  // lo > hi: empty
   uint64_t x = 0, y = 0;
   // The deepest kept level on (x, y)'s path at `level` (false: none, start afresh).
@@ -67,6 +75,46 @@ struct WalkPath {
     return true;
   }
 };
+
+// The state a caller keeps between the single-tap walks of one tile (TapWalks): the last
+// walk's path, in storage the tile's evaluator interprets (tap_path). Opaque to the
+// caller, who only keeps it alive across a run of taps; nothing in it is initialized
+// until a walk uses it, so one on the stack costs nothing.
+struct TapPath {
+  static constexpr size_t kBytes = 2048;
+  alignas(16) unsigned char raw[kBytes];
+  const void* type = nullptr;   // which path type raw holds (null: none yet)
+  const void* owner = nullptr;  // the evaluator whose last walk it holds
+};
+
+// A tile's single tap as one call that resumes from the last walk's path (the walks of
+// single_tap_batch below, one at a time): the client answers most taps of a batch from
+// the regions it keeps (MH 2016 §3.3's last-sample cache) without calling the tile, and
+// calls walk_tap only for the others, keeping one TapPath per tile it walks in. Returns
+// depth_region(level, x, y) bit for bit, for x, y < 2^level, level <= finest_level().
+// No allocation, no exception.
+class TapWalks {
+ public:
+  virtual DepthRegion walk_tap(uint32_t level, uint64_t x, uint64_t y, TapPath& path) const noexcept = 0;
+
+ protected:
+  ~TapWalks() = default;
+};
+
+// The Path (a WalkPath) that `p` holds for `owner`: made in place on first use, emptied
+// when it last held another owner's walk (a path resumes only within one tree).
+template <class Path>
+Path& tap_path(TapPath& p, const void* owner) {
+  static_assert(sizeof(Path) <= TapPath::kBytes && alignof(Path) <= 16 && std::is_trivially_destructible_v<Path>);
+  static constexpr char kType = 0;  // one address per Path type
+  if (p.type != &kType) {
+    p.type = &kType, p.owner = owner;
+    return *::new (static_cast<void*>(p.raw)) Path();
+  }
+  Path& path = *std::launder(reinterpret_cast<Path*>(p.raw));
+  if (p.owner != owner) path.lo = 1, path.hi = 0, p.owner = owner;
+  return path;
+}
 
 // walk(level, x, y) -> DepthRegion: depth_region's answer for x, y < 2^level, level <=
 // ev.finest_level() (the walker keeps its own WalkPath).
