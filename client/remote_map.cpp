@@ -206,6 +206,7 @@ bool RemoteMap::enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch
   mark_used(page.slot);
   sc.ev = slot_eval_[page.slot].get();
   sc.win = slot_window_[page.slot];
+  if (sc.win) sc.win->prefetch();  // the tile's walks follow (WindowDepths::prefetch)
   sc.level = level;
   sc.rel = hit.rel;
   sc.x0 = x - hit.tx;

@@ -18,8 +18,9 @@ namespace {
 
 class DagmhEvaluator final : public Evaluator, public WindowDepths {
  public:
-  DagmhEvaluator(const dagmh::View& view, std::shared_ptr<const dagmh::Dictionary> dict)
-      : v_(view), dict_(std::move(dict)) {}
+  DagmhEvaluator(const dagmh::View& view, std::span<const uint8_t> bytes,
+                 std::shared_ptr<const dagmh::Dictionary> dict)
+      : v_(view), bytes_(bytes.data()), size_(bytes.size()), dict_(std::move(dict)) {}
 
   uint32_t finest_level() const override { return v_.finest_level; }
 
@@ -63,6 +64,21 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths {
       const uint32_t index = v_.finish_region(c, level, x, y, shift);
       return {v_.value(index), shift};
     });
+  }
+
+  // WindowDepths::prefetch: the tile's first kPrefetchBytes (all of it for every tile of
+  // the 4K^2 city's pack: at most 1,844 bytes, 529 on average; a larger tile's first bytes
+  // hold its header, skip table and top nodes, which every walk reads) and the root node
+  // when the pack dictionary holds it. A walk's loads depend on each other (node, child,
+  // treelet, chunk, multipliers), so a tile whose lines left the cache otherwise costs a
+  // batch several misses in a row; this asks for them all at once, when the client enters
+  // the tile and before it collects the tile's taps.
+  void prefetch() const noexcept override {
+    const size_t n = std::min(size_, kPrefetchBytes);
+    for (size_t o = 0; o < n; o += 64) __builtin_prefetch(bytes_ + o);
+    if ((v_.root_ref & dagmh::kRefTagMask) == dagmh::kRefInner &&
+        (v_.root_ref & dagmh::kRefIndexMask) < v_.dict_node_words)
+      __builtin_prefetch(v_.node_at(v_.root_ref & dagmh::kRefIndexMask));
   }
 
   // The kernel's window of distinct texels in one window walk (depth_window: the walk to
@@ -202,19 +218,23 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths {
     x = std::min(x, top), y = std::min(y, top);
   }
 
+  static constexpr size_t kPrefetchBytes = 2048;
+
   dagmh::View v_;
+  const uint8_t* bytes_;  // the tile buffer the view points into (for prefetch)
+  size_t size_;
   std::shared_ptr<const dagmh::Dictionary> dict_;  // kept alive while the view points into it
 };
 
 }  // namespace
 
 std::unique_ptr<Evaluator> open_dagmh(std::span<const uint8_t> bytes) {
-  return std::make_unique<DagmhEvaluator>(dagmh::validate(bytes), nullptr);
+  return std::make_unique<DagmhEvaluator>(dagmh::validate(bytes), bytes, nullptr);
 }
 
 std::unique_ptr<Evaluator> open_dagmh(std::span<const uint8_t> bytes, std::shared_ptr<const dagmh::Dictionary> dict) {
   const dagmh::View view = dagmh::validate(bytes, dict.get());
-  return std::make_unique<DagmhEvaluator>(view, std::move(dict));
+  return std::make_unique<DagmhEvaluator>(view, bytes, std::move(dict));
 }
 
 }  // namespace st
