@@ -37,33 +37,87 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths {
     return {v_.value(index), shift};
   }
 
-  // Single taps through kept regions and walks resumed from the last walk's path
-  // (tap_batch.hpp): a resumed walk starts at a cursor the same walk from the skip table
-  // passes (the path above the highest differing bit), so it ends at the same index.
+  // Single taps (tap_batch.hpp's scheme, with wider kept regions): a tap inside a kept
+  // answer's region takes its value without a walk (MH 2016 §3.3's last-sample cache); a
+  // walk resumes from the deepest cursor of the last walk on its own path (DAG-MH §3.5:
+  // the path above the highest bit in which the texels differ), a cursor the walk from the
+  // skip table passes, so it ends at the same index. A kept region is a node's children
+  // that share the answer (View::finish_siblings; below a missing child, every missing
+  // child of its parent, which all answer the parent's `last`), so a row of taps crossing
+  // a node walks once for its empty children, not once per child. out[i] equals
+  // pcf(level, x, y, 1, receiver) bit for bit (tests/tiles/depth_region_test.cpp).
   void pcf_batch(std::span<const PcfQuery> queries, std::span<float> out) const override {
+    const size_t n = std::min(queries.size(), out.size());
     WalkPath<dagmh::Cursor> path;
-    single_tap_batch(*this, queries, out, [&](uint32_t level, uint64_t x, uint64_t y) -> DepthRegion {
-      if (level >= std::size(path.at)) return depth_region(level, x, y);
-      dagmh::Cursor c;
-      uint32_t from = 0;
-      if (path.resume(level, x, y, from)) {
-        c = path.at[from];
-        path.hi = from;
+    struct Kept {  // the texels of `level` under node (x, y) `s` levels up, children in `mask`
+      uint32_t level, s, mask;
+      float value;
+      uint64_t x, y;
+      bool holds(uint32_t l, uint64_t tx, uint64_t ty) const {
+        const uint32_t child = uint32_t((tx >> (s - 1)) & 1) | uint32_t(((ty >> (s - 1)) & 1) << 1);
+        return l == level && (tx >> s) == x && (ty >> s) == y && ((mask >> child) & 1);
+      }
+    };
+    constexpr uint32_t kKept = 4;
+    Kept kept[kKept];
+    uint32_t used = 0, next = 0, last = 0;
+    for (size_t i = 0; i < n; ++i) {
+      const PcfQuery& q = queries[i];
+      if (q.r > 1 || q.level > v_.finest_level) {
+        out[i] = pcf(q.level, q.x, q.y, q.r, q.receiver);
+        continue;
+      }
+      const uint32_t level = q.level;
+      const uint64_t top = (uint64_t(1) << level) - 1;  // pcf_tap's clamp of a 1-tap kernel
+      const uint64_t x = std::min(q.x, top), y = std::min(q.y, top);
+      const Kept* hit = nullptr;
+      if (used) {
+        if (kept[last].holds(level, x, y)) hit = &kept[last];
+        for (uint32_t j = 0; !hit && j < used; ++j)
+          if (kept[j].holds(level, x, y)) hit = &kept[j], last = j;
+      }
+      float value;
+      if (hit) {
+        value = hit->value;
       } else {
-        c = v_.start(level, level, x, y);
-        path.lo = path.hi = c.level;
-        path.at[c.level] = c;
+        dagmh::Cursor c;
+        uint32_t from = 0;
+        if (path.resume(level, x, y, from)) {
+          c = path.at[from];
+          path.hi = from;
+        } else {
+          c = v_.start(level, level, x, y);
+          path.lo = path.hi = c.level;
+          path.at[c.level] = c;
+        }
+        while ((c.ref & dagmh::kRefTagMask) == dagmh::kRefInner && c.level < level) {
+          c = v_.descend(c, c.level + 1, level, x, y);  // one level: descend's own step
+          path.at[c.level] = c;
+          path.hi = c.level;
+        }
+        path.level = level, path.x = x, path.y = y;
+        uint32_t index, s, mask;
+        const uint32_t tag = c.ref & dagmh::kRefTagMask;
+        if (tag == dagmh::kRefInner || tag == dagmh::kRefTreelet) {
+          index = v_.finish_siblings(c, level, x, y, s, mask);
+        } else {  // the missing child at c.level: its parent's other missing children answer alike
+          index = c.last;
+          s = level - c.level + 1;
+          const uint32_t child = uint32_t((x >> (s - 1)) & 1) | uint32_t(((y >> (s - 1)) & 1) << 1);
+          mask = 1u << child;
+          if (c.level > path.lo) {  // the parent is on the path: an inner node (descend's step)
+            const dagmh::Cursor& p = path.at[c.level - 1];
+            mask = ~st::load_le<uint32_t>(v_.node_at(p.ref & dagmh::kRefIndexMask)) & dagmh::kNodeChildMask;
+          }
+        }
+        value = v_.value(index);
+        kept[next] = Kept{level, s, mask, value, x >> s, y >> s};
+        last = next;
+        next = next + 1 == kKept ? 0 : next + 1;
+        used = std::min(used + 1, kKept);
       }
-      while ((c.ref & dagmh::kRefTagMask) == dagmh::kRefInner && c.level < level) {
-        c = v_.descend(c, c.level + 1, level, x, y);  // one level: descend's own step
-        path.at[c.level] = c;
-        path.hi = c.level;
-      }
-      path.level = level, path.x = x, path.y = y;
-      uint32_t shift = 0;
-      const uint32_t index = v_.finish_region(c, level, x, y, shift);
-      return {v_.value(index), shift};
-    });
+      out[i] = q.receiver <= value ? 1.0f : 0.0f;
+    }
   }
 
   // WindowDepths::prefetch: the tile's first kPrefetchBytes (all of it for every tile of
