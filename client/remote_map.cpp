@@ -226,6 +226,7 @@ bool RemoteMap::enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch
   sc.ev = slot_eval_[page.slot].get();
   sc.win = slot_window_[page.slot];
   sc.walks = slot_walks_[page.slot];
+  if (sc.win) sc.win->prefetch();  // the tile's walks follow (WindowDepths::prefetch)
   sc.level = level;
   sc.rel = hit.rel;
   sc.x0 = x - hit.tx;

@@ -3,6 +3,7 @@
 // invariant, and PCF equals the average of single lookups exactly.
 #include <gtest/gtest.h>
 
+#include <bit>
 #include <cmath>
 #include <string>
 
@@ -10,6 +11,7 @@
 #include "tests/tiles/interval_fields.hpp"
 #include "tiles/build/dagmh_encode.hpp"
 #include "tiles/build/mh_build.hpp"
+#include "tiles/core/dagmh_validate.hpp"
 
 namespace st {
 namespace {
@@ -191,6 +193,60 @@ TEST(DagmhRoundTrip, PcfEqualsTheAverageOfSingleLookupsExactly) {
     for (uint64_t c : {uint64_t(0), uint64_t(side / 2 - 1), uint64_t(side / 2), uint64_t(side - 1)})
       for (float receiver : {0.0f, 0.3f, 0.7f, 1.0f})
         ASSERT_EQ(o.eval->pcf(h.depth, c, c, r, receiver), o.eval->Evaluator::pcf(h.depth, c, c, r, receiver));
+}
+
+// View::finish_siblings (the tile batch's kept regions): every texel under the reported
+// node whose child is in the mask has the walk's value index, the index is finish()'s,
+// and some masks hold more than the region node (the sibling rule is not vacuous). Then
+// pcf_batch over rows, zigzags and columns of sparse random trees (missing children at
+// every level, whose kept region is every missing child of the parent) equals depth().
+TEST(DagmhRoundTrip, SiblingRegionsShareTheAnswer) {
+  const int runs = fields::small_test_scale() ? 6 : 24;
+  uint64_t wider = 0;
+  for (int seed = 0; seed < runs; ++seed) {
+    const uint32_t depth = 3 + uint32_t(seed % 6);
+    const Hierarchy h = random_hierarchy(depth, uint64_t(seed) + 900, 0.3 + 0.1 * (seed % 5), 0.3,
+                                         dagmh_test::mixed_interval);
+    auto o = encode_and_open(h);
+    const dagmh::View v = dagmh::validate(o.bytes);
+    fields::Rng rng{uint64_t(seed)};
+    for (uint32_t level = 0; level <= depth; ++level)
+      for (int k = 0; k < 40; ++k) {
+        const uint64_t side = uint64_t(1) << level, x = rng.below(uint32_t(side)), y = rng.below(uint32_t(side));
+        const dagmh::Cursor c = v.descend(v.start(level, level, x, y), level, level, x, y);
+        const uint32_t tag = c.ref & dagmh::kRefTagMask;
+        if (tag != dagmh::kRefInner && tag != dagmh::kRefTreelet) continue;  // the caller's case
+        uint32_t s = 0, mask = 0;
+        const uint32_t index = v.finish_siblings(c, level, x, y, s, mask);
+        ASSERT_EQ(index, v.finish(c, level, x, y));
+        ASSERT_TRUE(s >= 1 && s <= level + 1 && mask != 0 && mask < 16);
+        wider += std::popcount(mask) > 1;
+        const uint64_t half = uint64_t(1) << (s - 1), x0 = (x >> s) << s, y0 = (y >> s) << s;
+        for (uint32_t ch = 0; ch < 4; ++ch) {
+          if (!((mask >> ch) & 1)) continue;
+          const uint64_t cx = x0 + (ch & 1) * half, cy = y0 + (ch >> 1) * half;
+          for (uint64_t j = 0; j < half && cy + j < side; j += std::max<uint64_t>(1, half / 4))
+            for (uint64_t i = 0; i < half && cx + i < side; i += std::max<uint64_t>(1, half / 4))
+              ASSERT_EQ(v.lookup_index(level, cx + i, cy + j), index)
+                  << "seed " << seed << " level " << level << " texel " << x << "," << y << " s " << s << " mask "
+                  << mask << " child " << ch;
+        }
+      }
+    std::vector<PcfQuery> q;
+    const uint64_t side = uint64_t(1) << depth;
+    auto tap = [&](uint64_t x, uint64_t y) {  // a receiver at the texel's depth or just behind it
+      const float d = o.eval->depth(depth, x, y);
+      q.push_back({x, y, depth, 1, q.size() & 1 ? d : std::nextafter(d, INFINITY)});
+    };
+    for (uint64_t y = 0; y < side; y += 1 + side / 16)
+      for (uint64_t k = 0; k < side; ++k) tap(y & 1 ? side - 1 - k : k, y), tap(y, k);  // rows (zigzag), columns
+    std::vector<float> got(q.size());
+    o.eval->pcf_batch(q, got);
+    for (size_t i = 0; i < q.size(); ++i)
+      ASSERT_EQ(got[i], q[i].receiver <= o.eval->depth(depth, q[i].x, q[i].y) ? 1.0f : 0.0f)
+          << "seed " << seed << " query " << i;
+  }
+  EXPECT_GT(wider, 0u);
 }
 
 TEST(DagmhRoundTrip, RealisticFieldBytesPerValuedNode) {

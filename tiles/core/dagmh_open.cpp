@@ -18,8 +18,9 @@ namespace {
 
 class DagmhEvaluator final : public Evaluator, public WindowDepths, public TapWalks {
  public:
-  DagmhEvaluator(const dagmh::View& view, std::shared_ptr<const dagmh::Dictionary> dict)
-      : v_(view), dict_(std::move(dict)) {}
+  DagmhEvaluator(const dagmh::View& view, std::span<const uint8_t> bytes,
+                 std::shared_ptr<const dagmh::Dictionary> dict)
+      : v_(view), bytes_(bytes.data()), size_(bytes.size()), dict_(std::move(dict)) {}
 
   uint32_t finest_level() const override { return v_.finest_level; }
 
@@ -36,22 +37,106 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths, public TapWa
     return {v_.value(index), shift};
   }
 
-  // Single taps through kept regions and walks resumed from the last walk's path
-  // (tap_batch.hpp): a resumed walk starts at a cursor the same walk from the skip table
-  // passes (the path above the highest differing bit), so it ends at the same index.
+  // Single taps (tap_batch.hpp's scheme, with wider kept regions): a tap inside a kept
+  // answer's region takes its value without a walk (MH 2016 §3.3's last-sample cache); a
+  // walk resumes from the deepest cursor of the last walk on its own path (DAG-MH §3.5:
+  // the path above the highest bit in which the texels differ), a cursor the walk from the
+  // skip table passes, so it ends at the same index. A kept region is a node's children
+  // that share the answer (View::finish_siblings; below a missing child, every missing
+  // child of its parent, which all answer the parent's `last`), so a row of taps crossing
+  // a node walks once for its empty children, not once per child. out[i] equals
+  // pcf(level, x, y, 1, receiver) bit for bit (tests/tiles/depth_region_test.cpp).
   void pcf_batch(std::span<const PcfQuery> queries, std::span<float> out) const override {
+    const size_t n = std::min(queries.size(), out.size());
     WalkPath<dagmh::Cursor> path;
-    single_tap_batch(*this, queries, out,
-                     [&](uint32_t level, uint64_t x, uint64_t y) { return walk_resumed(path, level, x, y); });
+    struct Kept {  // the texels of `level` under node (x, y) `s` levels up, children in `mask`
+      uint32_t level, s, mask;
+      float value;
+      uint64_t x, y;
+      bool holds(uint32_t l, uint64_t tx, uint64_t ty) const {
+        const uint32_t child = uint32_t((tx >> (s - 1)) & 1) | uint32_t(((ty >> (s - 1)) & 1) << 1);
+        return l == level && (tx >> s) == x && (ty >> s) == y && ((mask >> child) & 1);
+      }
+    };
+    constexpr uint32_t kKept = 4;
+    Kept kept[kKept];
+    uint32_t used = 0, next = 0, last = 0;
+    for (size_t i = 0; i < n; ++i) {
+      const PcfQuery& q = queries[i];
+      if (q.r > 1 || q.level > v_.finest_level) {
+        out[i] = pcf(q.level, q.x, q.y, q.r, q.receiver);
+        continue;
+      }
+      const uint32_t level = q.level;
+      const uint64_t top = (uint64_t(1) << level) - 1;  // pcf_tap's clamp of a 1-tap kernel
+      const uint64_t x = std::min(q.x, top), y = std::min(q.y, top);
+      const Kept* hit = nullptr;
+      if (used) {
+        if (kept[last].holds(level, x, y)) hit = &kept[last];
+        for (uint32_t j = 0; !hit && j < used; ++j)
+          if (kept[j].holds(level, x, y)) hit = &kept[j], last = j;
+      }
+      float value;
+      if (hit) {
+        value = hit->value;
+      } else {
+        const dagmh::Cursor c = descend_resumed(path, level, x, y);
+        uint32_t index, s, mask;
+        const uint32_t tag = c.ref & dagmh::kRefTagMask;
+        if (tag == dagmh::kRefInner || tag == dagmh::kRefTreelet) {
+          index = v_.finish_siblings(c, level, x, y, s, mask);
+        } else {  // the missing child at c.level: its parent's other missing children answer alike
+          index = c.last;
+          s = level - c.level + 1;
+          const uint32_t child = uint32_t((x >> (s - 1)) & 1) | uint32_t(((y >> (s - 1)) & 1) << 1);
+          mask = 1u << child;
+          if (c.level > path.lo) {  // the parent is on the path: an inner node (descend's step)
+            const dagmh::Cursor& p = path.at[c.level - 1];
+            mask = ~st::load_le<uint32_t>(v_.node_at(p.ref & dagmh::kRefIndexMask)) & dagmh::kNodeChildMask;
+          }
+        }
+        value = v_.value(index);
+        kept[next] = Kept{level, s, mask, value, x >> s, y >> s};
+        last = next;
+        next = next + 1 == kKept ? 0 : next + 1;
+        used = std::min(used + 1, kKept);
+      }
+      out[i] = q.receiver <= value ? 1.0f : 0.0f;
+    }
   }
 
-  // TapWalks (tap_batch.hpp): the same walk, its path kept by the caller.
+  // WindowDepths::prefetch: the tile's first kPrefetchBytes (all of it for every tile of
+  // the 4K^2 city's pack: at most 1,844 bytes, 529 on average; a larger tile's first bytes
+  // hold its header, skip table and top nodes, which every walk reads) and the root node
+  // when the pack dictionary holds it. A walk's loads depend on each other (node, child,
+  // treelet, chunk, multipliers), so a tile whose lines left the cache otherwise costs a
+  // batch several misses in a row; this asks for them all at once, when the client enters
+  // the tile and before it collects the tile's taps.
+  void prefetch() const noexcept override {
+    const size_t n = std::min(size_, kPrefetchBytes);
+    for (size_t o = 0; o < n; o += 64) __builtin_prefetch(bytes_ + o);
+    if ((v_.root_ref & dagmh::kRefTagMask) == dagmh::kRefInner &&
+        (v_.root_ref & dagmh::kRefIndexMask) < v_.dict_node_words)
+      __builtin_prefetch(v_.node_at(v_.root_ref & dagmh::kRefIndexMask));
+  }
+
+  // TapWalks (tap_batch.hpp): the client's single taps, the walk's path kept by the caller.
   DepthRegion walk_tap(uint32_t level, uint64_t x, uint64_t y, TapPath& path) const noexcept override {
     return walk_resumed(tap_path<WalkPath<dagmh::Cursor>>(path, this), level, x, y);
   }
 
   DepthRegion walk_resumed(WalkPath<dagmh::Cursor>& path, uint32_t level, uint64_t x, uint64_t y) const {
     if (level >= std::size(path.at)) return depth_region(level, x, y);
+    const dagmh::Cursor c = descend_resumed(path, level, x, y);
+    uint32_t shift = 0;
+    const uint32_t index = v_.finish_region(c, level, x, y, shift);
+    return {v_.value(index), shift};
+  }
+
+  // The walk to (level, x, y) from the deepest cursor of the last walk on its own path
+  // (DAG-MH §3.5), or from the skip table; `path` then holds this walk. Stops where
+  // descend stops (a leaf, a treelet or a missing child); level < std::size(path.at).
+  dagmh::Cursor descend_resumed(WalkPath<dagmh::Cursor>& path, uint32_t level, uint64_t x, uint64_t y) const {
     dagmh::Cursor c;
     uint32_t from = 0;
     if (path.resume(level, x, y, from)) {
@@ -68,9 +153,7 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths, public TapWa
       path.hi = c.level;
     }
     path.level = level, path.x = x, path.y = y;
-    uint32_t shift = 0;
-    const uint32_t index = v_.finish_region(c, level, x, y, shift);
-    return {v_.value(index), shift};
+    return c;
   }
 
   // The kernel's window of distinct texels in one window walk (depth_window: the walk to
@@ -210,19 +293,23 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths, public TapWa
     x = std::min(x, top), y = std::min(y, top);
   }
 
+  static constexpr size_t kPrefetchBytes = 2048;
+
   dagmh::View v_;
+  const uint8_t* bytes_;  // the tile buffer the view points into (for prefetch)
+  size_t size_;
   std::shared_ptr<const dagmh::Dictionary> dict_;  // kept alive while the view points into it
 };
 
 }  // namespace
 
 std::unique_ptr<Evaluator> open_dagmh(std::span<const uint8_t> bytes) {
-  return std::make_unique<DagmhEvaluator>(dagmh::validate(bytes), nullptr);
+  return std::make_unique<DagmhEvaluator>(dagmh::validate(bytes), bytes, nullptr);
 }
 
 std::unique_ptr<Evaluator> open_dagmh(std::span<const uint8_t> bytes, std::shared_ptr<const dagmh::Dictionary> dict) {
   const dagmh::View view = dagmh::validate(bytes, dict.get());
-  return std::make_unique<DagmhEvaluator>(view, std::move(dict));
+  return std::make_unique<DagmhEvaluator>(view, bytes, std::move(dict));
 }
 
 }  // namespace st

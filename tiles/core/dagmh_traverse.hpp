@@ -173,6 +173,53 @@ struct View {
     return index;
   }
 
+  // finish_region's answer and a region at least as wide, for callers that keep answers
+  // (the tile batch): the texels of `level` under a node `s` >= 1 levels above them (those
+  // sharing x >> s, y >> s) whose child at bit s - 1 (the child index descend takes there)
+  // is in the 4-bit `mask`. In a treelet, when the region node of finish_region lies below
+  // the deepest set bit on the path (or none is set), every child of its parent whose
+  // subtree holds no set bit (down to treelet level `depth`: the node's own bit there)
+  // shares the answer too: its texels' paths pass the same set bits. Else the mask is the
+  // region node alone. An inner node of `level` answers its texel alone; the missing-child
+  // case is the caller's (it knows the parent's flags).
+  uint32_t finish_siblings(const Cursor& c, uint32_t level, uint64_t x, uint64_t y, uint32_t& s,
+                           uint32_t& mask) const {
+    auto child_at = [&](uint32_t shift) {
+      return uint32_t((x >> shift) & 1) | uint32_t(((y >> shift) & 1) << 1);
+    };
+    if ((c.ref & kRefTagMask) != kRefTreelet) {  // an inner node of `level`
+      s = 1, mask = 1u << child_at(0);
+      return finish(c, level, x, y);
+    }
+    const uint8_t* t = treelet_at(c.ref & kRefIndexMask);
+    const uint64_t low = st::load_le<uint64_t>(t);
+    const uint32_t high = st::load_le<uint32_t>(t + 8);
+    const uint32_t depth = std::min<uint32_t>(level - c.level, kTreeletLevels - 1);
+    uint32_t pos[kTreeletLevels] = {0, 0, 0, 0};
+    for (uint32_t n = 1; n <= depth; ++n) pos[n] = pos[n - 1] + 1 + kTreeletStride[n - 1] * child_at(level - c.level - n);
+    uint32_t index = c.last, m = 0, answered = 0;  // answered: 1 + the treelet level of the set bit that answers
+    for (uint32_t n = depth + 1; n-- > 0;)
+      if (treelet_bit(low, high, pos[n])) {
+        index = c.base + treelet_rank(low, high, pos[n]);
+        m = n, answered = n + 1;
+        break;
+      }
+    while (m < depth && treelet_any(low, high, pos[m] + 1, pos[m] + kTreeletSubtree[m])) ++m;
+    const uint32_t shift = level - c.level - m;  // finish_region's region
+    s = shift + 1;
+    if (m == 0 || m < answered) {
+      mask = 1u << child_at(shift);
+      return index;
+    }
+    const uint32_t size = m == depth ? 1 : kTreeletSubtree[m];
+    mask = 0;
+    for (uint32_t k = 0; k < 4; ++k) {
+      const uint32_t p = pos[m - 1] + 1 + kTreeletStride[m - 1] * k;
+      if (!treelet_any(low, high, p, p + size)) mask |= 1u << k;
+    }
+    return index;
+  }
+
   float value(uint32_t index) const { return read_value(chunks, multipliers, index); }
 
   uint32_t lookup_index(uint32_t level, uint64_t x, uint64_t y) const {

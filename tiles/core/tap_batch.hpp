@@ -39,6 +39,11 @@ class WindowDepths {
  public:
   virtual uint32_t depth_window(uint32_t level, uint64_t x0, uint64_t y0, uint32_t w, uint32_t h,
                                 float* out) const = 0;
+  // A hint that lookups in this tree follow soon: start bringing its bytes toward the
+  // cache. The client calls it when a lookup enters the tile, before it collects the
+  // tile's taps into a batch, so the tile's lines arrive while that happens instead of one
+  // dependent miss after another in the walks. Changes no answer. Default: nothing.
+  virtual void prefetch() const noexcept {}
 
  protected:
   ~WindowDepths() = default;
