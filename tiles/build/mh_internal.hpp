@@ -1,5 +1,6 @@
 // Private helpers shared by the MH constructions (mh_build*.cpp); not a public header.
 #pragma once
+#include <array>
 #include <bit>
 #include <cstddef>
 #include <cstdint>
@@ -46,6 +47,18 @@ inline float central_roundest(float lo, float hi) {
   h = h > hi ? hi : h;
   return l <= h ? roundest_in(l, h) : safe_midpoint(lo, hi);
 }
+
+// Hash of a hash-consing key (a node's kind, value bits, mask and its children's ids):
+// the octree encoder's and the sharing measure's tables. Keys are compared in full, so
+// the hash only spreads them.
+struct WordKeyHash {
+  template <size_t N>
+  size_t operator()(const std::array<uint32_t, N>& k) const noexcept {
+    uint64_t h = 0x9E3779B97F4A7C15ull;
+    for (uint32_t v : k) h = (h ^ v) * 0xff51afd7ed558ccdull, h ^= h >> 32;
+    return size_t(h);
+  }
+};
 
 // Throws st::Error unless the tile is square, a power of two a side (<= 2^14) and its
 // data has width*height entries. Returns log2(side).

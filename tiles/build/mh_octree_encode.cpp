@@ -2,6 +2,7 @@
 // the blocks of its earlier siblings' subtrees, so offsets shrink level by level), find
 // per-level shifts that make every offset fit 16 bits, then write the words.
 #include "tiles/build/mh_octree_encode.hpp"
+#include "tiles/build/mh_internal.hpp"
 
 #include <algorithm>
 #include <bit>
@@ -83,13 +84,7 @@ Flat flatten(const OctHierarchy& h) {
 // down (kinds, values, slots). Subtrees are hash-consed bottom-up; keys hold ids, never
 // hashes alone.
 using Key = std::array<uint32_t, 11>;
-struct KeyHash {
-  size_t operator()(const Key& k) const noexcept {
-    uint64_t h = 0x9E3779B97F4A7C15ull;
-    for (uint32_t v : k) h = (h ^ v) * 0xff51afd7ed558ccdull, h ^= h >> 32;
-    return size_t(h);
-  }
-};
+using KeyHash = mh_detail::WordKeyHash;
 
 // block_id[n] for nodes with children (0 for the others); returns the number of ids.
 uint32_t block_ids(const Flat& t, std::vector<uint32_t>& block_id) {

@@ -15,13 +15,7 @@ namespace {
 // A block: the same without the node's own value and kind.
 using Key = std::array<uint32_t, 10>;
 
-struct KeyHash {
-  size_t operator()(const Key& k) const noexcept {
-    uint64_t h = 0x9E3779B97F4A7C15ull;
-    for (uint32_t v : k) h = (h ^ v) * 0xff51afd7ed558ccdull, h ^= h >> 32;
-    return size_t(h);
-  }
-};
+using KeyHash = mh_detail::WordKeyHash;
 
 uint32_t own_words(const OctNode& n) { return n.has_value && n.child_mask ? 2 : 1; }
 
