@@ -68,6 +68,28 @@ float st_fdiv(float a, float b) {
 // byte 20 + round_up(max(n, k) + 1, 4).
 uint st_oct_xy_bits(uint l, uint n, uint depth) { return l + n >= depth ? l + n - depth : 0u; }
 
+// One step of a walk towards texel (x, y) of slice w at `level`, from the node at tree word
+// `pos` of octree level l: returns the child's code (0 missing, 1 leaf, 2 inner without a
+// value, 3 inner with one) and, unless 0, moves pos to the child's word.
+uint st_oct_step(uint base, uint tree, uint n, uint k, uint depth, uint l, uint x, uint y, uint w, uint level,
+                 inout uint pos) {
+  uint slot = 0u;
+  if (l + n >= depth) {  // the step halves x and y: their bits at the child's resolution
+    const uint b = level - st_oct_xy_bits(l + 1u, n, depth);
+    slot = ((x >> b) & 1u) | (((y >> b) & 1u) << 1u);
+  }
+  if (l + k >= depth) slot |= ((w >> (k - st_oct_xy_bits(l + 1u, k, depth))) & 1u) << 2u;  // halves w
+  const uint word = ST_POOL(tree + pos);
+  const uint mask = word & 0xFFFFu;
+  const uint code = (mask >> (2u * slot)) & 3u;
+  if (code == 0u) return 0u;
+  const uint shift = st_byte(base, 20u + l);
+  // off: a signed 16-bit number (version 2: negative = an equal block laid out earlier);
+  // uint arithmetic wraps as the CPU's block_start does.
+  pos = (((pos >> shift) + uint(int(word) >> 16)) << shift) + uint(bitCount(mask & ((1u << (2u * slot)) - 1u)));
+  return code;
+}
+
 float st_oct_depth(uint base, uint x, uint y, uint w, uint level) {
   const uint h1 = ST_POOL(base + 1u), h2 = ST_POOL(base + 2u);
   const uint n = (h1 >> 16u) & 0xFFu, k = h1 >> 24u;
@@ -79,20 +101,8 @@ float st_oct_depth(uint base, uint x, uint y, uint w, uint level) {
   uint val = root_leaf ? 0u : 1u;
   uint code = root_leaf ? 1u : 3u;
   for (uint l = 0u; l < target && code != 1u; ++l) {
-    uint slot = 0u;
-    if (l + n >= depth) {  // the step halves x and y: their bits at the child's resolution
-      const uint b = level - st_oct_xy_bits(l + 1u, n, depth);
-      slot = ((x >> b) & 1u) | (((y >> b) & 1u) << 1u);
-    }
-    if (l + k >= depth) slot |= ((w >> (k - st_oct_xy_bits(l + 1u, k, depth))) & 1u) << 2u;  // halves w
-    const uint word = ST_POOL(tree + pos);
-    const uint mask = word & 0xFFFFu;
-    code = (mask >> (2u * slot)) & 3u;
+    code = st_oct_step(base, tree, n, k, depth, l, x, y, w, level, pos);
     if (code == 0u) break;  // missing child: the last valued node answers
-    const uint shift = st_byte(base, 20u + l);
-    // off: a signed 16-bit number (version 2: negative = a back-reference to an earlier
-    // equal block); uint arithmetic wraps as the CPU's block_start does.
-    pos = (((pos >> shift) + uint(int(word) >> 16)) << shift) + uint(bitCount(mask & ((1u << (2u * slot)) - 1u)));
     if (code != 2u) val = code == 1u ? pos : pos + 1u;
   }
   return uintBitsToFloat(ST_POOL(tree + val));
@@ -145,19 +155,8 @@ float st_oct_depth_resumed(uint base, uint x, uint y, uint w, uint level) {
   uint code = (val & kStOctPathLeaf) != 0u ? 1u : 3u;  // only "leaf or not" matters here
   val &= ~kStOctPathLeaf;
   for (; l < target && code != 1u; ++l) {
-    uint slot = 0u;
-    if (l + n >= depth) {
-      const uint b = level - st_oct_xy_bits(l + 1u, n, depth);
-      slot = ((x >> b) & 1u) | (((y >> b) & 1u) << 1u);
-    }
-    if (l + k >= depth) slot |= ((w >> (k - st_oct_xy_bits(l + 1u, k, depth))) & 1u) << 2u;
-    const uint word = ST_POOL(tree + pos);
-    const uint mask = word & 0xFFFFu;
-    code = (mask >> (2u * slot)) & 3u;
+    code = st_oct_step(base, tree, n, k, depth, l, x, y, w, level, pos);
     if (code == 0u) break;  // missing child: the walk ends at level l
-    const uint shift = st_byte(base, 20u + l);
-    // off: signed, as in st_oct_depth (an earlier equal block when negative).
-    pos = (((pos >> shift) + uint(int(word) >> 16)) << shift) + uint(bitCount(mask & ((1u << (2u * slot)) - 1u)));
     if (code != 2u) val = code == 1u ? pos : pos + 1u;
     st_oct_path_pos[l + 1u] = pos;
     st_oct_path_val[l + 1u] = code == 1u ? val | kStOctPathLeaf : val;
