@@ -1,5 +1,6 @@
-// Single taps of an Evaluator::pcf_batch answered inside one encoded tree (an MH, MMH or
-// DAG-MH tile; the client hands a resident tile the runs of its batch that fall in it).
+// Single taps answered inside one encoded tree (an MH, MMH or DAG-MH tile): a tile's own
+// Evaluator::pcf_batch (single_tap_batch; DAG-MH runs its own loop on the same scheme) and
+// the client's taps one at a time (TapWalks::walk_tap, the client keeping the regions).
 // Two savings over one depth() walk per tap, both exact:
 //  - a tap inside the region of one of the last few answers (Evaluator::DepthRegion: the
 //    node where that walk ended) takes its value without a walk (MH 2016 §3.3's
@@ -10,7 +11,7 @@
 //    last node traversed: a screen-coherent batch steps a level or two per tap, not the
 //    whole tree.
 // Every tap runs the same walk as depth() from a node on its own path, so out[i] equals
-// pcf(level, x, y, 1, receiver) bit for bit (tests/tiles/tap_batch_test.cpp). Queries
+// pcf(level, x, y, 1, receiver) bit for bit (tests/tiles/depth_region_test.cpp). Queries
 // with r > 1, or a level finer than the tree, go to pcf() itself. No allocation.
 #pragma once
 #include <algorithm>
