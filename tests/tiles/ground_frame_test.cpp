@@ -15,6 +15,7 @@
 #include "tiles/build/mh_octree_encode.hpp"
 #include "tiles/core/light_set.hpp"
 #include "tiles/core/mh_octree.hpp"
+#include "tiles/core/sample_texels.hpp"
 #include "tiles/core/stack_lookup.hpp"
 
 namespace st {
@@ -183,10 +184,10 @@ TEST(GroundFrame, TracedStackIsLosslessOnEveryTexelOfEverySlice) {
               return tree.depth(x, y, w, level);
             }),
             "");
-  // The soft lookup's shared transform (GroundTransforms) is to_light bit for bit, and the
-  // shared walk equals independent lookups; receivers on the ground read one texel.
-  const GroundTransforms gt(set.samples);
-  ASSERT_TRUE(gt.valid());
+  // The soft lookup's batched transform (SampleTexels, the ground frame's shared offsets)
+  // is to_light bit for bit, and the shared walk equals independent lookups; receivers on
+  // the ground read one texel.
+  const SampleTexels texels(set.samples, level);
   const StackLookup look(tree, set);
   const Aabb b = load_scene(scene).bounds();
   Rng rng(5);
@@ -194,13 +195,17 @@ TEST(GroundFrame, TracedStackIsLosslessOnEveryTexelOfEverySlice) {
   for (int i = 0; i < 400; ++i) {
     const bool on_ground = i % 2 == 0;
     const Vec3d p{rng.uniform(b.lo.x, b.hi.x), on_ground ? 0.0 : rng.uniform(b.lo.y, b.hi.y), rng.uniform(b.lo.z, b.hi.z)};
-    const GroundTransforms::Point pt = gt.point(p);
+    SampleTexels::Run run;
+    texels.run(p, 0, set.size(), run);
     for (uint32_t w = 0; w < set.size(); ++w) {
       const LightPoint lp = set.samples[w].to_light(p);
-      ASSERT_EQ(gt.texel(level, pt, w), LightSpace::texel_of(level, lp.u, lp.v)) << i << " " << w;
-      ASSERT_EQ(pt.d, float(lp.d));
+      const auto t = LightSpace::texel_of(level, lp.u, lp.v);
+      ASSERT_EQ(run.x[w], t[0]) << i << " " << w;
+      ASSERT_EQ(run.y[w], t[1]) << i << " " << w;
+      ASSERT_EQ(run.d[w], float(lp.d));
       if (on_ground) {
-        ASSERT_EQ(gt.texel(level, pt, w), gt.texel(level, pt, 0));
+        ASSERT_EQ(run.x[w], run.x[0]);
+        ASSERT_EQ(run.y[w], run.y[0]);
       }
     }
     ASSERT_EQ(look.soft_visibility(p), look.soft_visibility_independent(p)) << i;

@@ -9,8 +9,10 @@
 #include <fstream>
 
 #include "common/error.hpp"
+#include "common/hash.hpp"
 #include "tests/test_tmp.hpp"
 #include "tests/tiles/stack_fixtures.hpp"
+#include "tiles/bake/scene.hpp"
 #include "tiles/build/mh_octree_encode.hpp"
 #include "tiles/build/stack_pack.hpp"
 #include "tiles/core/evaluator.hpp"
@@ -338,6 +340,46 @@ TEST(StackPack, SoftVisibilitySharedWalkEqualsSeparateLookups) {
       for (size_t i = 0; i < pts.size(); ++i) ASSERT_EQ(out[i], m->soft_visibility(pts[i], &exact_single)) << "K " << K << " " << i;
       EXPECT_EQ(exact, exact_single);
     }
+  }
+}
+
+// An area light (window frame, jittered) over the hairball, traced: the soft lookups
+// through the pack (PackReader, ResidentStack's StackMap: what a local client map reads)
+// answer as StackLookup on the in-memory octree, single and batched, with 37 samples (a
+// full run of the batched transforms and a short one).
+TEST(StackPack, SoftLookupsUnderAnAreaLightMatchTheInMemoryOctree) {
+  const char* scene = "procedural:hairball,count=12";
+  const LightSet set = stacks::fitted_set(scene, "area:pos=2,14,1,target=0,0,0,size=3,3,samples=37,jitter=0.5");
+  const IntervalStack s = stacks::traced_stack(scene, set, stacks::small_scale() ? 5 : 6);
+  const OctHierarchy h = build_octree(s);
+  const std::vector<uint8_t> bytes = encode_octree(h);
+  const MhOctree tree = MhOctree::open(bytes);
+  const StackLookup look(tree, set);
+  auto reader = PackReader::open(write(h, set, std::nullopt, 1024, "soft_area.pack"));
+  ASSERT_GT(reader->tiles().size(), 4u);
+  const ResidentStack local(*reader);
+  const StackMap& m = local.map();
+  const Aabb b = load_scene(scene).bounds();
+  Rng rng(23);
+  std::vector<Vec3d> pts;
+  uint32_t penumbra = 0;
+  for (int i = 0; i < 400; ++i) {
+    const Vec3d p{rng.uniform(b.lo.x, b.hi.x), rng.uniform(b.lo.y, b.hi.y), rng.uniform(b.lo.z, b.hi.z)};
+    pts.push_back(p);
+    bool exact = true;
+    const float v = m.soft_visibility(p, &exact);
+    ASSERT_EQ(v, look.soft_visibility(p)) << "point " << i;
+    ASSERT_EQ(v, look.soft_visibility_independent(p)) << "point " << i;
+    ASSERT_TRUE(exact);
+    penumbra += v > 0 && v < 1;
+  }
+  EXPECT_GT(penumbra, 20u);  // the test sees soft shadows, not only lit and umbra
+  std::vector<float> out(pts.size()), out_tree(pts.size());
+  m.soft_visibility(pts, out);
+  look.soft_visibility(pts, out_tree);
+  for (size_t i = 0; i < pts.size(); ++i) {
+    ASSERT_EQ(out[i], look.soft_visibility(pts[i])) << i;
+    ASSERT_EQ(out_tree[i], out[i]) << i;
   }
 }
 

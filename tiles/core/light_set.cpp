@@ -500,31 +500,6 @@ LightSet LightSet::fit(const LightSetSpec& spec, const Aabb& bounds, const std::
   return set;
 }
 
-GroundTransforms::GroundTransforms(const std::vector<LightSpace>& samples) {
-  if (samples.empty()) return;
-  const LightSpace& a = samples[0];
-  for (const LightSpace& s : samples) {
-    const bool same = s.kind() == LightKind::sun_ground && s.origin() == a.origin() && s.axis_u() == a.axis_u() &&
-                      s.axis_v() == a.axis_v() && s.depth_axis() == a.depth_axis() && s.extent_uv() == a.extent_uv() &&
-                      s.near_plane() == a.near_plane() && s.far_plane() == a.far_plane();
-    if (!same) {
-      ku_.clear(), kv_.clear();
-      return;
-    }
-    // As LightSpace::derive_ground: ray_axis . axis_u, ray_axis . axis_v.
-    ku_.push_back(dot(s.ray_axis(), s.axis_u()));
-    kv_.push_back(dot(s.ray_axis(), s.axis_v()));
-  }
-  origin_ = a.origin(), u_ = a.axis_u(), v_ = a.axis_v(), n_ = a.depth_axis();
-  extent_ = a.extent_uv(), near_ = a.near_plane(), far_ = a.far_plane();
-}
-
-GroundTransforms::Point GroundTransforms::point(const Vec3d& p) const {
-  const Vec3d r = p - origin_;
-  const double z = dot(r, n_);
-  return {dot(r, u_), dot(r, v_), z, float((z - near_) / (far_ - near_))};
-}
-
 double LightSet::time_of(uint32_t w) const {
   return samples.size() <= 1 ? 0.0 : double(w) / double(samples.size() - 1);
 }

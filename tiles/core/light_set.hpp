@@ -158,33 +158,6 @@ struct LightSet {
   double time_of(uint32_t w) const;
 };
 
-// A ground-frame light set's shared transform (light_set.hpp "Frames"): every sample has
-// one origin, axes, extent and depth range, so a point's offsets along the ground axes
-// and its depth distance are computed once and each sample's (u, v) from them in two
-// operations; its depth is the same in every slice. Bit for bit LightSpace::to_light
-// (the same operations on the same values; tested). What the soft lookups use.
-class GroundTransforms {
- public:
-  GroundTransforms() = default;
-  // valid() is false unless every sample is sun_ground and all share one frame.
-  explicit GroundTransforms(const std::vector<LightSpace>& samples);
-  bool valid() const { return !ku_.empty(); }
-  struct Point {
-    double ru, rv, z;  // r . axis_u, r . axis_v, r . n with r = p - origin
-    float d;           // the receiver's depth, every slice's
-  };
-  Point point(const Vec3d& p) const;
-  // The texel of `pt` at `level` in slice w (LightSpace::texel_of of to_light's u, v).
-  std::array<uint64_t, 2> texel(uint32_t level, const Point& pt, uint32_t w) const {
-    return LightSpace::texel_of(level, (pt.ru - ku_[w] * pt.z) / extent_, (pt.rv - kv_[w] * pt.z) / extent_);
-  }
-
- private:
-  Vec3d origin_{}, u_{}, v_{}, n_{};
-  double extent_ = 1, near_ = 0, far_ = 1;
-  std::vector<double> ku_, kv_;
-};
-
 // Point d (0 <= d < 4^order) of the Hilbert curve over a 2^order x 2^order grid: its cell
 // (x, y). Consecutive d are edge-neighbouring cells.
 void hilbert_cell(uint32_t order, uint64_t d, uint32_t& x, uint32_t& y);

@@ -40,13 +40,14 @@ class MhOctree {
   // path shares with the previous walk's (MH §3.3's lowest common node and last-sample
   // cache, carried over w): coherent texel sequences, such as one point's samples in
   // trajectory or Hilbert order, read only the nodes where their paths part.
+  // Compact (216 bytes, 440 with 64-bit words; a soft lookup's batch keeps one per lane): word indices fit 32
+  // bits (a buffer's byte_size is 32-bit), codes 2 bits, x and y 20 (kMaxXyLevel).
   struct Path {
-    uint64_t pos[moct::kMaxLevels] = {}, val[moct::kMaxLevels] = {};
-    uint32_t code[moct::kMaxLevels] = {};
-    uint32_t reached = 0;  // level of the last node of the previous walk
-    uint64_t x = 0, y = 0;
-    uint32_t w = 0;
+    uint32_t pos[moct::kMaxLevels] = {}, val[moct::kMaxLevels] = {};
+    uint8_t code[moct::kMaxLevels] = {};
+    uint8_t reached = 0;   // level of the last node of the previous walk
     bool valid = false;    // false: the next walk starts at the root
+    uint32_t x = 0, y = 0, w = 0;
     uint64_t steps = 0;    // nodes stepped into, summed over walks (benchmark figure)
   };
   // depth(x, y, w, xy_level()) for w < slices(), x, y < 2^xy_level() (not checked).
@@ -71,23 +72,23 @@ class MhOctree {
       const uint32_t L = geo_.depth();
       const uint32_t hx = uint32_t(std::bit_width((x ^ p.x) | (y ^ p.y)));
       const uint32_t hw = uint32_t(std::bit_width(uint32_t(w ^ p.w)));
-      start = std::min({L - std::min(L, hx), L - std::min(L, hw), p.reached});
+      start = std::min({L - std::min(L, hx), L - std::min(L, hw), uint32_t(p.reached)});
     } else {
       p.pos[0] = 0;
       p.val[0] = root_leaf_ ? 0 : 1;
       p.code[0] = root_leaf_ ? moct::kCodeLeaf : moct::kCodeInner;
     }
-    p.reached = start;
-    p.x = x, p.y = y, p.w = w;
+    p.reached = uint8_t(start);
+    p.x = uint32_t(x), p.y = uint32_t(y), p.w = w;
     p.valid = true;
     return {p.pos[start], p.val[start], p.code[start], start};
   }
   bool along_step(Path& p, Walk& k) const noexcept {
     const uint32_t l = k.level;
     if (l >= geo_.depth() || k.code == moct::kCodeLeaf) return false;
-    const uint32_t b = geo_.n - xy_next_[l];
-    uint32_t slot = split_xy_[l] ? uint32_t((p.x >> b) & 1) | uint32_t((p.y >> b) & 1) << 1 : 0u;
-    if (split_w_[l]) slot |= uint32_t((p.w >> w_shift_[l]) & 1) << 2;
+    const StepBits s = step_bits_[l];
+    const uint32_t slot = ((p.x >> s.xy_shift) & s.xy_bit) | ((p.y >> s.xy_shift) & s.xy_bit) << 1 |
+                          ((p.w >> s.w_shift) & s.w_bit) << 2;
     const uint32_t word_p = word_inline(k.pos);
     const uint32_t mask = moct::word_mask(word_p);
     const uint32_t cc = moct::child_code(mask, slot);
@@ -96,8 +97,8 @@ class MhOctree {
     if (cc != moct::kCodeEmpty) k.val = cc == moct::kCodeLeaf ? k.pos : k.pos + 1;
     k.code = cc;
     k.level = l + 1;
-    p.pos[l + 1] = k.pos, p.val[l + 1] = k.val, p.code[l + 1] = cc;
-    p.reached = l + 1;
+    p.pos[l + 1] = uint32_t(k.pos), p.val[l + 1] = uint32_t(k.val), p.code[l + 1] = uint8_t(cc);
+    p.reached = uint8_t(l + 1);
     ++p.steps;
     return true;
   }
@@ -129,6 +130,13 @@ class MhOctree {
   // of level l + 1, and the bit of a full-resolution w it reads.
   bool split_xy_[moct::kMaxLevels] = {}, split_w_[moct::kMaxLevels] = {};
   uint8_t xy_next_[moct::kMaxLevels] = {}, w_shift_[moct::kMaxLevels] = {};
+  // The same per level for along_step, without branches: the child slot is
+  // (x >> xy_shift & xy_bit) | (y >> xy_shift & xy_bit) << 1 | (w >> w_shift & w_bit) << 2,
+  // a bit 0 where the level does not split that axis.
+  struct StepBits {
+    uint8_t xy_shift = 0, w_shift = 0, xy_bit = 0, w_bit = 0;
+  };
+  StepBits step_bits_[moct::kMaxLevels] = {};
 };
 
 }  // namespace st

@@ -152,6 +152,8 @@ MhOctree MhOctree::open(std::span<const uint8_t> bytes) {
     t.split_xy_[l] = t.geo_.splits_xy(l), t.split_w_[l] = t.geo_.splits_w(l);
     t.xy_next_[l] = uint8_t(t.geo_.xy_bits(l + 1));
     t.w_shift_[l] = uint8_t(t.geo_.k - t.geo_.w_bits(l + 1));
+    t.step_bits_[l] = {uint8_t(t.geo_.n - t.xy_next_[l]), t.w_shift_[l], uint8_t(t.split_xy_[l]),
+                       uint8_t(t.split_w_[l])};
   }
   t.bytes_ = bytes;
   t.tree_ = b + tree_off;

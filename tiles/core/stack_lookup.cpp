@@ -47,7 +47,7 @@ StackBounds::StackBounds(const MhOctree& octree) {
 }
 
 StackLookup::StackLookup(const MhOctree& octree, const LightSet& lights)
-    : tree_(octree), lights_(lights), ground_(lights.samples) {
+    : tree_(octree), lights_(lights), texels_(lights.samples, octree.xy_level()) {
   if (lights.size() != octree.slices())
     throw Error("stack lookup: the light set has " + std::to_string(lights.size()) + " samples, the octree " +
                 std::to_string(octree.slices()) + " slices");
@@ -72,41 +72,32 @@ float StackLookup::visibility(const Vec3d& p, double time) const noexcept {
 }
 
 float StackLookup::soft_visibility(const Vec3d& p) const noexcept {
-  const uint32_t n = tree_.slices(), level = tree_.xy_level();
+  // The samples' texels a run at a time (SampleTexels: to_light and texel_of of every
+  // sample, bit for bit), then the shared walk sample after sample. A ground-frame sun
+  // path's receiver on the ground reads one (x, y) in every slice, so consecutive walks
+  // share all but the w steps, and a leaf that answers for a run of slices answers them
+  // without a step.
+  const uint32_t n = tree_.slices();
   MhOctree::Path path;
+  SampleTexels::Run run;
   uint32_t lit_samples = 0;
-  if (ground_.valid()) {
-    // A ground-frame sun path: the point's depth is every slice's and its offsets are
-    // computed once (GroundTransforms); a receiver on the ground reads one (x, y) in every
-    // slice, so consecutive walks share all but the w steps, and a leaf that answers for
-    // a run of slices answers them without a step.
-    const GroundTransforms::Point pt = ground_.point(p);
-    for (uint32_t w = 0; w < n; ++w) {
-      const auto t = ground_.texel(level, pt, w);
-      lit_samples += pt.d <= tree_.depth_along(path, t[0], t[1], w);
-    }
-    t_visited = path.steps + 1;
-    return float(lit_samples) / float(n);
-  }
-  for (uint32_t w = 0; w < n; ++w) {
-    const LightPoint lp = lights_.samples[w].to_light(p);
-    const auto t = LightSpace::texel_of(level, lp.u, lp.v);
-    lit_samples += float(lp.d) <= tree_.depth_along(path, t[0], t[1], w);
+  for (uint32_t w0 = 0; w0 < n; w0 += SampleTexels::kRun) {
+    const uint32_t m = std::min(SampleTexels::kRun, n - w0);
+    texels_.run(p, w0, m, run);
+    for (uint32_t i = 0; i < m; ++i) lit_samples += run.d[i] <= tree_.depth_along(path, run.x[i], run.y[i], w0 + i);
   }
   t_visited = path.steps + 1;  // and the root
   return float(lit_samples) / float(n);
 }
 
 void StackLookup::soft_visibility(std::span<const Vec3d> points, std::span<float> out) const noexcept {
-  const uint32_t n = tree_.slices(), level = tree_.xy_level();
-  const bool ground = ground_.valid();
+  const uint32_t n = tree_.slices();
   struct Lane {
     MhOctree::Path path;
     MhOctree::Walk walk;
-    GroundTransforms::Point pt{};
+    SampleTexels::Run run;  // samples w - w % kRun onward
     size_t i = 0;
     uint32_t w = 0, lit = 0;
-    float d = 0;
     bool walking = false;
   };
   uint64_t visited = 0, prefetched = 0;
@@ -114,25 +105,23 @@ void StackLookup::soft_visibility(std::span<const Vec3d> points, std::span<float
     ln.path.valid = false;
     ln.path.steps = 0;
     ln.i = i, ln.w = 0, ln.lit = 0, ln.walking = false;
-    if (ground) ln.pt = ground_.point(points[i]);
   };
-  // One point's soft_visibility (the loops above) as a resumable job: each sample begins a
+  // One point's soft_visibility (the loop above) as a resumable job: each sample begins a
   // shared walk, and a step into a node on another cache line prefetches it and yields.
   auto run = [&](Lane& ln) {
     // The lane's scalars live in registers while it runs and go back at a yield.
     MhOctree::Path& path = ln.path;
     uint32_t w = ln.w, lit = ln.lit;
-    float d = ln.d;
     bool walking = ln.walking;
     MhOctree::Walk k = ln.walk;
     for (;;) {
       if (walking) {
         if (step_until_new_line(tree_, path, k)) {
           ++prefetched;
-          ln.w = w, ln.lit = lit, ln.d = d, ln.walking = true, ln.walk = k;
+          ln.w = w, ln.lit = lit, ln.walking = true, ln.walk = k;
           return true;
         }
-        lit += d <= tree_.along_value(k);
+        lit += ln.run.d[w % SampleTexels::kRun] <= tree_.along_value(k);
         ++w;
       }
       if (w == n) {
@@ -140,16 +129,9 @@ void StackLookup::soft_visibility(std::span<const Vec3d> points, std::span<float
         visited += path.steps + 1;
         return false;
       }
-      std::array<uint64_t, 2> t;
-      if (ground) {
-        t = ground_.texel(level, ln.pt, w);
-        d = ln.pt.d;
-      } else {
-        const LightPoint lp = lights_.samples[w].to_light(points[ln.i]);
-        t = LightSpace::texel_of(level, lp.u, lp.v);
-        d = float(lp.d);
-      }
-      k = tree_.along_begin(path, t[0], t[1], w);
+      const uint32_t j = w % SampleTexels::kRun;
+      if (j == 0) texels_.run(points[ln.i], w, std::min(SampleTexels::kRun, n - w), ln.run);
+      k = tree_.along_begin(path, ln.run.x[j], ln.run.y[j], w);
       walking = true;
     }
   };

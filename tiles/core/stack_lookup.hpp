@@ -30,6 +30,7 @@
 
 #include "tiles/core/light_set.hpp"
 #include "tiles/core/mh_octree.hpp"
+#include "tiles/core/sample_texels.hpp"
 
 namespace st {
 
@@ -83,7 +84,7 @@ class StackLookup {
  private:
   const MhOctree& tree_;
   const LightSet& lights_;
-  GroundTransforms ground_;  // valid for a ground-frame sun path: one transform per point
+  SampleTexels texels_;  // the soft lookups' batched transforms (sample_texels.hpp)
 };
 
 }  // namespace st

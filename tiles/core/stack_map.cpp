@@ -13,7 +13,7 @@ namespace st {
 StackMap::StackMap(const StackGrid& grid, TileSource tile) : grid_(grid), tile_(std::move(tile)) {
   lights_.reserve(grid.slices);
   for (uint32_t w = 0; w < grid.slices; ++w) lights_.push_back(grid.light(w));
-  ground_ = GroundTransforms(lights_);
+  texels_ = SampleTexels(lights_, grid_.geo.n);
 }
 
 uint64_t StackMap::cell_of(uint64_t x, uint64_t y, uint32_t w) const {
@@ -51,16 +51,6 @@ void StackMap::texel(const Vec3d& p, uint32_t w, uint64_t& x, uint64_t& y, float
   d = float(lp.d);
 }
 
-void StackMap::sample_texel(const Vec3d& p, const GroundTransforms::Point& pt, uint32_t w, uint64_t& x,
-                            uint64_t& y, float& d) const {
-  if (ground_.valid()) {
-    const auto t = ground_.texel(grid_.geo.n, pt, w);
-    x = t[0], y = t[1], d = pt.d;
-  } else {
-    texel(p, w, x, y, d);
-  }
-}
-
 StackMap::CellTexel StackMap::cell_texel(uint64_t x, uint64_t y, uint32_t w) const {
   const moct::Geometry& g = grid_.geo;
   if ((x >> g.n) || (y >> g.n)) return {kLitDepth, false, 0, 0, 0, 0};
@@ -91,30 +81,31 @@ float StackMap::visibility(const Vec3d& p, double time, bool* exact) const {
 }
 
 float StackMap::soft_visibility(const Vec3d& p, bool* exact) const {
-  // depth(x, y, w, n) per sample, but consecutive samples whose texels fall in the same
-  // cell share one tile walk (MhOctree::depth_along: each starts from the deepest node
-  // its path shares with the previous one) and one tile fetch. A ground-frame sun path
-  // takes one transform per point (GroundTransforms): the same texel in every slice for a
-  // receiver on the ground.
-  const GroundTransforms::Point pt = ground_.valid() ? ground_.point(p) : GroundTransforms::Point{};
+  // depth(x, y, w, n) per sample, the texels a run of samples at a time (SampleTexels:
+  // lit()'s transform bit for bit), but consecutive samples whose texels fall in the same
+  // cell share one tile walk (MhOctree::depth_along: each starts from the deepest node its
+  // path shares with the previous one) and one tile fetch.
   MhOctree::Path path;
+  SampleTexels::Run run;
   uint64_t path_cell = ~uint64_t(0);
   const MhOctree* tile = nullptr;
   uint32_t lit_samples = 0;
-  for (uint32_t w = 0; w < grid_.slices; ++w) {
-    uint64_t x, y;
-    float d;
-    sample_texel(p, pt, w, x, y, d);
-    const CellTexel c = cell_texel(x, y, w);
-    float v = c.value;
-    if (c.tiled) {
-      if (c.cell != path_cell) path_cell = c.cell, tile = tile_(c.cell), path = MhOctree::Path{};
-      if (tile)
-        v = tile->depth_along(path, c.lx, c.ly, c.lw);
-      else if (exact)
-        *exact = false;
+  for (uint32_t w0 = 0; w0 < grid_.slices; w0 += SampleTexels::kRun) {
+    const uint32_t m = std::min(SampleTexels::kRun, grid_.slices - w0);
+    texels_.run(p, w0, m, run);
+    for (uint32_t i = 0; i < m; ++i) {
+      const uint32_t w = w0 + i;
+      const CellTexel c = cell_texel(run.x[i], run.y[i], w);
+      float v = c.value;
+      if (c.tiled) {
+        if (c.cell != path_cell) path_cell = c.cell, tile = tile_(c.cell), path.valid = false;
+        if (tile)
+          v = tile->depth_along(path, c.lx, c.ly, c.lw);
+        else if (exact)
+          *exact = false;
+      }
+      lit_samples += run.d[i] <= v;
     }
-    lit_samples += d <= v;
   }
   return float(lit_samples) / float(grid_.slices);
 }
@@ -123,38 +114,34 @@ void StackMap::soft_visibility(std::span<const Vec3d> points, std::span<float> o
   // soft_visibility(p) above as a resumable job per point (walk_interleave.hpp): the same
   // texels, cells, tile fetches and shared walks in the same order, so the same answers.
   const uint32_t slices = grid_.slices;
-  const bool ground = ground_.valid();
   struct Lane {
     MhOctree::Path path;
     MhOctree::Walk walk;
-    GroundTransforms::Point pt{};
+    SampleTexels::Run run;  // samples w - w % kRun onward
     const MhOctree* tile = nullptr;
     uint64_t path_cell = 0;
     size_t i = 0;
     uint32_t w = 0, lit = 0;
-    float d = 0;
     bool walking = false;
   };
   auto start = [&](Lane& ln, size_t i) {
     ln.path_cell = ~uint64_t(0), ln.tile = nullptr;
     ln.i = i, ln.w = 0, ln.lit = 0, ln.walking = false;
-    if (ground) ln.pt = ground_.point(points[i]);
   };
   auto run = [&](Lane& ln) {
     // The lane's scalars live in registers while it runs and go back at a yield.
     MhOctree::Path& path = ln.path;
     uint32_t w = ln.w, lit = ln.lit;
-    float d = ln.d;
     bool walking = ln.walking;
     MhOctree::Walk k = ln.walk;
     for (;;) {
       if (walking) {
         const MhOctree& tile = *ln.tile;
         if (step_until_new_line(tile, path, k)) {
-          ln.w = w, ln.lit = lit, ln.d = d, ln.walking = true, ln.walk = k;
+          ln.w = w, ln.lit = lit, ln.walking = true, ln.walk = k;
           return true;
         }
-        lit += d <= tile.along_value(k);
+        lit += ln.run.d[w % SampleTexels::kRun] <= tile.along_value(k);
         ++w;
         walking = false;
       }
@@ -162,9 +149,9 @@ void StackMap::soft_visibility(std::span<const Vec3d> points, std::span<float> o
         out[ln.i] = float(lit) / float(slices);
         return false;
       }
-      uint64_t x, y;
-      sample_texel(points[ln.i], ln.pt, w, x, y, d);
-      const CellTexel c = cell_texel(x, y, w);
+      const uint32_t j = w % SampleTexels::kRun;
+      if (j == 0) texels_.run(points[ln.i], w, std::min(SampleTexels::kRun, slices - w), ln.run);
+      const CellTexel c = cell_texel(ln.run.x[j], ln.run.y[j], w);
       if (c.tiled) {
         if (c.cell != ln.path_cell) ln.path_cell = c.cell, ln.tile = tile_(c.cell), path.valid = false;
         if (ln.tile) {
@@ -174,7 +161,7 @@ void StackMap::soft_visibility(std::span<const Vec3d> points, std::span<float> o
         }
         if (exact) *exact = false;
       }
-      lit += d <= c.value;
+      lit += ln.run.d[j] <= c.value;
       ++w;
     }
   };

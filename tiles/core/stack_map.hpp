@@ -16,6 +16,7 @@
 #include "tiles/core/light.hpp"
 #include "tiles/core/light_set.hpp"
 #include "tiles/core/mh_octree.hpp"
+#include "tiles/core/sample_texels.hpp"
 #include "tiles/core/stack_grid.hpp"
 
 namespace st {
@@ -63,11 +64,6 @@ class StackMap {
   float soft_visibility_filtered(const Vec3d& p, uint32_t pcf_radius, float footprint, bool* exact = nullptr) const;
 
  private:
-  // The soft lookups' per-sample steps, shared by the single and batched forms.
-  // Sample w's finest texel and receiver depth of a point (pt: its ground transform, used
-  // when ground_ is valid).
-  void sample_texel(const Vec3d& p, const GroundTransforms::Point& pt, uint32_t w, uint64_t& x, uint64_t& y,
-                    float& d) const;
   // Where texel (x, y) of slice w (finest level) is answered: `value` (lit outside the
   // slice; a cell's level-K entry) unless `tiled`, when the tile of level-K cell `cell`
   // holds it at the tile's own texel (lx, ly, lw).
@@ -82,7 +78,7 @@ class StackMap {
   const StackGrid& grid_;
   TileSource tile_;
   std::vector<LightSpace> lights_;
-  GroundTransforms ground_;  // valid for a ground-frame sun path (soft_visibility)
+  SampleTexels texels_;  // the soft lookups' batched transforms (sample_texels.hpp)
 };
 
 }  // namespace st
