@@ -45,12 +45,17 @@
 //                  node's value bounds decide it; StackBounds made once, timed apart)
 //   soft indep.  : StackLookup::soft_visibility_independent(p) (N octree walks)
 //   soft 2D      : N 2D evaluator lit tests (N separate quadtrees)
+// The "soft walk" line sums the soft lookups up per sample and against the 2D lookup, with
+// two figures of the walks themselves (JSON soft_same_texel_share, soft_bounds_levels_early):
+// the share of consecutive samples on the same texel and how many levels above a walk's
+// end per-node bounds would decide a sample.
 // Times are medians over --reps rounds of thread CPU time per lookup, every kind timed once
 // per round in turn (side by side: the machine's load falls on all alike); the table also
 // gives each against the 2D single lookup measured in the same rounds.
 #include <sys/resource.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <ctime>
 #include <cstdio>
@@ -326,6 +331,47 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
     if (look.soft_visibility_bounded(pts[i], sbounds) != look.soft_visibility(pts[i]))
       throw st::Error("bench: the bounded soft lookup differs");
   g_sink = acc;
+  // Where a soft walk's samples go (MHOCT.md "The batched transforms and the compact
+  // path"): the share of consecutive samples on the texel of the one before (their shared
+  // walk differs in w alone), and how many levels above a sample's walk end a per-node
+  // bounds test (StackBounds) decides it: what storing bounds in the format could save.
+  uint64_t same_texel = 0, sample_pairs = 0, levels_early = 0, walked = 0;
+  {
+    const st::moct::Geometry& tg = tree.geometry();
+    for (size_t i = 0; i < std::min<size_t>(ms, 500); ++i) {
+      std::array<uint64_t, 2> prev{};
+      for (uint32_t w = 0; w < n; ++w) {
+        const st::LightPoint lp = set.samples[w].to_light(pts[i]);
+        const auto t = st::LightSpace::texel_of(level, lp.u, lp.v);
+        if (w > 0) ++sample_pairs, same_texel += t == prev;
+        prev = t;
+        const float d = float(lp.d);
+        st::MhOctree::Cursor c = tree.root(), next;
+        uint32_t decide = ~0u;
+        for (;;) {
+          st::StackBounds::Range r = sbounds.at(c.pos);
+          if (c.code == st::moct::kCodeEmpty) {  // as soft_visibility_bounded
+            const float v = tree.value(c);
+            r.lo = std::min(r.lo, v), r.hi = std::max(r.hi, v);
+          }
+          if (decide == ~0u && (d <= r.lo || d > r.hi)) decide = c.level;
+          if (c.level >= tg.depth()) break;
+          uint32_t slot = 0;
+          if (tg.splits_xy(c.level)) {
+            const uint32_t b = tg.n - tg.xy_bits(c.level + 1);
+            slot = uint32_t((t[0] >> b) & 1) | uint32_t((t[1] >> b) & 1) << 1;
+          }
+          if (tg.splits_w(c.level)) slot |= uint32_t((w >> (tg.k - tg.w_bits(c.level + 1))) & 1) << 2;
+          if (!tree.child(c, slot, next)) break;
+          c = next;
+        }
+        levels_early += c.level - std::min(decide, c.level);
+        ++walked;
+      }
+    }
+  }
+  const double same_texel_share = double(same_texel) / double(std::max<uint64_t>(sample_pairs, 1));
+  const double bounds_levels_early = double(levels_early) / double(std::max<uint64_t>(walked, 1));
 
   const double raw = double(stack.data.size()) * 4;  // float32 depth per texel per slice
   std::printf("slices %u, octree levels %u (xy %u, w %u), samples 0-499 in penumbra: %zu\n", n, oh.geo.levels(), oh.geo.n,
@@ -381,6 +427,9 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
               "%.2f nodes and %.2f new cache lines (prefetches) per sample; the 32 hot points %.1f nodes per point\n",
               ns_soft / n, ns_soft_hot / n, ns_batch / n, ns_batch_hot / n, double(visited) / double(ms) / n,
               double(lines_batch) / double(ms) / n, double(visited_hot) / double(ms));
+  std::printf("soft walk: batched %.1f ns per sample, %.2fx a 2D lookup per point (shared walk %.1f ns, %.2fx); "
+              "consecutive samples on the same texel %.3f; per-node bounds decide %.2f levels early\n",
+              ns_batch / n, ns_batch / ns_2d, ns_soft / n, ns_soft / ns_2d, same_texel_share, bounds_levels_early);
   std::printf("peak RSS %.0f MiB\n", peak_rss_mib());
   std::printf("bounded early stop: %.1f ns per sample, nodes per point %.1f; bounds %.2f s, %zu bytes\n",
               ns_bounded / n, double(visited_b) / double(ms), bounds_s, sbounds.bytes());
@@ -423,6 +472,8 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
           {"soft_nodes_per_point", double(visited) / double(ms)},
           {"ns_soft_bounded", ns_bounded},
           {"soft_bounded_nodes_per_point", double(visited_b) / double(ms)},
+          {"soft_same_texel_share", same_texel_share},
+          {"soft_bounds_levels_early", bounds_levels_early},
           {"bounds_s", bounds_s},
           {"bounds_bytes", sbounds.bytes()},
           {"sharing",

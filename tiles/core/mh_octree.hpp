@@ -40,8 +40,9 @@ class MhOctree {
   // path shares with the previous walk's (MH §3.3's lowest common node and last-sample
   // cache, carried over w): coherent texel sequences, such as one point's samples in
   // trajectory or Hilbert order, read only the nodes where their paths part.
-  // Compact (216 bytes, 440 with 64-bit words; a soft lookup's batch keeps one per lane): word indices fit 32
-  // bits (a buffer's byte_size is 32-bit), codes 2 bits, x and y 20 (kMaxXyLevel).
+  // Compact (216 bytes, 440 with 64-bit words; a soft lookup's batch keeps one per lane):
+  // word indices fit 32 bits (a buffer's byte_size is 32-bit), codes 2 bits, x and y 20
+  // (kMaxXyLevel).
   struct Path {
     uint32_t pos[moct::kMaxLevels] = {}, val[moct::kMaxLevels] = {};
     uint8_t code[moct::kMaxLevels] = {};
