@@ -5,6 +5,7 @@
 // shared soft-shadow walk (stack_lookup.hpp) must equal independent lookups on it (also
 // where blocks are shared: nodes reached through more than one parent).
 #include <span>
+#include <string>
 
 #include "common/error.hpp"
 #include "common/hash.hpp"
@@ -17,7 +18,8 @@
 namespace {
 
 // Small stacks of each shape: cubic, shallower and deeper than wide, N not a power of
-// two; random intervals and slowly sliding ones (coherent along w).
+// two (37: more than one run of the soft lookups' batched transforms); random intervals
+// and slowly sliding ones (coherent along w).
 st::IntervalStack seed_stack(uint32_t level, uint32_t slices, uint64_t seed, bool coherent) {
   st::IntervalStack s{level, slices, {}};
   s.data.resize(size_t(s.side() * s.side()) * slices);
@@ -36,7 +38,7 @@ st::IntervalStack seed_stack(uint32_t level, uint32_t slices, uint64_t seed, boo
 
 std::vector<st::fuzz::Bytes> st::fuzz::seeds() {
   std::vector<Bytes> out;
-  const std::pair<uint32_t, uint32_t> shapes[] = {{0, 1}, {1, 2}, {2, 4}, {3, 3}, {3, 8}, {1, 8}, {4, 2}, {4, 5}};
+  const std::pair<uint32_t, uint32_t> shapes[] = {{0, 1}, {1, 2}, {2, 4}, {3, 3}, {3, 8}, {1, 8}, {4, 2}, {4, 5}, {2, 37}};
   uint64_t seed = 1;
   for (auto [level, slices] : shapes)
     for (bool coherent : {false, true}) out.push_back(encode_octree(build_octree(seed_stack(level, slices, seed++, coherent))));
@@ -70,27 +72,31 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       if (w >= tree.slices()) FUZZ_CHECK(v == st::kLitDepth);
     }
   }
-  // The shared walk against independent ones, with suns fitted to a unit box.
+  // The shared walk against independent ones, under a sun path and under a jittered area
+  // light (windowed spots: the batched transforms of sample_texels.hpp, runs of 32 samples
+  // and a shorter last one), each fitted to a unit box.
   if (tree.slices() <= 64) {
-    st::LightSetSpec spec = st::LightSetSpec::parse("sun-path:azimuth=0..90,elevation=30..60,samples=" +
-                                                    std::to_string(tree.slices()));
     st::Aabb box;
     box.extend({-1, -1, -1});
     box.extend({1, 1, 1});
-    const st::LightSet set = st::LightSet::fit(spec, box);
-    const st::StackLookup look(tree, set);
+    const std::string samples = ",samples=" + std::to_string(tree.slices());
     const st::StackBounds bounds(tree);
-    st::Rng rng(h);
-    st::Vec3d pts[20];
-    for (st::Vec3d& p : pts) p = {rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-1, 1)};
-    for (int i = 0; i < 4; ++i) {
-      const st::Vec3d& p = pts[i];
-      FUZZ_CHECK(look.soft_visibility(p) == look.soft_visibility_independent(p));
-      FUZZ_CHECK(look.soft_visibility_bounded(p, bounds) == look.soft_visibility_independent(p));
+    for (const char* light :
+         {"sun-path:azimuth=0..90,elevation=30..60", "area:pos=0.3,4,0.2,target=0,0,0,size=1,1,jitter=0.5"}) {
+      const st::LightSet set = st::LightSet::fit(st::LightSetSpec::parse(light + samples), box);
+      const st::StackLookup look(tree, set);
+      st::Rng rng(h);
+      st::Vec3d pts[20];
+      for (st::Vec3d& p : pts) p = {rng.uniform(-1, 1), rng.uniform(-1, 1), rng.uniform(-1, 1)};
+      for (int i = 0; i < 4; ++i) {
+        const st::Vec3d& p = pts[i];
+        FUZZ_CHECK(look.soft_visibility(p) == look.soft_visibility_independent(p));
+        FUZZ_CHECK(look.soft_visibility_bounded(p, bounds) == look.soft_visibility_independent(p));
+      }
+      float batch[20];
+      look.soft_visibility(pts, batch);  // more points than lanes: the interleaved walks
+      for (int i = 0; i < 20; ++i) FUZZ_CHECK(batch[i] == look.soft_visibility(pts[i]));
     }
-    float batch[20];
-    look.soft_visibility(pts, batch);  // more points than lanes: the interleaved walks
-    for (int i = 0; i < 20; ++i) FUZZ_CHECK(batch[i] == look.soft_visibility(pts[i]));
   }
   return 0;
 }

@@ -95,7 +95,8 @@ class MhOctree {
     const uint32_t cc = moct::child_code(mask, slot);
     if (!cc) return false;
     k.pos = moct::block_start(k.pos, shift_[l], moct::word_offset(word_p)) + moct::child_skip(mask, slot);
-    if (cc != moct::kCodeEmpty) k.val = cc == moct::kCodeLeaf ? k.pos : k.pos + 1;
+    // Branchless: an empty node keeps the inherited value; a leaf's is its word, an inner's the next.
+    k.val = cc == moct::kCodeEmpty ? k.val : k.pos + (cc >> 1);
     k.code = cc;
     k.level = l + 1;
     p.pos[l + 1] = uint32_t(k.pos), p.val[l + 1] = uint32_t(k.val), p.code[l + 1] = uint8_t(cc);
