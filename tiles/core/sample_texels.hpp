@@ -40,8 +40,9 @@ class SampleTexels {
   uint32_t size() const { return count_; }
   uint32_t level() const { return level_; }
 
-  // Samples w0 .. w0 + n - 1 of point p: out.x[i], out.y[i], out.d[i] for sample w0 + i.
-  // Preconditions (asserted): n <= kRun, w0 + n <= size().
+  // Samples w0 .. w0 + n - 1 of point p: out.x[i], out.y[i], out.d[i] for sample w0 + i;
+  // entries from n on are unspecified. Preconditions (asserted): n <= kRun,
+  // w0 + n <= size().
   void run(const Vec3d& p, uint32_t w0, uint32_t n, Run& out) const noexcept;
 
   // One sample the scalar way (LightSpace::to_light + texel_of): the reference.
@@ -52,10 +53,11 @@ class SampleTexels {
   std::vector<LightSpace> samples_;
   uint32_t count_ = 0, level_ = 0;
   Path path_ = Path::scalar;
-  // Per-sample parameters, structure of arrays with one pad sample (an odd run's second lane): origin,
-  // axis_u, axis_v, forward (sun_ground: the depth axis n), extent, near, far - near, and
-  // (c_u, c_v) of a spot_window or (k_u, k_v) of the ground frame (LightSpace::ray_axis()
-  // . axis_u, . axis_v). ground_shared reads only extent and (k_u, k_v) per sample.
+  // Per-sample parameters, structure of arrays with one pad sample (an odd run's second
+  // lane reads it): origin, axis_u, axis_v, forward (sun_ground: the depth axis n),
+  // extent, near, far - near, and (c_u, c_v) of a spot_window or (k_u, k_v) of the ground
+  // frame (LightSpace::ray_axis() . axis_u, . axis_v). ground_shared reads only extent
+  // and (k_u, k_v) per sample.
   std::vector<double> ox_, oy_, oz_, ux_, uy_, uz_, vx_, vy_, vz_, fx_, fy_, fz_, ext_, near_, span_, c0_, c1_;
 };
 

@@ -19,7 +19,8 @@
 //   last-sample cache, carried over w). Neighbouring samples (trajectory or Hilbert order)
 //   are neighbouring slices, and where a node (a leaf, or a node without the child the path
 //   needs) answers for all the w under it, the next samples are answered by that node
-//   without reading anything new.
+//   without reading anything new. The samples' texels come a run of up to 32 at a time
+//   from SampleTexels (sample_texels.hpp), lit()'s transform bit for bit.
 //
 // Thread safety: const lookups; noexcept, no allocation. The octree and the light set are
 // borrowed and must outlive the lookup.
