@@ -500,7 +500,13 @@ void RemoteMap::pcf_batch_shared(std::span<const PcfQuery> queries, std::span<fl
   uint64_t g_x = 0, g_y = 0;
   float g_value = 0;
   Counted g_counted = Counted::none;
-  uint64_t counted[3] = {0, 0, 0};  // by Counted
+  // Answers from kept regions by kind, in registers (an array indexed by the kind would
+  // be a load and a store through memory per tap).
+  uint64_t counted_hit = 0, counted_coarse = 0;
+  auto count = [&] {
+    counted_hit += g_counted == Counted::hit;
+    counted_coarse += g_counted == Counted::coarse;
+  };
   auto take = [&](const LookupScratch::Region& g) {
     g_level = g.level, g_shift = g.shift, g_x = g.x, g_y = g.y, g_value = g.value, g_counted = g.counted;
   };
@@ -516,13 +522,13 @@ void RemoteMap::pcf_batch_shared(std::span<const PcfQuery> queries, std::span<fl
     const uint64_t top = (uint64_t(1) << q.level) - 1;  // pcf_tap's clamp of one tap
     const uint64_t x = std::min(q.x, top), y = std::min(q.y, top);
     if (q.level == g_level && (((x ^ g_x) | (y ^ g_y)) >> g_shift) == 0) {
-      ++counted[uint8_t(g_counted)];
+      count();
       out[i] = q.receiver <= g_value ? 1.0f : 0.0f;
       continue;
     }
     if (const LookupScratch::Region* g = sc.find_other(q.level, x, y)) {  // another kept region
       take(*g);
-      ++counted[uint8_t(g_counted)];
+      count();
       out[i] = q.receiver <= g_value ? 1.0f : 0.0f;
       continue;
     }
@@ -561,9 +567,9 @@ void RemoteMap::pcf_batch_shared(std::span<const PcfQuery> queries, std::span<fl
     g_level = q.level, g_shift = r.shift, g_x = x, g_y = y, g_value = r.value, g_counted = Counted::hit;
     out[i] = q.receiver <= r.value ? 1.0f : 0.0f;
   }
-  sc.hits += walked + counted[uint8_t(Counted::hit)];
-  sc.missed += counted[uint8_t(Counted::coarse)];
-  sc.coarse += counted[uint8_t(Counted::coarse)];
+  sc.hits += walked + counted_hit;
+  sc.missed += counted_coarse;
+  sc.coarse += counted_coarse;
 }
 
 namespace {

@@ -6,10 +6,13 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <cassert>
 #include <cmath>
 #include <limits>
 
-#if defined(__SSE2__)
+#if defined(__x86_64__) || defined(__i386__)
+#include <immintrin.h>  // SSE2 and, in functions built for it, AVX (sun_tap_queries)
+#elif defined(__SSE2__)
 #include <emmintrin.h>
 #endif
 
@@ -226,55 +229,225 @@ float map_visibility_filtered(const Evaluator& eval, const Receiver& r, const Li
 
 namespace {
 
-// lookup_point (the offset p + normal * k * texel) and a sun's LightSpace::to_light for
-// n receivers, operation for operation in the same order (so the same IEEE doubles:
-// contraction is off, see filter_level.hpp), in one loop without calls or branches.
-// With SSE2 (every x86-64) two receivers at a time: packed IEEE double arithmetic gives
-// each lane exactly the scalar result, and the three divisions per receiver (the loop's
-// cost) go two to an instruction.
-void sun_lookup_chunk(const LightSpace& light, uint32_t level, uint32_t pcf_radius, const Receiver* rc, size_t n,
-                      double* u, double* v, double* d) {
-  const Vec3d org = light.origin(), au = light.axis_u(), av = light.axis_v(), fw = light.forward();
-  const double e = light.extent_uv(), near = light.near_plane(), depth = light.far_plane() - light.near_plane();
-  const double texel = light.extent_uv() / double(uint64_t(1) << level);
-  const double k_closed = kClosedReceiverOffsetTexels + pcf_radius, k_open = kOpenReceiverOffsetTexels + pcf_radius;
-  size_t i = 0;
+// The constants of lookup_point and a sun's LightSpace::to_light at one level, read once
+// per batch.
+struct SunTransform {
+  Vec3d org, au, av, fw;
+  double e, near, depth, texel, k_closed, k_open, side;
+  uint32_t level, kr;
+};
+
+SunTransform sun_transform(const LightSpace& light, uint32_t level, uint32_t pcf_radius) {
+  SunTransform t;
+  t.org = light.origin(), t.au = light.axis_u(), t.av = light.axis_v(), t.fw = light.forward();
+  t.e = light.extent_uv(), t.near = light.near_plane(), t.depth = light.far_plane() - light.near_plane();
+  t.texel = light.extent_uv() / double(uint64_t(1) << level);  // lookup_point's, for a sun
+  t.k_closed = kClosedReceiverOffsetTexels + pcf_radius, t.k_open = kOpenReceiverOffsetTexels + pcf_radius;
+  t.side = double(uint64_t(1) << level);
+  t.level = level, t.kr = 2 * pcf_radius + 1;
+  return t;
+}
+
+// One receiver: lookup_point's p + normal * k * texel, then to_light, operation for
+// operation in the same order (the same IEEE doubles: contraction is off, see
+// filter_level.hpp and tiles/CMakeLists.txt), the in-map test, and the texel. (u, v) in
+// [0, 1): u * 2^level is exact and below 2^level, so truncating it is
+// LightSpace::texel_of's floor, without its library calls. False outside the map.
+inline bool sun_tap_one(const SunTransform& t, const Receiver& r, PcfQuery& q) {
+  const double k = r.closed ? t.k_closed : t.k_open;
+  const double rx = (r.pos.x + r.normal.x * k * t.texel) - t.org.x;
+  const double ry = (r.pos.y + r.normal.y * k * t.texel) - t.org.y;
+  const double rz = (r.pos.z + r.normal.z * k * t.texel) - t.org.z;
+  const double u = (rx * t.au.x + ry * t.au.y + rz * t.au.z) / t.e;
+  const double v = (rx * t.av.x + ry * t.av.y + rz * t.av.z) / t.e;
+  const double d = ((rx * t.fw.x + ry * t.fw.y + rz * t.fw.z) - t.near) / t.depth;
+  if (!(u >= 0 && u < 1 && v >= 0 && v < 1)) return false;
+  q = {uint64_t(u * t.side), uint64_t(v * t.side), t.level, t.kr, float(d)};
+  return true;
+}
+
+size_t sun_tap_queries_scalar(const SunTransform& t, const Receiver* rc, size_t n, PcfQuery* q, uint32_t* index) {
+  size_t nq = 0;
+  for (size_t i = 0; i < n; ++i)
+    if (sun_tap_one(t, rc[i], q[nq])) index[nq++] = uint32_t(i);
+  return nq;
+}
+
+// The packed paths convert texels with a double -> int32 truncation: exact below 2^31.
+constexpr uint32_t kPackedMaxLevel = 30;
+
+// The lanes' results into the queries: every lane is written, the count moves only for
+// those in the map (no branch on the mask).
+inline size_t put_lanes(const SunTransform& t, size_t i, size_t lanes, int inside, const int32_t* tx,
+                        const int32_t* ty, const float* d, PcfQuery* q, uint32_t* index, size_t nq) {
+  for (size_t l = 0; l < lanes; ++l) {
+    q[nq] = {uint64_t(uint32_t(tx[l])), uint64_t(uint32_t(ty[l])), t.level, t.kr, d[l]};
+    index[nq] = uint32_t(i + l);
+    nq += size_t((inside >> l) & 1);
+  }
+  return nq;
+}
+
 #if defined(__SSE2__)
-  const __m128d t2 = _mm_set1_pd(texel), e2 = _mm_set1_pd(e), near2 = _mm_set1_pd(near), depth2 = _mm_set1_pd(depth);
-  const __m128d ox = _mm_set1_pd(org.x), oy = _mm_set1_pd(org.y), oz = _mm_set1_pd(org.z);
-  const __m128d aux = _mm_set1_pd(au.x), auy = _mm_set1_pd(au.y), auz = _mm_set1_pd(au.z);
-  const __m128d avx = _mm_set1_pd(av.x), avy = _mm_set1_pd(av.y), avz = _mm_set1_pd(av.z);
-  const __m128d fwx = _mm_set1_pd(fw.x), fwy = _mm_set1_pd(fw.y), fwz = _mm_set1_pd(fw.z);
+// Two receivers at a time: packed IEEE double arithmetic gives each lane exactly the
+// scalar result (sun_tap_one's operations in its order), and the three divisions per
+// receiver, the loop's cost, go two to an instruction.
+size_t sun_tap_queries_sse2(const SunTransform& t, const Receiver* rc, size_t n, PcfQuery* q, uint32_t* index) {
+  if (t.level > kPackedMaxLevel) return sun_tap_queries_scalar(t, rc, n, q, index);
+  const __m128d t2 = _mm_set1_pd(t.texel), e2 = _mm_set1_pd(t.e), near2 = _mm_set1_pd(t.near),
+                depth2 = _mm_set1_pd(t.depth), side2 = _mm_set1_pd(t.side), zero = _mm_setzero_pd(),
+                one = _mm_set1_pd(1.0);
+  const __m128d ox = _mm_set1_pd(t.org.x), oy = _mm_set1_pd(t.org.y), oz = _mm_set1_pd(t.org.z);
+  const __m128d aux = _mm_set1_pd(t.au.x), auy = _mm_set1_pd(t.au.y), auz = _mm_set1_pd(t.au.z);
+  const __m128d avx = _mm_set1_pd(t.av.x), avy = _mm_set1_pd(t.av.y), avz = _mm_set1_pd(t.av.z);
+  const __m128d fwx = _mm_set1_pd(t.fw.x), fwy = _mm_set1_pd(t.fw.y), fwz = _mm_set1_pd(t.fw.z);
+  size_t i = 0, nq = 0;
   for (; i + 2 <= n; i += 2) {
     const Receiver& a = rc[i];
     const Receiver& b = rc[i + 1];
-    const __m128d k = _mm_set_pd(b.closed ? k_closed : k_open, a.closed ? k_closed : k_open);
-    // (pos + normal * k * texel) - org, left to right as in the scalar loop below.
+    const __m128d k = _mm_set_pd(b.closed ? t.k_closed : t.k_open, a.closed ? t.k_closed : t.k_open);
     const __m128d rx = _mm_sub_pd(
         _mm_add_pd(_mm_set_pd(b.pos.x, a.pos.x), _mm_mul_pd(_mm_mul_pd(_mm_set_pd(b.normal.x, a.normal.x), k), t2)), ox);
     const __m128d ry = _mm_sub_pd(
         _mm_add_pd(_mm_set_pd(b.pos.y, a.pos.y), _mm_mul_pd(_mm_mul_pd(_mm_set_pd(b.normal.y, a.normal.y), k), t2)), oy);
     const __m128d rz = _mm_sub_pd(
         _mm_add_pd(_mm_set_pd(b.pos.z, a.pos.z), _mm_mul_pd(_mm_mul_pd(_mm_set_pd(b.normal.z, a.normal.z), k), t2)), oz);
-    auto dot = [&](__m128d x, __m128d y, __m128d z) {
-      return _mm_add_pd(_mm_add_pd(_mm_mul_pd(rx, x), _mm_mul_pd(ry, y)), _mm_mul_pd(rz, z));
-    };
-    _mm_storeu_pd(u + i, _mm_div_pd(dot(aux, auy, auz), e2));
-    _mm_storeu_pd(v + i, _mm_div_pd(dot(avx, avy, avz), e2));
-    _mm_storeu_pd(d + i, _mm_div_pd(_mm_sub_pd(dot(fwx, fwy, fwz), near2), depth2));
+    const __m128d u =
+        _mm_div_pd(_mm_add_pd(_mm_add_pd(_mm_mul_pd(rx, aux), _mm_mul_pd(ry, auy)), _mm_mul_pd(rz, auz)), e2);
+    const __m128d v =
+        _mm_div_pd(_mm_add_pd(_mm_add_pd(_mm_mul_pd(rx, avx), _mm_mul_pd(ry, avy)), _mm_mul_pd(rz, avz)), e2);
+    const __m128d d = _mm_div_pd(
+        _mm_sub_pd(_mm_add_pd(_mm_add_pd(_mm_mul_pd(rx, fwx), _mm_mul_pd(ry, fwy)), _mm_mul_pd(rz, fwz)), near2),
+        depth2);
+    // Ordered compares: NaN is outside, as in the scalar test.
+    const int inside = _mm_movemask_pd(_mm_and_pd(_mm_and_pd(_mm_cmpge_pd(u, zero), _mm_cmplt_pd(u, one)),
+                                                  _mm_and_pd(_mm_cmpge_pd(v, zero), _mm_cmplt_pd(v, one))));
+    alignas(16) int32_t tx[4], ty[4];
+    alignas(16) float df[4];
+    _mm_store_si128(reinterpret_cast<__m128i*>(tx), _mm_cvttpd_epi32(_mm_mul_pd(u, side2)));
+    _mm_store_si128(reinterpret_cast<__m128i*>(ty), _mm_cvttpd_epi32(_mm_mul_pd(v, side2)));
+    _mm_store_ps(df, _mm_cvtpd_ps(d));  // round to nearest, as float(d)
+    nq = put_lanes(t, i, 2, inside, tx, ty, df, q, index, nq);
   }
-#endif
-  for (; i < n; ++i) {
-    const Receiver& r = rc[i];
-    const double k = r.closed ? k_closed : k_open;
-    const double rx = (r.pos.x + r.normal.x * k * texel) - org.x;
-    const double ry = (r.pos.y + r.normal.y * k * texel) - org.y;
-    const double rz = (r.pos.z + r.normal.z * k * texel) - org.z;
-    u[i] = (rx * au.x + ry * au.y + rz * au.z) / e;
-    v[i] = (rx * av.x + ry * av.y + rz * av.z) / e;
-    d[i] = ((rx * fw.x + ry * fw.y + rz * fw.z) - near) / depth;
-  }
+  for (; i < n; ++i)
+    if (sun_tap_one(t, rc[i], q[nq])) index[nq++] = uint32_t(i);
+  return nq;
 }
+#endif
+
+#if defined(__x86_64__) || defined(__i386__)
+#define ST_AVX __attribute__((target("avx")))
+ST_AVX inline __attribute__((always_inline)) __m256d st_dot3_avx(__m256d rx, __m256d ry, __m256d rz, __m256d x,
+                                                                 __m256d y, __m256d z) {
+  return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(rx, x), _mm256_mul_pd(ry, y)), _mm256_mul_pd(rz, z));
+}
+
+ST_AVX inline __attribute__((always_inline)) __m256d st_offset_avx(double p0, double p1, double p2, double p3,
+                                                                   double n0, double n1, double n2, double n3,
+                                                                   __m256d k, __m256d texel, __m256d o) {
+  return _mm256_sub_pd(
+      _mm256_add_pd(_mm256_set_pd(p3, p2, p1, p0), _mm256_mul_pd(_mm256_mul_pd(_mm256_set_pd(n3, n2, n1, n0), k), texel)),
+      o);
+}
+
+// Four receivers at a time, the same operations as sun_tap_queries_sse2 (AVX has no
+// fused multiply-add, so nothing can contract); chosen at run time (tap_query_path_available).
+ST_AVX size_t sun_tap_queries_avx(const SunTransform& t, const Receiver* rc, size_t n, PcfQuery* q,
+                                  uint32_t* index) {
+  if (t.level > kPackedMaxLevel) return sun_tap_queries_scalar(t, rc, n, q, index);
+  const __m256d t4 = _mm256_set1_pd(t.texel), e4 = _mm256_set1_pd(t.e), near4 = _mm256_set1_pd(t.near),
+                depth4 = _mm256_set1_pd(t.depth), side4 = _mm256_set1_pd(t.side), zero = _mm256_setzero_pd(),
+                one = _mm256_set1_pd(1.0);
+  const __m256d ox = _mm256_set1_pd(t.org.x), oy = _mm256_set1_pd(t.org.y), oz = _mm256_set1_pd(t.org.z);
+  const __m256d aux = _mm256_set1_pd(t.au.x), auy = _mm256_set1_pd(t.au.y), auz = _mm256_set1_pd(t.au.z);
+  const __m256d avx = _mm256_set1_pd(t.av.x), avy = _mm256_set1_pd(t.av.y), avz = _mm256_set1_pd(t.av.z);
+  const __m256d fwx = _mm256_set1_pd(t.fw.x), fwy = _mm256_set1_pd(t.fw.y), fwz = _mm256_set1_pd(t.fw.z);
+  size_t i = 0, nq = 0;
+  for (; i + 4 <= n; i += 4) {
+    const Receiver& a = rc[i];
+    const Receiver& b = rc[i + 1];
+    const Receiver& c = rc[i + 2];
+    const Receiver& d = rc[i + 3];
+    const __m256d k = _mm256_set_pd(d.closed ? t.k_closed : t.k_open, c.closed ? t.k_closed : t.k_open,
+                                    b.closed ? t.k_closed : t.k_open, a.closed ? t.k_closed : t.k_open);
+    const __m256d rx = st_offset_avx(a.pos.x, b.pos.x, c.pos.x, d.pos.x, a.normal.x, b.normal.x, c.normal.x,
+                                     d.normal.x, k, t4, ox);
+    const __m256d ry = st_offset_avx(a.pos.y, b.pos.y, c.pos.y, d.pos.y, a.normal.y, b.normal.y, c.normal.y,
+                                     d.normal.y, k, t4, oy);
+    const __m256d rz = st_offset_avx(a.pos.z, b.pos.z, c.pos.z, d.pos.z, a.normal.z, b.normal.z, c.normal.z,
+                                     d.normal.z, k, t4, oz);
+    const __m256d u = _mm256_div_pd(st_dot3_avx(rx, ry, rz, aux, auy, auz), e4);
+    const __m256d v = _mm256_div_pd(st_dot3_avx(rx, ry, rz, avx, avy, avz), e4);
+    const __m256d dd = _mm256_div_pd(_mm256_sub_pd(st_dot3_avx(rx, ry, rz, fwx, fwy, fwz), near4), depth4);
+    // Ordered, non-signalling compares: NaN is outside, as in the scalar test.
+    const int inside = _mm256_movemask_pd(
+        _mm256_and_pd(_mm256_and_pd(_mm256_cmp_pd(u, zero, _CMP_GE_OQ), _mm256_cmp_pd(u, one, _CMP_LT_OQ)),
+                      _mm256_and_pd(_mm256_cmp_pd(v, zero, _CMP_GE_OQ), _mm256_cmp_pd(v, one, _CMP_LT_OQ))));
+    alignas(16) int32_t tx[4], ty[4];
+    alignas(16) float df[4];
+    _mm_store_si128(reinterpret_cast<__m128i*>(tx), _mm256_cvttpd_epi32(_mm256_mul_pd(u, side4)));
+    _mm_store_si128(reinterpret_cast<__m128i*>(ty), _mm256_cvttpd_epi32(_mm256_mul_pd(v, side4)));
+    _mm_store_ps(df, _mm256_cvtpd_ps(dd));  // round to nearest, as float(d)
+    nq = put_lanes(t, i, 4, inside, tx, ty, df, q, index, nq);
+  }
+  for (; i < n; ++i)
+    if (sun_tap_one(t, rc[i], q[nq])) index[nq++] = uint32_t(i);
+  return nq;
+}
+#undef ST_AVX
+#endif
+
+}  // namespace
+
+bool tap_query_path_available(TapQueryPath path) {
+  switch (path) {
+    case TapQueryPath::scalar:
+      return true;
+    case TapQueryPath::sse2:
+#if defined(__SSE2__)
+      return true;
+#else
+      return false;
+#endif
+    case TapQueryPath::avx:
+#if defined(__x86_64__) || defined(__i386__)
+      return __builtin_cpu_supports("avx");
+#else
+      return false;
+#endif
+    case TapQueryPath::best:
+      return true;
+  }
+  return false;
+}
+
+size_t sun_tap_queries(const LightSpace& light, uint32_t level, uint32_t pcf_radius, std::span<const Receiver> rc,
+                       PcfQuery* queries, uint32_t* index, TapQueryPath path) {
+  assert(light.kind() == LightKind::sun && level < 64);
+  const SunTransform t = sun_transform(light, level, pcf_radius);
+  if (path == TapQueryPath::best) {
+    static const TapQueryPath best = tap_query_path_available(TapQueryPath::avx)    ? TapQueryPath::avx
+                                     : tap_query_path_available(TapQueryPath::sse2) ? TapQueryPath::sse2
+                                                                                    : TapQueryPath::scalar;
+    path = best;
+  }
+  switch (path) {
+#if defined(__x86_64__) || defined(__i386__)
+    case TapQueryPath::avx:
+      if (tap_query_path_available(TapQueryPath::avx)) return sun_tap_queries_avx(t, rc.data(), rc.size(), queries, index);
+      break;
+#endif
+#if defined(__SSE2__)
+    case TapQueryPath::sse2:
+      return sun_tap_queries_sse2(t, rc.data(), rc.size(), queries, index);
+#endif
+    default:
+      break;
+  }
+  return sun_tap_queries_scalar(t, rc.data(), rc.size(), queries, index);
+}
+
+namespace {
 
 // The shading of render_view and render_stack_view: sky, ambient + Lambert times visibility.
 void shade_image(const std::vector<Receiver>& rec, const std::vector<float>& v, double ambient, std::vector<float>& img) {
@@ -338,8 +511,10 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
   const uint32_t kr = 2 * o.pcf_radius + 1;
   const bool sun_fast = light.kind() == LightKind::sun && !(o.pixel_angle > 0);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, m, 4096), [&](const tbb::blocked_range<size_t>& r) {
-    // Sub-chunks of kChunk receivers on the stack: nothing allocated per pass.
-    constexpr size_t kChunk = 256;
+    // Sub-chunks of kChunk receivers on the stack: nothing allocated per pass. A sun's
+    // chunk is one client call of 1024 taps: the call's fixed costs (the shared lock, the
+    // kept regions and tile paths starting afresh) spread over four times as many taps.
+    constexpr size_t kChunk = 1024;
     PcfQuery queries[2 * kChunk];
     uint32_t index[kChunk];  // the receiver of each query (its first, with a blend)
     float blend[kChunk], answers[2 * kChunk];  // trilinear weight (NaN: one level only)
@@ -347,24 +522,14 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
       const size_t b1 = std::min(r.end(), b0 + kChunk);
       size_t nq = 0, ni = 0;
       if (sun_fast) {
-        // A sun at the finest level: lookup_point and LightSpace::to_light operation for
-        // operation (the same IEEE doubles), in one tight loop over the chunk
-        // (sun_lookup_chunk), then the in-map test and the texels.
-        double u[kChunk], v[kChunk], d[kChunk];
-        sun_lookup_chunk(light, L, o.pcf_radius, fr.data() + b0, b1 - b0, u, v, d);
-        const double side = double(uint64_t(1) << L);
-        for (size_t k = 0; k < b1 - b0; ++k) {
-          if (!(u[k] >= 0 && u[k] < 1 && v[k] >= 0 && v[k] < 1)) {
-            fvis[b0 + k] = 1;
-            continue;
-          }
-          // (u, v) in [0, 1): u * 2^level is exact and below 2^level, so truncating it is
-          // LightSpace::texel_of's floor, without its library calls.
-          queries[nq++] = {uint64_t(u[k] * side), uint64_t(v[k] * side), L, kr, float(d[k])};
-          index[ni++] = uint32_t(b0 + k);
-        }
+        // A sun at the finest level: lookup_point, to_light and the texel (the same IEEE
+        // doubles) for the whole chunk in packed arithmetic (sun_tap_queries); receivers
+        // outside the map are lit.
+        nq = sun_tap_queries(light, L, o.pcf_radius, std::span<const Receiver>(fr.data() + b0, b1 - b0), queries,
+                             index, o.tap_query_path);
+        std::fill(fvis.begin() + ptrdiff_t(b0), fvis.begin() + ptrdiff_t(b1), 1.0f);
         eval.pcf_batch(std::span<const PcfQuery>(queries, nq), std::span<float>(answers, nq));
-        for (size_t k = 0; k < ni; ++k) fvis[index[k]] = answers[k];
+        for (size_t k = 0; k < nq; ++k) fvis[b0 + index[k]] = answers[k];
         continue;
       }
       for (size_t i = b0; i < b1; ++i) {

@@ -25,6 +25,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -97,6 +98,25 @@ float map_visibility_filtered(const Evaluator& eval, const Receiver& r, const Li
 // finest-level texels of the map at its position: the input of filter_levels.
 float receiver_footprint_texels(const Receiver& r, const LightSpace& light, uint32_t map_level, double pixel_angle);
 
+// How sun_tap_queries computes: scalar, two receivers per SSE2 instruction, four per AVX
+// instruction (an x86 CPU that has it, chosen at run time), or the best this CPU runs.
+// Every path gives the same queries bit for bit (tests/tiles/render_tap_queries_test.cpp).
+enum class TapQueryPath : uint8_t { best, scalar, sse2, avx };
+
+// Whether this build and CPU run `path` (best and scalar: always; sse2: an SSE2 build;
+// avx: an x86 build on a CPU with AVX).
+bool tap_query_path_available(TapQueryPath path);
+
+// A sun's single-tap or PCF queries at `level` for receivers rc (all light-facing hits):
+// lookup_point(rc[i], light, level, pcf_radius), then the texel of (u, v) and the depth as
+// a float, kernel side 2 * pcf_radius + 1: for every receiver whose (u, v) lies in
+// [0, 1)^2 (the others are lit), queries[k] and index[k] = i, in receiver order; returns
+// k's count. Bit for bit the PcfQuery of lookup_point + LightSpace::texel_of, on every
+// path (an unavailable path, or a level above 30 on a packed one, runs scalar).
+// queries and index hold rc.size() entries. light.kind() must be LightKind::sun.
+size_t sun_tap_queries(const LightSpace& light, uint32_t level, uint32_t pcf_radius, std::span<const Receiver> rc,
+                       PcfQuery* queries, uint32_t* index, TapQueryPath path = TapQueryPath::best);
+
 struct RenderOptions {
   uint32_t width = 960, height = 540;
   uint32_t pcf_radius = 0;
@@ -105,6 +125,8 @@ struct RenderOptions {
   double pixel_angle = 0;
   bool diff = false;       // also ray-traced shadows and a difference image
   double ambient = 0.15;
+  // A sun's queries (sun_tap_queries): the same answers on every path; tests pick one.
+  TapQueryPath tap_query_path = TapQueryPath::best;
 };
 
 struct RenderResult {

@@ -110,7 +110,7 @@ class TreeEvaluator final : public Evaluator, public WindowDepths, public TapWal
  public:
   TreeEvaluator(std::span<const uint8_t> bytes, const TreeInfo& info)
       : tree_(bytes.data() + info.tree_offset), finest_(info.levels - 1), root_leaf_(info.root_leaf),
-        shift_(info.shift) {}
+        shift_(info.shift), tree_bytes_(bytes.subspan(std::min<size_t>(info.tree_offset, bytes.size()))) {}
 
   uint32_t finest_level() const override { return finest_; }
 
@@ -141,6 +141,16 @@ class TreeEvaluator final : public Evaluator, public WindowDepths, public TapWal
   // TapWalks (tap_batch.hpp): the same walk, its path kept by the caller.
   DepthRegion walk_tap(uint32_t level, uint64_t x, uint64_t y, TapPath& path) const noexcept override {
     return walk_resumed(tap_path<WalkPath<Cursor>>(path, this), level, x, y);
+  }
+
+  // WindowDepths::prefetch: the tree's first kPrefetchBytes (the root's block and, in the
+  // depth-first layout of MHQUAD.md, the first subtrees below it), which walks read first;
+  // a walk's loads depend on each other (node, then child), so a tile whose lines left the
+  // cache otherwise costs a batch one miss after another. The client calls it when a batch
+  // enters the tile (a small tile: all of it).
+  void prefetch() const noexcept override {
+    const size_t n = std::min(tree_bytes_.size(), kPrefetchBytes);
+    for (size_t o = 0; o < n; o += 64) __builtin_prefetch(tree_bytes_.data() + o);
   }
 
   // MH §3.3, Fig. 5: the taps share the root path down to the lowest common node of the
@@ -325,6 +335,8 @@ class TreeEvaluator final : public Evaluator, public WindowDepths, public TapWal
   uint32_t finest_;
   bool root_leaf_;
   std::array<uint8_t, kMaxLevels> shift_;
+  std::span<const uint8_t> tree_bytes_;  // from the tree's first word to the tile's end (prefetch)
+  static constexpr size_t kPrefetchBytes = 2048;
 };
 
 }  // namespace
