@@ -25,7 +25,7 @@
 //             bits 16-31: child offset `off`, a signed 16-bit number (two's complement,
 //                         -32768..32767, non-zero) in units of 2^shift[level] words. The
 //                         block it names is either the node's own children block (after
-//                         the node) or, version 2, a block of equal children stored
+//                         the node) or, since version 2, a block of equal children stored
 //                         earlier in the depth-first order for another node of the same
 //                         level (a shared block: identical subtrees stored once, DAG-MH
 //                         style), before or after the node
