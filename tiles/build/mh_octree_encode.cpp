@@ -19,9 +19,14 @@ namespace {
 
 using namespace moct;
 
-// Layout rounds that add far words (encode_octree); a constant of the encoder, not of the
-// format.
+// Layout rounds that add far words, and the most near hits a copied block may have and
+// still be replaced by a far word (encode_octree); constants of the encoder, not of the
+// format. Measured on the city at 1024^2 x 32 (MHOCT.md "Version 3 measured"): far words
+// for every copy made the buffer grow after round 3 (a copy other nodes reach by near
+// offsets relays the block; dropping it sends them out of reach too); at most 2 hits kept
+// the least words (0.772 of the N quadtrees' bytes; 0 hits 0.781, 4 hits 0.778).
 constexpr uint32_t kFarRounds = 4;
+constexpr uint32_t kFarMaxHits = 2;
 
 struct Flat {
   std::vector<uint32_t> first_child;
@@ -133,6 +138,8 @@ struct Pass {
   std::vector<uint8_t> far, copied;     // per node: block reached through the far word; an equal
                                         // block was out of reach, so this one is a copy
   std::vector<uint32_t> last;           // per block id: the latest copy laid out (0: none)
+  std::vector<uint32_t> last_owner;     // per block id: the node that laid that copy out
+  std::vector<uint32_t> hits;           // per node: nodes that share its block by a near offset
   uint64_t words = 0, padding = 0, shared_blocks = 0, out_of_reach = 0, far_blocks = 0, far_words = 0;
   uint32_t nodes = 0;
   std::array<uint64_t, kMaxLevels> max_off{};
@@ -152,6 +159,8 @@ void layout(const Flat& t, const std::vector<uint32_t>& block_id, uint32_t ids, 
   out.far.assign(t.size(), 0);
   out.copied.assign(t.size(), 0);
   out.last.assign(ids, 0);
+  out.last_owner.assign(ids, 0);
+  out.hits.assign(t.size(), 0);
   out.max_off.fill(0);
   out.fits = true, out.too_big = false, out.padding = 0, out.shared_blocks = 0, out.out_of_reach = 0;
   out.far_blocks = 0, out.far_words = 0;
@@ -172,6 +181,7 @@ void layout(const Flat& t, const std::vector<uint32_t>& block_id, uint32_t ids, 
       if (d != 0 && d >= -int64_t(kMaxBackOffset) && d <= int64_t(kMaxOffset)) {
         out.block[n] = copy, out.shared[n] = 1;
         ++out.shared_blocks;
+        ++out.hits[out.last_owner[block_id[n]]];
         continue;
       }
       if (out.far_pos[n]) {
@@ -194,6 +204,7 @@ void layout(const Flat& t, const std::vector<uint32_t>& block_id, uint32_t ids, 
     }
     out.block[n] = uint32_t(w);
     out.last[block_id[n]] = uint32_t(w);
+    out.last_owner[block_id[n]] = n;
     const uint64_t off = (w >> s) - (uint64_t(out.pos[n]) >> s);
     if (out.far_pos[n] && off > kMaxOffset)
       out.far[n] = 1, ++out.far_blocks;  // its own block beyond reach: the far word names it
@@ -234,9 +245,10 @@ std::vector<uint8_t> encode_octree(const OctHierarchy& h, OctEncodeStats* stats)
   std::array<uint8_t, kMaxLevels> sh{};
   Pass pass, trial;
   // Far words (format version 3), chosen by hits: a node gets one when, in the previous
-  // round's layout, its block repeated an earlier block (a hit) that lay out of the
-  // offset's reach, so it was copied, and the copy costs more than the far word
-  // (far_worth). Each round lays out again with the far words of all earlier rounds
+  // round's layout, its block repeated an earlier block that lay out of the offset's
+  // reach, so it was copied, the copy costs more than the far word (far_worth), and at
+  // most kFarMaxHits later nodes shared the copy by a near offset (a copy with more hits
+  // is a relay worth its words). Each round lays out again with the far words of all earlier rounds
   // (positions move, so some copies fall within reach and new ones out of it), at most
   // kFarRounds rounds; deterministic (depth-first order, no hashing order involved).
   const std::vector<uint8_t> worth = far_worth(t);
@@ -259,8 +271,16 @@ std::vector<uint8_t> encode_octree(const OctHierarchy& h, OctEncodeStats* stats)
     if (round == kFarRounds) break;
     bool more = false;
     for (uint32_t n = 0; n < t.size(); ++n)
-      if (pass.copied[n] && worth[n] && !far_want[n]) far_want[n] = 1, more = true;
+      if (pass.copied[n] && worth[n] && !far_want[n] && pass.hits[n] <= kFarMaxHits) far_want[n] = 1, more = true;
     if (!more) break;
+  }
+  // Far words reserved in the last round and left unused (their node found its block
+  // within near reach) are dropped where that makes the buffer smaller.
+  {
+    std::vector<uint8_t> used(t.size(), 0);
+    for (uint32_t n = 0; n < t.size(); ++n) used[n] = far_want[n] && pass.far[n];
+    layout(t, block_id, ids, used, sh, trial);
+    if (!trial.too_big && trial.fits && trial.words < pass.words) std::swap(pass, trial), far_want.swap(used);
   }
   // Then one step either way on every scaled level, keeping the smallest buffer (as the MH
   // quadtree encoder, MHQUAD.md "Offsets and the scale search").
