@@ -9,7 +9,7 @@
 //
 // --all-2d (whole mode): every slice also encoded as MMH and DAG-MH, the smaller 2D
 // encodings, so the octree is set against the best of them too ("best 2D" line). Every
-// whole-mode run also prints the encoder's stats (shared blocks, format version 2), the
+// whole-mode run also prints the encoder's stats (shared blocks, far words: format version 3), the
 // sharing measure with the roundest values, and the cost model of anisotropic splits
 // (mh_octree_share.hpp `hybrid_octree_quad_words`, "hybrid model" line).
 //
@@ -392,9 +392,11 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
               (unsigned long long)share.dag_words, double(share.dag_words) / double(share.words),
               (unsigned long long)share.block_dag_words, double(share.block_dag_words) / double(share.words),
               (unsigned long long)share.repeated_inner, (unsigned long long)share.largest_repeated_words);
-  std::printf("encoded: %llu words (%.3f of the tree's), %u nodes stored, %llu shared blocks (%llu more out of reach), %llu padding words; shifts",
+  std::printf("encoded: %llu words (%.3f of the tree's), %u nodes stored, %llu shared blocks (%llu more out of reach), "
+              "%llu blocks through far words (%llu far words), %llu padding words; shifts",
               (unsigned long long)oct_stats.words, double(oct_stats.words) / double(share.words), oct_stats.nodes,
               (unsigned long long)oct_stats.shared_blocks, (unsigned long long)oct_stats.out_of_reach,
+              (unsigned long long)oct_stats.far_blocks, (unsigned long long)oct_stats.far_words,
               (unsigned long long)oct_stats.padding_words);
   for (uint32_t l = 0; l < oh.geo.levels(); ++l) std::printf(" %u", unsigned(oct_stats.shift[l]));
   std::printf("\n");
@@ -490,6 +492,8 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
             {"encoded_words", oct_stats.words},
             {"shared_blocks", oct_stats.shared_blocks},
             {"shared_out_of_reach", oct_stats.out_of_reach},
+            {"far_blocks", oct_stats.far_blocks},
+            {"far_words", oct_stats.far_words},
             {"padding_words", oct_stats.padding_words},
             {"hybrid_words", hybrid_words},
             {"quad_words", quad_total_words}}},

@@ -69,6 +69,8 @@ static_assert(moct::kOffVersion == 4 && moct::kOffXyLevel == 6 && moct::kOffWLev
               moct::kOffFlags == 10 && moct::kOffShifts == 20 && moct::kFlagRootLeaf == 1);
 static_assert(moct::kCodeLeaf == 1 && moct::kCodeEmpty == 2 && moct::kCodeInner == 3 && moct::kMaxLevels == 21);
 static_assert(moct::tree_offset(1) == 20 + 4 && moct::tree_offset(21) == 20 + 24);
+// st_oct_step's far offsets (version 3): off < -32736 reads the far word at pos + 1 + off + 32768.
+static_assert(moct::kVersion == 3 && moct::kFarOffsetMin == -32768 && moct::kFarLimit == -32736);
 static_assert(layout::kMaxStackCells == kStackMaxCells);
 static_assert(layout::kStLightWords >= 13 && layout::kStHeaderWords > layout::kStLights);
 static_assert(layout::kStLightCentreU == 13 && layout::kStLightCentreV == 14 &&

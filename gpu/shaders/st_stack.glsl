@@ -84,9 +84,12 @@ uint st_oct_step(uint base, uint tree, uint n, uint k, uint depth, uint l, uint 
   const uint code = (mask >> (2u * slot)) & 3u;
   if (code == 0u) return 0u;
   const uint shift = st_byte(base, 20u + l);
-  // off: a signed 16-bit number (version 2: negative = an equal block laid out earlier);
-  // uint arithmetic wraps as the CPU's block_start does.
-  pos = (((pos >> shift) + uint(int(word) >> 16)) << shift) + uint(bitCount(mask & ((1u << (2u * slot)) - 1u)));
+  // off: a signed 16-bit number (negative = an equal block laid out earlier); uint
+  // arithmetic wraps as the CPU's block_start does. Version 3: off < -32736 is far, the
+  // block's tree word is the far word at pos + 1 + (off + 32768) (moct::child_block).
+  const int off = int(word) >> 16;
+  const uint block = off < -32736 ? ST_POOL(tree + pos + 1u + uint(off + 32768)) : ((pos >> shift) + uint(off)) << shift;
+  pos = block + uint(bitCount(mask & ((1u << (2u * slot)) - 1u)));
   return code;
 }
 

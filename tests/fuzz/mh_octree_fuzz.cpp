@@ -48,6 +48,11 @@ std::vector<st::fuzz::Bytes> st::fuzz::seeds() {
     for (uint64_t y = 0; y < 16; ++y)
       for (uint64_t x = 0; x < 16; ++x) periodic.at(x, y, w) = periodic.at(x % 4, y % 4, 0);
   out.push_back(encode_octree(build_octree(periodic)));
+  // MHOCT.md's far-word example (version 3; the encoder uses far words only in trees of
+  // more than 32767 words): quadrant 1 reaches the shared leaf through the far word 4.
+  out.push_back({'S', 'T', 'O', 'C', 3, 0, 2, 0, 1, 0, 0, 0, 4, 0, 0, 0, 48, 0, 0, 0, 0, 0, 0, 0,
+                 0x0A, 0x00, 0x02, 0x00, 0x00, 0x00, 0x00, 0x3F, 0x01, 0x00, 0x03, 0x00, 0x01, 0x00, 0x00, 0x80,
+                 0x05, 0x00, 0x00, 0x00, 0x00, 0x00, 0x80, 0x3E});
   return out;
 }
 

@@ -20,9 +20,11 @@
 #include "gpu/shadow_reference.hpp"
 #include "tests/client/loopback.hpp"
 #include "tests/gpu/gpu_test_util.hpp"
+#include "tiles/build/mh_octree_encode.hpp"
 #include "tiles/build/stack_pack.hpp"
 #include "tiles/core/filter_level.hpp"
 #include "tiles/core/light_set.hpp"
+#include "tiles/core/mh_octree.hpp"
 #include "tiles/core/stack_map.hpp"
 
 namespace st::gpu {
@@ -60,12 +62,20 @@ std::string area_spec(const std::string& frame) {
   return "area:pos=4,28,6,target=0,0,0,size=6,4,samples=" + std::to_string(kSlices) + ",fov=50,frame=" + frame;
 }
 
+// The stack of kSlices slices, its skip level and tile bytes a served stack is cut with
+// (default: sliding_stack, the default level, 512-byte tiles).
+struct StackSource {
+  const IntervalStack* stack = nullptr;
+  std::optional<uint32_t> skip_level;
+  uint32_t tile_bytes = 512;
+};
+
 // frame: the sun path's frame (light_set.hpp "Frames"; ground is the default); or a whole
 // light set spec (area_spec).
-ServedStack serve_stack(const std::string& name, const std::string& frame = "ground") {
+ServedStack serve_stack(const std::string& name, const std::string& frame = "ground", const StackSource& src = {}) {
   ServedStack s;
-  const IntervalStack is = sliding_stack(looptest::small_scale() ? 5 : 6, kSlices);
-  StackCut cut = cut_stack(build_octree(is), std::nullopt, 512);
+  const IntervalStack is = src.stack ? *src.stack : sliding_stack(looptest::small_scale() ? 5 : 6, kSlices);
+  StackCut cut = cut_stack(build_octree(is), src.skip_level, src.tile_bytes);
   Aabb box;
   box.extend({-10, 0, -10});
   box.extend({10, 5, 10});
@@ -80,7 +90,7 @@ ServedStack serve_stack(const std::string& name, const std::string& frame = "gro
   cut.grid.spec = set.spec.to_string();
   s.path = std::string(SHADOWTILE_TEST_TMP) + "/" + name + ".pack";
   StackPackParams p;
-  p.tile_bytes = 512;
+  p.tile_bytes = src.tile_bytes;
   write_stack_pack(s.path, cut, p);
   s.tiles = cut.tiles.size();
   s.server = looptest::start_server({s.path});
@@ -184,6 +194,61 @@ TEST(GpuStack, EveryTexelOfEverySliceAnswersBitExactlyLikeTheCpu) {
   }
   EXPECT_EQ(bad, 0u);
   EXPECT_GT(fractional, 100u);  // the kernels straddle shadow edges
+  EXPECT_EQ(g.stats().validation_messages, 0u);
+}
+
+// One tile holding a stack whose equal blocks lie beyond a 16-bit offset's reach, so its
+// octree reaches them through far words (MHOCT.md "Far words"): random slices whose bottom
+// half repeats the top half shifted by two texels (the finest 2x2x2 blocks are equal,
+// two root quadrants apart). Every finest texel of every slice and the level above it,
+// by the GPU's st_oct_step, against the CPU's MhOctree::depth, bit for bit.
+TEST(GpuStack, FarSharedBlocksAnswerBitExactlyLikeTheCpu) {
+  const uint32_t level = 7;
+  const uint64_t side = uint64_t(1) << level;
+  IntervalStack is{level, kSlices, std::vector<Interval>(side * side * kSlices)};
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<float> u(0.05f, 0.95f);
+  for (Interval& v : is.data) {
+    const float a = u(rng), b = u(rng);
+    v = rng() % 4 == 0 ? Interval{a, a} : Interval{std::min(a, b), std::max(a, b)};
+  }
+  for (uint32_t w = 0; w < kSlices; ++w)
+    for (uint64_t y = side / 2 + 2; y < side; ++y)
+      for (uint64_t x = 0; x < side; ++x) is.at(x, y, w) = is.at(x, y - side / 2 - 2, w);
+  OctEncodeStats st;
+  const std::vector<uint8_t> whole = encode_octree(build_octree(is), &st);
+  ASSERT_GT(st.far_blocks, 100u) << "the stack must use far words; words " << st.words;
+  // Skip level 0: the one tile is that buffer (checked through the CPU's answers below).
+  ServedStack s = serve_stack("gpu_stack_far", "ground", {&is, 0, uint32_t(2 * whole.size())});
+  ASSERT_EQ(s.tiles, 1u);
+  ASSERT_GT(s.map.request_slices(0, kSlices - 1, 10), 0u);
+  ASSERT_TRUE(looptest::wait_until([&] { return s.map.slices_resident(0, kSlices - 1); }));
+  s.server.stop();
+  GpuMap g(s.map, gputest::options());
+  EXPECT_EQ(g.sync(), 1u);
+  const MhOctree t = MhOctree::open(whole);
+  std::vector<GpuStackQuery> q;
+  for (uint32_t w = 0; w < kSlices; ++w)
+    for (uint32_t l : {level - 1, level})
+      for (uint32_t y = 0; y < (1u << l); ++y)
+        for (uint32_t x = 0; x < (1u << l); ++x) q.push_back({x, y, w, l, 0, 1, 0});
+  size_t bad = 0, checked = 0;
+  for (size_t at = 0; at < q.size(); at += gputest::options().max_queries) {
+    const std::vector<GpuStackQuery> part(q.begin() + ptrdiff_t(at),
+                                          q.begin() + ptrdiff_t(std::min(q.size(), at + gputest::options().max_queries)));
+    std::vector<float> out(part.size());
+    g.evaluate(part, out);
+    for (size_t i = 0; i < part.size(); ++i, ++checked) {
+      const GpuStackQuery& a = part[i];
+      const float want = t.depth(a.x, a.y, a.slice, a.level);
+      if (bits(want) != bits(s.map.slice_depth(a.slice, a.level, a.x, a.y)) && bad++ == 0)
+        ADD_FAILURE() << describe(a) << ": the tile and the whole stack's buffer differ";
+      if (bits(out[i]) != bits(want) && bad++ == 0)
+        ADD_FAILURE() << describe(a) << ": gpu " << out[i] << ", cpu " << want;
+    }
+  }
+  EXPECT_EQ(bad, 0u);
+  EXPECT_EQ(checked, q.size());
   EXPECT_EQ(g.stats().validation_messages, 0u);
 }
 

@@ -34,7 +34,7 @@ TEST(MhOctreeFormat, ExampleBufferIsPinnedByteForByte) {
     std::memcpy(b, &v, 4);
     return std::vector<uint8_t>(b, b + 4);
   };
-  std::vector<uint8_t> want = {'S', 'T', 'O', 'C', 2, 0, 1, 1, 2, 0, 0, 0, 3, 0, 0, 0, 40, 0, 0, 0,
+  std::vector<uint8_t> want = {'S', 'T', 'O', 'C', 3, 0, 1, 1, 2, 0, 0, 0, 3, 0, 0, 0, 40, 0, 0, 0,
                                0, 0, 0, 0,                // shifts of levels 0, 1; padding
                                0x01, 0x04, 0x02, 0x00};  // root: slot 0 leaf, slot 5 leaf; off 2
   for (float v : {0.5f, 0.25f, 0.75f})
@@ -56,7 +56,7 @@ TEST(MhOctreeFormat, SharedBlockExampleIsPinnedByteForByte) {
   s.at(0, 0, 0) = s.at(2, 0, 0) = {0.25f, 0.25f};
   OctEncodeStats st;
   const std::vector<uint8_t> bytes = encode_octree(build_octree(s), &st);
-  const std::vector<uint8_t> want = {'S', 'T', 'O', 'C', 2, 0, 2, 0, 1, 0, 0, 0, 4, 0, 0, 0, 44, 0, 0, 0,
+  const std::vector<uint8_t> want = {'S', 'T', 'O', 'C', 3, 0, 2, 0, 1, 0, 0, 0, 4, 0, 0, 0, 44, 0, 0, 0,
                                      0, 0, 0, 0,              // shifts of levels 0..2; padding
                                      0x0A, 0x00, 0x02, 0x00,  // root: slots 0, 1 empty; off 2
                                      0x00, 0x00, 0x00, 0x3F,  // root value 0.5
@@ -79,9 +79,132 @@ TEST(MhOctreeFormat, SharedBlockExampleIsPinnedByteForByte) {
   };
   refused(3, 0, "offset zero");
   refused(3, 0xFFFF, "quadrant 1 naming word 2 (quadrant 0, a level-1 node) as its level-2 children");
-  refused(3, 0x8000, "a block before the tree");
+  refused(3, 0x8020, "a block before the tree (off -32736, the farthest near offset back)");
+  refused(3, 0x8000, "a far word that is a node's word (word 4, the shared leaf)");
   refused(2, 3, "quadrant 0's block at word 5, past the end");
   refused(2, 1, "quadrant 0 naming word 3 (quadrant 1, not yet a validated leaf)");
+}
+
+// MHOCT.md's far-word example: the shared-block example's stack built by hand with
+// quadrant 1 reaching the shared block through a far word (version 3): its offset is
+// -32768 (code 0), so the block's word index is the far word at 3 + 1 + 0 = word 4, right
+// after the level-1 block; the shared leaf moves to word 5.
+std::vector<uint8_t> far_example() {
+  return {'S', 'T', 'O', 'C', 3, 0, 2, 0, 1, 0, 0, 0, 4, 0, 0, 0, 48, 0, 0, 0,
+          0, 0, 0, 0,              // shifts of levels 0..2; padding
+          0x0A, 0x00, 0x02, 0x00,  // word 0, root: slots 0, 1 empty; off 2 (block at word 2)
+          0x00, 0x00, 0x00, 0x3F,  // word 1, root value 0.5
+          0x01, 0x00, 0x03, 0x00,  // word 2, quadrant 0: slot 0 leaf; off 3 (block at word 5)
+          0x01, 0x00, 0x00, 0x80,  // word 3, quadrant 1: slot 0 leaf; off -32768: far code 0
+          0x05, 0x00, 0x00, 0x00,  // word 4, quadrant 1's far word: block at word 5
+          0x00, 0x00, 0x80, 0x3E};  // word 5, the shared leaf 0.25
+}
+
+TEST(MhOctreeFormat, FarSharedBlockExampleIsPinned) {
+  static_assert(moct::kVersion == 3 && moct::kFarCodes == 32 && moct::kFarOffsetMin == -32768 &&
+                moct::kFarLimit == -32736 && moct::kMaxBackOffset == 32736);
+  EXPECT_EQ(moct::far_word(3, -32768), 4u);
+  EXPECT_EQ(moct::far_word(3, -32737), 35u);
+  EXPECT_EQ(moct::far_offset(3, 4), -32768);
+  EXPECT_FALSE(moct::is_far(-32736));
+  const std::vector<uint8_t> bytes = far_example();
+  const MhOctree t = MhOctree::open(bytes);
+  EXPECT_EQ(t.node_count(), 4u);
+  for (uint64_t y = 0; y < 4; ++y)
+    for (uint64_t x = 0; x < 4; ++x)
+      EXPECT_EQ(t.depth(x, y, 0, 2), (y == 0 && (x == 0 || x == 2)) ? 0.25f : 0.5f) << x << "," << y;
+  EXPECT_EQ(t.depth(1, 0, 0, 1), 0.5f);  // level 1: quadrant 1 (empty) inherits the root's value
+  // The child step follows the far word: quadrant 1's slot 0 is word 5.
+  MhOctree::Cursor q1, leaf;
+  ASSERT_TRUE(t.child(t.root(), 1, q1));
+  EXPECT_EQ(q1.pos, 3u);
+  ASSERT_TRUE(t.child(q1, 0, leaf));
+  EXPECT_EQ(leaf.pos, 5u);
+  EXPECT_EQ(t.value(leaf), 0.25f);
+  MhOctree::Path p;
+  EXPECT_EQ(t.depth_along(p, 2, 0, 0), 0.25f);
+  EXPECT_EQ(t.depth_along(p, 3, 0, 0), 0.5f);
+}
+
+// Hostile far words, each refused with one line: outside the buffer, claimed twice (by two
+// nodes, or a far word laid over a node), and a far target that would loop back.
+TEST(MhOctreeFormat, HostileFarWordsAreRefused) {
+  const std::vector<uint8_t> good = far_example();
+  ASSERT_NO_THROW(MhOctree::open(good));
+  auto with = [&](size_t word, size_t byte, std::initializer_list<uint8_t> v) {
+    std::vector<uint8_t> b = good;
+    std::copy(v.begin(), v.end(), b.begin() + ptrdiff_t(24 + 4 * word + byte));
+    return b;
+  };
+  auto refused = [](const std::vector<uint8_t>& b, const char* field, const char* what) {
+    try {
+      MhOctree::open(b);
+      ADD_FAILURE() << "accepted: " << what;
+    } catch (const FormatError& e) {
+      const std::string m = e.what();
+      EXPECT_NE(m.find(field), std::string::npos) << what << ": " << m;
+      EXPECT_EQ(m.find('\n'), std::string::npos) << m;
+    }
+  };
+  refused(with(3, 2, {0x1F, 0x80}), "far word", "code 31: word 35, past the end of the 6-word tree");
+  refused(with(3, 2, {0x02, 0x80}), "far word", "code 2: word 6, one past the end");
+  refused(with(2, 2, {0x01, 0x80}), "far word", "quadrant 0 claiming word 4 too: claimed twice");
+  refused(with(3, 2, {0x01, 0x80}), "far word", "code 1: word 5, the shared leaf (a node's word)");
+  refused(with(4, 0, {0x02}), "child offset", "far target word 2: quadrant 1's own block, a loop");
+  refused(with(4, 0, {0x00}), "child offset", "far target word 0: the root, a loop");
+  refused(with(4, 0, {0x03}), "child offset", "far target word 3: quadrant 1 itself");
+  refused(with(4, 0, {0x06}), "child offset", "far target word 6: outside the tree");
+  refused(with(4, 3, {0x80}), "child offset", "far target beyond 2^31 words");
+  // A far word claims its word: a node laid over it later is an overlap.
+  std::vector<uint8_t> over = good;
+  over[24 + 4 * 0 + 2] = 0x02;  // root keeps off 2
+  over[24 + 4 * 2 + 2] = 0x00, over[24 + 4 * 2 + 3] = 0x80;  // quadrant 0 far, code 0: word 3 = quadrant 1
+  refused(over, "MH octree: ", "quadrant 0's far word is quadrant 1's node word");
+}
+
+// A stack whose equal blocks lie far apart: the bottom half of every slice repeats the top
+// half shifted down by two texels, so the 2x2x2 blocks of the finest step are equal while
+// the coarser ones are not, and the equal pairs lie two root quadrants (about half the
+// tree) apart in the depth-first order, beyond a 16-bit offset's reach (shift 0 at the
+// finest levels).
+IntervalStack far_repeat_stack(uint32_t level, uint32_t slices, uint64_t seed) {
+  IntervalStack s = stacks::random_stack(level, slices, seed);
+  const uint64_t side = s.side(), shift = 2;
+  for (uint32_t w = 0; w < slices; ++w)
+    for (uint64_t y = side / 2 + shift; y < side; ++y)
+      for (uint64_t x = 0; x < side; ++x) s.at(x, y, w) = s.at(x, y - side / 2 - shift, w);
+  return s;
+}
+
+TEST(MhOctreeFormat, FarBlocksAreSharedLosslessly) {
+  const uint32_t level = 7;
+  const IntervalStack s = far_repeat_stack(level, 10, 3);
+  const OctHierarchy h = build_octree(s);
+  OctEncodeStats st;
+  const std::vector<uint8_t> bytes = encode_octree(h, &st);
+  EXPECT_GT(st.far_blocks, 100u) << "words " << st.words << " shared " << st.shared_blocks;
+  EXPECT_GE(st.far_words, st.far_blocks);
+  EXPECT_EQ(st.shift[h.geo.depth() - 1], 0u);
+  const MhOctree t = MhOctree::open(bytes);
+  EXPECT_EQ(t.node_count(), st.nodes);
+  // Every texel of every slice keeps the invariant of the uncompressed bounds, by the plain
+  // walk and by the resumed walk, and every level answers as the hierarchy.
+  EXPECT_EQ(stacks::first_violation(s, [&](uint64_t x, uint64_t y, uint64_t w) { return t.depth(x, y, uint32_t(w), level); }),
+            "");
+  MhOctree::Path p;
+  EXPECT_EQ(stacks::first_violation(
+                s, [&](uint64_t x, uint64_t y, uint64_t w) { return t.depth_along(p, x, y, uint32_t(w)); }),
+            "");
+  for (uint32_t q = 0; q <= level; ++q) {
+    const uint32_t ol = h.geo.level_of_xy(q);
+    for (uint32_t w = 0; w < s.slices; ++w)
+      for (uint64_t y = 0; y < (uint64_t(1) << q); ++y)
+        for (uint64_t x = 0; x < (uint64_t(1) << q); ++x)
+          ASSERT_EQ(t.depth(x, y, w, q), h.depth_at(ol, x, y, w >> (h.geo.k - h.geo.w_bits(ol))))
+              << "level " << q << " texel " << x << "," << y << " slice " << w;
+  }
+  // Smaller than the same tree with every out-of-reach block copied (version 2's layout).
+  EXPECT_LT(st.out_of_reach, st.far_blocks);
 }
 
 TEST(MhOctreeFormat, DecodesLikeTheHierarchyOnEveryTexelSliceAndLevel) {
@@ -156,12 +279,17 @@ TEST(MhOctreeFormat, HostileBuffersAreRefused) {
     return b;
   };
   expect_refused(patched(0, 'X'), "magic");
-  expect_refused(patched(4, 3), "version");
-  try {
-    MhOctree::open(patched(4, 1));
-    ADD_FAILURE() << "accepted version 1";
-  } catch (const FormatError& e) {
-    EXPECT_NE(std::string(e.what()).find("version 1"), std::string::npos) << e.what();
+  expect_refused(patched(4, 4), "version");
+  for (uint8_t old_version : {1, 2}) {  // the versions before far words: one line saying what to do
+    try {
+      MhOctree::open(patched(4, old_version));
+      ADD_FAILURE() << "accepted version " << int(old_version);
+    } catch (const FormatError& e) {
+      const std::string m = e.what();
+      EXPECT_NE(m.find("version " + std::to_string(old_version)), std::string::npos) << m;
+      EXPECT_NE(m.find("rebuild the stack"), std::string::npos) << m;
+      EXPECT_EQ(m.find('\n'), std::string::npos) << m;
+    }
   }
   expect_refused(patched(6, 21), "xy_level");
   expect_refused(patched(7, 13), "w_level");

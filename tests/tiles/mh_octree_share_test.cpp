@@ -49,7 +49,7 @@ TEST(OctreeSharing, RepeatedHalfIsStoredOnce) {
 }
 
 TEST(OctreeSharing, EncoderStoresTheRepeatedHalfOnce) {
-  // The same stack encoded (format version 2): the second half's blocks point at the
+  // The same stack encoded (format version 3): the second half's blocks point at the
   // first half's, the buffer holds the measure's words (everything is within reach), and
   // every texel of every slice still decodes losslessly.
   IntervalStack st = stacks::random_stack(2, 8, 5);

@@ -36,12 +36,20 @@ inline float roundest_in(float lo, float hi) {
   return std::bit_cast<float>((b >> m) << m);
 }
 
-// The roundest float (roundest_in) of the middle half of [lo, hi]: a canonical value that
-// still keeps a quarter of the interval on either side, as the midpoint keeps half, for
-// receivers that lie within a surface's interval (the octree's values, MHOCT.md "Value
-// choice"). lo == hi returns lo.
+// The margin central_roundest keeps free on either side of a node's interval, as a
+// fraction of its width. Any value inside is lossless (MH 2016 §3.1); a smaller margin
+// leaves a wider window, so rounder values (fewer significant mantissa bits), more equal
+// blocks and more sharing in the octree (MHOCT.md "Value choice"); a wider one keeps the
+// value further from receivers that lie within a surface's interval. 1/8: the middle
+// three quarters. Changing it changes the encoder's bytes, not the format.
+inline constexpr double kCentralMargin = 0.125;
+
+// The roundest float (roundest_in) of the middle of [lo, hi] (kCentralMargin of the width
+// left out on either side): a canonical value that still keeps a margin on either side,
+// as the midpoint keeps half, for receivers that lie within a surface's interval (the
+// octree's values, MHOCT.md "Value choice"). lo == hi returns lo.
 inline float central_roundest(float lo, float hi) {
-  const double a = double(lo), b = double(hi), q = 0.25 * (b - a);
+  const double a = double(lo), b = double(hi), q = kCentralMargin * (b - a);
   float l = float(a + q), h = float(b - q);  // rounding is monotone: lo <= l <= h <= hi
   l = l < lo ? lo : l;
   h = h > hi ? hi : h;

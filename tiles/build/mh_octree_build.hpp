@@ -19,8 +19,9 @@
 //
 // Meaning: depth_at(l, x, y, w) is the value of the deepest valued node on the path to
 // (l, x, y, w) at a level <= l; a valued node's [lo, hi] is exactly the intersection of
-// the intervals of the texels it answers for, and its value is the roundest float in it
-// (mh_internal.hpp `roundest_in`: the value choice that makes equal subtrees, MHOCT.md).
+// the intervals of the texels it answers for, and its value is the roundest float of its
+// middle three quarters (mh_internal.hpp `central_roundest`: the value choice that makes
+// equal subtrees, MHOCT.md).
 #pragma once
 #include <cstddef>
 #include <cstdint>

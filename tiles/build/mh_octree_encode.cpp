@@ -1,6 +1,7 @@
 // The MH octree encoder: flatten, lay out depth-first (a node's children block follows
-// the blocks of its earlier siblings' subtrees, so offsets shrink level by level), find
-// per-level shifts that make every offset fit 16 bits, then write the words.
+// the blocks of its earlier siblings' subtrees, so offsets shrink level by level), share
+// equal blocks (near by offset, far by a far word), find per-level shifts that make every
+// near offset fit 16 bits, then write the words.
 #include "tiles/build/mh_octree_encode.hpp"
 #include "tiles/build/mh_internal.hpp"
 
@@ -17,6 +18,15 @@ namespace st {
 namespace {
 
 using namespace moct;
+
+// Layout rounds that add far words, and the most near hits a copied block may have and
+// still be replaced by a far word (encode_octree); constants of the encoder, not of the
+// format. Measured on the city at 1024^2 x 32 (MHOCT.md "Version 3 measured"): far words
+// for every copy made the buffer grow after round 3 (a copy other nodes reach by near
+// offsets relays the block; dropping it sends them out of reach too); at most 2 hits kept
+// the least words (0.772 of the N quadtrees' bytes; 0 hits 0.781, 4 hits 0.778).
+constexpr uint32_t kFarRounds = 4;
+constexpr uint32_t kFarMaxHits = 2;
 
 struct Flat {
   std::vector<uint32_t> first_child;
@@ -105,27 +115,58 @@ uint32_t block_ids(const Flat& t, std::vector<uint32_t>& block_id) {
   return uint32_t(blocks.size()) + 1;
 }
 
+// Whether a far word (1 word) saves anything over a copy of the node's block: the copy
+// costs the block's words and its children's subtrees, so a block of one leaf or one
+// childless empty node costs no more than the far word.
+std::vector<uint8_t> far_worth(const Flat& t) {
+  std::vector<uint8_t> worth(t.size(), 0);
+  for (uint32_t n = 0; n < t.size(); ++n) {
+    if (!t.mask[n]) continue;
+    uint32_t words = 0;
+    bool deeper = false;
+    const uint32_t c0 = t.first_child[n], cn = uint32_t(std::popcount(unsigned(t.mask[n])));
+    for (uint32_t c = c0; c < c0 + cn; ++c) words += code_words(t.kind(c)), deeper = deeper || t.mask[c];
+    worth[n] = words > 1 || deeper;
+  }
+  return worth;
+}
+
 struct Pass {
   std::vector<uint32_t> pos, block;
   std::vector<uint8_t> stored, shared;  // per node: written; its block is a back-reference
+  std::vector<uint32_t> far_pos;        // per node: its reserved far word (0: none; word 0 is the root)
+  std::vector<uint8_t> far, copied;     // per node: block reached through the far word; an equal
+                                        // block was out of reach, so this one is a copy
   std::vector<uint32_t> last;           // per block id: the latest copy laid out (0: none)
-  uint64_t words = 0, padding = 0, shared_blocks = 0, out_of_reach = 0;
+  std::vector<uint32_t> last_owner;     // per block id: the node that laid that copy out
+  std::vector<uint32_t> hits;           // per node: nodes that share its block by a near offset
+  uint64_t words = 0, padding = 0, shared_blocks = 0, out_of_reach = 0, far_blocks = 0, far_words = 0;
   uint32_t nodes = 0;
   std::array<uint64_t, kMaxLevels> max_off{};
   bool fits = true, too_big = false;
 };
 
-void layout(const Flat& t, const std::vector<uint32_t>& block_id, uint32_t ids, const std::array<uint8_t, kMaxLevels>& sh,
-            Pass& out) {
+// One layout with the shifts `sh`; the nodes with far_want get a far word after the block
+// that holds them (format version 3), used when their block's equal copy, or their own
+// block, lies beyond the 16-bit offset's reach.
+void layout(const Flat& t, const std::vector<uint32_t>& block_id, uint32_t ids, const std::vector<uint8_t>& far_want,
+            const std::array<uint8_t, kMaxLevels>& sh, Pass& out) {
   out.pos.assign(t.size(), 0);
   out.block.assign(t.size(), 0);
   out.stored.assign(t.size(), 0);
   out.shared.assign(t.size(), 0);
+  out.far_pos.assign(t.size(), 0);
+  out.far.assign(t.size(), 0);
+  out.copied.assign(t.size(), 0);
   out.last.assign(ids, 0);
+  out.last_owner.assign(ids, 0);
+  out.hits.assign(t.size(), 0);
   out.max_off.fill(0);
   out.fits = true, out.too_big = false, out.padding = 0, out.shared_blocks = 0, out.out_of_reach = 0;
+  out.far_blocks = 0, out.far_words = 0;
   out.stored[0] = 1, out.nodes = 1;
   uint64_t w = code_words(t.kind(0));
+  uint64_t end = w;  // past the last node or used far word: unused far words at the end are cut
   std::vector<uint32_t> stack{0};
   while (!stack.empty()) {
     const uint32_t n = stack.back();
@@ -140,9 +181,17 @@ void layout(const Flat& t, const std::vector<uint32_t>& block_id, uint32_t ids, 
       if (d != 0 && d >= -int64_t(kMaxBackOffset) && d <= int64_t(kMaxOffset)) {
         out.block[n] = copy, out.shared[n] = 1;
         ++out.shared_blocks;
+        ++out.hits[out.last_owner[block_id[n]]];
+        continue;
+      }
+      if (out.far_pos[n]) {
+        out.block[n] = copy, out.shared[n] = 1, out.far[n] = 1;
+        end = std::max<uint64_t>(end, out.far_pos[n] + 1);
+        ++out.shared_blocks, ++out.far_blocks;
         continue;
       }
       ++out.out_of_reach;
+      out.copied[n] = 1;
     }
     const uint64_t align = uint64_t(1) << s;
     const uint64_t start = (w + align - 1) & ~(align - 1);
@@ -155,8 +204,12 @@ void layout(const Flat& t, const std::vector<uint32_t>& block_id, uint32_t ids, 
     }
     out.block[n] = uint32_t(w);
     out.last[block_id[n]] = uint32_t(w);
+    out.last_owner[block_id[n]] = n;
     const uint64_t off = (w >> s) - (uint64_t(out.pos[n]) >> s);
-    out.max_off[t.level[n]] = std::max(out.max_off[t.level[n]], off);
+    if (out.far_pos[n] && off > kMaxOffset)
+      out.far[n] = 1, ++out.far_blocks;  // its own block beyond reach: the far word names it
+    else
+      out.max_off[t.level[n]] = std::max(out.max_off[t.level[n]], off);
     const uint32_t c0 = t.first_child[n], cn = uint32_t(std::popcount(unsigned(t.mask[n])));
     for (uint32_t c = c0; c < c0 + cn; ++c) {
       out.pos[c] = uint32_t(w);
@@ -164,11 +217,14 @@ void layout(const Flat& t, const std::vector<uint32_t>& block_id, uint32_t ids, 
       ++out.nodes;
       w += code_words(t.kind(c));
     }
+    end = w;
+    for (uint32_t c = c0; c < c0 + cn; ++c)  // at most 8 far words: within kFarCodes of every child
+      if (far_want[c]) out.far_pos[c] = uint32_t(w++), ++out.far_words;
     for (uint32_t c = c0 + cn; c-- > c0;)
       if (t.mask[c]) stack.push_back(c);
   }
-  out.words = w;
-  if (w > (kMaxBytes - tree_offset(kMaxLevels)) / 4) out.too_big = true;
+  out.words = end;
+  if (end > (kMaxBytes - tree_offset(kMaxLevels)) / 4) out.too_big = true;
   for (uint64_t m : out.max_off) out.fits = out.fits && m <= kMaxOffset;
 }
 
@@ -188,27 +244,53 @@ std::vector<uint8_t> encode_octree(const OctHierarchy& h, OctEncodeStats* stats)
   const uint32_t L = h.geo.depth();
   std::array<uint8_t, kMaxLevels> sh{};
   Pass pass, trial;
-  // The smallest shifts that fit (raise each overflowing level by what its overflow
-  // needs, lay out again), then one step either way on every scaled level, keeping the
-  // smallest buffer (as the MH quadtree encoder, MHQUAD.md "Offsets and the scale search").
-  for (;;) {
-    layout(t, block_id, ids, sh, pass);
-    if (pass.too_big) too_big(pass.words);
-    if (pass.fits) break;
-    for (uint32_t l = 0; l < L; ++l) {
-      if (pass.max_off[l] <= kMaxOffset) continue;
-      const uint32_t raise = std::max<uint32_t>(1, uint32_t(std::bit_width((pass.max_off[l] - 1) / kMaxOffset)));
-      if (sh[l] + raise > kMaxShift) too_big(pass.words);
-      sh[l] = uint8_t(sh[l] + raise);
+  // Far words (format version 3), chosen by hits: a node gets one when, in the previous
+  // round's layout, its block repeated an earlier block that lay out of the offset's
+  // reach, so it was copied, the copy costs more than the far word (far_worth), and at
+  // most kFarMaxHits later nodes shared the copy by a near offset (a copy with more hits
+  // is a relay worth its words). Each round lays out again with the far words of all earlier rounds
+  // (positions move, so some copies fall within reach and new ones out of it), at most
+  // kFarRounds rounds; deterministic (depth-first order, no hashing order involved).
+  const std::vector<uint8_t> worth = far_worth(t);
+  std::vector<uint8_t> far_want(t.size(), 0);
+  for (uint32_t round = 1;; ++round) {
+    // The smallest shifts that fit (raise each overflowing level by what its overflow
+    // needs, lay out again).
+    sh.fill(0);
+    for (;;) {
+      layout(t, block_id, ids, far_want, sh, pass);
+      if (pass.too_big) too_big(pass.words);
+      if (pass.fits) break;
+      for (uint32_t l = 0; l < L; ++l) {
+        if (pass.max_off[l] <= kMaxOffset) continue;
+        const uint32_t raise = std::max<uint32_t>(1, uint32_t(std::bit_width((pass.max_off[l] - 1) / kMaxOffset)));
+        if (sh[l] + raise > kMaxShift) too_big(pass.words);
+        sh[l] = uint8_t(sh[l] + raise);
+      }
     }
+    if (round == kFarRounds) break;
+    bool more = false;
+    for (uint32_t n = 0; n < t.size(); ++n)
+      if (pass.copied[n] && worth[n] && !far_want[n] && pass.hits[n] <= kFarMaxHits) far_want[n] = 1, more = true;
+    if (!more) break;
   }
+  // Far words reserved in the last round and left unused (their node found its block
+  // within near reach) are dropped where that makes the buffer smaller.
+  {
+    std::vector<uint8_t> used(t.size(), 0);
+    for (uint32_t n = 0; n < t.size(); ++n) used[n] = far_want[n] && pass.far[n];
+    layout(t, block_id, ids, used, sh, trial);
+    if (!trial.too_big && trial.fits && trial.words < pass.words) std::swap(pass, trial), far_want.swap(used);
+  }
+  // Then one step either way on every scaled level, keeping the smallest buffer (as the MH
+  // quadtree encoder, MHQUAD.md "Offsets and the scale search").
   for (uint32_t l = 0; l < L; ++l) {
     if (sh[l] == 0) continue;
     for (int d : {-1, 1}) {
       auto cand = sh;
       cand[l] = uint8_t(int(sh[l]) + d);
       if (cand[l] > kMaxShift) continue;
-      layout(t, block_id, ids, cand, trial);
+      layout(t, block_id, ids, far_want, cand, trial);
       if (!trial.too_big && trial.fits && trial.words < pass.words) std::swap(pass, trial), sh = cand;
     }
   }
@@ -235,7 +317,11 @@ std::vector<uint8_t> encode_octree(const OctHierarchy& h, OctEncodeStats* stats)
       continue;
     }
     const uint32_t s = sh[t.level[n]];
-    const int32_t off = int32_t(int64_t(uint64_t(pass.block[n]) >> s) - int64_t(uint64_t(pass.pos[n]) >> s));
+    int32_t off = int32_t(int64_t(uint64_t(pass.block[n]) >> s) - int64_t(uint64_t(pass.pos[n]) >> s));
+    if (pass.far[n]) {
+      off = far_offset(pass.pos[n], pass.far_pos[n]);
+      put_u32(out, tree_off + size_t(pass.far_pos[n]) * 4, pass.block[n]);
+    }
     put_u32(out, at, node_word(t.code_mask(n), off));
     if (kind == kCodeInner) put_u32(out, at + 4, float_bits(t.value[n]));
   }
@@ -246,6 +332,8 @@ std::vector<uint8_t> encode_octree(const OctHierarchy& h, OctEncodeStats* stats)
     stats->nodes = pass.nodes;
     stats->shared_blocks = pass.shared_blocks;
     stats->out_of_reach = pass.out_of_reach;
+    stats->far_blocks = pass.far_blocks;
+    stats->far_words = pass.far_words;
   }
   return out;
 }

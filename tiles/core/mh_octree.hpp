@@ -19,8 +19,10 @@ class MhOctree {
  public:
   // Validates the whole buffer: header fields, every node reached from the root once (in
   // bounds, no overlap, only the child slots the level's geometry splits, no children at
-  // the finest level, offsets strictly forward, finite floats), zero padding, no trailing
-  // bytes, node count. Throws st::FormatError("MH octree: <field> at byte <offset>: ...").
+  // the finest level, each offset naming either a block it claims after its node or a
+  // shared block of validated nodes one level down, far words inside the buffer and
+  // claimed by one node each, finite floats), zero padding, no trailing bytes, node
+  // count; versions 1 and 2 are refused ("rebuild the stack"). Throws st::FormatError("MH octree: <field> at byte <offset>: ...").
   static MhOctree open(std::span<const uint8_t> bytes);
 
   const moct::Geometry& geometry() const { return geo_; }
@@ -94,7 +96,7 @@ class MhOctree {
     const uint32_t mask = moct::word_mask(word_p);
     const uint32_t cc = moct::child_code(mask, slot);
     if (!cc) return false;
-    k.pos = moct::block_start(k.pos, shift_[l], moct::word_offset(word_p)) + moct::child_skip(mask, slot);
+    k.pos = moct::child_block(tree_, k.pos, shift_[l], word_p) + moct::child_skip(mask, slot);
     // Branchless: an empty node keeps the inherited value; a leaf's is its word, an inner's the next.
     k.val = cc == moct::kCodeEmpty ? k.val : k.pos + (cc >> 1);
     k.code = cc;

@@ -25,24 +25,31 @@
 //             bits 16-31: child offset `off`, a signed 16-bit number (two's complement,
 //                         -32768..32767, non-zero) in units of 2^shift[level] words. The
 //                         block it names is either the node's own children block (after
-//                         the node) or, version 2, a block of equal children stored
+//                         the node) or, since version 2, a block of equal children stored
 //                         earlier in the depth-first order for another node of the same
 //                         level (a shared block: identical subtrees stored once, DAG-MH
 //                         style), before or after the node
-//   The children block of a node at word p starts at ((p >> s) + off) << s; child slot c
+//                         version 3: off in -32768..-32737 (kFarCodes codes) is FAR: for
+//                         c = off + 32768 the block starts at the tree word whose index is
+//                         the 32-bit far word at p + 1 + c (far words lie right after the
+//                         block that holds the node; each is claimed by one node only), so
+//                         a shared block any distance away is reached without a copy
+//   The children block of a node at word p starts at ((p >> s) + off) << s (or at its
+//   far word's value, child_block); child slot c
 //   lies popcount(mask & ((1 << 2c) - 1)) words in. With 16-bit masks a node word has no
 //   pad byte (MH §4: octree nodes are 4-byte aligned by default).
 #pragma once
 #include <bit>
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 
 namespace st::moct {
 
 static_assert(std::endian::native == std::endian::little, "tree words are little-endian");
 
 inline constexpr uint32_t kMagic = 0x434F5453u;  // bytes "STOC"
-inline constexpr uint16_t kVersion = 2;  // 1: forward offsets only (no longer read)
+inline constexpr uint16_t kVersion = 3;  // 1: forward offsets only; 2: no far words (neither read any more)
 inline constexpr uint32_t kMaxXyLevel = 20;  // kMaxLevel (interval.hpp)
 inline constexpr uint32_t kMaxWLevel = 12;   // 4096 slices (kMaxLightSamples)
 inline constexpr uint32_t kMaxLevels = 21;   // max(n, k) + 1
@@ -55,7 +62,13 @@ inline constexpr uint8_t kFlagRootLeaf = 1, kFlagsKnown = 1;
 inline constexpr uint32_t kCodeNone = 0, kCodeLeaf = 1, kCodeEmpty = 2, kCodeInner = 3;
 inline constexpr uint32_t kSlots = 8;  // child slot c = cx | cy << 1 | cw << 2
 inline constexpr uint32_t kMaxOffset = 0x7FFF;      // the largest offset forward
-inline constexpr uint32_t kMaxBackOffset = 0x8000;  // the largest backward (off = -32768)
+// Far offsets (version 3): off in [kFarOffsetMin, kFarOffsetMin + kFarCodes) names a far
+// word (a node's block holds at most 8 inner children, 16 words, and 8 far words follow
+// it: 32 codes reach every far word of the block from every node of it).
+inline constexpr uint32_t kFarCodes = 32;
+inline constexpr int32_t kFarOffsetMin = -0x8000;
+inline constexpr int32_t kFarLimit = kFarOffsetMin + int32_t(kFarCodes);  // off < kFarLimit: far
+inline constexpr uint32_t kMaxBackOffset = 0x8000 - kFarCodes;  // the largest backward (off = -32736)
 inline constexpr uint32_t kMaxShift = 15;
 inline constexpr uint64_t kMaxBytes = 0xFFFFFFFCull;
 
@@ -77,6 +90,21 @@ inline uint32_t child_skip(uint32_t mask, uint32_t slot) { return popcount16(mas
 // word 0: the validator checks it).
 inline uint64_t block_start(uint64_t parent_word, uint32_t shift, int32_t off) {
   return ((parent_word >> shift) + uint64_t(int64_t(off))) << shift;
+}
+inline bool is_far(int32_t off) { return off < kFarLimit; }
+// The far word of a node at word p with a far offset; far_offset is the inverse.
+inline uint64_t far_word(uint64_t p, int32_t off) { return p + 1 + uint64_t(off - kFarOffsetMin); }
+inline int32_t far_offset(uint64_t p, uint64_t far) { return kFarOffsetMin + int32_t(far - p - 1); }
+// The children block of the node at word p whose node word is w (shift: its level's);
+// `tree` is the tree's first byte. A validated tree keeps the result in the buffer.
+inline uint64_t child_block(const uint8_t* tree, uint64_t p, uint32_t shift, uint32_t w) {
+  const int32_t off = word_offset(w);
+  if (is_far(off)) [[unlikely]] {
+    uint32_t b;
+    std::memcpy(&b, tree + 4 * far_word(p, off), 4);
+    return b;
+  }
+  return block_start(p, shift, off);
 }
 
 // Level geometry of a stack of 2^k slices of 2^n x 2^n texels (MH §4 "non-cubic image

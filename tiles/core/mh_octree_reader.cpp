@@ -27,7 +27,10 @@ using namespace moct;
 // down. A node of level l + 1 is validated, with its whole subtree, before any node of
 // level l that is not its ancestor is visited (only ancestors are on the recursion's
 // path), so a shared block reads only validated words; and every step goes one level
-// down, so no walk can loop.
+// down, so no walk can loop. A far offset (version 3) names its block through a far word:
+// the word must lie in the tree, be no node's and no other node's far word (it is marked
+// claimed, so a node laid over it later is refused as an overlap); the block it names
+// then follows the same rules, so a far target keeps every walk acyclic too.
 class Validator {
  public:
   Validator(const uint8_t* tree, uint64_t words, size_t tree_offset, const Geometry& geo, const uint8_t* shift)
@@ -44,7 +47,7 @@ class Validator {
  private:
   // mark_[w]: 0 no node; a node's first word: its code | (level + 1) << 3; an inner
   // node's second word: kSecond.
-  static constexpr uint8_t kSecond = 4;
+  static constexpr uint8_t kSecond = 4, kFarWord = 2;  // first marks are >= 9
   static uint8_t first_mark(uint32_t code, uint32_t level) { return uint8_t(code | (level + 1) << 3); }
 
   [[noreturn]] void fail_at(const char* field, uint64_t word, const std::string& what) const {
@@ -74,7 +77,15 @@ class Validator {
       fail_at("child mask", p, "a child in a slot level " + std::to_string(level) + " does not split");
     const int32_t off = word_offset(w);
     if (off == 0) fail_at("child offset", p, "zero");
-    const uint64_t block = block_start(p, shift_[level], off);  // wraps to a huge value before word 0
+    uint64_t block = block_start(p, shift_[level], off);  // wraps to a huge value before word 0
+    if (is_far(off)) {
+      const uint64_t f = far_word(p, off);
+      if (f >= words_) fail_at("far word", p, "word " + std::to_string(f) + " lies past the end of the tree");
+      if (mark_[f])
+        fail_at("far word", p, "word " + std::to_string(f) + " is a node's word or another node's far word");
+      mark_[f] = kFarWord;
+      block = st::load_le<uint32_t>(tree_ + 4 * f);
+    }
     if (block >= words_ || block + popcount16(mask) > words_)
       fail_at("child offset", p, "children block outside the tree");
     if (mark_[block]) {  // a shared block: validated nodes of the kinds the mask names
@@ -110,9 +121,10 @@ MhOctree MhOctree::open(std::span<const uint8_t> bytes) {
   if (size < kHeaderFixedSize) fail("header", 0, "truncated: " + std::to_string(size) + " bytes, need at least 20");
   if (st::load_le<uint32_t>(b + kOffMagic) != kMagic) fail("magic", kOffMagic, "not an MH octree buffer");
   const uint16_t version = st::load_le<uint16_t>(b + kOffVersion);
-  if (version == 1)
+  if (version == 1 || version == 2)
     fail("version", kOffVersion,
-         "version 1 (forward offsets only) is no longer read; this reader reads version 2: rebuild the stack");
+         "version " + std::to_string(version) + (version == 1 ? " (forward offsets only)" : " (no far words)") +
+             " is no longer read; this reader reads version 3: rebuild the stack");
   if (version != kVersion) fail("version", kOffVersion, "unsupported version " + std::to_string(version));
   MhOctree t;
   t.geo_.n = b[kOffXyLevel];
@@ -175,7 +187,7 @@ bool MhOctree::child(const Cursor& c, uint32_t slot, Cursor& out) const noexcept
   const uint32_t mask = word_mask(w);
   const uint32_t code = child_code(mask, slot);
   if (!code) return false;
-  out.pos = block_start(c.pos, shift_[c.level], word_offset(w)) + child_skip(mask, slot);
+  out.pos = child_block(tree_, c.pos, shift_[c.level], w) + child_skip(mask, slot);
   out.code = code;
   out.level = c.level + 1;
   out.val = code == kCodeEmpty ? c.val : (code == kCodeLeaf ? out.pos : out.pos + 1);
@@ -205,7 +217,7 @@ float MhOctree::depth(uint64_t x, uint64_t y, uint32_t w, uint32_t level) const 
     const uint32_t mask = word_mask(word_p);
     code = child_code(mask, slot);
     if (!code) break;
-    pos = block_start(pos, shift_[l], word_offset(word_p)) + child_skip(mask, slot);
+    pos = child_block(tree_, pos, shift_[l], word_p) + child_skip(mask, slot);
     if (code != kCodeEmpty) val = code == kCodeLeaf ? pos : pos + 1;
   }
   return bits_float(word(val));
