@@ -281,7 +281,8 @@ class RemoteMap final : public Evaluator {
   // Evaluator::pcf's answer, from the kept regions: a kernel inside one answers at once;
   // one on the last kernels' rows reads only its new columns (the tap window); another
   // inside one resident tile (or crossing only the map's edges) goes through the tile's
-  // own shared-walk pcf (MH §3.3, DAG-MH §3.5); others row by row, the taps of a row that
+  // own shared-walk pcf (MH §3.3, DAG-MH §3.5); others with no tap clamped counted one
+  // window per tile or region (count_window_shared); the rest row by row, the taps of a row that
   // one region holds together (MH §3.3's last-sample cache, across tile borders and
   // missing tiles alike).
   // pcf_batch's body, under a lock the caller holds.
