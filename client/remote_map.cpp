@@ -300,7 +300,7 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
       w.col[slot] = kx1;
       w.slide = x + 1;
       w.slide_slot = slot + 1 == r ? 0 : slot + 1;
-      return float(count_lit(w.depth.data(), r * r, receiver)) / float(r * r);
+      return pcf_fraction(count_lit(w.depth.data(), r * r, receiver), r);
     }
   }
   w.slide = ~uint64_t(0);  // set again below where the window ends up holding the kernel
@@ -376,7 +376,7 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
         lit_taps = count_lit(w.depth.data(), r * r, receiver);
         if (w_rows) w.slide = x + 1, w.slide_slot = uint32_t((kx1 + 1) % r);
       }
-      return float(lit_taps) / float(r * r);
+      return pcf_fraction(lit_taps, r);
     }
     // Not on the last kernels' rows: enter the centre's tile (no walk); a kernel inside it
     // goes straight to the tile's own shared-walk pcf (MH §3.3 Fig. 5, DAG-MH §3.5), which
@@ -396,11 +396,18 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
         }
       }
     }
+    // No tap clamped: one kept region may hold the kernel (attempt 1), else it is counted
+    // tile by tile below.
+    if (interior && w_rows) continue;
     depth_shared(level, pcf_tap(x, (r - 1) / 2, r, side), pcf_tap(y, (r - 1) / 2, r, side), sc);
   }
   // A new row of kernels: the next kernel on it fills the window (above).
   w.level = level, w.r = r, w.y = y;
   std::fill_n(w.col.begin(), r, ~uint64_t(0));
+  // No tap clamped (the kernel is a window of r x r distinct texels): counted one window
+  // per tile or kept region it overlaps (a kernel straddling a border or a corner reads
+  // one window from each tile, WindowDepths::count_window).
+  if (interior && w_rows) return pcf_fraction(count_window_shared(level, kx0, ky0, kx1, ky1, receiver, sc), r);
   // Row by row: the taps of a row that one region holds take its answer together, each
   // region found among the kept ones or by one walk (which keeps it). Every tap answers
   // like depth(), so the fraction equals the base class's exactly.
@@ -418,7 +425,49 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
       i += n;
     }
   }
-  return float(lit_taps) / float(r * r);
+  return pcf_fraction(lit_taps, r);
+}
+
+uint32_t RemoteMap::count_window_shared(uint32_t level, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by,
+                                        float receiver, LookupScratch& sc) const noexcept {
+  // The tile or region holding (ax, ay): an aligned square, so the rectangle's part in it
+  // is its top-left corner up to (ex, ey); the rest is a part to the right and one below.
+  const LookupScratch::Region* g = nullptr;
+  if (!sc.covers(level, ax, ay)) {
+    g = sc.find(level, ax, ay);
+    float value;
+    if ((!g || g->counted == LookupScratch::Counted::hit) && enter_tile(level, ax, ay, sc, value)) g = nullptr;
+    else if (!g) g = sc.last_region();  // enter_tile kept the answer's region
+  }
+  uint64_t ex, ey;
+  uint32_t lit;
+  if (g) {
+    const uint64_t s = (uint64_t(1) << g->shift) - 1;
+    ex = std::min(bx, ax | s), ey = std::min(by, ay | s);
+    const uint32_t area = uint32_t((ex - ax + 1) * (ey - ay + 1));
+    lit = receiver <= g->value ? area : 0;
+    // Counted like `area` answers of the region (depth_shared's per-tap answers).
+    if (g->counted == LookupScratch::Counted::hit) sc.hits += area;
+    else if (g->counted == LookupScratch::Counted::coarse) sc.missed += area, sc.coarse += area;
+  } else {
+    ex = std::min(bx, sc.x0 + sc.side - 1), ey = std::min(by, sc.y0 + sc.side - 1);
+    const uint32_t w = uint32_t(ex - ax + 1), h = uint32_t(ey - ay + 1);
+    ++sc.hits;
+    try {
+      if (sc.win) {
+        lit = sc.win->count_window(sc.rel, ax - sc.x0, ay - sc.y0, w, h, receiver);
+      } else {
+        lit = 0;
+        for (uint64_t tx = ax; tx <= ex; ++tx)
+          for (uint64_t ty = ay; ty <= ey; ++ty) lit += receiver <= sc.ev->depth(sc.rel, tx - sc.x0, ty - sc.y0) ? 1u : 0u;
+      }
+    } catch (...) {  // an opened tile does not throw; if one did, stay lit and alive
+      lit = receiver <= kLitDepth ? w * h : 0;
+    }
+  }
+  if (ex < bx) lit += count_window_shared(level, ex + 1, ay, bx, ey, receiver, sc);
+  if (ey < by) lit += count_window_shared(level, ax, ey + 1, bx, by, receiver, sc);
+  return lit;
 }
 
 void RemoteMap::finish_lookups(const LookupScratch& sc) const noexcept {

@@ -281,11 +281,18 @@ class RemoteMap final : public Evaluator {
   // Evaluator::pcf's answer, from the kept regions: a kernel inside one answers at once;
   // one on the last kernels' rows reads only its new columns (the tap window); another
   // inside one resident tile (or crossing only the map's edges) goes through the tile's
-  // own shared-walk pcf (MH §3.3, DAG-MH §3.5); others row by row, the taps of a row that
+  // own shared-walk pcf (MH §3.3, DAG-MH §3.5); others with no tap clamped counted one
+  // window per tile or region (count_window_shared); the rest row by row, the taps of a row that
   // one region holds together (MH §3.3's last-sample cache, across tile borders and
   // missing tiles alike).
   // pcf_batch's body, under a lock the caller holds.
   void pcf_batch_shared(std::span<const PcfQuery> queries, std::span<float> out, LookupScratch& sc) const noexcept;
+  // How many texels of [ax, bx] x [ay, by] (of `level`, in the map) are lit for
+  // `receiver`: the rectangle cut at the borders of the resident tiles and kept regions
+  // over it, each part one WindowDepths::count_window or one region's answer times its
+  // area; every texel counted as depth_shared answers it (missing tiles coarse, as there).
+  uint32_t count_window_shared(uint32_t level, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by, float receiver,
+                               LookupScratch& sc) const noexcept;
   float pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver,
                    LookupScratch& sc) const noexcept;
   float visibility_shared(const WorldPoint& world, float footprint_world, uint32_t pcf_radius,

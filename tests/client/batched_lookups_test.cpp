@@ -138,6 +138,53 @@ TEST(ClientLookups, SharedWalkPcfEqualsSingleLookupsAcrossBordersEdgesAndMissing
   }
 }
 
+// Kernels with no tap clamped that leave their centre's tile are counted one window per
+// tile or kept region (RemoteMap::count_window_shared, WindowDepths::count_window): with
+// a checkerboard of resident and missing tiles, every texel's kernel of every side 2..9
+// (straddling borders and corners, missing neighbours answered coarsely) equals the
+// per-tap reference bit for bit, with receivers at a tap's exact depth and one ulp either
+// side; single calls (fresh scratch) and one batch in a scattered order alike.
+TEST(ClientLookups, CountedKernelsEqualPerTapKernelsAcrossBordersAndMissingTiles) {
+  for (Encoding e : looptest::available_encodings()) {
+    SCOPED_TRACE(to_string(e));
+    Fixture f = make_fixture("pcf_count_" + to_string(e), e, 512);
+    const uint64_t side = uint64_t(1) << f.level, cell = side / 8;
+    for (int round = 0; round < 8; ++round) {
+      for (uint64_t cy = 0; cy < 8; ++cy)
+        for (uint64_t cx = (cy & 1); cx < 8; cx += 2) f.map->request_region(f.level, cx * cell, cy * cell, cell, cell, 1);
+      if (f.deliver_round() == 0) break;
+    }
+    ASSERT_TRUE(f.map->region_resident(f.level, 0, 0, cell, cell));
+    ASSERT_FALSE(f.map->region_resident(f.level, 0, 0, side, side));
+    st::Rng rng(17);
+    for (uint32_t l : {f.level, f.level - 1, f.level - 3}) {
+      const uint64_t n = uint64_t(1) << l;
+      std::vector<PcfQuery> queries;
+      for (uint64_t y = 0; y < n; ++y)
+        for (uint64_t x = 0; x < n; ++x) {
+          const uint32_t r = 2 + uint32_t((x + 3 * y) % 8);
+          const uint64_t tx = pcf_tap(x, uint32_t(rng.next() % r), r, n), ty = pcf_tap(y, uint32_t(rng.next() % r), r, n);
+          const float d = f.map->depth(l, tx, ty);
+          const float receiver = (x + y) % 3 == 0 ? d : std::nextafter(d, (x + y) % 3 == 1 ? -1.0f : 2.0f);
+          const PcfQuery q{x, y, l, r, receiver};
+          queries.push_back(q);
+          const float want = f.map->Evaluator::pcf(l, x, y, r, receiver);
+          ASSERT_EQ(bits(f.map->pcf(l, x, y, r, receiver)), bits(want))
+              << "level " << l << " (" << x << ", " << y << ") r " << r << " receiver " << receiver;
+        }
+      for (size_t i = queries.size(); i > 1; --i) std::swap(queries[i - 1], queries[rng.next() % i]);
+      std::vector<float> got(queries.size());
+      f.map->pcf_batch(queries, got);
+      for (size_t i = 0; i < queries.size(); ++i) {
+        const PcfQuery& q = queries[i];
+        ASSERT_EQ(bits(got[i]), bits(f.map->Evaluator::pcf(q.level, q.x, q.y, q.r, q.receiver)))
+            << "batch level " << l << " (" << q.x << ", " << q.y << ") r " << q.r;
+      }
+    }
+    EXPECT_GT(f.map->stats().coarse_answers, 0u);
+  }
+}
+
 TEST(ClientLookups, BatchesAnswerLikeSingleLookupsBitForBit) {
   Fixture f = make_fixture("batch_eq", looptest::first_encoding(), 2048);
   const uint64_t side = uint64_t(1) << f.level;

@@ -180,5 +180,62 @@ TEST(DepthRegion, WindowWalkAnswersLikeDepth) {
   }
 }
 
+// WindowDepths::count_window counts exactly the lit texels the per-texel tests on
+// depth() find: every window size 1..7 (squares and rectangles), random positions, and
+// receivers at the window's own depths, one ulp either side and past every depth (the
+// exact endpoints where the test flips). The tile's pcf through it equals the per-tap
+// fraction bit for bit (pcf_fraction's table included).
+TEST(DepthRegion, CountingWindowEqualsPerTapCount) {
+  const uint32_t L = fields::small_test_scale() ? 6 : 7;
+  for (const fields::NamedField& f : fields::all_fields(1u << L, 20261207)) {
+    const Hierarchy h = build_hierarchy(f.tile);
+    for (Encoding e : {Encoding::mh, Encoding::mmh, Encoding::dagmh}) {
+      SCOPED_TRACE(f.name + " " + to_string(e));
+      const std::vector<uint8_t> bytes = encode(h, e);
+      const auto eval = open_encoded(e, bytes);
+      const auto* win = dynamic_cast<const WindowDepths*>(eval.get());
+      ASSERT_NE(win, nullptr);
+      fields::Rng rng(uint64_t(e) + 23);
+      for (uint32_t size = 1; size <= 7; ++size)
+        for (uint32_t k = 0; k < 120; ++k) {
+          const uint32_t level = uint32_t(rng.next() % (L + 1));
+          const uint64_t n = uint64_t(1) << level;
+          const uint32_t w = uint32_t(std::min<uint64_t>(n, size));
+          const uint32_t hh = uint32_t(std::min<uint64_t>(n, k % 3 == 0 ? 1 + rng.next() % 7 : size));
+          const uint64_t x0 = rng.next() % (n - w + 1), y0 = rng.next() % (n - hh + 1);
+          std::vector<float> depths;
+          for (uint32_t i = 0; i < w; ++i)
+            for (uint32_t j = 0; j < hh; ++j) depths.push_back(eval->depth(level, x0 + i, y0 + j));
+          const float d = depths[rng.next() % depths.size()];
+          for (float recv : {d, std::nextafter(d, -1.0f), std::nextafter(d, 2.0f), 0.0f, 2.0f,
+                             depths.front(), depths.back(), float(rng.uniform())}) {
+            uint32_t lit = 0;
+            for (float v : depths) lit += recv <= v ? 1u : 0u;
+            ASSERT_EQ(win->count_window(level, x0, y0, w, hh, recv), lit)
+                << "level " << level << " window " << x0 << "," << y0 << " " << w << "x" << hh << " receiver " << recv;
+          }
+          // The kernel of side `size` around a random texel (odd and even sides, clamped at
+          // the edges or not) against its per-tap fraction.
+          const uint64_t cx = rng.next() % n, cy = rng.next() % n;
+          const float recv = eval->depth(level, cx, cy);
+          uint32_t lit = 0;
+          for (uint32_t j = 0; j < size; ++j)
+            for (uint32_t i = 0; i < size; ++i)
+              lit += recv <= eval->depth(level, pcf_tap(cx, i, size, n), pcf_tap(cy, j, size, n)) ? 1u : 0u;
+          ASSERT_EQ(bits(eval->pcf(level, cx, cy, size, recv)), bits(float(lit) / float(size * size)))
+              << "pcf r " << size << " level " << level << " at " << cx << "," << cy;
+        }
+    }
+  }
+}
+
+TEST(DepthRegion, PcfFractionIsTheDivision) {
+  for (uint32_t r = 1; r <= Evaluator::kMaxPcf; ++r)
+    for (uint32_t lit = 0; lit <= r * r; ++lit) {
+      volatile float num = float(lit), den = float(r * r);  // the division at run time
+      ASSERT_EQ(bits(pcf_fraction(lit, r)), bits(num / den)) << lit << " / " << r << "^2";
+    }
+}
+
 }  // namespace
 }  // namespace st

@@ -156,9 +156,10 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths, public TapWa
     return c;
   }
 
-  // The kernel's window of distinct texels in one window walk (depth_window: the walk to
-  // the lowest common node, then each node over the window once), its taps counted from
-  // it (a clamped kernel at the map's edge reads its edge texels again).
+  // A kernel with no tap clamped: one count_window (each node over the window once, a
+  // subtree whose texels share their answer counted whole). At the map's edge, the
+  // kernel's window of distinct texels in one window walk (depth_window), its taps counted
+  // from it (a clamped kernel reads its edge texels again).
   float pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver) const override {
     r = std::clamp<uint32_t>(r, 1, kMaxPcf);
     clamp(level, x, y);
@@ -166,6 +167,7 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths, public TapWa
     const uint64_t x0 = pcf_tap(x, 0, r, side), x1 = pcf_tap(x, r - 1, r, side);
     const uint64_t y0 = pcf_tap(y, 0, r, side), y1 = pcf_tap(y, r - 1, r, side);
     const uint32_t w = uint32_t(x1 - x0 + 1), h = uint32_t(y1 - y0 + 1);
+    if (w == r && h == r) return pcf_fraction(count_window(level, x0, y0, r, r, receiver), r);  // no tap clamped
     float win[kMaxPcf * kMaxPcf];
     depth_window(level, x0, y0, w, h, win);
     uint32_t lit = 0;
@@ -204,6 +206,31 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths, public TapWa
     return (base.ref & dagmh::kRefTagMask) != dagmh::kRefInner && (base.ref & dagmh::kRefTagMask) != dagmh::kRefTreelet
                ? level - base.level
                : 0;
+  }
+
+  // WindowDepths::count_window: depth_window's walk (skip cells included), a part of the
+  // window under a node where every texel's walk ends alike (a missing child, a treelet
+  // node with no set bit below it) counted whole: one test per subtree (DAG-MH §3.5, MH
+  // §3.3's hierarchical PCF).
+  uint32_t count_window(uint32_t level, uint64_t x0, uint64_t y0, uint32_t w, uint32_t h,
+                        float receiver) const override {
+    const uint64_t x1 = x0 + w - 1, y1 = y0 + h - 1;
+    const uint64_t differ = (x0 ^ x1) | (y0 ^ y1);
+    const uint32_t common = level - uint32_t(differ ? 64 - __builtin_clzll(differ) : 0);
+    Values values;
+    if (common < v_.skip_level && level >= v_.skip_level) {  // as depth_window
+      const uint32_t cs = level - v_.skip_level;
+      uint32_t lit = 0;
+      for (uint64_t cy = y0 >> cs; cy <= y1 >> cs; ++cy)
+        for (uint64_t cx = x0 >> cs; cx <= x1 >> cs; ++cx) {
+          const uint64_t ax = std::max(x0, cx << cs), bx = std::min(x1, ((cx + 1) << cs) - 1);
+          const uint64_t ay = std::max(y0, cy << cs), by = std::min(y1, ((cy + 1) << cs) - 1);
+          lit += count(v_.skip_entry(level, ax, ay), level, ax, ay, bx, by, receiver, values);
+        }
+      return lit;
+    }
+    const dagmh::Cursor base = v_.descend(v_.start(common, level, x0, y0), common, level, x0, y0);
+    return count(base, level, x0, y0, x1, y1, receiver, values);
   }
 
  private:
@@ -275,6 +302,55 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths, public TapWa
       if (cx0 > cx1 || cy0 > cy1) continue;
       fill_treelet(tr, n + 1, p + 1 + dagmh::kTreeletStride[n] * slot, index, cx0, cy0, cx1, cy1, x0, y0, h, out, vs);
     }
+  }
+
+  // The lit texels of [ax, bx] x [ay, by] (texels lit: receiver <= value): fill's walk.
+  static uint32_t area_lit(bool lit, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by) {
+    return lit ? uint32_t((bx - ax + 1) * (by - ay + 1)) : 0u;
+  }
+  uint32_t count(const dagmh::Cursor& c, uint32_t level, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by,
+                 float receiver, Values& vs) const {
+    const uint32_t tag = c.ref & dagmh::kRefTagMask;
+    if (tag != dagmh::kRefInner || c.level >= level) {
+      if (tag != dagmh::kRefInner && tag != dagmh::kRefTreelet)  // below a missing child
+        return area_lit(receiver <= value_of(c.last, vs), ax, ay, bx, by);
+      if (tag == dagmh::kRefInner) {  // an inner node of `level`: one texel
+        uint32_t lit = 0;
+        for (uint64_t x = ax; x <= bx; ++x)
+          for (uint64_t y = ay; y <= by; ++y) lit += receiver <= value_of(v_.finish(c, level, x, y), vs) ? 1u : 0u;
+        return lit;
+      }
+      const uint8_t* t = v_.treelet_at(c.ref & dagmh::kRefIndexMask);
+      const Treelet tr{c, st::load_le<uint64_t>(t), st::load_le<uint32_t>(t + 8),
+                       std::min<uint32_t>(level - c.level, dagmh::kTreeletLevels - 1), level};
+      return count_treelet(tr, 0, 0, c.last, ax, ay, bx, by, receiver, vs);
+    }
+    const uint64_t half = uint64_t(1) << (level - c.level - 1);
+    const uint64_t mx = (ax & ~(2 * half - 1)) + half, my = (ay & ~(2 * half - 1)) + half;
+    uint32_t lit = 0;
+    for (uint32_t slot = 0; slot < 4; ++slot) {
+      const uint64_t cx0 = slot & 1u ? std::max(ax, mx) : ax, cx1 = slot & 1u ? bx : std::min(bx, mx - 1);
+      const uint64_t cy0 = slot & 2u ? std::max(ay, my) : ay, cy1 = slot & 2u ? by : std::min(by, my - 1);
+      if (cx0 > cx1 || cy0 > cy1) continue;
+      lit += count(v_.descend(c, c.level + 1, level, cx0, cy0), level, cx0, cy0, cx1, cy1, receiver, vs);
+    }
+    return lit;
+  }
+  uint32_t count_treelet(const Treelet& tr, uint32_t n, uint32_t p, uint32_t index, uint64_t ax, uint64_t ay,
+                         uint64_t bx, uint64_t by, float receiver, Values& vs) const {
+    if (dagmh::treelet_bit(tr.low, tr.high, p)) index = tr.c.base + dagmh::treelet_rank(tr.low, tr.high, p);
+    if (n == tr.depth || !dagmh::treelet_any(tr.low, tr.high, p + 1, p + dagmh::kTreeletSubtree[n]))
+      return area_lit(receiver <= value_of(index, vs), ax, ay, bx, by);
+    const uint64_t half = uint64_t(1) << (tr.level - tr.c.level - n - 1);
+    const uint64_t mx = (ax & ~(2 * half - 1)) + half, my = (ay & ~(2 * half - 1)) + half;
+    uint32_t lit = 0;
+    for (uint32_t slot = 0; slot < 4; ++slot) {
+      const uint64_t cx0 = slot & 1u ? std::max(ax, mx) : ax, cx1 = slot & 1u ? bx : std::min(bx, mx - 1);
+      const uint64_t cy0 = slot & 2u ? std::max(ay, my) : ay, cy1 = slot & 2u ? by : std::min(by, my - 1);
+      if (cx0 > cx1 || cy0 > cy1) continue;
+      lit += count_treelet(tr, n + 1, p + 1 + dagmh::kTreeletStride[n] * slot, index, cx0, cy0, cx1, cy1, receiver, vs);
+    }
+    return lit;
   }
 
   bool texel_in_tile(uint32_t level, uint64_t x, uint64_t y) const {

@@ -153,16 +153,20 @@ class TreeEvaluator final : public Evaluator, public WindowDepths, public TapWal
     for (size_t o = 0; o < n; o += 64) __builtin_prefetch(tree_bytes_.data() + o);
   }
 
-  // MH §3.3, Fig. 5: the taps share the root path down to the lowest common node of the
-  // kernel's corner texels; each tap continues from there, and a tap whose texel lies in
-  // the region where the previous tap's walk stopped reuses its answer (the last-sample
-  // cache). Same walks as depth(), so the result equals the average of single lookups.
+  // A kernel with no tap clamped is one count_window (MH §3.3's hierarchical PCF). At the
+  // map's edge (taps repeat): MH §3.3, Fig. 5: the taps share the root path down to the
+  // lowest common node of the kernel's corner texels; each tap continues from there, and a
+  // tap whose texel lies in the region where the previous tap's walk stopped reuses its
+  // answer (the last-sample cache). Same walks as depth(), so the result equals the
+  // average of single lookups.
   float pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver) const override {
     r = std::clamp<uint32_t>(r, 1, kMaxPcf);
     level = std::min(level, kMaxLevel);
     const uint64_t side = uint64_t(1) << level;
     const uint64_t x0 = pcf_tap(x, 0, r, side), x1 = pcf_tap(x, r - 1, r, side);
     const uint64_t y0 = pcf_tap(y, 0, r, side), y1 = pcf_tap(y, r - 1, r, side);
+    // No tap clamped at the map's edge: the kernel is the window, each texel once.
+    if (x1 - x0 == r - 1 && y1 - y0 == r - 1) return pcf_fraction(count_window(level, x0, y0, r, r, receiver), r);
     const uint64_t diff = (x0 ^ x1) | (y0 ^ y1);
     const uint32_t common = level - uint32_t(std::bit_width(diff));
     Cursor base = root();
@@ -210,6 +214,18 @@ class TreeEvaluator final : public Evaluator, public WindowDepths, public TapWal
     fill(base, level, x0, y0, x1, y1, x0, y0, h, out);
     if (base.missing) return level - (base.level + 1);
     return base.code == kCodeLeaf ? level - base.level : 0;
+  }
+
+  // WindowDepths::count_window: depth_window's walk, a node where depth()'s walk stops
+  // counted whole (MH 2016 §3.3's hierarchical PCF).
+  uint32_t count_window(uint32_t level, uint64_t x0, uint64_t y0, uint32_t w, uint32_t h,
+                        float receiver) const override {
+    level = std::min(level, kMaxLevel);
+    const uint64_t x1 = x0 + w - 1, y1 = y0 + h - 1;
+    const uint32_t common = level - uint32_t(std::bit_width((x0 ^ x1) | (y0 ^ y1)));
+    Cursor base = root();
+    descend(base, level, x0, y0, common);
+    return count(base, level, x0, y0, x1, y1, receiver);
   }
 
  private:
@@ -329,6 +345,31 @@ class TreeEvaluator final : public Evaluator, public WindowDepths, public TapWal
       }
       fill(child(c, w, slot, code), level, cx0, cy0, cx1, cy1, x0, y0, h, out);
     }
+  }
+
+  // fill's walk, counting the lit texels of [ax, bx] x [ay, by] instead of writing them.
+  uint32_t count(const Cursor& c, uint32_t level, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by,
+                 float receiver) const {
+    if (c.missing || c.code == kCodeLeaf || c.level >= level)
+      return receiver <= value(c) ? uint32_t((bx - ax + 1) * (by - ay + 1)) : 0u;
+    const uint32_t bit = level - (c.level + 1);
+    const uint32_t w = word(c.pos);
+    const uint32_t mask = word_mask(w);
+    const uint64_t half = uint64_t(1) << bit;
+    const uint64_t mx = (ax & ~(2 * half - 1)) + half, my = (ay & ~(2 * half - 1)) + half;
+    uint32_t lit = 0;
+    for (uint32_t slot = 0; slot < 4; ++slot) {
+      const uint64_t cx0 = slot & 1u ? std::max(ax, mx) : ax, cx1 = slot & 1u ? bx : std::min(bx, mx - 1);
+      const uint64_t cy0 = slot & 2u ? std::max(ay, my) : ay, cy1 = slot & 2u ? by : std::min(by, my - 1);
+      if (cx0 > cx1 || cy0 > cy1) continue;
+      const uint32_t code = child_code(mask, slot);
+      if (!code) {  // depth() stops here: c's value answers the part
+        lit += receiver <= value(c) ? uint32_t((cx1 - cx0 + 1) * (cy1 - cy0 + 1)) : 0u;
+        continue;
+      }
+      lit += count(child(c, w, slot, code), level, cx0, cy0, cx1, cy1, receiver);
+    }
+    return lit;
   }
 
   const uint8_t* tree_;

@@ -15,6 +15,7 @@
 // with r > 1, or a level finer than the tree, go to pcf() itself. No allocation.
 #pragma once
 #include <algorithm>
+#include <array>
 #include <cstdint>
 #include <new>
 #include <span>
@@ -40,6 +41,15 @@ class WindowDepths {
  public:
   virtual uint32_t depth_window(uint32_t level, uint64_t x0, uint64_t y0, uint32_t w, uint32_t h,
                                 float* out) const = 0;
+  // How many texels of the same rectangle are lit for `receiver` (receiver <= depth, the
+  // lit test of the lossless invariant's contract, tiles/core/interval.hpp): exactly the
+  // count of the per-texel tests on depth_window's output, without writing the depths.
+  // One walk as depth_window's, but a node where every texel's walk ends (a leaf, a
+  // missing child, a treelet node with no value below it) adds the area of its part of
+  // the rectangle at once, one test for the whole subtree (MH 2016 §3.3's hierarchical
+  // PCF, DAG-MH 2021 §3.5). Same bounds as depth_window. No allocation.
+  virtual uint32_t count_window(uint32_t level, uint64_t x0, uint64_t y0, uint32_t w, uint32_t h,
+                                float receiver) const = 0;
   // A hint that lookups in this tree follow soon: start bringing its bytes toward the
   // cache. The client calls it when a lookup enters the tile, before it collects the
   // tile's taps into a batch, so the tile's lines arrive while that happens instead of one
@@ -49,6 +59,19 @@ class WindowDepths {
  protected:
   ~WindowDepths() = default;
 };
+
+// lit / (r * r) in float for 0 <= lit <= r * r, 1 <= r <= kMaxPcf, from a table (the
+// same IEEE division, done once at compile time): a PCF kernel's fraction of lit taps.
+inline float pcf_fraction(uint32_t lit, uint32_t r) {
+  constexpr uint32_t kN = Evaluator::kMaxPcf;
+  static constexpr auto kTable = [] {
+    std::array<std::array<float, kN * kN + 1>, kN + 1> t{};
+    for (uint32_t k = 1; k <= kN; ++k)
+      for (uint32_t c = 0; c <= k * k; ++c) t[k][c] = float(c) / float(k * k);
+    return t;
+  }();
+  return kTable[r][lit];
+}
 
 // Writes `value` over the texels [ax, bx] x [ay, by] of depth_window's output.
 inline void window_put(float value, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by, uint64_t x0, uint64_t y0,
