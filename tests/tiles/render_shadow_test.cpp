@@ -12,27 +12,13 @@
 #include "tiles/bake/render_error.hpp"
 #include "tiles/bake/scene.hpp"
 #include "tiles/core/pack_evaluator.hpp"
+#include "tests/tiles/render_scenes.hpp"
 
 namespace st {
 namespace {
 
-// A closed axis-aligned box as one mesh (outward winding).
-void add_box(Scene& s, const std::string& name, Vec3d lo, Vec3d hi) {
-  const uint32_t base = uint32_t(s.vertices.size());
-  for (int i = 0; i < 8; ++i)
-    s.vertices.push_back({(i & 1) ? hi.x : lo.x, (i & 2) ? hi.y : lo.y, (i & 4) ? hi.z : lo.z});
-  const uint32_t quads[6][4] = {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}};
-  Mesh m;
-  m.name = name;
-  m.first_triangle = uint32_t(s.triangles.size());
-  for (const auto& q : quads) {
-    s.triangles.push_back({base + q[0], base + q[1], base + q[2]});
-    s.triangles.push_back({base + q[0], base + q[2], base + q[3]});
-  }
-  m.triangle_count = 12;
-  m.closed = true;
-  s.meshes.push_back(m);
-}
+using render_test::add_box;
+using render_test::cube_on_slab;
 
 TEST(RenderShadow, CubeOnSlabMatchesRayTracedAwayFromEdges) {
   Scene s;
@@ -89,14 +75,6 @@ TEST(RenderShadow, CubeOnSlabMatchesRayTracedAwayFromEdges) {
 }
 
 // A 4-unit cube on a 20-unit slab: the scene of the pack-based tests below.
-Scene cube_on_slab() {
-  Scene s;
-  s.name = "cube-on-slab";
-  add_box(s, "slab", {-10, -1, -10}, {10, 0, 10});
-  add_box(s, "cube", {-2, 0, -2}, {2, 4, 2});
-  return s;
-}
-
 // An MH pack of level 9 of `s` under `light`, built into the test folder as NAME.pack.
 std::shared_ptr<PackReader> mh_level9_pack(const Scene& s, const LightSpace& light, const std::string& name) {
   MapBuildOptions o;
