@@ -266,11 +266,10 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths, public TapWa
       return;
     }
     const uint64_t half = uint64_t(1) << (level - c.level - 1);
-    const uint64_t mx = (ax & ~(2 * half - 1)) + half, my = (ay & ~(2 * half - 1)) + half;
+    const QuadSplit split(ax, ay, bx, by, half);
     for (uint32_t slot = 0; slot < 4; ++slot) {
-      const uint64_t cx0 = slot & 1u ? std::max(ax, mx) : ax, cx1 = slot & 1u ? bx : std::min(bx, mx - 1);
-      const uint64_t cy0 = slot & 2u ? std::max(ay, my) : ay, cy1 = slot & 2u ? by : std::min(by, my - 1);
-      if (cx0 > cx1 || cy0 > cy1) continue;
+      uint64_t cx0, cy0, cx1, cy1;
+      if (!split.part(slot, cx0, cy0, cx1, cy1)) continue;
       // One step toward the part's first texel: the child in this slot.
       fill(v_.descend(c, c.level + 1, level, cx0, cy0), level, cx0, cy0, cx1, cy1, x0, y0, h, out, vs);
     }
@@ -295,11 +294,10 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths, public TapWa
       return;
     }
     const uint64_t half = uint64_t(1) << (tr.level - tr.c.level - n - 1);
-    const uint64_t mx = (ax & ~(2 * half - 1)) + half, my = (ay & ~(2 * half - 1)) + half;
+    const QuadSplit split(ax, ay, bx, by, half);
     for (uint32_t slot = 0; slot < 4; ++slot) {
-      const uint64_t cx0 = slot & 1u ? std::max(ax, mx) : ax, cx1 = slot & 1u ? bx : std::min(bx, mx - 1);
-      const uint64_t cy0 = slot & 2u ? std::max(ay, my) : ay, cy1 = slot & 2u ? by : std::min(by, my - 1);
-      if (cx0 > cx1 || cy0 > cy1) continue;
+      uint64_t cx0, cy0, cx1, cy1;
+      if (!split.part(slot, cx0, cy0, cx1, cy1)) continue;
       fill_treelet(tr, n + 1, p + 1 + dagmh::kTreeletStride[n] * slot, index, cx0, cy0, cx1, cy1, x0, y0, h, out, vs);
     }
   }
@@ -326,12 +324,11 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths, public TapWa
       return count_treelet(tr, 0, 0, c.last, ax, ay, bx, by, receiver, vs);
     }
     const uint64_t half = uint64_t(1) << (level - c.level - 1);
-    const uint64_t mx = (ax & ~(2 * half - 1)) + half, my = (ay & ~(2 * half - 1)) + half;
+    const QuadSplit split(ax, ay, bx, by, half);
     uint32_t lit = 0;
     for (uint32_t slot = 0; slot < 4; ++slot) {
-      const uint64_t cx0 = slot & 1u ? std::max(ax, mx) : ax, cx1 = slot & 1u ? bx : std::min(bx, mx - 1);
-      const uint64_t cy0 = slot & 2u ? std::max(ay, my) : ay, cy1 = slot & 2u ? by : std::min(by, my - 1);
-      if (cx0 > cx1 || cy0 > cy1) continue;
+      uint64_t cx0, cy0, cx1, cy1;
+      if (!split.part(slot, cx0, cy0, cx1, cy1)) continue;
       lit += count(v_.descend(c, c.level + 1, level, cx0, cy0), level, cx0, cy0, cx1, cy1, receiver, vs);
     }
     return lit;
@@ -342,12 +339,11 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths, public TapWa
     if (n == tr.depth || !dagmh::treelet_any(tr.low, tr.high, p + 1, p + dagmh::kTreeletSubtree[n]))
       return area_lit(receiver <= value_of(index, vs), ax, ay, bx, by);
     const uint64_t half = uint64_t(1) << (tr.level - tr.c.level - n - 1);
-    const uint64_t mx = (ax & ~(2 * half - 1)) + half, my = (ay & ~(2 * half - 1)) + half;
+    const QuadSplit split(ax, ay, bx, by, half);
     uint32_t lit = 0;
     for (uint32_t slot = 0; slot < 4; ++slot) {
-      const uint64_t cx0 = slot & 1u ? std::max(ax, mx) : ax, cx1 = slot & 1u ? bx : std::min(bx, mx - 1);
-      const uint64_t cy0 = slot & 2u ? std::max(ay, my) : ay, cy1 = slot & 2u ? by : std::min(by, my - 1);
-      if (cx0 > cx1 || cy0 > cy1) continue;
+      uint64_t cx0, cy0, cx1, cy1;
+      if (!split.part(slot, cx0, cy0, cx1, cy1)) continue;
       lit += count_treelet(tr, n + 1, p + 1 + dagmh::kTreeletStride[n] * slot, index, cx0, cy0, cx1, cy1, receiver, vs);
     }
     return lit;

@@ -333,11 +333,10 @@ class TreeEvaluator final : public Evaluator, public WindowDepths, public TapWal
     const uint32_t mask = word_mask(w);
     // The node's square is 2^(bit+1) texels, aligned; its children split it at `mid`.
     const uint64_t half = uint64_t(1) << bit;
-    const uint64_t mx = (ax & ~(2 * half - 1)) + half, my = (ay & ~(2 * half - 1)) + half;
+    const QuadSplit split(ax, ay, bx, by, half);
     for (uint32_t slot = 0; slot < 4; ++slot) {
-      const uint64_t cx0 = slot & 1u ? std::max(ax, mx) : ax, cx1 = slot & 1u ? bx : std::min(bx, mx - 1);
-      const uint64_t cy0 = slot & 2u ? std::max(ay, my) : ay, cy1 = slot & 2u ? by : std::min(by, my - 1);
-      if (cx0 > cx1 || cy0 > cy1) continue;
+      uint64_t cx0, cy0, cx1, cy1;
+      if (!split.part(slot, cx0, cy0, cx1, cy1)) continue;
       const uint32_t code = child_code(mask, slot);
       if (!code) {  // depth() stops here: the last valued node's value (c's)
         window_put(value(c), cx0, cy0, cx1, cy1, x0, y0, h, out);
@@ -356,12 +355,11 @@ class TreeEvaluator final : public Evaluator, public WindowDepths, public TapWal
     const uint32_t w = word(c.pos);
     const uint32_t mask = word_mask(w);
     const uint64_t half = uint64_t(1) << bit;
-    const uint64_t mx = (ax & ~(2 * half - 1)) + half, my = (ay & ~(2 * half - 1)) + half;
+    const QuadSplit split(ax, ay, bx, by, half);
     uint32_t lit = 0;
     for (uint32_t slot = 0; slot < 4; ++slot) {
-      const uint64_t cx0 = slot & 1u ? std::max(ax, mx) : ax, cx1 = slot & 1u ? bx : std::min(bx, mx - 1);
-      const uint64_t cy0 = slot & 2u ? std::max(ay, my) : ay, cy1 = slot & 2u ? by : std::min(by, my - 1);
-      if (cx0 > cx1 || cy0 > cy1) continue;
+      uint64_t cx0, cy0, cx1, cy1;
+      if (!split.part(slot, cx0, cy0, cx1, cy1)) continue;
       const uint32_t code = child_code(mask, slot);
       if (!code) {  // depth() stops here: c's value answers the part
         lit += receiver <= value(c) ? uint32_t((cx1 - cx0 + 1) * (cy1 - cy0 + 1)) : 0u;

@@ -73,6 +73,21 @@ inline float pcf_fraction(uint32_t lit, uint32_t r) {
   return kTable[r][lit];
 }
 
+// A rectangle [ax, bx] x [ay, by] inside an aligned square of side 2 * half, cut along the
+// square's children (slot bit 0: the right half, bit 1: the lower half): the walks of
+// depth_window and count_window visit each child's part once.
+struct QuadSplit {
+  QuadSplit(uint64_t ax_, uint64_t ay_, uint64_t bx_, uint64_t by_, uint64_t half)
+      : ax(ax_), ay(ay_), bx(bx_), by(by_), mx((ax_ & ~(2 * half - 1)) + half), my((ay_ & ~(2 * half - 1)) + half) {}
+  // The part in child `slot`; false where the rectangle does not reach that child.
+  bool part(uint32_t slot, uint64_t& x0, uint64_t& y0, uint64_t& x1, uint64_t& y1) const {
+    x0 = slot & 1u ? std::max(ax, mx) : ax, x1 = slot & 1u ? bx : std::min(bx, mx - 1);
+    y0 = slot & 2u ? std::max(ay, my) : ay, y1 = slot & 2u ? by : std::min(by, my - 1);
+    return x0 <= x1 && y0 <= y1;
+  }
+  uint64_t ax, ay, bx, by, mx, my;
+};
+
 // Writes `value` over the texels [ax, bx] x [ay, by] of depth_window's output.
 inline void window_put(float value, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by, uint64_t x0, uint64_t y0,
                        uint32_t h, float* out) {
