@@ -10,6 +10,9 @@
 
 namespace {
 thread_local uint64_t t_allocations = 0;
+// The probe's pointer goes here, so no optimisation level may elide its allocations
+// (new-expressions whose result is unused may be removed since C++14).
+void* volatile g_probe_escape = nullptr;
 }  // namespace
 
 // Counting replacements of the global allocation functions (the whole test binary uses
@@ -51,6 +54,8 @@ TEST(RemoteMapLookups, NeverAllocateWhetherTilesAreMissingOrResident) {
   {  // the probe itself counts
     const uint64_t before = t_allocations;
     auto* v = new std::vector<int>(10);
+    g_probe_escape = v->data();
+    g_probe_escape = v;
     delete v;
     ASSERT_EQ(t_allocations, before + 2);
   }
