@@ -260,6 +260,33 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
   if (level > header_.map_level) return 1.0f;
   const uint64_t side = uint64_t(1) << level;
   if (r == 1) return receiver <= depth_shared(level, pcf_tap(x, 0, 1, side), pcf_tap(y, 0, 1, side), sc) ? 1.0f : 0.0f;
+  // A kernel with no tap clamped on the rows of the columns kept ahead, overlapping them
+  // or right after them (the next kernel along a screen-coherent row): its r columns are
+  // r * r consecutive depths there, counted in one pass; the columns it lacks are read
+  // kAhead at a time, one window walk per tile or kept region they lie in
+  // (fill_columns), the columns it shares with the kept ones moved to the front first.
+  // Every depth is depth()'s, so the count is exact. Other kernels: below.
+  {
+    const uint64_t h = (r - 1) / 2;
+    LookupScratch::Ahead& a = sc.ahead[level & 1];
+    if (a.n && a.level == level && a.r == r && y >= h && y - h == a.y0 && x >= h && x - h + r <= side &&
+        a.y0 + r <= side) {
+      const uint64_t kx0 = x - h, at = kx0 - a.x0;  // unsigned: kx0 < a.x0 wraps
+      if (at <= a.n && a.n - at >= r) return pcf_fraction(count_lit(a.depth + at * r, r * r, receiver), r);
+      if (at <= a.n) {
+        const uint32_t keep = uint32_t(a.n - at);  // < r
+        std::memmove(a.depth, a.depth + at * r, size_t(keep) * r * sizeof(float));
+        a.x0 = kx0, a.n = keep;
+        while (a.n < r) {
+          const uint32_t got = fill_columns(level, kx0 + a.n, a.y0, a.y0 + r - 1, sc, a.depth + size_t(a.n) * r);
+          if (got == 0) break;
+          a.n += got;
+        }
+        if (a.n >= r) return pcf_fraction(count_lit(a.depth, r * r, receiver), r);
+        a.n = 0;  // a tile with no window walk: the paths below
+      }
+    }
+  }
   // A kernel inside one region: every tap gets its value, so the fraction is exactly 1
   // or 0 (a region is an aligned square: its corners decide). Failing that, the centre
   // tap's region (one walk) often holds the next kernels along a row.
@@ -269,11 +296,13 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
   const bool same_rows = w.r == r && w.level == level && w.y == y;
   const bool interior = kx1 - kx0 == r - 1, w_rows = ky1 - ky0 == r - 1;  // r consecutive columns, rows
   // The column tx (inside the kernel's rows ky0..ky1, consecutive) into `col` without a
-  // per-tap walk: from the columns fetched ahead, one kept region holding it, or (inside
-  // the current tile) a window walk of it and the next columns up to kAhead, whose region
-  // is kept when one node holds them. False: none of these (the caller reads it tap by tap).
+  // per-tap walk: from the columns fetched ahead, one kept region holding it, (inside the
+  // current tile) a window walk of it and the next columns up to kAhead, whose region is
+  // kept when one node holds them, or (a column across a tile border, or outside the
+  // current tile) fill_columns's window walk per tile. False: none of these (a
+  // tile with no window walk; the caller reads it tap by tap).
   auto read_column = [&](uint64_t tx, float* col) {
-    LookupScratch::Ahead& a = sc.ahead;
+    LookupScratch::Ahead& a = sc.ahead[level & 1];
     if (a.n && a.level == level && a.r == r && a.y0 == ky0 && tx - a.x0 < a.n) {
       std::copy_n(a.depth + (tx - a.x0) * r, r, col);
       return true;
@@ -282,7 +311,14 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
       std::fill_n(col, r, sc.answer(*g));
       return true;
     }
-    if (!sc.win || !sc.covers(level, tx, ky0) || !sc.covers(level, tx, ky1)) return false;
+    if (!sc.win || !sc.covers(level, tx, ky0) || !sc.covers(level, tx, ky1)) {
+      a.n = 0;  // rewritten below
+      const uint32_t n = fill_columns(level, tx, ky0, ky1, sc, a.depth);
+      if (n == 0) return false;
+      a.level = level, a.r = r, a.n = n, a.x0 = tx, a.y0 = ky0;
+      std::copy_n(a.depth, r, col);
+      return true;
+    }
     ++sc.hits;
     const uint32_t n = uint32_t(std::min<uint64_t>(LookupScratch::kAhead, sc.x0 + sc.side - tx));
     const uint32_t shift = sc.win->depth_window(sc.rel, tx - sc.x0, ky0 - sc.y0, n, r, a.depth);
@@ -350,17 +386,14 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
         const uint64_t tx = pcf_tap(x, i, r, side);
         if (tx != prev) slot = slot + 1 == r ? 0 : slot + 1, prev = tx;
         float* col = w.depth.data() + slot * r;
-        if (w.col[slot] != tx && w_rows && sc.win && sc.covers(level, tx, ky0) && sc.covers(level, tx, ky1)) {
-          // The column inside the current tile: from the columns fetched ahead, or one kept
-          // region holding it gives all its taps; else it and the next columns up to
-          // kAhead (inside the tile) in one window walk (shared down to their lowest
-          // common node, each node once), whose region is kept when one node holds them.
+        if (w.col[slot] != tx) {
           w.col[slot] = tx;
-          read_column(tx, col);
-        } else if (w.col[slot] != tx) {
-          w.col[slot] = tx;
-          // The column's taps that one region holds take its value together.
-          for (uint32_t k = 0; k < r;) {
+          // On r consecutive rows: from the columns fetched ahead, or one kept region
+          // holding it gives all its taps; else it and the next columns up to kAhead in
+          // one window walk per tile they lie in (shared down to their lowest common
+          // node, each node once; read_column).
+          // Else tap by tap, the column's taps that one region holds taking its value together.
+          for (uint32_t k = w_rows && read_column(tx, col) ? r : 0; k < r;) {
             const uint64_t ty = pcf_tap(y, k, r, side);
             const float v = depth_shared(level, tx, ty, sc);
             col[k++] = v;
@@ -426,6 +459,50 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
     }
   }
   return pcf_fraction(lit_taps, r);
+}
+
+uint32_t RemoteMap::fill_columns(uint32_t level, uint64_t tx, uint64_t ky0, uint64_t ky1, LookupScratch& sc,
+                                 float* out) const noexcept {
+  using Tile = LookupScratch::TileView;
+  const uint32_t r = uint32_t(ky1 - ky0 + 1);
+  uint32_t n = uint32_t(std::min<uint64_t>(LookupScratch::kAhead, (uint64_t(1) << level) - tx));
+  float part[LookupScratch::kAhead * kMaxPcf];
+  // Each part of the columns: rows [ty, ey], the columns [tx, tx + n) of one kept region
+  // (its value) or of one tile (one window walk); n shrinks to what every part holds.
+  for (uint64_t ty = ky0, ey = 0; ty <= ky1; ty = ey + 1) {
+    const LookupScratch::Region* g = sc.find(level, tx, ty);
+    if (!g && !sc.covers(level, tx, ty)) {
+      const Tile before = sc.tile();
+      if (sc.alt.covers(level, tx, ty)) {  // the tile it was in before: no page-table walk
+        sc.set_tile(sc.alt);
+      } else {
+        float value;
+        if (!enter_tile(level, tx, ty, sc, value)) g = sc.last_region();  // it keeps the answer's region
+      }
+      if (before.ev) sc.alt = before;
+    }
+    if (g) {
+      const uint64_t m = (uint64_t(1) << g->shift) - 1;
+      ey = std::min(ky1, ty | m);
+      n = uint32_t(std::min<uint64_t>(n, (tx | m) - tx + 1));
+      const float v = sc.answer(*g);
+      for (uint32_t c = 0; c < n; ++c) std::fill(out + c * r + (ty - ky0), out + c * r + (ey - ky0) + 1, v);
+      continue;
+    }
+    if (!sc.win) return 0;
+    ey = std::min(ky1, sc.y0 + sc.side - 1);
+    n = uint32_t(std::min<uint64_t>(n, sc.x0 + sc.side - tx));
+    const uint32_t h = uint32_t(ey - ty + 1);
+    ++sc.hits;
+    // Straight into `out` when the part is the whole column (depth_window's layout).
+    float* to = h == r ? out : part;
+    const uint32_t shift = sc.win->depth_window(sc.rel, tx - sc.x0, ty - sc.y0, n, h, to);
+    if (to == part)
+      for (uint32_t c = 0; c < n; ++c) std::copy_n(part + c * h, h, out + c * r + (ty - ky0));
+    if ((((tx ^ (tx + n - 1)) | (ty ^ ey)) >> shift) == 0)  // one node holds the part: keep its region
+      sc.set_region(level, tx, ty, shift, to[0], LookupScratch::Counted::hit);
+  }
+  return n;
 }
 
 uint32_t RemoteMap::count_window_shared(uint32_t level, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by,
