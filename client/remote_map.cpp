@@ -170,7 +170,7 @@ size_t counter_shard() noexcept {
 namespace {
 // How many of depth[0, n) the receiver lies at or in front of (receiver <= depth), four
 // at a time with SSE2 (the same IEEE comparison as the scalar test, NaN never lit).
-uint32_t count_lit(const float* depth, uint32_t n, float receiver) {
+[[gnu::always_inline]] inline uint32_t count_lit(const float* depth, uint32_t n, float receiver) {
   uint32_t k = 0, lit = 0;
 #if defined(__SSE2__)
   const __m128 rv = _mm_set1_ps(receiver);
@@ -254,39 +254,48 @@ float RemoteMap::depth_shared(uint32_t level, uint64_t x, uint64_t y, LookupScra
   }
 }
 
+bool RemoteMap::extend_ahead(uint32_t level, uint64_t kx0, uint32_t r, LookupScratch& sc) const noexcept {
+  LookupScratch::Ahead& a = sc.ahead[level & 1];
+  const uint32_t keep = uint32_t(a.n - (kx0 - a.x0));  // the columns it shares with the kept ones (< r)
+  std::memmove(a.depth, a.depth + (kx0 - a.x0) * r, size_t(keep) * r * sizeof(float));
+  a.x0 = kx0, a.n = keep;
+  while (a.n < r) {
+    const uint32_t got = fill_columns(level, kx0 + a.n, a.y0, a.y0 + r - 1, sc, a.depth + size_t(a.n) * r);
+    if (got == 0) {
+      a.n = 0;  // a tile with no window walk: pcf_general's paths
+      return false;
+    }
+    a.n += got;
+  }
+  return true;
+}
+
 float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver,
                             LookupScratch& sc) const noexcept {
-  r = std::clamp<uint32_t>(r, 1, kMaxPcf);
-  if (level > header_.map_level) return 1.0f;
-  const uint64_t side = uint64_t(1) << level;
-  if (r == 1) return receiver <= depth_shared(level, pcf_tap(x, 0, 1, side), pcf_tap(y, 0, 1, side), sc) ? 1.0f : 0.0f;
   // A kernel with no tap clamped on the rows of the columns kept ahead, overlapping them
   // or right after them (the next kernel along a screen-coherent row): its r columns are
   // r * r consecutive depths there, counted in one pass; the columns it lacks are read
   // kAhead at a time, one window walk per tile or kept region they lie in
-  // (fill_columns), the columns it shares with the kept ones moved to the front first.
-  // Every depth is depth()'s, so the count is exact. Other kernels: below.
-  {
+  // (extend_ahead, fill_columns). Every depth is depth()'s, so the count is exact.
+  if (r >= 2 && r <= kMaxPcf && level <= header_.map_level) {
     const uint64_t h = (r - 1) / 2;
     LookupScratch::Ahead& a = sc.ahead[level & 1];
-    if (a.n && a.level == level && a.r == r && y >= h && y - h == a.y0 && x >= h && x - h + r <= side &&
-        a.y0 + r <= side) {
-      const uint64_t kx0 = x - h, at = kx0 - a.x0;  // unsigned: kx0 < a.x0 wraps
-      if (at <= a.n && a.n - at >= r) return pcf_fraction(count_lit(a.depth + at * r, r * r, receiver), r);
-      if (at <= a.n) {
-        const uint32_t keep = uint32_t(a.n - at);  // < r
-        std::memmove(a.depth, a.depth + at * r, size_t(keep) * r * sizeof(float));
-        a.x0 = kx0, a.n = keep;
-        while (a.n < r) {
-          const uint32_t got = fill_columns(level, kx0 + a.n, a.y0, a.y0 + r - 1, sc, a.depth + size_t(a.n) * r);
-          if (got == 0) break;
-          a.n += got;
-        }
-        if (a.n >= r) return pcf_fraction(count_lit(a.depth, r * r, receiver), r);
-        a.n = 0;  // a tile with no window walk: the paths below
-      }
+    if (a.n && a.level == level && a.r == r && y >= h && y - h == a.y0 && x >= h &&
+        x - h + r <= (uint64_t(1) << level)) {
+      const uint64_t at = x - h - a.x0;  // unsigned: a kernel left of the kept columns wraps
+      if (at <= a.n && (a.n - at >= r || extend_ahead(level, x - h, r, sc)))
+        return pcf_fraction(count_lit(a.depth + (x - h - a.x0) * r, r * r, receiver), r);
     }
   }
+  return pcf_general(level, x, y, r, receiver, sc);
+}
+
+float RemoteMap::pcf_general(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver,
+                             LookupScratch& sc) const noexcept {
+  r = std::clamp<uint32_t>(r, 1, kMaxPcf);
+  if (level > header_.map_level) return 1.0f;
+  const uint64_t side = uint64_t(1) << level;
+  if (r == 1) return receiver <= depth_shared(level, pcf_tap(x, 0, 1, side), pcf_tap(y, 0, 1, side), sc) ? 1.0f : 0.0f;
   // A kernel inside one region: every tap gets its value, so the fraction is exactly 1
   // or 0 (a region is an aligned square: its corners decide). Failing that, the centre
   // tap's region (one walk) often holds the next kernels along a row.
@@ -802,6 +811,26 @@ void RemoteMap::visibility_batch(std::span<const WorldPoint> points, std::span<c
       }
       pcf_batch_shared(std::span<const PcfQuery>(queries, nq), std::span<float>(got, nq), sc);
       for (size_t q = 0; q < nq; ++q) out[i0 + at[q]] = got[q];
+    }
+  } else if (footprints.empty()) {
+    // r x r kernels at the finest level: visibility_at's answer without a footprint (lit
+    // outside the light's box, else pcf_shared of the finest level) in one loop.
+    const uint32_t L = header_.map_level;
+    const uint32_t r = 2 * std::min<uint32_t>(pcf_radius, (kMaxPcf - 1) / 2) + 1;
+    std::shared_lock lock(mu_);
+    for (size_t i0 = 0; i0 < n; i0 += kTransformChunk) {
+      const size_t m = std::min(kTransformChunk, n - i0);
+      if (sun) sun_to_light_chunk(light_, points.data() + i0, m, u, v, d);
+      for (size_t k = 0, i = i0; k < m; ++k, ++i) {
+        const LightPoint p =
+            sun ? LightPoint{u[k], v[k], d[k]} : light_.to_light(Vec3d{points[i].x, points[i].y, points[i].z});
+        if (!(p.u >= 0 && p.u < 1 && p.v >= 0 && p.v < 1 && p.d >= 0 && p.d <= 1)) {
+          out[i] = 1.0f;
+          continue;
+        }
+        const auto t = texel_in_unit(L, p.u, p.v);
+        out[i] = pcf_shared(L, t[0], t[1], r, float(p.d), sc);
+      }
     }
   } else {
     std::shared_lock lock(mu_);

@@ -300,7 +300,12 @@ class RemoteMap final : public Evaluator {
   // encoded tile, now sc's current one. False: `value` answers (coarse when missed).
   bool enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc, float& value) const noexcept;
   float depth_shared(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc) const noexcept;
-  // Evaluator::pcf's answer, from the kept regions: a kernel inside one answers at once;
+  // Evaluator::pcf's answer, from the kept regions: a kernel with no tap clamped on the
+  // rows of the columns kept ahead (LookupScratch::Ahead) and reaching at most to the
+  // column after them (a screen-coherent row of kernels) counts its r * r depths there,
+  // reading the columns it lacks kAhead at a time, one window walk per tile or region
+  // they lie in (fill_columns, across tile borders and missing tiles alike); else
+  // (pcf_general) a kernel inside one region answers at once;
   // one on the last kernels' rows reads only its new columns (the tap window); another
   // inside one resident tile (or crossing only the map's edges) goes through the tile's
   // own shared-walk pcf (MH §3.3, DAG-MH §3.5); others with no tap clamped counted one
@@ -324,6 +329,14 @@ class RemoteMap final : public Evaluator {
                                LookupScratch& sc) const noexcept;
   float pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver,
                    LookupScratch& sc) const noexcept;
+  // pcf_shared for every kernel but one counted from the columns kept ahead.
+  float pcf_general(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver,
+                    LookupScratch& sc) const noexcept;
+  // The columns kept ahead for `level` (on the kernel's rows, x0 <= kx0 <= x0 + n < kx0 +
+  // r) made to start at kx0 and hold at least r columns: the ones from kx0 on moved to
+  // the front, the rest read by fill_columns. False: a tile with no window walk (then
+  // none are kept).
+  bool extend_ahead(uint32_t level, uint64_t kx0, uint32_t r, LookupScratch& sc) const noexcept;
   float visibility_shared(const WorldPoint& world, float footprint_world, uint32_t pcf_radius,
                           LookupScratch& sc) const noexcept;
   // The same from the point's light-space position `p` (LightSpace::to_light of `w`).
