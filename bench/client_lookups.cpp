@@ -8,6 +8,7 @@
 //                        [--encodings mh,mmh,dagmh] [--tile-bytes 8192] [--lookups 262144]
 //                        [--batch 1024] [--reps 5] [--render-reps 3] [--threads 1,2] [--size 960x540]
 //                        [--camera pos=-350,220,-380,target=0,0,0,fov=50] [--clock cpu|wall] [--quick]
+//                        [--patterns random,coherent] [--kernels 1,5] [--subjects array,single,batch,filtered]
 //                        [--json PATH]
 //
 // Each encoding's pack is built with build_map into a temporary folder, then every tile
@@ -30,7 +31,9 @@
 // Before timing: batch == single == array bit for bit on every point, and the client's
 // PCF (shared walk inside tiles) == the average of its single lookups on a sample.
 // --quick: 2K^2, 64K lookups, 3 reps, one render rep. --render-only: only the render
-// comparison (for profiling it).
+// comparison (for profiling it). --patterns, --kernels (1: single tap, 5: 5x5) and
+// --subjects time only those cells (checked as always), e.g. `--patterns coherent
+// --kernels 5 --subjects batch` under perf; ratios and targets need the cells they divide.
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -163,6 +166,8 @@ int main(int argc, char** argv) {
   uint32_t level = 12, tile_bytes = 8192;
   size_t count = size_t(1) << 18, batch = 1024;
   int reps = 5, render_reps = 3;
+  std::vector<std::string> pattern_names{"random", "coherent"}, subject_names{"array", "single", "batch", "filtered"};
+  std::vector<uint32_t> radii{0, 2};
   bool quick = false, level_given = false, use_cpu = true, render_reps_given = false, render_only = false;
   try {
     for (int i = 1; i < argc; ++i) {
@@ -187,6 +192,15 @@ int main(int argc, char** argv) {
       else if (a == "--camera") camera_spec = next();
       else if (a == "--quick") quick = true;
       else if (a == "--render-only") render_only = true;
+      else if (a == "--patterns") pattern_names = split_list(next());
+      else if (a == "--subjects") subject_names = split_list(next());
+      else if (a == "--kernels") {
+        radii.clear();
+        for (const auto& k : split_list(next())) {
+          if (k != "1" && k != "5") throw st::Error("--kernels: expected 1 or 5, got '" + k + "'");
+          radii.push_back(k == "1" ? 0u : 2u);
+        }
+      }
       else if (a == "--json") json_path = next();
       else if (a == "--clock") {
         const std::string c = next();
@@ -197,7 +211,8 @@ int main(int argc, char** argv) {
         throw st::Error("usage: bench_client_lookups [--scene S] [--light L] [--res 4k] [--encodings mh,mmh,dagmh] "
                         "[--tile-bytes N] [--lookups N] [--batch N] [--reps R] [--render-reps R] [--threads 1,2] "
                         "[--size WxH] "
-                        "[--camera SPEC] [--clock cpu|wall] [--quick] [--render-only] [--json PATH]");
+                        "[--camera SPEC] [--clock cpu|wall] [--quick] [--render-only] [--patterns random,coherent] "
+                        "[--kernels 1,5] [--subjects array,single,batch,filtered] [--json PATH]");
     }
     if (scene_spec.find(':') == std::string::npos) scene_spec = "procedural:" + scene_spec;
     if (quick) {
@@ -300,10 +315,11 @@ int main(int argc, char** argv) {
       const Encoded& e = encoded[ei];
       if (ei > 0) paint(e);  // the float array of this same map
       for (auto& [pname, list] : patterns) {
+        if (std::find(pattern_names.begin(), pattern_names.end(), pname) == pattern_names.end()) continue;
         std::vector<WorldPoint> points(list->size());
         for (size_t i = 0; i < points.size(); ++i) points[i] = (*list)[i].p;
         // Checks before timing.
-        for (uint32_t radius : {0u, 2u}) {
+        for (uint32_t radius : radii) {
           time_pass(Subject::array, e, arr, light, *list, points, footprints, radius, 1, batch, ref);
           for (Subject s : {Subject::single, Subject::batch}) {
             time_pass(s, e, arr, light, *list, points, footprints, radius, 1, batch, out);
@@ -320,9 +336,12 @@ int main(int argc, char** argv) {
             const float recv = float(light.to_light({q.p.x, q.p.y, q.p.z}).d);
             pcf_mismatches += e.remote->pcf(level, q.x, q.y, r, recv) != e.remote->Evaluator::pcf(level, q.x, q.y, r, recv);
           }
-        for (uint32_t radius : {0u, 2u})
+        for (uint32_t radius : radii)
           for (unsigned threads : thread_counts) {
-            const Subject subjects[] = {Subject::array, Subject::single, Subject::batch, Subject::filtered};
+            std::vector<Subject> subjects;
+            for (Subject s : {Subject::array, Subject::single, Subject::batch, Subject::filtered})
+              if (std::find(subject_names.begin(), subject_names.end(), subject_name(s)) != subject_names.end())
+                subjects.push_back(s);
             std::vector<std::vector<double>> t(std::size(subjects)), c(std::size(subjects));
             for (int rep = 0; rep < reps + 1; ++rep)  // the first pass warms up
               for (size_t s = 0; s < std::size(subjects); ++s) {
@@ -420,6 +439,9 @@ int main(int argc, char** argv) {
       for (auto& [pname, list] : patterns) {
         const Encoded& e = encoded[ei];
         (void)list;
+        if (find(e.name, pname, "array", 0, 1) == 0 || find(e.name, pname, "batch", 0, 1) == 0 ||
+            find(e.name, pname, "batch", 2, 1) == 0 || find_wall(e.name, pname, "batch", 0, thread_counts.back()) == 0)
+          continue;  // not all timed (--patterns, --kernels, --subjects)
         const double single = find(e.name, pname, "batch", 0, 1) / find(e.name, pname, "array", 0, 1);
         const double pcf = find(e.name, pname, "batch", 2, 1) / find(e.name, pname, "batch", 0, 1);
         const unsigned tn = thread_counts.back();

@@ -170,7 +170,7 @@ size_t counter_shard() noexcept {
 namespace {
 // How many of depth[0, n) the receiver lies at or in front of (receiver <= depth), four
 // at a time with SSE2 (the same IEEE comparison as the scalar test, NaN never lit).
-uint32_t count_lit(const float* depth, uint32_t n, float receiver) {
+[[gnu::always_inline]] inline uint32_t count_lit(const float* depth, uint32_t n, float receiver) {
   uint32_t k = 0, lit = 0;
 #if defined(__SSE2__)
   const __m128 rv = _mm_set1_ps(receiver);
@@ -254,8 +254,44 @@ float RemoteMap::depth_shared(uint32_t level, uint64_t x, uint64_t y, LookupScra
   }
 }
 
+bool RemoteMap::extend_ahead(uint32_t level, uint64_t kx0, uint32_t r, LookupScratch& sc) const noexcept {
+  LookupScratch::Ahead& a = sc.ahead[level & 1];
+  const uint32_t keep = uint32_t(a.n - (kx0 - a.x0));  // the columns it shares with the kept ones (< r)
+  std::memmove(a.depth, a.depth + (kx0 - a.x0) * r, size_t(keep) * r * sizeof(float));
+  a.x0 = kx0, a.n = keep;
+  while (a.n < r) {
+    const uint32_t got = fill_columns(level, kx0 + a.n, a.y0, a.y0 + r - 1, sc, a.depth + size_t(a.n) * r);
+    if (got == 0) {
+      a.n = 0;  // a tile with no window walk: pcf_general's paths
+      return false;
+    }
+    a.n += got;
+  }
+  return true;
+}
+
 float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver,
                             LookupScratch& sc) const noexcept {
+  // A kernel with no tap clamped on the rows of the columns kept ahead, overlapping them
+  // or right after them (the next kernel along a screen-coherent row): its r columns are
+  // r * r consecutive depths there, counted in one pass; the columns it lacks are read
+  // kAhead at a time, one window walk per tile or kept region they lie in
+  // (extend_ahead, fill_columns). Every depth is depth()'s, so the count is exact.
+  if (r >= 2 && r <= kMaxPcf && level <= header_.map_level) {
+    const uint64_t h = (r - 1) / 2;
+    LookupScratch::Ahead& a = sc.ahead[level & 1];
+    if (a.n && a.level == level && a.r == r && y >= h && y - h == a.y0 && x >= h &&
+        x - h + r <= (uint64_t(1) << level)) {
+      const uint64_t at = x - h - a.x0;  // unsigned: a kernel left of the kept columns wraps
+      if (at <= a.n && (a.n - at >= r || extend_ahead(level, x - h, r, sc)))
+        return pcf_fraction(count_lit(a.depth + (x - h - a.x0) * r, r * r, receiver), r);
+    }
+  }
+  return pcf_general(level, x, y, r, receiver, sc);
+}
+
+float RemoteMap::pcf_general(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver,
+                             LookupScratch& sc) const noexcept {
   r = std::clamp<uint32_t>(r, 1, kMaxPcf);
   if (level > header_.map_level) return 1.0f;
   const uint64_t side = uint64_t(1) << level;
@@ -269,11 +305,13 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
   const bool same_rows = w.r == r && w.level == level && w.y == y;
   const bool interior = kx1 - kx0 == r - 1, w_rows = ky1 - ky0 == r - 1;  // r consecutive columns, rows
   // The column tx (inside the kernel's rows ky0..ky1, consecutive) into `col` without a
-  // per-tap walk: from the columns fetched ahead, one kept region holding it, or (inside
-  // the current tile) a window walk of it and the next columns up to kAhead, whose region
-  // is kept when one node holds them. False: none of these (the caller reads it tap by tap).
+  // per-tap walk: from the columns fetched ahead, one kept region holding it, (inside the
+  // current tile) a window walk of it and the next columns up to kAhead, whose region is
+  // kept when one node holds them, or (a column across a tile border, or outside the
+  // current tile) fill_columns's window walk per tile. False: none of these (a
+  // tile with no window walk; the caller reads it tap by tap).
   auto read_column = [&](uint64_t tx, float* col) {
-    LookupScratch::Ahead& a = sc.ahead;
+    LookupScratch::Ahead& a = sc.ahead[level & 1];
     if (a.n && a.level == level && a.r == r && a.y0 == ky0 && tx - a.x0 < a.n) {
       std::copy_n(a.depth + (tx - a.x0) * r, r, col);
       return true;
@@ -282,7 +320,14 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
       std::fill_n(col, r, sc.answer(*g));
       return true;
     }
-    if (!sc.win || !sc.covers(level, tx, ky0) || !sc.covers(level, tx, ky1)) return false;
+    if (!sc.win || !sc.covers(level, tx, ky0) || !sc.covers(level, tx, ky1)) {
+      a.n = 0;  // rewritten below
+      const uint32_t n = fill_columns(level, tx, ky0, ky1, sc, a.depth);
+      if (n == 0) return false;
+      a.level = level, a.r = r, a.n = n, a.x0 = tx, a.y0 = ky0;
+      std::copy_n(a.depth, r, col);
+      return true;
+    }
     ++sc.hits;
     const uint32_t n = uint32_t(std::min<uint64_t>(LookupScratch::kAhead, sc.x0 + sc.side - tx));
     const uint32_t shift = sc.win->depth_window(sc.rel, tx - sc.x0, ky0 - sc.y0, n, r, a.depth);
@@ -350,17 +395,14 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
         const uint64_t tx = pcf_tap(x, i, r, side);
         if (tx != prev) slot = slot + 1 == r ? 0 : slot + 1, prev = tx;
         float* col = w.depth.data() + slot * r;
-        if (w.col[slot] != tx && w_rows && sc.win && sc.covers(level, tx, ky0) && sc.covers(level, tx, ky1)) {
-          // The column inside the current tile: from the columns fetched ahead, or one kept
-          // region holding it gives all its taps; else it and the next columns up to
-          // kAhead (inside the tile) in one window walk (shared down to their lowest
-          // common node, each node once), whose region is kept when one node holds them.
+        if (w.col[slot] != tx) {
           w.col[slot] = tx;
-          read_column(tx, col);
-        } else if (w.col[slot] != tx) {
-          w.col[slot] = tx;
-          // The column's taps that one region holds take its value together.
-          for (uint32_t k = 0; k < r;) {
+          // On r consecutive rows: from the columns fetched ahead, or one kept region
+          // holding it gives all its taps; else it and the next columns up to kAhead in
+          // one window walk per tile they lie in (shared down to their lowest common
+          // node, each node once; read_column).
+          // Else tap by tap, the column's taps that one region holds taking its value together.
+          for (uint32_t k = w_rows && read_column(tx, col) ? r : 0; k < r;) {
             const uint64_t ty = pcf_tap(y, k, r, side);
             const float v = depth_shared(level, tx, ty, sc);
             col[k++] = v;
@@ -426,6 +468,50 @@ float RemoteMap::pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, 
     }
   }
   return pcf_fraction(lit_taps, r);
+}
+
+uint32_t RemoteMap::fill_columns(uint32_t level, uint64_t tx, uint64_t ky0, uint64_t ky1, LookupScratch& sc,
+                                 float* out) const noexcept {
+  using Tile = LookupScratch::TileView;
+  const uint32_t r = uint32_t(ky1 - ky0 + 1);
+  uint32_t n = uint32_t(std::min<uint64_t>(LookupScratch::kAhead, (uint64_t(1) << level) - tx));
+  float part[LookupScratch::kAhead * kMaxPcf];
+  // Each part of the columns: rows [ty, ey], the columns [tx, tx + n) of one kept region
+  // (its value) or of one tile (one window walk); n shrinks to what every part holds.
+  for (uint64_t ty = ky0, ey = 0; ty <= ky1; ty = ey + 1) {
+    const LookupScratch::Region* g = sc.find(level, tx, ty);
+    if (!g && !sc.covers(level, tx, ty)) {
+      const Tile before = sc.tile();
+      if (sc.alt.covers(level, tx, ty)) {  // the tile it was in before: no page-table walk
+        sc.set_tile(sc.alt);
+      } else {
+        float value;
+        if (!enter_tile(level, tx, ty, sc, value)) g = sc.last_region();  // it keeps the answer's region
+      }
+      if (before.ev) sc.alt = before;
+    }
+    if (g) {
+      const uint64_t m = (uint64_t(1) << g->shift) - 1;
+      ey = std::min(ky1, ty | m);
+      n = uint32_t(std::min<uint64_t>(n, (tx | m) - tx + 1));
+      const float v = sc.answer(*g);
+      for (uint32_t c = 0; c < n; ++c) std::fill(out + c * r + (ty - ky0), out + c * r + (ey - ky0) + 1, v);
+      continue;
+    }
+    if (!sc.win) return 0;
+    ey = std::min(ky1, sc.y0 + sc.side - 1);
+    n = uint32_t(std::min<uint64_t>(n, sc.x0 + sc.side - tx));
+    const uint32_t h = uint32_t(ey - ty + 1);
+    ++sc.hits;
+    // Straight into `out` when the part is the whole column (depth_window's layout).
+    float* to = h == r ? out : part;
+    const uint32_t shift = sc.win->depth_window(sc.rel, tx - sc.x0, ty - sc.y0, n, h, to);
+    if (to == part)
+      for (uint32_t c = 0; c < n; ++c) std::copy_n(part + c * h, h, out + c * r + (ty - ky0));
+    if ((((tx ^ (tx + n - 1)) | (ty ^ ey)) >> shift) == 0)  // one node holds the part: keep its region
+      sc.set_region(level, tx, ty, shift, to[0], LookupScratch::Counted::hit);
+  }
+  return n;
 }
 
 uint32_t RemoteMap::count_window_shared(uint32_t level, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by,
@@ -725,6 +811,26 @@ void RemoteMap::visibility_batch(std::span<const WorldPoint> points, std::span<c
       }
       pcf_batch_shared(std::span<const PcfQuery>(queries, nq), std::span<float>(got, nq), sc);
       for (size_t q = 0; q < nq; ++q) out[i0 + at[q]] = got[q];
+    }
+  } else if (footprints.empty()) {
+    // r x r kernels at the finest level: visibility_at's answer without a footprint (lit
+    // outside the light's box, else pcf_shared of the finest level) in one loop.
+    const uint32_t L = header_.map_level;
+    const uint32_t r = 2 * std::min<uint32_t>(pcf_radius, (kMaxPcf - 1) / 2) + 1;
+    std::shared_lock lock(mu_);
+    for (size_t i0 = 0; i0 < n; i0 += kTransformChunk) {
+      const size_t m = std::min(kTransformChunk, n - i0);
+      if (sun) sun_to_light_chunk(light_, points.data() + i0, m, u, v, d);
+      for (size_t k = 0, i = i0; k < m; ++k, ++i) {
+        const LightPoint p =
+            sun ? LightPoint{u[k], v[k], d[k]} : light_.to_light(Vec3d{points[i].x, points[i].y, points[i].z});
+        if (!(p.u >= 0 && p.u < 1 && p.v >= 0 && p.v < 1 && p.d >= 0 && p.d <= 1)) {
+          out[i] = 1.0f;
+          continue;
+        }
+        const auto t = texel_in_unit(L, p.u, p.v);
+        out[i] = pcf_shared(L, t[0], t[1], r, float(p.d), sc);
+      }
     }
   } else {
     std::shared_lock lock(mu_);

@@ -206,14 +206,17 @@ class RemoteMap final : public Evaluator {
     };
     std::array<Taps, 2> taps;
     // The columns a kernel sliding right along a row reads next, fetched kAhead at a time
-    // in one window walk (the walk to their common node shared by kAhead kernels):
-    // columns [x0, x0 + n) of rows [y0, y0 + r) of `level`, depth[(x - x0) * r + row].
+    // in one window walk per tile (the walk to their common node shared by kAhead
+    // kernels): columns [x0, x0 + n) of rows [y0, y0 + r) of `level`, depth[(x - x0) * r +
+    // row], so a kernel inside them is r * r consecutive depths; the r - 1 columns the next
+    // kernel shares stay in front when more are read. One per level parity, as taps.
     static constexpr uint32_t kAhead = 8;
     struct Ahead {
       uint32_t level, r, n = 0;  // n == 0: none
       uint64_t x0, y0;
-      float depth[kAhead * kMaxPcf];
-    } ahead;
+      float depth[(kAhead + kMaxPcf - 1) * kMaxPcf];
+    };
+    std::array<Ahead, 2> ahead;
     static constexpr size_t kMaxMisses = 8;  // more distinct misses in one call: asked again later
     std::array<uint64_t, kMaxMisses> miss_tile{};
     std::array<GridEntry, kMaxMisses> miss_entry{};
@@ -273,12 +276,36 @@ class RemoteMap final : public Evaluator {
     bool covers(uint32_t l, uint64_t x, uint64_t y) const {
       return ev && l == level && x - x0 < side && y - y0 < side;  // unsigned: x < x0 wraps
     }
+    // The current tile's fields above, as one value (ev null: none).
+    struct TileView {
+      const Evaluator* ev = nullptr;
+      const WindowDepths* win = nullptr;
+      const TapWalks* walks = nullptr;
+      uint32_t level = 0, rel = 0;
+      uint64_t x0 = 0, y0 = 0, side = 0;
+      bool covers(uint32_t l, uint64_t x, uint64_t y) const {
+        return ev && l == level && x - x0 < side && y - y0 < side;
+      }
+    };
+    TileView tile() const { return {ev, win, walks, level, rel, x0, y0, side}; }
+    void set_tile(const TileView& t) {
+      ev = t.ev, win = t.win, walks = t.walks, level = t.level, rel = t.rel, x0 = t.x0, y0 = t.y0, side = t.side;
+    }
+    // The tile fill_columns was in before it entered another: a column across a
+    // tile border alternates between two tiles, and this one comes back without a
+    // page-table walk (lock held: it stays resident).
+    TileView alt;
   };
   // Walks (level, x, y) (in the map) under the shared lock. True: it ends in a resident
   // encoded tile, now sc's current one. False: `value` answers (coarse when missed).
   bool enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc, float& value) const noexcept;
   float depth_shared(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc) const noexcept;
-  // Evaluator::pcf's answer, from the kept regions: a kernel inside one answers at once;
+  // Evaluator::pcf's answer, from the kept regions: a kernel with no tap clamped on the
+  // rows of the columns kept ahead (LookupScratch::Ahead) and reaching at most to the
+  // column after them (a screen-coherent row of kernels) counts its r * r depths there,
+  // reading the columns it lacks kAhead at a time, one window walk per tile or region
+  // they lie in (fill_columns, across tile borders and missing tiles alike); else
+  // (pcf_general) a kernel inside one region answers at once;
   // one on the last kernels' rows reads only its new columns (the tap window); another
   // inside one resident tile (or crossing only the map's edges) goes through the tile's
   // own shared-walk pcf (MH §3.3, DAG-MH §3.5); others with no tap clamped counted one
@@ -291,10 +318,25 @@ class RemoteMap final : public Evaluator {
   // `receiver`: the rectangle cut at the borders of the resident tiles and kept regions
   // over it, each part one WindowDepths::count_window or one region's answer times its
   // area; every texel counted as depth_shared answers it (missing tiles coarse, as there).
+  // Columns [tx, tx + n) of the rows [ky0, ky1] (of `level`, in the map; 2 <= rows <=
+  // kMaxPcf) into out[(column - tx) * rows + row - ky0], returning n (1 <= n <= kAhead,
+  // as far as every part reaches): the columns cut at the borders of the tiles and kept
+  // regions they cross, each part one WindowDepths::depth_window or one region's value
+  // (missing tiles coarse, as depth_shared answers them). 0: a tile with no window walk.
+  uint32_t fill_columns(uint32_t level, uint64_t tx, uint64_t ky0, uint64_t ky1, LookupScratch& sc,
+                        float* out) const noexcept;
   uint32_t count_window_shared(uint32_t level, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by, float receiver,
                                LookupScratch& sc) const noexcept;
   float pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver,
                    LookupScratch& sc) const noexcept;
+  // pcf_shared for every kernel but one counted from the columns kept ahead.
+  float pcf_general(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver,
+                    LookupScratch& sc) const noexcept;
+  // The columns kept ahead for `level` (on the kernel's rows, x0 <= kx0 <= x0 + n < kx0 +
+  // r) made to start at kx0 and hold at least r columns: the ones from kx0 on moved to
+  // the front, the rest read by fill_columns. False: a tile with no window walk (then
+  // none are kept).
+  bool extend_ahead(uint32_t level, uint64_t kx0, uint32_t r, LookupScratch& sc) const noexcept;
   float visibility_shared(const WorldPoint& world, float footprint_world, uint32_t pcf_radius,
                           LookupScratch& sc) const noexcept;
   // The same from the point's light-space position `p` (LightSpace::to_light of `w`).

@@ -185,6 +185,98 @@ TEST(ClientLookups, CountedKernelsEqualPerTapKernelsAcrossBordersAndMissingTiles
   }
 }
 
+// Screen-coherent rows of kernels, the pattern whose columns the client keeps ahead
+// (RemoteMap::pcf_shared counts a kernel on their rows from them and reads the columns
+// it lacks one window walk per tile or region, fill_columns): runs of kernels stepping
+// right along a row, mostly by one texel, sometimes staying, jumping by up to r or
+// stepping back (a kernel left of or past the kept columns), some runs alternating two
+// levels (a filtered lookup's pattern), every side 2..9, rows and columns crossing tile
+// borders and a checkerboard of missing tiles (answered coarsely), receivers at a tap's
+// exact depth and one ulp either side. Each answer equals the per-tap reference bit for
+// bit, in pcf_batch and in Map::visibility over a span; then again with every tile
+// resident.
+std::string coherent_rows_difference(Fixture& f, uint64_t seed) {
+  const RemoteMap& m = *f.map;
+  st::Rng rng(seed);
+  std::vector<PcfQuery> queries;
+  for (uint32_t l : {f.level, f.level - 1}) {
+    const uint64_t n = uint64_t(1) << l;
+    for (int run = 0; run < 96; ++run) {
+      const uint32_t r = 2 + uint32_t(rng.next() % 8);
+      const bool two_levels = run % 5 == 4;
+      uint64_t x = rng.next() % n, y = rng.next() % n;
+      const int len = 8 + int(rng.next() % (n / 2));
+      for (int k = 0; k < len && x < n; ++k) {
+        for (uint32_t lv : {l, l - 2}) {
+          if (lv != l && !two_levels) continue;
+          const uint64_t s = lv == l ? 0 : 2, side = uint64_t(1) << lv;
+          const uint64_t qx = x >> s, qy = y >> s;
+          const uint64_t tx = pcf_tap(qx, uint32_t(rng.next() % r), r, side);
+          const uint64_t ty = pcf_tap(qy, uint32_t(rng.next() % r), r, side);
+          const float d = m.depth(lv, tx, ty);
+          const uint64_t pick = rng.next() % 3;
+          const float receiver = pick == 0 ? d : std::nextafter(d, pick == 1 ? -1.0f : 2.0f);
+          queries.push_back({qx, qy, lv, r, receiver});
+        }
+        const uint64_t step = rng.next() % 16;
+        if (step < 12) x += 1;                               // the next kernel along the row
+        else if (step == 12) x += 0;                         // the same kernel again
+        else if (step == 13) x += 2 + rng.next() % r;        // past the kept columns
+        else x -= std::min<uint64_t>(x, 1 + rng.next() % r);  // back, left of them
+      }
+    }
+  }
+  std::vector<float> got(queries.size());
+  m.pcf_batch(queries, got);
+  for (size_t i = 0; i < queries.size(); ++i) {
+    const PcfQuery& q = queries[i];
+    const float want = m.Evaluator::pcf(q.level, q.x, q.y, q.r, q.receiver);
+    if (bits(got[i]) != bits(want))
+      return "batch: level " + std::to_string(q.level) + " (" + std::to_string(q.x) + ", " + std::to_string(q.y) +
+             ") r " + std::to_string(q.r) + ": " + std::to_string(got[i]) + " vs " + std::to_string(want);
+  }
+  // Map::visibility over a span: kernels of the finest level at texel centres along rows.
+  Map map = MapAccess::wrap(f.map);
+  const LightSpace light = f.pack.reader->light();
+  const uint64_t side = uint64_t(1) << f.level;
+  std::vector<WorldPoint> points;
+  for (int run = 0; run < 64; ++run) {
+    const uint64_t y = rng.next() % side;
+    for (uint64_t x = rng.next() % side, k = 0; x < side && k < 96; ++x, ++k) {
+      const LightRay ray = light.texel_ray(f.level, x, y);
+      const Vec3d w = ray.origin + ray.dir * (double(m.depth(f.level, x, y)) + (rng.uniform() - 0.5) * 1e-3);
+      points.push_back({w.x, w.y, w.z});
+    }
+  }
+  for (uint32_t radius : {1u, 2u, 4u}) {
+    std::vector<float> batch(points.size());
+    map.visibility(points, batch, radius);
+    for (size_t i = 0; i < points.size(); ++i)
+      if (bits(batch[i]) != bits(map.visibility(points[i], radius)))
+        return "visibility: point " + std::to_string(i) + " radius " + std::to_string(radius);
+  }
+  return "";
+}
+
+TEST(ClientLookups, CoherentKernelRowsEqualPerTapKernelsAcrossBordersAndMissingTiles) {
+  for (Encoding e : looptest::available_encodings()) {
+    SCOPED_TRACE(to_string(e));
+    Fixture f = make_fixture("pcf_rows_" + to_string(e), e, 512);  // small tiles: many borders
+    const uint64_t side = uint64_t(1) << f.level, cell = side / 8;
+    for (int round = 0; round < 8; ++round) {
+      for (uint64_t cy = 0; cy < 8; ++cy)
+        for (uint64_t cx = (cy & 1); cx < 8; cx += 2) f.map->request_region(f.level, cx * cell, cy * cell, cell, cell, 1);
+      if (f.deliver_round() == 0) break;
+    }
+    ASSERT_TRUE(f.map->region_resident(f.level, 0, 0, cell, cell));
+    ASSERT_FALSE(f.map->region_resident(f.level, 0, 0, side, side));
+    EXPECT_EQ(coherent_rows_difference(f, 23), "");
+    EXPECT_GT(f.map->stats().coarse_answers, 0u);
+    f.make_all_resident();
+    EXPECT_EQ(coherent_rows_difference(f, 31), "");
+  }
+}
+
 TEST(ClientLookups, BatchesAnswerLikeSingleLookupsBitForBit) {
   Fixture f = make_fixture("batch_eq", looptest::first_encoding(), 2048);
   const uint64_t side = uint64_t(1) << f.level;
