@@ -118,7 +118,8 @@ TEST(MhOctreeMerge, ValuesOutsideTheirIntervalAreKeptBitForBit) {
   for (auto& lv : h.levels)
     for (OctNode& n : lv) n.lo = n.hi = 0;
   OctEncodeStats st;
-  const MhOctree t = MhOctree::open(encode_octree(h, &st, kMerge));
+  const std::vector<uint8_t> bytes = encode_octree(h, &st, kMerge);
+  const MhOctree t = MhOctree::open(bytes);  // a view: the buffer must outlive it
   EXPECT_EQ(st.merged_values, 0u);
   EXPECT_EQ(t.depth(0, 0, 0, 2), 0.25f);
   EXPECT_EQ(t.depth(2, 0, 0, 2), 0.3125f);
