@@ -6,12 +6,17 @@
 //                [--reps 3] [--case city|city-hour|hairball|all] [--hair-jitter 0.5] [--json PATH]
 //                [--mode auto|whole|blocked] [--tracer auto|embree] [--spill-dir /tmp]
 //                [--frame ground|ortho|both] [--hair-frame window|translate|both] [--all-2d]
+//                [--oct-merge on|off]
 //
 // --all-2d (whole mode): every slice also encoded as MMH and DAG-MH, the smaller 2D
 // encodings, so the octree is set against the best of them too ("best 2D" line). Every
 // whole-mode run also prints the encoder's stats (shared blocks, far words: format version 3), the
 // sharing measure with the roundest values, and the cost model of anisotropic splits
 // (mh_octree_share.hpp `hybrid_octree_quad_words`, "hybrid model" line).
+//
+// --oct-merge on: the whole-stack octree with the encoder's subtree merger (off by
+// default, as in the encoder: it saved under 0.1%; MHOCT.md "Version 3, merged subtrees
+// measured"); the "merge" line gives the merger's counts.
 //
 // --frame: the sun paths' frame (light_set.hpp "Frames"): ground (the default, the
 // oblique ground-aligned frame), ortho (an orthographic box per sample), or both (each
@@ -139,6 +144,7 @@ class SideBySide {
 
 volatile float g_sink = 0;
 bool g_all_2d = false;  // --all-2d
+bool g_oct_merge = false;  // --oct-merge
 
 double peak_rss_mib() {
   rusage ru{};
@@ -182,7 +188,9 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
   const double oct_build_s = since(t0);
   t0 = Clock::now();
   st::OctEncodeStats oct_stats;
-  const std::vector<uint8_t> oct = st::encode_octree(oh, &oct_stats);
+  st::OctEncodeOptions oct_options;
+  oct_options.merge = g_oct_merge;
+  const std::vector<uint8_t> oct = st::encode_octree(oh, &oct_stats, oct_options);
   const double oct_encode_s = since(t0);
   t0 = Clock::now();
   const st::OctreeSharing share = st::measure_octree_sharing(oh);
@@ -400,6 +408,12 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
               (unsigned long long)oct_stats.padding_words);
   for (uint32_t l = 0; l < oh.geo.levels(); ++l) std::printf(" %u", unsigned(oct_stats.shift[l]));
   std::printf("\n");
+  std::printf("merge (%s): %llu candidates, %llu tests (%llu quick rejects, %llu full rejects), %llu merges, %llu "
+              "values moved\n",
+              g_oct_merge ? "on" : "off", (unsigned long long)oct_stats.merge_candidates,
+              (unsigned long long)oct_stats.merge_tests, (unsigned long long)oct_stats.merge_quick_rejects,
+              (unsigned long long)oct_stats.merge_full_rejects, (unsigned long long)oct_stats.merges,
+              (unsigned long long)oct_stats.merged_values);
   std::printf("value choice (roundest float in each node's interval): distinct blocks %llu, every distinct block once "
               "%llu words (%.3f)\n",
               (unsigned long long)share_round.unique_blocks, (unsigned long long)share_round.block_dag_words,
@@ -495,6 +509,9 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
             {"far_blocks", oct_stats.far_blocks},
             {"far_words", oct_stats.far_words},
             {"padding_words", oct_stats.padding_words},
+            {"merge", g_oct_merge},
+            {"merges", oct_stats.merges},
+            {"merged_values", oct_stats.merged_values},
             {"hybrid_words", hybrid_words},
             {"quad_words", quad_total_words}}},
           {"mmh2d_bytes", mmh_bytes},
@@ -744,6 +761,11 @@ int main(int argc, char** argv) {
       else if (a == "--spill-dir") spill_dir = next();
       else if (a == "--frame") frame = next();
       else if (a == "--all-2d") g_all_2d = true;
+      else if (a == "--oct-merge") {
+        const std::string v = next();
+        if (v != "on" && v != "off") throw st::Error("--oct-merge: expected on or off");
+        g_oct_merge = v == "on";
+      }
       else throw st::Error("unknown option " + a);
     }
     if (frame != "ground" && frame != "ortho" && frame != "both") throw st::Error("--frame: expected ground, ortho or both");

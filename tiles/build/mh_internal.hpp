@@ -44,16 +44,27 @@ inline float roundest_in(float lo, float hi) {
 // three quarters. Changing it changes the encoder's bytes, not the format.
 inline constexpr double kCentralMargin = 0.125;
 
+// The window central_roundest chooses in: [l, h], the middle of [lo, hi] (kCentralMargin
+// of the width left out on either side) rounded inward to floats, or the one point
+// safe_midpoint(lo, hi) where rounding leaves no float inside (a very narrow interval).
+// The octree encoder's subtree merger keeps every merged value inside the intersection
+// of the windows it answers for (MHOCT.md "Version 3, merged subtrees measured").
+inline void central_window(float lo, float hi, float& l, float& h) {
+  const double a = double(lo), b = double(hi), q = kCentralMargin * (b - a);
+  l = float(a + q), h = float(b - q);  // rounding is monotone: lo <= l <= h <= hi
+  l = l < lo ? lo : l;
+  h = h > hi ? hi : h;
+  if (!(l <= h)) l = h = safe_midpoint(lo, hi);
+}
+
 // The roundest float (roundest_in) of the middle of [lo, hi] (kCentralMargin of the width
 // left out on either side): a canonical value that still keeps a margin on either side,
 // as the midpoint keeps half, for receivers that lie within a surface's interval (the
 // octree's values, MHOCT.md "Value choice"). lo == hi returns lo.
 inline float central_roundest(float lo, float hi) {
-  const double a = double(lo), b = double(hi), q = kCentralMargin * (b - a);
-  float l = float(a + q), h = float(b - q);  // rounding is monotone: lo <= l <= h <= hi
-  l = l < lo ? lo : l;
-  h = h > hi ? hi : h;
-  return l <= h ? roundest_in(l, h) : safe_midpoint(lo, hi);
+  float l, h;
+  central_window(lo, hi, l, h);
+  return roundest_in(l, h);  // lo == hi: the window is [lo, lo]
 }
 
 // Hash of a hash-consing key (a node's kind, value bits, mask and its children's ids):

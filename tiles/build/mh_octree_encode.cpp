@@ -4,6 +4,8 @@
 // near offset fit 16 bits, then write the words.
 #include "tiles/build/mh_octree_encode.hpp"
 #include "tiles/build/mh_internal.hpp"
+#include "tiles/build/mh_octree_flat.hpp"
+#include "tiles/build/mh_octree_merge.hpp"
 
 #include <algorithm>
 #include <bit>
@@ -18,6 +20,7 @@ namespace st {
 namespace {
 
 using namespace moct;
+using moct_detail::Flat;
 
 // Layout rounds that add far words, and the most near hits a copied block may have and
 // still be replaced by a far word (encode_octree); constants of the encoder, not of the
@@ -27,20 +30,6 @@ using namespace moct;
 // the least words (0.772 of the N quadtrees' bytes; 0 hits 0.781, 4 hits 0.778).
 constexpr uint32_t kFarRounds = 4;
 constexpr uint32_t kFarMaxHits = 2;
-
-struct Flat {
-  std::vector<uint32_t> first_child;
-  std::vector<uint8_t> mask, level, valued;
-  std::vector<float> value;
-  size_t size() const { return mask.size(); }
-  uint32_t kind(uint32_t n) const { return valued[n] ? (mask[n] ? kCodeInner : kCodeLeaf) : kCodeEmpty; }
-  uint32_t code_mask(uint32_t n) const {
-    uint32_t m = 0, c = first_child[n];
-    for (uint32_t slot = 0; slot < kSlots; ++slot)
-      if (mask[n] >> slot & 1u) m |= kind(c++) << (2 * slot);
-    return m;
-  }
-};
 
 [[noreturn]] void bad(uint32_t l, size_t j, const std::string& what) {
   throw Error("octree hierarchy: level " + std::to_string(l) + " node " + std::to_string(j) + ": " + what);
@@ -60,7 +49,7 @@ Flat flatten(const OctHierarchy& h) {
   if (total >= (size_t(1) << 31)) throw Error("octree hierarchy: too many nodes for one buffer");
   Flat t;
   t.first_child.resize(total), t.mask.resize(total), t.level.resize(total), t.valued.resize(total),
-      t.value.resize(total);
+      t.value.resize(total), t.lo.resize(total), t.hi.resize(total);
   uint32_t n = 0;
   for (uint32_t l = 0; l < h.levels.size(); ++l) {
     const auto& lv = h.levels[l];
@@ -77,6 +66,7 @@ Flat flatten(const OctHierarchy& h) {
       t.level[n] = uint8_t(l);
       t.valued[n] = node.has_value;
       t.value[n] = node.value;
+      t.lo[n] = node.lo, t.hi[n] = node.hi;
       for (uint32_t c = 0; c < kSlots; ++c) {
         if (!(node.child_mask >> c & 1u)) continue;
         const uint64_t want = (node.code << step_bits(g, l)) | (g.splits_xy(l) ? c : c >> 2);
@@ -235,10 +225,60 @@ void layout(const Flat& t, const std::vector<uint32_t>& block_id, uint32_t ids, 
 
 void put_u32(std::vector<uint8_t>& b, size_t off, uint32_t v) { std::memcpy(b.data() + off, &v, 4); }
 
+// Always on: walks every node of the hierarchy through the written buffer, as a reader
+// does (near and far blocks, shared or not), and checks that each one is found with its
+// kind and child mask and that each valued one reads a value inside its window (the
+// central window of its interval, or its own value: value_windows). So whatever the
+// merger and the layout shared, every texel of every slice and level keeps the lossless
+// invariant (MH 2016 §3.1) of the hierarchy it was given.
+void verify_buffer(const Flat& t, const std::vector<float>& wlo, const std::vector<float>& whi,
+                   const std::vector<uint8_t>& out, size_t tree_off, const std::array<uint8_t, kMaxLevels>& sh) {
+  const uint8_t* tree = out.data() + tree_off;
+  const uint64_t words = (out.size() - tree_off) / 4;
+  auto word = [&](uint64_t i) {
+    if (i >= words) throw Error("MH octree encoder: internal error: a node lies outside the buffer");
+    uint32_t v;
+    std::memcpy(&v, tree + 4 * i, 4);
+    return v;
+  };
+  auto check_value = [&](uint32_t n, uint64_t at) {
+    const float v = bits_float(word(at));
+    if (!(wlo[n] <= v && v <= whi[n]))
+      throw Error("MH octree encoder: internal error: node " + std::to_string(n) + " reads a value outside its window");
+  };
+  struct Item {
+    uint32_t node;
+    uint64_t pos;
+  };
+  std::vector<Item> stack{{0, 0}};
+  check_value(0, t.mask[0] ? 1 : 0);
+  while (!stack.empty()) {
+    const Item it = stack.back();
+    stack.pop_back();
+    if (!t.mask[it.node]) continue;
+    const uint32_t w = word(it.pos);
+    if (word_mask(w) != t.code_mask(it.node))
+      throw Error("MH octree encoder: internal error: node " + std::to_string(it.node) + " has the wrong child mask");
+    if (is_far(word_offset(w))) (void)word(far_word(it.pos, word_offset(w)));
+    const uint64_t block = child_block(tree, it.pos, sh[t.level[it.node]], w);
+    uint32_t c = t.first_child[it.node];
+    for (uint32_t slot = 0; slot < kSlots; ++slot) {
+      if (!(t.mask[it.node] >> slot & 1u)) continue;
+      const uint64_t at = block + child_skip(word_mask(w), slot);
+      if (t.valued[c]) check_value(c, t.mask[c] ? at + 1 : at);
+      stack.push_back({c++, at});
+    }
+  }
+}
+
 }  // namespace
 
-std::vector<uint8_t> encode_octree(const OctHierarchy& h, OctEncodeStats* stats) {
-  const Flat t = flatten(h);
+std::vector<uint8_t> encode_octree(const OctHierarchy& h, OctEncodeStats* stats, const OctEncodeOptions& options) {
+  Flat t = flatten(h);
+  std::vector<float> wlo, whi;
+  moct_detail::value_windows(t, wlo, whi);
+  moct_detail::MergeCounts merged;
+  if (options.merge) moct_detail::merge_subtrees(t, wlo, whi, {options.merge_window, options.merge_max_pairs}, merged);
   std::vector<uint32_t> block_id;
   const uint32_t ids = block_ids(t, block_id);
   const uint32_t L = h.geo.depth();
@@ -325,7 +365,14 @@ std::vector<uint8_t> encode_octree(const OctHierarchy& h, OctEncodeStats* stats)
     put_u32(out, at, node_word(t.code_mask(n), off));
     if (kind == kCodeInner) put_u32(out, at + 4, float_bits(t.value[n]));
   }
+  verify_buffer(t, wlo, whi, out, tree_off, sh);
   if (stats) {
+    stats->merge_candidates = merged.candidates;
+    stats->merge_tests = merged.tests;
+    stats->merge_quick_rejects = merged.quick_rejects;
+    stats->merge_full_rejects = merged.full_rejects;
+    stats->merges = merged.merges;
+    stats->merged_values = merged.values_changed;
     stats->shift = sh;
     stats->words = pass.words;
     stats->padding_words = pass.padding;
