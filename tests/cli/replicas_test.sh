@@ -32,7 +32,28 @@ grep -q "is DOWN" haproxy.log && die "a healthy replica was marked down: $(grep 
 load=(load --map city --cameras 2 --duration 3 --rate 30)
 "$st" "${load[@]}" --server 127.0.0.1:$front --report via_haproxy >via_haproxy.log 2>&1 & la=$!; pids+=($la)
 "$st" "${load[@]}" --server 127.0.0.1:$p1,127.0.0.1:$p2 --report direct >direct.log 2>&1 & lb=$!; pids+=($lb)
-sleep 1.2
+# Kill replica 1 once the direct run holds a connection to it (a fixed sleep raced a
+# slow start under the sanitizers or a loaded machine: the run then met a dead replica at
+# its first connect, a failed connect, and never failed over). The run's sockets are the
+# inodes behind its fds; /proc/net/tcp names each one's peer port and state (01: open).
+connected_to() {  # connected_to PID PORT: PID has an established TCP connection to PORT
+  python3 - "$1" "$2" <<'PY'
+import os, sys
+pid, port = sys.argv[1], int(sys.argv[2])
+try:
+    inodes = {os.readlink(f"/proc/{pid}/fd/{f}")[8:-1] for f in os.listdir(f"/proc/{pid}/fd")}
+except OSError:
+    sys.exit(1)
+for line in open("/proc/net/tcp").readlines()[1:]:
+    f = line.split()
+    if int(f[2].split(":")[1], 16) == port and f[3] == "01" and f[9] in inodes:
+        sys.exit(0)
+sys.exit(1)
+PY
+}
+for _ in $(seq 1 200); do connected_to $lb $p1 && break; sleep 0.05; done
+connected_to $lb $p1 || die "the direct run did not connect to replica 1 within 10 s: $(tail -n 3 direct.log)"
+sleep 0.3  # a few frames' requests in flight on it
 kill -9 $s1; wait $s1 2>/dev/null
 wait $la; ra=$?
 wait $lb; rb=$?
@@ -51,7 +72,7 @@ if json.load(open("direct/load.json"))["connections"]["disconnects"] < 1:
     print("FAIL direct: no client was connected to the killed replica (no failover exercised)"); ok = False
 sys.exit(0 if ok else 1)
 PY
-[[ $ra == 0 && $rb == 0 ]] || { echo "FAIL load exit codes: via haproxy $ra, direct $rb"; tail -3 via_haproxy.log direct.log; fail=1; }
+[[ $ra == 0 && $rb == 0 ]] || { echo "FAIL load exit codes: via haproxy $ra, direct $rb"; tail -n 3 via_haproxy.log direct.log; fail=1; }
 for _ in $(seq 1 40); do grep -q "replica1 is DOWN" haproxy.log && break; sleep 0.1; done
 if grep -q "replica1 is DOWN" haproxy.log && ! grep -q "replica2 is DOWN" haproxy.log; then
   echo "ok   haproxy marked the killed replica down: $(grep -o 'replica1 is DOWN[^.]*' haproxy.log | head -1)"
