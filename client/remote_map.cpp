@@ -734,6 +734,13 @@ void sun_to_light_chunk(const LightSpace& light, const WorldPoint* w, size_t n, 
 
 }  // namespace
 
+namespace {
+// The light's box in light space: a point outside it is lit (every lookup path's rule).
+inline bool inside_light_box(const LightPoint& p) noexcept {
+  return p.u >= 0 && p.u < 1 && p.v >= 0 && p.v < 1 && p.d >= 0 && p.d <= 1;
+}
+}  // namespace
+
 float RemoteMap::visibility_shared(const WorldPoint& world, float footprint_world, uint32_t pcf_radius,
                                    LookupScratch& sc) const noexcept {
   const Vec3d w{world.x, world.y, world.z};
@@ -742,7 +749,7 @@ float RemoteMap::visibility_shared(const WorldPoint& world, float footprint_worl
 
 float RemoteMap::visibility_at(const LightPoint& p, const Vec3d& w, float footprint_world, uint32_t pcf_radius,
                                LookupScratch& sc) const noexcept {
-  if (!(p.u >= 0 && p.u < 1 && p.v >= 0 && p.v < 1 && p.d >= 0 && p.d <= 1)) return 1.0f;
+  if (!inside_light_box(p)) return 1.0f;
   const uint32_t L = header_.map_level;
   const uint32_t r = 2 * std::min<uint32_t>(pcf_radius, (kMaxPcf - 1) / 2) + 1;
   const float receiver = float(p.d);
@@ -800,7 +807,7 @@ void RemoteMap::visibility_batch(std::span<const WorldPoint> points, std::span<c
           const size_t i = i0 + c0 + k;
           const LightPoint p =
               sun ? LightPoint{u[k], v[k], d[k]} : light_.to_light(Vec3d{points[i].x, points[i].y, points[i].z});
-          if (!(p.u >= 0 && p.u < 1 && p.v >= 0 && p.v < 1 && p.d >= 0 && p.d <= 1)) {
+          if (!inside_light_box(p)) {
             out[i] = 1.0f;
             continue;
           }
@@ -824,7 +831,7 @@ void RemoteMap::visibility_batch(std::span<const WorldPoint> points, std::span<c
       for (size_t k = 0, i = i0; k < m; ++k, ++i) {
         const LightPoint p =
             sun ? LightPoint{u[k], v[k], d[k]} : light_.to_light(Vec3d{points[i].x, points[i].y, points[i].z});
-        if (!(p.u >= 0 && p.u < 1 && p.v >= 0 && p.v < 1 && p.d >= 0 && p.d <= 1)) {
+        if (!inside_light_box(p)) {
           out[i] = 1.0f;
           continue;
         }

@@ -44,6 +44,16 @@ struct Fixture {
     m.payload_crc32 = e.crc;
     map->tile_arrived(m, request_id, pack.reader->read_stored(tile));
   }
+  // The finest level's 8 x 8 cells resident in a checkerboard (cell (0, 0) resident), the
+  // others missing.
+  void make_checkerboard_resident() {
+    const uint64_t cell = (uint64_t(1) << level) / 8;
+    for (int round = 0; round < 8; ++round) {
+      for (uint64_t cy = 0; cy < 8; ++cy)
+        for (uint64_t cx = (cy & 1); cx < 8; cx += 2) map->request_region(level, cx * cell, cy * cell, cell, cell, 1);
+      if (deliver_round() == 0) break;
+    }
+  }
   void make_all_resident() {
     const uint64_t side = uint64_t(1) << level;
     do map->request_region(level, 0, 0, side, side, 1);
@@ -149,11 +159,7 @@ TEST(ClientLookups, CountedKernelsEqualPerTapKernelsAcrossBordersAndMissingTiles
     SCOPED_TRACE(to_string(e));
     Fixture f = make_fixture("pcf_count_" + to_string(e), e, 512);
     const uint64_t side = uint64_t(1) << f.level, cell = side / 8;
-    for (int round = 0; round < 8; ++round) {
-      for (uint64_t cy = 0; cy < 8; ++cy)
-        for (uint64_t cx = (cy & 1); cx < 8; cx += 2) f.map->request_region(f.level, cx * cell, cy * cell, cell, cell, 1);
-      if (f.deliver_round() == 0) break;
-    }
+    f.make_checkerboard_resident();
     ASSERT_TRUE(f.map->region_resident(f.level, 0, 0, cell, cell));
     ASSERT_FALSE(f.map->region_resident(f.level, 0, 0, side, side));
     st::Rng rng(17);
@@ -263,11 +269,7 @@ TEST(ClientLookups, CoherentKernelRowsEqualPerTapKernelsAcrossBordersAndMissingT
     SCOPED_TRACE(to_string(e));
     Fixture f = make_fixture("pcf_rows_" + to_string(e), e, 512);  // small tiles: many borders
     const uint64_t side = uint64_t(1) << f.level, cell = side / 8;
-    for (int round = 0; round < 8; ++round) {
-      for (uint64_t cy = 0; cy < 8; ++cy)
-        for (uint64_t cx = (cy & 1); cx < 8; cx += 2) f.map->request_region(f.level, cx * cell, cy * cell, cell, cell, 1);
-      if (f.deliver_round() == 0) break;
-    }
+    f.make_checkerboard_resident();
     ASSERT_TRUE(f.map->region_resident(f.level, 0, 0, cell, cell));
     ASSERT_FALSE(f.map->region_resident(f.level, 0, 0, side, side));
     EXPECT_EQ(coherent_rows_difference(f, 23), "");
