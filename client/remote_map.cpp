@@ -739,6 +739,10 @@ namespace {
 inline bool inside_light_box(const LightPoint& p) noexcept {
   return p.u >= 0 && p.u < 1 && p.v >= 0 && p.v < 1 && p.d >= 0 && p.d <= 1;
 }
+// The side of a PCF kernel of radius pcf_radius, capped at Evaluator::kMaxPcf.
+inline uint32_t kernel_side(uint32_t pcf_radius) noexcept {
+  return 2 * std::min<uint32_t>(pcf_radius, (Evaluator::kMaxPcf - 1) / 2) + 1;
+}
 }  // namespace
 
 float RemoteMap::visibility_shared(const WorldPoint& world, float footprint_world, uint32_t pcf_radius,
@@ -751,7 +755,7 @@ float RemoteMap::visibility_at(const LightPoint& p, const Vec3d& w, float footpr
                                LookupScratch& sc) const noexcept {
   if (!inside_light_box(p)) return 1.0f;
   const uint32_t L = header_.map_level;
-  const uint32_t r = 2 * std::min<uint32_t>(pcf_radius, (kMaxPcf - 1) / 2) + 1;
+  const uint32_t r = kernel_side(pcf_radius);
   const float receiver = float(p.d);
   FilterLevels f{L, L, 0.0f};
   if (footprint_world > 0) {
@@ -787,10 +791,21 @@ void RemoteMap::visibility_batch(std::span<const WorldPoint> points, std::span<c
   LookupScratch sc;
   const bool sun = light_.kind() == LightKind::sun;
   double u[kTransformChunk], v[kTransformChunk], d[kTransformChunk];
+  // Points [i0, i0 + m) (m <= kTransformChunk) in light space: those outside the light's
+  // box are answered lit, fn(i, p) is called for the others (visibility_at's first rule).
+  auto for_each_in_box = [&](size_t i0, size_t m, auto&& fn) {
+    if (sun) sun_to_light_chunk(light_, points.data() + i0, m, u, v, d);
+    for (size_t k = 0, i = i0; k < m; ++k, ++i) {
+      const LightPoint p =
+          sun ? LightPoint{u[k], v[k], d[k]} : light_.to_light(Vec3d{points[i].x, points[i].y, points[i].z});
+      if (inside_light_box(p)) fn(i, p);
+      else out[i] = 1.0f;
+    }
+  };
   if (footprints.empty() && pcf_radius == 0) {
-    // Single taps at the finest level: visibility_at's answer (outside the light box lit,
-    // else one tap of the finest level), with the taps in the box answered by
-    // pcf_batch_shared, so a coherent batch walks each tile's taps in one run.
+    // Single taps at the finest level: visibility_at's answer (one tap of the finest
+    // level), with the taps answered by pcf_batch_shared, so a coherent batch walks each
+    // tile's taps in one run.
     const uint32_t L = header_.map_level;
     constexpr size_t kQueries = 4 * kTransformChunk;
     PcfQuery queries[kQueries];
@@ -800,56 +815,32 @@ void RemoteMap::visibility_batch(std::span<const WorldPoint> points, std::span<c
     for (size_t i0 = 0; i0 < n; i0 += kQueries) {
       const size_t m = std::min(kQueries, n - i0);
       size_t nq = 0;
-      for (size_t c0 = 0; c0 < m; c0 += kTransformChunk) {
-        const size_t mc = std::min(kTransformChunk, m - c0);
-        if (sun) sun_to_light_chunk(light_, points.data() + i0 + c0, mc, u, v, d);
-        for (size_t k = 0; k < mc; ++k) {
-          const size_t i = i0 + c0 + k;
-          const LightPoint p =
-              sun ? LightPoint{u[k], v[k], d[k]} : light_.to_light(Vec3d{points[i].x, points[i].y, points[i].z});
-          if (!inside_light_box(p)) {
-            out[i] = 1.0f;
-            continue;
-          }
+      for (size_t c0 = 0; c0 < m; c0 += kTransformChunk)
+        for_each_in_box(i0 + c0, std::min(kTransformChunk, m - c0), [&](size_t i, const LightPoint& p) {
           const auto t = texel_in_unit(L, p.u, p.v);
           queries[nq] = PcfQuery{t[0], t[1], L, 1, float(p.d)};
           at[nq++] = uint32_t(i - i0);
-        }
-      }
+        });
       pcf_batch_shared(std::span<const PcfQuery>(queries, nq), std::span<float>(got, nq), sc);
       for (size_t q = 0; q < nq; ++q) out[i0 + at[q]] = got[q];
     }
   } else if (footprints.empty()) {
-    // r x r kernels at the finest level: visibility_at's answer without a footprint (lit
-    // outside the light's box, else pcf_shared of the finest level) in one loop.
+    // r x r kernels at the finest level: visibility_at's answer without a footprint
+    // (pcf_shared of the finest level) in one loop.
     const uint32_t L = header_.map_level;
-    const uint32_t r = 2 * std::min<uint32_t>(pcf_radius, (kMaxPcf - 1) / 2) + 1;
+    const uint32_t r = kernel_side(pcf_radius);
     std::shared_lock lock(mu_);
-    for (size_t i0 = 0; i0 < n; i0 += kTransformChunk) {
-      const size_t m = std::min(kTransformChunk, n - i0);
-      if (sun) sun_to_light_chunk(light_, points.data() + i0, m, u, v, d);
-      for (size_t k = 0, i = i0; k < m; ++k, ++i) {
-        const LightPoint p =
-            sun ? LightPoint{u[k], v[k], d[k]} : light_.to_light(Vec3d{points[i].x, points[i].y, points[i].z});
-        if (!inside_light_box(p)) {
-          out[i] = 1.0f;
-          continue;
-        }
+    for (size_t i0 = 0; i0 < n; i0 += kTransformChunk)
+      for_each_in_box(i0, std::min(kTransformChunk, n - i0), [&](size_t i, const LightPoint& p) {
         const auto t = texel_in_unit(L, p.u, p.v);
         out[i] = pcf_shared(L, t[0], t[1], r, float(p.d), sc);
-      }
-    }
+      });
   } else {
     std::shared_lock lock(mu_);
-    for (size_t i0 = 0; i0 < n; i0 += kTransformChunk) {
-      const size_t m = std::min(kTransformChunk, n - i0);
-      if (sun) sun_to_light_chunk(light_, points.data() + i0, m, u, v, d);
-      for (size_t k = 0, i = i0; k < m; ++k, ++i) {
-        const Vec3d w{points[i].x, points[i].y, points[i].z};
-        out[i] = visibility_at(sun ? LightPoint{u[k], v[k], d[k]} : light_.to_light(w), w,
-                               footprints.empty() ? 0.0f : footprints[i], pcf_radius, sc);
-      }
-    }
+    for (size_t i0 = 0; i0 < n; i0 += kTransformChunk)
+      for_each_in_box(i0, std::min(kTransformChunk, n - i0), [&](size_t i, const LightPoint& p) {
+        out[i] = visibility_at(p, Vec3d{points[i].x, points[i].y, points[i].z}, footprints[i], pcf_radius, sc);
+      });
   }
   finish_lookups(sc);
 }
