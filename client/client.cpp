@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <atomic>
 
+#include "client/call_error.hpp"
 #include "client/fetcher.hpp"
 #include "client/map_access.hpp"
 #include "client/remote_map.hpp"
@@ -167,7 +168,7 @@ Map Client::open(const std::string& name) {
 std::vector<MapListing> Client::list_maps() {
   proto::Message m = fetcher_->call(proto::ListMaps{});
   auto* list = std::get_if<proto::MapList>(&m);
-  if (!list) throw Error("client: list_maps: unexpected answer");
+  if (!list) throw CallError(CallFailure::unexpected_answer, "client: list_maps: unexpected answer");
   std::vector<MapListing> out;
   out.reserve(list->maps.size());
   for (const proto::MapEntry& e : list->maps) {
@@ -186,7 +187,7 @@ std::vector<MapListing> Client::list_maps() {
 ServerStats Client::server_stats() {
   proto::Message m = fetcher_->call(proto::GetStats{});
   auto* s = std::get_if<proto::Stats>(&m);
-  if (!s) throw Error("client: server_stats: unexpected answer");
+  if (!s) throw CallError(CallFailure::unexpected_answer, "client: server_stats: unexpected answer");
   ServerStats out;
   for (const proto::Counter& c : s->counters) out.counters.push_back({c.name, c.value});
   for (const proto::Histogram& h : s->histograms) {

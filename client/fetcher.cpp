@@ -9,6 +9,7 @@
 #include <boost/asio/redirect_error.hpp>
 #include <future>
 
+#include "client/call_error.hpp"
 #include "common/error.hpp"
 
 namespace st::client {
@@ -151,10 +152,10 @@ ClientStats Fetcher::stats() const {
 // ---------------------------------------------------------------- API calls
 
 proto::Message Fetcher::call(const proto::Message& request) {
-  if (stopped_) throw Error("client: stopped");
+  if (stopped_) throw CallError(CallFailure::stopped, "client: stopped");
   if (refused_) {
     std::lock_guard lock(stats_mu_);
-    throw Error("client: " + refusal_);
+    throw CallError(CallFailure::refused, "client: " + refusal_);
   }
   auto promise = std::make_shared<std::promise<proto::Message>>();
   auto future = promise->get_future();
@@ -186,23 +187,26 @@ proto::Message Fetcher::call(const proto::Message& request) {
       std::lock_guard lock(stats_mu_);
       why = " (not connected" + (last_failure_.empty() ? std::string() : ": " + last_failure_) + ")";
     }
-    throw Error("client: no answer to " + std::string(proto::to_string(proto::type_of(request))) + " from " +
-                endpoint_name() + " within " +
-                std::to_string(options_.request_timeout.count()) + " ms" + why);
+    throw CallError(CallFailure::timeout,
+                    "client: no answer to " + std::string(proto::to_string(proto::type_of(request))) + " from " +
+                        endpoint_name() + " within " + std::to_string(options_.request_timeout.count()) + " ms" +
+                        why);
   }
   proto::Message m = future.get();
   if (auto* e = std::get_if<proto::ErrorMessage>(&m))
-    throw Error("client: server refused " + std::string(proto::to_string(proto::type_of(request))) + ": " +
-                std::string(proto::to_string(e->code)) + ": " + e->message);
+    throw CallError(e->code == ErrorCode::auth_failed ? CallFailure::refused : CallFailure::server_error,
+                    "client: server refused " + std::string(proto::to_string(proto::type_of(request))) + ": " +
+                        std::string(proto::to_string(e->code)) + ": " + e->message,
+                    e->code);
   return m;
 }
 
 std::shared_ptr<RemoteMap> Fetcher::open(const std::string& name) {
   if (proto::Status s = proto::validate_map_name(name); !s)
-    throw Error("client: open('" + name + "'): " + proto::to_string(s));
+    throw CallError(CallFailure::bad_argument, "client: open('" + name + "'): " + proto::to_string(s));
   proto::Message m = call(proto::OpenMap{name});
   auto* info = std::get_if<proto::MapInfo>(&m);
-  if (!info) throw Error("client: open('" + name + "'): unexpected answer");
+  if (!info) throw CallError(CallFailure::unexpected_answer, "client: open('" + name + "'): unexpected answer");
   auto map = std::make_shared<RemoteMap>(name, std::move(info->pack_header), std::move(info->skip_grid),
                                          options_, notifier_);
   // Register on the I/O thread; the map id may belong to a connection that has since
@@ -217,7 +221,7 @@ std::shared_ptr<RemoteMap> Fetcher::open(const std::string& name) {
     registered->set_value(map);
   });
   if (fut.wait_for(options_.request_timeout) != std::future_status::ready)
-    throw Error("client: open('" + name + "'): the fetcher thread did not answer");
+    throw CallError(CallFailure::timeout, "client: open('" + name + "'): the fetcher thread did not answer");
   return fut.get();
 }
 

@@ -6,10 +6,12 @@ function(shadowtile_module name dir)
   cmake_parse_arguments(M "" "" "PUBLIC_DEPS;PRIVATE_DEPS" ${ARGN})
   file(GLOB srcs CONFIGURE_DEPENDS ${dir}/*.cpp)
   list(FILTER srcs EXCLUDE REGEX "/main\\.cpp$")
-  add_library(shadowtile_${name} ${srcs})
+  # Always static (position-independent): with BUILD_SHARED_LIBS the client still ships as
+  # the one libshadowtile.so (client/CMakeLists.txt), not as a .so per module.
+  add_library(shadowtile_${name} STATIC ${srcs})
   add_library(shadowtile::${name} ALIAS shadowtile_${name})
   target_include_directories(shadowtile_${name} PUBLIC
     $<BUILD_INTERFACE:${PROJECT_SOURCE_DIR}> $<INSTALL_INTERFACE:include>)
-  target_link_libraries(shadowtile_${name} PUBLIC ${M_PUBLIC_DEPS} PRIVATE shadowtile_warnings ${M_PRIVATE_DEPS})
+  target_link_libraries(shadowtile_${name} PUBLIC ${M_PUBLIC_DEPS} PRIVATE $<BUILD_INTERFACE:shadowtile_warnings> ${M_PRIVATE_DEPS})
   set_target_properties(shadowtile_${name} PROPERTIES POSITION_INDEPENDENT_CODE ON EXPORT_NAME ${name})
 endfunction()

@@ -47,6 +47,10 @@
 // decompression. A lookup costs a lock and a page-table walk: call the batched overloads
 // (hundreds to thousands of points per call, neighbours next to each other) on hot paths. A Map
 // stays valid (answering from its cache) after its Client is destroyed.
+//
+// Files named in these comments (tiles/core/..., client/README.md, proto/PROTOCOL.md) are
+// installed under share/doc/shadowtile/ with the same relative paths. The C API over this
+// one is <shadowtile/shadowtile.h>.
 #pragma once
 #include <chrono>
 #include <cstdint>
@@ -54,6 +58,8 @@
 #include <span>
 #include <string>
 #include <vector>
+
+#include "shadowtile/export.h"  // SHADOWTILE_API: what libshadowtile.so exports
 
 namespace st::client {
 
@@ -66,7 +72,7 @@ struct Endpoint {
 class IoPool;
 // threads in [1, 64]; throws std::runtime_error otherwise. The pool outlives the Clients
 // using it (they hold it); destroy the Clients before the last reference goes.
-std::shared_ptr<IoPool> make_io_pool(unsigned threads);
+SHADOWTILE_API std::shared_ptr<IoPool> make_io_pool(unsigned threads);
 
 struct ClientOptions {
   uint32_t cache_slots = 256;               // tile cache slots per map
@@ -157,7 +163,7 @@ struct MapListing {
 };
 
 // The server's counters and histograms (server_stats), as the server names them.
-struct ServerStats {
+struct SHADOWTILE_API ServerStats {
   struct Counter {
     std::string name;
     uint64_t value = 0;
@@ -191,7 +197,7 @@ class RemoteMap;
 struct MapAccess;
 
 // A handle to an opened map (cheap to copy; all copies share one cache).
-class Map {
+class SHADOWTILE_API Map {
  public:
   Map() = default;
   bool valid() const noexcept { return bool(map_); }
@@ -291,7 +297,7 @@ class Map {
 
 class Fetcher;
 
-class Client {
+class SHADOWTILE_API Client {
  public:
   explicit Client(Endpoint endpoint, ClientOptions options = {});
   // Several replicas serving the same pack files (a map opens on a replica only if its
