@@ -38,6 +38,12 @@ int main(int argc, char** argv) {
       if (std::chrono::steady_clock::now() > deadline) throw std::runtime_error("tiles not resident within 60 s");
       std::this_thread::sleep_for(std::chrono::milliseconds(5));
     }
+    // An unknown map throws std::runtime_error (client.hpp), also across libshadowtile.so.
+    try {
+      client.open("no_such_map");
+      throw std::logic_error("open('no_such_map') returned a map");
+    } catch (const std::runtime_error&) {
+    }
     // A default Map answers like an empty map (lit) instead of crashing.
     const st::client::Map none;
     if (none.valid() || none.depth(0, 0, 0) != 1.0f || none.visibility({0, 0, 0}) != 1.0f)
