@@ -7,6 +7,8 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <cstddef>
+#include <cstdint>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -19,6 +21,23 @@
 #include "client/call_error.hpp"
 #include "common/version.hpp"
 #include "shadowtile/client.hpp"
+
+// The C structs are ABI: their layout on LP64 (Linux x86-64, arm64) is pinned here, so a
+// change that moves a field fails to compile instead of breaking bindings (C#, Rust,
+// ctypes: tests/capi/capi_test.py mirrors them) at run time.
+#if UINTPTR_MAX == UINT64_MAX
+static_assert(sizeof(shadowtile_endpoint) == 16);
+static_assert(sizeof(shadowtile_client_options) == 96 && offsetof(shadowtile_client_options, connect_timeout_ms) == 28 &&
+              offsetof(shadowtile_client_options, client_name) == 48 && offsetof(shadowtile_client_options, tls) == 72 &&
+              offsetof(shadowtile_client_options, tls_server_name) == 88);
+static_assert(sizeof(shadowtile_client_stats) == 64 && offsetof(shadowtile_client_stats, refused) == 60);
+static_assert(sizeof(shadowtile_map_listing) == 40 && offsetof(shadowtile_map_listing, pack_bytes) == 32);
+static_assert(sizeof(shadowtile_map_info) == 56 && offsetof(shadowtile_map_info, tile_count) == 32 &&
+              offsetof(shadowtile_map_info, has_deep) == 52);
+static_assert(sizeof(shadowtile_point) == 24 && sizeof(shadowtile_rgb) == 12);
+static_assert(sizeof(shadowtile_map_stats) == 136 && offsetof(shadowtile_map_stats, tiles_requested) == 48 &&
+              offsetof(shadowtile_map_stats, dictionary_bytes) == 128);
+#endif
 
 struct shadowtile_client {
   st::client::Client client;
@@ -322,6 +341,10 @@ shadowtile_status shadowtile_client_open_map(shadowtile_client* client, const ch
 }
 
 // ---------------------------------------------------------------- map
+
+// Reserved: shadowtile_map_request_view (Map::request_view) and
+// shadowtile_map_get_light_transform (MapInfo's LightTransform) go here, as declared in
+// shadowtile.h's reserved section.
 
 void shadowtile_map_close(shadowtile_map* map) { delete map; }
 
