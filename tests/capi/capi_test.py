@@ -32,7 +32,7 @@ def fail(msg):
 
 # ---------------------------------------------------------------- the binding
 
-OK, INVALID_ARGUMENT, NOT_FOUND, TIMEOUT = 0, 1, 2, 3
+OK, INVALID_ARGUMENT, NOT_FOUND, TIMEOUT, REFUSED = 0, 1, 2, 3, 4
 
 
 class Endpoint(C.Structure):
@@ -337,6 +337,18 @@ def check_binding(lib_path, port, points, want, got_c):
            "cache_slots 0", lib)
     expect(lib.shadowtile_client_create(C.byref(endpoint), 0, None, C.byref(other)), INVALID_ARGUMENT,
            "no endpoint", lib)
+    # A key the server does not ask for: the client refuses the server, for good.
+    keyed = ClientOptions()
+    lib.shadowtile_client_options_default(C.byref(keyed))
+    secret = (C.c_uint8 * 16)(*range(16))
+    keyed.key, keyed.key_size = C.cast(secret, C.POINTER(C.c_uint8)), 16
+    expect(lib.shadowtile_client_create(C.byref(endpoint), 1, C.byref(keyed), C.byref(other)), OK, "create", lib)
+    expect(lib.shadowtile_client_open_map(other, b"city", C.byref(bad)), REFUSED, "unasked key", lib)
+    refused = ClientStats()
+    expect(lib.shadowtile_client_get_stats(other, C.byref(refused)), OK, "client stats", lib)
+    lib.shadowtile_client_destroy(other)
+    if not refused.refused:
+        fail("client stats after a refusal: refused = 0")
     # Nothing listening (a bound socket that never listens refuses connections): open times out.
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
