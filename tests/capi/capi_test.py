@@ -343,7 +343,12 @@ def check_binding(lib_path, port, points, want, got_c):
     secret = (C.c_uint8 * 16)(*range(16))
     keyed.key, keyed.key_size = C.cast(secret, C.POINTER(C.c_uint8)), 16
     expect(lib.shadowtile_client_create(C.byref(endpoint), 1, C.byref(keyed), C.byref(other)), OK, "create", lib)
+    keyed.request_timeout_ms = 30000
+    t0 = time.time()
     expect(lib.shadowtile_client_open_map(other, b"city", C.byref(bad)), REFUSED, "unasked key", lib)
+    if time.time() - t0 > 15:
+        fail("the refusal took %.1f s: it waited for request_timeout instead of failing at once" % (time.time() - t0))
+    print("capi: refused in %.2f s" % (time.time() - t0))
     refused = ClientStats()
     expect(lib.shadowtile_client_get_stats(other, C.byref(refused)), OK, "client stats", lib)
     lib.shadowtile_client_destroy(other)
