@@ -29,12 +29,20 @@ static int read_points(shadowtile_point** out, size_t* count) {
   while (scanf("%lf %lf %lf", &x, &y, &z) == 3) {
     if (n == cap) {
       shadowtile_point* q = realloc(p, 2 * cap * sizeof *p);
-      if (!q) return free(p), 0;
-      p = q, cap *= 2;
+      if (!q) {
+        free(p);
+        return 0;
+      }
+      p = q;
+      cap *= 2;
     }
-    p[n].x = x, p[n].y = y, p[n].z = z, ++n;
+    p[n].x = x;
+    p[n].y = y;
+    p[n].z = z;
+    ++n;
   }
-  *out = p, *count = n;
+  *out = p;
+  *count = n;
   return 1;
 }
 
@@ -78,7 +86,8 @@ int main(int argc, char** argv) {
   side = (uint64_t)1 << info.finest_level;
   radius = argc == 5 ? (uint64_t)strtoull(argv[4], NULL, 10) : 256;
   x0 = side / 2 > radius ? side / 2 - radius : 0;
-  y0 = x0, w = 2 * radius;
+  y0 = x0;
+  w = 2 * radius;
   deadline = time(NULL) + 60;
   for (;;) {
     struct timespec pause = {0, 5000000};
