@@ -182,15 +182,19 @@ proto::Message Fetcher::call(const proto::Message& request) {
         }
     });
     std::string why;
-    if (!connected_) {
+    {
       std::lock_guard lock(stats_mu_);
-      why = " (not connected" + (last_failure_.empty() ? std::string() : ": " + last_failure_) + ")";
+      if (!connected_) why = " (not connected" + (last_failure_.empty() ? std::string() : ": " + last_failure_) + ")";
+      else if (!last_failure_.empty()) why = " (last failure: " + last_failure_ + ")";
     }
     throw Error("client: no answer to " + std::string(proto::to_string(proto::type_of(request))) + " from " +
                 endpoint_name() + " within " +
                 std::to_string(options_.request_timeout.count()) + " ms" + why);
   }
   proto::Message m = future.get();
+  if (!c->malformed.empty())  // set on the I/O thread before the answer: the future orders it
+    throw Error("client: " + std::string(proto::to_string(proto::type_of(request))) + " to " + endpoint_name() +
+                ": " + c->malformed);
   if (auto* e = std::get_if<proto::ErrorMessage>(&m))
     throw Error("client: server refused " + std::string(proto::to_string(proto::type_of(request))) + ": " +
                 std::string(proto::to_string(e->code)) + ": " + e->message);
