@@ -26,6 +26,31 @@ namespace st::cli {
 
 client::Endpoint parse_endpoint(const std::string& option, const std::string& text);  // cmd_load.cpp
 
+namespace {
+// A tile given up (undecodable, refused, unanswered) answers from a coarser level: an
+// image made so is not the map's. One line, and a failure exit.
+void check_no_failed_tiles(const client::Map& map) {
+  const client::MapStats s = map.stats();
+  if (s.tiles_failed == 0) return;
+  throw Error("render: " + std::to_string(s.tiles_failed) + " tile(s) could not be had from the server (" +
+              std::to_string(s.decode_errors) + " decode errors, " + std::to_string(s.crc_errors) + " CRC errors, " +
+              std::to_string(s.tiles_unanswered) + " never answered, " + std::to_string(s.tiles_received) +
+              " received): the image would show coarser levels there");
+}
+
+// The timeout's line: says when the cache cannot hold the view (slots all used, evicting).
+Error view_timeout(const client::Map& map, const std::string& what, std::chrono::milliseconds timeout) {
+  const client::MapStats s = map.stats();
+  const uint64_t slots = uint64_t(s.cache.resident) + s.cache.pinned + s.cache.free;
+  std::string why;
+  if (s.cache.free == 0 && s.cache.evictions > 0)
+    why = ": the cache's " + std::to_string(slots) + " slots of " + std::to_string(map.slot_bytes()) +
+          " bytes (--cache-mb) are full and evicting; the view needs more: raise --cache-mb";
+  return Error("render: " + what + " did not all arrive within " + std::to_string(timeout.count()) + " ms (" +
+               std::to_string(s.tiles_received) + " tiles received)" + why);
+}
+}  // namespace
+
 // Requests every tile the receivers' finest-level lookups need and waits (bounded) until
 // they are resident. Returns the number of cells; throws st::Error on timeout.
 size_t fetch_for_receivers(client::Map& map, const std::vector<Receiver>& rec, const LightSpace& light,
@@ -43,9 +68,11 @@ size_t fetch_for_receivers(client::Map& map, const std::vector<Receiver>& rec, c
         all = false;
         map.request_region(c.level, c.x0(), c.y0(), c.side(), c.side(), 1000);
       }
-    if (all) return cells.size();
-    if (std::chrono::steady_clock::now() > deadline)
-      throw Error("render: the view's tiles did not all arrive within " + std::to_string(timeout.count()) + " ms");
+    if (all) {
+      check_no_failed_tiles(map);
+      return cells.size();
+    }
+    if (std::chrono::steady_clock::now() > deadline) throw view_timeout(map, "the view's tiles", timeout);
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   }
 }
@@ -119,11 +146,13 @@ void run_stack(const RenderArgs& a, const RenderOptions& ro, const Camera& cam, 
     map->request_slices(w0, w1, 1000);
     while (!map->slices_resident(w0, w1)) {
       if (std::chrono::steady_clock::now() > deadline)
-        throw Error("render: slices " + std::to_string(w0) + ".." + std::to_string(w1) + " did not all arrive within " +
-                    std::to_string(int64_t(a.timeout * 1000)) + " ms");
+        throw view_timeout(*map, "slices " + std::to_string(w0) + ".." + std::to_string(w1),
+                           std::chrono::milliseconds(int64_t(a.timeout * 1000)));
       map->request_slices(w0, w1, 1000);
+      check_no_failed_tiles(*map);  // a given-up cell never becomes resident: say so now
       std::this_thread::sleep_for(std::chrono::milliseconds(5));
     }
+    check_no_failed_tiles(*map);
     std::printf("fetched slices %u..%u in %.0f ms\n", w0, w1,
                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
     const client::Map& m = *map;
@@ -194,9 +223,9 @@ void run(const RenderArgs& a) {
     co.tls = a.tls || !a.tls_ca.empty();
     co.tls_ca_file = a.tls_ca;
     co.tls_server_name = a.tls_name;
-    cl = std::make_unique<client::Client>(parse_endpoint("--server", a.server), co);
-    map = cl->open(a.map);
-    co.cache_slots = uint32_t(std::max(16.0, a.cache_mb * 1048576.0 / std::max(1u, client::pack_header(map).tile_bytes)));
+    // The same rule as load and view: the budget holds the map's metadata and everything
+    // per slot, whatever the pack's tile bound (client.hpp cache_bytes).
+    co.cache_bytes = uint64_t(a.cache_mb * 1048576.0);
     cl = std::make_unique<client::Client>(parse_endpoint("--server", a.server), co);
     map = cl->open(a.map);
     if (map.slices()) {

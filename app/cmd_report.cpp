@@ -116,10 +116,7 @@ std::vector<RefinementPoint> refinement(const std::string& pack_path, const std:
   client::ClientOptions co;
   co.client_name = "shadowtile-report";
   std::vector<RefinementPoint> pts;
-  {
-    auto reader = PackReader::open(pack_path);
-    co.cache_slots = uint32_t(std::max(16.0, cache_mb * 1048576.0 / std::max(1u, reader->header().tile_bytes)));
-  }
+  co.cache_bytes = uint64_t(cache_mb * 1048576.0);  // everything per slot counted (client.hpp)
   client::Client cl({"127.0.0.1", srv.port()}, co);
   client::Map map = cl.open(name);
   const uint32_t L = map.finest_level();

@@ -76,12 +76,17 @@ void run(const ViewArgs& a) {
   const Scene scene = load_scene(a.scene, so);
   client::ClientOptions co;
   co.client_name = "shadowtile-view";
+  co.cache_slots = 1;  // a probe: the slot size, in one slot
   auto cl = std::make_unique<client::Client>(parse_endpoint("--server", a.server), co);
   client::Map map = cl->open(a.map);
-  co.cache_slots = uint32_t(std::max(16.0, a.cache_mb * 1048576.0 / std::max(1u, client::pack_header(map).tile_bytes)));
-  co.want_capacity = std::max<uint32_t>(co.want_capacity, 4 * co.cache_slots);
+  // The budget holds everything per slot (client.hpp cache_bytes); the queue follows the slots.
+  co.cache_bytes = uint64_t(a.cache_mb * 1048576.0);
+  co.want_capacity = std::max<uint32_t>(
+      co.want_capacity, uint32_t(std::min<uint64_t>(4 * (co.cache_bytes / (map.slot_bytes() + client::kSlotOverheadBytes)),
+                                                    uint64_t(1) << 20)));
   cl = std::make_unique<client::Client>(parse_endpoint("--server", a.server), co);
   map = cl->open(a.map);
+  co.cache_slots = map.stats().cache.resident + map.stats().cache.pinned + map.stats().cache.free;
   const PackHeader& h = client::pack_header(map);
   const LightSpace light = LightSpace::from_array(h.light_kind, h.light);  // a stack's: slice 0's
   if (h.scene_hash != scene.content_hash())

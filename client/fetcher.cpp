@@ -183,9 +183,10 @@ proto::Message Fetcher::call(const proto::Message& request) {
         }
     });
     std::string why;
-    if (!connected_) {
+    {
       std::lock_guard lock(stats_mu_);
-      why = " (not connected" + (last_failure_.empty() ? std::string() : ": " + last_failure_) + ")";
+      if (!connected_) why = " (not connected" + (last_failure_.empty() ? std::string() : ": " + last_failure_) + ")";
+      else if (!last_failure_.empty()) why = " (last failure: " + last_failure_ + ")";
     }
     throw CallError(CallFailure::timeout,
                     "client: no answer to " + std::string(proto::to_string(proto::type_of(request))) + " from " +
@@ -193,6 +194,9 @@ proto::Message Fetcher::call(const proto::Message& request) {
                         why);
   }
   proto::Message m = future.get();
+  if (!c->malformed.empty())  // set on the I/O thread before the answer: the future orders it
+    throw Error("client: " + std::string(proto::to_string(proto::type_of(request))) + " to " + endpoint_name() +
+                ": " + c->malformed);
   if (auto* e = std::get_if<proto::ErrorMessage>(&m))
     throw CallError(e->code == ErrorCode::auth_failed ? CallFailure::refused : CallFailure::server_error,
                     "client: server refused " + std::string(proto::to_string(proto::type_of(request))) + ": " +

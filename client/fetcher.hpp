@@ -67,6 +67,7 @@ class Fetcher : public std::enable_shared_from_this<Fetcher> {
     proto::Message request;
     std::function<void(proto::Message&&)> done;  // runs on the I/O thread
     uint32_t request_id = 0;                     // 0: not sent on this connection
+    std::string malformed;  // set (before done) when the answer did not decode: why
   };
   struct MapSlot {
     std::shared_ptr<RemoteMap> map;
@@ -77,6 +78,7 @@ class Fetcher : public std::enable_shared_from_this<Fetcher> {
   struct GetTilesRequest {
     RemoteMap* map;
     uint32_t map_id;
+    uint32_t sent = 0, answered = 0;  // tiles in it; answers naming one of them (fewer at FINAL: request_ended)
   };
 
   // What this client proposes in its Hello (and validates its options by).
@@ -151,6 +153,10 @@ class Fetcher : public std::enable_shared_from_this<Fetcher> {
   bool writing_ = false, stopping_io_ = false;
   std::vector<asio::steady_timer*> watchdog_timers_;  // live watchdogs' ticks (stop() cancels them)
   Clock::time_point write_started_, last_rx_;
+  uint64_t session_rx_ = 0;           // bytes read on this session (error messages)
+  bool handshake_timed_out_ = false;  // the watchdog closed this session before its handshake ended
+  bool parser_failed_ = false;        // this session's bytes broke the framing (parser_error_ says how)
+  std::string parser_error_;
 
   std::atomic<bool> connected_{false}, stopped_{false}, refused_{false};
   std::string refusal_;       // why, once refused_ (guarded by stats_mu_)

@@ -51,6 +51,9 @@ asio::awaitable<bool> Fetcher::read_frame(net::Stream& sock, proto::Frame& out) 
         co_return true;
       }
       if (r.state == proto::FrameParser::State::error) {
+        parser_failed_ = true;
+        parser_error_ = proto::to_string(parser_->status());
+        note_failure("the server sent bytes that are not a frame of this protocol: " + parser_error_);
         std::lock_guard lock(stats_mu_);
         ++stats_.protocol_errors;
         co_return false;
@@ -61,6 +64,7 @@ asio::awaitable<bool> Fetcher::read_frame(net::Stream& sock, proto::Frame& out) 
     if (ec) co_return false;
     rx_begin_ = 0;
     rx_end_ = n;
+    session_rx_ += n;
     last_rx_ = Clock::now();
     std::lock_guard lock(stats_mu_);
     stats_.bytes_received += n;
@@ -131,6 +135,8 @@ asio::awaitable<bool> Fetcher::session() {
   socket_ = sock;
   ++epoch_;
   rx_begin_ = rx_end_ = 0;
+  session_rx_ = 0;
+  handshake_timed_out_ = parser_failed_ = false;
   limits_ = proto::handshake_limits(local_limits(options_));
   parser_ = std::make_unique<proto::FrameParser>(limits_, proto::Receiver::client);
   last_rx_ = Clock::now();
@@ -202,9 +208,17 @@ asio::awaitable<bool> Fetcher::handshake(net::Stream& sock) {
   if (ok) ok = co_await write(sock, out);
   if (ok) ok = co_await read_frame(sock, f);
   if (!ok) {
-    note_failure(sock.tls() ? "the server closed the connection before its HelloAck"
-                            : "the server closed the connection before its HelloAck (a TLS server? then "
-                              "the client needs TLS too)");
+    const std::string bound = std::to_string(options_.connect_timeout.count()) + " ms (connect_timeout)";
+    if (handshake_timed_out_)  // the watchdog closed it: the server was silent, not gone
+      note_failure(session_rx_ == 0 ? "the server sent nothing within " + bound + " after the Hello"
+                                    : "the server sent " + std::to_string(session_rx_) +
+                                          " bytes but no whole HelloAck within " + bound);
+    else if (parser_failed_)
+      note_failure("the server's answer to the Hello is not a frame of this protocol (" + parser_error_ + ")");
+    else
+      note_failure(sock.tls() ? "the server closed the connection before its HelloAck"
+                              : "the server closed the connection before its HelloAck (a TLS server? then "
+                                "the client needs TLS too)");
     co_return false;
   }
   if (f.header.type == MessageType::error) {
@@ -224,8 +238,11 @@ asio::awaitable<bool> Fetcher::handshake(net::Stream& sock) {
   proto::HelloAck ack;
   proto::Limits negotiated;
   if (f.header.type != MessageType::hello_ack || !proto::decode_payload(f.payload, limits_, ack) ||
-      !proto::check_hello_ack(hello, ack, negotiated))
+      !proto::check_hello_ack(hello, ack, negotiated)) {
+    note_failure("the server answered the Hello with a " + std::string(proto::to_string(f.header.type)) +
+                 " that is not a valid HelloAck for this client's Hello");
     co_return false;
+  }
   limits_ = negotiated;
   parser_->set_limits(negotiated);
   const bool authenticated = co_await authenticate(sock, ack);
@@ -303,7 +320,7 @@ bool Fetcher::encode_tile_batches(std::vector<uint8_t>& out) {
       if (get.tiles.empty()) continue;
       next_id();
       ok &= bool(proto::encode_message(get, id, proto::kFlagFinal, limits_, out));
-      tile_requests_.emplace(id, GetTilesRequest{s.map.get(), s.map_id});
+      tile_requests_.emplace(id, GetTilesRequest{s.map.get(), s.map_id, uint32_t(get.tiles.size()), 0});
       progress = true;
     }
   }
@@ -357,7 +374,12 @@ void Fetcher::handle(proto::Frame&& f) {
     if (socket_) socket_->close();
   };
   auto end_tile_request = [&] {
-    if (f.header.final() && tile_requests_.erase(id)) wake();
+    if (!f.header.final()) return;
+    auto it = tile_requests_.find(id);
+    if (it == tile_requests_.end()) return;
+    if (it->second.answered < it->second.sent) it->second.map->request_ended(id);
+    tile_requests_.erase(it);
+    wake();
   };
   if (f.header.type == MessageType::tile_data || f.header.type == MessageType::tile_error) {
     auto it = tile_requests_.find(id);
@@ -367,17 +389,30 @@ void Fetcher::handle(proto::Frame&& f) {
       std::span<const uint8_t> bytes;
       if (!proto::decode_tile_data_view(f.payload, meta, bytes) || meta.map_id != it->second.map_id)
         return protocol_error();
-      it->second.map->tile_arrived(meta, id, bytes);
+      it->second.answered += it->second.map->tile_arrived(meta, id, bytes);
     } else {
       proto::TileError te;
       if (!proto::decode_payload(f.payload, limits_, te) || te.map_id != it->second.map_id)
         return protocol_error();
-      it->second.map->tile_refused(te.tile_id, id, te.code);
+      it->second.answered += it->second.map->tile_refused(te.tile_id, id, te.code);
     }
     return end_tile_request();
   }
   proto::Message m;
-  if (!proto::decode_message(f, limits_, m)) return protocol_error();
+  if (proto::Status st = proto::decode_message(f, limits_, m); !st) {
+    // The waiting call learns what was malformed, rather than waiting out its timeout
+    // while the connection is dropped and its request re-sent to the same server.
+    const std::string why = "the server's " + std::string(proto::to_string(f.header.type)) + " does not decode: " +
+                            proto::to_string(st);
+    note_failure(why);
+    if (auto c = controls_sent_.find(id); c != controls_sent_.end()) {
+      auto control = c->second;
+      controls_sent_.erase(c);
+      control->malformed = why;
+      control->done(proto::ErrorMessage{ErrorCode::invalid_field, why});
+    }
+    return protocol_error();
+  }
   if (f.header.type == MessageType::error && (id == proto::kNoRequest || tile_requests_.count(id))) {
     // The server gave up on the connection, or refused a tile batch as a whole
     // (overloaded, shutting down): reconnect, and re-request after the backoff.
@@ -411,7 +446,7 @@ asio::awaitable<void> Fetcher::watchdog(std::shared_ptr<net::Stream> sock, uint6
     const auto now = Clock::now();
     const bool owed = !tile_requests_.empty() || !controls_sent_.empty();
     bool stuck = false;
-    if (!connected_ && now - started > options_.connect_timeout) stuck = true;  // connect + handshake
+    if (!connected_ && now - started > options_.connect_timeout) stuck = handshake_timed_out_ = true;  // connect + handshake
     if (writing_ && now - write_started_ > options_.io_timeout) stuck = true;
     if (connected_ && owed && now - last_rx_ > options_.io_timeout) stuck = true;
     if (stuck) {

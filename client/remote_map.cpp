@@ -13,6 +13,7 @@
 #include "tiles/core/dagmh_validate.hpp"
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/pack_dictionary.hpp"
+#include "tiles/core/pack_light_check.hpp"
 #include "tiles/core/filter_level.hpp"
 #include "tiles/core/interval.hpp"
 
@@ -68,6 +69,41 @@ uint32_t slots_for(const ClientOptions& o, const PackHeader& h, const dagmh::Dic
   return uint32_t(std::max<uint64_t>(1, o.cache_slots > taken ? o.cache_slots - taken : 1));
 }
 
+// The map's memory besides its slots (ClientOptions::cache_bytes): the grid section
+// twice (as it came, then parsed: the skip grid's entries and coarse values, the
+// preview's per-entry ordinals and values, or a stack grid), the dictionary inflated, the
+// request table, and the page-table entries that are not a slot's (requested pages and
+// remembered failures; 64 bytes each: a 24-byte bucket at a load factor >= 3/8).
+uint64_t metadata_bytes(const ClientOptions& o, const PackHeader& h, size_t grid_section_bytes,
+                        const dagmh::Dictionary* dict) {
+  const uint64_t requests = uint64_t(o.want_capacity) + uint64_t(o.max_in_flight) * o.tiles_per_request;
+  const uint64_t request_table = requests * (sizeof(RequestRecord) + 3 * sizeof(uint32_t) + sizeof(uint64_t)) +
+                                 2 * uint64_t(o.want_capacity) * 16;
+  return kPackHeaderBytes + 2 * uint64_t(grid_section_bytes) + (dict ? dict->memory_bytes() : 0) + request_table +
+         std::min<uint64_t>(h.tile_count, requests + kPageReserve + kMaxFailedTiles) * 64;
+}
+
+// The slot count a byte budget gives (cache_bytes), or cache_slots without one.
+uint32_t budget_slots(const ClientOptions& o, const PackHeader& h, const dagmh::Dictionary* dict,
+                      size_t grid_section_bytes, const std::string& name) {
+  if (o.cache_bytes == 0) return slots_for(o, h, dict);
+  const uint64_t meta = metadata_bytes(o, h, grid_section_bytes, dict);
+  const uint64_t per_slot = uint64_t(slot_size_for(h)) + kSlotOverheadBytes;
+  if (o.cache_bytes < meta + per_slot)
+    throw Error("map '" + name + "': a cache of " + std::to_string(o.cache_bytes) + " bytes cannot hold its metadata (" +
+                std::to_string(meta) + " bytes) and one slot of " + std::to_string(per_slot) + " bytes (tiles of up to " +
+                std::to_string(h.tile_bytes) + " bytes): give at least " + std::to_string((meta + per_slot + 1048575) >> 20) +
+                " MiB");
+  return uint32_t(std::min<uint64_t>((o.cache_bytes - meta) / per_slot, uint64_t(1) << 24));
+}
+
+// A MapInfo's pack header, checked as the pack reader checks a file's (the light too).
+PackHeader checked_header(std::span<const uint8_t> bytes, const std::string& name) {
+  PackHeader h = PackHeader::parse(bytes, "map '" + name + "' header");
+  check_header_light(h, "map '" + name + "' header");
+  return h;
+}
+
 }  // namespace
 
 RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::vector<uint8_t> grid_bytes,
@@ -76,7 +112,7 @@ RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::v
       options_(options),
       notifier_(std::move(notifier)),
       header_bytes_(std::move(header_bytes)),
-      header_(PackHeader::parse(header_bytes_, "map '" + name_ + "' header")),
+      header_(checked_header(header_bytes_, name_)),
       grid_(header_.flags & kFeatureStack
                 ? CutGrid::constant(0, kLitDepth)
                 : CutGrid::parse(std::span<const uint8_t>(grid_bytes).first(
@@ -89,7 +125,8 @@ RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::v
                                        "map '" + name_ + "'")),
       dictionary_(dictionary_of(header_, grid_bytes, name_)),
       light_(LightSpace::from_array(header_.light_kind, header_.light)),
-      cache_(slots_for(options, header_, dictionary_.get()), slot_size_for(header_)),
+      cache_(budget_slots(options, header_, dictionary_.get(), grid_bytes.size(), name_), slot_size_for(header_)),
+      metadata_bytes_(options.cache_bytes ? metadata_bytes(options, header_, grid_bytes.size(), dictionary_.get()) : 0),
       requests_(size_t(options.want_capacity) + size_t(options.max_in_flight) * options.tiles_per_request,
                 options.want_capacity) {
   const std::string what = "map '" + name_ + "'";
@@ -108,10 +145,13 @@ RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::v
   slot_grid_.resize(cache_.slot_count());
   // Pages are requested (one per record), resident (one per slot) or constant: sized so
   // that requesting a page from a lookup does not grow the table.
-  cache_.reserve_pages(std::min<uint64_t>(header_.tile_count, requests_.capacity() + cache_.slot_count() + 4096));
+  cache_.reserve_pages(std::min<uint64_t>(header_.tile_count, requests_.capacity() + cache_.slot_count() + kPageReserve));
   cancels_.reserve(requests_.capacity());
   if (header_.flags & kFeatureDeepShadow)  // the deep part (deep_part.hpp): its own small cache
-    deep_ = std::make_unique<DeepPart>(name_, header_.tile_bytes, options.cache_slots, options.max_tile_retries,
+    deep_ = std::make_unique<DeepPart>(name_, header_.tile_bytes,
+                                       options.cache_bytes ? std::max<uint32_t>(1, cache_.slot_count() / 4)
+                                                           : options.cache_slots,
+                                       options.max_tile_retries,
                                        std::max<uint16_t>(options.miss_priority, 1), notifier_);
 }
 
@@ -120,6 +160,7 @@ RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::v
 bool RemoteMap::want_locked(uint64_t tile, const GridEntry& e, uint16_t priority) const noexcept {
   const PageState state = cache_.lookup(tile).state;
   if (state == PageState::absent) {
+    if (failed_ >= kMaxFailedTiles) return false;  // the server refused too much: ask no more
     RequestRecord* r = requests_.insert(tile, e, priority);
     if (!r) {
       ++stats_.queue_full;
@@ -958,6 +999,7 @@ MapStats RemoteMap::stats() const noexcept {
   std::lock_guard lock(mu_);
   MapStats s = stats_;
   s.dictionary_bytes = dictionary_ ? dictionary_->memory_bytes() : 0;
+  s.accounted_bytes = metadata_bytes_ + uint64_t(cache_.slot_count()) * (cache_.slot_bytes() + kSlotOverheadBytes);
   const CacheStats c = cache_.stats();
   s.cache = CacheCounters{c.hits, c.misses, c.evictions, c.inserts, c.resident, c.pinned, c.free};
   for (const CounterShard& k : counters_) {  // lookups count here, not in the cache
@@ -977,6 +1019,13 @@ void RemoteMap::take_wanted(size_t max, uint32_t request_id, std::vector<proto::
     max -= out.size() - before;
   }
   std::lock_guard lock(mu_);
+  if (failed_ >= kMaxFailedTiles) {  // the server refused too much: what is queued is not sent either
+    if (requests_.queued() > 0)
+      requests_.for_each([&](RequestRecord& r) {
+        if (r.state == RequestState::queued) drop_locked(r);
+      });
+    return;
+  }
   for (size_t taken = 0; taken < max; ++taken) {
     const RequestRecord* r = requests_.pop(request_id);
     if (!r) break;
@@ -1018,11 +1067,28 @@ void RemoteMap::give_up_locked(RequestRecord& r) noexcept {
   const uint64_t tile = r.tile;
   const float value = r.entry.value;
   requests_.erase(r);
+  // Remembered (a constant page: never asked again) up to kMaxFailedTiles; the one that
+  // reaches it stops new requests (want_locked), so nothing is asked again either way.
+  if (failed_ >= kMaxFailedTiles) return cache_.cancel_request(tile);
+  ++failed_;
   try {
     cache_.set_constant(tile, value);  // the page exists (requested): nothing allocates
   } catch (...) {                      // only a pinned resident page refuses, and this one is not
     cache_.cancel_request(tile);
   }
+}
+
+void RemoteMap::request_ended(uint32_t request_id) noexcept {
+  std::lock_guard lock(mu_);
+  requests_.for_each([&](RequestRecord& r) {
+    if (r.state == RequestState::queued || r.request_id != request_id) return;
+    ++stats_.tiles_unanswered;
+    if (r.state == RequestState::cancel_sent) return drop_locked(r);
+    // Counted as a failed delivery: asked again up to max_tile_retries, then given up.
+    if (++r.retries > options_.max_tile_retries) return give_up_locked(r);
+    if (!requests_.requeue(r)) drop_locked(r);
+  });
+  if (requests_.queued() > 0) notifier_->notify();
 }
 
 void RemoteMap::retry_or_give_up(uint64_t tile, uint32_t request_id, uint64_t MapStats::*counter) noexcept {
@@ -1072,20 +1138,27 @@ bool RemoteMap::fill_slot(uint32_t slot, const proto::TileMeta& meta, const Grid
   }
 }
 
-void RemoteMap::tile_arrived(const proto::TileMeta& meta, uint32_t request_id,
+bool RemoteMap::tile_arrived(const proto::TileMeta& meta, uint32_t request_id,
                              std::span<const uint8_t> stored) noexcept {
   const uint64_t tile = meta.tile_id;
   if (is_deep_id(tile)) {
     if (deep_) deep_->tile_arrived(meta, request_id, stored);
-    return;
+    return true;
   }
   GridEntry entry;
   {
     std::lock_guard lock(mu_);
     const RequestRecord* r = sent_record_locked(tile, request_id);
-    if (!r) return;  // not asked for in this request (a late duplicate): ignore
+    if (!r) return false;  // not asked for in this request (a late duplicate, a wrong id): ignore
     entry = r->entry;
   }
+  tile_answer(meta, request_id, stored, entry);
+  return true;
+}
+
+void RemoteMap::tile_answer(const proto::TileMeta& meta, uint32_t request_id, std::span<const uint8_t> stored,
+                            const GridEntry& entry) noexcept {
+  const uint64_t tile = meta.tile_id;
   // End to end: the stored bytes must be the bytes the pack builder wrote (the frame CRC
   // only covers the hop). A mismatch is refetched.
   if (!proto::tile_crc_matches(meta, stored)) return retry_or_give_up(tile, request_id, &MapStats::crc_errors);
@@ -1138,20 +1211,21 @@ void RemoteMap::tile_arrived(const proto::TileMeta& meta, uint32_t request_id,
   }
 }
 
-void RemoteMap::tile_refused(uint64_t tile, uint32_t request_id, proto::ErrorCode code) noexcept {
+bool RemoteMap::tile_refused(uint64_t tile, uint32_t request_id, proto::ErrorCode code) noexcept {
   if (is_deep_id(tile)) {
     if (deep_) deep_->tile_refused(tile, request_id, code);
-    return;
+    return true;
   }
   std::lock_guard lock(mu_);
   RequestRecord* r = sent_record_locked(tile, request_id);
-  if (!r) return;
+  if (!r) return false;
   if (code == proto::ErrorCode::cancelled) {
     ++stats_.tiles_cancelled;
     drop_locked(*r);
   } else {
     give_up_locked(*r);
   }
+  return true;
 }
 
 void RemoteMap::connection_lost() noexcept {

@@ -70,6 +70,15 @@ class Notifier {
   std::atomic<bool> pending_{false};
 };
 
+// Page-table entries reserved beyond the request table and the slots, so that lookups
+// queueing misses rarely grow it.
+inline constexpr uint64_t kPageReserve = 4096;
+// Tiles given up (refused by the server, or failing after retries) remembered per map as
+// constant pages, so they are not asked for again; past this many the map stops asking
+// the server for new tiles (failed_locked): a server refusing everything is not asked
+// for every tile of the map, one after another, for ever.
+inline constexpr uint64_t kMaxFailedTiles = 4096;
+
 class RemoteMap final : public Evaluator {
  public:
   // Parses and checks the MapInfo blobs (st::Error naming the map otherwise).
@@ -127,10 +136,16 @@ class RemoteMap final : public Evaluator {
   bool has_work() const;
   // A TileData answering `request_id`: end-to-end CRC, decompress into a reserved slot,
   // open, publish; refetch or give up on failure. Answers for a tile not sent in
-  // `request_id` are ignored.
-  void tile_arrived(const proto::TileMeta& meta, uint32_t request_id, std::span<const uint8_t> stored) noexcept;
+  // `request_id` are ignored (false: not an answer to it).
+  bool tile_arrived(const proto::TileMeta& meta, uint32_t request_id, std::span<const uint8_t> stored) noexcept;
   // A TileError: cancelled -> absent again; any other code -> given up (coarse answers).
-  void tile_refused(uint64_t tile, uint32_t request_id, proto::ErrorCode code) noexcept;
+  // False: no tile of this map was sent under that id (ignored).
+  bool tile_refused(uint64_t tile, uint32_t request_id, proto::ErrorCode code) noexcept;
+  // `request_id` ended (FINAL) with tiles of it never answered (a server breaking
+  // PROTOCOL.md §7: wrong ids, missing answers): each is counted in tiles_unanswered and
+  // asked again up to max_tile_retries, then given up; cancelled ones are dropped. O(the
+  // request table): the fetcher calls it only when the answers fell short.
+  void request_ended(uint32_t request_id) noexcept;
   // The connection dropped: every sent tile is queued again (cancelled ones dropped).
   void connection_lost() noexcept;
   // ---- the GPU mirror (gpu/gpu_map.cpp) ----
@@ -362,6 +377,9 @@ class RemoteMap final : public Evaluator {
   // or give it up after max_tile_retries.
   void retry_or_give_up(uint64_t tile, uint32_t request_id, uint64_t MapStats::*counter) noexcept;
   void retry_or_give_up_locked(uint64_t tile, uint32_t request_id, uint64_t MapStats::*counter) noexcept;
+  // tile_arrived once its record was found: the checks, the slot, the publication.
+  void tile_answer(const proto::TileMeta& meta, uint32_t request_id, std::span<const uint8_t> stored,
+                   const GridEntry& entry) noexcept;
   // Decompresses (or copies) `stored` into the reserved `slot` and opens it; false if the
   // bytes do not make the tile `entry` names. Runs without the lock.
   bool fill_slot(uint32_t slot, const proto::TileMeta& meta, const GridEntry& entry,
@@ -395,6 +413,7 @@ class RemoteMap final : public Evaluator {
 
   mutable RwLock mu_;
   mutable TileCache cache_;
+  uint64_t metadata_bytes_ = 0;  // accounted outside the slots (ClientOptions::cache_bytes; else 0)
   std::unique_ptr<std::atomic<uint32_t>[]> slot_used_;  // epoch of each slot's last use
   uint32_t epoch_ = 1;                                   // written under the exclusive lock
   struct alignas(64) CounterShard {
@@ -418,6 +437,7 @@ class RemoteMap final : public Evaluator {
   std::array<Region, kMaxRegions> regions_{};
   size_t region_count_ = 0;
   mutable MapStats stats_;
+  uint64_t failed_ = 0;  // tiles given up and remembered (constant pages), <= kMaxFailedTiles
   std::unique_ptr<DeepPart> deep_;
 };
 

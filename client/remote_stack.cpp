@@ -138,6 +138,7 @@ size_t RemoteMap::request_slices(uint32_t w0, uint32_t w1, uint16_t priority) no
   const StackGrid& g = *stack_grid_;
   size_t queued = 0;
   std::lock_guard lock(mu_);
+  if (failed_ >= kMaxFailedTiles) return 0;  // asks for nothing more (give_up_locked): no walk of every cell
   for (uint64_t cell = 0; cell < g.entries.size(); ++cell) {
     if (g.entries[cell].kind != 1) continue;
     uint64_t first, last;

@@ -45,7 +45,9 @@ std::string load_table(const LoadResult& r) {
                                                           : fmt("%.3f", o.time0) + ".." + fmt("%.3f", o.time1) + " swept") +
                                     " (needed cells are slices)");
   row("cache per connection", fmt("%.1f MiB", o.cache_mb) + " (" + std::to_string(r.cache_slots) + " slots of " +
-                                  std::to_string(r.slot_bytes) + " B), peak used " + std::to_string(r.peak_slots_used));
+                                  std::to_string(r.slot_bytes) + " B; " +
+                                  fmt("%.1f MiB", double(r.map.accounted_bytes) / 1048576 / std::max(1u, r.connections)) +
+                                  " accounted), peak used " + std::to_string(r.peak_slots_used));
   row("prefetch", o.prefetch ? "on" : "off");
   row("threads: camera workers / client I/O", std::to_string(r.workers) + " / " + std::to_string(o.io_threads) +
                                                   " (residency poll up to " + fmt("%.0f ms", r.watcher_poll_ms_max) + ")");
@@ -73,10 +75,13 @@ std::string load_table(const LoadResult& r) {
       fmt("%.1f", percentile_of(r.cut_residency_ms, .5)) + " / " + fmt("%.1f", percentile_of(r.cut_residency_ms, .9)) +
           " / " + fmt("%.1f", percentile_of(r.cut_residency_ms, 1)) + "  (" + std::to_string(r.cut_residency_ms.size()) +
           " of " + std::to_string(r.cuts) + " cuts; " + std::to_string(r.cuts_incomplete) + " cut again first)");
-  row("errors (crc/decode/failed/proto/connect)",
+  row("errors (crc/decode/failed/unanswered/proto/connect)",
       std::to_string(r.map.crc_errors) + "/" + std::to_string(r.map.decode_errors) + "/" +
-          std::to_string(r.map.tiles_failed) + "/" + std::to_string(r.client.protocol_errors) + "/" +
-          std::to_string(r.client.connect_failures));
+          std::to_string(r.map.tiles_failed) + "/" + std::to_string(r.map.tiles_unanswered) + "/" +
+          std::to_string(r.client.protocol_errors) + "/" + std::to_string(r.client.connect_failures) +
+          (r.no_tile_received() ? "  (no tile received at all: counted as an error)" : ""));
+  if (r.frames_skipped)
+    row("frames skipped (past the duration)", std::to_string(r.frames_skipped));
   row("drained at end", r.drained ? "yes" : "no");
   return s;
 }
@@ -127,6 +132,7 @@ std::string load_json(const LoadResult& r) {
                            {"p90", percentile_of(r.cut_residency_ms, .9)}, {"max", percentile_of(r.cut_residency_ms, 1)},
                            {"all", r.cut_residency_ms}};
   j["errors"] = {{"crc", r.map.crc_errors}, {"decode", r.map.decode_errors}, {"failed", r.map.tiles_failed},
+                 {"unanswered", r.map.tiles_unanswered}, {"no_tile_received", r.no_tile_received()},
                  {"protocol", r.client.protocol_errors}, {"connect_failures", r.client.connect_failures},
                  {"total", r.errors()}};
   j["drained"] = r.drained;

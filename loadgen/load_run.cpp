@@ -79,6 +79,7 @@ struct Shared {
   // Per-camera frame counters (summed at the end and for the series).
   std::atomic<uint64_t> frames{0}, holes{0}, late{0}, needed{0}, missing{0}, samples{0}, lookups{0};
   std::atomic<uint64_t> lookup_ns{0};
+  std::atomic<uint64_t> skipped{0};  // frames not run: the run was past its duration + 1 s
   std::mutex lag_mu;
   double max_lag_ms = 0, visibility_sum = 0;
 };
@@ -260,7 +261,8 @@ void camera_frame(CameraRun& cam, const LoadOptions& o, const WorldFrame& world,
 
 // A worker runs its cameras' frames, always the one scheduled earliest next (a frame
 // that starts late still counts from its schedule: no coordinated omission).
-void worker_loop(std::vector<CameraRun*> cams, const LoadOptions& o, const WorldFrame& world, Shared& sh) {
+void worker_loop(std::vector<CameraRun*> cams, const LoadOptions& o, const WorldFrame& world, Shared& sh,
+                 Clock::time_point end) {
   auto later = [&](const CameraRun* a, const CameraRun* b) {
     return a->schedule(o.rate, a->next_frame) > b->schedule(o.rate, b->next_frame);
   };
@@ -269,6 +271,11 @@ void worker_loop(std::vector<CameraRun*> cams, const LoadOptions& o, const World
   while (!cams.empty()) {
     std::pop_heap(cams.begin(), cams.end(), later);
     CameraRun& cam = *cams.back();
+    if (Clock::now() > end) {  // stalled (frames slower than the rate): the duration holds
+      sh.skipped.fetch_add(cam.frames - cam.next_frame, std::memory_order_relaxed);
+      cams.pop_back();
+      continue;
+    }
     std::this_thread::sleep_until(cam.schedule(o.rate, cam.next_frame));
     camera_frame(cam, o, world, sh);
     if (cam.next_frame < cam.frames) std::push_heap(cams.begin(), cams.end(), later);
@@ -284,6 +291,7 @@ void add(client::MapStats& a, const client::MapStats& b) {
   a.bytes_received += b.bytes_received, a.crc_errors += b.crc_errors, a.decode_errors += b.decode_errors;
   a.tiles_failed += b.tiles_failed, a.tiles_cancelled += b.tiles_cancelled, a.cache_full += b.cache_full;
   a.queue_full += b.queue_full, a.coarse_answers += b.coarse_answers;
+  a.tiles_unanswered += b.tiles_unanswered, a.accounted_bytes += b.accounted_bytes;
 }
 
 void add(client::ClientStats& a, const client::ClientStats& b) {
@@ -305,25 +313,16 @@ LoadResult run_load(const LoadOptions& o_in) {
   LoadResult r;
   r.connections = o.connections == 0 ? o.cameras : std::clamp(o.connections, 1u, o.cameras);
 
-  // The tile bound (slot size) comes from the pack header: ask once with a probe client.
-  uint32_t tile_bytes = 0;
-  {
-    client::ClientOptions po;
-    po.cache_slots = 1;
-    po.key = o.key;
-    po.tls = o.tls;
-    po.tls_ca_file = o.tls_ca_file;
-    po.tls_server_name = o.tls_server_name;
-    client::Client probe(all_endpoints(o), po);
-    tile_bytes = client::pack_header(probe.open(o.map)).tile_bytes;
-  }
   client::ClientOptions co;
   co.client_name = "shadowtile-load";
   co.key = o.key;
   co.tls = o.tls;
   co.tls_ca_file = o.tls_ca_file;
   co.tls_server_name = o.tls_server_name;
-  co.cache_slots = uint32_t(std::clamp<double>(o.cache_mb * 1048576.0 / std::max(1u, tile_bytes), 1, 1 << 24));
+  // The library's one rule (client.hpp cache_bytes): metadata and everything per slot
+  // within --cache-mb, whatever the pack's tile bound; a budget too small for one slot
+  // is refused by open() in one line.
+  co.cache_bytes = uint64_t(o.cache_mb * 1048576.0);
   // Every connection's fetcher on a few shared I/O threads (not one thread per
   // connection: 1,000 connections stay 1,000 sockets, not 1,000 threads).
   co.io_pool = client::make_io_pool(std::clamp(o.io_threads, 1u, 64u));
@@ -336,7 +335,10 @@ LoadResult run_load(const LoadOptions& o_in) {
   const client::Map& m0 = maps[0];
   r.map_level = m0.finest_level();
   r.skip_level = client::skip_grid(m0).levels;
-  r.cache_slots = co.cache_slots;
+  {
+    const client::MapStats s0 = m0.stats();
+    r.cache_slots = s0.cache.resident + s0.cache.pinned + s0.cache.free;
+  }
   r.slot_bytes = m0.slot_bytes();
   r.slices = m0.slices();
   if (r.slices) r.skip_level = client::MapAccess::remote(m0).stack_grid()->skip_level;
@@ -429,7 +431,8 @@ LoadResult run_load(const LoadOptions& o_in) {
   for (uint32_t c = 0; c < o.cameras; ++c) assigned[c % workers].push_back(&cameras[c]);
   std::vector<std::thread> pool;
   for (uint32_t w = 0; w < workers; ++w)
-    pool.emplace_back(worker_loop, std::move(assigned[w]), std::cref(o), std::cref(r.world), std::ref(sh));
+    pool.emplace_back(worker_loop, std::move(assigned[w]), std::cref(o), std::cref(r.world), std::ref(sh),
+                      start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(o.duration + 1)));
   for (auto& t : pool) t.join();
   const auto end = Clock::now();
   // Let the watcher record the last arrivals of the final frames' needs briefly, then
@@ -461,6 +464,7 @@ LoadResult run_load(const LoadOptions& o_in) {
 
   r.options = o;
   r.frames = sh.frames, r.frames_with_holes = sh.holes, r.frames_late = sh.late;
+  r.frames_skipped = sh.skipped;
   r.cells_needed = sh.needed, r.cells_missing = sh.missing;
   r.samples = sh.samples, r.lookups = sh.lookups;
   r.lookup_seconds = double(sh.lookup_ns.load()) * 1e-9;

@@ -108,9 +108,13 @@ struct LoadResult {
   std::vector<SeriesPoint> series;        // every 100 ms
   WorldFrame world;
 
+  uint64_t frames_skipped = 0;  // not run: their time had passed the duration by over a second (a stalled run ends on time)
+  // Tiles were asked for and none ever came (a server that answers nothing, or only
+  // under wrong ids): the run measured nothing, whatever the counters below say.
+  bool no_tile_received() const { return map.tiles_requested > 0 && map.tiles_received == 0; }
   uint64_t errors() const {
-    return map.crc_errors + map.decode_errors + map.tiles_failed + client.protocol_errors +
-           client.connect_failures;
+    return map.crc_errors + map.decode_errors + map.tiles_failed + map.tiles_unanswered + client.protocol_errors +
+           client.connect_failures + (no_tile_received() ? 1 : 0);
   }
   double hole_fraction() const { return frames ? double(frames_with_holes) / double(frames) : 0; }
   double cache_hit_rate() const {

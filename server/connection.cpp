@@ -40,8 +40,10 @@ Connection::Connection(tcp::socket socket, ServerCore& core, asio::ip::address f
       limits_(proto::handshake_limits(core.options.limits)),  // until HelloAck
       parser_(limits_, proto::Receiver::server),
       in_flight_(core.options.limits.max_in_flight),
-      tiles_(size_t(core.options.limits.max_in_flight) * core.options.limits.max_tiles_per_batch) {
+      tiles_(size_t(core.options.limits.max_in_flight) * core.options.limits.max_tiles_per_batch),
+      prefix_(PendingBudget::prefix_of(from_)) {
   accepted_ = last_read_ = last_activity_ = frame_started_ = Clock::now();
+  last_read_ticks_.store(last_read_.time_since_epoch().count(), std::memory_order_relaxed);
   authed_ = core.options.key.empty();
   tls_ready_ = core.tls == nullptr;
   writer_wake_.expires_at(Clock::time_point::max());
@@ -82,7 +84,7 @@ bool Connection::leave_pending() {
   size_t& n = core_.useful_per_prefix[PendingBudget::prefix_of(from_)];
   if (opt_.max_connections_per_prefix && n >= opt_.max_connections_per_prefix) return false;
   ++n;
-  useful_ = true;
+  useful_ = useful_counted_ = true;
   if (pending_) core_.pending.remove(pending_it_);
   pending_ = false;
   return true;
@@ -137,6 +139,7 @@ asio::awaitable<void> Connection::reader(std::shared_ptr<Connection> /*keep aliv
       size_t n = co_await stream_.read_some(asio::buffer(buf), ec);
       if (ec) break;  // EOF, reset, or closed by the watchdog / stop()
       last_read_ = last_activity_ = Clock::now();
+      last_read_ticks_.store(last_read_.time_since_epoch().count(), std::memory_order_relaxed);
       core_.stats.received(n);
       const uint64_t chunk_start = parser_.stream_offset();
       const bool was_mid_frame = mid_frame();

@@ -19,6 +19,7 @@
 // and the timeouts.
 #pragma once
 #include <array>
+#include <atomic>
 #include <chrono>
 #include <cstdint>
 #include <deque>
@@ -36,6 +37,7 @@ namespace st::server {
 
 class Connection : public std::enable_shared_from_this<Connection> {
  public:
+  using Clock = std::chrono::steady_clock;
   // `from`: the client's address, counted in core.per_address until the end.
   Connection(tcp::socket socket, ServerCore& core, asio::ip::address from);
   // Spawns the coroutines. The connection removes itself from core.connections at the end.
@@ -57,9 +59,16 @@ class Connection : public std::enable_shared_from_this<Connection> {
     pending_ = false;
     evicted_ = true;
   }
+  // Under core.mu: a useful connection (counted in core.useful_per_prefix) not already
+  // evicted, of network `prefix()`, idle since `last_read()` (Server::Impl::admit evicts
+  // the longest idle of the network holding the most when the server is full).
+  bool evictable_useful() const { return useful_counted_ && !evicted_; }
+  const PendingBudget::Prefix& prefix() const { return prefix_; }
+  Clock::time_point last_read() const {
+    return Clock::time_point(Clock::duration(last_read_ticks_.load(std::memory_order_relaxed)));
+  }
 
  private:
-  using Clock = std::chrono::steady_clock;
 
   asio::awaitable<void> reader(std::shared_ptr<Connection> self);
   asio::awaitable<void> writer(std::shared_ptr<Connection> self);
@@ -174,6 +183,10 @@ class Connection : public std::enable_shared_from_this<Connection> {
   // Guarded by core.mu:
   std::list<PendingBudget::Entry>::iterator pending_it_{};
   bool pending_ = false, evicted_ = false;
+  bool useful_counted_ = false;  // useful_, as core.mu sees it
+  const PendingBudget::Prefix prefix_;
+  // last_read_ for other threads (admit, under core.mu): steady-clock ticks.
+  std::atomic<Clock::rep> last_read_ticks_{0};
   Clock::time_point shutdown_deadline_ = Clock::time_point::max();
   bool closed_ = false;
   bool writing_ = false;

@@ -1,5 +1,6 @@
 #include "server/serve_command.hpp"
 
+#include <algorithm>
 #include <cstdio>
 #include <string>
 #include <vector>
@@ -45,6 +46,10 @@ void add_serve_options(CLI::App& app, ServeConfig& a) {
                  "Require clients to prove this catalog key (hex or raw bytes; HMAC-SHA256 challenge)");
   app.add_option("--tls-cert", a.tls_cert, "Serve over TLS with this certificate chain (PEM); needs --tls-key");
   app.add_option("--tls-key", a.tls_key, "The certificate's private key (PEM)");
+  app.add_option("--tls-handshake-rate", a.tls_handshake_rate,
+                 "TLS handshakes each network (IPv4 /24, IPv6 /64) may start per second, twice that at once; "
+                 "more are closed before the handshake (0: no limit)")
+      ->capture_default_str()->check(CLI::Range(0.0, 1e6));
   app.add_option("--idle-timeout", a.idle_timeout, "Close connections idle this many seconds")
       ->capture_default_str()->check(CLI::Range(0.1, 86400.0));
   app.add_option("--max-frame-bytes", a.max_frame_bytes,
@@ -104,6 +109,8 @@ void run_serve(const ServeConfig& a, const char* program) {
   if (!a.key_file.empty()) o.key = proto::load_key_file(a.key_file);
   o.tls_cert_file = a.tls_cert;
   o.tls_key_file = a.tls_key;
+  o.tls_handshakes_per_second = a.tls_handshake_rate;
+  o.tls_handshake_burst = std::max(1.0, 2 * a.tls_handshake_rate);
   const size_t maps = catalog.maps().size();
   Server srv(std::move(catalog), o);
   srv.start();

@@ -28,6 +28,7 @@ struct ServeConfig {
   // info; else this cap exactly (65536..67108864), and what exceeds it is refused.
   uint32_t max_frame_bytes = 0;
   std::string key_file, tls_cert, tls_key;
+  double tls_handshake_rate = 20;  // per network per second (server.hpp); burst twice that
 };
 
 // Adds the options (and the positional pack paths) to `app`, writing into `config`.

@@ -65,14 +65,15 @@ std::shared_ptr<Connection> PendingBudget::victim_for(const asio::ip::address& f
   // ones among those `in_scope`: the flooder pays for its flood, not the newcomer.
   // `flooders_too`: also within the grace, but only of addresses over their own budget.
   const auto old_enough = now - o.pending_grace;
-  auto evict_heaviest = [&](auto in_scope, bool flooders_too) -> std::shared_ptr<Connection> {
+  auto evict_heaviest = [&](auto in_scope, bool flooders_too,
+                            std::chrono::steady_clock::time_point cutoff) -> std::shared_ptr<Connection> {
     // Candidates: addresses in scope with a connection past the grace (the list is
     // oldest first, so those are a prefix of it); the victim is the oldest connection of
     // the candidate holding the most pending connections.
     std::list<Entry>::iterator best = order.end();
     size_t most = 0;
     for (auto it = order.begin(); it != order.end(); ++it) {
-      if (it->since > old_enough && !flooders_too) break;
+      if (it->since > cutoff && !flooders_too) break;
       if (!in_scope(it->from)) continue;
       const size_t n = per_address.at(it->from);
       if (flooders_too && n <= o.max_pending_per_address) continue;
@@ -91,16 +92,28 @@ std::shared_ptr<Connection> PendingBudget::victim_for(const asio::ip::address& f
   std::shared_ptr<Connection> victim;
   const Prefix prefix = prefix_of(from);
   if (o.max_pending_per_address && count(per_address, from) >= o.max_pending_per_address)
-    victim = evict_heaviest([&](const asio::ip::address& a) { return a == from; }, false);
+    victim = evict_heaviest([&](const asio::ip::address& a) { return a == from; }, false, old_enough);
   else if (o.max_pending_per_prefix && count(per_prefix, prefix) >= o.max_pending_per_prefix)
-    victim = evict_heaviest([&](const asio::ip::address& a) { return prefix_of(a) == prefix; }, false);
+    victim = evict_heaviest([&](const asio::ip::address& a) { return prefix_of(a) == prefix; }, false, old_enough);
   else if ((o.max_pending_connections && order.size() >= o.max_pending_connections) || total_full)
-    victim = evict_heaviest(anyone, false);
+    victim = evict_heaviest(anyone, false, old_enough);
   // At max_connections with every pending connection inside the grace (a flood opened
   // faster than the grace, reopening what is evicted): the grace protects only
   // addresses within their budget, so the newcomer takes the slot of a flooder's
   // oldest pending connection instead of being refused.
-  if (!victim && total_full) victim = evict_heaviest(anyone, true);
+  if (!victim && total_full) victim = evict_heaviest(anyone, true, old_enough);
+  // Over the global pending budget with every pending connection inside the grace and
+  // every address within its own budget: many addresses (each under its per-address and
+  // per-prefix bounds) recycling connections faster than the grace. Past twice the
+  // budget the grace shrinks to a quarter: a handshake takes round trips, not a quarter
+  // of a second, so an honest burst has finished (and left the budget) by then, while a
+  // connection still pending at that age is the churn's; at the budget with the server
+  // full, it no longer applies at all. The newcomer takes the slot of the oldest such
+  // connection of the address holding the most (a newcomer's address holds few, so it is
+  // not the one evicted next).
+  if (!victim && o.max_pending_connections && order.size() >= o.max_pending_connections &&
+      (total_full || order.size() >= 2 * o.max_pending_connections))
+    victim = evict_heaviest(anyone, false, total_full ? now : now - o.pending_grace / 4);
   return victim;
 }
 
@@ -199,6 +212,12 @@ struct Server::Impl {
   // and starts its Connection, or refuses it with Error(overloaded).
   void admit(tcp::socket socket);
   void reject(tcp::socket socket, const char* why);
+  // At max_connections with no pending connection to evict (core.mu held): the newcomer's
+  // network holds little (at least 2 useful connections fewer than the network holding
+  // the most), so it takes the slot of that network's longest-idle useful connection. So
+  // useful-looking connections from a few networks cannot hold the server full against
+  // every other network; they keep at most an even share. Null: no such victim.
+  std::shared_ptr<Connection> useful_victim_locked(const asio::ip::address& from);
   void shutdown_on_io();  // runs on the io_context
   // EMFILE: frees the spare descriptor, accepts and refuses one client, takes it back.
   bool shed_one();  // true: one client was accepted and refused
@@ -314,8 +333,12 @@ void Server::Impl::admit(tcp::socket socket) {
     const bool total_full = core.connections.size() - core.evicting >= core.options.max_connections;
     if (per_address_limit && here != core.per_address.end() && here->second >= per_address_limit) {
       refused = "too many connections from your address";
+    } else if (core.tls &&
+               !core.tls_handshakes.admit(PendingBudget::prefix_of(from), std::chrono::steady_clock::now())) {
+      refused = "too many TLS handshakes from your network";
     } else {
       victim = core.pending.victim_for(from, core.options, total_full, std::chrono::steady_clock::now());
+      if (total_full && !victim) victim = useful_victim_locked(from);
       if (total_full && !victim) {
         refused = "server at its connection limit";
       } else {
@@ -342,6 +365,22 @@ void Server::Impl::admit(tcp::socket socket) {
   }
   core.stats.connection_opened();
   conn->start();
+}
+
+std::shared_ptr<Connection> Server::Impl::useful_victim_locked(const asio::ip::address& from) {
+  if (core.useful_per_prefix.empty()) return nullptr;
+  const PendingBudget::Prefix mine = PendingBudget::prefix_of(from);
+  const auto here = core.useful_per_prefix.find(mine);
+  const size_t held = here == core.useful_per_prefix.end() ? 0 : here->second;
+  auto heaviest = core.useful_per_prefix.begin();
+  for (auto it = core.useful_per_prefix.begin(); it != core.useful_per_prefix.end(); ++it)
+    if (it->second > heaviest->second) heaviest = it;
+  if (heaviest->first == mine || heaviest->second < held + 2) return nullptr;
+  std::shared_ptr<Connection> idlest;
+  for (const auto& c : core.connections)  // O(connections), only at max_connections
+    if (c->evictable_useful() && c->prefix() == heaviest->first && (!idlest || c->last_read() < idlest->last_read()))
+      idlest = c;
+  return idlest;
 }
 
 // Over a connection limit: one Error(overloaded) frame, best effort, then close.
@@ -405,6 +444,9 @@ Server::Server(Catalog catalog, ServerOptions options) {
                   options.tls_cert_file + "'");
     impl_->core.tls = std::move(ctx);
   }
+  if (!(options.tls_handshakes_per_second >= 0) || !(options.tls_handshake_burst >= 1))
+    throw Error("serve: --tls-handshake-rate must be >= 0 and its burst >= 1");
+  impl_->core.tls_handshakes = HandshakeLimiter(options.tls_handshakes_per_second, options.tls_handshake_burst);
   impl_->core.options = std::move(options);
   impl_->core.catalog = std::move(catalog);
   std::vector<size_t> tiles;

@@ -83,6 +83,12 @@ struct ServerOptions {
   // TLS (Asio SSL streams, TLS 1.2 or later): both set, PEM files, or both empty (plain
   // TCP). The key file must not be a key clients know: it is the server's private key.
   std::string tls_cert_file, tls_key_file;
+  // TLS handshakes each network (IPv4 /24, IPv6 /64) may start per second, and at once
+  // (server/handshake_limiter.hpp): a connection over it is closed before its handshake
+  // (counted in connections_rejected), so a handshake flood cannot take the I/O thread's
+  // CPU from other clients. rate 0: no limit. Plain TCP: not used.
+  double tls_handshakes_per_second = 20;
+  double tls_handshake_burst = 40;
   // Periodic stats line (0: none), written through `log`.
   std::chrono::milliseconds stats_interval{0};
   std::function<void(const std::string&)> log;  // default: stderr

@@ -15,6 +15,7 @@
 #include <boost/asio/ssl.hpp>
 
 #include "server/catalog.hpp"
+#include "server/handshake_limiter.hpp"
 #include "server/log_throttle.hpp"
 #include "server/payload_cache.hpp"
 #include "server/server.hpp"
@@ -39,7 +40,10 @@ class Connection;
 // to evict itself; with no such victim the budget is soft until max_connections. There
 // the grace no longer shields an address over its own budget: the newcomer evicts that
 // address's oldest pending connection, however young (a flood reopened faster than the
-// grace cannot hold the server full); only with no such address is it refused.
+// grace cannot hold the server full); only with no such address is it refused. Past
+// twice the global budget (or at it when full) the grace shrinks to a quarter for every
+// address: many addresses, each within its own budget, recycling connections faster than
+// the grace cannot hold the budget either (an honest handshake is long done by then).
 // Guarded by ServerCore::mu.
 struct PendingBudget {
   using Prefix = std::array<uint8_t, 16>;
@@ -78,6 +82,7 @@ struct ServerCore {
   // /24 or /64, against ServerOptions::max_connections_per_prefix.
   std::map<PendingBudget::Prefix, size_t> useful_per_prefix;
   PendingBudget pending;
+  HandshakeLimiter tls_handshakes{0, 1};  // set from options by Server's constructor
   size_t evicting = 0;
   // Answer bytes owned by connections (control frames queued, tile bytes being written)
   // against ServerOptions::max_queued_bytes.

@@ -17,6 +17,7 @@
 
 #include "client/map_access.hpp"
 #include "proto/proto.hpp"
+#include "server/handshake_limiter.hpp"
 #include "tests/client/loopback.hpp"
 
 namespace st::client {
@@ -181,6 +182,38 @@ TEST(TlsLoopback, BadCertificateFilesAreClearErrors) {
   EXPECT_NE(error_of(o).find("both"), std::string::npos);
   ClientOptions co = tls_options("/nonexistent/ca.pem");
   EXPECT_THROW(Client({"127.0.0.1", 1}, co), Error);
+}
+
+// The TLS handshake limiter (server/handshake_limiter.hpp): one network opening
+// connections as fast as it can gets its burst, then the rest are closed before any
+// handshake work (counted as rejected); a client on another network is served meanwhile.
+TEST(TlsLoopback, HandshakeFloodFromOneNetworkIsRateLimited) {
+  const CertFiles cert = make_cert("limited");
+  auto p = build_pack("tlsmap4", 5, 74, looptest::available_encodings()[0], 2, 1024);
+  server::ServerOptions so = tls_server(cert);
+  so.tls_handshakes_per_second = 2;
+  so.tls_handshake_burst = 3;
+  auto srv = start_server({p.path}, so);
+  std::vector<std::unique_ptr<RawSocket>> flood;
+  for (int i = 0; i < 12; ++i) flood.push_back(std::make_unique<RawSocket>(srv.port, 300ms, "127.0.71.2"));
+  ASSERT_TRUE(wait_until([&] { return srv.server->stats().connections_rejected >= 8; }, 5s))
+      << srv.server->stats().connections_rejected;
+  size_t closed = 0;
+  for (auto& s : flood) closed += s->wait_closed();
+  EXPECT_GE(closed, 8u);
+  EXPECT_LE(closed, 10u);  // the burst (3, plus what refilled meanwhile) was let in
+  Client c({"127.0.0.1", srv.port}, tls_options(cert.cert));
+  EXPECT_EQ(c.list_maps().size(), 1u);
+  // A unit check of the bucket: 3 at once, then 2 a second.
+  server::HandshakeLimiter lim(2, 3);
+  const auto t0 = std::chrono::steady_clock::now();
+  const server::HandshakeLimiter::Prefix a{1}, b{2};
+  int in = 0;
+  for (int i = 0; i < 10; ++i) in += lim.admit(a, t0);
+  EXPECT_EQ(in, 3);
+  EXPECT_TRUE(lim.admit(b, t0));
+  EXPECT_FALSE(lim.admit(a, t0 + 400ms));
+  EXPECT_TRUE(lim.admit(a, t0 + 600ms));
 }
 
 }  // namespace

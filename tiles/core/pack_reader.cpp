@@ -1,4 +1,5 @@
 #include "tiles/core/pack_reader.hpp"
+#include "tiles/core/pack_light_check.hpp"
 #include "tiles/core/coarse_hulls.hpp"
 
 #include "tiles/core/map_preview.hpp"
@@ -121,8 +122,7 @@ void PackReader::load() {
   read_at(0, header_bytes_);
   header_ = PackHeader::parse(header_bytes_, name_);
   file_size_ = size;
-  if (const std::string why = LightSpace::check_array(header_.light_kind, header_.light); !why.empty())
-    throw FormatError(where(40) + ": header: the light is not one a build makes: " + why);
+  check_header_light(header_, name_);
   if (header_.state != PackState::complete)
     throw FormatError(name_ + ": an unfinished build (state 'building'): resume or rebuild it");
   // A payloads-only pack's compact index is the rest of the file (its header names its size).

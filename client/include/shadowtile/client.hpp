@@ -75,8 +75,16 @@ class IoPool;
 SHADOWTILE_API std::shared_ptr<IoPool> make_io_pool(unsigned threads);
 
 struct ClientOptions {
-  uint32_t cache_slots = 256;               // tile cache slots per map
+  uint32_t cache_slots = 256;               // tile cache slots per map (cache_bytes 0)
   uint32_t max_slot_bytes = 16u << 20;      // refuse maps whose tile bound exceeds this
+  // Memory per map in bytes (0: cache_slots slots instead). The slot count then follows
+  // from it: the map's metadata (skip grid, preview, DAG-MH dictionary, request table)
+  // is taken first, then every slot costs its size (the pack's tile bound, at least an
+  // index tile's 2,396 bytes) plus kSlotOverheadBytes for what each slot holds besides
+  // (its opened tile, page-table and bookkeeping entries). open() refuses, in one line, a
+  // map whose metadata and one slot do not fit. The client tools (load, render, view,
+  // report) set this from --cache-mb: memory follows the budget, whatever tile_bytes is.
+  uint64_t cache_bytes = 0;
   uint32_t want_capacity = 8192;            // queued (not yet sent) tile requests per map
   uint16_t max_in_flight = 64;              // tile requests proposed in the handshake
   uint16_t tiles_per_request = 8;           // tiles per request (small: priorities stay fresh)
@@ -124,13 +132,22 @@ struct MapStats {
   uint64_t decode_errors = 0;        // zlib or tile format failures
   uint64_t tiles_failed = 0;         // given up (retries exhausted or refused by the server)
   uint64_t tiles_cancelled = 0;
+  // Tiles a finished GetTiles never answered (a server that breaks the protocol: answers
+  // under wrong ids, or none): each asked again up to max_tile_retries, then given up.
+  uint64_t tiles_unanswered = 0;
   uint64_t cache_full = 0;           // a tile arrived while every slot was pinned
   uint64_t queue_full = 0;           // a wanted tile could not be queued (want_capacity)
   uint64_t coarse_answers = 0;       // lookups answered above the level asked for
   // A DAG-MH pack's shared dictionary, fetched with the map and resident for its life;
   // its bytes come out of cache_slots (the slots it fills are not made; one always is).
   uint64_t dictionary_bytes = 0;
+  // The memory this map accounts for: metadata + slots x (slot bytes + kSlotOverheadBytes);
+  // within ClientOptions::cache_bytes when that is set.
+  uint64_t accounted_bytes = 0;
 };
+
+// What one cache slot costs beyond its tile bytes (ClientOptions::cache_bytes).
+inline constexpr uint64_t kSlotOverheadBytes = 4096;
 
 struct ClientStats {
   uint64_t connects = 0, connect_failures = 0, disconnects = 0;
