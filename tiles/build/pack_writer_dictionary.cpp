@@ -43,13 +43,25 @@ std::vector<uint8_t> PackWriter::share_dictionary(RewrittenTiles& rewritten_tile
                   std::to_string(params_.dictionary_max_input_bytes) + " (PackParams::dictionary_max_input_bytes)";
     return {};
   }
-  std::vector<std::vector<uint8_t>> raw(which.size());
+  std::vector<std::vector<uint8_t>> raw;
+  std::vector<size_t> dagmh_tiles;
   for (size_t k = 0; k < which.size(); ++k) {
     const TileIndexEntry& t = tiles_[which[k]];
     std::vector<uint8_t> stored(t.stored_size);
     pack_io::pread_all(fd_, t.offset, stored, what);
     if (crc32_of(stored) != t.crc) throw Error(what + ": " + describe_tile(t.id) + " fails its CRC on the read back");
-    raw[k] = zlib_decompress(stored, t.raw_size, what + ": " + describe_tile(t.id));
+    std::vector<uint8_t> bytes = zlib_decompress(stored, t.raw_size, what + ": " + describe_tile(t.id));
+    if (is_mmh_buffer(bytes)) {  // a mixed tile (tiles/PACK.md "Mixed tiles") shares nothing
+      out.raw_after += t.raw_size;
+      continue;
+    }
+    dagmh_tiles.push_back(which[k]);
+    raw.push_back(std::move(bytes));
+  }
+  which = std::move(dagmh_tiles);
+  if (which.size() < 2) {
+    out.skipped = "fewer than two DAG-MH tiles";
+    return {};
   }
   // 2. Share; a dictionary above the pack bound shares only subtrees found in more tiles.
   dagmh::SharedTiles shared;
