@@ -27,6 +27,17 @@ check inspect-json 0 '"encoding": "dagmh"' -- "$st" inspect city.pack --json
 # DAG-MH builds carry the pack dictionary by default (tiles/PACK.md "DAG-MH dictionary").
 check inspect-dictionary 0 "dictionary   DAG-MH, .* inner nodes" -- "$st" inspect city.pack
 check bad-dictionary-option 1 "dagmh-dictionary: expected on or off" -- "$st" build $scene $light --resolution 256 --dagmh-dictionary maybe -o x.pack -q
+check bad-dagmh-tiles-option 1 "dagmh-tiles: expected mixed or dagmh" -- "$st" build $scene $light --resolution 256 --dagmh-tiles maybe -o x.pack -q
+check bad-up-option 1 "--up: expected y or z" -- "$st" bounds procedural:cube $light --resolution 256 --up x -o x.exr
+# A real open-mesh asset (Debian's assimp-testmodels, scripts/deps): the default DAG-MH
+# build (mixed tiles) says which up axis it read, and verify proves every texel.
+duck=/usr/share/assimp/models/Collada/teapots.DAE
+if [[ -f "$duck" ]]; then
+  check real-build 0 "up axis z \(from the file's <up_axis>, turned by assimp\)" -- "$st" build "$duck" $light --resolution 1024 -o teapots.pack
+  check real-verify-all 0 "" -- "$st" verify teapots.pack "$duck" --all
+else
+  echo "skip real-build: $duck missing (scripts/deps installs assimp-testmodels)"
+fi
 # Stack packs (a light set): build, inspect, verify every texel of every slice, export a slice.
 stackl="--light sun-path:azimuth=170..185,elevation=50..52,samples=4"
 check stack-build 0 "stack of 4 slices of 128\^2" -- "$st" build $scene $stackl --resolution 128 --tile-bytes 4096 -o stack.pack -q
