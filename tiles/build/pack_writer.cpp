@@ -263,10 +263,11 @@ void PackWriter::finish(const CutGrid& grid) {
   std::vector<uint8_t> grid_bytes = grid.serialize();
   const std::vector<uint8_t> preview = preview_bytes(grid);
   grid_bytes.insert(grid_bytes.end(), preview.begin(), preview.end());
-  if (params_.encoding == Encoding::dagmh && any_mmh_tile()) h.flags |= kFeatureMixedTiles;
+  const bool mixed = params_.encoding == Encoding::dagmh && any_mmh_tile();
+  if (mixed) h.flags |= kFeatureMixedTiles;
   RewrittenTiles rewritten;
   if (params_.dagmh_dictionary) {
-    const std::vector<uint8_t> dict = share_dictionary(rewritten);
+    const std::vector<uint8_t> dict = share_dictionary(rewritten, mixed);
     if (!dict.empty()) {
       h.flags |= kFeatureDagmhDictionary;
       const std::vector<uint8_t> section = dictionary_section(dict, params_.compression_level);

@@ -20,7 +20,7 @@
 
 namespace st {
 
-std::vector<uint8_t> PackWriter::share_dictionary(RewrittenTiles& rewritten_tiles) {
+std::vector<uint8_t> PackWriter::share_dictionary(RewrittenTiles& rewritten_tiles, bool must_pay) {
   const std::string what = tmp_path();
   DictionaryOutcome& out = dictionary_;
   out = DictionaryOutcome{};
@@ -83,6 +83,25 @@ std::vector<uint8_t> PackWriter::share_dictionary(RewrittenTiles& rewritten_tile
     }
     out.raw_after += shared.tiles[k].size();
     rewritten_tiles.emplace_back(tiles_[which[k]].id, std::move(shared.tiles[k]));  // in id order
+  }
+  if (must_pay) {
+    // Mixed tiles: the pack must stay no larger than the MMH pack tile for tile, so the
+    // dictionary goes in only when its stored section costs less than it saves.
+    uint64_t saved = 0;
+    for (const auto& [id, bytes] : rewritten_tiles) {
+      const auto t = std::lower_bound(tiles_.begin(), tiles_.end(), id,
+                                      [](const TileIndexEntry& e, uint64_t i) { return e.id < i; });
+      const uint64_t now = zlib_compress(bytes, params_.compression_level).size();
+      saved += t->stored_size > now ? t->stored_size - now : 0;
+    }
+    const uint64_t cost = kPackDictionaryHeaderBytes + zlib_compress(shared.dictionary, params_.compression_level).size();
+    if (saved <= cost) {
+      rewritten_tiles.clear();
+      out.raw_after = out.raw_before;
+      out.skipped = "it would store " + std::to_string(cost) + " bytes to save " + std::to_string(saved) +
+                    " in the DAG-MH tiles of a pack with mixed tiles";
+      return {};
+    }
   }
   out.bytes = shared.dictionary.size();
   out.tiles_rewritten = rewritten_tiles.size();
