@@ -25,7 +25,7 @@ namespace st::cli {
 namespace {
 
 struct BoundsOptions {
-  std::string scene, light, resolution, region, up = "y", output;
+  std::string scene, light, resolution, region, up, output;
   uint32_t preview_size = 2048;
 };
 
@@ -102,8 +102,7 @@ void run_bounds(const BoundsOptions& o) {
   const TraceRegion region = parse_region(o.region, level);
   const LightSpec spec = LightSpec::parse(o.light);
   SceneOptions so;
-  if (o.up == "z") so.up = UpAxis::z;
-  else if (o.up != "y") throw Error("--up: expected y or z, got '" + o.up + "'");
+  so.up = parse_up_axis(o.up);
   if (o.output.empty()) throw Error("-o: an output .exr path is required");
   {  // fail before a long trace, not after it
     const auto dir = std::filesystem::path(o.output).parent_path();
@@ -166,7 +165,7 @@ void setup_bounds(CLI::App& sub) {
   sub.add_option("--region", o->region,
                  "Texels X,Y,W,H of the map to trace (default: the whole map; at most "
                  "8192^2 texels per call, so larger maps need --region)");
-  sub.add_option("--up", o->up, "Up axis of a scene file: y (default) or z (turned to +Y up)");
+  sub.add_option("--up", o->up, "Up axis of a scene file: y or z; default: the file's own (Quake 3: z; FBX metadata; COLLADA <up_axis>), else y");
   sub.add_option("-o,--output", o->output,
                  "Output EXR (channels lo, hi as float32); a PNG preview is written beside "
                  "it with the same stem")

@@ -38,7 +38,7 @@ TexelRegion parse_region(const std::string& text) {
 
 struct BuildArgs {
   std::string scene, light, resolution = "4096", encoding = "dagmh", out, report, region,
-                     construction = "bottom-up", up = "y", intervals = "default", shard,
+                     construction = "bottom-up", up, intervals = "default", shard,
               builder = "auto", skip = "auto";
   std::optional<uint32_t> skip_level;
   uint32_t tile_bytes = 64 * 1024, depth_bits = 16;
@@ -51,6 +51,7 @@ struct BuildArgs {
   double deep_epsilon = -1;
   std::string deep_from;  // a deep OpenEXR to take the deep map from instead of sampling
   std::string dagmh_dictionary = "on";  // tiles/PACK.md "DAG-MH dictionary"
+  std::string dagmh_tiles = "mixed";     // tiles/PACK.md "Mixed tiles"
 };
 
 // What the pack's deep directory records of the deep map.
@@ -175,6 +176,9 @@ void run(const BuildArgs& a) {
   if (a.dagmh_dictionary != "on" && a.dagmh_dictionary != "off")
     throw Error("--dagmh-dictionary: expected on or off, got '" + a.dagmh_dictionary + "'");
   o.dagmh_dictionary = a.dagmh_dictionary == "on" && o.encoding == Encoding::dagmh;
+  if (a.dagmh_tiles != "mixed" && a.dagmh_tiles != "dagmh")
+    throw Error("--dagmh-tiles: expected mixed or dagmh, got '" + a.dagmh_tiles + "'");
+  o.dagmh_mixed_tiles = a.dagmh_tiles == "mixed" && o.encoding == Encoding::dagmh;
   if (!a.shard.empty()) o.shard = BuildShard::parse(a.shard);
   if (a.mpi && o.shard) throw Error("--mpi and --shard: choose one (a shard is one process's slice)");
 #ifdef SHADOWTILE_HAVE_MPI
@@ -188,7 +192,7 @@ void run(const BuildArgs& a) {
   o.light_spec = a.light;
 
   SceneOptions so;
-  so.up = a.up == "z" ? UpAxis::z : UpAxis::y;
+  so.up = parse_up_axis(a.up);
   Scene scene = load_scene(a.scene, so);
   LightSpec spec = LightSpec::parse(a.light);
   LightSpace light = LightSpace::fit(spec, scene.bounds());
@@ -317,7 +321,7 @@ void setup(CLI::App& app) {
   app.add_option("--region", a->region,
                  "Build only cells touching texels X,Y,W,H of the finest level (the rest constant)");
   app.add_option("--compression", a->compression, "zlib level 0..12 (libdeflate)")->capture_default_str();
-  app.add_option("--up", a->up, "Up axis of the scene file: y (glTF) or z")->capture_default_str();
+  app.add_option("--up", a->up, "Up axis of a scene file: y or z; default: the file's own (Quake 3: z; FBX metadata; COLLADA <up_axis>), else y");
   app.add_option("--intervals", a->intervals,
                  "default: [first hit, exit of closed objects]; static: an open surface's interval also "
                  "reaches to just below the next surface (lossless for receivers on surfaces only)")
@@ -355,6 +359,11 @@ void setup(CLI::App& app) {
                  "dagmh: on (default) moves subtrees found in two or more tiles into one pack-wide dictionary "
                  "that clients fetch once with the skip grid (smaller tiles, same answers); off keeps every tile "
                  "self-contained")
+      ->capture_default_str();
+  app.add_option("--dagmh-tiles", a->dagmh_tiles,
+                 "dagmh: mixed (default) writes a tile as MMH where that stores in fewer bytes (open meshes' "
+                 "zero-width intervals), so the pack is never larger than MMH's tile for tile; dagmh writes "
+                 "every tile as DAG-MH")
       ->capture_default_str();
   app.add_flag("-q,--quiet", a->quiet, "No summary or progress");
   app.callback([a]() { run(*a); });

@@ -35,7 +35,7 @@ struct ExportArgs {
   bool level_set = false;
   // --deep
   bool deep = false;
-  std::string light, up = "y";
+  std::string light, up;
   uint32_t samples = 4;
   double epsilon = -1;
   uint64_t seed = 1;
@@ -48,8 +48,7 @@ void run_deep(const ExportArgs& a) {
   if (a.light.empty()) throw Error("export --deep: --light is required");
   const LightSpec spec = LightSpec::parse(a.light);
   SceneOptions so;
-  if (a.up == "z") so.up = UpAxis::z;
-  else if (a.up != "y") throw Error("--up: expected y or z, got '" + a.up + "'");
+  so.up = parse_up_axis(a.up);
   const uint32_t level = a.level_set ? a.level : 8;
   if (level > kMaxLevel) throw Error("--level " + std::to_string(level) + " exceeds " + std::to_string(kMaxLevel));
   const Rect r = region_of(a.region, level);
@@ -156,7 +155,7 @@ void setup(CLI::App& app) {
   app.add_option("--samples", a->samples, "With --deep: jittered samples per texel side (N = S^2, 1..64; default 4)");
   app.add_option("--epsilon", a->epsilon, "With --deep: compression bound (default 0.25 / sqrt(N), DSM 2000 §4)");
   app.add_option("--seed", a->seed, "With --deep: jitter seed (default 1)");
-  app.add_option("--up", a->up, "With --deep: up axis of a scene file, y (default) or z");
+  app.add_option("--up", a->up, "With --deep: Up axis of a scene file: y or z; default: the file's own (Quake 3: z; FBX metadata; COLLADA <up_axis>), else y");
   app.add_option("--level", a->level, "Level to decode (each level is a complete map; default min(L, 12))")
       ->each([a](const std::string&) { a->level_set = true; });
   app.add_option("--slice", a->slice, "Stack packs: the slice W (light sample) to export");

@@ -80,7 +80,7 @@ size_t fetch_for_receivers(client::Map& map, const std::vector<Receiver>& rec, c
 namespace {
 
 struct RenderArgs {
-  std::string pack, server, map, scene, camera, size = "960x540", out, up = "y", key_file, tls_ca, tls_name;
+  std::string pack, server, map, scene, camera, size = "960x540", out, up, key_file, tls_ca, tls_name;
   bool tls = false;
   uint32_t pcf = 0;
   bool diff = false;
@@ -194,7 +194,7 @@ void run(const RenderArgs& a) {
   // Hierarchical filtering: one pixel's angle from the vertical field of view.
   if (a.filter) o.pixel_angle = 2 * std::tan(cam.fov_deg * 3.14159265358979323846 / 360) / o.height;
   SceneOptions so;
-  so.up = a.up == "z" ? UpAxis::z : UpAxis::y;
+  so.up = parse_up_axis(a.up);
   const Scene scene = load_scene(a.scene, so);
 
   std::shared_ptr<const PackReader> reader;
@@ -264,7 +264,7 @@ Register reg{"render", "Render a camera view shaded with the map's shadows (EXR 
   sub.add_option("--tls-name", a->tls_name, "With --server: name the certificate must carry");
   sub.add_option("--map", a->map, "Map name on the server");
   sub.add_option("--scene", a->scene, "Scene the map was built from (primary rays)")->required();
-  sub.add_option("--up", a->up, "Up axis of a scene file: y or z")->capture_default_str();
+  sub.add_option("--up", a->up, "Up axis of a scene file: y or z; default: the file's own (Quake 3: z; FBX metadata; COLLADA <up_axis>), else y");
   sub.add_option("--camera", a->camera, "pos=X,Y,Z,target=X,Y,Z[,fov=DEG]")->required();
   sub.add_option("--size", a->size, "Image size WxH")->capture_default_str();
   sub.add_option("--pcf", a->pcf, "PCF radius R: (2R+1)^2 taps (0: single tap)")->capture_default_str()

@@ -36,7 +36,7 @@ namespace st::cli {
 namespace {
 
 struct VerifyArgs {
-  std::string pack, scene, up = "y", builder = "pack";
+  std::string pack, scene, up, builder = "pack";
   uint64_t samples = 1000000, seed = 1;
   uint32_t show = 10;
   bool all = false;
@@ -230,7 +230,7 @@ void run(const VerifyArgs& a) {
               reader->tiles().size());
 
   SceneOptions so;
-  so.up = a.up == "z" ? UpAxis::z : UpAxis::y;
+  so.up = parse_up_axis(a.up);
   Scene scene = load_scene(a.scene, so);
   if (reader->deep_directory()) {
     // The deep part against the scene's partial occluders; the opaque map against the rest.
@@ -411,7 +411,7 @@ void setup(CLI::App& app) {
                  "(--cell-side) instead of all of it (maps too large to re-trace whole)");
   app.add_option("--cell-side", a->cell_side, "With --cells: the squares' side in texels, a power of two")
       ->capture_default_str();
-  app.add_option("--up", a->up, "Up axis of the scene file: y or z")->capture_default_str();
+  app.add_option("--up", a->up, "Up axis of a scene file: y or z; default: the file's own (Quake 3: z; FBX metadata; COLLADA <up_axis>), else y");
   app.callback([a]() { run(*a); });
 }
 

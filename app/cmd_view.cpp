@@ -48,7 +48,7 @@ void parse_time_range(const std::string& option, const std::string& text, double
 namespace {
 
 struct ViewArgs {
-  std::string server, map, scene, path = "flyover", size = "1920x1080", device, out = "view-out", json, up = "y";
+  std::string server, map, scene, path = "flyover", size = "1920x1080", device, out = "view-out", json, up;
   std::string time, time_sweep;
   bool soft = false, full_walks = false;
   uint32_t frames = 24, pcf = 3;
@@ -72,7 +72,7 @@ void run(const ViewArgs& a) {
     parse_time_range("--time-sweep", a.time_sweep, time0, time1);
   }
   SceneOptions so;
-  so.up = a.up == "z" ? UpAxis::z : UpAxis::y;
+  so.up = parse_up_axis(a.up);
   const Scene scene = load_scene(a.scene, so);
   client::ClientOptions co;
   co.client_name = "shadowtile-view";
@@ -237,7 +237,7 @@ Register reg{"view", "Headless viewer: fly a camera path, GPU shadow pass from s
                sub.add_option("--server", a->server, "Server HOST:PORT")->required();
                sub.add_option("--map", a->map, "Map name")->required();
                sub.add_option("--scene", a->scene, "The scene the map was built from")->required();
-               sub.add_option("--up", a->up, "Up axis of a scene file: y or z")->check(CLI::IsMember({"y", "z"}));
+               sub.add_option("--up", a->up, "Up axis of a scene file: y or z; default: the file's own (Quake 3: z; FBX metadata; COLLADA <up_axis>), else y")->check(CLI::IsMember({"y", "z"}));
                sub.add_option("--path", a->path, "Camera path: flyover, orbit, walk, teleport");
                sub.add_option("--frames", a->frames, "Frames to render");
                sub.add_option("--fps", a->fps, "Simulated frames per second of the path");

@@ -22,6 +22,7 @@ std::string feature_names(uint32_t flags) {
   add(kFeatureDagmhDictionary, "dagmh-dictionary");
   add(kFeatureCompressedGrid, "compressed-grid");
   add(kFeaturePayloadsOnly, "payloads-only");
+  add(kFeatureMixedTiles, "mixed-tiles");
   return s.empty() ? "none" : s;
 }
 

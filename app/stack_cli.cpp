@@ -24,7 +24,7 @@ void run_stack_build(const StackBuildArgs& a) {
   o.scene_spec = a.scene;
   o.light_spec = a.light;
   SceneOptions so;
-  so.up = a.up == "z" ? UpAxis::z : UpAxis::y;
+  so.up = parse_up_axis(a.up);
   const Scene scene = load_scene(a.scene, so);
   if (!a.quiet) std::printf("%s\n", summary(scene).c_str());
   Progress progress("build " + a.out, "slices");
@@ -58,7 +58,7 @@ void verify_stack_pack(const std::string& pack, const std::string& scene_spec, c
   std::printf("verify %s: all %zu octree tiles, checksums and the stack grid are intact\n", pack.c_str(),
               reader->tiles().size());
   SceneOptions so;
-  so.up = up == "z" ? UpAxis::z : UpAxis::y;
+  so.up = parse_up_axis(up);
   const Scene scene = load_scene(scene_spec, so);
   if (scene.content_hash() != reader->header().scene_hash)
     std::printf("warning: the scene's hash differs from the one the pack was built from\n");

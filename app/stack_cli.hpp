@@ -15,7 +15,7 @@ class PackReader;
 namespace st::cli {
 
 struct StackBuildArgs {
-  std::string scene, light, resolution, out, up = "y";
+  std::string scene, light, resolution, out, up;
   std::optional<uint32_t> skip_level;
   uint32_t tile_bytes = 64 * 1024;
   int compression = 6;

@@ -4,7 +4,10 @@
 // (tiles/core/DAGMH.md: header, skip table, inner nodes, treelets, chunk infos,
 // multipliers), raw and as stored. A section's stored share is its marginal cost: the
 // tile's zlib size (level 6, as packs store tiles) minus that of the tile without it,
-// summed over tiles (so the shares need not add up to the stored total).
+// summed over tiles (so the shares need not add up to the stored total). MH and MMH
+// tiles (an MH/MMH pack's, or the MMH tiles of a DAG-MH pack with mixed tiles) are split
+// the same way into header, node words (structure: child masks, offsets), values and
+// padding, found by walking each tree from its root (tiles/core/mh_quadtree_format.hpp).
 //
 //   bench_pack_bytes PACK... [--json PATH]
 #include <bit>
@@ -12,11 +15,14 @@
 #include <cstring>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <span>
 #include <string>
 #include <vector>
 
 #include "common/error.hpp"
 #include "tiles/core/dagmh_format.hpp"
+#include "tiles/core/encoding.hpp"
+#include "tiles/core/mh_quadtree_format.hpp"
 #include "tiles/core/map_preview.hpp"
 #include "tiles/core/pack_reader.hpp"
 
@@ -26,6 +32,44 @@ struct Part {
   const char* name;
   uint64_t raw = 0, stored = 0;
 };
+
+// Word classes of an MH/MMH tile: 0 header, 1 node words, 2 values, 3 padding.
+std::vector<uint8_t> mh_word_classes(const std::vector<uint8_t>& raw) {
+  namespace q = st::mhq;
+  const uint32_t levels = raw[q::kOffLevels];
+  const bool relative = raw[q::kOffFlags] & q::kFlagRelative, root_leaf = raw[q::kOffFlags] & q::kFlagRootLeaf;
+  const size_t tree = q::tree_offset(levels), words = (raw.size() - tree) / 4;
+  std::vector<uint8_t> cls(words, 3);
+  auto word = [&](size_t w) { return st::load_le<uint32_t>(raw.data() + tree + 4 * w); };
+  if (root_leaf) {
+    cls[0] = 2;
+    return cls;
+  }
+  cls[0] = 1, cls[1] = 2;
+  std::vector<std::pair<size_t, uint32_t>> todo{{0, 0}};  // node word, level
+  std::vector<bool> seen(words, false);
+  while (!todo.empty()) {
+    auto [p, level] = todo.back();
+    todo.pop_back();
+    if (seen[p]) continue;  // a merged (shared) block is counted once
+    seen[p] = true;
+    const uint32_t nw = word(p), mask = nw & 0xFF;
+    if (!mask) continue;
+    const uint32_t shift = relative ? (nw >> 12) & 0xF : raw[q::kOffShifts + level];
+    size_t c0 = ((p >> shift) + (nw >> 16)) << shift;
+    for (uint32_t c = 0; c < 4; ++c) {
+      const uint32_t code = mask >> (2 * c) & 3;
+      if (code == q::kCodeLeaf) cls[c0] = 2;
+      if (code == q::kCodeEmpty || code == q::kCodeInner) {
+        cls[c0] = 1;
+        todo.push_back({c0, level + 1});
+      }
+      if (code == q::kCodeInner) cls[c0 + 1] = 2;
+      c0 += q::code_words(code);
+    }
+  }
+  return cls;
+}
 
 void row(const char* name, uint64_t bytes, uint64_t total) {
   std::printf("  %-34s %12llu  %5.1f%%\n", name, (unsigned long long)bytes, 100.0 * double(bytes) / double(total));
@@ -70,6 +114,43 @@ nlohmann::json measure(const std::string& path) {
                         {"header_params", h.journal_offset}, {"tile_records", records}, {"payloads", payload},
                         {"cell_records", cells_and_pad}, {"grid_section_stored", h.grid_size}, {"skip_grid", grid}, {"preview", preview},
                         {"dictionary", dict},     {"index", index},      {"tiles_raw", tile_raw}};
+  // MH / MMH tiles: header, node words, values, padding (raw and marginal stored).
+  Part mh_parts[4] = {{"header"}, {"node words"}, {"values"}, {"padding"}};
+  uint64_t mh_tiles = 0, mh_stored = 0, mh_raw = 0;
+  for (const auto& e : reader->tiles()) {
+    if (e.kind != st::TileKind::encoded || h.encoding == st::Encoding::vsdag) continue;
+    const std::vector<uint8_t> raw = reader->read_raw(e.id);
+    if (st::load_le<uint32_t>(raw.data()) != st::mhq::kMagicMh && !st::is_mmh_buffer(raw)) continue;
+    ++mh_tiles;
+    mh_raw += raw.size();
+    const size_t tree = st::mhq::tree_offset(raw[st::mhq::kOffLevels]);
+    const std::vector<uint8_t> cls = mh_word_classes(raw);
+    const uint64_t full = st::zlib_compress(raw, 6).size();
+    mh_stored += full;
+    mh_parts[0].raw += tree;
+    mh_parts[0].stored += full - st::zlib_compress(std::span(raw).subspan(tree), 6).size();
+    for (uint8_t k = 1; k < 4; ++k) {
+      std::vector<uint8_t> without(raw.begin(), raw.begin() + long(tree));
+      for (size_t w = 0; w < cls.size(); ++w) {
+        if (cls[w] == k) {
+          mh_parts[k].raw += 4;
+          continue;
+        }
+        without.insert(without.end(), raw.begin() + long(tree + 4 * w), raw.begin() + long(tree + 4 * w + 4));
+      }
+      mh_parts[k].stored += full - st::zlib_compress(without, 6).size();
+    }
+  }
+  if (mh_tiles) {
+    std::printf("  MH/MMH tiles: %llu, raw %llu, stored %llu; section: raw / marginal stored\n",
+                (unsigned long long)mh_tiles, (unsigned long long)mh_raw, (unsigned long long)mh_stored);
+    nlohmann::json sections = nlohmann::json::object();
+    for (const Part& p : mh_parts) {
+      std::printf("    %-14s %10llu  %10llu\n", p.name, (unsigned long long)p.raw, (unsigned long long)p.stored);
+      sections[p.name] = {{"raw", p.raw}, {"stored", p.stored}};
+    }
+    out["mh_tiles"] = {{"tiles", mh_tiles}, {"raw", mh_raw}, {"stored", mh_stored}, {"sections", sections}};
+  }
   if (h.encoding != st::Encoding::dagmh) return out;
   Part parts[6] = {{"header"}, {"skip table"}, {"inner nodes"}, {"treelets"}, {"chunk infos"}, {"multipliers"}};
   uint64_t stored_sum = 0;
@@ -77,8 +158,9 @@ nlohmann::json measure(const std::string& path) {
   uint64_t k_hist[33] = {}, mask_zero = 0, mask_full = 0, values_in_chunks = 0;
   for (const auto& e : reader->tiles()) {
     if (e.kind != st::TileKind::encoded) continue;
-    ++encoded_tiles;
     const std::vector<uint8_t> raw = reader->read_raw(e.id);
+    if (st::is_mmh_buffer(raw)) continue;  // a mixed tile: counted with the MH/MMH tiles above
+    ++encoded_tiles;
     const st::dagmh::Header th = st::dagmh::load_header(raw.data());
     const st::dagmh::Sections ts = st::dagmh::sections_of(th, raw.size());
     ++skip_hist[std::min<uint32_t>(th.skip_level, 6)];
@@ -116,6 +198,7 @@ nlohmann::json measure(const std::string& path) {
     if (k_hist[k]) std::printf(" %d:%llu", k, (unsigned long long)k_hist[k]);
   std::printf("\n");
   out["dagmh_sections"] = sections;
+  out["dagmh_tiles"] = {{"tiles", encoded_tiles}, {"stored", stored_sum}};
   return out;
 }
 

@@ -332,8 +332,11 @@ float st_tile_depth(uint slot, uint rel, uint x, uint y) {
   const uint base = slot * ST_PAGE(kPtSlotWords);
   const uint enc = ST_PAGE(kPtEncoding);
   if (enc == 3u) return st_vsdag_depth(base, rel, x, y);
-  if (enc == 2u) return st_dag_depth(base, rel, x, y);
-  return st_mh_depth(base, rel, x, y, enc == 1u);
+  // A DAG-MH pack's tile may be an MMH buffer, told by its magic "STMM" (tiles/PACK.md
+  // "Mixed tiles"; encoding.cpp open_encoded).
+  const bool mmh_tile = enc == 2u && ST_POOL(base) == 0x4D4D5453u;
+  if (enc == 2u && !mmh_tile) return st_dag_depth(base, rel, x, y);
+  return st_mh_depth(base, rel, x, y, enc == 1u || mmh_tile);
 }
 
 // ---- the page-table walk (page_table.hpp walk_page_table; remote_map.cpp depth_locked) ----

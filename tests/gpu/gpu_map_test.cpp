@@ -190,6 +190,50 @@ TEST(GpuMap, EveryTexelOfADictionaryPackAnswersBitExactlyLikeTheCpu) {
   EXPECT_EQ(st.validation_messages, 0u);
 }
 
+// A DAG-MH pack with mixed tiles (tiles/PACK.md "Mixed tiles"): every other tile an MMH
+// buffer (the builder picks by size; here the order decides, so both kinds are sure to be
+// there), told apart by its magic on the GPU as on the CPU, every answer the CPU's bits.
+TEST(GpuMap, EveryTexelOfAMixedTilesPackAnswersBitExactlyLikeTheCpu) {
+  const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/gpu_mixed.pack";
+  const Hierarchy h = build_hierarchy(looptest::random_field(test_level(), 5));
+  CutParams cut;
+  cut.map_level = test_level();
+  cut.skip_level = 2;
+  cut.tile_bytes = 4096;
+  cut.codec = TileCodec::of(Encoding::dagmh);
+  auto count = std::make_shared<uint32_t>(0);
+  cut.codec.encode = [count](const Hierarchy& t) { return ++*count % 2 ? encode_mmh(t) : encode_dagmh(t); };
+  PackParams pp = PackParams::from(
+      LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), Aabb{{-10, 0, -10}, {10, 5, 10}}), cut);
+  pp.dagmh_dictionary = true;
+  write_pack(path, h, cut, pp);
+  const auto pack = PackReader::open(path);
+  ASSERT_TRUE(pack->header().flags & kFeatureMixedTiles);
+  size_t mmh = 0, dag = 0;
+  for (const TileIndexEntry& t : pack->tiles())
+    if (t.kind == TileKind::encoded) ++(is_mmh_buffer(pack->read_raw(t.id)) ? mmh : dag);
+  ASSERT_GT(mmh, 0u);
+  ASSERT_GT(dag, 0u);
+  looptest::TestServer srv = start_server({path});
+  client::ClientOptions co = looptest::quick_options();
+  co.cache_slots = uint32_t(pack->tiles().size()) + 32;
+  client::Client c({"127.0.0.1", srv.port}, co);
+  client::Map map = c.open("gpu_mixed");
+  ASSERT_TRUE(fetch_all(map));
+  // The client's CPU answers are the pack's own (every texel, every level).
+  PackEvaluator local(PackReader::open(path));
+  for (uint32_t l = 0; l <= map.finest_level(); ++l)
+    for (uint32_t y = 0; y < (1u << l); ++y)
+      for (uint32_t x = 0; x < (1u << l); ++x)
+        ASSERT_EQ(bits(map.depth(l, x, y)), bits(local.depth(l, x, y))) << l << " " << x << " " << y;
+  GpuMap g(map, gputest::options());
+  EXPECT_EQ(g.sync(), map.stats().cache.resident);
+  expect_bit_exact(g, map, 19);
+  const GpuStats st = g.stats();
+  EXPECT_EQ(st.holes, 0u);
+  EXPECT_EQ(st.validation_messages, 0u);
+}
+
 // The tiles the CPU's page-table walk over the same cache finds absent for each texel.
 std::map<uint64_t, uint32_t> absent_tiles(const client::Map& map, const std::vector<GpuQuery>& q) {
   const client::RemoteMap& rm = client::MapAccess::remote(map);

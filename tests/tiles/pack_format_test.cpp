@@ -94,7 +94,9 @@ TEST(PackFormat, HeaderRefusesEveryBadField) {
     return h.serialize();
   };
   std::vector<std::array<uint8_t, kPackHeaderBytes>> cases = {
-      resigned([](PackHeader& h) { h.flags |= 1u << 9; }),
+      resigned([](PackHeader& h) { h.flags |= 1u << 10; }),
+      // Mixed tiles (bit 9): DAG-MH packs only.
+      resigned([](PackHeader& h) { h.flags |= kFeatureMixedTiles, h.encoding = Encoding::mmh; }),
       resigned([](PackHeader& h) { h.map_level = 21; }),
       resigned([](PackHeader& h) { h.skip_level = 11; }),
       resigned([](PackHeader& h) { h.tile_bytes = 0; }),
@@ -120,6 +122,12 @@ TEST(PackFormat, HeaderRefusesEveryBadField) {
     h.grid_size += 64, h.index_offset += 64;
     EXPECT_EQ(PackHeader::parse(h.serialize(), "x.pack").flags, h.flags);
     EXPECT_EQ(load_le<uint32_t>(h.serialize().data() + 20), 0x43u);  // exit_depths | has_tiles | bit 6
+  }
+  {  // mixed tiles (bit 9) are accepted on a DAG-MH pack
+    PackHeader h = sample_header();
+    h.flags |= kFeatureMixedTiles;
+    EXPECT_EQ(uint32_t(kFeatureMixedTiles), 0x200u);  // format constant
+    EXPECT_EQ(PackHeader::parse(h.serialize(), "x.pack").flags, h.flags);
   }
   for (size_t i = 0; i < cases.size(); ++i) {
     try {

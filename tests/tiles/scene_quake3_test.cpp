@@ -206,6 +206,17 @@ TEST(Quake3, MapInStoredAndDeflatedPk3AndBareBspLoads) {
   EXPECT_EQ(load_scene(bare, z_up).content_hash(), load_scene(tmp("stored.pk3"), z_up).content_hash());
 }
 
+TEST(Quake3, MapsLoadUprightWithoutBeingToldAndAGivenAxisOverrides) {
+  const std::string path = tmp("upright.bsp");
+  write_bytes(path, test_map());
+  const Scene s = load_scene(path);  // Quake 3 is Z-up: turned without SceneOptions::up
+  expect_test_map(s);
+  EXPECT_EQ(up_axis_text(s), "z (Quake 3 maps are Z-up)");
+  const Scene as_written = load_scene(path, SceneOptions{UpAxis::y});
+  EXPECT_EQ(up_axis_text(as_written), "y (given)");
+  EXPECT_EQ(as_written.bounds().hi, (Vec3d{64, 64, 100}));  // height stays along +Z
+}
+
 TEST(Quake3, BadArchivesAndMapsGiveClearErrors) {
   std::string empty_map = "IBSP";
   put<int32_t>(empty_map, 46);

@@ -99,6 +99,11 @@ struct MapBuildOptions {
   // DAG-MH: finish with the pack-wide dictionary of shared subtrees (PackParams::
   // dagmh_dictionary; tiles/PACK.md "DAG-MH dictionary"). The CLI turns it on by default.
   bool dagmh_dictionary = false;
+  // DAG-MH: a tile whose MMH encoding stores in fewer bytes is written as MMH instead
+  // (TileCodec::dagmh_or_mmh; pack feature mixed_tiles, tiles/PACK.md "Mixed tiles"), so
+  // no tile of the pack is larger than the MMH pack's would be. The CLI turns it on by
+  // default (--dagmh-tiles mixed).
+  bool dagmh_mixed_tiles = false;
   // Build only the cells touching this region; every other cell is the constant
   // kLitDepth (a partial map: only texels inside the region are traced and lossless).
   std::optional<TexelRegion> region;

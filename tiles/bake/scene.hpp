@@ -3,6 +3,7 @@
 #pragma once
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -32,6 +33,8 @@ struct SceneStats {
   uint64_t meshes_flipped = 0;      // closed meshes whose winding was turned outwards
 };
 
+enum class UpAxis { y, z };
+
 struct Scene {
   std::string name;                            // the spec or file name it came from
   std::vector<Vec3d> vertices;                 // world space, double
@@ -43,6 +46,10 @@ struct Scene {
   std::vector<AlphaTexture> alpha_textures;
   std::vector<Volume> volumes;
   SceneStats stats;
+  // Files: the source axis that was turned to +Y (up_axis_text() says which and why);
+  // up_reason empty for procedural scenes, which are generated +Y up.
+  UpAxis up = UpAxis::y;
+  std::string up_reason;
 
   Aabb bounds() const;
   size_t closed_triangle_count() const;
@@ -53,11 +60,21 @@ struct Scene {
   uint64_t content_hash() const;
 };
 
-enum class UpAxis { y, z };
-
 struct SceneOptions {
-  UpAxis up = UpAxis::y;  // Z-up sources are turned to Y-up on load
+  // The source's up axis, turned to +Y on load. Unset: the file's own, where it is fixed
+  // or recorded (Quake 3 maps: Z; FBX: the UpAxis / UpAxisSign metadata assimp exposes;
+  // COLLADA: <up_axis>, applied by assimp), else Y. Set: overrides what the file says
+  // (COLLADA's <up_axis> is then ignored too).
+  std::optional<UpAxis> up;
 };
+
+// "z (from the file's metadata)", "y (given)", ...: the axis a file scene was read with
+// and why; "y" for procedural scenes.
+std::string up_axis_text(const Scene& scene);
+
+// The CLIs' --up: "" (unset: the file's own axis), "y" or "z"; anything else throws
+// st::Error naming the option.
+std::optional<UpAxis> parse_up_axis(const std::string& text);
 
 // Loads "procedural:NAME[,k=v...]" or a file path. Throws st::Error with a one-line
 // message naming the file / mesh / parameter at fault: missing file, unknown format,
@@ -65,10 +82,10 @@ struct SceneOptions {
 // Files: one st::Mesh per mesh instance (node transforms applied in double, named after
 // the mesh, else the node), triangulated, points and lines dropped, vertices welded by
 // exact position per mesh, degenerate triangles dropped (counted), closed meshes turned
-// outwards (counted). options.up applies to files only (procedural scenes are +Y up).
-// COLLADA files carrying <up_axis>Z_UP</up_axis> are already turned by assimp itself.
-// Quake 3 maps (.bsp, .pk3, "ARCHIVE.pk3:maps/NAME.bsp") are read by our own checked
-// parser, not assimp (scene_quake3.hpp); they are Z-up: pass UpAxis::z.
+// outwards (counted). options.up applies to files only (procedural scenes are +Y up);
+// Scene::up and up_reason record the axis used. Quake 3 maps (.bsp, .pk3,
+// "ARCHIVE.pk3:maps/NAME.bsp") are read by our own checked parser, not assimp
+// (scene_quake3.hpp); they are Z-up, so they load upright without options.up.
 Scene load_scene(const std::string& spec, const SceneOptions& options = {});
 
 // Procedural scenes (deterministic: splitmix64, same spec -> same content_hash()).

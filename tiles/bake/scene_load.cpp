@@ -12,6 +12,7 @@
 
 #include <cctype>
 #include <cmath>
+#include <cstdint>
 #include <exception>
 #include <filesystem>
 #include <fstream>
@@ -170,6 +171,49 @@ void check_gltf_file(const std::string& path) {
   check_gltf_structure(bytes, path);
 }
 
+// The up axis a file records, when SceneOptions::up leaves it to the file. FBX keeps it
+// in GlobalSettings, which assimp exposes as scene metadata (UpAxis 0/1/2 = X/Y/Z,
+// UpAxisSign +1/-1) without applying it. COLLADA keeps it in <asset><up_axis>, which
+// assimp applies itself to the root node: it is read here (from the file's head, where
+// <asset> is) only to say which axis was used.
+struct FileUp {
+  UpAxis up = UpAxis::y;
+  std::string reason;
+};
+
+FileUp collada_up(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::string head(64 * 1024, '\0');
+  in.read(head.data(), std::streamsize(head.size()));
+  head.resize(size_t(in.gcount()));
+  const size_t open = head.find("<up_axis>");
+  if (open == std::string::npos) return {UpAxis::y, "the file records none"};
+  const size_t from = open + 9, close = head.find("</up_axis>", from);
+  std::string axis = head.substr(from, close == std::string::npos ? 0 : close - from);
+  axis.erase(0, axis.find_first_not_of(" \t\r\n"));
+  axis.erase(axis.find_last_not_of(" \t\r\n") + 1);
+  if (axis == "Z_UP") return {UpAxis::z, "from the file's <up_axis>, turned by assimp"};
+  if (axis == "Y_UP") return {UpAxis::y, "from the file's <up_axis>"};
+  return {UpAxis::y, "the file's <up_axis> says " + axis.substr(0, 16) + ", turned by assimp"};
+}
+
+FileUp file_up(const aiScene& as, const std::string& path, const std::string& ext) {
+  int32_t axis = -1, sign = 1;
+  if (as.mMetaData && as.mMetaData->Get("UpAxis", axis)) {
+    as.mMetaData->Get("UpAxisSign", sign);
+    if (axis == 2 && sign == 1) return {UpAxis::z, "from the file's metadata"};
+    if (axis == 1 && sign == 1) return {UpAxis::y, "from the file's metadata"};
+    std::string why = "the file's metadata says up is ";
+    why.push_back(sign < 0 ? '-' : '+');
+    why.push_back(axis >= 0 && axis < 3 ? "XYZ"[axis] : '?');
+    why += ", which is not supported: read as y (pass --up)";
+    return {UpAxis::y, why};
+  }
+  if (ext == ".dae") return collada_up(path);
+  if (ext == ".zae") return {UpAxis::y, "COLLADA's <up_axis>, if any, turned by assimp"};
+  return {UpAxis::y, "the file records none"};
+}
+
 Scene import_file(const std::string& path, const SceneOptions& options) {
   namespace fs = std::filesystem;
   std::error_code ec;
@@ -183,6 +227,8 @@ Scene import_file(const std::string& path, const SceneOptions& options) {
 
   check_gltf_file(path);
   Assimp::Importer importer;
+  // A given axis overrides the file's: assimp must not turn a COLLADA file by its own.
+  if (options.up) importer.SetPropertyBool(AI_CONFIG_IMPORT_COLLADA_IGNORE_UP_DIRECTION, true);
   // Validation stays on: assimp 5.2.5 crashes on some inputs (Quake 3 .bsp) without it
   // (seen with assimp 5.2.5). No JoinIdenticalVertices/FindDegenerates: welding and degenerate
   // removal happen in append_mesh() so they are counted and identical for all sources.
@@ -208,7 +254,17 @@ Scene import_file(const std::string& path, const SceneOptions& options) {
   Scene scene;
   scene.name = path;
   FileMaterials materials(*as, path);  // partial occluders (scene_materials.hpp)
-  const Affine root = options.up == UpAxis::z ? z_up_to_y_up() : Affine{};
+  if (options.up) {
+    scene.up = *options.up;
+    scene.up_reason = "given";
+  } else {
+    FileUp found = file_up(*as, path, ext);
+    scene.up = found.up;
+    scene.up_reason = std::move(found.reason);
+  }
+  // COLLADA's own axis was applied by assimp (unless a given one overrode it).
+  const bool turned_by_assimp = !options.up && scene.up_reason.find("turned by assimp") != std::string::npos;
+  const Affine root = scene.up == UpAxis::z && !turned_by_assimp ? z_up_to_y_up() : Affine{};
   std::vector<unsigned> uses(as->mNumMeshes, 0);
   {
     std::vector<const aiNode*> todo{as->mRootNode};
@@ -264,16 +320,17 @@ Scene load_scene(const std::string& spec, const SceneOptions& options) {
   // (scene_volumes.hpp).
   if (const size_t plus = volume_suffix(spec); plus != std::string::npos) {
     Scene scene = load_scene(spec.substr(0, plus), options);
-    add_spec_volumes(scene, spec.substr(plus), options.up);
+    // Volumes follow the axis their scene was read with (a given one, else the file's).
+    add_spec_volumes(scene, spec.substr(plus), options.up.value_or(scene.up));
     return scene;
   }
-  if (spec.rfind("vdb:", 0) == 0) return load_vdb_scene(spec, options.up);
+  if (spec.rfind("vdb:", 0) == 0) return load_vdb_scene(spec, options.up.value_or(UpAxis::y));
   // Procedural scenes are generated +Y up; options.up only describes file sources.
   if (spec.rfind("procedural:", 0) == 0) return make_procedural(spec);
   // "ARCHIVE.pk3:maps/NAME.bsp" picks one map of a pack (when no file has that name).
   std::string lower = spec;
   for (char& c : lower) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  if (lower.size() > 4 && lower.compare(lower.size() - 4, 4, ".vdb") == 0) return load_vdb_scene(spec, options.up);
+  if (lower.size() > 4 && lower.compare(lower.size() - 4, 4, ".vdb") == 0) return load_vdb_scene(spec, options.up.value_or(UpAxis::y));
   const size_t pk3 = lower.find(".pk3:");
   if (pk3 != std::string::npos && !std::filesystem::exists(spec)) {
     const std::string archive = spec.substr(0, pk3 + 4), member = spec.substr(pk3 + 5);

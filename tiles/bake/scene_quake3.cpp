@@ -245,9 +245,11 @@ Scene load_quake3_bytes(std::vector<uint8_t> bytes, const std::string& path, boo
   }
   Scene scene;
   scene.name = member.empty() ? path : path + ":" + member;
+  scene.up = options.up.value_or(UpAxis::z);
+  scene.up_reason = options.up ? "given" : "Quake 3 maps are Z-up";
   for (auto& [texture, soup] : by_texture) {
     soup.name = texture_name(bsp, texture);
-    if (options.up == UpAxis::z)  // (x, y, z) -> (x, z, -y), a rotation: winding kept
+    if (scene.up == UpAxis::z)  // (x, y, z) -> (x, z, -y), a rotation: winding kept
       for (auto& v : soup.vertices) v = {v.x, v.z, -v.y};
     append_mesh(scene, std::move(soup));
   }

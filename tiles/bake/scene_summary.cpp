@@ -1,6 +1,8 @@
 // summary(): the one paragraph a CLI prints after loading a scene.
 #include <cstdio>
+#include <optional>
 
+#include "common/error.hpp"
 #include "tiles/bake/scene.hpp"
 
 namespace st {
@@ -27,7 +29,20 @@ std::string summary(const Scene& scene) {
   for (const Volume& v : scene.volumes)
     volumes += ", volume '" + v.name + "' " + std::to_string(v.nx) + "x" + std::to_string(v.ny) + "x" +
                std::to_string(v.nz) + " voxels";
-  return "scene '" + scene.name + "': " + text + volumes;
+  const std::string up = scene.up_reason.empty() ? "" : ", up axis " + up_axis_text(scene);
+  return "scene '" + scene.name + "': " + text + volumes + up;
+}
+
+std::optional<UpAxis> parse_up_axis(const std::string& text) {
+  if (text.empty()) return std::nullopt;
+  if (text == "y") return UpAxis::y;
+  if (text == "z") return UpAxis::z;
+  throw Error("--up: expected y or z, got '" + text + "'");
+}
+
+std::string up_axis_text(const Scene& scene) {
+  const std::string axis = scene.up == UpAxis::z ? "z" : "y";
+  return scene.up_reason.empty() ? axis : axis + " (" + scene.up_reason + ")";
 }
 
 }  // namespace st

@@ -263,9 +263,11 @@ void PackWriter::finish(const CutGrid& grid) {
   std::vector<uint8_t> grid_bytes = grid.serialize();
   const std::vector<uint8_t> preview = preview_bytes(grid);
   grid_bytes.insert(grid_bytes.end(), preview.begin(), preview.end());
+  const bool mixed = params_.encoding == Encoding::dagmh && any_mmh_tile();
+  if (mixed) h.flags |= kFeatureMixedTiles;
   RewrittenTiles rewritten;
   if (params_.dagmh_dictionary) {
-    const std::vector<uint8_t> dict = share_dictionary(rewritten);
+    const std::vector<uint8_t> dict = share_dictionary(rewritten, mixed);
     if (!dict.empty()) {
       h.flags |= kFeatureDagmhDictionary;
       const std::vector<uint8_t> section = dictionary_section(dict, params_.compression_level);
@@ -394,6 +396,18 @@ void PackWriter::write_finished(PackHeader h, std::vector<uint8_t> grid_bytes, c
   ::unlink(what.c_str());
   fsync_dir_of(path_);
   finished_ = true;
+}
+
+bool PackWriter::any_mmh_tile() const {
+  const std::string what = tmp_path();
+  for (const TileIndexEntry& t : tiles_) {
+    if (t.kind != TileKind::encoded) continue;
+    std::vector<uint8_t> stored(t.stored_size);
+    pack_io::pread_all(fd_, t.offset, stored, what);
+    if (crc32_of(stored) != t.crc) throw Error(what + ": " + describe_tile(t.id) + " fails its CRC on the read back");
+    if (is_mmh_buffer(zlib_decompress(stored, t.raw_size, what + ": " + describe_tile(t.id)))) return true;
+  }
+  return false;
 }
 
 std::vector<uint8_t> PackWriter::preview_bytes(const CutGrid& grid) const {

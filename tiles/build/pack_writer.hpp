@@ -147,7 +147,11 @@ class PackWriter {
   // the dictionary's raw bytes and in `rewritten` (sorted by id) the tiles that reference
   // it; empty (dictionary_.skipped says why) when none applies.
   using RewrittenTiles = std::vector<std::pair<uint64_t, std::vector<uint8_t>>>;
-  std::vector<uint8_t> share_dictionary(RewrittenTiles& rewritten);
+  // must_pay (mixed tiles): only a dictionary whose stored section is smaller than the
+  // stored bytes it saves the tiles.
+  std::vector<uint8_t> share_dictionary(RewrittenTiles& rewritten, bool must_pay);
+  // DAG-MH packs: whether some encoded tile is an MMH buffer (feature mixed_tiles).
+  bool any_mmh_tile() const;  // under mu_
   // finish()'s file: `h` complete but for the offsets, sizes and CRCs it fills.
   void write_finished(PackHeader h, std::vector<uint8_t> grid_bytes, const RewrittenTiles& rewritten);
   // PackParams::journal_records: the old layout, finished in place.

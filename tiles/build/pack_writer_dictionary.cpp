@@ -20,7 +20,7 @@
 
 namespace st {
 
-std::vector<uint8_t> PackWriter::share_dictionary(RewrittenTiles& rewritten_tiles) {
+std::vector<uint8_t> PackWriter::share_dictionary(RewrittenTiles& rewritten_tiles, bool must_pay) {
   const std::string what = tmp_path();
   DictionaryOutcome& out = dictionary_;
   out = DictionaryOutcome{};
@@ -43,13 +43,25 @@ std::vector<uint8_t> PackWriter::share_dictionary(RewrittenTiles& rewritten_tile
                   std::to_string(params_.dictionary_max_input_bytes) + " (PackParams::dictionary_max_input_bytes)";
     return {};
   }
-  std::vector<std::vector<uint8_t>> raw(which.size());
+  std::vector<std::vector<uint8_t>> raw;
+  std::vector<size_t> dagmh_tiles;
   for (size_t k = 0; k < which.size(); ++k) {
     const TileIndexEntry& t = tiles_[which[k]];
     std::vector<uint8_t> stored(t.stored_size);
     pack_io::pread_all(fd_, t.offset, stored, what);
     if (crc32_of(stored) != t.crc) throw Error(what + ": " + describe_tile(t.id) + " fails its CRC on the read back");
-    raw[k] = zlib_decompress(stored, t.raw_size, what + ": " + describe_tile(t.id));
+    std::vector<uint8_t> bytes = zlib_decompress(stored, t.raw_size, what + ": " + describe_tile(t.id));
+    if (is_mmh_buffer(bytes)) {  // a mixed tile (tiles/PACK.md "Mixed tiles") shares nothing
+      out.raw_after += t.raw_size;
+      continue;
+    }
+    dagmh_tiles.push_back(which[k]);
+    raw.push_back(std::move(bytes));
+  }
+  which = std::move(dagmh_tiles);
+  if (which.size() < 2) {
+    out.skipped = "fewer than two DAG-MH tiles";
+    return {};
   }
   // 2. Share; a dictionary above the pack bound shares only subtrees found in more tiles.
   dagmh::SharedTiles shared;
@@ -71,6 +83,25 @@ std::vector<uint8_t> PackWriter::share_dictionary(RewrittenTiles& rewritten_tile
     }
     out.raw_after += shared.tiles[k].size();
     rewritten_tiles.emplace_back(tiles_[which[k]].id, std::move(shared.tiles[k]));  // in id order
+  }
+  if (must_pay) {
+    // Mixed tiles: the pack must stay no larger than the MMH pack tile for tile, so the
+    // dictionary goes in only when its stored section costs less than it saves.
+    uint64_t saved = 0;
+    for (const auto& [id, bytes] : rewritten_tiles) {
+      const auto t = std::lower_bound(tiles_.begin(), tiles_.end(), id,
+                                      [](const TileIndexEntry& e, uint64_t i) { return e.id < i; });
+      const uint64_t now = zlib_compress(bytes, params_.compression_level).size();
+      saved += t->stored_size > now ? t->stored_size - now : 0;
+    }
+    const uint64_t cost = kPackDictionaryHeaderBytes + zlib_compress(shared.dictionary, params_.compression_level).size();
+    if (saved <= cost) {
+      rewritten_tiles.clear();
+      out.raw_after = out.raw_before;
+      out.skipped = "it would store " + std::to_string(cost) + " bytes to save " + std::to_string(saved) +
+                    " in the DAG-MH tiles of a pack with mixed tiles";
+      return {};
+    }
   }
   out.bytes = shared.dictionary.size();
   out.tiles_rewritten = rewritten_tiles.size();

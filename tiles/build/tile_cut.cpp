@@ -7,6 +7,7 @@
 #include "common/error.hpp"
 #include "tiles/core/interval.hpp"
 #include "tiles/build/mh_build.hpp"
+#include "tiles/core/pack_format.hpp"
 
 namespace st {
 
@@ -15,6 +16,12 @@ TileCodec TileCodec::of(Encoding e) {
   c.encoding = e;
   c.encode = [e](const Hierarchy& h) { return st::encode(h, e); };
   c.open = [e](std::span<const uint8_t> bytes) { return open_encoded(e, bytes); };
+  return c;
+}
+
+TileCodec TileCodec::dagmh_or_mmh() {
+  TileCodec c = of(Encoding::dagmh);
+  c.alternative = [](const Hierarchy& h) { return encode_mmh(h); };
   return c;
 }
 
@@ -123,6 +130,9 @@ SplitResult split_hierarchy(const Hierarchy& h, uint32_t d) {
 
 namespace {
 
+// The zlib level at which two encodings of a tile are compared (packs' default).
+constexpr int kChoiceLevel = 6;
+
 // Index levels for a subtree whose encoding is `bytes` > tile_bytes: enough that the
 // children average one tile (log4 of the excess), at least 1, at most the subtree's depth
 // and kMaxIndexLevels, and small enough that the index tile itself fits one tile.
@@ -142,17 +152,28 @@ GridEntry cut_subtree(const CutParams& p, Hierarchy&& h, uint32_t level, uint32_
   if (root.child_mask == 0) return GridEntry{root.value, EntryKind::constant, 0};
   const uint64_t id = make_tile_id(level, x, y);
   size_t encoded_size = SIZE_MAX;
+  std::vector<uint8_t> fits;
   try {
     std::vector<uint8_t> bytes = p.codec.encode(h);
-    if (bytes.size() <= p.tile_bytes) {
-      out.push_back(CutTile{id, TileKind::encoded, std::move(bytes)});
-      return GridEntry{root.value, EntryKind::tile, 0};
-    }
-    encoded_size = bytes.size();
+    if (bytes.size() <= p.tile_bytes) fits = std::move(bytes);
+    else encoded_size = bytes.size();
   } catch (const Error&) {
     // An encoder may refuse a subtree too large for its format (e.g. offsets that no
     // longer fit): cut it deeper like any oversized subtree. A small one is a real error.
-    if (h.depth <= kMaxIndexLevels) throw;
+    if (h.depth <= kMaxIndexLevels && !p.codec.alternative) throw;
+  }
+  if (p.codec.alternative) {
+    // The second encoding where it stores smaller (what a pack keeps is the zlib stream).
+    std::vector<uint8_t> alt = p.codec.alternative(h);
+    if (alt.size() <= p.tile_bytes &&
+        (fits.empty() || zlib_compress(alt, kChoiceLevel).size() < zlib_compress(fits, kChoiceLevel).size()))
+      fits = std::move(alt);
+    else if (fits.empty())
+      encoded_size = std::min(encoded_size, alt.size());
+  }
+  if (!fits.empty()) {
+    out.push_back(CutTile{id, TileKind::encoded, std::move(fits)});
+    return GridEntry{root.value, EntryKind::tile, 0};
   }
   const uint32_t d = choose_index_levels(encoded_size, p.tile_bytes, h.depth);
   SplitResult s = split_hierarchy(h, d);

@@ -46,7 +46,14 @@ struct TileCodec {
   Encoding encoding = Encoding::mh;
   std::function<std::vector<uint8_t>(const Hierarchy&)> encode;
   std::function<std::unique_ptr<Evaluator>(std::span<const uint8_t>)> open;
+  // Optional second encoding of a tile: a subtree takes it instead of encode()'s when it
+  // fits tile_bytes and deflates (zlib level 6, as packs store tiles) to fewer bytes, or
+  // when encode()'s does not fit and it does. open() must tell them apart (DAG-MH packs:
+  // MMH tiles by their magic, tiles/PACK.md "Mixed tiles"). Empty: encode() alone.
+  std::function<std::vector<uint8_t>(const Hierarchy&)> alternative;
   static TileCodec of(Encoding e);
+  // DAG-MH tiles, each an MMH buffer instead where that stores smaller (map builds' default).
+  static TileCodec dagmh_or_mmh();
 };
 
 inline constexpr uint32_t kDefaultTileBytes = 64 * 1024;

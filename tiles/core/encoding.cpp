@@ -2,7 +2,9 @@
 // an encoder that is linked into this build: the others answer with a clear st::Error.
 #include "tiles/core/encoding.hpp"
 
+#include "common/bytes.hpp"
 #include "common/error.hpp"
+#include "tiles/core/mh_quadtree_format.hpp"
 
 namespace st {
 
@@ -30,7 +32,12 @@ namespace {
 }
 }  // namespace
 
+bool is_mmh_buffer(std::span<const uint8_t> bytes) {
+  return bytes.size() >= 4 && load_le<uint32_t>(bytes.data()) == mhq::kMagicMmh;
+}
+
 std::unique_ptr<Evaluator> open_encoded(Encoding e, std::span<const uint8_t> bytes) {
+  if (e == Encoding::dagmh && is_mmh_buffer(bytes)) return open_mmh(bytes);  // a mixed tile
   switch (e) {
     case Encoding::mh: return open_mh(bytes);
     case Encoding::mmh: return open_mmh(bytes);

@@ -30,7 +30,12 @@ std::unique_ptr<Evaluator> open_mmh(std::span<const uint8_t> bytes);
 std::unique_ptr<Evaluator> open_dagmh(std::span<const uint8_t> bytes);
 std::unique_ptr<Evaluator> open_vsdag(std::span<const uint8_t> bytes);  // voxel shadow DAG (VSDAG.md)
 
-// Dispatch by tag.
+// Whether `bytes` start with the MMH magic "STMM": a DAG-MH pack's tile may be an MMH
+// buffer where that stored smaller (tiles/PACK.md "Mixed tiles").
+bool is_mmh_buffer(std::span<const uint8_t> bytes);
+
+// Dispatch by tag. Encoding::dagmh opens an MMH buffer as MMH (is_mmh_buffer), so every
+// reader of a DAG-MH pack's tiles takes its mixed tiles.
 std::unique_ptr<Evaluator> open_encoded(Encoding e, std::span<const uint8_t> bytes);
 
 }  // namespace st

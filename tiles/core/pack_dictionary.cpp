@@ -75,7 +75,7 @@ std::shared_ptr<const dagmh::Dictionary> open_pack_dictionary(const GridSectionP
 
 std::unique_ptr<Evaluator> open_pack_tile(Encoding e, std::span<const uint8_t> raw,
                                           const std::shared_ptr<const dagmh::Dictionary>& dict) {
-  if (e == Encoding::dagmh && dict) return open_dagmh(raw, dict);
+  if (e == Encoding::dagmh && dict && !is_mmh_buffer(raw)) return open_dagmh(raw, dict);
   return open_encoded(e, raw);
 }
 

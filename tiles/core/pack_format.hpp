@@ -85,7 +85,13 @@ enum PackFeature : uint32_t {
   // the "<name>.tmp" journal and in part files (resume, merge). Every build, resume and
   // merge writes it; never with stack.
   kFeaturePayloadsOnly = 1u << 8,
-  kKnownFeatures = 0x1FF,
+  // A DAG-MH pack some of whose encoded tiles are MMH buffers (magic "STMM", MH quadtree
+  // format with merged subtrees) because that tile stored in fewer bytes (tiles/PACK.md
+  // "Mixed tiles"): each tile's magic says which; readers open it by its magic
+  // (open_encoded). Only with encoding dagmh, never with stack. Readers before it refuse
+  // the pack by this bit.
+  kFeatureMixedTiles = 1u << 9,
+  kKnownFeatures = 0x3FF,
 };
 
 // Header layout (offset: size field):

@@ -485,7 +485,8 @@ std::string PackReader::summary() const {
                                                     {kFeatureStack, "stack"},
                                                     {kFeatureDagmhDictionary, "dagmh_dictionary"},
                                                     {kFeatureCompressedGrid, "compressed_grid"},
-                                                    {kFeaturePayloadsOnly, "payloads_only"}};
+                                                    {kFeaturePayloadsOnly, "payloads_only"},
+                                                    {kFeatureMixedTiles, "mixed_tiles"}};
   for (auto [bit, n] : names)
     if (header_.flags & bit) features += std::string(features.empty() ? "" : ",") + n;
   char buf[320];
