@@ -14,11 +14,16 @@ trap cleanup EXIT
 fail() { echo "FAIL consumer: $*"; exit 1; }
 
 cmake --install "$build" --prefix "$work/prefix" >/dev/null
-headers=$(cd "$work/prefix/include" && find . -type f | sort)
-[[ "$headers" == "./shadowtile/client.hpp" ]] || fail "installed headers are not just shadowtile/client.hpp: $headers"
+headers=$(cd "$work/prefix/include" && find . -type f | sort | tr '\n' ' ')
+gpu=OFF
+if [[ -f "$work/prefix/include/shadowtile/gpu.hpp" ]]; then gpu=ON; fi
+want_headers="./shadowtile/cache_view.hpp ./shadowtile/client.hpp "
+[[ $gpu == ON ]] && want_headers="./shadowtile/cache_view.hpp ./shadowtile/client.hpp ./shadowtile/gpu.hpp "
+[[ "$headers" == "$want_headers" ]] || fail "installed headers are not just the public ones: $headers"
+[[ $gpu == OFF || -f "$work/prefix/share/shadowtile/shaders/shadowtile.glsl" ]] || fail "shadowtile.glsl not installed"
 
 cmake -S "$src/tests/consumer" -B "$work/build" -G Ninja -DCMAKE_BUILD_TYPE=Release \
-  -DCMAKE_PREFIX_PATH="$work/prefix" -DCONSUMER_SANITIZE="$sanitize" \
+  -DCMAKE_PREFIX_PATH="$work/prefix" -DCONSUMER_SANITIZE="$sanitize" -DCONSUMER_GPU="$gpu" \
   -DCMAKE_DISABLE_FIND_PACKAGE_embree=TRUE -DCMAKE_DISABLE_FIND_PACKAGE_assimp=TRUE \
   -DCMAKE_DISABLE_FIND_PACKAGE_OpenEXR=TRUE >"$work/configure.log" 2>&1 || { cat "$work/configure.log"; fail "configure"; }
 cmake --build "$work/build" >"$work/build.log" 2>&1 || { cat "$work/build.log"; fail "build"; }
@@ -46,3 +51,10 @@ lines=$(wc -l <"$work/want.txt")
 [[ "$lines" -eq $((512 * 512)) ]] || fail "reference has $lines lines"
 cmp -s "$work/got.txt" "$work/want.txt" || { diff "$work/got.txt" "$work/want.txt" | head -5; fail "answers differ from the pack"; }
 echo "consumer: $lines texels of level $level equal the pack's, bit for bit"
+if [[ $gpu == ON ]]; then
+  VK_ICD_FILENAMES=/usr/share/vulkan/icd.d/lvp_icd.x86_64.json SHADOWTILE_VK_DEVICE=llvmpipe XDG_RUNTIME_DIR="$work" \
+    timeout 120 "$work/build/consumer_gpu" 127.0.0.1 "$port" city $level >"$work/got_gpu.txt" || fail "consumer_gpu exited $?"
+  cmp -s "$work/got_gpu.txt" "$work/want.txt" || { diff "$work/got_gpu.txt" "$work/want.txt" | head -5; fail "GPU answers differ from the pack"; }
+  [[ -f "$work/build/shade.frag.spv" ]] || fail "the fragment shader over the installed shadowtile.glsl did not compile"
+  echo "consumer_gpu: $lines texels of level $level on the GPU equal the pack's, bit for bit"
+fi

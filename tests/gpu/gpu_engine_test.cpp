@@ -1,0 +1,270 @@
+// GpuMap in engine mode, driven by a tiny engine (engine_harness.hpp) that owns the
+// instance, device, queue, command buffers, fences and the G-buffer images: GpuMap only
+// records into the engine's command buffers. Its shadow pass over the engine's images
+// equals the own-device pass and the CPU twin bit for bit, and its feedback names the
+// same absent tiles; frames in flight with a churning cache never stall and count only
+// tile, page-table and feedback bytes; the engine's loaders and allocator are the ones
+// used. The engine's validation layer must stay silent throughout.
+#include <gtest/gtest.h>
+
+#include <bit>
+#include <map>
+#include <random>
+
+#include "client/map_access.hpp"
+#include "gpu/layout.hpp"
+#include "gpu/shadow_reference.hpp"
+#include "tests/client/loopback.hpp"
+#include "tests/gpu/engine_harness.hpp"
+#include "tests/gpu/gpu_test_util.hpp"
+#include "tiles/core/light.hpp"
+
+namespace st::gpu {
+namespace {
+
+using enginetest::run_frame;
+using enginetest::Targets;
+using enginetest::TestEngine;
+using looptest::wait_until;
+
+uint32_t bits(float v) { return std::bit_cast<uint32_t>(v); }
+
+struct Served {
+  looptest::TestPack pack;
+  looptest::TestServer server;
+  std::unique_ptr<client::Client> client;
+  client::Map map;
+};
+
+Served serve(const std::string& name, uint32_t slots) {
+  Served s;
+  s.pack = looptest::build_pack(name, looptest::small_scale() ? 5 : 6, 7, looptest::first_encoding(), 2, 512);
+  s.server = looptest::start_server({s.pack.path});
+  client::ClientOptions o = looptest::quick_options();
+  o.cache_slots = slots;
+  s.client = std::make_unique<client::Client>(client::Endpoint{"127.0.0.1", s.server.port}, o);
+  s.map = s.client->open(name);
+  return s;
+}
+
+// A tilted plane across the map's light space, a little outside the box at the edges, a
+// few background pixels (w == 0): positions and normals, 4 floats a pixel.
+struct Plane {
+  static constexpr uint32_t width = 64, height = 48;
+  std::vector<float> pos, nrm;
+  explicit Plane(const PackHeader& h) : pos(size_t(width) * height * 4), nrm(pos.size()) {
+    const LightSpace ls = LightSpace::from_array(h.light_kind, h.light);
+    std::mt19937_64 rng(9);
+    std::uniform_real_distribution<double> jitter(-0.002, 0.002);
+    for (uint32_t y = 0; y < height; ++y)
+      for (uint32_t x = 0; x < width; ++x) {
+        const size_t p = size_t(y) * width + x;
+        const double u = -0.05 + 1.1 * (x + 0.5) / width + jitter(rng), v = -0.05 + 1.1 * (y + 0.5) / height;
+        const double d = 0.3 + 0.4 * u + jitter(rng) * 50;
+        const double e = ls.extent_uv(), z = ls.near_plane() + d * (ls.far_plane() - ls.near_plane());
+        const Vec3d wp = ls.origin() + ls.axis_u() * (u * e) + ls.axis_v() * (v * e) + ls.forward() * z;
+        pos[4 * p] = float(wp.x), pos[4 * p + 1] = float(wp.y), pos[4 * p + 2] = float(wp.z);
+        pos[4 * p + 3] = (x * 7 + y * 3) % 29 == 0 ? 0.0f : 1.0f;
+        const Vec3d n = ls.forward() * -1.0;
+        nrm[4 * p] = float(n.x), nrm[4 * p + 1] = float(n.y), nrm[4 * p + 2] = float(n.z);
+      }
+  }
+  ShadowPassInput input(const ShadowPassSettings& s) const {
+    ShadowPassInput in;
+    in.positions = pos;
+    in.normals = nrm;
+    in.width = width;
+    in.height = height;
+    in.kernel = s.kernel;
+    in.normal_offset = s.normal_offset;
+    in.neighbour_footprint = s.neighbour_footprint;
+    in.footprint = s.footprint;
+    in.time = s.time;
+    in.soft = s.soft;
+    in.resume_walks = s.resume_walks;
+    return in;
+  }
+};
+
+std::map<uint64_t, uint32_t> feedback_of(const GpuMap& g) {
+  std::map<uint64_t, uint32_t> m;
+  for (const auto& t : g.last_feedback()) m[t.tile] = t.pixels;
+  return m;
+}
+
+// Bytes of the resident tiles as the mirror uploads them (each padded to 4 bytes).
+uint64_t resident_tile_bytes(const client::Map& map) {
+  uint64_t sum = 0;
+  client::MapAccess::remote(map).inspect_cache([&](const TileCache& c) {
+    for (uint32_t s = 0; s < c.slot_count(); ++s) {
+      const TileId t = c.slot_tile(s);
+      if (t == kInvalidTile) continue;
+      const PageEntry pe = c.lookup(t);
+      if (pe.state == PageState::resident && pe.slot == s) sum += (c.tile_bytes(s).size() + 3) & ~size_t(3);
+    }
+  });
+  return sum;
+}
+
+bool resident(const client::Map& map, uint64_t tile) {
+  bool r = false;
+  client::MapAccess::remote(map).inspect_cache([&](const TileCache& c) { r = c.lookup(tile).state == PageState::resident; });
+  return r;
+}
+
+uint64_t feedback_bytes(uint32_t capacity, uint32_t tiles) {
+  return (uint64_t(layout::kFbHeaderWords) + capacity + uint64_t(tiles) * layout::kFbRecordWords) * 4;
+}
+
+TEST(GpuEngine, ShadowPassOverTheEnginesImagesEqualsTheOwnDevicePassAndTheCpuTwin) {
+  Served s = serve("gpu_engine_pass", 10);
+  const uint32_t l = s.map.finest_level();
+  s.map.request_region(l, 0, 0, (1u << l) / 2, (1u << l) / 2, 10);
+  ASSERT_TRUE(wait_until([&] { return s.map.region_resident(l, 0, 0, (1u << l) / 2, (1u << l) / 2); }));
+  s.server.stop();
+  ASSERT_TRUE(wait_until([&] { return !s.client->stats().connected; }));
+  const PackHeader& h = client::pack_header(s.map);
+  const Plane plane(h);
+  GpuMap own(s.map, gputest::options());
+  const uint64_t lookups_before = enginetest::g_instance_lookups + enginetest::g_device_lookups;
+  {
+    TestEngine e(2);
+    Targets t(e, plane.width, plane.height, plane.pos, plane.nrm, 2);
+    enginetest::CountingAllocator alloc(e.device, e.physical);
+    GpuOptions o;
+    o.frames_in_flight = 2;
+    {
+      GpuMap g(s.map, e.engine_device(&alloc), o);
+      EXPECT_TRUE(g.engine_mode());
+      EXPECT_GT(enginetest::g_instance_lookups + enginetest::g_device_lookups, lookups_before);  // the engine's loaders
+      EXPECT_GT(alloc.live, 0);  // and its allocator
+      EXPECT_THROW(g.sync(), GpuError);  // own-device calls refuse in engine mode
+      uint64_t frame = 100;  // the engine's counter: any start
+      std::vector<FrameStats> retired;
+      uint32_t k = 0;
+      for (uint32_t kernel : {1u, 3u, 5u}) {
+        SCOPED_TRACE(kernel);
+        ShadowPassSettings set;
+        set.kernel = kernel;
+        set.normal_offset = 0.001f;
+        set.neighbour_footprint = kernel != 5;
+        set.footprint = 2.5f;
+        const FrameStats up = run_frame(e, g, t, ++frame, set, &retired);
+        if (k++ == 0) {  // the first frame: every resident tile and the whole page table
+          EXPECT_EQ(up.tile_bytes, resident_tile_bytes(s.map));
+          EXPECT_GT(up.page_bytes, 0u);
+        } else {  // nothing changed: no tile, no page-table word
+          EXPECT_EQ(up.tile_bytes, 0u);
+          EXPECT_EQ(up.page_bytes, 0u);
+        }
+        EXPECT_EQ(up.host_io_bytes, 0u);
+        const uint64_t done = e.finish();
+        const std::span<const FrameStats> r = g.retire(done);
+        ASSERT_FALSE(r.empty());
+        ASSERT_EQ(r.back().frame, frame);
+        const FrameStats fs = r.back();
+        const std::vector<float> got = t.read(frame);
+        const std::map<uint64_t, uint32_t> engine_feedback = feedback_of(g);
+        // The own-device pass over the same G-buffer (host spans) and the CPU twin.
+        const ShadowPassInput in = plane.input(set);
+        std::vector<float> own_out(got.size()), want(got.size());
+        const FrameStats ofs = own.wait(own.submit_shadow_pass(in), own_out);
+        shadow_pass_reference(client::evaluator(s.map), h, in, want);
+        size_t bad = 0, bad_own = 0;
+        for (size_t i = 0; i < got.size(); ++i) {
+          if (bits(got[i]) != bits(want[i]) && bad++ == 0)
+            ADD_FAILURE() << "pixel " << i << ": engine pass " << got[i] << ", cpu twin " << want[i];
+          bad_own += bits(got[i]) != bits(own_out[i]);
+        }
+        EXPECT_EQ(bad, 0u);
+        EXPECT_EQ(bad_own, 0u);
+        // Feedback: the same absent tiles with the same pixel counts as the own-device pass
+        // (whose feedback the own-device tests check against the CPU's walk), all absent.
+        EXPECT_FALSE(engine_feedback.empty());  // half the map is absent
+        EXPECT_EQ(engine_feedback, feedback_of(own));
+        for (const auto& [tile, n] : engine_feedback) EXPECT_FALSE(resident(s.map, tile)) << tile;
+        EXPECT_EQ(fs.holes, ofs.holes);
+        EXPECT_EQ(fs.feedback_dropped, 0u);
+        // Per frame: tile + page-table bytes up, the feedback read back, nothing else.
+        EXPECT_EQ(fs.feedback_bytes, feedback_bytes(o.feedback_capacity, fs.feedback_tiles));
+        EXPECT_EQ(fs.host_io_bytes, 0u);
+        EXPECT_EQ(ofs.host_io_bytes, uint64_t(plane.width) * plane.height * (16 + 16 + 4));  // own mode: G-buffer in, out
+      }
+      const GpuStats st = g.stats();
+      EXPECT_EQ(st.host_io_bytes, 0u);
+      EXPECT_EQ(st.bytes_uploaded, st.tile_bytes + st.page_bytes);
+      // A frame whose ring slot still holds an unretired frame is refused, not waited for.
+      uint64_t completed = 0;
+      VkCommandBuffer cmd = e.begin(frame + 1, completed);
+      g.record_uploads(cmd, frame + 1);
+      EXPECT_THROW(g.record_uploads(cmd, frame + 3), GpuError);
+      EXPECT_THROW(g.record_uploads(cmd, frame + 1), GpuError);  // not after the last
+      e.submit(frame + 1);
+      g.retire(e.finish());
+    }
+    EXPECT_EQ(alloc.live, 0);  // every buffer given back to the engine's allocator
+    EXPECT_EQ(e.messages(), 0u) << e.first_message();
+  }
+  EXPECT_EQ(own.stats().validation_messages, 0u);
+}
+
+TEST(GpuEngine, FramesInFlightWithAChurningCacheNeverStallAndMoveOnlyTilePageAndFeedbackBytes) {
+  Served s = serve("gpu_engine_churn", 6);
+  const uint32_t l = s.map.finest_level();
+  const uint32_t side = 1u << l;
+  const Plane plane(client::pack_header(s.map));
+  TestEngine e(3);
+  Targets t(e, plane.width, plane.height, plane.pos, plane.nrm, 3);
+  GpuOptions o;
+  o.frames_in_flight = 3;
+  o.upload_budget_bytes = 600;  // about one slot a frame: uploads trail the cache
+  GpuMap g(s.map, e.engine_device(), o);
+  std::mt19937_64 rng(5);
+  std::vector<FrameStats> retired;
+  ShadowPassSettings set;
+  set.kernel = 3;
+  uint64_t frame = 0;
+  for (int i = 0; i < 30; ++i) {
+    const uint32_t w = side / 4;
+    s.map.request_region(l, rng() % (side - w), rng() % (side - w), w, w, uint16_t(1 + i));
+    run_frame(e, g, t, ++frame, set, &retired);
+  }
+  const std::span<const FrameStats> last = g.retire(e.finish());
+  retired.insert(retired.end(), last.begin(), last.end());
+  ASSERT_EQ(retired.size(), frame);
+  uint64_t tiles = 0, requested = 0;
+  for (size_t i = 0; i < retired.size(); ++i) {
+    const FrameStats& fs = retired[i];
+    EXPECT_EQ(fs.frame, i + 1);  // oldest first, every frame once
+    EXPECT_TRUE(fs.tile_bytes <= o.upload_budget_bytes || fs.slots_uploaded == 1) << fs.tile_bytes;
+    EXPECT_EQ(fs.bytes_uploaded, fs.tile_bytes + fs.page_bytes);
+    if (fs.feedback_dropped == 0) {
+      EXPECT_EQ(fs.feedback_bytes, feedback_bytes(o.feedback_capacity, fs.feedback_tiles));
+    }
+    EXPECT_EQ(fs.host_io_bytes, 0u);
+    tiles += fs.slots_uploaded;
+    requested += fs.requested;
+  }
+  EXPECT_GT(tiles, 6u);      // slots were reused
+  EXPECT_GT(requested, 0u);  // the pass's feedback reached the Map
+  // The cache holds still: frames until the mirror has caught up, then one more equals
+  // the CPU twin bit for bit.
+  s.server.stop();
+  ASSERT_TRUE(wait_until([&] { return !s.client->stats().connected; }));
+  for (int i = 0; i < 64; ++i) {
+    const FrameStats up = run_frame(e, g, t, ++frame, set);
+    if (up.tile_bytes == 0 && up.page_bytes == 0) break;
+  }
+  run_frame(e, g, t, ++frame, set);
+  g.retire(e.finish());
+  std::vector<float> want(size_t(plane.width) * plane.height);
+  shadow_pass_reference(client::evaluator(s.map), client::pack_header(s.map), plane.input(set), want);
+  const std::vector<float> got = t.read(frame);
+  size_t bad = 0;
+  for (size_t i = 0; i < got.size(); ++i) bad += bits(got[i]) != bits(want[i]);
+  EXPECT_EQ(bad, 0u);
+  EXPECT_EQ(e.messages(), 0u) << e.first_message();
+}
+
+}  // namespace
+}  // namespace st::gpu
