@@ -5,7 +5,6 @@
 #include <algorithm>
 #include <bit>
 #include <cstring>
-#include <unordered_map>
 #include <vector>
 
 #include "shadowtile/cache_view.hpp"
@@ -26,6 +25,55 @@ constexpr uint32_t kGridMagicWord = 0x52475453u;  // "STGR": a serialized CutGri
 constexpr uint32_t kDirtyBlockWords = 64;
 
 uint32_t align4(uint32_t n) { return (n + 3u) & ~3u; }
+
+// Tile -> the slot holding it on the device: open addressing, linear probing, backward-shift
+// deletion, sized once for at most slot_count keys (load <= 1/2), so linking and unlinking
+// tiles on the frame path never allocates.
+class TileSlotTable {
+ public:
+  void init(uint32_t max_keys) {
+    mask_ = std::bit_ceil(std::max<uint64_t>(16, uint64_t(max_keys) * 2)) - 1;
+    keys_.assign(mask_ + 1, kInvalidTile);
+    slots_.assign(mask_ + 1, 0);
+  }
+  uint32_t find(TileId t) const {
+    for (uint64_t i = home(t);; i = (i + 1) & mask_) {
+      if (keys_[i] == t) return slots_[i];
+      if (keys_[i] == kInvalidTile) return layout::kNoSlot;
+    }
+  }
+  void set(TileId t, uint32_t slot) {
+    uint64_t i = home(t);
+    while (keys_[i] != kInvalidTile && keys_[i] != t) i = (i + 1) & mask_;
+    keys_[i] = t;
+    slots_[i] = slot;
+  }
+  // Removes t only while it still maps to `slot`.
+  void erase(TileId t, uint32_t slot) {
+    uint64_t i = home(t);
+    while (keys_[i] != t) {
+      if (keys_[i] == kInvalidTile) return;
+      i = (i + 1) & mask_;
+    }
+    if (slots_[i] != slot) return;
+    for (uint64_t j = i;;) {  // shift later keys of the run back over the hole
+      j = (j + 1) & mask_;
+      if (keys_[j] == kInvalidTile) break;
+      const uint64_t h = home(keys_[j]);
+      if (((j - h) & mask_) < ((j - i) & mask_)) continue;  // its home lies after the hole: stays
+      keys_[i] = keys_[j];
+      slots_[i] = slots_[j];
+      i = j;
+    }
+    keys_[i] = kInvalidTile;
+  }
+
+ private:
+  uint64_t home(TileId t) const { return ((t ^ (t >> 29)) * 0x9E3779B97F4A7C15ull >> 17) & mask_; }
+  uint64_t mask_ = 0;
+  std::vector<TileId> keys_;
+  std::vector<uint32_t> slots_;
+};
 
 }  // namespace
 
@@ -79,7 +127,7 @@ struct GpuMap::Impl {
   std::vector<TileId> mirror_tile;       // per slot: the tile the device holds, or kInvalidTile
   std::vector<uint8_t> slot_levels;      // per slot: index tile levels d, 0 for an encoded tile
   std::vector<uint8_t> child_kind;       // per slot * 256: kinds of an index tile's entries
-  std::unordered_map<TileId, uint32_t> tile_slot;
+  TileSlotTable tile_slot;
   std::vector<VkBufferCopy> pool_copies, page_copies;
   std::vector<client::WantedTile> wanted;
   std::vector<FeedbackTile> feedback;
@@ -244,7 +292,7 @@ struct GpuMap::Impl {
     mirror_tile.assign(slot_count, kInvalidTile);
     slot_levels.assign(slot_count, 0);
     child_kind.assign(size_t(slot_count) * L::kChildTableWords, 0);
-    tile_slot.reserve(size_t(slot_count) * 2);
+    tile_slot.init(slot_count);
     pool_copies.reserve(slot_count);
     page_copies.reserve(dirty.size());
     wanted.reserve(opt.feedback_capacity);
@@ -419,7 +467,7 @@ struct GpuMap::Impl {
     // The cache may already have moved the tile to another slot that this pass linked
     // first (slots are compared in index order): that mapping must survive, or an index
     // tile linked later would not find its child and answer coarser than the CPU.
-    if (auto it = tile_slot.find(t); it != tile_slot.end() && it->second == s) tile_slot.erase(it);
+    tile_slot.erase(t, s);
     mirror_tile[s] = kInvalidTile;
     slot_levels[s] = 0;
     --resident;
@@ -429,7 +477,7 @@ struct GpuMap::Impl {
   // is an index tile, point its entries at those of its children the device holds.
   void link(uint32_t s, TileId tile, std::span<const uint8_t> b) {
     mirror_tile[s] = tile;
-    tile_slot[tile] = s;
+    tile_slot.set(tile, s);
     ++resident;
     uint32_t magic = 0, d = 0;
     if (b.size() >= 8) std::memcpy(&magic, b.data(), 4), std::memcpy(&d, b.data() + 4, 4);
@@ -444,8 +492,7 @@ struct GpuMap::Impl {
         uint32_t ptr = L::kNoSlot;
         if (kind != L::kKindConstant) {
           const uint32_t cx = (a.x << d) + (c & ((1u << d) - 1)), cy = (a.y << d) + (c >> d);
-          auto it = tile_slot.find(make_tile_id(a.level + d, cx, cy));
-          if (it != tile_slot.end()) ptr = it->second;
+          ptr = tile_slot.find(make_tile_id(a.level + d, cx, cy));
         }
         set_page_word(off_children + s * L::kChildTableWords + c, ptr);
       }
