@@ -10,7 +10,8 @@
 //                 [--frame-ms 200] [--orbit 30] [--filter] [--out engine-raster-out] [--device NAME]
 //
 // 3x3 PCF at the finest level, or with --filter at the two levels the pixel's footprint
-// picks (from the light-space derivatives: MH §3.3, Map::pcf_footprint's choice).
+// picks (MH §3.3, Map::pcf_footprint's choice; the footprint and the receiver offset as
+// `shadowtile render --filter` takes them, so the two can be compared).
 // 2D maps with a sun (a stack map's slice 0 would need the time: st_shadow_stack).
 #include <vulkan/vulkan.h>
 
@@ -46,6 +47,8 @@ const uint32_t kFragSpv[] = {
 void check(VkResult r, const char* what) {
   if (r != VK_SUCCESS) throw std::runtime_error(std::string(what) + " failed: " + std::to_string(int(r)));
 }
+
+constexpr double kFovY = 0.9;  // the camera's vertical field of view, radians (51.57 degrees)
 
 using Mat4 = std::array<float, 16>;  // column-major, as GLSL's mat4
 
@@ -477,9 +480,9 @@ int run(const Args& a) {
       Mat4 vp;
       float sun[4];
       float eye[4];
-    } push{view_projection(eye, centre, 0.9, double(width) / height, radius * 0.02, radius * 6),
+    } push{view_projection(eye, centre, kFovY, double(width) / height, radius * 0.02, radius * 6),
            {float(to_sun.x), float(to_sun.y), float(to_sun.z), texel},
-           {float(eye.x), float(eye.y), float(eye.z), a.filter ? 1.0f : 0.0f}};
+           {float(eye.x), float(eye.y), float(eye.z), a.filter ? float(2 * std::tan(kFovY / 2) / height) : 0.0f}};
     std::printf("frame %llu: camera pos=%.3f,%.3f,%.3f,target=%.3f,%.3f,%.3f\n", (unsigned long long)f, eye.x, eye.y,
                 eye.z, centre.x, centre.y, centre.z);
     VkClearValue clear[2] = {};

@@ -21,8 +21,11 @@
 //
 // footprint: the pixel's size in texels of the map's finest level (the level choice of
 // MH §3.3 / Map::pcf_footprint); st_footprint_of measures it from neighbouring receivers'
-// light-space positions (a compute pass's neighbours, or uvd + dFdx(uvd) in a fragment
-// shader). Feedback: every absent tile a call needed lands in the frame's feedback buffer
+// light-space positions (the passes' definition: a compute pass's neighbours, or uvd +
+// dFdx(uvd) in a fragment shader), which grows at grazing angles; distance x pixel angle /
+// texel (tiles/bake/render.cpp's) stays isotropic (examples/shaders/scene.frag). At a
+// coarse level the receiver needs a coarse texel's offset along the normal, as
+// tiles/bake/render.hpp explains, or sloped surfaces shadow themselves. Feedback: every absent tile a call needed lands in the frame's feedback buffer
 // (GpuMap reads it back when the frame retires and queues the tiles on the Map); it needs
 // a stage with storage-buffer writes (fragmentStoresAndAtomics for fragment shaders).
 // No workgroup size is assumed: the engine declares its own local_size.
