@@ -1105,6 +1105,8 @@ uint32_t GpuMap::sync() {
 GpuStats GpuMap::stats() const {
   GpuStats s = impl_->totals;
   s.resident_slots = impl_->resident;
+  s.pool_bytes = impl_->pool_bytes;
+  s.page_table_bytes = impl_->page_shadow.size() * 4;
   s.validation_messages = impl_->ctx->validation_messages();  // own-device mode's layer only
   return s;
 }

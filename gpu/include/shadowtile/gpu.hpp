@@ -277,6 +277,10 @@ struct GpuStats {
   uint64_t tile_bytes = 0, page_bytes = 0, feedback_bytes = 0, host_io_bytes = 0;  // FrameStats' sums
   uint32_t resident_slots = 0;   // slots the device holds now
   uint32_t slot_count = 0;
+  // Device memory of the two shared buffers. The page table goes up whole once (the own-
+  // device constructor, or engine mode's first record_uploads, beyond upload_budget_bytes):
+  // plan that frame for it; later frames send only changed 64-word blocks.
+  uint64_t pool_bytes = 0, page_table_bytes = 0;
   uint64_t validation_messages = 0;
   std::string device;
 };
