@@ -294,7 +294,6 @@ class GpuMap {
   GpuMap(const GpuMap&) = delete;
   GpuMap& operator=(const GpuMap&) = delete;
 
-
   // ---- engine mode ----
   // Borrows the engine's device (EngineDevice) and creates, in this call only, the slot
   // pool, the page table, per ring slot a staging and a feedback buffer, and the shadow
@@ -310,7 +309,8 @@ class GpuMap {
   //
   // retire(completed): every frame <= `completed` has finished on the device (its fence or
   // timeline value signalled). Reads back those frames' feedback (oldest first) into the
-  // Map's request queue, never waiting; returns their FrameStats, valid until the next call.
+  // Map's request queue, never waiting; returns their FrameStats, valid until the next call
+  // (last_feedback() then names the newest retired frame's absent tiles).
   std::span<const FrameStats> retire(uint64_t completed_frame);
   // Records frame f's uploads into `cmd` (outside a render pass): the tiles that changed in
   // the cache (at most upload_budget_bytes; the first frame also the whole page table) and
@@ -339,7 +339,8 @@ class GpuMap {
   GpuDescriptors descriptors(uint64_t frame) const;
   bool engine_mode() const;
 
-  // ---- own-device mode (every call below throws GpuError in engine mode) ----
+  // ---- own-device mode (evaluate, submit_*, wait and sync throw GpuError in engine mode;
+  // stats, last_feedback, device_name and is_stack serve both modes) ----
   // Answers `queries` into `out` (same size, <= max_queries); waits for the device.
   FrameStats evaluate(std::span<const GpuQuery> queries, std::span<float> out);
   // The same, asynchronous: returns the frame number for wait().
