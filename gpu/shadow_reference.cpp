@@ -140,6 +140,14 @@ bool pixel_texel(const ShadowLight& l, const ShadowPassInput& in, size_t p, uint
 
 }  // namespace
 
+bool shadow_pass_texel(const ShadowLight& light, const ShadowPassInput& in, size_t p, uint32_t finest, uint32_t& x,
+                       uint32_t& y) {
+  Texel t;
+  if (!pixel_texel(light, in, p, finest, t)) return false;
+  x = t.x, y = t.y;
+  return true;
+}
+
 void shadow_pass_reference(const Evaluator& ev, const PackHeader& h, const ShadowPassInput& in, std::span<float> out) {
   const ShadowLight l = shadow_light(h);
   const uint32_t finest = h.map_level;

@@ -2,9 +2,10 @@
 // instance, device, queue, command buffers, fences and the G-buffer images: GpuMap only
 // records into the engine's command buffers. Its shadow pass over the engine's images
 // equals the own-device pass and the CPU twin bit for bit, and its feedback names the
-// same absent tiles; frames in flight with a churning cache never stall and count only
-// tile, page-table and feedback bytes; the engine's loaders and allocator are the ones
-// used. The engine's validation layer must stay silent throughout.
+// same absent tiles as the own-device pass's (and, for one tap, exactly the tiles the
+// CPU's page-table walk finds absent); frames in flight with a churning cache never stall
+// and count only tile, page-table and feedback bytes; the engine's loaders and allocator
+// are the ones used. The engine's validation layer must stay silent throughout.
 #include <gtest/gtest.h>
 
 #include <bit>
@@ -18,6 +19,8 @@
 #include "tests/gpu/engine_harness.hpp"
 #include "tests/gpu/gpu_test_util.hpp"
 #include "tiles/core/light.hpp"
+#include "tiles/core/page_table.hpp"
+#include "tiles/core/tile_cut_grid.hpp"
 
 namespace st::gpu {
 namespace {
@@ -110,6 +113,32 @@ bool resident(const client::Map& map, uint64_t tile) {
   bool r = false;
   client::MapAccess::remote(map).inspect_cache([&](const TileCache& c) { r = c.lookup(tile).state == PageState::resident; });
   return r;
+}
+
+// The tiles the CPU's page-table walk over the same cache finds absent for each finest
+// texel, with the number of texels (pixels) that needed each.
+std::map<uint64_t, uint32_t> absent_tiles(const client::Map& map, const std::vector<std::array<uint32_t, 2>>& texels) {
+  const client::RemoteMap& rm = client::MapAccess::remote(map);
+  const uint32_t l = map.finest_level();
+  std::map<uint64_t, uint32_t> want;
+  rm.inspect_cache([&](const TileCache& c) {
+    std::map<uint32_t, CutGrid> grids;
+    for (const auto& [x, y] : texels) {
+      auto index = [&](uint64_t id, const GridEntry&) -> const CutGrid* {
+        const PageEntry page = c.lookup(id);
+        if (page.state != PageState::resident) return nullptr;
+        auto it = grids.find(page.slot);
+        if (it == grids.end())
+          it = grids.emplace(page.slot, CutGrid::parse(c.tile_bytes(page.slot), "slot", kMaxIndexLevels)).first;
+        return &it->second;
+      };
+      const PageHit hit = walk_page_table(rm.grid(), l, x, y, index);
+      if (hit.kind == PageHit::Kind::absent ||
+          (hit.kind == PageHit::Kind::tile && c.lookup(hit.tile).state != PageState::resident))
+        ++want[hit.tile];
+    }
+  });
+  return want;
 }
 
 uint64_t feedback_bytes(uint32_t capacity, uint32_t tiles) {
@@ -455,6 +484,28 @@ TEST(GpuEngine, ShadowPassOverTheEnginesImagesEqualsTheOwnDevicePassAndTheCpuTwi
         EXPECT_EQ(fs.feedback_bytes, feedback_bytes(o.feedback_capacity, fs.feedback_tiles));
         EXPECT_EQ(fs.host_io_bytes, 0u);
         EXPECT_EQ(ofs.host_io_bytes, uint64_t(plane.width) * plane.height * (16 + 16 + 4));  // own mode: G-buffer in, out
+      }
+      // One tap at the finest level (kernel 1, footprint 1): the feedback names exactly the
+      // tiles the CPU's page-table walk finds absent for the pixels' texels, each with the
+      // number of pixels that needed it.
+      {
+        ShadowPassSettings one;
+        one.kernel = 1;
+        one.normal_offset = 0.001f;
+        one.neighbour_footprint = false;
+        one.footprint = 1.0f;
+        run_frame(e, g, t, ++frame, one);
+        g.retire(e.finish());
+        const ShadowPassInput in = plane.input(one);
+        const ShadowLight sl = shadow_light(h);
+        std::vector<std::array<uint32_t, 2>> texels;
+        for (size_t p = 0; p < size_t(plane.width) * plane.height; ++p) {
+          uint32_t x = 0, y = 0;
+          if (shadow_pass_texel(sl, in, p, s.map.finest_level(), x, y)) texels.push_back({x, y});
+        }
+        const std::map<uint64_t, uint32_t> want = absent_tiles(s.map, texels);
+        EXPECT_FALSE(want.empty());
+        EXPECT_EQ(feedback_of(g), want);
       }
       const GpuStats st = g.stats();
       EXPECT_EQ(st.host_io_bytes, 0u);
