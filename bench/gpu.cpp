@@ -14,7 +14,10 @@
 // GpuMap. Queries are random finest texels; half the receivers sit on the stored depth
 // (lit), half just behind it (shadowed), so the GPU answers are checked against the R32F
 // image's (they must agree: the map is lossless). The G-buffer is a plane across the light
-// box whose receivers sit on the map's surface. Figures are medians over --reps.
+// box whose receivers sit on the map's surface. Figures are medians over --reps. Each
+// shadow pass row also reports its frame's host <-> device bytes by kind (FrameStats: tile,
+// page-table, feedback, and the G-buffer in and visibility out that only the own-device
+// mode moves).
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -204,7 +207,11 @@ int main(int argc, char** argv) try {
       in.neighbour_footprint = false;
       in.footprint = 1;
       std::vector<float> vis(pixels), vis_img(pixels);
-      const double pms = median_ms(a.reps, [&] { return g.wait(g.submit_shadow_pass(in), vis).gpu_ms; });
+      gpu::FrameStats pass_stats;
+      const double pms = median_ms(a.reps, [&] {
+        pass_stats = g.wait(g.submit_shadow_pass(in), vis);
+        return pass_stats.gpu_ms;
+      });
       double pims = 0;
       if (img) {
         pims = median_ms(a.reps, [&] { return img->shadow_pass(in, gpu::shadow_light(client::pack_header(map)), vis_img); });
@@ -219,7 +226,16 @@ int main(int argc, char** argv) try {
                       {"gpu_ms", gms}, {"r32f_ms", ims}, {"pass_ms", pms}, {"r32f_pass_ms", pims},
                       {"pass_vs_r32f", pims > 0 ? pms / pims : 0}, {"upload_bytes", gs.bytes_uploaded},
                       {"upload_mb_per_s", upload_mbs}, {"slots", gs.slot_count}, {"agree_with_r32f", agree},
-                      {"r32f", img ? "yes" : no_image}});
+                      {"r32f", img ? "yes" : no_image},
+                      // One shadow pass frame's host <-> device bytes by kind (FrameStats): what
+                      // engine mode moves is tile + page + feedback (its G-buffer stays on the GPU).
+                      {"pass_tile_bytes", pass_stats.tile_bytes}, {"pass_page_bytes", pass_stats.page_bytes},
+                      {"pass_feedback_bytes", pass_stats.feedback_bytes}, {"pass_host_io_bytes", pass_stats.host_io_bytes}});
+      std::printf("%-6s %-5s   pass frame bytes: tile %llu, page table %llu, feedback %llu | G-buffer in + visibility out "
+                  "%llu (own-device mode only)\n",
+                  name.c_str(), op.c_str(), (unsigned long long)pass_stats.tile_bytes,
+                  (unsigned long long)pass_stats.page_bytes, (unsigned long long)pass_stats.feedback_bytes,
+                  (unsigned long long)pass_stats.host_io_bytes);
     }
     srv.stop();
   }

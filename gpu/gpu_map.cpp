@@ -5,16 +5,15 @@
 #include <algorithm>
 #include <bit>
 #include <cstring>
-#include <unordered_map>
 #include <vector>
 
-#include "client/map_access.hpp"
+#include "shadowtile/cache_view.hpp"
 #include "gpu/kernels.hpp"
 #include "gpu/layout.hpp"
 #include "gpu/shadow_reference.hpp"
 #include "gpu/vk_context.hpp"
-#include "tiles/core/dagmh_validate.hpp"
-#include "tiles/core/stack_grid.hpp"
+#include "tiles/core/tile_cache.hpp"
+#include "tiles/core/tile_cut_grid.hpp"
 
 namespace st::gpu {
 
@@ -27,6 +26,55 @@ constexpr uint32_t kDirtyBlockWords = 64;
 
 uint32_t align4(uint32_t n) { return (n + 3u) & ~3u; }
 
+// Tile -> the slot holding it on the device: open addressing, linear probing, backward-shift
+// deletion, sized once for at most slot_count keys (load <= 1/2), so linking and unlinking
+// tiles on the frame path never allocates.
+class TileSlotTable {
+ public:
+  void init(uint32_t max_keys) {
+    mask_ = std::bit_ceil(std::max<uint64_t>(16, uint64_t(max_keys) * 2)) - 1;
+    keys_.assign(mask_ + 1, kInvalidTile);
+    slots_.assign(mask_ + 1, 0);
+  }
+  uint32_t find(TileId t) const {
+    for (uint64_t i = home(t);; i = (i + 1) & mask_) {
+      if (keys_[i] == t) return slots_[i];
+      if (keys_[i] == kInvalidTile) return layout::kNoSlot;
+    }
+  }
+  void set(TileId t, uint32_t slot) {
+    uint64_t i = home(t);
+    while (keys_[i] != kInvalidTile && keys_[i] != t) i = (i + 1) & mask_;
+    keys_[i] = t;
+    slots_[i] = slot;
+  }
+  // Removes t only while it still maps to `slot`.
+  void erase(TileId t, uint32_t slot) {
+    uint64_t i = home(t);
+    while (keys_[i] != t) {
+      if (keys_[i] == kInvalidTile) return;
+      i = (i + 1) & mask_;
+    }
+    if (slots_[i] != slot) return;
+    for (uint64_t j = i;;) {  // shift later keys of the run back over the hole
+      j = (j + 1) & mask_;
+      if (keys_[j] == kInvalidTile) break;
+      const uint64_t h = home(keys_[j]);
+      if (((j - h) & mask_) < ((j - i) & mask_)) continue;  // its home lies after the hole: stays
+      keys_[i] = keys_[j];
+      slots_[i] = slots_[j];
+      i = j;
+    }
+    keys_[i] = kInvalidTile;
+  }
+
+ private:
+  uint64_t home(TileId t) const { return ((t ^ (t >> 29)) * 0x9E3779B97F4A7C15ull >> 17) & mask_; }
+  uint64_t mask_ = 0;
+  std::vector<TileId> keys_;
+  std::vector<uint32_t> slots_;
+};
+
 }  // namespace
 
 struct GpuMap::Impl {
@@ -38,21 +86,34 @@ struct GpuMap::Impl {
     VkCommandBuffer cmd = VK_NULL_HANDLE;
     VkFence fence = VK_NULL_HANDLE;
     VkDescriptorSet set = VK_NULL_HANDLE;
-    bool in_flight = false;
+    bool in_flight = false;  // own mode: submitted, fence not waited; engine mode: recorded, not retired
     bool collected = true;
+    bool pass_recorded = false;  // engine mode: this frame's shadow pass (one per frame: its set)
     uint64_t frame = 0;
     uint32_t count = 0;  // outputs
     FrameStats stats;
   };
 
   client::Map map;
-  const client::RemoteMap* rm = nullptr;
-  const StackGrid* sg = nullptr;  // a stack map's grid (remote_stack.cpp), else null
+  std::unique_ptr<client::CacheView> view;  // the Map's cache through its published view
+  const client::StackTables* sg = nullptr;  // a stack map's grid, else null
   GpuOptions opt;
   uint32_t map_level = 0, k = 0, encoding = 0, slot_count = 0, slot_bytes = 0, slot_words = 0;
   uint64_t pool_bytes = 0;
   std::unique_ptr<VkContext> ctx;
+  bool engine = false;  // engine mode: the engine's device, recordings only
   Kernels kernels;
+  // Engine mode: the compute shadow pass over the engine's images (engine_shadow_pass.comp).
+  VkSampler ep_sampler = VK_NULL_HANDLE;
+  VkDescriptorSetLayout ep_set_layout = VK_NULL_HANDLE;
+  VkPipelineLayout ep_layout = VK_NULL_HANDLE;
+  VkPipeline ep_pipeline = VK_NULL_HANDLE;
+  VkDescriptorPool ep_pool = VK_NULL_HANDLE;
+  VkPipelineStageFlags shader_stages = VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT;  // stages that may read our buffers
+  bool page_table_sent = false;  // engine mode: the first record_uploads sends the whole page table
+  bool any_recorded = false;
+  uint64_t last_recorded = 0;
+  std::vector<FrameStats> retired;  // retire()'s answer (capacity frames_in_flight)
   VkBufferBox pool, page;
   VkCommandPool cmd_pool = VK_NULL_HANDLE;
   VkQueryPool queries = VK_NULL_HANDLE;
@@ -66,35 +127,34 @@ struct GpuMap::Impl {
   std::vector<TileId> mirror_tile;       // per slot: the tile the device holds, or kInvalidTile
   std::vector<uint8_t> slot_levels;      // per slot: index tile levels d, 0 for an encoded tile
   std::vector<uint8_t> child_kind;       // per slot * 256: kinds of an index tile's entries
-  std::unordered_map<TileId, uint32_t> tile_slot;
+  TileSlotTable tile_slot;
   std::vector<VkBufferCopy> pool_copies, page_copies;
-  std::vector<client::RemoteMap::WantedTile> wanted;
+  std::vector<client::WantedTile> wanted;
   std::vector<FeedbackTile> feedback;
   GpuStats totals;
   uint32_t resident = 0;
   uint32_t off_coarse = 0, off_entries = 0, off_skip_slots = 0, off_children = 0, off_pcf = 0;
   uint32_t off_stack = 0, off_cell_slots = 0;  // stack maps: the stack block, its slot pointers
 
-  Impl(client::Map m, GpuOptions o) : map(std::move(m)), opt(std::move(o)) {
+  Impl(client::Map m, const EngineDevice* e, GpuOptions o) : map(std::move(m)), opt(std::move(o)) {
     if (!map.valid()) throw std::runtime_error("GpuMap: the Map is not open (default-constructed)");
-    rm = &client::MapAccess::remote(map);
-    sg = rm->stack_grid();
+    view = std::make_unique<client::CacheView>(map);
+    sg = view->stack();
     if (opt.frames_in_flight < 1 || opt.frames_in_flight > 4) throw GpuError("GpuMap: frames_in_flight must be 1..4");
     if (opt.feedback_capacity < 16 || !std::has_single_bit(opt.feedback_capacity) || opt.feedback_capacity > (1u << 20))
       throw GpuError("GpuMap: feedback_capacity must be a power of two in 16..2^20");
     if (opt.max_queries == 0 || opt.max_pixels == 0) throw GpuError("GpuMap: max_queries and max_pixels must be > 0");
-    const PackHeader& h = rm->header();
-    map_level = h.map_level;
-    k = rm->grid().levels;
-    encoding = uint32_t(h.encoding);
-    rm->inspect_cache([&](const TileCache& c) {
-      slot_count = c.slot_count();
-      slot_bytes = c.slot_bytes();
-    });
+    const client::CacheShape& shape = view->shape();
+    map_level = shape.finest_level;
+    k = shape.skip_level;
+    encoding = shape.encoding;
+    slot_count = shape.slot_count;
+    slot_bytes = shape.slot_bytes;
     slot_words = align4(slot_bytes) / 4;
     if (slot_count > (1u << 23)) throw GpuError("GpuMap: more than 2^23 cache slots");
     pool_bytes = uint64_t(slot_count) * slot_words * 4;
-    ctx = std::make_unique<VkContext>(opt.device, opt.validation);
+    engine = e != nullptr;
+    ctx = engine ? std::make_unique<VkContext>(*e) : std::make_unique<VkContext>(opt.device, opt.validation);
     totals.device = ctx->device_name();
     totals.slot_count = slot_count;
     if (pool_bytes > ctx->properties().limits.maxStorageBufferRange)
@@ -103,8 +163,12 @@ struct GpuMap::Impl {
                      std::to_string(ctx->properties().limits.maxStorageBufferRange) + "); use fewer cache slots");
     build_page_table();
     try {
-      create_device_objects();
-      upload_all_page_table();
+      if (engine) {
+        create_engine_objects();
+      } else {
+        create_device_objects();
+        upload_all_page_table();
+      }
     } catch (...) {
       release();
       throw;
@@ -116,17 +180,25 @@ struct GpuMap::Impl {
   void release() noexcept {
     if (!ctx) return;
     VkDevice d = ctx->device();
-    vkDeviceWaitIdle(d);
+    if (!engine) ctx->vk.DeviceWaitIdle(d);  // engine mode: the engine has every frame completed
+    const VkAllocationCallbacks* cb = ctx->callbacks();
+    if (ep_pipeline) ctx->vk.DestroyPipeline(d, ep_pipeline, cb);
+    if (ep_pool) ctx->vk.DestroyDescriptorPool(d, ep_pool, cb);
+    if (ep_layout) ctx->vk.DestroyPipelineLayout(d, ep_layout, cb);
+    if (ep_set_layout) ctx->vk.DestroyDescriptorSetLayout(d, ep_set_layout, cb);
+    if (ep_sampler) ctx->vk.DestroySampler(d, ep_sampler, cb);
+    ep_pipeline = VK_NULL_HANDLE, ep_pool = VK_NULL_HANDLE, ep_layout = VK_NULL_HANDLE;
+    ep_set_layout = VK_NULL_HANDLE, ep_sampler = VK_NULL_HANDLE;
     for (Frame& f : frames) {
       for (VkBufferBox* b : {&f.staging, &f.input, &f.normals, &f.output, &f.feedback, &f.input_host, &f.normals_host,
                              &f.output_host})
         ctx->destroy(*b);
-      if (f.fence) vkDestroyFence(d, f.fence, nullptr);
+      if (f.fence) ctx->vk.DestroyFence(d, f.fence, nullptr);
     }
     frames.clear();
-    if (queries) vkDestroyQueryPool(d, queries, nullptr);
+    if (queries) ctx->vk.DestroyQueryPool(d, queries, nullptr);
     queries = VK_NULL_HANDLE;
-    if (cmd_pool) vkDestroyCommandPool(d, cmd_pool, nullptr);
+    if (cmd_pool) ctx->vk.DestroyCommandPool(d, cmd_pool, nullptr);
     cmd_pool = VK_NULL_HANDLE;
     kernels.destroy(*ctx);
     ctx->destroy(pool);
@@ -136,7 +208,8 @@ struct GpuMap::Impl {
 
   // ---- the page table's initial contents: header, skip grid, no slots, PCF quotients ----
   void build_page_table() {
-    const CutGrid& g = rm->grid();
+    const std::span<const float> coarse = view->skip_coarse();
+    const std::span<const client::CacheEntry> entries = view->skip_entries();
     const uint32_t cells = 1u << (2 * k);
     off_coarse = L::kPtHeaderWords;
     off_entries = off_coarse + uint32_t(CutGrid::coarse_count(k));
@@ -144,22 +217,23 @@ struct GpuMap::Impl {
     off_children = off_skip_slots + cells;
     off_pcf = off_children + slot_count * L::kChildTableWords;
     // The map preview (tiles/core/map_preview.hpp): answers where a tile is absent.
-    const MapPreview& pv = rm->preview();
-    const uint32_t pv_words = uint32_t(MapPreview::words(pv.levels()));
+    const client::PreviewTables pv = view->preview();
+    const uint32_t pv_words = pv.mask_words;
     const uint32_t off_preview = off_pcf + L::kMaxPcf * L::kPcfTableStride;
     const uint32_t pv_cells = off_preview + L::kPvHeaderWords + cells;
     const uint32_t pv_cell_words = L::kPvCellHeaderWords + 2 * pv_words;
-    const uint32_t pv_values = pv_cells + uint32_t(pv.cells()) * pv_cell_words;
+    const uint32_t pv_values = pv_cells + uint32_t(pv.bases.size()) * pv_cell_words;
     // The pack's DAG-MH dictionary, word for word, uploaded once with the page table
     // (tiles with the dictionary flag reference it: st_dag_depth).
-    const dagmh::Dictionary* dict = rm->dictionary().get();
-    const uint32_t off_dict = pv_values + uint32_t(pv.values().size());
-    const uint32_t pv_end = off_dict + (dict ? uint32_t(dict->bytes().size() / 4) : 0u);  // then the stack block
-    const uint32_t words = pv_end + stack_words();
+    const std::span<const uint8_t> dict = view->dictionary();
+    const uint32_t off_dict = pv_values + uint32_t(pv.values.size());
+    const uint32_t pv_end = off_dict + uint32_t(dict.size() / 4);  // then the 2D light or the stack block
+    const uint32_t light_words = sg ? 0u : L::kStLightWords;  // a 2D map's light (kPtLight)
+    const uint32_t words = pv_end + light_words + stack_words();
     page_shadow.assign(words, 0);
     uint32_t* p = page_shadow.data();
-    if (dict) {
-      std::memcpy(p + off_dict, dict->bytes().data(), dict->bytes().size());  // little-endian words
+    if (!dict.empty()) {
+      std::memcpy(p + off_dict, dict.data(), dict.size());  // little-endian words
       p[L::kPtDictionary] = off_dict;
     }
     p[L::kPtMagic] = L::kPageMagic;
@@ -175,39 +249,50 @@ struct GpuMap::Impl {
     p[L::kPtChildSlots] = off_children;
     p[L::kPtPcfTable] = off_pcf;
     p[L::kPtPreview] = off_preview;
-    p[off_preview + L::kPvLevels] = pv.levels();
+    p[off_preview + L::kPvLevels] = pv.levels;
     p[off_preview + L::kPvMaskWords] = pv_words;
     p[off_preview + L::kPvCells] = pv_cells;
     p[off_preview + L::kPvValues] = pv_values;
-    std::copy(pv.ordinals().begin(), pv.ordinals().end(), p + off_preview + L::kPvHeaderWords);
-    for (size_t c = 0; c < pv.cells(); ++c) {
+    std::copy(pv.ordinals.begin(), pv.ordinals.end(), p + off_preview + L::kPvHeaderWords);
+    for (size_t c = 0; c < pv.bases.size(); ++c) {
       uint32_t* r = p + pv_cells + c * pv_cell_words;
-      r[0] = pv.bases()[c];
-      r[1] = std::bit_cast<uint32_t>(pv.entry_values()[c]);
+      r[0] = pv.bases[c];
+      r[1] = std::bit_cast<uint32_t>(pv.entry_values[c]);
       for (uint32_t i = 0; i < pv_words; ++i) {
-        const uint64_t m = pv.masks()[c * pv_words + i];
+        const uint64_t m = pv.masks[c * pv_words + i];
         r[L::kPvCellHeaderWords + 2 * i] = uint32_t(m);
         r[L::kPvCellHeaderWords + 2 * i + 1] = uint32_t(m >> 32);
       }
     }
-    for (size_t i = 0; i < pv.values().size(); ++i) p[pv_values + i] = std::bit_cast<uint32_t>(pv.values()[i]);
-    for (size_t i = 0; i < g.coarse.size(); ++i) p[off_coarse + i] = std::bit_cast<uint32_t>(g.coarse[i]);
+    for (size_t i = 0; i < pv.values.size(); ++i) p[pv_values + i] = std::bit_cast<uint32_t>(pv.values[i]);
+    for (size_t i = 0; i < coarse.size(); ++i) p[off_coarse + i] = std::bit_cast<uint32_t>(coarse[i]);
     for (uint32_t e = 0; e < cells; ++e) {
-      p[off_entries + 2 * e] = std::bit_cast<uint32_t>(g.entries[e].value);
-      p[off_entries + 2 * e + 1] = uint32_t(g.entries[e].kind) | uint32_t(g.entries[e].index_levels) << 8;
+      p[off_entries + 2 * e] = std::bit_cast<uint32_t>(entries[e].value);
+      p[off_entries + 2 * e + 1] = (entries[e].kind & 0xFFu) | (entries[e].index_levels & 0xFFu) << 8;
     }
     std::fill(p + off_skip_slots, p + off_pcf, L::kNoSlot);
     // The CPU's quotient float(lit) / float(r * r) (evaluator.hpp), so the GPU never divides.
     for (uint32_t r = 1; r <= L::kMaxPcf; ++r)
       for (uint32_t lit = 0; lit <= r * r; ++lit)
         p[off_pcf + (r - 1) * L::kPcfTableStride + lit] = std::bit_cast<uint32_t>(float(lit) / float(r * r));
-    if (sg) build_stack_block(pv_end);
+    if (sg) {
+      build_stack_block(pv_end);
+    } else {
+      // The 2D map's light in the page table, so an engine's shader reads it from there
+      // (shadowtile.glsl); 0 when the pass refuses the light (GpuError at the pass).
+      try {
+        write_light(pv_end, map_light());
+        p[L::kPtLight] = pv_end;
+      } catch (const GpuError&) {
+        p[L::kPtLight] = 0;
+      }
+    }
     dirty.assign((words + kDirtyBlockWords - 1) / kDirtyBlockWords, 0);
     dirty_list.reserve(dirty.size());
     mirror_tile.assign(slot_count, kInvalidTile);
     slot_levels.assign(slot_count, 0);
     child_kind.assign(size_t(slot_count) * L::kChildTableWords, 0);
-    tile_slot.reserve(size_t(slot_count) * 2);
+    tile_slot.init(slot_count);
     pool_copies.reserve(slot_count);
     page_copies.reserve(dirty.size());
     wanted.reserve(opt.feedback_capacity);
@@ -253,25 +338,25 @@ struct GpuMap::Impl {
   // ---- the stack block (stack maps; GPU_LAYOUT.md "The stack block") ----
   uint32_t stack_words() const {
     if (!sg) return 0;
-    const StackGrid& g = *sg;
+    const client::StackTables& g = *sg;
     const uint32_t K = g.skip_level;
     uint64_t words = L::kStHeaderWords + K;
-    for (uint32_t l = 0; l < K; ++l) words += g.cells(l);
-    words += (L::kEntryWords + 1) * g.entries.size() + uint64_t(L::kStLightWords) * g.slices;
-    if (g.entries.size() > L::kMaxStackCells || words > (uint64_t(1) << 28))
-      throw GpuError("GpuMap: the stack grid (" + std::to_string(g.entries.size()) + " cells) is too large");
+    for (uint32_t l = 0; l < K; ++l) words += g.coarse[l].size();
+    words += (L::kEntryWords + 1) * g.cells.size() + uint64_t(L::kStLightWords) * g.slices;
+    if (g.cells.size() > L::kMaxStackCells || words > (uint64_t(1) << 28))
+      throw GpuError("GpuMap: the stack grid (" + std::to_string(g.cells.size()) + " cells) is too large");
     return uint32_t(words);
   }
 
   void build_stack_block(uint32_t at) {
-    const StackGrid& g = *sg;
+    const client::StackTables& g = *sg;
     const uint32_t K = g.skip_level;
     uint32_t* p = page_shadow.data();
     off_stack = at;
     p[L::kPtStack] = at;
     uint32_t* h = p + at;
-    h[L::kStXyLevel] = g.geo.n;
-    h[L::kStWLevel] = g.geo.k;
+    h[L::kStXyLevel] = g.xy_level;
+    h[L::kStWLevel] = g.w_level;
     h[L::kStSlices] = g.slices;
     h[L::kStSkipLevel] = K;
     uint32_t o = at + L::kStHeaderWords + K;
@@ -280,26 +365,39 @@ struct GpuMap::Impl {
       for (float v : g.coarse[l]) p[o++] = std::bit_cast<uint32_t>(v);
     }
     h[L::kStEntries] = o;
-    for (const StackEntry& e : g.entries) {
+    for (const client::CacheEntry& e : g.cells) {
       p[o++] = std::bit_cast<uint32_t>(e.value);
       p[o++] = e.kind;
     }
     h[L::kStCellSlots] = off_cell_slots = o;
-    for (size_t c = 0; c < g.entries.size(); ++c) p[o++] = L::kNoSlot;
+    for (size_t c = 0; c < g.cells.size(); ++c) p[o++] = L::kNoSlot;
     h[L::kStLights] = o;
-    for (uint32_t w = 0; w < g.slices; ++w, o += L::kStLightWords) {
-      const ShadowLight sl = shadow_light(g.light(w));  // any kind (perspective: spots)
-      for (int i = 0; i < 3; ++i) {
-        p[o + i] = std::bit_cast<uint32_t>(sl.origin[i]);
-        p[o + 3 + i] = std::bit_cast<uint32_t>(sl.axis_u[i]);
-        p[o + 6 + i] = std::bit_cast<uint32_t>(sl.axis_v[i]);
-        p[o + 9 + i] = std::bit_cast<uint32_t>(sl.forward[i]);
-      }
-      p[o + 12] = std::bit_cast<uint32_t>(sl.near_scaled);
-      p[o + L::kStLightCentreU] = std::bit_cast<uint32_t>(sl.centre_u);
-      p[o + L::kStLightCentreV] = std::bit_cast<uint32_t>(sl.centre_v);
-      p[o + L::kStLightProjection] = sl.perspective ? 1u : 0u;
+    for (uint32_t w = 0; w < g.slices; ++w, o += L::kStLightWords)
+      write_light(o, shadow_light(LightSpace::from_array(LightKind(g.lights[w].kind), g.lights[w].params)));  // any kind
+  }
+
+  // The 2D map's light as the pass projects it (suns only: GpuError for any other kind).
+  ShadowLight map_light() const {
+    const client::LightParams lp = view->light();
+    const auto kind = LightKind(lp.kind);
+    if (kind != LightKind::sun && kind != LightKind::sun_ground)
+      throw GpuError("GpuMap: the GPU shadow pass supports sun lights only");
+    return shadow_light(LightSpace::from_array(kind, lp.params));
+  }
+
+  // kStLightWords words at `o`: GPU_LAYOUT.md "The stack block" (the 2D light likewise).
+  void write_light(uint32_t o, const ShadowLight& sl) {
+    uint32_t* p = page_shadow.data();
+    for (int i = 0; i < 3; ++i) {
+      p[o + i] = std::bit_cast<uint32_t>(sl.origin[i]);
+      p[o + 3 + i] = std::bit_cast<uint32_t>(sl.axis_u[i]);
+      p[o + 6 + i] = std::bit_cast<uint32_t>(sl.axis_v[i]);
+      p[o + 9 + i] = std::bit_cast<uint32_t>(sl.forward[i]);
     }
+    p[o + 12] = std::bit_cast<uint32_t>(sl.near_scaled);
+    p[o + L::kStLightCentreU] = std::bit_cast<uint32_t>(sl.centre_u);
+    p[o + L::kStLightCentreV] = std::bit_cast<uint32_t>(sl.centre_v);
+    p[o + L::kStLightProjection] = sl.perspective ? 1u : 0u;
   }
 
   void upload_all_page_table() {
@@ -308,11 +406,11 @@ struct GpuMap::Impl {
     VkCommandBufferBeginInfo bi{};
     bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
     bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
-    vk_check(vkBeginCommandBuffer(f.cmd, &bi), "vkBeginCommandBuffer");
+    vk_check(ctx->vk.BeginCommandBuffer(f.cmd, &bi), "vkBeginCommandBuffer");
     VkBufferCopy all{0, 0, page_shadow.size() * 4};
-    vkCmdCopyBuffer(f.cmd, f.staging.buffer, page.buffer, 1, &all);
-    vkCmdFillBuffer(f.cmd, pool.buffer, 0, VK_WHOLE_SIZE, 0);
-    vk_check(vkEndCommandBuffer(f.cmd), "vkEndCommandBuffer");
+    ctx->vk.CmdCopyBuffer(f.cmd, f.staging.buffer, page.buffer, 1, &all);
+    ctx->vk.CmdFillBuffer(f.cmd, pool.buffer, 0, VK_WHOLE_SIZE, 0);
+    vk_check(ctx->vk.EndCommandBuffer(f.cmd), "vkEndCommandBuffer");
     submit_and_wait(f);
   }
 
@@ -321,9 +419,9 @@ struct GpuMap::Impl {
     si.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
     si.commandBufferCount = 1;
     si.pCommandBuffers = &f.cmd;
-    vk_check(vkQueueSubmit(ctx->queue(), 1, &si, f.fence), "vkQueueSubmit");
-    vk_check(vkWaitForFences(ctx->device(), 1, &f.fence, VK_TRUE, UINT64_MAX), "vkWaitForFences");
-    vk_check(vkResetFences(ctx->device(), 1, &f.fence), "vkResetFences");
+    vk_check(ctx->vk.QueueSubmit(ctx->queue(), 1, &si, f.fence), "vkQueueSubmit");
+    vk_check(ctx->vk.WaitForFences(ctx->device(), 1, &f.fence, VK_TRUE, UINT64_MAX), "vkWaitForFences");
+    vk_check(ctx->vk.ResetFences(ctx->device(), 1, &f.fence), "vkResetFences");
   }
 
   // ---- the mirror ----
@@ -339,7 +437,7 @@ struct GpuMap::Impl {
   uint32_t pointer_word(TileId tile) const {
     if (sg) {  // a stack cell's tile: the cell's slot pointer
       uint64_t cell = 0;
-      return sg->cell_of(tile, cell) ? off_cell_slots + uint32_t(cell) : ~0u;
+      return view->stack_tile_cell(tile, cell) ? off_cell_slots + uint32_t(cell) : ~0u;
     }
     const TileAddress a = tile_address(tile);
     if (a.level < k) return ~0u;
@@ -369,7 +467,7 @@ struct GpuMap::Impl {
     // The cache may already have moved the tile to another slot that this pass linked
     // first (slots are compared in index order): that mapping must survive, or an index
     // tile linked later would not find its child and answer coarser than the CPU.
-    if (auto it = tile_slot.find(t); it != tile_slot.end() && it->second == s) tile_slot.erase(it);
+    tile_slot.erase(t, s);
     mirror_tile[s] = kInvalidTile;
     slot_levels[s] = 0;
     --resident;
@@ -379,7 +477,7 @@ struct GpuMap::Impl {
   // is an index tile, point its entries at those of its children the device holds.
   void link(uint32_t s, TileId tile, std::span<const uint8_t> b) {
     mirror_tile[s] = tile;
-    tile_slot[tile] = s;
+    tile_slot.set(tile, s);
     ++resident;
     uint32_t magic = 0, d = 0;
     if (b.size() >= 8) std::memcpy(&magic, b.data(), 4), std::memcpy(&d, b.data() + 4, 4);
@@ -394,8 +492,7 @@ struct GpuMap::Impl {
         uint32_t ptr = L::kNoSlot;
         if (kind != L::kKindConstant) {
           const uint32_t cx = (a.x << d) + (c & ((1u << d) - 1)), cy = (a.y << d) + (c >> d);
-          auto it = tile_slot.find(make_tile_id(a.level + d, cx, cy));
-          if (it != tile_slot.end()) ptr = it->second;
+          ptr = tile_slot.find(make_tile_id(a.level + d, cx, cy));
         }
         set_page_word(off_children + s * L::kChildTableWords + c, ptr);
       }
@@ -411,31 +508,35 @@ struct GpuMap::Impl {
     page_copies.clear();
     uint64_t off = 0;
     auto* staging = static_cast<uint8_t*>(f.staging.mapped);
-    rm->inspect_cache([&](const TileCache& c) {
-      for (uint32_t s = 0; s < slot_count; ++s) {
-        const TileId t = c.slot_tile(s);
-        TileId want = kInvalidTile;
-        if (t != kInvalidTile) {
-          const PageEntry pe = c.lookup(t);
-          if (pe.state == PageState::resident && pe.slot == s) want = t;
-        }
-        if (mirror_tile[s] == want) continue;
-        if (mirror_tile[s] != kInvalidTile) unlink(s);
-        if (want == kInvalidTile) continue;
-        const std::span<const uint8_t> b = c.tile_bytes(s);
-        const uint32_t bytes = align4(uint32_t(b.size()));
-        if (off > 0 && off + bytes > opt.upload_budget_bytes) {  // one slot always fits: no starvation
-          ++totals.slots_deferred;
-          continue;
-        }
-        std::memcpy(staging + off, b.data(), b.size());
-        std::memset(staging + off + b.size(), 0, bytes - b.size());
-        if (bytes) pool_copies.push_back({off, uint64_t(s) * slot_words * 4, bytes});
-        off += bytes;
-        link(s, want, b);
-        ++fs.slots_uploaded;
+    // The cache's changed slots (client::CacheView), in slot order; mirror_tile is the
+    // view's `known`: a slot left for a later frame (budget) stays unlinked until then.
+    view->changed_slots(mirror_tile, [&](const client::SlotChange& c) {
+      const uint32_t s = c.slot;
+      if (mirror_tile[s] != kInvalidTile) unlink(s);
+      if (c.tile == client::kNoTile) return true;
+      const uint32_t bytes = align4(uint32_t(c.bytes.size()));
+      if (off > 0 && off + bytes > opt.upload_budget_bytes) {  // one slot always fits: no starvation
+        ++totals.slots_deferred;
+        return false;
       }
+      std::memcpy(staging + off, c.bytes.data(), c.bytes.size());
+      std::memset(staging + off + c.bytes.size(), 0, bytes - c.bytes.size());
+      if (bytes) pool_copies.push_back({off, uint64_t(s) * slot_words * 4, bytes});
+      off += bytes;
+      link(s, c.tile, c.bytes);
+      ++fs.slots_uploaded;
+      return true;
     });
+    fs.tile_bytes = off;
+    if (engine && !page_table_sent) {  // engine mode's first frame: the whole page table
+      std::memcpy(staging + off, page_shadow.data(), page_shadow.size() * 4);
+      page_copies.push_back({off, 0, page_shadow.size() * 4});
+      off += page_shadow.size() * 4;
+      totals.page_words_uploaded += page_shadow.size();
+      for (uint32_t blk : dirty_list) dirty[blk] = 0;
+      dirty_list.clear();
+      page_table_sent = true;
+    }
     std::sort(dirty_list.begin(), dirty_list.end());
     for (uint32_t blk : dirty_list) {
       const uint32_t w0 = blk * kDirtyBlockWords;
@@ -448,11 +549,246 @@ struct GpuMap::Impl {
     }
     dirty_list.clear();
     fs.bytes_uploaded = off;
+    fs.page_bytes = off - fs.tile_bytes;
+    totals.tile_bytes += fs.tile_bytes;
+    totals.page_bytes += fs.page_bytes;
     totals.slots_uploaded += fs.slots_uploaded;
     totals.bytes_uploaded += off;
   }
 
-  // ---- frames ----
+
+  // ---- engine mode ----
+  void create_engine_objects() {
+    const VkFunctions& vk = ctx->vk;
+    VkDevice d = ctx->device();
+    const VkAllocationCallbacks* cb = ctx->callbacks();
+    const uint64_t range = ctx->properties().limits.maxStorageBufferRange;
+    if (page_shadow.size() * 4 > range)
+      throw GpuError("GpuMap: the page table (" + std::to_string(page_shadow.size() * 4) +
+                     " bytes) exceeds device '" + ctx->device_name() + "' maxStorageBufferRange");
+    {
+      uint32_t qn = 0;
+      vk.GetPhysicalDeviceQueueFamilyProperties(ctx->physical(), &qn, nullptr);
+      std::vector<VkQueueFamilyProperties> qs(qn);
+      vk.GetPhysicalDeviceQueueFamilyProperties(ctx->physical(), &qn, qs.data());
+      if (qs[ctx->queue_family()].queueFlags & VK_QUEUE_GRAPHICS_BIT)
+        shader_stages |= VK_PIPELINE_STAGE_VERTEX_SHADER_BIT | VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT;
+    }
+    pool = ctx->make_buffer(pool_bytes, false);
+    page = ctx->make_buffer(page_shadow.size() * 4, false);
+    const uint64_t staging = opt.upload_budget_bytes + uint64_t(slot_words) * 4 + page_shadow.size() * 4;
+    const uint64_t fb_bytes = (L::kFbHeaderWords + uint64_t(opt.feedback_capacity) * (1 + L::kFbRecordWords)) * 4;
+    retired.reserve(opt.frames_in_flight);
+    frames.resize(opt.frames_in_flight);
+    for (Frame& f : frames) {
+      f.staging = ctx->make_buffer(staging, true, 0, BufferUse::upload);
+      f.feedback = ctx->make_buffer(fb_bytes, true, 0, BufferUse::readback);
+    }
+    // The pass: pool, page table, feedback, positions, normals (texelFetch through our
+    // immutable nearest sampler), visibility (R32F storage image).
+    VkSamplerCreateInfo sci{};
+    sci.sType = VK_STRUCTURE_TYPE_SAMPLER_CREATE_INFO;
+    sci.magFilter = sci.minFilter = VK_FILTER_NEAREST;
+    sci.mipmapMode = VK_SAMPLER_MIPMAP_MODE_NEAREST;
+    sci.addressModeU = sci.addressModeV = sci.addressModeW = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
+    vk_check(vk.CreateSampler(d, &sci, cb, &ep_sampler), "vkCreateSampler");
+    VkDescriptorSetLayoutBinding b[6] = {};
+    for (uint32_t i = 0; i < 6; ++i) {
+      b[i].binding = i;
+      b[i].descriptorCount = 1;
+      b[i].stageFlags = VK_SHADER_STAGE_COMPUTE_BIT;
+      b[i].descriptorType = i < 3 ? VK_DESCRIPTOR_TYPE_STORAGE_BUFFER
+                            : i < 5 ? VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER
+                                    : VK_DESCRIPTOR_TYPE_STORAGE_IMAGE;
+      if (i == 3 || i == 4) b[i].pImmutableSamplers = &ep_sampler;
+    }
+    VkDescriptorSetLayoutCreateInfo sli{};
+    sli.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO;
+    sli.bindingCount = 6;
+    sli.pBindings = b;
+    vk_check(vk.CreateDescriptorSetLayout(d, &sli, cb, &ep_set_layout), "vkCreateDescriptorSetLayout");
+    const VkPushConstantRange pcr{VK_SHADER_STAGE_COMPUTE_BIT, 0, L::kPcWords * 4};
+    VkPipelineLayoutCreateInfo pli{};
+    pli.sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO;
+    pli.setLayoutCount = 1;
+    pli.pSetLayouts = &ep_set_layout;
+    pli.pushConstantRangeCount = 1;
+    pli.pPushConstantRanges = &pcr;
+    vk_check(vk.CreatePipelineLayout(d, &pli, cb, &ep_layout), "vkCreatePipelineLayout");
+    const uint32_t n = opt.frames_in_flight;
+    const VkDescriptorPoolSize ps[3] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 3 * n},
+                                        {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 2 * n},
+                                        {VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, n}};
+    VkDescriptorPoolCreateInfo dpi{};
+    dpi.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO;
+    dpi.maxSets = n;
+    dpi.poolSizeCount = 3;
+    dpi.pPoolSizes = ps;
+    vk_check(vk.CreateDescriptorPool(d, &dpi, cb, &ep_pool), "vkCreateDescriptorPool");
+    for (Frame& f : frames) {
+      VkDescriptorSetAllocateInfo dai{};
+      dai.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO;
+      dai.descriptorPool = ep_pool;
+      dai.descriptorSetCount = 1;
+      dai.pSetLayouts = &ep_set_layout;
+      vk_check(vk.AllocateDescriptorSets(d, &dai, &f.set), "vkAllocateDescriptorSets");
+    }
+    VkShaderModule m = ctx->make_shader(engine_shadow_pass_spirv());
+    VkComputePipelineCreateInfo cpi{};
+    cpi.sType = VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO;
+    cpi.stage.sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
+    cpi.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
+    cpi.stage.module = m;
+    cpi.stage.pName = "main";
+    cpi.layout = ep_layout;
+    const VkResult r = vk.CreateComputePipelines(d, VK_NULL_HANDLE, 1, &cpi, cb, &ep_pipeline);
+    vk.DestroyShaderModule(d, m, cb);
+    vk_check(r, "vkCreateComputePipelines");
+  }
+
+  void need_engine(const char* call) const {
+    if (!engine) throw GpuError(std::string("GpuMap::") + call + ": only in engine mode (GpuMap(map, EngineDevice, options))");
+  }
+  void need_own(const char* call) const {
+    if (engine)
+      throw GpuError(std::string("GpuMap::") + call +
+                     ": not in engine mode (record_uploads / record_shadow_pass into the engine's command buffers)");
+  }
+
+  // The ring slot recording `frame` now (the last record_uploads), or a GpuError.
+  Frame& current(uint64_t frame, const char* call) {
+    Frame& f = frames[frame % frames.size()];
+    if (!any_recorded || frame != last_recorded || !f.in_flight || f.frame != frame)
+      throw GpuError(std::string("GpuMap::") + call + ": frame " + std::to_string(frame) +
+                     " is not the frame being recorded (record_uploads(cmd, frame) first)");
+    return f;
+  }
+
+  void barrier(VkCommandBuffer cmd, VkPipelineStageFlags src, VkAccessFlags src_access, VkPipelineStageFlags dst,
+               VkAccessFlags dst_access) const {
+    VkMemoryBarrier mb{};
+    mb.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
+    mb.srcAccessMask = src_access;
+    mb.dstAccessMask = dst_access;
+    ctx->vk.CmdPipelineBarrier(cmd, src, dst, 0, 1, &mb, 0, nullptr, 0, nullptr);
+  }
+
+  FrameStats record_uploads(VkCommandBuffer cmd, uint64_t frame) {
+    need_engine("record_uploads");
+    if (any_recorded && frame <= last_recorded)
+      throw GpuError("GpuMap::record_uploads: frame " + std::to_string(frame) + " is not after the last frame recorded (" +
+                     std::to_string(last_recorded) + ")");
+    Frame& f = frames[frame % frames.size()];
+    if (f.in_flight)
+      throw GpuError("GpuMap::record_uploads: frame " + std::to_string(frame) + "'s ring slot still holds frame " +
+                     std::to_string(f.frame) + ", not retired (retire(" + std::to_string(f.frame) +
+                     ") once it completes, or more frames_in_flight)");
+    const VkFunctions& vk = ctx->vk;
+    FrameStats fs;
+    fs.frame = frame;
+    const bool first = !page_table_sent;
+    stage_changes(f, fs);
+    // Earlier frames' shader reads of the pool and page table end before the copies write.
+    barrier(cmd, shader_stages, VK_ACCESS_SHADER_READ_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT);
+    if (first) {  // the pool starts zeroed (as the own-device mode's), before any slot lands
+      vk.CmdFillBuffer(cmd, pool.buffer, 0, VK_WHOLE_SIZE, 0);
+      barrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT,
+              VK_ACCESS_TRANSFER_WRITE_BIT);
+    }
+    if (!pool_copies.empty())
+      vk.CmdCopyBuffer(cmd, f.staging.buffer, pool.buffer, uint32_t(pool_copies.size()), pool_copies.data());
+    if (!page_copies.empty())
+      vk.CmdCopyBuffer(cmd, f.staging.buffer, page.buffer, uint32_t(page_copies.size()), page_copies.data());
+    // The frame's feedback set emptied on the device, its capacity word written.
+    const uint32_t cap = opt.feedback_capacity;
+    vk.CmdFillBuffer(cmd, f.feedback.buffer, 0, L::kFbCapacity * 4, 0);
+    vk.CmdUpdateBuffer(cmd, f.feedback.buffer, L::kFbCapacity * 4, 4, &cap);
+    vk.CmdFillBuffer(cmd, f.feedback.buffer, (L::kFbCapacity + 1) * 4, VK_WHOLE_SIZE, 0);
+    barrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT, shader_stages,
+            VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
+    f.in_flight = true;
+    f.collected = false;
+    f.pass_recorded = false;
+    f.frame = frame;
+    f.stats = fs;
+    any_recorded = true;
+    last_recorded = frame;
+    ++totals.frames;
+    return fs;
+  }
+
+  void record_shadow_pass(VkCommandBuffer cmd, uint64_t frame, const ShadowPassImages& im, const ShadowPassSettings& in) {
+    need_engine("record_shadow_pass");
+    Frame& f = current(frame, "record_shadow_pass");
+    if (f.pass_recorded)
+      throw GpuError("GpuMap::record_shadow_pass: one pass per frame (frame " + std::to_string(frame) + " has one)");
+    if (!im.positions || !im.normals || !im.visibility || im.width == 0 || im.height == 0)
+      throw GpuError("GpuMap::record_shadow_pass: positions, normals, visibility and a non-empty size are needed");
+    if (in.kernel < 1 || in.kernel > L::kMaxPcf) throw GpuError("GpuMap::record_shadow_pass: kernel must be 1..9");
+    if (!sg && in.soft) throw GpuError("GpuMap::record_shadow_pass: a soft pass needs a stack map (a pack built with a light set)");
+    if (!sg && page_shadow[L::kPtLight] == 0) (void)map_light();  // throws: the light the pass refuses
+    const VkFunctions& vk = ctx->vk;
+    const VkDescriptorBufferInfo bufs[3] = {{pool.buffer, 0, VK_WHOLE_SIZE}, {page.buffer, 0, VK_WHOLE_SIZE},
+                                            {f.feedback.buffer, 0, VK_WHOLE_SIZE}};
+    const VkDescriptorImageInfo imgs[3] = {{VK_NULL_HANDLE, im.positions, im.gbuffer_layout},
+                                           {VK_NULL_HANDLE, im.normals, im.gbuffer_layout},
+                                           {VK_NULL_HANDLE, im.visibility, VK_IMAGE_LAYOUT_GENERAL}};
+    VkWriteDescriptorSet w[6] = {};
+    for (uint32_t i = 0; i < 6; ++i) {
+      w[i].sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
+      w[i].dstSet = f.set;
+      w[i].dstBinding = i;
+      w[i].descriptorCount = 1;
+      w[i].descriptorType = i < 3 ? VK_DESCRIPTOR_TYPE_STORAGE_BUFFER
+                            : i < 5 ? VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER
+                                    : VK_DESCRIPTOR_TYPE_STORAGE_IMAGE;
+      if (i < 3) w[i].pBufferInfo = &bufs[i];
+      else w[i].pImageInfo = &imgs[i - 3];
+    }
+    vk.UpdateDescriptorSets(ctx->device(), 6, w, 0, nullptr);
+    uint32_t pc[L::kPcWords] = {};
+    pc[L::kPcCount] = im.width;
+    pc[L::kPcHeight] = im.height;
+    pc[L::kPcKernel] = in.kernel;
+    pc[L::kPcFlags] = (in.neighbour_footprint ? L::kFlagNeighbourFootprint : 0) | (in.soft ? L::kFlagSoft : 0) |
+                      (in.resume_walks ? L::kFlagResumeWalks : 0);
+    if (sg) {
+      const StackTime t = in.soft ? StackTime{} : stack_time(sg->slices, in.time);
+      pc[L::kPcSliceA] = t.a;
+      pc[L::kPcSliceB] = t.b;
+      pc[L::kPcTimeWeight] = std::bit_cast<uint32_t>(t.f);
+    }
+    pc[L::kPcNormalOffset] = std::bit_cast<uint32_t>(in.normal_offset);
+    pc[L::kPcFootprint] = std::bit_cast<uint32_t>(in.footprint);
+    vk.CmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, ep_pipeline);
+    vk.CmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, ep_layout, 0, 1, &f.set, 0, nullptr);
+    vk.CmdPushConstants(cmd, ep_layout, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(pc), pc);
+    vk.CmdDispatch(cmd, (im.width + 7) / 8, (im.height + 7) / 8, 1);
+    f.pass_recorded = true;
+  }
+
+  void record_end_of_frame(VkCommandBuffer cmd, uint64_t frame) {
+    need_engine("record_end_of_frame");
+    current(frame, "record_end_of_frame");
+    barrier(cmd, shader_stages, VK_ACCESS_SHADER_WRITE_BIT, VK_PIPELINE_STAGE_HOST_BIT, VK_ACCESS_HOST_READ_BIT);
+  }
+
+  std::span<const FrameStats> retire(uint64_t completed) {
+    need_engine("retire");
+    retired.clear();
+    for (;;) {  // oldest first; at most frames_in_flight slots
+      Frame* next = nullptr;
+      for (Frame& f : frames)
+        if (f.in_flight && f.frame <= completed && (!next || f.frame < next->frame)) next = &f;
+      if (!next) break;
+      next->in_flight = false;
+      collect_feedback(*next);
+      retired.push_back(next->stats);
+    }
+    return retired;
+  }
+
+  // ---- frames (own-device mode) ----
   // One evaluate batch: `words` input words per query, written by fill(query, words).
   template <class Query, class Fill>
   uint64_t submit_queries(std::span<const Query> queries, uint32_t words, Kernel kernel, Fill fill) {
@@ -476,8 +812,8 @@ struct GpuMap::Impl {
   }
 
   void finish(Frame& f) {
-    vk_check(vkWaitForFences(ctx->device(), 1, &f.fence, VK_TRUE, UINT64_MAX), "vkWaitForFences");
-    vk_check(vkResetFences(ctx->device(), 1, &f.fence), "vkResetFences");
+    vk_check(ctx->vk.WaitForFences(ctx->device(), 1, &f.fence, VK_TRUE, UINT64_MAX), "vkWaitForFences");
+    vk_check(ctx->vk.ResetFences(ctx->device(), 1, &f.fence), "vkResetFences");
     f.in_flight = false;
     if (!f.collected) collect_feedback(f);
   }
@@ -492,33 +828,38 @@ struct GpuMap::Impl {
     wanted.clear();
     feedback.clear();
     const uint32_t cap = opt.feedback_capacity;
+    uint32_t claimed = 0;
     for (uint32_t h = 0; h < cap; ++h) {
       const uint32_t key = fb[L::kFbHeaderWords + h];
       if (key == 0) continue;
+      ++claimed;
       const uint32_t* rec = fb + L::kFbHeaderWords + cap + size_t(h) * L::kFbRecordWords;
       const uint32_t level = rec[L::kFbRecLevel], x = rec[L::kFbRecX], y = rec[L::kFbRecY];
-      client::RemoteMap::WantedTile w;
+      client::WantedTile w;
       if (sg) {  // an absent stack cell: kFbStackKeyBit | cell
         const uint32_t cell = key & ~L::kFbStackKeyBit;
-        if ((key & L::kFbChildKeyBit) || !(key & L::kFbStackKeyBit) || cell >= sg->entries.size()) continue;
-        w.tile = sg->tile_id(cell);
+        if ((key & L::kFbChildKeyBit) || !(key & L::kFbStackKeyBit) || cell >= sg->cells.size()) continue;
+        w.tile = view->stack_cell_tile(cell);
       } else {
         if (level > map_level || (x >> level) != 0 || (y >> level) != 0) continue;
         w.tile = make_tile_id(level, x, y);
       }
       w.entry.value = std::bit_cast<float>(rec[L::kFbRecValue]);
-      w.entry.kind = EntryKind(rec[L::kFbRecKind] & 0xFFu);
-      w.entry.index_levels = uint8_t(rec[L::kFbRecKind] >> 8);
+      w.entry.kind = rec[L::kFbRecKind] & 0xFFu;
+      w.entry.index_levels = (rec[L::kFbRecKind] >> 8) & 0xFFu;
       w.priority = uint16_t(std::clamp<uint32_t>(rec[L::kFbRecCount], 1, 65535));
       wanted.push_back(w);
       feedback.push_back({w.tile, rec[L::kFbRecCount]});
     }
     fs.feedback_tiles = uint32_t(wanted.size());
-    fs.requested = uint32_t(rm->want_tiles(wanted));
-    if (queries) {
+    // What the host read of the feedback buffer: its header, the key array, the claimed records.
+    fs.feedback_bytes = (uint64_t(L::kFbHeaderWords) + cap + uint64_t(claimed) * L::kFbRecordWords) * 4;
+    totals.feedback_bytes += fs.feedback_bytes;
+    fs.requested = uint32_t(view->want_tiles(wanted));
+    if (queries && !engine) {
       uint64_t ts[2] = {0, 0};
       const uint32_t q = uint32_t(&f - frames.data()) * 2;
-      if (vkGetQueryPoolResults(ctx->device(), queries, q, 2, sizeof(ts), ts, 8, VK_QUERY_RESULT_64_BIT) == VK_SUCCESS) {
+      if (ctx->vk.GetQueryPoolResults(ctx->device(), queries, q, 2, sizeof(ts), ts, 8, VK_QUERY_RESULT_64_BIT) == VK_SUCCESS) {
         const uint32_t bits = ctx->timestamp_bits();
         const uint64_t mask = bits >= 64 ? ~uint64_t(0) : (uint64_t(1) << bits) - 1;
         fs.gpu_ms = double((ts[1] - ts[0]) & mask) * ctx->properties().limits.timestampPeriod * 1e-6;
@@ -537,67 +878,69 @@ struct GpuMap::Impl {
     fb[L::kFbCapacity] = opt.feedback_capacity;
     stage_changes(f, fs);
     VkCommandBuffer cmd = f.cmd;
-    vk_check(vkResetCommandBuffer(cmd, 0), "vkResetCommandBuffer");
+    vk_check(ctx->vk.ResetCommandBuffer(cmd, 0), "vkResetCommandBuffer");
     VkCommandBufferBeginInfo bi{};
     bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
     bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
-    vk_check(vkBeginCommandBuffer(cmd, &bi), "vkBeginCommandBuffer");
+    vk_check(ctx->vk.BeginCommandBuffer(cmd, &bi), "vkBeginCommandBuffer");
     const uint32_t q = uint32_t(&f - frames.data()) * 2;
-    if (queries) vkCmdResetQueryPool(cmd, queries, q, 2);
+    if (queries) ctx->vk.CmdResetQueryPool(cmd, queries, q, 2);
     if (!pool_copies.empty() || !page_copies.empty() || f.input_bytes || f.normals_bytes) {
       // Every earlier dispatch (of any frame) has finished reading before a copy writes.
       VkMemoryBarrier war{};
       war.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
       war.srcAccessMask = VK_ACCESS_SHADER_READ_BIT;
       war.dstAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
-      vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &war, 0,
+      ctx->vk.CmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &war, 0,
                            nullptr, 0, nullptr);
       if (!pool_copies.empty())
-        vkCmdCopyBuffer(cmd, f.staging.buffer, pool.buffer, uint32_t(pool_copies.size()), pool_copies.data());
+        ctx->vk.CmdCopyBuffer(cmd, f.staging.buffer, pool.buffer, uint32_t(pool_copies.size()), pool_copies.data());
       if (!page_copies.empty())
-        vkCmdCopyBuffer(cmd, f.staging.buffer, page.buffer, uint32_t(page_copies.size()), page_copies.data());
+        ctx->vk.CmdCopyBuffer(cmd, f.staging.buffer, page.buffer, uint32_t(page_copies.size()), page_copies.data());
       const VkBufferCopy in_copy{0, 0, f.input_bytes}, n_copy{0, 0, f.normals_bytes};
-      if (f.input_bytes) vkCmdCopyBuffer(cmd, f.input_host.buffer, f.input.buffer, 1, &in_copy);
-      if (f.normals_bytes) vkCmdCopyBuffer(cmd, f.normals_host.buffer, f.normals.buffer, 1, &n_copy);
+      if (f.input_bytes) ctx->vk.CmdCopyBuffer(cmd, f.input_host.buffer, f.input.buffer, 1, &in_copy);
+      if (f.normals_bytes) ctx->vk.CmdCopyBuffer(cmd, f.normals_host.buffer, f.normals.buffer, 1, &n_copy);
     }
     // Copies (this frame's and the first upload's) land before the dispatch reads.
     VkMemoryBarrier raw{};
     raw.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
     raw.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT | VK_ACCESS_HOST_WRITE_BIT;
     raw.dstAccessMask = VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT;
-    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_HOST_BIT,
+    ctx->vk.CmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_HOST_BIT,
                          VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, 0, 1, &raw, 0, nullptr, 0, nullptr);
     kernels.record(cmd, which, f.set, pc);
-    if (queries) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, queries, q);
-    vkCmdDispatch(cmd, (invocations + L::kWorkgroupSize - 1) / L::kWorkgroupSize, 1, 1);
-    if (queries) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, queries, q + 1);
+    if (queries) ctx->vk.CmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, queries, q);
+    ctx->vk.CmdDispatch(cmd, (invocations + L::kWorkgroupSize - 1) / L::kWorkgroupSize, 1, 1);
+    if (queries) ctx->vk.CmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, queries, q + 1);
     VkMemoryBarrier out{};
     out.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
     out.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
     out.dstAccessMask = VK_ACCESS_TRANSFER_READ_BIT | VK_ACCESS_HOST_READ_BIT;
-    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+    ctx->vk.CmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
                          VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &out, 0, nullptr, 0, nullptr);
     if (invocations) {
       const VkBufferCopy out_copy{0, 0, uint64_t(invocations) * 4};
-      vkCmdCopyBuffer(cmd, f.output.buffer, f.output_host.buffer, 1, &out_copy);
+      ctx->vk.CmdCopyBuffer(cmd, f.output.buffer, f.output_host.buffer, 1, &out_copy);
       VkMemoryBarrier host{};
       host.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
       host.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
       host.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
-      vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &host, 0, nullptr, 0,
+      ctx->vk.CmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &host, 0, nullptr, 0,
                            nullptr);
     }
-    vk_check(vkEndCommandBuffer(cmd), "vkEndCommandBuffer");
+    vk_check(ctx->vk.EndCommandBuffer(cmd), "vkEndCommandBuffer");
     VkSubmitInfo si{};
     si.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
     si.commandBufferCount = 1;
     si.pCommandBuffers = &cmd;
-    vk_check(vkQueueSubmit(ctx->queue(), 1, &si, f.fence), "vkQueueSubmit");
+    vk_check(ctx->vk.QueueSubmit(ctx->queue(), 1, &si, f.fence), "vkQueueSubmit");
     f.in_flight = true;
     f.collected = false;
     f.frame = next_frame++;
     f.count = invocations;
     fs.frame = f.frame;
+    fs.host_io_bytes = f.input_bytes + f.normals_bytes + uint64_t(invocations) * 4;  // in, and answers back
+    totals.host_io_bytes += fs.host_io_bytes;
     f.stats = fs;
     ++totals.frames;
     return f.frame;
@@ -610,8 +953,35 @@ struct GpuMap::Impl {
   }
 };
 
-GpuMap::GpuMap(client::Map map, GpuOptions options) : impl_(std::make_unique<Impl>(std::move(map), std::move(options))) {}
+GpuMap::GpuMap(client::Map map, GpuOptions options)
+    : impl_(std::make_unique<Impl>(std::move(map), nullptr, std::move(options))) {}
+GpuMap::GpuMap(client::Map map, const EngineDevice& device, GpuOptions options)
+    : impl_(std::make_unique<Impl>(std::move(map), &device, std::move(options))) {}
 GpuMap::~GpuMap() = default;
+
+std::span<const FrameStats> GpuMap::retire(uint64_t completed_frame) { return impl_->retire(completed_frame); }
+
+FrameStats GpuMap::record_uploads(VkCommandBuffer cmd, uint64_t frame) { return impl_->record_uploads(cmd, frame); }
+
+void GpuMap::record_shadow_pass(VkCommandBuffer cmd, uint64_t frame, const ShadowPassImages& images,
+                                const ShadowPassSettings& settings) {
+  impl_->record_shadow_pass(cmd, frame, images, settings);
+}
+
+void GpuMap::record_end_of_frame(VkCommandBuffer cmd, uint64_t frame) { impl_->record_end_of_frame(cmd, frame); }
+
+GpuDescriptors GpuMap::descriptors(uint64_t frame) const {
+  const Impl& m = *impl_;
+  m.need_engine("descriptors");
+  const Impl::Frame& f = m.frames[frame % m.frames.size()];
+  GpuDescriptors d;
+  d.pool = {m.pool.buffer, 0, VK_WHOLE_SIZE};
+  d.page_table = {m.page.buffer, 0, VK_WHOLE_SIZE};
+  d.feedback = {f.feedback.buffer, 0, VK_WHOLE_SIZE};
+  return d;
+}
+
+bool GpuMap::engine_mode() const { return impl_->engine; }
 
 FrameStats GpuMap::evaluate(std::span<const GpuQuery> queries, std::span<float> out) {
   if (queries.size() != out.size()) throw GpuError("GpuMap::evaluate: queries and out differ in size");
@@ -619,6 +989,7 @@ FrameStats GpuMap::evaluate(std::span<const GpuQuery> queries, std::span<float> 
 }
 
 uint64_t GpuMap::submit_evaluate(std::span<const GpuQuery> queries) {
+  impl_->need_own("submit_evaluate");
   return impl_->submit_queries(queries, L::kQueryWords, Kernel::evaluate, [](const GpuQuery& q, uint32_t* w) {
     w[L::kQueryX] = q.x;
     w[L::kQueryY] = q.y;
@@ -635,6 +1006,7 @@ FrameStats GpuMap::evaluate(std::span<const GpuStackQuery> queries, std::span<fl
 }
 
 uint64_t GpuMap::submit_evaluate(std::span<const GpuStackQuery> queries) {
+  impl_->need_own("submit_evaluate");
   if (!impl_->sg) throw GpuError("GpuMap::evaluate: stack queries on a map that is not a stack");
   return impl_->submit_queries(queries, L::kSqWords, Kernel::stack_evaluate, [](const GpuStackQuery& q, uint32_t* w) {
     w[L::kSqX] = q.x;
@@ -649,6 +1021,7 @@ uint64_t GpuMap::submit_evaluate(std::span<const GpuStackQuery> queries) {
 
 uint64_t GpuMap::submit_shadow_pass(const ShadowPassInput& in) {
   Impl& m = *impl_;
+  m.need_own("submit_shadow_pass");
   const uint64_t pixels = uint64_t(in.width) * in.height;
   if (pixels == 0 || pixels > m.opt.max_pixels)
     throw GpuError("GpuMap::submit_shadow_pass: " + std::to_string(in.width) + "x" + std::to_string(in.height) +
@@ -676,7 +1049,7 @@ uint64_t GpuMap::submit_shadow_pass(const ShadowPassInput& in) {
     return m.submit(f, Kernel::stack_shadow_pass, uint32_t(pixels), pc);
   }
   if (in.soft) throw GpuError("GpuMap::submit_shadow_pass: a soft pass needs a stack map (a pack built with a light set)");
-  const ShadowLight light = shadow_light(m.rm->header());
+  const ShadowLight light = m.map_light();
   Impl::Frame& f = m.acquire();
   std::memcpy(f.input_host.mapped, in.positions.data(), pixels * 16);
   std::memcpy(f.normals_host.mapped, in.normals.data(), pixels * 16);
@@ -700,6 +1073,7 @@ uint64_t GpuMap::submit_shadow_pass(const ShadowPassInput& in) {
 
 FrameStats GpuMap::wait(uint64_t frame, std::span<float> out) {
   Impl& m = *impl_;
+  m.need_own("wait");
   Impl::Frame* f = m.find(frame);
   if (!f) throw GpuError("GpuMap::wait: frame " + std::to_string(frame) + " is not in flight");
   if (f->in_flight) m.finish(*f);
@@ -712,6 +1086,7 @@ FrameStats GpuMap::wait(uint64_t frame, std::span<float> out) {
 
 uint32_t GpuMap::sync() {
   Impl& m = *impl_;
+  m.need_own("sync");
   uint32_t uploaded = 0;
   for (uint32_t round = 0; round <= m.slot_count; ++round) {
     Impl::Frame& f = m.acquire();
@@ -730,7 +1105,9 @@ uint32_t GpuMap::sync() {
 GpuStats GpuMap::stats() const {
   GpuStats s = impl_->totals;
   s.resident_slots = impl_->resident;
-  s.validation_messages = impl_->ctx->validation_messages();
+  s.pool_bytes = impl_->pool_bytes;
+  s.page_table_bytes = impl_->page_shadow.size() * 4;
+  s.validation_messages = impl_->ctx->validation_messages();  // own-device mode's layer only
   return s;
 }
 

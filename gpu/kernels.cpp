@@ -22,9 +22,16 @@ const uint32_t kStackShadowPassSpv[] = {
 #include "gpu/shaders/stack_shadow_pass.spv.inc"
 };
 
+const uint32_t kEngineShadowPassSpv[] = {
+#include "gpu/shaders/engine_shadow_pass.spv.inc"
+};
+
 }  // namespace
 
+std::span<const uint32_t> engine_shadow_pass_spirv() { return kEngineShadowPassSpv; }
+
 void Kernels::create(VkContext& ctx, uint32_t sets) {
+  vk_ = &ctx.vk;
   VkDevice d = ctx.device();
   VkDescriptorSetLayoutBinding b[6] = {};
   for (uint32_t i = 0; i < 6; ++i) {
@@ -37,7 +44,7 @@ void Kernels::create(VkContext& ctx, uint32_t sets) {
   sli.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO;
   sli.bindingCount = 6;
   sli.pBindings = b;
-  vk_check(vkCreateDescriptorSetLayout(d, &sli, nullptr, &set_layout_), "vkCreateDescriptorSetLayout");
+  vk_check(vk_->CreateDescriptorSetLayout(d, &sli, nullptr, &set_layout_), "vkCreateDescriptorSetLayout");
   VkPushConstantRange pcr{VK_SHADER_STAGE_COMPUTE_BIT, 0, layout::kPcWords * 4};
   VkPipelineLayoutCreateInfo pli{};
   pli.sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO;
@@ -45,14 +52,14 @@ void Kernels::create(VkContext& ctx, uint32_t sets) {
   pli.pSetLayouts = &set_layout_;
   pli.pushConstantRangeCount = 1;
   pli.pPushConstantRanges = &pcr;
-  vk_check(vkCreatePipelineLayout(d, &pli, nullptr, &pipeline_layout_), "vkCreatePipelineLayout");
+  vk_check(vk_->CreatePipelineLayout(d, &pli, nullptr, &pipeline_layout_), "vkCreatePipelineLayout");
   VkDescriptorPoolSize ps{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 6 * sets};
   VkDescriptorPoolCreateInfo dpi{};
   dpi.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO;
   dpi.maxSets = sets;
   dpi.poolSizeCount = 1;
   dpi.pPoolSizes = &ps;
-  vk_check(vkCreateDescriptorPool(d, &dpi, nullptr, &descriptor_pool_), "vkCreateDescriptorPool");
+  vk_check(vk_->CreateDescriptorPool(d, &dpi, nullptr, &descriptor_pool_), "vkCreateDescriptorPool");
   sets_.assign(sets, VK_NULL_HANDLE);
   std::vector<VkDescriptorSetLayout> layouts(sets, set_layout_);
   VkDescriptorSetAllocateInfo dai{};
@@ -60,7 +67,7 @@ void Kernels::create(VkContext& ctx, uint32_t sets) {
   dai.descriptorPool = descriptor_pool_;
   dai.descriptorSetCount = sets;
   dai.pSetLayouts = layouts.data();
-  vk_check(vkAllocateDescriptorSets(d, &dai, sets_.data()), "vkAllocateDescriptorSets");
+  vk_check(vk_->AllocateDescriptorSets(d, &dai, sets_.data()), "vkAllocateDescriptorSets");
 
   const std::span<const uint32_t> code[kKernelCount] = {kEvaluateSpv, kShadowPassSpv, kLayoutProbeSpv,
                                                            kR32fSpv,     kStackEvaluateSpv, kStackShadowPassSpv};
@@ -73,8 +80,8 @@ void Kernels::create(VkContext& ctx, uint32_t sets) {
     cpi.stage.module = m;
     cpi.stage.pName = "main";
     cpi.layout = pipeline_layout_;
-    const VkResult r = vkCreateComputePipelines(d, VK_NULL_HANDLE, 1, &cpi, nullptr, &pipelines_[i]);
-    vkDestroyShaderModule(d, m, nullptr);
+    const VkResult r = vk_->CreateComputePipelines(d, VK_NULL_HANDLE, 1, &cpi, nullptr, &pipelines_[i]);
+    vk_->DestroyShaderModule(d, m, nullptr);
     vk_check(r, "vkCreateComputePipelines");
   }
 }
@@ -91,23 +98,24 @@ VkDescriptorSet Kernels::bind(VkContext& ctx, uint32_t i, const std::array<VkBuf
     w[b].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
     w[b].pBufferInfo = &info[b];
   }
-  vkUpdateDescriptorSets(ctx.device(), 6, w, 0, nullptr);
+  vk_->UpdateDescriptorSets(ctx.device(), 6, w, 0, nullptr);
   return sets_[i];
 }
 
 void Kernels::record(VkCommandBuffer cmd, Kernel k, VkDescriptorSet set, const uint32_t (&pc)[layout::kPcWords]) const {
-  vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipelines_[uint32_t(k)]);
-  vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_layout_, 0, 1, &set, 0, nullptr);
-  vkCmdPushConstants(cmd, pipeline_layout_, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(pc), pc);
+  vk_->CmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipelines_[uint32_t(k)]);
+  vk_->CmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_layout_, 0, 1, &set, 0, nullptr);
+  vk_->CmdPushConstants(cmd, pipeline_layout_, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(pc), pc);
 }
 
 void Kernels::destroy(VkContext& ctx) {
+  if (!vk_) return;
   VkDevice d = ctx.device();
   for (VkPipeline& p : pipelines_)
-    if (p) vkDestroyPipeline(d, p, nullptr), p = VK_NULL_HANDLE;
-  if (descriptor_pool_) vkDestroyDescriptorPool(d, descriptor_pool_, nullptr);
-  if (pipeline_layout_) vkDestroyPipelineLayout(d, pipeline_layout_, nullptr);
-  if (set_layout_) vkDestroyDescriptorSetLayout(d, set_layout_, nullptr);
+    if (p) vk_->DestroyPipeline(d, p, nullptr), p = VK_NULL_HANDLE;
+  if (descriptor_pool_) vk_->DestroyDescriptorPool(d, descriptor_pool_, nullptr);
+  if (pipeline_layout_) vk_->DestroyPipelineLayout(d, pipeline_layout_, nullptr);
+  if (set_layout_) vk_->DestroyDescriptorSetLayout(d, set_layout_, nullptr);
   descriptor_pool_ = VK_NULL_HANDLE;
   pipeline_layout_ = VK_NULL_HANDLE;
   set_layout_ = VK_NULL_HANDLE;

@@ -6,6 +6,7 @@
 
 #include <array>
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "gpu/layout.hpp"
@@ -25,6 +26,10 @@ enum class Kernel : uint32_t {
 };
 inline constexpr uint32_t kKernelCount = 6;
 
+// The engine-mode shadow pass (shaders/engine_shadow_pass.comp), built by GpuMap itself
+// with its own descriptor-set layout (images), not one of the Kernels.
+std::span<const uint32_t> engine_shadow_pass_spirv();
+
 class Kernels {
  public:
   // Pipelines plus `sets` descriptor sets.
@@ -40,6 +45,7 @@ class Kernels {
   VkDescriptorPool descriptor_pool_ = VK_NULL_HANDLE;
   std::array<VkPipeline, kKernelCount> pipelines_{};
   std::vector<VkDescriptorSet> sets_;
+  const VkFunctions* vk_ = nullptr;  // the context's table (create())
 };
 
 }  // namespace st::gpu

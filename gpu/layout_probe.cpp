@@ -21,9 +21,9 @@ std::vector<uint32_t> run_probe(const std::string& device, bool validation, std:
   std::vector<uint32_t> out(out_words, 0);
   const size_t words = std::max({size_t(layout::kProbeWords), input.size(), out_words});
   auto cleanup = [&] {
-    vkDeviceWaitIdle(ctx.device());
-    if (fence) vkDestroyFence(ctx.device(), fence, nullptr);
-    if (pool) vkDestroyCommandPool(ctx.device(), pool, nullptr);
+    ctx.vk.DeviceWaitIdle(ctx.device());
+    if (fence) ctx.vk.DestroyFence(ctx.device(), fence, nullptr);
+    if (pool) ctx.vk.DestroyCommandPool(ctx.device(), pool, nullptr);
     for (VkBufferBox& b : bufs) ctx.destroy(b);
     kernels.destroy(ctx);
   };
@@ -38,25 +38,25 @@ std::vector<uint32_t> run_probe(const std::string& device, bool validation, std:
     VkCommandBuffer cmd = ctx.allocate_command_buffer(pool);
     VkCommandBufferBeginInfo bi{};
     bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
-    vk_check(vkBeginCommandBuffer(cmd, &bi), "vkBeginCommandBuffer");
+    vk_check(ctx.vk.BeginCommandBuffer(cmd, &bi), "vkBeginCommandBuffer");
     uint32_t pc[layout::kPcWords] = {};
     pc[layout::kPcCount] = count;
     kernels.record(cmd, Kernel::layout_probe, set, pc);
-    vkCmdDispatch(cmd, std::max(1u, (count + layout::kWorkgroupSize - 1) / layout::kWorkgroupSize), 1, 1);
+    ctx.vk.CmdDispatch(cmd, std::max(1u, (count + layout::kWorkgroupSize - 1) / layout::kWorkgroupSize), 1, 1);
     VkMemoryBarrier host{};
     host.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
     host.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
     host.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
-    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &host, 0, nullptr, 0,
+    ctx.vk.CmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &host, 0, nullptr, 0,
                          nullptr);
-    vk_check(vkEndCommandBuffer(cmd), "vkEndCommandBuffer");
+    vk_check(ctx.vk.EndCommandBuffer(cmd), "vkEndCommandBuffer");
     fence = ctx.make_fence();
     VkSubmitInfo si{};
     si.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
     si.commandBufferCount = 1;
     si.pCommandBuffers = &cmd;
-    vk_check(vkQueueSubmit(ctx.queue(), 1, &si, fence), "vkQueueSubmit");
-    vk_check(vkWaitForFences(ctx.device(), 1, &fence, VK_TRUE, UINT64_MAX), "vkWaitForFences");
+    vk_check(ctx.vk.QueueSubmit(ctx.queue(), 1, &si, fence), "vkQueueSubmit");
+    vk_check(ctx.vk.WaitForFences(ctx.device(), 1, &fence, VK_TRUE, UINT64_MAX), "vkWaitForFences");
     std::memcpy(out.data(), bufs[4].mapped, out.size() * 4);
   } catch (...) {
     cleanup();

@@ -55,7 +55,7 @@ struct R32fImage::Impl {
         std::memcpy(normals.mapped, reinterpret_cast<const uint8_t*>(values.data()) + off, n);
         begin();
         VkBufferCopy c{0, off, n};
-        vkCmdCopyBuffer(cmd, normals.buffer, image.buffer, 1, &c);
+        ctx.vk.CmdCopyBuffer(cmd, normals.buffer, image.buffer, 1, &c);
         submit();
       }
     } catch (...) {
@@ -66,31 +66,31 @@ struct R32fImage::Impl {
   ~Impl() { release(); }
 
   void release() noexcept {
-    vkDeviceWaitIdle(ctx.device());
-    if (queries) vkDestroyQueryPool(ctx.device(), queries, nullptr);
-    if (fence) vkDestroyFence(ctx.device(), fence, nullptr);
-    if (pool) vkDestroyCommandPool(ctx.device(), pool, nullptr);
+    ctx.vk.DeviceWaitIdle(ctx.device());
+    if (queries) ctx.vk.DestroyQueryPool(ctx.device(), queries, nullptr);
+    if (fence) ctx.vk.DestroyFence(ctx.device(), fence, nullptr);
+    if (pool) ctx.vk.DestroyCommandPool(ctx.device(), pool, nullptr);
     queries = VK_NULL_HANDLE, fence = VK_NULL_HANDLE, pool = VK_NULL_HANDLE;
     for (VkBufferBox* b : {&image, &page, &input, &normals, &output, &feedback}) ctx.destroy(*b);
     kernels.destroy(ctx);
   }
 
   void begin() {
-    vk_check(vkResetCommandBuffer(cmd, 0), "vkResetCommandBuffer");
+    vk_check(ctx.vk.ResetCommandBuffer(cmd, 0), "vkResetCommandBuffer");
     VkCommandBufferBeginInfo bi{};
     bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
     bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
-    vk_check(vkBeginCommandBuffer(cmd, &bi), "vkBeginCommandBuffer");
+    vk_check(ctx.vk.BeginCommandBuffer(cmd, &bi), "vkBeginCommandBuffer");
   }
   void submit() {
-    vk_check(vkEndCommandBuffer(cmd), "vkEndCommandBuffer");
+    vk_check(ctx.vk.EndCommandBuffer(cmd), "vkEndCommandBuffer");
     VkSubmitInfo si{};
     si.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
     si.commandBufferCount = 1;
     si.pCommandBuffers = &cmd;
-    vk_check(vkQueueSubmit(ctx.queue(), 1, &si, fence), "vkQueueSubmit");
-    vk_check(vkWaitForFences(ctx.device(), 1, &fence, VK_TRUE, UINT64_MAX), "vkWaitForFences");
-    vk_check(vkResetFences(ctx.device(), 1, &fence), "vkResetFences");
+    vk_check(ctx.vk.QueueSubmit(ctx.queue(), 1, &si, fence), "vkQueueSubmit");
+    vk_check(ctx.vk.WaitForFences(ctx.device(), 1, &fence, VK_TRUE, UINT64_MAX), "vkWaitForFences");
+    vk_check(ctx.vk.ResetFences(ctx.device(), 1, &fence), "vkResetFences");
   }
 
   double run(const uint32_t (&pc)[L::kPcWords], uint32_t n, std::span<float> out) {
@@ -99,23 +99,23 @@ struct R32fImage::Impl {
     raw.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
     raw.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT | VK_ACCESS_HOST_WRITE_BIT;
     raw.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
-    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_HOST_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
+    ctx.vk.CmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_HOST_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
                          0, 1, &raw, 0, nullptr, 0, nullptr);
-    if (queries) vkCmdResetQueryPool(cmd, queries, 0, 2);
+    if (queries) ctx.vk.CmdResetQueryPool(cmd, queries, 0, 2);
     kernels.record(cmd, Kernel::r32f, set, pc);
-    if (queries) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, queries, 0);
-    vkCmdDispatch(cmd, (n + L::kWorkgroupSize - 1) / L::kWorkgroupSize, 1, 1);
-    if (queries) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, queries, 1);
+    if (queries) ctx.vk.CmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, queries, 0);
+    ctx.vk.CmdDispatch(cmd, (n + L::kWorkgroupSize - 1) / L::kWorkgroupSize, 1, 1);
+    if (queries) ctx.vk.CmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, queries, 1);
     VkMemoryBarrier host{};
     host.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
     host.srcAccessMask = VK_ACCESS_SHADER_WRITE_BIT;
     host.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
-    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &host, 0, nullptr, 0, nullptr);
+    ctx.vk.CmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &host, 0, nullptr, 0, nullptr);
     submit();
     std::memcpy(out.data(), output.mapped, size_t(n) * 4);
     if (!queries) return 0;
     uint64_t ts[2] = {0, 0};
-    vk_check(vkGetQueryPoolResults(ctx.device(), queries, 0, 2, sizeof(ts), ts, 8, VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT),
+    vk_check(ctx.vk.GetQueryPoolResults(ctx.device(), queries, 0, 2, sizeof(ts), ts, 8, VK_QUERY_RESULT_64_BIT | VK_QUERY_RESULT_WAIT_BIT),
              "vkGetQueryPoolResults");
     const uint32_t bits = ctx.timestamp_bits();
     const uint64_t mask = bits >= 64 ? ~uint64_t(0) : (uint64_t(1) << bits) - 1;

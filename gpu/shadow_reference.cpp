@@ -6,7 +6,7 @@
 #include <cmath>
 #include <vector>
 
-#include "client/map_access.hpp"
+#include "shadowtile/cache_view.hpp"
 #include "tiles/core/filter_level.hpp"
 #include "tiles/core/light.hpp"
 #include "tiles/core/stack_grid.hpp"
@@ -140,6 +140,14 @@ bool pixel_texel(const ShadowLight& l, const ShadowPassInput& in, size_t p, uint
 
 }  // namespace
 
+bool shadow_pass_texel(const ShadowLight& light, const ShadowPassInput& in, size_t p, uint32_t finest, uint32_t& x,
+                       uint32_t& y) {
+  Texel t;
+  if (!pixel_texel(light, in, p, finest, t)) return false;
+  x = t.x, y = t.y;
+  return true;
+}
+
 void shadow_pass_reference(const Evaluator& ev, const PackHeader& h, const ShadowPassInput& in, std::span<float> out) {
   const ShadowLight l = shadow_light(h);
   const uint32_t finest = h.map_level;
@@ -175,9 +183,10 @@ StackTime stack_time(uint32_t slices, double time) {
 }
 
 void stack_shadow_pass_reference(const client::Map& map, const ShadowPassInput& in, std::span<float> out) {
-  const StackGrid* g = client::MapAccess::remote(map).stack_grid();
+  const client::CacheView view(map);
+  const client::StackTables* g = view.stack();
   if (!g) throw GpuError("stack_shadow_pass_reference: not a stack map");
-  const uint32_t finest = g->geo.n;
+  const uint32_t finest = g->xy_level;
   const uint32_t r = std::clamp<uint32_t>(in.kernel, 1, Evaluator::kMaxPcf);
   // r x r PCF in slice w at `level` (st_stack_pcf): lit taps / (r * r), taps clamped.
   auto pcf = [&](uint32_t w, uint32_t level, uint32_t x, uint32_t y, float d) {
@@ -189,7 +198,8 @@ void stack_shadow_pass_reference(const client::Map& map, const ShadowPassInput& 
     return float(lit) / float(r * r);
   };
   std::vector<ShadowLight> lights;
-  for (uint32_t w = 0; w < g->slices; ++w) lights.push_back(shadow_light(g->light(w)));
+  for (const client::LightParams& l : g->lights)
+    lights.push_back(shadow_light(LightSpace::from_array(LightKind(l.kind), l.params)));
   auto slice = [&](size_t p, uint32_t w) {
     Texel t;
     if (!pixel_texel(lights[w], in, p, finest, t)) return 1.0f;

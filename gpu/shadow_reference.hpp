@@ -57,6 +57,12 @@ ShadowLight ground_shadow_light(const LightSpace& ls);
 // map that is not a stack.
 void stack_shadow_pass_reference(const client::Map& map, const ShadowPassInput& in, std::span<float> out);
 
+// The finest-level texel (x, y) the shadow pass reads for pixel p of `in` in `light` (the
+// twin's float operations); false where the pass answers lit without a lookup (no
+// surface, or outside the light's box). Tests use it to name the tiles a pass needs.
+bool shadow_pass_texel(const ShadowLight& light, const ShadowPassInput& in, size_t p, uint32_t finest, uint32_t& x,
+                       uint32_t& y);
+
 // The CPU twin of the shadow pass over `ev` (the Map's evaluator, the same cache state).
 void shadow_pass_reference(const Evaluator& ev, const PackHeader& h, const ShadowPassInput& in, std::span<float> out);
 

@@ -3,7 +3,81 @@
 #include <cstdlib>
 #include <cstring>
 
+// gpu/ is compiled with VK_NO_PROTOTYPES: the one symbol taken from the loader we link
+// (the own-device mode's only way in; engine mode uses the engine's).
+extern "C" VKAPI_ATTR PFN_vkVoidFunction VKAPI_CALL vkGetInstanceProcAddr(VkInstance instance, const char* name);
+
 namespace st::gpu {
+
+void VkFunctions::load_instance(PFN_vkGetInstanceProcAddr gipa, VkInstance instance) {
+#define ST_VK_LOAD(name)                                                                        \
+  name = reinterpret_cast<PFN_vk##name>(gipa(instance, "vk" #name));                            \
+  if (!name) throw GpuError("Vulkan: vkGetInstanceProcAddr returned no vk" #name);
+  ST_VK_INSTANCE_FUNCTIONS(ST_VK_LOAD)
+#undef ST_VK_LOAD
+}
+
+void VkFunctions::load_device(PFN_vkGetDeviceProcAddr gdpa, VkDevice device) {
+  if (!gdpa) gdpa = GetDeviceProcAddr;
+#define ST_VK_LOAD(name)                                                                        \
+  name = reinterpret_cast<PFN_vk##name>(gdpa(device, "vk" #name));                              \
+  if (!name) throw GpuError("Vulkan: vkGetDeviceProcAddr returned no vk" #name);
+  ST_VK_DEVICE_FUNCTIONS(ST_VK_LOAD)
+#undef ST_VK_LOAD
+}
+
+// The default GpuAllocator: one vkAllocateMemory per buffer (GpuMap makes a handful, once).
+class VkContext::DefaultAllocator final : public GpuAllocator {
+ public:
+  explicit DefaultAllocator(const VkContext& c) : c_(c) {}
+  VkResult create_buffer(const VkBufferCreateInfo& info, BufferUse use, GpuBuffer& out) override {
+    static_assert(sizeof(void*) >= sizeof(VkDeviceMemory), "GpuBuffer::allocation holds a VkDeviceMemory");
+    const VkFunctions& vk = c_.vk;
+    out = GpuBuffer{};
+    VkResult r = vk.CreateBuffer(c_.device_, &info, c_.callbacks_, &out.buffer);
+    if (r != VK_SUCCESS) return r;
+    VkMemoryRequirements req{};
+    vk.GetBufferMemoryRequirements(c_.device_, out.buffer, &req);
+    const VkMemoryPropertyFlags hv = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
+    uint32_t type = 0;
+    try {
+      type = use == BufferUse::device_local ? c_.memory_type(req.memoryTypeBits, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT, 0)
+             : use == BufferUse::readback  ? c_.memory_type(req.memoryTypeBits, hv | VK_MEMORY_PROPERTY_HOST_CACHED_BIT, hv)
+                                           : c_.memory_type(req.memoryTypeBits, hv, hv);
+    } catch (const GpuError&) {
+      destroy_buffer(out);
+      return VK_ERROR_OUT_OF_DEVICE_MEMORY;
+    }
+    VkMemoryAllocateInfo mai{};
+    mai.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO;
+    mai.allocationSize = req.size;
+    mai.memoryTypeIndex = type;
+    VkDeviceMemory mem = VK_NULL_HANDLE;
+    r = vk.AllocateMemory(c_.device_, &mai, c_.callbacks_, &mem);
+    if (r == VK_SUCCESS) {
+      out.allocation = reinterpret_cast<void*>(mem);
+      r = vk.BindBufferMemory(c_.device_, out.buffer, mem, 0);
+    }
+    if (r == VK_SUCCESS && use != BufferUse::device_local) r = vk.MapMemory(c_.device_, mem, 0, VK_WHOLE_SIZE, 0, &out.mapped);
+    if (r != VK_SUCCESS) {
+      destroy_buffer(out);
+      return r;
+    }
+    out.size = info.size;
+    return VK_SUCCESS;
+  }
+  void destroy_buffer(GpuBuffer& b) noexcept override {
+    const VkFunctions& vk = c_.vk;
+    const auto mem = reinterpret_cast<VkDeviceMemory>(b.allocation);
+    if (b.mapped) vk.UnmapMemory(c_.device_, mem);
+    if (b.buffer) vk.DestroyBuffer(c_.device_, b.buffer, c_.callbacks_);
+    if (mem) vk.FreeMemory(c_.device_, mem, c_.callbacks_);
+    b = GpuBuffer{};
+  }
+
+ private:
+  const VkContext& c_;
+};
 
 const char* vk_result_name(VkResult r) {
   switch (r) {
@@ -57,6 +131,11 @@ std::string VkContext::first_validation_message() const {
 
 VkContext::VkContext(const std::string& device_name, bool validation) {
   try {
+    const PFN_vkGetInstanceProcAddr gipa = &::vkGetInstanceProcAddr;
+    const auto EnumerateInstanceLayerProperties = reinterpret_cast<PFN_vkEnumerateInstanceLayerProperties>(
+        gipa(VK_NULL_HANDLE, "vkEnumerateInstanceLayerProperties"));
+    const auto CreateInstance = reinterpret_cast<PFN_vkCreateInstance>(gipa(VK_NULL_HANDLE, "vkCreateInstance"));
+    if (!EnumerateInstanceLayerProperties || !CreateInstance) throw GpuError("Vulkan: the loader returned no vkCreateInstance");
     VkApplicationInfo app{};
     app.sType = VK_STRUCTURE_TYPE_APPLICATION_INFO;
     app.pApplicationName = "shadowtile";
@@ -72,9 +151,9 @@ VkContext::VkContext(const std::string& device_name, bool validation) {
     dbg.pUserData = this;
     if (validation) {
       uint32_t n = 0;
-      vk_check(vkEnumerateInstanceLayerProperties(&n, nullptr), "vkEnumerateInstanceLayerProperties");
+      vk_check(EnumerateInstanceLayerProperties(&n, nullptr), "vkEnumerateInstanceLayerProperties");
       std::vector<VkLayerProperties> have(n);
-      vk_check(vkEnumerateInstanceLayerProperties(&n, have.data()), "vkEnumerateInstanceLayerProperties");
+      vk_check(EnumerateInstanceLayerProperties(&n, have.data()), "vkEnumerateInstanceLayerProperties");
       bool found = false;
       for (const auto& l : have) found |= std::strcmp(l.layerName, "VK_LAYER_KHRONOS_validation") == 0;
       if (!found) throw GpuError("Vulkan: validation asked for but VK_LAYER_KHRONOS_validation is not installed (vulkan-validationlayers)");
@@ -89,22 +168,23 @@ VkContext::VkContext(const std::string& device_name, bool validation) {
     ici.enabledExtensionCount = uint32_t(extensions.size());
     ici.ppEnabledExtensionNames = extensions.data();
     if (validation) ici.pNext = &dbg;
-    const VkResult ir = vkCreateInstance(&ici, nullptr, &instance_);
+    const VkResult ir = CreateInstance(&ici, nullptr, &instance_);
     if (ir == VK_ERROR_INCOMPATIBLE_DRIVER || ir == VK_ERROR_INITIALIZATION_FAILED)
       throw GpuError(std::string("Vulkan: no Vulkan driver found (vkCreateInstance: ") + vk_result_name(ir) +
                      "); install one, e.g. mesa-vulkan-drivers for lavapipe");
     vk_check(ir, "vkCreateInstance");
+    vk.load_instance(gipa, instance_);
     if (validation) {
       auto create = reinterpret_cast<PFN_vkCreateDebugUtilsMessengerEXT>(
-          vkGetInstanceProcAddr(instance_, "vkCreateDebugUtilsMessengerEXT"));
+          gipa(instance_, "vkCreateDebugUtilsMessengerEXT"));
       if (!create) throw GpuError("Vulkan: vkCreateDebugUtilsMessengerEXT not available");
       vk_check(create(instance_, &dbg, nullptr, &messenger_), "vkCreateDebugUtilsMessengerEXT");
     }
 
     uint32_t n = 0;
-    vk_check(vkEnumeratePhysicalDevices(instance_, &n, nullptr), "vkEnumeratePhysicalDevices");
+    vk_check(vk.EnumeratePhysicalDevices(instance_, &n, nullptr), "vkEnumeratePhysicalDevices");
     std::vector<VkPhysicalDevice> devs(n);
-    if (n) vk_check(vkEnumeratePhysicalDevices(instance_, &n, devs.data()), "vkEnumeratePhysicalDevices");
+    if (n) vk_check(vk.EnumeratePhysicalDevices(instance_, &n, devs.data()), "vkEnumeratePhysicalDevices");
     std::string want = device_name;
     if (want.empty())
       if (const char* e = std::getenv("SHADOWTILE_VK_DEVICE")) want = e;
@@ -112,7 +192,7 @@ VkContext::VkContext(const std::string& device_name, bool validation) {
     std::vector<VkPhysicalDevice> match;
     for (VkPhysicalDevice d : devs) {
       VkPhysicalDeviceProperties p{};
-      vkGetPhysicalDeviceProperties(d, &p);
+      vk.GetPhysicalDeviceProperties(d, &p);
       names += std::string(names.empty() ? "" : ", ") + "'" + p.deviceName + "'";
       if (want.empty() || std::strstr(p.deviceName, want.c_str())) match.push_back(d);
     }
@@ -122,17 +202,12 @@ VkContext::VkContext(const std::string& device_name, bool validation) {
       throw GpuError(std::string(want.empty() ? "Vulkan: several devices and none named" : "Vulkan: '" + want + "' names several devices") +
                      " (devices: " + names + "); choose one with GpuOptions::device or SHADOWTILE_VK_DEVICE");
     physical_ = match[0];
-    vkGetPhysicalDeviceProperties(physical_, &props_);
-    vkGetPhysicalDeviceMemoryProperties(physical_, &memory_);
-    name_ = props_.deviceName;
-    if (VK_API_VERSION_MINOR(props_.apiVersion) < 2 && VK_API_VERSION_MAJOR(props_.apiVersion) == 1)
-      throw GpuError("Vulkan: device '" + name_ + "' supports only Vulkan 1." +
-                     std::to_string(VK_API_VERSION_MINOR(props_.apiVersion)) + ", 1.2 is needed");
+    read_device_properties();
 
     uint32_t qn = 0;
-    vkGetPhysicalDeviceQueueFamilyProperties(physical_, &qn, nullptr);
+    vk.GetPhysicalDeviceQueueFamilyProperties(physical_, &qn, nullptr);
     std::vector<VkQueueFamilyProperties> qs(qn);
-    vkGetPhysicalDeviceQueueFamilyProperties(physical_, &qn, qs.data());
+    vk.GetPhysicalDeviceQueueFamilyProperties(physical_, &qn, qs.data());
     family_ = ~0u;
     for (uint32_t i = 0; i < qn && family_ == ~0u; ++i)
       if (qs[i].queueFlags & VK_QUEUE_COMPUTE_BIT) family_ = i;
@@ -148,26 +223,67 @@ VkContext::VkContext(const std::string& device_name, bool validation) {
     dci.sType = VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO;
     dci.queueCreateInfoCount = 1;
     dci.pQueueCreateInfos = &qci;
-    vk_check(vkCreateDevice(physical_, &dci, nullptr, &device_), "vkCreateDevice");
-    vkGetDeviceQueue(device_, family_, 0, &queue_);
+    vk_check(vk.CreateDevice(physical_, &dci, nullptr, &device_), "vkCreateDevice");
+    vk.load_device(nullptr, device_);
+    vk.GetDeviceQueue(device_, family_, 0, &queue_);
+    own_allocator_ = std::make_unique<DefaultAllocator>(*this);
+    allocator_ = own_allocator_.get();
   } catch (...) {
     release();
     throw;
   }
 }
 
+VkContext::VkContext(const EngineDevice& e) : borrowed_(true) {
+  if (!e.instance || !e.physical_device || !e.device || !e.get_instance_proc_addr)
+    throw GpuError("GpuMap: EngineDevice needs instance, physical_device, device and get_instance_proc_addr");
+  instance_ = e.instance;
+  physical_ = e.physical_device;
+  device_ = e.device;
+  family_ = e.queue_family;
+  callbacks_ = e.allocation_callbacks;
+  vk.load_instance(e.get_instance_proc_addr, instance_);
+  vk.load_device(e.get_device_proc_addr, device_);
+  read_device_properties();
+  uint32_t qn = 0;
+  vk.GetPhysicalDeviceQueueFamilyProperties(physical_, &qn, nullptr);
+  std::vector<VkQueueFamilyProperties> qs(qn);
+  vk.GetPhysicalDeviceQueueFamilyProperties(physical_, &qn, qs.data());
+  if (family_ >= qn || !(qs[family_].queueFlags & VK_QUEUE_COMPUTE_BIT))
+    throw GpuError("GpuMap: EngineDevice::queue_family " + std::to_string(family_) + " of '" + name_ +
+                   "' is not a family with compute (the shadow pass and uploads are recorded for it)");
+  if (e.allocator) {
+    allocator_ = e.allocator;
+  } else {
+    own_allocator_ = std::make_unique<DefaultAllocator>(*this);
+    allocator_ = own_allocator_.get();
+  }
+}
+
+void VkContext::read_device_properties() {
+  vk.GetPhysicalDeviceProperties(physical_, &props_);
+  vk.GetPhysicalDeviceMemoryProperties(physical_, &memory_);
+  name_ = props_.deviceName;
+  if (VK_API_VERSION_MINOR(props_.apiVersion) < 2 && VK_API_VERSION_MAJOR(props_.apiVersion) == 1)
+    throw GpuError("Vulkan: device '" + name_ + "' supports only Vulkan 1." +
+                   std::to_string(VK_API_VERSION_MINOR(props_.apiVersion)) + ", 1.2 is needed");
+}
+
 VkContext::~VkContext() { release(); }
 
 void VkContext::release() noexcept {
-  if (device_) vkDestroyDevice(device_, nullptr);
+  own_allocator_.reset();
+  allocator_ = nullptr;
+  if (borrowed_) return;  // the engine's objects: never ours to destroy
+  if (device_ && vk.DestroyDevice) vk.DestroyDevice(device_, nullptr);
   device_ = VK_NULL_HANDLE;
   if (messenger_) {
     auto destroy = reinterpret_cast<PFN_vkDestroyDebugUtilsMessengerEXT>(
-        vkGetInstanceProcAddr(instance_, "vkDestroyDebugUtilsMessengerEXT"));
+        ::vkGetInstanceProcAddr(instance_, "vkDestroyDebugUtilsMessengerEXT"));
     if (destroy) destroy(instance_, messenger_, nullptr);
     messenger_ = VK_NULL_HANDLE;
   }
-  if (instance_) vkDestroyInstance(instance_, nullptr);
+  if (instance_ && vk.DestroyInstance) vk.DestroyInstance(instance_, nullptr);
   instance_ = VK_NULL_HANDLE;
 }
 
@@ -178,34 +294,24 @@ uint32_t VkContext::memory_type(uint32_t bits, VkMemoryPropertyFlags want, VkMem
   throw GpuError("Vulkan: device '" + name_ + "' has no suitable memory type");
 }
 
-VkBufferBox VkContext::make_buffer(VkDeviceSize size, bool host, VkBufferUsageFlags extra_usage) {
-  VkBufferBox b;
-  b.size = size;
+VkBufferBox VkContext::make_buffer(VkDeviceSize size, bool host, VkBufferUsageFlags extra_usage, BufferUse host_use) {
   VkBufferCreateInfo bci{};
   bci.sType = VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO;
   bci.size = size;
   bci.usage = VK_BUFFER_USAGE_STORAGE_BUFFER_BIT | VK_BUFFER_USAGE_TRANSFER_SRC_BIT | VK_BUFFER_USAGE_TRANSFER_DST_BIT |
               extra_usage;
   bci.sharingMode = VK_SHARING_MODE_EXCLUSIVE;
-  vk_check(vkCreateBuffer(device_, &bci, nullptr, &b.buffer), "vkCreateBuffer");
-  try {
-    VkMemoryRequirements req{};
-    vkGetBufferMemoryRequirements(device_, b.buffer, &req);
-    const VkMemoryPropertyFlags hv = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
-    const uint32_t type = host ? memory_type(req.memoryTypeBits, hv | VK_MEMORY_PROPERTY_HOST_CACHED_BIT, hv)
-                               : memory_type(req.memoryTypeBits, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT, 0);
-    VkMemoryAllocateInfo mai{};
-    mai.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO;
-    mai.allocationSize = req.size;
-    mai.memoryTypeIndex = type;
-    vk_check(vkAllocateMemory(device_, &mai, nullptr, &b.memory), "vkAllocateMemory");
-    vk_check(vkBindBufferMemory(device_, b.buffer, b.memory, 0), "vkBindBufferMemory");
-    b.host_visible = host;
-    if (host) vk_check(vkMapMemory(device_, b.memory, 0, VK_WHOLE_SIZE, 0, &b.mapped), "vkMapMemory");
-  } catch (...) {
-    destroy(b);
-    throw;
+  const BufferUse use = host ? (host_use == BufferUse::upload ? BufferUse::upload : BufferUse::readback) : BufferUse::device_local;
+  VkBufferBox b;
+  const VkResult r = allocator_->create_buffer(bci, use, b);
+  if (r != VK_SUCCESS)
+    throw GpuError("Vulkan: creating a buffer of " + std::to_string(size) + " bytes on '" + name_ + "' failed: " +
+                   vk_result_name(r));
+  if (host && !b.mapped) {
+    allocator_->destroy_buffer(b);
+    throw GpuError("GpuMap: the allocator returned a host-visible buffer that is not mapped");
   }
+  b.size = size;
   return b;
 }
 
@@ -215,7 +321,7 @@ VkCommandPool VkContext::make_command_pool(bool resettable_buffers) {
   cpi.flags = resettable_buffers ? VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT : 0;
   cpi.queueFamilyIndex = family_;
   VkCommandPool pool = VK_NULL_HANDLE;
-  vk_check(vkCreateCommandPool(device_, &cpi, nullptr, &pool), "vkCreateCommandPool");
+  vk_check(vk.CreateCommandPool(device_, &cpi, callbacks_, &pool), "vkCreateCommandPool");
   return pool;
 }
 
@@ -226,7 +332,7 @@ VkCommandBuffer VkContext::allocate_command_buffer(VkCommandPool pool) {
   cai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
   cai.commandBufferCount = 1;
   VkCommandBuffer cmd = VK_NULL_HANDLE;
-  vk_check(vkAllocateCommandBuffers(device_, &cai, &cmd), "vkAllocateCommandBuffers");
+  vk_check(vk.AllocateCommandBuffers(device_, &cai, &cmd), "vkAllocateCommandBuffers");
   return cmd;
 }
 
@@ -234,7 +340,7 @@ VkFence VkContext::make_fence() {
   VkFenceCreateInfo fci{};
   fci.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
   VkFence fence = VK_NULL_HANDLE;
-  vk_check(vkCreateFence(device_, &fci, nullptr, &fence), "vkCreateFence");
+  vk_check(vk.CreateFence(device_, &fci, callbacks_, &fence), "vkCreateFence");
   return fence;
 }
 
@@ -245,14 +351,12 @@ VkQueryPool VkContext::make_timestamp_queries(uint32_t count) {
   qpi.queryType = VK_QUERY_TYPE_TIMESTAMP;
   qpi.queryCount = count;
   VkQueryPool queries = VK_NULL_HANDLE;
-  vk_check(vkCreateQueryPool(device_, &qpi, nullptr, &queries), "vkCreateQueryPool");
+  vk_check(vk.CreateQueryPool(device_, &qpi, callbacks_, &queries), "vkCreateQueryPool");
   return queries;
 }
 
 void VkContext::destroy(VkBufferBox& b) {
-  if (b.mapped) vkUnmapMemory(device_, b.memory);
-  if (b.buffer) vkDestroyBuffer(device_, b.buffer, nullptr);
-  if (b.memory) vkFreeMemory(device_, b.memory, nullptr);
+  if (b.buffer && allocator_) allocator_->destroy_buffer(b);
   b = VkBufferBox{};
 }
 
@@ -262,7 +366,7 @@ VkShaderModule VkContext::make_shader(std::span<const uint32_t> spirv) {
   sci.codeSize = spirv.size() * 4;
   sci.pCode = spirv.data();
   VkShaderModule m = VK_NULL_HANDLE;
-  vk_check(vkCreateShaderModule(device_, &sci, nullptr, &m), "vkCreateShaderModule");
+  vk_check(vk.CreateShaderModule(device_, &sci, callbacks_, &m), "vkCreateShaderModule");
   return m;
 }
 

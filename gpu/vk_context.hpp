@@ -1,7 +1,10 @@
-// The Vulkan 1.2 compute context behind GpuMap: instance (optionally with the Khronos
-// validation layer and a debug messenger that counts every error and warning), the one
-// physical device chosen by name, one compute queue, buffers and compute pipelines.
-// Internal to gpu/.
+// The Vulkan 1.2 context behind GpuMap, in one of two modes. Own device: instance
+// (optionally with the Khronos validation layer and a debug messenger that counts every
+// error and warning), the one physical device chosen by name, one compute queue. Engine:
+// the engine's instance, device and queue family borrowed (EngineDevice), nothing created
+// or destroyed but our own objects. Either way every call goes through `vk`, the table
+// loaded from the loaders (vk_functions.hpp), and buffers through a GpuAllocator (the
+// engine's, or the default one here). Internal to gpu/.
 //
 // Device choice, never by chance: the name asked for (GpuOptions::device, else the
 // environment variable SHADOWTILE_VK_DEVICE) must be a substring of exactly one device's
@@ -13,6 +16,7 @@
 #include <vulkan/vulkan.h>
 
 #include <atomic>
+#include <memory>
 #include <cstdint>
 #include <mutex>
 #include <span>
@@ -20,6 +24,7 @@
 #include <vector>
 
 #include "gpu/gpu_map.hpp"
+#include "gpu/vk_functions.hpp"
 
 namespace st::gpu {
 
@@ -27,23 +32,24 @@ namespace st::gpu {
 void vk_check(VkResult r, const char* call);
 const char* vk_result_name(VkResult r);
 
-struct VkBufferBox {
-  VkBuffer buffer = VK_NULL_HANDLE;
-  VkDeviceMemory memory = VK_NULL_HANDLE;
-  VkDeviceSize size = 0;
-  void* mapped = nullptr;  // host-visible buffers stay mapped
-  bool host_visible = false;
-};
+// A buffer from the context's allocator (host-visible ones stay mapped).
+using VkBufferBox = GpuBuffer;
 
 class VkContext {
  public:
   VkContext(const std::string& device_name, bool validation);
+  explicit VkContext(const EngineDevice& engine);  // borrows; throws GpuError on a bad EngineDevice
   ~VkContext();
   VkContext(const VkContext&) = delete;
   VkContext& operator=(const VkContext&) = delete;
 
+  VkFunctions vk;  // every Vulkan call of gpu/ goes through this table
+
+  bool borrowed() const { return borrowed_; }  // engine mode
+  const VkAllocationCallbacks* callbacks() const { return callbacks_; }
   VkDevice device() const { return device_; }
-  VkQueue queue() const { return queue_; }
+  VkPhysicalDevice physical() const { return physical_; }
+  VkQueue queue() const { return queue_; }  // VK_NULL_HANDLE in engine mode: we never submit
   uint32_t queue_family() const { return family_; }
   const std::string& device_name() const { return name_; }
   const VkPhysicalDeviceProperties& properties() const { return props_; }
@@ -51,7 +57,9 @@ class VkContext {
 
   // Storage buffer. `host`: host-visible and coherent, mapped (staging, readback, small
   // inputs); else device-local where the device has such memory (the pool, the page table).
-  VkBufferBox make_buffer(VkDeviceSize size, bool host, VkBufferUsageFlags extra_usage = 0);
+  // `host`: BufferUse::readback unless `use` says upload.
+  VkBufferBox make_buffer(VkDeviceSize size, bool host, VkBufferUsageFlags extra_usage = 0,
+                          BufferUse host_use = BufferUse::readback);
   void destroy(VkBufferBox& b);
 
   VkShaderModule make_shader(std::span<const uint32_t> spirv);
@@ -73,7 +81,17 @@ class VkContext {
                                                    VkDebugUtilsMessageTypeFlagsEXT types,
                                                    const VkDebugUtilsMessengerCallbackDataEXT* data, void* self);
   void release() noexcept;
+  void read_device_properties();
+
+ public:
   uint32_t memory_type(uint32_t bits, VkMemoryPropertyFlags want, VkMemoryPropertyFlags fallback) const;
+
+ private:
+  class DefaultAllocator;
+  std::unique_ptr<GpuAllocator> own_allocator_;
+  GpuAllocator* allocator_ = nullptr;
+  const VkAllocationCallbacks* callbacks_ = nullptr;
+  bool borrowed_ = false;
 
   VkInstance instance_ = VK_NULL_HANDLE;
   VkDebugUtilsMessengerEXT messenger_ = VK_NULL_HANDLE;

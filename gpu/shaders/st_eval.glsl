@@ -41,6 +41,13 @@ bool st_lit(float receiver, float value) {
 }
 
 // ---- feedback (sparse virtual texturing style): absent tiles into a hash set ----
+// With ST_NO_FEEDBACK defined (shadowtile.glsl's ST_FEEDBACK 0) nothing is written and no
+// ST_FB accessor is needed: the probe still says whether a tap answered coarsely.
+#ifdef ST_NO_FEEDBACK
+void st_feedback(uint key, uint level, uint ex, uint ey, uint value_bits, uint kind_word, inout StProbe probe) {
+  probe.hole = true;
+}
+#else
 void st_feedback(uint key, uint level, uint ex, uint ey, uint value_bits, uint kind_word, inout StProbe probe) {
   probe.hole = true;
   atomicAdd(ST_FB(kFbAbsentTaps), 1u);
@@ -69,6 +76,7 @@ void st_feedback(uint key, uint level, uint ex, uint ey, uint value_bits, uint k
   }
   atomicAdd(ST_FB(kFbDropped), 1u);
 }
+#endif
 
 // ---- small helpers ----
 uint st_coarse_index(uint level) { return ((1u << (2u * level)) - 1u) / 3u; }

@@ -17,7 +17,7 @@ namespace st::gpu::layout {
 #define ST_UINT(name, value) const uint name = value;
 #endif
 
-ST_UINT(kLayoutVersion, 4u)  // 2: the map preview (kPtPreview); 3: the stack block (kPtStack); 4: the DAG-MH dictionary (kPtDictionary)
+ST_UINT(kLayoutVersion, 5u)  // 2: the map preview (kPtPreview); 3: the stack block (kPtStack); 4: the DAG-MH dictionary (kPtDictionary); 5: the 2D light (kPtLight)
 
 // ---- page-table buffer (binding kBindPage) ----
 // header words, then the skip grid's coarse values and entries, the skip grid's slot
@@ -38,6 +38,8 @@ ST_UINT(kPtPcfTable, 11u)      // word offset: kMaxPcf * kPcfTableStride f32 quo
 ST_UINT(kPtPreview, 12u)       // word offset: the map preview (kPv* header, then its arrays)
 ST_UINT(kPtDictionary, 13u)    // word offset: the pack's DAG-MH dictionary (kDict*), 0: none
 ST_UINT(kPtStack, 14u)         // word offset: the stack block (kSt*) of a stack map; 0 for a 2D map
+ST_UINT(kPtLight, 15u)         // word offset: a 2D map's light space (kStLightWords words, the stack block's
+                               // light layout; projection 0), 0: none (a stack map, or a light the pass refuses)
 ST_UINT(kPtHeaderWords, 16u)
 
 // The DAG-MH dictionary block (tiles/core/DAGMH.md "Dictionary"), at word kPtDictionary:

@@ -19,8 +19,13 @@ fail() { echo "FAIL consumer: $*"; exit 1; }
 prefix="$work/prefix"
 cmake --install "$build" --prefix "$prefix" >/dev/null
 headers=$(cd "$prefix/include" && find . -type f | sort | tr '\n' ' ')
-[[ "$headers" == "./shadowtile/client.hpp ./shadowtile/export.h ./shadowtile/shadowtile.h " ]] ||
-  fail "installed headers are not client.hpp, export.h and shadowtile.h: $headers"
+gpu=OFF
+[[ -f "$prefix/include/shadowtile/gpu.hpp" ]] && gpu=ON
+want_headers="./shadowtile/cache_view.hpp ./shadowtile/client.hpp ./shadowtile/export.h "
+[[ $gpu == ON ]] && want_headers+="./shadowtile/gpu.hpp "
+want_headers+="./shadowtile/shadowtile.h "
+[[ "$headers" == "$want_headers" ]] || fail "installed headers are not just the public ones: $headers"
+[[ $gpu == OFF || -f "$prefix/share/shadowtile/shaders/shadowtile.glsl" ]] || fail "shadowtile.glsl not installed"
 # Every file the headers send their reader to is installed under share/doc/shadowtile.
 for f in $(grep -ohE '\b(client|proto|tiles)/[A-Za-z_/]+\.(md|hpp)\b' "$prefix/include/shadowtile/"* | sort -u); do
   [[ -f "$prefix/share/doc/shadowtile/$f" ]] || fail "the headers cite $f, not installed under share/doc/shadowtile"
@@ -78,7 +83,14 @@ variant() {
 
 # Static: Boost (the client's build dependency) is unfindable; pkg-config is not disabled
 # only because CMake's own FindOpenSSL calls it when present.
-variant static -Dshadowtile_SHARED=OFF -DCMAKE_DISABLE_FIND_PACKAGE_Boost=TRUE
+variant static -Dshadowtile_SHARED=OFF -DCMAKE_DISABLE_FIND_PACKAGE_Boost=TRUE -DCONSUMER_GPU="$gpu"
+if [[ $gpu == ON ]]; then
+  VK_ICD_FILENAMES=/usr/share/vulkan/icd.d/lvp_icd.x86_64.json SHADOWTILE_VK_DEVICE=llvmpipe XDG_RUNTIME_DIR="$work" \
+    timeout 120 "$work/build-static/consumer_gpu" 127.0.0.1 "$port" city $level >"$work/got_gpu.txt" || fail "consumer_gpu exited $?"
+  cmp -s "$work/got_gpu.txt" "$work/want.txt" || { diff "$work/got_gpu.txt" "$work/want.txt" | head -5; fail "GPU answers differ from the pack"; }
+  [[ -f "$work/build-static/shade.frag.spv" ]] || fail "the fragment shader over the installed shadowtile.glsl did not compile"
+  echo "consumer_gpu: $lines texels of level $level on the GPU equal the pack's, bit for bit"
+fi
 readelf -d "$work/build-static/consumer" | grep -q 'NEEDED.*libshadowtile' && fail "static: consumer needs libshadowtile.so"
 
 variant shared -Dshadowtile_SHARED=ON -DCMAKE_DISABLE_FIND_PACKAGE_Boost=TRUE -DCMAKE_DISABLE_FIND_PACKAGE_PkgConfig=TRUE \

@@ -19,6 +19,7 @@
 #include "client/map_access.hpp"
 #include "gpu/shadow_reference.hpp"
 #include "tests/client/loopback.hpp"
+#include "tests/gpu/engine_harness.hpp"
 #include "tests/gpu/gpu_test_util.hpp"
 #include "tiles/build/mh_octree_encode.hpp"
 #include "tiles/build/stack_pack.hpp"
@@ -582,6 +583,48 @@ TEST(GpuStack, AreaLightStackPassesEqualTheirCpuTwins) {
     EXPECT_GT(tally[0], 1000u);
     EXPECT_GT(tally[1], 100u);
     EXPECT_GT(tally[2], 300u);
+  }
+}
+
+
+// Engine mode on stack maps (a sun path's ground frame, and an area light's perspective
+// samples): the pass over the engine's images, at sample times, between them and soft,
+// equals the CPU twin bit for bit; the light spaces come from the GPU-resident stack block.
+TEST(GpuStack, EngineModePassesOverTheEnginesImagesEqualTheCpuTwin) {
+  for (const std::string& spec : {std::string("ground"), area_spec("window")}) {
+    SCOPED_TRACE(spec);
+    ServedStack s = serve_frozen(spec == "ground" ? "gpu_stack_engine_sun" : "gpu_stack_engine_area", spec, kSlices / 2);
+    const GBuffer gb;
+    enginetest::TestEngine e(2);
+    enginetest::Targets t(e, gb.width, gb.height, gb.pos, gb.nrm, 2);
+    GpuMap g(s.map, e.engine_device());
+    uint64_t frame = 0;
+    size_t between = 0;
+    for (const double time : {0.0, 0.43, 1.0, -1.0}) {  // -1: soft
+      SCOPED_TRACE(time);
+      const ShadowPassInput in = gb.input(std::max(time, 0.0), 3, time < 0);
+      ShadowPassSettings set;
+      set.kernel = in.kernel;
+      set.normal_offset = in.normal_offset;
+      set.neighbour_footprint = in.neighbour_footprint;
+      set.footprint = in.footprint;
+      set.time = in.time;
+      set.soft = in.soft;
+      enginetest::run_frame(e, g, t, ++frame, set);
+      g.retire(e.finish());
+      const std::vector<float> got = t.read(frame);
+      std::vector<float> want(got.size());
+      stack_shadow_pass_reference(s.map, in, want);
+      size_t bad = 0;
+      for (size_t i = 0; i < got.size(); ++i) {
+        if (bits(got[i]) != bits(want[i]) && bad++ == 0)
+          ADD_FAILURE() << "pixel " << i << ": engine pass " << got[i] << ", cpu twin " << want[i];
+        between += want[i] > 0.0f && want[i] < 1.0f;
+      }
+      EXPECT_EQ(bad, 0u);
+    }
+    EXPECT_GT(between, 100u);
+    EXPECT_EQ(e.messages(), 0u) << e.first_message();
   }
 }
 

@@ -1,0 +1,138 @@
+// CacheView (shadowtile/cache_view.hpp) over the RemoteMap behind a Map: the immutable
+// tables copied into plain structs once, the slot diff under the cache's lock.
+#include "shadowtile/cache_view.hpp"
+
+#include <stdexcept>
+
+#include "client/map_access.hpp"
+#include "client/remote_map.hpp"
+#include "tiles/core/dagmh_validate.hpp"
+#include "tiles/core/stack_grid.hpp"
+
+namespace st::client {
+
+struct CacheView::Impl {
+  Map map;  // holds the RemoteMap (and so every table below) open
+  const RemoteMap* rm = nullptr;
+  CacheShape shape;
+  std::vector<CacheEntry> skip_entries;
+  std::vector<CacheEntry> stack_cells;
+  std::vector<LightParams> stack_lights;
+  StackTables stack;
+  bool is_stack = false;
+};
+
+CacheView::CacheView(const Map& map) : impl_(std::make_unique<Impl>()) {
+  if (!map.valid()) throw std::runtime_error("CacheView: the Map is not open (default-constructed)");
+  Impl& m = *impl_;
+  m.map = map;
+  m.rm = &MapAccess::remote(m.map);
+  const RemoteMap& rm = *m.rm;
+  m.shape.finest_level = rm.header().map_level;
+  m.shape.skip_level = rm.grid().levels;
+  m.shape.encoding = uint32_t(rm.header().encoding);
+  rm.inspect_cache([&](const TileCache& c) {
+    m.shape.slot_count = c.slot_count();
+    m.shape.slot_bytes = c.slot_bytes();
+  });
+  m.skip_entries.reserve(rm.grid().entries.size());
+  for (const GridEntry& e : rm.grid().entries) m.skip_entries.push_back({e.value, uint32_t(e.kind), e.index_levels});
+  if (const StackGrid* g = rm.stack_grid()) {
+    m.is_stack = true;
+    m.shape.slices = g->slices;
+    m.stack.xy_level = g->geo.n;
+    m.stack.w_level = g->geo.k;
+    m.stack.slices = g->slices;
+    m.stack.skip_level = g->skip_level;
+    for (const std::vector<float>& level : g->coarse) m.stack.coarse.emplace_back(level);
+    m.stack_cells.reserve(g->entries.size());
+    for (const StackEntry& e : g->entries) m.stack_cells.push_back({e.value, e.kind, 0});
+    for (const auto& l : g->lights) m.stack_lights.push_back({uint32_t(g->light_kind), l});
+    m.stack.cells = m.stack_cells;
+    m.stack.lights = m.stack_lights;
+  }
+}
+
+CacheView::~CacheView() = default;
+
+const CacheShape& CacheView::shape() const { return impl_->shape; }
+std::span<const float> CacheView::skip_coarse() const { return impl_->rm->grid().coarse; }
+std::span<const CacheEntry> CacheView::skip_entries() const { return impl_->skip_entries; }
+
+PreviewTables CacheView::preview() const {
+  const MapPreview& pv = impl_->rm->preview();
+  PreviewTables t;
+  t.levels = pv.levels();
+  t.mask_words = uint32_t(MapPreview::words(pv.levels()));
+  t.ordinals = pv.ordinals();
+  t.bases = pv.bases();
+  t.entry_values = pv.entry_values();
+  t.masks = pv.masks();
+  t.values = pv.values();
+  return t;
+}
+
+std::span<const uint8_t> CacheView::dictionary() const {
+  const dagmh::Dictionary* d = impl_->rm->dictionary().get();
+  return d ? d->bytes() : std::span<const uint8_t>{};
+}
+
+LightParams CacheView::light() const { return {uint32_t(impl_->rm->header().light_kind), impl_->rm->header().light}; }
+
+const StackTables* CacheView::stack() const { return impl_->is_stack ? &impl_->stack : nullptr; }
+
+uint64_t CacheView::stack_cell_tile(uint64_t cell) const {
+  const StackGrid* g = impl_->rm->stack_grid();
+  return g && cell < g->entries.size() ? g->tile_id(cell) : kNoTile;
+}
+
+bool CacheView::stack_tile_cell(uint64_t tile, uint64_t& cell) const {
+  const StackGrid* g = impl_->rm->stack_grid();
+  return g && g->cell_of(tile, cell);
+}
+
+size_t CacheView::changed_slots_impl(std::span<uint64_t> known, void* visit,
+                                     bool (*call)(void*, const SlotChange&)) const {
+  size_t n = 0;
+  impl_->rm->inspect_cache([&](const TileCache& c) {
+    const uint32_t slots = std::min<uint32_t>(c.slot_count(), uint32_t(known.size()));
+    for (uint32_t s = 0; s < slots; ++s) {
+      const TileId t = c.slot_tile(s);
+      uint64_t want = kNoTile;
+      if (t != kInvalidTile) {
+        const PageEntry pe = c.lookup(t);
+        if (pe.state == PageState::resident && pe.slot == s) want = t;
+      }
+      if (known[s] == want) continue;
+      SlotChange ch;
+      ch.slot = s;
+      ch.tile = want;
+      if (want != kNoTile) ch.bytes = c.tile_bytes(s);
+      ++n;
+      if (call(visit, ch)) known[s] = want;
+    }
+  });
+  return n;
+}
+
+size_t CacheView::want_tiles(std::span<const WantedTile> tiles) const {
+  // Small batches (a frame's feedback): converted on the stack in chunks, no allocation.
+  constexpr size_t kChunk = 256;
+  RemoteMap::WantedTile buf[kChunk];
+  size_t queued = 0;
+  for (size_t i = 0; i < tiles.size(); i += kChunk) {
+    const size_t n = std::min(kChunk, tiles.size() - i);
+    for (size_t j = 0; j < n; ++j) {
+      const WantedTile& w = tiles[i + j];
+      buf[j].tile = w.tile;
+      buf[j].entry.value = w.entry.value;
+      buf[j].entry.kind = EntryKind(w.entry.kind & 0xFFu);
+      buf[j].entry.index_levels = uint8_t(w.entry.index_levels);
+      buf[j].priority = w.priority;
+    }
+    queued += impl_->rm->want_tiles(std::span<const RemoteMap::WantedTile>(buf, n));
+  }
+  return queued;
+}
+
+}  // namespace st::client

@@ -1,0 +1,380 @@
+// <shadowtile/gpu.hpp>: a client Map's tile cache mirrored on a Vulkan device, and the GPU
+// evaluators over it (GPU_LAYOUT.md, installed beside shadowtile.glsl, draws the buffers).
+//
+// Two modes over the same core (the mirror, the page table, the feedback):
+//
+// Engine mode (a game's renderer owns instance, device, queue, memory and command buffers,
+// the way Dear ImGui's Vulkan backend or NRD enter a renderer):
+//
+//   st::gpu::EngineDevice dev{instance, physical, device, queue_family,
+//                             vkGetInstanceProcAddr, vkGetDeviceProcAddr};
+//   st::gpu::GpuMap gpu(map, dev, {.frames_in_flight = 2});
+//   // every frame f (the engine's counter), once frame f - frames_in_flight has completed:
+//   gpu.retire(completed);                      // reads back feedback of frames <= completed
+//   gpu.record_uploads(cmd, f);                 // changed tiles + page-table words, bounded
+//   gpu.record_shadow_pass(cmd, f, images, settings);  // or: the engine's own shader that
+//                                               // includes shadowtile.glsl, bound with
+//                                               // gpu.descriptors(f)
+//   gpu.record_end_of_frame(cmd, f);            // feedback made visible to the host
+//   // the engine submits cmd on its queue; GpuMap never submits, waits or allocates there.
+//
+// Own-device mode (tools, tests, `shadowtile view`): GpuMap(map, options) creates its own
+// instance, device and queue, takes the G-buffer as host spans and copies visibility back:
+//
+//   st::gpu::GpuMap gpu(map, {.device = "llvmpipe"});
+//   gpu.evaluate(queries, answers);                   // a batch, synchronous
+//   uint64_t f = gpu.submit_shadow_pass(gbuffer);     // a frame, asynchronous
+//   gpu.wait(f, visibility);                          // its visibility image
+//
+// The Map's TileCache stays the one authority for LRU and allocation: before each
+// submission GpuMap compares every slot with what the device holds and uploads, through
+// a staging ring, only the slots that changed (at most upload_budget_bytes per frame; the
+// rest follow in later frames and answer coarsely meanwhile), and the page-table words
+// that point at them. Nothing is re-uploaded per frame. Uploads are recorded in the
+// frame's own command buffer before its dispatch, behind a barrier after every earlier
+// dispatch on the queue: a slot is overwritten only once every frame submitted before has
+// finished reading it, and a frame sees each page wholly before or wholly after an update.
+//
+// Feedback (sparse virtual texturing): every pass records the tiles it needed and found
+// absent on the device, with the number of queries or pixels that needed each. When the
+// frame is collected (wait(), or its ring slot's reuse) those tiles are queued on the
+// Map's request queue at priority min(pixels, 65535), so the fetcher follows what the
+// GPU sampled.
+//
+// Answers are bit-exact with the CPU's (Map::depth, Map::pcf, pcf_footprint) for the
+// same cache contents; GPU_LAYOUT.md "Exactness" says how.
+//
+// Stack maps (Map::slices() > 0: shadow-map stacks, a moving sun) use the same mirror: the
+// page table carries the stack grid and one light per slice (GPU_LAYOUT.md "The stack
+// block"), evaluate() takes GpuStackQuery (bit-exact with Map::slice_depth and the same
+// kernels per slice), and the shadow pass answers at ShadowPassInput::time, or the soft
+// shadow over all slices (ShadowPassInput::soft), for suns and area lights (perspective
+// samples) alike.
+//
+// Errors: the constructor throws GpuError when no Vulkan device is there or the one asked
+// for is not (one line naming the devices present), or a Vulkan call fails (naming the
+// call). The CPU path (the Map itself) is never affected. Not thread-safe: one thread
+// drives a GpuMap.
+#pragma once
+#include <vulkan/vulkan.h>
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <stdexcept>
+#include <string>
+
+#include "shadowtile/client.hpp"
+
+namespace st::gpu {
+
+class GpuError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct GpuOptions {
+  // Substring of the device's name (vulkaninfo's deviceName), e.g. "llvmpipe" or "H200".
+  // Empty: the environment variable SHADOWTILE_VK_DEVICE, else the machine's only device.
+  std::string device;
+  bool validation = false;                  // VK_LAYER_KHRONOS_validation + a messenger
+  uint32_t max_queries = 1u << 16;          // per evaluate() call
+  uint32_t max_pixels = 1920u * 1080u;      // per shadow pass
+  uint64_t upload_budget_bytes = 16u << 20; // tile bytes uploaded per frame at most
+  uint32_t feedback_capacity = 4096;        // distinct absent tiles recorded per frame (power of two)
+  uint32_t frames_in_flight = 2;            // 1..4
+};
+
+
+// ---- engine mode: the engine's device, memory and frames ----
+
+// A buffer with its memory bound, as a GpuAllocator hands it out.
+struct GpuBuffer {
+  VkBuffer buffer = VK_NULL_HANDLE;
+  VkDeviceSize size = 0;
+  void* mapped = nullptr;      // host-visible buffers: persistently mapped, host-coherent
+  void* allocation = nullptr;  // the allocator's own handle (a VmaAllocation, a VkDeviceMemory, ...)
+};
+
+// What a buffer is for: device_local (the slot pool, the page table: written by transfers,
+// read by shaders), upload (staging: written by the host each frame, sequentially), readback
+// (feedback: written by shaders, read by the host). upload and readback must be HOST_VISIBLE
+// | HOST_COHERENT and stay mapped for the buffer's life.
+enum class BufferUse : uint32_t { device_local = 0, upload = 1, readback = 2 };
+
+// The memory interface an engine implements (or leaves to the default, one
+// vkAllocateMemory per buffer, EngineDevice::allocator == nullptr). GpuMap creates every
+// buffer in its constructor and destroys them in its destructor: never on the frame path.
+// Called from the thread that constructs or destroys the GpuMap. A Vulkan Memory Allocator
+// user backs it in a few lines:
+//
+//   struct VmaBacked final : st::gpu::GpuAllocator {
+//     VmaAllocator vma;
+//     VkResult create_buffer(const VkBufferCreateInfo& info, st::gpu::BufferUse use,
+//                            st::gpu::GpuBuffer& out) override {
+//       VmaAllocationCreateInfo a{};
+//       a.usage = VMA_MEMORY_USAGE_AUTO;
+//       if (use != st::gpu::BufferUse::device_local) {
+//         a.flags = VMA_ALLOCATION_CREATE_MAPPED_BIT |
+//                   (use == st::gpu::BufferUse::upload ? VMA_ALLOCATION_CREATE_HOST_ACCESS_SEQUENTIAL_WRITE_BIT
+//                                                      : VMA_ALLOCATION_CREATE_HOST_ACCESS_RANDOM_BIT);
+//         a.requiredFlags = VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
+//       }
+//       VmaAllocationInfo ai{};
+//       VmaAllocation alloc = nullptr;
+//       const VkResult r = vmaCreateBuffer(vma, &info, &a, &out.buffer, &alloc, &ai);
+//       out.size = info.size, out.mapped = ai.pMappedData, out.allocation = alloc;
+//       return r;
+//     }
+//     void destroy_buffer(st::gpu::GpuBuffer& b) noexcept override {
+//       vmaDestroyBuffer(vma, b.buffer, static_cast<VmaAllocation>(b.allocation));
+//       b = {};
+//     }
+//   };
+class GpuAllocator {
+ public:
+  virtual ~GpuAllocator() = default;
+  // Creates a buffer from `info` (size, usage, exclusive sharing) with memory for `use`
+  // bound (and mapped, for upload / readback); VK_SUCCESS or the failure (GpuMap turns it
+  // into a GpuError naming the buffer).
+  virtual VkResult create_buffer(const VkBufferCreateInfo& info, BufferUse use, GpuBuffer& out) = 0;
+  virtual void destroy_buffer(GpuBuffer& buffer) noexcept = 0;
+};
+
+// The engine's Vulkan objects. GpuMap borrows them (never destroys them) and loads every
+// entry point it calls from the two loaders given, so the engine's loader (or its layer
+// chain, or volk) is the one used. The device must be Vulkan 1.2 or later.
+struct EngineDevice {
+  VkInstance instance = VK_NULL_HANDLE;
+  VkPhysicalDevice physical_device = VK_NULL_HANDLE;
+  VkDevice device = VK_NULL_HANDLE;
+  uint32_t queue_family = 0;  // the family of the queue that runs our recordings (compute or graphics)
+  PFN_vkGetInstanceProcAddr get_instance_proc_addr = nullptr;  // required
+  PFN_vkGetDeviceProcAddr get_device_proc_addr = nullptr;      // null: loaded from the instance
+  const VkAllocationCallbacks* allocation_callbacks = nullptr;  // passed to every vkCreate*/vkDestroy*
+  GpuAllocator* allocator = nullptr;  // null: the default; else must outlive the GpuMap
+};
+
+// The G-buffer and target of GpuMap::record_shadow_pass, all the engine's image views.
+// positions: xyz a world position, w == 0 no surface (visibility 1); normals: xyz the
+// normal. Both read with texelFetch through a combined image sampler of our own (nearest,
+// unnormalized not needed), so any format the device samples works; the answers are
+// bit-exact with the CPU twin for 32-bit float formats (RGBA32F). visibility: an R32F
+// storage image in VK_IMAGE_LAYOUT_GENERAL. Width and height: the region written, from
+// (0, 0), at most each image's extent.
+struct ShadowPassImages {
+  VkImageView positions = VK_NULL_HANDLE;
+  VkImageView normals = VK_NULL_HANDLE;
+  VkImageLayout gbuffer_layout = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
+  VkImageView visibility = VK_NULL_HANDLE;
+  uint32_t width = 0, height = 0;
+};
+
+// The shadow pass's settings, ShadowPassInput's without the host spans (same meanings).
+struct ShadowPassSettings {
+  uint32_t kernel = 3;
+  float normal_offset = 0;
+  bool neighbour_footprint = true;
+  float footprint = 1;
+  double time = 0;      // stack maps
+  bool soft = false;    // stack maps
+  bool resume_walks = true;
+};
+
+// What GpuMap's buffers are, for the engine's own descriptor sets (shadowtile.glsl binds
+// them at the set and bindings the engine defines). All three are storage buffers; the
+// feedback range is the frame's own (its ring slot's).
+struct GpuDescriptors {
+  VkDescriptorBufferInfo pool{}, page_table{}, feedback{};
+};
+
+// One query of evaluate(). r == 0: the depth of texel (x, y) of `level`. Else r x r PCF
+// (1..9) for `receiver` at texel (x, y) of `level`, or, with level == kLevelFromFootprint,
+// at the level pcf_footprint picks for `footprint` with (x, y) a texel of the finest level.
+struct GpuQuery {
+  uint32_t x = 0, y = 0;
+  float receiver = 0;
+  float footprint = 1;
+  uint32_t r = 1;
+  uint32_t level = 0;
+};
+inline constexpr uint32_t kLevelFromFootprint = 0xFFFFFFFFu;
+
+// One query of evaluate() on a stack map (Map::slices() > 0): the same as GpuQuery in
+// slice `slice` of the stack. r == 0: the depth of texel (x, y) of `level` (Map::slice_depth);
+// else r x r PCF (1..9) at `level`, or at the level the footprint picks (kLevelFromFootprint,
+// (x, y) a texel of the finest level), as StackMap::filtered filters one slice.
+struct GpuStackQuery {
+  uint32_t x = 0, y = 0;
+  uint32_t slice = 0;
+  uint32_t level = 0;
+  float receiver = 0;
+  float footprint = 1;
+  uint32_t r = 0;
+};
+
+// The G-buffer of a shadow pass: per pixel a world position (x, y, z, w; w == 0: no
+// surface, visibility 1) and a normal (x, y, z, unused), row-major, width * height each.
+// The receiver is offset by normal_offset world units along the normal. The footprint
+// is measured per pixel from its right and lower neighbours, or `footprint` for all.
+struct ShadowPassInput {
+  std::span<const float> positions, normals;  // 4 floats per pixel
+  uint32_t width = 0, height = 0;
+  uint32_t kernel = 3;                        // PCF kernel side 1..9
+  float normal_offset = 0;
+  bool neighbour_footprint = true;
+  float footprint = 1;
+  // Stack maps only: the light set's time in [0, 1] (clamped; NaN reads as 0), sample w at
+  // w / (N - 1). Each of the two nearest slices is filtered in its own light space as a
+  // 2D map's pass filters its one; they are blended va + f * (vb - va) (exact at a
+  // sample's time: that slice alone), StackLookup::visibility's contract.
+  double time = 0;
+  // Stack maps only: the soft shadow instead, the average over all N slices (time unused):
+  // each slice filtered in its own light space as above, summed in slice order in float,
+  // divided by N (StackMap::soft_visibility_filtered's order; gpu/shadow_reference.hpp).
+  bool soft = false;
+  // Stack maps only: each walk in a tile starts from the deepest node its path shares with
+  // the pixel's previous walk in that tile (MH 2016 §3.3's last-sample cache carried over
+  // w: consecutive slices, PCF taps and the footprint's two levels), as the CPU's shared
+  // walk (MhOctree::along_begin) does; false walks each from the tile's root. The answers
+  // are the same bits either way (GPU_LAYOUT.md "The stack block": what each costs).
+  bool resume_walks = true;
+};
+
+// A stack pass's time (ShadowPassInput::time) as StackMap::visibility takes it: with
+// s = clamp(time, 0, 1) * (N - 1), a sample's own time (s within 1e-9 of an integer w)
+// reads slice w alone (a == b == w, f == 0); else slices a = floor(s) and b = a + 1 are
+// blended with f = float(s - a): va + f * (vb - va).
+struct StackTime {
+  uint32_t a = 0, b = 0;
+  float f = 0;
+};
+StackTime stack_time(uint32_t slices, double time);
+
+struct FrameStats {
+  uint64_t frame = 0;
+  double gpu_ms = 0;             // the dispatch, from device timestamps (0 if unsupported)
+  uint32_t holes = 0;            // queries/pixels with a tap answered from a coarser level
+  uint32_t absent_taps = 0;
+  uint32_t feedback_tiles = 0;   // distinct absent tiles recorded
+  uint32_t feedback_dropped = 0; // absent tiles the feedback set had no room for
+  uint32_t requested = 0;        // of those, newly queued or raised on the Map
+  uint32_t slots_uploaded = 0;   // tiles uploaded for this frame
+  uint64_t bytes_uploaded = 0;   // tile + page-table bytes
+  // Host <-> device traffic of this frame, by kind (bytes the host wrote to or read from
+  // memory the device reads or writes): tile bytes and page-table bytes uploaded (staging),
+  // feedback bytes read back (header, key array, claimed records), and the G-buffer in and
+  // visibility or answers out, which only the own-device mode moves (engine mode: 0).
+  uint64_t tile_bytes = 0, page_bytes = 0, feedback_bytes = 0, host_io_bytes = 0;
+};
+
+struct GpuStats {
+  uint64_t frames = 0;
+  uint64_t slots_uploaded = 0, bytes_uploaded = 0, page_words_uploaded = 0;
+  uint64_t slots_deferred = 0;   // changed slots left for a later frame (budget)
+  uint64_t feedback_tiles = 0, feedback_requested = 0, feedback_dropped = 0;
+  uint64_t holes = 0;
+  uint64_t tile_bytes = 0, page_bytes = 0, feedback_bytes = 0, host_io_bytes = 0;  // FrameStats' sums
+  uint32_t resident_slots = 0;   // slots the device holds now
+  uint32_t slot_count = 0;
+  // Device memory of the two shared buffers. The page table goes up whole once (the own-
+  // device constructor, or engine mode's first record_uploads, beyond upload_budget_bytes):
+  // plan that frame for it; later frames send only changed 64-word blocks.
+  uint64_t pool_bytes = 0, page_table_bytes = 0;
+  uint64_t validation_messages = 0;
+  std::string device;
+};
+
+class GpuMap {
+ public:
+  // Throws GpuError (no device, device not found, Vulkan failure, a pool larger than the
+  // device's storage-buffer range) or std::runtime_error for an invalid Map.
+  GpuMap(client::Map map, GpuOptions options = {});
+  ~GpuMap();
+  GpuMap(const GpuMap&) = delete;
+  GpuMap& operator=(const GpuMap&) = delete;
+
+  // ---- engine mode ----
+  // Borrows the engine's device (EngineDevice) and creates, in this call only, the slot
+  // pool, the page table, per ring slot a staging and a feedback buffer, and the shadow
+  // pass's pipeline. GpuOptions::device and ::validation are unused (the engine chose the
+  // device and its layers); max_queries and max_pixels are unused (no host inputs). Throws
+  // GpuError as the own-device constructor does. The engine keeps the device alive, and idle
+  // as far as our work goes (every recorded frame completed), until the destructor returns.
+  GpuMap(client::Map map, const EngineDevice& device, GpuOptions options = {});
+
+  // Frames are the engine's own counter (strictly increasing, any start); frame f uses ring
+  // slot f % frames_in_flight. Every command buffer we record into runs on one queue of
+  // EngineDevice::queue_family, submitted in frame order.
+  //
+  // retire(completed): every frame <= `completed` has finished on the device (its fence or
+  // timeline value signalled). Reads back those frames' feedback (oldest first) into the
+  // Map's request queue, never waiting; returns their FrameStats, valid until the next call
+  // (last_feedback() then names the newest retired frame's absent tiles).
+  std::span<const FrameStats> retire(uint64_t completed_frame);
+  // Records frame f's uploads into `cmd` (outside a render pass): the tiles that changed in
+  // the cache (at most upload_budget_bytes; the first frame also the whole page table) and
+  // the page-table words pointing at them, from the ring slot's staging buffer, and clears
+  // the frame's feedback. Barriers recorded: before the copies, shader reads (vertex,
+  // fragment, compute) of earlier commands -> transfer writes; after them, transfer writes ->
+  // shader reads and writes (vertex, fragment, compute). So the engine needs none around it,
+  // but must record it before any use of our buffers in frame f. GpuError when frame f's
+  // ring slot still holds an unretired frame, or f is not after the last frame recorded.
+  // Returns the upload half of FrameStats (slots, tile and page-table bytes).
+  FrameStats record_uploads(VkCommandBuffer cmd, uint64_t frame);
+  // Records the compute shadow pass of frame f (after record_uploads(cmd, f)): reads the
+  // G-buffer views and writes `images.visibility`; 2D maps (suns) and stack maps (at
+  // settings.time, or soft) with the same answers, bit for bit, as the own-device pass
+  // and its CPU twins. The engine provides the image barriers: G-buffer writes -> compute
+  // shader reads (images in gbuffer_layout), visibility in GENERAL and earlier accesses of it
+  // -> compute shader writes; after it, compute shader writes -> its own reads.
+  void record_shadow_pass(VkCommandBuffer cmd, uint64_t frame, const ShadowPassImages& images,
+                          const ShadowPassSettings& settings);
+  // Records, after the frame's last use of our buffers (our pass or the engine's shaders
+  // that include shadowtile.glsl), the barrier that makes the feedback writes visible to
+  // the host (shader writes -> host reads), so retire() can read them.
+  void record_end_of_frame(VkCommandBuffer cmd, uint64_t frame);
+  // The buffers for the engine's own descriptor sets (the feedback range of frame f's
+  // ring slot). Valid for the GpuMap's life; the ranges never change.
+  GpuDescriptors descriptors(uint64_t frame) const;
+  bool engine_mode() const;
+
+  // ---- own-device mode (evaluate, submit_*, wait and sync throw GpuError in engine mode;
+  // stats, last_feedback, device_name and is_stack serve both modes) ----
+  // Answers `queries` into `out` (same size, <= max_queries); waits for the device.
+  FrameStats evaluate(std::span<const GpuQuery> queries, std::span<float> out);
+  // The same, asynchronous: returns the frame number for wait().
+  uint64_t submit_evaluate(std::span<const GpuQuery> queries);
+  // Stack maps: queries in slices of the stack. Throws GpuError on a 2D map.
+  FrameStats evaluate(std::span<const GpuStackQuery> queries, std::span<float> out);
+  uint64_t submit_evaluate(std::span<const GpuStackQuery> queries);
+  // Submits a shadow pass (width * height <= max_pixels) and returns its frame number;
+  // waits only when every ring slot is still in flight. On a stack map, the pass answers
+  // at `in.time`, or the soft shadow with `in.soft`, from the stack's tiles (absent cells:
+  // the level-K value, and feedback). A 2D map's pass supports suns only (GpuError);
+  // `in.soft` on a 2D map is a GpuError.
+  uint64_t submit_shadow_pass(const ShadowPassInput& in);
+  // Waits for `frame`, copies its visibility image into `out` (width * height floats) and
+  // hands its feedback to the Map. Throws GpuError for a frame not in flight.
+  FrameStats wait(uint64_t frame, std::span<float> out);
+
+  // Uploads changed slots (within the budget) and waits until the device holds what the
+  // cache holds now; returns the slots uploaded. For tests and tools.
+  uint32_t sync();
+  GpuStats stats() const;
+  // The absent tiles the last collected frame's feedback named, with the pixels (or
+  // queries) that needed each. Valid until the next frame is collected.
+  struct FeedbackTile {
+    uint64_t tile = 0;
+    uint32_t pixels = 0;
+  };
+  std::span<const FeedbackTile> last_feedback() const;
+  const std::string& device_name() const;
+  bool is_stack() const;  // a map of a stack pack: its tiles are MH octree cells
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace st::gpu

@@ -1,0 +1,83 @@
+#version 450
+// The engine-mode shadow pass (GpuMap::record_shadow_pass): the engine's G-buffer images
+// (world positions, normals) -> its R32F visibility image, through shadowtile.glsl (the
+// include an engine's own shaders use). Per pixel the same operations as shadow_pass.comp
+// (2D maps) and stack_shadow_pass.comp (stack maps, at a time or soft): the neighbour
+// footprint per slice in that slice's light, the blend or the soft average; so the answers
+// equal theirs and their CPU twins (gpu/shadow_reference.hpp) bit for bit.
+#extension GL_GOOGLE_include_directive : require
+#define ST_SET 0
+#define ST_BINDING_POOL 0
+#define ST_BINDING_PAGE 1
+#define ST_BINDING_FEEDBACK 2
+#include "shadowtile.glsl"
+
+layout(local_size_x = 8, local_size_y = 8) in;
+layout(set = 0, binding = 3) uniform sampler2D st_positions;
+layout(set = 0, binding = 4) uniform sampler2D st_normals;
+layout(set = 0, binding = 5, r32f) uniform writeonly image2D st_visibility;
+layout(push_constant) uniform StEnginePush { uint w[kPcWords]; } pc;
+
+float pc_float(uint i) { return uintBitsToFloat(pc.w[i]); }
+
+// The receiver of pixel q; false where it holds no surface (w == 0).
+bool gbuffer_receiver(ivec2 q, out vec3 r) {
+  const vec4 p = texelFetch(st_positions, q, 0);
+  r = vec3(0.0);
+  if (p.w == 0.0) return false;
+  r = st_receiver(p.xyz, texelFetch(st_normals, q, 0).xyz, pc_float(kPcNormalOffset));
+  return true;
+}
+
+// Visibility of the pixel (receiver r) in slice w, the footprint from its right and lower
+// neighbours in that slice's light (or the push constant's).
+float slice_visibility(uint w, ivec2 q, vec3 r, inout StProbe probe) {
+  const uint lb = st_light_block(w);
+  const vec3 uvd = st_light_uvd(lb, r);
+  if (!st_in_light_box(uvd)) return 1.0;
+  float footprint = pc_float(kPcFootprint);
+  if ((pc.w[kPcFlags] & kFlagNeighbourFootprint) != 0u) {
+    vec3 rr, rd;
+    const bool has_right = uint(q.x) + 1u < pc.w[kPcCount] && gbuffer_receiver(q + ivec2(1, 0), rr);
+    const bool has_down = uint(q.y) + 1u < pc.w[kPcHeight] && gbuffer_receiver(q + ivec2(0, 1), rd);
+    footprint = st_footprint_of(uvd, has_right ? st_light_uvd(lb, rr) : uvd, has_right,
+                                has_down ? st_light_uvd(lb, rd) : uvd, has_down);
+  }
+  return st_shadow_uvd(w, uvd, footprint, pc.w[kPcKernel], probe);
+}
+
+void main() {
+  const ivec2 q = ivec2(gl_GlobalInvocationID.xy);
+  if (uint(q.x) >= pc.w[kPcCount] || uint(q.y) >= pc.w[kPcHeight]) return;
+  vec3 r;
+  if (!gbuffer_receiver(q, r) || st_light_block(0u) == 0u) {
+    imageStore(st_visibility, q, vec4(1.0));
+    return;
+  }
+  StProbe probe = st_probe();
+  float answer;
+  if (st_slices() == 0u) {
+    answer = slice_visibility(0u, q, r, probe);
+  } else {
+    st_oct_path_reset((pc.w[kPcFlags] & kFlagResumeWalks) != 0u);
+    if ((pc.w[kPcFlags] & kFlagSoft) != 0u) {
+      const uint n = st_slices();
+      precise float sum = 0.0;
+      for (uint w = 0u; w < n; ++w) sum = sum + slice_visibility(w, q, r, probe);
+      answer = st_fdiv(sum, float(n));
+    } else {
+      const uint wa = pc.w[kPcSliceA], wb = pc.w[kPcSliceB];
+      const float va = slice_visibility(wa, q, r, probe);
+      answer = va;
+      if (wb != wa) {
+        const float vb = slice_visibility(wb, q, r, probe);
+        precise float step = vb - va;
+        precise float scaled = pc_float(kPcTimeWeight) * step;
+        precise float blended = va + scaled;
+        answer = blended;
+      }
+    }
+  }
+  imageStore(st_visibility, q, vec4(answer));
+  st_finish(probe);
+}

@@ -1,0 +1,171 @@
+// shadowtile.glsl: the GPU tile cache for an engine's own shaders (fragment, compute, any
+// stage that may read storage buffers). Installed with the client (share/shadowtile/shaders)
+// beside st_layout.h, st_eval.glsl and st_stack.glsl, which it includes: compile with
+// glslc -I <that folder>. It declares GpuMap's three buffers at the set and bindings the
+// engine chooses and answers visibility at a world position, bit for bit as the CPU's
+// Map::pcf / pcf_footprint (2D maps) and StackMap's filtered lookups (stack maps) answer
+// with the same float light transform (gpu/shadow_reference.hpp). The light comes from
+// the page table (GPU-resident, uploaded once): nothing per frame but what the engine
+// passes as arguments.
+//
+//   #define ST_SET 2                  // descriptor set of our buffers (default 0)
+//   #define ST_BINDING_POOL 0         // GpuDescriptors::pool        (default 0)
+//   #define ST_BINDING_PAGE 1         // GpuDescriptors::page_table  (default 1)
+//   #define ST_BINDING_FEEDBACK 2     // GpuDescriptors::feedback    (default 2)
+//   #define ST_FEEDBACK 0             // optional: no feedback buffer (read-only use)
+//   #include "shadowtile.glsl"
+//   ...
+//   StProbe probe = st_probe();
+//   float vis = st_shadow(world_pos, normal, normal_offset, footprint, 3u, probe);
+//   st_finish(probe);                 // counts the pixel in the feedback's holes
+//
+// footprint: the pixel's size in texels of the map's finest level (the level choice of
+// MH §3.3 / Map::pcf_footprint); st_footprint_of measures it from neighbouring receivers'
+// light-space positions (the passes' definition: a compute pass's neighbours, or uvd +
+// dFdx(uvd) in a fragment shader), which grows at grazing angles; distance x pixel angle /
+// texel (tiles/bake/render.cpp's) stays isotropic (examples/shaders/scene.frag). At a
+// coarse level the receiver needs a coarse texel's offset along the normal, as
+// tiles/bake/render.hpp explains, or sloped surfaces shadow themselves. Feedback: every absent tile a call needed lands in the frame's feedback buffer
+// (GpuMap reads it back when the frame retires and queues the tiles on the Map); it needs
+// a stage with storage-buffer writes (fragmentStoresAndAtomics for fragment shaders).
+// No workgroup size is assumed: the engine declares its own local_size.
+#ifndef SHADOWTILE_GLSL
+#define SHADOWTILE_GLSL
+#extension GL_GOOGLE_include_directive : require
+
+#ifndef ST_SET
+#define ST_SET 0
+#endif
+#ifndef ST_BINDING_POOL
+#define ST_BINDING_POOL 0
+#endif
+#ifndef ST_BINDING_PAGE
+#define ST_BINDING_PAGE 1
+#endif
+#ifndef ST_BINDING_FEEDBACK
+#define ST_BINDING_FEEDBACK 2
+#endif
+#ifndef ST_FEEDBACK
+#define ST_FEEDBACK 1
+#endif
+
+#include "st_layout.h"
+
+layout(std430, set = ST_SET, binding = ST_BINDING_POOL) readonly buffer StPoolBuffer { uint st_pool[]; };
+layout(std430, set = ST_SET, binding = ST_BINDING_PAGE) readonly buffer StPageBuffer { uint st_page[]; };
+#define ST_POOL(i) st_pool[i]
+#define ST_PAGE(i) st_page[i]
+#if ST_FEEDBACK
+layout(std430, set = ST_SET, binding = ST_BINDING_FEEDBACK) coherent buffer StFeedbackBuffer { uint st_fb[]; };
+#define ST_FB(i) st_fb[i]
+#else
+#define ST_NO_FEEDBACK 1
+#endif
+
+#include "st_eval.glsl"
+#include "st_stack.glsl"
+
+// ---- the map and its lights (page table) ----
+// Slices of a stack map (0: a 2D map).
+uint st_slices() {
+  const uint blk = ST_PAGE(kPtStack);
+  return blk == 0u ? 0u : ST_PAGE(blk + kStSlices);
+}
+// The finest level of the light space's texels (2D: the map's; stack: a slice's).
+uint st_finest_level() {
+  const uint blk = ST_PAGE(kPtStack);
+  return blk == 0u ? ST_PAGE(kPtMapLevel) : ST_PAGE(blk + kStXyLevel);
+}
+// Word offset of the light block (kStLightWords words) of slice w (stack maps) or of the
+// map's light (2D maps: w unused); 0 when the map has none the GPU can use.
+uint st_light_block(uint w) {
+  const uint blk = ST_PAGE(kPtStack);
+  return blk == 0u ? ST_PAGE(kPtLight) : ST_PAGE(blk + kStLights) + w * kStLightWords;
+}
+float st_light_word(uint lb, uint i) { return uintBitsToFloat(ST_PAGE(lb + i)); }
+
+// The receiver: the surface point moved `offset` world units along the normal, each
+// component p + n * offset (the product rounded, then the sum: never fused).
+vec3 st_receiver(vec3 position, vec3 normal, float offset) {
+  precise float rx = position.x + normal.x * offset;
+  precise float ry = position.y + normal.y * offset;
+  precise float rz = position.z + normal.z * offset;
+  return vec3(rx, ry, rz);
+}
+
+// Light-space (u, v, d) of a receiver in the light at `lb`: (r - origin) against the
+// scaled axes, a perspective light's divide rounded as the CPU's (st_fdiv), d from near.
+vec3 st_light_uvd(uint lb, vec3 receiver) {
+  precise float rx = receiver.x - st_light_word(lb, 0u);
+  precise float ry = receiver.y - st_light_word(lb, 1u);
+  precise float rz = receiver.z - st_light_word(lb, 2u);
+  precise float pu = rx * st_light_word(lb, 3u) + ry * st_light_word(lb, 4u) + rz * st_light_word(lb, 5u);
+  precise float pv = rx * st_light_word(lb, 6u) + ry * st_light_word(lb, 7u) + rz * st_light_word(lb, 8u);
+  precise float pz = rx * st_light_word(lb, 9u) + ry * st_light_word(lb, 10u) + rz * st_light_word(lb, 11u);
+  if (ST_PAGE(lb + kStLightProjection) != 0u) {
+    pu = st_fdiv(pu, pz) + st_light_word(lb, kStLightCentreU);
+    pv = st_fdiv(pv, pz) + st_light_word(lb, kStLightCentreV);
+  }
+  precise float pd = pz - st_light_word(lb, 12u);
+  return vec3(pu, pv, pd);
+}
+
+bool st_in_light_box(vec3 uvd) {
+  return uvd.x >= 0.0 && uvd.x < 1.0 && uvd.y >= 0.0 && uvd.y < 1.0 && uvd.z >= 0.0 && uvd.z <= 1.0;
+}
+
+// The footprint in finest texels from the light-space positions of the neighbours that
+// hold a surface: max over them of max(|du|, |dv|), times 2^finest (0 with none).
+float st_footprint_of(vec3 uvd, vec3 right, bool has_right, vec3 down, bool has_down) {
+  precise float f = 0.0;
+  if (has_right) f = max(f, max(abs(right.x - uvd.x), abs(right.y - uvd.y)));
+  if (has_down) f = max(f, max(abs(down.x - uvd.x), abs(down.y - uvd.y)));
+  const float side = uintBitsToFloat((127u + st_finest_level()) << 23u);  // 2^finest, exact
+  return f * side;
+}
+
+// Visibility of a light-space point in slice w (2D maps: w unused): outside the light's box
+// lit (1); else the texel floor(uv * 2^finest), the level pair of the footprint and
+// kernel x kernel PCF at each (1..9), blended. Absent tiles answer coarsely and are fed back.
+float st_shadow_uvd(uint w, vec3 uvd, float footprint, uint kernel, inout StProbe probe) {
+  if (!st_in_light_box(uvd)) return 1.0;
+  const uint finest = st_finest_level();
+  const float side = uintBitsToFloat((127u + finest) << 23u);
+  precise float fu = floor(uvd.x * side), fv = floor(uvd.y * side);
+  const uint x = min(uint(fu), (1u << finest) - 1u), y = min(uint(fv), (1u << finest) - 1u);
+  if (ST_PAGE(kPtStack) != 0u) return st_stack_lookup(x, y, w, uvd.z, footprint, kernel, probe);
+  return st_lookup(x, y, uvd.z, footprint, kernel, probe);
+}
+
+// Visibility at a world position (2D maps; on a stack map slice 0): the receiver offset
+// along the normal, the map's light, the footprint given. 1 where the map has no light.
+float st_shadow(vec3 world_position, vec3 normal, float normal_offset, float footprint, uint kernel,
+                inout StProbe probe) {
+  const uint lb = st_light_block(0u);
+  if (lb == 0u) return 1.0;
+  return st_shadow_uvd(0u, st_light_uvd(lb, st_receiver(world_position, normal, normal_offset)), footprint, kernel,
+                       probe);
+}
+
+// A stack map at a time of the light set: slices a and b (GpuMap's stack_time: a == b at a
+// sample's time) blended va + f * (vb - va), each in its own light with the same footprint.
+float st_shadow_stack(vec3 world_position, vec3 normal, float normal_offset, float footprint, uint kernel, uint a,
+                      uint b, float f, inout StProbe probe) {
+  const vec3 r = st_receiver(world_position, normal, normal_offset);
+  const float va = st_shadow_uvd(a, st_light_uvd(st_light_block(a), r), footprint, kernel, probe);
+  if (a == b) return va;
+  const float vb = st_shadow_uvd(b, st_light_uvd(st_light_block(b), r), footprint, kernel, probe);
+  precise float step = vb - va;
+  precise float scaled = f * step;
+  precise float blended = va + scaled;
+  return blended;
+}
+
+// Ends a pixel's lookups: counts it in the frame's holes when a tap answered coarsely.
+void st_finish(StProbe probe) {
+#if ST_FEEDBACK
+  if (probe.hole) atomicAdd(ST_FB(kFbHoles), 1u);
+#endif
+}
+
+#endif

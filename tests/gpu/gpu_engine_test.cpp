@@ -1,0 +1,587 @@
+// GpuMap in engine mode, driven by a tiny engine (engine_harness.hpp) that owns the
+// instance, device, queue, command buffers, fences and the G-buffer images: GpuMap only
+// records into the engine's command buffers. Its shadow pass over the engine's images
+// equals the own-device pass and the CPU twin bit for bit, and its feedback names the
+// same absent tiles as the own-device pass's (and, for one tap, exactly the tiles the
+// CPU's page-table walk finds absent); frames in flight with a churning cache never stall
+// and count only tile, page-table and feedback bytes; the engine's loaders and allocator
+// are the ones used. The engine's validation layer must stay silent throughout.
+#include <gtest/gtest.h>
+
+#include <bit>
+#include <map>
+#include <random>
+
+#include "client/map_access.hpp"
+#include "gpu/layout.hpp"
+#include "gpu/shadow_reference.hpp"
+#include "tests/client/loopback.hpp"
+#include "tests/gpu/engine_harness.hpp"
+#include "tests/gpu/gpu_test_util.hpp"
+#include "tiles/core/light.hpp"
+#include "tiles/core/page_table.hpp"
+#include "tiles/core/tile_cut_grid.hpp"
+
+namespace st::gpu {
+namespace {
+
+using enginetest::run_frame;
+using enginetest::Targets;
+using enginetest::TestEngine;
+using looptest::wait_until;
+
+uint32_t bits(float v) { return std::bit_cast<uint32_t>(v); }
+
+struct Served {
+  looptest::TestPack pack;
+  looptest::TestServer server;
+  std::unique_ptr<client::Client> client;
+  client::Map map;
+};
+
+Served serve(const std::string& name, uint32_t slots) {
+  Served s;
+  s.pack = looptest::build_pack(name, looptest::small_scale() ? 5 : 6, 7, looptest::first_encoding(), 2, 512);
+  s.server = looptest::start_server({s.pack.path});
+  client::ClientOptions o = looptest::quick_options();
+  o.cache_slots = slots;
+  s.client = std::make_unique<client::Client>(client::Endpoint{"127.0.0.1", s.server.port}, o);
+  s.map = s.client->open(name);
+  return s;
+}
+
+// A tilted plane across the map's light space, a little outside the box at the edges, a
+// few background pixels (w == 0): positions and normals, 4 floats a pixel.
+struct Plane {
+  static constexpr uint32_t width = 64, height = 48;
+  std::vector<float> pos, nrm;
+  explicit Plane(const PackHeader& h) : pos(size_t(width) * height * 4), nrm(pos.size()) {
+    const LightSpace ls = LightSpace::from_array(h.light_kind, h.light);
+    std::mt19937_64 rng(9);
+    std::uniform_real_distribution<double> jitter(-0.002, 0.002);
+    for (uint32_t y = 0; y < height; ++y)
+      for (uint32_t x = 0; x < width; ++x) {
+        const size_t p = size_t(y) * width + x;
+        const double u = -0.05 + 1.1 * (x + 0.5) / width + jitter(rng), v = -0.05 + 1.1 * (y + 0.5) / height;
+        const double d = 0.3 + 0.4 * u + jitter(rng) * 50;
+        const double e = ls.extent_uv(), z = ls.near_plane() + d * (ls.far_plane() - ls.near_plane());
+        const Vec3d wp = ls.origin() + ls.axis_u() * (u * e) + ls.axis_v() * (v * e) + ls.forward() * z;
+        pos[4 * p] = float(wp.x), pos[4 * p + 1] = float(wp.y), pos[4 * p + 2] = float(wp.z);
+        pos[4 * p + 3] = (x * 7 + y * 3) % 29 == 0 ? 0.0f : 1.0f;
+        const Vec3d n = ls.forward() * -1.0;
+        nrm[4 * p] = float(n.x), nrm[4 * p + 1] = float(n.y), nrm[4 * p + 2] = float(n.z);
+      }
+  }
+  ShadowPassInput input(const ShadowPassSettings& s) const {
+    ShadowPassInput in;
+    in.positions = pos;
+    in.normals = nrm;
+    in.width = width;
+    in.height = height;
+    in.kernel = s.kernel;
+    in.normal_offset = s.normal_offset;
+    in.neighbour_footprint = s.neighbour_footprint;
+    in.footprint = s.footprint;
+    in.time = s.time;
+    in.soft = s.soft;
+    in.resume_walks = s.resume_walks;
+    return in;
+  }
+};
+
+std::map<uint64_t, uint32_t> feedback_of(const GpuMap& g) {
+  std::map<uint64_t, uint32_t> m;
+  for (const auto& t : g.last_feedback()) m[t.tile] = t.pixels;
+  return m;
+}
+
+// Bytes of the resident tiles as the mirror uploads them (each padded to 4 bytes).
+uint64_t resident_tile_bytes(const client::Map& map) {
+  uint64_t sum = 0;
+  client::MapAccess::remote(map).inspect_cache([&](const TileCache& c) {
+    for (uint32_t s = 0; s < c.slot_count(); ++s) {
+      const TileId t = c.slot_tile(s);
+      if (t == kInvalidTile) continue;
+      const PageEntry pe = c.lookup(t);
+      if (pe.state == PageState::resident && pe.slot == s) sum += (c.tile_bytes(s).size() + 3) & ~size_t(3);
+    }
+  });
+  return sum;
+}
+
+bool resident(const client::Map& map, uint64_t tile) {
+  bool r = false;
+  client::MapAccess::remote(map).inspect_cache([&](const TileCache& c) { r = c.lookup(tile).state == PageState::resident; });
+  return r;
+}
+
+// The tiles the CPU's page-table walk over the same cache finds absent for each finest
+// texel, with the number of texels (pixels) that needed each.
+std::map<uint64_t, uint32_t> absent_tiles(const client::Map& map, const std::vector<std::array<uint32_t, 2>>& texels) {
+  const client::RemoteMap& rm = client::MapAccess::remote(map);
+  const uint32_t l = map.finest_level();
+  std::map<uint64_t, uint32_t> want;
+  rm.inspect_cache([&](const TileCache& c) {
+    std::map<uint32_t, CutGrid> grids;
+    for (const auto& [x, y] : texels) {
+      auto index = [&](uint64_t id, const GridEntry&) -> const CutGrid* {
+        const PageEntry page = c.lookup(id);
+        if (page.state != PageState::resident) return nullptr;
+        auto it = grids.find(page.slot);
+        if (it == grids.end())
+          it = grids.emplace(page.slot, CutGrid::parse(c.tile_bytes(page.slot), "slot", kMaxIndexLevels)).first;
+        return &it->second;
+      };
+      const PageHit hit = walk_page_table(rm.grid(), l, x, y, index);
+      if (hit.kind == PageHit::Kind::absent ||
+          (hit.kind == PageHit::Kind::tile && c.lookup(hit.tile).state != PageState::resident))
+        ++want[hit.tile];
+    }
+  });
+  return want;
+}
+
+uint64_t feedback_bytes(uint32_t capacity, uint32_t tiles) {
+  return (uint64_t(layout::kFbHeaderWords) + capacity + uint64_t(tiles) * layout::kFbRecordWords) * 4;
+}
+
+
+const uint32_t kFullscreenVertSpv[] = {
+#include "tests/gpu/fullscreen.vert.spv.inc"
+};
+const uint32_t kEngineFragmentSpv[] = {
+#include "tests/gpu/engine_fragment.frag.spv.inc"
+};
+
+// The engine's own raster pass (tests/gpu/shaders): a full-screen triangle into an R32F
+// colour attachment, its fragment shader including shadowtile.glsl with our buffers at
+// set 0 bindings 3, 5, 7 (GpuMap::descriptors) and the G-buffer at set 1.
+struct RasterPass {
+  VkDevice d = VK_NULL_HANDLE;
+  VkRenderPass rp = VK_NULL_HANDLE;
+  VkFramebuffer fb = VK_NULL_HANDLE;
+  VkSampler sampler = VK_NULL_HANDLE;
+  VkDescriptorSetLayout l0 = VK_NULL_HANDLE, l1 = VK_NULL_HANDLE;
+  VkPipelineLayout layout = VK_NULL_HANDLE;
+  VkPipeline pipeline = VK_NULL_HANDLE;
+  VkDescriptorPool pool = VK_NULL_HANDLE;
+  VkDescriptorSet s0 = VK_NULL_HANDLE, s1 = VK_NULL_HANDLE;
+  uint32_t width, height;
+
+  VkShaderModule module(std::span<const uint32_t> code) const {
+    VkShaderModuleCreateInfo ci{};
+    ci.sType = VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO;
+    ci.codeSize = code.size() * 4;
+    ci.pCode = code.data();
+    VkShaderModule m = VK_NULL_HANDLE;
+    enginetest::check(vkCreateShaderModule(d, &ci, nullptr, &m), "vkCreateShaderModule");
+    return m;
+  }
+
+  RasterPass(TestEngine& e, const enginetest::Image& target, const enginetest::Image& pos, const enginetest::Image& nrm,
+             const GpuDescriptors& g)
+      : d(e.device), width(target.width), height(target.height) {
+    VkAttachmentDescription att{};
+    att.format = VK_FORMAT_R32_SFLOAT;
+    att.samples = VK_SAMPLE_COUNT_1_BIT;
+    att.loadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
+    att.storeOp = VK_ATTACHMENT_STORE_OP_STORE;
+    att.stencilLoadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
+    att.stencilStoreOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
+    att.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
+    att.finalLayout = VK_IMAGE_LAYOUT_GENERAL;
+    VkAttachmentReference ref{0, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
+    VkSubpassDescription sub{};
+    sub.pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
+    sub.colorAttachmentCount = 1;
+    sub.pColorAttachments = &ref;
+    VkRenderPassCreateInfo rpi{};
+    rpi.sType = VK_STRUCTURE_TYPE_RENDER_PASS_CREATE_INFO;
+    rpi.attachmentCount = 1;
+    rpi.pAttachments = &att;
+    rpi.subpassCount = 1;
+    rpi.pSubpasses = &sub;
+    enginetest::check(vkCreateRenderPass(d, &rpi, nullptr, &rp), "vkCreateRenderPass");
+    VkFramebufferCreateInfo fbi{};
+    fbi.sType = VK_STRUCTURE_TYPE_FRAMEBUFFER_CREATE_INFO;
+    fbi.renderPass = rp;
+    fbi.attachmentCount = 1;
+    fbi.pAttachments = &target.view;
+    fbi.width = width;
+    fbi.height = height;
+    fbi.layers = 1;
+    enginetest::check(vkCreateFramebuffer(d, &fbi, nullptr, &fb), "vkCreateFramebuffer");
+    VkSamplerCreateInfo sci{};
+    sci.sType = VK_STRUCTURE_TYPE_SAMPLER_CREATE_INFO;
+    sci.magFilter = sci.minFilter = VK_FILTER_NEAREST;
+    enginetest::check(vkCreateSampler(d, &sci, nullptr, &sampler), "vkCreateSampler");
+    VkDescriptorSetLayoutBinding b0[3] = {};
+    for (uint32_t i = 0; i < 3; ++i)
+      b0[i] = {3 + 2 * i, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr};
+    VkDescriptorSetLayoutBinding b1[2] = {};
+    for (uint32_t i = 0; i < 2; ++i)
+      b1[i] = {i, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, &sampler};
+    VkDescriptorSetLayoutCreateInfo li{};
+    li.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO;
+    li.bindingCount = 3;
+    li.pBindings = b0;
+    enginetest::check(vkCreateDescriptorSetLayout(d, &li, nullptr, &l0), "vkCreateDescriptorSetLayout");
+    li.bindingCount = 2;
+    li.pBindings = b1;
+    enginetest::check(vkCreateDescriptorSetLayout(d, &li, nullptr, &l1), "vkCreateDescriptorSetLayout");
+    const VkDescriptorSetLayout sets[2] = {l0, l1};
+    const VkPushConstantRange pcr{VK_SHADER_STAGE_FRAGMENT_BIT, 0, 12};
+    VkPipelineLayoutCreateInfo pli{};
+    pli.sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO;
+    pli.setLayoutCount = 2;
+    pli.pSetLayouts = sets;
+    pli.pushConstantRangeCount = 1;
+    pli.pPushConstantRanges = &pcr;
+    enginetest::check(vkCreatePipelineLayout(d, &pli, nullptr, &layout), "vkCreatePipelineLayout");
+    const VkDescriptorPoolSize ps[2] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 3}, {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 2}};
+    VkDescriptorPoolCreateInfo dpi{};
+    dpi.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO;
+    dpi.maxSets = 2;
+    dpi.poolSizeCount = 2;
+    dpi.pPoolSizes = ps;
+    enginetest::check(vkCreateDescriptorPool(d, &dpi, nullptr, &pool), "vkCreateDescriptorPool");
+    VkDescriptorSetAllocateInfo dai{};
+    dai.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO;
+    dai.descriptorPool = pool;
+    dai.descriptorSetCount = 2;
+    dai.pSetLayouts = sets;
+    VkDescriptorSet out[2];
+    enginetest::check(vkAllocateDescriptorSets(d, &dai, out), "vkAllocateDescriptorSets");
+    s0 = out[0], s1 = out[1];
+    const VkDescriptorBufferInfo bufs[3] = {g.pool, g.page_table, g.feedback};
+    const VkDescriptorImageInfo imgs[2] = {{VK_NULL_HANDLE, pos.view, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL},
+                                           {VK_NULL_HANDLE, nrm.view, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL}};
+    VkWriteDescriptorSet w[5] = {};
+    for (uint32_t i = 0; i < 5; ++i) {
+      w[i].sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
+      w[i].descriptorCount = 1;
+      if (i < 3) {
+        w[i].dstSet = s0, w[i].dstBinding = 3 + 2 * i, w[i].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+        w[i].pBufferInfo = &bufs[i];
+      } else {
+        w[i].dstSet = s1, w[i].dstBinding = i - 3, w[i].descriptorType = VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
+        w[i].pImageInfo = &imgs[i - 3];
+      }
+    }
+    vkUpdateDescriptorSets(d, 5, w, 0, nullptr);
+    VkShaderModule vs = module(kFullscreenVertSpv), fs = module(kEngineFragmentSpv);
+    VkPipelineShaderStageCreateInfo st[2] = {};
+    for (int i = 0; i < 2; ++i) {
+      st[i].sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
+      st[i].stage = i == 0 ? VK_SHADER_STAGE_VERTEX_BIT : VK_SHADER_STAGE_FRAGMENT_BIT;
+      st[i].module = i == 0 ? vs : fs;
+      st[i].pName = "main";
+    }
+    VkPipelineVertexInputStateCreateInfo vi{};
+    vi.sType = VK_STRUCTURE_TYPE_PIPELINE_VERTEX_INPUT_STATE_CREATE_INFO;
+    VkPipelineInputAssemblyStateCreateInfo ia{};
+    ia.sType = VK_STRUCTURE_TYPE_PIPELINE_INPUT_ASSEMBLY_STATE_CREATE_INFO;
+    ia.topology = VK_PRIMITIVE_TOPOLOGY_TRIANGLE_LIST;
+    const VkViewport vp{0, 0, float(width), float(height), 0, 1};
+    const VkRect2D sc{{0, 0}, {width, height}};
+    VkPipelineViewportStateCreateInfo vps{};
+    vps.sType = VK_STRUCTURE_TYPE_PIPELINE_VIEWPORT_STATE_CREATE_INFO;
+    vps.viewportCount = 1;
+    vps.pViewports = &vp;
+    vps.scissorCount = 1;
+    vps.pScissors = &sc;
+    VkPipelineRasterizationStateCreateInfo rs{};
+    rs.sType = VK_STRUCTURE_TYPE_PIPELINE_RASTERIZATION_STATE_CREATE_INFO;
+    rs.polygonMode = VK_POLYGON_MODE_FILL;
+    rs.cullMode = VK_CULL_MODE_NONE;
+    rs.lineWidth = 1;
+    VkPipelineMultisampleStateCreateInfo ms{};
+    ms.sType = VK_STRUCTURE_TYPE_PIPELINE_MULTISAMPLE_STATE_CREATE_INFO;
+    ms.rasterizationSamples = VK_SAMPLE_COUNT_1_BIT;
+    VkPipelineColorBlendAttachmentState cba{};
+    cba.colorWriteMask = VK_COLOR_COMPONENT_R_BIT;
+    VkPipelineColorBlendStateCreateInfo cb{};
+    cb.sType = VK_STRUCTURE_TYPE_PIPELINE_COLOR_BLEND_STATE_CREATE_INFO;
+    cb.attachmentCount = 1;
+    cb.pAttachments = &cba;
+    VkGraphicsPipelineCreateInfo gpi{};
+    gpi.sType = VK_STRUCTURE_TYPE_GRAPHICS_PIPELINE_CREATE_INFO;
+    gpi.stageCount = 2;
+    gpi.pStages = st;
+    gpi.pVertexInputState = &vi;
+    gpi.pInputAssemblyState = &ia;
+    gpi.pViewportState = &vps;
+    gpi.pRasterizationState = &rs;
+    gpi.pMultisampleState = &ms;
+    gpi.pColorBlendState = &cb;
+    gpi.layout = layout;
+    gpi.renderPass = rp;
+    const VkResult r = vkCreateGraphicsPipelines(d, VK_NULL_HANDLE, 1, &gpi, nullptr, &pipeline);
+    vkDestroyShaderModule(d, vs, nullptr);
+    vkDestroyShaderModule(d, fs, nullptr);
+    enginetest::check(r, "vkCreateGraphicsPipelines");
+  }
+  ~RasterPass() {
+    vkDestroyPipeline(d, pipeline, nullptr);
+    vkDestroyDescriptorPool(d, pool, nullptr);
+    vkDestroyPipelineLayout(d, layout, nullptr);
+    vkDestroyDescriptorSetLayout(d, l0, nullptr);
+    vkDestroyDescriptorSetLayout(d, l1, nullptr);
+    vkDestroySampler(d, sampler, nullptr);
+    vkDestroyFramebuffer(d, fb, nullptr);
+    vkDestroyRenderPass(d, rp, nullptr);
+  }
+  RasterPass(const RasterPass&) = delete;
+  RasterPass& operator=(const RasterPass&) = delete;
+
+  void record(VkCommandBuffer cmd, uint32_t kernel, float normal_offset, float footprint) const {
+    VkRenderPassBeginInfo bi{};
+    bi.sType = VK_STRUCTURE_TYPE_RENDER_PASS_BEGIN_INFO;
+    bi.renderPass = rp;
+    bi.framebuffer = fb;
+    bi.renderArea = {{0, 0}, {width, height}};
+    vkCmdBeginRenderPass(cmd, &bi, VK_SUBPASS_CONTENTS_INLINE);
+    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline);
+    const VkDescriptorSet sets[2] = {s0, s1};
+    vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, layout, 0, 2, sets, 0, nullptr);
+    uint32_t push[3] = {kernel, std::bit_cast<uint32_t>(normal_offset), std::bit_cast<uint32_t>(footprint)};
+    vkCmdPushConstants(cmd, layout, VK_SHADER_STAGE_FRAGMENT_BIT, 0, sizeof(push), push);
+    vkCmdDraw(cmd, 3, 1, 0, 0);
+    vkCmdEndRenderPass(cmd);
+  }
+};
+
+// An engine's fragment shader that includes shadowtile.glsl answers what the compute pass
+// answers (footprint given, no neighbours), bit for bit, and feeds back the same tiles.
+TEST(GpuEngine, AFragmentShaderIncludingShadowtileGlslAnswersLikeTheComputePass) {
+  Served s = serve("gpu_engine_fragment", 10);
+  const uint32_t l = s.map.finest_level();
+  s.map.request_region(l, 0, 0, (1u << l) / 2, (1u << l) / 2, 10);
+  ASSERT_TRUE(wait_until([&] { return s.map.region_resident(l, 0, 0, (1u << l) / 2, (1u << l) / 2); }));
+  s.server.stop();
+  ASSERT_TRUE(wait_until([&] { return !s.client->stats().connected; }));
+  const PackHeader& h = client::pack_header(s.map);
+  const Plane plane(h);
+  TestEngine e(1);
+  ASSERT_TRUE(e.fragment_stores) << "the device has no fragmentStoresAndAtomics";
+  Targets t(e, plane.width, plane.height, plane.pos, plane.nrm, 1);
+  enginetest::Image& colour = e.image(plane.width, plane.height, VK_FORMAT_R32_SFLOAT, VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT);
+  GpuOptions o;
+  o.frames_in_flight = 1;
+  GpuMap g(s.map, e.engine_device(), o);
+  ShadowPassSettings set;
+  set.kernel = 3;
+  set.normal_offset = 0.001f;
+  set.neighbour_footprint = false;
+  set.footprint = 2.5f;
+  // Frame 1: the compute pass.
+  run_frame(e, g, t, 1, set);
+  g.retire(e.finish());
+  const std::vector<float> compute = t.read(1);
+  const std::map<uint64_t, uint32_t> compute_feedback = feedback_of(g);
+  // Frame 2: the engine's raster pass reads the same buffers at its own bindings.
+  const RasterPass raster(e, colour, *t.pos, *t.nrm, g.descriptors(2));
+  uint64_t completed = 0;
+  VkCommandBuffer cmd = e.begin(2, completed);
+  g.retire(completed);
+  const FrameStats up = g.record_uploads(cmd, 2);
+  EXPECT_EQ(up.tile_bytes + up.page_bytes, 0u);
+  raster.record(cmd, set.kernel, set.normal_offset, set.footprint);
+  e.record_readback(cmd, colour, VK_IMAGE_LAYOUT_GENERAL, VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT, t.readback[0],
+                    VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT);
+  g.record_end_of_frame(cmd, 2);
+  e.submit(2);
+  const std::span<const FrameStats> r = g.retire(e.finish());
+  ASSERT_EQ(r.size(), 1u);
+  const std::vector<float> fragment = t.read(2);
+  std::vector<float> want(compute.size());
+  shadow_pass_reference(client::evaluator(s.map), h, plane.input(set), want);
+  size_t bad = 0, bad_twin = 0, shadowed = 0;
+  for (size_t i = 0; i < compute.size(); ++i) {
+    if (bits(fragment[i]) != bits(compute[i]) && bad++ == 0)
+      ADD_FAILURE() << "pixel " << i << ": fragment " << fragment[i] << ", compute " << compute[i];
+    bad_twin += bits(fragment[i]) != bits(want[i]);
+    shadowed += fragment[i] < 1.0f;
+  }
+  EXPECT_EQ(bad, 0u);
+  EXPECT_EQ(bad_twin, 0u);
+  EXPECT_GT(shadowed, 0u);
+  EXPECT_FALSE(compute_feedback.empty());
+  EXPECT_EQ(feedback_of(g), compute_feedback);  // the fragment shader fed back the same tiles
+  EXPECT_EQ(e.messages(), 0u) << e.first_message();
+}
+
+TEST(GpuEngine, ShadowPassOverTheEnginesImagesEqualsTheOwnDevicePassAndTheCpuTwin) {
+  Served s = serve("gpu_engine_pass", 10);
+  const uint32_t l = s.map.finest_level();
+  s.map.request_region(l, 0, 0, (1u << l) / 2, (1u << l) / 2, 10);
+  ASSERT_TRUE(wait_until([&] { return s.map.region_resident(l, 0, 0, (1u << l) / 2, (1u << l) / 2); }));
+  s.server.stop();
+  ASSERT_TRUE(wait_until([&] { return !s.client->stats().connected; }));
+  const PackHeader& h = client::pack_header(s.map);
+  const Plane plane(h);
+  GpuMap own(s.map, gputest::options());
+  const uint64_t lookups_before = enginetest::g_instance_lookups + enginetest::g_device_lookups;
+  {
+    TestEngine e(2);
+    Targets t(e, plane.width, plane.height, plane.pos, plane.nrm, 2);
+    enginetest::CountingAllocator alloc(e.device, e.physical);
+    GpuOptions o;
+    o.frames_in_flight = 2;
+    {
+      GpuMap g(s.map, e.engine_device(&alloc), o);
+      EXPECT_TRUE(g.engine_mode());
+      EXPECT_GT(enginetest::g_instance_lookups + enginetest::g_device_lookups, lookups_before);  // the engine's loaders
+      EXPECT_GT(alloc.live, 0);  // and its allocator
+      EXPECT_THROW(g.sync(), GpuError);  // own-device calls refuse in engine mode
+      uint64_t frame = 100;  // the engine's counter: any start
+      std::vector<FrameStats> retired;
+      uint32_t k = 0;
+      for (uint32_t kernel : {1u, 3u, 5u}) {
+        SCOPED_TRACE(kernel);
+        ShadowPassSettings set;
+        set.kernel = kernel;
+        set.normal_offset = 0.001f;
+        set.neighbour_footprint = kernel != 5;
+        set.footprint = 2.5f;
+        const FrameStats up = run_frame(e, g, t, ++frame, set, &retired);
+        if (k++ == 0) {  // the first frame: every resident tile and the whole page table
+          EXPECT_EQ(up.tile_bytes, resident_tile_bytes(s.map));
+          EXPECT_EQ(up.page_bytes, g.stats().page_table_bytes);
+        } else {  // nothing changed: no tile, no page-table word
+          EXPECT_EQ(up.tile_bytes, 0u);
+          EXPECT_EQ(up.page_bytes, 0u);
+        }
+        EXPECT_EQ(up.host_io_bytes, 0u);
+        const uint64_t done = e.finish();
+        const std::span<const FrameStats> r = g.retire(done);
+        ASSERT_FALSE(r.empty());
+        ASSERT_EQ(r.back().frame, frame);
+        const FrameStats fs = r.back();
+        const std::vector<float> got = t.read(frame);
+        const std::map<uint64_t, uint32_t> engine_feedback = feedback_of(g);
+        // The own-device pass over the same G-buffer (host spans) and the CPU twin.
+        const ShadowPassInput in = plane.input(set);
+        std::vector<float> own_out(got.size()), want(got.size());
+        const FrameStats ofs = own.wait(own.submit_shadow_pass(in), own_out);
+        shadow_pass_reference(client::evaluator(s.map), h, in, want);
+        size_t bad = 0, bad_own = 0;
+        for (size_t i = 0; i < got.size(); ++i) {
+          if (bits(got[i]) != bits(want[i]) && bad++ == 0)
+            ADD_FAILURE() << "pixel " << i << ": engine pass " << got[i] << ", cpu twin " << want[i];
+          bad_own += bits(got[i]) != bits(own_out[i]);
+        }
+        EXPECT_EQ(bad, 0u);
+        EXPECT_EQ(bad_own, 0u);
+        // Feedback: the same absent tiles with the same pixel counts as the own-device pass
+        // (whose feedback the own-device tests check against the CPU's walk), all absent.
+        EXPECT_FALSE(engine_feedback.empty());  // half the map is absent
+        EXPECT_EQ(engine_feedback, feedback_of(own));
+        for (const auto& [tile, n] : engine_feedback) EXPECT_FALSE(resident(s.map, tile)) << tile;
+        EXPECT_EQ(fs.holes, ofs.holes);
+        EXPECT_EQ(fs.feedback_dropped, 0u);
+        // Per frame: tile + page-table bytes up, the feedback read back, nothing else.
+        EXPECT_EQ(fs.feedback_bytes, feedback_bytes(o.feedback_capacity, fs.feedback_tiles));
+        EXPECT_EQ(fs.host_io_bytes, 0u);
+        EXPECT_EQ(ofs.host_io_bytes, uint64_t(plane.width) * plane.height * (16 + 16 + 4));  // own mode: G-buffer in, out
+      }
+      // One tap at the finest level (kernel 1, footprint 1): the feedback names exactly the
+      // tiles the CPU's page-table walk finds absent for the pixels' texels, each with the
+      // number of pixels that needed it.
+      {
+        ShadowPassSettings one;
+        one.kernel = 1;
+        one.normal_offset = 0.001f;
+        one.neighbour_footprint = false;
+        one.footprint = 1.0f;
+        run_frame(e, g, t, ++frame, one);
+        g.retire(e.finish());
+        const ShadowPassInput in = plane.input(one);
+        const ShadowLight sl = shadow_light(h);
+        std::vector<std::array<uint32_t, 2>> texels;
+        for (size_t p = 0; p < size_t(plane.width) * plane.height; ++p) {
+          uint32_t x = 0, y = 0;
+          if (shadow_pass_texel(sl, in, p, s.map.finest_level(), x, y)) texels.push_back({x, y});
+        }
+        const std::map<uint64_t, uint32_t> want = absent_tiles(s.map, texels);
+        EXPECT_FALSE(want.empty());
+        EXPECT_EQ(feedback_of(g), want);
+      }
+      const GpuStats st = g.stats();
+      EXPECT_EQ(st.host_io_bytes, 0u);
+      EXPECT_EQ(st.bytes_uploaded, st.tile_bytes + st.page_bytes);
+      // A frame whose ring slot still holds an unretired frame is refused, not waited for.
+      uint64_t completed = 0;
+      VkCommandBuffer cmd = e.begin(frame + 1, completed);
+      g.record_uploads(cmd, frame + 1);
+      EXPECT_THROW(g.record_uploads(cmd, frame + 3), GpuError);
+      EXPECT_THROW(g.record_uploads(cmd, frame + 1), GpuError);  // not after the last
+      e.submit(frame + 1);
+      g.retire(e.finish());
+    }
+    EXPECT_EQ(alloc.live, 0);  // every buffer given back to the engine's allocator
+    EXPECT_EQ(e.messages(), 0u) << e.first_message();
+  }
+  EXPECT_EQ(own.stats().validation_messages, 0u);
+}
+
+TEST(GpuEngine, FramesInFlightWithAChurningCacheNeverStallAndMoveOnlyTilePageAndFeedbackBytes) {
+  Served s = serve("gpu_engine_churn", 6);
+  const uint32_t l = s.map.finest_level();
+  const uint32_t side = 1u << l;
+  const Plane plane(client::pack_header(s.map));
+  TestEngine e(3);
+  Targets t(e, plane.width, plane.height, plane.pos, plane.nrm, 3);
+  GpuOptions o;
+  o.frames_in_flight = 3;
+  o.upload_budget_bytes = 600;  // about one slot a frame: uploads trail the cache
+  GpuMap g(s.map, e.engine_device(), o);
+  std::mt19937_64 rng(5);
+  std::vector<FrameStats> retired;
+  ShadowPassSettings set;
+  set.kernel = 3;
+  uint64_t frame = 0;
+  for (int i = 0; i < 30; ++i) {
+    const uint32_t w = side / 4;
+    s.map.request_region(l, rng() % (side - w), rng() % (side - w), w, w, uint16_t(1 + i));
+    run_frame(e, g, t, ++frame, set, &retired);
+  }
+  const std::span<const FrameStats> last = g.retire(e.finish());
+  retired.insert(retired.end(), last.begin(), last.end());
+  ASSERT_EQ(retired.size(), frame);
+  uint64_t tiles = 0, requested = 0;
+  for (size_t i = 0; i < retired.size(); ++i) {
+    const FrameStats& fs = retired[i];
+    EXPECT_EQ(fs.frame, i + 1);  // oldest first, every frame once
+    EXPECT_TRUE(fs.tile_bytes <= o.upload_budget_bytes || fs.slots_uploaded == 1) << fs.tile_bytes;
+    EXPECT_EQ(fs.bytes_uploaded, fs.tile_bytes + fs.page_bytes);
+    if (fs.feedback_dropped == 0) {
+      EXPECT_EQ(fs.feedback_bytes, feedback_bytes(o.feedback_capacity, fs.feedback_tiles));
+    }
+    EXPECT_EQ(fs.host_io_bytes, 0u);
+    tiles += fs.slots_uploaded;
+    requested += fs.requested;
+  }
+  EXPECT_GT(tiles, 6u);      // slots were reused
+  EXPECT_GT(requested, 0u);  // the pass's feedback reached the Map
+  // The cache holds still: frames until the mirror has caught up, then one more equals
+  // the CPU twin bit for bit.
+  s.server.stop();
+  ASSERT_TRUE(wait_until([&] { return !s.client->stats().connected; }));
+  for (int i = 0; i < 64; ++i) {
+    const FrameStats up = run_frame(e, g, t, ++frame, set);
+    if (up.tile_bytes == 0 && up.page_bytes == 0) break;
+  }
+  run_frame(e, g, t, ++frame, set);
+  g.retire(e.finish());
+  std::vector<float> want(size_t(plane.width) * plane.height);
+  shadow_pass_reference(client::evaluator(s.map), client::pack_header(s.map), plane.input(set), want);
+  const std::vector<float> got = t.read(frame);
+  size_t bad = 0;
+  for (size_t i = 0; i < got.size(); ++i) bad += bits(got[i]) != bits(want[i]);
+  EXPECT_EQ(bad, 0u);
+  EXPECT_EQ(e.messages(), 0u) << e.first_message();
+}
+
+}  // namespace
+}  // namespace st::gpu

@@ -1,0 +1,32 @@
+#version 450
+// An engine's fragment shader over the GPU tile cache (the fragment-shader test): our
+// buffers in set 0 at the bindings the engine chose, its G-buffer in set 1; per pixel the
+// receiver's visibility with the footprint given, feedback on. It must answer what the
+// compute pass answers with neighbour_footprint off, bit for bit.
+#define ST_SET 0
+#define ST_BINDING_POOL 3
+#define ST_BINDING_PAGE 5
+#define ST_BINDING_FEEDBACK 7
+#include "shadowtile.glsl"
+
+layout(set = 1, binding = 0) uniform sampler2D gbuffer_positions;
+layout(set = 1, binding = 1) uniform sampler2D gbuffer_normals;
+layout(push_constant) uniform Push {
+  uint kernel;
+  float normal_offset;
+  float footprint;
+} push;
+layout(location = 0) out float visibility;
+
+void main() {
+  const ivec2 q = ivec2(gl_FragCoord.xy);
+  const vec4 p = texelFetch(gbuffer_positions, q, 0);
+  if (p.w == 0.0) {
+    visibility = 1.0;
+    return;
+  }
+  StProbe probe = st_probe();
+  visibility = st_shadow(p.xyz, texelFetch(gbuffer_normals, q, 0).xyz, push.normal_offset, push.footprint, push.kernel,
+                         probe);
+  st_finish(probe);
+}
