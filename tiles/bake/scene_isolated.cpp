@@ -191,7 +191,10 @@ const std::string* g_child_oom_message = nullptr;
   if (limits.memory_bytes > 0 && !kAddressSanitizer) {
     const uint64_t now = statm_field(::getpid(), 0);
     if (now > 0) {
-      const uint64_t cap = now + limits.memory_bytes + kImportStackBytes;
+      // The import stack's reservation counts within the limit, so the child's memory
+      // never grows past memory_bytes (under kImportStackBytes + a little, the reader
+      // runs on the forking thread's own stack instead).
+      const uint64_t cap = now + limits.memory_bytes;
       const rlimit r{rlim_t(cap), rlim_t(cap)};
       ::setrlimit(RLIMIT_AS, &r);
     }
