@@ -62,10 +62,18 @@ Outcome load_error(const std::string& path, const SceneLimits& limits = {}) {
   return o;
 }
 
-// Neither this process nor any reader child it ran went past `mib` of resident memory.
+#if defined(__SANITIZE_ADDRESS__)
+constexpr bool kAsan = true;  // shadow memory and quarantine inflate resident memory
+#else
+constexpr bool kAsan = false;
+#endif
+
+// Neither this process nor any reader child it ran went past `mib` of resident memory
+// (three times that under ASan).
 void expect_memory_below(uint64_t mib) {
-  EXPECT_LT(max_rss_mib(RUSAGE_SELF), mib);
-  EXPECT_LT(max_rss_mib(RUSAGE_CHILDREN), mib);
+  const uint64_t bound = kAsan ? 3 * mib : mib;
+  EXPECT_LT(max_rss_mib(RUSAGE_SELF), bound);
+  EXPECT_LT(max_rss_mib(RUSAGE_CHILDREN), bound);
 }
 
 TEST(SceneHostile, PlyCountClaimsAreCheckedAgainstTheFileSize) {
@@ -163,6 +171,9 @@ TEST(SceneHostile, GltfInstancesAreCountedAgainstTheTriangleBudgetBeforeCopying)
 }
 
 TEST(SceneHostile, ManyGltfNodesStopAtTheReadersMemoryLimit) {
+  // Under ASan the limit is a resident-memory watch with room for the sanitizer's own
+  // overhead (scene_isolated.hpp), too loose for this small file to reach.
+  if (kAsan) GTEST_SKIP() << "the address-space limit is off under ASan";
   const std::string d = dir_of("nodes");
   // 100,000 bare nodes (1.6 MB): assimp spends about a kilobyte on each (the 10^6 of a
   // 59 MB file took 2.35 GiB); under a 64 MiB limit the reader runs out, in one line.
