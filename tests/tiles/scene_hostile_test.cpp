@@ -286,7 +286,10 @@ TEST(SceneHostile, ExitCountingIsLinearInCoincidentClosedMeshes) {
   EXPECT_EQ(r.lo_t, 0.25);
   EXPECT_EQ(r.hi_t, 0.75);
   EXPECT_FALSE(r.fell_back);
-  EXPECT_LT(s, 1.0);  // about 10 ms; the quadratic search took tens of seconds
+  // 0.23 s measured (release, loaded machine); the quadratic search took 11.4 s. The test
+  // file compiles at -O0 under the sanitizers, and this header is inline: more room there.
+  const double bound = kAsan ? 5.0 : 1.0;
+  EXPECT_LT(s, bound);
   // Stacked and touching: mesh m spans [m, m + 1], so the ray goes on through all of them
   // and every mesh it met stays counted.
   hits.clear();
@@ -297,7 +300,7 @@ TEST(SceneHostile, ExitCountingIsLinearInCoincidentClosedMeshes) {
   std::sort(hits.begin(), hits.end());
   const auto t1 = std::chrono::steady_clock::now();
   const CanonicalResult stacked = canonical_interval(hits, 2.0 * kMeshes);
-  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count(), 1.0);
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count(), bound);
   EXPECT_EQ(stacked.lo_t, 0.0);
   EXPECT_EQ(stacked.hi_t, double(kMeshes));
   EXPECT_FALSE(stacked.fell_back);
