@@ -136,7 +136,7 @@ MeshSoup instance(const aiMesh& mesh, const std::string& name, const Affine& wor
 
 // glTF (by content, as assimp picks its importer by content too when the extension is not
 // its own): its nesting checked before assimp recurses over it (scene_gltf_check.hpp).
-void check_gltf_file(const std::string& path) {
+void check_gltf_file(const std::string& path, uint64_t memory_bytes) {
   std::ifstream in(path, std::ios::binary);
   char head[64] = {};
   in.read(head, sizeof head);
@@ -146,7 +146,7 @@ void check_gltf_file(const std::string& path) {
   in.clear();
   in.seekg(0);
   const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  check_gltf_structure(bytes, path);
+  check_gltf_structure(bytes, path, memory_bytes);
 }
 
 Scene import_file(const std::string& path, const SceneOptions& options, const SceneLimits& limits) {
@@ -160,7 +160,7 @@ Scene import_file(const std::string& path, const SceneOptions& options, const Sc
   for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   if (ext == ".pk3" || ext == ".bsp") return load_quake3(path, options, "", limits.max_triangles);
 
-  check_gltf_file(path);
+  check_gltf_file(path, limits.isolate ? limits.memory_bytes : 0);
   check_header_counts(path);  // PLY and OFF element counts against the file's size
   check_xml_nesting(path);    // COLLADA and the other XML formats
   Assimp::Importer importer;
