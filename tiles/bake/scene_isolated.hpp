@@ -17,11 +17,10 @@
 namespace st {
 
 // Runs `read` in a forked child and returns the scene it built. In the child: no core
-// dumps, an address-space limit of its size at the fork + limits.memory_bytes (RLIMIT_AS;
-// under AddressSanitizer, which reserves terabytes, the parent instead kills a child whose
-// resident memory grows past 2 x memory_bytes + 256 MiB), and `read` runs on a thread
-// with a 256 MiB stack, whose reservation counts within the limit (when it does not fit,
-// on the forking thread). The parent kills the child
+// dumps, an address-space limit of its size at the fork + limits.memory_bytes + the
+// 256 MiB import stack's reservation (RLIMIT_AS; under AddressSanitizer, which reserves
+// terabytes, the parent instead kills a child whose resident memory grows past
+// 2 x memory_bytes + 256 MiB), and `read` runs on a thread with that 256 MiB stack. The parent kills the child
 // after limits.seconds. Throws st::Error naming `path` for: an error thrown by `read`
 // (its own message), memory exhausted, the deadline passed, a crash (the signal named), an
 // answer that breaks the format or the limits. Without limits.isolate, `read` runs on a
