@@ -14,10 +14,12 @@
 #include <sstream>
 #include <thread>
 
+#include "tiles/bake/scene_limits.hpp"
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/exr_io.hpp"
 #include "tiles/bake/png_io.hpp"
 #include "tiles/bake/scene.hpp"
+#include "app/scene_limits_option.hpp"
 #include "app/command.hpp"
 #include "common/error.hpp"
 
@@ -26,6 +28,7 @@ namespace {
 
 struct BoundsOptions {
   std::string scene, light, resolution, region, up, output;
+  std::string scene_limits;  // --scene-limits (tiles/bake/scene_limits.hpp)
   uint32_t preview_size = 2048;
 };
 
@@ -112,7 +115,7 @@ void run_bounds(const BoundsOptions& o) {
   }
 
   const auto t0 = std::chrono::steady_clock::now();
-  Scene scene = load_scene(o.scene, so);
+  Scene scene = load_scene(o.scene, so, parse_scene_limits(o.scene_limits));
   const double load_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   std::printf("%s\n", summary(scene).c_str());
   const LightSpace light = LightSpace::fit(spec, scene.bounds());
@@ -166,6 +169,7 @@ void setup_bounds(CLI::App& sub) {
                  "Texels X,Y,W,H of the map to trace (default: the whole map; at most "
                  "8192^2 texels per call, so larger maps need --region)");
   sub.add_option("--up", o->up, "Up axis of a scene file: y or z; default: the file's own (Quake 3: z; FBX metadata; COLLADA <up_axis>), else y");
+  add_scene_limits_option(sub, o->scene_limits);
   sub.add_option("-o,--output", o->output,
                  "Output EXR (channels lo, hi as float32); a PNG preview is written beside "
                  "it with the same stem")

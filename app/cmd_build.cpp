@@ -5,10 +5,12 @@
 #include <fstream>
 #include <optional>
 
+#include "tiles/bake/scene_limits.hpp"
 #include "tiles/bake/deep_build.hpp"
 #include "tiles/bake/deep_exr.hpp"
 #include "tiles/bake/map_build.hpp"
 #include "tiles/bake/scene.hpp"
+#include "app/scene_limits_option.hpp"
 #include "app/command.hpp"
 #include "app/html_page.hpp"
 #ifdef SHADOWTILE_HAVE_MPI
@@ -37,6 +39,7 @@ TexelRegion parse_region(const std::string& text) {
 }
 
 struct BuildArgs {
+  std::string scene_limits;  // --scene-limits (tiles/bake/scene_limits.hpp)
   std::string scene, light, resolution = "4096", encoding = "dagmh", out, report, region,
                      construction = "bottom-up", up, intervals = "default", shard,
               builder = "auto", skip = "auto";
@@ -193,7 +196,7 @@ void run(const BuildArgs& a) {
 
   SceneOptions so;
   so.up = parse_up_axis(a.up);
-  Scene scene = load_scene(a.scene, so);
+  Scene scene = load_scene(a.scene, so, parse_scene_limits(a.scene_limits));
   LightSpec spec = LightSpec::parse(a.light);
   LightSpace light = LightSpace::fit(spec, scene.bounds());
   if (!quiet) std::printf("%s\n", summary(scene).c_str());
@@ -322,6 +325,7 @@ void setup(CLI::App& app) {
                  "Build only cells touching texels X,Y,W,H of the finest level (the rest constant)");
   app.add_option("--compression", a->compression, "zlib level 0..12 (libdeflate)")->capture_default_str();
   app.add_option("--up", a->up, "Up axis of a scene file: y or z; default: the file's own (Quake 3: z; FBX metadata; COLLADA <up_axis>), else y");
+  add_scene_limits_option(app, a->scene_limits);
   app.add_option("--intervals", a->intervals,
                  "default: [first hit, exit of closed objects]; static: an open surface's interval also "
                  "reaches to just below the next surface (lossless for receivers on surfaces only)")

@@ -5,9 +5,11 @@
 #include <cstdio>
 #include <thread>
 
+#include "tiles/bake/scene_limits.hpp"
 #include "tiles/bake/deep_exr.hpp"
 #include "tiles/bake/exr_io.hpp"
 #include "tiles/bake/png_io.hpp"
+#include "app/scene_limits_option.hpp"
 #include "app/command.hpp"
 #include "app/pack_cli_util.hpp"
 #include "app/stack_cli.hpp"
@@ -30,6 +32,7 @@ Rect region_of(const std::string& region, uint32_t level) {
 }
 
 struct ExportArgs {
+  std::string scene_limits;  // --scene-limits (tiles/bake/scene_limits.hpp)
   std::string pack, region, out;
   uint32_t level = 0;
   bool level_set = false;
@@ -55,7 +58,7 @@ void run_deep(const ExportArgs& a) {
   if (r.w * r.h > kMaxDeepRegion)
     throw Error("export --deep: region " + std::to_string(r.w) + "x" + std::to_string(r.h) +
                 " exceeds 1024^2 texels; pass a smaller --region or a coarser --level");
-  const Scene scene = load_scene(a.pack, so);
+  const Scene scene = load_scene(a.pack, so, parse_scene_limits(a.scene_limits));
   if (!scene.any_partial())
     throw Error("export --deep: scene '" + a.pack +
                 "' has no partial occluder (no transmittance, alpha texture or volume): "
@@ -156,6 +159,7 @@ void setup(CLI::App& app) {
   app.add_option("--epsilon", a->epsilon, "With --deep: compression bound (default 0.25 / sqrt(N), DSM 2000 §4)");
   app.add_option("--seed", a->seed, "With --deep: jitter seed (default 1)");
   app.add_option("--up", a->up, "With --deep: Up axis of a scene file: y or z; default: the file's own (Quake 3: z; FBX metadata; COLLADA <up_axis>), else y");
+  add_scene_limits_option(app, a->scene_limits);
   app.add_option("--level", a->level, "Level to decode (each level is a complete map; default min(L, 12))")
       ->each([a](const std::string&) { a->level_set = true; });
   app.add_option("--slice", a->slice, "Stack packs: the slice W (light sample) to export");

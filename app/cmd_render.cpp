@@ -13,9 +13,11 @@
 
 #include "client/map_access.hpp"
 #include "loadgen/view_tiles.hpp"
+#include "tiles/bake/scene_limits.hpp"
 #include "tiles/bake/render.hpp"
 #include "tiles/bake/scene.hpp"
 #include "proto/auth.hpp"
+#include "app/scene_limits_option.hpp"
 #include "app/command.hpp"
 #include "common/error.hpp"
 #include "tiles/core/pack_evaluator.hpp"
@@ -81,6 +83,7 @@ namespace {
 
 struct RenderArgs {
   std::string pack, server, map, scene, camera, size = "960x540", out, up, key_file, tls_ca, tls_name;
+  std::string scene_limits;  // --scene-limits (tiles/bake/scene_limits.hpp)
   bool tls = false;
   uint32_t pcf = 0;
   bool diff = false;
@@ -195,7 +198,7 @@ void run(const RenderArgs& a) {
   if (a.filter) o.pixel_angle = 2 * std::tan(cam.fov_deg * 3.14159265358979323846 / 360) / o.height;
   SceneOptions so;
   so.up = parse_up_axis(a.up);
-  const Scene scene = load_scene(a.scene, so);
+  const Scene scene = load_scene(a.scene, so, parse_scene_limits(a.scene_limits));
 
   std::shared_ptr<const PackReader> reader;
   std::unique_ptr<PackEvaluator> pack_eval;
@@ -265,6 +268,7 @@ Register reg{"render", "Render a camera view shaded with the map's shadows (EXR 
   sub.add_option("--map", a->map, "Map name on the server");
   sub.add_option("--scene", a->scene, "Scene the map was built from (primary rays)")->required();
   sub.add_option("--up", a->up, "Up axis of a scene file: y or z; default: the file's own (Quake 3: z; FBX metadata; COLLADA <up_axis>), else y");
+  add_scene_limits_option(sub, a->scene_limits);
   sub.add_option("--camera", a->camera, "pos=X,Y,Z,target=X,Y,Z[,fov=DEG]")->required();
   sub.add_option("--size", a->size, "Image size WxH")->capture_default_str();
   sub.add_option("--pcf", a->pcf, "PCF radius R: (2R+1)^2 taps (0: single tap)")->capture_default_str()

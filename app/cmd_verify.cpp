@@ -16,11 +16,13 @@
 #include <vector>
 
 #include "common/hash.hpp"
+#include "tiles/bake/scene_limits.hpp"
 #include "tiles/bake/deep_sampler.hpp"
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/map_build.hpp"
 #include "tiles/bake/raster_bounds.hpp"
 #include "tiles/bake/scene.hpp"
+#include "app/scene_limits_option.hpp"
 #include "app/command.hpp"
 #include "app/pack_cli_util.hpp"
 #include "common/error.hpp"
@@ -37,6 +39,7 @@ namespace {
 
 struct VerifyArgs {
   std::string pack, scene, up, builder = "pack";
+  std::string scene_limits;  // --scene-limits (tiles/bake/scene_limits.hpp)
   uint64_t samples = 1000000, seed = 1;
   uint32_t show = 10;
   bool all = false;
@@ -231,7 +234,7 @@ void run(const VerifyArgs& a) {
 
   SceneOptions so;
   so.up = parse_up_axis(a.up);
-  Scene scene = load_scene(a.scene, so);
+  Scene scene = load_scene(a.scene, so, parse_scene_limits(a.scene_limits));
   if (reader->deep_directory()) {
     // The deep part against the scene's partial occluders; the opaque map against the rest.
     if (verify_deep(a, *reader, scene, std::min<uint64_t>(a.samples, 256))) {
@@ -412,6 +415,7 @@ void setup(CLI::App& app) {
   app.add_option("--cell-side", a->cell_side, "With --cells: the squares' side in texels, a power of two")
       ->capture_default_str();
   app.add_option("--up", a->up, "Up axis of a scene file: y or z; default: the file's own (Quake 3: z; FBX metadata; COLLADA <up_axis>), else y");
+  add_scene_limits_option(app, a->scene_limits);
   app.callback([a]() { run(*a); });
 }
 

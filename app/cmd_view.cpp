@@ -29,6 +29,7 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "app/scene_limits_option.hpp"
 #include "app/command.hpp"
 #include "client/map_access.hpp"
 #include "common/error.hpp"
@@ -36,6 +37,7 @@
 #include "loadgen/camera_path.hpp"
 #include "loadgen/load_run.hpp"
 #include "tiles/core/stack_grid.hpp"
+#include "tiles/bake/scene_limits.hpp"
 #include "tiles/bake/png_io.hpp"
 #include "tiles/bake/render.hpp"
 #include "tiles/bake/scene.hpp"
@@ -49,6 +51,7 @@ namespace {
 
 struct ViewArgs {
   std::string server, map, scene, path = "flyover", size = "1920x1080", device, out = "view-out", json, up;
+  std::string scene_limits;  // --scene-limits (tiles/bake/scene_limits.hpp)
   std::string time, time_sweep;
   bool soft = false, full_walks = false;
   uint32_t frames = 24, pcf = 3;
@@ -73,7 +76,7 @@ void run(const ViewArgs& a) {
   }
   SceneOptions so;
   so.up = parse_up_axis(a.up);
-  const Scene scene = load_scene(a.scene, so);
+  const Scene scene = load_scene(a.scene, so, parse_scene_limits(a.scene_limits));
   client::ClientOptions co;
   co.client_name = "shadowtile-view";
   co.cache_slots = 1;  // a probe: the slot size, in one slot
@@ -238,6 +241,7 @@ Register reg{"view", "Headless viewer: fly a camera path, GPU shadow pass from s
                sub.add_option("--map", a->map, "Map name")->required();
                sub.add_option("--scene", a->scene, "The scene the map was built from")->required();
                sub.add_option("--up", a->up, "Up axis of a scene file: y or z; default: the file's own (Quake 3: z; FBX metadata; COLLADA <up_axis>), else y")->check(CLI::IsMember({"y", "z"}));
+               add_scene_limits_option(sub, a->scene_limits);
                sub.add_option("--path", a->path, "Camera path: flyover, orbit, walk, teleport");
                sub.add_option("--frames", a->frames, "Frames to render");
                sub.add_option("--fps", a->fps, "Simulated frames per second of the path");

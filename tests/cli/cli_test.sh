@@ -17,6 +17,13 @@ check bad-resolution 1 "power of two" -- "$st" bounds procedural:cube $light --r
 check bad-light 1 "elevation" -- "$st" bounds procedural:cube --light sun:azimuth=3,elevation=0 --resolution 256 -o x.exr
 check missing-scene 1 "nosuch.obj" -- "$st" bounds nosuch.obj $light --resolution 256 -o x.exr
 check unknown-procedural 1 "teapot" -- "$st" bounds procedural:teapot $light --resolution 256 -o x.exr
+# Hostile scene files (SECURITY.md "Reading files"): one line, fast; limits by flag.
+printf 'OFF\n353535235358 6 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n' > oom.off
+check hostile-off 1 "OFF header claims 353535235358 vertices" -- "$st" bounds oom.off $light --resolution 256 -o x.exr
+printf 'OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n' > tri.off
+check scene-limits-triangles 1 "triangles must be in \[1, 2\^32-1\]" -- "$st" build tri.off $light --resolution 256 -o x.pack -q --scene-limits triangles=0
+check scene-limits-bad-key 1 "scene-limits: expected none or KEY=VALUE" -- "$st" bounds tri.off $light --resolution 256 -o x.exr --scene-limits colour=3
+check scene-limits-raised 0 "1 triangles" -- "$st" bounds tri.off $light --resolution 256 -o t.exr --scene-limits memory=2048,seconds=120
 check build 0 "html: skipped \(SHADOWTILE_HTML=0\)" -- "$st" build $scene $light --resolution 2048 --encoding dagmh -o city.pack --report build.json -q
 # The tile bound's message names the real bounds (64 B .. 64 MiB), as --help does.
 check tile-bytes-too-big 1 "outside \[64 B, 64 MiB\]" -- "$st" build $scene $light --resolution 256 --tile-bytes 134217728 -o big.pack -q

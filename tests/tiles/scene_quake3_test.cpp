@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 #include <zlib.h>
 
+#include <chrono>
 #include <filesystem>
 #include <fstream>
 
@@ -240,7 +241,7 @@ TEST(Quake3, BadArchivesAndMapsGiveClearErrors) {
                         {{{"maps/a.bsp", empty_map}}, "no shadow-casting surfaces"},
                         {{{"maps/a.bsp", hostile}}, "lump 0 (offset 2147418112, size 4096) lies outside"},
                         {{{"maps/a.bsp", "IBSP"}}, "shorter than the 144-byte header"},
-                        {{{"maps/a.bsp", "VBSP" + hostile.substr(4)}}, "magic is not IBSP"},
+                        {{{"maps/a.bsp", "VBSP" + hostile.substr(4)}}, "'maps/a.bsp' does not start with 'IBSP'"},
                         {{{"maps/a.bsp", bad_face}}, "maps/a.bsp: malformed Quake 3 map: face 0: mesh-vertex range"},
                         {{{"maps/a.bsp", bad_index}}, "face 0: mesh vertex 7 outside"},
                         {{{"maps/a.bsp", bad_patch}}, "face 0: patch size 3x3"},
@@ -333,6 +334,18 @@ TEST(Quake3, TessellationPastTheCapIsRefusedBeforeAllocating) {
   write_bytes(tmp("shared_mesh.bsp"), bsp({{"textures/base/wall", 0}}, v, mv, faces));
   const std::string msg2 = error_of(tmp("shared_mesh.bsp"), SceneOptions{UpAxis::z});
   EXPECT_NE(msg2.find("too large"), std::string::npos) << msg2;
+}
+
+// A member of 32 MiB that is not a map (32 KB deflated): refused on its first inflated
+// bytes, before its stated size is allocated or the rest inflated.
+TEST(Quake3, Pk3MemberIsCheckedForItsMagicBeforeItIsInflatedWhole) {
+  const std::string zeros(size_t(32) << 20, '\0');
+  write_bytes(tmp("zeros.pk3"), zip({{"maps/zeros.bsp", zeros}}, true));
+  const auto t0 = std::chrono::steady_clock::now();
+  const std::string msg = error_of(tmp("zeros.pk3"));
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_NE(msg.find("'maps/zeros.bsp' does not start with 'IBSP'"), std::string::npos) << msg;
+  EXPECT_LT(s, 2.0);
 }
 
 }  // namespace

@@ -29,6 +29,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <unordered_map>
 #include <utility>
 #include <vector>
 
@@ -150,6 +151,9 @@ struct CanonicalResult {
 namespace canonical_detail {
 // (mesh, count) pairs in insertion order, inline up to kInline entries and on the heap
 // beyond: canonical_interval() allocates nothing for the common handful of meshes per ray.
+// Past kInline, a hash index finds a mesh in O(1): a ray through m coincident or stacked
+// closed meshes then costs O(m), not O(m^2) (5,000 coincident closed meshes took 187 s
+// for a 128^2 map with a linear search).
 class MeshCounts {
  public:
   struct Entry {
@@ -157,10 +161,17 @@ class MeshCounts {
     int32_t second;  // count
   };
   static constexpr size_t kInline = 16;
-  void clear() { n_ = 0, heap_.clear(); }
+  void clear() {
+    if (n_ > kInline) heap_.clear(), index_.clear();
+    n_ = 0;
+  }
   Entry* begin() { return n_ <= kInline ? inline_ : heap_.data(); }
   Entry* end() { return begin() + n_; }
   Entry* find(uint32_t mesh) {
+    if (n_ > kInline) {
+      const auto it = index_.find(mesh);
+      return it == index_.end() ? nullptr : heap_.data() + it->second;
+    }
     Entry* e = std::find_if(begin(), end(), [&](const Entry& c) { return c.first == mesh; });
     return e == end() ? nullptr : e;
   }
@@ -168,7 +179,11 @@ class MeshCounts {
     if (n_ < kInline) {
       inline_[n_] = Entry{mesh, count};
     } else {
-      if (n_ == kInline) heap_.assign(inline_, inline_ + kInline);
+      if (n_ == kInline) {
+        heap_.assign(inline_, inline_ + kInline);
+        for (size_t k = 0; k < kInline; ++k) index_.emplace(inline_[k].first, uint32_t(k));
+      }
+      index_.emplace(mesh, uint32_t(heap_.size()));
       heap_.push_back(Entry{mesh, count});
     }
     ++n_;
@@ -178,6 +193,7 @@ class MeshCounts {
  private:
   Entry inline_[kInline];  // the first n_ are set (not initialised beyond: no per-call cost)
   std::vector<Entry> heap_;
+  std::unordered_map<uint32_t, uint32_t> index_;  // mesh -> position in heap_, past kInline
   size_t n_ = 0;
 };
 }  // namespace canonical_detail

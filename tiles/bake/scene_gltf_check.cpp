@@ -1,5 +1,7 @@
 #include "tiles/bake/scene_gltf_check.hpp"
 
+#include <assimp/scene.h>
+
 #include <cstring>
 #include <map>
 #include <nlohmann/json.hpp>
@@ -52,7 +54,7 @@ void check_json_nesting(std::string_view s, const std::string& path) {
 
 }  // namespace
 
-void check_gltf_structure(const std::vector<uint8_t>& bytes, const std::string& path) {
+void check_gltf_structure(const std::vector<uint8_t>& bytes, const std::string& path, uint64_t memory_bytes) {
   const std::string_view text = json_text(bytes, path);
   if (text.empty()) return;
   check_json_nesting(text, path);
@@ -61,6 +63,10 @@ void check_gltf_structure(const std::vector<uint8_t>& bytes, const std::string& 
   const auto nodes_it = j.find("nodes");
   if (nodes_it == j.end()) return;
   const nlohmann::json& nodes = *nodes_it;
+  if (memory_bytes > 0 && (nodes.is_array() || nodes.is_object()) && nodes.size() > memory_bytes / sizeof(aiNode))
+    throw Error(path + ": glTF file has " + std::to_string(nodes.size()) + " nodes; assimp spends at least " +
+                std::to_string(sizeof(aiNode)) + " bytes on each, more than the reader's limit of " +
+                std::to_string(memory_bytes >> 20) + " MiB (raise it with --scene-limits memory=MIB)");
   // Node ids: glTF 2 indexes an array, glTF 1 names the members of an object.
   std::vector<std::string> names;
   std::map<std::string, size_t> by_name;

@@ -8,8 +8,6 @@
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 
-#include <pthread.h>
-
 #include <cctype>
 #include <cmath>
 #include <cstdint>
@@ -24,6 +22,9 @@
 #include <vector>
 
 #include "tiles/bake/scene_gltf_check.hpp"
+#include "tiles/bake/scene_header_check.hpp"
+#include "tiles/bake/scene_isolated.hpp"
+#include "tiles/bake/scene_limits.hpp"
 #include "tiles/bake/scene_materials.hpp"
 #include "tiles/bake/scene_mesh.hpp"
 #include "tiles/bake/scene_quake3.hpp"
@@ -134,31 +135,9 @@ MeshSoup instance(const aiMesh& mesh, const std::string& name, const Affine& wor
   return soup;
 }
 
-// Stack of the thread assimp imports on (reserved, touched only as deep as it recurses).
-constexpr size_t kImportStackBytes = size_t(256) << 20;
-
-// Runs `fn` on a new thread with a stack of `bytes` and waits for it; `fn` must not throw.
-void run_with_stack(size_t bytes, const std::function<void()>& fn) {
-  pthread_attr_t attr;
-  if (pthread_attr_init(&attr) != 0) throw Error("cannot start the import thread (pthread_attr_init)");
-  pthread_attr_setstacksize(&attr, bytes);
-  pthread_t thread;
-  auto trampoline = [](void* f) -> void* {
-    (*static_cast<const std::function<void()>*>(f))();
-    return nullptr;
-  };
-  const int rc = pthread_create(&thread, &attr, trampoline, const_cast<std::function<void()>*>(&fn));
-  pthread_attr_destroy(&attr);
-  if (rc != 0) {  // no thread (address space or thread limits): import on this one
-    fn();
-    return;
-  }
-  pthread_join(thread, nullptr);
-}
-
 // glTF (by content, as assimp picks its importer by content too when the extension is not
 // its own): its nesting checked before assimp recurses over it (scene_gltf_check.hpp).
-void check_gltf_file(const std::string& path) {
+void check_gltf_file(const std::string& path, uint64_t memory_bytes) {
   std::ifstream in(path, std::ios::binary);
   char head[64] = {};
   in.read(head, sizeof head);
@@ -168,7 +147,7 @@ void check_gltf_file(const std::string& path) {
   in.clear();
   in.seekg(0);
   const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-  check_gltf_structure(bytes, path);
+  check_gltf_structure(bytes, path, memory_bytes);
 }
 
 // The up axis a file records, when SceneOptions::up leaves it to the file. FBX keeps it
@@ -214,7 +193,7 @@ FileUp file_up(const aiScene& as, const std::string& path, const std::string& ex
   return {UpAxis::y, "the file records none"};
 }
 
-Scene import_file(const std::string& path, const SceneOptions& options) {
+Scene import_file(const std::string& path, const SceneOptions& options, const SceneLimits& limits) {
   namespace fs = std::filesystem;
   std::error_code ec;
   const auto status = fs::status(path, ec);
@@ -223,9 +202,11 @@ Scene import_file(const std::string& path, const SceneOptions& options) {
 
   std::string ext = fs::path(path).extension().string();
   for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  if (ext == ".pk3" || ext == ".bsp") return load_quake3(path, options);
+  if (ext == ".pk3" || ext == ".bsp") return load_quake3(path, options, "", limits.max_triangles);
 
-  check_gltf_file(path);
+  check_gltf_file(path, limits.isolate ? limits.memory_bytes : 0);
+  check_header_counts(path);  // PLY and OFF element counts against the file's size
+  check_xml_nesting(path);    // COLLADA and the other XML formats
   Assimp::Importer importer;
   // A given axis overrides the file's: assimp must not turn a COLLADA file by its own.
   if (options.up) importer.SetPropertyBool(AI_CONFIG_IMPORT_COLLADA_IGNORE_UP_DIRECTION, true);
@@ -241,6 +222,8 @@ Scene import_file(const std::string& path, const SceneOptions& options) {
   }
   if (!as) {
     const std::string why = one_line(importer.GetErrorString());
+    if (why.find("bad_alloc") != std::string::npos || why.find("bad_array_new_length") != std::string::npos)
+      throw std::bad_alloc();  // assimp caught it: the reader's memory limit (scene_isolated.cpp)
     if (!importer.IsExtensionSupported(ext))
       throw Error(path + ": unknown scene format '" + ext + "' (" + why + ")");
     if (why.find("mNumMeshes is 0") != std::string::npos)
@@ -253,7 +236,7 @@ Scene import_file(const std::string& path, const SceneOptions& options) {
 
   Scene scene;
   scene.name = path;
-  FileMaterials materials(*as, path);  // partial occluders (scene_materials.hpp)
+  FileMaterials materials(*as, path, limits.max_texels);  // partial occluders (scene_materials.hpp)
   if (options.up) {
     scene.up = *options.up;
     scene.up_reason = "given";
@@ -267,12 +250,22 @@ Scene import_file(const std::string& path, const SceneOptions& options) {
   const Affine root = scene.up == UpAxis::z && !turned_by_assimp ? z_up_to_y_up() : Affine{};
   std::vector<unsigned> uses(as->mNumMeshes, 0);
   {
+    // The triangles the node tree emits, every instance counted, against the budget before
+    // any of them is copied: a file of kilobytes can instance one mesh a million times.
+    uint64_t emitted = 0;
     std::vector<const aiNode*> todo{as->mRootNode};
     while (!todo.empty()) {
       const aiNode* node = todo.back();
       todo.pop_back();
       for (unsigned i = 0; i < node->mNumMeshes; ++i)
-        if (node->mMeshes[i] < as->mNumMeshes) ++uses[node->mMeshes[i]];
+        if (node->mMeshes[i] < as->mNumMeshes) {
+          ++uses[node->mMeshes[i]];
+          emitted += as->mMeshes[node->mMeshes[i]]->mNumFaces;
+        }
+      if (emitted > limits.max_triangles)
+        throw Error(path + ": the scene's node tree instances more than " +
+                    std::to_string(limits.max_triangles) +
+                    " triangles, the limit (raise it with --scene-limits triangles=N)");
       for (unsigned c = 0; c < node->mNumChildren; ++c) todo.push_back(node->mChildren[c]);
     }
   }
@@ -296,30 +289,22 @@ Scene import_file(const std::string& path, const SceneOptions& options) {
   return scene;
 }
 
-// assimp imports and frees node trees (and parses XML and JSON) by recursion: the whole
-// import runs on a thread with a stack far larger than the main thread's, so nesting that
-// check_gltf_file() does not cover (other formats) needs far deeper files to exhaust it.
-Scene load_file(const std::string& path, const SceneOptions& options) {
-  Scene scene;
-  std::exception_ptr failure;
-  run_with_stack(kImportStackBytes, [&]() {
-    try {
-      scene = import_file(path, options);
-    } catch (...) {
-      failure = std::current_exception();
-    }
-  });
-  if (failure) std::rethrow_exception(failure);
-  return scene;
+// Every file is read in a child process under `limits` (scene_isolated.hpp): assimp
+// allocates from header counts and recurses over what it parses, and a crash, a limit or a
+// deadline there is one line of error here.
+Scene load_file(const std::string& path, const SceneOptions& options, const SceneLimits& limits) {
+  return read_scene_isolated(path, limits, [&] { return import_file(path, options, limits); });
 }
 
 }  // namespace
 
-Scene load_scene(const std::string& spec, const SceneOptions& options) {
+Scene load_scene(const std::string& spec, const SceneOptions& options) { return load_scene(spec, options, SceneLimits{}); }
+
+Scene load_scene(const std::string& spec, const SceneOptions& options, const SceneLimits& limits) {
   // "BASE+vdb:...+fog:..." adds volumes to BASE; "vdb:..." and "*.vdb" are volumes alone
   // (scene_volumes.hpp).
   if (const size_t plus = volume_suffix(spec); plus != std::string::npos) {
-    Scene scene = load_scene(spec.substr(0, plus), options);
+    Scene scene = load_scene(spec.substr(0, plus), options, limits);
     // Volumes follow the axis their scene was read with (a given one, else the file's).
     add_spec_volumes(scene, spec.substr(plus), options.up.value_or(scene.up));
     return scene;
@@ -335,9 +320,9 @@ Scene load_scene(const std::string& spec, const SceneOptions& options) {
   if (pk3 != std::string::npos && !std::filesystem::exists(spec)) {
     const std::string archive = spec.substr(0, pk3 + 4), member = spec.substr(pk3 + 5);
     if (!std::filesystem::is_regular_file(archive)) throw Error("scene file not found: " + archive);
-    return load_quake3(archive, options, member);
+    return read_scene_isolated(spec, limits, [&] { return load_quake3(archive, options, member, limits.max_triangles); });
   }
-  return load_file(spec, options);
+  return load_file(spec, options, limits);
 }
 
 }  // namespace st

@@ -61,10 +61,24 @@ bool is_png(const uint8_t* head, size_t n) {
   return n >= 8 && std::memcmp(head, "\x89PNG\r\n\x1a\n", 8) == 0;
 }
 
+// A PNG's size from its IHDR chunk (PNG spec 11.2.2: width and height big-endian at
+// bytes 16 and 20), 0 when the bytes do not hold one (libpng then says what is wrong).
+uint64_t png_texels(const uint8_t* head, size_t n) {
+  if (n < 24 || std::memcmp(head + 12, "IHDR", 4) != 0) return 0;
+  auto be = [&](size_t at) {
+    return uint32_t(head[at]) << 24 | uint32_t(head[at + 1]) << 16 | uint32_t(head[at + 2]) << 8 | head[at + 3];
+  };
+  return uint64_t(be(16)) * be(20);
+}
+
 }  // namespace
 
-FileMaterials::FileMaterials(const aiScene& scene, const std::string& model_path)
-    : as_(scene), model_path_(model_path), done_(scene.mNumMaterials), read_(scene.mNumMaterials, false) {}
+FileMaterials::FileMaterials(const aiScene& scene, const std::string& model_path, uint64_t max_texels)
+    : as_(scene),
+      model_path_(model_path),
+      done_(scene.mNumMaterials),
+      read_(scene.mNumMaterials, false),
+      max_texels_(max_texels) {}
 
 const MaterialPartial& FileMaterials::get(unsigned index, Scene& scene) {
   static const MaterialPartial kOpaque{};
@@ -147,9 +161,16 @@ const MaterialPartial& FileMaterials::get(unsigned index, Scene& scene) {
     if (auto it = textures_.find(key); it != textures_.end()) {
       out.alpha_texture = it->second;
     } else {
+      // Counted against the scene's budget from the image's header, before decoding it.
+      auto budget = [&](uint64_t texels) {
+        if (texels > max_texels_ - std::min(texels_, max_texels_))
+          throw Error(label + " has " + std::to_string(texels) + " texels, which takes the scene's alpha textures past " +
+                      std::to_string(max_texels_) + " texels, the limit (raise it with --scene-limits texels=N)");
+      };
       try {
         if (embedded && embedded->mHeight != 0) {  // uncompressed ARGB8888 texels
           const uint64_t n = uint64_t(embedded->mWidth) * embedded->mHeight;
+          budget(n);
           if (n > kMaxAlphaTexels) throw FormatError(label + " is larger than 8192^2 texels");
           img.width = embedded->mWidth, img.height = embedded->mHeight;
           img.has_alpha = true;
@@ -164,19 +185,22 @@ const MaterialPartial& FileMaterials::get(unsigned index, Scene& scene) {
           if (!is_png(bytes, embedded->mWidth))
             throw Error(label + " is " + format_name(bytes, embedded->mWidth, "." + std::string(embedded->achFormatHint)) +
                         "; only PNG textures are read (re-export it as PNG)");
+          budget(png_texels(bytes, embedded->mWidth));
           img = read_png_planes(bytes, embedded->mWidth, label, kMaxAlphaTexels);
         } else {
           const std::string& path = file_path;
           std::ifstream f(path, std::ios::binary);
           if (!f) throw Error(label + " not found or unreadable");
-          uint8_t buf[16] = {};
+          uint8_t buf[24] = {};
           f.read(reinterpret_cast<char*>(buf), sizeof buf);
           const size_t got = size_t(f.gcount());
           if (!is_png(buf, got))
             throw Error(label + " is " + format_name(buf, got, path) +
                         "; only PNG textures are read (convert it to PNG)");
+          budget(png_texels(buf, got));
           img = read_png_planes(path, kMaxAlphaTexels);
         }
+        texels_ += uint64_t(img.width) * img.height;
       } catch (const Error& e) {
         throw Error(where + ": " + e.what());
       }

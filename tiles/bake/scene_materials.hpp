@@ -57,7 +57,9 @@ struct MaterialPartial {
 // the scene (one AlphaTexture per distinct image, plane, factor and cutoff).
 class FileMaterials {
  public:
-  FileMaterials(const aiScene& scene, const std::string& model_path);
+  // `max_texels`: the texels all alpha textures of the scene may hold together, checked
+  // from each image's header before it is decoded (SceneLimits::max_texels).
+  FileMaterials(const aiScene& scene, const std::string& model_path, uint64_t max_texels);
   // Throws st::Error (one line) for a material or texture that cannot be read.
   const MaterialPartial& get(unsigned material_index, Scene& scene);
 
@@ -67,6 +69,7 @@ class FileMaterials {
   std::vector<MaterialPartial> done_;
   std::vector<bool> read_;
   std::map<std::string, int32_t> textures_;  // dedupe key -> index
+  uint64_t max_texels_ = 0, texels_ = 0;      // the budget, and what the textures hold
 };
 
 }  // namespace st

@@ -1,5 +1,6 @@
 #include "tiles/bake/scene_quake3.hpp"
 
+#include <algorithm>
 #include <cctype>
 #include <cstring>
 #include <filesystem>
@@ -193,10 +194,19 @@ std::vector<uint8_t> read_all(const std::string& path) {
 
 }  // namespace
 
-Scene load_quake3(const std::string& path, const SceneOptions& options, const std::string& member) {
+Scene load_quake3(const std::string& path, const SceneOptions& options, const std::string& member,
+                  uint64_t max_output) {
   std::string ext = std::filesystem::path(path).extension().string();
   for (char& c : ext) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return load_quake3_bytes(read_all(path), path, ext == ".pk3", options, member);
+  if (ext != ".pk3") {
+    std::error_code ec;
+    const auto size = std::filesystem::file_size(path, ec);
+    if (!ec && size > kQuake3MaxBspBytes)
+      throw Error(path + ": map of " + std::to_string(size) + " bytes, more than the " +
+                  std::to_string(kQuake3MaxBspBytes >> 20) + " MiB a Quake 3 map may take");
+  }
+  return load_quake3_bytes(read_all(path), path, ext == ".pk3", options, member,
+                           std::min(max_output, uint64_t(UINT32_MAX)));
 }
 
 Scene load_quake3_bytes(std::vector<uint8_t> bytes, const std::string& path, bool is_pk3,
@@ -217,7 +227,10 @@ Scene load_quake3_bytes(std::vector<uint8_t> bytes, const std::string& path, boo
         if ((*entries)[i].name.rfind("maps/", 0) == 0) pick = i;
     }
     where = path + ": " + (*entries)[pick].name;
-    bytes = extract_zip(bytes, path, (*entries)[pick]);
+    if ((*entries)[pick].size > kQuake3MaxBspBytes)
+      throw Error(where + ": map of " + std::to_string((*entries)[pick].size) + " bytes, more than the " +
+                  std::to_string(kQuake3MaxBspBytes >> 20) + " MiB a Quake 3 map may take");
+    bytes = extract_zip(bytes, path, (*entries)[pick], "IBSP");
   }
   Bsp bsp{bytes};
   validate(bsp, where);

@@ -16,6 +16,9 @@ inline constexpr int kQuake3PatchLevel = 8;
 // 3x3 patch block becomes 128 triangles, so without a cap a file of a few hundred KB can
 // ask for gigabytes. Real maps stay far below (hundreds of thousands of triangles).
 inline constexpr uint64_t kQuake3MaxTriangles = uint64_t(1) << 22;
+// The largest .bsp (file or .pk3 member) read; real maps take tens of MB. A member is
+// checked to start with "IBSP" before its stated size is inflated.
+inline constexpr uint64_t kQuake3MaxBspBytes = uint64_t(256) << 20;
 
 // Loads a .bsp file, or from a .pk3 (zip) the member `member` when given, else the first
 // member under maps/ ending in .bsp (else the first .bsp member). load_scene() accepts
@@ -28,7 +31,9 @@ inline constexpr uint64_t kQuake3MaxTriangles = uint64_t(1) << 22;
 // Z-up: pass UpAxis::z. Throws st::Error naming the file (and member) and the field at
 // fault for any structural inconsistency, and for maps past kQuake3MaxTriangles
 // triangles or vertices.
-Scene load_quake3(const std::string& path, const SceneOptions& options, const std::string& member = "");
+// `max_output` as for load_quake3_bytes below.
+Scene load_quake3(const std::string& path, const SceneOptions& options, const std::string& member = "",
+                  uint64_t max_output = kQuake3MaxTriangles);
 
 // The same from bytes already in memory: a .pk3 archive when `is_pk3`, else a bare .bsp;
 // `name` stands for the file in the scene name and in error messages.

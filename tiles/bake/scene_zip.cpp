@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <cstring>
 
 #include "common/error.hpp"
 
@@ -84,7 +85,8 @@ std::optional<std::vector<ZipEntry>> list_zip(const std::vector<uint8_t>& zip, c
   return out;
 }
 
-std::vector<uint8_t> extract_zip(const std::vector<uint8_t>& zip, const std::string& path, const ZipEntry& entry) {
+std::vector<uint8_t> extract_zip(const std::vector<uint8_t>& zip, const std::string& path, const ZipEntry& entry,
+                                 std::string_view magic) {
   auto fail = [&](const std::string& what) {
     throw Error(path + ": malformed zip archive: '" + entry.name + "' " + what);
   };
@@ -94,23 +96,55 @@ std::vector<uint8_t> extract_zip(const std::vector<uint8_t>& zip, const std::str
   if (entry.method == 0 && entry.packed != entry.size) fail("is stored with different packed and unpacked sizes");
   if (entry.method == 8 && entry.size > kMaxDeflateRatio * entry.packed + 64)
     fail("claims more bytes than deflate can expand " + std::to_string(entry.packed) + " bytes to");
-  std::vector<uint8_t> data(entry.size);
+  auto check_magic = [&](const uint8_t* p, size_t n) {
+    if (magic.empty()) return;
+    if (n < magic.size() || std::memcmp(p, magic.data(), magic.size()) != 0)
+      throw Error(path + ": '" + entry.name + "' does not start with '" + std::string(magic) + "'");
+  };
+  std::vector<uint8_t> data;
   if (entry.method == 0) {
-    std::copy_n(zip.begin() + long(entry.data_at), entry.size, data.begin());
-  } else if (entry.method == 8) {
+    check_magic(zip.data() + entry.data_at, entry.size);
+    data.assign(zip.begin() + long(entry.data_at), zip.begin() + long(entry.data_at + entry.size));
+  } else {
     z_stream z{};
     if (inflateInit2(&z, -MAX_WBITS) != Z_OK) fail("could not start zlib");
+    struct End {
+      z_stream* z;
+      ~End() { inflateEnd(z); }
+    } end{&z};
     z.next_in = const_cast<Bytef*>(zip.data() + entry.data_at);
     z.avail_in = static_cast<uInt>(entry.packed);
-    uint8_t none = 0;  // zlib refuses a null output buffer, even for an empty member
-    z.next_out = data.empty() ? &none : data.data();
-    z.avail_out = static_cast<uInt>(data.size());
-    const int rc = inflate(&z, Z_FINISH);
-    const size_t produced = z.total_out;
-    inflateEnd(&z);
-    if (rc != Z_STREAM_END || produced != entry.size) fail("does not inflate to its stated size");
-  } else {
-    fail("uses unsupported compression method " + std::to_string(entry.method));
+    // The first bytes alone, so the magic is checked before the stated size is allocated.
+    uint8_t first[4096];
+    z.next_out = first;
+    z.avail_out = static_cast<uInt>(std::min<size_t>(sizeof first, entry.size));
+    int rc = Z_OK;
+    if (z.avail_out > 0) rc = inflate(&z, Z_SYNC_FLUSH);
+    if (rc != Z_OK && rc != Z_STREAM_END) fail("does not inflate to its stated size");
+    const size_t head = z.total_out;
+    check_magic(first, head);
+    // Reserved, not touched: memory grows with the bytes really inflated, so a member whose
+    // stream breaks early costs what it gave.
+    data.reserve(entry.size);
+    data.assign(first, first + head);
+    constexpr size_t kStep = size_t(1) << 20;
+    while (rc != Z_STREAM_END && data.size() < entry.size) {
+      const size_t at = data.size();
+      data.resize(std::min(entry.size, at + kStep));
+      z.next_out = data.data() + at;
+      z.avail_out = static_cast<uInt>(data.size() - at);
+      rc = inflate(&z, Z_SYNC_FLUSH);
+      if (rc != Z_OK && rc != Z_STREAM_END) fail("does not inflate to its stated size");
+      data.resize(z.total_out);
+      if (rc == Z_OK && z.avail_in == 0 && data.size() < entry.size) fail("does not inflate to its stated size");
+    }
+    if (rc != Z_STREAM_END) {  // all the stated bytes: the stream must end here
+      uint8_t extra = 0;
+      z.next_out = &extra;
+      z.avail_out = 1;
+      rc = inflate(&z, Z_FINISH);
+    }
+    if (rc != Z_STREAM_END || z.total_out != entry.size) fail("does not inflate to its stated size");
   }
   if (uint32_t(crc32(0L, data.data(), static_cast<uInt>(data.size()))) != entry.crc) fail("fails its CRC-32 check");
   return data;

@@ -4,6 +4,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 namespace st {
@@ -29,6 +30,11 @@ std::optional<std::vector<ZipEntry>> list_zip(const std::vector<uint8_t>& zip, c
 // The uncompressed bytes of `entry`. Throws st::Error naming `path` and the member when
 // it does not inflate to its stated size, fails its CRC-32, or uses a compression method
 // other than stored (0) or deflate (8).
-std::vector<uint8_t> extract_zip(const std::vector<uint8_t>& zip, const std::string& path, const ZipEntry& entry);
+// `magic`, when given, is what the member must start with: it is checked on the first
+// inflated bytes, before the member's stated size is allocated or the rest inflated (a
+// member of 1 GiB that is not what the caller reads costs a few KiB), and a mismatch is an
+// st::Error naming the member.
+std::vector<uint8_t> extract_zip(const std::vector<uint8_t>& zip, const std::string& path, const ZipEntry& entry,
+                                 std::string_view magic = {});
 
 }  // namespace st
