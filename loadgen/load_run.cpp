@@ -142,7 +142,7 @@ struct CameraRun {
   uint32_t id = 0;
   CameraPath path;
   client::Map map;
-  uint32_t view_base = 0;              // its views: view_base (now), + 1..3 (poses ahead)
+  uint32_t view_base = 0;              // its views: view_base (now), + 1..4 (poses ahead)
   bool ahead_views = false;            // prefetch as views (room for 4 views per camera)
   Clock::time_point first;             // schedule of frame 0 (start + phase)
   uint64_t next_frame = 0, frames = 0;
@@ -195,13 +195,13 @@ void camera_frame(CameraRun& cam, const LoadOptions& o, const WorldFrame& world,
     map.request_view(cam.view_base, vp.data(), display_w(o.view), display_h(o.view), vo);
     needs.cells.push_back(view_need(cam.view_base));
     if (cam.ahead_views && (cut || (f + cam.id) % kPrefetchEvery == 0))
-      for (size_t k = 0; k < std::size(kPrefetchAhead); ++k) {
+      for (size_t k = 0; k < std::size(kViewAhead); ++k) {
         const uint32_t id = cam.view_base + 1 + uint32_t(k);
-        const double ta = t + kPrefetchAhead[k];
+        const double ta = t + kViewAhead[k];
         if (ta < o.duration && path.segment(ta) == seg) {
           const auto va = view_projection(path.at(ta), kNearPlane, kFarPlane);
           map.request_view(id, va.data(), display_w(o.view), display_h(o.view),
-                           view_options(world, o.view, uint16_t(40000 - 10000 * k)));
+                           view_options(world, o.view, uint16_t(40000 - 8000 * k)));
         } else {
           map.remove_view(id);
         }
@@ -429,9 +429,10 @@ LoadResult run_load(const LoadOptions& o_in) {
     const double phase = double(c) / double(o.cameras) / o.rate;
     // Views per connection: kMaxViews; a camera takes 4 (now and 3 poses ahead) while they
     // fit, else 1 (no prefetch views).
-    const bool ahead = o.prefetch && per_conn[conn] * 4 <= client::kMaxViews;
+    constexpr uint32_t kViews = 1 + uint32_t(std::size(kViewAhead));
+    const bool ahead = o.prefetch && per_conn[conn] * kViews <= client::kMaxViews;
     cameras.push_back(CameraRun{c, CameraPath(o.path, r.world, o.seed, c), maps[conn],
-                                (c / r.connections) * (ahead ? 4u : 1u), ahead,
+                                (c / r.connections) * (ahead ? kViews : 1u), ahead,
                                 start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(phase)),
                                 0, frames_per_camera});
   }

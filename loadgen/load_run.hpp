@@ -76,6 +76,9 @@ inline WorldFrame stack_world_frame(const client::Map& m) { return map_world_fra
 
 inline constexpr double kPrefetchAhead[] = {0.25, 0.5, 1.0};  // seconds
 inline constexpr uint64_t kPrefetchEvery = 6;                   // frames between prefetch rounds
+// A 2D map's poses ahead, each a view (client::Map::request_view) of lower priority: one a
+// prefetch round ahead too, so the tiles a camera meets before its next round are asked for.
+inline constexpr double kViewAhead[] = {0.1, 0.25, 0.5, 1.0};  // seconds
 
 struct SeriesPoint {
   double t = 0;                 // seconds since start
