@@ -204,7 +204,6 @@ struct ViewStats {
 };
 inline constexpr uint32_t kMaxViews = 16;
 inline constexpr uint32_t kMaxViewSamples = 16384;
-inline constexpr uint32_t kMinTileSlots = 4;  // open() refuses fewer slots for tiles
 
 struct CacheCounters {
   uint64_t hits = 0;       // lookups that found their tile resident
@@ -227,8 +226,8 @@ struct MapStats {
   uint64_t queue_full = 0;           // a wanted tile could not be queued (want_capacity)
   uint64_t coarse_answers = 0;       // lookups answered above the level asked for
   // A DAG-MH pack's shared dictionary, fetched with the map and resident for its life;
-  // its bytes come out of cache_slots: it takes dictionary_slots of them and tiles get
-  // tile_slots (open() refuses a cache that leaves tiles fewer than kMinTileSlots).
+  // its bytes come out of cache_slots: it takes dictionary_slots of them (rounded up) and
+  // tiles get tile_slots (at least 1, even when the dictionary alone fills cache_slots).
   uint64_t dictionary_bytes = 0;
   uint32_t dictionary_slots = 0;
   uint32_t tile_slots = 0;           // slots for tiles: cache_slots - dictionary_slots
