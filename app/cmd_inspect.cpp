@@ -2,6 +2,8 @@
 #include <cstdio>
 #include <nlohmann/json.hpp>
 
+#include "tiles/core/surface_extent.hpp"
+
 #include "app/command.hpp"
 #include "app/stack_cli.hpp"
 #include "app/pack_cli_util.hpp"
@@ -46,6 +48,20 @@ void run(const InspectArgs& a) {
   j["encoding"] = to_string(h.encoding);
   j["light"] = r->light().spec().to_string();
   j["light_kind"] = light_kind_name(h.light_kind);
+  {  // the light as client::LightTransform publishes it (MapInfo::light), and the scene's extent
+    const LightSpace& l = r->light();
+    auto vec = [](const Vec3d& v) { return nlohmann::json::array({v.x, v.y, v.z}); };
+    j["light_transform"] = {{"kind", light_kind_name(l.kind())}, {"origin", vec(l.origin())},
+                            {"axis_u", vec(l.axis_u())},      {"axis_v", vec(l.axis_v())},
+                            {"forward", vec(l.forward())},    {"extent", l.extent_uv()},
+                            {"near", l.near_plane()},         {"far", l.far_plane()},
+                            {"array", l.to_array()}};
+    if (!(h.flags & kFeatureStack)) {
+      const SurfaceExtent e = surface_extent(l, r->grid());
+      j["scene"] = {{"bounds_lo", vec(e.box.lo)}, {"bounds_hi", vec(e.box.hi)}, {"ground", e.ground},
+                    {"top", e.top}, {"x0", e.x0}, {"x1", e.x1}, {"z0", e.z0}, {"z1", e.z1}, {"points", e.points}};
+    }
+  }
   j["tile_bytes"] = h.tile_bytes;
   char hash[32];
   std::snprintf(hash, sizeof hash, "%016llx", (unsigned long long)h.scene_hash);

@@ -142,8 +142,7 @@ void run(const ViewArgs& a) {
   const uint32_t cols = std::min<uint32_t>(a.frames, 6), rows = (a.frames + cols - 1) / cols;
   std::vector<Rgb8> sheet(size_t(tw) * cols * th * rows);
   // One finest texel in world units (a spot's at the world's centre).
-  const double texel = (light.parallel() ? light.extent_uv() : length(world.centre() - light.origin()) * light.extent_uv()) /
-                       double(uint64_t(1) << h.map_level);
+  const double texel = light.texel_size(world.centre(), h.map_level);
   nlohmann::json frames = nlohmann::json::array();
   std::printf("%6s %10s %10s %10s %9s %9s %10s%s\n", "frame", "cpu ms", "gpu ms", "requested", "holes", "hole %",
               "resident", stack && !a.soft ? "     time" : "");

@@ -35,7 +35,65 @@ MapInfo Map::info() const {
   i.tile_count = h.tile_count;
   i.scene_hash = h.scene_hash;
   i.sun = h.light_kind == LightKind::sun || h.light_kind == LightKind::sun_ground;
+  i.light.space_ = map_->info_light();
+  const SurfaceExtent& e = map_->surface();
+  i.scene.bounds = {{e.box.lo.x, e.box.lo.y, e.box.lo.z}, {e.box.hi.x, e.box.hi.y, e.box.hi.z}};
+  i.scene.ground = e.ground, i.scene.top = e.top;
+  i.scene.x0 = e.x0, i.scene.x1 = e.x1, i.scene.z0 = e.z0, i.scene.z1 = e.z1;
+  i.scene.points = e.points;
   return i;
+}
+
+ViewStats Map::request_view(uint32_t view_id, const double view_projection[16], uint32_t width, uint32_t height,
+                            const ViewOptions& options) noexcept {
+  return map_ ? map_->request_view(view_id, view_projection, width, height, options) : ViewStats{};
+}
+bool Map::remove_view(uint32_t view_id) noexcept { return map_ && map_->remove_view(view_id); }
+ViewStats Map::view_stats(uint32_t view_id) const noexcept { return map_ ? map_->view_stats(view_id) : ViewStats{}; }
+
+// ---------------------------------------------------------------- LightTransform
+
+namespace {
+WorldPoint wp(const Vec3d& v) { return {v.x, v.y, v.z}; }
+Vec3d v3(const WorldPoint& p) { return {p.x, p.y, p.z}; }
+}  // namespace
+
+bool LightTransform::orthographic() const noexcept { return space_ && space_->parallel(); }
+const char* LightTransform::kind_name() const noexcept { return space_ ? light_kind_name(space_->kind()) : ""; }
+WorldPoint LightTransform::origin() const noexcept { return space_ ? wp(space_->origin()) : WorldPoint{}; }
+WorldPoint LightTransform::axis_u() const noexcept { return space_ ? wp(space_->axis_u()) : WorldPoint{}; }
+WorldPoint LightTransform::axis_v() const noexcept { return space_ ? wp(space_->axis_v()) : WorldPoint{}; }
+WorldPoint LightTransform::forward() const noexcept { return space_ ? wp(space_->forward()) : WorldPoint{}; }
+double LightTransform::extent() const noexcept { return space_ ? space_->extent_uv() : 0; }
+double LightTransform::near_plane() const noexcept { return space_ ? space_->near_plane() : 0; }
+double LightTransform::far_plane() const noexcept { return space_ ? space_->far_plane() : 0; }
+
+LightCoord LightTransform::to_light(const WorldPoint& p) const noexcept {
+  if (!space_) return {};
+  const LightPoint l = space_->to_light(v3(p));
+  return {l.u, l.v, l.d};
+}
+Texel LightTransform::texel(uint32_t level, const LightCoord& c) const noexcept {
+  if (!space_) return {};
+  const auto t = LightSpace::texel_of(std::min<uint32_t>(level, 30), c.u, c.v);
+  return {t[0], t[1]};
+}
+Texel LightTransform::texel(uint32_t level, const WorldPoint& p) const noexcept { return texel(level, to_light(p)); }
+double LightTransform::texel_size(const WorldPoint& p, uint32_t level) const noexcept {
+  return space_ ? space_->texel_size(v3(p), level) : 0;
+}
+WorldPoint LightTransform::to_world(const LightCoord& c) const noexcept {
+  return space_ ? wp(space_->to_world(c.u, c.v, c.d)) : WorldPoint{};
+}
+uint8_t LightTransform::kind_id() const noexcept { return space_ ? uint8_t(space_->kind()) : 0; }
+std::array<double, 18> LightTransform::to_array() const noexcept {
+  return space_ ? space_->to_array() : std::array<double, 18>{};
+}
+WorldBox LightTransform::volume_bounds() const noexcept {
+  if (!space_) return {};
+  Aabb b;
+  for (int i = 0; i < 8; ++i) b.extend(space_->to_world(i & 1, (i >> 1) & 1, (i >> 2) & 1));
+  return {wp(b.lo), wp(b.hi)};
 }
 
 uint32_t Map::finest_level() const noexcept { return map_ ? map_->finest_level() : 0; }
@@ -117,8 +175,7 @@ Transmittance Map::transmittance_filtered(const WorldPoint& world, float footpri
   // spot's grows with the distance from the eye), as visibility_filtered.
   double width = 0;
   if (footprint > 0)
-    width = double(footprint) /
-            (l.parallel() ? l.extent_uv() : length(w - l.origin()) * l.extent_uv());
+    width = double(footprint) / l.texel_size(w, 0);
   const auto t = map_->deep()->lookup(p.u, p.v, float(p.d), width);
   return {t[0], t[1], t[2]};
 }

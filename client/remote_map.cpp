@@ -143,6 +143,7 @@ RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::v
   slot_window_.resize(cache_.slot_count());
   slot_walks_.resize(cache_.slot_count());
   slot_grid_.resize(cache_.slot_count());
+  slot_in_view_.assign(cache_.slot_count(), 0);
   // Pages are requested (one per record), resident (one per slot) or constant: sized so
   // that requesting a page from a lookup does not grow the table.
   cache_.reserve_pages(std::min<uint64_t>(header_.tile_count, requests_.capacity() + cache_.slot_count() + kPageReserve));
@@ -153,6 +154,13 @@ RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::v
                                                            : options.cache_slots,
                                        options.max_tile_retries,
                                        std::max<uint16_t>(options.miss_priority, 1), notifier_);
+  if (!stack_grid_) {
+    info_light_ = std::make_shared<const LightSpace>(light_);
+    surface_ = surface_extent(light_, grid_);
+  } else {
+    info_light_ = std::make_shared<const LightSpace>(stack_grid_->light(0));
+    surface_ = stack_surface();
+  }
 }
 
 // ---------------------------------------------------------------- lookups
@@ -610,6 +618,9 @@ void RemoteMap::finish_lookups(const LookupScratch& sc) const noexcept {
 void RemoteMap::sync_lru_locked() noexcept {
   for (uint32_t s = 0; s < cache_.slot_count(); ++s)
     if (slot_used_[s].load(std::memory_order_relaxed) == epoch_) cache_.touch(s);
+  if (view_count_)  // the views' tiles last: the most recently used (remote_views.cpp)
+    for (uint32_t s = 0; s < cache_.slot_count(); ++s)
+      if (slot_in_view_[s]) cache_.touch(s);
   if (++epoch_ == 0) {  // after 2^32 evictions: start over rather than confuse old stamps
     for (uint32_t s = 0; s < cache_.slot_count(); ++s) slot_used_[s].store(0, std::memory_order_relaxed);
     epoch_ = 1;
@@ -802,9 +813,7 @@ float RemoteMap::visibility_at(const LightPoint& p, const Vec3d& w, float footpr
   if (footprint_world > 0) {
     // One finest-level texel's side in world units at this point (a spot's grows with
     // the distance from the eye).
-    const double texel = (light_.parallel() ? light_.extent_uv()
-                                                          : length(w - light_.origin()) * light_.extent_uv()) /
-                         std::ldexp(1.0, int(L));
+    const double texel = light_.texel_size(w, L);
     f = filter_levels(L, float(double(footprint_world) / texel));
   }
   const auto tf = texel_in_unit(f.fine, p.u, p.v);
@@ -1000,6 +1009,17 @@ MapStats RemoteMap::stats() const noexcept {
   MapStats s = stats_;
   s.dictionary_bytes = dictionary_ ? dictionary_->memory_bytes() : 0;
   s.accounted_bytes = metadata_bytes_ + uint64_t(cache_.slot_count()) * (cache_.slot_bytes() + kSlotOverheadBytes);
+  s.tile_slots = cache_.slot_count();
+  s.dictionary_slots = options_.cache_slots > s.tile_slots ? options_.cache_slots - s.tile_slots : 0;
+  s.views = view_count_;
+  s.view_slots = view_slots();
+  {
+    uint64_t wanted = 0;
+    for (const View& v : views_)
+      if (v.used) wanted += v.wanted;
+    s.view_tiles_wanted = wanted;
+    s.view_tiles_over = wanted > s.view_slots ? wanted - s.view_slots : 0;
+  }
   const CacheStats c = cache_.stats();
   s.cache = CacheCounters{c.hits, c.misses, c.evictions, c.inserts, c.resident, c.pinned, c.free};
   for (const CounterShard& k : counters_) {  // lookups count here, not in the cache
@@ -1173,6 +1193,7 @@ void RemoteMap::tile_answer(const proto::TileMeta& meta, uint32_t request_id, st
     try {
       sync_lru_locked();            // the lookups' use since the last arrival, then
       slot = cache_.reserve(tile);  // evict the least recently used unpinned tile
+      slot_in_view_[slot] = view_count_ && in_other_view_locked(nullptr, tile);
     } catch (...) {
       ++stats_.cache_full;
       drop_locked(*r);

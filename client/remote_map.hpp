@@ -45,6 +45,7 @@
 #include "tiles/core/pack_format.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
 #include "tiles/core/stack_map.hpp"
+#include "tiles/core/surface_extent.hpp"
 #include "tiles/core/tap_batch.hpp"
 
 namespace st::dagmh {
@@ -101,6 +102,16 @@ class RemoteMap final : public Evaluator {
   size_t cancel_outside(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, uint64_t h) noexcept;
   bool region_resident(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, uint64_t h) const noexcept;
   MapStats stats() const noexcept;
+  // Cameras (remote_views.cpp; client.hpp Map::request_view).
+  ViewStats request_view(uint32_t id, const double* view_projection, uint32_t width, uint32_t height,
+                         const ViewOptions& options) noexcept;
+  bool remove_view(uint32_t id) noexcept;
+  ViewStats view_stats(uint32_t id) const noexcept;
+  // The light MapInfo publishes: the pack's, or a stack map's first sample's.
+  const std::shared_ptr<const LightSpace>& info_light() const noexcept { return info_light_; }
+  // Where the surfaces lie (surface_extent.hpp), for MapInfo::scene and views' receiver
+  // plane; a stack map's from its first slice's level-a map.
+  const SurfaceExtent& surface() const noexcept { return surface_; }
 
   const std::string& name() const { return name_; }
   const PackHeader& header() const { return header_; }
@@ -396,6 +407,38 @@ class RemoteMap final : public Evaluator {
   static std::unique_ptr<Evaluator> open_stack_tile(const StackGrid& g, uint64_t id, std::span<uint8_t> raw);
   template <class Fn>
   auto stack_lookup(Fn&& fn) const noexcept;
+
+  // ---- views (remote_views.cpp) ----
+  // One tile a view needs: `path` for a resident index tile its walks pass through (kept
+  // resident too, not counted as a need), else the tile the walk ended at (an encoded
+  // tile, or an index tile not at hand: its children follow once it arrives).
+  struct ViewTile {
+    uint64_t tile;
+    GridEntry entry;
+    float distance;
+    bool path, seen_resident;
+  };
+  static bool tile_less(const ViewTile& a, const ViewTile& b) { return a.tile < b.tile; }
+  struct View {
+    bool used = false;
+    uint32_t id = 0;
+    uint16_t priority = 0;
+    uint32_t wanted = 0;
+    std::vector<ViewTile> tiles;   // kept, sorted by tile id (mu_)
+    std::vector<ViewTile> next, scratch;  // the next request's work (views_mu_)
+  };
+  bool in_other_view_locked(const View* self, uint64_t tile) const noexcept;
+  uint32_t view_slots() const noexcept;
+  ViewStats view_counts_locked(const View& v) const noexcept;
+  std::mutex views_mu_;  // one request_view at a time; taken before mu_
+  std::array<View, kMaxViews> views_;
+  uint32_t view_count_ = 0;  // (mu_)
+  SurfaceExtent surface_;
+  // 1: the slot's tile is in some view (mu_): sync_lru_locked makes it most recently used
+  // before every eviction, so views' tiles go last.
+  std::vector<uint8_t> slot_in_view_;
+  std::shared_ptr<const LightSpace> info_light_;
+  SurfaceExtent stack_surface();  // remote_stack.cpp: from slice 0's level-a map
 
   const std::string name_;
   const ClientOptions options_;

@@ -37,6 +37,17 @@ void RemoteMap::open_stack(const std::vector<uint8_t>& grid_bytes) {
   stack_map_ = std::make_unique<StackMap>(g, [this](uint64_t cell) { return stack_tile(cell); });
 }
 
+SurfaceExtent RemoteMap::stack_surface() {
+  // Slice 0's level-a map (a <= the skip level's x, y resolution, so the stack grid answers
+  // every texel and no tile is read), as a constant skip grid.
+  const StackGrid& g = *stack_grid_;
+  const uint32_t a = std::min<uint32_t>(g.geo.xy_bits(g.skip_level), 7);
+  CutGrid grid = CutGrid::constant(a, kLitDepth);
+  for (uint64_t y = 0; y < (uint64_t(1) << a); ++y)
+    for (uint64_t x = 0; x < (uint64_t(1) << a); ++x) grid.entry(x, y).value = stack_depth(0, a, x, y);
+  return surface_extent(*info_light_, grid);
+}
+
 std::unique_ptr<Evaluator> RemoteMap::open_stack_tile(const StackGrid& g, uint64_t id, std::span<uint8_t> raw) {
   uint64_t cell = 0;
   if (!g.cell_of(id, cell) || g.entries[cell].kind != 1) return nullptr;

@@ -23,6 +23,7 @@
 #include "tiles/core/camera.hpp"  // header-only: links nothing
 #include "tiles/core/light.hpp"
 #include "tiles/core/pack_format.hpp"
+#include "tiles/core/surface_extent.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
 #include "tiles/core/vec.hpp"
 
@@ -39,6 +40,8 @@ struct WorldFrame {
 // From a pack header and its skip grid. Never throws on a map without hits (falls back
 // to the light box's extent at its lowest corner).
 WorldFrame world_frame(const PackHeader& header, const CutGrid& grid);
+// From a light and where its surfaces lie (what client::MapInfo publishes).
+WorldFrame world_frame(const LightSpace& light, const SurfaceExtent& surface);
 
 enum class PathKind { flyover, orbit, walk, teleport };
 PathKind parse_path(const std::string& name);  // throws st::Error

@@ -63,6 +63,10 @@ std::string load_table(const LoadResult& r) {
   row("bytes received (tiles / wire)", fmt("%.2f MiB", double(r.map.bytes_received) / 1048576) + " / " +
                                           fmt("%.2f MiB", double(r.client.bytes_received) / 1048576));
   row("cache hit rate", fmt("%.2f%%", 100 * r.cache_hit_rate()) + " (evictions " + std::to_string(r.map.cache.evictions) + ")");
+  if (!r.slices)
+    row("views: slots / over / overflows / refetches",
+        std::to_string(r.map.view_slots) + " / " + std::to_string(r.map.view_tiles_over) + " / " +
+            std::to_string(r.map.view_overflows) + " / " + std::to_string(r.map.view_refetches));
   row("lookups (mean ns, mean lit)", std::to_string(r.lookups) + " (" +
                                          fmt("%.0f", r.lookups ? r.lookup_seconds * 1e9 / double(r.lookups) : 0) +
                                          ", " + fmt("%.3f", r.mean_visibility) + ")");
@@ -116,6 +120,9 @@ std::string load_json(const LoadResult& r) {
   j["cache"] = {{"hits", r.map.cache.hits}, {"misses", r.map.cache.misses}, {"hit_rate", r.cache_hit_rate()},
                 {"evictions", r.map.cache.evictions}, {"inserts", r.map.cache.inserts},
                 {"peak_slots_used", r.peak_slots_used}};
+  j["views"] = {{"slots", r.map.view_slots}, {"tiles_wanted", r.map.view_tiles_wanted},
+                {"tiles_over", r.map.view_tiles_over}, {"overflows", r.map.view_overflows},
+                {"refetches", r.map.view_refetches}};
   j["lookups"] = {{"count", r.lookups}, {"seconds", r.lookup_seconds}, {"mean_visibility", r.mean_visibility}};
   const auto& lat = r.latency_ms;
   j["latency_ms"] = {{"count", lat.size()}, {"abandoned", r.latency_abandoned}, {"p50", percentile_of(lat, .5)},

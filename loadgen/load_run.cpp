@@ -8,13 +8,24 @@
 #include <thread>
 #include <unordered_map>
 
-#include "client/io_pool.hpp"
 #include "common/error.hpp"
-#include "tiles/core/stack_grid.hpp"
 
 namespace st::loadgen {
 
 using Clock = std::chrono::steady_clock;
+
+// The synthetic cameras' clip planes (request_view uses only their rays).
+constexpr double kNearPlane = 0.1, kFarPlane = 1e6;
+uint32_t display_w(const ViewOptions& v) { return uint32_t(std::max(1.0, v.display_width)); }
+uint32_t display_h(const ViewOptions& v) { return uint32_t(std::max(1.0, v.display_width / Camera{}.aspect)); }
+client::ViewOptions view_options(const WorldFrame& world, const ViewOptions& v, uint16_t priority) {
+  client::ViewOptions o;
+  o.samples_x = v.samples_x, o.samples_y = v.samples_y;
+  o.receiver_height = world.ground;
+  o.max_distance = v.max_distance > 0 ? v.max_distance : 1.5 * world.span();
+  o.priority = priority;
+  return o;
+}
 
 void time_slices(double time, uint32_t slices, uint32_t& first, uint32_t& last) {
   if (slices == 0) {
@@ -87,9 +98,23 @@ struct Shared {
 // A stack map's need is one slice: cell_level kSliceNeed, cx the slice.
 constexpr uint32_t kSliceNeed = 63;
 
+// A camera's view (Map::request_view): cell_level kViewNeed, cx the view id.
+constexpr uint32_t kViewNeed = 62;
+
 bool resident(const client::Map& m, const CellNeed& c) {
   if (c.cell_level == kSliceNeed) return m.slices_resident(uint32_t(c.cx), uint32_t(c.cx));
+  if (c.cell_level == kViewNeed) {
+    const client::ViewStats s = m.view_stats(uint32_t(c.cx));
+    return !s.ok || s.resident == s.kept;  // a view removed needs nothing
+  }
   return m.region_resident(c.level, c.x0(), c.y0(), c.side(), c.side());
+}
+
+CellNeed view_need(uint32_t id) {
+  CellNeed c;
+  c.level = c.cell_level = kViewNeed;
+  c.cx = id;
+  return c;
 }
 
 CellNeed slice_need(uint32_t w) {
@@ -101,16 +126,13 @@ CellNeed slice_need(uint32_t w) {
 
 }  // namespace
 
-WorldFrame stack_world_frame(const client::Map& m) {
-  const StackGrid& g = *client::MapAccess::remote(m).stack_grid();
-  const uint32_t a = std::min<uint32_t>(g.geo.xy_bits(g.skip_level), 7);
-  CutGrid grid = CutGrid::constant(a, kLitDepth);
-  for (uint64_t y = 0; y < (uint64_t(1) << a); ++y)
-    for (uint64_t x = 0; x < (uint64_t(1) << a); ++x) grid.entry(x, y).value = m.slice_depth(0, a, x, y);
-  PackHeader h = client::pack_header(m);
-  h.light_kind = g.light_kind;
-  h.light = g.lights[0];
-  return world_frame(h, grid);
+WorldFrame map_world_frame(const client::Map& m) {
+  const client::MapInfo info = m.info();
+  const LightSpace light = LightSpace::from_array(LightKind(info.light.kind_id()), info.light.to_array());
+  SurfaceExtent e;
+  e.ground = info.scene.ground, e.top = info.scene.top;
+  e.x0 = info.scene.x0, e.x1 = info.scene.x1, e.z0 = info.scene.z0, e.z1 = info.scene.z1;
+  return world_frame(light, e);
 }
 
 namespace {
@@ -121,7 +143,8 @@ struct CameraRun {
   uint32_t id = 0;
   CameraPath path;
   client::Map map;
-  bool alone = false;                  // the only camera on its connection
+  uint32_t view_base = 0;              // its views: view_base (now), + 1..4 (poses ahead)
+  bool ahead_views = false;            // prefetch as views (room for 4 views per camera)
   Clock::time_point first;             // schedule of frame 0 (start + phase)
   uint64_t next_frame = 0, frames = 0;
   uint64_t prev_segment = ~uint64_t(0);
@@ -135,7 +158,6 @@ struct CameraRun {
 void camera_frame(CameraRun& cam, const LoadOptions& o, const WorldFrame& world, Shared& sh) {
   client::Map& map = cam.map;
   const uint32_t L = map.finest_level();
-  const CutGrid& grid = client::skip_grid(map);
   const uint32_t conn = sh.camera_conn[cam.id];
   const uint64_t f = cam.next_frame++;
   const double t = double(f) / o.rate;
@@ -148,7 +170,7 @@ void camera_frame(CameraRun& cam, const LoadOptions& o, const WorldFrame& world,
   const uint64_t seg = path.segment(t);
   const bool cut = seg != cam.prev_segment;
   cam.prev_segment = seg;
-  ViewNeeds needs = view_needs(world, path.at(t), L, grid, o.view);
+  ViewNeeds needs = view_points(world, path.at(t), L, o.view);
   const uint32_t slices = map.slices();
   const double time = time_at(o, t);
   if (slices) {
@@ -156,7 +178,6 @@ void camera_frame(CameraRun& cam, const LoadOptions& o, const WorldFrame& world,
     // its time ahead; the view's 2D cells mean nothing here.
     uint32_t w0 = 0, w1 = slices - 1;
     if (!o.soft) time_slices(time, slices, w0, w1);
-    needs.cells.clear();
     for (uint32_t w = w0; w <= w1; ++w) needs.cells.push_back(slice_need(w));
     map.request_slices(w0, w1, 60000);
     if (o.prefetch && !o.soft && (cut || (f + cam.id) % kPrefetchEvery == 0))
@@ -165,42 +186,28 @@ void camera_frame(CameraRun& cam, const LoadOptions& o, const WorldFrame& world,
         time_slices(time_at(o, t + kPrefetchAhead[k]), slices, a0, a1);
         map.request_slices(a0, a1, uint16_t(40000 - 10000 * k));
       }
-  }
-  std::vector<ViewNeeds> ahead;
-  // Poses ahead move slowly: refresh their requests kPrefetchEvery frames (and at cuts),
-  // each camera on its own beat (a fleet of cameras does not prefetch in lockstep).
-  if (!slices && o.prefetch && (cut || (f + cam.id) % kPrefetchEvery == 0))
-    for (double a : kPrefetchAhead)
-      if (t + a < o.duration && path.segment(t + a) == seg)
-        ahead.push_back(view_needs(world, path.at(t + a), L, grid, o.view));
-
-  if (!slices && cut && cam.alone && f > 0) {
-    // The old view is gone: drop queued and in-flight fetches outside the new one
-    // (only when no other camera shares this cache).
-    uint64_t x0 = ~uint64_t(0), y0 = ~uint64_t(0), x1 = 0, y1 = 0;
-    auto extend = [&](const std::vector<CellNeed>& cells) {
-      for (const CellNeed& c : cells) {
-        const uint32_t s = L - c.cell_level;
-        x0 = std::min(x0, c.cx << s), y0 = std::min(y0, c.cy << s);
-        x1 = std::max(x1, (c.cx + 1) << s), y1 = std::max(y1, (c.cy + 1) << s);
+  } else {
+    // A 2D map: the camera is a view (client.hpp Map::request_view): the library finds the
+    // tiles its pixels need, nearest first, keeps them resident while in view and cancels
+    // what leaves every view. Its poses ahead on the same path segment are views of lower
+    // priority (a real client cannot see a teleport coming: across a cut they go).
+    const client::ViewOptions vo = view_options(world, o.view, 60000);
+    const auto vp = view_projection(path.at(t), kNearPlane, kFarPlane);
+    map.request_view(cam.view_base, vp.data(), display_w(o.view), display_h(o.view), vo);
+    needs.cells.push_back(view_need(cam.view_base));
+    if (cam.ahead_views && (cut || (f + cam.id) % kPrefetchEvery == 0))
+      for (size_t k = 0; k < std::size(kViewAhead); ++k) {
+        const uint32_t id = cam.view_base + 1 + uint32_t(k);
+        const double ta = t + kViewAhead[k];
+        if (ta < o.duration && path.segment(ta) == seg) {
+          const auto va = view_projection(path.at(ta), kNearPlane, kFarPlane);
+          map.request_view(id, va.data(), display_w(o.view), display_h(o.view),
+                           view_options(world, o.view, uint16_t(40000 - 8000 * k)));
+        } else {
+          map.remove_view(id);
+        }
       }
-    };
-    extend(needs.cells);
-    for (const ViewNeeds& a : ahead) extend(a.cells);
-    if (x1 > x0) map.cancel_outside(L, x0, y0, x1 - x0, y1 - y0);
-    else map.cancel_outside(L, 0, 0, 0, 0);
   }
-  // Needed now: nearest first, above every prefetch.
-  for (size_t i = 0; i < needs.cells.size() && !slices; ++i) {
-    const CellNeed& c = needs.cells[i];
-    map.request_region(c.level, c.x0(), c.y0(), c.side(), c.side(), uint16_t(60000 - std::min<size_t>(i, 9999)));
-  }
-  for (size_t k = 0; k < ahead.size(); ++k)
-    for (size_t i = 0; i < ahead[k].cells.size(); ++i) {
-      const CellNeed& c = ahead[k].cells[i];
-      map.request_region(c.level, c.x0(), c.y0(), c.side(), c.side(),
-                         uint16_t(40000 - 10000 * k - std::min<size_t>(i, 9999)));
-    }
 
   // Evaluation: which needed cells are resident, then the shadow lookups.
   std::vector<CellNeed> missing;
@@ -292,6 +299,9 @@ void add(client::MapStats& a, const client::MapStats& b) {
   a.tiles_failed += b.tiles_failed, a.tiles_cancelled += b.tiles_cancelled, a.cache_full += b.cache_full;
   a.queue_full += b.queue_full, a.coarse_answers += b.coarse_answers;
   a.tiles_unanswered += b.tiles_unanswered, a.accounted_bytes += b.accounted_bytes;
+  a.views += b.views, a.view_slots = b.view_slots;  // per connection: the same on each
+  a.view_tiles_wanted += b.view_tiles_wanted, a.view_tiles_over += b.view_tiles_over;
+  a.view_overflows += b.view_overflows, a.view_refetches += b.view_refetches;
 }
 
 void add(client::ClientStats& a, const client::ClientStats& b) {
@@ -334,15 +344,14 @@ LoadResult run_load(const LoadOptions& o_in) {
   }
   const client::Map& m0 = maps[0];
   r.map_level = m0.finest_level();
-  r.skip_level = client::skip_grid(m0).levels;
+  r.skip_level = m0.info().skip_level;
   {
     const client::MapStats s0 = m0.stats();
     r.cache_slots = s0.cache.resident + s0.cache.pinned + s0.cache.free;
   }
   r.slot_bytes = m0.slot_bytes();
   r.slices = m0.slices();
-  if (r.slices) r.skip_level = client::MapAccess::remote(m0).stack_grid()->skip_level;
-  r.world = r.slices ? stack_world_frame(m0) : world_frame(client::pack_header(m0), client::skip_grid(m0));
+  r.world = map_world_frame(m0);
 
   Shared sh;
   sh.pending.resize(r.connections);
@@ -420,7 +429,12 @@ LoadResult run_load(const LoadOptions& o_in) {
   for (uint32_t c = 0; c < o.cameras; ++c) {
     const uint32_t conn = sh.camera_conn[c];
     const double phase = double(c) / double(o.cameras) / o.rate;
-    cameras.push_back(CameraRun{c, CameraPath(o.path, r.world, o.seed, c), maps[conn], per_conn[conn] == 1,
+    // Views per connection: kMaxViews; a camera takes 4 (now and 3 poses ahead) while they
+    // fit, else 1 (no prefetch views).
+    constexpr uint32_t kViews = 1 + uint32_t(std::size(kViewAhead));
+    const bool ahead = o.prefetch && per_conn[conn] * kViews <= client::kMaxViews;
+    cameras.push_back(CameraRun{c, CameraPath(o.path, r.world, o.seed, c), maps[conn],
+                                (c / r.connections) * (ahead ? kViews : 1u), ahead,
                                 start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(phase)),
                                 0, frames_per_camera});
   }

@@ -27,7 +27,7 @@
 #include <string>
 #include <vector>
 
-#include "client/map_access.hpp"
+#include "shadowtile/client.hpp"
 #include "loadgen/camera_path.hpp"
 #include "loadgen/view_tiles.hpp"
 
@@ -69,10 +69,16 @@ struct LoadOptions {
 void time_slices(double time, uint32_t slices, uint32_t& first, uint32_t& last);
 // A stack map's world frame (camera paths over it): the level-a map of slice 0 (a <= the
 // skip level's x, y resolution, so no tile is read) in place of the 2D skip grid.
-WorldFrame stack_world_frame(const client::Map& m);
+// A map's world frame from its public MapInfo (light and scene extent): a stack map's
+// from its first slice (client.hpp MapInfo::light).
+WorldFrame map_world_frame(const client::Map& m);
+inline WorldFrame stack_world_frame(const client::Map& m) { return map_world_frame(m); }
 
 inline constexpr double kPrefetchAhead[] = {0.25, 0.5, 1.0};  // seconds
 inline constexpr uint64_t kPrefetchEvery = 6;                   // frames between prefetch rounds
+// A 2D map's poses ahead, each a view (client::Map::request_view) of lower priority: one a
+// prefetch round ahead too, so the tiles a camera meets before its next round are asked for.
+inline constexpr double kViewAhead[] = {0.1, 0.25, 0.5, 1.0};  // seconds
 
 struct SeriesPoint {
   double t = 0;                 // seconds since start

@@ -51,6 +51,26 @@ std::vector<CellNeed> cells_for_points(const std::vector<LightPoint>& points, ui
   return out;
 }
 
+ViewNeeds view_points(const WorldFrame& world, const Camera& camera, uint32_t, const ViewOptions& o) {
+  ViewNeeds out;
+  out.samples = o.samples_x * o.samples_y;
+  const CameraBasis b = basis(camera);
+  const double max_dist = o.max_distance > 0 ? o.max_distance : 1.5 * world.span();
+  const double pixel_angle = 2 * b.tan_half_x / std::max(1.0, o.display_width);
+  out.points.reserve(out.samples);
+  out.footprints.reserve(out.samples);
+  for (uint32_t j = 0; j < o.samples_y; ++j)
+    for (uint32_t i = 0; i < o.samples_x; ++i) {
+      const Vec3d d = ray_dir(b, (i + 0.5) / o.samples_x, (j + 0.5) / o.samples_y);
+      if (!(d.y < -1e-9)) continue;  // sky
+      const double t = (world.ground - camera.pos.y) / d.y;
+      if (!(t > 0) || t > max_dist) continue;
+      out.points.push_back(camera.pos + d * t);
+      out.footprints.push_back(float(t * pixel_angle));
+    }
+  return out;
+}
+
 ViewNeeds view_needs(const WorldFrame& world, const Camera& camera, uint32_t map_level, const CutGrid& grid,
                      const ViewOptions& o) {
   ViewNeeds out;

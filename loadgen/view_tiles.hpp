@@ -42,6 +42,11 @@ struct ViewNeeds {
 ViewNeeds view_needs(const WorldFrame& world, const Camera& camera, uint32_t map_level, const CutGrid& grid,
                      const ViewOptions& options = {});
 
+// view_needs' points and footprints alone (cells empty): what a frame looks up. The tiles
+// they need come from client::Map::request_view, which casts the same samples.
+ViewNeeds view_points(const WorldFrame& world, const Camera& camera, uint32_t map_level,
+                      const ViewOptions& options = {});
+
 // The cells lookups at `level` of these light-space points need (outside points and
 // constant entries need none); for renderers that know their receivers exactly.
 std::vector<CellNeed> cells_for_points(const std::vector<LightPoint>& points, uint32_t level, const CutGrid& grid);

@@ -188,17 +188,14 @@ LightPoint lookup_point(const Receiver& r, const LightSpace& light, uint32_t map
   {
     // Open geometry has hi = lo; closed surfaces meet stored lo values: move the lookup
     // off the surface (render.hpp).
-    // 2^level exactly, as ldexp would give it, without the library call.
-    const double texel = (light.parallel() ? light.extent_uv() : length(p - light.origin()) * light.extent_uv()) /
-                         double(uint64_t(1) << map_level);
+    const double texel = light.texel_size(p, map_level);
     p = p + r.normal * ((r.closed ? kClosedReceiverOffsetTexels : kOpenReceiverOffsetTexels) + pcf_radius) * texel;
   }
   return light.to_light(p);
 }
 
 float receiver_footprint_texels(const Receiver& r, const LightSpace& light, uint32_t map_level, double pixel_angle) {
-  const double texel = (light.parallel() ? light.extent_uv() : length(r.pos - light.origin()) * light.extent_uv()) /
-                       std::ldexp(1.0, int(map_level));
+  const double texel = light.texel_size(r.pos, map_level);
   return float(r.distance * pixel_angle / texel);
 }
 
@@ -626,9 +623,7 @@ RenderResult render_stack_view(const SceneTracer& tracer, const std::vector<Rece
         footprint = float(rc.distance * o.pixel_angle);
       }
       // lookup_point's normal offset, kept in world space (each sample projects it).
-      const double texel = (light.parallel() ? light.extent_uv()
-                                                           : length(rc.pos - light.origin()) * light.extent_uv()) /
-                           double(uint64_t(1) << level);
+      const double texel = light.texel_size(rc.pos, level);
       const Vec3d p =
           rc.pos + rc.normal * ((rc.closed ? kClosedReceiverOffsetTexels : kOpenReceiverOffsetTexels) + o.pcf_radius) * texel;
       bool all_face = true;

@@ -21,9 +21,7 @@ namespace {
 float supersampled(const SceneTracer& tracer, const Receiver& rec, uint32_t map_level, double side, uint32_t n) {
   const LightSpace& light = tracer.light();
   // World size of a finest texel at the receiver (a spot's texels grow with distance).
-  const double texel = (light.kind() == LightKind::sun ? light.extent_uv()
-                                                         : length(rec.pos - light.origin()) * light.extent_uv()) /
-                       std::ldexp(1.0, int(map_level));
+  const double texel = light.texel_size(rec.pos, map_level);
   const Vec3d ldir = tracer.to_light(rec.pos);
   const double ln = dot(ldir, rec.normal);
   double sum = 0;

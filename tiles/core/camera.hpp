@@ -2,6 +2,7 @@
 // the load tester's synthetic cameras. Header-only on purpose: the load tester (which
 // must not link tiles/bake: Embree, OpenEXR) includes it without linking anything.
 #pragma once
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -42,6 +43,30 @@ inline Vec3d ray_dir(const CameraBasis& b, double sx, double sy) {
   return normalize(b.forward + b.right * px + b.up * py);
 }
 
+// The camera's OpenGL view-projection matrix (gluLookAt then gluPerspective, NDC depth
+// [-1, 1]), column-major as GL and glm store it: element (row r, column c) at [c * 4 + r].
+// What client::Map::request_view takes.
+inline std::array<double, 16> view_projection(const Camera& c, double near_plane, double far_plane) {
+  const CameraBasis b = basis(c);
+  const Vec3d s = b.right, u = b.up, f = b.forward;
+  const double view[4][4] = {{s.x, s.y, s.z, -dot(s, c.pos)},
+                             {u.x, u.y, u.z, -dot(u, c.pos)},
+                             {-f.x, -f.y, -f.z, dot(f, c.pos)},
+                             {0, 0, 0, 1}};
+  const double fy = 1 / b.tan_half_y, n = near_plane, fa = far_plane;
+  const double proj[4][4] = {{fy / c.aspect, 0, 0, 0},
+                             {0, fy, 0, 0},
+                             {0, 0, (fa + n) / (n - fa), 2 * fa * n / (n - fa)},
+                             {0, 0, -1, 0}};
+  std::array<double, 16> m{};
+  for (int r = 0; r < 4; ++r)
+    for (int col = 0; col < 4; ++col) {
+      double v = 0;
+      for (int k = 0; k < 4; ++k) v += proj[r][k] * view[k][col];
+      m[size_t(col * 4 + r)] = v;
+    }
+  return m;
+}
 // "pos=X,Y,Z,target=X,Y,Z[,fov=DEG]"; throws st::Error naming the field.
 inline Camera parse_camera(const std::string& text) {
   Camera c;

@@ -230,6 +230,14 @@ Vec3d LightSpace::perspective_dir(double u, double v) const {
   return forward_ + axis_u_ * ((u - 0.5) * extent_uv_) + axis_v_ * ((v - 0.5) * extent_uv_);
 }
 
+Vec3d LightSpace::to_world(double u, double v, double d) const {
+  if (parallel()) {  // texel_ray's arithmetic at (u, v), t == d
+    const Vec3d ax = ray_axis();
+    return origin_ + axis_u_ * (u * extent_uv_) + axis_v_ * (v * extent_uv_) + ax * near_ + ax * ((far_ - near_) * d);
+  }
+  return origin_ + perspective_dir(u, v) * (near_ + d * (far_ - near_));
+}
+
 double LightSpace::depth_of_t(const LightRay&, double t) const {
   if (parallel()) return t;
   return (t - near_) / (far_ - near_);

@@ -16,6 +16,7 @@
 // double, so maps up to 2^20 a side are addressed exactly.
 #pragma once
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <string>
 
@@ -86,6 +87,9 @@ class LightSpace {
   LightRay texel_ray(uint32_t level, uint64_t x, uint64_t y) const;
   // Depth of the point at parameter t on a texel ray (sun: d = t).
   double depth_of_t(const LightRay& ray, double t) const;
+  // The world point at light coordinates (u, v, d): to_light's inverse (up to rounding):
+  // on the ray through image point (u, v), at depth d.
+  Vec3d to_world(double u, double v, double d) const;
   // Ground frame (LightKind::sun_ground) and what every parallel-ray light shares.
   // True for sun and sun_ground: every texel ray has one direction and t == d.
   bool parallel() const { return kind_ == LightKind::sun || kind_ == LightKind::sun_ground; }
@@ -103,6 +107,16 @@ class LightSpace {
 
   // Integer texel containing (u, v) at `level`, clamped to the map.
   static std::array<uint64_t, 2> texel_of(uint32_t level, double u, double v);
+  // The side, in world units, of one texel of `level` at world point p: the map's width
+  // (a parallel light's box side; a perspective light's image-plane width at p's distance
+  // from the eye, |p - origin| * extent) divided by 2^level. The one home of this
+  // formula: filtered lookups, receiver offsets, the renderers and the client's public
+  // LightTransform all call it (so their results agree bit for bit).
+  double texel_size(const Vec3d& p, uint32_t level) const {
+    // 2^level exactly, as ldexp gives it, without the library call on hot paths.
+    const double side = level < 64 ? double(uint64_t(1) << level) : std::ldexp(1.0, int(level));
+    return (parallel() ? extent_uv_ : length(p - origin_) * extent_uv_) / side;
+  }
 
   // Basis and extents, for serialization in pack headers.
   // sun: corner of the near plane; spot: eye; sun_ground: corner of the square on the

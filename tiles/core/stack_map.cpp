@@ -178,8 +178,7 @@ float StackMap::filtered(const Vec3d& p, uint32_t w, uint32_t pcf_radius, float 
   FilterLevels f{n, n, 0.0f};
   if (footprint > 0) {
     // One finest texel's side in world units at p (a spot's grows with the distance).
-    const double texel = (ls.parallel() ? ls.extent_uv() : length(p - ls.origin()) * ls.extent_uv()) /
-                         std::ldexp(1.0, int(n));
+    const double texel = ls.texel_size(p, n);
     f = filter_levels(n, float(double(footprint) / texel));
   }
   auto kernel = [&](uint32_t level) {

@@ -52,14 +52,19 @@
 // installed under share/doc/shadowtile/ with the same relative paths. The C API over this
 // one is <shadowtile/shadowtile.h>.
 #pragma once
+#include <array>
 #include <chrono>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <span>
 #include <string>
 #include <vector>
 
 #include "shadowtile/export.h"  // SHADOWTILE_API: what libshadowtile.so exports
+namespace st {
+class LightSpace;  // the pack's light (tiles/core/light.hpp), behind LightTransform
+}
 
 namespace st::client {
 
@@ -115,6 +120,104 @@ struct ClientOptions {
   std::shared_ptr<IoPool> io_pool;
 };
 
+// A world-space point (right-handed, +Y up), in the units of the scene the map was built from.
+struct WorldPoint {
+  double x = 0, y = 0, z = 0;
+};
+struct WorldBox {
+  WorldPoint lo, hi;  // lo > hi on some axis: empty
+};
+
+// A point in light space: u, v in [0, 1) across the map's image plane (outside: not
+// covered), d the light-space depth (0 at the near plane, 1 at the far plane; a spot's is
+// linear in the distance along its axis).
+struct LightCoord {
+  double u = 0, v = 0, d = 0;
+};
+// An integer texel of one level (0 <= x, y < 2^level).
+struct Texel {
+  uint64_t x = 0, y = 0;
+};
+
+// The map's light: how world points become texels and depths. It is the pack's own light
+// (the same object and the same double arithmetic the server's pack and the lookups use),
+// so a point's texel and depth here are bit for bit those visibility() tests. A sun is an
+// orthographic box (parallel rays; `sun-ground` frames of sun-path stacks are oblique but
+// parallel too), a spot a perspective frustum. Cheap to copy; a default-constructed one
+// is invalid() and maps every point to (0, 0, 0), texel size 0.
+class SHADOWTILE_API LightTransform {
+ public:
+  LightTransform() = default;
+  bool valid() const noexcept { return bool(space_); }
+  bool orthographic() const noexcept;  // parallel rays (sun); false: perspective (spot)
+  const char* kind_name() const noexcept;  // "sun", "spot", "sun-ground", "spot-window"
+  // The frame, in world units: sun: origin is the near plane's corner (u, v) = (0, 0),
+  // extent the box's side, near 0 and far the box's depth; spot: origin is the eye,
+  // extent the image plane's width at distance 1, near/far distances along forward.
+  WorldPoint origin() const noexcept;
+  WorldPoint axis_u() const noexcept;
+  WorldPoint axis_v() const noexcept;
+  WorldPoint forward() const noexcept;
+  double extent() const noexcept;
+  double near_plane() const noexcept;
+  double far_plane() const noexcept;
+  // The world box holding the light's volume (the ortho box, or the frustum from near to
+  // far): every surface the map was built from lies in it.
+  WorldBox volume_bounds() const noexcept;
+  LightCoord to_light(const WorldPoint& p) const noexcept;
+  // The texel of `level` holding p (or c), clamped to the map's edges (levels <= 30).
+  Texel texel(uint32_t level, const WorldPoint& p) const noexcept;
+  Texel texel(uint32_t level, const LightCoord& c) const noexcept;
+  // The side, in world units, of one texel of `level` at p (a spot's grows with p's
+  // distance from the eye). A pixel covering f world units there needs the level where
+  // this is about f (MH 2016 §3.3; visibility_filtered picks its levels so).
+  double texel_size(const WorldPoint& p, uint32_t level) const noexcept;
+  // The world point at light coordinates c (to_light's inverse, up to rounding).
+  WorldPoint to_world(const LightCoord& c) const noexcept;
+  // The light as the pack header stores it (tiles/PACK.md: kind 0 sun, 1 spot, 2
+  // sun-ground, 3 spot-window; 18 doubles): a program can rebuild it exactly.
+  uint8_t kind_id() const noexcept;
+  std::array<double, 18> to_array() const noexcept;
+
+ private:
+  friend class Map;
+  std::shared_ptr<const st::LightSpace> space_;
+};
+
+// Where the map's surfaces lie, from its skip grid (every level-K texel's stored depth
+// put back on its light ray): `bounds` holds every such point; ground (5th percentile
+// height), top (98th) and the x, z footprint (1st to 99th percentiles) are what a camera
+// path or a receiver plane wants. `points` < 4: nothing was hit at level K and the values
+// come from the light box's lowest face.
+struct SceneExtent {
+  WorldBox bounds;
+  double ground = 0, top = 1;
+  double x0 = 0, x1 = 1, z0 = 0, z1 = 1;
+  uint64_t points = 0;
+};
+
+// A camera for Map::request_view. POD, C-friendly.
+struct ViewOptions {
+  // Screen samples cast per call (samples_x * samples_y <= kMaxViewSamples): each finds
+  // its receiver where its ray meets the plane y = receiver_height, and needs the tile
+  // under it at the level whose texel is about its pixel's footprint.
+  uint32_t samples_x = 64, samples_y = 36;
+  double receiver_height = std::numeric_limits<double>::quiet_NaN();  // NaN: MapInfo::scene.ground
+  double max_distance = 0;   // receivers farther than this need nothing (0: 1.5 x the scene's span)
+  uint16_t priority = 60000; // the nearest tile's fetch priority; each next tile one lower
+};
+// What a view needs and holds (Map::request_view, Map::view_stats).
+struct ViewStats {
+  bool ok = false;        // false: no such view, or the request was refused (see request_view)
+  uint32_t wanted = 0;    // distinct tiles the view needs
+  uint32_t kept = 0;      // those it holds (nearest first; the rest answer from coarser levels)
+  uint32_t resident = 0;  // of the kept, resident now (== kept: every lookup the view makes is exact)
+  uint32_t queued = 0;    // request_view: fetches newly queued or raised
+  uint32_t cancelled = 0; // request_view: fetches cancelled because their tiles left every view
+};
+inline constexpr uint32_t kMaxViews = 16;
+inline constexpr uint32_t kMaxViewSamples = 16384;
+
 struct CacheCounters {
   uint64_t hits = 0;       // lookups that found their tile resident
   uint64_t misses = 0;     // lookups that found it absent or on its way
@@ -139,11 +242,28 @@ struct MapStats {
   uint64_t queue_full = 0;           // a wanted tile could not be queued (want_capacity)
   uint64_t coarse_answers = 0;       // lookups answered above the level asked for
   // A DAG-MH pack's shared dictionary, fetched with the map and resident for its life;
-  // its bytes come out of cache_slots (the slots it fills are not made; one always is).
+  // its bytes come out of cache_slots: it takes dictionary_slots of them (rounded up) and
+  // tiles get tile_slots (at least 1, even when the dictionary alone fills cache_slots).
   uint64_t dictionary_bytes = 0;
   // The memory this map accounts for: metadata + slots x (slot bytes + kSlotOverheadBytes);
   // within ClientOptions::cache_bytes when that is set.
   uint64_t accounted_bytes = 0;
+  uint32_t dictionary_slots = 0;
+  uint32_t tile_slots = 0;           // slots for tiles: cache_slots - dictionary_slots
+  // Views (Map::request_view). view_slots: the slots views may hold (tile_slots less a
+  // headroom for arrivals and lookups' own misses). view_tiles_wanted: the distinct tiles
+  // the registered views needed at their last requests; view_tiles_over: how many of
+  // those did not fit in view_slots (0: the working set fits; else the farthest are
+  // answered from coarser levels and this many more slots would hold them all; size
+  // cache_slots by it). view_overflows counts requests that did not fit.
+  // view_refetches counts tiles that were resident, stayed in a view, and were found
+  // evicted (each is fetched again): 0 while the working set fits.
+  uint32_t views = 0;
+  uint32_t view_slots = 0;
+  uint64_t view_tiles_wanted = 0;
+  uint64_t view_tiles_over = 0;
+  uint64_t view_overflows = 0;
+  uint64_t view_refetches = 0;
 };
 
 // What one cache slot costs beyond its tile bytes (ClientOptions::cache_bytes).
@@ -167,6 +287,8 @@ struct MapInfo {
   uint64_t tile_count = 0;
   uint64_t scene_hash = 0;    // of the scene the map was built from
   bool sun = true;            // directional light (orthographic, or a sun path's ground frame); false: spot (perspective)
+  LightTransform light;       // world -> texels and depth (a stack map: its first light sample's)
+  SceneExtent scene;          // where the surfaces lie (from the skip grid)
 };
 
 // One map of the server's catalog (list_maps).
@@ -199,10 +321,6 @@ struct SHADOWTILE_API ServerStats {
   uint64_t counter(const std::string& name) const noexcept;
 };
 
-// A world-space point (right-handed, +Y up), in the units of the scene the map was built from.
-struct WorldPoint {
-  double x = 0, y = 0, z = 0;
-};
 
 // Per-channel transmittance (1: nothing partial between the light and the point).
 struct Transmittance {
@@ -268,6 +386,31 @@ class SHADOWTILE_API Map {
   size_t cancel_outside(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, uint64_t h) noexcept;
   // True when every tile under the region is resident (lookups there are exact).
   bool region_resident(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, uint64_t h) const noexcept;
+
+  // Cameras. request_view registers or updates view `view_id` (any number; up to
+  // kMaxViews at once per map) from its view-projection matrix (16 doubles, column-major
+  // as OpenGL and glm store it: clip = M * (x, y, z, 1), element (row r, column c) at
+  // [c * 4 + r]; perspective or orthographic; NDC depth may be [-1, 1] or [0, 1],
+  // reversed-Z included) and its viewport in pixels. It casts options' screen samples,
+  // finds each one's receiver (on the plane y = receiver_height), picks the level whose
+  // texel matches the pixel's footprint there (LightTransform::texel_size; distant pixels
+  // need coarse levels, and levels the skip grid answers need no fetch) and queues the
+  // tiles under them, nearest first (priority counts down from options.priority). The
+  // views' tiles are kept resident while in some view (eviction takes other tiles
+  // first); fetches of tiles that left every view are cancelled; a view whose tiles do
+  // not fit (MapStats::view_slots, shared by views in order of priority) keeps its
+  // nearest and counts the rest in ViewStats::wanted - kept and MapStats::view_tiles_over.
+  // Refused (ok false, nothing changes): kMaxViews other views registered, a viewport or
+  // sample grid of 0 or samples over kMaxViewSamples, a matrix with a non-finite entry
+  // or not invertible, a stack map. noexcept; the first request of a view allocates its
+  // bounded storage (kMaxViewSamples entries) once, later ones never allocate. Call it
+  // every frame for each camera; remove_view when a camera goes away (false: no such view).
+  ViewStats request_view(uint32_t view_id, const double view_projection[16], uint32_t width, uint32_t height,
+                         const ViewOptions& options = {}) noexcept;
+  bool remove_view(uint32_t view_id) noexcept;
+  // The view's counts now (resident == kept: the view's lookups are exact); ok false for
+  // a view not registered.
+  ViewStats view_stats(uint32_t view_id) const noexcept;
 
   // Stack maps: packs built with a light set (`build --light sun-path:...` or `area:...`,
   // MH 2016 §4): N shadow maps, one per light sample (slice w = sample w). On a stack map
