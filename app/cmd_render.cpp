@@ -4,6 +4,7 @@
 // PNG; --diff also ray-traces the shadows and writes where the two differ. A stack pack (a
 // light set) is drawn at --time T (the two nearest slices blended) or --soft (the average
 // over every sample), and --diff traces the same samples with the same weights.
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -20,6 +21,7 @@
 #include "app/scene_limits_option.hpp"
 #include "app/command.hpp"
 #include "common/error.hpp"
+#include "tiles/core/deep_pack.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_reader.hpp"
 #include "tiles/core/stack_map.hpp"
@@ -79,6 +81,42 @@ size_t fetch_for_receivers(client::Map& map, const std::vector<Receiver>& rec, c
   }
 }
 
+// The deep part of a served map (partial occluders): waits (bounded) for its directory
+// and every deep tile under the receivers' deep lookup points; returns the tiles' count
+// of cells asked (points grouped by 1/1024 of the map: no deep tile is smaller).
+size_t fetch_deep_for_receivers(const client::DeepPart& deep, const std::vector<Receiver>& rec,
+                                const LightSpace& light, uint32_t map_level, std::chrono::milliseconds timeout) {
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  auto wait_or_throw = [&] {
+    if (std::chrono::steady_clock::now() > deadline)
+      throw Error("render: the view's deep tiles did not all arrive within " + std::to_string(timeout.count()) + " ms");
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  };
+  while (!deep.directory_known()) {
+    deep.lookup(0.5, 0.5, 0.0f, 0.0);  // keeps the directory wanted
+    wait_or_throw();
+  }
+  constexpr double kCells = 1024;  // 2^kMaxTilesPerSideBits: a deep tile spans whole cells
+  std::vector<uint64_t> cells;
+  for (const Receiver& r : rec) {
+    if (!r.hit || r.n_dot_l <= 0) continue;
+    const LightPoint p = deep_lookup_point(r, light, map_level, deep.level());
+    if (!(p.u >= 0 && p.u < 1 && p.v >= 0 && p.v < 1)) continue;
+    cells.push_back((uint64_t(p.v * kCells) << 32) | uint64_t(p.u * kCells));
+  }
+  std::sort(cells.begin(), cells.end());
+  cells.erase(std::unique(cells.begin(), cells.end()), cells.end());
+  for (;;) {
+    bool all = true;
+    for (uint64_t c : cells) {
+      const double u = (double(c & 0xFFFFFFFFu) + 0.5) / kCells, v = (double(c >> 32) + 0.5) / kCells;
+      all = deep.resident(u, v, u, v) && all;
+    }
+    if (all) return cells.size();
+    wait_or_throw();
+  }
+}
+
 namespace {
 
 struct RenderArgs {
@@ -114,6 +152,7 @@ void write_outputs(const RenderArgs& a, const RenderResult& r) {
                 r.traced_seconds * 1e3, base.c_str(), base.c_str());
     std::printf("differing pixels: %llu of %llu receivers (%.4f%%)\n", (unsigned long long)r.differing,
                 (unsigned long long)r.receivers, 100 * r.differing_fraction());
+    std::printf("mean |map - traced| light over the receivers: %.4f\n", r.mean_abs_difference);
   }
 }
 
@@ -180,7 +219,6 @@ void run_stack(const RenderArgs& a, const RenderOptions& ro, const Camera& cam, 
                            .c_str());
   const RenderResult r = render_stack_view(tracer, rec, samples, g.geo.n, vis, o);
   write_outputs(a, r);
-  if (a.diff) std::printf("mean |map - traced| over the receivers: %.4f\n", r.mean_abs_difference);
 }
 
 void run(const RenderArgs& a) {
@@ -202,6 +240,7 @@ void run(const RenderArgs& a) {
 
   std::shared_ptr<const PackReader> reader;
   std::unique_ptr<PackEvaluator> pack_eval;
+  std::unique_ptr<PackDeepMap> pack_deep;
   std::unique_ptr<client::Client> cl;
   client::Map map;
   const Evaluator* eval = nullptr;
@@ -217,6 +256,14 @@ void run(const RenderArgs& a) {
     }
     pack_eval = std::make_unique<PackEvaluator>(reader, 4096);
     eval = pack_eval.get();
+    pack_deep = PackDeepMap::load(*reader);
+    if (pack_deep) {
+      const DeepMap& dm = pack_deep->map();
+      o.deep.level = dm.level();
+      o.deep.transmittance = [&dm](double u, double v, float d, double width) {
+        return width > 0 ? dm.filtered(u, v, d, width) : dm.transmittance(u, v, d);
+      };
+    }
     light = reader->light();
     scene_hash = reader->header().scene_hash;
   } else {
@@ -242,7 +289,8 @@ void run(const RenderArgs& a) {
     scene_hash = client::pack_header(map).scene_hash;
   }
   if (a.time || a.soft) throw Error("render: --time and --soft need a stack pack (built with a light set)");
-  if (scene_hash != scene.content_hash())
+  // A pack with a deep part records the hash of the scene's opaque part (its opaque map's).
+  if (scene_hash != scene.content_hash() && !(scene.any_partial() && scene_hash == opaque_part(scene).content_hash()))
     std::fprintf(stderr, "shadowtile render: warning: scene '%s' is not the scene the map was built from\n",
                  a.scene.c_str());
   const SceneTracer tracer(scene, light);
@@ -252,7 +300,16 @@ void run(const RenderArgs& a) {
     const size_t cells = fetch_for_receivers(map, rec, light, std::chrono::milliseconds(int64_t(a.timeout * 1000)));
     std::printf("fetched the view's %zu cell(s) in %.0f ms\n", cells,
                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    if (const client::DeepPart* deep = client::MapAccess::remote(map).deep()) {
+      const auto t1 = std::chrono::steady_clock::now();
+      const size_t n = fetch_deep_for_receivers(*deep, rec, light, map.finest_level(), std::chrono::milliseconds(int64_t(a.timeout * 1000)));
+      std::printf("fetched the view's deep tiles (%zu cell(s) of the light's image) in %.0f ms\n", n,
+                  std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t1).count());
+      o.deep.level = deep->level();
+      o.deep.transmittance = [deep](double u, double v, float d, double width) { return deep->lookup(u, v, d, width); };
+    }
   }
+  if (o.deep) std::printf("partial occluders: the deep map's transmittance (level %u) times the opaque map's visibility\n", o.deep.level);
   const RenderResult r = render_view(tracer, rec, *eval, o);
   write_outputs(a, r);
 }

@@ -27,6 +27,16 @@ bool DeepPart::directory_known() const noexcept {
   return dir_.has_value();
 }
 
+uint64_t DeepPart::generation() const noexcept {
+  std::lock_guard lock(mu_);
+  return generation_;
+}
+
+uint32_t DeepPart::level() const noexcept {
+  std::lock_guard lock(mu_);
+  return dir_ ? dir_->level : 0;
+}
+
 bool DeepPart::resident(double u0, double v0, double u1, double v1) const noexcept {
   std::lock_guard lock(mu_);
   if (!dir_) return false;
@@ -130,6 +140,7 @@ void DeepPart::evict_locked() noexcept {
     if (victim == tiles_.end()) return;
     tiles_.erase(victim);
     --resident_;
+    ++generation_;
   }
 }
 
@@ -165,6 +176,7 @@ void DeepPart::tile_arrived(const proto::TileMeta& meta, uint32_t request_id, st
   if (!ok) return failed_locked(id, t);
   t.state = State::resident;
   t.bytes = std::move(raw);  // the view points into the vector's buffer, which a move keeps
+  ++generation_;
   if (dir) {
     dir_ = std::move(dir);
     return;

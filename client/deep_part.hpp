@@ -25,6 +25,7 @@
 #include "tiles/core/deep_pack.hpp"
 #include "tiles/core/deep_tile.hpp"
 #include "tiles/core/light.hpp"
+#include "tiles/core/tile_cut_grid.hpp"
 
 namespace st::client {
 
@@ -39,10 +40,27 @@ class DeepPart {
   // map units (0: the finest texel). noexcept: never blocks on the network or allocates.
   std::array<float, 3> lookup(double u, double v, float d, double width) const noexcept;
   bool directory_known() const noexcept;
+  uint32_t level() const noexcept;  // the deep map's level (0 until the directory is known)
   // Every deep tile under [u0, u1) x [v0, v1) resident (the directory known); queues the
   // missing ones (as many as the want list holds).
   bool resident(double u0, double v0, double u1, double v1) const noexcept;
   size_t resident_tiles() const noexcept;
+  // For mirrors of the deep part (gpu/: GpuMap): a count that changes whenever the
+  // directory arrives or a tile becomes resident or is dropped, and a visit of the
+  // directory's shape and every resident tile's (tx, ty) and bytes under the lock (the
+  // bytes are valid only during the call).
+  uint64_t generation() const noexcept;
+  template <class Shape, class Visit>
+  void inspect(Shape&& shape, Visit&& visit) const {
+    std::lock_guard lock(mu_);
+    if (!dir_) return;
+    shape(dir_->level, dir_->side_bits);
+    for (const auto& [id, t] : tiles_)
+      if (t.state == State::resident && id != kDeepDirectoryId) {
+        const TileAddress a = tile_address(id & ~kDeepTileIdBit);
+        visit(uint32_t(a.x), uint32_t(a.y), std::span<const uint8_t>(t.bytes));
+      }
+  }
 
   // ---- fetcher side (through RemoteMap) ----
   void take_wanted(size_t max, uint32_t request_id, std::vector<proto::TileRequest>& out);
@@ -75,6 +93,7 @@ class DeepPart {
   mutable std::vector<uint64_t> want_;  // queued by lookups (capacity fixed: kMaxWants)
   mutable uint64_t clock_ = 0;
   size_t resident_ = 0;
+  uint64_t generation_ = 0;
   static constexpr size_t kMaxWants = 256;
 };
 

@@ -629,7 +629,7 @@ def index_page(d, command):
     page.parts.append('<section id="verdict" class="verdict %s"><h2>%s: %d pages, %d failed</h2>%s</section>' % (
         {True: "pass", False: "fail", None: "info"}[ok], {True: "PASS", False: "FAIL", None: "EMPTY"}[ok],
         len(pages), failed, table(["page", "verdict"], rows)))
-    views = [("view.png", "from the server's tiles"), ("view_traced.png", "ray-traced (Embree shadow rays)"),
+    views = [("view.png", "from the server's tiles"), ("view_traced.png", "ray-traced (Embree shadow rays; partial occluders by their transmittance)"),
              ("view_diff.png", "difference (red: map shadow where the rays see light)")]
     present = [(f, c) for f, c in views if os.path.exists(os.path.join(d, f))]
     body = '<div class="views">%s</div>' % "".join(

@@ -29,6 +29,7 @@
 #include <filesystem>
 #include <limits>
 
+#include "tiles/bake/deep_sampler.hpp"
 #include "tiles/bake/png_io.hpp"
 #include "common/error.hpp"
 
@@ -38,57 +39,134 @@ struct SceneTracer::Impl {
   RTCDevice device = nullptr;
   RTCScene scene = nullptr;
   Vec3d centre;                       // vertices are recentred (float precision far from 0)
-  std::vector<uint8_t> closed;        // per triangle
-  std::vector<Vec3d> normals;         // per triangle, outward for closed meshes
+  std::vector<uint8_t> closed;        // per scene triangle
+  std::vector<Vec3d> normals;         // per scene triangle, outward for closed meshes
   double scale = 1;                   // scene size, for ray offsets
+  // Geometry kOpaqueGeom holds the opaque meshes, kPartialGeom the partial ones (when
+  // any): each Embree primitive's scene triangle.
+  std::vector<uint32_t> prim_triangle[2];
+  // Alpha test of primary rays on partial meshes (per scene triangle: its texture or -1).
+  std::vector<int32_t> triangle_alpha;
+  std::vector<std::array<Vec2f, 3>> uv;
+  std::vector<AlphaTexture> textures;
+  // The partial occluders' transmittance along light rays (null without any).
+  std::unique_ptr<DeepSampler> deep;
   ~Impl() {
     if (scene) rtcReleaseScene(scene);
     if (device) rtcReleaseDevice(device);
   }
 };
 
+namespace {
+
+constexpr unsigned kOpaqueGeom = 0, kPartialGeom = 1;
+
+// Primary rays on a partial mesh: an alpha-tested triangle is hit only where its texture
+// is solid (as the deep sampler's crossings), so cut-away card corners are not receivers.
+void partial_intersect_filter(const RTCFilterFunctionNArguments* args) {
+  const auto* impl = static_cast<const SceneTracer::Impl*>(args->geometryUserPtr);
+  for (unsigned i = 0; i < args->N; ++i) {
+    if (args->valid[i] == 0) continue;
+    const uint32_t tri = impl->prim_triangle[kPartialGeom][RTCHitN_primID(args->hit, args->N, i)];
+    const int32_t a = impl->triangle_alpha[tri];
+    if (a < 0) continue;
+    const float bu = RTCHitN_u(args->hit, args->N, i), bv = RTCHitN_v(args->hit, args->N, i);
+    const auto& c = impl->uv[tri];
+    const float w0 = 1 - bu - bv;
+    const float tu = w0 * c[0].u + bu * c[1].u + bv * c[2].u;
+    const float tv = w0 * c[0].v + bu * c[1].v + bv * c[2].v;
+    if (!impl->textures[size_t(a)].solid(tu, tv)) args->valid[i] = 0;
+  }
+}
+
+// Shadow rays (rtcOccluded1) see only the opaque meshes: partial ones are the deep
+// sampler's (transmittance()), as the opaque map leaves them to deep tiles.
+void partial_occluded_filter(const RTCFilterFunctionNArguments* args) {
+  for (unsigned i = 0; i < args->N; ++i) args->valid[i] = 0;
+}
+
+}  // namespace
+
 SceneTracer::SceneTracer(const Scene& scene, const LightSpace& light) : impl_(std::make_unique<Impl>()), light_(light) {
   if (scene.triangles.empty()) throw Error("render: scene '" + scene.name + "' has no triangles");
   const Aabb b = scene.bounds();
-  impl_->centre = b.center();
-  impl_->scale = std::max({b.extent().x, b.extent().y, b.extent().z, 1e-9});
-  impl_->device = rtcNewDevice(nullptr);
-  if (!impl_->device) throw Error("render: Embree device creation failed");
-  impl_->scene = rtcNewScene(impl_->device);
-  rtcSetSceneFlags(impl_->scene, RTC_SCENE_FLAG_ROBUST);
-  RTCGeometry g = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_TRIANGLE);
-  auto* vp = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
-                                                         3 * sizeof(float), scene.vertices.size()));
-  for (size_t i = 0; i < scene.vertices.size(); ++i) {
-    const Vec3d v = scene.vertices[i] - impl_->centre;
-    vp[3 * i] = float(v.x), vp[3 * i + 1] = float(v.y), vp[3 * i + 2] = float(v.z);
-  }
-  auto* ip = static_cast<unsigned*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                                            3 * sizeof(unsigned), scene.triangles.size()));
-  impl_->closed.assign(scene.triangles.size(), 0);
-  impl_->normals.resize(scene.triangles.size());
-  for (size_t t = 0; t < scene.triangles.size(); ++t) {
-    const auto& tri = scene.triangles[t];
-    for (int k = 0; k < 3; ++k) {
-      if (tri[k] >= scene.vertices.size()) {
-        rtcReleaseGeometry(g);
-        throw Error("render: scene '" + scene.name + "' triangle " + std::to_string(t) + " has a bad index");
+  Impl& m = *impl_;
+  m.centre = b.center();
+  m.scale = std::max({b.extent().x, b.extent().y, b.extent().z, 1e-9});
+  const size_t nt = scene.triangles.size();
+  m.closed.assign(nt, 0);
+  m.normals.resize(nt);
+  m.triangle_alpha.assign(nt, -1);
+  std::vector<uint8_t> partial(nt, 0);
+  bool any_alpha = false;
+  for (const Mesh& mesh : scene.meshes) {
+    if (uint64_t(mesh.first_triangle) + mesh.triangle_count > nt)
+      throw Error("render: scene '" + scene.name + "' mesh '" + mesh.name + "' references triangles past the end");
+    for (uint32_t i = 0; i < mesh.triangle_count; ++i) {
+      const uint32_t t = mesh.first_triangle + i;
+      m.closed[t] = mesh.closed;
+      partial[t] = mesh.partial();
+      if (mesh.alpha_texture >= 0) {
+        if (size_t(mesh.alpha_texture) >= scene.alpha_textures.size())
+          throw Error("render: scene '" + scene.name + "' mesh '" + mesh.name + "' names a missing alpha texture");
+        m.triangle_alpha[t] = mesh.alpha_texture;
+        any_alpha = true;
       }
-      ip[3 * t + k] = tri[k];
     }
+  }
+  if (any_alpha) {
+    if (scene.triangle_uv.size() != nt)
+      throw Error("render: scene '" + scene.name + "' has alpha-tested meshes but no UV per triangle");
+    m.uv = scene.triangle_uv;
+    m.textures = scene.alpha_textures;
+  }
+  for (size_t t = 0; t < nt; ++t) {
+    const auto& tri = scene.triangles[t];
+    for (int k = 0; k < 3; ++k)
+      if (tri[k] >= scene.vertices.size())
+        throw Error("render: scene '" + scene.name + "' triangle " + std::to_string(t) + " has a bad index");
     const Vec3d n = cross(scene.vertices[tri[1]] - scene.vertices[tri[0]], scene.vertices[tri[2]] - scene.vertices[tri[0]]);
     const double len = length(n);
-    impl_->normals[t] = len > 0 ? n / len : Vec3d{0, 1, 0};
+    m.normals[t] = len > 0 ? n / len : Vec3d{0, 1, 0};
+    m.prim_triangle[partial[t] ? kPartialGeom : kOpaqueGeom].push_back(uint32_t(t));
   }
-  for (const Mesh& m : scene.meshes)
-    if (m.closed)
-      std::fill(impl_->closed.begin() + m.first_triangle, impl_->closed.begin() + m.first_triangle + m.triangle_count, 1);
-  rtcCommitGeometry(g);
-  rtcAttachGeometry(impl_->scene, g);
-  rtcReleaseGeometry(g);
-  rtcCommitScene(impl_->scene);
-  if (rtcGetDeviceError(impl_->device) != RTC_ERROR_NONE) throw Error("render: Embree scene build failed");
+  m.device = rtcNewDevice(nullptr);
+  if (!m.device) throw Error("render: Embree device creation failed");
+  m.scene = rtcNewScene(m.device);
+  rtcSetSceneFlags(m.scene, RTC_SCENE_FLAG_ROBUST);
+  for (unsigned geom : {kOpaqueGeom, kPartialGeom}) {
+    const auto& prims = m.prim_triangle[geom];
+    if (prims.empty()) continue;
+    RTCGeometry g = rtcNewGeometry(m.device, RTC_GEOMETRY_TYPE_TRIANGLE);
+    auto* vp = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                                           3 * sizeof(float), scene.vertices.size()));
+    auto* ip = static_cast<unsigned*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                              3 * sizeof(unsigned), prims.size()));
+    if (!vp || !ip) {
+      rtcReleaseGeometry(g);
+      throw Error("render: Embree cannot allocate the geometry buffers");
+    }
+    for (size_t i = 0; i < scene.vertices.size(); ++i) {
+      const Vec3d v = scene.vertices[i] - m.centre;
+      vp[3 * i] = float(v.x), vp[3 * i + 1] = float(v.y), vp[3 * i + 2] = float(v.z);
+    }
+    for (size_t p = 0; p < prims.size(); ++p)
+      for (int k = 0; k < 3; ++k) ip[3 * p + k] = scene.triangles[prims[p]][k];
+    if (geom == kPartialGeom) {
+      rtcSetGeometryUserData(g, impl_.get());
+      rtcSetGeometryIntersectFilterFunction(g, partial_intersect_filter);
+      rtcSetGeometryOccludedFilterFunction(g, partial_occluded_filter);
+    }
+    rtcCommitGeometry(g);
+    rtcAttachGeometryByID(m.scene, g, geom);
+    rtcReleaseGeometry(g);
+  }
+  rtcCommitScene(m.scene);
+  if (rtcGetDeviceError(m.device) != RTC_ERROR_NONE) throw Error("render: Embree scene build failed");
+  if (scene.any_partial()) m.deep = std::make_unique<DeepSampler>(scene, light);
 }
+
+bool SceneTracer::has_partial() const { return impl_->deep != nullptr; }
 
 SceneTracer::~SceneTracer() = default;
 
@@ -124,8 +202,9 @@ std::vector<Receiver> SceneTracer::primary(const Camera& camera, uint32_t width,
         r.hit = true;
         r.distance = rh.ray.tfar;
         r.pos = cam.pos + d * double(rh.ray.tfar);
-        r.closed = impl_->closed[rh.hit.primID] != 0;
-        r.normal = impl_->normals[rh.hit.primID];
+        const uint32_t tri = impl_->prim_triangle[rh.hit.geomID][rh.hit.primID];
+        r.closed = impl_->closed[tri] != 0;
+        r.normal = impl_->normals[tri];
         if (!r.closed && dot(r.normal, d) > 0) r.normal = -r.normal;  // open: face the camera
         r.n_dot_l = dot(r.normal, to_light(r.pos));
       }
@@ -157,6 +236,16 @@ float SceneTracer::traced(const Receiver& r, const Vec3d& offset) const {
   const Vec3d dir = to_light(p);
   const Vec3d org = p - impl_->centre + r.normal * (1e-5 * impl_->scale);
   return lit_along(impl_->scene, org, dir, light_, p);
+}
+
+std::array<float, 3> SceneTracer::transmittance(const Receiver& r, const Vec3d& offset) const {
+  if (!impl_->deep || !r.hit) return {1, 1, 1};
+  // The light ray through the receiver's point (the shadow ray's line), moved off its
+  // surface as traced() moves the shadow ray's start: the receiver's own crossing lies
+  // behind it.
+  const Vec3d p = r.pos + offset + r.normal * (1e-5 * impl_->scale);
+  const LightPoint lp = light_.to_light(p);
+  return impl_->deep->ray_function(lp.u, lp.v).eval(float(lp.d));
 }
 
 namespace {
@@ -192,6 +281,18 @@ LightPoint lookup_point(const Receiver& r, const LightSpace& light, uint32_t map
     p = p + r.normal * ((r.closed ? kClosedReceiverOffsetTexels : kOpenReceiverOffsetTexels) + pcf_radius) * texel;
   }
   return light.to_light(p);
+}
+
+LightPoint deep_lookup_point(const Receiver& r, const LightSpace& light, uint32_t map_level, uint32_t deep_level,
+                             uint32_t pcf_radius) {
+  Vec3d p = r.pos;
+  const double extent = light.parallel() ? light.extent_uv() : length(p - light.origin()) * light.extent_uv();
+  p = p + r.normal * ((r.closed ? kClosedReceiverOffsetTexels : kOpenReceiverOffsetTexels) + pcf_radius) * extent /
+              double(uint64_t(1) << map_level);
+  const Vec3d toward = light.parallel() ? -light.forward() : normalize(light.origin() - p);
+  const double deep_texel = (light.parallel() ? light.extent_uv() : length(p - light.origin()) * light.extent_uv()) /
+                            double(uint64_t(1) << deep_level);
+  return light.to_light(p + toward * (kDeepDepthBiasTexels * deep_texel));
 }
 
 float receiver_footprint_texels(const Receiver& r, const LightSpace& light, uint32_t map_level, double pixel_angle) {
@@ -446,8 +547,10 @@ size_t sun_tap_queries(const LightSpace& light, uint32_t level, uint32_t pcf_rad
 
 namespace {
 
-// The shading of render_view and render_stack_view: sky, ambient + Lambert times visibility.
-void shade_image(const std::vector<Receiver>& rec, const std::vector<float>& v, double ambient, std::vector<float>& img) {
+// The shading of render_view and render_stack_view: sky, ambient + Lambert times
+// visibility (times the transmittance per channel, when `trans` holds one RGB per pixel).
+void shade_image(const std::vector<Receiver>& rec, const std::vector<float>& v, double ambient, std::vector<float>& img,
+                 const std::vector<float>* trans = nullptr) {
   const size_t n = rec.size();
   img.assign(n * 3, 0);
   for (size_t i = 0; i < n; ++i) {
@@ -456,11 +559,16 @@ void shade_image(const std::vector<Receiver>& rec, const std::vector<float>& v, 
       px[0] = 0.55f, px[1] = 0.7f, px[2] = 0.9f;  // sky
       continue;
     }
-    const double c = ambient + (1 - ambient) * std::max(0.0, rec[i].n_dot_l) * v[i];
+    const double lambert = (1 - ambient) * std::max(0.0, rec[i].n_dot_l) * v[i];
     const float albedo[3] = {rec[i].closed ? 0.8f : 0.6f, rec[i].closed ? 0.78f : 0.7f, rec[i].closed ? 0.72f : 0.55f};
-    for (int k = 0; k < 3; ++k) px[k] = float(albedo[k] * c);
+    for (int k = 0; k < 3; ++k)
+      px[k] = float(albedo[k] * (ambient + lambert * (trans ? double((*trans)[3 * i + k]) : 1.0)));
   }
 }
+
+// The light a receiver gets, as one number for the lit test: the mean over the channels
+// of visibility x transmittance.
+float light_of(float vis, const float* t) { return vis * ((t[0] + t[1] + t[2]) / 3.0f); }
 
 }  // namespace
 
@@ -555,37 +663,81 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
       }
     }
   });
+  // Partial occluders: the deep map's transmittance per receiver, per channel (at
+  // lookup_point's offset in texels of the deep level), filtered where the render filters.
+  std::vector<float> ftrans(o.deep ? 3 * m : 0, 1.0f);
+  if (o.deep) {
+    const double finest_texel = std::ldexp(1.0, -int(L));  // map units
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, m, 1024), [&](const tbb::blocked_range<size_t>& r) {
+      for (size_t i = r.begin(); i < r.end(); ++i) {
+        const Receiver& rc = fr[i];
+        double width = 0;
+        if (o.pixel_angle > 0)
+          width = kr * std::max(1.0, double(receiver_footprint_texels(rc, light, L, o.pixel_angle))) * finest_texel;
+        else if (o.pcf_radius > 0)
+          width = kr * finest_texel;
+        const LightPoint lp = deep_lookup_point(rc, light, L, o.deep.level, o.pcf_radius);
+        if (!(lp.u >= 0 && lp.u < 1 && lp.v >= 0 && lp.v < 1)) continue;
+        const auto t = o.deep.transmittance(lp.u, lp.v, float(lp.d), width);
+        for (int c = 0; c < 3; ++c) ftrans[3 * i + c] = t[c];
+      }
+    });
+  }
   res.map_seconds = std::chrono::duration<double>(Clk::now() - t0).count();
   res.map_cpu_seconds = process_cpu_seconds() - c0;
+  std::vector<float> fttrans, ttrans;
   if (o.diff) {
     ftvis.assign(m, 0);
+    if (tracer.has_partial()) fttrans.assign(3 * m, 1.0f);
     t0 = Clk::now();
     c0 = process_cpu_seconds();
     tbb::parallel_for(tbb::blocked_range<size_t>(0, m, 4096), [&](const tbb::blocked_range<size_t>& r) {
       for (size_t i = r.begin(); i < r.end(); ++i) ftvis[i] = tracer.traced(fr[i]);
     });
+    if (tracer.has_partial())
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, m, 256), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i < r.end(); ++i) {
+          const auto t = tracer.transmittance(fr[i]);
+          for (int c = 0; c < 3; ++c) fttrans[3 * i + c] = t[c];
+        }
+      });
     res.traced_seconds = std::chrono::duration<double>(Clk::now() - t0).count();
     res.traced_cpu_seconds = process_cpu_seconds() - c0;
     tvis.assign(n, 0);
-    for (size_t k = 0; k < m; ++k) tvis[facing[k]] = ftvis[k];
+    ttrans.assign(3 * n, 1.0f);
+    for (size_t k = 0; k < m; ++k) {
+      tvis[facing[k]] = ftvis[k];
+      if (!fttrans.empty())
+        for (int c = 0; c < 3; ++c) ttrans[3 * facing[k] + c] = fttrans[3 * k + c];
+    }
   }
-  for (size_t k = 0; k < m; ++k) vis[facing[k]] = fvis[k];
-  shade_image(rec, vis, o.ambient, res.image);
+  res.transmittance.assign(3 * n, 1.0f);
+  for (size_t k = 0; k < m; ++k) {
+    vis[facing[k]] = fvis[k];
+    if (!ftrans.empty())
+      for (int c = 0; c < 3; ++c) res.transmittance[3 * facing[k] + c] = ftrans[3 * k + c];
+  }
+  shade_image(rec, vis, o.ambient, res.image, &res.transmittance);
   for (size_t i = 0; i < n; ++i) res.receivers += rec[i].hit && rec[i].n_dot_l > 0;
   if (o.diff) {
-    shade_image(rec, tvis, o.ambient, res.traced_image);
+    shade_image(rec, tvis, o.ambient, res.traced_image, &ttrans);
     res.diff_image.assign(n * 3, 0);
+    double abs_sum = 0;
     for (size_t i = 0; i < n; ++i) {
       float* px = &res.diff_image[3 * i];
       const float g = rec[i].hit ? 0.25f + 0.25f * float(std::max(0.0, rec[i].n_dot_l)) : 0.05f;
       px[0] = px[1] = px[2] = g;
       if (!rec[i].hit || rec[i].n_dot_l <= 0) continue;
-      const bool map_lit = vis[i] >= 0.5f, ray_lit = tvis[i] >= 0.5f;
+      for (int c = 0; c < 3; ++c)
+        abs_sum += std::fabs(double(vis[i]) * res.transmittance[3 * i + c] - double(tvis[i]) * ttrans[3 * i + c]) / 3;
+      const bool map_lit = light_of(vis[i], &res.transmittance[3 * i]) >= 0.5f;
+      const bool ray_lit = light_of(tvis[i], &ttrans[3 * i]) >= 0.5f;
       if (map_lit == ray_lit) continue;
       ++res.differing;
       if (ray_lit) px[0] = 1, px[1] = 0.1f, px[2] = 0.1f;  // map says shadow, rays say lit
       else px[0] = 0.1f, px[1] = 0.3f, px[2] = 1;          // map says lit, rays say shadow
     }
+    res.mean_abs_difference = res.receivers ? abs_sum / double(res.receivers) : 0;
   }
   res.visibility = std::move(vis);
   return res;

@@ -22,6 +22,7 @@
 // Thread safety: a SceneTracer is built once and is const afterwards (rays may be cast
 // from many threads). Errors: st::Error (Embree failure, bad sizes, I/O).
 #pragma once
+#include <array>
 #include <cstdint>
 #include <functional>
 #include <memory>
@@ -55,12 +56,23 @@ class SceneTracer {
   SceneTracer(const SceneTracer&) = delete;
   SceneTracer& operator=(const SceneTracer&) = delete;
 
-  // Primary rays through pixel centres, row 0 at the top (TBB-parallel over rows).
+  // Primary rays through pixel centres, row 0 at the top (TBB-parallel over rows); they
+  // hit opaque and partial meshes alike, an alpha-tested one only where its texture is
+  // solid (volumes are not seen: they only dim the light).
   std::vector<Receiver> primary(const Camera& camera, uint32_t width, uint32_t height) const;
   // Ray-traced visibility of a receiver: 1 if an Embree shadow ray toward the light
-  // reaches the light, else 0. `offset` moves the ray's start (world units; for
-  // supersampled PCF references across a kernel's footprint).
+  // reaches the light past every opaque mesh, else 0 (partial meshes and volumes are
+  // transmittance()'s, as the opaque map leaves them to deep tiles). `offset` moves the
+  // ray's start (world units; for supersampled PCF references across a kernel's footprint).
   float traced(const Receiver& r, const Vec3d& offset = {}) const;
+  // Ray-traced transmittance of the partial occluders (deep shadow maps, DSM 2000 §3.2)
+  // between the light and the receiver, per channel: the light ray through the receiver's
+  // point (moved off its surface as traced() moves it) through every partial mesh
+  // (transmit, alpha test) and volume (exp(-tau)), one ray, the deep sampler's
+  // ray_function evaluated at the receiver's depth. {1, 1, 1} in a scene without partial
+  // occluders. The light reaching the receiver is traced() * transmittance() per channel.
+  std::array<float, 3> transmittance(const Receiver& r, const Vec3d& offset = {}) const;
+  bool has_partial() const;  // the scene has partial meshes or volumes
   // The same shadow ray toward another light (a sample of a light set: stack packs);
   // 0 off surfaces facing away from this tracer's light, as traced().
   float traced_toward(const Receiver& r, const LightSpace& light) const;
@@ -68,8 +80,9 @@ class SceneTracer {
   Vec3d to_light(const Vec3d& p) const;
   const LightSpace& light() const { return light_; }
 
+  struct Impl;  // render.cpp (named here for its Embree filter callbacks)
+
  private:
-  struct Impl;
   std::unique_ptr<Impl> impl_;
   LightSpace light_;
 };
@@ -80,6 +93,16 @@ class SceneTracer {
 // light the kernel's far texels lie in front of the receiver, so the offset grows by R
 // texels (a normal-offset form of receiver-plane bias).
 LightPoint lookup_point(const Receiver& r, const LightSpace& light, uint32_t map_level, uint32_t pcf_radius = 0);
+
+// Light-space lookup point of a receiver in a deep map of level `deep_level`: the opaque
+// map's point (lookup_point at `map_level`), moved toward the light along the light ray
+// by kDeepDepthBiasTexels texels of the deep level. The move keeps (u, v), so the shadow
+// is not shifted sideways (a normal offset of a coarse deep texel would be: on the forest
+// at 512^2 it moved leaf shadows by a texel and doubled the mismatch), and clears the
+// receiver's own crossing, whose depth varies across a coarse deep texel of a sloped card.
+inline constexpr double kDeepDepthBiasTexels = 1.5;
+LightPoint deep_lookup_point(const Receiver& r, const LightSpace& light, uint32_t map_level, uint32_t deep_level,
+                             uint32_t pcf_radius = 0);
 
 // Fraction lit of a receiver by the map: pcf_radius 0 = single tap (exact lit test),
 // else a (2r+1)^2 kernel at `level` (default: the finest). Outside the map: lit.
@@ -117,6 +140,19 @@ bool tap_query_path_available(TapQueryPath path);
 size_t sun_tap_queries(const LightSpace& light, uint32_t level, uint32_t pcf_radius, std::span<const Receiver> rc,
                        PcfQuery* queries, uint32_t* index, TapQueryPath path = TapQueryPath::best);
 
+// A map's partial occluders (its deep shadow map, DSM 2000; tiles/core/DEEP.md): the
+// per-channel transmittance at light-space (u, v) and depth d, over a footprint `width`
+// map units wide (0: the texel under (u, v), DeepMap::transmittance; > 0: filtered with
+// the deep tile's mips, DeepMap::filtered). `level` is the deep map's level: a receiver's
+// deep lookup point is moved off its surface by lookup_point's offset in texels of that
+// level (a coarse deep texel averages the crossing depths of a sloped surface over its
+// whole width; deep_lookup_point). Empty `transmittance`: the map has no deep part.
+struct DeepLookup {
+  uint32_t level = 0;
+  std::function<std::array<float, 3>(double u, double v, float d, double width)> transmittance;
+  explicit operator bool() const { return bool(transmittance); }
+};
+
 struct RenderOptions {
   uint32_t width = 960, height = 540;
   uint32_t pcf_radius = 0;
@@ -127,6 +163,10 @@ struct RenderOptions {
   double ambient = 0.15;
   // A sun's queries (sun_tap_queries): the same answers on every path; tests pick one.
   TapQueryPath tap_query_path = TapQueryPath::best;
+  // Partial occluders: the light is visibility x transmittance per channel. The deep
+  // lookup filters where the render does: with pixel_angle, over the pixel's footprint
+  // times the PCF kernel; with a PCF kernel alone, over the kernel; else one texel.
+  DeepLookup deep;
 };
 
 struct RenderResult {
@@ -134,9 +174,14 @@ struct RenderResult {
   std::vector<float> image;         // RGB, shaded with the map
   std::vector<float> traced_image;  // RGB, shaded with ray-traced shadows (diff only)
   std::vector<float> diff_image;    // RGB: red map-shadowed/traced-lit, blue the reverse
-  std::vector<float> visibility;    // per pixel, the map's answer (0 off light-facing surfaces)
+  std::vector<float> visibility;    // per pixel, the opaque map's answer (0 off light-facing surfaces)
+  // Per pixel RGB, the deep map's transmittance (1 without a deep part, and off
+  // light-facing surfaces): the light is visibility x transmittance per channel.
+  std::vector<float> transmittance;
   uint64_t receivers = 0;           // pixels on light-facing surfaces
-  uint64_t differing = 0;           // of those, lit answers that differ (diff only)
+  // Of those, lit answers that differ (diff only): a receiver is lit when the mean over
+  // the channels of visibility x transmittance is at least 0.5 (the rays' the same way).
+  uint64_t differing = 0;
   double map_seconds = 0, traced_seconds = 0;
   // The same phases in the process's CPU seconds (all threads): on a busy machine a
   // steadier measure of what each costs than the wall times above. Both passes answer the
@@ -147,7 +192,7 @@ struct RenderResult {
   // timed passes read (neither pass's time includes it).
   double gather_seconds = 0, gather_cpu_seconds = 0;
   double differing_fraction() const { return receivers ? double(differing) / double(receivers) : 0; }
-  double mean_abs_difference = 0;   // over the receivers, |map - traced| (diff only)
+  double mean_abs_difference = 0;   // over the receivers and channels, |map - traced| light (diff only)
 };
 
 RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>& receivers, const Evaluator& eval,
