@@ -285,14 +285,11 @@ LightPoint lookup_point(const Receiver& r, const LightSpace& light, uint32_t map
 
 LightPoint deep_lookup_point(const Receiver& r, const LightSpace& light, uint32_t map_level, uint32_t deep_level,
                              uint32_t pcf_radius) {
-  Vec3d p = r.pos;
-  const double extent = light.parallel() ? light.extent_uv() : length(p - light.origin()) * light.extent_uv();
-  p = p + r.normal * ((r.closed ? kClosedReceiverOffsetTexels : kOpenReceiverOffsetTexels) + pcf_radius) * extent /
-              double(uint64_t(1) << map_level);
-  const Vec3d toward = light.parallel() ? -light.forward() : normalize(light.origin() - p);
-  const double deep_texel = (light.parallel() ? light.extent_uv() : length(p - light.origin()) * light.extent_uv()) /
+  (void)map_level, (void)pcf_radius;  // no normal offset: it would shift (u, v) (render.hpp)
+  const Vec3d toward = light.parallel() ? -light.forward() : normalize(light.origin() - r.pos);
+  const double deep_texel = (light.parallel() ? light.extent_uv() : length(r.pos - light.origin()) * light.extent_uv()) /
                             double(uint64_t(1) << deep_level);
-  return light.to_light(p + toward * (kDeepDepthBiasTexels * deep_texel));
+  return light.to_light(r.pos + toward * (kDeepDepthBiasTexels * deep_texel));
 }
 
 float receiver_footprint_texels(const Receiver& r, const LightSpace& light, uint32_t map_level, double pixel_angle) {
