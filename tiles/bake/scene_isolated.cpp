@@ -39,6 +39,7 @@
 #include <stdexcept>
 
 #include "common/error.hpp"
+#include "common/sanitizer.hpp"
 
 namespace st {
 namespace {
@@ -51,17 +52,6 @@ constexpr uint32_t kKindScene = 0, kKindError = 1;
 // recursion).
 constexpr size_t kImportStackBytes = size_t(256) << 20;
 
-#if defined(__SANITIZE_ADDRESS__)
-constexpr bool kAddressSanitizer = true;
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-constexpr bool kAddressSanitizer = true;
-#else
-constexpr bool kAddressSanitizer = false;
-#endif
-#else
-constexpr bool kAddressSanitizer = false;
-#endif
 
 template <class T>
 void put(SceneSink& out, const T& v) {

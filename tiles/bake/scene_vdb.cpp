@@ -29,6 +29,7 @@
 #include <thread>
 
 #include "common/error.hpp"
+#include "common/sanitizer.hpp"
 #include "common/text.hpp"
 
 namespace st {
@@ -356,17 +357,6 @@ constexpr uint32_t kAnswerNone = 0, kAnswerVolume = 1, kAnswerError = 2;
 constexpr size_t kDensityOffset = (sizeof(ChildAnswer) + 63) / 64 * 64;
 constexpr auto kReaderTimeout = std::chrono::seconds(600);
 
-#if defined(__SANITIZE_ADDRESS__)
-constexpr bool kAddressSanitizer = true;
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-constexpr bool kAddressSanitizer = true;
-#else
-constexpr bool kAddressSanitizer = false;
-#endif
-#else
-constexpr bool kAddressSanitizer = false;
-#endif
 
 // The child's virtual memory now (from /proc/self/statm), 0 if unknown.
 uint64_t address_space_bytes() {
