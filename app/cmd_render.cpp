@@ -1,10 +1,11 @@
 // `shadowtile render (PACK | --server HOST:PORT --map NAME) --scene SCENE --camera ...
-//  [--size WxH] [--pcf R] [--filter] [--diff] [--time T | --soft] -o view.exr`: the scene from a
+//  [--size WxH] [--pcf SIDE] [--filter] [--diff] [--time T | --soft] -o view.exr`: the scene from a
 // camera, Lambert-shaded with the map's shadows (tiles/bake/render.hpp), as RGB float EXR and
 // PNG; --diff also ray-traces the shadows and writes where the two differ. A stack pack (a
 // light set) is drawn at --time T (the two nearest slices blended) or --soft (the average
 // over every sample), and --diff traces the same samples with the same weights.
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -12,14 +13,14 @@
 #include <optional>
 #include <thread>
 
-#include "client/map_access.hpp"
-#include "loadgen/view_tiles.hpp"
 #include "tiles/bake/scene_limits.hpp"
 #include "tiles/bake/render.hpp"
 #include "tiles/bake/scene.hpp"
 #include "proto/auth.hpp"
 #include "app/scene_limits_option.hpp"
 #include "app/command.hpp"
+#include "app/pcf_option.hpp"
+#include "app/public_map.hpp"
 #include "common/error.hpp"
 #include "tiles/core/deep_pack.hpp"
 #include "tiles/core/pack_evaluator.hpp"
@@ -56,51 +57,41 @@ Error view_timeout(const client::Map& map, const std::string& what, std::chrono:
 }  // namespace
 
 // Requests every tile the receivers' finest-level lookups need and waits (bounded) until
-// they are resident. Returns the number of cells; throws st::Error on timeout.
+// they are resident (the public API: app/public_map.hpp). Returns the number of cells;
+// throws st::Error on timeout.
 size_t fetch_for_receivers(client::Map& map, const std::vector<Receiver>& rec, const LightSpace& light,
                            std::chrono::milliseconds timeout) {
   const uint32_t L = map.finest_level();
-  std::vector<LightPoint> pts;
+  std::vector<std::pair<double, double>> uv;
   for (const Receiver& r : rec)
-    if (r.hit && r.n_dot_l > 0) pts.push_back(lookup_point(r, light, L));
-  const auto cells = loadgen::cells_for_points(pts, L, client::skip_grid(map));
-  const auto deadline = std::chrono::steady_clock::now() + timeout;
-  for (;;) {
-    bool all = true;
-    for (const auto& c : cells)
-      if (!map.region_resident(c.level, c.x0(), c.y0(), c.side(), c.side())) {
-        all = false;
-        map.request_region(c.level, c.x0(), c.y0(), c.side(), c.side(), 1000);
-      }
-    if (all) {
-      check_no_failed_tiles(map);
-      return cells.size();
+    if (r.hit && r.n_dot_l > 0) {
+      const LightPoint p = lookup_point(r, light, L);
+      uv.emplace_back(p.u, p.v);
     }
-    if (std::chrono::steady_clock::now() > deadline) throw view_timeout(map, "the view's tiles", timeout);
-    std::this_thread::sleep_for(std::chrono::milliseconds(5));
-  }
+  const std::vector<TexelCell> cells = cells_under(uv, L, map.info().skip_level);
+  if (!fetch_cells(map, L, cells, timeout, [&] { check_no_failed_tiles(map); }))
+    throw view_timeout(map, "the view's tiles", timeout);
+  return cells.size();
 }
 
 // The deep part of a served map (partial occluders): waits (bounded) for its directory
-// and every deep tile under the receivers' deep lookup points; returns the tiles' count
-// of cells asked (points grouped by 1/1024 of the map: no deep tile is smaller).
-size_t fetch_deep_for_receivers(const client::DeepPart& deep, const std::vector<Receiver>& rec,
-                                const LightSpace& light, uint32_t map_level, std::chrono::milliseconds timeout) {
+// and every deep tile under the receivers' deep lookup points (Map::deep_resident);
+// returns the count of cells asked (points grouped by 1/1024 of the map: no deep tile is
+// smaller).
+size_t fetch_deep_for_receivers(const client::Map& map, const std::vector<Receiver>& rec, const LightSpace& light,
+                                std::chrono::milliseconds timeout) {
   const auto deadline = std::chrono::steady_clock::now() + timeout;
   auto wait_or_throw = [&] {
     if (std::chrono::steady_clock::now() > deadline)
       throw Error("render: the view's deep tiles did not all arrive within " + std::to_string(timeout.count()) + " ms");
     std::this_thread::sleep_for(std::chrono::milliseconds(5));
   };
-  while (!deep.directory_known()) {
-    deep.lookup(0.5, 0.5, 0.0f, 0.0);  // keeps the directory wanted
-    wait_or_throw();
-  }
+  while (map.deep_level() == 0) wait_or_throw();  // the directory is on its way
   constexpr double kCells = 1024;  // 2^kMaxTilesPerSideBits: a deep tile spans whole cells
   std::vector<uint64_t> cells;
   for (const Receiver& r : rec) {
     if (!r.hit || r.n_dot_l <= 0) continue;
-    const LightPoint p = deep_lookup_point(r, light, map_level, deep.level());
+    const LightPoint p = deep_lookup_point(r, light, map.finest_level(), map.deep_level());
     if (!(p.u >= 0 && p.u < 1 && p.v >= 0 && p.v < 1)) continue;
     cells.push_back((uint64_t(p.v * kCells) << 32) | uint64_t(p.u * kCells));
   }
@@ -110,7 +101,7 @@ size_t fetch_deep_for_receivers(const client::DeepPart& deep, const std::vector<
     bool all = true;
     for (uint64_t c : cells) {
       const double u = (double(c & 0xFFFFFFFFu) + 0.5) / kCells, v = (double(c >> 32) + 0.5) / kCells;
-      all = deep.resident(u, v, u, v) && all;
+      all = map.deep_resident(u, v, u, v) && all;
     }
     if (all) return cells.size();
     wait_or_throw();
@@ -123,7 +114,7 @@ struct RenderArgs {
   std::string pack, server, map, scene, camera, size = "960x540", out, up, key_file, tls_ca, tls_name;
   std::string scene_limits;  // --scene-limits (tiles/bake/scene_limits.hpp)
   bool tls = false;
-  uint32_t pcf = 0;
+  uint32_t pcf = 1;  // kernel side
   bool diff = false;
   bool filter = false;
   double timeout = 60;
@@ -160,12 +151,15 @@ void write_outputs(const RenderArgs& a, const RenderResult& r) {
 void run_stack(const RenderArgs& a, const RenderOptions& ro, const Camera& cam, const Scene& scene,
                const PackReader* reader, client::Map* map) {
   if (a.soft && a.time) throw Error("render: give --time T or --soft, not both");
-  const StackGrid& g = reader ? *reader->stack() : *client::MapAccess::remote(*map).stack_grid();
-  std::vector<LightSpace> samples;
-  for (uint32_t w = 0; w < g.slices; ++w) samples.push_back(g.light(w));
+  std::vector<LightSpace> samples;  // the light set's samples: the pack's, or the served map's (MapInfo)
+  if (reader)
+    for (uint32_t w = 0; w < reader->stack()->slices; ++w) samples.push_back(reader->stack()->light(w));
+  else
+    for (const client::LightTransform& t : map->info().slice_lights) samples.push_back(light_of(t));
+  const uint32_t map_level = reader ? reader->stack()->geo.n : map->finest_level();
   const double time = a.time.value_or(0.0);
   // The slices read, and the sample that shades (n.l) and sizes the normal offset.
-  const uint32_t n = g.slices;
+  const uint32_t n = uint32_t(samples.size());
   const double s = std::clamp(time, 0.0, 1.0) * double(n - 1);
   const uint32_t w0 = a.soft ? 0 : uint32_t(std::floor(s)), w1 = a.soft ? n - 1 : std::min(n - 1, uint32_t(std::ceil(s)));
   const LightSpace& shading = samples[a.soft ? n / 2 : uint32_t(std::nearbyint(s))];
@@ -200,15 +194,16 @@ void run_stack(const RenderArgs& a, const RenderOptions& ro, const Camera& cam, 
     const client::Map& m = *map;
     if (a.soft)
       vis.all = [&m, &o](const Vec3d& p, float fp) {
-        return m.soft_visibility_filtered({p.x, p.y, p.z}, fp, o.pcf_radius);
+        return m.soft_visibility_filtered({p.x, p.y, p.z}, fp, 2 * o.pcf_radius + 1);
       };
     else
       vis.all = [&m, &o](const Vec3d& p, float fp) {
-        return m.time_visibility_filtered({p.x, p.y, p.z}, o.time, fp, o.pcf_radius);
+        return m.time_visibility_filtered({p.x, p.y, p.z}, o.time, fp, 2 * o.pcf_radius + 1);
       };
     // One sample: the time lookup at the sample's own time is exactly that slice.
     vis.sample = [&m, &o, n](const Vec3d& p, uint32_t w, float fp) {
-      return m.time_visibility_filtered({p.x, p.y, p.z}, n > 1 ? double(w) / double(n - 1) : 0.0, fp, o.pcf_radius);
+      return m.time_visibility_filtered({p.x, p.y, p.z}, n > 1 ? double(w) / double(n - 1) : 0.0, fp,
+                                        2 * o.pcf_radius + 1);
     };
   }
   std::printf("stack of %u slices: %s\n", n,
@@ -217,7 +212,7 @@ void run_stack(const RenderArgs& a, const RenderOptions& ro, const Camera& cam, 
                                  : "time " + std::to_string(time) + ", slices " + std::to_string(w0) + " and " +
                                        std::to_string(w1) + " blended")
                            .c_str());
-  const RenderResult r = render_stack_view(tracer, rec, samples, g.geo.n, vis, o);
+  const RenderResult r = render_stack_view(tracer, rec, samples, map_level, vis, o);
   write_outputs(a, r);
 }
 
@@ -229,7 +224,7 @@ void run(const RenderArgs& a) {
   if (std::sscanf(a.size.c_str(), "%ux%u", &o.width, &o.height) != 2 || o.width == 0 || o.height == 0 ||
       o.width > 16384 || o.height > 16384)
     throw Error("--size: expected WxH (1..16384), got '" + a.size + "'");
-  o.pcf_radius = a.pcf;
+  o.pcf_radius = (checked_pcf_side("--pcf", a.pcf) - 1) / 2;  // the renderer's kernels: side 2R+1
   o.diff = a.diff;
   const Camera cam = parse_camera(a.camera);
   // Hierarchical filtering: one pixel's angle from the vertical field of view.
@@ -243,6 +238,7 @@ void run(const RenderArgs& a) {
   std::unique_ptr<PackDeepMap> pack_deep;
   std::unique_ptr<client::Client> cl;
   client::Map map;
+  std::unique_ptr<MapEvaluator> map_eval;
   const Evaluator* eval = nullptr;
   LightSpace light;
   uint64_t scene_hash = 0;
@@ -278,15 +274,17 @@ void run(const RenderArgs& a) {
     co.cache_bytes = uint64_t(a.cache_mb * 1048576.0);
     cl = std::make_unique<client::Client>(parse_endpoint("--server", a.server), co);
     map = cl->open(a.map);
+    const client::MapInfo info = map.info();
     if (map.slices()) {
-      if (client::pack_header(map).scene_hash != scene.content_hash())
+      if (info.scene_hash != scene.content_hash())
         std::fprintf(stderr, "shadowtile render: warning: scene '%s' is not the scene the map was built from\n",
                      a.scene.c_str());
       return run_stack(a, o, cam, scene, nullptr, &map);
     }
-    eval = &client::evaluator(map);
-    light = LightSpace::from_array(client::pack_header(map).light_kind, client::pack_header(map).light);
-    scene_hash = client::pack_header(map).scene_hash;
+    map_eval = std::make_unique<MapEvaluator>(map);
+    eval = map_eval.get();
+    light = light_of(info.light);
+    scene_hash = info.scene_hash;
   }
   if (a.time || a.soft) throw Error("render: --time and --soft need a stack pack (built with a light set)");
   // A pack with a deep part records the hash of the scene's opaque part (its opaque map's).
@@ -300,13 +298,16 @@ void run(const RenderArgs& a) {
     const size_t cells = fetch_for_receivers(map, rec, light, std::chrono::milliseconds(int64_t(a.timeout * 1000)));
     std::printf("fetched the view's %zu cell(s) in %.0f ms\n", cells,
                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
-    if (const client::DeepPart* deep = client::MapAccess::remote(map).deep()) {
+    if (map.has_deep()) {
       const auto t1 = std::chrono::steady_clock::now();
-      const size_t n = fetch_deep_for_receivers(*deep, rec, light, map.finest_level(), std::chrono::milliseconds(int64_t(a.timeout * 1000)));
+      const size_t n = fetch_deep_for_receivers(map, rec, light, std::chrono::milliseconds(int64_t(a.timeout * 1000)));
       std::printf("fetched the view's deep tiles (%zu cell(s) of the light's image) in %.0f ms\n", n,
                   std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t1).count());
-      o.deep.level = deep->level();
-      o.deep.transmittance = [deep](double u, double v, float d, double width) { return deep->lookup(u, v, d, width); };
+      o.deep.level = map.deep_level();
+      o.deep.transmittance = [&map](double u, double v, float d, double width) {
+        const client::Transmittance t = map.transmittance_at({u, v, double(d)}, width);
+        return std::array<float, 3>{t.r, t.g, t.b};
+      };
     }
   }
   if (o.deep) std::printf("partial occluders: the deep map's transmittance (level %u) times the opaque map's visibility\n", o.deep.level);
@@ -328,8 +329,7 @@ Register reg{"render", "Render a camera view shaded with the map's shadows (EXR 
   add_scene_limits_option(sub, a->scene_limits);
   sub.add_option("--camera", a->camera, "pos=X,Y,Z,target=X,Y,Z[,fov=DEG]")->required();
   sub.add_option("--size", a->size, "Image size WxH")->capture_default_str();
-  sub.add_option("--pcf", a->pcf, "PCF radius R: (2R+1)^2 taps (0: single tap)")->capture_default_str()
-      ->check(CLI::Range(0u, 4u));
+  sub.add_option("--pcf", a->pcf, "PCF kernel side: odd, 1..9 (1: single tap, 3: 3x3, ...)")->capture_default_str();
   sub.add_flag("--filter", a->filter,
                "Hierarchical filtering: the level from each pixel's footprint, two levels blended (MH 2016 3.3)");
   sub.add_flag("--diff", a->diff, "Also ray-trace shadows and write where they differ");

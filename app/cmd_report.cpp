@@ -20,7 +20,6 @@
 #include <sstream>
 #include <thread>
 
-#include "client/map_access.hpp"
 #include "loadgen/camera_path.hpp"
 #include "loadgen/view_tiles.hpp"
 #include "server/server.hpp"
@@ -30,6 +29,8 @@
 #include "tiles/bake/scene.hpp"
 #include "app/command.hpp"
 #include "app/html_page.hpp"
+#include "app/pcf_option.hpp"
+#include "app/public_map.hpp"
 #include "common/error.hpp"
 #include "tiles/core/map_preview.hpp"
 #include "tiles/core/pack_evaluator.hpp"
@@ -44,7 +45,7 @@ using Clk = std::chrono::steady_clock;
 struct ReportArgs {
   std::string scene, light, resolution = "2048", out = "report-out", encodings = "mh,mmh,dagmh,vsdag", size = "320x180";
   uint32_t frames = 4;
-  std::vector<uint32_t> pcf = {1, 2};
+  std::vector<uint32_t> pcf = {3, 5};  // PCF kernel sides
   double cache_mb = 64, sample_ms = 5;
   std::optional<uint32_t> skip_level;  // the packs' K (default: the build's)
   uint32_t tile_bytes = 64 * 1024;
@@ -119,35 +120,31 @@ std::vector<RefinementPoint> refinement(const std::string& pack_path, const std:
   co.cache_bytes = uint64_t(cache_mb * 1048576.0);  // everything per slot counted (client.hpp)
   client::Client cl({"127.0.0.1", srv.port()}, co);
   client::Map map = cl.open(name);
+  const MapEvaluator eval(map);  // the public API's lookups (app/public_map.hpp)
   const uint32_t L = map.finest_level();
-  std::vector<LightPoint> lps;
-  for (uint32_t i : f.lit_facing) lps.push_back(lookup_point(f.receivers[i], light, L));
-  const auto cells = loadgen::cells_for_points(lps, L, client::skip_grid(map));
+  std::vector<std::pair<double, double>> uv;
+  for (uint32_t i : f.lit_facing) {
+    const LightPoint lp = lookup_point(f.receivers[i], light, L);
+    uv.emplace_back(lp.u, lp.v);
+  }
+  std::vector<int64_t> cell_of;
+  const std::vector<TexelCell> cells = cells_under(uv, L, map.info().skip_level, &cell_of);
   cells_total = cells.size();
   // The answer at the cut itself, before any request: what the map info alone gives
   // (the skip grid's level K and the map preview's levels K+1 .. K+p below it). Later samples are timed from their start; tiles keep
   // arriving while a sample evaluates the frame.
-  pts.push_back({0.0, frame_error(client::evaluator(map), light, f, 0, L).fraction(), 0});
+  pts.push_back({0.0, frame_error(eval, light, f, 0, L).fraction(), 0});
   const auto t0 = Clk::now();
   // Requests ordered by the error they can remove: a cell's tiles change the answers of
   // the receivers that look up in it, so cells serving more receivers go first (ties:
   // the nearest receiver first). Cells in order of first appearance would be screen order.
   std::vector<double> nearest(cells.size(), INFINITY);
   std::vector<uint64_t> served(cells.size(), 0);
-  {
-    std::unordered_map<uint64_t, size_t> idx;
-    for (size_t c = 0; c < cells.size(); ++c) idx[cells[c].key()] = c;
-    for (size_t i = 0; i < lps.size(); ++i) {
-      const auto one = loadgen::cells_for_points({lps[i]}, L, client::skip_grid(map));
-      if (!one.empty()) {
-        auto it = idx.find(one[0].key());
-        if (it != idx.end()) {
-          nearest[it->second] = std::min(nearest[it->second], f.receivers[f.lit_facing[i]].distance);
-          ++served[it->second];
-        }
-      }
+  for (size_t i = 0; i < cell_of.size(); ++i)
+    if (cell_of[i] >= 0) {
+      nearest[size_t(cell_of[i])] = std::min(nearest[size_t(cell_of[i])], f.receivers[f.lit_facing[i]].distance);
+      ++served[size_t(cell_of[i])];
     }
-  }
   std::vector<size_t> order(cells.size());
   for (size_t i = 0; i < order.size(); ++i) order[i] = i;
   std::sort(order.begin(), order.end(), [&](size_t a, size_t b) {
@@ -155,13 +152,13 @@ std::vector<RefinementPoint> refinement(const std::string& pack_path, const std:
   });
   for (size_t r = 0; r < order.size(); ++r) {
     const auto& c = cells[order[r]];
-    map.request_region(c.level, c.x0(), c.y0(), c.side(), c.side(), uint16_t(60000 - std::min<size_t>(r, 50000)));
+    map.request_region(L, c.x0, c.y0, c.side, c.side, uint16_t(60000 - std::min<size_t>(r, 50000)));
   }
   for (bool last = false;;) {
     const double ms = std::chrono::duration<double, std::milli>(Clk::now() - t0).count();
     size_t resident = 0;
-    for (const auto& c : cells) resident += map.region_resident(c.level, c.x0(), c.y0(), c.side(), c.side());
-    const FrameError e = frame_error(client::evaluator(map), light, f, 0, L);
+    for (const auto& c : cells) resident += map.region_resident(L, c.x0, c.y0, c.side, c.side);
+    const FrameError e = frame_error(eval, light, f, 0, L);
     pts.push_back({ms, e.fraction(), resident});
     if (last || ms > 60000) break;
     last = resident == cells.size();
@@ -176,8 +173,8 @@ void run(const ReportArgs& a) {
   uint32_t w = 0, h = 0;
   if (std::sscanf(a.size.c_str(), "%ux%u", &w, &h) != 2 || w == 0 || h == 0 || w > 4096 || h > 4096)
     throw Error("--size: expected WxH (1..4096), got '" + a.size + "'");
-  for (uint32_t r : a.pcf)
-    if (r == 0 || r > 4) throw Error("--pcf: radii must be in 1..4");
+  std::vector<uint32_t> radii;  // the measuring code's kernels: side 2R+1 (the single tap is always measured)
+  for (uint32_t s : a.pcf) radii.push_back((checked_pcf_side("--pcf", s, 3) - 1) / 2);
   std::filesystem::create_directories(a.out);
   const Scene scene = load_scene(a.scene);
   const LightSpace light = LightSpace::fit(LightSpec::parse(a.light), scene.bounds());
@@ -235,12 +232,12 @@ void run(const ReportArgs& a) {
   for (uint32_t i = 0; i < a.frames; ++i) {
     Camera cam = path.at(3.0 * i);
     cam.aspect = double(w) / h;
-    frames.push_back(make_frame_truth(tracer, cam, w, h, L, a.pcf));
+    frames.push_back(make_frame_truth(tracer, cam, w, h, L, radii));
   }
   // Footprint references for hierarchical filtering: single tap and every PCF radius,
   // at the pixel angle of the frame's vertical field of view (as `render --filter`).
   std::vector<uint32_t> filter_radii = {0};
-  for (uint32_t r : a.pcf)
+  for (uint32_t r : radii)
     if (std::find(filter_radii.begin(), filter_radii.end(), r) == filter_radii.end()) filter_radii.push_back(r);
   for (FrameTruth& f : frames)
     add_footprint_truth(tracer, f, L, filter_radii,
@@ -268,11 +265,11 @@ void run(const ReportArgs& a) {
     measure(b.enc, "warm-up", e, b.memory, 0, L);  // opens the tiles: not timed below
     rows.pop_back();
     for (uint32_t lv : {L, L - 1, L - 2}) measure(b.enc, "single tap", e, b.memory, 0, lv);
-    for (uint32_t r : a.pcf) measure(b.enc, "pcf " + std::to_string(2 * r + 1) + "x" + std::to_string(2 * r + 1), e, b.memory, r, L);
+    for (uint32_t r : radii) measure(b.enc, "pcf " + std::to_string(2 * r + 1) + "x" + std::to_string(2 * r + 1), e, b.memory, r, L);
   }
   for (const auto& [label, f] : flats) {
     measure(label, "single tap", *f, f->bytes(), 0, f->finest_level());
-    for (uint32_t r : a.pcf)
+    for (uint32_t r : radii)
       measure(label, "pcf " + std::to_string(2 * r + 1) + "x" + std::to_string(2 * r + 1), *f, f->bytes(), r, f->finest_level());
   }
   // (c) hierarchical filtering next to fixed-level PCF, against the footprint reference.
@@ -435,13 +432,14 @@ void run(const ReportArgs& a) {
   j["same_memory_budget_bytes"] = budget;
   json jr = json::array();
   for (const Row& r : rows)
-    jr.push_back({{"map", r.map}, {"lookup", r.what}, {"level", r.level}, {"pcf_radius", r.pcf}, {"bytes", r.bytes},
+    jr.push_back({{"map", r.map}, {"lookup", r.what}, {"level", r.level}, {"pcf_radius", r.pcf}, {"pcf_side", 2 * r.pcf + 1},
+                  {"bytes", r.bytes},
                   {"error", r.error}, {"ms_per_frame", r.ms_per_frame}});
   j["error_vs_time"] = jr;
   j["lossless_disagreements"] = lossless;
   json jf = json::array();
   for (const FilterRow& r : filter_rows)
-    jf.push_back({{"map", r.map}, {"pcf_radius", r.radius}, {"bytes", r.bytes}, {"fixed_level_error", r.fixed},
+    jf.push_back({{"map", r.map}, {"pcf_radius", r.radius}, {"pcf_side", 2 * r.radius + 1}, {"bytes", r.bytes}, {"fixed_level_error", r.fixed},
                   {"filtered_error", r.filtered}, {"fixed_level_ms_per_frame", r.fixed_ms},
                   {"filtered_ms_per_frame", r.filtered_ms}});
   j["hierarchical_filtering"] = {{"reference", "ray-traced visibility supersampled over the kernel scaled to the pixel footprint"},
@@ -463,7 +461,7 @@ Register reg{"report", "Shadow error vs time: encodings, PCF, levels, uncompress
   sub.add_option("--encodings", a->encodings, "Comma-separated encodings")->capture_default_str();
   sub.add_option("--frames", a->frames, "Camera frames along the path")->capture_default_str()->check(CLI::Range(1u, 1000u));
   sub.add_option("--size", a->size, "Frame size WxH")->capture_default_str();
-  sub.add_option("--pcf", a->pcf, "PCF radii to measure")->capture_default_str();
+  sub.add_option("--pcf", a->pcf, "PCF kernel sides to measure: odd, 3..9")->capture_default_str();
   sub.add_option("--cache-mb", a->cache_mb, "Client tile cache for the refinement run (MiB)")->capture_default_str();
   sub.add_option("--sample-ms", a->sample_ms, "Refinement sampling period (ms)")->capture_default_str();
   sub.add_option("--skip-level", a->skip_level, "Skip level K of the packs (as build --skip-level)");

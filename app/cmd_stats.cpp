@@ -14,7 +14,7 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
-#include "client/map_access.hpp"
+#include "shadowtile/client.hpp"
 #include "loadgen/prometheus_text.hpp"
 #include "loadgen/server_watch.hpp"
 #include "app/command.hpp"

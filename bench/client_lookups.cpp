@@ -125,19 +125,19 @@ PassTime time_pass(Subject s, const Encoded& e, const FloatMap& arr, const st::L
         for (size_t i = begin; i < end; ++i) out[i] = array_visibility(arr, light, probes[i].p, radius);
         break;
       case Subject::single:
-        for (size_t i = begin; i < end; ++i) out[i] = e.map.visibility(probes[i].p, radius);
+        for (size_t i = begin; i < end; ++i) out[i] = e.map.visibility(probes[i].p, 2 * radius + 1);
         break;
       case Subject::batch:
         for (size_t i = begin; i < end; i += batch) {
           const size_t n = std::min(batch, end - i);
-          e.map.visibility(std::span(points).subspan(i, n), std::span(out).subspan(i, n), radius);
+          e.map.visibility(std::span(points).subspan(i, n), std::span(out).subspan(i, n), 2 * radius + 1);
         }
         break;
       case Subject::filtered:
         for (size_t i = begin; i < end; i += batch) {
           const size_t n = std::min(batch, end - i);
           e.map.visibility_filtered(std::span(points).subspan(i, n), std::span(footprints).subspan(i, n),
-                                    std::span(out).subspan(i, n), radius);
+                                    std::span(out).subspan(i, n), 2 * radius + 1);
         }
         break;
     }
@@ -328,7 +328,7 @@ int main(int argc, char** argv) {
           time_pass(Subject::filtered, e, arr, light, *list, points, footprints, radius, 1, batch, out);
           for (size_t i = 0; i < std::min<size_t>(count, 4096); ++i)
             filtered_mismatches += std::bit_cast<uint32_t>(out[i]) !=
-                                   std::bit_cast<uint32_t>(e.map.visibility_filtered(points[i], footprints[i], radius));
+                                   std::bit_cast<uint32_t>(e.map.visibility_filtered(points[i], footprints[i], 2 * radius + 1));
         }
         for (size_t i = 0; i < std::min<size_t>(count, 4096); ++i)
           for (uint32_t r : {3u, 5u, 9u}) {

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <array>
 #include <chrono>
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <cstdio>
@@ -37,16 +38,26 @@ static_assert(sizeof(shadowtile_map_info) == 56 && offsetof(shadowtile_map_info,
 static_assert(sizeof(shadowtile_point) == 24 && sizeof(shadowtile_rgb) == 12);
 static_assert(sizeof(shadowtile_map_stats) == 136 && offsetof(shadowtile_map_stats, tiles_requested) == 48 &&
               offsetof(shadowtile_map_stats, dictionary_bytes) == 128);
-#endif
 
 struct shadowtile_client {
   st::client::Client client;
 };
 
+static_assert(sizeof(shadowtile_view_options) == 32 && offsetof(shadowtile_view_options, priority) == 24);
+static_assert(sizeof(shadowtile_view_stats) == 24);
+static_assert(sizeof(shadowtile_light) == 328 && offsetof(shadowtile_light, origin) == 16 &&
+              offsetof(shadowtile_light, extent) == 112 && offsetof(shadowtile_light, volume_lo) == 136 &&
+              offsetof(shadowtile_light, params) == 184);
+static_assert(sizeof(shadowtile_scene_extent) == 104 && offsetof(shadowtile_scene_extent, points) == 96);
+static_assert(sizeof(shadowtile_map_budget) == 64 && offsetof(shadowtile_map_budget, view_tiles_wanted) == 32);
+#endif
+
 struct shadowtile_map {
   st::client::Map map;
   std::string name, encoding;  // what shadowtile_map_info's pointers point at
   shadowtile_map_info info{};
+  st::client::LightTransform light;  // MapInfo's, kept: the transform calls never allocate
+  st::client::SceneExtent scene;
 };
 
 namespace {
@@ -119,19 +130,17 @@ shadowtile_status null_argument(const char* where, const char* what) noexcept {
   return fail(SHADOWTILE_ERROR_INVALID_ARGUMENT, buf);
 }
 
-// Map::visibility's contract takes pcf_radius <= 4 (it clamps larger ones); here a larger
-// one is the caller's mistake and says so.
-constexpr uint32_t kMaxPcfRadius = 4;
-
+// Map::visibility answers NaN for a kernel side that is not odd 1..9 (client.hpp "PCF");
+// here such a side is the caller's mistake and says so, before anything is written.
 shadowtile_status check_lookup(const char* where, const shadowtile_map* map, const void* points, size_t count,
-                               const void* out, uint32_t pcf_radius) noexcept {
+                               const void* out, uint32_t pcf_side) noexcept {
   if (!map) return null_argument(where, "map");
   if (count > 0 && !points) return null_argument(where, "points");
   if (count > 0 && !out) return null_argument(where, "out");
-  if (pcf_radius > kMaxPcfRadius) {
+  if (!st::client::pcf_side_valid(pcf_side)) {
     char buf[kMessageBytes];
-    std::snprintf(buf, sizeof buf, "%s: pcf_radius %u is above %u", where, unsigned(pcf_radius),
-                  unsigned(kMaxPcfRadius));
+    std::snprintf(buf, sizeof buf, "%s: pcf_side %u is not a PCF kernel side (odd, 1..%u)", where, unsigned(pcf_side),
+                  unsigned(st::client::kMaxPcfSide));
     return fail(SHADOWTILE_ERROR_INVALID_ARGUMENT, buf);
   }
   return SHADOWTILE_OK;
@@ -319,8 +328,10 @@ shadowtile_status shadowtile_client_open_map(shadowtile_client* client, const ch
   if (!name) return null_argument(where, "name");
   if (!out_map) return null_argument(where, "out_map");
   try {
-    auto* m = new shadowtile_map{client->client.open(name), {}, {}, {}};
+    auto* m = new shadowtile_map{client->client.open(name), {}, {}, {}, {}, {}};
     const st::client::MapInfo i = m->map.info();
+    m->light = i.light;
+    m->scene = i.scene;
     m->name = i.name;
     m->encoding = i.encoding;
     m->info.name = m->name.c_str();
@@ -342,10 +353,6 @@ shadowtile_status shadowtile_client_open_map(shadowtile_client* client, const ch
 
 // ---------------------------------------------------------------- map
 
-// Reserved: shadowtile_map_request_view (Map::request_view) and
-// shadowtile_map_get_light_transform (MapInfo's LightTransform) go here, as declared in
-// shadowtile.h's reserved section.
-
 void shadowtile_map_close(shadowtile_map* map) { delete map; }
 
 shadowtile_status shadowtile_map_get_info(const shadowtile_map* map, shadowtile_map_info* out) {
@@ -356,31 +363,31 @@ shadowtile_status shadowtile_map_get_info(const shadowtile_map* map, shadowtile_
 }
 
 shadowtile_status shadowtile_map_visibility(const shadowtile_map* map, const shadowtile_point* points, size_t count,
-                                            uint32_t pcf_radius, float* out) {
-  if (shadowtile_status s = check_lookup("shadowtile_map_visibility", map, points, count, out, pcf_radius))
+                                            uint32_t pcf_side, float* out) {
+  if (shadowtile_status s = check_lookup("shadowtile_map_visibility", map, points, count, out, pcf_side))
     return s;
   for_each_chunk(points, count, [&](size_t i0, std::span<const st::client::WorldPoint> p) {
-    map->map.visibility(p, std::span<float>(out + i0, p.size()), pcf_radius);
+    map->map.visibility(p, std::span<float>(out + i0, p.size()), pcf_side);
   });
   return SHADOWTILE_OK;
 }
 
 shadowtile_status shadowtile_map_visibility_filtered(const shadowtile_map* map, const shadowtile_point* points,
-                                                     const float* footprints, size_t count, uint32_t pcf_radius,
+                                                     const float* footprints, size_t count, uint32_t pcf_side,
                                                      float* out) {
   constexpr const char* where = "shadowtile_map_visibility_filtered";
-  if (shadowtile_status s = check_lookup(where, map, points, count, out, pcf_radius)) return s;
+  if (shadowtile_status s = check_lookup(where, map, points, count, out, pcf_side)) return s;
   if (count > 0 && !footprints) return null_argument(where, "footprints");
   for_each_chunk(points, count, [&](size_t i0, std::span<const st::client::WorldPoint> p) {
     map->map.visibility_filtered(p, std::span<const float>(footprints + i0, p.size()),
-                                 std::span<float>(out + i0, p.size()), pcf_radius);
+                                 std::span<float>(out + i0, p.size()), pcf_side);
   });
   return SHADOWTILE_OK;
 }
 
 shadowtile_status shadowtile_map_transmittance(const shadowtile_map* map, const shadowtile_point* points,
                                                const float* footprints, size_t count, shadowtile_rgb* out) {
-  if (shadowtile_status s = check_lookup("shadowtile_map_transmittance", map, points, count, out, 0)) return s;
+  if (shadowtile_status s = check_lookup("shadowtile_map_transmittance", map, points, count, out, 1)) return s;
   for (size_t i = 0; i < count; ++i) {
     const st::client::WorldPoint p{points[i].x, points[i].y, points[i].z};
     const st::client::Transmittance t =
@@ -438,6 +445,173 @@ shadowtile_status shadowtile_map_get_stats(const shadowtile_map* map, shadowtile
   o.coarse_answers = s.coarse_answers;
   o.dictionary_bytes = s.dictionary_bytes;
   *out = o;
+  return SHADOWTILE_OK;
+}
+
+// ---------------------------------------------------------------- views
+
+void shadowtile_view_options_default(shadowtile_view_options* o) {
+  if (!o) return;
+  const st::client::ViewOptions d;
+  *o = shadowtile_view_options{d.samples_x, d.samples_y, d.receiver_height, d.max_distance, d.priority, {0, 0, 0}};
+}
+
+namespace {
+shadowtile_view_stats c_view_stats(const st::client::ViewStats& v) noexcept {
+  return shadowtile_view_stats{v.wanted, v.kept, v.resident, v.queued, v.cancelled, 0};
+}
+shadowtile_status invalid(const char* where, const char* what) noexcept {
+  char buf[kMessageBytes];
+  std::snprintf(buf, sizeof buf, "%s: %s", where, what);
+  return fail(SHADOWTILE_ERROR_INVALID_ARGUMENT, buf);
+}
+}  // namespace
+
+shadowtile_status shadowtile_map_request_view(shadowtile_map* map, uint32_t view_id, const double view_projection[16],
+                                              uint32_t width, uint32_t height, const shadowtile_view_options* options,
+                                              shadowtile_view_stats* out_stats) {
+  constexpr const char* where = "shadowtile_map_request_view";
+  if (!map) return null_argument(where, "map");
+  if (!view_projection) return null_argument(where, "view_projection");
+  st::client::ViewOptions o;
+  if (options) {
+    o.samples_x = options->samples_x;
+    o.samples_y = options->samples_y;
+    o.receiver_height = options->receiver_height;
+    o.max_distance = options->max_distance;
+    o.priority = options->priority;
+  }
+  // The reasons a caller can see here are named; the rest (a singular matrix, too many
+  // views, a stack map) share the C++ API's one refusal.
+  if (width == 0 || height == 0) return invalid(where, "the viewport is empty (width or height 0)");
+  if (o.samples_x == 0 || o.samples_y == 0 || uint64_t(o.samples_x) * o.samples_y > st::client::kMaxViewSamples)
+    return invalid(where, "samples_x * samples_y must be in 1..16384");
+  for (int i = 0; i < 16; ++i)
+    if (!std::isfinite(view_projection[i])) return invalid(where, "view_projection has a non-finite entry");
+  const st::client::ViewStats v = map->map.request_view(view_id, view_projection, width, height, o);
+  if (!v.ok)
+    return invalid(where, map->map.slices() ? "views are not supported on stack maps"
+                                            : "refused: the matrix is singular, or 16 other views are registered");
+  if (out_stats) *out_stats = c_view_stats(v);
+  return SHADOWTILE_OK;
+}
+
+shadowtile_status shadowtile_map_remove_view(shadowtile_map* map, uint32_t view_id, int32_t* out_removed) {
+  if (!map) return null_argument("shadowtile_map_remove_view", "map");
+  const bool removed = map->map.remove_view(view_id);
+  if (out_removed) *out_removed = removed ? 1 : 0;
+  return SHADOWTILE_OK;
+}
+
+shadowtile_status shadowtile_map_view_stats(const shadowtile_map* map, uint32_t view_id,
+                                            shadowtile_view_stats* out_stats) {
+  constexpr const char* where = "shadowtile_map_view_stats";
+  if (!map) return null_argument(where, "map");
+  if (!out_stats) return null_argument(where, "out_stats");
+  const st::client::ViewStats v = map->map.view_stats(view_id);
+  if (!v.ok) {
+    char buf[kMessageBytes];
+    std::snprintf(buf, sizeof buf, "%s: no view %u is registered", where, unsigned(view_id));
+    return fail(SHADOWTILE_ERROR_NOT_FOUND, buf);
+  }
+  *out_stats = c_view_stats(v);
+  return SHADOWTILE_OK;
+}
+
+// ---------------------------------------------------------------- the light
+
+namespace {
+shadowtile_point c_point(const st::client::WorldPoint& p) noexcept { return shadowtile_point{p.x, p.y, p.z}; }
+st::client::WorldPoint cpp_point(const shadowtile_point& p) noexcept { return st::client::WorldPoint{p.x, p.y, p.z}; }
+shadowtile_status check_array(const char* where, const shadowtile_map* map, const void* in, size_t count,
+                              const void* out) noexcept {
+  if (!map) return null_argument(where, "map");
+  if (count > 0 && !in) return null_argument(where, "the input array");
+  if (count > 0 && !out) return null_argument(where, "out");
+  return SHADOWTILE_OK;
+}
+}  // namespace
+
+shadowtile_status shadowtile_map_get_light(const shadowtile_map* map, shadowtile_light* out) {
+  constexpr const char* where = "shadowtile_map_get_light";
+  if (!map) return null_argument(where, "map");
+  if (!out) return null_argument(where, "out_light");
+  const st::client::LightTransform& l = map->light;
+  shadowtile_light o{};
+  o.kind = l.kind_id();
+  o.orthographic = l.orthographic() ? 1 : 0;
+  o.kind_name = l.kind_name();
+  o.origin = c_point(l.origin());
+  o.axis_u = c_point(l.axis_u());
+  o.axis_v = c_point(l.axis_v());
+  o.forward = c_point(l.forward());
+  o.extent = l.extent();
+  o.near_plane = l.near_plane();
+  o.far_plane = l.far_plane();
+  const st::client::WorldBox b = l.volume_bounds();
+  o.volume_lo = c_point(b.lo);
+  o.volume_hi = c_point(b.hi);
+  const std::array<double, 18> a = l.to_array();
+  std::copy(a.begin(), a.end(), o.params);
+  *out = o;
+  return SHADOWTILE_OK;
+}
+
+shadowtile_status shadowtile_map_to_light(const shadowtile_map* map, const shadowtile_point* points, size_t count,
+                                          shadowtile_light_coord* out) {
+  if (shadowtile_status s = check_array("shadowtile_map_to_light", map, points, count, out)) return s;
+  for (size_t i = 0; i < count; ++i) {
+    const st::client::LightCoord c = map->light.to_light(cpp_point(points[i]));
+    out[i] = shadowtile_light_coord{c.u, c.v, c.d};
+  }
+  return SHADOWTILE_OK;
+}
+
+shadowtile_status shadowtile_map_to_world(const shadowtile_map* map, const shadowtile_light_coord* coords,
+                                          size_t count, shadowtile_point* out) {
+  if (shadowtile_status s = check_array("shadowtile_map_to_world", map, coords, count, out)) return s;
+  for (size_t i = 0; i < count; ++i)
+    out[i] = c_point(map->light.to_world(st::client::LightCoord{coords[i].u, coords[i].v, coords[i].d}));
+  return SHADOWTILE_OK;
+}
+
+shadowtile_status shadowtile_map_texels(const shadowtile_map* map, uint32_t level, const shadowtile_point* points,
+                                        size_t count, shadowtile_texel* out) {
+  constexpr const char* where = "shadowtile_map_texels";
+  if (shadowtile_status s = check_array(where, map, points, count, out)) return s;
+  if (level > 30) return invalid(where, "level is above 30");
+  for (size_t i = 0; i < count; ++i) {
+    const st::client::Texel t = map->light.texel(level, cpp_point(points[i]));
+    out[i] = shadowtile_texel{t.x, t.y};
+  }
+  return SHADOWTILE_OK;
+}
+
+shadowtile_status shadowtile_map_texel_size(const shadowtile_map* map, uint32_t level, const shadowtile_point* points,
+                                            size_t count, double* out) {
+  constexpr const char* where = "shadowtile_map_texel_size";
+  if (shadowtile_status s = check_array(where, map, points, count, out)) return s;
+  if (level > 30) return invalid(where, "level is above 30");
+  for (size_t i = 0; i < count; ++i) out[i] = map->light.texel_size(cpp_point(points[i]), level);
+  return SHADOWTILE_OK;
+}
+
+shadowtile_status shadowtile_map_get_scene_extent(const shadowtile_map* map, shadowtile_scene_extent* out) {
+  if (!map) return null_argument("shadowtile_map_get_scene_extent", "map");
+  if (!out) return null_argument("shadowtile_map_get_scene_extent", "out_extent");
+  const st::client::SceneExtent& e = map->scene;
+  *out = shadowtile_scene_extent{c_point(e.bounds.lo), c_point(e.bounds.hi), e.ground, e.top, e.x0, e.x1, e.z0, e.z1,
+                                 e.points};
+  return SHADOWTILE_OK;
+}
+
+shadowtile_status shadowtile_map_get_budget(const shadowtile_map* map, shadowtile_map_budget* out) {
+  if (!map) return null_argument("shadowtile_map_get_budget", "map");
+  if (!out) return null_argument("shadowtile_map_get_budget", "out_budget");
+  const st::client::MapStats s = map->map.stats();
+  *out = shadowtile_map_budget{s.dictionary_bytes,  s.accounted_bytes, s.dictionary_slots,  s.tile_slots,
+                               s.views,             s.view_slots,      s.view_tiles_wanted, s.view_tiles_over,
+                               s.view_overflows,    s.view_refetches};
   return SHADOWTILE_OK;
 }
 

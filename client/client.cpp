@@ -41,6 +41,12 @@ MapInfo Map::info() const {
   i.scene.ground = e.ground, i.scene.top = e.top;
   i.scene.x0 = e.x0, i.scene.x1 = e.x1, i.scene.z0 = e.z0, i.scene.z1 = e.z1;
   i.scene.points = e.points;
+  if (const StackGrid* g = map_->stack_grid())
+    for (uint32_t w = 0; w < g->slices; ++w) {
+      LightTransform t;
+      t.space_ = std::make_shared<const LightSpace>(g->light(w));
+      i.slice_lights.push_back(std::move(t));
+    }
   return i;
 }
 
@@ -101,28 +107,46 @@ uint32_t Map::finest_level() const noexcept { return map_ ? map_->finest_level()
 float Map::depth(uint32_t level, uint64_t x, uint64_t y) const noexcept {
   return map_ ? map_->depth(level, x, y) : kLitDepth;
 }
-float Map::pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver) const noexcept {
-  return map_ ? map_->pcf(level, x, y, r, receiver) : 1.0f;
+// The one PCF unit of the public API is the kernel side (client.hpp "PCF"); the
+// internal lookups below take a radius (side = 2 * radius + 1). An invalid side answers NaN.
+namespace {
+constexpr float kBadSide = std::numeric_limits<float>::quiet_NaN();
+constexpr uint32_t radius_of(uint32_t side) noexcept { return (side - 1) / 2; }
+// Fills out[0, n) with NaN (a batch given an invalid side); returns true when it did.
+bool refuse_side(uint32_t side, std::span<float> out, size_t n) noexcept {
+  if (pcf_side_valid(side)) return false;
+  std::fill_n(out.begin(), std::min(n, out.size()), kBadSide);
+  return true;
+}
+}  // namespace
+
+float Map::pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t side, float receiver) const noexcept {
+  if (!pcf_side_valid(side)) return kBadSide;
+  return map_ ? map_->pcf(level, x, y, side, receiver) : 1.0f;
 }
 bool Map::lit(uint64_t x, uint64_t y, float receiver_depth) const noexcept {
   return receiver_depth <= depth(finest_level(), x, y);
 }
-float Map::visibility(const WorldPoint& world, uint32_t pcf_radius) const noexcept {
-  return map_ ? map_->visibility(Vec3d{world.x, world.y, world.z}, pcf_radius) : 1.0f;
+float Map::visibility(const WorldPoint& world, uint32_t pcf_side) const noexcept {
+  if (!pcf_side_valid(pcf_side)) return kBadSide;
+  return map_ ? map_->visibility(Vec3d{world.x, world.y, world.z}, radius_of(pcf_side)) : 1.0f;
 }
-float Map::visibility_filtered(const WorldPoint& world, float footprint, uint32_t pcf_radius) const noexcept {
+float Map::visibility_filtered(const WorldPoint& world, float footprint, uint32_t pcf_side) const noexcept {
+  if (!pcf_side_valid(pcf_side)) return kBadSide;
   float out = 1.0f;
-  if (map_) map_->visibility_batch({&world, 1}, {&footprint, 1}, {&out, 1}, pcf_radius);
+  if (map_) map_->visibility_batch({&world, 1}, {&footprint, 1}, {&out, 1}, radius_of(pcf_side));
   return out;
 }
-void Map::visibility(std::span<const WorldPoint> points, std::span<float> out, uint32_t pcf_radius) const noexcept {
-  if (map_) map_->visibility_batch(points, {}, out, pcf_radius);
+void Map::visibility(std::span<const WorldPoint> points, std::span<float> out, uint32_t pcf_side) const noexcept {
+  if (refuse_side(pcf_side, out, points.size())) return;
+  if (map_) map_->visibility_batch(points, {}, out, radius_of(pcf_side));
   else std::fill_n(out.begin(), std::min(points.size(), out.size()), 1.0f);
 }
 void Map::visibility_filtered(std::span<const WorldPoint> points, std::span<const float> footprints,
-                              std::span<float> out, uint32_t pcf_radius) const noexcept {
+                              std::span<float> out, uint32_t pcf_side) const noexcept {
   if (footprints.empty()) return;  // nothing to answer: the smallest span is empty
-  if (map_) map_->visibility_batch(points, footprints, out, pcf_radius);
+  if (refuse_side(pcf_side, out, std::min(points.size(), footprints.size()))) return;
+  if (map_) map_->visibility_batch(points, footprints, out, radius_of(pcf_side));
   else std::fill_n(out.begin(), std::min({points.size(), footprints.size(), out.size()}), 1.0f);
 }
 size_t Map::request_region(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, uint64_t h,
@@ -138,22 +162,27 @@ bool Map::region_resident(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, 
 uint32_t Map::slices() const noexcept {
   return map_ && map_->stack_grid() ? map_->stack_grid()->slices : 0;
 }
-float Map::time_visibility(const WorldPoint& world, double time, uint32_t pcf_radius) const noexcept {
-  return map_ ? map_->stack_visibility({world.x, world.y, world.z}, time, pcf_radius) : 1.0f;
+float Map::time_visibility(const WorldPoint& world, double time, uint32_t pcf_side) const noexcept {
+  if (!pcf_side_valid(pcf_side)) return kBadSide;
+  return map_ ? map_->stack_visibility({world.x, world.y, world.z}, time, radius_of(pcf_side)) : 1.0f;
 }
 float Map::time_visibility_filtered(const WorldPoint& world, double time, float footprint,
-                                    uint32_t pcf_radius) const noexcept {
-  return map_ ? map_->stack_visibility({world.x, world.y, world.z}, time, pcf_radius, footprint) : 1.0f;
+                                    uint32_t pcf_side) const noexcept {
+  if (!pcf_side_valid(pcf_side)) return kBadSide;
+  return map_ ? map_->stack_visibility({world.x, world.y, world.z}, time, radius_of(pcf_side), footprint) : 1.0f;
 }
-float Map::soft_visibility(const WorldPoint& world, uint32_t pcf_radius) const noexcept {
-  return map_ ? map_->stack_soft_visibility({world.x, world.y, world.z}, pcf_radius) : 1.0f;
+float Map::soft_visibility(const WorldPoint& world, uint32_t pcf_side) const noexcept {
+  if (!pcf_side_valid(pcf_side)) return kBadSide;
+  return map_ ? map_->stack_soft_visibility({world.x, world.y, world.z}, radius_of(pcf_side)) : 1.0f;
 }
-void Map::soft_visibility(std::span<const WorldPoint> points, std::span<float> out, uint32_t pcf_radius) const noexcept {
-  if (map_) map_->stack_soft_visibility_batch(points, out, pcf_radius);
+void Map::soft_visibility(std::span<const WorldPoint> points, std::span<float> out, uint32_t pcf_side) const noexcept {
+  if (refuse_side(pcf_side, out, points.size())) return;
+  if (map_) map_->stack_soft_visibility_batch(points, out, radius_of(pcf_side));
   else std::fill_n(out.begin(), std::min(points.size(), out.size()), 1.0f);
 }
-float Map::soft_visibility_filtered(const WorldPoint& world, float footprint, uint32_t pcf_radius) const noexcept {
-  return map_ ? map_->stack_soft_visibility({world.x, world.y, world.z}, pcf_radius, footprint) : 1.0f;
+float Map::soft_visibility_filtered(const WorldPoint& world, float footprint, uint32_t pcf_side) const noexcept {
+  if (!pcf_side_valid(pcf_side)) return kBadSide;
+  return map_ ? map_->stack_soft_visibility({world.x, world.y, world.z}, radius_of(pcf_side), footprint) : 1.0f;
 }
 float Map::slice_depth(uint32_t slice, uint32_t level, uint64_t x, uint64_t y) const noexcept {
   return map_ ? map_->stack_depth(slice, level, x, y) : 1.0f;
@@ -181,6 +210,12 @@ Transmittance Map::transmittance_filtered(const WorldPoint& world, float footpri
 }
 bool Map::deep_resident(double u0, double v0, double u1, double v1) const noexcept {
   return map_ && map_->deep() && map_->deep()->resident(u0, v0, u1, v1);
+}
+uint32_t Map::deep_level() const noexcept { return map_ && map_->deep() ? map_->deep()->level() : 0; }
+Transmittance Map::transmittance_at(const LightCoord& c, double footprint_uv) const noexcept {
+  if (!map_ || !map_->deep()) return {};
+  const std::array<float, 3> t = map_->deep()->lookup(c.u, c.v, float(c.d), footprint_uv);
+  return {t[0], t[1], t[2]};
 }
 MapStats Map::stats() const noexcept { return map_ ? map_->stats() : MapStats{}; }
 uint32_t Map::slot_bytes() const noexcept { return map_ ? map_->slot_bytes() : 0; }

@@ -60,15 +60,6 @@ std::shared_ptr<const dagmh::Dictionary> dictionary_of(const PackHeader& h, std:
   return open_pack_dictionary(grid_parts(h, grid_bytes, name), "map '" + name + "': DAG-MH dictionary");
 }
 
-// cache_slots is the map's tile memory: the dictionary, resident for the map's life,
-// takes the slots its bytes fill (rounded up); one slot always remains (a probe that
-// opens a map with one slot, or a dictionary larger than the whole budget, still works).
-uint32_t slots_for(const ClientOptions& o, const PackHeader& h, const dagmh::Dictionary* dict) {
-  if (!dict) return o.cache_slots;
-  const uint64_t slot = slot_size_for(h), taken = (dict->memory_bytes() + slot - 1) / slot;
-  return uint32_t(std::max<uint64_t>(1, o.cache_slots > taken ? o.cache_slots - taken : 1));
-}
-
 // The map's memory besides its slots (ClientOptions::cache_bytes): the grid section
 // twice (as it came, then parsed: the skip grid's entries and coarse values, the
 // preview's per-entry ordinals and values, or a stack grid), the dictionary inflated, the
@@ -83,18 +74,41 @@ uint64_t metadata_bytes(const ClientOptions& o, const PackHeader& h, size_t grid
          std::min<uint64_t>(h.tile_count, requests + kPageReserve + kMaxFailedTiles) * 64;
 }
 
-// The slot count a byte budget gives (cache_bytes), or cache_slots without one.
+// The slot count a byte budget gives (cache_bytes): the metadata (the DAG-MH dictionary
+// included) first, then slots of slot size + kSlotOverheadBytes; a budget that leaves
+// fewer than kMinTileSlots is refused, naming the sizes and the budget to set. Without a
+// budget: cache_slots slots, all for tiles (the dictionary is held beside them).
 uint32_t budget_slots(const ClientOptions& o, const PackHeader& h, const dagmh::Dictionary* dict,
                       size_t grid_section_bytes, const std::string& name) {
-  if (o.cache_bytes == 0) return slots_for(o, h, dict);
+  if (o.cache_bytes == 0) return o.cache_slots;
   const uint64_t meta = metadata_bytes(o, h, grid_section_bytes, dict);
   const uint64_t per_slot = uint64_t(slot_size_for(h)) + kSlotOverheadBytes;
-  if (o.cache_bytes < meta + per_slot)
+  const uint64_t need = meta + kMinTileSlots * per_slot;
+  if (o.cache_bytes < need) {
+    const std::string of_which =
+        dict ? ", of which " + std::to_string(dict->memory_bytes()) + " are the DAG-MH dictionary" : "";
     throw Error("map '" + name + "': a cache of " + std::to_string(o.cache_bytes) + " bytes cannot hold its metadata (" +
-                std::to_string(meta) + " bytes) and one slot of " + std::to_string(per_slot) + " bytes (tiles of up to " +
-                std::to_string(h.tile_bytes) + " bytes): give at least " + std::to_string((meta + per_slot + 1048575) >> 20) +
-                " MiB");
+                std::to_string(meta) + " bytes" + of_which + ") and the " + std::to_string(kMinTileSlots) +
+                " tile slots a view needs at least (" + std::to_string(per_slot) + " bytes each: tiles of up to " +
+                std::to_string(h.tile_bytes) + " bytes): set cache_bytes (--cache-mb) to at least " +
+                std::to_string(need) + " bytes (" + std::to_string((need + 1048575) >> 20) + " MiB)");
+  }
   return uint32_t(std::min<uint64_t>((o.cache_bytes - meta) / per_slot, uint64_t(1) << 24));
+}
+
+// The tile slots the dictionary displaces (MapStats::dictionary_slots): with a byte
+// budget, the slots the same budget gives the same map without its dictionary (neither
+// inflated nor in the grid section) less those it gives with it: the arithmetic of
+// budget_slots, so exact; without a budget, 0.
+uint32_t displaced_slots(const ClientOptions& o, const PackHeader& h, const dagmh::Dictionary* dict,
+                         std::span<const uint8_t> grid_bytes, const std::string& name, uint32_t slots) {
+  if (o.cache_bytes == 0 || !dict) return 0;
+  const GridSectionParts parts = grid_parts(h, grid_bytes, name);  // the section less the dictionary's (header too)
+  const size_t section = parts.skip_grid.size() + parts.preview.size();
+  const uint64_t meta = metadata_bytes(o, h, section, nullptr);
+  const uint64_t per_slot = uint64_t(slot_size_for(h)) + kSlotOverheadBytes;
+  const uint64_t without = o.cache_bytes > meta ? std::min<uint64_t>((o.cache_bytes - meta) / per_slot, uint64_t(1) << 24) : 0;
+  return uint32_t(without > slots ? without - slots : 0);
 }
 
 // A MapInfo's pack header, checked as the pack reader checks a file's (the light too).
@@ -126,7 +140,8 @@ RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::v
       dictionary_(dictionary_of(header_, grid_bytes, name_)),
       light_(LightSpace::from_array(header_.light_kind, header_.light)),
       cache_(budget_slots(options, header_, dictionary_.get(), grid_bytes.size(), name_), slot_size_for(header_)),
-      metadata_bytes_(options.cache_bytes ? metadata_bytes(options, header_, grid_bytes.size(), dictionary_.get()) : 0),
+      metadata_bytes_(metadata_bytes(options, header_, grid_bytes.size(), dictionary_.get())),
+      dictionary_slots_(displaced_slots(options, header_, dictionary_.get(), grid_bytes, name_, cache_.slot_count())),
       requests_(size_t(options.want_capacity) + size_t(options.max_in_flight) * options.tiles_per_request,
                 options.want_capacity) {
   const std::string what = "map '" + name_ + "'";
@@ -1010,7 +1025,7 @@ MapStats RemoteMap::stats() const noexcept {
   s.dictionary_bytes = dictionary_ ? dictionary_->memory_bytes() : 0;
   s.accounted_bytes = metadata_bytes_ + uint64_t(cache_.slot_count()) * (cache_.slot_bytes() + kSlotOverheadBytes);
   s.tile_slots = cache_.slot_count();
-  s.dictionary_slots = options_.cache_slots > s.tile_slots ? options_.cache_slots - s.tile_slots : 0;
+  s.dictionary_slots = dictionary_slots_;
   s.views = view_count_;
   s.view_slots = view_slots();
   {

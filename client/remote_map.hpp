@@ -448,7 +448,8 @@ class RemoteMap final : public Evaluator {
   CutGrid grid_;
   MapPreview preview_;  // after the skip grid in MapInfo: answers where a tile is missing
   // The pack's DAG-MH dictionary (after the preview in MapInfo; tiles/PACK.md "DAG-MH
-  // dictionary"): resident for the map's life, its bytes taken from the cache's slots.
+  // dictionary"): resident for the map's life, beside the slots (counted in a byte
+  // budget's metadata: ClientOptions::cache_bytes).
   std::shared_ptr<const dagmh::Dictionary> dictionary_;
   LightSpace light_;
   std::unique_ptr<StackGrid> stack_grid_;
@@ -456,7 +457,8 @@ class RemoteMap final : public Evaluator {
 
   mutable RwLock mu_;
   mutable TileCache cache_;
-  uint64_t metadata_bytes_ = 0;  // accounted outside the slots (ClientOptions::cache_bytes; else 0)
+  uint64_t metadata_bytes_ = 0;    // accounted outside the slots (ClientOptions::cache_bytes)
+  uint32_t dictionary_slots_ = 0;  // MapStats::dictionary_slots
   std::unique_ptr<std::atomic<uint32_t>[]> slot_used_;  // epoch of each slot's last use
   uint32_t epoch_ = 1;                                   // written under the exclusive lock
   struct alignas(64) CounterShard {

@@ -1,13 +1,14 @@
-/* The shadowtile C API from C99: connect, list and open a map, prefetch, answer a batch of
- * world points, print the map's stats. Links libshadowtile.so (or the static libraries).
+/* The shadowtile C API from C99: connect, list and open a map, prefetch for a camera and
+ * around a region, answer a batch of world points, print the map's stats. Links libshadowtile.so (or the static libraries).
  *
  *   c_client HOST PORT MAP [RADIUS] < points
  *
  * points: "x y z" lines (world units). Prints one line per point: its visibility as the
  * float's bits in hex (exact, for comparing runs), then the value. The prefetch asks for
- * the finest-level texels within RADIUS (default 256) of the map's centre and waits until
- * they are resident, so answers there are exact; a game asks each frame for what its
- * camera sees instead (Map::request_view, once the C API wraps it). */
+ * the tiles a camera looking straight down on the scene needs (shadowtile_map_request_view,
+ * what a game calls each frame for each camera) and the finest-level texels within RADIUS
+ * (default 256) of the map's centre, and waits until both are resident, so answers there
+ * are exact. */
 #define _POSIX_C_SOURCE 199309L
 #include <shadowtile/shadowtile.h>
 
@@ -54,6 +55,9 @@ int main(int argc, char** argv) {
   shadowtile_map_listing* maps = NULL;
   shadowtile_map_info info;
   shadowtile_map_stats stats;
+  shadowtile_scene_extent scene;
+  shadowtile_view_stats view;
+  double camera[16];
   shadowtile_point* points = NULL;
   float* lit = NULL;
   size_t n_maps = 0, n = 0, i;
@@ -83,6 +87,19 @@ int main(int argc, char** argv) {
   fprintf(stderr, "c_client: %s: %s, 2^%u texels a side, %llu tiles\n", info.name, info.encoding,
           (unsigned)info.finest_level, (unsigned long long)info.tile_count);
 
+  /* A camera looking straight down on the scene's footprint: an orthographic
+   * view-projection, column-major (element (row r, column c) at [c * 4 + r]): x across,
+   * z up the screen, height into depth [0, 1] from above the top to below the ground. */
+  shadowtile_map_get_scene_extent(map, &scene);
+  memset(camera, 0, sizeof camera);
+  camera[0] = 2.0 / (scene.x1 - scene.x0);
+  camera[12] = -(scene.x1 + scene.x0) / (scene.x1 - scene.x0);
+  camera[9] = 2.0 / (scene.z1 - scene.z0);
+  camera[13] = -(scene.z1 + scene.z0) / (scene.z1 - scene.z0);
+  camera[6] = -1.0 / (scene.top - scene.ground + 2.0);
+  camera[14] = (scene.top + 1.0) / (scene.top - scene.ground + 2.0);
+  camera[15] = 1.0;
+
   side = (uint64_t)1 << info.finest_level;
   radius = argc == 5 ? (uint64_t)strtoull(argv[4], NULL, 10) : 256;
   x0 = side / 2 > radius ? side / 2 - radius : 0;
@@ -91,18 +108,21 @@ int main(int argc, char** argv) {
   deadline = time(NULL) + 60;
   for (;;) {
     struct timespec pause = {0, 5000000};
+    if (shadowtile_map_request_view(map, 0, camera, 640, 360, NULL, &view) != SHADOWTILE_OK) goto done;
     shadowtile_map_request_region(map, info.finest_level, x0, y0, w, w, 1, NULL);
     shadowtile_map_region_resident(map, info.finest_level, x0, y0, w, w, &resident);
-    if (resident) break;
+    if (resident && view.resident == view.kept) break;
     if (time(NULL) > deadline) {
-      fprintf(stderr, "c_client: the region is not resident after 60 s\n");
+      fprintf(stderr, "c_client: the view or the region is not resident after 60 s\n");
       goto done;
     }
     nanosleep(&pause, NULL);
   }
 
   if (!read_points(&points, &n) || !(lit = malloc((n ? n : 1) * sizeof *lit))) goto done;
-  if (shadowtile_map_visibility(map, points, n, 0, lit) != SHADOWTILE_OK) goto done;
+  fprintf(stderr, "c_client: the camera needs %u tiles, holds %u, all resident\n", (unsigned)view.wanted,
+          (unsigned)view.kept);
+  if (shadowtile_map_visibility(map, points, n, 1, lit) != SHADOWTILE_OK) goto done;
   for (i = 0; i < n; ++i) {
     uint32_t bits;
     memcpy(&bits, &lit[i], sizeof bits);

@@ -44,7 +44,7 @@ int main(int argc, char** argv) try {
   std::vector<st::client::WorldPoint> points;
   for (st::client::WorldPoint p; std::cin >> p.x >> p.y >> p.z;) points.push_back(p);
   std::vector<float> lit(points.size());
-  map.visibility(points, lit, /*pcf_radius=*/0);
+  map.visibility(points, lit, /*pcf_side=*/1);
   for (float v : lit) std::printf("%08x %g\n", std::bit_cast<uint32_t>(v), v);
 
   const st::client::MapStats s = map.stats();

@@ -26,6 +26,21 @@ constexpr uint32_t kDirtyBlockWords = 64;
 
 uint32_t align4(uint32_t n) { return (n + 3u) & ~3u; }
 
+// PCF takes the kernel side everywhere (client.hpp "PCF"): odd, 1..9. A shadow pass's
+// kernel must be one; a query's r is one, or 0 for the depth.
+void check_kernel(const char* where, uint32_t kernel) {
+  if (!client::pcf_side_valid(kernel))
+    throw GpuError(std::string(where) + ": kernel " + std::to_string(kernel) +
+                   " is not a PCF kernel side (odd, 1..9)");
+}
+template <typename Query>
+void check_query_kernels(std::span<const Query> queries) {
+  for (size_t i = 0; i < queries.size(); ++i)
+    if (queries[i].r != 0 && !client::pcf_side_valid(queries[i].r))
+      throw GpuError("GpuMap::evaluate: query " + std::to_string(i) + ": r " + std::to_string(queries[i].r) +
+                     " is neither 0 (the depth) nor a PCF kernel side (odd, 1..9)");
+}
+
 // Tile -> the slot holding it on the device: open addressing, linear probing, backward-shift
 // deletion, sized once for at most slot_count keys (load <= 1/2), so linking and unlinking
 // tiles on the frame path never allocates.
@@ -724,7 +739,7 @@ struct GpuMap::Impl {
       throw GpuError("GpuMap::record_shadow_pass: one pass per frame (frame " + std::to_string(frame) + " has one)");
     if (!im.positions || !im.normals || !im.visibility || im.width == 0 || im.height == 0)
       throw GpuError("GpuMap::record_shadow_pass: positions, normals, visibility and a non-empty size are needed");
-    if (in.kernel < 1 || in.kernel > L::kMaxPcf) throw GpuError("GpuMap::record_shadow_pass: kernel must be 1..9");
+    check_kernel("GpuMap::record_shadow_pass", in.kernel);
     if (!sg && in.soft) throw GpuError("GpuMap::record_shadow_pass: a soft pass needs a stack map (a pack built with a light set)");
     if (!sg && page_shadow[L::kPtLight] == 0) (void)map_light();  // throws: the light the pass refuses
     const VkFunctions& vk = ctx->vk;
@@ -990,6 +1005,7 @@ FrameStats GpuMap::evaluate(std::span<const GpuQuery> queries, std::span<float> 
 
 uint64_t GpuMap::submit_evaluate(std::span<const GpuQuery> queries) {
   impl_->need_own("submit_evaluate");
+  check_query_kernels(queries);
   return impl_->submit_queries(queries, L::kQueryWords, Kernel::evaluate, [](const GpuQuery& q, uint32_t* w) {
     w[L::kQueryX] = q.x;
     w[L::kQueryY] = q.y;
@@ -1008,6 +1024,7 @@ FrameStats GpuMap::evaluate(std::span<const GpuStackQuery> queries, std::span<fl
 uint64_t GpuMap::submit_evaluate(std::span<const GpuStackQuery> queries) {
   impl_->need_own("submit_evaluate");
   if (!impl_->sg) throw GpuError("GpuMap::evaluate: stack queries on a map that is not a stack");
+  check_query_kernels(queries);
   return impl_->submit_queries(queries, L::kSqWords, Kernel::stack_evaluate, [](const GpuStackQuery& q, uint32_t* w) {
     w[L::kSqX] = q.x;
     w[L::kSqY] = q.y;
@@ -1028,7 +1045,7 @@ uint64_t GpuMap::submit_shadow_pass(const ShadowPassInput& in) {
                    " pixels, want 1.." + std::to_string(m.opt.max_pixels));
   if (in.positions.size() != pixels * 4 || in.normals.size() != pixels * 4)
     throw GpuError("GpuMap::submit_shadow_pass: positions and normals need 4 floats per pixel");
-  if (in.kernel < 1 || in.kernel > L::kMaxPcf) throw GpuError("GpuMap::submit_shadow_pass: kernel must be 1..9");
+  check_kernel("GpuMap::submit_shadow_pass", in.kernel);
   if (m.sg) {
     const StackTime t = in.soft ? StackTime{} : stack_time(m.sg->slices, in.time);
     Impl::Frame& f = m.acquire();

@@ -221,7 +221,7 @@ void camera_frame(CameraRun& cam, const LoadOptions& o, const WorldFrame& world,
   // Filtered at each sample's footprint (MH §3.3: the level from the pixel, two levels
   // blended), as a renderer that does not alias in the distance would ask.
   if (!slices) {
-    map.visibility_filtered(points, needs.footprints, answers, 0);
+    map.visibility_filtered(points, needs.footprints, answers, 1);
   } else {
     for (size_t i = 0; i < points.size(); ++i)
       answers[i] = o.soft ? map.soft_visibility_filtered(points[i], needs.footprints[i])

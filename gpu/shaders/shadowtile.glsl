@@ -126,8 +126,11 @@ float st_footprint_of(vec3 uvd, vec3 right, bool has_right, vec3 down, bool has_
 
 // Visibility of a light-space point in slice w (2D maps: w unused): outside the light's box
 // lit (1); else the texel floor(uv * 2^finest), the level pair of the footprint and
-// kernel x kernel PCF at each (1..9), blended. Absent tiles answer coarsely and are fed back.
+// kernel x kernel PCF at each, blended. kernel: the PCF kernel side, odd 1..9 (the C++
+// API's unit); any other answers NaN, as Map::visibility does. Absent tiles answer
+// coarsely and are fed back.
 float st_shadow_uvd(uint w, vec3 uvd, float footprint, uint kernel, inout StProbe probe) {
+  if (kernel < 1u || kernel > 9u || (kernel & 1u) == 0u) return uintBitsToFloat(0x7FC00000u);
   if (!st_in_light_box(uvd)) return 1.0;
   const uint finest = st_finest_level();
   const float side = uintBitsToFloat((127u + finest) << 23u);

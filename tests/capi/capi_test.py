@@ -84,6 +84,41 @@ class MapStats(C.Structure):
                                           "queue_full", "coarse_answers", "dictionary_bytes")]
 
 
+class ViewOptions(C.Structure):
+    _fields_ = [("samples_x", C.c_uint32), ("samples_y", C.c_uint32), ("receiver_height", C.c_double),
+                ("max_distance", C.c_double), ("priority", C.c_uint16), ("reserved", C.c_uint16 * 3)]
+
+
+class ViewStats(C.Structure):
+    _fields_ = [(n, C.c_uint32) for n in ("wanted", "kept", "resident", "queued", "cancelled", "reserved")]
+
+
+class LightCoord(C.Structure):
+    _fields_ = [("u", C.c_double), ("v", C.c_double), ("d", C.c_double)]
+
+
+class Texel(C.Structure):
+    _fields_ = [("x", C.c_uint64), ("y", C.c_uint64)]
+
+
+class Light(C.Structure):
+    _fields_ = [("kind", C.c_uint32), ("orthographic", C.c_int32), ("kind_name", C.c_char_p),
+                ("origin", Point), ("axis_u", Point), ("axis_v", Point), ("forward", Point),
+                ("extent", C.c_double), ("near_plane", C.c_double), ("far_plane", C.c_double),
+                ("volume_lo", Point), ("volume_hi", Point), ("params", C.c_double * 18)]
+
+
+class SceneExtent(C.Structure):
+    _fields_ = [("bounds_lo", Point), ("bounds_hi", Point)] + \
+               [(n, C.c_double) for n in ("ground", "top", "x0", "x1", "z0", "z1")] + [("points", C.c_uint64)]
+
+
+class Budget(C.Structure):
+    _fields_ = [("dictionary_bytes", C.c_uint64), ("accounted_bytes", C.c_uint64)] + \
+               [(n, C.c_uint32) for n in ("dictionary_slots", "tile_slots", "views", "view_slots")] + \
+               [(n, C.c_uint64) for n in ("view_tiles_wanted", "view_tiles_over", "view_overflows", "view_refetches")]
+
+
 ErrorCallback = C.CFUNCTYPE(None, C.c_void_p, C.c_int, C.c_char_p)
 
 
@@ -116,6 +151,18 @@ def load(path):
         "shadowtile_map_region_resident": (C.c_int, [C.c_void_p, C.c_uint32, C.c_uint64, C.c_uint64, C.c_uint64,
                                                      C.c_uint64, P(C.c_int32)]),
         "shadowtile_map_get_stats": (C.c_int, [C.c_void_p, P(MapStats)]),
+        "shadowtile_view_options_default": (None, [P(ViewOptions)]),
+        "shadowtile_map_request_view": (C.c_int, [C.c_void_p, C.c_uint32, P(C.c_double), C.c_uint32, C.c_uint32,
+                                                  P(ViewOptions), P(ViewStats)]),
+        "shadowtile_map_remove_view": (C.c_int, [C.c_void_p, C.c_uint32, P(C.c_int32)]),
+        "shadowtile_map_view_stats": (C.c_int, [C.c_void_p, C.c_uint32, P(ViewStats)]),
+        "shadowtile_map_get_light": (C.c_int, [C.c_void_p, P(Light)]),
+        "shadowtile_map_to_light": (C.c_int, [C.c_void_p, P(Point), C.c_size_t, P(LightCoord)]),
+        "shadowtile_map_to_world": (C.c_int, [C.c_void_p, P(LightCoord), C.c_size_t, P(Point)]),
+        "shadowtile_map_texels": (C.c_int, [C.c_void_p, C.c_uint32, P(Point), C.c_size_t, P(Texel)]),
+        "shadowtile_map_texel_size": (C.c_int, [C.c_void_p, C.c_uint32, P(Point), C.c_size_t, P(C.c_double)]),
+        "shadowtile_map_get_scene_extent": (C.c_int, [C.c_void_p, P(SceneExtent)]),
+        "shadowtile_map_get_budget": (C.c_int, [C.c_void_p, P(Budget)]),
     }
     for name, (res, args) in sig.items():
         f = getattr(lib, name)
@@ -227,6 +274,89 @@ def check_serve(st, server, probe, lib_path, c_client, minimal, tmp):
     shutil.rmtree(work, ignore_errors=True)
 
 
+def scene_extent(lib, m):
+    e = SceneExtent()
+    expect(lib.shadowtile_map_get_scene_extent(m, C.byref(e)), OK, "scene extent", lib)
+    return e
+
+
+def top_down_camera(e):
+    """An orthographic camera looking straight down on the scene's footprint (column-major)."""
+    vp = [0.0] * 16
+    vp[0], vp[12] = 2 / (e.x1 - e.x0), -(e.x1 + e.x0) / (e.x1 - e.x0)
+    vp[9], vp[13] = 2 / (e.z1 - e.z0), -(e.z1 + e.z0) / (e.z1 - e.z0)
+    vp[6], vp[14] = -1 / (e.top - e.ground + 2), (e.top + 1) / (e.top - e.ground + 2)
+    vp[15] = 1.0
+    return vp
+
+
+def check_light_and_views(lib, m, pts, n, info):
+    """The light transform, the scene extent, a camera's view and the cache's shares."""
+    light = Light()
+    expect(lib.shadowtile_map_get_light(m, C.byref(light)), OK, "get_light", lib)
+    if (light.kind, light.orthographic, light.kind_name) != (0, 1, b"sun") or not light.extent > 0 or \
+            not light.far_plane > light.near_plane:
+        fail("light: kind %d ortho %d %r extent %g" % (light.kind, light.orthographic, light.kind_name, light.extent))
+    lc = (LightCoord * n)()
+    back = (Point * n)()
+    tx = (Texel * n)()
+    size = (C.c_double * n)()
+    L = info.finest_level
+    expect(lib.shadowtile_map_to_light(m, pts, n, lc), OK, "to_light", lib)
+    expect(lib.shadowtile_map_to_world(m, lc, n, back), OK, "to_world", lib)
+    expect(lib.shadowtile_map_texels(m, L, pts, n, tx), OK, "texels", lib)
+    expect(lib.shadowtile_map_texel_size(m, L, pts, n, size), OK, "texel_size", lib)
+    span = max(light.extent, light.far_plane)
+    side = 1 << L
+    for i in range(n):
+        p, c = pts[i], lc[i]
+        if max(abs(back[i].x - p.x), abs(back[i].y - p.y), abs(back[i].z - p.z)) > 1e-9 * span:
+            fail("to_world(to_light(p)) != p at %d" % i)
+        want_t = [min(max(int(v * side), 0), side - 1) if v >= 0 else 0 for v in (c.u, c.v)]
+        if 0 <= c.u < 1 and 0 <= c.v < 1 and [tx[i].x, tx[i].y] != want_t:
+            fail("texel %d: %s, (u, v) = (%r, %r) says %s" % (i, (tx[i].x, tx[i].y), c.u, c.v, want_t))
+        # A sun's texel is the same size everywhere: the box's side over 2^L.
+        if abs(size[i] - light.extent / side) > 1e-12 * light.extent:
+            fail("texel_size %r, expected extent / 2^L = %r" % (size[i], light.extent / side))
+    e = scene_extent(lib, m)
+    if not (e.points >= 4 and e.ground <= e.top and e.x0 < e.x1 and e.z0 < e.z1 and
+            e.bounds_lo.y <= e.ground <= e.bounds_hi.y):
+        fail("scene extent: points %d ground %g top %g x %g..%g" % (e.points, e.ground, e.top, e.x0, e.x1))
+
+    # A camera: its tiles are queued, held and resident; then removed.
+    vp = (C.c_double * 16)(*top_down_camera(e))
+    vs = ViewStats()
+    deadline = time.time() + 60
+    while True:
+        expect(lib.shadowtile_map_request_view(m, 7, vp, 320, 180, None, C.byref(vs)), OK, "request_view", lib)
+        if vs.wanted == 0 or vs.kept == 0 or vs.kept > vs.wanted:
+            fail("request_view: wanted %d kept %d" % (vs.wanted, vs.kept))
+        if vs.resident == vs.kept:
+            break
+        if time.time() > deadline:
+            fail("the view is not resident after 60 s: %d of %d" % (vs.resident, vs.kept))
+        time.sleep(0.005)
+    again = ViewStats()
+    expect(lib.shadowtile_map_view_stats(m, 7, C.byref(again)), OK, "view_stats", lib)
+    if (again.wanted, again.kept, again.resident) != (vs.wanted, vs.kept, vs.resident):
+        fail("view_stats differs from request_view's answer")
+    budget = Budget()
+    expect(lib.shadowtile_map_get_budget(m, C.byref(budget)), OK, "budget", lib)
+    # cache_slots mode: every slot holds tiles, the dictionary lies beside them.
+    if (budget.views, budget.tile_slots, budget.dictionary_slots) != (1, 1024, 0) or \
+            budget.view_tiles_wanted != vs.wanted or not 0 < budget.view_slots < budget.tile_slots or \
+            budget.accounted_bytes < budget.dictionary_bytes + budget.tile_slots * info.tile_bytes:
+        fail("budget: %s" % [(f, getattr(budget, f)) for f, _ in Budget._fields_])
+    removed = C.c_int32(-1)
+    expect(lib.shadowtile_map_remove_view(m, 7, C.byref(removed)), OK, "remove_view", lib)
+    if removed.value != 1:
+        fail("remove_view of a registered view: %d" % removed.value)
+    expect(lib.shadowtile_map_remove_view(m, 7, C.byref(removed)), OK, "remove_view again", lib)
+    if removed.value != 0:
+        fail("remove_view of a removed view: %d" % removed.value)
+    print("capi: light, scene extent and a camera's %d tiles checked through ctypes" % vs.wanted)
+
+
 def check_binding(lib_path, port, points, want, got_c):
     lib = load(lib_path)
     version = lib.shadowtile_version().decode()
@@ -274,7 +404,7 @@ def check_binding(lib_path, port, points, want, got_c):
     n = len(points)
     pts = (Point * n)(*[Point(*p) for p in points])
     out = (C.c_float * n)()
-    expect(lib.shadowtile_map_visibility(m, pts, n, 0, out), OK, "visibility", lib)
+    expect(lib.shadowtile_map_visibility(m, pts, n, 1, out), OK, "visibility", lib)
     got = [bits(v) for v in out]
     if got != want or got != got_c:
         diff = [i for i in range(n) if got[i] != want[i]]
@@ -282,14 +412,16 @@ def check_binding(lib_path, port, points, want, got_c):
     # Footprints no wider than a texel take the finest level: the unfiltered answers.
     footprints = (C.c_float * n)(*([0.0] * n))
     filt = (C.c_float * n)()
-    expect(lib.shadowtile_map_visibility_filtered(m, pts, footprints, n, 0, filt), OK, "visibility_filtered", lib)
+    expect(lib.shadowtile_map_visibility_filtered(m, pts, footprints, n, 1, filt), OK, "visibility_filtered", lib)
     if [bits(v) for v in filt] != want:
         fail("visibility_filtered with zero footprints differs from visibility")
-    # PCF: fractions of a 3x3 kernel, in [0, 1], in ninths.
-    pcf = (C.c_float * n)()
-    expect(lib.shadowtile_map_visibility(m, pts, n, 1, pcf), OK, "visibility pcf 1", lib)
-    if any(not (0 <= v <= 1) or abs(v * 9 - round(v * 9)) > 1e-5 for v in pcf):
-        fail("PCF answers outside [0, 1] or not in ninths")
+    # PCF takes the kernel side: fractions of a side x side kernel, in [0, 1], in side^2-ths.
+    for side_k in (3, 5, 9):
+        pcf = (C.c_float * n)()
+        expect(lib.shadowtile_map_visibility(m, pts, n, side_k, pcf), OK, "visibility pcf side %d" % side_k, lib)
+        k2 = side_k * side_k
+        if any(not (0 <= v <= 1) or abs(v * k2 - round(v * k2)) > 1e-4 for v in pcf):
+            fail("PCF side %d: answers outside [0, 1] or not in %d-ths" % (side_k, k2))
     rgb = (Rgb * n)()
     expect(lib.shadowtile_map_transmittance(m, pts, None, n, rgb), OK, "transmittance", lib)
     if any((t.r, t.g, t.b) != (1.0, 1.0, 1.0) for t in rgb):
@@ -308,6 +440,8 @@ def check_binding(lib_path, port, points, want, got_c):
     if cancelled.value != 0:
         fail("cancel_outside the whole map cancelled %d" % cancelled.value)
 
+    check_light_and_views(lib, m, pts, n, info)
+
     # ---- the error model
     if errors:
         fail("the callback was called without an error: %s" % errors)
@@ -318,10 +452,10 @@ def check_binding(lib_path, port, points, want, got_c):
         fail("unknown map: handle %s, message %r, callback %s" % (bad.value, msg, errors))
     expect(lib.shadowtile_client_open_map(client, b"../etc", C.byref(bad)), INVALID_ARGUMENT, "bad name", lib)
     expect(lib.shadowtile_client_open_map(client, None, C.byref(bad)), INVALID_ARGUMENT, "NULL name", lib)
-    expect(lib.shadowtile_map_visibility(m, pts, n, 5, out), INVALID_ARGUMENT, "pcf_radius 5", lib)
-    expect(lib.shadowtile_map_visibility(None, pts, n, 0, out), INVALID_ARGUMENT, "NULL map", lib)
-    expect(lib.shadowtile_map_visibility(m, None, 0, 0, None), OK, "empty batch", lib)
-    if "pcf_radius" in lib.shadowtile_last_error().decode() or "map is NULL" not in lib.shadowtile_last_error().decode():
+    expect(lib.shadowtile_map_visibility(m, pts, n, 2, out), INVALID_ARGUMENT, "pcf_side 2", lib)
+    expect(lib.shadowtile_map_visibility(None, pts, n, 1, out), INVALID_ARGUMENT, "NULL map", lib)
+    expect(lib.shadowtile_map_visibility(m, None, 0, 1, None), OK, "empty batch", lib)
+    if "pcf_side" in lib.shadowtile_last_error().decode() or "map is NULL" not in lib.shadowtile_last_error().decode():
         fail("last_error after an empty batch: %r" % lib.shadowtile_last_error())
     seen = []
     t = threading.Thread(target=lambda: seen.append(lib.shadowtile_last_error()))
@@ -329,6 +463,35 @@ def check_binding(lib_path, port, points, want, got_c):
     t.join()
     if seen != [b""]:
         fail("last_error is not per thread: a new thread sees %r" % seen)
+    # PCF sides that are not odd 1..9 are refused, nothing written, the message naming the side.
+    for side_k in (0, 2, 4, 8, 10, 11, 0xFFFFFFFF):
+        marker = (C.c_float * n)(*([-1.0] * n))
+        expect(lib.shadowtile_map_visibility(m, pts, n, side_k, marker), INVALID_ARGUMENT, "pcf side %d" % side_k,
+               lib)
+        expect(lib.shadowtile_map_visibility_filtered(m, pts, footprints, n, side_k, marker), INVALID_ARGUMENT,
+               "filtered pcf side %d" % side_k, lib)
+        msg = lib.shadowtile_last_error().decode()
+        if "pcf_side %d" % side_k not in msg or "odd, 1..9" not in msg or any(v != -1.0 for v in marker):
+            fail("pcf side %d: message %r, or answers written" % (side_k, msg))
+    # Views: bad arguments are refused with a status and a message, nothing registered.
+    vp = (C.c_double * 16)(*top_down_camera(scene_extent(lib, m)))
+    for what, args in (("empty viewport", (vp, 0, 360)), ("NULL matrix", (None, 64, 64))):
+        expect(lib.shadowtile_map_request_view(m, 3, args[0], args[1], args[2], None, None), INVALID_ARGUMENT,
+               what, lib)
+    nan = (C.c_double * 16)(*vp)
+    nan[5] = float("nan")
+    expect(lib.shadowtile_map_request_view(m, 3, nan, 64, 64, None, None), INVALID_ARGUMENT, "NaN matrix", lib)
+    singular = (C.c_double * 16)()
+    expect(lib.shadowtile_map_request_view(m, 3, singular, 64, 64, None, None), INVALID_ARGUMENT, "singular", lib)
+    many = ViewOptions()
+    lib.shadowtile_view_options_default(C.byref(many))
+    many.samples_x, many.samples_y = 200, 200
+    expect(lib.shadowtile_map_request_view(m, 3, vp, 64, 64, C.byref(many), None), INVALID_ARGUMENT, "samples", lib)
+    vs = ViewStats()
+    expect(lib.shadowtile_map_view_stats(m, 3, C.byref(vs)), NOT_FOUND, "refused views register nothing", lib)
+    expect(lib.shadowtile_map_view_stats(m, 7, C.byref(vs)), NOT_FOUND, "a removed view", lib)
+    tx = (Texel * n)()
+    expect(lib.shadowtile_map_texels(m, 31, pts, n, tx), INVALID_ARGUMENT, "texel level 31", lib)
     zero = ClientOptions()
     lib.shadowtile_client_options_default(C.byref(zero))
     zero.cache_slots = 0
@@ -368,7 +531,7 @@ def check_binding(lib_path, port, points, want, got_c):
 
     # A map outlives its client, answering from its cache.
     lib.shadowtile_client_destroy(client)
-    expect(lib.shadowtile_map_visibility(m, pts, n, 0, out), OK, "visibility after destroy", lib)
+    expect(lib.shadowtile_map_visibility(m, pts, n, 1, out), OK, "visibility after destroy", lib)
     if [bits(v) for v in out] != want:
         fail("answers changed after the client was destroyed")
     lib.shadowtile_map_close(m)

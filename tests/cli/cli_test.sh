@@ -62,11 +62,18 @@ check stack-render-time 0 "slices 1 and 2 blended" -- "$st" render stack.pack --
 check stack-render-time-diff 0 "differing pixels: [0-9]+ of [1-9][0-9]+ receivers \(0\.[0-9]+%\)" -- \
   "$st" render stack.pack --scene $scene $scam --time 0.4 --diff -o st.exr
 check stack-render-soft-diff 0 "differing pixels: [0-9]+ of [1-9][0-9]+ receivers \(0\.[0-9]+%\)" -- \
-  "$st" render stack.pack --scene $scene $scam --soft --pcf 1 --filter --diff -o ss.exr
+  "$st" render stack.pack --scene $scene $scam --soft --pcf 3 --filter --diff -o ss.exr
 [[ -f ss.png && -f ss_traced.png && -f ss_diff.png ]] || { echo "FAIL stack-render outputs missing"; fail=1; }
 check stack-render-both 1 "not both" -- "$st" render stack.pack --scene $scene $scam --time 0.5 --soft -o x.exr
 check stack-render-bad-time 1 "time: expected a time in \[0, 1\]" -- \
   "$st" render stack.pack --scene $scene $scam --time 1.5 -o x.exr
+# PCF takes one unit everywhere, the kernel side: 0, even and out-of-range sides are refused.
+for side in 0 2 4 11; do
+  check render-pcf-side-$side 1 "pcf: a PCF kernel side is odd, 1\.\.9 \(1: one tap, 3: 3x3, 5: 5x5, \.\.\.\), got $side" -- \
+    "$st" render stack.pack --scene $scene $scam --pcf $side -o x.exr
+done
+check report-pcf-side-1 1 "pcf: a PCF kernel side is odd, 3\.\.9 \(3: 3x3, 5: 5x5, \.\.\.\), got 1" -- \
+  "$st" report --scene $scene --light sun:azimuth=30,elevation=50 --pcf 1 --out rep-x
 # An area light's stack in its default window frame (windowed spots): inspect names the
 # frame, verify re-traces every texel of every slice, a slice exports, soft shadows render.
 hair="procedural:hairball,count=12"

@@ -254,12 +254,12 @@ std::string coherent_rows_difference(Fixture& f, uint64_t seed) {
       points.push_back({w.x, w.y, w.z});
     }
   }
-  for (uint32_t radius : {1u, 2u, 4u}) {
+  for (uint32_t side : {3u, 5u, 9u}) {
     std::vector<float> batch(points.size());
-    map.visibility(points, batch, radius);
+    map.visibility(points, batch, side);
     for (size_t i = 0; i < points.size(); ++i)
-      if (bits(batch[i]) != bits(map.visibility(points[i], radius)))
-        return "visibility: point " + std::to_string(i) + " radius " + std::to_string(radius);
+      if (bits(batch[i]) != bits(map.visibility(points[i], side)))
+        return "visibility: point " + std::to_string(i) + " side " + std::to_string(side);
   }
   return "";
 }
@@ -298,13 +298,13 @@ TEST(ClientLookups, BatchesAnswerLikeSingleLookupsBitForBit) {
     }
   points.push_back({1e9, 0, 0});  // outside the light's box: lit
   footprints.push_back(1.0f);
-  for (uint32_t radius : {0u, 1u, 2u}) {
+  for (uint32_t side : {1u, 3u, 5u}) {
     std::vector<float> batch(points.size()), filtered(points.size());
-    map.visibility(points, batch, radius);
-    map.visibility_filtered(points, footprints, filtered, radius);
+    map.visibility(points, batch, side);
+    map.visibility_filtered(points, footprints, filtered, side);
     for (size_t i = 0; i < points.size(); ++i) {
-      ASSERT_EQ(bits(batch[i]), bits(map.visibility(points[i], radius))) << i << " r " << radius;
-      ASSERT_EQ(bits(filtered[i]), bits(map.visibility_filtered(points[i], footprints[i], radius))) << i;
+      ASSERT_EQ(bits(batch[i]), bits(map.visibility(points[i], side))) << i << " side " << side;
+      ASSERT_EQ(bits(filtered[i]), bits(map.visibility_filtered(points[i], footprints[i], side))) << i;
       ASSERT_GE(filtered[i], 0.0f);
       ASSERT_LE(filtered[i], 1.0f);
     }
@@ -312,10 +312,10 @@ TEST(ClientLookups, BatchesAnswerLikeSingleLookupsBitForBit) {
   }
   // The smallest span bounds the answers; nothing past it is written.
   std::vector<float> out(4, -1.0f);
-  map.visibility(std::span(points).first(2), out, 0);
+  map.visibility(std::span(points).first(2), out, 1);
   EXPECT_EQ(out[2], -1.0f);
   std::fill(out.begin(), out.end(), -1.0f);
-  map.visibility_filtered(points, std::span<const float>(), out, 0);
+  map.visibility_filtered(points, std::span<const float>(), out, 1);
   for (float v : out) EXPECT_EQ(v, -1.0f);
   EXPECT_GT(f.map->stats().cache.hits, 0u);
   EXPECT_GT(f.map->stats().coarse_answers, 0u);

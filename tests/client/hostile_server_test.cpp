@@ -125,11 +125,12 @@ TEST(HostileServer, EveryLegalTileBoundStaysWithinTheCacheBudget) {
       EXPECT_LE(st.accounted_bytes, budget) << tile_bytes;
       EXPECT_LE(slots * (m.slot_bytes() + kSlotOverheadBytes), budget) << tile_bytes;
       EXPECT_GE(m.slot_bytes(), tile_bytes);
-      EXPECT_GE(slots, 1u);
+      EXPECT_GE(slots, kMinTileSlots);
     } catch (const std::exception& e) {
-      // Refused only when one slot cannot fit beside the metadata, and then saying so.
+      // Refused only when kMinTileSlots slots cannot fit beside the metadata, and then saying so.
       const std::string why = e.what();
-      EXPECT_GT(uint64_t(tile_bytes) + kSlotOverheadBytes, budget / 2) << tile_bytes << ": " << why;
+      EXPECT_GT(uint64_t(kMinTileSlots) * (uint64_t(tile_bytes) + kSlotOverheadBytes), budget / 2)
+          << tile_bytes << ": " << why;
       EXPECT_NE(why.find("cannot hold its metadata"), std::string::npos) << why;
     }
   }

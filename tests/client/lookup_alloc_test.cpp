@@ -74,7 +74,7 @@ TEST(RemoteMapLookups, NeverAllocateWhetherTilesAreMissingOrResident) {
       for (uint32_t l = 0; l <= level; ++l)
         for (uint64_t y = 0; y < (uint64_t(1) << l); ++y)
           for (uint64_t x = 0; x < (uint64_t(1) << l); ++x) sink += ev.depth(l, x, y);
-      for (uint64_t i = 0; i < 64; ++i) sink += map.pcf(level, i, 63 - i, 5, 0.5f) + map.visibility({0.1 * double(i), 1, 0}, 2);
+      for (uint64_t i = 0; i < 64; ++i) sink += map.pcf(level, i, 63 - i, 5, 0.5f) + map.visibility({0.1 * double(i), 1, 0}, 5);
     };
     const uint64_t before_miss = t_allocations;
     sweep();  // nothing resident: coarse answers, fetches queued

@@ -84,9 +84,9 @@ void served_stack_answers_like_local(const std::string& light_set, const std::st
     // PCF and the footprint level: the local pack's answers; no footprint, no kernel: the
     // single tap.
     const float fp = float(3 * next());
-    EXPECT_EQ(m.time_visibility_filtered(wp, t, fp, 1), local.map().visibility_filtered(q, t, 1, fp));
-    EXPECT_EQ(m.soft_visibility_filtered(wp, fp, 2), local.map().soft_visibility_filtered(q, 2, fp));
-    EXPECT_EQ(m.time_visibility(wp, t, 1), local.map().visibility_filtered(q, t, 1, 0));
+    EXPECT_EQ(m.time_visibility_filtered(wp, t, fp, 3), local.map().visibility_filtered(q, t, 1, fp));
+    EXPECT_EQ(m.soft_visibility_filtered(wp, fp, 5), local.map().soft_visibility_filtered(q, 2, fp));
+    EXPECT_EQ(m.time_visibility(wp, t, 3), local.map().visibility_filtered(q, t, 1, 0));
     EXPECT_EQ(m.time_visibility_filtered(wp, t, 0), m.time_visibility(wp, t));
   }
   {  // the batched soft lookup (interleaved walks; PCF: per point)
@@ -94,10 +94,10 @@ void served_stack_answers_like_local(const std::string& light_set, const std::st
     for (const Vec3d& q : points) wps.push_back({q.x, q.y, q.z});
     std::vector<float> out(wps.size()), out_pcf(wps.size());
     m.soft_visibility(wps, out);
-    m.soft_visibility(wps, out_pcf, 1);
+    m.soft_visibility(wps, out_pcf, 3);
     for (size_t i = 0; i < wps.size(); ++i) {
       EXPECT_EQ(out[i], local.map().soft_visibility(points[i]));
-      EXPECT_EQ(out_pcf[i], m.soft_visibility(wps[i], 1));
+      EXPECT_EQ(out_pcf[i], m.soft_visibility(wps[i], 3));
     }
   }
   for (uint32_t w = 0; w < slices; w += 3)

@@ -6,7 +6,7 @@
 //                                     occur), anywhere along the ray, and a few outside
 //                                     the light's box
 //   pack_probe PACK visibility        reads "x y z" lines on stdin, prints each point's
-//                                     single-tap visibility (pcf_radius 0) as hex bits:
+//                                     single-tap visibility (pcf_side 1) as hex bits:
 //                                     lit outside the light's box, else d <= depth of the
 //                                     finest texel under it (client.hpp's contract)
 #include <bit>

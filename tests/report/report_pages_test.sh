@@ -27,7 +27,7 @@ run() {  # run NAME EXIT PATTERN -- command...: exit EXIT (any: not checked), la
 run build 0 '^html: rep/build\.html$' -- "$st" build $scene --light $light --resolution 512 --encoding dagmh \
   --tile-bytes 8192 -o city.pack --report rep/build.json -q
 run report 0 '^html: rep/quality/report\.html$' -- "$st" report --scene $scene --light $light --resolution 128 \
-  --frames 1 --size 48x27 --encodings dagmh --pcf 1 --out rep/quality
+  --frames 1 --size 48x27 --encodings dagmh --pcf 3 --out rep/quality
 # The soak runs the load tester too (its page lands in rep/soak/load/); a 1 s run may
 # fail its memory rule: the page must say so, the verdict itself is not checked here. The
 # load page needs 2 figures (timeline, latency); the per-cut one only once a cut completed.

@@ -5,8 +5,8 @@
 //   st::client::Client client({"127.0.0.1", 7447});
 //   st::client::Map map = client.open("city");           // header + skip grid
 //   map.request_region(level, x0, y0, w, h, priority);    // prefetch what cameras see
-//   float lit = map.visibility({x, y, z}, pcf_radius);    // 0..1, never blocks
-//   map.visibility(points, out, pcf_radius);              // a batch: one lock, one walk per tile
+//   float lit = map.visibility({x, y, z}, 3);             // 0..1 (3x3 PCF), never blocks
+//   map.visibility(points, out, 3);                       // a batch: one lock, one walk per tile
 //   float d = map.depth(level, x, y);
 //   st::client::MapStats s = map.stats();
 //
@@ -39,6 +39,10 @@
 //     allocate, never throw. A tile that cannot be had (corrupt after max_tile_retries,
 //     refused by the server) keeps answering from the coarser level for good and is
 //     counted in MapStats::tiles_failed.
+//   - PCF (every lookup and every tool takes one unit, the kernel side): an odd side
+//     1, 3, 5, 7 or 9 (kMaxPcfSide), 1 a single tap. A lookup given any other side
+//     (0, even, above 9) answers NaN (every out[i] of a batch), so a wrong unit shows at
+//     once and never passes as a plausible shadow; pcf_side_valid() checks one first.
 //   - A default-constructed Map is valid() == false and answers like an empty map: depth
 //     1 (lit), pcf and visibility 1, no tiles, zero stats.
 // Thread safety: every method of Client and Map may be called from any thread. Lookups on
@@ -80,14 +84,17 @@ class IoPool;
 SHADOWTILE_API std::shared_ptr<IoPool> make_io_pool(unsigned threads);
 
 struct ClientOptions {
-  uint32_t cache_slots = 256;               // tile cache slots per map (cache_bytes 0)
+  // Tile cache slots per map when cache_bytes is 0: exactly this many hold tiles (at least
+  // 1); a DAG-MH pack's dictionary is held beside them (MapStats::dictionary_bytes).
+  uint32_t cache_slots = 256;
   uint32_t max_slot_bytes = 16u << 20;      // refuse maps whose tile bound exceeds this
   // Memory per map in bytes (0: cache_slots slots instead). The slot count then follows
   // from it: the map's metadata (skip grid, preview, DAG-MH dictionary, request table)
   // is taken first, then every slot costs its size (the pack's tile bound, at least an
   // index tile's 2,396 bytes) plus kSlotOverheadBytes for what each slot holds besides
-  // (its opened tile, page-table and bookkeeping entries). open() refuses, in one line, a
-  // map whose metadata and one slot do not fit. The client tools (load, render, view,
+  // (its opened tile, page-table and bookkeeping entries). open() refuses, in one line
+  // naming the sizes and the budget to set, a map whose metadata (the dictionary
+  // included) and kMinTileSlots slots do not fit: never a silent shrink. The client tools (load, render, view,
   // report) set this from --cache-mb: memory follows the budget, whatever tile_bytes is.
   uint64_t cache_bytes = 0;
   uint32_t want_capacity = 8192;            // queued (not yet sent) tile requests per map
@@ -241,15 +248,17 @@ struct MapStats {
   uint64_t cache_full = 0;           // a tile arrived while every slot was pinned
   uint64_t queue_full = 0;           // a wanted tile could not be queued (want_capacity)
   uint64_t coarse_answers = 0;       // lookups answered above the level asked for
-  // A DAG-MH pack's shared dictionary, fetched with the map and resident for its life;
-  // its bytes come out of cache_slots: it takes dictionary_slots of them (rounded up) and
-  // tiles get tile_slots (at least 1, even when the dictionary alone fills cache_slots).
+  // A DAG-MH pack's shared dictionary (0: none), fetched with the map and resident for
+  // its life. With cache_bytes it comes out of the budget: dictionary_slots is exactly
+  // the tile slots it displaces (tile_slots + dictionary_slots is what the same budget
+  // gives a map without it). With cache_slots it lies beside the slots: dictionary_slots
+  // is 0 and tile_slots == cache_slots.
   uint64_t dictionary_bytes = 0;
-  // The memory this map accounts for: metadata + slots x (slot bytes + kSlotOverheadBytes);
-  // within ClientOptions::cache_bytes when that is set.
+  // The memory this map accounts for: metadata (the dictionary included) + slots x (slot
+  // bytes + kSlotOverheadBytes); within ClientOptions::cache_bytes when that is set.
   uint64_t accounted_bytes = 0;
   uint32_t dictionary_slots = 0;
-  uint32_t tile_slots = 0;           // slots for tiles: cache_slots - dictionary_slots
+  uint32_t tile_slots = 0;           // slots for tiles
   // Views (Map::request_view). view_slots: the slots views may hold (tile_slots less a
   // headroom for arrivals and lookups' own misses). view_tiles_wanted: the distinct tiles
   // the registered views needed at their last requests; view_tiles_over: how many of
@@ -268,6 +277,10 @@ struct MapStats {
 
 // What one cache slot costs beyond its tile bytes (ClientOptions::cache_bytes).
 inline constexpr uint64_t kSlotOverheadBytes = 4096;
+// The fewest tile slots a byte budget (ClientOptions::cache_bytes) must leave beside the
+// metadata: a view's least working set (MapStats::view_slots) plus the headroom kept for
+// arrivals and lookups' own misses. A smaller budget is an error at open().
+inline constexpr uint32_t kMinTileSlots = 8;
 
 struct ClientStats {
   uint64_t connects = 0, connect_failures = 0, disconnects = 0;
@@ -289,6 +302,7 @@ struct MapInfo {
   bool sun = true;            // directional light (orthographic, or a sun path's ground frame); false: spot (perspective)
   LightTransform light;       // world -> texels and depth (a stack map: its first light sample's)
   SceneExtent scene;          // where the surfaces lie (from the skip grid)
+  std::vector<LightTransform> slice_lights;  // a stack map's light samples, slice w's at [w]; 2D: empty
 };
 
 // One map of the server's catalog (list_maps).
@@ -322,6 +336,10 @@ struct SHADOWTILE_API ServerStats {
 };
 
 
+// PCF kernel sides: odd, 1..kMaxPcfSide (1: a single tap, 3: 3x3, ..., 9: 9x9).
+inline constexpr uint32_t kMaxPcfSide = 9;
+constexpr bool pcf_side_valid(uint32_t side) noexcept { return side >= 1 && side <= kMaxPcfSide && side % 2 == 1; }
+
 // Per-channel transmittance (1: nothing partial between the light and the point).
 struct Transmittance {
   float r = 1, g = 1, b = 1;
@@ -340,26 +358,27 @@ class SHADOWTILE_API Map {
   uint32_t finest_level() const noexcept;
 
   float depth(uint32_t level, uint64_t x, uint64_t y) const noexcept;
-  // Fraction of an r x r kernel (1 <= r <= 9) around texel (x, y) of `level` whose taps are
-  // lit for `receiver`; taps are clamped to the map's edges.
-  float pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver) const noexcept;
+  // Fraction of the side x side kernel around texel (x, y) of `level` (texels x - side/2
+  // .. x + side/2 on each axis, clamped to the map's edges) whose taps are lit for
+  // `receiver`. side: odd, 1..9 (pcf_side_valid); any other answers NaN.
+  float pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t side, float receiver) const noexcept;
   bool lit(uint64_t x, uint64_t y, float receiver_depth) const noexcept;  // at the finest level
   // Fraction lit (0..1) of a world point: light space from the map's header, PCF over a
-  // (2 * pcf_radius + 1)^2 kernel at the finest level (pcf_radius <= 4). Points outside
-  // the light's box are lit (1).
-  float visibility(const WorldPoint& world, uint32_t pcf_radius = 0) const noexcept;
+  // pcf_side x pcf_side kernel at the finest level (1: one tap, the exact lit test; an
+  // invalid side answers NaN, see "PCF" above). Points outside the light's box are lit (1).
+  float visibility(const WorldPoint& world, uint32_t pcf_side = 1) const noexcept;
   // Hierarchical filtering (MH 2016 §3.3): `footprint` is the side, in world units, of
   // the area the receiver's pixel covers; the kernel is applied at the two levels where
   // one texel is about that size and blended trilinearly (tiles/core/filter_level.hpp
   // states the arithmetic). footprint <= one finest texel: the finest level, as above.
-  float visibility_filtered(const WorldPoint& world, float footprint, uint32_t pcf_radius = 0) const noexcept;
-  // Batches: out[i] = visibility(points[i], pcf_radius) (or visibility_filtered(points[i],
-  // footprints[i], pcf_radius)) for i below the
+  float visibility_filtered(const WorldPoint& world, float footprint, uint32_t pcf_side = 1) const noexcept;
+  // Batches: out[i] = visibility(points[i], pcf_side) (or visibility_filtered(points[i],
+  // footprints[i], pcf_side)) for i below the
   // smallest of the spans' sizes, bit for bit, under one shared lock, with the page-table
   // walk skipped while consecutive points stay inside one tile. Nothing allocates.
-  void visibility(std::span<const WorldPoint> points, std::span<float> out, uint32_t pcf_radius = 0) const noexcept;
+  void visibility(std::span<const WorldPoint> points, std::span<float> out, uint32_t pcf_side = 1) const noexcept;
   void visibility_filtered(std::span<const WorldPoint> points, std::span<const float> footprints,
-                           std::span<float> out, uint32_t pcf_radius = 0) const noexcept;
+                           std::span<float> out, uint32_t pcf_side = 1) const noexcept;
 
   // Partial occluders (semi-transparent surfaces, alpha-tested cards, volumes), held in the
   // pack's deep shadow map (Lokovic and Veach 2000) next to the opaque map: the light
@@ -376,6 +395,12 @@ class SHADOWTILE_API Map {
   // rectangle [u0, u1) x [v0, v1) (map units, 0..1: the light's image plane) is resident
   // (tests, prefetch loops); queues the missing ones. False for a map without a deep part.
   bool deep_resident(double u0, double v0, double u1, double v1) const noexcept;
+  // The deep map's level (its texels: 2^level a side; 0 until its directory arrived, and
+  // for a map without a deep part), and transmittance_filtered at light coordinates
+  // (LightTransform::to_light) with the footprint in map units (0: unfiltered): for
+  // renderers that carry light-space points. Never block; never throw.
+  uint32_t deep_level() const noexcept;
+  Transmittance transmittance_at(const LightCoord& c, double footprint_uv = 0) const noexcept;
 
   // Queues the fetch of every tile under texels [x0, x0+w) x [y0, y0+h) of `level`
   // (clamped to the map), walking index tiles as they arrive. Larger priority = sooner.
@@ -424,22 +449,22 @@ class SHADOWTILE_API Map {
   // [w0, w1] (the next ones a day-night cycle needs) and slices_resident says when the
   // answers there are exact. noexcept, no allocation, as the 2D lookups.
   // PCF and footprint level as in 2D (visibility / visibility_filtered above): each
-  // sample's answer is the fraction of a (2 * pcf_radius + 1)^2 kernel of its slice
-  // (pcf_radius <= 4), and with the _filtered forms at the two levels of the slice where
-  // one texel is about `footprint` world units wide, blended; the time blend and the
-  // average over samples are then taken of those fractions. pcf_radius 0 with no
+  // sample's answer is the fraction of a pcf_side x pcf_side kernel of its slice (an
+  // invalid side answers NaN), and with the _filtered forms at the two levels of the slice
+  // where one texel is about `footprint` world units wide, blended; the time blend and the
+  // average over samples are then taken of those fractions. pcf_side 1 with no
   // footprint is the single-tap lookup, bit for bit.
   uint32_t slices() const noexcept;
-  float time_visibility(const WorldPoint& world, double time, uint32_t pcf_radius = 0) const noexcept;
+  float time_visibility(const WorldPoint& world, double time, uint32_t pcf_side = 1) const noexcept;
   float time_visibility_filtered(const WorldPoint& world, double time, float footprint,
-                                 uint32_t pcf_radius = 0) const noexcept;
-  float soft_visibility(const WorldPoint& world, uint32_t pcf_radius = 0) const noexcept;
-  float soft_visibility_filtered(const WorldPoint& world, float footprint, uint32_t pcf_radius = 0) const noexcept;
-  // out[i] = soft_visibility(points[i], pcf_radius) for i < min(points.size(), out.size()),
-  // bit for bit. With pcf_radius 0 the walks of several points are interleaved so that
+                                 uint32_t pcf_side = 1) const noexcept;
+  float soft_visibility(const WorldPoint& world, uint32_t pcf_side = 1) const noexcept;
+  float soft_visibility_filtered(const WorldPoint& world, float footprint, uint32_t pcf_side = 1) const noexcept;
+  // out[i] = soft_visibility(points[i], pcf_side) for i < min(points.size(), out.size()),
+  // bit for bit. With pcf_side 1 the walks of several points are interleaved so that
   // their cache misses overlap: a frame's receivers in one call cost several times less
   // per point than one call each (tiles/core/MHOCT.md "Batched soft lookups").
-  void soft_visibility(std::span<const WorldPoint> points, std::span<float> out, uint32_t pcf_radius = 0) const noexcept;
+  void soft_visibility(std::span<const WorldPoint> points, std::span<float> out, uint32_t pcf_side = 1) const noexcept;
   float slice_depth(uint32_t slice, uint32_t level, uint64_t x, uint64_t y) const noexcept;
   size_t request_slices(uint32_t w0, uint32_t w1, uint16_t priority) noexcept;
   bool slices_resident(uint32_t w0, uint32_t w1) const noexcept;

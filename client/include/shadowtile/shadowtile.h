@@ -10,8 +10,8 @@
  *     fprintf(stderr, "%s\n", shadowtile_last_error());
  *   shadowtile_map* map;
  *   shadowtile_client_open_map(client, "city", &map);        (waits for the server)
- *   shadowtile_map_request_region(map, level, x0, y0, w, h, priority, NULL);
- *   shadowtile_map_visibility(map, points, count, pcf_radius, out);  (never blocks)
+ *   shadowtile_map_request_view(map, 0, view_projection, 1920, 1080, NULL, NULL);  (each frame)
+ *   shadowtile_map_visibility(map, points, count, 3, out);  (3x3 PCF; never blocks)
  *   shadowtile_map_close(map);
  *   shadowtile_client_destroy(client);
  *
@@ -19,7 +19,8 @@
  * On failure the out-parameters are left unchanged, a one-line message is kept for the
  * calling thread (shadowtile_last_error) and the error callback, if one is set, is called.
  * No C++ exception ever crosses this boundary. Lookups (visibility, transmittance) and
- * region calls fail only on bad arguments (a NULL handle or array, pcf_radius > 4): they
+ * region calls fail only on bad arguments (a NULL handle or array, a pcf_side that is not
+ * odd 1..9): they
  * never block on the network, never allocate, and where a tile is not resident they
  * answer from a coarser level and queue its fetch.
  *
@@ -49,11 +50,14 @@
 extern "C" {
 #endif
 
-#define SHADOWTILE_C_API_VERSION 1
+/* 2: PCF takes the kernel side (odd, 1..9), not a radius; views, the light transform,
+ * the scene extent and the cache's shares added. */
+#define SHADOWTILE_C_API_VERSION 2
+#define SHADOWTILE_MAX_PCF_SIDE 9
 
 typedef enum shadowtile_status {
   SHADOWTILE_OK = 0,
-  SHADOWTILE_ERROR_INVALID_ARGUMENT = 1, /* NULL handle or pointer, bad option, bad map name, pcf_radius > 4 */
+  SHADOWTILE_ERROR_INVALID_ARGUMENT = 1, /* NULL handle or pointer, bad option, bad map name, bad pcf_side */
   SHADOWTILE_ERROR_NOT_FOUND = 2,        /* the server has no map of that name */
   SHADOWTILE_ERROR_TIMEOUT = 3,          /* no answer within request_timeout_ms (not connected, or a slow server) */
   SHADOWTILE_ERROR_REFUSED = 4,          /* the key was refused, either way: final for this client */
@@ -182,17 +186,18 @@ typedef struct shadowtile_rgb {
   float r, g, b;
 } shadowtile_rgb;
 
-/* out[i] = fraction lit (0..1) of points[i], PCF over a (2 pcf_radius + 1)^2 kernel at the
- * finest level (pcf_radius <= 4); points outside the light's box are lit. Bit for bit the
- * C++ Map::visibility. count 0 allows NULL arrays. */
+/* out[i] = fraction lit (0..1) of points[i], PCF over a pcf_side x pcf_side kernel at the
+ * finest level: pcf_side odd, 1 (one tap) to SHADOWTILE_MAX_PCF_SIDE; any other side is
+ * INVALID_ARGUMENT (nothing written). Points outside the light's box are lit. Bit for bit
+ * the C++ Map::visibility. count 0 allows NULL arrays. */
 SHADOWTILE_API shadowtile_status shadowtile_map_visibility(const shadowtile_map* map, const shadowtile_point* points,
-                                                           size_t count, uint32_t pcf_radius, float* out);
+                                                           size_t count, uint32_t pcf_side, float* out);
 /* Hierarchical filtering: footprints[i] is the side, in world units, of the area
  * points[i]'s pixel covers (Map::visibility_filtered). */
 SHADOWTILE_API shadowtile_status shadowtile_map_visibility_filtered(const shadowtile_map* map,
                                                                     const shadowtile_point* points,
                                                                     const float* footprints, size_t count,
-                                                                    uint32_t pcf_radius, float* out);
+                                                                    uint32_t pcf_side, float* out);
 /* Partial occluders (Map::transmittance): out[i] for points[i]; footprints NULL: unfiltered,
  * else filtered over footprints[i] world units (Map::transmittance_filtered). All 1 for a
  * map without a deep part. */
@@ -214,9 +219,108 @@ SHADOWTILE_API shadowtile_status shadowtile_map_region_resident(const shadowtile
                                                                 uint64_t y0, uint64_t w, uint64_t h,
                                                                 int32_t* out_resident);
 
-/* ---- Reserved: the camera-driven prefetch (Map::request_view) and the light transform
- * of MapInfo are wrapped here as functions of their own (shadowtile_map_request_view,
- * shadowtile_map_get_light_transform), so that shadowtile_map_info keeps its layout. */
+/* ---- Cameras (Map::request_view of client.hpp: read it for what a view needs and keeps). */
+
+/* ViewOptions of client.hpp. Start from shadowtile_view_options_default. */
+typedef struct shadowtile_view_options {
+  uint32_t samples_x, samples_y; /* screen samples (64 x 36); product <= 16384 */
+  double receiver_height;        /* NaN: the scene's ground (shadowtile_scene_extent.ground) */
+  double max_distance;           /* 0: 1.5 x the scene's span */
+  uint16_t priority;             /* the nearest tile's fetch priority (60000) */
+  uint16_t reserved[3];          /* 0 */
+} shadowtile_view_options;
+SHADOWTILE_API void shadowtile_view_options_default(shadowtile_view_options* options);
+
+/* ViewStats of client.hpp. */
+typedef struct shadowtile_view_stats {
+  uint32_t wanted;    /* distinct tiles the view needs */
+  uint32_t kept;      /* those it holds (nearest first) */
+  uint32_t resident;  /* of the kept, resident now (== kept: the view's lookups are exact) */
+  uint32_t queued;    /* request_view: fetches newly queued or raised */
+  uint32_t cancelled; /* request_view: fetches cancelled (their tiles left every view) */
+  uint32_t reserved;
+} shadowtile_view_stats;
+
+/* Registers or updates view `view_id` (up to 16 at once per map) from its view-projection
+ * matrix (16 doubles, column-major as OpenGL and glm store it) and viewport in pixels, and
+ * queues the tiles it needs, nearest first. Call it every frame for each camera.
+ * options NULL: the defaults; out_stats may be NULL. INVALID_ARGUMENT (nothing changes):
+ * a NULL matrix, a zero viewport, a sample grid of 0 or over 16384, a non-finite or
+ * singular matrix, 16 other views registered, a stack map. Never blocks. */
+SHADOWTILE_API shadowtile_status shadowtile_map_request_view(shadowtile_map* map, uint32_t view_id,
+                                                             const double view_projection[16], uint32_t width,
+                                                             uint32_t height, const shadowtile_view_options* options,
+                                                             shadowtile_view_stats* out_stats);
+/* Forgets a view (its tiles may then be evicted). *out_removed (if not NULL): 1 if it was
+ * registered, else 0. */
+SHADOWTILE_API shadowtile_status shadowtile_map_remove_view(shadowtile_map* map, uint32_t view_id,
+                                                            int32_t* out_removed);
+/* A registered view's counts now; NOT_FOUND for a view not registered. */
+SHADOWTILE_API shadowtile_status shadowtile_map_view_stats(const shadowtile_map* map, uint32_t view_id,
+                                                           shadowtile_view_stats* out_stats);
+
+/* ---- The light (LightTransform of client.hpp): world points to light space and texels,
+ * bit for bit what the lookups test. A stack map's: its first light sample's. */
+
+/* A point in light space: u, v in [0, 1) across the map's image plane (outside: not
+ * covered), d the depth (0 at the near plane, 1 at the far plane). */
+typedef struct shadowtile_light_coord {
+  double u, v, d;
+} shadowtile_light_coord;
+typedef struct shadowtile_texel {
+  uint64_t x, y;
+} shadowtile_texel;
+
+typedef struct shadowtile_light {
+  uint32_t kind;          /* 0 sun, 1 spot, 2 sun-ground, 3 spot-window (tiles/PACK.md) */
+  int32_t orthographic;   /* 1: parallel rays (sun); 0: perspective (spot) */
+  const char* kind_name;  /* "sun", "spot", "sun-ground", "spot-window" (static) */
+  /* The frame: sun: origin is the near plane's corner (u, v) = (0, 0), extent the box's
+   * side; spot: origin is the eye, extent the image plane's width at distance 1. */
+  shadowtile_point origin, axis_u, axis_v, forward;
+  double extent, near_plane, far_plane;
+  shadowtile_point volume_lo, volume_hi; /* a world box holding the light's volume */
+  double params[18];      /* the pack header's 18 doubles: rebuilds the light exactly */
+} shadowtile_light;
+SHADOWTILE_API shadowtile_status shadowtile_map_get_light(const shadowtile_map* map, shadowtile_light* out_light);
+
+/* out[i] = points[i] in light space. */
+SHADOWTILE_API shadowtile_status shadowtile_map_to_light(const shadowtile_map* map, const shadowtile_point* points,
+                                                         size_t count, shadowtile_light_coord* out);
+/* out[i] = coords[i] back in world space (to_light's inverse, up to rounding). */
+SHADOWTILE_API shadowtile_status shadowtile_map_to_world(const shadowtile_map* map,
+                                                         const shadowtile_light_coord* coords, size_t count,
+                                                         shadowtile_point* out);
+/* out[i] = the texel of `level` (<= 30) holding points[i], clamped to the map's edges. */
+SHADOWTILE_API shadowtile_status shadowtile_map_texels(const shadowtile_map* map, uint32_t level,
+                                                       const shadowtile_point* points, size_t count,
+                                                       shadowtile_texel* out);
+/* out[i] = the side, in world units, of one texel of `level` at points[i] (a pixel
+ * covering f world units there needs the level where this is about f). */
+SHADOWTILE_API shadowtile_status shadowtile_map_texel_size(const shadowtile_map* map, uint32_t level,
+                                                           const shadowtile_point* points, size_t count,
+                                                           double* out);
+
+/* SceneExtent of client.hpp: where the map's surfaces lie (from its skip grid). */
+typedef struct shadowtile_scene_extent {
+  shadowtile_point bounds_lo, bounds_hi; /* every surface point of the skip grid */
+  double ground, top;                    /* 5th and 98th percentile heights */
+  double x0, x1, z0, z1;                 /* footprint: 1st to 99th percentiles */
+  uint64_t points;                       /* < 4: nothing hit; values from the light box */
+} shadowtile_scene_extent;
+SHADOWTILE_API shadowtile_status shadowtile_map_get_scene_extent(const shadowtile_map* map,
+                                                                 shadowtile_scene_extent* out_extent);
+
+/* The cache's shares and the views' working set (MapStats of client.hpp). */
+typedef struct shadowtile_map_budget {
+  uint64_t dictionary_bytes;  /* a DAG-MH pack's shared dictionary, resident for the map's life */
+  uint64_t accounted_bytes;   /* metadata + slots (within cache_bytes when that is set) */
+  uint32_t dictionary_slots;  /* tile slots the dictionary displaces (see MapStats) */
+  uint32_t tile_slots;        /* slots for tiles */
+  uint32_t views, view_slots; /* registered views; slots they may hold */
+  uint64_t view_tiles_wanted, view_tiles_over, view_overflows, view_refetches;
+} shadowtile_map_budget;
+SHADOWTILE_API shadowtile_status shadowtile_map_get_budget(const shadowtile_map* map, shadowtile_map_budget* out_budget);
 
 typedef struct shadowtile_map_stats {
   /* the tile cache */

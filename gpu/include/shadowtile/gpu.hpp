@@ -172,7 +172,7 @@ struct ShadowPassImages {
 
 // The shadow pass's settings, ShadowPassInput's without the host spans (same meanings).
 struct ShadowPassSettings {
-  uint32_t kernel = 3;
+  uint32_t kernel = 3;  // PCF kernel side: odd, 1..9 (else GpuError)
   float normal_offset = 0;
   bool neighbour_footprint = true;
   float footprint = 1;
@@ -189,7 +189,7 @@ struct GpuDescriptors {
 };
 
 // One query of evaluate(). r == 0: the depth of texel (x, y) of `level`. Else r x r PCF
-// (1..9) for `receiver` at texel (x, y) of `level`, or, with level == kLevelFromFootprint,
+// (r a kernel side: odd, 1..9; evaluate() throws GpuError naming the query otherwise) for `receiver` at texel (x, y) of `level`, or, with level == kLevelFromFootprint,
 // at the level pcf_footprint picks for `footprint` with (x, y) a texel of the finest level.
 struct GpuQuery {
   uint32_t x = 0, y = 0;
@@ -202,7 +202,7 @@ inline constexpr uint32_t kLevelFromFootprint = 0xFFFFFFFFu;
 
 // One query of evaluate() on a stack map (Map::slices() > 0): the same as GpuQuery in
 // slice `slice` of the stack. r == 0: the depth of texel (x, y) of `level` (Map::slice_depth);
-// else r x r PCF (1..9) at `level`, or at the level the footprint picks (kLevelFromFootprint,
+// else r x r PCF (r odd, 1..9, as GpuQuery) at `level`, or at the level the footprint picks (kLevelFromFootprint,
 // (x, y) a texel of the finest level), as StackMap::filtered filters one slice.
 struct GpuStackQuery {
   uint32_t x = 0, y = 0;
@@ -220,7 +220,7 @@ struct GpuStackQuery {
 struct ShadowPassInput {
   std::span<const float> positions, normals;  // 4 floats per pixel
   uint32_t width = 0, height = 0;
-  uint32_t kernel = 3;                        // PCF kernel side 1..9
+  uint32_t kernel = 3;                        // PCF kernel side: odd, 1..9 (else GpuError)
   float normal_offset = 0;
   bool neighbour_footprint = true;
   float footprint = 1;
