@@ -44,7 +44,7 @@
 //     (0, even, above 9) answers NaN (every out[i] of a batch), so a wrong unit shows at
 //     once and never passes as a plausible shadow; pcf_side_valid() checks one first.
 //   - A default-constructed Map is valid() == false and answers like an empty map: depth
-//     1 (lit), pcf and visibility 1, no tiles, zero stats.
+//     1 (lit), pcf and visibility 1 (for a valid side), no tiles, zero stats.
 // Thread safety: every method of Client and Map may be called from any thread. Lookups on
 // many threads run at once (they share the cache's lock and change nothing another
 // lookup reads); a tile arriving holds them up only for O(1) bookkeeping, never for its
@@ -94,8 +94,9 @@ struct ClientOptions {
   // index tile's 2,396 bytes) plus kSlotOverheadBytes for what each slot holds besides
   // (its opened tile, page-table and bookkeeping entries). open() refuses, in one line
   // naming the sizes and the budget to set, a map whose metadata (the dictionary
-  // included) and kMinTileSlots slots do not fit: never a silent shrink. The client tools (load, render, view,
-  // report) set this from --cache-mb: memory follows the budget, whatever tile_bytes is.
+  // included) and kMinTileSlots slots do not fit: never a silent shrink. The client
+  // tools (load, render, view, report) set this from --cache-mb: memory follows the
+  // budget, whatever tile_bytes is.
   uint64_t cache_bytes = 0;
   uint32_t want_capacity = 8192;            // queued (not yet sent) tile requests per map
   uint16_t max_in_flight = 64;              // tile requests proposed in the handshake
