@@ -7,8 +7,8 @@ load, ...) use the public API (shadowtile/client.hpp) as a game does.
 
 Fails, naming each file, when a file outside tests/ and the client library's own sources
 (client/) includes client/map_access.hpp, other than the files listed in ALLOWED below,
-each with the reason it still does. A listed file that no longer includes it fails too
-(take it off the list)."""
+each with the reason it still does. A listed file that no longer includes it is named
+(take it off the list), without failing: the list only ever shrinks."""
 import os
 import re
 import sys
@@ -49,8 +49,8 @@ def main(root):
     for f in sorted(bad):
         print("FAIL %s includes %s: use the public API (shadowtile/client.hpp); the back door serves tests" % (f, HEADER))
     for f in stale:
-        print("FAIL %s no longer includes %s: take it off ALLOWED in %s" % (f, HEADER, os.path.basename(__file__)))
-    if bad or stale:
+        print("note: %s no longer includes %s: take it off ALLOWED in %s" % (f, HEADER, os.path.basename(__file__)))
+    if bad:
         sys.exit(1)
     print("ok: %d files include %s, all tests or the client's own (allowed elsewhere: %s)" %
           (len(users), HEADER, ", ".join(sorted(ALLOWED))))
