@@ -154,7 +154,7 @@ void run(const ViewArgs& a) {
               width, height, a.frames, fixed ? ("camera " + to_string(*fixed)).c_str() : ("path " + a.path).c_str(),
               co.cache_slots, a.in_flight);
   if (slices)
-    std::printf("stack of %u slices, %s\n", slices,
+    std::printf("stack of %u slices (%s lights), %s\n", slices, info.light.kind_name(),
                 a.soft                 ? "soft (every sample averaged)"
                 : a.time_sweep.empty() ? ("time " + std::to_string(time0)).c_str()
                                        : ("time " + std::to_string(time0) + ".." + std::to_string(time1) + " swept").c_str());
