@@ -65,7 +65,7 @@ struct ViewArgs {
   std::string server, map, scene, path = "flyover", camera, size = "1920x1080", device, out = "view-out", json, up;
   std::string scene_limits;  // --scene-limits (tiles/bake/scene_limits.hpp)
   std::string time, time_sweep;
-  bool soft = false, twin = false;
+  bool soft = false, twin = false, validation = false;
   uint32_t frames = 24, pcf = 3, in_flight = 2;
   double fps = 24, cache_mb = 256, upload_mb = 16;
   uint64_t seed = 1;
@@ -147,6 +147,7 @@ void run(const ViewArgs& a) {
   ro.frames_in_flight = a.in_flight;
   ro.upload_budget_bytes = uint64_t(a.upload_mb * 1048576.0);
   ro.twin = a.twin;
+  ro.validation = a.validation;
   const std::vector<float> triangles = raster::flat_triangles(scene);
   if (triangles.empty()) throw Error("view: scene '" + a.scene + "' has no triangles to draw");
   raster::Rasterizer r(map, triangles, ro);
@@ -293,6 +294,11 @@ void run(const ViewArgs& a) {
     report["twin"] = {{"lookups", lookups}, {"differ", differ}, {"differ_pct", pct}, {"max_difference", max_diff},
                       {"holes", last.stats.holes}};
   }
+  if (a.validation) {
+    std::printf("validation: %llu messages%s%s\n", (unsigned long long)r.validation_messages(),
+                r.validation_messages() ? "; the first: " : "", r.first_validation_message().c_str());
+    report["validation_messages"] = r.validation_messages();
+  }
   const std::string json = a.json.empty() ? a.out + "/view.json" : a.json;
   std::ofstream(json) << report.dump(2) << "\n";
   std::printf("wrote %s/frame_*.png, %s/contact_sheet.png, %s\n", a.out.c_str(), a.out.c_str(), json.c_str());
@@ -337,6 +343,8 @@ Register reg{"view",
                sub.add_flag("--twin", a->twin,
                             "Answer the last frame's lookups again on the CPU (the client's lookups) and count "
                             "the pixels that differ");
+               sub.add_flag("--validation", a->validation,
+                            "Run under VK_LAYER_KHRONOS_validation and count its warnings and errors");
                sub.add_option("--out", a->out, "Output folder (frames, contact sheet, view.json)");
                sub.add_option("--json", a->json, "JSON report path (default OUT/view.json)");
                sub.callback([a] { run(*a); });

@@ -58,7 +58,19 @@ struct Device {
   uint32_t timestamp_bits = 0;
   std::string name;
 
-  explicit Device(std::string want) {
+  VkDebugUtilsMessengerEXT messenger = VK_NULL_HANDLE;
+  uint64_t messages = 0;
+  std::string first_message;
+
+  static VKAPI_ATTR VkBool32 VKAPI_CALL on_message(VkDebugUtilsMessageSeverityFlagBitsEXT,
+                                                   VkDebugUtilsMessageTypeFlagsEXT,
+                                                   const VkDebugUtilsMessengerCallbackDataEXT* data, void* user) {
+    auto* d = static_cast<Device*>(user);
+    if (d->messages++ == 0 && data && data->pMessage) d->first_message = data->pMessage;
+    return VK_FALSE;
+  }
+
+  Device(std::string want, bool validation) {
     if (want.empty())
       if (const char* e = std::getenv("SHADOWTILE_VK_DEVICE")) want = e;
     VkApplicationInfo app{};
@@ -68,7 +80,32 @@ struct Device {
     VkInstanceCreateInfo ici{};
     ici.sType = VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO;
     ici.pApplicationInfo = &app;
-    check(vkCreateInstance(&ici, nullptr, &instance), "vkCreateInstance");
+    const char* layer = "VK_LAYER_KHRONOS_validation";
+    const char* ext = VK_EXT_DEBUG_UTILS_EXTENSION_NAME;
+    VkDebugUtilsMessengerCreateInfoEXT mci{};
+    mci.sType = VK_STRUCTURE_TYPE_DEBUG_UTILS_MESSENGER_CREATE_INFO_EXT;
+    mci.messageSeverity = VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT;
+    mci.messageType = VK_DEBUG_UTILS_MESSAGE_TYPE_GENERAL_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_TYPE_VALIDATION_BIT_EXT;
+    mci.pfnUserCallback = &on_message;
+    mci.pUserData = this;
+    if (validation) {
+      ici.enabledLayerCount = 1;
+      ici.ppEnabledLayerNames = &layer;
+      ici.enabledExtensionCount = 1;
+      ici.ppEnabledExtensionNames = &ext;
+      ici.pNext = &mci;  // instance creation and destruction too
+    }
+    if (VkResult r = vkCreateInstance(&ici, nullptr, &instance); r != VK_SUCCESS)
+      throw std::runtime_error(std::string("vkCreateInstance failed: VkResult ") + std::to_string(int(r)) +
+                               (validation ? " (is VK_LAYER_KHRONOS_validation installed?)" : ""));
+    if (validation) {
+      auto create = reinterpret_cast<PFN_vkCreateDebugUtilsMessengerEXT>(
+          vkGetInstanceProcAddr(instance, "vkCreateDebugUtilsMessengerEXT"));
+      if (!create || create(instance, &mci, nullptr, &messenger) != VK_SUCCESS) {
+        vkDestroyInstance(instance, nullptr);
+        throw std::runtime_error("vkCreateDebugUtilsMessengerEXT failed");
+      }
+    }
     uint32_t n = 0;
     vkEnumeratePhysicalDevices(instance, &n, nullptr);
     std::vector<VkPhysicalDevice> devs(n);
@@ -81,6 +118,7 @@ struct Device {
       if (!physical && (want.empty() || std::strstr(p.deviceName, want.c_str()))) physical = d, props = p;
     }
     if (!physical) {
+      destroy_messenger();
       vkDestroyInstance(instance, nullptr);
       throw std::runtime_error("no Vulkan device named like '" + want + "' (present: " + (names.empty() ? "none" : names) + ")");
     }
@@ -93,6 +131,7 @@ struct Device {
     for (uint32_t i = 0; i < qn && family == ~0u; ++i)
       if ((qs[i].queueFlags & VK_QUEUE_GRAPHICS_BIT) && (qs[i].queueFlags & VK_QUEUE_COMPUTE_BIT)) family = i;
     if (family == ~0u) {
+      destroy_messenger();
       vkDestroyInstance(instance, nullptr);
       throw std::runtime_error("device '" + name + "' has no graphics + compute queue");
     }
@@ -100,6 +139,7 @@ struct Device {
     VkPhysicalDeviceFeatures have{};
     vkGetPhysicalDeviceFeatures(physical, &have);
     if (!have.fragmentStoresAndAtomics) {
+      destroy_messenger();
       vkDestroyInstance(instance, nullptr);
       throw std::runtime_error("device '" + name + "' has no fragmentStoresAndAtomics (the fragment shader writes feedback)");
     }
@@ -117,6 +157,7 @@ struct Device {
     dci.pQueueCreateInfos = &qci;
     dci.pEnabledFeatures = &features;
     if (VkResult r = vkCreateDevice(physical, &dci, nullptr, &device); r != VK_SUCCESS) {
+      destroy_messenger();
       vkDestroyInstance(instance, nullptr);
       check(r, "vkCreateDevice");
     }
@@ -124,7 +165,15 @@ struct Device {
   }
   ~Device() {
     vkDestroyDevice(device, nullptr);
+    destroy_messenger();
     vkDestroyInstance(instance, nullptr);
+  }
+  void destroy_messenger() {
+    if (!messenger) return;
+    auto destroy = reinterpret_cast<PFN_vkDestroyDebugUtilsMessengerEXT>(
+        vkGetInstanceProcAddr(instance, "vkDestroyDebugUtilsMessengerEXT"));
+    if (destroy) destroy(instance, messenger, nullptr);
+    messenger = VK_NULL_HANDLE;
   }
   Device(const Device&) = delete;
   Device& operator=(const Device&) = delete;
@@ -266,7 +315,7 @@ struct Rasterizer::Impl {
   std::vector<std::vector<uint8_t>> done_rgba;
   std::vector<std::vector<float>> done_rec, done_vis;
 
-  Impl(client::Map m, std::span<const float> tri, const RasterOptions& opt) : o(opt), map(std::move(m)), dev(opt.device) {
+  Impl(client::Map m, std::span<const float> tri, const RasterOptions& opt) : o(opt), map(std::move(m)), dev(opt.device, opt.validation) {
     if (o.width == 0 || o.height == 0 || o.width > 8192 || o.height > 8192)
       throw std::runtime_error("raster: size " + std::to_string(o.width) + "x" + std::to_string(o.height) + " (1..8192 each)");
     if (o.frames_in_flight < 1 || o.frames_in_flight > 4) throw std::runtime_error("raster: frames in flight 1..4");
@@ -844,6 +893,8 @@ std::span<const FrameResult> Rasterizer::finish() {
 }
 uint64_t Rasterizer::frames() const { return impl_->frame; }
 uint64_t Rasterizer::ring_waits() const { return impl_->waits; }
+uint64_t Rasterizer::validation_messages() const { return impl_->dev.messages; }
+const std::string& Rasterizer::first_validation_message() const { return impl_->dev.first_message; }
 double Rasterizer::retire_host_us_last() const { return impl_->retire_us; }
 const std::string& Rasterizer::device_name() const { return impl_->dev.name; }
 gpu::GpuStats Rasterizer::stats() const { return impl_->g->stats(); }

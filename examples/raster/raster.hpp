@@ -53,6 +53,9 @@ struct RasterOptions {
   uint64_t upload_budget_bytes = 16u << 20;
   uint32_t feedback_capacity = 4096;
   bool readback = true;             // copy each frame's colour to the host (FrameResult::rgba)
+  // VK_LAYER_KHRONOS_validation with a messenger counting its warnings and errors
+  // (validation_messages(); the first is kept): runtime_error when the layer is absent.
+  bool validation = false;
   // Also write, per pixel, the receiver the lookup used (xyz; w the footprint in finest
   // texels, -1 where no lookup ran) and the visibility (R32F), read back with the colour:
   // a CPU twin can answer the same lookups (shadowtile view --twin).
@@ -110,6 +113,8 @@ class Rasterizer {
 
   uint64_t frames() const;                // frames submitted
   uint64_t ring_waits() const;            // render() calls that had to wait for a ring slot
+  uint64_t validation_messages() const;   // RasterOptions::validation: warnings and errors so far
+  const std::string& first_validation_message() const;
   double retire_host_us_last() const;     // host time of the last GpuMap::retire call
   const std::string& device_name() const;
   gpu::GpuStats stats() const;

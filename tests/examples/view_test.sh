@@ -5,7 +5,8 @@
 # falling to none as tiles arrive, the last frame's lookups equal to the CPU twin's (the
 # client's lookups at the receivers the fragment shader used: --twin), and the last frame
 # beside `shadowtile render` from the same camera (Embree primary rays, the CPU's lookups)
-# differing in few pixels (silhouettes: rasterized against ray-traced edges).
+# differing in few pixels (silhouettes: rasterized against ray-traced edges); the Khronos
+# validation layer silent throughout (--validation).
 # Usage: view_test.sh SHADOWTILE WORKDIR
 set -uo pipefail
 st=$1 work=$2
@@ -30,7 +31,7 @@ for _ in $(seq 100); do
 done
 cam="pos=140,110,50,target=0,20,0,fov=50" size=160x90 frames=6
 timeout 300 "$st" view --server "127.0.0.1:$port" --map city --scene "$scene" --camera "$cam" --size $size \
-  --frames $frames --fps 4 --pcf 3 --device llvmpipe --twin --out "$work/view" >"$work/view.txt" 2>&1
+  --frames $frames --fps 4 --pcf 3 --device llvmpipe --twin --validation --out "$work/view" >"$work/view.txt" 2>&1
 rc=$?
 (( rc == 0 )) || { cat "$work/view.txt"; fail "view exited $rc"; }
 pngs=$(find "$work/view" -name 'frame_*.png' -size +0 | wc -l)
@@ -40,6 +41,7 @@ holes=$(awk '$1 ~ /^[0-9]+$/ && NF == 9 {print $7}' "$work/view.txt")
 first=$(head -n 1 <<<"$holes") last=$(tail -n 1 <<<"$holes")
 [[ -n "$first" && -n "$last" ]] || { cat "$work/view.txt"; fail "no per-frame rows"; }
 (( first > 0 && last == 0 )) || { cat "$work/view.txt"; fail "holes did not fall to none ($first -> $last)"; }
+grep -qx "validation: 0 messages" "$work/view.txt" || { cat "$work/view.txt"; fail "the validation layer reported"; }
 grep -qE "^twin: last frame's [1-9][0-9]* lookups against the CPU's: 0 differ .* holes in that frame 0$" "$work/view.txt" ||
   { cat "$work/view.txt"; fail "the fragment shader's lookups differ from the CPU twin's"; }
 "$st" render --server "127.0.0.1:$port" --map city --scene "$scene" --camera "$cam" --size $size --pcf 1 --filter \
