@@ -12,12 +12,13 @@
 //
 //   engine_raster --server HOST:PORT --map NAME --scene SPEC [--size 960x540] [--frames 8]
 //                 [--frame-ms 200] [--orbit 30] [--pcf 3] [--filter] [--out engine-raster-out]
-//                 [--device NAME]
+//                 [--device NAME] [--validation]
 //
 // --pcf: kernel side at the finest level, or with --filter at the two levels the pixel's
 // footprint picks (MH §3.3, Map::pcf_footprint's choice; the footprint and the receiver
 // offset as `shadowtile render --filter` takes them, so the two can be compared).
-// 2D maps (suns, spots) and stack maps (slice 0).
+// 2D maps (suns, spots) and stack maps (slice 0). --validation: under the Khronos validation
+// layer, its warnings and errors counted.
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -41,7 +42,7 @@ struct Args {
   std::string server, map, scene, size = "960x540", out = "engine-raster-out", device;
   uint32_t frames = 8, frame_ms = 200, pcf = 3;
   double orbit = 30;
-  bool filter = false;
+  bool filter = false, validation = false;
 };
 
 void print(const raster::FrameResult& r) {
@@ -68,6 +69,7 @@ int run(const Args& a) {
   raster::RasterOptions ro;
   ro.width = width, ro.height = height, ro.device = a.device;
   ro.upload_budget_bytes = 8u << 20;
+  ro.validation = a.validation;
   const std::vector<float> triangles = raster::flat_triangles(scene);
   raster::Rasterizer r(map, triangles, ro);
 
@@ -114,6 +116,9 @@ int run(const Args& a) {
   write(r.finish());
   std::printf("wrote %u frames to %s (%zu triangles); %llu waits for a ring slot\n", a.frames, a.out.c_str(),
               triangles.size() / 18, (unsigned long long)r.ring_waits());
+  if (a.validation)
+    std::printf("validation: %llu messages%s%s\n", (unsigned long long)r.validation_messages(),
+                r.validation_messages() ? "; the first: " : "", r.first_validation_message().c_str());
   return 0;
 }
 
@@ -139,6 +144,7 @@ int main(int argc, char** argv) {
       else if (k == "--out") a.out = next();
       else if (k == "--device") a.device = next();
       else if (k == "--filter") a.filter = true;
+      else if (k == "--validation") a.validation = true;
       else throw std::runtime_error("unknown option " + k);
     } catch (const std::exception& e) {
       std::fprintf(stderr, "engine_raster: %s\n", e.what());
