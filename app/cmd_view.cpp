@@ -315,7 +315,8 @@ Register reg{"view",
                    "pixel's footprint; frames in flight, tiles asked for by the shader's feedback. Changed: no "
                    "Embree G-buffer on the CPU and no wait per frame any more; columns 'gpu ms' / 'shade ms' are "
                    "the frame's and its shading pass's GPU time, 'host us' the frame path's CPU time in GpuMap; "
-                   "--full-walks (a compute-pass setting) is gone; --camera, --frames-in-flight and --twin are new.");
+                   "--full-walks (a compute-pass setting) is gone; --camera, --frames-in-flight, --twin and --validation are "
+                   "new.");
                sub.add_option("--server", a->server, "Server HOST:PORT")->required();
                sub.add_option("--map", a->map, "Map name")->required();
                sub.add_option("--scene", a->scene, "The scene the map was built from (drawn by the rasterizer)")->required();
