@@ -166,7 +166,7 @@ int main(int argc, char** argv) try {
   for (const std::string& spec : split_list(a.scenes)) {
     const Scene scene = load_scene(spec);
     const LightSpace light = LightSpace::fit(LightSpec::parse(a.light), scene.bounds());
-    const std::string name = short_name(spec) + "_" + side_name(level) + "_" + a.encoding +
+    const std::string name = short_name(spec) + "_" + side_name(level) + "_" + a.encoding + "_t" + std::to_string(a.tile_bytes) +
                              (a.region ? "_win" + std::to_string(a.region->w) : std::string());
     const std::string path = a.out + "/" + name + ".pack";
     if (!std::filesystem::exists(path)) {
@@ -310,13 +310,13 @@ int main(int argc, char** argv) try {
       };
       struct PathFrame {
         uint64_t frame, tiles;
-        double host_us;
+        double host_us, retire_us, uploads_us;
         gpu::FrameStats st;
       };
       std::vector<PathFrame> got;
       auto take = [&](std::span<const raster::FrameResult> done) {
         for (const raster::FrameResult& fr : done)
-          if (arrived.count(fr.frame)) got.push_back({fr.frame, arrived[fr.frame], fr.host_us, fr.stats});
+          if (arrived.count(fr.frame)) got.push_back({fr.frame, arrived[fr.frame], fr.host_us, fr.retire_us, fr.uploads_us, fr.stats});
       };
       // Untimed: the page table's first upload, the shader's compile, and the tiles the view's
       // feedback asks for (until a frame has no holes), so later arrivals are ours alone.
@@ -354,7 +354,8 @@ int main(int argc, char** argv) try {
       nlohmann::json frames = nlohmann::json::array();
       for (const PathFrame& p : got)
         frames.push_back({{"frame", p.frame}, {"tiles_arrived", p.tiles}, {"slots_uploaded", p.st.slots_uploaded},
-                          {"host_us", p.host_us}, {"tile_bytes", p.st.tile_bytes}, {"page_bytes", p.st.page_bytes},
+                          {"host_us", p.host_us}, {"retire_us", p.retire_us}, {"record_uploads_us", p.uploads_us},
+                          {"tile_bytes", p.st.tile_bytes}, {"page_bytes", p.st.page_bytes},
                           {"feedback_bytes", p.st.feedback_bytes}, {"host_io_bytes", p.st.host_io_bytes}});
       path_rows.push_back({{"scene", spec}, {"tiles_uploaded_median", median(tiles)}, {"host_us_median", median(host)},
                            {"host_us_max", *std::max_element(host.begin(), host.end())},

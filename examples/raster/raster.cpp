@@ -306,7 +306,7 @@ struct Rasterizer::Impl {
   struct Slot {
     uint64_t frame = 0;  // the frame it runs (0: none)
     Buffer rgba, rec, vis;
-    double host_us = 0;
+    double host_us = 0, retire_us = 0, uploads_us = 0;
   };
   std::vector<Slot> slots;
   uint64_t frame = 0, completed = 0, waits = 0;
@@ -717,7 +717,7 @@ struct Rasterizer::Impl {
     Slot& sl = slots[s];
     FrameResult r;
     r.frame = sl.frame;
-    r.host_us = sl.host_us;
+    r.host_us = sl.host_us, r.retire_us = sl.retire_us, r.uploads_us = sl.uploads_us;
     if (queries) {
       uint64_t t[kStamps] = {};
       check(vkGetQueryPoolResults(dev.device, queries, s * kStamps, kStamps, sizeof(t), t, sizeof(uint64_t),
@@ -799,7 +799,9 @@ struct Rasterizer::Impl {
     }
     auto t0 = Clock::now();
     g->record_uploads(cmd, f);
-    sl.host_us = us_since(t0) + retire_us;
+    sl.uploads_us = us_since(t0);
+    sl.retire_us = retire_us;
+    sl.host_us = sl.uploads_us + retire_us;
     if (queries) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, queries, s * kStamps + 1);
 
     // Near and far planes around the scene's box.

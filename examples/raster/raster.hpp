@@ -92,7 +92,9 @@ struct FrameResult {
   std::span<const float> visibility;    // twin: 1 float per pixel
   double gpu_frame_ms = 0;              // the frame's command buffer, first to last timestamp
   double gpu_upload_ms = 0, gpu_depth_ms = 0, gpu_shade_ms = 0;
-  double host_us = 0;                   // host time in GpuMap's calls for this frame (record_uploads, record_end_of_frame)
+  // Host time in GpuMap's calls on this frame's path: the retire() before recording it, its
+  // record_uploads and record_end_of_frame (host_us, the sum; retire_us and uploads_us of it).
+  double host_us = 0, retire_us = 0, uploads_us = 0;
   gpu::FrameStats stats;                // GpuMap's (uploads and feedback)
 };
 
