@@ -844,7 +844,10 @@ struct GpuMap::Impl {
     feedback.clear();
     const uint32_t cap = opt.feedback_capacity;
     uint32_t claimed = 0;
-    for (uint32_t h = 0; h < cap; ++h) {
+    // A frame that claimed no key (kFbUsed == 0: every tile it read was resident) reads
+    // the header alone: the steady state moves no key array over the bus.
+    const bool any = fb[L::kFbUsed] != 0 || fs.feedback_dropped != 0;
+    for (uint32_t h = 0; any && h < cap; ++h) {
       const uint32_t key = fb[L::kFbHeaderWords + h];
       if (key == 0) continue;
       ++claimed;
@@ -868,7 +871,7 @@ struct GpuMap::Impl {
     }
     fs.feedback_tiles = uint32_t(wanted.size());
     // What the host read of the feedback buffer: its header, the key array, the claimed records.
-    fs.feedback_bytes = (uint64_t(L::kFbHeaderWords) + cap + uint64_t(claimed) * L::kFbRecordWords) * 4;
+    fs.feedback_bytes = (uint64_t(L::kFbHeaderWords) + (any ? cap : 0) + uint64_t(claimed) * L::kFbRecordWords) * 4;
     totals.feedback_bytes += fs.feedback_bytes;
     fs.requested = uint32_t(view->want_tiles(wanted));
     if (queries && !engine) {

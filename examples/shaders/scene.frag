@@ -1,43 +1,116 @@
 #version 450
-// The example renderer's fragment shader: Lambert shading with streamed shadows, the
-// visibility from the GPU tile cache through shadowtile.glsl (our buffers in set 0), the
-// level pair from the pixel's footprint (or the finest level), 3x3 PCF; absent tiles
-// answer coarsely and are fed back, so the next frames stream them.
+// The example renderer's fragment shader (examples/raster/raster.cpp): Lambert shading
+// with streamed shadows as `shadowtile render` shades (ambient 0.15, albedo, sky, gamma
+// 2.2 for its PNG), the visibility from the GPU tile cache through shadowtile.glsl (our
+// buffers in set 0). Absent tiles answer coarsely and are fed back, so the next frames
+// stream them. The level pair comes from the pixel's footprint (or the finest level).
+// Stack maps: two slices blended at the frame's time, or every slice averaged (soft).
+// mode.x picks the lookup: 0 none (the pass's cost without shadows), 1 shadowtile, 2 a
+// plain R32F depth map of the finest level (set 1) with the same texel and PCF taps, the
+// baseline the benchmark compares with. RASTER_TWIN: the receiver and the visibility are
+// also written (a CPU twin answers the same lookups).
 #define ST_SET 0
 #define ST_BINDING_POOL 0
 #define ST_BINDING_PAGE 1
 #define ST_BINDING_FEEDBACK 2
 #include "shadowtile.glsl"
 
+// Early fragment tests: with the depth pre-pass and the EQUAL test only the visible
+// surface runs this shader (its feedback writes would otherwise force the tests late).
+layout(early_fragment_tests) in;
+
+layout(set = 1, binding = 0) uniform sampler2D r32f_map;
+
 layout(location = 0) in vec3 world_position;
 layout(location = 1) in vec3 world_normal;
 layout(push_constant) uniform Push {
   mat4 view_projection;
-  vec4 to_sun;  // w: one finest texel in world units
-  vec4 eye;  // xyz: the camera; w: the pixel angle (radians), 0: the finest level
+  vec4 light;  // xyz: toward a sun, or a point light's position (w == 1)
+  vec4 eye;    // xyz: the camera; w: the pixel's angle (radians), 0: the finest level
+  uvec4 mode;  // lookup, PCF kernel side, slice a | slice b << 16, soft
+  vec4 misc;   // blend between slices a and b, one finest texel (world units), offset in texels
 } push;
 layout(location = 0) out vec4 colour;
+#ifdef RASTER_TWIN
+layout(location = 1) out vec4 out_receiver;  // xyz the receiver; w the footprint (finest texels), -1: no lookup
+layout(location = 2) out float out_visibility;
+#endif
+
+// The baseline: r x r PCF on the R32F map at the finest level, the lit test and the
+// taps clamped at the edges as st_pcf's (the fraction of lit taps).
+float r32f_shadow(vec3 uvd, uint r) {
+  if (!st_in_light_box(uvd)) return 1.0;
+  const uint finest = st_finest_level();
+  const float side = uintBitsToFloat((127u + finest) << 23u);
+  const uint x = min(uint(floor(uvd.x * side)), (1u << finest) - 1u), y = min(uint(floor(uvd.y * side)), (1u << finest) - 1u);
+  const uint n = 1u << finest;
+  uint lit = 0u;
+  for (uint j = 0u; j < r; ++j)
+    for (uint i = 0u; i < r; ++i)
+      lit += st_lit(uvd.z, texelFetch(r32f_map, ivec2(st_pcf_tap(x, i, r, n), st_pcf_tap(y, j, r, n)), 0).x) ? 1u : 0u;
+  return float(lit) / float(r * r);
+}
 
 void main() {
   vec3 n = normalize(world_normal);
   if (dot(n, push.eye.xyz - world_position) < 0.0) n = -n;  // the side the camera sees
+  const vec3 to_light = push.light.w != 0.0 ? normalize(push.light.xyz - world_position) : push.light.xyz;
+  const float lambert = max(dot(n, to_light), 0.0);
   const uint finest = st_finest_level();
-  // eye.w > 0: the pixel's angle; the level pair from the footprint (MH §3.3, as
-  // Map::pcf_footprint), measured as the CPU renderer does (tiles/bake/render.cpp): the
-  // pixel's size at the receiver in finest texels. The light-space derivatives
-  // (st_footprint_of with uvd + dFdx(uvd)) overestimate it at grazing angles: coarser
-  // levels, speckled shadows. eye.w == 0: the finest level.
-  const float footprint = push.eye.w != 0.0 ? distance(push.eye.xyz, world_position) * push.eye.w / push.to_sun.w : 1.0;
+  // The footprint in finest texels, as `shadowtile render --filter` measures it
+  // (tiles/bake/render.cpp): the pixel's size at the receiver (distance x pixel angle)
+  // over one finest texel. The light-space derivatives (st_footprint_of with uvd +
+  // dFdx(uvd)) overestimate it at grazing angles: coarser levels, speckled shadows.
+  const float footprint = push.eye.w != 0.0 ? distance(push.eye.xyz, world_position) * push.eye.w / push.misc.y : 1.0;
   // The receiver's offset along the normal, as the CPU renderer's (tiles/bake/render.hpp):
   // 1.5 texels plus the PCF radius, in texels of the finer level filtered (a kernel of
   // coarse texels needs a coarse texel's bias, or sloped surfaces shadow themselves).
   const StFilter level = st_filter_levels(footprint, finest);
-  const float offset = 2.5 * push.to_sun.w * float(1u << (finest - level.fine));
-  const float lambert = max(dot(n, push.to_sun.xyz), 0.0);
+  const float offset = push.misc.z * push.misc.y * float(1u << (finest - level.fine));
+  const uint kernel = push.mode.y;
+  float vis = 1.0;
   StProbe probe = st_probe();
-  const float vis = lambert > 0.0 ? st_shadow(world_position, n, offset, footprint, 3u, probe) : 0.0;
+  if (lambert <= 0.0) {
+    vis = 0.0;  // facing away: unlit whatever the map says
+  } else if (push.mode.x == 1u) {
+    // One call site of the lookup (each inlines the page-table walk and the decoders):
+    // a 2D map's one light, a stack's slices a and b (blended as st_shadow_stack), or
+    // every slice (soft: summed in slice order, then divided, as the CPU's).
+    const uint slices = st_slices();
+    const bool soft = slices != 0u && push.mode.w != 0u;
+    const uint a = push.mode.z & 0xFFFFu, b = push.mode.z >> 16;
+    const uint count = slices == 0u ? 1u : soft ? slices : (a == b ? 1u : 2u);
+    const vec3 r = st_receiver(world_position, n, offset);
+    precise float sum = 0.0;
+    float va = 1.0, vb = 1.0;
+    for (uint i = 0u; i < count; ++i) {
+      const uint w = soft ? i : (i == 0u ? a : b);
+      const uint lb = st_light_block(slices == 0u ? 0u : w);
+      const float v = lb == 0u ? 1.0 : st_shadow_uvd(w, st_light_uvd(lb, r), footprint, kernel, probe);
+      sum = sum + v;
+      if (i == 0u) va = v;
+      else vb = v;
+    }
+    if (soft) {
+      vis = sum / float(slices);
+    } else if (count == 2u) {
+      precise float step = vb - va;
+      precise float scaled = push.misc.x * step;
+      precise float blended = va + scaled;
+      vis = blended;
+    } else {
+      vis = va;
+    }
+  } else if (push.mode.x == 2u) {
+    const uint lb = st_light_block(0u);
+    if (lb != 0u) vis = r32f_shadow(st_light_uvd(lb, st_receiver(world_position, n, offset)), kernel);
+  }
   st_finish(probe);
-  const vec3 albedo = vec3(0.78, 0.74, 0.68);
-  const vec3 c = albedo * (0.22 + 0.78 * lambert * vis);
+#ifdef RASTER_TWIN
+  out_receiver = vec4(st_receiver(world_position, n, offset), lambert > 0.0 && push.mode.x == 1u ? footprint : -1.0);
+  out_visibility = vis;
+#endif
+  const vec3 albedo = vec3(0.8, 0.78, 0.72);
+  const vec3 c = albedo * (0.15 + 0.85 * lambert * vis);
   colour = vec4(pow(c, vec3(1.0 / 2.2)), 1.0);
 }

@@ -26,13 +26,14 @@ for _ in $(seq 100); do
 done
 frames=6
 timeout 300 "$raster" --server "127.0.0.1:$port" --map city --scene "$scene" --size 160x90 \
-  --frames $frames --frame-ms 300 --orbit 0 --device llvmpipe --out "$work/frames" >"$work/out.txt" 2>&1
+  --frames $frames --frame-ms 300 --orbit 0 --device llvmpipe --validation --out "$work/frames" >"$work/out.txt" 2>&1
 rc=$?
 (( rc == 0 )) || { cat "$work/out.txt"; fail "exited $rc"; }
+grep -qx "validation: 0 messages" "$work/out.txt" || { cat "$work/out.txt"; fail "the validation layer reported"; }
 pngs=$(find "$work/frames" -name '*.png' -size +0 | wc -l)
 [[ "$pngs" -ge $frames ]] || { cat "$work/out.txt"; fail "$pngs PNG frames written, expected $frames"; }
-# The per-frame table: frame, tile B, page B, feedback B, fb tiles, requested, holes.
-holes=$(awk '$1 ~ /^[0-9]+$/ && NF == 7 {print $7}' "$work/out.txt")
+# The per-frame table: frame, tile B, page B, feedback B, fb tiles, requested, holes, gpu ms, shade ms.
+holes=$(awk '$1 ~ /^[0-9]+$/ && NF == 9 {print $7}' "$work/out.txt")
 first=$(head -n 1 <<<"$holes") last=$(tail -n 1 <<<"$holes")
 [[ -n "$first" && -n "$last" ]] || { cat "$work/out.txt"; fail "no per-frame table"; }
 (( last < first || (first == 0 && last == 0) )) || { cat "$work/out.txt"; fail "holes did not fall ($first -> $last)"; }

@@ -141,8 +141,10 @@ std::map<uint64_t, uint32_t> absent_tiles(const client::Map& map, const std::vec
   return want;
 }
 
+// What retire() reads of a frame's feedback: the header, and the key array and the claimed
+// records only when the frame claimed a key.
 uint64_t feedback_bytes(uint32_t capacity, uint32_t tiles) {
-  return (uint64_t(layout::kFbHeaderWords) + capacity + uint64_t(tiles) * layout::kFbRecordWords) * 4;
+  return (uint64_t(layout::kFbHeaderWords) + (tiles ? capacity : 0) + uint64_t(tiles) * layout::kFbRecordWords) * 4;
 }
 
 

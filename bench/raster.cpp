@@ -1,0 +1,391 @@
+// The GPU tile cache inside a rasterizer, as an engine uses it (examples/raster, engine mode):
+//
+// 1. The lookup a GPU is judged by: in the same shading pass of the same frame (a depth
+//    pre-pass, then each visible pixel's fragment shader once), st_shadow over the GPU tile
+//    cache against a plain R32F shadow map of the map's finest level sampled in the same
+//    fragment shader (texelFetch, the same texel, lit test and PCF taps), single tap and
+//    5x5 PCF, and the pass with no lookup. Shading-pass times from device timestamps,
+//    medians over --reps interleaved frames; the ratio is shadowtile / R32F (the whole pass,
+//    and the lookups alone: each less the pass without lookups).
+// 2. Engine mode's frame path: per frame, --arriving tiles land in the client's cache (fetched
+//    between frames, off the frame path) and the frame's GpuMap calls (retire, record_uploads,
+//    record_end_of_frame) are timed on the host; the frame's bus bytes (tile + page-table +
+//    feedback) against its tile + page-table bytes.
+//
+//   bench_raster [--scenes procedural:city,FILE...] [--light sun:azimuth=30,elevation=50]
+//                [--res 2k] [--encoding dagmh] [--tile-bytes 65536] [--width 1920] [--height 1080]
+//                [--reps 5] [--arriving 100] [--arrival-frames 10] [--device NAME]
+//                [--out bench-out/raster] [--json PATH] [--no-frame-path] [--no-ratio] [--no-r32f]
+//                [--region X,Y,W,H]
+//
+// --region builds only a window of the map (finest texels; the rest lit): a 64K^2 map in
+// minutes; the camera then looks at the window. The R32F map (the finest level, 4^L floats)
+// is skipped with --no-r32f, with --region, and above 16K^2: its rows print '-'.
+// Each scene's pack is built once into --out (reused), served by an in-process server and
+// fetched whole into the client's cache before the ratio (so no frame has holes: asserted);
+// the frame-path run starts from an empty cache. The camera looks down at the scene's
+// footprint from its world frame (loadgen::map_world_frame). Default scenes: the procedural
+// city and a real open mesh, Debian's assimp test model 2CylinderEngine.glb (a CAD engine).
+#include <algorithm>
+#include <cctype>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <optional>
+#include <nlohmann/json.hpp>
+#include <thread>
+
+#include "bench/bench_map.hpp"
+#include "examples/raster/flat_mesh.hpp"
+#include "examples/raster/raster.hpp"
+#include "loadgen/load_run.hpp"
+#include "server/catalog.hpp"
+#include "server/server.hpp"
+#include "tiles/bake/map_build.hpp"
+
+namespace {
+
+using namespace st;
+using namespace st::bench;
+
+struct Args {
+  std::string scenes = "procedural:city,/usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb";
+  std::string light = "sun:azimuth=30,elevation=50", res = "2k", encoding = "dagmh", device;
+  std::string out = "bench-out/raster", json;
+  uint32_t tile_bytes = 64 * 1024, width = 1920, height = 1080, reps = 5, arriving = 100, arrival_frames = 10;
+  bool frame_path = true, ratio = true, r32f = true;
+  std::optional<TexelRegion> region;  // --region: a window of the map built (the rest constant, lit)
+};
+
+Args parse(int argc, char** argv) {
+  Args a;
+  for (int i = 1; i < argc; ++i) {
+    const std::string k = argv[i];
+    auto next = [&]() -> std::string {
+      if (i + 1 >= argc) throw Error("bench_raster: " + k + " needs a value");
+      return argv[++i];
+    };
+    if (k == "--scenes") a.scenes = next();
+    else if (k == "--light") a.light = next();
+    else if (k == "--res") a.res = next();
+    else if (k == "--encoding") a.encoding = next();
+    else if (k == "--tile-bytes") a.tile_bytes = uint32_t(std::stoul(next()));
+    else if (k == "--width") a.width = uint32_t(std::stoul(next()));
+    else if (k == "--height") a.height = uint32_t(std::stoul(next()));
+    else if (k == "--reps") a.reps = uint32_t(std::stoul(next()));
+    else if (k == "--arriving") a.arriving = uint32_t(std::stoul(next()));
+    else if (k == "--arrival-frames") a.arrival_frames = uint32_t(std::stoul(next()));
+    else if (k == "--device") a.device = next();
+    else if (k == "--out") a.out = next();
+    else if (k == "--json") a.json = next();
+    else if (k == "--no-frame-path") a.frame_path = false;
+    else if (k == "--no-ratio") a.ratio = false;
+    else if (k == "--no-r32f") a.r32f = false;
+    else if (k == "--region") {
+      TexelRegion r;
+      const std::string v = next();
+      if (std::sscanf(v.c_str(), "%lu,%lu,%lu,%lu", &r.x, &r.y, &r.w, &r.h) != 4 || r.w == 0 || r.h == 0)
+        throw Error("bench_raster: --region X,Y,W,H (finest texels), got '" + v + "'");
+      a.region = r;
+    }
+    else throw Error("bench_raster: unknown option " + k);
+  }
+  if (a.reps == 0 || a.width == 0 || a.height == 0 || a.arriving == 0) throw Error("bench_raster: counts must be > 0");
+  if (a.json.empty()) a.json = a.out + ".json";
+  return a;
+}
+
+std::string short_name(const std::string& scene) {
+  const std::string base = std::filesystem::path(scene).stem().string();
+  std::string s = scene.rfind("procedural:", 0) == 0 ? scene.substr(11) : base;
+  for (char& c : s)
+    if (!std::isalnum(static_cast<unsigned char>(c))) c = '_';
+  return s;
+}
+
+struct Mode {
+  const char* name;
+  raster::Lookup lookup;
+  uint32_t kernel;
+};
+
+struct Served {
+  std::unique_ptr<server::Server> srv;
+  uint64_t tiles = 0;
+};
+
+client::Map open_map(const Served& s, const std::string& name, uint32_t slots, std::unique_ptr<client::Client>& cl) {
+  client::ClientOptions co;
+  co.max_slot_bytes = 64u << 20;
+  co.request_timeout = std::chrono::milliseconds(60000);
+  co.cache_slots = slots;
+  co.want_capacity = slots;
+  cl = std::make_unique<client::Client>(client::Endpoint{"127.0.0.1", s.srv->port()}, co);
+  return cl->open(name);
+}
+
+raster::FrameInput camera_of(const client::Map& map, const std::optional<TexelRegion>& window) {
+  const loadgen::WorldFrame w = loadgen::map_world_frame(map);
+  const Vec3d c = w.centre();
+  const double span = w.span(), height = std::max(w.top - w.ground, 1e-3 * span);
+  raster::FrameInput in;
+  in.eye = {c.x + 0.55 * span, w.ground + height + 0.45 * span, c.z + 0.55 * span};
+  in.target = {c.x, w.ground + 0.3 * height, c.z};
+  in.fov_deg = 60;
+  const client::MapInfo info = map.info();
+  const client::WorldPoint f = info.light.forward();
+  in.light = {-f.x, -f.y, -f.z};
+  in.texel = info.light.texel_size({c.x, c.y, c.z}, info.finest_level);
+  in.filter = false;  // the finest level: what the R32F map holds
+  if (window) {  // look down at the window's centre from about its size away
+    const uint64_t cx = window->x + window->w / 2, cy = window->y + window->h / 2, side = uint64_t(1) << info.finest_level;
+    const float d = map.depth(info.finest_level, cx, cy);
+    const client::WorldPoint t = info.light.to_world({(double(cx) + 0.5) / double(side), (double(cy) + 0.5) / double(side),
+                                                      d >= 0 && d <= 1 ? double(d) : 0.5});
+    const double size = double(std::max(window->w, window->h)) * info.light.texel_size(t, info.finest_level);
+    in.eye = {t.x + 0.45 * size, t.y + 0.4 * size, t.z + 0.45 * size};
+    in.target = {t.x, t.y, t.z};
+  }
+  return in;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) try {
+  const Args a = parse(argc, argv);
+  const uint32_t level = parse_level(a.res);
+  std::filesystem::create_directories(a.out);
+  nlohmann::json report = {{"light", a.light}, {"resolution", side_name(level)}, {"encoding", a.encoding},
+                           {"width", a.width}, {"height", a.height}, {"reps", a.reps}};
+  nlohmann::json ratio_rows = nlohmann::json::array(), path_rows = nlohmann::json::array();
+  std::vector<std::string> ratio_lines, path_lines;
+  std::string device;
+  for (const std::string& spec : split_list(a.scenes)) {
+    const Scene scene = load_scene(spec);
+    const LightSpace light = LightSpace::fit(LightSpec::parse(a.light), scene.bounds());
+    const std::string name = short_name(spec) + "_" + side_name(level) + "_" + a.encoding + "_t" + std::to_string(a.tile_bytes) +
+                             (a.region ? "_win" + std::to_string(a.region->w) : std::string());
+    const std::string path = a.out + "/" + name + ".pack";
+    if (!std::filesystem::exists(path)) {
+      MapBuildOptions o;
+      o.map_level = level;
+      o.encoding = parse_encoding(a.encoding);
+      o.tile_bytes = a.tile_bytes;
+      o.scene_spec = spec;
+      o.light_spec = a.light;
+      o.region = a.region;
+      o.dagmh_dictionary = o.dagmh_mixed_tiles = true;  // the CLI's defaults
+      std::fprintf(stderr, "bench_raster: building %s\n", path.c_str());
+      build_map(scene, light, o, path);
+    }
+    server::ServerOptions so;
+    so.host = "127.0.0.1";
+    so.port = 0;
+    so.log = [](const std::string&) {};
+    Served s;
+    s.srv = std::make_unique<server::Server>(server::Catalog::scan(std::vector<std::string>{path}), so);
+    s.srv->start();
+    std::unique_ptr<client::Client> cl;
+    s.tiles = open_map(s, name, 1, cl).info().tile_count;
+    const std::vector<float> tri = raster::flat_triangles(scene);
+
+    // ---- 1. the lookup ratio, every tile resident ----
+    if (a.ratio) {
+      const bool r32f = a.r32f && !a.region && level <= 14;
+      client::Map map = open_map(s, name, uint32_t(s.tiles + 8), cl);
+      const uint64_t side = uint64_t(1) << level;
+      map.request_region(level, 0, 0, side, side, 10);
+      const auto t_end = Clock::now() + std::chrono::minutes(10);
+      while (!map.region_resident(level, 0, 0, side, side) && Clock::now() < t_end)
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+      if (!map.region_resident(level, 0, 0, side, side)) throw Error("bench_raster: the map did not arrive in 10 minutes");
+      // The R32F map: the finest level read back from the cache (every tile resident), rows
+      // split over the machine's threads.
+      std::vector<float> depths(r32f ? side * side : 0);
+      if (r32f) {
+        std::vector<std::thread> pool;
+        const uint32_t n = std::max(1u, std::thread::hardware_concurrency());
+        for (uint32_t t = 0; t < n; ++t)
+          pool.emplace_back([&, t] {
+            for (uint64_t y = t; y < side; y += n)
+              for (uint64_t x = 0; x < side; ++x) depths[y * side + x] = map.depth(level, x, y);
+          });
+        for (auto& th : pool) th.join();
+      }
+      raster::RasterOptions ro;
+      ro.width = a.width, ro.height = a.height, ro.device = a.device;
+      ro.readback = false;
+      ro.upload_budget_bytes = 1ull << 30;  // the whole cache in the first frame
+      if (r32f) ro.r32f_level = level, ro.r32f = depths;
+      raster::Rasterizer r(map, tri, ro);
+      device = r.device_name();
+      raster::FrameInput in = camera_of(map, a.region);
+      std::vector<Mode> modes = {{"none", raster::Lookup::none, 1},      {"st 1", raster::Lookup::shadowtile, 1},
+                                 {"r32f 1", raster::Lookup::r32f, 1},     {"st 5x5", raster::Lookup::shadowtile, 5},
+                                 {"r32f 5x5", raster::Lookup::r32f, 5}};
+      std::map<uint64_t, size_t> mode_of;
+      std::vector<std::vector<double>> ms(modes.size()), frame_ms(modes.size());
+      uint64_t holes = 0;
+      auto take = [&](std::span<const raster::FrameResult> done) {
+        for (const raster::FrameResult& fr : done) {
+          const auto it = mode_of.find(fr.frame);
+          if (it == mode_of.end()) continue;
+          ms[it->second].push_back(fr.gpu_shade_ms);
+          frame_ms[it->second].push_back(fr.gpu_frame_ms);
+          holes += fr.stats.holes;
+        }
+      };
+      // Warm: the uploads (every tile in frame 1), the shaders compiled, every mode once.
+      for (size_t m = 0; m < modes.size(); ++m) {
+        if (!r32f && modes[m].lookup == raster::Lookup::r32f) continue;
+        in.lookup = modes[m].lookup, in.kernel = modes[m].kernel;
+        r.render(in), r.render(in);
+      }
+      r.finish();
+      for (uint32_t rep = 0; rep < a.reps; ++rep)
+        for (size_t m = 0; m < modes.size(); ++m) {
+          if (!r32f && modes[m].lookup == raster::Lookup::r32f) continue;
+          in.lookup = modes[m].lookup, in.kernel = modes[m].kernel;
+          mode_of[r.frames() + 1] = m;
+          take(r.render(in));
+        }
+      take(r.finish());
+      if (holes) throw Error("bench_raster: " + std::to_string(holes) + " holes in timed frames (the cache was full)");
+      std::vector<double> med;
+      for (auto& v : ms) med.push_back(v.empty() ? 0.0 : median(v));
+      const double none = med[0];
+      auto only = [&](double x, double y) { return (y - none) > 0 ? (x - none) / (y - none) : 0.0; };
+      auto num = [&](double v) {
+        char b[32];
+        std::snprintf(b, sizeof b, "%.2f", v);
+        return r32f ? std::string(b) : std::string("-");
+      };
+      char line[512];
+      std::snprintf(line, sizeof line, "%-16s %8.3f | %8.3f %8s %6s %6s | %8.3f %8s %6s %6s", short_name(spec).c_str(),
+                    none, med[1], num(med[2]).c_str(), num(med[1] / med[2]).c_str(), num(only(med[1], med[2])).c_str(),
+                    med[3], num(med[4]).c_str(), num(med[3] / med[4]).c_str(), num(only(med[3], med[4])).c_str());
+      ratio_lines.push_back(line);
+      nlohmann::json row = {{"scene", spec}, {"pack", path}, {"tiles", s.tiles}, {"triangles", tri.size() / 18},
+                            {"none_ms", none}, {"st1_ms", med[1]}, {"st5_ms", med[3]}, {"runs_ms", ms},
+                            {"frame_runs_ms", frame_ms},
+                            {"r32f", r32f}};
+      if (a.region) row["region"] = {a.region->x, a.region->y, a.region->w, a.region->h};
+      if (r32f) {
+        row["r32f1_ms"] = med[2], row["ratio1"] = med[1] / med[2], row["lookup_ratio1"] = only(med[1], med[2]);
+        row["r32f5_ms"] = med[4], row["ratio5"] = med[3] / med[4], row["lookup_ratio5"] = only(med[3], med[4]);
+      }
+      ratio_rows.push_back(row);
+    }
+
+    // ---- 2. the frame path with tiles arriving ----
+    if (a.frame_path) {
+      client::Map map = open_map(s, name, uint32_t(s.tiles + 8), cl);
+      raster::RasterOptions ro;
+      ro.width = a.width, ro.height = a.height, ro.device = a.device;
+      ro.readback = false;
+      ro.feedback_capacity = 1024;
+      raster::Rasterizer r(map, tri, ro);
+      raster::FrameInput in = camera_of(map, a.region);
+      in.kernel = 1;  // the frame path's host work does not depend on it; lavapipe's frames do
+      // Finest-level squares in scan order, each queued until --arriving tiles are on their way.
+      const uint64_t side = uint64_t(1) << level, step = std::max<uint64_t>(1, side >> 5);
+      uint64_t next_square = 0;
+      std::map<uint64_t, uint64_t> arrived;  // frame -> tiles that arrived before it
+      // One finest-level square at a time, each fetched whole, until --arriving tiles arrived.
+      auto arrive = [&]() -> uint64_t {
+        const uint64_t before = map.stats().tiles_received;
+        const auto t_end = Clock::now() + std::chrono::seconds(60);
+        while (map.stats().tiles_received - before < a.arriving && next_square < (side / step) * (side / step) &&
+               Clock::now() < t_end) {
+          const uint64_t x = (next_square % (side / step)) * step, y = (next_square / (side / step)) * step;
+          ++next_square;
+          map.request_region(level, x, y, step, step, 100);
+          while (!map.region_resident(level, x, y, step, step) && Clock::now() < t_end)
+            std::this_thread::sleep_for(std::chrono::microseconds(200));
+        }
+        return map.stats().tiles_received - before;
+      };
+      struct PathFrame {
+        uint64_t frame, tiles;
+        double host_us, retire_us, uploads_us;
+        gpu::FrameStats st;
+      };
+      std::vector<PathFrame> got;
+      auto take = [&](std::span<const raster::FrameResult> done) {
+        for (const raster::FrameResult& fr : done)
+          if (arrived.count(fr.frame)) got.push_back({fr.frame, arrived[fr.frame], fr.host_us, fr.retire_us, fr.uploads_us, fr.stats});
+      };
+      // Untimed: the page table's first upload, the shader's compile, and the tiles the view's
+      // feedback asks for (until a frame has no holes), so later arrivals are ours alone.
+      for (int warm = 0; warm < 40; ++warm) {
+        r.render(in);
+        const std::span<const raster::FrameResult> w = r.finish();
+        if (warm >= 2 && !w.empty() && w.back().stats.holes == 0) break;
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+      }
+      for (uint32_t f = 0; f < a.arrival_frames; ++f) {
+        const uint64_t n = arrive();
+        arrived[r.frames() + 1] = n;
+        take(r.render(in));
+      }
+      take(r.finish());
+      std::vector<double> host, tiles, ratio;
+      uint64_t tile_b = 0, page_b = 0, fb_b = 0, io_b = 0;
+      for (const PathFrame& p : got) {
+        if (p.st.slots_uploaded == 0) continue;  // frames with arrivals only (the map may run out)
+        host.push_back(p.host_us);
+        tiles.push_back(double(p.st.slots_uploaded));
+        tile_b += p.st.tile_bytes, page_b += p.st.page_bytes, fb_b += p.st.feedback_bytes, io_b += p.st.host_io_bytes;
+        const double payload = double(p.st.tile_bytes + p.st.page_bytes);
+        ratio.push_back(payload > 0 ? double(p.st.tile_bytes + p.st.page_bytes + p.st.feedback_bytes + p.st.host_io_bytes) / payload
+                                    : 0.0);
+      }
+      if (host.empty()) throw Error("bench_raster: no tile arrived in the frame path (the view fetched them all: a larger map)");
+      const double n = std::max<double>(1, double(host.size()));
+      const double overhead_pct = 100.0 * double(fb_b + io_b) / std::max<double>(1, double(tile_b + page_b));
+      char line[512];
+      std::snprintf(line, sizeof line, "%-16s %7.0f %9.1f %9.1f %12.0f %10.0f %10.0f %9.3f%%", short_name(spec).c_str(),
+                    median(tiles), median(host), *std::max_element(host.begin(), host.end()), double(tile_b) / n,
+                    double(page_b) / n, double(fb_b + io_b) / n, overhead_pct);
+      path_lines.push_back(line);
+      nlohmann::json frames = nlohmann::json::array();
+      for (const PathFrame& p : got)
+        frames.push_back({{"frame", p.frame}, {"tiles_arrived", p.tiles}, {"slots_uploaded", p.st.slots_uploaded},
+                          {"host_us", p.host_us}, {"retire_us", p.retire_us}, {"record_uploads_us", p.uploads_us},
+                          {"tile_bytes", p.st.tile_bytes}, {"page_bytes", p.st.page_bytes},
+                          {"feedback_bytes", p.st.feedback_bytes}, {"host_io_bytes", p.st.host_io_bytes}});
+      path_rows.push_back({{"scene", spec}, {"tiles_uploaded_median", median(tiles)}, {"host_us_median", median(host)},
+                           {"host_us_max", *std::max_element(host.begin(), host.end())},
+                           {"frames_with_arrivals", host.size()},
+                           {"tile_bytes_per_frame", double(tile_b) / n}, {"page_bytes_per_frame", double(page_b) / n},
+                           {"other_bytes_per_frame", double(fb_b + io_b) / n}, {"overhead_pct", overhead_pct},
+                           {"frames", frames}});
+    }
+    s.srv->stop();
+  }
+  std::printf("device '%s', %ux%u, %s %s maps, medians of %u frames (device timestamps, the shading pass)\n",
+              device.c_str(), a.width, a.height, side_name(level).c_str(), a.encoding.c_str(), a.reps);
+  std::printf("%-16s %8s | %8s %8s %6s %6s | %8s %8s %6s %6s\n", "scene", "none ms", "st 1", "R32F 1", "ratio", "lookup",
+              "st 5x5", "R32F 5x5", "ratio", "lookup");
+  for (const auto& l : ratio_lines) std::printf("%s\n", l.c_str());
+  if (a.frame_path) {
+    std::printf("\nengine frame path (retire + record_uploads + record_end_of_frame, host), %u tiles arriving per frame\n",
+                a.arriving);
+    std::printf("(medians over the frames that uploaded tiles; bytes per such frame)\n");
+    std::printf("%-16s %7s %9s %9s %12s %10s %10s %10s\n", "scene", "tiles", "host us", "max us", "tile B/frame",
+                "page B", "other B", "overhead");
+    for (const auto& l : path_lines) std::printf("%s\n", l.c_str());
+  }
+  report["device"] = device;
+  report["ratio"] = ratio_rows;
+  report["frame_path"] = path_rows;
+  std::ofstream(a.json) << report.dump(2) << "\n";
+  std::printf("wrote %s\n", a.json.c_str());
+  return 0;
+} catch (const std::exception& e) {
+  std::fprintf(stderr, "bench_raster: %s\n", e.what());
+  return 1;
+}

@@ -1,0 +1,906 @@
+// The headless rasterizer of raster.hpp: the engine's side of engine mode, written the way
+// a renderer would (its own Vulkan objects; GpuMap only records into its command buffers).
+#include "examples/raster/raster.hpp"
+
+#include <vulkan/vulkan.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <stdexcept>
+
+#include "tiles/core/camera.hpp"  // header-only: the pinhole camera `shadowtile render` uses
+
+namespace st::raster {
+namespace {
+
+const uint32_t kVertSpv[] = {
+#include "examples/scene.vert.spv.inc"
+};
+const uint32_t kFragSpv[] = {
+#include "examples/scene.frag.spv.inc"
+};
+const uint32_t kFragTwinSpv[] = {
+#include "examples/scene_twin.frag.spv.inc"
+};
+
+void check(VkResult r, const char* what) {
+  if (r != VK_SUCCESS) throw std::runtime_error(std::string(what) + " failed: VkResult " + std::to_string(int(r)));
+}
+
+using Clock = std::chrono::steady_clock;
+double us_since(Clock::time_point t0) { return std::chrono::duration<double, std::micro>(Clock::now() - t0).count(); }
+
+constexpr uint32_t kStamps = 5;  // begin, uploads done, depth pre-pass done, shading done, copies done
+
+struct Buffer {
+  VkBuffer buffer = VK_NULL_HANDLE;
+  VkDeviceMemory memory = VK_NULL_HANDLE;
+  void* mapped = nullptr;
+};
+struct Image {
+  VkImage image = VK_NULL_HANDLE;
+  VkDeviceMemory memory = VK_NULL_HANDLE;
+  VkImageView view = VK_NULL_HANDLE;
+};
+
+// The engine's device: instance, physical device, one graphics + compute queue.
+struct Device {
+  VkInstance instance = VK_NULL_HANDLE;
+  VkPhysicalDevice physical = VK_NULL_HANDLE;
+  VkDevice device = VK_NULL_HANDLE;
+  VkQueue queue = VK_NULL_HANDLE;
+  uint32_t family = ~0u;
+  VkPhysicalDeviceMemoryProperties mem{};
+  VkPhysicalDeviceProperties props{};
+  uint32_t timestamp_bits = 0;
+  std::string name;
+
+  VkDebugUtilsMessengerEXT messenger = VK_NULL_HANDLE;
+  uint64_t messages = 0;
+  std::string first_message;
+
+  static VKAPI_ATTR VkBool32 VKAPI_CALL on_message(VkDebugUtilsMessageSeverityFlagBitsEXT,
+                                                   VkDebugUtilsMessageTypeFlagsEXT,
+                                                   const VkDebugUtilsMessengerCallbackDataEXT* data, void* user) {
+    auto* d = static_cast<Device*>(user);
+    if (d->messages++ == 0 && data && data->pMessage) d->first_message = data->pMessage;
+    return VK_FALSE;
+  }
+
+  Device(std::string want, bool validation) {
+    if (want.empty())
+      if (const char* e = std::getenv("SHADOWTILE_VK_DEVICE")) want = e;
+    VkApplicationInfo app{};
+    app.sType = VK_STRUCTURE_TYPE_APPLICATION_INFO;
+    app.pApplicationName = "shadowtile raster";
+    app.apiVersion = VK_API_VERSION_1_2;
+    VkInstanceCreateInfo ici{};
+    ici.sType = VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO;
+    ici.pApplicationInfo = &app;
+    const char* layer = "VK_LAYER_KHRONOS_validation";
+    const char* ext = VK_EXT_DEBUG_UTILS_EXTENSION_NAME;
+    VkDebugUtilsMessengerCreateInfoEXT mci{};
+    mci.sType = VK_STRUCTURE_TYPE_DEBUG_UTILS_MESSENGER_CREATE_INFO_EXT;
+    mci.messageSeverity = VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT;
+    mci.messageType = VK_DEBUG_UTILS_MESSAGE_TYPE_GENERAL_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_TYPE_VALIDATION_BIT_EXT;
+    mci.pfnUserCallback = &on_message;
+    mci.pUserData = this;
+    if (validation) {
+      ici.enabledLayerCount = 1;
+      ici.ppEnabledLayerNames = &layer;
+      ici.enabledExtensionCount = 1;
+      ici.ppEnabledExtensionNames = &ext;
+      ici.pNext = &mci;  // instance creation and destruction too
+    }
+    if (VkResult r = vkCreateInstance(&ici, nullptr, &instance); r != VK_SUCCESS)
+      throw std::runtime_error(std::string("vkCreateInstance failed: VkResult ") + std::to_string(int(r)) +
+                               (validation ? " (is VK_LAYER_KHRONOS_validation installed?)" : ""));
+    if (validation) {
+      auto create = reinterpret_cast<PFN_vkCreateDebugUtilsMessengerEXT>(
+          vkGetInstanceProcAddr(instance, "vkCreateDebugUtilsMessengerEXT"));
+      if (!create || create(instance, &mci, nullptr, &messenger) != VK_SUCCESS) {
+        vkDestroyInstance(instance, nullptr);
+        throw std::runtime_error("vkCreateDebugUtilsMessengerEXT failed");
+      }
+    }
+    uint32_t n = 0;
+    vkEnumeratePhysicalDevices(instance, &n, nullptr);
+    std::vector<VkPhysicalDevice> devs(n);
+    vkEnumeratePhysicalDevices(instance, &n, devs.data());
+    std::string names;
+    for (VkPhysicalDevice d : devs) {
+      VkPhysicalDeviceProperties p{};
+      vkGetPhysicalDeviceProperties(d, &p);
+      names += std::string(names.empty() ? "" : ", ") + "'" + p.deviceName + "'";
+      if (!physical && (want.empty() || std::strstr(p.deviceName, want.c_str()))) physical = d, props = p;
+    }
+    if (!physical) {
+      destroy_messenger();
+      vkDestroyInstance(instance, nullptr);
+      throw std::runtime_error("no Vulkan device named like '" + want + "' (present: " + (names.empty() ? "none" : names) + ")");
+    }
+    name = props.deviceName;
+    vkGetPhysicalDeviceMemoryProperties(physical, &mem);
+    uint32_t qn = 0;
+    vkGetPhysicalDeviceQueueFamilyProperties(physical, &qn, nullptr);
+    std::vector<VkQueueFamilyProperties> qs(qn);
+    vkGetPhysicalDeviceQueueFamilyProperties(physical, &qn, qs.data());
+    for (uint32_t i = 0; i < qn && family == ~0u; ++i)
+      if ((qs[i].queueFlags & VK_QUEUE_GRAPHICS_BIT) && (qs[i].queueFlags & VK_QUEUE_COMPUTE_BIT)) family = i;
+    if (family == ~0u) {
+      destroy_messenger();
+      vkDestroyInstance(instance, nullptr);
+      throw std::runtime_error("device '" + name + "' has no graphics + compute queue");
+    }
+    timestamp_bits = props.limits.timestampComputeAndGraphics ? qs[family].timestampValidBits : 0;
+    VkPhysicalDeviceFeatures have{};
+    vkGetPhysicalDeviceFeatures(physical, &have);
+    if (!have.fragmentStoresAndAtomics) {
+      destroy_messenger();
+      vkDestroyInstance(instance, nullptr);
+      throw std::runtime_error("device '" + name + "' has no fragmentStoresAndAtomics (the fragment shader writes feedback)");
+    }
+    const float prio = 1;
+    VkDeviceQueueCreateInfo qci{};
+    qci.sType = VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO;
+    qci.queueFamilyIndex = family;
+    qci.queueCount = 1;
+    qci.pQueuePriorities = &prio;
+    VkPhysicalDeviceFeatures features{};
+    features.fragmentStoresAndAtomics = VK_TRUE;
+    VkDeviceCreateInfo dci{};
+    dci.sType = VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO;
+    dci.queueCreateInfoCount = 1;
+    dci.pQueueCreateInfos = &qci;
+    dci.pEnabledFeatures = &features;
+    if (VkResult r = vkCreateDevice(physical, &dci, nullptr, &device); r != VK_SUCCESS) {
+      destroy_messenger();
+      vkDestroyInstance(instance, nullptr);
+      check(r, "vkCreateDevice");
+    }
+    vkGetDeviceQueue(device, family, 0, &queue);
+  }
+  ~Device() {
+    vkDestroyDevice(device, nullptr);
+    destroy_messenger();
+    vkDestroyInstance(instance, nullptr);
+  }
+  void destroy_messenger() {
+    if (!messenger) return;
+    auto destroy = reinterpret_cast<PFN_vkDestroyDebugUtilsMessengerEXT>(
+        vkGetInstanceProcAddr(instance, "vkDestroyDebugUtilsMessengerEXT"));
+    if (destroy) destroy(instance, messenger, nullptr);
+    messenger = VK_NULL_HANDLE;
+  }
+  Device(const Device&) = delete;
+  Device& operator=(const Device&) = delete;
+
+  uint32_t type(uint32_t bits, VkMemoryPropertyFlags want) const {
+    for (uint32_t i = 0; i < mem.memoryTypeCount; ++i)
+      if ((bits & (1u << i)) && (mem.memoryTypes[i].propertyFlags & want) == want) return i;
+    throw std::runtime_error("no memory type with flags " + std::to_string(want));
+  }
+  Buffer buffer(VkDeviceSize size, VkBufferUsageFlags usage) const {
+    Buffer b;
+    VkBufferCreateInfo bi{};
+    bi.sType = VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO;
+    bi.size = std::max<VkDeviceSize>(size, 4);
+    bi.usage = usage;
+    check(vkCreateBuffer(device, &bi, nullptr, &b.buffer), "vkCreateBuffer");
+    VkMemoryRequirements req{};
+    vkGetBufferMemoryRequirements(device, b.buffer, &req);
+    VkMemoryAllocateInfo ai{};
+    ai.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO;
+    ai.allocationSize = req.size;
+    ai.memoryTypeIndex = type(req.memoryTypeBits, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT);
+    check(vkAllocateMemory(device, &ai, nullptr, &b.memory), "vkAllocateMemory");
+    check(vkBindBufferMemory(device, b.buffer, b.memory, 0), "vkBindBufferMemory");
+    check(vkMapMemory(device, b.memory, 0, VK_WHOLE_SIZE, 0, &b.mapped), "vkMapMemory");
+    return b;
+  }
+  void destroy(Buffer& b) const {
+    if (b.buffer) vkDestroyBuffer(device, b.buffer, nullptr);
+    if (b.memory) vkFreeMemory(device, b.memory, nullptr);
+    b = {};
+  }
+  Image image(uint32_t w, uint32_t h, VkFormat format, VkImageUsageFlags usage, VkImageAspectFlags aspect) const {
+    Image im;
+    VkImageCreateInfo ci{};
+    ci.sType = VK_STRUCTURE_TYPE_IMAGE_CREATE_INFO;
+    ci.imageType = VK_IMAGE_TYPE_2D;
+    ci.format = format;
+    ci.extent = {w, h, 1};
+    ci.mipLevels = ci.arrayLayers = 1;
+    ci.samples = VK_SAMPLE_COUNT_1_BIT;
+    ci.usage = usage;
+    check(vkCreateImage(device, &ci, nullptr, &im.image), "vkCreateImage");
+    VkMemoryRequirements req{};
+    vkGetImageMemoryRequirements(device, im.image, &req);
+    VkMemoryAllocateInfo ai{};
+    ai.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO;
+    ai.allocationSize = req.size;
+    ai.memoryTypeIndex = type(req.memoryTypeBits, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+    check(vkAllocateMemory(device, &ai, nullptr, &im.memory), "vkAllocateMemory");
+    check(vkBindImageMemory(device, im.image, im.memory, 0), "vkBindImageMemory");
+    VkImageViewCreateInfo vi{};
+    vi.sType = VK_STRUCTURE_TYPE_IMAGE_VIEW_CREATE_INFO;
+    vi.image = im.image;
+    vi.viewType = VK_IMAGE_VIEW_TYPE_2D;
+    vi.format = format;
+    vi.subresourceRange = {aspect, 0, 1, 0, 1};
+    check(vkCreateImageView(device, &vi, nullptr, &im.view), "vkCreateImageView");
+    return im;
+  }
+  void destroy(Image& im) const {
+    if (im.view) vkDestroyImageView(device, im.view, nullptr);
+    if (im.image) vkDestroyImage(device, im.image, nullptr);
+    if (im.memory) vkFreeMemory(device, im.memory, nullptr);
+    im = {};
+  }
+  VkShaderModule module(std::span<const uint32_t> code) const {
+    VkShaderModuleCreateInfo ci{};
+    ci.sType = VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO;
+    ci.codeSize = code.size() * 4;
+    ci.pCode = code.data();
+    VkShaderModule m = VK_NULL_HANDLE;
+    check(vkCreateShaderModule(device, &ci, nullptr, &m), "vkCreateShaderModule");
+    return m;
+  }
+};
+
+// The shaders' push constants (examples/shaders/scene.vert, scene.frag): 128 bytes.
+struct Push {
+  std::array<float, 16> view_projection;
+  float light[4];   // xyz: toward a sun, or a point light's position; w: 1 for a point
+  float eye[4];     // xyz: the camera; w: the pixel's angle (radians), 0: the finest level
+  uint32_t mode[4]; // lookup, kernel, slice a | slice b << 16, soft
+  float misc[4];    // blend f, one finest texel (world), offset in texels, unused
+};
+static_assert(sizeof(Push) == 128);
+
+}  // namespace
+
+std::array<float, 16> vulkan_view_projection(const FrameInput& in, double aspect, double near_plane, double far_plane) {
+  Camera c;
+  c.pos = {in.eye[0], in.eye[1], in.eye[2]};
+  c.target = {in.target[0], in.target[1], in.target[2]};
+  c.fov_deg = in.fov_deg;
+  c.aspect = aspect;
+  const std::array<double, 16> gl = view_projection(c, near_plane, far_plane);  // OpenGL: y up, depth -1..1
+  std::array<float, 16> m{};
+  for (int col = 0; col < 4; ++col) {
+    const double* g = &gl[size_t(col) * 4];
+    m[size_t(col) * 4 + 0] = float(g[0]);
+    m[size_t(col) * 4 + 1] = float(-g[1]);                 // Vulkan: y down
+    m[size_t(col) * 4 + 2] = float(0.5 * g[2] + 0.5 * g[3]);  // depth 0..1
+    m[size_t(col) * 4 + 3] = float(g[3]);
+  }
+  return m;
+}
+
+struct Rasterizer::Impl {
+  RasterOptions o;
+  client::Map map;
+  Device dev;
+  std::unique_ptr<gpu::GpuMap> g;
+  uint32_t vertex_count = 0;
+  std::array<double, 3> lo{}, hi{};  // the scene's box (near and far planes)
+  Buffer vb;
+  Image colour, depth, receivers, visibility, r32f;
+  VkSampler sampler = VK_NULL_HANDLE;
+  VkRenderPass rp_depth = VK_NULL_HANDLE, rp_shade = VK_NULL_HANDLE;
+  VkFramebuffer fb_depth = VK_NULL_HANDLE, fb_shade = VK_NULL_HANDLE;
+  VkDescriptorSetLayout set_layout = VK_NULL_HANDLE, map_layout = VK_NULL_HANDLE;
+  VkPipelineLayout layout = VK_NULL_HANDLE;
+  VkDescriptorPool dpool = VK_NULL_HANDLE;
+  std::vector<VkDescriptorSet> sets;
+  VkDescriptorSet map_set = VK_NULL_HANDLE;
+  VkPipeline depth_pipeline = VK_NULL_HANDLE, shade_pipeline = VK_NULL_HANDLE;
+  VkCommandPool cpool = VK_NULL_HANDLE;
+  std::vector<VkCommandBuffer> cmds;
+  std::vector<VkFence> fences;
+  VkQueryPool queries = VK_NULL_HANDLE;
+  struct Slot {
+    uint64_t frame = 0;  // the frame it runs (0: none)
+    Buffer rgba, rec, vis;
+    double host_us = 0, retire_us = 0, uploads_us = 0;
+  };
+  std::vector<Slot> slots;
+  uint64_t frame = 0, completed = 0, waits = 0;
+  double retire_us = 0;
+  std::vector<FrameResult> done;
+  std::vector<std::vector<uint8_t>> done_rgba;
+  std::vector<std::vector<float>> done_rec, done_vis;
+
+  Impl(client::Map m, std::span<const float> tri, const RasterOptions& opt) : o(opt), map(std::move(m)), dev(opt.device, opt.validation) {
+    if (o.width == 0 || o.height == 0 || o.width > 8192 || o.height > 8192)
+      throw std::runtime_error("raster: size " + std::to_string(o.width) + "x" + std::to_string(o.height) + " (1..8192 each)");
+    if (o.frames_in_flight < 1 || o.frames_in_flight > 4) throw std::runtime_error("raster: frames in flight 1..4");
+    if (tri.empty() || tri.size() % 18) throw std::runtime_error("raster: no triangles (6 floats a corner, 3 corners each)");
+    vertex_count = uint32_t(tri.size() / 6);
+    lo = {tri[0], tri[1], tri[2]}, hi = lo;
+    for (size_t i = 0; i < tri.size(); i += 6)
+      for (int k = 0; k < 3; ++k) lo[k] = std::min<double>(lo[k], tri[i + k]), hi[k] = std::max<double>(hi[k], tri[i + k]);
+
+    gpu::EngineDevice ed;
+    ed.instance = dev.instance;
+    ed.physical_device = dev.physical;
+    ed.device = dev.device;
+    ed.queue_family = dev.family;
+    ed.get_instance_proc_addr = &vkGetInstanceProcAddr;
+    ed.get_device_proc_addr = &vkGetDeviceProcAddr;
+    gpu::GpuOptions go;
+    go.frames_in_flight = o.frames_in_flight;
+    go.upload_budget_bytes = o.upload_budget_bytes;
+    go.feedback_capacity = o.feedback_capacity;
+    g = std::make_unique<gpu::GpuMap>(map, ed, go);
+
+    vb = dev.buffer(tri.size() * 4, VK_BUFFER_USAGE_VERTEX_BUFFER_BIT);
+    std::memcpy(vb.mapped, tri.data(), tri.size() * 4);
+    colour = dev.image(o.width, o.height, VK_FORMAT_R8G8B8A8_UNORM,
+                       VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT, VK_IMAGE_ASPECT_COLOR_BIT);
+    depth = dev.image(o.width, o.height, VK_FORMAT_D32_SFLOAT, VK_IMAGE_USAGE_DEPTH_STENCIL_ATTACHMENT_BIT,
+                      VK_IMAGE_ASPECT_DEPTH_BIT);
+    if (o.twin) {
+      receivers = dev.image(o.width, o.height, VK_FORMAT_R32G32B32A32_SFLOAT,
+                            VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT, VK_IMAGE_ASPECT_COLOR_BIT);
+      visibility = dev.image(o.width, o.height, VK_FORMAT_R32_SFLOAT,
+                             VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT, VK_IMAGE_ASPECT_COLOR_BIT);
+    }
+    const size_t pixels = size_t(o.width) * o.height;
+    slots.resize(o.frames_in_flight);
+    for (Slot& s : slots) {
+      if (o.readback) s.rgba = dev.buffer(pixels * 4, VK_BUFFER_USAGE_TRANSFER_DST_BIT);
+      if (o.twin) {
+        s.rec = dev.buffer(pixels * 16, VK_BUFFER_USAGE_TRANSFER_DST_BIT);
+        s.vis = dev.buffer(pixels * 4, VK_BUFFER_USAGE_TRANSFER_DST_BIT);
+      }
+    }
+    make_commands();
+    make_r32f();
+    make_passes();
+    make_pipelines();
+  }
+
+  ~Impl() {
+    if (dev.device) vkDeviceWaitIdle(dev.device);
+    g.reset();  // before the device goes
+    VkDevice d = dev.device;
+    for (VkFence f : fences) vkDestroyFence(d, f, nullptr);
+    if (queries) vkDestroyQueryPool(d, queries, nullptr);
+    if (cpool) vkDestroyCommandPool(d, cpool, nullptr);
+    if (depth_pipeline) vkDestroyPipeline(d, depth_pipeline, nullptr);
+    if (shade_pipeline) vkDestroyPipeline(d, shade_pipeline, nullptr);
+    if (dpool) vkDestroyDescriptorPool(d, dpool, nullptr);
+    if (layout) vkDestroyPipelineLayout(d, layout, nullptr);
+    if (set_layout) vkDestroyDescriptorSetLayout(d, set_layout, nullptr);
+    if (map_layout) vkDestroyDescriptorSetLayout(d, map_layout, nullptr);
+    if (fb_depth) vkDestroyFramebuffer(d, fb_depth, nullptr);
+    if (fb_shade) vkDestroyFramebuffer(d, fb_shade, nullptr);
+    if (rp_depth) vkDestroyRenderPass(d, rp_depth, nullptr);
+    if (rp_shade) vkDestroyRenderPass(d, rp_shade, nullptr);
+    if (sampler) vkDestroySampler(d, sampler, nullptr);
+    for (Slot& s : slots) dev.destroy(s.rgba), dev.destroy(s.rec), dev.destroy(s.vis);
+    for (Image* im : {&colour, &depth, &receivers, &visibility, &r32f}) dev.destroy(*im);
+    dev.destroy(vb);
+  }
+
+  void make_commands() {
+    VkCommandPoolCreateInfo cpi{};
+    cpi.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
+    cpi.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
+    cpi.queueFamilyIndex = dev.family;
+    check(vkCreateCommandPool(dev.device, &cpi, nullptr, &cpool), "vkCreateCommandPool");
+    cmds.resize(o.frames_in_flight);
+    VkCommandBufferAllocateInfo cai{};
+    cai.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
+    cai.commandPool = cpool;
+    cai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
+    cai.commandBufferCount = o.frames_in_flight;
+    check(vkAllocateCommandBuffers(dev.device, &cai, cmds.data()), "vkAllocateCommandBuffers");
+    fences.resize(o.frames_in_flight);
+    for (VkFence& f : fences) {
+      VkFenceCreateInfo fci{};
+      fci.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
+      fci.flags = VK_FENCE_CREATE_SIGNALED_BIT;
+      check(vkCreateFence(dev.device, &fci, nullptr, &f), "vkCreateFence");
+    }
+    if (dev.timestamp_bits) {
+      VkQueryPoolCreateInfo qi{};
+      qi.sType = VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO;
+      qi.queryType = VK_QUERY_TYPE_TIMESTAMP;
+      qi.queryCount = kStamps * o.frames_in_flight;
+      check(vkCreateQueryPool(dev.device, &qi, nullptr, &queries), "vkCreateQueryPool");
+    }
+  }
+
+  // The plain depth map of Lookup::r32f: uploaded once, at set-up (never per frame).
+  void make_r32f() {
+    const uint32_t side = o.r32f.empty() ? 1u : 1u << o.r32f_level;
+    if (!o.r32f.empty() && (o.r32f_level > 14 || o.r32f.size() != size_t(side) * side))
+      throw std::runtime_error("raster: the R32F map needs 4^level floats (level <= 14)");
+    r32f = dev.image(side, side, VK_FORMAT_R32_SFLOAT, VK_IMAGE_USAGE_SAMPLED_BIT | VK_IMAGE_USAGE_TRANSFER_DST_BIT,
+                     VK_IMAGE_ASPECT_COLOR_BIT);
+    Buffer staging = dev.buffer(size_t(side) * side * 4, VK_BUFFER_USAGE_TRANSFER_SRC_BIT);
+    if (o.r32f.empty()) std::memset(staging.mapped, 0, 4);
+    else std::memcpy(staging.mapped, o.r32f.data(), o.r32f.size() * 4);
+    VkCommandBuffer cmd = cmds[0];
+    VkCommandBufferBeginInfo bi{};
+    bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
+    bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+    check(vkBeginCommandBuffer(cmd, &bi), "vkBeginCommandBuffer");
+    VkImageMemoryBarrier b{};
+    b.sType = VK_STRUCTURE_TYPE_IMAGE_MEMORY_BARRIER;
+    b.srcQueueFamilyIndex = b.dstQueueFamilyIndex = VK_QUEUE_FAMILY_IGNORED;
+    b.image = r32f.image;
+    b.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 1, 0, 1};
+    b.oldLayout = VK_IMAGE_LAYOUT_UNDEFINED;
+    b.newLayout = VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
+    b.dstAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 0, nullptr, 0, nullptr, 1, &b);
+    VkBufferImageCopy c{};
+    c.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
+    c.imageExtent = {side, side, 1};
+    vkCmdCopyBufferToImage(cmd, staging.buffer, r32f.image, VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL, 1, &c);
+    b.oldLayout = VK_IMAGE_LAYOUT_TRANSFER_DST_OPTIMAL;
+    b.newLayout = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
+    b.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+    b.dstAccessMask = VK_ACCESS_SHADER_READ_BIT;
+    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT, 0, 0, nullptr, 0, nullptr,
+                         1, &b);
+    check(vkEndCommandBuffer(cmd), "vkEndCommandBuffer");
+    VkSubmitInfo si{};
+    si.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
+    si.commandBufferCount = 1;
+    si.pCommandBuffers = &cmd;
+    check(vkResetFences(dev.device, 1, &fences[0]), "vkResetFences");
+    check(vkQueueSubmit(dev.queue, 1, &si, fences[0]), "vkQueueSubmit");
+    check(vkWaitForFences(dev.device, 1, &fences[0], VK_TRUE, UINT64_MAX), "vkWaitForFences");  // set-up only
+    dev.destroy(staging);
+    VkSamplerCreateInfo sci{};
+    sci.sType = VK_STRUCTURE_TYPE_SAMPLER_CREATE_INFO;
+    sci.magFilter = sci.minFilter = VK_FILTER_NEAREST;
+    sci.addressModeU = sci.addressModeV = sci.addressModeW = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
+    check(vkCreateSampler(dev.device, &sci, nullptr, &sampler), "vkCreateSampler");
+  }
+
+  void make_passes() {
+    // The depth pre-pass: depth only, cleared and stored.
+    VkAttachmentDescription d{};
+    d.format = VK_FORMAT_D32_SFLOAT;
+    d.samples = VK_SAMPLE_COUNT_1_BIT;
+    d.loadOp = VK_ATTACHMENT_LOAD_OP_CLEAR;
+    d.storeOp = VK_ATTACHMENT_STORE_OP_STORE;
+    d.stencilLoadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
+    d.stencilStoreOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
+    d.finalLayout = VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL;
+    const VkAttachmentReference dref{0, VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL};
+    VkSubpassDescription sub{};
+    sub.pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
+    sub.pDepthStencilAttachment = &dref;
+    VkSubpassDependency dep{};  // the previous frame's shading pass read this depth
+    dep.srcSubpass = VK_SUBPASS_EXTERNAL;
+    dep.dstSubpass = 0;
+    dep.srcStageMask = dep.dstStageMask = VK_PIPELINE_STAGE_EARLY_FRAGMENT_TESTS_BIT | VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT;
+    dep.srcAccessMask = VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_READ_BIT | VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT;
+    dep.dstAccessMask = VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_READ_BIT | VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT;
+    VkRenderPassCreateInfo rpi{};
+    rpi.sType = VK_STRUCTURE_TYPE_RENDER_PASS_CREATE_INFO;
+    rpi.attachmentCount = 1;
+    rpi.pAttachments = &d;
+    rpi.subpassCount = 1;
+    rpi.pSubpasses = &sub;
+    rpi.dependencyCount = 1;
+    rpi.pDependencies = &dep;
+    check(vkCreateRenderPass(dev.device, &rpi, nullptr, &rp_depth), "vkCreateRenderPass");
+    VkFramebufferCreateInfo fbi{};
+    fbi.sType = VK_STRUCTURE_TYPE_FRAMEBUFFER_CREATE_INFO;
+    fbi.renderPass = rp_depth;
+    fbi.attachmentCount = 1;
+    fbi.pAttachments = &depth.view;
+    fbi.width = o.width;
+    fbi.height = o.height;
+    fbi.layers = 1;
+    check(vkCreateFramebuffer(dev.device, &fbi, nullptr, &fb_depth), "vkCreateFramebuffer");
+
+    // The shading pass: colour (and the twin's receivers and visibility) cleared, depth
+    // loaded and tested EQUAL (each pixel's fragment shader runs once).
+    VkAttachmentDescription att[4] = {};
+    const VkFormat formats[4] = {VK_FORMAT_D32_SFLOAT, VK_FORMAT_R8G8B8A8_UNORM, VK_FORMAT_R32G32B32A32_SFLOAT,
+                                 VK_FORMAT_R32_SFLOAT};
+    const uint32_t n = o.twin ? 4 : 2;
+    for (uint32_t i = 0; i < n; ++i) {
+      att[i].format = formats[i];
+      att[i].samples = VK_SAMPLE_COUNT_1_BIT;
+      att[i].loadOp = i == 0 ? VK_ATTACHMENT_LOAD_OP_LOAD : VK_ATTACHMENT_LOAD_OP_CLEAR;
+      att[i].storeOp = i == 0 ? VK_ATTACHMENT_STORE_OP_DONT_CARE : VK_ATTACHMENT_STORE_OP_STORE;
+      att[i].stencilLoadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
+      att[i].stencilStoreOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
+      att[i].initialLayout = i == 0 ? VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL : VK_IMAGE_LAYOUT_UNDEFINED;
+      att[i].finalLayout = i == 0 ? VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL : VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL;
+    }
+    const VkAttachmentReference cref[3] = {{1, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL},
+                                           {2, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL},
+                                           {3, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL}};
+    const VkAttachmentReference sdref{0, VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL};
+    VkSubpassDescription ssub{};
+    ssub.pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
+    ssub.colorAttachmentCount = n - 1;
+    ssub.pColorAttachments = cref;
+    ssub.pDepthStencilAttachment = &sdref;
+    VkSubpassDependency deps[3] = {};
+    deps[0].srcSubpass = VK_SUBPASS_EXTERNAL;  // the pre-pass's depth writes -> this pass's tests
+    deps[0].dstSubpass = 0;
+    deps[0].srcStageMask = VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT;
+    deps[0].dstStageMask = VK_PIPELINE_STAGE_EARLY_FRAGMENT_TESTS_BIT | VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT;
+    deps[0].srcAccessMask = VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT;
+    deps[0].dstAccessMask = VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_READ_BIT;
+    deps[1].srcSubpass = VK_SUBPASS_EXTERNAL;  // the previous frame's copies of the colour
+    deps[1].dstSubpass = 0;
+    deps[1].srcStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT;
+    deps[1].dstStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+    deps[1].srcAccessMask = 0;
+    deps[1].dstAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+    deps[2].srcSubpass = 0;  // the attachments' writes -> the copies to the readback buffers
+    deps[2].dstSubpass = VK_SUBPASS_EXTERNAL;
+    deps[2].srcStageMask = VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT;
+    deps[2].dstStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT;
+    deps[2].srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
+    deps[2].dstAccessMask = VK_ACCESS_TRANSFER_READ_BIT;
+    VkRenderPassCreateInfo spi{};
+    spi.sType = VK_STRUCTURE_TYPE_RENDER_PASS_CREATE_INFO;
+    spi.attachmentCount = n;
+    spi.pAttachments = att;
+    spi.subpassCount = 1;
+    spi.pSubpasses = &ssub;
+    spi.dependencyCount = 3;
+    spi.pDependencies = deps;
+    check(vkCreateRenderPass(dev.device, &spi, nullptr, &rp_shade), "vkCreateRenderPass");
+    const VkImageView views[4] = {depth.view, colour.view, receivers.view, visibility.view};
+    fbi.renderPass = rp_shade;
+    fbi.attachmentCount = n;
+    fbi.pAttachments = views;
+    check(vkCreateFramebuffer(dev.device, &fbi, nullptr, &fb_shade), "vkCreateFramebuffer");
+  }
+
+  void make_pipelines() {
+    // Set 0: GpuMap's buffers (shadowtile.glsl), one set per ring slot (its feedback range).
+    VkDescriptorSetLayoutBinding b[3] = {};
+    for (uint32_t i = 0; i < 3; ++i) b[i] = {i, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr};
+    VkDescriptorSetLayoutCreateInfo li{};
+    li.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO;
+    li.bindingCount = 3;
+    li.pBindings = b;
+    check(vkCreateDescriptorSetLayout(dev.device, &li, nullptr, &set_layout), "vkCreateDescriptorSetLayout");
+    // Set 1: the plain R32F depth map (Lookup::r32f).
+    const VkDescriptorSetLayoutBinding rb{0, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr};
+    li.bindingCount = 1;
+    li.pBindings = &rb;
+    check(vkCreateDescriptorSetLayout(dev.device, &li, nullptr, &map_layout), "vkCreateDescriptorSetLayout");
+    const VkDescriptorSetLayout both[2] = {set_layout, map_layout};
+    const VkPushConstantRange pcr{VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, 0, sizeof(Push)};
+    VkPipelineLayoutCreateInfo pli{};
+    pli.sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO;
+    pli.setLayoutCount = 2;
+    pli.pSetLayouts = both;
+    pli.pushConstantRangeCount = 1;
+    pli.pPushConstantRanges = &pcr;
+    check(vkCreatePipelineLayout(dev.device, &pli, nullptr, &layout), "vkCreatePipelineLayout");
+    const VkDescriptorPoolSize ps[2] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 3 * o.frames_in_flight},
+                                        {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1}};
+    VkDescriptorPoolCreateInfo dpi{};
+    dpi.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO;
+    dpi.maxSets = o.frames_in_flight + 1;
+    dpi.poolSizeCount = 2;
+    dpi.pPoolSizes = ps;
+    check(vkCreateDescriptorPool(dev.device, &dpi, nullptr, &dpool), "vkCreateDescriptorPool");
+    sets.resize(o.frames_in_flight);
+    for (uint32_t i = 0; i < o.frames_in_flight; ++i) {
+      VkDescriptorSetAllocateInfo dai{};
+      dai.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO;
+      dai.descriptorPool = dpool;
+      dai.descriptorSetCount = 1;
+      dai.pSetLayouts = &set_layout;
+      check(vkAllocateDescriptorSets(dev.device, &dai, &sets[i]), "vkAllocateDescriptorSets");
+      const gpu::GpuDescriptors d = g->descriptors(i);  // ring slot i's feedback (frame f uses slot f % N)
+      const VkDescriptorBufferInfo infos[3] = {d.pool, d.page_table, d.feedback};
+      VkWriteDescriptorSet w[3] = {};
+      for (uint32_t k = 0; k < 3; ++k) {
+        w[k].sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
+        w[k].dstSet = sets[i];
+        w[k].dstBinding = k;
+        w[k].descriptorCount = 1;
+        w[k].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
+        w[k].pBufferInfo = &infos[k];
+      }
+      vkUpdateDescriptorSets(dev.device, 3, w, 0, nullptr);
+    }
+    VkDescriptorSetAllocateInfo dai{};
+    dai.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO;
+    dai.descriptorPool = dpool;
+    dai.descriptorSetCount = 1;
+    dai.pSetLayouts = &map_layout;
+    check(vkAllocateDescriptorSets(dev.device, &dai, &map_set), "vkAllocateDescriptorSets");
+    const VkDescriptorImageInfo ii{sampler, r32f.view, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
+    VkWriteDescriptorSet w{};
+    w.sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
+    w.dstSet = map_set;
+    w.descriptorCount = 1;
+    w.descriptorType = VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
+    w.pImageInfo = &ii;
+    vkUpdateDescriptorSets(dev.device, 1, &w, 0, nullptr);
+
+    VkShaderModule vs = dev.module(kVertSpv);
+    VkShaderModule fs = o.twin ? dev.module(kFragTwinSpv) : dev.module(kFragSpv);
+    VkPipelineShaderStageCreateInfo st[2] = {};
+    for (int i = 0; i < 2; ++i) {
+      st[i].sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
+      st[i].stage = i == 0 ? VK_SHADER_STAGE_VERTEX_BIT : VK_SHADER_STAGE_FRAGMENT_BIT;
+      st[i].module = i == 0 ? vs : fs;
+      st[i].pName = "main";
+    }
+    const VkVertexInputBindingDescription vbind{0, 24, VK_VERTEX_INPUT_RATE_VERTEX};
+    const VkVertexInputAttributeDescription vattr[2] = {{0, 0, VK_FORMAT_R32G32B32_SFLOAT, 0},
+                                                        {1, 0, VK_FORMAT_R32G32B32_SFLOAT, 12}};
+    VkPipelineVertexInputStateCreateInfo vi{};
+    vi.sType = VK_STRUCTURE_TYPE_PIPELINE_VERTEX_INPUT_STATE_CREATE_INFO;
+    vi.vertexBindingDescriptionCount = 1;
+    vi.pVertexBindingDescriptions = &vbind;
+    vi.vertexAttributeDescriptionCount = 2;
+    vi.pVertexAttributeDescriptions = vattr;
+    VkPipelineInputAssemblyStateCreateInfo ia{};
+    ia.sType = VK_STRUCTURE_TYPE_PIPELINE_INPUT_ASSEMBLY_STATE_CREATE_INFO;
+    ia.topology = VK_PRIMITIVE_TOPOLOGY_TRIANGLE_LIST;
+    const VkViewport vp{0, 0, float(o.width), float(o.height), 0, 1};
+    const VkRect2D sc{{0, 0}, {o.width, o.height}};
+    VkPipelineViewportStateCreateInfo vps{};
+    vps.sType = VK_STRUCTURE_TYPE_PIPELINE_VIEWPORT_STATE_CREATE_INFO;
+    vps.viewportCount = 1;
+    vps.pViewports = &vp;
+    vps.scissorCount = 1;
+    vps.pScissors = &sc;
+    VkPipelineRasterizationStateCreateInfo rs{};
+    rs.sType = VK_STRUCTURE_TYPE_PIPELINE_RASTERIZATION_STATE_CREATE_INFO;
+    rs.polygonMode = VK_POLYGON_MODE_FILL;
+    rs.cullMode = VK_CULL_MODE_NONE;
+    rs.lineWidth = 1;
+    VkPipelineMultisampleStateCreateInfo ms{};
+    ms.sType = VK_STRUCTURE_TYPE_PIPELINE_MULTISAMPLE_STATE_CREATE_INFO;
+    ms.rasterizationSamples = VK_SAMPLE_COUNT_1_BIT;
+    VkPipelineDepthStencilStateCreateInfo ds{};
+    ds.sType = VK_STRUCTURE_TYPE_PIPELINE_DEPTH_STENCIL_STATE_CREATE_INFO;
+    ds.depthTestEnable = ds.depthWriteEnable = VK_TRUE;
+    ds.depthCompareOp = VK_COMPARE_OP_LESS;
+    VkPipelineColorBlendAttachmentState cba[3] = {};
+    for (auto& c : cba) c.colorWriteMask = 0xF;
+    VkPipelineColorBlendStateCreateInfo cb{};
+    cb.sType = VK_STRUCTURE_TYPE_PIPELINE_COLOR_BLEND_STATE_CREATE_INFO;
+    VkGraphicsPipelineCreateInfo gpi{};
+    gpi.sType = VK_STRUCTURE_TYPE_GRAPHICS_PIPELINE_CREATE_INFO;
+    gpi.stageCount = 1;  // the pre-pass: the vertex shader alone
+    gpi.pStages = st;
+    gpi.pVertexInputState = &vi;
+    gpi.pInputAssemblyState = &ia;
+    gpi.pViewportState = &vps;
+    gpi.pRasterizationState = &rs;
+    gpi.pMultisampleState = &ms;
+    gpi.pDepthStencilState = &ds;
+    gpi.pColorBlendState = &cb;
+    gpi.layout = layout;
+    gpi.renderPass = rp_depth;
+    VkResult r = vkCreateGraphicsPipelines(dev.device, VK_NULL_HANDLE, 1, &gpi, nullptr, &depth_pipeline);
+    if (r == VK_SUCCESS) {
+      ds.depthWriteEnable = VK_FALSE;
+      ds.depthCompareOp = VK_COMPARE_OP_EQUAL;  // gl_Position is invariant: the same depths
+      cb.attachmentCount = o.twin ? 3 : 1;
+      cb.pAttachments = cba;
+      gpi.stageCount = 2;
+      gpi.renderPass = rp_shade;
+      r = vkCreateGraphicsPipelines(dev.device, VK_NULL_HANDLE, 1, &gpi, nullptr, &shade_pipeline);
+    }
+    vkDestroyShaderModule(dev.device, vs, nullptr);
+    vkDestroyShaderModule(dev.device, fs, nullptr);
+    check(r, "vkCreateGraphicsPipelines");
+  }
+
+  double stamp_ms(const uint64_t* t, int a, int b) const {
+    if (!queries) return 0;
+    const uint64_t mask = dev.timestamp_bits >= 64 ? ~uint64_t(0) : (uint64_t(1) << dev.timestamp_bits) - 1;
+    return double((t[b] - t[a]) & mask) * double(dev.props.limits.timestampPeriod) * 1e-6;
+  }
+
+  // Collects slot s's finished frame into `done` (its pixels copied out, its timestamps read).
+  void collect(uint32_t s) {
+    Slot& sl = slots[s];
+    FrameResult r;
+    r.frame = sl.frame;
+    r.host_us = sl.host_us, r.retire_us = sl.retire_us, r.uploads_us = sl.uploads_us;
+    if (queries) {
+      uint64_t t[kStamps] = {};
+      check(vkGetQueryPoolResults(dev.device, queries, s * kStamps, kStamps, sizeof(t), t, sizeof(uint64_t),
+                                  VK_QUERY_RESULT_64_BIT),
+            "vkGetQueryPoolResults");
+      r.gpu_upload_ms = stamp_ms(t, 0, 1);
+      r.gpu_depth_ms = stamp_ms(t, 1, 2);
+      r.gpu_shade_ms = stamp_ms(t, 2, 3);
+      r.gpu_frame_ms = stamp_ms(t, 0, 4);
+    }
+    const size_t pixels = size_t(o.width) * o.height;
+    if (o.readback) {
+      const auto* p = static_cast<const uint8_t*>(sl.rgba.mapped);
+      done_rgba.emplace_back(p, p + pixels * 4);
+    }
+    if (o.twin) {
+      const auto* rc = static_cast<const float*>(sl.rec.mapped);
+      const auto* vs = static_cast<const float*>(sl.vis.mapped);
+      done_rec.emplace_back(rc, rc + pixels * 4);
+      done_vis.emplace_back(vs, vs + pixels);
+    }
+    done.push_back(r);
+    completed = std::max(completed, sl.frame);
+    sl.frame = 0;
+  }
+
+  // Every slot whose fence has signalled (polled), oldest frame first; then GpuMap's retire.
+  void retire(bool wait_all, int must_free) {
+    done.clear(), done_rgba.clear(), done_rec.clear(), done_vis.clear();
+    std::vector<uint32_t> order;
+    for (uint32_t s = 0; s < slots.size(); ++s)
+      if (slots[s].frame) order.push_back(s);
+    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return slots[a].frame < slots[b].frame; });
+    for (uint32_t s : order) {
+      VkResult st = vkGetFenceStatus(dev.device, fences[s]);
+      if (st == VK_NOT_READY && (wait_all || int(s) == must_free)) {
+        if (!wait_all) ++waits;
+        st = vkWaitForFences(dev.device, 1, &fences[s], VK_TRUE, UINT64_MAX);
+      }
+      if (st == VK_NOT_READY) break;  // frames complete in order: later ones are running too
+      check(st, "vkGetFenceStatus");
+      collect(s);
+    }
+    const auto t0 = Clock::now();
+    const std::span<const gpu::FrameStats> fs = g->retire(completed);
+    retire_us = us_since(t0);
+    for (const gpu::FrameStats& x : fs)
+      for (FrameResult& r : done)
+        if (r.frame == x.frame) r.stats = x;
+    for (size_t i = 0; i < done.size(); ++i) {
+      if (o.readback) done[i].rgba = done_rgba[i];
+      if (o.twin) done[i].receivers = done_rec[i], done[i].visibility = done_vis[i];
+    }
+  }
+
+  void copy_out(VkCommandBuffer cmd, const Image& im, const Buffer& to) {
+    VkBufferImageCopy c{};
+    c.imageSubresource = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 0, 1};
+    c.imageExtent = {o.width, o.height, 1};
+    vkCmdCopyImageToBuffer(cmd, im.image, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL, to.buffer, 1, &c);
+  }
+
+  void render(const FrameInput& in) {
+    if (in.kernel < 1 || in.kernel > 9) throw std::runtime_error("raster: PCF kernel side 1..9");
+    const uint64_t f = ++frame;
+    const uint32_t s = uint32_t(f % slots.size());
+    retire(false, int(s));
+    Slot& sl = slots[s];
+    VkCommandBuffer cmd = cmds[s];
+    check(vkResetFences(dev.device, 1, &fences[s]), "vkResetFences");
+    check(vkResetCommandBuffer(cmd, 0), "vkResetCommandBuffer");
+    VkCommandBufferBeginInfo bi{};
+    bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
+    bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
+    check(vkBeginCommandBuffer(cmd, &bi), "vkBeginCommandBuffer");
+    if (queries) {
+      vkCmdResetQueryPool(cmd, queries, s * kStamps, kStamps);
+      vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, queries, s * kStamps + 0);
+    }
+    auto t0 = Clock::now();
+    g->record_uploads(cmd, f);
+    sl.uploads_us = us_since(t0);
+    sl.retire_us = retire_us;
+    sl.host_us = sl.uploads_us + retire_us;
+    if (queries) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, queries, s * kStamps + 1);
+
+    // Near and far planes around the scene's box.
+    double far = 0;
+    for (int c = 0; c < 8; ++c) {
+      const double p[3] = {c & 1 ? hi[0] : lo[0], c & 2 ? hi[1] : lo[1], c & 4 ? hi[2] : lo[2]};
+      far = std::max(far, std::hypot(p[0] - in.eye[0], p[1] - in.eye[1], p[2] - in.eye[2]));
+    }
+    far = far * 1.01 + 1e-6;
+    Push push{};
+    push.view_projection = vulkan_view_projection(in, double(o.width) / o.height, far * 1e-4, far);
+    for (int k = 0; k < 3; ++k) push.light[k] = float(in.light[k]), push.eye[k] = float(in.eye[k]);
+    push.light[3] = in.light_is_point ? 1.0f : 0.0f;
+    // One pixel's angle (as `render --filter` measures it): the footprint's level pair.
+    push.eye[3] = in.filter ? float(2 * std::tan(in.fov_deg * 3.14159265358979323846 / 360) / o.height) : 0.0f;
+    push.mode[0] = uint32_t(in.lookup);
+    push.mode[1] = in.kernel;
+    push.mode[2] = (in.slice_a & 0xFFFFu) | (in.slice_b << 16);
+    push.mode[3] = in.soft ? 1u : 0u;
+    push.misc[0] = in.blend;
+    push.misc[1] = float(in.texel);
+    push.misc[2] = float(1.5 + (in.kernel - 1) / 2.0);  // `render`'s open-receiver offset plus the PCF radius
+
+    VkClearValue clear[4] = {};
+    clear[0].depthStencil = {1.0f, 0};
+    // `render`'s sky (0.55, 0.7, 0.9) with its PNG's gamma, as the shader writes its colour.
+    clear[1].color = {{std::pow(0.55f, 1 / 2.2f), std::pow(0.7f, 1 / 2.2f), std::pow(0.9f, 1 / 2.2f), 1.0f}};
+    clear[2].color = {{0, 0, 0, -1.0f}};
+    clear[3].color = {{1.0f, 0, 0, 0}};
+    const VkDeviceSize zero = 0;
+    VkRenderPassBeginInfo rbi{};
+    rbi.sType = VK_STRUCTURE_TYPE_RENDER_PASS_BEGIN_INFO;
+    rbi.renderPass = rp_depth;
+    rbi.framebuffer = fb_depth;
+    rbi.renderArea = {{0, 0}, {o.width, o.height}};
+    rbi.clearValueCount = 1;
+    rbi.pClearValues = clear;
+    vkCmdBeginRenderPass(cmd, &rbi, VK_SUBPASS_CONTENTS_INLINE);
+    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, depth_pipeline);
+    vkCmdPushConstants(cmd, layout, VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, 0, sizeof(push), &push);
+    vkCmdBindVertexBuffers(cmd, 0, 1, &vb.buffer, &zero);
+    vkCmdDraw(cmd, vertex_count, 1, 0, 0);
+    vkCmdEndRenderPass(cmd);
+    if (queries) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT, queries, s * kStamps + 2);
+
+    rbi.renderPass = rp_shade;
+    rbi.framebuffer = fb_shade;
+    rbi.clearValueCount = o.twin ? 4 : 2;
+    vkCmdBeginRenderPass(cmd, &rbi, VK_SUBPASS_CONTENTS_INLINE);
+    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, shade_pipeline);
+    const VkDescriptorSet both[2] = {sets[s], map_set};
+    vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, layout, 0, 2, both, 0, nullptr);
+    vkCmdPushConstants(cmd, layout, VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, 0, sizeof(push), &push);
+    vkCmdBindVertexBuffers(cmd, 0, 1, &vb.buffer, &zero);
+    vkCmdDraw(cmd, vertex_count, 1, 0, 0);
+    vkCmdEndRenderPass(cmd);
+    if (queries) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT, queries, s * kStamps + 3);
+
+    if (o.readback) copy_out(cmd, colour, sl.rgba);
+    if (o.twin) copy_out(cmd, receivers, sl.rec), copy_out(cmd, visibility, sl.vis);
+    VkMemoryBarrier mb{};
+    mb.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
+    mb.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+    mb.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
+    vkCmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &mb, 0, nullptr, 0, nullptr);
+    if (queries) vkCmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_BOTTOM_OF_PIPE_BIT, queries, s * kStamps + 4);
+    t0 = Clock::now();
+    g->record_end_of_frame(cmd, f);
+    sl.host_us += us_since(t0);
+    check(vkEndCommandBuffer(cmd), "vkEndCommandBuffer");
+    VkSubmitInfo si{};
+    si.sType = VK_STRUCTURE_TYPE_SUBMIT_INFO;
+    si.commandBufferCount = 1;
+    si.pCommandBuffers = &cmd;
+    check(vkQueueSubmit(dev.queue, 1, &si, fences[s]), "vkQueueSubmit");
+    sl.frame = f;
+  }
+};
+
+Rasterizer::Rasterizer(client::Map map, std::span<const float> triangles, const RasterOptions& options)
+    : impl_(std::make_unique<Impl>(std::move(map), triangles, options)) {}
+Rasterizer::~Rasterizer() = default;
+
+std::span<const FrameResult> Rasterizer::render(const FrameInput& in) {
+  impl_->render(in);
+  return impl_->done;
+}
+std::span<const FrameResult> Rasterizer::finish() {
+  impl_->retire(true, -1);
+  return impl_->done;
+}
+uint64_t Rasterizer::frames() const { return impl_->frame; }
+uint64_t Rasterizer::ring_waits() const { return impl_->waits; }
+uint64_t Rasterizer::validation_messages() const { return impl_->dev.messages; }
+const std::string& Rasterizer::first_validation_message() const { return impl_->dev.first_message; }
+double Rasterizer::retire_host_us_last() const { return impl_->retire_us; }
+const std::string& Rasterizer::device_name() const { return impl_->dev.name; }
+gpu::GpuStats Rasterizer::stats() const { return impl_->g->stats(); }
+uint32_t Rasterizer::width() const { return impl_->o.width; }
+uint32_t Rasterizer::height() const { return impl_->o.height; }
+
+}  // namespace st::raster
