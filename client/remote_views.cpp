@@ -1,18 +1,26 @@
 // Cameras: Map::request_view (client.hpp). A view is a set of tiles, recomputed from the
 // camera on every request:
-//   1. (views_mu_, lock shared) each screen sample's ray meets the receiver plane at p;
-//      its pixel's footprint there is t * pixel_angle (a perspective camera; an
-//      orthographic one's is constant); the level is the finest whose texel
-//      (LightSpace::texel_size) is no larger than the footprint, and levels <= K need
-//      nothing (the skip grid answers). The page-table walk at p's texel of that level
-//      names the tile needed (through resident index tiles, which are kept too).
-//   2. The samples' tiles, deduplicated (nearest distance kept), are ordered nearest
-//      first and cut to the view's share of view_slots(): views of higher priority claim
-//      their tiles first, so a near camera is never starved by a minimap or a prefetch.
+//   1. (views_mu_, lock shared) each screen sample's ray (Rays: the one loop, also behind
+//      Map::view_samples) meets the receiver plane at p; its pixel's footprint there is
+//      t * pixel_angle (a perspective camera; an orthographic one's is constant); the
+//      level is filter_levels' fine level for that footprint (what visibility_filtered
+//      reads), and levels <= K + p need nothing (the skip grid and the map preview answer
+//      them exactly). The page-table walk at p's texel of that level names the tile
+//      needed (through resident index tiles, which are kept too). With the frame's time
+//      (ViewOptions::time) and the previous request's matrix and time, the matrix is
+//      extrapolated to poses ahead (ahead_times: one frame interval, then doubling up to
+//      ViewOptions::lookahead) and their samples' tiles are added, flagged `ahead`.
+//   2. The tiles, deduplicated (a need now over a need ahead, nearest distance kept), are
+//      ordered nearest first, the poses ahead after, and cut to the view's share of
+//      view_slots(): views of higher priority claim their tiles first, so a near camera is
+//      never starved by a minimap or a prefetch, and a view's own tiles before its poses
+//      ahead.
 //   3. (lock exclusive) the tiles that left this view and are in no other have their
 //      fetches cancelled (queued: dropped; sent: Cancel); the kept ones are wanted at
 //      priority options.priority - rank; a tile seen resident before, still in the
-//      view and now absent is counted as a refetch (MapStats::view_refetches).
+//      view and now absent is counted as a refetch (MapStats::view_refetches). Tiles
+//      ahead are held like the view's own but are not counted as its needs
+//      (ViewStats::ahead).
 // The slots of the views' tiles are flagged (slot_in_view_: set when a view takes a
 // resident tile or a tile of a view arrives, cleared when it leaves every view), and
 // before every eviction sync_lru_locked makes them the most recently used (one pass over
