@@ -56,6 +56,10 @@ ViewStats Map::request_view(uint32_t view_id, const double view_projection[16], 
 }
 bool Map::remove_view(uint32_t view_id) noexcept { return map_ && map_->remove_view(view_id); }
 ViewStats Map::view_stats(uint32_t view_id) const noexcept { return map_ ? map_->view_stats(view_id) : ViewStats{}; }
+size_t Map::view_samples(const double view_projection[16], uint32_t width, uint32_t height, const ViewOptions& options,
+                         std::span<ViewSample> out) const noexcept {
+  return map_ ? map_->view_samples(view_projection, width, height, options, out) : 0;
+}
 
 // ---------------------------------------------------------------- LightTransform
 

@@ -271,6 +271,13 @@ bool RemoteMap::enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch
     sc.set_region(level, x, y, hit.region_shift, value, LookupScratch::Counted::none);
     return false;
   }
+  if (page.state != PageState::resident && level <= grid_.levels + preview_.levels()) {
+    // The map preview holds this level's answer exactly (map_preview.hpp): no miss.
+    value = preview_.coarse_answer(grid_.levels, hit, level, x, y);
+    sc.set_region(level, x, y, preview_.coarse_region_shift(grid_.levels, hit, level), value,
+                  LookupScratch::Counted::none);
+    return false;
+  }
   if (page.state != PageState::resident) {
     value = preview_.coarse_answer(grid_.levels, hit, level, x, y);  // the map preview's finer node
     // That answer holds for the whole preview node (or the entry's node) while the tile is away.

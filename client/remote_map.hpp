@@ -107,6 +107,8 @@ class RemoteMap final : public Evaluator {
                          const ViewOptions& options) noexcept;
   bool remove_view(uint32_t id) noexcept;
   ViewStats view_stats(uint32_t id) const noexcept;
+  size_t view_samples(const double* view_projection, uint32_t width, uint32_t height, const ViewOptions& options,
+                      std::span<ViewSample> out) const noexcept;
   // The light MapInfo publishes: the pack's, or a stack map's first sample's.
   const std::shared_ptr<const LightSpace>& info_light() const noexcept { return info_light_; }
   // Where the surfaces lie (surface_extent.hpp), for MapInfo::scene and views' receiver
@@ -411,12 +413,13 @@ class RemoteMap final : public Evaluator {
   // ---- views (remote_views.cpp) ----
   // One tile a view needs: `path` for a resident index tile its walks pass through (kept
   // resident too, not counted as a need), else the tile the walk ended at (an encoded
-  // tile, or an index tile not at hand: its children follow once it arrives).
+  // tile, or an index tile not at hand: its children follow once it arrives). `ahead`:
+  // needed only by the camera's poses ahead (ViewOptions::time), not by its pixels now.
   struct ViewTile {
     uint64_t tile;
     GridEntry entry;
     float distance;
-    bool path, seen_resident;
+    bool path, seen_resident, ahead;
   };
   static bool tile_less(const ViewTile& a, const ViewTile& b) { return a.tile < b.tile; }
   struct View {
@@ -424,12 +427,19 @@ class RemoteMap final : public Evaluator {
     uint32_t id = 0;
     uint16_t priority = 0;
     uint32_t wanted = 0;
+    std::array<double, 16> last_vp{};  // the previous request's matrix and time (views_mu_)
+    double last_time = 0;
+    bool has_last = false;
     std::vector<ViewTile> tiles;   // kept, sorted by tile id (mu_)
     std::vector<ViewTile> next, scratch;  // the next request's work (views_mu_)
   };
   bool in_other_view_locked(const View* self, uint64_t tile) const noexcept;
   uint32_t view_slots() const noexcept;
   ViewStats view_counts_locked(const View& v) const noexcept;
+  // Appends the tiles the screen samples of the camera with inverse view-projection `inv`
+  // need (lock held shared), `ahead` flagged; false when the camera casts nothing.
+  template <class Rays>
+  void collect_view_tiles(const Rays& rays, const ViewOptions& o, bool ahead, std::vector<ViewTile>& out) const;
   std::mutex views_mu_;  // one request_view at a time; taken before mu_
   std::array<View, kMaxViews> views_;
   uint32_t view_count_ = 0;  // (mu_)

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <mutex>
 #include <thread>
@@ -143,8 +144,7 @@ struct CameraRun {
   uint32_t id = 0;
   CameraPath path;
   client::Map map;
-  uint32_t view_base = 0;              // its views: view_base (now), + 1..4 (poses ahead)
-  bool ahead_views = false;            // prefetch as views (room for 4 views per camera)
+  uint32_t view_id = 0;                // its view on its connection's map (2D maps)
   Clock::time_point first;             // schedule of frame 0 (start + phase)
   uint64_t next_frame = 0, frames = 0;
   uint64_t prev_segment = ~uint64_t(0);
@@ -157,7 +157,6 @@ struct CameraRun {
 // Runs frame `cam.next_frame` (its scheduled time has come) and advances it.
 void camera_frame(CameraRun& cam, const LoadOptions& o, const WorldFrame& world, Shared& sh) {
   client::Map& map = cam.map;
-  const uint32_t L = map.finest_level();
   const uint32_t conn = sh.camera_conn[cam.id];
   const uint64_t f = cam.next_frame++;
   const double t = double(f) / o.rate;
@@ -170,7 +169,17 @@ void camera_frame(CameraRun& cam, const LoadOptions& o, const WorldFrame& world,
   const uint64_t seg = path.segment(t);
   const bool cut = seg != cam.prev_segment;
   cam.prev_segment = seg;
-  ViewNeeds needs = view_points(world, path.at(t), L, o.view);
+  // The frame's receivers: the camera's screen samples on the ground (the client casts
+  // them, the same rays request_view casts), each with its pixel's footprint.
+  client::ViewOptions vo = view_options(world, o.view, 60000);
+  // A camera that moves on (no cut) tells the library its frame time: the view asks for
+  // the tiles of its poses ahead too (look-ahead from its motion); a cut is a new camera.
+  vo.time = cut ? std::numeric_limits<double>::quiet_NaN() : t;
+  vo.lookahead = o.prefetch ? kLookahead : 0;
+  const auto vp = view_projection(path.at(t), kNearPlane, kFarPlane);
+  std::vector<client::ViewSample> samples(size_t(o.view.samples_x) * o.view.samples_y);
+  samples.resize(map.view_samples(vp.data(), display_w(o.view), display_h(o.view), vo, samples));
+  std::vector<CellNeed> cells;
   const uint32_t slices = map.slices();
   const double time = time_at(o, t);
   if (slices) {
@@ -178,7 +187,7 @@ void camera_frame(CameraRun& cam, const LoadOptions& o, const WorldFrame& world,
     // its time ahead; the view's 2D cells mean nothing here.
     uint32_t w0 = 0, w1 = slices - 1;
     if (!o.soft) time_slices(time, slices, w0, w1);
-    for (uint32_t w = w0; w <= w1; ++w) needs.cells.push_back(slice_need(w));
+    for (uint32_t w = w0; w <= w1; ++w) cells.push_back(slice_need(w));
     map.request_slices(w0, w1, 60000);
     if (o.prefetch && !o.soft && (cut || (f + cam.id) % kPrefetchEvery == 0))
       for (size_t k = 0; k < std::size(kPrefetchAhead); ++k) {
@@ -188,53 +197,38 @@ void camera_frame(CameraRun& cam, const LoadOptions& o, const WorldFrame& world,
       }
   } else {
     // A 2D map: the camera is a view (client.hpp Map::request_view): the library finds the
-    // tiles its pixels need, nearest first, keeps them resident while in view and cancels
-    // what leaves every view. Its poses ahead on the same path segment are views of lower
-    // priority (a real client cannot see a teleport coming: across a cut they go).
-    const client::ViewOptions vo = view_options(world, o.view, 60000);
-    const auto vp = view_projection(path.at(t), kNearPlane, kFarPlane);
-    map.request_view(cam.view_base, vp.data(), display_w(o.view), display_h(o.view), vo);
-    needs.cells.push_back(view_need(cam.view_base));
-    if (cam.ahead_views && (cut || (f + cam.id) % kPrefetchEvery == 0))
-      for (size_t k = 0; k < std::size(kViewAhead); ++k) {
-        const uint32_t id = cam.view_base + 1 + uint32_t(k);
-        const double ta = t + kViewAhead[k];
-        if (ta < o.duration && path.segment(ta) == seg) {
-          const auto va = view_projection(path.at(ta), kNearPlane, kFarPlane);
-          map.request_view(id, va.data(), display_w(o.view), display_h(o.view),
-                           view_options(world, o.view, uint16_t(40000 - 8000 * k)));
-        } else {
-          map.remove_view(id);
-        }
-      }
+    // tiles its pixels need, nearest first, keeps them resident while in view, cancels what
+    // leaves every view and, from the frame times, asks for the tiles of the poses ahead.
+    map.request_view(cam.view_id, vp.data(), display_w(o.view), display_h(o.view), vo);
+    cells.push_back(view_need(cam.view_id));
   }
 
   // Evaluation: which needed cells are resident, then the shadow lookups.
   std::vector<CellNeed> missing;
-  for (const CellNeed& c : needs.cells)
+  for (const CellNeed& c : cells)
     if (!resident(map, c)) missing.push_back(c);
   // One batched call per frame, as a game would make it (client.hpp).
-  std::vector<client::WorldPoint> points(needs.points.size());
-  std::vector<float> answers(points.size());
-  for (size_t i = 0; i < points.size(); ++i) points[i] = {needs.points[i].x, needs.points[i].y, needs.points[i].z};
+  std::vector<client::WorldPoint> points(samples.size());
+  std::vector<float> footprints(samples.size()), answers(samples.size());
+  for (size_t i = 0; i < samples.size(); ++i) points[i] = samples[i].point, footprints[i] = samples[i].footprint;
   const auto t0 = Clock::now();
   // Filtered at each sample's footprint (MH §3.3: the level from the pixel, two levels
   // blended), as a renderer that does not alias in the distance would ask.
   if (!slices) {
-    map.visibility_filtered(points, needs.footprints, answers, 1);
+    map.visibility_filtered(points, footprints, answers, 1);
   } else {
     for (size_t i = 0; i < points.size(); ++i)
-      answers[i] = o.soft ? map.soft_visibility_filtered(points[i], needs.footprints[i])
-                          : map.time_visibility_filtered(points[i], time, needs.footprints[i]);
+      answers[i] = o.soft ? map.soft_visibility_filtered(points[i], footprints[i])
+                          : map.time_visibility_filtered(points[i], time, footprints[i]);
   }
   const auto t1 = Clock::now();
   double vis = 0;
   for (float v : answers) vis += v;
   sh.lookup_ns.fetch_add(uint64_t(std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count()),
                          std::memory_order_relaxed);
-  sh.lookups.fetch_add(needs.points.size(), std::memory_order_relaxed);
-  sh.samples.fetch_add(needs.samples, std::memory_order_relaxed);
-  sh.needed.fetch_add(needs.cells.size(), std::memory_order_relaxed);
+  sh.lookups.fetch_add(points.size(), std::memory_order_relaxed);
+  sh.samples.fetch_add(uint64_t(o.view.samples_x) * o.view.samples_y, std::memory_order_relaxed);
+  sh.needed.fetch_add(cells.size(), std::memory_order_relaxed);
   sh.missing.fetch_add(missing.size(), std::memory_order_relaxed);
   if (!missing.empty()) sh.holes.fetch_add(1, std::memory_order_relaxed);
   {
@@ -356,11 +350,7 @@ LoadResult run_load(const LoadOptions& o_in) {
   Shared sh;
   sh.pending.resize(r.connections);
   sh.cuts.resize(o.cameras);
-  std::vector<uint32_t> per_conn(r.connections, 0);
-  for (uint32_t c = 0; c < o.cameras; ++c) {
-    sh.camera_conn.push_back(c % r.connections);
-    ++per_conn[c % r.connections];
-  }
+  for (uint32_t c = 0; c < o.cameras; ++c) sh.camera_conn.push_back(c % r.connections);
 
   const auto start = Clock::now() + std::chrono::milliseconds(20);
   std::atomic<bool> stop{false};
@@ -429,12 +419,9 @@ LoadResult run_load(const LoadOptions& o_in) {
   for (uint32_t c = 0; c < o.cameras; ++c) {
     const uint32_t conn = sh.camera_conn[c];
     const double phase = double(c) / double(o.cameras) / o.rate;
-    // Views per connection: kMaxViews; a camera takes 4 (now and 3 poses ahead) while they
-    // fit, else 1 (no prefetch views).
-    constexpr uint32_t kViews = 1 + uint32_t(std::size(kViewAhead));
-    const bool ahead = o.prefetch && per_conn[conn] * kViews <= client::kMaxViews;
-    cameras.push_back(CameraRun{c, CameraPath(o.path, r.world, o.seed, c), maps[conn],
-                                (c / r.connections) * (ahead ? kViews : 1u), ahead,
+    // One view per camera (client::kMaxViews per connection; the look-ahead is the
+    // view's own, from its frame times).
+    cameras.push_back(CameraRun{c, CameraPath(o.path, r.world, o.seed, c), maps[conn], c / r.connections,
                                 start + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(phase)),
                                 0, frames_per_camera});
   }

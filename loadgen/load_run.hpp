@@ -8,12 +8,14 @@
 // its requests go out then whether or not earlier answers came back (request_region
 // never blocks); a frame that starts late still counts from its scheduled time.
 //
-// Per frame a camera (1) works out the cells its view needs (view_tiles.hpp) and asks for
-// them, nearest first, at high priority; (2) prefetches the cells of its poses
-// kPrefetchAhead seconds ahead on the same path segment at lower priority (never across a
-// cut: a real client cannot see a teleport coming), every kPrefetchEvery frames (camera c
-// at frames f with (f + c) % kPrefetchEvery == 0, so a fleet does not prefetch in
-// lockstep); (3) checks which needed cells are not
+// Per frame a camera (1) casts its screen samples (client::Map::view_samples) and, on a 2D
+// map, registers its view (Map::request_view) with the frame's time, so that the library
+// asks for its pixels' tiles nearest first and for those of its poses up to kLookahead
+// seconds ahead from its motion (a cut starts without a time: a real client cannot see a
+// teleport coming); a stack map's camera asks for its slices and (2) prefetches those
+// kPrefetchAhead seconds on, every kPrefetchEvery frames (camera c at frames f with
+// (f + c) % kPrefetchEvery == 0, so a fleet does not prefetch in lockstep); (3) checks
+// which needed cells are not
 // resident (a frame with holes: its lookups answered from coarser levels) and (4)
 // evaluates map.visibility_filtered at every receiver sample (its pixel footprint picks
 // the levels, MH §3.3).
@@ -76,9 +78,8 @@ inline WorldFrame stack_world_frame(const client::Map& m) { return map_world_fra
 
 inline constexpr double kPrefetchAhead[] = {0.25, 0.5, 1.0};  // seconds
 inline constexpr uint64_t kPrefetchEvery = 6;                   // frames between prefetch rounds
-// A 2D map's poses ahead, each a view (client::Map::request_view) of lower priority: one a
-// prefetch round ahead too, so the tiles a camera meets before its next round are asked for.
-inline constexpr double kViewAhead[] = {0.1, 0.25, 0.5, 1.0};  // seconds
+// How far ahead each camera's view looks from its motion (client::ViewOptions::lookahead).
+inline constexpr double kLookahead = 0.25;  // seconds
 
 struct SeriesPoint {
   double t = 0;                 // seconds since start

@@ -1,10 +1,8 @@
-// What one camera frame needs from the map: a grid of screen samples is cast
-// onto the ground plane of the WorldFrame (the receivers the frame shades), and each
-// sample picks the map level whose texel matches its pixel's footprint (finer near the
-// camera, coarser far away: the hierarchy's every level is a complete map, MH §3.3).
-// Samples needing a level finer than the skip level K need the tile under their level-K
-// cell (or, under an index entry, the sub-cell one index level deeper); coarser samples
-// are answered by the skip grid and need nothing.
+// A synthetic camera's screen: its sample grid and display (the rays themselves are cast
+// by the client, client::Map::view_samples and request_view, from the camera's matrix),
+// and the cells that lookups at known light-space points need (render, report): a point
+// needing a level finer than the skip level K needs the tile under its level-K cell (or,
+// under an index entry, the sub-cell one index level deeper).
 #pragma once
 #include <cstdint>
 #include <vector>
@@ -32,27 +30,8 @@ struct CellNeed {
   uint64_t key() const { return (uint64_t(cell_level) << 58) | (cy << 29) | cx; }
 };
 
-struct ViewNeeds {
-  std::vector<Vec3d> points;     // receivers (world) of the samples that hit the ground
-  std::vector<float> footprints; // per point: its pixel's side in world units (filtered lookups)
-  std::vector<CellNeed> cells;   // nearest first
-  uint32_t samples = 0;          // samples_x * samples_y
-};
-
-ViewNeeds view_needs(const WorldFrame& world, const Camera& camera, uint32_t map_level, const CutGrid& grid,
-                     const ViewOptions& options = {});
-
-// view_needs' points and footprints alone (cells empty): what a frame looks up. The tiles
-// they need come from client::Map::request_view, which casts the same samples.
-ViewNeeds view_points(const WorldFrame& world, const Camera& camera, uint32_t map_level,
-                      const ViewOptions& options = {});
-
 // The cells lookups at `level` of these light-space points need (outside points and
 // constant entries need none); for renderers that know their receivers exactly.
 std::vector<CellNeed> cells_for_points(const std::vector<LightPoint>& points, uint32_t level, const CutGrid& grid);
-
-// Level whose texel is about `footprint` world units for a map of `extent` world units,
-// clamped to [0, map_level].
-uint32_t level_for_footprint(double extent, double footprint, uint32_t map_level);
 
 }  // namespace st::loadgen

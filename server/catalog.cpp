@@ -39,7 +39,26 @@ CatalogMap::CatalogMap(std::string name, std::string path)
     for (int i = 0; i < 4; ++i) tail->push_back(uint8_t(n >> (8 * i)));  // little endian (§3)
     tail->insert(tail->end(), b.begin(), b.end());
   };
-  put(pack_->header_bytes());
+  // MapInfo's header carries tile_bytes tightened to the largest tile the pack holds (raw,
+  // index and deep tiles included, rounded up to 64 bytes): a client sizes its cache slots by that bound, and a
+  // build's target (64 KiB by default) over tiles of 1 KB would give it 60x fewer slots
+  // than its memory holds. Only when the header re-serializes to the file's bytes (a
+  // header this reader fully understands); the file itself is untouched.
+  std::vector<uint8_t> header(pack_->header_bytes().begin(), pack_->header_bytes().end());
+  uint32_t largest_raw = 0;
+  for (const TileIndexEntry& t : pack_->tiles()) largest_raw = std::max(largest_raw, t.raw_size);
+  // Rounded up to 64 bytes: slots (and the tiles in them) stay aligned to cache lines.
+  const uint32_t bound = std::min(h.tile_bytes, uint32_t((uint64_t(largest_raw) + 63) & ~uint64_t(63)));
+  if (largest_raw > 0 && bound < h.tile_bytes) {
+    const auto same = h.serialize();
+    if (std::equal(same.begin(), same.end(), header.begin(), header.end())) {
+      PackHeader tight = h;
+      tight.tile_bytes = bound;
+      const auto b = tight.serialize();
+      header.assign(b.begin(), b.end());
+    }
+  }
+  put(header);
   put(pack_->grid_bytes());
   map_info_tail_ = std::move(tail);
 }

@@ -6,6 +6,7 @@
 // pack's tiles itself.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <set>
 
@@ -48,8 +49,9 @@ struct Fixture {
   }
 };
 
-Fixture make_fixture(const std::string& name, uint32_t cache_slots) {
+Fixture make_fixture(const std::string& name, uint32_t cache_slots, uint32_t k = 3) {
   Fixture f;
+  f.k = k;
   f.level = looptest::small_scale() ? 6 : 7;
   f.pack = looptest::build_pack(name, f.level, 31, looptest::first_encoding(), f.k, 1 << 20);  // no index tiles
   ClientOptions o = looptest::quick_options();
@@ -256,5 +258,128 @@ TEST(RequestView, RefusesWhatItCannotUse) {
   EXPECT_FALSE(Map().request_view(1, cam.data(), 64, 64).ok);
 }
 
+// A camera `height` above the ground at (x, z), heading `yaw` radians from +x, 45 degrees down.
+std::array<double, 16> camera_heading(const MapInfo& info, double x, double z, double height, double yaw) {
+  Camera c;
+  c.pos = {x, info.scene.ground + height, z};
+  c.target = {x + height * std::cos(yaw), info.scene.ground, z + height * std::sin(yaw)};
+  c.fov_deg = 60;
+  c.aspect = 16.0 / 9.0;
+  return view_projection(c, 0.01, 1000);
+}
+
+// A camera flying straight at constant speed, 60 frames a second, over a map whose tiles
+// arrive at once: with its frame time (ViewOptions::time) the view asks for the tiles of
+// its poses ahead, so that from the third frame on (the motion is known after two) every
+// tile a frame's pixels need was asked for before that frame and is resident when the
+// frame asks: no tile enters the view unrequested. The same flight without times does
+// meet tiles it never asked for (what the look-ahead removes), and neither fetches a tile
+// twice while it stays in view, though tiles leave the cache all along the way.
+struct Flight {
+  uint32_t frames_short = 0;  // frames whose tiles were not all resident before delivery
+  uint32_t max_held = 0;      // most tiles the view held at once (its own and ahead)
+  uint64_t distinct = 0, refetches = 0, evictions = 0;
+};
+// The same pack opened again: an empty cache of `cache_slots`.
+Fixture reopen(const Fixture& base, uint32_t cache_slots) {
+  Fixture f;
+  f.level = base.level, f.k = base.k;
+  ClientOptions co = looptest::quick_options();
+  co.cache_slots = cache_slots;
+  const auto h = base.pack.reader->header_bytes();
+  const auto g = base.pack.reader->grid_bytes();
+  f.remote = std::make_shared<RemoteMap>("again", std::vector<uint8_t>(h.begin(), h.end()),
+                                         std::vector<uint8_t>(g.begin(), g.end()), co, std::make_shared<Notifier>());
+  f.map = MapAccess::wrap(f.remote);
+  f.pack.reader = base.pack.reader;
+  return f;
+}
+
+Flight fly(const Fixture& base, bool with_time, uint32_t cache_slots) {
+  Fixture f = reopen(base, cache_slots);
+  const MapInfo info = f.map.info();
+  const double w = info.scene.x1 - info.scene.x0, d = info.scene.z1 - info.scene.z0;
+  Flight out;
+  std::set<uint64_t> seen;
+  for (uint32_t k = 0; k < 90; ++k) {
+    const double t = k / 60.0;  // corner to corner in 1.5 s, heading along the diagonal
+    const double x = info.scene.x0 + w * (0.02 + 0.64 * t), z = info.scene.z0 + d * (0.02 + 0.64 * t);
+    const auto cam = camera_heading(info, x, z, 2.5, std::atan2(d, w));
+    ViewOptions o;
+    o.samples_x = 48, o.samples_y = 27;
+    o.max_distance = 3;  // the lower half of the screen: the flight crosses many views' worth of tiles
+    o.lookahead = 0.05;  // three frames
+    if (with_time) o.time = t;
+    const ViewStats v = f.map.request_view(1, cam.data(), 1920, 1080, o);
+    EXPECT_TRUE(v.ok);
+    EXPECT_EQ(v.kept, v.wanted) << "the test wants views that fit";
+    if (k >= 2 && v.resident < v.kept) ++out.frames_short;
+    out.max_held = std::max(out.max_held, v.kept + v.ahead);
+    const auto sent = f.take();
+    for (const auto& r : sent) seen.insert(r.tile_id);
+    f.deliver(sent);
+    EXPECT_EQ(f.map.view_stats(1).resident, v.kept) << "frame " << k;
+  }
+  const MapStats s = f.map.stats();
+  out.distinct = seen.size();
+  out.refetches = s.view_refetches;
+  out.evictions = s.cache.evictions;
+  return out;
+}
+
+TEST(RequestView, AMovingCameraAsksForTilesBeforeTheyEnterTheView) {
+  const Fixture base = make_fixture("view_fly", 8);
+  // A cache just larger than what the view holds at once, smaller than the flight's ground.
+  const Flight roomy = fly(base, true, 1000);
+  EXPECT_EQ(roomy.frames_short, 0u);
+  const uint32_t slots = roomy.max_held + 4;  // view_slots: slots - 4
+  ASSERT_GT(roomy.distinct, slots) << "the test wants a flight over more tiles than the cache holds";
+  const Flight known = fly(base, true, slots), unknown = fly(base, false, slots);
+  EXPECT_EQ(known.frames_short, 0u) << "a tile entered the view before it was asked for";
+  EXPECT_GT(unknown.frames_short, 0u) << "without its times the camera meets tiles it never asked for";
+  EXPECT_EQ(known.refetches, 0u);
+  EXPECT_EQ(unknown.refetches, 0u);
+  EXPECT_GT(known.evictions, 0u) << "the test wants tiles leaving the cache on the way";
+}
+
+// The receivers view_samples returns are the ones request_view's tiles answer: once the
+// view is resident, filtered lookups there read no missing tile, and answer exactly what
+// they answer with the whole map resident (levels the map preview answers included).
+TEST(RequestView, ViewSamplesReadOnlyTheViewsTiles) {
+  const Fixture base = make_fixture("view_samples", 8);
+  for (double height : {3.0, 12.0}) {
+    Fixture f = reopen(base, 1000);
+    const MapInfo info = f.map.info();
+    const double cx = (info.scene.x0 + info.scene.x1) / 2 - 4, cz = (info.scene.z0 + info.scene.z1) / 2;
+    const auto cam = camera_at(info, cx, cz, height);
+    std::vector<ViewSample> samples(64 * 36);
+    samples.resize(f.map.view_samples(cam.data(), 1920, 1080, {}, samples));
+    ASSERT_GT(samples.size(), 100u);
+    for (size_t i = 1; i < samples.size(); ++i) {  // footprints grow with the distance
+      ASSERT_GT(samples[i].footprint, 0.0f);
+      if (samples[i].distance > 1.01f * samples[i - 1].distance) {
+        ASSERT_GT(samples[i].footprint, samples[i - 1].footprint);
+      }
+    }
+    ASSERT_TRUE(f.map.request_view(1, cam.data(), 1920, 1080).ok);
+    f.fetch_all();
+    ASSERT_EQ(f.map.view_stats(1).resident, f.map.view_stats(1).kept);
+    std::vector<WorldPoint> points;
+    std::vector<float> footprints;
+    for (const ViewSample& s : samples) points.push_back(s.point), footprints.push_back(s.footprint);
+    std::vector<float> view(points.size()), full(points.size());
+    const uint64_t coarse = f.map.stats().coarse_answers, queued = f.map.stats().tiles_requested;
+    f.map.visibility_filtered(points, footprints, view, 1);
+    EXPECT_EQ(f.map.stats().coarse_answers, coarse) << "height " << height;
+    f.fetch_all();
+    EXPECT_EQ(f.map.stats().tiles_requested, queued) << "the lookups queued tiles the view did not hold";
+    const uint32_t side = 1u << f.level;
+    f.map.request_region(f.level, 0, 0, side, side, 10);
+    f.fetch_all();
+    ASSERT_TRUE(f.map.region_resident(f.level, 0, 0, side, side));
+    f.map.visibility_filtered(points, footprints, full, 1);
+    for (size_t i = 0; i < points.size(); ++i) ASSERT_EQ(view[i], full[i]) << i;
+  }
+}
 }  // namespace
 }  // namespace st::client

@@ -144,20 +144,6 @@ TEST(LoadRun, PathsAreDeterministic) {
       EXPECT_EQ(a.at(t).target, b.at(t).target);
     }
     EXPECT_NE(a.at(1.7).pos, c.at(1.7).pos);
-    const ViewNeeds n = view_needs(w, a.at(0.5), reader->map_level(), reader->grid());
-    EXPECT_GT(n.points.size(), 0u) << to_string(k);
-    // Every point carries its pixel's footprint (the filtered lookups' input), growing
-    // with the distance from the camera.
-    ASSERT_EQ(n.footprints.size(), n.points.size()) << to_string(k);
-    const Camera cam = a.at(0.5);
-    for (size_t i = 0; i < n.points.size(); ++i) {
-      EXPECT_GT(n.footprints[i], 0.0f) << i;
-      for (size_t j = 0; j < i; ++j)
-        if (length(n.points[i] - cam.pos) > 1.01 * length(n.points[j] - cam.pos)) {
-          EXPECT_GT(n.footprints[i], n.footprints[j]) << i << " " << j;
-          break;
-        }
-    }
   }
 }
 

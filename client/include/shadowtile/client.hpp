@@ -213,6 +213,21 @@ struct ViewOptions {
   double receiver_height = std::numeric_limits<double>::quiet_NaN();  // NaN: MapInfo::scene.ground
   double max_distance = 0;   // receivers farther than this need nothing (0: 1.5 x the scene's span)
   uint16_t priority = 60000; // the nearest tile's fetch priority; each next tile one lower
+  // Look-ahead from the camera's motion: `time` is this frame's time in seconds on the
+  // caller's clock (NaN: motion unknown). With the time and matrix of the view's previous
+  // request (0 < dt <= 1 s), the matrix is extrapolated up to `lookahead` seconds on and
+  // the tiles those poses need are asked for after the view's own (ViewStats::ahead), so
+  // that tiles enter the view already resident or on their way.
+  double time = std::numeric_limits<double>::quiet_NaN();
+  double lookahead = 0.25;
+};
+// One screen sample of a view on its receiver plane (Map::view_samples): where its ray
+// meets the plane, the side of its pixel's footprint there in world units (what
+// visibility_filtered takes) and its distance from the eye.
+struct ViewSample {
+  WorldPoint point;
+  float footprint = 0;
+  float distance = 0;
 };
 // What a view needs and holds (Map::request_view, Map::view_stats).
 struct ViewStats {
@@ -222,6 +237,7 @@ struct ViewStats {
   uint32_t resident = 0;  // of the kept, resident now (== kept: every lookup the view makes is exact)
   uint32_t queued = 0;    // request_view: fetches newly queued or raised
   uint32_t cancelled = 0; // request_view: fetches cancelled because their tiles left every view
+  uint32_t ahead = 0;     // tiles held for the camera's motion (ViewOptions::time), not needed yet
 };
 inline constexpr uint32_t kMaxViews = 16;
 inline constexpr uint32_t kMaxViewSamples = 16384;
@@ -420,7 +436,8 @@ class SHADOWTILE_API Map {
   // reversed-Z included) and its viewport in pixels. It casts options' screen samples,
   // finds each one's receiver (on the plane y = receiver_height), picks the level whose
   // texel matches the pixel's footprint there (LightTransform::texel_size; distant pixels
-  // need coarse levels, and levels the skip grid answers need no fetch) and queues the
+  // need coarse levels, and levels the skip grid and the map preview answer exactly need
+  // no fetch) and queues the
   // tiles under them, nearest first (priority counts down from options.priority). The
   // views' tiles are kept resident while in some view (eviction takes other tiles
   // first); fetches of tiles that left every view are cancelled; a view whose tiles do
@@ -437,6 +454,12 @@ class SHADOWTILE_API Map {
   // The view's counts now (resident == kept: the view's lookups are exact); ok false for
   // a view not registered.
   ViewStats view_stats(uint32_t view_id) const noexcept;
+  // The receivers request_view's screen samples meet (the same rays, in row order, sky and
+  // samples past max_distance left out) into `out`; returns how many were written (at
+  // most out.size(); 0 when request_view would refuse the camera). Lookups at these
+  // points with their footprints read exactly the tiles the view holds.
+  size_t view_samples(const double view_projection[16], uint32_t width, uint32_t height, const ViewOptions& options,
+                      std::span<ViewSample> out) const noexcept;
 
   // Stack maps: packs built with a light set (`build --light sun-path:...` or `area:...`,
   // MH 2016 §4): N shadow maps, one per light sample (slice w = sample w). On a stack map
