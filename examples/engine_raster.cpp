@@ -12,7 +12,8 @@
 // 3x3 PCF at the finest level, or with --filter at the two levels the pixel's footprint
 // picks (MH §3.3, Map::pcf_footprint's choice; the footprint and the receiver offset as
 // `shadowtile render --filter` takes them, so the two can be compared).
-// 2D maps with a sun (a stack map's slice 0 would need the time: st_shadow_stack).
+// 2D maps with a sun (a stack map's slice 0 would need the time: st_shadow_stack); a pack
+// with a deep part (foliage, smoke, fog) shades with their transmittance per channel.
 #include <vulkan/vulkan.h>
 
 #include <algorithm>
@@ -473,6 +474,9 @@ int run(const Args& a) {
     bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
     check(vkResetCommandBuffer(cmd, 0), "vkResetCommandBuffer");
     check(vkBeginCommandBuffer(cmd, &bi), "vkBeginCommandBuffer");
+    // Partial occluders (a pack with a deep part): the fragment shader multiplies their
+    // transmittance in (st_shadow); deep tiles come through the Map, not the GPU's feedback.
+    if (map.has_deep()) map.deep_resident(0, 0, 0.999999, 0.999999);
     g.record_uploads(cmd, f);
     const double angle = (a.orbit * double(f - 1) + 20.0) * 3.14159265358979 / 180.0;
     const Vec3d eye = centre + Vec3d{std::cos(angle) * radius, 0.55 * radius, std::sin(angle) * radius};

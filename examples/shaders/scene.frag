@@ -1,7 +1,7 @@
 #version 450
 // The example renderer's fragment shader: Lambert shading with streamed shadows, the
-// visibility from the GPU tile cache through shadowtile.glsl (our buffers in set 0), the
-// level pair from the pixel's footprint (or the finest level), 3x3 PCF; absent tiles
+// light (visibility x the partial occluders' transmittance, per channel) from the GPU
+// tile cache through shadowtile.glsl (our buffers in set 0), the level pair from the pixel's footprint (or the finest level), 3x3 PCF; absent tiles
 // answer coarsely and are fed back, so the next frames stream them.
 #define ST_SET 0
 #define ST_BINDING_POOL 0
@@ -35,9 +35,10 @@ void main() {
   const float offset = 2.5 * push.to_sun.w * float(1u << (finest - level.fine));
   const float lambert = max(dot(n, push.to_sun.xyz), 0.0);
   StProbe probe = st_probe();
-  const float vis = lambert > 0.0 ? st_shadow(world_position, n, offset, footprint, 3u, probe) : 0.0;
+  // The light per channel: the visibility times the partial occluders' transmittance.
+  const vec3 light = lambert > 0.0 ? st_shadow(world_position, n, offset, footprint, 3u, probe) : vec3(0.0);
   st_finish(probe);
   const vec3 albedo = vec3(0.78, 0.74, 0.68);
-  const vec3 c = albedo * (0.22 + 0.78 * lambert * vis);
+  const vec3 c = albedo * (0.22 + 0.78 * lambert * light);
   colour = vec4(pow(c, vec3(1.0 / 2.2)), 1.0);
 }
