@@ -274,7 +274,7 @@ TEST(GpuDeep, EnginePassAndFragmentShaderLightEqualTheCpuTwin) {
   in = gb.input(set);
   shadow_pass_reference(client::evaluator(s->map), client::pack_header(s->map), in, want_vis);
   shadow_pass_light_reference(s->map, in, want_vis, want);
-  const enginetest::RasterPass raster(e, colour, *t.pos, *t.nrm, g.descriptors(2));
+  const enginetest::RasterPass raster(e, colour, *t.pos, *t.nrm, g.descriptors(2), true);
   size_t bad = 0, below = 0;
   for (uint32_t c = 1; c <= 3; ++c) {
     const uint64_t f = 1 + c;

@@ -16,6 +16,9 @@ const uint32_t kFullscreenVertSpv[] = {
 const uint32_t kEngineFragmentSpv[] = {
 #include "tests/gpu/engine_fragment.frag.spv.inc"
 };
+const uint32_t kEngineFragmentDeepSpv[] = {  // with partial occluders (ST_TEST_DEEP)
+#include "tests/gpu/engine_fragment_deep.frag.spv.inc"
+};
 
 // The engine's own raster pass (tests/gpu/shaders): a full-screen triangle into an R32F
 // colour attachment, its fragment shader including shadowtile.glsl with our buffers at
@@ -42,8 +45,9 @@ struct RasterPass {
     return m;
   }
 
+  // deep: the fragment shader built with partial occluders (st_shadow times st_transmittance).
   RasterPass(enginetest::TestEngine& e, const Image& target, const Image& pos, const Image& nrm,
-             const gpu::GpuDescriptors& g)
+             const gpu::GpuDescriptors& g, bool deep = false)
       : d(e.device), width(target.width), height(target.height) {
     VkAttachmentDescription att{};
     att.format = VK_FORMAT_R32_SFLOAT;
@@ -133,7 +137,7 @@ struct RasterPass {
       }
     }
     vkUpdateDescriptorSets(d, 5, w, 0, nullptr);
-    VkShaderModule vs = module(kFullscreenVertSpv), fs = module(kEngineFragmentSpv);
+    VkShaderModule vs = module(kFullscreenVertSpv), fs = module(deep ? std::span<const uint32_t>(kEngineFragmentDeepSpv) : std::span<const uint32_t>(kEngineFragmentSpv));
     VkPipelineShaderStageCreateInfo st[2] = {};
     for (int i = 0; i < 2; ++i) {
       st[i].sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;

@@ -2,12 +2,16 @@
 // An engine's fragment shader over the GPU tile cache (the fragment-shader test): our
 // buffers in set 0 at the bindings the engine chose, its G-buffer in set 1; per pixel the
 // receiver's visibility with the footprint given, feedback on, or one channel of the light
-// (st_shadow: times the deep part's transmittance). It must answer what the compute pass
+// (st_shadow: times the deep part's transmittance; compiled with ST_TEST_DEEP for the deep
+// tests, engine_fragment_deep.frag.spv.inc). It must answer what the compute pass
 // answers with neighbour_footprint off, bit for bit.
 #define ST_SET 0
 #define ST_BINDING_POOL 3
 #define ST_BINDING_PAGE 5
 #define ST_BINDING_FEEDBACK 7
+#ifndef ST_TEST_DEEP
+#define ST_DEEP_SHADOWS 0  // the opaque tests' build: st_shadow = vec3(visibility), less to compile
+#endif
 #include "shadowtile.glsl"
 
 layout(set = 1, binding = 0) uniform sampler2D gbuffer_positions;
