@@ -115,6 +115,27 @@ size_t CacheView::changed_slots_impl(std::span<uint64_t> known, void* visit,
   return n;
 }
 
+bool CacheView::has_deep() const { return impl_->rm->deep() != nullptr; }
+
+uint64_t CacheView::deep_generation() const {
+  const DeepPart* d = impl_->rm->deep();
+  return d ? d->generation() : 0;
+}
+
+DeepShape CacheView::deep_tiles_impl(void* visit, void (*call)(void*, const DeepTile&)) const {
+  DeepShape shape;
+  const DeepPart* d = impl_->rm->deep();
+  if (!d) return shape;
+  d->inspect([&](uint32_t level, uint32_t side_bits) { shape = {level, side_bits}; },
+             [&](uint32_t tx, uint32_t ty, std::span<const uint8_t> bytes) { call(visit, DeepTile{tx, ty, bytes}); });
+  return shape;
+}
+
+std::array<float, 3> CacheView::deep_transmittance(double u, double v, float d, double width) const noexcept {
+  const DeepPart* p = impl_->rm->deep();
+  return p ? p->lookup(u, v, d, width) : std::array<float, 3>{1, 1, 1};
+}
+
 size_t CacheView::want_tiles(std::span<const WantedTile> tiles) const {
   // Small batches (a frame's feedback): converted on the stack in chunks, no allocation.
   constexpr size_t kChunk = 256;

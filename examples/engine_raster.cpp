@@ -17,7 +17,8 @@
 // --pcf: kernel side at the finest level, or with --filter at the two levels the pixel's
 // footprint picks (MH §3.3, Map::pcf_footprint's choice; the footprint and the receiver
 // offset as `shadowtile render --filter` takes them, so the two can be compared).
-// 2D maps (suns, spots) and stack maps (slice 0). --validation: under the Khronos validation
+// 2D maps (suns, spots) and stack maps (slice 0); a 2D pack with a deep part (foliage,
+// smoke, fog) shades with their transmittance per channel. --validation: under the Khronos validation
 // layer, its warnings and errors counted.
 #include <algorithm>
 #include <chrono>
@@ -110,6 +111,10 @@ int run(const Args& a) {
     in.target = {centre.x, centre.y, centre.z};
     std::printf("frame %u: camera pos=%.3f,%.3f,%.3f,target=%.3f,%.3f,%.3f,fov=%.4f\n", f, eye.x, eye.y, eye.z, centre.x,
                 centre.y, centre.z, in.fov_deg);
+    // Partial occluders (a pack with a deep part): the fragment shader multiplies their
+    // transmittance in (st_transmittance); deep tiles come through the Map, not the GPU's
+    // feedback, so the example keeps the whole deep map asked for.
+    if (map.has_deep()) map.deep_resident(0, 0, 0.999999, 0.999999);
     write(r.render(in));
     std::this_thread::sleep_for(std::chrono::milliseconds(a.frame_ms));  // the game's frame time: tiles arrive
   }

@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "shadowtile/cache_view.hpp"
+#include "gpu/gpu_deep.hpp"
 #include "gpu/kernels.hpp"
 #include "gpu/layout.hpp"
 #include "gpu/shadow_reference.hpp"
@@ -106,6 +107,7 @@ struct GpuMap::Impl {
     bool pass_recorded = false;  // engine mode: this frame's shadow pass (one per frame: its set)
     uint64_t frame = 0;
     uint32_t count = 0;  // outputs
+    uint32_t out_words = 1;  // per output: 4 when a deep pass writes rgb after the answers
     FrameStats stats;
   };
 
@@ -123,6 +125,7 @@ struct GpuMap::Impl {
   VkDescriptorSetLayout ep_set_layout = VK_NULL_HANDLE;
   VkPipelineLayout ep_layout = VK_NULL_HANDLE;
   VkPipeline ep_pipeline = VK_NULL_HANDLE;
+  VkPipeline ep_light_pipeline = VK_NULL_HANDLE;  // the same, also writing ShadowPassImages::light
   VkDescriptorPool ep_pool = VK_NULL_HANDLE;
   VkPipelineStageFlags shader_stages = VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT;  // stages that may read our buffers
   bool page_table_sent = false;  // engine mode: the first record_uploads sends the whole page table
@@ -146,15 +149,19 @@ struct GpuMap::Impl {
   std::vector<VkBufferCopy> pool_copies, page_copies;
   std::vector<client::WantedTile> wanted;
   std::vector<FeedbackTile> feedback;
+  std::vector<float> answers;  // evaluate_deep's (unused) first word per query
   GpuStats totals;
   uint32_t resident = 0;
   uint32_t off_coarse = 0, off_entries = 0, off_skip_slots = 0, off_children = 0, off_pcf = 0;
   uint32_t off_stack = 0, off_cell_slots = 0;  // stack maps: the stack block, its slot pointers
+  bool deep_part = false;  // a 2D map with a deep part: the deep block (kPtDeep)
+  DeepMirror deep;
 
   Impl(client::Map m, const EngineDevice* e, GpuOptions o) : map(std::move(m)), opt(std::move(o)) {
     if (!map.valid()) throw std::runtime_error("GpuMap: the Map is not open (default-constructed)");
     view = std::make_unique<client::CacheView>(map);
     sg = view->stack();
+    deep_part = !sg && view->has_deep();
     if (opt.frames_in_flight < 1 || opt.frames_in_flight > 4) throw GpuError("GpuMap: frames_in_flight must be 1..4");
     if (opt.feedback_capacity < 16 || !std::has_single_bit(opt.feedback_capacity) || opt.feedback_capacity > (1u << 20))
       throw GpuError("GpuMap: feedback_capacity must be a power of two in 16..2^20");
@@ -198,6 +205,8 @@ struct GpuMap::Impl {
     if (!engine) ctx->vk.DeviceWaitIdle(d);  // engine mode: the engine has every frame completed
     const VkAllocationCallbacks* cb = ctx->callbacks();
     if (ep_pipeline) ctx->vk.DestroyPipeline(d, ep_pipeline, cb);
+    if (ep_light_pipeline) ctx->vk.DestroyPipeline(d, ep_light_pipeline, cb);
+    ep_light_pipeline = VK_NULL_HANDLE;
     if (ep_pool) ctx->vk.DestroyDescriptorPool(d, ep_pool, cb);
     if (ep_layout) ctx->vk.DestroyPipelineLayout(d, ep_layout, cb);
     if (ep_set_layout) ctx->vk.DestroyDescriptorSetLayout(d, ep_set_layout, cb);
@@ -244,7 +253,9 @@ struct GpuMap::Impl {
     const uint32_t off_dict = pv_values + uint32_t(pv.values.size());
     const uint32_t pv_end = off_dict + uint32_t(dict.size() / 4);  // then the 2D light or the stack block
     const uint32_t light_words = sg ? 0u : L::kStLightWords;  // a 2D map's light (kPtLight)
-    const uint32_t words = pv_end + light_words + stack_words();
+    const uint32_t deep_at = pv_end + light_words + stack_words();  // then the deep block
+    const uint32_t deep_words = DeepMirror::words(deep_part, opt.deep_bytes);
+    const uint32_t words = deep_at + deep_words;
     page_shadow.assign(words, 0);
     uint32_t* p = page_shadow.data();
     if (!dict.empty()) {
@@ -302,6 +313,7 @@ struct GpuMap::Impl {
         p[L::kPtLight] = 0;
       }
     }
+    if (deep_part) deep.init(deep_at, deep_words, p, view->light());
     dirty.assign((words + kDirtyBlockWords - 1) / kDirtyBlockWords, 0);
     dirty_list.reserve(dirty.size());
     mirror_tile.assign(slot_count, kInvalidTile);
@@ -323,7 +335,8 @@ struct GpuMap::Impl {
     const uint64_t staging = opt.upload_budget_bytes + uint64_t(slot_words) * 4 + page_shadow.size() * 4;
     const uint64_t query_words = sg ? L::kSqWords : L::kQueryWords;
     const uint64_t in_bytes = std::max<uint64_t>(uint64_t(opt.max_queries) * query_words * 4, uint64_t(opt.max_pixels) * 16);
-    const uint64_t out_bytes = uint64_t(std::max(opt.max_queries, opt.max_pixels)) * 4;
+    // A deep part's passes and queries write rgb after the answers: 4 floats each.
+    const uint64_t out_bytes = uint64_t(std::max(opt.max_queries, opt.max_pixels)) * (deep_part ? 16 : 4);
     const uint64_t fb_bytes = (L::kFbHeaderWords + uint64_t(opt.feedback_capacity) * (1 + L::kFbRecordWords)) * 4;
     const uint64_t range = ctx->properties().limits.maxStorageBufferRange;
     if (in_bytes > range || out_bytes > range)
@@ -543,6 +556,7 @@ struct GpuMap::Impl {
       return true;
     });
     fs.tile_bytes = off;
+    if (deep_part) deep.update(*view, [this](uint32_t w, uint32_t v) { set_page_word(w, v); });
     if (engine && !page_table_sent) {  // engine mode's first frame: the whole page table
       std::memcpy(staging + off, page_shadow.data(), page_shadow.size() * 4);
       page_copies.push_back({off, 0, page_shadow.size() * 4});
@@ -607,8 +621,9 @@ struct GpuMap::Impl {
     sci.mipmapMode = VK_SAMPLER_MIPMAP_MODE_NEAREST;
     sci.addressModeU = sci.addressModeV = sci.addressModeW = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
     vk_check(vk.CreateSampler(d, &sci, cb, &ep_sampler), "vkCreateSampler");
-    VkDescriptorSetLayoutBinding b[6] = {};
-    for (uint32_t i = 0; i < 6; ++i) {
+    // Binding 6: the light image, read only by the ST_PASS_LIGHT pipeline.
+    VkDescriptorSetLayoutBinding b[7] = {};
+    for (uint32_t i = 0; i < 7; ++i) {
       b[i].binding = i;
       b[i].descriptorCount = 1;
       b[i].stageFlags = VK_SHADER_STAGE_COMPUTE_BIT;
@@ -619,7 +634,7 @@ struct GpuMap::Impl {
     }
     VkDescriptorSetLayoutCreateInfo sli{};
     sli.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO;
-    sli.bindingCount = 6;
+    sli.bindingCount = 7;
     sli.pBindings = b;
     vk_check(vk.CreateDescriptorSetLayout(d, &sli, cb, &ep_set_layout), "vkCreateDescriptorSetLayout");
     const VkPushConstantRange pcr{VK_SHADER_STAGE_COMPUTE_BIT, 0, L::kPcWords * 4};
@@ -633,7 +648,7 @@ struct GpuMap::Impl {
     const uint32_t n = opt.frames_in_flight;
     const VkDescriptorPoolSize ps[3] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 3 * n},
                                         {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 2 * n},
-                                        {VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, n}};
+                                        {VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 2 * n}};
     VkDescriptorPoolCreateInfo dpi{};
     dpi.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO;
     dpi.maxSets = n;
@@ -648,17 +663,20 @@ struct GpuMap::Impl {
       dai.pSetLayouts = &ep_set_layout;
       vk_check(vk.AllocateDescriptorSets(d, &dai, &f.set), "vkAllocateDescriptorSets");
     }
-    VkShaderModule m = ctx->make_shader(engine_shadow_pass_spirv());
-    VkComputePipelineCreateInfo cpi{};
-    cpi.sType = VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO;
-    cpi.stage.sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
-    cpi.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
-    cpi.stage.module = m;
-    cpi.stage.pName = "main";
-    cpi.layout = ep_layout;
-    const VkResult r = vk.CreateComputePipelines(d, VK_NULL_HANDLE, 1, &cpi, cb, &ep_pipeline);
-    vk.DestroyShaderModule(d, m, cb);
-    vk_check(r, "vkCreateComputePipelines");
+    for (const bool light : {false, true}) {
+      if (light && !opt.light_pass) break;
+      VkShaderModule m = ctx->make_shader(engine_shadow_pass_spirv(light));
+      VkComputePipelineCreateInfo cpi{};
+      cpi.sType = VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO;
+      cpi.stage.sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
+      cpi.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
+      cpi.stage.module = m;
+      cpi.stage.pName = "main";
+      cpi.layout = ep_layout;
+      const VkResult r = vk.CreateComputePipelines(d, VK_NULL_HANDLE, 1, &cpi, cb, light ? &ep_light_pipeline : &ep_pipeline);
+      vk.DestroyShaderModule(d, m, cb);
+      vk_check(r, "vkCreateComputePipelines");
+    }
   }
 
   void need_engine(const char* call) const {
@@ -742,14 +760,18 @@ struct GpuMap::Impl {
     check_kernel("GpuMap::record_shadow_pass", in.kernel);
     if (!sg && in.soft) throw GpuError("GpuMap::record_shadow_pass: a soft pass needs a stack map (a pack built with a light set)");
     if (!sg && page_shadow[L::kPtLight] == 0) (void)map_light();  // throws: the light the pass refuses
+    if (im.light && !ep_light_pipeline)
+      throw GpuError("GpuMap::record_shadow_pass: a light image needs GpuOptions::light_pass (its pipeline)");
     const VkFunctions& vk = ctx->vk;
     const VkDescriptorBufferInfo bufs[3] = {{pool.buffer, 0, VK_WHOLE_SIZE}, {page.buffer, 0, VK_WHOLE_SIZE},
                                             {f.feedback.buffer, 0, VK_WHOLE_SIZE}};
-    const VkDescriptorImageInfo imgs[3] = {{VK_NULL_HANDLE, im.positions, im.gbuffer_layout},
+    const VkDescriptorImageInfo imgs[4] = {{VK_NULL_HANDLE, im.positions, im.gbuffer_layout},
                                            {VK_NULL_HANDLE, im.normals, im.gbuffer_layout},
-                                           {VK_NULL_HANDLE, im.visibility, VK_IMAGE_LAYOUT_GENERAL}};
-    VkWriteDescriptorSet w[6] = {};
-    for (uint32_t i = 0; i < 6; ++i) {
+                                           {VK_NULL_HANDLE, im.visibility, VK_IMAGE_LAYOUT_GENERAL},
+                                           {VK_NULL_HANDLE, im.light, VK_IMAGE_LAYOUT_GENERAL}};
+    const uint32_t writes = im.light ? 7 : 6;
+    VkWriteDescriptorSet w[7] = {};
+    for (uint32_t i = 0; i < writes; ++i) {
       w[i].sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
       w[i].dstSet = f.set;
       w[i].dstBinding = i;
@@ -760,7 +782,7 @@ struct GpuMap::Impl {
       if (i < 3) w[i].pBufferInfo = &bufs[i];
       else w[i].pImageInfo = &imgs[i - 3];
     }
-    vk.UpdateDescriptorSets(ctx->device(), 6, w, 0, nullptr);
+    vk.UpdateDescriptorSets(ctx->device(), writes, w, 0, nullptr);
     uint32_t pc[L::kPcWords] = {};
     pc[L::kPcCount] = im.width;
     pc[L::kPcHeight] = im.height;
@@ -775,7 +797,7 @@ struct GpuMap::Impl {
     }
     pc[L::kPcNormalOffset] = std::bit_cast<uint32_t>(in.normal_offset);
     pc[L::kPcFootprint] = std::bit_cast<uint32_t>(in.footprint);
-    vk.CmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, ep_pipeline);
+    vk.CmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, im.light ? ep_light_pipeline : ep_pipeline);
     vk.CmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, ep_layout, 0, 1, &f.set, 0, nullptr);
     vk.CmdPushConstants(cmd, ep_layout, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(pc), pc);
     vk.CmdDispatch(cmd, (im.width + 7) / 8, (im.height + 7) / 8, 1);
@@ -806,7 +828,8 @@ struct GpuMap::Impl {
   // ---- frames (own-device mode) ----
   // One evaluate batch: `words` input words per query, written by fill(query, words).
   template <class Query, class Fill>
-  uint64_t submit_queries(std::span<const Query> queries, uint32_t words, Kernel kernel, Fill fill) {
+  uint64_t submit_queries(std::span<const Query> queries, uint32_t words, Kernel kernel, Fill fill,
+                          uint32_t out_words = 1) {
     if (queries.size() > opt.max_queries)
       throw GpuError("GpuMap::evaluate: " + std::to_string(queries.size()) + " queries, more than max_queries (" +
                      std::to_string(opt.max_queries) + ")");
@@ -817,12 +840,14 @@ struct GpuMap::Impl {
     for (size_t i = 0; i < queries.size(); ++i) fill(queries[i], in + i * words);
     uint32_t pc[L::kPcWords] = {};
     pc[L::kPcCount] = uint32_t(queries.size());
+    f.out_words = out_words;
     return submit(f, kernel, uint32_t(queries.size()), pc);
   }
 
   Frame& acquire() {
     Frame& f = frames[next_frame % frames.size()];
     if (f.in_flight) finish(f);
+    f.out_words = 1;
     return f;
   }
 
@@ -937,7 +962,7 @@ struct GpuMap::Impl {
     ctx->vk.CmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
                          VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &out, 0, nullptr, 0, nullptr);
     if (invocations) {
-      const VkBufferCopy out_copy{0, 0, uint64_t(invocations) * 4};
+      const VkBufferCopy out_copy{0, 0, uint64_t(invocations) * 4 * f.out_words};
       ctx->vk.CmdCopyBuffer(cmd, f.output.buffer, f.output_host.buffer, 1, &out_copy);
       VkMemoryBarrier host{};
       host.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
@@ -957,7 +982,7 @@ struct GpuMap::Impl {
     f.frame = next_frame++;
     f.count = invocations;
     fs.frame = f.frame;
-    fs.host_io_bytes = f.input_bytes + f.normals_bytes + uint64_t(invocations) * 4;  // in, and answers back
+    fs.host_io_bytes = f.input_bytes + f.normals_bytes + uint64_t(invocations) * 4 * f.out_words;  // in, answers back
     totals.host_io_bytes += fs.host_io_bytes;
     f.stats = fs;
     ++totals.frames;
@@ -1088,6 +1113,7 @@ uint64_t GpuMap::submit_shadow_pass(const ShadowPassInput& in) {
   pc[L::kPcNear] = std::bit_cast<uint32_t>(light.near_scaled);
   pc[L::kPcNormalOffset] = std::bit_cast<uint32_t>(in.normal_offset);
   pc[L::kPcFootprint] = std::bit_cast<uint32_t>(in.footprint);
+  if (m.deep_part) f.out_words = 4;  // the light per channel after the visibility (shadow_pass.comp)
   return m.submit(f, Kernel::shadow_pass, uint32_t(pixels), pc);
 }
 
@@ -1103,6 +1129,49 @@ FrameStats GpuMap::wait(uint64_t frame, std::span<float> out) {
   f->frame = 0;  // handed out
   return f->stats;
 }
+
+FrameStats GpuMap::wait(uint64_t frame, std::span<float> out, std::span<float> light_rgb) {
+  Impl& m = *impl_;
+  m.need_own("wait");
+  Impl::Frame* f = m.find(frame);
+  if (!f) throw GpuError("GpuMap::wait: frame " + std::to_string(frame) + " is not in flight");
+  if (f->in_flight) m.finish(*f);
+  if (out.size() < f->count || light_rgb.size() < size_t(f->count) * 3)
+    throw GpuError("GpuMap::wait: output of " + std::to_string(out.size()) + " and light of " +
+                   std::to_string(light_rgb.size()) + " floats, frame has " + std::to_string(f->count) +
+                   " outputs (1 and 3 floats each)");
+  const auto* words = static_cast<const float*>(f->output_host.mapped);
+  std::memcpy(out.data(), words, size_t(f->count) * 4);
+  if (f->out_words == 4) {
+    std::memcpy(light_rgb.data(), words + f->count, size_t(f->count) * 12);
+  } else {
+    for (uint32_t i = 0; i < f->count; ++i) light_rgb[3 * i] = light_rgb[3 * i + 1] = light_rgb[3 * i + 2] = words[i];
+  }
+  f->frame = 0;  // handed out
+  return f->stats;
+}
+
+FrameStats GpuMap::evaluate_deep(std::span<const GpuDeepQuery> queries, std::span<float> out_rgb) {
+  Impl& m = *impl_;
+  m.need_own("evaluate_deep");
+  if (out_rgb.size() != queries.size() * 3) throw GpuError("GpuMap::evaluate_deep: out_rgb needs 3 floats per query");
+  if (!m.deep_part) {
+    std::fill(out_rgb.begin(), out_rgb.end(), 1.0f);
+    return {};
+  }
+  const uint64_t frame = m.submit_queries(queries, L::kQueryWords, Kernel::evaluate, [](const GpuDeepQuery& q, uint32_t* w) {
+    w[L::kQueryX] = std::bit_cast<uint32_t>(q.u);
+    w[L::kQueryY] = std::bit_cast<uint32_t>(q.v);
+    w[L::kQueryReceiver] = std::bit_cast<uint32_t>(q.depth);
+    w[L::kQueryFootprint] = std::bit_cast<uint32_t>(q.width);
+    w[L::kQueryR] = L::kDeepQuery;
+    w[L::kQueryLevel] = 0;
+  }, 4);
+  m.answers.resize(queries.size());
+  return wait(frame, m.answers, out_rgb);
+}
+
+bool GpuMap::has_deep() const { return impl_->deep_part; }
 
 uint32_t GpuMap::sync() {
   Impl& m = *impl_;
@@ -1125,6 +1194,8 @@ uint32_t GpuMap::sync() {
 GpuStats GpuMap::stats() const {
   GpuStats s = impl_->totals;
   s.resident_slots = impl_->resident;
+  s.deep_tiles = impl_->deep_part ? impl_->deep.count() : 0;
+  s.deep_tiles_dropped = impl_->deep_part ? impl_->deep.dropped() : 0;
   s.pool_bytes = impl_->pool_bytes;
   s.page_table_bytes = impl_->page_shadow.size() * 4;
   s.validation_messages = impl_->ctx->validation_messages();  // own-device mode's layer only

@@ -26,9 +26,16 @@ const uint32_t kEngineShadowPassSpv[] = {
 #include "gpu/shaders/engine_shadow_pass.spv.inc"
 };
 
+const uint32_t kEngineShadowLightPassSpv[] = {
+#include "gpu/shaders/engine_shadow_light_pass.spv.inc"
+};
+
 }  // namespace
 
-std::span<const uint32_t> engine_shadow_pass_spirv() { return kEngineShadowPassSpv; }
+std::span<const uint32_t> engine_shadow_pass_spirv(bool light) {
+  if (light) return kEngineShadowLightPassSpv;
+  return kEngineShadowPassSpv;
+}
 
 void Kernels::create(VkContext& ctx, uint32_t sets) {
   vk_ = &ctx.vk;

@@ -27,8 +27,9 @@ enum class Kernel : uint32_t {
 inline constexpr uint32_t kKernelCount = 6;
 
 // The engine-mode shadow pass (shaders/engine_shadow_pass.comp), built by GpuMap itself
-// with its own descriptor-set layout (images), not one of the Kernels.
-std::span<const uint32_t> engine_shadow_pass_spirv();
+// with its own descriptor-set layout (images), not one of the Kernels; `light`: the
+// variant that also writes the light per channel (binding 6, ST_PASS_LIGHT).
+std::span<const uint32_t> engine_shadow_pass_spirv(bool light = false);
 
 class Kernels {
  public:

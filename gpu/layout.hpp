@@ -41,6 +41,7 @@ static_assert(layout::kPcWords * 4 <= 128, "push constants: Vulkan guarantees 12
 static_assert(layout::kFbRecordWords == 6 && layout::kFbHeaderWords >= 5);
 static_assert(layout::kPtHeaderWords > layout::kPtPcfTable && layout::kPtHeaderWords > layout::kPtStack);
 static_assert(layout::kPtHeaderWords > layout::kPtDictionary && layout::kPtDictionary > layout::kPtPreview);
+static_assert(layout::kPtHeaderWords > layout::kPtDeep && layout::kPtDeep > layout::kPtLight);
 // The dictionary block is the DGMD buffer word for word (dagmh_format.hpp DictHeader).
 static_assert(offsetof(dagmh::DictHeader, node_words) == layout::kDictNodeWords * 4 &&
               offsetof(dagmh::DictHeader, treelet_count) == layout::kDictTreeletCount * 4 &&

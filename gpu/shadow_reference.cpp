@@ -6,6 +6,7 @@
 #include <cmath>
 #include <vector>
 
+#include "gpu/gpu_deep.hpp"
 #include "shadowtile/cache_view.hpp"
 #include "tiles/core/filter_level.hpp"
 #include "tiles/core/light.hpp"
@@ -81,11 +82,10 @@ struct Point {
   float u, v, d;
 };
 
-bool light_point(const ShadowLight& l, const ShadowPassInput& in, size_t p, Point& out) {
+bool light_point_at(const ShadowLight& l, const ShadowPassInput& in, size_t p, float off, Point& out) {
   const float* q = in.positions.data() + 4 * p;
   const float* n = in.normals.data() + 4 * p;
   if (q[3] == 0.0f) return false;
-  const float off = in.normal_offset;
   float r[3];
   for (int i = 0; i < 3; ++i) {
     const float moved = n[i] * off;
@@ -106,6 +106,10 @@ bool light_point(const ShadowLight& l, const ShadowPassInput& in, size_t p, Poin
   }
   out.d = z - l.near_scaled;
   return true;
+}
+
+bool light_point(const ShadowLight& l, const ShadowPassInput& in, size_t p, Point& out) {
+  return light_point_at(l, in, p, in.normal_offset, out);
 }
 
 // Pixel p's light-space point and its finest texel (x, y), and the footprint the pass
@@ -164,6 +168,43 @@ void shadow_pass_reference(const Evaluator& ev, const PackHeader& h, const Shado
     out[p] = f.t == 0.0f ? a
                          : filter_blend(a, ev.pcf(f.coarse, t.x >> (finest - f.coarse), t.y >> (finest - f.coarse),
                                                   in.kernel, t.c.d), f.t);
+  }
+}
+
+std::array<float, 3> deep_shadow_reference(const client::CacheView& view, float bias, uint32_t finest, float u, float v,
+                                           float d, float footprint, uint32_t kernel) {
+  const float moved = d - bias;
+  float width = 0.0f;
+  if (kernel > 1 || footprint > 1.0f) {
+    const float texels = float(kernel) * (footprint > 1.0f ? footprint : 1.0f);
+    width = texels * std::ldexp(1.0f, -int(finest));
+  }
+  return view.deep_transmittance(double(u), double(v), moved, double(width));
+}
+
+void shadow_pass_light_reference(const client::Map& map, const ShadowPassInput& in, std::span<const float> vis,
+                                 std::span<float> light_rgb) {
+  const client::CacheView view(map);
+  const size_t pixels = size_t(in.width) * in.height;
+  const client::DeepShape shape = view.deep_tiles([](const client::DeepTile&) {});
+  const bool deep = view.has_deep() && !view.stack();
+  if (!deep) {
+    for (size_t p = 0; p < pixels; ++p) light_rgb[3 * p] = light_rgb[3 * p + 1] = light_rgb[3 * p + 2] = vis[p];
+    return;
+  }
+  const client::LightParams lp = view.light();
+  const ShadowLight l = shadow_light(LightSpace::from_array(LightKind(lp.kind), lp.params));
+  const uint32_t finest = view.shape().finest_level;
+  const float bias = shape.level ? deep_depth_bias(lp, shape.level) : 0.0f;
+  for (size_t p = 0; p < pixels; ++p) {
+    std::array<float, 3> t{1, 1, 1};
+    Point c, surface;
+    if (light_point(l, in, p, c) && light_point_at(l, in, p, 0.0f, surface)) {
+      Texel tx;
+      const float footprint = pixel_texel(l, in, p, finest, tx) ? tx.footprint : in.footprint;
+      t = deep_shadow_reference(view, bias, finest, surface.u, surface.v, surface.d, footprint, in.kernel);
+    }
+    for (int ch = 0; ch < 3; ++ch) light_rgb[3 * p + size_t(ch)] = vis[p] * t[size_t(ch)];
   }
 }
 

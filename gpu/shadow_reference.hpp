@@ -17,6 +17,7 @@
 #include <span>
 
 #include "gpu/gpu_map.hpp"
+#include "shadowtile/cache_view.hpp"
 #include "tiles/core/evaluator.hpp"
 #include "tiles/core/light.hpp"
 #include "tiles/core/pack_format.hpp"
@@ -65,5 +66,22 @@ bool shadow_pass_texel(const ShadowLight& light, const ShadowPassInput& in, size
 
 // The CPU twin of the shadow pass over `ev` (the Map's evaluator, the same cache state).
 void shadow_pass_reference(const Evaluator& ev, const PackHeader& h, const ShadowPassInput& in, std::span<float> out);
+
+// The CPU twin of the deep part's factor of a 2D shadow lookup (st_deep_shadow,
+// shaders/st_deep.glsl): at the surface point's float light-space (u, v, d) (no normal
+// offset), d - bias (bias: the deep block's kDpDepthBias, deep_depth_bias), over a
+// footprint of kernel x max(1, footprint) finest texels times 2^-finest map units when
+// kernel > 1 or footprint > 1 (else the texel under (u, v)), the CPU's own lookup
+// (CacheView::deep_transmittance). Each float operation rounded once.
+std::array<float, 3> deep_shadow_reference(const client::CacheView& view, float bias, uint32_t finest, float u, float v,
+                                           float d, float footprint, uint32_t kernel);
+
+// The CPU twin of a 2D pass's light per channel (GpuMap::wait's light_rgb, the engine
+// pass's light image rgb) for the visibility `vis` it gave: per pixel with a surface,
+// vis * deep_shadow_reference at the pixel's surface point with the footprint the pass
+// filtered with (in.footprint outside the light's box), one rounding per channel; vis
+// where it has none, or for a map without a deep part (or a stack map).
+void shadow_pass_light_reference(const client::Map& map, const ShadowPassInput& in, std::span<const float> vis,
+                                 std::span<float> light_rgb);
 
 }  // namespace st::gpu

@@ -7,7 +7,8 @@
 // Stack maps: two slices blended at the frame's time, or every slice averaged (soft).
 // mode.x picks the lookup: 0 none (the pass's cost without shadows), 1 shadowtile, 2 a
 // plain R32F depth map of the finest level (set 1) with the same texel and PCF taps, the
-// baseline the benchmark compares with. RASTER_TWIN: the receiver and the visibility are
+// baseline the benchmark compares with. A 2D map's partial occluders (its deep part)
+// multiply their transmittance per channel into the light. RASTER_TWIN: the receiver and the visibility are
 // also written (a CPU twin answers the same lookups).
 #define ST_SET 0
 #define ST_BINDING_POOL 0
@@ -110,7 +111,14 @@ void main() {
   out_receiver = vec4(st_receiver(world_position, n, offset), lambert > 0.0 && push.mode.x == 1u ? footprint : -1.0);
   out_visibility = vis;
 #endif
+  // The light per channel: on a 2D map with a deep part (foliage, smoke, fog) the
+  // visibility times the partial occluders' transmittance (shadowtile.glsl).
+  vec3 light = vec3(vis);
+  if (lambert > 0.0 && push.mode.x == 1u && st_slices() == 0u) {
+    precise vec3 lit = vis * st_transmittance(world_position, footprint, kernel);
+    light = lit;
+  }
   const vec3 albedo = vec3(0.8, 0.78, 0.72);
-  const vec3 c = albedo * (0.15 + 0.85 * lambert * vis);
+  const vec3 c = albedo * (0.15 + 0.85 * lambert * light);
   colour = vec4(pow(c, vec3(1.0 / 2.2)), 1.0);
 }

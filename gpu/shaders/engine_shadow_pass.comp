@@ -4,7 +4,10 @@
 // include an engine's own shaders use). Per pixel the same operations as shadow_pass.comp
 // (2D maps) and stack_shadow_pass.comp (stack maps, at a time or soft): the neighbour
 // footprint per slice in that slice's light, the blend or the soft average; so the answers
-// equal theirs and their CPU twins (gpu/shadow_reference.hpp) bit for bit.
+// equal theirs and their CPU twins (gpu/shadow_reference.hpp) bit for bit. Compiled a
+// second time with ST_PASS_LIGHT (ShadowPassImages::light): it also writes the light per
+// channel, visibility x the deep part's transmittance (st_deep_shadow at the pixel's
+// surface point, the pixel's footprint), as rgb, and the visibility as a.
 #extension GL_GOOGLE_include_directive : require
 #define ST_SET 0
 #define ST_BINDING_POOL 0
@@ -15,7 +18,10 @@
 layout(local_size_x = 8, local_size_y = 8) in;
 layout(set = 0, binding = 3) uniform sampler2D st_positions;
 layout(set = 0, binding = 4) uniform sampler2D st_normals;
-layout(set = 0, binding = 5, r32f) uniform writeonly image2D st_visibility;
+layout(set = 0, binding = 5, r32f) uniform writeonly image2D st_visibility_image;
+#ifdef ST_PASS_LIGHT
+layout(set = 0, binding = 6, rgba32f) uniform writeonly image2D st_light_image;
+#endif
 layout(push_constant) uniform StEnginePush { uint w[kPcWords]; } pc;
 
 float pc_float(uint i) { return uintBitsToFloat(pc.w[i]); }
@@ -31,11 +37,12 @@ bool gbuffer_receiver(ivec2 q, out vec3 r) {
 
 // Visibility of the pixel (receiver r) in slice w, the footprint from its right and lower
 // neighbours in that slice's light (or the push constant's).
-float slice_visibility(uint w, ivec2 q, vec3 r, inout StProbe probe) {
+// `footprint`: the one it filtered with (the push constant's outside the light's box).
+float slice_visibility(uint w, ivec2 q, vec3 r, inout StProbe probe, out float footprint) {
   const uint lb = st_light_block(w);
   const vec3 uvd = st_light_uvd(lb, r);
+  footprint = pc_float(kPcFootprint);
   if (!st_in_light_box(uvd)) return 1.0;
-  float footprint = pc_float(kPcFootprint);
   if ((pc.w[kPcFlags] & kFlagNeighbourFootprint) != 0u) {
     vec3 rr, rd;
     const bool has_right = uint(q.x) + 1u < pc.w[kPcCount] && gbuffer_receiver(q + ivec2(1, 0), rr);
@@ -51,26 +58,33 @@ void main() {
   if (uint(q.x) >= pc.w[kPcCount] || uint(q.y) >= pc.w[kPcHeight]) return;
   vec3 r;
   if (!gbuffer_receiver(q, r) || st_light_block(0u) == 0u) {
-    imageStore(st_visibility, q, vec4(1.0));
+    imageStore(st_visibility_image, q, vec4(1.0));
+#ifdef ST_PASS_LIGHT
+    imageStore(st_light_image, q, vec4(1.0));
+#endif
     return;
   }
   StProbe probe = st_probe();
-  float answer;
+  float answer, footprint;
+  vec3 t = vec3(1.0);
   if (st_slices() == 0u) {
-    answer = slice_visibility(0u, q, r, probe);
+    answer = slice_visibility(0u, q, r, probe, footprint);
+#ifdef ST_PASS_LIGHT
+    t = st_transmittance(texelFetch(st_positions, q, 0).xyz, footprint, pc.w[kPcKernel]);
+#endif
   } else {
     st_oct_path_reset((pc.w[kPcFlags] & kFlagResumeWalks) != 0u);
     if ((pc.w[kPcFlags] & kFlagSoft) != 0u) {
       const uint n = st_slices();
       precise float sum = 0.0;
-      for (uint w = 0u; w < n; ++w) sum = sum + slice_visibility(w, q, r, probe);
+      for (uint w = 0u; w < n; ++w) sum = sum + slice_visibility(w, q, r, probe, footprint);
       answer = st_fdiv(sum, float(n));
     } else {
       const uint wa = pc.w[kPcSliceA], wb = pc.w[kPcSliceB];
-      const float va = slice_visibility(wa, q, r, probe);
+      const float va = slice_visibility(wa, q, r, probe, footprint);
       answer = va;
       if (wb != wa) {
-        const float vb = slice_visibility(wb, q, r, probe);
+        const float vb = slice_visibility(wb, q, r, probe, footprint);
         precise float step = vb - va;
         precise float scaled = pc_float(kPcTimeWeight) * step;
         precise float blended = va + scaled;
@@ -78,6 +92,10 @@ void main() {
       }
     }
   }
-  imageStore(st_visibility, q, vec4(answer));
+  imageStore(st_visibility_image, q, vec4(answer));
+#ifdef ST_PASS_LIGHT
+  precise vec3 light = answer * t;
+  imageStore(st_light_image, q, vec4(light, answer));
+#endif
   st_finish(probe);
 }

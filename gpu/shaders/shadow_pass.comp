@@ -5,14 +5,41 @@
 #include "st_buffers.glsl"
 
 #include "st_light.glsl"
+#include "st_deep.glsl"
+
+// The transmittance at pixel p's surface point itself (no normal offset).
+vec3 st_deep_surface(uint p, float footprint) {
+  if (ST_PAGE(kPtDeep) == 0u) return vec3(1.0);
+  float su, sv, sd;
+  st_light_point_at(p, 0.0, su, sv, sd);
+  return st_deep_shadow(vec3(su, sv, sd), footprint, st_pc.w[kPcKernel]);
+}
+
+// A map with a deep part (page word kPtDeep != 0): the light per channel, visibility x
+// transmittance (st_deep_shadow at the pixel's surface point, the pass's footprint and
+// kernel), follows the visibility image at st_output[count + 3 p + c] (GPU_LAYOUT.md "The
+// deep block").
+void st_write_light(uint p, uint count, float vis, vec3 t) {
+  if (ST_PAGE(kPtDeep) == 0u) return;
+  precise vec3 light = vis * t;
+  st_output[count + 3u * p] = light.x;
+  st_output[count + 3u * p + 1u] = light.y;
+  st_output[count + 3u * p + 2u] = light.z;
+}
 
 void main() {
   const uint width = st_pc.w[kPcCount], height = st_pc.w[kPcHeight];
   const uint p = gl_GlobalInvocationID.x;
   if (p >= width * height) return;
   float u, v, d;
-  if (!st_light_point(p, u, v, d) || !(u >= 0.0 && u < 1.0 && v >= 0.0 && v < 1.0 && d >= 0.0 && d <= 1.0)) {
+  if (!st_light_point(p, u, v, d)) {
     st_output[p] = 1.0;
+    st_write_light(p, width * height, 1.0, vec3(1.0));
+    return;
+  }
+  if (!(u >= 0.0 && u < 1.0 && v >= 0.0 && v < 1.0 && d >= 0.0 && d <= 1.0)) {
+    st_output[p] = 1.0;
+    st_write_light(p, width * height, 1.0, st_deep_surface(p, st_pcf_word(kPcFootprint)));
     return;
   }
   const uint finest = st_page_words[kPtMapLevel];
@@ -30,6 +57,8 @@ void main() {
     footprint = f * side;
   }
   StProbe probe = st_probe();
-  st_output[p] = st_lookup(x, y, d, footprint, st_pc.w[kPcKernel], probe);
+  const float vis = st_lookup(x, y, d, footprint, st_pc.w[kPcKernel], probe);
+  st_output[p] = vis;
   if (probe.hole) atomicAdd(st_fb_words[kFbHoles], 1u);
+  st_write_light(p, width * height, vis, st_deep_surface(p, footprint));
 }

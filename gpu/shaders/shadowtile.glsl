@@ -1,22 +1,26 @@
 // shadowtile.glsl: the GPU tile cache for an engine's own shaders (fragment, compute, any
 // stage that may read storage buffers). Installed with the client (share/shadowtile/shaders)
-// beside st_layout.h, st_eval.glsl and st_stack.glsl, which it includes: compile with
-// glslc -I <that folder>. It declares GpuMap's three buffers at the set and bindings the
-// engine chooses and answers visibility at a world position, bit for bit as the CPU's
-// Map::pcf / pcf_footprint (2D maps) and StackMap's filtered lookups (stack maps) answer
-// with the same float light transform (gpu/shadow_reference.hpp). The light comes from
-// the page table (GPU-resident, uploaded once): nothing per frame but what the engine
-// passes as arguments.
+// beside st_layout.h, st_eval.glsl, st_stack.glsl, st_fdiv.glsl and st_deep.glsl, which it
+// includes: compile with glslc -I <that folder>. It declares GpuMap's three buffers at the
+// set and bindings the engine chooses and answers the light reaching a world position,
+// bit for bit as the CPU's Map::pcf / pcf_footprint (2D maps) and StackMap's filtered
+// lookups (stack maps) answer with the same float light transform
+// (gpu/shadow_reference.hpp), times the deep part's transmittance (partial occluders:
+// foliage, smoke, fog) as the CPU's deep lookups answer it. The light comes from the page
+// table (GPU-resident, uploaded once): nothing per frame but what the engine passes as
+// arguments.
 //
 //   #define ST_SET 2                  // descriptor set of our buffers (default 0)
 //   #define ST_BINDING_POOL 0         // GpuDescriptors::pool        (default 0)
 //   #define ST_BINDING_PAGE 1         // GpuDescriptors::page_table  (default 1)
 //   #define ST_BINDING_FEEDBACK 2     // GpuDescriptors::feedback    (default 2)
 //   #define ST_FEEDBACK 0             // optional: no feedback buffer (read-only use)
+//   #define ST_DEEP_SHADOWS 0         // optional: no partial occluders (st_shadow = vec3(visibility))
 //   #include "shadowtile.glsl"
 //   ...
 //   StProbe probe = st_probe();
-//   float vis = st_shadow(world_pos, normal, normal_offset, footprint, 3u, probe);
+//   vec3 light = st_shadow(world_pos, normal, normal_offset, footprint, 3u, probe);  // per channel
+//   float vis = st_visibility(world_pos, normal, normal_offset, footprint, 3u, probe);  // opaque only
 //   st_finish(probe);                 // counts the pixel in the feedback's holes
 //
 // footprint: the pixel's size in texels of the map's finest level (the level choice of
@@ -25,10 +29,15 @@
 // dFdx(uvd) in a fragment shader), which grows at grazing angles; distance x pixel angle /
 // texel (tiles/bake/render.cpp's) stays isotropic (examples/shaders/scene.frag). At a
 // coarse level the receiver needs a coarse texel's offset along the normal, as
-// tiles/bake/render.hpp explains, or sloped surfaces shadow themselves. Feedback: every absent tile a call needed lands in the frame's feedback buffer
+// tiles/bake/render.hpp explains, or sloped surfaces shadow themselves. The deep part is
+// looked up at the surface point itself moved toward the light along the light ray by 1.5
+// deep texels (no normal offset, which would shift leaf shadows sideways), filtered with
+// its mips over kernel x max(1, footprint) finest texels (st_deep.glsl). Feedback: every
+// absent tile a call needed lands in the frame's feedback buffer
 // (GpuMap reads it back when the frame retires and queues the tiles on the Map); it needs
 // a stage with storage-buffer writes (fragmentStoresAndAtomics for fragment shaders).
-// No workgroup size is assumed: the engine declares its own local_size.
+// Deep tiles are not fed back: the Map fetches those its CPU lookups and deep_resident ask
+// for. No workgroup size is assumed: the engine declares its own local_size.
 #ifndef SHADOWTILE_GLSL
 #define SHADOWTILE_GLSL
 #extension GL_GOOGLE_include_directive : require
@@ -48,6 +57,9 @@
 #ifndef ST_FEEDBACK
 #define ST_FEEDBACK 1
 #endif
+#ifndef ST_DEEP_SHADOWS
+#define ST_DEEP_SHADOWS 1
+#endif
 
 #include "st_layout.h"
 
@@ -64,6 +76,9 @@ layout(std430, set = ST_SET, binding = ST_BINDING_FEEDBACK) coherent buffer StFe
 
 #include "st_eval.glsl"
 #include "st_stack.glsl"
+#if ST_DEEP_SHADOWS
+#include "st_deep.glsl"
+#endif
 
 // ---- the map and its lights (page table) ----
 // Slices of a stack map (0: a 2D map).
@@ -142,12 +157,34 @@ float st_shadow_uvd(uint w, vec3 uvd, float footprint, uint kernel, inout StProb
 
 // Visibility at a world position (2D maps; on a stack map slice 0): the receiver offset
 // along the normal, the map's light, the footprint given. 1 where the map has no light.
-float st_shadow(vec3 world_position, vec3 normal, float normal_offset, float footprint, uint kernel,
-                inout StProbe probe) {
+float st_visibility(vec3 world_position, vec3 normal, float normal_offset, float footprint, uint kernel,
+                    inout StProbe probe) {
   const uint lb = st_light_block(0u);
   if (lb == 0u) return 1.0;
   return st_shadow_uvd(0u, st_light_uvd(lb, st_receiver(world_position, normal, normal_offset)), footprint, kernel,
                        probe);
+}
+
+// The deep part's transmittance per channel at a world position (the surface point, no
+// normal offset: st_deep_shadow); 1 for a map without a deep part, a stack map, or with
+// ST_DEEP_SHADOWS 0.
+vec3 st_transmittance(vec3 world_position, float footprint, uint kernel) {
+#if ST_DEEP_SHADOWS
+  const uint lb = st_light_block(0u);
+  if (lb == 0u || ST_PAGE(kPtStack) != 0u || ST_PAGE(kPtDeep) == 0u) return vec3(1.0);
+  return st_deep_shadow(st_light_uvd(lb, world_position), footprint, kernel);
+#else
+  return vec3(1.0);
+#endif
+}
+
+// The light reaching a world position per channel (2D maps; on a stack map slice 0):
+// st_visibility times st_transmittance, one rounding per channel.
+vec3 st_shadow(vec3 world_position, vec3 normal, float normal_offset, float footprint, uint kernel,
+               inout StProbe probe) {
+  const float vis = st_visibility(world_position, normal, normal_offset, footprint, kernel, probe);
+  precise vec3 light = vis * st_transmittance(world_position, footprint, kernel);
+  return light;
 }
 
 // A stack map at a time of the light set: slices a and b (GpuMap's stack_time: a == b at a

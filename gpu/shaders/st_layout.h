@@ -17,7 +17,7 @@ namespace st::gpu::layout {
 #define ST_UINT(name, value) const uint name = value;
 #endif
 
-ST_UINT(kLayoutVersion, 5u)  // 2: the map preview (kPtPreview); 3: the stack block (kPtStack); 4: the DAG-MH dictionary (kPtDictionary); 5: the 2D light (kPtLight)
+ST_UINT(kLayoutVersion, 6u)  // 2: the map preview (kPtPreview); 3: the stack block (kPtStack); 4: the DAG-MH dictionary (kPtDictionary); 5: the 2D light (kPtLight); 6: the deep block (kPtDeep)
 
 // ---- page-table buffer (binding kBindPage) ----
 // header words, then the skip grid's coarse values and entries, the skip grid's slot
@@ -40,7 +40,8 @@ ST_UINT(kPtDictionary, 13u)    // word offset: the pack's DAG-MH dictionary (kDi
 ST_UINT(kPtStack, 14u)         // word offset: the stack block (kSt*) of a stack map; 0 for a 2D map
 ST_UINT(kPtLight, 15u)         // word offset: a 2D map's light space (kStLightWords words, the stack block's
                                // light layout; projection 0), 0: none (a stack map, or a light the pass refuses)
-ST_UINT(kPtHeaderWords, 16u)
+ST_UINT(kPtDeep, 16u)          // word offset: the deep block (kDp*) of a 2D map with a deep part; 0: none
+ST_UINT(kPtHeaderWords, 17u)
 
 // The DAG-MH dictionary block (tiles/core/DAGMH.md "Dictionary"), at word kPtDictionary:
 // the dictionary buffer MapInfo carries (inflated), word for word: its 8-word header (D node
@@ -160,6 +161,21 @@ ST_UINT(kPcWords, 20u)
 ST_UINT(kFlagNeighbourFootprint, 1u)
 ST_UINT(kFlagSoft, 2u)      // stack shadow pass: the average over all N slices (slices a, b unused)
 ST_UINT(kFlagResumeWalks, 4u)  // stack shadow pass: tile walks resume from the previous walk's path
+
+// ---- the deep block (deep shadow maps, tiles/core/DEEP.md; GPU_LAYOUT.md "The deep block") ----
+// At page word kPtDeep: a header, then `capacity` (key, word offset) pairs of the deep tiles
+// the device holds, sorted by key = ty << (D - b) | tx (the first `count` used), then the
+// tiles' words (each a deep tile, tiles/core/deep_format.hpp, as the client holds it).
+ST_UINT(kDpLevel, 0u)           // D: the deep map's level; 0 until its directory arrives (all lit)
+ST_UINT(kDpSideBits, 1u)        // b: deep tiles are 2^b texels a side
+ST_UINT(kDpCount, 2u)           // tiles on the device (pairs used)
+ST_UINT(kDpCapacity, 3u)        // pairs reserved
+ST_UINT(kDpDepthBias, 4u)       // f32: the lookup point's move toward the light, in light-space depth
+ST_UINT(kDpHeaderWords, 8u)
+ST_UINT(kDeepQuery, 0xFFFFFFFEu)  // evaluate: kQueryR of a deep query (u, v, depth, width: GpuDeepQuery)
+// A deep tile's own words (deep_format.hpp): a 12-word header, then 2 directory words per texel.
+ST_UINT(kDtTexelCount, 5u)
+ST_UINT(kDtHeaderWords, 12u)
 
 // ---- bindings (descriptor set 0) ----
 ST_UINT(kBindPool, 0u)

@@ -4,14 +4,14 @@
 #define SHADOWTILE_GPU_ST_LIGHT_GLSL
 float st_pcf_word(uint i) { return uintBitsToFloat(st_pc.w[i]); }
 
-// Light-space (u, v, d) of pixel p; false when it holds no surface.
-bool st_light_point(uint p, out float u, out float v, out float d) {
+// Light-space (u, v, d) of pixel p's surface point moved `off` along its normal; false
+// when it holds no surface.
+bool st_light_point_at(uint p, float off, out float u, out float v, out float d) {
   const uint b = 4u * p;
   u = 0.0;
   v = 0.0;
   d = 0.0;
   if (uintBitsToFloat(st_input_words[b + 3u]) == 0.0) return false;
-  const float off = st_pcf_word(kPcNormalOffset);
   precise float rx = uintBitsToFloat(st_input_words[b]) + uintBitsToFloat(st_normal_words[b]) * off;
   precise float ry = uintBitsToFloat(st_input_words[b + 1u]) + uintBitsToFloat(st_normal_words[b + 1u]) * off;
   precise float rz = uintBitsToFloat(st_input_words[b + 2u]) + uintBitsToFloat(st_normal_words[b + 2u]) * off;
@@ -26,6 +26,11 @@ bool st_light_point(uint p, out float u, out float v, out float d) {
   v = pv;
   d = pd;
   return true;
+}
+
+// The receiver's: moved by the pass's normal offset.
+bool st_light_point(uint p, out float u, out float v, out float d) {
+  return st_light_point_at(p, st_pcf_word(kPcNormalOffset), u, v, d);
 }
 
 #endif

@@ -16,7 +16,7 @@ void main() {
   const vec3 uvd = st_light_uvd(st_light_block(0u), st_receiver(world_position, world_normal, 0.01));
   const float side = float(1u << st_finest_level());
   const float footprint = max(length(dFdx(uvd.xy)), length(dFdy(uvd.xy))) * side;
-  const float v = st_shadow(world_position, world_normal, 0.01, footprint, 3u, probe);
+  const float v = st_visibility(world_position, world_normal, 0.01, footprint, 3u, probe);
   st_finish(probe);
   colour = vec4(vec3(0.2 + 0.8 * v), 1.0);
 }

@@ -9,6 +9,7 @@
 
 #include "gpu/layout.hpp"
 #include "gpu/layout_probe.hpp"
+#include "tiles/core/deep_format.hpp"
 #include "tests/gpu/gpu_test_util.hpp"
 
 namespace st::gpu {
@@ -34,7 +35,8 @@ TEST(GpuLayout, TheShaderSeesEveryConstantTheCppSideSees) {
       L::kStLights, L::kStHeaderWords, L::kStLightWords, L::kMaxStackCells, L::kSqWords, L::kSqX, L::kSqY,
       L::kSqSlice, L::kSqLevel, L::kSqReceiver, L::kSqFootprint, L::kSqR, L::kFbStackKeyBit, L::kPcSliceA,
       L::kPcSliceB, L::kPcTimeWeight, L::kStLightCentreU, L::kStLightCentreV, L::kStLightProjection, L::kFlagSoft,
-      L::kFlagResumeWalks};
+      L::kFlagResumeWalks, L::kPtDeep, L::kDpLevel, L::kDpSideBits, L::kDpCount, L::kDpCapacity,
+      L::kDpDepthBias, L::kDpHeaderWords, L::kDeepQuery, L::kDtTexelCount, L::kDtHeaderWords};
   ASSERT_LE(want.size(), L::kProbeWords);
   uint64_t messages = 0;
   const std::vector<uint32_t> got = run_layout_probe(gputest::device(), true, &messages);
@@ -81,7 +83,28 @@ TEST(GpuLayout, StackBlockHeaderWordsAreWhereTheDrawingPutsThem) {
   EXPECT_EQ(L::kFlagResumeWalks, 4u);
 }
 
-// st_fdiv (shaders/st_stack.glsl), the division of the stack passes' perspective divide
+// The page-table header and the deep block as GPU_LAYOUT.md draws them ("The page table",
+// "The deep block"): layout version 6 added the header word kPtDeep.
+TEST(GpuLayout, DeepBlockWordsAreWhereTheDrawingPutsThem) {
+  namespace L = layout;
+  EXPECT_EQ(L::kLayoutVersion, 6u);
+  EXPECT_EQ(L::kPtLight, 15u);
+  EXPECT_EQ(L::kPtDeep, 16u);
+  EXPECT_EQ(L::kPtHeaderWords, 17u);
+  EXPECT_EQ(L::kDpLevel, 0u);
+  EXPECT_EQ(L::kDpSideBits, 1u);
+  EXPECT_EQ(L::kDpCount, 2u);
+  EXPECT_EQ(L::kDpCapacity, 3u);
+  EXPECT_EQ(L::kDpDepthBias, 4u);
+  EXPECT_EQ(L::kDpHeaderWords, 8u);
+  EXPECT_EQ(L::kDeepQuery, 0xFFFFFFFEu);
+  EXPECT_EQ(L::kDtTexelCount, 5u);
+  EXPECT_EQ(L::kDtHeaderWords, 12u);
+  EXPECT_EQ(deep::kDepthFlushBelow, std::ldexp(1.0f, -103));
+  EXPECT_EQ(sizeof(GpuDeepQuery), 16u);
+}
+
+// st_fdiv (shaders/st_fdiv.glsl), the division of the stack passes' perspective divide
 // and soft average, on the device: every quotient has the bits of the CPU's float
 // division (IEEE 754, round to nearest even; a NaN quotient only needs to be a NaN), over
 // random bit patterns (every exponent: subnormals, infinities, NaNs), near-equal

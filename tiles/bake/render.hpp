@@ -31,6 +31,7 @@
 #include <vector>
 
 #include "tiles/core/camera.hpp"
+#include "tiles/core/deep_format.hpp"
 #include "tiles/bake/scene.hpp"
 #include "tiles/core/evaluator.hpp"
 #include "tiles/core/light.hpp"
@@ -102,7 +103,7 @@ LightPoint lookup_point(const Receiver& r, const LightSpace& light, uint32_t map
 // deep texels, and an offset of opaque texels put a floor of 0.76% at deep level 12), and
 // it clears the receiver's own crossing, whose depth varies across the texel of a sloped
 // card. (map_level and pcf_radius are not used; kept for the callers' symmetry.)
-inline constexpr double kDeepDepthBiasTexels = 1.5;
+inline constexpr double kDeepDepthBiasTexels = deep::kLookupBiasTexels;  // the GPU lookups use it too
 LightPoint deep_lookup_point(const Receiver& r, const LightSpace& light, uint32_t map_level, uint32_t deep_level,
                              uint32_t pcf_radius = 0);
 

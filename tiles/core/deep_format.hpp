@@ -21,6 +21,19 @@ inline constexpr uint32_t kMaxVertices = 65535; // per texel (uint16 count); for
 // to nearest adds at most kQuantisation to a function's error and keeps it nonincreasing.
 inline constexpr double kUnormScale = 65535.0;
 inline constexpr double kQuantisation = 0.5 / kUnormScale;
+// Lookups read a stored q as float(q) * kUnormInverse (the float nearest 1 / 65535, bits
+// 0x37800080; 65535 * it is exactly 1): within one float ulp of q / 65535.
+inline constexpr float kUnormInverse = 1.0f / 65535.0f;
+
+// Lookups read depths (stored and asked) of magnitude below 2^-103 as 0 (deep_tile.cpp
+// flush_depth; the shader's st_deep_flush), so CPU and GPU lookups agree bit for bit.
+inline constexpr float kDepthFlushBelow = 0x1p-103f;
+
+// A receiver's deep lookup point: the surface point moved toward the light along the
+// light ray by this many texels of the deep level (tiles/bake/render.hpp
+// deep_lookup_point says why; gpu/ writes it into the GPU's deep block). Not a format
+// constant.
+inline constexpr double kLookupBiasTexels = 1.5;
 
 // Directory entry flags (format constants).
 inline constexpr uint8_t kFlagMonochrome = 1;  // one channel stored (DSM 2000 §5.2)

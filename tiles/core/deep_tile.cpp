@@ -2,6 +2,7 @@
 #include "tiles/core/deep_tile.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 
 #include "common/bytes.hpp"
@@ -13,9 +14,19 @@ namespace {
 using namespace deep;
 
 float depth_at(const uint8_t* depths, uint32_t i) { return load_le<float>(depths + 4 * size_t(i)); }
+// q / 65535 as float(q) times the float nearest 1 / 65535 (0x37800080), one correctly
+// rounded product that a shader forms with the same bits (Vulkan's multiply is IEEE's;
+// no division, whose GPU precision is 2.5 ulp): within one ulp of the quotient, monotone
+// in q, exactly 0 and 1 at q = 0 and 65535.
 float value_at(const uint8_t* values, uint32_t i) {
-  return float(double(load_le<uint16_t>(values + 2 * size_t(i))) / kUnormScale);
+  return float(load_le<uint16_t>(values + 2 * size_t(i))) * kUnormInverse;
 }
+
+// Depths of magnitude below 2^-103 read as 0: every other float is then a multiple of
+// 2^-126, so the difference of two of them is 0 or a normal float, and the lookup never
+// forms a subnormal that a device flushing them (shaderDenormPreserveFloat32 = false)
+// would answer differently (gpu/GPU_LAYOUT.md "Exactness").
+float flush_depth(float d) { return std::fabs(d) < deep::kDepthFlushBelow ? 0.0f : d; }
 
 }  // namespace
 
@@ -96,28 +107,30 @@ DeepTileView::Texel DeepTileView::texel(uint32_t x, uint32_t y, uint32_t mip) co
 std::array<float, 3> DeepTileView::eval(const Texel& t, float z) {
   if (t.n == 0) return {1, 1, 1};
   const uint32_t c = t.mono ? 1 : 3;
-  auto value = [&](uint32_t k) -> std::array<double, 3> {
-    const double r = value_at(t.values, k * c);
+  auto value = [&](uint32_t k) -> std::array<float, 3> {
+    const float r = value_at(t.values, k * c);
     if (t.mono) return {r, r, r};
     return {r, value_at(t.values, k * c + 1), value_at(t.values, k * c + 2)};
   };
-  // k: the first vertex at depth >= z (a receiver at a step's depth sees the value before).
+  // Float arithmetic a shader repeats bit for bit (gpu/shaders/st_deep.glsl): depths and
+  // the receiver's depth read through flush_depth, then one rounding per operation (this
+  // file is built without contraction). k: the first vertex at depth >= z (a receiver at a
+  // step's depth sees the value before).
+  const float zf = flush_depth(z);
   uint32_t lo = 0, hi = t.n;
   while (lo < hi) {
     const uint32_t m = lo + (hi - lo) / 2;
-    if (depth_at(t.depths, m) < z) lo = m + 1;
+    if (flush_depth(depth_at(t.depths, m)) < zf) lo = m + 1;
     else hi = m;
   }
-  std::array<double, 3> r;
-  if (lo == 0) r = value(0);
-  else if (lo == t.n) r = value(t.n - 1);
-  else {
-    const double za = depth_at(t.depths, lo - 1), zb = depth_at(t.depths, lo);
-    const double f = std::clamp((double(z) - za) / (zb - za), 0.0, 1.0);
-    const auto a = value(lo - 1), b = value(lo);
-    for (int ch = 0; ch < 3; ++ch) r[ch] = a[ch] + (b[ch] - a[ch]) * f;
-  }
-  return {float(r[0]), float(r[1]), float(r[2])};
+  if (lo == 0) return value(0);
+  if (lo == t.n) return value(t.n - 1);
+  const float za = flush_depth(depth_at(t.depths, lo - 1)), zb = flush_depth(depth_at(t.depths, lo));
+  const float f = std::clamp((zf - za) / (zb - za), 0.0f, 1.0f);
+  const auto a = value(lo - 1), b = value(lo);
+  std::array<float, 3> r;
+  for (int ch = 0; ch < 3; ++ch) r[ch] = a[ch] + (b[ch] - a[ch]) * f;
+  return r;
 }
 
 std::array<float, 3> DeepTileView::transmittance(uint32_t x, uint32_t y, float z, uint32_t mip) const {
@@ -132,44 +145,72 @@ bool DeepTileView::monochrome(uint32_t x, uint32_t y, uint32_t mip) const {
   return texel(x, y, mip).mono;
 }
 
-std::array<float, 3> DeepTileView::bilinear(double u, double v, float z, uint32_t mip) const {
+// The filters run in float, one rounding per operation, in the order written (this file
+// is built without contraction): gpu/shaders/st_deep.glsl repeats them bit for bit. No
+// step forms a subnormal: positions are multiples of 2^-24 texels or 0, weights and values
+// 0 or at least 2^-41 (DEEP.md "Lookups").
+std::array<float, 3> DeepTileView::bilinear_f(float u, float v, float z, uint32_t mip) const {
   const uint32_t s = side(mip);
-  auto axis = [&](double w, uint32_t& i0, uint32_t& i1, double& f) {
-    double p = w * s - 0.5;
-    if (!std::isfinite(p)) p = 0;
-    p = std::clamp(p, 0.0, double(s - 1));
+  const float last = float(s - 1);
+  auto axis = [&](float w, uint32_t& i0, uint32_t& i1, float& f) {
+    float p = w * float(s) - 0.5f;
+    if (!(p > 0.0f)) p = 0.0f;  // also NaN
+    if (p > last) p = last;
     i0 = uint32_t(p);
     i1 = std::min(i0 + 1, s - 1);
-    f = p - i0;
+    f = p - float(i0);
   };
   uint32_t x0, x1, y0, y1;
-  double fx, fy;
+  float fx, fy;
   axis(u, x0, x1, fx);
   axis(v, y0, y1, fy);
   const auto a = eval(texel(x0, y0, mip), z), b = eval(texel(x1, y0, mip), z);
   const auto c = eval(texel(x0, y1, mip), z), d = eval(texel(x1, y1, mip), z);
+  const float gx = 1.0f - fx, gy = 1.0f - fy;
   std::array<float, 3> r;
-  for (int ch = 0; ch < 3; ++ch)
-    r[ch] = float((a[ch] * (1 - fx) + b[ch] * fx) * (1 - fy) + (c[ch] * (1 - fx) + d[ch] * fx) * fy);
+  for (int ch = 0; ch < 3; ++ch) {
+    const float top = a[ch] * gx + b[ch] * fx;
+    const float bottom = c[ch] * gx + d[ch] * fx;
+    r[ch] = top * gy + bottom * fy;
+  }
   return r;
+}
+
+std::array<float, 3> DeepTileView::mip_blend(float u, float v, float z, uint32_t m0, float f) const {
+  const auto a = bilinear_f(u, v, z, m0);
+  if (f == 0.0f || m0 >= side_bits_) return a;
+  const auto b = bilinear_f(u, v, z, m0 + 1);
+  const float g = 1.0f - f;
+  std::array<float, 3> r;
+  for (int ch = 0; ch < 3; ++ch) r[ch] = a[ch] * g + b[ch] * f;
+  return r;
+}
+
+std::array<float, 3> DeepTileView::bilinear(double u, double v, float z, uint32_t mip) const {
+  return bilinear_f(float(u), float(v), z, mip);
 }
 
 std::array<float, 3> DeepTileView::trilinear(double u, double v, float z, double lod) const {
   if (!(lod >= 0)) lod = 0;  // also NaN
   lod = std::min(lod, double(side_bits_));
-  const uint32_t m0 = uint32_t(lod), m1 = std::min(m0 + 1, side_bits_);
-  const double f = lod - m0;
-  const auto a = bilinear(u, v, z, m0);
-  if (f == 0 || m1 == m0) return a;
-  const auto b = bilinear(u, v, z, m1);
-  std::array<float, 3> r;
-  for (int ch = 0; ch < 3; ++ch) r[ch] = float(a[ch] * (1 - f) + b[ch] * f);
-  return r;
+  const uint32_t m0 = uint32_t(lod);
+  return mip_blend(float(u), float(v), z, m0, float(lod - m0));
 }
 
 std::array<float, 3> DeepTileView::filtered(double u, double v, float z, double width) const {
-  const double texels = width * double(side(0));
-  return trilinear(u, v, z, texels > 1 ? std::log2(texels) : 0.0);
+  // texels = width * side(0); lod = e + (m - 1) for texels = m * 2^e, m in [1, 2): log2
+  // linear between powers of two (exact at them, never off by more than 0.086), formed
+  // from the float's bits so a shader gets the same mip pair and weight.
+  const float texels = float(width * double(side(0)));
+  uint32_t m0 = 0;
+  float f = 0.0f;
+  if (texels > 1.0f) {  // also not NaN
+    const uint32_t bits = std::bit_cast<uint32_t>(texels);
+    const uint32_t e = (bits >> 23) - 127;  // >= 0: texels > 1
+    if (e >= side_bits_) m0 = side_bits_;
+    else m0 = e, f = float(bits & 0x7FFFFFu) * 0x1p-23f;
+  }
+  return mip_blend(float(u), float(v), z, m0, f);
 }
 
 VisibilityFunction DeepTileView::function(uint32_t x, uint32_t y, uint32_t mip) const {

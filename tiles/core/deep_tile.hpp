@@ -37,13 +37,16 @@ class DeepTileView {
   std::array<float, 3> transmittance(uint32_t x, uint32_t y, float z, uint32_t mip) const;
   uint32_t vertex_count(uint32_t x, uint32_t y, uint32_t mip) const;
   bool monochrome(uint32_t x, uint32_t y, uint32_t mip) const;
+  // The filters compute in float (u, v rounded to float first; DEEP.md "Lookups"), so a
+  // GPU repeats them bit for bit (gpu/shaders/st_deep.glsl).
   // Bilinear between the four texel centres around (u, v) at one mip (clamped at edges).
   std::array<float, 3> bilinear(double u, double v, float z, uint32_t mip) const;
   // Trilinear: bilinear at floor(lod) and floor(lod) + 1, blended; lod clamped to
   // [0, mip_count() - 1] (NaN: 0).
   std::array<float, 3> trilinear(double u, double v, float z, double lod) const;
-  // A footprint `width` wide (tile-local units) centred on (u, v): trilinear at
-  // lod = log2(width * side(0)), the mip whose texels are about as wide as the footprint.
+  // A footprint `width` wide (tile-local units) centred on (u, v): trilinear at the mip
+  // whose texels are about as wide as the footprint, lod = e + (m - 1) for
+  // float(width * side(0)) = m * 2^e (log2, linear between powers of two), 0 below 1.
   std::array<float, 3> filtered(double u, double v, float z, double width) const;
 
   // The stored function of a texel (allocates; tools and tests).
@@ -58,6 +61,9 @@ class DeepTileView {
   };
   Texel texel(uint32_t x, uint32_t y, uint32_t mip) const;
   static std::array<float, 3> eval(const Texel& t, float z);
+  std::array<float, 3> bilinear_f(float u, float v, float z, uint32_t mip) const;
+  // bilinear at mip m0 and m0 + 1 blended a (1 - f) + b f (f == 0 or m0 the last: m0 alone).
+  std::array<float, 3> mip_blend(float u, float v, float z, uint32_t m0, float f) const;
 
   const uint8_t* dir_ = nullptr;
   const uint8_t* data_ = nullptr;

@@ -2,7 +2,8 @@
 // keeps its own copy of it (the GPU mirror, shadowtile::gpu, or an engine's own): the map's
 // static tables, the tables a page-table walk needs (the skip grid, the map preview, the
 // DAG-MH dictionary, a stack map's grid), the light transforms, and the slots whose tile
-// changed since the consumer last looked; plus the way back, tiles the consumer wants.
+// changed since the consumer last looked; plus the way back, tiles the consumer wants;
+// and the deep part's resident tiles (partial occluders), when the map has one.
 //
 // Lifetime: the view holds the Map open; every span it returns stays valid and unchanged
 // for the view's life (the tables are immutable once the map is open). Thread safety:
@@ -85,6 +86,21 @@ struct WantedTile {
   uint16_t priority = 1;
 };
 
+// The deep part (partial occluders, Map::has_deep; tiles/core/DEEP.md): the deep map's
+// level D (0 until its directory arrived) and its tiles' side bits b; tiles are 2^b texels
+// a side, at (tx, ty) of a grid 2^(D - b) tiles a side.
+struct DeepShape {
+  uint32_t level = 0;
+  uint32_t side_bits = 0;
+};
+
+// One resident deep tile: its place in the grid and its bytes (tiles/core/deep_format.hpp,
+// validated, as the client holds it).
+struct DeepTile {
+  uint32_t tx = 0, ty = 0;
+  std::span<const uint8_t> bytes;
+};
+
 class CacheView {
  public:
   explicit CacheView(const Map& map);  // std::runtime_error: the Map is not open
@@ -114,12 +130,31 @@ class CacheView {
     return changed_slots_impl(known, &visit, [](void* v, const SlotChange& c) { return (*static_cast<Visit*>(v))(c); });
   }
 
+  // ---- the deep part (all three answer "none" for a map without one) ----
+  bool has_deep() const;
+  // A count that changes whenever the deep directory arrives or a deep tile becomes
+  // resident or is dropped: a consumer that remembers it re-reads deep_tiles only then.
+  uint64_t deep_generation() const;
+  // Calls visit(const DeepTile&) for every resident deep tile (any order), under the deep
+  // part's lock: the bytes are valid only during the call (copy them; call nothing on the
+  // Map). Returns the shape; level 0 (directory not known yet, or no deep part): no visits.
+  template <class Visit>
+  DeepShape deep_tiles(Visit&& visit) const {
+    return deep_tiles_impl(&visit, [](void* v, const DeepTile& t) { (*static_cast<Visit*>(v))(t); });
+  }
+  // The CPU's own deep lookup (Map::transmittance / transmittance_filtered after their
+  // light transform), for consumers that compare against it: per-channel transmittance at
+  // light-space (u, v) in [0, 1) and depth d, over a footprint `width` map units wide (0:
+  // the texel under (u, v)). A missing tile answers 1 and is queued, as there. Never blocks.
+  std::array<float, 3> deep_transmittance(double u, double v, float d, double width) const noexcept;
+
   // Queues tiles the consumer needed on the Map's request queue (raising a queued tile's
   // priority); returns how many were newly queued or raised. Never blocks on the network.
   size_t want_tiles(std::span<const WantedTile> tiles) const;
 
  private:
   size_t changed_slots_impl(std::span<uint64_t> known, void* visit, bool (*call)(void*, const SlotChange&)) const;
+  DeepShape deep_tiles_impl(void* visit, void (*call)(void*, const DeepTile&)) const;
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

@@ -44,6 +44,15 @@
 // Answers are bit-exact with the CPU's (Map::depth, Map::pcf, pcf_footprint) for the
 // same cache contents; GPU_LAYOUT.md "Exactness" says how.
 //
+// Partial occluders (Map::has_deep: a pack with a deep part, foliage cards, smoke, fog):
+// the page table carries the Map's resident deep tiles (GPU_LAYOUT.md "The deep block",
+// GpuOptions::deep_bytes), and every 2D path multiplies the visibility by their
+// transmittance per channel: shadowtile.glsl's st_shadow, the engine pass's light image
+// (ShadowPassImages::light), the own-device pass (wait with light_rgb) and
+// evaluate_deep, bit for bit the CPU's deep lookups (point and mip-filtered) for the same
+// tiles. Deep tiles are fetched by the Map (its own lookups, deep_resident), not by GPU
+// feedback.
+//
 // Stack maps (Map::slices() > 0: shadow-map stacks, a moving sun) use the same mirror: the
 // page table carries the stack grid and one light per slice (GPU_LAYOUT.md "The stack
 // block"), evaluate() takes GpuStackQuery (bit-exact with Map::slice_depth and the same
@@ -83,6 +92,13 @@ struct GpuOptions {
   uint64_t upload_budget_bytes = 16u << 20; // tile bytes uploaded per frame at most
   uint32_t feedback_capacity = 4096;        // distinct absent tiles recorded per frame (power of two)
   uint32_t frames_in_flight = 2;            // 1..4
+  // A 2D map with a deep part (Map::has_deep): page-table bytes reserved for the deep
+  // tiles the Map holds (GPU_LAYOUT.md "The deep block"); tiles that do not fit answer
+  // transmittance 1 (GpuStats::deep_tiles_dropped counts them).
+  uint64_t deep_bytes = 8u << 20;
+  // Engine mode: also build the shadow pass that writes ShadowPassImages::light (one more
+  // compute pipeline, created in the constructor like the other).
+  bool light_pass = false;
 };
 
 
@@ -168,6 +184,11 @@ struct ShadowPassImages {
   VkImageLayout gbuffer_layout = VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL;
   VkImageView visibility = VK_NULL_HANDLE;
   uint32_t width = 0, height = 0;
+  // Optional: an RGBA32F storage image (GENERAL) that also receives the light per channel,
+  // rgb = visibility x the deep part's transmittance (1 without one), a = visibility; the
+  // same barriers as `visibility`. VK_NULL_HANDLE: not written. Needs
+  // GpuOptions::light_pass (else record_shadow_pass throws GpuError).
+  VkImageView light = VK_NULL_HANDLE;
 };
 
 // The shadow pass's settings, ShadowPassInput's without the host spans (same meanings).
@@ -199,6 +220,16 @@ struct GpuQuery {
   uint32_t level = 0;
 };
 inline constexpr uint32_t kLevelFromFootprint = 0xFFFFFFFFu;
+
+// One query of evaluate_deep(): the deep part's transmittance at light-space (u, v) (map
+// units, [0, 1)) and depth, over a footprint `width` map units wide (0: the texel under
+// (u, v); > 0: filtered with the deep tile's mips). The arguments of the CPU's lookup
+// (client::CacheView::deep_transmittance, Map::transmittance after its light transform).
+struct GpuDeepQuery {
+  float u = 0, v = 0;
+  float depth = 0;
+  float width = 0;
+};
 
 // One query of evaluate() on a stack map (Map::slices() > 0): the same as GpuQuery in
 // slice `slice` of the stack. r == 0: the depth of texel (x, y) of `level` (Map::slice_depth);
@@ -276,6 +307,8 @@ struct GpuStats {
   uint64_t holes = 0;
   uint64_t tile_bytes = 0, page_bytes = 0, feedback_bytes = 0, host_io_bytes = 0;  // FrameStats' sums
   uint32_t resident_slots = 0;   // slots the device holds now
+  uint32_t deep_tiles = 0;       // deep tiles the device holds now (0: no deep part)
+  uint32_t deep_tiles_dropped = 0;  // resident deep tiles that did not fit deep_bytes
   uint32_t slot_count = 0;
   // Device memory of the two shared buffers. The page table goes up whole once (the own-
   // device constructor, or engine mode's first record_uploads, beyond upload_budget_bytes):
@@ -357,6 +390,16 @@ class GpuMap {
   // Waits for `frame`, copies its visibility image into `out` (width * height floats) and
   // hands its feedback to the Map. Throws GpuError for a frame not in flight.
   FrameStats wait(uint64_t frame, std::span<float> out);
+  // The same, and the light per channel (3 floats per pixel, light_rgb): for a 2D map's
+  // shadow pass, visibility x the deep part's transmittance (st_deep_shadow at the pixel's
+  // surface point, its footprint and kernel: GPU_LAYOUT.md "The deep block"); the
+  // visibility repeated for a map without a deep part or a stack map.
+  FrameStats wait(uint64_t frame, std::span<float> out, std::span<float> light_rgb);
+  // Partial occluders: the deep part's transmittance (3 floats per query, rgb), bit for bit
+  // the CPU's lookup for the deep tiles the device holds (those the Map held at the last
+  // upload; others answer 1). All 1 for a map without a deep part. Waits for the device.
+  FrameStats evaluate_deep(std::span<const GpuDeepQuery> queries, std::span<float> out_rgb);
+  bool has_deep() const;  // a 2D map with a deep part (a stack map: never)
 
   // Uploads changed slots (within the budget) and waits until the device holds what the
   // cache holds now; returns the slots uploaded. For tests and tools.

@@ -1,12 +1,17 @@
 #version 450
 // An engine's fragment shader over the GPU tile cache (the fragment-shader test): our
 // buffers in set 0 at the bindings the engine chose, its G-buffer in set 1; per pixel the
-// receiver's visibility with the footprint given, feedback on. It must answer what the
-// compute pass answers with neighbour_footprint off, bit for bit.
+// receiver's visibility with the footprint given, feedback on, or one channel of the light
+// (st_shadow: times the deep part's transmittance; compiled with ST_TEST_DEEP for the deep
+// tests, engine_fragment_deep.frag.spv.inc). It must answer what the compute pass
+// answers with neighbour_footprint off, bit for bit.
 #define ST_SET 0
 #define ST_BINDING_POOL 3
 #define ST_BINDING_PAGE 5
 #define ST_BINDING_FEEDBACK 7
+#ifndef ST_TEST_DEEP
+#define ST_DEEP_SHADOWS 0  // the opaque tests' build: st_shadow = vec3(visibility), less to compile
+#endif
 #include "shadowtile.glsl"
 
 layout(set = 1, binding = 0) uniform sampler2D gbuffer_positions;
@@ -15,6 +20,7 @@ layout(push_constant) uniform Push {
   uint kernel;
   float normal_offset;
   float footprint;
+  uint channel;  // 0: st_visibility; 1..3: st_shadow's r, g, b
 } push;
 layout(location = 0) out float visibility;
 
@@ -26,7 +32,12 @@ void main() {
     return;
   }
   StProbe probe = st_probe();
-  visibility = st_shadow(p.xyz, texelFetch(gbuffer_normals, q, 0).xyz, push.normal_offset, push.footprint, push.kernel,
-                         probe);
+  const vec3 n = texelFetch(gbuffer_normals, q, 0).xyz;
+  if (push.channel == 0u) {
+    visibility = st_visibility(p.xyz, n, push.normal_offset, push.footprint, push.kernel, probe);
+  } else {
+    const vec3 light = st_shadow(p.xyz, n, push.normal_offset, push.footprint, push.kernel, probe);
+    visibility = light[push.channel - 1u];
+  }
   st_finish(probe);
 }
