@@ -3,5 +3,5 @@
 #pragma once
 
 namespace st {
-inline constexpr const char* kVersion = "0.1.0";
+inline constexpr const char* kVersion = "0.2.0";
 }  // namespace st
