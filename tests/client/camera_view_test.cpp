@@ -16,7 +16,7 @@
 #include "tiles/core/camera.hpp"
 
 namespace st::client {
-namespace {
+namespace camera_view_test {
 
 struct Fixture {
   looptest::TestPack pack;
@@ -256,5 +256,5 @@ TEST(RequestView, RefusesWhatItCannotUse) {
   EXPECT_FALSE(Map().request_view(1, cam.data(), 64, 64).ok);
 }
 
-}  // namespace
+}  // namespace camera_view_test
 }  // namespace st::client

@@ -20,7 +20,7 @@
 #include "tiles/core/tile_cut_grid.hpp"
 
 namespace st::client {
-namespace {
+namespace fault_test {
 
 using namespace std::chrono_literals;
 using looptest::build_pack;
@@ -257,5 +257,5 @@ TEST(Faults, ConnectionFloodFromOneAddressIsCappedWhileOthersAreServed) {
       << srv.server->stats().connections_open << " open; the good client alone should be";
 }
 
-}  // namespace
+}  // namespace fault_test
 }  // namespace st::client

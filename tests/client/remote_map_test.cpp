@@ -17,7 +17,7 @@
 #include "tiles/core/map_preview.hpp"
 
 namespace st::client {
-namespace {
+namespace remote_map_test {
 
 using namespace std::chrono_literals;
 using looptest::build_pack;
@@ -324,5 +324,5 @@ TEST(RemoteMap, TileMatchingItsCrcButNotDecodingIsRetriedThenGivenUp) {
   EXPECT_EQ(s.cache.resident, c.pack.reader->tiles().size() - 1) << "the failed slot was given back";
 }
 
-}  // namespace
+}  // namespace remote_map_test
 }  // namespace st::client
