@@ -81,7 +81,8 @@ TEST(Faults, ServerKilledMidStreamAndRestartedEndsWithTheSameAnswers) {
   ASSERT_GT(total, 20u);
   const uint16_t port = free_port(p.path);
   server::ServerOptions slow;  // so that the kill lands while answers are in flight
-  slow.tile_hook = [](uint64_t, std::span<uint8_t>) { std::this_thread::sleep_for(2ms); };
+  slow.tile_source =
+      std::make_shared<looptest::WatchedTiles>([](uint64_t, std::span<uint8_t>) { std::this_thread::sleep_for(2ms); });
   auto srv = serve_on(port, p.path, slow);
   Client c({"127.0.0.1", port}, options_for(p));
   Map m = c.open("midstream");
