@@ -21,9 +21,9 @@
 
 #include "common/error.hpp"
 #include "tiles/build/mh_build.hpp"
-// The field generators are the tests' (one definition of "realistic" for both); the
-// bench target compiles only this file, so the helper's source is included here.
-#include "tests/tiles/interval_fields_helpers.cpp"
+// The field generators are the tests' (one definition of "realistic" for both; the
+// shadowtile_interval_fields library, tests/fixtures.cmake).
+#include "tests/tiles/interval_fields.hpp"
 
 namespace {
 

@@ -23,8 +23,8 @@
 #include "tiles/build/encode.hpp"
 #include "common/error.hpp"
 #include "tiles/build/mh_build.hpp"
-// The field generators are the tests' (bench targets compile one file).
-#include "tests/tiles/interval_fields_helpers.cpp"
+// The field generators are the tests' (the shadowtile_interval_fields library).
+#include "tests/tiles/interval_fields.hpp"
 
 namespace {
 

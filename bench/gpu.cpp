@@ -30,7 +30,7 @@
 #include "bench/bench_map.hpp"
 #include "client/map_access.hpp"
 #include "gpu/gpu_map.hpp"
-#include "gpu/r32f_image.hpp"
+#include "bench/baselines/r32f_image.hpp"
 #include "gpu/shadow_reference.hpp"
 #include "server/catalog.hpp"
 #include "server/server.hpp"

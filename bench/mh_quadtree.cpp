@@ -23,9 +23,9 @@
 #include "tiles/build/mh_build.hpp"
 #include "tiles/build/mh_quadtree_layout.hpp"
 #include "tiles/build/mmh_merge.hpp"
-// The field generators are the tests' (one definition of "realistic" for both); the
-// bench target compiles only this file, so the helper's source is included here.
-#include "tests/tiles/interval_fields_helpers.cpp"
+// The field generators are the tests' (one definition of "realistic" for both; the
+// shadowtile_interval_fields library, tests/fixtures.cmake).
+#include "tests/tiles/interval_fields.hpp"
 
 namespace {
 

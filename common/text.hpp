@@ -1,6 +1,8 @@
 // Text from files, shown on a terminal or in a log: printable_text() makes it one safe
 // line, escaped the way JSON escapes strings, so a hostile file cannot move the cursor,
 // rewrite earlier lines or forge log lines (ESC, CR, BS, C1 controls such as CSI).
+// (Text sent on the wire follows the protocol's rule instead: proto::sanitize_text in
+// proto/names.hpp replaces control bytes and bounds the length; it keeps no escapes.)
 #pragma once
 #include <string>
 #include <string_view>

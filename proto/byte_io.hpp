@@ -1,5 +1,5 @@
 // Little-endian loads/stores and the bounded Reader/Writer the message codecs are built
-// on (internal to proto, shipped because it is header-only). The Reader is the one place
+// on (internal to proto and not installed). The Reader is the one place
 // that touches untrusted payload bytes: every read is bounds-checked, the first failure
 // is sticky and names the message, field and byte offset, and counts are checked against
 // the bytes actually left before anything is allocated (meshoptimizer's decoders: never

@@ -1,4 +1,4 @@
-// Internal to proto (shipped only because the headers are installed as a folder): the
+// Internal to proto (not installed: the one public header is the client's): the
 // per-message rule checks shared by encoders and decoders (message_rules.cpp).
 #pragma once
 #include <cstddef>

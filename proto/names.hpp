@@ -26,7 +26,8 @@ Status validate_text(std::string_view text, std::size_t max_bytes, const char* f
 
 // Makes any text valid free text: control bytes become '?', and it is cut to max_bytes
 // (at a byte boundary; a cut UTF-8 sequence is harmless since UTF-8 is not validated).
-// For forwarding exception messages (st::Error::what()) into Error frames.
+// For forwarding exception messages (st::Error::what()) into Error and TileError frames.
+// (Text from files shown on a terminal or in a log is escaped instead: common/text.hpp.)
 std::string sanitize_text(std::string_view text, std::size_t max_bytes);
 
 }  // namespace st::proto

@@ -34,6 +34,7 @@ Connection::Connection(tcp::socket socket, ServerCore& core, asio::ip::address f
       core_(core),
       from_(std::move(from)),
       opt_(core.options),
+      source_(*core.options.tile_source),
       writer_wake_(stream_.get_executor()),
       reader_wake_(stream_.get_executor()),
       watchdog_timer_(stream_.get_executor()),
@@ -534,19 +535,16 @@ bool Connection::write_tiles_inline() {
   return true;
 }
 
-// A tile's stored bytes: from the payload cache, or read from the pack (pread, then the
-// pack index's CRC check: st::Error on a mismatch) and cached. The test hook sees (and may
-// alter) a private copy of every read, so with a hook nothing is cached.
+// A tile's stored bytes: from the payload cache, or read from the tile source (the pack's:
+// pread, then the pack index's CRC check, st::Error on a mismatch) and cached. A source
+// that does not answer checked pack bytes is read every time and nothing is cached.
 PayloadCache::Bytes Connection::load_stored(const CatalogMap& map, uint32_t map_index,
                                             const TileIndexEntry& entry, uint32_t pos) {
-  if (!opt_.tile_hook) {
-    if (auto hit = core_.payloads.find(map_index, pos)) return hit;
-    auto bytes = std::make_shared<const std::vector<uint8_t>>(map.pack().read_stored(entry.id));
-    core_.payloads.insert(map_index, pos, bytes);
-    return bytes;
-  }
-  auto bytes = std::make_shared<std::vector<uint8_t>>(map.pack().read_stored(entry.id));
-  opt_.tile_hook(entry.id, *bytes);
+  if (!source_.answers_checked_pack_bytes())
+    return std::make_shared<const std::vector<uint8_t>>(source_.read(map.pack(), entry.id));
+  if (auto hit = core_.payloads.find(map_index, pos)) return hit;
+  auto bytes = std::make_shared<const std::vector<uint8_t>>(source_.read(map.pack(), entry.id));
+  core_.payloads.insert(map_index, pos, bytes);
   return bytes;
 }
 
@@ -587,13 +585,13 @@ void Connection::prepare_tile(const PoppedTile& p, TileFrame& out) {
   }
   if (code == ErrorCode::ok) {
     // Bytes checked against the pack index's CRC (cache or read): the frame's payload
-    // CRC is combined from it, not recomputed over the bytes; bytes a test hook may have
-    // altered are summed as they are.
+    // CRC is combined from it, not recomputed over the bytes; another source's bytes are
+    // summed as they are.
     proto::Status s =
-        opt_.tile_hook
-            ? proto::encode_tile_data_prefix(meta, *out.stored, p.tile.request_id, flags, limits_, out.prefix)
-            : proto::encode_tile_data_prefix(meta, uint32_t(out.stored->size()), meta.payload_crc32,
-                                             p.tile.request_id, flags, limits_, out.prefix);
+        source_.answers_checked_pack_bytes()
+            ? proto::encode_tile_data_prefix(meta, uint32_t(out.stored->size()), meta.payload_crc32,
+                                             p.tile.request_id, flags, limits_, out.prefix)
+            : proto::encode_tile_data_prefix(meta, *out.stored, p.tile.request_id, flags, limits_, out.prefix);
     if (s) {
       out.is_data = true;
       out.received = p.tile.received;
@@ -608,9 +606,7 @@ void Connection::prepare_tile(const PoppedTile& p, TileFrame& out) {
   te.tile_id = p.tile.tile;
   te.map_id = p.tile.map_id;
   te.code = code;
-  te.message = why.substr(0, proto::kMaxErrorMessageBytes);
-  for (char& c : te.message)
-    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) c = ' ';
+  te.message = proto::sanitize_text(why, proto::kMaxErrorMessageBytes);
   if (!proto::encode_message(te, p.tile.request_id, flags, limits_, out.error)) {
     // Cannot happen (the message is bounded); never leave a tile unanswered silently.
     te.message.clear();

@@ -147,6 +147,7 @@ class Connection : public std::enable_shared_from_this<Connection> {
   ServerCore& core_;
   const asio::ip::address from_;
   const ServerOptions& opt_;
+  TileSource& source_;  // opt_.tile_source (the packs' unless the server was given one)
   asio::steady_timer writer_wake_, reader_wake_, watchdog_timer_;
 
   proto::Limits limits_;  // handshake limits until HelloAck, then the negotiated ones

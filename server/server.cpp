@@ -448,6 +448,7 @@ Server::Server(Catalog catalog, ServerOptions options) {
     throw Error("serve: --tls-handshake-rate must be >= 0 and its burst >= 1");
   impl_->core.tls_handshakes = HandshakeLimiter(options.tls_handshakes_per_second, options.tls_handshake_burst);
   impl_->core.options = std::move(options);
+  if (!impl_->core.options.tile_source) impl_->core.options.tile_source = std::make_shared<PackTileSource>();
   impl_->core.catalog = std::move(catalog);
   std::vector<size_t> tiles;
   for (const auto& m : impl_->core.catalog.maps()) tiles.push_back(m->pack().tiles().size());

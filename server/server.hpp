@@ -21,6 +21,7 @@
 #include "proto/limits.hpp"
 #include "server/catalog.hpp"
 #include "server/server_stats.hpp"
+#include "server/tile_source.hpp"
 
 namespace st::server {
 
@@ -92,8 +93,9 @@ struct ServerOptions {
   // Periodic stats line (0: none), written through `log`.
   std::chrono::milliseconds stats_interval{0};
   std::function<void(const std::string&)> log;  // default: stderr
-  // Test hook: sees (and may alter) a tile's stored bytes after pread, before sending.
-  std::function<void(uint64_t tile_id, std::span<uint8_t> bytes)> tile_hook;
+  // Where tiles' stored bytes come from (server/tile_source.hpp); null: the packs
+  // themselves (PackTileSource). Shared by every connection, called from the I/O threads.
+  std::shared_ptr<TileSource> tile_source;
 };
 
 class Server {

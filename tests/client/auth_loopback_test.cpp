@@ -13,7 +13,7 @@
 #include "tests/client/loopback.hpp"
 
 namespace st::client {
-namespace {
+namespace auth_loopback_test {
 
 using namespace std::chrono_literals;
 using looptest::build_pack;
@@ -207,5 +207,5 @@ TEST(AuthLoopback, AKeyHolderRefusesAServerThatCannotProveTheKey) {
   }
 }
 
-}  // namespace
+}  // namespace auth_loopback_test
 }  // namespace st::client

@@ -17,7 +17,7 @@
 #include "common/hash.hpp"
 
 namespace st::client {
-namespace {
+namespace batched_lookups_test {
 
 uint32_t bits(float v) { return std::bit_cast<uint32_t>(v); }
 
@@ -390,5 +390,5 @@ TEST(ClientLookups, TwoThreadsLookUpWhileTilesArriveAndEndExact) {
       ASSERT_EQ(bits(f.map->depth(f.level, x, y)), bits(local.depth(f.level, x, y))) << x << ", " << y;
 }
 
-}  // namespace
+}  // namespace batched_lookups_test
 }  // namespace st::client

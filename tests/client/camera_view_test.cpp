@@ -17,7 +17,7 @@
 #include "tiles/core/camera.hpp"
 
 namespace st::client {
-namespace {
+namespace camera_view_test {
 
 struct Fixture {
   looptest::TestPack pack;
@@ -381,5 +381,5 @@ TEST(RequestView, ViewSamplesReadOnlyTheViewsTiles) {
     for (size_t i = 0; i < points.size(); ++i) ASSERT_EQ(view[i], full[i]) << i;
   }
 }
-}  // namespace
+}  // namespace camera_view_test
 }  // namespace st::client

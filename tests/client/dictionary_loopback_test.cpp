@@ -14,7 +14,7 @@
 #include "tiles/core/dagmh_validate.hpp"
 
 namespace st::client {
-namespace {
+namespace dictionary_loopback_test {
 
 using looptest::quick_options;
 using looptest::start_server;
@@ -182,5 +182,5 @@ TEST(DictionaryLoopback, ByteBudgetTooSmallForTheDictionaryAndAViewIsAnError) {
   EXPECT_EQ(least.accounted_bytes, need);
 }
 
-}  // namespace
+}  // namespace dictionary_loopback_test
 }  // namespace st::client

@@ -20,7 +20,7 @@
 #include "tiles/core/tile_cut_grid.hpp"
 
 namespace st::client {
-namespace {
+namespace fault_test {
 
 using namespace std::chrono_literals;
 using looptest::build_pack;
@@ -81,7 +81,8 @@ TEST(Faults, ServerKilledMidStreamAndRestartedEndsWithTheSameAnswers) {
   ASSERT_GT(total, 20u);
   const uint16_t port = free_port(p.path);
   server::ServerOptions slow;  // so that the kill lands while answers are in flight
-  slow.tile_hook = [](uint64_t, std::span<uint8_t>) { std::this_thread::sleep_for(2ms); };
+  slow.tile_source =
+      std::make_shared<looptest::WatchedTiles>([](uint64_t, std::span<uint8_t>) { std::this_thread::sleep_for(2ms); });
   auto srv = serve_on(port, p.path, slow);
   Client c({"127.0.0.1", port}, options_for(p));
   Map m = c.open("midstream");
@@ -257,5 +258,5 @@ TEST(Faults, ConnectionFloodFromOneAddressIsCappedWhileOthersAreServed) {
       << srv.server->stats().connections_open << " open; the good client alone should be";
 }
 
-}  // namespace
+}  // namespace fault_test
 }  // namespace st::client

@@ -13,7 +13,7 @@
 #include "tests/client/loopback.hpp"
 
 namespace st::client {
-namespace {
+namespace hostile_server_test {
 
 using namespace std::chrono_literals;
 using looptest::HostileServer;
@@ -224,5 +224,5 @@ TEST(HostileServer, AnswersUnderWrongIdsAreCountedAndBounded) {
   EXPECT_LE(srv.most_asks_of_one_tile(), o.max_tile_retries + 1);
 }
 
-}  // namespace
+}  // namespace hostile_server_test
 }  // namespace st::client

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cstdint>
 #include <functional>
+#include <span>
 #include <memory>
 #include <string>
 #include <vector>
@@ -21,6 +22,24 @@
 namespace st::looptest {
 
 bool small_scale();  // SHADOWTILE_TEST_SCALE=small (the asan preset)
+
+// The packs' own tile source, with each tile's stored bytes handed to `see` (which may
+// wait, record or alter them) before they are sent: a slow, watched or corrupting disk
+// (ServerOptions::tile_source). The server sums such bytes and caches none.
+class WatchedTiles final : public server::TileSource {
+ public:
+  using See = std::function<void(uint64_t tile_id, std::span<uint8_t> bytes)>;
+  explicit WatchedTiles(See see) : see_(std::move(see)) {}
+  std::vector<uint8_t> read(const PackReader& pack, uint64_t tile_id) override {
+    std::vector<uint8_t> bytes = pack_.read(pack, tile_id);
+    see_(tile_id, bytes);
+    return bytes;
+  }
+
+ private:
+  server::PackTileSource pack_;
+  See see_;
+};
 
 // A random field of 2^level texels a side: constant blocks (no tiles below them), noisy
 // blocks (big tiles, index tiles when tile_bytes is small), smooth slopes, lit border.

@@ -17,7 +17,7 @@
 #include "tiles/core/map_preview.hpp"
 
 namespace st::client {
-namespace {
+namespace remote_map_test {
 
 using namespace std::chrono_literals;
 using looptest::build_pack;
@@ -156,7 +156,7 @@ TEST(RemoteMap, AnswersFromTheCoarserLevelUntilTilesArrive) {
   auto p = build_pack("coarse", level, 5, encodings[0], k, 1024);
   auto gate = std::make_shared<Gate>();
   server::ServerOptions so;
-  so.tile_hook = [gate](uint64_t, std::span<uint8_t>) { gate->wait(); };
+  so.tile_source = std::make_shared<looptest::WatchedTiles>([gate](uint64_t, std::span<uint8_t>) { gate->wait(); });
   auto srv = start_server({p.path}, so);
   Client client({"127.0.0.1", srv.port}, quick_options());
   Map map = client.open("coarse");
@@ -190,10 +190,10 @@ TEST(RemoteMap, CorruptPayloadIsCaughtByTheCrcAndRefetched) {
   // check on read passes and only the client can notice).
   auto seen = std::make_shared<std::pair<std::mutex, std::set<uint64_t>>>();
   server::ServerOptions so;
-  so.tile_hook = [seen](uint64_t id, std::span<uint8_t> bytes) {
+  so.tile_source = std::make_shared<looptest::WatchedTiles>([seen](uint64_t id, std::span<uint8_t> bytes) {
     std::lock_guard lock(seen->first);
     if (seen->second.insert(id).second && !bytes.empty()) bytes[bytes.size() / 2] ^= 0x40;
-  };
+  });
   auto srv = start_server({p.path}, so);
   ClientOptions o = quick_options();
   o.cache_slots = uint32_t(p.reader->tiles().size()) + 4;
@@ -263,9 +263,9 @@ MapStats expect_given_up(const GivenUpCase& c, uint16_t port) {
 TEST(RemoteMap, AlwaysCorruptTileIsGivenUpAndItsTexelsStayCoarse) {
   const GivenUpCase c = given_up_case("corrupt_always", 13);
   server::ServerOptions so;
-  so.tile_hook = [bad = c.bad](uint64_t id, std::span<uint8_t> bytes) {
+  so.tile_source = std::make_shared<looptest::WatchedTiles>([bad = c.bad](uint64_t id, std::span<uint8_t> bytes) {
     if (id == bad && !bytes.empty()) bytes[0] ^= 0x01;
-  };
+  });
   auto srv = start_server({c.pack.path}, so);
   const MapStats s = expect_given_up(c, srv.port);
   EXPECT_EQ(s.crc_errors, 3u);  // the first try and two retries
@@ -314,9 +314,9 @@ TEST(RemoteMap, TileMatchingItsCrcButNotDecodingIsRetriedThenGivenUp) {
   ASSERT_EQ(crc32_of(forged), crc32_of(good));
   ASSERT_THROW(zlib_decompress(forged, c.pack.reader->find(c.bad)->raw_size, "forged"), Error);
   server::ServerOptions so;
-  so.tile_hook = [bad = c.bad, forged](uint64_t id, std::span<uint8_t> bytes) {
+  so.tile_source = std::make_shared<looptest::WatchedTiles>([bad = c.bad, forged](uint64_t id, std::span<uint8_t> bytes) {
     if (id == bad && bytes.size() == forged.size()) std::copy(forged.begin(), forged.end(), bytes.begin());
-  };
+  });
   auto srv = start_server({c.pack.path}, so);
   const MapStats s = expect_given_up(c, srv.port);
   EXPECT_EQ(s.crc_errors, 0u);      // the end-to-end CRC passed every time
@@ -324,5 +324,5 @@ TEST(RemoteMap, TileMatchingItsCrcButNotDecodingIsRetriedThenGivenUp) {
   EXPECT_EQ(s.cache.resident, c.pack.reader->tiles().size() - 1) << "the failed slot was given back";
 }
 
-}  // namespace
+}  // namespace remote_map_test
 }  // namespace st::client

@@ -265,13 +265,13 @@ TEST(ServerLoopback, ClientRetriesWithBackoffAndResumesAfterServerRestart) {
 server::ServerOptions slow_server(std::shared_ptr<std::pair<std::mutex, std::vector<uint64_t>>> order,
                                   std::chrono::milliseconds delay) {
   server::ServerOptions so;
-  so.tile_hook = [order, delay](uint64_t id, std::span<uint8_t>) {
+  so.tile_source = std::make_shared<looptest::WatchedTiles>([order, delay](uint64_t id, std::span<uint8_t>) {
     {
       std::lock_guard lock(order->first);
       order->second.push_back(id);
     }
     std::this_thread::sleep_for(delay);
-  };
+  });
   return so;
 }
 

@@ -24,7 +24,7 @@
 #include "tiles/core/tile_cut_grid.hpp"
 
 namespace st::gpu {
-namespace {
+namespace gpu_engine_test {
 
 using enginetest::RasterPass;
 using enginetest::run_frame;
@@ -382,5 +382,5 @@ TEST(GpuEngine, FramesInFlightWithAChurningCacheNeverStallAndMoveOnlyTilePageAnd
   EXPECT_EQ(e.messages(), 0u) << e.first_message();
 }
 
-}  // namespace
+}  // namespace gpu_engine_test
 }  // namespace st::gpu

@@ -8,7 +8,7 @@
 #include <random>
 
 #include "gpu/layout.hpp"
-#include "gpu/layout_probe.hpp"
+#include "tests/gpu/layout_probe.hpp"
 #include "tiles/core/deep_format.hpp"
 #include "tests/gpu/gpu_test_util.hpp"
 

@@ -24,7 +24,7 @@
 #include "tiles/core/page_table.hpp"
 
 namespace st::gpu {
-namespace {
+namespace gpu_map_test {
 
 using looptest::build_pack;
 using looptest::start_server;
@@ -436,7 +436,7 @@ TEST(GpuMap, NoDeviceOfTheNameAskedForFailsClearlyAndTheCpuPathStillAnswers) {
   EXPECT_THROW(GpuMap(client::Map{}, gputest::options()), std::runtime_error);
 }
 
-}  // namespace
+}  // namespace gpu_map_test
 }  // namespace st::gpu
 
 // Debian 12's current Mesa (lavapipe) leaks from a module it unloads before exit, so

@@ -8,7 +8,7 @@
 #include "proto/proto.hpp"
 
 namespace st::proto {
-namespace {
+namespace frame_layout_test {
 
 std::string hex(std::span<const std::uint8_t> b) {
   std::string s;
@@ -120,5 +120,5 @@ TEST(FrameLayout, ExampleDumpsOfTheSpec) {
             "00 00 01 00");
 }
 
-}  // namespace
+}  // namespace frame_layout_test
 }  // namespace st::proto

@@ -13,7 +13,7 @@
 #include "tiles/bake/depth_bounds.hpp"
 
 namespace st {
-namespace {
+namespace canonical_depth_test {
 
 bool same_bits(const Interval& a, const Interval& b) {
   return std::memcmp(&a.lo, &b.lo, sizeof(float)) == 0 &&
@@ -151,5 +151,5 @@ TEST(CanonicalDepth, AgreesWithTheDoubleReference) {
   }
 }
 
-}  // namespace
+}  // namespace canonical_depth_test
 }  // namespace st

@@ -14,7 +14,7 @@
 #include "tiles/core/dagmh_validate.hpp"
 
 namespace st {
-namespace {
+namespace dagmh_dictionary_test {
 
 // The same topology with fresh intervals: what neighbouring tiles of a city look like to
 // the per-tile DAG (the same building footprints, other depths).
@@ -170,5 +170,5 @@ TEST(DagmhDictionary, HostileDictionariesAndTiles) {
   EXPECT_GE(sink, 0.0);
 }
 
-}  // namespace
+}  // namespace dagmh_dictionary_test
 }  // namespace st

@@ -19,7 +19,7 @@
 #include "tiles/core/pack_reader.hpp"
 
 namespace st {
-namespace {
+namespace deep_pack_test {
 
 std::vector<uint8_t> file_bytes(const std::string& path) {
   std::ifstream f(path, std::ios::binary);
@@ -195,5 +195,5 @@ TEST(DeepPack, WriterRefusesMisplacedDeepTiles) {
   EXPECT_THROW(build_map(s, light, o, packtest::temp_path("deep_refused.pack")), Error);
 }
 
-}  // namespace
+}  // namespace deep_pack_test
 }  // namespace st

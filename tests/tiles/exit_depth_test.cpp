@@ -13,7 +13,7 @@
 #include "tiles/bake/exit_depth.hpp"
 
 namespace st {
-namespace {
+namespace exit_depth_test {
 
 constexpr float kNoHit = ExitDepthRay::kNoHit;
 const Vec3d kOrigin{0, 0, 0}, kDir{0, 0, 1};
@@ -471,5 +471,5 @@ TEST(ExitDepth, DepthsOfASpotMapTheRayRange) {
   EXPECT_EQ(depth_of_t(spot, 0.0f), 0.0f);
 }
 
-}  // namespace
+}  // namespace exit_depth_test
 }  // namespace st

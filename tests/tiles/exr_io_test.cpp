@@ -11,7 +11,7 @@
 #include "common/error.hpp"
 
 namespace st {
-namespace {
+namespace exr_io_test {
 
 std::string tmp_path(const std::string& name) { return std::string(SHADOWTILE_TEST_TMP) + "/" + name; }
 
@@ -137,5 +137,5 @@ TEST(PngIo, PreviewShowsLitTexelsInBlueAndNearHitsBright) {
   EXPECT_THROW(read_png(junk, rw, rh), FormatError);
 }
 
-}  // namespace
+}  // namespace exr_io_test
 }  // namespace st

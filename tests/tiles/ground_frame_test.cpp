@@ -19,7 +19,7 @@
 #include "tiles/core/stack_lookup.hpp"
 
 namespace st {
-namespace {
+namespace ground_frame_test {
 
 Aabb town_box() {
   Aabb b;
@@ -228,5 +228,5 @@ TEST(GroundFrame, TracedStackIsLosslessOnEveryTexelOfEverySlice) {
   EXPECT_GT(hit, stack.side() * stack.side());  // geometry in view
 }
 
-}  // namespace
+}  // namespace ground_frame_test
 }  // namespace st

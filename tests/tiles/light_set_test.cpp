@@ -7,7 +7,7 @@
 #include "tiles/core/light_set.hpp"
 
 namespace st {
-namespace {
+namespace light_set_test {
 
 Aabb unit_box() {
   Aabb b;
@@ -149,5 +149,5 @@ TEST(LightSet, HilbertCurveVisitsEveryCellWithUnitSteps) {
   }
 }
 
-}  // namespace
+}  // namespace light_set_test
 }  // namespace st

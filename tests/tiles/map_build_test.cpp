@@ -14,7 +14,7 @@
 #include "tiles/core/pack_evaluator.hpp"
 
 namespace st {
-namespace {
+namespace map_build_test {
 
 namespace fs = std::filesystem;
 
@@ -169,5 +169,5 @@ TEST(MapBuild, BadOptionsAreClearErrors) {
   EXPECT_THROW(build_map(b.scene, b.light, o, tmp_path("mb_bad.pack")), Error);
 }
 
-}  // namespace
+}  // namespace map_build_test
 }  // namespace st

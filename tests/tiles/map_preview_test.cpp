@@ -21,7 +21,7 @@
 #include "tiles/core/pack_reader.hpp"
 
 namespace st {
-namespace {
+namespace map_preview_test {
 
 using packtest::bits;
 
@@ -182,5 +182,5 @@ TEST(MapPreview, AVersion1PackIsRefusedNamingTheVersion) {
   }
 }
 
-}  // namespace
+}  // namespace map_preview_test
 }  // namespace st

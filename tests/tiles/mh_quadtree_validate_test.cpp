@@ -10,7 +10,7 @@
 #include "tiles/core/mh_quadtree_format.hpp"
 
 namespace st {
-namespace {
+namespace mh_quadtree_validate_test {
 
 using namespace mhq;
 
@@ -109,5 +109,5 @@ TEST(MhQuadtreeValidate, ChildrenBelowTheFinestLevelAreRejected) {
   EXPECT_EQ(error_of(true, buffer(true, 5, 6, deep)), "");
 }
 
-}  // namespace
+}  // namespace mh_quadtree_validate_test
 }  // namespace st

@@ -16,7 +16,7 @@
 #include "tiles/core/pack_evaluator.hpp"
 
 namespace st {
-namespace {
+namespace mixed_tiles_test {
 
 namespace fs = std::filesystem;
 
@@ -76,5 +76,5 @@ TEST(MixedTiles, OpenTownTakesMmhWhereSmallerStaysLosslessAndNoLargerThanEither)
   for (const Built* b : {&mmh, &only, &mixed}) fs::remove(b->path);
 }
 
-}  // namespace
+}  // namespace mixed_tiles_test
 }  // namespace st

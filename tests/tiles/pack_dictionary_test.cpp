@@ -23,7 +23,7 @@
 #include "tiles/core/pack_reader.hpp"
 
 namespace st {
-namespace {
+namespace pack_dictionary_test {
 
 std::vector<uint8_t> slurp(const std::string& path) {
   std::ifstream f(path, std::ios::binary);
@@ -306,5 +306,5 @@ TEST(PackDictionary, ResumedAndMergedBuildsWriteTheSamePack) {
   EXPECT_EQ(PackReader::open(plain)->dictionary(), nullptr);
 }
 
-}  // namespace
+}  // namespace pack_dictionary_test
 }  // namespace st

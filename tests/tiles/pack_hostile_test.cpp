@@ -26,7 +26,7 @@
 #include "tiles/core/pack_reader.hpp"
 
 namespace st {
-namespace {
+namespace pack_hostile_test {
 
 struct Built {
   IntervalTile field;
@@ -270,5 +270,5 @@ TEST(PackHostile, PrintableTextEscapesControlsLikeJson) {
   EXPECT_EQ(printable_text("\xe2\x82\xac"), "\xe2\x82\xac");           // the euro sign
 }
 
-}  // namespace
+}  // namespace pack_hostile_test
 }  // namespace st

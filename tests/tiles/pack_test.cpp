@@ -18,7 +18,7 @@
 #include "tiles/build/pack_writer.hpp"
 
 namespace st {
-namespace {
+namespace pack_test {
 
 using packtest::bits;
 
@@ -348,5 +348,5 @@ TEST(Pack, Level20MapIsAddressedExactly) {
   }
 }
 
-}  // namespace
+}  // namespace pack_test
 }  // namespace st

@@ -7,7 +7,7 @@
 #include "common/error.hpp"
 
 namespace st {
-namespace {
+namespace partial_test {
 
 Volume box(float rho, uint32_t n) {
   Volume v;
@@ -82,5 +82,5 @@ TEST(AlphaTexture, WrapsAndChecksItsSize) {
   EXPECT_THROW(t.validate(), Error);
 }
 
-}  // namespace
+}  // namespace partial_test
 }  // namespace st

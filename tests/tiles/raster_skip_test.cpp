@@ -18,7 +18,7 @@
 #include "tiles/core/pack_evaluator.hpp"
 
 namespace st {
-namespace {
+namespace raster_skip_test {
 
 bool same_bits(const Interval& a, const Interval& b) {
   return std::memcmp(&a.lo, &b.lo, sizeof(float)) == 0 && std::memcmp(&a.hi, &b.hi, sizeof(float)) == 0;
@@ -190,5 +190,5 @@ TEST(RasterSkip, RegionsPackIsLosslessOnEveryTexel) {
   EXPECT_GT(in_regions, 0u) << "no region was ever proven during a build";
 }
 
-}  // namespace
+}  // namespace raster_skip_test
 }  // namespace st

@@ -16,7 +16,7 @@
 #include "tiles/core/pack_evaluator.hpp"
 
 namespace st {
-namespace {
+namespace render_deep_test {
 
 constexpr uint32_t kLevel = 9;
 
@@ -134,5 +134,5 @@ TEST(RenderDeep, PrimaryRaysPassTheCutAwayCornersOfAlphaTestedCards) {
   EXPECT_GT(farther, 0u) << "the solid card hides what the cut-away one lets the camera see";
 }
 
-}  // namespace
+}  // namespace render_deep_test
 }  // namespace st

@@ -14,7 +14,7 @@
 #include "common/error.hpp"
 
 namespace st {
-namespace {
+namespace scene_formats_test {
 
 std::string tmp(const std::string& name) {
   std::filesystem::create_directories(SHADOWTILE_TEST_TMP);
@@ -433,5 +433,5 @@ TEST(SceneFormats, GltfChainAtTheNestingBoundLoads) {
   EXPECT_NE(error_of(path).find("nest deeper"), std::string::npos) << error_of(path);
 }
 
-}  // namespace
+}  // namespace scene_formats_test
 }  // namespace st

@@ -23,7 +23,7 @@
 #include "tiles/bake/scene_limits.hpp"
 
 namespace st {
-namespace {
+namespace scene_hostile_test {
 
 std::string dir_of(const std::string& name) {
   const std::string d = std::string(SHADOWTILE_TEST_TMP) + "/scene_hostile_" + name;
@@ -389,5 +389,5 @@ TEST(SceneHostile, SceneLimitsParse) {
     EXPECT_THROW(parse_scene_limits(bad), Error) << bad;
 }
 
-}  // namespace
+}  // namespace scene_hostile_test
 }  // namespace st

@@ -14,7 +14,7 @@
 #include "common/error.hpp"
 
 namespace st {
-namespace {
+namespace scene_quake3_test {
 
 std::string tmp(const std::string& name) {
   std::filesystem::create_directories(SHADOWTILE_TEST_TMP);
@@ -348,5 +348,5 @@ TEST(Quake3, Pk3MemberIsCheckedForItsMagicBeforeItIsInflatedWhole) {
   EXPECT_LT(s, 2.0);
 }
 
-}  // namespace
+}  // namespace scene_quake3_test
 }  // namespace st

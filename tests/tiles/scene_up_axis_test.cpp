@@ -16,7 +16,7 @@
 #include "tiles/bake/scene_mesh.hpp"
 
 namespace st {
-namespace {
+namespace scene_up_axis_test {
 
 std::string tmp(const std::string& name) {
   std::filesystem::create_directories(SHADOWTILE_TEST_TMP);
@@ -137,5 +137,5 @@ TEST(SceneUpAxis, FormatsWithoutAnAxisReadYAndProceduralScenesSayNothing) {
   EXPECT_THROW(parse_up_axis("x"), Error);
 }
 
-}  // namespace
+}  // namespace scene_up_axis_test
 }  // namespace st

@@ -20,7 +20,7 @@
 #endif
 
 namespace st {
-namespace {
+namespace scene_vdb_test {
 
 // The error of a load, which must be one line naming what it is about.
 std::string load_error(const std::string& spec, const SceneOptions& so = {}) {
@@ -271,5 +271,5 @@ TEST(SceneVdb, BuiltWithoutOpenVdbSaysSo) {
 
 #endif
 
-}  // namespace
+}  // namespace scene_vdb_test
 }  // namespace st

@@ -26,7 +26,7 @@
 #include "tiles/core/pack_reader.hpp"
 
 namespace st {
-namespace {
+namespace tracer_raster_exact_test {
 
 namespace fs = std::filesystem;
 
@@ -217,11 +217,11 @@ TEST(TracerRasterExact, PacksOfEitherBuilderHoldTheSameTiles) {
   }
 }
 
-}  // namespace
+}  // namespace tracer_raster_exact_test
 }  // namespace st
 
 namespace st {
-namespace {
+namespace tracer_raster_exact_test {
 
 // The one-off full check (ARCHITECTURE.md "Canonical coverage"), by hand:
 //   SHADOWTILE_EXACT_LEVEL=11 build/release/tests/tiles_tests --gtest_also_run_disabled_tests
@@ -267,5 +267,5 @@ TEST(TracerRasterExact, DISABLED_FullSize) {
   }
 }
 
-}  // namespace
+}  // namespace tracer_raster_exact_test
 }  // namespace st

@@ -13,7 +13,7 @@
 #include "tiles/core/mh_octree.hpp"
 
 namespace st {
-namespace {
+namespace window_frame_test {
 
 constexpr char kLight[] = "area:pos=1,14,2,target=0,0,0,size=4,3,samples=16,jitter=0.5";
 
@@ -148,5 +148,5 @@ TEST(WindowFrame, TracedStackIsLosslessOnEveryTexelOfEverySlice) {
             "");
 }
 
-}  // namespace
+}  // namespace window_frame_test
 }  // namespace st

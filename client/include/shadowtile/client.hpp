@@ -310,7 +310,7 @@ struct ClientStats {
 // What a map is, from its header.
 struct MapInfo {
   std::string name;
-  std::string encoding;       // "mh", "mmh" or "dagmh"
+  std::string encoding;       // "mh", "mmh", "dagmh" or "vsdag"
   uint32_t finest_level = 0;  // L: the map is 2^L texels a side
   uint32_t skip_level = 0;    // K: the page table's dense top grid is 2^K a side
   uint32_t tile_bytes = 0;    // bound on one tile's decoded size (a cache slot)

@@ -1,4 +1,4 @@
-#include "gpu/layout_probe.hpp"
+#include "tests/gpu/layout_probe.hpp"
 
 #include <algorithm>
 #include <cstring>

@@ -1,4 +1,4 @@
-#include "gpu/r32f_image.hpp"
+#include "bench/baselines/r32f_image.hpp"
 
 #include <bit>
 #include <cstring>

@@ -1,0 +1,3 @@
+// The other half: ring_a.hpp includes this header, and this one includes it.
+#pragma once
+#include "tiles/core/ring_a.hpp"
