@@ -37,8 +37,9 @@
 // comparison (for profiling it). --patterns, --kernels (1: single tap, 5: 5x5) and
 // --subjects time only those cells (checked as always), e.g. `--patterns coherent
 // --kernels 5 --subjects batch` under perf; ratios and targets need the cells they divide.
-// --profile-map N (with --render-only): the client's map pass of the render alone, N
-// times, its median printed (for perf: the samples fall in the lookups).
+// --profile-map N (with --render-only): the render's single taps alone through the client
+// (its receivers, order and queries; pcf_batch over --batch queries) on one thread, N
+// times, the median printed (for perf: the samples fall in the lookups).
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -445,20 +446,38 @@ int main(int argc, char** argv) {
     std::printf("%-8s %-6s %9s %9s %9s %9s %9s %11s %11s %9s %8s\n", "enc", "eval", "receivers", "map ms",
                 "map cpu", "rays ms", "rays cpu", "map ns/rcv", "rays ns/rcv", "map/rays", "differ");
     if (profile_map > 0) {
-      // Only the client's map pass (no rays), N times: for perf, whose samples then fall
-      // mostly in the lookups. Prints the median map pass.
+      // The render's single taps alone, on this thread: its light-facing receivers in its
+      // order (8x8-pixel screen tiles), sun_tap_queries, then pcf_batch over chunks of
+      // `batch` queries, N passes (for perf: the samples fall in the lookups). Prints the
+      // median thread-CPU ns per query.
+      constexpr uint32_t kGather = 8;
+      std::vector<st::Receiver> facing;
+      for (uint32_t ty = 0; ty < height; ty += kGather)
+        for (uint32_t tx = 0; tx < width; tx += kGather)
+          for (uint32_t y = ty; y < std::min(height, ty + kGather); ++y)
+            for (uint32_t x = tx; x < std::min(width, tx + kGather); ++x) {
+              const st::Receiver& r = receivers[size_t(y) * width + x];
+              if (r.hit && r.n_dot_l > 0) facing.push_back(r);
+            }
+      if (light.kind() != st::LightKind::sun) throw st::Error("--profile-map: a sun light only");
+      std::vector<st::PcfQuery> queries(facing.size());
+      std::vector<uint32_t> index(facing.size());
+      queries.resize(st::sun_tap_queries(light, level, 0, facing, queries.data(), index.data()));
+      std::vector<float> answers(queries.size());
       for (const Encoded& e : encoded) {
-        st::RenderOptions ro;
-        ro.width = width, ro.height = height;
-        std::vector<double> mc;
-        uint64_t recv = 0;
-        for (int rep = 0; rep < profile_map; ++rep) {
-          const st::RenderResult rr = st::render_view(tracer, receivers, *e.remote, ro);
-          mc.push_back(rr.map_cpu_seconds), recv = rr.receivers;
+        std::vector<double> cpu;
+        for (int rep = 0; rep < profile_map + 1; ++rep) {  // the first pass warms up
+          const double c0 = thread_cpu_now();
+          for (size_t i = 0; i < queries.size(); i += batch) {
+            const size_t n = std::min(batch, queries.size() - i);
+            e.remote->pcf_batch(std::span(queries).subspan(i, n), std::span(answers).subspan(i, n));
+          }
+          if (rep > 0) cpu.push_back(thread_cpu_now() - c0);
         }
-        std::printf("%-8s client map pass: median %.2f ms CPU, %.1f ns per receiver (%llu)\n", e.name.c_str(),
-                    1e3 * median(mc), 1e9 * median(mc) / double(std::max<uint64_t>(recv, 1)),
-                    (unsigned long long)recv);
+        std::printf("%-8s client taps of the render, one thread, batches of %zu: median %.2f ms CPU, %.1f ns per "
+                    "query (%zu)\n",
+                    e.name.c_str(), batch, 1e3 * median(cpu), 1e9 * median(cpu) / double(std::max<size_t>(queries.size(), 1)),
+                    queries.size());
       }
       return 0;
     }
