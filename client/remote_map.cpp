@@ -16,6 +16,7 @@
 #include "tiles/core/pack_light_check.hpp"
 #include "tiles/core/filter_level.hpp"
 #include "tiles/core/interval.hpp"
+#include "tiles/core/tap_order.hpp"
 
 namespace st::client {
 
@@ -304,6 +305,18 @@ bool RemoteMap::enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch
   sc.y0 = y - hit.ty;
   sc.side = uint64_t(1) << hit.rel;
   return true;
+}
+
+void RemoteMap::prefetch_tile(uint32_t level, uint64_t x, uint64_t y) const noexcept {
+  if (!texel_in_map(header_.map_level, level, x, y)) return;
+  const PageHit hit = walk_page_table(grid_, level, x, y, [&](uint64_t id, const GridEntry&) -> const CutGrid* {
+    const PageEntry page = cache_.lookup(id);
+    return page.state == PageState::resident ? &slot_grid_[page.slot] : nullptr;
+  });
+  if (hit.kind != PageHit::Kind::tile) return;
+  const PageEntry page = cache_.lookup(hit.tile);
+  if (page.state != PageState::resident) return;
+  if (const WindowDepths* w = slot_window_[page.slot]) w->prefetch();
 }
 
 float RemoteMap::depth_shared(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc) const noexcept {
@@ -720,61 +733,98 @@ void RemoteMap::pcf_batch_shared(std::span<const PcfQuery> queries, std::span<fl
     g_level = g.level, g_shift = g.shift, g_x = g.x, g_y = g.y, g_value = g.value, g_counted = g.counted;
   };
   if (sc.used) take(sc.regions[sc.last]);
-  uint64_t walked = 0;
-  for (size_t i = 0; i < n; ++i) {
-    const PcfQuery& q = queries[i];
-    if (q.r > 1 || q.level > map_level) {
-      out[i] = pcf_shared(q.level, q.x, q.y, q.r, q.receiver, sc);
-      if (sc.used) take(sc.regions[sc.last]);
-      continue;
-    }
-    const uint64_t top = (uint64_t(1) << q.level) - 1;  // pcf_tap's clamp of one tap
-    const uint64_t x = std::min(q.x, top), y = std::min(q.y, top);
-    if (q.level == g_level && (((x ^ g_x) | (y ^ g_y)) >> g_shift) == 0) {
-      count();
-      out[i] = q.receiver <= g_value ? 1.0f : 0.0f;
-      continue;
-    }
-    if (const LookupScratch::Region* g = sc.find_other(q.level, x, y)) {  // another kept region
-      take(*g);
-      count();
-      out[i] = q.receiver <= g_value ? 1.0f : 0.0f;
-      continue;
-    }
-    size_t t = cur;
-    if (!(used_tiles && tiles[t].covers(q.level, x, y))) {
-      t = 0;
-      while (t < used_tiles && !tiles[t].covers(q.level, x, y)) ++t;
-      if (t == used_tiles) {
-        float value;
-        if (!enter_tile(q.level, x, y, sc, value)) {  // a page-table value: its region is kept
-          take(sc.regions[sc.last]);
-          out[i] = q.receiver <= value ? 1.0f : 0.0f;
-          continue;
+  uint64_t walked = 0;  // taps answered by a tile's tree (in runs)
+  // Single taps in Morton order of their texels, kTapOrderMax at a time (tap_order.hpp):
+  // a tile's taps together, each walk resuming from a neighbour's path. Taps that follow
+  // each other in one tile go to it as one run (TapWalks::tap_run): the loop below runs
+  // per run, not per tap.
+  uint16_t order[kTapOrderMax];
+  for (size_t b0 = 0; b0 < n; b0 += kTapOrderMax) {
+    const size_t bn = std::min(kTapOrderMax, n - b0);
+    const PcfQuery* const base = queries.data() + b0;
+    float* const base_out = out.data() + b0;
+    if (!(bn >= kTapOrderMin && tap_order(std::span(base, bn), map_level, order)))
+      for (size_t k = 0; k < bn; ++k) order[k] = uint16_t(k);
+    for (size_t k = 0; k < bn;) {
+      const size_t i = order[k];
+      const PcfQuery& q = base[i];
+      if (q.r > 1 || q.level > map_level) {
+        base_out[i] = pcf_shared(q.level, q.x, q.y, q.r, q.receiver, sc);
+        if (sc.used) take(sc.regions[sc.last]);
+        ++k;
+        continue;
+      }
+      const uint64_t top = (uint64_t(1) << q.level) - 1;  // pcf_tap's clamp of one tap
+      const uint64_t x = std::min(q.x, top), y = std::min(q.y, top);
+      if (q.level == g_level && (((x ^ g_x) | (y ^ g_y)) >> g_shift) == 0) {
+        count();
+        base_out[i] = tap_lit(q.receiver, g_value);
+        ++k;
+        continue;
+      }
+      if (const LookupScratch::Region* g = sc.find_other(q.level, x, y)) {  // another kept region
+        take(*g);
+        count();
+        base_out[i] = tap_lit(q.receiver, g_value);
+        ++k;
+        continue;
+      }
+      size_t t = cur;
+      if (!(used_tiles && tiles[t].covers(q.level, x, y))) {
+        t = 0;
+        while (t < used_tiles && !tiles[t].covers(q.level, x, y)) ++t;
+        if (t == used_tiles) {
+          float value;
+          if (!enter_tile(q.level, x, y, sc, value)) {  // a page-table value: its region is kept
+            take(sc.regions[sc.last]);
+            base_out[i] = tap_lit(q.receiver, value);
+            ++k;
+            continue;
+          }
+          t = used_tiles < kTiles ? used_tiles++ : next_tile;
+          next_tile = (t + 1) % kTiles;
+          tiles[t] = Tile{sc.ev, sc.walks, sc.level, sc.rel, sc.x0, sc.y0, sc.side};
+          paths[t].owner = nullptr;  // a new tile: its path starts empty
         }
-        t = used_tiles < kTiles ? used_tiles++ : next_tile;
-        next_tile = (t + 1) % kTiles;
-        tiles[t] = Tile{sc.ev, sc.walks, sc.level, sc.rel, sc.x0, sc.y0, sc.side};
-        paths[t].owner = nullptr;  // a new tile: its path starts empty
+        cur = t;
       }
-      cur = t;
-    }
-    const Tile& tl = tiles[t];
-    DepthRegion r;
-    if (tl.walks) {
-      r = tl.walks->walk_tap(tl.rel, x - tl.x0, y - tl.y0, paths[t]);
-    } else {
-      try {
-        r = tl.ev->depth_region(tl.rel, x - tl.x0, y - tl.y0);
-      } catch (...) {  // an opened tile does not throw; if one did, stay lit and alive
-        r = DepthRegion{kLitDepth, 0};
+      const Tile& tl = tiles[t];
+      // The run: this tap and the single taps after it in the same tile.
+      size_t e = k + 1;
+      for (; e < bn; ++e) {
+        const PcfQuery& nq = base[order[e]];
+        if (nq.r > 1 || !tl.covers(nq.level, std::min(nq.x, top), std::min(nq.y, top))) break;
       }
+      // The next run's tile, asked for now so that its bytes arrive while this run walks.
+      if (e < bn) {
+        const PcfQuery& nq = base[order[e]];
+        if (nq.r <= 1 && nq.level <= map_level) {
+          const uint64_t ntop = (uint64_t(1) << nq.level) - 1;
+          prefetch_tile(nq.level, std::min(nq.x, ntop), std::min(nq.y, ntop));
+        }
+      }
+      TapRunEnd end;
+      if (tl.walks) {
+        end = tl.walks->tap_run(TapRun{base, order + k, e - k, q.level, tl.rel, tl.x0, tl.y0, base_out}, paths[t]);
+      } else {
+        end = tap_run_loop(TapRun{base, order + k, e - k, q.level, tl.rel, tl.x0, tl.y0, base_out},
+                           [&](uint32_t l, uint64_t tx, uint64_t ty) {
+                             try {
+                               return tl.ev->depth_region(l, tx, ty);
+                             } catch (...) {  // an opened tile does not throw; if one did, stay lit and alive
+                               return DepthRegion{kLitDepth, 0};
+                             }
+                           });
+      }
+      walked += e - k;
+      k = e;
+      // The last walk's region (the tile is aligned to its side, >= the region's, so it
+      // holds in map texels).
+      const uint64_t ex = end.x + tl.x0, ey = end.y + tl.y0;
+      sc.set_region(q.level, ex, ey, end.region.shift, end.region.value, Counted::hit);
+      g_level = q.level, g_shift = end.region.shift, g_x = ex, g_y = ey, g_value = end.region.value;
+      g_counted = Counted::hit;
     }
-    ++walked;
-    // The tile is aligned to its side (>= the region's), so the region holds in map texels.
-    sc.set_region(q.level, x, y, r.shift, r.value, Counted::hit);
-    g_level = q.level, g_shift = r.shift, g_x = x, g_y = y, g_value = r.value, g_counted = Counted::hit;
-    out[i] = q.receiver <= r.value ? 1.0f : 0.0f;
   }
   sc.hits += walked + counted_hit;
   sc.missed += counted_coarse;

@@ -328,6 +328,10 @@ class RemoteMap final : public Evaluator {
   // encoded tile, now sc's current one. False: `value` answers (coarse when missed).
   bool enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc, float& value) const noexcept;
   float depth_shared(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc) const noexcept;
+  // Starts bringing the bytes of the resident tile answering (level, x, y) (in the map)
+  // toward the cache (WindowDepths::prefetch), changing nothing: a batch asks for the
+  // next run's tile before it walks the current run. Lock held shared.
+  void prefetch_tile(uint32_t level, uint64_t x, uint64_t y) const noexcept;
   // Evaluator::pcf's answer, from the kept regions: a kernel with no tap clamped on the
   // rows of the columns kept ahead (LookupScratch::Ahead) and reaching at most to the
   // column after them (a screen-coherent row of kernels) counts its r * r depths there,

@@ -124,6 +124,11 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths, public TapWa
   DepthRegion walk_tap(uint32_t level, uint64_t x, uint64_t y, TapPath& path) const noexcept override {
     return walk_resumed(tap_path<WalkPath<dagmh::Cursor>>(path, this), level, x, y);
   }
+  // TapWalks::tap_run: the same walks, inlined into one loop over the run.
+  TapRunEnd tap_run(const TapRun& run, TapPath& path) const noexcept override {
+    WalkPath<dagmh::Cursor>& p = tap_path<WalkPath<dagmh::Cursor>>(path, this);
+    return tap_run_loop(run, [&](uint32_t l, uint64_t x, uint64_t y) { return walk_resumed(p, l, x, y); });
+  }
 
   DepthRegion walk_resumed(WalkPath<dagmh::Cursor>& path, uint32_t level, uint64_t x, uint64_t y) const {
     if (level >= std::size(path.at)) return depth_region(level, x, y);

@@ -142,12 +142,20 @@ class TreeEvaluator final : public Evaluator, public WindowDepths, public TapWal
   DepthRegion walk_tap(uint32_t level, uint64_t x, uint64_t y, TapPath& path) const noexcept override {
     return walk_resumed(tap_path<WalkPath<Cursor>>(path, this), level, x, y);
   }
+  // TapWalks::tap_run: the same walks, inlined into one loop over the run.
+  TapRunEnd tap_run(const TapRun& run, TapPath& path) const noexcept override {
+    WalkPath<Cursor>& p = tap_path<WalkPath<Cursor>>(path, this);
+    return tap_run_loop(run, [&](uint32_t l, uint64_t x, uint64_t y) { return walk_resumed(p, l, x, y); });
+  }
 
   // WindowDepths::prefetch: the tree's first kPrefetchBytes (the root's block and, in the
   // depth-first layout of MHQUAD.md, the first subtrees below it), which walks read first;
   // a walk's loads depend on each other (node, then child), so a tile whose lines left the
   // cache otherwise costs a batch one miss after another. The client calls it when a batch
-  // enters the tile (a small tile: all of it).
+  // enters the tile, and for the next run's tile before it walks a run (remote_map.cpp).
+  // 16 KiB: every tile of a real level's pack whole (Quake 3 oa_dm1 at 8192^2: at most
+  // 10,240 raw bytes, 3.7 KiB on average, each walked by about 20 of a view's taps in
+  // Morton order, whose walks reach most of its lines); 2 KiB left those walks missing.
   void prefetch() const noexcept override {
     const size_t n = std::min(tree_bytes_.size(), kPrefetchBytes);
     for (size_t o = 0; o < n; o += 64) __builtin_prefetch(tree_bytes_.data() + o);
@@ -375,7 +383,7 @@ class TreeEvaluator final : public Evaluator, public WindowDepths, public TapWal
   bool root_leaf_;
   std::array<uint8_t, kMaxLevels> shift_;
   std::span<const uint8_t> tree_bytes_;  // from the tree's first word to the tile's end (prefetch)
-  static constexpr size_t kPrefetchBytes = 2048;
+  static constexpr size_t kPrefetchBytes = 16384;
 };
 
 }  // namespace

@@ -137,9 +137,62 @@ struct TapPath {
 // calls walk_tap only for the others, keeping one TapPath per tile it walks in. Returns
 // depth_region(level, x, y) bit for bit, for x, y < 2^level, level <= finest_level().
 // No allocation, no exception.
+// A run of single taps that all fall in one tile, in the caller's order (TapWalks::tap_run):
+// tap k is queries[order[k]], a tap of `level` (its x, y clamped to 2^level - 1 as
+// pcf_tap clamps one tap), inside the tile whose first texel at `level` is (x0, y0) and
+// whose tree answers it at its own level `rel`; its answer goes to out[order[k]].
+struct TapRun {
+  const PcfQuery* queries = nullptr;
+  const uint16_t* order = nullptr;
+  size_t count = 0;
+  uint32_t level = 0, rel = 0;
+  uint64_t x0 = 0, y0 = 0;
+  float* out = nullptr;
+};
+
+// What a run ends with: the last tap's texel (relative to the tile, at `rel`) and its
+// answer's region, which the caller may keep; and how many taps walked the tree.
+struct TapRunEnd {
+  uint64_t x = 0, y = 0;
+  DepthRegion region;
+  uint64_t walks = 0;
+};
+
+// The answer of one tap of a run: receiver <= the texel's value (the lit test).
+inline float tap_lit(float receiver, float value) { return receiver <= value ? 1.0f : 0.0f; }
+
+// tap_run's loop over a run: a tap inside the region of the last walk's answer takes it
+// without a walk (MH 2016 §3.3's last-sample cache); the others call walk(rel, x, y) ->
+// DepthRegion, the tile's walk_tap. One call per run of taps in a tile, not per tap, so
+// a caller's own per-tap work (tiles, kept regions, a virtual call) is paid per run.
+template <class Walk>
+TapRunEnd tap_run_loop(const TapRun& run, Walk&& walk) {
+  TapRunEnd end;
+  const uint64_t top = (uint64_t(1) << run.level) - 1;
+  bool have = false;
+  for (size_t k = 0; k < run.count; ++k) {
+    const uint32_t i = run.order[k];
+    const PcfQuery& q = run.queries[i];
+    const uint64_t x = std::min(q.x, top) - run.x0, y = std::min(q.y, top) - run.y0;
+    if (!have || (((x ^ end.x) | (y ^ end.y)) >> end.region.shift) != 0) {
+      end.region = walk(run.rel, x, y);
+      end.x = x, end.y = y, have = true;
+      ++end.walks;
+    }
+    run.out[i] = tap_lit(q.receiver, end.region.value);
+  }
+  return end;
+}
+
 class TapWalks {
  public:
   virtual DepthRegion walk_tap(uint32_t level, uint64_t x, uint64_t y, TapPath& path) const noexcept = 0;
+  // Every tap of `run` (count >= 1), bit for bit walk_tap's answers with the lit test:
+  // out[order[k]] = receiver <= walk_tap(rel, x - x0, y - y0).value. The walks resume
+  // from `path` and leave their last one in it. Default: tap_run_loop over walk_tap.
+  virtual TapRunEnd tap_run(const TapRun& run, TapPath& path) const noexcept {
+    return tap_run_loop(run, [&](uint32_t l, uint64_t x, uint64_t y) { return walk_tap(l, x, y, path); });
+  }
 
  protected:
   ~TapWalks() = default;
