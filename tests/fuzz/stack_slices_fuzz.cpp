@@ -9,6 +9,7 @@
 
 #include "common/error.hpp"
 #include "common/hash.hpp"
+#include "tests/fuzz/evaluator_probe.hpp"
 #include "tests/fuzz/fuzz_harness.hpp"
 #include "tiles/build/stack_slices_encode.hpp"
 #include "tiles/core/stack_slices.hpp"
