@@ -363,7 +363,10 @@ int main(int argc, char** argv) {
                            ",jitter=0.5,frame=window"});
     if (cases.empty()) throw st::Error("--case: expected city, engine, hairball or all");
     nlohmann::json out = nlohmann::json::array();
-    for (const Case& c : cases) out.push_back(run_case(c, level, spill_dir));
+    for (const Case& c : cases) {
+      out.push_back(run_case(c, level, spill_dir));
+      std::ofstream(json_path) << out.dump(2) << "\n";  // after each case: long runs keep what finished
+    }
     std::printf("\n| case | N | separate DAG-MH packs | octree stack pack | / separate | per-cell pack (default) | / separate |\n");
     std::printf("| --- | --- | --- | --- | --- | --- | --- |\n");
     for (const auto& r : out)
