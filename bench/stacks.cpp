@@ -606,17 +606,17 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
   // Resident tiles and the pack lookups.
   std::vector<uint64_t> cells;
   std::vector<std::vector<uint8_t>> bufs;
-  std::vector<st::MhOctree> trees;
+  std::vector<st::StackTile> trees;  // octree or per-slice cells (--stack-cells)
   for (size_t i = 0; i < cut.tile_count(); ++i) {
     auto [cell, b] = cut.tile(i);
     cells.push_back(cell);
     bufs.push_back(std::move(b));
   }
   trees.reserve(bufs.size());
-  for (const auto& b : bufs) trees.push_back(st::MhOctree::open(b));
-  const st::StackMap map(cut.grid, [&](uint64_t cell) -> const st::MhOctree* {
+  for (const auto& b : bufs) trees.push_back(st::StackTile::open(b));
+  const st::StackMap map(cut.grid, [&](uint64_t cell) -> st::StackTileRef {
     auto it = std::lower_bound(cells.begin(), cells.end(), cell);
-    return it != cells.end() && *it == cell ? &trees[size_t(it - cells.begin())] : nullptr;
+    return it != cells.end() && *it == cell ? trees[size_t(it - cells.begin())].ref() : st::StackTileRef();
   });
   std::vector<std::unique_ptr<st::Evaluator>> ev;
   for (const auto& b : mh) ev.push_back(st::open_mh(b));
