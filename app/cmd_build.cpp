@@ -55,6 +55,7 @@ struct BuildArgs {
   std::string deep_from;  // a deep OpenEXR to take the deep map from instead of sampling
   std::string dagmh_dictionary = "on";  // tiles/PACK.md "DAG-MH dictionary"
   std::string dagmh_tiles = "mixed";     // tiles/PACK.md "Mixed tiles"
+  std::string stack_cells = "smaller";   // light sets: tiles/core/MHOCT.md "Per-slice cells"
 };
 
 // What the pack's deep directory records of the deep map.
@@ -154,7 +155,7 @@ void run(const BuildArgs& a) {
     if (a.resume || a.mpi || !a.shard.empty() || !a.region.empty())
       throw Error("build: --resume, --mpi, --shard and --region are not supported for light sets (stack packs)");
     return run_stack_build({a.scene, a.light, a.resolution, a.out, a.up, a.skip_level, a.tile_bytes, a.compression,
-                            a.quiet});
+                            a.quiet, a.stack_cells});
   }
   MapBuildOptions o;
   o.map_level = parse_resolution(a.resolution);
@@ -363,6 +364,12 @@ void setup(CLI::App& app) {
                  "dagmh: on (default) moves subtrees found in two or more tiles into one pack-wide dictionary "
                  "that clients fetch once with the skip grid (smaller tiles, same answers); off keeps every tile "
                  "self-contained")
+      ->capture_default_str();
+  app.add_option("--stack-cells", a->stack_cells,
+                 "light sets (stack packs): smaller (default) stores each cell as the stack's octree or as its "
+                 "slices' own DAG-MH/MMH tiles, whichever is smaller, so the stack never costs much more than "
+                 "separate packs of its samples; octree stores every cell as the octree (the GPU passes read "
+                 "only these); slices stores every cell per slice")
       ->capture_default_str();
   app.add_option("--dagmh-tiles", a->dagmh_tiles,
                  "dagmh: mixed (default) writes a tile as MMH where that stores in fewer bytes (open meshes' "

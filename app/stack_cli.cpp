@@ -21,6 +21,7 @@ void run_stack_build(const StackBuildArgs& a) {
   o.skip_level = a.skip_level;
   o.tile_bytes = a.tile_bytes;
   o.compression_level = a.compression;
+  o.cells = parse_stack_cells(a.cells);
   o.scene_spec = a.scene;
   o.light_spec = a.light;
   SceneOptions so;
@@ -37,6 +38,8 @@ void run_stack_build(const StackBuildArgs& a) {
               a.out.c_str(), r.slices, side, r.skip_level, (unsigned long long)r.cells, (unsigned long long)r.tiles,
               (unsigned long long)r.max_tile_bytes, double(r.pack_bytes) / (1 << 20),
               100.0 * double(r.pack_bytes) / (side * side * 4 * r.slices));
+  if (r.slice_cells) std::printf("  %llu of the %llu tiles per slice (stored smaller than the octree)\n",
+                                 (unsigned long long)r.slice_cells, (unsigned long long)r.tiles);
   std::printf("  trace %.1f s (%s), octree+encode %.1f s (%llu nodes, %llu blocks of level %u), top+patch %.1f s, "
               "write %.1f s; exit depths %s; spilled %.1f MiB\n",
               r.trace_seconds, r.bounds_by.c_str(), r.octree_seconds, (unsigned long long)r.octree_nodes,

@@ -20,6 +20,7 @@ struct StackBuildArgs {
   uint32_t tile_bytes = 64 * 1024;
   int compression = 6;
   bool quiet = false;
+  std::string cells = "smaller";  // --stack-cells: octree | slices | smaller
 };
 void run_stack_build(const StackBuildArgs& a);
 

@@ -6,7 +6,7 @@
 //                [--reps 3] [--case city|city-hour|hairball|all] [--hair-jitter 0.5] [--json PATH]
 //                [--mode auto|whole|blocked] [--tracer auto|embree] [--spill-dir /tmp]
 //                [--frame ground|ortho|both] [--hair-frame window|translate|both] [--all-2d]
-//                [--oct-merge on|off]
+//                [--oct-merge on|off] [--stack-cells octree|slices|smaller]
 //
 // --all-2d (whole mode): every slice also encoded as MMH and DAG-MH, the smaller 2D
 // encodings, so the octree is set against the best of them too ("best 2D" line). Every
@@ -17,6 +17,9 @@
 // --oct-merge on: the whole-stack octree with the encoder's subtree merger (off by
 // default, as in the encoder: it saved under 0.1%; MHOCT.md "Version 3, merged subtrees
 // measured"); the "merge" line gives the merger's counts.
+//
+// --stack-cells (blocked mode): the cells' form (tiles/core/stack_slices.hpp): octree (the
+// default here, the earlier figures), slices, or smaller (what `build` writes by default).
 //
 // --frame: the sun paths' frame (light_set.hpp "Frames"): ground (the default, the
 // oblique ground-aligned frame), ortho (an orthographic box per sample), or both (each
@@ -145,6 +148,7 @@ class SideBySide {
 volatile float g_sink = 0;
 bool g_all_2d = false;  // --all-2d
 bool g_oct_merge = false;  // --oct-merge
+st::StackCells g_stack_cells = st::StackCells::octree;  // --stack-cells (blocked mode)
 
 double peak_rss_mib() {
   rusage ru{};
@@ -589,7 +593,8 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
   // The blocked octree and its cut.
   t0 = Clock::now();
   st::BlockedCutStats bst;
-  st::BlockedStackCut cut(spill, K, 64 * 1024, spill_path + ".tiles", &bst);
+  st::BlockedStackCut cut(spill, K, 64 * 1024, spill_path + ".tiles", &bst, g_stack_cells);
+  if (cut.slice_cells) std::printf("per-slice cells: %llu of %zu tiles\n", (unsigned long long)cut.slice_cells, cut.tile_count());
   const double oct_s = since(t0);
   const double rss_build = peak_rss_mib();
   cut.grid.light_kind = set.samples[0].kind();
@@ -601,17 +606,17 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
   // Resident tiles and the pack lookups.
   std::vector<uint64_t> cells;
   std::vector<std::vector<uint8_t>> bufs;
-  std::vector<st::MhOctree> trees;
+  std::vector<st::StackTile> trees;  // octree or per-slice cells (--stack-cells)
   for (size_t i = 0; i < cut.tile_count(); ++i) {
     auto [cell, b] = cut.tile(i);
     cells.push_back(cell);
     bufs.push_back(std::move(b));
   }
   trees.reserve(bufs.size());
-  for (const auto& b : bufs) trees.push_back(st::MhOctree::open(b));
-  const st::StackMap map(cut.grid, [&](uint64_t cell) -> const st::MhOctree* {
+  for (const auto& b : bufs) trees.push_back(st::StackTile::open(b));
+  const st::StackMap map(cut.grid, [&](uint64_t cell) -> st::StackTileRef {
     auto it = std::lower_bound(cells.begin(), cells.end(), cell);
-    return it != cells.end() && *it == cell ? &trees[size_t(it - cells.begin())] : nullptr;
+    return it != cells.end() && *it == cell ? trees[size_t(it - cells.begin())].ref() : st::StackTileRef();
   });
   std::vector<std::unique_ptr<st::Evaluator>> ev;
   for (const auto& b : mh) ev.push_back(st::open_mh(b));
@@ -761,6 +766,7 @@ int main(int argc, char** argv) {
       else if (a == "--spill-dir") spill_dir = next();
       else if (a == "--frame") frame = next();
       else if (a == "--all-2d") g_all_2d = true;
+      else if (a == "--stack-cells") g_stack_cells = st::parse_stack_cells(next());
       else if (a == "--oct-merge") {
         const std::string v = next();
         if (v != "on" && v != "off") throw st::Error("--oct-merge: expected on or off");

@@ -408,7 +408,7 @@ class RemoteMap final : public Evaluator {
   void rerequest_regions_locked();
   // Stack lookups: the StackMap's tile source reads the cache (shared lock held) and
   // notes misses in a per-thread scratch; they are wanted once the lock is dropped.
-  const MhOctree* stack_tile(uint64_t cell) const noexcept;
+  StackTileRef stack_tile(uint64_t cell) const noexcept;
   void open_stack(const std::vector<uint8_t>& grid_bytes);  // the constructor's, for stack packs
   static std::unique_ptr<Evaluator> open_stack_tile(const StackGrid& g, uint64_t id, std::span<uint8_t> raw);
   template <class Fn>

@@ -12,12 +12,13 @@
 namespace st::client {
 namespace {
 
+// A stack tile in a cache slot: an MH octree or per-slice tiles (stack_slices.hpp), by its magic.
 class StackTileEvaluator final : public Evaluator {
  public:
-  explicit StackTileEvaluator(const MhOctree& t) : tree(t) {}
-  uint32_t finest_level() const override { return tree.xy_level(); }
-  float depth(uint32_t level, uint64_t x, uint64_t y) const override { return tree.depth(x, y, 0, level); }
-  MhOctree tree;
+  explicit StackTileEvaluator(StackTile t) : tile(std::move(t)) {}
+  uint32_t finest_level() const override { return tile.xy_level(); }
+  float depth(uint32_t level, uint64_t x, uint64_t y) const override { return tile.ref().depth(x, y, 0, level); }
+  StackTile tile;
 };
 
 struct Misses {
@@ -51,18 +52,18 @@ SurfaceExtent RemoteMap::stack_surface() {
 std::unique_ptr<Evaluator> RemoteMap::open_stack_tile(const StackGrid& g, uint64_t id, std::span<uint8_t> raw) {
   uint64_t cell = 0;
   if (!g.cell_of(id, cell) || g.entries[cell].kind != 1) return nullptr;
-  const MhOctree t = MhOctree::open(raw);  // validates the whole buffer; throws FormatError
+  StackTile t = StackTile::open(raw);  // validates the whole buffer; throws FormatError
   const uint32_t K = g.skip_level;
-  if (t.geometry().n != g.geo.n - g.geo.xy_bits(K) || t.geometry().k != g.geo.k - g.geo.w_bits(K)) return nullptr;
-  return std::make_unique<StackTileEvaluator>(t);
+  if (t.xy_level() != g.geo.n - g.geo.xy_bits(K) || t.w_level() != g.geo.k - g.geo.w_bits(K)) return nullptr;
+  return std::make_unique<StackTileEvaluator>(std::move(t));
 }
 
-const MhOctree* RemoteMap::stack_tile(uint64_t cell) const noexcept {
+StackTileRef RemoteMap::stack_tile(uint64_t cell) const noexcept {
   const uint64_t id = stack_grid_->tile_id(cell);
   const PageEntry page = cache_.lookup(id);
   if (page.state == PageState::resident) {
     mark_used(page.slot);
-    return &static_cast<const StackTileEvaluator*>(slot_eval_[page.slot].get())->tree;
+    return static_cast<const StackTileEvaluator*>(slot_eval_[page.slot].get())->tile.ref();
   }
   if (page.state != PageState::constant) {  // constant: given up, the coarse value for good
     Misses& m = t_misses;
@@ -70,7 +71,7 @@ const MhOctree* RemoteMap::stack_tile(uint64_t cell) const noexcept {
     for (size_t i = 0; i < m.count && !noted; ++i) noted = m.cell[i] == cell;
     if (!noted && m.count < Misses::kMax) m.cell[m.count++] = cell;
   }
-  return nullptr;
+  return StackTileRef();
 }
 
 template <class Fn>

@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include "tests/client/loopback.hpp"
+#include "tiles/build/stack_blocked.hpp"
 #include "tiles/build/stack_pack.hpp"
 #include "tiles/core/light_set.hpp"
 #include "tiles/core/stack_map.hpp"
@@ -28,12 +29,28 @@ IntervalStack sliding_stack(uint32_t level, uint32_t slices) {
   return s;
 }
 
+// The cut of `s` with every cell per slice (tiles/core/stack_slices.hpp), as a StackCut.
+StackCut per_slice_cut(const IntervalStack& s, const std::string& name, uint32_t tile_bytes) {
+  const std::string base = std::string(SHADOWTILE_TEST_TMP) + "/" + name;
+  StackSpill spill(base + ".spill", s.level, s.slices, 0);
+  const size_t area = size_t(s.side() * s.side());
+  for (uint32_t w = 0; w < s.slices; ++w)
+    spill.write_rows(w, 0, s.side(), std::span<const Interval>(s.data.data() + w * area, area));
+  BlockedStackCut blocked(spill, std::nullopt, tile_bytes, base + ".tiles", nullptr, StackCells::slices);
+  StackCut cut;
+  cut.grid = blocked.grid;
+  for (size_t i = 0; i < blocked.tile_count(); ++i) cut.tiles.push_back(blocked.tile(i));
+  cut.max_tile_bytes = blocked.max_tile_bytes;
+  return cut;
+}
+
 // `light_set` gives the slices' transforms (the stack itself is synthetic); `name` the
-// pack's file and map name.
-void served_stack_answers_like_local(const std::string& light_set, const std::string& name) {
+// pack's file and map name; `per_slice`: every cell as per-slice tiles instead of octrees.
+void served_stack_answers_like_local(const std::string& light_set, const std::string& name, bool per_slice = false) {
   const uint32_t slices = 10;
   const IntervalStack s = sliding_stack(looptest::small_scale() ? 5 : 6, slices);
-  StackCut cut = cut_stack(build_octree(s), std::nullopt, 512);
+  const uint32_t tile_bytes = per_slice ? 4096 : 512;
+  StackCut cut = per_slice ? per_slice_cut(s, name, tile_bytes) : cut_stack(build_octree(s), std::nullopt, tile_bytes);
   Aabb box;
   box.extend({-10, 0, -10});
   box.extend({10, 5, 10});
@@ -43,11 +60,12 @@ void served_stack_answers_like_local(const std::string& light_set, const std::st
   cut.grid.spec = set.spec.to_string();
   const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/" + name + ".pack";
   StackPackParams p;
-  p.tile_bytes = 512;
+  p.tile_bytes = tile_bytes;
   write_stack_pack(path, cut, p);
   ASSERT_GT(cut.tiles.size(), 4u);
 
   const auto reader = PackReader::open(path);
+  EXPECT_EQ(bool(reader->header().flags & kFeatureStackSliceTiles), per_slice);
   const ResidentStack local(*reader);
   auto srv = looptest::start_server({path});
   Client c({"127.0.0.1", srv.port}, looptest::quick_options());
@@ -116,6 +134,11 @@ TEST(StackLoopback, ServedStackAnswersLikeTheLocalPack) {
 // each slice's points as the local pack does.
 TEST(StackLoopback, ServedWindowFrameAreaStackAnswersLikeTheLocalPack) {
   served_stack_answers_like_local("area:pos=1,30,2,target=0,0,0,size=4,4,jitter=0.5", "stackarea");
+}
+
+// Per-slice cells (every cell its slices' own DAG-MH / MMH tiles) stream and answer the same.
+TEST(StackLoopback, ServedPerSliceCellsAnswerLikeTheLocalPack) {
+  served_stack_answers_like_local("sun-path:azimuth=150..200,elevation=40..60", "stackslices", true);
 }
 
 }  // namespace

@@ -174,7 +174,8 @@ StackBuildReport build_stack_pack(const Scene& scene, const LightSetSpec& spec_i
   r.trace_seconds = since(t0);
   t0 = std::chrono::steady_clock::now();
   BlockedCutStats bst;
-  BlockedStackCut cut(spill, K, o.tile_bytes, spill_path + ".tiles", &bst);
+  BlockedStackCut cut(spill, K, o.tile_bytes, spill_path + ".tiles", &bst, o.cells);
+  r.slice_cells = cut.slice_cells;
   r.octree_seconds = bst.reduce_seconds;
   r.cut_seconds = bst.patch_seconds;
   r.octree_nodes = bst.octree_nodes;

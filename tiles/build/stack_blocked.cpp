@@ -14,6 +14,7 @@
 #include "common/error.hpp"
 #include "tiles/build/mh_octree_encode.hpp"
 #include "tiles/build/stack_pack.hpp"
+#include "tiles/core/pack_format.hpp"
 
 namespace st {
 namespace {
@@ -52,6 +53,26 @@ void read_all(int fd, void* data, size_t size, uint64_t off, const std::string& 
     if (r <= 0) throw Error("stack spill: cannot read '" + path + "'" + (r < 0 ? std::string(": ") + std::strerror(errno) : ": short file"));
     p += r, size -= size_t(r), off += uint64_t(r);
   }
+}
+
+// The per-slice form of level-K cell (x, y, w) of block `blk` (block-local cell
+// coordinates): each real slice's square of the cell (stack_slices_encode.hpp).
+std::vector<uint8_t> cell_slice_tiles(const IntervalStack& blk, const moct::Geometry& g, uint32_t K, uint32_t B,
+                                      uint64_t x, uint64_t y, uint64_t w) {
+  (void)B;
+  const uint32_t m = g.n - g.xy_bits(K), j = g.k - g.w_bits(K);
+  const uint64_t cs = uint64_t(1) << m, W = uint64_t(1) << j;
+  std::vector<IntervalTile> slices;
+  for (uint64_t s = w * W; s < std::min<uint64_t>(blk.slices, (w + 1) * W); ++s) {
+    IntervalTile t;
+    t.level = m;
+    t.width = t.height = uint32_t(cs);
+    t.data.resize(cs * cs);
+    for (uint64_t ty = 0; ty < cs; ++ty)
+      for (uint64_t tx = 0; tx < cs; ++tx) t.data[ty * cs + tx] = blk.at(x * cs + tx, y * cs + ty, s);
+    slices.push_back(std::move(t));
+  }
+  return encode_slice_tiles(slices, m, j);
 }
 
 }  // namespace
@@ -123,8 +144,8 @@ Interval StackSpill::texel(uint64_t x, uint64_t y, uint32_t w) const {
 }
 
 BlockedStackCut::BlockedStackCut(const StackSpill& spill, std::optional<uint32_t> skip_level, uint32_t tile_bytes,
-                                 std::string tile_path, BlockedCutStats* stats)
-    : path_(std::move(tile_path)) {
+                                 std::string tile_path, BlockedCutStats* stats, StackCells cells)
+    : cells_(cells), path_(std::move(tile_path)) {
   const moct::Geometry& g = spill.geo();
   const uint32_t L = g.depth(), B = spill.block_level();
   uint32_t K = skip_level.value_or(std::max(default_stack_skip_level(g), B));
@@ -196,7 +217,8 @@ void BlockedStackCut::run(const StackSpill& spill, uint32_t K, uint32_t tile_byt
     for (uint64_t bw = 0; bw < nwB && bw * spill.block_slices() < spill.slices(); ++bw)
       for (uint64_t by = 0; by < nxB; ++by)
         for (uint64_t bx = 0; bx < nxB; ++bx) {
-          const OctHierarchy sub = build_octree(spill.read_block(bx, by, bw), kB);
+          const IntervalStack blk = spill.read_block(bx, by, bw);
+          const OctHierarchy sub = build_octree(blk, kB);
           if (!probing) {
             ++st.blocks;
             st.octree_nodes += sub.node_count() - 1;
@@ -221,9 +243,18 @@ void BlockedStackCut::run(const StackSpill& spill, uint32_t K, uint32_t tile_byt
               uint64_t x, y, w;
               oct_coords(sub.geo, rel, cr.code, x, y, w);
               const uint64_t cell = grid.index(K, (bx << da) + x, (by << da) + y, (bw << dw) + w);
-              const std::vector<uint8_t> bytes = encode_octree(cell_subtree(sub, rel, cr, 0.0f, cursor));
+              std::vector<uint8_t> bytes = encode_octree(cell_subtree(sub, rel, cr, 0.0f, cursor));
+              bool octree = true;
+              if (cells_ != StackCells::octree) {
+                std::vector<uint8_t> per_slice = cell_slice_tiles(blk, g, K, B, x, y, w);
+                const bool take = cells_ == StackCells::slices ||
+                                  (per_slice.size() <= tile_bytes &&
+                                   (bytes.size() > tile_bytes ||
+                                    zlib_compress(per_slice, 6).size() < zlib_compress(bytes, 6).size()));
+                if (take) bytes = std::move(per_slice), octree = false;
+              }
               write_all(fd_, bytes.data(), bytes.size(), at, path_);
-              tiles_.push_back({cell, at, uint32_t(bytes.size())});
+              tiles_.push_back({cell, at, uint32_t(bytes.size()), octree});
               at += bytes.size();
               if (bytes.size() > largest) largest = bytes.size(), largest_cell = cell;
             }
@@ -271,11 +302,16 @@ void BlockedStackCut::run(const StackSpill& spill, uint32_t K, uint32_t tile_byt
     // Each tile's root is inner: its value is word 1 of the tree, which starts after the
     // header's shifts (MHOCT.md "Header"), levels L - K + 1.
     const uint64_t root_value = 20 + ((uint64_t(L - K + 1) + 3) & ~uint64_t(3)) + 4;
+    slice_cells = 0;
     for (const Ref& r : tiles_) {
       grid.entries[r.cell].kind = 1;
+      tile_bytes_total += r.size;
+      if (!r.octree) {  // per-slice tiles: each slice's root is its own
+        ++slice_cells;
+        continue;
+      }
       const float v = vals[K][r.cell];
       write_all(fd_, &v, sizeof v, r.offset + root_value, path_);
-      tile_bytes_total += r.size;
     }
     std::sort(tiles_.begin(), tiles_.end(), [](const Ref& a, const Ref& b) { return a.cell < b.cell; });
     max_tile_bytes = largest;

@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "tiles/build/mh_octree_build.hpp"
+#include "tiles/build/stack_slices_encode.hpp"
 #include "tiles/core/stack_grid.hpp"
 
 namespace st {
@@ -83,14 +84,17 @@ class BlockedStackCut {
  public:
   // skip_level must be >= spill.block_level() (default: default_stack_skip_level); past
   // `tile_bytes` the cut moves one level deeper and reduces the blocks again, as cut_stack.
+  // `cells`: each cell's form (stack_slices_encode.hpp): the octree (cut_stack's bytes),
+  // per-slice tiles, or the smaller of the two (zlib level 6) among those that fit.
   BlockedStackCut(const StackSpill& spill, std::optional<uint32_t> skip_level, uint32_t tile_bytes,
-                  std::string tile_path, BlockedCutStats* stats = nullptr);
+                  std::string tile_path, BlockedCutStats* stats = nullptr, StackCells cells = StackCells::octree);
   ~BlockedStackCut();
   BlockedStackCut(const BlockedStackCut&) = delete;
   BlockedStackCut& operator=(const BlockedStackCut&) = delete;
 
   StackGrid grid;  // lights and spec left empty: the caller fills them
   uint64_t max_tile_bytes = 0, tile_bytes_total = 0;
+  uint64_t slice_cells = 0;  // tiles in the per-slice form
   size_t tile_count() const { return tiles_.size(); }
   // Tile i (increasing cell order): its cell and octree buffer.
   std::pair<uint64_t, std::vector<uint8_t>> tile(size_t i) const;
@@ -99,8 +103,10 @@ class BlockedStackCut {
   struct Ref {
     uint64_t cell, offset;
     uint32_t size;
+    bool octree;
   };
   void run(const StackSpill& spill, uint32_t K, uint32_t tile_bytes, BlockedCutStats* stats);
+  StackCells cells_ = StackCells::octree;
   std::vector<Ref> tiles_;
   std::string path_;
   int fd_ = -1;

@@ -1,5 +1,7 @@
 #include "tiles/build/stack_pack.hpp"
 
+#include "tiles/core/stack_slices.hpp"
+
 #include <algorithm>
 #include <array>
 #include <span>
@@ -152,6 +154,7 @@ uint64_t write_stack_pack(const std::string& path, const StackGrid& sg, size_t c
   uint64_t journal = 0;
   for (size_t i = 0; i < count; ++i) {
     const auto [cell, raw] = tile(i);
+    if (is_slice_tiles(raw)) h.flags |= kFeatureStackSliceTiles;
     TileRecord r;
     r.kind = TileKind::encoded;
     r.id = sg.tile_id(cell);

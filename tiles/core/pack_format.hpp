@@ -91,7 +91,12 @@ enum PackFeature : uint32_t {
   // (open_encoded). Only with encoding dagmh, never with stack. Readers before it refuse
   // the pack by this bit.
   kFeatureMixedTiles = 1u << 9,
-  kKnownFeatures = 0x3FF,
+  // A stack pack some of whose tiles are per-slice cells (magic "STSL", stack_slices.hpp,
+  // tiles/core/MHOCT.md "Per-slice cells"): each slice's square of the cell as its own
+  // DAG-MH or MMH tile, where that stored smaller than the cell's octree. Each tile's
+  // magic says which; only with stack. Readers before it refuse the pack by this bit.
+  kFeatureStackSliceTiles = 1u << 10,
+  kKnownFeatures = 0x7FF,
 };
 
 // Header layout (offset: size field):

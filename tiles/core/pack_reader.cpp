@@ -486,7 +486,8 @@ std::string PackReader::summary() const {
                                                     {kFeatureDagmhDictionary, "dagmh_dictionary"},
                                                     {kFeatureCompressedGrid, "compressed_grid"},
                                                     {kFeaturePayloadsOnly, "payloads_only"},
-                                                    {kFeatureMixedTiles, "mixed_tiles"}};
+                                                    {kFeatureMixedTiles, "mixed_tiles"},
+                                                    {kFeatureStackSliceTiles, "stack_slice_tiles"}};
   for (auto [bit, n] : names)
     if (header_.flags & bit) features += std::string(features.empty() ? "" : ",") + n;
   char buf[320];

@@ -8,6 +8,7 @@
 #include "tiles/core/interval.hpp"
 #include "tiles/core/mh_octree.hpp"
 #include "tiles/core/pack_reader.hpp"
+#include "tiles/core/stack_slices.hpp"
 #include "tiles/core/stack_grid.hpp"
 
 namespace st {
@@ -51,6 +52,19 @@ void PackReader::verify_stack() const {
     uint64_t cell = 0;
     if (!g.cell_of(e.id, cell) || g.entries[cell].kind != 1) throw FormatError(what + ": no stack cell names it");
     const std::vector<uint8_t> raw = read_raw(e.id);
+    if (is_slice_tiles(raw)) {
+      // A per-slice cell (stack_slices.hpp): only in a pack that says so.
+      if (!(header_.flags & kFeatureStackSliceTiles))
+        throw FormatError(what + ": a per-slice cell (\"STSL\") in a pack without feature stack_slice_tiles");
+      SliceTiles t;
+      try {
+        t = SliceTiles::open(raw);
+      } catch (const Error& err) {
+        throw FormatError(what + ": " + err.what());
+      }
+      if (t.xy_level() != n || t.w_level() != k) throw FormatError(what + ": per-slice cell geometry differs from its cell's");
+      continue;
+    }
     MhOctree t;
     try {
       t = MhOctree::open(raw);

@@ -34,13 +34,13 @@ float StackMap::depth(uint64_t x, uint64_t y, uint32_t w, uint32_t level, bool* 
   const uint64_t cell = grid_.index(K, cx, cy, cw);
   const StackEntry& e = grid_.entries[cell];
   if (e.kind == 0 || T == K) return e.value;
-  const MhOctree* t = tile_(cell);
+  const StackTileRef t = tile_(cell);
   if (!t) {
     if (exact) *exact = false;
     return e.value;
   }
   const uint32_t rel = level - a;  // the tile's own x, y level
-  return t->depth(x - (cx << rel), y - (cy << rel), uint32_t(w - (cw << (g.k - b))), rel);
+  return t.depth(x - (cx << rel), y - (cy << rel), uint32_t(w - (cw << (g.k - b))), rel);
 }
 
 void StackMap::texel(const Vec3d& p, uint32_t w, uint64_t& x, uint64_t& y, float& d) const {
@@ -88,7 +88,7 @@ float StackMap::soft_visibility(const Vec3d& p, bool* exact) const {
   MhOctree::Path path;
   SampleTexels::Run run;
   uint64_t path_cell = ~uint64_t(0);
-  const MhOctree* tile = nullptr;
+  StackTileRef tile;
   uint32_t lit_samples = 0;
   for (uint32_t w0 = 0; w0 < grid_.slices; w0 += SampleTexels::kRun) {
     const uint32_t m = std::min(SampleTexels::kRun, grid_.slices - w0);
@@ -99,8 +99,10 @@ float StackMap::soft_visibility(const Vec3d& p, bool* exact) const {
       float v = c.value;
       if (c.tiled) {
         if (c.cell != path_cell) path_cell = c.cell, tile = tile_(c.cell), path.valid = false;
-        if (tile)
-          v = tile->depth_along(path, c.lx, c.ly, c.lw);
+        if (tile.octree)
+          v = tile.octree->depth_along(path, c.lx, c.ly, c.lw);
+        else if (tile.slices)  // per-slice tiles: the slice's own 2D tile, no shared walk
+          v = tile.slices->depth(c.lx, c.ly, c.lw, tile.slices->xy_level());
         else if (exact)
           *exact = false;
       }
@@ -118,14 +120,14 @@ void StackMap::soft_visibility(std::span<const Vec3d> points, std::span<float> o
     MhOctree::Path path;
     MhOctree::Walk walk;
     SampleTexels::Run run;  // samples w - w % kRun onward
-    const MhOctree* tile = nullptr;
+    StackTileRef tile;
     uint64_t path_cell = 0;
     size_t i = 0;
     uint32_t w = 0, lit = 0;
     bool walking = false;
   };
   auto start = [&](Lane& ln, size_t i) {
-    ln.path_cell = ~uint64_t(0), ln.tile = nullptr;
+    ln.path_cell = ~uint64_t(0), ln.tile = StackTileRef();
     ln.i = i, ln.w = 0, ln.lit = 0, ln.walking = false;
   };
   auto run = [&](Lane& ln) {
@@ -136,7 +138,7 @@ void StackMap::soft_visibility(std::span<const Vec3d> points, std::span<float> o
     MhOctree::Walk k = ln.walk;
     for (;;) {
       if (walking) {
-        const MhOctree& tile = *ln.tile;
+        const MhOctree& tile = *ln.tile.octree;
         if (step_until_new_line(tile, path, k)) {
           ln.w = w, ln.lit = lit, ln.walking = true, ln.walk = k;
           return true;
@@ -154,9 +156,14 @@ void StackMap::soft_visibility(std::span<const Vec3d> points, std::span<float> o
       const CellTexel c = cell_texel(ln.run.x[j], ln.run.y[j], w);
       if (c.tiled) {
         if (c.cell != ln.path_cell) ln.path_cell = c.cell, ln.tile = tile_(c.cell), path.valid = false;
-        if (ln.tile) {
-          k = ln.tile->along_begin(path, c.lx, c.ly, c.lw);
+        if (ln.tile.octree) {
+          k = ln.tile.octree->along_begin(path, c.lx, c.ly, c.lw);
           walking = true;
+          continue;
+        }
+        if (ln.tile.slices) {  // per-slice tiles: the slice's own 2D tile, read at once
+          lit += ln.run.d[j] <= ln.tile.slices->depth(c.lx, c.ly, c.lw, ln.tile.slices->xy_level());
+          ++w;
           continue;
         }
         if (exact) *exact = false;
@@ -234,15 +241,15 @@ ResidentStack::ResidentStack(const PackReader& pack) {
   trees_.reserve(buffers_.size());
   for (size_t i = 0; i < buffers_.size(); ++i) {
     try {
-      trees_.push_back(MhOctree::open(buffers_[i]));
+      trees_.push_back(StackTile::open(buffers_[i]));
     } catch (const Error& err) {
       throw FormatError(pack.name() + ": " + describe_tile(pack.tiles()[i].id) + ": " + err.what());
     }
   }
   // Ids sort as cells do (one level), so cells_ is sorted.
-  map_ = std::make_unique<StackMap>(*g, [this](uint64_t cell) -> const MhOctree* {
+  map_ = std::make_unique<StackMap>(*g, [this](uint64_t cell) -> StackTileRef {
     auto it = std::lower_bound(cells_.begin(), cells_.end(), cell);
-    return it != cells_.end() && *it == cell ? &trees_[size_t(it - cells_.begin())] : nullptr;
+    return it != cells_.end() && *it == cell ? trees_[size_t(it - cells_.begin())].ref() : StackTileRef();
   });
 }
 

@@ -18,13 +18,15 @@
 #include "tiles/core/mh_octree.hpp"
 #include "tiles/core/sample_texels.hpp"
 #include "tiles/core/stack_grid.hpp"
+#include "tiles/core/stack_slices.hpp"
 
 namespace st {
 
 class StackMap {
  public:
-  // The octree of cell i (its dense index at the skip level), or nullptr while absent.
-  using TileSource = std::function<const MhOctree*(uint64_t cell)>;
+  // The tile of cell i (its dense index at the skip level): its MH octree or its per-slice
+  // tiles (stack_slices.hpp), or nothing (nullptr) while absent.
+  using TileSource = std::function<StackTileRef(uint64_t cell)>;
   StackMap(const StackGrid& grid, TileSource tile);
 
   const StackGrid& grid() const { return grid_; }
@@ -98,7 +100,7 @@ class ResidentStack {
  private:
   std::vector<uint64_t> cells_;  // sorted
   std::vector<std::vector<uint8_t>> buffers_;
-  std::vector<MhOctree> trees_;
+  std::vector<StackTile> trees_;
   std::unique_ptr<StackMap> map_;
   uint64_t bytes_ = 0;
 };

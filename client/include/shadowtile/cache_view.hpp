@@ -103,7 +103,9 @@ struct DeepTile {
 
 class CacheView {
  public:
-  explicit CacheView(const Map& map);  // std::runtime_error: the Map is not open
+  // std::runtime_error: the Map is not open, or it is a stack pack with per-slice cells
+  // (feature stack_slice_tiles), whose cells the shipped GLSL does not walk.
+  explicit CacheView(const Map& map);
   ~CacheView();
   CacheView(const CacheView&) = delete;
   CacheView& operator=(const CacheView&) = delete;

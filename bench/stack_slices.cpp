@@ -1,0 +1,386 @@
+// Where a shadow-map stack's bytes go, set against the same samples as separate DAG-MH
+// packs, and how much of each slice's 2D DAG-MH repeats in its neighbours' (MH 2016 §4,
+// DAG-MH 2021 §3.1; tiles/core/MHOCT.md "Stack against separate DAG-MH packs").
+//
+//   bench_stack_slices [--res 4k] [--samples 32] [--area-samples 64]
+//                      [--case city|hairball|engine|all] [--json PATH] [--spill-dir /tmp]
+//
+// Per case every slice is traced into a spill (trace_stack_to_spill, as `shadowtile build`
+// does), then:
+//   separate packs: each slice written as the 2D pack `shadowtile build --encoding dagmh`
+//     writes (DAG-MH tiles or MMH where smaller, the pack's own dictionary, zlib), file bytes;
+//     and each slice's whole-map DAG-MH buffer's sections (dagmh::EncodeStats: inner nodes,
+//     treelets, value chunks, multipliers, header and skip list).
+//   stack pack: the out-of-core octree cut (BlockedStackCut) written as a stack pack, file
+//     bytes; its tiles' raw bytes split into headers, node words (structure), value words and
+//     far words (+ zero padding), by walking every tile as a reader does.
+//   per-cell pack: the stack pack `shadowtile build` writes by default (--stack-cells
+//     smaller): each cell its octree or its slices' own 2D tiles (stack_slices.hpp),
+//     whichever stores smaller, file bytes.
+//   the slices' 2D tiles of the stack's default cells (split_hierarchy, each DAG-MH or
+//     MMH, the smaller zlib stream, as the 2D packs choose), stored bytes.
+//   repetition between neighbours: the share of slice w's 2D tiles (bytes) byte-equal to
+//     slice w-1's in the same cell; the share of texels whose interval equals / meets
+//     slice w-1's; and a DAG-MH dictionary (dagmh::share_across_tiles) over every slice's
+//     DAG-MH tiles at once against one per slice (structure and treelets shared across
+//     slices; values stay per tile).
+// Cases: procedural:city under a day's sun (azimuth 100..260, elevation 25..65, ground
+// frame), procedural:hairball under a 4 m x 4 m area light 25 m above it (window frame),
+// and a real open mesh, assimp's 2CylinderEngine.glb, under the same day's sun.
+#include <sys/resource.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "common/error.hpp"
+#include "tiles/bake/scene.hpp"
+#include "tiles/bake/stack_build.hpp"
+#include "tiles/build/dagmh_dictionary.hpp"
+#include "tiles/build/dagmh_encode.hpp"
+#include "tiles/build/encode.hpp"
+#include "tiles/build/mh_build.hpp"
+#include "tiles/build/pack_writer.hpp"
+#include "tiles/build/stack_blocked.hpp"
+#include "tiles/build/stack_pack.hpp"
+#include "tiles/build/tile_cut.hpp"
+#include "tiles/core/pack_format.hpp"
+#include "tiles/core/resolution.hpp"
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+
+struct Case {
+  std::string name, scene, light;
+};
+
+// An MH octree buffer's raw bytes by role (MHOCT.md "Header", "Tree words", "Far words").
+struct OctBytes {
+  uint64_t header = 0, node = 0, value = 0, far = 0, pad = 0;
+  uint64_t total() const { return header + node + value + far + pad; }
+};
+
+void add_octree_bytes(const std::vector<uint8_t>& b, OctBytes& out) {
+  auto u32 = [&](uint64_t off) {
+    uint32_t v;
+    std::memcpy(&v, b.data() + off, 4);
+    return v;
+  };
+  const uint32_t n = b[6], k = b[7], L = std::max(n, k) + 1;
+  const uint64_t T = 20 + ((uint64_t(L) + 3) & ~uint64_t(3));
+  const uint64_t words = (b.size() - T) / 4;
+  std::vector<uint8_t> role(words, 0);  // 1 node, 2 value, 3 far
+  struct Item {
+    uint64_t p;
+    uint32_t level, kind;
+  };
+  std::vector<Item> todo{{0, 0, (b[10] & 1) ? 1u : 3u}};
+  while (!todo.empty()) {
+    const Item it = todo.back();
+    todo.pop_back();
+    if (it.kind == 1) {
+      role[it.p] = 2;
+      continue;
+    }
+    if (role[it.p] == 1) continue;  // a shared block's node reached again
+    role[it.p] = 1;
+    if (it.kind == 3) role[it.p + 1] = 2;
+    const uint32_t word = u32(T + 4 * it.p), mask = word & 0xffffu;
+    const int32_t off = int16_t(uint16_t(word >> 16));
+    uint64_t block;
+    if (off <= -32737) {
+      const uint64_t fw = it.p + 1 + uint64_t(off + 32768);
+      role[fw] = 3;
+      block = u32(T + 4 * fw);
+    } else {
+      const uint32_t s = b[20 + it.level];
+      block = uint64_t((int64_t(it.p >> s) + off) << s);
+    }
+    for (uint32_t c = 0; c < 8; ++c) {
+      const uint32_t kind = (mask >> (2 * c)) & 3u;
+      if (!kind) continue;
+      const uint64_t at = block + uint64_t(__builtin_popcount(mask & ((1u << (2 * c)) - 1)));
+      todo.push_back({at, it.level + 1, kind == 2 ? 2u : kind});
+    }
+  }
+  out.header += T;
+  for (uint8_t r : role) (r == 1 ? out.node : r == 2 ? out.value : r == 3 ? out.far : out.pad) += 4;
+}
+
+double peak_rss_mib() {
+  rusage ru{};
+  getrusage(RUSAGE_SELF, &ru);
+  return double(ru.ru_maxrss) / 1024.0;
+}
+
+nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_dir) {
+  std::printf("\n== %s: %s, %s, %u^2 per slice\n", c.name.c_str(), c.scene.c_str(), c.light.c_str(), 1u << level);
+  std::fflush(stdout);
+  const st::Scene scene = st::load_scene(c.scene);
+  const st::LightSet set = st::fit_light_set(scene, st::LightSetSpec::parse(c.light));
+  const uint32_t n = set.size();
+  uint32_t k = 0;
+  while ((1u << k) < n) ++k;
+  const st::moct::Geometry g{level, k};
+  const uint32_t K = st::default_stack_skip_level(g);
+  const uint32_t a = g.xy_bits(K);
+  const uint32_t K2 = st::default_skip_level(level);
+  if (a != K2)
+    std::printf("note: the stack's cells are 2^%u a side, the 2D packs' 2^%u: per-cell figures use the stack's\n", a, K2);
+  const uint64_t cells_xy = uint64_t(1) << (2 * a);
+  const std::string tmp = spill_dir + "/bench_stack_slices_" + std::to_string(::getpid());
+  const std::string spill_path = tmp + ".spill";
+  st::StackSpill spill(spill_path, level, n, st::stack_block_level(g, K, st::kStackBlockTexels));
+
+  // Per slice: the 2D pack, the whole-map DAG-MH's sections, the 2D tiles of the stack's
+  // cells (stored sizes, bytes for equality with the previous slice), repetition figures.
+  uint64_t packs_bytes = 0;
+  st::dagmh::EncodeStats sum{};
+  std::vector<std::vector<uint8_t>> prev_raw(cells_xy), cur_raw(cells_xy);
+  std::vector<std::vector<std::vector<uint8_t>>> dag_tiles(n);  // DAG-MH tiles per slice (dictionary measure)
+  uint64_t stored_2d = 0, raw_2d = 0, raw_equal_prev = 0, texels_equal = 0, texels_meet = 0, texels_compared = 0;
+  st::IntervalTile prev_tile;
+  const st::LightSpace header_light = st::LightSpace::fit(st::LightSpec{}, scene.bounds());
+  double pack_s = 0, cells_s = 0;
+  auto t0 = Clock::now();
+  st::trace_stack_to_spill(scene, set, spill, nullptr, {}, [&](uint32_t w, const st::IntervalTile& tile) {
+    const st::Hierarchy h = st::build_hierarchy(tile);
+    auto p0 = Clock::now();
+    {
+      st::CutParams cut;
+      cut.map_level = level;
+      cut.skip_level = K2;
+      cut.codec = st::TileCodec::dagmh_or_mmh();
+      // A 2D pack holds a plain sun or spot (the ground and window frames are stack-only
+      // header kinds): the header's light is a plain sun of the same box; the tiles are
+      // this slice's, byte for byte what its own build would cut (the header is 256 bytes
+      // whatever the light).
+      st::PackParams pp = st::PackParams::from(header_light, cut);
+      pp.dagmh_dictionary = true;
+      const std::string path = tmp + "_2d.pack";
+      st::write_pack(path, h, cut, pp);
+      packs_bytes += std::filesystem::file_size(path);
+      std::filesystem::remove(path);
+      st::dagmh::EncodeStats s;
+      st::dagmh::encode(h, &s);
+      sum.header_bytes += s.header_bytes, sum.skip_bytes += s.skip_bytes, sum.node_bytes += s.node_bytes;
+      sum.treelet_bytes += s.treelet_bytes, sum.chunk_bytes += s.chunk_bytes;
+      sum.multiplier_bytes += s.multiplier_bytes, sum.total_bytes += s.total_bytes;
+    }
+    pack_s += since(p0);
+    p0 = Clock::now();
+    st::SplitResult split = st::split_hierarchy(h, a);
+    for (uint64_t cell = 0; cell < cells_xy; ++cell) {
+      cur_raw[cell].clear();
+      // split's subtrees are row-major (j * 2^a + i), as the stack grid's (y, x).
+      const auto& sub = split.subtrees[cell];
+      if (!sub) continue;
+      std::vector<uint8_t> dag = st::encode_dagmh(*sub), mmh = st::encode_mmh(*sub);
+      const auto sd = st::zlib_compress(dag, 6), sm = st::zlib_compress(mmh, 6);
+      const bool use_dag = sd.size() <= sm.size();
+      cur_raw[cell] = use_dag ? dag : mmh;
+      stored_2d += use_dag ? sd.size() : sm.size();
+      raw_2d += cur_raw[cell].size();
+      if (w > 0 && cur_raw[cell] == prev_raw[cell]) raw_equal_prev += cur_raw[cell].size();
+      if (use_dag) dag_tiles[w].push_back(std::move(dag));
+    }
+    std::swap(prev_raw, cur_raw);
+    if (w > 0) {
+      for (size_t i = 0; i < tile.data.size(); ++i) {
+        const st::Interval u = tile.data[i], v = prev_tile.data[i];
+        texels_equal += u.lo == v.lo && u.hi == v.hi;
+        texels_meet += std::max(u.lo, v.lo) <= std::min(u.hi, v.hi);
+      }
+      texels_compared += tile.data.size();
+    }
+    prev_tile = tile;
+    cells_s += since(p0);
+    std::printf("  slice %u/%u (%.0f s)\r", w + 1, n, since(t0));
+    std::fflush(stdout);
+  });
+  std::printf("\n");
+  prev_tile = {};
+  const double trace_s = since(t0) - pack_s - cells_s;
+
+  // The stack pack and its tiles by role; the per-cell choice.
+  t0 = Clock::now();
+  st::BlockedStackCut cut(spill, K, 64 * 1024, spill_path + ".tiles");
+  cut.grid.light_kind = set.samples[0].kind();
+  for (const st::LightSpace& l : set.samples) cut.grid.lights.push_back(l.to_array());
+  cut.grid.spec = set.spec.to_string();
+  const double cut_s = since(t0);
+  OctBytes ob;
+  uint64_t oct_stored = 0;
+  for (size_t i = 0; i < cut.tile_count(); ++i) {
+    const auto [cell, buf] = cut.tile(i);
+    add_octree_bytes(buf, ob);
+    oct_stored += st::zlib_compress(buf, 6).size();
+  }
+  const uint64_t grid_bytes = cut.grid.serialize().size();
+  st::StackPackParams sp;
+  const std::string stack_path = tmp + "_stack.pack";
+  const uint64_t stack_file = st::write_stack_pack(stack_path, cut.grid, cut.tile_count(),
+                                                   [&](size_t i) { return cut.tile(i); }, sp);
+  std::filesystem::remove(stack_path);
+  const double stack_s = since(t0);
+
+  // The pack the builder writes by default (--stack-cells smaller): each cell the smaller
+  // of its octree and per-slice tiles, both measured, as written.
+  t0 = Clock::now();
+  uint64_t smaller_file = 0, smaller_slice_cells = 0, smaller_tiles = 0;
+  {
+    st::BlockedStackCut pick(spill, K, 64 * 1024, spill_path + ".pick", nullptr, st::StackCells::smaller);
+    pick.grid.light_kind = cut.grid.light_kind;
+    pick.grid.lights = cut.grid.lights;
+    pick.grid.spec = cut.grid.spec;
+    smaller_file = st::write_stack_pack(stack_path, pick.grid, pick.tile_count(), [&](size_t i) { return pick.tile(i); }, sp);
+    smaller_slice_cells = pick.slice_cells, smaller_tiles = pick.tile_count();
+    std::filesystem::remove(stack_path);
+  }
+  const double smaller_s = since(t0);
+
+  // DAG-MH structure shared across slices: one dictionary over all slices against one per slice.
+  t0 = Clock::now();
+  uint64_t per_slice_after = 0, per_slice_before = 0;
+  std::vector<std::vector<uint8_t>> all;
+  for (uint32_t w = 0; w < n; ++w) {
+    if (dag_tiles[w].empty()) continue;
+    const st::dagmh::SharedTiles s = st::dagmh::share_across_tiles(dag_tiles[w]);
+    per_slice_before += s.bytes_before, per_slice_after += s.bytes_after + s.dictionary.size();
+    for (auto& t : dag_tiles[w]) all.push_back(std::move(t));
+  }
+  dag_tiles.clear();
+  const st::dagmh::SharedTiles whole = st::dagmh::share_across_tiles(all);
+  const uint64_t across_after = whole.bytes_after + whole.dictionary.size();
+  const double dict_s = since(t0);
+
+  const double r_stack = double(stack_file) / double(packs_bytes);
+  std::printf("separate DAG-MH packs: %llu bytes (%u packs, %.1f s to write)\n", (unsigned long long)packs_bytes, n, pack_s);
+  std::printf("  whole-slice DAG-MH raw: %llu = nodes %llu + treelets %llu + value chunks %llu + multipliers %llu + "
+              "header/skip %llu\n",
+              (unsigned long long)sum.total_bytes, (unsigned long long)sum.node_bytes, (unsigned long long)sum.treelet_bytes,
+              (unsigned long long)sum.chunk_bytes, (unsigned long long)sum.multiplier_bytes,
+              (unsigned long long)(sum.header_bytes + sum.skip_bytes));
+  std::printf("stack pack (octree, K = %u): %llu bytes = %.3f x the separate packs (cut %.1f s)\n", K,
+              (unsigned long long)stack_file, r_stack, cut_s);
+  std::printf("  octree tiles raw %llu: headers %llu, node words %llu (%.1f%%), value words %llu (%.1f%%), far words "
+              "%llu, padding %llu; grid %llu\n",
+              (unsigned long long)ob.total(), (unsigned long long)ob.header, (unsigned long long)ob.node,
+              100.0 * double(ob.node) / double(ob.total()), (unsigned long long)ob.value,
+              100.0 * double(ob.value) / double(ob.total()), (unsigned long long)ob.far, (unsigned long long)ob.pad,
+              (unsigned long long)grid_bytes);
+  std::printf("the slices' 2D tiles of the stack's cells (2^%u a side; DAG-MH or MMH, the smaller): %llu stored "
+              "(octree tiles %llu stored)\n",
+              a, (unsigned long long)stored_2d, (unsigned long long)oct_stored);
+  std::printf("stack pack, cells the smaller form (the default): %llu bytes = %.3f x the separate packs (%llu of %llu "
+              "tiles per slice; cut %.1f s)\n",
+              (unsigned long long)smaller_file, double(smaller_file) / double(packs_bytes),
+              (unsigned long long)smaller_slice_cells, (unsigned long long)smaller_tiles, smaller_s);
+  std::printf("neighbours: 2D tile bytes equal to the previous slice's %.2f%%; texels with an equal interval %.2f%%, "
+              "meeting %.2f%%\n",
+              100.0 * double(raw_equal_prev) / double(raw_2d), 100.0 * double(texels_equal) / double(texels_compared),
+              100.0 * double(texels_meet) / double(texels_compared));
+  std::printf("DAG-MH dictionary: per slice %llu -> %llu raw; across all slices -> %llu (%.3f of per slice; %.1f s)\n",
+              (unsigned long long)per_slice_before, (unsigned long long)per_slice_after, (unsigned long long)across_after,
+              double(across_after) / double(per_slice_after), dict_s);
+  std::printf("trace %.1f s, peak RSS %.0f MiB\n", trace_s, peak_rss_mib());
+
+  return {{"case", c.name},
+          {"scene", c.scene},
+          {"light", set.spec.to_string()},
+          {"resolution", 1u << level},
+          {"slices", n},
+          {"skip_level", K},
+          {"separate_dagmh_packs_bytes", packs_bytes},
+          {"whole_slice_dagmh",
+           {{"total", sum.total_bytes},
+            {"nodes", sum.node_bytes},
+            {"treelets", sum.treelet_bytes},
+            {"value_chunks", sum.chunk_bytes},
+            {"multipliers", sum.multiplier_bytes},
+            {"header_skip", sum.header_bytes + sum.skip_bytes}}},
+          {"stack_pack_bytes", stack_file},
+          {"stack_over_separate", r_stack},
+          {"octree_tiles_raw",
+           {{"headers", ob.header}, {"node_words", ob.node}, {"value_words", ob.value}, {"far_words", ob.far}, {"padding", ob.pad}}},
+          {"octree_tiles_stored", oct_stored},
+          {"grid_bytes", grid_bytes},
+          {"slice_tiles_stored", stored_2d},
+          {"stack_pack_smaller_bytes", smaller_file},
+          {"stack_pack_smaller_over_separate", double(smaller_file) / double(packs_bytes)},
+          {"stack_pack_smaller_slice_cells", smaller_slice_cells},
+          {"stack_pack_smaller_tiles", smaller_tiles},
+          {"tiles_2d_raw", raw_2d},
+          {"tiles_2d_equal_previous_raw", raw_equal_prev},
+          {"texels_equal_previous", double(texels_equal) / double(texels_compared)},
+          {"texels_meet_previous", double(texels_meet) / double(texels_compared)},
+          {"dictionary_per_slice_raw", per_slice_after},
+          {"dictionary_across_slices_raw", across_after},
+          {"dagmh_tiles_raw", per_slice_before},
+          {"trace_s", trace_s},
+          {"packs_s", pack_s},
+          {"stack_s", stack_s},
+          {"peak_rss_mib", peak_rss_mib()}};
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    uint32_t level = 12, samples = 32, area_samples = 64;
+    std::string which = "all", json_path = "build/bench_stack_slices.json", spill_dir = "/tmp";
+    for (int i = 1; i < argc; ++i) {
+      const std::string arg = argv[i];
+      auto next = [&]() -> std::string {
+        if (i + 1 >= argc) throw st::Error(arg + " needs a value");
+        return argv[++i];
+      };
+      if (arg == "--res") level = st::parse_resolution(next());
+      else if (arg == "--samples") samples = uint32_t(std::stoul(next()));
+      else if (arg == "--area-samples") area_samples = uint32_t(std::stoul(next()));
+      else if (arg == "--case") which = next();
+      else if (arg == "--json") json_path = next();
+      else if (arg == "--spill-dir") spill_dir = next();
+      else throw st::Error("unknown option " + arg);
+    }
+    const std::string day = "sun-path:azimuth=100..260,elevation=25..65,samples=" + std::to_string(samples) + ",frame=ground";
+    std::vector<Case> cases;
+    if (which == "all" || which == "city") cases.push_back({"city-day", "procedural:city", day});
+    if (which == "all" || which == "engine")
+      cases.push_back({"engine-day", "/usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb", day});
+    if (which == "all" || which == "hairball")
+      cases.push_back({"hairball-area", "procedural:hairball",
+                       "area:pos=0,25,0,target=0,0,0,size=4,4,samples=" + std::to_string(area_samples) +
+                           ",jitter=0.5,frame=window"});
+    if (cases.empty()) throw st::Error("--case: expected city, engine, hairball or all");
+    nlohmann::json out = nlohmann::json::array();
+    for (const Case& c : cases) {
+      out.push_back(run_case(c, level, spill_dir));
+      std::ofstream(json_path) << out.dump(2) << "\n";  // after each case: long runs keep what finished
+    }
+    std::printf("\n| case | N | separate DAG-MH packs | octree stack pack | / separate | per-cell pack (default) | / separate |\n");
+    std::printf("| --- | --- | --- | --- | --- | --- | --- |\n");
+    for (const auto& r : out)
+      std::printf("| %s %u^2 | %u | %llu | %llu | %.3f | %llu | %.3f |\n", r["case"].get<std::string>().c_str(),
+                  r["resolution"].get<uint32_t>(), r["slices"].get<uint32_t>(),
+                  (unsigned long long)r["separate_dagmh_packs_bytes"].get<uint64_t>(),
+                  (unsigned long long)r["stack_pack_bytes"].get<uint64_t>(), r["stack_over_separate"].get<double>(),
+                  (unsigned long long)r["stack_pack_smaller_bytes"].get<uint64_t>(),
+                  r["stack_pack_smaller_over_separate"].get<double>());
+    std::ofstream(json_path) << out.dump(2) << "\n";
+    std::printf("\nwrote %s\n", json_path.c_str());
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_stack_slices: %s\n", e.what());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,242 @@
+// Per-slice stack cells (tiles/core/stack_slices.hpp, MHOCT.md "Per-slice cells"): the
+// "STSL" layout pinned, hostile buffers refused in one line, and stack packs built with
+// per-slice cells (every cell, or the smaller form per cell) lossless on every texel of
+// every slice, equal to the octree pack above the cells, and whose soft lookups (single and
+// batched) equal the slices' lit tests.
+#include <gtest/gtest.h>
+
+#include <bit>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+
+#include "common/error.hpp"
+#include "common/hash.hpp"
+#include "tests/test_tmp.hpp"
+#include "tests/tiles/stack_fixtures.hpp"
+#include "tiles/build/stack_blocked.hpp"
+#include "tiles/build/stack_pack.hpp"
+#include "tiles/build/stack_slices_encode.hpp"
+#include "tiles/core/pack_reader.hpp"
+#include "tiles/core/stack_map.hpp"
+#include "tiles/core/stack_slices.hpp"
+
+namespace st {
+namespace {
+
+std::string tmp(const std::string& name) { return std::string(SHADOWTILE_TEST_TMP) + "/" + name; }
+
+uint32_t u32(const std::vector<uint8_t>& b, size_t at) {
+  uint32_t v;
+  std::memcpy(&v, b.data() + at, 4);
+  return v;
+}
+
+IntervalTile square(uint32_t m, float lo, float hi) {
+  IntervalTile t;
+  t.level = m;
+  t.width = t.height = 1u << m;
+  t.data.assign(size_t(t.width) * t.height, Interval{lo, hi});
+  return t;
+}
+
+// Three 2x2 slices in 2^2 entries: slice 0 one value (constant), slices 1 and 2 equal
+// (one buffer both name), entry 3 the padding (kLitDepth).
+std::vector<uint8_t> example() {
+  IntervalTile a = square(1, 0.5f, 0.5f), b = square(1, 0.5f, 0.5f);
+  b.data[0] = {0.25f, 0.25f};
+  return encode_slice_tiles(std::vector<IntervalTile>{a, b, b}, 1, 2);
+}
+
+TEST(StackSlicesFormat, LayoutIsPinned) {
+  const std::vector<uint8_t> b = example();
+  ASSERT_GE(b.size(), 48u);
+  EXPECT_EQ(std::vector<uint8_t>(b.begin(), b.begin() + 8), (std::vector<uint8_t>{'S', 'T', 'S', 'L', 1, 0, 1, 2}));
+  EXPECT_EQ(u32(b, 8), b.size());  // byte_size
+  EXPECT_EQ(u32(b, 12), 0u);
+  // entries at 16 + 8 w: (0, the value's bits) constant, else (offset, size)
+  EXPECT_EQ(u32(b, 16), 0u);
+  EXPECT_EQ(u32(b, 20), std::bit_cast<uint32_t>(0.5f));
+  EXPECT_EQ(u32(b, 24), 48u);  // the first buffer right after the 4 entries
+  const uint32_t size = u32(b, 28);
+  EXPECT_EQ(u32(b, 32), 48u);  // slice 2 names the same buffer
+  EXPECT_EQ(u32(b, 36), size);
+  EXPECT_EQ(u32(b, 40), 0u);  // padding slice: kLitDepth
+  EXPECT_EQ(u32(b, 44), std::bit_cast<uint32_t>(kLitDepth));
+  EXPECT_EQ(b.size(), 48u + ((size + 3) & ~3u));
+  const uint32_t magic = u32(b, 48);
+  EXPECT_TRUE(magic == 0x484D4744u || magic == 0x4D4D5453u) << "a DAG-MH or MMH buffer";
+  const SliceTiles t = SliceTiles::open(b);
+  EXPECT_EQ(t.slices(), 4u);
+  EXPECT_EQ(t.buffers(), 1u);
+  for (uint64_t y = 0; y < 2; ++y)
+    for (uint64_t x = 0; x < 2; ++x) {
+      EXPECT_EQ(t.depth(x, y, 0, 1), 0.5f);
+      EXPECT_EQ(t.depth(x, y, 1, 1), x == 0 && y == 0 ? 0.25f : 0.5f);
+      EXPECT_EQ(t.depth(x, y, 2, 1), t.depth(x, y, 1, 1));
+      EXPECT_EQ(t.depth(x, y, 3, 1), kLitDepth);
+    }
+}
+
+TEST(StackSlicesFormat, RefusesHostileBuffers) {
+  const std::vector<uint8_t> good = example();
+  auto refused = [](std::vector<uint8_t> b, const char* field) {
+    try {
+      SliceTiles::open(b);
+    } catch (const FormatError& e) {
+      return std::string(e.what()).find(field) != std::string::npos ? "" : std::string(e.what());
+    }
+    return std::string("accepted");
+  };
+  for (size_t n = 0; n < good.size(); ++n) {  // every truncation
+    std::vector<uint8_t> b(good.begin(), good.begin() + ptrdiff_t(n));
+    if (b.size() >= 12) std::memcpy(b.data() + 8, &n, 4);  // even with a matching byte_size
+    EXPECT_NE(refused(b, ""), "accepted") << n << " bytes";
+  }
+  std::vector<uint8_t> b = good;
+  b.push_back(0), b.push_back(0), b.push_back(0), b.push_back(0);
+  const uint32_t longer = uint32_t(b.size());
+  std::memcpy(b.data() + 8, &longer, 4);
+  EXPECT_EQ(refused(b, "after the last buffer"), "");
+  b = good, b[4] = 2;
+  EXPECT_EQ(refused(b, "version"), "");
+  b = good, b[12] = 1;
+  EXPECT_EQ(refused(b, "reserved"), "");
+  b = good, b[7] = 13;
+  EXPECT_EQ(refused(b, "w_level"), "");
+  b = good;
+  const uint32_t nan = 0x7FC00000u;
+  std::memcpy(b.data() + 20, &nan, 4);
+  EXPECT_EQ(refused(b, "not finite"), "");
+  b = good;
+  const uint32_t off = 52;
+  std::memcpy(b.data() + 24, &off, 4);
+  EXPECT_EQ(refused(b, "the next buffer starts at"), "");
+  b = good;
+  const uint32_t size = u32(good, 28) + 4;
+  std::memcpy(b.data() + 36, &size, 4);
+  EXPECT_EQ(refused(b, "size differs"), "");
+  b = good, b[48] ^= 0xFF;
+  EXPECT_EQ(refused(b, "slice 1's tile"), "");
+}
+
+std::unique_ptr<StackSpill> spill_of(const IntervalStack& s, uint32_t block_level, const std::string& name) {
+  auto spill = std::make_unique<StackSpill>(tmp(name), s.level, s.slices, block_level);
+  const size_t area = size_t(s.side() * s.side());
+  for (uint32_t w = 0; w < s.slices; ++w)
+    spill->write_rows(w, 0, s.side(), std::span<const Interval>(s.data.data() + w * area, area));
+  return spill;
+}
+
+// The pack of `s` with cells in form `cells`, written and opened as a client would.
+std::unique_ptr<PackReader> build(const IntervalStack& s, StackCells cells, const std::string& name,
+                                  uint64_t* slice_cells = nullptr) {
+  auto spill = spill_of(s, 0, name + ".spill");
+  BlockedStackCut cut(*spill, std::nullopt, 64 * 1024, tmp(name + ".tiles"), nullptr, cells);
+  if (slice_cells) *slice_cells = cut.slice_cells;
+  const LightSet set = LightSet::fit(
+      LightSetSpec::parse("sun-path:azimuth=150..200,elevation=40..60,samples=" + std::to_string(s.slices)),
+      Aabb{{-10, 0, -10}, {10, 5, 10}});
+  cut.grid.light_kind = set.samples[0].kind();
+  for (const LightSpace& l : set.samples) cut.grid.lights.push_back(l.to_array());
+  cut.grid.spec = set.spec.to_string();
+  write_stack_pack(tmp(name + ".pack"), cut.grid, cut.tile_count(), [&](size_t i) { return cut.tile(i); }, {});
+  auto r = PackReader::open(tmp(name + ".pack"));
+  r->verify();
+  return r;
+}
+
+void expect_lossless_and_like_octree(const IntervalStack& s, const std::string& what) {
+  SCOPED_TRACE(what);
+  const auto oct = build(s, StackCells::octree, "oct");
+  EXPECT_FALSE(oct->header().flags & kFeatureStackSliceTiles);
+  const ResidentStack ro(*oct);
+  for (StackCells form : {StackCells::slices, StackCells::smaller}) {
+    uint64_t slice_cells = 0;
+    const auto pack = build(s, form, form == StackCells::slices ? "slices" : "smaller", &slice_cells);
+    EXPECT_EQ(bool(pack->header().flags & kFeatureStackSliceTiles), slice_cells > 0);
+    if (form == StackCells::slices) {
+      EXPECT_EQ(slice_cells, pack->tiles().size());
+    }
+    const ResidentStack rs(*pack);
+    const StackMap& m = rs.map();
+    EXPECT_EQ(stacks::first_violation(s, [&](uint64_t x, uint64_t y, uint32_t w) { return m.depth(x, y, w, s.level); }), "");
+    // Above the cells the grid answers as the octree pack's (the same grid).
+    const uint32_t a = m.grid().geo.xy_bits(m.grid().skip_level);
+    for (uint32_t w = 0; w < s.slices; ++w)
+      for (uint32_t level = 0; level <= std::min(a, s.level); ++level)
+        for (uint64_t y = 0; y < (uint64_t(1) << level); ++y)
+          for (uint64_t x = 0; x < (uint64_t(1) << level); ++x)
+            ASSERT_EQ(m.depth(x, y, w, level), ro.map().depth(x, y, w, level)) << level << " " << x << " " << y << " " << w;
+    // Soft lookups: single, batched, and the slices' lit tests agree bit for bit.
+    Rng rng(5);
+    std::vector<Vec3d> pts(40);
+    for (Vec3d& p : pts) p = {rng.uniform(-10, 10), rng.uniform(0, 5), rng.uniform(-10, 10)};
+    std::vector<float> batch(pts.size());
+    m.soft_visibility(pts, batch);
+    for (size_t i = 0; i < pts.size(); ++i) {
+      uint32_t lit = 0;
+      for (uint32_t w = 0; w < s.slices; ++w) lit += m.lit(pts[i], w);
+      const float want = float(lit) / float(s.slices);
+      EXPECT_EQ(m.soft_visibility(pts[i]), want);
+      EXPECT_EQ(batch[i], want);
+    }
+  }
+}
+
+TEST(StackSlicesPack, EveryTexelOfEverySliceIsLossless) {
+  expect_lossless_and_like_octree(stacks::coherent_stack(6, 5, 3), "coherent 64^2 x 5");
+  expect_lossless_and_like_octree(stacks::random_stack(5, 3, 4), "random 32^2 x 3");
+  expect_lossless_and_like_octree(stacks::coherent_stack(3, 20, 6), "coherent 8^2 x 20 (deeper than wide)");
+}
+
+TEST(StackSlicesPack, SmallerFormIsNeverLargerThanTheOctree) {
+  const IntervalStack s = stacks::random_stack(6, 4, 9);  // incoherent: per-slice wins
+  const auto oct = build(s, StackCells::octree, "oct2");
+  uint64_t slice_cells = 0;
+  const auto pick = build(s, StackCells::smaller, "pick2", &slice_cells);
+  EXPECT_GT(slice_cells, 0u);
+  uint64_t a = 0, b = 0;
+  for (const TileIndexEntry& e : oct->tiles()) a += e.stored_size;
+  for (const TileIndexEntry& e : pick->tiles()) b += e.stored_size;
+  EXPECT_LE(b, a);
+}
+
+TEST(StackSlicesPack, ATileWithoutTheFeatureBitIsRefused) {
+  // The per-slice tiles written with the octree pack's header flags: verify names the tile.
+  const IntervalStack s = stacks::coherent_stack(5, 3, 2);
+  auto spill = spill_of(s, 0, "nobit.spill");
+  BlockedStackCut cut(*spill, std::nullopt, 64 * 1024, tmp("nobit.tiles"), nullptr, StackCells::slices);
+  const LightSet set = LightSet::fit(LightSetSpec::parse("sun-path:azimuth=150..200,elevation=40..60,samples=3"),
+                                     Aabb{{-10, 0, -10}, {10, 5, 10}});
+  cut.grid.light_kind = set.samples[0].kind();
+  for (const LightSpace& l : set.samples) cut.grid.lights.push_back(l.to_array());
+  cut.grid.spec = set.spec.to_string();
+  write_stack_pack(tmp("nobit.pack"), cut.grid, cut.tile_count(), [&](size_t i) { return cut.tile(i); }, {});
+  // Clear the bit and fix the header's CRC.
+  std::vector<uint8_t> file;
+  {
+    std::ifstream f(tmp("nobit.pack"), std::ios::binary);
+    file.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+  }
+  PackHeader h = PackHeader::parse(std::span<const uint8_t>(file.data(), kPackHeaderBytes), "nobit");
+  ASSERT_TRUE(h.flags & kFeatureStackSliceTiles);
+  h.flags &= ~uint32_t(kFeatureStackSliceTiles);
+  const auto head = h.serialize();
+  std::memcpy(file.data(), head.data(), head.size());
+  {
+    std::ofstream f(tmp("nobit.pack"), std::ios::binary | std::ios::trunc);
+    f.write(reinterpret_cast<const char*>(file.data()), std::streamsize(file.size()));
+  }
+  auto r = PackReader::open(tmp("nobit.pack"));
+  try {
+    r->verify();
+    ADD_FAILURE() << "verify accepted a per-slice cell without the feature bit";
+  } catch (const FormatError& e) {
+    EXPECT_NE(std::string(e.what()).find("stack_slice_tiles"), std::string::npos) << e.what();
+  }
+}
+
+}  // namespace
+}  // namespace st

@@ -1,0 +1,27 @@
+// The per-slice form of a stack cell (tiles/core/stack_slices.hpp, MHOCT.md "Per-slice
+// cells"): each slice's square of the cell built as its own 2D hierarchy (MH §3.1) and
+// encoded as DAG-MH or MMH, whichever deflates smaller (as a 2D pack's mixed tiles), and
+// the choice between that and the cell's MH octree tile.
+#pragma once
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "tiles/core/interval.hpp"
+
+namespace st {
+
+// Which form a stack build gives its cells: the octree always (the format before per-slice
+// cells), per-slice tiles always (tests), or per cell the one whose zlib stream (level 6,
+// as the pack stores it) is shorter and fits the tile bound (the default).
+enum class StackCells : uint8_t { octree, slices, smaller };
+StackCells parse_stack_cells(const std::string& text);  // "octree" | "slices" | "smaller"; throws st::Error
+
+// The "STSL" buffer of a cell whose slices' squares (each 2^m a side, row-major) are
+// `slices` (at most 2^j of them; the entries past them are constant kLitDepth). A slice
+// whose square stores nothing below its root is a constant entry; equal buffers are
+// stored once. Throws st::Error when the result exceeds the format's 32-bit size.
+std::vector<uint8_t> encode_slice_tiles(std::span<const IntervalTile> slices, uint32_t m, uint32_t j);
+
+}  // namespace st

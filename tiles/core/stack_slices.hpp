@@ -1,0 +1,105 @@
+// Per-slice cells of a stack pack (tiles/core/MHOCT.md "Per-slice cells", tiles/PACK.md
+// "Stack packs"): a level-K cell of a shadow-map stack stored as its slices' own 2D tiles
+// (DAG-MH, or MMH where that stored smaller, as a 2D DAG-MH pack's mixed tiles) instead of
+// one MH octree over (x, y, w). The builder takes whichever of the two stores smaller per
+// cell, so a stack pack is never much larger than the same slices as separate 2D packs
+// where the slices disagree (a day's sun at 4K^2) and keeps the octree where they agree.
+// A stack tile's first four bytes say which it is ("STOC" octree, "STSL" per-slice).
+//
+// Layout (little-endian; pinned by tests/tiles/stack_slices_test.cpp):
+//   0   4      magic "STSL"
+//   4   2      version 1
+//   6   1      xy_level m: each slice's square is 2^m texels a side (0..20)
+//   7   1      w_level j: 2^j slice entries (0..12)
+//   8   4      byte_size: the whole buffer, header included
+//   12  4      zero
+//   16  8 2^j  entries, slice 0 first: u32 offset, u32 word
+//                offset 0: the slice is constant, word = the f32 value's bits
+//                else: the slice's 2D buffer is bytes [offset, offset + word) (word = its
+//                size), a DAG-MH ("DGMH") or MMH ("STMM") buffer of finest level m
+//   B          the 2D buffers, back to back in order of first use, each followed by zero
+//              bytes to a multiple of 4; B = 16 + 8 2^j; slices with equal buffers name
+//              the same one; the last buffer's padding ends the buffer (byte_size)
+// Slices past the stack's N (the last cells' padding) are constant kLitDepth.
+#pragma once
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "tiles/core/evaluator.hpp"
+#include "tiles/core/mh_octree.hpp"
+
+namespace st {
+
+inline constexpr uint32_t kSliceTilesMagic = 0x4C535453u;  // "STSL"; format constant
+inline constexpr uint16_t kSliceTilesVersion = 1;           // format constant
+inline constexpr uint32_t kSliceTilesHeaderBytes = 16;      // format constant
+inline constexpr uint32_t kSliceTilesEntryBytes = 8;        // format constant
+
+// Whether `bytes` start with "STSL".
+bool is_slice_tiles(std::span<const uint8_t> bytes);
+
+class SliceTiles {
+ public:
+  // Validates the header, every entry (constant values finite; buffers inside the buffer,
+  // 4-aligned, laid out back to back in first-use order with zero padding, no byte
+  // unaccounted for) and opens every distinct 2D buffer with its own full validation
+  // (finest level m). Throws st::FormatError("slice tiles: <field> at byte <offset>: ...").
+  // The bytes are borrowed: the caller keeps them alive and unchanged.
+  static SliceTiles open(std::span<const uint8_t> bytes);
+
+  uint32_t xy_level() const { return xy_level_; }
+  uint32_t w_level() const { return w_level_; }
+  uint32_t slices() const { return uint32_t(slot_.size()); }
+  size_t byte_size() const { return byte_size_; }
+  size_t buffers() const { return evals_.size(); }
+
+  // Texel (x, y) of the level-`level` map of slice w (level <= xy_level(); x, y < 2^level;
+  // w < slices(); not checked): the slice's 2D tile's answer, or its constant.
+  float depth(uint64_t x, uint64_t y, uint32_t w, uint32_t level) const {
+    const int32_t s = slot_[w];
+    return s < 0 ? value_[w] : evals_[size_t(s)]->depth(level, x, y);
+  }
+
+ private:
+  uint32_t xy_level_ = 0, w_level_ = 0;
+  size_t byte_size_ = 0;
+  std::vector<int32_t> slot_;  // per slice: index into evals_, or -1 (constant)
+  std::vector<float> value_;   // per slice: the constant (when slot_ < 0)
+  std::vector<std::shared_ptr<const Evaluator>> evals_;
+};
+
+// A stack tile as lookups see it: an MH octree or per-slice tiles (or neither: absent).
+// Converts from either pointer, so a tile source may hand out `const MhOctree*` as before.
+struct StackTileRef {
+  const MhOctree* octree = nullptr;
+  const SliceTiles* slices = nullptr;
+  StackTileRef() = default;
+  StackTileRef(const MhOctree* o) : octree(o) {}      // NOLINT: implicit by design
+  StackTileRef(const SliceTiles* s) : slices(s) {}    // NOLINT: implicit by design
+  StackTileRef(std::nullptr_t) {}                     // NOLINT: implicit by design
+  explicit operator bool() const { return octree || slices; }
+  // depth(x, y, w, level) of whichever it is (present; arguments in range).
+  float depth(uint64_t x, uint64_t y, uint32_t w, uint32_t level) const {
+    return octree ? octree->depth(x, y, w, level) : slices->depth(x, y, w, level);
+  }
+};
+
+// An opened stack tile that owns its reader (not its bytes): "STOC" as MhOctree::open,
+// "STSL" as SliceTiles::open. Throws st::FormatError for anything else or a bad buffer.
+class StackTile {
+ public:
+  static StackTile open(std::span<const uint8_t> bytes);
+  StackTileRef ref() const { return octree_ ? StackTileRef(&*octree_) : StackTileRef(&*slices_); }
+  // The tile's slices' side level and slice-entry level (the octree's n and k).
+  uint32_t xy_level() const { return octree_ ? octree_->geometry().n : slices_->xy_level(); }
+  uint32_t w_level() const { return octree_ ? octree_->geometry().k : slices_->w_level(); }
+  bool is_octree() const { return bool(octree_); }
+
+ private:
+  std::unique_ptr<MhOctree> octree_;
+  std::unique_ptr<SliceTiles> slices_;
+};
+
+}  // namespace st
