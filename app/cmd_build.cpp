@@ -55,7 +55,7 @@ struct BuildArgs {
   std::string deep_from;  // a deep OpenEXR to take the deep map from instead of sampling
   std::string dagmh_dictionary = "on";  // tiles/PACK.md "DAG-MH dictionary"
   std::string dagmh_tiles = "mixed";     // tiles/PACK.md "Mixed tiles"
-  std::string stack_cells = "smaller";   // light sets: tiles/core/MHOCT.md "Per-slice cells"
+  std::string stack_cells = "octree";   // light sets: tiles/core/MHOCT.md "Per-slice cells"
 };
 
 // What the pack's deep directory records of the deep map.
@@ -366,10 +366,10 @@ void setup(CLI::App& app) {
                  "self-contained")
       ->capture_default_str();
   app.add_option("--stack-cells", a->stack_cells,
-                 "light sets (stack packs): smaller (default) stores each cell as the stack's octree or as its "
-                 "slices' own DAG-MH/MMH tiles, whichever is smaller, so the stack never costs much more than "
-                 "separate packs of its samples; octree stores every cell as the octree (the GPU passes read "
-                 "only these); slices stores every cell per slice")
+                 "light sets (stack packs): octree (default) stores every cell as the stack's octree, the form "
+                 "every reader takes, the GPU passes included; smaller stores each cell as the octree or as its "
+                 "slices' own DAG-MH/MMH tiles, whichever is smaller (CPU clients and the server only: the GPU "
+                 "passes refuse such packs for now); slices stores every cell per slice")
       ->capture_default_str();
   app.add_option("--dagmh-tiles", a->dagmh_tiles,
                  "dagmh: mixed (default) writes a tile as MMH where that stores in fewer bytes (open meshes' "
