@@ -11,7 +11,7 @@
 #include "tests/client/loopback.hpp"
 
 namespace st::client {
-namespace {
+namespace map_info_bound_test {
 
 TEST(ServerLoopback, MapInfoBoundsTilesByTheLargestThePackHolds) {
   auto p = looptest::build_pack("bound", 6, 17, looptest::first_encoding(), 3, 1u << 16);  // a 64 KiB target
@@ -41,5 +41,5 @@ TEST(ServerLoopback, MapInfoBoundsTilesByTheLargestThePackHolds) {
       }
 }
 
-}  // namespace
+}  // namespace map_info_bound_test
 }  // namespace st::client

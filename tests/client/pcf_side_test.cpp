@@ -13,7 +13,7 @@
 #include "tests/client/loopback.hpp"
 
 namespace st::client {
-namespace {
+namespace pcf_side_test {
 
 uint32_t bits(float v) { return std::bit_cast<uint32_t>(v); }
 
@@ -119,5 +119,5 @@ TEST(PcfSide, ServedMapAnswersValidSidesExactlyAndInvalidOnesNaN) {
   }
 }
 
-}  // namespace
+}  // namespace pcf_side_test
 }  // namespace st::client

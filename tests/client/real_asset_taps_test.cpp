@@ -21,7 +21,7 @@
 #include "tiles/core/tap_order.hpp"
 
 namespace st::client {
-namespace {
+namespace real_asset_taps_test {
 
 namespace fs = std::filesystem;
 
@@ -147,5 +147,5 @@ INSTANTIATE_TEST_SUITE_P(Assimp, RealAssetTaps,
                            return fs::path(info.param.file).stem().string() + "_" + to_string(info.param.encoding);
                          });
 
-}  // namespace
+}  // namespace real_asset_taps_test
 }  // namespace st::client

@@ -24,7 +24,7 @@
 #include "tests/gpu/raster_pass.hpp"
 
 namespace st::gpu {
-namespace {
+namespace gpu_deep_test {
 
 using looptest::kDeepLevel;
 using looptest::wait_until;
@@ -299,5 +299,5 @@ TEST(GpuDeep, EnginePassAndFragmentShaderLightEqualTheCpuTwin) {
   EXPECT_EQ(e.messages(), 0u) << e.first_message();
 }
 
-}  // namespace
+}  // namespace gpu_deep_test
 }  // namespace st::gpu

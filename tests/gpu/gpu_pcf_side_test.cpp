@@ -10,7 +10,7 @@
 #include "tests/gpu/gpu_test_util.hpp"
 
 namespace st::gpu {
-namespace {
+namespace gpu_pcf_side_test {
 
 TEST(GpuPcfSide, EvenZeroAndLargeKernelsAreRefusedByName) {
   auto pack = looptest::build_pack("gpu_pcf_side", 5, 3, looptest::first_encoding(), 2, 512);
@@ -57,5 +57,5 @@ TEST(GpuPcfSide, EvenZeroAndLargeKernelsAreRefusedByName) {
   EXPECT_EQ(g.stats().validation_messages, 0u);
 }
 
-}  // namespace
+}  // namespace gpu_pcf_side_test
 }  // namespace st::gpu

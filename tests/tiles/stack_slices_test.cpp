@@ -23,7 +23,7 @@
 #include "tiles/core/stack_slices.hpp"
 
 namespace st {
-namespace {
+namespace stack_slices_test {
 
 std::string tmp(const std::string& name) { return std::string(SHADOWTILE_TEST_TMP) + "/" + name; }
 
@@ -238,5 +238,5 @@ TEST(StackSlicesPack, ATileWithoutTheFeatureBitIsRefused) {
   }
 }
 
-}  // namespace
+}  // namespace stack_slices_test
 }  // namespace st

@@ -9,7 +9,7 @@
 #include "tiles/core/tap_order.hpp"
 
 namespace st {
-namespace {
+namespace tap_order_test {
 
 // Morton code of texel (x, y) scaled to `finest`, whole (for the order's check).
 uint64_t morton(const PcfQuery& q, uint32_t finest) {
@@ -67,5 +67,5 @@ TEST(TapOrder, RefusesKernelsAndLevelsFinerThanTheMap) {
   for (uint16_t i : order) EXPECT_EQ(i, 7) << "untouched";
 }
 
-}  // namespace
+}  // namespace tap_order_test
 }  // namespace st
