@@ -28,7 +28,9 @@
 // ctypes: tests/capi/capi_test.py mirrors them) at run time.
 #if UINTPTR_MAX == UINT64_MAX
 static_assert(sizeof(shadowtile_endpoint) == 16);
-static_assert(sizeof(shadowtile_client_options) == 96 && offsetof(shadowtile_client_options, connect_timeout_ms) == 28 &&
+static_assert(SHADOWTILE_SLOT_OVERHEAD_BYTES == st::client::kSlotOverheadBytes &&
+              SHADOWTILE_MIN_TILE_SLOTS == st::client::kMinTileSlots);
+static_assert(sizeof(shadowtile_client_options) == 104 && offsetof(shadowtile_client_options, cache_bytes) == 96 && offsetof(shadowtile_client_options, connect_timeout_ms) == 28 &&
               offsetof(shadowtile_client_options, client_name) == 48 && offsetof(shadowtile_client_options, tls) == 72 &&
               offsetof(shadowtile_client_options, tls_server_name) == 88);
 static_assert(sizeof(shadowtile_client_stats) == 64 && offsetof(shadowtile_client_stats, refused) == 60);
@@ -214,6 +216,7 @@ void shadowtile_client_options_default(shadowtile_client_options* o) {
   o->request_timeout_ms = uint32_t(d.request_timeout.count());
   o->backoff_initial_ms = uint32_t(d.backoff_initial.count());
   o->backoff_max_ms = uint32_t(d.backoff_max.count());
+  o->cache_bytes = d.cache_bytes;
 }
 
 shadowtile_status shadowtile_client_create(const shadowtile_endpoint* endpoints, size_t endpoint_count,
@@ -239,6 +242,7 @@ shadowtile_status shadowtile_client_create(const shadowtile_endpoint* endpoints,
     if (o.key_size > 0 && !o.key) return null_argument(where, "options->key (key_size > 0)");
     st::client::ClientOptions co;
     co.cache_slots = o.cache_slots;
+    co.cache_bytes = o.cache_bytes;
     co.max_slot_bytes = o.max_slot_bytes;
     co.want_capacity = o.want_capacity;
     co.max_in_flight = o.max_in_flight;

@@ -54,7 +54,8 @@ vec3 st_deep_vertex(uint values, uint k, bool mono) {
 // DeepTileView::eval of texel `index` (directory order: mip 0 row-major, then each mip) of
 // the deep tile at word `base`: the first vertex at depth >= z (a receiver at a step's
 // depth sees the value before the step), then a + (b - a) * f per channel with f =
-// clamp((z - za) / (zb - za), 0, 1), every operation rounded once (precise; st_fdiv).
+// clamp((z - za) / (zb - za), 0, 1), every operation rounded once (precise; st_fdiv),
+// clamped to [min(a, b), max(a, b)].
 // One call site per shader (the filters loop over their taps): st_fdiv stays one copy.
 vec3 st_deep_texel(uint base, uint index, float z) {
   const uint texels = ST_DEEP(base + kDtTexelCount);
@@ -80,7 +81,7 @@ vec3 st_deep_texel(uint base, uint index, float z) {
   const float f = clamp(st_fdiv(num, den), 0.0, 1.0);
   const vec3 a = st_deep_vertex(values, lo - 1u, mono), b = st_deep_vertex(values, lo, mono);
   precise vec3 r = a + (b - a) * f;
-  return r;
+  return clamp(r, min(a, b), max(a, b));  // DeepTileView::eval's clamp: non-increasing in z
 }
 
 uint st_deep_level() {

@@ -47,7 +47,8 @@ class ClientOptions(C.Structure):
                 ("connect_timeout_ms", C.c_uint32), ("io_timeout_ms", C.c_uint32), ("request_timeout_ms", C.c_uint32),
                 ("backoff_initial_ms", C.c_uint32), ("backoff_max_ms", C.c_uint32),
                 ("client_name", C.c_char_p), ("key", C.POINTER(C.c_uint8)), ("key_size", C.c_size_t),
-                ("tls", C.c_int32), ("tls_ca_file", C.c_char_p), ("tls_server_name", C.c_char_p)]
+                ("tls", C.c_int32), ("tls_ca_file", C.c_char_p), ("tls_server_name", C.c_char_p),
+                ("cache_bytes", C.c_uint64)]
 
 
 class MapListing(C.Structure):
@@ -500,6 +501,31 @@ def check_binding(lib_path, port, points, want, got_c):
            "cache_slots 0", lib)
     expect(lib.shadowtile_client_create(C.byref(endpoint), 0, None, C.byref(other)), INVALID_ARGUMENT,
            "no endpoint", lib)
+    # A memory budget per map (cache_bytes): one too small is refused at open, naming the
+    # least budget; that least opens with SHADOWTILE_MIN_TILE_SLOTS (8) slots within it.
+    budgeted = ClientOptions()
+    lib.shadowtile_client_options_default(C.byref(budgeted))
+    if budgeted.cache_bytes != 0:
+        fail("default cache_bytes %d, expected 0 (cache_slots mode)" % budgeted.cache_bytes)
+    budgeted.cache_bytes = 4096
+    expect(lib.shadowtile_client_create(C.byref(endpoint), 1, C.byref(budgeted), C.byref(other)), OK, "create", lib)
+    small = C.c_void_p()
+    if lib.shadowtile_client_open_map(other, b"city", C.byref(small)) == OK:
+        fail("a 4096-byte budget opened the map")
+    why = lib.shadowtile_last_error().decode()
+    least = re.search(r"set cache_bytes \(--cache-mb\) to at least ([0-9]+) bytes", why)
+    if not least or "\n" in why:
+        fail("the too-small budget's error does not name the least budget in one line: %r" % why)
+    lib.shadowtile_client_destroy(other)
+    budgeted.cache_bytes = int(least.group(1))
+    expect(lib.shadowtile_client_create(C.byref(endpoint), 1, C.byref(budgeted), C.byref(other)), OK, "create", lib)
+    expect(lib.shadowtile_client_open_map(other, b"city", C.byref(small)), OK, "open at the least budget", lib)
+    tight = Budget()
+    expect(lib.shadowtile_map_get_budget(small, C.byref(tight)), OK, "budget", lib)
+    if tight.tile_slots != 8 or tight.accounted_bytes != budgeted.cache_bytes:
+        fail("least budget: %d slots, %d of %d bytes" % (tight.tile_slots, tight.accounted_bytes, budgeted.cache_bytes))
+    lib.shadowtile_map_close(small)
+    lib.shadowtile_client_destroy(other)
     # A key the server does not ask for: the client refuses the server, for good.
     keyed = ClientOptions()
     lib.shadowtile_client_options_default(C.byref(keyed))

@@ -128,8 +128,12 @@ std::array<float, 3> DeepTileView::eval(const Texel& t, float z) {
   const float za = flush_depth(depth_at(t.depths, lo - 1)), zb = flush_depth(depth_at(t.depths, lo));
   const float f = std::clamp((zf - za) / (zb - za), 0.0f, 1.0f);
   const auto a = value(lo - 1), b = value(lo);
+  // Clamped to the segment's two values: b - a rounds, so a + (b - a) * f could pass b by
+  // an ulp at f near 1 and the next segment (starting at b exactly) would rise; clamped,
+  // the function stays non-increasing in z as the vertices are (min/max round nothing).
   std::array<float, 3> r;
-  for (int ch = 0; ch < 3; ++ch) r[ch] = a[ch] + (b[ch] - a[ch]) * f;
+  for (int ch = 0; ch < 3; ++ch)
+    r[ch] = std::clamp(a[ch] + (b[ch] - a[ch]) * f, std::min(a[ch], b[ch]), std::max(a[ch], b[ch]));
   return r;
 }
 

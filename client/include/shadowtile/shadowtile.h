@@ -51,9 +51,14 @@ extern "C" {
 #endif
 
 /* 2: PCF takes the kernel side (odd, 1..9), not a radius; views, the light transform,
- * the scene extent and the cache's shares added. */
-#define SHADOWTILE_C_API_VERSION 2
+ * the scene extent and the cache's shares added. 3: shadowtile_client_options::cache_bytes
+ * (a memory budget per map). */
+#define SHADOWTILE_C_API_VERSION 3
 #define SHADOWTILE_MAX_PCF_SIDE 9
+/* What one cache slot costs beyond its tile bytes, and the fewest tile slots a map opens
+   with under a byte budget (shadowtile_client_options::cache_bytes). */
+#define SHADOWTILE_SLOT_OVERHEAD_BYTES 4096
+#define SHADOWTILE_MIN_TILE_SLOTS 8
 
 typedef enum shadowtile_status {
   SHADOWTILE_OK = 0,
@@ -67,7 +72,7 @@ typedef enum shadowtile_status {
   SHADOWTILE_ERROR_INTERNAL = 8          /* anything else: the message says what */
 } shadowtile_status;
 
-/* The library's version ("0.1.0"), and SHADOWTILE_C_API_VERSION as it was built. */
+/* The library's version ("0.2.0"), and SHADOWTILE_C_API_VERSION as it was built. */
 SHADOWTILE_API const char* shadowtile_version(void);
 SHADOWTILE_API uint32_t shadowtile_c_api_version(void);
 /* "ok", "invalid_argument", ...: a static string, never NULL. */
@@ -113,6 +118,11 @@ typedef struct shadowtile_client_options {
   int32_t tls;                /* nonzero: TLS; the certificate must chain to tls_ca_file */
   const char* tls_ca_file;    /* PEM; NULL or "": the system's trust store */
   const char* tls_server_name; /* NULL or "": the endpoint's host */
+  uint64_t cache_bytes;       /* 0: cache_slots slots per map; else each map's memory budget in
+                                 bytes (metadata, the DAG-MH dictionary and slots of the map's
+                                 tile bound + SHADOWTILE_SLOT_OVERHEAD_BYTES; cache_slots is then
+                                 ignored); a budget that cannot hold the metadata and
+                                 SHADOWTILE_MIN_TILE_SLOTS slots fails at open, naming the least */
 } shadowtile_client_options;
 
 SHADOWTILE_API void shadowtile_client_options_default(shadowtile_client_options* options);
