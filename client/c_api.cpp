@@ -45,7 +45,8 @@ struct shadowtile_client {
   st::client::Client client;
 };
 
-static_assert(sizeof(shadowtile_view_options) == 32 && offsetof(shadowtile_view_options, priority) == 24);
+static_assert(sizeof(shadowtile_view_options) == 48 && offsetof(shadowtile_view_options, priority) == 24 &&
+              offsetof(shadowtile_view_options, time) == 32 && offsetof(shadowtile_view_options, lookahead) == 40);
 static_assert(sizeof(shadowtile_view_stats) == 24);
 static_assert(sizeof(shadowtile_light) == 328 && offsetof(shadowtile_light, origin) == 16 &&
               offsetof(shadowtile_light, extent) == 112 && offsetof(shadowtile_light, volume_lo) == 136 &&
@@ -457,12 +458,13 @@ shadowtile_status shadowtile_map_get_stats(const shadowtile_map* map, shadowtile
 void shadowtile_view_options_default(shadowtile_view_options* o) {
   if (!o) return;
   const st::client::ViewOptions d;
-  *o = shadowtile_view_options{d.samples_x, d.samples_y, d.receiver_height, d.max_distance, d.priority, {0, 0, 0}};
+  *o = shadowtile_view_options{d.samples_x, d.samples_y, d.receiver_height, d.max_distance, d.priority, {0, 0, 0},
+                               d.time, d.lookahead};
 }
 
 namespace {
 shadowtile_view_stats c_view_stats(const st::client::ViewStats& v) noexcept {
-  return shadowtile_view_stats{v.wanted, v.kept, v.resident, v.queued, v.cancelled, 0};
+  return shadowtile_view_stats{v.wanted, v.kept, v.resident, v.queued, v.cancelled, v.ahead};
 }
 shadowtile_status invalid(const char* where, const char* what) noexcept {
   char buf[kMessageBytes];
@@ -484,6 +486,8 @@ shadowtile_status shadowtile_map_request_view(shadowtile_map* map, uint32_t view
     o.receiver_height = options->receiver_height;
     o.max_distance = options->max_distance;
     o.priority = options->priority;
+    o.time = options->time;
+    o.lookahead = options->lookahead;
   }
   // The reasons a caller can see here are named; the rest (a singular matrix, too many
   // views, a stack map) share the C++ API's one refusal.

@@ -15,6 +15,7 @@
       callback, and a map that outlives its client.
 """
 import ctypes as C
+import math
 import os
 import re
 import shutil
@@ -87,11 +88,12 @@ class MapStats(C.Structure):
 
 class ViewOptions(C.Structure):
     _fields_ = [("samples_x", C.c_uint32), ("samples_y", C.c_uint32), ("receiver_height", C.c_double),
-                ("max_distance", C.c_double), ("priority", C.c_uint16), ("reserved", C.c_uint16 * 3)]
+                ("max_distance", C.c_double), ("priority", C.c_uint16), ("reserved", C.c_uint16 * 3),
+                ("time", C.c_double), ("lookahead", C.c_double)]
 
 
 class ViewStats(C.Structure):
-    _fields_ = [(n, C.c_uint32) for n in ("wanted", "kept", "resident", "queued", "cancelled", "reserved")]
+    _fields_ = [(n, C.c_uint32) for n in ("wanted", "kept", "resident", "queued", "cancelled", "ahead")]
 
 
 class LightCoord(C.Structure):
@@ -281,14 +283,45 @@ def scene_extent(lib, m):
     return e
 
 
-def top_down_camera(e):
-    """An orthographic camera looking straight down on the scene's footprint (column-major)."""
+def top_down_camera(e, x0=None, x1=None):
+    """An orthographic camera looking straight down on the scene's footprint (column-major),
+    or on the strip x0..x1 of it."""
+    x0 = e.x0 if x0 is None else x0
+    x1 = e.x1 if x1 is None else x1
     vp = [0.0] * 16
-    vp[0], vp[12] = 2 / (e.x1 - e.x0), -(e.x1 + e.x0) / (e.x1 - e.x0)
+    vp[0], vp[12] = 2 / (x1 - x0), -(x1 + x0) / (x1 - x0)
     vp[9], vp[13] = 2 / (e.z1 - e.z0), -(e.z1 + e.z0) / (e.z1 - e.z0)
     vp[6], vp[14] = -1 / (e.top - e.ground + 2), (e.top + 1) / (e.top - e.ground + 2)
     vp[15] = 1.0
     return vp
+
+
+def check_lookahead(lib, m, e):
+    """View look-ahead through the C API: a camera over a strip of the scene moving along x
+    with its frame times holds tiles ahead of its motion; the same moves without times hold none."""
+    o = ViewOptions()
+    lib.shadowtile_view_options_default(C.byref(o))
+    if not math.isnan(o.time) or o.lookahead != 0.25:
+        fail("view options default: time %r lookahead %r, expected NaN and 0.25" % (o.time, o.lookahead))
+    w = (e.x1 - e.x0) / 8
+    held = {}
+    for timed in (True, False):
+        view = 11 if timed else 12
+        o.lookahead = 1.0
+        ahead = 0
+        for k in range(3):
+            vp = (C.c_double * 16)(*top_down_camera(e, e.x0 + k * w / 4, e.x0 + w + k * w / 4))
+            o.time = 0.1 * k if timed else float("nan")
+            vs = ViewStats()
+            expect(lib.shadowtile_map_request_view(m, view, vp, 320, 180, C.byref(o), C.byref(vs)), OK,
+                   "request_view (look-ahead)", lib)
+            ahead = max(ahead, vs.ahead)
+        held[timed] = ahead
+        removed = C.c_int32(-1)
+        expect(lib.shadowtile_map_remove_view(m, view, C.byref(removed)), OK, "remove_view", lib)
+    if not held[True] > 0 or held[False] != 0:
+        fail("look-ahead: %d tiles ahead with frame times, %d without" % (held[True], held[False]))
+    print("capi: a moving camera held %d tiles ahead of its motion" % held[True])
 
 
 def check_light_and_views(lib, m, pts, n, info):
@@ -355,6 +388,7 @@ def check_light_and_views(lib, m, pts, n, info):
     expect(lib.shadowtile_map_remove_view(m, 7, C.byref(removed)), OK, "remove_view again", lib)
     if removed.value != 0:
         fail("remove_view of a removed view: %d" % removed.value)
+    check_lookahead(lib, m, e)
     print("capi: light, scene extent and a camera's %d tiles checked through ctypes" % vs.wanted)
 
 

@@ -52,7 +52,8 @@ extern "C" {
 
 /* 2: PCF takes the kernel side (odd, 1..9), not a radius; views, the light transform,
  * the scene extent and the cache's shares added. 3: shadowtile_client_options::cache_bytes
- * (a memory budget per map). */
+ * (a memory budget per map), view look-ahead (shadowtile_view_options::time, lookahead;
+ * shadowtile_view_stats::ahead). */
 #define SHADOWTILE_C_API_VERSION 3
 #define SHADOWTILE_MAX_PCF_SIDE 9
 /* What one cache slot costs beyond its tile bytes, and the fewest tile slots a map opens
@@ -238,6 +239,10 @@ typedef struct shadowtile_view_options {
   double max_distance;           /* 0: 1.5 x the scene's span */
   uint16_t priority;             /* the nearest tile's fetch priority (60000) */
   uint16_t reserved[3];          /* 0 */
+  double time;                   /* this frame's time in seconds on the caller's clock (NaN:
+                                    motion unknown); with the previous request's time and
+                                    matrix the view looks ahead along the camera's motion */
+  double lookahead;              /* seconds to look ahead (0.25; 0: none) */
 } shadowtile_view_options;
 SHADOWTILE_API void shadowtile_view_options_default(shadowtile_view_options* options);
 
@@ -248,7 +253,7 @@ typedef struct shadowtile_view_stats {
   uint32_t resident;  /* of the kept, resident now (== kept: the view's lookups are exact) */
   uint32_t queued;    /* request_view: fetches newly queued or raised */
   uint32_t cancelled; /* request_view: fetches cancelled (their tiles left every view) */
-  uint32_t reserved;
+  uint32_t ahead;     /* tiles held for the camera's motion (shadowtile_view_options::time) */
 } shadowtile_view_stats;
 
 /* Registers or updates view `view_id` (up to 16 at once per map) from its view-projection
