@@ -242,9 +242,6 @@ void run(const ViewArgs& a) {
       const gpu::StackTime next = gpu::stack_time(slices, time_of(f + 1));
       if (next.a != st.a || next.b != st.b) map.request_slices(next.a, next.b, 1);
     }
-    // Partial occluders (a 2D pack's deep part): the fragment shader multiplies their
-    // transmittance in; their tiles come through the Map (the GPU feeds back opaque tiles only).
-    if (!slices && map.has_deep()) map.deep_resident(0, 0, 0.999999, 0.999999);
     const auto t0 = std::chrono::steady_clock::now();
     const std::span<const raster::FrameResult> done = r.render(in);
     record_us[f] = std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0).count();

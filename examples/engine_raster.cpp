@@ -111,10 +111,6 @@ int run(const Args& a) {
     in.target = {centre.x, centre.y, centre.z};
     std::printf("frame %u: camera pos=%.3f,%.3f,%.3f,target=%.3f,%.3f,%.3f,fov=%.4f\n", f, eye.x, eye.y, eye.z, centre.x,
                 centre.y, centre.z, in.fov_deg);
-    // Partial occluders (a pack with a deep part): the fragment shader multiplies their
-    // transmittance in (st_transmittance); deep tiles come through the Map, not the GPU's
-    // feedback, so the example keeps the whole deep map asked for.
-    if (map.has_deep()) map.deep_resident(0, 0, 0.999999, 0.999999);
     write(r.render(in));
     std::this_thread::sleep_for(std::chrono::milliseconds(a.frame_ms));  // the game's frame time: tiles arrive
   }
