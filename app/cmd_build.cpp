@@ -370,6 +370,7 @@ void setup(CLI::App& app) {
                  "every reader takes, the GPU passes included; smaller stores each cell as the octree or as its "
                  "slices' own DAG-MH/MMH tiles, whichever is smaller (CPU clients and the server only: the GPU "
                  "passes refuse such packs for now); slices stores every cell per slice")
+      ->check(CLI::IsMember({"octree", "smaller", "slices"}))
       ->capture_default_str();
   app.add_option("--dagmh-tiles", a->dagmh_tiles,
                  "dagmh: mixed (default) writes a tile as MMH where that stores in fewer bytes (open meshes' "
