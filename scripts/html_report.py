@@ -636,7 +636,50 @@ def index_page(d, command):
         '<figure><img src="%s" alt="%s"><figcaption>%s: %s</figcaption></figure>' % (esc(f), esc(c), esc(f), esc(c))
         for f, c in present) if present else "<p>no rendered views in this folder</p>"
     page.section("views", "Rendered views", body)
+    gpu = gpu_view_section(d)
+    if gpu:
+        page.section("gpu", "GPU path: shadowtile view (Vulkan rasterizer)", gpu)
     return page
+
+
+def gpu_view_section(d):
+    """The GPU path's frames (`shadowtile view --out gpu/`, beside index.html), its last frame next
+    to `render --filter` from the same camera (view_gpu.png, view_filtered.png), the per-frame
+    holes and times, the CPU twin's count and the pixel comparison (gpu/compare.txt)."""
+    path = os.path.join(d, "gpu", "view.json")
+    if not os.path.exists(path):
+        return ""
+    j = load_json(path)
+    frames = j.get("frames") or []
+    figs = [("view_gpu.png", "GPU path, frame %s: the fragment shader's lookups in the GPU tile cache" %
+             (frames[-1]["frame"] if frames else "?")),
+            ("view_filtered.png", "CPU: render --filter, the client's lookups at each pixel's footprint")]
+    parts = ['<p>Device %s, %sx%s, PCF %s, %s frame(s) of one camera; tiles reach the GPU cache only '
+             'through the fragment shader\'s feedback (the first frames show holes as coarse shadows).</p>' % (
+                 esc(j.get("device", "?")), esc(j.get("width")), esc(j.get("height")), esc(j.get("pcf")), len(frames))]
+    present = [(f, c) for f, c in figs if os.path.exists(os.path.join(d, f))]
+    parts.append('<div class="views">%s</div>' % "".join(
+        '<figure><img src="%s" alt="%s"><figcaption>%s: %s</figcaption></figure>' % (esc(f), esc(c), esc(f), esc(c))
+        for f, c in present))
+    facts = []
+    tw = j.get("twin")
+    if isinstance(tw, dict):
+        facts.append("CPU twin of the last frame: %s of %s lookups differ (%s%%), max difference %s, holes %s" % (
+            tw.get("differ"), tw.get("lookups"), num(tw.get("differ_pct")), num(tw.get("max_difference")),
+            tw.get("holes")))
+    cmp_path = os.path.join(d, "gpu", "compare.txt")
+    if os.path.exists(cmp_path):
+        with open(cmp_path) as f:
+            facts.append("pixels, view_gpu.png against view_filtered.png: " + f.read().strip())
+    if facts:
+        parts.append("<ul>%s</ul>" % "".join("<li>%s</li>" % esc(x) for x in facts))
+    parts.append(table(["frame", "gpu ms", "shade ms", "requested", "resident", "holes", "holes %"],
+                       [[esc(f.get("frame")), num(f.get("gpu_ms")), num(f.get("shade_ms")), esc(f.get("requested")),
+                         esc(f.get("resident")), esc(f.get("holes")), num(f.get("holes_pct"))] for f in frames]))
+    if os.path.exists(os.path.join(d, "gpu", "contact_sheet.png")):
+        parts.append('<figure><img src="gpu/contact_sheet.png" alt="every frame" style="max-width:100%">'
+                     '<figcaption>gpu/contact_sheet.png: every frame, first to last</figcaption></figure>')
+    return "".join(parts)
 
 
 def main():
