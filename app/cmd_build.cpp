@@ -55,7 +55,7 @@ struct BuildArgs {
   std::string deep_from;  // a deep OpenEXR to take the deep map from instead of sampling
   std::string dagmh_dictionary = "on";  // tiles/PACK.md "DAG-MH dictionary"
   std::string dagmh_tiles = "mixed";     // tiles/PACK.md "Mixed tiles"
-  std::string stack_cells = "octree";   // light sets: tiles/core/MHOCT.md "Per-slice cells"
+  std::string stack_cells = "smaller";   // light sets: tiles/core/MHOCT.md "Per-slice cells"
 };
 
 // What the pack's deep directory records of the deep map.
@@ -366,10 +366,10 @@ void setup(CLI::App& app) {
                  "self-contained")
       ->capture_default_str();
   app.add_option("--stack-cells", a->stack_cells,
-                 "light sets (stack packs): octree (default) stores every cell as the stack's octree, the form "
-                 "every reader takes, the GPU passes included; smaller stores each cell as the octree or as its "
-                 "slices' own DAG-MH/MMH tiles, whichever is smaller (CPU clients and the server only: the GPU "
-                 "passes refuse such packs for now); slices stores every cell per slice")
+                 "light sets (stack packs): smaller (default) stores each cell as the stack's octree or as its "
+                 "slices' own DAG-MH/MMH tiles, whichever is smaller; octree stores every cell as the octree "
+                 "(the packs of earlier versions, byte for byte); slices stores every cell per slice. Every "
+                 "reader, the GPU passes included, takes all three")
       ->check(CLI::IsMember({"octree", "smaller", "slices"}))
       ->capture_default_str();
   app.add_option("--dagmh-tiles", a->dagmh_tiles,

@@ -38,12 +38,8 @@ CacheView::CacheView(const Map& map) : impl_(std::make_unique<Impl>()) {
   m.skip_entries.reserve(rm.grid().entries.size());
   for (const GridEntry& e : rm.grid().entries) m.skip_entries.push_back({e.value, uint32_t(e.kind), e.index_levels});
   if (const StackGrid* g = rm.stack_grid()) {
-    // The tables' consumers (the GPU passes, shadowtile.glsl) walk a stack cell's tile as
-    // an MH octree; per-slice cells (tiles/core/stack_slices.hpp) they cannot read yet.
-    if (rm.header().flags & kFeatureStackSliceTiles)
-      throw std::runtime_error("map '" + rm.name() + "': a stack pack with per-slice cells (feature stack_slice_tiles); "
-                               "the GPU stack passes read octree cells only: rebuild it with `shadowtile build "
-                               "--stack-cells octree`");
+    // A cell's tile is an MH octree or per-slice 2D tiles (stack_slices.hpp); the GLSL
+    // (st_stack.glsl) tells them by their magic, so both kinds of stack pack pass.
     m.is_stack = true;
     m.shape.slices = g->slices;
     m.stack.xy_level = g->geo.n;

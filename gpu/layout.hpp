@@ -13,6 +13,7 @@
 #include "tiles/core/mh_octree_format.hpp"
 #include "tiles/core/mh_quadtree_format.hpp"
 #include "tiles/core/stack_grid.hpp"
+#include "tiles/core/stack_slices.hpp"
 #include "tiles/core/tile_cache.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
 
@@ -70,6 +71,10 @@ static_assert(moct::kOffVersion == 4 && moct::kOffXyLevel == 6 && moct::kOffWLev
               moct::kOffFlags == 10 && moct::kOffShifts == 20 && moct::kFlagRootLeaf == 1);
 static_assert(moct::kCodeLeaf == 1 && moct::kCodeEmpty == 2 && moct::kCodeInner == 3 && moct::kMaxLevels == 21);
 static_assert(moct::tree_offset(1) == 20 + 4 && moct::tree_offset(21) == 20 + 24);
+// What st_stack.glsl reads of a per-slice cell (stack_slices.hpp): the magic, then entry w at
+// byte 16 + 8 w; and the MMH magic st_eval.glsl tells a mixed tile by.
+static_assert(layout::kSlMagic == kSliceTilesMagic && layout::kSlHeaderWords * 4 == kSliceTilesHeaderBytes &&
+              layout::kSlEntryWords * 4 == kSliceTilesEntryBytes && layout::kMmhMagic == mhq::kMagicMmh);
 // st_oct_step's far offsets (version 3): off < -32736 reads the far word at pos + 1 + off + 32768.
 static_assert(moct::kVersion == 3 && moct::kFarOffsetMin == -32768 && moct::kFarLimit == -32736);
 static_assert(layout::kMaxStackCells == kStackMaxCells);

@@ -97,6 +97,12 @@ ST_UINT(kStLightCentreU, 13u)   // f32: perspective lights: u = x / z + this (0 
 ST_UINT(kStLightCentreV, 14u)   // f32: likewise v
 ST_UINT(kStLightProjection, 15u)  // 0: affine (u = x, v = y), 1: perspective (x / z, y / z)
 ST_UINT(kMaxStackCells, 0x400000u)  // kStackMaxCells: cells < 2^22
+// A per-slice cell's tile (tiles/core/stack_slices.hpp "STSL"): a 4-word header, then per
+// slice 2 words (byte offset of its 2D tile, 0: a constant; then the size or the f32 bits).
+ST_UINT(kSlMagic, 0x4C535453u)     // "STSL"
+ST_UINT(kSlHeaderWords, 4u)
+ST_UINT(kSlEntryWords, 2u)
+ST_UINT(kMmhMagic, 0x4D4D5453u)    // "STMM": an MMH tile where a DAG-MH one may be (PACK.md "Mixed tiles")
 
 // ---- stack queries (binding kBindInput of stack_evaluate.comp) ----
 ST_UINT(kSqWords, 7u)

@@ -1,5 +1,5 @@
 // shadowtile GPU evaluators for stack maps (shadow-map stacks, MH 2016 §4): the MH octree
-// tile decoder and the walk of the stack block (the octree's top K levels and the level-K
+// tile decoder, per-slice cells (each slice's own 2D tile) and the walk of the stack block (the octree's top K levels and the level-K
 // cells, gpu/GPU_LAYOUT.md "The stack block"), the same operations as the CPU's
 // MhOctree::depth (tiles/core/mh_octree_reader.cpp) and StackMap::depth
 // (tiles/core/stack_map.cpp), so every answer is bit-exact with the CPU's.
@@ -15,6 +15,8 @@
 #define SHADOWTILE_GPU_ST_STACK_GLSL
 
 #include "st_fdiv.glsl"
+
+// A cell's tile is an MH octree ("STOC") or per-slice 2D tiles ("STSL"), told by its magic.
 
 // ---- MH octree tiles (tiles/core/MHOCT.md) ----
 // Texel (x, y) of the level-`level` map of slice w of the octree at pool word `base`
@@ -128,6 +130,21 @@ float st_oct_depth_resumed(uint base, uint x, uint y, uint w, uint level) {
   return uintBitsToFloat(ST_POOL(tree + val));
 }
 
+// ---- per-slice cells (tiles/core/stack_slices.hpp "STSL") ----
+// Texel (x, y) of the level-`level` map of slice w of the per-slice cell at pool word `base`
+// (level <= its xy_level, w < its 2^w_level entries: the caller checks): entry w's first word
+// is the byte offset of the slice's own 2D tile (4-aligned), 0 for a constant slice whose f32
+// bits are the second word; the tile is DAG-MH, or MMH by its magic, as st_tile_depth reads a
+// DAG-MH pack's mixed tiles. The same answer as SliceTiles::depth.
+float st_slices_depth(uint base, uint x, uint y, uint w, uint level) {
+  const uint e = base + kSlHeaderWords + kSlEntryWords * w;
+  const uint off = ST_POOL(e);
+  if (off == 0u) return uintBitsToFloat(ST_POOL(e + 1u));
+  const uint tile = base + (off >> 2u);
+  if (ST_POOL(tile) == kMmhMagic) return st_mh_depth(tile, level, x, y, true);
+  return st_dag_depth(tile, level, x, y);
+}
+
 // ---- the stack block's walk (StackMap::depth over the GPU's copy of the cache) ----
 // Texel (x, y) of the level-`level` map of slice w. Out of range: lit. Levels above K
 // read the dense coarse values; a constant cell, or level K itself, its entry's value; a
@@ -156,6 +173,7 @@ float st_stack_depth(uint x, uint y, uint w, uint level, inout StProbe probe) {
   }
   const uint rel = level - a;  // the tile's own x, y level
   const uint tile = slot * ST_PAGE(kPtSlotWords), tx = x - (cx << rel), ty = y - (cy << rel), tw = w - (cw << (k - b));
+  if (ST_POOL(tile) == kSlMagic) return st_slices_depth(tile, tx, ty, tw, rel);  // a per-slice cell
   return st_oct_resume ? st_oct_depth_resumed(tile, tx, ty, tw, rel) : st_oct_depth(tile, tx, ty, tw, rel);
 }
 

@@ -9,8 +9,10 @@
 // twins. The validation layer is on throughout and must stay silent.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <bit>
 #include <cmath>
+#include <cstring>
 #include <map>
 #include <random>
 #include <set>
@@ -22,11 +24,13 @@
 #include "tests/gpu/engine_harness.hpp"
 #include "tests/gpu/gpu_test_util.hpp"
 #include "tiles/build/mh_octree_encode.hpp"
+#include "tiles/build/stack_blocked.hpp"
 #include "tiles/build/stack_pack.hpp"
 #include "tiles/core/filter_level.hpp"
 #include "tiles/core/light_set.hpp"
 #include "tiles/core/mh_octree.hpp"
 #include "tiles/core/stack_map.hpp"
+#include "tiles/core/stack_slices.hpp"
 
 namespace st::gpu {
 namespace {
@@ -53,6 +57,7 @@ struct ServedStack {
   looptest::TestServer server;
   std::unique_ptr<client::Client> client;
   client::Map map;
+  std::vector<std::vector<uint8_t>> tile_bytes;  // the cut's tiles, by cell
 };
 
 constexpr uint32_t kSlices = 10;
@@ -69,14 +74,31 @@ struct StackSource {
   const IntervalStack* stack = nullptr;
   std::optional<uint32_t> skip_level;
   uint32_t tile_bytes = 512;
+  StackCells cells = StackCells::octree;  // else the blocked cut's per-slice or smaller cells
 };
+
+// The blocked cut of `is` (the builder's; cut_stack's bytes for octree cells) with `cells`.
+StackCut blocked_cut(const IntervalStack& is, const std::string& name, const StackSource& src) {
+  const std::string base = std::string(SHADOWTILE_TEST_TMP) + "/" + name;
+  StackSpill spill(base + ".spill", is.level, is.slices, 0);
+  const size_t area = size_t(is.side() * is.side());
+  for (uint32_t w = 0; w < is.slices; ++w)
+    spill.write_rows(w, 0, is.side(), std::span<const Interval>(is.data.data() + w * area, area));
+  BlockedStackCut blocked(spill, src.skip_level, src.tile_bytes, base + ".tiles", nullptr, src.cells);
+  StackCut cut;
+  cut.grid = blocked.grid;
+  for (size_t i = 0; i < blocked.tile_count(); ++i) cut.tiles.push_back(blocked.tile(i));
+  cut.max_tile_bytes = blocked.max_tile_bytes;
+  return cut;
+}
 
 // frame: the sun path's frame (light_set.hpp "Frames"; ground is the default); or a whole
 // light set spec (area_spec).
 ServedStack serve_stack(const std::string& name, const std::string& frame = "ground", const StackSource& src = {}) {
   ServedStack s;
   const IntervalStack is = src.stack ? *src.stack : sliding_stack(looptest::small_scale() ? 5 : 6, kSlices);
-  StackCut cut = cut_stack(build_octree(is), src.skip_level, src.tile_bytes);
+  StackCut cut = src.cells == StackCells::octree ? cut_stack(build_octree(is), src.skip_level, src.tile_bytes)
+                                                 : blocked_cut(is, name, src);
   Aabb box;
   box.extend({-10, 0, -10});
   box.extend({10, 5, 10});
@@ -94,6 +116,7 @@ ServedStack serve_stack(const std::string& name, const std::string& frame = "gro
   p.tile_bytes = src.tile_bytes;
   write_stack_pack(s.path, cut, p);
   s.tiles = cut.tiles.size();
+  for (auto& t : cut.tiles) s.tile_bytes.push_back(std::move(t.second));
   s.server = looptest::start_server({s.path});
   client::ClientOptions o = looptest::quick_options();
   o.cache_slots = uint32_t(s.tiles) + 4;
@@ -104,8 +127,8 @@ ServedStack serve_stack(const std::string& name, const std::string& frame = "gro
 
 // serve_stack with slices 0..last resident and the server stopped: the cache then stays
 // as it is, so a GPU pass and its CPU twin read the same tiles.
-ServedStack serve_frozen(const std::string& name, const std::string& frame, uint32_t last) {
-  ServedStack s = serve_stack(name, frame);
+ServedStack serve_frozen(const std::string& name, const std::string& frame, uint32_t last, const StackSource& src = {}) {
+  ServedStack s = serve_stack(name, frame, src);
   if (s.map.request_slices(0, last, 10) == 0) ADD_FAILURE() << "nothing to prefetch";
   if (!looptest::wait_until([&] { return s.map.slices_resident(0, last); })) ADD_FAILURE() << "prefetch timed out";
   s.server.stop();
@@ -625,6 +648,99 @@ TEST(GpuStack, EngineModePassesOverTheEnginesImagesEqualTheCpuTwin) {
     }
     EXPECT_GT(between, 100u);
     EXPECT_EQ(e.messages(), 0u) << e.first_message();
+  }
+}
+
+// The forms of a served stack's tiles: [octree tiles, per-slice tiles, their slices that are
+// DAG-MH tiles, MMH tiles, constants] (stack_slices.hpp's layout, read here by hand).
+std::array<size_t, 5> tile_forms(const ServedStack& s) {
+  std::array<size_t, 5> f{};
+  auto u32 = [](const std::vector<uint8_t>& b, size_t at) {
+    uint32_t v;
+    std::memcpy(&v, b.data() + at, 4);
+    return v;
+  };
+  for (const std::vector<uint8_t>& t : s.tile_bytes) {
+    if (!is_slice_tiles(t)) {
+      ++f[0];
+      continue;
+    }
+    ++f[1];
+    for (uint32_t w = 0; w < (1u << t[7]); ++w) {
+      const uint32_t off = u32(t, kSliceTilesHeaderBytes + kSliceTilesEntryBytes * w);
+      ++f[off == 0 ? 4 : u32(t, off) == 0x4D4D5453u ? 3 : 2];  // "STMM": MMH
+    }
+  }
+  return f;
+}
+
+// sliding_stack with its lower half incoherent across w: on the right a slope whose height
+// changes with every slice, on the left a pattern that shifts with w; the builder's default
+// then stores cells of both forms (the octree for the coherent top, per-slice tiles below).
+IntervalStack mixed_stack(uint32_t level, uint32_t slices) {
+  IntervalStack s = sliding_stack(level, slices);
+  const uint64_t side = s.side();
+  for (uint32_t w = 0; w < slices; ++w)
+    for (uint64_t y = side / 2; y < side; ++y)
+      for (uint64_t x = 0; x < side; ++x) {
+        const float slope = 0.3f + 0.004f * float(x) + 0.003f * float(y) + 0.011f * float(w);
+        const float pattern = 0.3f + 0.1f * float(((x * 7 + w * 13) ^ (y * 3)) % 5);
+        s.at(x, y, w) = x >= side / 2 ? Interval{slope, slope} : Interval{pattern, pattern + 0.01f};
+      }
+  return s;
+}
+
+// Per-slice cells (tiles/core/stack_slices.hpp): each cell its slices' own DAG-MH or MMH
+// tiles or constants (every cell, under a sun path's ground frame), and the smaller form's
+// mix of those and octree cells (mixed_stack, under an area light's windowed spots). With the
+// later slices absent: every texel of every level of every slice equals the CPU's
+// (Map::slice_depth), the time pass at samples and between and the soft pass equal their
+// CPU twins on every pixel, with and without resumed walks (st_stack.glsl resumes octree
+// walks only).
+TEST(GpuStack, PerSliceCellsAnswerBitExactlyLikeTheCpu) {
+  const uint32_t level = looptest::small_scale() ? 5 : 6;
+  const IntervalStack sliding = sliding_stack(level, kSlices), mixed = mixed_stack(level, kSlices);
+  for (const StackCells cells : {StackCells::slices, StackCells::smaller}) {
+    const bool all = cells == StackCells::slices;
+    const IntervalStack& is = all ? sliding : mixed;
+    SCOPED_TRACE(all ? "slices" : "smaller");
+    const std::string name = all ? "gpu_stack_slices_all" : "gpu_stack_slices_smaller";
+    ServedStack s = serve_frozen(name, all ? "ground" : area_spec("window"), kSlices / 2 - 1,
+                                 StackSource{&is, std::nullopt, 4096, cells});
+    const std::array<size_t, 5> f = tile_forms(s);
+    if (all) {
+      EXPECT_EQ(f[0], 0u);
+      EXPECT_GT(f[2], 0u);  // DAG-MH slices
+      EXPECT_GT(f[3], 0u);  // MMH slices
+      EXPECT_GT(f[4], 0u);  // constant slices
+    } else {
+      EXPECT_GT(f[0], 0u);  // both forms in one pack
+      EXPECT_GT(f[1], 0u);
+    }
+    EXPECT_GT(f[2] + f[3], 0u);
+    ASSERT_TRUE(client::MapAccess::remote(s.map).header().flags & kFeatureStackSliceTiles);
+    GpuMap g(s.map, gputest::options());
+    const uint32_t n = client::MapAccess::remote(s.map).stack_grid()->geo.n;
+    EXPECT_EQ(compare_every_texel(g, s.map, n), "");
+    const GBuffer gb;
+    std::array<size_t, 3> tally{};
+    FrameStats fs;
+    for (const bool resume : {true, false})
+      for (const double time : {0.0, 0.43, 1.0, -1.0}) {  // -1: soft
+        SCOPED_TRACE("time " + std::to_string(time) + (resume ? "" : ", walks from the root"));
+        ShadowPassInput in = gb.input(std::max(time, 0.0), 3, time < 0);
+        in.resume_walks = resume;
+        EXPECT_EQ(pass_against_twin(g, s.map, in, fs, tally), 0u);
+        if (time == 0.0) {
+          EXPECT_EQ(fs.holes, 0u);
+        } else if (time == 1.0 || time < 0) {
+          EXPECT_GT(fs.holes, 0u);
+        }
+      }
+    EXPECT_GT(tally[0], 1000u);
+    EXPECT_GT(tally[1], 100u);
+    EXPECT_GT(tally[2], 100u);
+    EXPECT_EQ(g.stats().validation_messages, 0u);
   }
 }
 

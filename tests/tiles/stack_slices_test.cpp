@@ -203,6 +203,62 @@ TEST(StackSlicesPack, SmallerFormIsNeverLargerThanTheOctree) {
   EXPECT_LE(b, a);
 }
 
+// The cut moves a level deeper only when a cell's kept form does not fit the tile bound:
+// with the bound between the octree cells' largest and the largest of each cell's smaller
+// form, the octree form's cut moves deeper while the smaller form's stays at its skip level
+// (the per-slice tiles of the cells whose octree outgrows the bound fit), every tile fitting;
+// past it, the probe for the next level weighs both forms too.
+TEST(StackSlicesPack, TheSmallerFormsCutMovesDeeperOnlyWhenACellFitsNeitherWay) {
+  // A pattern of five depths that shifts with w: each slice's quadtree stays small (the
+  // pattern repeats), the octree over (x, y, w) shares nothing between slices.
+  IntervalStack s{6, 8, std::vector<Interval>(64 * 64 * 8)};
+  for (uint32_t w = 0; w < s.slices; ++w)
+    for (uint64_t y = 0; y < s.side(); ++y)
+      for (uint64_t x = 0; x < s.side(); ++x) {
+        const float v = 0.3f + 0.1f * float(((x * 7 + w * 13) ^ (y * 3)) % 5);
+        s.at(x, y, w) = {v, v + 0.01f};
+      }
+  auto spill = spill_of(s, 0, "depth.spill");
+  // At skip level `level` without a bound: the octree cells' largest, and the largest of
+  // each cell's smaller form (raw bytes, what the bound limits).
+  auto largest = [&](std::optional<uint32_t> level, uint32_t& K, uint64_t& octree_largest, uint64_t& bound) {
+    const uint32_t unbounded = 1u << 26;
+    BlockedStackCut oct(*spill, level, unbounded, tmp("depth_oct.tiles"), nullptr, StackCells::octree);
+    BlockedStackCut per(*spill, level, unbounded, tmp("depth_per.tiles"), nullptr, StackCells::slices);
+    K = oct.grid.skip_level;
+    ASSERT_EQ(per.grid.skip_level, K);
+    ASSERT_EQ(oct.tile_count(), per.tile_count());
+    octree_largest = bound = 0;
+    for (size_t i = 0; i < oct.tile_count(); ++i) {
+      const auto [cell, o] = oct.tile(i);
+      const auto [cell2, p] = per.tile(i);
+      ASSERT_EQ(cell, cell2);
+      octree_largest = std::max<uint64_t>(octree_largest, o.size());
+      bound = std::max<uint64_t>(bound, std::min(o.size(), p.size()));
+    }
+  };
+  uint32_t K = 0, K1 = 0;
+  uint64_t octree_largest = 0, bound = 0, octree_largest1 = 0, bound1 = 0;
+  largest(1, K, octree_largest, bound);  // cells of 32^2 texels x 8 slices
+  largest(2, K1, octree_largest1, bound1);
+  ASSERT_LT(bound, octree_largest) << "the fixture's per-slice cells are no smaller";
+  // A bound below both the first level's smaller-form largest and the next level's octree
+  // cells' largest, that the next level's smaller forms fit.
+  const uint64_t tight = std::min(bound, octree_largest1) - 1;
+  ASSERT_LE(bound1, tight) << "the fixture's next level has no bound between the forms";
+  BlockedStackCut oct_bounded(*spill, K, uint32_t(bound), tmp("depth_ob.tiles"), nullptr, StackCells::octree);
+  EXPECT_GT(oct_bounded.grid.skip_level, K);
+  BlockedStackCut pick(*spill, K, uint32_t(bound), tmp("depth_pick.tiles"), nullptr, StackCells::smaller);
+  EXPECT_EQ(pick.grid.skip_level, K);
+  EXPECT_GT(pick.slice_cells, 0u);
+  EXPECT_LE(pick.max_tile_bytes, bound);
+  // Tighter: some cell fits neither way, so the smaller form's cut moves deeper too, one
+  // level (where each cell's smaller form fits), not to where the octree cells would fit.
+  BlockedStackCut tighter(*spill, K, uint32_t(tight), tmp("depth_t.tiles"), nullptr, StackCells::smaller);
+  EXPECT_EQ(tighter.grid.skip_level, K + 1);
+  EXPECT_LE(tighter.max_tile_bytes, tight);
+}
+
 TEST(StackSlicesPack, ATileWithoutTheFeatureBitIsRefused) {
   // The per-slice tiles written with the octree pack's header flags: verify names the tile.
   const IntervalStack s = stacks::coherent_stack(5, 3, 2);

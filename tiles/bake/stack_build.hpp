@@ -39,7 +39,7 @@ struct StackBuildOptions {
   std::function<void(uint32_t done, uint32_t total)> progress;  // slices traced
   uint64_t block_texels = kStackBlockTexels;
   std::string spill_dir;  // default: the output's directory
-  StackCells cells = StackCells::octree;  // each cell's form (stack_slices_encode.hpp); smaller: GPU refuses
+  StackCells cells = StackCells::smaller;  // each cell's form (stack_slices_encode.hpp)
 };
 
 struct StackBuildReport {

@@ -195,17 +195,25 @@ void BlockedStackCut::run(const StackSpill& spill, uint32_t K, uint32_t tile_byt
     // block again, so the result is cut_stack's whichever way the sizes go).
     bool probing = false;
     uint32_t need = K;
-    auto block_fits = [&](const OctHierarchy& sub, uint32_t Kp, uint64_t bx, uint64_t by, uint64_t bw, uint64_t& size,
-                          uint64_t& cell) {
+    // A cell fits when the form the cut would keep fits: the octree, or (cells other than
+    // octree) its per-slice tiles where the octree does not fit, so a stack whose octree
+    // cells outgrow the bound stays at the level where its per-slice cells still fit
+    // instead of moving to one whose small cells pay a header per slice.
+    auto block_fits = [&](const IntervalStack& blk, const OctHierarchy& sub, uint32_t Kp, uint64_t bx, uint64_t by,
+                          uint64_t bw, uint64_t& size, uint64_t& cell) {
       const uint32_t r = Kp - B, da = g.xy_bits(Kp) - g.xy_bits(B), dw = g.w_bits(Kp) - g.w_bits(B);
       std::vector<size_t> cursor(sub.geo.depth() + 1, 0);
       size = 0;
       for (const OctNode& cr : sub.levels[r]) {
         if (!cr.child_mask) continue;
-        const uint64_t bytes = encode_octree(cell_subtree(sub, r, cr, 0.0f, cursor)).size();
-        if (bytes <= size) continue;
+        const OctHierarchy cs = cell_subtree(sub, r, cr, 0.0f, cursor);  // advances the cursor
         uint64_t x, y, w;
         oct_coords(sub.geo, r, cr.code, x, y, w);
+        uint64_t bytes = cells_ == StackCells::slices ? cell_slice_tiles(blk, g, Kp, B, x, y, w).size()
+                                                      : encode_octree(cs).size();
+        if (bytes > tile_bytes && cells_ == StackCells::smaller)
+          bytes = std::min<uint64_t>(bytes, cell_slice_tiles(blk, g, Kp, B, x, y, w).size());
+        if (bytes <= size) continue;
         size = bytes, cell = grid.index(Kp, (bx << da) + x, (by << da) + y, (bw << dw) + w);
       }
       return size <= tile_bytes;
@@ -263,7 +271,7 @@ void BlockedStackCut::run(const StackSpill& spill, uint32_t K, uint32_t tile_byt
             probing = true, need = K + 1;
           }
           uint64_t size = 0, cell = 0;
-          while (!block_fits(sub, need, bx, by, bw, size, cell)) {
+          while (!block_fits(blk, sub, need, bx, by, bw, size, cell)) {
             if (need + 1 >= L) throw too_big(cell, size);
             ++need;
           }

@@ -103,8 +103,7 @@ struct DeepTile {
 
 class CacheView {
  public:
-  // std::runtime_error: the Map is not open, or it is a stack pack with per-slice cells
-  // (feature stack_slice_tiles), whose cells the shipped GLSL does not walk.
+  // std::runtime_error: the Map is not open.
   explicit CacheView(const Map& map);
   ~CacheView();
   CacheView(const CacheView&) = delete;
