@@ -27,7 +27,8 @@
 //   gpu.wait(f, visibility);                          // its visibility image
 //
 // The Map's TileCache stays the one authority for LRU and allocation: before each
-// submission GpuMap compares every slot with what the device holds and uploads, through
+// submission GpuMap compares the slots that changed since the last one (the cache's change
+// journal: O(changes), not O(slots)) with what the device holds and uploads, through
 // a staging ring, only the slots that changed (at most upload_budget_bytes per frame; the
 // rest follow in later frames and answer coarsely meanwhile), and the page-table words
 // that point at them. Nothing is re-uploaded per frame. Uploads are recorded in the
