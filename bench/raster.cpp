@@ -16,7 +16,7 @@
 //                [--res 2k] [--encoding dagmh] [--tile-bytes 65536] [--width 1920] [--height 1080]
 //                [--reps 5] [--arriving 100] [--arrival-frames 10] [--device NAME]
 //                [--out bench-out/raster] [--json PATH] [--no-frame-path] [--no-ratio] [--no-r32f]
-//                [--region X,Y,W,H]
+//                [--region X,Y,W,H] [--scene-limits seconds=S,...]
 //
 // --region builds only a window of the map (finest texels; the rest lit): a 64K^2 map in
 // minutes; the camera then looks at the window. The R32F map (the finest level, 4^L floats)
@@ -45,6 +45,7 @@
 #include "server/catalog.hpp"
 #include "server/server.hpp"
 #include "tiles/bake/map_build.hpp"
+#include "tiles/bake/scene_limits.hpp"
 
 namespace {
 
@@ -58,6 +59,7 @@ struct Args {
   uint32_t tile_bytes = 64 * 1024, width = 1920, height = 1080, reps = 5, arriving = 100, arrival_frames = 10;
   bool frame_path = true, ratio = true, r32f = true;
   std::optional<TexelRegion> region;  // --region: a window of the map built (the rest constant, lit)
+  SceneLimits limits;                 // --scene-limits: the scene reader's (a loaded machine reads slowly)
 };
 
 Args parse(int argc, char** argv) {
@@ -82,6 +84,7 @@ Args parse(int argc, char** argv) {
     else if (k == "--out") a.out = next();
     else if (k == "--json") a.json = next();
     else if (k == "--no-frame-path") a.frame_path = false;
+    else if (k == "--scene-limits") a.limits = parse_scene_limits(next(), a.limits);
     else if (k == "--no-ratio") a.ratio = false;
     else if (k == "--no-r32f") a.r32f = false;
     else if (k == "--region") {
@@ -164,7 +167,7 @@ int main(int argc, char** argv) try {
   std::vector<std::string> ratio_lines, path_lines;
   std::string device;
   for (const std::string& spec : split_list(a.scenes)) {
-    const Scene scene = load_scene(spec);
+    const Scene scene = load_scene(spec, {}, a.limits);
     const LightSpace light = LightSpace::fit(LightSpec::parse(a.light), scene.bounds());
     const std::string name = short_name(spec) + "_" + side_name(level) + "_" + a.encoding + "_t" + std::to_string(a.tile_bytes) +
                              (a.region ? "_win" + std::to_string(a.region->w) : std::string());

@@ -2,8 +2,11 @@
 // tables copied into plain structs once, the slot diff under the cache's lock.
 #include "shadowtile/cache_view.hpp"
 
+#include <algorithm>
+#include <mutex>
 #include <stdexcept>
 
+#include "client/deep_part.hpp"
 #include "client/map_access.hpp"
 #include "client/remote_map.hpp"
 #include "tiles/core/dagmh_validate.hpp"
@@ -20,6 +23,17 @@ struct CacheView::Impl {
   std::vector<LightParams> stack_lights;
   StackTables stack;
   bool is_stack = false;
+  // changed_slots' place in the cache's change journal (tile_cache.hpp) for the consumer's
+  // `known` array it last served; slots that consumer left for later (visit false); and a
+  // scratch list of the slots to compare with a mark per slot (each compared once). Sized
+  // once: a call allocates nothing.
+  std::mutex journal_mu;
+  bool cursor_valid = false;
+  uint64_t cursor = 0;
+  const uint64_t* known_data = nullptr;
+  size_t known_size = 0;
+  std::vector<uint32_t> pending, scratch;
+  std::vector<uint8_t> marked;
 };
 
 CacheView::CacheView(const Map& map) : impl_(std::make_unique<Impl>()) {
@@ -31,10 +45,15 @@ CacheView::CacheView(const Map& map) : impl_(std::make_unique<Impl>()) {
   m.shape.finest_level = rm.header().map_level;
   m.shape.skip_level = rm.grid().levels;
   m.shape.encoding = uint32_t(rm.header().encoding);
+  uint64_t journal_capacity = 0;
   rm.inspect_cache([&](const TileCache& c) {
     m.shape.slot_count = c.slot_count();
     m.shape.slot_bytes = c.slot_bytes();
+    journal_capacity = c.journal_capacity();
   });
+  m.pending.reserve(m.shape.slot_count);
+  m.scratch.reserve(m.shape.slot_count + journal_capacity);
+  m.marked.assign(m.shape.slot_count, 0);
   m.skip_entries.reserve(rm.grid().entries.size());
   for (const GridEntry& e : rm.grid().entries) m.skip_entries.push_back({e.value, uint32_t(e.kind), e.index_levels});
   if (const StackGrid* g = rm.stack_grid()) {
@@ -95,24 +114,49 @@ bool CacheView::stack_tile_cell(uint64_t tile, uint64_t& cell) const {
 
 size_t CacheView::changed_slots_impl(std::span<uint64_t> known, void* visit,
                                      bool (*call)(void*, const SlotChange&)) const {
+  Impl& m = *impl_;
+  std::lock_guard guard(m.journal_mu);
   size_t n = 0;
-  impl_->rm->inspect_cache([&](const TileCache& c) {
+  m.rm->inspect_cache([&](const TileCache& c) {
     const uint32_t slots = std::min<uint32_t>(c.slot_count(), uint32_t(known.size()));
-    for (uint32_t s = 0; s < slots; ++s) {
+    auto compare = [&](uint32_t s) {
       const TileId t = c.slot_tile(s);
       uint64_t want = kNoTile;
       if (t != kInvalidTile) {
         const PageEntry pe = c.lookup(t);
         if (pe.state == PageState::resident && pe.slot == s) want = t;
       }
-      if (known[s] == want) continue;
+      if (known[s] == want) return;
       SlotChange ch;
       ch.slot = s;
       ch.tile = want;
       if (want != kNoTile) ch.bytes = c.tile_bytes(s);
       ++n;
       if (call(visit, ch)) known[s] = want;
+      else m.pending.push_back(s);  // left for later: compared again next call
+    };
+    // The journal serves the consumer it last served (the same `known`): the slots it
+    // left for later and those changed since, each once. Anything else compares every slot.
+    bool scan = !m.cursor_valid || known.data() != m.known_data || known.size() != m.known_size;
+    m.scratch.clear();
+    if (!scan) {
+      auto add = [&](uint32_t s) {
+        if (s < slots && !m.marked[s]) m.marked[s] = 1, m.scratch.push_back(s);
+      };
+      for (uint32_t s : m.pending) add(s);
+      scan = !c.changes_since(m.cursor, add);
     }
+    for (uint32_t s : m.scratch) m.marked[s] = 0;
+    m.pending.clear();
+    if (scan) {
+      for (uint32_t s = 0; s < slots; ++s) compare(s);
+    } else {
+      for (uint32_t s : m.scratch) compare(s);
+    }
+    m.cursor = c.journal_end();
+    m.cursor_valid = true;
+    m.known_data = known.data();
+    m.known_size = known.size();
   });
   return n;
 }
@@ -131,6 +175,31 @@ DeepShape CacheView::deep_tiles_impl(void* visit, void (*call)(void*, const Deep
   d->inspect([&](uint32_t level, uint32_t side_bits) { shape = {level, side_bits}; },
              [&](uint32_t tx, uint32_t ty, std::span<const uint8_t> bytes) { call(visit, DeepTile{tx, ty, bytes}); });
   return shape;
+}
+
+DeepShape CacheView::deep_directory_impl(void* visit, void (*call)(void*, std::span<const uint8_t>)) const {
+  DeepShape shape;
+  const DeepPart* d = impl_->rm->deep();
+  if (!d) return shape;
+  d->inspect_directory([&](uint32_t level, uint32_t side_bits, std::span<const uint8_t> bitmap) {
+    shape = {level, side_bits};
+    call(visit, bitmap);
+  });
+  return shape;
+}
+
+size_t CacheView::want_deep_tiles(std::span<const DeepWant> tiles) const {
+  const DeepPart* d = impl_->rm->deep();
+  if (!d) return 0;
+  constexpr size_t kChunk = 256;  // a frame's feedback, converted on the stack: no allocation
+  std::array<uint32_t, 2> buf[kChunk];
+  size_t queued = 0;
+  for (size_t i = 0; i < tiles.size(); i += kChunk) {
+    const size_t n = std::min(kChunk, tiles.size() - i);
+    for (size_t j = 0; j < n; ++j) buf[j] = {tiles[i + j].tx, tiles[i + j].ty};
+    queued += d->want(std::span<const std::array<uint32_t, 2>>(buf, n));
+  }
+  return queued;
 }
 
 std::array<float, 3> CacheView::deep_transmittance(double u, double v, float d, double width) const noexcept {

@@ -58,6 +58,20 @@ bool DeepPart::resident(double u0, double v0, double u1, double v1) const noexce
   return all;
 }
 
+size_t DeepPart::want(std::span<const std::array<uint32_t, 2>> tiles) const noexcept {
+  std::lock_guard lock(mu_);
+  if (!dir_) return 0;
+  const size_t before = want_.size();
+  const uint32_t t = dir_->tiles_per_side();
+  for (const auto& [tx, ty] : tiles) {
+    if (tx >= t || ty >= t || !dir_->has(tx, ty)) continue;
+    const uint64_t id = dir_->tile_id(tx, ty);
+    auto it = tiles_.find(id);
+    if (it == tiles_.end() || it->second.state == State::queued) want_locked(id);
+  }
+  return want_.size() - before;
+}
+
 size_t DeepPart::resident_tiles() const noexcept {
   std::lock_guard lock(mu_);
   return resident_;

@@ -62,6 +62,21 @@ class DeepPart {
       }
   }
 
+  // The directory's shape and bitmap (bit ty << (D - b) | tx, little-endian bytes: the
+  // tile exists) under the lock: shape(level, side_bits, bytes); false (no call) until the
+  // directory arrived. For a GPU mirror that feeds back only tiles that exist.
+  template <class Visit>
+  bool inspect_directory(Visit&& visit) const {
+    std::lock_guard lock(mu_);
+    if (!dir_) return false;
+    visit(dir_->level, dir_->side_bits, std::span<const uint8_t>(dir_->bitmap));
+    return true;
+  }
+  // Tiles (tx, ty) a GPU pass needed and found absent (its feedback): each the directory
+  // names that is not resident, on its way or given up is queued like a lookup miss (up
+  // to the want list's room). Returns how many were queued. Never blocks or allocates.
+  size_t want(std::span<const std::array<uint32_t, 2>> tiles) const noexcept;
+
   // ---- fetcher side (through RemoteMap) ----
   void take_wanted(size_t max, uint32_t request_id, std::vector<proto::TileRequest>& out);
   bool has_work() const;

@@ -11,6 +11,8 @@
 #include "gpu/layout.hpp"
 #include "tiles/core/deep_format.hpp"
 #include "tiles/core/light.hpp"
+#include "tiles/core/pack_format.hpp"
+#include "tiles/core/tile_cut_grid.hpp"
 
 namespace st::gpu {
 
@@ -59,45 +61,103 @@ void DeepMirror::init(uint32_t at, uint32_t words, uint32_t* page, const client:
   page[at + L::kDpCapacity] = pairs_;
 }
 
+uint32_t DeepMirror::key(uint32_t tx, uint32_t ty) const {
+  if (level_ == 0) return ~0u;
+  const uint32_t bits = level_ - side_bits_;
+  return tx >> bits || ty >> bits ? ~0u : (ty << bits) | tx;
+}
+
+uint64_t DeepMirror::tile_id(uint32_t tx, uint32_t ty) const {
+  return kDeepTileIdBit | make_tile_id(level_ - side_bits_, tx, ty);
+}
+
+bool DeepMirror::place(uint32_t words, uint32_t& off) {
+  uint32_t end = 0;  // of the tile before the gap
+  size_t i = 0;
+  for (; i < by_off_.size(); ++i) {
+    if (by_off_[i].off - end >= words) break;
+    end = by_off_[i].off + by_off_[i].words;
+  }
+  if (i == by_off_.size() && data_words_ - end < words) return false;
+  off = end;
+  by_off_.insert(by_off_.begin() + std::ptrdiff_t(i), Placed{0, off, words});
+  return true;
+}
+
 uint32_t DeepMirror::update(const client::CacheView& view, const std::function<void(uint32_t, uint32_t)>& set) {
-  const uint64_t g = view.deep_generation();
+  const uint64_t g = view.deep_generation();  // before reading: a later change shows next frame
   if (g == generation_) return count_;
   generation_ = g;
-  size_t n_tiles = 0;
-  uint32_t level = 0, side_bits = 0;
-  const client::DeepShape shape = view.deep_tiles([&](const client::DeepTile& t) {
-    if (n_tiles == tiles_.size()) tiles_.emplace_back();
-    Tile& d = tiles_[n_tiles++];
-    d.key = t.tx | t.ty << 16;  // rekeyed below, once the shape is known
-    d.words.assign((t.bytes.size() + 3) / 4, 0);
-    std::memcpy(d.words.data(), t.bytes.data(), t.bytes.size());  // little-endian words
-  });
-  level = shape.level, side_bits = shape.side_bits;
-  if (level == 0) n_tiles = 0;
-  for (size_t i = 0; i < n_tiles; ++i) {
-    const uint32_t tx = tiles_[i].key & 0xFFFFu, ty = tiles_[i].key >> 16;
-    tiles_[i].key = (ty << (level - side_bits)) | tx;
+  if (level_ == 0) {
+    // The directory, once (it never changes while the map is open): its bitmap at the start
+    // of the data words, so that the shader feeds back only tiles that exist.
+    uint32_t bitmap_words = 0;
+    const client::DeepShape shape = view.deep_directory([&](std::span<const uint8_t> bitmap) {
+      const uint32_t w = uint32_t((bitmap.size() + 3) / 4);
+      if (w > data_words_ / 2) return;  // no room: no deep feedback (the Map's own lookups fetch)
+      bitmap_words = w;
+      for (uint32_t i = 0; i < w; ++i) {
+        uint32_t v = 0;
+        for (uint32_t k = 0; k < 4 && 4 * size_t(i) + k < bitmap.size(); ++k) v |= uint32_t(bitmap[4 * i + k]) << (8 * k);
+        set(data_at_ + i, v);
+      }
+    });
+    if (shape.level != 0) {
+      level_ = shape.level, side_bits_ = shape.side_bits;
+      if (bitmap_words) {
+        set(at_ + L::kDpPresence, data_at_);
+        data_at_ += bitmap_words, data_words_ -= bitmap_words;
+      }
+    }
   }
-  std::sort(tiles_.begin(), tiles_.begin() + std::ptrdiff_t(n_tiles),
-            [](const Tile& a, const Tile& b) { return a.key < b.key; });
-  uint32_t n = 0, off = 0;
+  // Which tiles stay, which arrive (their bytes copied: valid only during the visit).
+  seen_.assign(placed_.size(), 0);
+  size_t n_in = 0;
+  if (level_ != 0)
+    view.deep_tiles([&](const client::DeepTile& t) {
+      const uint32_t k = key(t.tx, t.ty);
+      if (k == ~0u) return;
+      const auto it = std::lower_bound(placed_.begin(), placed_.end(), k, [](const Placed& p, uint32_t v) { return p.key < v; });
+      if (it != placed_.end() && it->key == k) {
+        seen_[size_t(it - placed_.begin())] = 1;
+        return;
+      }
+      if (n_in == incoming_.size()) incoming_.emplace_back();
+      Incoming& d = incoming_[n_in++];
+      d.key = k;
+      d.words.assign((t.bytes.size() + 3) / 4, 0);
+      std::memcpy(d.words.data(), t.bytes.data(), t.bytes.size());  // little-endian words
+    });
+  size_t kept = 0;
+  for (size_t i = 0; i < placed_.size(); ++i)
+    if (seen_[i]) placed_[kept++] = placed_[i];
+  placed_.resize(kept);
+  std::sort(incoming_.begin(), incoming_.begin() + std::ptrdiff_t(n_in),
+            [](const Incoming& a, const Incoming& b) { return a.key < b.key; });
+  by_off_.assign(placed_.begin(), placed_.end());
+  std::sort(by_off_.begin(), by_off_.end(), [](const Placed& a, const Placed& b) { return a.off < b.off; });
   dropped_ = 0;
-  for (size_t i = 0; i < n_tiles; ++i) {
-    const Tile& t = tiles_[i];
-    if (n == pairs_ || off + t.words.size() > data_words_) {
-      ++dropped_;
+  for (size_t i = 0; i < n_in; ++i) {
+    const Incoming& d = incoming_[i];
+    const uint32_t words = uint32_t(d.words.size());
+    uint32_t off = 0;
+    if (placed_.size() == pairs_ || !place(words, off)) {
+      ++dropped_;  // tried again at the next change
       continue;
     }
-    set(at_ + L::kDpHeaderWords + 2 * n, t.key);
-    set(at_ + L::kDpHeaderWords + 2 * n + 1, data_at_ + off);
-    for (size_t w = 0; w < t.words.size(); ++w) set(data_at_ + off + uint32_t(w), t.words[w]);
-    off += uint32_t(t.words.size());
-    ++n;
+    for (uint32_t w = 0; w < words; ++w) set(data_at_ + off + w, d.words[w]);
+    placed_.push_back({d.key, off, words});
   }
-  set(at_ + L::kDpLevel, level);
-  set(at_ + L::kDpSideBits, side_bits);
+  std::sort(placed_.begin(), placed_.end(), [](const Placed& a, const Placed& b) { return a.key < b.key; });
+  const uint32_t n = uint32_t(placed_.size());
+  for (uint32_t i = 0; i < n; ++i) {
+    set(at_ + L::kDpHeaderWords + 2 * i, placed_[i].key);
+    set(at_ + L::kDpHeaderWords + 2 * i + 1, data_at_ + placed_[i].off);
+  }
+  set(at_ + L::kDpLevel, level_);
+  set(at_ + L::kDpSideBits, side_bits_);
   set(at_ + L::kDpCount, n);
-  set(at_ + L::kDpDepthBias, std::bit_cast<uint32_t>(level ? deep_depth_bias(light_, level) : 0.0f));
+  set(at_ + L::kDpDepthBias, std::bit_cast<uint32_t>(level_ ? deep_depth_bias(light_, level_) : 0.0f));
   count_ = n;
   return n;
 }

@@ -3,11 +3,15 @@
 // mirrored into page-table words that shaders/st_deep.glsl reads. Internal to gpu/.
 //
 // The block has a fixed size, chosen when the page table is built (GpuOptions::deep_bytes):
-// a header, sorted (key, word offset) pairs and the tiles' words. Whenever the deep part's
-// resident set changes (CacheView::deep_generation), the block is laid out again, tiles in
-// key order while they fit (the rest answer 1, as tiles still on their way do on the CPU),
-// through the page table's word writer: only the 64-word blocks that changed travel, in the
-// frame's own upload, so a frame sees the block wholly before or wholly after the change.
+// a header, sorted (key, word offset) pairs, the directory's bitmap (once it arrived: the
+// shader feeds back only tiles that exist) and the tiles' words. Whenever the deep part's
+// resident set changes (CacheView::deep_generation), the block follows it: a tile keeps its
+// words where they are while it stays resident, a new tile takes the first gap that holds
+// it (one that fits nowhere answers 1, as tiles still on their way do on the CPU), and the
+// pairs are rewritten in key order. Every word goes through the page table's word writer,
+// which sends only the 64-word blocks that changed, in the frame's own upload, so a frame
+// sees the block wholly before or wholly after the change, and an arrival moves its own
+// words and a few pairs, not the block.
 #pragma once
 #include <cstdint>
 #include <functional>
@@ -35,16 +39,29 @@ class DeepMirror {
   uint32_t update(const client::CacheView& view, const std::function<void(uint32_t, uint32_t)>& set);
   uint32_t count() const { return count_; }      // deep tiles on the device
   uint32_t dropped() const { return dropped_; }  // resident tiles that did not fit, last layout
+  uint32_t level() const { return level_; }      // D, 0 until the directory arrived
+  // The feedback key of tile (tx, ty) (ty << (D - b) | tx), ~0u outside the grid or
+  // before the directory; its pack id (kDeepTileIdBit | make_tile_id(D - b, tx, ty)).
+  uint32_t key(uint32_t tx, uint32_t ty) const;
+  uint64_t tile_id(uint32_t tx, uint32_t ty) const;
 
  private:
-  struct Tile {
+  struct Placed {
+    uint32_t key = 0, off = 0, words = 0;  // off: from data_at_
+  };
+  struct Incoming {
     uint32_t key = 0;
     std::vector<uint32_t> words;
   };
+  bool place(uint32_t words, uint32_t& off);  // first fit in the data words (gaps_ in offset order)
   uint32_t at_ = 0, pairs_ = 0, data_at_ = 0, data_words_ = 0, count_ = 0, dropped_ = 0;
+  uint32_t level_ = 0, side_bits_ = 0;
   uint64_t generation_ = ~uint64_t(0);
   client::LightParams light_;
-  std::vector<Tile> tiles_;  // scratch of update (kept: no allocation once warm)
+  std::vector<Placed> placed_;      // on the device, by key
+  std::vector<uint8_t> seen_;       // per placed_: still resident (update's scratch)
+  std::vector<Incoming> incoming_;  // resident, not on the device yet (scratch; capacity kept)
+  std::vector<Placed> by_off_;      // placed_ by offset (place's scratch)
 };
 
 }  // namespace st::gpu

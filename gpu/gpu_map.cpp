@@ -148,6 +148,7 @@ struct GpuMap::Impl {
   TileSlotTable tile_slot;
   std::vector<VkBufferCopy> pool_copies, page_copies;
   std::vector<client::WantedTile> wanted;
+  std::vector<client::DeepWant> deep_wanted;
   std::vector<FeedbackTile> feedback;
   std::vector<float> answers;  // evaluate_deep's (unused) first word per query
   GpuStats totals;
@@ -323,6 +324,7 @@ struct GpuMap::Impl {
     pool_copies.reserve(slot_count);
     page_copies.reserve(dirty.size());
     wanted.reserve(opt.feedback_capacity);
+    deep_wanted.reserve(opt.feedback_capacity);
     feedback.reserve(opt.feedback_capacity);
   }
 
@@ -337,7 +339,7 @@ struct GpuMap::Impl {
     const uint64_t in_bytes = std::max<uint64_t>(uint64_t(opt.max_queries) * query_words * 4, uint64_t(opt.max_pixels) * 16);
     // A deep part's passes and queries write rgb after the answers: 4 floats each.
     const uint64_t out_bytes = uint64_t(std::max(opt.max_queries, opt.max_pixels)) * (deep_part ? 16 : 4);
-    const uint64_t fb_bytes = (L::kFbHeaderWords + uint64_t(opt.feedback_capacity) * (1 + L::kFbRecordWords)) * 4;
+    const uint64_t fb_bytes = (L::kFbHeaderWords + uint64_t(opt.feedback_capacity) * (2 + L::kFbRecordWords)) * 4;
     const uint64_t range = ctx->properties().limits.maxStorageBufferRange;
     if (in_bytes > range || out_bytes > range)
       throw GpuError("GpuMap: max_queries / max_pixels exceed device '" + ctx->device_name() + "' maxStorageBufferRange");
@@ -606,12 +608,16 @@ struct GpuMap::Impl {
     pool = ctx->make_buffer(pool_bytes, false);
     page = ctx->make_buffer(page_shadow.size() * 4, false);
     const uint64_t staging = opt.upload_budget_bytes + uint64_t(slot_words) * 4 + page_shadow.size() * 4;
-    const uint64_t fb_bytes = (L::kFbHeaderWords + uint64_t(opt.feedback_capacity) * (1 + L::kFbRecordWords)) * 4;
+    const uint64_t fb_bytes = (L::kFbHeaderWords + uint64_t(opt.feedback_capacity) * (2 + L::kFbRecordWords)) * 4;
     retired.reserve(opt.frames_in_flight);
     frames.resize(opt.frames_in_flight);
     for (Frame& f : frames) {
       f.staging = ctx->make_buffer(staging, true, 0, BufferUse::upload);
       f.feedback = ctx->make_buffer(fb_bytes, true, 0, BufferUse::readback);
+      // Empty, its capacity written, once: later frames' collect_feedback clears what each
+      // frame claimed on the host (no fill of the buffer over the bus each frame).
+      std::memset(f.feedback.mapped, 0, fb_bytes);
+      static_cast<uint32_t*>(f.feedback.mapped)[L::kFbCapacity] = opt.feedback_capacity;
     }
     // The pass: pool, page table, feedback, positions, normals (texelFetch through our
     // immutable nearest sampler), visibility (R32F storage image).
@@ -732,11 +738,9 @@ struct GpuMap::Impl {
       vk.CmdCopyBuffer(cmd, f.staging.buffer, pool.buffer, uint32_t(pool_copies.size()), pool_copies.data());
     if (!page_copies.empty())
       vk.CmdCopyBuffer(cmd, f.staging.buffer, page.buffer, uint32_t(page_copies.size()), page_copies.data());
-    // The frame's feedback set emptied on the device, its capacity word written.
-    const uint32_t cap = opt.feedback_capacity;
-    vk.CmdFillBuffer(cmd, f.feedback.buffer, 0, L::kFbCapacity * 4, 0);
-    vk.CmdUpdateBuffer(cmd, f.feedback.buffer, L::kFbCapacity * 4, 4, &cap);
-    vk.CmdFillBuffer(cmd, f.feedback.buffer, (L::kFbCapacity + 1) * 4, VK_WHOLE_SIZE, 0);
+    // The frame's feedback set is empty already: collect_feedback cleared it on the host
+    // when the frame that last used the ring slot retired (host-coherent memory, written
+    // before the engine submits this frame).
     barrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT, shader_stages,
             VK_ACCESS_SHADER_READ_BIT | VK_ACCESS_SHADER_WRITE_BIT);
     f.in_flight = true;
@@ -866,18 +870,32 @@ struct GpuMap::Impl {
     fs.absent_taps = fb[L::kFbAbsentTaps];
     fs.feedback_dropped = fb[L::kFbDropped];
     wanted.clear();
+    deep_wanted.clear();
     feedback.clear();
     const uint32_t cap = opt.feedback_capacity;
-    uint32_t claimed = 0;
-    // A frame that claimed no key (kFbUsed == 0: every tile it read was resident) reads
-    // the header alone: the steady state moves no key array over the bus.
-    const bool any = fb[L::kFbUsed] != 0 || fs.feedback_dropped != 0;
-    for (uint32_t h = 0; any && h < cap; ++h) {
+    // The keys this frame claimed, listed in claim order (st_feedback): a frame that
+    // claimed none (every tile it read was resident) reads the header alone.
+    auto* fbw = static_cast<uint32_t*>(f.feedback.mapped);
+    const uint32_t claimed = std::min(fb[L::kFbUsed], cap);
+    const uint32_t* list = fb + L::kFbHeaderWords + size_t(cap) * (1 + L::kFbRecordWords);
+    for (uint32_t i = 0; i < claimed; ++i) {
+      const uint32_t h = list[i] & (cap - 1);
       const uint32_t key = fb[L::kFbHeaderWords + h];
-      if (key == 0) continue;
-      ++claimed;
-      const uint32_t* rec = fb + L::kFbHeaderWords + cap + size_t(h) * L::kFbRecordWords;
+      uint32_t* rec = fbw + L::kFbHeaderWords + cap + size_t(h) * L::kFbRecordWords;
       const uint32_t level = rec[L::kFbRecLevel], x = rec[L::kFbRecX], y = rec[L::kFbRecY];
+      const uint32_t value_bits = rec[L::kFbRecValue], kind_word = rec[L::kFbRecKind], count = rec[L::kFbRecCount];
+      // Cleared for the ring slot's next frame, here on the host: nothing else to empty.
+      fbw[L::kFbHeaderWords + h] = 0;
+      std::fill(rec, rec + L::kFbRecordWords, 0u);
+      if (key == 0) continue;
+      if (deep_part && (key & (L::kFbChildKeyBit | L::kFbDeepKeyBit)) == L::kFbDeepKeyBit) {
+        // An absent deep tile (st_deep.glsl): asked of the Map's deep part, not its cache.
+        const client::DeepWant dw{x, y};
+        if (level != deep.level() || (key & ~L::kFbDeepKeyBit) != deep.key(dw.tx, dw.ty)) continue;
+        deep_wanted.push_back(dw);
+        feedback.push_back({deep.tile_id(dw.tx, dw.ty), count});
+        continue;
+      }
       client::WantedTile w;
       if (sg) {  // an absent stack cell: kFbStackKeyBit | cell
         const uint32_t cell = key & ~L::kFbStackKeyBit;
@@ -887,18 +905,21 @@ struct GpuMap::Impl {
         if (level > map_level || (x >> level) != 0 || (y >> level) != 0) continue;
         w.tile = make_tile_id(level, x, y);
       }
-      w.entry.value = std::bit_cast<float>(rec[L::kFbRecValue]);
-      w.entry.kind = rec[L::kFbRecKind] & 0xFFu;
-      w.entry.index_levels = (rec[L::kFbRecKind] >> 8) & 0xFFu;
-      w.priority = uint16_t(std::clamp<uint32_t>(rec[L::kFbRecCount], 1, 65535));
+      w.entry.value = std::bit_cast<float>(value_bits);
+      w.entry.kind = kind_word & 0xFFu;
+      w.entry.index_levels = (kind_word >> 8) & 0xFFu;
+      w.priority = uint16_t(std::clamp<uint32_t>(count, 1, 65535));
       wanted.push_back(w);
-      feedback.push_back({w.tile, rec[L::kFbRecCount]});
+      feedback.push_back({w.tile, count});
     }
-    fs.feedback_tiles = uint32_t(wanted.size());
-    // What the host read of the feedback buffer: its header, the key array, the claimed records.
-    fs.feedback_bytes = (uint64_t(L::kFbHeaderWords) + (any ? cap : 0) + uint64_t(claimed) * L::kFbRecordWords) * 4;
+    fbw[L::kFbUsed] = fbw[L::kFbDropped] = fbw[L::kFbHoles] = fbw[L::kFbAbsentTaps] = 0;
+    fs.feedback_tiles = uint32_t(wanted.size() + deep_wanted.size());
+    fs.deep_wanted = uint32_t(deep_wanted.size());
+    // What the feedback moved: its header and, per claimed key, its list entry, key and record.
+    fs.feedback_bytes = (uint64_t(L::kFbHeaderWords) + uint64_t(claimed) * (2 + L::kFbRecordWords)) * 4;
     totals.feedback_bytes += fs.feedback_bytes;
     fs.requested = uint32_t(view->want_tiles(wanted));
+    if (!deep_wanted.empty()) fs.requested += uint32_t(view->want_deep_tiles(deep_wanted));
     if (queries && !engine) {
       uint64_t ts[2] = {0, 0};
       const uint32_t q = uint32_t(&f - frames.data()) * 2;

@@ -93,5 +93,9 @@ static_assert(sizeof(GpuStackQuery) == layout::kSqWords * 4 && offsetof(GpuStack
 static_assert(layout::kPcSliceA >= layout::kPcOrigin && layout::kPcTimeWeight < layout::kPcNear &&
               layout::kPcTimeWeight < layout::kPcWords);
 static_assert((layout::kFbStackKeyBit & layout::kFbChildKeyBit) == 0 && layout::kMaxStackCells <= layout::kFbStackKeyBit);
+// A deep key's grid index has 2 (D - b) <= 20 bits (deep::kMaxTilesPerSideBits): below the bit.
+static_assert(((layout::kFbChildKeyBit | layout::kFbStackKeyBit) & layout::kFbDeepKeyBit) == 0 &&
+              (uint64_t(1) << 20) <= layout::kFbDeepKeyBit);
+static_assert(layout::kDpPresence < layout::kDpHeaderWords && layout::kDpPresence != layout::kDpDepthBias);
 
 }  // namespace st::gpu

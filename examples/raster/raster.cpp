@@ -790,9 +790,8 @@ struct Rasterizer::Impl {
     check(vkResetFences(dev.device, 1, &fences[s]), "vkResetFences");
     check(vkResetCommandBuffer(cmd, 0), "vkResetCommandBuffer");
     // Partial occluders (a pack's deep part): the fragment shader multiplies their
-    // transmittance in (st_transmittance); deep tiles come through the Map, not the GPU's
-    // feedback (which names opaque tiles only), so the whole deep map stays asked for.
-    if (map.has_deep()) map.deep_resident(0, 0, 0.999999, 0.999999);
+    // transmittance in (st_transmittance) and feeds back the deep tiles it lacked, as it
+    // does opaque ones: nothing to ask for here.
     VkCommandBufferBeginInfo bi{};
     bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
     bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;

@@ -106,7 +106,6 @@ void main() {
     const uint lb = st_light_block(0u);
     if (lb != 0u) vis = r32f_shadow(st_light_uvd(lb, st_receiver(world_position, n, offset)), kernel);
   }
-  st_finish(probe);
 #ifdef RASTER_TWIN
   out_receiver = vec4(st_receiver(world_position, n, offset), lambert > 0.0 && push.mode.x == 1u ? footprint : -1.0);
   out_visibility = vis;
@@ -115,9 +114,10 @@ void main() {
   // visibility times the partial occluders' transmittance (shadowtile.glsl).
   vec3 light = vec3(vis);
   if (lambert > 0.0 && push.mode.x == 1u && st_slices() == 0u) {
-    precise vec3 lit = vis * st_transmittance(world_position, footprint, kernel);
+    precise vec3 lit = vis * st_transmittance(world_position, footprint, kernel, probe);  // feeds back deep tiles
     light = lit;
   }
+  st_finish(probe);
   const vec3 albedo = vec3(0.8, 0.78, 0.72);
   const vec3 c = albedo * (0.15 + 0.85 * lambert * light);
   colour = vec4(pow(c, vec3(1.0 / 2.2)), 1.0);

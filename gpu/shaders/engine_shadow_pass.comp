@@ -70,7 +70,7 @@ void main() {
   if (st_slices() == 0u) {
     answer = slice_visibility(0u, q, r, probe, footprint);
 #ifdef ST_PASS_LIGHT
-    t = st_transmittance(texelFetch(st_positions, q, 0).xyz, footprint, pc.w[kPcKernel]);
+    t = st_transmittance(texelFetch(st_positions, q, 0).xyz, footprint, pc.w[kPcKernel], probe);
 #endif
   } else {
     st_oct_path_reset((pc.w[kPcFlags] & kFlagResumeWalks) != 0u);

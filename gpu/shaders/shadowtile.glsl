@@ -36,8 +36,8 @@
 // absent tile a call needed lands in the frame's feedback buffer
 // (GpuMap reads it back when the frame retires and queues the tiles on the Map); it needs
 // a stage with storage-buffer writes (fragmentStoresAndAtomics for fragment shaders).
-// Deep tiles are not fed back: the Map fetches those its CPU lookups and deep_resident ask
-// for. No workgroup size is assumed: the engine declares its own local_size.
+// Deep tiles are fed back likewise (the tiles of partial occluders a lookup needed; pass the
+// probe to st_transmittance). No workgroup size is assumed: the engine declares its own local_size.
 #ifndef SHADOWTILE_GLSL
 #define SHADOWTILE_GLSL
 #extension GL_GOOGLE_include_directive : require
@@ -167,15 +167,19 @@ float st_visibility(vec3 world_position, vec3 normal, float normal_offset, float
 
 // The deep part's transmittance per channel at a world position (the surface point, no
 // normal offset: st_deep_shadow); 1 for a map without a deep part, a stack map, or with
-// ST_DEEP_SHADOWS 0.
-vec3 st_transmittance(vec3 world_position, float footprint, uint kernel) {
+// ST_DEEP_SHADOWS 0. An absent deep tile is fed back and marks the probe's hole.
+vec3 st_transmittance(vec3 world_position, float footprint, uint kernel, inout StProbe probe) {
 #if ST_DEEP_SHADOWS
   const uint lb = st_light_block(0u);
   if (lb == 0u || ST_PAGE(kPtStack) != 0u || ST_PAGE(kPtDeep) == 0u) return vec3(1.0);
-  return st_deep_shadow(st_light_uvd(lb, world_position), footprint, kernel);
+  return st_deep_shadow(st_light_uvd(lb, world_position), footprint, kernel, probe);
 #else
   return vec3(1.0);
 #endif
+}
+vec3 st_transmittance(vec3 world_position, float footprint, uint kernel) {
+  StProbe probe = st_probe();
+  return st_transmittance(world_position, footprint, kernel, probe);
 }
 
 // The light reaching a world position per channel (2D maps; on a stack map slice 0):
@@ -183,7 +187,7 @@ vec3 st_transmittance(vec3 world_position, float footprint, uint kernel) {
 vec3 st_shadow(vec3 world_position, vec3 normal, float normal_offset, float footprint, uint kernel,
                inout StProbe probe) {
   const float vis = st_visibility(world_position, normal, normal_offset, footprint, kernel, probe);
-  precise vec3 light = vis * st_transmittance(world_position, footprint, kernel);
+  precise vec3 light = vis * st_transmittance(world_position, footprint, kernel, probe);
   return light;
 }
 

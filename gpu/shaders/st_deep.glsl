@@ -4,9 +4,14 @@
 // DeepMap / the client's DeepPart, tiles/core/deep_tile.cpp) for the same tiles
 // (GPU_LAYOUT.md "The deep block" and "Exactness").
 //
-// Include after st_layout.h with ST_PAGE(i) defined (the page table: the block sits at
-// word kPtDeep), or define ST_DEEP(i) as word i of another buffer holding a deep block.
-// Functions:
+// Include after st_layout.h and st_eval.glsl (StProbe, st_feedback) with ST_PAGE(i) defined
+// (the page table: the block sits at word kPtDeep), or define ST_DEEP(i) as word i of
+// another buffer holding a deep block.
+// Feedback: a lookup whose deep tile the directory names (the block's presence bitmap) but
+// the device does not hold records the tile in the frame's feedback (key kFbDeepKeyBit |
+// ty << (D - b) | tx), as an absent opaque tile is, and marks the probe's hole; GpuMap
+// asks the Map for it. The forms without a probe feed back too (a probe of their own).
+// Functions (each also with a trailing `inout StProbe probe`):
 //   st_deep_level()                          D, 0 when the map has no deep part (yet)
 //   st_deep_transmittance(u, v, d, width)    at map coordinates (u, v) in [0, 1) and
 //                                            light-space depth d, over a footprint `width`
@@ -89,6 +94,14 @@ uint st_deep_level() {
   return blk == 0u ? 0u : ST_DEEP(blk + kDpLevel);
 }
 
+// Tile (tx, ty) (grid index i) has no words on the device: when the directory names it,
+// into the feedback (GpuMap fetches it), and the probe has a hole.
+void st_deep_absent(uint blk, uint i, uint level, uint tx, uint ty, inout StProbe probe) {
+  const uint pres = ST_DEEP(blk + kDpPresence);
+  if (pres == 0u || (ST_DEEP(pres + (i >> 5u)) & (1u << (i & 31u))) == 0u) return;  // no partial occluder there
+  st_feedback(kFbDeepKeyBit | i, level, tx, ty, 0u, 0u, probe);
+}
+
 // The word of the deep tile (tx, ty) on the device, or kNoSlot (no partial occluder over
 // it, or not on the device): a binary search of the block's sorted keys.
 uint st_deep_tile_base(uint blk, uint tx, uint ty) {
@@ -128,7 +141,7 @@ vec3 st_deep_blend4(vec3 a, vec3 b, vec3 c, vec3 d, float fx, float fy) {
   return r;
 }
 
-vec3 st_deep_transmittance(float u, float v, float d, float width) {
+vec3 st_deep_transmittance(float u, float v, float d, float width, inout StProbe probe) {
   const uint blk = ST_PAGE(kPtDeep);
   if (blk == 0u) return vec3(1.0);
   const uint level = ST_DEEP(blk + kDpLevel);
@@ -141,7 +154,10 @@ vec3 st_deep_transmittance(float u, float v, float d, float width) {
   precise float pu = u * tf, pv = v * tf;
   const uint tx = min(uint(pu), t - 1u), ty = min(uint(pv), t - 1u);
   const uint base = st_deep_tile_base(blk, tx, ty);
-  if (base == kNoSlot) return vec3(1.0);
+  if (base == kNoSlot) {
+    st_deep_absent(blk, (ty << (level - b)) | tx, level, tx, ty, probe);
+    return vec3(1.0);
+  }
   precise float lu = pu - float(tx), lv = pv - float(ty);  // tile-local, exact
   const uint s = 1u << b;
   // The taps (directory indices): the texel under (u, v) (width 0), or four at mip m0 and,
@@ -195,7 +211,12 @@ vec3 st_deep_transmittance(float u, float v, float d, float width) {
   return r;
 }
 
-vec3 st_deep_shadow(vec3 uvd, float footprint, uint kernel) {
+vec3 st_deep_transmittance(float u, float v, float d, float width) {
+  StProbe probe = st_probe();
+  return st_deep_transmittance(u, v, d, width, probe);
+}
+
+vec3 st_deep_shadow(vec3 uvd, float footprint, uint kernel, inout StProbe probe) {
   const uint blk = ST_PAGE(kPtDeep);
   if (blk == 0u) return vec3(1.0);
   precise float d = uvd.z - uintBitsToFloat(ST_DEEP(blk + kDpDepthBias));
@@ -205,7 +226,12 @@ vec3 st_deep_shadow(vec3 uvd, float footprint, uint kernel) {
     precise float w = texels * uintBitsToFloat((127u - ST_PAGE(kPtMapLevel)) << 23u);  // * 2^-L, exact
     width = w;
   }
-  return st_deep_transmittance(uvd.x, uvd.y, d, width);
+  return st_deep_transmittance(uvd.x, uvd.y, d, width, probe);
+}
+
+vec3 st_deep_shadow(vec3 uvd, float footprint, uint kernel) {
+  StProbe probe = st_probe();
+  return st_deep_shadow(uvd, footprint, kernel, probe);
 }
 
 #endif

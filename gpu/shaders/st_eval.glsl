@@ -58,8 +58,9 @@ void st_feedback(uint key, uint level, uint ex, uint ey, uint value_bits, uint k
   for (uint i = 0u; i < kFbMaxProbes; ++i) {
     const uint old = atomicCompSwap(ST_FB(kFbHeaderWords + h), 0u, key);
     const uint rec = kFbHeaderWords + cap + h * kFbRecordWords;
-    if (old == 0u) {  // this invocation claimed the key: it writes the record
-      atomicAdd(ST_FB(kFbUsed), 1u);
+    if (old == 0u) {  // this invocation claimed the key: it lists it and writes the record
+      const uint n = atomicAdd(ST_FB(kFbUsed), 1u);  // < cap: one claim per empty key word
+      ST_FB(kFbHeaderWords + cap * (1u + kFbRecordWords) + n) = h;
       ST_FB(rec + kFbRecLevel) = level;
       ST_FB(rec + kFbRecX) = ex;
       ST_FB(rec + kFbRecY) = ey;

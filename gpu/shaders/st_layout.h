@@ -125,8 +125,10 @@ ST_UINT(kQueryLevel, 5u)      // explicit level, or kLevelFromFootprint
 ST_UINT(kLevelFromFootprint, 0xFFFFFFFFu)
 
 // ---- feedback buffer (binding kBindFeedback) ----
-// header words, then kFbCapacity keys (0 = empty; a hash set), then one record per key.
-ST_UINT(kFbUsed, 0u)        // keys claimed
+// header words, then kFbCapacity keys (0 = empty; a hash set), then one record per key,
+// then the claimed keys' positions in claim order (kFbUsed of them): the host reads and
+// clears only what a frame claimed.
+ST_UINT(kFbUsed, 0u)        // keys claimed (and positions listed)
 ST_UINT(kFbDropped, 1u)     // absent tiles that found no room (set full or probes exhausted)
 ST_UINT(kFbHoles, 2u)       // queries/pixels answered from a coarser level
 ST_UINT(kFbAbsentTaps, 3u)  // taps answered from a coarser level
@@ -145,6 +147,9 @@ ST_UINT(kFbMaxProbes, 32u)
 ST_UINT(kFbChildKeyBit, 0x80000000u)
 // A stack map's absent cell c -> kFbStackKeyBit | c (record: level K, x c, y 0).
 ST_UINT(kFbStackKeyBit, 0x40000000u)
+// An absent deep tile (tx, ty) of a deep map of level D, tiles 2^b a side ->
+// kFbDeepKeyBit | ty << (D - b) | tx (record: level D, x tx, y ty, value 0, kind 0).
+ST_UINT(kFbDeepKeyBit, 0x20000000u)
 
 // ---- push constants (words) ----
 ST_UINT(kPcCount, 0u)       // evaluate: queries; shadow pass: width
@@ -177,6 +182,8 @@ ST_UINT(kDpSideBits, 1u)        // b: deep tiles are 2^b texels a side
 ST_UINT(kDpCount, 2u)           // tiles on the device (pairs used)
 ST_UINT(kDpCapacity, 3u)        // pairs reserved
 ST_UINT(kDpDepthBias, 4u)       // f32: the lookup point's move toward the light, in light-space depth
+ST_UINT(kDpPresence, 5u)        // page word of the directory's bitmap (bit ty << (D - b) | tx: the tile
+                                // exists), for feedback of absent deep tiles; 0: none (no deep feedback)
 ST_UINT(kDpHeaderWords, 8u)
 ST_UINT(kDeepQuery, 0xFFFFFFFEu)  // evaluate: kQueryR of a deep query (u, v, depth, width: GpuDeepQuery)
 // A deep tile's own words (deep_format.hpp): a 12-word header, then 2 directory words per texel.

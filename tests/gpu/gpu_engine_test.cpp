@@ -143,10 +143,10 @@ std::map<uint64_t, uint32_t> absent_tiles(const client::Map& map, const std::vec
   return want;
 }
 
-// What retire() reads of a frame's feedback: the header, and the key array and the claimed
-// records only when the frame claimed a key.
-uint64_t feedback_bytes(uint32_t capacity, uint32_t tiles) {
-  return (uint64_t(layout::kFbHeaderWords) + (tiles ? capacity : 0) + uint64_t(tiles) * layout::kFbRecordWords) * 4;
+// What retire() reads of a frame's feedback: the header and, per claimed key, its list
+// entry, key and record (never the whole key array).
+uint64_t feedback_bytes(uint32_t tiles) {
+  return (uint64_t(layout::kFbHeaderWords) + uint64_t(tiles) * (2 + layout::kFbRecordWords)) * 4;
 }
 
 
@@ -280,7 +280,7 @@ TEST(GpuEngine, ShadowPassOverTheEnginesImagesEqualsTheOwnDevicePassAndTheCpuTwi
         EXPECT_EQ(fs.holes, ofs.holes);
         EXPECT_EQ(fs.feedback_dropped, 0u);
         // Per frame: tile + page-table bytes up, the feedback read back, nothing else.
-        EXPECT_EQ(fs.feedback_bytes, feedback_bytes(o.feedback_capacity, fs.feedback_tiles));
+        EXPECT_EQ(fs.feedback_bytes, feedback_bytes(fs.feedback_tiles));
         EXPECT_EQ(fs.host_io_bytes, 0u);
         EXPECT_EQ(ofs.host_io_bytes, uint64_t(plane.width) * plane.height * (16 + 16 + 4));  // own mode: G-buffer in, out
       }
@@ -355,7 +355,7 @@ TEST(GpuEngine, FramesInFlightWithAChurningCacheNeverStallAndMoveOnlyTilePageAnd
     EXPECT_TRUE(fs.tile_bytes <= o.upload_budget_bytes || fs.slots_uploaded == 1) << fs.tile_bytes;
     EXPECT_EQ(fs.bytes_uploaded, fs.tile_bytes + fs.page_bytes);
     if (fs.feedback_dropped == 0) {
-      EXPECT_EQ(fs.feedback_bytes, feedback_bytes(o.feedback_capacity, fs.feedback_tiles));
+      EXPECT_EQ(fs.feedback_bytes, feedback_bytes(fs.feedback_tiles));
     }
     EXPECT_EQ(fs.host_io_bytes, 0u);
     tiles += fs.slots_uploaded;

@@ -96,6 +96,8 @@ TEST(GpuLayout, DeepBlockWordsAreWhereTheDrawingPutsThem) {
   EXPECT_EQ(L::kDpCount, 2u);
   EXPECT_EQ(L::kDpCapacity, 3u);
   EXPECT_EQ(L::kDpDepthBias, 4u);
+  EXPECT_EQ(L::kDpPresence, 5u);
+  EXPECT_EQ(L::kFbDeepKeyBit, 0x20000000u);
   EXPECT_EQ(L::kDpHeaderWords, 8u);
   EXPECT_EQ(L::kDeepQuery, 0xFFFFFFFEu);
   EXPECT_EQ(L::kDtTexelCount, 5u);

@@ -1,6 +1,8 @@
 #include "common/hash.hpp"
 #include "tiles/core/tile_cache.hpp"
 
+#include <algorithm>
+#include <bit>
 #include <cassert>
 #include <cstring>
 #include <string>
@@ -28,6 +30,7 @@ TileCache::TileCache(uint32_t slot_count, uint32_t slot_bytes)
   // Free list in ascending slot order, so an empty cache fills slots 0, 1, 2, ...
   for (uint32_t s = slot_count; s-- > 0;) free_push(s);
   table_.resize(kInitialBuckets);
+  journal_.assign(std::bit_ceil(std::max<uint64_t>(slot_count, 64)), kNoSlot);
 }
 
 std::span<const uint8_t> TileCache::tile_bytes(uint32_t slot) const {
@@ -88,7 +91,10 @@ void TileCache::drop_slot(uint32_t s) {
   assert(n.state != SlotState::free);
   if (n.on_lru) lru_unlink(s);
   if (n.pins > 0) --pinned_count_;
-  if (n.state == SlotState::resident) --resident_count_;
+  if (n.state == SlotState::resident) {
+    --resident_count_;
+    journal(s);  // its tile leaves the pool (a filling slot never held a resident tile)
+  }
   // Zero the used bytes so a slot's unused tail is always zero (deterministic uploads).
   std::memset(pool_.data() + slot_offset(s), 0, n.used);
   n.used = 0;
@@ -250,6 +256,7 @@ bool TileCache::commit(uint32_t slot, uint32_t used_bytes) {
   PageEntry& e = upsert(n.tile);
   e = PageEntry{PageState::resident, slot, 0};
   ++inserts_;
+  journal(slot);
   unpin(slot);
   return true;
 }

@@ -29,6 +29,14 @@
 // removes a slot from the list, so eviction (taking the list's tail) is O(1) and never
 // touches a pinned slot. When every slot is pinned, reserve() throws CacheFullError.
 //
+// Change journal: every time a slot's resident tile changes (a commit makes it resident,
+// an eviction, drop or abort frees it), the slot's index is appended to a ring of
+// journal_capacity() entries, numbered by a count that only grows (journal_end()). A
+// mirror of the pool (the GPU's, client::CacheView) remembers the count it last read and
+// visits only the slots named since: O(changes), not O(slots). A slot may be named more
+// than once; a reader more than journal_capacity() changes behind has lost its place and
+// compares every slot instead (no dearer then: the capacity is at least slot_count).
+//
 // Thread safety: none. The owner (RemoteMap, PackEvaluator) serializes access with its mutex.
 #pragma once
 #include <cstdint>
@@ -129,6 +137,21 @@ class TileCache {
 
   CacheStats stats() const;
 
+  // ---- the change journal (see the top of the file) ----
+  // Changes recorded so far: the journal's end.
+  uint64_t journal_end() const { return journal_end_; }
+  uint64_t journal_capacity() const { return journal_.size(); }
+  // Calls fn(slot) for each change in [from, journal_end()), oldest first, and returns
+  // true; returns false (calling nothing) when the ring no longer holds them all
+  // (from + journal_capacity() < journal_end()) or from is past the end.
+  template <class Fn>
+  bool changes_since(uint64_t from, Fn&& fn) const {
+    if (from > journal_end_ || journal_end_ - from > journal_.size()) return false;
+    const uint64_t mask = journal_.size() - 1;
+    for (uint64_t i = from; i < journal_end_; ++i) fn(journal_[i & mask]);
+    return true;
+  }
+
  private:
   enum class SlotState : uint8_t { free, filling, resident };
   struct Slot {
@@ -148,6 +171,7 @@ class TileCache {
   void free_push(uint32_t s);
   uint32_t free_pop();
   void drop_slot(uint32_t s);  // resident/filling -> free, clears bytes
+  void journal(uint32_t s) { journal_[journal_end_++ & (journal_.size() - 1)] = s; }
 
   size_t find_bucket(TileId key) const noexcept;  // bucket index or npos
   PageEntry& upsert(TileId key);
@@ -165,6 +189,9 @@ class TileCache {
   size_t table_used_ = 0;
 
   uint64_t hits_ = 0, misses_ = 0, evictions_ = 0, inserts_ = 0;
+
+  std::vector<uint32_t> journal_;  // power-of-two ring of changed slots, >= slot_count_
+  uint64_t journal_end_ = 0;
 };
 
 }  // namespace st

@@ -7,7 +7,8 @@
 //
 // Lifetime: the view holds the Map open; every span it returns stays valid and unchanged
 // for the view's life (the tables are immutable once the map is open). Thread safety:
-// like Map, any thread; changed_slots holds the cache's lock while it calls its visitor
+// like Map, any thread (changed_slots calls are serialized per view); changed_slots holds
+// the cache's lock shared while it calls its visitor
 // (keep the visitor short: copy bytes, update the consumer's state, nothing that calls
 // back into the Map). Errors: the constructor throws std::runtime_error for a Map that
 // is not open; nothing else throws but std::bad_alloc.
@@ -101,6 +102,11 @@ struct DeepTile {
   std::span<const uint8_t> bytes;
 };
 
+// A deep tile a consumer needed and did not have (its feedback): its place in the grid.
+struct DeepWant {
+  uint32_t tx = 0, ty = 0;
+};
+
 class CacheView {
  public:
   // std::runtime_error: the Map is not open.
@@ -122,10 +128,16 @@ class CacheView {
   bool stack_tile_cell(uint64_t tile, uint64_t& cell) const;
 
   // Calls visit(change) for every slot s whose resident tile differs from known[s]
-  // (known.size() == slot_count; kNoTile for empty), in slot order, under the cache's
-  // lock. When visit returns true the consumer took the change and known[s] becomes its
-  // tile; false leaves known[s] as it was (the slot comes again next time: an upload
-  // budget). Returns the changes visited.
+  // (known.size() == slot_count; kNoTile for empty), each once, under the cache's lock
+  // (taken shared: lookups go on). When visit returns true the consumer took the change
+  // and known[s] becomes its tile; false leaves known[s] as it was (the slot comes again
+  // next time: an upload budget). Returns the changes visited.
+  // Cost: O(slots changed since the last call), not O(slots): the view follows the cache's
+  // change journal for the `known` array it last served, so one view serves one consumer,
+  // whose `known` changes only through this call. The first call, a different array (by
+  // address or size), or a call so late that the journal overran (more changes than about
+  // slot_count) compares every slot, in slot order; otherwise slots come in the order they
+  // changed. Allocates nothing.
   template <class Visit>
   size_t changed_slots(std::span<uint64_t> known, Visit&& visit) const {
     return changed_slots_impl(known, &visit, [](void* v, const SlotChange& c) { return (*static_cast<Visit*>(v))(c); });
@@ -143,6 +155,17 @@ class CacheView {
   DeepShape deep_tiles(Visit&& visit) const {
     return deep_tiles_impl(&visit, [](void* v, const DeepTile& t) { (*static_cast<Visit*>(v))(t); });
   }
+  // Calls visit(std::span<const uint8_t> bitmap) with the deep directory's bitmap under
+  // the deep part's lock (bit ty << (D - b) | tx of the little-endian bytes: a deep tile
+  // exists there; valid only during the call). Returns the shape; level 0 (directory not
+  // known yet, or no deep part): no call. A mirror feeds back only tiles that exist.
+  template <class Visit>
+  DeepShape deep_directory(Visit&& visit) const {
+    return deep_directory_impl(&visit, [](void* v, std::span<const uint8_t> b) { (*static_cast<Visit*>(v))(b); });
+  }
+  // Queues deep tiles the consumer needed (GPU feedback): those the directory names that
+  // are neither resident nor on their way. Returns how many were queued. Never blocks.
+  size_t want_deep_tiles(std::span<const DeepWant> tiles) const;
   // The CPU's own deep lookup (Map::transmittance / transmittance_filtered after their
   // light transform), for consumers that compare against it: per-channel transmittance at
   // light-space (u, v) in [0, 1) and depth d, over a footprint `width` map units wide (0:
@@ -156,6 +179,7 @@ class CacheView {
  private:
   size_t changed_slots_impl(std::span<uint64_t> known, void* visit, bool (*call)(void*, const SlotChange&)) const;
   DeepShape deep_tiles_impl(void* visit, void (*call)(void*, const DeepTile&)) const;
+  DeepShape deep_directory_impl(void* visit, void (*call)(void*, std::span<const uint8_t>)) const;
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

@@ -27,7 +27,8 @@
 //   gpu.wait(f, visibility);                          // its visibility image
 //
 // The Map's TileCache stays the one authority for LRU and allocation: before each
-// submission GpuMap compares every slot with what the device holds and uploads, through
+// submission GpuMap compares the slots that changed since the last one (the cache's change
+// journal: O(changes), not O(slots)) with what the device holds and uploads, through
 // a staging ring, only the slots that changed (at most upload_budget_bytes per frame; the
 // rest follow in later frames and answer coarsely meanwhile), and the page-table words
 // that point at them. Nothing is re-uploaded per frame. Uploads are recorded in the
@@ -50,8 +51,9 @@
 // transmittance per channel: shadowtile.glsl's st_shadow, the engine pass's light image
 // (ShadowPassImages::light), the own-device pass (wait with light_rgb) and
 // evaluate_deep, bit for bit the CPU's deep lookups (point and mip-filtered) for the same
-// tiles. Deep tiles are fetched by the Map (its own lookups, deep_resident), not by GPU
-// feedback.
+// tiles. Deep tiles come through the feedback like opaque ones: a lookup whose deep tile
+// the directory names but the device lacks records it, and GpuMap asks the Map for it
+// (FrameStats::deep_wanted); the Map's own lookups and deep_resident fetch them too.
 //
 // Stack maps (Map::slices() > 0: shadow-map stacks, a moving sun) use the same mirror: the
 // page table carries the stack grid and one light per slice (GPU_LAYOUT.md "The stack
@@ -290,6 +292,7 @@ struct FrameStats {
   uint32_t feedback_tiles = 0;   // distinct absent tiles recorded
   uint32_t feedback_dropped = 0; // absent tiles the feedback set had no room for
   uint32_t requested = 0;        // of those, newly queued or raised on the Map
+  uint32_t deep_wanted = 0;      // of feedback_tiles, deep tiles (partial occluders) absent
   uint32_t slots_uploaded = 0;   // tiles uploaded for this frame
   uint64_t bytes_uploaded = 0;   // tile + page-table bytes
   // Host <-> device traffic of this frame, by kind (bytes the host wrote to or read from
@@ -406,7 +409,8 @@ class GpuMap {
   uint32_t sync();
   GpuStats stats() const;
   // The absent tiles the last collected frame's feedback named, with the pixels (or
-  // queries) that needed each. Valid until the next frame is collected.
+  // queries) that needed each; a deep tile by its pack id (bit 63 set: tiles/PACK.md
+  // "Deep tiles"). Valid until the next frame is collected.
   struct FeedbackTile {
     uint64_t tile = 0;
     uint32_t pixels = 0;
