@@ -225,7 +225,8 @@ int main(int argc, char** argv) {
                         "[--kernels 1,5] [--subjects array,single,batch,filtered] [--pack P1,P2,...] [--profile-map N] "
                         "[--json PATH]");
     }
-    if (scene_spec.find(':') == std::string::npos) scene_spec = "procedural:" + scene_spec;
+    if (scene_spec.find(':') == std::string::npos && !std::filesystem::exists(scene_spec))
+      scene_spec = "procedural:" + scene_spec;  // a bare name; a file path stays a file
     if (quick) {
       if (!level_given) level = 11;
       count = std::min<size_t>(count, size_t(1) << 16);

@@ -50,6 +50,9 @@ struct Scene {
   // up_reason empty for procedural scenes, which are generated +Y up.
   UpAxis up = UpAxis::y;
   std::string up_reason;
+  // Files whose unit was applied (FBX's UnitScaleFactor): the scale and where it came
+  // from; empty where the coordinates are the file's as they are.
+  std::string unit_reason;
 
   Aabb bounds() const;
   size_t closed_triangle_count() const;

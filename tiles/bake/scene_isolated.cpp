@@ -17,7 +17,8 @@
 //                 A x     texture: u32 name length + name, u32 width, u32 height, f32
 //                         cutoff, width x height alpha bytes
 //                 u32 up axis (0 y, 1 z), u32 up reason length + reason (Scene::up, up_reason)
-//           then 8 bytes "STSCEND2".
+//                 u32 unit reason length + reason (Scene::unit_reason)
+//           then 8 bytes "STSCEND3".
 #include "tiles/bake/scene_isolated.hpp"
 
 #include <fcntl.h>
@@ -45,7 +46,7 @@ namespace st {
 namespace {
 
 constexpr char kMagic[8] = {'S', 'T', 'S', 'C', 'A', 'N', 'S', '2'};
-constexpr char kEndMagic[8] = {'S', 'T', 'S', 'C', 'E', 'N', 'D', '2'};
+constexpr char kEndMagic[8] = {'S', 'T', 'S', 'C', 'E', 'N', 'D', '3'};
 constexpr uint32_t kKindScene = 0, kKindError = 1;
 // Stack of the thread a scene is imported on (reserved, touched only as deep as the
 // reader recurses: assimp imports and frees node trees, and parses XML and JSON, by
@@ -346,6 +347,7 @@ void write_scene_answer(SceneSink& out, const Scene& s) {
   }
   put<uint32_t>(out, s.up == UpAxis::z ? 1 : 0);
   put_text(out, s.up_reason);
+  put_text(out, s.unit_reason);
   out.put(kEndMagic, sizeof kEndMagic);
 }
 
@@ -422,6 +424,7 @@ Scene read_scene_answer(SceneSource& in, const std::string& path, const SceneLim
   if (up > 1) throw Error(path + ": the reader's answer has an unknown up axis " + std::to_string(up));
   s.up = up == 1 ? UpAxis::z : UpAxis::y;
   s.up_reason = text("up reason");
+  s.unit_reason = text("unit reason");
   in.get(magic, sizeof magic);
   if (std::memcmp(magic, kEndMagic, sizeof magic) != 0) throw Error(path + ": the reader's answer has a bad end");
   for (auto& tri : s.triangles)

@@ -11,6 +11,7 @@
 #include <cctype>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <exception>
 #include <filesystem>
 #include <fstream>
@@ -193,6 +194,28 @@ FileUp file_up(const aiScene& as, const std::string& path, const std::string& ex
   return {UpAxis::y, "the file records none"};
 }
 
+// An FBX file's unit (its GlobalSettings UnitScaleFactor: centimetres per file unit,
+// which assimp 5.2 reports in the scene's metadata and does not apply): coordinates are
+// multiplied by it, so every FBX scene is in centimetres whatever unit it was saved in.
+// 1 where the file records none (FBX's default unit is the centimetre); a factor that is
+// not a positive finite number is refused in one line.
+double fbx_unit_scale(const aiScene& as, const std::string& path, std::string& reason) {
+  double factor = 1;
+  float f32 = 1;
+  if (!as.mMetaData) return 1;
+  if (!as.mMetaData->Get("UnitScaleFactor", factor)) {
+    if (!as.mMetaData->Get("UnitScaleFactor", f32)) return 1;
+    factor = f32;
+  }
+  if (!(std::isfinite(factor) && factor > 0 && factor < 1e9))
+    throw Error(path + ": the file's UnitScaleFactor " + std::to_string(factor) +
+                " is not a positive finite number of centimetres per unit");
+  char text[96];
+  std::snprintf(text, sizeof text, "x%.9g (the file's UnitScaleFactor: coordinates in centimetres)", factor);
+  reason = text;
+  return factor;
+}
+
 Scene import_file(const std::string& path, const SceneOptions& options, const SceneLimits& limits) {
   namespace fs = std::filesystem;
   std::error_code ec;
@@ -247,7 +270,12 @@ Scene import_file(const std::string& path, const SceneOptions& options, const Sc
   }
   // COLLADA's own axis was applied by assimp (unless a given one overrode it).
   const bool turned_by_assimp = !options.up && scene.up_reason.find("turned by assimp") != std::string::npos;
-  const Affine root = scene.up == UpAxis::z && !turned_by_assimp ? z_up_to_y_up() : Affine{};
+  Affine root = scene.up == UpAxis::z && !turned_by_assimp ? z_up_to_y_up() : Affine{};
+  if (ext == ".fbx") {
+    const double unit = fbx_unit_scale(*as, path, scene.unit_reason);
+    for (auto& row : root.m)
+      for (double& v : row) v *= unit;
+  }
   std::vector<unsigned> uses(as->mNumMeshes, 0);
   {
     // The triangles the node tree emits, every instance counted, against the budget before

@@ -30,7 +30,8 @@ std::string summary(const Scene& scene) {
     volumes += ", volume '" + v.name + "' " + std::to_string(v.nx) + "x" + std::to_string(v.ny) + "x" +
                std::to_string(v.nz) + " voxels";
   const std::string up = scene.up_reason.empty() ? "" : ", up axis " + up_axis_text(scene);
-  return "scene '" + scene.name + "': " + text + volumes + up;
+  const std::string unit = scene.unit_reason.empty() ? "" : ", unit scale " + scene.unit_reason;
+  return "scene '" + scene.name + "': " + text + volumes + up + unit;
 }
 
 std::optional<UpAxis> parse_up_axis(const std::string& text) {

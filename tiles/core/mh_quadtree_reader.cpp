@@ -7,6 +7,7 @@
 
 #include "common/error.hpp"
 #include "tiles/core/interval.hpp"
+#include "tiles/core/mhq_tap_walk.hpp"
 #include "tiles/core/tap_batch.hpp"
 
 namespace st::mhq {
@@ -110,7 +111,8 @@ class TreeEvaluator final : public Evaluator, public WindowDepths, public TapWal
  public:
   TreeEvaluator(std::span<const uint8_t> bytes, const TreeInfo& info)
       : tree_(bytes.data() + info.tree_offset), finest_(info.levels - 1), root_leaf_(info.root_leaf),
-        shift_(info.shift), tree_bytes_(bytes.subspan(std::min<size_t>(info.tree_offset, bytes.size()))) {}
+        shift_(info.shift), tree_bytes_(bytes.subspan(std::min<size_t>(info.tree_offset, bytes.size()))),
+        walker_(tree_, root_leaf_, shift_) {}
 
   uint32_t finest_level() const override { return finest_; }
 
@@ -133,18 +135,18 @@ class TreeEvaluator final : public Evaluator, public WindowDepths, public TapWal
   // Single taps through kept regions and walks resumed from the last walk's path
   // (tap_batch.hpp).
   void pcf_batch(std::span<const PcfQuery> queries, std::span<float> out) const override {
-    WalkPath<Cursor> path;
+    TapWalkPath path;
     single_tap_batch(*this, queries, out,
                      [&](uint32_t level, uint64_t x, uint64_t y) { return walk_resumed(path, level, x, y); });
   }
 
   // TapWalks (tap_batch.hpp): the same walk, its path kept by the caller.
   DepthRegion walk_tap(uint32_t level, uint64_t x, uint64_t y, TapPath& path) const noexcept override {
-    return walk_resumed(tap_path<WalkPath<Cursor>>(path, this), level, x, y);
+    return walk_resumed(tap_path<TapWalkPath>(path, this), level, x, y);
   }
   // TapWalks::tap_run: the same walks, inlined into one loop over the run.
   TapRunEnd tap_run(const TapRun& run, TapPath& path) const noexcept override {
-    WalkPath<Cursor>& p = tap_path<WalkPath<Cursor>>(path, this);
+    TapWalkPath& p = tap_path<TapWalkPath>(path, this);
     return tap_run_loop(run, [&](uint32_t l, uint64_t x, uint64_t y) { return walk_resumed(p, l, x, y); });
   }
 
@@ -249,30 +251,10 @@ class TreeEvaluator final : public Evaluator, public WindowDepths, public TapWal
   uint32_t word(uint64_t w) const { return st::load_le<uint32_t>(tree_ + 4 * w); }
 
   // depth_region's answer, the walk resumed from the deepest node of `path` (the last
-  // walk) on this texel's path. A cursor that found its next child missing is not kept
-  // (its flag belongs to the old texel's child), only the nodes the walk entered.
-  DepthRegion walk_resumed(WalkPath<Cursor>& path, uint32_t level, uint64_t x, uint64_t y) const {
+  // walk) on this texel's path (mhq_tap_walk.hpp: the same walk, in a loop for taps).
+  DepthRegion walk_resumed(TapWalkPath& path, uint32_t level, uint64_t x, uint64_t y) const {
     if (level > kMaxLevel) return depth_region(level, x, y);
-    Cursor c;
-    uint32_t from = 0;
-    if (path.resume(level, x, y, from)) {
-      c = path.at[from];
-      path.hi = from;
-    } else {
-      c = root();
-      path.lo = path.hi = 0;
-      path.at[0] = c;
-    }
-    while (c.level < level && c.code != kCodeLeaf) {
-      Cursor step = c;
-      descend(step, level, x, y, c.level + 1);  // one level: descend's own step
-      c = step;
-      if (c.missing) break;
-      path.at[c.level] = c;
-      path.hi = c.level;
-    }
-    path.level = level, path.x = x, path.y = y;
-    return {value(c), level - (c.missing ? c.level + 1 : c.level)};
+    return walker_.walk(path, level, x, y);
   }
 
   Cursor root() const {
@@ -384,6 +366,7 @@ class TreeEvaluator final : public Evaluator, public WindowDepths, public TapWal
   std::array<uint8_t, kMaxLevels> shift_;
   std::span<const uint8_t> tree_bytes_;  // from the tree's first word to the tile's end (prefetch)
   static constexpr size_t kPrefetchBytes = 16384;
+  TapWalker<kRelative> walker_;  // the single taps' walk (after tree_, root_leaf_, shift_)
 };
 
 }  // namespace
