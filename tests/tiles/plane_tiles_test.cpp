@@ -125,8 +125,21 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
           const float d = ev->depth(depth, x, y);
           ASSERT_TRUE(iv.lo <= d && d <= iv.hi) << to_string(e) << " texel " << x << "," << y;
         }
-      // Coarser levels answer too (the multiresolution map stays complete).
-      for (uint32_t l = 0; l < depth; ++l) EXPECT_FALSE(std::isnan(ev->depth(l, 0, 0)));
+      // Coarser levels answer too (the multiresolution map stays complete); a region shares
+      // its value at every texel; PCF is the mean of the single taps.
+      std::mt19937 rng(ty);
+      for (uint32_t l = 0; l <= depth; ++l)
+        for (int k = 0; k < 200; ++k) {
+          const uint32_t x = rng() % (1u << l), y = rng() % (1u << l);
+          const DepthRegion reg = ev->depth_region(l, x, y);
+          ASSERT_EQ(reg.value, ev->depth(l, x, y));
+          const uint32_t rx = (x >> reg.shift << reg.shift) + rng() % (1u << reg.shift);
+          const uint32_t ry = (y >> reg.shift << reg.shift) + rng() % (1u << reg.shift);
+          ASSERT_EQ(ev->depth(l, rx, ry), reg.value) << "level " << l << " region " << reg.shift;
+          const uint32_t r = 1 + 2 * (rng() % 5);
+          const float receiver = ev->depth(l, x, y) + (k % 3 == 0 ? 0.0f : 0.001f * float(int(rng() % 21) - 10));
+          ASSERT_EQ(ev->pcf(l, x, y, r, receiver), ev->Evaluator::pcf(l, x, y, r, receiver));
+        }
     }
   }
   EXPECT_GT(plane_texels, 0u) << "the engine's flat faces seen at a slant are planes";

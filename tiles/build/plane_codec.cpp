@@ -14,11 +14,11 @@ namespace {
 constexpr int kChoiceLevel = 6;  // as tile_cut.cpp compares two encodings: packs' default zlib level
 }  // namespace
 
-TileCodec TileCodec::with_planes(TileCodec base, uint32_t tile_bytes) {
+TileCodec TileCodec::with_planes(TileCodec base, uint32_t tile_bytes, const PlaneFitOptions& fit) {
   TileCodec c = base;
   using Fn = std::function<std::vector<uint8_t>(const Hierarchy&)>;
   c.alternative = nullptr;
-  c.encode = [enc = base.encode, alt = base.alternative, tile_bytes](const Hierarchy& h) {
+  c.encode = [enc = base.encode, alt = base.alternative, tile_bytes, fit](const Hierarchy& h) {
     // Candidates: the base encodings of h, and of h without its plane blocks behind them.
     std::optional<std::vector<uint8_t>> best;
     size_t best_z = SIZE_MAX;
@@ -40,7 +40,7 @@ TileCodec TileCodec::with_planes(TileCodec base, uint32_t tile_bytes) {
     };
     attempt(enc, h, nullptr);
     attempt(alt, h, nullptr);
-    const PlaneSplit split = fit_planes(h);
+    const PlaneSplit split = fit_planes(h, fit);
     if (!split.planes.empty()) {
       attempt(enc, split.pruned, &split);
       attempt(alt, split.pruned, &split);

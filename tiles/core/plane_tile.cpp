@@ -70,8 +70,19 @@ class PlaneTileEvaluator final : public Evaluator {
   bool overlaps_rect(uint32_t level, uint64_t x0, uint64_t y0, uint64_t x1, uint64_t y1) const {
     const uint32_t s = v_.finest_level - level;
     const uint64_t fx0 = x0 << s, fy0 = y0 << s, fx1 = ((x1 + 1) << s) - 1, fy1 = ((y1 + 1) << s) - 1;
-    for (uint32_t i = 0; i < v_.plane_count; ++i) {  // few blocks meet a rectangle: see find()
+    // Every texel of the rectangle has a morton code in [m0, m1] (the code grows with x and
+    // with y): only blocks whose codes meet that range can meet it.
+    const uint64_t m0 = morton_encode(uint32_t(fx0), uint32_t(fy0)), m1 = morton_encode(uint32_t(fx1), uint32_t(fy1));
+    uint32_t i = 0, hi = v_.plane_count;
+    while (i < hi) {  // the first block ending after m0
+      const uint32_t mid = (i + hi) / 2;
+      const Plane p = v_.plane(mid);
+      if (uint64_t(p.start) + (uint64_t(1) << (2 * p.shift)) <= m0) i = mid + 1;
+      else hi = mid;
+    }
+    for (; i < v_.plane_count; ++i) {
       const Plane p = v_.plane(i);
+      if (p.start > m1) break;
       const uint64_t bx = morton_compact(p.start), by = morton_compact(uint64_t(p.start) >> 1);
       const uint64_t side = uint64_t(1) << p.shift;
       if (bx <= fx1 && fx0 < bx + side && by <= fy1 && fy0 < by + side) return true;
