@@ -292,6 +292,12 @@ TEST(GpuMap, EveryTexelOfAPlaneTilesPackAnswersBitExactlyLikeTheCpu) {
   client::Client c({"127.0.0.1", srv.port}, co);
   client::Map map = c.open("gpu_planes");
   ASSERT_TRUE(fetch_all(map));
+  // The client's CPU answers are the pack's own (every texel, every level).
+  PackEvaluator local(PackReader::open(path));
+  for (uint32_t l = 0; l <= map.finest_level(); ++l)
+    for (uint32_t y = 0; y < (1u << l); ++y)
+      for (uint32_t x = 0; x < (1u << l); ++x)
+        ASSERT_EQ(bits(map.depth(l, x, y)), bits(local.depth(l, x, y))) << l << " " << x << " " << y;
   GpuMap g(map, gputest::options());
   EXPECT_EQ(g.sync(), map.stats().cache.resident);
   expect_bit_exact(g, map, 23);
