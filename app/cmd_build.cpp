@@ -55,6 +55,7 @@ struct BuildArgs {
   std::string deep_from;  // a deep OpenEXR to take the deep map from instead of sampling
   std::string dagmh_dictionary = "on";  // tiles/PACK.md "DAG-MH dictionary"
   std::string dagmh_tiles = "mixed";     // tiles/PACK.md "Mixed tiles"
+  std::string planes = "off";            // tiles/core/PLANES.md
   std::string stack_cells = "smaller";   // light sets: tiles/core/MHOCT.md "Per-slice cells"
 };
 
@@ -183,6 +184,9 @@ void run(const BuildArgs& a) {
   if (a.dagmh_tiles != "mixed" && a.dagmh_tiles != "dagmh")
     throw Error("--dagmh-tiles: expected mixed or dagmh, got '" + a.dagmh_tiles + "'");
   o.dagmh_mixed_tiles = a.dagmh_tiles == "mixed" && o.encoding == Encoding::dagmh;
+  if (a.planes != "on" && a.planes != "off") throw Error("--planes: expected on or off, got '" + a.planes + "'");
+  if (a.planes == "on" && o.encoding == Encoding::vsdag) throw Error("--planes on: vsdag has no plane tiles (mh, mmh, dagmh do)");
+  o.planes = a.planes == "on";
   if (!a.shard.empty()) o.shard = BuildShard::parse(a.shard);
   if (a.mpi && o.shard) throw Error("--mpi and --shard: choose one (a shard is one process's slice)");
 #ifdef SHADOWTILE_HAVE_MPI
@@ -371,6 +375,10 @@ void setup(CLI::App& app) {
                  "(the packs of earlier versions, byte for byte); slices stores every cell per slice. Every "
                  "reader, the GPU passes included, takes all three")
       ->check(CLI::IsMember({"octree", "smaller", "slices"}))
+      ->capture_default_str();
+  app.add_option("--planes", a->planes,
+                 "on: a tile may store blocks of texels that one plane answers exactly as planes over the "
+                 "encoding of the rest, where that stores smaller (open surfaces; tiles/core/PLANES.md)")
       ->capture_default_str();
   app.add_option("--dagmh-tiles", a->dagmh_tiles,
                  "dagmh: mixed (default) writes a tile as MMH where that stores in fewer bytes (open meshes' "

@@ -23,6 +23,7 @@ std::string feature_names(uint32_t flags) {
   add(kFeatureCompressedGrid, "compressed-grid");
   add(kFeaturePayloadsOnly, "payloads-only");
   add(kFeatureMixedTiles, "mixed-tiles");
+  add(kFeaturePlaneTiles, "plane-tiles");
   return s.empty() ? "none" : s;
 }
 

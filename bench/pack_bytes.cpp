@@ -8,6 +8,9 @@
 // tiles (an MH/MMH pack's, or the MMH tiles of a DAG-MH pack with mixed tiles) are split
 // the same way into header, node words (structure: child masks, offsets), values and
 // padding, found by walking each tree from its root (tiles/core/mh_quadtree_format.hpp).
+// Plane tiles (tiles/core/PLANES.md) count their header and plane records as the section
+// "planes" (marginal stored: the tile's zlib size minus its inner buffer's) and their inner
+// buffer with the MH/MMH or DAG-MH tiles.
 //
 //   bench_pack_bytes PACK... [--json PATH]
 #include <bit>
@@ -25,8 +28,16 @@
 #include "tiles/core/mh_quadtree_format.hpp"
 #include "tiles/core/map_preview.hpp"
 #include "tiles/core/pack_reader.hpp"
+#include "tiles/core/plane_tile.hpp"
 
 namespace {
+
+// A plane tile's inner buffer (tiles/core/PLANES.md), or the tile itself.
+std::vector<uint8_t> inner_of(std::vector<uint8_t> raw) {
+  if (!st::is_plane_buffer(raw)) return raw;
+  const std::span<const uint8_t> in = st::validate_plane_tile(raw).inner;
+  return {in.begin(), in.end()};
+}
 
 struct Part {
   const char* name;
@@ -114,12 +125,32 @@ nlohmann::json measure(const std::string& path) {
                         {"header_params", h.journal_offset}, {"tile_records", records}, {"payloads", payload},
                         {"cell_records", cells_and_pad}, {"grid_section_stored", h.grid_size}, {"skip_grid", grid}, {"preview", preview},
                         {"dictionary", dict},     {"index", index},      {"tiles_raw", tile_raw}};
+  // Plane tiles: header + plane records, raw and marginal stored.
+  uint64_t plane_tiles = 0, planes = 0, plane_texels = 0, plane_raw = 0, plane_stored = 0;
+  for (const auto& e : reader->tiles()) {
+    if (e.kind != st::TileKind::encoded) continue;
+    const std::vector<uint8_t> raw = reader->read_raw(e.id);
+    if (!st::is_plane_buffer(raw)) continue;
+    const st::PlaneTileView v = st::validate_plane_tile(raw);
+    ++plane_tiles;
+    planes += v.plane_count;
+    for (uint32_t i = 0; i < v.plane_count; ++i) plane_texels += uint64_t(1) << (2 * v.plane(i).shift);
+    plane_raw += raw.size() - v.inner.size();
+    plane_stored += st::zlib_compress(raw, 6).size() - st::zlib_compress(v.inner, 6).size();
+  }
+  if (plane_tiles) {
+    std::printf("  plane tiles: %llu, planes %llu over %llu texels; planes section raw %llu, marginal stored %llu\n",
+                (unsigned long long)plane_tiles, (unsigned long long)planes, (unsigned long long)plane_texels,
+                (unsigned long long)plane_raw, (unsigned long long)plane_stored);
+    out["plane_tiles"] = {{"tiles", plane_tiles}, {"planes", planes}, {"texels", plane_texels},
+                          {"raw", plane_raw}, {"stored", plane_stored}};
+  }
   // MH / MMH tiles: header, node words, values, padding (raw and marginal stored).
   Part mh_parts[4] = {{"header"}, {"node words"}, {"values"}, {"padding"}};
   uint64_t mh_tiles = 0, mh_stored = 0, mh_raw = 0;
   for (const auto& e : reader->tiles()) {
     if (e.kind != st::TileKind::encoded || h.encoding == st::Encoding::vsdag) continue;
-    const std::vector<uint8_t> raw = reader->read_raw(e.id);
+    const std::vector<uint8_t> raw = inner_of(reader->read_raw(e.id));
     if (st::load_le<uint32_t>(raw.data()) != st::mhq::kMagicMh && !st::is_mmh_buffer(raw)) continue;
     ++mh_tiles;
     mh_raw += raw.size();
@@ -158,7 +189,7 @@ nlohmann::json measure(const std::string& path) {
   uint64_t k_hist[33] = {}, mask_zero = 0, mask_full = 0, values_in_chunks = 0;
   for (const auto& e : reader->tiles()) {
     if (e.kind != st::TileKind::encoded) continue;
-    const std::vector<uint8_t> raw = reader->read_raw(e.id);
+    const std::vector<uint8_t> raw = inner_of(reader->read_raw(e.id));
     if (st::is_mmh_buffer(raw)) continue;  // a mixed tile: counted with the MH/MMH tiles above
     ++encoded_tiles;
     const st::dagmh::Header th = st::dagmh::load_header(raw.data());

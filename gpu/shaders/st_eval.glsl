@@ -337,10 +337,76 @@ float st_vsdag_depth(uint base, uint level, uint x, uint y) {
   return uintBitsToFloat(floatBitsToUint(q) - 1u);
 }
 
+// ---- plane tiles (tiles/core/PLANES.md, plane_format.hpp, plane_tile.cpp) ----
+// Integers only, in 32-bit word pairs: v = a + b x + c y modulo 2^64, then v 2^-60 to the
+// nearest binary32 (ties to even) built from its bits, as plane_fixed_to_float does.
+uint st_spread16(uint v) {
+  v = (v | (v << 8u)) & 0x00FF00FFu;
+  v = (v | (v << 4u)) & 0x0F0F0F0Fu;
+  v = (v | (v << 2u)) & 0x33333333u;
+  return (v | (v << 1u)) & 0x55555555u;
+}
+// (hi, lo) += (bh, bl) * k for k < 2^16, modulo 2^64.
+void st_mad64(inout uint hi, inout uint lo, uint bl, uint bh, uint k) {
+  uint mh, ml, carry;
+  umulExtended(bl, k, mh, ml);
+  lo = uaddCarry(lo, ml, carry);
+  hi = hi + bh * k + mh + carry;
+}
+float st_plane_round(uint hi, uint lo) {
+  if ((hi & 0x80000000u) != 0u || (hi | lo) == 0u) return 0.0;
+  if (hi >= 0x10000000u) return 1.0;  // v >= 2^60
+  const int p = hi != 0u ? 32 + findMSB(hi) : findMSB(lo);
+  uint m;
+  if (p <= 23) {
+    m = lo << uint(23 - p);
+  } else {
+    const int k = p - 23;  // 1..36 dropped bits
+    m = k < 32 ? (lo >> uint(k)) | (k == 0 ? 0u : hi << uint(32 - k)) : hi >> uint(k - 32);
+    const int j = k - 1;   // the half bit
+    const bool halfbit = ((j < 32 ? lo >> uint(j) : hi >> uint(j - 32)) & 1u) != 0u;
+    const bool below = j == 0 ? false
+                     : j < 32 ? (lo & ((1u << uint(j)) - 1u)) != 0u
+                              : lo != 0u || (j > 32 && (hi & ((1u << uint(j - 32)) - 1u)) != 0u);
+    if (halfbit && (below || (m & 1u) != 0u)) m += 1u;
+  }
+  return uintBitsToFloat((uint(p - 60 + 127) << 23u) + (m - 0x800000u));
+}
+// Whether plane tile `base` answers (rel, x, y); its depth in `d`.
+bool st_plane_lookup(uint base, uint rel, uint x, uint y, out float d) {
+  const uint finest = ((ST_POOL(base + 1u) >> 16u) & 0xFFu) - 1u;
+  const uint s = finest - min(rel, finest);
+  if (s >= 8u) return false;
+  const uint h = s == 0u ? 0u : 1u << (s - 1u);
+  const uint fx = (x << s) + h, fy = (y << s) + h;
+  const uint key = st_spread16(fx) | (st_spread16(fy) << 1u);
+  uint a = 0u, b = ST_POOL(base + 2u);  // the last record whose start <= key
+  while (a < b) {
+    const uint mid = (a + b) >> 1u;
+    if (ST_POOL(base + 4u + 8u * mid) <= key) a = mid + 1u;
+    else b = mid;
+  }
+  if (a == 0u) return false;
+  const uint r = base + 4u + 8u * (a - 1u);
+  const uint start = ST_POOL(r), shift = ST_POOL(r + 1u);
+  if (shift <= s || key - start >= (1u << (2u * shift))) return false;
+  const uint mask = (1u << shift) - 1u;
+  uint hi = ST_POOL(r + 3u), lo = ST_POOL(r + 2u);
+  st_mad64(hi, lo, ST_POOL(r + 4u), ST_POOL(r + 5u), fx & mask);
+  st_mad64(hi, lo, ST_POOL(r + 6u), ST_POOL(r + 7u), fy & mask);
+  d = st_plane_round(hi, lo);
+  return true;
+}
+
 float st_tile_depth(uint slot, uint rel, uint x, uint y) {
-  const uint base = slot * ST_PAGE(kPtSlotWords);
+  uint base = slot * ST_PAGE(kPtSlotWords);
   const uint enc = ST_PAGE(kPtEncoding);
   if (enc == 3u) return st_vsdag_depth(base, rel, x, y);
+  if (ST_POOL(base) == 0x4E505453u) {  // "STPN": plane blocks over an inner buffer
+    float d;
+    if (st_plane_lookup(base, rel, x, y, d)) return d;
+    base += 4u + 8u * ST_POOL(base + 2u);
+  }
   // A DAG-MH pack's tile may be an MMH buffer, told by its magic "STMM" (tiles/PACK.md
   // "Mixed tiles"; encoding.cpp open_encoded).
   const bool mmh_tile = enc == 2u && ST_POOL(base) == 0x4D4D5453u;

@@ -18,10 +18,12 @@
 #include "tests/gpu/gpu_test_util.hpp"
 #include "tiles/build/mh_build.hpp"
 #include "tiles/build/pack_writer.hpp"
+#include "tiles/build/plane_fit.hpp"
 #include "tiles/core/dagmh_format.hpp"
 #include "tiles/core/dagmh_validate.hpp"
 #include "tiles/core/light.hpp"
 #include "tiles/core/page_table.hpp"
+#include "tiles/core/plane_tile.hpp"
 
 namespace st::gpu {
 namespace gpu_map_test {
@@ -229,6 +231,76 @@ TEST(GpuMap, EveryTexelOfAMixedTilesPackAnswersBitExactlyLikeTheCpu) {
   GpuMap g(map, gputest::options());
   EXPECT_EQ(g.sync(), map.stats().cache.resident);
   expect_bit_exact(g, map, 19);
+  const GpuStats st = g.stats();
+  EXPECT_EQ(st.holes, 0u);
+  EXPECT_EQ(st.validation_messages, 0u);
+}
+
+// Plane tiles (tiles/core/PLANES.md): random plane blocks of every size over DAG-MH and MMH
+// inner buffers (a, b, c drawn across their whole ranges, so the integer evaluation crosses
+// word carries, binades, the clamps at 0 and 1 and exact rounding ties), every answer the
+// CPU's bits: shadowtile.glsl's st_plane_lookup against plane_tile.cpp.
+TEST(GpuMap, EveryTexelOfAPlaneTilesPackAnswersBitExactlyLikeTheCpu) {
+  const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/gpu_planes.pack";
+  const Hierarchy h = build_hierarchy(looptest::random_field(test_level(), 6));
+  CutParams cut;
+  cut.map_level = test_level();
+  cut.skip_level = 1;
+  cut.tile_bytes = 1u << 16;
+  cut.codec = TileCodec::of(Encoding::dagmh);
+  auto rng = std::make_shared<std::mt19937_64>(11);
+  cut.codec.encode = [rng](const Hierarchy& t) {
+    std::mt19937_64& r = *rng;
+    const std::vector<uint8_t> inner = r() % 3 == 0 ? encode_mmh(t) : encode_dagmh(t);
+    std::vector<planes::Plane> ps;
+    const uint32_t side = 1u << t.depth;
+    for (uint32_t shift = std::min<uint32_t>(t.depth - 1, planes::kMaxShift); shift >= planes::kMinShift; --shift) {
+      // A few blocks of this size in squares no plane holds yet; the first, at the corner,
+      // holds an exact tie between two floats on its first row.
+      for (int k : {1, 0, 2}) {
+        const bool corner = k == 1 && shift == std::min<uint32_t>(t.depth - 1, planes::kMaxShift);
+        const uint32_t bx = corner ? 0 : uint32_t(r() % (side >> shift)) << shift;
+        const uint32_t by = corner ? 0 : uint32_t(r() % (side >> shift)) << shift;
+        planes::Plane p;
+        p.shift = shift;
+        p.start = uint32_t(morton_encode(bx, by));
+        const uint64_t size = uint64_t(1) << (2 * shift);
+        bool free = true;
+        for (const planes::Plane& q : ps)
+          free &= p.start + size <= q.start || q.start + (uint64_t(1) << (2 * q.shift)) <= p.start;
+        if (!free) continue;
+        const int64_t mag = int64_t(1) << (r() % 53);
+        p.a = int64_t(r() % uint64_t(planes::kOne + planes::kOne / 4)) - planes::kOne / 8;
+        if (k == 1) p.a = (int64_t(1) << 59) + (int64_t(1) << 35);  // 0.5 + half an ulp: a tie
+        p.b = k == 1 ? 0 : int64_t(r() % uint64_t(2 * mag + 1)) - mag;
+        p.c = k == 1 ? int64_t(1) << 36 : int64_t(r() % uint64_t(2 * mag + 1)) - mag;
+        ps.push_back(p);
+      }
+    }
+    if (ps.empty()) return inner;
+    std::sort(ps.begin(), ps.end(), [](const planes::Plane& a, const planes::Plane& b) { return a.start < b.start; });
+    return wrap_planes(ps, t.depth, inner);
+  };
+  PackParams pp = PackParams::from(
+      LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), Aabb{{-10, 0, -10}, {10, 5, 10}}), cut);
+  write_pack(path, h, cut, pp);
+  const auto pack = PackReader::open(path);
+  ASSERT_TRUE(pack->header().flags & kFeaturePlaneTiles);
+  looptest::TestServer srv = start_server({path});
+  client::ClientOptions co = looptest::quick_options();
+  co.cache_slots = uint32_t(pack->tiles().size()) + 32;
+  client::Client c({"127.0.0.1", srv.port}, co);
+  client::Map map = c.open("gpu_planes");
+  ASSERT_TRUE(fetch_all(map));
+  // The client's CPU answers are the pack's own (every texel, every level).
+  PackEvaluator local(PackReader::open(path));
+  for (uint32_t l = 0; l <= map.finest_level(); ++l)
+    for (uint32_t y = 0; y < (1u << l); ++y)
+      for (uint32_t x = 0; x < (1u << l); ++x)
+        ASSERT_EQ(bits(map.depth(l, x, y)), bits(local.depth(l, x, y))) << l << " " << x << " " << y;
+  GpuMap g(map, gputest::options());
+  EXPECT_EQ(g.sync(), map.stats().cache.resident);
+  expect_bit_exact(g, map, 23);
   const GpuStats st = g.stats();
   EXPECT_EQ(st.holes, 0u);
   EXPECT_EQ(st.validation_messages, 0u);

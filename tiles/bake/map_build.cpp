@@ -54,6 +54,7 @@ CutParams checked_cut_params(const MapBuildOptions& o) {
     if (vo.z_bits < vsdag::kMinZBits || vo.z_bits > vsdag::kMaxZBits) throw Error("build: --depth-bits must be 3..20");
     cut.codec.encode = [vo](const Hierarchy& h) { return encode_vsdag(h, vo); };
   }
+  if (o.planes && o.encoding != Encoding::vsdag) cut.codec = TileCodec::with_planes(cut.codec, cut.tile_bytes, o.plane_fit);
   cut.validate();
   if (o.region) {
     const uint64_t R = uint64_t(1) << cut.map_level;

@@ -21,6 +21,7 @@
 
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/raster_bounds.hpp"
+#include "tiles/build/plane_fit.hpp"
 #include "tiles/bake/scene.hpp"
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/light.hpp"
@@ -104,6 +105,11 @@ struct MapBuildOptions {
   // no tile of the pack is larger than the MMH pack's would be. The CLI turns it on by
   // default (--dagmh-tiles mixed).
   bool dagmh_mixed_tiles = false;
+  // MH, MMH, DAG-MH: a tile whose finest texels hold blocks of one plane each also tries
+  // plane blocks over the encoding of the rest (TileCodec::with_planes; pack feature
+  // plane_tiles, tiles/core/PLANES.md) and keeps what stores smaller.
+  bool planes = false;
+  PlaneFitOptions plane_fit;  // which blocks are tried (plane_fit.hpp)
   // Build only the cells touching this region; every other cell is the constant
   // kLitDepth (a partial map: only texels inside the region are traced and lossless).
   std::optional<TexelRegion> region;

@@ -16,6 +16,7 @@
 #include "tiles/core/map_preview.hpp"
 #include "tiles/core/page_table.hpp"
 #include "tiles/core/pack_dictionary.hpp"
+#include "tiles/core/plane_tile.hpp"
 
 namespace st {
 
@@ -263,8 +264,9 @@ void PackWriter::finish(const CutGrid& grid) {
   std::vector<uint8_t> grid_bytes = grid.serialize();
   const std::vector<uint8_t> preview = preview_bytes(grid);
   grid_bytes.insert(grid_bytes.end(), preview.begin(), preview.end());
-  const bool mixed = params_.encoding == Encoding::dagmh && any_mmh_tile();
-  if (mixed) h.flags |= kFeatureMixedTiles;
+  const uint32_t kinds = tile_kind_features();
+  const bool mixed = kinds & kFeatureMixedTiles;
+  h.flags |= kinds;
   RewrittenTiles rewritten;
   if (params_.dagmh_dictionary) {
     const std::vector<uint8_t> dict = share_dictionary(rewritten, mixed);
@@ -398,16 +400,23 @@ void PackWriter::write_finished(PackHeader h, std::vector<uint8_t> grid_bytes, c
   finished_ = true;
 }
 
-bool PackWriter::any_mmh_tile() const {
+uint32_t PackWriter::tile_kind_features() const {
   const std::string what = tmp_path();
+  uint32_t flags = 0;
   for (const TileIndexEntry& t : tiles_) {
     if (t.kind != TileKind::encoded) continue;
     std::vector<uint8_t> stored(t.stored_size);
     pack_io::pread_all(fd_, t.offset, stored, what);
     if (crc32_of(stored) != t.crc) throw Error(what + ": " + describe_tile(t.id) + " fails its CRC on the read back");
-    if (is_mmh_buffer(zlib_decompress(stored, t.raw_size, what + ": " + describe_tile(t.id)))) return true;
+    const std::vector<uint8_t> raw = zlib_decompress(stored, t.raw_size, what + ": " + describe_tile(t.id));
+    std::span<const uint8_t> tile = raw;
+    if (is_plane_buffer(tile)) {
+      flags |= kFeaturePlaneTiles;
+      tile = validate_plane_tile(tile).inner;
+    }
+    if (params_.encoding == Encoding::dagmh && is_mmh_buffer(tile)) flags |= kFeatureMixedTiles;
   }
-  return false;
+  return flags;
 }
 
 std::vector<uint8_t> PackWriter::preview_bytes(const CutGrid& grid) const {

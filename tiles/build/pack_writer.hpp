@@ -150,8 +150,9 @@ class PackWriter {
   // must_pay (mixed tiles): only a dictionary whose stored section is smaller than the
   // stored bytes it saves the tiles.
   std::vector<uint8_t> share_dictionary(RewrittenTiles& rewritten, bool must_pay);
-  // DAG-MH packs: whether some encoded tile is an MMH buffer (feature mixed_tiles).
-  bool any_mmh_tile() const;  // under mu_
+  // The features the encoded tiles' kinds call for: kFeatureMixedTiles (a DAG-MH pack with
+  // an MMH tile, also inside a plane tile) and kFeaturePlaneTiles (a plane tile).
+  uint32_t tile_kind_features() const;  // under mu_
   // finish()'s file: `h` complete but for the offsets, sizes and CRCs it fills.
   void write_finished(PackHeader h, std::vector<uint8_t> grid_bytes, const RewrittenTiles& rewritten);
   // PackParams::journal_records: the old layout, finished in place.

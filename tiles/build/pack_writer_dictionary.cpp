@@ -17,6 +17,7 @@
 #include "tiles/build/pack_file_io.hpp"
 #include "tiles/build/dagmh_dictionary.hpp"
 #include "tiles/core/pack_dictionary.hpp"
+#include "tiles/core/plane_tile.hpp"
 
 namespace st {
 
@@ -51,7 +52,8 @@ std::vector<uint8_t> PackWriter::share_dictionary(RewrittenTiles& rewritten_tile
     pack_io::pread_all(fd_, t.offset, stored, what);
     if (crc32_of(stored) != t.crc) throw Error(what + ": " + describe_tile(t.id) + " fails its CRC on the read back");
     std::vector<uint8_t> bytes = zlib_decompress(stored, t.raw_size, what + ": " + describe_tile(t.id));
-    if (is_mmh_buffer(bytes)) {  // a mixed tile (tiles/PACK.md "Mixed tiles") shares nothing
+    // A mixed tile (tiles/PACK.md "Mixed tiles") or a plane tile (tiles/core/PLANES.md) shares nothing.
+    if (is_mmh_buffer(bytes) || is_plane_buffer(bytes)) {
       out.raw_after += t.raw_size;
       continue;
     }

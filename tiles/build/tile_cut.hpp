@@ -34,6 +34,7 @@
 
 #include "tiles/build/encode.hpp"
 #include "tiles/build/hierarchy.hpp"
+#include "tiles/build/plane_fit.hpp"
 #include "tiles/core/interval.hpp"
 #include "tiles/core/pack_format.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
@@ -54,6 +55,10 @@ struct TileCodec {
   static TileCodec of(Encoding e);
   // DAG-MH tiles, each an MMH buffer instead where that stores smaller (map builds' default).
   static TileCodec dagmh_or_mmh();
+  // `base` (its encode and alternative) with plane blocks (plane_codec.cpp, tiles/core/
+  // PLANES.md): a tile is also encoded as plane blocks over base's encoding of the rest,
+  // and the candidate that fits tile_bytes and deflates smallest is kept.
+  static TileCodec with_planes(TileCodec base, uint32_t tile_bytes, const PlaneFitOptions& fit = {});
 };
 
 inline constexpr uint32_t kDefaultTileBytes = 64 * 1024;

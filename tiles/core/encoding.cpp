@@ -5,6 +5,7 @@
 #include "common/bytes.hpp"
 #include "common/error.hpp"
 #include "tiles/core/mh_quadtree_format.hpp"
+#include "tiles/core/plane_tile.hpp"
 
 namespace st {
 
@@ -37,6 +38,9 @@ bool is_mmh_buffer(std::span<const uint8_t> bytes) {
 }
 
 std::unique_ptr<Evaluator> open_encoded(Encoding e, std::span<const uint8_t> bytes) {
+  // A plane tile (tiles/core/PLANES.md) of an MH, MMH or DAG-MH pack holds that encoding's buffer.
+  if (e != Encoding::vsdag && is_plane_buffer(bytes))
+    return open_plane_tile(bytes, [e](std::span<const uint8_t> inner) { return open_encoded(e, inner); });
   if (e == Encoding::dagmh && is_mmh_buffer(bytes)) return open_mmh(bytes);  // a mixed tile
   switch (e) {
     case Encoding::mh: return open_mh(bytes);

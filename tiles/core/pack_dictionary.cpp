@@ -5,6 +5,7 @@
 #include "tiles/core/dagmh_validate.hpp"
 #include "tiles/core/map_preview.hpp"
 #include "tiles/core/pack_format.hpp"
+#include "tiles/core/plane_tile.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
 
 namespace st {
@@ -75,6 +76,8 @@ std::shared_ptr<const dagmh::Dictionary> open_pack_dictionary(const GridSectionP
 
 std::unique_ptr<Evaluator> open_pack_tile(Encoding e, std::span<const uint8_t> raw,
                                           const std::shared_ptr<const dagmh::Dictionary>& dict) {
+  if (e != Encoding::vsdag && is_plane_buffer(raw))  // plane tiles (tiles/core/PLANES.md)
+    return open_plane_tile(raw, [e, dict](std::span<const uint8_t> inner) { return open_pack_tile(e, inner, dict); });
   if (e == Encoding::dagmh && dict && !is_mmh_buffer(raw)) return open_dagmh(raw, dict);
   return open_encoded(e, raw);
 }

@@ -96,7 +96,12 @@ enum PackFeature : uint32_t {
   // DAG-MH or MMH tile, where that stored smaller than the cell's octree. Each tile's
   // magic says which; only with stack. Readers before it refuse the pack by this bit.
   kFeatureStackSliceTiles = 1u << 10,
-  kKnownFeatures = 0x7FF,
+  // Some encoded tiles are plane tiles (magic "STPN", tiles/core/PLANES.md): plane blocks
+  // over an inner buffer of the pack's encoding (MH, MMH or DAG-MH; in a DAG-MH pack also
+  // MMH, then with mixed_tiles). Never with stack or vsdag. Readers before it refuse the
+  // pack by this bit.
+  kFeaturePlaneTiles = 1u << 11,
+  kKnownFeatures = 0xFFF,
 };
 
 // Header layout (offset: size field):

@@ -487,7 +487,8 @@ std::string PackReader::summary() const {
                                                     {kFeatureCompressedGrid, "compressed_grid"},
                                                     {kFeaturePayloadsOnly, "payloads_only"},
                                                     {kFeatureMixedTiles, "mixed_tiles"},
-                                                    {kFeatureStackSliceTiles, "stack_slice_tiles"}};
+                                                    {kFeatureStackSliceTiles, "stack_slice_tiles"},
+                                                    {kFeaturePlaneTiles, "plane_tiles"}};
   for (auto [bit, n] : names)
     if (header_.flags & bit) features += std::string(features.empty() ? "" : ",") + n;
   char buf[320];

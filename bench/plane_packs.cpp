@@ -1,0 +1,101 @@
+// Pack bytes with and without plane tiles (tiles/core/PLANES.md) next to static-interval
+// packs: for each scene, the CLI's default DAG-MH build (mixed tiles, dictionary) with
+// default intervals, the same with --intervals static, and the default with --planes on;
+// file sizes, the ratios the plane tiles are measured by, build seconds. The packs stay in
+// OUT for bench_pack_bytes (per-section bytes, the planes section included).
+//
+//   bench_plane_packs SCENE@RES... [--out DIR] [--json PATH] [--light SPEC] [--min-shift S] [--min-nodes N]
+// e.g. bench_plane_packs /usr/share/games/openarena/baseoa/pak1-maps.pk3:maps/oa_dm1.bsp@8192
+//      /usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb@4096 procedural:city@4096
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
+
+#include "common/error.hpp"
+#include "tiles/bake/map_build.hpp"
+#include "tiles/bake/scene.hpp"
+#include "tiles/core/resolution.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Variant {
+  const char* name;
+  bool planes, static_intervals;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) try {
+  std::vector<std::string> scenes;
+  st::PlaneFitOptions fit;
+  std::string out_dir = "bench-out/planes", json_path, light_spec = "sun:azimuth=30,elevation=50";
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto next = [&]() -> std::string {
+      if (i + 1 >= argc) throw st::Error(a + ": value missing");
+      return argv[++i];
+    };
+    if (a == "--out") out_dir = next();
+    else if (a == "--json") json_path = next();
+    else if (a == "--light") light_spec = next();
+    else if (a == "--min-shift") fit.min_shift = uint32_t(std::stoul(next()));
+    else if (a == "--min-nodes") fit.min_stored_nodes = uint32_t(std::stoul(next()));
+    else scenes.push_back(a);
+  }
+  if (scenes.empty()) throw st::Error("usage: bench_plane_packs SCENE@RES... [--out DIR] [--json PATH] [--light SPEC]");
+  fs::create_directories(out_dir);
+  const Variant variants[] = {{"default", false, false}, {"static", false, true}, {"planes", true, false}};
+  nlohmann::json rows = nlohmann::json::array();
+  std::printf("%-40s %6s %12s %12s %12s %8s %8s %8s %8s %8s\n", "scene", "res", "default B", "static B", "planes B",
+              "pl/stat", "def/stat", "pl/def", "t def s", "t pl s");
+  for (const std::string& entry : scenes) {
+    const size_t at = entry.rfind('@');
+    const std::string spec = at == std::string::npos ? entry : entry.substr(0, at);
+    const std::string res = at == std::string::npos ? "4096" : entry.substr(at + 1);
+    const st::Scene scene = st::load_scene(spec);
+    const st::LightSpace light = st::LightSpace::fit(st::LightSpec::parse(light_spec), scene.bounds());
+    std::string stem = fs::path(spec.substr(spec.rfind(':') == std::string::npos ? 0 : spec.rfind(':') + 1)).stem().string();
+    if (stem.empty()) stem = "scene";
+    nlohmann::json row = {{"scene", spec}, {"resolution", res}};
+    uint64_t bytes[3] = {};
+    double secs[3] = {};
+    for (int v = 0; v < 3; ++v) {
+      st::MapBuildOptions o;
+      o.map_level = st::parse_resolution(res);
+      o.encoding = st::Encoding::dagmh;
+      o.dagmh_dictionary = o.dagmh_mixed_tiles = true;  // the CLI's default build
+      o.planes = variants[v].planes;
+      o.plane_fit = fit;
+      if (variants[v].static_intervals) o.intervals = st::IntervalRule::static_geometry;
+      o.scene_spec = spec;
+      o.light_spec = light_spec;
+      const std::string path = out_dir + "/" + stem + "." + res + "." + variants[v].name + ".pack";
+      const auto t0 = std::chrono::steady_clock::now();
+      st::build_map(scene, light, o, path);
+      secs[v] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      bytes[v] = fs::file_size(path);
+      row[variants[v].name] = {{"bytes", bytes[v]}, {"seconds", secs[v]}, {"pack", path}};
+    }
+    const double ps = double(bytes[2]) / double(bytes[1]), ds = double(bytes[0]) / double(bytes[1]);
+    const double pd = double(bytes[2]) / double(bytes[0]);
+    row["planes_over_static"] = ps;
+    row["default_over_static"] = ds;
+    row["planes_over_default"] = pd;
+    std::printf("%-40s %6s %12llu %12llu %12llu %8.2f %8.2f %8.3f %8.1f %8.1f\n", stem.c_str(), res.c_str(),
+                (unsigned long long)bytes[0], (unsigned long long)bytes[1], (unsigned long long)bytes[2], ps, ds, pd,
+                secs[0], secs[2]);
+    std::fflush(stdout);
+    rows.push_back(row);
+  }
+  if (!json_path.empty()) std::ofstream(json_path) << rows.dump(2) << "\n";
+  return 0;
+} catch (const std::exception& e) {
+  std::fprintf(stderr, "bench_plane_packs: %s\n", e.what());
+  return 1;
+}

@@ -1,0 +1,263 @@
+// Plane tiles (tiles/core/PLANES.md): blocks of a tile's finest texels answered by one
+// plane each, decoded with integer arithmetic. Pinned here: the rounding of the fixed-point
+// depth (to the nearest binary32, ties to even), the byte layout, the fit on real open
+// meshes (every texel of every pack within a fresh trace), and hostile buffers refused.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <random>
+
+#include "common/bytes.hpp"
+#include "common/error.hpp"
+#include "interval_fields.hpp"
+#include "tiles/bake/map_build.hpp"
+#include "tiles/bake/raster_bounds.hpp"
+#include "tiles/bake/scene.hpp"
+#include "tiles/build/encode.hpp"
+#include "tiles/build/mh_build.hpp"
+#include "tiles/build/plane_fit.hpp"
+#include "tiles/core/encoding.hpp"
+#include "tiles/core/pack_evaluator.hpp"
+#include "tiles/core/pack_format.hpp"
+#include "tiles/core/plane_tile.hpp"
+
+namespace st {
+namespace plane_tiles_test {
+
+namespace fs = std::filesystem;
+using namespace planes;
+
+constexpr const char* kModels = "/usr/share/assimp/models/";
+
+// The exact value v 2^-60 rounded once to binary32 (long double holds v exactly).
+float reference_round(int64_t v) {
+  if (v <= 0) return 0.0f;
+  if (v >= kOne) return 1.0f;
+  return float(std::ldexp((long double)v, -int(kFracBits)));
+}
+
+TEST(PlaneFormat, FixedPointDepthIsTheNearestFloatTiesToEven) {
+  std::mt19937_64 rng(7);
+  for (int i = 0; i < 200000; ++i) {
+    const int64_t v = int64_t(rng() >> (4 + rng() % 60));
+    ASSERT_EQ(plane_fixed_to_float(v), reference_round(v)) << v;
+  }
+  // Exact ties between two floats round to the even one, both ways.
+  const int64_t one_and_half_ulp = (int64_t(1) << 59) + (int64_t(3) << 35);  // 0.5 + 1.5 ulp(0.5)
+  EXPECT_EQ(plane_fixed_to_float(one_and_half_ulp), reference_round(one_and_half_ulp));
+  EXPECT_EQ(plane_fixed_to_float((int64_t(1) << 59) + (int64_t(1) << 35)), 0.5f);  // 0.5 + ulp/2: to 0.5 (even)
+  EXPECT_EQ(plane_fixed_to_float(kOne - 1), 1.0f);  // carries into the next binade
+  EXPECT_EQ(plane_fixed_to_float(0), 0.0f);
+  EXPECT_EQ(plane_fixed_to_float(-5), 0.0f);
+  EXPECT_EQ(plane_fixed_to_float(kOne + 12345), 1.0f);
+  EXPECT_EQ(plane_fixed_to_float(1), 0x1p-60f);
+  EXPECT_EQ(plane_fixed_to_float(int64_t(1) << 40), 0x1p-20f);
+}
+
+TEST(PlaneFormat, LayoutIsPinned) {
+  static_assert(kHeaderSize == 16 && kRecordSize == 32);
+  static_assert(kOffMagic == 0 && kOffVersion == 4 && kOffLevels == 6 && kOffFlags == 7);
+  static_assert(kOffPlaneCount == 8 && kOffByteSize == 12);
+  static_assert(kOffStart == 0 && kOffShift == 4 && kOffA == 8 && kOffB == 16 && kOffC == 24);
+  static_assert(kMagic == 0x4E505453u && kVersion == 1 && kFracBits == 60);
+  Plane p;
+  p.start = 64;
+  p.shift = 3;
+  p.a = 0x0102030405060708;
+  p.b = -2;
+  p.c = 3;
+  const std::vector<uint8_t> inner{1, 2, 3, 4};
+  const std::vector<uint8_t> b = wrap_planes({p}, 4, inner);
+  const std::vector<uint8_t> want{
+      'S', 'T', 'P', 'N', 1, 0, 5, 0, 1, 0, 0, 0, 52, 0, 0, 0,  // header: 16 + 32 + 4 bytes
+      64, 0, 0, 0, 3, 0, 0, 0, 8, 7, 6, 5, 4, 3, 2, 1,         // start, shift, a
+      0xFE, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 3, 0, 0, 0, 0, 0, 0, 0, 1, 2, 3, 4};
+  EXPECT_EQ(b, want);
+  const PlaneTileView v = validate_plane_tile(b);
+  EXPECT_EQ(v.finest_level, 4u);
+  EXPECT_EQ(v.find(8, 0), 0);   // morton 64 = (8, 0): the block's corner
+  EXPECT_EQ(v.find(15, 7), 0);  // its far corner
+  EXPECT_EQ(v.find(7, 0), -1);
+  EXPECT_EQ(v.find(0, 8), -1);
+  EXPECT_EQ(v.plane(0).fixed(2, 1), 0x0102030405060708 - 4 + 3);
+}
+
+// A hierarchy of one tile of `scene` (bottom-up MH construction of a fresh trace).
+struct Traced {
+  IntervalTile truth;
+  Hierarchy h;
+};
+Traced trace_tile(const Scene& scene, const LightSpace& light, uint32_t level, uint32_t x, uint32_t y, uint32_t depth) {
+  Traced t;
+  t.truth = RasterBounds(scene, light).trace(TraceRegion{level, x, y, 1u << depth, 1u << depth});
+  t.h = build_hierarchy(t.truth);
+  return t;
+}
+
+Scene load_model(const char* file) {
+  const std::string path = std::string(kModels) + file;
+  if (!fs::exists(path)) return {};
+  return load_scene(path);
+}
+
+// The split answers every finest texel of the trace exactly: planes where they are, the
+// pruned hierarchy's encodings elsewhere; and the wrapped buffers open to the same answers.
+TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
+  const Scene scene = load_model("glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb");
+  if (scene.triangles.empty()) GTEST_SKIP() << "assimp-testmodels missing: run scripts/deps";
+  const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), scene.bounds());
+  const uint32_t depth = 7, level = 9;
+  uint64_t plane_texels = 0;
+  for (uint32_t ty = 1; ty < 3; ++ty) {
+    const Traced t = trace_tile(scene, light, level, 128 * ty, 192, depth);
+    const PlaneSplit s = fit_planes(t.h);
+    plane_texels += s.texels;
+    if (s.planes.empty()) continue;
+    EXPECT_LT(s.pruned.valued_count(), t.h.valued_count());
+    for (Encoding e : {Encoding::mh, Encoding::mmh, Encoding::dagmh}) {
+      const std::vector<uint8_t> bytes = wrap_planes(s.planes, depth, encode(s.pruned, e));
+      const auto ev = open_encoded(e, bytes);
+      const uint32_t side = 1u << depth;
+      for (uint32_t y = 0; y < side; ++y)
+        for (uint32_t x = 0; x < side; ++x) {
+          const Interval iv = t.truth.at(x, y);
+          const float d = ev->depth(depth, x, y);
+          ASSERT_TRUE(iv.lo <= d && d <= iv.hi) << to_string(e) << " texel " << x << "," << y;
+        }
+      // Coarser levels answer too (the multiresolution map stays complete); a region shares
+      // its value at every texel; PCF is the mean of the single taps.
+      std::mt19937 rng(ty);
+      for (uint32_t l = 0; l <= depth; ++l)
+        for (int k = 0; k < 200; ++k) {
+          const uint32_t x = rng() % (1u << l), y = rng() % (1u << l);
+          const DepthRegion reg = ev->depth_region(l, x, y);
+          ASSERT_EQ(reg.value, ev->depth(l, x, y));
+          const uint32_t rx = (x >> reg.shift << reg.shift) + rng() % (1u << reg.shift);
+          const uint32_t ry = (y >> reg.shift << reg.shift) + rng() % (1u << reg.shift);
+          ASSERT_EQ(ev->depth(l, rx, ry), reg.value) << "level " << l << " region " << reg.shift;
+          const uint32_t r = 1 + 2 * (rng() % 5);
+          const float receiver = ev->depth(l, x, y) + (k % 3 == 0 ? 0.0f : 0.001f * float(int(rng() % 21) - 10));
+          ASSERT_EQ(ev->pcf(l, x, y, r, receiver), ev->Evaluator::pcf(l, x, y, r, receiver));
+        }
+    }
+  }
+  EXPECT_GT(plane_texels, 0u) << "the engine's flat faces seen at a slant are planes";
+}
+
+TEST(PlaneFit, ABlockAcrossTwoPlanesIsNoPlane) {
+  // Two slopes meeting in the middle of an 8x8 block, one float per texel.
+  std::vector<float> lo(64), hi(64);
+  for (uint32_t i = 0; i < 64; ++i) {
+    const double x = i % 8, y = i / 8;
+    lo[i] = hi[i] = float(0.25 + 0.001 * y + (x < 4 ? 0.0003 * x : 0.0012 - 0.0002 * (x - 4)));
+  }
+  Plane p;
+  EXPECT_FALSE(fit_block(lo, hi, 3, p));
+  for (uint32_t i = 0; i < 64; ++i) lo[i] = hi[i] = float(0.25 + 0.001 * (i / 8) + 0.0003 * (i % 8));
+  ASSERT_TRUE(fit_block(lo, hi, 3, p));
+  for (uint32_t i = 0; i < 64; ++i) EXPECT_EQ(p.depth(i % 8, i / 8), lo[i]);
+}
+
+// Packs built with plane tiles, every texel against a fresh trace (as RealAssetsLossless
+// does for the encodings alone), on three real open-mesh assets.
+struct Case {
+  const char* file;
+  Encoding encoding;
+  const char* light;
+};
+
+class PlanePacks : public ::testing::TestWithParam<Case> {};
+
+TEST_P(PlanePacks, EveryTexelIsWithinTheFreshTraceAndPlaneTilesAreUsed) {
+  const Case& c = GetParam();
+  const Scene scene = load_model(c.file);
+  if (scene.triangles.empty()) GTEST_SKIP() << c.file << " missing: run scripts/deps (assimp-testmodels)";
+  const LightSpace light = LightSpace::fit(LightSpec::parse(c.light), scene.bounds());
+  const uint32_t L = fields::small_test_scale() ? 8 : 9;
+  MapBuildOptions o;
+  o.map_level = L;
+  o.encoding = c.encoding;
+  o.skip_level = 3;
+  o.dagmh_dictionary = o.dagmh_mixed_tiles = c.encoding == Encoding::dagmh;
+  o.planes = true;
+  fs::create_directories(SHADOWTILE_TEST_TMP);
+  const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/planes_" + fs::path(c.file).stem().string() + "_" +
+                           to_string(c.encoding) + ".pack";
+  build_map(scene, light, o, path);
+  auto reader = PackReader::open(path);
+  EXPECT_TRUE(reader->header().flags & kFeaturePlaneTiles) << "some tile stores planes";
+  uint64_t plane_tiles = 0;
+  for (const TileIndexEntry& t : reader->tiles())
+    if (t.kind == TileKind::encoded) plane_tiles += is_plane_buffer(reader->read_raw(t.id));
+  EXPECT_GT(plane_tiles, 0u);
+  const IntervalTile truth = RasterBounds(scene, light).trace(TraceRegion{L, 0, 0, 1u << L, 1u << L});
+  PackEvaluator eval(std::move(reader));
+  EXPECT_EQ(fields::first_violation(truth, [&](uint32_t i, uint32_t j) { return eval.depth(L, i, j); }), "");
+  fs::remove(path);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Assimp, PlanePacks,
+    ::testing::Values(Case{"Collada/teapots.DAE", Encoding::dagmh, "sun:azimuth=30,elevation=50"},
+                      Case{"FBX/spider.fbx", Encoding::mmh, "sun:azimuth=120,elevation=70"},
+                      Case{"glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb", Encoding::dagmh,
+                           "sun:azimuth=200,elevation=35"},
+                      Case{"glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb", Encoding::mh,
+                           "sun:azimuth=30,elevation=50"}),
+    [](const auto& info) { return fs::path(info.param.file).stem().string() + "_" + to_string(info.param.encoding); });
+
+// A real plane tile, cut at every length and with every byte changed: each buffer opens and
+// answers every texel inside the tile's bounds (no out-of-range read, no crash) or is refused
+// with a FormatError; none takes long or much memory (the tile is a few KiB).
+TEST(PlaneTileHostile, TruncatedAndFlippedBuffersAreRefusedOrAnswerSafely) {
+  const Scene scene = load_model("glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb");
+  if (scene.triangles.empty()) GTEST_SKIP() << "assimp-testmodels missing: run scripts/deps";
+  const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), scene.bounds());
+  const uint32_t depth = 5;
+  std::vector<uint8_t> good;
+  for (uint32_t ty = 0; ty < 16 && good.empty(); ++ty) {
+    const Traced t = trace_tile(scene, light, 8, 96 + 32 * (ty % 4), 64 + 32 * (ty / 4), depth);
+    const PlaneSplit s = fit_planes(t.h, PlaneFitOptions{3, 1, 10});
+    if (!s.planes.empty()) good = wrap_planes(s.planes, depth, encode(s.pruned, Encoding::dagmh));
+  }
+  ASSERT_FALSE(good.empty()) << "no tile with a plane";
+  ASSERT_NO_THROW(open_encoded(Encoding::dagmh, good));
+  auto probe = [&](std::span<const uint8_t> b) {
+    std::unique_ptr<Evaluator> ev;
+    try {
+      ev = open_encoded(Encoding::dagmh, b);
+    } catch (const FormatError&) {
+      return;
+    }
+    const uint32_t side = 1u << ev->finest_level();
+    ASSERT_LE(ev->finest_level(), 16u);
+    for (uint32_t y = 0; y < side; y += 3)
+      for (uint32_t x = 0; x < side; x += 3) (void)ev->depth(ev->finest_level(), x, y);
+  };
+  for (size_t n = 0; n < good.size(); ++n) {
+    const std::span<const uint8_t> cut(good.data(), n);
+    EXPECT_THROW(open_encoded(Encoding::dagmh, cut), FormatError) << "truncated at " << n;
+  }
+  const size_t header_and_planes = kHeaderSize + kRecordSize * load_le<uint32_t>(good.data() + kOffPlaneCount);
+  for (size_t i = 0; i < header_and_planes; ++i)
+    for (uint8_t flip : {uint8_t(0x01), uint8_t(0x80), uint8_t(0xFF)}) {
+      std::vector<uint8_t> bad = good;
+      bad[i] ^= flip;
+      probe(bad);
+    }
+  std::vector<uint8_t> newer = good;
+  newer[kOffVersion] = 2;
+  try {
+    open_encoded(Encoding::dagmh, newer);
+    ADD_FAILURE() << "a version-2 plane tile opened";
+  } catch (const FormatError& e) {
+    EXPECT_NE(std::string(e.what()).find("version 2, this reader knows 1"), std::string::npos) << e.what();
+  }
+  std::vector<uint8_t> nested = wrap_planes({validate_plane_tile(good).plane(0)}, depth, good);
+  EXPECT_THROW(open_encoded(Encoding::dagmh, nested), FormatError);
+  EXPECT_THROW(open_encoded(Encoding::vsdag, good), FormatError) << "vsdag packs hold no plane tiles";
+}
+
+}  // namespace plane_tiles_test
+}  // namespace st

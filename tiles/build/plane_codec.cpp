@@ -1,0 +1,58 @@
+// TileCodec::with_planes (tile_cut.hpp): each tile's encoding with and without plane blocks
+// (plane_fit.hpp, tiles/core/PLANES.md), the one that stores smaller kept.
+#include <optional>
+
+#include "common/error.hpp"
+#include "tiles/build/plane_fit.hpp"
+#include "tiles/build/tile_cut.hpp"
+#include "tiles/core/pack_format.hpp"
+#include "tiles/core/plane_tile.hpp"
+
+namespace st {
+
+namespace {
+constexpr int kChoiceLevel = 6;  // as tile_cut.cpp compares two encodings: packs' default zlib level
+}  // namespace
+
+TileCodec TileCodec::with_planes(TileCodec base, uint32_t tile_bytes, const PlaneFitOptions& fit) {
+  TileCodec c = base;
+  using Fn = std::function<std::vector<uint8_t>(const Hierarchy&)>;
+  c.alternative = nullptr;
+  c.encode = [enc = base.encode, alt = base.alternative, tile_bytes, fit](const Hierarchy& h) {
+    // Candidates: the base encodings of h, and of h without its plane blocks behind them.
+    std::optional<std::vector<uint8_t>> best;
+    size_t best_z = SIZE_MAX;
+    std::optional<Error> failure;
+    auto offer = [&](std::vector<uint8_t> bytes) {
+      const bool fits = bytes.size() <= tile_bytes, best_fits = best && best->size() <= tile_bytes;
+      if (best_fits && !fits) return;
+      const size_t z = fits ? zlib_compress(bytes, kChoiceLevel).size() : bytes.size();
+      if (!best || (fits && !best_fits) || z < best_z) best = std::move(bytes), best_z = z;
+    };
+    auto attempt = [&](const Fn& f, const Hierarchy& tree, const PlaneSplit* split) {
+      if (!f) return;
+      try {
+        std::vector<uint8_t> inner = f(tree);
+        offer(split ? wrap_planes(split->planes, h.depth, inner) : std::move(inner));
+      } catch (const Error& e) {
+        if (!failure) failure = e;
+      }
+    };
+    attempt(enc, h, nullptr);
+    attempt(alt, h, nullptr);
+    const PlaneSplit split = fit_planes(h, fit);
+    if (!split.planes.empty()) {
+      attempt(enc, split.pruned, &split);
+      attempt(alt, split.pruned, &split);
+    }
+    if (!best) throw *failure;
+    return std::move(*best);
+  };
+  c.open = [open = base.open](std::span<const uint8_t> bytes) {
+    if (is_plane_buffer(bytes)) return open_plane_tile(bytes, open);
+    return open(bytes);
+  };
+  return c;
+}
+
+}  // namespace st

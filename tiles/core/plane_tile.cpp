@@ -1,0 +1,185 @@
+#include "tiles/core/plane_tile.hpp"
+
+#include <algorithm>
+#include <string>
+
+#include "common/bytes.hpp"
+#include "common/error.hpp"
+#include "tiles/core/morton.hpp"
+
+namespace st {
+
+namespace {
+
+using namespace planes;
+
+[[noreturn]] void fail(const std::string& field, size_t offset, const std::string& why) {
+  throw FormatError("plane tile: " + field + " at byte " + std::to_string(offset) + ": " + why);
+}
+
+int64_t abs64(int64_t v) { return v < 0 ? (v == INT64_MIN ? INT64_MAX : -v) : v; }
+
+class PlaneTileEvaluator final : public Evaluator {
+ public:
+  PlaneTileEvaluator(PlaneTileView view, std::unique_ptr<Evaluator> inner)
+      : v_(view), inner_(std::move(inner)) {}
+
+  uint32_t finest_level() const override { return v_.finest_level; }
+
+  float depth(uint32_t level, uint64_t x, uint64_t y) const override {
+    float d;
+    return from_plane(level, x, y, d) ? d : inner_->depth(level, x, y);
+  }
+
+  DepthRegion depth_region(uint32_t level, uint64_t x, uint64_t y) const override {
+    float d;
+    if (from_plane(level, x, y, d)) return {d, 0};
+    // The inner walk's region may cover a plane block (a node with nothing valued below
+    // it after the blocks were taken out): it is only the texel's own then.
+    DepthRegion r = inner_->depth_region(level, x, y);
+    if (r.shift > 0 && overlaps_plane(level, x >> r.shift << r.shift, y >> r.shift << r.shift, r.shift)) r.shift = 0;
+    return r;
+  }
+
+  float pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver) const override {
+    // The kernel's square at the finest level: no block in it, the inner walk shares it.
+    r = std::clamp<uint32_t>(r, 1, kMaxPcf);
+    const uint64_t side = uint64_t(1) << level;
+    const uint64_t x0 = pcf_tap(x, 0, r, side), y0 = pcf_tap(y, 0, r, side);
+    const uint64_t x1 = pcf_tap(x, r - 1, r, side), y1 = pcf_tap(y, r - 1, r, side);
+    if (!overlaps_rect(level, x0, y0, x1, y1)) return inner_->pcf(level, x, y, r, receiver);
+    return Evaluator::pcf(level, x, y, r, receiver);
+  }
+
+ private:
+  bool from_plane(uint32_t level, uint64_t x, uint64_t y, float& out) const {
+    const uint32_t s = v_.finest_level - level;
+    if (s >= kMaxShift) return false;  // no block is as coarse as this texel
+    const uint64_t h = s ? uint64_t(1) << (s - 1) : 0;
+    const uint32_t fx = uint32_t((x << s) + h), fy = uint32_t((y << s) + h);
+    const int64_t i = v_.find(fx, fy);
+    if (i < 0) return false;
+    const Plane p = v_.plane(uint32_t(i));
+    if (p.shift <= s) return false;  // the block is finer than the texel
+    const uint32_t mask = (uint32_t(1) << p.shift) - 1;
+    out = p.depth(fx & mask, fy & mask);
+    return true;
+  }
+
+  // Whether any block meets the finest-level rectangle under texels [x0, x1] x [y0, y1] of `level`.
+  bool overlaps_rect(uint32_t level, uint64_t x0, uint64_t y0, uint64_t x1, uint64_t y1) const {
+    const uint32_t s = v_.finest_level - level;
+    const uint64_t fx0 = x0 << s, fy0 = y0 << s, fx1 = ((x1 + 1) << s) - 1, fy1 = ((y1 + 1) << s) - 1;
+    // Every texel of the rectangle has a morton code in [m0, m1] (the code grows with x and
+    // with y): only blocks whose codes meet that range can meet it.
+    const uint64_t m0 = morton_encode(uint32_t(fx0), uint32_t(fy0)), m1 = morton_encode(uint32_t(fx1), uint32_t(fy1));
+    uint32_t i = 0, hi = v_.plane_count;
+    while (i < hi) {  // the first block ending after m0
+      const uint32_t mid = (i + hi) / 2;
+      const Plane p = v_.plane(mid);
+      if (uint64_t(p.start) + (uint64_t(1) << (2 * p.shift)) <= m0) i = mid + 1;
+      else hi = mid;
+    }
+    for (; i < v_.plane_count; ++i) {
+      const Plane p = v_.plane(i);
+      if (p.start > m1) break;
+      const uint64_t bx = morton_compact(p.start), by = morton_compact(uint64_t(p.start) >> 1);
+      const uint64_t side = uint64_t(1) << p.shift;
+      if (bx <= fx1 && fx0 < bx + side && by <= fy1 && fy0 < by + side) return true;
+    }
+    return false;
+  }
+  bool overlaps_plane(uint32_t level, uint64_t x, uint64_t y, uint32_t shift) const {
+    const uint64_t n = (uint64_t(1) << shift) - 1;
+    return overlaps_rect(level, x, y, x + n, y + n);
+  }
+
+  PlaneTileView v_;
+  std::unique_ptr<Evaluator> inner_;
+};
+
+}  // namespace
+
+bool is_plane_buffer(std::span<const uint8_t> bytes) {
+  return bytes.size() >= 4 && load_le<uint32_t>(bytes.data()) == kMagic;
+}
+
+Plane PlaneTileView::plane(uint32_t i) const {
+  const uint8_t* r = records.data() + size_t(i) * kRecordSize;
+  Plane p;
+  p.start = load_le<uint32_t>(r + kOffStart);
+  p.shift = load_le<uint32_t>(r + kOffShift);
+  p.a = int64_t(load_le<uint64_t>(r + kOffA));
+  p.b = int64_t(load_le<uint64_t>(r + kOffB));
+  p.c = int64_t(load_le<uint64_t>(r + kOffC));
+  return p;
+}
+
+int64_t PlaneTileView::find(uint32_t x, uint32_t y) const {
+  const uint64_t m = morton_encode(x, y);
+  // The last block starting at or before m (blocks are sorted and disjoint).
+  uint32_t lo = 0, hi = plane_count;
+  while (lo < hi) {
+    const uint32_t mid = (lo + hi) / 2;
+    if (load_le<uint32_t>(records.data() + size_t(mid) * kRecordSize + kOffStart) <= m) lo = mid + 1;
+    else hi = mid;
+  }
+  if (lo == 0) return -1;
+  const uint8_t* r = records.data() + size_t(lo - 1) * kRecordSize;
+  const uint64_t start = load_le<uint32_t>(r + kOffStart), shift = load_le<uint32_t>(r + kOffShift);
+  return m < start + (uint64_t(1) << (2 * shift)) ? int64_t(lo - 1) : -1;
+}
+
+PlaneTileView validate_plane_tile(std::span<const uint8_t> b) {
+  if (b.size() < kHeaderSize) fail("header", 0, std::to_string(b.size()) + " bytes, need at least 16");
+  if (load_le<uint32_t>(b.data()) != kMagic) fail("magic", kOffMagic, "not \"STPN\"");
+  const uint16_t version = load_le<uint16_t>(b.data() + kOffVersion);
+  if (version != kVersion)
+    fail("version", kOffVersion, "version " + std::to_string(version) + ", this reader knows " + std::to_string(kVersion));
+  const uint32_t levels = b[kOffLevels];
+  if (levels < 1 || levels > kMaxLevels) fail("levels", kOffLevels, std::to_string(levels) + " outside 1..17");
+  if (b[kOffFlags] != 0) fail("flags", kOffFlags, "unknown flags " + std::to_string(b[kOffFlags]));
+  const uint32_t count = load_le<uint32_t>(b.data() + kOffPlaneCount);
+  if (count < 1 || count > kMaxPlanes) fail("plane_count", kOffPlaneCount, std::to_string(count) + " outside 1..2^20");
+  const uint32_t byte_size = load_le<uint32_t>(b.data() + kOffByteSize);
+  if (byte_size != b.size())
+    fail("byte_size", kOffByteSize, std::to_string(byte_size) + " but the buffer holds " + std::to_string(b.size()));
+  const size_t inner_at = kHeaderSize + size_t(count) * kRecordSize;
+  if (inner_at + 4 > b.size()) fail("plane_count", kOffPlaneCount, std::to_string(count) + " records leave no inner buffer");
+  PlaneTileView v;
+  v.finest_level = levels - 1;
+  v.plane_count = count;
+  v.records = b.subspan(kHeaderSize, inner_at - kHeaderSize);
+  v.inner = b.subspan(inner_at);
+  if (is_plane_buffer(v.inner)) fail("inner", inner_at, "a plane tile inside a plane tile");
+  const uint64_t texels = uint64_t(1) << (2 * v.finest_level);
+  uint64_t end = 0;
+  for (uint32_t i = 0; i < count; ++i) {
+    const size_t at = kHeaderSize + size_t(i) * kRecordSize;
+    const Plane p = v.plane(i);
+    if (p.shift < kMinShift || p.shift > kMaxShift || p.shift > v.finest_level)
+      fail("plane " + std::to_string(i) + " shift", at + kOffShift, std::to_string(p.shift) + " outside 2..min(8, finest level)");
+    const uint64_t size = uint64_t(1) << (2 * p.shift);
+    if (p.start % size != 0) fail("plane " + std::to_string(i) + " start", at + kOffStart, "not aligned to its block");
+    if (p.start < end) fail("plane " + std::to_string(i) + " start", at + kOffStart, "blocks unsorted or overlapping");
+    if (p.start + size > texels) fail("plane " + std::to_string(i) + " start", at + kOffStart, "outside the tile");
+    end = p.start + size;
+    if (abs64(p.a) > kMaxBase) fail("plane " + std::to_string(i) + " a", at + kOffA, "|a| > 2^61");
+    if (abs64(p.b) > kMaxSlope) fail("plane " + std::to_string(i) + " b", at + kOffB, "|b| > 2^52");
+    if (abs64(p.c) > kMaxSlope) fail("plane " + std::to_string(i) + " c", at + kOffC, "|c| > 2^52");
+  }
+  return v;
+}
+
+std::unique_ptr<Evaluator> open_plane_tile(
+    std::span<const uint8_t> bytes,
+    const std::function<std::unique_ptr<Evaluator>(std::span<const uint8_t>)>& open_inner) {
+  const PlaneTileView v = validate_plane_tile(bytes);
+  std::unique_ptr<Evaluator> inner = open_inner(v.inner);
+  if (inner->finest_level() != v.finest_level)
+    fail("inner", kHeaderSize + size_t(v.plane_count) * kRecordSize,
+         "finest level " + std::to_string(inner->finest_level()) + ", the tile's is " + std::to_string(v.finest_level));
+  return std::make_unique<PlaneTileEvaluator>(v, std::move(inner));
+}
+
+}  // namespace st
