@@ -338,11 +338,12 @@ void setup(CLI::App& app) {
                 "Run under mpirun: the cells spread over the ranks (dynamic scheduling), rank 0 writes "
                 "the pack; --resume continues after a rank died");
   app.add_option("--builder", a->builder,
-                 "Depth bounds producer: raster (light-space rasterizer; sun lights, default intervals), "
+                 "Depth bounds producer: raster (light-space rasterizer; sun lights, either interval rule), "
                  "embree (ray tracer; every light), or auto (raster where it applies)")
       ->capture_default_str();
   app.add_option("--raster-skip", a->skip,
-                 "Rasterizer tiles covered by one closed object's entry and exit: exact (their intervals "
+                 "Rasterizer tiles covered by one closed object's entry and exit (with --intervals static also "
+                 "by one open layer with everything else beyond it): exact (their intervals "
                  "from the two planes, the same bits as off), narrow (one sub-interval per tile: lossless, "
                  "recorded as intervals_narrowed=yes), regions (narrow, and whole quadtree regions of a cell "
                  "proven by their corners become one node: work follows the edges between surfaces, not "

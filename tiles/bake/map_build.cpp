@@ -69,7 +69,8 @@ class CellBounds {
  public:
   CellBounds(const Scene& scene, const LightSpace& light, const MapBuildOptions& o)
       : builder_(resolve_builder(o.builder, light, o.intervals)), mode_(trace_mode_of(o.intervals)) {
-    if (builder_ == BoundsBuilder::raster) raster_ = std::make_unique<RasterBounds>(scene, light, o.raster_skip);
+    if (builder_ == BoundsBuilder::raster)
+      raster_ = std::make_unique<RasterBounds>(scene, light, o.raster_skip, mode_);
     else tracer_ = std::make_unique<DepthBoundsTracer>(scene, light);
   }
   BoundsBuilder builder() const { return builder_; }
@@ -418,13 +419,11 @@ BoundsBuilder parse_bounds_builder(const std::string& text) {
 }
 
 BoundsBuilder resolve_builder(BoundsBuilder b, const LightSpace& light, IntervalRule rule) {
-  const bool applies = light.kind() == LightKind::sun && rule == IntervalRule::closed_objects;
+  (void)rule;  // the rasterizer builds both interval rules
+  const bool applies = light.kind() == LightKind::sun;
   if (b == BoundsBuilder::automatic) return applies ? BoundsBuilder::raster : BoundsBuilder::embree;
   if (b == BoundsBuilder::raster && !applies)
-    throw Error(light.kind() != LightKind::sun
-                    ? "--builder raster: the rasterizer handles sun lights only; use --builder embree for a spot light"
-                    : "--builder raster: the rasterizer builds the default interval rule only; use --builder embree "
-                      "with --intervals static");
+    throw Error("--builder raster: the rasterizer handles sun lights only; use --builder embree for a spot light");
   return b;
 }
 
