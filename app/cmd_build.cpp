@@ -180,9 +180,10 @@ void run(const BuildArgs& a) {
   if (a.dagmh_dictionary != "on" && a.dagmh_dictionary != "off")
     throw Error("--dagmh-dictionary: expected on or off, got '" + a.dagmh_dictionary + "'");
   o.dagmh_dictionary = a.dagmh_dictionary == "on" && o.encoding == Encoding::dagmh;
-  if (a.dagmh_tiles != "mixed" && a.dagmh_tiles != "dagmh")
-    throw Error("--dagmh-tiles: expected mixed or dagmh, got '" + a.dagmh_tiles + "'");
-  o.dagmh_mixed_tiles = a.dagmh_tiles == "mixed" && o.encoding == Encoding::dagmh;
+  if (a.dagmh_tiles != "mixed" && a.dagmh_tiles != "exhaustive" && a.dagmh_tiles != "dagmh")
+    throw Error("--dagmh-tiles: expected mixed, exhaustive or dagmh, got '" + a.dagmh_tiles + "'");
+  o.dagmh_mixed_tiles = a.dagmh_tiles != "dagmh" && o.encoding == Encoding::dagmh;
+  o.dagmh_mixed_exhaustive = a.dagmh_tiles == "exhaustive";
   if (!a.shard.empty()) o.shard = BuildShard::parse(a.shard);
   if (a.mpi && o.shard) throw Error("--mpi and --shard: choose one (a shard is one process's slice)");
 #ifdef SHADOWTILE_HAVE_MPI
@@ -374,9 +375,10 @@ void setup(CLI::App& app) {
       ->check(CLI::IsMember({"octree", "smaller", "slices"}))
       ->capture_default_str();
   app.add_option("--dagmh-tiles", a->dagmh_tiles,
-                 "dagmh: mixed (default) writes a tile as MMH where that stores in fewer bytes (open meshes' "
-                 "zero-width intervals), so the pack is never larger than MMH's tile for tile; dagmh writes "
-                 "every tile as DAG-MH")
+                 "dagmh: mixed (default) writes a tile as MMH where that is likely to store in fewer bytes "
+                 "(mostly zero-width intervals: open meshes), encoding both only where unsure; exhaustive "
+                 "encodes every tile both ways and keeps the smaller (never larger than MMH's tile for tile; "
+                 "slower); dagmh writes every tile as DAG-MH")
       ->capture_default_str();
   app.add_flag("-q,--quiet", a->quiet, "No summary or progress");
   app.callback([a]() { run(*a); });

@@ -57,6 +57,9 @@ std::vector<StaticCase> cases() {
   v.push_back({"city", make_procedural("procedural:city,size=2"), "sun:azimuth=30,elevation=50"});
   v.push_back({"grazing_open_town", test::all_open(test::hazard_town()), "sun:azimuth=77,elevation=0.5"});
   v.push_back({"grid", load_scene("grid:" + building_obj() + ",n=3,gap=0.5,seed=3"), "sun:azimuth=200,elevation=60"});
+  // Real tool exports (Debian's assimp-testmodels, scripts/deps), open meshes.
+  const std::string teapots = "/usr/share/assimp/models/Collada/teapots.DAE";
+  if (fs::exists(teapots)) v.push_back({"teapots", load_scene(teapots), "sun:azimuth=30,elevation=50"});
   return v;
 }
 

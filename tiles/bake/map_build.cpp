@@ -48,7 +48,7 @@ CutParams checked_cut_params(const MapBuildOptions& o) {
   cut.map_level = o.map_level;
   cut.skip_level = o.skip_level.value_or(default_skip_level(o.map_level));
   cut.tile_bytes = o.tile_bytes;
-  cut.codec = o.encoding == Encoding::dagmh && o.dagmh_mixed_tiles ? TileCodec::dagmh_or_mmh() : TileCodec::of(o.encoding);
+  cut.codec = o.encoding == Encoding::dagmh && o.dagmh_mixed_tiles ? TileCodec::dagmh_or_mmh(o.dagmh_mixed_exhaustive) : TileCodec::of(o.encoding);
   if (o.encoding == Encoding::vsdag) {
     const VsdagOptions vo{o.vsdag_z_bits};
     if (vo.z_bits < vsdag::kMinZBits || vo.z_bits > vsdag::kMaxZBits) throw Error("build: --depth-bits must be 3..20");

@@ -101,9 +101,13 @@ struct MapBuildOptions {
   bool dagmh_dictionary = false;
   // DAG-MH: a tile whose MMH encoding stores in fewer bytes is written as MMH instead
   // (TileCodec::dagmh_or_mmh; pack feature mixed_tiles, tiles/PACK.md "Mixed tiles"), so
-  // no tile of the pack is larger than the MMH pack's would be. The CLI turns it on by
-  // default (--dagmh-tiles mixed).
+  // no tile of the pack is larger than the MMH pack's would be (exhaustive below; else the
+  // choice is predicted per tile and the pack measured). The CLI turns it on by default
+  // (--dagmh-tiles mixed).
   bool dagmh_mixed_tiles = false;
+  // With dagmh_mixed_tiles: encode every tile both ways (TileCodec::dagmh_or_mmh(true)),
+  // instead of only where the share of zero-width intervals leaves the winner unsure.
+  bool dagmh_mixed_exhaustive = false;
   // Build only the cells touching this region; every other cell is the constant
   // kLitDepth (a partial map: only texels inside the region are traced and lossless).
   std::optional<TexelRegion> region;
