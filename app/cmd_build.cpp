@@ -181,9 +181,10 @@ void run(const BuildArgs& a) {
   if (a.dagmh_dictionary != "on" && a.dagmh_dictionary != "off")
     throw Error("--dagmh-dictionary: expected on or off, got '" + a.dagmh_dictionary + "'");
   o.dagmh_dictionary = a.dagmh_dictionary == "on" && o.encoding == Encoding::dagmh;
-  if (a.dagmh_tiles != "mixed" && a.dagmh_tiles != "dagmh")
-    throw Error("--dagmh-tiles: expected mixed or dagmh, got '" + a.dagmh_tiles + "'");
-  o.dagmh_mixed_tiles = a.dagmh_tiles == "mixed" && o.encoding == Encoding::dagmh;
+  if (a.dagmh_tiles != "mixed" && a.dagmh_tiles != "exhaustive" && a.dagmh_tiles != "dagmh")
+    throw Error("--dagmh-tiles: expected mixed, exhaustive or dagmh, got '" + a.dagmh_tiles + "'");
+  o.dagmh_mixed_tiles = a.dagmh_tiles != "dagmh" && o.encoding == Encoding::dagmh;
+  o.dagmh_mixed_exhaustive = a.dagmh_tiles == "exhaustive";
   if (a.planes != "on" && a.planes != "off") throw Error("--planes: expected on or off, got '" + a.planes + "'");
   if (a.planes == "on" && o.encoding == Encoding::vsdag) throw Error("--planes on: vsdag has no plane tiles (mh, mmh, dagmh do)");
   o.planes = a.planes == "on";
@@ -342,11 +343,12 @@ void setup(CLI::App& app) {
                 "Run under mpirun: the cells spread over the ranks (dynamic scheduling), rank 0 writes "
                 "the pack; --resume continues after a rank died");
   app.add_option("--builder", a->builder,
-                 "Depth bounds producer: raster (light-space rasterizer; sun lights, default intervals), "
-                 "embree (ray tracer; every light), or auto (raster where it applies)")
+                 "Depth bounds producer: raster (light-space rasterizer; sun lights, either interval rule), "
+                 "embree (ray tracer; every light), or auto (raster for a sun under the default rule)")
       ->capture_default_str();
   app.add_option("--raster-skip", a->skip,
-                 "Rasterizer tiles covered by one closed object's entry and exit: exact (their intervals "
+                 "Rasterizer tiles covered by one closed object's entry and exit (with --intervals static also "
+                 "by one open layer with everything else beyond it): exact (their intervals "
                  "from the two planes, the same bits as off), narrow (one sub-interval per tile: lossless, "
                  "recorded as intervals_narrowed=yes), regions (narrow, and whole quadtree regions of a cell "
                  "proven by their corners become one node: work follows the edges between surfaces, not "
@@ -381,9 +383,10 @@ void setup(CLI::App& app) {
                  "encoding of the rest, where that stores smaller (open surfaces; tiles/core/PLANES.md)")
       ->capture_default_str();
   app.add_option("--dagmh-tiles", a->dagmh_tiles,
-                 "dagmh: mixed (default) writes a tile as MMH where that stores in fewer bytes (open meshes' "
-                 "zero-width intervals), so the pack is never larger than MMH's tile for tile; dagmh writes "
-                 "every tile as DAG-MH")
+                 "dagmh: mixed (default) writes a tile as MMH where that is likely to store in fewer bytes "
+                 "(mostly zero-width intervals: open meshes), encoding both only where unsure; exhaustive "
+                 "encodes every tile both ways and keeps the smaller (never larger than MMH's tile for tile; "
+                 "slower); dagmh writes every tile as DAG-MH")
       ->capture_default_str();
   app.add_flag("-q,--quiet", a->quiet, "No summary or progress");
   app.callback([a]() { run(*a); });

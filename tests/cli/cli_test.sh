@@ -34,7 +34,7 @@ check inspect-json 0 '"encoding": "dagmh"' -- "$st" inspect city.pack --json
 # DAG-MH builds carry the pack dictionary by default (tiles/PACK.md "DAG-MH dictionary").
 check inspect-dictionary 0 "dictionary   DAG-MH, .* inner nodes" -- "$st" inspect city.pack
 check bad-dictionary-option 1 "dagmh-dictionary: expected on or off" -- "$st" build $scene $light --resolution 256 --dagmh-dictionary maybe -o x.pack -q
-check bad-dagmh-tiles-option 1 "dagmh-tiles: expected mixed or dagmh" -- "$st" build $scene $light --resolution 256 --dagmh-tiles maybe -o x.pack -q
+check bad-dagmh-tiles-option 1 "dagmh-tiles: expected mixed, exhaustive or dagmh" -- "$st" build $scene $light --resolution 256 --dagmh-tiles maybe -o x.pack -q
 check bad-up-option 1 "up: expected y or z, got .x." -- "$st" bounds procedural:cube $light --resolution 256 --up x -o x.exr
 # Real assets (Debian's assimp-testmodels, scripts/deps): bounds says which up axis it
 # read and why; the default DAG-MH build (dictionary, mixed tiles) of a game model with

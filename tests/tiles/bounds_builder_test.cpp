@@ -84,6 +84,7 @@ TEST(BoundsBuilder, AutoPicksRasterForTheSunAndEmbreeOtherwise) {
   EXPECT_EQ(resolve_builder(BoundsBuilder::automatic, sun, IntervalRule::closed_objects), BoundsBuilder::raster);
   EXPECT_EQ(resolve_builder(BoundsBuilder::automatic, spot, IntervalRule::closed_objects), BoundsBuilder::embree);
   EXPECT_EQ(resolve_builder(BoundsBuilder::automatic, sun, IntervalRule::static_geometry), BoundsBuilder::embree);
+  EXPECT_EQ(resolve_builder(BoundsBuilder::raster, sun, IntervalRule::static_geometry), BoundsBuilder::raster);
   EXPECT_THROW(resolve_builder(BoundsBuilder::raster, spot, IntervalRule::closed_objects), Error);
   EXPECT_THROW(parse_bounds_builder("gpu"), Error);
   MapBuildOptions o;

@@ -26,13 +26,15 @@ struct Built {
   uint32_t flags = 0;
 };
 
-Built build(const Scene& scene, const LightSpace& light, uint32_t level, Encoding e, bool mixed, const char* name) {
+Built build(const Scene& scene, const LightSpace& light, uint32_t level, Encoding e, bool mixed, const char* name,
+            bool exhaustive = false) {
   MapBuildOptions o;
   o.map_level = level;
   o.encoding = e;
   o.skip_level = 4;
   o.dagmh_dictionary = e == Encoding::dagmh;  // as the CLI builds by default
   o.dagmh_mixed_tiles = mixed;
+  o.dagmh_mixed_exhaustive = exhaustive;
   fs::create_directories(SHADOWTILE_TEST_TMP);
   Built b;
   b.path = std::string(SHADOWTILE_TEST_TMP) + "/mixed_" + name + ".pack";
@@ -48,6 +50,30 @@ Built build(const Scene& scene, const LightSpace& light, uint32_t level, Encodin
     else if (load_le<uint32_t>(raw.data()) == dagmh::kMagic) ++b.dagmh_tiles;
   }
   return b;
+}
+
+// The default mixed build predicts each tile's smaller encoding from its share of
+// zero-width intervals and encodes both only where unsure; exhaustive encodes every tile
+// both ways. On a closed city (wide intervals) the prediction keeps DAG-MH, on its open
+// copy MMH: both packs stay no larger than the MMH pack and within 2% of exhaustive.
+TEST(MixedTiles, PredictedChoiceStaysNoLargerThanMmhAndNearExhaustive) {
+  const uint32_t L = fields::small_test_scale() ? 8 : 10;
+  const Scene closed = load_scene("procedural:city,size=3,seed=9");
+  for (const Scene& scene : {closed, test::all_open(closed)}) {
+    const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), scene.bounds());
+    const Built mmh = build(scene, light, L, Encoding::mmh, false, "p_mmh");
+    const Built predicted = build(scene, light, L, Encoding::dagmh, true, "p_predicted");
+    const Built exhaustive = build(scene, light, L, Encoding::dagmh, true, "p_exhaustive", true);
+    const bool open = !scene.any_closed();
+    EXPECT_LE(predicted.file, mmh.file) << (open ? "open" : "closed");
+    EXPECT_LE(double(predicted.payloads), 1.02 * double(exhaustive.payloads)) << (open ? "open" : "closed");
+    if (open) {
+      EXPECT_EQ(predicted.dagmh_tiles, 0u) << "zero-width intervals: MMH predicted everywhere";
+    } else {
+      EXPECT_EQ(predicted.mmh_tiles, 0u) << "wide intervals: DAG-MH predicted everywhere";
+    }
+    for (const Built* b : {&mmh, &predicted, &exhaustive}) fs::remove(b->path);
+  }
 }
 
 TEST(MixedTiles, OpenTownTakesMmhWhereSmallerStaysLosslessAndNoLargerThanEither) {

@@ -51,7 +51,7 @@ enum class IntervalRule : uint8_t {
 // (canonical_coverage.hpp) where Embree decides coverage in float, so the two can differ
 // on a texel whose ray passes within float error of a triangle edge (ARCHITECTURE.md).
 enum class BoundsBuilder : uint8_t {
-  automatic,  // raster where it applies (a sun and the closed-object rule), else embree
+  automatic,  // raster for a sun under the default rule, else embree (static: raster opt-in)
   raster,     // the light-space rasterizer (raster_bounds.hpp)
   embree,     // the Embree tracer (depth_bounds.hpp): every light and interval rule
 };
@@ -102,14 +102,18 @@ struct MapBuildOptions {
   bool dagmh_dictionary = false;
   // DAG-MH: a tile whose MMH encoding stores in fewer bytes is written as MMH instead
   // (TileCodec::dagmh_or_mmh; pack feature mixed_tiles, tiles/PACK.md "Mixed tiles"), so
-  // no tile of the pack is larger than the MMH pack's would be. The CLI turns it on by
-  // default (--dagmh-tiles mixed).
+  // no tile of the pack is larger than the MMH pack's would be (exhaustive below; else the
+  // choice is predicted per tile and the pack measured). The CLI turns it on by default
+  // (--dagmh-tiles mixed).
   bool dagmh_mixed_tiles = false;
   // MH, MMH, DAG-MH: a tile whose finest texels hold blocks of one plane each also tries
   // plane blocks over the encoding of the rest (TileCodec::with_planes; pack feature
   // plane_tiles, tiles/core/PLANES.md) and keeps what stores smaller.
   bool planes = false;
   PlaneFitOptions plane_fit;  // which blocks are tried (plane_fit.hpp)
+  // With dagmh_mixed_tiles: encode every tile both ways (TileCodec::dagmh_or_mmh(true)),
+  // instead of only where the share of zero-width intervals leaves the winner unsure.
+  bool dagmh_mixed_exhaustive = false;
   // Build only the cells touching this region; every other cell is the constant
   // kLitDepth (a partial map: only texels inside the region are traced and lossless).
   std::optional<TexelRegion> region;

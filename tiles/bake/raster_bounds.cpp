@@ -145,13 +145,17 @@ struct DirEdge {
 struct Scratch {
   std::vector<SkipInfo> others, fronts, backs;  // skip_tile()
   std::vector<Live> live;                       // classify()
-  std::vector<uint32_t> members;                // make_patch()
+  std::vector<uint32_t> members;                // make_patch(), classify_open()
+  std::vector<uint8_t> in_layer;                // classify_open()
   std::vector<DirEdge> edges;                   // make_patch()
   std::vector<uint32_t> setup_ids;              // classify()'s candidates
   std::vector<uint32_t> cover;  // skip_tile(): the setups covering every texel centre of the tile
   bool known = false;           // skip_tile(): every candidate covers the whole tile or misses it
   double ox[kTileTexels], oy[kTileTexels], oz[kTileTexels];
   double nearest[kTileTexels];
+  // Static rule, tiles without closed triangles: the nearest hit's depth and the smallest
+  // depth above it (add_hit()).
+  float first_depth[kTileTexels], next_depth[kTileTexels];
   std::vector<CanonicalHit> frags[kTileTexels];
 };
 
@@ -174,7 +178,10 @@ struct RasterBounds::Impl {
   std::vector<std::array<uint32_t, 2>> grid_first;  // per setup: first grid cell (gx, gy)
   mutable tbb::enumerable_thread_specific<Scratch> scratch;
   RasterSkip skip = RasterSkip::exact;
+  bool static_rule = false;  // TraceMode::static_bounds
   mutable std::atomic<uint64_t> skipped{0};
+  // Static rule: the most candidates an open layer may have (classify_open()).
+  static constexpr size_t kMaxLayer = 48;
 
   Impl(const Scene& scene, const LightSpace& l);
   std::array<int64_t, 4> grid_range(double u0, double v0, double u1, double v1) const {
@@ -195,6 +202,33 @@ struct RasterBounds::Impl {
   bool classify(const Corners& c, const std::vector<uint32_t>& ids, bool narrow, Scratch& s, Interval& iv) const;
   std::optional<Interval> region_interval(uint32_t level, uint64_t x0, uint64_t y0, uint64_t side) const;
   bool make_patch(const Corners& c, Scratch& s, uint32_t mesh, int8_t sigma, Patch& p) const;
+  bool cover_once(const Corners& c, Scratch& s, int8_t sigma, Patch& p) const;
+  bool classify_open(const Corners& c, Scratch& s, Interval& iv) const;
+  // A hit of an open-only tile: the nearest t and, under the static rule, the depths.
+  void add_hit(Scratch& s, uint32_t k, double t) const {
+    if (!static_rule) {
+      s.nearest[k] = std::min(s.nearest[k], t);
+      return;
+    }
+    const float d = canonical_depth(light, t);  // monotone in t: depths order as t does
+    if (t < s.nearest[k]) {
+      if (d < s.first_depth[k]) s.next_depth[k] = s.first_depth[k];
+      s.nearest[k] = t, s.first_depth[k] = d;
+    } else if (d > s.first_depth[k]) {
+      s.next_depth[k] = std::min(s.next_depth[k], d);
+    }
+  }
+  // The static-geometry interval of a reduced texel (TraceMode::static_bounds, as the
+  // tracer ends it): an open result (hi = lo, no fallback) of a non-empty hit list
+  // reaches to just below `next`, the smallest depth above lo (INFINITY: none, then 1).
+  static Interval widen_static(Interval iv, float next) {
+    return Interval{iv.lo, next == INFINITY ? kLitDepth : std::max(iv.lo, std::nextafter(next, -INFINITY))};
+  }
+  static float next_depth_after(const LightSpace& light, const CanonicalHit* h, size_t n, float lo) {
+    for (size_t i = 0; i < n; ++i)
+      if (const float d = canonical_depth(light, h[i].t); d > lo) return d;
+    return INFINITY;
+  }
   bool classify_patches(const Corners& c, Scratch& s, Interval& iv) const;
   Interval texel_reference(uint32_t level, uint64_t x, uint64_t y) const;
 };
@@ -395,6 +429,7 @@ void RasterBounds::Impl::tile(const TraceRegion& r, const Candidate* cand, const
   for (size_t c = 0; c < n; ++c) lists |= setups[cand[ids[c]].setup].closed;
   for (uint32_t k = 0; k < kTileTexels; ++k) {
     s.nearest[k] = INFINITY;
+    s.first_depth[k] = s.next_depth[k] = INFINITY;
     if (lists) s.frags[k].clear();
   }
   // The origin steps of one texel along x and y (spans below).
@@ -417,7 +452,7 @@ void RasterBounds::Impl::tile(const TraceRegion& r, const Candidate* cand, const
           const double t = (T.pd - (T.nx * ox + T.ny * oy + T.nz * oz)) / T.den;
           if (!std::isfinite(t) || t < 0 || t > 1) continue;
           if (lists) s.frags[k].push_back(CanonicalHit{t, T.tri, T.mesh, int8_t(T.sigma), T.closed});
-          else s.nearest[k] = std::min(s.nearest[k], t);
+          else add_hit(s, k, t);
         }
       }
   }
@@ -483,7 +518,7 @@ void RasterBounds::Impl::tile(const TraceRegion& r, const Candidate* cand, const
         const double t = (T.pd - (T.nx * ox + T.ny * oy + T.nz * oz)) / T.den;
         if (!std::isfinite(t) || t < 0 || t > 1) continue;
         if (lists) s.frags[k].push_back(CanonicalHit{t, T.tri, T.mesh, int8_t(facing), T.closed});
-        else s.nearest[k] = std::min(s.nearest[k], t);
+        else add_hit(s, k, t);
       }
     }
   }
@@ -492,6 +527,7 @@ void RasterBounds::Impl::tile(const TraceRegion& r, const Candidate* cand, const
     for (uint32_t i = 0; i < tw; ++i) {
       const uint32_t k = j * kTile + i;
       CanonicalResult res;
+      float next = INFINITY;  // static rule: the smallest depth above lo
       if (lists) {
         auto& f = s.frags[k];
         if (f.size() == 2) {
@@ -507,10 +543,14 @@ void RasterBounds::Impl::tile(const TraceRegion& r, const Candidate* cand, const
         } else {
           res = canonical_interval(f.data(), f.size(), 1.0);
         }
+        if (static_rule && !f.empty() && !res.fell_back)
+          next = next_depth_after(light, f.data(), f.size(), canonical_depth(light, res.lo_t));
       } else if (s.nearest[k] < INFINITY) {
         res.lo_t = res.hi_t = s.nearest[k];
+        next = s.next_depth[k];
       }
-      const Interval iv = canonical_depths(light, res);
+      Interval iv = canonical_depths(light, res);
+      if (static_rule && res.lo_t < INFINITY && !res.fell_back && iv.hi == iv.lo) iv = widen_static(iv, next);
       out.at(bi + i, bj + j) = iv;
       st.hits += res.lo_t < INFINITY;
       st.closed += iv.hi > iv.lo;
@@ -608,7 +648,9 @@ bool RasterBounds::Impl::classify(const Corners& c, const std::vector<uint32_t>&
     else s.others.push_back(info);
   }
   s.known = !partial;
-  if (!narrow || !any_closed || unbounded) return false;
+  if (!narrow || unbounded) return false;
+  if (static_rule && classify_open(c, s, iv)) return true;
+  if (!any_closed) return false;
   if (classify_patches(c, s, iv)) return true;
   // F: the nearest covering front face; B: the nearest covering back face of its mesh after it.
   for (const SkipInfo& f : fronts)
@@ -686,6 +728,13 @@ bool RasterBounds::Impl::make_patch(const Corners& c, Scratch& s, uint32_t mesh,
     if (l.sigma == 0) return false;  // an edge-on member of the mesh: neither side
     if (l.sigma == sigma) s.members.push_back(i);
   }
+  return cover_once(c, s, sigma, p);
+}
+
+// The live candidates s.members, all facing `sigma`, as one surface: true (and their
+// corner depths in p) when every texel centre of the tile or region is covered by exactly
+// one of them (the proof above make_patch()).
+bool RasterBounds::Impl::cover_once(const Corners& c, Scratch& s, int8_t sigma, Patch& p) const {
   if (s.members.empty()) return false;
   s.edges.clear();
   for (uint32_t m : s.members) {
@@ -796,6 +845,56 @@ bool RasterBounds::Impl::classify_patches(const Corners& c, Scratch& s, Interval
   return true;
 }
 
+// The static rule's open layer (raster_bounds.hpp "static"). The layer grows from the
+// nearest live candidate by every candidate not provably after it (scalar bounds first,
+// then the corner test of after(Patch, ...), redone until nothing joins, since the layer's
+// depths widen as it grows); a closed member, a member facing the other way or more than
+// kMaxLayer members end the proof. Then (1) cover_once(): each texel centre is covered by
+// exactly one member, so its hit list starts with that member's hit (every non-member is
+// after the layer at every texel, and t in [0, 1] is checked), which is open: lo is its
+// depth, at most the layer's largest depth a; (2) every later hit is a non-member's, whose
+// t is at least their smallest padded bound bt, so the smallest depth above lo is at
+// least depth(bt) and hi, just below it (or 1), is at least b = depth(bt) less one ulp
+// (1 when bt > 1: nothing else can be hit). [a, b] then lies inside [lo, hi].
+bool RasterBounds::Impl::classify_open(const Corners& c, Scratch& s, Interval& iv) const {
+  const size_t n = s.live.size();
+  if (n == 0) return false;
+  uint32_t first = 0;
+  for (uint32_t i = 1; i < n; ++i)
+    if (s.live[i].info.tmin < s.live[first].info.tmin) first = i;
+  const Live& f = s.live[first];
+  if (f.closed || f.sigma == 0 || !(f.info.tmin >= 0)) return false;
+  s.in_layer.assign(n, 0);
+  s.in_layer[first] = 1;
+  s.members.assign(1, first);
+  Patch P = patch_of(f.info);
+  for (bool grew = true; grew;) {
+    grew = false;
+    for (uint32_t i = 0; i < n; ++i) {
+      if (s.in_layer[i]) continue;
+      const Live& l = s.live[i];
+      if (l.info.tmin > P.tmax || after(P, patch_of(l.info), 0)) continue;
+      if (l.closed || l.sigma != f.sigma || s.members.size() >= kMaxLayer) return false;
+      s.in_layer[i] = 1;
+      s.members.push_back(i);
+      for (int q = 0; q < 4; ++q) P.lo[q] = std::min(P.lo[q], l.info.t[q]), P.hi[q] = std::max(P.hi[q], l.info.t[q]);
+      P.pad = std::max(P.pad, l.info.pad), P.tmin = std::min(P.tmin, l.info.tmin), P.tmax = std::max(P.tmax, l.info.tmax);
+      grew = true;
+    }
+  }
+  if (!(P.tmin >= 0) || !(P.tmax <= 1)) return false;
+  Patch covered;
+  if (!cover_once(c, s, f.sigma, covered)) return false;
+  double bt = INFINITY;
+  for (uint32_t i = 0; i < n; ++i)
+    if (!s.in_layer[i]) bt = std::min(bt, s.live[i].info.tmin);
+  const float a = canonical_depth(light, P.tmax);
+  const float b = bt > 1 ? kLitDepth : std::nextafter(canonical_depth(light, bt), -INFINITY);
+  if (!(a <= b)) return false;
+  iv = Interval{a, b};
+  return true;
+}
+
 std::optional<Interval> RasterBounds::Impl::region_interval(uint32_t level, uint64_t x0, uint64_t y0,
                                                             uint64_t side) const {
   const std::vector<Candidate> cand = candidates({level, x0, y0, uint32_t(side), uint32_t(side)});
@@ -837,7 +936,11 @@ Interval RasterBounds::Impl::texel_reference(uint32_t level, uint64_t x, uint64_
     hits.push_back(CanonicalHit{tp, t, mesh[t], int8_t(f), closed[t] != 0});
   }
   std::sort(hits.begin(), hits.end());
-  return canonical_depths(light, canonical_interval(hits, 1.0));
+  const CanonicalResult res = canonical_interval(hits, 1.0);
+  const Interval iv = canonical_depths(light, res);
+  if (static_rule && !hits.empty() && !res.fell_back && iv.hi == iv.lo)
+    return widen_static(iv, next_depth_after(light, hits.data(), hits.size(), iv.lo));
+  return iv;
 }
 
 const char* to_string(RasterSkip s) {
@@ -858,11 +961,15 @@ RasterSkip parse_raster_skip(const std::string& text) {
   throw Error("--raster-skip: expected off, exact, narrow or regions, got '" + text + "'");
 }
 
-RasterBounds::RasterBounds(const Scene& scene, const LightSpace& light, RasterSkip skip)
+RasterBounds::RasterBounds(const Scene& scene, const LightSpace& light, RasterSkip skip, TraceMode mode)
     : impl_(std::make_unique<Impl>(scene, light)) {
+  if (mode != TraceMode::bounds && mode != TraceMode::static_bounds)
+    throw Error("raster builder: only the canonical bounds and the static-geometry interval are supported");
   impl_->skip = skip;
+  impl_->static_rule = mode == TraceMode::static_bounds;
 }
 RasterSkip RasterBounds::skip() const { return impl_->skip; }
+TraceMode RasterBounds::mode() const { return impl_->static_rule ? TraceMode::static_bounds : TraceMode::bounds; }
 uint64_t RasterBounds::skipped_texels() const { return impl_->skipped.load(); }
 RasterBounds::~RasterBounds() = default;
 

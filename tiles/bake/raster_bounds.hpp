@@ -24,8 +24,12 @@
 //     only the nearest hit.
 //
 // Scope: sun lights (parallel texel rays: orthographic or the ground frame's sheared
-// map, whose origins are affine in the texel too) and the closed-object interval rule; a spot
-// light is refused with st::Error (the Embree tracer handles it).
+// map, whose origins are affine in the texel too), the closed-object interval rule
+// (TraceMode::bounds) and the static-geometry rule (TraceMode::static_bounds: where the
+// reduced interval is open, hi reaches to just below the next depth of the texel's hit
+// list, exactly as the tracer does; tiles without closed triangles keep only the nearest
+// depth and the next larger one); a spot light is refused with st::Error (the Embree
+// tracer handles it).
 // Assumption shared with every binning rasterizer: the definition's double evaluation
 // never covers a texel centre more than a texel outside the triangle's light-space box
 // (it would take edges shorter than about 1e-9 of the scene at level 20).
@@ -61,6 +65,14 @@ namespace st {
 //           a hierarchy built from it keeps the lossless invariant against the true
 //           intervals, but stored intervals may differ from an unnarrowed build's (the pack
 //           records intervals_narrowed=yes). Open geometry is never narrowed.
+//   static: under TraceMode::static_bounds, narrow and regions also prove an open layer:
+//           the live candidates whose depths are not provably beyond the nearest one's
+//           (a roof, the ground between buildings; any meshes, open, one facing) cover
+//           every texel centre exactly once (the patch proof below) and every other
+//           candidate lies beyond the layer's largest depth. Each texel's first hit is
+//           then a layer member, open, and the next larger depth comes from the others,
+//           so [largest layer depth, just below the others' smallest depth] (or 1 when
+//           none can be hit) lies inside every texel's static interval.
 //   regions: narrow, and a build (map_build.hpp) builds each cell's hierarchy top-down
 //           over square regions: a region that region_interval() proves (all lit, or
 //           one closed mesh's F and B) becomes one node without per-texel work, any other
@@ -76,7 +88,9 @@ class RasterBounds {
  public:
   static constexpr uint32_t kTile = 16;  // texels a side of a binning tile
 
-  RasterBounds(const Scene& scene, const LightSpace& light, RasterSkip skip = RasterSkip::exact);
+  // `mode`: TraceMode::bounds or TraceMode::static_bounds (else st::Error).
+  RasterBounds(const Scene& scene, const LightSpace& light, RasterSkip skip = RasterSkip::exact,
+               TraceMode mode = TraceMode::bounds);
   ~RasterBounds();
   RasterBounds(const RasterBounds&) = delete;
   RasterBounds& operator=(const RasterBounds&) = delete;
@@ -86,6 +100,7 @@ class RasterBounds {
   double setup_seconds() const;  // the per-triangle setup and the grid
   uint64_t triangle_count() const;
   RasterSkip skip() const;
+  TraceMode mode() const;
   // Texels filled by the skip path over every trace() call so far (all threads).
   uint64_t skipped_texels() const;
 
@@ -105,7 +120,7 @@ class RasterBounds {
   std::optional<Interval> region_interval(uint32_t level, uint64_t x0, uint64_t y0, uint64_t side) const;
 
   // Reference: the same definition on one texel with every triangle as a candidate,
-  // straight from canonical_coverage.hpp (no setup, no bounds, no binning).
+  // straight from canonical_coverage.hpp (no setup, no bounds, no binning), under mode().
   Interval brute_force_texel(uint32_t level, uint64_t x, uint64_t y) const;
 
  private:

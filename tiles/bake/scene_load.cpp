@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "tiles/bake/scene_gltf_check.hpp"
+#include "tiles/bake/scene_grid.hpp"
 #include "tiles/bake/scene_header_check.hpp"
 #include "tiles/bake/scene_isolated.hpp"
 #include "tiles/bake/scene_limits.hpp"
@@ -338,6 +339,7 @@ Scene load_scene(const std::string& spec, const SceneOptions& options, const Sce
     return scene;
   }
   if (spec.rfind("vdb:", 0) == 0) return load_vdb_scene(spec, options.up.value_or(UpAxis::y));
+  if (is_grid_spec(spec)) return load_grid_scene(spec, options, limits);
   // Procedural scenes are generated +Y up; options.up only describes file sources.
   if (spec.rfind("procedural:", 0) == 0) return make_procedural(spec);
   // "ARCHIVE.pk3:maps/NAME.bsp" picks one map of a pack (when no file has that name).

@@ -18,7 +18,8 @@ TileCodec TileCodec::with_planes(TileCodec base, uint32_t tile_bytes, const Plan
   TileCodec c = base;
   using Fn = std::function<std::vector<uint8_t>(const Hierarchy&)>;
   c.alternative = nullptr;
-  c.encode = [enc = base.encode, alt = base.alternative, tile_bytes, fit](const Hierarchy& h) {
+  c.choose = nullptr;
+  c.encode = [enc = base.encode, alt = base.alternative, choose = base.choose, tile_bytes, fit](const Hierarchy& h) {
     // Candidates: the base encodings of h, and of h without its plane blocks behind them.
     std::optional<std::vector<uint8_t>> best;
     size_t best_z = SIZE_MAX;
@@ -38,13 +39,20 @@ TileCodec TileCodec::with_planes(TileCodec base, uint32_t tile_bytes, const Plan
         if (!failure) failure = e;
       }
     };
-    attempt(enc, h, nullptr);
-    attempt(alt, h, nullptr);
+    // base.choose, as tile_cut.cpp honours it: a sure guess encodes only that encoding (the
+    // other too where the guessed one fails or does not fit tile_bytes); unsure: both.
+    const int pick = alt && choose ? choose(h) : 0;
+    auto both = [&](const Hierarchy& tree, const PlaneSplit* split) {
+      const Fn& first = pick > 0 ? alt : enc;
+      const Fn& second = pick > 0 ? enc : alt;
+      const bool fitted_before = best && best->size() <= tile_bytes;
+      attempt(first, tree, split);
+      const bool fitted = best && best->size() <= tile_bytes;
+      if (pick == 0 || (!fitted_before && !fitted)) attempt(second, tree, split);
+    };
+    both(h, nullptr);
     const PlaneSplit split = fit_planes(h, fit);
-    if (!split.planes.empty()) {
-      attempt(enc, split.pruned, &split);
-      attempt(alt, split.pruned, &split);
-    }
+    if (!split.planes.empty()) both(split.pruned, &split);
     if (!best) throw *failure;
     return std::move(*best);
   };

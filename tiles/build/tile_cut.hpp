@@ -52,9 +52,16 @@ struct TileCodec {
   // when encode()'s does not fit and it does. open() must tell them apart (DAG-MH packs:
   // MMH tiles by their magic, tiles/PACK.md "Mixed tiles"). Empty: encode() alone.
   std::function<std::vector<uint8_t>(const Hierarchy&)> alternative;
+  // Optional, with `alternative`: a cheap guess of the smaller encoding for a subtree,
+  // > 0 the alternative, < 0 encode(), 0 unsure. A sure guess encodes only that one (the
+  // other still where it does not fit tile_bytes); unsure or empty: both, as above.
+  std::function<int(const Hierarchy&)> choose;
   static TileCodec of(Encoding e);
-  // DAG-MH tiles, each an MMH buffer instead where that stores smaller (map builds' default).
-  static TileCodec dagmh_or_mmh();
+  // DAG-MH tiles, each an MMH buffer instead where that stores smaller (map builds'
+  // default). Unless `exhaustive`, only tiles whose share of zero-width intervals leaves
+  // the winner unsure are encoded both ways (tile_cut.cpp, predict_dagmh_or_mmh): a tile
+  // may then be larger than its other encoding, the pack measured no larger than MMH's.
+  static TileCodec dagmh_or_mmh(bool exhaustive = false);
   // `base` (its encode and alternative) with plane blocks (plane_codec.cpp, tiles/core/
   // PLANES.md): a tile is also encoded as plane blocks over base's encoding of the rest,
   // and the candidate that fits tile_bytes and deflates smallest is kept.
