@@ -168,8 +168,7 @@ void setup_bounds(CLI::App& sub) {
   sub.add_option("--region", o->region,
                  "Texels X,Y,W,H of the map to trace (default: the whole map; at most "
                  "8192^2 texels per call, so larger maps need --region)");
-  sub.add_option("--up", o->up, "Up axis of a scene file: y or z; default: the file's own (Quake 3: z; FBX metadata; COLLADA <up_axis>), else y");
-  add_scene_limits_option(sub, o->scene_limits);
+  add_scene_file_options(sub, o->up, o->scene_limits);
   sub.add_option("-o,--output", o->output,
                  "Output EXR (channels lo, hi as float32); a PNG preview is written beside "
                  "it with the same stem")

@@ -330,8 +330,7 @@ void setup(CLI::App& app) {
   app.add_option("--region", a->region,
                  "Build only cells touching texels X,Y,W,H of the finest level (the rest constant)");
   app.add_option("--compression", a->compression, "zlib level 0..12 (libdeflate)")->capture_default_str();
-  app.add_option("--up", a->up, "Up axis of a scene file: y or z; default: the file's own (Quake 3: z; FBX metadata; COLLADA <up_axis>), else y");
-  add_scene_limits_option(app, a->scene_limits);
+  add_scene_file_options(app, a->up, a->scene_limits);
   app.add_option("--intervals", a->intervals,
                  "default: [first hit, exit of closed objects]; static: an open surface's interval also "
                  "reaches to just below the next surface (lossless for receivers on surfaces only)")

@@ -158,8 +158,7 @@ void setup(CLI::App& app) {
   app.add_option("--samples", a->samples, "With --deep: jittered samples per texel side (N = S^2, 1..64; default 4)");
   app.add_option("--epsilon", a->epsilon, "With --deep: compression bound (default 0.25 / sqrt(N), DSM 2000 §4)");
   app.add_option("--seed", a->seed, "With --deep: jitter seed (default 1)");
-  app.add_option("--up", a->up, "With --deep: Up axis of a scene file: y or z; default: the file's own (Quake 3: z; FBX metadata; COLLADA <up_axis>), else y");
-  add_scene_limits_option(app, a->scene_limits);
+  add_scene_file_options(app, a->up, a->scene_limits, "With --deep: ");
   app.add_option("--level", a->level, "Level to decode (each level is a complete map; default min(L, 12))")
       ->each([a](const std::string&) { a->level_set = true; });
   app.add_option("--slice", a->slice, "Stack packs: the slice W (light sample) to export");

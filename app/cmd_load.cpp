@@ -8,7 +8,7 @@
 #include "loadgen/load_report.hpp"
 #include "loadgen/load_run.hpp"
 #include "app/command.hpp"
-#include "proto/auth.hpp"
+#include "app/connect_options.hpp"
 #include "common/error.hpp"
 
 namespace st::cli {
@@ -43,8 +43,8 @@ void parse_time_range(const std::string& option, const std::string& text, double
 namespace {
 
 struct LoadArgs {
-  std::string server, map, path = "flyover", report, key_file, tls_ca, tls_name;
-  bool tls = false;
+  std::string server, map, path = "flyover", report;
+  ConnectArgs connect;
   uint32_t cameras = 4, connections = 0, samples_x = 64, samples_y = 36, workers = 0, io_threads = 2;
   double duration = 10, rate = 60, cache_mb = 64;
   uint64_t seed = 1;
@@ -65,10 +65,7 @@ void run(const LoadArgs& a) {
     begin = comma + 1;
   }
   o.map = a.map;
-  if (!a.key_file.empty()) o.key = proto::load_key_file(a.key_file);
-  o.tls = a.tls || !a.tls_ca.empty();
-  o.tls_ca_file = a.tls_ca;
-  o.tls_server_name = a.tls_name;
+  apply_connect_options(a.connect, o);
   o.cameras = a.cameras;
   o.connections = a.connections;
   o.path = loadgen::parse_path(a.path);
@@ -116,10 +113,7 @@ Register reg{"load", "Load-test a server with synthetic cameras (client library 
       ->check(CLI::Range(0.01, 65536.0));
   sub.add_option("--report", a->report, "Write load.json, load.txt and load.html into this folder");
   sub.add_option("--seed", a->seed, "Path seed")->capture_default_str();
-  sub.add_option("--key-file", a->key_file, "File holding the server's catalog key (hex or raw bytes)");
-  sub.add_flag("--tls", a->tls, "Connect over TLS (the system's trust store unless --tls-ca)");
-  sub.add_option("--tls-ca", a->tls_ca, "Trust this CA / self-signed certificate (PEM); implies --tls");
-  sub.add_option("--tls-name", a->tls_name, "Name the server's certificate must carry (default: the host)");
+  add_connect_options(sub, a->connect);
   sub.add_option("--samples", a->samples_x, "Screen samples across (rows: 9/16 of it)")->capture_default_str()
       ->check(CLI::Range(1u, 1024u));
   sub.add_option("--workers", a->workers, "Camera threads (0: max(2, cores)); cameras are spread over them")

@@ -16,7 +16,7 @@
 #include "tiles/bake/scene_limits.hpp"
 #include "tiles/bake/render.hpp"
 #include "tiles/bake/scene.hpp"
-#include "proto/auth.hpp"
+#include "app/connect_options.hpp"
 #include "app/scene_limits_option.hpp"
 #include "app/command.hpp"
 #include "app/pcf_option.hpp"
@@ -111,9 +111,9 @@ size_t fetch_deep_for_receivers(const client::Map& map, const std::vector<Receiv
 namespace {
 
 struct RenderArgs {
-  std::string pack, server, map, scene, camera, size = "960x540", out, up, key_file, tls_ca, tls_name;
+  std::string pack, server, map, scene, camera, size = "960x540", out, up;
   std::string scene_limits;  // --scene-limits (tiles/bake/scene_limits.hpp)
-  bool tls = false;
+  ConnectArgs connect;
   uint32_t pcf = 1;  // kernel side
   bool diff = false;
   bool filter = false;
@@ -265,10 +265,7 @@ void run(const RenderArgs& a) {
   } else {
     client::ClientOptions co;
     co.client_name = "shadowtile-render";
-    if (!a.key_file.empty()) co.key = proto::load_key_file(a.key_file);
-    co.tls = a.tls || !a.tls_ca.empty();
-    co.tls_ca_file = a.tls_ca;
-    co.tls_server_name = a.tls_name;
+    apply_connect_options(a.connect, co);
     // The same rule as load and view: the budget holds the map's metadata and everything
     // per slot, whatever the pack's tile bound (client.hpp cache_bytes).
     co.cache_bytes = uint64_t(a.cache_mb * 1048576.0);
@@ -319,14 +316,10 @@ Register reg{"render", "Render a camera view shaded with the map's shadows (EXR 
   auto a = std::make_shared<RenderArgs>();
   sub.add_option("pack", a->pack, "Pack file (or use --server and --map)");
   sub.add_option("--server", a->server, "Server HOST:PORT");
-  sub.add_option("--key-file", a->key_file, "With --server: file holding the catalog key");
-  sub.add_flag("--tls", a->tls, "With --server: connect over TLS");
-  sub.add_option("--tls-ca", a->tls_ca, "With --server: trust this CA certificate (PEM); implies --tls");
-  sub.add_option("--tls-name", a->tls_name, "With --server: name the certificate must carry");
+  add_connect_options(sub, a->connect, "With --server: ");
   sub.add_option("--map", a->map, "Map name on the server");
   sub.add_option("--scene", a->scene, "Scene the map was built from (primary rays)")->required();
-  sub.add_option("--up", a->up, "Up axis of a scene file: y or z; default: the file's own (Quake 3: z; FBX metadata; COLLADA <up_axis>), else y");
-  add_scene_limits_option(sub, a->scene_limits);
+  add_scene_file_options(sub, a->up, a->scene_limits);
   sub.add_option("--camera", a->camera, "pos=X,Y,Z,target=X,Y,Z[,fov=DEG]")->required();
   sub.add_option("--size", a->size, "Image size WxH")->capture_default_str();
   sub.add_option("--pcf", a->pcf, "PCF kernel side: odd, 1..9 (1: single tap, 3: 3x3, ...)")->capture_default_str();

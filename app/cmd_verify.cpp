@@ -414,8 +414,7 @@ void setup(CLI::App& app) {
                  "(--cell-side) instead of all of it (maps too large to re-trace whole)");
   app.add_option("--cell-side", a->cell_side, "With --cells: the squares' side in texels, a power of two")
       ->capture_default_str();
-  app.add_option("--up", a->up, "Up axis of a scene file: y or z; default: the file's own (Quake 3: z; FBX metadata; COLLADA <up_axis>), else y");
-  add_scene_limits_option(app, a->scene_limits);
+  add_scene_file_options(app, a->up, a->scene_limits);
   app.callback([a]() { run(*a); });
 }
 

@@ -42,6 +42,7 @@
 #include <thread>
 
 #include "app/command.hpp"
+#include "app/connect_options.hpp"
 #include "app/pcf_option.hpp"
 #include "app/scene_limits_option.hpp"
 #include "common/error.hpp"
@@ -65,6 +66,7 @@ namespace {
 struct ViewArgs {
   std::string server, map, scene, path = "flyover", camera, size = "1920x1080", device, out = "view-out", json, up;
   std::string scene_limits;  // --scene-limits (tiles/bake/scene_limits.hpp)
+  ConnectArgs connect;
   std::string time, time_sweep;
   bool soft = false, twin = false, validation = false;
   uint32_t frames = 24, pcf = 3, in_flight = 2;
@@ -100,6 +102,7 @@ void run(const ViewArgs& a) {
   const Scene scene = load_scene(a.scene, so, parse_scene_limits(a.scene_limits));
   client::ClientOptions co;
   co.client_name = "shadowtile-view";
+  apply_connect_options(a.connect, co);
   co.cache_slots = 1;  // a probe: the slot size, in one slot
   auto cl = std::make_unique<client::Client>(parse_endpoint("--server", a.server), co);
   client::Map map = cl->open(a.map);
@@ -318,9 +321,9 @@ Register reg{"view",
                    "new.");
                sub.add_option("--server", a->server, "Server HOST:PORT")->required();
                sub.add_option("--map", a->map, "Map name")->required();
+               add_connect_options(sub, a->connect);
                sub.add_option("--scene", a->scene, "The scene the map was built from (drawn by the rasterizer)")->required();
-               sub.add_option("--up", a->up, "Up axis of a scene file: y or z; default: the file's own (Quake 3: z; FBX metadata; COLLADA <up_axis>), else y")->check(CLI::IsMember({"y", "z"}));
-               add_scene_limits_option(sub, a->scene_limits);
+               add_scene_file_options(sub, a->up, a->scene_limits);
                sub.add_option("--path", a->path, "Camera path: flyover, orbit, walk, teleport");
                sub.add_option("--camera", a->camera,
                               "One camera for every frame, pos=X,Y,Z,target=X,Y,Z[,fov=DEG] as `render` takes it "

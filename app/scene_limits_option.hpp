@@ -1,4 +1,5 @@
-// --scene-limits for every command that loads a scene file (tiles/bake/scene_limits.hpp).
+// The options of every command that loads a scene file: --up (tiles/bake/scene.hpp
+// parse_up_axis) and --scene-limits (tiles/bake/scene_limits.hpp).
 #pragma once
 #include <CLI/CLI.hpp>
 #include <string>
@@ -11,6 +12,14 @@ inline void add_scene_limits_option(CLI::App& sub, std::string& into) {
                  "triangles=N (4194304, instances counted), texels=N (268435456, alpha textures together), "
                  "isolate=0|1 (1: read in a child process); 'none' lifts all but the child; 0 = unlimited "
                  "for memory and seconds");
+}
+
+// --up and --scene-limits; `when` prefixes --up's help (export: "With --deep: ").
+inline void add_scene_file_options(CLI::App& sub, std::string& up, std::string& limits, const std::string& when = "") {
+  sub.add_option("--up", up,
+                 when + "Up axis of a scene file: y or z; default: the file's own (Quake 3: z; FBX metadata; "
+                        "COLLADA <up_axis>), else y");
+  add_scene_limits_option(sub, limits);
 }
 
 }  // namespace st::cli

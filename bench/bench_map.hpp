@@ -29,26 +29,9 @@
 #include "tiles/core/interval.hpp"
 #include "tiles/core/light.hpp"
 #include "tiles/build/mh_build.hpp"
+#include "bench/timing.hpp"
 
 namespace st::bench {
-
-using Clock = std::chrono::steady_clock;
-
-inline double seconds_since(Clock::time_point t0) {
-  return std::chrono::duration<double>(Clock::now() - t0).count();
-}
-
-inline double thread_cpu_now() {
-  timespec ts;
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
-}
-
-inline double median(std::vector<double> v) {
-  if (v.empty()) return 0;
-  std::sort(v.begin(), v.end());
-  return v.size() % 2 ? v[v.size() / 2] : 0.5 * (v[v.size() / 2 - 1] + v[v.size() / 2]);
-}
 
 inline uint32_t parse_level(const std::string& s) { return parse_resolution(s); }
 

@@ -24,39 +24,13 @@
 // The field generators are the tests' (one definition of "realistic" for both; the
 // shadowtile_interval_fields library, tests/fixtures.cmake).
 #include "tests/tiles/interval_fields.hpp"
+#include "bench/timing.hpp"
 
 namespace {
 
-using Clock = std::chrono::steady_clock;
-
-// Wall and thread-CPU seconds of one call. The machine is shared (load > cores at
-// times), so CPU time is the steadier figure; both are reported.
-struct Timing {
-  double wall = 0, cpu = 0;
-};
-double thread_cpu_now() {
-  timespec ts;
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
-}
-Timing time_of(const std::function<void()>& f) {
-  double c0 = thread_cpu_now();
-  auto t0 = Clock::now();
-  f();
-  return {std::chrono::duration<double>(Clock::now() - t0).count(), thread_cpu_now() - c0};
-}
-
-// Medians of wall and CPU time, separately.
-Timing median_time(int reps, const std::function<void()>& f) {
-  std::vector<double> wall, cpu;
-  for (int r = 0; r < reps; ++r) {
-    Timing t = time_of(f);
-    wall.push_back(t.wall), cpu.push_back(t.cpu);
-  }
-  std::sort(wall.begin(), wall.end());
-  std::sort(cpu.begin(), cpu.end());
-  return {wall[wall.size() / 2], cpu[cpu.size() / 2]};
-}
+using st::bench::Clock;
+using st::bench::median_time;
+using st::bench::Timing;
 
 // Reference pass: [max lo, min hi] pyramid in morton order (what a bottom-up pass must at
 // least read and write), to report the constructions' speed as a ratio to it.

@@ -25,26 +25,11 @@
 #include "tiles/build/mh_build.hpp"
 // The field generators are the tests' (the shadowtile_interval_fields library).
 #include "tests/tiles/interval_fields.hpp"
+#include "bench/timing.hpp"
 
 namespace {
 
-double thread_cpu_now() {
-  timespec ts;
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
-}
-
-// Median thread-CPU seconds of `reps` calls.
-double median_cpu(int reps, const std::function<void()>& f) {
-  std::vector<double> t;
-  for (int r = 0; r < reps; ++r) {
-    const double c0 = thread_cpu_now();
-    f();
-    t.push_back(thread_cpu_now() - c0);
-  }
-  std::sort(t.begin(), t.end());
-  return t[t.size() / 2];
-}
+using st::bench::median_cpu;
 
 volatile float g_sink = 0;
 

@@ -26,25 +26,11 @@
 // The field generators are the tests' (one definition of "realistic" for both; the
 // shadowtile_interval_fields library, tests/fixtures.cmake).
 #include "tests/tiles/interval_fields.hpp"
+#include "bench/timing.hpp"
 
 namespace {
 
-double cpu_now() {
-  timespec ts;
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
-}
-
-double median_cpu(int reps, const std::function<void()>& f) {
-  std::vector<double> t;
-  for (int r = 0; r < reps; ++r) {
-    const double c0 = cpu_now();
-    f();
-    t.push_back(cpu_now() - c0);
-  }
-  std::sort(t.begin(), t.end());
-  return t[t.size() / 2];
-}
+using st::bench::median_cpu;
 
 volatile float g_sink;
 

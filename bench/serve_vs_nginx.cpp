@@ -66,6 +66,7 @@
 #include "tiles/build/mh_build.hpp"
 #include "tiles/core/pack_reader.hpp"
 #include "tiles/build/pack_writer.hpp"
+#include "bench/timing.hpp"
 
 using namespace st;
 namespace fs = std::filesystem;
@@ -75,11 +76,7 @@ namespace {
 
 double since(Clock::time_point t0, Clock::time_point t1) { return std::chrono::duration<double>(t1 - t0).count(); }
 
-double thread_cpu_s() {
-  timespec ts{};
-  ::clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return double(ts.tv_sec) + double(ts.tv_nsec) * 1e-9;
-}
+using st::bench::thread_cpu_now;
 
 double process_cpu_s() {
   rusage ru{};
@@ -388,9 +385,9 @@ Cell measure_once(const std::string& server, Driver drive, const CpuProbe& cpu, 
         // The open loop's sleeps end on time (the default 50 us timer slack would count
         // as server latency).
         ::prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
-        const double c0 = thread_cpu_s();
+        const double c0 = thread_cpu_now();
         drive(port, ids, load, 1000u + uint32_t(c), w, res[size_t(c)]);
-        res[size_t(c)].driver_cpu_s = thread_cpu_s() - c0;
+        res[size_t(c)].driver_cpu_s = thread_cpu_now() - c0;
       } catch (const std::exception& e) {
         res[size_t(c)].error = e.what();
       }

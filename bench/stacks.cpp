@@ -90,6 +90,7 @@
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/resolution.hpp"
 #include "tiles/core/stack_lookup.hpp"
+#include "bench/timing.hpp"
 
 namespace {
 
@@ -105,45 +106,8 @@ st::Vec3d receiver_point(const st::LightSpace& ls, uint32_t level, uint64_t x, u
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-// Thread CPU time: the machine is shared (load average above 10 on 2 cores at times), and
-// wall time there measures the scheduler more than the lookups.
-double thread_cpu_s() {
-  timespec ts{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
-  return double(ts.tv_sec) + 1e-9 * double(ts.tv_nsec);
-}
-
-// Lookup kinds timed side by side: each round runs every kind once, in turn, so that a
-// change in the shared machine's load falls on all of them alike; each kind's figure is
-// its median over the rounds (thread CPU time per lookup).
-class SideBySide {
- public:
-  template <class F>
-  void add(double& result, size_t count, F body) {
-    kinds_.push_back({&result, count, std::function<void()>(std::move(body)), {}});
-  }
-  void run(int reps) {
-    for (int r = 0; r < reps; ++r)
-      for (Kind& k : kinds_) {
-        const double t0 = thread_cpu_s();
-        k.body();
-        k.t.push_back((thread_cpu_s() - t0) * 1e9 / double(k.count));
-      }
-    for (Kind& k : kinds_) {
-      std::sort(k.t.begin(), k.t.end());
-      *k.result = k.t[k.t.size() / 2];
-    }
-  }
-
- private:
-  struct Kind {
-    double* result;
-    size_t count;
-    std::function<void()> body;
-    std::vector<double> t;
-  };
-  std::vector<Kind> kinds_;
-};
+// Lookup kinds timed side by side (thread CPU time per lookup, bench/timing.hpp).
+using st::bench::SideBySide;
 
 volatile float g_sink = 0;
 bool g_all_2d = false;  // --all-2d

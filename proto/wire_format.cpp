@@ -1,8 +1,6 @@
 // Names and directions of the format constants in wire_format.hpp.
 #include "proto/wire_format.hpp"
 
-#include "proto/status.hpp"
-
 namespace st::proto {
 
 bool is_known_type(std::uint16_t type) {
@@ -110,15 +108,6 @@ std::string_view to_string(ErrorCode code) {
     case ErrorCode::auth_failed: return "auth_failed";
   }
   return "unknown";
-}
-
-std::string to_string(const Status& s) {
-  std::string out(to_string(s.code));
-  if (!s.detail.empty()) {
-    out += ": ";
-    out += s.detail;
-  }
-  return out;
 }
 
 }  // namespace st::proto

@@ -11,6 +11,7 @@
 #include <cstring>
 #include <stdexcept>
 
+#include "examples/raster/vk_setup.hpp"
 #include "tiles/core/camera.hpp"  // header-only: the pinhole camera `shadowtile render` uses
 
 namespace st::raster {
@@ -240,15 +241,6 @@ struct Device {
     if (im.memory) vkFreeMemory(device, im.memory, nullptr);
     im = {};
   }
-  VkShaderModule module(std::span<const uint32_t> code) const {
-    VkShaderModuleCreateInfo ci{};
-    ci.sType = VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO;
-    ci.codeSize = code.size() * 4;
-    ci.pCode = code.data();
-    VkShaderModule m = VK_NULL_HANDLE;
-    check(vkCreateShaderModule(device, &ci, nullptr, &m), "vkCreateShaderModule");
-    return m;
-  }
 };
 
 // The shaders' push constants (examples/shaders/scene.vert, scene.frag): 128 bytes.
@@ -469,68 +461,33 @@ struct Rasterizer::Impl {
 
   void make_passes() {
     // The depth pre-pass: depth only, cleared and stored.
-    VkAttachmentDescription d{};
-    d.format = VK_FORMAT_D32_SFLOAT;
-    d.samples = VK_SAMPLE_COUNT_1_BIT;
-    d.loadOp = VK_ATTACHMENT_LOAD_OP_CLEAR;
-    d.storeOp = VK_ATTACHMENT_STORE_OP_STORE;
-    d.stencilLoadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
-    d.stencilStoreOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
-    d.finalLayout = VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL;
+    const VkAttachmentDescription d =
+        vk_setup::attachment(VK_FORMAT_D32_SFLOAT, VK_ATTACHMENT_LOAD_OP_CLEAR, VK_ATTACHMENT_STORE_OP_STORE,
+                             VK_IMAGE_LAYOUT_UNDEFINED, VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL);
     const VkAttachmentReference dref{0, VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL};
-    VkSubpassDescription sub{};
-    sub.pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
-    sub.pDepthStencilAttachment = &dref;
     VkSubpassDependency dep{};  // the previous frame's shading pass read this depth
     dep.srcSubpass = VK_SUBPASS_EXTERNAL;
     dep.dstSubpass = 0;
     dep.srcStageMask = dep.dstStageMask = VK_PIPELINE_STAGE_EARLY_FRAGMENT_TESTS_BIT | VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT;
     dep.srcAccessMask = VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_READ_BIT | VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT;
     dep.dstAccessMask = VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_READ_BIT | VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT;
-    VkRenderPassCreateInfo rpi{};
-    rpi.sType = VK_STRUCTURE_TYPE_RENDER_PASS_CREATE_INFO;
-    rpi.attachmentCount = 1;
-    rpi.pAttachments = &d;
-    rpi.subpassCount = 1;
-    rpi.pSubpasses = &sub;
-    rpi.dependencyCount = 1;
-    rpi.pDependencies = &dep;
-    check(vkCreateRenderPass(dev.device, &rpi, nullptr, &rp_depth), "vkCreateRenderPass");
-    VkFramebufferCreateInfo fbi{};
-    fbi.sType = VK_STRUCTURE_TYPE_FRAMEBUFFER_CREATE_INFO;
-    fbi.renderPass = rp_depth;
-    fbi.attachmentCount = 1;
-    fbi.pAttachments = &depth.view;
-    fbi.width = o.width;
-    fbi.height = o.height;
-    fbi.layers = 1;
-    check(vkCreateFramebuffer(dev.device, &fbi, nullptr, &fb_depth), "vkCreateFramebuffer");
+    rp_depth = vk_setup::render_pass(dev.device, {&d, 1}, {}, &dref, {&dep, 1});
+    fb_depth = vk_setup::framebuffer(dev.device, rp_depth, {&depth.view, 1}, o.width, o.height);
 
     // The shading pass: colour (and the twin's receivers and visibility) cleared, depth
     // loaded and tested EQUAL (each pixel's fragment shader runs once).
-    VkAttachmentDescription att[4] = {};
-    const VkFormat formats[4] = {VK_FORMAT_D32_SFLOAT, VK_FORMAT_R8G8B8A8_UNORM, VK_FORMAT_R32G32B32A32_SFLOAT,
-                                 VK_FORMAT_R32_SFLOAT};
+    VkAttachmentDescription att[4];
+    att[0] = vk_setup::attachment(VK_FORMAT_D32_SFLOAT, VK_ATTACHMENT_LOAD_OP_LOAD, VK_ATTACHMENT_STORE_OP_DONT_CARE,
+                                  VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL,
+                                  VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL);
+    const VkFormat formats[3] = {VK_FORMAT_R8G8B8A8_UNORM, VK_FORMAT_R32G32B32A32_SFLOAT, VK_FORMAT_R32_SFLOAT};
+    for (uint32_t i = 0; i < 3; ++i)
+      att[i + 1] = vk_setup::attachment(formats[i], VK_ATTACHMENT_LOAD_OP_CLEAR, VK_ATTACHMENT_STORE_OP_STORE,
+                                        VK_IMAGE_LAYOUT_UNDEFINED, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL);
     const uint32_t n = o.twin ? 4 : 2;
-    for (uint32_t i = 0; i < n; ++i) {
-      att[i].format = formats[i];
-      att[i].samples = VK_SAMPLE_COUNT_1_BIT;
-      att[i].loadOp = i == 0 ? VK_ATTACHMENT_LOAD_OP_LOAD : VK_ATTACHMENT_LOAD_OP_CLEAR;
-      att[i].storeOp = i == 0 ? VK_ATTACHMENT_STORE_OP_DONT_CARE : VK_ATTACHMENT_STORE_OP_STORE;
-      att[i].stencilLoadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
-      att[i].stencilStoreOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
-      att[i].initialLayout = i == 0 ? VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL : VK_IMAGE_LAYOUT_UNDEFINED;
-      att[i].finalLayout = i == 0 ? VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL : VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL;
-    }
     const VkAttachmentReference cref[3] = {{1, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL},
                                            {2, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL},
                                            {3, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL}};
-    const VkAttachmentReference sdref{0, VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL};
-    VkSubpassDescription ssub{};
-    ssub.pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
-    ssub.colorAttachmentCount = n - 1;
-    ssub.pColorAttachments = cref;
-    ssub.pDepthStencilAttachment = &sdref;
     VkSubpassDependency deps[3] = {};
     deps[0].srcSubpass = VK_SUBPASS_EXTERNAL;  // the pre-pass's depth writes -> this pass's tests
     deps[0].dstSubpass = 0;
@@ -550,160 +507,55 @@ struct Rasterizer::Impl {
     deps[2].dstStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT;
     deps[2].srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
     deps[2].dstAccessMask = VK_ACCESS_TRANSFER_READ_BIT;
-    VkRenderPassCreateInfo spi{};
-    spi.sType = VK_STRUCTURE_TYPE_RENDER_PASS_CREATE_INFO;
-    spi.attachmentCount = n;
-    spi.pAttachments = att;
-    spi.subpassCount = 1;
-    spi.pSubpasses = &ssub;
-    spi.dependencyCount = 3;
-    spi.pDependencies = deps;
-    check(vkCreateRenderPass(dev.device, &spi, nullptr, &rp_shade), "vkCreateRenderPass");
+    rp_shade = vk_setup::render_pass(dev.device, {att, n}, {cref, n - 1}, &dref, deps);
     const VkImageView views[4] = {depth.view, colour.view, receivers.view, visibility.view};
-    fbi.renderPass = rp_shade;
-    fbi.attachmentCount = n;
-    fbi.pAttachments = views;
-    check(vkCreateFramebuffer(dev.device, &fbi, nullptr, &fb_shade), "vkCreateFramebuffer");
+    fb_shade = vk_setup::framebuffer(dev.device, rp_shade, {views, n}, o.width, o.height);
   }
 
   void make_pipelines() {
+    const VkDevice d = dev.device;
     // Set 0: GpuMap's buffers (shadowtile.glsl), one set per ring slot (its feedback range).
-    VkDescriptorSetLayoutBinding b[3] = {};
-    for (uint32_t i = 0; i < 3; ++i) b[i] = {i, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr};
-    VkDescriptorSetLayoutCreateInfo li{};
-    li.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO;
-    li.bindingCount = 3;
-    li.pBindings = b;
-    check(vkCreateDescriptorSetLayout(dev.device, &li, nullptr, &set_layout), "vkCreateDescriptorSetLayout");
+    set_layout = vk_setup::set_layout(d, vk_setup::bindings(3, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VK_SHADER_STAGE_FRAGMENT_BIT));
     // Set 1: the plain R32F depth map (Lookup::r32f).
-    const VkDescriptorSetLayoutBinding rb{0, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr};
-    li.bindingCount = 1;
-    li.pBindings = &rb;
-    check(vkCreateDescriptorSetLayout(dev.device, &li, nullptr, &map_layout), "vkCreateDescriptorSetLayout");
+    map_layout = vk_setup::set_layout(d, vk_setup::bindings(1, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, VK_SHADER_STAGE_FRAGMENT_BIT));
     const VkDescriptorSetLayout both[2] = {set_layout, map_layout};
-    const VkPushConstantRange pcr{VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, 0, sizeof(Push)};
-    VkPipelineLayoutCreateInfo pli{};
-    pli.sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO;
-    pli.setLayoutCount = 2;
-    pli.pSetLayouts = both;
-    pli.pushConstantRangeCount = 1;
-    pli.pPushConstantRanges = &pcr;
-    check(vkCreatePipelineLayout(dev.device, &pli, nullptr, &layout), "vkCreatePipelineLayout");
+    layout = vk_setup::pipeline_layout(d, both, {VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, 0, sizeof(Push)});
     const VkDescriptorPoolSize ps[2] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 3 * o.frames_in_flight},
                                         {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1}};
-    VkDescriptorPoolCreateInfo dpi{};
-    dpi.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO;
-    dpi.maxSets = o.frames_in_flight + 1;
-    dpi.poolSizeCount = 2;
-    dpi.pPoolSizes = ps;
-    check(vkCreateDescriptorPool(dev.device, &dpi, nullptr, &dpool), "vkCreateDescriptorPool");
+    dpool = vk_setup::descriptor_pool(d, o.frames_in_flight + 1, ps);
     sets.resize(o.frames_in_flight);
     for (uint32_t i = 0; i < o.frames_in_flight; ++i) {
-      VkDescriptorSetAllocateInfo dai{};
-      dai.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO;
-      dai.descriptorPool = dpool;
-      dai.descriptorSetCount = 1;
-      dai.pSetLayouts = &set_layout;
-      check(vkAllocateDescriptorSets(dev.device, &dai, &sets[i]), "vkAllocateDescriptorSets");
-      const gpu::GpuDescriptors d = g->descriptors(i);  // ring slot i's feedback (frame f uses slot f % N)
-      const VkDescriptorBufferInfo infos[3] = {d.pool, d.page_table, d.feedback};
-      VkWriteDescriptorSet w[3] = {};
-      for (uint32_t k = 0; k < 3; ++k) {
-        w[k].sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
-        w[k].dstSet = sets[i];
-        w[k].dstBinding = k;
-        w[k].descriptorCount = 1;
-        w[k].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
-        w[k].pBufferInfo = &infos[k];
-      }
-      vkUpdateDescriptorSets(dev.device, 3, w, 0, nullptr);
+      sets[i] = vk_setup::allocate_set(d, dpool, set_layout);
+      const gpu::GpuDescriptors g_i = g->descriptors(i);  // ring slot i's feedback (frame f uses slot f % N)
+      const VkDescriptorBufferInfo infos[3] = {g_i.pool, g_i.page_table, g_i.feedback};
+      vk_setup::write_buffers(d, sets[i], infos);
     }
-    VkDescriptorSetAllocateInfo dai{};
-    dai.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO;
-    dai.descriptorPool = dpool;
-    dai.descriptorSetCount = 1;
-    dai.pSetLayouts = &map_layout;
-    check(vkAllocateDescriptorSets(dev.device, &dai, &map_set), "vkAllocateDescriptorSets");
+    map_set = vk_setup::allocate_set(d, dpool, map_layout);
     const VkDescriptorImageInfo ii{sampler, r32f.view, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};
-    VkWriteDescriptorSet w{};
-    w.sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
-    w.dstSet = map_set;
-    w.descriptorCount = 1;
-    w.descriptorType = VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
-    w.pImageInfo = &ii;
-    vkUpdateDescriptorSets(dev.device, 1, &w, 0, nullptr);
+    vk_setup::write_images(d, map_set, {&ii, 1});
 
-    VkShaderModule vs = dev.module(kVertSpv);
-    VkShaderModule fs = o.twin ? dev.module(kFragTwinSpv) : dev.module(kFragSpv);
-    VkPipelineShaderStageCreateInfo st[2] = {};
-    for (int i = 0; i < 2; ++i) {
-      st[i].sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
-      st[i].stage = i == 0 ? VK_SHADER_STAGE_VERTEX_BIT : VK_SHADER_STAGE_FRAGMENT_BIT;
-      st[i].module = i == 0 ? vs : fs;
-      st[i].pName = "main";
-    }
+    const vk_setup::ShaderModule vs(d, kVertSpv), fs(d, o.twin ? std::span<const uint32_t>(kFragTwinSpv)
+                                                                : std::span<const uint32_t>(kFragSpv));
     const VkVertexInputBindingDescription vbind{0, 24, VK_VERTEX_INPUT_RATE_VERTEX};
     const VkVertexInputAttributeDescription vattr[2] = {{0, 0, VK_FORMAT_R32G32B32_SFLOAT, 0},
                                                         {1, 0, VK_FORMAT_R32G32B32_SFLOAT, 12}};
-    VkPipelineVertexInputStateCreateInfo vi{};
-    vi.sType = VK_STRUCTURE_TYPE_PIPELINE_VERTEX_INPUT_STATE_CREATE_INFO;
-    vi.vertexBindingDescriptionCount = 1;
-    vi.pVertexBindingDescriptions = &vbind;
-    vi.vertexAttributeDescriptionCount = 2;
-    vi.pVertexAttributeDescriptions = vattr;
-    VkPipelineInputAssemblyStateCreateInfo ia{};
-    ia.sType = VK_STRUCTURE_TYPE_PIPELINE_INPUT_ASSEMBLY_STATE_CREATE_INFO;
-    ia.topology = VK_PRIMITIVE_TOPOLOGY_TRIANGLE_LIST;
-    const VkViewport vp{0, 0, float(o.width), float(o.height), 0, 1};
-    const VkRect2D sc{{0, 0}, {o.width, o.height}};
-    VkPipelineViewportStateCreateInfo vps{};
-    vps.sType = VK_STRUCTURE_TYPE_PIPELINE_VIEWPORT_STATE_CREATE_INFO;
-    vps.viewportCount = 1;
-    vps.pViewports = &vp;
-    vps.scissorCount = 1;
-    vps.pScissors = &sc;
-    VkPipelineRasterizationStateCreateInfo rs{};
-    rs.sType = VK_STRUCTURE_TYPE_PIPELINE_RASTERIZATION_STATE_CREATE_INFO;
-    rs.polygonMode = VK_POLYGON_MODE_FILL;
-    rs.cullMode = VK_CULL_MODE_NONE;
-    rs.lineWidth = 1;
-    VkPipelineMultisampleStateCreateInfo ms{};
-    ms.sType = VK_STRUCTURE_TYPE_PIPELINE_MULTISAMPLE_STATE_CREATE_INFO;
-    ms.rasterizationSamples = VK_SAMPLE_COUNT_1_BIT;
     VkPipelineDepthStencilStateCreateInfo ds{};
     ds.sType = VK_STRUCTURE_TYPE_PIPELINE_DEPTH_STENCIL_STATE_CREATE_INFO;
     ds.depthTestEnable = ds.depthWriteEnable = VK_TRUE;
     ds.depthCompareOp = VK_COMPARE_OP_LESS;
-    VkPipelineColorBlendAttachmentState cba[3] = {};
-    for (auto& c : cba) c.colorWriteMask = 0xF;
-    VkPipelineColorBlendStateCreateInfo cb{};
-    cb.sType = VK_STRUCTURE_TYPE_PIPELINE_COLOR_BLEND_STATE_CREATE_INFO;
-    VkGraphicsPipelineCreateInfo gpi{};
-    gpi.sType = VK_STRUCTURE_TYPE_GRAPHICS_PIPELINE_CREATE_INFO;
-    gpi.stageCount = 1;  // the pre-pass: the vertex shader alone
-    gpi.pStages = st;
-    gpi.pVertexInputState = &vi;
-    gpi.pInputAssemblyState = &ia;
-    gpi.pViewportState = &vps;
-    gpi.pRasterizationState = &rs;
-    gpi.pMultisampleState = &ms;
-    gpi.pDepthStencilState = &ds;
-    gpi.pColorBlendState = &cb;
-    gpi.layout = layout;
-    gpi.renderPass = rp_depth;
-    VkResult r = vkCreateGraphicsPipelines(dev.device, VK_NULL_HANDLE, 1, &gpi, nullptr, &depth_pipeline);
-    if (r == VK_SUCCESS) {
-      ds.depthWriteEnable = VK_FALSE;
-      ds.depthCompareOp = VK_COMPARE_OP_EQUAL;  // gl_Position is invariant: the same depths
-      cb.attachmentCount = o.twin ? 3 : 1;
-      cb.pAttachments = cba;
-      gpi.stageCount = 2;
-      gpi.renderPass = rp_shade;
-      r = vkCreateGraphicsPipelines(dev.device, VK_NULL_HANDLE, 1, &gpi, nullptr, &shade_pipeline);
-    }
-    vkDestroyShaderModule(dev.device, vs, nullptr);
-    vkDestroyShaderModule(dev.device, fs, nullptr);
-    check(r, "vkCreateGraphicsPipelines");
+    vk_setup::Pipeline p;
+    p.layout = layout, p.width = o.width, p.height = o.height;
+    p.vertex = vs.module;  // the pre-pass: the vertex shader alone
+    p.vertex_bindings = {&vbind, 1}, p.vertex_attributes = vattr;
+    p.depth = &ds;
+    p.pass = rp_depth;
+    depth_pipeline = vk_setup::pipeline(d, p);
+    ds.depthWriteEnable = VK_FALSE;
+    ds.depthCompareOp = VK_COMPARE_OP_EQUAL;  // gl_Position is invariant: the same depths
+    p.fragment = fs.module;
+    p.colour_attachments = o.twin ? 3 : 1;
+    p.pass = rp_shade;
+    shade_pipeline = vk_setup::pipeline(d, p);
   }
 
   double stamp_ms(const uint64_t* t, int a, int b) const {

@@ -17,7 +17,7 @@ HEADER = "client/map_access.hpp"
 # Files outside tests/ and client/ allowed to include it, and why.
 ALLOWED = {
     # Benchmarks time the cache's internals: a RemoteMap filled without a Client, the
-    # Evaluator behind a Map (bench/README.md); they are not tools a user runs.
+    # Evaluator behind a Map; they print tables for us, they are not tools a user runs.
     "bench/client_lookups.cpp": "benchmark of the cache's own lookups",
     "bench/gpu.cpp": "benchmark: fills a cache without a server",
     "bench/serve_loopback.cpp": "benchmark: fills a cache without a Client",

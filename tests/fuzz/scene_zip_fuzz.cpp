@@ -1,8 +1,9 @@
-// libFuzzer harness for the zip reader (tiles/bake/scene_zip.hpp) that .pk3 archives go
-// through. Input: byte 0 is a control byte (bit 0: list only members ending in ".bsp"),
-// the rest the archive. list_zip must return nullopt, throw st::Error or return entries
-// whose data lies inside the archive and whose size those bytes can give; extract_zip of each must throw st::Error or give
-// exactly the size the entry states with a matching CRC-32.
+// libFuzzer harness for the zip reader (tiles/bake/scene_zip.hpp: minizip and our limits)
+// that .pk3 archives go through. Input: byte 0 is a control byte (bit 0: list only members
+// ending in ".bsp"), the rest the archive. list_zip must return nullopt, throw st::Error
+// or return at most kZipMaxEntries entries whose packed bytes fit in the archive and whose
+// size those bytes can give; extract_zip of each must throw st::Error or give exactly the
+// size the entry states with a matching CRC-32.
 #include <zlib.h>
 
 #include "common/error.hpp"
@@ -34,9 +35,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     return 0;
   }
   if (!entries) return 0;
+  FUZZ_CHECK(entries->size() <= st::kZipMaxEntries);
   bool all = true;
   for (const st::ZipEntry& e : *entries) {
-    FUZZ_CHECK(e.data_at <= zip.size() && e.packed <= zip.size() - e.data_at);
+    FUZZ_CHECK(e.packed <= zip.size() && e.size <= (std::size_t(1) << 30));
     // What extract_zip allocates is bounded by the archive: stored bytes or deflate's
     // largest expansion of them.
     FUZZ_CHECK(e.method == 0 || e.method == 8);

@@ -6,6 +6,7 @@
 #include <bit>
 #include <span>
 
+#include "examples/raster/vk_setup.hpp"
 #include "tests/gpu/engine_harness.hpp"
 
 namespace st::enginetest {
@@ -35,159 +36,43 @@ struct RasterPass {
   VkDescriptorSet s0 = VK_NULL_HANDLE, s1 = VK_NULL_HANDLE;
   uint32_t width, height;
 
-  VkShaderModule module(std::span<const uint32_t> code) const {
-    VkShaderModuleCreateInfo ci{};
-    ci.sType = VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO;
-    ci.codeSize = code.size() * 4;
-    ci.pCode = code.data();
-    VkShaderModule m = VK_NULL_HANDLE;
-    check(vkCreateShaderModule(d, &ci, nullptr, &m), "vkCreateShaderModule");
-    return m;
-  }
-
   // deep: the fragment shader built with partial occluders (st_shadow times st_transmittance).
   RasterPass(enginetest::TestEngine& e, const Image& target, const Image& pos, const Image& nrm,
              const gpu::GpuDescriptors& g, bool deep = false)
       : d(e.device), width(target.width), height(target.height) {
-    VkAttachmentDescription att{};
-    att.format = VK_FORMAT_R32_SFLOAT;
-    att.samples = VK_SAMPLE_COUNT_1_BIT;
-    att.loadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
-    att.storeOp = VK_ATTACHMENT_STORE_OP_STORE;
-    att.stencilLoadOp = VK_ATTACHMENT_LOAD_OP_DONT_CARE;
-    att.stencilStoreOp = VK_ATTACHMENT_STORE_OP_DONT_CARE;
-    att.initialLayout = VK_IMAGE_LAYOUT_UNDEFINED;
-    att.finalLayout = VK_IMAGE_LAYOUT_GENERAL;
-    VkAttachmentReference ref{0, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
-    VkSubpassDescription sub{};
-    sub.pipelineBindPoint = VK_PIPELINE_BIND_POINT_GRAPHICS;
-    sub.colorAttachmentCount = 1;
-    sub.pColorAttachments = &ref;
-    VkRenderPassCreateInfo rpi{};
-    rpi.sType = VK_STRUCTURE_TYPE_RENDER_PASS_CREATE_INFO;
-    rpi.attachmentCount = 1;
-    rpi.pAttachments = &att;
-    rpi.subpassCount = 1;
-    rpi.pSubpasses = &sub;
-    check(vkCreateRenderPass(d, &rpi, nullptr, &rp), "vkCreateRenderPass");
-    VkFramebufferCreateInfo fbi{};
-    fbi.sType = VK_STRUCTURE_TYPE_FRAMEBUFFER_CREATE_INFO;
-    fbi.renderPass = rp;
-    fbi.attachmentCount = 1;
-    fbi.pAttachments = &target.view;
-    fbi.width = width;
-    fbi.height = height;
-    fbi.layers = 1;
-    check(vkCreateFramebuffer(d, &fbi, nullptr, &fb), "vkCreateFramebuffer");
+    const VkAttachmentDescription att =
+        vk_setup::attachment(VK_FORMAT_R32_SFLOAT, VK_ATTACHMENT_LOAD_OP_DONT_CARE, VK_ATTACHMENT_STORE_OP_STORE,
+                             VK_IMAGE_LAYOUT_UNDEFINED, VK_IMAGE_LAYOUT_GENERAL);
+    const VkAttachmentReference ref{0, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
+    rp = vk_setup::render_pass(d, {&att, 1}, {&ref, 1}, nullptr);
+    fb = vk_setup::framebuffer(d, rp, {&target.view, 1}, width, height);
     VkSamplerCreateInfo sci{};
     sci.sType = VK_STRUCTURE_TYPE_SAMPLER_CREATE_INFO;
     sci.magFilter = sci.minFilter = VK_FILTER_NEAREST;
     check(vkCreateSampler(d, &sci, nullptr, &sampler), "vkCreateSampler");
-    VkDescriptorSetLayoutBinding b0[3] = {};
-    for (uint32_t i = 0; i < 3; ++i)
-      b0[i] = {3 + 2 * i, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, nullptr};
-    VkDescriptorSetLayoutBinding b1[2] = {};
-    for (uint32_t i = 0; i < 2; ++i)
-      b1[i] = {i, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1, VK_SHADER_STAGE_FRAGMENT_BIT, &sampler};
-    VkDescriptorSetLayoutCreateInfo li{};
-    li.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO;
-    li.bindingCount = 3;
-    li.pBindings = b0;
-    check(vkCreateDescriptorSetLayout(d, &li, nullptr, &l0), "vkCreateDescriptorSetLayout");
-    li.bindingCount = 2;
-    li.pBindings = b1;
-    check(vkCreateDescriptorSetLayout(d, &li, nullptr, &l1), "vkCreateDescriptorSetLayout");
+    l0 = vk_setup::set_layout(d, vk_setup::bindings(3, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VK_SHADER_STAGE_FRAGMENT_BIT, 3, 2));
+    auto b1 = vk_setup::bindings(2, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, VK_SHADER_STAGE_FRAGMENT_BIT);
+    for (auto& b : b1) b.pImmutableSamplers = &sampler;
+    l1 = vk_setup::set_layout(d, b1);
     const VkDescriptorSetLayout sets[2] = {l0, l1};
-    const VkPushConstantRange pcr{VK_SHADER_STAGE_FRAGMENT_BIT, 0, 16};
-    VkPipelineLayoutCreateInfo pli{};
-    pli.sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO;
-    pli.setLayoutCount = 2;
-    pli.pSetLayouts = sets;
-    pli.pushConstantRangeCount = 1;
-    pli.pPushConstantRanges = &pcr;
-    check(vkCreatePipelineLayout(d, &pli, nullptr, &layout), "vkCreatePipelineLayout");
+    layout = vk_setup::pipeline_layout(d, sets, {VK_SHADER_STAGE_FRAGMENT_BIT, 0, 16});
     const VkDescriptorPoolSize ps[2] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 3}, {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 2}};
-    VkDescriptorPoolCreateInfo dpi{};
-    dpi.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO;
-    dpi.maxSets = 2;
-    dpi.poolSizeCount = 2;
-    dpi.pPoolSizes = ps;
-    check(vkCreateDescriptorPool(d, &dpi, nullptr, &pool), "vkCreateDescriptorPool");
-    VkDescriptorSetAllocateInfo dai{};
-    dai.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO;
-    dai.descriptorPool = pool;
-    dai.descriptorSetCount = 2;
-    dai.pSetLayouts = sets;
-    VkDescriptorSet out[2];
-    check(vkAllocateDescriptorSets(d, &dai, out), "vkAllocateDescriptorSets");
-    s0 = out[0], s1 = out[1];
+    pool = vk_setup::descriptor_pool(d, 2, ps);
+    s0 = vk_setup::allocate_set(d, pool, l0);
+    s1 = vk_setup::allocate_set(d, pool, l1);
     const VkDescriptorBufferInfo bufs[3] = {g.pool, g.page_table, g.feedback};
+    vk_setup::write_buffers(d, s0, bufs, 3, 2);
     const VkDescriptorImageInfo imgs[2] = {{VK_NULL_HANDLE, pos.view, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL},
                                            {VK_NULL_HANDLE, nrm.view, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL}};
-    VkWriteDescriptorSet w[5] = {};
-    for (uint32_t i = 0; i < 5; ++i) {
-      w[i].sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
-      w[i].descriptorCount = 1;
-      if (i < 3) {
-        w[i].dstSet = s0, w[i].dstBinding = 3 + 2 * i, w[i].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
-        w[i].pBufferInfo = &bufs[i];
-      } else {
-        w[i].dstSet = s1, w[i].dstBinding = i - 3, w[i].descriptorType = VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER;
-        w[i].pImageInfo = &imgs[i - 3];
-      }
-    }
-    vkUpdateDescriptorSets(d, 5, w, 0, nullptr);
-    VkShaderModule vs = module(kFullscreenVertSpv), fs = module(deep ? std::span<const uint32_t>(kEngineFragmentDeepSpv) : std::span<const uint32_t>(kEngineFragmentSpv));
-    VkPipelineShaderStageCreateInfo st[2] = {};
-    for (int i = 0; i < 2; ++i) {
-      st[i].sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
-      st[i].stage = i == 0 ? VK_SHADER_STAGE_VERTEX_BIT : VK_SHADER_STAGE_FRAGMENT_BIT;
-      st[i].module = i == 0 ? vs : fs;
-      st[i].pName = "main";
-    }
-    VkPipelineVertexInputStateCreateInfo vi{};
-    vi.sType = VK_STRUCTURE_TYPE_PIPELINE_VERTEX_INPUT_STATE_CREATE_INFO;
-    VkPipelineInputAssemblyStateCreateInfo ia{};
-    ia.sType = VK_STRUCTURE_TYPE_PIPELINE_INPUT_ASSEMBLY_STATE_CREATE_INFO;
-    ia.topology = VK_PRIMITIVE_TOPOLOGY_TRIANGLE_LIST;
-    const VkViewport vp{0, 0, float(width), float(height), 0, 1};
-    const VkRect2D sc{{0, 0}, {width, height}};
-    VkPipelineViewportStateCreateInfo vps{};
-    vps.sType = VK_STRUCTURE_TYPE_PIPELINE_VIEWPORT_STATE_CREATE_INFO;
-    vps.viewportCount = 1;
-    vps.pViewports = &vp;
-    vps.scissorCount = 1;
-    vps.pScissors = &sc;
-    VkPipelineRasterizationStateCreateInfo rs{};
-    rs.sType = VK_STRUCTURE_TYPE_PIPELINE_RASTERIZATION_STATE_CREATE_INFO;
-    rs.polygonMode = VK_POLYGON_MODE_FILL;
-    rs.cullMode = VK_CULL_MODE_NONE;
-    rs.lineWidth = 1;
-    VkPipelineMultisampleStateCreateInfo ms{};
-    ms.sType = VK_STRUCTURE_TYPE_PIPELINE_MULTISAMPLE_STATE_CREATE_INFO;
-    ms.rasterizationSamples = VK_SAMPLE_COUNT_1_BIT;
-    VkPipelineColorBlendAttachmentState cba{};
-    cba.colorWriteMask = VK_COLOR_COMPONENT_R_BIT;
-    VkPipelineColorBlendStateCreateInfo cb{};
-    cb.sType = VK_STRUCTURE_TYPE_PIPELINE_COLOR_BLEND_STATE_CREATE_INFO;
-    cb.attachmentCount = 1;
-    cb.pAttachments = &cba;
-    VkGraphicsPipelineCreateInfo gpi{};
-    gpi.sType = VK_STRUCTURE_TYPE_GRAPHICS_PIPELINE_CREATE_INFO;
-    gpi.stageCount = 2;
-    gpi.pStages = st;
-    gpi.pVertexInputState = &vi;
-    gpi.pInputAssemblyState = &ia;
-    gpi.pViewportState = &vps;
-    gpi.pRasterizationState = &rs;
-    gpi.pMultisampleState = &ms;
-    gpi.pColorBlendState = &cb;
-    gpi.layout = layout;
-    gpi.renderPass = rp;
-    const VkResult r = vkCreateGraphicsPipelines(d, VK_NULL_HANDLE, 1, &gpi, nullptr, &pipeline);
-    vkDestroyShaderModule(d, vs, nullptr);
-    vkDestroyShaderModule(d, fs, nullptr);
-    check(r, "vkCreateGraphicsPipelines");
+    vk_setup::write_images(d, s1, imgs);
+    const vk_setup::ShaderModule vs(d, kFullscreenVertSpv);
+    const vk_setup::ShaderModule fs(d, deep ? std::span<const uint32_t>(kEngineFragmentDeepSpv)
+                                            : std::span<const uint32_t>(kEngineFragmentSpv));
+    vk_setup::Pipeline p;
+    p.layout = layout, p.pass = rp, p.width = width, p.height = height;
+    p.vertex = vs.module, p.fragment = fs.module;
+    p.colour_attachments = 1, p.colour_mask = VK_COLOR_COMPONENT_R_BIT;
+    pipeline = vk_setup::pipeline(d, p);
   }
   ~RasterPass() {
     vkDestroyPipeline(d, pipeline, nullptr);

@@ -10,8 +10,11 @@
 #   client      <- loadgen, gpu
 #   everything  <- app (and tests/, bench/, which are not checked)
 #
-# And no include cycle among the modules' headers (A includes B includes ... A: with
-# `#pragma once` it compiles or not by include order alone).
+# And no include cycle among the modules' components (a component is a header with the
+# .cpp of the same name: a.hpp or a.cpp includes b.hpp, b.hpp or b.cpp includes a.hpp ...
+# back to a). Among headers alone such a cycle compiles or not by include order (with
+# `#pragma once`); through a .cpp it means neither part can be understood, tested or moved
+# without the other.
 cmake_minimum_required(VERSION 3.25)  # IN_LIST
 if(NOT ROOT)
   message(FATAL_ERROR "check_layering: pass -DROOT=<repository root>")
@@ -63,7 +66,7 @@ foreach(mod ${modules})
         set(inc_path "client/include/${inc}")
       endif()
       string(REGEX REPLACE "\\.[^./]+$" "" to "${inc_path}")
-      if(rel_src MATCHES "\\.(hpp|h)$" AND NOT from STREQUAL to AND EXISTS ${ROOT}/${inc_path})
+      if(NOT from STREQUAL to AND EXISTS ${ROOT}/${inc_path})
         list(APPEND "deps_${from}" "${to}")
         list(APPEND components "${from}" "${to}")
       endif()
@@ -77,9 +80,9 @@ foreach(mod ${modules})
   endforeach()
 endforeach()
 
-# Include cycles: drop every component that depends on no remaining one (a sink), then
-# every one no remaining one depends on (a source), until nothing changes; what is left
-# lies on a cycle (or between two).
+# Include cycles among components: drop every component that depends on no remaining one
+# (a sink), then every one no remaining one depends on (a source), until nothing changes;
+# every cycle lies in what is left (with what lies between two cycles).
 list(REMOVE_DUPLICATES components)
 set(left ${components})
 set(changed TRUE)
@@ -116,20 +119,66 @@ while(changed)
   endif()
   set(left ${next})
 endwhile()
+# What each remaining component reaches (within what is left: a cycle never leaves it);
+# a cycle is the components that reach each other.
 foreach(c ${left})
-  set(on "")
-  foreach(d ${deps_${c}})
-    if("${d}" IN_LIST left)
-      list(APPEND on "${d}")
+  set(reach_${c} "")
+  set(todo ${c})
+  while(todo)
+    list(POP_FRONT todo x)
+    foreach(d ${deps_${x}})
+      if("${d}" IN_LIST left AND NOT "${d}" IN_LIST reach_${c})
+        list(APPEND reach_${c} "${d}")
+        list(APPEND todo "${d}")
+      endif()
+    endforeach()
+  endwhile()
+endforeach()
+# Cycles written down with the reason they are still there; any other cycle fails, and so
+# does a listed one that has grown (its members are compared whole).
+set(known_cycles
+  # messages.cpp checks with message_rules and frames with tile_prefix, whose headers take
+  # messages.hpp's types: the message types want a header of their own.
+  "proto/message_rules,proto/messages,proto/tile_prefix"
+  # server.cpp starts connections, whose core state holds ServerOptions (server.hpp).
+  "server/connection,server/server,server/server_core"
+  # deep_part.cpp fills RemoteMap's deep state; remote_map.hpp holds a DeepPart.
+  "client/deep_part,client/remote_map"
+  # gpu_map.cpp drives the kernels, layout and context, whose headers take gpu_map.hpp's types.
+  "gpu/gpu_deep,gpu/gpu_map,gpu/kernels,gpu/layout,gpu/shadow_reference,gpu/vk_context")
+set(reported "")
+foreach(c ${left})
+  if(NOT "${c}" IN_LIST reach_${c} OR "${c}" IN_LIST reported)
+    continue()
+  endif()
+  set(cycle ${c})
+  foreach(x ${reach_${c}})
+    if("${c}" IN_LIST reach_${x})
+      list(APPEND cycle "${x}")
     endif()
   endforeach()
-  list(REMOVE_DUPLICATES on)
-  string(REPLACE ";" ", " on "${on}")
-  message("layering: include cycle: ${c} includes ${on}, which lead back to it")
-  math(EXPR offences "${offences} + 1")
+  list(REMOVE_DUPLICATES cycle)
+  list(SORT cycle)
+  list(APPEND reported ${cycle})
+  string(REPLACE ";" "," key "${cycle}")
+  if("${key}" IN_LIST known_cycles)
+    continue()
+  endif()
+  foreach(x ${cycle})
+    set(on "")
+    foreach(d ${deps_${x}})
+      if("${d}" IN_LIST cycle)
+        list(APPEND on "${d}")
+      endif()
+    endforeach()
+    list(REMOVE_DUPLICATES on)
+    string(REPLACE ";" ", " on "${on}")
+    message("layering: include cycle: ${x} includes ${on}, which lead back to it")
+    math(EXPR offences "${offences} + 1")
+  endforeach()
 endforeach()
 
 if(offences GREATER 0)
   message(FATAL_ERROR "layering: ${offences} include(s) against the module arrows or in a cycle (ARCHITECTURE.md)")
 endif()
-message(STATUS "layering: every module includes only what it may see, and no include cycle")
+message(STATUS "layering: every module includes only what it may see, and no include cycle but the listed ones")

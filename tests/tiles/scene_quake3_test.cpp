@@ -5,6 +5,7 @@
 #include <zlib.h>
 
 #include <chrono>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 
@@ -263,6 +264,42 @@ TEST(Quake3, BadArchivesAndMapsGiveClearErrors) {
   const std::string moved_path = tmp("moved.pk3");
   write_bytes(moved_path, moved);
   EXPECT_NE(error_of(moved_path).find("malformed zip archive"), std::string::npos) << error_of(moved_path);
+}
+
+// The reader's limits, each refused in one line naming the member before anything of its
+// stated size is allocated: a deflate ratio no stream can reach (a zip bomb's claim), a
+// member over 1 GiB, a compression method other than stored or deflate, encryption.
+TEST(Quake3, Pk3MembersPastTheReadersLimitsAreRefused) {
+  const std::string archive = zip({{"maps/a.bsp", test_map()}}, true);
+  const size_t end = archive.size() - 22;
+  uint32_t cd_at = 0;
+  std::memcpy(&cd_at, archive.data() + end + 16, 4);
+  auto patched = [&](size_t field, const std::string& bytes) {
+    std::string z = archive;
+    z.replace(cd_at + field, bytes.size(), bytes);
+    return z;
+  };
+  auto le32 = [](uint32_t v) {
+    std::string out;
+    put(out, v);
+    return out;
+  };
+  const struct {
+    std::string bytes;
+    const char* want;
+  } cases[] = {{patched(24, le32(700u << 20)), "more than deflate can expand to"},
+               {patched(24, le32(0xfffffff0u)), "claims 4294967280 bytes"},
+               {patched(10, std::string("\x0c\x00", 2)), "unsupported compression method 12"},
+               {patched(8, std::string("\x01\x00", 2)), "'maps/a.bsp' is encrypted"}};
+  int k = 0;
+  for (const auto& c : cases) {
+    const std::string path = tmp("limit" + std::to_string(k++) + ".pk3");
+    write_bytes(path, c.bytes);
+    const std::string msg = error_of(path);
+    EXPECT_NE(msg.find(path + ": malformed zip archive: "), std::string::npos) << msg;
+    EXPECT_NE(msg.find(c.want), std::string::npos) << msg;
+    EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+  }
 }
 
 // Truncation at every length and a corrupted byte at every offset: an error or a valid

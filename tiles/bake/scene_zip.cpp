@@ -1,35 +1,93 @@
 #include "tiles/bake/scene_zip.hpp"
 
-#include <zlib.h>
+#include <unzip.h>
 
 #include <algorithm>
 #include <cctype>
 #include <cstring>
+#include <memory>
 
 #include "common/error.hpp"
 
 namespace st {
 namespace {
 
-// PKWARE APPNOTE 6.3 layouts (little-endian):
-//   end of central directory: 22 bytes + comment; entries at +10 (u16), directory size at
-//     +12 (u32), directory offset at +16 (u32)
-//   central directory entry: 46 bytes + name + extra + comment; method +10 (u16), packed
-//     size +20, size +24 (u32), name/extra/comment lengths +28/+30/+32 (u16), local header
-//     offset +42 (u32), CRC-32 of the uncompressed data +16 (u32)
-//   local header: 30 bytes + name + extra; name/extra lengths +26/+28 (u16)
-constexpr size_t kEndSize = 22, kCentralSize = 46, kLocalSize = 30, kMaxComment = 65535;
-constexpr uint32_t kEndMagic = 0x06054b50u, kCentralMagic = 0x02014b50u, kLocalMagic = 0x04034b50u;
 constexpr size_t kMaxMember = size_t(1) << 30, kMaxDeflateRatio = 1032;
+constexpr uint16_t kStored = 0, kDeflate = 8;
 
-uint32_t u32(const std::vector<uint8_t>& d, size_t at) {
-  return uint32_t(d[at]) | uint32_t(d[at + 1]) << 8 | uint32_t(d[at + 2]) << 16 | uint32_t(d[at + 3]) << 24;
+// minizip's file functions over an archive held in memory (minizip itself only ever reads
+// through these: it never sees a path).
+// A read past the end is an error (minizip's own byte readers count end of file as success
+// unless the stream reports an error, and would read zeros).
+struct Memory {
+  const uint8_t* data;
+  size_t size, at = 0;
+  bool short_read = false;
+};
+
+voidpf ZCALLBACK mem_open(voidpf opaque, const void*, int mode) {
+  return (mode & ZLIB_FILEFUNC_MODE_WRITE) ? nullptr : opaque;
 }
-uint16_t u16(const std::vector<uint8_t>& d, size_t at) { return uint16_t(d[at] | d[at + 1] << 8); }
+uLong ZCALLBACK mem_read(voidpf, voidpf stream, void* buf, uLong size) {
+  auto* m = static_cast<Memory*>(stream);
+  const size_t n = std::min<size_t>(size, m->size - m->at);
+  std::memcpy(buf, m->data + m->at, n);
+  m->at += n;
+  if (n < size) m->short_read = true;
+  return uLong(n);
+}
+uLong ZCALLBACK mem_write(voidpf, voidpf, const void*, uLong) { return 0; }
+ZPOS64_T ZCALLBACK mem_tell(voidpf, voidpf stream) { return static_cast<Memory*>(stream)->at; }
+long ZCALLBACK mem_seek(voidpf, voidpf stream, ZPOS64_T offset, int origin) {
+  auto* m = static_cast<Memory*>(stream);
+  const uint64_t base = origin == ZLIB_FILEFUNC_SEEK_SET ? 0 : origin == ZLIB_FILEFUNC_SEEK_CUR ? m->at : m->size;
+  if (offset > m->size || base > m->size - offset) return -1;
+  m->at = size_t(base + offset);
+  return 0;
+}
+int ZCALLBACK mem_close(voidpf, voidpf) { return 0; }
+int ZCALLBACK mem_error(voidpf, voidpf stream) { return static_cast<Memory*>(stream)->short_read ? 1 : 0; }
+
+struct Archive {
+  Memory memory;
+  unzFile file = nullptr;
+  explicit Archive(const std::vector<uint8_t>& zip) : memory{zip.data(), zip.size()} {
+    zlib_filefunc64_def io{mem_open, mem_read, mem_write, mem_tell, mem_seek, mem_close, mem_error, &memory};
+    file = unzOpen2_64("", &io);
+  }
+  ~Archive() {
+    if (file) unzClose(file);
+  }
+  Archive(const Archive&) = delete;
+  Archive& operator=(const Archive&) = delete;
+};
+
+// Whether the last 64 KiB + 22 bytes hold an end-of-central-directory signature: what
+// tells a zip minizip could not open ("malformed") from bytes that are no zip at all.
+bool has_end_record(const std::vector<uint8_t>& zip) {
+  static constexpr uint8_t kEnd[4] = {'P', 'K', 5, 6};
+  const size_t from = zip.size() > 65535 + 22 ? zip.size() - 65535 - 22 : 0;
+  return std::search(zip.begin() + long(from), zip.end(), std::begin(kEnd), std::end(kEnd)) != zip.end();
+}
 
 bool ends_with_lower(std::string name, const std::string& suffix) {
   for (char& c : name) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
   return name.size() >= suffix.size() && name.compare(name.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+// The limits on one member, checked from its directory entry before anything is allocated
+// for it: "" when they hold, else what is wrong.
+std::string member_fault(const ZipEntry& e) {
+  if (e.method != kStored && e.method != kDeflate)
+    return "uses unsupported compression method " + std::to_string(e.method);
+  if (e.size > kMaxMember) return "claims " + std::to_string(e.size) + " bytes";
+  // A stored member is its packed bytes; deflate expands at most 1032:1 (RFC 1951: a
+  // 258-byte match per 2 bits at best).
+  if (e.method == kStored && e.packed != e.size) return "is stored with different packed and unpacked sizes";
+  if (e.method == kDeflate && e.size > kMaxDeflateRatio * e.packed + 64)
+    return "claims " + std::to_string(e.size) + " bytes from " + std::to_string(e.packed) +
+           " deflated bytes, more than deflate can expand to";
+  return {};
 }
 
 }  // namespace
@@ -37,51 +95,47 @@ bool ends_with_lower(std::string name, const std::string& suffix) {
 std::optional<std::vector<ZipEntry>> list_zip(const std::vector<uint8_t>& zip, const std::string& path,
                                               const std::string& suffix) {
   auto fail = [&](const std::string& what) { throw Error(path + ": malformed zip archive: " + what); };
-  if (zip.size() < kEndSize) return std::nullopt;
-  size_t end = std::string::npos;
-  for (size_t at = zip.size() - kEndSize + 1; at-- > 0 && zip.size() - at <= kEndSize + kMaxComment;)
-    if (u32(zip, at) == kEndMagic) {
-      end = at;
-      break;
-    }
-  if (end == std::string::npos) return std::nullopt;
-  const size_t entries = u16(zip, end + 10), cd_size = u32(zip, end + 12), cd_at = u32(zip, end + 16);
-  if (cd_at > end || cd_size > end - cd_at) fail("central directory outside the file");
-  const size_t cd_end = cd_at + cd_size;
+  Archive archive(zip);
+  if (!archive.file) {
+    if (!has_end_record(zip)) return std::nullopt;
+    // An archive with nothing in it: minizip cannot open one whose end record is at byte 0.
+    static constexpr uint8_t kEmpty[10] = {'P', 'K', 5, 6, 0, 0, 0, 0, 0, 0};
+    if (zip.size() >= 22 && std::equal(std::begin(kEmpty), std::end(kEmpty), zip.begin()) && zip[10] == 0 &&
+        zip[11] == 0)
+      return std::vector<ZipEntry>{};
+    fail("its end record or central directory cannot be read (truncated, or offsets outside the file)");
+  }
+  unz_global_info64 global{};
+  if (unzGetGlobalInfo64(archive.file, &global) != UNZ_OK) fail("its central directory cannot be read");
+  if (global.number_entry > kZipMaxEntries)
+    fail("lists " + std::to_string(global.number_entry) + " entries, more than the " +
+         std::to_string(kZipMaxEntries) + " a .pk3 may hold");
   std::vector<ZipEntry> out;
-  size_t at = cd_at;
-  for (size_t e = 0; e < entries; ++e) {
-    if (at > cd_end || cd_end - at < kCentralSize || u32(zip, at) != kCentralMagic)
+  std::vector<char> name(65536 + 1);
+  int rc = global.number_entry ? unzGoToFirstFile(archive.file) : UNZ_END_OF_LIST_OF_FILE;
+  for (uint64_t e = 0; rc == UNZ_OK; ++e, rc = unzGoToNextFile(archive.file)) {
+    unz_file_info64 info{};
+    if (unzGetCurrentFileInfo64(archive.file, &info, name.data(), uLong(name.size()), nullptr, 0, nullptr, 0) != UNZ_OK)
       fail("bad central directory entry " + std::to_string(e));
     ZipEntry entry;
-    entry.method = u16(zip, at + 10);
-    entry.crc = u32(zip, at + 16);
-    entry.packed = u32(zip, at + 20);
-    entry.size = u32(zip, at + 24);
-    const size_t name_len = u16(zip, at + 28), extra = u16(zip, at + 30), comment = u16(zip, at + 32);
-    const size_t local = u32(zip, at + 42);
-    if (cd_end - at - kCentralSize < name_len) fail("entry " + std::to_string(e) + " name outside the directory");
-    entry.name.assign(zip.begin() + long(at + kCentralSize), zip.begin() + long(at + kCentralSize + name_len));
-    at += kCentralSize + name_len + extra + comment;
+    entry.name.assign(name.data(), std::min<size_t>(info.size_filename, name.size() - 1));
     if (!ends_with_lower(entry.name, suffix)) continue;
-    if (local > zip.size() || zip.size() - local < kLocalSize || u32(zip, local) != kLocalMagic)
-      fail("bad local header of '" + entry.name + "'");
-    entry.data_at = local + kLocalSize + u16(zip, local + 26) + u16(zip, local + 28);
-    if (entry.data_at > zip.size() || entry.packed > zip.size() - entry.data_at)
-      fail("data of '" + entry.name + "' outside the file");
-    if (entry.size > kMaxMember) fail("'" + entry.name + "' claims " + std::to_string(entry.size) + " bytes");
-    // What extract_zip will allocate is checked here, against the bytes really present:
-    // a stored member is its packed bytes; deflate expands at most 1032:1 (RFC 1951: a
-    // 258-byte match per 2 bits at best); nothing else is read.
-    if (entry.method == 0 && entry.packed != entry.size)
-      fail("'" + entry.name + "' is stored with different packed and unpacked sizes");
-    if (entry.method == 8 && entry.size > kMaxDeflateRatio * entry.packed + 64)
-      fail("'" + entry.name + "' claims " + std::to_string(entry.size) + " bytes from " +
-           std::to_string(entry.packed) + " deflated bytes, more than deflate can expand to");
-    if (entry.method != 0 && entry.method != 8)
-      fail("'" + entry.name + "' uses unsupported compression method " + std::to_string(entry.method));
+    entry.method = uint16_t(info.compression_method);
+    entry.crc = uint32_t(info.crc);
+    entry.packed = size_t(info.compressed_size);
+    entry.size = size_t(info.uncompressed_size);
+    unz64_file_pos at{};
+    if (unzGetFilePos64(archive.file, &at) != UNZ_OK) fail("bad central directory entry " + std::to_string(e));
+    entry.directory_at = at.pos_in_zip_directory;
+    entry.index = at.num_of_file;
+    if (info.compression_method > 0xffff || info.uncompressed_size > kMaxMember || info.compressed_size > zip.size())
+      fail("'" + entry.name + "' claims " + std::to_string(info.uncompressed_size) + " bytes from " +
+           std::to_string(info.compressed_size) + " packed bytes");
+    if (info.flag & 1) fail("'" + entry.name + "' is encrypted");
+    if (const std::string fault = member_fault(entry); !fault.empty()) fail("'" + entry.name + "' " + fault);
     out.push_back(std::move(entry));
   }
+  if (rc != UNZ_END_OF_LIST_OF_FILE) fail("bad central directory entry " + std::to_string(out.size()));
   return out;
 }
 
@@ -90,63 +144,50 @@ std::vector<uint8_t> extract_zip(const std::vector<uint8_t>& zip, const std::str
   auto fail = [&](const std::string& what) {
     throw Error(path + ": malformed zip archive: '" + entry.name + "' " + what);
   };
-  ST_CHECK(entry.data_at <= zip.size() && entry.packed <= zip.size() - entry.data_at);
   // Checked before allocating (list_zip checks the same for the entries it returns).
-  if (entry.method != 0 && entry.method != 8) fail("uses unsupported compression method " + std::to_string(entry.method));
-  if (entry.method == 0 && entry.packed != entry.size) fail("is stored with different packed and unpacked sizes");
-  if (entry.method == 8 && entry.size > kMaxDeflateRatio * entry.packed + 64)
-    fail("claims more bytes than deflate can expand " + std::to_string(entry.packed) + " bytes to");
-  auto check_magic = [&](const uint8_t* p, size_t n) {
-    if (magic.empty()) return;
-    if (n < magic.size() || std::memcmp(p, magic.data(), magic.size()) != 0)
-      throw Error(path + ": '" + entry.name + "' does not start with '" + std::string(magic) + "'");
+  if (const std::string fault = member_fault(entry); !fault.empty()) fail(fault);
+  Archive archive(zip);
+  if (!archive.file) throw Error(path + ": malformed zip archive: its central directory cannot be read");
+  unz64_file_pos at{entry.directory_at, entry.index};
+  unz_file_info64 info{};
+  if (unzGoToFilePos64(archive.file, &at) != UNZ_OK ||
+      unzGetCurrentFileInfo64(archive.file, &info, nullptr, 0, nullptr, 0, nullptr, 0) != UNZ_OK ||
+      info.compression_method != entry.method || info.uncompressed_size != entry.size ||
+      info.compressed_size != entry.packed || info.crc != entry.crc)
+    fail("is not where its directory entry said");
+  if (unzOpenCurrentFile(archive.file) != UNZ_OK) fail("has a bad local header");
+  struct Close {
+    unzFile f;
+    ~Close() { unzCloseCurrentFile(f); }
+  } close{archive.file};
+  // minizip stops at the stated size; a stream that ends (or breaks) before it is short.
+  auto read = [&](uint8_t* to, size_t n) {
+    while (n > 0) {
+      const int got = unzReadCurrentFile(archive.file, to, unsigned(std::min<size_t>(n, size_t(1) << 20)));
+      if (got <= 0) fail("does not inflate to its stated size");
+      to += got;
+      n -= size_t(got);
+    }
   };
-  std::vector<uint8_t> data;
-  if (entry.method == 0) {
-    check_magic(zip.data() + entry.data_at, entry.size);
-    data.assign(zip.begin() + long(entry.data_at), zip.begin() + long(entry.data_at + entry.size));
-  } else {
-    z_stream z{};
-    if (inflateInit2(&z, -MAX_WBITS) != Z_OK) fail("could not start zlib");
-    struct End {
-      z_stream* z;
-      ~End() { inflateEnd(z); }
-    } end{&z};
-    z.next_in = const_cast<Bytef*>(zip.data() + entry.data_at);
-    z.avail_in = static_cast<uInt>(entry.packed);
-    // The first bytes alone, so the magic is checked before the stated size is allocated.
-    uint8_t first[4096];
-    z.next_out = first;
-    z.avail_out = static_cast<uInt>(std::min<size_t>(sizeof first, entry.size));
-    int rc = Z_OK;
-    if (z.avail_out > 0) rc = inflate(&z, Z_SYNC_FLUSH);
-    if (rc != Z_OK && rc != Z_STREAM_END) fail("does not inflate to its stated size");
-    const size_t head = z.total_out;
-    check_magic(first, head);
-    // Reserved, not touched: memory grows with the bytes really inflated, so a member whose
-    // stream breaks early costs what it gave.
-    data.reserve(entry.size);
-    data.assign(first, first + head);
-    constexpr size_t kStep = size_t(1) << 20;
-    while (rc != Z_STREAM_END && data.size() < entry.size) {
-      const size_t at = data.size();
-      data.resize(std::min(entry.size, at + kStep));
-      z.next_out = data.data() + at;
-      z.avail_out = static_cast<uInt>(data.size() - at);
-      rc = inflate(&z, Z_SYNC_FLUSH);
-      if (rc != Z_OK && rc != Z_STREAM_END) fail("does not inflate to its stated size");
-      data.resize(z.total_out);
-      if (rc == Z_OK && z.avail_in == 0 && data.size() < entry.size) fail("does not inflate to its stated size");
-    }
-    if (rc != Z_STREAM_END) {  // all the stated bytes: the stream must end here
-      uint8_t extra = 0;
-      z.next_out = &extra;
-      z.avail_out = 1;
-      rc = inflate(&z, Z_FINISH);
-    }
-    if (rc != Z_STREAM_END || z.total_out != entry.size) fail("does not inflate to its stated size");
+  // The first bytes alone, so the magic is checked before the stated size is allocated.
+  uint8_t first[4096];
+  const size_t head = std::min<size_t>(sizeof first, entry.size);
+  read(first, head);
+  if (!magic.empty() && (head < magic.size() || std::memcmp(first, magic.data(), magic.size()) != 0))
+    throw Error(path + ": '" + entry.name + "' does not start with '" + std::string(magic) + "'");
+  // Grown a MiB at a time as bytes really inflate, so a member whose stream breaks early
+  // costs what it gave.
+  std::vector<uint8_t> data(first, first + head);
+  data.reserve(entry.size);
+  while (data.size() < entry.size) {
+    const size_t from = data.size();
+    data.resize(std::min(entry.size, from + (size_t(1) << 20)));
+    read(data.data() + from, data.size() - from);
   }
-  if (uint32_t(crc32(0L, data.data(), static_cast<uInt>(data.size()))) != entry.crc) fail("fails its CRC-32 check");
+  close.f = nullptr;
+  const int rc = unzCloseCurrentFile(archive.file);
+  if (rc == UNZ_CRCERROR) fail("fails its CRC-32 check");
+  if (rc != UNZ_OK) fail("does not inflate to its stated size");
   return data;
 }
 

@@ -1,5 +1,7 @@
-// A minimal, bounds-checked zip reader (stored and deflated members) for Quake 3 .pk3
-// archives, so that hostile archives never reach a parser that trusts them.
+// The zip reader for Quake 3 .pk3 archives: minizip (Debian libminizip) reads the archive
+// from memory; this file adds the limits that keep a hostile archive bounded (member size,
+// entry count, deflate ratio, compression method) and turns every failure into one
+// st::Error line naming the archive.
 #pragma once
 #include <cstdint>
 #include <optional>
@@ -9,21 +11,25 @@
 
 namespace st {
 
-// One member as its central-directory entry describes it; data_at/packed were checked
-// to lie inside the archive.
+// One member as its central-directory entry describes it.
 struct ZipEntry {
   std::string name;  // path inside the archive, as stored
   uint16_t method = 0;
   uint32_t crc = 0;
-  size_t packed = 0, size = 0, data_at = 0;
+  size_t packed = 0, size = 0;
+  uint64_t directory_at = 0, index = 0;  // where minizip finds the entry again
 };
+
+// Most entries an archive may list (a Quake 3 pk3 holds hundreds to a few thousand).
+constexpr size_t kZipMaxEntries = size_t(1) << 20;
 
 // The entries of the archive `zip` whose lower-cased name ends with `suffix` (all if
 // empty), in central-directory order. std::nullopt if there is no end-of-central-directory
-// record (not a zip). Throws st::Error naming `path` when offsets or sizes point outside
-// the archive, a member claims more than 1 GiB or more than its packed bytes can give
-// (stored: exactly them; deflate: 1032 times them), or uses a method other than stored
-// or deflate: what extract_zip allocates is bounded by the archive's own size.
+// record (not a zip). Throws st::Error naming `path` when the directory cannot be read
+// (offsets or sizes outside the archive, more than kZipMaxEntries entries), a member
+// claims more than 1 GiB or more than its packed bytes can give (stored: exactly them;
+// deflate: 1032 times them), is encrypted, or uses a method other than stored or deflate:
+// what extract_zip allocates is bounded by the archive's own size.
 std::optional<std::vector<ZipEntry>> list_zip(const std::vector<uint8_t>& zip, const std::string& path,
                                               const std::string& suffix);
 

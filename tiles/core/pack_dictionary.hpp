@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "tiles/core/encoding.hpp"
+#include "tiles/core/pack_format.hpp"
 
 namespace st {
 
@@ -33,14 +34,7 @@ namespace dagmh {
 class Dictionary;
 }
 
-// Format constants.
-inline constexpr uint32_t kPackDictionaryMagic = 0x44445453;  // "STDD"
-inline constexpr uint32_t kPackDictionaryHeaderBytes = 16;
-// The bound keeps MapInfo inside the protocol's 64 MiB frame ceiling with the largest skip
-// grid (K = 10: 9.8 MB) and map preview (16 MiB) beside it; the writer shrinks a larger
-// dictionary (shares only subtrees found in more tiles) until it fits.
-inline constexpr uint64_t kMaxPackDictionaryBytes = 32ull << 20;
-inline constexpr uint64_t kMinPackDictionaryBytes = 32;  // a DGMD header alone
+// Format constants: kPackDictionary* in pack_format.hpp (the grid section's sizes need them).
 
 // A complete non-stack pack's grid section cut into its parts; `dictionary` is the DGMD
 // buffer's zlib stream of `dictionary_raw` bytes (empty when the pack has none). `at` is

@@ -1,8 +1,6 @@
 #include "tiles/core/pack_format.hpp"
-#include "tiles/core/pack_light_check.hpp"
 
 #include "tiles/core/map_preview.hpp"
-#include "tiles/core/pack_dictionary.hpp"
 
 #include <libdeflate.h>
 
@@ -190,11 +188,6 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
     if (bool(h.flags & kFeatureHasTiles) != has_tiles) fail(20, "has_tiles flag disagrees with the tile count");
   }
   return h;
-}
-
-void check_header_light(const PackHeader& h, const std::string& what) {
-  if (const std::string why = LightSpace::check_array(h.light_kind, h.light); !why.empty())
-    throw FormatError(what + " at byte 40: header: the light is not one a build makes: " + why);
 }
 
 // ---- journal records ------------------------------------------------------------------

@@ -48,6 +48,14 @@ inline constexpr uint32_t kMaxParamsBytes = 1 << 20;
 // make a reader allocate at most this much per tile.
 inline constexpr uint32_t kMaxTileBytes = 64u << 20;
 inline constexpr uint32_t kMinTileBytes = 64;  // room for the smallest index tile (d = 1)
+// The DAG-MH dictionary section that ends a grid section (pack_dictionary.hpp draws it).
+inline constexpr uint32_t kPackDictionaryMagic = 0x44445453;  // "STDD"
+inline constexpr uint32_t kPackDictionaryHeaderBytes = 16;
+// The bound keeps MapInfo inside the protocol's 64 MiB frame ceiling with the largest skip
+// grid (K = 10: 9.8 MB) and map preview (16 MiB) beside it; the writer shrinks a larger
+// dictionary (shares only subtrees found in more tiles) until it fits.
+inline constexpr uint64_t kMaxPackDictionaryBytes = 32ull << 20;
+inline constexpr uint64_t kMinPackDictionaryBytes = 32;  // a DGMD header alone
 // "[64 B, 64 MiB]": the bounds as error messages and --help state them.
 std::string tile_bytes_bounds();
 enum class PackState : uint32_t { building = 0, complete = 1 };

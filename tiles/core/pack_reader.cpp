@@ -5,6 +5,7 @@
 #include "tiles/core/map_preview.hpp"
 #include "tiles/core/pack_dictionary.hpp"
 #include "tiles/core/dagmh_validate.hpp"
+#include "tiles/core/deep_tile.hpp"
 
 #include <fcntl.h>
 #include <sys/stat.h>

@@ -17,7 +17,7 @@
 #include <string>
 #include <vector>
 
-#include "tiles/core/deep_pack.hpp"
+#include "tiles/core/deep_directory.hpp"
 #include "tiles/core/evaluator.hpp"
 #include "tiles/core/pack_format.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
