@@ -79,79 +79,48 @@ void st_feedback(uint key, uint level, uint ex, uint ey, uint value_bits, uint k
 #endif
 
 // ---- small helpers ----
-// Tap i of an r-wide kernel about x, clamped to a map of `side` texels (evaluator.hpp pcf_tap).
-uint st_pcf_tap(uint x, uint i, uint r, uint side) {
-  const int t = int(x) - int((r - 1u) / 2u) + int(i);
-  return t < 0 ? 0u : uint(t) >= side ? side - 1u : uint(t);
-}
-
 uint st_coarse_index(uint level) { return ((1u << (2u * level)) - 1u) / 3u; }
 uint st_byte(uint base_word, uint byte_offset) {
   return (ST_POOL(base_word + (byte_offset >> 2u)) >> (8u * (byte_offset & 3u))) & 0xFFu;
 }
 
 // ---- MH and MMH tiles (MH §3.2; tiles/core/MHQUAD.md) ----
-// A walk down an MH or MMH tile: the node reached (its word `pos`, its 2-bit code, level
-// l), the value it answers (MH: the word of the last valued node; MMH: the sum so far),
-// and `done` once a missing child ended it.
-struct StMhCursor {
-  uint tree, pos, code, val_pos, l;
-  float value;
-  bool done;
-};
-
-StMhCursor st_mh_root(uint base) {
+float st_mh_depth(uint base, uint level, uint x, uint y, bool relative) {
+  level = min(level, kMaxMapLevel);
   const uint hdr = ST_POOL(base + 1u);
   const uint levels = (hdr >> 16u) & 0xFFu;
   const bool root_leaf = ((hdr >> 24u) & 1u) != 0u;
-  StMhCursor c;
-  c.tree = base + 4u + ((levels + 3u) >> 2u);
-  c.pos = 0u;
-  c.code = root_leaf ? 1u : 3u;
-  c.val_pos = root_leaf ? 0u : 1u;
-  c.value = uintBitsToFloat(ST_POOL(c.tree + c.val_pos));
-  c.l = 0u;
-  c.done = false;
-  return c;
-}
-
-// Descends towards (x, y) of `level` until level `stop`, a leaf or a missing child.
-StMhCursor st_mh_descend(uint base, StMhCursor c, uint stop, uint level, uint x, uint y, bool relative) {
-  precise float value = c.value;
-  while (c.l < stop && c.code != 1u && !c.done) {
-    const uint bit = level - (c.l + 1u);
+  const uint tree = base + 4u + ((levels + 3u) >> 2u);
+  uint pos = 0u;
+  uint code = root_leaf ? 1u : 3u;
+  uint val_pos = root_leaf ? 0u : 1u;
+  precise float value = uintBitsToFloat(ST_POOL(tree + val_pos));
+  uint l = 0u;
+  while (l < level && code != 1u) {
+    const uint bit = level - (l + 1u);
     const uint slot = ((x >> bit) & 1u) | (((y >> bit) & 1u) << 1u);
-    const uint w = ST_POOL(c.tree + c.pos);
+    const uint w = ST_POOL(tree + pos);
     const uint mask = w & 0xFFu;
     const uint child_code = (mask >> (2u * slot)) & 3u;
-    if (child_code == 0u) {  // missing child: the last valued node answers
-      c.done = true;
-      break;
-    }
-    const uint shift = relative ? ((w >> 12u) & 0xFu) : st_byte(base, 16u + c.l);
-    const uint child = (((c.pos >> shift) + (w >> 16u)) << shift) + uint(bitCount(mask & ((1u << (2u * slot)) - 1u)));
-    c.pos = child;
-    c.code = child_code;
-    c.l += 1u;
-    if (c.code != 2u) {
-      const uint vp = c.code == 1u ? child : child + 1u;
+    if (child_code == 0u) break;  // missing child: the last valued node answers
+    const uint shift = relative ? ((w >> 12u) & 0xFu) : st_byte(base, 16u + l);
+    const uint child = (((pos >> shift) + (w >> 16u)) << shift) + uint(bitCount(mask & ((1u << (2u * slot)) - 1u)));
+    pos = child;
+    code = child_code;
+    l += 1u;
+    if (code != 2u) {
+      const uint vp = code == 1u ? child : child + 1u;
       if (relative) {
-        const float s = uintBitsToFloat(ST_POOL(c.tree + vp));
+        const float s = uintBitsToFloat(ST_POOL(tree + vp));
         // mmh_add: one binary32 addition, nothing contracted into it
         value = ((w >> (8u + slot)) & 1u) != 0u ? s : value + s;
       } else {
-        c.val_pos = vp;
+        val_pos = vp;
       }
     }
   }
-  c.value = value;
-  return c;
+  return relative ? value : uintBitsToFloat(ST_POOL(tree + val_pos));
 }
-
-float st_mh_answer(StMhCursor c, bool relative) { return relative ? c.value : uintBitsToFloat(ST_POOL(c.tree + c.val_pos)); }
-
-// Whether the walk can go no deeper: every texel below it has its answer.
-bool st_mh_final(StMhCursor c) { return c.done || c.code == 1u; }
 
 // ---- DAG-MH tiles (DAG-MH §3.5 Alg. 1, §3.4 Alg. 2; tiles/core/DAGMH.md) ----
 struct StDagCursor {
@@ -200,81 +169,56 @@ uint st_dag_treelet_word(StDagSpace s, uint t, uint w) {
   return t < s.t ? ST_PAGE(s.dtreelets + t * 3u + w) : ST_POOL(s.treelets + (t - s.t) * 3u + w);
 }
 
-// A DAG-MH tile opened once: the sections every lookup in it reads (a PCF kernel's taps
-// share them).
-struct StDagTile {
-  uint base, finest, skip_level, skip_words, root;
-  uint chunks, mults;
-  StDagSpace sp;
-};
-
-StDagTile st_dag_open(uint base) {
+float st_dag_depth(uint base, uint level, uint x, uint y) {
   // Header version 3 (DAGMH.md): word 2 = finest_level | skip_level << 8 | flags << 16;
   // the sections follow from the counts (dagmh::sections_of).
-  StDagTile t;
-  t.base = base;
   const uint w2 = ST_POOL(base + 2u);
-  t.finest = w2 & 0xFFu;
-  t.skip_level = (w2 >> 8u) & 0xFFu;
-  t.skip_words = base + 8u;
-  t.root = ST_POOL(base + 3u);
-  t.sp.nodes = t.skip_words + (t.skip_level == 0u ? 0u : 4u << (2u * t.skip_level));  // S = 0: no table
-  t.sp.treelets = t.sp.nodes + ST_POOL(base + 4u);
-  t.chunks = t.sp.treelets + 3u * ST_POOL(base + 5u);
-  t.mults = t.chunks + 5u * ((ST_POOL(base + 6u) + 31u) / 32u);
-  t.sp.d = 0u;
-  t.sp.t = 0u;
-  t.sp.dnodes = 0u;
-  t.sp.dtreelets = 0u;
+  const uint finest = w2 & 0xFFu;
+  const uint skip_level = (w2 >> 8u) & 0xFFu;
+  const uint skip_words = base + 8u;
+  StDagSpace sp;
+  sp.nodes = skip_words + (skip_level == 0u ? 0u : 4u << (2u * skip_level));  // S = 0: no table
+  sp.treelets = sp.nodes + ST_POOL(base + 4u);
+  const uint chunk_words = sp.treelets + 3u * ST_POOL(base + 5u);
+  const uint mult_words = chunk_words + 5u * ((ST_POOL(base + 6u) + 31u) / 32u);
+  sp.d = 0u;
+  sp.t = 0u;
+  sp.dnodes = 0u;
+  sp.dtreelets = 0u;
   if (((w2 >> 16u) & 1u) != 0u) {  // flag dictionary: opened by the client against the dictionary GpuMap uploaded
     const uint dict = ST_PAGE(kPtDictionary);
-    t.sp.d = ST_PAGE(dict + kDictNodeWords);
-    t.sp.t = ST_PAGE(dict + kDictTreeletCount);
-    t.sp.dnodes = dict + kDictHeaderWords;
-    t.sp.dtreelets = t.sp.dnodes + t.sp.d;
+    sp.d = ST_PAGE(dict + kDictNodeWords);
+    sp.t = ST_PAGE(dict + kDictTreeletCount);
+    sp.dnodes = dict + kDictHeaderWords;
+    sp.dtreelets = sp.dnodes + sp.d;
   }
-  return t;
-}
-
-// The texel of the tile's finest level that answers (x, y) of `level` (a level below the
-// finest: the texel's ancestor), clamped to the tile; the level it lies on in .z.
-uvec3 st_dag_texel(StDagTile t, uint level, uint x, uint y) {
-  if (level > t.finest) {
-    const uint sh = level - t.finest;
+  if (level > finest) {
+    const uint sh = level - finest;
     x >>= sh;
     y >>= sh;
-    level = t.finest;
+    level = finest;
   }
   const uint top = (1u << level) - 1u;
-  return uvec3(min(x, top), min(y, top), level);
-}
-
-// The cheapest valid start of a walk to a node of level `stop` on the path to (x, y) of
-// `level`: the skip table when stop >= skip_level, else the root (View::start).
-StDagCursor st_dag_start(StDagTile t, uint stop, uint level, uint x, uint y) {
+  x = min(x, top);
+  y = min(y, top);
   StDagCursor c;
-  if (t.skip_level > 0u && stop >= t.skip_level) {
-    const uint sh = level - t.skip_level;
-    const uint e = t.skip_words + 4u * (((y >> sh) << t.skip_level) + (x >> sh));
+  if (skip_level > 0u && level >= skip_level) {
+    const uint sh = level - skip_level;
+    const uint e = skip_words + 4u * (((y >> sh) << skip_level) + (x >> sh));
     c.ref = ST_POOL(e);
     c.level = ST_POOL(e + 1u);
     c.base = ST_POOL(e + 2u);
     c.last = ST_POOL(e + 3u);
   } else {
-    c.ref = t.root;
+    c.ref = ST_POOL(base + 3u);
     c.level = 0u;
     c.base = 0u;
     c.last = 0u;
   }
-  return c;
-}
-
-// Inner nodes from `c` towards (x, y) of `level`, stopping at an inner node of level
-// `stop`, a treelet or a missing child (ref 0) (View::descend).
-StDagCursor st_dag_descend(StDagTile t, StDagCursor c, uint stop, uint level, uint x, uint y) {
-  while ((c.ref & 0xC0000000u) == 0x40000000u && c.level < stop) {
+  // descend (dagmh_traverse.hpp View::descend)
+  while ((c.ref & 0xC0000000u) == 0x40000000u && c.level < level) {
     const uint node = c.ref & 0x3FFFFFFFu;
-    const uint flags = st_dag_node_word(t.sp, node);
+    const uint flags = st_dag_node_word(sp, node);
     if ((flags & 0x100u) != 0u) c.last = c.base;
     const uint sh = level - c.level - 1u;
     const uint child = ((x >> sh) & 1u) | (((y >> sh) & 1u) << 1u);
@@ -285,23 +229,18 @@ StDagCursor st_dag_descend(StDagTile t, StDagCursor c, uint stop, uint level, ui
     }
     const uint rank = uint(bitCount(flags & 0xFu & ((1u << child) - 1u)));
     const uint entry = node + 1u + 2u * rank;
-    c.base += st_dag_node_word(t.sp, entry + 1u);
-    c.ref = st_dag_node_word(t.sp, entry) | (((flags >> (4u + child)) & 1u) != 0u ? 0x80000000u : 0x40000000u);
+    c.base += st_dag_node_word(sp, entry + 1u);
+    c.ref = st_dag_node_word(sp, entry) | (((flags >> (4u + child)) & 1u) != 0u ? 0x80000000u : 0x40000000u);
   }
-  return c;
-}
-
-// The value index of (x, y) of `level` from descend's cursor (View::finish; Alg. 1 in a
-// treelet: from its deepest level on the path up, the first valued node answers).
-uint st_dag_finish(StDagTile t, StDagCursor c, uint level, uint x, uint y) {
+  // finish
   uint index = c.last;
   const uint tag = c.ref & 0xC0000000u;
   if (tag == 0x40000000u) {
-    index = (st_dag_node_word(t.sp, c.ref & 0x3FFFFFFFu) & 0x100u) != 0u ? c.base : c.last;
+    index = (st_dag_node_word(sp, c.ref & 0x3FFFFFFFu) & 0x100u) != 0u ? c.base : c.last;
   } else if (tag == 0x80000000u) {
-    const uint tr = c.ref & 0x3FFFFFFFu;
-    const uint w0 = st_dag_treelet_word(t.sp, tr, 0u), w1 = st_dag_treelet_word(t.sp, tr, 1u),
-               w2 = st_dag_treelet_word(t.sp, tr, 2u);
+    const uint t = c.ref & 0x3FFFFFFFu;
+    const uint w0 = st_dag_treelet_word(sp, t, 0u), w1 = st_dag_treelet_word(sp, t, 1u),
+               w2 = st_dag_treelet_word(sp, t, 2u);
     const uint depth = min(level - c.level, 3u);
     uint p[4];
     p[0] = 0u;
@@ -324,7 +263,7 @@ uint st_dag_finish(StDagTile t, StDagCursor c, uint level, uint x, uint y) {
       break;
     }
   }
-  return index;
+  return st_dag_value(base, chunk_words, mult_words, index);
 }
 
 // ---- voxel shadow DAG tiles (voxelized shadows 2014 §4, §6.2; tiles/core/VSDAG.md) ----
@@ -395,6 +334,17 @@ float st_vsdag_depth(uint base, uint level, uint x, uint y) {
   // f / 2^z_bits is exact (a power-of-two scale, f < 2^20); its predecessor is one bit below
   precise float q = float(a) * uintBitsToFloat((127u - z_bits) << 23u);
   return uintBitsToFloat(floatBitsToUint(q) - 1u);
+}
+
+float st_tile_depth(uint slot, uint rel, uint x, uint y) {
+  const uint base = slot * ST_PAGE(kPtSlotWords);
+  const uint enc = ST_PAGE(kPtEncoding);
+  if (enc == 3u) return st_vsdag_depth(base, rel, x, y);
+  // A DAG-MH pack's tile may be an MMH buffer, told by its magic "STMM" (tiles/PACK.md
+  // "Mixed tiles"; encoding.cpp open_encoded).
+  const bool mmh_tile = enc == 2u && ST_POOL(base) == 0x4D4D5453u;
+  if (enc == 2u && !mmh_tile) return st_dag_depth(base, rel, x, y);
+  return st_mh_depth(base, rel, x, y, enc == 1u || mmh_tile);
 }
 
 // ---- the page-table walk (page_table.hpp walk_page_table; remote_map.cpp depth_locked) ----
@@ -517,93 +467,11 @@ bool st_in_walk(StWalk w, uint level, uint x, uint y) {
   return (x >> (level - w.l)) == w.ex && (y >> (level - w.l)) == w.ey;
 }
 
-// ---- a tile's texels for a kernel of taps (MH §3.3's shared walk) ----
-// The taps of a PCF kernel that fall in one tile share its header and the walk down to the
-// deepest node over all of them (the MH/MMH authors' PCF walks once to the deepest node
-// covering the kernel, then each tap continues from there); when that node can go no
-// deeper (a DAG-MH missing child, an MH leaf or missing child) it answers every such tap.
-// A DAG-MH value index equal to the previous tap's reuses its value.
-struct StKernel {
-  uint slot;    // the tile opened (kNoSlot: none yet)
-  uint type;    // 0 DAG-MH, 1 MH, 2 MMH (relative values), 3 voxel shadow DAG
-  uint l;       // the level the shared walk's taps are decoded at
-  bool answered;  // the shared walk answers every tap in the tile
-  StDagTile dag;
-  StDagCursor dc;
-  StMhCursor mc;
-  uint last_index;
-  float last_value;
-};
-
-StKernel st_kernel() {
-  StKernel k;
-  k.slot = kNoSlot;
-  return k;
-}
-
-// Opens the tile of walk w (kind 1) for the taps in [x0, x1] x [y0, y1] (tile-relative
-// texels of level w.rel): the walk down to the deepest node over them.
-void st_kernel_open(inout StKernel k, StWalk w, uint x0, uint y0, uint x1, uint y1) {
-  k.slot = w.slot;
-  k.last_index = 0xFFFFFFFFu;
-  k.answered = false;
-  const uint base = w.slot * ST_PAGE(kPtSlotWords);
-  const uint enc = ST_PAGE(kPtEncoding);
-  if (enc == 3u) {
-    k.type = 3u;
-    return;
-  }
-  // A DAG-MH pack's tile may be an MMH buffer, told by its magic "STMM" (tiles/PACK.md
-  // "Mixed tiles"; encoding.cpp open_encoded).
-  const bool mmh_tile = enc == 2u && ST_POOL(base) == 0x4D4D5453u;
-  if (enc == 2u && !mmh_tile) {
-    k.type = 0u;
-    k.dag = st_dag_open(base);
-    const uvec3 a = st_dag_texel(k.dag, w.rel, x0, y0), b = st_dag_texel(k.dag, w.rel, x1, y1);
-    k.l = a.z;
-    const uint stop = a.z - uint(findMSB((a.x ^ b.x) | (a.y ^ b.y)) + 1);  // findMSB(0) = -1: one texel
-    k.dc = st_dag_descend(k.dag, st_dag_start(k.dag, stop, a.z, a.x, a.y), stop, a.z, a.x, a.y);
-    const uint tag = k.dc.ref & 0xC0000000u;
-    k.answered = tag != 0x40000000u && tag != 0x80000000u;  // below a missing child: c.last answers
-  } else {
-    const bool relative = enc == 1u || mmh_tile;
-    k.type = relative ? 2u : 1u;
-    k.l = min(w.rel, kMaxMapLevel);
-    const uint stop = uint(max(int(k.l) - (findMSB((x0 ^ x1) | (y0 ^ y1)) + 1), 0));
-    k.mc = st_mh_descend(base, st_mh_root(base), stop, k.l, x0, y0, relative);
-    k.answered = st_mh_final(k.mc) || stop == k.l;
-  }
-}
-
-// Texel (x, y) (tile-relative, level w.rel) of the tile st_kernel_open opened.
-float st_kernel_depth(inout StKernel k, StWalk w, uint x, uint y) {
-  const uint base = k.slot * ST_PAGE(kPtSlotWords);
-  if (k.type == 3u) return st_vsdag_depth(base, w.rel, x, y);
-  if (k.type == 0u) {
-    uint index = k.dc.last;
-    if (!k.answered) {
-      const uvec3 p = st_dag_texel(k.dag, w.rel, x, y);
-      index = st_dag_finish(k.dag, st_dag_descend(k.dag, k.dc, p.z, p.z, p.x, p.y), p.z, p.x, p.y);
-    }
-    if (index != k.last_index) {
-      k.last_index = index;
-      k.last_value = st_dag_value(base, k.dag.chunks, k.dag.mults, index);
-    }
-    return k.last_value;
-  }
-  const bool relative = k.type == 2u;
-  return st_mh_answer(k.answered ? k.mc : st_mh_descend(base, k.mc, k.l, k.l, x, y, relative), relative);
-}
-
-// The answer for texel (x, y) of `level` given a walk that covers it; a tile is opened
-// (k) for the taps in [x0, x1] x [y0, y1] (texels of `level`) unless k holds it already.
-float st_answer(StWalk w, uint level, uint x, uint y, uint x0, uint y0, uint x1, uint y1, inout StKernel k,
-                inout StProbe probe) {
+// The answer for texel (x, y) of `level` given a walk that covers it.
+float st_answer(StWalk w, uint level, uint x, uint y, inout StProbe probe) {
   if (w.kind == 1u) {
-    const uint ox = w.ex << w.rel, oy = w.ey << w.rel, last = (1u << w.rel) - 1u;
-    if (k.slot != w.slot)
-      st_kernel_open(k, w, max(x0, ox) - ox, max(y0, oy) - oy, min(x1 - ox, last), min(y1 - oy, last));
-    return st_kernel_depth(k, w, x - ox, y - oy);
+    const uint rel = level - w.l;
+    return st_tile_depth(w.slot, rel, x - (w.ex << rel), y - (w.ey << rel));
   }
   if (w.kind == 2u) {
     st_feedback(w.key, w.l, w.ex, w.ey, w.value_bits, w.kind_word, probe);
@@ -613,46 +481,31 @@ float st_answer(StWalk w, uint level, uint x, uint y, uint x0, uint y0, uint x1,
 }
 
 float st_depth(uint level, uint x, uint y, inout StProbe probe) {
-  StKernel k = st_kernel();
-  return st_answer(st_walk(level, x, y), level, x, y, x, y, x, y, k, probe);
+  return st_answer(st_walk(level, x, y), level, x, y, probe);
+}
+
+uint st_pcf_tap(uint x, uint i, uint r, uint side) {
+  const int t = int(x) - int((r - 1u) / 2u) + int(i);
+  return t < 0 ? 0u : uint(t) >= side ? side - 1u : uint(t);
 }
 
 // r x r PCF (evaluator.hpp: lit taps / (r * r) in float, taps clamped to the map). The
 // quotient comes from a table the host filled with the CPU's division, so no GPU
-// division (not correctly rounded in Vulkan) enters the answer; one tap answers 0 or 1.
-// Taps in one page-table walk share it (a tap outside it walks again), taps in one tile
-// share its walk (st_answer); a walk whose value, or whose tile's shared walk, answers
-// every tap of the kernel ends the kernel with one lit test.
+// division (not correctly rounded in Vulkan) enters the answer.
 float st_pcf(uint level, uint x, uint y, uint r, float receiver, inout StProbe probe) {
   r = clamp(r, 1u, kMaxPcf);
   if (level > ST_PAGE(kPtMapLevel)) return 1.0;
   const uint side = 1u << level;
-  const uint x0 = st_pcf_tap(x, 0u, r, side), y0 = st_pcf_tap(y, 0u, r, side);
-  const uint x1 = st_pcf_tap(x, r - 1u, r, side), y1 = st_pcf_tap(y, r - 1u, r, side);
-  StWalk w;
-  StKernel k = st_kernel();
-  bool walked = false, whole = false, done = false;
   uint lit = 0u;
-  for (uint j = 0u; j < r && !done; ++j) {
+  StWalk w = st_walk(level, st_pcf_tap(x, 0u, r, side), st_pcf_tap(y, 0u, r, side));
+  for (uint j = 0u; j < r; ++j) {
     const uint ty = st_pcf_tap(y, j, r, side);
     for (uint i = 0u; i < r; ++i) {
       const uint tx = st_pcf_tap(x, i, r, side);
-      if (!walked || !st_in_walk(w, level, tx, ty)) {  // else: the same walk
-        w = st_walk(level, tx, ty);
-        k.slot = kNoSlot;
-        walked = true;
-        whole = w.kind != 2u && st_in_walk(w, level, x0, y0) && st_in_walk(w, level, x1, y1);
-      }
-      const bool is_lit = st_lit(receiver, st_answer(w, level, tx, ty, x0, y0, x1, y1, k, probe));
-      if (whole && (w.kind == 0u || k.answered)) {  // one answer for every tap
-        lit = is_lit ? r * r : 0u;
-        done = true;
-        break;
-      }
-      lit += is_lit ? 1u : 0u;
+      if (!st_in_walk(w, level, tx, ty)) w = st_walk(level, tx, ty);  // else: the same walk
+      lit += st_lit(receiver, st_answer(w, level, tx, ty, probe)) ? 1u : 0u;
     }
   }
-  if (r == 1u) return lit != 0u ? 1.0 : 0.0;
   return uintBitsToFloat(ST_PAGE(ST_PAGE(kPtPcfTable) + (r - 1u) * kPcfTableStride + lit));
 }
 
@@ -681,15 +534,9 @@ StFilter st_filter_levels(float footprint, uint finest) {
 float st_lookup(uint x, uint y, float receiver, float footprint, uint r, inout StProbe probe) {
   const uint finest = ST_PAGE(kPtMapLevel);
   const StFilter f = st_filter_levels(footprint, finest);
-  // One call site of st_pcf for both levels: a shader compiler inlines it once.
-  float a = 0.0, c = 0.0;
-  for (uint i = 0u; i < (f.t == 0.0 ? 1u : 2u); ++i) {
-    const uint l = i == 0u ? f.fine : f.coarse;
-    const float v = st_pcf(l, x >> (finest - l), y >> (finest - l), r, receiver, probe);
-    if (i == 0u) a = v;
-    else c = v;
-  }
+  const float a = st_pcf(f.fine, x >> (finest - f.fine), y >> (finest - f.fine), r, receiver, probe);
   if (f.t == 0.0) return a;
+  const float c = st_pcf(f.coarse, x >> (finest - f.coarse), y >> (finest - f.coarse), r, receiver, probe);
   precise float step = c - a;
   precise float scaled = f.t * step;
   precise float blended = a + scaled;
