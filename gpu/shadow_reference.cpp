@@ -174,11 +174,8 @@ void shadow_pass_reference(const Evaluator& ev, const PackHeader& h, const Shado
 std::array<float, 3> deep_shadow_reference(const client::CacheView& view, float bias, uint32_t finest, float u, float v,
                                            float d, float footprint, uint32_t kernel) {
   const float moved = d - bias;
-  float width = 0.0f;
-  if (kernel > 1 || footprint > 1.0f) {
-    const float texels = float(kernel) * (footprint > 1.0f ? footprint : 1.0f);
-    width = texels * std::ldexp(1.0f, -int(finest));
-  }
+  const float texels = float(kernel) * (footprint > 1.0f ? footprint : 1.0f);
+  const float width = texels * std::ldexp(1.0f, -int(finest));
   return view.deep_transmittance(double(u), double(v), moved, double(width));
 }
 

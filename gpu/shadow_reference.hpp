@@ -70,8 +70,8 @@ void shadow_pass_reference(const Evaluator& ev, const PackHeader& h, const Shado
 // The CPU twin of the deep part's factor of a 2D shadow lookup (st_deep_shadow,
 // shaders/st_deep.glsl): at the surface point's float light-space (u, v, d) (no normal
 // offset), d - bias (bias: the deep block's kDpDepthBias, deep_depth_bias), over a
-// footprint of kernel x max(1, footprint) finest texels times 2^-finest map units when
-// kernel > 1 or footprint > 1 (else the texel under (u, v)), the CPU's own lookup
+// footprint of kernel x max(1, footprint) finest texels times 2^-finest map units (one
+// texel: bilinear at the deep map's mip 0, never a point lookup), the CPU's own lookup
 // (CacheView::deep_transmittance). Each float operation rounded once.
 std::array<float, 3> deep_shadow_reference(const client::CacheView& view, float bias, uint32_t finest, float u, float v,
                                            float d, float footprint, uint32_t kernel);

@@ -22,8 +22,8 @@
 //                                            surface point's (u, v, d) (no normal offset)
 //                                            moved toward the light by the block's depth
 //                                            bias, over kernel x max(1, footprint) finest
-//                                            texels (a point lookup for kernel 1 and
-//                                            footprint <= 1)
+//                                            texels (bilinear at mip 0 while that is
+//                                            a deep texel or less)
 #ifndef SHADOWTILE_GPU_ST_DEEP_GLSL
 #define SHADOWTILE_GPU_ST_DEEP_GLSL
 
@@ -220,12 +220,11 @@ vec3 st_deep_shadow(vec3 uvd, float footprint, uint kernel, inout StProbe probe)
   const uint blk = ST_PAGE(kPtDeep);
   if (blk == 0u) return vec3(1.0);
   precise float d = uvd.z - uintBitsToFloat(ST_DEEP(blk + kDpDepthBias));
-  float width = 0.0;
-  if (kernel > 1u || footprint > 1.0) {
-    precise float texels = float(kernel) * (footprint > 1.0 ? footprint : 1.0);
-    precise float w = texels * uintBitsToFloat((127u - ST_PAGE(kPtMapLevel)) << 23u);  // * 2^-L, exact
-    width = w;
-  }
+  // Never a point lookup: one texel's box-filtered coverage read as a step would put every
+  // leaf edge on a deep texel's edge; bilinear between texel centres puts it where the
+  // coverage crosses 1/2, between them (render.cpp measured the map against the rays).
+  precise float texels = float(kernel) * (footprint > 1.0 ? footprint : 1.0);
+  precise float width = texels * uintBitsToFloat((127u - ST_PAGE(kPtMapLevel)) << 23u);  // * 2^-L, exact
   return st_deep_transmittance(uvd.x, uvd.y, d, width, probe);
 }
 

@@ -102,10 +102,11 @@ TEST(RenderDeep, ForestAgreesWithRaysAsWellAsTheOpaqueCity) {
   EXPECT_GT(shadowed(with), shadowed(without) + with.receivers / 50);
   EXPECT_GT(without.differing_fraction(), 0.02);
   // With the deep part, about as few receivers differ as on the opaque city: measured
-  // 1.85% against the city's 0.64% (17.6% without the deep part). Leaf shadows have far
+  // 1.12% against the city's 0.64% (17.6% without the deep part; 1.85% when a single tap
+  // read one deep texel as a step instead of filtering bilinearly). Leaf shadows have far
   // more edge per area than buildings, and a deep texel holds the box-filtered coverage of
   // 16 rays where a ray samples a point, so edges differ somewhat more often.
-  EXPECT_LE(with.differing_fraction(), std::max(3.5 * c.differing_fraction(), 0.01));
+  EXPECT_LE(with.differing_fraction(), std::max(2.5 * c.differing_fraction(), 0.01));
   EXPECT_LT(with.mean_abs_difference, without.mean_abs_difference / 3);
   // The PCF and filtered paths read the deep map too (its mips), and stay close to the rays.
   ro.pcf_radius = 1;
