@@ -66,7 +66,10 @@ TEST(MixedTiles, PredictedChoiceStaysNoLargerThanMmhAndNearExhaustive) {
     const Built exhaustive = build(scene, light, L, Encoding::dagmh, true, "p_exhaustive", true);
     const bool open = !scene.any_closed();
     EXPECT_LE(predicted.file, mmh.file) << (open ? "open" : "closed");
-    EXPECT_LE(double(predicted.payloads), 1.02 * double(exhaustive.payloads)) << (open ? "open" : "closed");
+    // Within 2% of exhaustive; 8% at the sanitizers' small scale (level 8: a few dozen tiles,
+    // where one tile predicted the wrong way is several percent of the pack).
+    const double slack = fields::small_test_scale() ? 1.08 : 1.02;
+    EXPECT_LE(double(predicted.payloads), slack * double(exhaustive.payloads)) << (open ? "open" : "closed");
     if (open) {
       EXPECT_EQ(predicted.dagmh_tiles, 0u) << "zero-width intervals: MMH predicted everywhere";
     } else {

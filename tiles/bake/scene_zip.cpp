@@ -31,7 +31,7 @@ voidpf ZCALLBACK mem_open(voidpf opaque, const void*, int mode) {
 uLong ZCALLBACK mem_read(voidpf, voidpf stream, void* buf, uLong size) {
   auto* m = static_cast<Memory*>(stream);
   const size_t n = std::min<size_t>(size, m->size - m->at);
-  std::memcpy(buf, m->data + m->at, n);
+  if (n != 0) std::memcpy(buf, m->data + m->at, n);  // data is null for an empty buffer
   m->at += n;
   if (n < size) m->short_read = true;
   return uLong(n);
