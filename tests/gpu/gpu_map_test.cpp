@@ -192,6 +192,29 @@ TEST(GpuMap, EveryTexelOfADictionaryPackAnswersBitExactlyLikeTheCpu) {
   EXPECT_EQ(st.validation_messages, 0u);
 }
 
+// A pack served over loopback and fetched whole: the client's CPU answers equal the pack's
+// own on every texel of every level, and the GPU's equal the client's (no hole, the
+// validation layer silent).
+void expect_served_pack_bit_exact(const std::string& path, const std::string& name, size_t tiles, uint32_t seed) {
+  looptest::TestServer srv = start_server({path});
+  client::ClientOptions co = looptest::quick_options();
+  co.cache_slots = uint32_t(tiles) + 32;
+  client::Client c({"127.0.0.1", srv.port}, co);
+  client::Map map = c.open(name);
+  ASSERT_TRUE(fetch_all(map));
+  PackEvaluator local(PackReader::open(path));
+  for (uint32_t l = 0; l <= map.finest_level(); ++l)
+    for (uint32_t y = 0; y < (1u << l); ++y)
+      for (uint32_t x = 0; x < (1u << l); ++x)
+        ASSERT_EQ(bits(map.depth(l, x, y)), bits(local.depth(l, x, y))) << l << " " << x << " " << y;
+  GpuMap g(map, gputest::options());
+  EXPECT_EQ(g.sync(), map.stats().cache.resident);
+  expect_bit_exact(g, map, seed);
+  const GpuStats st = g.stats();
+  EXPECT_EQ(st.holes, 0u);
+  EXPECT_EQ(st.validation_messages, 0u);
+}
+
 // A DAG-MH pack with mixed tiles (tiles/PACK.md "Mixed tiles"): every other tile an MMH
 // buffer (the builder picks by size; here the order decides, so both kinds are sure to be
 // there), told apart by its magic on the GPU as on the CPU, every answer the CPU's bits.
@@ -216,24 +239,7 @@ TEST(GpuMap, EveryTexelOfAMixedTilesPackAnswersBitExactlyLikeTheCpu) {
     if (t.kind == TileKind::encoded) ++(is_mmh_buffer(pack->read_raw(t.id)) ? mmh : dag);
   ASSERT_GT(mmh, 0u);
   ASSERT_GT(dag, 0u);
-  looptest::TestServer srv = start_server({path});
-  client::ClientOptions co = looptest::quick_options();
-  co.cache_slots = uint32_t(pack->tiles().size()) + 32;
-  client::Client c({"127.0.0.1", srv.port}, co);
-  client::Map map = c.open("gpu_mixed");
-  ASSERT_TRUE(fetch_all(map));
-  // The client's CPU answers are the pack's own (every texel, every level).
-  PackEvaluator local(PackReader::open(path));
-  for (uint32_t l = 0; l <= map.finest_level(); ++l)
-    for (uint32_t y = 0; y < (1u << l); ++y)
-      for (uint32_t x = 0; x < (1u << l); ++x)
-        ASSERT_EQ(bits(map.depth(l, x, y)), bits(local.depth(l, x, y))) << l << " " << x << " " << y;
-  GpuMap g(map, gputest::options());
-  EXPECT_EQ(g.sync(), map.stats().cache.resident);
-  expect_bit_exact(g, map, 19);
-  const GpuStats st = g.stats();
-  EXPECT_EQ(st.holes, 0u);
-  EXPECT_EQ(st.validation_messages, 0u);
+  expect_served_pack_bit_exact(path, "gpu_mixed", pack->tiles().size(), 19);
 }
 
 // Plane tiles (tiles/core/PLANES.md): random plane blocks of every size over DAG-MH and MMH
@@ -286,24 +292,7 @@ TEST(GpuMap, EveryTexelOfAPlaneTilesPackAnswersBitExactlyLikeTheCpu) {
   write_pack(path, h, cut, pp);
   const auto pack = PackReader::open(path);
   ASSERT_TRUE(pack->header().flags & kFeaturePlaneTiles);
-  looptest::TestServer srv = start_server({path});
-  client::ClientOptions co = looptest::quick_options();
-  co.cache_slots = uint32_t(pack->tiles().size()) + 32;
-  client::Client c({"127.0.0.1", srv.port}, co);
-  client::Map map = c.open("gpu_planes");
-  ASSERT_TRUE(fetch_all(map));
-  // The client's CPU answers are the pack's own (every texel, every level).
-  PackEvaluator local(PackReader::open(path));
-  for (uint32_t l = 0; l <= map.finest_level(); ++l)
-    for (uint32_t y = 0; y < (1u << l); ++y)
-      for (uint32_t x = 0; x < (1u << l); ++x)
-        ASSERT_EQ(bits(map.depth(l, x, y)), bits(local.depth(l, x, y))) << l << " " << x << " " << y;
-  GpuMap g(map, gputest::options());
-  EXPECT_EQ(g.sync(), map.stats().cache.resident);
-  expect_bit_exact(g, map, 23);
-  const GpuStats st = g.stats();
-  EXPECT_EQ(st.holes, 0u);
-  EXPECT_EQ(st.validation_messages, 0u);
+  expect_served_pack_bit_exact(path, "gpu_planes", pack->tiles().size(), 23);
 }
 
 // The tiles the CPU's page-table walk over the same cache finds absent for each texel.
