@@ -23,14 +23,18 @@
 // feedback's). With --soft it averages all N samples (an area light's soft shadow, or a day's
 // mean sun), shaded toward the samples' mean light.
 //
-// --twin: the last frame's lookups are answered again on the CPU through the client's public
-// lookups (Map::visibility_filtered, time_visibility_filtered, soft_visibility_filtered) at
-// the receivers and footprints the fragment shader used, and the pixels that differ counted.
+// --twin: the last frame's lookups are answered again on the CPU at the receivers and
+// footprints the fragment shader used (gpu::receiver_lookup_reference: the shader's float
+// light transform, the Map's cache), and the pixels whose bits differ counted. The
+// client's own lookups (Map::visibility_filtered) transform in double: where the float
+// transform rounds onto a texel's edge they read the neighbouring texel, so they are not
+// the shader's twin.
 //
 // Before the rasterizer, `view` ray-traced a G-buffer with Embree on the CPU and ran the GPU
 // compute pass over it, waiting for every frame; --full-walks (a compute-pass setting) went
 // with it.
 #include <algorithm>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -273,21 +277,23 @@ void run(const ViewArgs& a) {
   if (slices) report["stack"] = {{"slices", slices}, {"soft", a.soft}, {"time0", time0}, {"time1", time1}};
   if (a.twin) {
     // The CPU twin of the last frame: the same receivers and footprints through the
-    // client's public lookups (the cache now holds at least what the GPU had).
+    // shader's float light transform and the client's cache (the cache now holds at least
+    // what the GPU had); any bit that differs counts.
+    gpu::ReceiverLookup q;
+    q.kernel = a.pcf, q.soft = a.soft;
+    if (slices && !a.soft) {
+      const gpu::StackTime st = gpu::stack_time(slices, times[a.frames - 1]);
+      q.slice_a = st.a, q.slice_b = st.b, q.blend = st.f;
+    }
+    std::vector<float> cpu(pixels);
+    gpu::receiver_lookup_reference(map, last_rec, q, cpu);
     uint64_t lookups = 0, differ = 0;
     double max_diff = 0;
     for (size_t p = 0; p < pixels; ++p) {
-      const float* q = &last_rec[4 * p];
-      if (!(q[3] >= 0)) continue;
-      const client::WorldPoint w{q[0], q[1], q[2]};
-      const float fw = float(double(q[3]) * texel);
-      const float cpu = !slices ? map.visibility_filtered(w, fw, a.pcf)
-                        : a.soft ? map.soft_visibility_filtered(w, fw, a.pcf)
-                                 : map.time_visibility_filtered(w, times[a.frames - 1], fw, a.pcf);
-      const double d = std::fabs(double(cpu) - double(last_vis[p]));
+      if (!(last_rec[4 * p + 3] >= 0)) continue;
       ++lookups;
-      differ += d > 1e-4;
-      max_diff = std::max(max_diff, d);
+      differ += std::bit_cast<uint32_t>(cpu[p]) != std::bit_cast<uint32_t>(last_vis[p]);
+      max_diff = std::max(max_diff, std::fabs(double(cpu[p]) - double(last_vis[p])));
     }
     const double pct = lookups ? 100.0 * double(differ) / double(lookups) : 0.0;
     std::printf("twin: last frame's %llu lookups against the CPU's: %llu differ (%.3f%%), max difference %.4f; holes "

@@ -1,9 +1,11 @@
 #include "gpu/shadow_reference.hpp"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cfloat>
 #include <cmath>
+#include <limits>
 #include <vector>
 
 #include "gpu/gpu_deep.hpp"
@@ -82,22 +84,17 @@ struct Point {
   float u, v, d;
 };
 
-bool light_point_at(const ShadowLight& l, const ShadowPassInput& in, size_t p, float off, Point& out) {
-  const float* q = in.positions.data() + 4 * p;
-  const float* n = in.normals.data() + 4 * p;
-  if (q[3] == 0.0f) return false;
+// A receiver's light-space point (st_light_uvd): r = receiver - origin per component, the
+// rows' dot products (products, then sums left to right), a perspective divide, d from near.
+Point receiver_point(const ShadowLight& l, const float* receiver) {
   float r[3];
-  for (int i = 0; i < 3; ++i) {
-    const float moved = n[i] * off;
-    r[i] = (q[i] + moved) - l.origin[i];
-  }
+  for (int i = 0; i < 3; ++i) r[i] = receiver[i] - l.origin[i];
   auto dot = [&](const std::array<float, 3>& a) {
     const float x = r[0] * a[0], y = r[1] * a[1], z = r[2] * a[2];
     const float xy = x + y;
     return xy + z;
   };
-  out.u = dot(l.axis_u);
-  out.v = dot(l.axis_v);
+  Point out{dot(l.axis_u), dot(l.axis_v), 0};
   const float z = dot(l.forward);
   if (l.perspective) {
     const float qu = out.u / z, qv = out.v / z;
@@ -105,7 +102,38 @@ bool light_point_at(const ShadowLight& l, const ShadowPassInput& in, size_t p, f
     out.v = qv + l.centre_v;
   }
   out.d = z - l.near_scaled;
+  return out;
+}
+
+bool light_point_at(const ShadowLight& l, const ShadowPassInput& in, size_t p, float off, Point& out) {
+  const float* q = in.positions.data() + 4 * p;
+  const float* n = in.normals.data() + 4 * p;
+  if (q[3] == 0.0f) return false;
+  float r[3];
+  for (int i = 0; i < 3; ++i) {
+    const float moved = n[i] * off;
+    r[i] = q[i] + moved;
+  }
+  out = receiver_point(l, r);
   return true;
+}
+
+bool in_light_box(const Point& c) { return c.u >= 0 && c.u < 1 && c.v >= 0 && c.v < 1 && c.d >= 0 && c.d <= 1; }
+
+// The finest texel of an in-box point: floor(u * 2^finest), clamped to the map.
+std::array<uint32_t, 2> finest_texel(const Point& c, uint32_t finest) {
+  const float side = std::ldexp(1.0f, int(finest));
+  const uint32_t top = (1u << finest) - 1;
+  return {std::min(uint32_t(std::floor(c.u * side)), top), std::min(uint32_t(std::floor(c.v * side)), top)};
+}
+
+// Filtering at the finest texel (x, y) (filter_level.hpp, st_lookup): pcf(level, x, y) at the
+// footprint's fine level, and where t > 0 blended with its coarse one.
+template <class Pcf>
+float filtered(uint32_t finest, uint32_t x, uint32_t y, float footprint, Pcf&& pcf) {
+  const FilterLevels f = filter_levels(finest, footprint);
+  const float a = pcf(f.fine, x >> (finest - f.fine), y >> (finest - f.fine));
+  return f.t == 0.0f ? a : filter_blend(a, pcf(f.coarse, x >> (finest - f.coarse), y >> (finest - f.coarse)), f.t);
 }
 
 bool light_point(const ShadowLight& l, const ShadowPassInput& in, size_t p, Point& out) {
@@ -122,12 +150,10 @@ struct Texel {
 };
 bool pixel_texel(const ShadowLight& l, const ShadowPassInput& in, size_t p, uint32_t finest, Texel& t) {
   Point& c = t.c;
-  if (!light_point(l, in, p, c) || !(c.u >= 0 && c.u < 1 && c.v >= 0 && c.v < 1 && c.d >= 0 && c.d <= 1))
-    return false;
+  if (!light_point(l, in, p, c) || !in_light_box(c)) return false;
   const float side = std::ldexp(1.0f, int(finest));
-  const uint32_t top = (1u << finest) - 1;
-  t.x = std::min(uint32_t(std::floor(c.u * side)), top);
-  t.y = std::min(uint32_t(std::floor(c.v * side)), top);
+  const std::array<uint32_t, 2> xy = finest_texel(c, finest);
+  t.x = xy[0], t.y = xy[1];
   t.footprint = in.footprint;
   if (in.neighbour_footprint) {
     float f = 0;
@@ -163,11 +189,8 @@ void shadow_pass_reference(const Evaluator& ev, const PackHeader& h, const Shado
       continue;
     }
     // Evaluator::pcf_footprint's filtering on the finest texel (filter_level.hpp).
-    const FilterLevels f = filter_levels(finest, t.footprint);
-    const float a = ev.pcf(f.fine, t.x >> (finest - f.fine), t.y >> (finest - f.fine), in.kernel, t.c.d);
-    out[p] = f.t == 0.0f ? a
-                         : filter_blend(a, ev.pcf(f.coarse, t.x >> (finest - f.coarse), t.y >> (finest - f.coarse),
-                                                  in.kernel, t.c.d), f.t);
+    out[p] = filtered(finest, t.x, t.y, t.footprint,
+                      [&](uint32_t level, uint32_t x, uint32_t y) { return ev.pcf(level, x, y, in.kernel, t.c.d); });
   }
 }
 
@@ -220,32 +243,38 @@ StackTime stack_time(uint32_t slices, double time) {
   return t;
 }
 
+namespace {
+
+// r x r PCF in slice w at `level` (st_stack_pcf): lit taps / (r * r), taps clamped.
+float slice_pcf(const client::Map& map, uint32_t w, uint32_t level, uint32_t x, uint32_t y, uint32_t r, float d) {
+  const uint64_t s = uint64_t(1) << level;
+  uint32_t lit = 0;
+  for (uint32_t j = 0; j < r; ++j)
+    for (uint32_t i = 0; i < r; ++i) lit += d <= map.slice_depth(w, level, pcf_tap(x, i, r, s), pcf_tap(y, j, r, s));
+  return float(lit) / float(r * r);
+}
+
+std::vector<ShadowLight> slice_lights(const client::StackTables& g) {
+  std::vector<ShadowLight> lights;
+  for (const client::LightParams& l : g.lights)
+    lights.push_back(shadow_light(LightSpace::from_array(LightKind(l.kind), l.params)));
+  return lights;
+}
+
+}  // namespace
+
 void stack_shadow_pass_reference(const client::Map& map, const ShadowPassInput& in, std::span<float> out) {
   const client::CacheView view(map);
   const client::StackTables* g = view.stack();
   if (!g) throw GpuError("stack_shadow_pass_reference: not a stack map");
   const uint32_t finest = g->xy_level;
   const uint32_t r = std::clamp<uint32_t>(in.kernel, 1, Evaluator::kMaxPcf);
-  // r x r PCF in slice w at `level` (st_stack_pcf): lit taps / (r * r), taps clamped.
-  auto pcf = [&](uint32_t w, uint32_t level, uint32_t x, uint32_t y, float d) {
-    const uint64_t s = uint64_t(1) << level;
-    uint32_t lit = 0;
-    for (uint32_t j = 0; j < r; ++j)
-      for (uint32_t i = 0; i < r; ++i)
-        lit += d <= map.slice_depth(w, level, pcf_tap(x, i, r, s), pcf_tap(y, j, r, s));
-    return float(lit) / float(r * r);
-  };
-  std::vector<ShadowLight> lights;
-  for (const client::LightParams& l : g->lights)
-    lights.push_back(shadow_light(LightSpace::from_array(LightKind(l.kind), l.params)));
+  const std::vector<ShadowLight> lights = slice_lights(*g);
   auto slice = [&](size_t p, uint32_t w) {
     Texel t;
     if (!pixel_texel(lights[w], in, p, finest, t)) return 1.0f;
-    const FilterLevels f = filter_levels(finest, t.footprint);
-    const float a = pcf(w, f.fine, t.x >> (finest - f.fine), t.y >> (finest - f.fine), t.c.d);
-    return f.t == 0.0f
-               ? a
-               : filter_blend(a, pcf(w, f.coarse, t.x >> (finest - f.coarse), t.y >> (finest - f.coarse), t.c.d), f.t);
+    return filtered(finest, t.x, t.y, t.footprint,
+                    [&](uint32_t level, uint32_t x, uint32_t y) { return slice_pcf(map, w, level, x, y, r, t.c.d); });
   };
   const size_t pixels = size_t(in.width) * in.height;
   if (in.soft) {
@@ -260,6 +289,48 @@ void stack_shadow_pass_reference(const client::Map& map, const ShadowPassInput& 
   for (size_t p = 0; p < pixels; ++p) {
     const float va = slice(p, t.a);
     out[p] = t.a == t.b ? va : va + t.f * (slice(p, t.b) - va);
+  }
+}
+
+void receiver_lookup_reference(const client::Map& map, std::span<const float> receivers, const ReceiverLookup& q,
+                               std::span<float> out) {
+  const client::CacheView view(map);
+  const client::StackTables* g = view.stack();
+  const uint32_t finest = g ? g->xy_level : view.shape().finest_level;
+  const bool kernel_ok = q.kernel >= 1 && q.kernel <= Evaluator::kMaxPcf && q.kernel % 2 == 1;
+  std::vector<ShadowLight> lights;
+  if (g) {
+    lights = slice_lights(*g);
+  } else {
+    const client::LightParams lp = view.light();
+    const auto kind = LightKind(lp.kind);
+    if (kind == LightKind::sun || kind == LightKind::sun_ground)  // else GpuMap gives the shader none: lit
+      lights.push_back(shadow_light(LightSpace::from_array(kind, lp.params)));
+  }
+  // Slice w's value (2D: w = 0) at one receiver, st_shadow_uvd's steps.
+  auto slice = [&](const float* receiver, float footprint, uint32_t w) {
+    if (!kernel_ok) return std::numeric_limits<float>::quiet_NaN();
+    if (w >= lights.size()) return 1.0f;
+    const Point c = receiver_point(lights[w], receiver);
+    if (!in_light_box(c)) return 1.0f;
+    const std::array<uint32_t, 2> t = finest_texel(c, finest);
+    return filtered(finest, t[0], t[1], footprint, [&](uint32_t level, uint32_t x, uint32_t y) {
+      return g ? slice_pcf(map, w, level, x, y, q.kernel, c.d) : map.pcf(level, x, y, q.kernel, c.d);
+    });
+  };
+  const size_t n = std::min(receivers.size() / 4, out.size());
+  for (size_t p = 0; p < n; ++p) {
+    const float* r = receivers.data() + 4 * p;
+    if (!(r[3] >= 0.0f)) {
+      out[p] = std::numeric_limits<float>::quiet_NaN();
+    } else if (g && q.soft) {
+      float sum = 0;
+      for (uint32_t w = 0; w < g->slices; ++w) sum = sum + slice(r, r[3], w);
+      out[p] = sum / float(g->slices);
+    } else {
+      const float va = slice(r, r[3], g ? q.slice_a : 0);
+      out[p] = !g || q.slice_a == q.slice_b ? va : va + q.blend * (slice(r, r[3], q.slice_b) - va);
+    }
   }
 }
 

@@ -93,7 +93,7 @@ void main() {
       else vb = v;
     }
     if (soft) {
-      vis = sum / float(slices);
+      vis = st_fdiv(sum, float(slices));  // rounded as the CPU divides (st_fdiv.glsl)
     } else if (count == 2u) {
       precise float step = vb - va;
       precise float scaled = push.misc.x * step;

@@ -284,6 +284,24 @@ struct StackTime {
 };
 StackTime stack_time(uint32_t slices, double time);
 
+// The CPU twin of shadowtile.glsl's lookup at the receivers an engine's shader used (what
+// `shadowtile view --twin` checks a frame with): the shader's float32 light transform of
+// each receiver (st_light_uvd; not Map::visibility_filtered's double one, whose texel and
+// depth can differ in the last bit), its box test, finest texel, the footprint's two
+// levels and kernel x kernel PCF on the Map's cache (Map::pcf; a stack: Map::slice_depth per
+// slice), blended as the shader blends: bit for bit its answer for the same cache contents.
+// receivers: 4 floats each, xyz the receiver already moved along its normal (st_receiver's
+// result) and w the footprint in finest texels; w < 0 or NaN: no lookup, answered NaN.
+// A 2D map whose light the GPU refuses (not a sun) answers 1, as the shader does.
+struct ReceiverLookup {
+  uint32_t kernel = 3;                    // PCF kernel side: odd, 1..9 (else NaN, as the shader)
+  uint32_t slice_a = 0, slice_b = 0;      // stack maps: slice_a alone when equal, else
+  float blend = 0;                        //   va + blend * (vb - va)
+  bool soft = false;                      // stack maps: every slice summed in order, then / N
+};
+void receiver_lookup_reference(const client::Map& map, std::span<const float> receivers, const ReceiverLookup& q,
+                               std::span<float> out);
+
 struct FrameStats {
   uint64_t frame = 0;
   double gpu_ms = 0;             // the dispatch, from device timestamps (0 if unsupported)
