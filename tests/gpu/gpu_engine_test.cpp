@@ -9,6 +9,8 @@
 #include <gtest/gtest.h>
 
 #include <bit>
+#include <cmath>
+#include <cstdio>
 #include <map>
 #include <random>
 
@@ -207,6 +209,89 @@ TEST(GpuEngine, AFragmentShaderIncludingShadowtileGlslAnswersLikeTheComputePass)
   EXPECT_GT(shadowed, 0u);
   EXPECT_FALSE(compute_feedback.empty());
   EXPECT_EQ(feedback_of(g), compute_feedback);  // the fragment shader fed back the same tiles
+  EXPECT_EQ(e.messages(), 0u) << e.first_message();
+}
+
+// The twin of a fragment shader's lookups (gpu::receiver_lookup_reference, what `shadowtile
+// view --twin` checks a frame with) at receivers the float32 light transform puts in
+// another texel than the client's double one (u on a texel's edge), or at another depth
+// bit (d on the stored depth): bit for bit the shader's answer on every pixel, where the
+// client's Map::visibility_filtered (the view's former twin) differs on some.
+TEST(GpuEngine, TheReceiverTwinAnswersLikeAFragmentShaderWhereTheDoubleTransformDoesNot) {
+  Served s = serve("gpu_engine_twin", 64);
+  const uint32_t l = s.map.finest_level();
+  s.map.request_region(l, 0, 0, 1u << l, 1u << l, 10);
+  ASSERT_TRUE(wait_until([&] { return s.map.region_resident(l, 0, 0, 1u << l, 1u << l); }));
+  s.server.stop();
+  ASSERT_TRUE(wait_until([&] { return !s.client->stats().connected; }));
+  const PackHeader& h = client::pack_header(s.map);
+  const LightSpace ls = LightSpace::from_array(h.light_kind, h.light);
+  const ShadowLight fl = shadow_light(h);
+  constexpr uint32_t kW = 32, kH = 32, kKernel = 3;
+  constexpr float kFootprint = 2.5f;  // two levels blended
+  const double side = std::ldexp(1.0, int(l)), texel = ls.texel_size(ls.origin(), l);
+  // Receivers 4 floats each (xyz, footprint) as the view's shader writes them; the
+  // G-buffer's positions are the same points (normal offset 0: st_receiver leaves them).
+  std::vector<float> rec(size_t(kW) * kH * 4), pos(rec.size()), nrm(rec.size(), 0.0f);
+  std::mt19937_64 rng(5);
+  std::uniform_real_distribution<double> unit(0.0, 1.0), edge(-3e-7, 3e-7);
+  size_t moved = 0;  // receivers whose float texel differs from the double one
+  for (size_t p = 0; p < size_t(kW) * kH; ++p) {
+    // u on a texel's edge (within a few float ulps), v anywhere; d the stored depth there.
+    const double u = (std::floor(unit(rng) * (side - 2)) + 1) / side + edge(rng), v = unit(rng) * 0.98 + 0.01;
+    const float stored = s.map.depth(l, uint64_t(u * side), uint64_t(v * side));
+    const double d = stored < 1.0f ? double(stored) : 0.5;
+    const Vec3d w = ls.to_world(u, v, d);
+    const float f[3] = {float(w.x), float(w.y), float(w.z)};
+    for (int i = 0; i < 3; ++i) rec[4 * p + size_t(i)] = pos[4 * p + size_t(i)] = f[i];
+    rec[4 * p + 3] = kFootprint, pos[4 * p + 3] = 1.0f;
+    nrm[4 * p + 1] = 1.0f;
+    float r[3];
+    for (int i = 0; i < 3; ++i) r[i] = f[i] - fl.origin[i];
+    const float fu = (r[0] * fl.axis_u[0] + r[1] * fl.axis_u[1]) + r[2] * fl.axis_u[2];
+    const LightPoint dp = ls.to_light(Vec3d{f[0], f[1], f[2]});
+    moved += uint64_t(std::floor(double(fu) * side)) != uint64_t(std::floor(dp.u * side));
+  }
+  EXPECT_GT(moved, 0u) << "no receiver whose float and double texels differ: the test tests nothing";
+  TestEngine e(1);
+  ASSERT_TRUE(e.fragment_stores) << "the device has no fragmentStoresAndAtomics";
+  Targets t(e, kW, kH, pos, nrm, 1);
+  enginetest::Image& colour = e.image(kW, kH, VK_FORMAT_R32_SFLOAT, VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT);
+  GpuOptions o;
+  o.frames_in_flight = 1;
+  GpuMap g(s.map, e.engine_device(), o);
+  const RasterPass raster(e, colour, *t.pos, *t.nrm, g.descriptors(2));
+  uint64_t completed = 0;
+  VkCommandBuffer cmd = e.begin(1, completed);
+  g.retire(completed);
+  g.record_uploads(cmd, 1);
+  raster.record(cmd, kKernel, 0.0f, kFootprint);
+  e.record_readback(cmd, colour, VK_IMAGE_LAYOUT_GENERAL, VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT, t.readback[0],
+                    VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT);
+  g.record_end_of_frame(cmd, 1);
+  e.submit(1);
+  const std::span<const FrameStats> r = g.retire(e.finish());
+  ASSERT_EQ(r.size(), 1u);
+  EXPECT_EQ(r[0].holes, 0u);
+  const std::vector<float> gpu = t.read(1);
+  std::vector<float> twin(gpu.size());
+  ReceiverLookup q;
+  q.kernel = kKernel;
+  receiver_lookup_reference(s.map, rec, q, twin);
+  size_t bad = 0, client_differs = 0, partial = 0;
+  for (size_t p = 0; p < gpu.size(); ++p) {
+    if (bits(gpu[p]) != bits(twin[p]) && bad++ == 0)
+      ADD_FAILURE() << "pixel " << p << ": fragment shader " << gpu[p] << ", twin " << twin[p];
+    const client::WorldPoint w{rec[4 * p], rec[4 * p + 1], rec[4 * p + 2]};
+    client_differs += bits(s.map.visibility_filtered(w, float(double(kFootprint) * texel), kKernel)) != bits(gpu[p]);
+    partial += gpu[p] > 0.0f && gpu[p] < 1.0f;
+  }
+  EXPECT_EQ(bad, 0u);
+  EXPECT_GT(partial, 0u);
+  EXPECT_GT(client_differs, 0u) << "the client's double transform agreed everywhere: the receivers miss the edges";
+  std::printf("receiver twin: %zu pixels, %zu with another float texel, %zu partly lit, %zu where the client's "
+              "double lookup differs\n",
+              gpu.size(), moved, partial, client_differs);
   EXPECT_EQ(e.messages(), 0u) << e.first_message();
 }
 
