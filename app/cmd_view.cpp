@@ -350,8 +350,8 @@ Register reg{"view",
                sub.add_flag("--soft", a->soft,
                             "Stack maps: the soft shadow, every sample of the light set averaged (area lights)");
                sub.add_flag("--twin", a->twin,
-                            "Answer the last frame's lookups again on the CPU (the client's lookups) and count "
-                            "the pixels that differ");
+                            "Answer the last frame's lookups again on the CPU (the shader's float light transform "
+                            "over the client's cache) and count the pixels whose bits differ");
                sub.add_flag("--validation", a->validation,
                             "Run under VK_LAYER_KHRONOS_validation and count its warnings and errors");
                sub.add_option("--out", a->out, "Output folder (frames, contact sheet, view.json)");

@@ -2,8 +2,9 @@
 # `shadowtile view` as an engine renders: a served city pack, the GPU rasterizer of
 # examples/raster on lavapipe, one camera held for every frame, tiles streamed only through
 # its fragment shader's feedback. Checks: exit 0, one non-empty PNG per frame, the holes
-# falling to none as tiles arrive, the last frame's lookups equal to the CPU twin's (the
-# client's lookups at the receivers the fragment shader used: --twin), and the last frame
+# falling to none as tiles arrive, the last frame's lookups equal to the CPU twin's bit for
+# bit (the shader's float light transform over the client's cache at the receivers the
+# fragment shader used: --twin), and the last frame
 # beside `shadowtile render` from the same camera (Embree primary rays, the CPU's lookups)
 # differing in few pixels (silhouettes: rasterized against ray-traced edges); the Khronos
 # validation layer silent throughout (--validation).
