@@ -347,7 +347,7 @@ void setup(CLI::App& app) {
                 "the pack; --resume continues after a rank died");
   app.add_option("--builder", a->builder,
                  "Depth bounds producer: raster (light-space rasterizer; sun lights, either interval rule), "
-                 "embree (ray tracer; every light), or auto (raster for a sun under the default rule)")
+                 "embree (ray tracer; every light), or auto (raster where it applies)")
       ->capture_default_str();
   app.add_option("--raster-skip", a->skip,
                  "Rasterizer tiles covered by one closed object's entry and exit (with --intervals static also "

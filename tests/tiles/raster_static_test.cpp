@@ -143,10 +143,9 @@ TEST(RasterStatic, RegionsPackIsLosslessOnEveryTexel) {
     o.encoding = k % 2 ? Encoding::mh : Encoding::dagmh;
     o.intervals = IntervalRule::static_geometry;
     o.raster_skip = RasterSkip::regions;
-    o.builder = BoundsBuilder::raster;
     const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/static_regions_" + std::to_string(k++) + ".pack";
     const MapBuildReport rep = build_map(c.scene, light, o, path);
-    EXPECT_EQ(rep.builder, "raster");
+    EXPECT_EQ(rep.builder, "raster") << "auto picks the rasterizer for a sun under the static rule";
     EXPECT_EQ(rep.texels_in_regions + rep.texels_traced, uint64_t(1) << (2 * L)) << c.name;
     in_regions += rep.texels_in_regions;
     const IntervalTile truth = DepthBoundsTracer(c.scene, light).trace({L, 0, 0, 1u << L, 1u << L},
