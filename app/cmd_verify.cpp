@@ -268,8 +268,9 @@ void run(const VerifyArgs& a) {
   std::unique_ptr<DepthBoundsTracer> tracer;
   TraceFn trace;
   if (builder == BoundsBuilder::raster) {
-    // Without the per-tile skip: the check does not lean on the skip's own proof.
-    raster = std::make_unique<RasterBounds>(scene, light, RasterSkip::off);
+    // Without the per-tile skip: the check does not lean on the skip's own proof. Under
+    // the pack's own interval rule, as the Embree branch below.
+    raster = std::make_unique<RasterBounds>(scene, light, RasterSkip::off, mode);
     trace = [&](const TraceRegion& r) { return raster->trace(r); };
   } else {
     tracer = std::make_unique<DepthBoundsTracer>(scene, light);

@@ -123,6 +123,13 @@ check build-static 0 "built static.pack" -- "$st" build open_town.obj $light --r
 check inspect-static 0 "static-intervals" -- "$st" inspect static.pack
 check verify-static-contract 0 "static-geometry intervals: lossless for receivers that lie on surfaces" -- "$st" verify static.pack open_town.obj --all
 check verify-static 0 "OK: every texel of the built region \(1024 x 1024" -- "$st" verify static.pack open_town.obj --all
+# A rasterized static pack is re-traced under its own rule too (not the closed-object one).
+check build-static-raster 0 "bounds by raster" -- "$st" build open_town.obj $light --resolution 256 --builder raster --intervals static -o static_raster.pack -q
+check verify-static-raster 0 "OK: every texel of the built region \(256 x 256" -- "$st" verify static_raster.pack open_town.obj --all
+# --raster-skip auto proves whole regions of static builds from 16K^2 up (128K^2 under the default rule).
+check build-static-auto-regions 0 "skip regions" -- "$st" build open_town.obj $light --resolution 16k --intervals static --region 8064,8064,256,256 -o static16k.pack -q
+check verify-static-auto-regions 0 "OK: every texel of the built region \(256 x 256" -- "$st" verify static16k.pack open_town.obj --all
+check build-default-auto-exact 0 "skip exact" -- "$st" build open_town.obj $light --resolution 16k --region 8064,8064,256,256 -o default16k.pack -q
 # A vsdag pack is checked against its slab contract at the depth resolution it recorded.
 check build-vsdag 0 "built vsdag.pack" -- "$st" build $scene $light --resolution 512 --encoding vsdag --depth-bits 10 -o vsdag.pack -q
 check inspect-vsdag 0 '"depth_bits": "10"' -- "$st" inspect vsdag.pack --json

@@ -83,7 +83,7 @@ TEST(BoundsBuilder, AutoPicksRasterForTheSunAndEmbreeOtherwise) {
       LightSpace::fit(LightSpec::parse("spot:pos=3,6,2,target=0,0.5,0,fov=50"), s.bounds());
   EXPECT_EQ(resolve_builder(BoundsBuilder::automatic, sun, IntervalRule::closed_objects), BoundsBuilder::raster);
   EXPECT_EQ(resolve_builder(BoundsBuilder::automatic, spot, IntervalRule::closed_objects), BoundsBuilder::embree);
-  EXPECT_EQ(resolve_builder(BoundsBuilder::automatic, sun, IntervalRule::static_geometry), BoundsBuilder::embree);
+  EXPECT_EQ(resolve_builder(BoundsBuilder::automatic, sun, IntervalRule::static_geometry), BoundsBuilder::raster);
   EXPECT_EQ(resolve_builder(BoundsBuilder::raster, sun, IntervalRule::static_geometry), BoundsBuilder::raster);
   EXPECT_THROW(resolve_builder(BoundsBuilder::raster, spot, IntervalRule::closed_objects), Error);
   EXPECT_THROW(parse_bounds_builder("gpu"), Error);

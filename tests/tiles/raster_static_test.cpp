@@ -7,6 +7,8 @@
 // form (scene_grid.hpp) that tiles asset files across a ground.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -101,6 +103,40 @@ TEST(RasterStatic, EqualsTheTracerOnEveryTexelWhateverTheSkip) {
 // Every aligned square of every size (down to 4 texels) whose corners prove an interval
 // under the static rule: it lies inside every texel's static interval; open layers are
 // proven (not only empty regions).
+// Deep levels, where a texel is 2^-20 of the map: small squares around scene vertices
+// (where edges meet, coverage is decided by the definition itself) at levels 14 and 20,
+// binned and gathered as a 1M^2 build does, equal the tracer bit for bit.
+TEST(RasterStatic, EqualsTheTracerNearVerticesAtDeepLevels) {
+  uint64_t texels = 0, hit = 0;
+  for (const StaticCase& c : cases()) {
+    const LightSpace light = LightSpace::fit(LightSpec::parse(c.sun), c.scene.bounds());
+    const DepthBoundsTracer tracer(c.scene, light);
+    const RasterBounds off(c.scene, light, RasterSkip::off, TraceMode::static_bounds);
+    const RasterBounds exact(c.scene, light, RasterSkip::exact, TraceMode::static_bounds);
+    const size_t nv = c.scene.vertices.size(), step = std::max<size_t>(1, nv / 6);
+    for (size_t k = 0; k < nv; k += step)
+      for (const uint32_t L : {14u, 20u}) {
+        constexpr uint32_t kSide = 16;
+        const LightPoint p = light.to_light(c.scene.vertices[k]);
+        const double S = std::ldexp(1.0, int(L)), hi = S - kSide;
+        const TraceRegion r{L, uint64_t(std::clamp(p.u * S - kSide / 2, 0.0, hi)),
+                            uint64_t(std::clamp(p.v * S - kSide / 2, 0.0, hi)), kSide, kSide};
+        const IntervalTile truth = tracer.trace(r, TraceMode::static_bounds);
+        const IntervalTile a = off.trace(r), b = exact.trace(r);
+        for (uint32_t y = 0; y < kSide; ++y)
+          for (uint32_t x = 0; x < kSide; ++x) {
+            ++texels;
+            hit += truth.at(x, y).lo < kLitDepth;
+            ASSERT_TRUE(same_bits(a.at(x, y), truth.at(x, y)) && same_bits(b.at(x, y), truth.at(x, y)))
+                << c.name << " level " << L << " texel " << r.x0 + x << "," << r.y0 + y << ": raster off ["
+                << a.at(x, y).lo << ", " << a.at(x, y).hi << "] exact [" << b.at(x, y).lo << ", " << b.at(x, y).hi
+                << "] tracer [" << truth.at(x, y).lo << ", " << truth.at(x, y).hi << "]";
+          }
+      }
+  }
+  EXPECT_GT(hit, texels / 4) << "the squares around vertices should mostly hit surfaces";
+}
+
 TEST(RasterStatic, ProvenRegionsLieInsideEveryTexelsStaticInterval) {
   const uint32_t L = fields::small_test_scale() ? 6 : 8, side = 1u << L;
   uint64_t proven_open = 0;
@@ -143,10 +179,9 @@ TEST(RasterStatic, RegionsPackIsLosslessOnEveryTexel) {
     o.encoding = k % 2 ? Encoding::mh : Encoding::dagmh;
     o.intervals = IntervalRule::static_geometry;
     o.raster_skip = RasterSkip::regions;
-    o.builder = BoundsBuilder::raster;
     const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/static_regions_" + std::to_string(k++) + ".pack";
     const MapBuildReport rep = build_map(c.scene, light, o, path);
-    EXPECT_EQ(rep.builder, "raster");
+    EXPECT_EQ(rep.builder, "raster") << "auto picks the rasterizer for a sun under the static rule";
     EXPECT_EQ(rep.texels_in_regions + rep.texels_traced, uint64_t(1) << (2 * L)) << c.name;
     in_regions += rep.texels_in_regions;
     const IntervalTile truth = DepthBoundsTracer(c.scene, light).trace({L, 0, 0, 1u << L, 1u << L},

@@ -420,12 +420,9 @@ BoundsBuilder parse_bounds_builder(const std::string& text) {
 }
 
 BoundsBuilder resolve_builder(BoundsBuilder b, const LightSpace& light, IntervalRule rule) {
-  // The rasterizer builds both interval rules; auto keeps the tracer for the static rule
-  // until the rasterizer's static intervals agree with it on every texel of level-20 maps
-  // (a 1M^2 grid of Quake 3 levels showed texels where they differ; small maps agree).
+  (void)rule;  // the rasterizer builds both interval rules
   const bool applies = light.kind() == LightKind::sun;
-  if (b == BoundsBuilder::automatic)
-    return applies && rule == IntervalRule::closed_objects ? BoundsBuilder::raster : BoundsBuilder::embree;
+  if (b == BoundsBuilder::automatic) return applies ? BoundsBuilder::raster : BoundsBuilder::embree;
   if (b == BoundsBuilder::raster && !applies)
     throw Error("--builder raster: the rasterizer handles sun lights only; use --builder embree for a spot light");
   return b;

@@ -51,7 +51,7 @@ enum class IntervalRule : uint8_t {
 // (canonical_coverage.hpp) where Embree decides coverage in float, so the two can differ
 // on a texel whose ray passes within float error of a triangle edge (ARCHITECTURE.md).
 enum class BoundsBuilder : uint8_t {
-  automatic,  // raster for a sun under the default rule, else embree (static: raster opt-in)
+  automatic,  // raster where it applies (a sun, either interval rule), else embree
   raster,     // the light-space rasterizer (raster_bounds.hpp)
   embree,     // the Embree tracer (depth_bounds.hpp): every light and interval rule
 };
