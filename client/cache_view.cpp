@@ -3,6 +3,7 @@
 #include "shadowtile/cache_view.hpp"
 
 #include <algorithm>
+#include <cassert>
 #include <mutex>
 #include <stdexcept>
 
@@ -120,12 +121,9 @@ size_t CacheView::changed_slots_impl(std::span<uint64_t> known, void* visit,
   m.rm->inspect_cache([&](const TileCache& c) {
     const uint32_t slots = std::min<uint32_t>(c.slot_count(), uint32_t(known.size()));
     auto compare = [&](uint32_t s) {
-      const TileId t = c.slot_tile(s);
-      uint64_t want = kNoTile;
-      if (t != kInvalidTile) {
-        const PageEntry pe = c.lookup(t);
-        if (pe.state == PageState::resident && pe.slot == s) want = t;
-      }
+      // The slot's own state, not a probe of the cache's page table per changed slot.
+      const uint64_t want = c.slot_resident(s) ? c.slot_tile(s) : kNoTile;
+      assert(want == kNoTile || (c.lookup(want).state == PageState::resident && c.lookup(want).slot == s));
       if (known[s] == want) return;
       SlotChange ch;
       ch.slot = s;

@@ -13,6 +13,7 @@
 #include "gpu/layout.hpp"
 #include "gpu/shadow_reference.hpp"
 #include "gpu/vk_context.hpp"
+#include "tiles/core/morton.hpp"
 #include "tiles/core/tile_cache.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
 
@@ -144,7 +145,6 @@ struct GpuMap::Impl {
   std::vector<uint32_t> dirty_list;
   std::vector<TileId> mirror_tile;       // per slot: the tile the device holds, or kInvalidTile
   std::vector<uint8_t> slot_levels;      // per slot: index tile levels d, 0 for an encoded tile
-  std::vector<uint8_t> child_kind;       // per slot * 256: kinds of an index tile's entries
   TileSlotTable tile_slot;
   std::vector<VkBufferCopy> pool_copies, page_copies;
   std::vector<client::WantedTile> wanted;
@@ -319,7 +319,6 @@ struct GpuMap::Impl {
     dirty_list.reserve(dirty.size());
     mirror_tile.assign(slot_count, kInvalidTile);
     slot_levels.assign(slot_count, 0);
-    child_kind.assign(size_t(slot_count) * L::kChildTableWords, 0);
     tile_slot.init(slot_count);
     pool_copies.reserve(slot_count);
     page_copies.reserve(dirty.size());
@@ -462,32 +461,33 @@ struct GpuMap::Impl {
     if (!dirty[b]) dirty[b] = 1, dirty_list.push_back(b);
   }
 
-  // The page-table word that points at `tile` on the device (its parent's entry), or
-  // ~0u when the walk to it stops first (a parent index tile not on the device).
+  // The page-table word that points at `tile` on the device: its skip cell's slot word,
+  // or its entry in the child table of its parent index tile, when the device holds that
+  // parent; else ~0u. Found bottom-up through the tile -> slot table (the parent is the
+  // resident ancestor at level - j whose index levels are j, j = 1..kMaxIndexLevels: in
+  // a pack, no other tile sits on that path), not by walking down from the skip grid:
+  // the walk read one child-table word and one kind per level from tables of slot_count *
+  // 256 entries (megabytes on a large cache), a cache miss or two per level per tile on
+  // the frame path. A parent the device holds but cannot reach yet (its own parent
+  // absent) also gets its child's pointer here, as its own link would have found it.
   uint32_t pointer_word(TileId tile) const {
     if (sg) {  // a stack cell's tile: the cell's slot pointer
       uint64_t cell = 0;
       return view->stack_tile_cell(tile, cell) ? off_cell_slots + uint32_t(cell) : ~0u;
     }
-    const TileAddress a = tile_address(tile);
-    if (a.level < k) return ~0u;
-    uint32_t l = k;
-    uint64_t ex = a.x >> (a.level - k), ey = a.y >> (a.level - k);
-    uint32_t word = off_skip_slots + uint32_t((ey << k) + ex);
-    uint32_t kind = page_shadow[off_entries + 2 * ((ey << k) + ex) + 1] & 0xFFu;
-    while (l < a.level) {
-      if (kind != L::kKindIndex) return ~0u;
-      const uint32_t s = page_shadow[word];
-      if (s == L::kNoSlot || mirror_tile[s] == kInvalidTile) return ~0u;
-      const uint32_t d = slot_levels[s];
-      if (d == 0 || l + d > a.level) return ~0u;
-      const uint64_t cx = a.x >> (a.level - l - d), cy = a.y >> (a.level - l - d);
-      const uint32_t c = uint32_t(((cy - (ey << d)) << d) + (cx - (ex << d)));
-      word = off_children + s * L::kChildTableWords + c;
-      kind = child_kind[size_t(s) * L::kChildTableWords + c];
-      l += d, ex = cx, ey = cy;
+    const uint32_t level = uint32_t(tile >> kTileIdLevelShift);
+    const uint64_t morton = tile & ((uint64_t(1) << kTileIdLevelShift) - 1);
+    if (level < k) return ~0u;
+    if (level == k) return off_skip_slots + uint32_t((uint64_t(morton_compact(morton >> 1)) << k) + morton_compact(morton));
+    for (uint32_t j = 1; j <= kMaxIndexLevels && j <= level - k; ++j) {
+      const TileId parent = (TileId(level - j) << kTileIdLevelShift) | (morton >> (2 * j));
+      const uint32_t s = tile_slot.find(parent);
+      if (s == L::kNoSlot || slot_levels[s] != j) continue;
+      const uint64_t low = morton & ((uint64_t(1) << (2 * j)) - 1);  // the child within the parent
+      const uint32_t c = (morton_compact(low >> 1) << j) + morton_compact(low);
+      return off_children + s * L::kChildTableWords + c;
     }
-    return word;
+    return ~0u;
   }
 
   void unlink(uint32_t s) {
@@ -518,7 +518,6 @@ struct GpuMap::Impl {
       const size_t entries = 8 + 4 * CutGrid::coarse_count(d);
       for (uint32_t c = 0; c < (1u << (2 * d)); ++c) {
         const uint8_t kind = entries + 8 * c + 4 < b.size() ? b[entries + 8 * c + 4] : 0;
-        child_kind[size_t(s) * L::kChildTableWords + c] = kind;
         uint32_t ptr = L::kNoSlot;
         if (kind != L::kKindConstant) {
           const uint32_t cx = (a.x << d) + (c & ((1u << d) - 1)), cy = (a.y << d) + (c >> d);
@@ -529,6 +528,20 @@ struct GpuMap::Impl {
     }
     const uint32_t w = pointer_word(tile);
     if (w != ~0u) set_page_word(w, s);
+  }
+
+  // One copy region more, or the last one longer when both ranges continue it (adjacent
+  // dirty page-table blocks; a tile that fills its slot next to the last): fewer regions
+  // for the driver to record and the device to run, the same bytes.
+  static void add_copy(std::vector<VkBufferCopy>& copies, uint64_t src, uint64_t dst, uint64_t bytes) {
+    if (!copies.empty()) {
+      VkBufferCopy& last = copies.back();
+      if (last.srcOffset + last.size == src && last.dstOffset + last.size == dst) {
+        last.size += bytes;
+        return;
+      }
+    }
+    copies.push_back({src, dst, bytes});
   }
 
   // Compares every slot with the cache and stages what changed into `f`'s staging
@@ -551,7 +564,8 @@ struct GpuMap::Impl {
       }
       std::memcpy(staging + off, c.bytes.data(), c.bytes.size());
       std::memset(staging + off + c.bytes.size(), 0, bytes - c.bytes.size());
-      if (bytes) pool_copies.push_back({off, uint64_t(s) * slot_words * 4, bytes});
+      const uint64_t dst = uint64_t(s) * slot_words * 4;
+      if (bytes) add_copy(pool_copies, off, dst, bytes);
       off += bytes;
       link(s, c.tile, c.bytes);
       ++fs.slots_uploaded;
@@ -573,7 +587,7 @@ struct GpuMap::Impl {
       const uint32_t w0 = blk * kDirtyBlockWords;
       const uint32_t n = std::min<uint32_t>(kDirtyBlockWords, uint32_t(page_shadow.size()) - w0);
       std::memcpy(staging + off, page_shadow.data() + w0, n * 4);
-      page_copies.push_back({off, uint64_t(w0) * 4, uint64_t(n) * 4});
+      add_copy(page_copies, off, uint64_t(w0) * 4, uint64_t(n) * 4);
       off += n * 4;
       dirty[blk] = 0;
       totals.page_words_uploaded += n;
@@ -613,6 +627,10 @@ struct GpuMap::Impl {
     frames.resize(opt.frames_in_flight);
     for (Frame& f : frames) {
       f.staging = ctx->make_buffer(staging, true, 0, BufferUse::upload);
+      // Written once here, so no frame's staging pays the first touch of its pages (a
+      // driver whose host-visible memory is ordinary pageable memory, as lavapipe's, would
+      // take those page faults inside record_uploads).
+      std::memset(f.staging.mapped, 0, staging);
       f.feedback = ctx->make_buffer(fb_bytes, true, 0, BufferUse::readback);
       // Empty, its capacity written, once: later frames' collect_feedback clears what each
       // frame claimed on the host (no fill of the buffer over the bus each frame).

@@ -89,6 +89,9 @@ class TileCache {
   std::span<uint8_t> slot_span(uint32_t slot);
   uint32_t used(uint32_t slot) const { return slots_[slot].used; }
   TileId slot_tile(uint32_t slot) const { return slots_[slot].tile; }
+  // The slot holds its tile resident (committed, not dropped): exactly when
+  // lookup(slot_tile(slot)) is resident in this slot, without the page-table probe.
+  bool slot_resident(uint32_t slot) const { return slots_[slot].state == SlotState::resident; }
 
   // ---- the page table ----
   // The page's state, without counting or touching anything.
