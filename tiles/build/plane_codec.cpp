@@ -34,7 +34,7 @@ TileCodec TileCodec::with_planes(TileCodec base, uint32_t tile_bytes, const Plan
       if (!f) return;
       try {
         std::vector<uint8_t> inner = f(tree);
-        offer(split ? wrap_planes(split->planes, h.depth, inner) : std::move(inner));
+        offer(split ? wrap_planes(split->planes, h.depth, inner, split->labelled) : std::move(inner));
       } catch (const Error& e) {
         if (!failure) failure = e;
       }
@@ -52,7 +52,7 @@ TileCodec TileCodec::with_planes(TileCodec base, uint32_t tile_bytes, const Plan
     };
     both(h, nullptr);
     const PlaneSplit split = fit_planes(h, fit);
-    if (!split.planes.empty()) both(split.pruned, &split);
+    if (!split.planes.empty() || !split.labelled.empty()) both(split.pruned, &split);
     if (!best) throw *failure;
     return std::move(*best);
   };
