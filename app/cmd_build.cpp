@@ -57,7 +57,7 @@ struct BuildArgs {
   std::string deep_from;  // a deep OpenEXR to take the deep map from instead of sampling
   std::string dagmh_dictionary = "on";  // tiles/PACK.md "DAG-MH dictionary"
   std::string dagmh_tiles = "mixed";     // tiles/PACK.md "Mixed tiles"
-  std::string planes = "off";            // tiles/core/PLANES.md
+  std::string planes = "auto";           // tiles/core/PLANES.md
   std::string stack_cells = "smaller";   // light sets: tiles/core/MHOCT.md "Per-slice cells"
 };
 
@@ -194,9 +194,10 @@ void run(const BuildArgs& a) {
     throw Error("--dagmh-tiles: expected mixed, exhaustive or dagmh, got '" + a.dagmh_tiles + "'");
   o.dagmh_mixed_tiles = a.dagmh_tiles != "dagmh" && o.encoding == Encoding::dagmh;
   o.dagmh_mixed_exhaustive = a.dagmh_tiles == "exhaustive";
-  if (a.planes != "on" && a.planes != "off") throw Error("--planes: expected on or off, got '" + a.planes + "'");
+  if (a.planes != "on" && a.planes != "off" && a.planes != "auto")
+    throw Error("--planes: expected auto, on or off, got '" + a.planes + "'");
   if (a.planes == "on" && o.encoding == Encoding::vsdag) throw Error("--planes on: vsdag has no plane tiles (mh, mmh, dagmh do)");
-  o.planes = a.planes == "on";
+  o.planes = a.planes == "on" || (a.planes == "auto" && o.encoding != Encoding::vsdag);
   if (!a.shard.empty()) o.shard = BuildShard::parse(a.shard);
   if (a.mpi && o.shard) throw Error("--mpi and --shard: choose one (a shard is one process's slice)");
 #ifdef SHADOWTILE_HAVE_MPI
@@ -388,7 +389,8 @@ void setup(CLI::App& app) {
       ->capture_default_str();
   app.add_option("--planes", a->planes,
                  "on: a tile may store blocks of texels that one plane answers exactly as planes over the "
-                 "encoding of the rest, where that stores smaller (open surfaces; tiles/core/PLANES.md)")
+                 "encoding of the rest, where that stores smaller (open surfaces; tiles/core/PLANES.md); "
+                 "auto (default): on for mh, mmh and dagmh, off for vsdag; off: never")
       ->capture_default_str();
   app.add_option("--dagmh-tiles", a->dagmh_tiles,
                  "dagmh: mixed (default) writes a tile as MMH where that is likely to store in fewer bytes "

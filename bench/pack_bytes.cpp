@@ -125,8 +125,8 @@ nlohmann::json measure(const std::string& path) {
                         {"header_params", h.journal_offset}, {"tile_records", records}, {"payloads", payload},
                         {"cell_records", cells_and_pad}, {"grid_section_stored", h.grid_size}, {"skip_grid", grid}, {"preview", preview},
                         {"dictionary", dict},     {"index", index},      {"tiles_raw", tile_raw}};
-  // Plane tiles: header + plane records, raw and marginal stored.
-  uint64_t plane_tiles = 0, planes = 0, plane_texels = 0, plane_raw = 0, plane_stored = 0;
+  // Plane tiles: header, plane table and block records, raw and marginal stored.
+  uint64_t plane_tiles = 0, planes = 0, table = 0, labelled = 0, plane_texels = 0, plane_raw = 0, plane_stored = 0;
   for (const auto& e : reader->tiles()) {
     if (e.kind != st::TileKind::encoded) continue;
     const std::vector<uint8_t> raw = reader->read_raw(e.id);
@@ -134,15 +134,18 @@ nlohmann::json measure(const std::string& path) {
     const st::PlaneTileView v = st::validate_plane_tile(raw);
     ++plane_tiles;
     planes += v.plane_count;
+    table += v.table_count;
+    labelled += v.label_count;
     for (uint32_t i = 0; i < v.plane_count; ++i) plane_texels += uint64_t(1) << (2 * v.plane(i).shift);
     plane_raw += raw.size() - v.inner.size();
     plane_stored += st::zlib_compress(raw, 6).size() - st::zlib_compress(v.inner, 6).size();
   }
   if (plane_tiles) {
-    std::printf("  plane tiles: %llu, planes %llu over %llu texels; planes section raw %llu, marginal stored %llu\n",
-                (unsigned long long)plane_tiles, (unsigned long long)planes, (unsigned long long)plane_texels,
+    std::printf("  plane tiles: %llu, blocks %llu (%llu labelled) over %llu texels, %llu table planes; planes section raw %llu, marginal stored %llu\n",
+                (unsigned long long)plane_tiles, (unsigned long long)planes, (unsigned long long)labelled,
+                (unsigned long long)plane_texels, (unsigned long long)table,
                 (unsigned long long)plane_raw, (unsigned long long)plane_stored);
-    out["plane_tiles"] = {{"tiles", plane_tiles}, {"planes", planes}, {"texels", plane_texels},
+    out["plane_tiles"] = {{"tiles", plane_tiles}, {"blocks", planes}, {"labelled", labelled}, {"table_planes", table}, {"texels", plane_texels},
                           {"raw", plane_raw}, {"stored", plane_stored}};
   }
   // MH / MMH tiles: header, node words, values, padding (raw and marginal stored).

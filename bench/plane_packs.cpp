@@ -4,7 +4,7 @@
 // file sizes, the ratios the plane tiles are measured by, build seconds. The packs stay in
 // OUT for bench_pack_bytes (per-section bytes, the planes section included).
 //
-//   bench_plane_packs SCENE@RES... [--out DIR] [--json PATH] [--light SPEC] [--min-shift S] [--min-nodes N]
+//   bench_plane_packs SCENE@RES... [--out DIR] [--json PATH] [--light SPEC] [--min-shift S] [--min-nodes N] [--min-reused N]
 // e.g. bench_plane_packs /usr/share/games/openarena/baseoa/pak1-maps.pk3:maps/oa_dm1.bsp@8192
 //      /usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb@4096 procedural:city@4096
 #include <chrono>
@@ -46,6 +46,7 @@ int main(int argc, char** argv) try {
     else if (a == "--light") light_spec = next();
     else if (a == "--min-shift") fit.min_shift = uint32_t(std::stoul(next()));
     else if (a == "--min-nodes") fit.min_stored_nodes = uint32_t(std::stoul(next()));
+    else if (a == "--min-reused") fit.min_reused_nodes = uint32_t(std::stoul(next()));
     else scenes.push_back(a);
   }
   if (scenes.empty()) throw st::Error("usage: bench_plane_packs SCENE@RES... [--out DIR] [--json PATH] [--light SPEC]");

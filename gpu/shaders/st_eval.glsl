@@ -372,7 +372,10 @@ float st_plane_round(uint hi, uint lo) {
   }
   return uintBitsToFloat((uint(p - 60 + 127) << 23u) + (m - 0x800000u));
 }
-// Whether plane tile `base` answers (rel, x, y); its depth in `d`.
+// Whether plane tile `base` answers (rel, x, y); its depth in `d`. Words: 2 block count B,
+// 4 table count T, 5 labelled blocks L, 6 the table (6 words a plane: a, b, c), 6 + 6T the
+// blocks (2 words: start, shift | kind << 8 | index << 16), 6 + 6T + 2B the labelled blocks
+// (6 words: palette u16 x 4, 2-bit labels); v = a + b fx + c fy modulo 2^64 in tile coordinates.
 bool st_plane_lookup(uint base, uint rel, uint x, uint y, out float d) {
   const uint finest = ((ST_POOL(base + 1u) >> 16u) & 0xFFu) - 1u;
   const uint s = finest - min(rel, finest);
@@ -380,20 +383,28 @@ bool st_plane_lookup(uint base, uint rel, uint x, uint y, out float d) {
   const uint h = s == 0u ? 0u : 1u << (s - 1u);
   const uint fx = (x << s) + h, fy = (y << s) + h;
   const uint key = st_spread16(fx) | (st_spread16(fy) << 1u);
-  uint a = 0u, b = ST_POOL(base + 2u);  // the last record whose start <= key
+  const uint blocks = base + 6u + 6u * ST_POOL(base + 4u);
+  uint a = 0u, b = ST_POOL(base + 2u);  // the last block whose start <= key
   while (a < b) {
     const uint mid = (a + b) >> 1u;
-    if (ST_POOL(base + 4u + 8u * mid) <= key) a = mid + 1u;
+    if (ST_POOL(blocks + 2u * mid) <= key) a = mid + 1u;
     else b = mid;
   }
   if (a == 0u) return false;
-  const uint r = base + 4u + 8u * (a - 1u);
-  const uint start = ST_POOL(r), shift = ST_POOL(r + 1u);
+  const uint r = blocks + 2u * (a - 1u);
+  const uint start = ST_POOL(r), w = ST_POOL(r + 1u), shift = w & 0xFFu;
   if (shift <= s || key - start >= (1u << (2u * shift))) return false;
-  const uint mask = (1u << shift) - 1u;
-  uint hi = ST_POOL(r + 3u), lo = ST_POOL(r + 2u);
-  st_mad64(hi, lo, ST_POOL(r + 4u), ST_POOL(r + 5u), fx & mask);
-  st_mad64(hi, lo, ST_POOL(r + 6u), ST_POOL(r + 7u), fy & mask);
+  uint entry = w >> 16u;
+  if (((w >> 8u) & 0xFFu) == 1u) {  // labelled 8x8 block: the texel's label picks the plane
+    const uint lb = blocks + 2u * ST_POOL(base + 2u) + 6u * entry;
+    const uint i = ((fy & 7u) << 3u) | (fx & 7u);
+    const uint label = (ST_POOL(lb + 2u + (i >> 4u)) >> (2u * (i & 15u))) & 3u;
+    entry = (ST_POOL(lb + (label >> 1u)) >> (16u * (label & 1u))) & 0xFFFFu;
+  }
+  const uint t = base + 6u + 6u * entry;
+  uint hi = ST_POOL(t + 1u), lo = ST_POOL(t);
+  st_mad64(hi, lo, ST_POOL(t + 2u), ST_POOL(t + 3u), fx);
+  st_mad64(hi, lo, ST_POOL(t + 4u), ST_POOL(t + 5u), fy);
   d = st_plane_round(hi, lo);
   return true;
 }
@@ -405,7 +416,7 @@ float st_tile_depth(uint slot, uint rel, uint x, uint y) {
   if (ST_POOL(base) == 0x4E505453u) {  // "STPN": plane blocks over an inner buffer
     float d;
     if (st_plane_lookup(base, rel, x, y, d)) return d;
-    base += 4u + 8u * ST_POOL(base + 2u);
+    base += 6u + 6u * ST_POOL(base + 4u) + 2u * ST_POOL(base + 2u) + 6u * ST_POOL(base + 5u);
   }
   // A DAG-MH pack's tile may be an MMH buffer, told by its magic "STMM" (tiles/PACK.md
   // "Mixed tiles"; encoding.cpp open_encoded).

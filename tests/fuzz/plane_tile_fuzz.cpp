@@ -1,6 +1,6 @@
 // libFuzzer harness for plane tiles (tiles/core/PLANES.md, plane_tile.hpp) in a DAG-MH
 // pack's tile slot: plane blocks over an inner DAG-MH or MMH buffer. Contract: the opener
-// validates the header and every plane record and the inner buffer, or throws
+// validates the header, the plane table, every block record and labelled block and the inner buffer, or throws
 // st::FormatError; a buffer it accepts answers every lookup without reading out of bounds,
 // and PCF equals the average of its single lookups (evaluator_probe.hpp).
 #include <span>
@@ -16,7 +16,8 @@
 namespace {
 
 // A tile of `level` whose texels lie on a few slanted planes (open geometry: hi = lo), the
-// field plane tiles are made for: one plane, two halves, a plane with a step of holes.
+// field plane tiles are made for: one plane, two halves (labelled blocks on their edge), a
+// plane with a step of holes.
 st::IntervalTile planar_tile(uint32_t level, int kind) {
   const uint32_t side = 1u << level;
   st::IntervalTile t{level, 0, 0, side, side, {}};
@@ -24,7 +25,7 @@ st::IntervalTile planar_tile(uint32_t level, int kind) {
   for (uint32_t y = 0; y < side; ++y)
     for (uint32_t x = 0; x < side; ++x) {
       double d = 0.3 + 0.0011 * x + 0.0007 * y;
-      if (kind == 1 && x >= side / 2) d = 0.6 - 0.0013 * x + 0.0002 * y;
+      if (kind == 1 && 2 * x + y >= side) d = 0.6 - 0.0013 * x + 0.0002 * y;  // a slanted edge
       if (kind == 2 && (x / 8 + y / 8) % 3 == 0) d = 1.0;  // no hit
       const float f = float(d);
       t.at(x, y) = {f, kind == 3 ? f + 0.01f : f};
@@ -39,9 +40,9 @@ std::vector<st::fuzz::Bytes> st::fuzz::seeds() {
   for (uint32_t level : {3u, 4u, 5u})
     for (int kind = 0; kind < 4; ++kind) {
       const st::PlaneSplit s = st::fit_planes(st::build_hierarchy(planar_tile(level, kind)), st::PlaneFitOptions{3, 1, 10});
-      if (s.planes.empty()) continue;
+      if (s.planes.empty() && s.labelled.empty()) continue;
       for (st::Encoding e : {st::Encoding::dagmh, st::Encoding::mmh})
-        out.push_back(st::wrap_planes(s.planes, level, st::encode(s.pruned, e)));
+        out.push_back(st::wrap_planes(s.planes, level, st::encode(s.pruned, e), s.labelled));
     }
   return out;
 }

@@ -242,7 +242,8 @@ TEST(GpuMap, EveryTexelOfAMixedTilesPackAnswersBitExactlyLikeTheCpu) {
   expect_served_pack_bit_exact(path, "gpu_mixed", pack->tiles().size(), 19);
 }
 
-// Plane tiles (tiles/core/PLANES.md): random plane blocks of every size over DAG-MH and MMH
+// Plane tiles (tiles/core/PLANES.md): random plane blocks of every size and labelled 8x8
+// blocks of 1-4 planes over DAG-MH and MMH
 // inner buffers (a, b, c drawn across their whole ranges, so the integer evaluation crosses
 // word carries, binades, the clamps at 0 and 1 and exact rounding ties), every answer the
 // CPU's bits: shadowtile.glsl's st_plane_lookup against plane_tile.cpp.
@@ -283,9 +284,34 @@ TEST(GpuMap, EveryTexelOfAPlaneTilesPackAnswersBitExactlyLikeTheCpu) {
         ps.push_back(p);
       }
     }
-    if (ps.empty()) return inner;
+    // Labelled 8x8 blocks in free squares: 1-4 random planes, a random label per texel.
+    std::vector<LabelBlock> lbs;
+    for (int k = 0; k < 3 && t.depth > planes::kLabelShift; ++k) {
+      LabelBlock lb;
+      lb.start = uint32_t(morton_encode(uint32_t(r() % (side >> 3)) << 3, uint32_t(r() % (side >> 3)) << 3));
+      bool free = true;
+      for (const planes::Plane& q : ps)
+        free &= lb.start + 64 <= q.start || q.start + (uint64_t(1) << (2 * q.shift)) <= lb.start;
+      for (const LabelBlock& q : lbs) free &= lb.start != q.start;
+      if (!free) continue;
+      const size_t n = 1 + r() % planes::kPalette;
+      for (size_t j = 0; j < n; ++j) {
+        const int64_t mag = int64_t(1) << (r() % 53);
+        planes::Plane q;
+        q.shift = planes::kLabelShift;
+        q.start = lb.start;
+        q.a = int64_t(r() % uint64_t(planes::kOne + planes::kOne / 4)) - planes::kOne / 8;
+        q.b = int64_t(r() % uint64_t(2 * mag + 1)) - mag;
+        q.c = int64_t(r() % uint64_t(2 * mag + 1)) - mag;
+        lb.palette.push_back(q);
+      }
+      for (uint8_t& l : lb.label) l = uint8_t(r() % n);
+      lbs.push_back(lb);
+    }
+    if (ps.empty() && lbs.empty()) return inner;
     std::sort(ps.begin(), ps.end(), [](const planes::Plane& a, const planes::Plane& b) { return a.start < b.start; });
-    return wrap_planes(ps, t.depth, inner);
+    std::sort(lbs.begin(), lbs.end(), [](const LabelBlock& a, const LabelBlock& b) { return a.start < b.start; });
+    return wrap_planes(ps, t.depth, inner, lbs);
   };
   PackParams pp = PackParams::from(
       LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), Aabb{{-10, 0, -10}, {10, 5, 10}}), cut);

@@ -56,31 +56,75 @@ TEST(PlaneFormat, FixedPointDepthIsTheNearestFloatTiesToEven) {
 }
 
 TEST(PlaneFormat, LayoutIsPinned) {
-  static_assert(kHeaderSize == 16 && kRecordSize == 32);
+  static_assert(kHeaderSize == 24 && kEntrySize == 24 && kRecordSize == 8 && kLabelSize == 24);
   static_assert(kOffMagic == 0 && kOffVersion == 4 && kOffLevels == 6 && kOffFlags == 7);
-  static_assert(kOffPlaneCount == 8 && kOffByteSize == 12);
-  static_assert(kOffStart == 0 && kOffShift == 4 && kOffA == 8 && kOffB == 16 && kOffC == 24);
-  static_assert(kMagic == 0x4E505453u && kVersion == 1 && kFracBits == 60);
+  static_assert(kOffPlaneCount == 8 && kOffByteSize == 12 && kOffTableCount == 16 && kOffLabelCount == 20);
+  static_assert(kOffA == 0 && kOffB == 8 && kOffC == 16);
+  static_assert(kOffStart == 0 && kOffShift == 4 && kOffKind == 5 && kOffIndex == 6 && kOffLabelBits == 8);
+  static_assert(kKindPlane == 0 && kKindLabels == 1 && kLabelShift == 3 && kPalette == 4);
+  static_assert(kMagic == 0x4E505453u && kVersion == 2 && kFracBits == 60);
+  // Tile of finest level 4 (16x16): an 8x8 block at (8, 0) and a 4x4 block at (0, 8) on one
+  // plane (one table entry), and a labelled 8x8 block at (8, 8) whose odd columns take a
+  // second plane.
   Plane p;
-  p.start = 64;
+  p.start = 64;  // (8, 0)
   p.shift = 3;
   p.a = 0x0102030405060708;
   p.b = -2;
   p.c = 3;
+  Plane p2 = p;
+  p2.start = 128;  // (0, 8)
+  p2.shift = 2;
+  p2.a = p.a + 2 * 8 + 3 * 8;  // the same plane at (0, 8)
+  LabelBlock lb;
+  lb.start = 192;  // (8, 8)
+  Plane at88 = p;
+  at88.a = p.a + 3 * 8;  // the same plane at (8, 8)
+  Plane q;
+  q.shift = 3;
+  q.a = 1000;
+  q.b = 5;
+  q.c = -7;
+  lb.palette = {at88, q};
+  for (uint32_t i = 0; i < 64; ++i) lb.label[i] = uint8_t(i % 2);
   const std::vector<uint8_t> inner{1, 2, 3, 4};
-  const std::vector<uint8_t> b = wrap_planes({p}, 4, inner);
-  const std::vector<uint8_t> want{
-      'S', 'T', 'P', 'N', 1, 0, 5, 0, 1, 0, 0, 0, 52, 0, 0, 0,  // header: 16 + 32 + 4 bytes
-      64, 0, 0, 0, 3, 0, 0, 0, 8, 7, 6, 5, 4, 3, 2, 1,         // start, shift, a
-      0xFE, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 3, 0, 0, 0, 0, 0, 0, 0, 1, 2, 3, 4};
+  const std::vector<uint8_t> b = wrap_planes({p, p2}, 4, inner, {lb});
+  std::vector<uint8_t> want{'S', 'T', 'P', 'N', 2, 0, 5, 0,  // magic, version 2, levels, flags
+                            3, 0, 0, 0, 124, 0, 0, 0,        // 3 blocks, byte size 24 + 48 + 24 + 24 + 4
+                            2, 0, 0, 0, 1, 0, 0, 0};         // 2 planes, 1 labelled block
+  auto le64 = [&](uint64_t v) {
+    for (int k = 0; k < 8; ++k) want.push_back(uint8_t(v >> (8 * k)));
+  };
+  le64(0x0102030405060708 + 16);  // plane 0: a at (0, 0) = a - b 8
+  le64(uint64_t(-2));
+  le64(3);
+  le64(1000 - 5 * 8 + 7 * 8);  // plane 1: a at (0, 0)
+  le64(5);
+  le64(uint64_t(-7));
+  const std::vector<uint8_t> blocks{64, 0, 0, 0, 3, 0, 0, 0,    // start 64, shift 3, plane, index 0
+                                    128, 0, 0, 0, 2, 0, 0, 0,   // start 128, shift 2, plane, index 0
+                                    192, 0, 0, 0, 3, 1, 0, 0};  // start 192, shift 3, labelled, block 0
+  want.insert(want.end(), blocks.begin(), blocks.end());
+  const std::vector<uint8_t> palette{0, 0, 1, 0, 1, 0, 1, 0};  // unused entries repeat the last
+  want.insert(want.end(), palette.begin(), palette.end());
+  want.insert(want.end(), 16, uint8_t(0x44));  // labels 0, 1, 0, 1 in each byte
+  want.insert(want.end(), inner.begin(), inner.end());
   EXPECT_EQ(b, want);
   const PlaneTileView v = validate_plane_tile(b);
   EXPECT_EQ(v.finest_level, 4u);
+  EXPECT_EQ(v.table_count, 2u);
+  EXPECT_EQ(v.label_count, 1u);
   EXPECT_EQ(v.find(8, 0), 0);   // morton 64 = (8, 0): the block's corner
   EXPECT_EQ(v.find(15, 7), 0);  // its far corner
   EXPECT_EQ(v.find(7, 0), -1);
-  EXPECT_EQ(v.find(0, 8), -1);
+  EXPECT_EQ(v.find(3, 11), 1);
+  EXPECT_EQ(v.find(4, 8), -1);
+  EXPECT_EQ(v.find(9, 8), 2);
   EXPECT_EQ(v.plane(0).fixed(2, 1), 0x0102030405060708 - 4 + 3);
+  EXPECT_EQ(v.plane(1).a, p2.a);
+  EXPECT_EQ(v.plane_at(2, 8, 9).a, at88.a);  // even column: plane 0
+  EXPECT_EQ(v.plane_at(2, 9, 9).a, 1000);    // odd column: plane 1 at the block's corner
+  EXPECT_EQ(v.plane_at(2, 9, 9).fixed(1, 1), 1000 + 5 - 7);
 }
 
 // A hierarchy of one tile of `scene` (bottom-up MH construction of a fresh trace).
@@ -108,15 +152,16 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
   if (scene.triangles.empty()) GTEST_SKIP() << "assimp-testmodels missing: run scripts/deps";
   const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), scene.bounds());
   const uint32_t depth = 7, level = 9;
-  uint64_t plane_texels = 0;
+  uint64_t plane_texels = 0, labelled = 0;
   for (uint32_t ty = 1; ty < 3; ++ty) {
     const Traced t = trace_tile(scene, light, level, 128 * ty, 192, depth);
     const PlaneSplit s = fit_planes(t.h);
     plane_texels += s.texels;
-    if (s.planes.empty()) continue;
+    if (s.planes.empty() && s.labelled.empty()) continue;
+    labelled += s.labelled.size();
     EXPECT_LT(s.pruned.valued_count(), t.h.valued_count());
     for (Encoding e : {Encoding::mh, Encoding::mmh, Encoding::dagmh}) {
-      const std::vector<uint8_t> bytes = wrap_planes(s.planes, depth, encode(s.pruned, e));
+      const std::vector<uint8_t> bytes = wrap_planes(s.planes, depth, encode(s.pruned, e), s.labelled);
       const auto ev = open_encoded(e, bytes);
       const uint32_t side = 1u << depth;
       for (uint32_t y = 0; y < side; ++y)
@@ -143,6 +188,7 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
     }
   }
   EXPECT_GT(plane_texels, 0u) << "the engine's flat faces seen at a slant are planes";
+  EXPECT_GT(labelled, 0u) << "blocks across the engine's edges are labelled";
 }
 
 TEST(PlaneFit, ABlockAcrossTwoPlanesIsNoPlane) {
@@ -217,12 +263,13 @@ TEST(PlaneTileHostile, TruncatedAndFlippedBuffersAreRefusedOrAnswerSafely) {
   const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), scene.bounds());
   const uint32_t depth = 5;
   std::vector<uint8_t> good;
-  for (uint32_t ty = 0; ty < 16 && good.empty(); ++ty) {
-    const Traced t = trace_tile(scene, light, 8, 96 + 32 * (ty % 4), 64 + 32 * (ty / 4), depth);
+  for (uint32_t ty = 0; ty < 64 && good.empty(); ++ty) {
+    const Traced t = trace_tile(scene, light, 9, 192 + 32 * (ty % 8), 128 + 32 * (ty / 8), depth);
     const PlaneSplit s = fit_planes(t.h, PlaneFitOptions{3, 1, 10});
-    if (!s.planes.empty()) good = wrap_planes(s.planes, depth, encode(s.pruned, Encoding::dagmh));
+    if (!s.planes.empty() && !s.labelled.empty())
+      good = wrap_planes(s.planes, depth, encode(s.pruned, Encoding::dagmh), s.labelled);
   }
-  ASSERT_FALSE(good.empty()) << "no tile with a plane";
+  ASSERT_FALSE(good.empty()) << "no tile with a plane block and a labelled block";
   ASSERT_NO_THROW(open_encoded(Encoding::dagmh, good));
   auto probe = [&](std::span<const uint8_t> b) {
     std::unique_ptr<Evaluator> ev;
@@ -240,7 +287,7 @@ TEST(PlaneTileHostile, TruncatedAndFlippedBuffersAreRefusedOrAnswerSafely) {
     const std::span<const uint8_t> cut(good.data(), n);
     EXPECT_THROW(open_encoded(Encoding::dagmh, cut), FormatError) << "truncated at " << n;
   }
-  const size_t header_and_planes = kHeaderSize + kRecordSize * load_le<uint32_t>(good.data() + kOffPlaneCount);
+  const size_t header_and_planes = size_t(validate_plane_tile(good).inner.data() - good.data());
   for (size_t i = 0; i < header_and_planes; ++i)
     for (uint8_t flip : {uint8_t(0x01), uint8_t(0x80), uint8_t(0xFF)}) {
       std::vector<uint8_t> bad = good;
@@ -248,12 +295,12 @@ TEST(PlaneTileHostile, TruncatedAndFlippedBuffersAreRefusedOrAnswerSafely) {
       probe(bad);
     }
   std::vector<uint8_t> newer = good;
-  newer[kOffVersion] = 2;
+  newer[kOffVersion] = 3;
   try {
     open_encoded(Encoding::dagmh, newer);
-    ADD_FAILURE() << "a version-2 plane tile opened";
+    ADD_FAILURE() << "a version-3 plane tile opened";
   } catch (const FormatError& e) {
-    EXPECT_NE(std::string(e.what()).find("version 2, this reader knows 1"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("version 3, this reader knows 2"), std::string::npos) << e.what();
   }
   std::vector<uint8_t> nested = wrap_planes({validate_plane_tile(good).plane(0)}, depth, good);
   EXPECT_THROW(open_encoded(Encoding::dagmh, nested), FormatError);

@@ -34,7 +34,7 @@ TileCodec TileCodec::with_planes(TileCodec base, uint32_t tile_bytes, const Plan
       if (!f) return;
       try {
         std::vector<uint8_t> inner = f(tree);
-        offer(split ? wrap_planes(split->planes, h.depth, inner) : std::move(inner));
+        offer(split ? wrap_planes(split->planes, h.depth, inner, split->labelled) : std::move(inner));
       } catch (const Error& e) {
         if (!failure) failure = e;
       }
@@ -51,8 +51,16 @@ TileCodec TileCodec::with_planes(TileCodec base, uint32_t tile_bytes, const Plan
       if (pick == 0 || (!fitted_before && !fitted)) attempt(second, tree, split);
     };
     both(h, nullptr);
+    uint64_t valued = 0, zero = 0;
+    for (const auto& level : h.levels)
+      for (const HNode& n : level)
+        if (n.has_value) ++valued, zero += n.lo == n.hi;
+    if (valued == 0 || double(zero) < fit.min_zero_width_share * double(valued)) {
+      if (!best) throw *failure;
+      return std::move(*best);
+    }
     const PlaneSplit split = fit_planes(h, fit);
-    if (!split.planes.empty()) both(split.pruned, &split);
+    if (!split.planes.empty() || !split.labelled.empty()) both(split.pruned, &split);
     if (!best) throw *failure;
     return std::move(*best);
   };

@@ -4,6 +4,8 @@
 #include <bit>
 #include <cmath>
 #include <limits>
+#include <map>
+#include <tuple>
 
 #include "common/bytes.hpp"
 #include "common/error.hpp"
@@ -138,7 +140,18 @@ const std::vector<uint32_t>& texel_order(uint32_t shift) {
   return orders[shift];
 }
 
-int64_t abs64(int64_t v) { return v < 0 ? -v : v; }
+int64_t abs64(int64_t v) { return v < 0 ? (v == INT64_MIN ? INT64_MAX : -v) : v; }
+
+// Whether plane p answers every texel of its block within [lo, hi] (the decoder's function;
+// corners first, so a plane of another surface fails fast).
+bool answers(const Plane& p, std::span<const float> lo, std::span<const float> hi) {
+  const uint32_t side = 1u << p.shift;
+  for (uint32_t i : texel_order(p.shift)) {
+    const float d = p.depth(i % side, i / side);
+    if (!(lo[i] <= d && d <= hi[i])) return false;
+  }
+  return true;
+}
 
 }  // namespace
 
@@ -181,10 +194,7 @@ bool fit_block(std::span<const float> lo, std::span<const float> hi, uint32_t sh
   p.b = int64_t(bb);
   p.c = int64_t(cc);
   if (abs64(p.a) > kMaxBase || abs64(p.b) > kMaxSlope || abs64(p.c) > kMaxSlope) return false;
-  for (uint32_t i = 0; i < n; ++i) {  // the decoder's exact answer, texel by texel
-    const float d = p.depth(i % side, i / side);
-    if (!(lo[i] <= d && d <= hi[i])) return false;
-  }
+  if (!answers(p, lo, hi)) return false;  // the decoder's exact answer, texel by texel
   out = p;
   return true;
 }
@@ -224,39 +234,118 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
       below[l][j] = sum;
     }
   }
-  // Top-down: a node's block is tried before its children's.
-  std::vector<std::vector<uint8_t>> cut(d + 1);
-  for (uint32_t l = 0; l <= d; ++l) cut[l].assign(h.levels[l].size(), 0);
-  std::vector<float> blo, bhi;
-  auto visit = [&](auto&& self, uint32_t l, size_t j) -> void {
-    const HNode& n = h.levels[l][j];
-    if (!n.child_mask) return;
-    const uint32_t s = d - l;
-    if (s < o.min_shift || s < kMinShift) return;
-    if (s <= kMaxShift && below[l][j] >= o.min_stored_nodes) {
-      const uint32_t w = 1u << s;
-      const uint32_t x0 = morton_compact(n.morton) << s, y0 = morton_compact(n.morton >> 1) << s;
-      blo.resize(size_t(w) * w);
-      bhi.resize(size_t(w) * w);
-      for (uint32_t y = 0; y < w; ++y) {
-        std::copy_n(lo.begin() + size_t(y0 + y) * side + x0, w, blo.begin() + size_t(y) * w);
-        std::copy_n(hi.begin() + size_t(y0 + y) * side + x0, w, bhi.begin() + size_t(y) * w);
-      }
-      Plane p;
-      if (fit_block(blo, bhi, s, p)) {
-        p.start = uint32_t(n.morton << (2 * s));
-        out.planes.push_back(p);
-        out.texels += uint64_t(w) * w;
-        cut[l][j] = 1;
-        return;
-      }
-    }
-    for (uint32_t c = 0, k = first[l][j]; c < uint32_t(std::popcount(unsigned(n.child_mask))); ++c, ++k)
-      self(self, l + 1, k);
+  // Level by level, the largest blocks first over the whole tile; a node's block is tried
+  // when no ancestor's was taken. A block first tries the planes already taken (the most
+  // recently used first, each checked on every texel with the decoder's function), so the
+  // blocks of one surface share one table entry (plane_format.hpp); else its own fit.
+  struct Known {
+    int64_t a0, b, c;  // a at the tile's origin
   };
-  visit(visit, 0, 0);
-  if (out.planes.empty()) return out;
+  std::vector<Known> known;
+  constexpr size_t kReuseTries = 64;
+  const uint32_t min_reused = std::min(o.min_reused_nodes, o.min_stored_nodes);
+  std::vector<std::vector<uint8_t>> cut(d + 1), under(d + 1);
+  for (uint32_t l = 0; l <= d; ++l) cut[l].assign(h.levels[l].size(), 0), under[l].assign(h.levels[l].size(), 0);
+  std::vector<float> blo, bhi;
+  for (uint32_t l = 0; l <= d; ++l) {
+    const uint32_t s = d - l, w = 1u << s;
+    const bool sized = s >= std::max(o.min_shift, kMinShift) && s <= kMaxShift;
+    for (size_t j = 0; j < h.levels[l].size(); ++j) {
+      const HNode& n = h.levels[l][j];
+      if (!under[l][j] && n.child_mask && sized && below[l][j] >= min_reused) {
+        const uint32_t x0 = morton_compact(n.morton) << s, y0 = morton_compact(n.morton >> 1) << s;
+        blo.resize(size_t(w) * w);
+        bhi.resize(size_t(w) * w);
+        for (uint32_t y = 0; y < w; ++y) {
+          std::copy_n(lo.begin() + size_t(y0 + y) * side + x0, w, blo.begin() + size_t(y) * w);
+          std::copy_n(hi.begin() + size_t(y0 + y) * side + x0, w, bhi.begin() + size_t(y) * w);
+        }
+        Plane p;
+        p.shift = s;
+        bool taken = false;
+        for (size_t t = known.size(), tries = 0; t-- > 0 && tries < kReuseTries; ++tries) {
+          p.b = known[t].b, p.c = known[t].c;
+          p.a = int64_t(uint64_t(known[t].a0) + uint64_t(p.b) * x0 + uint64_t(p.c) * y0);
+          if (abs64(p.a) > kMaxBase || !answers(p, blo, bhi)) continue;
+          std::rotate(known.begin() + ptrdiff_t(t), known.begin() + ptrdiff_t(t) + 1, known.end());
+          taken = true;
+          break;
+        }
+        if (!taken && below[l][j] >= o.min_stored_nodes && fit_block(blo, bhi, s, p)) {
+          known.push_back(Known{p.origin_a(x0, y0), p.b, p.c});
+          taken = true;
+        }
+        if (!taken && s == kLabelShift && below[l][j] >= o.min_labelled_nodes) {
+          // Labels: each texel takes the first palette plane that answers it, else the most
+          // recently used known plane that does; the texels none answers get a plane fitted
+          // to them alone (the block's other texels unconstrained). At most 4 planes in all.
+          LabelBlock lb;
+          lb.start = uint32_t(n.morton << (2 * s));
+          auto fits = [&](const Plane& q, uint32_t i) {
+            const float v = q.depth(i % 8, i / 8);
+            return blo[i] <= v && v <= bhi[i];
+          };
+          constexpr uint8_t kNone = 0xFF;
+          uint32_t missing = 0;
+          for (uint32_t i = 0; i < 64; ++i) {
+            size_t k = 0;
+            while (k < lb.palette.size() && !fits(lb.palette[k], i)) ++k;
+            if (k == lb.palette.size() && k < kPalette) {
+              bool found = false;
+              for (size_t t = known.size(), tries = 0; t-- > 0 && tries < kReuseTries && !found; ++tries) {
+                Plane q;
+                q.shift = s, q.start = lb.start, q.b = known[t].b, q.c = known[t].c;
+                q.a = int64_t(uint64_t(known[t].a0) + uint64_t(q.b) * x0 + uint64_t(q.c) * y0);
+                if (abs64(q.a) > kMaxBase || !fits(q, i)) continue;
+                lb.palette.push_back(q);
+                found = true;
+              }
+              if (!found) k = kNone;
+            } else if (k == lb.palette.size()) {
+              k = kNone;
+            }
+            lb.label[i] = uint8_t(k);
+            missing += k == kNone;
+          }
+          bool ok = true;
+          while (missing && ok) {
+            ok = false;
+            if (lb.palette.size() == kPalette) break;
+            std::vector<float> slo(blo), shi(bhi);
+            for (uint32_t i = 0; i < 64; ++i)
+              if (lb.label[i] != kNone) slo[i] = 0.0f, shi[i] = 1.0f;
+            Plane q;
+            if (!fit_block(slo, shi, s, q)) break;
+            q.start = lb.start;
+            for (uint32_t i = 0; i < 64; ++i)
+              if (lb.label[i] == kNone && fits(q, i)) lb.label[i] = uint8_t(lb.palette.size()), --missing;
+            known.push_back(Known{q.origin_a(x0, y0), q.b, q.c});
+            lb.palette.push_back(q);
+            ok = true;
+          }
+          ok = ok && missing == 0 && !lb.palette.empty();
+          if (ok) {
+            out.labelled.push_back(std::move(lb));
+            out.texels += 64;
+            cut[l][j] = 1;
+          }
+        }
+        if (taken) {
+          p.start = uint32_t(n.morton << (2 * s));
+          out.planes.push_back(p);
+          out.texels += uint64_t(w) * w;
+          cut[l][j] = 1;
+        }
+      }
+      if (l < d)
+        for (uint32_t c = 0, k = first[l][j]; c < uint32_t(std::popcount(unsigned(n.child_mask))); ++c, ++k)
+          under[l + 1][k] = under[l][j] || cut[l][j];
+    }
+  }
+  if (out.planes.empty() && out.labelled.empty()) return out;
   std::sort(out.planes.begin(), out.planes.end(), [](const Plane& a, const Plane& b) { return a.start < b.start; });
+  std::sort(out.labelled.begin(), out.labelled.end(),
+            [](const LabelBlock& a, const LabelBlock& b) { return a.start < b.start; });
   // Prune: drop the blocks' descendants, then empty nodes left without children.
   std::vector<std::vector<uint8_t>> drop(d + 1);
   for (uint32_t l = 0; l <= d; ++l) drop[l].assign(h.levels[l].size(), 0);
@@ -292,25 +381,82 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
   return out;
 }
 
-std::vector<uint8_t> wrap_planes(const std::vector<Plane>& ps, uint32_t finest_level, std::span<const uint8_t> inner) {
-  ST_CHECK(!ps.empty() && ps.size() <= kMaxPlanes && finest_level + 1 <= kMaxLevels);
-  const size_t size = kHeaderSize + ps.size() * kRecordSize + inner.size();
+std::vector<uint8_t> wrap_planes(const std::vector<Plane>& ps, uint32_t finest_level, std::span<const uint8_t> inner,
+                                 const std::vector<LabelBlock>& labelled) {
+  const size_t blocks = ps.size() + labelled.size();
+  ST_CHECK(blocks >= 1 && blocks <= kMaxPlanes && finest_level + 1 <= kMaxLevels);
+  if (labelled.size() > kMaxTable) throw Error("plane tile: " + std::to_string(labelled.size()) + " labelled blocks, at most 65535");
+  // The table: one entry per distinct plane (a at the tile's origin, b, c), in order of first use.
+  struct Entry {
+    int64_t a, b, c;
+    bool operator<(const Entry& o) const { return std::tie(a, b, c) < std::tie(o.a, o.b, o.c); }
+  };
+  std::map<Entry, uint32_t> index;
+  std::vector<Entry> table;
+  auto entry = [&](const Plane& p, uint32_t start) {
+    const Entry e{p.origin_a(morton_compact(start), morton_compact(uint64_t(start) >> 1)), p.b, p.c};
+    auto [it, fresh] = index.emplace(e, uint32_t(table.size()));
+    if (fresh) table.push_back(e);
+    return it->second;
+  };
+  // Block records in order of start: (start, shift, kind, index).
+  struct Rec {
+    uint32_t start, shift;
+    uint8_t kind;
+    uint32_t index;
+  };
+  std::vector<Rec> recs;
+  recs.reserve(blocks);
+  size_t i = 0, k = 0;
+  std::vector<uint32_t> palettes;
+  while (i < ps.size() || k < labelled.size()) {
+    if (k == labelled.size() || (i < ps.size() && ps[i].start < labelled[k].start)) {
+      recs.push_back(Rec{ps[i].start, ps[i].shift, kKindPlane, entry(ps[i], ps[i].start)});
+      ++i;
+    } else {
+      const LabelBlock& lb = labelled[k];
+      ST_CHECK(!lb.palette.empty() && lb.palette.size() <= kPalette);
+      for (uint32_t t = 0; t < kPalette; ++t) palettes.push_back(entry(lb.palette[std::min<size_t>(t, lb.palette.size() - 1)], lb.start));
+      recs.push_back(Rec{lb.start, kLabelShift, kKindLabels, uint32_t(k)});
+      ++k;
+    }
+  }
+  if (table.size() > kMaxTable) throw Error("plane tile: " + std::to_string(table.size()) + " planes, at most 65535");
+  const size_t blocks_at = kHeaderSize + table.size() * kEntrySize;
+  const size_t labels_at = blocks_at + blocks * kRecordSize;
+  const size_t inner_at = labels_at + labelled.size() * kLabelSize;
+  const size_t size = inner_at + inner.size();
   if (size > 0xFFFFFFFFull) throw Error("plane tile: " + std::to_string(size) + " bytes do not fit its 32-bit size");
   std::vector<uint8_t> out(size, 0);
   store_le<uint32_t>(out.data() + kOffMagic, kMagic);
   store_le<uint16_t>(out.data() + kOffVersion, kVersion);
   out[kOffLevels] = uint8_t(finest_level + 1);
-  store_le<uint32_t>(out.data() + kOffPlaneCount, uint32_t(ps.size()));
+  store_le<uint32_t>(out.data() + kOffPlaneCount, uint32_t(blocks));
   store_le<uint32_t>(out.data() + kOffByteSize, uint32_t(size));
-  for (size_t i = 0; i < ps.size(); ++i) {
-    uint8_t* r = out.data() + kHeaderSize + i * kRecordSize;
-    store_le<uint32_t>(r + kOffStart, ps[i].start);
-    store_le<uint32_t>(r + kOffShift, ps[i].shift);
-    store_le<uint64_t>(r + kOffA, uint64_t(ps[i].a));
-    store_le<uint64_t>(r + kOffB, uint64_t(ps[i].b));
-    store_le<uint64_t>(r + kOffC, uint64_t(ps[i].c));
+  store_le<uint32_t>(out.data() + kOffTableCount, uint32_t(table.size()));
+  store_le<uint32_t>(out.data() + kOffLabelCount, uint32_t(labelled.size()));
+  for (size_t t = 0; t < table.size(); ++t) {
+    uint8_t* e = out.data() + kHeaderSize + t * kEntrySize;
+    store_le<uint64_t>(e + kOffA, uint64_t(table[t].a));
+    store_le<uint64_t>(e + kOffB, uint64_t(table[t].b));
+    store_le<uint64_t>(e + kOffC, uint64_t(table[t].c));
   }
-  std::copy(inner.begin(), inner.end(), out.begin() + ptrdiff_t(kHeaderSize + ps.size() * kRecordSize));
+  for (size_t r = 0; r < recs.size(); ++r) {
+    uint8_t* o = out.data() + blocks_at + r * kRecordSize;
+    store_le<uint32_t>(o + kOffStart, recs[r].start);
+    o[kOffShift] = uint8_t(recs[r].shift);
+    o[kOffKind] = recs[r].kind;
+    store_le<uint16_t>(o + kOffIndex, uint16_t(recs[r].index));
+  }
+  for (size_t b = 0; b < labelled.size(); ++b) {
+    uint8_t* o = out.data() + labels_at + b * kLabelSize;
+    for (uint32_t t = 0; t < kPalette; ++t) store_le<uint16_t>(o + 2 * t, uint16_t(palettes[b * kPalette + t]));
+    for (uint32_t t = 0; t < 64; ++t) {
+      ST_CHECK(labelled[b].label[t] < labelled[b].palette.size());
+      o[kOffLabelBits + t / 4] |= uint8_t(labelled[b].label[t] << (2 * (t % 4)));
+    }
+  }
+  std::copy(inner.begin(), inner.end(), out.begin() + ptrdiff_t(inner_at));
   return out;
 }
 

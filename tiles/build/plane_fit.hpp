@@ -26,24 +26,41 @@
 namespace st {
 
 struct PlaneFitOptions {
-  uint32_t min_shift = 3;          // smallest block: 2^min_shift a side
-  uint32_t min_stored_nodes = 16;  // a block must take at least this many valued nodes out
+  uint32_t min_shift = 2;          // smallest block: 2^min_shift a side
+  uint32_t min_stored_nodes = 16;  // a block with a plane of its own must take at least this many valued nodes out
   uint32_t max_tile_depth = 10;    // tiles deeper than this are not searched (memory, time)
+  uint32_t min_reused_nodes = 2;   // a block that reuses a plane already in the tile's table: at least this many
+  uint32_t min_labelled_nodes = 4; // an 8x8 block labelled with up to 4 of the table's planes: at least this many
+  // Tiles whose valued nodes are less than this share zero-width (hi = lo: open surfaces under
+  // the default rule) are not searched: wide intervals (closed objects) let the trees merge
+  // their values, planes did not store smaller there (procedural:city) and cost build time.
+  double min_zero_width_share = 0.5;
+};
+
+// An 8x8 block whose texels are answered by up to 4 planes (plane_format.hpp, labelled block).
+struct LabelBlock {
+  uint32_t start = 0;                  // finest-level morton code of the block's first texel
+  std::vector<planes::Plane> palette;  // 1..4 planes resolved to the block's corner (shift 3)
+  uint8_t label[64] = {};              // texel (x, y) of the block: palette[label[8 y + x]]
 };
 
 struct PlaneSplit {
-  std::vector<planes::Plane> planes;  // sorted by start, disjoint
-  Hierarchy pruned;                   // the hierarchy without the nodes below each block
-  uint64_t texels = 0;                // finest texels the planes answer
+  std::vector<planes::Plane> planes;   // sorted by start, disjoint
+  std::vector<LabelBlock> labelled;    // sorted by start, disjoint from each other and from `planes`
+  Hierarchy pruned;                    // the hierarchy without the nodes below each block
+  uint64_t texels = 0;                 // finest texels the planes answer
 };
 
-// Blocks are tried top-down (the largest first, down to min_shift); no plane: `planes` is
-// empty and `pruned` a copy of h.
+// Blocks are tried top-down (the largest first, down to min_shift), each first with the
+// planes already found in the tile, then with a fit of its own; an 8x8 block that neither
+// answers is labelled when up to 4 of the planes found answer all its texels. No block:
+// `planes` and `labelled` are empty and `pruned` a copy of h.
 PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o = {});
 
-// The plane tile: header, records, then `inner` (the encoding of PlaneSplit::pruned).
+// The plane tile: header, table, block records, labelled blocks, then `inner` (the encoding
+// of PlaneSplit::pruned). Blocks whose planes are equal share one table entry.
 std::vector<uint8_t> wrap_planes(const std::vector<planes::Plane>& planes, uint32_t finest_level,
-                                 std::span<const uint8_t> inner);
+                                 std::span<const uint8_t> inner, const std::vector<LabelBlock>& labelled = {});
 
 // One block: integers (a, b, c) whose depth lies in [lo[i], hi[i]] for texel i = y * side + x
 // of the 2^shift square, verified with planes::Plane::depth; false when none was found.

@@ -1,33 +1,50 @@
 // Plane tiles (tiles/core/PLANES.md): a tile whose finest texels are, block by block, the
-// depths of one plane each, stores those blocks as planes and the rest of its subtree in
-// an inner DAG-MH, MMH or MH buffer. Layout (every constant here is a format constant:
-// changing one changes the bytes on disk, so bump kVersion):
+// depths of one plane each, stores those blocks as references into a table of the tile's
+// planes and the rest of its subtree in an inner DAG-MH, MMH or MH buffer. Blocks on one
+// surface share one table entry, so a block costs 8 bytes and a plane 24. An 8x8 block
+// across an edge of a few planes (a labelled block) names up to 4 table planes and, per
+// texel, which of them answers it (24 more bytes). Layout (every
+// constant here is a format constant: changing one changes the bytes on disk, so bump
+// kVersion):
 //
-//   offset     size  field
-//   0          4     magic        "STPN", bytes in that order
-//   4          2     version      kVersion
-//   6          1     levels       the tile's finest level + 1 (1..kMaxLevels); the inner
-//                                 buffer has the same finest level
-//   7          1     flags        zero (no flag is defined)
-//   8          4     plane_count  P (1..kMaxPlanes)
-//   12         4     byte_size    whole buffer, header, planes and inner buffer included
-//   16         32*P  planes       sorted by `start`, disjoint (below)
-//   16+32P     rest  inner        the inner buffer (its own magic: DAG-MH, MMH or MH)
+//   offset        size  field
+//   0             4     magic        "STPN", bytes in that order
+//   4             2     version      kVersion (2; version 1 had a plane per block)
+//   6             1     levels       the tile's finest level + 1 (1..kMaxLevels); the inner
+//                                    buffer has the same finest level
+//   7             1     flags        zero (no flag is defined)
+//   8             4     block_count  B (1..kMaxPlanes)
+//   12            4     byte_size    whole buffer, header, table, blocks and inner buffer
+//   16            4     table_count  T (1..kMaxTable)
+//   20            4     label_count  L (0..kMaxTable): labelled blocks
+//   24            24*T  table        planes (a, b, c) of the tile (below)
+//   24+24T        8*B   blocks       sorted by `start`, disjoint (below)
+//   24+24T+8B     24*L  labels       the labelled blocks' palettes and labels (below)
+//   24+24T+8B+24L rest  inner        the inner buffer (its own magic: DAG-MH, MMH or MH)
 //
-// Plane record (32 bytes, all little-endian):
+// Table entry (24 bytes, all little-endian), in units of 2^-kFracBits:
+//   0  i64 a       depth at the tile's texel (0, 0) (any value: the sum wraps, below)
+//   8  i64 b       step per texel along x, |b| <= kMaxSlope
+//   16 i64 c       step per texel along y, |c| <= kMaxSlope
+// Block record (8 bytes):
 //   0  u32 start   finest-level morton code of the block's first texel; a multiple of
 //                  4^shift (the block is an aligned square of the tile)
-//   4  u32 shift   log2 of the block's side, kMinShift..kMaxShift, <= the tile's finest level
-//   8  i64 a       depth in units of 2^-kFracBits at the block's first texel
-//   16 i64 b       step per texel along x, |b| <= kMaxSlope
-//   24 i64 c       step per texel along y, |c| <= kMaxSlope
+//   4  u8  shift   log2 of the block's side, kMinShift..kMaxShift, <= the tile's finest level
+//   5  u8  kind    kKindPlane: one plane answers the block; kKindLabels: a labelled block
+//                  (shift kLabelShift), its texels answered by the planes their labels name
+//   6  u16 index   kKindPlane: index into the table, < T; kKindLabels: into the labels, < L
+// Labelled block (24 bytes): 0 four u16 palette entries, each < T; 8 sixteen bytes of
+//   2-bit labels, texel (x, y) of the block (i = 8 y + x) in bits 2 (i mod 4) .. +1 of byte
+//   i / 4: its plane is palette[label] (unused palette entries repeat a used one).
 //
-// Depth of a finest texel (x, y) of the block, (x, y) relative to the block's corner
-// (0 <= x, y < 2^shift): v = a + b x + c y in 64-bit integers (no overflow: |a| <= kMaxBase
-// and the bounds above keep |v| < 2^62), then plane_fixed_to_float(v): v <= 0 gives 0, v >=
+// Depth of a finest texel (x, y) of a block (tile coordinates) whose plane is (a, b, c):
+// v = a + b x + c y modulo 2^64, read as a signed 64-bit integer. The validator requires
+// the block's own corner value a' = a + b x0 + c y0 (modulo 2^64) to satisfy |a'| <=
+// kMaxBase, so that inside the block v = a' + b (x - x0) + c (y - y0) without overflow
+// (|v| < 2^62): the same integer whichever way it is summed. Then plane_fixed_to_float(v): v <= 0 gives 0, v >=
 // 2^kFracBits gives 1, otherwise v 2^-kFracBits rounded to the nearest binary32, ties to
 // even, computed with integer operations only. Nothing in the evaluation is a floating-point
-// operation, so the CPU and every GPU (shadowtile.glsl's st_plane_depth, 32-bit words) answer
+// operation, so the CPU and every GPU (shadowtile.glsl's st_plane_lookup, 32-bit words) answer
 // the same bits; the encoder verifies each texel it gives to a plane with these functions.
 // A texel of a coarser level l inside a block (the block is finer than l: finest - l <
 // shift) answers the plane at its central finest texel ((x << s) + h, (y << s) + h),
@@ -41,12 +58,17 @@
 namespace st::planes {
 
 inline constexpr uint32_t kMagic = 0x4E505453u;  // bytes "STPN"
-inline constexpr uint16_t kVersion = 1;
+inline constexpr uint16_t kVersion = 2;
 inline constexpr uint32_t kMaxLevels = 17;  // finest level <= 16: starts fit 32 bits
 inline constexpr size_t kOffMagic = 0, kOffVersion = 4, kOffLevels = 6, kOffFlags = 7;
-inline constexpr size_t kOffPlaneCount = 8, kOffByteSize = 12, kHeaderSize = 16;
-inline constexpr size_t kRecordSize = 32;
-inline constexpr size_t kOffStart = 0, kOffShift = 4, kOffA = 8, kOffB = 16, kOffC = 24;
+inline constexpr size_t kOffPlaneCount = 8, kOffByteSize = 12, kOffTableCount = 16, kOffLabelCount = 20;
+inline constexpr size_t kHeaderSize = 24;
+inline constexpr size_t kEntrySize = 24, kOffA = 0, kOffB = 8, kOffC = 16;  // table entry
+inline constexpr size_t kRecordSize = 8, kOffStart = 0, kOffShift = 4, kOffKind = 5, kOffIndex = 6;  // block
+inline constexpr uint8_t kKindPlane = 0, kKindLabels = 1;
+inline constexpr uint32_t kLabelShift = 3, kPalette = 4;
+inline constexpr size_t kLabelSize = 24, kOffLabelBits = 8;  // labelled block: palette, then labels
+inline constexpr uint32_t kMaxTable = 0xFFFFu;
 inline constexpr uint32_t kMinShift = 2, kMaxShift = 8;
 inline constexpr uint32_t kMaxPlanes = 1u << 20;
 inline constexpr uint32_t kFracBits = 60;
@@ -76,6 +98,7 @@ inline float plane_fixed_to_float(int64_t v) {
   return f;
 }
 
+// One block with its plane resolved to the block's corner: a = the table's a + b x0 + c y0.
 struct Plane {
   uint32_t start = 0, shift = 0;
   int64_t a = 0, b = 0, c = 0;
@@ -85,6 +108,10 @@ struct Plane {
     return int64_t(uint64_t(a) + uint64_t(b) * uint64_t(x) + uint64_t(c) * uint64_t(y));
   }
   float depth(uint32_t x, uint32_t y) const { return plane_fixed_to_float(fixed(x, y)); }
+  // The table's a (at the tile's texel (0, 0)) of this block, whose corner is (x0, y0).
+  int64_t origin_a(uint32_t x0, uint32_t y0) const {
+    return int64_t(uint64_t(a) - uint64_t(b) * uint64_t(x0) - uint64_t(c) * uint64_t(y0));
+  }
 };
 
 }  // namespace st::planes

@@ -59,7 +59,7 @@ class PlaneTileEvaluator final : public Evaluator {
     const uint32_t fx = uint32_t((x << s) + h), fy = uint32_t((y << s) + h);
     const int64_t i = v_.find(fx, fy);
     if (i < 0) return false;
-    const Plane p = v_.plane(uint32_t(i));
+    const Plane p = v_.plane_at(uint32_t(i), fx, fy);
     if (p.shift <= s) return false;  // the block is finer than the texel
     const uint32_t mask = (uint32_t(1) << p.shift) - 1;
     out = p.depth(fx & mask, fy & mask);
@@ -104,15 +104,30 @@ bool is_plane_buffer(std::span<const uint8_t> bytes) {
   return bytes.size() >= 4 && load_le<uint32_t>(bytes.data()) == kMagic;
 }
 
-Plane PlaneTileView::plane(uint32_t i) const {
+Plane PlaneTileView::plane_at(uint32_t i, uint32_t fx, uint32_t fy) const {
   const uint8_t* r = records.data() + size_t(i) * kRecordSize;
   Plane p;
   p.start = load_le<uint32_t>(r + kOffStart);
-  p.shift = load_le<uint32_t>(r + kOffShift);
-  p.a = int64_t(load_le<uint64_t>(r + kOffA));
-  p.b = int64_t(load_le<uint64_t>(r + kOffB));
-  p.c = int64_t(load_le<uint64_t>(r + kOffC));
+  p.shift = r[kOffShift];
+  const uint32_t x0 = morton_compact(p.start), y0 = morton_compact(uint64_t(p.start) >> 1);
+  uint32_t entry = load_le<uint16_t>(r + kOffIndex);
+  if (r[kOffKind] == kKindLabels) {
+    const uint8_t* lb = labels.data() + size_t(entry) * kLabelSize;
+    const uint32_t t = ((fy - y0) << kLabelShift) + (fx - x0);
+    const uint32_t label = (lb[kOffLabelBits + t / 4] >> (2 * (t % 4))) & 3u;
+    entry = load_le<uint16_t>(lb + 2 * label);
+  }
+  const uint8_t* e = table.data() + size_t(entry) * kEntrySize;
+  p.b = int64_t(load_le<uint64_t>(e + kOffB));
+  p.c = int64_t(load_le<uint64_t>(e + kOffC));
+  // a' = a + b x0 + c y0 modulo 2^64 (plane_format.hpp).
+  p.a = int64_t(load_le<uint64_t>(e + kOffA) + uint64_t(p.b) * x0 + uint64_t(p.c) * y0);
   return p;
+}
+
+Plane PlaneTileView::plane(uint32_t i) const {
+  const uint32_t start = load_le<uint32_t>(records.data() + size_t(i) * kRecordSize + kOffStart);
+  return plane_at(i, morton_compact(start), morton_compact(uint64_t(start) >> 1));
 }
 
 int64_t PlaneTileView::find(uint32_t x, uint32_t y) const {
@@ -126,12 +141,13 @@ int64_t PlaneTileView::find(uint32_t x, uint32_t y) const {
   }
   if (lo == 0) return -1;
   const uint8_t* r = records.data() + size_t(lo - 1) * kRecordSize;
-  const uint64_t start = load_le<uint32_t>(r + kOffStart), shift = load_le<uint32_t>(r + kOffShift);
+  const uint64_t start = load_le<uint32_t>(r + kOffStart), shift = r[kOffShift];
   return m < start + (uint64_t(1) << (2 * shift)) ? int64_t(lo - 1) : -1;
 }
 
 PlaneTileView validate_plane_tile(std::span<const uint8_t> b) {
-  if (b.size() < kHeaderSize) fail("header", 0, std::to_string(b.size()) + " bytes, need at least 16");
+  if (b.size() < kHeaderSize)
+    fail("header", 0, std::to_string(b.size()) + " bytes, need at least " + std::to_string(kHeaderSize));
   if (load_le<uint32_t>(b.data()) != kMagic) fail("magic", kOffMagic, "not \"STPN\"");
   const uint16_t version = load_le<uint16_t>(b.data() + kOffVersion);
   if (version != kVersion)
@@ -140,34 +156,77 @@ PlaneTileView validate_plane_tile(std::span<const uint8_t> b) {
   if (levels < 1 || levels > kMaxLevels) fail("levels", kOffLevels, std::to_string(levels) + " outside 1..17");
   if (b[kOffFlags] != 0) fail("flags", kOffFlags, "unknown flags " + std::to_string(b[kOffFlags]));
   const uint32_t count = load_le<uint32_t>(b.data() + kOffPlaneCount);
-  if (count < 1 || count > kMaxPlanes) fail("plane_count", kOffPlaneCount, std::to_string(count) + " outside 1..2^20");
+  if (count < 1 || count > kMaxPlanes) fail("block_count", kOffPlaneCount, std::to_string(count) + " outside 1..2^20");
   const uint32_t byte_size = load_le<uint32_t>(b.data() + kOffByteSize);
   if (byte_size != b.size())
     fail("byte_size", kOffByteSize, std::to_string(byte_size) + " but the buffer holds " + std::to_string(b.size()));
-  const size_t inner_at = kHeaderSize + size_t(count) * kRecordSize;
-  if (inner_at + 4 > b.size()) fail("plane_count", kOffPlaneCount, std::to_string(count) + " records leave no inner buffer");
+  const uint32_t tables = load_le<uint32_t>(b.data() + kOffTableCount);
+  if (tables < 1 || tables > kMaxTable) fail("table_count", kOffTableCount, std::to_string(tables) + " outside 1..65535");
+  const uint32_t label_count = load_le<uint32_t>(b.data() + kOffLabelCount);
+  if (label_count > kMaxTable || label_count > count)
+    fail("label_count", kOffLabelCount, std::to_string(label_count) + " outside 0..min(65535, block_count)");
+  const size_t blocks_at = kHeaderSize + size_t(tables) * kEntrySize;
+  const size_t labels_at = blocks_at + size_t(count) * kRecordSize;
+  const size_t inner_at = labels_at + size_t(label_count) * kLabelSize;
+  if (inner_at + 4 > b.size())
+    fail("block_count", kOffPlaneCount,
+         std::to_string(tables) + " planes, " + std::to_string(count) + " blocks and " + std::to_string(label_count) +
+             " labelled blocks leave no inner buffer");
   PlaneTileView v;
   v.finest_level = levels - 1;
   v.plane_count = count;
-  v.records = b.subspan(kHeaderSize, inner_at - kHeaderSize);
+  v.table_count = tables;
+  v.table = b.subspan(kHeaderSize, blocks_at - kHeaderSize);
+  v.label_count = label_count;
+  v.records = b.subspan(blocks_at, labels_at - blocks_at);
+  v.labels = b.subspan(labels_at, inner_at - labels_at);
   v.inner = b.subspan(inner_at);
   if (is_plane_buffer(v.inner)) fail("inner", inner_at, "a plane tile inside a plane tile");
+  for (uint32_t i = 0; i < tables; ++i) {
+    const size_t at = kHeaderSize + size_t(i) * kEntrySize;
+    if (abs64(int64_t(load_le<uint64_t>(b.data() + at + kOffB))) > kMaxSlope)
+      fail("plane " + std::to_string(i) + " b", at + kOffB, "|b| > 2^52");
+    if (abs64(int64_t(load_le<uint64_t>(b.data() + at + kOffC))) > kMaxSlope)
+      fail("plane " + std::to_string(i) + " c", at + kOffC, "|c| > 2^52");
+  }
   const uint64_t texels = uint64_t(1) << (2 * v.finest_level);
   uint64_t end = 0;
+  uint32_t labelled = 0;
   for (uint32_t i = 0; i < count; ++i) {
-    const size_t at = kHeaderSize + size_t(i) * kRecordSize;
+    const size_t at = blocks_at + size_t(i) * kRecordSize;
+    const std::string what = "block " + std::to_string(i);
+    const uint8_t kind = b[at + kOffKind];
+    if (kind != kKindPlane && kind != kKindLabels) fail(what + " kind", at + kOffKind, "unknown kind " + std::to_string(kind));
+    const uint32_t index = load_le<uint16_t>(b.data() + at + kOffIndex);
+    const uint32_t limit = kind == kKindPlane ? tables : label_count;
+    if (index >= limit)
+      fail(what + " index", at + kOffIndex,
+           std::to_string(index) + " >= " + std::to_string(limit) + (kind == kKindPlane ? " planes" : " labelled blocks"));
+    if (kind == kKindLabels) {
+      if (b[at + kOffShift] != kLabelShift) fail(what + " shift", at + kOffShift, "a labelled block's shift is not 3");
+      if (index != labelled) fail(what + " index", at + kOffIndex, "labelled blocks not in order");
+      ++labelled;
+      const size_t lat = labels_at + size_t(index) * kLabelSize;
+      for (uint32_t k = 0; k < kPalette; ++k)
+        if (load_le<uint16_t>(b.data() + lat + 2 * k) >= tables)
+          fail("labelled block " + std::to_string(index) + " palette", lat + 2 * k, "plane index >= " + std::to_string(tables));
+    }
     const Plane p = v.plane(i);
     if (p.shift < kMinShift || p.shift > kMaxShift || p.shift > v.finest_level)
-      fail("plane " + std::to_string(i) + " shift", at + kOffShift, std::to_string(p.shift) + " outside 2..min(8, finest level)");
+      fail(what + " shift", at + kOffShift, std::to_string(p.shift) + " outside 2..min(8, finest level)");
     const uint64_t size = uint64_t(1) << (2 * p.shift);
-    if (p.start % size != 0) fail("plane " + std::to_string(i) + " start", at + kOffStart, "not aligned to its block");
-    if (p.start < end) fail("plane " + std::to_string(i) + " start", at + kOffStart, "blocks unsorted or overlapping");
-    if (p.start + size > texels) fail("plane " + std::to_string(i) + " start", at + kOffStart, "outside the tile");
+    if (p.start % size != 0) fail(what + " start", at + kOffStart, "not aligned to its block");
+    if (p.start < end) fail(what + " start", at + kOffStart, "blocks unsorted or overlapping");
+    if (p.start + size > texels) fail(what + " start", at + kOffStart, "outside the tile");
     end = p.start + size;
-    if (abs64(p.a) > kMaxBase) fail("plane " + std::to_string(i) + " a", at + kOffA, "|a| > 2^61");
-    if (abs64(p.b) > kMaxSlope) fail("plane " + std::to_string(i) + " b", at + kOffB, "|b| > 2^52");
-    if (abs64(p.c) > kMaxSlope) fail("plane " + std::to_string(i) + " c", at + kOffC, "|c| > 2^52");
+    // Each plane the block can answer with, at the block's corner (plane_format.hpp).
+    const uint32_t x0 = morton_compact(p.start), y0 = morton_compact(uint64_t(p.start) >> 1);
+    for (uint32_t k = 0; k < (kind == kKindLabels ? 64u : 1u); ++k)
+      if (abs64(v.plane_at(i, x0 + k % 8, y0 + k / 8).a) > kMaxBase)
+        fail(what + " plane", at + kOffIndex, "|a| at the block's corner > 2^61");
   }
+  if (labelled != label_count)
+    fail("label_count", kOffLabelCount, std::to_string(label_count) + " but " + std::to_string(labelled) + " blocks are labelled");
   return v;
 }
 
@@ -177,7 +236,7 @@ std::unique_ptr<Evaluator> open_plane_tile(
   const PlaneTileView v = validate_plane_tile(bytes);
   std::unique_ptr<Evaluator> inner = open_inner(v.inner);
   if (inner->finest_level() != v.finest_level)
-    fail("inner", kHeaderSize + size_t(v.plane_count) * kRecordSize,
+    fail("inner", size_t(v.inner.data() - bytes.data()),
          "finest level " + std::to_string(inner->finest_level()) + ", the tile's is " + std::to_string(v.finest_level));
   return std::make_unique<PlaneTileEvaluator>(v, std::move(inner));
 }

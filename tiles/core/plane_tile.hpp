@@ -18,10 +18,18 @@ bool is_plane_buffer(std::span<const uint8_t> bytes);
 
 struct PlaneTileView {
   uint32_t finest_level = 0;
-  uint32_t plane_count = 0;
-  std::span<const uint8_t> records;  // plane_count * 32 bytes
+  uint32_t plane_count = 0;          // blocks
+  uint32_t table_count = 0;          // distinct planes
+  uint32_t label_count = 0;          // labelled blocks
+  std::span<const uint8_t> table;    // table_count * 24 bytes
+  std::span<const uint8_t> records;  // plane_count * 8 bytes
+  std::span<const uint8_t> labels;   // label_count * 24 bytes
   std::span<const uint8_t> inner;    // the inner buffer
 
+  // Block i with the plane that answers its finest texel (fx, fy) (tile coordinates, inside
+  // the block), resolved to the block's corner.
+  planes::Plane plane_at(uint32_t i, uint32_t fx, uint32_t fy) const;
+  // Block i with its first plane (a labelled block's palette entry 0).
   planes::Plane plane(uint32_t i) const;
   // Index of the plane whose block holds finest texel (x, y), or -1.
   int64_t find(uint32_t x, uint32_t y) const;
