@@ -32,7 +32,7 @@ struct BoundsOptions {
   uint32_t preview_size = 2048;
 };
 
-TraceRegion parse_region(const std::string& text, uint32_t level) {
+TraceRegion parse_trace_region(const std::string& text, uint32_t level) {
   const uint64_t side = uint64_t(1) << level;
   if (text.empty()) {
     if (side * side > DepthBoundsTracer::kMaxRegionTexels)
@@ -60,14 +60,15 @@ TraceRegion parse_region(const std::string& text, uint32_t level) {
   return {level, v[0], v[1], uint32_t(v[2]), uint32_t(v[3])};
 }
 
-// Progress on a terminal for long runs: a watcher thread polls the tracer's counter.
-class Progress {
+// Progress on a terminal for long runs: a watcher thread polls the tracer's counter (not
+// progress.hpp's Progress, which the CLI's other commands use).
+class TraceProgress {
  public:
-  Progress(uint64_t total, std::atomic<uint64_t>& done)
+  TraceProgress(uint64_t total, std::atomic<uint64_t>& done)
       : total_(total), done_(done), enabled_(isatty(STDERR_FILENO) && total >= (1u << 22)) {
     if (enabled_) thread_ = std::thread([this] { run(); });
   }
-  ~Progress() { stop(); }
+  ~TraceProgress() { stop(); }
   void stop() {
     if (!thread_.joinable()) return;
     {
@@ -102,7 +103,7 @@ class Progress {
 
 void run_bounds(const BoundsOptions& o) {
   const uint32_t level = parse_resolution(o.resolution);
-  const TraceRegion region = parse_region(o.region, level);
+  const TraceRegion region = parse_trace_region(o.region, level);
   const LightSpec spec = LightSpec::parse(o.light);
   SceneOptions so;
   so.up = parse_up_axis(o.up);
@@ -129,7 +130,7 @@ void run_bounds(const BoundsOptions& o) {
   DepthBoundsStats st;
   IntervalTile tile;
   {
-    Progress progress(uint64_t(region.width) * region.height, done);
+    TraceProgress progress(uint64_t(region.width) * region.height, done);
     tile = tracer.trace(region, TraceMode::bounds, &st, &done);
   }
   write_interval_exr(o.output, tile, {spec.to_string(), light});
@@ -186,8 +187,8 @@ void setup_bounds(CLI::App& sub) {
   sub.callback([o] { run_bounds(*o); });
 }
 
-const Register kRegister{"bounds", "Trace dual depth bounds (lo, hi) of a shadow-map region to EXR",
-                         setup_bounds};
+const Register reg_bounds{"bounds", "Trace dual depth bounds (lo, hi) of a shadow-map region to EXR",
+                          setup_bounds};
 
 }  // namespace
 }  // namespace st::cli

@@ -157,7 +157,7 @@ std::optional<DeepPart> build_deep_part(const BuildArgs& a, const Scene& scene, 
   return DeepPart{std::move(d), so.effective_epsilon(), a.deep_samples};
 }
 
-void run(const BuildArgs& a) {
+void run_build(const BuildArgs& a) {
   if (LightSetSpec::names_light_set(a.light)) {  // a stack (app/stack_cli.cpp)
     if (a.resume || a.mpi || !a.shard.empty() || !a.region.empty())
       throw Error("build: --resume, --mpi, --shard and --region are not supported for light sets (stack packs)");
@@ -309,7 +309,7 @@ void run(const BuildArgs& a) {
   }
 }
 
-void setup(CLI::App& app) {
+void setup_build(CLI::App& app) {
   auto a = std::make_shared<BuildArgs>();
   app.footer(
       "Example:\n  shadowtile build procedural:city --light sun:azimuth=30,elevation=50 "
@@ -399,10 +399,10 @@ void setup(CLI::App& app) {
                  "slower); dagmh writes every tile as DAG-MH")
       ->capture_default_str();
   app.add_flag("-q,--quiet", a->quiet, "No summary or progress");
-  app.callback([a]() { run(*a); });
+  app.callback([a]() { run_build(*a); });
 }
 
-Register reg{"build", "Build a pack: depth bounds -> hierarchy -> encode -> tiles (out of core)", setup};
+Register reg_build{"build", "Build a pack: depth bounds -> hierarchy -> encode -> tiles (out of core)", setup_build};
 
 }  // namespace
 }  // namespace st::cli

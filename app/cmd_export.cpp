@@ -90,7 +90,7 @@ void run_deep(const ExportArgs& a) {
               (unsigned long long)st.texels, st.seconds);
 }
 
-void run(const ExportArgs& a) {
+void run_export(const ExportArgs& a) {
   if (a.deep) return run_deep(a);
   if (a.slice) return export_stack_slice(a.pack, *a.slice, a.level_set ? std::optional(a.level) : std::nullopt, a.out);
   std::shared_ptr<const PackReader> reader = PackReader::open(a.pack);
@@ -142,7 +142,7 @@ void run(const ExportArgs& a) {
               (unsigned long long)r.h, a.pack.c_str(), a.out.c_str(), png.c_str());
 }
 
-void setup(CLI::App& app) {
+void setup_export(CLI::App& app) {
   auto a = std::make_shared<ExportArgs>();
   app.footer("Example:\n  shadowtile export city.pack --level 12 -o city_l12.exr\n"
              "  shadowtile export city.pack --level 16 --region 30000,30000,2048,2048 -o detail.exr\n"
@@ -164,10 +164,10 @@ void setup(CLI::App& app) {
   app.add_option("--slice", a->slice, "Stack packs: the slice W (light sample) to export");
   app.add_option("--region", a->region, "X,Y,W,H in texels of that level (default: the whole level)");
   app.add_option("-o,--output", a->out, "EXR to write (a PNG preview is written beside it)")->required();
-  app.callback([a]() { run(*a); });
+  app.callback([a]() { run_export(*a); });
 }
 
-Register reg{"export", "Decode a region of any level of a pack back to an EXR image", setup};
+Register reg_export{"export", "Decode a region of any level of a pack back to an EXR image", setup_export};
 
 }  // namespace
 }  // namespace st::cli

@@ -21,7 +21,7 @@ struct InspectArgs {
   bool json = false;
 };
 
-void run(const InspectArgs& a) {
+void run_inspect(const InspectArgs& a) {
   auto r = PackReader::open(a.pack);
   const auto& h = r->header();
   uint64_t constants = 0, tiles = 0, index = 0;
@@ -152,15 +152,15 @@ void run(const InspectArgs& a) {
     std::printf("  param        %s = %s\n", printable_text(k).c_str(), printable_text(v).c_str());
 }
 
-void setup(CLI::App& app) {
+void setup_inspect(CLI::App& app) {
   auto a = std::make_shared<InspectArgs>();
   app.footer("Example:\n  shadowtile inspect city.pack --json");
   app.add_option("pack", a->pack, "Pack file")->required();
   app.add_flag("--json", a->json, "Print JSON instead of a table");
-  app.callback([a]() { run(*a); });
+  app.callback([a]() { run_inspect(*a); });
 }
 
-Register reg{"inspect", "Show what a pack holds: header, features, tiles and sizes", setup};
+Register reg_inspect{"inspect", "Show what a pack holds: header, features, tiles and sizes", setup_inspect};
 
 }  // namespace
 }  // namespace st::cli

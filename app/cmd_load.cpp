@@ -53,7 +53,7 @@ struct LoadArgs {
   bool soft = false;
 };
 
-void run(const LoadArgs& a) {
+void run_load(const LoadArgs& a) {
   loadgen::LoadOptions o;
   // --server A,B,C: replicas of one server (spread over, failed over between).
   for (size_t begin = 0;;) {
@@ -96,7 +96,7 @@ void run(const LoadArgs& a) {
   if (r.errors() > 0) exit_with(kExitError);
 }
 
-Register reg{"load", "Load-test a server with synthetic cameras (client library only)", [](CLI::App& sub) {
+Register reg_load{"load", "Load-test a server with synthetic cameras (client library only)", [](CLI::App& sub) {
   auto a = std::make_shared<LoadArgs>();
   sub.add_option("--server", a->server,
                  "Server address HOST:PORT, or replicas HOST:PORT,HOST:PORT,... (connections spread over "
@@ -126,7 +126,7 @@ Register reg{"load", "Load-test a server with synthetic cameras (client library 
                  "Stack maps: time A..B swept over the run (the slices around the current time requested, the "
                  "next ones prefetched)");
   sub.add_flag("--soft", a->soft, "Stack maps: soft shadows, the average over every slice (area lights)");
-  sub.callback([a] { run(*a); });
+  sub.callback([a] { run_load(*a); });
 }};
 
 }  // namespace

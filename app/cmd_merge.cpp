@@ -15,7 +15,7 @@ struct MergeArgs {
   std::string dagmh_dictionary = "on";
 };
 
-void run(const MergeArgs& a) {
+void run_merge(const MergeArgs& a) {
   if (a.dagmh_dictionary != "on" && a.dagmh_dictionary != "off")
     throw Error("--dagmh-dictionary: expected on or off, got '" + a.dagmh_dictionary + "'");
   MergeReport r = merge_parts(a.parts, a.out, a.dagmh_dictionary == "on");
@@ -28,7 +28,7 @@ void run(const MergeArgs& a) {
   }
 }
 
-void setup(CLI::App& app) {
+void setup_merge(CLI::App& app) {
   auto a = std::make_shared<MergeArgs>();
   app.footer(
       "Example (a Slurm array or Kubernetes Indexed Job runs one build per index):\n"
@@ -44,10 +44,10 @@ void setup(CLI::App& app) {
                  "off keeps every tile self-contained (match the one-go build's choice)")
       ->capture_default_str();
   app.add_flag("-q,--quiet", a->quiet, "No summary");
-  app.callback([a]() { run(*a); });
+  app.callback([a]() { run_merge(*a); });
 }
 
-Register reg{"merge", "Join the part files of a sharded build (build --shard I/N) into one pack", setup};
+Register reg_merge{"merge", "Join the part files of a sharded build (build --shard I/N) into one pack", setup_merge};
 
 }  // namespace
 }  // namespace st::cli

@@ -216,7 +216,7 @@ void run_stack(const RenderArgs& a, const RenderOptions& ro, const Camera& cam, 
   write_outputs(a, r);
 }
 
-void run(const RenderArgs& a) {
+void run_render(const RenderArgs& a) {
   if (a.pack.empty() == (a.server.empty() || a.map.empty()))
     throw Error("render: give either a PACK or --server HOST:PORT with --map NAME");
   if (a.time && !(*a.time >= 0 && *a.time <= 1)) throw Error("--time: expected a time in [0, 1]");
@@ -312,7 +312,7 @@ void run(const RenderArgs& a) {
   write_outputs(a, r);
 }
 
-Register reg{"render", "Render a camera view shaded with the map's shadows (EXR + PNG)", [](CLI::App& sub) {
+Register reg_render{"render", "Render a camera view shaded with the map's shadows (EXR + PNG)", [](CLI::App& sub) {
   auto a = std::make_shared<RenderArgs>();
   sub.add_option("pack", a->pack, "Pack file (or use --server and --map)");
   sub.add_option("--server", a->server, "Server HOST:PORT");
@@ -332,7 +332,7 @@ Register reg{"render", "Render a camera view shaded with the map's shadows (EXR 
   sub.add_option("--timeout", a->timeout, "Seconds to wait for the view's tiles (--server)")->capture_default_str();
   sub.add_option("--cache-mb", a->cache_mb, "Tile cache (MiB, --server)")->capture_default_str();
   sub.add_option("-o,--out", a->out, "Output EXR (the PNG preview goes beside it)")->required();
-  sub.callback([a] { run(*a); });
+  sub.callback([a] { run_render(*a); });
 }};
 
 }  // namespace

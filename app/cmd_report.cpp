@@ -168,7 +168,7 @@ std::vector<RefinementPoint> refinement(const std::string& pack_path, const std:
   return pts;
 }
 
-void run(const ReportArgs& a) {
+void run_report(const ReportArgs& a) {
   const uint32_t L = parse_resolution(a.resolution);
   uint32_t w = 0, h = 0;
   if (std::sscanf(a.size.c_str(), "%ux%u", &w, &h) != 2 || w == 0 || h == 0 || w > 4096 || h > 4096)
@@ -452,7 +452,7 @@ void run(const ReportArgs& a) {
   write_html_page("report", a.out + "/report.json", a.out + "/report.html");
 }
 
-Register reg{"report", "Shadow error vs time: encodings, PCF, levels, uncompressed maps, refinement", [](CLI::App& sub) {
+Register reg_report{"report", "Shadow error vs time: encodings, PCF, levels, uncompressed maps, refinement", [](CLI::App& sub) {
   auto a = std::make_shared<ReportArgs>();
   sub.add_option("--scene", a->scene, "Scene spec or file")->required();
   sub.add_option("--light", a->light, "Light spec")->required();
@@ -467,7 +467,7 @@ Register reg{"report", "Shadow error vs time: encodings, PCF, levels, uncompress
   sub.add_option("--skip-level", a->skip_level, "Skip level K of the packs (as build --skip-level)");
   sub.add_option("--tile-bytes", a->tile_bytes, "Tile size bound of the packs (as build --tile-bytes)")
       ->capture_default_str();
-  sub.callback([a] { run(*a); });
+  sub.callback([a] { run_report(*a); });
 }};
 
 }  // namespace

@@ -8,7 +8,7 @@
 namespace st::cli {
 namespace {
 
-Register reg{"serve", "Serve packs' tiles over TCP (the shadowtile wire protocol)", [](CLI::App& sub) {
+Register reg_serve{"serve", "Serve packs' tiles over TCP (the shadowtile wire protocol)", [](CLI::App& sub) {
   auto a = std::make_shared<server::ServeConfig>();
   server::add_serve_options(sub, *a);
   sub.callback([a] { server::run_serve(*a, "shadowtile serve"); });

@@ -51,7 +51,7 @@ std::vector<Watched> parse_pids(const std::vector<std::string>& specs) {
   return out;
 }
 
-void run(const StatsArgs& a) {
+void run_stats(const StatsArgs& a) {
   const client::Endpoint ep = parse_endpoint("--server", a.server);
   const std::vector<Watched> watched = parse_pids(a.pids);
   std::unique_ptr<std::ofstream> out;
@@ -157,7 +157,7 @@ void run(const StatsArgs& a) {
   }
 }
 
-Register reg{"stats", "Watch a running server's counters (and processes' memory) over time", [](CLI::App& sub) {
+Register reg_stats{"stats", "Watch a running server's counters (and processes' memory) over time", [](CLI::App& sub) {
   auto a = std::make_shared<StatsArgs>();
   sub.add_option("--server", a->server, "Server address HOST:PORT")->required();
   sub.add_option("--interval", a->interval, "Seconds between samples")->capture_default_str()
@@ -170,7 +170,7 @@ Register reg{"stats", "Watch a running server's counters (and processes' memory)
   sub.add_option("--prometheus", a->prometheus,
                  "Rewrite this file every interval with the server's counters and latency histogram in "
                  "Prometheus' text format (node_exporter textfile collector: a *.prom file in its directory)");
-  sub.callback([a] { run(*a); });
+  sub.callback([a] { run_stats(*a); });
 }};
 
 }  // namespace

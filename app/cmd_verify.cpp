@@ -219,7 +219,7 @@ uint64_t verify_deep(const VerifyArgs& a, const PackReader& reader, const Scene&
   return bad;
 }
 
-void run(const VerifyArgs& a) {
+void run_verify(const VerifyArgs& a) {
   std::shared_ptr<const PackReader> reader = PackReader::open(a.pack);
   if (reader->stack()) return verify_stack_pack(a.pack, a.scene, a.up, a.max_mismatches);
   try {
@@ -391,7 +391,7 @@ void run(const VerifyArgs& a) {
               (unsigned long long)checked, contract.within().c_str());
 }
 
-void setup(CLI::App& app) {
+void setup_verify(CLI::App& app) {
   auto a = std::make_shared<VerifyArgs>();
   app.footer("Exit code 3 when a checksum, a tile or a texel fails.\nExample:\n"
              "  shadowtile verify city.pack procedural:city --samples 1000000\n"
@@ -416,10 +416,10 @@ void setup(CLI::App& app) {
   app.add_option("--cell-side", a->cell_side, "With --cells: the squares' side in texels, a power of two")
       ->capture_default_str();
   add_scene_file_options(app, a->up, a->scene_limits);
-  app.callback([a]() { run(*a); });
+  app.callback([a]() { run_verify(*a); });
 }
 
-Register reg{"verify", "Check a pack's checksums and re-trace random texels against it (lossless)", setup};
+Register reg_verify{"verify", "Check a pack's checksums and re-trace random texels against it (lossless)", setup_verify};
 
 }  // namespace
 }  // namespace st::cli

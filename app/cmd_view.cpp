@@ -83,7 +83,7 @@ double med(std::vector<double> v) {
   return v.empty() ? 0.0 : v[v.size() / 2];
 }
 
-void run(const ViewArgs& a) {
+void run_view(const ViewArgs& a) {
   uint32_t width = 0, height = 0;
   if (std::sscanf(a.size.c_str(), "%ux%u", &width, &height) != 2 || width == 0 || height == 0 || width > 8192 ||
       height > 8192)
@@ -312,7 +312,7 @@ void run(const ViewArgs& a) {
   std::printf("wrote %s/frame_*.png, %s/contact_sheet.png, %s\n", a.out.c_str(), a.out.c_str(), json.c_str());
 }
 
-Register reg{"view",
+Register reg_view{"view",
              "Headless viewer: a GPU rasterizer (engine mode) draws a camera path or a camera with shadows from "
              "streamed tiles, looked up in its fragment shader (PNG frames)",
              [](CLI::App& sub) {
@@ -356,7 +356,7 @@ Register reg{"view",
                             "Run under VK_LAYER_KHRONOS_validation and count its warnings and errors");
                sub.add_option("--out", a->out, "Output folder (frames, contact sheet, view.json)");
                sub.add_option("--json", a->json, "JSON report path (default OUT/view.json)");
-               sub.callback([a] { run(*a); });
+               sub.callback([a] { run_view(*a); });
              }};
 
 }  // namespace
