@@ -1,5 +1,5 @@
 // Depth-interval maps as OpenEXR files: see exr_io.hpp for the layout.
-#include "tiles/bake/exr_io.hpp"
+#include "image/exr_io.hpp"
 
 #include <Iex.h>
 #include <ImfChannelList.h>

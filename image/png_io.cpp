@@ -1,5 +1,5 @@
 // PNG output through libpng's simplified API (png_image_*: no setjmp/longjmp in our code).
-#include "tiles/bake/png_io.hpp"
+#include "image/png_io.hpp"
 
 #include <png.h>
 

@@ -1,4 +1,4 @@
-#include "tiles/bake/render.hpp"
+#include "render/render.hpp"
 
 #include "tiles/core/filter_level.hpp"
 
@@ -30,7 +30,7 @@
 #include <limits>
 
 #include "tiles/bake/deep_sampler.hpp"
-#include "tiles/bake/png_io.hpp"
+#include "image/png_io.hpp"
 #include "common/error.hpp"
 
 namespace st {

@@ -32,7 +32,7 @@
 
 #include "tiles/core/camera.hpp"
 #include "tiles/core/deep_format.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 #include "tiles/core/evaluator.hpp"
 #include "tiles/core/light.hpp"
 

@@ -1,4 +1,4 @@
-#include "tiles/bake/render_error.hpp"
+#include "render/render_error.hpp"
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>

@@ -23,7 +23,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "tiles/bake/render.hpp"
+#include "render/render.hpp"
 #include "tiles/core/interval.hpp"
 
 namespace st {

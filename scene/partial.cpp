@@ -1,4 +1,4 @@
-#include "tiles/bake/partial.hpp"
+#include "scene/partial.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -1,7 +1,7 @@
 // make_procedural: spec parsing, the common scale/offset keys and the small test scenes
 // (cube, sphere, plane, boxes). The big scenes live in procedural_{city,terrain,hairball}.cpp,
 // the partial occluders (forest, smoke) in procedural_partial.cpp.
-#include "tiles/bake/procedural.hpp"
+#include "scene/procedural.hpp"
 
 #include <algorithm>
 #include <charconv>

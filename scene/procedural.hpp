@@ -1,4 +1,4 @@
-// Building blocks of the procedural scenes (internal to tiles/bake): a portable PRNG, the
+// Building blocks of the procedural scenes (internal to scene/): a portable PRNG, the
 // key=value parameter reader and closed-solid generators. Every generator writes
 // outward-facing, consistently wound solids whose shared edges use shared vertex indices,
 // so append_mesh() finds them closed without relying on welding.
@@ -13,7 +13,7 @@
 #include <vector>
 
 #include "common/hash.hpp"
-#include "tiles/bake/scene_mesh.hpp"
+#include "scene/scene_mesh.hpp"
 
 namespace st::procedural {
 

@@ -9,7 +9,7 @@
 // the semi-transparent hair of the deep shadow map paper (DSM 2000 §6).
 #include <cmath>
 
-#include "tiles/bake/procedural.hpp"
+#include "scene/procedural.hpp"
 
 namespace st::procedural {
 namespace {

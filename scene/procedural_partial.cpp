@@ -16,7 +16,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "tiles/bake/procedural.hpp"
+#include "scene/procedural.hpp"
 
 namespace st::procedural {
 namespace {

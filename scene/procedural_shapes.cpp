@@ -4,7 +4,7 @@
 #include <cmath>
 #include <numbers>
 
-#include "tiles/bake/procedural.hpp"
+#include "scene/procedural.hpp"
 #include "common/error.hpp"
 
 namespace st::procedural {

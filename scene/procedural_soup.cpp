@@ -18,7 +18,7 @@
 #include <cmath>
 #include <numbers>
 
-#include "tiles/bake/procedural.hpp"
+#include "scene/procedural.hpp"
 
 namespace st::procedural {
 

@@ -7,7 +7,7 @@
 // Triangles: 4 size^2 (top and bottom grids) + 8 size (skirts).
 #include <cmath>
 
-#include "tiles/bake/procedural.hpp"
+#include "scene/procedural.hpp"
 
 namespace st::procedural {
 namespace {

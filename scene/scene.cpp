@@ -1,4 +1,4 @@
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 
 #include <cstring>
 

@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "tiles/bake/partial.hpp"
+#include "scene/partial.hpp"
 #include "tiles/core/vec.hpp"
 
 namespace st {

@@ -1,4 +1,4 @@
-#include "tiles/bake/scene_export.hpp"
+#include "scene/scene_export.hpp"
 
 #include <assimp/Exporter.hpp>
 #include <assimp/material.h>

@@ -3,7 +3,7 @@
 #pragma once
 #include <string>
 
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 
 namespace st {
 

@@ -1,4 +1,4 @@
-#include "tiles/bake/scene_gltf_check.hpp"
+#include "scene/scene_gltf_check.hpp"
 
 #include <assimp/scene.h>
 

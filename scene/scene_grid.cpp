@@ -1,5 +1,5 @@
 // Grid scenes: see scene_grid.hpp.
-#include "tiles/bake/scene_grid.hpp"
+#include "scene/scene_grid.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -20,8 +20,8 @@
 #pragma once
 #include <string>
 
-#include "tiles/bake/scene.hpp"
-#include "tiles/bake/scene_limits.hpp"
+#include "scene/scene.hpp"
+#include "scene/scene_limits.hpp"
 
 namespace st {
 

@@ -1,5 +1,5 @@
 // Scene file checks before assimp: see scene_header_check.hpp.
-#include "tiles/bake/scene_header_check.hpp"
+#include "scene/scene_header_check.hpp"
 
 #include <algorithm>
 #include <cctype>

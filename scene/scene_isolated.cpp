@@ -19,7 +19,7 @@
 //                 u32 up axis (0 y, 1 z), u32 up reason length + reason (Scene::up, up_reason)
 //                 u32 unit reason length + reason (Scene::unit_reason)
 //           then 8 bytes "STSCEND3".
-#include "tiles/bake/scene_isolated.hpp"
+#include "scene/scene_isolated.hpp"
 
 #include <fcntl.h>
 #include <poll.h>

@@ -11,8 +11,8 @@
 #include <string>
 #include <vector>
 
-#include "tiles/bake/scene.hpp"
-#include "tiles/bake/scene_limits.hpp"
+#include "scene/scene.hpp"
+#include "scene/scene_limits.hpp"
 
 namespace st {
 

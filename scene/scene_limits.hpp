@@ -8,7 +8,7 @@
 #include <cstdint>
 #include <string>
 
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 
 namespace st {
 

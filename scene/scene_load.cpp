@@ -22,15 +22,15 @@
 #include <utility>
 #include <vector>
 
-#include "tiles/bake/scene_gltf_check.hpp"
-#include "tiles/bake/scene_grid.hpp"
-#include "tiles/bake/scene_header_check.hpp"
-#include "tiles/bake/scene_isolated.hpp"
-#include "tiles/bake/scene_limits.hpp"
-#include "tiles/bake/scene_materials.hpp"
-#include "tiles/bake/scene_mesh.hpp"
-#include "tiles/bake/scene_quake3.hpp"
-#include "tiles/bake/scene_volumes.hpp"
+#include "scene/scene_gltf_check.hpp"
+#include "scene/scene_grid.hpp"
+#include "scene/scene_header_check.hpp"
+#include "scene/scene_isolated.hpp"
+#include "scene/scene_limits.hpp"
+#include "scene/scene_materials.hpp"
+#include "scene/scene_mesh.hpp"
+#include "scene/scene_quake3.hpp"
+#include "scene/scene_volumes.hpp"
 #include "common/error.hpp"
 
 namespace st {

@@ -1,5 +1,5 @@
 // Partial occluders from a scene file's materials: see scene_materials.hpp.
-#include "tiles/bake/scene_materials.hpp"
+#include "scene/scene_materials.hpp"
 
 #include <assimp/GltfMaterial.h>
 #include <assimp/material.h>
@@ -13,7 +13,7 @@
 #include <fstream>
 
 #include "common/error.hpp"
-#include "tiles/bake/png_io.hpp"
+#include "image/png_io.hpp"
 
 namespace st {
 namespace {

@@ -39,7 +39,7 @@
 #include <string>
 #include <vector>
 
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 
 struct aiScene;
 

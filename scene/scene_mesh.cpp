@@ -1,4 +1,4 @@
-#include "tiles/bake/scene_mesh.hpp"
+#include "scene/scene_mesh.hpp"
 
 #include <algorithm>
 #include <cstring>

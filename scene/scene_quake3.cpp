@@ -1,4 +1,4 @@
-#include "tiles/bake/scene_quake3.hpp"
+#include "scene/scene_quake3.hpp"
 
 #include <algorithm>
 #include <cctype>
@@ -7,8 +7,8 @@
 #include <fstream>
 #include <map>
 
-#include "tiles/bake/scene_mesh.hpp"
-#include "tiles/bake/scene_zip.hpp"
+#include "scene/scene_mesh.hpp"
+#include "scene/scene_zip.hpp"
 #include "common/error.hpp"
 
 namespace st {

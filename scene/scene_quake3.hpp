@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 
 namespace st {
 

@@ -3,7 +3,7 @@
 #include <optional>
 
 #include "common/error.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 
 namespace st {
 

@@ -1,7 +1,7 @@
 // load_vdb_volume: one float grid of an OpenVDB file as a dense st::Volume (the rules are
 // in scene_volumes.hpp). The only file of the project that includes OpenVDB; without it
 // (SHADOWTILE_OPENVDB=OFF) every .vdb scene fails with one line saying so.
-#include "tiles/bake/scene_volumes.hpp"
+#include "scene/scene_volumes.hpp"
 
 #ifdef SHADOWTILE_HAVE_OPENVDB
 #include <openvdb/io/File.h>

@@ -1,6 +1,6 @@
 // Volume parts of scene specs ("vdb:", "+vdb:", "+fog:") and the fog layer; the OpenVDB
 // reader itself is scene_vdb.cpp. scene_volumes.hpp has the grammar.
-#include "tiles/bake/scene_volumes.hpp"
+#include "scene/scene_volumes.hpp"
 
 #include <algorithm>
 #include <charconv>

@@ -52,7 +52,7 @@
 #include <cstdint>
 #include <string>
 
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 
 namespace st {
 

@@ -1,4 +1,4 @@
-#include "tiles/bake/scene_zip.hpp"
+#include "scene/scene_zip.hpp"
 
 #include <unzip.h>
 

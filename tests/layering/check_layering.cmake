@@ -5,7 +5,8 @@
 #   common      <- proto, net, tiles/core
 #   proto       <- server, client
 #   net         <- server, client
-#   tiles/core  <- tiles/build <- tiles/bake
+#   tiles/core  <- image <- scene <- tiles/bake <- render
+#   tiles/core  <- tiles/encode <- tiles/bake
 #   tiles/core  <- server, client
 #   client      <- loadgen, gpu
 #   everything  <- app (and tests/, bench/, which are not checked)
@@ -24,16 +25,19 @@ set(allowed_common "common")
 set(allowed_proto "common;proto")
 set(allowed_net "common;net")
 set(allowed_tiles/core "common;tiles/core")
-set(allowed_tiles/build "common;tiles/core;tiles/build")
-set(allowed_tiles/bake "common;tiles/core;tiles/build;tiles/bake")
+set(allowed_tiles/encode "common;tiles/core;tiles/encode")
+set(allowed_image "common;tiles/core;image")
+set(allowed_scene "common;tiles/core;image;scene")
+set(allowed_tiles/bake "common;tiles/core;tiles/encode;scene;tiles/bake")
+set(allowed_render "common;tiles/core;tiles/encode;image;scene;tiles/bake;render")
 set(allowed_server "common;proto;net;tiles/core;server")
 set(allowed_client "common;proto;net;tiles/core;client")
 set(allowed_loadgen "common;proto;tiles/core;client;loadgen")
 set(allowed_gpu "common;tiles/core;client;gpu")
-set(modules common proto net tiles/core tiles/build tiles/bake server client loadgen gpu)
+set(modules common proto net tiles/core tiles/encode image scene tiles/bake render server client loadgen gpu)
 # Every folder that holds headers a module could include: an include of any other
 # "x/..." path is not one of ours (a system or third-party header).
-set(known_roots common proto net tiles/core tiles/build tiles/bake server client loadgen gpu app tests bench)
+set(known_roots common proto net tiles/core tiles/encode image scene tiles/bake render server client loadgen gpu app tests bench)
 
 set(offences 0)
 set(components "")

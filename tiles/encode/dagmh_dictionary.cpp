@@ -1,8 +1,8 @@
-// DAG-MH pack dictionary builder (tiles/build/dagmh_dictionary.hpp; format DAGMH.md
+// DAG-MH pack dictionary builder (tiles/encode/dagmh_dictionary.hpp; format DAGMH.md
 // "Dictionary"). Nodes are keyed by topology exactly as the per-tile DAG keys them
 // (DAG-MH §3.1): flags and the keys of the children, compared in full, so equal keys mean
 // equal subtrees, hence equal value counts and value offsets.
-#include "tiles/build/dagmh_dictionary.hpp"
+#include "tiles/encode/dagmh_dictionary.hpp"
 
 #include <algorithm>
 #include <array>

@@ -1,12 +1,12 @@
 // DAG-MH encoder: structure DAG + value chunks + skip table, assembled into one buffer
 // (layout: tiles/core/DAGMH.md).
-#include "tiles/build/dagmh_encode.hpp"
+#include "tiles/encode/dagmh_encode.hpp"
 
 #include <algorithm>
 #include <numeric>
 
 #include "tiles/core/dagmh_traverse.hpp"
-#include "tiles/build/encode.hpp"
+#include "tiles/encode/encode.hpp"
 #include "common/error.hpp"
 #include "tiles/core/interval.hpp"
 

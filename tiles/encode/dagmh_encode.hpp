@@ -4,9 +4,9 @@
 #include <cstdint>
 #include <vector>
 
-#include "tiles/build/dagmh_structure.hpp"
-#include "tiles/build/dagmh_values_encode.hpp"
-#include "tiles/build/hierarchy.hpp"
+#include "tiles/encode/dagmh_structure.hpp"
+#include "tiles/encode/dagmh_values_encode.hpp"
+#include "tiles/encode/hierarchy.hpp"
 
 namespace st::dagmh {
 

@@ -1,5 +1,5 @@
 // Bottom-up DAG construction over a Hierarchy (DAG-MH §3.1, §3.2); see the header.
-#include "tiles/build/dagmh_structure.hpp"
+#include "tiles/encode/dagmh_structure.hpp"
 
 #include <algorithm>
 #include <bit>

@@ -18,8 +18,8 @@
 #include <vector>
 
 #include "tiles/core/dagmh_format.hpp"
-#include "tiles/build/dagmh_values_encode.hpp"
-#include "tiles/build/hierarchy.hpp"
+#include "tiles/encode/dagmh_values_encode.hpp"
+#include "tiles/encode/hierarchy.hpp"
 
 namespace st::dagmh {
 

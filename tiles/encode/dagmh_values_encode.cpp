@@ -12,7 +12,7 @@
 // Every value is checked with the decoder's exact float arithmetic (affine_value, no
 // fma), and the packed chunks are decoded once more at the end: a value outside its
 // interval is a bug and stops the encoder (ST_CHECK), never a silently lossy map.
-#include "tiles/build/dagmh_values_encode.hpp"
+#include "tiles/encode/dagmh_values_encode.hpp"
 
 #include <algorithm>
 #include <bit>

@@ -1,5 +1,5 @@
 // Deep shadow tile encoder: see deep_encode.hpp and tiles/core/DEEP.md.
-#include "tiles/build/deep_encode.hpp"
+#include "tiles/encode/deep_encode.hpp"
 
 #include <algorithm>
 #include <cmath>

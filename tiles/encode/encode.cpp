@@ -1,11 +1,11 @@
 // Encoder dispatch by format tag, and the MH / MMH entry points (the quadtree layout is
 // mh_quadtree_layout.cpp, MMH's merge plan mmh_merge.cpp; DAG-MH is dagmh_encode.cpp).
-#include "tiles/build/encode.hpp"
+#include "tiles/encode/encode.hpp"
 
 #include "common/error.hpp"
-#include "tiles/build/mh_quadtree_layout.hpp"
-#include "tiles/build/mmh_merge.hpp"
-#include "tiles/build/vsdag_encode.hpp"
+#include "tiles/encode/mh_quadtree_layout.hpp"
+#include "tiles/encode/mmh_merge.hpp"
+#include "tiles/encode/vsdag_encode.hpp"
 
 namespace st {
 

@@ -6,7 +6,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "tiles/build/hierarchy.hpp"
+#include "tiles/encode/hierarchy.hpp"
 #include "tiles/core/encoding.hpp"
 
 namespace st {

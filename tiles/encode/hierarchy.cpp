@@ -1,4 +1,4 @@
-#include "tiles/build/hierarchy.hpp"
+#include "tiles/encode/hierarchy.hpp"
 
 #include <algorithm>
 

@@ -13,7 +13,7 @@
 // By induction a node's I is exactly the intersection of the intervals of the texels it
 // answers for (those reached through covered nodes only), which is the admissible
 // interval HNode::lo/hi documents; the value is its float-safe midpoint.
-#include "tiles/build/mh_build.hpp"
+#include "tiles/encode/mh_build.hpp"
 
 #include <algorithm>
 #include <cfloat>
@@ -22,8 +22,8 @@
 #include <string>
 
 #include "common/error.hpp"
-#include "tiles/build/mh_internal.hpp"
-#include "tiles/build/mh_level_step.hpp"
+#include "tiles/encode/mh_internal.hpp"
+#include "tiles/encode/mh_level_step.hpp"
 
 namespace st {
 namespace mh_detail {

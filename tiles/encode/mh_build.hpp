@@ -4,7 +4,7 @@
 #pragma once
 #include <cstdint>
 
-#include "tiles/build/hierarchy.hpp"
+#include "tiles/encode/hierarchy.hpp"
 #include "tiles/core/interval.hpp"
 
 namespace st {

@@ -18,8 +18,8 @@
 #include <utility>
 
 #include "common/error.hpp"
-#include "tiles/build/mh_build.hpp"
-#include "tiles/build/mh_internal.hpp"
+#include "tiles/encode/mh_build.hpp"
+#include "tiles/encode/mh_internal.hpp"
 
 namespace st {
 namespace {

@@ -26,8 +26,8 @@
 #include <cstring>
 
 #include "common/error.hpp"
-#include "tiles/build/mh_build.hpp"
-#include "tiles/build/mh_internal.hpp"
+#include "tiles/encode/mh_build.hpp"
+#include "tiles/encode/mh_internal.hpp"
 
 namespace st::mh_detail {
 namespace {

@@ -5,7 +5,7 @@
 #include <cstddef>
 #include <cstdint>
 
-#include "tiles/build/hierarchy.hpp"
+#include "tiles/encode/hierarchy.hpp"
 #include "tiles/core/interval.hpp"
 
 namespace st::mh_detail {

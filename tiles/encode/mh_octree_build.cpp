@@ -9,7 +9,7 @@
 // intervals (ties: most covered children without stored descendants, then the lowest
 // slot), with I the intersection of the covered children. A child is covered iff its
 // interval contains I; covered children vanish, or turn empty if they have descendants.
-#include "tiles/build/mh_octree_build.hpp"
+#include "tiles/encode/mh_octree_build.hpp"
 
 #include <algorithm>
 #include <cfloat>
@@ -18,7 +18,7 @@
 #include <string>
 
 #include "common/error.hpp"
-#include "tiles/build/mh_internal.hpp"
+#include "tiles/encode/mh_internal.hpp"
 
 namespace st {
 namespace {

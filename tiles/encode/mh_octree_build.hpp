@@ -74,7 +74,7 @@ void oct_coords(const moct::Geometry& g, uint32_t l, uint64_t code, uint64_t& x,
 // bad shape. The result satisfies the lossless invariant on every texel of every slice:
 // depth_at(L, x, y, w) lies in the texel's interval (L = geo.depth()).
 //
-// `w_level` (blocked builds, tiles/build/stack_blocked.hpp): pad to 2^w_level slices
+// `w_level` (blocked builds, tiles/encode/stack_blocked.hpp): pad to 2^w_level slices
 // instead of the smallest power of two >= slices (slices <= 2^w_level), so the result is
 // the subtree of one node of a larger stack whose slices past `slices` are placeholders.
 OctHierarchy build_octree(const IntervalStack& stack, std::optional<uint32_t> w_level = std::nullopt);

@@ -2,10 +2,10 @@
 // the blocks of its earlier siblings' subtrees, so offsets shrink level by level), share
 // equal blocks (near by offset, far by a far word), find per-level shifts that make every
 // near offset fit 16 bits, then write the words.
-#include "tiles/build/mh_octree_encode.hpp"
-#include "tiles/build/mh_internal.hpp"
-#include "tiles/build/mh_octree_flat.hpp"
-#include "tiles/build/mh_octree_merge.hpp"
+#include "tiles/encode/mh_octree_encode.hpp"
+#include "tiles/encode/mh_internal.hpp"
+#include "tiles/encode/mh_octree_flat.hpp"
+#include "tiles/encode/mh_octree_merge.hpp"
 
 #include <algorithm>
 #include <bit>

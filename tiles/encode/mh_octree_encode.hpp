@@ -7,13 +7,13 @@
 // reaches, else through a far word (format version 3) when an earlier layout round
 // found the block copied out of reach. Before that, compatible subtrees (same topology,
 // values that can meet) are made equal by choosing their values (MMH style, absolute
-// values; tiles/build/mh_octree_merge.hpp).
+// values; tiles/encode/mh_octree_merge.hpp).
 #pragma once
 #include <array>
 #include <cstdint>
 #include <vector>
 
-#include "tiles/build/mh_octree_build.hpp"
+#include "tiles/encode/mh_octree_build.hpp"
 
 namespace st {
 

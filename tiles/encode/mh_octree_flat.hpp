@@ -1,4 +1,4 @@
-// The octree encoder's working form of an OctHierarchy (private to tiles/build): every
+// The octree encoder's working form of an OctHierarchy (private to tiles/encode): every
 // node once, level by level in code order, so a node's children are contiguous, in slot
 // order, from first_child, and every child comes after its parent. Shared by the encoder
 // (mh_octree_encode.cpp) and its subtree merger (mh_octree_merge.cpp).

@@ -19,7 +19,7 @@
 // 4. Each class of more than one id takes roundest_in of its window (the roundest float
 //    every node of it admits, as central_roundest picks for one node); the others keep
 //    their value.
-#include "tiles/build/mh_octree_merge.hpp"
+#include "tiles/encode/mh_octree_merge.hpp"
 
 #include <algorithm>
 #include <array>
@@ -29,7 +29,7 @@
 
 #include "common/error.hpp"
 #include "common/hash.hpp"
-#include "tiles/build/mh_internal.hpp"
+#include "tiles/encode/mh_internal.hpp"
 
 namespace st::moct_detail {
 namespace {

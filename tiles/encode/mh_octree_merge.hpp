@@ -1,4 +1,4 @@
-// The octree encoder's subtree merger (private to tiles/build; MHOCT.md "Version 3, merged
+// The octree encoder's subtree merger (private to tiles/encode; MHOCT.md "Version 3, merged
 // subtrees measured"): two nodes of one level whose children blocks have the same topology (child
 // masks and kinds all the way down) and whose corresponding valued nodes admit a common
 // value can point at one children block. The merger only chooses values: every node that
@@ -11,7 +11,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "tiles/build/mh_octree_flat.hpp"
+#include "tiles/encode/mh_octree_flat.hpp"
 
 namespace st::moct_detail {
 

@@ -1,6 +1,6 @@
-#include "tiles/build/mh_octree_share.hpp"
+#include "tiles/encode/mh_octree_share.hpp"
 
-#include "tiles/build/mh_internal.hpp"
+#include "tiles/encode/mh_internal.hpp"
 
 #include <algorithm>
 #include <array>

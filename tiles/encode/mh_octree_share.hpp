@@ -18,7 +18,7 @@
 #include <utility>
 #include <vector>
 
-#include "tiles/build/mh_octree_build.hpp"
+#include "tiles/encode/mh_octree_build.hpp"
 
 namespace st {
 

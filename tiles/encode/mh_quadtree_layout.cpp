@@ -1,4 +1,4 @@
-#include "tiles/build/mh_quadtree_layout.hpp"
+#include "tiles/encode/mh_quadtree_layout.hpp"
 
 #include <algorithm>
 #include <cmath>

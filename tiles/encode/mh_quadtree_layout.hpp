@@ -7,7 +7,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "tiles/build/hierarchy.hpp"
+#include "tiles/encode/hierarchy.hpp"
 #include "tiles/core/mh_quadtree_format.hpp"
 
 namespace st::mhq {

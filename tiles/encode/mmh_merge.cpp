@@ -1,5 +1,5 @@
 #include "common/hash.hpp"
-#include "tiles/build/mmh_merge.hpp"
+#include "tiles/encode/mmh_merge.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -28,7 +28,7 @@
 #pragma once
 #include <cstdint>
 
-#include "tiles/build/mh_quadtree_layout.hpp"
+#include "tiles/encode/mh_quadtree_layout.hpp"
 
 namespace st::mhq {
 

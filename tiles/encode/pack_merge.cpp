@@ -1,4 +1,4 @@
-#include "tiles/build/pack_merge.hpp"
+#include "tiles/encode/pack_merge.hpp"
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -12,10 +12,10 @@
 #include <vector>
 
 #include "common/error.hpp"
-#include "tiles/build/hierarchy.hpp"
-#include "tiles/build/mh_build.hpp"
-#include "tiles/build/pack_writer.hpp"
-#include "tiles/build/tile_cut.hpp"
+#include "tiles/encode/hierarchy.hpp"
+#include "tiles/encode/mh_build.hpp"
+#include "tiles/encode/pack_writer.hpp"
+#include "tiles/encode/tile_cut.hpp"
 
 namespace st {
 

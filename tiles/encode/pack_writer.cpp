@@ -1,4 +1,4 @@
-#include "tiles/build/pack_writer.hpp"
+#include "tiles/encode/pack_writer.hpp"
 
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -10,7 +10,7 @@
 #include <unordered_map>
 
 #include "common/error.hpp"
-#include "tiles/build/pack_file_io.hpp"
+#include "tiles/encode/pack_file_io.hpp"
 #include "tiles/core/interval.hpp"
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/map_preview.hpp"

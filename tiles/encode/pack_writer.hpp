@@ -31,7 +31,7 @@
 #include <vector>
 
 #include "tiles/core/pack_format.hpp"
-#include "tiles/build/tile_cut.hpp"
+#include "tiles/encode/tile_cut.hpp"
 
 namespace st {
 

@@ -6,7 +6,7 @@
 // rewritten tiles in place of theirs. The tiles are shared in tile-id order, so the
 // dictionary depends on the tiles alone, never on the order cells were appended in (a
 // merged, resumed or MPI-built pack gets the same bytes).
-#include "tiles/build/pack_writer.hpp"
+#include "tiles/encode/pack_writer.hpp"
 
 #include <algorithm>
 #include <cerrno>
@@ -14,8 +14,8 @@
 #include <unordered_map>
 
 #include "common/error.hpp"
-#include "tiles/build/pack_file_io.hpp"
-#include "tiles/build/dagmh_dictionary.hpp"
+#include "tiles/encode/pack_file_io.hpp"
+#include "tiles/encode/dagmh_dictionary.hpp"
 #include "tiles/core/pack_dictionary.hpp"
 #include "tiles/core/plane_tile.hpp"
 

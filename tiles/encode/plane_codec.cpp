@@ -3,8 +3,8 @@
 #include <optional>
 
 #include "common/error.hpp"
-#include "tiles/build/plane_fit.hpp"
-#include "tiles/build/tile_cut.hpp"
+#include "tiles/encode/plane_fit.hpp"
+#include "tiles/encode/tile_cut.hpp"
 #include "tiles/core/pack_format.hpp"
 #include "tiles/core/plane_tile.hpp"
 

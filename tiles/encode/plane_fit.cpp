@@ -1,4 +1,4 @@
-#include "tiles/build/plane_fit.hpp"
+#include "tiles/encode/plane_fit.hpp"
 
 #include <algorithm>
 #include <bit>

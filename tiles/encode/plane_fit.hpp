@@ -20,7 +20,7 @@
 #include <span>
 #include <vector>
 
-#include "tiles/build/hierarchy.hpp"
+#include "tiles/encode/hierarchy.hpp"
 #include "tiles/core/plane_format.hpp"
 
 namespace st {

@@ -1,4 +1,4 @@
-#include "tiles/build/stack_blocked.hpp"
+#include "tiles/encode/stack_blocked.hpp"
 
 #include <fcntl.h>
 #include <unistd.h>
@@ -12,8 +12,8 @@
 #include <limits>
 
 #include "common/error.hpp"
-#include "tiles/build/mh_octree_encode.hpp"
-#include "tiles/build/stack_pack.hpp"
+#include "tiles/encode/mh_octree_encode.hpp"
+#include "tiles/encode/stack_pack.hpp"
 #include "tiles/core/pack_format.hpp"
 
 namespace st {

@@ -22,8 +22,8 @@
 #include <string>
 #include <vector>
 
-#include "tiles/build/mh_octree_build.hpp"
-#include "tiles/build/stack_slices_encode.hpp"
+#include "tiles/encode/mh_octree_build.hpp"
+#include "tiles/encode/stack_slices_encode.hpp"
 #include "tiles/core/stack_grid.hpp"
 
 namespace st {

@@ -1,4 +1,4 @@
-#include "tiles/build/stack_pack.hpp"
+#include "tiles/encode/stack_pack.hpp"
 
 #include "tiles/core/stack_slices.hpp"
 
@@ -9,7 +9,7 @@
 #include <fstream>
 
 #include "common/error.hpp"
-#include "tiles/build/mh_octree_encode.hpp"
+#include "tiles/encode/mh_octree_encode.hpp"
 
 namespace st {
 namespace {

@@ -9,7 +9,7 @@
 #include <string>
 #include <vector>
 
-#include "tiles/build/mh_octree_build.hpp"
+#include "tiles/encode/mh_octree_build.hpp"
 #include "tiles/core/pack_format.hpp"
 #include "tiles/core/stack_grid.hpp"
 

@@ -1,11 +1,11 @@
-#include "tiles/build/stack_slices_encode.hpp"
+#include "tiles/encode/stack_slices_encode.hpp"
 
 #include <cstring>
 #include <string>
 
 #include "common/error.hpp"
-#include "tiles/build/encode.hpp"
-#include "tiles/build/mh_build.hpp"
+#include "tiles/encode/encode.hpp"
+#include "tiles/encode/mh_build.hpp"
 #include "tiles/core/pack_format.hpp"
 #include "tiles/core/stack_slices.hpp"
 

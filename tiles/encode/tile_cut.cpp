@@ -1,4 +1,4 @@
-#include "tiles/build/tile_cut.hpp"
+#include "tiles/encode/tile_cut.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -6,7 +6,7 @@
 
 #include "common/error.hpp"
 #include "tiles/core/interval.hpp"
-#include "tiles/build/mh_build.hpp"
+#include "tiles/encode/mh_build.hpp"
 #include "tiles/core/pack_format.hpp"
 
 namespace st {

@@ -32,9 +32,9 @@
 #include <span>
 #include <vector>
 
-#include "tiles/build/encode.hpp"
-#include "tiles/build/hierarchy.hpp"
-#include "tiles/build/plane_fit.hpp"
+#include "tiles/encode/encode.hpp"
+#include "tiles/encode/hierarchy.hpp"
+#include "tiles/encode/plane_fit.hpp"
 #include "tiles/core/interval.hpp"
 #include "tiles/core/pack_format.hpp"
 #include "tiles/core/tile_cut_grid.hpp"

@@ -1,6 +1,6 @@
 // Voxel shadow DAG construction (voxelized shadows 2014 §6.1 top down against a min-max
 // pyramid, then common-subtree merging bottom up); see vsdag_encode.hpp.
-#include "tiles/build/vsdag_encode.hpp"
+#include "tiles/encode/vsdag_encode.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -14,7 +14,7 @@
 #include <cstdint>
 #include <vector>
 
-#include "tiles/build/hierarchy.hpp"
+#include "tiles/encode/hierarchy.hpp"
 #include "tiles/core/vsdag_format.hpp"
 
 namespace st {
