@@ -12,8 +12,9 @@
 #   everything  <- app (and tests/, bench/, which are not checked)
 #
 # And no include cycle among the modules' components (a component is a header with the
-# .cpp of the same name: a.hpp or a.cpp includes b.hpp, b.hpp or b.cpp includes a.hpp ...
-# back to a). Among headers alone such a cycle compiles or not by include order (with
+# .cpp of the same name, or with the parts its .cpp is split in when there is no a.cpp:
+# a_x.cpp, a_y.cpp without headers of their own. a.hpp or a.cpp includes b.hpp, b.hpp or
+# b.cpp includes a.hpp ... back to a). Among headers alone such a cycle compiles or not by include order (with
 # `#pragma once`); through a .cpp it means neither part can be understood, tested or moved
 # without the other.
 cmake_minimum_required(VERSION 3.25)  # IN_LIST
@@ -65,6 +66,20 @@ foreach(mod ${modules})
       # The header graph (include cycles, below).
       file(RELATIVE_PATH rel_src ${ROOT} ${src})
       string(REGEX REPLACE "\\.[^./]+$" "" from "${rel_src}")
+      # A header whose .cpp is split in parts (a.hpp with a_x.cpp, a_y.cpp and no a.cpp:
+      # client/remote_map_lookups.cpp, remote_map_residency.cpp) is one component with them.
+      if(src MATCHES "\\.cpp$" AND NOT EXISTS ${ROOT}/${from}.hpp)
+        set(stem "${from}")
+        while(stem MATCHES "_[^_/]*$")
+          string(REGEX REPLACE "_[^_/]*$" "" stem "${stem}")
+          if(EXISTS ${ROOT}/${stem}.hpp)
+            if(NOT EXISTS ${ROOT}/${stem}.cpp)
+              set(from "${stem}")
+            endif()
+            break()
+          endif()
+        endwhile()
+      endif()
       set(inc_path "${inc}")
       if(inc MATCHES "^shadowtile/")
         set(inc_path "client/include/${inc}")
