@@ -14,11 +14,11 @@
 #include <sstream>
 #include <thread>
 
-#include "tiles/bake/scene_limits.hpp"
+#include "scene/scene_limits.hpp"
 #include "tiles/bake/depth_bounds.hpp"
-#include "tiles/bake/exr_io.hpp"
-#include "tiles/bake/png_io.hpp"
-#include "tiles/bake/scene.hpp"
+#include "image/exr_io.hpp"
+#include "image/png_io.hpp"
+#include "scene/scene.hpp"
 #include "app/scene_limits_option.hpp"
 #include "app/command.hpp"
 #include "common/error.hpp"
@@ -28,7 +28,7 @@ namespace {
 
 struct BoundsOptions {
   std::string scene, light, resolution, region, up, output;
-  std::string scene_limits;  // --scene-limits (tiles/bake/scene_limits.hpp)
+  std::string scene_limits;  // --scene-limits (scene/scene_limits.hpp)
   uint32_t preview_size = 2048;
 };
 

@@ -5,11 +5,11 @@
 #include <fstream>
 #include <optional>
 
-#include "tiles/bake/scene_limits.hpp"
+#include "scene/scene_limits.hpp"
 #include "tiles/bake/deep_build.hpp"
 #include "tiles/bake/deep_exr.hpp"
 #include "tiles/bake/map_build.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 #include "app/scene_limits_option.hpp"
 #include "app/command.hpp"
 #include "app/html_page.hpp"
@@ -41,7 +41,7 @@ TexelRegion parse_region(const std::string& text) {
 }
 
 struct BuildArgs {
-  std::string scene_limits;  // --scene-limits (tiles/bake/scene_limits.hpp)
+  std::string scene_limits;  // --scene-limits (scene/scene_limits.hpp)
   std::string scene, light, resolution = "4096", encoding = "dagmh", out, report, region,
                      construction = "bottom-up", up, intervals = "default", shard,
               builder = "auto", skip = "auto";

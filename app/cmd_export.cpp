@@ -5,10 +5,10 @@
 #include <cstdio>
 #include <thread>
 
-#include "tiles/bake/scene_limits.hpp"
+#include "scene/scene_limits.hpp"
 #include "tiles/bake/deep_exr.hpp"
-#include "tiles/bake/exr_io.hpp"
-#include "tiles/bake/png_io.hpp"
+#include "image/exr_io.hpp"
+#include "image/png_io.hpp"
 #include "app/scene_limits_option.hpp"
 #include "app/command.hpp"
 #include "app/pack_cli_util.hpp"
@@ -32,7 +32,7 @@ Rect region_of(const std::string& region, uint32_t level) {
 }
 
 struct ExportArgs {
-  std::string scene_limits;  // --scene-limits (tiles/bake/scene_limits.hpp)
+  std::string scene_limits;  // --scene-limits (scene/scene_limits.hpp)
   std::string pack, region, out;
   uint32_t level = 0;
   bool level_set = false;

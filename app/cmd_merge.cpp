@@ -3,7 +3,7 @@
 
 #include "app/command.hpp"
 #include "common/error.hpp"
-#include "tiles/build/pack_merge.hpp"
+#include "tiles/encode/pack_merge.hpp"
 
 namespace st::cli {
 namespace {

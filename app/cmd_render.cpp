@@ -1,6 +1,6 @@
 // `shadowtile render (PACK | --server HOST:PORT --map NAME) --scene SCENE --camera ...
 //  [--size WxH] [--pcf SIDE] [--filter] [--diff] [--time T | --soft] -o view.exr`: the scene from a
-// camera, Lambert-shaded with the map's shadows (tiles/bake/render.hpp), as RGB float EXR and
+// camera, Lambert-shaded with the map's shadows (render/render.hpp), as RGB float EXR and
 // PNG; --diff also ray-traces the shadows and writes where the two differ. A stack pack (a
 // light set) is drawn at --time T (the two nearest slices blended) or --soft (the average
 // over every sample), and --diff traces the same samples with the same weights.
@@ -13,9 +13,9 @@
 #include <optional>
 #include <thread>
 
-#include "tiles/bake/scene_limits.hpp"
-#include "tiles/bake/render.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene_limits.hpp"
+#include "render/render.hpp"
+#include "scene/scene.hpp"
 #include "app/connect_options.hpp"
 #include "app/scene_limits_option.hpp"
 #include "app/command.hpp"
@@ -112,7 +112,7 @@ namespace {
 
 struct RenderArgs {
   std::string pack, server, map, scene, camera, size = "960x540", out, up;
-  std::string scene_limits;  // --scene-limits (tiles/bake/scene_limits.hpp)
+  std::string scene_limits;  // --scene-limits (scene/scene_limits.hpp)
   ConnectArgs connect;
   uint32_t pcf = 1;  // kernel side
   bool diff = false;

@@ -16,12 +16,12 @@
 #include <vector>
 
 #include "common/hash.hpp"
-#include "tiles/bake/scene_limits.hpp"
+#include "scene/scene_limits.hpp"
 #include "tiles/bake/deep_sampler.hpp"
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/map_build.hpp"
 #include "tiles/bake/raster_bounds.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 #include "app/scene_limits_option.hpp"
 #include "app/command.hpp"
 #include "app/pack_cli_util.hpp"
@@ -39,7 +39,7 @@ namespace {
 
 struct VerifyArgs {
   std::string pack, scene, up, builder = "pack";
-  std::string scene_limits;  // --scene-limits (tiles/bake/scene_limits.hpp)
+  std::string scene_limits;  // --scene-limits (scene/scene_limits.hpp)
   uint64_t samples = 1000000, seed = 1;
   uint32_t show = 10;
   bool all = false;

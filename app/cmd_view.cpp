@@ -55,9 +55,9 @@
 #include "loadgen/camera_path.hpp"
 #include "loadgen/load_run.hpp"
 #include "shadowtile/cache_view.hpp"
-#include "tiles/bake/png_io.hpp"
-#include "tiles/bake/scene.hpp"
-#include "tiles/bake/scene_limits.hpp"
+#include "image/png_io.hpp"
+#include "scene/scene.hpp"
+#include "scene/scene_limits.hpp"
 #include "tiles/core/light.hpp"
 
 namespace st::cli {
@@ -69,7 +69,7 @@ namespace {
 
 struct ViewArgs {
   std::string server, map, scene, path = "flyover", camera, size = "1920x1080", device, out = "view-out", json, up;
-  std::string scene_limits;  // --scene-limits (tiles/bake/scene_limits.hpp)
+  std::string scene_limits;  // --scene-limits (scene/scene_limits.hpp)
   ConnectArgs connect;
   std::string time, time_sweep;
   bool soft = false, twin = false, validation = false;

@@ -1,5 +1,5 @@
-// The options of every command that loads a scene file: --up (tiles/bake/scene.hpp
-// parse_up_axis) and --scene-limits (tiles/bake/scene_limits.hpp).
+// The options of every command that loads a scene file: --up (scene/scene.hpp
+// parse_up_axis) and --scene-limits (scene/scene_limits.hpp).
 #pragma once
 #include <CLI/CLI.hpp>
 #include <string>

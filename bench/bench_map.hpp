@@ -22,13 +22,13 @@
 
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/raster_bounds.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 #include "common/error.hpp"
-#include "tiles/build/hierarchy.hpp"
+#include "tiles/encode/hierarchy.hpp"
 #include "tiles/core/evaluator.hpp"
 #include "tiles/core/interval.hpp"
 #include "tiles/core/light.hpp"
-#include "tiles/build/mh_build.hpp"
+#include "tiles/encode/mh_build.hpp"
 #include "bench/timing.hpp"
 
 namespace st::bench {

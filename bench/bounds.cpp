@@ -27,7 +27,7 @@
 #include <vector>
 
 #include "tiles/bake/depth_bounds.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 #include "common/error.hpp"
 #include "tiles/core/resolution.hpp"
 

@@ -20,7 +20,7 @@
 // Encoding `dagmh` builds without the pack dictionary, `dagmh+dict` with it (the build's
 // own finish pass, timed with the build; tiles/PACK.md "DAG-MH dictionary"), so the two
 // pack sizes stand side by side with MMH's. Each plain DAG-MH build is also followed by a
-// line estimating the dictionary from its tiles (tiles/build/dagmh_dictionary.hpp, not
+// line estimating the dictionary from its tiles (tiles/encode/dagmh_dictionary.hpp, not
 // timed): pack bytes with the tiles' zlib streams replaced by the rewritten tiles' plus
 // the dictionary's, and the tiles' raw bytes (what a client caches) with the dictionary's.
 // Each measurement runs in a forked child so that its peak memory (wait4 rusage) is its
@@ -47,10 +47,10 @@
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/map_build.hpp"
 #include "tiles/bake/raster_bounds.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 #include "common/error.hpp"
 #include "tiles/core/resolution.hpp"
-#include "tiles/build/tile_cut.hpp"
+#include "tiles/encode/tile_cut.hpp"
 
 namespace {
 

@@ -48,7 +48,7 @@
 #include "bench/bench_map.hpp"
 #include "client/map_access.hpp"
 #include "tiles/bake/map_build.hpp"
-#include "tiles/bake/render.hpp"
+#include "render/render.hpp"
 #include "tiles/core/camera.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_reader.hpp"

@@ -20,7 +20,7 @@
 #include <vector>
 
 #include "common/error.hpp"
-#include "tiles/build/mh_build.hpp"
+#include "tiles/encode/mh_build.hpp"
 // The field generators are the tests' (one definition of "realistic" for both; the
 // shadowtile_interval_fields library, tests/fixtures.cmake).
 #include "tests/tiles/interval_fields.hpp"

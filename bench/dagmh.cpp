@@ -19,10 +19,10 @@
 #include <string>
 #include <vector>
 
-#include "tiles/build/dagmh_encode.hpp"
-#include "tiles/build/encode.hpp"
+#include "tiles/encode/dagmh_encode.hpp"
+#include "tiles/encode/encode.hpp"
 #include "common/error.hpp"
-#include "tiles/build/mh_build.hpp"
+#include "tiles/encode/mh_build.hpp"
 // The field generators are the tests' (the shadowtile_interval_fields library).
 #include "tests/tiles/interval_fields.hpp"
 #include "bench/timing.hpp"

@@ -1,4 +1,4 @@
-// What the DAG-MH pack dictionary (tiles/build/dagmh_dictionary.hpp) gives on a pack's
+// What the DAG-MH pack dictionary (tiles/encode/dagmh_dictionary.hpp) gives on a pack's
 // encoded tiles: raw and zlib bytes (level 6, as a pack stores them) of the tiles before
 // and after, and of the dictionary, which a client fetches once and keeps. Shared by
 // bench_dagmh_sharing and bench_build.
@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-#include "tiles/build/dagmh_dictionary.hpp"
+#include "tiles/encode/dagmh_dictionary.hpp"
 #include "tiles/core/pack_format.hpp"
 #include "tiles/core/pack_reader.hpp"
 

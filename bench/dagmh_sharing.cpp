@@ -8,7 +8,7 @@
 //
 //   bench_dagmh_sharing PACK... [--mmh PACK] [--check] [--json PATH]
 //
-// Then it builds the dictionary (tiles/build/dagmh_dictionary.hpp: every node and
+// Then it builds the dictionary (tiles/encode/dagmh_dictionary.hpp: every node and
 // treelet found in >= 2 tiles) and reports what it actually gives: the tiles' raw and
 // zlib (level 6, as a pack stores them) bytes before and after, the dictionary's, and with
 // --mmh the same map's MMH pack's tile bytes for the ratio DAG-MH / MMH. --check looks up
@@ -43,7 +43,7 @@
 #include "common/error.hpp"
 #include "bench/dagmh_dict_figures.hpp"
 #include "bench/timing.hpp"
-#include "tiles/build/dagmh_dictionary.hpp"
+#include "tiles/encode/dagmh_dictionary.hpp"
 #include "tiles/core/dagmh_validate.hpp"
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/pack_reader.hpp"
@@ -324,7 +324,7 @@ int main(int argc, char** argv) {
       dict_rows.push_back(d);
       out.push_back(j);
     }
-    std::printf("\nwith the dictionary (tiles/build/dagmh_dictionary.hpp; dict = its bytes, counted once):\n");
+    std::printf("\nwith the dictionary (tiles/encode/dagmh_dictionary.hpp; dict = its bytes, counted once):\n");
     std::printf("%-28s %10s %10s %9s %7s | %10s %10s %9s %7s | %12s %12s\n", "pack", "raw before", "raw after",
                 "dict raw", "after%", "zlib bef.", "zlib aft.", "dict zlib", "after%", "DAG/MMH raw", "DAG/MMH zlib");
     for (const auto& d : dict_rows) {

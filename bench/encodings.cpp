@@ -33,7 +33,7 @@
 // 3 MB/s on this machine, so a 16K^2 map (1 GiB raw) takes minutes per scene.
 // DAG+dict (tiles mode only; the whole-map encode has no tile edges to share across): the
 // per-tile DAG-MH buffers and the top sharing their common subtrees through one pack
-// dictionary (tiles/build/dagmh_dictionary.hpp, tiles/core/DAGMH.md "Dictionary"), its
+// dictionary (tiles/encode/dagmh_dictionary.hpp, tiles/core/DAGMH.md "Dictionary"), its
 // bytes counted once. --whole-max 4k puts 16K^2 in tiles mode (16 tiles).
 // --quick: sides 2K only (under a minute on an idle 2-core machine).
 // The voxel shadow DAG (tiles/core/VSDAG.md, --depth-bits, default 16; the voxel paper uses
@@ -48,9 +48,9 @@
 #include <nlohmann/json.hpp>
 
 #include "bench/bench_map.hpp"
-#include "tiles/build/dagmh_dictionary.hpp"
-#include "tiles/build/encode.hpp"
-#include "tiles/build/vsdag_encode.hpp"
+#include "tiles/encode/dagmh_dictionary.hpp"
+#include "tiles/encode/encode.hpp"
+#include "tiles/encode/vsdag_encode.hpp"
 
 namespace {
 
@@ -77,7 +77,7 @@ struct Row {
   std::map<st::Encoding, EncodingResult> enc;
   EncodingResult vsdag;  // sum over 4096^2 tiles
   // Tiles mode: DAG-MH with a pack dictionary over the tiles and the coarse top
-  // (tiles/build/dagmh_dictionary.hpp): the rewritten buffers plus the dictionary, once.
+  // (tiles/encode/dagmh_dictionary.hpp): the rewritten buffers plus the dictionary, once.
   uint64_t dag_dict_bytes = 0, dag_dict_only = 0;
   std::vector<std::vector<uint8_t>> dag_buffers;
 };
@@ -367,7 +367,7 @@ int main(int argc, char** argv) {
     std::printf("mode: whole = one encode of the stitched whole-map hierarchy; tiles = sum of per-4096^2-tile "
                 "encodes + the coarse top over the tiles' roots (whole map kept out of memory)\n");
     std::printf("DAG+dict (tiles mode): the same DAG-MH buffers sharing their common subtrees through one pack "
-                "dictionary (tiles/build/dagmh_dictionary.hpp), dictionary bytes included once\n");
+                "dictionary (tiles/encode/dagmh_dictionary.hpp), dictionary bytes included once\n");
 
     std::printf("\nConstruction seconds per stage (summed call times; trace uses all cores itself)\n");
     std::printf("%-9s %5s %8s %8s %8s %8s %9s %8s %8s %8s %8s %12s\n", "scene", "side", "trace", "zstd", "bot-up",

@@ -36,7 +36,7 @@
 #include <random>
 
 #include "bench/bench_map.hpp"
-#include "tiles/build/encode.hpp"
+#include "tiles/encode/encode.hpp"
 #include "tiles/core/evaluator.hpp"
 #include "tiles/core/vsdag_evaluator.hpp"
 

@@ -19,10 +19,10 @@
 #include <string>
 #include <vector>
 
-#include "tiles/build/encode.hpp"
-#include "tiles/build/mh_build.hpp"
-#include "tiles/build/mh_quadtree_layout.hpp"
-#include "tiles/build/mmh_merge.hpp"
+#include "tiles/encode/encode.hpp"
+#include "tiles/encode/mh_build.hpp"
+#include "tiles/encode/mh_quadtree_layout.hpp"
+#include "tiles/encode/mmh_merge.hpp"
 // The field generators are the tests' (one definition of "realistic" for both; the
 // shadowtile_interval_fields library, tests/fixtures.cmake).
 #include "tests/tiles/interval_fields.hpp"

@@ -17,7 +17,7 @@
 
 #include "common/error.hpp"
 #include "tiles/bake/map_build.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 #include "tiles/core/resolution.hpp"
 
 namespace {

@@ -45,7 +45,7 @@
 #include "server/catalog.hpp"
 #include "server/server.hpp"
 #include "tiles/bake/map_build.hpp"
-#include "tiles/bake/scene_limits.hpp"
+#include "scene/scene_limits.hpp"
 
 namespace {
 

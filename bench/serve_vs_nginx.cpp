@@ -63,9 +63,9 @@
 #include "proto/proto.hpp"
 #include "server/server.hpp"
 #include "common/error.hpp"
-#include "tiles/build/mh_build.hpp"
+#include "tiles/encode/mh_build.hpp"
 #include "tiles/core/pack_reader.hpp"
-#include "tiles/build/pack_writer.hpp"
+#include "tiles/encode/pack_writer.hpp"
 #include "bench/timing.hpp"
 
 using namespace st;

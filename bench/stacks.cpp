@@ -78,15 +78,15 @@
 #include "common/error.hpp"
 #include "common/hash.hpp"
 #include "tiles/bake/depth_bounds.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 #include "tiles/bake/stack_build.hpp"
-#include "tiles/build/stack_blocked.hpp"
-#include "tiles/build/stack_pack.hpp"
+#include "tiles/encode/stack_blocked.hpp"
+#include "tiles/encode/stack_pack.hpp"
 #include "tiles/core/stack_map.hpp"
-#include "tiles/build/encode.hpp"
-#include "tiles/build/mh_build.hpp"
-#include "tiles/build/mh_octree_encode.hpp"
-#include "tiles/build/mh_octree_share.hpp"
+#include "tiles/encode/encode.hpp"
+#include "tiles/encode/mh_build.hpp"
+#include "tiles/encode/mh_octree_encode.hpp"
+#include "tiles/encode/mh_octree_share.hpp"
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/resolution.hpp"
 #include "tiles/core/stack_lookup.hpp"
@@ -490,7 +490,7 @@ nlohmann::json run_case(const Case& c, uint32_t level, size_t lookups, int reps,
 // Out-of-core mode (--blocked, the default from 4K^2 per slice): the slices are traced
 // (rasterizer for suns, Embree for the area light; --tracer embree forces Embree) into a
 // spill file in octree blocks and reduced block by block into the stack pack's cut
-// (tiles/build/stack_blocked.hpp); "octree bytes" are then the pack's raw octree tiles plus
+// (tiles/encode/stack_blocked.hpp); "octree bytes" are then the pack's raw octree tiles plus
 // its grid (the cut at skip level K), and the octree lookups go through StackMap over the
 // resident tiles (what a client holding the whole pack does). The N 2D quadtrees are built
 // from each slice as it is traced (one slice in memory at a time).

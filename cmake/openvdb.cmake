@@ -1,4 +1,4 @@
-# OpenVDB (.vdb density grids read as scene volumes; tiles/bake/scene_vdb.cpp). Only tiles_bake
+# OpenVDB (.vdb density grids read as scene volumes; scene/scene_vdb.cpp). Only shadowtile::scene
 # links it: never the client library or the server.
 #
 # Debian 12's libopenvdb-dev ships OpenVDB's own find module in lib/cmake/OpenVDB, but next

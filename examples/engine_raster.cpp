@@ -33,7 +33,7 @@
 #include "examples/raster/flat_mesh.hpp"
 #include "examples/raster/raster.hpp"
 #include "shadowtile/client.hpp"
-#include "tiles/bake/png_io.hpp"
+#include "image/png_io.hpp"
 
 namespace {
 

@@ -9,12 +9,6 @@ const uint32_t kEvaluateSpv[] = {
 const uint32_t kShadowPassSpv[] = {
 #include "gpu/shaders/shadow_pass.spv.inc"
 };
-const uint32_t kLayoutProbeSpv[] = {
-#include "gpu/shaders/layout_probe.spv.inc"
-};
-const uint32_t kR32fSpv[] = {
-#include "gpu/shaders/r32f.spv.inc"
-};
 const uint32_t kStackEvaluateSpv[] = {
 #include "gpu/shaders/stack_evaluate.spv.inc"
 };
@@ -37,7 +31,7 @@ std::span<const uint32_t> engine_shadow_pass_spirv(bool light) {
   return kEngineShadowPassSpv;
 }
 
-void Kernels::create(VkContext& ctx, uint32_t sets) {
+void Kernels::create(VkContext& ctx, uint32_t sets, std::span<const std::span<const uint32_t>> extra) {
   vk_ = &ctx.vk;
   VkDevice d = ctx.device();
   VkDescriptorSetLayoutBinding b[6] = {};
@@ -76,9 +70,10 @@ void Kernels::create(VkContext& ctx, uint32_t sets) {
   dai.pSetLayouts = layouts.data();
   vk_check(vk_->AllocateDescriptorSets(d, &dai, sets_.data()), "vkAllocateDescriptorSets");
 
-  const std::span<const uint32_t> code[kKernelCount] = {kEvaluateSpv, kShadowPassSpv, kLayoutProbeSpv,
-                                                           kR32fSpv,     kStackEvaluateSpv, kStackShadowPassSpv};
-  for (uint32_t i = 0; i < kKernelCount; ++i) {
+  std::vector<std::span<const uint32_t>> code = {kEvaluateSpv, kShadowPassSpv, kStackEvaluateSpv, kStackShadowPassSpv};
+  code.insert(code.end(), extra.begin(), extra.end());
+  pipelines_.assign(code.size(), VK_NULL_HANDLE);
+  for (size_t i = 0; i < code.size(); ++i) {
     VkShaderModule m = ctx.make_shader(code[i]);
     VkComputePipelineCreateInfo cpi{};
     cpi.sType = VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO;
@@ -120,6 +115,7 @@ void Kernels::destroy(VkContext& ctx) {
   VkDevice d = ctx.device();
   for (VkPipeline& p : pipelines_)
     if (p) vk_->DestroyPipeline(d, p, nullptr), p = VK_NULL_HANDLE;
+  pipelines_.clear();
   if (descriptor_pool_) vk_->DestroyDescriptorPool(d, descriptor_pool_, nullptr);
   if (pipeline_layout_) vk_->DestroyPipelineLayout(d, pipeline_layout_, nullptr);
   if (set_layout_) vk_->DestroyDescriptorSetLayout(d, set_layout_, nullptr);

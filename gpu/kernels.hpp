@@ -1,6 +1,8 @@
-// The compute pipelines of gpu/ (evaluate, shadow pass, layout probe) over one
+// The compute pipelines of gpu/ (evaluate, shadow pass, and both for stacks) over one
 // descriptor-set layout (shaders/st_buffers.glsl), their SPIR-V compiled by glslc at build
-// time and embedded. Internal to gpu/.
+// time and embedded. Internal to gpu/. A test's probe or a benchmark's baseline brings its
+// own SPIR-V over the same layout (Kernels::create's `extra`): the library ships only the
+// kernels GpuMap runs.
 #pragma once
 #include <vulkan/vulkan.h>
 
@@ -14,17 +16,16 @@
 
 namespace st::gpu {
 
-// r32f: bench_gpu's baseline, the finest level as a plain float image (shaders/r32f.comp).
 // stack_*: the same two for stack maps (shaders/st_stack.glsl).
 enum class Kernel : uint32_t {
   evaluate = 0,
   shadow_pass = 1,
-  layout_probe = 2,
-  r32f = 3,
-  stack_evaluate = 4,
-  stack_shadow_pass = 5
+  stack_evaluate = 2,
+  stack_shadow_pass = 3
 };
-inline constexpr uint32_t kKernelCount = 6;
+inline constexpr uint32_t kKernelCount = 4;
+// The i-th of the `extra` kernels given to Kernels::create.
+constexpr Kernel extra_kernel(uint32_t i) { return Kernel(kKernelCount + i); }
 
 // The engine-mode shadow pass (shaders/engine_shadow_pass.comp), built by GpuMap itself
 // with its own descriptor-set layout (images), not one of the Kernels; `light`: the
@@ -33,8 +34,9 @@ std::span<const uint32_t> engine_shadow_pass_spirv(bool light = false);
 
 class Kernels {
  public:
-  // Pipelines plus `sets` descriptor sets.
-  void create(VkContext& ctx, uint32_t sets);
+  // Pipelines plus `sets` descriptor sets; `extra`: SPIR-V of further compute kernels over
+  // the same set layout and push constants, recorded as extra_kernel(i).
+  void create(VkContext& ctx, uint32_t sets, std::span<const std::span<const uint32_t>> extra = {});
   // Points descriptor set `i` at the six buffers, in binding order.
   VkDescriptorSet bind(VkContext& ctx, uint32_t i, const std::array<VkBuffer, 6>& buffers);
   void record(VkCommandBuffer cmd, Kernel k, VkDescriptorSet set, const uint32_t (&pc)[layout::kPcWords]) const;
@@ -44,7 +46,7 @@ class Kernels {
   VkDescriptorSetLayout set_layout_ = VK_NULL_HANDLE;
   VkPipelineLayout pipeline_layout_ = VK_NULL_HANDLE;
   VkDescriptorPool descriptor_pool_ = VK_NULL_HANDLE;
-  std::array<VkPipeline, kKernelCount> pipelines_{};
+  std::vector<VkPipeline> pipelines_;
   std::vector<VkDescriptorSet> sets_;
   const VkFunctions* vk_ = nullptr;  // the context's table (create())
 };

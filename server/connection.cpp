@@ -430,10 +430,7 @@ void Connection::answer_error(uint32_t request_id, ErrorCode code, const std::st
                               bool last) {
   core_.stats.error();
   std::vector<uint8_t> out;
-  std::string text = message.substr(0, proto::kMaxErrorMessageBytes);
-  for (char& c : text)
-    if (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) c = ' ';
-  proto::ErrorMessage e{code, text};
+  proto::ErrorMessage e{code, proto::sanitize_text(message, proto::kMaxErrorMessageBytes)};
   if (proto::encode_message(e, request_id, proto::kFlagFinal, limits_, out))
     queue_control({std::move(out), request_id, last, {}});
   else if (last)

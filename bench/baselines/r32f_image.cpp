@@ -10,6 +10,13 @@ namespace st::gpu {
 
 namespace L = layout;
 
+namespace {
+const uint32_t kR32fSpv[] = {
+#include "bench/baselines/r32f.comp.spv.inc"
+};
+const std::span<const uint32_t> kR32fKernel[] = {kR32fSpv};
+}  // namespace
+
 struct R32fImage::Impl {
   VkContext ctx;
   Kernels kernels;
@@ -28,7 +35,7 @@ struct R32fImage::Impl {
       if (values.size() != (uint64_t(1) << (2 * l))) throw GpuError("R32fImage: values must hold 4^level floats");
       if (bytes > ctx.properties().limits.maxStorageBufferRange)
         throw GpuError("R32fImage: " + std::to_string(bytes) + " bytes exceed maxStorageBufferRange of '" + ctx.device_name() + "'");
-      kernels.create(ctx, 1);
+      kernels.create(ctx, 1, kR32fKernel);
       image = ctx.make_buffer(bytes, false);
       const uint32_t pcf = L::kPtHeaderWords;
       page = ctx.make_buffer((pcf + L::kMaxPcf * L::kPcfTableStride) * 4, true);
@@ -102,7 +109,7 @@ struct R32fImage::Impl {
     ctx.vk.CmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT | VK_PIPELINE_STAGE_HOST_BIT, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT,
                          0, 1, &raw, 0, nullptr, 0, nullptr);
     if (queries) ctx.vk.CmdResetQueryPool(cmd, queries, 0, 2);
-    kernels.record(cmd, Kernel::r32f, set, pc);
+    kernels.record(cmd, extra_kernel(0), set, pc);
     if (queries) ctx.vk.CmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_TOP_OF_PIPE_BIT, queries, 0);
     ctx.vk.CmdDispatch(cmd, (n + L::kWorkgroupSize - 1) / L::kWorkgroupSize, 1, 1);
     if (queries) ctx.vk.CmdWriteTimestamp(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, queries, 1);

@@ -1,6 +1,6 @@
 // The baseline bench_gpu measures the GPU evaluators against: a map's finest level as an
 // uncompressed R32F image in one storage buffer on the same device, with the same queries
-// (single tap, r x r PCF) and the same shadow pass at the finest level (shaders/r32f.comp).
+// (single tap, r x r PCF) and the same shadow pass at the finest level (r32f.comp).
 // Benchmark code (bench/CMakeLists.txt compiles it into bench_gpu only); it drives gpu/'s
 // internal kernels.
 #pragma once

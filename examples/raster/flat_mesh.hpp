@@ -3,7 +3,7 @@
 #pragma once
 #include <vector>
 
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 
 namespace st::raster {
 

@@ -59,11 +59,11 @@ void main() {
   const float lambert = max(dot(n, to_light), 0.0);
   const uint finest = st_finest_level();
   // The footprint in finest texels, as `shadowtile render --filter` measures it
-  // (tiles/bake/render.cpp): the pixel's size at the receiver (distance x pixel angle)
+  // (render/render.cpp): the pixel's size at the receiver (distance x pixel angle)
   // over one finest texel. The light-space derivatives (st_footprint_of with uvd +
   // dFdx(uvd)) overestimate it at grazing angles: coarser levels, speckled shadows.
   const float footprint = push.eye.w != 0.0 ? distance(push.eye.xyz, world_position) * push.eye.w / push.misc.y : 1.0;
-  // The receiver's offset along the normal, as the CPU renderer's (tiles/bake/render.hpp):
+  // The receiver's offset along the normal, as the CPU renderer's (render/render.hpp):
   // 1.5 texels plus the PCF radius, in texels of the finer level filtered (a kernel of
   // coarse texels needs a coarse texel's bias, or sloped surfaces shadow themselves).
   const StFilter level = st_filter_levels(footprint, finest);

@@ -27,9 +27,9 @@
 // MH §3.3 / Map::pcf_footprint); st_footprint_of measures it from neighbouring receivers'
 // light-space positions (the passes' definition: a compute pass's neighbours, or uvd +
 // dFdx(uvd) in a fragment shader), which grows at grazing angles; distance x pixel angle /
-// texel (tiles/bake/render.cpp's) stays isotropic (examples/shaders/scene.frag). At a
+// texel (render/render.cpp's) stays isotropic (examples/shaders/scene.frag). At a
 // coarse level the receiver needs a coarse texel's offset along the normal, as
-// tiles/bake/render.hpp explains, or sloped surfaces shadow themselves. The deep part is
+// render/render.hpp explains, or sloped surfaces shadow themselves. The deep part is
 // looked up at the surface point itself moved toward the light along the light ray by 1.5
 // deep texels (no normal offset, which would shift leaf shadows sideways), filtered with
 // its mips over kernel x max(1, footprint) finest texels (st_deep.glsl). Feedback: every

@@ -1,6 +1,6 @@
 // shadowtile GPU evaluators: the page-table walk over the GPU tile cache and the MH, MMH
 // DAG-MH and voxel shadow DAG tile decoders, the same operations as the CPU's (tiles/core/page_table.hpp,
-// mh_quadtree_reader.cpp, dagmh_traverse.hpp, dagmh_values.hpp, client/remote_map.cpp),
+// mh_quadtree_reader.cpp, dagmh_traverse.hpp, dagmh_values.hpp, client/remote_map_lookups.cpp),
 // so every answer is bit-exact with the CPU's (gpu/GPU_LAYOUT.md "Exactness").
 //
 // An engine includes this file in its own compute or fragment shader. Before including
@@ -425,7 +425,7 @@ float st_tile_depth(uint slot, uint rel, uint x, uint y) {
   return st_mh_depth(base, rel, x, y, enc == 1u || mmh_tile);
 }
 
-// ---- the page-table walk (page_table.hpp walk_page_table; remote_map.cpp depth_locked) ----
+// ---- the page-table walk (page_table.hpp walk_page_table; client/remote_map_lookups.cpp enter_tile) ----
 // Where a texel's answer lives, and the square (level l, ex, ey) of texels whose walk
 // ends the same way (same value, same tile, same absent tile): PCF taps inside it skip
 // the walk (the shared walk of MH §3.3, at the page-table level).

@@ -14,8 +14,8 @@
 #include "tests/client/loopback.hpp"
 #include "tiles/bake/deep_build.hpp"
 #include "tiles/bake/map_build.hpp"
-#include "tiles/bake/png_io.hpp"
-#include "tiles/bake/scene.hpp"
+#include "image/png_io.hpp"
+#include "scene/scene.hpp"
 #include "tiles/core/deep_format.hpp"
 
 namespace st::client {

@@ -11,7 +11,7 @@
 #include "tests/client/loopback.hpp"
 #include "tiles/bake/deep_build.hpp"
 #include "tiles/bake/map_build.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 #include "tiles/core/deep_pack.hpp"
 #ifdef SHADOWTILE_HAVE_OPENVDB
 #include "tests/tiles/vdb_fixtures.hpp"

@@ -10,7 +10,7 @@
 #include "client/map_access.hpp"
 #include "tests/client/loopback.hpp"
 #include "tiles/bake/map_build.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 #include "tiles/core/dagmh_validate.hpp"
 
 namespace st::client {

@@ -14,7 +14,7 @@
 #include "proto/proto.hpp"
 #include "server/server.hpp"
 #include "tiles/core/encoding.hpp"
-#include "tiles/build/hierarchy.hpp"
+#include "tiles/encode/hierarchy.hpp"
 #include "tiles/core/interval.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_reader.hpp"

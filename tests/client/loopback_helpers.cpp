@@ -14,9 +14,9 @@
 #include "tests/client/loopback.hpp"
 #include "tests/tiles/pack_test_support.hpp"
 #include "common/error.hpp"
-#include "tiles/build/mh_build.hpp"
-#include "tiles/build/pack_writer.hpp"
-#include "tiles/build/tile_cut.hpp"
+#include "tiles/encode/mh_build.hpp"
+#include "tiles/encode/pack_writer.hpp"
+#include "tiles/encode/tile_cut.hpp"
 
 namespace st::looptest {
 

@@ -16,7 +16,7 @@
 #include "proto/proto.hpp"
 #include "server/catalog.hpp"
 #include "tests/client/loopback.hpp"
-#include "tiles/build/pack_writer.hpp"
+#include "tiles/encode/pack_writer.hpp"
 #include "tiles/core/map_preview.hpp"
 #include "tiles/core/pack_format.hpp"
 #include "tiles/core/tile_cut_grid.hpp"

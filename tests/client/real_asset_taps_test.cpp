@@ -15,7 +15,7 @@
 #include "client/remote_map.hpp"
 #include "tests/client/loopback.hpp"
 #include "tiles/bake/map_build.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_reader.hpp"
 #include "tiles/core/tap_order.hpp"

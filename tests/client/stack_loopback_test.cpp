@@ -5,8 +5,8 @@
 #include <gtest/gtest.h>
 
 #include "tests/client/loopback.hpp"
-#include "tiles/build/stack_blocked.hpp"
-#include "tiles/build/stack_pack.hpp"
+#include "tiles/encode/stack_blocked.hpp"
+#include "tiles/encode/stack_pack.hpp"
 #include "tiles/core/light_set.hpp"
 #include "tiles/core/stack_map.hpp"
 

@@ -10,7 +10,7 @@
 #include "common/error.hpp"
 #include "tests/fuzz/evaluator_probe.hpp"
 #include "tests/fuzz/seed_support.hpp"
-#include "tiles/build/dagmh_dictionary.hpp"
+#include "tiles/encode/dagmh_dictionary.hpp"
 #include "tiles/core/dagmh_validate.hpp"
 
 std::vector<st::fuzz::Bytes> st::fuzz::seeds() {

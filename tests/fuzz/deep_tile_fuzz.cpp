@@ -11,7 +11,7 @@
 #include "common/error.hpp"
 #include "tests/fuzz/evaluator_probe.hpp"
 #include "tests/fuzz/seed_support.hpp"
-#include "tiles/build/deep_encode.hpp"
+#include "tiles/encode/deep_encode.hpp"
 #include "tiles/core/deep_tile.hpp"
 
 std::vector<st::fuzz::Bytes> st::fuzz::seeds() {

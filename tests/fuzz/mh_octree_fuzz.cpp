@@ -11,7 +11,7 @@
 #include "common/hash.hpp"
 #include "tests/fuzz/evaluator_probe.hpp"
 #include "tests/fuzz/fuzz_harness.hpp"
-#include "tiles/build/mh_octree_encode.hpp"
+#include "tiles/encode/mh_octree_encode.hpp"
 #include "tiles/core/mh_octree.hpp"
 #include "tiles/core/stack_lookup.hpp"
 

@@ -8,9 +8,9 @@
 #include "common/error.hpp"
 #include "tests/fuzz/evaluator_probe.hpp"
 #include "tests/fuzz/fuzz_harness.hpp"
-#include "tiles/build/encode.hpp"
-#include "tiles/build/mh_build.hpp"
-#include "tiles/build/plane_fit.hpp"
+#include "tiles/encode/encode.hpp"
+#include "tiles/encode/mh_build.hpp"
+#include "tiles/encode/plane_fit.hpp"
 #include "tiles/core/encoding.hpp"
 
 namespace {

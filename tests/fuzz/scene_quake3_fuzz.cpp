@@ -1,4 +1,4 @@
-// libFuzzer harness for the Quake 3 map reader (tiles/bake/scene_quake3.hpp). Input:
+// libFuzzer harness for the Quake 3 map reader (scene/scene_quake3.hpp). Input:
 // byte 0 is a control byte (bit 0: the rest is a .pk3 archive, else a bare .bsp; bit 1:
 // Z-up; bit 2: name the member "maps/a.bsp" instead of picking one), the rest the file.
 // load_quake3_bytes must either throw st::Error or return a scene that holds what
@@ -9,7 +9,7 @@
 
 #include "common/error.hpp"
 #include "tests/fuzz/quake3_seeds.hpp"
-#include "tiles/bake/scene_quake3.hpp"
+#include "scene/scene_quake3.hpp"
 
 std::vector<st::fuzz::Bytes> st::fuzz::seeds() {
   std::vector<Bytes> out;

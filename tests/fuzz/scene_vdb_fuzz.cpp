@@ -1,4 +1,4 @@
-// libFuzzer harness for the OpenVDB scene reader (tiles/bake/scene_vdb.cpp,
+// libFuzzer harness for the OpenVDB scene reader (scene/scene_vdb.cpp,
 // load_vdb_volume): our structure check of the file (every length against the bytes
 // left, every offset against the file's size) runs before OpenVDB reads a byte of it.
 // Input: the file's bytes, written to a per-process temporary file (OpenVDB reads files).
@@ -14,7 +14,7 @@
 #include "common/error.hpp"
 #include "tests/fuzz/fuzz_harness.hpp"
 #include "tests/tiles/vdb_fixtures.hpp"
-#include "tiles/bake/scene_volumes.hpp"
+#include "scene/scene_volumes.hpp"
 
 namespace {
 

@@ -1,4 +1,4 @@
-// libFuzzer harness for the zip reader (tiles/bake/scene_zip.hpp: minizip and our limits)
+// libFuzzer harness for the zip reader (scene/scene_zip.hpp: minizip and our limits)
 // that .pk3 archives go through. Input: byte 0 is a control byte (bit 0: list only members
 // ending in ".bsp"), the rest the archive. list_zip must return nullopt, throw st::Error
 // or return at most kZipMaxEntries entries whose packed bytes fit in the archive and whose
@@ -8,7 +8,7 @@
 
 #include "common/error.hpp"
 #include "tests/fuzz/quake3_seeds.hpp"
-#include "tiles/bake/scene_zip.hpp"
+#include "scene/scene_zip.hpp"
 
 std::vector<st::fuzz::Bytes> st::fuzz::seeds() {
   std::vector<Bytes> out;

@@ -11,9 +11,9 @@
 #include "proto/proto.hpp"
 #include "common/error.hpp"
 #include "tiles/core/light.hpp"
-#include "tiles/build/mh_build.hpp"
-#include "tiles/build/pack_writer.hpp"
-#include "tiles/build/tile_cut.hpp"
+#include "tiles/encode/mh_build.hpp"
+#include "tiles/encode/pack_writer.hpp"
+#include "tiles/encode/tile_cut.hpp"
 #include "tiles/core/tile_cut_grid.hpp"
 
 namespace st::fuzz {

@@ -8,7 +8,7 @@
 
 #include "tests/fuzz/fuzz_harness.hpp"
 #include "tiles/core/encoding.hpp"
-#include "tiles/build/hierarchy.hpp"
+#include "tiles/encode/hierarchy.hpp"
 #include "tiles/core/interval.hpp"
 
 namespace st::fuzz {

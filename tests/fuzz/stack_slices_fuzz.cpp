@@ -11,7 +11,7 @@
 #include "common/hash.hpp"
 #include "tests/fuzz/evaluator_probe.hpp"
 #include "tests/fuzz/fuzz_harness.hpp"
-#include "tiles/build/stack_slices_encode.hpp"
+#include "tiles/encode/stack_slices_encode.hpp"
 #include "tiles/core/stack_slices.hpp"
 
 namespace {

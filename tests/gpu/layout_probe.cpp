@@ -9,6 +9,11 @@ namespace st::gpu {
 
 namespace {
 
+const uint32_t kLayoutProbeSpv[] = {
+#include "tests/gpu/layout_probe.comp.spv.inc"
+};
+const std::span<const uint32_t> kLayoutProbeKernel[] = {kLayoutProbeSpv};
+
 // One dispatch of layout_probe.comp: `input` in binding 2, push-constant count `count`,
 // returns `out_words` words of binding 4.
 std::vector<uint32_t> run_probe(const std::string& device, bool validation, std::span<const uint32_t> input,
@@ -28,7 +33,7 @@ std::vector<uint32_t> run_probe(const std::string& device, bool validation, std:
     kernels.destroy(ctx);
   };
   try {
-    kernels.create(ctx, 1);
+    kernels.create(ctx, 1, kLayoutProbeKernel);
     for (int i = 0; i < 6; ++i) bufs.push_back(ctx.make_buffer(words * 4, true));
     std::memset(bufs[2].mapped, 0, words * 4);
     if (!input.empty()) std::memcpy(bufs[2].mapped, input.data(), input.size() * 4);
@@ -41,7 +46,7 @@ std::vector<uint32_t> run_probe(const std::string& device, bool validation, std:
     vk_check(ctx.vk.BeginCommandBuffer(cmd, &bi), "vkBeginCommandBuffer");
     uint32_t pc[layout::kPcWords] = {};
     pc[layout::kPcCount] = count;
-    kernels.record(cmd, Kernel::layout_probe, set, pc);
+    kernels.record(cmd, extra_kernel(0), set, pc);
     ctx.vk.CmdDispatch(cmd, std::max(1u, (count + layout::kWorkgroupSize - 1) / layout::kWorkgroupSize), 1, 1);
     VkMemoryBarrier host{};
     host.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;

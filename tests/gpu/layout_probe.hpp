@@ -1,6 +1,6 @@
-// Runs shaders/layout_probe.comp on the named device and returns the layout constants the
-// shader was compiled against, in the order the probe writes them (layout::kProbeWords
-// words). Throws GpuError like GpuMap's constructor (and run_fdiv_probe also for a or b
+// Runs tests/gpu/shaders/layout_probe.comp on the named device and returns the layout
+// constants the shader was compiled against, in the order the probe writes them
+// (layout::kProbeWords words). Throws GpuError like GpuMap's constructor (and run_fdiv_probe also for a or b
 // of different sizes or more than 2^22 pairs). Test code: compiled into gpu_tests only,
 // never into shadowtile::gpu; it drives gpu/'s internal kernels.
 #pragma once

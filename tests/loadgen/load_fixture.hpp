@@ -7,7 +7,7 @@
 
 #include "server/server.hpp"
 #include "tiles/bake/map_build.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 
 namespace st::loadtest {
 

@@ -9,7 +9,7 @@
 #include "client/map_access.hpp"
 #include "load_fixture.hpp"
 #include "loadgen/view_tiles.hpp"
-#include "tiles/bake/render.hpp"
+#include "render/render.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 
 namespace st {

@@ -1,4 +1,4 @@
-// The DAG-MH pack dictionary (tiles/core/DAGMH.md "Dictionary", tiles/build/dagmh_dictionary.hpp):
+// The DAG-MH pack dictionary (tiles/core/DAGMH.md "Dictionary", tiles/encode/dagmh_dictionary.hpp):
 // tiles rewritten to share their common subtrees answer every lookup bit-identically, the
 // bytes shrink, the dictionary's layout is the drawn one, and hostile dictionaries and
 // tiles are refused with a FormatError or answer without reading out of bounds (ASan).
@@ -10,7 +10,7 @@
 #include "common/error.hpp"
 #include "tests/tiles/dagmh_fixtures.hpp"
 #include "tests/tiles/interval_fields.hpp"
-#include "tiles/build/dagmh_dictionary.hpp"
+#include "tiles/encode/dagmh_dictionary.hpp"
 #include "tiles/core/dagmh_validate.hpp"
 
 namespace st {

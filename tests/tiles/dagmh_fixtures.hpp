@@ -9,8 +9,8 @@
 #include <vector>
 
 #include "tests/tiles/interval_fields.hpp"
-#include "tiles/build/encode.hpp"
-#include "tiles/build/hierarchy.hpp"
+#include "tiles/encode/encode.hpp"
+#include "tiles/encode/hierarchy.hpp"
 
 namespace st::dagmh_test {
 

@@ -5,7 +5,7 @@
 #include <cstddef>
 
 #include "tests/tiles/dagmh_fixtures.hpp"
-#include "tiles/build/dagmh_encode.hpp"
+#include "tiles/encode/dagmh_encode.hpp"
 #include "tiles/core/dagmh_format.hpp"
 
 namespace st::dagmh {

@@ -9,8 +9,8 @@
 
 #include "tests/tiles/dagmh_fixtures.hpp"
 #include "tests/tiles/interval_fields.hpp"
-#include "tiles/build/dagmh_encode.hpp"
-#include "tiles/build/mh_build.hpp"
+#include "tiles/encode/dagmh_encode.hpp"
+#include "tiles/encode/mh_build.hpp"
 #include "tiles/core/dagmh_validate.hpp"
 
 namespace st {

@@ -5,8 +5,8 @@
 
 #include "tests/tiles/dagmh_fixtures.hpp"
 #include "tests/tiles/interval_fields.hpp"
-#include "tiles/build/dagmh_encode.hpp"
-#include "tiles/build/mh_build.hpp"
+#include "tiles/encode/dagmh_encode.hpp"
+#include "tiles/encode/mh_build.hpp"
 
 namespace st {
 namespace {

@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "tests/tiles/interval_fields.hpp"
-#include "tiles/build/dagmh_values_encode.hpp"
+#include "tiles/encode/dagmh_values_encode.hpp"
 #include "common/error.hpp"
 
 namespace st::dagmh {

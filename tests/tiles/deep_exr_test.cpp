@@ -15,7 +15,7 @@
 
 #include "common/error.hpp"
 #include "tiles/bake/deep_build.hpp"
-#include "tiles/bake/exr_io.hpp"
+#include "image/exr_io.hpp"
 #include "tiles/core/deep_format.hpp"
 #include "tiles/core/deep_map.hpp"
 

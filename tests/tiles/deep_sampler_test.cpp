@@ -8,8 +8,8 @@
 #include <cmath>
 
 #include "common/error.hpp"
-#include "tiles/bake/scene_mesh.hpp"
-#include "tiles/build/deep_encode.hpp"
+#include "scene/scene_mesh.hpp"
+#include "tiles/encode/deep_encode.hpp"
 #include "tiles/core/deep_tile.hpp"
 
 namespace st {

@@ -8,7 +8,7 @@
 
 #include "common/bytes.hpp"
 #include "common/error.hpp"
-#include "tiles/build/deep_encode.hpp"
+#include "tiles/encode/deep_encode.hpp"
 #include "tiles/core/deep_tile.hpp"
 
 namespace st {

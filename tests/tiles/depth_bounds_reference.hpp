@@ -10,7 +10,7 @@
 #include <string>
 #include <vector>
 
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 #include "tiles/core/interval.hpp"
 #include "tiles/core/light.hpp"
 

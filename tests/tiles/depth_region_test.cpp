@@ -1,7 +1,7 @@
 // Evaluator::depth_region: the region each encoding reports around a texel really shares
 // its answer (every texel in it gives the same depth() bits), the value is depth()'s, and
 // the regions are not vacuous (a field with constant areas reports regions wider than one
-// texel). The client's last-sample cache trusts exactly this (client/remote_map.cpp).
+// texel). The client's last-sample cache trusts exactly this (client/remote_map_lookups.cpp).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -10,8 +10,8 @@
 #include <vector>
 
 #include "interval_fields.hpp"
-#include "tiles/build/encode.hpp"
-#include "tiles/build/mh_build.hpp"
+#include "tiles/encode/encode.hpp"
+#include "tiles/encode/mh_build.hpp"
 #include "tiles/core/tap_batch.hpp"
 
 namespace st {

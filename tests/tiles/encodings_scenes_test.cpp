@@ -5,9 +5,9 @@
 
 #include "interval_fields.hpp"
 #include "tiles/bake/depth_bounds.hpp"
-#include "tiles/bake/scene.hpp"
-#include "tiles/build/encode.hpp"
-#include "tiles/build/mh_build.hpp"
+#include "scene/scene.hpp"
+#include "tiles/encode/encode.hpp"
+#include "tiles/encode/mh_build.hpp"
 
 namespace st {
 namespace {

@@ -6,8 +6,8 @@
 #include <fstream>
 #include <random>
 
-#include "tiles/bake/exr_io.hpp"
-#include "tiles/bake/png_io.hpp"
+#include "image/exr_io.hpp"
+#include "image/png_io.hpp"
 #include "common/error.hpp"
 
 namespace st {

@@ -14,8 +14,8 @@
 #include "tests/tiles/hazard_scenes.hpp"
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/map_build.hpp"
-#include "tiles/bake/render.hpp"
-#include "tiles/bake/render_error.hpp"
+#include "render/render.hpp"
+#include "render/render_error.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 
 namespace st {

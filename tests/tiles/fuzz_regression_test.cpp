@@ -10,10 +10,10 @@
 
 #include "tests/tiles/pack_test_support.hpp"
 #include "tiles/core/light.hpp"
-#include "tiles/build/mh_build.hpp"
+#include "tiles/encode/mh_build.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_reader.hpp"
-#include "tiles/build/pack_writer.hpp"
+#include "tiles/encode/pack_writer.hpp"
 
 namespace st {
 namespace {

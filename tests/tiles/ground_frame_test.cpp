@@ -12,7 +12,7 @@
 #include "common/hash.hpp"
 #include "tests/tiles/stack_fixtures.hpp"
 #include "tiles/bake/stack_build.hpp"
-#include "tiles/build/mh_octree_encode.hpp"
+#include "tiles/encode/mh_octree_encode.hpp"
 #include "tiles/core/light_set.hpp"
 #include "tiles/core/mh_octree.hpp"
 #include "tiles/core/sample_texels.hpp"

@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "common/hash.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 #include "tiles/core/vec.hpp"
 
 namespace st::test {

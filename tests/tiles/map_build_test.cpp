@@ -9,7 +9,7 @@
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/map_build.hpp"
 #include "tiles/bake/raster_bounds.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 #include "common/error.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 

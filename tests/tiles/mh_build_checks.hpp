@@ -1,11 +1,11 @@
-// Checks of a Hierarchy (tiles/build/hierarchy.hpp) against its contract, shared by the
+// Checks of a Hierarchy (tiles/encode/hierarchy.hpp) against its contract, shared by the
 // construction tests and the encoders' tests. Each returns "" when the property holds,
 // else a one-line description of the first failure.
 #pragma once
 #include <string>
 #include <vector>
 
-#include "tiles/build/hierarchy.hpp"
+#include "tiles/encode/hierarchy.hpp"
 #include "tiles/core/interval.hpp"
 
 namespace st::fields {

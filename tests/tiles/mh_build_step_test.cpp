@@ -8,8 +8,8 @@
 #include <cstring>
 
 #include "tests/tiles/interval_fields.hpp"
-#include "tiles/build/mh_internal.hpp"
-#include "tiles/build/mh_level_step.hpp"
+#include "tiles/encode/mh_internal.hpp"
+#include "tiles/encode/mh_level_step.hpp"
 
 namespace st::mh_detail {
 namespace {

@@ -10,7 +10,7 @@
 #include "tests/tiles/interval_fields.hpp"
 #include "tests/tiles/mh_build_checks.hpp"
 #include "common/error.hpp"
-#include "tiles/build/mh_build.hpp"
+#include "tiles/encode/mh_build.hpp"
 
 namespace st {
 namespace {

@@ -5,7 +5,7 @@
 
 #include "common/error.hpp"
 #include "tests/tiles/stack_fixtures.hpp"
-#include "tiles/build/mh_build.hpp"
+#include "tiles/encode/mh_build.hpp"
 
 namespace st {
 namespace {

@@ -1,4 +1,4 @@
-// The octree encoder's subtree merger (tiles/build/mh_octree_merge.hpp, MHOCT.md
+// The octree encoder's subtree merger (tiles/encode/mh_octree_merge.hpp, MHOCT.md
 // "Version 3, merged subtrees measured"): compatible but unequal subtrees end up sharing one block,
 // incompatible ones do not, and on random stacks every texel of every level of every slice
 // decodes inside the interval (and the central window) of the node the builder answers
@@ -11,8 +11,8 @@
 
 #include "common/hash.hpp"
 #include "tests/tiles/stack_fixtures.hpp"
-#include "tiles/build/mh_internal.hpp"
-#include "tiles/build/mh_octree_encode.hpp"
+#include "tiles/encode/mh_internal.hpp"
+#include "tiles/encode/mh_octree_encode.hpp"
 #include "tiles/core/mh_octree.hpp"
 
 namespace st {

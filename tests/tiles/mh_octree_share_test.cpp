@@ -3,8 +3,8 @@
 #include <gtest/gtest.h>
 
 #include "tests/tiles/stack_fixtures.hpp"
-#include "tiles/build/mh_octree_encode.hpp"
-#include "tiles/build/mh_octree_share.hpp"
+#include "tiles/encode/mh_octree_encode.hpp"
+#include "tiles/encode/mh_octree_share.hpp"
 #include "tiles/core/mh_octree.hpp"
 
 namespace st {

@@ -14,7 +14,7 @@
 #include "tests/tiles/mh_build_checks.hpp"
 #include "common/error.hpp"
 #include "tiles/core/evaluator.hpp"
-#include "tiles/build/hierarchy.hpp"
+#include "tiles/encode/hierarchy.hpp"
 #include "tiles/core/interval.hpp"
 
 namespace st::mhtest {

@@ -11,9 +11,9 @@
 
 #include "tests/tiles/interval_fields.hpp"
 #include "tests/tiles/mh_quadtree_checks.hpp"
-#include "tiles/build/encode.hpp"
+#include "tiles/encode/encode.hpp"
 #include "common/error.hpp"
-#include "tiles/build/mh_build.hpp"
+#include "tiles/encode/mh_build.hpp"
 #include "tiles/core/mh_quadtree_format.hpp"
 
 namespace st {

@@ -13,8 +13,8 @@
 #include <vector>
 
 #include "interval_fields.hpp"
-#include "tiles/build/encode.hpp"
-#include "tiles/build/mh_build.hpp"
+#include "tiles/encode/encode.hpp"
+#include "tiles/encode/mh_build.hpp"
 #include "tiles/core/morton.hpp"
 #include "tiles/core/tap_batch.hpp"
 

@@ -7,11 +7,11 @@
 
 #include "tests/tiles/interval_fields.hpp"
 #include "tests/tiles/mh_quadtree_checks.hpp"
-#include "tiles/build/encode.hpp"
+#include "tiles/encode/encode.hpp"
 #include "common/error.hpp"
-#include "tiles/build/mh_build.hpp"
+#include "tiles/encode/mh_build.hpp"
 #include "tiles/core/mh_quadtree_format.hpp"
-#include "tiles/build/mmh_merge.hpp"
+#include "tiles/encode/mmh_merge.hpp"
 
 namespace st {
 namespace {

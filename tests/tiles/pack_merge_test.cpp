@@ -6,9 +6,9 @@
 #include "tests/tiles/interval_fields.hpp"
 #include "tests/tiles/pack_test_support.hpp"
 #include "common/error.hpp"
-#include "tiles/build/mh_build.hpp"
-#include "tiles/build/pack_merge.hpp"
-#include "tiles/build/pack_writer.hpp"
+#include "tiles/encode/mh_build.hpp"
+#include "tiles/encode/pack_merge.hpp"
+#include "tiles/encode/pack_writer.hpp"
 
 namespace st {
 namespace {

@@ -9,10 +9,10 @@
 #include "tests/tiles/interval_fields.hpp"
 #include "tests/tiles/pack_test_support.hpp"
 #include "common/error.hpp"
-#include "tiles/build/mh_build.hpp"
+#include "tiles/encode/mh_build.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_reader.hpp"
-#include "tiles/build/pack_writer.hpp"
+#include "tiles/encode/pack_writer.hpp"
 
 namespace st {
 namespace {

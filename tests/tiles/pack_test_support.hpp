@@ -11,9 +11,9 @@
 
 #include "common/error.hpp"
 #include "tiles/core/evaluator.hpp"
-#include "tiles/build/hierarchy.hpp"
+#include "tiles/encode/hierarchy.hpp"
 #include "tiles/core/interval.hpp"
-#include "tiles/build/tile_cut.hpp"
+#include "tiles/encode/tile_cut.hpp"
 
 namespace st::packtest {
 

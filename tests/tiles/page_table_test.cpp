@@ -10,8 +10,8 @@
 
 #include "tests/tiles/interval_fields.hpp"
 #include "tests/tiles/pack_test_support.hpp"
-#include "tiles/build/mh_build.hpp"
-#include "tiles/build/pack_writer.hpp"
+#include "tiles/encode/mh_build.hpp"
+#include "tiles/encode/pack_writer.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_reader.hpp"
 #include "tiles/core/page_table.hpp"

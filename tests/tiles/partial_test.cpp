@@ -1,6 +1,6 @@
 // Partial occluders: the volume march against analytic optical depths, and the checks of
 // alpha textures and volumes.
-#include "tiles/bake/partial.hpp"
+#include "scene/partial.hpp"
 
 #include <gtest/gtest.h>
 

@@ -19,7 +19,7 @@
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/map_build.hpp"
 #include "tiles/bake/raster_bounds.hpp"
-#include "tiles/bake/scene_grid.hpp"
+#include "scene/scene_grid.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 
 namespace st {

@@ -11,7 +11,7 @@
 #include "interval_fields.hpp"
 #include "tiles/bake/map_build.hpp"
 #include "tiles/bake/raster_bounds.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 
 namespace st {

@@ -10,8 +10,8 @@
 
 #include "tiles/bake/deep_build.hpp"
 #include "tiles/bake/map_build.hpp"
-#include "tiles/bake/render.hpp"
-#include "tiles/bake/scene.hpp"
+#include "render/render.hpp"
+#include "scene/scene.hpp"
 #include "tiles/core/deep_pack.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 

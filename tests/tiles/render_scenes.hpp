@@ -4,7 +4,7 @@
 
 #include <string>
 
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 
 namespace st::render_test {
 

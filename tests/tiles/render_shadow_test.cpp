@@ -8,9 +8,9 @@
 #include <cstdlib>
 
 #include "tiles/bake/map_build.hpp"
-#include "tiles/bake/render.hpp"
-#include "tiles/bake/render_error.hpp"
-#include "tiles/bake/scene.hpp"
+#include "render/render.hpp"
+#include "render/render_error.hpp"
+#include "scene/scene.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tests/tiles/render_scenes.hpp"
 

@@ -9,8 +9,8 @@
 #include <vector>
 
 #include "tiles/bake/map_build.hpp"
-#include "tiles/bake/render.hpp"
-#include "tiles/bake/scene.hpp"
+#include "render/render.hpp"
+#include "scene/scene.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tests/tiles/render_scenes.hpp"
 

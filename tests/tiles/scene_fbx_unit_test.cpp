@@ -11,7 +11,7 @@
 #include <string>
 
 #include "common/error.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 
 namespace st {
 namespace scene_fbx_unit_test {

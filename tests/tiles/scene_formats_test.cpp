@@ -7,10 +7,10 @@
 #include <filesystem>
 #include <fstream>
 
-#include "tiles/bake/scene.hpp"
-#include "tiles/bake/scene_gltf_check.hpp"
-#include "tiles/bake/scene_export.hpp"
-#include "tiles/bake/scene_mesh.hpp"
+#include "scene/scene.hpp"
+#include "scene/scene_gltf_check.hpp"
+#include "scene/scene_export.hpp"
+#include "scene/scene_mesh.hpp"
 #include "common/error.hpp"
 
 namespace st {

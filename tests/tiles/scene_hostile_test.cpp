@@ -16,11 +16,11 @@
 
 #include "common/error.hpp"
 #include "tiles/bake/canonical_coverage.hpp"
-#include "tiles/bake/png_io.hpp"
-#include "tiles/bake/scene.hpp"
-#include "tiles/bake/scene_header_check.hpp"
-#include "tiles/bake/scene_isolated.hpp"
-#include "tiles/bake/scene_limits.hpp"
+#include "image/png_io.hpp"
+#include "scene/scene.hpp"
+#include "scene/scene_header_check.hpp"
+#include "scene/scene_isolated.hpp"
+#include "scene/scene_limits.hpp"
 
 namespace st {
 namespace scene_hostile_test {

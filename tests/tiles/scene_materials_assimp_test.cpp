@@ -13,8 +13,8 @@
 #include <iterator>
 
 #include "common/error.hpp"
-#include "tiles/bake/png_io.hpp"
-#include "tiles/bake/scene.hpp"
+#include "image/png_io.hpp"
+#include "scene/scene.hpp"
 
 namespace st {
 namespace {

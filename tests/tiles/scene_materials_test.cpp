@@ -8,8 +8,8 @@
 #include <fstream>
 
 #include "common/error.hpp"
-#include "tiles/bake/png_io.hpp"
-#include "tiles/bake/scene.hpp"
+#include "image/png_io.hpp"
+#include "scene/scene.hpp"
 
 namespace st {
 namespace {

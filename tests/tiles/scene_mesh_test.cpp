@@ -4,8 +4,8 @@
 #include <cmath>
 #include <limits>
 
-#include "tiles/bake/scene.hpp"
-#include "tiles/bake/scene_mesh.hpp"
+#include "scene/scene.hpp"
+#include "scene/scene_mesh.hpp"
 #include "common/error.hpp"
 
 namespace st {

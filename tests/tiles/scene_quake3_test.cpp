@@ -9,9 +9,9 @@
 #include <filesystem>
 #include <fstream>
 
-#include "tiles/bake/scene.hpp"
-#include "tiles/bake/scene_mesh.hpp"
-#include "tiles/bake/scene_quake3.hpp"
+#include "scene/scene.hpp"
+#include "scene/scene_mesh.hpp"
+#include "scene/scene_quake3.hpp"
 #include "common/error.hpp"
 
 namespace st {

@@ -10,8 +10,8 @@
 #include <map>
 #include <numbers>
 
-#include "tiles/bake/scene.hpp"
-#include "tiles/bake/scene_mesh.hpp"
+#include "scene/scene.hpp"
+#include "scene/scene_mesh.hpp"
 #include "common/error.hpp"
 
 namespace st {

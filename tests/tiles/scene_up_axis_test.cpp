@@ -11,9 +11,9 @@
 #include <string>
 
 #include "common/error.hpp"
-#include "tiles/bake/scene.hpp"
-#include "tiles/bake/scene_export.hpp"
-#include "tiles/bake/scene_mesh.hpp"
+#include "scene/scene.hpp"
+#include "scene/scene_export.hpp"
+#include "scene/scene_mesh.hpp"
 
 namespace st {
 namespace scene_up_axis_test {

@@ -13,7 +13,7 @@
 
 #include "common/error.hpp"
 #include "tiles/bake/deep_build.hpp"
-#include "tiles/bake/scene_volumes.hpp"
+#include "scene/scene_volumes.hpp"
 #include "tiles/core/deep_map.hpp"
 #ifdef SHADOWTILE_HAVE_OPENVDB
 #include "tests/tiles/vdb_fixtures.hpp"

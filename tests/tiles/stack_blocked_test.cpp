@@ -1,4 +1,4 @@
-// The out-of-core stack build (tiles/build/stack_blocked.hpp): a stack spilled in octree
+// The out-of-core stack build (tiles/encode/stack_blocked.hpp): a stack spilled in octree
 // blocks and reduced one block at a time gives the one-shot cut_stack(build_octree(...))
 // grid and tiles byte for byte, and the same pack file, for wide and deep stacks, padded
 // slice counts, every block level down to the skip level and a cut that must move deeper;
@@ -13,10 +13,10 @@
 #include "tests/test_tmp.hpp"
 #include "tests/tiles/stack_fixtures.hpp"
 #include "tiles/bake/raster_bounds.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 #include "tiles/bake/stack_build.hpp"
-#include "tiles/build/stack_blocked.hpp"
-#include "tiles/build/stack_pack.hpp"
+#include "tiles/encode/stack_blocked.hpp"
+#include "tiles/encode/stack_pack.hpp"
 
 namespace st {
 namespace {

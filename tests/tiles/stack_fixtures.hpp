@@ -4,7 +4,7 @@
 #include <cstdint>
 #include <string>
 
-#include "tiles/build/mh_octree_build.hpp"
+#include "tiles/encode/mh_octree_build.hpp"
 #include "tiles/core/light_set.hpp"
 
 namespace st::stacks {

@@ -4,7 +4,7 @@
 #include "common/hash.hpp"
 #include "tests/tiles/stack_fixtures.hpp"
 #include "tiles/bake/depth_bounds.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 #include "tiles/bake/stack_build.hpp"
 
 namespace st::stacks {

@@ -7,8 +7,8 @@
 #include "common/error.hpp"
 #include "common/hash.hpp"
 #include "tests/tiles/stack_fixtures.hpp"
-#include "tiles/bake/scene.hpp"
-#include "tiles/build/mh_octree_encode.hpp"
+#include "scene/scene.hpp"
+#include "tiles/encode/mh_octree_encode.hpp"
 #include "tiles/core/stack_lookup.hpp"
 #include "tiles/core/walk_interleave.hpp"
 

@@ -10,8 +10,8 @@
 #include "tests/tiles/mh_build_checks.hpp"
 #include "tests/tiles/pack_test_support.hpp"
 #include "common/error.hpp"
-#include "tiles/build/mh_build.hpp"
-#include "tiles/build/tile_cut.hpp"
+#include "tiles/encode/mh_build.hpp"
+#include "tiles/encode/tile_cut.hpp"
 
 namespace st {
 namespace {

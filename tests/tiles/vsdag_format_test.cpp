@@ -11,8 +11,8 @@
 
 #include "common/error.hpp"
 #include "tests/tiles/interval_fields.hpp"
-#include "tiles/build/mh_build.hpp"
-#include "tiles/build/vsdag_encode.hpp"
+#include "tiles/encode/mh_build.hpp"
+#include "tiles/encode/vsdag_encode.hpp"
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/vsdag_evaluator.hpp"
 

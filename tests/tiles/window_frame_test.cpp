@@ -9,7 +9,7 @@
 #include "common/error.hpp"
 #include "common/hash.hpp"
 #include "tests/tiles/stack_fixtures.hpp"
-#include "tiles/build/mh_octree_encode.hpp"
+#include "tiles/encode/mh_octree_encode.hpp"
 #include "tiles/core/mh_octree.hpp"
 
 namespace st {

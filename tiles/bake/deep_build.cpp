@@ -2,7 +2,7 @@
 #include "tiles/bake/deep_build.hpp"
 
 #include "common/error.hpp"
-#include "tiles/build/pack_writer.hpp"
+#include "tiles/encode/pack_writer.hpp"
 #include "tiles/core/deep_format.hpp"
 #include "tiles/core/deep_pack.hpp"
 

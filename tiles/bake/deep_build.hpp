@@ -9,7 +9,7 @@
 #include <vector>
 
 #include "tiles/bake/deep_sampler.hpp"
-#include "tiles/build/deep_encode.hpp"
+#include "tiles/encode/deep_encode.hpp"
 
 namespace st {
 

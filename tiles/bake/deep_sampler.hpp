@@ -35,7 +35,7 @@
 #include <vector>
 
 #include "tiles/bake/depth_bounds.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 #include "tiles/core/light.hpp"
 #include "tiles/core/visibility_function.hpp"
 

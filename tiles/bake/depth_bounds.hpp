@@ -38,7 +38,7 @@
 #include <cstdint>
 #include <memory>
 
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 #include "tiles/core/interval.hpp"
 #include "tiles/core/light.hpp"
 

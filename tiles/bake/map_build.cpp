@@ -21,11 +21,11 @@
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/raster_bounds.hpp"
 #include "common/error.hpp"
-#include "tiles/build/hierarchy.hpp"
+#include "tiles/encode/hierarchy.hpp"
 #include "tiles/core/pack_reader.hpp"
-#include "tiles/build/pack_writer.hpp"
-#include "tiles/build/tile_cut.hpp"
-#include "tiles/build/vsdag_encode.hpp"
+#include "tiles/encode/pack_writer.hpp"
+#include "tiles/encode/tile_cut.hpp"
+#include "tiles/encode/vsdag_encode.hpp"
 
 namespace st {
 namespace {

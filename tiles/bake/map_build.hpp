@@ -21,12 +21,12 @@
 
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/raster_bounds.hpp"
-#include "tiles/build/plane_fit.hpp"
-#include "tiles/bake/scene.hpp"
+#include "tiles/encode/plane_fit.hpp"
+#include "scene/scene.hpp"
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/light.hpp"
-#include "tiles/build/mh_build.hpp"
-#include "tiles/build/pack_merge.hpp"
+#include "tiles/encode/mh_build.hpp"
+#include "tiles/encode/pack_merge.hpp"
 
 namespace st {
 

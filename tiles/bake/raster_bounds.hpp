@@ -43,7 +43,7 @@
 #include <string>
 
 #include "tiles/bake/depth_bounds.hpp"
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"
 #include "tiles/core/interval.hpp"
 #include "tiles/core/light.hpp"
 

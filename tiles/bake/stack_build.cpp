@@ -13,7 +13,7 @@
 #include "common/error.hpp"
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/raster_bounds.hpp"
-#include "tiles/build/stack_pack.hpp"
+#include "tiles/encode/stack_pack.hpp"
 
 namespace st {
 namespace {

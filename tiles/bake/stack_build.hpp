@@ -4,7 +4,7 @@
 // light's perspective samples), builds the stack's octree (MH 2016 §4), cuts it at a skip
 // level in (x, y, w) and writes a stack pack (tiles/PACK.md "Stack packs").
 //
-// Out of core (tiles/build/stack_blocked.hpp): each slice is traced in regions and
+// Out of core (tiles/encode/stack_blocked.hpp): each slice is traced in regions and
 // spilled to a file next to the output in blocks of the octree; the blocks are read back
 // and reduced one at a time and the tiles streamed into the pack, so memory is one traced
 // region, one block (2^24 texels) and the octree's top levels, whatever N x R^2. The spill
@@ -18,9 +18,9 @@
 #include <string>
 
 #include "tiles/bake/depth_bounds.hpp"
-#include "tiles/bake/scene.hpp"
-#include "tiles/build/mh_octree_build.hpp"
-#include "tiles/build/stack_blocked.hpp"
+#include "scene/scene.hpp"
+#include "tiles/encode/mh_octree_build.hpp"
+#include "tiles/encode/stack_blocked.hpp"
 #include "tiles/core/light_set.hpp"
 
 namespace st {

@@ -5,7 +5,7 @@
 //
 // Decoder arithmetic (a format rule): the product is rounded to float, then the sum:
 //     v = float(c_l + float(c_f * float(i)))      -- two roundings, NO fused multiply-add.
-// The encoder (tiles/build/dagmh_values_encode.hpp) verifies every value with exactly this function, so a decoder that fused
+// The encoder (tiles/encode/dagmh_values_encode.hpp) verifies every value with exactly this function, so a decoder that fused
 // the two operations could leave an admissible interval. affine_value() forbids the
 // contraction itself (an empty asm barrier on the product) and every dagmh*.cpp is
 // compiled with -ffp-contract=off as well (tiles/CMakeLists.txt). GPU ports must do the

@@ -30,7 +30,7 @@ inline constexpr float kUnormInverse = 1.0f / 65535.0f;
 inline constexpr float kDepthFlushBelow = 0x1p-103f;
 
 // A receiver's deep lookup point: the surface point moved toward the light along the
-// light ray by this many texels of the deep level (tiles/bake/render.hpp
+// light ray by this many texels of the deep level (render/render.hpp
 // deep_lookup_point says why; gpu/ writes it into the GPU's deep block). Not a format
 // constant.
 inline constexpr double kLookupBiasTexels = 1.5;

@@ -2,7 +2,7 @@
 // buffer with offsets, no pointers, read in place by its evaluator (the same bytes later
 // sit in a pack, on the wire and in a GPU cache slot).
 //
-// Encoders (tiles/build/encode.hpp) take a Hierarchy and return the buffer. Openers
+// Encoders (tiles/encode/encode.hpp) take a Hierarchy and return the buffer. Openers
 // validate the whole buffer once (every offset, count and length in range; trailing
 // bytes rejected) and throw st::FormatError naming the field and byte offset otherwise;
 // after a successful open, lookups never read out of bounds. The returned evaluator

@@ -1,6 +1,6 @@
 // Byte layout and level geometry of the MH octree: a shadow-map stack (MH 2016 §4) as
-// one flat buffer. Shared by the builder (tiles/build/mh_octree_build.*), the encoder
-// (tiles/build/mh_octree_encode.*) and the reader (mh_octree_reader.*). The drawing with
+// one flat buffer. Shared by the builder (tiles/encode/mh_octree_build.*), the encoder
+// (tiles/encode/mh_octree_encode.*) and the reader (mh_octree_reader.*). The drawing with
 // an example is tiles/core/MHOCT.md; every constant here is a format constant: changing
 // one changes the bytes, so bump kVersion.
 //

@@ -1,6 +1,6 @@
 // MH quadtree (MH §3.2) and MMH openers: entry points declared in tiles/core/encoding.hpp.
 // The format is drawn in tiles/core/mh_quadtree_format.hpp and tiles/core/MHQUAD.md; the
-// encoders are in tiles/build/encode.cpp.
+// encoders are in tiles/encode/encode.cpp.
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/mh_quadtree_reader.hpp"
 

@@ -154,7 +154,7 @@ class TreeEvaluator final : public Evaluator, public WindowDepths, public TapWal
   // depth-first layout of MHQUAD.md, the first subtrees below it), which walks read first;
   // a walk's loads depend on each other (node, then child), so a tile whose lines left the
   // cache otherwise costs a batch one miss after another. The client calls it when a batch
-  // enters the tile, and for the next run's tile before it walks a run (remote_map.cpp).
+  // enters the tile, and for the next run's tile before it walks a run (client/remote_map_lookups.cpp).
   // 16 KiB: every tile of a real level's pack whole (Quake 3 oa_dm1 at 8192^2: at most
   // 10,240 raw bytes, 3.7 KiB on average, each walked by about 20 of a view's taps in
   // Morton order, whose walks reach most of its lines); 2 KiB left those walks missing.

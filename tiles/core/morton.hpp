@@ -1,5 +1,5 @@
 // Morton (Z-order) codes of texel coordinates: x in the even bits, y in the odd bits.
-// Tile ids (tile_cut_grid.hpp) and the hierarchy's node lists (tiles/build/hierarchy.hpp)
+// Tile ids (tile_cut_grid.hpp) and the hierarchy's node lists (tiles/encode/hierarchy.hpp)
 // are ordered by them, so the four children of a node are contiguous in child order.
 #pragma once
 #include <cstdint>

@@ -1,3 +1,3 @@
 // A server header that includes the baking module: the layering check must refuse it.
 #pragma once
-#include "tiles/bake/scene.hpp"
+#include "scene/scene.hpp"

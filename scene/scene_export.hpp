@@ -1,0 +1,17 @@
+// Writing a Scene through assimp's exporters, so procedural scenes can be viewed in
+// other tools and the loader can be tested on files of every format it claims to read.
+#pragma once
+#include <string>
+
+#include "scene/scene.hpp"
+
+namespace st {
+
+// Writes `scene` to `path` with the assimp exporter `format_id` ("obj", "ply", "plyb",
+// "gltf2", "glb2", "collada", "fbx", "stl", "3ds", ...): one node and one mesh per
+// st::Mesh, identity transforms, one plain material. Vertices are stored as float (the
+// formats' precision), so coordinates far from the origin lose bits. Throws st::Error
+// naming the file on an unknown format id or a failed export.
+void write_scene(const Scene& scene, const std::string& path, const std::string& format_id);
+
+}  // namespace st

@@ -1,0 +1,463 @@
+#include "tiles/encode/plane_fit.hpp"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <tuple>
+
+#include "common/bytes.hpp"
+#include "common/error.hpp"
+#include "tiles/core/morton.hpp"
+
+namespace st {
+
+namespace {
+
+using namespace planes;
+using LD = long double;
+
+// The fixed-point values that plane_fixed_to_float maps into [lo, hi], shrunk to exclude the
+// rounding midpoints (ties): false when the interval is empty, reaches above 1, or has an end
+// in (0, 2^-30) (tiny depths: left to the inner encoding).
+bool preimage(float lo, float hi, int64_t& vmin, int64_t& vmax) {
+  constexpr float kTiny = 0x1p-30f;
+  if (!(lo <= hi) || lo > 1.0f) return false;
+  if (lo <= 0.0f) {
+    vmin = -kOne;
+  } else {
+    if (lo < kTiny) return false;
+    const int64_t f = int64_t(std::ldexp(double(lo), int(kFracBits)));
+    const int64_t below = f - int64_t(std::ldexp(double(std::nextafter(lo, 0.0f)), int(kFracBits)));
+    vmin = f - below / 2 + 1;
+  }
+  if (hi >= 1.0f) {
+    vmax = 2 * kOne;
+  } else if (hi <= 0.0f) {
+    if (hi < 0.0f) return false;
+    vmax = 0;
+  } else {
+    if (hi < kTiny) return false;
+    const int64_t f = int64_t(std::ldexp(double(hi), int(kFracBits)));
+    const int64_t above = int64_t(std::ldexp(double(std::nextafter(hi, 2.0f)), int(kFracBits))) - f;
+    vmax = f + above / 2 - 1;
+  }
+  return vmin <= vmax;
+}
+
+// Seidel's randomized incremental LP (feasibility: zero objective) in n <= 3 unknowns,
+// each within |x_j| <= box[j]; constraints a . x <= b taken in order. In 1D it returns the
+// middle of the feasible interval. Long double: the fit is verified exactly afterwards, the
+// LP only has to find a point.
+struct Con {
+  LD a[3];
+  LD b;
+};
+
+bool seidel(int n, const LD* box, const Con* cons, size_t count, LD* x) {
+  constexpr LD kEps = 1e-15L;
+  if (n == 1) {
+    LD lo = -box[0], hi = box[0];
+    for (size_t i = 0; i < count; ++i) {
+      const Con& c = cons[i];
+      const LD tol = kEps * (1 + std::fabs(c.b));
+      if (c.a[0] > tol) hi = std::min(hi, c.b / c.a[0]);
+      else if (c.a[0] < -tol) lo = std::max(lo, c.b / c.a[0]);
+      else if (c.b < -tol) return false;
+      if (lo > hi) return false;
+    }
+    x[0] = (lo + hi) / 2;
+    return true;
+  }
+  for (int j = 0; j < n; ++j) x[j] = 0;
+  std::vector<Con> sub;
+  for (size_t i = 0; i < count; ++i) {
+    const Con& h = cons[i];
+    LD ax = 0;
+    for (int j = 0; j < n; ++j) ax += h.a[j] * x[j];
+    if (ax <= h.b + kEps * (1 + std::fabs(h.b))) continue;
+    // The new point lies on a . x = b: eliminate the unknown with the largest coefficient.
+    int k = 0;
+    for (int j = 1; j < n; ++j)
+      if (std::fabs(h.a[j]) > std::fabs(h.a[k])) k = j;
+    if (std::fabs(h.a[k]) == 0) return false;  // 0 <= b violated
+    sub.clear();
+    auto project = [&](const LD* ga, LD gb) {
+      Con s{};
+      const LD r = ga[k] / h.a[k];
+      for (int j = 0, t = 0; j < n; ++j)
+        if (j != k) s.a[t++] = ga[j] - r * h.a[j];
+      s.b = gb - r * h.b;
+      sub.push_back(s);
+    };
+    LD e[3] = {0, 0, 0};
+    e[k] = 1;
+    project(e, box[k]);
+    e[k] = -1;
+    project(e, box[k]);
+    for (size_t g = 0; g < i; ++g) project(cons[g].a, cons[g].b);
+    LD sub_box[2], y[2];
+    for (int j = 0, t = 0; j < n; ++j)
+      if (j != k) sub_box[t++] = box[j];
+    if (!seidel(n - 1, sub_box, sub.data(), sub.size(), y)) return false;
+    LD rest = h.b;
+    for (int j = 0, t = 0; j < n; ++j)
+      if (j != k) {
+        x[j] = y[t++];
+        rest -= h.a[j] * x[j];
+      }
+    x[k] = rest / h.a[k];
+  }
+  return true;
+}
+
+// A fixed permutation of a block's texels (the LP's expected time needs a random order;
+// a fixed one keeps builds deterministic).
+const std::vector<uint32_t>& texel_order(uint32_t shift) {
+  static const std::vector<std::vector<uint32_t>> orders = [] {
+    std::vector<std::vector<uint32_t>> o(kMaxShift + 1);
+    for (uint32_t s = 0; s <= kMaxShift; ++s) {
+      const uint32_t side = 1u << s, n = side * side;
+      auto& v = o[s];
+      // The four corners first: a block across two surfaces fails in a few constraints.
+      const uint32_t corners[4] = {0, side - 1, (side - 1) * side, n - 1};
+      std::vector<uint8_t> taken(n, 0);
+      for (uint32_t c : corners)
+        if (!taken[c]) v.push_back(c), taken[c] = 1;
+      std::vector<uint32_t> rest;
+      for (uint32_t i = 0; i < n; ++i)
+        if (!taken[i]) rest.push_back(i);
+      uint64_t state = 0x9E3779B97F4A7C15ull;
+      for (size_t i = rest.size(); i > 1; --i) {  // Fisher-Yates with a fixed xorshift
+        state ^= state << 13, state ^= state >> 7, state ^= state << 17;
+        std::swap(rest[i - 1], rest[state % i]);
+      }
+      v.insert(v.end(), rest.begin(), rest.end());
+    }
+    return o;
+  }();
+  return orders[shift];
+}
+
+int64_t abs64(int64_t v) { return v < 0 ? (v == INT64_MIN ? INT64_MAX : -v) : v; }
+
+// Whether plane p answers every texel of its block within [lo, hi] (the decoder's function;
+// corners first, so a plane of another surface fails fast).
+bool answers(const Plane& p, std::span<const float> lo, std::span<const float> hi) {
+  const uint32_t side = 1u << p.shift;
+  for (uint32_t i : texel_order(p.shift)) {
+    const float d = p.depth(i % side, i / side);
+    if (!(lo[i] <= d && d <= hi[i])) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+bool fit_block(std::span<const float> lo, std::span<const float> hi, uint32_t shift, Plane& out) {
+  if (shift < kMinShift || shift > kMaxShift) return false;
+  const uint32_t side = 1u << shift, n = side * side;
+  if (lo.size() < n || hi.size() < n) return false;
+  std::vector<int64_t> vmin(n), vmax(n);
+  const int64_t margin = 2 * int64_t(side) + 2;  // rounding (a, b, c) to integers moves v by < 2 side
+  for (uint32_t i = 0; i < n; ++i) {
+    if (!preimage(lo[i], hi[i], vmin[i], vmax[i])) return false;
+    vmin[i] += margin;
+    vmax[i] -= margin;
+    if (vmin[i] > vmax[i]) return false;
+  }
+  // Unknowns: v = r + unit (a0 + b (x - m) + c (y - m)), m the block's centre, r a reference.
+  const int64_t r = vmin[0] / 2 + vmax[0] / 2;
+  int64_t width = std::numeric_limits<int64_t>::max();
+  for (uint32_t i = 0; i < n; ++i) width = std::min(width, vmax[i] - vmin[i]);
+  const LD unit = LD(std::max<int64_t>(width, 1));
+  const LD m = LD(side - 1) / 2;
+  std::vector<Con> cons;
+  cons.reserve(2 * size_t(n));
+  for (uint32_t i : texel_order(shift)) {
+    const LD u = LD(i % side) - m, v = LD(i / side) - m;
+    cons.push_back(Con{{1, u, v}, LD(vmax[i] - r) / unit});
+    cons.push_back(Con{{-1, -u, -v}, -(LD(vmin[i] - r) / unit)});
+  }
+  const LD slope_box = LD(kMaxSlope) / unit;
+  const LD box[3] = {LD(kOne) * 4 / unit, slope_box, slope_box};
+  LD x[3];
+  if (!seidel(3, box, cons.data(), cons.size(), x)) return false;
+  const LD bb = std::round(x[1] * unit), cc = std::round(x[2] * unit);
+  if (std::fabs(bb) > LD(kMaxSlope) || std::fabs(cc) > LD(kMaxSlope)) return false;
+  const LD a0 = std::round(LD(r) + x[0] * unit - bb * m - cc * m);
+  if (std::fabs(a0) > LD(kMaxBase)) return false;
+  Plane p;
+  p.shift = shift;
+  p.a = int64_t(a0);
+  p.b = int64_t(bb);
+  p.c = int64_t(cc);
+  if (abs64(p.a) > kMaxBase || abs64(p.b) > kMaxSlope || abs64(p.c) > kMaxSlope) return false;
+  if (!answers(p, lo, hi)) return false;  // the decoder's exact answer, texel by texel
+  out = p;
+  return true;
+}
+
+PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
+  PlaneSplit out;
+  out.pruned = h;
+  const uint32_t d = h.depth;
+  if (d < std::max(o.min_shift, kMinShift) || d > std::min<uint32_t>(o.max_tile_depth, kMaxLevels - 1) ||
+      h.levels.size() != size_t(d) + 1)
+    return out;
+  const uint32_t side = 1u << d;
+  // Every finest texel's admissible interval: the deepest valued node answering it.
+  std::vector<float> lo(size_t(side) * side), hi(size_t(side) * side);
+  for (uint32_t l = 0; l <= d; ++l) {
+    const uint32_t s = d - l, w = 1u << s;
+    for (const HNode& n : h.levels[l]) {
+      if (!n.has_value) continue;
+      const uint32_t x0 = morton_compact(n.morton) << s, y0 = morton_compact(n.morton >> 1) << s;
+      for (uint32_t y = y0; y < y0 + w; ++y) {
+        std::fill_n(lo.begin() + size_t(y) * side + x0, w, n.lo);
+        std::fill_n(hi.begin() + size_t(y) * side + x0, w, n.hi);
+      }
+    }
+  }
+  // Valued nodes in each subtree (the node's own value excluded), bottom-up.
+  const auto first = h.first_child_index();
+  std::vector<std::vector<uint32_t>> below(d + 1);
+  for (uint32_t l = d + 1; l-- > 0;) {
+    below[l].assign(h.levels[l].size(), 0);
+    if (l == d) continue;
+    for (size_t j = 0; j < h.levels[l].size(); ++j) {
+      const HNode& n = h.levels[l][j];
+      uint32_t sum = 0;
+      for (uint32_t c = 0, k = first[l][j]; c < uint32_t(std::popcount(unsigned(n.child_mask))); ++c, ++k)
+        sum += below[l + 1][k] + h.levels[l + 1][k].has_value;
+      below[l][j] = sum;
+    }
+  }
+  // Level by level, the largest blocks first over the whole tile; a node's block is tried
+  // when no ancestor's was taken. A block first tries the planes already taken (the most
+  // recently used first, each checked on every texel with the decoder's function), so the
+  // blocks of one surface share one table entry (plane_format.hpp); else its own fit.
+  struct Known {
+    int64_t a0, b, c;  // a at the tile's origin
+  };
+  std::vector<Known> known;
+  constexpr size_t kReuseTries = 64;
+  const uint32_t min_reused = std::min(o.min_reused_nodes, o.min_stored_nodes);
+  std::vector<std::vector<uint8_t>> cut(d + 1), under(d + 1);
+  for (uint32_t l = 0; l <= d; ++l) cut[l].assign(h.levels[l].size(), 0), under[l].assign(h.levels[l].size(), 0);
+  std::vector<float> blo, bhi;
+  for (uint32_t l = 0; l <= d; ++l) {
+    const uint32_t s = d - l, w = 1u << s;
+    const bool sized = s >= std::max(o.min_shift, kMinShift) && s <= kMaxShift;
+    for (size_t j = 0; j < h.levels[l].size(); ++j) {
+      const HNode& n = h.levels[l][j];
+      if (!under[l][j] && n.child_mask && sized && below[l][j] >= min_reused) {
+        const uint32_t x0 = morton_compact(n.morton) << s, y0 = morton_compact(n.morton >> 1) << s;
+        blo.resize(size_t(w) * w);
+        bhi.resize(size_t(w) * w);
+        for (uint32_t y = 0; y < w; ++y) {
+          std::copy_n(lo.begin() + size_t(y0 + y) * side + x0, w, blo.begin() + size_t(y) * w);
+          std::copy_n(hi.begin() + size_t(y0 + y) * side + x0, w, bhi.begin() + size_t(y) * w);
+        }
+        Plane p;
+        p.shift = s;
+        bool taken = false;
+        for (size_t t = known.size(), tries = 0; t-- > 0 && tries < kReuseTries; ++tries) {
+          p.b = known[t].b, p.c = known[t].c;
+          p.a = int64_t(uint64_t(known[t].a0) + uint64_t(p.b) * x0 + uint64_t(p.c) * y0);
+          if (abs64(p.a) > kMaxBase || !answers(p, blo, bhi)) continue;
+          std::rotate(known.begin() + ptrdiff_t(t), known.begin() + ptrdiff_t(t) + 1, known.end());
+          taken = true;
+          break;
+        }
+        if (!taken && below[l][j] >= o.min_stored_nodes && fit_block(blo, bhi, s, p)) {
+          known.push_back(Known{p.origin_a(x0, y0), p.b, p.c});
+          taken = true;
+        }
+        if (!taken && s == kLabelShift && below[l][j] >= o.min_labelled_nodes) {
+          // Labels: each texel takes the first palette plane that answers it, else the most
+          // recently used known plane that does; the texels none answers get a plane fitted
+          // to them alone (the block's other texels unconstrained). At most 4 planes in all.
+          LabelBlock lb;
+          lb.start = uint32_t(n.morton << (2 * s));
+          auto fits = [&](const Plane& q, uint32_t i) {
+            const float v = q.depth(i % 8, i / 8);
+            return blo[i] <= v && v <= bhi[i];
+          };
+          constexpr uint8_t kNone = 0xFF;
+          uint32_t missing = 0;
+          for (uint32_t i = 0; i < 64; ++i) {
+            size_t k = 0;
+            while (k < lb.palette.size() && !fits(lb.palette[k], i)) ++k;
+            if (k == lb.palette.size() && k < kPalette) {
+              bool found = false;
+              for (size_t t = known.size(), tries = 0; t-- > 0 && tries < kReuseTries && !found; ++tries) {
+                Plane q;
+                q.shift = s, q.start = lb.start, q.b = known[t].b, q.c = known[t].c;
+                q.a = int64_t(uint64_t(known[t].a0) + uint64_t(q.b) * x0 + uint64_t(q.c) * y0);
+                if (abs64(q.a) > kMaxBase || !fits(q, i)) continue;
+                lb.palette.push_back(q);
+                found = true;
+              }
+              if (!found) k = kNone;
+            } else if (k == lb.palette.size()) {
+              k = kNone;
+            }
+            lb.label[i] = uint8_t(k);
+            missing += k == kNone;
+          }
+          bool ok = true;
+          while (missing && ok) {
+            ok = false;
+            if (lb.palette.size() == kPalette) break;
+            std::vector<float> slo(blo), shi(bhi);
+            for (uint32_t i = 0; i < 64; ++i)
+              if (lb.label[i] != kNone) slo[i] = 0.0f, shi[i] = 1.0f;
+            Plane q;
+            if (!fit_block(slo, shi, s, q)) break;
+            q.start = lb.start;
+            for (uint32_t i = 0; i < 64; ++i)
+              if (lb.label[i] == kNone && fits(q, i)) lb.label[i] = uint8_t(lb.palette.size()), --missing;
+            known.push_back(Known{q.origin_a(x0, y0), q.b, q.c});
+            lb.palette.push_back(q);
+            ok = true;
+          }
+          ok = ok && missing == 0 && !lb.palette.empty();
+          if (ok) {
+            out.labelled.push_back(std::move(lb));
+            out.texels += 64;
+            cut[l][j] = 1;
+          }
+        }
+        if (taken) {
+          p.start = uint32_t(n.morton << (2 * s));
+          out.planes.push_back(p);
+          out.texels += uint64_t(w) * w;
+          cut[l][j] = 1;
+        }
+      }
+      if (l < d)
+        for (uint32_t c = 0, k = first[l][j]; c < uint32_t(std::popcount(unsigned(n.child_mask))); ++c, ++k)
+          under[l + 1][k] = under[l][j] || cut[l][j];
+    }
+  }
+  if (out.planes.empty() && out.labelled.empty()) return out;
+  std::sort(out.planes.begin(), out.planes.end(), [](const Plane& a, const Plane& b) { return a.start < b.start; });
+  std::sort(out.labelled.begin(), out.labelled.end(),
+            [](const LabelBlock& a, const LabelBlock& b) { return a.start < b.start; });
+  // Prune: drop the blocks' descendants, then empty nodes left without children.
+  std::vector<std::vector<uint8_t>> drop(d + 1);
+  for (uint32_t l = 0; l <= d; ++l) drop[l].assign(h.levels[l].size(), 0);
+  std::vector<std::vector<uint8_t>> mask(d + 1);
+  for (uint32_t l = 0; l <= d; ++l) {
+    mask[l].resize(h.levels[l].size());
+    for (size_t j = 0; j < h.levels[l].size(); ++j) mask[l][j] = cut[l][j] ? 0 : h.levels[l][j].child_mask;
+  }
+  for (uint32_t l = 0; l < d; ++l)
+    for (size_t j = 0; j < h.levels[l].size(); ++j)
+      for (uint32_t c = 0, k = first[l][j]; c < uint32_t(std::popcount(unsigned(h.levels[l][j].child_mask))); ++c, ++k)
+        drop[l + 1][k] = drop[l][j] || cut[l][j];
+  for (uint32_t l = d; l > 0; --l)  // bottom-up: an empty node whose children all went goes too
+    for (size_t j = 0; j < h.levels[l - 1].size(); ++j) {
+      const HNode& pn = h.levels[l - 1][j];
+      for (uint32_t c = 0, k = first[l - 1][j]; c < 4; ++c) {
+        if (!(pn.child_mask >> c & 1)) continue;
+        if (!drop[l][k] && !h.levels[l][k].has_value && mask[l][k] == 0) drop[l][k] = 1;
+        if (drop[l][k]) mask[l - 1][j] &= uint8_t(~(1u << c));
+        ++k;
+      }
+    }
+  for (uint32_t l = 0; l <= d; ++l) {
+    auto& dst = out.pruned.levels[l];
+    dst.clear();
+    for (size_t j = 0; j < h.levels[l].size(); ++j) {
+      if (drop[l][j]) continue;
+      HNode n = h.levels[l][j];
+      n.child_mask = mask[l][j];
+      dst.push_back(n);
+    }
+  }
+  return out;
+}
+
+std::vector<uint8_t> wrap_planes(const std::vector<Plane>& ps, uint32_t finest_level, std::span<const uint8_t> inner,
+                                 const std::vector<LabelBlock>& labelled) {
+  const size_t blocks = ps.size() + labelled.size();
+  ST_CHECK(blocks >= 1 && blocks <= kMaxPlanes && finest_level + 1 <= kMaxLevels);
+  if (labelled.size() > kMaxTable) throw Error("plane tile: " + std::to_string(labelled.size()) + " labelled blocks, at most 65535");
+  // The table: one entry per distinct plane (a at the tile's origin, b, c), in order of first use.
+  struct Entry {
+    int64_t a, b, c;
+    bool operator<(const Entry& o) const { return std::tie(a, b, c) < std::tie(o.a, o.b, o.c); }
+  };
+  std::map<Entry, uint32_t> index;
+  std::vector<Entry> table;
+  auto entry = [&](const Plane& p, uint32_t start) {
+    const Entry e{p.origin_a(morton_compact(start), morton_compact(uint64_t(start) >> 1)), p.b, p.c};
+    auto [it, fresh] = index.emplace(e, uint32_t(table.size()));
+    if (fresh) table.push_back(e);
+    return it->second;
+  };
+  // Block records in order of start: (start, shift, kind, index).
+  struct Rec {
+    uint32_t start, shift;
+    uint8_t kind;
+    uint32_t index;
+  };
+  std::vector<Rec> recs;
+  recs.reserve(blocks);
+  size_t i = 0, k = 0;
+  std::vector<uint32_t> palettes;
+  while (i < ps.size() || k < labelled.size()) {
+    if (k == labelled.size() || (i < ps.size() && ps[i].start < labelled[k].start)) {
+      recs.push_back(Rec{ps[i].start, ps[i].shift, kKindPlane, entry(ps[i], ps[i].start)});
+      ++i;
+    } else {
+      const LabelBlock& lb = labelled[k];
+      ST_CHECK(!lb.palette.empty() && lb.palette.size() <= kPalette);
+      for (uint32_t t = 0; t < kPalette; ++t) palettes.push_back(entry(lb.palette[std::min<size_t>(t, lb.palette.size() - 1)], lb.start));
+      recs.push_back(Rec{lb.start, kLabelShift, kKindLabels, uint32_t(k)});
+      ++k;
+    }
+  }
+  if (table.size() > kMaxTable) throw Error("plane tile: " + std::to_string(table.size()) + " planes, at most 65535");
+  const size_t blocks_at = kHeaderSize + table.size() * kEntrySize;
+  const size_t labels_at = blocks_at + blocks * kRecordSize;
+  const size_t inner_at = labels_at + labelled.size() * kLabelSize;
+  const size_t size = inner_at + inner.size();
+  if (size > 0xFFFFFFFFull) throw Error("plane tile: " + std::to_string(size) + " bytes do not fit its 32-bit size");
+  std::vector<uint8_t> out(size, 0);
+  store_le<uint32_t>(out.data() + kOffMagic, kMagic);
+  store_le<uint16_t>(out.data() + kOffVersion, kVersion);
+  out[kOffLevels] = uint8_t(finest_level + 1);
+  store_le<uint32_t>(out.data() + kOffPlaneCount, uint32_t(blocks));
+  store_le<uint32_t>(out.data() + kOffByteSize, uint32_t(size));
+  store_le<uint32_t>(out.data() + kOffTableCount, uint32_t(table.size()));
+  store_le<uint32_t>(out.data() + kOffLabelCount, uint32_t(labelled.size()));
+  for (size_t t = 0; t < table.size(); ++t) {
+    uint8_t* e = out.data() + kHeaderSize + t * kEntrySize;
+    store_le<uint64_t>(e + kOffA, uint64_t(table[t].a));
+    store_le<uint64_t>(e + kOffB, uint64_t(table[t].b));
+    store_le<uint64_t>(e + kOffC, uint64_t(table[t].c));
+  }
+  for (size_t r = 0; r < recs.size(); ++r) {
+    uint8_t* o = out.data() + blocks_at + r * kRecordSize;
+    store_le<uint32_t>(o + kOffStart, recs[r].start);
+    o[kOffShift] = uint8_t(recs[r].shift);
+    o[kOffKind] = recs[r].kind;
+    store_le<uint16_t>(o + kOffIndex, uint16_t(recs[r].index));
+  }
+  for (size_t b = 0; b < labelled.size(); ++b) {
+    uint8_t* o = out.data() + labels_at + b * kLabelSize;
+    for (uint32_t t = 0; t < kPalette; ++t) store_le<uint16_t>(o + 2 * t, uint16_t(palettes[b * kPalette + t]));
+    for (uint32_t t = 0; t < 64; ++t) {
+      ST_CHECK(labelled[b].label[t] < labelled[b].palette.size());
+      o[kOffLabelBits + t / 4] |= uint8_t(labelled[b].label[t] << (2 * (t % 4)));
+    }
+  }
+  std::copy(inner.begin(), inner.end(), out.begin() + ptrdiff_t(inner_at));
+  return out;
+}
+
+}  // namespace st

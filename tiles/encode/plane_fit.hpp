@@ -1,0 +1,69 @@
+// Plane blocks of a tile (tiles/core/PLANES.md): find the aligned squares of a tile's
+// finest texels that one plane answers exactly, take their subtrees out of the hierarchy,
+// and wrap the rest's encoding behind the planes (plane_format.hpp).
+//
+// Why: on open geometry every texel's interval is one float wide (hi = lo), so a planar
+// surface seen at a slant stores one value per texel in every tree encoding. Each of those
+// values is the canonical depth of one triangle's plane (tiles/bake/canonical_depth.hpp),
+// so a block on one triangle's plane is an affine function of the texel, rounded once.
+// The encoder does not need to know the triangles: it finds, per block, integers (a, b, c)
+// whose decoded depths (plane_format.hpp, integer arithmetic) lie in every texel's
+// admissible interval, as a linear feasibility problem in three unknowns (Seidel's
+// randomized LP), and verifies every texel with the decoder's own function. So a block is
+// a plane only when it reproduces exactly what the intervals admit, for every receiver.
+//
+// A texel's admissible interval is taken from the hierarchy: its own leaf's [lo, hi], or
+// the [lo, hi] of the deepest valued node that answers it (hierarchy.hpp: that interval is
+// admissible for every texel the node answers for).
+#pragma once
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "tiles/encode/hierarchy.hpp"
+#include "tiles/core/plane_format.hpp"
+
+namespace st {
+
+struct PlaneFitOptions {
+  uint32_t min_shift = 2;          // smallest block: 2^min_shift a side
+  uint32_t min_stored_nodes = 16;  // a block with a plane of its own must take at least this many valued nodes out
+  uint32_t max_tile_depth = 10;    // tiles deeper than this are not searched (memory, time)
+  uint32_t min_reused_nodes = 2;   // a block that reuses a plane already in the tile's table: at least this many
+  uint32_t min_labelled_nodes = 4; // an 8x8 block labelled with up to 4 of the table's planes: at least this many
+  // Tiles whose valued nodes are less than this share zero-width (hi = lo: open surfaces under
+  // the default rule) are not searched: wide intervals (closed objects) let the trees merge
+  // their values, planes did not store smaller there (procedural:city) and cost build time.
+  double min_zero_width_share = 0.5;
+};
+
+// An 8x8 block whose texels are answered by up to 4 planes (plane_format.hpp, labelled block).
+struct LabelBlock {
+  uint32_t start = 0;                  // finest-level morton code of the block's first texel
+  std::vector<planes::Plane> palette;  // 1..4 planes resolved to the block's corner (shift 3)
+  uint8_t label[64] = {};              // texel (x, y) of the block: palette[label[8 y + x]]
+};
+
+struct PlaneSplit {
+  std::vector<planes::Plane> planes;   // sorted by start, disjoint
+  std::vector<LabelBlock> labelled;    // sorted by start, disjoint from each other and from `planes`
+  Hierarchy pruned;                    // the hierarchy without the nodes below each block
+  uint64_t texels = 0;                 // finest texels the planes answer
+};
+
+// Blocks are tried top-down (the largest first, down to min_shift), each first with the
+// planes already found in the tile, then with a fit of its own; an 8x8 block that neither
+// answers is labelled when up to 4 of the planes found answer all its texels. No block:
+// `planes` and `labelled` are empty and `pruned` a copy of h.
+PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o = {});
+
+// The plane tile: header, table, block records, labelled blocks, then `inner` (the encoding
+// of PlaneSplit::pruned). Blocks whose planes are equal share one table entry.
+std::vector<uint8_t> wrap_planes(const std::vector<planes::Plane>& planes, uint32_t finest_level,
+                                 std::span<const uint8_t> inner, const std::vector<LabelBlock>& labelled = {});
+
+// One block: integers (a, b, c) whose depth lies in [lo[i], hi[i]] for texel i = y * side + x
+// of the 2^shift square, verified with planes::Plane::depth; false when none was found.
+bool fit_block(std::span<const float> lo, std::span<const float> hi, uint32_t shift, planes::Plane& out);
+
+}  // namespace st
