@@ -73,6 +73,7 @@ struct ViewArgs {
   ConnectArgs connect;
   std::string time, time_sweep;
   bool soft = false, twin = false, validation = false;
+  bool cache_mb_given = false;  // --cache-mb on the command line (else the default, clamped to fit any device)
   uint32_t frames = 24, pcf = 3, in_flight = 2;
   double fps = 24, cache_mb = 256, upload_mb = 16;
   uint64_t seed = 1;
@@ -118,6 +119,24 @@ void run_view(const ViewArgs& a) {
   cl = std::make_unique<client::Client>(parse_endpoint("--server", a.server), co);
   map = cl->open(a.map);
   co.cache_slots = map.stats().cache.resident + map.stats().cache.pinned + map.stats().cache.free;
+  // The default cache shrinks until its slot pool (one storage buffer on the GPU) fits
+  // 2^27 bytes, the maxStorageBufferRange every Vulkan device offers (lavapipe's exactly):
+  // a default must work anywhere. A --cache-mb given keeps GpuMap's clear error instead.
+  constexpr uint64_t kAnyDeviceStorageRange = uint64_t(1) << 27;
+  const uint64_t slot_words_bytes = (uint64_t(map.slot_bytes()) + 3) / 4 * 4;
+  if (!a.cache_mb_given && uint64_t(co.cache_slots) * slot_words_bytes > kAnyDeviceStorageRange) {
+    const uint32_t asked = co.cache_slots;
+    for (int i = 0; i < 16 && uint64_t(co.cache_slots) * slot_words_bytes > kAnyDeviceStorageRange; ++i) {
+      const double fit = double(kAnyDeviceStorageRange / slot_words_bytes) / double(co.cache_slots);
+      co.cache_bytes = uint64_t(double(co.cache_bytes) * std::min(fit, 0.99));
+      cl = std::make_unique<client::Client>(parse_endpoint("--server", a.server), co);
+      map = cl->open(a.map);
+      co.cache_slots = map.stats().cache.resident + map.stats().cache.pinned + map.stats().cache.free;
+    }
+    std::printf("view: default cache clamped from %u to %u slots (%.0f MiB) so its slot pool fits any Vulkan "
+                "device's storage-buffer range (2^27 bytes); give --cache-mb to choose\n",
+                asked, co.cache_slots, double(co.cache_bytes) / 1048576.0);
+  }
   const client::MapInfo info = map.info();
   if (info.scene_hash != scene.content_hash() &&
       !(scene.any_partial() && info.scene_hash == opaque_part(scene).content_hash()))
@@ -340,7 +359,9 @@ Register reg_view{"view",
                sub.add_option("--pcf", a->pcf, "PCF kernel side: odd, 1..9 (at the two levels of each pixel's footprint)");
                sub.add_option("--seed", a->seed, "Camera path seed");
                sub.add_option("--device", a->device, "Vulkan device name (default: SHADOWTILE_VK_DEVICE)");
-               sub.add_option("--cache-mb", a->cache_mb, "Tile cache size");
+               CLI::Option* cache_mb = sub.add_option(
+                   "--cache-mb", a->cache_mb,
+                   "Tile cache size (MiB; default 256, clamped so that the GPU slot pool fits any device)");
                sub.add_option("--upload-mb", a->upload_mb, "GPU upload budget per frame");
                sub.add_option("--frames-in-flight", a->in_flight, "Frames the GPU may run behind the CPU (1..4)");
                sub.add_option("--time", a->time,
@@ -356,7 +377,10 @@ Register reg_view{"view",
                             "Run under VK_LAYER_KHRONOS_validation and count its warnings and errors");
                sub.add_option("--out", a->out, "Output folder (frames, contact sheet, view.json)");
                sub.add_option("--json", a->json, "JSON report path (default OUT/view.json)");
-               sub.callback([a] { run_view(*a); });
+               sub.callback([a, cache_mb] {
+                 a->cache_mb_given = cache_mb->count() > 0;
+                 run_view(*a);
+               });
              }};
 
 }  // namespace
