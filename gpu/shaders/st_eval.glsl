@@ -623,33 +623,44 @@ uint st_pcf_run(uint x, uint i, uint r, uint side, uint s) {
 
 // r x r PCF (evaluator.hpp: lit taps / (r * r) in float, taps clamped to the map). The
 // quotient comes from a table the host filled with the CPU's division, so no GPU
-// division (not correctly rounded in Vulkan) enters the answer. Taps are counted in runs
-// (MH §3.3's hierarchical PCF): a tap's answer holds for the square of texels its walk
-// and tile path share (st_answer's shift), so the taps of its row in that square count
-// with it, and a run that fills its row counts the rows below it in the square too; a
-// kernel inside one page-table value, leaf or missing child costs one walk. The count is
-// the per-tap count, so the answer is the CPU's bit for bit. No state beyond the per-tap
-// loop's is carried from one run to the next (llvmpipe keeps such state in memory).
+// division (not correctly rounded in Vulkan) enters the answer. Taps are counted in
+// blocks (MH §3.3's hierarchical PCF): a tap's answer holds for the square of texels its
+// walk and tile path share (st_answer's shift), so every tap of the kernel in that square
+// (a block of n x m taps from it, clamped edge taps included) counts with it, and the next
+// walk starts at the first tap not counted yet (a mask of counted taps; a block may overlap
+// an earlier, smaller one: only its new taps count). A kernel inside one page-table value,
+// leaf or missing child costs one walk. The count is the per-tap count, so the answer is
+// the CPU's bit for bit. The loop carries little (walk, count, mask): llvmpipe keeps
+// loop-carried state in memory, and a shared cursor across taps was slower there.
 float st_pcf(uint level, uint x, uint y, uint r, float receiver, inout StProbe probe) {
   r = clamp(r, 1u, kMaxPcf);
   if (level > ST_PAGE(kPtMapLevel)) return 1.0;
   const uint side = 1u << level;
-  uint lit = 0u, i = 0u, j = 0u;
+  // taps counted so far: bit j * r + i of (done0, done1, done2); r * r <= 81
+  uint lit = 0u, done0 = 0u, done1 = 0u, done2 = 0u, k = 0u;
   StWalk w = st_walk(level, st_pcf_tap(x, 0u, r, side), st_pcf_tap(y, 0u, r, side));
-  while (j < r) {
+  while (k < r * r) {
+    const uint j = k / r, i = k - j * r;
     const uint tx = st_pcf_tap(x, i, r, side), ty = st_pcf_tap(y, j, r, side);
     if (!st_in_walk(w, level, tx, ty)) w = st_walk(level, tx, ty);  // else: the same walk
     uint s;
     const bool tap_lit = st_lit(receiver, st_answer(w, level, tx, ty, probe, s));
     // An absent tile's taps go one by one: each is counted in the feedback.
     const uint n = w.kind == 2u ? 1u : st_pcf_run(x, i, r, side, s);
-    const uint m = i == 0u && n == r ? st_pcf_run(y, j, r, side, s) : 1u;
-    lit += tap_lit ? n * m : 0u;
-    i += n;
-    if (i == r) {
-      i = 0u;
-      j += m;
+    const uint m = w.kind == 2u ? 1u : st_pcf_run(y, j, r, side, s);
+    uint fresh = 0u;  // taps of the n x m block not counted yet (an earlier block may hold some)
+    for (uint jj = j; jj < j + m; ++jj) {
+      const uint lo = jj * r + i, hi = lo + n;
+      const uint b0 = st_bit_span(lo, hi, 0u) & ~done0, b1 = st_bit_span(lo, hi, 32u) & ~done1,
+                 b2 = st_bit_span(lo, hi, 64u) & ~done2;
+      fresh += uint(bitCount(b0) + bitCount(b1) + bitCount(b2));
+      done0 |= b0;
+      done1 |= b1;
+      done2 |= b2;
     }
+    lit += tap_lit ? fresh : 0u;
+    const int f0 = findLSB(~done0), f1 = findLSB(~done1), f2 = findLSB(~done2);
+    k = f0 >= 0 ? uint(f0) : f1 >= 0 ? 32u + uint(f1) : f2 >= 0 ? 64u + uint(f2) : 96u;
   }
   return uintBitsToFloat(ST_PAGE(ST_PAGE(kPtPcfTable) + (r - 1u) * kPcfTableStride + lit));
 }

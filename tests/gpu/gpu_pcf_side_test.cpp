@@ -61,10 +61,10 @@ TEST(GpuPcfSide, EvenZeroAndLargeKernelsAreRefusedByName) {
   EXPECT_EQ(g.stats().validation_messages, 0u);
 }
 
-// st_pcf counts a kernel's taps in runs: a tap's answer holds for the square of texels its
-// page-table walk and tile path share (a value, a leaf, a missing child, an empty treelet
-// subtree), so the taps of its row in that square, and the rows below when it fills its
-// row, count with it. The count must stay the per-tap count: every texel of every level,
+// st_pcf counts a kernel's taps in blocks: a tap's answer holds for the square of texels
+// its page-table walk and tile path share (a value, a leaf, a missing child, an empty
+// treelet subtree), so every tap of the kernel in that square counts with it (blocks may
+// overlap). The count must stay the per-tap count: every texel of every level,
 // every kernel side, against the CPU's PCF, with each receiver at (or one float either side
 // of) the depth of one of its own taps, so a run that swallowed a tap of another depth
 // flips the count. The random field mixes constant blocks (wide missing children), noise
