@@ -14,10 +14,11 @@
 //
 //   bench_raster [--scenes procedural:city,FILE...] [--light sun:azimuth=30,elevation=50]
 //                [--res 2k] [--encoding dagmh] [--tile-bytes 65536] [--width 1920] [--height 1080]
-//                [--reps 5] [--arriving 100] [--arrival-frames 10] [--device NAME]
+//                [--reps 5] [--kernels 1,5] [--arriving 100] [--arrival-frames 10] [--device NAME]
 //                [--out bench-out/raster] [--json PATH] [--no-frame-path] [--no-ratio] [--no-r32f]
 //                [--region X,Y,W,H] [--scene-limits seconds=S,...]
 //
+// --kernels: the PCF kernel sides timed (odd, 1..9), each against R32F with the same kernel.
 // --region builds only a window of the map (finest texels; the rest lit): a 64K^2 map in
 // minutes; the camera then looks at the window. The R32F map (the finest level, 4^L floats)
 // is skipped with --no-r32f, with --region, and above 16K^2: its rows print '-'.
@@ -56,6 +57,7 @@ struct Args {
   std::string scenes = "procedural:city,/usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb";
   std::string light = "sun:azimuth=30,elevation=50", res = "2k", encoding = "dagmh", device;
   std::string out = "bench-out/raster", json;
+  std::vector<uint32_t> kernels = {1, 5};
   uint32_t tile_bytes = 64 * 1024, width = 1920, height = 1080, reps = 5, arriving = 100, arrival_frames = 10;
   bool frame_path = true, ratio = true, r32f = true;
   std::optional<TexelRegion> region;  // --region: a window of the map built (the rest constant, lit)
@@ -78,6 +80,14 @@ Args parse(int argc, char** argv) {
     else if (k == "--width") a.width = uint32_t(std::stoul(next()));
     else if (k == "--height") a.height = uint32_t(std::stoul(next()));
     else if (k == "--reps") a.reps = uint32_t(std::stoul(next()));
+    else if (k == "--kernels") {
+      a.kernels.clear();
+      for (const std::string& v : split_list(next())) {
+        const unsigned long r = v.find_first_not_of("0123456789") == std::string::npos && !v.empty() ? std::stoul(v) : 0;
+        if (r < 1 || r > 9 || r % 2 == 0) throw Error("bench_raster: --kernels takes odd sides 1..9, got '" + v + "'");
+        a.kernels.push_back(uint32_t(r));
+      }
+    }
     else if (k == "--arriving") a.arriving = uint32_t(std::stoul(next()));
     else if (k == "--arrival-frames") a.arrival_frames = uint32_t(std::stoul(next()));
     else if (k == "--device") a.device = next();
@@ -97,6 +107,7 @@ Args parse(int argc, char** argv) {
     else throw Error("bench_raster: unknown option " + k);
   }
   if (a.reps == 0 || a.width == 0 || a.height == 0 || a.arriving == 0) throw Error("bench_raster: counts must be > 0");
+  if (a.kernels.empty()) throw Error("bench_raster: --kernels needs at least one side");
   if (a.json.empty()) a.json = a.out + ".json";
   return a;
 }
@@ -226,9 +237,12 @@ int main(int argc, char** argv) try {
       raster::Rasterizer r(map, tri, ro);
       device = r.device_name();
       raster::FrameInput in = camera_of(map, a.region);
-      std::vector<Mode> modes = {{"none", raster::Lookup::none, 1},      {"st 1", raster::Lookup::shadowtile, 1},
-                                 {"r32f 1", raster::Lookup::r32f, 1},     {"st 5x5", raster::Lookup::shadowtile, 5},
-                                 {"r32f 5x5", raster::Lookup::r32f, 5}};
+      // Mode 0 the pass without lookups, then per kernel shadowtile and R32F (interleaved).
+      std::vector<Mode> modes = {{"none", raster::Lookup::none, 1}};
+      for (const uint32_t k : a.kernels) {
+        modes.push_back({"st", raster::Lookup::shadowtile, k});
+        modes.push_back({"r32f", raster::Lookup::r32f, k});
+      }
       std::map<uint64_t, size_t> mode_of;
       std::vector<std::vector<double>> ms(modes.size()), frame_ms(modes.size());
       uint64_t holes = 0;
@@ -266,20 +280,24 @@ int main(int argc, char** argv) try {
         std::snprintf(b, sizeof b, "%.2f", v);
         return r32f ? std::string(b) : std::string("-");
       };
-      char line[512];
-      std::snprintf(line, sizeof line, "%-16s %8.3f | %8.3f %8s %6s %6s | %8.3f %8s %6s %6s", short_name(spec).c_str(),
-                    none, med[1], num(med[2]).c_str(), num(med[1] / med[2]).c_str(), num(only(med[1], med[2])).c_str(),
-                    med[3], num(med[4]).c_str(), num(med[3] / med[4]).c_str(), num(only(med[3], med[4])).c_str());
-      ratio_lines.push_back(line);
+      std::string line;
+      char cell[128];
+      std::snprintf(cell, sizeof cell, "%-16s %8.3f", short_name(spec).c_str(), none);
+      line = cell;
       nlohmann::json row = {{"scene", spec}, {"pack", path}, {"tiles", s.tiles}, {"triangles", tri.size() / 18},
-                            {"none_ms", none}, {"st1_ms", med[1]}, {"st5_ms", med[3]}, {"runs_ms", ms},
-                            {"frame_runs_ms", frame_ms},
+                            {"none_ms", none}, {"kernels", a.kernels}, {"runs_ms", ms}, {"frame_runs_ms", frame_ms},
                             {"r32f", r32f}};
-      if (a.region) row["region"] = {a.region->x, a.region->y, a.region->w, a.region->h};
-      if (r32f) {
-        row["r32f1_ms"] = med[2], row["ratio1"] = med[1] / med[2], row["lookup_ratio1"] = only(med[1], med[2]);
-        row["r32f5_ms"] = med[4], row["ratio5"] = med[3] / med[4], row["lookup_ratio5"] = only(med[3], med[4]);
+      for (size_t k = 0; k < a.kernels.size(); ++k) {
+        const double st = med[1 + 2 * k], rf = med[2 + 2 * k];
+        std::snprintf(cell, sizeof cell, " | %8.3f %8s %6s %6s", st, num(rf).c_str(), num(st / rf).c_str(),
+                      num(only(st, rf)).c_str());
+        line += cell;
+        const std::string n = std::to_string(a.kernels[k]);
+        row["st" + n + "_ms"] = st;
+        if (r32f) row["r32f" + n + "_ms"] = rf, row["ratio" + n] = st / rf, row["lookup_ratio" + n] = only(st, rf);
       }
+      ratio_lines.push_back(line);
+      if (a.region) row["region"] = {a.region->x, a.region->y, a.region->w, a.region->h};
       ratio_rows.push_back(row);
     }
 
@@ -371,8 +389,16 @@ int main(int argc, char** argv) try {
   }
   std::printf("device '%s', %ux%u, %s %s maps, medians of %u frames (device timestamps, the shading pass)\n",
               device.c_str(), a.width, a.height, side_name(level).c_str(), a.encoding.c_str(), a.reps);
-  std::printf("%-16s %8s | %8s %8s %6s %6s | %8s %8s %6s %6s\n", "scene", "none ms", "st 1", "R32F 1", "ratio", "lookup",
-              "st 5x5", "R32F 5x5", "ratio", "lookup");
+  std::string head;
+  char cell[128];
+  std::snprintf(cell, sizeof cell, "%-16s %8s", "scene", "none ms");
+  head = cell;
+  for (const uint32_t k : a.kernels) {
+    const std::string n = k == 1 ? "1" : std::to_string(k) + "x" + std::to_string(k);
+    std::snprintf(cell, sizeof cell, " | %8s %8s %6s %6s", ("st " + n).c_str(), ("R32F " + n).c_str(), "ratio", "lookup");
+    head += cell;
+  }
+  std::printf("%s\n", head.c_str());
   for (const auto& l : ratio_lines) std::printf("%s\n", l.c_str());
   if (a.frame_path) {
     std::printf("\nengine frame path (retire + record_uploads + record_end_of_frame, host), %u tiles arriving per frame\n",

@@ -86,7 +86,10 @@ uint st_byte(uint base_word, uint byte_offset) {
 }
 
 // ---- MH and MMH tiles (MH §3.2; tiles/core/MHQUAD.md) ----
-float st_mh_depth(uint base, uint level, uint x, uint y, bool relative) {
+// The depth of texel (x, y) of `level` and in `shift` the square of texels that share it
+// (those with the same x >> shift, y >> shift): a walk that ends above `level` at a leaf or
+// a missing child ends there for every texel under that node, with the same value.
+float st_mh_depth(uint base, uint level, uint x, uint y, bool relative, out uint shift) {
   level = min(level, kMaxMapLevel);
   const uint hdr = ST_POOL(base + 1u);
   const uint levels = (hdr >> 16u) & 0xFFu;
@@ -96,14 +99,17 @@ float st_mh_depth(uint base, uint level, uint x, uint y, bool relative) {
   uint code = root_leaf ? 1u : 3u;
   uint val_pos = root_leaf ? 0u : 1u;
   precise float value = uintBitsToFloat(ST_POOL(tree + val_pos));
-  uint l = 0u;
+  uint l = 0u, end = level;  // end: the level of the node whose texels share the answer
   while (l < level && code != 1u) {
     const uint bit = level - (l + 1u);
     const uint slot = ((x >> bit) & 1u) | (((y >> bit) & 1u) << 1u);
     const uint w = ST_POOL(tree + pos);
     const uint mask = w & 0xFFu;
     const uint child_code = (mask >> (2u * slot)) & 3u;
-    if (child_code == 0u) break;  // missing child: the last valued node answers
+    if (child_code == 0u) {  // missing child: the last valued node answers every texel under it
+      end = l + 1u;
+      break;
+    }
     const uint shift = relative ? ((w >> 12u) & 0xFu) : st_byte(base, 16u + l);
     const uint child = (((pos >> shift) + (w >> 16u)) << shift) + uint(bitCount(mask & ((1u << (2u * slot)) - 1u)));
     pos = child;
@@ -120,7 +126,13 @@ float st_mh_depth(uint base, uint level, uint x, uint y, bool relative) {
       }
     }
   }
+  if (code == 1u) end = l;  // a leaf (a missing child's break leaves code != 1)
+  shift = level - end;
   return relative ? value : uintBitsToFloat(ST_POOL(tree + val_pos));
+}
+float st_mh_depth(uint base, uint level, uint x, uint y, bool relative) {
+  uint shift;
+  return st_mh_depth(base, level, x, y, relative, shift);
 }
 
 // ---- DAG-MH tiles (DAG-MH §3.5 Alg. 1, §3.4 Alg. 2; tiles/core/DAGMH.md) ----
@@ -170,7 +182,21 @@ uint st_dag_treelet_word(StDagSpace s, uint t, uint w) {
   return t < s.t ? ST_PAGE(s.dtreelets + t * 3u + w) : ST_POOL(s.treelets + (t - s.t) * 3u + w);
 }
 
-float st_dag_depth(uint base, uint level, uint x, uint y) {
+// Whether any of bits [lo, hi) of a treelet's 96-bit bitmap (w0, w1, w2) is set.
+uint st_bit_span(uint lo, uint hi, uint at) {  // the bits of [lo, hi) in the word of bits [at, at + 32)
+  const uint a = clamp(lo, at, at + 32u) - at, b = clamp(hi, at, at + 32u) - at;
+  return (b >= 32u ? 0xFFFFFFFFu : (1u << b) - 1u) & ~(a >= 32u ? 0xFFFFFFFFu : (1u << a) - 1u);
+}
+bool st_treelet_any(uint w0, uint w1, uint w2, uint lo, uint hi) {
+  return ((w0 & st_bit_span(lo, hi, 0u)) | (w1 & st_bit_span(lo, hi, 32u)) | (w2 & st_bit_span(lo, hi, 64u))) != 0u;
+}
+
+// The depth of texel (x, y) of `level` and in `shift` the square of texels that share its
+// value index (those with the same x >> shift, y >> shift), as View::finish_region finds
+// it: below a missing child every texel; at an inner node of `level` the texel alone; in a
+// treelet the shallowest node on the path at or below the one that answered whose subtree
+// holds no set bit besides its own (its deepest level the query reaches: the node alone).
+float st_dag_depth(uint base, uint level, uint x, uint y, out uint shift) {
   // Header version 3 (DAGMH.md): word 2 = finest_level | skip_level << 8 | flags << 16;
   // the sections follow from the counts (dagmh::sections_of).
   const uint w2 = ST_POOL(base + 2u);
@@ -193,11 +219,13 @@ float st_dag_depth(uint base, uint level, uint x, uint y) {
     sp.dnodes = dict + kDictHeaderWords;
     sp.dtreelets = sp.dnodes + sp.d;
   }
+  shift = 0u;
   if (level > finest) {
     const uint sh = level - finest;
     x >>= sh;
     y >>= sh;
     level = finest;
+    shift = sh;  // texels below the tile's finest level share its texel's answer
   }
   const uint top = (1u << level) - 1u;
   x = min(x, top);
@@ -236,9 +264,11 @@ float st_dag_depth(uint base, uint level, uint x, uint y) {
   // finish
   uint index = c.last;
   const uint tag = c.ref & 0xC0000000u;
-  if (tag == 0x40000000u) {
+  if (tag == 0x40000000u) {  // an inner node of `level`: the texel alone
     index = (st_dag_node_word(sp, c.ref & 0x3FFFFFFFu) & 0x100u) != 0u ? c.base : c.last;
-  } else if (tag == 0x80000000u) {
+  } else if (tag != 0x80000000u) {  // the missing child at c.level: every texel under it
+    shift += level - c.level;
+  } else {
     const uint t = c.ref & 0x3FFFFFFFu;
     const uint w0 = st_dag_treelet_word(sp, t, 0u), w1 = st_dag_treelet_word(sp, t, 1u),
                w2 = st_dag_treelet_word(sp, t, 2u);
@@ -251,6 +281,7 @@ float st_dag_depth(uint base, uint level, uint x, uint y) {
       const uint stride = n == 1u ? 21u : n == 2u ? 5u : 1u;
       p[n] = p[n - 1u] + 1u + stride * child;
     }
+    uint m = 0u;  // the treelet level of the set bit that answers (0: none did)
     for (int n = int(depth); n >= 0; --n) {
       const uint q = p[n];
       const uint word = q < 32u ? w0 : q < 64u ? w1 : w2;
@@ -261,10 +292,18 @@ float st_dag_depth(uint base, uint level, uint x, uint y) {
       else if (q < 64u) before = uint(bitCount(w0)) + uint(bitCount(w1 & below_mask));
       else before = uint(bitCount(w0)) + uint(bitCount(w1)) + uint(bitCount(w2 & below_mask));
       index = c.base + before;
+      m = uint(n);
       break;
     }
+    // subtrees below treelet levels 0, 1, 2: 85, 21, 5 bits
+    while (m < depth && st_treelet_any(w0, w1, w2, p[m] + 1u, p[m] + (m == 0u ? 85u : m == 1u ? 21u : 5u))) ++m;
+    shift += level - c.level - m;
   }
   return st_dag_value(base, chunk_words, mult_words, index);
+}
+float st_dag_depth(uint base, uint level, uint x, uint y) {
+  uint shift;
+  return st_dag_depth(base, level, x, y, shift);
 }
 
 // ---- voxel shadow DAG tiles (voxelized shadows 2014 §4, §6.2; tiles/core/VSDAG.md) ----
@@ -409,20 +448,29 @@ bool st_plane_lookup(uint base, uint rel, uint x, uint y, out float d) {
   return true;
 }
 
-float st_tile_depth(uint slot, uint rel, uint x, uint y) {
+// The depth of texel (x, y) of level `rel` below a tile's root, and in `shift` the square
+// of texels that share it (st_mh_depth, st_dag_depth; 0 for voxel and plane tiles: a plane
+// block may sit where the inner buffer has a missing child).
+float st_tile_depth(uint slot, uint rel, uint x, uint y, out uint shift) {
   uint base = slot * ST_PAGE(kPtSlotWords);
   const uint enc = ST_PAGE(kPtEncoding);
+  shift = 0u;
   if (enc == 3u) return st_vsdag_depth(base, rel, x, y);
+  bool planes = false;
   if (ST_POOL(base) == 0x4E505453u) {  // "STPN": plane blocks over an inner buffer
     float d;
     if (st_plane_lookup(base, rel, x, y, d)) return d;
     base += 6u + 6u * ST_POOL(base + 4u) + 2u * ST_POOL(base + 2u) + 6u * ST_POOL(base + 5u);
+    planes = true;
   }
   // A DAG-MH pack's tile may be an MMH buffer, told by its magic "STMM" (tiles/PACK.md
   // "Mixed tiles"; encoding.cpp open_encoded).
   const bool mmh_tile = enc == 2u && ST_POOL(base) == 0x4D4D5453u;
-  if (enc == 2u && !mmh_tile) return st_dag_depth(base, rel, x, y);
-  return st_mh_depth(base, rel, x, y, enc == 1u || mmh_tile);
+  uint s;
+  const float d = enc == 2u && !mmh_tile ? st_dag_depth(base, rel, x, y, s)
+                                         : st_mh_depth(base, rel, x, y, enc == 1u || mmh_tile, s);
+  shift = planes ? 0u : min(s, rel);
+  return d;
 }
 
 // ---- the page-table walk (page_table.hpp walk_page_table; client/remote_map_lookups.cpp enter_tile) ----
@@ -545,17 +593,26 @@ bool st_in_walk(StWalk w, uint level, uint x, uint y) {
   return (x >> (level - w.l)) == w.ex && (y >> (level - w.l)) == w.ey;
 }
 
-// The answer for texel (x, y) of `level` given a walk that covers it.
-float st_answer(StWalk w, uint level, uint x, uint y, inout StProbe probe) {
+// The answer for texel (x, y) of `level` given a walk that covers it, and in `shift` the
+// square of texels that get the same answer (x >> shift, y >> shift equal): a value
+// holds for the walk's square, a tile's path for st_tile_depth's, an absent tile's
+// preview answer for the texel alone.
+float st_answer(StWalk w, uint level, uint x, uint y, inout StProbe probe, out uint shift) {
+  shift = 0u;
   if (w.kind == 1u) {
     const uint rel = level - w.l;
-    return st_tile_depth(w.slot, rel, x - (w.ex << rel), y - (w.ey << rel));
+    return st_tile_depth(w.slot, rel, x - (w.ex << rel), y - (w.ey << rel), shift);
   }
   if (w.kind == 2u) {
     st_feedback(w.key, w.l, w.ex, w.ey, w.value_bits, w.kind_word, probe);
     return st_preview(level, x, y, w.l, w.value);
   }
+  shift = level - w.l;
   return w.value;
+}
+float st_answer(StWalk w, uint level, uint x, uint y, inout StProbe probe) {
+  uint shift;
+  return st_answer(w, level, x, y, probe, shift);
 }
 
 float st_depth(uint level, uint x, uint y, inout StProbe probe) {
@@ -567,22 +624,54 @@ uint st_pcf_tap(uint x, uint i, uint r, uint side) {
   return t < 0 ? 0u : uint(t) >= side ? side - 1u : uint(t);
 }
 
+// Taps i, i + 1, ... (< r) of an r-wide kernel about x whose texels lie in the aligned
+// span of 2^s texels that holds tap i's (taps clamped at the map's edges included): >= 1.
+uint st_pcf_run(uint x, uint i, uint r, uint side, uint s) {
+  const int t = int(x) - int((r - 1u) / 2u) + int(i);  // tap i before the clamp
+  const uint end = ((st_pcf_tap(x, i, r, side) >> s) + 1u) << s;  // the first texel past the span
+  return end >= side ? r - i : min(r - i, uint(int(end) - t));
+}
+
 // r x r PCF (evaluator.hpp: lit taps / (r * r) in float, taps clamped to the map). The
 // quotient comes from a table the host filled with the CPU's division, so no GPU
-// division (not correctly rounded in Vulkan) enters the answer.
+// division (not correctly rounded in Vulkan) enters the answer. Taps are counted in
+// blocks (MH §3.3's hierarchical PCF): a tap's answer holds for the square of texels its
+// walk and tile path share (st_answer's shift), so every tap of the kernel in that square
+// (a block of n x m taps from it, clamped edge taps included) counts with it, and the next
+// walk starts at the first tap not counted yet (a mask of counted taps; a block may overlap
+// an earlier, smaller one: only its new taps count). A kernel inside one page-table value,
+// leaf or missing child costs one walk. The count is the per-tap count, so the answer is
+// the CPU's bit for bit. The loop carries little (walk, count, mask): llvmpipe keeps
+// loop-carried state in memory, and a shared cursor across taps was slower there.
 float st_pcf(uint level, uint x, uint y, uint r, float receiver, inout StProbe probe) {
   r = clamp(r, 1u, kMaxPcf);
   if (level > ST_PAGE(kPtMapLevel)) return 1.0;
   const uint side = 1u << level;
-  uint lit = 0u;
+  // taps counted so far: bit j * r + i of (done0, done1, done2); r * r <= 81
+  uint lit = 0u, done0 = 0u, done1 = 0u, done2 = 0u, k = 0u;
   StWalk w = st_walk(level, st_pcf_tap(x, 0u, r, side), st_pcf_tap(y, 0u, r, side));
-  for (uint j = 0u; j < r; ++j) {
-    const uint ty = st_pcf_tap(y, j, r, side);
-    for (uint i = 0u; i < r; ++i) {
-      const uint tx = st_pcf_tap(x, i, r, side);
-      if (!st_in_walk(w, level, tx, ty)) w = st_walk(level, tx, ty);  // else: the same walk
-      lit += st_lit(receiver, st_answer(w, level, tx, ty, probe)) ? 1u : 0u;
+  while (k < r * r) {
+    const uint j = k / r, i = k - j * r;
+    const uint tx = st_pcf_tap(x, i, r, side), ty = st_pcf_tap(y, j, r, side);
+    if (!st_in_walk(w, level, tx, ty)) w = st_walk(level, tx, ty);  // else: the same walk
+    uint s;
+    const bool tap_lit = st_lit(receiver, st_answer(w, level, tx, ty, probe, s));
+    // An absent tile's taps go one by one: each is counted in the feedback.
+    const uint n = w.kind == 2u ? 1u : st_pcf_run(x, i, r, side, s);
+    const uint m = w.kind == 2u ? 1u : st_pcf_run(y, j, r, side, s);
+    uint fresh = 0u;  // taps of the n x m block not counted yet (an earlier block may hold some)
+    for (uint jj = j; jj < j + m; ++jj) {
+      const uint lo = jj * r + i, hi = lo + n;
+      const uint b0 = st_bit_span(lo, hi, 0u) & ~done0, b1 = st_bit_span(lo, hi, 32u) & ~done1,
+                 b2 = st_bit_span(lo, hi, 64u) & ~done2;
+      fresh += uint(bitCount(b0) + bitCount(b1) + bitCount(b2));
+      done0 |= b0;
+      done1 |= b1;
+      done2 |= b2;
     }
+    lit += tap_lit ? fresh : 0u;
+    const int f0 = findLSB(~done0), f1 = findLSB(~done1), f2 = findLSB(~done2);
+    k = f0 >= 0 ? uint(f0) : f1 >= 0 ? 32u + uint(f1) : f2 >= 0 ? 64u + uint(f2) : 96u;
   }
   return uintBitsToFloat(ST_PAGE(ST_PAGE(kPtPcfTable) + (r - 1u) * kPcfTableStride + lit));
 }
@@ -612,9 +701,16 @@ StFilter st_filter_levels(float footprint, uint finest) {
 float st_lookup(uint x, uint y, float receiver, float footprint, uint r, inout StProbe probe) {
   const uint finest = ST_PAGE(kPtMapLevel);
   const StFilter f = st_filter_levels(footprint, finest);
-  const float a = st_pcf(f.fine, x >> (finest - f.fine), y >> (finest - f.fine), r, receiver, probe);
+  // One call site of st_pcf for both levels: a shader compiler inlines the walk and the
+  // decoders once (half the pipeline compile time of two sites).
+  float a = 0.0, c = 0.0;
+  for (uint k = 0u; k < (f.t == 0.0 ? 1u : 2u); ++k) {
+    const uint l = k == 0u ? f.fine : f.coarse;
+    const float v = st_pcf(l, x >> (finest - l), y >> (finest - l), r, receiver, probe);
+    if (k == 0u) a = v;
+    else c = v;
+  }
   if (f.t == 0.0) return a;
-  const float c = st_pcf(f.coarse, x >> (finest - f.coarse), y >> (finest - f.coarse), r, receiver, probe);
   precise float step = c - a;
   precise float scaled = f.t * step;
   precise float blended = a + scaled;

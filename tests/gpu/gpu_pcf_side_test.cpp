@@ -3,6 +3,10 @@
 // naming it, before anything is submitted, and the map keeps answering afterwards.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <random>
 #include <string>
 #include <vector>
 
@@ -55,6 +59,60 @@ TEST(GpuPcfSide, EvenZeroAndLargeKernelsAreRefusedByName) {
     EXPECT_LE(v, 1.0f);
   }
   EXPECT_EQ(g.stats().validation_messages, 0u);
+}
+
+// st_pcf counts a kernel's taps in blocks: a tap's answer holds for the square of texels
+// its page-table walk and tile path share (a value, a leaf, a missing child, an empty
+// treelet subtree), so every tap of the kernel in that square counts with it (blocks may
+// overlap). The count must stay the per-tap count: every texel of every level,
+// every kernel side, against the CPU's PCF, with each receiver at (or one float either side
+// of) the depth of one of its own taps, so a run that swallowed a tap of another depth
+// flips the count. The random field mixes constant blocks (wide missing children), noise
+// (treelets), slopes and lit blocks; the map edges clamp taps.
+TEST(GpuPcfSide, KernelRunsCountEveryTapLikeTheCpu) {
+  for (Encoding e : looptest::available_encodings()) {
+    SCOPED_TRACE(to_string(e));
+    const std::string name = "gpu_pcf_runs_" + to_string(e);
+    auto pack = looptest::build_pack(name, 6, 23, e, 2, 512);
+    looptest::TestServer srv = looptest::start_server({pack.path});
+    client::ClientOptions o = looptest::quick_options();
+    o.cache_slots = uint32_t(pack.reader->tiles().size()) + 4;
+    client::Client c({"127.0.0.1", srv.port}, o);
+    client::Map map = c.open(name);
+    const uint32_t finest = map.finest_level();
+    const uint64_t side = uint64_t(1) << finest;
+    map.request_region(finest, 0, 0, side, side, 10);
+    ASSERT_TRUE(looptest::wait_until([&] { return map.region_resident(finest, 0, 0, side, side); }));
+    GpuMap g(map, gputest::options());
+    g.sync();
+    std::mt19937_64 rng(5);
+    std::vector<GpuQuery> q;
+    for (uint32_t level : {finest, finest - 1, finest - 3})
+      for (uint32_t y = 0; y < (1u << level); ++y)
+        for (uint32_t x = 0; x < (1u << level); ++x) {
+          const uint32_t r = uint32_t(1 + 2 * (rng() % 5)), h = (r - 1) / 2, n = 1u << level;
+          auto tap = [&](uint32_t t, uint32_t i) { return uint32_t(std::clamp<int>(int(t) - int(h) + int(i), 0, int(n) - 1)); };
+          float d = map.depth(level, tap(x, uint32_t(rng() % r)), tap(y, uint32_t(rng() % r)));
+          const uint32_t nudge = uint32_t(rng() % 3);
+          if (nudge == 1) d = std::nextafter(d, -1.0f);
+          if (nudge == 2) d = std::nextafter(d, 2.0f);
+          q.push_back({x, y, d, 1, r, level});
+        }
+    std::vector<float> out(q.size());
+    g.evaluate(q, out);
+    size_t bad = 0;
+    std::string first;
+    for (size_t i = 0; i < q.size(); ++i) {
+      const float want = map.pcf(q[i].level, q[i].x, q[i].y, q[i].r, q[i].receiver);
+      if (std::bit_cast<uint32_t>(want) == std::bit_cast<uint32_t>(out[i])) continue;
+      if (bad++ == 0)
+        first = "level " + std::to_string(q[i].level) + " (" + std::to_string(q[i].x) + ", " + std::to_string(q[i].y) +
+                ") r " + std::to_string(q[i].r) + ": gpu " + std::to_string(out[i]) + ", cpu " + std::to_string(want);
+    }
+    EXPECT_EQ(bad, 0u) << first;
+    EXPECT_EQ(g.stats().validation_messages, 0u);
+    srv.stop();
+  }
 }
 
 }  // namespace gpu_pcf_side_test
