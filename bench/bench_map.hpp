@@ -73,18 +73,17 @@ struct TiledRun {
 };
 
 // Where a bench map's depth bounds come from: the Embree tracer (`--builder embree`, either
-// interval rule) or the light-space rasterizer (`--builder raster`: sun lights and the
-// closed-object rule only, as map_build's resolve_builder; same canonical bounds up to
+// interval rule) or the light-space rasterizer (`--builder raster`: sun lights, either
+// interval rule, as map_build's resolve_builder; same canonical bounds up to
 // the few texels ARCHITECTURE.md "Canonical coverage" counts). `static_rule`: the
 // static-geometry interval (an open first hit reaches to just below the next surface;
-// voxel shadows 2014 §6.1), Embree only.
+// voxel shadows 2014 §6.1), from either builder.
 class BoundsSource {
  public:
   BoundsSource(const Scene& scene, const LightSpace& light, const std::string& builder, bool static_rule)
       : mode_(static_rule ? TraceMode::static_bounds : TraceMode::bounds) {
     if (builder == "raster") {
-      if (static_rule) throw Error("--builder raster builds the closed-object rule only; use --builder embree");
-      raster_ = std::make_unique<RasterBounds>(scene, light);
+      raster_ = std::make_unique<RasterBounds>(scene, light, RasterSkip::exact, mode_);
     } else if (builder == "embree") {
       tracer_ = std::make_unique<DepthBoundsTracer>(scene, light);
     } else {

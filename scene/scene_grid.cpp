@@ -11,7 +11,7 @@
 namespace st {
 namespace {
 
-constexpr const char* kPrefix = "grid:";
+constexpr const char* kGridPrefix = "grid:";
 constexpr uint32_t kMaxCells = 4096;  // a side
 
 struct GridSpec {
@@ -42,7 +42,7 @@ double parse_number(const std::string& spec, const std::string& key, const std::
 
 GridSpec parse(const std::string& spec) {
   GridSpec g;
-  const std::string body = spec.substr(std::string(kPrefix).size());
+  const std::string body = spec.substr(std::string(kGridPrefix).size());
   const size_t comma = body.find(',');
   const std::string list = body.substr(0, comma);
   if (list.empty()) fail(spec, "no file (grid:FILE[|FILE...][,key=value...])");
@@ -110,7 +110,7 @@ void append_copy(Scene& out, const Scene& src, int quarter, const Vec3d& shift, 
 
 }  // namespace
 
-bool is_grid_spec(const std::string& spec) { return spec.rfind(kPrefix, 0) == 0; }
+bool is_grid_spec(const std::string& spec) { return spec.rfind(kGridPrefix, 0) == 0; }
 
 Scene load_grid_scene(const std::string& spec, const SceneOptions& options, const SceneLimits& limits) {
   const GridSpec g = parse(spec);

@@ -18,7 +18,7 @@
 namespace st {
 namespace {
 
-double since(std::chrono::steady_clock::time_point t0) {
+double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
@@ -171,7 +171,7 @@ StackBuildReport build_stack_pack(const Scene& scene, const LightSetSpec& spec_i
   StackSpill spill(spill_path, o.map_level, n, B);
   auto t0 = std::chrono::steady_clock::now();
   r.bounds_by = trace_stack_to_spill(scene, set, spill, &r.exit_depths, o.progress);
-  r.trace_seconds = since(t0);
+  r.trace_seconds = seconds_since(t0);
   t0 = std::chrono::steady_clock::now();
   BlockedCutStats bst;
   BlockedStackCut cut(spill, K, o.tile_bytes, spill_path + ".tiles", &bst, o.cells);
@@ -198,7 +198,7 @@ StackBuildReport build_stack_pack(const Scene& scene, const LightSetSpec& spec_i
   std::sort(pp.build_params.begin(), pp.build_params.end());
   t0 = std::chrono::steady_clock::now();
   r.pack_bytes = write_stack_pack(out, cut.grid, cut.tile_count(), [&](size_t i) { return cut.tile(i); }, pp);
-  r.write_seconds = since(t0);
+  r.write_seconds = seconds_since(t0);
   r.slices = set.size();
   r.map_level = o.map_level;
   r.skip_level = cut.grid.skip_level;
