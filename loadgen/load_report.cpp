@@ -54,6 +54,15 @@ std::string load_table(const LoadResult& r) {
   row("connects / disconnects", std::to_string(r.client.connects) + " / " + std::to_string(r.client.disconnects));
   row("frames (late)", std::to_string(r.frames) + " (" + std::to_string(r.frames_late) + "), max lag " +
                            fmt("%.1f ms", r.max_lag_ms));
+  const FrameTimes& ft = r.frame_times;
+  row("frame work ms mean/p50/p99/max", fmt("%.3f", ft.mean_ms()) + " / " + fmt("%.3f", ft.percentile_ms(.5)) + " / " +
+                                            fmt("%.3f", ft.percentile_ms(.99)) + " / " + fmt("%.3f", ft.max_ms));
+  if (r.slices && o.time0 != o.time1 && !o.soft) {
+    const FrameTimes& ct = r.crossing_times;
+    row("slice crossings: frames / holes / max ms", std::to_string(ct.frames) + " / " + std::to_string(r.crossing_holes) +
+                                                        " / " + fmt("%.3f", ct.max_ms) + " (mean " +
+                                                        fmt("%.3f", ct.mean_ms()) + ")");
+  }
   row("frames with holes", std::to_string(r.frames_with_holes) + " (" + fmt("%.2f%%", 100 * r.hole_fraction()) + ")");
   row("  of them outside cut fill time", std::to_string(r.frames_with_holes_steady) + " (" +
                                            fmt("%.2f%%", r.frames ? 100.0 * double(r.frames_with_holes_steady) / double(r.frames) : 0) + ")");
@@ -104,7 +113,18 @@ std::string load_json(const LoadResult& r) {
   j["connections"] = {{"connects", r.client.connects}, {"disconnects", r.client.disconnects},
                       {"connect_failures", r.client.connect_failures}};
   j["watcher_poll_ms_max"] = r.watcher_poll_ms_max;
-  if (r.slices) j["stack"] = {{"slices", r.slices}, {"time0", o.time0}, {"time1", o.time1}, {"soft", o.soft}};
+  if (r.slices)
+    j["stack"] = {{"slices", r.slices},
+                  {"time0", o.time0},
+                  {"time1", o.time1},
+                  {"soft", o.soft},
+                  {"crossings", {{"frames", r.crossing_times.frames},
+                                 {"with_holes", r.crossing_holes},
+                                 {"mean_ms", r.crossing_times.mean_ms()},
+                                 {"max_ms", r.crossing_times.max_ms}}}};
+  const FrameTimes& ft = r.frame_times;
+  j["frame_ms"] = {{"frames", ft.frames}, {"mean", ft.mean_ms()}, {"p50", ft.percentile_ms(.5)},
+                   {"p90", ft.percentile_ms(.9)}, {"p99", ft.percentile_ms(.99)}, {"max", ft.max_ms}};
   j["map"] = {{"level", r.map_level}, {"skip_level", r.skip_level}, {"cache_slots", r.cache_slots},
               {"slot_bytes", r.slot_bytes}, {"ground", r.world.ground}, {"top", r.world.top},
               {"footprint", {r.world.x0, r.world.z0, r.world.x1, r.world.z1}}};

@@ -52,6 +52,33 @@ double percentile_of(std::vector<double> v, double p) {
   return v[i] + (v[i + 1] - v[i]) * (pos - double(i));
 }
 
+void FrameTimes::add(double ms) {
+  ++frames;
+  sum_ms += ms;
+  max_ms = std::max(max_ms, ms);
+  const double us = std::max(1.0, ms * 1000);
+  const int b = std::min(int(counts.size()) - 1, int(std::floor(std::log2(us) * kBucketsPerOctave)));
+  ++counts[size_t(b)];
+}
+
+void FrameTimes::merge(const FrameTimes& o) {
+  for (size_t i = 0; i < counts.size(); ++i) counts[i] += o.counts[i];
+  frames += o.frames, sum_ms += o.sum_ms, max_ms = std::max(max_ms, o.max_ms);
+}
+
+double FrameTimes::percentile_ms(double p) const {
+  if (!frames) return 0;
+  if (p >= 1) return max_ms;
+  const uint64_t rank = uint64_t(std::ceil(std::clamp(p, 0.0, 1.0) * double(frames)));
+  uint64_t seen = 0;
+  for (size_t i = 0; i < counts.size(); ++i) {
+    seen += counts[i];
+    if (seen >= std::max<uint64_t>(rank, 1))
+      return std::min(max_ms, std::exp2(double(i + 1) / kBucketsPerOctave) / 1000);
+  }
+  return max_ms;
+}
+
 namespace {
 
 std::vector<client::Endpoint> all_endpoints(const LoadOptions& o) {
@@ -94,6 +121,8 @@ struct Shared {
   std::atomic<uint64_t> skipped{0};  // frames not run: the run was past its duration + 1 s
   std::mutex lag_mu;
   double max_lag_ms = 0, visibility_sum = 0;
+  FrameTimes frame_times, crossing_times;  // under lag_mu
+  uint64_t crossing_holes = 0;
 };
 
 // A stack map's need is one slice: cell_level kSliceNeed, cx the slice.
@@ -148,6 +177,7 @@ struct CameraRun {
   Clock::time_point first;             // schedule of frame 0 (start + phase)
   uint64_t next_frame = 0, frames = 0;
   uint64_t prev_segment = ~uint64_t(0);
+  uint32_t prev_w0 = 0, prev_w1 = 0;  // the slices its previous frame read (stack maps)
 
   Clock::time_point schedule(double rate, uint64_t f) const {
     return first + std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(double(f) / rate));
@@ -182,11 +212,14 @@ void camera_frame(CameraRun& cam, const LoadOptions& o, const WorldFrame& world,
   std::vector<CellNeed> cells;
   const uint32_t slices = map.slices();
   const double time = time_at(o, t);
+  bool crossing = false;  // reads a slice the previous frame did not
   if (slices) {
     // A stack map: the slices around the camera's time now, then (prefetch) those around
     // its time ahead; the view's 2D cells mean nothing here.
     uint32_t w0 = 0, w1 = slices - 1;
     if (!o.soft) time_slices(time, slices, w0, w1);
+    crossing = f > 0 && (w0 < cam.prev_w0 || w1 > cam.prev_w1);
+    cam.prev_w0 = w0, cam.prev_w1 = w1;
     for (uint32_t w = w0; w <= w1; ++w) cells.push_back(slice_need(w));
     map.request_slices(w0, w1, 60000);
     if (o.prefetch && !o.soft && (cut || (f + cam.id) % kPrefetchEvery == 0))
@@ -252,10 +285,16 @@ void camera_frame(CameraRun& cam, const LoadOptions& o, const WorldFrame& world,
       }
     }
   }
+  const double work_ms = ms_between(began, Clock::now());
   {
     std::lock_guard lock(sh.lag_mu);
     sh.max_lag_ms = std::max(sh.max_lag_ms, lag);
     sh.visibility_sum += vis;
+    sh.frame_times.add(work_ms);
+    if (crossing) {
+      sh.crossing_times.add(work_ms);
+      sh.crossing_holes += !missing.empty();
+    }
   }
   sh.frames.fetch_add(1, std::memory_order_relaxed);
 }
@@ -471,6 +510,7 @@ LoadResult run_load(const LoadOptions& o_in) {
   r.lookup_seconds = double(sh.lookup_ns.load()) * 1e-9;
   r.mean_visibility = r.lookups ? sh.visibility_sum / double(r.lookups) : 0;
   r.max_lag_ms = sh.max_lag_ms;
+  r.frame_times = sh.frame_times, r.crossing_times = sh.crossing_times, r.crossing_holes = sh.crossing_holes;
   r.latency_ms = std::move(sh.latency_ms);
   r.latency_abandoned = sh.abandoned;
   r.cut_residency_ms = std::move(sh.cut_ms);

@@ -25,6 +25,7 @@
 // resident. Time to full residency after a cut: from the cut frame's scheduled time until
 // every cell that frame needed is resident.
 #pragma once
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -88,6 +89,22 @@ struct SeriesPoint {
   uint64_t bytes = 0;
 };
 
+// A frame's work on its camera thread, from the moment it starts (after any sleep until
+// its schedule) to its end: the view's samples, the requests, the residency checks and the
+// shadow lookups, what a game's frame spends on shadows. Kept as a histogram (8 buckets an
+// octave from 1 us, about 9% wide) so that a soak of hours stays bounded; the maximum and
+// the mean are exact, the percentiles the upper edge of their bucket.
+struct FrameTimes {
+  static constexpr int kBucketsPerOctave = 8, kOctaves = 25;  // 1 us .. 2^25 us (33 s)
+  std::array<uint64_t, kBucketsPerOctave * kOctaves> counts{};
+  uint64_t frames = 0;
+  double sum_ms = 0, max_ms = 0;
+  void add(double ms);
+  void merge(const FrameTimes& o);
+  double mean_ms() const { return frames ? sum_ms / double(frames) : 0; }
+  double percentile_ms(double p) const;  // p in [0, 1]; 1 is the exact maximum
+};
+
 struct LoadResult {
   LoadOptions options;
   uint32_t connections = 0, map_level = 0, skip_level = 0, cache_slots = 0, slot_bytes = 0;
@@ -114,6 +131,12 @@ struct LoadResult {
   uint64_t cuts = 0, cuts_incomplete = 0; // cut superseded by the next or by the run's end
   std::vector<SeriesPoint> series;        // every 100 ms
   WorldFrame world;
+  FrameTimes frame_times;  // every frame's work (FrameTimes)
+  // A stack map swept in time: the frames that read a slice their camera's previous frame
+  // did not (the sun crossed into the next slice), their work and how many had holes. A
+  // hitch at a crossing shows as their maximum above the other frames'.
+  FrameTimes crossing_times;
+  uint64_t crossing_holes = 0;
 
   uint64_t frames_skipped = 0;  // not run: their time had passed the duration by over a second (a stalled run ends on time)
   // Tiles were asked for and none ever came (a server that answers nothing, or only

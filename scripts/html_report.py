@@ -639,7 +639,57 @@ def index_page(d, command):
     gpu = gpu_view_section(d)
     if gpu:
         page.section("gpu", "GPU path: shadowtile view (Vulkan rasterizer)", gpu)
+    day = day_section(d)
+    if day:
+        page.section("day", "A day: the sun over a real open mesh (stack pack)", day)
     return page
+
+
+def day_section(d):
+    """The demo's day (scripts/demo-day, day/day.json from scripts/day_report.py): the stack's
+    bytes and build time against the same samples as 2D packs, the 60 FPS sweep's frame work
+    and slice crossings, and per time of day the map's view, the ray-traced one and the GPU
+    frame side by side."""
+    path = os.path.join(d, "day", "day.json")
+    if not os.path.exists(path):
+        return ""
+    j = load_json(path)
+    st, p2, ld = j["stack"], j["packs_2d"], j["load"]
+    fm, cr = ld["frame_ms"], ld["crossings"]
+    facts = [
+        "Scene %s; light %s: %d slices of %d^2" % (j["scene"], j["light"], j["slices"], j["resolution"]),
+        "Stack pack %s B, built in %s s; the same %d samples as separate 2D packs %s B, built in %s s "
+        "(two at a time): stack / 2D bytes %s" % (st["bytes"], num(st["build_s"]), p2["count"], p2["bytes"],
+                                                   num(p2["build_s"]), num(j["stack_over_2d_bytes"])),
+        "Sweep: %s camera at %s FPS over the whole day in %s s: %s frames, %s late (max lag %s ms), %s with holes; "
+        "frame work ms mean %s, p99 %s, max %s" % (ld["cameras"], ld["rate_fps"], ld["duration_s"], ld["frames"],
+                                                 ld["late"], num(ld["max_lag_ms"]), ld["with_holes"], num(fm["mean"]),
+                                                 num(fm["p99"]), num(fm["max"])),
+        "Slice crossings (frames reading a slice their previous frame did not): %s, %s with holes, work ms mean %s, "
+        "max %s" % (cr["frames"], cr["with_holes"], num(cr["mean_ms"]), num(cr["max_ms"])),
+    ]
+    parts = ["<ul>%s</ul>" % "".join("<li>%s</li>" % esc(x) for x in facts)]
+    if os.path.exists(os.path.join(d, "day", "load", "load.html")):
+        parts.append('<p>The sweep\'s load page: <a href="day/load/load.html">day/load/load.html</a></p>')
+    g = j.get("gpu") or {}
+    gframes = {f["time"]: f for f in g.get("frames", [])}
+    rows, figs = [], []
+    for r in j["renders"]:
+        gf = gframes.get(r["time"])
+        rows.append([num(r["time"]), esc(r["slices"]), "%s of %s (%s%%)" % (r["differing"], r["receivers"],
+                                                                          num(r["differing_pct"])),
+                     num(r["mean_abs_difference"]), esc(gf["compare"]) if gf else "no GPU view"])
+        cells = [("day/" + r["image"], "time %s: map shadows (render --time, PCF 3, filtered)" % num(r["time"])),
+                 ("day/" + r["traced"], "time %s: ray-traced (Embree shadow rays, same samples)" % num(r["time"]))]
+        if gf:
+            cells.append(("day/" + gf["image"], "time %s: GPU view frame %s" % (num(r["time"]), gf["frame"])))
+        figs.append('<div class="views">%s</div>' % "".join(
+            '<figure><img src="%s" alt="%s"><figcaption>%s</figcaption></figure>' % (esc(f), esc(c), esc(c))
+            for f, c in cells if os.path.exists(os.path.join(d, f))))
+    parts.append(table(["time", "slices read", "receivers differing from rays", "mean |map - rays|",
+                        "GPU frame vs render"], rows))
+    parts.extend(figs)
+    return "".join(parts)
 
 
 def gpu_view_section(d):

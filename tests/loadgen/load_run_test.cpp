@@ -5,6 +5,7 @@
 #include <dirent.h>
 
 #include <algorithm>
+#include <cmath>
 #include <atomic>
 #include <thread>
 
@@ -69,6 +70,13 @@ void expect_counters_add_up(const LoadResult& r) {
   EXPECT_LE(r.cells_missing, r.cells_needed);
   EXPECT_EQ(r.lookups, r.lookups);  // counted
   EXPECT_GT(r.lookups, 0u);
+  // Every frame's work was timed; a 2D map has no slice crossings.
+  EXPECT_EQ(r.frame_times.frames, r.frames);
+  EXPECT_GT(r.frame_times.max_ms, 0.0);
+  EXPECT_LE(r.frame_times.percentile_ms(.5), r.frame_times.percentile_ms(.99));
+  EXPECT_LE(r.frame_times.percentile_ms(.99), r.frame_times.max_ms);
+  EXPECT_LE(r.frame_times.mean_ms(), r.frame_times.max_ms);
+  EXPECT_EQ(r.crossing_times.frames, 0u);
   // JSON names the totals the table shows.
   const std::string j = load_json(r);
   EXPECT_NE(j.find("\"requested\": " + std::to_string(r.map.tiles_requested)), std::string::npos);
@@ -86,6 +94,29 @@ void expect_counters_add_up(const LoadResult& r) {
       EXPECT_GE(curve[i][1].get<double>(), curve[i - 1][1].get<double>());
     }
   }
+}
+
+// The frame-time histogram: exact count, mean and maximum; a percentile is the upper edge
+// of its bucket, at most one bucket (2^(1/8), about 9%) above the exact value.
+TEST(LoadFrameTimes, PercentilesLieWithinOneBucketOfTheExactValue) {
+  FrameTimes a, b;
+  for (int i = 1; i <= 100; ++i) (i % 2 ? a : b).add(0.1 * i);  // 0.1 .. 10 ms
+  a.merge(b);
+  EXPECT_EQ(a.frames, 100u);
+  EXPECT_NEAR(a.mean_ms(), 5.05, 1e-9);
+  EXPECT_EQ(a.max_ms, 10.0);
+  EXPECT_EQ(a.percentile_ms(1), 10.0);
+  for (double p : {0.01, 0.5, 0.9, 0.99}) {
+    const double exact = 0.1 * std::ceil(p * 100);
+    EXPECT_GE(a.percentile_ms(p), exact - 1e-12) << p;
+    EXPECT_LE(a.percentile_ms(p), exact * std::exp2(1.0 / FrameTimes::kBucketsPerOctave) + 1e-12) << p;
+  }
+  FrameTimes empty;
+  EXPECT_EQ(empty.percentile_ms(.5), 0.0);
+  EXPECT_EQ(empty.mean_ms(), 0.0);
+  FrameTimes huge;  // beyond the last bucket: counted there, the maximum exact
+  huge.add(1e9);
+  EXPECT_EQ(huge.percentile_ms(.5), 1e9);
 }
 
 TEST(LoadRun, FlyoverCountersAddUp) {
