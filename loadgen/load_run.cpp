@@ -73,8 +73,8 @@ double FrameTimes::percentile_ms(double p) const {
   uint64_t seen = 0;
   for (size_t i = 0; i < counts.size(); ++i) {
     seen += counts[i];
-    if (seen >= std::max<uint64_t>(rank, 1))
-      return std::min(max_ms, std::exp2(double(i + 1) / kBucketsPerOctave) / 1000);
+    if (seen >= std::max<uint64_t>(rank, 1))  // the last bucket holds everything above it: its edge is the maximum
+      return i + 1 == counts.size() ? max_ms : std::min(max_ms, std::exp2(double(i + 1) / kBucketsPerOctave) / 1000);
   }
   return max_ms;
 }
