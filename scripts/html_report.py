@@ -84,7 +84,7 @@ class Page:
     def verdict(self, ok, headline, facts):
         cls = "pass" if ok is True else "fail" if ok is False else "info"
         word = {True: "PASS", False: "FAIL", None: ""}[ok]
-        rows = "".join("<tr><th>%s</th><td>%s</td></tr>" % (esc(k), v) for k, v in facts)
+        rows = "".join("<tr><th>%s</th><td>%s</td></tr>" % (esc(k), v) for k, v in filter(None, facts))
         self.parts.append('<section id="verdict" class="verdict %s"><h2>%s %s</h2><table>%s</table></section>' %
                           (cls, word, esc(headline), rows))
 
@@ -218,6 +218,11 @@ def load_page(j, src, command):
                      ("drained at end", "yes" if drained else "no"),
                      ("frames with holes", "%s of %s (%.2f%%)" % (frames.get("with_holes"), frames.get("total"),
                                                                   100 * frames.get("hole_fraction", 0))),
+                     ("frame work mean / p99 / max", "%s / %s / %s ms" % (
+                         num(get(j, "frame_ms", "mean")), num(get(j, "frame_ms", "p99")), num(get(j, "frame_ms", "max")))),
+                     ("slice crossings: frames / with holes / max work", "%s / %s / %s ms" % (
+                         get(j, "stack", "crossings", "frames"), get(j, "stack", "crossings", "with_holes"),
+                         num(get(j, "stack", "crossings", "max_ms")))) if get(j, "stack", "crossings") else None,
                      ("tile latency p50 / p99 / max", "%s / %s / %s ms" % (num(lat.get("p50")), num(lat.get("p99")),
                                                                          num(lat.get("max")))),
                      ("cut to full residency p50 / p90 / max", "%s / %s / %s ms (%s of %s cuts)" % (
