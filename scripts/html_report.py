@@ -219,7 +219,8 @@ def load_page(j, src, command):
                      ("frames with holes", "%s of %s (%.2f%%)" % (frames.get("with_holes"), frames.get("total"),
                                                                   100 * frames.get("hole_fraction", 0))),
                      ("frame work mean / p99 / max", "%s / %s / %s ms" % (
-                         num(get(j, "frame_ms", "mean")), num(get(j, "frame_ms", "p99")), num(get(j, "frame_ms", "max")))),
+                         num(get(j, "frame_ms", "mean")), num(get(j, "frame_ms", "p99")), num(get(j, "frame_ms", "max"))))
+                     if get(j, "frame_ms") else None,
                      ("slice crossings: frames / with holes / max work", "%s / %s / %s ms" % (
                          get(j, "stack", "crossings", "frames"), get(j, "stack", "crossings", "with_holes"),
                          num(get(j, "stack", "crossings", "max_ms")))) if get(j, "stack", "crossings") else None,
