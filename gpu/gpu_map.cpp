@@ -4,8 +4,13 @@
 
 #include <algorithm>
 #include <bit>
+#include <cstdlib>
 #include <cstring>
+#include <new>
 #include <vector>
+#if defined(__linux__)
+#include <sys/mman.h>
+#endif
 
 #include "shadowtile/cache_view.hpp"
 #include "gpu/gpu_deep.hpp"
@@ -42,6 +47,38 @@ void check_query_kernels(std::span<const Query> queries) {
       throw GpuError("GpuMap::evaluate: query " + std::to_string(i) + ": r " + std::to_string(queries[i].r) +
                      " is neither 0 (the depth) nor a PCF kernel side (odd, 1..9)");
 }
+
+// The mirror's tables, read at random on the frame path (the page table's shadow: megabytes
+// of child tables on a large cache; the tile -> slot table), in transparent huge pages
+// where the system grants them on request (Linux's THP "madvise" mode): a lookup then
+// rarely misses the TLB, whose misses cost a full page walk each, and more under a
+// hypervisor. Smaller arrays come from operator new as usual.
+template <class T>
+struct GpuMapHugeAlloc {
+  using value_type = T;
+  static constexpr size_t kHuge = size_t(2) << 20, kFrom = size_t(64) << 10;
+  GpuMapHugeAlloc() = default;
+  template <class U>
+  GpuMapHugeAlloc(const GpuMapHugeAlloc<U>&) noexcept {}
+  static size_t rounded(size_t n) { return (n * sizeof(T) + kHuge - 1) & ~(kHuge - 1); }
+  T* allocate(size_t n) {
+    if (n * sizeof(T) < kFrom) return static_cast<T*>(::operator new(n * sizeof(T)));
+    void* p = std::aligned_alloc(kHuge, rounded(n));
+    if (!p) throw std::bad_alloc();
+#if defined(__linux__)
+    (void)madvise(p, rounded(n), MADV_HUGEPAGE);  // advice only: 4 KiB pages when refused
+#endif
+    return static_cast<T*>(p);
+  }
+  void deallocate(T* p, size_t n) noexcept {
+    if (n * sizeof(T) < kFrom) ::operator delete(p);
+    else std::free(p);
+  }
+  template <class U>
+  bool operator==(const GpuMapHugeAlloc<U>&) const noexcept { return true; }
+};
+template <class T>
+using HugeVector = std::vector<T, GpuMapHugeAlloc<T>>;
 
 // Tile -> the slot holding it on the device: open addressing, linear probing, backward-shift
 // deletion, sized once for at most slot_count keys (load <= 1/2), so linking and unlinking
@@ -91,7 +128,7 @@ class TileSlotTable {
   };
   uint64_t home(TileId t) const { return ((t ^ (t >> 29)) * 0x9E3779B97F4A7C15ull >> 17) & mask_; }
   uint64_t mask_ = 0;
-  std::vector<Bucket> b_;
+  HugeVector<Bucket> b_;
 };
 
 }  // namespace
@@ -142,8 +179,8 @@ struct GpuMap::Impl {
   uint64_t next_frame = 1;
 
   // ---- the mirror (what the device holds, as the host last recorded it) ----
-  std::vector<uint32_t> page_shadow;     // the page-table buffer's contents
-  std::vector<uint8_t> dirty;            // per kDirtyBlockWords block of page_shadow
+  HugeVector<uint32_t> page_shadow;      // the page-table buffer's contents
+  HugeVector<uint8_t> dirty;             // per kDirtyBlockWords block of page_shadow
   std::vector<uint32_t> dirty_list;
   std::vector<TileId> mirror_tile;       // per slot: the tile the device holds, or kInvalidTile
   std::vector<uint8_t> slot_levels;      // per slot: index tile levels d, 0 for an encoded tile
