@@ -4,13 +4,8 @@
 
 #include <algorithm>
 #include <bit>
-#include <cstdlib>
 #include <cstring>
-#include <new>
 #include <vector>
-#if defined(__linux__)
-#include <sys/mman.h>
-#endif
 
 #include "shadowtile/cache_view.hpp"
 #include "gpu/gpu_deep.hpp"
@@ -48,87 +43,53 @@ void check_query_kernels(std::span<const Query> queries) {
                      " is neither 0 (the depth) nor a PCF kernel side (odd, 1..9)");
 }
 
-// The mirror's tables, read at random on the frame path (the page table's shadow: megabytes
-// of child tables on a large cache; the tile -> slot table), in transparent huge pages
-// where the system grants them on request (Linux's THP "madvise" mode): a lookup then
-// rarely misses the TLB, whose misses cost a full page walk each, and more under a
-// hypervisor. Smaller arrays come from operator new as usual.
-template <class T>
-struct GpuMapHugeAlloc {
-  using value_type = T;
-  static constexpr size_t kHuge = size_t(2) << 20, kFrom = size_t(64) << 10;
-  GpuMapHugeAlloc() = default;
-  template <class U>
-  GpuMapHugeAlloc(const GpuMapHugeAlloc<U>&) noexcept {}
-  static size_t rounded(size_t n) { return (n * sizeof(T) + kHuge - 1) & ~(kHuge - 1); }
-  T* allocate(size_t n) {
-    if (n * sizeof(T) < kFrom) return static_cast<T*>(::operator new(n * sizeof(T)));
-    void* p = std::aligned_alloc(kHuge, rounded(n));
-    if (!p) throw std::bad_alloc();
-#if defined(__linux__)
-    (void)madvise(p, rounded(n), MADV_HUGEPAGE);  // advice only: 4 KiB pages when refused
-#endif
-    return static_cast<T*>(p);
-  }
-  void deallocate(T* p, size_t n) noexcept {
-    if (n * sizeof(T) < kFrom) ::operator delete(p);
-    else std::free(p);
-  }
-  template <class U>
-  bool operator==(const GpuMapHugeAlloc<U>&) const noexcept { return true; }
-};
-template <class T>
-using HugeVector = std::vector<T, GpuMapHugeAlloc<T>>;
-
 // Tile -> the slot holding it on the device: open addressing, linear probing, backward-shift
 // deletion, sized once for at most slot_count keys (load <= 1/2), so linking and unlinking
-// tiles on the frame path never allocates. Key and slot share a 16-byte bucket: a probe
-// reads one cache line.
+// tiles on the frame path never allocates.
 class TileSlotTable {
  public:
   void init(uint32_t max_keys) {
     mask_ = std::bit_ceil(std::max<uint64_t>(16, uint64_t(max_keys) * 2)) - 1;
-    b_.assign(mask_ + 1, Bucket{});
+    keys_.assign(mask_ + 1, kInvalidTile);
+    slots_.assign(mask_ + 1, 0);
   }
   uint32_t find(TileId t) const {
     for (uint64_t i = home(t);; i = (i + 1) & mask_) {
-      if (b_[i].key == t) return b_[i].slot;
-      if (b_[i].key == kInvalidTile) return layout::kNoSlot;
+      if (keys_[i] == t) return slots_[i];
+      if (keys_[i] == kInvalidTile) return layout::kNoSlot;
     }
   }
   void set(TileId t, uint32_t slot) {
     uint64_t i = home(t);
-    while (b_[i].key != kInvalidTile && b_[i].key != t) i = (i + 1) & mask_;
-    b_[i].key = t;
-    b_[i].slot = slot;
+    while (keys_[i] != kInvalidTile && keys_[i] != t) i = (i + 1) & mask_;
+    keys_[i] = t;
+    slots_[i] = slot;
   }
   // Removes t only while it still maps to `slot`.
   void erase(TileId t, uint32_t slot) {
     uint64_t i = home(t);
-    while (b_[i].key != t) {
-      if (b_[i].key == kInvalidTile) return;
+    while (keys_[i] != t) {
+      if (keys_[i] == kInvalidTile) return;
       i = (i + 1) & mask_;
     }
-    if (b_[i].slot != slot) return;
+    if (slots_[i] != slot) return;
     for (uint64_t j = i;;) {  // shift later keys of the run back over the hole
       j = (j + 1) & mask_;
-      if (b_[j].key == kInvalidTile) break;
-      const uint64_t h = home(b_[j].key);
+      if (keys_[j] == kInvalidTile) break;
+      const uint64_t h = home(keys_[j]);
       if (((j - h) & mask_) < ((j - i) & mask_)) continue;  // its home lies after the hole: stays
-      b_[i] = b_[j];
+      keys_[i] = keys_[j];
+      slots_[i] = slots_[j];
       i = j;
     }
-    b_[i].key = kInvalidTile;
+    keys_[i] = kInvalidTile;
   }
 
  private:
-  struct Bucket {
-    TileId key = kInvalidTile;
-    uint32_t slot = 0, unused = 0;
-  };
   uint64_t home(TileId t) const { return ((t ^ (t >> 29)) * 0x9E3779B97F4A7C15ull >> 17) & mask_; }
   uint64_t mask_ = 0;
-  HugeVector<Bucket> b_;
+  std::vector<TileId> keys_;
+  std::vector<uint32_t> slots_;
 };
 
 }  // namespace
@@ -179,35 +140,12 @@ struct GpuMap::Impl {
   uint64_t next_frame = 1;
 
   // ---- the mirror (what the device holds, as the host last recorded it) ----
-  HugeVector<uint32_t> page_shadow;      // the page-table buffer's contents
-  HugeVector<uint8_t> dirty;             // per kDirtyBlockWords block of page_shadow
+  std::vector<uint32_t> page_shadow;     // the page-table buffer's contents
+  std::vector<uint8_t> dirty;            // per kDirtyBlockWords block of page_shadow
   std::vector<uint32_t> dirty_list;
   std::vector<TileId> mirror_tile;       // per slot: the tile the device holds, or kInvalidTile
   std::vector<uint8_t> slot_levels;      // per slot: index tile levels d, 0 for an encoded tile
   TileSlotTable tile_slot;
-  // The parents pointer_word found last (tiles arrive in spatial runs: siblings share a
-  // parent), so most arriving tiles find theirs without probing tile_slot per level. An
-  // entry stands while its slot holds its parent: link and unlink of that slot or tile
-  // drop it.
-  struct ParentMemo {
-    TileId parent = kInvalidTile;
-    uint32_t slot = 0, j = 0;
-  };
-  static constexpr uint32_t kParentMemos = 4;
-  ParentMemo parent_memo[kParentMemos];
-  uint32_t parent_memo_next = 0;
-  // Device-resident tiles counted by sibling group (level, morton >> 8), hashed into a
-  // small table: an index tile's children (at most 256, one group) are looked up in
-  // tile_slot only when their group's count is not 0. Index tiles usually arrive before
-  // their children, so most child tables are written without a probe per child.
-  static constexpr uint32_t kGroupCounts = 4096;
-  std::vector<uint32_t> group_count = std::vector<uint32_t>(kGroupCounts, 0);
-  static uint32_t group_of(uint32_t level, uint64_t morton) {
-    return uint32_t(((morton >> 8) * 0x9E3779B97F4A7C15ull + level * 0xC2B2AE3D27D4EB4Full) >> 52) & (kGroupCounts - 1);
-  }
-  static uint32_t group_of(TileId t) {
-    return group_of(uint32_t(t >> kTileIdLevelShift), t & ((uint64_t(1) << kTileIdLevelShift) - 1));
-  }
   std::vector<VkBufferCopy> pool_copies, page_copies;
   std::vector<client::WantedTile> wanted;
   std::vector<client::DeepWant> deep_wanted;
@@ -532,7 +470,7 @@ struct GpuMap::Impl {
   // 256 entries (megabytes on a large cache), a cache miss or two per level per tile on
   // the frame path. A parent the device holds but cannot reach yet (its own parent
   // absent) also gets its child's pointer here, as its own link would have found it.
-  uint32_t pointer_word(TileId tile) {
+  uint32_t pointer_word(TileId tile) const {
     if (sg) {  // a stack cell's tile: the cell's slot pointer
       uint64_t cell = 0;
       return view->stack_tile_cell(tile, cell) ? off_cell_slots + uint32_t(cell) : ~0u;
@@ -541,31 +479,15 @@ struct GpuMap::Impl {
     const uint64_t morton = tile & ((uint64_t(1) << kTileIdLevelShift) - 1);
     if (level < k) return ~0u;
     if (level == k) return off_skip_slots + uint32_t((uint64_t(morton_compact(morton >> 1)) << k) + morton_compact(morton));
-    auto word = [&](uint32_t s, uint32_t j) {
-      const uint64_t low = morton & ((uint64_t(1) << (2 * j)) - 1);  // the child within the parent
-      const uint32_t c = (morton_compact(low >> 1) << j) + morton_compact(low);
-      return off_children + s * L::kChildTableWords + c;
-    };
-    // A remembered parent on the tile's path is the one the search below finds: only one
-    // tile of a pack spans a level on that path.
-    for (const ParentMemo& m : parent_memo)
-      if (m.j != 0 && m.j <= level - k && m.parent == ((TileId(level - m.j) << kTileIdLevelShift) | (morton >> (2 * m.j))))
-        return word(m.slot, m.j);
     for (uint32_t j = 1; j <= kMaxIndexLevels && j <= level - k; ++j) {
       const TileId parent = (TileId(level - j) << kTileIdLevelShift) | (morton >> (2 * j));
       const uint32_t s = tile_slot.find(parent);
       if (s == L::kNoSlot || slot_levels[s] != j) continue;
-      parent_memo[parent_memo_next] = {parent, s, j};
-      parent_memo_next = (parent_memo_next + 1) % kParentMemos;
-      return word(s, j);
+      const uint64_t low = morton & ((uint64_t(1) << (2 * j)) - 1);  // the child within the parent
+      const uint32_t c = (morton_compact(low >> 1) << j) + morton_compact(low);
+      return off_children + s * L::kChildTableWords + c;
     }
     return ~0u;
-  }
-
-  // Slot s or tile t changes on the device: a parent remembered there no longer stands.
-  void forget_parent(uint32_t s, TileId t) {
-    for (ParentMemo& m : parent_memo)
-      if (m.slot == s || m.parent == t) m = ParentMemo{};
   }
 
   void unlink(uint32_t s) {
@@ -576,8 +498,6 @@ struct GpuMap::Impl {
     // first (slots are compared in index order): that mapping must survive, or an index
     // tile linked later would not find its child and answer coarser than the CPU.
     tile_slot.erase(t, s);
-    forget_parent(s, t);
-    if (!sg) --group_count[group_of(t)];
     mirror_tile[s] = kInvalidTile;
     slot_levels[s] = 0;
     --resident;
@@ -588,8 +508,6 @@ struct GpuMap::Impl {
   void link(uint32_t s, TileId tile, std::span<const uint8_t> b) {
     mirror_tile[s] = tile;
     tile_slot.set(tile, s);
-    forget_parent(s, tile);
-    if (!sg) ++group_count[group_of(tile)];
     ++resident;
     uint32_t magic = 0, d = 0;
     if (b.size() >= 8) std::memcpy(&magic, b.data(), 4), std::memcpy(&d, b.data() + 4, 4);
@@ -598,12 +516,10 @@ struct GpuMap::Impl {
       slot_levels[s] = uint8_t(d);
       const TileAddress a = tile_address(tile);
       const size_t entries = 8 + 4 * CutGrid::coarse_count(d);
-      const uint64_t first_child = (tile & ((uint64_t(1) << kTileIdLevelShift) - 1)) << (2 * d);
-      const bool any_child = group_count[group_of(a.level + d, first_child)] != 0;
       for (uint32_t c = 0; c < (1u << (2 * d)); ++c) {
         const uint8_t kind = entries + 8 * c + 4 < b.size() ? b[entries + 8 * c + 4] : 0;
         uint32_t ptr = L::kNoSlot;
-        if (any_child && kind != L::kKindConstant) {
+        if (kind != L::kKindConstant) {
           const uint32_t cx = (a.x << d) + (c & ((1u << d) - 1)), cy = (a.y << d) + (c >> d);
           ptr = tile_slot.find(make_tile_id(a.level + d, cx, cy));
         }
