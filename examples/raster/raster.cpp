@@ -748,6 +748,11 @@ std::span<const FrameResult> Rasterizer::finish() {
   impl_->retire(true, -1);
   return impl_->done;
 }
+void Rasterizer::wait_idle() {
+  Impl& m = *impl_;
+  for (uint32_t s = 0; s < m.slots.size(); ++s)
+    if (m.slots[s].frame) check(vkWaitForFences(m.dev.device, 1, &m.fences[s], VK_TRUE, UINT64_MAX), "vkWaitForFences");
+}
 uint64_t Rasterizer::frames() const { return impl_->frame; }
 uint64_t Rasterizer::ring_waits() const { return impl_->waits; }
 uint64_t Rasterizer::validation_messages() const { return impl_->dev.messages; }

@@ -112,6 +112,11 @@ class Rasterizer {
   std::span<const FrameResult> render(const FrameInput& in);
   // Waits for every frame in flight and returns them (the end of a run).
   std::span<const FrameResult> finish();
+  // Waits until the device has run every frame submitted, without collecting them (the
+  // next render() or finish() retires them). A benchmark that times the host's frame path
+  // on a CPU device (lavapipe) calls it first, so that the device's threads do not take
+  // the CPU from the timed calls.
+  void wait_idle();
 
   uint64_t frames() const;                // frames submitted
   uint64_t ring_waits() const;            // render() calls that had to wait for a ring slot
