@@ -646,61 +646,21 @@ struct GpuMap::Impl {
     sci.addressModeU = sci.addressModeV = sci.addressModeW = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
     vk_check(vk.CreateSampler(d, &sci, cb, &ep_sampler), "vkCreateSampler");
     // Binding 6: the light image, read only by the ST_PASS_LIGHT pipeline.
-    VkDescriptorSetLayoutBinding b[7] = {};
-    for (uint32_t i = 0; i < 7; ++i) {
-      b[i].binding = i;
-      b[i].descriptorCount = 1;
-      b[i].stageFlags = VK_SHADER_STAGE_COMPUTE_BIT;
-      b[i].descriptorType = i < 3 ? VK_DESCRIPTOR_TYPE_STORAGE_BUFFER
-                            : i < 5 ? VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER
-                                    : VK_DESCRIPTOR_TYPE_STORAGE_IMAGE;
-      if (i == 3 || i == 4) b[i].pImmutableSamplers = &ep_sampler;
-    }
-    VkDescriptorSetLayoutCreateInfo sli{};
-    sli.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO;
-    sli.bindingCount = 7;
-    sli.pBindings = b;
-    vk_check(vk.CreateDescriptorSetLayout(d, &sli, cb, &ep_set_layout), "vkCreateDescriptorSetLayout");
-    const VkPushConstantRange pcr{VK_SHADER_STAGE_COMPUTE_BIT, 0, L::kPcWords * 4};
-    VkPipelineLayoutCreateInfo pli{};
-    pli.sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO;
-    pli.setLayoutCount = 1;
-    pli.pSetLayouts = &ep_set_layout;
-    pli.pushConstantRangeCount = 1;
-    pli.pPushConstantRanges = &pcr;
-    vk_check(vk.CreatePipelineLayout(d, &pli, cb, &ep_layout), "vkCreatePipelineLayout");
+    const auto setup = ctx->setup();
+    auto b = vk_setup::bindings(7, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VK_SHADER_STAGE_COMPUTE_BIT);
+    for (uint32_t i = 3; i < 7; ++i)
+      b[i].descriptorType = i < 5 ? VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER : VK_DESCRIPTOR_TYPE_STORAGE_IMAGE;
+    b[3].pImmutableSamplers = b[4].pImmutableSamplers = &ep_sampler;
+    ep_set_layout = vk_setup::set_layout(setup, b);
+    ep_layout = vk_setup::pipeline_layout(setup, {&ep_set_layout, 1}, {VK_SHADER_STAGE_COMPUTE_BIT, 0, L::kPcWords * 4});
     const uint32_t n = opt.frames_in_flight;
     const VkDescriptorPoolSize ps[3] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 3 * n},
                                         {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 2 * n},
                                         {VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 2 * n}};
-    VkDescriptorPoolCreateInfo dpi{};
-    dpi.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO;
-    dpi.maxSets = n;
-    dpi.poolSizeCount = 3;
-    dpi.pPoolSizes = ps;
-    vk_check(vk.CreateDescriptorPool(d, &dpi, cb, &ep_pool), "vkCreateDescriptorPool");
-    for (Frame& f : frames) {
-      VkDescriptorSetAllocateInfo dai{};
-      dai.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO;
-      dai.descriptorPool = ep_pool;
-      dai.descriptorSetCount = 1;
-      dai.pSetLayouts = &ep_set_layout;
-      vk_check(vk.AllocateDescriptorSets(d, &dai, &f.set), "vkAllocateDescriptorSets");
-    }
-    for (const bool light : {false, true}) {
-      if (light && !opt.light_pass) break;
-      VkShaderModule m = ctx->make_shader(engine_shadow_pass_spirv(light));
-      VkComputePipelineCreateInfo cpi{};
-      cpi.sType = VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO;
-      cpi.stage.sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
-      cpi.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
-      cpi.stage.module = m;
-      cpi.stage.pName = "main";
-      cpi.layout = ep_layout;
-      const VkResult r = vk.CreateComputePipelines(d, VK_NULL_HANDLE, 1, &cpi, cb, light ? &ep_light_pipeline : &ep_pipeline);
-      vk.DestroyShaderModule(d, m, cb);
-      vk_check(r, "vkCreateComputePipelines");
-    }
+    ep_pool = vk_setup::descriptor_pool(setup, n, ps);
+    for (Frame& f : frames) f.set = vk_setup::allocate_set(setup, ep_pool, ep_set_layout);
+    ep_pipeline = vk_setup::compute_pipeline(setup, ep_layout, engine_shadow_pass_spirv(false));
+    if (opt.light_pass) ep_light_pipeline = vk_setup::compute_pipeline(setup, ep_layout, engine_shadow_pass_spirv(true));
   }
 
   void need_engine(const char* call) const {

@@ -6,7 +6,7 @@
 #include <bit>
 #include <span>
 
-#include "examples/raster/vk_setup.hpp"
+#include "shadowtile/vk_setup.hpp"
 #include "tests/gpu/engine_harness.hpp"
 
 namespace st::enginetest {
@@ -40,39 +40,40 @@ struct RasterPass {
   RasterPass(enginetest::TestEngine& e, const Image& target, const Image& pos, const Image& nrm,
              const gpu::GpuDescriptors& g, bool deep = false)
       : d(e.device), width(target.width), height(target.height) {
+    const vk_setup::Device<vk_setup::Loader> v{vk_setup::kLoader, d};
     const VkAttachmentDescription att =
         vk_setup::attachment(VK_FORMAT_R32_SFLOAT, VK_ATTACHMENT_LOAD_OP_DONT_CARE, VK_ATTACHMENT_STORE_OP_STORE,
                              VK_IMAGE_LAYOUT_UNDEFINED, VK_IMAGE_LAYOUT_GENERAL);
     const VkAttachmentReference ref{0, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
-    rp = vk_setup::render_pass(d, {&att, 1}, {&ref, 1}, nullptr);
-    fb = vk_setup::framebuffer(d, rp, {&target.view, 1}, width, height);
+    rp = vk_setup::render_pass(v, {&att, 1}, {&ref, 1}, nullptr);
+    fb = vk_setup::framebuffer(v, rp, {&target.view, 1}, width, height);
     VkSamplerCreateInfo sci{};
     sci.sType = VK_STRUCTURE_TYPE_SAMPLER_CREATE_INFO;
     sci.magFilter = sci.minFilter = VK_FILTER_NEAREST;
     check(vkCreateSampler(d, &sci, nullptr, &sampler), "vkCreateSampler");
-    l0 = vk_setup::set_layout(d, vk_setup::bindings(3, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VK_SHADER_STAGE_FRAGMENT_BIT, 3, 2));
+    l0 = vk_setup::set_layout(v, vk_setup::bindings(3, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VK_SHADER_STAGE_FRAGMENT_BIT, 3, 2));
     auto b1 = vk_setup::bindings(2, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, VK_SHADER_STAGE_FRAGMENT_BIT);
     for (auto& b : b1) b.pImmutableSamplers = &sampler;
-    l1 = vk_setup::set_layout(d, b1);
+    l1 = vk_setup::set_layout(v, b1);
     const VkDescriptorSetLayout sets[2] = {l0, l1};
-    layout = vk_setup::pipeline_layout(d, sets, {VK_SHADER_STAGE_FRAGMENT_BIT, 0, 16});
+    layout = vk_setup::pipeline_layout(v, sets, {VK_SHADER_STAGE_FRAGMENT_BIT, 0, 16});
     const VkDescriptorPoolSize ps[2] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 3}, {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 2}};
-    pool = vk_setup::descriptor_pool(d, 2, ps);
-    s0 = vk_setup::allocate_set(d, pool, l0);
-    s1 = vk_setup::allocate_set(d, pool, l1);
+    pool = vk_setup::descriptor_pool(v, 2, ps);
+    s0 = vk_setup::allocate_set(v, pool, l0);
+    s1 = vk_setup::allocate_set(v, pool, l1);
     const VkDescriptorBufferInfo bufs[3] = {g.pool, g.page_table, g.feedback};
-    vk_setup::write_buffers(d, s0, bufs, 3, 2);
+    vk_setup::write_buffers(v, s0, bufs, 3, 2);
     const VkDescriptorImageInfo imgs[2] = {{VK_NULL_HANDLE, pos.view, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL},
                                            {VK_NULL_HANDLE, nrm.view, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL}};
-    vk_setup::write_images(d, s1, imgs);
-    const vk_setup::ShaderModule vs(d, kFullscreenVertSpv);
-    const vk_setup::ShaderModule fs(d, deep ? std::span<const uint32_t>(kEngineFragmentDeepSpv)
+    vk_setup::write_images(v, s1, imgs);
+    const vk_setup::ShaderModule vs(v, kFullscreenVertSpv);
+    const vk_setup::ShaderModule fs(v, deep ? std::span<const uint32_t>(kEngineFragmentDeepSpv)
                                             : std::span<const uint32_t>(kEngineFragmentSpv));
     vk_setup::Pipeline p;
     p.layout = layout, p.pass = rp, p.width = width, p.height = height;
     p.vertex = vs.module, p.fragment = fs.module;
     p.colour_attachments = 1, p.colour_mask = VK_COLOR_COMPONENT_R_BIT;
-    pipeline = vk_setup::pipeline(d, p);
+    pipeline = vk_setup::pipeline(v, p);
   }
   ~RasterPass() {
     vkDestroyPipeline(d, pipeline, nullptr);
