@@ -1001,6 +1001,19 @@ GpuMap::GpuMap(client::Map map, const EngineDevice& device, GpuOptions options)
     : impl_(std::make_unique<Impl>(std::move(map), &device, std::move(options))) {}
 GpuMap::~GpuMap() = default;
 
+uint32_t GpuMap::max_cache_slots(uint64_t storage_range, uint32_t slot_bytes) {
+  const uint64_t slot = align4(std::max<uint32_t>(slot_bytes, 1));  // as Impl's pool_bytes
+  return uint32_t(std::min<uint64_t>(storage_range / slot, uint64_t(1) << 23));
+}
+uint32_t GpuMap::max_cache_slots(const EngineDevice& device, uint32_t slot_bytes) {
+  const VkContext ctx(device);
+  return max_cache_slots(ctx.properties().limits.maxStorageBufferRange, slot_bytes);
+}
+uint32_t GpuMap::max_cache_slots(const GpuOptions& options, uint32_t slot_bytes) {
+  const VkContext ctx(options.device, false);
+  return max_cache_slots(ctx.properties().limits.maxStorageBufferRange, slot_bytes);
+}
+
 std::span<const FrameStats> GpuMap::retire(uint64_t completed_frame) { return impl_->retire(completed_frame); }
 
 FrameStats GpuMap::record_uploads(VkCommandBuffer cmd, uint64_t frame) { return impl_->record_uploads(cmd, frame); }

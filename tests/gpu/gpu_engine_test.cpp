@@ -467,5 +467,28 @@ TEST(GpuEngine, FramesInFlightWithAChurningCacheNeverStallAndMoveOnlyTilePageAnd
   EXPECT_EQ(e.messages(), 0u) << e.first_message();
 }
 
+// Sizing a cache for a device: the most slots whose pool fits the device's
+// maxStorageBufferRange, the engine's device and the own-device one alike (both lavapipe
+// here), slots rounded to words as the pool holds them, never past GpuMap's 2^23 slots.
+TEST(GpuEngine, MaxCacheSlotsFillsTheDevicesStorageRangeAndNoMore) {
+  TestEngine e(1);
+  VkPhysicalDeviceProperties p{};
+  vkGetPhysicalDeviceProperties(e.physical, &p);
+  const uint64_t range = p.limits.maxStorageBufferRange;
+  for (const uint32_t slot_bytes : {2396u, 4099u, 65536u, 1u << 20}) {
+    SCOPED_TRACE(slot_bytes);
+    const uint64_t words = (uint64_t(slot_bytes) + 3) / 4 * 4;
+    const uint32_t n = GpuMap::max_cache_slots(e.engine_device(), slot_bytes);
+    EXPECT_LE(n * words, range);
+    EXPECT_GT((n + 1) * words, range);
+    EXPECT_EQ(GpuMap::max_cache_slots(gputest::options(), slot_bytes), n);
+    EXPECT_EQ(GpuMap::max_cache_slots(range, slot_bytes), n);
+  }
+  EXPECT_EQ(GpuMap::max_cache_slots(1000, 10), 83u);  // 12-byte slots
+  EXPECT_EQ(GpuMap::max_cache_slots(uint64_t(1) << 40, 4), 1u << 23);
+  EXPECT_EQ(GpuMap::max_cache_slots(GpuMap::kAnyDeviceStorageRange, 4096), 32768u);
+  EXPECT_EQ(e.messages(), 0u) << e.first_message();
+}
+
 }  // namespace gpu_engine_test
 }  // namespace st::gpu
