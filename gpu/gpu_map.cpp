@@ -475,15 +475,14 @@ struct GpuMap::Impl {
       uint64_t cell = 0;
       return view->stack_tile_cell(tile, cell) ? off_cell_slots + uint32_t(cell) : ~0u;
     }
-    const uint32_t level = uint32_t(tile >> kTileIdLevelShift);
-    const uint64_t morton = tile & ((uint64_t(1) << kTileIdLevelShift) - 1);
+    const uint32_t level = tile_level(tile);
+    const uint64_t morton = tile_morton(tile);
     if (level < k) return ~0u;
     if (level == k) return off_skip_slots + uint32_t((uint64_t(morton_compact(morton >> 1)) << k) + morton_compact(morton));
     for (uint32_t j = 1; j <= kMaxIndexLevels && j <= level - k; ++j) {
-      const TileId parent = (TileId(level - j) << kTileIdLevelShift) | (morton >> (2 * j));
-      const uint32_t s = tile_slot.find(parent);
+      const uint32_t s = tile_slot.find(tile_parent(tile, j));
       if (s == L::kNoSlot || slot_levels[s] != j) continue;
-      const uint64_t low = morton & ((uint64_t(1) << (2 * j)) - 1);  // the child within the parent
+      const uint64_t low = tile_child_morton(tile, j);
       const uint32_t c = (morton_compact(low >> 1) << j) + morton_compact(low);
       return off_children + s * L::kChildTableWords + c;
     }
