@@ -182,18 +182,9 @@ TEST(GpuEngine, AFragmentShaderIncludingShadowtileGlslAnswersLikeTheComputePass)
   const std::map<uint64_t, uint32_t> compute_feedback = feedback_of(g);
   // Frame 2: the engine's raster pass reads the same buffers at its own bindings.
   const RasterPass raster(e, colour, *t.pos, *t.nrm, g.descriptors(2));
-  uint64_t completed = 0;
-  VkCommandBuffer cmd = e.begin(2, completed);
-  g.retire(completed);
-  const FrameStats up = g.record_uploads(cmd, 2);
-  EXPECT_EQ(up.tile_bytes + up.page_bytes, 0u);
-  raster.record(cmd, set.kernel, set.normal_offset, set.footprint);
-  e.record_readback(cmd, colour, VK_IMAGE_LAYOUT_GENERAL, VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT, t.readback[0],
-                    VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT);
-  g.record_end_of_frame(cmd, 2);
-  e.submit(2);
-  const std::span<const FrameStats> r = g.retire(e.finish());
-  ASSERT_EQ(r.size(), 1u);
+  const RasterPass::Frame r = raster.run_frame(e, g, 2, t.readback[0], set.kernel, set.normal_offset, set.footprint);
+  EXPECT_EQ(r.uploads.tile_bytes + r.uploads.page_bytes, 0u);
+  ASSERT_EQ(r.retired.size(), 1u);
   const std::vector<float> fragment = t.read(2);
   std::vector<float> want(compute.size());
   shadow_pass_reference(client::evaluator(s.map), h, plane.input(set), want);
@@ -261,18 +252,9 @@ TEST(GpuEngine, TheReceiverTwinAnswersLikeAFragmentShaderWhereTheDoubleTransform
   o.frames_in_flight = 1;
   GpuMap g(s.map, e.engine_device(), o);
   const RasterPass raster(e, colour, *t.pos, *t.nrm, g.descriptors(2));
-  uint64_t completed = 0;
-  VkCommandBuffer cmd = e.begin(1, completed);
-  g.retire(completed);
-  g.record_uploads(cmd, 1);
-  raster.record(cmd, kKernel, 0.0f, kFootprint);
-  e.record_readback(cmd, colour, VK_IMAGE_LAYOUT_GENERAL, VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT, t.readback[0],
-                    VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT);
-  g.record_end_of_frame(cmd, 1);
-  e.submit(1);
-  const std::span<const FrameStats> r = g.retire(e.finish());
-  ASSERT_EQ(r.size(), 1u);
-  EXPECT_EQ(r[0].holes, 0u);
+  const RasterPass::Frame r = raster.run_frame(e, g, 1, t.readback[0], kKernel, 0.0f, kFootprint);
+  ASSERT_EQ(r.retired.size(), 1u);
+  EXPECT_EQ(r.retired[0].holes, 0u);
   const std::vector<float> gpu = t.read(1);
   std::vector<float> twin(gpu.size());
   ReceiverLookup q;

@@ -5,6 +5,7 @@
 #pragma once
 #include <bit>
 #include <span>
+#include <vector>
 
 #include "shadowtile/vk_setup.hpp"
 #include "tests/gpu/engine_harness.hpp"
@@ -34,12 +35,13 @@ struct RasterPass {
   VkPipeline pipeline = VK_NULL_HANDLE;
   VkDescriptorPool pool = VK_NULL_HANDLE;
   VkDescriptorSet s0 = VK_NULL_HANDLE, s1 = VK_NULL_HANDLE;
+  const Image* target;
   uint32_t width, height;
 
   // deep: the fragment shader built with partial occluders (st_shadow times st_transmittance).
   RasterPass(enginetest::TestEngine& e, const Image& target, const Image& pos, const Image& nrm,
              const gpu::GpuDescriptors& g, bool deep = false)
-      : d(e.device), width(target.width), height(target.height) {
+      : d(e.device), target(&target), width(target.width), height(target.height) {
     const vk_setup::Device<vk_setup::Loader> v{vk_setup::kLoader, d};
     const VkAttachmentDescription att =
         vk_setup::attachment(VK_FORMAT_R32_SFLOAT, VK_ATTACHMENT_LOAD_OP_DONT_CARE, VK_ATTACHMENT_STORE_OP_STORE,
@@ -103,6 +105,31 @@ struct RasterPass {
     vkCmdPushConstants(cmd, layout, VK_SHADER_STAGE_FRAGMENT_BIT, 0, sizeof(push), push);
     vkCmdDraw(cmd, 3, 1, 0, 0);
     vkCmdEndRenderPass(cmd);
+  }
+
+  // One engine frame through this pass, waited for (the tests read each frame at once):
+  // begin (the slot's fence), retire, GpuMap's uploads, the pass, the target's copy into
+  // `readback`, GpuMap's end of frame, submit, finish. Returns the uploads' stats and the
+  // frames the final retire collected.
+  struct Frame {
+    gpu::FrameStats uploads;
+    std::vector<gpu::FrameStats> retired;
+  };
+  Frame run_frame(TestEngine& e, gpu::GpuMap& g, uint64_t frame, const gpu::GpuBuffer& readback, uint32_t kernel,
+                  float normal_offset, float footprint, uint32_t channel = 0) const {
+    uint64_t completed = 0;
+    VkCommandBuffer cmd = e.begin(frame, completed);
+    g.retire(completed);
+    Frame out;
+    out.uploads = g.record_uploads(cmd, frame);
+    record(cmd, kernel, normal_offset, footprint, channel);
+    e.record_readback(cmd, *target, VK_IMAGE_LAYOUT_GENERAL, VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT, readback,
+                      VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT);
+    g.record_end_of_frame(cmd, frame);
+    e.submit(frame);
+    const std::span<const gpu::FrameStats> r = g.retire(e.finish());
+    out.retired.assign(r.begin(), r.end());
+    return out;
   }
 };
 
