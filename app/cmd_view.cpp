@@ -73,7 +73,7 @@ struct ViewArgs {
   ConnectArgs connect;
   std::string time, time_sweep;
   bool soft = false, twin = false, validation = false;
-  bool cache_mb_given = false;  // --cache-mb on the command line (else the default, clamped to fit any device)
+  bool cache_mb_given = false;  // --cache-mb on the command line (else the default, clamped to fit the device)
   uint32_t frames = 24, pcf = 3, in_flight = 2;
   double fps = 24, cache_mb = 256, upload_mb = 16;
   uint64_t seed = 1;
@@ -119,23 +119,29 @@ void run_view(const ViewArgs& a) {
   cl = std::make_unique<client::Client>(parse_endpoint("--server", a.server), co);
   map = cl->open(a.map);
   co.cache_slots = map.stats().cache.resident + map.stats().cache.pinned + map.stats().cache.free;
-  // The default cache shrinks until its slot pool (one storage buffer on the GPU) fits
-  // 2^27 bytes, the maxStorageBufferRange every Vulkan device offers (lavapipe's exactly):
-  // a default must work anywhere. A --cache-mb given keeps GpuMap's clear error instead.
-  constexpr uint64_t kAnyDeviceStorageRange = uint64_t(1) << 27;
-  const uint64_t slot_words_bytes = (uint64_t(map.slot_bytes()) + 3) / 4 * 4;
-  if (!a.cache_mb_given && uint64_t(co.cache_slots) * slot_words_bytes > kAnyDeviceStorageRange) {
+  // The default cache shrinks until its slot pool (one storage buffer on the GPU) fits the
+  // device's maxStorageBufferRange (GpuMap::max_cache_slots; 2^27 bytes on lavapipe): a
+  // default must work on the device at hand. A --cache-mb given keeps GpuMap's clear error.
+  if (!a.cache_mb_given) {
+    gpu::GpuOptions probe;
+    probe.device = a.device;
+    uint32_t fit = 0;
+    try {
+      fit = gpu::GpuMap::max_cache_slots(probe, map.slot_bytes());
+    } catch (const gpu::GpuError&) {  // several devices, none named: the raster takes the first
+      fit = gpu::GpuMap::max_cache_slots(gpu::GpuMap::kAnyDeviceStorageRange, map.slot_bytes());
+    }
     const uint32_t asked = co.cache_slots;
-    for (int i = 0; i < 16 && uint64_t(co.cache_slots) * slot_words_bytes > kAnyDeviceStorageRange; ++i) {
-      const double fit = double(kAnyDeviceStorageRange / slot_words_bytes) / double(co.cache_slots);
-      co.cache_bytes = uint64_t(double(co.cache_bytes) * std::min(fit, 0.99));
+    for (int i = 0; i < 16 && co.cache_slots > fit; ++i) {
+      co.cache_bytes = uint64_t(double(co.cache_bytes) * std::min(double(fit) / double(co.cache_slots), 0.99));
       cl = std::make_unique<client::Client>(parse_endpoint("--server", a.server), co);
       map = cl->open(a.map);
       co.cache_slots = map.stats().cache.resident + map.stats().cache.pinned + map.stats().cache.free;
     }
-    std::printf("view: default cache clamped from %u to %u slots (%.0f MiB) so its slot pool fits any Vulkan "
-                "device's storage-buffer range (2^27 bytes); give --cache-mb to choose\n",
-                asked, co.cache_slots, double(co.cache_bytes) / 1048576.0);
+    if (co.cache_slots != asked)
+      std::printf("view: default cache clamped from %u to %u slots (%.0f MiB) so its slot pool fits the device's "
+                  "storage-buffer range (%u slots); give --cache-mb to choose\n",
+                  asked, co.cache_slots, double(co.cache_bytes) / 1048576.0, fit);
   }
   const client::MapInfo info = map.info();
   if (info.scene_hash != scene.content_hash() &&
@@ -361,7 +367,7 @@ Register reg_view{"view",
                sub.add_option("--device", a->device, "Vulkan device name (default: SHADOWTILE_VK_DEVICE)");
                CLI::Option* cache_mb = sub.add_option(
                    "--cache-mb", a->cache_mb,
-                   "Tile cache size (MiB; default 256, clamped so that the GPU slot pool fits any device)");
+                   "Tile cache size (MiB; default 256, clamped so that the GPU slot pool fits the device)");
                sub.add_option("--upload-mb", a->upload_mb, "GPU upload budget per frame");
                sub.add_option("--frames-in-flight", a->in_flight, "Frames the GPU may run behind the CPU (1..4)");
                sub.add_option("--time", a->time,

@@ -51,7 +51,7 @@ size_t RemoteMap::want_tiles(std::span<const WantedTile> tiles) const noexcept {
       continue;
     }
     if (!is_valid_tile_id(w.tile) || w.entry.kind == EntryKind::constant) continue;
-    const uint32_t level = uint32_t(w.tile >> kTileIdLevelShift);
+    const uint32_t level = tile_level(w.tile);
     if (level < grid_.levels || level >= header_.map_level) continue;
     queued += want_locked(w.tile, w.entry, w.priority);
   }

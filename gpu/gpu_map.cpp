@@ -475,15 +475,14 @@ struct GpuMap::Impl {
       uint64_t cell = 0;
       return view->stack_tile_cell(tile, cell) ? off_cell_slots + uint32_t(cell) : ~0u;
     }
-    const uint32_t level = uint32_t(tile >> kTileIdLevelShift);
-    const uint64_t morton = tile & ((uint64_t(1) << kTileIdLevelShift) - 1);
+    const uint32_t level = tile_level(tile);
+    const uint64_t morton = tile_morton(tile);
     if (level < k) return ~0u;
     if (level == k) return off_skip_slots + uint32_t((uint64_t(morton_compact(morton >> 1)) << k) + morton_compact(morton));
     for (uint32_t j = 1; j <= kMaxIndexLevels && j <= level - k; ++j) {
-      const TileId parent = (TileId(level - j) << kTileIdLevelShift) | (morton >> (2 * j));
-      const uint32_t s = tile_slot.find(parent);
+      const uint32_t s = tile_slot.find(tile_parent(tile, j));
       if (s == L::kNoSlot || slot_levels[s] != j) continue;
-      const uint64_t low = morton & ((uint64_t(1) << (2 * j)) - 1);  // the child within the parent
+      const uint64_t low = tile_child_morton(tile, j);
       const uint32_t c = (morton_compact(low >> 1) << j) + morton_compact(low);
       return off_children + s * L::kChildTableWords + c;
     }
@@ -646,61 +645,21 @@ struct GpuMap::Impl {
     sci.addressModeU = sci.addressModeV = sci.addressModeW = VK_SAMPLER_ADDRESS_MODE_CLAMP_TO_EDGE;
     vk_check(vk.CreateSampler(d, &sci, cb, &ep_sampler), "vkCreateSampler");
     // Binding 6: the light image, read only by the ST_PASS_LIGHT pipeline.
-    VkDescriptorSetLayoutBinding b[7] = {};
-    for (uint32_t i = 0; i < 7; ++i) {
-      b[i].binding = i;
-      b[i].descriptorCount = 1;
-      b[i].stageFlags = VK_SHADER_STAGE_COMPUTE_BIT;
-      b[i].descriptorType = i < 3 ? VK_DESCRIPTOR_TYPE_STORAGE_BUFFER
-                            : i < 5 ? VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER
-                                    : VK_DESCRIPTOR_TYPE_STORAGE_IMAGE;
-      if (i == 3 || i == 4) b[i].pImmutableSamplers = &ep_sampler;
-    }
-    VkDescriptorSetLayoutCreateInfo sli{};
-    sli.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_LAYOUT_CREATE_INFO;
-    sli.bindingCount = 7;
-    sli.pBindings = b;
-    vk_check(vk.CreateDescriptorSetLayout(d, &sli, cb, &ep_set_layout), "vkCreateDescriptorSetLayout");
-    const VkPushConstantRange pcr{VK_SHADER_STAGE_COMPUTE_BIT, 0, L::kPcWords * 4};
-    VkPipelineLayoutCreateInfo pli{};
-    pli.sType = VK_STRUCTURE_TYPE_PIPELINE_LAYOUT_CREATE_INFO;
-    pli.setLayoutCount = 1;
-    pli.pSetLayouts = &ep_set_layout;
-    pli.pushConstantRangeCount = 1;
-    pli.pPushConstantRanges = &pcr;
-    vk_check(vk.CreatePipelineLayout(d, &pli, cb, &ep_layout), "vkCreatePipelineLayout");
+    const auto setup = ctx->setup();
+    auto b = vk_setup::bindings(7, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VK_SHADER_STAGE_COMPUTE_BIT);
+    for (uint32_t i = 3; i < 7; ++i)
+      b[i].descriptorType = i < 5 ? VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER : VK_DESCRIPTOR_TYPE_STORAGE_IMAGE;
+    b[3].pImmutableSamplers = b[4].pImmutableSamplers = &ep_sampler;
+    ep_set_layout = vk_setup::set_layout(setup, b);
+    ep_layout = vk_setup::pipeline_layout(setup, {&ep_set_layout, 1}, {VK_SHADER_STAGE_COMPUTE_BIT, 0, L::kPcWords * 4});
     const uint32_t n = opt.frames_in_flight;
     const VkDescriptorPoolSize ps[3] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 3 * n},
                                         {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 2 * n},
                                         {VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 2 * n}};
-    VkDescriptorPoolCreateInfo dpi{};
-    dpi.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_POOL_CREATE_INFO;
-    dpi.maxSets = n;
-    dpi.poolSizeCount = 3;
-    dpi.pPoolSizes = ps;
-    vk_check(vk.CreateDescriptorPool(d, &dpi, cb, &ep_pool), "vkCreateDescriptorPool");
-    for (Frame& f : frames) {
-      VkDescriptorSetAllocateInfo dai{};
-      dai.sType = VK_STRUCTURE_TYPE_DESCRIPTOR_SET_ALLOCATE_INFO;
-      dai.descriptorPool = ep_pool;
-      dai.descriptorSetCount = 1;
-      dai.pSetLayouts = &ep_set_layout;
-      vk_check(vk.AllocateDescriptorSets(d, &dai, &f.set), "vkAllocateDescriptorSets");
-    }
-    for (const bool light : {false, true}) {
-      if (light && !opt.light_pass) break;
-      VkShaderModule m = ctx->make_shader(engine_shadow_pass_spirv(light));
-      VkComputePipelineCreateInfo cpi{};
-      cpi.sType = VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO;
-      cpi.stage.sType = VK_STRUCTURE_TYPE_PIPELINE_SHADER_STAGE_CREATE_INFO;
-      cpi.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
-      cpi.stage.module = m;
-      cpi.stage.pName = "main";
-      cpi.layout = ep_layout;
-      const VkResult r = vk.CreateComputePipelines(d, VK_NULL_HANDLE, 1, &cpi, cb, light ? &ep_light_pipeline : &ep_pipeline);
-      vk.DestroyShaderModule(d, m, cb);
-      vk_check(r, "vkCreateComputePipelines");
-    }
+    ep_pool = vk_setup::descriptor_pool(setup, n, ps);
+    for (Frame& f : frames) f.set = vk_setup::allocate_set(setup, ep_pool, ep_set_layout);
+    ep_pipeline = vk_setup::compute_pipeline(setup, ep_layout, engine_shadow_pass_spirv(false));
+    if (opt.light_pass) ep_light_pipeline = vk_setup::compute_pipeline(setup, ep_layout, engine_shadow_pass_spirv(true));
   }
 
   void need_engine(const char* call) const {
@@ -1040,6 +999,19 @@ GpuMap::GpuMap(client::Map map, GpuOptions options)
 GpuMap::GpuMap(client::Map map, const EngineDevice& device, GpuOptions options)
     : impl_(std::make_unique<Impl>(std::move(map), &device, std::move(options))) {}
 GpuMap::~GpuMap() = default;
+
+uint32_t GpuMap::max_cache_slots(uint64_t storage_range, uint32_t slot_bytes) {
+  const uint64_t slot = align4(std::max<uint32_t>(slot_bytes, 1));  // as Impl's pool_bytes
+  return uint32_t(std::min<uint64_t>(storage_range / slot, uint64_t(1) << 23));
+}
+uint32_t GpuMap::max_cache_slots(const EngineDevice& device, uint32_t slot_bytes) {
+  const VkContext ctx(device);
+  return max_cache_slots(ctx.properties().limits.maxStorageBufferRange, slot_bytes);
+}
+uint32_t GpuMap::max_cache_slots(const GpuOptions& options, uint32_t slot_bytes) {
+  const VkContext ctx(options.device, false);
+  return max_cache_slots(ctx.properties().limits.maxStorageBufferRange, slot_bytes);
+}
 
 std::span<const FrameStats> GpuMap::retire(uint64_t completed_frame) { return impl_->retire(completed_frame); }
 

@@ -32,46 +32,25 @@ class VkContext::DefaultAllocator final : public GpuAllocator {
   explicit DefaultAllocator(const VkContext& c) : c_(c) {}
   VkResult create_buffer(const VkBufferCreateInfo& info, BufferUse use, GpuBuffer& out) override {
     static_assert(sizeof(void*) >= sizeof(VkDeviceMemory), "GpuBuffer::allocation holds a VkDeviceMemory");
-    const VkFunctions& vk = c_.vk;
-    out = GpuBuffer{};
-    VkResult r = vk.CreateBuffer(c_.device_, &info, c_.callbacks_, &out.buffer);
-    if (r != VK_SUCCESS) return r;
-    VkMemoryRequirements req{};
-    vk.GetBufferMemoryRequirements(c_.device_, out.buffer, &req);
     const VkMemoryPropertyFlags hv = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
-    uint32_t type = 0;
-    try {
-      type = use == BufferUse::device_local ? c_.memory_type(req.memoryTypeBits, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT, 0)
-             : use == BufferUse::readback  ? c_.memory_type(req.memoryTypeBits, hv | VK_MEMORY_PROPERTY_HOST_CACHED_BIT, hv)
-                                           : c_.memory_type(req.memoryTypeBits, hv, hv);
-    } catch (const GpuError&) {
-      destroy_buffer(out);
-      return VK_ERROR_OUT_OF_DEVICE_MEMORY;
-    }
-    VkMemoryAllocateInfo mai{};
-    mai.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO;
-    mai.allocationSize = req.size;
-    mai.memoryTypeIndex = type;
-    VkDeviceMemory mem = VK_NULL_HANDLE;
-    r = vk.AllocateMemory(c_.device_, &mai, c_.callbacks_, &mem);
-    if (r == VK_SUCCESS) {
-      out.allocation = reinterpret_cast<void*>(mem);
-      r = vk.BindBufferMemory(c_.device_, out.buffer, mem, 0);
-    }
-    if (r == VK_SUCCESS && use != BufferUse::device_local) r = vk.MapMemory(c_.device_, mem, 0, VK_WHOLE_SIZE, 0, &out.mapped);
-    if (r != VK_SUCCESS) {
-      destroy_buffer(out);
-      return r;
-    }
+    const VkMemoryPropertyFlags want = use == BufferUse::device_local ? VkMemoryPropertyFlags(VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT)
+                                       : use == BufferUse::readback   ? hv | VK_MEMORY_PROPERTY_HOST_CACHED_BIT
+                                                                      : hv;
+    const VkMemoryPropertyFlags fallback = use == BufferUse::device_local ? 0 : hv;
+    vk_setup::Buffer b;
+    out = GpuBuffer{};
+    const VkResult r =
+        vk_setup::create_buffer(c_.setup(), c_.memory_, info, want, fallback, use != BufferUse::device_local, b);
+    if (r != VK_SUCCESS) return r;
+    out.buffer = b.buffer;
+    out.allocation = reinterpret_cast<void*>(b.memory);
+    out.mapped = b.mapped;
     out.size = info.size;
     return VK_SUCCESS;
   }
   void destroy_buffer(GpuBuffer& b) noexcept override {
-    const VkFunctions& vk = c_.vk;
-    const auto mem = reinterpret_cast<VkDeviceMemory>(b.allocation);
-    if (b.mapped) vk.UnmapMemory(c_.device_, mem);
-    if (b.buffer) vk.DestroyBuffer(c_.device_, b.buffer, c_.callbacks_);
-    if (mem) vk.FreeMemory(c_.device_, mem, c_.callbacks_);
+    vk_setup::Buffer own{b.buffer, reinterpret_cast<VkDeviceMemory>(b.allocation), b.mapped};
+    vk_setup::destroy(c_.setup(), own);
     b = GpuBuffer{};
   }
 
@@ -287,13 +266,6 @@ void VkContext::release() noexcept {
   instance_ = VK_NULL_HANDLE;
 }
 
-uint32_t VkContext::memory_type(uint32_t bits, VkMemoryPropertyFlags want, VkMemoryPropertyFlags fallback) const {
-  for (VkMemoryPropertyFlags f : {want, fallback})
-    for (uint32_t i = 0; i < memory_.memoryTypeCount; ++i)
-      if ((bits & (1u << i)) && (memory_.memoryTypes[i].propertyFlags & f) == f) return i;
-  throw GpuError("Vulkan: device '" + name_ + "' has no suitable memory type");
-}
-
 VkBufferBox VkContext::make_buffer(VkDeviceSize size, bool host, VkBufferUsageFlags extra_usage, BufferUse host_use) {
   VkBufferCreateInfo bci{};
   bci.sType = VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO;
@@ -316,43 +288,20 @@ VkBufferBox VkContext::make_buffer(VkDeviceSize size, bool host, VkBufferUsageFl
 }
 
 VkCommandPool VkContext::make_command_pool(bool resettable_buffers) {
-  VkCommandPoolCreateInfo cpi{};
-  cpi.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
-  cpi.flags = resettable_buffers ? VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT : 0;
-  cpi.queueFamilyIndex = family_;
-  VkCommandPool pool = VK_NULL_HANDLE;
-  vk_check(vk.CreateCommandPool(device_, &cpi, callbacks_, &pool), "vkCreateCommandPool");
-  return pool;
+  return vk_setup::command_pool(setup(), family_, resettable_buffers);
 }
 
 VkCommandBuffer VkContext::allocate_command_buffer(VkCommandPool pool) {
-  VkCommandBufferAllocateInfo cai{};
-  cai.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
-  cai.commandPool = pool;
-  cai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
-  cai.commandBufferCount = 1;
   VkCommandBuffer cmd = VK_NULL_HANDLE;
-  vk_check(vk.AllocateCommandBuffers(device_, &cai, &cmd), "vkAllocateCommandBuffers");
+  vk_setup::command_buffers(setup(), pool, {&cmd, 1});
   return cmd;
 }
 
-VkFence VkContext::make_fence() {
-  VkFenceCreateInfo fci{};
-  fci.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
-  VkFence fence = VK_NULL_HANDLE;
-  vk_check(vk.CreateFence(device_, &fci, callbacks_, &fence), "vkCreateFence");
-  return fence;
-}
+VkFence VkContext::make_fence() { return vk_setup::fence(setup(), false); }
 
 VkQueryPool VkContext::make_timestamp_queries(uint32_t count) {
   if (timestamp_bits_ == 0) return VK_NULL_HANDLE;
-  VkQueryPoolCreateInfo qpi{};
-  qpi.sType = VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO;
-  qpi.queryType = VK_QUERY_TYPE_TIMESTAMP;
-  qpi.queryCount = count;
-  VkQueryPool queries = VK_NULL_HANDLE;
-  vk_check(vk.CreateQueryPool(device_, &qpi, callbacks_, &queries), "vkCreateQueryPool");
-  return queries;
+  return vk_setup::timestamp_queries(setup(), count);
 }
 
 void VkContext::destroy(VkBufferBox& b) {
@@ -360,14 +309,6 @@ void VkContext::destroy(VkBufferBox& b) {
   b = VkBufferBox{};
 }
 
-VkShaderModule VkContext::make_shader(std::span<const uint32_t> spirv) {
-  VkShaderModuleCreateInfo sci{};
-  sci.sType = VK_STRUCTURE_TYPE_SHADER_MODULE_CREATE_INFO;
-  sci.codeSize = spirv.size() * 4;
-  sci.pCode = spirv.data();
-  VkShaderModule m = VK_NULL_HANDLE;
-  vk_check(vk.CreateShaderModule(device_, &sci, callbacks_, &m), "vkCreateShaderModule");
-  return m;
-}
+VkShaderModule VkContext::make_shader(std::span<const uint32_t> spirv) { return vk_setup::shader_module(setup(), spirv); }
 
 }  // namespace st::gpu

@@ -25,6 +25,7 @@
 
 #include "gpu/gpu_map.hpp"
 #include "gpu/vk_functions.hpp"
+#include "shadowtile/vk_setup.hpp"
 
 namespace st::gpu {
 
@@ -44,6 +45,8 @@ class VkContext {
   VkContext& operator=(const VkContext&) = delete;
 
   VkFunctions vk;  // every Vulkan call of gpu/ goes through this table
+  // The device for <shadowtile/vk_setup.hpp>: this table, our callbacks, GpuError on failure.
+  vk_setup::Device<VkFunctions> setup() const { return {vk, device_, callbacks_, &vk_check}; }
 
   bool borrowed() const { return borrowed_; }  // engine mode
   const VkAllocationCallbacks* callbacks() const { return callbacks_; }
@@ -82,9 +85,6 @@ class VkContext {
                                                    const VkDebugUtilsMessengerCallbackDataEXT* data, void* self);
   void release() noexcept;
   void read_device_properties();
-
- public:
-  uint32_t memory_type(uint32_t bits, VkMemoryPropertyFlags want, VkMemoryPropertyFlags fallback) const;
 
  private:
   class DefaultAllocator;

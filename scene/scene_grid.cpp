@@ -22,21 +22,21 @@ struct GridSpec {
   bool rotate = true, ground = true;
 };
 
-[[noreturn]] void fail(const std::string& spec, const std::string& why) {
+[[noreturn]] void grid_fail(const std::string& spec, const std::string& why) {
   throw Error("grid scene '" + spec + "': " + why);
 }
 
 bool parse_flag(const std::string& spec, const std::string& key, const std::string& v) {
   if (v == "yes" || v == "1" || v == "true") return true;
   if (v == "no" || v == "0" || v == "false") return false;
-  fail(spec, key + " expects yes or no, got '" + v + "'");
+  grid_fail(spec, key + " expects yes or no, got '" + v + "'");
 }
 
 double parse_number(const std::string& spec, const std::string& key, const std::string& v, double lo, double hi) {
   char* end = nullptr;
   const double x = std::strtod(v.c_str(), &end);
   if (v.empty() || *end != '\0' || !std::isfinite(x) || x < lo || x > hi)
-    fail(spec, key + " expects a number in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got '" + v + "'");
+    grid_fail(spec, key + " expects a number in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got '" + v + "'");
   return x;
 }
 
@@ -45,12 +45,12 @@ GridSpec parse(const std::string& spec) {
   const std::string body = spec.substr(std::string(kGridPrefix).size());
   const size_t comma = body.find(',');
   const std::string list = body.substr(0, comma);
-  if (list.empty()) fail(spec, "no file (grid:FILE[|FILE...][,key=value...])");
+  if (list.empty()) grid_fail(spec, "no file (grid:FILE[|FILE...][,key=value...])");
   for (size_t p = 0;;) {
     const size_t bar = list.find('|', p);
     const std::string f = list.substr(p, bar == std::string::npos ? std::string::npos : bar - p);
-    if (f.empty()) fail(spec, "an empty file name in the list");
-    if (is_grid_spec(f)) fail(spec, "a grid cannot hold a grid ('" + f + "')");
+    if (f.empty()) grid_fail(spec, "an empty file name in the list");
+    if (is_grid_spec(f)) grid_fail(spec, "a grid cannot hold a grid ('" + f + "')");
     g.files.push_back(f);
     if (bar == std::string::npos) break;
     p = bar + 1;
@@ -61,15 +61,15 @@ GridSpec parse(const std::string& spec) {
     const std::string kv = rest.substr(0, next);
     rest = next == std::string::npos ? "" : rest.substr(next + 1);
     const size_t eq = kv.find('=');
-    if (eq == std::string::npos) fail(spec, "expected key=value, got '" + kv + "'");
+    if (eq == std::string::npos) grid_fail(spec, "expected key=value, got '" + kv + "'");
     const std::string k = kv.substr(0, eq), v = kv.substr(eq + 1);
     if (k == "n") g.n = uint32_t(parse_number(spec, k, v, 1, kMaxCells));
     else if (k == "gap") g.gap = parse_number(spec, k, v, 0, 10);
     else if (k == "seed") g.seed = uint64_t(parse_number(spec, k, v, 0, 9007199254740992.0));
     else if (k == "rotate") g.rotate = parse_flag(spec, k, v);
     else if (k == "ground") g.ground = parse_flag(spec, k, v);
-    else fail(spec, "unknown key '" + k + "' (n, gap, seed, rotate, ground)");
-    if (k == "n" && double(g.n) != std::strtod(v.c_str(), nullptr)) fail(spec, "n expects a whole number, got '" + v + "'");
+    else grid_fail(spec, "unknown key '" + k + "' (n, gap, seed, rotate, ground)");
+    if (k == "n" && double(g.n) != std::strtod(v.c_str(), nullptr)) grid_fail(spec, "n expects a whole number, got '" + v + "'");
   }
   return g;
 }
@@ -119,8 +119,8 @@ Scene load_grid_scene(const std::string& spec, const SceneOptions& options, cons
   uint64_t per_cell_max = 0;
   for (const std::string& f : g.files) {
     Scene s = load_scene(f, options, limits);
-    if (!s.volumes.empty()) fail(spec, "'" + f + "' has volumes; a grid copies surfaces only");
-    if (s.triangles.empty()) fail(spec, "'" + f + "' has no triangles");
+    if (!s.volumes.empty()) grid_fail(spec, "'" + f + "' has volumes; a grid copies surfaces only");
+    if (s.triangles.empty()) grid_fail(spec, "'" + f + "' has no triangles");
     const Aabb b = s.bounds();
     // Centred on its footprint, standing on y = 0.
     const Vec3d c{(b.lo.x + b.hi.x) / 2, b.lo.y, (b.lo.z + b.hi.z) / 2};
@@ -129,11 +129,11 @@ Scene load_grid_scene(const std::string& spec, const SceneOptions& options, cons
     per_cell_max = std::max<uint64_t>(per_cell_max, s.triangles.size());
     assets.push_back(std::move(s));
   }
-  if (!(cell > 0)) fail(spec, "the files have no horizontal extent");
+  if (!(cell > 0)) grid_fail(spec, "the files have no horizontal extent");
   cell *= 1 + g.gap;
   const uint64_t cells = uint64_t(g.n) * g.n;
   if (per_cell_max * cells + 2 > limits.max_triangles)
-    fail(spec, "up to " + std::to_string(per_cell_max * cells + 2) + " triangles exceed the budget of " +
+    grid_fail(spec, "up to " + std::to_string(per_cell_max * cells + 2) + " triangles exceed the budget of " +
                    std::to_string(limits.max_triangles) + " (raise --scene-limits triangles=N)");
   Scene out;
   out.name = spec;

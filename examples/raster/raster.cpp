@@ -11,7 +11,7 @@
 #include <cstring>
 #include <stdexcept>
 
-#include "examples/raster/vk_setup.hpp"
+#include "shadowtile/vk_setup.hpp"  // the Vulkan set-up, over the plain loader
 #include "tiles/core/camera.hpp"  // header-only: the pinhole camera `shadowtile render` uses
 
 namespace st::raster {
@@ -36,16 +36,8 @@ double us_since(Clock::time_point t0) { return std::chrono::duration<double, std
 
 constexpr uint32_t kStamps = 5;  // begin, uploads done, depth pre-pass done, shading done, copies done
 
-struct Buffer {
-  VkBuffer buffer = VK_NULL_HANDLE;
-  VkDeviceMemory memory = VK_NULL_HANDLE;
-  void* mapped = nullptr;
-};
-struct Image {
-  VkImage image = VK_NULL_HANDLE;
-  VkDeviceMemory memory = VK_NULL_HANDLE;
-  VkImageView view = VK_NULL_HANDLE;
-};
+using Buffer = vk_setup::Buffer;
+using Image = vk_setup::Image;
 
 // The engine's device: instance, physical device, one graphics + compute queue.
 struct Device {
@@ -179,68 +171,25 @@ struct Device {
   Device(const Device&) = delete;
   Device& operator=(const Device&) = delete;
 
-  uint32_t type(uint32_t bits, VkMemoryPropertyFlags want) const {
-    for (uint32_t i = 0; i < mem.memoryTypeCount; ++i)
-      if ((bits & (1u << i)) && (mem.memoryTypes[i].propertyFlags & want) == want) return i;
-    throw std::runtime_error("no memory type with flags " + std::to_string(want));
-  }
+  vk_setup::Device<vk_setup::Loader> setup() const { return {vk_setup::kLoader, device}; }
+  // Host-visible, coherent and mapped.
   Buffer buffer(VkDeviceSize size, VkBufferUsageFlags usage) const {
-    Buffer b;
     VkBufferCreateInfo bi{};
     bi.sType = VK_STRUCTURE_TYPE_BUFFER_CREATE_INFO;
     bi.size = std::max<VkDeviceSize>(size, 4);
     bi.usage = usage;
-    check(vkCreateBuffer(device, &bi, nullptr, &b.buffer), "vkCreateBuffer");
-    VkMemoryRequirements req{};
-    vkGetBufferMemoryRequirements(device, b.buffer, &req);
-    VkMemoryAllocateInfo ai{};
-    ai.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO;
-    ai.allocationSize = req.size;
-    ai.memoryTypeIndex = type(req.memoryTypeBits, VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT);
-    check(vkAllocateMemory(device, &ai, nullptr, &b.memory), "vkAllocateMemory");
-    check(vkBindBufferMemory(device, b.buffer, b.memory, 0), "vkBindBufferMemory");
-    check(vkMapMemory(device, b.memory, 0, VK_WHOLE_SIZE, 0, &b.mapped), "vkMapMemory");
+    const VkMemoryPropertyFlags hv = VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
+    Buffer b;
+    check(vk_setup::create_buffer(setup(), mem, bi, hv, hv, true, b), "creating a buffer");
     return b;
   }
-  void destroy(Buffer& b) const {
-    if (b.buffer) vkDestroyBuffer(device, b.buffer, nullptr);
-    if (b.memory) vkFreeMemory(device, b.memory, nullptr);
-    b = {};
-  }
+  void destroy(Buffer& b) const { vk_setup::destroy(setup(), b); }
   Image image(uint32_t w, uint32_t h, VkFormat format, VkImageUsageFlags usage, VkImageAspectFlags aspect) const {
     Image im;
-    VkImageCreateInfo ci{};
-    ci.sType = VK_STRUCTURE_TYPE_IMAGE_CREATE_INFO;
-    ci.imageType = VK_IMAGE_TYPE_2D;
-    ci.format = format;
-    ci.extent = {w, h, 1};
-    ci.mipLevels = ci.arrayLayers = 1;
-    ci.samples = VK_SAMPLE_COUNT_1_BIT;
-    ci.usage = usage;
-    check(vkCreateImage(device, &ci, nullptr, &im.image), "vkCreateImage");
-    VkMemoryRequirements req{};
-    vkGetImageMemoryRequirements(device, im.image, &req);
-    VkMemoryAllocateInfo ai{};
-    ai.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO;
-    ai.allocationSize = req.size;
-    ai.memoryTypeIndex = type(req.memoryTypeBits, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
-    check(vkAllocateMemory(device, &ai, nullptr, &im.memory), "vkAllocateMemory");
-    check(vkBindImageMemory(device, im.image, im.memory, 0), "vkBindImageMemory");
-    VkImageViewCreateInfo vi{};
-    vi.sType = VK_STRUCTURE_TYPE_IMAGE_VIEW_CREATE_INFO;
-    vi.image = im.image;
-    vi.viewType = VK_IMAGE_VIEW_TYPE_2D;
-    vi.format = format;
-    vi.subresourceRange = {aspect, 0, 1, 0, 1};
-    check(vkCreateImageView(device, &vi, nullptr, &im.view), "vkCreateImageView");
+    check(vk_setup::create_image(setup(), mem, w, h, format, usage, aspect, im), "creating an image");
     return im;
   }
-  void destroy(Image& im) const {
-    if (im.view) vkDestroyImageView(device, im.view, nullptr);
-    if (im.image) vkDestroyImage(device, im.image, nullptr);
-    if (im.memory) vkFreeMemory(device, im.memory, nullptr);
-    im = {};
-  }
+  void destroy(Image& im) const { vk_setup::destroy(setup(), im); }
 };
 
 // The shaders' push constants (examples/shaders/scene.vert, scene.frag): 128 bytes.
@@ -381,32 +330,13 @@ struct Rasterizer::Impl {
   }
 
   void make_commands() {
-    VkCommandPoolCreateInfo cpi{};
-    cpi.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
-    cpi.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
-    cpi.queueFamilyIndex = dev.family;
-    check(vkCreateCommandPool(dev.device, &cpi, nullptr, &cpool), "vkCreateCommandPool");
+    const auto d = dev.setup();
+    cpool = vk_setup::command_pool(d, dev.family, true);
     cmds.resize(o.frames_in_flight);
-    VkCommandBufferAllocateInfo cai{};
-    cai.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
-    cai.commandPool = cpool;
-    cai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
-    cai.commandBufferCount = o.frames_in_flight;
-    check(vkAllocateCommandBuffers(dev.device, &cai, cmds.data()), "vkAllocateCommandBuffers");
+    vk_setup::command_buffers(d, cpool, cmds);
     fences.resize(o.frames_in_flight);
-    for (VkFence& f : fences) {
-      VkFenceCreateInfo fci{};
-      fci.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
-      fci.flags = VK_FENCE_CREATE_SIGNALED_BIT;
-      check(vkCreateFence(dev.device, &fci, nullptr, &f), "vkCreateFence");
-    }
-    if (dev.timestamp_bits) {
-      VkQueryPoolCreateInfo qi{};
-      qi.sType = VK_STRUCTURE_TYPE_QUERY_POOL_CREATE_INFO;
-      qi.queryType = VK_QUERY_TYPE_TIMESTAMP;
-      qi.queryCount = kStamps * o.frames_in_flight;
-      check(vkCreateQueryPool(dev.device, &qi, nullptr, &queries), "vkCreateQueryPool");
-    }
+    for (VkFence& f : fences) f = vk_setup::fence(d, true);
+    if (dev.timestamp_bits) queries = vk_setup::timestamp_queries(d, kStamps * o.frames_in_flight);
   }
 
   // The plain depth map of Lookup::r32f: uploaded once, at set-up (never per frame).
@@ -471,8 +401,8 @@ struct Rasterizer::Impl {
     dep.srcStageMask = dep.dstStageMask = VK_PIPELINE_STAGE_EARLY_FRAGMENT_TESTS_BIT | VK_PIPELINE_STAGE_LATE_FRAGMENT_TESTS_BIT;
     dep.srcAccessMask = VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_READ_BIT | VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT;
     dep.dstAccessMask = VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_READ_BIT | VK_ACCESS_DEPTH_STENCIL_ATTACHMENT_WRITE_BIT;
-    rp_depth = vk_setup::render_pass(dev.device, {&d, 1}, {}, &dref, {&dep, 1});
-    fb_depth = vk_setup::framebuffer(dev.device, rp_depth, {&depth.view, 1}, o.width, o.height);
+    rp_depth = vk_setup::render_pass(dev.setup(), {&d, 1}, {}, &dref, {&dep, 1});
+    fb_depth = vk_setup::framebuffer(dev.setup(), rp_depth, {&depth.view, 1}, o.width, o.height);
 
     // The shading pass: colour (and the twin's receivers and visibility) cleared, depth
     // loaded and tested EQUAL (each pixel's fragment shader runs once).
@@ -507,13 +437,13 @@ struct Rasterizer::Impl {
     deps[2].dstStageMask = VK_PIPELINE_STAGE_TRANSFER_BIT;
     deps[2].srcAccessMask = VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT;
     deps[2].dstAccessMask = VK_ACCESS_TRANSFER_READ_BIT;
-    rp_shade = vk_setup::render_pass(dev.device, {att, n}, {cref, n - 1}, &dref, deps);
+    rp_shade = vk_setup::render_pass(dev.setup(), {att, n}, {cref, n - 1}, &dref, deps);
     const VkImageView views[4] = {depth.view, colour.view, receivers.view, visibility.view};
-    fb_shade = vk_setup::framebuffer(dev.device, rp_shade, {views, n}, o.width, o.height);
+    fb_shade = vk_setup::framebuffer(dev.setup(), rp_shade, {views, n}, o.width, o.height);
   }
 
   void make_pipelines() {
-    const VkDevice d = dev.device;
+    const auto d = dev.setup();
     // Set 0: GpuMap's buffers (shadowtile.glsl), one set per ring slot (its feedback range).
     set_layout = vk_setup::set_layout(d, vk_setup::bindings(3, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VK_SHADER_STAGE_FRAGMENT_BIT));
     // Set 1: the plain R32F depth map (Lookup::r32f).

@@ -1,6 +1,6 @@
 // raster.hpp: a headless Vulkan rasterizer that uses the GPU tile cache as a game engine
 // does (engine mode, public API only: <shadowtile/gpu.hpp>, <shadowtile/cache_view.hpp>,
-// <shadowtile/client.hpp>). It is the core of examples/engine_raster and of
+// <shadowtile/client.hpp>, and <shadowtile/vk_setup.hpp> for its own Vulkan objects). It is the core of examples/engine_raster and of
 // `shadowtile view`: one home for the renderer, read as an example.
 //
 // The renderer owns what an engine owns: instance, device, queue, command buffers, fences,

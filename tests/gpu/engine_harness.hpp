@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "gpu/gpu_map.hpp"
+#include "shadowtile/vk_setup.hpp"
 #include "tests/gpu/gpu_test_util.hpp"
 
 namespace st::enginetest {
@@ -39,39 +40,28 @@ class CountingAllocator final : public gpu::GpuAllocator {
   CountingAllocator(VkDevice d, VkPhysicalDevice p) : device_(d) { vkGetPhysicalDeviceMemoryProperties(p, &mem_); }
   VkResult create_buffer(const VkBufferCreateInfo& info, gpu::BufferUse use, gpu::GpuBuffer& out) override {
     out = {};
-    VkResult r = vkCreateBuffer(device_, &info, nullptr, &out.buffer);
+    const bool host = use != gpu::BufferUse::device_local;
+    const VkMemoryPropertyFlags want = host ? VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT
+                                            : VkMemoryPropertyFlags(VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
+    vk_setup::Buffer b;
+    const VkResult r = vk_setup::create_buffer(setup(), mem_, info, want, want, host, b);
     if (r != VK_SUCCESS) return r;
-    VkMemoryRequirements req{};
-    vkGetBufferMemoryRequirements(device_, out.buffer, &req);
-    const VkMemoryPropertyFlags want = use == gpu::BufferUse::device_local
-                                           ? VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT
-                                           : VK_MEMORY_PROPERTY_HOST_VISIBLE_BIT | VK_MEMORY_PROPERTY_HOST_COHERENT_BIT;
-    VkMemoryAllocateInfo mai{};
-    mai.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO;
-    mai.allocationSize = req.size;
-    mai.memoryTypeIndex = type(req.memoryTypeBits, want);
-    VkDeviceMemory m = VK_NULL_HANDLE;
-    r = vkAllocateMemory(device_, &mai, nullptr, &m);
-    if (r != VK_SUCCESS) return vkDestroyBuffer(device_, out.buffer, nullptr), r;
-    vkBindBufferMemory(device_, out.buffer, m, 0);
-    if (use != gpu::BufferUse::device_local) vkMapMemory(device_, m, 0, VK_WHOLE_SIZE, 0, &out.mapped);
-    out.allocation = reinterpret_cast<void*>(m);
+    out.buffer = b.buffer;
+    out.mapped = b.mapped;
+    out.allocation = reinterpret_cast<void*>(b.memory);
     out.size = info.size;
     ++live;
     ++created;
     return VK_SUCCESS;
   }
   void destroy_buffer(gpu::GpuBuffer& b) noexcept override {
-    vkDestroyBuffer(device_, b.buffer, nullptr);
-    vkFreeMemory(device_, reinterpret_cast<VkDeviceMemory>(b.allocation), nullptr);  // unmaps
+    vk_setup::Buffer own{b.buffer, reinterpret_cast<VkDeviceMemory>(b.allocation), b.mapped};
+    vk_setup::destroy(setup(), own);
     b = {};
     --live;
   }
-  uint32_t type(uint32_t bits, VkMemoryPropertyFlags want) const {
-    for (uint32_t i = 0; i < mem_.memoryTypeCount; ++i)
-      if ((bits & (1u << i)) && (mem_.memoryTypes[i].propertyFlags & want) == want) return i;
-    throw std::runtime_error("test engine: no memory type");
-  }
+  vk_setup::Device<vk_setup::Loader> setup() const { return {vk_setup::kLoader, device_}; }
+  const VkPhysicalDeviceMemoryProperties& memory() const { return mem_; }
   int live = 0, created = 0;
 
  private:
@@ -79,10 +69,7 @@ class CountingAllocator final : public gpu::GpuAllocator {
   VkPhysicalDeviceMemoryProperties mem_{};
 };
 
-struct Image {
-  VkImage image = VK_NULL_HANDLE;
-  VkDeviceMemory memory = VK_NULL_HANDLE;
-  VkImageView view = VK_NULL_HANDLE;
+struct Image : vk_setup::Image {
   VkFormat format = VK_FORMAT_UNDEFINED;
   uint32_t width = 0, height = 0;
 };
@@ -150,26 +137,13 @@ class TestEngine {
     dci.pEnabledFeatures = &want;
     check(vkCreateDevice(physical, &dci, nullptr, &device), "vkCreateDevice");
     vkGetDeviceQueue(device, family, 0, &queue);
-    VkCommandPoolCreateInfo cpi{};
-    cpi.sType = VK_STRUCTURE_TYPE_COMMAND_POOL_CREATE_INFO;
-    cpi.flags = VK_COMMAND_POOL_CREATE_RESET_COMMAND_BUFFER_BIT;
-    cpi.queueFamilyIndex = family;
-    check(vkCreateCommandPool(device, &cpi, nullptr, &pool_), "vkCreateCommandPool");
+    const vk_setup::Device<vk_setup::Loader> v{vk_setup::kLoader, device};
+    pool_ = vk_setup::command_pool(v, family, true);
     cmds_.resize(n_);
-    VkCommandBufferAllocateInfo cai{};
-    cai.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
-    cai.commandPool = pool_;
-    cai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
-    cai.commandBufferCount = n_;
-    check(vkAllocateCommandBuffers(device, &cai, cmds_.data()), "vkAllocateCommandBuffers");
+    vk_setup::command_buffers(v, pool_, cmds_);
     fences_.resize(n_);
     submitted_.assign(n_, 0);
-    for (VkFence& f : fences_) {
-      VkFenceCreateInfo fci{};
-    fci.sType = VK_STRUCTURE_TYPE_FENCE_CREATE_INFO;
-      fci.flags = VK_FENCE_CREATE_SIGNALED_BIT;
-      check(vkCreateFence(device, &fci, nullptr, &f), "vkCreateFence");
-    }
+    for (VkFence& f : fences_) f = vk_setup::fence(v, true);
   }
 
   ~TestEngine() {
@@ -234,12 +208,7 @@ class TestEngine {
   template <class Fn>
   void once(Fn&& fn) {
     VkCommandBuffer cmd = VK_NULL_HANDLE;
-    VkCommandBufferAllocateInfo cai{};
-    cai.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_ALLOCATE_INFO;
-    cai.commandPool = pool_;
-    cai.level = VK_COMMAND_BUFFER_LEVEL_PRIMARY;
-    cai.commandBufferCount = 1;
-    check(vkAllocateCommandBuffers(device, &cai, &cmd), "vkAllocateCommandBuffers");
+    vk_setup::command_buffers(vk_setup::Device<vk_setup::Loader>{vk_setup::kLoader, device}, pool_, {&cmd, 1});
     VkCommandBufferBeginInfo bi{};
     bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
     bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
@@ -260,32 +229,11 @@ class TestEngine {
     auto* im = new Image{};
     images_.push_back(im);
     im->format = format, im->width = w, im->height = h;
-    VkImageCreateInfo ici{};
-    ici.sType = VK_STRUCTURE_TYPE_IMAGE_CREATE_INFO;
-    ici.imageType = VK_IMAGE_TYPE_2D;
-    ici.format = format;
-    ici.extent = {w, h, 1};
-    ici.mipLevels = ici.arrayLayers = 1;
-    ici.samples = VK_SAMPLE_COUNT_1_BIT;
-    ici.tiling = VK_IMAGE_TILING_OPTIMAL;
-    ici.usage = usage | VK_IMAGE_USAGE_TRANSFER_SRC_BIT | VK_IMAGE_USAGE_TRANSFER_DST_BIT;
-    check(vkCreateImage(device, &ici, nullptr, &im->image), "vkCreateImage");
-    VkMemoryRequirements req{};
-    vkGetImageMemoryRequirements(device, im->image, &req);
-    CountingAllocator types(device, physical);
-    VkMemoryAllocateInfo mai{};
-    mai.sType = VK_STRUCTURE_TYPE_MEMORY_ALLOCATE_INFO;
-    mai.allocationSize = req.size;
-    mai.memoryTypeIndex = types.type(req.memoryTypeBits, VK_MEMORY_PROPERTY_DEVICE_LOCAL_BIT);
-    check(vkAllocateMemory(device, &mai, nullptr, &im->memory), "vkAllocateMemory");
-    vkBindImageMemory(device, im->image, im->memory, 0);
-    VkImageViewCreateInfo vci{};
-    vci.sType = VK_STRUCTURE_TYPE_IMAGE_VIEW_CREATE_INFO;
-    vci.image = im->image;
-    vci.viewType = VK_IMAGE_VIEW_TYPE_2D;
-    vci.format = format;
-    vci.subresourceRange = {VK_IMAGE_ASPECT_COLOR_BIT, 0, 1, 0, 1};
-    check(vkCreateImageView(device, &vci, nullptr, &im->view), "vkCreateImageView");
+    CountingAllocator memory(device, physical);
+    check(vk_setup::create_image(memory.setup(), memory.memory(), w, h, format,
+                                 usage | VK_IMAGE_USAGE_TRANSFER_SRC_BIT | VK_IMAGE_USAGE_TRANSFER_DST_BIT,
+                                 VK_IMAGE_ASPECT_COLOR_BIT, *im),
+          "creating an image");
     return *im;
   }
 
@@ -373,9 +321,7 @@ class TestEngine {
     return VK_FALSE;
   }
   void destroy(Image& im) {
-    vkDestroyImageView(device, im.view, nullptr);
-    vkDestroyImage(device, im.image, nullptr);
-    vkFreeMemory(device, im.memory, nullptr);
+    vk_setup::destroy(vk_setup::Device<vk_setup::Loader>{vk_setup::kLoader, device}, static_cast<vk_setup::Image&>(im));
     delete &im;
   }
 

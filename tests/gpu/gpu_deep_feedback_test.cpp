@@ -108,20 +108,13 @@ TEST(GpuDeepFeedback, AForestsFragmentShaderFetchesItsDeepTilesThroughFeedbackAn
   o.frames_in_flight = 1;
   GpuMap g(map, e.engine_device(), o);
   const enginetest::RasterPass raster(e, colour, *t.pos, *t.nrm, g.descriptors(2), true);
-  uint64_t f = 0, completed = 0;
+  uint64_t f = 0;
   auto frame = [&](uint32_t channel) {
-    VkCommandBuffer cmd = e.begin(++f, completed);
-    g.retire(completed);
-    const FrameStats up = g.record_uploads(cmd, f);
-    raster.record(cmd, set.kernel, set.normal_offset, set.footprint, channel);
-    e.record_readback(cmd, colour, VK_IMAGE_LAYOUT_GENERAL, VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT, t.readback[0],
-                      VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT);
-    g.record_end_of_frame(cmd, f);
-    e.submit(f);
-    const std::span<const FrameStats> r = g.retire(e.finish());
-    EXPECT_EQ(r.size(), 1u);
-    FrameStats fs = r.empty() ? FrameStats{} : r.back();
-    fs.bytes_uploaded = up.bytes_uploaded;
+    const enginetest::RasterPass::Frame r =
+        raster.run_frame(e, g, ++f, t.readback[0], set.kernel, set.normal_offset, set.footprint, channel);
+    EXPECT_EQ(r.retired.size(), 1u);
+    FrameStats fs = r.retired.empty() ? FrameStats{} : r.retired.back();
+    fs.bytes_uploaded = r.uploads.bytes_uploaded;
     return fs;
   };
   // Frame 1: the feedback names exactly the absent deep tiles under the receivers.

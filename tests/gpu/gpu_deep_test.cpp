@@ -278,15 +278,7 @@ TEST(GpuDeep, EnginePassAndFragmentShaderLightEqualTheCpuTwin) {
   size_t bad = 0, below = 0;
   for (uint32_t c = 1; c <= 3; ++c) {
     const uint64_t f = 1 + c;
-    cmd = e.begin(f, completed);
-    g.retire(completed);
-    g.record_uploads(cmd, f);
-    raster.record(cmd, set.kernel, set.normal_offset, set.footprint, c);
-    e.record_readback(cmd, colour, VK_IMAGE_LAYOUT_GENERAL, VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT, t.readback[0],
-                      VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT);
-    g.record_end_of_frame(cmd, f);
-    e.submit(f);
-    g.retire(e.finish());
+    raster.run_frame(e, g, f, t.readback[0], set.kernel, set.normal_offset, set.footprint, c);
     const std::vector<float> frag = t.read(f);
     for (size_t p = 0; p < n; ++p) {
       bad += bits(frag[p]) != bits(want[3 * p + c - 1]);

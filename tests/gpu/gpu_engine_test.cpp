@@ -182,18 +182,9 @@ TEST(GpuEngine, AFragmentShaderIncludingShadowtileGlslAnswersLikeTheComputePass)
   const std::map<uint64_t, uint32_t> compute_feedback = feedback_of(g);
   // Frame 2: the engine's raster pass reads the same buffers at its own bindings.
   const RasterPass raster(e, colour, *t.pos, *t.nrm, g.descriptors(2));
-  uint64_t completed = 0;
-  VkCommandBuffer cmd = e.begin(2, completed);
-  g.retire(completed);
-  const FrameStats up = g.record_uploads(cmd, 2);
-  EXPECT_EQ(up.tile_bytes + up.page_bytes, 0u);
-  raster.record(cmd, set.kernel, set.normal_offset, set.footprint);
-  e.record_readback(cmd, colour, VK_IMAGE_LAYOUT_GENERAL, VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT, t.readback[0],
-                    VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT);
-  g.record_end_of_frame(cmd, 2);
-  e.submit(2);
-  const std::span<const FrameStats> r = g.retire(e.finish());
-  ASSERT_EQ(r.size(), 1u);
+  const RasterPass::Frame r = raster.run_frame(e, g, 2, t.readback[0], set.kernel, set.normal_offset, set.footprint);
+  EXPECT_EQ(r.uploads.tile_bytes + r.uploads.page_bytes, 0u);
+  ASSERT_EQ(r.retired.size(), 1u);
   const std::vector<float> fragment = t.read(2);
   std::vector<float> want(compute.size());
   shadow_pass_reference(client::evaluator(s.map), h, plane.input(set), want);
@@ -261,18 +252,9 @@ TEST(GpuEngine, TheReceiverTwinAnswersLikeAFragmentShaderWhereTheDoubleTransform
   o.frames_in_flight = 1;
   GpuMap g(s.map, e.engine_device(), o);
   const RasterPass raster(e, colour, *t.pos, *t.nrm, g.descriptors(2));
-  uint64_t completed = 0;
-  VkCommandBuffer cmd = e.begin(1, completed);
-  g.retire(completed);
-  g.record_uploads(cmd, 1);
-  raster.record(cmd, kKernel, 0.0f, kFootprint);
-  e.record_readback(cmd, colour, VK_IMAGE_LAYOUT_GENERAL, VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT, t.readback[0],
-                    VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT);
-  g.record_end_of_frame(cmd, 1);
-  e.submit(1);
-  const std::span<const FrameStats> r = g.retire(e.finish());
-  ASSERT_EQ(r.size(), 1u);
-  EXPECT_EQ(r[0].holes, 0u);
+  const RasterPass::Frame r = raster.run_frame(e, g, 1, t.readback[0], kKernel, 0.0f, kFootprint);
+  ASSERT_EQ(r.retired.size(), 1u);
+  EXPECT_EQ(r.retired[0].holes, 0u);
   const std::vector<float> gpu = t.read(1);
   std::vector<float> twin(gpu.size());
   ReceiverLookup q;
@@ -464,6 +446,29 @@ TEST(GpuEngine, FramesInFlightWithAChurningCacheNeverStallAndMoveOnlyTilePageAnd
   size_t bad = 0;
   for (size_t i = 0; i < got.size(); ++i) bad += bits(got[i]) != bits(want[i]);
   EXPECT_EQ(bad, 0u);
+  EXPECT_EQ(e.messages(), 0u) << e.first_message();
+}
+
+// Sizing a cache for a device: the most slots whose pool fits the device's
+// maxStorageBufferRange, the engine's device and the own-device one alike (both lavapipe
+// here), slots rounded to words as the pool holds them, never past GpuMap's 2^23 slots.
+TEST(GpuEngine, MaxCacheSlotsFillsTheDevicesStorageRangeAndNoMore) {
+  TestEngine e(1);
+  VkPhysicalDeviceProperties p{};
+  vkGetPhysicalDeviceProperties(e.physical, &p);
+  const uint64_t range = p.limits.maxStorageBufferRange;
+  for (const uint32_t slot_bytes : {2396u, 4099u, 65536u, 1u << 20}) {
+    SCOPED_TRACE(slot_bytes);
+    const uint64_t words = (uint64_t(slot_bytes) + 3) / 4 * 4;
+    const uint32_t n = GpuMap::max_cache_slots(e.engine_device(), slot_bytes);
+    EXPECT_LE(n * words, range);
+    EXPECT_GT((n + 1) * words, range);
+    EXPECT_EQ(GpuMap::max_cache_slots(gputest::options(), slot_bytes), n);
+    EXPECT_EQ(GpuMap::max_cache_slots(range, slot_bytes), n);
+  }
+  EXPECT_EQ(GpuMap::max_cache_slots(1000, 10), 83u);  // 12-byte slots
+  EXPECT_EQ(GpuMap::max_cache_slots(uint64_t(1) << 40, 4), 1u << 23);
+  EXPECT_EQ(GpuMap::max_cache_slots(GpuMap::kAnyDeviceStorageRange, 4096), 32768u);
   EXPECT_EQ(e.messages(), 0u) << e.first_message();
 }
 

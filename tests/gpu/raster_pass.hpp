@@ -5,8 +5,9 @@
 #pragma once
 #include <bit>
 #include <span>
+#include <vector>
 
-#include "examples/raster/vk_setup.hpp"
+#include "shadowtile/vk_setup.hpp"
 #include "tests/gpu/engine_harness.hpp"
 
 namespace st::enginetest {
@@ -34,45 +35,47 @@ struct RasterPass {
   VkPipeline pipeline = VK_NULL_HANDLE;
   VkDescriptorPool pool = VK_NULL_HANDLE;
   VkDescriptorSet s0 = VK_NULL_HANDLE, s1 = VK_NULL_HANDLE;
+  const Image* target;
   uint32_t width, height;
 
   // deep: the fragment shader built with partial occluders (st_shadow times st_transmittance).
   RasterPass(enginetest::TestEngine& e, const Image& target, const Image& pos, const Image& nrm,
              const gpu::GpuDescriptors& g, bool deep = false)
-      : d(e.device), width(target.width), height(target.height) {
+      : d(e.device), target(&target), width(target.width), height(target.height) {
+    const vk_setup::Device<vk_setup::Loader> v{vk_setup::kLoader, d};
     const VkAttachmentDescription att =
         vk_setup::attachment(VK_FORMAT_R32_SFLOAT, VK_ATTACHMENT_LOAD_OP_DONT_CARE, VK_ATTACHMENT_STORE_OP_STORE,
                              VK_IMAGE_LAYOUT_UNDEFINED, VK_IMAGE_LAYOUT_GENERAL);
     const VkAttachmentReference ref{0, VK_IMAGE_LAYOUT_COLOR_ATTACHMENT_OPTIMAL};
-    rp = vk_setup::render_pass(d, {&att, 1}, {&ref, 1}, nullptr);
-    fb = vk_setup::framebuffer(d, rp, {&target.view, 1}, width, height);
+    rp = vk_setup::render_pass(v, {&att, 1}, {&ref, 1}, nullptr);
+    fb = vk_setup::framebuffer(v, rp, {&target.view, 1}, width, height);
     VkSamplerCreateInfo sci{};
     sci.sType = VK_STRUCTURE_TYPE_SAMPLER_CREATE_INFO;
     sci.magFilter = sci.minFilter = VK_FILTER_NEAREST;
     check(vkCreateSampler(d, &sci, nullptr, &sampler), "vkCreateSampler");
-    l0 = vk_setup::set_layout(d, vk_setup::bindings(3, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VK_SHADER_STAGE_FRAGMENT_BIT, 3, 2));
+    l0 = vk_setup::set_layout(v, vk_setup::bindings(3, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VK_SHADER_STAGE_FRAGMENT_BIT, 3, 2));
     auto b1 = vk_setup::bindings(2, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, VK_SHADER_STAGE_FRAGMENT_BIT);
     for (auto& b : b1) b.pImmutableSamplers = &sampler;
-    l1 = vk_setup::set_layout(d, b1);
+    l1 = vk_setup::set_layout(v, b1);
     const VkDescriptorSetLayout sets[2] = {l0, l1};
-    layout = vk_setup::pipeline_layout(d, sets, {VK_SHADER_STAGE_FRAGMENT_BIT, 0, 16});
+    layout = vk_setup::pipeline_layout(v, sets, {VK_SHADER_STAGE_FRAGMENT_BIT, 0, 16});
     const VkDescriptorPoolSize ps[2] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 3}, {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 2}};
-    pool = vk_setup::descriptor_pool(d, 2, ps);
-    s0 = vk_setup::allocate_set(d, pool, l0);
-    s1 = vk_setup::allocate_set(d, pool, l1);
+    pool = vk_setup::descriptor_pool(v, 2, ps);
+    s0 = vk_setup::allocate_set(v, pool, l0);
+    s1 = vk_setup::allocate_set(v, pool, l1);
     const VkDescriptorBufferInfo bufs[3] = {g.pool, g.page_table, g.feedback};
-    vk_setup::write_buffers(d, s0, bufs, 3, 2);
+    vk_setup::write_buffers(v, s0, bufs, 3, 2);
     const VkDescriptorImageInfo imgs[2] = {{VK_NULL_HANDLE, pos.view, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL},
                                            {VK_NULL_HANDLE, nrm.view, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL}};
-    vk_setup::write_images(d, s1, imgs);
-    const vk_setup::ShaderModule vs(d, kFullscreenVertSpv);
-    const vk_setup::ShaderModule fs(d, deep ? std::span<const uint32_t>(kEngineFragmentDeepSpv)
+    vk_setup::write_images(v, s1, imgs);
+    const vk_setup::ShaderModule vs(v, kFullscreenVertSpv);
+    const vk_setup::ShaderModule fs(v, deep ? std::span<const uint32_t>(kEngineFragmentDeepSpv)
                                             : std::span<const uint32_t>(kEngineFragmentSpv));
     vk_setup::Pipeline p;
     p.layout = layout, p.pass = rp, p.width = width, p.height = height;
     p.vertex = vs.module, p.fragment = fs.module;
     p.colour_attachments = 1, p.colour_mask = VK_COLOR_COMPONENT_R_BIT;
-    pipeline = vk_setup::pipeline(d, p);
+    pipeline = vk_setup::pipeline(v, p);
   }
   ~RasterPass() {
     vkDestroyPipeline(d, pipeline, nullptr);
@@ -102,6 +105,31 @@ struct RasterPass {
     vkCmdPushConstants(cmd, layout, VK_SHADER_STAGE_FRAGMENT_BIT, 0, sizeof(push), push);
     vkCmdDraw(cmd, 3, 1, 0, 0);
     vkCmdEndRenderPass(cmd);
+  }
+
+  // One engine frame through this pass, waited for (the tests read each frame at once):
+  // begin (the slot's fence), retire, GpuMap's uploads, the pass, the target's copy into
+  // `readback`, GpuMap's end of frame, submit, finish. Returns the uploads' stats and the
+  // frames the final retire collected.
+  struct Frame {
+    gpu::FrameStats uploads;
+    std::vector<gpu::FrameStats> retired;
+  };
+  Frame run_frame(TestEngine& e, gpu::GpuMap& g, uint64_t frame, const gpu::GpuBuffer& readback, uint32_t kernel,
+                  float normal_offset, float footprint, uint32_t channel = 0) const {
+    uint64_t completed = 0;
+    VkCommandBuffer cmd = e.begin(frame, completed);
+    g.retire(completed);
+    Frame out;
+    out.uploads = g.record_uploads(cmd, frame);
+    record(cmd, kernel, normal_offset, footprint, channel);
+    e.record_readback(cmd, *target, VK_IMAGE_LAYOUT_GENERAL, VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT, readback,
+                      VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT);
+    g.record_end_of_frame(cmd, frame);
+    e.submit(frame);
+    const std::span<const gpu::FrameStats> r = g.retire(e.finish());
+    out.retired.assign(r.begin(), r.end());
+    return out;
   }
 };
 

@@ -36,6 +36,28 @@ TEST(TileId, RoundTripsEveryLevelUpTo20) {
   EXPECT_LT(make_tile_id(4, 1, 0), make_tile_id(4, 0, 1));
 }
 
+// tile_parent(id, j) is the tile whose root covers id's root j levels up (coordinates
+// halved j times), tile_child_morton(id, j) id's place inside it, and together they give
+// id back: the decoding GpuMap's pointer words and the client's wants rely on.
+TEST(TileId, ParentAndChildWithinItRebuildTheId) {
+  fields::Rng rng(9);
+  for (uint32_t level = 0; level <= kMaxLevel; ++level)
+    for (int i = 0; i < 50; ++i) {
+      const uint32_t x = rng.below(1u << level), y = rng.below(1u << level);
+      const uint64_t id = make_tile_id(level, x, y);
+      EXPECT_EQ(tile_level(id), level);
+      EXPECT_EQ(tile_parent(id, 0), id);
+      for (uint32_t j = 1; j <= level; ++j) {
+        const uint64_t parent = tile_parent(id, j);
+        ASSERT_EQ(parent, make_tile_id(level - j, x >> j, y >> j)) << describe_tile(id) << " j " << j;
+        const uint64_t low = tile_child_morton(id, j);
+        ASSERT_LT(low, uint64_t(1) << (2 * j));
+        EXPECT_EQ(make_tile_id(level, ((x >> j) << j), ((y >> j) << j)) + low, id);
+        EXPECT_EQ((uint64_t(level) << kTileIdLevelShift) | (tile_morton(parent) << (2 * j)) | low, id);
+      }
+    }
+}
+
 TEST(TileId, RejectsInvalidIds) {
   EXPECT_FALSE(is_valid_tile_id(uint64_t(21) << kTileIdLevelShift));
   EXPECT_FALSE(is_valid_tile_id((uint64_t(2) << kTileIdLevelShift) | 16));  // morton >= 4^2

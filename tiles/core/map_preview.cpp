@@ -157,7 +157,7 @@ float MapPreview::value(uint64_t ex, uint64_t ey, uint32_t j, uint64_t lx, uint6
 float MapPreview::coarse_answer(uint32_t k, const PageHit& hit, uint32_t level, uint64_t x,
                                 uint64_t y) const noexcept {
   if (p_ == 0 || level <= k || hit.kind == PageHit::Kind::value) return hit.value;
-  const uint32_t reached = uint32_t(hit.tile >> kTileIdLevelShift);  // the entry's level
+  const uint32_t reached = tile_level(hit.tile);  // the entry's level
   const uint32_t j = std::min(level - k, p_);
   if (k + j <= reached) return hit.value;
   const uint32_t s = level - k;  // texel -> cell
@@ -167,7 +167,7 @@ float MapPreview::coarse_answer(uint32_t k, const PageHit& hit, uint32_t level, 
 }
 
 uint32_t MapPreview::coarse_region_shift(uint32_t k, const PageHit& hit, uint32_t level) const noexcept {
-  const uint32_t reached = uint32_t(hit.tile >> kTileIdLevelShift);
+  const uint32_t reached = tile_level(hit.tile);
   const uint32_t whole = level - std::min(level, reached);
   if (p_ == 0 || level <= k) return whole;
   const uint32_t j = std::min(level - k, p_);

@@ -126,6 +126,8 @@ struct Geometry {
   // Whether the step from level l to l + 1 halves x and y / w.
   constexpr bool splits_xy(uint32_t l) const { return l + n >= depth(); }
   constexpr bool splits_w(uint32_t l) const { return l + k >= depth(); }
+  // Bits of a node's code the step from level l to l + 1 adds (x and y: 2, w: 1).
+  constexpr uint32_t step_bits(uint32_t l) const { return (splits_xy(l) ? 2u : 0u) + (splits_w(l) ? 1u : 0u); }
   // The child slots a node of level l may use (bit c: slot c).
   constexpr uint32_t slot_set(uint32_t l) const {
     const uint32_t xy = splits_xy(l) ? 0x0Fu : 0x01u;

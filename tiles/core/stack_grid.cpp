@@ -5,18 +5,19 @@
 
 #include "common/bytes.hpp"
 #include "common/error.hpp"
+#include "tiles/core/tile_cut_grid.hpp"  // the id fields (level, code) a cell id reuses
 
 namespace st {
 
 uint64_t StackGrid::tile_id(uint64_t cell) const {
   const uint32_t b = 2 * geo.xy_bits(skip_level) + geo.w_bits(skip_level);
-  return (uint64_t((b + 1) / 2) << 58) | cell;
+  return (uint64_t((b + 1) / 2) << kTileIdLevelShift) | cell;
 }
 
 bool StackGrid::cell_of(uint64_t id, uint64_t& cell) const {
   const uint32_t b = 2 * geo.xy_bits(skip_level) + geo.w_bits(skip_level);
-  if ((id >> 58) != (b + 1) / 2) return false;
-  cell = id & ((uint64_t(1) << 58) - 1);
+  if (tile_level(id) != (b + 1) / 2) return false;
+  cell = tile_morton(id);
   return cell < entries.size();
 }
 

@@ -86,10 +86,9 @@ uint64_t make_tile_id(uint32_t level, uint32_t x, uint32_t y) {
 }
 
 bool is_valid_tile_id(uint64_t id) {
-  uint64_t level = id >> kTileIdLevelShift;
+  const uint32_t level = tile_level(id);
   if (level > kMaxLevel) return false;
-  uint64_t morton = id & ((uint64_t(1) << kTileIdLevelShift) - 1);
-  return (morton >> (2 * level)) == 0;
+  return (tile_morton(id) >> (2 * level)) == 0;
 }
 
 TileAddress tile_address(uint64_t id) {
@@ -98,8 +97,8 @@ TileAddress tile_address(uint64_t id) {
     std::snprintf(buf, sizeof buf, "invalid tile id 0x%016llx", (unsigned long long)id);
     throw FormatError(buf);
   }
-  uint64_t morton = id & ((uint64_t(1) << kTileIdLevelShift) - 1);
-  return TileAddress{uint32_t(id >> kTileIdLevelShift), morton_compact(morton), morton_compact(morton >> 1)};
+  const uint64_t morton = tile_morton(id);
+  return TileAddress{tile_level(id), morton_compact(morton), morton_compact(morton >> 1)};
 }
 
 std::string describe_tile(uint64_t id) {
@@ -107,7 +106,7 @@ std::string describe_tile(uint64_t id) {
   // Deep ids (pack_format.hpp, kDeepTileIdBit): bit 63 over an opaque-style id, or the
   // deep directory (level field 31).
   const uint64_t deep_bit = uint64_t(1) << 63;
-  if ((id & deep_bit) && (id >> kTileIdLevelShift) == 63 && (id << 6) == 0) {
+  if ((id & deep_bit) && tile_level(id) == 63 && (id << 6) == 0) {
     std::snprintf(buf, sizeof buf, "deep directory 0x%016llx", (unsigned long long)id);
   } else if ((id & deep_bit) && is_valid_tile_id(id & ~deep_bit)) {
     TileAddress a = tile_address(id & ~deep_bit);

@@ -82,6 +82,17 @@ struct CutGrid {
 // Sorting by id orders tiles by level, then along the Z curve.
 inline constexpr uint32_t kTileIdLevelShift = 58;
 
+// The fields of an id (no validity check: is_valid_tile_id).
+constexpr uint32_t tile_level(uint64_t id) { return uint32_t(id >> kTileIdLevelShift); }
+constexpr uint64_t tile_morton(uint64_t id) { return id & ((uint64_t(1) << kTileIdLevelShift) - 1); }
+// The tile j levels above `id`'s root that covers it (contract: j <= tile_level(id)).
+constexpr uint64_t tile_parent(uint64_t id, uint32_t j) {
+  return (uint64_t(tile_level(id) - j) << kTileIdLevelShift) | (tile_morton(id) >> (2 * j));
+}
+// Which of tile_parent(id, j)'s 4^j descendants j levels down `id` is: the morton code
+// of its root within the parent's.
+constexpr uint64_t tile_child_morton(uint64_t id, uint32_t j) { return tile_morton(id) & ((uint64_t(1) << (2 * j)) - 1); }
+
 struct TileAddress {
   uint32_t level = 0;
   uint32_t x = 0, y = 0;

@@ -28,10 +28,7 @@ constexpr float kNeutralLo = -FLT_MAX, kNeutralHi = FLT_MAX;  // placeholder int
 
 inline uint32_t pop8(uint32_t m) { return moct::popcount16(m & 0xFFu); }
 
-// Bits of the code a step from level l adds, and the slot <-> compact mapping.
-inline uint32_t step_bits(const moct::Geometry& g, uint32_t l) {
-  return (g.splits_xy(l) ? 2u : 0u) + (g.splits_w(l) ? 1u : 0u);
-}
+// The slot <-> compact mapping (the bits a step adds: Geometry::step_bits).
 inline uint32_t slot_of(const moct::Geometry& g, uint32_t l, uint32_t comp) {
   return g.splits_xy(l) ? comp : comp << 2;  // xy (+w): slot = comp; w only: comp is cw
 }
@@ -129,7 +126,7 @@ uint64_t oct_code(const moct::Geometry& g, uint32_t l, uint64_t x, uint64_t y, u
     } else {
       comp = uint32_t((w >> (g.w_bits(l) - g.w_bits(j + 1))) & 1);
     }
-    code = (code << step_bits(g, j)) | comp;
+    code = (code << g.step_bits(j)) | comp;
   }
   return code;
 }
@@ -137,7 +134,7 @@ uint64_t oct_code(const moct::Geometry& g, uint32_t l, uint64_t x, uint64_t y, u
 void oct_coords(const moct::Geometry& g, uint32_t l, uint64_t code, uint64_t& x, uint64_t& y, uint64_t& w) {
   x = y = w = 0;
   for (uint32_t j = l; j-- > 0;) {
-    const uint32_t a = step_bits(g, j);
+    const uint32_t a = g.step_bits(j);
     const uint32_t c = slot_of(g, j, uint32_t(code & ((1u << a) - 1)));
     code >>= a;
     if (g.splits_xy(j)) {
@@ -210,7 +207,7 @@ OctHierarchy build_octree(const IntervalStack& stack, std::optional<uint32_t> w_
     }
   }
   for (uint32_t l = L - 1; l-- > 0;) {
-    const uint32_t a = step_bits(g, l), slots = g.slot_set(l);
+    const uint32_t a = g.step_bits(l), slots = g.slot_set(l);
     const size_t count = size_t(1) << (2 * g.xy_bits(l) + g.w_bits(l)), out = d.base[l], in = d.base[l + 1];
     float lo[8] = {}, hi[8] = {};
     for (size_t m = 0; m < count; ++m) {
@@ -234,7 +231,7 @@ OctHierarchy build_octree(const IntervalStack& stack, std::optional<uint32_t> w_
     size_t total = 0;
     for (const OctNode& p : parents) total += pop8(p.child_mask);
     nodes.reserve(total);
-    const uint32_t pl = l - 1, a = step_bits(g, pl);
+    const uint32_t pl = l - 1, a = g.step_bits(pl);
     for (const OctNode& p : parents) {
       const uint32_t vmask = d.valued[d.base[pl] + p.code];
       uint64_t px = 0, py = 0, pw = 0;
@@ -274,7 +271,7 @@ std::vector<std::vector<float>> octree_top_values(const moct::Geometry& g, uint3
   lo[lb].resize(nb), hi[lb].resize(nb), present[lb] = child_mask, valued[lb].assign(nb, 0);
   for (size_t i = 0; i < nb; ++i) lo[lb][i] = iv[i].lo, hi[lb][i] = iv[i].hi;
   for (uint32_t l = lb; l-- > 0;) {
-    const uint32_t a = step_bits(g, l), slots = g.slot_set(l);
+    const uint32_t a = g.step_bits(l), slots = g.slot_set(l);
     const size_t count = size_t(1) << (2 * g.xy_bits(l) + g.w_bits(l));
     lo[l].resize(count), hi[l].resize(count), present[l].resize(count), valued[l].resize(count);
     float clo[8] = {}, chi[8] = {};
@@ -297,7 +294,7 @@ std::vector<std::vector<float>> octree_top_values(const moct::Geometry& g, uint3
   v[0] = {mh_detail::central_roundest(lo[0][0], hi[0][0])};
   is_present[0] = {1};
   for (uint32_t l = 1; l <= lb; ++l) {
-    const uint32_t a = step_bits(g, l - 1);
+    const uint32_t a = g.step_bits(l - 1);
     const size_t count = lo[l].size();
     v[l].resize(count), is_present[l].assign(count, 0);
     for (size_t i = 0; i < count; ++i) {

@@ -35,8 +35,6 @@ constexpr uint32_t kFarMaxHits = 2;
   throw Error("octree hierarchy: level " + std::to_string(l) + " node " + std::to_string(j) + ": " + what);
 }
 
-uint32_t step_bits(const Geometry& g, uint32_t l) { return (g.splits_xy(l) ? 2u : 0u) + (g.splits_w(l) ? 1u : 0u); }
-
 Flat flatten(const OctHierarchy& h) {
   const Geometry& g = h.geo;
   if (g.n > kMaxXyLevel || g.k > kMaxWLevel) throw Error("octree hierarchy: geometry out of range");
@@ -69,7 +67,7 @@ Flat flatten(const OctHierarchy& h) {
       t.lo[n] = node.lo, t.hi[n] = node.hi;
       for (uint32_t c = 0; c < kSlots; ++c) {
         if (!(node.child_mask >> c & 1u)) continue;
-        const uint64_t want = (node.code << step_bits(g, l)) | (g.splits_xy(l) ? c : c >> 2);
+        const uint64_t want = (node.code << g.step_bits(l)) | (g.splits_xy(l) ? c : c >> 2);
         if (l + 1 >= h.levels.size() || next >= h.levels[l + 1].size() || h.levels[l + 1][next].code != want)
           bad(l, j, "child " + std::to_string(c) + " is not at the expected code");
         ++next;

@@ -10,10 +10,6 @@
 
 namespace st {
 
-namespace {
-constexpr int kChoiceLevel = 6;  // as tile_cut.cpp compares two encodings: packs' default zlib level
-}  // namespace
-
 TileCodec TileCodec::with_planes(TileCodec base, uint32_t tile_bytes, const PlaneFitOptions& fit) {
   TileCodec c = base;
   using Fn = std::function<std::vector<uint8_t>(const Hierarchy&)>;
@@ -27,7 +23,7 @@ TileCodec TileCodec::with_planes(TileCodec base, uint32_t tile_bytes, const Plan
     auto offer = [&](std::vector<uint8_t> bytes) {
       const bool fits = bytes.size() <= tile_bytes, best_fits = best && best->size() <= tile_bytes;
       if (best_fits && !fits) return;
-      const size_t z = fits ? zlib_compress(bytes, kChoiceLevel).size() : bytes.size();
+      const size_t z = fits ? zlib_compress(bytes, kEncodingChoiceZlibLevel).size() : bytes.size();
       if (!best || (fits && !best_fits) || z < best_z) best = std::move(bytes), best_z = z;
     };
     auto attempt = [&](const Fn& f, const Hierarchy& tree, const PlaneSplit* split) {

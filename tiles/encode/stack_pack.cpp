@@ -14,8 +14,6 @@
 namespace st {
 namespace {
 
-uint32_t step_bits(const moct::Geometry& g, uint32_t l) { return (g.splits_xy(l) ? 2 : 0) + (g.splits_w(l) ? 1 : 0); }
-
 // Dense values of levels 0..K: the value of the deepest valued node on each node's path.
 std::vector<std::vector<float>> dense_values(const OctHierarchy& h, const StackGrid& sg, uint32_t K) {
   const moct::Geometry& g = h.geo;
@@ -104,7 +102,7 @@ OctHierarchy cell_subtree(const OctHierarchy& h, uint32_t K, const OctNode& root
   sub.levels[0].push_back(r);
   uint32_t bits = 0;
   for (uint32_t l = K + 1; l <= L; ++l) {
-    bits += step_bits(g, l - 1);
+    bits += g.step_bits(l - 1);
     const auto& lv = h.levels[l];
     size_t& c = cursor[l];
     while (c < lv.size() && (lv[c].code >> bits) < root.code) ++c;

@@ -154,9 +154,6 @@ SplitResult split_hierarchy(const Hierarchy& h, uint32_t d) {
 
 namespace {
 
-// The zlib level at which two encodings of a tile are compared (packs' default).
-constexpr int kChoiceLevel = 6;
-
 // Index levels for a subtree whose encoding is `bytes` > tile_bytes: enough that the
 // children average one tile (log4 of the excess), at least 1, at most the subtree's depth
 // and kMaxIndexLevels, and small enough that the index tile itself fits one tile.
@@ -201,7 +198,7 @@ GridEntry cut_subtree(const CutParams& p, Hierarchy&& h, uint32_t level, uint32_
     // The second encoding where it stores smaller (what a pack keeps is the zlib stream).
     std::vector<uint8_t> alt = p.codec.alternative(h);
     if (alt.size() <= p.tile_bytes &&
-        (fits.empty() || zlib_compress(alt, kChoiceLevel).size() < zlib_compress(fits, kChoiceLevel).size()))
+        (fits.empty() || zlib_compress(alt, kEncodingChoiceZlibLevel).size() < zlib_compress(fits, kEncodingChoiceZlibLevel).size()))
       fits = std::move(alt);
     else if (fits.empty())
       encoded_size = std::min(encoded_size, alt.size());

@@ -69,6 +69,8 @@ struct TileCodec {
 };
 
 inline constexpr uint32_t kDefaultTileBytes = 64 * 1024;
+// The zlib level at which two encodings of a tile are compared (packs' default).
+inline constexpr int kEncodingChoiceZlibLevel = 6;
 
 // Default skip level for a map of level L: ceil(L / 2), at most 8 (a 256^2 grid of 8-byte
 // entries + the coarse pyramid = 597 KiB), so cells are <= 4096^2 texels at L = 20 and a

@@ -357,6 +357,18 @@ class GpuMap {
   // as far as our work goes (every recorded frame completed), until the destructor returns.
   GpuMap(client::Map map, const EngineDevice& device, GpuOptions options = {});
 
+  // Sizing a Map's cache for a device, before it is opened: the most cache slots of
+  // `slot_bytes` (Map::slot_bytes) whose slot pool, one storage buffer, fits the device's
+  // maxStorageBufferRange (2^27 bytes on some devices, lavapipe's; a bigger cache makes the
+  // constructors throw). Engine mode: the engine's device; own-device: the device
+  // options.device chooses (a short-lived instance and device). Throws GpuError as the
+  // constructors do.
+  static uint32_t max_cache_slots(const EngineDevice& device, uint32_t slot_bytes);
+  static uint32_t max_cache_slots(const GpuOptions& options, uint32_t slot_bytes);
+  // The same for a storage-buffer range in bytes (kAnyDeviceStorageRange: every device).
+  static uint32_t max_cache_slots(uint64_t storage_range, uint32_t slot_bytes);
+  static constexpr uint64_t kAnyDeviceStorageRange = uint64_t(1) << 27;  // Vulkan's minimum maxStorageBufferRange
+
   // Frames are the engine's own counter (strictly increasing, any start); frame f uses ring
   // slot f % frames_in_flight. Every command buffer we record into runs on one queue of
   // EngineDevice::queue_family, submitted in frame order.
