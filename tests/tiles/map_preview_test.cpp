@@ -190,6 +190,16 @@ TEST(MapPreview, BytesArePinnedAndHostileOnesRefused) {
     y.push_back(0);
     store_le<uint32_t>(y.data() + 12, r_bytes + 1);
     refused(y, "after the last value");
+    {
+      std::vector<uint8_t> o(b.begin(), b.end());  // the first residual written overlong (a 0 byte last)
+      const size_t at = 16 + 8 * m.cells();
+      if (o[at] < 0x80) {
+        o[at] |= 0x80;
+        o.insert(o.begin() + long(at + 1), uint8_t(0));
+        store_le<uint32_t>(o.data() + 12, r_bytes + 1);
+        refused(o, "overlong residual");
+      }
+    }
     std::vector<uint8_t> big(b.begin(), b.begin() + long(16 + 8 * m.cells()));  // a 5-byte varint above 2^32
     for (uint8_t v : {0xff, 0xff, 0xff, 0xff, 0x1f}) big.push_back(v);
     store_le<uint32_t>(big.data() + 12, 5);

@@ -212,6 +212,7 @@ MapPreview MapPreview::parse(std::span<const uint8_t> bytes, const CutGrid& grid
                             for (uint32_t shift = 0;; shift += 7) {
                               if (off == end) preview_error(what, off, "residuals end inside a value");
                               if (shift == 28 && bytes[off] > 0x0f) preview_error(what, off, "residual above 2^32");
+                              if (shift > 0 && bytes[off] == 0) preview_error(what, off, "overlong residual");
                               const uint8_t byte = bytes[off++];
                               z |= uint64_t(byte & 0x7f) << shift;
                               if (!(byte & 0x80)) break;
