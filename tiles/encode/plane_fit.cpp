@@ -335,6 +335,9 @@ void merge_surfaces(PlaneSplit& out, uint32_t d, std::span<const float> lo, std:
   for (uint32_t i = 0; i < owner.size(); ++i) owner[i] = i;
   std::vector<uint32_t> both_texels, both_corners;
   bool any = false;
+  // Work bound: the refits' unions together at most 4 tiles' texels (curved surfaces offer
+  // many near planes that no refit joins).
+  uint64_t budget = 4ull * side * side;
   for (size_t ia = 0; ia < order.size(); ++ia) {
     Use& a = uses[order[ia]];
     if (!a.alive) continue;
@@ -343,10 +346,11 @@ void merge_surfaces(PlaneSplit& out, uint32_t d, std::span<const float> lo, std:
       Use& b = uses[order[ib]];
       if (!b.alive) continue;
       bool merged = answers_all(a.plane, b.texels, b.corners);
-      if (!merged && refits < 16) {
+      if (!merged && refits < 4 && budget >= a.texels.size() + b.texels.size()) {
         // Near enough to be the same surface: a few widths off at b's first and last texels.
         if (miss(a.plane, b.texels.front()) > 64 || miss(a.plane, b.texels.back()) > 64) continue;
         ++refits;
+        budget -= a.texels.size() + b.texels.size();
         both_texels = a.texels;
         both_texels.insert(both_texels.end(), b.texels.begin(), b.texels.end());
         both_corners = a.corners;
