@@ -5,8 +5,11 @@
 // OUT for bench_pack_bytes (per-section bytes, the planes section included).
 //
 //   bench_plane_packs SCENE@RES... [--out DIR] [--json PATH] [--light SPEC] [--min-shift S] [--min-nodes N] [--min-reused N]
+//                     [--no-merge] [--only default,static,planes]
+// (--only builds the named variants alone; the others' columns print 0).
 // e.g. bench_plane_packs /usr/share/games/openarena/baseoa/pak1-maps.pk3:maps/oa_dm1.bsp@8192
 //      /usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb@4096 procedural:city@4096
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -35,6 +38,7 @@ int main(int argc, char** argv) try {
   std::vector<std::string> scenes;
   st::PlaneFitOptions fit;
   std::string out_dir = "bench-out/planes", json_path, light_spec = "sun:azimuth=30,elevation=50";
+  std::vector<std::string> only;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&]() -> std::string {
@@ -47,6 +51,13 @@ int main(int argc, char** argv) try {
     else if (a == "--min-shift") fit.min_shift = uint32_t(std::stoul(next()));
     else if (a == "--min-nodes") fit.min_stored_nodes = uint32_t(std::stoul(next()));
     else if (a == "--min-reused") fit.min_reused_nodes = uint32_t(std::stoul(next()));
+    else if (a == "--no-merge") fit.merge_surfaces = false;
+    else if (a == "--only") {
+      std::string list = next(), name;
+      for (char ch : list + ',')
+        if (ch == ',') only.push_back(name), name.clear();
+        else name.push_back(ch);
+    }
     else scenes.push_back(a);
   }
   if (scenes.empty()) throw st::Error("usage: bench_plane_packs SCENE@RES... [--out DIR] [--json PATH] [--light SPEC]");
@@ -67,6 +78,7 @@ int main(int argc, char** argv) try {
     uint64_t bytes[3] = {};
     double secs[3] = {};
     for (int v = 0; v < 3; ++v) {
+      if (!only.empty() && std::find(only.begin(), only.end(), variants[v].name) == only.end()) continue;
       st::MapBuildOptions o;
       o.map_level = st::parse_resolution(res);
       o.encoding = st::Encoding::dagmh;
@@ -83,8 +95,8 @@ int main(int argc, char** argv) try {
       bytes[v] = fs::file_size(path);
       row[variants[v].name] = {{"bytes", bytes[v]}, {"seconds", secs[v]}, {"pack", path}};
     }
-    const double ps = double(bytes[2]) / double(bytes[1]), ds = double(bytes[0]) / double(bytes[1]);
-    const double pd = double(bytes[2]) / double(bytes[0]);
+    auto ratio = [](uint64_t a, uint64_t b) { return b ? double(a) / double(b) : 0.0; };
+    const double ps = ratio(bytes[2], bytes[1]), ds = ratio(bytes[0], bytes[1]), pd = ratio(bytes[2], bytes[0]);
     row["planes_over_static"] = ps;
     row["default_over_static"] = ds;
     row["planes_over_default"] = pd;

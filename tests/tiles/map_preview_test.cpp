@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <array>
+#include <bit>
 #include <cstring>
 #include <fstream>
 #include <iterator>
@@ -101,11 +102,57 @@ TEST(MapPreview, BytesArePinnedAndHostileOnesRefused) {
   EXPECT_EQ(load_le<uint32_t>(b.data() + 0), kPreviewMagic);
   EXPECT_EQ(load_le<uint32_t>(b.data() + 4), 2u);
   EXPECT_EQ(load_le<uint32_t>(b.data() + 8), m.cells());
-  EXPECT_EQ(load_le<uint32_t>(b.data() + 12), m.stored_values());
+  const uint32_t r_bytes = load_le<uint32_t>(b.data() + 12);
   EXPECT_EQ(MapPreview::nodes(2), 20u);
   EXPECT_EQ(MapPreview::words(2), 1u);
   EXPECT_EQ(MapPreview::words(4), 6u);
-  EXPECT_EQ(b.size(), 16u + 8u * m.cells() + 4u * m.stored_values());
+  EXPECT_EQ(b.size(), 16u + 8u * m.cells() + r_bytes);
+  // Every byte: the masks as stored, then each stored node's residual against its
+  // prediction (map_preview.hpp), decoded here independently of the reader.
+  {
+    size_t at = 16 + 8 * m.cells(), value = 0;
+    uint64_t stored = 0;
+    for (size_t o = 0; o < m.cells(); ++o) {
+      const uint64_t mask = load_le<uint64_t>(b.data() + 16 + 8 * o);
+      EXPECT_EQ(mask, m.masks()[o]);
+      EXPECT_EQ(mask >> 20, 0u);
+      stored += uint64_t(std::popcount(mask));
+      uint32_t level[2][16] = {};  // bit patterns of levels 1 (2 x 2) and 2 (4 x 4), row-major
+      const uint32_t entry = bits(m.entry_values()[o]);
+      for (uint32_t j = 1; j <= 2; ++j) {
+        const uint32_t s = 1u << j;
+        uint32_t* g = level[j - 1];
+        for (uint32_t y = 0; y < s; ++y)
+          for (uint32_t x = 0; x < s; ++x) {
+            const uint32_t parent = j == 1 ? entry : level[0][(y / 2) * 2 + x / 2];
+            const uint32_t bit = ((1u << (2 * j)) - 4) / 3 + (y << j) + x;
+            if (!(mask >> bit & 1)) {
+              g[y * s + x] = parent;
+              continue;
+            }
+            auto at_ = [&](uint32_t xx, uint32_t yy) { return g[yy * s + xx]; };
+            uint32_t pred = parent;
+            if (x >= 1 && y >= 1) pred = at_(x - 1, y) + at_(x, y - 1) - at_(x - 1, y - 1);
+            else if (x >= 2) pred = 2 * at_(x - 1, y) - at_(x - 2, y);
+            else if (y >= 2) pred = 2 * at_(x, y - 1) - at_(x, y - 2);
+            else if (x == 1) pred = at_(0, y);
+            else if (y == 1) pred = at_(x, 0);
+            uint32_t z = 0;
+            for (uint32_t sh = 0;; sh += 7) {
+              ASSERT_LT(at, b.size());
+              z |= uint32_t(b[at] & 0x7f) << sh;
+              if (!(b[at++] & 0x80)) break;
+            }
+            g[y * s + x] = pred + ((z >> 1) ^ (0u - (z & 1)));
+            ASSERT_LT(value, m.values().size());
+            EXPECT_EQ(g[y * s + x], bits(m.values()[value++]));
+          }
+      }
+    }
+    EXPECT_EQ(stored, m.stored_values());
+    EXPECT_EQ(value, m.stored_values());
+    EXPECT_EQ(at, b.size());
+  }
   // The pack holds it right after the skip grid, in the grid section.
   const auto section = r->grid_bytes();
   ASSERT_EQ(section.size(), CutGrid::serialized_size(1) + b.size());
@@ -128,18 +175,61 @@ TEST(MapPreview, BytesArePinnedAndHostileOnesRefused) {
     return x;
   };
   refused(with(0, 0), "bad magic");
+  refused(with(0, 0x56505453), "before residual values");  // "STPV": raw f32 values
   refused(with(4, 5), "levels 5");
   refused(with(4, 4), "levels 4");  // K + p beyond the map's level 4
   refused(with(8, uint32_t(m.cells() + 1)), "non-constant entries");
-  refused(with(12, uint32_t(m.stored_values() + 1)), "needs");
+  refused(with(12, r_bytes + 1), "needs");
+  refused({b.begin(), b.end() - 1}, "needs");
+  if (m.stored_values() > 0) {
+    std::vector<uint8_t> x(b.begin(), b.end());  // one residual byte short: the last value is cut
+    x.pop_back();
+    store_le<uint32_t>(x.data() + 12, r_bytes - 1);
+    refused(x, r_bytes - 1 < m.stored_values() ? "residual bytes for" : "residuals end inside a value");
+    std::vector<uint8_t> y(b.begin(), b.end());  // one byte too many
+    y.push_back(0);
+    store_le<uint32_t>(y.data() + 12, r_bytes + 1);
+    refused(y, "after the last value");
+    {
+      std::vector<uint8_t> o(b.begin(), b.end());  // the first residual written overlong (a 0 byte last)
+      const size_t at = 16 + 8 * m.cells();
+      if (o[at] < 0x80) {
+        o[at] |= 0x80;
+        o.insert(o.begin() + long(at + 1), uint8_t(0));
+        store_le<uint32_t>(o.data() + 12, r_bytes + 1);
+        refused(o, "overlong residual");
+      }
+    }
+    std::vector<uint8_t> big(b.begin(), b.begin() + long(16 + 8 * m.cells()));  // a 5-byte varint above 2^32
+    for (uint8_t v : {0xff, 0xff, 0xff, 0xff, 0x1f}) big.push_back(v);
+    store_le<uint32_t>(big.data() + 12, 5);
+    refused(big, m.stored_values() > 5 ? "residual bytes for" : "above 2^32");
+  }
   {
     std::vector<uint8_t> x = with(16 + 4, 1u << 31);  // bit 63 of the first mask: beyond node 19
     refused(x, "mask bits beyond the last node");
   }
-  if (m.stored_values() > 0) {
-    std::vector<uint8_t> x = b;
-    const float nan = std::numeric_limits<float>::quiet_NaN();
-    std::memcpy(x.data() + 16 + 8 * m.cells(), &nan, 4);
+  {
+    // A first residual that makes the first stored value a NaN (masks first; residual 1 byte
+    // replaced by the 5-byte varint of NaN - prediction, here found by re-predicting).
+    const size_t values_at = 16 + 8 * m.cells();
+    ASSERT_GT(m.stored_values(), 0u);
+    uint32_t z = 0;
+    size_t len = 0;
+    for (uint32_t sh = 0;; sh += 7, ++len) {
+      z |= uint32_t(b[values_at + len] & 0x7f) << sh;
+      if (!(b[values_at + len] & 0x80)) break;
+    }
+    ++len;
+    const uint32_t pred = bits(m.values()[0]) - ((z >> 1) ^ (0u - (z & 1)));
+    const uint32_t e = 0x7fc00000u - pred, nz = (e << 1) ^ uint32_t(int32_t(e) >> 31);
+    std::vector<uint8_t> x(b.begin(), b.begin() + long(values_at));
+    for (uint32_t u = nz; ; u >>= 7) {
+      x.push_back(uint8_t((u & 0x7f) | (u >= 0x80 ? 0x80 : 0)));
+      if (u < 0x80) break;
+    }
+    x.insert(x.end(), b.begin() + long(values_at + len), b.end());
+    store_le<uint32_t>(x.data() + 12, uint32_t(x.size() - values_at));
     refused(x, "NaN value");
   }
 }
@@ -154,7 +244,7 @@ TEST(MapPreview, VerifyRefusesAPreviewThatDiffersFromTheTiles) {
   ASSERT_EQ(b.size(), r->file_size());
   const uint64_t grid_at = r->header().grid_offset, grid_size = r->header().grid_size;
   const uint64_t value_at = grid_at + CutGrid::serialized_size(1) + 16 + 8 * r->preview().cells();
-  store_le<float>(b.data() + value_at, load_le<float>(b.data() + value_at) + 0.125f);  // still a valid float
+  b[value_at] ^= 0x02;  // the first residual moves by one unit: still a valid varint and float
   PackHeader h = r->header();
   h.grid_crc = crc32_of(std::span<const uint8_t>(b.data() + grid_at, grid_size));
   const auto head = h.serialize();

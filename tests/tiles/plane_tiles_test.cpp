@@ -152,7 +152,7 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
   if (scene.triangles.empty()) GTEST_SKIP() << "assimp-testmodels missing: run scripts/deps";
   const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), scene.bounds());
   const uint32_t depth = 7, level = 9;
-  uint64_t plane_texels = 0, labelled = 0;
+  uint64_t plane_texels = 0, labelled = 0, table_merged = 0, table_unmerged = 0;
   for (uint32_t ty = 1; ty < 3; ++ty) {
     const Traced t = trace_tile(scene, light, level, 128 * ty, 192, depth);
     const PlaneSplit s = fit_planes(t.h);
@@ -160,6 +160,20 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
     if (s.planes.empty() && s.labelled.empty()) continue;
     labelled += s.labelled.size();
     EXPECT_LT(s.pruned.valued_count(), t.h.valued_count());
+    {
+      // Merging the planes of one surface changes planes, never blocks: the same blocks,
+      // fewer table entries (and every texel still exact: checked below on the merged split).
+      PlaneFitOptions unmerged;
+      unmerged.merge_surfaces = false;
+      const PlaneSplit u = fit_planes(t.h, unmerged);
+      EXPECT_EQ(u.texels, s.texels);
+      ASSERT_EQ(u.planes.size(), s.planes.size());
+      for (size_t i = 0; i < u.planes.size(); ++i) EXPECT_EQ(u.planes[i].start, s.planes[i].start);
+      ASSERT_EQ(u.labelled.size(), s.labelled.size());
+      const std::vector<uint8_t> empty_inner = encode(s.pruned, Encoding::mh);
+      table_merged += load_le<uint32_t>(wrap_planes(s.planes, depth, empty_inner, s.labelled).data() + planes::kOffTableCount);
+      table_unmerged += load_le<uint32_t>(wrap_planes(u.planes, depth, empty_inner, u.labelled).data() + planes::kOffTableCount);
+    }
     for (Encoding e : {Encoding::mh, Encoding::mmh, Encoding::dagmh}) {
       const std::vector<uint8_t> bytes = wrap_planes(s.planes, depth, encode(s.pruned, e), s.labelled);
       const auto ev = open_encoded(e, bytes);
@@ -189,6 +203,7 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
   }
   EXPECT_GT(plane_texels, 0u) << "the engine's flat faces seen at a slant are planes";
   EXPECT_GT(labelled, 0u) << "blocks across the engine's edges are labelled";
+  EXPECT_LT(table_merged, table_unmerged) << "planes of one surface found on separate blocks are merged";
 }
 
 TEST(PlaneFit, ABlockAcrossTwoPlanesIsNoPlane) {

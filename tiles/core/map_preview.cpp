@@ -22,6 +22,58 @@ uint32_t node_bit(uint32_t j, uint64_t x, uint64_t y) {
 
 bool same_bits(float a, float b) { return std::memcmp(&a, &b, sizeof a) == 0; }
 
+uint32_t float_bits(float v) {
+  uint32_t u;
+  std::memcpy(&u, &v, 4);
+  return u;
+}
+float bits_float(uint32_t u) {
+  float v;
+  std::memcpy(&v, &u, 4);
+  return v;
+}
+
+// The stored nodes of one cell in bit order, each with the prediction of its value bits
+// (map_preview.hpp "Values"): `stored(pred)` returns the node's bits. `grid` holds a
+// level's answers (bit patterns), row-major; `parent` the level above.
+template <class Stored>
+void walk_cell_predictions(uint32_t p, const uint64_t* mask, uint32_t entry_bits, std::vector<uint32_t>& grid,
+                           std::vector<uint32_t>& parent, Stored&& stored) {
+  parent.assign(1, entry_bits);
+  for (uint32_t j = 1; j <= p; ++j) {
+    const uint64_t s = uint64_t(1) << j;
+    grid.resize(s * s);
+    for (uint64_t y = 0; y < s; ++y)
+      for (uint64_t x = 0; x < s; ++x) {
+        const uint32_t up = parent[(y / 2) * (s / 2) + x / 2];
+        const uint32_t b = node_bit(j, x, y);
+        uint32_t& v = grid[y * s + x];
+        if (!(mask[b / 64] >> (b % 64) & 1)) {
+          v = up;
+          continue;
+        }
+        // Sums modulo 2^32: a plane's answers are nearly affine in their bit patterns.
+        auto at = [&](uint64_t xx, uint64_t yy) { return grid[yy * s + xx]; };
+        uint32_t pred = up;
+        if (x >= 1 && y >= 1) pred = at(x - 1, y) + at(x, y - 1) - at(x - 1, y - 1);
+        else if (x >= 2) pred = 2 * at(x - 1, y) - at(x - 2, y);
+        else if (y >= 2) pred = 2 * at(x, y - 1) - at(x, y - 2);
+        else if (x == 1) pred = at(0, y);
+        else if (y == 1) pred = at(x, 0);
+        v = stored(pred);
+      }
+    parent.swap(grid);
+  }
+}
+
+uint32_t zigzag(uint32_t residual) { return (residual << 1) ^ uint32_t(int32_t(residual) >> 31); }
+uint32_t unzigzag(uint32_t z) { return (z >> 1) ^ (0u - (z & 1)); }
+
+void append_varint(std::vector<uint8_t>& out, uint32_t u) {
+  for (; u >= 0x80; u >>= 7) out.push_back(uint8_t(u | 0x80));
+  out.push_back(uint8_t(u));
+}
+
 }  // namespace
 
 MapPreview MapPreview::build(const CutGrid& grid, uint32_t p,
@@ -67,7 +119,23 @@ MapPreview MapPreview::build(const CutGrid& grid, uint32_t p,
           }
       }
     }
+  m.residuals_ = m.encode_values();
   return m;
+}
+
+std::vector<uint8_t> MapPreview::encode_values() const {
+  std::vector<uint8_t> out;
+  const uint32_t w = words(p_);
+  std::vector<uint32_t> grid, parent;
+  for (size_t o = 0; o < base_.size(); ++o) {
+    size_t next = base_[o];
+    walk_cell_predictions(p_, masks_.data() + o * w, float_bits(entry_value_[o]), grid, parent, [&](uint32_t pred) {
+      const uint32_t v = float_bits(values_[next++]);
+      append_varint(out, zigzag(v - pred));
+      return v;
+    });
+  }
+  return out;
 }
 
 std::vector<uint8_t> MapPreview::serialize() const {
@@ -76,9 +144,9 @@ std::vector<uint8_t> MapPreview::serialize() const {
   append_le<uint32_t>(out, kPreviewMagic);
   append_le<uint32_t>(out, p_);
   append_le<uint32_t>(out, uint32_t(base_.size()));
-  append_le<uint32_t>(out, uint32_t(values_.size()));
+  append_le<uint32_t>(out, uint32_t(residuals_.size()));
   for (uint64_t m : masks_) append_le<uint64_t>(out, m);
-  for (float v : values_) append_le<float>(out, v);
+  out.insert(out.end(), residuals_.begin(), residuals_.end());
   return out;
 }
 
@@ -89,7 +157,10 @@ MapPreview MapPreview::parse(std::span<const uint8_t> bytes, const CutGrid& grid
   if (bytes.size() > kMaxPreviewBytes)
     preview_error(what, kMaxPreviewBytes, std::to_string(bytes.size()) + " bytes > the bound " +
                                               std::to_string(kMaxPreviewBytes));
-  if (load_le<uint32_t>(bytes, 0) != kPreviewMagic) preview_error(what, 0, "bad magic");
+  const uint32_t magic = load_le<uint32_t>(bytes, 0);
+  if (magic == kPreviewMagicRaw)
+    preview_error(what, 0, "the layout before residual values (\"STPV\"): rebuild the pack");
+  if (magic != kPreviewMagic) preview_error(what, 0, "bad magic");
   MapPreview m;
   m.p_ = load_le<uint32_t>(bytes, 4);
   m.k_ = grid.levels;
@@ -108,7 +179,7 @@ MapPreview MapPreview::parse(std::span<const uint8_t> bytes, const CutGrid& grid
     preview_error(what, 8, std::to_string(c) + " cells, the skip grid has " + std::to_string(cells) +
                                " non-constant entries");
   const uint64_t w = words(m.p_);
-  const uint64_t want = kPreviewHeaderBytes + 8 * w * c + 4ull * n;
+  const uint64_t want = kPreviewHeaderBytes + 8 * w * c + uint64_t(n);  // n: the residuals' bytes
   if (bytes.size() != want)
     preview_error(what, std::min<uint64_t>(bytes.size(), want),
                   "needs " + std::to_string(want) + " bytes, has " + std::to_string(bytes.size()));
@@ -127,13 +198,34 @@ MapPreview MapPreview::parse(std::span<const uint8_t> bytes, const CutGrid& grid
       count += bit_count(word);
     }
   }
-  if (count != n) preview_error(what, 12, std::to_string(n) + " values, the masks store " + std::to_string(count));
-  m.values_.resize(n);
-  for (uint32_t i = 0; i < n; ++i, off += 4) {
-    const float v = load_le<float>(bytes, off);
-    if (std::isnan(v)) preview_error(what, off, "NaN value");
-    m.values_[i] = v;
+  // Residuals: one varint a stored node (at most 5 bytes, below 2^32), exactly n bytes.
+  if (count > n) preview_error(what, 12, std::to_string(n) + " residual bytes for " + std::to_string(count) + " values");
+  m.values_.resize(count);
+  const size_t end = bytes.size();
+  std::vector<uint32_t> level_bits, parent_bits;
+  for (uint32_t i = 0; i < c; ++i) {
+    size_t next = m.base_[i];
+    walk_cell_predictions(m.p_, m.masks_.data() + size_t(i) * w, float_bits(m.entry_value_[i]), level_bits, parent_bits,
+                          [&](uint32_t pred) {
+                            const size_t at = off;
+                            uint64_t z = 0;
+                            for (uint32_t shift = 0;; shift += 7) {
+                              if (off == end) preview_error(what, off, "residuals end inside a value");
+                              if (shift == 28 && bytes[off] > 0x0f) preview_error(what, off, "residual above 2^32");
+                              if (shift > 0 && bytes[off] == 0) preview_error(what, off, "overlong residual");
+                              const uint8_t byte = bytes[off++];
+                              z |= uint64_t(byte & 0x7f) << shift;
+                              if (!(byte & 0x80)) break;
+                            }
+                            const uint32_t v = pred + unzigzag(uint32_t(z));
+                            const float f = bits_float(v);
+                            if (std::isnan(f)) preview_error(what, at, "NaN value");
+                            m.values_[next++] = f;
+                            return v;
+                          });
   }
+  if (off != end) preview_error(what, off, std::to_string(end - off) + " residual bytes after the last value");
+  m.residuals_.assign(bytes.begin() + long(end - n), bytes.end());
   return m;
 }
 

@@ -14,16 +14,26 @@
 //
 // Serialized layout (little-endian; format constants; pinned by map_preview_test):
 //   off         size      field
-//   0           4         magic "STPV"
+//   0           4         magic "STPR"
 //   4           4         levels p (0..kMaxPreviewLevels)
 //   8           4         cells c: the skip grid's non-constant entries, in row-major order
-//   12          4         values n
+//   12          4         residual bytes r
 //   16          8 * w * c stored-node masks, w = ceil(nodes(p) / 64) u64 words per cell,
 //                         nodes(p) = (4^(p+1) - 4) / 3; node (j, x, y), 1 <= j <= p, x, y
 //                         relative to the cell, is bit (4^j - 4)/3 + y 2^j + x (bit b in
 //                         word b / 64, LSB first); bits >= nodes(p) are 0
-//   16 + 8wc    4 * n     f32 values of the stored nodes, cell by cell in bit order
-// n equals the masks' popcount; no value is NaN; 16 + 8wc + 4n <= kMaxPreviewBytes.
+//   16 + 8wc    r         one residual per stored node, cell by cell in bit order: an
+//                         unsigned LEB128 varint (1..5 bytes, below 2^32) z, the residual
+//                         e = (z >> 1) XOR -(z AND 1) (zigzag), the node's f32 bit pattern
+//                         = prediction + e modulo 2^32
+// Prediction (integers modulo 2^32 on bit patterns; a level's answers as an s x s grid,
+// s = 2^j, an unstored node taking its parent's pattern, relative level 0 the entry's
+// value, nodes row-major): L, U, UL the left, upper, upper-left neighbours, LL, UU two
+// to the left / above: x, y >= 1: L + U - UL; else x >= 2: 2L - LL; else y >= 2: 2U - UU;
+// else x = 1: L; else y = 1: U; else the parent. The answers of a plane tile (a plane at
+// node centres) and of trees on slopes are nearly affine, so residuals are mostly tiny.
+// The values' count is the masks' popcount; no value is NaN; 16 + 8wc + r <= kMaxPreviewBytes.
+// The layout before residual values (magic "STPV", raw f32 values) is refused by its magic.
 #pragma once
 #include <cstdint>
 #include <functional>
@@ -37,7 +47,8 @@
 namespace st {
 
 // Format constants.
-inline constexpr uint32_t kPreviewMagic = 0x56505453;  // "STPV"
+inline constexpr uint32_t kPreviewMagic = 0x52505453;     // "STPR"
+inline constexpr uint32_t kPreviewMagicRaw = 0x56505453;  // "STPV": the layout before residuals, refused
 inline constexpr uint32_t kMaxPreviewLevels = 4;        // 340 nodes (6 mask words) a cell
 inline constexpr uint64_t kMaxPreviewBytes = 16ull << 20;
 inline constexpr uint32_t kPreviewHeaderBytes = 16;
@@ -58,7 +69,7 @@ class MapPreview {
   static MapPreview parse(std::span<const uint8_t> bytes, const CutGrid& grid, uint32_t map_level,
                           const std::string& what);
   std::vector<uint8_t> serialize() const;
-  uint64_t serialized_size() const { return kPreviewHeaderBytes + 8ull * masks_.size() + 4ull * values_.size(); }
+  uint64_t serialized_size() const { return kPreviewHeaderBytes + 8ull * masks_.size() + residuals_.size(); }
 
   uint32_t levels() const { return p_; }
   size_t cells() const { return base_.size(); }
@@ -95,6 +106,9 @@ class MapPreview {
   std::vector<float> entry_value_; // per cell: its skip-grid entry's value (relative level 0)
   std::vector<uint64_t> masks_;    // words(p) per cell
   std::vector<float> values_;
+  std::vector<uint8_t> residuals_;  // the values as serialized (the residuals' varints)
+
+  std::vector<uint8_t> encode_values() const;
 };
 
 }  // namespace st

@@ -23,12 +23,12 @@ GridSectionParts split_grid_section(std::span<const uint8_t> section, uint32_t s
     parts.preview = section.subspan(g);
     return parts;
   }
-  // The preview's extent from its own header (map_preview.hpp): 16 + 8 w c + 4 n bytes;
+  // The preview's extent from its own header (map_preview.hpp): 16 + 8 w c + r bytes;
   // MapPreview::parse checks the fields themselves.
   const uint8_t* p = section.data() + g;
-  const uint32_t levels = load_le<uint32_t>(p + 4), cells = load_le<uint32_t>(p + 8), values = load_le<uint32_t>(p + 12);
+  const uint32_t levels = load_le<uint32_t>(p + 4), cells = load_le<uint32_t>(p + 8), residuals = load_le<uint32_t>(p + 12);
   if (levels > kMaxPreviewLevels) fail(g + 4, "map preview levels " + std::to_string(levels) + " > " + std::to_string(kMaxPreviewLevels));
-  const uint64_t preview = kPreviewHeaderBytes + 8ull * MapPreview::words(levels) * cells + 4ull * values;
+  const uint64_t preview = kPreviewHeaderBytes + 8ull * MapPreview::words(levels) * cells + uint64_t(residuals);
   const uint64_t rest = section.size() - g;
   if (preview > kMaxPreviewBytes || preview > rest || rest - preview <= kPackDictionaryHeaderBytes)
     fail(g, "the map preview (" + std::to_string(preview) + " bytes) leaves no room for the DAG-MH dictionary the "

@@ -47,8 +47,27 @@ class PlaneTileEvaluator final : public Evaluator {
     const uint64_t side = uint64_t(1) << level;
     const uint64_t x0 = pcf_tap(x, 0, r, side), y0 = pcf_tap(y, 0, r, side);
     const uint64_t x1 = pcf_tap(x, r - 1, r, side), y1 = pcf_tap(y, r - 1, r, side);
-    if (!overlaps_rect(level, x0, y0, x1, y1)) return inner_->pcf(level, x, y, r, receiver);
-    return Evaluator::pcf(level, x, y, r, receiver);
+    uint32_t blocks[kPcfBlocks];
+    const uint32_t n = blocks_in_rect(level, x0, y0, x1, y1, blocks);
+    if (n == 0) return inner_->pcf(level, x, y, r, receiver);
+    if (n > kPcfBlocks) return Evaluator::pcf(level, x, y, r, receiver);
+    // The few blocks the kernel meets, found once: each tap tests them (no search of its
+    // own, from_plane's answer), the taps none holds ask the inner buffer.
+    const uint32_t s = v_.finest_level - level;
+    const uint64_t h = s ? uint64_t(1) << (s - 1) : 0;
+    uint32_t lit_taps = 0;
+    for (uint32_t j = 0; j < r; ++j) {
+      const uint64_t ty = pcf_tap(y, j, r, side);
+      const uint32_t fy = uint32_t((ty << s) + h);
+      for (uint32_t i = 0; i < r; ++i) {
+        const uint64_t tx = pcf_tap(x, i, r, side);
+        const uint32_t fx = uint32_t((tx << s) + h);
+        float d;
+        if (!tap_plane(blocks, n, s, fx, fy, d)) d = inner_->depth(level, tx, ty);
+        lit_taps += receiver <= d;
+      }
+    }
+    return float(lit_taps) / float(r * r);
   }
 
  private:
@@ -66,14 +85,41 @@ class PlaneTileEvaluator final : public Evaluator {
     return true;
   }
 
+  static constexpr uint32_t kPcfBlocks = 16;
+
+  // from_plane for the finest texel (fx, fy) under a texel of level finest - s, looked up in
+  // `blocks` (every block that can hold it).
+  bool tap_plane(const uint32_t* blocks, uint32_t n, uint32_t s, uint32_t fx, uint32_t fy, float& out) const {
+    if (s >= kMaxShift) return false;
+    for (uint32_t k = 0; k < n; ++k) {
+      const uint8_t* rec = v_.records.data() + size_t(blocks[k]) * kRecordSize;
+      const uint32_t start = load_le<uint32_t>(rec + kOffStart), shift = rec[kOffShift];
+      const uint32_t bx = morton_compact(start), by = morton_compact(uint64_t(start) >> 1);
+      if (fx - bx >= (1u << shift) || fy - by >= (1u << shift)) continue;  // unsigned: fx < bx too
+      if (shift <= s) return false;  // the block is finer than the texel
+      const Plane p = v_.plane_at(blocks[k], fx, fy);
+      const uint32_t mask = (uint32_t(1) << p.shift) - 1;
+      out = p.depth(fx & mask, fy & mask);
+      return true;
+    }
+    return false;
+  }
+
   // Whether any block meets the finest-level rectangle under texels [x0, x1] x [y0, y1] of `level`.
   bool overlaps_rect(uint32_t level, uint64_t x0, uint64_t y0, uint64_t x1, uint64_t y1) const {
+    uint32_t none[1];
+    return blocks_in_rect(level, x0, y0, x1, y1, none, 0) > 0;
+  }
+  // The blocks meeting that rectangle, in `out` (at most `cap`); returns their count, or
+  // cap + 1 when there are more.
+  uint32_t blocks_in_rect(uint32_t level, uint64_t x0, uint64_t y0, uint64_t x1, uint64_t y1, uint32_t* out,
+                          uint32_t cap = kPcfBlocks) const {
     const uint32_t s = v_.finest_level - level;
     const uint64_t fx0 = x0 << s, fy0 = y0 << s, fx1 = ((x1 + 1) << s) - 1, fy1 = ((y1 + 1) << s) - 1;
     // Every texel of the rectangle has a morton code in [m0, m1] (the code grows with x and
     // with y): only blocks whose codes meet that range can meet it.
     const uint64_t m0 = morton_encode(uint32_t(fx0), uint32_t(fy0)), m1 = morton_encode(uint32_t(fx1), uint32_t(fy1));
-    uint32_t i = 0, hi = v_.plane_count;
+    uint32_t i = 0, hi = v_.plane_count, count = 0;
     while (i < hi) {  // the first block ending after m0
       const uint32_t mid = (i + hi) / 2;
       const Plane p = v_.plane(mid);
@@ -85,9 +131,12 @@ class PlaneTileEvaluator final : public Evaluator {
       if (p.start > m1) break;
       const uint64_t bx = morton_compact(p.start), by = morton_compact(uint64_t(p.start) >> 1);
       const uint64_t side = uint64_t(1) << p.shift;
-      if (bx <= fx1 && fx0 < bx + side && by <= fy1 && fy0 < by + side) return true;
+      if (bx <= fx1 && fx0 < bx + side && by <= fy1 && fy0 < by + side) {
+        if (count == cap) return cap + 1;
+        out[count++] = i;
+      }
     }
-    return false;
+    return count;
   }
   bool overlaps_plane(uint32_t level, uint64_t x, uint64_t y, uint32_t shift) const {
     const uint64_t n = (uint64_t(1) << shift) - 1;

@@ -199,6 +199,191 @@ bool fit_block(std::span<const float> lo, std::span<const float> hi, uint32_t sh
   return true;
 }
 
+namespace {
+
+// A plane in the tile's coordinates: v = a0 + b x + c y (modulo 2^64).
+struct TilePlane {
+  int64_t a0 = 0, b = 0, c = 0;
+  float depth(uint32_t x, uint32_t y) const {
+    return plane_fixed_to_float(int64_t(uint64_t(a0) + uint64_t(b) * x + uint64_t(c) * y));
+  }
+};
+
+// Integers (a0, b, c) answering every texel of `texels` (y * side + x) within [lo, hi]:
+// the LP of fit_block over the texels' preimages (cutting planes: a sample first, then
+// the texels the found plane misses), verified texel by texel with the decoder's function.
+bool fit_texels(const std::vector<uint32_t>& texels, uint32_t side, std::span<const float> lo,
+                std::span<const float> hi, TilePlane& out) {
+  if (texels.empty()) return false;
+  uint32_t x0 = side, y0 = side, x1 = 0, y1 = 0;
+  for (uint32_t t : texels)
+    x0 = std::min(x0, t % side), x1 = std::max(x1, t % side), y0 = std::min(y0, t / side), y1 = std::max(y1, t / side);
+  const int64_t margin = 2 * int64_t(std::max(x1 - x0, y1 - y0) + 1) + 2;
+  auto bounds = [&](uint32_t t, int64_t& vmin, int64_t& vmax) {
+    if (!preimage(lo[t], hi[t], vmin, vmax)) return false;
+    vmin += margin, vmax -= margin;
+    return vmin <= vmax;
+  };
+  int64_t width = std::numeric_limits<int64_t>::max(), r = 0;
+  for (size_t i = 0; i < texels.size(); ++i) {
+    int64_t vmin, vmax;
+    if (!bounds(texels[i], vmin, vmax)) return false;
+    width = std::min(width, vmax - vmin);
+    if (i == 0) r = vmin / 2 + vmax / 2;
+  }
+  const LD unit = LD(std::max<int64_t>(width, 1));
+  const LD mx = LD(x0 + x1) / 2, my = LD(y0 + y1) / 2;
+  // The sample: every 16th texel and the extremes of each row of the set.
+  std::vector<uint32_t> active;
+  for (size_t i = 0; i < texels.size(); i += 16) active.push_back(texels[i]);
+  active.push_back(texels.back());
+  std::vector<Con> cons;
+  for (int round = 0; round < 6; ++round) {
+    cons.clear();
+    for (uint32_t t : active) {
+      int64_t vmin, vmax;
+      bounds(t, vmin, vmax);
+      const LD u = LD(t % side) - mx, v = LD(t / side) - my;
+      cons.push_back(Con{{1, u, v}, LD(vmax - r) / unit});
+      cons.push_back(Con{{-1, -u, -v}, -(LD(vmin - r) / unit)});
+    }
+    const LD slope_box = LD(kMaxSlope) / unit;
+    const LD box[3] = {LD(kOne) * 4 / unit, slope_box, slope_box};
+    LD x[3];
+    if (!seidel(3, box, cons.data(), cons.size(), x)) return false;
+    const LD bb = std::round(x[1] * unit), cc = std::round(x[2] * unit);
+    if (std::fabs(bb) > LD(kMaxSlope) || std::fabs(cc) > LD(kMaxSlope)) return false;
+    const LD a0 = std::round(LD(r) + x[0] * unit - bb * mx - cc * my);
+    if (std::fabs(a0) > LD(kOne) * 4) return false;
+    TilePlane q{int64_t(a0), int64_t(bb), int64_t(cc)};
+    size_t missed = 0;
+    for (uint32_t t : texels) {
+      const float d = q.depth(t % side, t / side);
+      if (!(lo[t] <= d && d <= hi[t])) {
+        if (std::find(active.begin(), active.end(), t) != active.end()) return false;  // the LP's rounding
+        active.push_back(t);
+        if (++missed == 64) break;
+      }
+    }
+    if (missed == 0) {
+      out = q;
+      return true;
+    }
+  }
+  return false;
+}
+
+// One surface, one plane: merges the tile's planes whose texels one plane can answer
+// together (refitted over their union), largest first, so the table holds fewer entries.
+void merge_surfaces(PlaneSplit& out, uint32_t d, std::span<const float> lo, std::span<const float> hi) {
+  const uint32_t side = 1u << d;
+  struct Use {
+    std::vector<uint32_t> texels;
+    std::vector<uint32_t> corners;  // the corners (y * side + x) of the blocks that use it
+    TilePlane plane;
+    bool alive = true;
+  };
+  std::map<std::tuple<int64_t, int64_t, int64_t>, uint32_t> id;
+  std::vector<Use> uses;
+  auto use_of = [&](const Plane& p, uint32_t x0, uint32_t y0) -> Use& {
+    const TilePlane t{p.origin_a(x0, y0), p.b, p.c};
+    auto [it, fresh] = id.emplace(std::make_tuple(t.a0, t.b, t.c), uint32_t(uses.size()));
+    if (fresh) uses.push_back(Use{{}, {}, t, true});
+    return uses[it->second];
+  };
+  for (const Plane& p : out.planes) {
+    const uint32_t x0 = morton_compact(p.start), y0 = morton_compact(uint64_t(p.start) >> 1), w = 1u << p.shift;
+    Use& u = use_of(p, x0, y0);
+    u.corners.push_back(y0 * side + x0);
+    for (uint32_t y = y0; y < y0 + w; ++y)
+      for (uint32_t x = x0; x < x0 + w; ++x) u.texels.push_back(y * side + x);
+  }
+  for (const LabelBlock& lb : out.labelled) {
+    const uint32_t x0 = morton_compact(lb.start), y0 = morton_compact(uint64_t(lb.start) >> 1);
+    for (uint32_t k = 0; k < lb.palette.size(); ++k) {
+      Use& u = use_of(lb.palette[k], x0, y0);
+      u.corners.push_back(y0 * side + x0);
+      for (uint32_t i = 0; i < 64; ++i)
+        if (lb.label[i] == k) u.texels.push_back((y0 + i / 8) * side + x0 + i % 8);
+    }
+  }
+  if (uses.size() < 2) return;
+  std::vector<uint32_t> order(uses.size());
+  for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+  std::stable_sort(order.begin(), order.end(),
+                   [&](uint32_t a, uint32_t b) { return uses[a].texels.size() > uses[b].texels.size(); });
+  auto answers_all = [&](const TilePlane& q, const std::vector<uint32_t>& texels, const std::vector<uint32_t>& corners) {
+    if (abs64(q.b) > kMaxSlope || abs64(q.c) > kMaxSlope) return false;
+    for (uint32_t t : corners)
+      if (abs64(int64_t(uint64_t(q.a0) + uint64_t(q.b) * (t % side) + uint64_t(q.c) * (t / side))) > kMaxBase)
+        return false;
+    for (uint32_t t : texels) {
+      const float v = q.depth(t % side, t / side);
+      if (!(lo[t] <= v && v <= hi[t])) return false;
+    }
+    return true;
+  };
+  // How far (in units of the texel's preimage width) q misses texel t: 0 inside.
+  auto miss = [&](const TilePlane& q, uint32_t t) -> LD {
+    int64_t vmin, vmax;
+    if (!preimage(lo[t], hi[t], vmin, vmax)) return 1e30L;
+    const LD v = LD(q.a0) + LD(q.b) * LD(t % side) + LD(q.c) * LD(t / side);
+    const LD w = LD(std::max<int64_t>(vmax - vmin, 1));
+    return v < LD(vmin) ? (LD(vmin) - v) / w : v > LD(vmax) ? (v - LD(vmax)) / w : 0;
+  };
+  std::vector<uint32_t> owner(uses.size());  // the use each one merged into (itself if none)
+  for (uint32_t i = 0; i < owner.size(); ++i) owner[i] = i;
+  std::vector<uint32_t> both_texels, both_corners;
+  bool any = false;
+  // Work bound: the refits' unions together at most 4 tiles' texels (curved surfaces offer
+  // many near planes that no refit joins).
+  uint64_t budget = 4ull * side * side;
+  for (size_t ia = 0; ia < order.size(); ++ia) {
+    Use& a = uses[order[ia]];
+    if (!a.alive) continue;
+    int refits = 0;
+    for (size_t ib = ia + 1; ib < order.size(); ++ib) {
+      Use& b = uses[order[ib]];
+      if (!b.alive) continue;
+      bool merged = answers_all(a.plane, b.texels, b.corners);
+      if (!merged && refits < 4 && budget >= a.texels.size() + b.texels.size()) {
+        // Near enough to be the same surface: a few widths off at b's first and last texels.
+        if (miss(a.plane, b.texels.front()) > 64 || miss(a.plane, b.texels.back()) > 64) continue;
+        ++refits;
+        budget -= a.texels.size() + b.texels.size();
+        both_texels = a.texels;
+        both_texels.insert(both_texels.end(), b.texels.begin(), b.texels.end());
+        both_corners = a.corners;
+        both_corners.insert(both_corners.end(), b.corners.begin(), b.corners.end());
+        TilePlane q;
+        if (fit_texels(both_texels, side, lo, hi, q) && answers_all(q, both_texels, both_corners)) {
+          a.plane = q;
+          merged = true;
+        }
+      }
+      if (!merged) continue;
+      a.texels.insert(a.texels.end(), b.texels.begin(), b.texels.end());
+      a.corners.insert(a.corners.end(), b.corners.begin(), b.corners.end());
+      b.alive = false;
+      owner[order[ib]] = order[ia];
+      any = true;
+    }
+  }
+  if (!any) return;
+  auto remap = [&](Plane& p, uint32_t x0, uint32_t y0) {
+    const auto it = id.find(std::make_tuple(p.origin_a(x0, y0), p.b, p.c));
+    ST_CHECK(it != id.end());
+    const TilePlane& q = uses[owner[it->second]].plane;
+    p.b = q.b, p.c = q.c;
+    p.a = int64_t(uint64_t(q.a0) + uint64_t(q.b) * x0 + uint64_t(q.c) * y0);
+  };
+  for (Plane& p : out.planes) remap(p, morton_compact(p.start), morton_compact(uint64_t(p.start) >> 1));
+  for (LabelBlock& lb : out.labelled)
+    for (Plane& q : lb.palette) remap(q, morton_compact(lb.start), morton_compact(uint64_t(lb.start) >> 1));
+}
+
+}  // namespace
+
 PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
   PlaneSplit out;
   out.pruned = h;
@@ -343,6 +528,7 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
     }
   }
   if (out.planes.empty() && out.labelled.empty()) return out;
+  if (o.merge_surfaces) merge_surfaces(out, d, lo, hi);
   std::sort(out.planes.begin(), out.planes.end(), [](const Plane& a, const Plane& b) { return a.start < b.start; });
   std::sort(out.labelled.begin(), out.labelled.end(),
             [](const LabelBlock& a, const LabelBlock& b) { return a.start < b.start; });

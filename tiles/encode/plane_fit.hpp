@@ -31,6 +31,9 @@ struct PlaneFitOptions {
   uint32_t max_tile_depth = 10;    // tiles deeper than this are not searched (memory, time)
   uint32_t min_reused_nodes = 2;   // a block that reuses a plane already in the tile's table: at least this many
   uint32_t min_labelled_nodes = 4; // an 8x8 block labelled with up to 4 of the table's planes: at least this many
+  // Planes of one surface merged after the search: a plane that answers another's texels
+  // too, or one refitted over both, replaces them (fewer table entries; tiles/core/PLANES.md).
+  bool merge_surfaces = true;
   // Tiles whose valued nodes are less than this share zero-width (hi = lo: open surfaces under
   // the default rule) are not searched: wide intervals (closed objects) let the trees merge
   // their values, planes did not store smaller there (procedural:city) and cost build time.
