@@ -132,7 +132,9 @@ bool RemoteMap::enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch
   sc.ev = slot_eval_[page.slot].get();
   sc.win = slot_window_[page.slot];
   sc.walks = slot_walks_[page.slot];
-  if (sc.win) sc.win->prefetch();  // the tile's walks follow (WindowDepths::prefetch)
+  // The tile's walks follow (WindowDepths::prefetch, TapWalks::prefetch).
+  if (sc.win) sc.win->prefetch();
+  else if (sc.walks) sc.walks->prefetch();
   sc.level = level;
   sc.rel = hit.rel;
   sc.x0 = x - hit.tx;
@@ -151,6 +153,7 @@ void RemoteMap::prefetch_tile(uint32_t level, uint64_t x, uint64_t y) const noex
   const PageEntry page = cache_.lookup(hit.tile);
   if (page.state != PageState::resident) return;
   if (const WindowDepths* w = slot_window_[page.slot]) w->prefetch();
+  else if (const TapWalks* t = slot_walks_[page.slot]) t->prefetch();
 }
 
 float RemoteMap::depth_shared(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc) const noexcept {

@@ -4,6 +4,8 @@
 
 #include "common/error.hpp"
 #include "tiles/core/page_table.hpp"
+#include "tiles/core/tap_batch.hpp"
+#include "tiles/core/tap_order.hpp"
 
 namespace st {
 
@@ -115,6 +117,67 @@ float PackEvaluator::depth(uint32_t level, uint64_t x, uint64_t y) const {
   }
   give_back(lock, slot, &TileCache::unpin);
   return v;
+}
+
+void PackEvaluator::pcf_batch(std::span<const PcfQuery> queries, std::span<float> out) const {
+  const size_t n = std::min(queries.size(), out.size());
+  const uint32_t map_level = reader_->map_level();
+  uint16_t order[kTapOrderMax];
+  TapPath path;  // the last run's walk (a path resumes only in the tile it was walked in)
+  for (size_t b0 = 0; b0 < n; b0 += kTapOrderMax) {
+    const size_t bn = std::min(kTapOrderMax, n - b0);
+    const PcfQuery* const base = queries.data() + b0;
+    float* const base_out = out.data() + b0;
+    if (!(bn >= kTapOrderMin && tap_order(std::span(base, bn), map_level, order)))
+      for (size_t k = 0; k < bn; ++k) order[k] = uint16_t(k);
+    for (size_t k = 0; k < bn;) {
+      const size_t i = order[k];
+      const PcfQuery& q = base[i];
+      if (q.r > 1 || q.level > map_level) {
+        base_out[i] = pcf(q.level, q.x, q.y, q.r, q.receiver);
+        ++k;
+        continue;
+      }
+      const uint64_t top = (uint64_t(1) << q.level) - 1;  // pcf_tap's clamp of one tap
+      const uint64_t x = std::min(q.x, top), y = std::min(q.y, top);
+      std::unique_lock lock(mu_);
+      const PageHit hit = walk_page_table(reader_->grid(), q.level, x, y, [&](uint64_t id, const GridEntry& e) {
+        return &slot_grid_[resident_slot(id, e, lock)];
+      });
+      if (hit.kind != PageHit::Kind::tile) {
+        lock.unlock();
+        base_out[i] = tap_lit(q.receiver, hit.value);
+        ++k;
+        continue;
+      }
+      const uint32_t slot = resident_slot(hit.tile, hit.entry, lock);
+      cache_.pin(slot);  // evaluated outside the lock: nothing may evict it meanwhile
+      lock.unlock();
+      // The run: this tap and the single taps after it in the same tile.
+      const uint64_t x0 = x - hit.tx, y0 = y - hit.ty, side = uint64_t(1) << hit.rel;
+      size_t e = k + 1;
+      for (; e < bn; ++e) {
+        const PcfQuery& nq = base[order[e]];
+        if (nq.r > 1 || nq.level != q.level || std::min(nq.x, top) - x0 >= side || std::min(nq.y, top) - y0 >= side)
+          break;
+      }
+      const Evaluator* ev = slot_eval_[slot].get();
+      const TapRun run{base, order + k, e - k, q.level, hit.rel, x0, y0, base_out};
+      path.owner = nullptr;  // the slot's evaluator may stand at a freed one's address
+      try {
+        if (const auto* walks = dynamic_cast<const TapWalks*>(ev)) {
+          walks->tap_run(run, path);
+        } else {
+          tap_run_loop(run, [&](uint32_t l, uint64_t tx, uint64_t ty) { return ev->depth_region(l, tx, ty); });
+        }
+      } catch (...) {
+        give_back(lock, slot, &TileCache::unpin);
+        throw;
+      }
+      give_back(lock, slot, &TileCache::unpin);
+      k = e;
+    }
+  }
 }
 
 }  // namespace st

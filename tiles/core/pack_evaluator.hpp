@@ -34,6 +34,11 @@ class PackEvaluator : public Evaluator {
 
   uint32_t finest_level() const override { return reader_->map_level(); }
   float depth(uint32_t level, uint64_t x, uint64_t y) const override;
+  // The same answers as pcf() per query, single taps answered by tile: in Morton order
+  // (tap_order.hpp), a run of taps in one tile takes the lock, the page-table walk and the
+  // pin once, and walks the tile's tree from the last walk's path (TapWalks::tap_run) with
+  // the last answer's region kept; kernels (r > 1) go to pcf() one by one.
+  void pcf_batch(std::span<const PcfQuery> queries, std::span<float> out) const override;
 
   const PackReader& reader() const { return *reader_; }
   uint64_t tiles_opened() const;  // cache misses so far

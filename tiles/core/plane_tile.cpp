@@ -6,6 +6,7 @@
 #include "common/bytes.hpp"
 #include "common/error.hpp"
 #include "tiles/core/morton.hpp"
+#include "tiles/core/tap_batch.hpp"
 
 namespace st {
 
@@ -19,10 +20,10 @@ using namespace planes;
 
 int64_t abs64(int64_t v) { return v < 0 ? (v == INT64_MIN ? INT64_MAX : -v) : v; }
 
-class PlaneTileEvaluator final : public Evaluator {
+class PlaneTileEvaluator final : public Evaluator, public TapWalks {
  public:
   PlaneTileEvaluator(PlaneTileView view, std::unique_ptr<Evaluator> inner)
-      : v_(view), inner_(std::move(inner)) {}
+      : v_(view), inner_(std::move(inner)), inner_walks_(dynamic_cast<const TapWalks*>(inner_.get())) {}
 
   uint32_t finest_level() const override { return v_.finest_level; }
 
@@ -36,9 +37,28 @@ class PlaneTileEvaluator final : public Evaluator {
     if (from_plane(level, x, y, d)) return {d, 0};
     // The inner walk's region may cover a plane block (a node with nothing valued below
     // it after the blocks were taken out): it is only the texel's own then.
-    DepthRegion r = inner_->depth_region(level, x, y);
-    if (r.shift > 0 && overlaps_plane(level, x >> r.shift << r.shift, y >> r.shift << r.shift, r.shift)) r.shift = 0;
-    return r;
+    return inner_region(level, x, y, inner_->depth_region(level, x, y));
+  }
+
+  // TapWalks (tap_batch.hpp): depth_region's answers, the inner tree's walks resumed from
+  // the caller's path.
+  DepthRegion walk_tap(uint32_t level, uint64_t x, uint64_t y, TapPath& path) const noexcept override {
+    float d;
+    if (from_plane(level, x, y, d)) return {d, 0};
+    return inner_region(level, x, y, inner_walk(level, x, y, path));
+  }
+  // A run of taps (in Morton order when the client sorted them): the block of the last
+  // tap answers the next one inside it without a search, and the search for another
+  // starts from it (the blocks are sorted by Morton code); the other taps walk the inner
+  // tree from its last walk's path. The same answers as depth_region, tap for tap.
+  TapRunEnd tap_run(const TapRun& run, TapPath& path) const noexcept override;
+  // The block records and the start of the inner tree, which a run's searches and walks
+  // read first (WindowDepths::prefetch's role, for the client's next tile).
+  void prefetch() const noexcept override {
+    const uint8_t* r = v_.records.data();
+    for (size_t o = 0; o < v_.records.size(); o += 64) __builtin_prefetch(r + o);
+    const size_t n = std::min<size_t>(v_.inner.size(), 1024);
+    for (size_t o = 0; o < n; o += 64) __builtin_prefetch(v_.inner.data() + o);
   }
 
   float pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver) const override {
@@ -143,9 +163,99 @@ class PlaneTileEvaluator final : public Evaluator {
     return overlaps_rect(level, x, y, x + n, y + n);
   }
 
+  // The inner tree's answer with depth_region's rule: a region over a plane block is the
+  // texel's own.
+  DepthRegion inner_region(uint32_t level, uint64_t x, uint64_t y, DepthRegion r) const {
+    if (r.shift > 0 && overlaps_plane(level, x >> r.shift << r.shift, y >> r.shift << r.shift, r.shift)) r.shift = 0;
+    return r;
+  }
+  DepthRegion inner_walk(uint32_t level, uint64_t x, uint64_t y, TapPath& path) const noexcept {
+    if (inner_walks_) return inner_walks_->walk_tap(level, x, y, path);
+    try {
+      return inner_->depth_region(level, x, y);
+    } catch (...) {  // an opened tile does not throw; if one did, stay lit and alive
+      return DepthRegion{1.0f, 0};
+    }
+  }
+
   PlaneTileView v_;
   std::unique_ptr<Evaluator> inner_;
+  const TapWalks* inner_walks_;  // the inner tree's resumable walks, or null
 };
+
+TapRunEnd PlaneTileEvaluator::tap_run(const TapRun& run, TapPath& path) const noexcept {
+  TapRunEnd end;
+  const uint64_t top = (uint64_t(1) << run.level) - 1;
+  const uint32_t s = v_.finest_level - std::min(run.rel, v_.finest_level);
+  const uint64_t h = s ? uint64_t(1) << (s - 1) : 0;
+  const uint32_t count = v_.plane_count;
+  const uint8_t* const rec = v_.records.data();
+  auto start_of = [rec](uint32_t i) { return load_le<uint32_t>(rec + size_t(i) * kRecordSize + kOffStart); };
+  // The block found last: index, corner and side at the finest level; its plane when it
+  // is one plane (a labelled block resolves each texel).
+  uint32_t bi = 0, bshift = 0;
+  uint64_t bx = ~uint64_t(0), by = ~uint64_t(0);
+  bool bplane = false;
+  Plane bp;
+  bool have = false;  // end.region holds the last answer (a region of the inner tree)
+  for (size_t k = 0; k < run.count; ++k) {
+    const uint32_t i = run.order[k];
+    const PcfQuery& q = run.queries[i];
+    const uint64_t x = std::min(q.x, top) - run.x0, y = std::min(q.y, top) - run.y0;
+    if (have && (((x ^ end.x) | (y ^ end.y)) >> end.region.shift) == 0) {
+      run.out[i] = tap_lit(q.receiver, end.region.value);
+      continue;
+    }
+    DepthRegion r{0, 0};
+    bool planar = false;
+    if (s < kMaxShift) {
+      const uint64_t fx = (x << s) + h, fy = (y << s) + h;
+      if (((fx ^ bx) | (fy ^ by)) >> bshift != 0) {
+        // Another block, or none: the last block starting at or before the texel's code,
+        // searched outward from the last one (find's answer, in fewer steps for a sorted run).
+        const uint64_t m = morton_encode(uint32_t(fx), uint32_t(fy));
+        uint32_t lo, hi;  // the first block starting after m lies in [lo, hi]
+        if (start_of(bi) <= m) {
+          uint32_t a = bi, step = 1;  // start(a) <= m
+          while (a + step < count && start_of(a + step) <= m) a += step, step *= 2;
+          lo = a + 1, hi = uint32_t(std::min<uint64_t>(count, uint64_t(a) + step));
+        } else {
+          uint32_t b = bi, step = 1;  // start(b) > m
+          while (b >= step && start_of(b - step) > m) b -= step, step *= 2;
+          lo = b >= step ? b - step + 1 : 0, hi = b;
+        }
+        while (lo < hi) {  // the first index in [lo, hi) starting after m
+          const uint32_t mid = lo + (hi - lo) / 2;
+          if (start_of(mid) <= m) lo = mid + 1;
+          else hi = mid;
+        }
+        bx = by = ~uint64_t(0), bshift = 0;
+        if (lo > 0) {
+          const uint32_t j = lo - 1;
+          const uint8_t* b = rec + size_t(j) * kRecordSize;
+          const uint32_t start = load_le<uint32_t>(b + kOffStart), shift = b[kOffShift];
+          bi = j;
+          if (m < uint64_t(start) + (uint64_t(1) << (2 * shift))) {
+            bx = morton_compact(start), by = morton_compact(uint64_t(start) >> 1), bshift = shift;
+            bplane = b[kOffKind] != kKindLabels;
+            if (bplane) bp = v_.plane_at(j, uint32_t(fx), uint32_t(fy));
+          }
+        }
+      }
+      if (bshift > s) {  // from_plane: a block coarser than the texel answers it
+        const Plane p = bplane ? bp : v_.plane_at(bi, uint32_t(fx), uint32_t(fy));
+        const uint32_t mask = (uint32_t(1) << bshift) - 1;
+        r = {p.depth(uint32_t(fx) & mask, uint32_t(fy) & mask), 0};
+        planar = true;
+      }
+    }
+    if (!planar) r = inner_region(run.rel, x, y, inner_walk(run.rel, x, y, path));
+    end.x = x, end.y = y, end.region = r, have = true;
+    ++end.walks;
+    run.out[i] = tap_lit(q.receiver, r.value);
+  }
+  return end;
+}
 
 }  // namespace
 

@@ -193,6 +193,9 @@ class TapWalks {
   virtual TapRunEnd tap_run(const TapRun& run, TapPath& path) const noexcept {
     return tap_run_loop(run, [&](uint32_t l, uint64_t x, uint64_t y) { return walk_tap(l, x, y, path); });
   }
+  // A hint that taps of this tile follow soon (WindowDepths::prefetch's, for a tile whose
+  // evaluator has taps but no window walk: a plane tile). Changes no answer. Default: nothing.
+  virtual void prefetch() const noexcept {}
 
  protected:
   ~TapWalks() = default;
