@@ -140,8 +140,9 @@ TEST(RenderShadow, FootprintReferenceAndHierarchicalFiltering) {
   const FrameError fixed = footprint_error(eval, light, g, 2, false);
   const FrameError filtered = footprint_error(eval, light, g, 2, true);
   // A single cube has no detail to alias, so filtering cannot win by much here; what it
-  // must not do is shadow sloped surfaces with a bias of finest texels under a kernel of
-  // coarse ones (2.4x the fixed-level error before the offset followed the level).
+  // must not do is shadow sloped surfaces with one receiver depth under a kernel of coarse
+  // texels (2.4x the fixed-level error with the finest level's offset, before the receiver
+  // plane or a level-scaled offset).
   EXPECT_LT(filtered.mean_abs, 1.25 * fixed.mean_abs) << fixed.mean_abs;
 
   RenderOptions ro;
