@@ -663,9 +663,12 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
         continue;
       }
       // Filtered: each tap against the receiver's plane (filtered_lookup). A batch asks
-      // every kernel at its greatest tap depth: all lit there is the answer (the common
-      // case on lit ground); the others are counted tap by tap (pcf_plane).
+      // every kernel at its greatest and least tap depths: all lit at the greatest or none
+      // at the least is the answer (lit ground, full shadow); the others are counted tap
+      // by tap (pcf_plane_taps).
       ReceiverPlane planes[kChunk];
+      PcfQuery extremes[4 * kChunk];
+      float extreme_answers[4 * kChunk];
       for (size_t i = b0; i < b1; ++i) {
         const Receiver& rc = fr[i];
         FilterLevels f{L, L, 0.0f};
@@ -679,19 +682,25 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
         float least = 0, greatest = 0;
         const auto tf = LightSpace::texel_of(f.fine, lp.u, lp.v);
         pcf_plane_bounds(pl, f.fine, tf[0], tf[1], kr, least, greatest);
+        extremes[2 * nq] = {tf[0], tf[1], f.fine, kr, greatest};
+        extremes[2 * nq + 1] = {tf[0], tf[1], f.fine, kr, least};
         queries[nq++] = {tf[0], tf[1], f.fine, kr, greatest};
         blend[ni] = f.t == 0.0f ? std::numeric_limits<float>::quiet_NaN() : f.t;
         index[ni++] = uint32_t(i);
         if (f.t != 0.0f) {
           const auto tc = LightSpace::texel_of(f.coarse, lp.u, lp.v);
           pcf_plane_bounds(pl, f.coarse, tc[0], tc[1], kr, least, greatest);
+          extremes[2 * nq] = {tc[0], tc[1], f.coarse, kr, greatest};
+          extremes[2 * nq + 1] = {tc[0], tc[1], f.coarse, kr, least};
           queries[nq++] = {tc[0], tc[1], f.coarse, kr, greatest};
         }
       }
-      eval.pcf_batch(std::span<const PcfQuery>(queries, nq), std::span<float>(answers, nq));
+      eval.pcf_batch(std::span<const PcfQuery>(extremes, 2 * nq), std::span<float>(extreme_answers, 2 * nq));
       auto exact = [&](size_t q, size_t k) {
         const PcfQuery& pq = queries[q];
-        return answers[q] == 1.0f ? 1.0f : pcf_plane(eval, pq.level, pq.x, pq.y, kr, planes[k]);
+        if (extreme_answers[2 * q] == 1.0f) return 1.0f;
+        if (extreme_answers[2 * q + 1] == 0.0f) return 0.0f;
+        return pcf_plane_taps(eval, pq.level, pq.x, pq.y, kr, planes[k]);
       };
       for (size_t k = 0, q = 0; k < ni; ++k) {
         const float a = exact(q++, k);

@@ -24,6 +24,11 @@ float pcf_plane(const Evaluator& eval, uint32_t level, uint64_t x, uint64_t y, u
   // Every tap lit at the greatest depth: each tap's own depth is at most that.
   if (eval.pcf(level, x, y, r, greatest) == 1.0f) return 1.0f;
   if (eval.pcf(level, x, y, r, least) == 0.0f) return 0.0f;
+  return pcf_plane_taps(eval, level, x, y, r, p);
+}
+
+float pcf_plane_taps(const Evaluator& eval, uint32_t level, uint64_t x, uint64_t y, uint32_t r, const ReceiverPlane& p) {
+  r = std::clamp<uint32_t>(r, 1, Evaluator::kMaxPcf);
   const uint64_t side = uint64_t(1) << level;
   uint32_t lit = 0;
   DepthRegion last{};

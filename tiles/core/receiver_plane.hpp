@@ -69,6 +69,10 @@ inline float receiver_plane_depth(const ReceiverPlane& p, uint32_t level, uint64
 // greatest: 1; none at the least: 0), else tap by tap.
 float pcf_plane(const Evaluator& eval, uint32_t level, uint64_t x, uint64_t y, uint32_t r, const ReceiverPlane& p);
 
+// pcf_plane's last step alone: every tap's plane depth against its value (depth_region
+// squares shared), lit taps / (r * r). For callers that asked the extremes themselves.
+float pcf_plane_taps(const Evaluator& eval, uint32_t level, uint64_t x, uint64_t y, uint32_t r, const ReceiverPlane& p);
+
 // The least and greatest tap depths of the r x r kernel at (x, y) of `level`.
 void pcf_plane_bounds(const ReceiverPlane& p, uint32_t level, uint64_t x, uint64_t y, uint32_t r, float& least,
                       float& greatest);
