@@ -211,7 +211,7 @@ void run_view(const ViewArgs& a) {
   std::vector<double> record_us(a.frames, 0.0);
   std::vector<Camera> cams(a.frames);
   raster::FrameResult last;
-  std::vector<float> last_rec, last_vis;
+  std::vector<float> last_rec, last_vis, last_slopes;
   auto collect = [&](std::span<const raster::FrameResult> done) {
     for (const raster::FrameResult& fr : done) {
       const uint32_t f = uint32_t(fr.frame - 1);
@@ -248,6 +248,7 @@ void run_view(const ViewArgs& a) {
         last = fr;
         last_rec.assign(fr.receivers.begin(), fr.receivers.end());
         last_vis.assign(fr.visibility.begin(), fr.visibility.end());
+        last_slopes.assign(fr.slopes.begin(), fr.slopes.end());
       }
     }
   };
@@ -311,7 +312,7 @@ void run_view(const ViewArgs& a) {
       q.slice_a = st.a, q.slice_b = st.b, q.blend = st.f;
     }
     std::vector<float> cpu(pixels);
-    gpu::receiver_lookup_reference(map, last_rec, q, cpu);
+    gpu::receiver_lookup_reference(map, last_rec, q, cpu, last_slopes);
     uint64_t lookups = 0, differ = 0;
     double max_diff = 0;
     for (size_t p = 0; p < pixels; ++p) {

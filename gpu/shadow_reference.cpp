@@ -12,6 +12,7 @@
 #include "shadowtile/cache_view.hpp"
 #include "tiles/core/filter_level.hpp"
 #include "tiles/core/light.hpp"
+#include "tiles/core/receiver_plane.hpp"
 #include "tiles/core/stack_grid.hpp"
 
 static_assert(FLT_EVAL_METHOD == 0, "the shadow pass's twin must evaluate in float");
@@ -292,8 +293,57 @@ void stack_shadow_pass_reference(const client::Map& map, const ShadowPassInput& 
   }
 }
 
+namespace {
+
+// st_slope_clamp: within +-cap (NaN: 0), and below 2^-60 in magnitude 0.
+float slope_clamp(float g, float cap) {
+  const float c = std::fabs(g) <= cap ? g : g > 0.0f ? cap : g < 0.0f ? -cap : 0.0f;
+  return std::fabs(c) < 0x1p-60f ? 0.0f : c;
+}
+
+// r x r PCF of the receiver plane at `level` (st_pcf_plane): each tap's plane depth
+// against Map::depth, lit taps / (r * r).
+float plane_pcf(const client::Map& map, uint32_t level, uint32_t x, uint32_t y, uint32_t r, const ReceiverPlane& p) {
+  const uint64_t s = uint64_t(1) << level;
+  uint32_t lit = 0;
+  for (uint32_t j = 0; j < r; ++j)
+    for (uint32_t i = 0; i < r; ++i) {
+      const uint64_t tx = pcf_tap(x, i, r, s), ty = pcf_tap(y, j, r, s);
+      lit += receiver_plane_depth(p, level, tx, ty) <= map.depth(level, tx, ty);
+    }
+  return float(lit) / float(r * r);
+}
+
+}  // namespace
+
+std::array<float, 2> receiver_slope_reference(const ShadowLight& l, uint32_t finest, const std::array<float, 3>& n,
+                                              const std::array<float, 3>& to_light, float texel) {
+  if (l.perspective) return {0.0f, 0.0f};
+  const std::array<float, 3>&a = l.axis_u, &b = l.axis_v, &c = l.forward;
+  auto cross = [](const std::array<float, 3>& p, const std::array<float, 3>& q) {
+    std::array<float, 3> o;
+    for (int i = 0; i < 3; ++i) {
+      const int i1 = (i + 1) % 3, i2 = (i + 2) % 3;
+      const float m1 = p[i1] * q[i2], m2 = p[i2] * q[i1];
+      o[i] = m1 - m2;
+    }
+    return o;
+  };
+  auto dot = [](const std::array<float, 3>& p, const std::array<float, 3>& q) {
+    const float x = p[0] * q[0], y = p[1] * q[1], z = p[2] * q[2];
+    const float xy = x + y;
+    return xy + z;
+  };
+  const float pu = dot(n, cross(b, c)), pv = dot(n, cross(c, a)), pw = dot(n, cross(a, b));
+  const float den = pw * std::ldexp(1.0f, int(finest));
+  const float cl = dot(c, to_light);
+  const float reach = texel * std::fabs(cl);
+  const float cap = kMaxReceiverSlope * reach;  // shadowtile.glsl's kStMaxReceiverSlope
+  return {slope_clamp(-pu / den, cap), slope_clamp(-pv / den, cap)};
+}
+
 void receiver_lookup_reference(const client::Map& map, std::span<const float> receivers, const ReceiverLookup& q,
-                               std::span<float> out) {
+                               std::span<float> out, std::span<const float> slopes) {
   const client::CacheView view(map);
   const client::StackTables* g = view.stack();
   const uint32_t finest = g ? g->xy_level : view.shape().finest_level;
@@ -308,28 +358,42 @@ void receiver_lookup_reference(const client::Map& map, std::span<const float> re
       lights.push_back(shadow_light(LightSpace::from_array(kind, lp.params)));
   }
   // Slice w's value (2D: w = 0) at one receiver, st_shadow_uvd's steps.
-  auto slice = [&](const float* receiver, float footprint, uint32_t w) {
+  auto slice = [&](const float* receiver, float footprint, uint32_t w, float gx, float gy) {
     if (!kernel_ok) return std::numeric_limits<float>::quiet_NaN();
     if (w >= lights.size()) return 1.0f;
     const Point c = receiver_point(lights[w], receiver);
     if (!in_light_box(c)) return 1.0f;
     const std::array<uint32_t, 2> t = finest_texel(c, finest);
+    if (g || (gx == 0.0f && gy == 0.0f))
+      return filtered(finest, t[0], t[1], footprint, [&](uint32_t level, uint32_t x, uint32_t y) {
+        return g ? slice_pcf(map, w, level, x, y, q.kernel, c.d) : map.pcf(level, x, y, q.kernel, c.d);
+      });
+    // st_shadow_uvd_plane: the plane's depth at the texel's low corner, then its taps.
+    const float side = std::ldexp(1.0f, int(finest));
+    const float su = c.u * side, sv = c.v * side;
+    const float in_u = su - std::floor(su), in_v = sv - std::floor(sv);
+    const float du = gx * in_u, dv = gy * in_v;
+    const float corner_u = c.d - du;
+    ReceiverPlane p;
+    p.fx = t[0], p.fy = t[1], p.finest = finest, p.corner = corner_u - dv, p.gx = gx, p.gy = gy;
     return filtered(finest, t[0], t[1], footprint, [&](uint32_t level, uint32_t x, uint32_t y) {
-      return g ? slice_pcf(map, w, level, x, y, q.kernel, c.d) : map.pcf(level, x, y, q.kernel, c.d);
+      return plane_pcf(map, level, x, y, q.kernel, p);
     });
   };
   const size_t n = std::min(receivers.size() / 4, out.size());
   for (size_t p = 0; p < n; ++p) {
     const float* r = receivers.data() + 4 * p;
+    const bool sloped = slopes.size() >= 2 * (p + 1);
+    const float gx = sloped ? slopes[2 * p] : 0.0f, gy = sloped ? slopes[2 * p + 1] : 0.0f;
     if (!(r[3] >= 0.0f)) {
       out[p] = std::numeric_limits<float>::quiet_NaN();
     } else if (g && q.soft) {
       float sum = 0;
-      for (uint32_t w = 0; w < g->slices; ++w) sum = sum + slice(r, r[3], w);
+      for (uint32_t w = 0; w < g->slices; ++w) sum = sum + slice(r, r[3], w, gx, gy);
       out[p] = sum / float(g->slices);
     } else {
-      const float va = slice(r, r[3], g ? q.slice_a : 0);
-      out[p] = !g || q.slice_a == q.slice_b ? va : va + q.blend * (slice(r, r[3], q.slice_b) - va);
+      const float va = slice(r, r[3], g ? q.slice_a : 0, gx, gy);
+      out[p] = !g || q.slice_a == q.slice_b ? va : va + q.blend * (slice(r, r[3], q.slice_b, gx, gy) - va);
     }
   }
 }

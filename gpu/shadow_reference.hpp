@@ -48,6 +48,14 @@ ShadowLight shadow_light(const PackHeader& h);
 ShadowLight shadow_light(const LightSpace& ls);
 ShadowLight ground_shadow_light(const LightSpace& ls);
 
+// The CPU twin of shadowtile.glsl's st_receiver_slope: a 2D map's receiver-plane slopes
+// (gx, gy) per finest texel from a surface normal through the float light `l`
+// (shadow_light), the unit direction toward the light and one finest texel in world
+// units, with the shader's float operations in its order (st_fdiv's quotients are IEEE
+// division's). (0, 0) for a perspective light.
+std::array<float, 2> receiver_slope_reference(const ShadowLight& l, uint32_t finest, const std::array<float, 3>& normal,
+                                              const std::array<float, 3>& to_light, float texel);
+
 // The CPU twin of a stack map's shadow pass: the same float operations per slice as
 // shaders/stack_shadow_pass.comp, depths from Map::slice_depth (the Map's cache, the same
 // state the GpuMap mirrors). Any light kind of a stack (suns, ground-frame suns, spots and

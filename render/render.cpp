@@ -310,16 +310,44 @@ float map_visibility(const Evaluator& eval, const Receiver& r, const LightSpace&
   return eval.pcf(lv, x, y, 2 * pcf_radius + 1, d);
 }
 
+bool filtered_lookup(const Receiver& r, const LightSpace& light, uint32_t map_level, LightPoint& lp,
+                     ReceiverPlane& plane) {
+  const double texel = light.texel_size(r.pos, map_level);
+  const Vec3d p = r.pos + r.normal * ((r.closed ? kClosedReceiverOffsetTexels : kOpenReceiverOffsetTexels) * texel);
+  lp = light.to_light(p);
+  if (!(lp.u >= 0 && lp.u < 1 && lp.v >= 0 && lp.v < 1)) return false;
+  const double side = std::ldexp(1.0, int(map_level));
+  // Two directions along the surface, one texel long, through the light's transform: the
+  // plane's depth change against its texel change, solved for d(depth)/dx and /dy.
+  const Vec3d n = r.normal;
+  const Vec3d t1 = normalize(cross(n, std::fabs(n.x) < 0.9 ? Vec3d{1, 0, 0} : Vec3d{0, 1, 0}));
+  const Vec3d t2 = cross(n, t1);
+  const LightPoint a = light.to_light(p + t1 * texel), b = light.to_light(p + t2 * texel);
+  const double ax = (a.u - lp.u) * side, ay = (a.v - lp.v) * side, ad = a.d - lp.d;
+  const double bx = (b.u - lp.u) * side, by = (b.v - lp.v) * side, bd = b.d - lp.d;
+  const double det = ax * by - bx * ay;
+  double gx = (ad * by - bd * ay) / det, gy = (ax * bd - bx * ad) / det;
+  // The clamp: kMaxReceiverSlope texels of depth along the light ray per texel across.
+  const Vec3d toward = light.parallel() ? -light.forward() : normalize(light.origin() - p);
+  const double cap = kMaxReceiverSlope * std::fabs(light.to_light(p + toward * texel).d - lp.d);
+  if (!std::isfinite(gx) || !std::isfinite(gy)) gx = gy = 0;
+  gx = std::clamp(gx, -cap, cap), gy = std::clamp(gy, -cap, cap);
+  plane.finest = map_level;
+  plane.fx = std::min(uint64_t(lp.u * side), uint64_t(side) - 1);
+  plane.fy = std::min(uint64_t(lp.v * side), uint64_t(side) - 1);
+  plane.gx = float(gx), plane.gy = float(gy);
+  const double fu = lp.u * side - double(plane.fx), fv = lp.v * side - double(plane.fy);
+  plane.corner = float(lp.d - double(plane.gx) * fu - double(plane.gy) * fv);
+  return true;
+}
+
 float map_visibility_filtered(const Evaluator& eval, const Receiver& r, const LightSpace& light, uint32_t pcf_radius,
                               float footprint) {
   if (!r.hit || r.n_dot_l <= 0) return 0;
-  // The receiver's normal offset (render.hpp) in texels of the finer level filtered: a
-  // kernel of coarse texels needs the bias of coarse texels, or sloped surfaces shadow
-  // themselves (measured: on a cube-on-slab view with 5-texel pixels, 5x5 filtered error
-  // 0.053 with the finest level's offset).
-  const LightPoint lp = lookup_point(r, light, filter_levels(eval.finest_level(), footprint).fine, pcf_radius);
-  if (!(lp.u >= 0 && lp.u < 1 && lp.v >= 0 && lp.v < 1)) return 1;
-  return eval.pcf_footprint(lp.u, lp.v, float(lp.d), footprint, 2 * pcf_radius + 1);
+  LightPoint lp;
+  ReceiverPlane plane;
+  if (!filtered_lookup(r, light, eval.finest_level(), lp, plane)) return 1;
+  return pcf_footprint_plane(eval, lp.u, lp.v, plane, footprint, 2 * pcf_radius + 1);
 }
 
 namespace {
@@ -634,29 +662,49 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
         for (size_t k = 0; k < nq; ++k) fvis[b0 + index[k]] = answers[k];
         continue;
       }
+      // Filtered: each tap against the receiver's plane (filtered_lookup). A batch asks
+      // every kernel at its greatest and least tap depths: all lit at the greatest or none
+      // at the least is the answer (lit ground, full shadow); the others are counted tap
+      // by tap (pcf_plane_taps).
+      ReceiverPlane planes[kChunk];
+      PcfQuery extremes[4 * kChunk];
+      float extreme_answers[4 * kChunk];
       for (size_t i = b0; i < b1; ++i) {
         const Receiver& rc = fr[i];
         FilterLevels f{L, L, 0.0f};
         if (o.pixel_angle > 0) f = filter_levels(L, receiver_footprint_texels(rc, light, L, o.pixel_angle));
-        // The normal offset in texels of the level filtered (map_visibility_filtered).
-        const LightPoint lp = lookup_point(rc, light, f.fine, o.pcf_radius);
-        if (!(lp.u >= 0 && lp.u < 1 && lp.v >= 0 && lp.v < 1)) {
+        LightPoint lp;
+        if (!filtered_lookup(rc, light, L, lp, planes[ni])) {
           fvis[i] = 1;
           continue;
         }
-        const double fine_side = double(uint64_t(1) << f.fine);
-        queries[nq++] = {uint64_t(lp.u * fine_side), uint64_t(lp.v * fine_side), f.fine, kr, float(lp.d)};
+        const ReceiverPlane& pl = planes[ni];
+        float least = 0, greatest = 0;
+        const auto tf = LightSpace::texel_of(f.fine, lp.u, lp.v);
+        pcf_plane_bounds(pl, f.fine, tf[0], tf[1], kr, least, greatest);
+        extremes[2 * nq] = {tf[0], tf[1], f.fine, kr, greatest};
+        extremes[2 * nq + 1] = {tf[0], tf[1], f.fine, kr, least};
+        queries[nq++] = {tf[0], tf[1], f.fine, kr, greatest};
         blend[ni] = f.t == 0.0f ? std::numeric_limits<float>::quiet_NaN() : f.t;
         index[ni++] = uint32_t(i);
         if (f.t != 0.0f) {
           const auto tc = LightSpace::texel_of(f.coarse, lp.u, lp.v);
-          queries[nq++] = {tc[0], tc[1], f.coarse, kr, float(lp.d)};
+          pcf_plane_bounds(pl, f.coarse, tc[0], tc[1], kr, least, greatest);
+          extremes[2 * nq] = {tc[0], tc[1], f.coarse, kr, greatest};
+          extremes[2 * nq + 1] = {tc[0], tc[1], f.coarse, kr, least};
+          queries[nq++] = {tc[0], tc[1], f.coarse, kr, greatest};
         }
       }
-      eval.pcf_batch(std::span<const PcfQuery>(queries, nq), std::span<float>(answers, nq));
+      eval.pcf_batch(std::span<const PcfQuery>(extremes, 2 * nq), std::span<float>(extreme_answers, 2 * nq));
+      auto exact = [&](size_t q, size_t k) {
+        const PcfQuery& pq = queries[q];
+        if (extreme_answers[2 * q] == 1.0f) return 1.0f;
+        if (extreme_answers[2 * q + 1] == 0.0f) return 0.0f;
+        return pcf_plane_taps(eval, pq.level, pq.x, pq.y, kr, planes[k]);
+      };
       for (size_t k = 0, q = 0; k < ni; ++k) {
-        const float a = answers[q++];
-        fvis[index[k]] = std::isnan(blend[k]) ? a : filter_blend(a, answers[q++], blend[k]);
+        const float a = exact(q++, k);
+        fvis[index[k]] = std::isnan(blend[k]) ? a : filter_blend(a, exact(q++, k), blend[k]);
       }
     }
   });

@@ -35,6 +35,7 @@
 #include "scene/scene.hpp"
 #include "tiles/core/evaluator.hpp"
 #include "tiles/core/light.hpp"
+#include "tiles/core/receiver_plane.hpp"
 
 namespace st {
 
@@ -112,11 +113,21 @@ LightPoint deep_lookup_point(const Receiver& r, const LightSpace& light, uint32_
 float map_visibility(const Evaluator& eval, const Receiver& r, const LightSpace& light, uint32_t pcf_radius,
                      uint32_t level);
 
+// The lookup of a filtered receiver: the point moved along the normal by the receiver's
+// offset (kOpenReceiverOffsetTexels or kClosedReceiverOffsetTexels) in finest texels, no
+// more (no PCF radius, no level scale: those were a normal-offset form of the bias that
+// moved lookups sideways, across thin open fins), and its receiver plane
+// (tiles/core/receiver_plane.hpp): the depth slopes per finest texel from the normal
+// through the light's transform (differences of to_light over one texel along the
+// surface), each clamped to kMaxReceiverSlope times the depth of one texel along the
+// light ray (a surface nearly edge-on to the light). False outside the map (lit).
+bool filtered_lookup(const Receiver& r, const LightSpace& light, uint32_t map_level, LightPoint& lp,
+                     ReceiverPlane& plane);
+
 // Hierarchical filtering of one receiver (MH §3.3): (2r+1)^2 PCF at the two levels
-// filter_levels picks for `footprint` finest-level texels, blended (filter_level.hpp);
-// the same lookup point and arithmetic as render_view's filtered path. The normal offset
-// of lookup_point is taken in texels of the finer level filtered (a coarse kernel needs
-// a coarse bias).
+// filter_levels picks for `footprint` finest-level texels, blended (filter_level.hpp),
+// each tap against the receiver plane of filtered_lookup (pcf_footprint_plane); the same
+// lookup point and arithmetic as render_view's filtered path.
 float map_visibility_filtered(const Evaluator& eval, const Receiver& r, const LightSpace& light, uint32_t pcf_radius,
                               float footprint);
 

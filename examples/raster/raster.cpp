@@ -198,7 +198,7 @@ struct Push {
   float light[4];   // xyz: toward a sun, or a point light's position; w: 1 for a point
   float eye[4];     // xyz: the camera; w: the pixel's angle (radians), 0: the finest level
   uint32_t mode[4]; // lookup, kernel, slice a | slice b << 16, soft
-  float misc[4];    // blend f, one finest texel (world), offset in texels, unused
+  float misc[4];    // blend f, one finest texel (world), offset in texels, filtered offset in texels
 };
 static_assert(sizeof(Push) == 128);
 
@@ -254,7 +254,7 @@ struct Rasterizer::Impl {
   double retire_us = 0;
   std::vector<FrameResult> done;
   std::vector<std::vector<uint8_t>> done_rgba;
-  std::vector<std::vector<float>> done_rec, done_vis;
+  std::vector<std::vector<float>> done_rec, done_vis, done_slopes;
 
   Impl(client::Map m, std::span<const float> tri, const RasterOptions& opt) : o(opt), map(std::move(m)), dev(opt.device, opt.validation) {
     if (o.width == 0 || o.height == 0 || o.width > 8192 || o.height > 8192)
@@ -288,7 +288,7 @@ struct Rasterizer::Impl {
     if (o.twin) {
       receivers = dev.image(o.width, o.height, VK_FORMAT_R32G32B32A32_SFLOAT,
                             VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT, VK_IMAGE_ASPECT_COLOR_BIT);
-      visibility = dev.image(o.width, o.height, VK_FORMAT_R32_SFLOAT,
+      visibility = dev.image(o.width, o.height, VK_FORMAT_R32G32B32A32_SFLOAT,
                              VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT | VK_IMAGE_USAGE_TRANSFER_SRC_BIT, VK_IMAGE_ASPECT_COLOR_BIT);
     }
     const size_t pixels = size_t(o.width) * o.height;
@@ -297,7 +297,7 @@ struct Rasterizer::Impl {
       if (o.readback) s.rgba = dev.buffer(pixels * 4, VK_BUFFER_USAGE_TRANSFER_DST_BIT);
       if (o.twin) {
         s.rec = dev.buffer(pixels * 16, VK_BUFFER_USAGE_TRANSFER_DST_BIT);
-        s.vis = dev.buffer(pixels * 4, VK_BUFFER_USAGE_TRANSFER_DST_BIT);
+        s.vis = dev.buffer(pixels * 16, VK_BUFFER_USAGE_TRANSFER_DST_BIT);  // visibility, slopes, 0
       }
     }
     make_commands();
@@ -410,7 +410,8 @@ struct Rasterizer::Impl {
     att[0] = vk_setup::attachment(VK_FORMAT_D32_SFLOAT, VK_ATTACHMENT_LOAD_OP_LOAD, VK_ATTACHMENT_STORE_OP_DONT_CARE,
                                   VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL,
                                   VK_IMAGE_LAYOUT_DEPTH_STENCIL_ATTACHMENT_OPTIMAL);
-    const VkFormat formats[3] = {VK_FORMAT_R8G8B8A8_UNORM, VK_FORMAT_R32G32B32A32_SFLOAT, VK_FORMAT_R32_SFLOAT};
+    const VkFormat formats[3] = {VK_FORMAT_R8G8B8A8_UNORM, VK_FORMAT_R32G32B32A32_SFLOAT,
+                                 VK_FORMAT_R32G32B32A32_SFLOAT};
     for (uint32_t i = 0; i < 3; ++i)
       att[i + 1] = vk_setup::attachment(formats[i], VK_ATTACHMENT_LOAD_OP_CLEAR, VK_ATTACHMENT_STORE_OP_STORE,
                                         VK_IMAGE_LAYOUT_UNDEFINED, VK_IMAGE_LAYOUT_TRANSFER_SRC_OPTIMAL);
@@ -519,7 +520,10 @@ struct Rasterizer::Impl {
       const auto* rc = static_cast<const float*>(sl.rec.mapped);
       const auto* vs = static_cast<const float*>(sl.vis.mapped);
       done_rec.emplace_back(rc, rc + pixels * 4);
-      done_vis.emplace_back(vs, vs + pixels);
+      // The shader's (visibility, gx, gy, 0) per pixel: split into the two spans.
+      std::vector<float>& v = done_vis.emplace_back(pixels);
+      std::vector<float>& g = done_slopes.emplace_back(2 * pixels);
+      for (size_t i = 0; i < pixels; ++i) v[i] = vs[4 * i], g[2 * i] = vs[4 * i + 1], g[2 * i + 1] = vs[4 * i + 2];
     }
     done.push_back(r);
     completed = std::max(completed, sl.frame);
@@ -528,7 +532,7 @@ struct Rasterizer::Impl {
 
   // Every slot whose fence has signalled (polled), oldest frame first; then GpuMap's retire.
   void retire(bool wait_all, int must_free) {
-    done.clear(), done_rgba.clear(), done_rec.clear(), done_vis.clear();
+    done.clear(), done_rgba.clear(), done_rec.clear(), done_vis.clear(), done_slopes.clear();
     std::vector<uint32_t> order;
     for (uint32_t s = 0; s < slots.size(); ++s)
       if (slots[s].frame) order.push_back(s);
@@ -551,7 +555,7 @@ struct Rasterizer::Impl {
         if (r.frame == x.frame) r.stats = x;
     for (size_t i = 0; i < done.size(); ++i) {
       if (o.readback) done[i].rgba = done_rgba[i];
-      if (o.twin) done[i].receivers = done_rec[i], done[i].visibility = done_vis[i];
+      if (o.twin) done[i].receivers = done_rec[i], done[i].visibility = done_vis[i], done[i].slopes = done_slopes[i];
     }
   }
 
@@ -609,6 +613,7 @@ struct Rasterizer::Impl {
     push.misc[0] = in.blend;
     push.misc[1] = float(in.texel);
     push.misc[2] = float(1.5 + (in.kernel - 1) / 2.0);  // `render`'s open-receiver offset plus the PCF radius
+    push.misc[3] = 1.5f;  // filtered: render's kOpenReceiverOffsetTexels alone (the receiver plane does the rest)
 
     VkClearValue clear[4] = {};
     clear[0].depthStencil = {1.0f, 0};

@@ -57,7 +57,8 @@ struct RasterOptions {
   // (validation_messages(); the first is kept): runtime_error when the layer is absent.
   bool validation = false;
   // Also write, per pixel, the receiver the lookup used (xyz; w the footprint in finest
-  // texels, -1 where no lookup ran) and the visibility (R32F), read back with the colour:
+  // texels, -1 where no lookup ran), the visibility and the receiver plane's slopes (RGBA32F:
+  // visibility, gx, gy, 0), read back with the colour:
   // a CPU twin can answer the same lookups (shadowtile view --twin).
   bool twin = false;
   // Lookup::r32f: the finest level of the map as 4^r32f_level floats (row-major); empty:
@@ -90,6 +91,7 @@ struct FrameResult {
   std::span<const uint8_t> rgba;        // width * height * 4 (readback); valid until the next call
   std::span<const float> receivers;     // twin: 4 floats per pixel
   std::span<const float> visibility;    // twin: 1 float per pixel
+  std::span<const float> slopes;        // twin: 2 floats per pixel, the receiver plane's (gx, gy)
   double gpu_frame_ms = 0;              // the frame's command buffer, first to last timestamp
   double gpu_upload_ms = 0, gpu_depth_ms = 0, gpu_shade_ms = 0;
   // Host time in GpuMap's calls on this frame's path: the retire() before recording it, its

@@ -29,12 +29,13 @@ layout(push_constant) uniform Push {
   vec4 light;  // xyz: toward a sun, or a point light's position (w == 1)
   vec4 eye;    // xyz: the camera; w: the pixel's angle (radians), 0: the finest level
   uvec4 mode;  // lookup, PCF kernel side, slice a | slice b << 16, soft
-  vec4 misc;   // blend between slices a and b, one finest texel (world units), offset in texels
+  vec4 misc;   // blend between slices a and b, one finest texel (world units), offset in texels,
+               // the filtered lookups' offset in finest texels
 } push;
 layout(location = 0) out vec4 colour;
 #ifdef RASTER_TWIN
 layout(location = 1) out vec4 out_receiver;  // xyz the receiver; w the footprint (finest texels), -1: no lookup
-layout(location = 2) out float out_visibility;
+layout(location = 2) out vec4 out_visibility;  // x the visibility, yz the receiver plane's slopes
 #endif
 
 // The baseline: r x r PCF on the R32F map at the finest level, the lit test and the
@@ -57,18 +58,20 @@ void main() {
   if (dot(n, push.eye.xyz - world_position) < 0.0) n = -n;  // the side the camera sees
   const vec3 to_light = push.light.w != 0.0 ? normalize(push.light.xyz - world_position) : push.light.xyz;
   const float lambert = max(dot(n, to_light), 0.0);
-  const uint finest = st_finest_level();
   // The footprint in finest texels, as `shadowtile render --filter` measures it
   // (render/render.cpp): the pixel's size at the receiver (distance x pixel angle)
   // over one finest texel. The light-space derivatives (st_footprint_of with uvd +
   // dFdx(uvd)) overestimate it at grazing angles: coarser levels, speckled shadows.
   const float footprint = push.eye.w != 0.0 ? distance(push.eye.xyz, world_position) * push.eye.w / push.misc.y : 1.0;
   // The receiver's offset along the normal, as the CPU renderer's (render/render.hpp):
-  // 1.5 texels plus the PCF radius, in texels of the finer level filtered (a kernel of
-  // coarse texels needs a coarse texel's bias, or sloped surfaces shadow themselves).
-  const StFilter level = st_filter_levels(footprint, finest);
-  const float offset = push.misc.z * push.misc.y * float(1u << (finest - level.fine));
+  // unfiltered, 1.5 texels plus the PCF radius; filtered, 1.5 finest texels and every PCF
+  // tap against the receiver's plane (st_receiver_slope: its depth slopes from the normal;
+  // render's filtered_lookup), so that kernels of coarse texels on sloped surfaces do not
+  // shadow their own surface.
+  const bool filtered = push.eye.w != 0.0;
+  const float offset = filtered ? push.misc.w * push.misc.y : push.misc.z * push.misc.y;
   const uint kernel = push.mode.y;
+  vec2 slope = vec2(0.0);
   float vis = 1.0;
   StProbe probe = st_probe();
   if (lambert <= 0.0) {
@@ -82,12 +85,13 @@ void main() {
     const uint a = push.mode.z & 0xFFFFu, b = push.mode.z >> 16;
     const uint count = slices == 0u ? 1u : soft ? slices : (a == b ? 1u : 2u);
     const vec3 r = st_receiver(world_position, n, offset);
+    if (filtered && slices == 0u) slope = st_receiver_slope(st_light_block(0u), n, to_light, push.misc.y);
     precise float sum = 0.0;
     float va = 1.0, vb = 1.0;
     for (uint i = 0u; i < count; ++i) {
       const uint w = soft ? i : (i == 0u ? a : b);
       const uint lb = st_light_block(slices == 0u ? 0u : w);
-      const float v = lb == 0u ? 1.0 : st_shadow_uvd(w, st_light_uvd(lb, r), footprint, kernel, probe);
+      const float v = lb == 0u ? 1.0 : st_shadow_uvd_plane(w, st_light_uvd(lb, r), slope, footprint, kernel, probe);
       sum = sum + v;
       if (i == 0u) va = v;
       else vb = v;
@@ -108,7 +112,7 @@ void main() {
   }
 #ifdef RASTER_TWIN
   out_receiver = vec4(st_receiver(world_position, n, offset), lambert > 0.0 && push.mode.x == 1u ? footprint : -1.0);
-  out_visibility = vis;
+  out_visibility = vec4(vis, slope, 0.0);
 #endif
   // The light per channel: on a 2D map with a deep part (foliage, smoke, fog) the
   // visibility times the partial occluders' transmittance (shadowtile.glsl).

@@ -9,7 +9,8 @@
 //   #define ST_PAGE(w) my_page[w]      // the page-table buffer
 //   #define ST_FB(w)   my_feedback[w]  // the feedback buffer (read-write, atomics)
 // Entry points: st_depth(level, x, y, probe), st_pcf(level, x, y, r, receiver, probe),
-// st_lookup(x, y, receiver, footprint, r, probe) (level from a footprint, MH §3.3).
+// st_lookup(x, y, receiver, footprint, r, probe) (level from a footprint, MH §3.3), and
+// st_pcf_plane / st_lookup_plane (a receiver plane per tap: tiles/core/receiver_plane.hpp).
 #ifndef SHADOWTILE_GPU_ST_EVAL_GLSL
 #define SHADOWTILE_GPU_ST_EVAL_GLSL
 
@@ -632,21 +633,43 @@ uint st_pcf_run(uint x, uint i, uint r, uint side, uint s) {
   return end >= side ? r - i : min(r - i, uint(int(end) - t));
 }
 
-// r x r PCF (evaluator.hpp: lit taps / (r * r) in float, taps clamped to the map). The
+// The least depth of a receiver's plane over texel (tx, ty) of a level s levels above the
+// finest (tiles/core/receiver_plane.hpp, receiver_plane_depth, the same float operations
+// in its order): plane = (corner, gx, gy), f the receiver's finest texel. Zero slopes
+// answer the corner itself (the constant receiver of st_pcf).
+float st_plane_depth(vec3 plane, uvec2 f, uint s, uint tx, uint ty) {
+  if (plane.y == 0.0 && plane.z == 0.0) return plane.x;
+  const int span = 1 << s;
+  const int ox = int(tx << s) - int(f.x) + (plane.y < 0.0 ? span : 0);
+  const int oy = int(ty << s) - int(f.y) + (plane.z < 0.0 ? span : 0);
+  precise float px = plane.y * float(ox);
+  precise float along_x = plane.x + px;
+  precise float py = plane.z * float(oy);
+  precise float d = along_x + py;
+  return d;
+}
+
+// r x r PCF (evaluator.hpp: lit taps / (r * r) in float, taps clamped to the map), each tap
+// compared with the receiver plane's least depth over its texel (st_plane_depth: `finest`
+// the map's finest level, f the receiver's finest texel; zero slopes: one receiver depth,
+// Evaluator::pcf; else pcf_plane, tiles/core/receiver_plane.hpp). The
 // quotient comes from a table the host filled with the CPU's division, so no GPU
 // division (not correctly rounded in Vulkan) enters the answer. Taps are counted in
 // blocks (MH §3.3's hierarchical PCF): a tap's answer holds for the square of texels its
 // walk and tile path share (st_answer's shift), so every tap of the kernel in that square
 // (a block of n x m taps from it, clamped edge taps included) counts with it, and the next
 // walk starts at the first tap not counted yet (a mask of counted taps; a block may overlap
-// an earlier, smaller one: only its new taps count). A kernel inside one page-table value,
-// leaf or missing child costs one walk. The count is the per-tap count, so the answer is
-// the CPU's bit for bit. The loop carries little (walk, count, mask): llvmpipe keeps
-// loop-carried state in memory, and a shared cursor across taps was slower there.
-float st_pcf(uint level, uint x, uint y, uint r, float receiver, inout StProbe probe) {
+// an earlier, smaller one: only its new taps count). A block's plane depths are least and
+// greatest at two opposite corner taps (float rounding is monotone): all lit at the
+// greatest, or none at the least, counts the block at once; else its new taps one by one.
+// A kernel inside one page-table value, leaf or missing child costs one walk. The count is
+// the per-tap count, so the answer is the CPU's bit for bit. The loop carries little
+// (walk, count, mask): llvmpipe keeps loop-carried state in memory, and a shared cursor
+// across taps was slower there.
+float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint finest, inout StProbe probe) {
   r = clamp(r, 1u, kMaxPcf);
   if (level > ST_PAGE(kPtMapLevel)) return 1.0;
-  const uint side = 1u << level;
+  const uint side = 1u << level, up = finest - level;
   // taps counted so far: bit j * r + i of (done0, done1, done2); r * r <= 81
   uint lit = 0u, done0 = 0u, done1 = 0u, done2 = 0u, k = 0u;
   StWalk w = st_walk(level, st_pcf_tap(x, 0u, r, side), st_pcf_tap(y, 0u, r, side));
@@ -655,25 +678,40 @@ float st_pcf(uint level, uint x, uint y, uint r, float receiver, inout StProbe p
     const uint tx = st_pcf_tap(x, i, r, side), ty = st_pcf_tap(y, j, r, side);
     if (!st_in_walk(w, level, tx, ty)) w = st_walk(level, tx, ty);  // else: the same walk
     uint s;
-    const bool tap_lit = st_lit(receiver, st_answer(w, level, tx, ty, probe, s));
+    const float value = st_answer(w, level, tx, ty, probe, s);
     // An absent tile's taps go one by one: each is counted in the feedback.
     const uint n = w.kind == 2u ? 1u : st_pcf_run(x, i, r, side, s);
     const uint m = w.kind == 2u ? 1u : st_pcf_run(y, j, r, side, s);
-    uint fresh = 0u;  // taps of the n x m block not counted yet (an earlier block may hold some)
+    const uint x0 = tx, x1 = st_pcf_tap(x, i + n - 1u, r, side), y0 = ty, y1 = st_pcf_tap(y, j + m - 1u, r, side);
+    const bool all = st_lit(st_plane_depth(plane, f, up, plane.y < 0.0 ? x0 : x1, plane.z < 0.0 ? y0 : y1), value);
+    const bool some = all || st_lit(st_plane_depth(plane, f, up, plane.y < 0.0 ? x1 : x0, plane.z < 0.0 ? y1 : y0), value);
     for (uint jj = j; jj < j + m; ++jj) {
       const uint lo = jj * r + i, hi = lo + n;
       const uint b0 = st_bit_span(lo, hi, 0u) & ~done0, b1 = st_bit_span(lo, hi, 32u) & ~done1,
                  b2 = st_bit_span(lo, hi, 64u) & ~done2;
-      fresh += uint(bitCount(b0) + bitCount(b1) + bitCount(b2));
+      if (all) {
+        lit += uint(bitCount(b0) + bitCount(b1) + bitCount(b2));
+      } else if (some) {  // the block straddles the value: its new taps one by one
+        const uint yy = st_pcf_tap(y, jj, r, side);
+        for (uint ii = i; ii < i + n; ++ii) {
+          const uint bit = jj * r + ii;
+          const uint word = bit < 32u ? b0 : bit < 64u ? b1 : b2;
+          if (((word >> (bit & 31u)) & 1u) != 0u &&
+              st_lit(st_plane_depth(plane, f, up, st_pcf_tap(x, ii, r, side), yy), value))
+            ++lit;
+        }
+      }
       done0 |= b0;
       done1 |= b1;
       done2 |= b2;
     }
-    lit += tap_lit ? fresh : 0u;
     const int f0 = findLSB(~done0), f1 = findLSB(~done1), f2 = findLSB(~done2);
     k = f0 >= 0 ? uint(f0) : f1 >= 0 ? 32u + uint(f1) : f2 >= 0 ? 64u + uint(f2) : 96u;
   }
   return uintBitsToFloat(ST_PAGE(ST_PAGE(kPtPcfTable) + (r - 1u) * kPcfTableStride + lit));
+}
+float st_pcf(uint level, uint x, uint y, uint r, float receiver, inout StProbe probe) {
+  return st_pcf_plane(level, x, y, r, vec3(receiver, 0.0, 0.0), uvec2(0u), level, probe);
 }
 
 // Hierarchical filtering, the one place the GPU makes it: the mirror of filter_levels and
@@ -696,17 +734,18 @@ StFilter st_filter_levels(float footprint, uint finest) {
 }
 
 // (x, y): texel of the finest level. The two levels from the footprint, r x r PCF at each
-// (the texel at a coarser level is the finest one shifted), blended; t == 0: the fine
-// level alone, as on the CPU.
-float st_lookup(uint x, uint y, float receiver, float footprint, uint r, inout StProbe probe) {
+// (the texel at a coarser level is the finest one shifted) against the receiver plane
+// (corner, gx, gy) of st_pcf_plane, blended; t == 0: the fine level alone, as on the CPU
+// (pcf_footprint_plane, tiles/core/receiver_plane.hpp).
+float st_lookup_plane(uint x, uint y, vec3 plane, float footprint, uint r, inout StProbe probe) {
   const uint finest = ST_PAGE(kPtMapLevel);
   const StFilter f = st_filter_levels(footprint, finest);
-  // One call site of st_pcf for both levels: a shader compiler inlines the walk and the
+  // One call site of st_pcf_plane for both levels: a shader compiler inlines the walk and the
   // decoders once (half the pipeline compile time of two sites).
   float a = 0.0, c = 0.0;
   for (uint k = 0u; k < (f.t == 0.0 ? 1u : 2u); ++k) {
     const uint l = k == 0u ? f.fine : f.coarse;
-    const float v = st_pcf(l, x >> (finest - l), y >> (finest - l), r, receiver, probe);
+    const float v = st_pcf_plane(l, x >> (finest - l), y >> (finest - l), r, plane, uvec2(x, y), finest, probe);
     if (k == 0u) a = v;
     else c = v;
   }
@@ -715,6 +754,10 @@ float st_lookup(uint x, uint y, float receiver, float footprint, uint r, inout S
   precise float scaled = f.t * step;
   precise float blended = a + scaled;
   return blended;
+}
+// The same with one receiver depth for every tap (Evaluator::pcf_footprint).
+float st_lookup(uint x, uint y, float receiver, float footprint, uint r, inout StProbe probe) {
+  return st_lookup_plane(x, y, vec3(receiver, 0.0, 0.0), footprint, r, probe);
 }
 
 #endif

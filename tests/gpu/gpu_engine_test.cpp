@@ -8,6 +8,7 @@
 // are the ones used. The engine's validation layer must stay silent throughout.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <bit>
 #include <cmath>
 #include <cstdio>
@@ -274,6 +275,92 @@ TEST(GpuEngine, TheReceiverTwinAnswersLikeAFragmentShaderWhereTheDoubleTransform
   std::printf("receiver twin: %zu pixels, %zu with another float texel, %zu partly lit, %zu where the client's "
               "double lookup differs\n",
               gpu.size(), moved, partial, client_differs);
+  EXPECT_EQ(e.messages(), 0u) << e.first_message();
+}
+
+// Filtered lookups with the receiver plane (shadowtile.glsl st_receiver_slope and
+// st_shadow_uvd_plane; tiles/core/receiver_plane.hpp) in a fragment shader, on receivers
+// tilted every way to the light (slopes of both signs, some clamped) at a footprint that
+// blends two levels: bit for bit the CPU twin's (receiver_slope_reference, then
+// receiver_lookup_reference with those slopes), which counts every tap; the blocks of taps
+// that share a value and straddle the plane are counted tap by tap on both sides.
+TEST(GpuEngine, ReceiverPlaneLookupsOnSlopesAnswerLikeTheTwin) {
+  Served s = serve("gpu_engine_slope", 64);
+  const uint32_t l = s.map.finest_level();
+  s.map.request_region(l, 0, 0, 1u << l, 1u << l, 10);
+  ASSERT_TRUE(wait_until([&] { return s.map.region_resident(l, 0, 0, 1u << l, 1u << l); }));
+  s.server.stop();
+  ASSERT_TRUE(wait_until([&] { return !s.client->stats().connected; }));
+  const PackHeader& h = client::pack_header(s.map);
+  const LightSpace ls = LightSpace::from_array(h.light_kind, h.light);
+  const ShadowLight fl = shadow_light(h);
+  constexpr uint32_t kW = 32, kH = 32, kKernel = 5;
+  constexpr float kFootprint = 2.5f;
+  const double side = std::ldexp(1.0, int(l));
+  const float texel = float(ls.texel_size(ls.origin(), l));
+  const Vec3d tl = ls.forward() * -1.0;
+  const std::array<float, 3> to_light = {float(tl.x), float(tl.y), float(tl.z)};
+  std::vector<float> rec(size_t(kW) * kH * 4), pos(rec.size()), nrm(rec.size(), 0.0f), slopes(size_t(kW) * kH * 2);
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  size_t sloped = 0;
+  for (size_t p = 0; p < size_t(kW) * kH; ++p) {
+    const double u = 0.02 + 0.96 * unit(rng), v = 0.02 + 0.96 * unit(rng);
+    const float stored = s.map.depth(l, uint64_t(u * side), uint64_t(v * side));
+    const double d = stored < 1.0f ? double(stored) : 0.5;
+    const Vec3d w = ls.to_world(u, v, d);
+    const float f[3] = {float(w.x), float(w.y), float(w.z)};
+    for (int i = 0; i < 3; ++i) rec[4 * p + size_t(i)] = pos[4 * p + size_t(i)] = f[i];
+    rec[4 * p + 3] = kFootprint, pos[4 * p + 3] = 1.0f;
+    // Tilted up to 84 degrees from facing the light (past the clamp), any azimuth.
+    const double tilt = 1.47 * unit(rng), az = 6.2831853 * unit(rng);
+    const Vec3d n = tl * std::cos(tilt) + (ls.axis_u() * std::cos(az) + ls.axis_v() * std::sin(az)) * std::sin(tilt);
+    const std::array<float, 3> nf = {float(n.x), float(n.y), float(n.z)};
+    for (int i = 0; i < 3; ++i) nrm[4 * p + size_t(i)] = nf[size_t(i)];
+    const std::array<float, 2> g = receiver_slope_reference(fl, l, nf, to_light, texel);
+    slopes[2 * p] = g[0], slopes[2 * p + 1] = g[1];
+    sloped += g[0] != 0.0f || g[1] != 0.0f;
+  }
+  EXPECT_GT(sloped, size_t(kW) * kH / 2);
+  TestEngine e(1);
+  ASSERT_TRUE(e.fragment_stores) << "the device has no fragmentStoresAndAtomics";
+  Targets t(e, kW, kH, pos, nrm, 1);
+  enginetest::Image& colour = e.image(kW, kH, VK_FORMAT_R32_SFLOAT, VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT);
+  GpuOptions o;
+  o.frames_in_flight = 1;
+  GpuMap g(s.map, e.engine_device(), o);
+  const RasterPass raster(e, colour, *t.pos, *t.nrm, g.descriptors(2));
+  uint64_t completed = 0;
+  VkCommandBuffer cmd = e.begin(1, completed);
+  g.retire(completed);
+  g.record_uploads(cmd, 1);
+  raster.record(cmd, kKernel, 0.0f, kFootprint, 4, to_light, texel);
+  e.record_readback(cmd, colour, VK_IMAGE_LAYOUT_GENERAL, VK_PIPELINE_STAGE_COLOR_ATTACHMENT_OUTPUT_BIT, t.readback[0],
+                    VK_ACCESS_COLOR_ATTACHMENT_WRITE_BIT);
+  g.record_end_of_frame(cmd, 1);
+  e.submit(1);
+  const std::span<const FrameStats> r = g.retire(e.finish());
+  ASSERT_EQ(r.size(), 1u);
+  EXPECT_EQ(r[0].holes, 0u);
+  const std::vector<float> gpu = t.read(1);
+  std::vector<float> twin(gpu.size()), flat(gpu.size());
+  ReceiverLookup q;
+  q.kernel = kKernel;
+  receiver_lookup_reference(s.map, rec, q, twin, slopes);
+  receiver_lookup_reference(s.map, rec, q, flat);
+  size_t bad = 0, partial = 0, plane_differs = 0;
+  for (size_t p = 0; p < gpu.size(); ++p) {
+    if (bits(gpu[p]) != bits(twin[p]) && bad++ == 0)
+      ADD_FAILURE() << "pixel " << p << ": fragment shader " << gpu[p] << ", twin " << twin[p] << " (slopes "
+                    << slopes[2 * p] << ", " << slopes[2 * p + 1] << ")";
+    partial += gpu[p] > 0.0f && gpu[p] < 1.0f;
+    plane_differs += bits(flat[p]) != bits(twin[p]);
+  }
+  EXPECT_EQ(bad, 0u);
+  EXPECT_GT(partial, 0u);
+  EXPECT_GT(plane_differs, 0u) << "the plane changed no answer: the test tests nothing";
+  std::printf("receiver plane twin: %zu pixels, %zu sloped, %zu partly lit, %zu answers moved by the plane\n",
+              gpu.size(), sloped, partial, plane_differs);
   EXPECT_EQ(e.messages(), 0u) << e.first_message();
 }
 

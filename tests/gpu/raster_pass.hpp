@@ -3,6 +3,7 @@
 // including shadowtile.glsl with our buffers at set 0 bindings 3, 5, 7
 // (GpuMap::descriptors) and the G-buffer at set 1.
 #pragma once
+#include <array>
 #include <bit>
 #include <span>
 #include <vector>
@@ -58,7 +59,7 @@ struct RasterPass {
     for (auto& b : b1) b.pImmutableSamplers = &sampler;
     l1 = vk_setup::set_layout(v, b1);
     const VkDescriptorSetLayout sets[2] = {l0, l1};
-    layout = vk_setup::pipeline_layout(v, sets, {VK_SHADER_STAGE_FRAGMENT_BIT, 0, 16});
+    layout = vk_setup::pipeline_layout(v, sets, {VK_SHADER_STAGE_FRAGMENT_BIT, 0, 32});
     const VkDescriptorPoolSize ps[2] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 3}, {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 2}};
     pool = vk_setup::descriptor_pool(v, 2, ps);
     s0 = vk_setup::allocate_set(v, pool, l0);
@@ -90,8 +91,11 @@ struct RasterPass {
   RasterPass(const RasterPass&) = delete;
   RasterPass& operator=(const RasterPass&) = delete;
 
-  // channel 0: the visibility (st_visibility); 1..3: st_shadow's red, green, blue.
-  void record(VkCommandBuffer cmd, uint32_t kernel, float normal_offset, float footprint, uint32_t channel = 0) const {
+  // channel 0: the visibility (st_visibility); 1..3: st_shadow's red, green, blue; 4: the
+  // visibility with the receiver plane (st_receiver_slope with to_light and one finest
+  // texel `texel` in world units, st_shadow_uvd_plane).
+  void record(VkCommandBuffer cmd, uint32_t kernel, float normal_offset, float footprint, uint32_t channel = 0,
+              std::array<float, 3> to_light = {}, float texel = 0) const {
     VkRenderPassBeginInfo bi{};
     bi.sType = VK_STRUCTURE_TYPE_RENDER_PASS_BEGIN_INFO;
     bi.renderPass = rp;
@@ -101,7 +105,14 @@ struct RasterPass {
     vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline);
     const VkDescriptorSet sets[2] = {s0, s1};
     vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, layout, 0, 2, sets, 0, nullptr);
-    uint32_t push[4] = {kernel, std::bit_cast<uint32_t>(normal_offset), std::bit_cast<uint32_t>(footprint), channel};
+    uint32_t push[8] = {kernel,
+                        std::bit_cast<uint32_t>(normal_offset),
+                        std::bit_cast<uint32_t>(footprint),
+                        channel,
+                        std::bit_cast<uint32_t>(to_light[0]),
+                        std::bit_cast<uint32_t>(to_light[1]),
+                        std::bit_cast<uint32_t>(to_light[2]),
+                        std::bit_cast<uint32_t>(texel)};
     vkCmdPushConstants(cmd, layout, VK_SHADER_STAGE_FRAGMENT_BIT, 0, sizeof(push), push);
     vkCmdDraw(cmd, 3, 1, 0, 0);
     vkCmdEndRenderPass(cmd);

@@ -103,7 +103,8 @@ TEST(RenderShadow, FlatBaselineAtFullResolutionAgreesWithThePack) {
 
 // Hierarchical filtering in the report: the footprint reference is the PCF reference
 // where a pixel covers at most a texel; the per-receiver filtered lookup is render's
-// (bit for bit); with pixels of several texels its error stays near fixed-level PCF's.
+// (bit for bit); with pixels of several texels its error stays near fixed-level PCF's,
+// and with pixels under a texel it is no worse.
 TEST(RenderShadow, FootprintReferenceAndHierarchicalFiltering) {
   const Scene s = cube_on_slab();
   const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=120,elevation=35"), s.bounds());
@@ -123,7 +124,10 @@ TEST(RenderShadow, FootprintReferenceAndHierarchicalFiltering) {
     ASSERT_GE(f.footprint_truth[0][i], 0.0f);
     ASSERT_LE(f.footprint_truth[0][i], 1.0f);
   }
-  EXPECT_EQ(footprint_error(eval, light, f, 1, true).mean_abs, footprint_error(eval, light, f, 1, false).mean_abs);
+  // At the finest level the filtered lookup is 3x3 PCF too, each tap against the receiver's
+  // plane (tiles/core/receiver_plane.hpp) rather than one depth behind a normal offset grown
+  // by the kernel's radius: no worse than fixed-level PCF (measured 0.0017 against 0.0039).
+  EXPECT_LE(footprint_error(eval, light, f, 1, true).mean_abs, footprint_error(eval, light, f, 1, false).mean_abs);
 
   // The same view at its true pixel angle: footprints of several texels.
   const double pixel_angle = 2 * std::tan(near_cam.fov_deg * 3.14159265358979323846 / 360) / h;
@@ -136,8 +140,9 @@ TEST(RenderShadow, FootprintReferenceAndHierarchicalFiltering) {
   const FrameError fixed = footprint_error(eval, light, g, 2, false);
   const FrameError filtered = footprint_error(eval, light, g, 2, true);
   // A single cube has no detail to alias, so filtering cannot win by much here; what it
-  // must not do is shadow sloped surfaces with a bias of finest texels under a kernel of
-  // coarse ones (2.4x the fixed-level error before the offset followed the level).
+  // must not do is shadow sloped surfaces with one receiver depth under a kernel of coarse
+  // texels (2.4x the fixed-level error with the finest level's offset, before the receiver
+  // plane or a level-scaled offset).
   EXPECT_LT(filtered.mean_abs, 1.25 * fixed.mean_abs) << fixed.mean_abs;
 
   RenderOptions ro;

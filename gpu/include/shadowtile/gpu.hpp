@@ -292,6 +292,9 @@ StackTime stack_time(uint32_t slices, double time);
 // slice), blended as the shader blends: bit for bit its answer for the same cache contents.
 // receivers: 4 floats each, xyz the receiver already moved along its normal (st_receiver's
 // result) and w the footprint in finest texels; w < 0 or NaN: no lookup, answered NaN.
+// slopes (optional): 2 floats each, the receiver plane's (gx, gy) the shader used
+// (st_receiver_slope; st_shadow_uvd_plane's taps, tiles/core/receiver_plane.hpp); empty or
+// zero: one receiver depth for every tap. Stack maps take one receiver depth, as the shader.
 // A 2D map whose light the GPU refuses (not a sun) answers 1, as the shader does.
 struct ReceiverLookup {
   uint32_t kernel = 3;                    // PCF kernel side: odd, 1..9 (else NaN, as the shader)
@@ -300,7 +303,8 @@ struct ReceiverLookup {
   bool soft = false;                      // stack maps: every slice summed in order, then / N
 };
 void receiver_lookup_reference(const client::Map& map, std::span<const float> receivers, const ReceiverLookup& q,
-                               std::span<float> out);
+                               std::span<float> out, std::span<const float> slopes = {});
+
 
 struct FrameStats {
   uint64_t frame = 0;

@@ -20,7 +20,8 @@ layout(push_constant) uniform Push {
   uint kernel;
   float normal_offset;
   float footprint;
-  uint channel;  // 0: st_visibility; 1..3: st_shadow's r, g, b
+  uint channel;  // 0: st_visibility; 1..3: st_shadow's r, g, b; 4: with the receiver plane
+  vec4 to_light_texel;  // channel 4: xyz toward the light (unit), w one finest texel (world)
 } push;
 layout(location = 0) out float visibility;
 
@@ -33,7 +34,13 @@ void main() {
   }
   StProbe probe = st_probe();
   const vec3 n = texelFetch(gbuffer_normals, q, 0).xyz;
-  if (push.channel == 0u) {
+  if (push.channel == 4u) {
+    // An engine's filtered lookup with the receiver plane (shadowtile.glsl).
+    const uint lb = st_light_block(0u);
+    const vec2 slope = st_receiver_slope(lb, n, push.to_light_texel.xyz, push.to_light_texel.w);
+    const vec3 uvd = st_light_uvd(lb, st_receiver(p.xyz, n, push.normal_offset));
+    visibility = st_shadow_uvd_plane(0u, uvd, slope, push.footprint, push.kernel, probe);
+  } else if (push.channel == 0u) {
     visibility = st_visibility(p.xyz, n, push.normal_offset, push.footprint, push.kernel, probe);
   } else {
     const vec3 light = st_shadow(p.xyz, n, push.normal_offset, push.footprint, push.kernel, probe);
