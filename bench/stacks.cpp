@@ -113,6 +113,7 @@ volatile float g_sink = 0;
 bool g_all_2d = false;  // --all-2d
 bool g_oct_merge = false;  // --oct-merge
 st::StackCells g_stack_cells = st::StackCells::octree;  // --stack-cells (blocked mode)
+std::string g_stack_cells_name = "octree";
 
 double peak_rss_mib() {
   rusage ru{};
@@ -606,11 +607,24 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
   float acc = 0;
   const size_t ms = std::max<size_t>(1, m / 8);
   std::vector<float> batch_out(ms);
-  double ns_2d = 0, ns_oct = 0, ns_time = 0, ns_soft = 0, ns_batch = 0, ns_soft_sep = 0, ns_soft2d = 0;
+  double ns_2d = 0, ns_oct = 0, ns_time = 0, ns_time_def = 0, ns_soft = 0, ns_batch = 0, ns_soft_sep = 0, ns_soft2d = 0;
+  // visibility(p, time) as the contract defines it (stack_lookup.hpp): lit() of the two
+  // nearest slices blended, or of the one slice at a sample's time.
+  auto time_by_definition = [&](const st::Vec3d& p, double time) {
+    const double s = std::clamp(time, 0.0, 1.0) * double(n - 1), near = std::nearbyint(s);
+    if (std::fabs(s - near) <= 1e-9) return map.lit(p, uint32_t(near)) ? 1.0f : 0.0f;
+    const uint32_t a = uint32_t(std::floor(s));
+    const float f = float(s - double(a));
+    const float la = map.lit(p, a) ? 1.0f : 0.0f, lb = map.lit(p, a + 1) ? 1.0f : 0.0f;
+    return la + f * (lb - la);
+  };
   SideBySide timing;
   timing.add(ns_2d, m, [&] { for (size_t i = 0; i < m; ++i) acc += lit2d(pts[i], ws[i]); });
   timing.add(ns_oct, m, [&] { for (size_t i = 0; i < m; ++i) acc += map.lit(pts[i], ws[i]); });
   timing.add(ns_time, m, [&] { for (size_t i = 0; i < m; ++i) acc += map.visibility(pts[i], times[i]); });
+  timing.add(ns_time_def, m, [&] {  // the contract's definition: two lit() lookups blended
+    for (size_t i = 0; i < m; ++i) acc += time_by_definition(pts[i], times[i]);
+  });
   timing.add(ns_soft, ms, [&] { for (size_t i = 0; i < ms; ++i) acc += map.soft_visibility(pts[i]); });
   timing.add(ns_batch, ms, [&] {
     map.soft_visibility(std::span<const st::Vec3d>(pts.data(), ms), batch_out);
@@ -639,6 +653,9 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
     for (uint32_t w = 0; w < n; ++w) lit += map.lit(pts[i], w);
     if (map.soft_visibility(pts[i]) != float(lit) / float(n)) throw st::Error("bench: the pack's soft lookup differs");
   }
+  for (size_t i = 0; i < m; ++i)
+    if (map.visibility(pts[i], times[i]) != time_by_definition(pts[i], times[i]))
+      throw st::Error("bench: the pack's time-interpolated lookup differs from its definition");
   g_sink = acc;
   const double rss_end = peak_rss_mib();
   const double raw = double(side * side) * n * 4;
@@ -658,6 +675,7 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
   row("2D lit (one slice)", ns_2d);
   row("pack lit (one slice)", ns_oct);
   row("pack visibility(p, time)", ns_time);
+  row("pack time, two lit() (definition)", ns_time_def);
   row("pack soft (all N, shared walk)", ns_soft);
   row("pack soft, batched interleaved", ns_batch);
   row("pack soft, N lit() lookups", ns_soft_sep);
@@ -691,6 +709,10 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
           {"ns_2d_lit", ns_2d},
           {"ns_pack_lit", ns_oct},
           {"ns_pack_visibility_time", ns_time},
+          {"ns_pack_time_two_lit", ns_time_def},
+          {"stack_cells", g_stack_cells_name},
+          {"slice_cells", cut.slice_cells},
+          {"tiles", cut.tile_count()},
           {"ns_pack_soft", ns_soft},
           {"ns_pack_soft_separate", ns_soft_sep},
           {"ns_pack_soft_batched", ns_batch},
@@ -730,7 +752,7 @@ int main(int argc, char** argv) {
       else if (a == "--spill-dir") spill_dir = next();
       else if (a == "--frame") frame = next();
       else if (a == "--all-2d") g_all_2d = true;
-      else if (a == "--stack-cells") g_stack_cells = st::parse_stack_cells(next());
+      else if (a == "--stack-cells") g_stack_cells = st::parse_stack_cells(g_stack_cells_name = next());
       else if (a == "--oct-merge") {
         const std::string v = next();
         if (v != "on" && v != "off") throw st::Error("--oct-merge: expected on or off");
@@ -753,6 +775,22 @@ int main(int argc, char** argv) {
         cases.push_back({"city-hour" + tag, "procedural:city",
                          "sun-path:azimuth=170..185,elevation=50..52,samples=" + std::to_string(city_n) + ",frame=" + f});
     }
+    // A real open mesh (assimp's 2CylinderEngine.glb): the same day's sun ("engine"), and an
+    // area light over it ("engine-area", --hair-samples samples, window frame) sized from the
+    // mesh's box: 3 box heights above its centre, a tenth of its width a side.
+    const std::string engine = "/usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb";
+    if (which == "engine" || which == "real")
+      cases.push_back({"engine", engine,
+                       "sun-path:azimuth=100..260,elevation=25..65,samples=" + std::to_string(city_n) + ",frame=ground"});
+    if (which == "engine-area" || which == "real") {
+      const st::Aabb b = st::load_scene(engine).bounds();
+      const st::Vec3d c = (b.lo + b.hi) * 0.5, e = b.hi - b.lo;
+      const double side = 0.1 * std::max(e.x, e.z), up = c.y + 3.0 * std::max({e.x, e.y, e.z});
+      char spec[256];
+      std::snprintf(spec, sizeof spec, "area:pos=%.3f,%.3f,%.3f,target=%.3f,%.3f,%.3f,size=%.3f,%.3f,samples=%u,jitter=%s,frame=window",
+                    c.x, up, c.z, c.x, c.y, c.z, side, side, hair_n, hair_jitter.c_str());
+      cases.push_back({"engine-area", engine, spec});
+    }
     if (hair_frame != "window" && hair_frame != "translate" && hair_frame != "both")
       throw st::Error("--hair-frame: expected window, translate or both");
     for (const char* hf : {"window", "translate"})
@@ -760,6 +798,7 @@ int main(int argc, char** argv) {
         cases.push_back({std::string(hf) == "window" ? "hairball" : "hairball-translate", "procedural:hairball",
                          "area:pos=0,25,0,target=0,0,0,size=4,4,samples=" + std::to_string(hair_n) +
                              ",jitter=" + hair_jitter + ",frame=" + hf});
+    if (cases.empty()) throw st::Error("--case: expected city, city-hour, hairball, engine, engine-area, real or all");
     nlohmann::json out = nlohmann::json::array();
     if (mode != "auto" && mode != "whole" && mode != "blocked") throw st::Error("--mode: expected auto, whole or blocked");
     if (tracer != "auto" && tracer != "embree") throw st::Error("--tracer: expected auto or embree");

@@ -10,6 +10,7 @@
 #include <memory>
 
 #include "tiles/core/dagmh_validate.hpp"
+#include "tiles/core/dagmh_view.hpp"
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/tap_batch.hpp"
 
@@ -23,6 +24,7 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths, public TapWa
       : v_(view), bytes_(bytes.data()), size_(bytes.size()), dict_(std::move(dict)) {}
 
   uint32_t finest_level() const override { return v_.finest_level; }
+  const dagmh::View& view() const { return v_; }
 
   float depth(uint32_t level, uint64_t x, uint64_t y) const override {
     clamp(level, x, y);
@@ -387,6 +389,11 @@ std::unique_ptr<Evaluator> open_dagmh(std::span<const uint8_t> bytes) {
 std::unique_ptr<Evaluator> open_dagmh(std::span<const uint8_t> bytes, std::shared_ptr<const dagmh::Dictionary> dict) {
   const dagmh::View view = dagmh::validate(bytes, dict.get());
   return std::make_unique<DagmhEvaluator>(view, bytes, std::move(dict));
+}
+
+const dagmh::View* dagmh_view(const Evaluator& ev) noexcept {
+  const auto* d = dynamic_cast<const DagmhEvaluator*>(&ev);
+  return d ? &d->view() : nullptr;
 }
 
 }  // namespace st

@@ -6,6 +6,7 @@
 #include "tiles/core/evaluator.hpp"
 #include "tiles/core/filter_level.hpp"
 #include "tiles/core/interval.hpp"
+#include "tiles/core/slice_walks.hpp"
 #include "tiles/core/walk_interleave.hpp"
 
 namespace st {
@@ -76,7 +77,39 @@ float StackMap::visibility(const Vec3d& p, double time, bool* exact) const {
   if (std::fabs(s - near) <= 1e-9) return lit(p, uint32_t(near), exact) ? 1.0f : 0.0f;
   const uint32_t a = uint32_t(std::floor(s));
   const float f = float(s - double(a));
-  const float la = lit(p, a, exact) ? 1.0f : 0.0f, lb = lit(p, a + 1, exact) ? 1.0f : 0.0f;
+  // lit(p, a) and lit(p, a + 1), bit for bit, with what the two share done once: both
+  // texels in one run of the batched transforms (lit()'s transform, sample_texels.hpp),
+  // one tile fetch when both lie in one cell, and there one walk serving both: an octree
+  // walk to slice a + 1 resumes from slice a's (depth_along: they share the path down to
+  // the level where w splits them), two per-slice walks run in lockstep (slice_walks.hpp).
+  SampleTexels::Run run;
+  texels_.run(p, a, 2, run);
+  const CellTexel c[2] = {cell_texel(run.x[0], run.y[0], a), cell_texel(run.x[1], run.y[1], a + 1)};
+  float v[2] = {c[0].value, c[1].value};
+  StackTileRef t[2];
+  for (uint32_t i = 0; i < 2; ++i)
+    if (c[i].tiled) {
+      t[i] = i == 1 && c[0].tiled && c[0].cell == c[1].cell ? t[0] : tile_(c[i].cell);
+      if (!t[i] && exact) *exact = false;
+    }
+  if (t[0] && c[1].tiled && c[0].cell == c[1].cell) {
+    if (t[0].octree) {
+      MhOctree::Path path;
+      v[0] = t[0].octree->depth_along(path, c[0].lx, c[0].ly, c[0].lw);
+      v[1] = t[0].octree->depth_along(path, c[1].lx, c[1].ly, c[1].lw);
+    } else {
+      const uint64_t x[2] = {c[0].lx, c[1].lx}, y[2] = {c[0].ly, c[1].ly};
+      const uint32_t w[2] = {c[0].lw, c[1].lw};
+      slice_depths(*t[0].slices, 2, x, y, w, v);
+    }
+  } else {
+    for (uint32_t i = 0; i < 2; ++i)
+      if (t[i]) {
+        const uint32_t level = t[i].octree ? t[i].octree->xy_level() : t[i].slices->xy_level();
+        v[i] = t[i].depth(c[i].lx, c[i].ly, c[i].lw, level);
+      }
+  }
+  const float la = run.d[0] <= v[0] ? 1.0f : 0.0f, lb = run.d[1] <= v[1] ? 1.0f : 0.0f;
   return la + f * (lb - la);
 }
 
@@ -93,23 +126,46 @@ float StackMap::soft_visibility(const Vec3d& p, bool* exact) const {
   for (uint32_t w0 = 0; w0 < grid_.slices; w0 += SampleTexels::kRun) {
     const uint32_t m = std::min(SampleTexels::kRun, grid_.slices - w0);
     texels_.run(p, w0, m, run);
-    for (uint32_t i = 0; i < m; ++i) {
+    for (uint32_t i = 0; i < m;) {
       const uint32_t w = w0 + i;
       const CellTexel c = cell_texel(run.x[i], run.y[i], w);
       float v = c.value;
       if (c.tiled) {
         if (c.cell != path_cell) path_cell = c.cell, tile = tile_(c.cell), path.valid = false;
-        if (tile.octree)
+        if (tile.octree) {
           v = tile.octree->depth_along(path, c.lx, c.ly, c.lw);
-        else if (tile.slices)  // per-slice tiles: the slice's own 2D tile, no shared walk
-          v = tile.slices->depth(c.lx, c.ly, c.lw, tile.slices->xy_level());
-        else if (exact)
+        } else if (tile.slices) {  // per-slice tiles: this run's samples in the cell, in lockstep
+          i = slice_run(*tile.slices, c, run, w0, i, m, lit_samples);
+          continue;
+        } else if (exact) {
           *exact = false;
+        }
       }
       lit_samples += run.d[i] <= v;
+      ++i;
     }
   }
   return float(lit_samples) / float(grid_.slices);
+}
+
+uint32_t StackMap::slice_run(const SliceTiles& tile, const CellTexel& first, const SampleTexels::Run& run, uint32_t w0,
+                             uint32_t i, uint32_t m, uint32_t& lit) const {
+  // Samples i.. of the run while their texels stay in first's cell (a tiled one: the same
+  // entry, so the same tile), their depths read in lockstep walks (slice_walks.hpp).
+  uint64_t x[SampleTexels::kRun], y[SampleTexels::kRun];
+  uint32_t w[SampleTexels::kRun];
+  float v[SampleTexels::kRun];
+  uint32_t count = 0, j = i;
+  x[0] = first.lx, y[0] = first.ly, w[0] = first.lw;
+  for (++count, ++j; j < m; ++j, ++count) {
+    const CellTexel c = cell_texel(run.x[j], run.y[j], w0 + j);
+    if (!c.tiled || c.cell != first.cell) break;
+    x[count] = c.lx, y[count] = c.ly, w[count] = c.lw;
+  }
+  static_assert(SampleTexels::kRun <= kMaxSliceWalks);
+  slice_depths(tile, count, x, y, w, v);
+  for (uint32_t k = 0; k < count; ++k) lit += run.d[i + k] <= v[k];
+  return j;
 }
 
 void StackMap::soft_visibility(std::span<const Vec3d> points, std::span<float> out, bool* exact) const {
@@ -161,9 +217,9 @@ void StackMap::soft_visibility(std::span<const Vec3d> points, std::span<float> o
           walking = true;
           continue;
         }
-        if (ln.tile.slices) {  // per-slice tiles: the slice's own 2D tile, read at once
-          lit += ln.run.d[j] <= ln.tile.slices->depth(c.lx, c.ly, c.lw, ln.tile.slices->xy_level());
-          ++w;
+        if (ln.tile.slices) {  // per-slice tiles: the run's samples in the cell, in lockstep, at once
+          const uint32_t w0 = w - j;
+          w = w0 + slice_run(*ln.tile.slices, c, ln.run, w0, j, std::min(SampleTexels::kRun, slices - w0), lit);
           continue;
         }
         if (exact) *exact = false;

@@ -76,6 +76,11 @@ class StackMap {
     uint32_t lw;
   };
   CellTexel cell_texel(uint64_t x, uint64_t y, uint32_t w) const;
+  // The soft lookups' samples i.. (< m) of `run` (samples w0 + i..) while they stay in
+  // `first`'s cell (per-slice `tile`), read in lockstep; adds their lit tests to `lit` and
+  // returns the index past them.
+  uint32_t slice_run(const SliceTiles& tile, const CellTexel& first, const SampleTexels::Run& run, uint32_t w0,
+                     uint32_t i, uint32_t m, uint32_t& lit) const;
 
   const StackGrid& grid_;
   TileSource tile_;

@@ -5,6 +5,7 @@
 #include <string>
 
 #include "common/error.hpp"
+#include "tiles/core/dagmh_view.hpp"
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/mh_octree_format.hpp"
 
@@ -83,6 +84,9 @@ SliceTiles SliceTiles::open(std::span<const uint8_t> b) {
       bad("slice " + std::to_string(w) + "'s tile", off,
           "finest level " + std::to_string(ev->finest_level()) + ", the cell's is " + std::to_string(t.xy_level_));
     t.slot_[w] = int32_t(t.evals_.size());
+    const dagmh::View* view = dagmh_view(*ev);
+    t.views_.push_back(view ? *view : dagmh::View{});
+    t.has_view_.push_back(view != nullptr);
     t.evals_.push_back(std::move(ev));
     starts.push_back(off);
     sizes.push_back(word);

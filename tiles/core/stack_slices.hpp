@@ -27,6 +27,7 @@
 #include <span>
 #include <vector>
 
+#include "tiles/core/dagmh_traverse.hpp"
 #include "tiles/core/evaluator.hpp"
 #include "tiles/core/mh_octree.hpp"
 
@@ -62,12 +63,25 @@ class SliceTiles {
     return s < 0 ? value_[w] : evals_[size_t(s)]->depth(level, x, y);
   }
 
+  // Lookup-side access for walks that run several slices' walks in lockstep
+  // (slice_walks.hpp): whether slice w is a constant (and its value), else its tile's
+  // evaluator and, when that tile is DAG-MH, a copy of its validated view (nullptr for MMH).
+  bool is_constant(uint32_t w) const { return slot_[w] < 0; }
+  float constant_value(uint32_t w) const { return value_[w]; }
+  const Evaluator& evaluator(uint32_t w) const { return *evals_[size_t(slot_[w])]; }
+  const dagmh::View* view(uint32_t w) const {
+    const size_t s = size_t(slot_[w]);
+    return has_view_[s] ? &views_[s] : nullptr;
+  }
+
  private:
   uint32_t xy_level_ = 0, w_level_ = 0;
   size_t byte_size_ = 0;
   std::vector<int32_t> slot_;  // per slice: index into evals_, or -1 (constant)
   std::vector<float> value_;   // per slice: the constant (when slot_ < 0)
   std::vector<std::shared_ptr<const Evaluator>> evals_;
+  std::vector<dagmh::View> views_;  // per evaluator: its DAG-MH view (when has_view_)
+  std::vector<uint8_t> has_view_;
 };
 
 // A stack tile as lookups see it: an MH octree or per-slice tiles (or neither: absent).
