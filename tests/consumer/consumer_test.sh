@@ -24,6 +24,7 @@ gpu=OFF
 want_headers="./shadowtile/cache_view.hpp ./shadowtile/client.hpp ./shadowtile/export.h "
 [[ $gpu == ON ]] && want_headers+="./shadowtile/gpu.hpp "
 want_headers+="./shadowtile/shadowtile.h "
+[[ $gpu == ON ]] && want_headers+="./shadowtile/vk_setup.hpp "
 [[ "$headers" == "$want_headers" ]] || fail "installed headers are not just the public ones: $headers"
 [[ $gpu == OFF || -f "$prefix/share/shadowtile/shaders/shadowtile.glsl" ]] || fail "shadowtile.glsl not installed"
 # Every file the headers send their reader to is installed under share/doc/shadowtile.

@@ -126,13 +126,13 @@ TEST(LoadRun, FlyoverCountersAddUp) {
 }
 
 TEST(LoadRun, TeleportWithATinyCacheEvictsButNeverExceedsIt) {
-  // 1.5 MiB: the request table and page reserve (~0.8 MiB) first, then slots of 16 KiB
-  // + client::kSlotOverheadBytes each (client.hpp cache_bytes).
+  // 1.5 MiB: the request table, page reserve and preview first, then slots of the pack's
+  // slot size + client::kSlotOverheadBytes each (client.hpp cache_bytes).
   const LoadResult r = run(PathKind::teleport, 2, 1, 1.5);
   expect_counters_add_up(r);
   EXPECT_LE(r.map.accounted_bytes, uint64_t(1.5 * 1048576));
   EXPECT_GE(r.cache_slots, 8u);
-  EXPECT_LE(r.cache_slots, 1.5 * 1048576 / (16384 + client::kSlotOverheadBytes));
+  EXPECT_LE(r.cache_slots, 1.5 * 1048576 / (r.slot_bytes + client::kSlotOverheadBytes)) << "slot bytes " << r.slot_bytes;
   EXPECT_GE(r.cuts, 2u * uint64_t(r.options.duration / kTeleportSeconds));
 }
 
