@@ -234,7 +234,7 @@ float MapPreview::value(uint64_t ex, uint64_t ey, uint32_t j, uint64_t lx, uint6
   const uint32_t o = ordinal_[(ey << k_) + ex];
   if (o == ~0u) return fallback;
   const uint32_t w = words(p_);
-  const uint64_t* mask = &masks_[size_t(o) * w];
+  const uint64_t* mask = masks_.data() + size_t(o) * w;  // no masks when the preview has no levels
   for (; j >= 1; --j, lx >>= 1, ly >>= 1) {
     const uint32_t b = node_bit(j, lx, ly);
     if (!(mask[b / 64] >> (b % 64) & 1)) continue;
