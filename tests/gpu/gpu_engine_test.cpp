@@ -55,6 +55,17 @@ Served serve(const std::string& name, uint32_t slots) {
   return s;
 }
 
+// serve() with the whole finest level resident and the server stopped: frames that see
+// every tile and no arrivals (callers wrap it in ASSERT_NO_FATAL_FAILURE).
+void serve_resident(const std::string& name, Served& s) {
+  s = serve(name, 64);
+  const uint32_t l = s.map.finest_level();
+  s.map.request_region(l, 0, 0, 1u << l, 1u << l, 10);
+  ASSERT_TRUE(wait_until([&] { return s.map.region_resident(l, 0, 0, 1u << l, 1u << l); }));
+  s.server.stop();
+  ASSERT_TRUE(wait_until([&] { return !s.client->stats().connected; }));
+}
+
 // A tilted plane across the map's light space, a little outside the box at the edges, a
 // few background pixels (w == 0): positions and normals, 4 floats a pixel.
 struct Plane {
@@ -210,12 +221,9 @@ TEST(GpuEngine, AFragmentShaderIncludingShadowtileGlslAnswersLikeTheComputePass)
 // bit (d on the stored depth): bit for bit the shader's answer on every pixel, where the
 // client's Map::visibility_filtered (the view's former twin) differs on some.
 TEST(GpuEngine, TheReceiverTwinAnswersLikeAFragmentShaderWhereTheDoubleTransformDoesNot) {
-  Served s = serve("gpu_engine_twin", 64);
+  Served s;
+  ASSERT_NO_FATAL_FAILURE(serve_resident("gpu_engine_twin", s));
   const uint32_t l = s.map.finest_level();
-  s.map.request_region(l, 0, 0, 1u << l, 1u << l, 10);
-  ASSERT_TRUE(wait_until([&] { return s.map.region_resident(l, 0, 0, 1u << l, 1u << l); }));
-  s.server.stop();
-  ASSERT_TRUE(wait_until([&] { return !s.client->stats().connected; }));
   const PackHeader& h = client::pack_header(s.map);
   const LightSpace ls = LightSpace::from_array(h.light_kind, h.light);
   const ShadowLight fl = shadow_light(h);
@@ -285,12 +293,9 @@ TEST(GpuEngine, TheReceiverTwinAnswersLikeAFragmentShaderWhereTheDoubleTransform
 // receiver_lookup_reference with those slopes), which counts every tap; the blocks of taps
 // that share a value and straddle the plane are counted tap by tap on both sides.
 TEST(GpuEngine, ReceiverPlaneLookupsOnSlopesAnswerLikeTheTwin) {
-  Served s = serve("gpu_engine_slope", 64);
+  Served s;
+  ASSERT_NO_FATAL_FAILURE(serve_resident("gpu_engine_slope", s));
   const uint32_t l = s.map.finest_level();
-  s.map.request_region(l, 0, 0, 1u << l, 1u << l, 10);
-  ASSERT_TRUE(wait_until([&] { return s.map.region_resident(l, 0, 0, 1u << l, 1u << l); }));
-  s.server.stop();
-  ASSERT_TRUE(wait_until([&] { return !s.client->stats().connected; }));
   const PackHeader& h = client::pack_header(s.map);
   const LightSpace ls = LightSpace::from_array(h.light_kind, h.light);
   const ShadowLight fl = shadow_light(h);

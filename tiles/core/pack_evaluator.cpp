@@ -128,8 +128,7 @@ void PackEvaluator::pcf_batch(std::span<const PcfQuery> queries, std::span<float
     const size_t bn = std::min(kTapOrderMax, n - b0);
     const PcfQuery* const base = queries.data() + b0;
     float* const base_out = out.data() + b0;
-    if (!(bn >= kTapOrderMin && tap_order(std::span(base, bn), map_level, order)))
-      for (size_t k = 0; k < bn; ++k) order[k] = uint16_t(k);
+    tap_order_or_identity(std::span(base, bn), map_level, order);
     for (size_t k = 0; k < bn;) {
       const size_t i = order[k];
       const PcfQuery& q = base[i];

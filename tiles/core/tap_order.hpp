@@ -78,4 +78,12 @@ inline bool tap_order(std::span<const PcfQuery> queries, uint32_t finest, uint16
   return true;
 }
 
+// The order a batch of at most kTapOrderMax queries is answered in: tap_order's where it
+// applies and the batch is large enough to pay (kTapOrderMin), else the batch's own.
+inline void tap_order_or_identity(std::span<const PcfQuery> queries, uint32_t finest, uint16_t* order) {
+  const size_t n = std::min(queries.size(), kTapOrderMax);
+  if (!(n >= kTapOrderMin && tap_order(queries.first(n), finest, order)))
+    for (size_t k = 0; k < n; ++k) order[k] = uint16_t(k);
+}
+
 }  // namespace st
