@@ -153,6 +153,26 @@ bool answers(const Plane& p, std::span<const float> lo, std::span<const float> h
   return true;
 }
 
+// One texel's two constraints on the LP's unknowns (u, v: its offset from the centre):
+// vmin <= r + unit (a0 + b u + c v) <= vmax.
+void push_texel_cons(std::vector<Con>& cons, LD u, LD v, int64_t vmin, int64_t vmax, int64_t r, LD unit) {
+  cons.push_back(Con{{1, u, v}, LD(vmax - r) / unit});
+  cons.push_back(Con{{-1, -u, -v}, -(LD(vmin - r) / unit)});
+}
+
+// The LP over `cons` solved in its box and rounded to integers: slopes bb, cc (each within
+// kMaxSlope, else false) and a0, the value at (0, 0) for the centre (mx, my).
+bool solve_rounded(const std::vector<Con>& cons, int64_t r, LD unit, LD mx, LD my, LD& a0, LD& bb, LD& cc) {
+  const LD slope_box = LD(kMaxSlope) / unit;
+  const LD box[3] = {LD(kOne) * 4 / unit, slope_box, slope_box};
+  LD x[3];
+  if (!seidel(3, box, cons.data(), cons.size(), x)) return false;
+  bb = std::round(x[1] * unit), cc = std::round(x[2] * unit);
+  if (std::fabs(bb) > LD(kMaxSlope) || std::fabs(cc) > LD(kMaxSlope)) return false;
+  a0 = std::round(LD(r) + x[0] * unit - bb * mx - cc * my);
+  return true;
+}
+
 }  // namespace
 
 bool fit_block(std::span<const float> lo, std::span<const float> hi, uint32_t shift, Plane& out) {
@@ -176,17 +196,10 @@ bool fit_block(std::span<const float> lo, std::span<const float> hi, uint32_t sh
   std::vector<Con> cons;
   cons.reserve(2 * size_t(n));
   for (uint32_t i : texel_order(shift)) {
-    const LD u = LD(i % side) - m, v = LD(i / side) - m;
-    cons.push_back(Con{{1, u, v}, LD(vmax[i] - r) / unit});
-    cons.push_back(Con{{-1, -u, -v}, -(LD(vmin[i] - r) / unit)});
+    push_texel_cons(cons, LD(i % side) - m, LD(i / side) - m, vmin[i], vmax[i], r, unit);
   }
-  const LD slope_box = LD(kMaxSlope) / unit;
-  const LD box[3] = {LD(kOne) * 4 / unit, slope_box, slope_box};
-  LD x[3];
-  if (!seidel(3, box, cons.data(), cons.size(), x)) return false;
-  const LD bb = std::round(x[1] * unit), cc = std::round(x[2] * unit);
-  if (std::fabs(bb) > LD(kMaxSlope) || std::fabs(cc) > LD(kMaxSlope)) return false;
-  const LD a0 = std::round(LD(r) + x[0] * unit - bb * m - cc * m);
+  LD a0, bb, cc;
+  if (!solve_rounded(cons, r, unit, m, m, a0, bb, cc)) return false;
   if (std::fabs(a0) > LD(kMaxBase)) return false;
   Plane p;
   p.shift = shift;
@@ -243,17 +256,10 @@ bool fit_texels(const std::vector<uint32_t>& texels, uint32_t side, std::span<co
     for (uint32_t t : active) {
       int64_t vmin, vmax;
       bounds(t, vmin, vmax);
-      const LD u = LD(t % side) - mx, v = LD(t / side) - my;
-      cons.push_back(Con{{1, u, v}, LD(vmax - r) / unit});
-      cons.push_back(Con{{-1, -u, -v}, -(LD(vmin - r) / unit)});
+      push_texel_cons(cons, LD(t % side) - mx, LD(t / side) - my, vmin, vmax, r, unit);
     }
-    const LD slope_box = LD(kMaxSlope) / unit;
-    const LD box[3] = {LD(kOne) * 4 / unit, slope_box, slope_box};
-    LD x[3];
-    if (!seidel(3, box, cons.data(), cons.size(), x)) return false;
-    const LD bb = std::round(x[1] * unit), cc = std::round(x[2] * unit);
-    if (std::fabs(bb) > LD(kMaxSlope) || std::fabs(cc) > LD(kMaxSlope)) return false;
-    const LD a0 = std::round(LD(r) + x[0] * unit - bb * mx - cc * my);
+    LD a0, bb, cc;
+    if (!solve_rounded(cons, r, unit, mx, my, a0, bb, cc)) return false;
     if (std::fabs(a0) > LD(kOne) * 4) return false;
     TilePlane q{int64_t(a0), int64_t(bb), int64_t(cc)};
     size_t missed = 0;
