@@ -112,8 +112,7 @@ class PlaneTileEvaluator final : public Evaluator, public TapWalks {
   bool tap_plane(const uint32_t* blocks, uint32_t n, uint32_t s, uint32_t fx, uint32_t fy, float& out) const {
     if (s >= kMaxShift) return false;
     for (uint32_t k = 0; k < n; ++k) {
-      const uint8_t* rec = v_.records.data() + size_t(blocks[k]) * kRecordSize;
-      const uint32_t start = load_le<uint32_t>(rec + kOffStart), shift = rec[kOffShift];
+      const uint32_t start = v_.block_start(blocks[k]), shift = v_.block_shift(blocks[k]);
       const uint32_t bx = morton_compact(start), by = morton_compact(uint64_t(start) >> 1);
       if (fx - bx >= (1u << shift) || fy - by >= (1u << shift)) continue;  // unsigned: fx < bx too
       if (shift <= s) return false;  // the block is finer than the texel
@@ -142,15 +141,14 @@ class PlaneTileEvaluator final : public Evaluator, public TapWalks {
     uint32_t i = 0, hi = v_.plane_count, count = 0;
     while (i < hi) {  // the first block ending after m0
       const uint32_t mid = (i + hi) / 2;
-      const Plane p = v_.plane(mid);
-      if (uint64_t(p.start) + (uint64_t(1) << (2 * p.shift)) <= m0) i = mid + 1;
+      if (v_.block_end(mid) <= m0) i = mid + 1;
       else hi = mid;
     }
     for (; i < v_.plane_count; ++i) {
-      const Plane p = v_.plane(i);
-      if (p.start > m1) break;
-      const uint64_t bx = morton_compact(p.start), by = morton_compact(uint64_t(p.start) >> 1);
-      const uint64_t side = uint64_t(1) << p.shift;
+      const uint32_t start = v_.block_start(i);
+      if (start > m1) break;
+      const uint64_t bx = morton_compact(start), by = morton_compact(uint64_t(start) >> 1);
+      const uint64_t side = uint64_t(1) << v_.block_shift(i);
       if (bx <= fx1 && fx0 < bx + side && by <= fy1 && fy0 < by + side) {
         if (count == cap) return cap + 1;
         out[count++] = i;
@@ -189,8 +187,6 @@ TapRunEnd PlaneTileEvaluator::tap_run(const TapRun& run, TapPath& path) const no
   const uint32_t s = v_.finest_level - std::min(run.rel, v_.finest_level);
   const uint64_t h = s ? uint64_t(1) << (s - 1) : 0;
   const uint32_t count = v_.plane_count;
-  const uint8_t* const rec = v_.records.data();
-  auto start_of = [rec](uint32_t i) { return load_le<uint32_t>(rec + size_t(i) * kRecordSize + kOffStart); };
   // The block found last: index, corner and side at the finest level; its plane when it
   // is one plane (a labelled block resolves each texel).
   uint32_t bi = 0, bshift = 0;
@@ -215,29 +211,24 @@ TapRunEnd PlaneTileEvaluator::tap_run(const TapRun& run, TapPath& path) const no
         // searched outward from the last one (find's answer, in fewer steps for a sorted run).
         const uint64_t m = morton_encode(uint32_t(fx), uint32_t(fy));
         uint32_t lo, hi;  // the first block starting after m lies in [lo, hi]
-        if (start_of(bi) <= m) {
+        if (v_.block_start(bi) <= m) {
           uint32_t a = bi, step = 1;  // start(a) <= m
-          while (a + step < count && start_of(a + step) <= m) a += step, step *= 2;
+          while (a + step < count && v_.block_start(a + step) <= m) a += step, step *= 2;
           lo = a + 1, hi = uint32_t(std::min<uint64_t>(count, uint64_t(a) + step));
         } else {
           uint32_t b = bi, step = 1;  // start(b) > m
-          while (b >= step && start_of(b - step) > m) b -= step, step *= 2;
+          while (b >= step && v_.block_start(b - step) > m) b -= step, step *= 2;
           lo = b >= step ? b - step + 1 : 0, hi = b;
         }
-        while (lo < hi) {  // the first index in [lo, hi) starting after m
-          const uint32_t mid = lo + (hi - lo) / 2;
-          if (start_of(mid) <= m) lo = mid + 1;
-          else hi = mid;
-        }
+        lo = v_.first_block_after(m, lo, hi);
         bx = by = ~uint64_t(0), bshift = 0;
         if (lo > 0) {
           const uint32_t j = lo - 1;
-          const uint8_t* b = rec + size_t(j) * kRecordSize;
-          const uint32_t start = load_le<uint32_t>(b + kOffStart), shift = b[kOffShift];
           bi = j;
-          if (m < uint64_t(start) + (uint64_t(1) << (2 * shift))) {
-            bx = morton_compact(start), by = morton_compact(uint64_t(start) >> 1), bshift = shift;
-            bplane = b[kOffKind] != kKindLabels;
+          if (m < v_.block_end(j)) {
+            const uint32_t start = v_.block_start(j);
+            bx = morton_compact(start), by = morton_compact(uint64_t(start) >> 1), bshift = v_.block_shift(j);
+            bplane = v_.records[size_t(j) * kRecordSize + kOffKind] != kKindLabels;
             if (bplane) bp = v_.plane_at(j, uint32_t(fx), uint32_t(fy));
           }
         }
@@ -285,23 +276,33 @@ Plane PlaneTileView::plane_at(uint32_t i, uint32_t fx, uint32_t fy) const {
 }
 
 Plane PlaneTileView::plane(uint32_t i) const {
-  const uint32_t start = load_le<uint32_t>(records.data() + size_t(i) * kRecordSize + kOffStart);
+  const uint32_t start = block_start(i);
   return plane_at(i, morton_compact(start), morton_compact(uint64_t(start) >> 1));
 }
 
 int64_t PlaneTileView::find(uint32_t x, uint32_t y) const {
   const uint64_t m = morton_encode(x, y);
-  // The last block starting at or before m (blocks are sorted and disjoint).
-  uint32_t lo = 0, hi = plane_count;
+  const uint32_t after = first_block_after(m, 0, plane_count);
+  return after > 0 && m < block_end(after - 1) ? int64_t(after - 1) : -1;
+}
+
+uint32_t PlaneTileView::block_start(uint32_t i) const {
+  return load_le<uint32_t>(records.data() + size_t(i) * kRecordSize + kOffStart);
+}
+
+uint32_t PlaneTileView::block_shift(uint32_t i) const { return records[size_t(i) * kRecordSize + kOffShift]; }
+
+uint64_t PlaneTileView::block_end(uint32_t i) const {
+  return uint64_t(block_start(i)) + (uint64_t(1) << (2 * block_shift(i)));
+}
+
+uint32_t PlaneTileView::first_block_after(uint64_t m, uint32_t lo, uint32_t hi) const {
   while (lo < hi) {
-    const uint32_t mid = (lo + hi) / 2;
-    if (load_le<uint32_t>(records.data() + size_t(mid) * kRecordSize + kOffStart) <= m) lo = mid + 1;
+    const uint32_t mid = lo + (hi - lo) / 2;
+    if (block_start(mid) <= m) lo = mid + 1;
     else hi = mid;
   }
-  if (lo == 0) return -1;
-  const uint8_t* r = records.data() + size_t(lo - 1) * kRecordSize;
-  const uint64_t start = load_le<uint32_t>(r + kOffStart), shift = r[kOffShift];
-  return m < start + (uint64_t(1) << (2 * shift)) ? int64_t(lo - 1) : -1;
+  return lo;
 }
 
 PlaneTileView validate_plane_tile(std::span<const uint8_t> b) {

@@ -33,6 +33,15 @@ struct PlaneTileView {
   planes::Plane plane(uint32_t i) const;
   // Index of the plane whose block holds finest texel (x, y), or -1.
   int64_t find(uint32_t x, uint32_t y) const;
+
+  // The block records' one reader (plane_format.hpp), for find and the evaluator's searches:
+  // block i's first finest texel's Morton code, its side's log2, the code one past its
+  // last texel, and the first block in [lo, hi) starting after code m (blocks are sorted
+  // and disjoint: the one before it is the only block that can hold m).
+  uint32_t block_start(uint32_t i) const;
+  uint32_t block_shift(uint32_t i) const;
+  uint64_t block_end(uint32_t i) const;
+  uint32_t first_block_after(uint64_t m, uint32_t lo, uint32_t hi) const;
 };
 
 // Throws st::FormatError naming the first bad field; does not open the inner buffer.
