@@ -107,33 +107,46 @@ struct View {
     return c;
   }
 
+  // A treelet cursor's path to texel (x, y) of `level` (Alg. 1): the treelet's 85-bit
+  // bitmap, the deepest treelet level on the path and each level's bit position.
+  struct TreeletPath {
+    uint64_t low = 0;
+    uint32_t high = 0, depth = 0;
+    uint32_t pos[kTreeletLevels] = {0, 0, 0, 0};
+  };
+  TreeletPath treelet_path(const Cursor& c, uint32_t level, uint64_t x, uint64_t y) const {
+    TreeletPath tp;
+    const uint8_t* t = treelet_at(c.ref & kRefIndexMask);
+    tp.low = st::load_le<uint64_t>(t);
+    tp.high = st::load_le<uint32_t>(t + 8);
+    tp.depth = std::min<uint32_t>(level - c.level, kTreeletLevels - 1);
+    for (uint32_t n = 1; n <= tp.depth; ++n) {
+      const uint32_t s = level - c.level - n;
+      const uint32_t child = uint32_t((x >> s) & 1) | uint32_t(((y >> s) & 1) << 1);
+      tp.pos[n] = tp.pos[n - 1] + 1 + kTreeletStride[n - 1] * child;
+    }
+    return tp;
+  }
+  // Alg. 1's answer on that path: from the deepest treelet level up to the treelet root,
+  // the first valued node answers, its index = base + set bits before it (depth-first);
+  // `answered` is 1 + its treelet level, or 0 when none is set (c.last answers).
+  static uint32_t treelet_answer(const Cursor& c, const TreeletPath& tp, uint32_t& answered) {
+    for (uint32_t n = tp.depth + 1; n-- > 0;)
+      if (treelet_bit(tp.low, tp.high, tp.pos[n])) {
+        answered = n + 1;
+        return c.base + treelet_rank(tp.low, tp.high, tp.pos[n]);
+      }
+    answered = 0;
+    return c.last;
+  }
+
   // The value index for (x, y) of `level`, given descend(c, level, level, x, y)'s cursor.
   uint32_t finish(const Cursor& c, uint32_t level, uint64_t x, uint64_t y) const {
     const uint32_t tag = c.ref & kRefTagMask;
     if (tag == kRefInner) return st::load_le<uint32_t>(node_at(c.ref & kRefIndexMask)) & kNodeValuedBit ? c.base : c.last;
     if (tag != kRefTreelet) return c.last;
-    // Alg. 1: from the deepest treelet level on the path up to the treelet root; the
-    // first valued node answers, its index = base + set bits before it (depth-first).
-    const uint8_t* t = treelet_at(c.ref & kRefIndexMask);
-    const uint64_t low = st::load_le<uint64_t>(t);
-    const uint32_t high = st::load_le<uint32_t>(t + 8);
-    const uint32_t depth = std::min<uint32_t>(level - c.level, kTreeletLevels - 1);
-    uint32_t pos[kTreeletLevels] = {0, 0, 0, 0};
-    for (uint32_t n = 1; n <= depth; ++n) {
-      const uint32_t shift = level - c.level - n;
-      const uint32_t child = uint32_t((x >> shift) & 1) | uint32_t(((y >> shift) & 1) << 1);
-      pos[n] = pos[n - 1] + 1 + kTreeletStride[n - 1] * child;
-    }
-    for (uint32_t n = depth + 1; n-- > 0;) {
-      const uint32_t p = pos[n];
-      const bool set = p < 64 ? (low >> p) & 1 : (high >> (p - 64)) & 1;
-      if (!set) continue;
-      const uint32_t before = p < 64 ? bit_count(uint64_t(low & ((uint64_t(1) << p) - 1)))
-                                     : bit_count(uint64_t(low)) +
-                                           bit_count(uint64_t(high & ((1u << (p - 64)) - 1)));
-      return c.base + before;
-    }
-    return c.last;
+    uint32_t answered;
+    return treelet_answer(c, treelet_path(c, level, x, y), answered);
   }
 
   // finish() and the square of texels of `level` that share its answer, as a shift
@@ -151,23 +164,13 @@ struct View {
       shift = level - c.level;
       return c.last;
     }
-    const uint8_t* t = treelet_at(c.ref & kRefIndexMask);
-    const uint64_t low = st::load_le<uint64_t>(t);
-    const uint32_t high = st::load_le<uint32_t>(t + 8);
-    const uint32_t depth = std::min<uint32_t>(level - c.level, kTreeletLevels - 1);
-    uint32_t pos[kTreeletLevels] = {0, 0, 0, 0};
-    for (uint32_t n = 1; n <= depth; ++n) {
-      const uint32_t s = level - c.level - n;
-      const uint32_t child = uint32_t((x >> s) & 1) | uint32_t(((y >> s) & 1) << 1);
-      pos[n] = pos[n - 1] + 1 + kTreeletStride[n - 1] * child;
-    }
-    uint32_t index = c.last, m = 0;
-    for (uint32_t n = depth + 1; n-- > 0;)
-      if (treelet_bit(low, high, pos[n])) {
-        index = c.base + treelet_rank(low, high, pos[n]);
-        m = n;
-        break;
-      }
+    const TreeletPath tp = treelet_path(c, level, x, y);
+    const uint64_t low = tp.low;
+    const uint32_t high = tp.high, depth = tp.depth;
+    const uint32_t* const pos = tp.pos;
+    uint32_t answered;
+    const uint32_t index = treelet_answer(c, tp, answered);
+    uint32_t m = answered ? answered - 1 : 0;
     while (m < depth && treelet_any(low, high, pos[m] + 1, pos[m] + kTreeletSubtree[m])) ++m;
     shift = level - c.level - m;
     return index;
@@ -191,19 +194,13 @@ struct View {
       s = 1, mask = 1u << child_at(0);
       return finish(c, level, x, y);
     }
-    const uint8_t* t = treelet_at(c.ref & kRefIndexMask);
-    const uint64_t low = st::load_le<uint64_t>(t);
-    const uint32_t high = st::load_le<uint32_t>(t + 8);
-    const uint32_t depth = std::min<uint32_t>(level - c.level, kTreeletLevels - 1);
-    uint32_t pos[kTreeletLevels] = {0, 0, 0, 0};
-    for (uint32_t n = 1; n <= depth; ++n) pos[n] = pos[n - 1] + 1 + kTreeletStride[n - 1] * child_at(level - c.level - n);
-    uint32_t index = c.last, m = 0, answered = 0;  // answered: 1 + the treelet level of the set bit that answers
-    for (uint32_t n = depth + 1; n-- > 0;)
-      if (treelet_bit(low, high, pos[n])) {
-        index = c.base + treelet_rank(low, high, pos[n]);
-        m = n, answered = n + 1;
-        break;
-      }
+    const TreeletPath tp = treelet_path(c, level, x, y);
+    const uint64_t low = tp.low;
+    const uint32_t high = tp.high, depth = tp.depth;
+    const uint32_t* const pos = tp.pos;
+    uint32_t answered;  // 1 + the treelet level of the set bit that answers
+    const uint32_t index = treelet_answer(c, tp, answered);
+    uint32_t m = answered ? answered - 1 : 0;
     while (m < depth && treelet_any(low, high, pos[m] + 1, pos[m] + kTreeletSubtree[m])) ++m;
     const uint32_t shift = level - c.level - m;  // finish_region's region
     s = shift + 1;
