@@ -12,6 +12,18 @@ using V3 = std::array<double, 3>;
 
 V3 value_d(const VisVertex& v) { return {v.t[0], v.t[1], v.t[2]}; }
 
+// An average's next vertex at depth z: t clamped to [0, 1] and to the previous vertex's
+// (the function never rises), its first channel alone when the average is monochrome.
+void push_average_vertex(VisibilityFunction& out, float z, const V3& t) {
+  VisVertex v;
+  v.depth = z;
+  for (int c = 0; c < 3; ++c) v.t[c] = float(std::clamp(t[c], 0.0, 1.0));
+  if (!out.vertices.empty())
+    for (int c = 0; c < 3; ++c) v.t[c] = std::min(v.t[c], out.vertices.back().t[c]);
+  if (out.monochrome) v.t[1] = v.t[2] = v.t[0];
+  out.vertices.push_back(v);
+}
+
 }  // namespace
 
 std::array<double, 3> VisibilityFunction::eval_d(double z, bool after) const {
@@ -184,17 +196,8 @@ VisibilityFunction average(std::span<const VisibilityFunction* const> in,
       const V3 b = in[i]->eval_d(z, false), a = in[i]->eval_d(z, true);
       for (int c = 0; c < 3; ++c) before[c] += b[c] * weights[i] / sum, after[c] += a[c] * weights[i] / sum;
     }
-    auto push = [&](const V3& t) {
-      VisVertex v;
-      v.depth = z;
-      for (int c = 0; c < 3; ++c) v.t[c] = float(std::clamp(t[c], 0.0, 1.0));
-      if (!out.vertices.empty())
-        for (int c = 0; c < 3; ++c) v.t[c] = std::min(v.t[c], out.vertices.back().t[c]);
-      if (out.monochrome) v.t[1] = v.t[2] = v.t[0];
-      out.vertices.push_back(v);
-    };
-    push(before);
-    if (after != before) push(after);
+    push_average_vertex(out, z, before);
+    if (after != before) push_average_vertex(out, z, after);
   }
   return out;
 }
@@ -233,15 +236,6 @@ VisibilityFunction average_sweep(std::span<const VisibilityFunction* const> in,
     for (int c = 0; c < 3; ++c) s[c] = (double(vs[a + 1].t[c]) - double(vs[a].t[c])) / dz;
     return s;
   };
-  auto push = [&](float z, const V3& t) {
-    VisVertex v;
-    v.depth = z;
-    for (int c = 0; c < 3; ++c) v.t[c] = float(std::clamp(t[c], 0.0, 1.0));
-    if (!out.vertices.empty())
-      for (int c = 0; c < 3; ++c) v.t[c] = std::min(v.t[c], out.vertices.back().t[c]);
-    if (out.monochrome) v.t[1] = v.t[2] = v.t[0];
-    out.vertices.push_back(v);
-  };
   double z_prev = events.empty() ? 0.0 : double(events[0].depth);
   for (size_t e = 0; e < events.size();) {
     const float z = events[e].depth;
@@ -259,8 +253,8 @@ VisibilityFunction average_sweep(std::span<const VisibilityFunction* const> in,
         slope[c] += w * (new_s[c] - old_s[c]);
       }
     }
-    push(z, before);
-    if (value != before) push(z, value);
+    push_average_vertex(out, z, before);
+    if (value != before) push_average_vertex(out, z, value);
   }
   return out;
 }
