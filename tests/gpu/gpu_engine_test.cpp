@@ -66,6 +66,21 @@ void serve_resident(const std::string& name, Served& s) {
   ASSERT_TRUE(wait_until([&] { return !s.client->stats().connected; }));
 }
 
+// Receiver p at light-space (u, v) of the finest level `l`, on the stored depth there (0.5
+// where the map stores none), as the view's shader writes it: its float point in `rec`
+// (with `footprint`) and `pos` (the G-buffer's position, w = 1). Returns the float point.
+std::array<float, 3> put_receiver(const Served& s, const LightSpace& ls, uint32_t l, double u, double v,
+                                  float footprint, size_t p, std::vector<float>& rec, std::vector<float>& pos) {
+  const double side = std::ldexp(1.0, int(l));
+  const float stored = s.map.depth(l, uint64_t(u * side), uint64_t(v * side));
+  const double d = stored < 1.0f ? double(stored) : 0.5;
+  const Vec3d w = ls.to_world(u, v, d);
+  const std::array<float, 3> f = {float(w.x), float(w.y), float(w.z)};
+  for (size_t i = 0; i < 3; ++i) rec[4 * p + i] = pos[4 * p + i] = f[i];
+  rec[4 * p + 3] = footprint, pos[4 * p + 3] = 1.0f;
+  return f;
+}
+
 // A tilted plane across the map's light space, a little outside the box at the edges, a
 // few background pixels (w == 0): positions and normals, 4 floats a pixel.
 struct Plane {
@@ -239,12 +254,7 @@ TEST(GpuEngine, TheReceiverTwinAnswersLikeAFragmentShaderWhereTheDoubleTransform
   for (size_t p = 0; p < size_t(kW) * kH; ++p) {
     // u on a texel's edge (within a few float ulps), v anywhere; d the stored depth there.
     const double u = (std::floor(unit(rng) * (side - 2)) + 1) / side + edge(rng), v = unit(rng) * 0.98 + 0.01;
-    const float stored = s.map.depth(l, uint64_t(u * side), uint64_t(v * side));
-    const double d = stored < 1.0f ? double(stored) : 0.5;
-    const Vec3d w = ls.to_world(u, v, d);
-    const float f[3] = {float(w.x), float(w.y), float(w.z)};
-    for (int i = 0; i < 3; ++i) rec[4 * p + size_t(i)] = pos[4 * p + size_t(i)] = f[i];
-    rec[4 * p + 3] = kFootprint, pos[4 * p + 3] = 1.0f;
+    const std::array<float, 3> f = put_receiver(s, ls, l, u, v, kFootprint, p, rec, pos);
     nrm[4 * p + 1] = 1.0f;
     float r[3];
     for (int i = 0; i < 3; ++i) r[i] = f[i] - fl.origin[i];
@@ -301,7 +311,6 @@ TEST(GpuEngine, ReceiverPlaneLookupsOnSlopesAnswerLikeTheTwin) {
   const ShadowLight fl = shadow_light(h);
   constexpr uint32_t kW = 32, kH = 32, kKernel = 5;
   constexpr float kFootprint = 2.5f;
-  const double side = std::ldexp(1.0, int(l));
   const float texel = float(ls.texel_size(ls.origin(), l));
   const Vec3d tl = ls.forward() * -1.0;
   const std::array<float, 3> to_light = {float(tl.x), float(tl.y), float(tl.z)};
@@ -311,12 +320,7 @@ TEST(GpuEngine, ReceiverPlaneLookupsOnSlopesAnswerLikeTheTwin) {
   size_t sloped = 0;
   for (size_t p = 0; p < size_t(kW) * kH; ++p) {
     const double u = 0.02 + 0.96 * unit(rng), v = 0.02 + 0.96 * unit(rng);
-    const float stored = s.map.depth(l, uint64_t(u * side), uint64_t(v * side));
-    const double d = stored < 1.0f ? double(stored) : 0.5;
-    const Vec3d w = ls.to_world(u, v, d);
-    const float f[3] = {float(w.x), float(w.y), float(w.z)};
-    for (int i = 0; i < 3; ++i) rec[4 * p + size_t(i)] = pos[4 * p + size_t(i)] = f[i];
-    rec[4 * p + 3] = kFootprint, pos[4 * p + 3] = 1.0f;
+    put_receiver(s, ls, l, u, v, kFootprint, p, rec, pos);
     // Tilted up to 84 degrees from facing the light (past the clamp), any azimuth.
     const double tilt = 1.47 * unit(rng), az = 6.2831853 * unit(rng);
     const Vec3d n = tl * std::cos(tilt) + (ls.axis_u() * std::cos(az) + ls.axis_v() * std::sin(az)) * std::sin(tilt);
