@@ -9,7 +9,11 @@
 #   tiles/core  <- tiles/encode <- tiles/bake
 #   tiles/core  <- server, client
 #   client      <- loadgen, gpu
-#   everything  <- app (and tests/, bench/, which are not checked)
+#   client, gpu <- examples/raster (the rasterizer the view, the example and bench_raster
+#                  share; also the header-only camera, and its flat_mesh.hpp reads a scene)
+#   everything  <- app (and tests/, bench/, the other examples, which are not checked)
+# No module includes tests/, bench/ or examples/ (test, bench and example code stays out
+# of the product libraries).
 #
 # And no include cycle among the modules' components (a component is a header with the
 # .cpp of the same name, or with the parts its .cpp is split in when there is no a.cpp:
@@ -35,10 +39,12 @@ set(allowed_server "common;proto;net;tiles/core;server")
 set(allowed_client "common;proto;net;tiles/core;client")
 set(allowed_loadgen "common;proto;tiles/core;client;loadgen")
 set(allowed_gpu "common;tiles/core;client;gpu")
-set(modules common proto net tiles/core tiles/encode image scene tiles/bake render server client loadgen gpu)
+set(allowed_examples/raster "tiles/core;scene;client;examples")  # gpu: its public header only (shadowtile/)
+set(modules common proto net tiles/core tiles/encode image scene tiles/bake render server client loadgen gpu examples/raster)
 # Every folder that holds headers a module could include: an include of any other
 # "x/..." path is not one of ours (a system or third-party header).
-set(known_roots common proto net tiles/core tiles/encode image scene tiles/bake render server client loadgen gpu app tests bench)
+set(known_roots common proto net tiles/core tiles/encode image scene tiles/bake render server client loadgen gpu app tests bench
+    examples)
 
 set(offences 0)
 set(components "")
