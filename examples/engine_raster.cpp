@@ -15,7 +15,7 @@
 //                 [--device NAME] [--validation]
 //
 // --pcf: kernel side at the finest level, or with --filter at the two levels the pixel's
-// footprint picks (MH §3.3, Map::pcf_footprint's choice; the footprint and the receiver
+// footprint picks (MH §3.3, Evaluator::pcf_footprint's choice; the footprint and the receiver
 // offset as `shadowtile render --filter` takes them, so the two can be compared).
 // 2D maps (suns, spots) and stack maps (slice 0); a 2D pack with a deep part (foliage,
 // smoke, fog) shades with their transmittance per channel. --validation: under the Khronos validation

@@ -142,7 +142,7 @@ bool light_point(const ShadowLight& l, const ShadowPassInput& in, size_t p, Poin
 }
 
 // Pixel p's light-space point and its finest texel (x, y), and the footprint the pass
-// filters with (the shader's st_neighbour_footprint when asked); false where the pixel
+// filters with (the shader's st_footprint_of when asked); false where the pixel
 // has no receiver or its point lies outside the map (the pass answers lit).
 struct Texel {
   Point c;

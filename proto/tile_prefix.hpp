@@ -16,7 +16,7 @@ std::uint32_t crc32_combine(std::uint32_t crc_a, std::uint32_t crc_b, std::uint6
 
 // Same bytes and failures as encode_tile_data_prefix(meta, tile_bytes, ...) when
 // tile_size == tile_bytes.size() and tile_crc32 == crc32(tile_bytes). The caller vouches
-// for the CRC: a wrong one makes the receiver reject the frame (crc_mismatch).
+// for the CRC: a wrong one makes the receiver reject the frame (ErrorCode::payload_checksum).
 Status encode_tile_data_prefix(const TileMeta& meta, std::uint32_t tile_size, std::uint32_t tile_crc32,
                                std::uint32_t request_id, std::uint8_t flags, const Limits& limits,
                                std::array<std::uint8_t, kTileDataPrefixBytes>& out);

@@ -3,7 +3,7 @@
 // beside st_layout.h, st_eval.glsl, st_stack.glsl, st_fdiv.glsl and st_deep.glsl, which it
 // includes: compile with glslc -I <that folder>. It declares GpuMap's three buffers at the
 // set and bindings the engine chooses and answers the light reaching a world position,
-// bit for bit as the CPU's Map::pcf / pcf_footprint (2D maps) and StackMap's filtered
+// bit for bit as the CPU's Map::pcf / Evaluator::pcf_footprint (2D maps) and StackMap's filtered
 // lookups (stack maps) answer with the same float light transform
 // (gpu/shadow_reference.hpp), times the deep part's transmittance (partial occluders:
 // foliage, smoke, fog) as the CPU's deep lookups answer it. The light comes from the page
@@ -24,7 +24,7 @@
 //   st_finish(probe);                 // counts the pixel in the feedback's holes
 //
 // footprint: the pixel's size in texels of the map's finest level (the level choice of
-// MH §3.3 / Map::pcf_footprint); st_footprint_of measures it from neighbouring receivers'
+// MH §3.3 / Evaluator::pcf_footprint); st_footprint_of measures it from neighbouring receivers'
 // light-space positions (the passes' definition: a compute pass's neighbours, or uvd +
 // dFdx(uvd) in a fragment shader), which grows at grazing angles; distance x pixel angle /
 // texel (render/render.cpp's) stays isotropic (examples/shaders/scene.frag). Filtered

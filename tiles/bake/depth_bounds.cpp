@@ -104,7 +104,7 @@ void intersect(const int* valid, RTCScene scene, RTCIntersectContext* ctx, RTCRa
 //
 // Each triangle that can ever be hit (its canonical plane is not parallel to every texel
 // ray) is an Embree user primitive whose box provably contains a point of every texel
-// ray the definition covers (coverage_box below); the intersect callback runs the
+// ray the definition covers (grown_box and slab_box below); the intersect callback runs the
 // definition (canonical_cover, the canonical plane's t) and appends hits without
 // accepting any, so one traversal of the whole line visits every candidate. The sorted,
 // deduplicated hit list then goes through canonical_interval(): the same function of the

@@ -1,5 +1,5 @@
 // Byte layout of the MH quadtree (MH §3.2) and of its merged variant MMH, shared by the
-// encoders (mh_quadtree_encode.cpp, mmh_merge.cpp) and the reader (mh_quadtree_reader.cpp).
+// encoders (tiles/encode/mh_quadtree_layout.cpp, mmh_merge.cpp) and the reader (mh_quadtree_reader.cpp).
 // The full drawing with examples is in tiles/core/MHQUAD.md; every constant here is a
 // format constant: changing one changes the bytes on disk, so bump kVersion.
 //

@@ -9,7 +9,7 @@
 // Entry (i, j) covers node (root_level + levels, (root_x << levels) + i, ...); its value
 // answers that node's level, and every finer level too when the entry is constant.
 //
-// Serialized layout (little-endian; format constants; pinned by tile_cut_grid_test):
+// Serialized layout (little-endian; format constants; pinned by tests/tiles/tile_cut_test.cpp):
 //   off  size            field
 //   0    4               magic "STGR"
 //   4    4               levels k (u32)

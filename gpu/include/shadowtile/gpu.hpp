@@ -42,7 +42,7 @@
 // Map's request queue at priority min(pixels, 65535), so the fetcher follows what the
 // GPU sampled.
 //
-// Answers are bit-exact with the CPU's (Map::depth, Map::pcf, pcf_footprint) for the
+// Answers are bit-exact with the CPU's (Map::depth, Map::pcf, Evaluator::pcf_footprint) for the
 // same cache contents; GPU_LAYOUT.md "Exactness" says how.
 //
 // Partial occluders (Map::has_deep: a pack with a deep part, foliage cards, smoke, fog):
