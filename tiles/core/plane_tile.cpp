@@ -187,6 +187,8 @@ TapRunEnd PlaneTileEvaluator::tap_run(const TapRun& run, TapPath& path) const no
   const uint32_t s = v_.finest_level - std::min(run.rel, v_.finest_level);
   const uint64_t h = s ? uint64_t(1) << (s - 1) : 0;
   const uint32_t count = v_.plane_count;
+  const uint8_t* const rec = v_.records.data();
+  auto start_of = [rec](uint32_t i) { return load_le<uint32_t>(rec + size_t(i) * kRecordSize + kOffStart); };
   // The block found last: index, corner and side at the finest level; its plane when it
   // is one plane (a labelled block resolves each texel).
   uint32_t bi = 0, bshift = 0;
@@ -211,24 +213,29 @@ TapRunEnd PlaneTileEvaluator::tap_run(const TapRun& run, TapPath& path) const no
         // searched outward from the last one (find's answer, in fewer steps for a sorted run).
         const uint64_t m = morton_encode(uint32_t(fx), uint32_t(fy));
         uint32_t lo, hi;  // the first block starting after m lies in [lo, hi]
-        if (v_.block_start(bi) <= m) {
+        if (start_of(bi) <= m) {
           uint32_t a = bi, step = 1;  // start(a) <= m
-          while (a + step < count && v_.block_start(a + step) <= m) a += step, step *= 2;
+          while (a + step < count && start_of(a + step) <= m) a += step, step *= 2;
           lo = a + 1, hi = uint32_t(std::min<uint64_t>(count, uint64_t(a) + step));
         } else {
           uint32_t b = bi, step = 1;  // start(b) > m
-          while (b >= step && v_.block_start(b - step) > m) b -= step, step *= 2;
+          while (b >= step && start_of(b - step) > m) b -= step, step *= 2;
           lo = b >= step ? b - step + 1 : 0, hi = b;
         }
-        lo = v_.first_block_after(m, lo, hi);
+        while (lo < hi) {  // the first index in [lo, hi) starting after m
+          const uint32_t mid = lo + (hi - lo) / 2;
+          if (start_of(mid) <= m) lo = mid + 1;
+          else hi = mid;
+        }
         bx = by = ~uint64_t(0), bshift = 0;
         if (lo > 0) {
           const uint32_t j = lo - 1;
+          const uint8_t* b = rec + size_t(j) * kRecordSize;
+          const uint32_t start = load_le<uint32_t>(b + kOffStart), shift = b[kOffShift];
           bi = j;
-          if (m < v_.block_end(j)) {
-            const uint32_t start = v_.block_start(j);
-            bx = morton_compact(start), by = morton_compact(uint64_t(start) >> 1), bshift = v_.block_shift(j);
-            bplane = v_.records[size_t(j) * kRecordSize + kOffKind] != kKindLabels;
+          if (m < uint64_t(start) + (uint64_t(1) << (2 * shift))) {
+            bx = morton_compact(start), by = morton_compact(uint64_t(start) >> 1), bshift = shift;
+            bplane = b[kOffKind] != kKindLabels;
             if (bplane) bp = v_.plane_at(j, uint32_t(fx), uint32_t(fy));
           }
         }
