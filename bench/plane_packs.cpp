@@ -5,7 +5,7 @@
 // OUT for bench_pack_bytes (per-section bytes, the planes section included).
 //
 //   bench_plane_packs SCENE@RES... [--out DIR] [--json PATH] [--light SPEC] [--min-shift S] [--min-nodes N] [--min-reused N]
-//                     [--no-merge] [--only default,static,planes]
+//                     [--no-merge] [--no-round] [--only default,static,planes]
 // (--only builds the named variants alone; the others' columns print 0).
 // e.g. bench_plane_packs /usr/share/games/openarena/baseoa/pak1-maps.pk3:maps/oa_dm1.bsp@8192
 //      /usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb@4096 procedural:city@4096
@@ -52,6 +52,7 @@ int main(int argc, char** argv) try {
     else if (a == "--min-nodes") fit.min_stored_nodes = uint32_t(std::stoul(next()));
     else if (a == "--min-reused") fit.min_reused_nodes = uint32_t(std::stoul(next()));
     else if (a == "--no-merge") fit.merge_surfaces = false;
+    else if (a == "--no-round") fit.round_planes = false;
     else if (a == "--only") {
       std::string list = next(), name;
       for (char ch : list + ',')

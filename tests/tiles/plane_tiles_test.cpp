@@ -4,6 +4,7 @@
 // meshes (every texel of every pack within a fresh trace), and hostile buffers refused.
 #include <gtest/gtest.h>
 
+#include <bit>
 #include <cmath>
 #include <filesystem>
 #include <random>
@@ -153,6 +154,13 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
   const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), scene.bounds());
   const uint32_t depth = 7, level = 9;
   uint64_t plane_texels = 0, labelled = 0, table_merged = 0, table_unmerged = 0;
+  uint64_t zeros_rounded = 0, zeros_unrounded = 0, z_rounded = 0, z_unrounded = 0;
+  // Trailing zero bits of a plane tile's table entries (a, b, c), and its table's zlib size.
+  auto table_of = [](const std::vector<uint8_t>& tile, uint64_t& zeros, uint64_t& z) {
+    const PlaneTileView v = validate_plane_tile(tile);
+    for (size_t o = 0; o < v.table.size(); o += 8) zeros += std::countr_zero(load_le<uint64_t>(v.table.data() + o) | (1ull << 63));
+    z += zlib_compress(v.table, 6).size();
+  };
   for (uint32_t ty = 1; ty < 3; ++ty) {
     const Traced t = trace_tile(scene, light, level, 128 * ty, 192, depth);
     const PlaneSplit s = fit_planes(t.h);
@@ -173,6 +181,16 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
       const std::vector<uint8_t> empty_inner = encode(s.pruned, Encoding::mh);
       table_merged += load_le<uint32_t>(wrap_planes(s.planes, depth, empty_inner, s.labelled).data() + planes::kOffTableCount);
       table_unmerged += load_le<uint32_t>(wrap_planes(u.planes, depth, empty_inner, u.labelled).data() + planes::kOffTableCount);
+      // Rounding changes planes, never blocks either: their low bits become zeros.
+      PlaneFitOptions unrounded;
+      unrounded.round_planes = false;
+      const PlaneSplit r = fit_planes(t.h, unrounded);
+      EXPECT_EQ(r.texels, s.texels);
+      ASSERT_EQ(r.planes.size(), s.planes.size());
+      for (size_t i = 0; i < r.planes.size(); ++i) EXPECT_EQ(r.planes[i].start, s.planes[i].start);
+      ASSERT_EQ(r.labelled.size(), s.labelled.size());
+      table_of(wrap_planes(s.planes, depth, empty_inner, s.labelled), zeros_rounded, z_rounded);
+      table_of(wrap_planes(r.planes, depth, empty_inner, r.labelled), zeros_unrounded, z_unrounded);
     }
     for (Encoding e : {Encoding::mh, Encoding::mmh, Encoding::dagmh}) {
       const std::vector<uint8_t> bytes = wrap_planes(s.planes, depth, encode(s.pruned, e), s.labelled);
@@ -204,6 +222,8 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
   EXPECT_GT(plane_texels, 0u) << "the engine's flat faces seen at a slant are planes";
   EXPECT_GT(labelled, 0u) << "blocks across the engine's edges are labelled";
   EXPECT_LT(table_merged, table_unmerged) << "planes of one surface found on separate blocks are merged";
+  EXPECT_GT(zeros_rounded, zeros_unrounded + 20 * table_merged) << "rounded planes end in zero bits";
+  EXPECT_LT(z_rounded, z_unrounded) << "rounded planes deflate smaller";
 }
 
 TEST(PlaneFit, ABlockAcrossTwoPlanesIsNoPlane) {

@@ -279,10 +279,9 @@ bool fit_texels(const std::vector<uint32_t>& texels, uint32_t side, std::span<co
   return false;
 }
 
-// One surface, one plane: merges the tile's planes whose texels one plane can answer
-// together (refitted over their union), largest first, so the table holds fewer entries.
-void merge_surfaces(PlaneSplit& out, uint32_t d, std::span<const float> lo, std::span<const float> hi) {
-  const uint32_t side = 1u << d;
+// The distinct planes of a tile's blocks and palettes (tile coordinates), each with the
+// texels it answers and the corners of the blocks that use it.
+struct PlaneUses {
   struct Use {
     std::vector<uint32_t> texels;
     std::vector<uint32_t> corners;  // the corners (y * side + x) of the blocks that use it
@@ -291,44 +290,72 @@ void merge_surfaces(PlaneSplit& out, uint32_t d, std::span<const float> lo, std:
   };
   std::map<std::tuple<int64_t, int64_t, int64_t>, uint32_t> id;
   std::vector<Use> uses;
-  auto use_of = [&](const Plane& p, uint32_t x0, uint32_t y0) -> Use& {
+
+  PlaneUses(const PlaneSplit& out, uint32_t side) {
+    for (const Plane& p : out.planes) {
+      const uint32_t x0 = morton_compact(p.start), y0 = morton_compact(uint64_t(p.start) >> 1), w = 1u << p.shift;
+      Use& u = use_of(p, x0, y0);
+      u.corners.push_back(y0 * side + x0);
+      for (uint32_t y = y0; y < y0 + w; ++y)
+        for (uint32_t x = x0; x < x0 + w; ++x) u.texels.push_back(y * side + x);
+    }
+    for (const LabelBlock& lb : out.labelled) {
+      const uint32_t x0 = morton_compact(lb.start), y0 = morton_compact(uint64_t(lb.start) >> 1);
+      for (uint32_t k = 0; k < lb.palette.size(); ++k) {
+        Use& u = use_of(lb.palette[k], x0, y0);
+        u.corners.push_back(y0 * side + x0);
+        for (uint32_t i = 0; i < 64; ++i)
+          if (lb.label[i] == k) u.texels.push_back((y0 + i / 8) * side + x0 + i % 8);
+      }
+    }
+  }
+  Use& use_of(const Plane& p, uint32_t x0, uint32_t y0) {
     const TilePlane t{p.origin_a(x0, y0), p.b, p.c};
     auto [it, fresh] = id.emplace(std::make_tuple(t.a0, t.b, t.c), uint32_t(uses.size()));
     if (fresh) uses.push_back(Use{{}, {}, t, true});
     return uses[it->second];
-  };
-  for (const Plane& p : out.planes) {
-    const uint32_t x0 = morton_compact(p.start), y0 = morton_compact(uint64_t(p.start) >> 1), w = 1u << p.shift;
-    Use& u = use_of(p, x0, y0);
-    u.corners.push_back(y0 * side + x0);
-    for (uint32_t y = y0; y < y0 + w; ++y)
-      for (uint32_t x = x0; x < x0 + w; ++x) u.texels.push_back(y * side + x);
   }
-  for (const LabelBlock& lb : out.labelled) {
-    const uint32_t x0 = morton_compact(lb.start), y0 = morton_compact(uint64_t(lb.start) >> 1);
-    for (uint32_t k = 0; k < lb.palette.size(); ++k) {
-      Use& u = use_of(lb.palette[k], x0, y0);
-      u.corners.push_back(y0 * side + x0);
-      for (uint32_t i = 0; i < 64; ++i)
-        if (lb.label[i] == k) u.texels.push_back((y0 + i / 8) * side + x0 + i % 8);
-    }
+  // Every block and palette entry takes the plane of the use `owner` names for its own.
+  void apply(PlaneSplit& out, const std::vector<uint32_t>& owner) const {
+    auto remap = [&](Plane& p, uint32_t x0, uint32_t y0) {
+      const auto it = id.find(std::make_tuple(p.origin_a(x0, y0), p.b, p.c));
+      ST_CHECK(it != id.end());
+      const TilePlane& q = uses[owner[it->second]].plane;
+      p.b = q.b, p.c = q.c;
+      p.a = int64_t(uint64_t(q.a0) + uint64_t(q.b) * x0 + uint64_t(q.c) * y0);
+    };
+    for (Plane& p : out.planes) remap(p, morton_compact(p.start), morton_compact(uint64_t(p.start) >> 1));
+    for (LabelBlock& lb : out.labelled)
+      for (Plane& q : lb.palette) remap(q, morton_compact(lb.start), morton_compact(uint64_t(lb.start) >> 1));
   }
+};
+
+// Whether q answers every texel within [lo, hi] (the decoder's function) and keeps every
+// block corner within |a'| <= 2^61 (plane_format.hpp).
+bool answers_all(const TilePlane& q, const std::vector<uint32_t>& texels, const std::vector<uint32_t>& corners,
+                 uint32_t side, std::span<const float> lo, std::span<const float> hi) {
+  if (abs64(q.b) > kMaxSlope || abs64(q.c) > kMaxSlope) return false;
+  for (uint32_t t : corners)
+    if (abs64(int64_t(uint64_t(q.a0) + uint64_t(q.b) * (t % side) + uint64_t(q.c) * (t / side))) > kMaxBase)
+      return false;
+  for (uint32_t t : texels) {
+    const float v = q.depth(t % side, t / side);
+    if (!(lo[t] <= v && v <= hi[t])) return false;
+  }
+  return true;
+}
+
+// One surface, one plane: merges the tile's planes whose texels one plane can answer
+// together (refitted over their union), largest first, so the table holds fewer entries.
+void merge_surfaces(PlaneSplit& out, uint32_t d, std::span<const float> lo, std::span<const float> hi) {
+  const uint32_t side = 1u << d;
+  PlaneUses all(out, side);
+  auto& uses = all.uses;
   if (uses.size() < 2) return;
   std::vector<uint32_t> order(uses.size());
   for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
   std::stable_sort(order.begin(), order.end(),
                    [&](uint32_t a, uint32_t b) { return uses[a].texels.size() > uses[b].texels.size(); });
-  auto answers_all = [&](const TilePlane& q, const std::vector<uint32_t>& texels, const std::vector<uint32_t>& corners) {
-    if (abs64(q.b) > kMaxSlope || abs64(q.c) > kMaxSlope) return false;
-    for (uint32_t t : corners)
-      if (abs64(int64_t(uint64_t(q.a0) + uint64_t(q.b) * (t % side) + uint64_t(q.c) * (t / side))) > kMaxBase)
-        return false;
-    for (uint32_t t : texels) {
-      const float v = q.depth(t % side, t / side);
-      if (!(lo[t] <= v && v <= hi[t])) return false;
-    }
-    return true;
-  };
   // How far (in units of the texel's preimage width) q misses texel t: 0 inside.
   auto miss = [&](const TilePlane& q, uint32_t t) -> LD {
     int64_t vmin, vmax;
@@ -345,13 +372,13 @@ void merge_surfaces(PlaneSplit& out, uint32_t d, std::span<const float> lo, std:
   // many near planes that no refit joins).
   uint64_t budget = 4ull * side * side;
   for (size_t ia = 0; ia < order.size(); ++ia) {
-    Use& a = uses[order[ia]];
+    PlaneUses::Use& a = uses[order[ia]];
     if (!a.alive) continue;
     int refits = 0;
     for (size_t ib = ia + 1; ib < order.size(); ++ib) {
-      Use& b = uses[order[ib]];
+      PlaneUses::Use& b = uses[order[ib]];
       if (!b.alive) continue;
-      bool merged = answers_all(a.plane, b.texels, b.corners);
+      bool merged = answers_all(a.plane, b.texels, b.corners, side, lo, hi);
       if (!merged && refits < 4 && budget >= a.texels.size() + b.texels.size()) {
         // Near enough to be the same surface: a few widths off at b's first and last texels.
         if (miss(a.plane, b.texels.front()) > 64 || miss(a.plane, b.texels.back()) > 64) continue;
@@ -362,7 +389,7 @@ void merge_surfaces(PlaneSplit& out, uint32_t d, std::span<const float> lo, std:
         both_corners = a.corners;
         both_corners.insert(both_corners.end(), b.corners.begin(), b.corners.end());
         TilePlane q;
-        if (fit_texels(both_texels, side, lo, hi, q) && answers_all(q, both_texels, both_corners)) {
+        if (fit_texels(both_texels, side, lo, hi, q) && answers_all(q, both_texels, both_corners, side, lo, hi)) {
           a.plane = q;
           merged = true;
         }
@@ -375,17 +402,80 @@ void merge_surfaces(PlaneSplit& out, uint32_t d, std::span<const float> lo, std:
       any = true;
     }
   }
-  if (!any) return;
-  auto remap = [&](Plane& p, uint32_t x0, uint32_t y0) {
-    const auto it = id.find(std::make_tuple(p.origin_a(x0, y0), p.b, p.c));
-    ST_CHECK(it != id.end());
-    const TilePlane& q = uses[owner[it->second]].plane;
-    p.b = q.b, p.c = q.c;
-    p.a = int64_t(uint64_t(q.a0) + uint64_t(q.b) * x0 + uint64_t(q.c) * y0);
-  };
-  for (Plane& p : out.planes) remap(p, morton_compact(p.start), morton_compact(uint64_t(p.start) >> 1));
-  for (LabelBlock& lb : out.labelled)
-    for (Plane& q : lb.palette) remap(q, morton_compact(lb.start), morton_compact(uint64_t(lb.start) >> 1));
+  if (any) all.apply(out, owner);
+}
+
+// Fewer significant bits: each plane becomes one that answers the same texels with as many
+// trailing zero bits in b and c as any near multiple allows, then in a0 (the LP returns some
+// point of a plane's feasible set, whose low bits are arbitrary; zeros deflate to almost
+// nothing, and planes of one surface may become equal). For b, c multiples of 2^k (the two
+// nearest each, k from the largest down) the admissible a0 is an interval, exact in 128-bit
+// integers from the texels' preimages (extreme texels first, then all); a0 is its point with
+// the most trailing zeros; the result is checked with the decoder's function on every texel.
+void round_planes(PlaneSplit& out, uint32_t d, std::span<const float> lo, std::span<const float> hi) {
+  using I128 = __int128;
+  const uint32_t side = 1u << d;
+  PlaneUses all(out, side);
+  std::vector<uint32_t> owner(all.uses.size());
+  std::vector<int64_t> vmin, vmax;
+  bool any = false;
+  auto floor_to = [](I128 v, int k) { return v >= 0 ? (v >> k) << k : -(((-v + (I128(1) << k) - 1) >> k) << k); };
+  for (uint32_t u = 0; u < all.uses.size(); ++u) {
+    owner[u] = u;
+    PlaneUses::Use& use = all.uses[u];
+    const std::vector<uint32_t>& ts = use.texels;
+    vmin.resize(ts.size());
+    vmax.resize(ts.size());
+    bool ok = true;
+    for (size_t i = 0; i < ts.size() && ok; ++i) ok = preimage(lo[ts[i]], hi[ts[i]], vmin[i], vmax[i]);
+    if (!ok || ts.empty()) continue;
+    // The texels at the extremes of x, y, x + y and x - y: the bounds that bind first.
+    size_t ext[8] = {};
+    auto key = [&](size_t i, int f) -> int64_t {
+      const int64_t x = ts[i] % side, y = ts[i] / side;
+      const int64_t v[4] = {x, y, x + y, x - y};
+      return v[f];
+    };
+    for (size_t i = 1; i < ts.size(); ++i)
+      for (int f = 0; f < 4; ++f) {
+        if (key(i, f) < key(ext[2 * f], f)) ext[2 * f] = i;
+        if (key(i, f) > key(ext[2 * f + 1], f)) ext[2 * f + 1] = i;
+      }
+    // The a0 interval [alo, ahi] for slopes (b, c) over texels i of `idx` (all when null).
+    auto a_range = [&](I128 b, I128 c, const size_t* idx, size_t n, I128& alo, I128& ahi) {
+      for (size_t j = 0; j < n && alo <= ahi; ++j) {
+        const size_t i = idx ? idx[j] : j;
+        const I128 off = b * (ts[i] % side) + c * (ts[i] / side);
+        alo = std::max(alo, I128(vmin[i]) - off);
+        ahi = std::min(ahi, I128(vmax[i]) - off);
+      }
+      return alo <= ahi;
+    };
+    bool done = false;
+    for (int k = 52; k >= 0 && !done; --k) {
+      const I128 step = I128(1) << k, fb = floor_to(use.plane.b, k), fc = floor_to(use.plane.c, k);
+      for (int combo = 0; combo < 4 && !done; ++combo) {
+        const I128 b = fb + (combo & 1 ? step : 0), c = fc + (combo & 2 ? step : 0);
+        if (b > kMaxSlope || b < -kMaxSlope || c > kMaxSlope || c < -kMaxSlope) continue;
+        I128 alo = -(I128(1) << 100), ahi = I128(1) << 100;
+        if (!a_range(b, c, ext, 8, alo, ahi) || !a_range(b, c, nullptr, ts.size(), alo, ahi)) continue;
+        I128 a0 = alo;
+        for (int j = 62; j > 0; --j) {
+          const I128 m = -floor_to(-alo, j);  // the least multiple of 2^j at or above alo
+          if (m <= ahi) {
+            a0 = m;
+            break;
+          }
+        }
+        if (a0 > INT64_MAX || a0 < INT64_MIN) continue;
+        const TilePlane q{int64_t(a0), int64_t(b), int64_t(c)};
+        if (!answers_all(q, ts, use.corners, side, lo, hi)) continue;
+        done = true;
+        if (q.a0 != use.plane.a0 || q.b != use.plane.b || q.c != use.plane.c) use.plane = q, any = true;
+      }
+    }
+  }
+  if (any) all.apply(out, owner);
 }
 
 }  // namespace
@@ -535,6 +625,7 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
   }
   if (out.planes.empty() && out.labelled.empty()) return out;
   if (o.merge_surfaces) merge_surfaces(out, d, lo, hi);
+  if (o.round_planes) round_planes(out, d, lo, hi);
   std::sort(out.planes.begin(), out.planes.end(), [](const Plane& a, const Plane& b) { return a.start < b.start; });
   std::sort(out.labelled.begin(), out.labelled.end(),
             [](const LabelBlock& a, const LabelBlock& b) { return a.start < b.start; });

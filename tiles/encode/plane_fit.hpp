@@ -27,13 +27,16 @@ namespace st {
 
 struct PlaneFitOptions {
   uint32_t min_shift = 2;          // smallest block: 2^min_shift a side
-  uint32_t min_stored_nodes = 16;  // a block with a plane of its own must take at least this many valued nodes out
+  uint32_t min_stored_nodes = 8;   // a block with a plane of its own must take at least this many valued nodes out
   uint32_t max_tile_depth = 10;    // tiles deeper than this are not searched (memory, time)
   uint32_t min_reused_nodes = 2;   // a block that reuses a plane already in the tile's table: at least this many
   uint32_t min_labelled_nodes = 4; // an 8x8 block labelled with up to 4 of the table's planes: at least this many
   // Planes of one surface merged after the search: a plane that answers another's texels
   // too, or one refitted over both, replaces them (fewer table entries; tiles/core/PLANES.md).
   bool merge_surfaces = true;
+  // Each plane then replaced by one answering the same texels with the most trailing zero
+  // bits (b and c, then a): the table deflates smaller (tiles/core/PLANES.md).
+  bool round_planes = true;
   // Tiles whose valued nodes are less than this share zero-width (hi = lo: open surfaces under
   // the default rule) are not searched: wide intervals (closed objects) let the trees merge
   // their values, planes did not store smaller there (procedural:city) and cost build time.
