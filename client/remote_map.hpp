@@ -328,10 +328,13 @@ class RemoteMap final : public Evaluator {
   // encoded tile, now sc's current one. False: `value` answers (coarse when missed).
   bool enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc, float& value) const noexcept;
   float depth_shared(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc) const noexcept;
-  // Starts bringing the bytes of the resident tile answering (level, x, y) (in the map)
-  // toward the cache (WindowDepths::prefetch), changing nothing: a batch asks for the
-  // next run's tile before it walks the current run. Lock held shared.
-  void prefetch_tile(uint32_t level, uint64_t x, uint64_t y) const noexcept;
+  // Whether (level, x, y) (in the map) lies in a resident encoded tile; if so `tile` is
+  // it, as enter_tile would enter it (marked used), and its bytes start toward the cache
+  // (WindowDepths::prefetch, TapWalks::prefetch). Nothing else changes (no region, no
+  // miss: a missing tile is for enter_tile). A batch asks it for the next run's tile
+  // before it walks the current run, and enters that tile from it without a second
+  // page-table walk. Lock held shared.
+  bool prefetch_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch::TileView& tile) const noexcept;
   // Evaluator::pcf's answer, from the kept regions: a kernel with no tap clamped on the
   // rows of the columns kept ahead (LookupScratch::Ahead) and reaching at most to the
   // column after them (a screen-coherent row of kernels) counts its r * r depths there,

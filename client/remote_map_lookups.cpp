@@ -143,17 +143,25 @@ bool RemoteMap::enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch
   return true;
 }
 
-void RemoteMap::prefetch_tile(uint32_t level, uint64_t x, uint64_t y) const noexcept {
-  if (!texel_in_map(header_.map_level, level, x, y)) return;
+bool RemoteMap::prefetch_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch::TileView& tile) const noexcept {
+  if (!texel_in_map(header_.map_level, level, x, y)) return false;
+  PageEntry page;
   const PageHit hit = walk_page_table(grid_, level, x, y, [&](uint64_t id, const GridEntry&) -> const CutGrid* {
-    const PageEntry page = cache_.lookup(id);
-    return page.state == PageState::resident ? &slot_grid_[page.slot] : nullptr;
+    page = cache_.lookup(id);
+    if (page.state != PageState::resident) return nullptr;
+    mark_used(page.slot);
+    return &slot_grid_[page.slot];
   });
-  if (hit.kind != PageHit::Kind::tile) return;
-  const PageEntry page = cache_.lookup(hit.tile);
-  if (page.state != PageState::resident) return;
-  if (const WindowDepths* w = slot_window_[page.slot]) w->prefetch();
-  else if (const TapWalks* t = slot_walks_[page.slot]) t->prefetch();
+  if (hit.kind != PageHit::Kind::tile) return false;
+  page = cache_.lookup(hit.tile);
+  if (page.state != PageState::resident) return false;
+  mark_used(page.slot);
+  const WindowDepths* w = slot_window_[page.slot];
+  const TapWalks* t = slot_walks_[page.slot];
+  if (w) w->prefetch();
+  else if (t) t->prefetch();
+  tile = {slot_eval_[page.slot].get(), w, t, level, hit.rel, x - hit.tx, y - hit.ty, uint64_t(1) << hit.rel};
+  return true;
 }
 
 float RemoteMap::depth_shared(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc) const noexcept {
@@ -631,12 +639,23 @@ void RemoteMap::pcf_batch_shared(std::span<const PcfQuery> queries, std::span<fl
         const PcfQuery& nq = base[order[e]];
         if (nq.r > 1 || !tl.covers(nq.level, std::min(nq.x, top), std::min(nq.y, top))) break;
       }
-      // The next run's tile, asked for now so that its bytes arrive while this run walks.
+      // The next run's tile, entered now (one page-table walk) so that its bytes arrive
+      // while this run walks; the next run finds it among the kept tiles.
       if (e < bn) {
         const PcfQuery& nq = base[order[e]];
         if (nq.r <= 1 && nq.level <= map_level) {
           const uint64_t ntop = (uint64_t(1) << nq.level) - 1;
-          prefetch_tile(nq.level, std::min(nq.x, ntop), std::min(nq.y, ntop));
+          const uint64_t nx = std::min(nq.x, ntop), ny = std::min(nq.y, ntop);
+          bool kept = false;
+          for (size_t j = 0; j < used_tiles && !kept; ++j) kept = tiles[j].covers(nq.level, nx, ny);
+          LookupScratch::TileView v;
+          if (!kept && prefetch_tile(nq.level, nx, ny, v)) {
+            size_t u = used_tiles < kTiles ? used_tiles++ : next_tile;
+            if (u == t) u = (u + 1) % kTiles;  // never the tile this run walks
+            next_tile = (u + 1) % kTiles;
+            tiles[u] = Tile{v.ev, v.walks, v.level, v.rel, v.x0, v.y0, v.side};
+            paths[u].owner = nullptr;  // a new tile: its path starts empty
+          }
         }
       }
       TapRunEnd end;

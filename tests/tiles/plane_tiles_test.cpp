@@ -54,6 +54,24 @@ TEST(PlaneFormat, FixedPointDepthIsTheNearestFloatTiesToEven) {
   EXPECT_EQ(plane_fixed_to_float(kOne + 12345), 1.0f);
   EXPECT_EQ(plane_fixed_to_float(1), 0x1p-60f);
   EXPECT_EQ(plane_fixed_to_float(int64_t(1) << 40), 0x1p-20f);
+  // In every binade: exact ties after an even and an odd significand, one below and one
+  // above them, the largest significand (its rounding carries into the next binade), and
+  // every value of the binades kept exactly.
+  for (int p = 0; p < int(kFracBits); ++p) {
+    const int k = p - 23;
+    for (const uint64_t m : {uint64_t(1) << 23, (uint64_t(1) << 23) + 1, (uint64_t(1) << 24) - 1, uint64_t(0xABCDEF)}) {
+      if (k <= 0) {
+        const int64_t v = int64_t(m >> (23 - p));
+        ASSERT_EQ(plane_fixed_to_float(v), reference_round(v)) << v;
+        continue;
+      }
+      const uint64_t half = uint64_t(1) << (k - 1);
+      for (const uint64_t rem : {uint64_t(0), half - 1, half, half + 1, (uint64_t(1) << k) - 1}) {
+        const int64_t v = int64_t((m << k) | rem);
+        ASSERT_EQ(plane_fixed_to_float(v), reference_round(v)) << v;
+      }
+    }
+  }
 }
 
 TEST(PlaneFormat, LayoutIsPinned) {

@@ -52,13 +52,15 @@ class PlaneTileEvaluator final : public Evaluator, public TapWalks {
   // starts from it (the blocks are sorted by Morton code); the other taps walk the inner
   // tree from its last walk's path. The same answers as depth_region, tap for tap.
   TapRunEnd tap_run(const TapRun& run, TapPath& path) const noexcept override;
-  // The block records and the start of the inner tree, which a run's searches and walks
-  // read first (WindowDepths::prefetch's role, for the client's next tile).
+  // The block records, the plane table and the inner tree, which a run's searches and
+  // walks read first (WindowDepths::prefetch's role, for the client's next tile).
+  // Only their first lines: a prefetch per line of every record (kilobytes in a tile of
+  // many blocks) stalled the lookups more than it saved (perf: ~10% of a real level's
+  // taps), and a level's tiles mostly stay in the cache between frames.
   void prefetch() const noexcept override {
-    const uint8_t* r = v_.records.data();
-    for (size_t o = 0; o < v_.records.size(); o += 64) __builtin_prefetch(r + o);
-    const size_t n = std::min<size_t>(v_.inner.size(), 1024);
-    for (size_t o = 0; o < n; o += 64) __builtin_prefetch(v_.inner.data() + o);
+    __builtin_prefetch(v_.records.data());
+    __builtin_prefetch(v_.table.data());
+    __builtin_prefetch(v_.inner.data());
   }
 
   float pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver) const override {
@@ -176,82 +178,123 @@ class PlaneTileEvaluator final : public Evaluator, public TapWalks {
     }
   }
 
+  // tap_run's block: the one holding the last tap's finest texel, or none (bx = by =
+  // ~0, shift 0: no texel matches). Corner and side at the finest level; a one-plane
+  // block's table plane (a at the tile's texel (0, 0): a + b fx + c fy is the same integer
+  // modulo 2^64 as plane_at's corner form), or a labelled block's palette and labels.
+  struct TapBlock {
+    uint64_t x = ~uint64_t(0), y = ~uint64_t(0);
+    uint32_t index = 0, shift = 0;
+    const uint8_t* labels = nullptr;
+    uint64_t a = 0, b = 0, c = 0;
+  };
+  // The block holding finest texel (fx, fy), searched outward from b.index (the last
+  // block starting at or before its Morton code: find's answer, in fewer steps for a
+  // sorted run). Out of line: taps in the last block do not pay its registers.
+  [[gnu::noinline]] void find_tap_block(uint64_t fx, uint64_t fy, TapBlock& b) const noexcept;
+
   PlaneTileView v_;
   std::unique_ptr<Evaluator> inner_;
   const TapWalks* inner_walks_;  // the inner tree's resumable walks, or null
 };
 
-TapRunEnd PlaneTileEvaluator::tap_run(const TapRun& run, TapPath& path) const noexcept {
-  TapRunEnd end;
-  const uint64_t top = (uint64_t(1) << run.level) - 1;
-  const uint32_t s = v_.finest_level - std::min(run.rel, v_.finest_level);
-  const uint64_t h = s ? uint64_t(1) << (s - 1) : 0;
+void PlaneTileEvaluator::find_tap_block(uint64_t fx, uint64_t fy, TapBlock& blk) const noexcept {
   const uint32_t count = v_.plane_count;
   const uint8_t* const rec = v_.records.data();
   auto start_of = [rec](uint32_t i) { return load_le<uint32_t>(rec + size_t(i) * kRecordSize + kOffStart); };
-  // The block found last: index, corner and side at the finest level; its plane when it
-  // is one plane (a labelled block resolves each texel).
-  uint32_t bi = 0, bshift = 0;
-  uint64_t bx = ~uint64_t(0), by = ~uint64_t(0);
-  bool bplane = false;
-  Plane bp;
-  bool have = false;  // end.region holds the last answer (a region of the inner tree)
-  for (size_t k = 0; k < run.count; ++k) {
-    const uint32_t i = run.order[k];
-    const PcfQuery& q = run.queries[i];
-    const uint64_t x = std::min(q.x, top) - run.x0, y = std::min(q.y, top) - run.y0;
-    if (have && (((x ^ end.x) | (y ^ end.y)) >> end.region.shift) == 0) {
-      run.out[i] = tap_lit(q.receiver, end.region.value);
+  const uint64_t m = morton_encode(uint32_t(fx), uint32_t(fy));
+  const uint32_t bi = blk.index;
+  uint32_t lo, hi;  // the first block starting after m lies in [lo, hi]
+  if (start_of(bi) <= m) {
+    uint32_t a = bi, step = 1;  // start(a) <= m
+    while (a + step < count && start_of(a + step) <= m) a += step, step *= 2;
+    lo = a + 1, hi = uint32_t(std::min<uint64_t>(count, uint64_t(a) + step));
+  } else {
+    uint32_t b = bi, step = 1;  // start(b) > m
+    while (b >= step && start_of(b - step) > m) b -= step, step *= 2;
+    lo = b >= step ? b - step + 1 : 0, hi = b;
+  }
+  while (lo < hi) {  // the first index in [lo, hi) starting after m
+    const uint32_t mid = lo + (hi - lo) / 2;
+    if (start_of(mid) <= m) lo = mid + 1;
+    else hi = mid;
+  }
+  blk.x = blk.y = ~uint64_t(0), blk.shift = 0;
+  if (lo == 0) return;
+  const uint32_t j = lo - 1;
+  const uint8_t* b = rec + size_t(j) * kRecordSize;
+  const uint32_t start = load_le<uint32_t>(b + kOffStart), shift = b[kOffShift];
+  blk.index = j;
+  if (m >= uint64_t(start) + (uint64_t(1) << (2 * shift))) return;
+  blk.x = morton_compact(start), blk.y = morton_compact(uint64_t(start) >> 1), blk.shift = shift;
+  const uint32_t index = load_le<uint16_t>(b + kOffIndex);
+  if (b[kOffKind] == kKindLabels) {
+    blk.labels = v_.labels.data() + size_t(index) * kLabelSize;
+  } else {
+    const uint8_t* e = v_.table.data() + size_t(index) * kEntrySize;
+    blk.labels = nullptr;
+    blk.a = load_le<uint64_t>(e + kOffA), blk.b = load_le<uint64_t>(e + kOffB), blk.c = load_le<uint64_t>(e + kOffC);
+  }
+}
+
+TapRunEnd PlaneTileEvaluator::tap_run(const TapRun& run, TapPath& path) const noexcept {
+  const uint32_t s = v_.finest_level - std::min(run.rel, v_.finest_level);
+  if (s >= kMaxShift)  // no block is as coarse as these texels: every tap asks the inner tree
+    return tap_run_loop(run, [&](uint32_t l, uint64_t x, uint64_t y) { return inner_region(l, x, y, inner_walk(l, x, y, path)); });
+  const uint64_t top = (uint64_t(1) << run.level) - 1;
+  const uint64_t h = s ? uint64_t(1) << (s - 1) : 0;
+  const uint8_t* const table = v_.table.data();
+  const PcfQuery* const queries = run.queries;
+  const uint16_t* const order = run.order;
+  float* const out = run.out;
+  const uint64_t x0 = run.x0, y0 = run.y0;
+  const size_t n = run.count;
+  // The last answer, in registers: its texel and region; `kept` when that region is the
+  // inner tree's, which may hold the next taps (a plane's answer holds its own texel only).
+  uint64_t ex = 0, ey = 0, walks = 0;
+  DepthRegion er{0, 0};
+  bool kept = false;
+  // The block of the last tap (TapBlock's fields in locals, so that they stay in
+  // registers: find_tap_block's TapBlock lives in memory).
+  uint64_t bx = ~uint64_t(0), by = ~uint64_t(0), pa = 0, pb = 0, pc = 0;
+  uint32_t bshift = 0, bindex = 0;
+  const uint8_t* blabels = nullptr;
+  for (size_t k = 0; k < n; ++k) {
+    const uint32_t i = order[k];
+    const PcfQuery& q = queries[i];
+    const uint64_t x = std::min(q.x, top) - x0, y = std::min(q.y, top) - y0;
+    if (kept && (((x ^ ex) | (y ^ ey)) >> er.shift) == 0) {
+      out[i] = tap_lit(q.receiver, er.value);
       continue;
     }
-    DepthRegion r{0, 0};
-    bool planar = false;
-    if (s < kMaxShift) {
-      const uint64_t fx = (x << s) + h, fy = (y << s) + h;
-      if (((fx ^ bx) | (fy ^ by)) >> bshift != 0) {
-        // Another block, or none: the last block starting at or before the texel's code,
-        // searched outward from the last one (find's answer, in fewer steps for a sorted run).
-        const uint64_t m = morton_encode(uint32_t(fx), uint32_t(fy));
-        uint32_t lo, hi;  // the first block starting after m lies in [lo, hi]
-        if (start_of(bi) <= m) {
-          uint32_t a = bi, step = 1;  // start(a) <= m
-          while (a + step < count && start_of(a + step) <= m) a += step, step *= 2;
-          lo = a + 1, hi = uint32_t(std::min<uint64_t>(count, uint64_t(a) + step));
-        } else {
-          uint32_t b = bi, step = 1;  // start(b) > m
-          while (b >= step && start_of(b - step) > m) b -= step, step *= 2;
-          lo = b >= step ? b - step + 1 : 0, hi = b;
-        }
-        while (lo < hi) {  // the first index in [lo, hi) starting after m
-          const uint32_t mid = lo + (hi - lo) / 2;
-          if (start_of(mid) <= m) lo = mid + 1;
-          else hi = mid;
-        }
-        bx = by = ~uint64_t(0), bshift = 0;
-        if (lo > 0) {
-          const uint32_t j = lo - 1;
-          const uint8_t* b = rec + size_t(j) * kRecordSize;
-          const uint32_t start = load_le<uint32_t>(b + kOffStart), shift = b[kOffShift];
-          bi = j;
-          if (m < uint64_t(start) + (uint64_t(1) << (2 * shift))) {
-            bx = morton_compact(start), by = morton_compact(uint64_t(start) >> 1), bshift = shift;
-            bplane = b[kOffKind] != kKindLabels;
-            if (bplane) bp = v_.plane_at(j, uint32_t(fx), uint32_t(fy));
-          }
-        }
-      }
-      if (bshift > s) {  // from_plane: a block coarser than the texel answers it
-        const Plane p = bplane ? bp : v_.plane_at(bi, uint32_t(fx), uint32_t(fy));
-        const uint32_t mask = (uint32_t(1) << bshift) - 1;
-        r = {p.depth(uint32_t(fx) & mask, uint32_t(fy) & mask), 0};
-        planar = true;
-      }
+    ++walks;
+    const uint64_t fx = (x << s) + h, fy = (y << s) + h;
+    if (((fx ^ bx) | (fy ^ by)) >> bshift != 0) [[unlikely]] {
+      TapBlock blk;
+      blk.index = bindex;
+      find_tap_block(fx, fy, blk);
+      bx = blk.x, by = blk.y, bshift = blk.shift, bindex = blk.index;
+      blabels = blk.labels, pa = blk.a, pb = blk.b, pc = blk.c;
     }
-    if (!planar) r = inner_region(run.rel, x, y, inner_walk(run.rel, x, y, path));
-    end.x = x, end.y = y, end.region = r, have = true;
-    ++end.walks;
-    run.out[i] = tap_lit(q.receiver, r.value);
+    if (bshift > s) {  // from_plane: a block coarser than the texel answers it
+      uint64_t a = pa, b = pb, c = pc;
+      if (blabels) [[unlikely]] {  // plane_at's label: the texel's 2 bits, then its palette entry
+        const uint32_t t = uint32_t(((fy - by) << kLabelShift) + (fx - bx));
+        const uint32_t label = (blabels[kOffLabelBits + t / 4] >> (2 * (t % 4))) & 3u;
+        const uint8_t* e = table + size_t(load_le<uint16_t>(blabels + 2 * label)) * kEntrySize;
+        a = load_le<uint64_t>(e + kOffA), b = load_le<uint64_t>(e + kOffB), c = load_le<uint64_t>(e + kOffC);
+      }
+      er = {plane_fixed_to_float(int64_t(a + b * fx + c * fy)), 0};
+      kept = false;
+    } else {
+      er = inner_region(run.rel, x, y, inner_walk(run.rel, x, y, path));
+      kept = true;
+    }
+    ex = x, ey = y;
+    out[i] = tap_lit(q.receiver, er.value);
   }
+  TapRunEnd end;
+  end.x = ex, end.y = ey, end.region = er, end.walks = walks;
   return end;
 }
 
