@@ -390,6 +390,22 @@ shadowtile_status shadowtile_map_visibility_filtered(const shadowtile_map* map, 
   return SHADOWTILE_OK;
 }
 
+shadowtile_status shadowtile_map_visibility_filtered_normal(const shadowtile_map* map, const shadowtile_point* points,
+                                                            const shadowtile_point* normals, const float* footprints,
+                                                            size_t count, uint32_t pcf_side, int closed, float* out) {
+  constexpr const char* where = "shadowtile_map_visibility_filtered_normal";
+  if (shadowtile_status s = check_lookup(where, map, points, count, out, pcf_side)) return s;
+  if (count > 0 && !normals) return null_argument(where, "normals");
+  if (count > 0 && !footprints) return null_argument(where, "footprints");
+  for_each_chunk(points, count, [&](size_t i0, std::span<const st::client::WorldPoint> p) {
+    for_each_chunk(normals + i0, p.size(), [&](size_t, std::span<const st::client::WorldPoint> nrm) {
+      map->map.visibility_filtered(p, nrm, std::span<const float>(footprints + i0, p.size()),
+                                   std::span<float>(out + i0, p.size()), pcf_side, closed != 0);
+    });
+  });
+  return SHADOWTILE_OK;
+}
+
 shadowtile_status shadowtile_map_transmittance(const shadowtile_map* map, const shadowtile_point* points,
                                                const float* footprints, size_t count, shadowtile_rgb* out) {
   if (shadowtile_status s = check_lookup("shadowtile_map_transmittance", map, points, count, out, 1)) return s;

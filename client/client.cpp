@@ -153,6 +153,22 @@ void Map::visibility_filtered(std::span<const WorldPoint> points, std::span<cons
   if (map_) map_->visibility_batch(points, footprints, out, radius_of(pcf_side));
   else std::fill_n(out.begin(), std::min({points.size(), footprints.size(), out.size()}), 1.0f);
 }
+float Map::visibility_filtered(const WorldPoint& world, const WorldPoint& normal, float footprint, uint32_t pcf_side,
+                              bool closed) const noexcept {
+  if (!pcf_side_valid(pcf_side)) return kBadSide;
+  float out = 1.0f;
+  if (map_) map_->visibility_plane_batch({&world, 1}, {&normal, 1}, {&footprint, 1}, {&out, 1}, radius_of(pcf_side), closed);
+  return out;
+}
+void Map::visibility_filtered(std::span<const WorldPoint> points, std::span<const WorldPoint> normals,
+                              std::span<const float> footprints, std::span<float> out, uint32_t pcf_side,
+                              bool closed) const noexcept {
+  const size_t n = std::min({points.size(), normals.size(), footprints.size()});
+  if (n == 0) return;  // nothing to answer: the smallest span is empty
+  if (refuse_side(pcf_side, out, n)) return;
+  if (map_) map_->visibility_plane_batch(points, normals, footprints, out, radius_of(pcf_side), closed);
+  else std::fill_n(out.begin(), std::min(n, out.size()), 1.0f);
+}
 size_t Map::request_region(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, uint64_t h,
                            uint16_t priority) noexcept {
   return map_ ? map_->request_region(level, x0, y0, w, h, priority) : 0;

@@ -96,6 +96,13 @@ class RemoteMap final : public Evaluator {
   // footprints: the side of each receiver's footprint in world units (0: the finest level).
   void visibility_batch(std::span<const WorldPoint> points, std::span<const float> footprints, std::span<float> out,
                         uint32_t pcf_radius) const noexcept;
+  // Each tap against the receiver plane (remote_map_plane.cpp): Evaluator::pcf_on_plane,
+  // and Map::visibility_filtered with normals (the point, offset and plane of
+  // receiver_plane_at, render's filtered path; footprints may be empty: the finest level).
+  float pcf_on_plane(uint32_t level, uint64_t x, uint64_t y, uint32_t r, const ReceiverPlane& p) const noexcept override;
+  void visibility_plane_batch(std::span<const WorldPoint> points, std::span<const WorldPoint> normals,
+                              std::span<const float> footprints, std::span<float> out, uint32_t pcf_radius,
+                              bool closed) const noexcept;
 
   size_t request_region(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, uint64_t h,
                         uint16_t priority) noexcept;
@@ -364,6 +371,13 @@ class RemoteMap final : public Evaluator {
                                LookupScratch& sc) const noexcept;
   float pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver,
                    LookupScratch& sc) const noexcept;
+  // count_window_shared and pcf_shared with each texel against the receiver plane
+  // (PlaneTaps: a region or a tile's window counted at once where the plane lies on one
+  // side of it; tiles through WindowDepths::count_window_plane), remote_map_plane.cpp.
+  uint32_t count_window_plane_shared(uint32_t level, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by,
+                                     const ReceiverPlane& p, LookupScratch& sc) const noexcept;
+  float pcf_plane_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, const ReceiverPlane& p,
+                         LookupScratch& sc) const noexcept;
   // pcf_shared for every kernel but one counted from the columns kept ahead.
   float pcf_general(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver,
                     LookupScratch& sc) const noexcept;

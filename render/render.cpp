@@ -312,33 +312,7 @@ float map_visibility(const Evaluator& eval, const Receiver& r, const LightSpace&
 
 bool filtered_lookup(const Receiver& r, const LightSpace& light, uint32_t map_level, LightPoint& lp,
                      ReceiverPlane& plane) {
-  const double texel = light.texel_size(r.pos, map_level);
-  const Vec3d p = r.pos + r.normal * ((r.closed ? kClosedReceiverOffsetTexels : kOpenReceiverOffsetTexels) * texel);
-  lp = light.to_light(p);
-  if (!(lp.u >= 0 && lp.u < 1 && lp.v >= 0 && lp.v < 1)) return false;
-  const double side = std::ldexp(1.0, int(map_level));
-  // Two directions along the surface, one texel long, through the light's transform: the
-  // plane's depth change against its texel change, solved for d(depth)/dx and /dy.
-  const Vec3d n = r.normal;
-  const Vec3d t1 = normalize(cross(n, std::fabs(n.x) < 0.9 ? Vec3d{1, 0, 0} : Vec3d{0, 1, 0}));
-  const Vec3d t2 = cross(n, t1);
-  const LightPoint a = light.to_light(p + t1 * texel), b = light.to_light(p + t2 * texel);
-  const double ax = (a.u - lp.u) * side, ay = (a.v - lp.v) * side, ad = a.d - lp.d;
-  const double bx = (b.u - lp.u) * side, by = (b.v - lp.v) * side, bd = b.d - lp.d;
-  const double det = ax * by - bx * ay;
-  double gx = (ad * by - bd * ay) / det, gy = (ax * bd - bx * ad) / det;
-  // The clamp: kMaxReceiverSlope texels of depth along the light ray per texel across.
-  const Vec3d toward = light.parallel() ? -light.forward() : normalize(light.origin() - p);
-  const double cap = kMaxReceiverSlope * std::fabs(light.to_light(p + toward * texel).d - lp.d);
-  if (!std::isfinite(gx) || !std::isfinite(gy)) gx = gy = 0;
-  gx = std::clamp(gx, -cap, cap), gy = std::clamp(gy, -cap, cap);
-  plane.finest = map_level;
-  plane.fx = std::min(uint64_t(lp.u * side), uint64_t(side) - 1);
-  plane.fy = std::min(uint64_t(lp.v * side), uint64_t(side) - 1);
-  plane.gx = float(gx), plane.gy = float(gy);
-  const double fu = lp.u * side - double(plane.fx), fv = lp.v * side - double(plane.fy);
-  plane.corner = float(lp.d - double(plane.gx) * fu - double(plane.gy) * fv);
-  return true;
+  return receiver_plane_at(light, map_level, r.pos, r.normal, r.closed, lp, plane);
 }
 
 float map_visibility_filtered(const Evaluator& eval, const Receiver& r, const LightSpace& light, uint32_t pcf_radius,
@@ -645,66 +619,42 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
     // chunk is one client call of 1024 taps: the call's fixed costs (the shared lock, the
     // kept regions and tile paths starting afresh) spread over four times as many taps.
     constexpr size_t kChunk = 1024;
-    PcfQuery queries[2 * kChunk];
-    uint32_t index[kChunk];  // the receiver of each query (its first, with a blend)
-    float blend[kChunk], answers[2 * kChunk];  // trilinear weight (NaN: one level only)
+    PcfQuery queries[kChunk];
+    uint32_t index[kChunk];  // the receiver of each query
+    float answers[kChunk];
     for (size_t b0 = r.begin(); b0 < r.end(); b0 += kChunk) {
       const size_t b1 = std::min(r.end(), b0 + kChunk);
-      size_t nq = 0, ni = 0;
       if (sun_fast) {
         // A sun at the finest level: lookup_point, to_light and the texel (the same IEEE
         // doubles) for the whole chunk in packed arithmetic (sun_tap_queries); receivers
         // outside the map are lit.
-        nq = sun_tap_queries(light, L, o.pcf_radius, std::span<const Receiver>(fr.data() + b0, b1 - b0), queries,
+        const size_t nq = sun_tap_queries(light, L, o.pcf_radius, std::span<const Receiver>(fr.data() + b0, b1 - b0), queries,
                              index, o.tap_query_path);
         std::fill(fvis.begin() + ptrdiff_t(b0), fvis.begin() + ptrdiff_t(b1), 1.0f);
         eval.pcf_batch(std::span<const PcfQuery>(queries, nq), std::span<float>(answers, nq));
         for (size_t k = 0; k < nq; ++k) fvis[b0 + index[k]] = answers[k];
         continue;
       }
-      // Filtered: each tap against the receiver's plane (filtered_lookup). A batch asks
-      // every kernel at its greatest and least tap depths: all lit at the greatest or none
-      // at the least is the answer (lit ground, full shadow); the others are counted tap
-      // by tap (pcf_plane_taps).
-      ReceiverPlane planes[kChunk];
-      PcfQuery extremes[4 * kChunk];
-      float extreme_answers[4 * kChunk];
+      // Filtered: each tap against the receiver's plane (filtered_lookup), counted inside
+      // the encoding's shared traversal (Evaluator::pcf_on_plane).
       for (size_t i = b0; i < b1; ++i) {
         const Receiver& rc = fr[i];
         FilterLevels f{L, L, 0.0f};
         if (o.pixel_angle > 0) f = filter_levels(L, receiver_footprint_texels(rc, light, L, o.pixel_angle));
         LightPoint lp;
-        if (!filtered_lookup(rc, light, L, lp, planes[ni])) {
+        ReceiverPlane pl;
+        if (!filtered_lookup(rc, light, L, lp, pl)) {
           fvis[i] = 1;
           continue;
         }
-        const ReceiverPlane& pl = planes[ni];
-        float least = 0, greatest = 0;
         const auto tf = LightSpace::texel_of(f.fine, lp.u, lp.v);
-        pcf_plane_bounds(pl, f.fine, tf[0], tf[1], kr, least, greatest);
-        extremes[2 * nq] = {tf[0], tf[1], f.fine, kr, greatest};
-        extremes[2 * nq + 1] = {tf[0], tf[1], f.fine, kr, least};
-        queries[nq++] = {tf[0], tf[1], f.fine, kr, greatest};
-        blend[ni] = f.t == 0.0f ? std::numeric_limits<float>::quiet_NaN() : f.t;
-        index[ni++] = uint32_t(i);
-        if (f.t != 0.0f) {
-          const auto tc = LightSpace::texel_of(f.coarse, lp.u, lp.v);
-          pcf_plane_bounds(pl, f.coarse, tc[0], tc[1], kr, least, greatest);
-          extremes[2 * nq] = {tc[0], tc[1], f.coarse, kr, greatest};
-          extremes[2 * nq + 1] = {tc[0], tc[1], f.coarse, kr, least};
-          queries[nq++] = {tc[0], tc[1], f.coarse, kr, greatest};
+        const float a = eval.pcf_on_plane(f.fine, tf[0], tf[1], kr, pl);
+        if (f.t == 0.0f) {
+          fvis[i] = a;
+          continue;
         }
-      }
-      eval.pcf_batch(std::span<const PcfQuery>(extremes, 2 * nq), std::span<float>(extreme_answers, 2 * nq));
-      auto exact = [&](size_t q, size_t k) {
-        const PcfQuery& pq = queries[q];
-        if (extreme_answers[2 * q] == 1.0f) return 1.0f;
-        if (extreme_answers[2 * q + 1] == 0.0f) return 0.0f;
-        return pcf_plane_taps(eval, pq.level, pq.x, pq.y, kr, planes[k]);
-      };
-      for (size_t k = 0, q = 0; k < ni; ++k) {
-        const float a = exact(q++, k);
-        fvis[index[k]] = std::isnan(blend[k]) ? a : filter_blend(a, exact(q++, k), blend[k]);
+        const auto tc = LightSpace::texel_of(f.coarse, lp.u, lp.v);
+        fvis[i] = filter_blend(a, eval.pcf_on_plane(f.coarse, tc[0], tc[1], kr, pl), f.t);
       }
     }
   });

@@ -39,8 +39,7 @@
 
 namespace st {
 
-inline constexpr double kOpenReceiverOffsetTexels = 1.5;
-inline constexpr double kClosedReceiverOffsetTexels = 0.5;
+// kOpenReceiverOffsetTexels, kClosedReceiverOffsetTexels: tiles/core/receiver_plane.hpp.
 
 // What a primary ray found.
 struct Receiver {

@@ -146,6 +146,8 @@ def load(path):
         "shadowtile_map_visibility": (C.c_int, [C.c_void_p, P(Point), C.c_size_t, C.c_uint32, P(C.c_float)]),
         "shadowtile_map_visibility_filtered": (C.c_int, [C.c_void_p, P(Point), P(C.c_float), C.c_size_t,
                                                          C.c_uint32, P(C.c_float)]),
+        "shadowtile_map_visibility_filtered_normal": (C.c_int, [C.c_void_p, P(Point), P(Point), P(C.c_float),
+                                                                C.c_size_t, C.c_uint32, C.c_int, P(C.c_float)]),
         "shadowtile_map_transmittance": (C.c_int, [C.c_void_p, P(Point), P(C.c_float), C.c_size_t, P(Rgb)]),
         "shadowtile_map_request_region": (C.c_int, [C.c_void_p, C.c_uint32, C.c_uint64, C.c_uint64, C.c_uint64,
                                                     C.c_uint64, C.c_uint16, P(C.c_size_t)]),
@@ -457,6 +459,18 @@ def check_binding(lib_path, port, points, want, got_c):
         k2 = side_k * side_k
         if any(not (0 <= v <= 1) or abs(v * k2 - round(v * k2)) > 1e-4 for v in pcf):
             fail("PCF side %d: answers outside [0, 1] or not in %d-ths" % (side_k, k2))
+    # With normals (receiver plane): PCF fractions in side^2-ths; no normals is refused.
+    normals = (Point * n)(*([Point(0.0, 1.0, 0.0)] * n))
+    plane = (C.c_float * n)()
+    expect(lib.shadowtile_map_visibility_filtered_normal(m, pts, normals, footprints, n, 3, 0, plane), OK,
+           "visibility_filtered_normal", lib)
+    if any(not (0 <= v <= 1) or abs(v * 9 - round(v * 9)) > 1e-4 for v in plane):
+        fail("visibility_filtered_normal: answers outside [0, 1] or not in 9-ths")
+    expect(lib.shadowtile_map_visibility_filtered_normal(m, pts, None, footprints, n, 3, 0, plane), INVALID_ARGUMENT,
+           "visibility_filtered_normal without normals", lib)
+    if len(errors) != 1 or "normals is NULL" not in errors[0][1]:
+        fail("visibility_filtered_normal without normals: callback %s" % errors)
+    errors.clear()  # the error model's checks below start from no error
     rgb = (Rgb * n)()
     expect(lib.shadowtile_map_transmittance(m, pts, None, n, rgb), OK, "transmittance", lib)
     if any((t.r, t.g, t.b) != (1.0, 1.0, 1.0) for t in rgb):

@@ -9,6 +9,7 @@
 
 #include <cmath>
 #include <cstdint>
+#include <filesystem>
 #include <random>
 #include <string>
 
@@ -16,6 +17,7 @@
 #include "render/render.hpp"
 #include "scene/scene.hpp"
 #include "tiles/core/pack_evaluator.hpp"
+#include "tiles/core/camera.hpp"
 #include "tiles/core/receiver_plane.hpp"
 #include "tests/tiles/render_scenes.hpp"
 
@@ -111,6 +113,68 @@ TEST(RenderSlope, PlanePcfCountsEveryTapLikeTheTapByTapDefinition) {
     ASSERT_EQ(pcf_plane(eval, level, x, y, r, p), want) << "query " << k;
   }
   EXPECT_GT(partial, 100u);  // the tap-by-tap path was exercised, not only the shortcuts
+}
+
+// Evaluator::pcf_on_plane inside each encoding's shared traversal (a square of texels that
+// share a value counted at once when the plane over it lies on one side of the value, else
+// halved; PlaneTaps) equals the tap-by-tap count through depth() on a real open mesh's
+// tiles: MH, MMH, DAG-MH (plane tiles too) and VSDAG, receiver planes of the view's own
+// receivers (filtered_lookup), the same planes at zero slope, at the 4:1 cap and at random
+// slopes up to it, at the finest level and three coarser ones, every kernel side.
+TEST(RenderSlope, PcfOnPlaneInsideTheTraversalCountsLikeTapByTapOnRealTiles) {
+  const std::string file = "/usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb";
+  if (!std::filesystem::exists(file)) GTEST_SKIP() << "assimp-testmodels missing: run scripts/deps";
+  const Scene scene = load_scene(file);
+  const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), scene.bounds());
+  const SceneTracer tracer(scene, light);
+  const std::vector<Receiver> rec = tracer.primary(parse_camera("pos=400,300,400,target=0,0,0,fov=50"), 40, 24);
+  struct Variant {
+    Encoding e;
+    bool planes;
+  };
+  uint64_t partial = 0, asked = 0;
+  for (const Variant var : {Variant{Encoding::mh, false}, Variant{Encoding::mmh, true}, Variant{Encoding::dagmh, false},
+                            Variant{Encoding::dagmh, true}, Variant{Encoding::vsdag, false}}) {
+    MapBuildOptions o;
+    o.map_level = 7;
+    o.skip_level = 3;
+    o.tile_bytes = 1024;  // several tiles: kernels across tile borders too
+    o.encoding = var.e;
+    o.planes = var.planes;
+    const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/render_plane_tiles_" + to_string(var.e) +
+                             (var.planes ? "_planes" : "") + ".pack";
+    build_map(scene, light, o, path);
+    const PackEvaluator eval(std::shared_ptr<PackReader>(PackReader::open(path)), 4096);
+    const uint32_t L = eval.finest_level();
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
+    for (const Receiver& r : rec) {
+      if (!r.hit || r.n_dot_l <= 0) continue;
+      LightPoint lp;
+      ReceiverPlane real;
+      if (!filtered_lookup(r, light, L, lp, real)) continue;
+      // filtered_lookup's cap: kMaxReceiverSlope texels of depth along the light ray.
+      const double texel = light.texel_size(r.pos, L);
+      const float cap = float(kMaxReceiverSlope * std::fabs(light.to_light(r.pos - light.forward() * texel).d -
+                                                            light.to_light(r.pos).d));
+      ReceiverPlane flat = real, capped = real, random = real;
+      flat.gx = flat.gy = 0;
+      capped.gx = unit(rng) < 0 ? -cap : cap, capped.gy = unit(rng) < 0 ? -cap : cap;
+      random.gx = cap * unit(rng), random.gy = cap * unit(rng);
+      for (const ReceiverPlane& p : {real, flat, capped, random})
+        for (uint32_t up = 0; up < 4; ++up) {
+          const uint32_t level = L - up, r_side = 1 + 2 * uint32_t(rng() % 5);
+          const uint64_t x = p.fx >> up, y = p.fy >> up;
+          const float want = pcf_plane_by_taps(eval, level, x, y, r_side, p);
+          partial += want != 0.0f && want != 1.0f;
+          ++asked;
+          ASSERT_EQ(eval.pcf_on_plane(level, x, y, r_side, p), want)
+              << to_string(var.e) << (var.planes ? "+planes" : "") << " level " << level << " texel " << x << "," << y
+              << " r " << r_side << " slopes " << p.gx << "," << p.gy;
+        }
+    }
+  }
+  EXPECT_GT(partial, asked / 20) << "of " << asked;  // kernels that straddle the plane were counted
 }
 
 }  // namespace

@@ -12,6 +12,7 @@
 #include "tiles/core/dagmh_validate.hpp"
 #include "tiles/core/dagmh_view.hpp"
 #include "tiles/core/encoding.hpp"
+#include "tiles/core/receiver_plane.hpp"
 #include "tiles/core/tap_batch.hpp"
 
 namespace st {
@@ -221,6 +222,22 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths, public TapWa
   // §3.3's hierarchical PCF).
   uint32_t count_window(uint32_t level, uint64_t x0, uint64_t y0, uint32_t w, uint32_t h,
                         float receiver) const override {
+    return count_window_taps(level, x0, y0, w, h, FlatTaps{receiver});
+  }
+  uint32_t count_window_plane(uint32_t level, uint64_t x0, uint64_t y0, uint32_t w, uint32_t h,
+                              const ReceiverPlane& p) const override {
+    return count_window_taps(level, x0, y0, w, h, PlaneTaps{p, level});
+  }
+  // pcf's walks with the receiver plane (receiver_plane.hpp window_pcf_plane).
+  float pcf_on_plane(uint32_t level, uint64_t x, uint64_t y, uint32_t r, const ReceiverPlane& p) const override {
+    if (level > v_.finest_level) return pcf_plane_extremes(*this, level, x, y, r, p);
+    return window_pcf_plane(*this, level, x, y, r, p);
+  }
+
+ private:
+  template <class Taps>
+  uint32_t count_window_taps(uint32_t level, uint64_t x0, uint64_t y0, uint32_t w, uint32_t h,
+                             const Taps& taps) const {
     const uint64_t x1 = x0 + w - 1, y1 = y0 + h - 1;
     const uint64_t differ = (x0 ^ x1) | (y0 ^ y1);
     const uint32_t common = level - uint32_t(differ ? 64 - __builtin_clzll(differ) : 0);
@@ -232,15 +249,14 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths, public TapWa
         for (uint64_t cx = x0 >> cs; cx <= x1 >> cs; ++cx) {
           const uint64_t ax = std::max(x0, cx << cs), bx = std::min(x1, ((cx + 1) << cs) - 1);
           const uint64_t ay = std::max(y0, cy << cs), by = std::min(y1, ((cy + 1) << cs) - 1);
-          lit += count(v_.skip_entry(level, ax, ay), level, ax, ay, bx, by, receiver, values);
+          lit += count(v_.skip_entry(level, ax, ay), level, ax, ay, bx, by, taps, values);
         }
       return lit;
     }
     const dagmh::Cursor base = v_.descend(v_.start(common, level, x0, y0), common, level, x0, y0);
-    return count(base, level, x0, y0, x1, y1, receiver, values);
+    return count(base, level, x0, y0, x1, y1, taps, values);
   }
 
- private:
   // Taps of a window often share a value (a coarse node): each index decoded once.
   struct Values {
     uint32_t index[16];
@@ -309,26 +325,25 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths, public TapWa
     }
   }
 
-  // The lit texels of [ax, bx] x [ay, by] (texels lit: receiver <= value): fill's walk.
-  static uint32_t area_lit(bool lit, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by) {
-    return lit ? uint32_t((bx - ax + 1) * (by - ay + 1)) : 0u;
-  }
+  // The lit texels of [ax, bx] x [ay, by] (Taps: FlatTaps or PlaneTaps, receiver_plane.hpp):
+  // fill's walk.
+  template <class Taps>
   uint32_t count(const dagmh::Cursor& c, uint32_t level, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by,
-                 float receiver, Values& vs) const {
+                 const Taps& taps, Values& vs) const {
     const uint32_t tag = c.ref & dagmh::kRefTagMask;
     if (tag != dagmh::kRefInner || c.level >= level) {
       if (tag != dagmh::kRefInner && tag != dagmh::kRefTreelet)  // below a missing child
-        return area_lit(receiver <= value_of(c.last, vs), ax, ay, bx, by);
+        return taps.count(value_of(c.last, vs), ax, ay, bx, by);
       if (tag == dagmh::kRefInner) {  // an inner node of `level`: one texel
         uint32_t lit = 0;
         for (uint64_t x = ax; x <= bx; ++x)
-          for (uint64_t y = ay; y <= by; ++y) lit += receiver <= value_of(v_.finish(c, level, x, y), vs) ? 1u : 0u;
+          for (uint64_t y = ay; y <= by; ++y) lit += taps.lit(value_of(v_.finish(c, level, x, y), vs), x, y) ? 1u : 0u;
         return lit;
       }
       const uint8_t* t = v_.treelet_at(c.ref & dagmh::kRefIndexMask);
       const Treelet tr{c, st::load_le<uint64_t>(t), st::load_le<uint32_t>(t + 8),
                        std::min<uint32_t>(level - c.level, dagmh::kTreeletLevels - 1), level};
-      return count_treelet(tr, 0, 0, c.last, ax, ay, bx, by, receiver, vs);
+      return count_treelet(tr, 0, 0, c.last, ax, ay, bx, by, taps, vs);
     }
     const uint64_t half = uint64_t(1) << (level - c.level - 1);
     const QuadSplit split(ax, ay, bx, by, half);
@@ -336,22 +351,23 @@ class DagmhEvaluator final : public Evaluator, public WindowDepths, public TapWa
     for (uint32_t slot = 0; slot < 4; ++slot) {
       uint64_t cx0, cy0, cx1, cy1;
       if (!split.part(slot, cx0, cy0, cx1, cy1)) continue;
-      lit += count(v_.descend(c, c.level + 1, level, cx0, cy0), level, cx0, cy0, cx1, cy1, receiver, vs);
+      lit += count(v_.descend(c, c.level + 1, level, cx0, cy0), level, cx0, cy0, cx1, cy1, taps, vs);
     }
     return lit;
   }
+  template <class Taps>
   uint32_t count_treelet(const Treelet& tr, uint32_t n, uint32_t p, uint32_t index, uint64_t ax, uint64_t ay,
-                         uint64_t bx, uint64_t by, float receiver, Values& vs) const {
+                         uint64_t bx, uint64_t by, const Taps& taps, Values& vs) const {
     if (dagmh::treelet_bit(tr.low, tr.high, p)) index = tr.c.base + dagmh::treelet_rank(tr.low, tr.high, p);
     if (n == tr.depth || !dagmh::treelet_any(tr.low, tr.high, p + 1, p + dagmh::kTreeletSubtree[n]))
-      return area_lit(receiver <= value_of(index, vs), ax, ay, bx, by);
+      return taps.count(value_of(index, vs), ax, ay, bx, by);
     const uint64_t half = uint64_t(1) << (tr.level - tr.c.level - n - 1);
     const QuadSplit split(ax, ay, bx, by, half);
     uint32_t lit = 0;
     for (uint32_t slot = 0; slot < 4; ++slot) {
       uint64_t cx0, cy0, cx1, cy1;
       if (!split.part(slot, cx0, cy0, cx1, cy1)) continue;
-      lit += count_treelet(tr, n + 1, p + 1 + dagmh::kTreeletStride[n] * slot, index, cx0, cy0, cx1, cy1, receiver, vs);
+      lit += count_treelet(tr, n + 1, p + 1 + dagmh::kTreeletStride[n] * slot, index, cx0, cy0, cx1, cy1, taps, vs);
     }
     return lit;
   }

@@ -10,6 +10,8 @@
 
 namespace st {
 
+struct ReceiverPlane;  // tiles/core/receiver_plane.hpp
+
 // One lookup of a batch (Evaluator::pcf_batch): r = 1 is a single lit test.
 struct PcfQuery {
   uint64_t x = 0, y = 0;  // texel of `level`
@@ -46,6 +48,16 @@ class Evaluator {
   // does r*r independent lookups; encodings override it with traversal shared down to
   // the lowest common node (MH §3.3, Fig. 5).
   virtual float pcf(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver) const;
+
+  // pcf with each tap compared with the receiver's plane over the tap's own (clamped)
+  // texel instead of one receiver depth (receiver_plane.hpp: receiver_plane_depth(p, level,
+  // tap) <= value): exactly (lit taps) / (r * r) in float, the tap-by-tap count. `p` is in
+  // this evaluator's own levels (p.finest == finest_level()). The base implementation asks
+  // the kernel's extreme tap depths through pcf (all lit at the greatest: 1; none at the
+  // least: 0), else counts tap by tap; the tree encodings count inside their shared
+  // traversal, a square of texels that share a value counted at once when the plane over
+  // it lies on one side of the value (PlaneTaps).
+  virtual float pcf_on_plane(uint32_t level, uint64_t x, uint64_t y, uint32_t r, const ReceiverPlane& p) const;
 
   // depth(level, x, y) and the region of texels that share it (DepthRegion), for
   // level <= finest_level() and x, y < 2^level. The base implementation answers the texel

@@ -8,6 +8,7 @@
 #include "common/error.hpp"
 #include "tiles/core/interval.hpp"
 #include "tiles/core/mhq_tap_walk.hpp"
+#include "tiles/core/receiver_plane.hpp"
 #include "tiles/core/tap_batch.hpp"
 
 namespace st::mhq {
@@ -235,7 +236,20 @@ class TreeEvaluator final : public Evaluator, public WindowDepths, public TapWal
     const uint32_t common = level - uint32_t(std::bit_width((x0 ^ x1) | (y0 ^ y1)));
     Cursor base = root();
     descend(base, level, x0, y0, common);
-    return count(base, level, x0, y0, x1, y1, receiver);
+    return count(base, level, x0, y0, x1, y1, FlatTaps{receiver});
+  }
+  uint32_t count_window_plane(uint32_t level, uint64_t x0, uint64_t y0, uint32_t w, uint32_t h,
+                              const ReceiverPlane& p) const override {
+    level = std::min(level, kMaxLevel);
+    const uint64_t x1 = x0 + w - 1, y1 = y0 + h - 1;
+    const uint32_t common = level - uint32_t(std::bit_width((x0 ^ x1) | (y0 ^ y1)));
+    Cursor base = root();
+    descend(base, level, x0, y0, common);
+    return count(base, level, x0, y0, x1, y1, PlaneTaps{p, level});
+  }
+  // pcf's walks with the receiver plane (receiver_plane.hpp window_pcf_plane).
+  float pcf_on_plane(uint32_t level, uint64_t x, uint64_t y, uint32_t r, const ReceiverPlane& p) const override {
+    return window_pcf_plane(*this, level, x, y, r, p);
   }
 
  private:
@@ -336,11 +350,12 @@ class TreeEvaluator final : public Evaluator, public WindowDepths, public TapWal
     }
   }
 
-  // fill's walk, counting the lit texels of [ax, bx] x [ay, by] instead of writing them.
+  // fill's walk, counting the lit texels of [ax, bx] x [ay, by] instead of writing them
+  // (Taps: FlatTaps or PlaneTaps, receiver_plane.hpp).
+  template <class Taps>
   uint32_t count(const Cursor& c, uint32_t level, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by,
-                 float receiver) const {
-    if (c.missing || c.code == kCodeLeaf || c.level >= level)
-      return receiver <= value(c) ? uint32_t((bx - ax + 1) * (by - ay + 1)) : 0u;
+                 const Taps& taps) const {
+    if (c.missing || c.code == kCodeLeaf || c.level >= level) return taps.count(value(c), ax, ay, bx, by);
     const uint32_t bit = level - (c.level + 1);
     const uint32_t w = word(c.pos);
     const uint32_t mask = word_mask(w);
@@ -352,10 +367,10 @@ class TreeEvaluator final : public Evaluator, public WindowDepths, public TapWal
       if (!split.part(slot, cx0, cy0, cx1, cy1)) continue;
       const uint32_t code = child_code(mask, slot);
       if (!code) {  // depth() stops here: c's value answers the part
-        lit += receiver <= value(c) ? uint32_t((cx1 - cx0 + 1) * (cy1 - cy0 + 1)) : 0u;
+        lit += taps.count(value(c), cx0, cy0, cx1, cy1);
         continue;
       }
-      lit += count(child(c, w, slot, code), level, cx0, cy0, cx1, cy1, receiver);
+      lit += count(child(c, w, slot, code), level, cx0, cy0, cx1, cy1, taps);
     }
     return lit;
   }

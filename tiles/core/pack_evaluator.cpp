@@ -4,6 +4,7 @@
 
 #include "common/error.hpp"
 #include "tiles/core/page_table.hpp"
+#include "tiles/core/receiver_plane.hpp"
 #include "tiles/core/tap_batch.hpp"
 #include "tiles/core/tap_order.hpp"
 
@@ -177,6 +178,44 @@ void PackEvaluator::pcf_batch(std::span<const PcfQuery> queries, std::span<float
       k = e;
     }
   }
+}
+
+float PackEvaluator::pcf_on_plane(uint32_t level, uint64_t x, uint64_t y, uint32_t r, const ReceiverPlane& p) const {
+  r = std::clamp<uint32_t>(r, 1, kMaxPcf);
+  const uint64_t side = uint64_t(1) << level;
+  if (level > reader_->map_level() || x >= side || y >= side) return pcf_plane_by_taps(*this, level, x, y, r, p);
+  const uint64_t x0 = pcf_tap(x, 0, r, side), x1 = pcf_tap(x, r - 1, r, side);
+  const uint64_t y0 = pcf_tap(y, 0, r, side), y1 = pcf_tap(y, r - 1, r, side);
+  std::unique_lock lock(mu_);
+  const PageHit hit = walk_page_table(reader_->grid(), level, x0, y0, [&](uint64_t id, const GridEntry& e) {
+    return &slot_grid_[resident_slot(id, e, lock)];
+  });
+  if (hit.kind == PageHit::Kind::value && x1 - x0 == r - 1 && y1 - y0 == r - 1 &&
+      (x0 >> hit.region_shift) == (x1 >> hit.region_shift) && (y0 >> hit.region_shift) == (y1 >> hit.region_shift)) {
+    lock.unlock();  // one value answers the whole window (no tap clamped: each texel once)
+    return pcf_fraction(PlaneTaps{p, level}.count(hit.value, x0, y0, x1, y1), r);
+  }
+  // The kernel's window inside the tile of its first texel: the tile answers every texel
+  // of it (its square at this level), and clamps its taps where the map does (a map edge
+  // is a tile edge; the centre lies in the window).
+  const uint64_t tx0 = x0 - hit.tx, ty0 = y0 - hit.ty;
+  if (hit.kind != PageHit::Kind::tile || x1 - tx0 >= (uint64_t(1) << hit.rel) ||
+      y1 - ty0 >= (uint64_t(1) << hit.rel)) {
+    lock.unlock();
+    return pcf_plane_by_taps(*this, level, x, y, r, p);
+  }
+  const uint32_t slot = resident_slot(hit.tile, hit.entry, lock);
+  cache_.pin(slot);  // evaluated outside the lock: nothing may evict it meanwhile
+  lock.unlock();
+  float v;
+  try {
+    v = slot_eval_[slot]->pcf_on_plane(hit.rel, x - tx0, y - ty0, r, plane_in_tree(p, level, hit.rel, tx0, ty0));
+  } catch (...) {
+    give_back(lock, slot, &TileCache::unpin);
+    throw;
+  }
+  give_back(lock, slot, &TileCache::unpin);
+  return v;
 }
 
 }  // namespace st

@@ -39,6 +39,9 @@ class PackEvaluator : public Evaluator {
   // pin once, and walks the tile's tree from the last walk's path (TapWalks::tap_run) with
   // the last answer's region kept; kernels (r > 1) go to pcf() one by one.
   void pcf_batch(std::span<const PcfQuery> queries, std::span<float> out) const override;
+  // A kernel inside one tile: that tile's own pcf_on_plane (its shared walk, the plane in
+  // the tile's coordinates), one lock and pin; others tap by tap through depth().
+  float pcf_on_plane(uint32_t level, uint64_t x, uint64_t y, uint32_t r, const ReceiverPlane& p) const override;
 
   const PackReader& reader() const { return *reader_; }
   uint64_t tiles_opened() const;  // cache misses so far

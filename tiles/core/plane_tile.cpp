@@ -6,6 +6,7 @@
 #include "common/bytes.hpp"
 #include "common/error.hpp"
 #include "tiles/core/morton.hpp"
+#include "tiles/core/receiver_plane.hpp"
 #include "tiles/core/tap_batch.hpp"
 
 namespace st {
@@ -87,6 +88,34 @@ class PlaneTileEvaluator final : public Evaluator, public TapWalks {
         float d;
         if (!tap_plane(blocks, n, s, fx, fy, d)) d = inner_->depth(level, tx, ty);
         lit_taps += receiver <= d;
+      }
+    }
+    return float(lit_taps) / float(r * r);
+  }
+
+  // pcf's scheme with each tap against the receiver plane (receiver_plane.hpp): no block
+  // under the kernel, the inner tree's own pcf_on_plane (its shared walk).
+  float pcf_on_plane(uint32_t level, uint64_t x, uint64_t y, uint32_t r, const ReceiverPlane& p) const override {
+    r = std::clamp<uint32_t>(r, 1, kMaxPcf);
+    const uint64_t side = uint64_t(1) << level;
+    const uint64_t x0 = pcf_tap(x, 0, r, side), y0 = pcf_tap(y, 0, r, side);
+    const uint64_t x1 = pcf_tap(x, r - 1, r, side), y1 = pcf_tap(y, r - 1, r, side);
+    uint32_t blocks[kPcfBlocks];
+    const uint32_t n = blocks_in_rect(level, x0, y0, x1, y1, blocks);
+    if (n == 0) return inner_->pcf_on_plane(level, x, y, r, p);
+    if (n > kPcfBlocks) return pcf_plane_by_taps(*this, level, x, y, r, p);
+    const uint32_t s = v_.finest_level - level;
+    const uint64_t h = s ? uint64_t(1) << (s - 1) : 0;
+    uint32_t lit_taps = 0;
+    for (uint32_t j = 0; j < r; ++j) {
+      const uint64_t ty = pcf_tap(y, j, r, side);
+      const uint32_t fy = uint32_t((ty << s) + h);
+      for (uint32_t i = 0; i < r; ++i) {
+        const uint64_t tx = pcf_tap(x, i, r, side);
+        const uint32_t fx = uint32_t((tx << s) + h);
+        float d;
+        if (!tap_plane(blocks, n, s, fx, fy, d)) d = inner_->depth(level, tx, ty);
+        lit_taps += receiver_plane_depth(p, level, tx, ty) <= d;
       }
     }
     return float(lit_taps) / float(r * r);

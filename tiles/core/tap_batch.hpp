@@ -50,6 +50,12 @@ class WindowDepths {
   // PCF, DAG-MH 2021 §3.5). Same bounds as depth_window. No allocation.
   virtual uint32_t count_window(uint32_t level, uint64_t x0, uint64_t y0, uint32_t w, uint32_t h,
                                 float receiver) const = 0;
+  // count_window with each texel compared with the receiver plane `p` (in this tree's own
+  // levels: receiver_plane_depth(p, level, x, y) <= value): the same walk, a part of the
+  // window whose texels share a value counted at once when the plane's least and greatest
+  // depth over the part lie on one side of it, else split (PlaneTaps, receiver_plane.hpp).
+  virtual uint32_t count_window_plane(uint32_t level, uint64_t x0, uint64_t y0, uint32_t w, uint32_t h,
+                                      const ReceiverPlane& p) const = 0;
   // A hint that lookups in this tree follow soon: start bringing its bytes toward the
   // cache. The client calls it when a lookup enters the tile, before it collects the
   // tile's taps into a batch, so the tile's lines arrive while that happens instead of one

@@ -396,6 +396,20 @@ class SHADOWTILE_API Map {
   void visibility(std::span<const WorldPoint> points, std::span<float> out, uint32_t pcf_side = 1) const noexcept;
   void visibility_filtered(std::span<const WorldPoint> points, std::span<const float> footprints,
                            std::span<float> out, uint32_t pcf_side = 1) const noexcept;
+  // The same with the receiver's surface normal (unit length, facing the light; one far
+  // from unit length is normalized): receiver-plane depth bias, what `shadowtile render
+  // --filter` and the shaders' st_receiver_slope do. The lookup point is `world` moved
+  // along the normal by 1.5 finest texels (`closed`: 0.5, for a surface of a closed
+  // object), and each PCF tap compares the receiver's plane over its own texel (slopes
+  // from the normal through the light, at most 4 texels of depth per texel) with the
+  // stored value, so sloped ground keeps no acne and no rings at coarse levels. Bit for
+  // bit render's filtered answer for the same point, normal and footprint
+  // (tiles/core/receiver_plane.hpp). footprint <= 0: the finest level.
+  float visibility_filtered(const WorldPoint& world, const WorldPoint& normal, float footprint, uint32_t pcf_side = 1,
+                            bool closed = false) const noexcept;
+  void visibility_filtered(std::span<const WorldPoint> points, std::span<const WorldPoint> normals,
+                           std::span<const float> footprints, std::span<float> out, uint32_t pcf_side = 1,
+                           bool closed = false) const noexcept;
 
   // Partial occluders (semi-transparent surfaces, alpha-tested cards, volumes), held in the
   // pack's deep shadow map (Lokovic and Veach 2000) next to the opaque map: the light

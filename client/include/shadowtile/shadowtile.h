@@ -209,6 +209,12 @@ SHADOWTILE_API shadowtile_status shadowtile_map_visibility_filtered(const shadow
                                                                     const shadowtile_point* points,
                                                                     const float* footprints, size_t count,
                                                                     uint32_t pcf_side, float* out);
+/* The same with each receiver's surface normal (normals[i], unit length, facing the light):
+ * receiver-plane depth bias, bit for bit Map::visibility_filtered with normals (open
+ * surfaces when closed is 0, closed objects' surfaces when 1). */
+SHADOWTILE_API shadowtile_status shadowtile_map_visibility_filtered_normal(
+    const shadowtile_map* map, const shadowtile_point* points, const shadowtile_point* normals,
+    const float* footprints, size_t count, uint32_t pcf_side, int closed, float* out);
 /* Partial occluders (Map::transmittance): out[i] for points[i]; footprints NULL: unfiltered,
  * else filtered over footprints[i] world units (Map::transmittance_filtered). All 1 for a
  * map without a deep part. */
