@@ -197,29 +197,44 @@ bool st_treelet_any(uint w0, uint w1, uint w2, uint lo, uint hi) {
 // it: below a missing child every texel; at an inner node of `level` the texel alone; in a
 // treelet the shallowest node on the path at or below the one that answered whose subtree
 // holds no set bit besides its own (its deepest level the query reaches: the node alone).
-float st_dag_depth(uint base, uint level, uint x, uint y, out uint shift) {
+// A DAG-MH tile's header decoded (st_dag_open): what st_dag_depth_in reads per texel, so
+// that a PCF kernel's taps in one tile decode it once.
+struct StDagTile {
+  uint base, finest, skip_level, skip_words, chunk_words, mult_words;
+  StDagSpace sp;
+};
+
+StDagTile st_dag_open(uint base) {
   // Header version 3 (DAGMH.md): word 2 = finest_level | skip_level << 8 | flags << 16;
   // the sections follow from the counts (dagmh::sections_of).
+  StDagTile t;
+  t.base = base;
   const uint w2 = ST_POOL(base + 2u);
-  const uint finest = w2 & 0xFFu;
-  const uint skip_level = (w2 >> 8u) & 0xFFu;
-  const uint skip_words = base + 8u;
-  StDagSpace sp;
-  sp.nodes = skip_words + (skip_level == 0u ? 0u : 4u << (2u * skip_level));  // S = 0: no table
-  sp.treelets = sp.nodes + ST_POOL(base + 4u);
-  const uint chunk_words = sp.treelets + 3u * ST_POOL(base + 5u);
-  const uint mult_words = chunk_words + 5u * ((ST_POOL(base + 6u) + 31u) / 32u);
-  sp.d = 0u;
-  sp.t = 0u;
-  sp.dnodes = 0u;
-  sp.dtreelets = 0u;
+  t.finest = w2 & 0xFFu;
+  t.skip_level = (w2 >> 8u) & 0xFFu;
+  t.skip_words = base + 8u;
+  t.sp.nodes = t.skip_words + (t.skip_level == 0u ? 0u : 4u << (2u * t.skip_level));  // S = 0: no table
+  t.sp.treelets = t.sp.nodes + ST_POOL(base + 4u);
+  t.chunk_words = t.sp.treelets + 3u * ST_POOL(base + 5u);
+  t.mult_words = t.chunk_words + 5u * ((ST_POOL(base + 6u) + 31u) / 32u);
+  t.sp.d = 0u;
+  t.sp.t = 0u;
+  t.sp.dnodes = 0u;
+  t.sp.dtreelets = 0u;
   if (((w2 >> 16u) & 1u) != 0u) {  // flag dictionary: opened by the client against the dictionary GpuMap uploaded
     const uint dict = ST_PAGE(kPtDictionary);
-    sp.d = ST_PAGE(dict + kDictNodeWords);
-    sp.t = ST_PAGE(dict + kDictTreeletCount);
-    sp.dnodes = dict + kDictHeaderWords;
-    sp.dtreelets = sp.dnodes + sp.d;
+    t.sp.d = ST_PAGE(dict + kDictNodeWords);
+    t.sp.t = ST_PAGE(dict + kDictTreeletCount);
+    t.sp.dnodes = dict + kDictHeaderWords;
+    t.sp.dtreelets = t.sp.dnodes + t.sp.d;
   }
+  return t;
+}
+
+float st_dag_depth_in(StDagTile t, uint level, uint x, uint y, out uint shift) {
+  const uint base = t.base, finest = t.finest, skip_level = t.skip_level, skip_words = t.skip_words;
+  const uint chunk_words = t.chunk_words, mult_words = t.mult_words;
+  const StDagSpace sp = t.sp;
   shift = 0u;
   if (level > finest) {
     const uint sh = level - finest;
@@ -301,6 +316,9 @@ float st_dag_depth(uint base, uint level, uint x, uint y, out uint shift) {
     shift += level - c.level - m;
   }
   return st_dag_value(base, chunk_words, mult_words, index);
+}
+float st_dag_depth(uint base, uint level, uint x, uint y, out uint shift) {
+  return st_dag_depth_in(st_dag_open(base), level, x, y, shift);
 }
 float st_dag_depth(uint base, uint level, uint x, uint y) {
   uint shift;
@@ -649,6 +667,42 @@ float st_plane_depth(vec3 plane, uvec2 f, uint s, uint tx, uint ty) {
   return d;
 }
 
+// Counts the block of n x m taps from tap (i, j) whose texels answer `value` (st_pcf_plane):
+// its taps not in (done0, done1, done2) yet, all at once where the plane's greatest depth over
+// the block is lit, none where its least is not, else one by one; marks them done.
+void st_pcf_block(uint x, uint y, uint r, uint side, uint i, uint j, uint n, uint m, float value, vec3 plane,
+                  uvec2 f, uint up, inout uint lit, inout uint done0, inout uint done1, inout uint done2) {
+  const uint x0 = st_pcf_tap(x, i, r, side), x1 = st_pcf_tap(x, i + n - 1u, r, side);
+  const uint y0 = st_pcf_tap(y, j, r, side), y1 = st_pcf_tap(y, j + m - 1u, r, side);
+  const bool all = st_lit(st_plane_depth(plane, f, up, plane.y < 0.0 ? x0 : x1, plane.z < 0.0 ? y0 : y1), value);
+  const bool some = all || st_lit(st_plane_depth(plane, f, up, plane.y < 0.0 ? x1 : x0, plane.z < 0.0 ? y1 : y0), value);
+  for (uint jj = j; jj < j + m; ++jj) {
+    const uint lo = jj * r + i, hi = lo + n;
+    const uint b0 = st_bit_span(lo, hi, 0u) & ~done0, b1 = st_bit_span(lo, hi, 32u) & ~done1,
+               b2 = st_bit_span(lo, hi, 64u) & ~done2;
+    if (all) {
+      lit += uint(bitCount(b0) + bitCount(b1) + bitCount(b2));
+    } else if (some) {  // the block straddles the value: its new taps one by one
+      const uint yy = st_pcf_tap(y, jj, r, side);
+      for (uint ii = i; ii < i + n; ++ii) {
+        const uint bit = jj * r + ii;
+        const uint word = bit < 32u ? b0 : bit < 64u ? b1 : b2;
+        if (((word >> (bit & 31u)) & 1u) != 0u && st_lit(st_plane_depth(plane, f, up, st_pcf_tap(x, ii, r, side), yy), value))
+          ++lit;
+      }
+    }
+    done0 |= b0;
+    done1 |= b1;
+    done2 |= b2;
+  }
+}
+
+// The first tap (row-major index) of an r x r kernel not in the mask (w0, w1, w2); 96: none.
+uint st_pcf_next(uint w0, uint w1, uint w2) {
+  const int f0 = findLSB(~w0), f1 = findLSB(~w1), f2 = findLSB(~w2);
+  return f0 >= 0 ? uint(f0) : f1 >= 0 ? 32u + uint(f1) : f2 >= 0 ? 64u + uint(f2) : 96u;
+}
+
 // r x r PCF (evaluator.hpp: lit taps / (r * r) in float, taps clamped to the map), each tap
 // compared with the receiver plane's least depth over its texel (st_plane_depth: `finest`
 // the map's finest level, f the receiver's finest texel; zero slopes: one receiver depth,
@@ -663,50 +717,76 @@ float st_plane_depth(vec3 plane, uvec2 f, uint s, uint tx, uint ty) {
 // greatest at two opposite corner taps (float rounding is monotone): all lit at the
 // greatest, or none at the least, counts the block at once; else its new taps one by one.
 // A kernel inside one page-table value, leaf or missing child costs one walk. The count is
-// the per-tap count, so the answer is the CPU's bit for bit. The loop carries little
-// (walk, count, mask): llvmpipe keeps loop-carried state in memory, and a shared cursor
-// across taps was slower there.
+// the per-tap count, so the answer is the CPU's bit for bit.
+// Two loops: the first answers the taps of page-table values and of MH, MMH and DAG-MH tiles
+// (a DAG-MH tile's header decoded once per walk) and leaves the others (absent tiles, plane
+// and voxel tiles) for the second, which answers any tap (st_answer).
+// A device that runs every branch of a loop body under a lane mask (llvmpipe) pays for the
+// decoders no tap needs once per loop pass, not once per tap: the first loop's body is small.
 float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint finest, inout StProbe probe) {
   r = clamp(r, 1u, kMaxPcf);
   if (level > ST_PAGE(kPtMapLevel)) return 1.0;
-  const uint side = 1u << level, up = finest - level;
-  // taps counted so far: bit j * r + i of (done0, done1, done2); r * r <= 81
-  uint lit = 0u, done0 = 0u, done1 = 0u, done2 = 0u, k = 0u;
+  const uint side = 1u << level, up = finest - level, taps = r * r;
+  // taps counted so far: bit j * r + i of (done0, done1, done2); r * r <= 81. Left to the
+  // second loop: (later0, later1, later2).
+  uint lit = 0u, done0 = 0u, done1 = 0u, done2 = 0u, later0 = 0u, later1 = 0u, later2 = 0u;
+  const uint enc = ST_PAGE(kPtEncoding);
+  uint k = 0u;
   StWalk w = st_walk(level, st_pcf_tap(x, 0u, r, side), st_pcf_tap(y, 0u, r, side));
-  while (k < r * r) {
+  StDagTile t;  // w's tile (opened: its header decoded once per walk)
+  bool opened = false, lean = false, dag = false, mmh = false;  // an MH/MMH/DAG-MH tile; which
+  while (k < taps) {
+    const uint j = k / r, i = k - j * r;
+    const uint tx = st_pcf_tap(x, i, r, side), ty = st_pcf_tap(y, j, r, side);
+    if (!st_in_walk(w, level, tx, ty)) {
+      w = st_walk(level, tx, ty);
+      opened = false;
+    }
+    if (!opened && w.kind == 1u) {
+      const uint base = w.slot * ST_PAGE(kPtSlotWords);
+      const uint magic = ST_POOL(base);
+      mmh = enc == 1u || (enc == 2u && magic == 0x4D4D5453u);  // "STMM": a DAG-MH pack's MMH tile
+      dag = enc == 2u && !mmh;
+      lean = enc != 3u && magic != 0x4E505453u;  // not a voxel tile, not "STPN" (a plane tile)
+      if (dag) t = st_dag_open(base);
+      t.base = base;
+      opened = true;
+    }
+    if (w.kind == 2u || (w.kind == 1u && !lean)) {  // the second loop's: every tap of the kernel in w's square
+      const uint sw = level - w.l, n = st_pcf_run(x, i, r, side, sw), m = st_pcf_run(y, j, r, side, sw);
+      for (uint jj = j; jj < j + m; ++jj) {
+        const uint lo = jj * r + i, hi = lo + n;
+        later0 |= st_bit_span(lo, hi, 0u) & ~done0;
+        later1 |= st_bit_span(lo, hi, 32u) & ~done1;
+        later2 |= st_bit_span(lo, hi, 64u) & ~done2;
+      }
+    } else {
+      uint s = level - w.l;
+      float value = w.value;
+      if (w.kind == 1u) {
+        const uint rel = level - w.l, lx = tx - (w.ex << rel), ly = ty - (w.ey << rel);
+        value = dag ? st_dag_depth_in(t, rel, lx, ly, s) : st_mh_depth(t.base, rel, lx, ly, mmh, s);
+        s = min(s, rel);
+      }
+      st_pcf_block(x, y, r, side, i, j, st_pcf_run(x, i, r, side, s), st_pcf_run(y, j, r, side, s), value, plane, f,
+                   up, lit, done0, done1, done2);
+    }
+    k = st_pcf_next(done0 | later0, done1 | later1, done2 | later2);
+  }
+  // The rest: any tap (st_answer). An absent tile's taps go one by one: each is counted in
+  // the feedback.
+  k = st_pcf_next(~later0 | done0, ~later1 | done1, ~later2 | done2);
+  if (k < taps) w = st_walk(level, st_pcf_tap(x, k % r, r, side), st_pcf_tap(y, k / r, r, side));
+  while (k < taps) {
     const uint j = k / r, i = k - j * r;
     const uint tx = st_pcf_tap(x, i, r, side), ty = st_pcf_tap(y, j, r, side);
     if (!st_in_walk(w, level, tx, ty)) w = st_walk(level, tx, ty);  // else: the same walk
     uint s;
     const float value = st_answer(w, level, tx, ty, probe, s);
-    // An absent tile's taps go one by one: each is counted in the feedback.
     const uint n = w.kind == 2u ? 1u : st_pcf_run(x, i, r, side, s);
     const uint m = w.kind == 2u ? 1u : st_pcf_run(y, j, r, side, s);
-    const uint x0 = tx, x1 = st_pcf_tap(x, i + n - 1u, r, side), y0 = ty, y1 = st_pcf_tap(y, j + m - 1u, r, side);
-    const bool all = st_lit(st_plane_depth(plane, f, up, plane.y < 0.0 ? x0 : x1, plane.z < 0.0 ? y0 : y1), value);
-    const bool some = all || st_lit(st_plane_depth(plane, f, up, plane.y < 0.0 ? x1 : x0, plane.z < 0.0 ? y1 : y0), value);
-    for (uint jj = j; jj < j + m; ++jj) {
-      const uint lo = jj * r + i, hi = lo + n;
-      const uint b0 = st_bit_span(lo, hi, 0u) & ~done0, b1 = st_bit_span(lo, hi, 32u) & ~done1,
-                 b2 = st_bit_span(lo, hi, 64u) & ~done2;
-      if (all) {
-        lit += uint(bitCount(b0) + bitCount(b1) + bitCount(b2));
-      } else if (some) {  // the block straddles the value: its new taps one by one
-        const uint yy = st_pcf_tap(y, jj, r, side);
-        for (uint ii = i; ii < i + n; ++ii) {
-          const uint bit = jj * r + ii;
-          const uint word = bit < 32u ? b0 : bit < 64u ? b1 : b2;
-          if (((word >> (bit & 31u)) & 1u) != 0u &&
-              st_lit(st_plane_depth(plane, f, up, st_pcf_tap(x, ii, r, side), yy), value))
-            ++lit;
-        }
-      }
-      done0 |= b0;
-      done1 |= b1;
-      done2 |= b2;
-    }
-    const int f0 = findLSB(~done0), f1 = findLSB(~done1), f2 = findLSB(~done2);
-    k = f0 >= 0 ? uint(f0) : f1 >= 0 ? 32u + uint(f1) : f2 >= 0 ? 64u + uint(f2) : 96u;
+    st_pcf_block(x, y, r, side, i, j, n, m, value, plane, f, up, lit, done0, done1, done2);
+    k = st_pcf_next(~later0 | done0, ~later1 | done1, ~later2 | done2);
   }
   return uintBitsToFloat(ST_PAGE(ST_PAGE(kPtPcfTable) + (r - 1u) * kPcfTableStride + lit));
 }
