@@ -98,9 +98,24 @@ float StackMap::visibility(const Vec3d& p, double time, bool* exact) const {
       v[0] = t[0].octree->depth_along(path, c[0].lx, c[0].ly, c[0].lw);
       v[1] = t[0].octree->depth_along(path, c[1].lx, c[1].ly, c[1].lw);
     } else {
-      const uint64_t x[2] = {c[0].lx, c[1].lx}, y[2] = {c[0].ly, c[1].ly};
-      const uint32_t w[2] = {c[0].lw, c[1].lw};
-      slice_depths(*t[0].slices, 2, x, y, w, v);
+      // Per-slice tiles: a slice whose bounds decide the receiver needs no walk (the
+      // answer's side of d stands in for the depth: d <= lo gives lit as the walk would,
+      // d > hi unlit); the rest in one lockstep call.
+      uint64_t x[2], y[2];
+      uint32_t w[2], at[2], count = 0;
+      for (uint32_t i = 0; i < 2; ++i) {
+        const SliceTiles::Bounds b = t[0].slices->bounds(c[i].lw);
+        if (run.d[i] <= b.lo) {
+          v[i] = b.lo;
+        } else if (run.d[i] > b.hi) {
+          v[i] = b.hi;
+        } else {
+          x[count] = c[i].lx, y[count] = c[i].ly, w[count] = c[i].lw, at[count++] = i;
+        }
+      }
+      float got[2];
+      if (count) slice_depths(*t[0].slices, count, x, y, w, got);
+      for (uint32_t k = 0; k < count; ++k) v[at[k]] = got[k];
     }
   } else {
     for (uint32_t i = 0; i < 2; ++i)
@@ -151,20 +166,33 @@ float StackMap::soft_visibility(const Vec3d& p, bool* exact) const {
 uint32_t StackMap::slice_run(const SliceTiles& tile, const CellTexel& first, const SampleTexels::Run& run, uint32_t w0,
                              uint32_t i, uint32_t m, uint32_t& lit) const {
   // Samples i.. of the run while their texels stay in first's cell (a tiled one: the same
-  // entry, so the same tile), their depths read in lockstep walks (slice_walks.hpp).
+  // entry, so the same tile). A sample whose receiver depth lies outside its slice's bounds
+  // (SliceTiles::bounds: every answer of the slice within [lo, hi]) is decided there,
+  // exactly as its walk would (d <= lo <= v, d > hi >= v); the others' depths are read in
+  // lockstep walks (slice_walks.hpp).
   uint64_t x[SampleTexels::kRun], y[SampleTexels::kRun];
-  uint32_t w[SampleTexels::kRun];
+  uint32_t w[SampleTexels::kRun], at[SampleTexels::kRun];
   float v[SampleTexels::kRun];
   uint32_t count = 0, j = i;
-  x[0] = first.lx, y[0] = first.ly, w[0] = first.lw;
-  for (++count, ++j; j < m; ++j, ++count) {
+  auto add = [&](uint64_t lx, uint64_t ly, uint32_t lw, uint32_t sample) {
+    const SliceTiles::Bounds b = tile.bounds(lw);
+    const float d = run.d[sample];
+    if (d <= b.lo) {
+      ++lit;
+    } else if (!(d > b.hi)) {
+      x[count] = lx, y[count] = ly, w[count] = lw, at[count] = sample;
+      ++count;
+    }
+  };
+  add(first.lx, first.ly, first.lw, i);
+  for (++j; j < m; ++j) {
     const CellTexel c = cell_texel(run.x[j], run.y[j], w0 + j);
     if (!c.tiled || c.cell != first.cell) break;
-    x[count] = c.lx, y[count] = c.ly, w[count] = c.lw;
+    add(c.lx, c.ly, c.lw, j);
   }
   static_assert(SampleTexels::kRun <= kMaxSliceWalks);
-  slice_depths(tile, count, x, y, w, v);
-  for (uint32_t k = 0; k < count; ++k) lit += run.d[i + k] <= v[k];
+  if (count) slice_depths(tile, count, x, y, w, v);
+  for (uint32_t k = 0; k < count; ++k) lit += run.d[at[k]] <= v[k];
   return j;
 }
 
