@@ -657,6 +657,43 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
     if (map.visibility(pts[i], times[i]) != time_by_definition(pts[i], times[i]))
       throw st::Error("bench: the pack's time-interpolated lookup differs from its definition");
   g_sink = acc;
+  // Where the soft lookups' samples go: the cell forms they fall in, how many a per-slice
+  // cell's bounds decide without a walk (SliceTiles::bounds), how many a per-slice cell
+  // walks, and how many samples share one per-slice cell in a row (a lockstep call's size).
+  size_t mix_outside = 0, mix_constant = 0, mix_absent = 0, mix_octree = 0, mix_slices = 0, mix_bounded = 0,
+         mix_runs = 0, mix_const_slice = 0;
+  {
+    const st::moct::Geometry& gg = cut.grid.geo;
+    const uint32_t KK = cut.grid.skip_level, sx = gg.n - gg.xy_bits(KK), sw = gg.k - gg.w_bits(KK);
+    for (size_t i = 0; i < ms; ++i) {
+      uint64_t prev = ~uint64_t(0);
+      for (uint32_t w = 0; w < n; ++w) {
+        uint64_t x = 0, y = 0;
+        float r = 0;
+        map.texel(pts[i], w, x, y, r);
+        if ((x >> gg.n) || (y >> gg.n)) { ++mix_outside, prev = ~uint64_t(0); continue; }
+        const uint64_t cell = cut.grid.index(KK, x >> sx, y >> sx, uint64_t(w) >> sw);
+        const st::StackEntry& e = cut.grid.entries[cell];
+        if (e.kind == 0) { ++mix_constant, prev = ~uint64_t(0); continue; }
+        auto it = std::lower_bound(cells.begin(), cells.end(), cell);
+        if (it == cells.end() || *it != cell) { ++mix_absent, prev = ~uint64_t(0); continue; }
+        const st::StackTileRef t = trees[size_t(it - cells.begin())].ref();
+        if (t.octree) { ++mix_octree, prev = ~uint64_t(0); continue; }
+        ++mix_slices;
+        if (cell != prev) ++mix_runs;
+        prev = cell;
+        const uint32_t lw = w & ((1u << sw) - 1);
+        const st::SliceTiles::Bounds b = t.slices->bounds(lw);
+        mix_const_slice += t.slices->is_constant(lw);
+        mix_bounded += r <= b.lo || r > b.hi;
+      }
+    }
+  }
+  const double all_samples = double(ms) * n;
+  std::printf("soft samples: outside %.3f, constant cells %.3f, octree cells %.3f, per-slice cells %.3f (constant slices "
+              "%.3f, decided by bounds %.3f of all samples; %.1f samples per per-slice run)\n",
+              mix_outside / all_samples, mix_constant / all_samples, mix_octree / all_samples, mix_slices / all_samples,
+              mix_const_slice / all_samples, mix_bounded / all_samples, mix_runs ? double(mix_slices) / double(mix_runs) : 0.0);
   const double rss_end = peak_rss_mib();
   const double raw = double(side * side) * n * 4;
   std::printf("slices %u, octree levels %u (xy %u, w %u), skip level %u, block level %u (%llu blocks), bounds by %s\n", n,
@@ -716,6 +753,11 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
           {"ns_pack_soft", ns_soft},
           {"ns_pack_soft_separate", ns_soft_sep},
           {"ns_pack_soft_batched", ns_batch},
+          {"soft_share_octree_cells", mix_octree / all_samples},
+          {"soft_share_slice_cells", mix_slices / all_samples},
+          {"soft_share_constant_cells", mix_constant / all_samples},
+          {"soft_share_decided_by_slice_bounds", mix_bounded / all_samples},
+          {"soft_samples_per_slice_run", mix_runs ? double(mix_slices) / double(mix_runs) : 0.0},
           {"ns_soft_2d", ns_soft2d},
           {"peak_rss_mib_trace", rss_trace},
           {"peak_rss_mib_build", rss_build},

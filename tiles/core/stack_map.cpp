@@ -98,9 +98,24 @@ float StackMap::visibility(const Vec3d& p, double time, bool* exact) const {
       v[0] = t[0].octree->depth_along(path, c[0].lx, c[0].ly, c[0].lw);
       v[1] = t[0].octree->depth_along(path, c[1].lx, c[1].ly, c[1].lw);
     } else {
-      const uint64_t x[2] = {c[0].lx, c[1].lx}, y[2] = {c[0].ly, c[1].ly};
-      const uint32_t w[2] = {c[0].lw, c[1].lw};
-      slice_depths(*t[0].slices, 2, x, y, w, v);
+      // Per-slice tiles: a slice whose bounds decide the receiver needs no walk (the
+      // answer's side of d stands in for the depth: d <= lo gives lit as the walk would,
+      // d > hi unlit); the rest in one lockstep call.
+      uint64_t x[2], y[2];
+      uint32_t w[2], at[2], count = 0;
+      for (uint32_t i = 0; i < 2; ++i) {
+        const SliceTiles::Bounds b = t[0].slices->bounds(c[i].lw);
+        if (run.d[i] <= b.lo) {
+          v[i] = b.lo;
+        } else if (run.d[i] > b.hi) {
+          v[i] = b.hi;
+        } else {
+          x[count] = c[i].lx, y[count] = c[i].ly, w[count] = c[i].lw, at[count++] = i;
+        }
+      }
+      float got[2];
+      if (count) slice_depths(*t[0].slices, count, x, y, w, got);
+      for (uint32_t k = 0; k < count; ++k) v[at[k]] = got[k];
     }
   } else {
     for (uint32_t i = 0; i < 2; ++i)
@@ -115,75 +130,94 @@ float StackMap::visibility(const Vec3d& p, double time, bool* exact) const {
 
 float StackMap::soft_visibility(const Vec3d& p, bool* exact) const {
   // depth(x, y, w, n) per sample, the texels a run of samples at a time (SampleTexels:
-  // lit()'s transform bit for bit), but consecutive samples whose texels fall in the same
-  // cell share one tile walk (MhOctree::depth_along: each starts from the deepest node its
-  // path shares with the previous one) and one tile fetch.
+  // lit()'s transform bit for bit). Per run, settle_run answers every sample that needs no
+  // octree walk (per-slice cells in lockstep across their tiles); the octree samples then
+  // walk in order, consecutive ones in the same cell sharing the walk
+  // (MhOctree::depth_along: each starts from the deepest node its path shares with the
+  // previous one). The lit count is a sum of per-sample tests, so the order is free.
   MhOctree::Path path;
   SampleTexels::Run run;
+  const MhOctree* oct[SampleTexels::kRun];
   uint64_t path_cell = ~uint64_t(0);
-  StackTileRef tile;
   uint32_t lit_samples = 0;
   for (uint32_t w0 = 0; w0 < grid_.slices; w0 += SampleTexels::kRun) {
     const uint32_t m = std::min(SampleTexels::kRun, grid_.slices - w0);
     texels_.run(p, w0, m, run);
-    for (uint32_t i = 0; i < m;) {
-      const uint32_t w = w0 + i;
-      const CellTexel c = cell_texel(run.x[i], run.y[i], w);
-      float v = c.value;
-      if (c.tiled) {
-        if (c.cell != path_cell) path_cell = c.cell, tile = tile_(c.cell), path.valid = false;
-        if (tile.octree) {
-          v = tile.octree->depth_along(path, c.lx, c.ly, c.lw);
-        } else if (tile.slices) {  // per-slice tiles: this run's samples in the cell, in lockstep
-          i = slice_run(*tile.slices, c, run, w0, i, m, lit_samples);
-          continue;
-        } else if (exact) {
-          *exact = false;
-        }
-      }
-      lit_samples += run.d[i] <= v;
-      ++i;
+    lit_samples += settle_run(run, w0, m, oct, exact);
+    for (uint32_t i = 0; i < m; ++i) {
+      if (!oct[i]) continue;
+      const CellTexel c = cell_texel(run.x[i], run.y[i], w0 + i);
+      if (c.cell != path_cell) path_cell = c.cell, path.valid = false;
+      lit_samples += run.d[i] <= oct[i]->depth_along(path, c.lx, c.ly, c.lw);
     }
   }
   return float(lit_samples) / float(grid_.slices);
 }
 
-uint32_t StackMap::slice_run(const SliceTiles& tile, const CellTexel& first, const SampleTexels::Run& run, uint32_t w0,
-                             uint32_t i, uint32_t m, uint32_t& lit) const {
-  // Samples i.. of the run while their texels stay in first's cell (a tiled one: the same
-  // entry, so the same tile), their depths read in lockstep walks (slice_walks.hpp).
-  uint64_t x[SampleTexels::kRun], y[SampleTexels::kRun];
-  uint32_t w[SampleTexels::kRun];
-  float v[SampleTexels::kRun];
-  uint32_t count = 0, j = i;
-  x[0] = first.lx, y[0] = first.ly, w[0] = first.lw;
-  for (++count, ++j; j < m; ++j, ++count) {
-    const CellTexel c = cell_texel(run.x[j], run.y[j], w0 + j);
-    if (!c.tiled || c.cell != first.cell) break;
-    x[count] = c.lx, y[count] = c.ly, w[count] = c.lw;
-  }
+uint32_t StackMap::settle_run(const SampleTexels::Run& run, uint32_t w0, uint32_t m, const MhOctree** oct,
+                              bool* exact) const {
+  // Every sample of the run but those in octree cells (oct[i] = the octree, else nullptr):
+  // outside the slice or in a constant cell its entry's value, in an absent tile its
+  // entry's value (exact cleared), in a per-slice cell its slice's bounds (SliceTiles::
+  // bounds: every answer of the slice within [lo, hi], so d <= lo is lit and d > hi
+  // shadowed exactly as the walk would say) or else its walk. A day's sun moves a raised
+  // receiver's texel across cells from one sample to the next (2CylinderEngine.glb at
+  // 1024^2 x 64: 1.7 samples a cell), so the walks are gathered over the whole run, each
+  // in its own tile, and run in lockstep (slice_walks.hpp): their misses overlap.
   static_assert(SampleTexels::kRun <= kMaxSliceWalks);
-  slice_depths(tile, count, x, y, w, v);
-  for (uint32_t k = 0; k < count; ++k) lit += run.d[i + k] <= v[k];
-  return j;
+  const SliceTiles* tiles[SampleTexels::kRun];
+  uint64_t x[SampleTexels::kRun], y[SampleTexels::kRun];
+  uint32_t w[SampleTexels::kRun], at[SampleTexels::kRun];
+  float v[SampleTexels::kRun];
+  uint32_t lit = 0, count = 0;
+  uint64_t last_cell = ~uint64_t(0);
+  StackTileRef last;
+  for (uint32_t i = 0; i < m; ++i) {
+    oct[i] = nullptr;
+    const CellTexel c = cell_texel(run.x[i], run.y[i], w0 + i);
+    if (!c.tiled) {
+      lit += run.d[i] <= c.value;
+      continue;
+    }
+    if (c.cell != last_cell) last_cell = c.cell, last = tile_(c.cell);
+    if (last.octree) {
+      oct[i] = last.octree;
+    } else if (!last.slices) {
+      if (exact) *exact = false;
+      lit += run.d[i] <= c.value;
+    } else {
+      const SliceTiles::Bounds b = last.slices->bounds(c.lw);
+      const float d = run.d[i];
+      if (d <= b.lo) {
+        ++lit;
+      } else if (!(d > b.hi)) {
+        tiles[count] = last.slices, x[count] = c.lx, y[count] = c.ly, w[count] = c.lw, at[count] = i;
+        ++count;
+      }
+    }
+  }
+  if (count) slice_depths(tiles, count, x, y, w, v);
+  for (uint32_t k = 0; k < count; ++k) lit += run.d[at[k]] <= v[k];
+  return lit;
 }
 
 void StackMap::soft_visibility(std::span<const Vec3d> points, std::span<float> out, bool* exact) const {
   // soft_visibility(p) above as a resumable job per point (walk_interleave.hpp): the same
-  // texels, cells, tile fetches and shared walks in the same order, so the same answers.
+  // texels, runs settled the same way and octree walks in the same order, so the same
+  // answers; a lane yields where its octree walk steps onto a new cache line.
   const uint32_t slices = grid_.slices;
   struct Lane {
     MhOctree::Path path;
     MhOctree::Walk walk;
     SampleTexels::Run run;  // samples w - w % kRun onward
-    StackTileRef tile;
+    const MhOctree* oct[SampleTexels::kRun];  // per sample of the run: its octree, or settled
     uint64_t path_cell = 0;
     size_t i = 0;
     uint32_t w = 0, lit = 0;
     bool walking = false;
   };
   auto start = [&](Lane& ln, size_t i) {
-    ln.path_cell = ~uint64_t(0), ln.tile = StackTileRef();
+    ln.path_cell = ~uint64_t(0);
     ln.i = i, ln.w = 0, ln.lit = 0, ln.walking = false;
   };
   auto run = [&](Lane& ln) {
@@ -194,7 +228,7 @@ void StackMap::soft_visibility(std::span<const Vec3d> points, std::span<float> o
     MhOctree::Walk k = ln.walk;
     for (;;) {
       if (walking) {
-        const MhOctree& tile = *ln.tile.octree;
+        const MhOctree& tile = *ln.oct[w % SampleTexels::kRun];
         if (step_until_new_line(tile, path, k)) {
           ln.w = w, ln.lit = lit, ln.walking = true, ln.walk = k;
           return true;
@@ -208,24 +242,19 @@ void StackMap::soft_visibility(std::span<const Vec3d> points, std::span<float> o
         return false;
       }
       const uint32_t j = w % SampleTexels::kRun;
-      if (j == 0) texels_.run(points[ln.i], w, std::min(SampleTexels::kRun, slices - w), ln.run);
-      const CellTexel c = cell_texel(ln.run.x[j], ln.run.y[j], w);
-      if (c.tiled) {
-        if (c.cell != ln.path_cell) ln.path_cell = c.cell, ln.tile = tile_(c.cell), path.valid = false;
-        if (ln.tile.octree) {
-          k = ln.tile.octree->along_begin(path, c.lx, c.ly, c.lw);
-          walking = true;
-          continue;
-        }
-        if (ln.tile.slices) {  // per-slice tiles: the run's samples in the cell, in lockstep, at once
-          const uint32_t w0 = w - j;
-          w = w0 + slice_run(*ln.tile.slices, c, ln.run, w0, j, std::min(SampleTexels::kRun, slices - w0), lit);
-          continue;
-        }
-        if (exact) *exact = false;
+      if (j == 0) {
+        const uint32_t m = std::min(SampleTexels::kRun, slices - w);
+        texels_.run(points[ln.i], w, m, ln.run);
+        lit += settle_run(ln.run, w, m, ln.oct, exact);
       }
-      lit += ln.run.d[j] <= c.value;
-      ++w;
+      if (!ln.oct[j]) {
+        ++w;
+        continue;
+      }
+      const CellTexel c = cell_texel(ln.run.x[j], ln.run.y[j], w);
+      if (c.cell != ln.path_cell) ln.path_cell = c.cell, path.valid = false;
+      k = ln.oct[j]->along_begin(path, c.lx, c.ly, c.lw);
+      walking = true;
     }
   };
   run_interleaved<Lane>(std::min(points.size(), out.size()), start, run);

@@ -76,11 +76,11 @@ class StackMap {
     uint32_t lw;
   };
   CellTexel cell_texel(uint64_t x, uint64_t y, uint32_t w) const;
-  // The soft lookups' samples i.. (< m) of `run` (samples w0 + i..) while they stay in
-  // `first`'s cell (per-slice `tile`), read in lockstep; adds their lit tests to `lit` and
-  // returns the index past them.
-  uint32_t slice_run(const SliceTiles& tile, const CellTexel& first, const SampleTexels::Run& run, uint32_t w0,
-                     uint32_t i, uint32_t m, uint32_t& lit) const;
+  // The soft lookups' run of samples w0 .. w0 + m - 1: adds nothing for samples in octree
+  // cells (oct[i] = that octree; they are walked by the caller) and returns how many of the
+  // others are lit (oct[i] = nullptr): entry values, absent tiles (`exact` cleared),
+  // per-slice cells by their bounds or walks in lockstep across tiles (slice_walks.hpp).
+  uint32_t settle_run(const SampleTexels::Run& run, uint32_t w0, uint32_t m, const MhOctree** oct, bool* exact) const;
 
   const StackGrid& grid_;
   TileSource tile_;

@@ -1,7 +1,9 @@
 #include "tiles/core/stack_slices.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <string>
 
 #include "common/error.hpp"
@@ -47,6 +49,9 @@ SliceTiles SliceTiles::open(std::span<const uint8_t> b) {
   t.byte_size_ = b.size();
   t.slot_.assign(count, -1);
   t.value_.assign(count, 0.0f);
+  constexpr float kUnknown = std::numeric_limits<float>::quiet_NaN();  // no receiver compares against NaN
+  t.bounds_.assign(count, {kUnknown, kUnknown});
+  std::vector<uint64_t> first_slice;  // per buffer: the first slice that names it
   std::vector<uint64_t> starts, sizes;  // buffers in order of first use
   uint64_t next = first;         // where the next new buffer must start
   for (uint64_t w = 0; w < count; ++w) {
@@ -57,6 +62,7 @@ SliceTiles SliceTiles::open(std::span<const uint8_t> b) {
       std::memcpy(&v, &word, 4);
       if (!std::isfinite(v)) bad("entry " + std::to_string(w), at + 4, "constant not finite");
       t.value_[w] = v;
+      t.bounds_[w] = {v, v};
       continue;
     }
     size_t s = 0;
@@ -64,6 +70,7 @@ SliceTiles SliceTiles::open(std::span<const uint8_t> b) {
     if (s < starts.size()) {  // a buffer an earlier slice named: the same size
       if (word != sizes[s]) bad("entry " + std::to_string(w), at + 4, "size differs from the earlier slice's of that buffer");
       t.slot_[w] = int32_t(s);
+      t.bounds_[w] = t.bounds_[first_slice[s]];
       continue;
     }
     if (off != next) bad("entry " + std::to_string(w), at, "offset " + std::to_string(off) + ", the next buffer starts at " + std::to_string(next));
@@ -87,6 +94,18 @@ SliceTiles SliceTiles::open(std::span<const uint8_t> b) {
     const dagmh::View* view = dagmh_view(*ev);
     t.views_.push_back(view ? *view : dagmh::View{});
     t.has_view_.push_back(view != nullptr);
+    if (view && view->value_count > 0) {  // every answer is one of the stored values (validated indices)
+      float lo = view->value(0), hi = lo;
+      bool nan = std::isnan(lo);
+      for (uint32_t i = 1; i < view->value_count; ++i) {
+        const float v = view->value(i);
+        nan = nan || std::isnan(v);
+        lo = std::min(lo, v);
+        hi = std::max(hi, v);
+      }
+      if (!nan) t.bounds_[w] = {lo, hi};
+    }
+    first_slice.push_back(w);
     t.evals_.push_back(std::move(ev));
     starts.push_back(off);
     sizes.push_back(word);

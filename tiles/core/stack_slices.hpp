@@ -73,6 +73,16 @@ class SliceTiles {
     const size_t s = size_t(slot_[w]);
     return has_view_[s] ? &views_[s] : nullptr;
   }
+  // Bounds of slice w's answers, found at open: every depth(x, y, w, level) of any texel
+  // and level lies in [lo, hi] (a constant: its value twice; a DAG-MH tile: the least and
+  // greatest of its stored values, every answer being one of them). Unknown (an MMH tile,
+  // not searched; a NaN value): lo = hi = NaN, which no receiver's test passes. A receiver
+  // at depth d <= lo is lit in the whole slice square and one at d > hi shadowed, without a
+  // walk (the soft and time lookups' early-out, stack_map.cpp).
+  struct Bounds {
+    float lo, hi;
+  };
+  Bounds bounds(uint32_t w) const { return bounds_[w]; }
 
  private:
   uint32_t xy_level_ = 0, w_level_ = 0;
@@ -82,6 +92,7 @@ class SliceTiles {
   std::vector<std::shared_ptr<const Evaluator>> evals_;
   std::vector<dagmh::View> views_;  // per evaluator: its DAG-MH view (when has_view_)
   std::vector<uint8_t> has_view_;
+  std::vector<Bounds> bounds_;  // per slice
 };
 
 // A stack tile as lookups see it: an MH octree or per-slice tiles (or neither: absent).
