@@ -4,6 +4,11 @@
 //
 //   bench_stack_slices [--res 4k] [--samples 32] [--area-samples 64]
 //                      [--case city|hairball|engine|all] [--json PATH] [--spill-dir /tmp]
+//                      [--bytes-only] [--dump-tiles DIR]
+//
+// --bytes-only skips the octree pack, the dictionary measure and the DAG-MH tiles they
+// need (those lines print 0); --dump-tiles writes the per-cell pack's raw tiles (STSL or
+// STOC) to DIR/<cell>.bin for offline study.
 //
 // Per case every slice is traced into a spill (trace_stack_to_spill, as `shadowtile build`
 // does), then:
@@ -16,7 +21,11 @@
 //     far words (+ zero padding), by walking every tile as a reader does.
 //   per-cell pack: the stack pack `shadowtile build` writes by default (--stack-cells
 //     smaller): each cell its octree or its slices' own 2D tiles (stack_slices.hpp),
-//     whichever stores smaller, file bytes.
+//     whichever stores smaller, file bytes; and the same cells with the per-slice cells
+//     written as STSL instead of grouped (StackPackParams::group_slice_tiles off).
+//   open values: for the texels off each slice's most common interval (an open mesh's own
+//     values), the mean bits of the bit pattern's residual against slice w-1's texel, the
+//     left neighbour, the planar L + U - UL, and slice w-1's texel moved by the left step.
 //   the slices' 2D tiles of the stack's default cells (split_hierarchy, each DAG-MH or
 //     MMH, the smaller zlib stream, as the 2D packs choose), stored bytes.
 //   repetition between neighbours: the share of slice w's 2D tiles (bytes) byte-equal to
@@ -31,6 +40,8 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <bit>
+#include <unordered_map>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -122,7 +133,8 @@ double peak_rss_mib() {
   return double(ru.ru_maxrss) / 1024.0;
 }
 
-nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_dir) {
+nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_dir, bool bytes_only,
+                        const std::string& dump_dir) {
   std::printf("\n== %s: %s, %s, %u^2 per slice\n", c.name.c_str(), c.scene.c_str(), c.light.c_str(), 1u << level);
   std::fflush(stdout);
   const st::Scene scene = st::load_scene(c.scene);
@@ -147,6 +159,7 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
   st::dagmh::EncodeStats sum{};
   std::vector<std::vector<uint8_t>> prev_raw(cells_xy), cur_raw(cells_xy);
   std::vector<std::vector<std::vector<uint8_t>>> dag_tiles(n);  // DAG-MH tiles per slice (dictionary measure)
+  uint64_t res_count = 0, res_prev = 0, res_prev_zero = 0, res_left = 0, res_left_zero = 0, res_lin = 0, res_both = 0;
   uint64_t stored_2d = 0, raw_2d = 0, raw_equal_prev = 0, texels_equal = 0, texels_meet = 0, texels_compared = 0;
   st::IntervalTile prev_tile;
   const st::LightSpace header_light = st::LightSpace::fit(st::LightSpec{}, scene.bounds());
@@ -191,9 +204,44 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
       stored_2d += use_dag ? sd.size() : sm.size();
       raw_2d += cur_raw[cell].size();
       if (w > 0 && cur_raw[cell] == prev_raw[cell]) raw_equal_prev += cur_raw[cell].size();
-      if (use_dag) dag_tiles[w].push_back(std::move(dag));
+      if (use_dag && !bytes_only) dag_tiles[w].push_back(std::move(dag));
     }
     std::swap(prev_raw, cur_raw);
+    {
+      // The texels off the slice's most common interval (an open mesh's own values): the
+      // bits of each one's bit-pattern residual (zigzag) against four predictions.
+      auto key = [](const st::Interval& iv) {
+        return uint64_t(std::bit_cast<uint32_t>(iv.lo)) << 32 | std::bit_cast<uint32_t>(iv.hi);
+      };
+      auto lo = [](const st::IntervalTile& t, size_t i) { return std::bit_cast<uint32_t>(t.data[i].lo); };
+      auto bits_of = [](uint32_t v, uint32_t pred) {
+        const int32_t d = int32_t(v - pred);
+        const uint32_t z = (uint32_t(d) << 1) ^ uint32_t(d >> 31);
+        return uint64_t(z ? 32 - std::countl_zero(z) : 0);
+      };
+      std::unordered_map<uint64_t, uint64_t> freq;
+      for (const st::Interval& iv : tile.data) ++freq[key(iv)];
+      uint64_t mode = 0, most = 0;
+      for (const auto& [k, c] : freq)
+        if (c > most) most = c, mode = k;
+      const size_t side = tile.width;
+      for (size_t i = 0; i < tile.data.size(); ++i) {
+        if (key(tile.data[i]) == mode) continue;
+        ++res_count;
+        const uint32_t v = lo(tile, i);
+        const bool left = i % side != 0, up = i >= side;
+        if (w > 0) {
+          const uint64_t b = bits_of(v, lo(prev_tile, i));
+          res_prev += b, res_prev_zero += b == 0;
+        }
+        if (left) {
+          const uint64_t b = bits_of(v, lo(tile, i - 1));
+          res_left += b, res_left_zero += b == 0;
+        }
+        if (left && up) res_lin += bits_of(v, lo(tile, i - 1) + lo(tile, i - side) - lo(tile, i - side - 1));
+        if (left && w > 0) res_both += bits_of(v, lo(prev_tile, i) + lo(tile, i - 1) - lo(prev_tile, i - 1));
+      }
+    }
     if (w > 0) {
       for (size_t i = 0; i < tile.data.size(); ++i) {
         const st::Interval u = tile.data[i], v = prev_tile.data[i];
@@ -213,37 +261,53 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
 
   // The stack pack and its tiles by role; the per-cell choice.
   t0 = Clock::now();
-  st::BlockedStackCut cut(spill, K, 64 * 1024, spill_path + ".tiles");
-  cut.grid.light_kind = set.samples[0].kind();
-  for (const st::LightSpace& l : set.samples) cut.grid.lights.push_back(l.to_array());
-  cut.grid.spec = set.spec.to_string();
-  const double cut_s = since(t0);
+  st::StackGrid lights_grid;
+  lights_grid.light_kind = set.samples[0].kind();
+  for (const st::LightSpace& l : set.samples) lights_grid.lights.push_back(l.to_array());
+  lights_grid.spec = set.spec.to_string();
   OctBytes ob;
-  uint64_t oct_stored = 0;
+  uint64_t oct_stored = 0, grid_bytes = 0, stack_file = 0;
+  double cut_s = 0;
+  st::StackPackParams sp;
+  const std::string stack_path = tmp + "_stack.pack";
+  if (!bytes_only) {
+  st::BlockedStackCut cut(spill, K, 64 * 1024, spill_path + ".tiles");
+  cut.grid.light_kind = lights_grid.light_kind;
+  cut.grid.lights = lights_grid.lights;
+  cut.grid.spec = lights_grid.spec;
+  cut_s = since(t0);
   for (size_t i = 0; i < cut.tile_count(); ++i) {
     const auto [cell, buf] = cut.tile(i);
     add_octree_bytes(buf, ob);
     oct_stored += st::zlib_compress(buf, 6).size();
   }
-  const uint64_t grid_bytes = cut.grid.serialize().size();
-  st::StackPackParams sp;
-  const std::string stack_path = tmp + "_stack.pack";
-  const uint64_t stack_file = st::write_stack_pack(stack_path, cut.grid, cut.tile_count(),
-                                                   [&](size_t i) { return cut.tile(i); }, sp);
+  grid_bytes = cut.grid.serialize().size();
+  stack_file = st::write_stack_pack(stack_path, cut.grid, cut.tile_count(), [&](size_t i) { return cut.tile(i); }, sp);
   std::filesystem::remove(stack_path);
+  }
   const double stack_s = since(t0);
 
   // The pack the builder writes by default (--stack-cells smaller): each cell the smaller
   // of its octree and per-slice tiles, both measured, as written.
   t0 = Clock::now();
-  uint64_t smaller_file = 0, smaller_slice_cells = 0, smaller_tiles = 0;
+  uint64_t smaller_file = 0, ungrouped_file = 0, smaller_slice_cells = 0, smaller_tiles = 0;
   {
     st::BlockedStackCut pick(spill, K, 64 * 1024, spill_path + ".pick", nullptr, st::StackCells::smaller);
-    pick.grid.light_kind = cut.grid.light_kind;
-    pick.grid.lights = cut.grid.lights;
-    pick.grid.spec = cut.grid.spec;
+    pick.grid.light_kind = lights_grid.light_kind;
+    pick.grid.lights = lights_grid.lights;
+    pick.grid.spec = lights_grid.spec;
     smaller_file = st::write_stack_pack(stack_path, pick.grid, pick.tile_count(), [&](size_t i) { return pick.tile(i); }, sp);
+    st::StackPackParams plain = sp;
+    plain.group_slice_tiles = false;
+    ungrouped_file = st::write_stack_pack(stack_path, pick.grid, pick.tile_count(), [&](size_t i) { return pick.tile(i); }, plain);
     smaller_slice_cells = pick.slice_cells, smaller_tiles = pick.tile_count();
+    if (!dump_dir.empty()) {
+      for (size_t i = 0; i < pick.tile_count(); ++i) {
+        const auto [cell, buf] = pick.tile(i);
+        std::ofstream(dump_dir + "/" + std::to_string(cell) + ".bin", std::ios::binary)
+            .write(reinterpret_cast<const char*>(buf.data()), std::streamsize(buf.size()));
+      }
+    }
     std::filesystem::remove(stack_path);
   }
   const double smaller_s = since(t0);
@@ -252,15 +316,18 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
   t0 = Clock::now();
   uint64_t per_slice_after = 0, per_slice_before = 0;
   std::vector<std::vector<uint8_t>> all;
-  for (uint32_t w = 0; w < n; ++w) {
+  for (uint32_t w = 0; w < n && !bytes_only; ++w) {
     if (dag_tiles[w].empty()) continue;
     const st::dagmh::SharedTiles s = st::dagmh::share_across_tiles(dag_tiles[w]);
     per_slice_before += s.bytes_before, per_slice_after += s.bytes_after + s.dictionary.size();
     for (auto& t : dag_tiles[w]) all.push_back(std::move(t));
   }
   dag_tiles.clear();
-  const st::dagmh::SharedTiles whole = st::dagmh::share_across_tiles(all);
-  const uint64_t across_after = whole.bytes_after + whole.dictionary.size();
+  uint64_t across_after = 0;
+  if (!bytes_only) {
+    const st::dagmh::SharedTiles whole = st::dagmh::share_across_tiles(all);
+    across_after = whole.bytes_after + whole.dictionary.size();
+  }
   const double dict_s = since(t0);
 
   const double r_stack = double(stack_file) / double(packs_bytes);
@@ -285,6 +352,8 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
               "tiles per slice; cut %.1f s)\n",
               (unsigned long long)smaller_file, double(smaller_file) / double(packs_bytes),
               (unsigned long long)smaller_slice_cells, (unsigned long long)smaller_tiles, smaller_s);
+  std::printf("  the same cells with per-slice cells stored as STSL (not grouped): %llu bytes = %.3f x the separate packs\n",
+              (unsigned long long)ungrouped_file, double(ungrouped_file) / double(packs_bytes));
   std::printf("neighbours: 2D tile bytes equal to the previous slice's %.2f%%; texels with an equal interval %.2f%%, "
               "meeting %.2f%%\n",
               100.0 * double(raw_equal_prev) / double(raw_2d), 100.0 * double(texels_equal) / double(texels_compared),
@@ -292,6 +361,9 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
   std::printf("DAG-MH dictionary: per slice %llu -> %llu raw; across all slices -> %llu (%.3f of per slice; %.1f s)\n",
               (unsigned long long)per_slice_before, (unsigned long long)per_slice_after, (unsigned long long)across_after,
               double(across_after) / double(per_slice_after), dict_s);
+  std::printf("open values: %llu texels off the mode; residual bits against slice w-1 %.2f (%.1f%% equal), left %.2f (%.1f%% equal), planar L+U-UL %.2f, w-1 + left - (w-1 left) %.2f\n",
+              (unsigned long long)res_count, double(res_prev) / double(res_count), 100.0 * double(res_prev_zero) / double(res_count),
+              double(res_left) / double(res_count), 100.0 * double(res_left_zero) / double(res_count), double(res_lin) / double(res_count), double(res_both) / double(res_count));
   std::printf("trace %.1f s, peak RSS %.0f MiB\n", trace_s, peak_rss_mib());
 
   return {{"case", c.name},
@@ -318,6 +390,13 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
           {"stack_pack_smaller_bytes", smaller_file},
           {"stack_pack_smaller_over_separate", double(smaller_file) / double(packs_bytes)},
           {"stack_pack_smaller_slice_cells", smaller_slice_cells},
+          {"stack_pack_smaller_ungrouped_bytes", ungrouped_file},
+          {"open_value_texels", res_count},
+          {"open_value_residual_bits",
+           {{"previous_slice", double(res_prev) / double(std::max<uint64_t>(res_count, 1))},
+            {"left", double(res_left) / double(std::max<uint64_t>(res_count, 1))},
+            {"planar", double(res_lin) / double(std::max<uint64_t>(res_count, 1))},
+            {"previous_slice_and_left", double(res_both) / double(std::max<uint64_t>(res_count, 1))}}},
           {"stack_pack_smaller_tiles", smaller_tiles},
           {"tiles_2d_raw", raw_2d},
           {"tiles_2d_equal_previous_raw", raw_equal_prev},
@@ -337,6 +416,8 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
 int main(int argc, char** argv) {
   try {
     uint32_t level = 12, samples = 32, area_samples = 64;
+    bool bytes_only = false;
+    std::string dump_dir;
     std::string which = "all", json_path = "build/bench_stack_slices.json", spill_dir = "/tmp";
     for (int i = 1; i < argc; ++i) {
       const std::string arg = argv[i];
@@ -350,6 +431,8 @@ int main(int argc, char** argv) {
       else if (arg == "--case") which = next();
       else if (arg == "--json") json_path = next();
       else if (arg == "--spill-dir") spill_dir = next();
+      else if (arg == "--bytes-only") bytes_only = true;
+      else if (arg == "--dump-tiles") dump_dir = next();
       else throw st::Error("unknown option " + arg);
     }
     const std::string day = "sun-path:azimuth=100..260,elevation=25..65,samples=" + std::to_string(samples) + ",frame=ground";
@@ -364,7 +447,7 @@ int main(int argc, char** argv) {
     if (cases.empty()) throw st::Error("--case: expected city, engine, hairball or all");
     nlohmann::json out = nlohmann::json::array();
     for (const Case& c : cases) {
-      out.push_back(run_case(c, level, spill_dir));
+      out.push_back(run_case(c, level, spill_dir, bytes_only, dump_dir));
       std::ofstream(json_path) << out.dump(2) << "\n";  // after each case: long runs keep what finished
     }
     std::printf("\n| case | N | separate DAG-MH packs | octree stack pack | / separate | per-cell pack (default) | / separate |\n");

@@ -17,6 +17,7 @@
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/pack_dictionary.hpp"
 #include "tiles/core/pack_light_check.hpp"
+#include "tiles/core/stack_slices.hpp"
 
 namespace st::client {
 
@@ -427,6 +428,7 @@ bool RemoteMap::fill_slot(uint32_t slot, const proto::TileMeta& meta, const Grid
     else if (!raw.empty()) std::memcpy(raw.data(), stored.data(), raw.size());  // sizes checked by the caller
     const TileAddress a = tile_address(meta.tile_id);
     if (stack_grid_) {  // an MH octree of one stack cell (remote_stack.cpp)
+      if (is_grouped_slice_tiles(raw)) ungroup_slice_tiles(raw);  // a grouped per-slice cell
       ev = open_stack_tile(*stack_grid_, meta.tile_id, raw);
       return bool(ev);
     }

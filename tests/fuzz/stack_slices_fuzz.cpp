@@ -1,5 +1,8 @@
 // libFuzzer harness for per-slice stack cells (tiles/core/stack_slices.hpp, MHOCT.md
-// "Per-slice cells"). Input: an "STSL" buffer. Contract: SliceTiles::open validates the
+// "Per-slice cells"). Input: an "STSL" buffer, or its grouped stored form "STSP", which
+// ungroup_slice_tiles turns back into STSL or refuses with st::FormatError (the seeds hold
+// both); an STSL buffer that opens comes back byte for byte through group_slice_tiles and
+// ungroup_slice_tiles. Contract: SliceTiles::open validates the
 // header, every entry and every slice's 2D tile (DAG-MH or MMH) or throws
 // st::FormatError; a buffer it accepts answers depth() at every level of every slice
 // without reading out of bounds, deterministically, and StackTile::open accepts it too
@@ -52,12 +55,20 @@ std::vector<st::fuzz::Bytes> st::fuzz::seeds() {
       uint32_t j = 0;
       while ((1u << j) < count) ++j;
       out.push_back(encode_slice_tiles(seed_slices(m, count, seed++, pattern), m, j + (pattern == 2)));
+      out.push_back(group_slice_tiles(out.back()));
     }
   return out;
 }
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-  const std::vector<std::uint8_t> bytes(data, data + size);  // exact size: ASan sees overreads
+  std::vector<std::uint8_t> bytes(data, data + size);  // exact size: ASan sees overreads
+  if (st::is_grouped_slice_tiles(bytes)) {
+    try {
+      st::ungroup_slice_tiles(bytes);
+    } catch (const st::FormatError&) {
+      return 0;
+    }
+  }
   const std::span<const std::uint8_t> span(bytes.data(), bytes.size());
   st::SliceTiles t;
   try {
@@ -66,6 +77,12 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     return 0;
   }
   st::fuzz::note_accepted();
+  {
+    std::vector<std::uint8_t> back = st::group_slice_tiles(span);
+    FUZZ_CHECK(back.size() == bytes.size());
+    if (st::is_grouped_slice_tiles(back)) st::ungroup_slice_tiles(back);
+    FUZZ_CHECK(back == bytes);
+  }
   const st::StackTile any = st::StackTile::open(span);
   FUZZ_CHECK(!any.is_octree() && any.xy_level() == t.xy_level() && any.w_level() == t.w_level());
   const uint64_t h = st::fuzz::input_hash(data, size);

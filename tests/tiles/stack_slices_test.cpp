@@ -18,6 +18,9 @@
 #include "tiles/encode/stack_blocked.hpp"
 #include "tiles/encode/stack_pack.hpp"
 #include "tiles/encode/stack_slices_encode.hpp"
+#include "tiles/encode/encode.hpp"
+#include "tiles/encode/mh_build.hpp"
+#include "tiles/core/pack_format.hpp"
 #include "tiles/core/pack_reader.hpp"
 #include "tiles/core/stack_map.hpp"
 #include "tiles/core/stack_slices.hpp"
@@ -119,6 +122,149 @@ TEST(StackSlicesFormat, RefusesHostileBuffers) {
   EXPECT_EQ(refused(b, "size differs"), "");
   b = good, b[48] ^= 0xFF;
   EXPECT_EQ(refused(b, "slice 1's tile"), "");
+}
+
+// A hand-made STSL of two slices: slice 0 a 2x2 DAG-MH buffer, slice 1 a 2x2 MMH buffer
+// (texel (0, 0) differs from the rest in both), in 2^1 entries.
+std::vector<uint8_t> two_kinds(std::vector<uint8_t>& dag, std::vector<uint8_t>& mmh) {
+  IntervalTile a = square(1, 0.5f, 0.5f), b = square(1, 0.75f, 0.75f);
+  a.data[0] = {0.25f, 0.25f};
+  b.data[0] = {0.125f, 0.125f};
+  dag = encode_dagmh(build_hierarchy(a));
+  mmh = encode_mmh(build_hierarchy(b));
+  std::vector<uint8_t> out(32, 0);
+  auto put = [&](size_t at, uint32_t v) { std::memcpy(out.data() + at, &v, 4); };
+  put(0, kSliceTilesMagic);
+  out[4] = 1, out[6] = 1, out[7] = 1;
+  put(16, 32), put(20, uint32_t(dag.size()));
+  out.insert(out.end(), dag.begin(), dag.end());
+  out.resize((out.size() + 3) & ~size_t(3), 0);
+  put(24, uint32_t(out.size())), put(28, uint32_t(mmh.size()));
+  out.insert(out.end(), mmh.begin(), mmh.end());
+  out.resize((out.size() + 3) & ~size_t(3), 0);
+  put(8, uint32_t(out.size()));
+  return out;
+}
+
+TEST(StackSlicesFormat, GroupedLayoutIsPinned) {
+  std::vector<uint8_t> dag, mmh;
+  const std::vector<uint8_t> stsl = two_kinds(dag, mmh);
+  ASSERT_NO_THROW(SliceTiles::open(stsl));
+  ASSERT_EQ(u32(dag, 0), 0x484D4744u);  // "DGMH"
+  ASSERT_EQ(u32(mmh, 0), 0x4D4D5453u);  // "STMM"
+  // The MMH: a root node (word 0) with its value (word 1) and one leaf (word 2).
+  const size_t mt = 16 + ((size_t(mmh[6]) + 3) & ~size_t(3));
+  ASSERT_EQ(mmh.size(), mt + 12);
+  // The DAG-MH: header, no skip table (S = 0), nodes, treelets, chunk infos, multipliers.
+  ASSERT_EQ(dag[9], 0);
+  const size_t structure = 4 * size_t(u32(dag, 16)) + 12 * size_t(u32(dag, 20)) + 20 * ((size_t(u32(dag, 24)) + 31) / 32);
+  std::vector<uint8_t> want(stsl.begin(), stsl.begin() + 32);
+  const std::vector<uint8_t> magic{'S', 'T', 'S', 'P'};
+  std::copy(magic.begin(), magic.end(), want.begin());
+  auto add = [&](const std::vector<uint8_t>& from, size_t at, size_t n) { want.insert(want.end(), from.begin() + ptrdiff_t(at), from.begin() + ptrdiff_t(at + n)); };
+  add(dag, 0, 32);                                   // heads: the DAG-MH's header,
+  add(mmh, 0, mt);                                   // the MMH's header and shifts
+  add(dag, 32, structure);                           // DAG-MH structure
+  add(mmh, mt, 4);                                   // MMH node words
+  add(dag, 32 + structure, dag.size() - 32 - structure);  // DAG-MH multipliers
+  add(mmh, mt + 4, 8);                               // MMH values
+  want.resize(stsl.size(), 0);                       // the padding, last
+  const std::vector<uint8_t> grouped = group_slice_tiles(stsl);
+  EXPECT_EQ(grouped, want);
+  std::vector<uint8_t> back = grouped;
+  ungroup_slice_tiles(back);
+  EXPECT_EQ(back, stsl);
+  // What does not group comes back as it was: an octree tile, an STSL of constants only.
+  const std::vector<uint8_t> constants = encode_slice_tiles(std::vector<IntervalTile>{square(1, 0.5f, 0.5f)}, 1, 0);
+  EXPECT_EQ(group_slice_tiles(constants), constants);
+}
+
+TEST(StackSlicesFormat, GroupedCellsRoundTripAndHostileOnesAreRefused) {
+  // Random cells (DAG-MH, MMH, constants, shared buffers) come back byte for byte.
+  for (uint32_t seed = 1; seed <= 6; ++seed) {
+    const IntervalStack s = seed % 2 ? stacks::random_stack(4, 5, seed) : stacks::coherent_stack(4, 5, seed);
+    std::vector<IntervalTile> squares(s.slices);
+    for (uint32_t w = 0; w < s.slices; ++w) {
+      squares[w] = square(s.level, 0, 0);
+      for (size_t i = 0; i < squares[w].data.size(); ++i) squares[w].data[i] = s.data[w * squares[w].data.size() + i];
+    }
+    const std::vector<uint8_t> stsl = encode_slice_tiles(squares, s.level, 3);
+    const std::vector<uint8_t> grouped = group_slice_tiles(stsl);
+    ASSERT_EQ(grouped.size(), stsl.size());
+    std::vector<uint8_t> back = grouped;
+    if (is_grouped_slice_tiles(grouped)) ungroup_slice_tiles(back);
+    EXPECT_EQ(back, stsl) << seed;
+  }
+  std::vector<uint8_t> dag, mmh;
+  const std::vector<uint8_t> good = group_slice_tiles(two_kinds(dag, mmh));
+  ASSERT_TRUE(is_grouped_slice_tiles(good));
+  auto refused = [](std::vector<uint8_t> b, const char* field) -> std::string {
+    try {
+      ungroup_slice_tiles(b);
+      SliceTiles::open(b);
+    } catch (const FormatError& e) {
+      return std::string(e.what()).find(field) != std::string::npos ? "" : std::string(e.what());
+    }
+    return "accepted";
+  };
+  for (size_t n = 0; n < good.size(); ++n) {  // every truncation, even with a matching byte_size
+    std::vector<uint8_t> b(good.begin(), good.begin() + ptrdiff_t(n));
+    if (b.size() >= 12) std::memcpy(b.data() + 8, &n, 4);
+    EXPECT_NE(refused(b, ""), "accepted") << n << " bytes";
+  }
+  std::vector<uint8_t> b = good;
+  // Entry 0 one byte shorter (the same padded end): the parts end a byte early and the
+  // MMH's last value byte (non-zero) is left over.
+  const uint32_t shorter = uint32_t(dag.size() - 1);
+  std::memcpy(b.data() + 20, &shorter, 4);
+  EXPECT_EQ(refused(b, "tail"), "");
+  b = good, b[0] = 'X';
+  EXPECT_EQ(refused(b, "magic"), "");
+  b = good, b[32] = 'X';  // the first head: neither kind
+  EXPECT_EQ(refused(b, "neither"), "");
+  b = good, b[32 + 9] = 7;  // a skip level past 6
+  EXPECT_EQ(refused(b, "skip level"), "");
+  b = good;
+  const uint32_t off = 36;
+  std::memcpy(b.data() + 16, &off, 4);
+  EXPECT_EQ(refused(b, "the next buffer starts at"), "");
+  for (size_t i = 0; i < good.size(); ++i)  // any one byte changed: refused or read, never a crash
+    for (uint8_t x : {uint8_t(1), uint8_t(0x80), uint8_t(0xFF)}) {
+      b = good, b[i] ^= x;
+      (void)refused(b, "");
+    }
+}
+
+TEST(StackSlicesPack, PerSliceCellsAreStoredGroupedAndReadAsStsl) {
+  const IntervalStack s = stacks::random_stack(5, 3, 4);
+  auto spill = spill_of(s, 0, "grouped.spill");
+  BlockedStackCut cut(*spill, std::nullopt, 64 * 1024, tmp("grouped.tiles"), nullptr, StackCells::slices);
+  const LightSet set = LightSet::fit(LightSetSpec::parse("sun-path:azimuth=150..200,elevation=40..60,samples=3"),
+                                     Aabb{{-10, 0, -10}, {10, 5, 10}});
+  cut.grid.light_kind = set.samples[0].kind();
+  for (const LightSpace& l : set.samples) cut.grid.lights.push_back(l.to_array());
+  cut.grid.spec = set.spec.to_string();
+  StackPackParams plain;
+  plain.group_slice_tiles = false;
+  const uint64_t grouped_size = write_stack_pack(tmp("grouped.pack"), cut.grid, cut.tile_count(), [&](size_t i) { return cut.tile(i); }, {});
+  const uint64_t plain_size = write_stack_pack(tmp("plain.pack"), cut.grid, cut.tile_count(), [&](size_t i) { return cut.tile(i); }, plain);
+  EXPECT_NE(grouped_size, plain_size);
+  auto r = PackReader::open(tmp("grouped.pack"));
+  r->verify();
+  size_t grouped = 0;
+  for (size_t i = 0; i < cut.tile_count(); ++i) {
+    const auto [cell, raw] = cut.tile(i);
+    const uint64_t id = r->stack()->tile_id(cell);
+    const auto t = r->find(id);
+    ASSERT_TRUE(t);
+    const std::vector<uint8_t> stored = zlib_decompress(r->read_stored(id), t->raw_size, "test");
+    grouped += is_grouped_slice_tiles(stored);
+    EXPECT_EQ(r->read_raw(id), raw);  // the reader hands out the STSL bytes
+    std::vector<uint8_t> slot(t->raw_size + 8, 0);
+    ASSERT_EQ(r->read_raw_into(id, slot), raw.size());
+    EXPECT_TRUE(std::equal(raw.begin(), raw.end(), slot.begin()));
+  }
+  EXPECT_GT(grouped, 0u);
 }
 
 std::unique_ptr<StackSpill> spill_of(const IntervalStack& s, uint32_t block_level, const std::string& name) {

@@ -1,4 +1,6 @@
 #include "tiles/core/pack_reader.hpp"
+
+#include "tiles/core/stack_slices.hpp"
 #include "tiles/core/pack_light_check.hpp"
 #include "tiles/core/coarse_hulls.hpp"
 
@@ -273,11 +275,30 @@ std::vector<uint8_t> PackReader::read_stored(uint64_t id) const {
   return stored;
 }
 
+namespace {
+
+// A stack pack's grouped per-slice cell ("STSP", stack_slices.hpp) back to its STSL bytes,
+// in place; anything else is left alone.
+void pack_reader_ungroup(const PackHeader& h, bool stack, std::span<uint8_t> raw, const std::string& what) {
+  if (!stack || !is_grouped_slice_tiles(raw)) return;
+  if (!(h.flags & kFeatureStackSliceTiles))
+    throw FormatError(what + ": a grouped per-slice cell (\"STSP\") in a pack without feature stack_slice_tiles");
+  try {
+    ungroup_slice_tiles(raw);
+  } catch (const FormatError& e) {
+    throw FormatError(what + ": " + e.what());
+  }
+}
+
+}  // namespace
+
 std::vector<uint8_t> PackReader::read_raw(uint64_t id) const {
   std::vector<uint8_t> stored = read_stored(id);
   auto t = find(id);
-  return zlib_decompress(stored, t->raw_size,
-                         name_ + ": " + describe_tile(id) + " at byte " + std::to_string(t->offset));
+  const std::string what = name_ + ": " + describe_tile(id) + " at byte " + std::to_string(t->offset);
+  std::vector<uint8_t> raw = zlib_decompress(stored, t->raw_size, what);
+  pack_reader_ungroup(header_, stack() != nullptr, raw, what);
+  return raw;
 }
 
 size_t PackReader::read_raw_into(uint64_t id, std::span<uint8_t> out) const {
@@ -288,6 +309,7 @@ size_t PackReader::read_raw_into(uint64_t id, std::span<uint8_t> out) const {
     throw FormatError(what + ": " + std::to_string(t->raw_size) + " raw bytes exceed the " +
                       std::to_string(out.size()) + "-byte slot");
   zlib_decompress_into(stored, out.first(t->raw_size), what);
+  pack_reader_ungroup(header_, stack() != nullptr, out.first(t->raw_size), what);
   return t->raw_size;
 }
 

@@ -7,9 +7,11 @@
 #include <string>
 
 #include "common/error.hpp"
+#include "tiles/core/dagmh_format.hpp"
 #include "tiles/core/dagmh_view.hpp"
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/mh_octree_format.hpp"
+#include "tiles/core/mh_quadtree_format.hpp"
 
 namespace st {
 namespace {
@@ -113,6 +115,106 @@ SliceTiles SliceTiles::open(std::span<const uint8_t> b) {
   }
   if (next != b.size()) bad("byte_size", next, std::to_string(b.size() - next) + " bytes after the last buffer");
   return t;
+}
+
+bool is_grouped_slice_tiles(std::span<const uint8_t> bytes) {
+  return bytes.size() >= 4 && u32_at(bytes, 0) == kGroupedSliceTilesMagic;
+}
+
+namespace {
+
+[[noreturn]] void bad_grouped(const std::string& field, size_t at, const std::string& why) {
+  throw FormatError("grouped slice tiles: " + field + " at byte " + std::to_string(at) + ": " + why);
+}
+
+}  // namespace
+
+void ungroup_slice_tiles(std::span<uint8_t> b) {
+  const size_t size = b.size();
+  if (size < kSliceTilesHeaderBytes) bad_grouped("header", 0, std::to_string(size) + " bytes, below the 16-byte header");
+  if (u32_at(b, 0) != kGroupedSliceTilesMagic) bad_grouped("magic", 0, "not \"STSP\"");
+  if (b[7] > moct::kMaxWLevel) bad_grouped("w_level", 7, std::to_string(b[7]) + " above 12");
+  if (u32_at(b, 8) != size) bad_grouped("byte_size", 8, std::to_string(u32_at(b, 8)) + ", the buffer holds " + std::to_string(size));
+  const uint64_t count = uint64_t(1) << b[7];
+  const uint64_t first = kSliceTilesHeaderBytes + kSliceTilesEntryBytes * count;
+  if (first > size) bad_grouped("entries", kSliceTilesHeaderBytes, std::to_string(count) + " entries run past the buffer");
+  struct Buf {
+    uint64_t off = 0, size = 0, head = 0, structure = 0;  // structure: DAG-MH only
+    bool dagmh = false;
+    std::vector<uint8_t> role;  // MMH only
+  };
+  std::vector<Buf> bufs;
+  uint64_t next = first;
+  for (uint64_t w = 0; w < count; ++w) {
+    const size_t at = kSliceTilesHeaderBytes + kSliceTilesEntryBytes * w;
+    const uint32_t off = u32_at(b, at), word = u32_at(b, at + 4);
+    if (off == 0 || off < next) continue;  // a constant, or a buffer an earlier slice named
+    if (off != next) bad_grouped("entry " + std::to_string(w), at, "offset " + std::to_string(off) + ", the next buffer starts at " + std::to_string(next));
+    if (word < 4 || uint64_t(off) + word > size)
+      bad_grouped("entry " + std::to_string(w), at + 4, "size " + std::to_string(word) + " runs past the buffer");
+    Buf f;
+    f.off = off, f.size = word;
+    bufs.push_back(std::move(f));
+    next = (uint64_t(off) + word + 3) & ~uint64_t(3);
+  }
+  if (next != size) bad_grouped("byte_size", 8, "the buffers end at byte " + std::to_string(next) + ", not at the end");
+
+  thread_local std::vector<uint8_t> src;
+  src.assign(b.begin(), b.end());
+  std::memset(b.data() + first, 0, size - first);
+  uint64_t at = first;  // read position in src
+  auto take = [&](uint64_t n, const char* part) {
+    if (n > size - at) bad_grouped(part, at, std::to_string(n) + " bytes run past the buffer");
+    const uint64_t r = at;
+    at += n;
+    return r;
+  };
+  auto copy = [&](uint64_t to, uint64_t n, const char* part) {
+    const uint64_t from = take(n, part);
+    if (n) std::memcpy(b.data() + to, src.data() + from, n);
+  };
+  for (Buf& f : bufs) {  // heads
+    if (size - at < 8) bad_grouped("head", at, "runs past the buffer");
+    const uint32_t magic = u32_at(src, at);
+    if (magic == dagmh::kMagic) {
+      f.dagmh = true, f.head = 32;
+      if (f.size < f.head + 8) bad_grouped("head", at, "a DAG-MH buffer of " + std::to_string(f.size) + " bytes");
+      const uint64_t base = at;
+      copy(f.off, f.head, "head");
+      const uint32_t S = src[base + 9];
+      if (S > 6) bad_grouped("head", base + 9, "skip level " + std::to_string(S) + " above 6");
+      const uint64_t nw = u32_at(src, base + 16), tc = u32_at(src, base + 20), vc = u32_at(src, base + 24);
+      f.structure = (S ? uint64_t(16) << (2 * S) : 0) + 4 * nw + 12 * tc + 20 * ((vc + 31) / 32);
+      if (f.structure > f.size - f.head) bad_grouped("head", base + 16, "sections run past the buffer's " + std::to_string(f.size) + " bytes");
+    } else if (magic == mhq::kMagicMmh) {
+      const uint32_t levels = src[at + 6];
+      if (levels < 1 || levels > mhq::kMaxLevels) bad_grouped("head", at + 6, "levels " + std::to_string(levels));
+      f.head = mhq::tree_offset(levels);
+      if (f.size < f.head || (f.size - f.head) % 4) bad_grouped("head", at, "an MMH buffer of " + std::to_string(f.size) + " bytes");
+      copy(f.off, f.head, "head");
+    } else {
+      bad_grouped("head", at, "neither a DAG-MH nor an MMH buffer");
+    }
+  }
+  for (const Buf& f : bufs)
+    if (f.dagmh) copy(f.off + f.head, f.structure, "structure");
+  for (Buf& f : bufs) {
+    if (f.dagmh) continue;
+    const uint64_t tree = f.off + f.head;
+    mmh_word_roles((f.size - f.head) / 4, b[f.off + mhq::kOffFlags] & mhq::kFlagRootLeaf, f.role, [&](uint64_t i) {
+      copy(tree + 4 * i, 4, "node words");
+      return u32_at(b, tree + 4 * i);
+    });
+  }
+  for (const Buf& f : bufs)
+    if (f.dagmh) copy(f.off + f.head + f.structure, f.size - f.head - f.structure, "multipliers");
+  for (const Buf& f : bufs)
+    for (uint64_t i = 0; i < f.role.size(); ++i)
+      if (f.role[i] == 2) copy(f.off + f.head + 4 * i, 4, "values");
+  for (uint64_t i = at; i < size; ++i)
+    if (src[i] != 0) bad_grouped("tail", i, "not zero");
+  const uint32_t magic = kSliceTilesMagic;
+  std::memcpy(b.data(), &magic, 4);
 }
 
 StackTile StackTile::open(std::span<const uint8_t> bytes) {

@@ -95,6 +95,62 @@ class SliceTiles {
   std::vector<Bounds> bounds_;  // per slice
 };
 
+// The grouped stored form of a per-slice cell ("STSP", tiles/PACK.md "Stack packs",
+// MHOCT.md "Grouped per-slice cells"): the same bytes as the cell's "STSL" buffer,
+// permuted so the zlib stream sees like with like (every slice's headers, then their
+// structure, then their values), the same size. Pack tiles only: the pack reader and the
+// client ungroup a tile as it is read (before any reader, CPU or GPU, sees it), so every
+// lookup reads plain STSL. Layout after the STSL header and entries (the magic "STSP",
+// the rest as in STSL), each part the distinct 2D buffers' pieces in order of first use:
+//   heads       DAG-MH: its 32-byte header; MMH: its header and shifts (tree offset)
+//   structure   DAG-MH: skip table, inner nodes, treelets and chunk infos
+//   node words  MMH: the tree words that are nodes, in word order (mmh_word_roles)
+//   multipliers DAG-MH: the multiplier section
+//   values      MMH: the tree words that are values, in word order
+//   zero bytes  to byte_size (the buffers' padding, the MMH trees' padding words)
+inline constexpr uint32_t kGroupedSliceTilesMagic = 0x50535453u;  // "STSP"; format constant
+
+// Whether `bytes` start with "STSP".
+bool is_grouped_slice_tiles(std::span<const uint8_t> bytes);
+
+// Turns a grouped cell back into its STSL buffer, in place (the same size). Checks what
+// the permutation needs (header, entries in first-use order, each buffer's kind and
+// section sizes, a zero tail) and throws st::FormatError("grouped slice tiles: <field> at
+// byte <offset>: ...") otherwise; the result still goes through SliceTiles::open.
+void ungroup_slice_tiles(std::span<uint8_t> bytes);
+
+// The roles of an MMH tree's W words (MHQUAD.md), as the grouped form splits them:
+// 1 node word, 2 value word, 0 neither (padding). A forward scan: word 0 is the root (a
+// leaf when `root_leaf`, else a node with its value after it); a node word's children mark
+// the words they occupy, those after it only, the first mark kept (every MMH child block
+// lies after its parent). `node(i)` yields word i when i is a node, called in increasing i.
+template <class NodeWord>
+void mmh_word_roles(uint64_t W, bool root_leaf, std::vector<uint8_t>& role, NodeWord&& node) {
+  role.assign(W, 0);
+  if (W == 0) return;
+  auto mark = [&](uint64_t at, uint8_t r) {
+    if (at < W && role[at] == 0) role[at] = r;
+  };
+  role[0] = root_leaf ? 2 : 1;
+  if (!root_leaf) mark(1, 2);
+  for (uint64_t i = 0; i < W; ++i) {
+    if (role[i] != 1) continue;
+    const uint32_t word = node(i);
+    const uint32_t mask = word & 0xFFu, shift = (word >> 12) & 0xFu, off = word >> 16;
+    const uint64_t block = ((i >> shift) + off) << shift;
+    uint64_t at = block;
+    for (uint32_t c = 0; c < 4; ++c) {
+      const uint32_t code = (mask >> (2 * c)) & 3u;
+      if (code == 0) continue;
+      if (at > i) {
+        mark(at, code == 1 ? 2 : 1);
+        if (code == 3 && at + 1 > i) mark(at + 1, 2);
+      }
+      at += code == 3 ? 2 : 1;
+    }
+  }
+}
+
 // A stack tile as lookups see it: an MH octree or per-slice tiles (or neither: absent).
 // Converts from either pointer, so a tile source may hand out `const MhOctree*` as before.
 struct StackTileRef {

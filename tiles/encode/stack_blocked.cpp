@@ -258,7 +258,7 @@ void BlockedStackCut::run(const StackSpill& spill, uint32_t K, uint32_t tile_byt
                 const bool take = cells_ == StackCells::slices ||
                                   (per_slice.size() <= tile_bytes &&
                                    (bytes.size() > tile_bytes ||
-                                    zlib_compress(per_slice, 6).size() < zlib_compress(bytes, 6).size()));
+                                    zlib_compress(group_slice_tiles(per_slice), 6).size() < zlib_compress(bytes, 6).size()));
                 if (take) bytes = std::move(per_slice), octree = false;
               }
               write_all(fd_, bytes.data(), bytes.size(), at, path_);

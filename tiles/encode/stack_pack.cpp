@@ -10,6 +10,7 @@
 
 #include "common/error.hpp"
 #include "tiles/encode/mh_octree_encode.hpp"
+#include "tiles/encode/stack_slices_encode.hpp"
 
 namespace st {
 namespace {
@@ -156,7 +157,9 @@ uint64_t write_stack_pack(const std::string& path, const StackGrid& sg, size_t c
     TileRecord r;
     r.kind = TileKind::encoded;
     r.id = sg.tile_id(cell);
-    const std::vector<uint8_t> stored = zlib_compress(raw, p.compression_level);
+    // A per-slice cell is stored grouped (the same bytes, like with like; readers ungroup).
+    const std::vector<uint8_t> stored =
+        zlib_compress(p.group_slice_tiles ? group_slice_tiles(raw) : raw, p.compression_level);
     r.stored_size = uint32_t(stored.size());
     r.raw_size = uint32_t(raw.size());
     r.crc = crc32_of(stored);

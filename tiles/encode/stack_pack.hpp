@@ -44,6 +44,8 @@ struct StackPackParams {
   uint64_t scene_hash = 0;
   PackParamList build_params;
   int compression_level = 6;
+  // Per-slice cells stored grouped ("STSP", tiles/core/stack_slices.hpp); off: as STSL.
+  bool group_slice_tiles = true;
 };
 
 // Writes the pack as `path`.tmp, then renames it to `path`. Returns the file size.

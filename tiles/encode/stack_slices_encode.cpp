@@ -4,6 +4,8 @@
 #include <string>
 
 #include "common/error.hpp"
+#include "tiles/core/dagmh_format.hpp"
+#include "tiles/core/mh_quadtree_format.hpp"
 #include "tiles/encode/encode.hpp"
 #include "tiles/encode/mh_build.hpp"
 #include "tiles/core/pack_format.hpp"
@@ -66,6 +68,83 @@ std::vector<uint8_t> encode_slice_tiles(std::span<const IntervalTile> slices, ui
   }
   put32(8, uint32_t(out.size()));
   return out;
+}
+
+std::vector<uint8_t> group_slice_tiles(std::span<const uint8_t> b) {
+  const std::vector<uint8_t> same(b.begin(), b.end());
+  if (!is_slice_tiles(b) || b.size() < kSliceTilesHeaderBytes || b[7] > 12) return same;
+  auto u32 = [&](uint64_t off) {
+    uint32_t v;
+    std::memcpy(&v, b.data() + off, 4);
+    return v;
+  };
+  const uint64_t count = uint64_t(1) << b[7];
+  const uint64_t first = kSliceTilesHeaderBytes + kSliceTilesEntryBytes * count;
+  if (first > b.size() || u32(8) != b.size()) return same;
+  struct Buf {
+    uint64_t off = 0, size = 0, head = 0, structure = 0;
+    bool dagmh = false;
+    std::vector<uint8_t> role;
+  };
+  std::vector<Buf> bufs;
+  uint64_t next = first;
+  for (uint64_t w = 0; w < count; ++w) {
+    const uint32_t off = u32(kSliceTilesHeaderBytes + kSliceTilesEntryBytes * w);
+    const uint32_t word = u32(kSliceTilesHeaderBytes + kSliceTilesEntryBytes * w + 4);
+    if (off == 0 || off < next) continue;
+    if (off != next || word < 8 || uint64_t(off) + word > b.size()) return same;
+    Buf f;
+    f.off = off, f.size = word;
+    const uint32_t magic = u32(off);
+    if (magic == dagmh::kMagic && word >= 40) {
+      const uint32_t S = b[off + 9];
+      f.dagmh = true, f.head = 32;
+      f.structure = (S ? uint64_t(16) << (2 * S) : 0) + 4 * uint64_t(u32(off + 16)) + 12 * uint64_t(u32(off + 20)) +
+                    20 * ((uint64_t(u32(off + 24)) + 31) / 32);
+      if (S > 6 || f.structure > word - f.head) return same;
+    } else if (magic == mhq::kMagicMmh) {
+      const uint32_t levels = b[off + 6];
+      f.head = mhq::tree_offset(levels);
+      if (levels < 1 || levels > mhq::kMaxLevels || word < f.head || (word - f.head) % 4) return same;
+    } else {
+      return same;
+    }
+    bufs.push_back(std::move(f));
+    next = (uint64_t(off) + word + 3) & ~uint64_t(3);
+  }
+  if (next != b.size() || bufs.empty()) return same;  // constants only: nothing to group
+  std::vector<uint8_t> out(b.begin(), b.begin() + first);
+  out.reserve(b.size());
+  const uint32_t magic = kGroupedSliceTilesMagic;
+  std::memcpy(out.data(), &magic, 4);
+  auto put = [&](uint64_t from, uint64_t n) { out.insert(out.end(), b.begin() + from, b.begin() + from + n); };
+  for (const Buf& f : bufs) put(f.off, f.head);
+  for (const Buf& f : bufs)
+    if (f.dagmh) put(f.off + f.head, f.structure);
+  for (Buf& f : bufs) {
+    if (f.dagmh) continue;
+    const uint64_t tree = f.off + f.head;
+    mmh_word_roles((f.size - f.head) / 4, b[f.off + mhq::kOffFlags] & mhq::kFlagRootLeaf, f.role, [&](uint64_t i) {
+      put(tree + 4 * i, 4);
+      return u32(tree + 4 * i);
+    });
+  }
+  for (const Buf& f : bufs)
+    if (f.dagmh) put(f.off + f.head + f.structure, f.size - f.head - f.structure);
+  for (const Buf& f : bufs)
+    for (uint64_t i = 0; i < f.role.size(); ++i)
+      if (f.role[i] == 2) put(f.off + f.head + 4 * i, 4);
+  if (out.size() > b.size()) return same;
+  out.resize(b.size(), 0);
+  // The permutation drops nothing only where every byte it leaves out is zero (padding):
+  // undo it and compare, so a buffer that does not group is stored as it was.
+  std::vector<uint8_t> back = out;
+  try {
+    ungroup_slice_tiles(back);
+  } catch (const FormatError&) {
+    return same;
+  }
+  return back == same ? out : same;
 }
 
 }  // namespace st

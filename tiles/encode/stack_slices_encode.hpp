@@ -24,4 +24,10 @@ StackCells parse_stack_cells(const std::string& text);  // "octree" | "slices" |
 // stored once. Throws st::Error when the result exceeds the format's 32-bit size.
 std::vector<uint8_t> encode_slice_tiles(std::span<const IntervalTile> slices, uint32_t m, uint32_t j);
 
+// The grouped stored form ("STSP", stack_slices.hpp) of an STSL buffer: the same bytes
+// permuted so like lies with like, the same size; ungroup_slice_tiles gives `stsl` back
+// (checked here on every call). Anything else (an octree tile, a buffer that does not
+// group) comes back unchanged. Used by the stack pack writer on every per-slice cell.
+std::vector<uint8_t> group_slice_tiles(std::span<const uint8_t> stsl);
+
 }  // namespace st
