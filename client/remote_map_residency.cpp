@@ -428,7 +428,10 @@ bool RemoteMap::fill_slot(uint32_t slot, const proto::TileMeta& meta, const Grid
     else if (!raw.empty()) std::memcpy(raw.data(), stored.data(), raw.size());  // sizes checked by the caller
     const TileAddress a = tile_address(meta.tile_id);
     if (stack_grid_) {  // an MH octree of one stack cell (remote_stack.cpp)
-      if (is_grouped_slice_tiles(raw)) ungroup_slice_tiles(raw);  // a grouped per-slice cell
+      if (is_grouped_slice_tiles(raw)) {  // a grouped per-slice cell: only in a pack that says so
+        if (!(header_.flags & kFeatureStackGroupedTiles)) return false;
+        ungroup_slice_tiles(raw);
+      }
       ev = open_stack_tile(*stack_grid_, meta.tile_id, raw);
       return bool(ev);
     }

@@ -415,28 +415,41 @@ TEST(StackSlicesPack, ATileWithoutTheFeatureBitIsRefused) {
   cut.grid.light_kind = set.samples[0].kind();
   for (const LightSpace& l : set.samples) cut.grid.lights.push_back(l.to_array());
   cut.grid.spec = set.spec.to_string();
-  write_stack_pack(tmp("nobit.pack"), cut.grid, cut.tile_count(), [&](size_t i) { return cut.tile(i); }, {});
-  // Clear the bit and fix the header's CRC.
-  std::vector<uint8_t> file;
-  {
-    std::ifstream f(tmp("nobit.pack"), std::ios::binary);
-    file.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
-  }
-  PackHeader h = PackHeader::parse(std::span<const uint8_t>(file.data(), kPackHeaderBytes), "nobit");
-  ASSERT_TRUE(h.flags & kFeatureStackSliceTiles);
-  h.flags &= ~uint32_t(kFeatureStackSliceTiles);
-  const auto head = h.serialize();
-  std::memcpy(file.data(), head.data(), head.size());
-  {
-    std::ofstream f(tmp("nobit.pack"), std::ios::binary | std::ios::trunc);
-    f.write(reinterpret_cast<const char*>(file.data()), std::streamsize(file.size()));
-  }
-  auto r = PackReader::open(tmp("nobit.pack"));
-  try {
-    r->verify();
-    ADD_FAILURE() << "verify accepted a per-slice cell without the feature bit";
-  } catch (const FormatError& e) {
-    EXPECT_NE(std::string(e.what()).find("stack_slice_tiles"), std::string::npos) << e.what();
+  // Clear a bit and fix the header's CRC: without stack_slice_tiles (and so without
+  // stack_grouped_tiles, which needs it) and, with plain cells, without stack_grouped_tiles alone.
+  StackPackParams plain;
+  plain.group_slice_tiles = false;
+  const std::pair<uint32_t, const char*> cases[] = {
+      {uint32_t(kFeatureStackSliceTiles | kFeatureStackGroupedTiles), "stack_slice_tiles"},
+      {uint32_t(kFeatureStackGroupedTiles), "stack_grouped_tiles"}};
+  for (const auto& [clear, name] : cases) {
+    const bool grouped_case = clear == uint32_t(kFeatureStackGroupedTiles);
+    write_stack_pack(tmp("nobit.pack"), cut.grid, cut.tile_count(), [&](size_t i) { return cut.tile(i); },
+                     grouped_case ? StackPackParams{} : plain);
+    std::vector<uint8_t> file;
+    {
+      std::ifstream f(tmp("nobit.pack"), std::ios::binary);
+      file.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+    }
+    PackHeader h = PackHeader::parse(std::span<const uint8_t>(file.data(), kPackHeaderBytes), "nobit");
+    ASSERT_TRUE(h.flags & kFeatureStackSliceTiles);
+    if (grouped_case) {
+      ASSERT_TRUE(h.flags & kFeatureStackGroupedTiles) << "no grouped cell to refuse";
+    }
+    h.flags &= ~clear;
+    const auto head = h.serialize();
+    std::memcpy(file.data(), head.data(), head.size());
+    {
+      std::ofstream f(tmp("nobit.pack"), std::ios::binary | std::ios::trunc);
+      f.write(reinterpret_cast<const char*>(file.data()), std::streamsize(file.size()));
+    }
+    auto r = PackReader::open(tmp("nobit.pack"));
+    try {
+      r->verify();
+      ADD_FAILURE() << "verify accepted a per-slice cell without the feature bit " << name;
+    } catch (const FormatError& e) {
+      EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
+    }
   }
 }
 

@@ -109,7 +109,12 @@ enum PackFeature : uint32_t {
   // MMH, then with mixed_tiles). Never with stack or vsdag. Readers before it refuse the
   // pack by this bit.
   kFeaturePlaneTiles = 1u << 11,
-  kKnownFeatures = 0xFFF,
+  // Some per-slice cells are stored grouped (magic "STSP", stack_slices.hpp, tiles/core/MHOCT.md
+  // "Grouped per-slice cells"): an STSL cell's bytes reordered so like lies with like, the same
+  // size; readers ungroup them as they load. Only with stack_slice_tiles. Readers before it
+  // refuse the pack by this bit.
+  kFeatureStackGroupedTiles = 1u << 12,
+  kKnownFeatures = 0x1FFF,
 };
 
 // Header layout (offset: size field):

@@ -281,8 +281,8 @@ namespace {
 // in place; anything else is left alone.
 void pack_reader_ungroup(const PackHeader& h, bool stack, std::span<uint8_t> raw, const std::string& what) {
   if (!stack || !is_grouped_slice_tiles(raw)) return;
-  if (!(h.flags & kFeatureStackSliceTiles))
-    throw FormatError(what + ": a grouped per-slice cell (\"STSP\") in a pack without feature stack_slice_tiles");
+  if (!(h.flags & kFeatureStackGroupedTiles))
+    throw FormatError(what + ": a grouped per-slice cell (\"STSP\") in a pack without feature stack_grouped_tiles");
   try {
     ungroup_slice_tiles(raw);
   } catch (const FormatError& e) {
@@ -511,7 +511,8 @@ std::string PackReader::summary() const {
                                                     {kFeaturePayloadsOnly, "payloads_only"},
                                                     {kFeatureMixedTiles, "mixed_tiles"},
                                                     {kFeatureStackSliceTiles, "stack_slice_tiles"},
-                                                    {kFeaturePlaneTiles, "plane_tiles"}};
+                                                    {kFeaturePlaneTiles, "plane_tiles"},
+                                                    {kFeatureStackGroupedTiles, "stack_grouped_tiles"}};
   for (auto [bit, n] : names)
     if (header_.flags & bit) features += std::string(features.empty() ? "" : ",") + n;
   char buf[320];

@@ -158,8 +158,10 @@ uint64_t write_stack_pack(const std::string& path, const StackGrid& sg, size_t c
     r.kind = TileKind::encoded;
     r.id = sg.tile_id(cell);
     // A per-slice cell is stored grouped (the same bytes, like with like; readers ungroup).
-    const std::vector<uint8_t> stored =
-        zlib_compress(p.group_slice_tiles ? group_slice_tiles(raw) : raw, p.compression_level);
+    const std::vector<uint8_t> grouped = p.group_slice_tiles ? group_slice_tiles(raw) : std::vector<uint8_t>{};
+    const bool is_grouped = p.group_slice_tiles && is_grouped_slice_tiles(grouped);
+    if (is_grouped) h.flags |= kFeatureStackGroupedTiles;
+    const std::vector<uint8_t> stored = zlib_compress(is_grouped ? std::span<const uint8_t>(grouped) : std::span<const uint8_t>(raw), p.compression_level);
     r.stored_size = uint32_t(stored.size());
     r.raw_size = uint32_t(raw.size());
     r.crc = crc32_of(stored);
