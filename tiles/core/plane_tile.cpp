@@ -74,23 +74,7 @@ class PlaneTileEvaluator final : public Evaluator, public TapWalks {
     const uint32_t n = blocks_in_rect(level, x0, y0, x1, y1, blocks);
     if (n == 0) return inner_->pcf(level, x, y, r, receiver);
     if (n > kPcfBlocks) return Evaluator::pcf(level, x, y, r, receiver);
-    // The few blocks the kernel meets, found once: each tap tests them (no search of its
-    // own, from_plane's answer), the taps none holds ask the inner buffer.
-    const uint32_t s = v_.finest_level - level;
-    const uint64_t h = s ? uint64_t(1) << (s - 1) : 0;
-    uint32_t lit_taps = 0;
-    for (uint32_t j = 0; j < r; ++j) {
-      const uint64_t ty = pcf_tap(y, j, r, side);
-      const uint32_t fy = uint32_t((ty << s) + h);
-      for (uint32_t i = 0; i < r; ++i) {
-        const uint64_t tx = pcf_tap(x, i, r, side);
-        const uint32_t fx = uint32_t((tx << s) + h);
-        float d;
-        if (!tap_plane(blocks, n, s, fx, fy, d)) d = inner_->depth(level, tx, ty);
-        lit_taps += receiver <= d;
-      }
-    }
-    return float(lit_taps) / float(r * r);
+    return count_with_blocks(level, x, y, r, blocks, n, [receiver](uint64_t, uint64_t) { return receiver; });
   }
 
   // pcf's scheme with each tap against the receiver plane (receiver_plane.hpp): no block
@@ -104,6 +88,18 @@ class PlaneTileEvaluator final : public Evaluator, public TapWalks {
     const uint32_t n = blocks_in_rect(level, x0, y0, x1, y1, blocks);
     if (n == 0) return inner_->pcf_on_plane(level, x, y, r, p);
     if (n > kPcfBlocks) return pcf_plane_by_taps(*this, level, x, y, r, p);
+    return count_with_blocks(level, x, y, r, blocks, n,
+                             [&p, level](uint64_t tx, uint64_t ty) { return receiver_plane_depth(p, level, tx, ty); });
+  }
+
+ private:
+  // The few blocks the kernel meets, found once: each tap tests them (no search of its own,
+  // from_plane's answer), the taps none holds ask the inner buffer; `receiver_at(tx, ty)` is
+  // the depth each tap compares (one receiver, or the receiver plane's over that texel).
+  template <class ReceiverAt>
+  float count_with_blocks(uint32_t level, uint64_t x, uint64_t y, uint32_t r, const uint32_t* blocks, uint32_t n,
+                          ReceiverAt receiver_at) const {
+    const uint64_t side = uint64_t(1) << level;
     const uint32_t s = v_.finest_level - level;
     const uint64_t h = s ? uint64_t(1) << (s - 1) : 0;
     uint32_t lit_taps = 0;
@@ -115,13 +111,12 @@ class PlaneTileEvaluator final : public Evaluator, public TapWalks {
         const uint32_t fx = uint32_t((tx << s) + h);
         float d;
         if (!tap_plane(blocks, n, s, fx, fy, d)) d = inner_->depth(level, tx, ty);
-        lit_taps += receiver_plane_depth(p, level, tx, ty) <= d;
+        lit_taps += receiver_at(tx, ty) <= d;
       }
     }
     return float(lit_taps) / float(r * r);
   }
 
- private:
   bool from_plane(uint32_t level, uint64_t x, uint64_t y, float& out) const {
     const uint32_t s = v_.finest_level - level;
     if (s >= kMaxShift) return false;  // no block is as coarse as this texel
