@@ -28,6 +28,7 @@
 #include "tiles/core/mh_quadtree_format.hpp"
 #include "tiles/core/map_preview.hpp"
 #include "tiles/core/pack_reader.hpp"
+#include "tiles/core/plane_pack.hpp"
 #include "tiles/core/plane_tile.hpp"
 
 namespace {
@@ -125,8 +126,17 @@ nlohmann::json measure(const std::string& path) {
                         {"header_params", h.journal_offset}, {"tile_records", records}, {"payloads", payload},
                         {"cell_records", cells_and_pad}, {"grid_section_stored", h.grid_size}, {"skip_grid", grid}, {"preview", preview},
                         {"dictionary", dict},     {"index", index},      {"tiles_raw", tile_raw}};
-  // Plane tiles: header, plane table and block records, raw and marginal stored.
+  // Plane tiles: header, plane table and block records, raw and marginal stored; as STPN
+  // and packed (plane_pack.hpp, as the pack stores them when it has packed_plane_tiles):
+  // the table's, the records' and the labelled blocks' own marginal shares of each.
   uint64_t plane_tiles = 0, planes = 0, table = 0, labelled = 0, plane_texels = 0, plane_raw = 0, plane_stored = 0;
+  uint64_t packed_stored = 0, table_stored = 0, records_stored = 0, labels_stored = 0, packed_table_stored = 0;
+  Part packed_parts[5] = {{"kinds"}, {"indices"}, {"palettes"}, {"palette planes"}, {"labels"}};
+  auto without = [](std::span<const uint8_t> b, size_t from, size_t to) {
+    std::vector<uint8_t> out(b.begin(), b.begin() + long(from));
+    out.insert(out.end(), b.begin() + long(to), b.end());
+    return st::zlib_compress(out, 6).size();
+  };
   for (const auto& e : reader->tiles()) {
     if (e.kind != st::TileKind::encoded) continue;
     const std::vector<uint8_t> raw = reader->read_raw(e.id);
@@ -138,15 +148,42 @@ nlohmann::json measure(const std::string& path) {
     labelled += v.label_count;
     for (uint32_t i = 0; i < v.plane_count; ++i) plane_texels += uint64_t(1) << (2 * v.plane(i).shift);
     plane_raw += raw.size() - v.inner.size();
-    plane_stored += st::zlib_compress(raw, 6).size() - st::zlib_compress(v.inner, 6).size();
+    const uint64_t whole = st::zlib_compress(raw, 6).size(), inner = st::zlib_compress(v.inner, 6).size();
+    plane_stored += whole - inner;
+    const size_t t_at = st::planes::kHeaderSize, r_at = t_at + v.table.size(), l_at = r_at + v.records.size();
+    table_stored += whole - without(raw, t_at, r_at);
+    records_stored += whole - without(raw, r_at, l_at);
+    labels_stored += whole - without(raw, l_at, l_at + v.labels.size());
+    st::PlanePackParts pp;
+    const std::vector<uint8_t> packed = st::pack_plane_tile(raw, &pp);
+    if (packed.empty()) continue;
+    const uint64_t packed_whole = st::zlib_compress(packed, 6).size();
+    packed_stored += packed_whole - inner;
+    packed_table_stored += packed_whole - without(packed, t_at, r_at);
+    size_t at = r_at;
+    const size_t sizes[5] = {pp.kinds, pp.indices, pp.palettes, pp.planes, pp.labels};
+    for (int k = 0; k < 5; ++k) {
+      packed_parts[k].raw += sizes[k];
+      packed_parts[k].stored += packed_whole - without(packed, at, at + sizes[k]);
+      at += sizes[k];
+    }
   }
   if (plane_tiles) {
     std::printf("  plane tiles: %llu, blocks %llu (%llu labelled) over %llu texels, %llu table planes; planes section raw %llu, marginal stored %llu\n",
                 (unsigned long long)plane_tiles, (unsigned long long)planes, (unsigned long long)labelled,
                 (unsigned long long)plane_texels, (unsigned long long)table,
                 (unsigned long long)plane_raw, (unsigned long long)plane_stored);
+    std::printf("    STPN marginal stored: table %llu, block records %llu, labelled blocks %llu; packed (STPQ) planes section %llu (table %llu)\n",
+                (unsigned long long)table_stored, (unsigned long long)records_stored, (unsigned long long)labels_stored,
+                (unsigned long long)packed_stored, (unsigned long long)packed_table_stored);
+    std::printf("    packed parts raw / marginal stored:");
+    for (const Part& p : packed_parts)
+      std::printf(" %s %llu / %llu;", p.name, (unsigned long long)p.raw, (unsigned long long)p.stored);
+    std::printf("\n");
     out["plane_tiles"] = {{"tiles", plane_tiles}, {"blocks", planes}, {"labelled", labelled}, {"table_planes", table}, {"texels", plane_texels},
-                          {"raw", plane_raw}, {"stored", plane_stored}};
+                          {"raw", plane_raw}, {"stored", plane_stored}, {"table_stored", table_stored},
+                          {"records_stored", records_stored}, {"labels_stored", labels_stored},
+                          {"packed_stored", packed_stored}, {"packed_table_stored", packed_table_stored}};
   }
   // MH / MMH tiles: header, node words, values, padding (raw and marginal stored).
   Part mh_parts[4] = {{"header"}, {"node words"}, {"values"}, {"padding"}};

@@ -17,6 +17,7 @@
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/pack_dictionary.hpp"
 #include "tiles/core/pack_light_check.hpp"
+#include "tiles/core/plane_pack.hpp"
 #include "tiles/core/stack_slices.hpp"
 
 namespace st::client {
@@ -436,6 +437,10 @@ bool RemoteMap::fill_slot(uint32_t slot, const proto::TileMeta& meta, const Grid
       return bool(ev);
     }
     if (entry.kind == EntryKind::tile) {
+      if (is_packed_plane_tile(raw)) {  // a packed plane tile: only in a pack that says so
+        if (!(header_.flags & kFeaturePackedPlaneTiles)) return false;
+        unpack_plane_tile(raw);
+      }
       ev = open_pack_tile(header_.encoding, raw, dictionary_);  // v2 DAG-MH tiles through the dictionary
       return ev && ev->finest_level() == header_.map_level - a.level;
     }

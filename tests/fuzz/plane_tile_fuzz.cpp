@@ -2,8 +2,13 @@
 // pack's tile slot: plane blocks over an inner DAG-MH or MMH buffer. Contract: the opener
 // validates the header, the plane table, every block record and labelled block and the inner buffer, or throws
 // st::FormatError; a buffer it accepts answers every lookup without reading out of bounds,
-// and PCF equals the average of its single lookups (evaluator_probe.hpp).
+// and PCF equals the average of its single lookups (evaluator_probe.hpp). A packed plane
+// tile ("STPQ", plane_pack.hpp: how packs store them) unpacks in place or throws
+// st::FormatError, and one whose unpacked bytes open packs back to the very input (the
+// packed form is canonical); the seeds hold both forms.
+#include <algorithm>
 #include <span>
+#include <vector>
 
 #include "common/error.hpp"
 #include "tests/fuzz/evaluator_probe.hpp"
@@ -12,6 +17,7 @@
 #include "tiles/encode/mh_build.hpp"
 #include "tiles/encode/plane_fit.hpp"
 #include "tiles/core/encoding.hpp"
+#include "tiles/core/plane_pack.hpp"
 
 namespace {
 
@@ -41,14 +47,25 @@ std::vector<st::fuzz::Bytes> st::fuzz::seeds() {
     for (int kind = 0; kind < 4; ++kind) {
       const st::PlaneSplit s = st::fit_planes(st::build_hierarchy(planar_tile(level, kind)), st::PlaneFitOptions{3, 1, 10});
       if (s.planes.empty() && s.labelled.empty()) continue;
-      for (st::Encoding e : {st::Encoding::dagmh, st::Encoding::mmh})
+      for (st::Encoding e : {st::Encoding::dagmh, st::Encoding::mmh}) {
         out.push_back(st::wrap_planes(s.planes, level, st::encode(s.pruned, e), s.labelled));
+        std::vector<std::uint8_t> packed = st::pack_plane_tile(out.back());
+        if (!packed.empty()) out.push_back(std::move(packed));
+      }
     }
   return out;
 }
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-  const std::vector<std::uint8_t> bytes(data, data + size);  // exact size: ASan sees overreads
+  std::vector<std::uint8_t> bytes(data, data + size);  // exact size: ASan sees overreads
+  const bool packed = st::is_packed_plane_tile(bytes);
+  if (packed) {
+    try {
+      st::unpack_plane_tile(bytes);
+    } catch (const st::FormatError&) {
+      return 0;
+    }
+  }
   std::unique_ptr<st::Evaluator> ev;
   try {
     ev = st::open_encoded(st::Encoding::dagmh, std::span<const std::uint8_t>(bytes.data(), bytes.size()));
@@ -56,6 +73,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     return 0;
   }
   FUZZ_CHECK(ev != nullptr);
+  if (packed) {
+    const std::vector<std::uint8_t> again = st::pack_plane_tile(bytes);
+    FUZZ_CHECK(again.size() == size && std::equal(again.begin(), again.end(), data));
+  }
   st::fuzz::note_accepted();
   st::fuzz::probe_evaluator(*ev, st::fuzz::input_hash(data, size));
   return 0;

@@ -1,12 +1,15 @@
 // Plane tiles (tiles/core/PLANES.md): blocks of a tile's finest texels answered by one
 // plane each, decoded with integer arithmetic. Pinned here: the rounding of the fixed-point
 // depth (to the nearest binary32, ties to even), the byte layout, the fit on real open
-// meshes (every texel of every pack within a fresh trace), and hostile buffers refused.
+// meshes (every texel of every pack within a fresh trace), and hostile buffers refused;
+// the packed form a pack stores them in (plane_pack.hpp) likewise.
 #include <gtest/gtest.h>
 
 #include <bit>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <random>
 
 #include "common/bytes.hpp"
@@ -21,6 +24,7 @@
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_format.hpp"
+#include "tiles/core/plane_pack.hpp"
 #include "tiles/core/plane_tile.hpp"
 
 namespace st {
@@ -144,6 +148,28 @@ TEST(PlaneFormat, LayoutIsPinned) {
   EXPECT_EQ(v.plane_at(2, 8, 9).a, at88.a);  // even column: plane 0
   EXPECT_EQ(v.plane_at(2, 9, 9).a, 1000);    // odd column: plane 1 at the block's corner
   EXPECT_EQ(v.plane_at(2, 9, 9).fixed(1, 1), 1000 + 5 - 7);
+
+  // The packed form of the same tile (plane_pack.hpp): the header and table as they were,
+  // then the quadtree of block kinds, indices, palettes, one-bit labels, zeros, the inner.
+  std::vector<uint8_t> packed_want(want.begin(), want.begin() + 24 + 48);
+  packed_want[3] = 'Q';
+  const std::vector<uint8_t> packed_planes{
+      0x61, 0x02, 0x03,  // kinds: split | empty, plane, split | plane, empty, empty, empty | labelled
+      0, 0,              // the two plane blocks' table indices (one byte: 2 planes)
+      0x54, 0x03,        // palette classes 0, 1, 1, 1; labels use entries 0 and 1
+      0, 1,              // its distinct planes
+      0xAA, 0xAA, 0xAA, 0xAA, 0xAA, 0xAA, 0xAA, 0xAA};  // one bit a texel: odd columns entry 1
+  packed_want.insert(packed_want.end(), packed_planes.begin(), packed_planes.end());
+  packed_want.resize(want.size() - inner.size(), 0);
+  packed_want.insert(packed_want.end(), inner.begin(), inner.end());
+  const std::vector<uint8_t> packed = pack_plane_tile(b);
+  EXPECT_EQ(packed, packed_want);
+  EXPECT_TRUE(is_packed_plane_tile(packed));
+  EXPECT_FALSE(is_plane_buffer(packed));
+  std::vector<uint8_t> back = packed;
+  unpack_plane_tile(back);
+  EXPECT_EQ(back, b);
+  EXPECT_TRUE(pack_plane_tile(packed).empty()) << "only a valid STPN tile packs";
 }
 
 // A hierarchy of one tile of `scene` (bottom-up MH construction of a fresh trace).
@@ -172,7 +198,7 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
   const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), scene.bounds());
   const uint32_t depth = 7, level = 9;
   uint64_t plane_texels = 0, labelled = 0, table_merged = 0, table_unmerged = 0;
-  uint64_t zeros_rounded = 0, zeros_unrounded = 0, z_rounded = 0, z_unrounded = 0;
+  uint64_t zeros_rounded = 0, zeros_unrounded = 0, z_rounded = 0, z_unrounded = 0, z_stpn = 0, z_packed = 0;
   // Trailing zero bits of a plane tile's table entries (a, b, c), and its table's zlib size.
   auto table_of = [](const std::vector<uint8_t>& tile, uint64_t& zeros, uint64_t& z) {
     const PlaneTileView v = validate_plane_tile(tile);
@@ -212,6 +238,16 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
     }
     for (Encoding e : {Encoding::mh, Encoding::mmh, Encoding::dagmh}) {
       const std::vector<uint8_t> bytes = wrap_planes(s.planes, depth, encode(s.pruned, e), s.labelled);
+      {
+        // Packed, the same size, back to the very bytes; smaller once deflated.
+        const std::vector<uint8_t> packed = pack_plane_tile(bytes);
+        ASSERT_EQ(packed.size(), bytes.size());
+        std::vector<uint8_t> back = packed;
+        unpack_plane_tile(back);
+        ASSERT_EQ(back, bytes);
+        z_stpn += zlib_compress(bytes, 6).size();
+        z_packed += zlib_compress(packed, 6).size();
+      }
       const auto ev = open_encoded(e, bytes);
       const uint32_t side = 1u << depth;
       for (uint32_t y = 0; y < side; ++y)
@@ -242,6 +278,7 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
   EXPECT_LT(table_merged, table_unmerged) << "planes of one surface found on separate blocks are merged";
   EXPECT_GT(zeros_rounded, zeros_unrounded + 20 * table_merged) << "rounded planes end in zero bits";
   EXPECT_LT(z_rounded, z_unrounded) << "rounded planes deflate smaller";
+  EXPECT_LT(z_packed, z_stpn) << "packed plane tiles deflate smaller";
 }
 
 TEST(PlaneFit, ABlockAcrossTwoPlanesIsNoPlane) {
@@ -287,13 +324,45 @@ TEST_P(PlanePacks, EveryTexelIsWithinTheFreshTraceAndPlaneTilesAreUsed) {
   build_map(scene, light, o, path);
   auto reader = PackReader::open(path);
   EXPECT_TRUE(reader->header().flags & kFeaturePlaneTiles) << "some tile stores planes";
-  uint64_t plane_tiles = 0;
-  for (const TileIndexEntry& t : reader->tiles())
-    if (t.kind == TileKind::encoded) plane_tiles += is_plane_buffer(reader->read_raw(t.id));
+  EXPECT_TRUE(reader->header().flags & kFeaturePackedPlaneTiles) << "plane tiles are stored packed";
+  // Stored packed (STPQ), read back as STPN: never more stored bytes than STPN's.
+  uint64_t plane_tiles = 0, packed_tiles = 0, stored = 0, stpn_stored = 0;
+  for (const TileIndexEntry& t : reader->tiles()) {
+    if (t.kind != TileKind::encoded) continue;
+    const std::vector<uint8_t> raw = reader->read_raw(t.id);
+    if (!is_plane_buffer(raw)) continue;
+    ++plane_tiles;
+    const std::vector<uint8_t> as_stored = zlib_decompress(reader->read_stored(t.id), t.raw_size, "test");
+    packed_tiles += is_packed_plane_tile(as_stored);
+    stored += t.stored_size;
+    stpn_stored += zlib_compress(raw, 6).size();
+  }
   EXPECT_GT(plane_tiles, 0u);
+  EXPECT_GT(packed_tiles, 0u);
+  EXPECT_LT(stored, stpn_stored);
   const IntervalTile truth = RasterBounds(scene, light).trace(TraceRegion{L, 0, 0, 1u << L, 1u << L});
   PackEvaluator eval(std::move(reader));
   EXPECT_EQ(fields::first_violation(truth, [&](uint32_t i, uint32_t j) { return eval.depth(L, i, j); }), "");
+  // Without the feature bit (header CRC fixed) a packed tile is refused by name.
+  std::vector<uint8_t> file;
+  {
+    std::ifstream f(path, std::ios::binary);
+    file.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+  }
+  PackHeader h = PackHeader::parse(std::span<const uint8_t>(file.data(), kPackHeaderBytes), path);
+  h.flags &= ~uint32_t(kFeaturePackedPlaneTiles);
+  const auto head = h.serialize();
+  std::memcpy(file.data(), head.data(), head.size());
+  {
+    std::ofstream f(path, std::ios::binary | std::ios::trunc);
+    f.write(reinterpret_cast<const char*>(file.data()), std::streamsize(file.size()));
+  }
+  try {
+    PackReader::open(path)->verify();
+    ADD_FAILURE() << "a packed plane tile read without feature packed_plane_tiles";
+  } catch (const FormatError& e) {
+    EXPECT_NE(std::string(e.what()).find("packed_plane_tiles"), std::string::npos) << e.what();
+  }
   fs::remove(path);
 }
 
@@ -346,6 +415,43 @@ TEST(PlaneTileHostile, TruncatedAndFlippedBuffersAreRefusedOrAnswerSafely) {
       std::vector<uint8_t> bad = good;
       bad[i] ^= flip;
       probe(bad);
+    }
+  // Its packed form (plane_pack.hpp) likewise: cut or changed, it unpacks or is refused
+  // with a FormatError; what unpacks either opens and answers safely or is refused, and
+  // what opens packs back to the same bytes (the packed form is canonical).
+  const std::vector<uint8_t> packed = pack_plane_tile(good);
+  ASSERT_EQ(packed.size(), good.size());
+  auto probe_packed = [&](std::vector<uint8_t> b) {
+    const std::vector<uint8_t> given = b;
+    try {
+      unpack_plane_tile(b);
+    } catch (const FormatError&) {
+      return;
+    }
+    bool valid = true;
+    try {
+      validate_plane_tile(b);
+    } catch (const FormatError&) {
+      valid = false;
+    }
+    if (valid) {
+      ASSERT_EQ(pack_plane_tile(b), given) << "two packed forms of one tile";
+    }
+    probe(b);
+  };
+  for (size_t n = 0; n < packed.size(); ++n) {
+    std::vector<uint8_t> cut(packed.begin(), packed.begin() + long(n));
+    try {
+      unpack_plane_tile(cut);
+      EXPECT_THROW(validate_plane_tile(cut), FormatError) << "packed, truncated at " << n;
+    } catch (const FormatError&) {
+    }
+  }
+  for (size_t i = 0; i < header_and_planes; ++i)
+    for (uint8_t flip : {uint8_t(0x01), uint8_t(0x80), uint8_t(0xFF)}) {
+      std::vector<uint8_t> bad = packed;
+      bad[i] ^= flip;
+      probe_packed(std::move(bad));
     }
   std::vector<uint8_t> newer = good;
   newer[kOffVersion] = 3;

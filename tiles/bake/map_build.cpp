@@ -54,7 +54,11 @@ CutParams checked_cut_params(const MapBuildOptions& o) {
     if (vo.z_bits < vsdag::kMinZBits || vo.z_bits > vsdag::kMaxZBits) throw Error("build: --depth-bits must be 3..20");
     cut.codec.encode = [vo](const Hierarchy& h) { return encode_vsdag(h, vo); };
   }
-  if (o.planes && o.encoding != Encoding::vsdag) cut.codec = TileCodec::with_planes(cut.codec, cut.tile_bytes, o.plane_fit);
+  if (o.planes && o.encoding != Encoding::vsdag) {
+    PlaneFitOptions fit = o.plane_fit;
+    fit.packed = o.pack_plane_tiles;  // weigh plane tiles as the pack will store them
+    cut.codec = TileCodec::with_planes(cut.codec, cut.tile_bytes, fit);
+  }
   cut.validate();
   if (o.region) {
     const uint64_t R = uint64_t(1) << cut.map_level;
@@ -101,6 +105,7 @@ PackParams pack_params(const Scene& scene, const LightSpace& light, const MapBui
   if (o.intervals == IntervalRule::static_geometry) pp.features |= kFeatureStaticIntervals;
   pp.compression_level = o.compression_level;
   pp.dagmh_dictionary = o.dagmh_dictionary && o.encoding == Encoding::dagmh;
+  pp.pack_plane_tiles = o.pack_plane_tiles;
   pp.build_params = {{"builder", to_string(builder)},
                      {"construction", o.construction == MhConstruction::bottom_up ? "bottom-up" : "top-down"},
                      {"light", o.light_spec.empty() ? light.spec().to_string() : o.light_spec},

@@ -111,6 +111,8 @@ struct MapBuildOptions {
   // plane_tiles, tiles/core/PLANES.md) and keeps what stores smaller.
   bool planes = false;
   PlaneFitOptions plane_fit;  // which blocks are tried (plane_fit.hpp)
+  // Plane tiles stored packed (PackParams::pack_plane_tiles, feature packed_plane_tiles).
+  bool pack_plane_tiles = true;
   // With dagmh_mixed_tiles: encode every tile both ways (TileCodec::dagmh_or_mmh(true)),
   // instead of only where the share of zero-width intervals leaves the winner unsure.
   bool dagmh_mixed_exhaustive = false;

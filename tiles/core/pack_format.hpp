@@ -114,7 +114,11 @@ enum PackFeature : uint32_t {
   // size; readers ungroup them as they load. Only with stack_slice_tiles. Readers before it
   // refuse the pack by this bit.
   kFeatureStackGroupedTiles = 1u << 12,
-  kKnownFeatures = 0x1FFF,
+  // Some plane tiles are stored packed (magic "STPQ", plane_pack.hpp, tiles/core/PLANES.md
+  // "Packed form"): the same size as their STPN bytes; readers unpack them as they load.
+  // Only with plane_tiles. Readers before it refuse the pack by this bit.
+  kFeaturePackedPlaneTiles = 1u << 13,
+  kKnownFeatures = 0x3FFF,
 };
 
 // Header layout (offset: size field):

@@ -1,6 +1,7 @@
 #include "tiles/core/pack_reader.hpp"
 
 #include "tiles/core/stack_slices.hpp"
+#include "tiles/core/plane_pack.hpp"
 #include "tiles/core/pack_light_check.hpp"
 #include "tiles/core/coarse_hulls.hpp"
 
@@ -278,8 +279,19 @@ std::vector<uint8_t> PackReader::read_stored(uint64_t id) const {
 namespace {
 
 // A stack pack's grouped per-slice cell ("STSP", stack_slices.hpp) back to its STSL bytes,
-// in place; anything else is left alone.
+// and a packed plane tile ("STPQ", plane_pack.hpp) back to its STPN bytes, in place;
+// anything else is left alone.
 void pack_reader_ungroup(const PackHeader& h, bool stack, std::span<uint8_t> raw, const std::string& what) {
+  if (!stack && is_packed_plane_tile(raw)) {
+    if (!(h.flags & kFeaturePackedPlaneTiles))
+      throw FormatError(what + ": a packed plane tile (\"STPQ\") in a pack without feature packed_plane_tiles");
+    try {
+      unpack_plane_tile(raw);
+    } catch (const FormatError& e) {
+      throw FormatError(what + ": " + e.what());
+    }
+    return;
+  }
   if (!stack || !is_grouped_slice_tiles(raw)) return;
   if (!(h.flags & kFeatureStackGroupedTiles))
     throw FormatError(what + ": a grouped per-slice cell (\"STSP\") in a pack without feature stack_grouped_tiles");
@@ -512,7 +524,8 @@ std::string PackReader::summary() const {
                                                     {kFeatureMixedTiles, "mixed_tiles"},
                                                     {kFeatureStackSliceTiles, "stack_slice_tiles"},
                                                     {kFeaturePlaneTiles, "plane_tiles"},
-                                                    {kFeatureStackGroupedTiles, "stack_grouped_tiles"}};
+                                                    {kFeatureStackGroupedTiles, "stack_grouped_tiles"},
+                                                    {kFeaturePackedPlaneTiles, "packed_plane_tiles"}};
   for (auto [bit, n] : names)
     if (header_.flags & bit) features += std::string(features.empty() ? "" : ",") + n;
   char buf[320];

@@ -16,6 +16,7 @@
 #include "tiles/core/map_preview.hpp"
 #include "tiles/core/page_table.hpp"
 #include "tiles/core/pack_dictionary.hpp"
+#include "tiles/core/plane_pack.hpp"
 #include "tiles/core/plane_tile.hpp"
 
 namespace st {
@@ -408,7 +409,11 @@ uint32_t PackWriter::tile_kind_features() const {
     std::vector<uint8_t> stored(t.stored_size);
     pack_io::pread_all(fd_, t.offset, stored, what);
     if (crc32_of(stored) != t.crc) throw Error(what + ": " + describe_tile(t.id) + " fails its CRC on the read back");
-    const std::vector<uint8_t> raw = zlib_decompress(stored, t.raw_size, what + ": " + describe_tile(t.id));
+    std::vector<uint8_t> raw = zlib_decompress(stored, t.raw_size, what + ": " + describe_tile(t.id));
+    if (is_packed_plane_tile(raw)) {
+      flags |= kFeaturePackedPlaneTiles;
+      unpack_plane_tile(raw);
+    }
     std::span<const uint8_t> tile = raw;
     if (is_plane_buffer(tile)) {
       flags |= kFeaturePlaneTiles;
@@ -440,6 +445,7 @@ std::vector<uint8_t> PackWriter::preview_bytes(const CutGrid& grid) const {
     pread_all(fd_, t->offset, stored, what);
     Open o;
     o.raw = zlib_decompress(stored, t->raw_size, what + ": " + describe_tile(id));
+    if (t->kind == TileKind::encoded && is_packed_plane_tile(o.raw)) unpack_plane_tile(o.raw);
     if (t->kind == TileKind::encoded) o.ev = open_encoded(params_.encoding, o.raw);
     else o.grid = CutGrid::parse(o.raw, what + ": " + describe_tile(id), kMaxIndexLevels);
     return open.emplace(id, std::move(o)).first->second;
@@ -465,6 +471,13 @@ std::vector<uint8_t> encode_cell_bytes(const CutCell& cell, const PackParams& pa
       throw Error(where + ": " + describe_tile(t.id) + " has " + std::to_string(t.raw.size()) +
                   " bytes (tile_bytes " + std::to_string(params.tile_bytes) + ")");
     std::vector<uint8_t> stored = zlib_compress(t.raw, params.compression_level);
+    if (params.pack_plane_tiles && t.kind == TileKind::encoded && is_plane_buffer(t.raw)) {
+      const std::vector<uint8_t> packed = pack_plane_tile(t.raw);  // the same size; empty if it does not round-trip
+      if (!packed.empty()) {
+        std::vector<uint8_t> z = zlib_compress(packed, params.compression_level);
+        if (z.size() < stored.size()) stored = std::move(z);
+      }
+    }
     TileRecord r{t.kind, t.id, uint32_t(stored.size()), uint32_t(t.raw.size()), crc32_of(stored)};
     auto head = r.serialize();
     buf.insert(buf.end(), head.begin(), head.end());

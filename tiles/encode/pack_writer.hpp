@@ -69,6 +69,10 @@ struct PackParams {
   // payloads_only, with the plain tile index): tests of verify()'s cell-record checks.
   // Not with a DAG-MH dictionary that rewrites tiles (finish() throws).
   bool journal_records = false;
+  // Store each plane tile packed ("STPQ", tiles/core/plane_pack.hpp, feature
+  // packed_plane_tiles) where that deflates smaller; readers unpack it as they load, so
+  // answers and raw sizes are unchanged. Off writes STPN as before.
+  bool pack_plane_tiles = true;
 
   static PackParams from(const LightSpace& light, const CutParams& cut);
 };

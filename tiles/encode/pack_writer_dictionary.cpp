@@ -17,6 +17,7 @@
 #include "tiles/encode/pack_file_io.hpp"
 #include "tiles/encode/dagmh_dictionary.hpp"
 #include "tiles/core/pack_dictionary.hpp"
+#include "tiles/core/plane_pack.hpp"
 #include "tiles/core/plane_tile.hpp"
 
 namespace st {
@@ -53,7 +54,7 @@ std::vector<uint8_t> PackWriter::share_dictionary(RewrittenTiles& rewritten_tile
     if (crc32_of(stored) != t.crc) throw Error(what + ": " + describe_tile(t.id) + " fails its CRC on the read back");
     std::vector<uint8_t> bytes = zlib_decompress(stored, t.raw_size, what + ": " + describe_tile(t.id));
     // A mixed tile (tiles/PACK.md "Mixed tiles") or a plane tile (tiles/core/PLANES.md) shares nothing.
-    if (is_mmh_buffer(bytes) || is_plane_buffer(bytes)) {
+    if (is_mmh_buffer(bytes) || is_plane_buffer(bytes) || is_packed_plane_tile(bytes)) {
       out.raw_after += t.raw_size;
       continue;
     }

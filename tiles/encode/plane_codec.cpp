@@ -1,11 +1,13 @@
 // TileCodec::with_planes (tile_cut.hpp): each tile's encoding with and without plane blocks
 // (plane_fit.hpp, tiles/core/PLANES.md), the one that stores smaller kept.
+#include <algorithm>
 #include <optional>
 
 #include "common/error.hpp"
 #include "tiles/encode/plane_fit.hpp"
 #include "tiles/encode/tile_cut.hpp"
 #include "tiles/core/pack_format.hpp"
+#include "tiles/core/plane_pack.hpp"
 #include "tiles/core/plane_tile.hpp"
 
 namespace st {
@@ -23,7 +25,11 @@ TileCodec TileCodec::with_planes(TileCodec base, uint32_t tile_bytes, const Plan
     auto offer = [&](std::vector<uint8_t> bytes) {
       const bool fits = bytes.size() <= tile_bytes, best_fits = best && best->size() <= tile_bytes;
       if (best_fits && !fits) return;
-      const size_t z = fits ? zlib_compress(bytes, kEncodingChoiceZlibLevel).size() : bytes.size();
+      size_t z = fits ? zlib_compress(bytes, kEncodingChoiceZlibLevel).size() : bytes.size();
+      if (fits && fit.packed && is_plane_buffer(bytes)) {  // as the pack will store it
+        const std::vector<uint8_t> packed = pack_plane_tile(bytes);
+        if (!packed.empty()) z = std::min(z, zlib_compress(packed, kEncodingChoiceZlibLevel).size());
+      }
       if (!best || (fits && !best_fits) || z < best_z) best = std::move(bytes), best_z = z;
     };
     auto attempt = [&](const Fn& f, const Hierarchy& tree, const PlaneSplit* split) {

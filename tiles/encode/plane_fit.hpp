@@ -41,6 +41,9 @@ struct PlaneFitOptions {
   // the default rule) are not searched: wide intervals (closed objects) let the trees merge
   // their values, planes did not store smaller there (procedural:city) and cost build time.
   double min_zero_width_share = 0.5;
+  // TileCodec::with_planes weighs a plane tile by the zlib size of its packed form
+  // (tiles/core/plane_pack.hpp), as a pack stores it (PackParams::pack_plane_tiles).
+  bool packed = true;
 };
 
 // An 8x8 block whose texels are answered by up to 4 planes (plane_format.hpp, labelled block).

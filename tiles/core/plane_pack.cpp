@@ -1,0 +1,306 @@
+#include "tiles/core/plane_pack.hpp"
+
+#include <algorithm>
+#include <bit>
+#include <cstring>
+#include <string>
+
+#include "common/bytes.hpp"
+#include "common/error.hpp"
+#include "tiles/core/plane_format.hpp"
+#include "tiles/core/plane_tile.hpp"
+
+namespace st {
+
+namespace plane_pack {
+
+inline constexpr uint32_t kMagic = 0x51505453u;  // bytes "STPQ"
+// Quadtree node kinds (plane_pack.hpp), 2 bits each.
+inline constexpr uint8_t kNodeEmpty = 0, kNodeSplit = 1, kNodePlane = 2, kNodeLabels = 3;
+inline constexpr uint32_t kTexels = 64;       // a labelled block's texels (8x8)
+inline constexpr size_t kLabelBytes = 16;     // 2-bit labels (plane_format.hpp)
+inline constexpr size_t kOneBitLabelBytes = 8;
+
+[[noreturn]] void fail(const std::string& field, size_t offset, const std::string& why) {
+  throw FormatError("packed plane tile: " + field + " at byte " + std::to_string(offset) + ": " + why);
+}
+
+// Texel i's 2-bit label in a labelled block's 16 label bytes.
+uint32_t label_of(const uint8_t* bits, uint32_t i) { return (bits[i / 4] >> (2 * (i % 4))) & 3u; }
+
+// The palette entries a labelled block's labels use, as a 4-bit mask.
+uint32_t used_entries(const uint8_t* bits) {
+  uint32_t used = 0;
+  for (uint32_t i = 0; i < kTexels; ++i) used |= 1u << label_of(bits, i);
+  return used;
+}
+
+struct Streams {
+  std::vector<uint8_t> kinds, indices, palettes, planes, labels;
+  uint32_t nodes = 0;
+  void node(uint8_t kind) {
+    if (nodes % 4 == 0) kinds.push_back(0);
+    kinds.back() |= uint8_t(kind << (2 * (nodes % 4)));
+    ++nodes;
+  }
+  void index(uint32_t i, bool wide) {
+    indices.push_back(uint8_t(i));
+    if (wide) indices.push_back(uint8_t(i >> 8));
+  }
+};
+
+// Emits the quadtree node of Morton code `start` and side 2^s over the sorted, disjoint
+// records from `next` on; false if a record does not sit on a node (not a valid tile).
+bool emit_node(const PlaneTileView& v, uint64_t start, uint32_t s, uint32_t& next, Streams& out) {
+  using namespace planes;
+  const uint64_t end = start + (uint64_t(1) << (2 * s));
+  if (next >= v.plane_count || v.block_start(next) >= end) {
+    out.node(kNodeEmpty);
+    return true;
+  }
+  if (v.block_start(next) == start && v.block_shift(next) == s) {
+    const uint8_t* r = v.records.data() + size_t(next) * kRecordSize;
+    const uint32_t index = load_le<uint16_t>(r + kOffIndex);
+    ++next;
+    if (r[kOffKind] == kKindPlane) {
+      out.node(kNodePlane);
+      out.index(index, v.table_count > 256);
+      return true;
+    }
+    out.node(kNodeLabels);
+    const uint8_t* l = v.labels.data() + size_t(index) * kLabelSize;
+    uint32_t palette[kPalette], distinct[kPalette], n = 0, classes = 0;
+    for (uint32_t k = 0; k < kPalette; ++k) {
+      palette[k] = load_le<uint16_t>(l + 2 * k);
+      uint32_t c = 0;
+      while (c < n && distinct[c] != palette[k]) ++c;
+      if (c == n) distinct[n++] = palette[k];
+      classes |= c << (2 * k);
+    }
+    const uint8_t* bits = l + kOffLabelBits;
+    const uint32_t used = used_entries(bits);
+    out.palettes.push_back(uint8_t(classes));
+    out.palettes.push_back(uint8_t(used));
+    for (uint32_t c = 0; c < n; ++c) {
+      out.planes.push_back(uint8_t(distinct[c]));
+      if (v.table_count > 256) out.planes.push_back(uint8_t(distinct[c] >> 8));
+    }
+    if (std::popcount(used) == 2) {
+      const uint32_t high = 31 - uint32_t(std::countl_zero(used));
+      uint64_t word = 0;
+      for (uint32_t i = 0; i < kTexels; ++i) word |= uint64_t(label_of(bits, i) == high) << i;
+      for (uint32_t k = 0; k < kOneBitLabelBytes; ++k) out.labels.push_back(uint8_t(word >> (8 * k)));
+    } else if (std::popcount(used) > 2) {
+      out.labels.insert(out.labels.end(), bits, bits + kLabelBytes);
+    }
+    return true;
+  }
+  if (s <= kMinShift) return false;
+  out.node(kNodeSplit);
+  for (uint64_t k = 0; k < 4; ++k)
+    if (!emit_node(v, start + k * (uint64_t(1) << (2 * (s - 1))), s - 1, next, out)) return false;
+  return true;
+}
+
+// Reads the packed streams of one buffer (bounds-checked, offsets in the whole buffer).
+class Reader {
+ public:
+  Reader(const std::vector<uint8_t>& bytes, size_t base) : b_(bytes), base_(base) {}
+  uint8_t byte(const char* field) {
+    if (at_ >= b_.size()) fail(field, base_ + at_, "past the packed section");
+    return b_[at_++];
+  }
+  uint32_t index(const char* field, bool wide) {
+    uint32_t i = byte(field);
+    if (wide) i |= uint32_t(byte(field)) << 8;
+    return i;
+  }
+  uint8_t node() {
+    if (bit_ == 0) cur_ = byte("block kinds");
+    const uint8_t k = (cur_ >> bit_) & 3u;
+    bit_ = (bit_ + 2) % 8;
+    return k;
+  }
+  // The kinds stream ends on a byte: its unused high bits must be zero.
+  void end_nodes() {
+    if (bit_ != 0 && (cur_ >> bit_) != 0) fail("block kinds", base_ + at_ - 1, "stray bits after the last node");
+    bit_ = 0;
+  }
+  size_t at() const { return base_ + at_; }
+  size_t offset() const { return at_; }
+
+ private:
+  const std::vector<uint8_t>& b_;
+  size_t base_ = 0, at_ = 0;
+  uint32_t bit_ = 0;
+  uint8_t cur_ = 0;
+};
+
+struct Block {
+  uint32_t start = 0;
+  uint8_t shift = 0, kind = 0;
+};
+
+// The node of Morton code `start` and side 2^s; returns whether it holds a block.
+bool read_node(Reader& r, uint64_t start, uint32_t s, uint32_t max_blocks, std::vector<Block>& out) {
+  using namespace planes;
+  const size_t at = r.at();
+  const uint8_t k = r.node();
+  if (k == kNodeEmpty) return false;
+  if (k != kNodeSplit) {
+    if (k == kNodePlane && (s < kMinShift || s > kMaxShift))
+      fail("block kinds", at, "a plane block of side 2^" + std::to_string(s));
+    if (k == kNodeLabels && s != kLabelShift) fail("block kinds", at, "a labelled block of side 2^" + std::to_string(s));
+    if (out.size() >= max_blocks) fail("block kinds", at, "more blocks than block_count " + std::to_string(max_blocks));
+    out.push_back(Block{uint32_t(start), uint8_t(s), k == kNodePlane ? kKindPlane : kKindLabels});
+    return true;
+  }
+  if (s <= kMinShift) fail("block kinds", at, "a split below side 2^" + std::to_string(kMinShift));
+  bool any = false;
+  for (uint64_t c = 0; c < 4; ++c) any |= read_node(r, start + c * (uint64_t(1) << (2 * (s - 1))), s - 1, max_blocks, out);
+  if (!any) fail("block kinds", at, "a split with no block below it");
+  return true;
+}
+
+void unpack(std::span<uint8_t> b);
+
+std::vector<uint8_t> pack(std::span<const uint8_t> stpn, PlanePackParts* parts) {
+  PlaneTileView v;
+  try {
+    v = validate_plane_tile(stpn);
+  } catch (const FormatError&) {
+    return {};
+  }
+  Streams s;
+  uint32_t next = 0;
+  if (!emit_node(v, 0, v.finest_level, next, s) || next != v.plane_count) return {};
+  const size_t table_end = planes::kHeaderSize + v.table.size();
+  const size_t inner_at = size_t(v.inner.data() - stpn.data());
+  const size_t packed = s.kinds.size() + s.indices.size() + s.palettes.size() + s.planes.size() + s.labels.size();
+  if (table_end + packed > inner_at) return {};
+  std::vector<uint8_t> out(stpn.begin(), stpn.end());
+  store_le<uint32_t>(out.data(), plane_pack::kMagic);
+  uint8_t* p = out.data() + table_end;
+  for (const std::vector<uint8_t>* part : {&s.kinds, &s.indices, &s.palettes, &s.planes, &s.labels}) {
+    if (!part->empty()) std::memcpy(p, part->data(), part->size());
+    p += part->size();
+  }
+  std::fill(p, out.data() + inner_at, uint8_t(0));
+  // The form is only kept if it unpacks to the very bytes it came from.
+  std::vector<uint8_t> back = out;
+  try {
+    unpack(back);
+  } catch (const FormatError&) {
+    return {};
+  }
+  if (!std::equal(back.begin(), back.end(), stpn.begin(), stpn.end())) return {};
+  if (parts) *parts = {s.kinds.size(), s.indices.size(), s.palettes.size(), s.planes.size(), s.labels.size()};
+  return out;
+}
+
+void unpack(std::span<uint8_t> b) {
+  using namespace planes;
+  if (b.size() < kHeaderSize) fail("header", 0, std::to_string(b.size()) + " bytes, fewer than 24");
+  if (load_le<uint32_t>(b.data()) != plane_pack::kMagic) fail("magic", 0, "not \"STPQ\"");
+  const uint32_t levels = b[kOffLevels];
+  if (levels < 1 || levels > kMaxLevels) fail("levels", kOffLevels, std::to_string(levels) + " outside 1..17");
+  const uint32_t count = load_le<uint32_t>(b.data() + kOffPlaneCount);
+  const uint32_t tables = load_le<uint32_t>(b.data() + kOffTableCount);
+  const uint32_t label_count = load_le<uint32_t>(b.data() + kOffLabelCount);
+  if (count > kMaxPlanes) fail("block_count", kOffPlaneCount, std::to_string(count) + " above 2^20");
+  if (tables > kMaxTable) fail("table_count", kOffTableCount, std::to_string(tables) + " above 65535");
+  if (label_count > count) fail("label_count", kOffLabelCount, std::to_string(label_count) + " above block_count");
+  const size_t table_end = kHeaderSize + size_t(tables) * kEntrySize;
+  const size_t labels_at = table_end + size_t(count) * kRecordSize;
+  const size_t inner_at = labels_at + size_t(label_count) * kLabelSize;
+  if (inner_at > b.size())
+    fail("block_count", kOffPlaneCount, "the unpacked blocks end at byte " + std::to_string(inner_at) + ", past the " +
+                                            std::to_string(b.size()) + "-byte buffer");
+  const std::vector<uint8_t> packed(b.begin() + ptrdiff_t(table_end), b.begin() + ptrdiff_t(inner_at));
+  Reader r(packed, table_end);
+  const size_t kinds_at = r.at();
+  std::vector<Block> blocks;
+  blocks.reserve(count);
+  read_node(r, 0, levels - 1, count, blocks);
+  r.end_nodes();
+  if (blocks.size() != count)
+    fail("block kinds", kinds_at, std::to_string(blocks.size()) + " blocks, block_count says " + std::to_string(count));
+  const bool wide = tables > 256;
+  std::vector<uint16_t> index(count);
+  uint32_t labelled = 0;
+  for (uint32_t i = 0; i < count; ++i) index[i] = uint16_t(blocks[i].kind == kKindPlane ? r.index("plane index", wide) : labelled++);
+  if (labelled != label_count)
+    fail("block kinds", kinds_at, std::to_string(labelled) + " labelled blocks, label_count says " + std::to_string(label_count));
+  std::vector<uint8_t> palettes(2 * size_t(label_count));
+  for (uint8_t& p : palettes) p = r.byte("palettes");
+  std::vector<uint8_t> labels(size_t(label_count) * kLabelSize);
+  std::vector<uint8_t> distinct_count(label_count);
+  for (uint32_t j = 0; j < label_count; ++j) {
+    const uint32_t classes = palettes[2 * j], used = palettes[2 * j + 1];
+    const size_t at = r.at() - 2 * size_t(label_count - j);  // its palette bytes
+    uint32_t n = 0;
+    for (uint32_t k = 0; k < kPalette; ++k) {
+      const uint32_t c = (classes >> (2 * k)) & 3u;
+      if (c > n) fail("labelled block " + std::to_string(j) + " classes", at, "not in first-seen order");
+      n = std::max(n, c + 1);
+    }
+    if (used == 0 || used > 15) fail("labelled block " + std::to_string(j) + " use mask", at + 1, "not 1..15");
+    distinct_count[j] = uint8_t(n);
+  }
+  for (uint32_t j = 0; j < label_count; ++j) {
+    const uint32_t classes = palettes[2 * j];
+    uint32_t distinct[kPalette] = {};
+    for (uint32_t c = 0; c < distinct_count[j]; ++c) {
+      const size_t at = r.at();
+      distinct[c] = r.index("palette planes", wide);
+      for (uint32_t d = 0; d < c; ++d)
+        if (distinct[d] == distinct[c]) fail("labelled block " + std::to_string(j) + " planes", at, "a plane named twice");
+    }
+    uint8_t* l = labels.data() + size_t(j) * kLabelSize;
+    for (uint32_t k = 0; k < kPalette; ++k) store_le<uint16_t>(l + 2 * k, uint16_t(distinct[(classes >> (2 * k)) & 3u]));
+  }
+  for (uint32_t j = 0; j < label_count; ++j) {
+    const uint32_t used = palettes[2 * j + 1];
+    uint8_t* bits = labels.data() + size_t(j) * kLabelSize + kOffLabelBits;
+    const size_t at = r.at();
+    if (std::popcount(used) == 1) {
+      const uint32_t e = uint32_t(std::countr_zero(used));
+      std::fill(bits, bits + kLabelBytes, uint8_t(e | e << 2 | e << 4 | e << 6));
+    } else if (std::popcount(used) == 2) {
+      const uint32_t low = uint32_t(std::countr_zero(used)), high = 31 - uint32_t(std::countl_zero(used));
+      uint64_t word = 0;
+      for (uint32_t k = 0; k < kOneBitLabelBytes; ++k) word |= uint64_t(r.byte("labels")) << (8 * k);
+      std::fill(bits, bits + kLabelBytes, uint8_t(0));
+      for (uint32_t i = 0; i < kTexels; ++i) bits[i / 4] |= uint8_t(((word >> i) & 1 ? high : low) << (2 * (i % 4)));
+    } else {
+      for (size_t k = 0; k < kLabelBytes; ++k) bits[k] = r.byte("labels");
+    }
+    if (used_entries(bits) != used)
+      fail("labelled block " + std::to_string(j) + " use mask", at, "not the entries its labels use");
+  }
+  for (size_t k = r.offset(); k < packed.size(); ++k)
+    if (packed[k] != 0) fail("padding", table_end + k, "not zero");
+  store_le<uint32_t>(b.data(), planes::kMagic);
+  for (uint32_t i = 0; i < count; ++i) {
+    uint8_t* rec = b.data() + table_end + size_t(i) * kRecordSize;
+    store_le<uint32_t>(rec + kOffStart, blocks[i].start);
+    rec[kOffShift] = blocks[i].shift;
+    rec[kOffKind] = blocks[i].kind;
+    store_le<uint16_t>(rec + kOffIndex, index[i]);
+  }
+  if (!labels.empty()) std::memcpy(b.data() + labels_at, labels.data(), labels.size());
+}
+
+}  // namespace plane_pack
+
+bool is_packed_plane_tile(std::span<const uint8_t> bytes) {
+  return bytes.size() >= 4 && load_le<uint32_t>(bytes.data()) == plane_pack::kMagic;
+}
+
+std::vector<uint8_t> pack_plane_tile(std::span<const uint8_t> stpn, PlanePackParts* parts) {
+  return plane_pack::pack(stpn, parts);
+}
+
+void unpack_plane_tile(std::span<uint8_t> bytes) { plane_pack::unpack(bytes); }
+
+}  // namespace st
