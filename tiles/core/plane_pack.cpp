@@ -28,11 +28,26 @@ inline constexpr size_t kOneBitLabelBytes = 8;
 // Texel i's 2-bit label in a labelled block's 16 label bytes.
 uint32_t label_of(const uint8_t* bits, uint32_t i) { return (bits[i / 4] >> (2 * (i % 4))) & 3u; }
 
-// The palette entries a labelled block's labels use, as a 4-bit mask.
+// The palette entries a labelled block's labels use, as a 4-bit mask (a unpack of a real
+// level's tiles runs this on every labelled block: word operations, not 64 texels).
 uint32_t used_entries(const uint8_t* bits) {
+  constexpr uint64_t kLow = 0x5555555555555555ull;
   uint32_t used = 0;
-  for (uint32_t i = 0; i < kTexels; ++i) used |= 1u << label_of(bits, i);
+  for (uint32_t half = 0; half < 2; ++half) {
+    const uint64_t w = load_le<uint64_t>(bits + 8 * half), b0 = w & kLow, b1 = (w >> 1) & kLow;
+    used |= uint32_t((~b1 & ~b0 & kLow) != 0) | uint32_t((~b1 & b0) != 0) << 1 | uint32_t((b1 & ~b0 & kLow) != 0) << 2 |
+            uint32_t((b1 & b0) != 0) << 3;
+  }
   return used;
+}
+
+// Eight texels' one-bit labels (a byte, texel k in bit k) as their 2-bit labels (16 bits):
+// `low` where the bit is clear, `high` where it is set.
+uint16_t widen_labels(uint8_t byte, uint32_t low, uint32_t high) {
+  uint32_t set = 0;  // each bit doubled
+  for (uint32_t k = 0; k < 8; ++k) set |= ((uint32_t(byte) >> k) & 1u) * (3u << (2 * k));
+  const uint32_t lows = low * 0x5555u, flips = (low ^ high) * 0x5555u;
+  return uint16_t(lows ^ (set & flips));
 }
 
 struct Streams {
@@ -268,10 +283,7 @@ void unpack(std::span<uint8_t> b) {
       std::fill(bits, bits + kLabelBytes, uint8_t(e | e << 2 | e << 4 | e << 6));
     } else if (std::popcount(used) == 2) {
       const uint32_t low = uint32_t(std::countr_zero(used)), high = 31 - uint32_t(std::countl_zero(used));
-      uint64_t word = 0;
-      for (uint32_t k = 0; k < kOneBitLabelBytes; ++k) word |= uint64_t(r.byte("labels")) << (8 * k);
-      std::fill(bits, bits + kLabelBytes, uint8_t(0));
-      for (uint32_t i = 0; i < kTexels; ++i) bits[i / 4] |= uint8_t(((word >> i) & 1 ? high : low) << (2 * (i % 4)));
+      for (uint32_t k = 0; k < kOneBitLabelBytes; ++k) store_le<uint16_t>(bits + 2 * k, widen_labels(r.byte("labels"), low, high));
     } else {
       for (size_t k = 0; k < kLabelBytes; ++k) bits[k] = r.byte("labels");
     }
