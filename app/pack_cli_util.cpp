@@ -24,6 +24,7 @@ std::string feature_names(uint32_t flags) {
   add(kFeaturePayloadsOnly, "payloads-only");
   add(kFeatureMixedTiles, "mixed-tiles");
   add(kFeaturePlaneTiles, "plane-tiles");
+  add(kFeaturePackedPlaneTiles, "packed-plane-tiles");
   return s.empty() ? "none" : s;
 }
 
