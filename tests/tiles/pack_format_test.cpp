@@ -97,6 +97,8 @@ TEST(PackFormat, HeaderRefusesEveryBadField) {
       resigned([](PackHeader& h) { h.flags |= 1u << 10; }),
       // Mixed tiles (bit 9): DAG-MH packs only.
       resigned([](PackHeader& h) { h.flags |= kFeatureMixedTiles, h.encoding = Encoding::mmh; }),
+      // Packed plane tiles (bit 13): only with plane_tiles (bit 11).
+      resigned([](PackHeader& h) { h.flags |= kFeaturePackedPlaneTiles; }),
       resigned([](PackHeader& h) { h.map_level = 21; }),
       resigned([](PackHeader& h) { h.skip_level = 11; }),
       resigned([](PackHeader& h) { h.tile_bytes = 0; }),
