@@ -47,8 +47,8 @@ class StackMap {
   // walk (equal to N lit() calls bit for bit, tested).
   float soft_visibility(const Vec3d& p, bool* exact = nullptr) const;
   // out[i] = soft_visibility(points[i]) for i < min(points.size(), out.size()), bit for bit
-  // (tested): the walks of up to kWalkLanes points interleaved so that their cache misses
-  // overlap (walk_interleave.hpp). `exact` is cleared when an absent tile answered any.
+  // (tested): each point's samples gathered as the single lookup does (lit_samples).
+  // `exact` is cleared when an absent tile answered any.
   void soft_visibility(std::span<const Vec3d> points, std::span<float> out, bool* exact = nullptr) const;
 
   // PCF and the footprint level, as the 2D lookups (Evaluator::pcf / pcf_footprint,
