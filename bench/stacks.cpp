@@ -579,9 +579,11 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
   }
   trees.reserve(bufs.size());
   for (const auto& b : bufs) trees.push_back(st::StackTile::open(b));
+  // The tile source as a resident map keeps it (ResidentStack): one dense entry per cell.
+  std::vector<st::StackTileRef> by_cell(cut.grid.entries.size());
+  for (size_t i = 0; i < cells.size(); ++i) by_cell.at(cells[i]) = trees[i].ref();
   const st::StackMap map(cut.grid, [&](uint64_t cell) -> st::StackTileRef {
-    auto it = std::lower_bound(cells.begin(), cells.end(), cell);
-    return it != cells.end() && *it == cell ? trees[size_t(it - cells.begin())].ref() : st::StackTileRef();
+    return cell < by_cell.size() ? by_cell[cell] : st::StackTileRef();
   });
   std::vector<std::unique_ptr<st::Evaluator>> ev;
   for (const auto& b : mh) ev.push_back(st::open_mh(b));

@@ -1,13 +1,13 @@
 #include "tiles/core/stack_map.hpp"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <new>
 
 #include "tiles/core/evaluator.hpp"
 #include "tiles/core/filter_level.hpp"
 #include "tiles/core/interval.hpp"
-#include "tiles/core/slice_walks.hpp"
-#include "tiles/core/walk_interleave.hpp"
 
 namespace st {
 
@@ -78,186 +78,224 @@ float StackMap::visibility(const Vec3d& p, double time, bool* exact) const {
   const uint32_t a = uint32_t(std::floor(s));
   const float f = float(s - double(a));
   // lit(p, a) and lit(p, a + 1), bit for bit, with what the two share done once: both
-  // texels in one run of the batched transforms (lit()'s transform, sample_texels.hpp),
-  // one tile fetch when both lie in one cell, and there one walk serving both: an octree
-  // walk to slice a + 1 resumes from slice a's (depth_along: they share the path down to
-  // the level where w splits them), two per-slice walks run in lockstep (slice_walks.hpp).
+  // texels in one run of the batched transforms (lit()'s transform, sample_texels.hpp)
+  // and both samples settled together by lit_samples (one tile fetch when both lie in one
+  // cell, where an octree walk to slice a + 1 resumes from slice a's; different cells'
+  // walks in lockstep).
   SampleTexels::Run run;
   texels_.run(p, a, 2, run);
-  const CellTexel c[2] = {cell_texel(run.x[0], run.y[0], a), cell_texel(run.x[1], run.y[1], a + 1)};
-  float v[2] = {c[0].value, c[1].value};
-  StackTileRef t[2];
-  for (uint32_t i = 0; i < 2; ++i)
-    if (c[i].tiled) {
-      t[i] = i == 1 && c[0].tiled && c[0].cell == c[1].cell ? t[0] : tile_(c[i].cell);
-      if (!t[i] && exact) *exact = false;
-    }
-  if (t[0] && c[1].tiled && c[0].cell == c[1].cell) {
-    if (t[0].octree) {
-      MhOctree::Path path;
-      v[0] = t[0].octree->depth_along(path, c[0].lx, c[0].ly, c[0].lw);
-      v[1] = t[0].octree->depth_along(path, c[1].lx, c[1].ly, c[1].lw);
-    } else {
-      // Per-slice tiles: a slice whose bounds decide the receiver needs no walk (the
-      // answer's side of d stands in for the depth: d <= lo gives lit as the walk would,
-      // d > hi unlit); the rest in one lockstep call.
-      uint64_t x[2], y[2];
-      uint32_t w[2], at[2], count = 0;
-      for (uint32_t i = 0; i < 2; ++i) {
-        const SliceTiles::Bounds b = t[0].slices->bounds(c[i].lw);
-        if (run.d[i] <= b.lo) {
-          v[i] = b.lo;
-        } else if (run.d[i] > b.hi) {
-          v[i] = b.hi;
-        } else {
-          x[count] = c[i].lx, y[count] = c[i].ly, w[count] = c[i].lw, at[count++] = i;
-        }
-      }
-      float got[2];
-      if (count) slice_depths(*t[0].slices, count, x, y, w, got);
-      for (uint32_t k = 0; k < count; ++k) v[at[k]] = got[k];
-    }
-  } else {
-    for (uint32_t i = 0; i < 2; ++i)
-      if (t[i]) {
-        const uint32_t level = t[i].octree ? t[i].octree->xy_level() : t[i].slices->xy_level();
-        v[i] = t[i].depth(c[i].lx, c[i].ly, c[i].lw, level);
-      }
-  }
-  const float la = run.d[0] <= v[0] ? 1.0f : 0.0f, lb = run.d[1] <= v[1] ? 1.0f : 0.0f;
+  const uint64_t lit = lit_samples(&run, a, 2, exact);
+  const float la = float(lit & 1), lb = float((lit >> 1) & 1);
   return la + f * (lb - la);
 }
 
 float StackMap::soft_visibility(const Vec3d& p, bool* exact) const {
   // depth(x, y, w, n) per sample, the texels a run of samples at a time (SampleTexels:
-  // lit()'s transform bit for bit). Per run, settle_run answers every sample that needs no
-  // octree walk (per-slice cells in lockstep across their tiles); the octree samples then
-  // walk in order, consecutive ones in the same cell sharing the walk
-  // (MhOctree::depth_along: each starts from the deepest node its path shares with the
-  // previous one). The lit count is a sum of per-sample tests, so the order is free.
-  MhOctree::Path path;
-  SampleTexels::Run run;
-  const MhOctree* oct[SampleTexels::kRun];
-  uint64_t path_cell = ~uint64_t(0);
-  uint32_t lit_samples = 0;
-  for (uint32_t w0 = 0; w0 < grid_.slices; w0 += SampleTexels::kRun) {
-    const uint32_t m = std::min(SampleTexels::kRun, grid_.slices - w0);
-    texels_.run(p, w0, m, run);
-    lit_samples += settle_run(run, w0, m, oct, exact);
-    for (uint32_t i = 0; i < m; ++i) {
-      if (!oct[i]) continue;
-      const CellTexel c = cell_texel(run.x[i], run.y[i], w0 + i);
-      if (c.cell != path_cell) path_cell = c.cell, path.valid = false;
-      lit_samples += run.d[i] <= oct[i]->depth_along(path, c.lx, c.ly, c.lw);
-    }
+  // lit()'s transform bit for bit), up to kGather samples settled together by lit_samples.
+  // The lit count is a sum of per-sample tests, so the order is free.
+  SampleTexels::Run runs[kGather / SampleTexels::kRun];
+  uint32_t lit = 0;
+  for (uint32_t w0 = 0; w0 < grid_.slices; w0 += kGather) {
+    const uint32_t m = std::min(kGather, grid_.slices - w0);
+    for (uint32_t r = 0; r * SampleTexels::kRun < m; ++r)
+      texels_.run(p, w0 + r * SampleTexels::kRun, std::min(SampleTexels::kRun, m - r * SampleTexels::kRun), runs[r]);
+    lit += uint32_t(std::popcount(lit_samples(runs, w0, m, exact)));
   }
-  return float(lit_samples) / float(grid_.slices);
+  return float(lit) / float(grid_.slices);
 }
 
-uint32_t StackMap::settle_run(const SampleTexels::Run& run, uint32_t w0, uint32_t m, const MhOctree** oct,
-                              bool* exact) const {
-  // Every sample of the run but those in octree cells (oct[i] = the octree, else nullptr):
-  // outside the slice or in a constant cell its entry's value, in an absent tile its
-  // entry's value (exact cleared), in a per-slice cell its slice's bounds (SliceTiles::
-  // bounds: every answer of the slice within [lo, hi], so d <= lo is lit and d > hi
-  // shadowed exactly as the walk would say) or else its walk. A day's sun moves a raised
-  // receiver's texel across cells from one sample to the next (2CylinderEngine.glb at
-  // 1024^2 x 64: 1.7 samples a cell), so the walks are gathered over the whole run, each
-  // in its own tile, and run in lockstep (slice_walks.hpp): their misses overlap.
-  static_assert(SampleTexels::kRun <= kMaxSliceWalks);
-  const SliceTiles* tiles[SampleTexels::kRun];
-  uint64_t x[SampleTexels::kRun], y[SampleTexels::kRun];
-  uint32_t w[SampleTexels::kRun], at[SampleTexels::kRun];
-  float v[SampleTexels::kRun];
-  uint32_t lit = 0, count = 0;
-  uint64_t last_cell = ~uint64_t(0);
-  StackTileRef last;
+namespace {
+
+// Raw storage for a walk state built only where used (a gathered call sets up as many
+// octree paths as it has cells, not kGather of them).
+template <class T>
+struct StackMapSlot {
+  alignas(T) unsigned char bytes[sizeof(T)];
+  T& get() { return *std::launder(reinterpret_cast<T*>(bytes)); }
+};
+
+// The cache lines of a tile's reader object (its fields are what a walk reads first).
+template <class T>
+void stack_map_prefetch_object(const T* p) {
+  const char* b = reinterpret_cast<const char*>(p);
+  for (size_t o = 0; o < sizeof(T); o += 64) __builtin_prefetch(b + o);
+}
+
+}  // namespace
+
+uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint32_t m, bool* exact) const {
+  // Every sample of the run settled in phases, each phase over all samples before the
+  // next, so that the loads of different samples are in flight together rather than one
+  // sample's dependent chain after another's (a day's sun moves a raised receiver's texel
+  // across cells from one sample to the next: 2CylinderEngine.glb at 1024^2 x 64 keeps
+  // 1.7 samples a cell, so nearly every sample reads a cold tile):
+  //   1. each sample's cell and entry (outside the slice, a constant cell: the value);
+  //   2. the tile of each cell (one tile_ call per change of cell), its reader object
+  //      prefetched;
+  //   3. per-slice samples: their slice's record (SliceTiles::Record, prefetched);
+  //      octree samples: gathered into one chain per cell (the root word prefetched),
+  //      the chain's samples walked one
+  //      after another along one path (MhOctree::along_*: each walk starts from the
+  //      deepest node it shares with the chain's previous one, as depth_along);
+  //   4. per-slice samples: the bounds (d <= lo lit, d > hi shadowed exactly as the walk
+  //      would say), a constant's value, an MMH tile's depth(), or a DAG-MH walk started
+  //      at its skip entry;
+  //   5. rounds of one step of every DAG-MH walk (View::descend's own step) and of every
+  //      octree chain, each prefetching the node it goes to; then the DAG-MH walks'
+  //      finish (treelets) and values.
+  // Each answer is the sample's own depth(x, y, w, n), bit for bit (tested).
+  constexpr uint32_t G = kGather, R = SampleTexels::kRun;
+  CellTexel c[G];
+  float d[G];
   for (uint32_t i = 0; i < m; ++i) {
-    oct[i] = nullptr;
-    const CellTexel c = cell_texel(run.x[i], run.y[i], w0 + i);
-    if (!c.tiled) {
-      lit += run.d[i] <= c.value;
-      continue;
+    const SampleTexels::Run& run = runs[i / R];
+    c[i] = cell_texel(run.x[i % R], run.y[i % R], w0 + i);
+    d[i] = run.d[i % R];
+  }
+  StackTileRef t[G];
+  {
+    uint64_t last_cell = ~uint64_t(0);
+    StackTileRef last;
+    for (uint32_t i = 0; i < m; ++i) {
+      if (!c[i].tiled) continue;
+      if (c[i].cell != last_cell) {
+        last_cell = c[i].cell, last = tile_(last_cell);
+        if (last.slices) stack_map_prefetch_object(last.slices);
+        if (last.octree) stack_map_prefetch_object(last.octree);
+      }
+      t[i] = last;
     }
-    if (c.cell != last_cell) last_cell = c.cell, last = tile_(c.cell);
-    if (last.octree) {
-      oct[i] = last.octree;
-    } else if (!last.slices) {
-      if (exact) *exact = false;
-      lit += run.d[i] <= c.value;
+  }
+  uint64_t lit = 0;
+  auto set = [&](uint32_t i, bool v) { lit |= uint64_t(v) << i; };
+  // Octree chains: samples in one cell, linked in sample order.
+  constexpr uint8_t kEnd = 0xFF;
+  uint8_t next_of[G], chain_head[G], chain_tail[G], chain_at[G];
+  const MhOctree* chain_tree[G];
+  uint64_t chain_cell[G];
+  uint32_t nc = 0, last_chain = 0;
+  const SliceTiles::Record* rec[G];
+  uint8_t rec_sample[G];
+  uint32_t nr = 0;
+  for (uint32_t i = 0; i < m; ++i) {
+    if (!c[i].tiled) {
+      set(i, d[i] <= c[i].value);
+    } else if (t[i].slices) {
+      const SliceTiles::Record* r = &t[i].slices->record(c[i].lw);
+      __builtin_prefetch(r);
+      __builtin_prefetch(reinterpret_cast<const char*>(r) + 64);
+      rec[nr] = r, rec_sample[nr++] = uint8_t(i);
+    } else if (t[i].octree) {
+      uint32_t j = last_chain;
+      if (j >= nc || chain_cell[j] != c[i].cell) {
+        j = 0;
+        while (j < nc && chain_cell[j] != c[i].cell) ++j;
+      }
+      if (j == nc) {
+        chain_tree[j] = t[i].octree, chain_cell[j] = c[i].cell, chain_head[j] = uint8_t(i);
+        __builtin_prefetch(t[i].octree->along_next(MhOctree::Walk{}));  // the root's word
+        ++nc;
+      } else {
+        next_of[chain_tail[j]] = uint8_t(i);
+      }
+      chain_tail[j] = uint8_t(i), next_of[i] = kEnd, last_chain = j;
     } else {
-      const SliceTiles::Bounds b = last.slices->bounds(c.lw);
-      const float d = run.d[i];
-      if (d <= b.lo) {
-        ++lit;
-      } else if (!(d > b.hi)) {
-        tiles[count] = last.slices, x[count] = c.lx, y[count] = c.ly, w[count] = c.lw, at[count] = i;
-        ++count;
+      if (exact) *exact = false;
+      set(i, d[i] <= c[i].value);
+    }
+  }
+  // DAG-MH walks of per-slice samples.
+  const dagmh::View* view[G];
+  dagmh::Cursor cur[G];
+  uint32_t level[G];
+  uint8_t walk_sample[G], active[G];
+  uint32_t nw = 0;
+  for (uint32_t k = 0; k < nr; ++k) {
+    const SliceTiles::Record& r = *rec[k];
+    const uint32_t i = rec_sample[k];
+    if (d[i] <= r.lo) {
+      set(i, true);
+    } else if (!(d[i] > r.hi)) {  // a constant slice never gets here with a number d
+      if (r.kind == SliceTiles::RecordKind::view) {
+        view[nw] = &r.view, level[nw] = r.xy_level, walk_sample[nw] = uint8_t(i);
+        cur[nw] = r.view.start(r.xy_level, r.xy_level, c[i].lx, c[i].ly);
+        ++nw;
+      } else if (r.kind == SliceTiles::RecordKind::evaluator) {
+        set(i, d[i] <= r.eval->depth(r.xy_level, c[i].lx, c[i].ly));
+      } else {
+        set(i, d[i] <= r.lo);
       }
     }
   }
-  if (count) slice_depths(tiles, count, x, y, w, v);
-  for (uint32_t k = 0; k < count; ++k) lit += run.d[at[k]] <= v[k];
+  auto descending = [&](uint32_t k) {
+    return (cur[k].ref & dagmh::kRefTagMask) == dagmh::kRefInner && cur[k].level < level[k];
+  };
+  uint32_t na = 0;
+  for (uint32_t k = 0; k < nw; ++k)
+    if (descending(k)) active[na++] = uint8_t(k);
+  // Octree chains begin.
+  StackMapSlot<MhOctree::Path> path[G];
+  StackMapSlot<MhOctree::Walk> walk[G];
+  uint8_t chains[G];
+  for (uint32_t j = 0; j < nc; ++j) {
+    const uint32_t i = chain_head[j];
+    new (path[j].bytes) MhOctree::Path();
+    chain_at[j] = uint8_t(i);
+    new (walk[j].bytes) MhOctree::Walk(chain_tree[j]->along_begin(path[j].get(), c[i].lx, c[i].ly, c[i].lw));
+    chains[j] = uint8_t(j);
+  }
+  uint32_t live = nc;
+  while (na || live) {
+    uint32_t kept = 0;
+    for (uint32_t a = 0; a < na; ++a) {  // one level of every DAG-MH walk that still descends
+      const uint32_t k = active[a];
+      const uint32_t i = walk_sample[k];
+      cur[k] = view[k]->descend(cur[k], cur[k].level + 1, level[k], c[i].lx, c[i].ly);
+      if (descending(k)) {
+        __builtin_prefetch(view[k]->node_at(cur[k].ref & dagmh::kRefIndexMask));
+        active[kept++] = uint8_t(k);
+      } else if ((cur[k].ref & dagmh::kRefTagMask) == dagmh::kRefTreelet) {
+        __builtin_prefetch(view[k]->treelet_at(cur[k].ref & dagmh::kRefIndexMask));
+      }
+    }
+    na = kept;
+    kept = 0;
+    for (uint32_t a = 0; a < live; ++a) {  // one step of every octree chain
+      const uint32_t j = chains[a];
+      const MhOctree& tree = *chain_tree[j];
+      MhOctree::Walk& k = walk[j].get();
+      if (tree.along_step(path[j].get(), k)) {
+        __builtin_prefetch(tree.along_next(k));
+        chains[kept++] = uint8_t(j);
+        continue;
+      }
+      uint32_t i = chain_at[j];
+      set(i, d[i] <= tree.along_value(k));
+      if ((i = next_of[i]) == kEnd) continue;
+      chain_at[j] = uint8_t(i);
+      k = tree.along_begin(path[j].get(), c[i].lx, c[i].ly, c[i].lw);
+      chains[kept++] = uint8_t(j);
+    }
+    live = kept;
+  }
+  uint32_t index[G];
+  for (uint32_t k = 0; k < nw; ++k) {
+    const uint32_t i = walk_sample[k];
+    index[k] = view[k]->finish(cur[k], level[k], c[i].lx, c[i].ly);
+  }
+  for (uint32_t k = 0; k < nw; ++k) {
+    const uint32_t i = walk_sample[k];
+    set(i, d[i] <= view[k]->value(index[k]));
+  }
   return lit;
 }
 
 void StackMap::soft_visibility(std::span<const Vec3d> points, std::span<float> out, bool* exact) const {
-  // soft_visibility(p) above as a resumable job per point (walk_interleave.hpp): the same
-  // texels, runs settled the same way and octree walks in the same order, so the same
-  // answers; a lane yields where its octree walk steps onto a new cache line.
-  const uint32_t slices = grid_.slices;
-  struct Lane {
-    MhOctree::Path path;
-    MhOctree::Walk walk;
-    SampleTexels::Run run;  // samples w - w % kRun onward
-    const MhOctree* oct[SampleTexels::kRun];  // per sample of the run: its octree, or settled
-    uint64_t path_cell = 0;
-    size_t i = 0;
-    uint32_t w = 0, lit = 0;
-    bool walking = false;
-  };
-  auto start = [&](Lane& ln, size_t i) {
-    ln.path_cell = ~uint64_t(0);
-    ln.i = i, ln.w = 0, ln.lit = 0, ln.walking = false;
-  };
-  auto run = [&](Lane& ln) {
-    // The lane's scalars live in registers while it runs and go back at a yield.
-    MhOctree::Path& path = ln.path;
-    uint32_t w = ln.w, lit = ln.lit;
-    bool walking = ln.walking;
-    MhOctree::Walk k = ln.walk;
-    for (;;) {
-      if (walking) {
-        const MhOctree& tile = *ln.oct[w % SampleTexels::kRun];
-        if (step_until_new_line(tile, path, k)) {
-          ln.w = w, ln.lit = lit, ln.walking = true, ln.walk = k;
-          return true;
-        }
-        lit += ln.run.d[w % SampleTexels::kRun] <= tile.along_value(k);
-        ++w;
-        walking = false;
-      }
-      if (w == slices) {
-        out[ln.i] = float(lit) / float(slices);
-        return false;
-      }
-      const uint32_t j = w % SampleTexels::kRun;
-      if (j == 0) {
-        const uint32_t m = std::min(SampleTexels::kRun, slices - w);
-        texels_.run(points[ln.i], w, m, ln.run);
-        lit += settle_run(ln.run, w, m, ln.oct, exact);
-      }
-      if (!ln.oct[j]) {
-        ++w;
-        continue;
-      }
-      const CellTexel c = cell_texel(ln.run.x[j], ln.run.y[j], w);
-      if (c.cell != ln.path_cell) ln.path_cell = c.cell, path.valid = false;
-      k = ln.oct[j]->along_begin(path, c.lx, c.ly, c.lw);
-      walking = true;
-    }
-  };
-  run_interleaved<Lane>(std::min(points.size(), out.size()), start, run);
+  // Each point's samples already go kGather at a time through lit_samples, whose phases
+  // keep their loads in flight together; interleaving points on top (walk_interleave.hpp,
+  // as before the gathered walks) would only add the lanes' bookkeeping.
+  const size_t n = std::min(points.size(), out.size());
+  for (size_t i = 0; i < n; ++i) out[i] = soft_visibility(points[i], exact);
 }
 
 float StackMap::filtered(const Vec3d& p, uint32_t w, uint32_t pcf_radius, float footprint, bool* exact) const {
@@ -331,10 +369,15 @@ ResidentStack::ResidentStack(const PackReader& pack) {
       throw FormatError(pack.name() + ": " + describe_tile(pack.tiles()[i].id) + ": " + err.what());
     }
   }
-  // Ids sort as cells do (one level), so cells_ is sorted.
+  // One dense entry per cell: a lookup's tile is one load (a search over the cells was a
+  // chain of cache misses per tile, which the soft lookups pay once per cell crossed).
+  by_cell_.assign(g->entries.size(), StackTileRef());
+  for (size_t i = 0; i < cells_.size(); ++i) {
+    if (cells_[i] >= by_cell_.size()) throw FormatError(pack.name() + ": " + describe_tile(pack.tiles()[i].id) + " names no stack cell");
+    by_cell_[cells_[i]] = trees_[i].ref();
+  }
   map_ = std::make_unique<StackMap>(*g, [this](uint64_t cell) -> StackTileRef {
-    auto it = std::lower_bound(cells_.begin(), cells_.end(), cell);
-    return it != cells_.end() && *it == cell ? trees_[size_t(it - cells_.begin())].ref() : StackTileRef();
+    return cell < by_cell_.size() ? by_cell_[cell] : StackTileRef();
   });
 }
 

@@ -47,8 +47,8 @@ class StackMap {
   // walk (equal to N lit() calls bit for bit, tested).
   float soft_visibility(const Vec3d& p, bool* exact = nullptr) const;
   // out[i] = soft_visibility(points[i]) for i < min(points.size(), out.size()), bit for bit
-  // (tested): the walks of up to kWalkLanes points interleaved so that their cache misses
-  // overlap (walk_interleave.hpp). `exact` is cleared when an absent tile answered any.
+  // (tested): each point's samples gathered as the single lookup does (lit_samples).
+  // `exact` is cleared when an absent tile answered any.
   void soft_visibility(std::span<const Vec3d> points, std::span<float> out, bool* exact = nullptr) const;
 
   // PCF and the footprint level, as the 2D lookups (Evaluator::pcf / pcf_footprint,
@@ -76,11 +76,13 @@ class StackMap {
     uint32_t lw;
   };
   CellTexel cell_texel(uint64_t x, uint64_t y, uint32_t w) const;
-  // The soft lookups' run of samples w0 .. w0 + m - 1: adds nothing for samples in octree
-  // cells (oct[i] = that octree; they are walked by the caller) and returns how many of the
-  // others are lit (oct[i] = nullptr): entry values, absent tiles (`exact` cleared),
-  // per-slice cells by their bounds or walks in lockstep across tiles (slice_walks.hpp).
-  uint32_t settle_run(const SampleTexels::Run& run, uint32_t w0, uint32_t m, const MhOctree** oct, bool* exact) const;
+  // The most samples one lit_samples call settles: a 64-sample soft lookup at once.
+  static constexpr uint32_t kGather = 2 * SampleTexels::kRun;
+  // Samples w0 .. w0 + m - 1 (m <= kGather; sample w0 + i's texel and depth at
+  // runs[i / kRun], entry i % kRun): bit i set when sample w0 + i is lit, d <= depth(x, y,
+  // w0 + i, n) exactly, with their loads gathered across samples (stack_map.cpp). `exact`
+  // is cleared when an absent tile answered.
+  uint64_t lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint32_t m, bool* exact) const;
 
   const StackGrid& grid_;
   TileSource tile_;
@@ -106,6 +108,7 @@ class ResidentStack {
   std::vector<uint64_t> cells_;  // sorted
   std::vector<std::vector<uint8_t>> buffers_;
   std::vector<StackTile> trees_;
+  std::vector<StackTileRef> by_cell_;  // per cell of the grid: its tile, or none
   std::unique_ptr<StackMap> map_;
   uint64_t bytes_ = 0;
 };

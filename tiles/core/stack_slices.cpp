@@ -114,7 +114,23 @@ SliceTiles SliceTiles::open(std::span<const uint8_t> b) {
     next = padded;
   }
   if (next != b.size()) bad("byte_size", next, std::to_string(b.size() - next) + " bytes after the last buffer");
+  t.build_records();
   return t;
+}
+
+void SliceTiles::build_records() {
+  records_.assign(slot_.size(), Record{});
+  for (uint32_t w = 0; w < slices(); ++w) {
+    Record& r = records_[w];
+    r.lo = bounds_[w].lo, r.hi = bounds_[w].hi, r.xy_level = xy_level_;
+    if (is_constant(w)) {
+      r.kind = RecordKind::constant;
+    } else if (const dagmh::View* v = view(w)) {
+      r.kind = RecordKind::view, r.view = *v;
+    } else {
+      r.kind = RecordKind::evaluator, r.eval = &evaluator(w);
+    }
+  }
 }
 
 bool is_grouped_slice_tiles(std::span<const uint8_t> bytes) {
