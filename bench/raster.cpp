@@ -26,6 +26,9 @@
 // --cpu-time: the timed frames run one at a time and the process's CPU time per frame is kept
 // too (JSON cpu_*; cpu_lookup_ratioN = (st - none) / (R32F - none) in CPU time): on a CPU
 // device under load (lavapipe on a shared machine) a steadier figure than the timestamps.
+// On lavapipe (Mesa 22.3) set MESA_SHADER_CACHE_DISABLE=true: a fragment shader loaded from
+// Mesa's disk cache shaded about 2x slower in every mode ("none" too) than one compiled fresh,
+// so runs mixing the two differ by that, and the ratio reads lower with the cached one.
 // --region builds only a window of the map (finest texels; the rest lit): a 64K^2 map in
 // minutes; the camera then looks at the window. The R32F map (the finest level, 4^L floats)
 // is skipped with --no-r32f, with --region, and above 16K^2: its rows print '-'.
