@@ -19,9 +19,16 @@
 //                [--res 2k] [--encoding dagmh] [--tile-bytes 65536] [--width 1920] [--height 1080]
 //                [--reps 5] [--kernels 1,5] [--arriving 100] [--arrival-frames 10] [--device NAME]
 //                [--out bench-out/raster] [--json PATH] [--no-frame-path] [--overlap] [--no-ratio] [--no-r32f]
+//                [--cpu-time]
 //                [--region X,Y,W,H] [--scene-limits seconds=S,...]
 //
 // --kernels: the PCF kernel sides timed (odd, 1..9), each against R32F with the same kernel.
+// --cpu-time: the timed frames run one at a time and the process's CPU time per frame is kept
+// too (JSON cpu_*; cpu_lookup_ratioN = (st - none) / (R32F - none) in CPU time): on a CPU
+// device under load (lavapipe on a shared machine) a steadier figure than the timestamps.
+// On lavapipe (Mesa 22.3) set MESA_SHADER_CACHE_DISABLE=true: a fragment shader loaded from
+// Mesa's disk cache shaded about 2x slower in every mode ("none" too) than one compiled fresh,
+// so runs mixing the two differ by that, and the ratio reads lower with the cached one.
 // --region builds only a window of the map (finest texels; the rest lit): a 64K^2 map in
 // minutes; the camera then looks at the window. The R32F map (the finest level, 4^L floats)
 // is skipped with --no-r32f, with --region, and above 16K^2: its rows print '-'.
@@ -35,6 +42,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -56,6 +64,14 @@ namespace {
 using namespace st;
 using namespace st::bench;
 
+// The process's CPU time (every thread: a CPU Vulkan device such as lavapipe shades in its own
+// threads), in ms: steadier than device timestamps on a loaded machine.
+double process_cpu_ms() {
+  timespec ts{};
+  clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+  return double(ts.tv_sec) * 1e3 + double(ts.tv_nsec) * 1e-6;
+}
+
 struct Args {
   std::string scenes = "procedural:city,/usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb";
   std::string light = "sun:azimuth=30,elevation=50", res = "2k", encoding = "dagmh", device;
@@ -63,6 +79,7 @@ struct Args {
   std::vector<uint32_t> kernels = {1, 5};
   uint32_t tile_bytes = 64 * 1024, width = 1920, height = 1080, reps = 5, arriving = 100, arrival_frames = 10;
   bool frame_path = true, ratio = true, r32f = true, idle = true;
+  bool cpu_time = false;  // --cpu-time: timed frames one at a time, the process's CPU time per frame too
   std::optional<TexelRegion> region;  // --region: a window of the map built (the rest constant, lit)
   SceneLimits limits;                 // --scene-limits: the scene reader's (a loaded machine reads slowly)
 };
@@ -101,6 +118,7 @@ Args parse(int argc, char** argv) {
     else if (k == "--scene-limits") a.limits = parse_scene_limits(next(), a.limits);
     else if (k == "--no-ratio") a.ratio = false;
     else if (k == "--no-r32f") a.r32f = false;
+    else if (k == "--cpu-time") a.cpu_time = true;
     else if (k == "--region") {
       TexelRegion r;
       const std::string v = next();
@@ -248,7 +266,7 @@ int main(int argc, char** argv) try {
         modes.push_back({"r32f", raster::Lookup::r32f, k});
       }
       std::map<uint64_t, size_t> mode_of;
-      std::vector<std::vector<double>> ms(modes.size()), frame_ms(modes.size());
+      std::vector<std::vector<double>> ms(modes.size()), frame_ms(modes.size()), cpu_ms(modes.size());
       uint64_t holes = 0;
       auto take = [&](std::span<const raster::FrameResult> done) {
         for (const raster::FrameResult& fr : done) {
@@ -271,7 +289,15 @@ int main(int argc, char** argv) try {
           if (!r32f && modes[m].lookup == raster::Lookup::r32f) continue;
           in.lookup = modes[m].lookup, in.kernel = modes[m].kernel;
           mode_of[r.frames() + 1] = m;
+          if (!a.cpu_time) {
+            take(r.render(in));
+            continue;
+          }
+          take(r.finish());  // this frame alone: the process's CPU time while it renders
+          const double c0 = process_cpu_ms();
           take(r.render(in));
+          take(r.finish());
+          cpu_ms[m].push_back(process_cpu_ms() - c0);
         }
       take(r.finish());
       if (holes) throw Error("bench_raster: " + std::to_string(holes) + " holes in timed frames (the cache was full)");
@@ -284,7 +310,7 @@ int main(int argc, char** argv) try {
         std::snprintf(b, sizeof b, "%.2f", v);
         return r32f ? std::string(b) : std::string("-");
       };
-      std::string line;
+      std::string line, cpu_line;
       char cell[128];
       std::snprintf(cell, sizeof cell, "%-16s %8.3f", short_name(spec).c_str(), none);
       line = cell;
@@ -299,7 +325,16 @@ int main(int argc, char** argv) try {
         const std::string n = std::to_string(a.kernels[k]);
         row["st" + n + "_ms"] = st;
         if (r32f) row["r32f" + n + "_ms"] = rf, row["ratio" + n] = st / rf, row["lookup_ratio" + n] = only(st, rf);
+        if (a.cpu_time && r32f) {
+          const double cn = median(cpu_ms[0]), cs = median(cpu_ms[1 + 2 * k]), cr = median(cpu_ms[2 + 2 * k]);
+          row["cpu_none_ms"] = cn, row["cpu_st" + n + "_ms"] = cs, row["cpu_r32f" + n + "_ms"] = cr;
+          row["cpu_lookup_ratio" + n] = cr > cn ? (cs - cn) / (cr - cn) : 0.0;
+          std::snprintf(cell, sizeof cell, " [cpu %.0f/%.0f/%.0f ms]", cn, cs, cr);
+          cpu_line += cell;
+        }
       }
+      if (a.cpu_time) row["cpu_runs_ms"] = cpu_ms;
+      if (!cpu_line.empty()) line += cpu_line;
       ratio_lines.push_back(line);
       if (a.region) row["region"] = {a.region->x, a.region->y, a.region->w, a.region->h};
       ratio_rows.push_back(row);
