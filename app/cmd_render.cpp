@@ -23,6 +23,7 @@
 #include "app/public_map.hpp"
 #include "common/error.hpp"
 #include "tiles/core/deep_pack.hpp"
+#include "tiles/core/filter_level.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_reader.hpp"
 #include "tiles/core/stack_map.hpp"
@@ -56,22 +57,37 @@ Error view_timeout(const client::Map& map, const std::string& what, std::chrono:
 }
 }  // namespace
 
-// Requests every tile the receivers' finest-level lookups need and waits (bounded) until
-// they are resident (the public API: app/public_map.hpp). Returns the number of cells;
-// throws st::Error on timeout.
+// Requests every tile the receivers' lookups need and waits (bounded) until they are
+// resident (the public API: app/public_map.hpp): the finest level's, or with pixel_angle
+// (--filter) each receiver's two filter levels' (filter_levels of its footprint, at the
+// filtered lookup point). Returns the number of cells; throws st::Error on timeout.
 size_t fetch_for_receivers(client::Map& map, const std::vector<Receiver>& rec, const LightSpace& light,
-                           std::chrono::milliseconds timeout) {
+                           double pixel_angle, std::chrono::milliseconds timeout) {
   const uint32_t L = map.finest_level();
-  std::vector<std::pair<double, double>> uv;
-  for (const Receiver& r : rec)
-    if (r.hit && r.n_dot_l > 0) {
+  std::vector<std::vector<std::pair<double, double>>> uv(L + 1);  // per level
+  for (const Receiver& r : rec) {
+    if (!r.hit || r.n_dot_l <= 0) continue;
+    if (!(pixel_angle > 0)) {
       const LightPoint p = lookup_point(r, light, L);
-      uv.emplace_back(p.u, p.v);
+      uv[L].emplace_back(p.u, p.v);
+      continue;
     }
-  const std::vector<TexelCell> cells = cells_under(uv, L, map.info().skip_level);
-  if (!fetch_cells(map, L, cells, timeout, [&] { check_no_failed_tiles(map); }))
-    throw view_timeout(map, "the view's tiles", timeout);
-  return cells.size();
+    LightPoint p;
+    ReceiverPlane plane;
+    if (!receiver_plane_at(light, L, r.pos, r.normal, r.closed, p, plane)) continue;
+    const FilterLevels f = filter_levels(L, receiver_footprint_texels(r, light, L, pixel_angle));
+    uv[f.fine].emplace_back(p.u, p.v);
+    if (f.t != 0.0f) uv[f.coarse].emplace_back(p.u, p.v);
+  }
+  size_t n = 0;
+  for (uint32_t level = 0; level <= L; ++level) {
+    if (uv[level].empty()) continue;
+    const std::vector<TexelCell> cells = cells_under(uv[level], level, map.info().skip_level);
+    if (!fetch_cells(map, level, cells, timeout, [&] { check_no_failed_tiles(map); }))
+      throw view_timeout(map, "the view's tiles", timeout);
+    n += cells.size();
+  }
+  return n;
 }
 
 // The deep part of a served map (partial occluders): waits (bounded) for its directory
@@ -292,7 +308,11 @@ void run_render(const RenderArgs& a) {
   const auto rec = tracer.primary(cam, o.width, o.height);
   if (map.valid()) {
     const auto t0 = std::chrono::steady_clock::now();
-    const size_t cells = fetch_for_receivers(map, rec, light, std::chrono::milliseconds(int64_t(a.timeout * 1000)));
+    const size_t cells =
+        fetch_for_receivers(map, rec, light, o.pixel_angle, std::chrono::milliseconds(int64_t(a.timeout * 1000)));
+    // The filtered path (--filter, or a light other than a sun) through the public filtered
+    // lookup with normals: the receiver plane counted inside the client's window walks.
+    o.filtered = filtered_lookups(map, 2 * o.pcf_radius + 1);
     std::printf("fetched the view's %zu cell(s) in %.0f ms\n", cells,
                 std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
     if (map.has_deep()) {

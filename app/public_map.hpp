@@ -7,11 +7,13 @@
 #include <algorithm>
 #include <chrono>
 #include <cstdint>
+#include <span>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include "common/error.hpp"
+#include "render/render.hpp"
 #include "shadowtile/client.hpp"
 #include "tiles/core/evaluator.hpp"
 #include "tiles/core/light.hpp"
@@ -36,6 +38,29 @@ class MapEvaluator final : public Evaluator {
  private:
   client::Map map_;
 };
+
+// RenderOptions::filtered over the served map: each run of receivers of one kind (open or
+// closed) in one Map::visibility_filtered batch with their normals (receiver-plane depth
+// bias), so `render --server` answers its filtered path as the local render's
+// pcf_on_plane does, bit for bit, under one lock per run.
+inline auto filtered_lookups(const client::Map& map, uint32_t pcf_side) {
+  return [&map, pcf_side](std::span<const Receiver> rec, std::span<const float> footprints, std::span<float> out) {
+    constexpr size_t kRun = 256;
+    client::WorldPoint points[kRun], normals[kRun];
+    const size_t n = std::min({rec.size(), footprints.size(), out.size()});
+    for (size_t i = 0; i < n;) {
+      const bool closed = rec[i].closed;
+      size_t e = i;
+      for (; e < n && e - i < kRun && rec[e].closed == closed; ++e) {
+        const Receiver& r = rec[e];
+        points[e - i] = {r.pos.x, r.pos.y, r.pos.z}, normals[e - i] = {r.normal.x, r.normal.y, r.normal.z};
+      }
+      map.visibility_filtered(std::span(points, e - i), std::span(normals, e - i), footprints.subspan(i, e - i),
+                              out.subspan(i, e - i), pcf_side, closed);
+      i = e;
+    }
+  };
+}
 
 // A square of texels of `level` whose tiles a set of points needs.
 struct TexelCell {

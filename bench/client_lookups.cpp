@@ -39,7 +39,9 @@
 // --kernels 5 --subjects batch` under perf; ratios and targets need the cells they divide.
 // --profile-map N (with --render-only): the render's single taps alone through the client
 // (its receivers, order and queries; pcf_batch over --batch queries) on one thread, N
-// times, the median printed (for perf: the samples fall in the lookups).
+// times, the median printed (for perf: the samples fall in the lookups); with --cold each
+// pass after 64 MiB of other memory is written (as the render's passes find the caches
+// after the rays and the image).
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -176,6 +178,7 @@ int main(int argc, char** argv) {
   std::vector<std::string> pattern_names{"random", "coherent"}, subject_names{"array", "single", "batch", "filtered"};
   std::vector<uint32_t> radii{0, 2};
   int profile_map = 0;
+  bool profile_cold = false;
   bool quick = false, level_given = false, use_cpu = true, render_reps_given = false, render_only = false;
   try {
     for (int i = 1; i < argc; ++i) {
@@ -201,6 +204,7 @@ int main(int argc, char** argv) {
       else if (a == "--quick") quick = true;
       else if (a == "--render-only") render_only = true;
       else if (a == "--profile-map") profile_map = std::max(1, std::stoi(next()));
+      else if (a == "--cold") profile_cold = true;
       else if (a == "--patterns") pattern_names = split_list(next());
       else if (a == "--subjects") subject_names = split_list(next());
       else if (a == "--kernels") {
@@ -222,7 +226,7 @@ int main(int argc, char** argv) {
                         "[--tile-bytes N] [--lookups N] [--batch N] [--reps R] [--render-reps R] [--threads 1,2] "
                         "[--size WxH] "
                         "[--camera SPEC] [--clock cpu|wall] [--quick] [--render-only] [--patterns random,coherent] "
-                        "[--kernels 1,5] [--subjects array,single,batch,filtered] [--pack P1,P2,...] [--profile-map N] "
+                        "[--kernels 1,5] [--subjects array,single,batch,filtered] [--pack P1,P2,...] [--profile-map N [--cold]] "
                         "[--json PATH]");
     }
     if (scene_spec.find(':') == std::string::npos && !std::filesystem::exists(scene_spec))
@@ -467,7 +471,9 @@ int main(int argc, char** argv) {
       std::vector<float> answers(queries.size());
       for (const Encoded& e : encoded) {
         std::vector<double> cpu;
+        std::vector<uint8_t> other(profile_cold ? size_t(64) << 20 : 0);
         for (int rep = 0; rep < profile_map + 1; ++rep) {  // the first pass warms up
+          for (size_t i = 0; i < other.size(); i += 64) other[i] = uint8_t(other[i] + rep);
           const double c0 = thread_cpu_now();
           for (size_t i = 0; i < queries.size(); i += batch) {
             const size_t n = std::min(batch, queries.size() - i);

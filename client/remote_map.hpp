@@ -367,15 +367,16 @@ class RemoteMap final : public Evaluator {
   // (missing tiles coarse, as depth_shared answers them). 0: a tile with no window walk.
   uint32_t fill_columns(uint32_t level, uint64_t tx, uint64_t ky0, uint64_t ky1, LookupScratch& sc,
                         float* out) const noexcept;
-  uint32_t count_window_shared(uint32_t level, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by, float receiver,
+  // Taps: how a part counts, FlatTaps (one receiver: WindowDepths::count_window) or
+  // PlaneTaps (each texel against the receiver plane: WindowDepths::count_window_plane),
+  // receiver_plane.hpp; one cut for both (remote_map_lookups.cpp, instantiated there).
+  template <class Taps>
+  uint32_t count_window_shared(uint32_t level, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by, const Taps& taps,
                                LookupScratch& sc) const noexcept;
   float pcf_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, float receiver,
                    LookupScratch& sc) const noexcept;
-  // count_window_shared and pcf_shared with each texel against the receiver plane
-  // (PlaneTaps: a region or a tile's window counted at once where the plane lies on one
-  // side of it; tiles through WindowDepths::count_window_plane), remote_map_plane.cpp.
-  uint32_t count_window_plane_shared(uint32_t level, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by,
-                                     const ReceiverPlane& p, LookupScratch& sc) const noexcept;
+  // pcf_shared with each texel against the receiver plane (count_window_shared with
+  // PlaneTaps), remote_map_plane.cpp.
   float pcf_plane_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, const ReceiverPlane& p,
                          LookupScratch& sc) const noexcept;
   // pcf_shared for every kernel but one counted from the columns kept ahead.

@@ -9,6 +9,7 @@
 
 #include "tiles/core/filter_level.hpp"
 #include "tiles/core/interval.hpp"
+#include "tiles/core/receiver_plane.hpp"
 #include "tiles/core/tap_order.hpp"
 
 namespace st::client {
@@ -378,7 +379,8 @@ float RemoteMap::pcf_general(uint32_t level, uint64_t x, uint64_t y, uint32_t r,
   // No tap clamped (the kernel is a window of r x r distinct texels): counted one window
   // per tile or kept region it overlaps (a kernel straddling a border or a corner reads
   // one window from each tile, WindowDepths::count_window).
-  if (interior && w_rows) return pcf_fraction(count_window_shared(level, kx0, ky0, kx1, ky1, receiver, sc), r);
+  if (interior && w_rows)
+    return pcf_fraction(count_window_shared(level, kx0, ky0, kx1, ky1, FlatTaps{receiver}, sc), r);
   // Row by row: the taps of a row that one region holds take its answer together, each
   // region found among the kept ones or by one walk (which keeps it). Every tap answers
   // like depth(), so the fraction equals the base class's exactly.
@@ -443,8 +445,24 @@ uint32_t RemoteMap::fill_columns(uint32_t level, uint64_t tx, uint64_t ky0, uint
   return n;
 }
 
+namespace remote_map_lookups {
+
+// One part inside one tile, through the tile's window walk (x0, y0: the tile's first
+// texel; rel: the level in its tree).
+uint32_t count_in_window(const WindowDepths& win, uint32_t rel, uint64_t x, uint64_t y, uint32_t w, uint32_t h,
+                         uint64_t, uint64_t, const FlatTaps& taps) {
+  return win.count_window(rel, x, y, w, h, taps.receiver);
+}
+uint32_t count_in_window(const WindowDepths& win, uint32_t rel, uint64_t x, uint64_t y, uint32_t w, uint32_t h,
+                         uint64_t x0, uint64_t y0, const PlaneTaps& taps) {
+  return win.count_window_plane(rel, x, y, w, h, plane_in_tree(taps.p, taps.level, rel, x0, y0));
+}
+
+}  // namespace remote_map_lookups
+
+template <class Taps>
 uint32_t RemoteMap::count_window_shared(uint32_t level, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by,
-                                        float receiver, LookupScratch& sc) const noexcept {
+                                        const Taps& taps, LookupScratch& sc) const noexcept {
   // The tile or region holding (ax, ay): an aligned square, so the rectangle's part in it
   // is its top-left corner up to (ex, ey); the rest is a part to the right and one below.
   const LookupScratch::Region* g = nullptr;
@@ -460,7 +478,7 @@ uint32_t RemoteMap::count_window_shared(uint32_t level, uint64_t ax, uint64_t ay
     const uint64_t s = (uint64_t(1) << g->shift) - 1;
     ex = std::min(bx, ax | s), ey = std::min(by, ay | s);
     const uint32_t area = uint32_t((ex - ax + 1) * (ey - ay + 1));
-    lit = receiver <= g->value ? area : 0;
+    lit = taps.count(g->value, ax, ay, ex, ey);
     // Counted like `area` answers of the region (depth_shared's per-tap answers).
     if (g->counted == LookupScratch::Counted::hit) sc.hits += area;
     else if (g->counted == LookupScratch::Counted::coarse) sc.missed += area, sc.coarse += area;
@@ -470,20 +488,26 @@ uint32_t RemoteMap::count_window_shared(uint32_t level, uint64_t ax, uint64_t ay
     ++sc.hits;
     try {
       if (sc.win) {
-        lit = sc.win->count_window(sc.rel, ax - sc.x0, ay - sc.y0, w, h, receiver);
+        lit = remote_map_lookups::count_in_window(*sc.win, sc.rel, ax - sc.x0, ay - sc.y0, w, h, sc.x0, sc.y0, taps);
       } else {
         lit = 0;
         for (uint64_t tx = ax; tx <= ex; ++tx)
-          for (uint64_t ty = ay; ty <= ey; ++ty) lit += receiver <= sc.ev->depth(sc.rel, tx - sc.x0, ty - sc.y0) ? 1u : 0u;
+          for (uint64_t ty = ay; ty <= ey; ++ty)
+            lit += taps.lit(sc.ev->depth(sc.rel, tx - sc.x0, ty - sc.y0), tx, ty) ? 1u : 0u;
       }
     } catch (...) {  // an opened tile does not throw; if one did, stay lit and alive
-      lit = receiver <= kLitDepth ? w * h : 0;
+      lit = taps.count(kLitDepth, ax, ay, ex, ey);
     }
   }
-  if (ex < bx) lit += count_window_shared(level, ex + 1, ay, bx, ey, receiver, sc);
-  if (ey < by) lit += count_window_shared(level, ax, ey + 1, bx, by, receiver, sc);
+  if (ex < bx) lit += count_window_shared(level, ex + 1, ay, bx, ey, taps, sc);
+  if (ey < by) lit += count_window_shared(level, ax, ey + 1, bx, by, taps, sc);
   return lit;
 }
+
+template uint32_t RemoteMap::count_window_shared<FlatTaps>(uint32_t, uint64_t, uint64_t, uint64_t, uint64_t,
+                                                           const FlatTaps&, LookupScratch&) const noexcept;
+template uint32_t RemoteMap::count_window_shared<PlaneTaps>(uint32_t, uint64_t, uint64_t, uint64_t, uint64_t,
+                                                            const PlaneTaps&, LookupScratch&) const noexcept;
 
 void RemoteMap::finish_lookups(const LookupScratch& sc) const noexcept {
   CounterShard& c = counters_[counter_shard() % kCounterShards];

@@ -1,9 +1,9 @@
 // The client's filtered lookups with the receiver plane (tiles/core/receiver_plane.hpp):
 // every tap compares the plane's least depth over its own texel with the stored value,
 // as render's filtered path does (receiver_plane_at: the same lookup point, slopes and
-// clamp), counted through the same cut of a kernel's window into resident tiles and kept
-// regions as pcf_shared's count_window_shared, each part at once where the plane lies on
-// one side of its value (PlaneTaps) and through the tile's own window walk
+// clamp), counted through pcf_shared's cut of a kernel's window into resident tiles and
+// kept regions (count_window_shared with PlaneTaps), each part at once where the plane lies
+// on one side of its value and through the tile's own window walk
 // (WindowDepths::count_window_plane) otherwise. Missing tiles answer coarsely, as
 // depth_shared does, and queue their fetch.
 #include <algorithm>
@@ -16,50 +16,6 @@
 
 namespace st::client {
 
-uint32_t RemoteMap::count_window_plane_shared(uint32_t level, uint64_t ax, uint64_t ay, uint64_t bx, uint64_t by,
-                                              const ReceiverPlane& p, LookupScratch& sc) const noexcept {
-  // count_window_shared's cut: the tile or region holding (ax, ay), an aligned square; the
-  // rest of the rectangle is a part to the right and one below.
-  const PlaneTaps taps{p, level};
-  const LookupScratch::Region* g = nullptr;
-  if (!sc.covers(level, ax, ay)) {
-    g = sc.find(level, ax, ay);
-    float value;
-    if ((!g || g->counted == LookupScratch::Counted::hit) && enter_tile(level, ax, ay, sc, value)) g = nullptr;
-    else if (!g) g = sc.last_region();  // enter_tile kept the answer's region
-  }
-  uint64_t ex, ey;
-  uint32_t lit;
-  if (g) {
-    const uint64_t s = (uint64_t(1) << g->shift) - 1;
-    ex = std::min(bx, ax | s), ey = std::min(by, ay | s);
-    const uint32_t area = uint32_t((ex - ax + 1) * (ey - ay + 1));
-    lit = taps.count(g->value, ax, ay, ex, ey);
-    if (g->counted == LookupScratch::Counted::hit) sc.hits += area;
-    else if (g->counted == LookupScratch::Counted::coarse) sc.missed += area, sc.coarse += area;
-  } else {
-    ex = std::min(bx, sc.x0 + sc.side - 1), ey = std::min(by, sc.y0 + sc.side - 1);
-    const uint32_t w = uint32_t(ex - ax + 1), h = uint32_t(ey - ay + 1);
-    ++sc.hits;
-    try {
-      if (sc.win) {
-        lit = sc.win->count_window_plane(sc.rel, ax - sc.x0, ay - sc.y0, w, h,
-                                         plane_in_tree(p, level, sc.rel, sc.x0, sc.y0));
-      } else {
-        lit = 0;
-        for (uint64_t tx = ax; tx <= ex; ++tx)
-          for (uint64_t ty = ay; ty <= ey; ++ty)
-            lit += taps.lit(sc.ev->depth(sc.rel, tx - sc.x0, ty - sc.y0), tx, ty) ? 1u : 0u;
-      }
-    } catch (...) {  // an opened tile does not throw; if one did, stay lit and alive
-      lit = taps.count(kLitDepth, ax, ay, ex, ey);
-    }
-  }
-  if (ex < bx) lit += count_window_plane_shared(level, ex + 1, ay, bx, ey, p, sc);
-  if (ey < by) lit += count_window_plane_shared(level, ax, ey + 1, bx, by, p, sc);
-  return lit;
-}
-
 float RemoteMap::pcf_plane_shared(uint32_t level, uint64_t x, uint64_t y, uint32_t r, const ReceiverPlane& p,
                                   LookupScratch& sc) const noexcept {
   r = std::clamp<uint32_t>(r, 1, kMaxPcf);
@@ -67,7 +23,7 @@ float RemoteMap::pcf_plane_shared(uint32_t level, uint64_t x, uint64_t y, uint32
   const uint64_t x0 = pcf_tap(x, 0, r, side), x1 = pcf_tap(x, r - 1, r, side);
   const uint64_t y0 = pcf_tap(y, 0, r, side), y1 = pcf_tap(y, r - 1, r, side);
   if (level <= header_.map_level && x1 - x0 == r - 1 && y1 - y0 == r - 1)  // no tap clamped: each texel once
-    return pcf_fraction(count_window_plane_shared(level, x0, y0, x1, y1, p, sc), r);
+    return pcf_fraction(count_window_shared(level, x0, y0, x1, y1, PlaneTaps{p, level}, sc), r);
   uint32_t lit = 0;  // the map's edge: taps repeat, each against its own clamped texel
   for (uint32_t j = 0; j < r; ++j)
     for (uint32_t i = 0; i < r; ++i) {

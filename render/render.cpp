@@ -292,9 +292,11 @@ LightPoint deep_lookup_point(const Receiver& r, const LightSpace& light, uint32_
   return light.to_light(r.pos + toward * (kDeepDepthBiasTexels * deep_texel));
 }
 
+float receiver_footprint_world(const Receiver& r, double pixel_angle) { return float(r.distance * pixel_angle); }
+
 float receiver_footprint_texels(const Receiver& r, const LightSpace& light, uint32_t map_level, double pixel_angle) {
   const double texel = light.texel_size(r.pos, map_level);
-  return float(r.distance * pixel_angle / texel);
+  return float(double(receiver_footprint_world(r, pixel_angle)) / texel);
 }
 
 float map_visibility(const Evaluator& eval, const Receiver& r, const LightSpace& light, uint32_t pcf_radius,
@@ -633,6 +635,14 @@ RenderResult render_view(const SceneTracer& tracer, const std::vector<Receiver>&
         std::fill(fvis.begin() + ptrdiff_t(b0), fvis.begin() + ptrdiff_t(b1), 1.0f);
         eval.pcf_batch(std::span<const PcfQuery>(queries, nq), std::span<float>(answers, nq));
         for (size_t k = 0; k < nq; ++k) fvis[b0 + index[k]] = answers[k];
+        continue;
+      }
+      if (o.filtered) {  // the map answers from the receivers (RenderOptions::filtered)
+        float footprints[kChunk];
+        for (size_t i = b0; i < b1; ++i)
+          footprints[i - b0] = o.pixel_angle > 0 ? receiver_footprint_world(fr[i], o.pixel_angle) : 0.0f;
+        o.filtered(std::span<const Receiver>(fr.data() + b0, b1 - b0), std::span<const float>(footprints, b1 - b0),
+                   std::span<float>(fvis.data() + b0, b1 - b0));
         continue;
       }
       // Filtered: each tap against the receiver's plane (filtered_lookup), counted inside

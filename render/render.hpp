@@ -130,8 +130,12 @@ bool filtered_lookup(const Receiver& r, const LightSpace& light, uint32_t map_le
 float map_visibility_filtered(const Evaluator& eval, const Receiver& r, const LightSpace& light, uint32_t pcf_radius,
                               float footprint);
 
-// The side of a receiver's pixel footprint (distance * pixel_angle, seen head-on) in
-// finest-level texels of the map at its position: the input of filter_levels.
+// The side of a receiver's pixel footprint (distance * pixel_angle, seen head-on) in world
+// units, as a float (what the client's visibility_filtered takes), and in finest-level
+// texels of the map at its position (the input of filter_levels): that float divided by
+// the texel's size, as the client divides, so local and served renders pick the same
+// levels and blend bit for bit.
+float receiver_footprint_world(const Receiver& r, double pixel_angle);
 float receiver_footprint_texels(const Receiver& r, const LightSpace& light, uint32_t map_level, double pixel_angle);
 
 // How sun_tap_queries computes: scalar, two receivers per SSE2 instruction, four per AVX
@@ -180,6 +184,14 @@ struct RenderOptions {
   // lookup filters where the render does: with pixel_angle, over the pixel's footprint
   // times the PCF kernel; with a PCF kernel alone, over the kernel; else one texel.
   DeepLookup deep;
+  // A map that answers filtered lookups from the receivers themselves (the client's
+  // Map::visibility_filtered with normals: `render --server`). Set, render_view calls it
+  // instead of eval's pcf_on_plane wherever that path runs (with pixel_angle, or a light
+  // other than a sun): out[i] for rec[i], footprint_world[i] its pixel's side in world
+  // units (receiver_footprint_world; 0 without pixel_angle), answered as
+  // map_visibility_filtered answers over the same map.
+  std::function<void(std::span<const Receiver> rec, std::span<const float> footprint_world, std::span<float> out)>
+      filtered;
 };
 
 struct RenderResult {

@@ -3,12 +3,15 @@
 // answers for the same receivers (map_visibility_filtered over the pack): a real open mesh
 // (2CylinderEngine), the view's own receivers, PCF 3 and 5, no footprint and footprints
 // of one to a few texels (two levels blended); on a map filled locally and on one served
-// over loopback, single lookups and batches. A missing package skips with the command.
+// over loopback, single lookups and batches, and whole render views (render --server's
+// filtered path). A missing package skips with the command.
 #include <gtest/gtest.h>
 
 #include <bit>
+#include <cmath>
 #include <filesystem>
 
+#include "app/public_map.hpp"
 #include "client/map_access.hpp"
 #include "client/remote_map.hpp"
 #include "render/render.hpp"
@@ -56,6 +59,30 @@ uint64_t compare_with_render(const Map& m, const PackEvaluator& pack, const Ligh
   return partial;
 }
 
+// `render --server`'s filtered path (RenderOptions::filtered through the public lookup,
+// app/public_map.hpp) against render_view over the pack: every receiver's visibility bit
+// for bit, PCF 3 and 5, with the camera's pixel angle (two levels blended) and a quarter
+// of it. The count of partly lit receivers.
+uint64_t compare_render_views(const Map& m, const PackEvaluator& pack, const SceneTracer& tracer,
+                              const std::vector<Receiver>& rec, uint32_t width, uint32_t height, double pixel_angle,
+                              const char* where) {
+  uint64_t partial = 0;
+  for (uint32_t radius : {1u, 2u})
+    for (double angle : {pixel_angle, pixel_angle / 4}) {
+      RenderOptions o;
+      o.width = width, o.height = height, o.pcf_radius = radius, o.pixel_angle = angle;
+      const RenderResult want = render_view(tracer, rec, pack, o);
+      o.filtered = cli::filtered_lookups(m, 2 * radius + 1);
+      const RenderResult got = render_view(tracer, rec, pack, o);
+      for (size_t i = 0; i < rec.size(); ++i) {
+        EXPECT_EQ(std::bit_cast<uint32_t>(got.visibility[i]), std::bit_cast<uint32_t>(want.visibility[i]))
+            << where << " render view, radius " << radius << " pixel angle " << angle << " pixel " << i;
+        partial += want.visibility[i] > 0.0f && want.visibility[i] < 1.0f;
+      }
+    }
+  return partial;
+}
+
 TEST(ClientReceiverPlane, FilteredLookupsWithNormalsAnswerLikeRenderLocallyAndServed) {
   const std::string file = "/usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb";
   if (!fs::exists(file)) GTEST_SKIP() << file << " missing: run scripts/deps (Debian package assimp-testmodels)";
@@ -72,7 +99,9 @@ TEST(ClientReceiverPlane, FilteredLookupsWithNormalsAnswerLikeRenderLocallyAndSe
   const std::shared_ptr<const PackReader> reader = PackReader::open(path);
   const PackEvaluator pack(reader, 4096);
   const SceneTracer tracer(scene, light);
-  const std::vector<Receiver> rec = tracer.primary(parse_camera("pos=400,300,400,target=0,0,0,fov=50"), 40, 30);
+  const Camera cam = parse_camera("pos=400,300,400,target=0,0,0,fov=50");
+  const std::vector<Receiver> rec = tracer.primary(cam, 40, 30);
+  const double pixel_angle = 2 * std::tan(cam.fov_deg * 3.14159265358979323846 / 360) / 30;  // render --filter's
   const uint32_t L = o.map_level;
 
   // Locally: every tile delivered by hand.
@@ -107,6 +136,9 @@ TEST(ClientReceiverPlane, FilteredLookupsWithNormalsAnswerLikeRenderLocallyAndSe
   ASSERT_TRUE(each_level([&](uint32_t l, uint64_t s) { return local->region_resident(l, 0, 0, s, s); }));
   const uint64_t partial = compare_with_render(MapAccess::wrap(local), pack, light, rec, "local");
   EXPECT_GT(partial, 20u);  // kernels that straddle the plane were compared
+  const uint64_t view_partial =
+      compare_render_views(MapAccess::wrap(local), pack, tracer, rec, 40, 30, pixel_angle, "local");
+  EXPECT_GT(view_partial, 20u);
 
   // Over the wire: the same pack served, every tile fetched first.
   looptest::TestServer srv = looptest::start_server({path});
@@ -121,6 +153,7 @@ TEST(ClientReceiverPlane, FilteredLookupsWithNormalsAnswerLikeRenderLocallyAndSe
     });
   }));
   EXPECT_EQ(compare_with_render(m, pack, light, rec, "served"), partial);
+  EXPECT_EQ(compare_render_views(m, pack, tracer, rec, 40, 30, pixel_angle, "served"), view_partial);
   srv.stop();
 }
 
