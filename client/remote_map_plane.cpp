@@ -24,13 +24,9 @@ float RemoteMap::pcf_plane_shared(uint32_t level, uint64_t x, uint64_t y, uint32
   const uint64_t y0 = pcf_tap(y, 0, r, side), y1 = pcf_tap(y, r - 1, r, side);
   if (level <= header_.map_level && x1 - x0 == r - 1 && y1 - y0 == r - 1)  // no tap clamped: each texel once
     return pcf_fraction(count_window_shared(level, x0, y0, x1, y1, PlaneTaps{p, level}, sc), r);
-  uint32_t lit = 0;  // the map's edge: taps repeat, each against its own clamped texel
-  for (uint32_t j = 0; j < r; ++j)
-    for (uint32_t i = 0; i < r; ++i) {
-      const uint64_t tx = pcf_tap(x, i, r, side), ty = pcf_tap(y, j, r, side);
-      lit += receiver_plane_depth(p, level, tx, ty) <= depth_shared(level, tx, ty, sc) ? 1u : 0u;
-    }
-  return pcf_fraction(lit, r);
+  // The map's edge: taps repeat, each against its own clamped texel.
+  return pcf_plane_each_tap(level, x, y, r, p,
+                            [&](uint64_t tx, uint64_t ty) { return depth_shared(level, tx, ty, sc); });
 }
 
 float RemoteMap::pcf_on_plane(uint32_t level, uint64_t x, uint64_t y, uint32_t r,

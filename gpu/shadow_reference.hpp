@@ -1,6 +1,9 @@
 // The shadow pass's light transform (a sun's light space in float32, as an engine's
-// shader does it) and its CPU twin: the same float operations in the same order as
-// shaders/shadow_pass.comp, so tests compare the GPU image with it bit for bit.
+// shader does it), and the float steps of the shaders' lookups that the CPU twins share:
+// the same float operations in the same order as shaders/shadow_pass.comp and
+// shadowtile.glsl, so a twin answers bit for bit as the GPU. The library's one twin is
+// receiver_lookup_reference (shadowtile/gpu.hpp: `shadowtile view --twin`); the twins
+// only the GPU tests call are in tests/gpu/shadow_twins.hpp, built on these steps.
 //
 //   r = (p + n * normal_offset) - origin           per component, product then sum
 //   u = r.x * au.x + r.y * au.y + r.z * au.z        au = axis_u / extent (rounded once)
@@ -14,11 +17,13 @@
 // more keep positions camera-relative (a documented limit, GPU_LAYOUT.md).
 #pragma once
 #include <array>
-#include <span>
+#include <cmath>
+#include <cstdint>
+#include <vector>
 
 #include "gpu/gpu_map.hpp"
 #include "shadowtile/cache_view.hpp"
-#include "tiles/core/evaluator.hpp"
+#include "tiles/core/filter_level.hpp"
 #include "tiles/core/light.hpp"
 #include "tiles/core/pack_format.hpp"
 
@@ -48,48 +53,37 @@ ShadowLight shadow_light(const PackHeader& h);
 ShadowLight shadow_light(const LightSpace& ls);
 ShadowLight ground_shadow_light(const LightSpace& ls);
 
-// The CPU twin of shadowtile.glsl's st_receiver_slope: a 2D map's receiver-plane slopes
-// (gx, gy) per finest texel from a surface normal through the float light `l`
-// (shadow_light), the unit direction toward the light and one finest texel in world
-// units, with the shader's float operations in its order (st_fdiv's quotients are IEEE
-// division's). (0, 0) for a perspective light.
-std::array<float, 2> receiver_slope_reference(const ShadowLight& l, uint32_t finest, const std::array<float, 3>& normal,
-                                              const std::array<float, 3>& to_light, float texel);
+// A point in a float light's map space: (u, v) in [0, 1) on the map, d its depth.
+struct LightUvd {
+  float u, v, d;
+};
 
-// The CPU twin of a stack map's shadow pass: the same float operations per slice as
-// shaders/stack_shadow_pass.comp, depths from Map::slice_depth (the Map's cache, the same
-// state the GpuMap mirrors). Any light kind of a stack (suns, ground-frame suns, spots and
-// an area light's windowed spots). At in.time, or with in.soft the average over the N
-// slices: sum = 0; for w = 0..N-1: sum = sum + v_w (float, one rounding per add); then
-// sum / float(N), one rounding: StackMap::soft_visibility_filtered's order, with v_w each
-// slice's filtered value in the pass's float light and footprint. Throws GpuError for a
-// map that is not a stack.
-void stack_shadow_pass_reference(const client::Map& map, const ShadowPassInput& in, std::span<float> out);
+// A receiver's light-space point (st_light_uvd): r = receiver - origin per component, the
+// rows' dot products (products, then sums left to right), a perspective divide, d from near.
+LightUvd light_uvd(const ShadowLight& l, const float* receiver);
 
-// The finest-level texel (x, y) the shadow pass reads for pixel p of `in` in `light` (the
-// twin's float operations); false where the pass answers lit without a lookup (no
-// surface, or outside the light's box). Tests use it to name the tiles a pass needs.
-bool shadow_pass_texel(const ShadowLight& light, const ShadowPassInput& in, size_t p, uint32_t finest, uint32_t& x,
-                       uint32_t& y);
+// Inside the light's box: u, v in [0, 1), d in [0, 1] (else the shaders answer lit).
+inline bool in_light_box(const LightUvd& c) {
+  return c.u >= 0 && c.u < 1 && c.v >= 0 && c.v < 1 && c.d >= 0 && c.d <= 1;
+}
 
-// The CPU twin of the shadow pass over `ev` (the Map's evaluator, the same cache state).
-void shadow_pass_reference(const Evaluator& ev, const PackHeader& h, const ShadowPassInput& in, std::span<float> out);
+// The finest texel of an in-box point: floor(u * 2^finest), clamped to the map.
+std::array<uint32_t, 2> finest_texel(const LightUvd& c, uint32_t finest);
 
-// The CPU twin of the deep part's factor of a 2D shadow lookup (st_deep_shadow,
-// shaders/st_deep.glsl): at the surface point's float light-space (u, v, d) (no normal
-// offset), d - bias (bias: the deep block's kDpDepthBias, deep_depth_bias), over a
-// footprint of kernel x max(1, footprint) finest texels times 2^-finest map units (one
-// texel: bilinear at the deep map's mip 0, never a point lookup), the CPU's own lookup
-// (CacheView::deep_transmittance). Each float operation rounded once.
-std::array<float, 3> deep_shadow_reference(const client::CacheView& view, float bias, uint32_t finest, float u, float v,
-                                           float d, float footprint, uint32_t kernel);
+// Filtering at the finest texel (x, y) (filter_level.hpp, st_lookup): pcf(level, x, y) at the
+// footprint's fine level, and where t > 0 blended with its coarse one.
+template <class Pcf>
+float filtered(uint32_t finest, uint32_t x, uint32_t y, float footprint, Pcf&& pcf) {
+  const FilterLevels f = filter_levels(finest, footprint);
+  const float a = pcf(f.fine, x >> (finest - f.fine), y >> (finest - f.fine));
+  return f.t == 0.0f ? a : filter_blend(a, pcf(f.coarse, x >> (finest - f.coarse), y >> (finest - f.coarse)), f.t);
+}
 
-// The CPU twin of a 2D pass's light per channel (GpuMap::wait's light_rgb, the engine
-// pass's light image rgb) for the visibility `vis` it gave: per pixel with a surface,
-// vis * deep_shadow_reference at the pixel's surface point with the footprint the pass
-// filtered with (in.footprint outside the light's box), one rounding per channel; vis
-// where it has none, or for a map without a deep part (or a stack map).
-void shadow_pass_light_reference(const client::Map& map, const ShadowPassInput& in, std::span<const float> vis,
-                                 std::span<float> light_rgb);
+// r x r PCF in slice w of a stack map at `level` (st_stack_pcf): lit taps / (r * r), taps
+// clamped, depths from Map::slice_depth.
+float slice_pcf(const client::Map& map, uint32_t w, uint32_t level, uint32_t x, uint32_t y, uint32_t r, float d);
+
+// Each slice's float light (shadow_light of its light space).
+std::vector<ShadowLight> slice_lights(const client::StackTables& g);
 
 }  // namespace st::gpu

@@ -6,7 +6,7 @@
 // over all N slices (sum in slice order, then / N). Each slice's light space in float32
 // comes from the stack block (a sun's affine rows, or a spot's rows and the perspective
 // divide); per slice the same operations as the 2D pass (shadow_pass.comp) and as the CPU
-// twin gpu::stack_shadow_pass_reference (gpu/shadow_reference.cpp). With kFlagResumeWalks
+// twin gpu::stack_shadow_pass_reference (tests/gpu/shadow_twins.cpp). With kFlagResumeWalks
 // every tile walk resumes from the pixel's previous walk in that tile (st_oct_depth_resumed:
 // consecutive PCF taps, levels and slices share the top of their paths); same answers.
 #include "st_buffers.glsl"

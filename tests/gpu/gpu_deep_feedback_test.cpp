@@ -11,12 +11,12 @@
 #include <set>
 #include <thread>
 
-#include "gpu/shadow_reference.hpp"
 #include "shadowtile/cache_view.hpp"
 #include "tests/client/deep_pack_fixture.hpp"
 #include "tests/client/loopback.hpp"
 #include "tests/gpu/engine_harness.hpp"
 #include "tests/gpu/raster_pass.hpp"
+#include "tests/gpu/shadow_twins.hpp"
 #include "tiles/core/pack_format.hpp"
 
 namespace st::gpu {

@@ -15,13 +15,13 @@
 #include <random>
 
 #include "gpu/layout.hpp"
-#include "gpu/shadow_reference.hpp"
 #include "shadowtile/cache_view.hpp"
 #include "tests/client/deep_pack_fixture.hpp"
 #include "tests/client/loopback.hpp"
 #include "tests/gpu/engine_harness.hpp"
 #include "tests/gpu/gpu_test_util.hpp"
 #include "tests/gpu/raster_pass.hpp"
+#include "tests/gpu/shadow_twins.hpp"
 
 namespace st::gpu {
 namespace gpu_deep_test {

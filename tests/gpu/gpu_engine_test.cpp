@@ -17,11 +17,11 @@
 
 #include "client/map_access.hpp"
 #include "gpu/layout.hpp"
-#include "gpu/shadow_reference.hpp"
 #include "tests/client/loopback.hpp"
 #include "tests/gpu/engine_harness.hpp"
 #include "tests/gpu/raster_pass.hpp"
 #include "tests/gpu/gpu_test_util.hpp"
+#include "tests/gpu/shadow_twins.hpp"
 #include "tiles/core/light.hpp"
 #include "tiles/core/page_table.hpp"
 #include "tiles/core/tile_cut_grid.hpp"

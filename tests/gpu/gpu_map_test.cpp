@@ -13,9 +13,9 @@
 #include <set>
 
 #include "client/map_access.hpp"
-#include "gpu/shadow_reference.hpp"
 #include "tests/client/loopback.hpp"
 #include "tests/gpu/gpu_test_util.hpp"
+#include "tests/gpu/shadow_twins.hpp"
 #include "tiles/encode/mh_build.hpp"
 #include "tiles/encode/pack_writer.hpp"
 #include "tiles/encode/plane_fit.hpp"

@@ -19,10 +19,10 @@
 #include <thread>
 
 #include "client/map_access.hpp"
-#include "gpu/shadow_reference.hpp"
 #include "tests/client/loopback.hpp"
 #include "tests/gpu/engine_harness.hpp"
 #include "tests/gpu/gpu_test_util.hpp"
+#include "tests/gpu/shadow_twins.hpp"
 #include "tiles/encode/mh_octree_encode.hpp"
 #include "tiles/encode/stack_blocked.hpp"
 #include "tiles/encode/stack_pack.hpp"

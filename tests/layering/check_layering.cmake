@@ -13,7 +13,10 @@
 #                  share; also the header-only camera, and its flat_mesh.hpp reads a scene)
 #   everything  <- app (and tests/, bench/, the other examples, which are not checked)
 # No module includes tests/, bench/ or examples/ (test, bench and example code stays out
-# of the product libraries).
+# of the product libraries), and no module holds a header that tests/ or bench/ include
+# but no product source does (the modules, app/, examples/): such a header and its code
+# serve only tests or benchmarks and belong in tests/ or bench/ (as the GPU passes' CPU
+# twins, tests/gpu/shadow_twins.hpp, and the scene writer, tests/tiles/scene_export.hpp).
 #
 # And no include cycle among the modules' components (a component is a header with the
 # .cpp of the same name, or with the parts its .cpp is split in when there is no a.cpp:
@@ -46,6 +49,19 @@ set(modules common proto net tiles/core tiles/encode image scene tiles/bake rend
 set(known_roots common proto net tiles/core tiles/encode image scene tiles/bake render server client loadgen gpu app tests bench
     examples)
 
+# The folder among ARGN that the include path `inc` starts with ("" when none).
+function(root_of inc out)
+  set(found "")
+  foreach(root ${ARGN})
+    string(LENGTH "${root}/" n)
+    string(SUBSTRING "${inc}" 0 ${n} head)
+    if(head STREQUAL "${root}/")
+      set(found ${root})
+    endif()
+  endforeach()
+  set(${out} "${found}" PARENT_SCOPE)
+endfunction()
+
 set(offences 0)
 set(components "")
 foreach(mod ${modules})
@@ -55,14 +71,7 @@ foreach(mod ${modules})
     file(STRINGS ${src} lines REGEX "^[ \t]*#[ \t]*include[ \t]*\"")
     foreach(line ${lines})
       string(REGEX REPLACE "^[ \t]*#[ \t]*include[ \t]*\"([^\"]+)\".*$" "\\1" inc "${line}")
-      set(target "")
-      foreach(root ${known_roots})
-        string(LENGTH "${root}/" n)
-        string(SUBSTRING "${inc}" 0 ${n} head)
-        if(head STREQUAL "${root}/")
-          set(target ${root})
-        endif()
-      endforeach()
+      root_of("${inc}" target ${known_roots})
       if(inc MATCHES "^shadowtile/")
         set(target client)  # the client's public header (client/include/shadowtile/)
       endif()
@@ -94,6 +103,7 @@ foreach(mod ${modules})
       if(NOT from STREQUAL to AND EXISTS ${ROOT}/${inc_path})
         list(APPEND "deps_${from}" "${to}")
         list(APPEND components "${from}" "${to}")
+        list(APPEND product_includes "${inc_path}")
       endif()
       list(FIND allowed_${mod} ${target} ok)
       if(ok EQUAL -1)
@@ -103,6 +113,48 @@ foreach(mod ${modules})
       endif()
     endforeach()
   endforeach()
+endforeach()
+
+# Headers of the modules that only tests/ or bench/ include. The product's other sources
+# (app/, examples/) count as includers; a header's own .cpp does not (above).
+function(includes_under root out)
+  file(GLOB_RECURSE files ${ROOT}/${root}/*.hpp ${ROOT}/${root}/*.cpp ${ROOT}/${root}/*.h ${ROOT}/${root}/*.c)
+  set(found "")
+  foreach(f ${files})
+    file(STRINGS ${f} lines REGEX "^[ \t]*#[ \t]*include[ \t]*\"")
+    foreach(line ${lines})
+      string(REGEX REPLACE "^[ \t]*#[ \t]*include[ \t]*\"([^\"]+)\".*$" "\\1" inc "${line}")
+      list(APPEND found "${inc}")
+    endforeach()
+  endforeach()
+  list(REMOVE_DUPLICATES found)
+  set(${out} "${found}" PARENT_SCOPE)
+endfunction()
+includes_under(app app_includes)
+includes_under(examples example_includes)
+list(APPEND product_includes ${app_includes} ${example_includes})
+includes_under(tests test_includes)
+includes_under(bench bench_includes)
+set(support_includes ${test_includes} ${bench_includes})
+list(REMOVE_DUPLICATES support_includes)
+# Library code that only tests and benchmarks reach today, each with its reason.
+set(support_only_known
+  # The reference lookups of a stack (the contract StackMap answers bit for bit; its header
+  # is installed with the client's documentation).
+  tiles/core/stack_lookup.hpp
+  # The DAG-MH encoder's entry with statistics (the product calls encode_dagmh, encode.hpp).
+  tiles/encode/dagmh_encode.hpp
+  # The measure of subtree sharing in stack octrees behind the format's design (MHOCT.md).
+  tiles/encode/mh_octree_share.hpp)
+foreach(inc ${support_includes})
+  root_of("${inc}" mod ${modules})
+  if(mod STREQUAL "" OR inc MATCHES "/include/" OR NOT EXISTS ${ROOT}/${inc} OR "${inc}" IN_LIST product_includes
+     OR "${inc}" IN_LIST support_only_known)
+    continue()
+  endif()
+  message("layering: ${inc} is included by tests/ or bench/ but by no product source: its code serves only "
+          "tests or benchmarks and belongs in tests/ or bench/")
+  math(EXPR offences "${offences} + 1")
 endforeach()
 
 # Include cycles among components: drop every component that depends on no remaining one
@@ -204,6 +256,6 @@ foreach(c ${left})
 endforeach()
 
 if(offences GREATER 0)
-  message(FATAL_ERROR "layering: ${offences} include(s) against the module arrows or in a cycle (ARCHITECTURE.md)")
+  message(FATAL_ERROR "layering: ${offences} include(s) against the module arrows, in a cycle or of test code in a module (ARCHITECTURE.md)")
 endif()
 message(STATUS "layering: every module includes only what it may see, and no include cycle but the listed ones")

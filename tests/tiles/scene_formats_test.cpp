@@ -9,9 +9,9 @@
 
 #include "scene/scene.hpp"
 #include "scene/scene_gltf_check.hpp"
-#include "scene/scene_export.hpp"
 #include "scene/scene_mesh.hpp"
 #include "common/error.hpp"
+#include "tests/tiles/scene_export.hpp"
 
 namespace st {
 namespace scene_formats_test {

@@ -12,8 +12,8 @@
 
 #include "common/error.hpp"
 #include "scene/scene.hpp"
-#include "scene/scene_export.hpp"
 #include "scene/scene_mesh.hpp"
+#include "tests/tiles/scene_export.hpp"
 
 namespace st {
 namespace scene_up_axis_test {

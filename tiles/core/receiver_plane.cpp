@@ -58,14 +58,7 @@ float Evaluator::pcf_on_plane(uint32_t level, uint64_t x, uint64_t y, uint32_t r
 float pcf_plane_by_taps(const Evaluator& eval, uint32_t level, uint64_t x, uint64_t y, uint32_t r,
                         const ReceiverPlane& p) {
   r = std::clamp<uint32_t>(r, 1, Evaluator::kMaxPcf);
-  const uint64_t side = uint64_t(1) << level;
-  uint32_t lit = 0;
-  for (uint32_t j = 0; j < r; ++j)
-    for (uint32_t i = 0; i < r; ++i) {
-      const uint64_t tx = pcf_tap(x, i, r, side), ty = pcf_tap(y, j, r, side);
-      lit += receiver_plane_depth(p, level, tx, ty) <= eval.depth(level, tx, ty);
-    }
-  return float(lit) / float(r * r);
+  return pcf_plane_each_tap(level, x, y, r, p, [&](uint64_t tx, uint64_t ty) { return eval.depth(level, tx, ty); });
 }
 
 float window_pcf_plane(const WindowDepths& win, uint32_t level, uint64_t x, uint64_t y, uint32_t r,
@@ -78,17 +71,8 @@ float window_pcf_plane(const WindowDepths& win, uint32_t level, uint64_t x, uint
   if (w == r && h == r) return pcf_fraction(win.count_window_plane(level, x0, y0, r, r, p), r);  // no tap clamped
   float depths[Evaluator::kMaxPcf * Evaluator::kMaxPcf];
   win.depth_window(level, x0, y0, w, h, depths);
-  const PlaneTaps taps{p, level};
-  uint32_t lit = 0;
-  for (uint32_t i = 0; i < r; ++i) {
-    const uint64_t tx = pcf_tap(x, i, r, side);
-    const float* col = depths + (tx - x0) * h;
-    for (uint32_t j = 0; j < r; ++j) {
-      const uint64_t ty = pcf_tap(y, j, r, side);
-      lit += taps.lit(col[ty - y0], tx, ty) ? 1u : 0u;
-    }
-  }
-  return pcf_fraction(lit, r);
+  return pcf_plane_each_tap(level, x, y, r, p,
+                            [&](uint64_t tx, uint64_t ty) { return depths[(tx - x0) * h + (ty - y0)]; });
 }
 
 float pcf_plane_extremes(const Evaluator& eval, uint32_t level, uint64_t x, uint64_t y, uint32_t r,

@@ -41,7 +41,7 @@ namespace st {
 // texels' depth along the light ray (a surface within about 76 degrees of edge-on to the
 // light; steeper ones are taken at this slope, or far taps would lie behind anything).
 // The renderer (render/render.cpp filtered_lookup), the shaders (shadowtile.glsl
-// kStMaxReceiverSlope) and their CPU twin (gpu/shadow_reference.cpp) use it.
+// kStMaxReceiverSlope) and their CPU twin (tests/gpu/shadow_twins.cpp) use it.
 inline constexpr float kMaxReceiverSlope = 4.0f;
 
 // The normal offsets of a filtered lookup's point, in finest-level texels (render.hpp's
@@ -144,8 +144,27 @@ inline float pcf_plane(const Evaluator& eval, uint32_t level, uint64_t x, uint64
 float pcf_plane_extremes(const Evaluator& eval, uint32_t level, uint64_t x, uint64_t y, uint32_t r,
                          const ReceiverPlane& p);
 
-// The tap-by-tap definition of Evaluator::pcf_on_plane, through depth() alone (for tests
-// and as the reference every shortcut must equal).
+// The tap-by-tap plane PCF over any stored depths: each tap of the r x r kernel at (x, y)
+// of `level` (clamped, pcf_tap) compared with receiver_plane_depth of its own texel,
+// depth(tx, ty) the stored value of texel (tx, ty) of `level`; lit taps / (r * r) in float.
+// r in [1, Evaluator::kMaxPcf] (the caller clamps). The one loop behind pcf_plane_by_taps
+// (an Evaluator), window_pcf_plane and the client's shared lookups at the map's edge, and
+// the GPU twin of st_pcf_plane (a client::Map).
+template <class Depth>
+float pcf_plane_each_tap(uint32_t level, uint64_t x, uint64_t y, uint32_t r, const ReceiverPlane& p, Depth&& depth) {
+  const uint64_t side = uint64_t(1) << level;
+  uint32_t lit = 0;
+  for (uint32_t j = 0; j < r; ++j)
+    for (uint32_t i = 0; i < r; ++i) {
+      const uint64_t tx = pcf_tap(x, i, r, side), ty = pcf_tap(y, j, r, side);
+      lit += receiver_plane_depth(p, level, tx, ty) <= depth(tx, ty) ? 1u : 0u;
+    }
+  return float(lit) / float(r * r);
+}
+
+// The tap-by-tap definition of Evaluator::pcf_on_plane, through depth() alone: the
+// reference every shortcut must equal, and the fallback where none applies (the pack
+// evaluator outside its tiles, a plane tile's kernel over too many blocks).
 float pcf_plane_by_taps(const Evaluator& eval, uint32_t level, uint64_t x, uint64_t y, uint32_t r,
                         const ReceiverPlane& p);
 

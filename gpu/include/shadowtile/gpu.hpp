@@ -264,7 +264,7 @@ struct ShadowPassInput {
   double time = 0;
   // Stack maps only: the soft shadow instead, the average over all N slices (time unused):
   // each slice filtered in its own light space as above, summed in slice order in float,
-  // divided by N (StackMap::soft_visibility_filtered's order; gpu/shadow_reference.hpp).
+  // divided by N (StackMap::soft_visibility_filtered's order; the GPU tests' CPU twin repeats it).
   bool soft = false;
   // Stack maps only: each walk in a tile starts from the deepest node its path shares with
   // the pixel's previous walk in that tile (MH 2016 §3.3's last-sample cache carried over

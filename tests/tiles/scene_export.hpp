@@ -1,5 +1,6 @@
-// Writing a Scene through assimp's exporters, so procedural scenes can be viewed in
-// other tools and the loader can be tested on files of every format it claims to read.
+// Test support: writing a Scene through assimp's exporters, so that the scene tests can
+// read back files of every format the loader claims to read (no product code writes
+// scenes: it is compiled into tiles_tests only).
 #pragma once
 #include <string>
 

@@ -1,4 +1,4 @@
-#include "scene/scene_export.hpp"
+#include "tests/tiles/scene_export.hpp"
 
 #include <assimp/Exporter.hpp>
 #include <assimp/material.h>
