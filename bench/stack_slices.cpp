@@ -4,11 +4,13 @@
 //
 //   bench_stack_slices [--res 4k] [--samples 32] [--area-samples 64]
 //                      [--case city|hairball|engine|all] [--json PATH] [--spill-dir /tmp]
-//                      [--bytes-only] [--dump-tiles DIR]
+//                      [--bytes-only] [--dump-tiles DIR] [--adaptive]
 //
 // --bytes-only skips the octree pack, the dictionary measure and the DAG-MH tiles they
 // need (those lines print 0); --dump-tiles writes the per-cell pack's raw tiles (STSL or
-// STOC) to DIR/<cell>.bin for offline study.
+// STOC) to DIR/<cell>.bin for offline study. --adaptive estimates a cut that goes deeper
+// only where a cell overflows (no such format yet): the uniform cuts at every level from the
+// default K to the level the default pack ended at, with no tile bound, combined per cell.
 //
 // Per case every slice is traced into a spill (trace_stack_to_spill, as `shadowtile build`
 // does), then:
@@ -22,7 +24,8 @@
 //   per-cell pack: the stack pack `shadowtile build` writes by default (--stack-cells
 //     smaller): each cell its octree or its slices' own 2D tiles (stack_slices.hpp),
 //     whichever stores smaller, file bytes; and the same cells with the per-slice cells
-//     written as STSL instead of grouped (StackPackParams::group_slice_tiles off).
+//     written as STSL instead of grouped (StackPackParams::group_slice_tiles off), and in
+//     the journal layout (records, plain index, raw grid: payloads_only, compress_grid off).
 //   open values: for the texels off each slice's most common interval (an open mesh's own
 //     values), the mean bits of the bit pattern's residual against slice w-1's texel, the
 //     left neighbour, the planar L + U - UL, and slice w-1's texel moved by the left step.
@@ -47,6 +50,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -134,7 +138,7 @@ double peak_rss_mib() {
 }
 
 nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_dir, bool bytes_only,
-                        const std::string& dump_dir) {
+                        const std::string& dump_dir, bool adaptive) {
   std::printf("\n== %s: %s, %s, %u^2 per slice\n", c.name.c_str(), c.scene.c_str(), c.light.c_str(), 1u << level);
   std::fflush(stdout);
   const st::Scene scene = st::load_scene(c.scene);
@@ -290,7 +294,8 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
   // The pack the builder writes by default (--stack-cells smaller): each cell the smaller
   // of its octree and per-slice tiles, both measured, as written.
   t0 = Clock::now();
-  uint64_t smaller_file = 0, ungrouped_file = 0, smaller_slice_cells = 0, smaller_tiles = 0;
+  uint64_t smaller_file = 0, ungrouped_file = 0, journal_file = 0, smaller_slice_cells = 0, smaller_tiles = 0;
+  uint64_t pick_stored = 0, pick_grid = 0, pick_level = K;
   {
     st::BlockedStackCut pick(spill, K, 64 * 1024, spill_path + ".pick", nullptr, st::StackCells::smaller);
     pick.grid.light_kind = lights_grid.light_kind;
@@ -300,7 +305,15 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
     st::StackPackParams plain = sp;
     plain.group_slice_tiles = false;
     ungrouped_file = st::write_stack_pack(stack_path, pick.grid, pick.tile_count(), [&](size_t i) { return pick.tile(i); }, plain);
+    st::StackPackParams journal = sp;
+    journal.payloads_only = journal.compress_grid = false;
+    journal_file = st::write_stack_pack(stack_path, pick.grid, pick.tile_count(), [&](size_t i) { return pick.tile(i); }, journal);
     smaller_slice_cells = pick.slice_cells, smaller_tiles = pick.tile_count();
+    pick_level = pick.grid.skip_level;
+    pick_grid = pick.grid.serialize().size();
+    if (adaptive)
+      for (size_t i = 0; i < pick.tile_count(); ++i)
+        pick_stored += st::zlib_compress(st::group_slice_tiles(pick.tile(i).second), 6).size();
     if (!dump_dir.empty()) {
       for (size_t i = 0; i < pick.tile_count(); ++i) {
         const auto [cell, buf] = pick.tile(i);
@@ -311,6 +324,65 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
     std::filesystem::remove(stack_path);
   }
   const double smaller_s = since(t0);
+
+  // --adaptive: what a cut deeper only where a cell overflows would store (an estimate, no
+  // such format yet): the cuts at every level K..K' (K' the uniform cut's level) with no
+  // tile bound, each cell its smaller form; a cell of level l < K' whose form's raw bytes
+  // fit the 64 KiB bound is kept, else its children at l + 1 are. Bytes: the kept tiles
+  // stored as write_stack_pack stores them, each with the uniform pack's per-tile share of
+  // records, index and header, the level-K grid and 8 bytes per child entry of a split cell:
+  // the journal layout's bytes (compare with that line), the finished layout's gain apart.
+  uint64_t adaptive_bytes = 0, adaptive_tiles = 0, adaptive_split = 0;
+  if (adaptive) {
+    t0 = Clock::now();
+    struct CellBytes {
+      uint64_t raw = 0, stored = 0;
+    };
+    std::vector<std::unordered_map<uint64_t, CellBytes>> at;
+    std::vector<uint64_t> level_stored;
+    const uint32_t Kp = uint32_t(pick_level);
+    const double per_tile = double(journal_file - pick_stored - pick_grid) / double(std::max<uint64_t>(smaller_tiles, 1));
+    for (uint32_t l = K; l <= Kp; ++l) {
+      st::BlockedStackCut cut(spill, l, st::kMaxTileBytes, spill_path + ".adaptive", nullptr, st::StackCells::smaller);
+      auto& m = at.emplace_back();
+      uint64_t total = 0;
+      for (size_t i = 0; i < cut.tile_count(); ++i) {
+        const auto [cell, buf] = cut.tile(i);
+        const uint64_t stored = st::zlib_compress(st::group_slice_tiles(buf), 6).size();
+        m[cell] = {buf.size(), stored};
+        total += stored;
+      }
+      level_stored.push_back(total);
+      if (l == K) adaptive_bytes += cut.grid.serialize().size();
+      std::printf("  uniform cut at K = %u, no bound: %zu tiles, %llu stored\n", l, cut.tile_count(), (unsigned long long)total);
+    }
+    st::StackGrid gg;
+    gg.geo = g;
+    std::function<void(uint32_t, uint64_t)> take = [&](uint32_t l, uint64_t cell) {
+      const auto it = at[l - K].find(cell);
+      if (it == at[l - K].end()) return;  // a constant cell
+      if (l == Kp || it->second.raw <= 64 * 1024) {
+        adaptive_bytes += it->second.stored + uint64_t(per_tile);
+        ++adaptive_tiles;
+        return;
+      }
+      ++adaptive_split;
+      const uint32_t a0 = g.xy_bits(l);
+      const uint64_t x = cell & ((uint64_t(1) << a0) - 1), y = (cell >> a0) & ((uint64_t(1) << a0) - 1), w = cell >> (2 * a0);
+      const uint32_t dx = g.splits_xy(l), dw = g.splits_w(l);
+      for (uint64_t cw = 0; cw <= dw; ++cw)
+        for (uint64_t cy = 0; cy <= dx; ++cy)
+          for (uint64_t cx = 0; cx <= dx; ++cx) {
+            adaptive_bytes += 8;
+            take(l + 1, gg.index(l + 1, (x << dx) + cx, (y << dx) + cy, (w << dw) + cw));
+          }
+    };
+    for (const auto& [cell, b] : at[0]) take(K, cell);
+    std::printf("adaptive cut estimate, journal layout (K = %u, split where a cell's raw > 64 KiB, down to %u): %llu "
+                "bytes = %.3f x the separate packs (%llu tiles, %llu cells split; per-tile overhead %.0f B; %.1f s)\n",
+                K, Kp, (unsigned long long)adaptive_bytes, double(adaptive_bytes) / double(packs_bytes),
+                (unsigned long long)adaptive_tiles, (unsigned long long)adaptive_split, per_tile, since(t0));
+  }
 
   // DAG-MH structure shared across slices: one dictionary over all slices against one per slice.
   t0 = Clock::now();
@@ -354,6 +426,10 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
               (unsigned long long)smaller_slice_cells, (unsigned long long)smaller_tiles, smaller_s);
   std::printf("  the same cells with per-slice cells stored as STSL (not grouped): %llu bytes = %.3f x the separate packs\n",
               (unsigned long long)ungrouped_file, double(ungrouped_file) / double(packs_bytes));
+  std::printf("  the same pack with journal records, a plain index and a raw grid (no payloads_only, compressed_grid): "
+              "%llu bytes = %.3f x the separate packs (K = %llu, grid %llu raw)\n",
+              (unsigned long long)journal_file, double(journal_file) / double(packs_bytes), (unsigned long long)pick_level,
+              (unsigned long long)pick_grid);
   std::printf("neighbours: 2D tile bytes equal to the previous slice's %.2f%%; texels with an equal interval %.2f%%, "
               "meeting %.2f%%\n",
               100.0 * double(raw_equal_prev) / double(raw_2d), 100.0 * double(texels_equal) / double(texels_compared),
@@ -391,6 +467,7 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
           {"stack_pack_smaller_over_separate", double(smaller_file) / double(packs_bytes)},
           {"stack_pack_smaller_slice_cells", smaller_slice_cells},
           {"stack_pack_smaller_ungrouped_bytes", ungrouped_file},
+          {"stack_pack_smaller_journal_layout_bytes", journal_file},
           {"open_value_texels", res_count},
           {"open_value_residual_bits",
            {{"previous_slice", double(res_prev) / double(std::max<uint64_t>(res_count, 1))},
@@ -398,6 +475,10 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
             {"planar", double(res_lin) / double(std::max<uint64_t>(res_count, 1))},
             {"previous_slice_and_left", double(res_both) / double(std::max<uint64_t>(res_count, 1))}}},
           {"stack_pack_smaller_tiles", smaller_tiles},
+          {"adaptive_estimate_bytes", adaptive_bytes},
+          {"adaptive_estimate_tiles", adaptive_tiles},
+          {"adaptive_estimate_split_cells", adaptive_split},
+          {"uniform_cut_level", pick_level},
           {"tiles_2d_raw", raw_2d},
           {"tiles_2d_equal_previous_raw", raw_equal_prev},
           {"texels_equal_previous", double(texels_equal) / double(texels_compared)},
@@ -416,7 +497,7 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
 int main(int argc, char** argv) {
   try {
     uint32_t level = 12, samples = 32, area_samples = 64;
-    bool bytes_only = false;
+    bool bytes_only = false, adaptive = false;
     std::string dump_dir;
     std::string which = "all", json_path = "build/bench_stack_slices.json", spill_dir = "/tmp";
     for (int i = 1; i < argc; ++i) {
@@ -432,6 +513,7 @@ int main(int argc, char** argv) {
       else if (arg == "--json") json_path = next();
       else if (arg == "--spill-dir") spill_dir = next();
       else if (arg == "--bytes-only") bytes_only = true;
+      else if (arg == "--adaptive") adaptive = true;
       else if (arg == "--dump-tiles") dump_dir = next();
       else throw st::Error("unknown option " + arg);
     }
@@ -447,7 +529,7 @@ int main(int argc, char** argv) {
     if (cases.empty()) throw st::Error("--case: expected city, engine, hairball or all");
     nlohmann::json out = nlohmann::json::array();
     for (const Case& c : cases) {
-      out.push_back(run_case(c, level, spill_dir, bytes_only, dump_dir));
+      out.push_back(run_case(c, level, spill_dir, bytes_only, dump_dir, adaptive));
       std::ofstream(json_path) << out.dump(2) << "\n";  // after each case: long runs keep what finished
     }
     std::printf("\n| case | N | separate DAG-MH packs | octree stack pack | / separate | per-cell pack (default) | / separate |\n");

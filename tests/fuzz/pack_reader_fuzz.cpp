@@ -5,11 +5,19 @@
 // read_raw (CRC, zlib, size checks), open encoded tiles with the pack's encoding (and its
 // DAG-MH dictionary, whose section CRC is repaired too) and probe them, parse index tiles with read_index_tile; verify() with the real opener;
 // then a PackEvaluator answers lookups at every level and PCF (evaluator_probe.hpp).
+// A stack pack (tiles/PACK.md "Stack packs"; seeds in both layouts: journal records, plain
+// index and raw grid, or payloads only, compact index and compressed grid) is verified
+// instead, and one verify() accepts answers lookups of every slice (StackMap).
 // Every rejection must be an st::FormatError (the reader's documented error for corrupt
 // data); anything else escaping, a crash or a sanitizer report is a finding.
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <span>
 
 #include "proto/byte_io.hpp"
@@ -22,9 +30,38 @@
 #include "common/error.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_reader.hpp"
+#include "tiles/core/light_set.hpp"
+#include "tiles/core/stack_map.hpp"
+#include "tiles/encode/mh_octree_build.hpp"
+#include "tiles/encode/stack_pack.hpp"
 
 std::vector<st::fuzz::Bytes> st::fuzz::seeds() {
   std::vector<Bytes> out = pack_files(11);
+  // Stack packs: a small stack of 3 slices, 2^4 a side, in both layouts.
+  st::IntervalStack s;
+  s.level = 4;
+  s.slices = 3;
+  s.data.resize(16 * 16 * 3);
+  for (size_t i = 0; i < s.data.size(); ++i) {
+    const float d = (i * 2654435761u) % 7 < 3 ? 0.25f + float((i * 40503u) % 97) / 200.0f : 1.0f;
+    s.data[i] = st::Interval{d, d};
+  }
+  st::StackCut cut = st::cut_stack(st::build_octree(s), 1, 512);
+  const st::LightSet set = st::LightSet::fit(st::LightSetSpec::parse("sun-path:azimuth=150..200,elevation=40..60,samples=3"),
+                                             st::Aabb{{-10, 0, -10}, {10, 5, 10}});
+  cut.grid.light_kind = set.samples[0].kind();
+  for (const st::LightSpace& l : set.samples) cut.grid.lights.push_back(l.to_array());
+  cut.grid.spec = set.spec.to_string();
+  for (const bool finished : {true, false}) {
+    st::StackPackParams p;
+    p.payloads_only = p.compress_grid = finished;
+    const std::string path =
+        (std::filesystem::temp_directory_path() / ("shadowtile_stack_seed_" + std::to_string(::getpid()) + ".pack")).string();
+    st::write_stack_pack(path, cut, p);
+    std::ifstream f(path, std::ios::binary);
+    out.emplace_back(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+    std::filesystem::remove(path);
+  }
   for (Bytes& b : out) b.insert(b.begin(), std::uint8_t(1));
   return out;
 }
@@ -179,6 +216,33 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     return 0;
   }
   FUZZ_CHECK(reader->map_level() <= st::kMaxLevel);
+  if (const st::StackGrid* g = reader->stack()) {
+    FUZZ_CHECK(g->entries.size() == g->cells(g->skip_level));
+    size_t n = 0;
+    for (const st::TileIndexEntry& t : reader->tiles()) {
+      if (n++ == kMaxTilesProbed) break;
+      try {
+        FUZZ_CHECK(reader->read_raw(t.id).size() == t.raw_size);
+      } catch (const st::FormatError&) {
+      }
+    }
+    try {
+      reader->verify();
+    } catch (const st::FormatError&) {
+      return 0;
+    }
+    st::fuzz::note_accepted();
+    // A verified stack answers every texel of every slice with a number.
+    const st::ResidentStack rs(*reader);
+    uint64_t hash = st::fuzz::input_hash(data, size);
+    for (uint32_t i = 0; i < 64; ++i) {
+      hash = hash * 6364136223846793005ull + 1442695040888963407ull;
+      const uint32_t level = uint32_t((hash >> 40) % (g->geo.n + 1));
+      const uint64_t mask = (uint64_t(1) << level) - 1;
+      FUZZ_CHECK(!std::isnan(rs.map().depth((hash >> 7) & mask, (hash >> 29) & mask, uint32_t((hash >> 50) % g->slices), level)));
+    }
+    return 0;
+  }
   FUZZ_CHECK(reader->skip_level() <= reader->map_level());
   FUZZ_CHECK(reader->grid().levels == reader->skip_level());
   const uint64_t hash = st::fuzz::input_hash(data, size);

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 
 #include "common/error.hpp"
@@ -38,7 +39,7 @@ LightSet lights(uint32_t n) {
 }
 
 std::string write(const OctHierarchy& h, const LightSet& set, std::optional<uint32_t> k, uint32_t tile_bytes,
-                  const std::string& name, StackCut* out = nullptr) {
+                  const std::string& name, StackCut* out = nullptr, bool finished = true) {
   StackCut cut = cut_stack(h, k, tile_bytes);
   cut.grid.light_kind = set.samples[0].kind();
   for (const LightSpace& l : set.samples) cut.grid.lights.push_back(l.to_array());
@@ -46,6 +47,7 @@ std::string write(const OctHierarchy& h, const LightSet& set, std::optional<uint
   StackPackParams p;
   p.tile_bytes = tile_bytes;
   p.build_params = {{"light", cut.grid.spec}};
+  p.payloads_only = p.compress_grid = finished;
   const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/" + name;
   write_stack_pack(path, cut, p);
   if (out) *out = std::move(cut);
@@ -201,19 +203,87 @@ TEST(StackPack, HostileGridsAndTilesAreRefused) {
     } catch (const FormatError&) {
     }
   }
-  // Any flipped byte of the file: open or verify refuses it (CRCs, then the octree check).
-  std::ifstream f(path, std::ios::binary);
-  const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(f)), {});
-  for (size_t i = 0; i < bytes.size(); i += 7) {
-    std::vector<uint8_t> bad = bytes;
-    bad[i] ^= 0x10;
-    EXPECT_THROW(
-        {
-          auto r = PackReader::open_memory(bad, "bad");
-          r->verify();
-        },
-        FormatError)
-        << "byte " << i;
+  // Any flipped byte of the file, in both layouts (payloads only with a compact index and
+  // a compressed grid, the default; journal records, plain index, raw grid): open or
+  // verify refuses it (CRCs, then the octree check).
+  for (const bool finished : {true, false}) {
+    SCOPED_TRACE(finished ? "payloads only" : "journal");
+    std::ifstream f(finished ? path : write(h, set, 1, 1024, "hostile_journal.pack", nullptr, false), std::ios::binary);
+    const std::vector<uint8_t> bytes((std::istreambuf_iterator<char>(f)), {});
+    for (size_t i = 0; i < bytes.size(); i += 7) {
+      std::vector<uint8_t> bad = bytes;
+      bad[i] ^= 0x10;
+      EXPECT_THROW(
+          {
+            auto r = PackReader::open_memory(bad, "bad");
+            r->verify();
+          },
+          FormatError)
+          << "byte " << i;
+    }
+  }
+}
+
+// The finished layout (StackPackParams payloads_only, compress_grid; the 2D packs' own, tiles/
+// PACK.md): each on or off, the pack opens, verifies and reads the same grid, tiles and
+// answers; on, it is smaller (no 32-byte journal record and 32-byte index entry per tile, the
+// grid deflated). A compressed stack grid that claims more than a stack grid can hold is
+// refused in one line before anything is inflated.
+TEST(StackPack, FinishedLayoutReadsTheSameInFewerBytes) {
+  const IntervalStack s = stacks::coherent_stack(5, 12, 3);
+  const OctHierarchy h = build_octree(s);
+  const LightSet set = lights(s.slices);
+  StackCut cut = cut_stack(h, std::nullopt, 2048);
+  ASSERT_GT(cut.tiles.size(), 8u);
+  cut.grid.light_kind = set.samples[0].kind();
+  for (const LightSpace& l : set.samples) cut.grid.lights.push_back(l.to_array());
+  cut.grid.spec = set.spec.to_string();
+  uint64_t sizes[2][2] = {};
+  for (const bool payloads_only : {false, true})
+    for (const bool compress_grid : {false, true}) {
+      SCOPED_TRACE(std::to_string(payloads_only) + std::to_string(compress_grid));
+      StackPackParams p;
+      p.tile_bytes = 2048;
+      p.payloads_only = payloads_only;
+      p.compress_grid = compress_grid;
+      const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/finished.pack";
+      sizes[payloads_only][compress_grid] = write_stack_pack(path, cut, p);
+      EXPECT_EQ(sizes[payloads_only][compress_grid], std::filesystem::file_size(path));
+      auto reader = PackReader::open(path);
+      ASSERT_NE(reader->stack(), nullptr);
+      EXPECT_EQ(bool(reader->header().flags & kFeaturePayloadsOnly), payloads_only);
+      EXPECT_EQ(bool(reader->header().flags & kFeatureCompressedGrid), compress_grid);
+      EXPECT_EQ(reader->stack()->serialize(), cut.grid.serialize());
+      ASSERT_EQ(reader->tiles().size(), cut.tiles.size());
+      for (const auto& [cell, raw] : cut.tiles) EXPECT_EQ(reader->read_raw(cut.grid.tile_id(cell)), raw) << cell;
+      EXPECT_NO_THROW(reader->verify());
+      EXPECT_NO_THROW(reader->check_depth_range());
+      const ResidentStack rs(*reader);
+      expect_same_as_octree(h, rs.map());
+    }
+  EXPECT_LT(sizes[1][0], sizes[0][0]);
+  EXPECT_LT(sizes[0][1], sizes[0][0]);
+  EXPECT_LT(sizes[1][1], sizes[1][0]);
+  EXPECT_LE(sizes[1][1] + 56 * cut.tiles.size(), sizes[0][0]);  // 64 bytes a tile less the compact index's
+
+  // The compressed grid's inflated size past kStackMaxGridBytes, CRCs made good: refused.
+  const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/finished.pack";
+  std::vector<uint8_t> file;
+  {
+    std::ifstream f(path, std::ios::binary);
+    file.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+  }
+  PackHeader head = PackHeader::parse(std::span<const uint8_t>(file.data(), kPackHeaderBytes), "finished");
+  const uint32_t claim = uint32_t(kStackMaxGridBytes + 1);
+  std::memcpy(file.data() + head.grid_offset + 4, &claim, 4);
+  head.grid_crc = crc32_of(std::span<const uint8_t>(file.data() + head.grid_offset, head.grid_size));
+  const auto hb = head.serialize();
+  std::memcpy(file.data(), hb.data(), hb.size());
+  try {
+    PackReader::open_memory(file, "claims");
+    ADD_FAILURE() << "a stack grid claiming " << claim << " inflated bytes opened";
+  } catch (const FormatError& e) {
+    EXPECT_NE(std::string(e.what()).find("inflated size"), std::string::npos) << e.what();
   }
 }
 

@@ -12,6 +12,7 @@
 #include "common/error.hpp"
 #include "tiles/core/interval.hpp"
 #include "tiles/core/light.hpp"
+#include "tiles/core/stack_grid.hpp"
 #include "common/bytes.hpp"
 
 namespace st {
@@ -167,9 +168,13 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
     const uint64_t limit = uint64_t(1) << 56;
     if (h.grid_offset < h.journal_offset || h.grid_offset > limit || h.grid_offset % 8) fail(208, "bad grid offset");
     if (stack) {
-      if (h.flags & uint32_t(kFeatureCompressedGrid)) fail(20, "feature compressed_grid on a stack pack");
-      if (h.flags & uint32_t(kFeaturePayloadsOnly)) fail(20, "feature payloads_only on a stack pack");
-      if (h.grid_size > (uint64_t(1) << 30)) fail(216, "stack grid size too large");
+      // A stack grid (stack_grid.hpp), stored as one zlib stream with compressed_grid.
+      if (h.flags & uint32_t(kFeatureCompressedGrid)) {
+        if (h.grid_size < kCompressedGridHeaderBytes + 1 || h.grid_size > kCompressedGridHeaderBytes + max_stored_size(kStackMaxGridBytes))
+          fail(216, "compressed stack grid size " + std::to_string(h.grid_size) + " out of bounds");
+      } else if (h.grid_size > kStackMaxGridBytes) {
+        fail(216, "stack grid size too large");
+      }
     } else {
       // The skip grid, then the map preview (map_preview.hpp): at least its header, at most its bound.
       // With the DAG-MH dictionary (pack_dictionary.hpp) its section follows the preview.

@@ -82,7 +82,8 @@ enum PackFeature : uint32_t {
   kFeatureDagmhDictionary = 1u << 6,
   // The grid section (skip grid, map preview, DAG-MH dictionary) is stored as one zlib
   // stream behind an 8-byte header (tiles/PACK.md "Compressed grid section"); readers
-  // inflate it at open and hand out the inflated section. Never with stack.
+  // inflate it at open and hand out the inflated section. With stack: the stack grid
+  // (at most kStackMaxGridBytes inflated); readers before that refuse such a pack.
   kFeatureCompressedGrid = 1u << 7,
   // A finished pack without the build journal's records (tiles/PACK.md "Payloads only"):
   // the section from journal_offset to the padding before the grid holds the tiles'
@@ -91,7 +92,8 @@ enum PackFeature : uint32_t {
   // compact (serialize_compact_index: a zlib stream of its columns, offsets implied), so
   // the file ends where that stream does. The journal's tile and cell records live only in
   // the "<name>.tmp" journal and in part files (resume, merge). Every build, resume and
-  // merge writes it; never with stack.
+  // merge writes it; a stack pack too (write_stack_pack, StackPackParams::payloads_only),
+  // which readers before that refuse.
   kFeaturePayloadsOnly = 1u << 8,
   // A DAG-MH pack some of whose encoded tiles are MMH buffers (magic "STMM", MH quadtree
   // format with merged subtrees) because that tile stored in fewer bytes (tiles/PACK.md

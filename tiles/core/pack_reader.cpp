@@ -162,8 +162,10 @@ void PackReader::load() {
   grid_bytes_.resize(header_.grid_size);
   read_at(header_.grid_offset, grid_bytes_);
   if (crc32_of(grid_bytes_) != header_.grid_crc) throw FormatError(where(header_.grid_offset) + ": skip grid CRC mismatch");
-  if (header_.flags & kFeatureCompressedGrid) {  // tiles/PACK.md "Compressed grid section"; never a stack
-    const auto [least, most] = grid_section_bounds(header_.skip_level, header_.flags & kFeatureDagmhDictionary);
+  if (header_.flags & kFeatureCompressedGrid) {  // tiles/PACK.md "Compressed grid section"
+    const auto [least, most] = header_.flags & kFeatureStack
+                                   ? std::pair<uint64_t, uint64_t>(kStackGridFixedBytes, kStackMaxGridBytes)
+                                   : grid_section_bounds(header_.skip_level, header_.flags & kFeatureDagmhDictionary);
     grid_bytes_ = inflate_grid_section(grid_bytes_, least, most, where(header_.grid_offset));
   }
   if (header_.flags & kFeatureStack) {
@@ -351,6 +353,7 @@ void PackReader::verify(const TileOpener& open_tile) const {
     if (std::any_of(pad.begin(), pad.end(), [](uint8_t b) { return b != 0; }))
       throw FormatError(where(end) + ": nonzero padding before the skip grid");
     for (const TileIndexEntry& e : index_) read_stored(e.id);  // every CRC
+    if (stack_) return verify_stack();
     return verify_tiles(open_tile);
   }
   // 1. The journal: a clean sequence of records, then < 8 zero bytes of padding.

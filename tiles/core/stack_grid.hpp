@@ -40,6 +40,10 @@ inline constexpr uint32_t kStackGridVersion = 1;
 inline constexpr uint32_t kStackGridFixedBytes = 24;
 inline constexpr uint32_t kStackMaxSpecBytes = 4096;
 inline constexpr uint64_t kStackMaxCells = uint64_t(1) << 22;  // entries at level K (32 MiB)
+// The largest grid parse accepts: 2^12 lights, the longest spec, and the coarse levels (each
+// level has at least twice its parent's cells, so fewer than the 2^22 entries together) and
+// the entries at the most cells; the bound a compressed stack grid section inflates to.
+inline constexpr uint64_t kStackMaxGridBytes = kStackGridFixedBytes + 144 * 4096 + kStackMaxSpecBytes + (4 + 8) * kStackMaxCells;
 
 struct StackEntry {
   float value = 0;

@@ -165,9 +165,11 @@ uint64_t write_stack_pack(const std::string& path, const StackGrid& sg, size_t c
     r.stored_size = uint32_t(stored.size());
     r.raw_size = uint32_t(raw.size());
     r.crc = crc32_of(stored);
-    const auto rec = r.serialize();
-    put(rec);
-    journal += rec.size();
+    if (!p.payloads_only) {
+      const auto rec = r.serialize();
+      put(rec);
+      journal += rec.size();
+    }
     index.push_back({r.id, h.journal_offset + journal, r.stored_size, r.raw_size, r.crc, TileKind::encoded});
     put(stored);
     journal += stored.size();
@@ -176,8 +178,13 @@ uint64_t write_stack_pack(const std::string& path, const StackGrid& sg, size_t c
   const uint64_t pad = (8 - (h.journal_offset + journal) % 8) % 8;
   put(std::span<const uint8_t>(zeros.data(), pad));
   journal += pad;
-  const std::vector<uint8_t> grid = sg.serialize();
-  const std::vector<uint8_t> idx = serialize_index(index);
+  std::vector<uint8_t> grid = sg.serialize();
+  if (p.compress_grid) {  // tiles/PACK.md "Compressed grid section"
+    h.flags |= kFeatureCompressedGrid;
+    grid = compress_grid_section(grid, p.compression_level);
+  }
+  if (p.payloads_only) h.flags |= kFeaturePayloadsOnly;  // tiles/PACK.md "Payloads only"
+  const std::vector<uint8_t> idx = p.payloads_only ? serialize_compact_index(index, p.compression_level) : serialize_index(index);
   h.grid_offset = h.journal_offset + journal;
   h.grid_size = grid.size();
   h.grid_crc = crc32_of(grid);
@@ -192,7 +199,7 @@ uint64_t write_stack_pack(const std::string& path, const StackGrid& sg, size_t c
   f.close();
   if (!f) throw Error("stack pack: cannot write '" + tmp + "'");
   if (std::rename(tmp.c_str(), path.c_str()) != 0) throw Error("stack pack: cannot rename '" + tmp + "' to '" + path + "'");
-  return h.file_size();
+  return h.index_offset + idx.size();
 }
 
 }  // namespace st

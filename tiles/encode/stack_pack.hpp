@@ -46,6 +46,11 @@ struct StackPackParams {
   int compression_level = 6;
   // Per-slice cells stored grouped ("STSP", tiles/core/stack_slices.hpp); off: as STSL.
   bool group_slice_tiles = true;
+  // The finished layout of 2D packs (tiles/PACK.md "Payloads only", "Compressed grid
+  // section"): the stored tiles back to back without journal records, the tile index
+  // compact, and the stack grid as one zlib stream. Off: records, plain index, raw grid.
+  bool payloads_only = true;
+  bool compress_grid = true;
 };
 
 // Writes the pack as `path`.tmp, then renames it to `path`. Returns the file size.
