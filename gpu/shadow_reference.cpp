@@ -128,6 +128,19 @@ std::array<uint32_t, 2> finest_texel(const Point& c, uint32_t finest) {
   return {std::min(uint32_t(std::floor(c.u * side)), top), std::min(uint32_t(std::floor(c.v * side)), top)};
 }
 
+// The receiver plane through c with slopes (gx, gy) (st_plane_corner): its depth at the low
+// corner of c's finest texel (x, y), (d - gx * in_u) - gy * in_v, (in_u, in_v) c's place in it.
+ReceiverPlane plane_through(const Point& c, uint32_t x, uint32_t y, uint32_t finest, float gx, float gy) {
+  const float side = std::ldexp(1.0f, int(finest));
+  const float su = c.u * side, sv = c.v * side;
+  const float in_u = su - std::floor(su), in_v = sv - std::floor(sv);
+  const float du = gx * in_u, dv = gy * in_v;
+  const float corner_u = c.d - du;
+  ReceiverPlane p;
+  p.fx = x, p.fy = y, p.finest = finest, p.corner = corner_u - dv, p.gx = gx, p.gy = gy;
+  return p;
+}
+
 // Filtering at the finest texel (x, y) (filter_level.hpp, st_lookup): pcf(level, x, y) at the
 // footprint's fine level, and where t > 0 blended with its coarse one.
 template <class Pcf>
@@ -182,11 +195,21 @@ bool shadow_pass_texel(const ShadowLight& light, const ShadowPassInput& in, size
 void shadow_pass_reference(const Evaluator& ev, const PackHeader& h, const ShadowPassInput& in, std::span<float> out) {
   const ShadowLight l = shadow_light(h);
   const uint32_t finest = h.map_level;
+  const float cap = receiver_slope_cap(LightSpace::from_array(h.light_kind, h.light), l, finest);
   const size_t pixels = size_t(in.width) * in.height;
   for (size_t p = 0; p < pixels; ++p) {
     Texel t;
     if (!pixel_texel(l, in, p, finest, t)) {
       out[p] = 1.0f;
+      continue;
+    }
+    if (in.receiver_plane) {  // shadow_pass.comp's st_plane_slope, st_plane_corner, st_lookup_plane
+      const float* n = in.normals.data() + 4 * p;
+      const std::array<float, 2> g = receiver_slope_reference(l, finest, {n[0], n[1], n[2]}, cap);
+      const ReceiverPlane pl = plane_through(t.c, t.x, t.y, finest, g[0], g[1]);
+      out[p] = filtered(finest, t.x, t.y, t.footprint, [&](uint32_t level, uint32_t x, uint32_t y) {
+        return pcf_plane_by_taps(ev, level, x, y, in.kernel, pl);
+      });
       continue;
     }
     // Evaluator::pcf_footprint's filtering on the finest texel (filter_level.hpp).
@@ -262,6 +285,19 @@ std::vector<ShadowLight> slice_lights(const client::StackTables& g) {
   return lights;
 }
 
+// r x r PCF in slice w at `level` with each tap against the receiver plane (st_stack_pcf_plane).
+float slice_pcf_plane(const client::Map& map, uint32_t w, uint32_t level, uint32_t x, uint32_t y, uint32_t r,
+                      const ReceiverPlane& p) {
+  const uint64_t s = uint64_t(1) << level;
+  uint32_t lit = 0;
+  for (uint32_t j = 0; j < r; ++j)
+    for (uint32_t i = 0; i < r; ++i) {
+      const uint64_t tx = pcf_tap(x, i, r, s), ty = pcf_tap(y, j, r, s);
+      lit += receiver_plane_depth(p, level, tx, ty) <= map.slice_depth(w, level, tx, ty);
+    }
+  return float(lit) / float(r * r);
+}
+
 }  // namespace
 
 void stack_shadow_pass_reference(const client::Map& map, const ShadowPassInput& in, std::span<float> out) {
@@ -271,9 +307,21 @@ void stack_shadow_pass_reference(const client::Map& map, const ShadowPassInput& 
   const uint32_t finest = g->xy_level;
   const uint32_t r = std::clamp<uint32_t>(in.kernel, 1, Evaluator::kMaxPcf);
   const std::vector<ShadowLight> lights = slice_lights(*g);
+  std::vector<float> caps;  // each slice's kStLightSlopeCap
+  for (uint32_t w = 0; w < g->slices; ++w)
+    caps.push_back(receiver_slope_cap(LightSpace::from_array(LightKind(g->lights[w].kind), g->lights[w].params),
+                                      lights[w], finest));
   auto slice = [&](size_t p, uint32_t w) {
     Texel t;
     if (!pixel_texel(lights[w], in, p, finest, t)) return 1.0f;
+    if (in.receiver_plane) {  // stack_shadow_pass.comp's st_plane_slope, st_plane_corner, st_stack_lookup_plane
+      const float* n = in.normals.data() + 4 * p;
+      const std::array<float, 2> sl = receiver_slope_reference(lights[w], finest, {n[0], n[1], n[2]}, caps[w]);
+      const ReceiverPlane pl = plane_through(t.c, t.x, t.y, finest, sl[0], sl[1]);
+      return filtered(finest, t.x, t.y, t.footprint, [&](uint32_t level, uint32_t x, uint32_t y) {
+        return slice_pcf_plane(map, w, level, x, y, r, pl);
+      });
+    }
     return filtered(finest, t.x, t.y, t.footprint,
                     [&](uint32_t level, uint32_t x, uint32_t y) { return slice_pcf(map, w, level, x, y, r, t.c.d); });
   };
@@ -316,8 +364,19 @@ float plane_pcf(const client::Map& map, uint32_t level, uint32_t x, uint32_t y, 
 
 }  // namespace
 
+namespace {
+
+// The float dot product of the shaders: the products, then (x + y) + z.
+float dot_reference(const std::array<float, 3>& p, const std::array<float, 3>& q) {
+  const float x = p[0] * q[0], y = p[1] * q[1], z = p[2] * q[2];
+  const float xy = x + y;
+  return xy + z;
+}
+
+}  // namespace
+
 std::array<float, 2> receiver_slope_reference(const ShadowLight& l, uint32_t finest, const std::array<float, 3>& n,
-                                              const std::array<float, 3>& to_light, float texel) {
+                                              float cap) {
   if (l.perspective) return {0.0f, 0.0f};
   const std::array<float, 3>&a = l.axis_u, &b = l.axis_v, &c = l.forward;
   auto cross = [](const std::array<float, 3>& p, const std::array<float, 3>& q) {
@@ -329,17 +388,27 @@ std::array<float, 2> receiver_slope_reference(const ShadowLight& l, uint32_t fin
     }
     return o;
   };
-  auto dot = [](const std::array<float, 3>& p, const std::array<float, 3>& q) {
-    const float x = p[0] * q[0], y = p[1] * q[1], z = p[2] * q[2];
-    const float xy = x + y;
-    return xy + z;
-  };
-  const float pu = dot(n, cross(b, c)), pv = dot(n, cross(c, a)), pw = dot(n, cross(a, b));
+  const float pu = dot_reference(n, cross(b, c)), pv = dot_reference(n, cross(c, a)),
+              pw = dot_reference(n, cross(a, b));
   const float den = pw * std::ldexp(1.0f, int(finest));
-  const float cl = dot(c, to_light);
-  const float reach = texel * std::fabs(cl);
-  const float cap = kMaxReceiverSlope * reach;  // shadowtile.glsl's kStMaxReceiverSlope
   return {slope_clamp(-pu / den, cap), slope_clamp(-pv / den, cap)};
+}
+
+std::array<float, 2> receiver_slope_reference(const ShadowLight& l, uint32_t finest, const std::array<float, 3>& n,
+                                              const std::array<float, 3>& to_light, float texel) {
+  const float cl = dot_reference(l.forward, to_light);
+  const float reach = texel * std::fabs(cl);
+  const float cap = kMaxReceiverSlope * reach;  // st_plane.glsl's kStMaxReceiverSlope
+  return receiver_slope_reference(l, finest, n, cap);
+}
+
+float receiver_slope_cap(const LightSpace& ls, const ShadowLight& l, uint32_t finest) {
+  if (l.perspective) return 0.0f;
+  const Vec3d t = ls.forward() * -1.0;  // toward the light (receiver_plane_at's for a parallel light)
+  const float texel = float(ls.texel_size(ls.origin(), finest));
+  const float cl = dot_reference(l.forward, {float(t.x), float(t.y), float(t.z)});
+  const float reach = texel * std::fabs(cl);
+  return kMaxReceiverSlope * reach;
 }
 
 void receiver_lookup_reference(const client::Map& map, std::span<const float> receivers, const ReceiverLookup& q,
@@ -364,20 +433,14 @@ void receiver_lookup_reference(const client::Map& map, std::span<const float> re
     const Point c = receiver_point(lights[w], receiver);
     if (!in_light_box(c)) return 1.0f;
     const std::array<uint32_t, 2> t = finest_texel(c, finest);
-    if (g || (gx == 0.0f && gy == 0.0f))
+    if (gx == 0.0f && gy == 0.0f)
       return filtered(finest, t[0], t[1], footprint, [&](uint32_t level, uint32_t x, uint32_t y) {
         return g ? slice_pcf(map, w, level, x, y, q.kernel, c.d) : map.pcf(level, x, y, q.kernel, c.d);
       });
     // st_shadow_uvd_plane: the plane's depth at the texel's low corner, then its taps.
-    const float side = std::ldexp(1.0f, int(finest));
-    const float su = c.u * side, sv = c.v * side;
-    const float in_u = su - std::floor(su), in_v = sv - std::floor(sv);
-    const float du = gx * in_u, dv = gy * in_v;
-    const float corner_u = c.d - du;
-    ReceiverPlane p;
-    p.fx = t[0], p.fy = t[1], p.finest = finest, p.corner = corner_u - dv, p.gx = gx, p.gy = gy;
+    const ReceiverPlane p = plane_through(c, t[0], t[1], finest, gx, gy);
     return filtered(finest, t[0], t[1], footprint, [&](uint32_t level, uint32_t x, uint32_t y) {
-      return plane_pcf(map, level, x, y, q.kernel, p);
+      return g ? slice_pcf_plane(map, w, level, x, y, q.kernel, p) : plane_pcf(map, level, x, y, q.kernel, p);
     });
   };
   const size_t n = std::min(receivers.size() / 4, out.size());

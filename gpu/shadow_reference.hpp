@@ -55,6 +55,14 @@ ShadowLight ground_shadow_light(const LightSpace& ls);
 // division's). (0, 0) for a perspective light.
 std::array<float, 2> receiver_slope_reference(const ShadowLight& l, uint32_t finest, const std::array<float, 3>& normal,
                                               const std::array<float, 3>& to_light, float texel);
+// The same with the slopes clamped to +-cap (st_plane_slope).
+std::array<float, 2> receiver_slope_reference(const ShadowLight& l, uint32_t finest, const std::array<float, 3>& normal,
+                                              float cap);
+// A light's cap (the light block's kStLightSlopeCap word, GpuMap writes it; st_plane.glsl):
+// kMaxReceiverSlope * (texel * |c . to_light|) in float, as st_receiver_slope computes it,
+// with texel = float(ls.texel_size(origin, finest)), to_light = float(-ls.forward()) (the
+// CPU's receiver_plane_at's) and c = l.forward; 0 for a perspective light.
+float receiver_slope_cap(const LightSpace& ls, const ShadowLight& l, uint32_t finest);
 
 // The CPU twin of a stack map's shadow pass: the same float operations per slice as
 // shaders/stack_shadow_pass.comp, depths from Map::slice_depth (the Map's cache, the same

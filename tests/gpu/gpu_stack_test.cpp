@@ -12,6 +12,7 @@
 #include <array>
 #include <bit>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <map>
 #include <random>
@@ -386,11 +387,11 @@ TEST(GpuStack, ShadowPassAtSampleTimesAndBetweenEqualsItsCpuTwin) {
   s.server.stop();
   GpuMap g(s.map, gputest::options());
   const GBuffer gb;
-  size_t lit = 0, shadow = 0, between = 0;
+  size_t lit = 0, shadow = 0, between = 0, plane_moved = 0;
   for (double time : {0.0, 2.0 / 9.0, 0.2, 0.43, 0.5, 0.61, 1.0})
     for (uint32_t kernel : {1u, 3u, 5u}) {
       SCOPED_TRACE("time " + std::to_string(time) + " kernel " + std::to_string(kernel));
-      const ShadowPassInput in = gb.input(time, kernel);
+      const ShadowPassInput in = gb.input(time, kernel);  // with the receiver plane (the default)
       std::vector<float> got(size_t(gb.width) * gb.height), want(got.size());
       const FrameStats fs = g.wait(g.submit_shadow_pass(in), got);
       stack_shadow_pass_reference(s.map, in, want);
@@ -401,6 +402,19 @@ TEST(GpuStack, ShadowPassAtSampleTimesAndBetweenEqualsItsCpuTwin) {
         lit += want[i] == 1.0f, shadow += want[i] == 0.0f, between += want[i] > 0.0f && want[i] < 1.0f;
       }
       EXPECT_EQ(bad, 0u);
+      if (kernel == 3) {  // one receiver depth for every tap: its own twin; the plane moves answers
+        ShadowPassInput flat_in = in;
+        flat_in.receiver_plane = false;
+        std::vector<float> flat(got.size()), flat_want(got.size());
+        g.wait(g.submit_shadow_pass(flat_in), flat);
+        stack_shadow_pass_reference(s.map, flat_in, flat_want);
+        size_t bad_flat = 0;
+        for (size_t i = 0; i < got.size(); ++i) {
+          bad_flat += bits(flat[i]) != bits(flat_want[i]);
+          plane_moved += bits(flat[i]) != bits(got[i]);
+        }
+        EXPECT_EQ(bad_flat, 0u);
+      }
       // The last slices are absent: a pass that reads them answers coarsely and says so.
       const StackTime t = stack_time(kSlices, time);
       if (s.map.slices_resident(t.a, t.b)) {
@@ -424,6 +438,8 @@ TEST(GpuStack, ShadowPassAtSampleTimesAndBetweenEqualsItsCpuTwin) {
   EXPECT_GT(lit, 1000u);
   EXPECT_GT(shadow, 1000u);
   EXPECT_GT(between, 100u);
+  EXPECT_GT(plane_moved, 0u) << "the receiver plane changed no answer: the twin's plane path tests nothing";
+  std::printf("%s: %zu answers moved by the receiver plane\n", frame.c_str(), plane_moved);
   EXPECT_EQ(g.stats().validation_messages, 0u);
   }
 }
