@@ -485,13 +485,15 @@ TEST(GpuStack, ShadowPassFeedbackStreamsTheCellsItNeedsUntilNoHoleIsLeft) {
 // One tap at the finest level (no neighbour footprint, footprint half a texel): the CPU
 // twin's soft value against the client's own soft lookup (Map::soft_visibility, double
 // light transform) at the same receivers (moved along the normal as the pass moves them),
-// inside the box every slice's light covers. They can differ only where the float32
+// inside the box every slice's light covers (the pass's one-depth rule, as
+// soft_visibility's single tap). They can differ only where the float32
 // transform and the double one pick different texels or round the receiver's depth
 // apart (none of the 1515 receivers here did, for the sun path and the area light).
 void expect_twin_agrees_with_client_soft(const client::Map& map, const GBuffer& gb) {
   ShadowPassInput in = gb.input(0, 1, true);
   in.neighbour_footprint = false;
   in.footprint = 0.5f;
+  in.receiver_plane = false;  // the client's soft_visibility: one receiver depth
   std::vector<float> twin(size_t(gb.width) * gb.height);
   stack_shadow_pass_reference(map, in, twin);
   size_t compared = 0, same = 0, fractional = 0;
