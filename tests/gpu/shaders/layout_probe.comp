@@ -32,7 +32,6 @@ void main() {
                           kStLights, kStHeaderWords, kStLightWords, kMaxStackCells, kSqWords, kSqX, kSqY, kSqSlice,
                           kSqLevel, kSqReceiver, kSqFootprint, kSqR, kFbStackKeyBit, kPcSliceA, kPcSliceB,
                           kPcTimeWeight, kStLightCentreU, kStLightCentreV, kStLightProjection, kFlagSoft,
-                          kFlagResumeWalks, kPtDeep, kDpLevel, kDpSideBits, kDpCount, kDpCapacity, kDpDepthBias, kDpHeaderWords, kDeepQuery, kDtTexelCount, kDtHeaderWords,
-                          kStLightSlopeCap, kFlagReceiverPlane);
+                          kFlagResumeWalks, kPtDeep, kDpLevel, kDpSideBits, kDpCount, kDpCapacity, kDpDepthBias, kDpHeaderWords, kDeepQuery, kDtTexelCount, kDtHeaderWords);
   for (uint i = 0u; i < kProbeWords; ++i) st_output[i] = uintBitsToFloat(i < v.length() ? v[i] : 0u);
 }
