@@ -1,5 +1,5 @@
 // The validated view (dagmh_traverse.hpp) behind a DAG-MH evaluator, for callers that run
-// several trees' walks in lockstep (tiles/core/slice_walks.hpp).
+// several trees' walks in lockstep (StackMap::lit_samples).
 #pragma once
 #include "tiles/core/dagmh_traverse.hpp"
 #include "tiles/core/evaluator.hpp"

@@ -64,7 +64,7 @@ class SliceTiles {
   }
 
   // Lookup-side access for walks that run several slices' walks in lockstep
-  // (slice_walks.hpp; the soft and time lookups read record() below instead): whether slice w is a constant (and its value), else its tile's
+  // (the soft and time lookups read record() below instead): whether slice w is a constant (and its value), else its tile's
   // evaluator and, when that tile is DAG-MH, a copy of its validated view (nullptr for MMH).
   bool is_constant(uint32_t w) const { return slot_[w] < 0; }
   float constant_value(uint32_t w) const { return value_[w]; }
