@@ -29,6 +29,13 @@
 // On lavapipe (Mesa 22.3) set MESA_SHADER_CACHE_DISABLE=true: a fragment shader loaded from
 // Mesa's disk cache shaded about 2x slower in every mode ("none" too) than one compiled fresh,
 // so runs mixing the two differ by that, and the ratio reads lower with the cached one.
+// Where lavapipe's shadowtile time goes (Mesa 22.3, LLVM 15, a profile of the shading
+// threads over the JIT code): llvmpipe compiles each storage-buffer read of a fragment
+// shader (ST_POOL / ST_PAGE, constant addresses too) to a loop over the 8 lanes with a
+// branch on each lane's mask bit and a bounds test (the fragment shader's ~450 read
+// sites); with the partial masks of small triangles those branches mispredict, and about
+// two thirds of the shader's samples fall in such loops. The R32F baseline's texelFetch is
+// one vectorised gather. The lookup's cost on lavapipe follows its count of buffer reads.
 // --region builds only a window of the map (finest texels; the rest lit): a 64K^2 map in
 // minutes; the camera then looks at the window. The R32F map (the finest level, 4^L floats)
 // is skipped with --no-r32f, with --region, and above 16K^2: its rows print '-'.
