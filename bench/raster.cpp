@@ -36,6 +36,8 @@
 // sites); with the partial masks of small triangles those branches mispredict, and about
 // two thirds of the shader's samples fall in such loops. The R32F baseline's texelFetch is
 // one vectorised gather. The lookup's cost on lavapipe follows its count of buffer reads.
+// Branches are lane masks there (an `if` or early return skips nothing), so the "none" and
+// R32F frames of this one shader also run the lookup's code with every lane off.
 // --region builds only a window of the map (finest texels; the rest lit): a 64K^2 map in
 // minutes; the camera then looks at the window. The R32F map (the finest level, 4^L floats)
 // is skipped with --no-r32f, with --region, and above 16K^2: its rows print '-'.
