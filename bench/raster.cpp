@@ -33,8 +33,8 @@
 // threads over the JIT code): llvmpipe compiles each storage-buffer read of a fragment
 // shader (ST_POOL / ST_PAGE, constant addresses too) to a loop over the 8 lanes with a
 // branch on each lane's mask bit and a bounds test (the fragment shader's ~450 read
-// sites); with the partial masks of small triangles those branches mispredict, and about
-// two thirds of the shader's samples fall in such loops. The R32F baseline's texelFetch is
+// sites); about two thirds of the shader's samples fall in such loops, about half even when
+// every lane is off. The R32F baseline's texelFetch is
 // one vectorised gather. The lookup's cost on lavapipe follows its count of buffer reads.
 // Branches are lane masks there (an `if` or early return skips nothing), so the "none" and
 // R32F frames of this one shader also run the lookup's code with every lane off.
