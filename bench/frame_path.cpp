@@ -273,9 +273,10 @@ struct FrameRow {
   std::vector<int64_t> counts;  // per Counters::all, -1 unavailable
 };
 
-// Every tile of the map's region of finest texels queued; `out` filled up to `n` tiles.
+// The camera's window of finest texels: position p of a boustrophedon walk over a grid x grid
+// tiling of the map (round and round).
 struct CameraPath {
-  uint32_t level = 0, grid = 8;
+  uint32_t grid = 8;
   uint64_t side = 0, step = 0, position = 0;
   uint64_t x() const {
     const uint64_t row = (position / grid) % grid, col = position % grid;
@@ -362,7 +363,6 @@ int main(int argc, char** argv) try {
         ++frame;
       }
       CameraPath cam;
-      cam.level = L;
       cam.side = uint64_t(1) << L;
       cam.step = std::max<uint64_t>(1, cam.side / cam.grid);
       uint32_t request_id = 1, empty_windows = 0;
@@ -414,6 +414,7 @@ int main(int argc, char** argv) try {
         mix(fs.slots_uploaded), mix(fs.tile_bytes), mix(fs.page_bytes);
         got.push_back(std::move(r));
       }
+      // Uploads beyond the slot count went into slots used before in this pass (evictions).
       evictions_guess += gm.stats().slots_uploaded > slots ? gm.stats().slots_uploaded - slots : 0;
       if (got.empty() && passes > 1) throw Error("bench_frame_path: " + path + ": no tile arrived (an empty map?)");
     }
