@@ -449,11 +449,11 @@ int main(int argc, char** argv) try {
     row["host_us"] = host;
     rows.push_back(row);
     char line[512];
-    std::snprintf(line, sizeof line, "%-16s %6llu %6u %6zu %5.0f %8.0f %6.0f | %6.1f %6.1f %6.1f %6.1f %6.1f | %6.1f %6.1f | %016llx",
+    std::snprintf(line, sizeof line, "%-30s %6llu %6u %6zu %5.0f %8.0f %6.0f | %6.1f %6.1f %6.1f %6.1f %6.1f | %6.1f %6.1f | %016llx",
                   row_name.c_str(), (unsigned long long)tiles, slots, got.size(), median(ntiles), median(tile_b),
                   median(page_b), percentile(host, 0), percentile(host, 0.1), percentile(host, 0.5), percentile(host, 0.9),
                   percentile(host, 0.99), percentile(up, 0.1), percentile(up, 0.5), (unsigned long long)digest);
-    lines.push_back(std::string(line) + (counter_cells.empty() ? "" : "\n" + std::string(18, ' ') + "counters (median):" + counter_cells));
+    lines.push_back(std::string(line) + (counter_cells.empty() ? "" : "\n" + std::string(32, ' ') + "counters (median):" + counter_cells));
     std::fprintf(stderr, "bench_frame_path: %s done\n", row_name.c_str());
   }
   std::printf("device '%s', %u frames per scene, %u tiles arriving per frame, cache %.2f of the tiles, %u MiB flushed before each frame\n",
@@ -461,7 +461,7 @@ int main(int argc, char** argv) try {
   std::printf("host us = retire + record_uploads + record_end_of_frame; frames that uploaded tiles; load average %.1f\n",
               load_average());
   std::printf("counters available: %s\n", counter_names.empty() ? "none (perf_event_open refused)" : counter_names.c_str());
-  std::printf("%-16s %6s %6s %6s %5s %8s %6s | %6s %6s %6s %6s %6s | %6s %6s | %s\n", "scene", "tiles", "slots", "frames",
+  std::printf("%-30s %6s %6s %6s %5s %8s %6s | %6s %6s %6s %6s %6s | %6s %6s | %s\n", "scene", "tiles", "slots", "frames",
               "tiles", "tile B", "page B", "min", "p10", "median", "p90", "p99", "up p10", "up med", "upload digest");
   for (const std::string& l : lines) std::printf("%s\n", l.c_str());
   nlohmann::json report = {{"device", engine.name}, {"frames", a.frames}, {"arriving", a.arriving},
