@@ -35,6 +35,7 @@
 
 #include "client/deep_part.hpp"
 #include "client/rw_lock.hpp"
+#include "client/tile_arena.hpp"
 #include "client/tile_requests.hpp"
 #include "shadowtile/client.hpp"
 #include "tiles/core/tile_cache.hpp"
@@ -489,6 +490,9 @@ class RemoteMap final : public Evaluator {
 
   mutable RwLock mu_;
   mutable TileCache cache_;
+  // The map tiles' bytes the evaluators read: copies packed tightly (tile_arena.hpp), not
+  // the slots, which are the tile bound apart (the GPU mirror's layout).
+  TileArena arena_;
   uint64_t metadata_bytes_ = 0;    // accounted outside the slots (ClientOptions::cache_bytes)
   uint32_t dictionary_slots_ = 0;  // MapStats::dictionary_slots
   std::unique_ptr<std::atomic<uint32_t>[]> slot_used_;  // epoch of each slot's last use

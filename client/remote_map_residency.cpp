@@ -143,6 +143,7 @@ RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::v
       dictionary_(dictionary_of(header_, grid_bytes, name_)),
       light_(LightSpace::from_array(header_.light_kind, header_.light)),
       cache_(budget_slots(options, header_, dictionary_.get(), grid_bytes.size(), name_), slot_size_for(header_)),
+      arena_(cache_.slot_count(), cache_.slot_bytes()),
       metadata_bytes_(metadata_bytes(options, header_, grid_bytes.size(), dictionary_.get())),
       dictionary_slots_(displaced_slots(options, header_, dictionary_.get(), grid_bytes, name_, cache_.slot_count())),
       requests_(size_t(options.want_capacity) + size_t(options.max_in_flight) * options.tiles_per_request,
@@ -441,7 +442,8 @@ bool RemoteMap::fill_slot(uint32_t slot, const proto::TileMeta& meta, const Grid
         if (!(header_.flags & kFeaturePackedPlaneTiles)) return false;
         unpack_plane_tile(raw);
       }
-      ev = open_pack_tile(header_.encoding, raw, dictionary_);  // v2 DAG-MH tiles through the dictionary
+      // Opened on its copy in the arena (tile_arena.hpp: packed tightly, not a slot apart).
+      ev = open_pack_tile(header_.encoding, arena_.place(slot, raw), dictionary_);  // v2 DAG-MH tiles through the dictionary
       return ev && ev->finest_level() == header_.map_level - a.level;
     }
     grid = CutGrid::parse(raw, what, kMaxIndexLevels);
@@ -506,6 +508,11 @@ void RemoteMap::tile_answer(const proto::TileMeta& meta, uint32_t request_id, st
       // The slot back (free, page absent), then under the same lock the page requested
       // again or given up, so that no lookup sees it absent in between.
       cache_.abort(slot);
+      // The slot's evaluator read the evicted tile's copy: both go.
+      arena_.release(slot);
+      slot_eval_[slot].reset();
+      slot_window_[slot] = nullptr;
+      slot_walks_[slot] = nullptr;
       retry_or_give_up_locked(tile, request_id, &MapStats::decode_errors);
     } else {
       slot_eval_[slot] = std::move(ev);

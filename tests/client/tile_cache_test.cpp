@@ -8,6 +8,8 @@
 #include <random>
 #include <vector>
 
+#include "client/tile_arena.hpp"
+#include "common/error.hpp"
 #include "tiles/core/tile_cache.hpp"
 
 namespace st::client {
@@ -254,3 +256,48 @@ TEST(TileCacheProperty, RandomOperationsMatchReferenceModel) {
 
 }  // namespace
 }  // namespace st::client
+
+// The evaluators' tight copies of the tiles (client/tile_arena.hpp): random places and
+// releases over a few slots; every live copy keeps its bytes (no two overlap), starts on
+// a line, and the arena holds at most one chunk beyond its live tiles.
+namespace st::client::arena_test {
+
+TEST(TileArena, RandomPlacesKeepEveryLiveCopyIntactAndBoundTheChunks) {
+  constexpr uint32_t kSlots = 24, kChunk = 4096;
+  TileArena arena(kSlots, kChunk);
+  std::mt19937 rng(7);
+  std::vector<std::vector<uint8_t>> want(kSlots);
+  std::vector<std::span<const uint8_t>> got(kSlots);
+  std::vector<bool> live(kSlots, false);
+  for (int op = 0; op < 4000; ++op) {
+    const uint32_t slot = rng() % kSlots;
+    if (rng() % 4 == 0) {
+      arena.release(slot);
+      live[slot] = false;
+    } else {
+      // Mostly small tiles (a real level's), now and then up to a whole chunk.
+      const uint32_t n = rng() % 8 == 0 ? rng() % (kChunk + 1) : rng() % 400;
+      want[slot] = bytes_of(n, uint8_t(op));
+      got[slot] = arena.place(slot, want[slot]);
+      live[slot] = true;
+      ASSERT_EQ(got[slot].size(), n);
+      if (n) {
+        EXPECT_EQ(reinterpret_cast<uintptr_t>(got[slot].data()) % TileArena::kAlign, 0u);
+      }
+    }
+    uint64_t live_count = 0;
+    for (uint32_t s = 0; s < kSlots; ++s) {
+      if (!live[s]) continue;
+      ++live_count;
+      ASSERT_TRUE(std::equal(got[s].begin(), got[s].end(), want[s].begin(), want[s].end()))
+          << "slot " << s << " after op " << op;
+    }
+    ASSERT_LE(arena.held_bytes(), (live_count + 1) * kChunk) << op;
+  }
+  for (uint32_t s = 0; s < kSlots; ++s) arena.release(s);
+  EXPECT_LE(arena.held_bytes(), uint64_t(kChunk));  // only the chunk being filled
+  EXPECT_THROW(arena.place(0, std::vector<uint8_t>(kChunk + 1)), Error);
+  EXPECT_TRUE(arena.place(1, {}).empty());
+}
+
+}  // namespace st::client::arena_test

@@ -224,7 +224,10 @@ class PlaneTileEvaluator final : public Evaluator, public TapWalks {
 
 void PlaneTileEvaluator::find_tap_block(uint64_t fx, uint64_t fy, TapBlock& blk) const noexcept {
   const uint32_t count = v_.plane_count;
-  auto start_of = [this](uint32_t i) { return v_.block_start(i); };
+  // The records read here, inline (PlaneTileView's readers are out of line: a call per
+  // probe of the search showed in a real level's profile).
+  const uint8_t* const records = v_.records.data();
+  auto start_of = [records](uint32_t i) { return load_le<uint32_t>(records + size_t(i) * kRecordSize + kOffStart); };
   const uint64_t m = morton_encode(uint32_t(fx), uint32_t(fy));
   const uint32_t bi = blk.index;
   uint32_t lo, hi;  // the first block starting after m lies in [lo, hi]
@@ -237,14 +240,18 @@ void PlaneTileEvaluator::find_tap_block(uint64_t fx, uint64_t fy, TapBlock& blk)
     while (b >= step && start_of(b - step) > m) b -= step, step *= 2;
     lo = b >= step ? b - step + 1 : 0, hi = b;
   }
-  lo = v_.first_block_after(m, lo, hi);
+  while (lo < hi) {  // PlaneTileView::first_block_after
+    const uint32_t mid = lo + (hi - lo) / 2;
+    if (start_of(mid) <= m) lo = mid + 1;
+    else hi = mid;
+  }
   blk.x = blk.y = ~uint64_t(0), blk.shift = 0;
   if (lo == 0) return;
   const uint32_t j = lo - 1;
   blk.index = j;
-  if (m >= v_.block_end(j)) return;
-  const uint32_t start = v_.block_start(j), shift = v_.block_shift(j);
-  const uint8_t* b = v_.records.data() + size_t(j) * kRecordSize;
+  const uint8_t* b = records + size_t(j) * kRecordSize;
+  const uint32_t start = start_of(j), shift = b[kOffShift];
+  if (m >= uint64_t(start) + (uint64_t(1) << (2 * shift))) return;  // past the block's end (block_end)
   blk.x = morton_compact(start), blk.y = morton_compact(uint64_t(start) >> 1), blk.shift = shift;
   const uint32_t index = load_le<uint16_t>(b + kOffIndex);
   if (b[kOffKind] == kKindLabels) {
