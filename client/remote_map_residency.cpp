@@ -438,7 +438,8 @@ bool RemoteMap::fill_slot(uint32_t slot, const proto::TileMeta& meta, const Grid
     }
     if (entry.kind == EntryKind::tile) {
       if (is_packed_plane_tile(raw)) {  // a packed plane tile: only in a pack that says so
-        if (!(header_.flags & kFeaturePackedPlaneTiles)) return false;
+        const uint32_t need = packed_plane_tile_features(raw);
+        if ((header_.flags & need) != need) return false;
         unpack_plane_tile(raw);
       }
       ev = open_pack_tile(header_.encoding, raw, dictionary_);  // v2 DAG-MH tiles through the dictionary

@@ -106,6 +106,7 @@ PackParams pack_params(const Scene& scene, const LightSpace& light, const MapBui
   pp.compression_level = o.compression_level;
   pp.dagmh_dictionary = o.dagmh_dictionary && o.encoding == Encoding::dagmh;
   pp.pack_plane_tiles = o.pack_plane_tiles;
+  pp.predict_plane_labels = o.predict_plane_labels;
   pp.build_params = {{"builder", to_string(builder)},
                      {"construction", o.construction == MhConstruction::bottom_up ? "bottom-up" : "top-down"},
                      {"light", o.light_spec.empty() ? light.spec().to_string() : o.light_spec},

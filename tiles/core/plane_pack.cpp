@@ -7,6 +7,8 @@
 
 #include "common/bytes.hpp"
 #include "common/error.hpp"
+#include "tiles/core/morton.hpp"
+#include "tiles/core/pack_format.hpp"
 #include "tiles/core/plane_format.hpp"
 #include "tiles/core/plane_tile.hpp"
 
@@ -14,7 +16,12 @@ namespace st {
 
 namespace plane_pack {
 
-inline constexpr uint32_t kMagic = 0x51505453u;  // bytes "STPQ"
+inline constexpr uint32_t kMagic = 0x51505453u;           // bytes "STPQ"
+inline constexpr uint32_t kMagicPredicted = 0x4C505453u;  // bytes "STPL": labels predicted
+// A labelled block's use byte in STPL: the use mask (bits 0..3), the prediction mode (bits
+// 4..5: 0 none, 1 the least plane, 2 the greatest), all predicted (bit 6: no label bytes).
+inline constexpr uint32_t kModeNone = 0, kModeLeast = 1, kModeGreatest = 2, kModes = 3;
+inline constexpr uint32_t kModeShift = 4, kAllPredicted = 0x40;
 // Quadtree node kinds (plane_pack.hpp), 2 bits each.
 inline constexpr uint8_t kNodeEmpty = 0, kNodeSplit = 1, kNodePlane = 2, kNodeLabels = 3;
 inline constexpr uint32_t kTexels = 64;       // a labelled block's texels (8x8)
@@ -50,9 +57,71 @@ uint16_t widen_labels(uint8_t byte, uint32_t low, uint32_t high) {
   return uint16_t(lows ^ (set & flips));
 }
 
+// The label each texel of a labelled block gets under prediction `mode` (kModeLeast: the
+// used palette entry whose plane is least at the texel, a crease's near surface;
+// kModeGreatest: the greatest; ties to the lower entry). kModeNone predicts entry 0 (more
+// than two used entries) or the lower used entry (two), so its residual is the plain label.
+// `table` is the tile's plane table; palette entries index it (checked by the caller);
+// (x0, y0) the block's corner in tile texels. Plane values are summed modulo 2^64 (what
+// the STPN decoder sums for a valid tile; an invalid one is refused after unpacking).
+void predict_labels(const uint8_t* table, const uint32_t* palette, uint32_t used, uint32_t x0, uint32_t y0, uint32_t mode,
+                    uint8_t* out) {
+  using namespace planes;
+  const uint32_t low = uint32_t(std::countr_zero(used));
+  if (mode == kModeNone) {
+    std::fill(out, out + kTexels, uint8_t(std::popcount(used) == 2 ? low : 0));
+    return;
+  }
+  int64_t best[kTexels] = {};
+  for (uint32_t e = 0; e < kPalette; ++e) {
+    if (!(used >> e & 1u)) continue;
+    const uint8_t* t = table + size_t(palette[e]) * kEntrySize;
+    const uint64_t a = load_le<uint64_t>(t + kOffA), b = load_le<uint64_t>(t + kOffB), c = load_le<uint64_t>(t + kOffC);
+    for (uint32_t i = 0; i < kTexels; ++i) {
+      const int64_t v = int64_t(a + b * uint64_t(x0 + i % 8) + c * uint64_t(y0 + i / 8));
+      if (e == low || (mode == kModeLeast ? v < best[i] : v > best[i])) best[i] = v, out[i] = uint8_t(e);
+    }
+  }
+}
+
+// The residual of labels `lab` against prediction `pred` (two used entries: one bit a
+// texel, set where exactly one of them is the higher entry; more: the 2-bit XOR), as the
+// count of texels it does not predict; `bits` (8 or 16 bytes) gets its stored form.
+uint32_t residual(const uint8_t* lab, const uint8_t* pred, uint32_t used, uint8_t* bits) {
+  uint32_t misses = 0;
+  if (std::popcount(used) == 2) {
+    const uint32_t high = 31 - uint32_t(std::countl_zero(used));
+    uint64_t word = 0;
+    for (uint32_t i = 0; i < kTexels; ++i) word |= uint64_t((lab[i] == high) != (pred[i] == high)) << i;
+    for (uint32_t k = 0; k < kOneBitLabelBytes; ++k) bits[k] = uint8_t(word >> (8 * k));
+    return uint32_t(std::popcount(word));
+  }
+  std::fill(bits, bits + kLabelBytes, uint8_t(0));
+  for (uint32_t i = 0; i < kTexels; ++i) {
+    const uint32_t r = uint32_t(lab[i] ^ pred[i]);
+    bits[i / 4] |= uint8_t(r << (2 * (i % 4)));
+    misses += r != 0;
+  }
+  return misses;
+}
+
+// The mode a block's labels are stored under: the fewest texels not predicted, ties to the
+// lower mode (the writer's choice, and the unpacker's canonical check).
+uint32_t best_mode(const uint8_t* table, const uint32_t* palette, uint32_t used, uint32_t x0, uint32_t y0, const uint8_t* lab) {
+  uint32_t mode = kModeNone, fewest = kTexels + 1;
+  uint8_t pred[kTexels], bits[kLabelBytes];
+  for (uint32_t m = 0; m < kModes; ++m) {
+    predict_labels(table, palette, used, x0, y0, m, pred);
+    const uint32_t misses = residual(lab, pred, used, bits);
+    if (misses < fewest) fewest = misses, mode = m;
+  }
+  return mode;
+}
+
 struct Streams {
   std::vector<uint8_t> kinds, indices, palettes, planes, labels;
   uint32_t nodes = 0;
+  bool predict = false;  // STPL: labels stored against a prediction
   void node(uint8_t kind) {
     if (nodes % 4 == 0) kinds.push_back(0);
     kinds.back() |= uint8_t(kind << (2 * (nodes % 4)));
@@ -100,7 +169,20 @@ bool emit_node(const PlaneTileView& v, uint64_t start, uint32_t s, uint32_t& nex
       out.planes.push_back(uint8_t(distinct[c]));
       if (v.table_count > 256) out.planes.push_back(uint8_t(distinct[c] >> 8));
     }
-    if (std::popcount(used) == 2) {
+    if (out.predict && std::popcount(used) >= 2) {
+      uint8_t lab[kTexels], pred[kTexels], res[kLabelBytes];
+      for (uint32_t i = 0; i < kTexels; ++i) lab[i] = uint8_t(label_of(bits, i));
+      const uint32_t x0 = morton_compact(start), y0 = morton_compact(start >> 1);
+      const uint32_t mode = best_mode(v.table.data(), palette, used, x0, y0, lab);
+      predict_labels(v.table.data(), palette, used, x0, y0, mode, pred);
+      const uint32_t misses = residual(lab, pred, used, res);
+      if (mode != kModeNone && misses == 0) {
+        out.palettes.back() |= uint8_t(mode << kModeShift | kAllPredicted);
+      } else {
+        out.palettes.back() |= uint8_t(mode << kModeShift);
+        out.labels.insert(out.labels.end(), res, res + (std::popcount(used) == 2 ? kOneBitLabelBytes : kLabelBytes));
+      }
+    } else if (std::popcount(used) == 2) {
       const uint32_t high = 31 - uint32_t(std::countl_zero(used));
       uint64_t word = 0;
       for (uint32_t i = 0; i < kTexels; ++i) word |= uint64_t(label_of(bits, i) == high) << i;
@@ -179,7 +261,7 @@ bool read_node(Reader& r, uint64_t start, uint32_t s, uint32_t max_blocks, std::
 
 void unpack(std::span<uint8_t> b);
 
-std::vector<uint8_t> pack(std::span<const uint8_t> stpn, PlanePackParts* parts) {
+std::vector<uint8_t> pack(std::span<const uint8_t> stpn, PlanePackParts* parts, bool predict) {
   PlaneTileView v;
   try {
     v = validate_plane_tile(stpn);
@@ -187,6 +269,7 @@ std::vector<uint8_t> pack(std::span<const uint8_t> stpn, PlanePackParts* parts) 
     return {};
   }
   Streams s;
+  s.predict = predict;
   uint32_t next = 0;
   if (!emit_node(v, 0, v.finest_level, next, s) || next != v.plane_count) return {};
   const size_t table_end = planes::kHeaderSize + v.table.size();
@@ -194,7 +277,7 @@ std::vector<uint8_t> pack(std::span<const uint8_t> stpn, PlanePackParts* parts) 
   const size_t packed = s.kinds.size() + s.indices.size() + s.palettes.size() + s.planes.size() + s.labels.size();
   if (table_end + packed > inner_at) return {};
   std::vector<uint8_t> out(stpn.begin(), stpn.end());
-  store_le<uint32_t>(out.data(), plane_pack::kMagic);
+  store_le<uint32_t>(out.data(), predict ? plane_pack::kMagicPredicted : plane_pack::kMagic);
   uint8_t* p = out.data() + table_end;
   for (const std::vector<uint8_t>* part : {&s.kinds, &s.indices, &s.palettes, &s.planes, &s.labels}) {
     if (!part->empty()) std::memcpy(p, part->data(), part->size());
@@ -216,7 +299,9 @@ std::vector<uint8_t> pack(std::span<const uint8_t> stpn, PlanePackParts* parts) 
 void unpack(std::span<uint8_t> b) {
   using namespace planes;
   if (b.size() < kHeaderSize) fail("header", 0, std::to_string(b.size()) + " bytes, fewer than 24");
-  if (load_le<uint32_t>(b.data()) != plane_pack::kMagic) fail("magic", 0, "not \"STPQ\"");
+  const uint32_t magic = load_le<uint32_t>(b.data());
+  if (magic != plane_pack::kMagic && magic != plane_pack::kMagicPredicted) fail("magic", 0, "not \"STPQ\" or \"STPL\"");
+  const bool predicted = magic == plane_pack::kMagicPredicted;
   const uint32_t levels = b[kOffLevels];
   if (levels < 1 || levels > kMaxLevels) fail("levels", kOffLevels, std::to_string(levels) + " outside 1..17");
   const uint32_t count = load_le<uint32_t>(b.data() + kOffPlaneCount);
@@ -242,8 +327,17 @@ void unpack(std::span<uint8_t> b) {
     fail("block kinds", kinds_at, std::to_string(blocks.size()) + " blocks, block_count says " + std::to_string(count));
   const bool wide = tables > 256;
   std::vector<uint16_t> index(count);
-  uint32_t labelled = 0;
-  for (uint32_t i = 0; i < count; ++i) index[i] = uint16_t(blocks[i].kind == kKindPlane ? r.index("plane index", wide) : labelled++);
+  std::vector<uint32_t> label_start;  // each labelled block's start, in order
+  label_start.reserve(label_count);
+  for (uint32_t i = 0; i < count; ++i) {
+    if (blocks[i].kind == kKindPlane) {
+      index[i] = uint16_t(r.index("plane index", wide));
+    } else {
+      index[i] = uint16_t(label_start.size());
+      label_start.push_back(blocks[i].start);
+    }
+  }
+  const uint32_t labelled = uint32_t(label_start.size());
   if (labelled != label_count)
     fail("block kinds", kinds_at, std::to_string(labelled) + " labelled blocks, label_count says " + std::to_string(label_count));
   std::vector<uint8_t> palettes(2 * size_t(label_count));
@@ -251,7 +345,8 @@ void unpack(std::span<uint8_t> b) {
   std::vector<uint8_t> labels(size_t(label_count) * kLabelSize);
   std::vector<uint8_t> distinct_count(label_count);
   for (uint32_t j = 0; j < label_count; ++j) {
-    const uint32_t classes = palettes[2 * j], used = palettes[2 * j + 1];
+    const uint32_t classes = palettes[2 * j], used = palettes[2 * j + 1] & (predicted ? 0x0Fu : 0xFFu);
+    const uint32_t mode = palettes[2 * j + 1] >> kModeShift & 3u, all = palettes[2 * j + 1] & kAllPredicted;
     const size_t at = r.at() - 2 * size_t(label_count - j);  // its palette bytes
     uint32_t n = 0;
     for (uint32_t k = 0; k < kPalette; ++k) {
@@ -260,8 +355,13 @@ void unpack(std::span<uint8_t> b) {
       n = std::max(n, c + 1);
     }
     if (used == 0 || used > 15) fail("labelled block " + std::to_string(j) + " use mask", at + 1, "not 1..15");
+    if (predicted && (palettes[2 * j + 1] & 0x80u || mode >= kModes || (all && mode == kModeNone) ||
+                      (std::popcount(used) < 2 && (mode != kModeNone || all))))
+      fail("labelled block " + std::to_string(j) + " prediction", at + 1, "mode " + std::to_string(mode) + (all ? ", all predicted" : "") +
+                                                                              " with " + std::to_string(std::popcount(used)) + " entries used");
     distinct_count[j] = uint8_t(n);
   }
+  std::vector<uint32_t> entries(size_t(label_count) * kPalette);  // each block's palette as table indices
   for (uint32_t j = 0; j < label_count; ++j) {
     const uint32_t classes = palettes[2 * j];
     uint32_t distinct[kPalette] = {};
@@ -270,15 +370,45 @@ void unpack(std::span<uint8_t> b) {
       distinct[c] = r.index("palette planes", wide);
       for (uint32_t d = 0; d < c; ++d)
         if (distinct[d] == distinct[c]) fail("labelled block " + std::to_string(j) + " planes", at, "a plane named twice");
+      if (predicted && distinct[c] >= tables)
+        fail("labelled block " + std::to_string(j) + " planes", at, "plane " + std::to_string(distinct[c]) + " of " + std::to_string(tables));
     }
     uint8_t* l = labels.data() + size_t(j) * kLabelSize;
-    for (uint32_t k = 0; k < kPalette; ++k) store_le<uint16_t>(l + 2 * k, uint16_t(distinct[(classes >> (2 * k)) & 3u]));
+    for (uint32_t k = 0; k < kPalette; ++k) {
+      entries[size_t(j) * kPalette + k] = distinct[(classes >> (2 * k)) & 3u];
+      store_le<uint16_t>(l + 2 * k, uint16_t(entries[size_t(j) * kPalette + k]));
+    }
   }
   for (uint32_t j = 0; j < label_count; ++j) {
-    const uint32_t used = palettes[2 * j + 1];
+    const uint32_t used = palettes[2 * j + 1] & 0x0Fu;
     uint8_t* bits = labels.data() + size_t(j) * kLabelSize + kOffLabelBits;
     const size_t at = r.at();
-    if (std::popcount(used) == 1) {
+    if (predicted && std::popcount(used) >= 2) {
+      // Labels stored against a prediction: undo it, then check the mode is the writer's.
+      const uint32_t mode = palettes[2 * j + 1] >> kModeShift & 3u;
+      const bool all = palettes[2 * j + 1] & kAllPredicted;
+      const uint32_t* palette = entries.data() + size_t(j) * kPalette;
+      const uint32_t x0 = morton_compact(label_start[j]), y0 = morton_compact(label_start[j] >> 1);
+      const uint8_t* table = b.data() + kHeaderSize;
+      uint8_t pred[kTexels], lab[kTexels], res[kLabelBytes] = {};
+      predict_labels(table, palette, used, x0, y0, mode, pred);
+      const bool two = std::popcount(used) == 2;
+      if (!all)
+        for (size_t k = 0; k < (two ? kOneBitLabelBytes : kLabelBytes); ++k) res[k] = r.byte("labels");
+      const uint32_t low = uint32_t(std::countr_zero(used)), high = 31 - uint32_t(std::countl_zero(used));
+      bool any = false;
+      for (uint32_t i = 0; i < kTexels; ++i) {
+        const uint32_t rb = two ? (res[i / 8] >> (i % 8)) & 1u : (res[i / 4] >> (2 * (i % 4))) & 3u;
+        any |= rb != 0;
+        lab[i] = uint8_t(two ? ((rb != 0) != (pred[i] == high) ? high : low) : (pred[i] ^ rb));
+      }
+      if (!all && any == false && mode != kModeNone)
+        fail("labelled block " + std::to_string(j) + " labels", at, "all predicted, not flagged so");
+      std::fill(bits, bits + kLabelBytes, uint8_t(0));
+      for (uint32_t i = 0; i < kTexels; ++i) bits[i / 4] |= uint8_t(lab[i] << (2 * (i % 4)));
+      if (used_entries(bits) == used && best_mode(table, palette, used, x0, y0, lab) != mode)
+        fail("labelled block " + std::to_string(j) + " prediction", at, "mode " + std::to_string(mode) + " is not the one that predicts most");
+    } else if (std::popcount(used) == 1) {
       const uint32_t e = uint32_t(std::countr_zero(used));
       std::fill(bits, bits + kLabelBytes, uint8_t(e | e << 2 | e << 4 | e << 6));
     } else if (std::popcount(used) == 2) {
@@ -306,11 +436,19 @@ void unpack(std::span<uint8_t> b) {
 }  // namespace plane_pack
 
 bool is_packed_plane_tile(std::span<const uint8_t> bytes) {
-  return bytes.size() >= 4 && load_le<uint32_t>(bytes.data()) == plane_pack::kMagic;
+  if (bytes.size() < 4) return false;
+  const uint32_t magic = load_le<uint32_t>(bytes.data());
+  return magic == plane_pack::kMagic || magic == plane_pack::kMagicPredicted;
 }
 
-std::vector<uint8_t> pack_plane_tile(std::span<const uint8_t> stpn, PlanePackParts* parts) {
-  return plane_pack::pack(stpn, parts);
+uint32_t packed_plane_tile_features(std::span<const uint8_t> bytes) {
+  if (!is_packed_plane_tile(bytes)) return 0;
+  return load_le<uint32_t>(bytes.data()) == plane_pack::kMagicPredicted ? kFeaturePackedPlaneTiles | kFeaturePredictedPlaneLabels
+                                                                        : kFeaturePackedPlaneTiles;
+}
+
+std::vector<uint8_t> pack_plane_tile(std::span<const uint8_t> stpn, PlanePackParts* parts, bool predict_labels) {
+  return plane_pack::pack(stpn, parts, predict_labels);
 }
 
 void unpack_plane_tile(std::span<uint8_t> bytes) { plane_pack::unpack(bytes); }
