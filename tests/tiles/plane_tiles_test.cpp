@@ -252,6 +252,50 @@ TEST(PlaneFormat, PredictedLabelsArePinnedAndCanonical) {
   std::vector<uint8_t> bad = plain;
   bad[table_end + 3] = 0x13;  // a mode in an STPQ tile
   EXPECT_THROW(unpack_plane_tile(bad), FormatError);
+
+  // An MH inner buffer (a constant tile: its root a leaf): STPL leaves out the fields its
+  // plane tile implies (magic, version, levels, byte_size: zeros) and names its kind in
+  // header byte 7 (1 MH, 2 MMH); node_count, flags and the tree stay.
+  const std::vector<uint8_t> mh{'S', 'T', 'M', 'H', 1, 0, 5, 1,  // magic, version 1, levels 5, root leaf
+                                1, 0, 0, 0, 28, 0, 0, 0,         // 1 node, 28 bytes
+                                0, 0, 0, 0, 0, 0, 0, 0,          // level shifts, padding
+                                0, 0, 0x80, 0x3F};               // the leaf: 1.0f
+  std::vector<uint8_t> with_mh = wrap_planes({}, 4, mh, {first, second});
+  const std::vector<uint8_t> packed_mh = pack_plane_tile(with_mh);
+  std::vector<uint8_t> want_mh = want;
+  want_mh.resize(want.size() - inner.size());
+  want_mh[kOffFlags] = 1;
+  want_mh.insert(want_mh.end(), {0, 0, 0, 0, 0, 0, 0, 1, 1, 0, 0, 0, 0, 0, 0, 0});
+  want_mh.insert(want_mh.end(), mh.begin() + 16, mh.end());
+  store_le<uint32_t>(want_mh.data() + kOffByteSize, uint32_t(with_mh.size()));
+  EXPECT_EQ(packed_mh, want_mh);
+  back = packed_mh;
+  unpack_plane_tile(back);
+  EXPECT_EQ(back, with_mh);
+  EXPECT_EQ(pack_plane_tile(with_mh, nullptr, false), [&] {  // STPQ keeps the inner as it is
+    std::vector<uint8_t> q = pack_plane_tile(stpn, nullptr, false);
+    q.resize(q.size() - inner.size());
+    q.insert(q.end(), mh.begin(), mh.end());
+    store_le<uint32_t>(q.data() + kOffByteSize, uint32_t(q.size()));
+    return q;
+  }());
+  auto refused_mh = [&](size_t at, uint8_t value, const char* why) {
+    std::vector<uint8_t> b = packed_mh;
+    b[at] = value;
+    try {
+      unpack_plane_tile(b);
+      ADD_FAILURE() << "byte " << at << " = " << int(value) << " unpacked";
+    } catch (const FormatError& e) {
+      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+    }
+  };
+  const size_t inner_at = want_mh.size() - mh.size();
+  refused_mh(kOffFlags, 3, "inner kind");
+  refused_mh(inner_at + 6, 5, "a left-out byte not zero");  // levels given anyway
+  std::vector<uint8_t> kept = with_mh;  // the whole MH header kept: not the canonical form
+  std::copy(packed_mh.begin(), packed_mh.begin() + long(inner_at), kept.begin());
+  kept[kOffFlags] = 0;
+  EXPECT_THROW(unpack_plane_tile(kept), FormatError);
 }
 
 // A hierarchy of one tile of `scene` (bottom-up MH construction of a fresh trace).

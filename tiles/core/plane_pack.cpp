@@ -7,6 +7,7 @@
 
 #include "common/bytes.hpp"
 #include "common/error.hpp"
+#include "tiles/core/mh_quadtree_format.hpp"
 #include "tiles/core/morton.hpp"
 #include "tiles/core/pack_format.hpp"
 #include "tiles/core/plane_format.hpp"
@@ -22,6 +23,24 @@ inline constexpr uint32_t kMagicPredicted = 0x4C505453u;  // bytes "STPL": label
 // 4..5: 0 none, 1 the least plane, 2 the greatest), all predicted (bit 6: no label bytes).
 inline constexpr uint32_t kModeNone = 0, kModeLeast = 1, kModeGreatest = 2, kModes = 3;
 inline constexpr uint32_t kModeShift = 4, kAllPredicted = 0x40;
+// STPL header byte 7 (the STPN flags, 0): the inner buffer's kind when its header's
+// derivable fields are left out (zeros in place): 0 none left out, 1 MH, 2 MMH.
+inline constexpr uint32_t kInnerKept = 0, kInnerMh = 1, kInnerMmh = 2;
+// The inner MH/MMH header bytes left out: magic, version and levels (0..6), byte_size (12..15).
+inline constexpr size_t kInnerLeftOut[2][2] = {{0, 7}, {12, 16}};
+
+// The inner kind code of an MH/MMH inner buffer `inner` whose derivable header fields
+// (magic, version, levels, byte_size) agree with its plane tile (finest level + 1 `levels`);
+// kInnerKept otherwise.
+uint32_t inner_kind(std::span<const uint8_t> inner, uint32_t levels) {
+  if (inner.size() < mhq::kHeaderFixedSize) return kInnerKept;
+  const uint32_t magic = load_le<uint32_t>(inner.data());
+  if (magic != mhq::kMagicMh && magic != mhq::kMagicMmh) return kInnerKept;
+  if (load_le<uint16_t>(inner.data() + mhq::kOffVersion) != mhq::kVersion || inner[mhq::kOffLevels] != levels ||
+      load_le<uint32_t>(inner.data() + mhq::kOffByteSize) != inner.size())
+    return kInnerKept;
+  return magic == mhq::kMagicMh ? kInnerMh : kInnerMmh;
+}
 // Quadtree node kinds (plane_pack.hpp), 2 bits each.
 inline constexpr uint8_t kNodeEmpty = 0, kNodeSplit = 1, kNodePlane = 2, kNodeLabels = 3;
 inline constexpr uint32_t kTexels = 64;       // a labelled block's texels (8x8)
@@ -284,6 +303,12 @@ std::vector<uint8_t> pack(std::span<const uint8_t> stpn, PlanePackParts* parts, 
     p += part->size();
   }
   std::fill(p, out.data() + inner_at, uint8_t(0));
+  if (predict) {  // STPL: the inner MH/MMH header's derivable fields left out (zeros)
+    const uint32_t kind = inner_kind(v.inner, v.finest_level + 1);
+    out[planes::kOffFlags] = uint8_t(kind);
+    if (kind != kInnerKept)
+      for (const auto& [from, to] : kInnerLeftOut) std::fill(out.data() + inner_at + from, out.data() + inner_at + to, uint8_t(0));
+  }
   // The form is only kept if it unpacks to the very bytes it came from.
   std::vector<uint8_t> back = out;
   try {
@@ -422,6 +447,26 @@ void unpack(std::span<uint8_t> b) {
   }
   for (size_t k = r.offset(); k < packed.size(); ++k)
     if (packed[k] != 0) fail("padding", table_end + k, "not zero");
+  if (predicted) {
+    // The inner MH/MMH header's derivable fields, left out (zeros) by the kind in byte 7.
+    const uint32_t kind = b[kOffFlags];
+    std::span<uint8_t> inner = b.subspan(inner_at);
+    if (kind > kInnerMmh) fail("inner kind", kOffFlags, std::to_string(kind) + " not 0..2");
+    if (kind == kInnerKept) {
+      if (inner_kind(inner, levels) != kInnerKept)
+        fail("inner kind", kOffFlags, "0 for an MH or MMH inner buffer whose header could be left out");
+    } else {
+      if (inner.size() < mhq::kHeaderFixedSize) fail("inner header", inner_at, "shorter than 16 bytes");
+      for (const auto& [from, to] : kInnerLeftOut)
+        for (size_t k = from; k < to; ++k)
+          if (inner[k] != 0) fail("inner header", inner_at + k, "a left-out byte not zero");
+      store_le<uint32_t>(inner.data(), kind == kInnerMh ? mhq::kMagicMh : mhq::kMagicMmh);
+      store_le<uint16_t>(inner.data() + mhq::kOffVersion, mhq::kVersion);
+      inner[mhq::kOffLevels] = uint8_t(levels);
+      store_le<uint32_t>(inner.data() + mhq::kOffByteSize, uint32_t(inner.size()));
+    }
+    b[kOffFlags] = 0;
+  }
   store_le<uint32_t>(b.data(), planes::kMagic);
   for (uint32_t i = 0; i < count; ++i) {
     uint8_t* rec = b.data() + table_end + size_t(i) * kRecordSize;

@@ -43,6 +43,11 @@
 // or the other way round, with more the 2-bit XOR of label and prediction. The mode is the
 // one that leaves the fewest texels unpredicted, ties to the lower mode (mode 0 counts the
 // texels whose plain code is not zero).
+// STPL also leaves out the inner buffer's header fields the tile implies: header byte 7
+// (the STPN flags, 0) is the inner kind, 1 MH or 2 MMH when its version is kVersion, its
+// levels the tile's and its byte_size the rest of the buffer (else 0: nothing left out),
+// and then the inner header's bytes 0..6 (magic, version, levels) and 12..15 (byte_size)
+// are zeros in place.
 //
 // The form is canonical: one STPN tile packs to one STPQ buffer and unpacking refuses any
 // other (stray bits, a split with no block below it, a class map out of first-seen order,
