@@ -57,6 +57,7 @@ CutParams checked_cut_params(const MapBuildOptions& o) {
   if (o.planes && o.encoding != Encoding::vsdag) {
     PlaneFitOptions fit = o.plane_fit;
     fit.packed = o.pack_plane_tiles;  // weigh plane tiles as the pack will store them
+    fit.predicted = o.predict_plane_labels;
     cut.codec = TileCodec::with_planes(cut.codec, cut.tile_bytes, fit);
   }
   cut.validate();
