@@ -76,63 +76,64 @@ uint16_t widen_labels(uint8_t byte, uint32_t low, uint32_t high) {
   return uint16_t(lows ^ (set & flips));
 }
 
-// The label each texel of a labelled block gets under prediction `mode` (kModeLeast: the
-// used palette entry whose plane is least at the texel, a crease's near surface;
-// kModeGreatest: the greatest; ties to the lower entry). kModeNone predicts entry 0 (more
-// than two used entries) or the lower used entry (two), so its residual is the plain label.
-// `table` is the tile's plane table; palette entries index it (checked by the caller);
-// (x0, y0) the block's corner in tile texels. Plane values are summed modulo 2^64 (what
-// the STPN decoder sums for a valid tile; an invalid one is refused after unpacking).
-void predict_labels(const uint8_t* table, const uint32_t* palette, uint32_t used, uint32_t x0, uint32_t y0, uint32_t mode,
-                    uint8_t* out) {
+// The label each texel of a labelled block gets under each prediction mode: kModeLeast the
+// used palette entry whose plane is least at the texel (a crease's near surface),
+// kModeGreatest the greatest, ties to the lower entry; kModeNone entry 0 (more than two
+// used entries) or the lower used entry (two), so its residual is the plain label. `table`
+// is the tile's plane table; palette entries index it (checked by the caller); (x0, y0) the
+// block's corner in tile texels. Plane values are summed modulo 2^64 (what the STPN decoder
+// sums for a valid tile; an invalid one is refused after unpacking).
+struct Predictions {
+  uint8_t label[kModes][kTexels];
+};
+
+void predict_labels(const uint8_t* table, const uint32_t* palette, uint32_t used, uint32_t x0, uint32_t y0, Predictions& p) {
   using namespace planes;
   const uint32_t low = uint32_t(std::countr_zero(used));
-  if (mode == kModeNone) {
-    std::fill(out, out + kTexels, uint8_t(std::popcount(used) == 2 ? low : 0));
-    return;
-  }
-  int64_t best[kTexels] = {};
-  for (uint32_t e = 0; e < kPalette; ++e) {
+  std::fill(p.label[kModeNone], p.label[kModeNone] + kTexels, uint8_t(std::popcount(used) == 2 ? low : 0));
+  int64_t least[kTexels] = {}, greatest[kTexels] = {};
+  for (uint32_t e = low; e < kPalette; ++e) {
     if (!(used >> e & 1u)) continue;
     const uint8_t* t = table + size_t(palette[e]) * kEntrySize;
     const uint64_t a = load_le<uint64_t>(t + kOffA), b = load_le<uint64_t>(t + kOffB), c = load_le<uint64_t>(t + kOffC);
-    for (uint32_t i = 0; i < kTexels; ++i) {
-      const int64_t v = int64_t(a + b * uint64_t(x0 + i % 8) + c * uint64_t(y0 + i / 8));
-      if (e == low || (mode == kModeLeast ? v < best[i] : v > best[i])) best[i] = v, out[i] = uint8_t(e);
+    uint64_t row = a + b * uint64_t(x0) + c * uint64_t(y0);  // the texel (x0, y0 + y), then along x
+    for (uint32_t y = 0; y < 8; ++y, row += c) {
+      uint64_t at = row;
+      for (uint32_t x = 0; x < 8; ++x, at += b) {
+        const uint32_t i = 8 * y + x;
+        const int64_t v = int64_t(at);
+        if (e == low || v < least[i]) least[i] = v, p.label[kModeLeast][i] = uint8_t(e);
+        if (e == low || v > greatest[i]) greatest[i] = v, p.label[kModeGreatest][i] = uint8_t(e);
+      }
     }
   }
 }
 
 // The residual of labels `lab` against prediction `pred` (two used entries: one bit a
-// texel, set where exactly one of them is the higher entry; more: the 2-bit XOR), as the
-// count of texels it does not predict; `bits` (8 or 16 bytes) gets its stored form.
-uint32_t residual(const uint8_t* lab, const uint8_t* pred, uint32_t used, uint8_t* bits) {
-  uint32_t misses = 0;
+// texel, set where exactly one of them is the higher entry; more: the 2-bit XOR) into
+// `bits` (8 or 16 bytes).
+void residual(const uint8_t* lab, const uint8_t* pred, uint32_t used, uint8_t* bits) {
   if (std::popcount(used) == 2) {
     const uint32_t high = 31 - uint32_t(std::countl_zero(used));
     uint64_t word = 0;
     for (uint32_t i = 0; i < kTexels; ++i) word |= uint64_t((lab[i] == high) != (pred[i] == high)) << i;
     for (uint32_t k = 0; k < kOneBitLabelBytes; ++k) bits[k] = uint8_t(word >> (8 * k));
-    return uint32_t(std::popcount(word));
+    return;
   }
   std::fill(bits, bits + kLabelBytes, uint8_t(0));
-  for (uint32_t i = 0; i < kTexels; ++i) {
-    const uint32_t r = uint32_t(lab[i] ^ pred[i]);
-    bits[i / 4] |= uint8_t(r << (2 * (i % 4)));
-    misses += r != 0;
-  }
-  return misses;
+  for (uint32_t i = 0; i < kTexels; ++i) bits[i / 4] |= uint8_t((lab[i] ^ pred[i]) << (2 * (i % 4)));
 }
 
-// The mode a block's labels are stored under: the fewest texels not predicted, ties to the
-// lower mode (the writer's choice, and the unpacker's canonical check).
-uint32_t best_mode(const uint8_t* table, const uint32_t* palette, uint32_t used, uint32_t x0, uint32_t y0, const uint8_t* lab) {
-  uint32_t mode = kModeNone, fewest = kTexels + 1;
-  uint8_t pred[kTexels], bits[kLabelBytes];
+// The mode a block's labels `lab` (each a used entry) are stored under: the fewest texels
+// not predicted, ties to the lower mode (the writer's choice, and the unpacker's canonical
+// check); `misses` gets that count.
+uint32_t best_mode(const Predictions& p, const uint8_t* lab, uint32_t& misses) {
+  uint32_t mode = kModeNone;
+  misses = kTexels + 1;
   for (uint32_t m = 0; m < kModes; ++m) {
-    predict_labels(table, palette, used, x0, y0, m, pred);
-    const uint32_t misses = residual(lab, pred, used, bits);
-    if (misses < fewest) fewest = misses, mode = m;
+    uint32_t n = 0;
+    for (uint32_t i = 0; i < kTexels; ++i) n += lab[i] != p.label[m][i];
+    if (n < misses) misses = n, mode = m;
   }
   return mode;
 }
@@ -189,12 +190,14 @@ bool emit_node(const PlaneTileView& v, uint64_t start, uint32_t s, uint32_t& nex
       if (v.table_count > 256) out.planes.push_back(uint8_t(distinct[c] >> 8));
     }
     if (out.predict && std::popcount(used) >= 2) {
-      uint8_t lab[kTexels], pred[kTexels], res[kLabelBytes];
+      uint8_t lab[kTexels], res[kLabelBytes];
       for (uint32_t i = 0; i < kTexels; ++i) lab[i] = uint8_t(label_of(bits, i));
       const uint32_t x0 = morton_compact(start), y0 = morton_compact(start >> 1);
-      const uint32_t mode = best_mode(v.table.data(), palette, used, x0, y0, lab);
-      predict_labels(v.table.data(), palette, used, x0, y0, mode, pred);
-      const uint32_t misses = residual(lab, pred, used, res);
+      Predictions pred;
+      predict_labels(v.table.data(), palette, used, x0, y0, pred);
+      uint32_t misses = 0;
+      const uint32_t mode = best_mode(pred, lab, misses);
+      residual(lab, pred.label[mode], used, res);
       if (mode != kModeNone && misses == 0) {
         out.palettes.back() |= uint8_t(mode << kModeShift | kAllPredicted);
       } else {
@@ -415,8 +418,10 @@ void unpack(std::span<uint8_t> b) {
       const uint32_t* palette = entries.data() + size_t(j) * kPalette;
       const uint32_t x0 = morton_compact(label_start[j]), y0 = morton_compact(label_start[j] >> 1);
       const uint8_t* table = b.data() + kHeaderSize;
-      uint8_t pred[kTexels], lab[kTexels], res[kLabelBytes] = {};
-      predict_labels(table, palette, used, x0, y0, mode, pred);
+      uint8_t lab[kTexels], res[kLabelBytes] = {};
+      Predictions predictions;
+      predict_labels(table, palette, used, x0, y0, predictions);
+      const uint8_t* pred = predictions.label[mode < kModes ? mode : kModeNone];
       const bool two = std::popcount(used) == 2;
       if (!all)
         for (size_t k = 0; k < (two ? kOneBitLabelBytes : kLabelBytes); ++k) res[k] = r.byte("labels");
@@ -431,7 +436,8 @@ void unpack(std::span<uint8_t> b) {
         fail("labelled block " + std::to_string(j) + " labels", at, "all predicted, not flagged so");
       std::fill(bits, bits + kLabelBytes, uint8_t(0));
       for (uint32_t i = 0; i < kTexels; ++i) bits[i / 4] |= uint8_t(lab[i] << (2 * (i % 4)));
-      if (used_entries(bits) == used && best_mode(table, palette, used, x0, y0, lab) != mode)
+      uint32_t misses = 0;
+      if (used_entries(bits) == used && best_mode(predictions, lab, misses) != mode)
         fail("labelled block " + std::to_string(j) + " prediction", at, "mode " + std::to_string(mode) + " is not the one that predicts most");
     } else if (std::popcount(used) == 1) {
       const uint32_t e = uint32_t(std::countr_zero(used));
