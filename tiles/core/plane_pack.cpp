@@ -138,6 +138,40 @@ uint32_t best_mode(const Predictions& p, const uint8_t* lab, uint32_t& misses) {
   return mode;
 }
 
+// Two used entries (`low`, `high`), as bit masks (bit i: texel i): where the higher entry's
+// plane is less than the lower's (there kModeLeast predicts `high`) and where it is greater
+// (kModeGreatest does); the same predictions as predict_labels, without the label arrays.
+void predict_two(const uint8_t* table, uint32_t low_plane, uint32_t high_plane, uint32_t x0, uint32_t y0, uint64_t& less,
+                 uint64_t& greater) {
+  using namespace planes;
+  const uint8_t* tl = table + size_t(low_plane) * kEntrySize;
+  const uint8_t* th = table + size_t(high_plane) * kEntrySize;
+  // Each plane's value summed modulo 2^64 along the rows, compared as signed integers.
+  const uint64_t al = load_le<uint64_t>(tl + kOffA), bl = load_le<uint64_t>(tl + kOffB), cl = load_le<uint64_t>(tl + kOffC);
+  const uint64_t ah = load_le<uint64_t>(th + kOffA), bh = load_le<uint64_t>(th + kOffB), ch = load_le<uint64_t>(th + kOffC);
+  uint64_t row_l = al + bl * uint64_t(x0) + cl * uint64_t(y0), row_h = ah + bh * uint64_t(x0) + ch * uint64_t(y0);
+  less = greater = 0;
+  for (uint32_t y = 0; y < 8; ++y, row_l += cl, row_h += ch) {
+    uint64_t l = row_l, h = row_h;
+    for (uint32_t x = 0; x < 8; ++x, l += bl, h += bh) {
+      less |= uint64_t(int64_t(h) < int64_t(l)) << (8 * y + x);
+      greater |= uint64_t(int64_t(h) > int64_t(l)) << (8 * y + x);
+    }
+  }
+}
+
+// The mode two-entry labels `high` (bit i: texel i takes the higher entry) are stored
+// under (best_mode's rule on masks); `misses` gets its count.
+uint32_t best_mode_two(uint64_t high, uint64_t less, uint64_t greater, uint32_t& misses) {
+  const uint32_t n[kModes] = {uint32_t(std::popcount(high)), uint32_t(std::popcount(high ^ less)),
+                              uint32_t(std::popcount(high ^ greater))};
+  uint32_t mode = kModeNone;
+  for (uint32_t m = 1; m < kModes; ++m)
+    if (n[m] < n[mode]) mode = m;
+  misses = n[mode];
+  return mode;
+}
+
 struct Streams {
   std::vector<uint8_t> kinds, indices, palettes, planes, labels;
   uint32_t nodes = 0;
@@ -189,7 +223,18 @@ bool emit_node(const PlaneTileView& v, uint64_t start, uint32_t s, uint32_t& nex
       out.planes.push_back(uint8_t(distinct[c]));
       if (v.table_count > 256) out.planes.push_back(uint8_t(distinct[c] >> 8));
     }
-    if (out.predict && std::popcount(used) >= 2) {
+    if (out.predict && std::popcount(used) == 2) {
+      const uint32_t low = uint32_t(std::countr_zero(used)), high = 31 - uint32_t(std::countl_zero(used));
+      uint64_t word = 0, less = 0, greater = 0;
+      for (uint32_t i = 0; i < kTexels; ++i) word |= uint64_t(label_of(bits, i) == high) << i;
+      predict_two(v.table.data(), palette[low], palette[high], morton_compact(start), morton_compact(start >> 1), less, greater);
+      uint32_t misses = 0;
+      const uint32_t mode = best_mode_two(word, less, greater, misses);
+      const uint64_t res = word ^ (mode == kModeLeast ? less : mode == kModeGreatest ? greater : 0);
+      out.palettes.back() |= uint8_t(mode << kModeShift | (mode != kModeNone && misses == 0 ? kAllPredicted : 0));
+      if (mode == kModeNone || misses != 0)
+        for (uint32_t k = 0; k < kOneBitLabelBytes; ++k) out.labels.push_back(uint8_t(res >> (8 * k)));
+    } else if (out.predict && std::popcount(used) > 2) {
       uint8_t lab[kTexels], res[kLabelBytes];
       for (uint32_t i = 0; i < kTexels; ++i) lab[i] = uint8_t(label_of(bits, i));
       const uint32_t x0 = morton_compact(start), y0 = morton_compact(start >> 1);
@@ -411,7 +456,25 @@ void unpack(std::span<uint8_t> b) {
     const uint32_t used = palettes[2 * j + 1] & 0x0Fu;
     uint8_t* bits = labels.data() + size_t(j) * kLabelSize + kOffLabelBits;
     const size_t at = r.at();
-    if (predicted && std::popcount(used) >= 2) {
+    if (predicted && std::popcount(used) == 2) {
+      // One bit a texel against a two-plane prediction: undo it, check the mode is the writer's.
+      const uint32_t mode = palettes[2 * j + 1] >> kModeShift & 3u;
+      const bool all = palettes[2 * j + 1] & kAllPredicted;
+      const uint32_t low = uint32_t(std::countr_zero(used)), high = 31 - uint32_t(std::countl_zero(used));
+      const uint32_t* palette = entries.data() + size_t(j) * kPalette;
+      uint64_t less = 0, greater = 0, res = 0;
+      predict_two(b.data() + kHeaderSize, palette[low], palette[high], morton_compact(label_start[j]),
+                  morton_compact(label_start[j] >> 1), less, greater);
+      if (!all)
+        for (uint32_t k = 0; k < kOneBitLabelBytes; ++k) res |= uint64_t(r.byte("labels")) << (8 * k);
+      if (!all && res == 0 && mode != kModeNone)
+        fail("labelled block " + std::to_string(j) + " labels", at, "all predicted, not flagged so");
+      const uint64_t word = res ^ (mode == kModeLeast ? less : mode == kModeGreatest ? greater : 0);
+      for (uint32_t k = 0; k < kOneBitLabelBytes; ++k) store_le<uint16_t>(bits + 2 * k, widen_labels(uint8_t(word >> (8 * k)), low, high));
+      uint32_t misses = 0;
+      if (used_entries(bits) == used && best_mode_two(word, less, greater, misses) != mode)
+        fail("labelled block " + std::to_string(j) + " prediction", at, "mode " + std::to_string(mode) + " is not the one that predicts most");
+    } else if (predicted && std::popcount(used) > 2) {
       // Labels stored against a prediction: undo it, then check the mode is the writer's.
       const uint32_t mode = palettes[2 * j + 1] >> kModeShift & 3u;
       const bool all = palettes[2 * j + 1] & kAllPredicted;
