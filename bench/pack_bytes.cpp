@@ -127,7 +127,7 @@ nlohmann::json measure(const std::string& path) {
                         {"cell_records", cells_and_pad}, {"grid_section_stored", h.grid_size}, {"skip_grid", grid}, {"preview", preview},
                         {"dictionary", dict},     {"index", index},      {"tiles_raw", tile_raw}};
   // Plane tiles: header, plane table and block records, raw and marginal stored; as STPN
-  // and packed (plane_pack.hpp, as the pack stores them when it has packed_plane_tiles):
+  // and packed (plane_pack.hpp, STPL, as the pack stores them with predicted_plane_labels):
   // the table's, the records' and the labelled blocks' own marginal shares of each.
   uint64_t plane_tiles = 0, planes = 0, table = 0, labelled = 0, plane_texels = 0, plane_raw = 0, plane_stored = 0;
   uint64_t packed_stored = 0, table_stored = 0, records_stored = 0, labels_stored = 0, packed_table_stored = 0;
@@ -173,7 +173,7 @@ nlohmann::json measure(const std::string& path) {
                 (unsigned long long)plane_tiles, (unsigned long long)planes, (unsigned long long)labelled,
                 (unsigned long long)plane_texels, (unsigned long long)table,
                 (unsigned long long)plane_raw, (unsigned long long)plane_stored);
-    std::printf("    STPN marginal stored: table %llu, block records %llu, labelled blocks %llu; packed (STPQ) planes section %llu (table %llu)\n",
+    std::printf("    STPN marginal stored: table %llu, block records %llu, labelled blocks %llu; packed (STPL: labels predicted, implied inner header fields left out) planes section %llu (table %llu)\n",
                 (unsigned long long)table_stored, (unsigned long long)records_stored, (unsigned long long)labels_stored,
                 (unsigned long long)packed_stored, (unsigned long long)packed_table_stored);
     std::printf("    packed parts raw / marginal stored:");

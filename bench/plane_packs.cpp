@@ -5,8 +5,9 @@
 // OUT for bench_pack_bytes (per-section bytes, the planes section included).
 //
 //   bench_plane_packs SCENE@RES... [--out DIR] [--json PATH] [--light SPEC] [--min-shift S] [--min-nodes N] [--min-reused N]
-//                     [--no-merge] [--no-round] [--no-pack] [--only default,static,planes]
-// (--no-pack stores plane tiles as STPN instead of packed, MapBuildOptions::pack_plane_tiles.)
+//                     [--no-merge] [--no-round] [--no-pack] [--no-predict] [--only default,static,planes]
+// (--no-pack stores plane tiles as STPN instead of packed, MapBuildOptions::pack_plane_tiles;
+// --no-predict packs them without predicted labels, "STPQ", MapBuildOptions::predict_plane_labels.)
 // (--only builds the named variants alone; the others' columns print 0).
 // e.g. bench_plane_packs /usr/share/games/openarena/baseoa/pak1-maps.pk3:maps/oa_dm1.bsp@8192
 //      /usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb@4096 procedural:city@4096
@@ -40,7 +41,7 @@ int main(int argc, char** argv) try {
   st::PlaneFitOptions fit;
   std::string out_dir = "bench-out/planes", json_path, light_spec = "sun:azimuth=30,elevation=50";
   std::vector<std::string> only;
-  bool pack_planes = true;
+  bool pack_planes = true, predict_labels = true;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&]() -> std::string {
@@ -56,6 +57,7 @@ int main(int argc, char** argv) try {
     else if (a == "--no-merge") fit.merge_surfaces = false;
     else if (a == "--no-round") fit.round_planes = false;
     else if (a == "--no-pack") pack_planes = false;
+    else if (a == "--no-predict") predict_labels = false;
     else if (a == "--only") {
       std::string list = next(), name;
       for (char ch : list + ',')
@@ -90,6 +92,7 @@ int main(int argc, char** argv) try {
       o.planes = variants[v].planes;
       o.plane_fit = fit;
       o.pack_plane_tiles = pack_planes;
+      o.predict_plane_labels = predict_labels;
       if (variants[v].static_intervals) o.intervals = st::IntervalRule::static_geometry;
       o.scene_spec = spec;
       o.light_spec = light_spec;

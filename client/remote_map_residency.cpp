@@ -439,7 +439,8 @@ bool RemoteMap::fill_slot(uint32_t slot, const proto::TileMeta& meta, const Grid
     }
     if (entry.kind == EntryKind::tile) {
       if (is_packed_plane_tile(raw)) {  // a packed plane tile: only in a pack that says so
-        if (!(header_.flags & kFeaturePackedPlaneTiles)) return false;
+        const uint32_t need = packed_plane_tile_features(raw);
+        if ((header_.flags & need) != need) return false;
         unpack_plane_tile(raw);
       }
       // Opened on its copy in the arena (tile_arena.hpp: packed tightly, not a slot apart).

@@ -3,7 +3,7 @@
 // validates the header, the plane table, every block record and labelled block and the inner buffer, or throws
 // st::FormatError; a buffer it accepts answers every lookup without reading out of bounds,
 // and PCF equals the average of its single lookups (evaluator_probe.hpp). A packed plane
-// tile ("STPQ", plane_pack.hpp: how packs store them) unpacks in place or throws
+// tile ("STPQ", or "STPL" with predicted labels: plane_pack.hpp, how packs store them) unpacks in place or throws
 // st::FormatError, and one whose unpacked bytes open packs back to the very input (the
 // packed form is canonical); the seeds hold both forms.
 #include <algorithm>
@@ -17,6 +17,7 @@
 #include "tiles/encode/mh_build.hpp"
 #include "tiles/encode/plane_fit.hpp"
 #include "tiles/core/encoding.hpp"
+#include "tiles/core/pack_format.hpp"
 #include "tiles/core/plane_pack.hpp"
 
 namespace {
@@ -49,8 +50,11 @@ std::vector<st::fuzz::Bytes> st::fuzz::seeds() {
       if (s.planes.empty() && s.labelled.empty()) continue;
       for (st::Encoding e : {st::Encoding::dagmh, st::Encoding::mmh}) {
         out.push_back(st::wrap_planes(s.planes, level, st::encode(s.pruned, e), s.labelled));
-        std::vector<std::uint8_t> packed = st::pack_plane_tile(out.back());
-        if (!packed.empty()) out.push_back(std::move(packed));
+        const std::vector<std::uint8_t> stpn = out.back();
+        for (bool predict : {false, true}) {  // "STPQ" and "STPL"
+          std::vector<std::uint8_t> packed = st::pack_plane_tile(stpn, nullptr, predict);
+          if (!packed.empty()) out.push_back(std::move(packed));
+        }
       }
     }
   return out;
@@ -59,6 +63,7 @@ std::vector<st::fuzz::Bytes> st::fuzz::seeds() {
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   std::vector<std::uint8_t> bytes(data, data + size);  // exact size: ASan sees overreads
   const bool packed = st::is_packed_plane_tile(bytes);
+  const bool predicted = st::packed_plane_tile_features(bytes) & st::kFeaturePredictedPlaneLabels;
   if (packed) {
     try {
       st::unpack_plane_tile(bytes);
@@ -74,7 +79,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   }
   FUZZ_CHECK(ev != nullptr);
   if (packed) {
-    const std::vector<std::uint8_t> again = st::pack_plane_tile(bytes);
+    const std::vector<std::uint8_t> again = st::pack_plane_tile(bytes, nullptr, predicted);
     FUZZ_CHECK(again.size() == size && std::equal(again.begin(), again.end(), data));
   }
   st::fuzz::note_accepted();

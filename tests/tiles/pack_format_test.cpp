@@ -99,6 +99,8 @@ TEST(PackFormat, HeaderRefusesEveryBadField) {
       resigned([](PackHeader& h) { h.flags |= kFeatureMixedTiles, h.encoding = Encoding::mmh; }),
       // Packed plane tiles (bit 13): only with plane_tiles (bit 11).
       resigned([](PackHeader& h) { h.flags |= kFeaturePackedPlaneTiles; }),
+      // Predicted plane labels (bit 14): only with packed_plane_tiles (bit 13).
+      resigned([](PackHeader& h) { h.flags |= kFeaturePredictedPlaneLabels | kFeaturePlaneTiles; }),
       resigned([](PackHeader& h) { h.map_level = 21; }),
       resigned([](PackHeader& h) { h.skip_level = 11; }),
       resigned([](PackHeader& h) { h.tile_bytes = 0; }),

@@ -162,14 +162,140 @@ TEST(PlaneFormat, LayoutIsPinned) {
   packed_want.insert(packed_want.end(), packed_planes.begin(), packed_planes.end());
   packed_want.resize(want.size() - inner.size(), 0);
   packed_want.insert(packed_want.end(), inner.begin(), inner.end());
-  const std::vector<uint8_t> packed = pack_plane_tile(b);
+  const std::vector<uint8_t> packed = pack_plane_tile(b, nullptr, false);
   EXPECT_EQ(packed, packed_want);
   EXPECT_TRUE(is_packed_plane_tile(packed));
+  EXPECT_EQ(packed_plane_tile_features(packed), uint32_t(kFeaturePackedPlaneTiles));
   EXPECT_FALSE(is_plane_buffer(packed));
   std::vector<uint8_t> back = packed;
   unpack_plane_tile(back);
   EXPECT_EQ(back, b);
   EXPECT_TRUE(pack_plane_tile(packed).empty()) << "only a valid STPN tile packs";
+  // With predicted labels ("STPL"): the labels alternate across the two planes, which no
+  // prediction beats (each mode misses 32 texels, ties to mode 0): the same bytes, magic L.
+  std::vector<uint8_t> predicted_want = packed_want;
+  predicted_want[3] = 'L';
+  EXPECT_EQ(pack_plane_tile(b), predicted_want);
+  EXPECT_EQ(packed_plane_tile_features(predicted_want), uint32_t(kFeaturePackedPlaneTiles | kFeaturePredictedPlaneLabels));
+  back = predicted_want;
+  unpack_plane_tile(back);
+  EXPECT_EQ(back, b);
+}
+
+// Predicted labels (plane_pack.hpp, "STPL"): two labelled 8x8 blocks where a rising plane
+// A crosses a flat one; each texel's label is the lower plane there (ties to entry 0), the
+// first block's last texel excepted. Every packed byte is pinned, and forms that are not
+// the writer's (another mode, the all-predicted flag dropped, mode 3, a stray bit) are
+// refused by name.
+TEST(PlaneFormat, PredictedLabelsArePinnedAndCanonical) {
+  auto flat = [](int64_t a) {
+    Plane p;
+    p.shift = 3;
+    p.a = a;
+    return p;
+  };
+  Plane a0 = flat(1000), a8 = flat(1080);  // A = 1000 + 10 x at the tile's (0, 0) and (8, 0)
+  a0.b = a8.b = 10;
+  LabelBlock first, second;
+  first.start = 0;
+  first.palette = {a0, flat(1040)};  // B: A is lower at x < 4, equal at 4
+  second.start = 64;
+  second.palette = {a8, flat(1120)};  // C: A is lower at x - 8 < 4, equal at 4
+  for (uint32_t i = 0; i < 64; ++i) first.label[i] = second.label[i] = uint8_t(i % 8 > 4);
+  first.label[63] = 0;  // one texel the prediction misses
+  const std::vector<uint8_t> inner{1, 2, 3, 4};
+  const std::vector<uint8_t> stpn = wrap_planes({}, 4, inner, {first, second});
+  const size_t table_end = kHeaderSize + 3 * kEntrySize;
+  ASSERT_EQ(load_le<uint32_t>(stpn.data() + kOffTableCount), 3u) << "A, B, C";
+  std::vector<uint8_t> want(stpn.begin(), stpn.begin() + long(table_end));
+  want[3] = 'L';
+  const std::vector<uint8_t> packed_planes{
+      0x3D, 0x00,              // kinds: split, labelled, labelled, empty | empty
+      0x54, 0x13, 0x54, 0x53,  // classes 0, 1, 1, 1; entries 0 and 1 used, mode 1 (least), all predicted (0x40)
+      0, 1, 0, 2,              // their distinct planes: A, B and A, C
+      0, 0, 0, 0, 0, 0, 0, 0x80};  // the first block's residual: texel 63 only
+  want.insert(want.end(), packed_planes.begin(), packed_planes.end());
+  want.resize(stpn.size() - inner.size(), 0);
+  want.insert(want.end(), inner.begin(), inner.end());
+  const std::vector<uint8_t> packed = pack_plane_tile(stpn);
+  ASSERT_EQ(packed, want);
+  std::vector<uint8_t> back = packed;
+  unpack_plane_tile(back);
+  EXPECT_EQ(back, stpn);
+  // The STPQ form stores the one-bit labels themselves.
+  const std::vector<uint8_t> plain = pack_plane_tile(stpn, nullptr, false);
+  EXPECT_EQ(plain[table_end + 3], 0x03);
+  EXPECT_EQ(plain[table_end + 5], 0x03);
+  back = plain;
+  unpack_plane_tile(back);
+  EXPECT_EQ(back, stpn);
+  auto refused = [&](size_t at, std::vector<uint8_t> values, const char* why) {
+    std::vector<uint8_t> bad = packed;
+    std::copy(values.begin(), values.end(), bad.begin() + long(table_end + at));
+    try {
+      unpack_plane_tile(bad);
+      ADD_FAILURE() << "byte " << at << " = " << int(values[0]) << " unpacked";
+    } catch (const FormatError& e) {
+      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+    }
+  };
+  // The first block's own labels stored plainly (mode 0): they unpack, but mode 1 predicts more.
+  std::vector<uint8_t> mode0{0x03, 0x54, 0x53, 0, 1, 0, 2};
+  mode0.insert(mode0.end(), 7, uint8_t(0xE0));
+  mode0.push_back(0x60);
+  refused(3, mode0, "is not the one that predicts most");
+  refused(5, {0x13}, "all predicted, not flagged so");  // the flag dropped: 8 zero bytes read
+  refused(3, {0x33}, "prediction");                     // mode 3
+  refused(3, {0x93}, "prediction");                     // bit 7
+  refused(3, {0x11}, "prediction");                     // one entry used, with a mode
+  refused(5, {0x03 | 0x40}, "prediction");              // all predicted without a mode
+  std::vector<uint8_t> bad = plain;
+  bad[table_end + 3] = 0x13;  // a mode in an STPQ tile
+  EXPECT_THROW(unpack_plane_tile(bad), FormatError);
+
+  // An MH inner buffer (a constant tile: its root a leaf): STPL leaves out the fields its
+  // plane tile implies (magic, version, levels, byte_size: zeros) and names its kind in
+  // header byte 7 (1 MH, 2 MMH); node_count, flags and the tree stay.
+  const std::vector<uint8_t> mh{'S', 'T', 'M', 'H', 1, 0, 5, 1,  // magic, version 1, levels 5, root leaf
+                                1, 0, 0, 0, 28, 0, 0, 0,         // 1 node, 28 bytes
+                                0, 0, 0, 0, 0, 0, 0, 0,          // level shifts, padding
+                                0, 0, 0x80, 0x3F};               // the leaf: 1.0f
+  std::vector<uint8_t> with_mh = wrap_planes({}, 4, mh, {first, second});
+  const std::vector<uint8_t> packed_mh = pack_plane_tile(with_mh);
+  std::vector<uint8_t> want_mh = want;
+  want_mh.resize(want.size() - inner.size());
+  want_mh[kOffFlags] = 1;
+  want_mh.insert(want_mh.end(), {0, 0, 0, 0, 0, 0, 0, 1, 1, 0, 0, 0, 0, 0, 0, 0});
+  want_mh.insert(want_mh.end(), mh.begin() + 16, mh.end());
+  store_le<uint32_t>(want_mh.data() + kOffByteSize, uint32_t(with_mh.size()));
+  EXPECT_EQ(packed_mh, want_mh);
+  back = packed_mh;
+  unpack_plane_tile(back);
+  EXPECT_EQ(back, with_mh);
+  EXPECT_EQ(pack_plane_tile(with_mh, nullptr, false), [&] {  // STPQ keeps the inner as it is
+    std::vector<uint8_t> q = pack_plane_tile(stpn, nullptr, false);
+    q.resize(q.size() - inner.size());
+    q.insert(q.end(), mh.begin(), mh.end());
+    store_le<uint32_t>(q.data() + kOffByteSize, uint32_t(q.size()));
+    return q;
+  }());
+  auto refused_mh = [&](size_t at, uint8_t value, const char* why) {
+    std::vector<uint8_t> b = packed_mh;
+    b[at] = value;
+    try {
+      unpack_plane_tile(b);
+      ADD_FAILURE() << "byte " << at << " = " << int(value) << " unpacked";
+    } catch (const FormatError& e) {
+      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+    }
+  };
+  const size_t inner_at = want_mh.size() - mh.size();
+  refused_mh(kOffFlags, 3, "inner kind");
+  refused_mh(inner_at + 6, 5, "a left-out byte not zero");  // levels given anyway
+  std::vector<uint8_t> kept = with_mh;  // the whole MH header kept: not the canonical form
+  std::copy(packed_mh.begin(), packed_mh.begin() + long(inner_at), kept.begin());
+  kept[kOffFlags] = 0;
+  EXPECT_THROW(unpack_plane_tile(kept), FormatError);
 }
 
 // A hierarchy of one tile of `scene` (bottom-up MH construction of a fresh trace).
@@ -325,6 +451,7 @@ TEST_P(PlanePacks, EveryTexelIsWithinTheFreshTraceAndPlaneTilesAreUsed) {
   auto reader = PackReader::open(path);
   EXPECT_TRUE(reader->header().flags & kFeaturePlaneTiles) << "some tile stores planes";
   EXPECT_TRUE(reader->header().flags & kFeaturePackedPlaneTiles) << "plane tiles are stored packed";
+  EXPECT_TRUE(reader->header().flags & kFeaturePredictedPlaneLabels) << "their labels predicted (STPL)";
   // Stored packed (STPQ), read back as STPN: never more stored bytes than STPN's.
   uint64_t plane_tiles = 0, packed_tiles = 0, stored = 0, stpn_stored = 0;
   for (const TileIndexEntry& t : reader->tiles()) {
@@ -343,25 +470,29 @@ TEST_P(PlanePacks, EveryTexelIsWithinTheFreshTraceAndPlaneTilesAreUsed) {
   const IntervalTile truth = RasterBounds(scene, light).trace(TraceRegion{L, 0, 0, 1u << L, 1u << L});
   PackEvaluator eval(std::move(reader));
   EXPECT_EQ(fields::first_violation(truth, [&](uint32_t i, uint32_t j) { return eval.depth(L, i, j); }), "");
-  // Without the feature bit (header CRC fixed) a packed tile is refused by name.
+  // Without the feature bits (header CRC fixed) a packed tile is refused by name.
   std::vector<uint8_t> file;
   {
     std::ifstream f(path, std::ios::binary);
     file.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
   }
-  PackHeader h = PackHeader::parse(std::span<const uint8_t>(file.data(), kPackHeaderBytes), path);
-  h.flags &= ~uint32_t(kFeaturePackedPlaneTiles);
-  const auto head = h.serialize();
-  std::memcpy(file.data(), head.data(), head.size());
-  {
-    std::ofstream f(path, std::ios::binary | std::ios::trunc);
-    f.write(reinterpret_cast<const char*>(file.data()), std::streamsize(file.size()));
-  }
-  try {
-    PackReader::open(path)->verify();
-    ADD_FAILURE() << "a packed plane tile read without feature packed_plane_tiles";
-  } catch (const FormatError& e) {
-    EXPECT_NE(std::string(e.what()).find("packed_plane_tiles"), std::string::npos) << e.what();
+  for (const auto& [bits, name] : {std::pair{uint32_t(kFeaturePredictedPlaneLabels), "without feature predicted_plane_labels"},
+                                   std::pair{uint32_t(kFeaturePredictedPlaneLabels | kFeaturePackedPlaneTiles),
+                                             "without feature packed_plane_tiles"}}) {
+    PackHeader h = PackHeader::parse(std::span<const uint8_t>(file.data(), kPackHeaderBytes), path);
+    h.flags &= ~bits;
+    const auto head = h.serialize();
+    std::memcpy(file.data(), head.data(), head.size());
+    {
+      std::ofstream f(path, std::ios::binary | std::ios::trunc);
+      f.write(reinterpret_cast<const char*>(file.data()), std::streamsize(file.size()));
+    }
+    try {
+      PackReader::open(path)->verify();
+      ADD_FAILURE() << "a packed plane tile read " << name;
+    } catch (const FormatError& e) {
+      EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
+    }
   }
   fs::remove(path);
 }

@@ -57,6 +57,7 @@ CutParams checked_cut_params(const MapBuildOptions& o) {
   if (o.planes && o.encoding != Encoding::vsdag) {
     PlaneFitOptions fit = o.plane_fit;
     fit.packed = o.pack_plane_tiles;  // weigh plane tiles as the pack will store them
+    fit.predicted = o.predict_plane_labels;
     cut.codec = TileCodec::with_planes(cut.codec, cut.tile_bytes, fit);
   }
   cut.validate();
@@ -106,6 +107,7 @@ PackParams pack_params(const Scene& scene, const LightSpace& light, const MapBui
   pp.compression_level = o.compression_level;
   pp.dagmh_dictionary = o.dagmh_dictionary && o.encoding == Encoding::dagmh;
   pp.pack_plane_tiles = o.pack_plane_tiles;
+  pp.predict_plane_labels = o.predict_plane_labels;
   pp.build_params = {{"builder", to_string(builder)},
                      {"construction", o.construction == MhConstruction::bottom_up ? "bottom-up" : "top-down"},
                      {"light", o.light_spec.empty() ? light.spec().to_string() : o.light_spec},

@@ -113,6 +113,8 @@ struct MapBuildOptions {
   PlaneFitOptions plane_fit;  // which blocks are tried (plane_fit.hpp)
   // Plane tiles stored packed (PackParams::pack_plane_tiles, feature packed_plane_tiles).
   bool pack_plane_tiles = true;
+  // Their labels predicted from their planes (PackParams::predict_plane_labels).
+  bool predict_plane_labels = true;
   // With dagmh_mixed_tiles: encode every tile both ways (TileCodec::dagmh_or_mmh(true)),
   // instead of only where the share of zero-width intervals leaves the winner unsure.
   bool dagmh_mixed_exhaustive = false;

@@ -120,7 +120,11 @@ enum PackFeature : uint32_t {
   // "Packed form"): the same size as their STPN bytes; readers unpack them as they load.
   // Only with plane_tiles. Readers before it refuse the pack by this bit.
   kFeaturePackedPlaneTiles = 1u << 13,
-  kKnownFeatures = 0x3FFF,
+  // Some packed plane tiles predict their labels from their planes (magic "STPL",
+  // plane_pack.hpp, tiles/core/PLANES.md "Predicted labels"). Only with packed_plane_tiles.
+  // Readers before it refuse the pack by this bit.
+  kFeaturePredictedPlaneLabels = 1u << 14,
+  kKnownFeatures = 0x7FFF,
 };
 
 // Header layout (offset: size field):

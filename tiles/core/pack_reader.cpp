@@ -286,7 +286,9 @@ namespace {
 void pack_reader_ungroup(const PackHeader& h, bool stack, std::span<uint8_t> raw, const std::string& what) {
   if (!stack && is_packed_plane_tile(raw)) {
     if (!(h.flags & kFeaturePackedPlaneTiles))
-      throw FormatError(what + ": a packed plane tile (\"STPQ\") in a pack without feature packed_plane_tiles");
+      throw FormatError(what + ": a packed plane tile (\"STPQ\" or \"STPL\") in a pack without feature packed_plane_tiles");
+    if (!(h.flags & kFeaturePredictedPlaneLabels) && (packed_plane_tile_features(raw) & kFeaturePredictedPlaneLabels))
+      throw FormatError(what + ": a plane tile with predicted labels (\"STPL\") in a pack without feature predicted_plane_labels");
     try {
       unpack_plane_tile(raw);
     } catch (const FormatError& e) {
@@ -528,7 +530,8 @@ std::string PackReader::summary() const {
                                                     {kFeatureStackSliceTiles, "stack_slice_tiles"},
                                                     {kFeaturePlaneTiles, "plane_tiles"},
                                                     {kFeatureStackGroupedTiles, "stack_grouped_tiles"},
-                                                    {kFeaturePackedPlaneTiles, "packed_plane_tiles"}};
+                                                    {kFeaturePackedPlaneTiles, "packed_plane_tiles"},
+                                                    {kFeaturePredictedPlaneLabels, "predicted_plane_labels"}};
   for (auto [bit, n] : names)
     if (header_.flags & bit) features += std::string(features.empty() ? "" : ",") + n;
   char buf[320];

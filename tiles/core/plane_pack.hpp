@@ -33,6 +33,22 @@
 //   then          zeros    up to where the STPN tile's inner buffer starts
 //   24+24T+8B+24L the inner buffer, unchanged
 //
+// Predicted labels (magic "STPL", pack feature bit 14 predicted_plane_labels; otherwise
+// the STPQ layout): a labelled block using two or more entries has in its use byte bits
+// 4..5 a prediction mode (0 none, 1 each texel takes the used entry whose plane is least
+// there, a crease's near surface, 2 the greatest; ties to the lower entry; plane values
+// a + b x + c y summed modulo 2^64 at the texel's tile coordinates) and bit 6 "all
+// predicted" (then no label bytes); its labels are stored against the prediction: with two
+// entries a bit a texel set where the label is the higher entry and the prediction is not
+// or the other way round, with more the 2-bit XOR of label and prediction. The mode is the
+// one that leaves the fewest texels unpredicted, ties to the lower mode (mode 0 counts the
+// texels whose plain code is not zero).
+// STPL also leaves out the inner buffer's header fields the tile implies: header byte 7
+// (the STPN flags, 0) is the inner kind, 1 MH or 2 MMH when its version is kVersion, its
+// levels the tile's and its byte_size the rest of the buffer (else 0: nothing left out),
+// and then the inner header's bytes 0..6 (magic, version, levels) and 12..15 (byte_size)
+// are zeros in place.
+//
 // The form is canonical: one STPN tile packs to one STPQ buffer and unpacking refuses any
 // other (stray bits, a split with no block below it, a class map out of first-seen order,
 // a plane named twice in a palette, a use mask that is not what the labels use, nonzero
@@ -44,19 +60,24 @@
 
 namespace st {
 
-// Whether `bytes` start with the packed plane tile magic "STPQ".
+// Whether `bytes` start with a packed plane tile magic ("STPQ" or "STPL").
 bool is_packed_plane_tile(std::span<const uint8_t> bytes);
+
+// The pack features (pack_format.hpp) a pack holding packed tile `bytes` must declare:
+// packed_plane_tiles, and predicted_plane_labels for "STPL"; 0 for anything else.
+uint32_t packed_plane_tile_features(std::span<const uint8_t> bytes);
 
 // The byte counts of a packed tile's parts after the table (for bench_pack_bytes).
 struct PlanePackParts {
   size_t kinds = 0, indices = 0, palettes = 0, planes = 0, labels = 0;
 };
 
-// The STPQ form of the valid STPN tile `stpn` (the same size), or empty when the tile is
-// not a valid plane tile. Throws nothing on any input. `parts`, if given, gets the sizes.
-std::vector<uint8_t> pack_plane_tile(std::span<const uint8_t> stpn, PlanePackParts* parts = nullptr);
+// The packed form of the valid STPN tile `stpn` (the same size): "STPL" with labels
+// predicted, else "STPQ"; empty when the tile is not a valid plane tile. Throws nothing on
+// any input. `parts`, if given, gets the sizes.
+std::vector<uint8_t> pack_plane_tile(std::span<const uint8_t> stpn, PlanePackParts* parts = nullptr, bool predict_labels = true);
 
-// An STPQ buffer back to its STPN bytes, in place (safe for untrusted input: throws
+// An STPQ or STPL buffer back to its STPN bytes, in place (safe for untrusted input: throws
 // st::FormatError naming the field and leaves `bytes` unspecified; the STPN result is
 // then validated by whoever opens it, like any tile).
 void unpack_plane_tile(std::span<uint8_t> bytes);

@@ -411,7 +411,7 @@ uint32_t PackWriter::tile_kind_features() const {
     if (crc32_of(stored) != t.crc) throw Error(what + ": " + describe_tile(t.id) + " fails its CRC on the read back");
     std::vector<uint8_t> raw = zlib_decompress(stored, t.raw_size, what + ": " + describe_tile(t.id));
     if (is_packed_plane_tile(raw)) {
-      flags |= kFeaturePackedPlaneTiles;
+      flags |= packed_plane_tile_features(raw);
       unpack_plane_tile(raw);
     }
     std::span<const uint8_t> tile = raw;
@@ -472,7 +472,8 @@ std::vector<uint8_t> encode_cell_bytes(const CutCell& cell, const PackParams& pa
                   " bytes (tile_bytes " + std::to_string(params.tile_bytes) + ")");
     std::vector<uint8_t> stored = zlib_compress(t.raw, params.compression_level);
     if (params.pack_plane_tiles && t.kind == TileKind::encoded && is_plane_buffer(t.raw)) {
-      const std::vector<uint8_t> packed = pack_plane_tile(t.raw);  // the same size; empty if it does not round-trip
+      // The same size; empty if it does not round-trip.
+      const std::vector<uint8_t> packed = pack_plane_tile(t.raw, nullptr, params.predict_plane_labels);
       if (!packed.empty()) {
         std::vector<uint8_t> z = zlib_compress(packed, params.compression_level);
         if (z.size() < stored.size()) stored = std::move(z);

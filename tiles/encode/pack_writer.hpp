@@ -73,6 +73,9 @@ struct PackParams {
   // packed_plane_tiles) where that deflates smaller; readers unpack it as they load, so
   // answers and raw sizes are unchanged. Off writes STPN as before.
   bool pack_plane_tiles = true;
+  // Packed plane tiles store their labels against a prediction from their planes ("STPL",
+  // feature predicted_plane_labels); off packs them as "STPQ".
+  bool predict_plane_labels = true;
 
   static PackParams from(const LightSpace& light, const CutParams& cut);
 };

@@ -27,7 +27,7 @@ TileCodec TileCodec::with_planes(TileCodec base, uint32_t tile_bytes, const Plan
       if (best_fits && !fits) return;
       size_t z = fits ? zlib_compress(bytes, kEncodingChoiceZlibLevel).size() : bytes.size();
       if (fits && fit.packed && is_plane_buffer(bytes)) {  // as the pack will store it
-        const std::vector<uint8_t> packed = pack_plane_tile(bytes);
+        const std::vector<uint8_t> packed = pack_plane_tile(bytes, nullptr, fit.predicted);
         if (!packed.empty()) z = std::min(z, zlib_compress(packed, kEncodingChoiceZlibLevel).size());
       }
       if (!best || (fits && !best_fits) || z < best_z) best = std::move(bytes), best_z = z;

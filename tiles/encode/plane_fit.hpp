@@ -44,6 +44,8 @@ struct PlaneFitOptions {
   // TileCodec::with_planes weighs a plane tile by the zlib size of its packed form
   // (tiles/core/plane_pack.hpp), as a pack stores it (PackParams::pack_plane_tiles).
   bool packed = true;
+  // ... with its labels predicted ("STPL", PackParams::predict_plane_labels), else "STPQ".
+  bool predicted = true;
 };
 
 // An 8x8 block whose texels are answered by up to 4 planes (plane_format.hpp, labelled block).
