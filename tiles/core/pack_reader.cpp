@@ -280,29 +280,32 @@ std::vector<uint8_t> PackReader::read_stored(uint64_t id) const {
 
 namespace {
 
+// One stored form back to its plain bytes in place, by `unpack`: refused by name when the
+// pack's flags lack `feature`, the form's `bit_name`; the unpacker's error gains the tile's name.
+void pack_reader_unpack(const PackHeader& h, uint32_t feature, const char* form, const char* bit_name,
+                        std::span<uint8_t> raw, const std::string& what, void (*unpack)(std::span<uint8_t>)) {
+  if (!(h.flags & feature))
+    throw FormatError(what + ": " + form + " in a pack without feature " + bit_name);
+  try {
+    unpack(raw);
+  } catch (const FormatError& e) {
+    throw FormatError(what + ": " + e.what());
+  }
+}
+
 // A stack pack's grouped per-slice cell ("STSP", stack_slices.hpp) back to its STSL bytes,
-// and a packed plane tile ("STPQ", plane_pack.hpp) back to its STPN bytes, in place;
+// and a packed plane tile ("STPQ" or "STPL", plane_pack.hpp) back to its STPN bytes, in place;
 // anything else is left alone.
 void pack_reader_ungroup(const PackHeader& h, bool stack, std::span<uint8_t> raw, const std::string& what) {
   if (!stack && is_packed_plane_tile(raw)) {
-    if (!(h.flags & kFeaturePackedPlaneTiles))
-      throw FormatError(what + ": a packed plane tile (\"STPQ\" or \"STPL\") in a pack without feature packed_plane_tiles");
-    if (!(h.flags & kFeaturePredictedPlaneLabels) && (packed_plane_tile_features(raw) & kFeaturePredictedPlaneLabels))
+    if ((h.flags & kFeaturePackedPlaneTiles) && !(h.flags & kFeaturePredictedPlaneLabels) &&
+        (packed_plane_tile_features(raw) & kFeaturePredictedPlaneLabels))
       throw FormatError(what + ": a plane tile with predicted labels (\"STPL\") in a pack without feature predicted_plane_labels");
-    try {
-      unpack_plane_tile(raw);
-    } catch (const FormatError& e) {
-      throw FormatError(what + ": " + e.what());
-    }
-    return;
-  }
-  if (!stack || !is_grouped_slice_tiles(raw)) return;
-  if (!(h.flags & kFeatureStackGroupedTiles))
-    throw FormatError(what + ": a grouped per-slice cell (\"STSP\") in a pack without feature stack_grouped_tiles");
-  try {
-    ungroup_slice_tiles(raw);
-  } catch (const FormatError& e) {
-    throw FormatError(what + ": " + e.what());
+    pack_reader_unpack(h, kFeaturePackedPlaneTiles, "a packed plane tile (\"STPQ\" or \"STPL\")", "packed_plane_tiles",
+                       raw, what, unpack_plane_tile);
+  } else if (stack && is_grouped_slice_tiles(raw)) {
+    pack_reader_unpack(h, kFeatureStackGroupedTiles, "a grouped per-slice cell (\"STSP\")", "stack_grouped_tiles", raw,
+                       what, ungroup_slice_tiles);
   }
 }
 
