@@ -120,7 +120,12 @@ enum PackFeature : uint32_t {
   // "Packed form"): the same size as their STPN bytes; readers unpack them as they load.
   // Only with plane_tiles. Readers before it refuse the pack by this bit.
   kFeaturePackedPlaneTiles = 1u << 13,
-  kKnownFeatures = 0x3FFF,
+  // A stack pack some of whose cells are split below the skip level (stack grid version 2,
+  // stack_grid.hpp; tiles/core/MHOCT.md "Split cells"): a cell whose tile would overflow
+  // the tile bound is answered by its children, one octree level deeper, instead of the
+  // whole cut moving deeper. Only with stack. Readers before it refuse the pack by this bit.
+  kFeatureStackSplitCells = 1u << 15,
+  kKnownFeatures = 0x3FFF | kFeatureStackSplitCells,
 };
 
 // Header layout (offset: size field):

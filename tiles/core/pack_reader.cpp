@@ -528,6 +528,7 @@ std::string PackReader::summary() const {
                                                     {kFeatureStackSliceTiles, "stack_slice_tiles"},
                                                     {kFeaturePlaneTiles, "plane_tiles"},
                                                     {kFeatureStackGroupedTiles, "stack_grouped_tiles"},
+                                                    {kFeatureStackSplitCells, "stack_split_cells"},
                                                     {kFeaturePackedPlaneTiles, "packed_plane_tiles"}};
   for (auto [bit, n] : names)
     if (header_.flags & bit) features += std::string(features.empty() ? "" : ",") + n;
