@@ -53,7 +53,7 @@ void served_stack_answers_like_local(const std::string& light_set, const std::st
                                      bool split = false) {
   const uint32_t slices = 10;
   const IntervalStack s = sliding_stack(looptest::small_scale() ? 5 : 6, slices);
-  const uint32_t tile_bytes = per_slice ? 4096 : split ? 256 : 512;
+  const uint32_t tile_bytes = per_slice ? 4096 : split ? 96 : 512;
   StackCut cut = per_slice || split ? blocked_cut(s, name, tile_bytes, split)
                                     : cut_stack(build_octree(s), std::nullopt, tile_bytes);
   Aabb box;
@@ -70,7 +70,9 @@ void served_stack_answers_like_local(const std::string& light_set, const std::st
   ASSERT_GT(cut.tiles.size(), 4u);
 
   const auto reader = PackReader::open(path);
-  if (!split) EXPECT_EQ(bool(reader->header().flags & kFeatureStackSliceTiles), per_slice);
+  if (!split) {
+    EXPECT_EQ(bool(reader->header().flags & kFeatureStackSliceTiles), per_slice);
+  }
   EXPECT_EQ(bool(reader->header().flags & kFeatureStackSplitCells), split);
   const ResidentStack local(*reader);
   auto srv = looptest::start_server({path});
