@@ -25,6 +25,7 @@ std::string feature_names(uint32_t flags) {
   add(kFeatureMixedTiles, "mixed-tiles");
   add(kFeaturePlaneTiles, "plane-tiles");
   add(kFeaturePackedPlaneTiles, "packed-plane-tiles");
+  add(kFeatureStackSplitCells, "stack-split-cells");
   return s.empty() ? "none" : s;
 }
 
