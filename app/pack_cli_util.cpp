@@ -26,6 +26,7 @@ std::string feature_names(uint32_t flags) {
   add(kFeaturePlaneTiles, "plane-tiles");
   add(kFeaturePackedPlaneTiles, "packed-plane-tiles");
   add(kFeaturePredictedPlaneLabels, "predicted-plane-labels");
+  add(kFeatureStackSplitCells, "stack-split-cells");
   return s.empty() ? "none" : s;
 }
 

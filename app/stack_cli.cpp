@@ -22,6 +22,7 @@ void run_stack_build(const StackBuildArgs& a) {
   o.tile_bytes = a.tile_bytes;
   o.compression_level = a.compression;
   o.cells = parse_stack_cells(a.cells);
+  o.split_cells = a.split_cells;
   o.scene_spec = a.scene;
   o.light_spec = a.light;
   SceneOptions so;
@@ -38,6 +39,8 @@ void run_stack_build(const StackBuildArgs& a) {
               a.out.c_str(), r.slices, side, r.skip_level, (unsigned long long)r.cells, (unsigned long long)r.tiles,
               (unsigned long long)r.max_tile_bytes, double(r.pack_bytes) / (1 << 20),
               100.0 * double(r.pack_bytes) / (side * side * 4 * r.slices));
+  if (r.split_cells) std::printf("  %llu cells split below the skip level (tiles over %u B)\n",
+                                 (unsigned long long)r.split_cells, a.tile_bytes);
   if (r.slice_cells) std::printf("  %llu of the %llu tiles per slice (stored smaller than the octree)\n",
                                  (unsigned long long)r.slice_cells, (unsigned long long)r.tiles);
   std::printf("  trace %.1f s (%s), octree+encode %.1f s (%llu nodes, %llu blocks of level %u), top+patch %.1f s, "
@@ -137,7 +140,7 @@ void export_stack_slice(const std::string& pack, uint32_t slice, std::optional<u
 void inspect_stack(const PackReader& r, nlohmann::json& j, bool print) {
   const StackGrid& g = *r.stack();
   uint64_t tiles = 0;
-  for (const StackEntry& e : g.entries) tiles += e.kind;
+  for (const StackEntry& e : g.entries) tiles += e.kind == 1;
   j["stack"] = {{"slices", g.slices},       {"xy_level", g.geo.n},      {"w_level", g.geo.k},
                 {"octree_levels", g.geo.levels()}, {"skip_level", g.skip_level}, {"cells", g.entries.size()},
                 {"tile_cells", tiles},      {"light_set", g.spec}};

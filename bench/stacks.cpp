@@ -6,7 +6,7 @@
 //                [--reps 3] [--case city|city-hour|hairball|all] [--hair-jitter 0.5] [--json PATH]
 //                [--mode auto|whole|blocked] [--tracer auto|embree] [--spill-dir /tmp]
 //                [--frame ground|ortho|both] [--hair-frame window|translate|both] [--all-2d]
-//                [--oct-merge on|off] [--stack-cells octree|slices|smaller]
+//                [--oct-merge on|off] [--stack-cells octree|slices|smaller] [--split-cells]
 //
 // --all-2d (whole mode): every slice also encoded as MMH and DAG-MH, the smaller 2D
 // encodings, so the octree is set against the best of them too ("best 2D" line). Every
@@ -20,6 +20,8 @@
 //
 // --stack-cells (blocked mode): the cells' form (tiles/core/stack_slices.hpp): octree (the
 // default here, the earlier figures), slices, or smaller (what `build` writes by default).
+// --split-cells (blocked mode): a cell over 64 KiB is split below K (what `build` does by
+// default) rather than the whole cut moving deeper.
 //
 // --frame: the sun paths' frame (light_set.hpp "Frames"): ground (the default, the
 // oblique ground-aligned frame), ortho (an orthographic box per sample), or both (each
@@ -114,6 +116,7 @@ bool g_all_2d = false;  // --all-2d
 bool g_oct_merge = false;  // --oct-merge
 st::StackCells g_stack_cells = st::StackCells::octree;  // --stack-cells (blocked mode)
 std::string g_stack_cells_name = "octree";
+bool g_split_cells = false;  // --split-cells (blocked mode): cells over 64 KiB split below K
 
 double peak_rss_mib() {
   rusage ru{};
@@ -558,7 +561,8 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
   // The blocked octree and its cut.
   t0 = Clock::now();
   st::BlockedCutStats bst;
-  st::BlockedStackCut cut(spill, K, 64 * 1024, spill_path + ".tiles", &bst, g_stack_cells);
+  st::BlockedStackCut cut(spill, K, 64 * 1024, spill_path + ".tiles", &bst, g_stack_cells, g_split_cells);
+  if (cut.split_cells) std::printf("split cells: %llu below K = %u\n", (unsigned long long)cut.split_cells, K);
   if (cut.slice_cells) std::printf("per-slice cells: %llu of %zu tiles\n", (unsigned long long)cut.slice_cells, cut.tile_count());
   const double oct_s = since(t0);
   const double rss_build = peak_rss_mib();
@@ -796,6 +800,7 @@ int main(int argc, char** argv) {
       else if (a == "--spill-dir") spill_dir = next();
       else if (a == "--frame") frame = next();
       else if (a == "--all-2d") g_all_2d = true;
+      else if (a == "--split-cells") g_split_cells = true;
       else if (a == "--stack-cells") g_stack_cells = st::parse_stack_cells(g_stack_cells_name = next());
       else if (a == "--oct-merge") {
         const std::string v = next();

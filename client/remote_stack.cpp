@@ -53,8 +53,8 @@ std::unique_ptr<Evaluator> RemoteMap::open_stack_tile(const StackGrid& g, uint64
   uint64_t cell = 0;
   if (!g.cell_of(id, cell) || g.entries[cell].kind != 1) return nullptr;
   StackTile t = StackTile::open(raw);  // validates the whole buffer; throws FormatError
-  const uint32_t K = g.skip_level;
-  if (t.xy_level() != g.geo.n - g.geo.xy_bits(K) || t.w_level() != g.geo.k - g.geo.w_bits(K)) return nullptr;
+  const uint32_t l = g.entries[cell].level;  // K, or deeper for a split cell's child
+  if (t.xy_level() != g.geo.n - g.geo.xy_bits(l) || t.w_level() != g.geo.k - g.geo.w_bits(l)) return nullptr;
   return std::make_unique<StackTileEvaluator>(std::move(t));
 }
 
@@ -132,32 +132,20 @@ float RemoteMap::stack_depth(uint32_t slice, uint32_t level, uint64_t x, uint64_
   return stack_lookup([&](const StackMap& m) { return m.depth(x, y, slice, level); });
 }
 
-namespace {
-
-// The slices [first, last] cell `cell` of grid g covers.
-void cell_slices(const StackGrid& g, uint64_t cell, uint64_t& first, uint64_t& last) {
-  const uint32_t K = g.skip_level;
-  const uint64_t cw = cell >> (2 * g.geo.xy_bits(K));
-  const uint32_t sw = g.geo.k - g.geo.w_bits(K);
-  first = cw << sw;
-  last = ((cw + 1) << sw) - 1;
-}
-
-}  // namespace
-
 size_t RemoteMap::request_slices(uint32_t w0, uint32_t w1, uint16_t priority) noexcept {
   if (!stack_grid_) return 0;
   const StackGrid& g = *stack_grid_;
   size_t queued = 0;
   std::lock_guard lock(mu_);
   if (failed_ >= kMaxFailedTiles) return 0;  // asks for nothing more (give_up_locked): no walk of every cell
-  for (uint64_t cell = 0; cell < g.entries.size(); ++cell) {
-    if (g.entries[cell].kind != 1) continue;
-    uint64_t first, last;
-    cell_slices(g, cell, first, last);
-    if (last < w0 || first > w1) continue;
+  // Every tiled cell (split cells' children too) whose slices [w << s, ((w + 1) << s) - 1]
+  // meet [w0, w1].
+  g.visit([&](uint64_t cell, uint32_t l, uint64_t, uint64_t, uint64_t w) {
+    if (g.entries[cell].kind != 1) return;
+    const uint32_t s = g.geo.k - g.geo.w_bits(l);
+    if (((w + 1) << s) - 1 < w0 || (w << s) > w1) return;
     queued += want_locked(g.tile_id(cell), GridEntry{g.entries[cell].value, EntryKind::tile, 0}, priority);
-  }
+  });
   return queued;
 }
 
@@ -165,14 +153,14 @@ bool RemoteMap::slices_resident(uint32_t w0, uint32_t w1) const noexcept {
   if (!stack_grid_) return true;
   const StackGrid& g = *stack_grid_;
   std::shared_lock lock(mu_);
-  for (uint64_t cell = 0; cell < g.entries.size(); ++cell) {
-    if (g.entries[cell].kind != 1) continue;
-    uint64_t first, last;
-    cell_slices(g, cell, first, last);
-    if (last < w0 || first > w1) continue;
-    if (cache_.lookup(g.tile_id(cell)).state != PageState::resident) return false;
-  }
-  return true;
+  bool resident = true;
+  g.visit([&](uint64_t cell, uint32_t l, uint64_t, uint64_t, uint64_t w) {
+    if (!resident || g.entries[cell].kind != 1) return;
+    const uint32_t s = g.geo.k - g.geo.w_bits(l);
+    if (((w + 1) << s) - 1 < w0 || (w << s) > w1) return;
+    resident = cache_.lookup(g.tile_id(cell)).state == PageState::resident;
+  });
+  return resident;
 }
 
 }  // namespace st::client

@@ -29,14 +29,16 @@ IntervalStack sliding_stack(uint32_t level, uint32_t slices) {
   return s;
 }
 
-// The cut of `s` with every cell per slice (tiles/core/stack_slices.hpp), as a StackCut.
-StackCut per_slice_cut(const IntervalStack& s, const std::string& name, uint32_t tile_bytes) {
+// The out-of-core cut of `s` as a StackCut: every cell per slice (tiles/core/stack_slices.hpp),
+// or with `split` each cell's smaller form and the overflowing cells split below K.
+StackCut blocked_cut(const IntervalStack& s, const std::string& name, uint32_t tile_bytes, bool split) {
   const std::string base = std::string(SHADOWTILE_TEST_TMP) + "/" + name;
   StackSpill spill(base + ".spill", s.level, s.slices, 0);
   const size_t area = size_t(s.side() * s.side());
   for (uint32_t w = 0; w < s.slices; ++w)
     spill.write_rows(w, 0, s.side(), std::span<const Interval>(s.data.data() + w * area, area));
-  BlockedStackCut blocked(spill, std::nullopt, tile_bytes, base + ".tiles", nullptr, StackCells::slices);
+  BlockedStackCut blocked(spill, std::nullopt, tile_bytes, base + ".tiles", nullptr,
+                          split ? StackCells::smaller : StackCells::slices, split);
   StackCut cut;
   cut.grid = blocked.grid;
   for (size_t i = 0; i < blocked.tile_count(); ++i) cut.tiles.push_back(blocked.tile(i));
@@ -45,12 +47,15 @@ StackCut per_slice_cut(const IntervalStack& s, const std::string& name, uint32_t
 }
 
 // `light_set` gives the slices' transforms (the stack itself is synthetic); `name` the
-// pack's file and map name; `per_slice`: every cell as per-slice tiles instead of octrees.
-void served_stack_answers_like_local(const std::string& light_set, const std::string& name, bool per_slice = false) {
+// pack's file and map name; `per_slice`: every cell as per-slice tiles instead of octrees;
+// `split`: cells over a small tile bound split below K (feature stack_split_cells).
+void served_stack_answers_like_local(const std::string& light_set, const std::string& name, bool per_slice = false,
+                                     bool split = false) {
   const uint32_t slices = 10;
   const IntervalStack s = sliding_stack(looptest::small_scale() ? 5 : 6, slices);
-  const uint32_t tile_bytes = per_slice ? 4096 : 512;
-  StackCut cut = per_slice ? per_slice_cut(s, name, tile_bytes) : cut_stack(build_octree(s), std::nullopt, tile_bytes);
+  const uint32_t tile_bytes = per_slice ? 4096 : split ? 96 : 512;
+  StackCut cut = per_slice || split ? blocked_cut(s, name, tile_bytes, split)
+                                    : cut_stack(build_octree(s), std::nullopt, tile_bytes);
   Aabb box;
   box.extend({-10, 0, -10});
   box.extend({10, 5, 10});
@@ -60,12 +65,15 @@ void served_stack_answers_like_local(const std::string& light_set, const std::st
   cut.grid.spec = set.spec.to_string();
   const std::string path = std::string(SHADOWTILE_TEST_TMP) + "/" + name + ".pack";
   StackPackParams p;
-  p.tile_bytes = tile_bytes;
+  p.tile_bytes = std::max(tile_bytes, kMinTileBytes);
   write_stack_pack(path, cut, p);
   ASSERT_GT(cut.tiles.size(), 4u);
 
   const auto reader = PackReader::open(path);
-  EXPECT_EQ(bool(reader->header().flags & kFeatureStackSliceTiles), per_slice);
+  if (!split) {
+    EXPECT_EQ(bool(reader->header().flags & kFeatureStackSliceTiles), per_slice);
+  }
+  EXPECT_EQ(bool(reader->header().flags & kFeatureStackSplitCells), split);
   const ResidentStack local(*reader);
   auto srv = looptest::start_server({path});
   Client c({"127.0.0.1", srv.port}, looptest::quick_options());
@@ -139,6 +147,12 @@ TEST(StackLoopback, ServedWindowFrameAreaStackAnswersLikeTheLocalPack) {
 // Per-slice cells (every cell its slices' own DAG-MH / MMH tiles) stream and answer the same.
 TEST(StackLoopback, ServedPerSliceCellsAnswerLikeTheLocalPack) {
   served_stack_answers_like_local("sun-path:azimuth=150..200,elevation=40..60", "stackslices", true);
+}
+
+// Split cells (cells over the tile bound answered by their children, stack grid version 2)
+// stream, prefetch by slices and answer the same.
+TEST(StackLoopback, ServedSplitCellsAnswerLikeTheLocalPack) {
+  served_stack_answers_like_local("sun-path:azimuth=150..200,elevation=40..60", "stacksplit", false, true);
 }
 
 }  // namespace

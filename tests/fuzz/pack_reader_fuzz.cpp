@@ -7,7 +7,8 @@
 // then a PackEvaluator answers lookups at every level and PCF (evaluator_probe.hpp).
 // A stack pack (tiles/PACK.md "Stack packs"; seeds in both layouts: journal records, plain
 // index and raw grid, or payloads only, compact index and compressed grid) is verified
-// instead, and one verify() accepts answers lookups of every slice (StackMap).
+// instead, and one verify() accepts answers lookups of every slice (StackMap); one more seed
+// splits cells below the skip level (feature stack_split_cells).
 // Every rejection must be an st::FormatError (the reader's documented error for corrupt
 // data); anything else escaping, a crash or a sanitizer report is a finding.
 #include <unistd.h>
@@ -33,6 +34,7 @@
 #include "tiles/core/light_set.hpp"
 #include "tiles/core/stack_map.hpp"
 #include "tiles/encode/mh_octree_build.hpp"
+#include "tiles/encode/stack_blocked.hpp"
 #include "tiles/encode/stack_pack.hpp"
 
 std::vector<st::fuzz::Bytes> st::fuzz::seeds() {
@@ -61,6 +63,24 @@ std::vector<st::fuzz::Bytes> st::fuzz::seeds() {
     std::ifstream f(path, std::ios::binary);
     out.emplace_back(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
     std::filesystem::remove(path);
+  }
+  {
+    // The same stack with split cells (feature stack_split_cells, grid version 2): a tile
+    // bound that level 1's cells overflow, split down two levels.
+    const std::string base =
+        (std::filesystem::temp_directory_path() / ("shadowtile_split_seed_" + std::to_string(::getpid()))).string();
+    st::StackSpill spill(base + ".spill", s.level, s.slices, 0);
+    for (uint32_t w = 0; w < s.slices; ++w)
+      spill.write_rows(w, 0, 16, std::span<const st::Interval>(s.data.data() + w * 256, 256));
+    st::BlockedStackCut split(spill, 1u, 100, base + ".tiles", nullptr, st::StackCells::octree, true);
+    split.grid.light_kind = cut.grid.light_kind;
+    split.grid.lights = cut.grid.lights;
+    split.grid.spec = cut.grid.spec;
+    st::write_stack_pack(base + ".pack", split.grid, split.tile_count(), [&](size_t i) { return split.tile(i); },
+                         st::StackPackParams{});
+    std::ifstream f(base + ".pack", std::ios::binary);
+    out.emplace_back(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+    std::filesystem::remove(base + ".pack");
   }
   for (Bytes& b : out) b.insert(b.begin(), std::uint8_t(1));
   return out;
@@ -217,7 +237,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   }
   FUZZ_CHECK(reader->map_level() <= st::kMaxLevel);
   if (const st::StackGrid* g = reader->stack()) {
-    FUZZ_CHECK(g->entries.size() == g->cells(g->skip_level));
+    FUZZ_CHECK(g->entries.size() >= g->cells(g->skip_level));
+    FUZZ_CHECK(g->split() == bool(reader->header().flags & st::kFeatureStackSplitCells));
     size_t n = 0;
     for (const st::TileIndexEntry& t : reader->tiles()) {
       if (n++ == kMaxTilesProbed) break;

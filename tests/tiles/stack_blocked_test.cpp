@@ -17,6 +17,8 @@
 #include "tiles/bake/stack_build.hpp"
 #include "tiles/encode/stack_blocked.hpp"
 #include "tiles/encode/stack_pack.hpp"
+#include "tiles/core/pack_reader.hpp"
+#include "tiles/core/stack_map.hpp"
 
 namespace st {
 namespace {
@@ -149,6 +151,201 @@ TEST(StackBlocked, SunSlicesByTheRasterizerAreTheCanonicalBounds) {
         const Interval a = spill.texel(x, y, w), b = raster.at(x, y, w);
         ASSERT_TRUE(a.lo == b.lo && a.hi == b.hi) << x << ", " << y << ", " << w;
       }
+}
+
+}  // namespace
+}  // namespace st
+
+namespace st {
+namespace {
+
+// Every level of every slice through `m` equals the uncut octree's depth_at.
+void expect_split_same_as_octree(const OctHierarchy& h, const StackMap& m) {
+  const moct::Geometry& g = h.geo;
+  for (uint32_t level = 0; level <= g.n; ++level) {
+    const uint32_t T = g.level_of_xy(level);
+    for (uint32_t w = 0; w < h.slices; ++w)
+      for (uint64_t y = 0; y < (uint64_t(1) << level); ++y)
+        for (uint64_t x = 0; x < (uint64_t(1) << level); ++x)
+          ASSERT_EQ(m.depth(x, y, w, level), h.depth_at(T, x, y, w >> (g.k - g.w_bits(T))))
+              << "level " << level << " texel (" << x << ", " << y << ") slice " << w;
+  }
+}
+
+// Split cells (stack_grid.hpp, MHOCT.md "Split cells"): with a tile bound the default cut
+// overflows, the blocked cut keeps K and splits only the overflowing cells (several levels
+// down where needed), every tile within the bound; the pack carries feature
+// stack_split_cells and grid version 2, opens, verifies, answers every texel within its
+// interval and (octree cells) every level of every slice like the uncut octree, and its
+// gathered soft lookups (their own cell walk) equal the per-sample lit(), for block levels 0
+// and K and two cell forms; the grid round-trips.
+TEST(StackBlocked, SplitCellsKeepTheSkipLevelAndAnswerLikeTheOctree) {
+  const IntervalStack s = stacks::random_stack(5, 6, 5);
+  const OctHierarchy h = build_octree(s);
+  const uint32_t K = default_stack_skip_level(h.geo);
+  for (const StackCells cells : {StackCells::octree, StackCells::smaller}) {
+    for (const uint32_t B : {0u, K}) {
+      SCOPED_TRACE("cells " + std::to_string(int(cells)) + ", block level " + std::to_string(B));
+      auto spill = spill_of(s, B, "split.spill");
+      BlockedStackCut cut(*spill, std::nullopt, 200, tmp("split.tiles"), nullptr, cells, true);
+      EXPECT_EQ(cut.grid.skip_level, K);
+      EXPECT_TRUE(cut.grid.split());
+      EXPECT_GT(cut.split_cells, 0u);
+      EXPECT_LE(cut.max_tile_bytes, 200u);
+      uint32_t deepest = 0;
+      for (const StackEntry& e : cut.grid.entries) deepest = std::max<uint32_t>(deepest, e.level);
+      EXPECT_GT(deepest, K);
+      for (size_t i = 0; i < cut.tile_count(); ++i) EXPECT_LE(cut.tile(i).second.size(), 200u);
+      fill_lights(cut.grid, s.slices);
+      const StackGrid back = StackGrid::parse(cut.grid.serialize(), "split");
+      ASSERT_EQ(back.entries.size(), cut.grid.entries.size());
+      for (size_t i = 0; i < back.entries.size(); ++i)
+        ASSERT_TRUE(back.entries[i] == cut.grid.entries[i] && back.entries[i].level == cut.grid.entries[i].level &&
+                    back.entries[i].first == cut.grid.entries[i].first)
+            << "entry " << i;
+      StackPackParams p;
+      p.tile_bytes = 200;
+      write_stack_pack(tmp("split.pack"), cut.grid, cut.tile_count(), [&](size_t i) { return cut.tile(i); }, p);
+      const auto r = PackReader::open(tmp("split.pack"));
+      EXPECT_TRUE(r->header().flags & kFeatureStackSplitCells);
+      r->verify();
+      const ResidentStack rs(*r);
+      if (cells == StackCells::octree) expect_split_same_as_octree(h, rs.map());
+      // Per-slice cells answer their own 2D tiles' values: within every texel's interval.
+      EXPECT_EQ(stacks::first_violation(s, [&](uint64_t x, uint64_t y, uint32_t w) { return rs.map().depth(x, y, w, s.level); }),
+                "");
+      // The soft lookups (lit_samples' own cell walk) equal the per-sample lit().
+      uint64_t state = 7;
+      auto next = [&] { return double((state = state * 6364136223846793005ull + 1442695040888963407ull) >> 11) / 9007199254740992.0; };
+      for (int i = 0; i < 300; ++i) {
+        const Vec3d p3{-10 + 20 * next(), 5 * next(), -10 + 20 * next()};
+        uint32_t lit = 0;
+        for (uint32_t w = 0; w < s.slices; ++w) lit += rs.map().lit(p3, w);
+        ASSERT_EQ(rs.map().soft_visibility(p3), float(lit) / float(s.slices)) << i;
+      }
+    }
+  }
+  // Without splitting, the same bound moves the whole cut deeper (the earlier packs).
+  auto spill = spill_of(s, 0, "split.spill");
+  BlockedStackCut uniform(*spill, std::nullopt, 200, tmp("split.tiles"), nullptr, StackCells::octree, false);
+  EXPECT_GT(uniform.grid.skip_level, K);
+  EXPECT_FALSE(uniform.grid.split());
+}
+
+// The version-2 layout, pinned: two 2x2 slices (n = k = 1), K = 0, the one cell split into
+// its 8 children (level 1: x, y and w halve). Entries from byte 312 (24 + 2 x 144, no
+// spec, no coarse level): the split root, then its children in (w, y, x) order; X = 8 at
+// byte 20; ids at level ceil(bits(8) / 2) = 2.
+TEST(StackBlocked, SplitGridLayoutIsPinned) {
+  StackGrid g;
+  g.geo = moct::Geometry{1, 1};
+  g.slices = 2;
+  g.skip_level = 0;
+  fill_lights(g, 2);
+  g.spec.clear();
+  g.entries.assign(9, StackEntry{0.5f, 0});
+  g.entries[0].kind = kStackSplit;
+  for (uint32_t i = 1; i < 9; ++i) g.entries[i].value = 0.1f * float(i);
+  g.link();
+  EXPECT_EQ(g.entries[0].first, 1u);
+  EXPECT_EQ(g.entries[8].level, 1u);
+  const std::vector<uint8_t> b = g.serialize();
+  ASSERT_EQ(b.size(), 384u);
+  EXPECT_EQ(b[4], 2u);   // version 2
+  EXPECT_EQ(b[20], 8u);  // X
+  EXPECT_EQ(b[312 + 4], kStackSplit);
+  float v;
+  std::memcpy(&v, b.data() + 320 + 8 * 6, 4);  // child (x 0, y 1, w 1): offset (1 * 2 + 1) * 2 + 0
+  EXPECT_EQ(v, 0.1f * 7.0f);
+  const StackGrid back = StackGrid::parse(b, "pinned");
+  uint32_t level = 0;
+  EXPECT_EQ(back.cell_at(1, 1, 0, 1, 1, level), 7u);
+  EXPECT_EQ(level, 1u);
+  EXPECT_EQ(back.cell_at(0, 1, 0, 1, 1, level), 0u);  // level 0 stops at the split root
+  EXPECT_EQ(back.tile_id(7), (uint64_t(2) << 58) | 7);
+  uint64_t cell = 0;
+  EXPECT_TRUE(back.cell_of(back.tile_id(8), cell));
+  EXPECT_EQ(cell, 8u);
+  EXPECT_FALSE(back.cell_of(back.tile_id(8) + 1, cell));
+  size_t visited = 0;
+  back.visit([&](uint64_t, uint32_t, uint64_t, uint64_t, uint64_t) { ++visited; });
+  EXPECT_EQ(visited, 9u);
+}
+
+// A split grid's hostile forms are refused in one line each; a pack whose grid splits
+// cells without the feature bit (or the bit without a split grid) does not open.
+TEST(StackBlocked, HostileSplitGridsAreRefused) {
+  const IntervalStack s = stacks::random_stack(4, 3, 11);
+  auto spill = spill_of(s, 0, "hsplit.spill");
+  BlockedStackCut cut(*spill, 1u, 120, tmp("hsplit.tiles"), nullptr, StackCells::octree, true);
+  ASSERT_TRUE(cut.grid.split());
+  fill_lights(cut.grid, s.slices);
+  const std::vector<uint8_t> grid = cut.grid.serialize();
+  auto refused = [&](std::vector<uint8_t> bad, const std::string& what, const std::string& says) {
+    try {
+      StackGrid::parse(bad, "t");
+      ADD_FAILURE() << what << ": parsed";
+    } catch (const FormatError& e) {
+      EXPECT_NE(std::string(e.what()).find(says), std::string::npos) << what << ": " << e.what();
+    }
+  };
+  const size_t entries = grid.size() - 8 * cut.grid.entries.size();
+  uint64_t split = 0;
+  while (cut.grid.entries[split].kind != kStackSplit) ++split;
+  {
+    std::vector<uint8_t> bad = grid;
+    bad[20] = bad[21] = bad[22] = bad[23] = 0;  // version 2, no split entries
+    refused(bad, "no extra", "version 2 without split entries");
+  }
+  {
+    std::vector<uint8_t> bad = grid;
+    bad[4] = 1;  // version 1 with a split count
+    refused(bad, "version 1", "nonzero reserved field");
+  }
+  {
+    std::vector<uint8_t> bad = grid;
+    bad[entries + 8 * split + 4] = 0;  // a split cell made constant: its children dangle
+    refused(bad, "dangling children", "split");
+  }
+  {
+    std::vector<uint8_t> bad = grid;
+    uint64_t j = cut.grid.entries.size() - 1;  // the last entry not split, split: more children than entries
+    while (cut.grid.entries[j].kind == kStackSplit) --j;
+    bad[entries + 8 * j + 4] = kStackSplit;
+    refused(bad, "one split more", "split");
+  }
+  {
+    std::vector<uint8_t> bad = grid;
+    bad[entries + 8 * split + 4] = 3;
+    refused(bad, "kind 3", "bad entry kind");
+  }
+  {
+    // A split at the finest level (a leaf's children): a grid of one cell at level L.
+    StackGrid g = cut.grid;
+    g.skip_level = g.geo.depth();
+    g.coarse.assign(g.geo.depth(), {});
+    for (uint32_t l = 0; l < g.geo.depth(); ++l) g.coarse[l].assign(g.cells(l), 0.5f);
+    g.entries.assign(g.cells(g.skip_level) + 1, StackEntry{0.5f, 0});
+    g.entries[0].kind = kStackSplit;
+    refused(g.serialize(), "finest", "split cell at the finest level");
+  }
+  // The bit and the grid must agree.
+  StackPackParams p;
+  p.tile_bytes = 120;
+  p.compress_grid = false;
+  write_stack_pack(tmp("hsplit.pack"), cut.grid, cut.tile_count(), [&](size_t i) { return cut.tile(i); }, p);
+  std::vector<uint8_t> file = file_bytes(tmp("hsplit.pack"));
+  PackHeader head = PackHeader::parse(std::span<const uint8_t>(file.data(), kPackHeaderBytes), "t");
+  ASSERT_TRUE(head.flags & kFeatureStackSplitCells);
+  head.flags &= ~uint32_t(kFeatureStackSplitCells);
+  const auto hb = head.serialize();
+  std::memcpy(file.data(), hb.data(), hb.size());
+  try {
+    PackReader::open_memory(file, "nobit");
+    ADD_FAILURE() << "a split grid without the bit opened";
+  } catch (const FormatError& e) {
+    EXPECT_NE(std::string(e.what()).find("without feature stack_split_cells"), std::string::npos) << e.what();
+  }
 }
 
 }  // namespace

@@ -40,11 +40,15 @@ struct StackBuildOptions {
   uint64_t block_texels = kStackBlockTexels;
   std::string spill_dir;  // default: the output's directory
   StackCells cells = StackCells::smaller;  // each cell's form (stack_slices_encode.hpp)
+  // A cell over tile_bytes split below K rather than the whole cut moved deeper
+  // (BlockedStackCut, stack_grid.hpp "Split cells").
+  bool split_cells = true;
 };
 
 struct StackBuildReport {
   uint32_t slices = 0, map_level = 0, skip_level = 0, block_level = 0;
   uint64_t slice_cells = 0;  // tiles in the per-slice form
+  uint64_t split_cells = 0;  // cells split below the skip level
   uint64_t cells = 0, tiles = 0, max_tile_bytes = 0, octree_nodes = 0, pack_bytes = 0, spill_bytes = 0, blocks = 0;
   double trace_seconds = 0, octree_seconds = 0, cut_seconds = 0, write_seconds = 0;
   bool exit_depths = false;

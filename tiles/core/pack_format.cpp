@@ -133,6 +133,7 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
     fail(25, "light kind " + std::to_string(b[25]) + " (" + light_kind_name(h.light_kind) +
                  ", a light set's sample frame) on a pack without the stack feature");
   if ((h.flags & uint32_t(kFeatureStackSliceTiles)) && !stack) fail(20, "feature stack_slice_tiles without stack");
+  if ((h.flags & uint32_t(kFeatureStackSplitCells)) && !stack) fail(20, "feature stack_split_cells without stack");
   if ((h.flags & uint32_t(kFeatureStackGroupedTiles)) && !(h.flags & uint32_t(kFeatureStackSliceTiles)))
     fail(20, "feature stack_grouped_tiles without stack_slice_tiles");
   if ((h.flags & uint32_t(kFeaturePackedPlaneTiles)) && !(h.flags & uint32_t(kFeaturePlaneTiles)))

@@ -124,7 +124,12 @@ enum PackFeature : uint32_t {
   // plane_pack.hpp, tiles/core/PLANES.md "Predicted labels"). Only with packed_plane_tiles.
   // Readers before it refuse the pack by this bit.
   kFeaturePredictedPlaneLabels = 1u << 14,
-  kKnownFeatures = 0x7FFF,
+  // A stack pack some of whose cells are split below the skip level (stack grid version 2,
+  // stack_grid.hpp; tiles/core/MHOCT.md "Split cells"): a cell whose tile would overflow
+  // the tile bound is answered by its children, one octree level deeper, instead of the
+  // whole cut moving deeper. Only with stack. Readers before it refuse the pack by this bit.
+  kFeatureStackSplitCells = 1u << 15,
+  kKnownFeatures = 0xFFFF,
 };
 
 // Header layout (offset: size field):

@@ -534,7 +534,8 @@ std::string PackReader::summary() const {
                                                     {kFeaturePlaneTiles, "plane_tiles"},
                                                     {kFeatureStackGroupedTiles, "stack_grouped_tiles"},
                                                     {kFeaturePackedPlaneTiles, "packed_plane_tiles"},
-                                                    {kFeaturePredictedPlaneLabels, "predicted_plane_labels"}};
+                                                    {kFeaturePredictedPlaneLabels, "predicted_plane_labels"},
+                                                    {kFeatureStackSplitCells, "stack_split_cells"}};
   for (auto [bit, n] : names)
     if (header_.flags & bit) features += std::string(features.empty() ? "" : ",") + n;
   char buf[320];

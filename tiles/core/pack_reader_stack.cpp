@@ -19,6 +19,9 @@ void PackReader::load_stack() {
   const StackGrid& g = *stack_;
   if (g.skip_level != header_.skip_level || g.geo.n != header_.map_level || g.light_kind != header_.light_kind)
     throw FormatError(where(header_.grid_offset) + ": stack grid disagrees with the header (skip level, map level or light kind)");
+  if (g.split() != bool(header_.flags & kFeatureStackSplitCells))
+    throw FormatError(where(header_.grid_offset) + (g.split() ? ": stack grid splits cells (version 2) in a pack without feature stack_split_cells"
+                                                              : ": feature stack_split_cells on a stack grid that splits no cell"));
   if (g.lights[0] != header_.light)
     throw FormatError(where(40) + ": header light differs from the stack's slice 0");
   if (header_.encoding != Encoding::mh || (header_.flags & kFeatureIndexTiles))
@@ -29,10 +32,10 @@ void PackReader::check_stack_index() const {
   const StackGrid& g = *stack_;
   uint64_t named = 0;
   for (uint64_t i = 0; i < g.entries.size(); ++i) {
-    if (g.entries[i].kind == 0) continue;
+    if (g.entries[i].kind != 1) continue;  // constant, or split (its children are entries)
     ++named;
     const auto t = find(g.tile_id(i));
-    if (!t || t->kind != TileKind::encoded || g.skip_level == g.geo.depth())
+    if (!t || t->kind != TileKind::encoded || g.entries[i].level == g.geo.depth())
       throw FormatError(name_ + ": stack cell " + std::to_string(i) + " names " + describe_tile(g.tile_id(i)) +
                         ", which the tile index lacks (or the cell is at the finest level)");
   }
@@ -45,12 +48,12 @@ void PackReader::verify_stack() const {
   // The index was matched with the journal and every tile named exactly once (open);
   // here every tile inflates and opens as an MH octree of its cell's geometry.
   const StackGrid& g = *stack_;
-  const uint32_t K = g.skip_level;
-  const uint32_t n = g.geo.n - g.geo.xy_bits(K), k = g.geo.k - g.geo.w_bits(K);
   for (const TileIndexEntry& e : index_) {
     const std::string what = name_ + ": " + describe_tile(e.id) + " at byte " + std::to_string(e.offset);
     uint64_t cell = 0;
     if (!g.cell_of(e.id, cell) || g.entries[cell].kind != 1) throw FormatError(what + ": no stack cell names it");
+    const uint32_t l = g.entries[cell].level;  // K, or deeper for a split cell's child
+    const uint32_t n = g.geo.n - g.geo.xy_bits(l), k = g.geo.k - g.geo.w_bits(l);
     const std::vector<uint8_t> raw = read_raw(e.id);
     if (is_slice_tiles(raw)) {
       // A per-slice cell (stack_slices.hpp): only in a pack that says so.
@@ -90,13 +93,14 @@ void PackReader::check_stack_range() const {
 
 std::string PackReader::stack_summary() const {
   const StackGrid& g = *stack_;
-  uint64_t tiles = 0;
-  for (const StackEntry& e : g.entries) tiles += e.kind;
-  char buf[200];
+  uint64_t tiles = 0, split = 0;
+  for (const StackEntry& e : g.entries) tiles += e.kind == 1, split += e.kind == kStackSplit;
+  char buf[260];
   std::snprintf(buf, sizeof buf,
-                "  stack: %u slices of %llu^2 (octree %u levels, w padded to %u), skip level %u: %llu cells, %llu tiles\n",
+                "  stack: %u slices of %llu^2 (octree %u levels, w padded to %u), skip level %u: %llu cells (%llu split), "
+                "%llu tiles\n",
                 g.slices, (unsigned long long)(uint64_t(1) << g.geo.n), g.geo.levels(), 1u << g.geo.k, g.skip_level,
-                (unsigned long long)g.entries.size(), (unsigned long long)tiles);
+                (unsigned long long)g.entries.size(), (unsigned long long)split, (unsigned long long)tiles);
   return std::string(buf) + "  light set: " + g.spec + "\n";
 }
 

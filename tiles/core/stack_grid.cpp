@@ -1,5 +1,7 @@
 #include "tiles/core/stack_grid.hpp"
 
+#include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstring>
 
@@ -9,40 +11,69 @@
 
 namespace st {
 
+namespace {
+
+// The id level of a grid's tiles (stack_grid.hpp): ceil(B / 2).
+uint32_t stack_id_level(const StackGrid& g) {
+  uint32_t b = 2 * g.geo.xy_bits(g.skip_level) + g.geo.w_bits(g.skip_level);
+  if (g.split()) b = uint32_t(std::bit_width(g.entries.size() - 1));
+  return (b + 1) / 2;
+}
+
+}  // namespace
+
 uint64_t StackGrid::tile_id(uint64_t cell) const {
-  const uint32_t b = 2 * geo.xy_bits(skip_level) + geo.w_bits(skip_level);
-  return (uint64_t((b + 1) / 2) << kTileIdLevelShift) | cell;
+  return (uint64_t(stack_id_level(*this)) << kTileIdLevelShift) | cell;
+}
+
+void StackGrid::link() {
+  const uint64_t E = cells(skip_level);
+  if (entries.size() < E) throw Error("stack grid: fewer entries than cells at the skip level");
+  uint64_t next = E;
+  for (uint64_t i = 0; i < E; ++i) entries[i].level = uint8_t(skip_level);
+  for (uint64_t i = 0; i < entries.size(); ++i) {
+    StackEntry& e = entries[i];
+    e.first = 0;
+    if (e.kind != kStackSplit) continue;
+    if (e.level >= geo.depth()) throw Error("stack grid: a split cell at the finest level");
+    const uint32_t c = children(e.level);
+    if (next + c > entries.size()) throw Error("stack grid: split cells name more children than the entries hold");
+    e.first = uint32_t(next);
+    for (uint32_t j = 0; j < c; ++j) entries[next + j].level = uint8_t(e.level + 1);
+    next += c;
+  }
+  if (next != entries.size()) throw Error("stack grid: entries no split cell names");
 }
 
 bool StackGrid::cell_of(uint64_t id, uint64_t& cell) const {
-  const uint32_t b = 2 * geo.xy_bits(skip_level) + geo.w_bits(skip_level);
-  if (tile_level(id) != (b + 1) / 2) return false;
+  if (tile_level(id) != stack_id_level(*this)) return false;
   cell = tile_morton(id);
   return cell < entries.size();
 }
 
 uint64_t StackGrid::serialized_size(const moct::Geometry& geo, uint32_t slices, uint32_t skip_level,
-                                    size_t spec_size) {
+                                    size_t spec_size, uint64_t split_entries) {
   StackGrid g;
   g.geo = geo;
   uint64_t coarse = 0;
   for (uint32_t l = 0; l < skip_level; ++l) coarse += g.cells(l);
   return kStackGridFixedBytes + 144ull * slices + ((spec_size + 3) & ~size_t(3)) + 4 * coarse +
-         8 * g.cells(skip_level);
+         8 * (g.cells(skip_level) + split_entries);
 }
 
 std::vector<uint8_t> StackGrid::serialize() const {
   std::vector<uint8_t> out;
-  out.reserve(serialized_size(geo, slices, skip_level, spec.size()));
+  const uint64_t extra = entries.size() - std::min<uint64_t>(entries.size(), cells(skip_level));
+  out.reserve(serialized_size(geo, slices, skip_level, spec.size(), extra));
   append_le<uint32_t>(out, kStackGridMagic);
-  append_le<uint32_t>(out, kStackGridVersion);
+  append_le<uint32_t>(out, extra ? kStackGridSplitVersion : kStackGridVersion);
   out.push_back(uint8_t(geo.n));
   out.push_back(uint8_t(geo.k));
   out.push_back(uint8_t(skip_level));
   out.push_back(uint8_t(light_kind));
   append_le<uint32_t>(out, slices);
   append_le<uint32_t>(out, uint32_t(spec.size()));
-  append_le<uint32_t>(out, 0);
+  append_le<uint32_t>(out, uint32_t(extra));
   for (const auto& l : lights)
     for (double d : l) append_le<uint64_t>(out, std::bit_cast<uint64_t>(d));
   out.insert(out.end(), spec.begin(), spec.end());
@@ -64,7 +95,8 @@ StackGrid StackGrid::parse(std::span<const uint8_t> b, const std::string& what) 
   };
   if (b.size() < kStackGridFixedBytes) fail(0, "truncated (" + std::to_string(b.size()) + " bytes)");
   if (load_le<uint32_t>(b, 0) != kStackGridMagic) fail(0, "bad magic");
-  if (load_le<uint32_t>(b, 4) != kStackGridVersion) fail(4, "unsupported version");
+  const uint32_t version = load_le<uint32_t>(b, 4);
+  if (version != kStackGridVersion && version != kStackGridSplitVersion) fail(4, "unsupported version");
   StackGrid g;
   g.geo.n = b[8];
   g.geo.k = b[9];
@@ -80,9 +112,12 @@ StackGrid StackGrid::parse(std::span<const uint8_t> b, const std::string& what) 
     fail(12, "slice count does not pad to 2^w_level");
   const uint32_t spec_size = load_le<uint32_t>(b, 16);
   if (spec_size > kStackMaxSpecBytes) fail(16, "spec longer than 4096 bytes");
-  if (load_le<uint32_t>(b, 20) != 0) fail(20, "nonzero reserved field");
+  const uint64_t extra = load_le<uint32_t>(b, 20);
+  if (version == kStackGridVersion && extra != 0) fail(20, "nonzero reserved field");
+  if (version == kStackGridSplitVersion && extra == 0) fail(20, "version 2 without split entries");
   if (g.cells(g.skip_level) > kStackMaxCells) fail(10, "more than 2^22 cells at the skip level");
-  const uint64_t size = serialized_size(g.geo, g.slices, g.skip_level, spec_size);
+  if (g.cells(g.skip_level) + extra > kStackMaxCells) fail(20, "more than 2^22 entries with the split cells'");
+  const uint64_t size = serialized_size(g.geo, g.slices, g.skip_level, spec_size, extra);
   if (b.size() != size) fail(0, "size " + std::to_string(b.size()) + " != " + std::to_string(size));
   size_t o = kStackGridFixedBytes;
   g.lights.resize(g.slices);
@@ -105,15 +140,29 @@ StackGrid StackGrid::parse(std::span<const uint8_t> b, const std::string& what) 
       o += 4;
     }
   }
-  g.entries.resize(g.cells(g.skip_level));
-  for (StackEntry& e : g.entries) {
+  const uint64_t E = g.cells(g.skip_level);
+  g.entries.resize(E + extra);
+  uint64_t next = E;  // the first child of the next split entry
+  for (uint64_t i = 0; i < g.entries.size(); ++i) {
+    StackEntry& e = g.entries[i];
+    if (i < E) e.level = uint8_t(g.skip_level);
+    if (i >= next) fail(o, "split entry " + std::to_string(i) + " no split cell names");
     e.value = std::bit_cast<float>(load_le<uint32_t>(b, o));
     if (std::isnan(e.value)) fail(o, "NaN value");
     e.kind = b[o + 4];
-    if (e.kind > 1) fail(o + 4, "bad entry kind");
+    if (e.kind > (extra ? kStackSplit : 1)) fail(o + 4, "bad entry kind");
     if (b[o + 5] || load_le<uint16_t>(b, o + 6)) fail(o + 5, "nonzero entry padding");
+    if (e.kind == kStackSplit) {
+      if (e.level >= g.geo.depth()) fail(o + 4, "split cell at the finest level");
+      const uint32_t c = g.children(e.level);
+      if (next + c > g.entries.size()) fail(o + 4, "split cell's children past the last entry");
+      e.first = uint32_t(next);
+      for (uint32_t j = 0; j < c; ++j) g.entries[next + j].level = uint8_t(e.level + 1);
+      next += c;
+    }
     o += 8;
   }
+  if (next != g.entries.size()) fail(20, "split entries no split cell names");
   return g;
 }
 

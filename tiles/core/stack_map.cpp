@@ -18,10 +18,8 @@ StackMap::StackMap(const StackGrid& grid, TileSource tile) : grid_(grid), tile_(
 }
 
 uint64_t StackMap::cell_of(uint64_t x, uint64_t y, uint32_t w) const {
-  const moct::Geometry& g = grid_.geo;
-  const uint32_t K = grid_.skip_level;
-  const uint32_t sx = g.n - g.xy_bits(K), sw = g.k - g.w_bits(K);
-  return grid_.index(K, x >> sx, y >> sx, w >> sw);
+  uint32_t l;
+  return grid_.cell_at(grid_.geo.depth(), grid_.geo.n, x, y, w, l);
 }
 
 float StackMap::depth(uint64_t x, uint64_t y, uint32_t w, uint32_t level, bool* exact) const {
@@ -29,12 +27,16 @@ float StackMap::depth(uint64_t x, uint64_t y, uint32_t w, uint32_t level, bool* 
   if (level > g.n || w >= grid_.slices || (x >> level) || (y >> level)) return kLitDepth;
   const uint32_t K = grid_.skip_level;
   const uint32_t T = g.level_of_xy(level);  // octree level with 2^level texels a side
-  const uint32_t a = g.xy_bits(std::min(T, K)), b = g.w_bits(std::min(T, K));
-  const uint64_t cx = x >> (level - a), cy = y >> (level - a), cw = uint64_t(w) >> (g.k - b);
-  if (T < K) return grid_.coarse[T][grid_.index(T, cx, cy, cw)];
-  const uint64_t cell = grid_.index(K, cx, cy, cw);
+  if (T < K) {
+    const uint32_t a = g.xy_bits(T), b = g.w_bits(T);
+    return grid_.coarse[T][grid_.index(T, x >> (level - a), y >> (level - a), uint64_t(w) >> (g.k - b))];
+  }
+  uint32_t l;  // the cell's level: K, deeper in a split cell, never past T
+  const uint64_t cell = grid_.cell_at(T, level, x, y, w, l);
   const StackEntry& e = grid_.entries[cell];
-  if (e.kind == 0 || T == K) return e.value;
+  if (e.kind != 1 || T == l) return e.value;  // a split cell here is at level T
+  const uint32_t a = g.xy_bits(l), b = g.w_bits(l);
+  const uint64_t cx = x >> (level - a), cy = y >> (level - a), cw = uint64_t(w) >> (g.k - b);
   const StackTileRef t = tile_(cell);
   if (!t) {
     if (exact) *exact = false;
@@ -55,11 +57,12 @@ void StackMap::texel(const Vec3d& p, uint32_t w, uint64_t& x, uint64_t& y, float
 StackMap::CellTexel StackMap::cell_texel(uint64_t x, uint64_t y, uint32_t w) const {
   const moct::Geometry& g = grid_.geo;
   if ((x >> g.n) || (y >> g.n)) return {kLitDepth, false, 0, 0, 0, 0};
-  const uint32_t K = grid_.skip_level, sx = g.n - g.xy_bits(K), sw = g.k - g.w_bits(K);
-  const uint64_t cell = grid_.index(K, x >> sx, y >> sx, uint64_t(w) >> sw);
+  uint32_t l;  // K, or deeper in a split cell
+  const uint64_t cell = grid_.cell_at(g.depth(), g.n, x, y, w, l);
   const StackEntry& e = grid_.entries[cell];
+  const uint32_t sx = g.n - g.xy_bits(l), sw = g.k - g.w_bits(l);
   const uint64_t xy_mask = (uint64_t(1) << sx) - 1;
-  return {e.value, e.kind != 0 && g.depth() != K, cell, x & xy_mask, y & xy_mask, w & ((uint32_t(1) << sw) - 1)};
+  return {e.value, e.kind == 1 && g.depth() != l, cell, x & xy_mask, y & xy_mask, w & ((uint32_t(1) << sw) - 1)};
 }
 
 bool StackMap::lit(const Vec3d& p, uint32_t w, bool* exact) const {

@@ -144,8 +144,8 @@ Interval StackSpill::texel(uint64_t x, uint64_t y, uint32_t w) const {
 }
 
 BlockedStackCut::BlockedStackCut(const StackSpill& spill, std::optional<uint32_t> skip_level, uint32_t tile_bytes,
-                                 std::string tile_path, BlockedCutStats* stats, StackCells cells)
-    : cells_(cells), path_(std::move(tile_path)) {
+                                 std::string tile_path, BlockedCutStats* stats, StackCells cells, bool split)
+    : cells_(cells), split_(split), path_(std::move(tile_path)) {
   const moct::Geometry& g = spill.geo();
   const uint32_t L = g.depth(), B = spill.block_level();
   uint32_t K = skip_level.value_or(std::max(default_stack_skip_level(g), B));
@@ -179,6 +179,9 @@ void BlockedStackCut::run(const StackSpill& spill, uint32_t K, uint32_t tile_byt
                   " cells, above the 2^22 a stack grid holds; raise --tile-bytes");
     if (::ftruncate(fd_, 0) != 0) throw Error("stack cut: cannot truncate '" + path_ + "'");
     tiles_.clear();
+    nodes_.clear();
+    split_roots_.clear();
+    split_cells = 0;
     const double earlier = st.reduce_seconds;
     st = BlockedCutStats{};
     st.reduce_seconds = earlier;
@@ -246,25 +249,76 @@ void BlockedStackCut::run(const StackSpill& spill, uint32_t K, uint32_t tile_byt
             }
             const uint32_t da = g.xy_bits(K) - g.xy_bits(B), dw = g.w_bits(K) - g.w_bits(B);
             std::vector<size_t> cursor(sub.geo.depth() + 1, 0);
-            for (const OctNode& cr : sub.levels[rel]) {
-              if (!cr.child_mask) continue;
-              uint64_t x, y, w;
-              oct_coords(sub.geo, rel, cr.code, x, y, w);
-              const uint64_t cell = grid.index(K, (bx << da) + x, (by << da) + y, (bw << dw) + w);
-              std::vector<uint8_t> bytes = encode_octree(cell_subtree(sub, rel, cr, 0.0f, cursor));
-              bool octree = true;
+            // The form a cell of block level r (octree level B + r; block-local x, y, w) keeps.
+            auto form = [&](uint32_t r, const OctNode& cr, uint64_t x, uint64_t y, uint64_t w,
+                            std::vector<size_t>& cur, bool& octree) {
+              std::vector<uint8_t> bytes = encode_octree(cell_subtree(sub, r, cr, 0.0f, cur));
+              octree = true;
               if (cells_ != StackCells::octree) {
-                std::vector<uint8_t> per_slice = cell_slice_tiles(blk, g, K, B, x, y, w);
+                std::vector<uint8_t> per_slice = cell_slice_tiles(blk, g, B + r, B, x, y, w);
                 const bool take = cells_ == StackCells::slices ||
                                   (per_slice.size() <= tile_bytes &&
                                    (bytes.size() > tile_bytes ||
                                     zlib_compress(group_slice_tiles(per_slice), 6).size() < zlib_compress(bytes, 6).size()));
                 if (take) bytes = std::move(per_slice), octree = false;
               }
+              return bytes;
+            };
+            auto put_tile = [&](uint64_t cell, const std::vector<uint8_t>& bytes, bool octree) {
               write_all(fd_, bytes.data(), bytes.size(), at, path_);
               tiles_.push_back({cell, at, uint32_t(bytes.size()), octree});
               at += bytes.size();
               if (bytes.size() > largest) largest = bytes.size(), largest_cell = cell;
+            };
+            // The children of split cell `cr` (block level r) as nodes_[first ..]: each
+            // kept whole where its form fits, else split again (a split one level above
+            // the leaves has only constant children, so this always ends).
+            auto split_children = [&](auto& self, uint32_t r, const OctNode& cr) -> uint32_t {
+              ++split_cells;
+              const uint32_t l = B + r, c = grid.children(l), bits = sub.geo.step_bits(r);
+              const uint32_t first = uint32_t(nodes_.size());
+              nodes_.resize(nodes_.size() + c, SplitNode{0, std::numeric_limits<float>::quiet_NaN(), 0});
+              const auto& lv = sub.levels[r + 1];
+              auto it = std::partition_point(lv.begin(), lv.end(), [&](const OctNode& nd) { return (nd.code >> bits) < cr.code; });
+              for (; it != lv.end() && (it->code >> bits) == cr.code; ++it) {
+                const OctNode& ch = *it;
+                uint64_t x, y, w;
+                oct_coords(sub.geo, r + 1, ch.code, x, y, w);
+                const uint32_t slot = first + uint32_t(grid.child_offset(l, x, y, w));
+                if (ch.has_value) nodes_[slot].value = ch.value;
+                if (!ch.child_mask) continue;
+                // cell_subtree's scan of each deeper level, started at this child's range.
+                std::vector<size_t> cur(sub.geo.depth() + 1, 0);
+                for (uint32_t d = r + 2, b = sub.geo.step_bits(r + 1); d <= sub.geo.depth(); b += sub.geo.step_bits(d), ++d) {
+                  const auto& dl = sub.levels[d];
+                  cur[d] = size_t(std::partition_point(dl.begin(), dl.end(),
+                                                       [&](const OctNode& nd) { return (nd.code >> b) < ch.code; }) -
+                                  dl.begin());
+                }
+                bool octree = true;
+                const std::vector<uint8_t> bytes = form(r + 1, ch, x, y, w, cur, octree);
+                if (bytes.size() <= tile_bytes) {
+                  nodes_[slot].kind = 1, nodes_[slot].ref = uint32_t(tiles_.size());
+                  put_tile(~uint64_t(0), bytes, octree);
+                } else {
+                  const uint32_t children = self(self, r + 1, ch);
+                  nodes_[slot].kind = kStackSplit, nodes_[slot].ref = children;
+                }
+              }
+              return first;
+            };
+            for (const OctNode& cr : sub.levels[rel]) {
+              if (!cr.child_mask) continue;
+              uint64_t x, y, w;
+              oct_coords(sub.geo, rel, cr.code, x, y, w);
+              const uint64_t cell = grid.index(K, (bx << da) + x, (by << da) + y, (bw << dw) + w);
+              bool octree = true;
+              const std::vector<uint8_t> bytes = form(rel, cr, x, y, w, cursor, octree);
+              if (split_ && bytes.size() > tile_bytes) {
+                split_roots_.emplace_back(cell, split_children(split_children, rel, cr));
+                continue;
+              }
+              put_tile(cell, bytes, octree);
             }
             if (largest <= tile_bytes) continue;
             if (K + 1 >= L) throw too_big(largest_cell, largest);
@@ -307,19 +361,43 @@ void BlockedStackCut::run(const StackSpill& spill, uint32_t K, uint32_t tile_byt
     grid.entries.resize(grid.cells(K));
     for (uint64_t i = 0; i < grid.entries.size(); ++i) grid.entries[i].value = vals[K][i];
     grid.coarse.assign(vals.begin(), vals.begin() + K);
+    for (const Ref& r : tiles_)
+      if (r.cell != ~uint64_t(0)) grid.entries[r.cell].kind = 1;
+    // Split cells' children numbered breadth first (stack_grid.hpp): level K's split cells
+    // in cell order, then each split child as its turn comes; a child that inherits takes
+    // its parent's value.
+    std::sort(split_roots_.begin(), split_roots_.end());
+    std::vector<std::pair<uint64_t, uint32_t>> queue(split_roots_);
+    for (size_t q = 0; q < queue.size(); ++q) {
+      const auto [cell, first] = queue[q];
+      grid.entries[cell].kind = kStackSplit;
+      const uint32_t c = grid.children(q < split_roots_.size() ? K : grid.entries[cell].level);
+      const float parent = grid.entries[cell].value;
+      for (uint32_t j = 0; j < c; ++j) {
+        const SplitNode& nd = nodes_[first + j];
+        const uint64_t child = grid.entries.size();
+        StackEntry e;
+        e.value = std::isnan(nd.value) ? parent : nd.value;
+        e.kind = nd.kind == kStackSplit ? 0 : nd.kind;  // a split kind once its turn comes
+        e.level = uint8_t((q < split_roots_.size() ? K : grid.entries[cell].level) + 1);
+        grid.entries.push_back(e);
+        if (nd.kind == 1) tiles_[nd.ref].cell = child;
+        if (nd.kind == kStackSplit) queue.emplace_back(child, nd.ref);
+      }
+    }
+    grid.link();
     // Each tile's root is inner: its value is word 1 of the tree, which starts after the
-    // header's shifts (MHOCT.md "Header"), levels L - K + 1.
-    const uint64_t root_value = 20 + ((uint64_t(L - K + 1) + 3) & ~uint64_t(3)) + 4;
+    // header's shifts (MHOCT.md "Header"), levels L - l + 1 for a cell of level l.
     slice_cells = 0;
     for (const Ref& r : tiles_) {
-      grid.entries[r.cell].kind = 1;
       tile_bytes_total += r.size;
       if (!r.octree) {  // per-slice tiles: each slice's root is its own
         ++slice_cells;
         continue;
       }
-      const float v = vals[K][r.cell];
-      write_all(fd_, &v, sizeof v, r.offset + root_value, path_);
+      const StackEntry& e = grid.entries[r.cell];
+      const uint64_t root_value = 20 + ((uint64_t(L - e.level + 1) + 3) & ~uint64_t(3)) + 4;
+      write_all(fd_, &e.value, sizeof e.value, r.offset + root_value, path_);
     }
     std::sort(tiles_.begin(), tiles_.end(), [](const Ref& a, const Ref& b) { return a.cell < b.cell; });
     max_tile_bytes = largest;

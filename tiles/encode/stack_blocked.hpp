@@ -86,8 +86,13 @@ class BlockedStackCut {
   // `tile_bytes` the cut moves one level deeper and reduces the blocks again, as cut_stack.
   // `cells`: each cell's form (stack_slices_encode.hpp): the octree (cut_stack's bytes),
   // per-slice tiles, or the smaller of the two (zlib level 6) among those that fit.
+  // `split`: a cell whose kept form overflows `tile_bytes` is split into its
+  // children one level deeper (and so on down; stack_grid.hpp "Split cells") instead of
+  // the whole cut moving deeper: K stays where it starts, only the overflowing cells go
+  // deeper (the pack then has feature stack_split_cells).
   BlockedStackCut(const StackSpill& spill, std::optional<uint32_t> skip_level, uint32_t tile_bytes,
-                  std::string tile_path, BlockedCutStats* stats = nullptr, StackCells cells = StackCells::octree);
+                  std::string tile_path, BlockedCutStats* stats = nullptr, StackCells cells = StackCells::octree,
+                  bool split = false);
   ~BlockedStackCut();
   BlockedStackCut(const BlockedStackCut&) = delete;
   BlockedStackCut& operator=(const BlockedStackCut&) = delete;
@@ -95,19 +100,31 @@ class BlockedStackCut {
   StackGrid grid;  // lights and spec left empty: the caller fills them
   uint64_t max_tile_bytes = 0, tile_bytes_total = 0;
   uint64_t slice_cells = 0;  // tiles in the per-slice form
+  uint64_t split_cells = 0;  // cells split below the skip level (split_cells)
   size_t tile_count() const { return tiles_.size(); }
   // Tile i (increasing cell order): its cell and octree buffer.
   std::pair<uint64_t, std::vector<uint8_t>> tile(size_t i) const;
 
  private:
   struct Ref {
-    uint64_t cell, offset;
+    uint64_t cell, offset;  // cell: a split child's is set once the cut is done
     uint32_t size;
     bool octree;
   };
+  // A cell below a split one while the blocks are read (numbered when the cut is done):
+  // kind as StackEntry, value NaN where it inherits its parent's, ref its tile (kind 1)
+  // or its first child (kind 2; the children contiguous).
+  struct SplitNode {
+    uint8_t kind;
+    float value;
+    uint32_t ref;
+  };
   void run(const StackSpill& spill, uint32_t K, uint32_t tile_bytes, BlockedCutStats* stats);
   StackCells cells_ = StackCells::octree;
+  bool split_ = false;
   std::vector<Ref> tiles_;
+  std::vector<SplitNode> nodes_;
+  std::vector<std::pair<uint64_t, uint32_t>> split_roots_;  // (level-K cell, its first child node)
   std::string path_;
   int fd_ = -1;
 };

@@ -81,6 +81,7 @@ StackCut cut_stack(const OctHierarchy& h, std::optional<uint32_t> skip_level, ui
       if (cut.tiles.back().second.size() > largest) largest = cut.tiles.back().second.size(), largest_cell = cell;
     }
     cut.max_tile_bytes = largest;
+    sg.link();
     std::sort(cut.tiles.begin(), cut.tiles.end(), [](auto& a, auto& b) { return a.first < b.first; });
     if (largest <= tile_bytes) return cut;
     if (K + 1 >= L)
@@ -129,6 +130,7 @@ uint64_t write_stack_pack(const std::string& path, const StackGrid& sg, size_t c
   PackHeader h;
   h.state = PackState::complete;
   h.flags = p.flags | kFeatureStack | (count == 0 ? 0u : uint32_t(kFeatureHasTiles));
+  if (sg.split()) h.flags |= kFeatureStackSplitCells;  // stack_grid.hpp "Split cells"
   h.encoding = Encoding::mh;
   h.light_kind = sg.light_kind;
   h.map_level = sg.geo.n;
