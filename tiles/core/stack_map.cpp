@@ -131,16 +131,17 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
   // across cells from one sample to the next: 2CylinderEngine.glb at 1024^2 x 64 keeps
   // 1.7 samples a cell, so nearly every sample reads a cold tile):
   //   1. each sample's cell and entry (outside the slice, a constant cell: the value);
-  //   2. the tile of each cell (one tile_ call per change of cell), its reader object
-  //      prefetched;
+  //   2. the tile of each cell (its change of cell; all in one batch_ call when the
+  //      source has one, else a tile_ call each), the reader objects prefetched;
   //   3. per-slice samples: their slice's record (SliceTiles::Record, prefetched);
   //      octree samples: gathered into one chain per cell (the root word prefetched),
   //      the chain's samples walked one
   //      after another along one path (MhOctree::along_*: each walk starts from the
   //      deepest node it shares with the chain's previous one, as depth_along);
   //   4. per-slice samples: the bounds (d <= lo lit, d > hi shadowed exactly as the walk
-  //      would say), a constant's value, an MMH tile's depth(), or a DAG-MH walk started
-  //      at its skip entry;
+  //      would say), a constant's value, an MMH tile (its evaluator prefetched; its
+  //      depth() one per round of step 5), or a DAG-MH walk (skip entry prefetched, then
+  //      read: its start);
   //   5. rounds of one step of every DAG-MH walk (View::descend's own step) and of every
   //      octree chain, each prefetching the node it goes to; then the DAG-MH walks'
   //      finish (treelets) and values.
