@@ -35,7 +35,9 @@ void RemoteMap::open_stack(const std::vector<uint8_t>& grid_bytes) {
   const StackGrid& g = *stack_grid_;
   if (g.skip_level != header_.skip_level || g.geo.n != header_.map_level)
     throw FormatError("map '" + name_ + "': stack grid disagrees with the header's levels");
-  stack_map_ = std::make_unique<StackMap>(g, [this](uint64_t cell) { return stack_tile(cell); });
+  stack_map_ = std::make_unique<StackMap>(
+      g, [this](uint64_t cell) { return stack_tile(cell); },
+      [this](const uint64_t* cells, uint32_t n, StackTileRef* out) { stack_tiles(cells, n, out); });
 }
 
 SurfaceExtent RemoteMap::stack_surface() {
@@ -72,6 +74,25 @@ StackTileRef RemoteMap::stack_tile(uint64_t cell) const noexcept {
     if (!noted && m.count < Misses::kMax) m.cell[m.count++] = cell;
   }
   return StackTileRef();
+}
+
+void RemoteMap::stack_tiles(const uint64_t* cells, uint32_t n, StackTileRef* out) const noexcept {
+  constexpr uint32_t kStep = 64;  // a soft lookup's cells at once
+  PageEntry page[kStep];
+  for (uint32_t i0 = 0; i0 < n; i0 += kStep) {
+    const uint32_t m = std::min(kStep, n - i0);
+    for (uint32_t i = 0; i < m; ++i) page[i] = cache_.lookup(stack_grid_->tile_id(cells[i0 + i]));
+    for (uint32_t i = 0; i < m; ++i)
+      if (page[i].state == PageState::resident) __builtin_prefetch(slot_eval_[page[i].slot].get());
+    for (uint32_t i = 0; i < m; ++i) {
+      if (page[i].state != PageState::resident) {
+        out[i0 + i] = stack_tile(cells[i0 + i]);  // notes the miss as a single call does
+        continue;
+      }
+      mark_used(page[i].slot);
+      out[i0 + i] = static_cast<const StackTileEvaluator*>(slot_eval_[page[i].slot].get())->tile.ref();
+    }
+  }
 }
 
 template <class Fn>

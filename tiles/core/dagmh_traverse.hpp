@@ -76,6 +76,12 @@ struct View {
     return c;
   }
 
+  // Where skip_entry(level, x, y) reads its entry (for a prefetch; skip_level > 0).
+  const uint8_t* skip_entry_at(uint32_t level, uint64_t x, uint64_t y) const {
+    const uint32_t shift = level - skip_level;
+    return skip + (((y >> shift) << skip_level) + (x >> shift)) * sizeof(Cursor);
+  }
+
   // Cheapest valid start for a walk to a node of level `stop` on the path to (x, y) at
   // `level`: the skip table when stop >= skip_level, else the root.
   Cursor start(uint32_t stop, uint32_t level, uint64_t x, uint64_t y) const {
@@ -218,6 +224,8 @@ struct View {
   }
 
   float value(uint32_t index) const { return read_value(chunks, multipliers, index); }
+  // The chunk value(index) reads first (for a prefetch).
+  const uint8_t* chunk_at(uint32_t index) const { return chunks + size_t(index / kChunkValues) * sizeof(ChunkInfo); }
 
   uint32_t lookup_index(uint32_t level, uint64_t x, uint64_t y) const {
     const Cursor c = descend(start(level, level, x, y), level, level, x, y);

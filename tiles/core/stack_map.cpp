@@ -11,7 +11,8 @@
 
 namespace st {
 
-StackMap::StackMap(const StackGrid& grid, TileSource tile) : grid_(grid), tile_(std::move(tile)) {
+StackMap::StackMap(const StackGrid& grid, TileSource tile, TileBatch batch)
+    : grid_(grid), tile_(std::move(tile)), batch_(std::move(batch)) {
   lights_.reserve(grid.slices);
   for (uint32_t w = 0; w < grid.slices; ++w) lights_.push_back(grid.light(w));
   texels_ = SampleTexels(lights_, grid_.geo.n);
@@ -133,16 +134,17 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
   // across cells from one sample to the next: 2CylinderEngine.glb at 1024^2 x 64 keeps
   // 1.7 samples a cell, so nearly every sample reads a cold tile):
   //   1. each sample's cell and entry (outside the slice, a constant cell: the value);
-  //   2. the tile of each cell (one tile_ call per change of cell), its reader object
-  //      prefetched;
+  //   2. the tile of each cell (its change of cell; all in one batch_ call when the
+  //      source has one, else a tile_ call each), the reader objects prefetched;
   //   3. per-slice samples: their slice's record (SliceTiles::Record, prefetched);
   //      octree samples: gathered into one chain per cell (the root word prefetched),
   //      the chain's samples walked one
   //      after another along one path (MhOctree::along_*: each walk starts from the
   //      deepest node it shares with the chain's previous one, as depth_along);
   //   4. per-slice samples: the bounds (d <= lo lit, d > hi shadowed exactly as the walk
-  //      would say), a constant's value, an MMH tile's depth(), or a DAG-MH walk started
-  //      at its skip entry;
+  //      would say), a constant's value, an MMH tile (its evaluator prefetched; its
+  //      depth() one per round of step 5), or a DAG-MH walk (skip entry prefetched, then
+  //      read: its start);
   //   5. rounds of one step of every DAG-MH walk (View::descend's own step) and of every
   //      octree chain, each prefetching the node it goes to; then the DAG-MH walks'
   //      finish (treelets) and values.
@@ -157,17 +159,27 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
   }
   StackTileRef t[G];
   {
-    uint64_t last_cell = ~uint64_t(0);
-    StackTileRef last;
+    // The distinct cells in a row, fetched in one batch call when the source has one.
+    uint64_t cells[G];
+    uint8_t of[G];
+    uint32_t nu = 0;
     for (uint32_t i = 0; i < m; ++i) {
       if (!c[i].tiled) continue;
-      if (c[i].cell != last_cell) {
-        last_cell = c[i].cell, last = tile_(last_cell);
-        if (last.slices) stack_map_prefetch_object(last.slices);
-        if (last.octree) stack_map_prefetch_object(last.octree);
-      }
-      t[i] = last;
+      if (nu == 0 || c[i].cell != cells[nu - 1]) cells[nu++] = c[i].cell;
+      of[i] = uint8_t(nu - 1);
     }
+    StackTileRef got[G];
+    if (batch_) {
+      batch_(cells, nu, got);
+    } else {
+      for (uint32_t u = 0; u < nu; ++u) got[u] = tile_(cells[u]);
+    }
+    for (uint32_t u = 0; u < nu; ++u) {
+      if (got[u].slices) stack_map_prefetch_object(got[u].slices);
+      if (got[u].octree) stack_map_prefetch_object(got[u].octree);
+    }
+    for (uint32_t i = 0; i < m; ++i)
+      if (c[i].tiled) t[i] = got[of[i]];
   }
   uint64_t lit = 0;
   auto set = [&](uint32_t i, bool v) { lit |= uint64_t(v) << i; };
@@ -209,6 +221,9 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
   }
   // DAG-MH walks of per-slice samples.
   const dagmh::View* view[G];
+  const SliceTiles::Record* mmh[G];
+  uint8_t mmh_sample[G];
+  uint32_t nm = 0;
   dagmh::Cursor cur[G];
   uint32_t level[G];
   uint8_t walk_sample[G], active[G];
@@ -220,11 +235,16 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
       set(i, true);
     } else if (!(d[i] > r.hi)) {  // a constant slice never gets here with a number d
       if (r.kind == SliceTiles::RecordKind::view) {
+        // The start is read in the next loop, once every walk's skip entry is on its way.
         view[nw] = &r.view, level[nw] = r.xy_level, walk_sample[nw] = uint8_t(i);
-        cur[nw] = r.view.start(r.xy_level, r.xy_level, c[i].lx, c[i].ly);
+        if (r.view.skip_level > 0 && r.xy_level >= r.view.skip_level)
+          __builtin_prefetch(r.view.skip_entry_at(r.xy_level, c[i].lx, c[i].ly));
         ++nw;
       } else if (r.kind == SliceTiles::RecordKind::evaluator) {
-        set(i, d[i] <= r.eval->depth(r.xy_level, c[i].lx, c[i].ly));
+        // Answered one per round of the walks below (its chain of misses in the shadow of
+        // theirs), the evaluator's object on its way.
+        __builtin_prefetch(r.eval);
+        mmh[nm] = &r, mmh_sample[nm++] = uint8_t(i);
       } else {
         set(i, d[i] <= r.lo);
       }
@@ -234,8 +254,16 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
     return (cur[k].ref & dagmh::kRefTagMask) == dagmh::kRefInner && cur[k].level < level[k];
   };
   uint32_t na = 0;
-  for (uint32_t k = 0; k < nw; ++k)
-    if (descending(k)) active[na++] = uint8_t(k);
+  for (uint32_t k = 0; k < nw; ++k) {  // the starts, each walk's first node on its way
+    const uint32_t i = walk_sample[k];
+    cur[k] = view[k]->start(level[k], level[k], c[i].lx, c[i].ly);
+    if (descending(k)) {
+      __builtin_prefetch(view[k]->node_at(cur[k].ref & dagmh::kRefIndexMask));
+      active[na++] = uint8_t(k);
+    } else if ((cur[k].ref & dagmh::kRefTagMask) == dagmh::kRefTreelet) {
+      __builtin_prefetch(view[k]->treelet_at(cur[k].ref & dagmh::kRefIndexMask));
+    }
+  }
   // Octree chains begin.
   StackMapSlot<MhOctree::Path> path[G];
   StackMapSlot<MhOctree::Walk> walk[G];
@@ -247,8 +275,14 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
     new (walk[j].bytes) MhOctree::Walk(chain_tree[j]->along_begin(path[j].get(), c[i].lx, c[i].ly, c[i].lw));
     chains[j] = uint8_t(j);
   }
-  uint32_t live = nc;
+  uint32_t live = nc, next_mmh = 0;
+  auto answer_mmh = [&](uint32_t k) {
+    const SliceTiles::Record& r = *mmh[k];
+    const uint32_t i = mmh_sample[k];
+    set(i, d[i] <= r.eval->depth(r.xy_level, c[i].lx, c[i].ly));
+  };
   while (na || live) {
+    if (next_mmh < nm) answer_mmh(next_mmh++);
     uint32_t kept = 0;
     for (uint32_t a = 0; a < na; ++a) {  // one level of every DAG-MH walk that still descends
       const uint32_t k = active[a];
@@ -281,10 +315,12 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
     }
     live = kept;
   }
+  while (next_mmh < nm) answer_mmh(next_mmh++);
   uint32_t index[G];
   for (uint32_t k = 0; k < nw; ++k) {
     const uint32_t i = walk_sample[k];
     index[k] = view[k]->finish(cur[k], level[k], c[i].lx, c[i].ly);
+    __builtin_prefetch(view[k]->chunk_at(index[k]));  // the value's chunk, read below
   }
   for (uint32_t k = 0; k < nw; ++k) {
     const uint32_t i = walk_sample[k];
@@ -379,9 +415,11 @@ ResidentStack::ResidentStack(const PackReader& pack) {
     if (cells_[i] >= by_cell_.size()) throw FormatError(pack.name() + ": " + describe_tile(pack.tiles()[i].id) + " names no stack cell");
     by_cell_[cells_[i]] = trees_[i].ref();
   }
-  map_ = std::make_unique<StackMap>(*g, [this](uint64_t cell) -> StackTileRef {
-    return cell < by_cell_.size() ? by_cell_[cell] : StackTileRef();
-  });
+  map_ = std::make_unique<StackMap>(
+      *g, [this](uint64_t cell) -> StackTileRef { return cell < by_cell_.size() ? by_cell_[cell] : StackTileRef(); },
+      [this](const uint64_t* cells, uint32_t n, StackTileRef* out) {
+        for (uint32_t i = 0; i < n; ++i) out[i] = cells[i] < by_cell_.size() ? by_cell_[cells[i]] : StackTileRef();
+      });
 }
 
 }  // namespace st

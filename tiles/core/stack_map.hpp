@@ -27,7 +27,12 @@ class StackMap {
   // The tile of cell i (its dense index at the skip level): its MH octree or its per-slice
   // tiles (stack_slices.hpp), or nothing (nullptr) while absent.
   using TileSource = std::function<StackTileRef(uint64_t cell)>;
-  StackMap(const StackGrid& grid, TileSource tile);
+  // Optional: out[i] = tile(cells[i]) for i < n, the cells of one soft (or time) lookup in
+  // one call, so that a source can keep their loads in flight together (ResidentStack: one
+  // loop over its dense array; through TileSource each cell is a call whose load the next
+  // one waits behind). Without it the lookups call `tile` once per cell.
+  using TileBatch = std::function<void(const uint64_t* cells, uint32_t n, StackTileRef* out)>;
+  StackMap(const StackGrid& grid, TileSource tile, TileBatch batch = {});
 
   const StackGrid& grid() const { return grid_; }
   uint32_t slices() const { return grid_.slices; }
@@ -86,6 +91,7 @@ class StackMap {
 
   const StackGrid& grid_;
   TileSource tile_;
+  TileBatch batch_;
   std::vector<LightSpace> lights_;
   SampleTexels texels_;  // the soft lookups' batched transforms (sample_texels.hpp)
 };
