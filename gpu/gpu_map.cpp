@@ -308,7 +308,9 @@ struct GpuMap::Impl {
       // The 2D map's light in the page table, so an engine's shader reads it from there
       // (shadowtile.glsl); 0 when the pass refuses the light (GpuError at the pass).
       try {
-        write_light(pv_end, map_light());
+        const client::LightParams lp = view->light();
+        const ShadowLight sl = map_light();
+        write_light(pv_end, sl, receiver_slope_cap(LightSpace::from_array(LightKind(lp.kind), lp.params), sl, map_level));
         p[L::kPtLight] = pv_end;
       } catch (const GpuError&) {
         p[L::kPtLight] = 0;
@@ -401,8 +403,11 @@ struct GpuMap::Impl {
     h[L::kStCellSlots] = off_cell_slots = o;
     for (size_t c = 0; c < g.cells.size(); ++c) p[o++] = L::kNoSlot;
     h[L::kStLights] = o;
-    for (uint32_t w = 0; w < g.slices; ++w, o += L::kStLightWords)
-      write_light(o, shadow_light(LightSpace::from_array(LightKind(g.lights[w].kind), g.lights[w].params)));  // any kind
+    for (uint32_t w = 0; w < g.slices; ++w, o += L::kStLightWords) {
+      const LightSpace ls = LightSpace::from_array(LightKind(g.lights[w].kind), g.lights[w].params);
+      const ShadowLight sl = shadow_light(ls);  // any kind
+      write_light(o, sl, receiver_slope_cap(ls, sl, g.xy_level));
+    }
   }
 
   // The 2D map's light as the pass projects it (suns only: GpuError for any other kind).
@@ -415,7 +420,7 @@ struct GpuMap::Impl {
   }
 
   // kStLightWords words at `o`: GPU_LAYOUT.md "The stack block" (the 2D light likewise).
-  void write_light(uint32_t o, const ShadowLight& sl) {
+  void write_light(uint32_t o, const ShadowLight& sl, float slope_cap) {
     uint32_t* p = page_shadow.data();
     for (int i = 0; i < 3; ++i) {
       p[o + i] = std::bit_cast<uint32_t>(sl.origin[i]);
@@ -427,6 +432,7 @@ struct GpuMap::Impl {
     p[o + L::kStLightCentreU] = std::bit_cast<uint32_t>(sl.centre_u);
     p[o + L::kStLightCentreV] = std::bit_cast<uint32_t>(sl.centre_v);
     p[o + L::kStLightProjection] = sl.perspective ? 1u : 0u;
+    p[o + L::kStLightSlopeCap] = std::bit_cast<uint32_t>(slope_cap);
   }
 
   void upload_all_page_table() {
@@ -769,7 +775,7 @@ struct GpuMap::Impl {
     pc[L::kPcHeight] = im.height;
     pc[L::kPcKernel] = in.kernel;
     pc[L::kPcFlags] = (in.neighbour_footprint ? L::kFlagNeighbourFootprint : 0) | (in.soft ? L::kFlagSoft : 0) |
-                      (in.resume_walks ? L::kFlagResumeWalks : 0);
+                      (in.resume_walks ? L::kFlagResumeWalks : 0) | (in.receiver_plane ? L::kFlagReceiverPlane : 0);
     if (sg) {
       const StackTime t = in.soft ? StackTime{} : stack_time(sg->slices, in.time);
       pc[L::kPcSliceA] = t.a;
@@ -1096,7 +1102,7 @@ uint64_t GpuMap::submit_shadow_pass(const ShadowPassInput& in) {
     pc[L::kPcHeight] = in.height;
     pc[L::kPcKernel] = in.kernel;
     pc[L::kPcFlags] = (in.neighbour_footprint ? L::kFlagNeighbourFootprint : 0) | (in.soft ? L::kFlagSoft : 0) |
-                      (in.resume_walks ? L::kFlagResumeWalks : 0);
+                      (in.resume_walks ? L::kFlagResumeWalks : 0) | (in.receiver_plane ? L::kFlagReceiverPlane : 0);
     pc[L::kPcSliceA] = t.a;
     pc[L::kPcSliceB] = t.b;
     pc[L::kPcTimeWeight] = std::bit_cast<uint32_t>(t.f);
@@ -1114,7 +1120,8 @@ uint64_t GpuMap::submit_shadow_pass(const ShadowPassInput& in) {
   pc[L::kPcCount] = in.width;
   pc[L::kPcHeight] = in.height;
   pc[L::kPcKernel] = in.kernel;
-  pc[L::kPcFlags] = in.neighbour_footprint ? L::kFlagNeighbourFootprint : 0;
+  pc[L::kPcFlags] = (in.neighbour_footprint ? L::kFlagNeighbourFootprint : 0) |
+                    (in.receiver_plane ? L::kFlagReceiverPlane : 0);
   for (int i = 0; i < 3; ++i) {
     pc[L::kPcOrigin + i] = std::bit_cast<uint32_t>(light.origin[i]);
     pc[L::kPcAxisU + i] = std::bit_cast<uint32_t>(light.axis_u[i]);

@@ -3,8 +3,9 @@
 // (world positions, normals) -> its R32F visibility image, through shadowtile.glsl (the
 // include an engine's own shaders use). Per pixel the same operations as shadow_pass.comp
 // (2D maps) and stack_shadow_pass.comp (stack maps, at a time or soft): the neighbour
-// footprint per slice in that slice's light, the blend or the soft average; so the answers
-// equal theirs and their CPU twins (gpu/shadow_reference.hpp) bit for bit. Compiled a
+// footprint per slice in that slice's light, the receiver plane from the pixel's normal
+// (kFlagReceiverPlane), the blend or the soft average; so the answers
+// equal theirs and their CPU twins (tests/gpu/shadow_twins.hpp) bit for bit. Compiled a
 // second time with ST_PASS_LIGHT (ShadowPassImages::light): it also writes the light per
 // channel, visibility x the deep part's transmittance (st_deep_shadow at the pixel's
 // surface point, the pixel's footprint), as rgb, and the visibility as a.
@@ -50,7 +51,10 @@ float slice_visibility(uint w, ivec2 q, vec3 r, inout StProbe probe, out float f
     footprint = st_footprint_of(uvd, has_right ? st_light_uvd(lb, rr) : uvd, has_right,
                                 has_down ? st_light_uvd(lb, rd) : uvd, has_down);
   }
-  return st_shadow_uvd(w, uvd, footprint, pc.w[kPcKernel], probe);
+  if ((pc.w[kPcFlags] & kFlagReceiverPlane) == 0u) return st_shadow_uvd(w, uvd, footprint, pc.w[kPcKernel], probe);
+  // Each tap against the receiver's plane through uvd with the pixel's normal (st_plane.glsl).
+  const vec2 slope = st_receiver_slope(lb, texelFetch(st_normals, q, 0).xyz);
+  return st_shadow_uvd_plane(w, uvd, slope, footprint, pc.w[kPcKernel], probe);
 }
 
 void main() {

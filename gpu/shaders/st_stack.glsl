@@ -9,7 +9,8 @@
 // st_oct_depth_resumed (the same answer, the walk resumed from the invocation's previous
 // walk in that tile; st_oct_path_reset(resume) first, which also makes st_stack_depth use it),
 // st_stack_depth(x, y, w, level, probe), st_stack_pcf(level, x, y, w, r, receiver, probe),
-// st_stack_lookup(x, y, w, receiver, footprint, r, probe) (level from a footprint), and
+// st_stack_lookup(x, y, w, receiver, footprint, r, probe) (level from a footprint), their
+// receiver-plane forms st_stack_pcf_plane and st_stack_lookup_plane, and
 // st_fdiv(a, b) (st_fdiv.glsl: a / b rounded as the CPU's float division, for the passes' divides).
 #ifndef SHADOWTILE_GPU_ST_STACK_GLSL
 #define SHADOWTILE_GPU_ST_STACK_GLSL
@@ -199,6 +200,41 @@ float st_stack_lookup(uint x, uint y, uint w, float receiver, float footprint, u
   const float a = st_stack_pcf(f.fine, x >> (finest - f.fine), y >> (finest - f.fine), w, r, receiver, probe);
   if (f.t == 0.0) return a;
   const float c = st_stack_pcf(f.coarse, x >> (finest - f.coarse), y >> (finest - f.coarse), w, r, receiver, probe);
+  precise float step = c - a;
+  precise float scaled = f.t * step;
+  precise float blended = a + scaled;
+  return blended;
+}
+
+// ---- with the receiver plane (tiles/core/receiver_plane.hpp; StackMap::filtered_on_plane) ----
+// st_stack_pcf with each tap compared with the receiver's plane (corner, gx, gy) over the
+// tap's texel (st_plane_depth: f the receiver's texel of the slice's finest level `finest`),
+// the taps in st_stack_pcf's order.
+float st_stack_pcf_plane(uint level, uint x, uint y, uint w, uint r, vec3 plane, uvec2 f, uint finest,
+                         inout StProbe probe) {
+  r = clamp(r, 1u, kMaxPcf);
+  const uint side = 1u << min(level, 31u);
+  uint lit = 0u;
+  for (uint j = 0u; j < r; ++j)
+    for (uint i = 0u; i < r; ++i) {
+      const uint tx = st_pcf_tap(x, i, r, side), ty = st_pcf_tap(y, j, r, side);
+      lit += st_lit(st_plane_depth(plane, f, finest - level, tx, ty), st_stack_depth(tx, ty, w, level, probe)) ? 1u
+                                                                                                                 : 0u;
+    }
+  return uintBitsToFloat(ST_PAGE(ST_PAGE(kPtPcfTable) + (r - 1u) * kPcfTableStride + lit));
+}
+
+// st_stack_lookup with the receiver plane: (x, y) the receiver's texel of slice w's finest
+// level, both levels' kernels against the plane, blended as st_stack_lookup.
+float st_stack_lookup_plane(uint x, uint y, uint w, vec3 plane, float footprint, uint r, inout StProbe probe) {
+  const uint finest = ST_PAGE(ST_PAGE(kPtStack) + kStXyLevel);
+  const StFilter f = st_filter_levels(footprint, finest);
+  const uvec2 at = uvec2(x, y);
+  const float a = st_stack_pcf_plane(f.fine, x >> (finest - f.fine), y >> (finest - f.fine), w, r, plane, at, finest,
+                                     probe);
+  if (f.t == 0.0) return a;
+  const float c = st_stack_pcf_plane(f.coarse, x >> (finest - f.coarse), y >> (finest - f.coarse), w, r, plane, at,
+                                     finest, probe);
   precise float step = c - a;
   precise float scaled = f.t * step;
   precise float blended = a + scaled;

@@ -9,9 +9,12 @@
 // twin gpu::stack_shadow_pass_reference (tests/gpu/shadow_twins.cpp). With kFlagResumeWalks
 // every tile walk resumes from the pixel's previous walk in that tile (st_oct_depth_resumed:
 // consecutive PCF taps, levels and slices share the top of their paths); same answers.
+// With kFlagReceiverPlane each tap compares the receiver's plane in the slice's light
+// (st_plane.glsl, st_stack_lookup_plane).
 #include "st_buffers.glsl"
 
 #include "st_stack.glsl"
+#include "st_plane.glsl"
 
 float st_light_word(uint base, uint i) { return uintBitsToFloat(st_page_words[base + i]); }
 
@@ -65,7 +68,14 @@ float st_slice_visibility(uint p, uint w, inout StProbe probe) {
     if (py + 1u < height && st_stack_light_point(p + width, lb, nu, nv, nd)) f = max(f, max(abs(nu - u), abs(nv - v)));
     footprint = f * side;
   }
-  return st_stack_lookup(x, y, w, d, footprint, st_pc.w[kPcKernel], probe);
+  if ((st_pc.w[kPcFlags] & kFlagReceiverPlane) == 0u) return st_stack_lookup(x, y, w, d, footprint, st_pc.w[kPcKernel], probe);
+  // Each tap against the receiver's plane in the slice's light (a spot's slopes: 0).
+  const uint b = 4u * p;
+  const vec3 n = vec3(uintBitsToFloat(st_normal_words[b]), uintBitsToFloat(st_normal_words[b + 1u]),
+                      uintBitsToFloat(st_normal_words[b + 2u]));
+  const vec2 slope = st_plane_slope(lb, finest, n);
+  const vec3 plane = vec3(st_plane_corner(vec3(u, v, d), slope, side), slope.x, slope.y);
+  return st_stack_lookup_plane(x, y, w, plane, footprint, st_pc.w[kPcKernel], probe);
 }
 
 void main() {
