@@ -282,7 +282,12 @@ TEST(GpuEngine, TheReceiverTwinAnswersLikeAFragmentShaderWhereTheDoubleTransform
   std::vector<float> twin(gpu.size());
   ReceiverLookup q;
   q.kernel = kKernel;
-  receiver_lookup_reference(s.map, rec, q, twin);
+  // st_visibility compares each tap with the receiver's plane: normals (0, 1, 0), the
+  // light's own slope cap.
+  const std::array<float, 2> up = receiver_slope_reference(fl, l, {0.0f, 1.0f, 0.0f}, receiver_slope_cap(ls, fl, l));
+  std::vector<float> slopes(size_t(kW) * kH * 2);
+  for (size_t p = 0; p < size_t(kW) * kH; ++p) slopes[2 * p] = up[0], slopes[2 * p + 1] = up[1];
+  receiver_lookup_reference(s.map, rec, q, twin, slopes);
   size_t bad = 0, client_differs = 0, partial = 0;
   for (size_t p = 0; p < gpu.size(); ++p) {
     if (bits(gpu[p]) != bits(twin[p]) && bad++ == 0)
