@@ -332,7 +332,8 @@ struct GpuMap::Impl {
   void create_device_objects() {
     pool = ctx->make_buffer(pool_bytes, false);
     page = ctx->make_buffer(page_shadow.size() * 4, false);
-    kernels.create(*ctx, opt.frames_in_flight);
+    const Kernel own[2] = {sg ? Kernel::stack_evaluate : Kernel::evaluate, sg ? Kernel::stack_shadow_pass : Kernel::shadow_pass};
+    kernels.create(*ctx, opt.frames_in_flight, own);
     cmd_pool = ctx->make_command_pool(true);
     queries = ctx->make_timestamp_queries(2 * opt.frames_in_flight);
     const uint64_t staging = opt.upload_budget_bytes + uint64_t(slot_words) * 4 + page_shadow.size() * 4;
@@ -664,8 +665,14 @@ struct GpuMap::Impl {
                                         {VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 2 * n}};
     ep_pool = vk_setup::descriptor_pool(setup, n, ps);
     for (Frame& f : frames) f.set = vk_setup::allocate_set(setup, ep_pool, ep_set_layout);
-    ep_pipeline = vk_setup::compute_pipeline(setup, ep_layout, engine_shadow_pass_spirv(false));
-    if (opt.light_pass) ep_light_pipeline = vk_setup::compute_pipeline(setup, ep_layout, engine_shadow_pass_spirv(true));
+    // Specialization constant 0 (shadowtile.glsl's ST_MAP_KIND_ID): 1 a 2D map, 2 a stack map;
+    // the other kind's tile walk is left out of the pipeline.
+    const uint32_t map_kind = sg ? 2u : 1u;
+    const VkSpecializationMapEntry entry{0, 0, sizeof(uint32_t)};
+    const VkSpecializationInfo spec{1, &entry, sizeof(map_kind), &map_kind};
+    ep_pipeline = vk_setup::compute_pipeline(setup, ep_layout, engine_shadow_pass_spirv(false), &spec);
+    if (opt.light_pass)
+      ep_light_pipeline = vk_setup::compute_pipeline(setup, ep_layout, engine_shadow_pass_spirv(true), &spec);
   }
 
   void need_engine(const char* call) const {
@@ -1199,7 +1206,7 @@ uint32_t GpuMap::sync() {
     Impl::Frame& f = m.acquire();
     uint32_t pc[L::kPcWords] = {};
     f.input_bytes = f.normals_bytes = 0;
-    const uint64_t frame = m.submit(f, Kernel::evaluate, 0, pc);  // uploads only: no queries
+    const uint64_t frame = m.submit(f, m.sg ? Kernel::stack_evaluate : Kernel::evaluate, 0, pc);  // uploads only
     Impl::Frame* g = m.find(frame);
     m.finish(*g);
     g->frame = 0;

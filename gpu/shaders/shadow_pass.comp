@@ -59,19 +59,19 @@ void main() {
     footprint = f * side;
   }
   StProbe probe = st_probe();
-  float vis;
+  // With kFlagReceiverPlane each tap against the receiver's plane through (u, v, d) with the
+  // pixel's normal, the slopes in the map's light (kPtLight: the rows of the push constants)
+  // and its cap; without, zero slopes: one receiver depth (the plane's corner is then d, bit
+  // for bit). One call site of the walk: a compiler inlines it once.
+  vec2 slope = vec2(0.0);
   if ((st_pc.w[kPcFlags] & kFlagReceiverPlane) != 0u) {
-    // Each tap against the receiver's plane through (u, v, d) with the pixel's normal, the
-    // slopes in the map's light (kPtLight: the rows of the push constants) and its cap.
     const uint b = 4u * p;
     const vec3 n = vec3(uintBitsToFloat(st_normal_words[b]), uintBitsToFloat(st_normal_words[b + 1u]),
                         uintBitsToFloat(st_normal_words[b + 2u]));
-    const vec2 slope = st_plane_slope(st_page_words[kPtLight], finest, n);
-    const vec3 plane = vec3(st_plane_corner(vec3(u, v, d), slope, side), slope.x, slope.y);
-    vis = st_lookup_plane(x, y, plane, footprint, st_pc.w[kPcKernel], probe);
-  } else {
-    vis = st_lookup(x, y, d, footprint, st_pc.w[kPcKernel], probe);
+    slope = st_plane_slope(st_page_words[kPtLight], finest, n);
   }
+  const vec3 plane = vec3(st_plane_corner(vec3(u, v, d), slope, side), slope.x, slope.y);
+  const float vis = st_lookup_plane(x, y, plane, footprint, st_pc.w[kPcKernel], probe);
   st_output[p] = vis;
   if (probe.hole) atomicAdd(st_fb_words[kFbHoles], 1u);
   st_write_light(p, width * height, vis, st_deep_surface(p, footprint));

@@ -16,6 +16,8 @@
 //   #define ST_BINDING_FEEDBACK 2     // GpuDescriptors::feedback    (default 2)
 //   #define ST_FEEDBACK 0             // optional: no feedback buffer (read-only use)
 //   #define ST_DEEP_SHADOWS 0         // optional: no partial occluders (st_shadow = vec3(visibility))
+//   #define ST_MAP_KIND_ID 7          // optional: specialization constant 7 says which maps the
+//                                     // pipeline serves: 0 either (default), 1 2D, 2 stack
 //   #include "shadowtile.glsl"
 //   ...
 //   StProbe probe = st_probe();
@@ -44,6 +46,13 @@
 // a stage with storage-buffer writes (fragmentStoresAndAtomics for fragment shaders).
 // Deep tiles are fed back likewise (the tiles of partial occluders a lookup needed; pass the
 // probe to st_transmittance). No workgroup size is assumed: the engine declares its own local_size.
+// Compile time: a shader compiler inlines every function, so each call of st_visibility,
+// st_shadow, st_shadow_uvd[_plane] or st_shadow_stack in a shader is one more copy of the
+// tile walk and its decoders (a pipeline compile of minutes on a software device from a cold
+// shader cache): call one of them once per shader (loop over slices or taps around the call,
+// as examples/shaders/scene.frag does), and with ST_MAP_KIND_ID set the specialization
+// constant to GpuMap::is_stack() (1 for a 2D map, 2 for a stack map) at pipeline creation:
+// the walk of the other kind of map is then left out.
 #ifndef SHADOWTILE_GLSL
 #define SHADOWTILE_GLSL
 #extension GL_GOOGLE_include_directive : require
@@ -88,6 +97,13 @@ layout(std430, set = ST_SET, binding = ST_BINDING_FEEDBACK) coherent buffer StFe
 #endif
 
 // ---- the map and its lights (page table) ----
+#ifdef ST_MAP_KIND_ID
+layout(constant_id = ST_MAP_KIND_ID) const uint st_map_kind = 0u;
+#else
+const uint st_map_kind = 0u;
+#endif
+// A stack map (the page table's stack block), or what the pipeline's st_map_kind says.
+bool st_stack_map() { return st_map_kind == 0u ? ST_PAGE(kPtStack) != 0u : st_map_kind == 2u; }
 // Slices of a stack map (0: a 2D map).
 uint st_slices() {
   const uint blk = ST_PAGE(kPtStack);
@@ -146,22 +162,6 @@ float st_footprint_of(vec3 uvd, vec3 right, bool has_right, vec3 down, bool has_
   return f * side;
 }
 
-// Visibility of a light-space point in slice w (2D maps: w unused): outside the light's box
-// lit (1); else the texel floor(uv * 2^finest), the level pair of the footprint and
-// kernel x kernel PCF at each, blended. kernel: the PCF kernel side, odd 1..9 (the C++
-// API's unit); any other answers NaN, as Map::visibility does. Absent tiles answer
-// coarsely and are fed back.
-float st_shadow_uvd(uint w, vec3 uvd, float footprint, uint kernel, inout StProbe probe) {
-  if (kernel < 1u || kernel > 9u || (kernel & 1u) == 0u) return uintBitsToFloat(0x7FC00000u);
-  if (!st_in_light_box(uvd)) return 1.0;
-  const uint finest = st_finest_level();
-  const float side = uintBitsToFloat((127u + finest) << 23u);
-  precise float fu = floor(uvd.x * side), fv = floor(uvd.y * side);
-  const uint x = min(uint(fu), (1u << finest) - 1u), y = min(uint(fv), (1u << finest) - 1u);
-  if (ST_PAGE(kPtStack) != 0u) return st_stack_lookup(x, y, w, uvd.z, footprint, kernel, probe);
-  return st_lookup(x, y, uvd.z, footprint, kernel, probe);
-}
-
 // ---- receiver-plane depth bias (tiles/core/receiver_plane.hpp, st_plane.glsl) ----
 // A filtered lookup compares each PCF tap with the receiver's plane over the tap's texel,
 // not with one depth: on surfaces sloped to the light a kernel (a coarse level's above all)
@@ -196,8 +196,18 @@ float st_shadow_uvd_plane(uint w, vec3 uvd, vec2 slope, float footprint, uint ke
   precise float fu = floor(uvd.x * side), fv = floor(uvd.y * side);
   const uint x = min(uint(fu), (1u << finest) - 1u), y = min(uint(fv), (1u << finest) - 1u);
   const vec3 plane = vec3(st_plane_corner(uvd, slope, side), slope.x, slope.y);
-  if (ST_PAGE(kPtStack) != 0u) return st_stack_lookup_plane(x, y, w, plane, footprint, kernel, probe);
+  if (st_stack_map()) return st_stack_lookup_plane(x, y, w, plane, footprint, kernel, probe);
   return st_lookup_plane(x, y, plane, footprint, kernel, probe);
+}
+
+// Visibility of a light-space point in slice w (2D maps: w unused): outside the light's box
+// lit (1); else the texel floor(uv * 2^finest), the level pair of the footprint and
+// kernel x kernel PCF at each with one receiver depth (uvd.z) for every tap, blended.
+// kernel: the PCF kernel side, odd 1..9 (the C++ API's unit); any other answers NaN, as
+// Map::visibility does. Absent tiles answer coarsely and are fed back. The same walk as
+// st_shadow_uvd_plane with zero slopes (its plane's corner is then uvd.z, bit for bit).
+float st_shadow_uvd(uint w, vec3 uvd, float footprint, uint kernel, inout StProbe probe) {
+  return st_shadow_uvd_plane(w, uvd, vec2(0.0), footprint, kernel, probe);
 }
 
 // Visibility at a world position (2D maps; on a stack map slice 0): the receiver offset
@@ -219,7 +229,7 @@ float st_visibility(vec3 world_position, vec3 normal, float normal_offset, float
 vec3 st_transmittance(vec3 world_position, float footprint, uint kernel, inout StProbe probe) {
 #if ST_DEEP_SHADOWS
   const uint lb = st_light_block(0u);
-  if (lb == 0u || ST_PAGE(kPtStack) != 0u || ST_PAGE(kPtDeep) == 0u) return vec3(1.0);
+  if (lb == 0u || st_stack_map() || ST_PAGE(kPtDeep) == 0u) return vec3(1.0);
   return st_deep_shadow(st_light_uvd(lb, world_position), footprint, kernel, probe);
 #else
   return vec3(1.0);
