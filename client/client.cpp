@@ -204,6 +204,20 @@ float Map::soft_visibility_filtered(const WorldPoint& world, float footprint, ui
   if (!pcf_side_valid(pcf_side)) return kBadSide;
   return map_ ? map_->stack_soft_visibility({world.x, world.y, world.z}, radius_of(pcf_side), footprint) : 1.0f;
 }
+float Map::time_visibility_filtered(const WorldPoint& world, const WorldPoint& normal, double time, float footprint,
+                                    uint32_t pcf_side, bool closed) const noexcept {
+  if (!pcf_side_valid(pcf_side)) return kBadSide;
+  return map_ ? map_->stack_visibility_plane({world.x, world.y, world.z}, {normal.x, normal.y, normal.z}, time,
+                                             radius_of(pcf_side), footprint, closed)
+              : 1.0f;
+}
+float Map::soft_visibility_filtered(const WorldPoint& world, const WorldPoint& normal, float footprint,
+                                    uint32_t pcf_side, bool closed) const noexcept {
+  if (!pcf_side_valid(pcf_side)) return kBadSide;
+  return map_ ? map_->stack_soft_visibility_plane({world.x, world.y, world.z}, {normal.x, normal.y, normal.z},
+                                                  radius_of(pcf_side), footprint, closed)
+              : 1.0f;
+}
 float Map::slice_depth(uint32_t slice, uint32_t level, uint64_t x, uint64_t y) const noexcept {
   return map_ ? map_->stack_depth(slice, level, x, y) : 1.0f;
 }

@@ -141,6 +141,12 @@ class RemoteMap final : public Evaluator {
   const StackGrid* stack_grid() const { return stack_grid_.get(); }
   float stack_visibility(const Vec3d& world, double time, uint32_t pcf_radius = 0, float footprint = 0) const noexcept;
   float stack_soft_visibility(const Vec3d& world, uint32_t pcf_radius = 0, float footprint = 0) const noexcept;
+  // The same with the receiver's normal (StackMap::*_on_plane; a normal far from unit
+  // length is made unit, as visibility_plane_batch does).
+  float stack_visibility_plane(const Vec3d& world, const Vec3d& normal, double time, uint32_t pcf_radius,
+                               float footprint, bool closed) const noexcept;
+  float stack_soft_visibility_plane(const Vec3d& world, const Vec3d& normal, uint32_t pcf_radius, float footprint,
+                                    bool closed) const noexcept;
   // stack_soft_visibility of each point (pcf_radius 0: StackMap's batched, interleaved walks).
   void stack_soft_visibility_batch(std::span<const WorldPoint> points, std::span<float> out,
                                    uint32_t pcf_radius) const noexcept;

@@ -3,6 +3,7 @@
 // cached and retried like any tile; lookups go through StackMap, whose absent tiles
 // answer the cell's level-K value (coarser while tiles stream) and queue the fetch.
 #include <algorithm>
+#include <cmath>
 #include <mutex>
 #include <shared_mutex>
 
@@ -182,6 +183,32 @@ bool RemoteMap::slices_resident(uint32_t w0, uint32_t w1) const noexcept {
     resident = cache_.lookup(g.tile_id(cell)).state == PageState::resident;
   });
   return resident;
+}
+
+namespace {
+// A normal far from unit length made unit (a unit one kept bit for bit: visibility_plane_batch's rule).
+Vec3d stack_plane_normal(const Vec3d& n) {
+  const double len2 = dot(n, n);
+  return len2 > 0 && std::fabs(len2 - 1.0) > 1e-3 ? n * (1.0 / std::sqrt(len2)) : n;
+}
+}  // namespace
+
+float RemoteMap::stack_visibility_plane(const Vec3d& world, const Vec3d& normal, double time, uint32_t pcf_radius,
+                                        float footprint, bool closed) const noexcept {
+  if (!stack_map_) return 1.0f;
+  const Vec3d n = stack_plane_normal(normal);
+  return stack_lookup([&](const StackMap& m) {
+    return m.visibility_filtered_on_plane(world, n, time, pcf_radius, footprint, closed);
+  });
+}
+
+float RemoteMap::stack_soft_visibility_plane(const Vec3d& world, const Vec3d& normal, uint32_t pcf_radius,
+                                             float footprint, bool closed) const noexcept {
+  if (!stack_map_) return 1.0f;
+  const Vec3d n = stack_plane_normal(normal);
+  return stack_lookup([&](const StackMap& m) {
+    return m.soft_visibility_filtered_on_plane(world, n, pcf_radius, footprint, closed);
+  });
 }
 
 }  // namespace st::client

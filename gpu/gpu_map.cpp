@@ -311,7 +311,9 @@ struct GpuMap::Impl {
       // The 2D map's light in the page table, so an engine's shader reads it from there
       // (shadowtile.glsl); 0 when the pass refuses the light (GpuError at the pass).
       try {
-        write_light(pv_end, map_light());
+        const client::LightParams lp = view->light();
+        const ShadowLight sl = map_light();
+        write_light(pv_end, sl, receiver_slope_cap(LightSpace::from_array(LightKind(lp.kind), lp.params), sl, map_level));
         p[L::kPtLight] = pv_end;
       } catch (const GpuError&) {
         p[L::kPtLight] = 0;
@@ -333,7 +335,8 @@ struct GpuMap::Impl {
   void create_device_objects() {
     pool = ctx->make_buffer(pool_bytes, false);
     page = ctx->make_buffer(page_shadow.size() * 4, false);
-    kernels.create(*ctx, opt.frames_in_flight);
+    const Kernel own[2] = {sg ? Kernel::stack_evaluate : Kernel::evaluate, sg ? Kernel::stack_shadow_pass : Kernel::shadow_pass};
+    kernels.create(*ctx, opt.frames_in_flight, own);
     cmd_pool = ctx->make_command_pool(true);
     queries = ctx->make_timestamp_queries(2 * opt.frames_in_flight);
     const uint64_t staging = opt.upload_budget_bytes + uint64_t(slot_words) * 4 + page_shadow.size() * 4;
@@ -404,8 +407,11 @@ struct GpuMap::Impl {
     h[L::kStCellSlots] = off_cell_slots = o;
     for (size_t c = 0; c < g.cells.size(); ++c) p[o++] = L::kNoSlot;
     h[L::kStLights] = o;
-    for (uint32_t w = 0; w < g.slices; ++w, o += L::kStLightWords)
-      write_light(o, shadow_light(LightSpace::from_array(LightKind(g.lights[w].kind), g.lights[w].params)));  // any kind
+    for (uint32_t w = 0; w < g.slices; ++w, o += L::kStLightWords) {
+      const LightSpace ls = LightSpace::from_array(LightKind(g.lights[w].kind), g.lights[w].params);
+      const ShadowLight sl = shadow_light(ls);  // any kind
+      write_light(o, sl, receiver_slope_cap(ls, sl, g.xy_level));
+    }
   }
 
   // The 2D map's light as the pass projects it (suns only: GpuError for any other kind).
@@ -418,7 +424,7 @@ struct GpuMap::Impl {
   }
 
   // kStLightWords words at `o`: GPU_LAYOUT.md "The stack block" (the 2D light likewise).
-  void write_light(uint32_t o, const ShadowLight& sl) {
+  void write_light(uint32_t o, const ShadowLight& sl, float slope_cap) {
     uint32_t* p = page_shadow.data();
     for (int i = 0; i < 3; ++i) {
       p[o + i] = std::bit_cast<uint32_t>(sl.origin[i]);
@@ -430,6 +436,7 @@ struct GpuMap::Impl {
     p[o + L::kStLightCentreU] = std::bit_cast<uint32_t>(sl.centre_u);
     p[o + L::kStLightCentreV] = std::bit_cast<uint32_t>(sl.centre_v);
     p[o + L::kStLightProjection] = sl.perspective ? 1u : 0u;
+    p[o + L::kStLightSlopeCap] = std::bit_cast<uint32_t>(slope_cap);
   }
 
   void upload_all_page_table() {
@@ -661,8 +668,14 @@ struct GpuMap::Impl {
                                         {VK_DESCRIPTOR_TYPE_STORAGE_IMAGE, 2 * n}};
     ep_pool = vk_setup::descriptor_pool(setup, n, ps);
     for (Frame& f : frames) f.set = vk_setup::allocate_set(setup, ep_pool, ep_set_layout);
-    ep_pipeline = vk_setup::compute_pipeline(setup, ep_layout, engine_shadow_pass_spirv(false));
-    if (opt.light_pass) ep_light_pipeline = vk_setup::compute_pipeline(setup, ep_layout, engine_shadow_pass_spirv(true));
+    // Specialization constant 0 (shadowtile.glsl's ST_MAP_KIND_ID): 1 a 2D map, 2 a stack map;
+    // the other kind's tile walk is left out of the pipeline.
+    const uint32_t map_kind = sg ? 2u : 1u;
+    const VkSpecializationMapEntry entry{0, 0, sizeof(uint32_t)};
+    const VkSpecializationInfo spec{1, &entry, sizeof(map_kind), &map_kind};
+    ep_pipeline = vk_setup::compute_pipeline(setup, ep_layout, engine_shadow_pass_spirv(false), &spec);
+    if (opt.light_pass)
+      ep_light_pipeline = vk_setup::compute_pipeline(setup, ep_layout, engine_shadow_pass_spirv(true), &spec);
   }
 
   void need_engine(const char* call) const {
@@ -772,7 +785,7 @@ struct GpuMap::Impl {
     pc[L::kPcHeight] = im.height;
     pc[L::kPcKernel] = in.kernel;
     pc[L::kPcFlags] = (in.neighbour_footprint ? L::kFlagNeighbourFootprint : 0) | (in.soft ? L::kFlagSoft : 0) |
-                      (in.resume_walks ? L::kFlagResumeWalks : 0);
+                      (in.resume_walks ? L::kFlagResumeWalks : 0) | (in.receiver_plane ? L::kFlagReceiverPlane : 0);
     if (sg) {
       const StackTime t = in.soft ? StackTime{} : stack_time(sg->slices, in.time);
       pc[L::kPcSliceA] = t.a;
@@ -1099,7 +1112,7 @@ uint64_t GpuMap::submit_shadow_pass(const ShadowPassInput& in) {
     pc[L::kPcHeight] = in.height;
     pc[L::kPcKernel] = in.kernel;
     pc[L::kPcFlags] = (in.neighbour_footprint ? L::kFlagNeighbourFootprint : 0) | (in.soft ? L::kFlagSoft : 0) |
-                      (in.resume_walks ? L::kFlagResumeWalks : 0);
+                      (in.resume_walks ? L::kFlagResumeWalks : 0) | (in.receiver_plane ? L::kFlagReceiverPlane : 0);
     pc[L::kPcSliceA] = t.a;
     pc[L::kPcSliceB] = t.b;
     pc[L::kPcTimeWeight] = std::bit_cast<uint32_t>(t.f);
@@ -1117,7 +1130,8 @@ uint64_t GpuMap::submit_shadow_pass(const ShadowPassInput& in) {
   pc[L::kPcCount] = in.width;
   pc[L::kPcHeight] = in.height;
   pc[L::kPcKernel] = in.kernel;
-  pc[L::kPcFlags] = in.neighbour_footprint ? L::kFlagNeighbourFootprint : 0;
+  pc[L::kPcFlags] = (in.neighbour_footprint ? L::kFlagNeighbourFootprint : 0) |
+                    (in.receiver_plane ? L::kFlagReceiverPlane : 0);
   for (int i = 0; i < 3; ++i) {
     pc[L::kPcOrigin + i] = std::bit_cast<uint32_t>(light.origin[i]);
     pc[L::kPcAxisU + i] = std::bit_cast<uint32_t>(light.axis_u[i]);
@@ -1195,7 +1209,7 @@ uint32_t GpuMap::sync() {
     Impl::Frame& f = m.acquire();
     uint32_t pc[L::kPcWords] = {};
     f.input_bytes = f.normals_bytes = 0;
-    const uint64_t frame = m.submit(f, Kernel::evaluate, 0, pc);  // uploads only: no queries
+    const uint64_t frame = m.submit(f, m.sg ? Kernel::stack_evaluate : Kernel::evaluate, 0, pc);  // uploads only
     Impl::Frame* g = m.find(frame);
     m.finish(*g);
     g->frame = 0;

@@ -31,8 +31,10 @@ std::span<const uint32_t> engine_shadow_pass_spirv(bool light) {
   return kEngineShadowPassSpv;
 }
 
-void Kernels::create(VkContext& ctx, uint32_t sets, std::span<const std::span<const uint32_t>> extra) {
+void Kernels::create(VkContext& ctx, uint32_t sets, std::span<const Kernel> now,
+                     std::span<const std::span<const uint32_t>> extra) {
   vk_ = &ctx.vk;
+  ctx_ = &ctx;
   const auto d = ctx.setup();
   set_layout_ = vk_setup::set_layout(d, vk_setup::bindings(6, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VK_SHADER_STAGE_COMPUTE_BIT));
   pipeline_layout_ = vk_setup::pipeline_layout(d, {&set_layout_, 1}, {VK_SHADER_STAGE_COMPUTE_BIT, 0, layout::kPcWords * 4});
@@ -41,10 +43,12 @@ void Kernels::create(VkContext& ctx, uint32_t sets, std::span<const std::span<co
   sets_.assign(sets, VK_NULL_HANDLE);
   for (VkDescriptorSet& s : sets_) s = vk_setup::allocate_set(d, descriptor_pool_, set_layout_);
 
-  std::vector<std::span<const uint32_t>> code = {kEvaluateSpv, kShadowPassSpv, kStackEvaluateSpv, kStackShadowPassSpv};
-  code.insert(code.end(), extra.begin(), extra.end());
-  pipelines_.assign(code.size(), VK_NULL_HANDLE);
-  for (size_t i = 0; i < code.size(); ++i) pipelines_[i] = vk_setup::compute_pipeline(d, pipeline_layout_, code[i]);
+  code_ = {kEvaluateSpv, kShadowPassSpv, kStackEvaluateSpv, kStackShadowPassSpv};
+  code_.insert(code_.end(), extra.begin(), extra.end());
+  pipelines_.assign(code_.size(), VK_NULL_HANDLE);
+  for (const Kernel k : now) pipelines_[uint32_t(k)] = vk_setup::compute_pipeline(d, pipeline_layout_, code_[uint32_t(k)]);
+  for (size_t i = kKernelCount; i < code_.size(); ++i)
+    pipelines_[i] = vk_setup::compute_pipeline(d, pipeline_layout_, code_[i]);
 }
 
 VkDescriptorSet Kernels::bind(VkContext& ctx, uint32_t i, const std::array<VkBuffer, 6>& buffers) {
@@ -55,7 +59,9 @@ VkDescriptorSet Kernels::bind(VkContext& ctx, uint32_t i, const std::array<VkBuf
 }
 
 void Kernels::record(VkCommandBuffer cmd, Kernel k, VkDescriptorSet set, const uint32_t (&pc)[layout::kPcWords]) const {
-  vk_->CmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipelines_[uint32_t(k)]);
+  VkPipeline& p = pipelines_[uint32_t(k)];
+  if (!p) p = vk_setup::compute_pipeline(ctx_->setup(), pipeline_layout_, code_[uint32_t(k)]);
+  vk_->CmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, p);
   vk_->CmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_COMPUTE, pipeline_layout_, 0, 1, &set, 0, nullptr);
   vk_->CmdPushConstants(cmd, pipeline_layout_, VK_SHADER_STAGE_COMPUTE_BIT, 0, sizeof(pc), pc);
 }
@@ -67,6 +73,7 @@ void Kernels::destroy(VkContext& ctx) {
   for (VkPipeline& p : pipelines_)
     if (p) vk_->DestroyPipeline(d, p, cb), p = VK_NULL_HANDLE;
   pipelines_.clear();
+  code_.clear();
   if (descriptor_pool_) vk_->DestroyDescriptorPool(d, descriptor_pool_, cb);
   if (pipeline_layout_) vk_->DestroyPipelineLayout(d, pipeline_layout_, cb);
   if (set_layout_) vk_->DestroyDescriptorSetLayout(d, set_layout_, cb);

@@ -35,8 +35,12 @@ std::span<const uint32_t> engine_shadow_pass_spirv(bool light = false);
 class Kernels {
  public:
   // Pipelines plus `sets` descriptor sets; `extra`: SPIR-V of further compute kernels over
-  // the same set layout and push constants, recorded as extra_kernel(i).
-  void create(VkContext& ctx, uint32_t sets, std::span<const std::span<const uint32_t>> extra = {});
+  // the same set layout and push constants, recorded as extra_kernel(i). The pipelines of
+  // `now` and the extra ones are built here; any other kernel's on its first record (a
+  // pipeline compile costs seconds to minutes from a cold shader cache on a software device,
+  // so a 2D map never builds the stack kernels, nor a stack map the 2D ones).
+  void create(VkContext& ctx, uint32_t sets, std::span<const Kernel> now,
+              std::span<const std::span<const uint32_t>> extra = {});
   // Points descriptor set `i` at the six buffers, in binding order.
   VkDescriptorSet bind(VkContext& ctx, uint32_t i, const std::array<VkBuffer, 6>& buffers);
   void record(VkCommandBuffer cmd, Kernel k, VkDescriptorSet set, const uint32_t (&pc)[layout::kPcWords]) const;
@@ -46,7 +50,9 @@ class Kernels {
   VkDescriptorSetLayout set_layout_ = VK_NULL_HANDLE;
   VkPipelineLayout pipeline_layout_ = VK_NULL_HANDLE;
   VkDescriptorPool descriptor_pool_ = VK_NULL_HANDLE;
-  std::vector<VkPipeline> pipelines_;
+  mutable std::vector<VkPipeline> pipelines_;  // VK_NULL_HANDLE: not built yet
+  std::vector<std::span<const uint32_t>> code_;
+  VkContext* ctx_ = nullptr;
   std::vector<VkDescriptorSet> sets_;
   const VkFunctions* vk_ = nullptr;  // the context's table (create())
 };

@@ -81,6 +81,9 @@ static_assert(layout::kMaxStackCells == kStackMaxCells);
 static_assert(layout::kStLightWords >= 13 && layout::kStHeaderWords > layout::kStLights);
 static_assert(layout::kStLightCentreU == 13 && layout::kStLightCentreV == 14 &&
               layout::kStLightProjection == 15 && layout::kStLightProjection < layout::kStLightWords);
+static_assert(layout::kStLightSlopeCap == 16 && layout::kStLightSlopeCap < layout::kStLightWords &&
+              (layout::kFlagReceiverPlane & (layout::kFlagSoft | layout::kFlagNeighbourFootprint |
+                                             layout::kFlagResumeWalks)) == 0);
 static_assert((layout::kFlagSoft & layout::kFlagNeighbourFootprint) == 0 &&
               (layout::kFlagResumeWalks & (layout::kFlagSoft | layout::kFlagNeighbourFootprint)) == 0);
 // A stack query is GpuStackQuery word for word; the stack pass's push constants sit where

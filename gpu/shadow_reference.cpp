@@ -101,6 +101,32 @@ std::array<uint32_t, 2> finest_texel(const LightUvd& c, uint32_t finest) {
   return {std::min(uint32_t(std::floor(c.u * side)), top), std::min(uint32_t(std::floor(c.v * side)), top)};
 }
 
+ReceiverPlane plane_through(const LightUvd& c, uint32_t x, uint32_t y, uint32_t finest, float gx, float gy) {
+  const float side = std::ldexp(1.0f, int(finest));
+  const float su = c.u * side, sv = c.v * side;
+  const float in_u = su - std::floor(su), in_v = sv - std::floor(sv);
+  const float du = gx * in_u, dv = gy * in_v;
+  const float corner_u = c.d - du;
+  ReceiverPlane p;
+  p.fx = x, p.fy = y, p.finest = finest, p.corner = corner_u - dv, p.gx = gx, p.gy = gy;
+  return p;
+}
+
+float dot_reference(const std::array<float, 3>& p, const std::array<float, 3>& q) {
+  const float x = p[0] * q[0], y = p[1] * q[1], z = p[2] * q[2];
+  const float xy = x + y;
+  return xy + z;
+}
+
+float receiver_slope_cap(const LightSpace& ls, const ShadowLight& l, uint32_t finest) {
+  if (l.perspective) return 0.0f;
+  const Vec3d t = ls.forward() * -1.0;  // toward the light (receiver_plane_at's for a parallel light)
+  const float texel = float(ls.texel_size(ls.origin(), finest));
+  const float cl = dot_reference(l.forward, {float(t.x), float(t.y), float(t.z)});
+  const float reach = texel * std::fabs(cl);
+  return kMaxReceiverSlope * reach;
+}
+
 StackTime stack_time(uint32_t slices, double time) {
   StackTime t;
   if (slices <= 1) return t;
@@ -122,6 +148,12 @@ float slice_pcf(const client::Map& map, uint32_t w, uint32_t level, uint32_t x, 
   for (uint32_t j = 0; j < r; ++j)
     for (uint32_t i = 0; i < r; ++i) lit += d <= map.slice_depth(w, level, pcf_tap(x, i, r, s), pcf_tap(y, j, r, s));
   return float(lit) / float(r * r);
+}
+
+float slice_pcf_plane(const client::Map& map, uint32_t w, uint32_t level, uint32_t x, uint32_t y, uint32_t r,
+                      const ReceiverPlane& p) {
+  return pcf_plane_each_tap(level, x, y, r, p,
+                            [&](uint64_t tx, uint64_t ty) { return map.slice_depth(w, level, tx, ty); });
 }
 
 std::vector<ShadowLight> slice_lights(const client::StackTables& g) {
@@ -163,20 +195,14 @@ void receiver_lookup_reference(const client::Map& map, std::span<const float> re
     const LightUvd c = light_uvd(lights[w], receiver);
     if (!in_light_box(c)) return 1.0f;
     const std::array<uint32_t, 2> t = finest_texel(c, finest);
-    if (g || (gx == 0.0f && gy == 0.0f))
+    if (gx == 0.0f && gy == 0.0f)
       return filtered(finest, t[0], t[1], footprint, [&](uint32_t level, uint32_t x, uint32_t y) {
         return g ? slice_pcf(map, w, level, x, y, q.kernel, c.d) : map.pcf(level, x, y, q.kernel, c.d);
       });
     // st_shadow_uvd_plane: the plane's depth at the texel's low corner, then its taps.
-    const float side = std::ldexp(1.0f, int(finest));
-    const float su = c.u * side, sv = c.v * side;
-    const float in_u = su - std::floor(su), in_v = sv - std::floor(sv);
-    const float du = gx * in_u, dv = gy * in_v;
-    const float corner_u = c.d - du;
-    ReceiverPlane p;
-    p.fx = t[0], p.fy = t[1], p.finest = finest, p.corner = corner_u - dv, p.gx = gx, p.gy = gy;
+    const ReceiverPlane p = plane_through(c, t[0], t[1], finest, gx, gy);
     return filtered(finest, t[0], t[1], footprint, [&](uint32_t level, uint32_t x, uint32_t y) {
-      return plane_pcf(map, level, x, y, q.kernel, p);
+      return g ? slice_pcf_plane(map, w, level, x, y, q.kernel, p) : plane_pcf(map, level, x, y, q.kernel, p);
     });
   };
   const size_t n = std::min(receivers.size() / 4, out.size());

@@ -26,6 +26,7 @@
 #include "tiles/core/filter_level.hpp"
 #include "tiles/core/light.hpp"
 #include "tiles/core/pack_format.hpp"
+#include "tiles/core/receiver_plane.hpp"
 
 namespace st::gpu {
 
@@ -70,6 +71,19 @@ inline bool in_light_box(const LightUvd& c) {
 // The finest texel of an in-box point: floor(u * 2^finest), clamped to the map.
 std::array<uint32_t, 2> finest_texel(const LightUvd& c, uint32_t finest);
 
+// The receiver plane through c with slopes (gx, gy) (st_plane_corner): its depth at the low
+// corner of c's finest texel (x, y), (d - gx * in_u) - gy * in_v, (in_u, in_v) c's place in it.
+ReceiverPlane plane_through(const LightUvd& c, uint32_t x, uint32_t y, uint32_t finest, float gx, float gy);
+
+// The float dot product of the shaders: the products, then (x + y) + z.
+float dot_reference(const std::array<float, 3>& p, const std::array<float, 3>& q);
+
+// A light's receiver-slope cap (the light block's kStLightSlopeCap word, GpuMap writes it;
+// st_plane.glsl): kMaxReceiverSlope * (texel * |c . to_light|) in float, as st_receiver_slope
+// computes it, with texel = float(ls.texel_size(origin, finest)), to_light = float(-ls.forward())
+// (the CPU's receiver_plane_at's) and c = l.forward; 0 for a perspective light.
+float receiver_slope_cap(const LightSpace& ls, const ShadowLight& l, uint32_t finest);
+
 // Filtering at the finest texel (x, y) (filter_level.hpp, st_lookup): pcf(level, x, y) at the
 // footprint's fine level, and where t > 0 blended with its coarse one.
 template <class Pcf>
@@ -82,6 +96,10 @@ float filtered(uint32_t finest, uint32_t x, uint32_t y, float footprint, Pcf&& p
 // r x r PCF in slice w of a stack map at `level` (st_stack_pcf): lit taps / (r * r), taps
 // clamped, depths from Map::slice_depth.
 float slice_pcf(const client::Map& map, uint32_t w, uint32_t level, uint32_t x, uint32_t y, uint32_t r, float d);
+
+// r x r PCF in slice w at `level` with each tap against the receiver plane (st_stack_pcf_plane).
+float slice_pcf_plane(const client::Map& map, uint32_t w, uint32_t level, uint32_t x, uint32_t y, uint32_t r,
+                      const ReceiverPlane& p);
 
 // Each slice's float light (shadow_light of its light space).
 std::vector<ShadowLight> slice_lights(const client::StackTables& g);

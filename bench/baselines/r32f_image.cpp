@@ -35,7 +35,7 @@ struct R32fImage::Impl {
       if (values.size() != (uint64_t(1) << (2 * l))) throw GpuError("R32fImage: values must hold 4^level floats");
       if (bytes > ctx.properties().limits.maxStorageBufferRange)
         throw GpuError("R32fImage: " + std::to_string(bytes) + " bytes exceed maxStorageBufferRange of '" + ctx.device_name() + "'");
-      kernels.create(ctx, 1, kR32fKernel);
+      kernels.create(ctx, 1, {}, kR32fKernel);
       image = ctx.make_buffer(bytes, false);
       const uint32_t pcf = L::kPtHeaderWords;
       page = ctx.make_buffer((pcf + L::kMaxPcf * L::kPcfTableStride) * 4, true);

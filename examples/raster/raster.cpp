@@ -484,6 +484,11 @@ struct Rasterizer::Impl {
     ds.depthWriteEnable = VK_FALSE;
     ds.depthCompareOp = VK_COMPARE_OP_EQUAL;  // gl_Position is invariant: the same depths
     p.fragment = fs.module;
+    // scene.frag's ST_MAP_KIND_ID: the map's kind, so the pipeline holds one kind's tile walk.
+    const uint32_t map_kind = g->is_stack() ? 2u : 1u;
+    const VkSpecializationMapEntry kind_entry{0, 0, sizeof(uint32_t)};
+    const VkSpecializationInfo spec{1, &kind_entry, sizeof(map_kind), &map_kind};
+    p.fragment_specialization = &spec;
     p.colour_attachments = o.twin ? 3 : 1;
     p.pass = rp_shade;
     shade_pipeline = vk_setup::pipeline(d, p);

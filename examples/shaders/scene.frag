@@ -10,6 +10,7 @@
 // baseline the benchmark compares with. A 2D map's partial occluders (its deep part)
 // multiply their transmittance per channel into the light. RASTER_TWIN: the receiver and the visibility are
 // also written (a CPU twin answers the same lookups).
+#define ST_MAP_KIND_ID 0  // specialization constant 0: 1 a 2D map, 2 a stack map (the other walk left out)
 #define ST_SET 0
 #define ST_BINDING_POOL 0
 #define ST_BINDING_PAGE 1

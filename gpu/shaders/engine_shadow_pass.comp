@@ -3,12 +3,17 @@
 // (world positions, normals) -> its R32F visibility image, through shadowtile.glsl (the
 // include an engine's own shaders use). Per pixel the same operations as shadow_pass.comp
 // (2D maps) and stack_shadow_pass.comp (stack maps, at a time or soft): the neighbour
-// footprint per slice in that slice's light, the blend or the soft average; so the answers
-// equal theirs and their CPU twins (gpu/shadow_reference.hpp) bit for bit. Compiled a
+// footprint per slice in that slice's light, the receiver plane from the pixel's normal
+// (kFlagReceiverPlane), the blend or the soft average; so the answers
+// equal theirs and their CPU twins (tests/gpu/shadow_twins.hpp) bit for bit. Compiled a
 // second time with ST_PASS_LIGHT (ShadowPassImages::light): it also writes the light per
 // channel, visibility x the deep part's transmittance (st_deep_shadow at the pixel's
-// surface point, the pixel's footprint), as rgb, and the visibility as a.
+// surface point, the pixel's footprint), as rgb, and the visibility as a. One call site of
+// the lookup (slices in a loop), and specialization constant 0 (GpuMap::is_stack: 1 a 2D
+// map, 2 a stack map) leaves the other kind's walk out: a pipeline compile from a cold
+// shader cache inlines the tile walk once.
 #extension GL_GOOGLE_include_directive : require
+#define ST_MAP_KIND_ID 0
 #define ST_SET 0
 #define ST_BINDING_POOL 0
 #define ST_BINDING_PAGE 1
@@ -50,7 +55,11 @@ float slice_visibility(uint w, ivec2 q, vec3 r, inout StProbe probe, out float f
     footprint = st_footprint_of(uvd, has_right ? st_light_uvd(lb, rr) : uvd, has_right,
                                 has_down ? st_light_uvd(lb, rd) : uvd, has_down);
   }
-  return st_shadow_uvd(w, uvd, footprint, pc.w[kPcKernel], probe);
+  // Each tap against the receiver's plane through uvd with the pixel's normal (st_plane.glsl);
+  // without kFlagReceiverPlane zero slopes: one receiver depth, st_shadow_uvd's answer.
+  const vec2 slope = (pc.w[kPcFlags] & kFlagReceiverPlane) == 0u ? vec2(0.0)
+                                                                 : st_receiver_slope(lb, texelFetch(st_normals, q, 0).xyz);
+  return st_shadow_uvd_plane(w, uvd, slope, footprint, pc.w[kPcKernel], probe);
 }
 
 void main() {
@@ -65,33 +74,35 @@ void main() {
     return;
   }
   StProbe probe = st_probe();
-  float answer, footprint;
-  vec3 t = vec3(1.0);
-  if (st_slices() == 0u) {
-    answer = slice_visibility(0u, q, r, probe, footprint);
-#ifdef ST_PASS_LIGHT
-    t = st_transmittance(texelFetch(st_positions, q, 0).xyz, footprint, pc.w[kPcKernel], probe);
-#endif
-  } else {
-    st_oct_path_reset((pc.w[kPcFlags] & kFlagResumeWalks) != 0u);
-    if ((pc.w[kPcFlags] & kFlagSoft) != 0u) {
-      const uint n = st_slices();
-      precise float sum = 0.0;
-      for (uint w = 0u; w < n; ++w) sum = sum + slice_visibility(w, q, r, probe, footprint);
-      answer = st_fdiv(sum, float(n));
-    } else {
-      const uint wa = pc.w[kPcSliceA], wb = pc.w[kPcSliceB];
-      const float va = slice_visibility(wa, q, r, probe, footprint);
-      answer = va;
-      if (wb != wa) {
-        const float vb = slice_visibility(wb, q, r, probe, footprint);
-        precise float step = vb - va;
-        precise float scaled = pc_float(kPcTimeWeight) * step;
-        precise float blended = va + scaled;
-        answer = blended;
-      }
-    }
+  // One call site of slice_visibility: a 2D map's light, a stack's slices a and b at a time
+  // (blended va + f * (vb - va)), or every slice (soft: summed in slice order, then divided).
+  const uint slices = st_slices();
+  const bool soft = slices != 0u && (pc.w[kPcFlags] & kFlagSoft) != 0u;
+  const uint wa = pc.w[kPcSliceA], wb = pc.w[kPcSliceB];
+  const uint count = slices == 0u ? 1u : soft ? slices : (wa == wb ? 1u : 2u);
+  if (slices != 0u) st_oct_path_reset((pc.w[kPcFlags] & kFlagResumeWalks) != 0u);
+  precise float sum = 0.0;
+  float va = 1.0, vb = 1.0, footprint = 0.0;
+  for (uint i = 0u; i < count; ++i) {
+    const uint w = slices == 0u ? 0u : soft ? i : (i == 0u ? wa : wb);
+    const float v = slice_visibility(w, q, r, probe, footprint);
+    sum = sum + v;
+    if (i == 0u) va = v;
+    else vb = v;
   }
+  float answer = va;
+  if (soft) {
+    answer = st_fdiv(sum, float(slices));
+  } else if (count == 2u) {
+    precise float step = vb - va;
+    precise float scaled = pc_float(kPcTimeWeight) * step;
+    precise float blended = va + scaled;
+    answer = blended;
+  }
+  vec3 t = vec3(1.0);
+#ifdef ST_PASS_LIGHT
+  if (slices == 0u) t = st_transmittance(texelFetch(st_positions, q, 0).xyz, footprint, pc.w[kPcKernel], probe);
+#endif
   imageStore(st_visibility_image, q, vec4(answer));
 #ifdef ST_PASS_LIGHT
   precise vec3 light = answer * t;

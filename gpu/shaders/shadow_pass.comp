@@ -1,11 +1,13 @@
 #version 450
 // The shadow pass (GpuMap::shadow_pass): world positions (and normals) of a G-buffer ->
 // visibility. A sun's light space in float32, the same operations as the CPU twin
-// gpu::shadow_pass_reference (gpu/shadow_reference.cpp); see GPU_LAYOUT.md.
+// gpu::shadow_pass_reference (gpu/shadow_reference.cpp); see GPU_LAYOUT.md. With
+// kFlagReceiverPlane each PCF tap compares the receiver's plane (st_plane.glsl).
 #include "st_buffers.glsl"
 
 #include "st_light.glsl"
 #include "st_deep.glsl"
+#include "st_plane.glsl"
 
 // The transmittance at pixel p's surface point itself (no normal offset).
 vec3 st_deep_surface(uint p, float footprint) {
@@ -57,7 +59,19 @@ void main() {
     footprint = f * side;
   }
   StProbe probe = st_probe();
-  const float vis = st_lookup(x, y, d, footprint, st_pc.w[kPcKernel], probe);
+  // With kFlagReceiverPlane each tap against the receiver's plane through (u, v, d) with the
+  // pixel's normal, the slopes in the map's light (kPtLight: the rows of the push constants)
+  // and its cap; without, zero slopes: one receiver depth (the plane's corner is then d, bit
+  // for bit). One call site of the walk: a compiler inlines it once.
+  vec2 slope = vec2(0.0);
+  if ((st_pc.w[kPcFlags] & kFlagReceiverPlane) != 0u) {
+    const uint b = 4u * p;
+    const vec3 n = vec3(uintBitsToFloat(st_normal_words[b]), uintBitsToFloat(st_normal_words[b + 1u]),
+                        uintBitsToFloat(st_normal_words[b + 2u]));
+    slope = st_plane_slope(st_page_words[kPtLight], finest, n);
+  }
+  const vec3 plane = vec3(st_plane_corner(vec3(u, v, d), slope, side), slope.x, slope.y);
+  const float vis = st_lookup_plane(x, y, plane, footprint, st_pc.w[kPcKernel], probe);
   st_output[p] = vis;
   if (probe.hole) atomicAdd(st_fb_words[kFbHoles], 1u);
   st_write_light(p, width * height, vis, st_deep_surface(p, footprint));

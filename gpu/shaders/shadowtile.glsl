@@ -1,6 +1,6 @@
 // shadowtile.glsl: the GPU tile cache for an engine's own shaders (fragment, compute, any
 // stage that may read storage buffers). Installed with the client (share/shadowtile/shaders)
-// beside st_layout.h, st_eval.glsl, st_stack.glsl, st_fdiv.glsl and st_deep.glsl, which it
+// beside st_layout.h, st_eval.glsl, st_stack.glsl, st_fdiv.glsl, st_deep.glsl and st_plane.glsl, which it
 // includes: compile with glslc -I <that folder>. It declares GpuMap's three buffers at the
 // set and bindings the engine chooses and answers the light reaching a world position,
 // bit for bit as the CPU's Map::pcf / Evaluator::pcf_footprint (2D maps) and StackMap's filtered
@@ -16,6 +16,8 @@
 //   #define ST_BINDING_FEEDBACK 2     // GpuDescriptors::feedback    (default 2)
 //   #define ST_FEEDBACK 0             // optional: no feedback buffer (read-only use)
 //   #define ST_DEEP_SHADOWS 0         // optional: no partial occluders (st_shadow = vec3(visibility))
+//   #define ST_MAP_KIND_ID 7          // optional: specialization constant 7 says which maps the
+//                                     // pipeline serves: 0 either (default), 1 2D, 2 stack
 //   #include "shadowtile.glsl"
 //   ...
 //   StProbe probe = st_probe();
@@ -29,12 +31,13 @@
 // dFdx(uvd) in a fragment shader), which grows at grazing angles; distance x pixel angle /
 // texel (render/render.cpp's) stays isotropic (examples/shaders/scene.frag). Filtered
 // kernels on surfaces sloped to the light shadow their own surface (a coarse level's
-// above all: rings around the camera) unless each tap compares the receiver's plane:
-//   vec2 slope = st_receiver_slope(st_light_block(0u), normal, to_light, finest_texel_world);
-//   float vis = st_shadow_uvd_plane(0u, st_light_uvd(st_light_block(0u), st_receiver(p, normal, 1.5 * finest_texel_world)),
-//                                   slope, footprint, 3u, probe);
-// as `shadowtile render --filter` does (render/render.hpp filtered_lookup); st_visibility
-// and st_shadow take one receiver depth (the unfiltered rule). The deep part is
+// above all: rings around the camera) unless each tap compares the receiver's plane, so
+// st_visibility and st_shadow compare each tap with the plane through the receiver with
+// the surface's normal (st_receiver_slope, st_plane.glsl), as the CPU's
+// Map::visibility_filtered with a normal and `shadowtile render --filter` do
+// (tiles/core/receiver_plane.hpp); an offset of 1.5 finest texels suits open surfaces:
+//   float vis = st_visibility(p, normal, 1.5 * finest_texel_world, footprint, 3u, probe);
+// One receiver depth for every tap (the unfiltered rule) is st_shadow_uvd. The deep part is
 // looked up at the surface point itself moved toward the light along the light ray by 1.5
 // deep texels (no normal offset, which would shift leaf shadows sideways), filtered with
 // its mips over kernel x max(1, footprint) finest texels (st_deep.glsl). Feedback: every
@@ -43,6 +46,13 @@
 // a stage with storage-buffer writes (fragmentStoresAndAtomics for fragment shaders).
 // Deep tiles are fed back likewise (the tiles of partial occluders a lookup needed; pass the
 // probe to st_transmittance). No workgroup size is assumed: the engine declares its own local_size.
+// Compile time: a shader compiler inlines every function, so each call of st_visibility,
+// st_shadow, st_shadow_uvd[_plane] or st_shadow_stack in a shader is one more copy of the
+// tile walk and its decoders (a pipeline compile of minutes on a software device from a cold
+// shader cache): call one of them once per shader (loop over slices or taps around the call,
+// as examples/shaders/scene.frag does), and with ST_MAP_KIND_ID set the specialization
+// constant to GpuMap::is_stack() (1 for a 2D map, 2 for a stack map) at pipeline creation:
+// the walk of the other kind of map is then left out.
 #ifndef SHADOWTILE_GLSL
 #define SHADOWTILE_GLSL
 #extension GL_GOOGLE_include_directive : require
@@ -81,11 +91,19 @@ layout(std430, set = ST_SET, binding = ST_BINDING_FEEDBACK) coherent buffer StFe
 
 #include "st_eval.glsl"
 #include "st_stack.glsl"
+#include "st_plane.glsl"
 #if ST_DEEP_SHADOWS
 #include "st_deep.glsl"
 #endif
 
 // ---- the map and its lights (page table) ----
+#ifdef ST_MAP_KIND_ID
+layout(constant_id = ST_MAP_KIND_ID) const uint st_map_kind = 0u;
+#else
+const uint st_map_kind = 0u;
+#endif
+// A stack map (the page table's stack block), or what the pipeline's st_map_kind says.
+bool st_stack_map() { return st_map_kind == 0u ? ST_PAGE(kPtStack) != 0u : st_map_kind == 2u; }
 // Slices of a stack map (0: a 2D map).
 uint st_slices() {
   const uint blk = ST_PAGE(kPtStack);
@@ -144,86 +162,65 @@ float st_footprint_of(vec3 uvd, vec3 right, bool has_right, vec3 down, bool has_
   return f * side;
 }
 
-// Visibility of a light-space point in slice w (2D maps: w unused): outside the light's box
-// lit (1); else the texel floor(uv * 2^finest), the level pair of the footprint and
-// kernel x kernel PCF at each, blended. kernel: the PCF kernel side, odd 1..9 (the C++
-// API's unit); any other answers NaN, as Map::visibility does. Absent tiles answer
-// coarsely and are fed back.
-float st_shadow_uvd(uint w, vec3 uvd, float footprint, uint kernel, inout StProbe probe) {
+// ---- receiver-plane depth bias (tiles/core/receiver_plane.hpp, st_plane.glsl) ----
+// A filtered lookup compares each PCF tap with the receiver's plane over the tap's texel,
+// not with one depth: on surfaces sloped to the light a kernel (a coarse level's above all)
+// otherwise shadows its own surface (rings around the camera on sloped open ground).
+// st_receiver_slope: the plane's depth slopes per finest texel, (gx, gy), from the surface
+// normal through the light at `lb` (st_plane_slope), each clamped to kStMaxReceiverSlope
+// times the depth of one texel along the light ray: the light's own cap (kStLightSlopeCap,
+// what st_visibility, st_shadow and the shadow passes use), or one from `texel` (one finest
+// texel in world units) and `to_light` (the unit direction toward the light),
+// kStMaxReceiverSlope * (texel * |c . to_light|). gpu::receiver_slope_reference is the CPU
+// twin. A perspective light (a stack's spot) answers (0, 0): one receiver depth, as before.
+vec2 st_receiver_slope(uint lb, vec3 normal) {
+  if (lb == 0u) return vec2(0.0);
+  return st_plane_slope(lb, st_finest_level(), normal);
+}
+vec2 st_receiver_slope(uint lb, vec3 normal, vec3 to_light, float texel) {
+  if (lb == 0u) return vec2(0.0);
+  const vec3 c = vec3(st_light_word(lb, 9u), st_light_word(lb, 10u), st_light_word(lb, 11u));
+  precise float cl = c.x * to_light.x + c.y * to_light.y + c.z * to_light.z;
+  precise float cap = kStMaxReceiverSlope * (texel * abs(cl));
+  return st_plane_slope(lb, st_finest_level(), normal, cap);
+}
+
+// st_shadow_uvd with the receiver plane: slope (gx, gy) from st_receiver_slope (slice w's
+// light for a stack map), the plane through uvd: its depth at the low corner of uvd's
+// finest texel (st_plane_corner).
+float st_shadow_uvd_plane(uint w, vec3 uvd, vec2 slope, float footprint, uint kernel, inout StProbe probe) {
   if (kernel < 1u || kernel > 9u || (kernel & 1u) == 0u) return uintBitsToFloat(0x7FC00000u);
   if (!st_in_light_box(uvd)) return 1.0;
   const uint finest = st_finest_level();
   const float side = uintBitsToFloat((127u + finest) << 23u);
   precise float fu = floor(uvd.x * side), fv = floor(uvd.y * side);
   const uint x = min(uint(fu), (1u << finest) - 1u), y = min(uint(fv), (1u << finest) - 1u);
-  if (ST_PAGE(kPtStack) != 0u) return st_stack_lookup(x, y, w, uvd.z, footprint, kernel, probe);
-  return st_lookup(x, y, uvd.z, footprint, kernel, probe);
+  const vec3 plane = vec3(st_plane_corner(uvd, slope, side), slope.x, slope.y);
+  if (st_stack_map()) return st_stack_lookup_plane(x, y, w, plane, footprint, kernel, probe);
+  return st_lookup_plane(x, y, plane, footprint, kernel, probe);
 }
 
-// ---- receiver-plane depth bias (tiles/core/receiver_plane.hpp) ----
-// A filtered lookup compares each PCF tap with the receiver's plane over the tap's texel,
-// not with one depth: on surfaces sloped to the light a kernel (a coarse level's above all)
-// otherwise shadows its own surface (rings around the camera on sloped open ground).
-// st_receiver_slope: the plane's depth slopes per finest texel, (gx, gy), from the
-// surface normal through the light's rows at `lb` (a, b, c: u, v, d of an affine light):
-// the plane's normal in light space is (n . (b x c), n . (c x a), n . (a x b)) up to a
-// factor, so d(depth)/du = -(n . (b x c)) / (n . (a x b)), likewise v, over 2^finest; each
-// clamped to kStMaxReceiverSlope times the depth of one texel along the light ray (texel:
-// one finest texel in world units, to_light: the unit direction toward the light), and a
-// slope below 2^-60 (or NaN) is 0 (no subnormal products on devices that flush them).
-// Every product, sum and the quotients (st_fdiv) rounded once, in the order written:
-// gpu::receiver_slope_reference is the CPU twin. A perspective light (a stack's spot)
-// answers (0, 0): one receiver depth, as before.
-const float kStMaxReceiverSlope = 4.0;  // kMaxReceiverSlope (tiles/core/receiver_plane.hpp)
-float st_slope_clamp(float g, float cap) {
-  const float c = abs(g) <= cap ? g : g > 0.0 ? cap : g < 0.0 ? -cap : 0.0;
-  return abs(c) < uintBitsToFloat(0x21800000u) ? 0.0 : c;  // 2^-60
-}
-vec2 st_receiver_slope(uint lb, vec3 normal, vec3 to_light, float texel) {
-  if (lb == 0u || ST_PAGE(lb + kStLightProjection) != 0u) return vec2(0.0);
-  const vec3 a = vec3(st_light_word(lb, 3u), st_light_word(lb, 4u), st_light_word(lb, 5u));
-  const vec3 b = vec3(st_light_word(lb, 6u), st_light_word(lb, 7u), st_light_word(lb, 8u));
-  const vec3 c = vec3(st_light_word(lb, 9u), st_light_word(lb, 10u), st_light_word(lb, 11u));
-  precise vec3 bc = vec3(b.y * c.z - b.z * c.y, b.z * c.x - b.x * c.z, b.x * c.y - b.y * c.x);
-  precise vec3 ca = vec3(c.y * a.z - c.z * a.y, c.z * a.x - c.x * a.z, c.x * a.y - c.y * a.x);
-  precise vec3 ab = vec3(a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x);
-  precise float pu = normal.x * bc.x + normal.y * bc.y + normal.z * bc.z;
-  precise float pv = normal.x * ca.x + normal.y * ca.y + normal.z * ca.z;
-  precise float pw = normal.x * ab.x + normal.y * ab.y + normal.z * ab.z;
-  const float side = uintBitsToFloat((127u + st_finest_level()) << 23u);
-  precise float den = pw * side;
-  precise float cl = c.x * to_light.x + c.y * to_light.y + c.z * to_light.z;
-  precise float cap = kStMaxReceiverSlope * (texel * abs(cl));
-  return vec2(st_slope_clamp(st_fdiv(-pu, den), cap), st_slope_clamp(st_fdiv(-pv, den), cap));
-}
-
-// st_shadow_uvd with the receiver plane: slope (gx, gy) from st_receiver_slope, the plane
-// through uvd: its depth at the low corner of uvd's finest texel, corner = (d - gx * fu) -
-// gy * fv with (fu, fv) uvd's place in that texel. Stack maps take one receiver depth.
-float st_shadow_uvd_plane(uint w, vec3 uvd, vec2 slope, float footprint, uint kernel, inout StProbe probe) {
-  if (kernel < 1u || kernel > 9u || (kernel & 1u) == 0u) return uintBitsToFloat(0x7FC00000u);
-  if (!st_in_light_box(uvd)) return 1.0;
-  const uint finest = st_finest_level();
-  const float side = uintBitsToFloat((127u + finest) << 23u);
-  precise float su = uvd.x * side, sv = uvd.y * side;
-  precise float fu = floor(su), fv = floor(sv);
-  const uint x = min(uint(fu), (1u << finest) - 1u), y = min(uint(fv), (1u << finest) - 1u);
-  if (ST_PAGE(kPtStack) != 0u) return st_stack_lookup(x, y, w, uvd.z, footprint, kernel, probe);
-  precise float in_u = su - fu, in_v = sv - fv;
-  precise float du = slope.x * in_u, dv = slope.y * in_v;
-  precise float corner_u = uvd.z - du;
-  precise float corner = corner_u - dv;
-  return st_lookup_plane(x, y, vec3(corner, slope.x, slope.y), footprint, kernel, probe);
+// Visibility of a light-space point in slice w (2D maps: w unused): outside the light's box
+// lit (1); else the texel floor(uv * 2^finest), the level pair of the footprint and
+// kernel x kernel PCF at each with one receiver depth (uvd.z) for every tap, blended.
+// kernel: the PCF kernel side, odd 1..9 (the C++ API's unit); any other answers NaN, as
+// Map::visibility does. Absent tiles answer coarsely and are fed back. The same walk as
+// st_shadow_uvd_plane with zero slopes (its plane's corner is then uvd.z, bit for bit).
+float st_shadow_uvd(uint w, vec3 uvd, float footprint, uint kernel, inout StProbe probe) {
+  return st_shadow_uvd_plane(w, uvd, vec2(0.0), footprint, kernel, probe);
 }
 
 // Visibility at a world position (2D maps; on a stack map slice 0): the receiver offset
-// along the normal, the map's light, the footprint given. 1 where the map has no light.
+// along the normal, the map's light, the footprint given, each PCF tap against the
+// receiver's plane (st_receiver_slope(lb, normal): Map::visibility_filtered with a normal,
+// the shadow passes' rule). 1 where the map has no light. One receiver depth for every
+// tap: st_shadow_uvd(0u, st_light_uvd(lb, st_receiver(...)), ...).
 float st_visibility(vec3 world_position, vec3 normal, float normal_offset, float footprint, uint kernel,
                     inout StProbe probe) {
   const uint lb = st_light_block(0u);
   if (lb == 0u) return 1.0;
-  return st_shadow_uvd(0u, st_light_uvd(lb, st_receiver(world_position, normal, normal_offset)), footprint, kernel,
-                       probe);
+  return st_shadow_uvd_plane(0u, st_light_uvd(lb, st_receiver(world_position, normal, normal_offset)),
+                             st_receiver_slope(lb, normal), footprint, kernel, probe);
 }
 
 // The deep part's transmittance per channel at a world position (the surface point, no
@@ -232,7 +229,7 @@ float st_visibility(vec3 world_position, vec3 normal, float normal_offset, float
 vec3 st_transmittance(vec3 world_position, float footprint, uint kernel, inout StProbe probe) {
 #if ST_DEEP_SHADOWS
   const uint lb = st_light_block(0u);
-  if (lb == 0u || ST_PAGE(kPtStack) != 0u || ST_PAGE(kPtDeep) == 0u) return vec3(1.0);
+  if (lb == 0u || st_stack_map() || ST_PAGE(kPtDeep) == 0u) return vec3(1.0);
   return st_deep_shadow(st_light_uvd(lb, world_position), footprint, kernel, probe);
 #else
   return vec3(1.0);
@@ -253,13 +250,15 @@ vec3 st_shadow(vec3 world_position, vec3 normal, float normal_offset, float foot
 }
 
 // A stack map at a time of the light set: slices a and b (GpuMap's stack_time: a == b at a
-// sample's time) blended va + f * (vb - va), each in its own light with the same footprint.
+// sample's time) blended va + f * (vb - va), each in its own light with the same footprint
+// and its own receiver plane (st_receiver_slope in that slice's light; a spot's: none).
 float st_shadow_stack(vec3 world_position, vec3 normal, float normal_offset, float footprint, uint kernel, uint a,
                       uint b, float f, inout StProbe probe) {
   const vec3 r = st_receiver(world_position, normal, normal_offset);
-  const float va = st_shadow_uvd(a, st_light_uvd(st_light_block(a), r), footprint, kernel, probe);
+  const uint la = st_light_block(a), lb = st_light_block(b);
+  const float va = st_shadow_uvd_plane(a, st_light_uvd(la, r), st_receiver_slope(la, normal), footprint, kernel, probe);
   if (a == b) return va;
-  const float vb = st_shadow_uvd(b, st_light_uvd(st_light_block(b), r), footprint, kernel, probe);
+  const float vb = st_shadow_uvd_plane(b, st_light_uvd(lb, r), st_receiver_slope(lb, normal), footprint, kernel, probe);
   precise float step = vb - va;
   precise float scaled = f * step;
   precise float blended = va + scaled;

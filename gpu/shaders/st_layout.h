@@ -17,7 +17,7 @@ namespace st::gpu::layout {
 #define ST_UINT(name, value) const uint name = value;
 #endif
 
-ST_UINT(kLayoutVersion, 6u)  // 2: the map preview (kPtPreview); 3: the stack block (kPtStack); 4: the DAG-MH dictionary (kPtDictionary); 5: the 2D light (kPtLight); 6: the deep block (kPtDeep)
+ST_UINT(kLayoutVersion, 7u)  // 2: the map preview (kPtPreview); 3: the stack block (kPtStack); 4: the DAG-MH dictionary (kPtDictionary); 5: the 2D light (kPtLight); 6: the deep block (kPtDeep); 7: a light's receiver-slope cap (kStLightSlopeCap)
 
 // ---- page-table buffer (binding kBindPage) ----
 // header words, then the skip grid's coarse values and entries, the skip grid's slot
@@ -92,10 +92,11 @@ ST_UINT(kStEntries, 4u)         // word offset of the cells' entries
 ST_UINT(kStCellSlots, 5u)       // word offset of the cells' slot pointers
 ST_UINT(kStLights, 6u)          // word offset of the slices' light spaces
 ST_UINT(kStHeaderWords, 8u)     // then the K coarse-level offsets
-ST_UINT(kStLightWords, 16u)     // origin, axis_u, axis_v, forward (f32 x3 each), near (f32), then:
+ST_UINT(kStLightWords, 17u)     // origin, axis_u, axis_v, forward (f32 x3 each), near (f32), then:
 ST_UINT(kStLightCentreU, 13u)   // f32: perspective lights: u = x / z + this (0 for an affine light)
 ST_UINT(kStLightCentreV, 14u)   // f32: likewise v
 ST_UINT(kStLightProjection, 15u)  // 0: affine (u = x, v = y), 1: perspective (x / z, y / z)
+ST_UINT(kStLightSlopeCap, 16u)  // f32: the receiver plane's steepest slope per finest texel (st_plane.glsl)
 ST_UINT(kMaxStackCells, 0x400000u)  // kStackMaxCells: cells < 2^22
 // A per-slice cell's tile (tiles/core/stack_slices.hpp "STSL"): a 4-word header, then per
 // slice 2 words (byte offset of its 2D tile, 0: a constant; then the size or the f32 bits).
@@ -172,6 +173,7 @@ ST_UINT(kPcWords, 20u)
 ST_UINT(kFlagNeighbourFootprint, 1u)
 ST_UINT(kFlagSoft, 2u)      // stack shadow pass: the average over all N slices (slices a, b unused)
 ST_UINT(kFlagResumeWalks, 4u)  // stack shadow pass: tile walks resume from the previous walk's path
+ST_UINT(kFlagReceiverPlane, 8u)  // shadow passes: each PCF tap against the receiver's plane (st_plane.glsl)
 
 // ---- the deep block (deep shadow maps, tiles/core/DEEP.md; GPU_LAYOUT.md "The deep block") ----
 // At page word kPtDeep: a header, then `capacity` (key, word offset) pairs of the deep tiles

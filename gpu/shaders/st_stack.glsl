@@ -9,7 +9,8 @@
 // st_oct_depth_resumed (the same answer, the walk resumed from the invocation's previous
 // walk in that tile; st_oct_path_reset(resume) first, which also makes st_stack_depth use it),
 // st_stack_depth(x, y, w, level, probe), st_stack_pcf(level, x, y, w, r, receiver, probe),
-// st_stack_lookup(x, y, w, receiver, footprint, r, probe) (level from a footprint), and
+// st_stack_lookup(x, y, w, receiver, footprint, r, probe) (level from a footprint), their
+// receiver-plane forms st_stack_pcf_plane and st_stack_lookup_plane, and
 // st_fdiv(a, b) (st_fdiv.glsl: a / b rounded as the CPU's float division, for the passes' divides).
 #ifndef SHADOWTILE_GPU_ST_STACK_GLSL
 #define SHADOWTILE_GPU_ST_STACK_GLSL
@@ -178,31 +179,50 @@ float st_stack_depth(uint x, uint y, uint w, uint level, inout StProbe probe) {
 }
 
 // r x r PCF in slice w (StackMap::filtered's kernel: lit taps / (r * r), taps clamped to
-// the slice's edges; the quotient from the host's table, as st_pcf).
-float st_stack_pcf(uint level, uint x, uint y, uint w, uint r, float receiver, inout StProbe probe) {
+// the slice's edges; the quotient from the host's table, as st_pcf), each tap compared with
+// the receiver's plane (corner, gx, gy) over the tap's texel (tiles/core/receiver_plane.hpp,
+// StackMap::filtered_on_plane; st_plane_depth: f the receiver's texel of the slice's finest
+// level `finest`). Zero slopes: one receiver depth, the corner (st_stack_pcf).
+float st_stack_pcf_plane(uint level, uint x, uint y, uint w, uint r, vec3 plane, uvec2 f, uint finest,
+                         inout StProbe probe) {
   r = clamp(r, 1u, kMaxPcf);
   const uint side = 1u << min(level, 31u);
   uint lit = 0u;
   for (uint j = 0u; j < r; ++j)
-    for (uint i = 0u; i < r; ++i)
-      lit += st_lit(receiver, st_stack_depth(st_pcf_tap(x, i, r, side), st_pcf_tap(y, j, r, side), w, level, probe))
-                 ? 1u : 0u;
+    for (uint i = 0u; i < r; ++i) {
+      const uint tx = st_pcf_tap(x, i, r, side), ty = st_pcf_tap(y, j, r, side);
+      lit += st_lit(st_plane_depth(plane, f, finest - level, tx, ty), st_stack_depth(tx, ty, w, level, probe)) ? 1u
+                                                                                                                 : 0u;
+    }
   return uintBitsToFloat(ST_PAGE(ST_PAGE(kPtPcfTable) + (r - 1u) * kPcfTableStride + lit));
 }
+float st_stack_pcf(uint level, uint x, uint y, uint w, uint r, float receiver, inout StProbe probe) {
+  return st_stack_pcf_plane(level, x, y, w, r, vec3(receiver, 0.0, 0.0), uvec2(0u), level, probe);
+}
 
-// (x, y): texel of slice w's finest level; the two levels from the footprint (in finest
-// texels), r x r PCF at each, blended (a + t * (c - a), each step rounded once) as
-// st_lookup does for 2D maps.
-float st_stack_lookup(uint x, uint y, uint w, float receiver, float footprint, uint r, inout StProbe probe) {
+// (x, y): the receiver's texel of slice w's finest level; the two levels from the footprint
+// (in finest texels), r x r PCF at each against the receiver plane (corner, gx, gy),
+// blended (a + t * (c - a), each step rounded once) as st_lookup_plane does for 2D maps.
+// One call site of st_stack_pcf_plane for both levels: a shader compiler inlines the walk once.
+float st_stack_lookup_plane(uint x, uint y, uint w, vec3 plane, float footprint, uint r, inout StProbe probe) {
   const uint finest = ST_PAGE(ST_PAGE(kPtStack) + kStXyLevel);
   const StFilter f = st_filter_levels(footprint, finest);
-  const float a = st_stack_pcf(f.fine, x >> (finest - f.fine), y >> (finest - f.fine), w, r, receiver, probe);
+  float a = 0.0, c = 0.0;
+  for (uint k = 0u; k < (f.t == 0.0 ? 1u : 2u); ++k) {
+    const uint l = k == 0u ? f.fine : f.coarse;
+    const float v = st_stack_pcf_plane(l, x >> (finest - l), y >> (finest - l), w, r, plane, uvec2(x, y), finest, probe);
+    if (k == 0u) a = v;
+    else c = v;
+  }
   if (f.t == 0.0) return a;
-  const float c = st_stack_pcf(f.coarse, x >> (finest - f.coarse), y >> (finest - f.coarse), w, r, receiver, probe);
   precise float step = c - a;
   precise float scaled = f.t * step;
   precise float blended = a + scaled;
   return blended;
+}
+// The same with one receiver depth for every tap (StackMap::filtered).
+float st_stack_lookup(uint x, uint y, uint w, float receiver, float footprint, uint r, inout StProbe probe) {
+  return st_stack_lookup_plane(x, y, w, vec3(receiver, 0.0, 0.0), footprint, r, probe);
 }
 
 #endif

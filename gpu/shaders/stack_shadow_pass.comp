@@ -9,9 +9,12 @@
 // twin gpu::stack_shadow_pass_reference (tests/gpu/shadow_twins.cpp). With kFlagResumeWalks
 // every tile walk resumes from the pixel's previous walk in that tile (st_oct_depth_resumed:
 // consecutive PCF taps, levels and slices share the top of their paths); same answers.
+// With kFlagReceiverPlane each tap compares the receiver's plane in the slice's light
+// (st_plane.glsl, st_stack_lookup_plane).
 #include "st_buffers.glsl"
 
 #include "st_stack.glsl"
+#include "st_plane.glsl"
 
 float st_light_word(uint base, uint i) { return uintBitsToFloat(st_page_words[base + i]); }
 
@@ -65,7 +68,17 @@ float st_slice_visibility(uint p, uint w, inout StProbe probe) {
     if (py + 1u < height && st_stack_light_point(p + width, lb, nu, nv, nd)) f = max(f, max(abs(nu - u), abs(nv - v)));
     footprint = f * side;
   }
-  return st_stack_lookup(x, y, w, d, footprint, st_pc.w[kPcKernel], probe);
+  // Each tap against the receiver's plane in the slice's light (a spot's slopes: 0); without
+  // kFlagReceiverPlane zero slopes: one receiver depth (st_stack_lookup's answer).
+  vec2 slope = vec2(0.0);
+  if ((st_pc.w[kPcFlags] & kFlagReceiverPlane) != 0u) {
+    const uint b = 4u * p;
+    const vec3 n = vec3(uintBitsToFloat(st_normal_words[b]), uintBitsToFloat(st_normal_words[b + 1u]),
+                        uintBitsToFloat(st_normal_words[b + 2u]));
+    slope = st_plane_slope(lb, finest, n);
+  }
+  const vec3 plane = vec3(st_plane_corner(vec3(u, v, d), slope, side), slope.x, slope.y);
+  return st_stack_lookup_plane(x, y, w, plane, footprint, st_pc.w[kPcKernel], probe);
 }
 
 void main() {
@@ -73,21 +86,26 @@ void main() {
   if (p >= st_pc.w[kPcCount] * st_pc.w[kPcHeight]) return;
   StProbe probe = st_probe();
   st_oct_path_reset((st_pc.w[kPcFlags] & kFlagResumeWalks) != 0u);  // tile walks resume from the last one's path
-  if ((st_pc.w[kPcFlags] & kFlagSoft) != 0u) {
-    // The soft pass: every slice in order, summed in float (one rounding per add), then
-    // divided by N (rounded once): StackMap::soft_visibility_filtered's average.
-    const uint slices = st_page_words[st_page_words[kPtStack] + kStSlices];
-    precise float sum = 0.0;
-    for (uint w = 0u; w < slices; ++w) sum = sum + st_slice_visibility(p, w, probe);
-    st_output[p] = st_fdiv(sum, float(slices));
-    if (probe.hole) atomicAdd(st_fb_words[kFbHoles], 1u);
-    return;
-  }
+  // One call site of st_slice_visibility (a compiler inlines the walk once): slices a and b
+  // at a time (a == b at a sample's time; else va + f * (vb - va), each step rounded once),
+  // or with kFlagSoft every slice in order, summed in float (one rounding per add), then
+  // divided by N (rounded once): StackMap::soft_visibility_filtered's average.
+  const bool soft = (st_pc.w[kPcFlags] & kFlagSoft) != 0u;
+  const uint slices = st_page_words[st_page_words[kPtStack] + kStSlices];
   const uint wa = st_pc.w[kPcSliceA], wb = st_pc.w[kPcSliceB];
-  const float va = st_slice_visibility(p, wa, probe);
+  const uint count = soft ? slices : (wa == wb ? 1u : 2u);
+  precise float sum = 0.0;
+  float va = 1.0, vb = 1.0;
+  for (uint i = 0u; i < count; ++i) {
+    const float v = st_slice_visibility(p, soft ? i : (i == 0u ? wa : wb), probe);
+    sum = sum + v;
+    if (i == 0u) va = v;
+    else vb = v;
+  }
   float answer = va;
-  if (wb != wa) {
-    const float vb = st_slice_visibility(p, wb, probe);
+  if (soft) {
+    answer = st_fdiv(sum, float(slices));
+  } else if (count == 2u) {
     const float f = uintBitsToFloat(st_pc.w[kPcTimeWeight]);
     precise float step = vb - va;
     precise float scaled = f * step;

@@ -4,6 +4,8 @@
 // that it answers the coarser level-K values, and its 2D lookups answer lit.
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 #include "tests/client/loopback.hpp"
 #include "tiles/encode/stack_blocked.hpp"
 #include "tiles/encode/stack_pack.hpp"
@@ -114,6 +116,13 @@ void served_stack_answers_like_local(const std::string& light_set, const std::st
     EXPECT_EQ(m.soft_visibility_filtered(wp, fp, 5), local.map().soft_visibility_filtered(q, 2, fp));
     EXPECT_EQ(m.time_visibility(wp, t, 3), local.map().visibility_filtered(q, t, 1, 0));
     EXPECT_EQ(m.time_visibility_filtered(wp, t, 0), m.time_visibility(wp, t));
+    // With the receiver's normal: the local pack's plane lookups.
+    const Vec3d nrm = normalize(Vec3d{next() - 0.5, 0.5 + next(), next() - 0.5});
+    const client::WorldPoint wn{nrm.x, nrm.y, nrm.z};
+    EXPECT_EQ(m.time_visibility_filtered(wp, wn, t, fp, 3), local.map().visibility_filtered_on_plane(q, nrm, t, 1, fp));
+    EXPECT_EQ(m.soft_visibility_filtered(wp, wn, fp, 5, true),
+              local.map().soft_visibility_filtered_on_plane(q, nrm, 2, fp, true));
+    EXPECT_TRUE(std::isnan(m.time_visibility_filtered(wp, wn, t, fp, 2)));  // an even side: NaN
   }
   {  // the batched soft lookup (interleaved walks; PCF: per point)
     std::vector<client::WorldPoint> wps;

@@ -90,16 +90,19 @@ struct Plane {
     const LightSpace ls = LightSpace::from_array(h.light_kind, h.light);
     std::mt19937_64 rng(9);
     std::uniform_real_distribution<double> jitter(-0.002, 0.002);
+    // The plane's own normal (d rises 0.4 across u), facing the light: its receivers'
+    // kernels take the receiver plane (ShadowPassSettings::receiver_plane).
+    const double e = ls.extent_uv(), depth = ls.far_plane() - ls.near_plane();
+    const Vec3d n = normalize(cross(ls.axis_v(), ls.axis_u() * e + ls.forward() * (0.4 * depth)));
     for (uint32_t y = 0; y < height; ++y)
       for (uint32_t x = 0; x < width; ++x) {
         const size_t p = size_t(y) * width + x;
         const double u = -0.05 + 1.1 * (x + 0.5) / width + jitter(rng), v = -0.05 + 1.1 * (y + 0.5) / height;
         const double d = 0.3 + 0.4 * u + jitter(rng) * 50;
-        const double e = ls.extent_uv(), z = ls.near_plane() + d * (ls.far_plane() - ls.near_plane());
+        const double z = ls.near_plane() + d * depth;
         const Vec3d wp = ls.origin() + ls.axis_u() * (u * e) + ls.axis_v() * (v * e) + ls.forward() * z;
         pos[4 * p] = float(wp.x), pos[4 * p + 1] = float(wp.y), pos[4 * p + 2] = float(wp.z);
         pos[4 * p + 3] = (x * 7 + y * 3) % 29 == 0 ? 0.0f : 1.0f;
-        const Vec3d n = ls.forward() * -1.0;
         nrm[4 * p] = float(n.x), nrm[4 * p + 1] = float(n.y), nrm[4 * p + 2] = float(n.z);
       }
   }
@@ -116,6 +119,7 @@ struct Plane {
     in.time = s.time;
     in.soft = s.soft;
     in.resume_walks = s.resume_walks;
+    in.receiver_plane = s.receiver_plane;
     return in;
   }
 };
@@ -278,7 +282,12 @@ TEST(GpuEngine, TheReceiverTwinAnswersLikeAFragmentShaderWhereTheDoubleTransform
   std::vector<float> twin(gpu.size());
   ReceiverLookup q;
   q.kernel = kKernel;
-  receiver_lookup_reference(s.map, rec, q, twin);
+  // st_visibility compares each tap with the receiver's plane: normals (0, 1, 0), the
+  // light's own slope cap.
+  const std::array<float, 2> up = receiver_slope_reference(fl, l, {0.0f, 1.0f, 0.0f}, receiver_slope_cap(ls, fl, l));
+  std::vector<float> slopes(size_t(kW) * kH * 2);
+  for (size_t p = 0; p < size_t(kW) * kH; ++p) slopes[2 * p] = up[0], slopes[2 * p + 1] = up[1];
+  receiver_lookup_reference(s.map, rec, q, twin, slopes);
   size_t bad = 0, client_differs = 0, partial = 0;
   for (size_t p = 0; p < gpu.size(); ++p) {
     if (bits(gpu[p]) != bits(twin[p]) && bad++ == 0)
@@ -370,6 +379,41 @@ TEST(GpuEngine, ReceiverPlaneLookupsOnSlopesAnswerLikeTheTwin) {
   EXPECT_GT(plane_differs, 0u) << "the plane changed no answer: the test tests nothing";
   std::printf("receiver plane twin: %zu pixels, %zu sloped, %zu partly lit, %zu answers moved by the plane\n",
               gpu.size(), sloped, partial, plane_differs);
+  // The compute passes over the same G-buffer (each pixel's normal, the light's own slope
+  // cap: the same slopes as the fragment shader's from to_light and texel), engine mode and
+  // own device, and their CPU twin: the fragment shader's answers, bit for bit.
+  ShadowPassSettings set;
+  set.kernel = kKernel;
+  set.normal_offset = 0.0f;
+  set.neighbour_footprint = false;
+  set.footprint = kFootprint;
+  run_frame(e, g, t, 2, set);
+  g.retire(e.finish());
+  const std::vector<float> compute = t.read(2);
+  ShadowPassInput in;
+  in.positions = pos;
+  in.normals = nrm;
+  in.width = kW;
+  in.height = kH;
+  in.kernel = kKernel;
+  in.normal_offset = 0.0f;
+  in.neighbour_footprint = false;
+  in.footprint = kFootprint;
+  GpuMap own(s.map, gputest::options());
+  std::vector<float> own_out(gpu.size()), pass_twin(gpu.size());
+  own.wait(own.submit_shadow_pass(in), own_out);
+  shadow_pass_reference(client::evaluator(s.map), h, in, pass_twin);
+  size_t bad_compute = 0, bad_own = 0, bad_pass_twin = 0;
+  for (size_t p = 0; p < gpu.size(); ++p) {
+    if (bits(compute[p]) != bits(twin[p]) && bad_compute++ == 0)
+      ADD_FAILURE() << "pixel " << p << ": engine pass " << compute[p] << ", twin " << twin[p];
+    bad_own += bits(own_out[p]) != bits(twin[p]);
+    bad_pass_twin += bits(pass_twin[p]) != bits(twin[p]);
+  }
+  EXPECT_EQ(bad_compute, 0u);
+  EXPECT_EQ(bad_own, 0u);
+  EXPECT_EQ(bad_pass_twin, 0u);
+  EXPECT_EQ(own.stats().validation_messages, 0u);
   EXPECT_EQ(e.messages(), 0u) << e.first_message();
 }
 
@@ -399,13 +443,15 @@ TEST(GpuEngine, ShadowPassOverTheEnginesImagesEqualsTheOwnDevicePassAndTheCpuTwi
       uint64_t frame = 100;  // the engine's counter: any start
       std::vector<FrameStats> retired;
       uint32_t k = 0;
-      for (uint32_t kernel : {1u, 3u, 5u}) {
-        SCOPED_TRACE(kernel);
+      size_t plane_moved = 0;
+      for (const auto& [kernel, with_plane] : {std::pair{1u, true}, {3u, true}, {5u, true}, {5u, false}}) {
+        SCOPED_TRACE(std::to_string(kernel) + (with_plane ? " with the receiver plane" : " one receiver depth"));
         ShadowPassSettings set;
         set.kernel = kernel;
         set.normal_offset = 0.001f;
         set.neighbour_footprint = kernel != 5;
         set.footprint = 2.5f;
+        set.receiver_plane = with_plane;
         const FrameStats up = run_frame(e, g, t, ++frame, set, &retired);
         if (k++ == 0) {  // the first frame: every resident tile and the whole page table
           EXPECT_EQ(up.tile_bytes, resident_tile_bytes(s.map));
@@ -435,6 +481,13 @@ TEST(GpuEngine, ShadowPassOverTheEnginesImagesEqualsTheOwnDevicePassAndTheCpuTwi
         }
         EXPECT_EQ(bad, 0u);
         EXPECT_EQ(bad_own, 0u);
+        if (with_plane) {  // the plane moves answers (else the twin's plane path tests nothing)
+          ShadowPassInput flat_in = in;
+          flat_in.receiver_plane = false;
+          std::vector<float> flat(got.size());
+          shadow_pass_reference(client::evaluator(s.map), h, flat_in, flat);
+          for (size_t i = 0; i < got.size(); ++i) plane_moved += bits(flat[i]) != bits(want[i]);
+        }
         // Feedback: the same absent tiles with the same pixel counts as the own-device pass
         // (whose feedback the own-device tests check against the CPU's walk), all absent.
         EXPECT_FALSE(engine_feedback.empty());  // half the map is absent
@@ -447,6 +500,8 @@ TEST(GpuEngine, ShadowPassOverTheEnginesImagesEqualsTheOwnDevicePassAndTheCpuTwi
         EXPECT_EQ(fs.host_io_bytes, 0u);
         EXPECT_EQ(ofs.host_io_bytes, uint64_t(plane.width) * plane.height * (16 + 16 + 4));  // own mode: G-buffer in, out
       }
+      EXPECT_GT(plane_moved, 0u);
+      std::printf("engine pass: %zu answers moved by the receiver plane\n", plane_moved);
       // One tap at the finest level (kernel 1, footprint 1): the feedback names exactly the
       // tiles the CPU's page-table walk finds absent for the pixels' texels, each with the
       // number of pixels that needed it.

@@ -36,7 +36,8 @@ TEST(GpuLayout, TheShaderSeesEveryConstantTheCppSideSees) {
       L::kSqSlice, L::kSqLevel, L::kSqReceiver, L::kSqFootprint, L::kSqR, L::kFbStackKeyBit, L::kPcSliceA,
       L::kPcSliceB, L::kPcTimeWeight, L::kStLightCentreU, L::kStLightCentreV, L::kStLightProjection, L::kFlagSoft,
       L::kFlagResumeWalks, L::kPtDeep, L::kDpLevel, L::kDpSideBits, L::kDpCount, L::kDpCapacity,
-      L::kDpDepthBias, L::kDpHeaderWords, L::kDeepQuery, L::kDtTexelCount, L::kDtHeaderWords};
+      L::kDpDepthBias, L::kDpHeaderWords, L::kDeepQuery, L::kDtTexelCount, L::kDtHeaderWords, L::kStLightSlopeCap,
+      L::kFlagReceiverPlane};
   ASSERT_LE(want.size(), L::kProbeWords);
   uint64_t messages = 0;
   const std::vector<uint32_t> got = run_layout_probe(gputest::device(), true, &messages);
@@ -70,7 +71,7 @@ TEST(GpuLayout, StackBlockHeaderWordsAreWhereTheDrawingPutsThem) {
   EXPECT_EQ(L::kStCellSlots, 5u);
   EXPECT_EQ(L::kStLights, 6u);
   EXPECT_EQ(L::kStHeaderWords, 8u);
-  EXPECT_EQ(L::kStLightWords, 16u);
+  EXPECT_EQ(L::kStLightWords, 17u);
   EXPECT_EQ(L::kSqWords, 7u);
   EXPECT_EQ(L::kFbStackKeyBit, 0x40000000u);
   EXPECT_EQ(L::kPcSliceA, 4u);
@@ -79,15 +80,18 @@ TEST(GpuLayout, StackBlockHeaderWordsAreWhereTheDrawingPutsThem) {
   EXPECT_EQ(L::kStLightCentreU, 13u);
   EXPECT_EQ(L::kStLightCentreV, 14u);
   EXPECT_EQ(L::kStLightProjection, 15u);
+  EXPECT_EQ(L::kStLightSlopeCap, 16u);
+  EXPECT_EQ(L::kFlagReceiverPlane, 8u);
   EXPECT_EQ(L::kFlagSoft, 2u);
   EXPECT_EQ(L::kFlagResumeWalks, 4u);
 }
 
 // The page-table header and the deep block as GPU_LAYOUT.md draws them ("The page table",
-// "The deep block"): layout version 6 added the header word kPtDeep.
+// "The deep block"): layout version 6 added the header word kPtDeep (7: a light's word
+// kStLightSlopeCap).
 TEST(GpuLayout, DeepBlockWordsAreWhereTheDrawingPutsThem) {
   namespace L = layout;
-  EXPECT_EQ(L::kLayoutVersion, 6u);
+  EXPECT_EQ(L::kLayoutVersion, 7u);
   EXPECT_EQ(L::kPtLight, 15u);
   EXPECT_EQ(L::kPtDeep, 16u);
   EXPECT_EQ(L::kPtHeaderWords, 17u);

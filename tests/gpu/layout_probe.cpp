@@ -33,7 +33,7 @@ std::vector<uint32_t> run_probe(const std::string& device, bool validation, std:
     kernels.destroy(ctx);
   };
   try {
-    kernels.create(ctx, 1, kLayoutProbeKernel);
+    kernels.create(ctx, 1, {}, kLayoutProbeKernel);
     for (int i = 0; i < 6; ++i) bufs.push_back(ctx.make_buffer(words * 4, true));
     std::memset(bufs[2].mapped, 0, words * 4);
     if (!input.empty()) std::memcpy(bufs[2].mapped, input.data(), input.size() * 4);

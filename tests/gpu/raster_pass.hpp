@@ -33,7 +33,10 @@ struct RasterPass {
   VkSampler sampler = VK_NULL_HANDLE;
   VkDescriptorSetLayout l0 = VK_NULL_HANDLE, l1 = VK_NULL_HANDLE;
   VkPipelineLayout layout = VK_NULL_HANDLE;
-  VkPipeline pipeline = VK_NULL_HANDLE;
+  // One pipeline per lookup the fragment shader makes (its specialization constant 1:
+  // st_visibility, st_shadow, st_shadow_uvd_plane), each built on its first frame.
+  mutable std::array<VkPipeline, 3> pipelines{};
+  VkShaderModule vertex = VK_NULL_HANDLE, fragment = VK_NULL_HANDLE;
   VkDescriptorPool pool = VK_NULL_HANDLE;
   VkDescriptorSet s0 = VK_NULL_HANDLE, s1 = VK_NULL_HANDLE;
   const Image* target;
@@ -69,17 +72,14 @@ struct RasterPass {
     const VkDescriptorImageInfo imgs[2] = {{VK_NULL_HANDLE, pos.view, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL},
                                            {VK_NULL_HANDLE, nrm.view, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL}};
     vk_setup::write_images(v, s1, imgs);
-    const vk_setup::ShaderModule vs(v, kFullscreenVertSpv);
-    const vk_setup::ShaderModule fs(v, deep ? std::span<const uint32_t>(kEngineFragmentDeepSpv)
-                                            : std::span<const uint32_t>(kEngineFragmentSpv));
-    vk_setup::Pipeline p;
-    p.layout = layout, p.pass = rp, p.width = width, p.height = height;
-    p.vertex = vs.module, p.fragment = fs.module;
-    p.colour_attachments = 1, p.colour_mask = VK_COLOR_COMPONENT_R_BIT;
-    pipeline = vk_setup::pipeline(v, p);
+    vertex = vk_setup::shader_module(v, kFullscreenVertSpv);
+    fragment = vk_setup::shader_module(v, deep ? std::span<const uint32_t>(kEngineFragmentDeepSpv)
+                                               : std::span<const uint32_t>(kEngineFragmentSpv));
   }
   ~RasterPass() {
-    vkDestroyPipeline(d, pipeline, nullptr);
+    for (VkPipeline p : pipelines) vkDestroyPipeline(d, p, nullptr);
+    vkDestroyShaderModule(d, fragment, nullptr);
+    vkDestroyShaderModule(d, vertex, nullptr);
     vkDestroyDescriptorPool(d, pool, nullptr);
     vkDestroyPipelineLayout(d, layout, nullptr);
     vkDestroyDescriptorSetLayout(d, l0, nullptr);
@@ -94,6 +94,24 @@ struct RasterPass {
   // channel 0: the visibility (st_visibility); 1..3: st_shadow's red, green, blue; 4: the
   // visibility with the receiver plane (st_receiver_slope with to_light and one finest
   // texel `texel` in world units, st_shadow_uvd_plane).
+  // The pipeline of a channel's lookup (built on first use): constant 0, a 2D map (1); 1,
+  // the lookup.
+  VkPipeline pipeline_for(uint32_t channel) const {
+    const uint32_t lookup = channel == 0 ? 0u : channel == 4 ? 2u : 1u;
+    if (!pipelines[lookup]) {
+      const vk_setup::Device<vk_setup::Loader> v{vk_setup::kLoader, d};
+      const uint32_t constants[2] = {1u, lookup};
+      const VkSpecializationMapEntry entries[2] = {{0, 0, 4}, {1, 4, 4}};
+      const VkSpecializationInfo spec{2, entries, sizeof(constants), constants};
+      vk_setup::Pipeline p;
+      p.layout = layout, p.pass = rp, p.width = width, p.height = height;
+      p.vertex = vertex, p.fragment = fragment, p.fragment_specialization = &spec;
+      p.colour_attachments = 1, p.colour_mask = VK_COLOR_COMPONENT_R_BIT;
+      pipelines[lookup] = vk_setup::pipeline(v, p);
+    }
+    return pipelines[lookup];
+  }
+
   void record(VkCommandBuffer cmd, uint32_t kernel, float normal_offset, float footprint, uint32_t channel = 0,
               std::array<float, 3> to_light = {}, float texel = 0) const {
     VkRenderPassBeginInfo bi{};
@@ -102,7 +120,7 @@ struct RasterPass {
     bi.framebuffer = fb;
     bi.renderArea = {{0, 0}, {width, height}};
     vkCmdBeginRenderPass(cmd, &bi, VK_SUBPASS_CONTENTS_INLINE);
-    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline);
+    vkCmdBindPipeline(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, pipeline_for(channel));
     const VkDescriptorSet sets[2] = {s0, s1};
     vkCmdBindDescriptorSets(cmd, VK_PIPELINE_BIND_POINT_GRAPHICS, layout, 0, 2, sets, 0, nullptr);
     uint32_t push[8] = {kernel,

@@ -78,11 +78,21 @@ bool shadow_pass_texel(const ShadowLight& light, const ShadowPassInput& in, size
 void shadow_pass_reference(const Evaluator& ev, const PackHeader& h, const ShadowPassInput& in, std::span<float> out) {
   const ShadowLight l = shadow_light(h);
   const uint32_t finest = h.map_level;
+  const float cap = receiver_slope_cap(LightSpace::from_array(h.light_kind, h.light), l, finest);
   const size_t pixels = size_t(in.width) * in.height;
   for (size_t p = 0; p < pixels; ++p) {
     Texel t;
     if (!pixel_texel(l, in, p, finest, t)) {
       out[p] = 1.0f;
+      continue;
+    }
+    if (in.receiver_plane) {  // shadow_pass.comp's st_plane_slope, st_plane_corner, st_lookup_plane
+      const float* n = in.normals.data() + 4 * p;
+      const std::array<float, 2> g = receiver_slope_reference(l, finest, {n[0], n[1], n[2]}, cap);
+      const ReceiverPlane pl = plane_through(t.c, t.x, t.y, finest, g[0], g[1]);
+      out[p] = filtered(finest, t.x, t.y, t.footprint, [&](uint32_t level, uint32_t x, uint32_t y) {
+        return pcf_plane_by_taps(ev, level, x, y, in.kernel, pl);
+      });
       continue;
     }
     // Evaluator::pcf_footprint's filtering on the finest texel (filter_level.hpp).
@@ -132,9 +142,21 @@ void stack_shadow_pass_reference(const client::Map& map, const ShadowPassInput& 
   const uint32_t finest = g->xy_level;
   const uint32_t r = std::clamp<uint32_t>(in.kernel, 1, Evaluator::kMaxPcf);
   const std::vector<ShadowLight> lights = slice_lights(*g);
+  std::vector<float> caps;  // each slice's kStLightSlopeCap
+  for (uint32_t w = 0; w < g->slices; ++w)
+    caps.push_back(receiver_slope_cap(LightSpace::from_array(LightKind(g->lights[w].kind), g->lights[w].params),
+                                      lights[w], finest));
   auto slice = [&](size_t p, uint32_t w) {
     Texel t;
     if (!pixel_texel(lights[w], in, p, finest, t)) return 1.0f;
+    if (in.receiver_plane) {  // stack_shadow_pass.comp's st_plane_slope, st_plane_corner, st_stack_lookup_plane
+      const float* n = in.normals.data() + 4 * p;
+      const std::array<float, 2> sl = receiver_slope_reference(lights[w], finest, {n[0], n[1], n[2]}, caps[w]);
+      const ReceiverPlane pl = plane_through(t.c, t.x, t.y, finest, sl[0], sl[1]);
+      return filtered(finest, t.x, t.y, t.footprint, [&](uint32_t level, uint32_t x, uint32_t y) {
+        return slice_pcf_plane(map, w, level, x, y, r, pl);
+      });
+    }
     return filtered(finest, t.x, t.y, t.footprint,
                     [&](uint32_t level, uint32_t x, uint32_t y) { return slice_pcf(map, w, level, x, y, r, t.c.d); });
   };
@@ -165,7 +187,7 @@ float slope_clamp(float g, float cap) {
 }  // namespace
 
 std::array<float, 2> receiver_slope_reference(const ShadowLight& l, uint32_t finest, const std::array<float, 3>& n,
-                                              const std::array<float, 3>& to_light, float texel) {
+                                              float cap) {
   if (l.perspective) return {0.0f, 0.0f};
   const std::array<float, 3>&a = l.axis_u, &b = l.axis_v, &c = l.forward;
   auto cross = [](const std::array<float, 3>& p, const std::array<float, 3>& q) {
@@ -177,17 +199,18 @@ std::array<float, 2> receiver_slope_reference(const ShadowLight& l, uint32_t fin
     }
     return o;
   };
-  auto dot = [](const std::array<float, 3>& p, const std::array<float, 3>& q) {
-    const float x = p[0] * q[0], y = p[1] * q[1], z = p[2] * q[2];
-    const float xy = x + y;
-    return xy + z;
-  };
-  const float pu = dot(n, cross(b, c)), pv = dot(n, cross(c, a)), pw = dot(n, cross(a, b));
+  const float pu = dot_reference(n, cross(b, c)), pv = dot_reference(n, cross(c, a)),
+              pw = dot_reference(n, cross(a, b));
   const float den = pw * std::ldexp(1.0f, int(finest));
-  const float cl = dot(c, to_light);
-  const float reach = texel * std::fabs(cl);
-  const float cap = kMaxReceiverSlope * reach;  // shadowtile.glsl's kStMaxReceiverSlope
   return {slope_clamp(-pu / den, cap), slope_clamp(-pv / den, cap)};
+}
+
+std::array<float, 2> receiver_slope_reference(const ShadowLight& l, uint32_t finest, const std::array<float, 3>& n,
+                                              const std::array<float, 3>& to_light, float texel) {
+  const float cl = dot_reference(l.forward, to_light);
+  const float reach = texel * std::fabs(cl);
+  const float cap = kMaxReceiverSlope * reach;  // st_plane.glsl's kStMaxReceiverSlope
+  return receiver_slope_reference(l, finest, n, cap);
 }
 
 }  // namespace st::gpu

@@ -21,6 +21,10 @@ namespace st::gpu {
 // division's). (0, 0) for a perspective light.
 std::array<float, 2> receiver_slope_reference(const ShadowLight& l, uint32_t finest, const std::array<float, 3>& normal,
                                               const std::array<float, 3>& to_light, float texel);
+// The same with the slopes clamped to +-cap (st_plane_slope; receiver_slope_cap gives a
+// light's cap).
+std::array<float, 2> receiver_slope_reference(const ShadowLight& l, uint32_t finest, const std::array<float, 3>& normal,
+                                              float cap);
 
 // The CPU twin of a stack map's shadow pass: the same float operations per slice as
 // shaders/stack_shadow_pass.comp, depths from Map::slice_depth (the Map's cache, the same

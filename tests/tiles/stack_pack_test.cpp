@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -20,6 +21,7 @@
 #include "tiles/core/filter_level.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 #include "tiles/core/pack_reader.hpp"
+#include "tiles/core/receiver_plane.hpp"
 #include "tiles/core/stack_lookup.hpp"
 #include "tiles/core/stack_map.hpp"
 
@@ -349,6 +351,67 @@ TEST(StackPack, PcfAndFootprintLevelAsIn2D) {
     ASSERT_TRUE(v >= 0 && v <= 1);
   }
   EXPECT_GT(partial, 0u);  // some kernels straddle a shadow edge
+}
+
+// The filtered lookups with the receiver's normal (StackMap::*_on_plane): in each slice the
+// 2D rule, the kernel counted by the 2D library's pcf_footprint_plane over that slice
+// (receiver_plane_at in the slice's light, the lookup point moved along the normal); the
+// time blend and the soft average of those answers; and the plane moves some answers.
+TEST(StackPack, ReceiverPlaneLookupsCountEachSliceLikeThe2DPlaneFilter) {
+  const IntervalStack s = stacks::coherent_stack(5, 6, 9);
+  const OctHierarchy h = build_octree(s);
+  const LightSet set = lights(s.slices);
+  auto reader = PackReader::open(write(h, set, std::nullopt, 1024, "filtered_plane.pack"));
+  const ResidentStack rs(*reader);
+  const StackMap& m = rs.map();
+  const uint32_t n = m.xy_level();
+  struct SliceEval final : Evaluator {  // slice w of the stack as a 2D map
+    const StackMap& map;
+    uint32_t w;
+    SliceEval(const StackMap& sm, uint32_t slice) : map(sm), w(slice) {}
+    uint32_t finest_level() const override { return map.xy_level(); }
+    float depth(uint32_t level, uint64_t x, uint64_t y) const override { return map.depth(x, y, w, level); }
+  };
+  uint64_t rng = 4242;
+  auto next = [&] {
+    rng = rng * 6364136223846793005ull + 1442695040888963407ull;
+    return double(rng >> 11) / double(1ull << 53);
+  };
+  uint32_t moved = 0, partial = 0;
+  for (int i = 0; i < 200; ++i) {
+    const Vec3d p{-10 + 20 * next(), 5 * next(), -10 + 20 * next()};
+    const Vec3d nrm = normalize(Vec3d{next() - 0.5, 0.3 + next(), next() - 0.5});  // up-ish, tilted any way
+    const uint32_t w = uint32_t(next() * s.slices);
+    const bool closed = i % 3 == 0;
+    const LightSpace& ls = m.grid().light(w);
+    const float fp = i % 2 ? float(3 * next() * ls.texel_size(p, n)) : 0.0f;
+    const uint32_t side = 1 + 2 * (uint32_t(i) % 3);
+    LightPoint lp;
+    ReceiverPlane pl;
+    float want = 1.0f;
+    if (receiver_plane_at(ls, n, p, nrm, closed, lp, pl))
+      want = pcf_footprint_plane(SliceEval(m, w), lp.u, lp.v, pl,
+                                 fp > 0 ? float(double(fp) / ls.texel_size(p, n)) : 0.0f, side);
+    const float got = m.filtered_on_plane(p, nrm, w, side / 2, fp, closed);
+    ASSERT_EQ(got, want) << "point " << i;
+    partial += got > 0 && got < 1;
+    // The same receiver point with one depth for every tap.
+    moved += got != m.filtered(ls.to_world(lp.u, lp.v, lp.d), w, side / 2, fp);
+    const double t = next();
+    const double st = t * double(s.slices - 1);
+    const uint32_t a = uint32_t(std::floor(st));
+    const float va = m.filtered_on_plane(p, nrm, a, side / 2, fp, closed);
+    const float vt = m.visibility_filtered_on_plane(p, nrm, t, side / 2, fp, closed);
+    if (a + 1 < s.slices && std::fabs(st - std::nearbyint(st)) > 1e-9) {
+      const float f = float(st - double(a));
+      ASSERT_EQ(vt, va + f * (m.filtered_on_plane(p, nrm, a + 1, side / 2, fp, closed) - va));
+    }
+    float sum = 0;
+    for (uint32_t k = 0; k < s.slices; ++k) sum += m.filtered_on_plane(p, nrm, k, side / 2, fp, closed);
+    ASSERT_EQ(m.soft_visibility_filtered_on_plane(p, nrm, side / 2, fp, closed), sum / float(s.slices));
+  }
+  EXPECT_GT(partial, 0u);
+  EXPECT_GT(moved, 0u) << "the receiver plane changed no answer";
 }
 
 }  // namespace

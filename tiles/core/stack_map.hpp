@@ -69,6 +69,21 @@ class StackMap {
   float visibility_filtered(const Vec3d& p, double time, uint32_t pcf_radius, float footprint,
                             bool* exact = nullptr) const;
   float soft_visibility_filtered(const Vec3d& p, uint32_t pcf_radius, float footprint, bool* exact = nullptr) const;
+  // The same three with the receiver's surface normal (unit length, facing the light):
+  // receiver-plane depth bias per slice (tiles/core/receiver_plane.hpp), what the 2D
+  // Map::visibility_filtered with a normal does in the one light. In slice w the lookup
+  // point is p moved along the normal by kOpenReceiverOffsetTexels (closed:
+  // kClosedReceiverOffsetTexels) finest texels of that slice, and each tap compares the
+  // receiver's plane over its own texel (receiver_plane_at in slice w's light) with the
+  // stored value; a point outside slice w's map is lit there. The footprint picks the
+  // levels as filtered() does (texel_size at p). Taps counted one by one
+  // (stack_map_plane.cpp).
+  float filtered_on_plane(const Vec3d& p, const Vec3d& normal, uint32_t w, uint32_t pcf_radius, float footprint,
+                          bool closed = false, bool* exact = nullptr) const;
+  float visibility_filtered_on_plane(const Vec3d& p, const Vec3d& normal, double time, uint32_t pcf_radius,
+                                     float footprint, bool closed = false, bool* exact = nullptr) const;
+  float soft_visibility_filtered_on_plane(const Vec3d& p, const Vec3d& normal, uint32_t pcf_radius, float footprint,
+                                          bool closed = false, bool* exact = nullptr) const;
 
  private:
   // Where texel (x, y) of slice w (finest level) is answered: `value` (lit outside the

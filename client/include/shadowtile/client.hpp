@@ -498,6 +498,14 @@ class SHADOWTILE_API Map {
                                  uint32_t pcf_side = 1) const noexcept;
   float soft_visibility(const WorldPoint& world, uint32_t pcf_side = 1) const noexcept;
   float soft_visibility_filtered(const WorldPoint& world, float footprint, uint32_t pcf_side = 1) const noexcept;
+  // The _filtered forms with the receiver's surface normal: in each sample's slice the
+  // receiver plane of visibility_filtered with a normal (the point moved 1.5 finest texels
+  // of that slice along the normal, `closed`: 0.5; each tap against the plane), then the
+  // same time blend or average. A sample whose slice does not hold the point answers lit.
+  float time_visibility_filtered(const WorldPoint& world, const WorldPoint& normal, double time, float footprint,
+                                 uint32_t pcf_side = 1, bool closed = false) const noexcept;
+  float soft_visibility_filtered(const WorldPoint& world, const WorldPoint& normal, float footprint,
+                                 uint32_t pcf_side = 1, bool closed = false) const noexcept;
   // out[i] = soft_visibility(points[i], pcf_side) for i < min(points.size(), out.size()),
   // bit for bit. With pcf_side 1 the walks of several points are interleaved so that
   // their cache misses overlap: a frame's receivers in one call cost several times less

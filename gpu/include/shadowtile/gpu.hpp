@@ -202,6 +202,7 @@ struct ShadowPassSettings {
   double time = 0;      // stack maps
   bool soft = false;    // stack maps
   bool resume_walks = true;
+  bool receiver_plane = true;
 };
 
 // What GpuMap's buffers are, for the engine's own descriptor sets (shadowtile.glsl binds
@@ -272,6 +273,13 @@ struct ShadowPassInput {
   // walk (MhOctree::along_begin) does; false walks each from the tile's root. The answers
   // are the same bits either way (GPU_LAYOUT.md "The stack block": what each costs).
   bool resume_walks = true;
+  // Each PCF tap compares the receiver's plane over its texel (tiles/core/receiver_plane.hpp:
+  // the plane through the receiver with the pixel's normal, its slopes clamped to
+  // kMaxReceiverSlope texels of depth along the light ray per texel), as the CPU's
+  // Map::visibility_filtered with a normal and shadowtile.glsl's st_visibility do: no acne
+  // from kernels on surfaces sloped to the light. false: one receiver depth for every tap.
+  // Perspective lights (a stack's spots) take one receiver depth either way.
+  bool receiver_plane = true;
 };
 
 // A stack pass's time (ShadowPassInput::time) as StackMap::visibility takes it: with
@@ -294,7 +302,8 @@ StackTime stack_time(uint32_t slices, double time);
 // result) and w the footprint in finest texels; w < 0 or NaN: no lookup, answered NaN.
 // slopes (optional): 2 floats each, the receiver plane's (gx, gy) the shader used
 // (st_receiver_slope; st_shadow_uvd_plane's taps, tiles/core/receiver_plane.hpp); empty or
-// zero: one receiver depth for every tap. Stack maps take one receiver depth, as the shader.
+// zero: one receiver depth for every tap (a stack map: the same slopes in each slice it
+// reads, as st_shadow_uvd_plane given them).
 // A 2D map whose light the GPU refuses (not a sun) answers 1, as the shader does.
 struct ReceiverLookup {
   uint32_t kernel = 3;                    // PCF kernel side: odd, 1..9 (else NaN, as the shader)

@@ -326,9 +326,11 @@ void write_images(const Device<Vk>& d, VkDescriptorSet set, std::span<const VkDe
   d.vk.UpdateDescriptorSets(d.device, uint32_t(w.size()), w.data(), 0, nullptr);
 }
 
-// A compute pipeline of `spirv`'s "main" (its shader module made and destroyed here).
+// A compute pipeline of `spirv`'s "main" (its shader module made and destroyed here),
+// with the specialization constants `spec` if given.
 template <class Vk>
-VkPipeline compute_pipeline(const Device<Vk>& d, VkPipelineLayout layout, std::span<const uint32_t> spirv) {
+VkPipeline compute_pipeline(const Device<Vk>& d, VkPipelineLayout layout, std::span<const uint32_t> spirv,
+                            const VkSpecializationInfo* spec = nullptr) {
   const ShaderModule<Vk> m(d, spirv);
   VkComputePipelineCreateInfo ci{};
   ci.sType = VK_STRUCTURE_TYPE_COMPUTE_PIPELINE_CREATE_INFO;
@@ -336,6 +338,7 @@ VkPipeline compute_pipeline(const Device<Vk>& d, VkPipelineLayout layout, std::s
   ci.stage.stage = VK_SHADER_STAGE_COMPUTE_BIT;
   ci.stage.module = m.module;
   ci.stage.pName = "main";
+  ci.stage.pSpecializationInfo = spec;
   ci.layout = layout;
   VkPipeline p = VK_NULL_HANDLE;
   check(d, d.vk.CreateComputePipelines(d.device, VK_NULL_HANDLE, 1, &ci, d.callbacks, &p), "vkCreateComputePipelines");
@@ -403,6 +406,7 @@ struct Pipeline {
   VkRenderPass pass = VK_NULL_HANDLE;
   uint32_t width = 0, height = 0;
   VkShaderModule vertex = VK_NULL_HANDLE, fragment = VK_NULL_HANDLE;  // fragment may be null
+  const VkSpecializationInfo* fragment_specialization = nullptr;  // the fragment shader's constants
   std::span<const VkVertexInputBindingDescription> vertex_bindings;
   std::span<const VkVertexInputAttributeDescription> vertex_attributes;
   const VkPipelineDepthStencilStateCreateInfo* depth = nullptr;  // null: no depth test
@@ -419,6 +423,7 @@ VkPipeline pipeline(const Device<Vk>& d, const Pipeline& p) {
     stages[i].module = i == 0 ? p.vertex : p.fragment;
     stages[i].pName = "main";
   }
+  stages[1].pSpecializationInfo = p.fragment_specialization;
   VkPipelineVertexInputStateCreateInfo vi{};
   vi.sType = VK_STRUCTURE_TYPE_PIPELINE_VERTEX_INPUT_STATE_CREATE_INFO;
   vi.vertexBindingDescriptionCount = uint32_t(p.vertex_bindings.size());

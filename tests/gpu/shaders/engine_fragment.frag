@@ -4,7 +4,12 @@
 // receiver's visibility with the footprint given, feedback on, or one channel of the light
 // (st_shadow: times the deep part's transmittance; compiled with ST_TEST_DEEP for the deep
 // tests, engine_fragment_deep.frag.spv.inc). It must answer what the compute pass
-// answers with neighbour_footprint off, bit for bit.
+// answers with neighbour_footprint off, bit for bit. One lookup per pipeline, as an engine
+// calls it once: specialization constant 1 picks st_visibility (channel 0), st_shadow
+// (1..3) or st_shadow_uvd_plane (4), constant 0 (ST_MAP_KIND_ID) says a 2D map; the others
+// fold away (each call site would inline the tile walk again: minutes of pipeline compile
+// on a software device from a cold shader cache).
+#define ST_MAP_KIND_ID 0
 #define ST_SET 0
 #define ST_BINDING_POOL 3
 #define ST_BINDING_PAGE 5
@@ -24,6 +29,7 @@ layout(push_constant) uniform Push {
   vec4 to_light_texel;  // channel 4: xyz toward the light (unit), w one finest texel (world)
 } push;
 layout(location = 0) out float visibility;
+layout(constant_id = 1) const uint kLookup = 0u;  // 0: st_visibility, 1: st_shadow, 2: st_shadow_uvd_plane
 
 void main() {
   const ivec2 q = ivec2(gl_FragCoord.xy);
@@ -34,13 +40,13 @@ void main() {
   }
   StProbe probe = st_probe();
   const vec3 n = texelFetch(gbuffer_normals, q, 0).xyz;
-  if (push.channel == 4u) {
+  if (kLookup == 2u) {
     // An engine's filtered lookup with the receiver plane (shadowtile.glsl).
     const uint lb = st_light_block(0u);
     const vec2 slope = st_receiver_slope(lb, n, push.to_light_texel.xyz, push.to_light_texel.w);
     const vec3 uvd = st_light_uvd(lb, st_receiver(p.xyz, n, push.normal_offset));
     visibility = st_shadow_uvd_plane(0u, uvd, slope, push.footprint, push.kernel, probe);
-  } else if (push.channel == 0u) {
+  } else if (kLookup == 0u) {
     visibility = st_visibility(p.xyz, n, push.normal_offset, push.footprint, push.kernel, probe);
   } else {
     const vec3 light = st_shadow(p.xyz, n, push.normal_offset, push.footprint, push.kernel, probe);

@@ -32,6 +32,7 @@ void main() {
                           kStLights, kStHeaderWords, kStLightWords, kMaxStackCells, kSqWords, kSqX, kSqY, kSqSlice,
                           kSqLevel, kSqReceiver, kSqFootprint, kSqR, kFbStackKeyBit, kPcSliceA, kPcSliceB,
                           kPcTimeWeight, kStLightCentreU, kStLightCentreV, kStLightProjection, kFlagSoft,
-                          kFlagResumeWalks, kPtDeep, kDpLevel, kDpSideBits, kDpCount, kDpCapacity, kDpDepthBias, kDpHeaderWords, kDeepQuery, kDtTexelCount, kDtHeaderWords);
+                          kFlagResumeWalks, kPtDeep, kDpLevel, kDpSideBits, kDpCount, kDpCapacity, kDpDepthBias, kDpHeaderWords, kDeepQuery, kDtTexelCount, kDtHeaderWords,
+                          kStLightSlopeCap, kFlagReceiverPlane);
   for (uint i = 0u; i < kProbeWords; ++i) st_output[i] = uintBitsToFloat(i < v.length() ? v[i] : 0u);
 }
