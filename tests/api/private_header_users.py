@@ -19,6 +19,7 @@ ALLOWED = {
     # Benchmarks time the cache's internals: a RemoteMap filled without a Client, the
     # Evaluator behind a Map; they print tables for us, they are not tools a user runs.
     "bench/client_lookups.cpp": "benchmark of the cache's own lookups",
+    "bench/frame_path.cpp": "benchmark: replays tile arrivals into a cache without a server",
     "bench/gpu.cpp": "benchmark: fills a cache without a server",
     "bench/serve_loopback.cpp": "benchmark: fills a cache without a Client",
 }
