@@ -58,7 +58,7 @@ struct BuildArgs {
   std::string dagmh_dictionary = "on";  // tiles/PACK.md "DAG-MH dictionary"
   std::string dagmh_tiles = "mixed";     // tiles/PACK.md "Mixed tiles"
   std::string planes = "auto";           // tiles/core/PLANES.md
-  bool no_split_cells = false;           // stack packs: the uniform cut (tiles/core/MHOCT.md "Split cells")
+  bool split_cells = false;              // stack packs: split only overflowing cells (tiles/core/MHOCT.md "Split cells")
   std::string stack_cells = "smaller";   // light sets: tiles/core/MHOCT.md "Per-slice cells"
 };
 
@@ -163,7 +163,7 @@ void run_build(const BuildArgs& a) {
     if (a.resume || a.mpi || !a.shard.empty() || !a.region.empty())
       throw Error("build: --resume, --mpi, --shard and --region are not supported for light sets (stack packs)");
     return run_stack_build({a.scene, a.light, a.resolution, a.out, a.up, a.skip_level, a.tile_bytes, a.compression,
-                            a.quiet, a.stack_cells, !a.no_split_cells});
+                            a.quiet, a.stack_cells, a.split_cells});
   }
   MapBuildOptions o;
   o.map_level = parse_resolution(a.resolution);
@@ -388,10 +388,11 @@ void setup_build(CLI::App& app) {
                  "reader, the GPU passes included, takes all three")
       ->check(CLI::IsMember({"octree", "smaller", "slices"}))
       ->capture_default_str();
-  app.add_flag("--no-split-cells", a->no_split_cells,
-               "light sets (stack packs): where a cell overflows --tile-bytes move the whole cut one level "
-               "deeper (the packs of earlier versions) instead of splitting only that cell (feature "
-               "stack_split_cells, which the GPU passes do not read yet)");
+  app.add_flag("--split-cells", a->split_cells,
+               "light sets (stack packs): where a cell overflows --tile-bytes split only that cell one level "
+               "deeper (feature stack_split_cells; smaller packs) instead of moving the whole cut deeper. "
+               "The CPU client and the server read such packs; the GPU passes do not yet, so it is off by "
+               "default");
   app.add_option("--planes", a->planes,
                  "on: a tile may store blocks of texels that one plane answers exactly as planes over the "
                  "encoding of the rest, where that stores smaller (open surfaces; tiles/core/PLANES.md); "

@@ -164,7 +164,7 @@ struct GpuMap::Impl {
     sg = view->stack();
     if (sg && std::any_of(sg->cells.begin(), sg->cells.end(), [](const client::CacheEntry& e) { return e.kind == 2; }))
       throw GpuError("GpuMap: the stack pack splits cells below its skip level (feature stack_split_cells), which the "
-                     "GPU stack passes do not read yet; build it with --no-split-cells for the GPU");
+                     "GPU stack passes do not read yet; build it without --split-cells for the GPU");
     deep_part = !sg && view->has_deep();
     if (opt.frames_in_flight < 1 || opt.frames_in_flight > 4) throw GpuError("GpuMap: frames_in_flight must be 1..4");
     if (opt.feedback_capacity < 16 || !std::has_single_bit(opt.feedback_capacity) || opt.feedback_capacity > (1u << 20))
