@@ -500,7 +500,8 @@ class RemoteMap final : public Evaluator {
   mutable RwLock mu_;
   mutable TileCache cache_;
   // The map tiles' bytes the evaluators read: copies packed tightly (tile_arena.hpp), not
-  // the slots, which are the tile bound apart (the GPU mirror's layout).
+  // the slots, which are the tile bound apart (the GPU mirror's layout); at most an eighth
+  // of the pool's bytes, past which a tile is read in its slot.
   TileArena arena_;
   uint64_t metadata_bytes_ = 0;    // accounted outside the slots (ClientOptions::cache_bytes)
   uint32_t dictionary_slots_ = 0;  // MapStats::dictionary_slots

@@ -143,7 +143,8 @@ RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::v
       dictionary_(dictionary_of(header_, grid_bytes, name_)),
       light_(LightSpace::from_array(header_.light_kind, header_.light)),
       cache_(budget_slots(options, header_, dictionary_.get(), grid_bytes.size(), name_), slot_size_for(header_)),
-      arena_(cache_.slot_count(), cache_.slot_bytes()),
+      // The copies' ceiling: an eighth of the pool's bytes (tile_arena.hpp).
+      arena_(cache_.slot_count(), cache_.slot_bytes(), std::max<uint32_t>(2, cache_.slot_count() / 8)),
       metadata_bytes_(metadata_bytes(options, header_, grid_bytes.size(), dictionary_.get())),
       dictionary_slots_(displaced_slots(options, header_, dictionary_.get(), grid_bytes, name_, cache_.slot_count())),
       requests_(size_t(options.want_capacity) + size_t(options.max_in_flight) * options.tiles_per_request,
@@ -444,7 +445,10 @@ bool RemoteMap::fill_slot(uint32_t slot, const proto::TileMeta& meta, const Grid
         unpack_plane_tile(raw);
       }
       // Opened on its copy in the arena (tile_arena.hpp: packed tightly, not a slot apart).
-      ev = open_pack_tile(header_.encoding, arena_.place(slot, raw), dictionary_);  // v2 DAG-MH tiles through the dictionary
+      // At the arena's ceiling the tile is read in its slot.
+      const std::span<const uint8_t> copy = arena_.place(slot, raw);
+      ev = open_pack_tile(header_.encoding, copy.data() ? copy : std::span<const uint8_t>(raw),
+                          dictionary_);  // v2 DAG-MH tiles through the dictionary
       return ev && ev->finest_level() == header_.map_level - a.level;
     }
     grid = CutGrid::parse(raw, what, kMaxIndexLevels);

@@ -9,8 +9,10 @@
 
 namespace st::client {
 
-TileArena::TileArena(uint32_t slot_count, uint32_t chunk_bytes)
-    : chunk_bytes_((std::max<uint32_t>(chunk_bytes, 1) + kAlign - 1) / kAlign * kAlign), homes_(slot_count) {}
+TileArena::TileArena(uint32_t slot_count, uint32_t chunk_bytes, uint32_t max_chunks)
+    : chunk_bytes_((std::max<uint32_t>(chunk_bytes, 1) + kAlign - 1) / kAlign * kAlign),
+      max_chunks_(std::max<uint32_t>(max_chunks, 1)),
+      homes_(slot_count) {}
 
 uint32_t TileArena::new_chunk_locked() {
   std::unique_ptr<uint8_t, Free> data(static_cast<uint8_t*>(std::aligned_alloc(kAlign, chunk_bytes_)));
@@ -38,7 +40,10 @@ std::span<const uint8_t> TileArena::place(uint32_t slot, std::span<const uint8_t
   if (bytes.empty()) return {};
   const uint32_t size = uint32_t((bytes.size() + kAlign - 1) / kAlign * kAlign);  // <= chunk_bytes_
   // A full chunk keeps a live tile (one whose tiles all left started over, below).
-  if (current_ == kNone || chunks_[current_].used + size > chunk_bytes_) current_ = new_chunk_locked();
+  if (current_ == kNone || chunks_[current_].used + size > chunk_bytes_) {
+    if (held_ >= max_chunks_) return {};  // at the ceiling: the caller reads its own bytes
+    current_ = new_chunk_locked();
+  }
   Chunk& c = chunks_[current_];
   uint8_t* at = c.data.get() + c.used;
   c.used += size;

@@ -15,8 +15,11 @@
 //
 // A chunk's bump pointer only rewinds when its last tile is released; a chunk with no
 // live tile (other than the one being filled) is freed. So the arena holds at most
-// (live tiles + 1) chunks, never more than the cache's slots + 1 chunk, and in a steady
-// state about the live tiles' bytes.
+// (live tiles + 1) chunks, and in a steady state about the live tiles' bytes. Under heavy
+// eviction a chunk may keep a single live tile, so the arena also has a ceiling,
+// `max_chunks` (RemoteMap: an eighth of the pool's bytes): a copy that would need a chunk
+// past it is not made, and that tile is read in its slot as before (slower, never more
+// memory than the cache's budget plus that eighth).
 //
 // Thread safety: place and release may be called from any thread (an internal mutex);
 // the returned bytes stay valid until the slot's next place or release.
@@ -32,11 +35,14 @@ namespace st::client {
 
 class TileArena {
  public:
-  // chunk_bytes: at least the largest tile placed (the cache's slot size).
-  TileArena(uint32_t slot_count, uint32_t chunk_bytes);
+  // chunk_bytes: at least the largest tile placed (the cache's slot size); max_chunks: the
+  // most chunks held at once (at least 1).
+  TileArena(uint32_t slot_count, uint32_t chunk_bytes, uint32_t max_chunks = ~0u);
 
   // Copies `bytes` into the arena as `slot`'s tile (its previous copy released first) and
-  // returns the copy. Throws std::bad_alloc, or st::Error when bytes exceed a chunk.
+  // returns the copy; a span without data (data() == nullptr) when the copy would need a
+  // chunk past max_chunks: nothing is placed, the caller reads its own bytes. Throws
+  // std::bad_alloc, or st::Error when bytes exceed a chunk.
   std::span<const uint8_t> place(uint32_t slot, std::span<const uint8_t> bytes);
   // Drops `slot`'s copy (none: nothing happens).
   void release(uint32_t slot) noexcept;
@@ -65,6 +71,7 @@ class TileArena {
 
   mutable std::mutex mu_;
   uint32_t chunk_bytes_;
+  uint32_t max_chunks_;
   std::vector<Chunk> chunks_;
   std::vector<uint32_t> free_ids_;  // chunks_ entries without data
   uint32_t current_ = kNone;        // the chunk being filled

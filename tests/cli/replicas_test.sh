@@ -29,7 +29,10 @@ haproxy -f haproxy.cfg -db 2>haproxy.log & hp=$!; pids+=($hp)
 sleep 1.2  # the first health checks (inter 1s) pass
 kill -0 $hp 2>/dev/null || die "haproxy did not start: $(cat haproxy.log)"
 grep -q "is DOWN" haproxy.log && die "a healthy replica was marked down: $(grep DOWN haproxy.log)"
-load=(load --map city --cameras 2 --duration 3 --rate 30)
+# 8 s: the kill below lands once the direct run holds a connection to replica 1, which on
+# a loaded 2-core machine (GPU tests compiling beside it) came late enough in a 3 s run
+# that the run had ended before the kill, so nothing failed over.
+load=(load --map city --cameras 2 --duration 8 --rate 30)
 "$st" "${load[@]}" --server 127.0.0.1:$front --report via_haproxy >via_haproxy.log 2>&1 & la=$!; pids+=($la)
 "$st" "${load[@]}" --server 127.0.0.1:$p1,127.0.0.1:$p2 --report direct >direct.log 2>&1 & lb=$!; pids+=($lb)
 # Kill replica 1 once the direct run holds a connection to it (a fixed sleep raced a
@@ -54,6 +57,7 @@ PY
 for _ in $(seq 1 200); do connected_to $lb $p1 && break; sleep 0.05; done
 connected_to $lb $p1 || die "the direct run did not connect to replica 1 within 10 s: $(tail -n 3 direct.log)"
 sleep 0.3  # a few frames' requests in flight on it
+kill -0 $lb 2>/dev/null || die "the direct run ended before replica 1 was killed: $(tail -n 3 direct.log)"
 kill -9 $s1; wait $s1 2>/dev/null
 wait $la; ra=$?
 wait $lb; rb=$?

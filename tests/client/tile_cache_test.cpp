@@ -300,4 +300,34 @@ TEST(TileArena, RandomPlacesKeepEveryLiveCopyIntactAndBoundTheChunks) {
   EXPECT_TRUE(arena.place(1, {}).empty());
 }
 
+// With a ceiling of chunks, a copy that needs one more is not made (a span without data:
+// the caller reads its own bytes) and the arena never holds more; the copies made keep
+// their bytes.
+TEST(TileArena, ACeilingOfChunksIsNeverPassedAndRefusedCopiesAreNotMade) {
+  constexpr uint32_t kSlots = 32, kChunk = 1024, kMax = 3;
+  TileArena arena(kSlots, kChunk, kMax);
+  std::mt19937 rng(11);
+  std::vector<std::vector<uint8_t>> want(kSlots);
+  std::vector<std::span<const uint8_t>> got(kSlots);
+  uint32_t refused = 0;
+  for (int op = 0; op < 3000; ++op) {
+    const uint32_t slot = rng() % kSlots;
+    if (rng() % 3 == 0) {
+      arena.release(slot);
+      got[slot] = {};
+      continue;
+    }
+    want[slot] = bytes_of(1 + rng() % 700, uint8_t(op));
+    got[slot] = arena.place(slot, want[slot]);
+    if (!got[slot].data()) ++refused;
+    ASSERT_LE(arena.held_bytes(), uint64_t(kMax) * kChunk) << op;
+    for (uint32_t s = 0; s < kSlots; ++s) {
+      if (got[s].data()) {
+        ASSERT_TRUE(std::equal(got[s].begin(), got[s].end(), want[s].begin(), want[s].end())) << s << " " << op;
+      }
+    }
+  }
+  EXPECT_GT(refused, 0u) << "the ceiling was never reached: the test proves nothing";
+}
+
 }  // namespace st::client::arena_test
