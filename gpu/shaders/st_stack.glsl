@@ -1,6 +1,6 @@
 // shadowtile GPU evaluators for stack maps (shadow-map stacks, MH 2016 §4): the MH octree
-// tile decoder, per-slice cells (each slice's own 2D tile) and the walk of the stack block (the octree's top K levels and the level-K
-// cells, gpu/GPU_LAYOUT.md "The stack block"), the same operations as the CPU's
+// tile decoder, per-slice cells (each slice's own 2D tile) and the walk of the stack block (the octree's top K levels, the level-K
+// cells and split cells' children, gpu/GPU_LAYOUT.md "The stack block"), the same operations as the CPU's
 // MhOctree::depth (tiles/core/mh_octree_reader.cpp) and StackMap::depth
 // (tiles/core/stack_map.cpp), so every answer is bit-exact with the CPU's.
 //
