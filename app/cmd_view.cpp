@@ -125,7 +125,6 @@ void run_view(const ViewArgs& a) {
   if (!a.cache_mb_given) {
     gpu::GpuOptions probe;
     probe.device = a.device;
-    probe.texel_buffers = true;  // the raster's fragment shader reads texel buffers (examples/raster)
     uint32_t fit = 0;
     try {
       fit = gpu::GpuMap::max_cache_slots(probe, map.slot_bytes());

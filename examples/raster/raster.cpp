@@ -277,7 +277,6 @@ struct Rasterizer::Impl {
     go.frames_in_flight = o.frames_in_flight;
     go.upload_budget_bytes = o.upload_budget_bytes;
     go.feedback_capacity = o.feedback_capacity;
-    go.texel_buffers = true;  // scene.frag reads the pool and page table as texel buffers (ST_TEXEL_BUFFERS)
     g = std::make_unique<gpu::GpuMap>(map, ed, go);
 
     vb = dev.buffer(tri.size() * 4, VK_BUFFER_USAGE_VERTEX_BUFFER_BIT);
@@ -446,27 +445,21 @@ struct Rasterizer::Impl {
 
   void make_pipelines() {
     const auto d = dev.setup();
-    // Set 0: GpuMap's buffers (shadowtile.glsl), one set per ring slot (its feedback range):
-    // the pool and page table as uniform texel buffers (ST_TEXEL_BUFFERS), the feedback a
-    // storage buffer.
-    auto b0 = vk_setup::bindings(3, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VK_SHADER_STAGE_FRAGMENT_BIT);
-    b0[0].descriptorType = b0[1].descriptorType = gpu::GpuDescriptors::texel_type;
-    set_layout = vk_setup::set_layout(d, b0);
+    // Set 0: GpuMap's buffers (shadowtile.glsl), one set per ring slot (its feedback range).
+    set_layout = vk_setup::set_layout(d, vk_setup::bindings(3, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VK_SHADER_STAGE_FRAGMENT_BIT));
     // Set 1: the plain R32F depth map (Lookup::r32f).
     map_layout = vk_setup::set_layout(d, vk_setup::bindings(1, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, VK_SHADER_STAGE_FRAGMENT_BIT));
     const VkDescriptorSetLayout both[2] = {set_layout, map_layout};
     layout = vk_setup::pipeline_layout(d, both, {VK_SHADER_STAGE_VERTEX_BIT | VK_SHADER_STAGE_FRAGMENT_BIT, 0, sizeof(Push)});
-    const VkDescriptorPoolSize ps[3] = {{gpu::GpuDescriptors::texel_type, 2 * o.frames_in_flight},
-                                        {VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, o.frames_in_flight},
+    const VkDescriptorPoolSize ps[2] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 3 * o.frames_in_flight},
                                         {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 1}};
     dpool = vk_setup::descriptor_pool(d, o.frames_in_flight + 1, ps);
     sets.resize(o.frames_in_flight);
     for (uint32_t i = 0; i < o.frames_in_flight; ++i) {
       sets[i] = vk_setup::allocate_set(d, dpool, set_layout);
       const gpu::GpuDescriptors g_i = g->descriptors(i);  // ring slot i's feedback (frame f uses slot f % N)
-      const VkBufferView views[2] = {g_i.pool_view, g_i.page_table_view};
-      vk_setup::write_texel_buffers(d, sets[i], views);
-      vk_setup::write_buffers(d, sets[i], {&g_i.feedback, 1}, 2);
+      const VkDescriptorBufferInfo infos[3] = {g_i.pool, g_i.page_table, g_i.feedback};
+      vk_setup::write_buffers(d, sets[i], infos);
     }
     map_set = vk_setup::allocate_set(d, dpool, map_layout);
     const VkDescriptorImageInfo ii{sampler, r32f.view, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL};

@@ -2,9 +2,7 @@
 // The example renderer's fragment shader (examples/raster/raster.cpp): Lambert shading
 // with streamed shadows as `shadowtile render` shades (ambient 0.15, albedo, sky, gamma
 // 2.2 for its PNG), the visibility from the GPU tile cache through shadowtile.glsl (our
-// buffers in set 0: the pool and page table as uniform texel buffers, the feedback a storage
-// buffer; on lavapipe texel fetches are gathers where storage-buffer reads are per-lane
-// loops: bench/raster.cpp). Absent tiles answer coarsely and are fed back, so the next frames
+// buffers in set 0). Absent tiles answer coarsely and are fed back, so the next frames
 // stream them. The level pair comes from the pixel's footprint (or the finest level).
 // Stack maps: two slices blended at the frame's time, or every slice averaged (soft).
 // mode.x picks the lookup: 0 none (the pass's cost without shadows), 1 shadowtile, 2 a
@@ -17,7 +15,6 @@
 #define ST_BINDING_POOL 0
 #define ST_BINDING_PAGE 1
 #define ST_BINDING_FEEDBACK 2
-#define ST_TEXEL_BUFFERS  // the pool and page table through texelFetch (GpuOptions::texel_buffers)
 #include "shadowtile.glsl"
 
 // Early fragment tests: with the depth pre-pass and the EQUAL test only the visible

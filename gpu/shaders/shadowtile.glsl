@@ -59,9 +59,8 @@
 // texelFetch on usamplerBuffers (R32_UINT views) instead of storage buffers: the same words,
 // so the same answers bit for bit. Create the GpuMap with GpuOptions::texel_buffers and bind
 // GpuDescriptors::pool_view and page_table_view as VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER at
-// ST_BINDING_POOL and ST_BINDING_PAGE (the feedback stays a storage buffer). A software
-// device (lavapipe) compiles each storage-buffer read of a fragment shader to a loop over
-// the lanes and each texel fetch to one gather (bench/raster.cpp's header: the figures).
+// ST_BINDING_POOL and ST_BINDING_PAGE (the feedback stays a storage buffer). On lavapipe it
+// did not make the 5x5 lookup cheaper (bench/raster.cpp's header: the figures).
 #ifndef SHADOWTILE_GLSL
 #define SHADOWTILE_GLSL
 #extension GL_GOOGLE_include_directive : require
