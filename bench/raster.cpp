@@ -38,6 +38,15 @@
 // one vectorised gather. The lookup's cost on lavapipe follows its count of buffer reads.
 // Branches are lane masks there (an `if` or early return skips nothing), so the "none" and
 // R32F frames of this one shader also run the lookup's code with every lane off.
+// Texel buffers (shadowtile.glsl's ST_TEXEL_BUFFERS, GpuOptions::texel_buffers: the pool and
+// page table read with texelFetch on usamplerBuffers) did not help here: the same command
+// (2k maps, 4096-byte tiles, 640x360, --reps 5 --kernels 1,5 --no-frame-path --cpu-time,
+// MESA_SHADER_CACHE_DISABLE=true), main's storage-buffer shader (A) and the texel one (B)
+// alternated A B A B, load 21-29: ratio to R32F 1 tap / 5x5, city A 2.06/2.24, 2.01/2.30,
+// B 2.02/2.81, 1.97/2.98; 2CylinderEngine.glb A 1.86/3.33, 1.79/4.26, B 1.76/4.38, 1.85/4.03.
+// Process CPU per frame (st 5x5 / R32F 5x5, ms): engine A 512/157, 447/136, B 505/134, 417/118;
+// the R32F frames (whose page reads became fetches too) got cheaper, the 5x5 lookup hardly.
+// So the example keeps storage buffers; the texel mode stays for engines (tested bit-exact).
 // --region builds only a window of the map (finest texels; the rest lit): a 64K^2 map in
 // minutes; the camera then looks at the window. The R32F map (the finest level, 4^L floats)
 // is skipped with --no-r32f, with --region, and above 16K^2: its rows print '-'.

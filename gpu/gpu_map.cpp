@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <bit>
 #include <cstring>
+#include <utility>
 #include <vector>
 
 #include "shadowtile/cache_view.hpp"
@@ -134,6 +135,7 @@ struct GpuMap::Impl {
   uint64_t last_recorded = 0;
   std::vector<FrameStats> retired;  // retire()'s answer (capacity frames_in_flight)
   VkBufferBox pool, page;
+  VkBufferView pool_view = VK_NULL_HANDLE, page_view = VK_NULL_HANDLE;  // GpuOptions::texel_buffers
   VkCommandPool cmd_pool = VK_NULL_HANDLE;
   VkQueryPool queries = VK_NULL_HANDLE;
   std::vector<Frame> frames;
@@ -226,6 +228,10 @@ struct GpuMap::Impl {
     if (cmd_pool) ctx->vk.DestroyCommandPool(d, cmd_pool, nullptr);
     cmd_pool = VK_NULL_HANDLE;
     kernels.destroy(*ctx);
+    for (VkBufferView* v : {&pool_view, &page_view}) {
+      if (*v) ctx->vk.DestroyBufferView(d, *v, ctx->callbacks());
+      *v = VK_NULL_HANDLE;
+    }
     ctx->destroy(pool);
     ctx->destroy(page);
     ctx.reset();
@@ -626,6 +632,33 @@ struct GpuMap::Impl {
 
 
   // ---- engine mode ----
+  // The slot pool and the page table; with GpuOptions::texel_buffers also uniform texel
+  // buffers, each with an R32_UINT view (shadowtile.glsl's ST_TEXEL_BUFFERS reads).
+  void create_pool_and_page() {
+    const uint64_t page_words = page_shadow.size();
+    if (opt.texel_buffers) {
+      const uint64_t elements = ctx->properties().limits.maxTexelBufferElements;
+      for (auto [what, words] : {std::pair{"slot pool", pool_bytes / 4}, std::pair{"page table", page_words}})
+        if (words > elements)
+          throw GpuError(std::string("GpuMap: texel_buffers: the ") + what + " (" + std::to_string(words) +
+                         " words) exceeds device '" + ctx->device_name() + "' maxTexelBufferElements (" +
+                         std::to_string(elements) + "); use fewer cache slots, or storage buffers");
+    }
+    const VkBufferUsageFlags texel = opt.texel_buffers ? VK_BUFFER_USAGE_UNIFORM_TEXEL_BUFFER_BIT : 0;
+    pool = ctx->make_buffer(pool_bytes, false, texel);
+    page = ctx->make_buffer(page_words * 4, false, texel);
+    if (!opt.texel_buffers) return;
+    for (auto [b, v] : {std::pair{&pool, &pool_view}, std::pair{&page, &page_view}}) {
+      VkBufferViewCreateInfo vci{};
+      vci.sType = VK_STRUCTURE_TYPE_BUFFER_VIEW_CREATE_INFO;
+      vci.buffer = b->buffer;
+      vci.format = VK_FORMAT_R32_UINT;  // uniform texel buffers: a mandatory format feature
+      vci.offset = 0;
+      vci.range = VK_WHOLE_SIZE;
+      vk_check(ctx->vk.CreateBufferView(ctx->device(), &vci, ctx->callbacks(), v), "vkCreateBufferView");
+    }
+  }
+
   void create_engine_objects() {
     const VkFunctions& vk = ctx->vk;
     VkDevice d = ctx->device();
@@ -642,8 +675,7 @@ struct GpuMap::Impl {
       if (qs[ctx->queue_family()].queueFlags & VK_QUEUE_GRAPHICS_BIT)
         shader_stages |= VK_PIPELINE_STAGE_VERTEX_SHADER_BIT | VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT;
     }
-    pool = ctx->make_buffer(pool_bytes, false);
-    page = ctx->make_buffer(page_shadow.size() * 4, false);
+    create_pool_and_page();
     const uint64_t staging = opt.upload_budget_bytes + uint64_t(slot_words) * 4 + page_shadow.size() * 4;
     const uint64_t fb_bytes = (L::kFbHeaderWords + uint64_t(opt.feedback_capacity) * (2 + L::kFbRecordWords)) * 4;
     retired.reserve(opt.frames_in_flight);
@@ -1034,13 +1066,21 @@ uint32_t GpuMap::max_cache_slots(uint64_t storage_range, uint32_t slot_bytes) {
   const uint64_t slot = align4(std::max<uint32_t>(slot_bytes, 1));  // as Impl's pool_bytes
   return uint32_t(std::min<uint64_t>(storage_range / slot, uint64_t(1) << 23));
 }
-uint32_t GpuMap::max_cache_slots(const EngineDevice& device, uint32_t slot_bytes) {
+// The pool's byte range on a device: its storage-buffer range, and with texel buffers
+// also its texel-buffer range (R32_UINT texels).
+namespace {
+uint64_t pool_range(const VkPhysicalDeviceLimits& l, bool texel_buffers) {
+  const uint64_t storage = l.maxStorageBufferRange;
+  return texel_buffers ? std::min<uint64_t>(storage, uint64_t(l.maxTexelBufferElements) * 4) : storage;
+}
+}  // namespace
+uint32_t GpuMap::max_cache_slots(const EngineDevice& device, uint32_t slot_bytes, bool texel_buffers) {
   const VkContext ctx(device);
-  return max_cache_slots(ctx.properties().limits.maxStorageBufferRange, slot_bytes);
+  return max_cache_slots(pool_range(ctx.properties().limits, texel_buffers), slot_bytes);
 }
 uint32_t GpuMap::max_cache_slots(const GpuOptions& options, uint32_t slot_bytes) {
   const VkContext ctx(options.device, false);
-  return max_cache_slots(ctx.properties().limits.maxStorageBufferRange, slot_bytes);
+  return max_cache_slots(pool_range(ctx.properties().limits, options.texel_buffers), slot_bytes);
 }
 
 std::span<const FrameStats> GpuMap::retire(uint64_t completed_frame) { return impl_->retire(completed_frame); }
@@ -1062,6 +1102,8 @@ GpuDescriptors GpuMap::descriptors(uint64_t frame) const {
   d.pool = {m.pool.buffer, 0, VK_WHOLE_SIZE};
   d.page_table = {m.page.buffer, 0, VK_WHOLE_SIZE};
   d.feedback = {f.feedback.buffer, 0, VK_WHOLE_SIZE};
+  d.pool_view = m.pool_view;
+  d.page_table_view = m.page_view;
   return d;
 }
 

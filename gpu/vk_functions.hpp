@@ -26,6 +26,8 @@ namespace st::gpu {
   X(QueueSubmit)                  \
   X(CreateBuffer)                 \
   X(DestroyBuffer)                \
+  X(CreateBufferView)             \
+  X(DestroyBufferView)            \
   X(GetBufferMemoryRequirements)  \
   X(AllocateMemory)               \
   X(FreeMemory)                   \

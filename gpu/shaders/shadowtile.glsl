@@ -18,6 +18,8 @@
 //   #define ST_DEEP_SHADOWS 0         // optional: no partial occluders (st_shadow = vec3(visibility))
 //   #define ST_MAP_KIND_ID 7          // optional: specialization constant 7 says which maps the
 //                                     // pipeline serves: 0 either (default), 1 2D, 2 stack
+//   #define ST_TEXEL_BUFFERS          // optional: the pool and page table read through texelFetch
+//                                     // on uniform texel buffers (GpuOptions::texel_buffers)
 //   #include "shadowtile.glsl"
 //   ...
 //   StProbe probe = st_probe();
@@ -53,6 +55,12 @@
 // as examples/shaders/scene.frag does), and with ST_MAP_KIND_ID set the specialization
 // constant to GpuMap::is_stack() (1 for a 2D map, 2 for a stack map) at pipeline creation:
 // the walk of the other kind of map is then left out.
+// Texel buffers (ST_TEXEL_BUFFERS defined): the pool and the page table are read with
+// texelFetch on usamplerBuffers (R32_UINT views) instead of storage buffers: the same words,
+// so the same answers bit for bit. Create the GpuMap with GpuOptions::texel_buffers and bind
+// GpuDescriptors::pool_view and page_table_view as VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER at
+// ST_BINDING_POOL and ST_BINDING_PAGE (the feedback stays a storage buffer). On lavapipe it
+// did not make the 5x5 lookup cheaper (bench/raster.cpp's header: the figures).
 #ifndef SHADOWTILE_GLSL
 #define SHADOWTILE_GLSL
 #extension GL_GOOGLE_include_directive : require
@@ -78,10 +86,19 @@
 
 #include "st_layout.h"
 
+#ifdef ST_TEXEL_BUFFERS
+// The pool and page table as uniform texel buffers (R32_UINT views: GpuDescriptors'
+// pool_view and page_table_view, VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER).
+layout(set = ST_SET, binding = ST_BINDING_POOL) uniform usamplerBuffer st_pool_texels;
+layout(set = ST_SET, binding = ST_BINDING_PAGE) uniform usamplerBuffer st_page_texels;
+#define ST_POOL(i) texelFetch(st_pool_texels, int(i)).x
+#define ST_PAGE(i) texelFetch(st_page_texels, int(i)).x
+#else
 layout(std430, set = ST_SET, binding = ST_BINDING_POOL) readonly buffer StPoolBuffer { uint st_pool[]; };
 layout(std430, set = ST_SET, binding = ST_BINDING_PAGE) readonly buffer StPageBuffer { uint st_page[]; };
 #define ST_POOL(i) st_pool[i]
 #define ST_PAGE(i) st_page[i]
+#endif
 #if ST_FEEDBACK
 layout(std430, set = ST_SET, binding = ST_BINDING_FEEDBACK) coherent buffer StFeedbackBuffer { uint st_fb[]; };
 #define ST_FB(i) st_fb[i]

@@ -90,6 +90,8 @@ if [[ $gpu == ON ]]; then
     timeout 120 "$work/build-static/consumer_gpu" 127.0.0.1 "$port" city $level >"$work/got_gpu.txt" || fail "consumer_gpu exited $?"
   cmp -s "$work/got_gpu.txt" "$work/want.txt" || { diff "$work/got_gpu.txt" "$work/want.txt" | head -5; fail "GPU answers differ from the pack"; }
   [[ -f "$work/build-static/shade.frag.spv" ]] || fail "the fragment shader over the installed shadowtile.glsl did not compile"
+  [[ -f "$work/build-static/shade_texel.frag.spv" ]] ||
+    fail "the fragment shader over the installed shadowtile.glsl with ST_TEXEL_BUFFERS did not compile"
   echo "consumer_gpu: $lines texels of level $level on the GPU equal the pack's, bit for bit"
 fi
 readelf -d "$work/build-static/consumer" | grep -q 'NEEDED.*libshadowtile' && fail "static: consumer needs libshadowtile.so"

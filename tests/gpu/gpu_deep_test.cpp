@@ -274,6 +274,7 @@ TEST(GpuDeep, EnginePassAndFragmentShaderLightEqualTheCpuTwin) {
   in = gb.input(set);
   shadow_pass_reference(client::evaluator(s->map), client::pack_header(s->map), in, want_vis);
   shadow_pass_light_reference(s->map, in, want_vis, want);
+  EXPECT_EQ(g.descriptors(2).pool_view, VkBufferView(VK_NULL_HANDLE));  // storage buffers only (no texel_buffers)
   const enginetest::RasterPass raster(e, colour, *t.pos, *t.nrm, g.descriptors(2), true);
   size_t bad = 0, below = 0;
   for (uint32_t c = 1; c <= 3; ++c) {

@@ -200,6 +200,7 @@ TEST(GpuEngine, AFragmentShaderIncludingShadowtileGlslAnswersLikeTheComputePass)
   enginetest::Image& colour = e.image(plane.width, plane.height, VK_FORMAT_R32_SFLOAT, VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT);
   GpuOptions o;
   o.frames_in_flight = 1;
+  o.texel_buffers = true;  // the fragment shader reads the pool and page table as texel buffers
   GpuMap g(s.map, e.engine_device(), o);
   ShadowPassSettings set;
   set.kernel = 3;
@@ -273,6 +274,7 @@ TEST(GpuEngine, TheReceiverTwinAnswersLikeAFragmentShaderWhereTheDoubleTransform
   enginetest::Image& colour = e.image(kW, kH, VK_FORMAT_R32_SFLOAT, VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT);
   GpuOptions o;
   o.frames_in_flight = 1;
+  o.texel_buffers = true;  // the fragment shader reads the pool and page table as texel buffers
   GpuMap g(s.map, e.engine_device(), o);
   const RasterPass raster(e, colour, *t.pos, *t.nrm, g.descriptors(2));
   const RasterPass::Frame r = raster.run_frame(e, g, 1, t.readback[0], kKernel, 0.0f, kFootprint);
@@ -346,6 +348,7 @@ TEST(GpuEngine, ReceiverPlaneLookupsOnSlopesAnswerLikeTheTwin) {
   enginetest::Image& colour = e.image(kW, kH, VK_FORMAT_R32_SFLOAT, VK_IMAGE_USAGE_COLOR_ATTACHMENT_BIT);
   GpuOptions o;
   o.frames_in_flight = 1;
+  o.texel_buffers = true;  // the fragment shader reads the pool and page table as texel buffers
   GpuMap g(s.map, e.engine_device(), o);
   const RasterPass raster(e, colour, *t.pos, *t.nrm, g.descriptors(2));
   uint64_t completed = 0;
@@ -601,8 +604,9 @@ TEST(GpuEngine, FramesInFlightWithAChurningCacheNeverStallAndMoveOnlyTilePageAnd
 }
 
 // Sizing a cache for a device: the most slots whose pool fits the device's
-// maxStorageBufferRange, the engine's device and the own-device one alike (both lavapipe
-// here), slots rounded to words as the pool holds them, never past GpuMap's 2^23 slots.
+// maxStorageBufferRange (and maxTexelBufferElements words for texel buffers), the engine's
+// device and the own-device one alike (both lavapipe here), slots rounded to words as the
+// pool holds them, never past GpuMap's 2^23 slots.
 TEST(GpuEngine, MaxCacheSlotsFillsTheDevicesStorageRangeAndNoMore) {
   TestEngine e(1);
   VkPhysicalDeviceProperties p{};
@@ -616,6 +620,9 @@ TEST(GpuEngine, MaxCacheSlotsFillsTheDevicesStorageRangeAndNoMore) {
     EXPECT_GT((n + 1) * words, range);
     EXPECT_EQ(GpuMap::max_cache_slots(gputest::options(), slot_bytes), n);
     EXPECT_EQ(GpuMap::max_cache_slots(range, slot_bytes), n);
+    // Texel buffers (GpuOptions::texel_buffers): the pool also within maxTexelBufferElements words.
+    const uint64_t texel_range = std::min<uint64_t>(range, uint64_t(p.limits.maxTexelBufferElements) * 4);
+    EXPECT_EQ(GpuMap::max_cache_slots(e.engine_device(), slot_bytes, true), GpuMap::max_cache_slots(texel_range, slot_bytes));
   }
   EXPECT_EQ(GpuMap::max_cache_slots(1000, 10), 83u);  // 12-byte slots
   EXPECT_EQ(GpuMap::max_cache_slots(uint64_t(1) << 40, 4), 1u << 23);

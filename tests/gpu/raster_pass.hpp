@@ -1,11 +1,14 @@
 // The engine's own raster pass of the GPU tests (tests/gpu/shaders): a full-screen
 // triangle into an R32F colour attachment, its fragment shader (engine_fragment.frag)
 // including shadowtile.glsl with our buffers at set 0 bindings 3, 5, 7
-// (GpuMap::descriptors) and the G-buffer at set 1.
+// (GpuMap::descriptors) and the G-buffer at set 1. The opaque shader reads the pool and
+// page table as texel buffers (its GpuMap made with GpuOptions::texel_buffers), the deep one
+// as storage buffers.
 #pragma once
 #include <array>
 #include <bit>
 #include <span>
+#include <stdexcept>
 #include <vector>
 
 #include "shadowtile/vk_setup.hpp"
@@ -42,7 +45,9 @@ struct RasterPass {
   const Image* target;
   uint32_t width, height;
 
-  // deep: the fragment shader built with partial occluders (st_shadow times st_transmittance).
+  // deep: the fragment shader built with partial occluders (st_shadow times st_transmittance),
+  // the pool and page table as storage buffers; else as texel buffers (g's views: the
+  // GpuMap made with GpuOptions::texel_buffers).
   RasterPass(enginetest::TestEngine& e, const Image& target, const Image& pos, const Image& nrm,
              const gpu::GpuDescriptors& g, bool deep = false)
       : d(e.device), target(&target), width(target.width), height(target.height) {
@@ -57,18 +62,29 @@ struct RasterPass {
     sci.sType = VK_STRUCTURE_TYPE_SAMPLER_CREATE_INFO;
     sci.magFilter = sci.minFilter = VK_FILTER_NEAREST;
     check(vkCreateSampler(d, &sci, nullptr, &sampler), "vkCreateSampler");
-    l0 = vk_setup::set_layout(v, vk_setup::bindings(3, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VK_SHADER_STAGE_FRAGMENT_BIT, 3, 2));
+    auto b0 = vk_setup::bindings(3, VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, VK_SHADER_STAGE_FRAGMENT_BIT, 3, 2);
+    if (!deep) b0[0].descriptorType = b0[1].descriptorType = gpu::GpuDescriptors::texel_type;
+    l0 = vk_setup::set_layout(v, b0);
     auto b1 = vk_setup::bindings(2, VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, VK_SHADER_STAGE_FRAGMENT_BIT);
     for (auto& b : b1) b.pImmutableSamplers = &sampler;
     l1 = vk_setup::set_layout(v, b1);
     const VkDescriptorSetLayout sets[2] = {l0, l1};
     layout = vk_setup::pipeline_layout(v, sets, {VK_SHADER_STAGE_FRAGMENT_BIT, 0, 32});
-    const VkDescriptorPoolSize ps[2] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 3}, {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 2}};
+    const VkDescriptorPoolSize ps[3] = {{VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, 3},
+                                        {gpu::GpuDescriptors::texel_type, 2},
+                                        {VK_DESCRIPTOR_TYPE_COMBINED_IMAGE_SAMPLER, 2}};
     pool = vk_setup::descriptor_pool(v, 2, ps);
     s0 = vk_setup::allocate_set(v, pool, l0);
     s1 = vk_setup::allocate_set(v, pool, l1);
-    const VkDescriptorBufferInfo bufs[3] = {g.pool, g.page_table, g.feedback};
-    vk_setup::write_buffers(v, s0, bufs, 3, 2);
+    if (deep) {
+      const VkDescriptorBufferInfo bufs[3] = {g.pool, g.page_table, g.feedback};
+      vk_setup::write_buffers(v, s0, bufs, 3, 2);
+    } else {
+      if (!g.pool_view || !g.page_table_view) throw std::runtime_error("RasterPass: the GpuMap has no texel-buffer views");
+      const VkBufferView views[2] = {g.pool_view, g.page_table_view};
+      vk_setup::write_texel_buffers(v, s0, views, 3, 2);
+      vk_setup::write_buffers(v, s0, {&g.feedback, 1}, 7);
+    }
     const VkDescriptorImageInfo imgs[2] = {{VK_NULL_HANDLE, pos.view, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL},
                                            {VK_NULL_HANDLE, nrm.view, VK_IMAGE_LAYOUT_SHADER_READ_ONLY_OPTIMAL}};
     vk_setup::write_images(v, s1, imgs);

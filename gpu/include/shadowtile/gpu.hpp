@@ -101,6 +101,13 @@ struct GpuOptions {
   // Engine mode: also build the shadow pass that writes ShadowPassImages::light (one more
   // compute pipeline, created in the constructor like the other).
   bool light_pass = false;
+  // Engine mode: the pool and the page table are also uniform texel buffers, and GpuMap
+  // creates an R32_UINT VkBufferView of each on the engine's device
+  // (GpuDescriptors::pool_view, page_table_view) for a shader that includes shadowtile.glsl
+  // with ST_TEXEL_BUFFERS defined. Each must fit the device's maxTexelBufferElements (words;
+  // 2^27 on lavapipe, at least 2^16 anywhere), else the constructor throws GpuError
+  // (max_cache_slots with texel_buffers sizes the cache). Unused in own-device mode.
+  bool texel_buffers = false;
 };
 
 
@@ -207,9 +214,15 @@ struct ShadowPassSettings {
 
 // What GpuMap's buffers are, for the engine's own descriptor sets (shadowtile.glsl binds
 // them at the set and bindings the engine defines). All three are storage buffers; the
-// feedback range is the frame's own (its ring slot's).
+// feedback range is the frame's own (its ring slot's). With GpuOptions::texel_buffers the
+// pool and page table are also R32_UINT texel-buffer views (VK_NULL_HANDLE without):
+// a shader built with ST_TEXEL_BUFFERS binds pool_view and page_table_view as
+// texel_type (VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER, VkWriteDescriptorSet::pTexelBufferView;
+// vk_setup::write_texel_buffers) and the feedback as a storage buffer.
 struct GpuDescriptors {
   VkDescriptorBufferInfo pool{}, page_table{}, feedback{};
+  VkBufferView pool_view = VK_NULL_HANDLE, page_table_view = VK_NULL_HANDLE;
+  static constexpr VkDescriptorType texel_type = VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER;
 };
 
 // One query of evaluate(). r == 0: the depth of texel (x, y) of `level`. Else r x r PCF
@@ -355,7 +368,8 @@ struct GpuStats {
 class GpuMap {
  public:
   // Throws GpuError (no device, device not found, Vulkan failure, a pool larger than the
-  // device's storage-buffer range) or std::runtime_error for an invalid Map.
+  // device's storage-buffer range, or than its texel-buffer range with
+  // GpuOptions::texel_buffers) or std::runtime_error for an invalid Map.
   GpuMap(client::Map map, GpuOptions options = {});
   ~GpuMap();
   GpuMap(const GpuMap&) = delete;
@@ -376,7 +390,9 @@ class GpuMap {
   // constructors throw). Engine mode: the engine's device; own-device: the device
   // options.device chooses (a short-lived instance and device). Throws GpuError as the
   // constructors do.
-  static uint32_t max_cache_slots(const EngineDevice& device, uint32_t slot_bytes);
+  // texel_buffers (GpuOptions::texel_buffers; the GpuOptions overload reads options'): the
+  // pool must also fit maxTexelBufferElements words.
+  static uint32_t max_cache_slots(const EngineDevice& device, uint32_t slot_bytes, bool texel_buffers = false);
   static uint32_t max_cache_slots(const GpuOptions& options, uint32_t slot_bytes);
   // The same for a storage-buffer range in bytes (kAnyDeviceStorageRange: every device).
   static uint32_t max_cache_slots(uint64_t storage_range, uint32_t slot_bytes);

@@ -311,6 +311,27 @@ void write_buffers(const Device<Vk>& d, VkDescriptorSet set, std::span<const VkD
   }
 }
 
+// Uniform texel buffers (GpuDescriptors::pool_view, page_table_view) into bindings first,
+// first + step, ... of `set` (no allocation).
+template <class Vk>
+void write_texel_buffers(const Device<Vk>& d, VkDescriptorSet set, std::span<const VkBufferView> views,
+                         uint32_t first = 0, uint32_t step = 1) {
+  VkWriteDescriptorSet w[8];
+  for (size_t at = 0; at < views.size(); at += 8) {
+    const uint32_t n = uint32_t(std::min<size_t>(8, views.size() - at));
+    for (uint32_t i = 0; i < n; ++i) {
+      w[i] = {};
+      w[i].sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
+      w[i].dstSet = set;
+      w[i].dstBinding = first + step * uint32_t(at + i);
+      w[i].descriptorCount = 1;
+      w[i].descriptorType = VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER;
+      w[i].pTexelBufferView = &views[at + i];
+    }
+    d.vk.UpdateDescriptorSets(d.device, n, w, 0, nullptr);
+  }
+}
+
 // Combined image samplers into bindings 0, 1, ... of `set`.
 template <class Vk>
 void write_images(const Device<Vk>& d, VkDescriptorSet set, std::span<const VkDescriptorImageInfo> images) {

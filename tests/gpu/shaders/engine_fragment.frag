@@ -3,7 +3,9 @@
 // buffers in set 0 at the bindings the engine chose, its G-buffer in set 1; per pixel the
 // receiver's visibility with the footprint given, feedback on, or one channel of the light
 // (st_shadow: times the deep part's transmittance; compiled with ST_TEST_DEEP for the deep
-// tests, engine_fragment_deep.frag.spv.inc). It must answer what the compute pass
+// tests, engine_fragment_deep.frag.spv.inc). The opaque build reads the pool and page table
+// as uniform texel buffers (ST_TEXEL_BUFFERS: GpuOptions::texel_buffers' views), the deep build
+// as storage buffers, so both of shadowtile.glsl's modes run. It must answer what the compute pass
 // answers with neighbour_footprint off, bit for bit. One lookup per pipeline, as an engine
 // calls it once: specialization constant 1 picks st_visibility (channel 0), st_shadow
 // (1..3) or st_shadow_uvd_plane (4), constant 0 (ST_MAP_KIND_ID) says a 2D map; the others
@@ -16,6 +18,7 @@
 #define ST_BINDING_FEEDBACK 7
 #ifndef ST_TEST_DEEP
 #define ST_DEEP_SHADOWS 0  // the opaque tests' build: st_shadow = vec3(visibility), less to compile
+#define ST_TEXEL_BUFFERS   // and the pool and page table as texel buffers (the deep build: storage buffers)
 #endif
 #include "shadowtile.glsl"
 
