@@ -4,13 +4,17 @@
 //
 //   bench_stack_slices [--res 4k] [--samples 32] [--area-samples 64]
 //                      [--case city|hairball|engine|all] [--json PATH] [--spill-dir /tmp]
-//                      [--bytes-only] [--dump-tiles DIR] [--adaptive]
+//                      [--bytes-only] [--dump-tiles DIR] [--adaptive] [--split-only] [--split-k 0,-1]
 //
-// --bytes-only skips the octree pack, the dictionary measure and the DAG-MH tiles they
-// need (those lines print 0); --dump-tiles writes the per-cell pack's raw tiles (STSL or
-// STOC) to DIR/<cell>.bin for offline study. --adaptive estimates a cut that goes deeper
+// --bytes-only skips the octree pack, the dictionary measure, the slices' own 2D tiles of
+// the stack's cells, the whole-slice DAG-MH sections and the open values (those lines
+// print 0); --dump-tiles writes the per-cell pack's raw tiles (STSL or STOC) to
+// DIR/<cell>.bin for offline study. --adaptive estimates a cut that goes deeper
 // only where a cell overflows (no such format yet): the uniform cuts at every level from the
 // default K to the level the default pack ended at, with no tile bound, combined per cell.
+// --split-only skips the uniform-cut pack (its lines print 0); --split-k writes the split
+// pack at each listed shift of the default K (0: the default; -1: cells twice as large),
+// each with its bytes per cell kind and section against the separate packs.
 //
 // Per case every slice is traced into a spill (trace_stack_to_spill, as `shadowtile build`
 // does), then:
@@ -67,8 +71,11 @@
 #include "tiles/encode/stack_pack.hpp"
 #include "tiles/core/pack_reader.hpp"
 #include "tiles/encode/tile_cut.hpp"
+#include "tiles/core/dagmh_format.hpp"
+#include "tiles/core/mh_quadtree_format.hpp"
 #include "tiles/core/pack_format.hpp"
 #include "tiles/core/resolution.hpp"
+#include "tiles/core/stack_slices.hpp"
 
 namespace {
 
@@ -132,6 +139,57 @@ void add_octree_bytes(const std::vector<uint8_t>& b, OctBytes& out) {
   for (uint8_t r : role) (r == 1 ? out.node : r == 2 ? out.value : r == 3 ? out.far : out.pad) += 4;
 }
 
+// A per-slice cell's raw bytes by section, in the grouped layout's order (STSP,
+// stack_slices.hpp): STSL header and entries, 2D heads, DAG-MH structure, MMH node words,
+// DAG-MH multipliers, MMH values, zero bytes. Empty when `b` is not a per-slice cell.
+std::vector<uint64_t> slice_cell_sections(const std::vector<uint8_t>& b) {
+  if (!st::is_slice_tiles(b) || b.size() < st::kSliceTilesHeaderBytes) return {};
+  auto u32 = [&](uint64_t off) {
+    uint32_t v;
+    std::memcpy(&v, b.data() + off, 4);
+    return v;
+  };
+  std::vector<uint64_t> sec(7, 0);
+  const uint64_t count = uint64_t(1) << b[7];
+  const uint64_t first = st::kSliceTilesHeaderBytes + st::kSliceTilesEntryBytes * count;
+  sec[0] = first;
+  uint64_t next = first;
+  std::vector<uint8_t> role;
+  for (uint64_t w = 0; w < count; ++w) {
+    const uint32_t off = u32(st::kSliceTilesHeaderBytes + st::kSliceTilesEntryBytes * w);
+    const uint32_t size = u32(st::kSliceTilesHeaderBytes + st::kSliceTilesEntryBytes * w + 4);
+    if (off == 0 || off < next) continue;
+    if (u32(off) == st::dagmh::kMagic) {
+      const uint32_t S = b[off + 9];
+      const uint64_t structure = (S ? uint64_t(16) << (2 * S) : 0) + 4 * uint64_t(u32(off + 16)) +
+                                 12 * uint64_t(u32(off + 20)) + 20 * ((uint64_t(u32(off + 24)) + 31) / 32);
+      sec[1] += 32, sec[2] += structure, sec[4] += size - 32 - structure;
+    } else {
+      const uint64_t head = st::mhq::tree_offset(b[off + 6]);
+      sec[1] += head;
+      st::mmh_word_roles((size - head) / 4, b[off + st::mhq::kOffFlags] & st::mhq::kFlagRootLeaf, role, [&](uint64_t i) {
+        return u32(off + head + 4 * i);
+      });
+      for (uint8_t r : role) sec[r == 1 ? 3 : r == 2 ? 5 : 6] += 4;
+    }
+    next = (uint64_t(off) + size + 3) & ~uint64_t(3);
+  }
+  uint64_t sum = 0;
+  for (uint64_t v : sec) sum += v;
+  sec[6] += b.size() - sum;  // buffer padding
+  return sec;
+}
+
+// Where a stack pack's bytes go, per cell kind and section, against the separate 2D packs'
+// bytes of the same squares and slices (the stack's level-K cells). `sq` is each slice's
+// stored bytes per level-K square (the bench's 2D tiles of the stack's cells) scaled to
+// the separate packs' file bytes.
+struct KindBytes {
+  uint64_t tiles = 0, raw = 0, stored = 0, cells = 0;
+  double separate = 0;                       // the separate packs' bytes for those cells
+  std::vector<uint64_t> sec_raw, sec_stored;  // sections (octree: header, node, value, far, pad)
+};
+
 double peak_rss_mib() {
   rusage ru{};
   getrusage(RUSAGE_SELF, &ru);
@@ -139,7 +197,7 @@ double peak_rss_mib() {
 }
 
 nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_dir, bool bytes_only,
-                        const std::string& dump_dir, bool adaptive) {
+                        const std::string& dump_dir, bool adaptive, bool split_only, std::vector<int> split_shifts) {
   std::printf("\n== %s: %s, %s, %u^2 per slice\n", c.name.c_str(), c.scene.c_str(), c.light.c_str(), 1u << level);
   std::fflush(stdout);
   const st::Scene scene = st::load_scene(c.scene);
@@ -164,6 +222,9 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
   st::dagmh::EncodeStats sum{};
   std::vector<std::vector<uint8_t>> prev_raw(cells_xy), cur_raw(cells_xy);
   std::vector<std::vector<std::vector<uint8_t>>> dag_tiles(n);  // DAG-MH tiles per slice (dictionary measure)
+  // The separate packs' stored tile bytes per slice w and level-K square c: [w * cells_xy + c].
+  std::vector<uint64_t> sq_pack(cells_xy * n, 0);
+  uint64_t packs_other = 0;
   uint64_t res_count = 0, res_prev = 0, res_prev_zero = 0, res_left = 0, res_left_zero = 0, res_lin = 0, res_both = 0;
   uint64_t stored_2d = 0, raw_2d = 0, raw_equal_prev = 0, texels_equal = 0, texels_meet = 0, texels_compared = 0;
   st::IntervalTile prev_tile;
@@ -186,18 +247,35 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
       pp.dagmh_dictionary = true;
       const std::string path = tmp + "_2d.pack";
       st::write_pack(path, h, cut, pp);
-      packs_bytes += std::filesystem::file_size(path);
+      const uint64_t file = std::filesystem::file_size(path);
+      packs_bytes += file;
+      {
+        // Each tile's stored bytes to the stack's level-K square holding it (tiles above
+        // that level, and the header, grid, index and dictionary, to packs_other).
+        const auto reader = st::PackReader::open(path);
+        uint64_t in_tiles = 0;
+        for (const st::TileIndexEntry& e : reader->tiles()) {
+          const st::TileAddress t = st::tile_address(e.id);
+          if (t.level < a) continue;
+          sq_pack[w * cells_xy + ((uint64_t(t.y) >> (t.level - a)) << a) + (t.x >> (t.level - a))] += e.stored_size;
+          in_tiles += e.stored_size;
+        }
+        packs_other += file - in_tiles;
+      }
       std::filesystem::remove(path);
-      st::dagmh::EncodeStats s;
-      st::dagmh::encode(h, &s);
-      sum.header_bytes += s.header_bytes, sum.skip_bytes += s.skip_bytes, sum.node_bytes += s.node_bytes;
-      sum.treelet_bytes += s.treelet_bytes, sum.chunk_bytes += s.chunk_bytes;
-      sum.multiplier_bytes += s.multiplier_bytes, sum.total_bytes += s.total_bytes;
+      if (!bytes_only) {
+        st::dagmh::EncodeStats s;
+        st::dagmh::encode(h, &s);
+        sum.header_bytes += s.header_bytes, sum.skip_bytes += s.skip_bytes, sum.node_bytes += s.node_bytes;
+        sum.treelet_bytes += s.treelet_bytes, sum.chunk_bytes += s.chunk_bytes;
+        sum.multiplier_bytes += s.multiplier_bytes, sum.total_bytes += s.total_bytes;
+      }
     }
     pack_s += since(p0);
     p0 = Clock::now();
-    st::SplitResult split = st::split_hierarchy(h, a);
-    for (uint64_t cell = 0; cell < cells_xy; ++cell) {
+    // --bytes-only: the slices' own 2D tiles of the stack's cells are not encoded (0 below).
+    st::SplitResult split = bytes_only ? st::SplitResult{} : st::split_hierarchy(h, a);
+    for (uint64_t cell = 0; cell < cells_xy && !bytes_only; ++cell) {
       cur_raw[cell].clear();
       // split's subtrees are row-major (j * 2^a + i), as the stack grid's (y, x).
       const auto& sub = split.subtrees[cell];
@@ -212,7 +290,7 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
       if (use_dag && !bytes_only) dag_tiles[w].push_back(std::move(dag));
     }
     std::swap(prev_raw, cur_raw);
-    {
+    if (!bytes_only) {  // --bytes-only: not measured (0 below)
       // The texels off the slice's most common interval (an open mesh's own values): the
       // bits of each one's bit-pattern residual (zigzag) against four predictions.
       auto key = [](const st::Interval& iv) {
@@ -297,7 +375,7 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
   t0 = Clock::now();
   uint64_t smaller_file = 0, ungrouped_file = 0, journal_file = 0, smaller_slice_cells = 0, smaller_tiles = 0;
   uint64_t pick_stored = 0, pick_grid = 0, pick_level = K;
-  {
+  if (!split_only) {
     st::BlockedStackCut pick(spill, K, 64 * 1024, spill_path + ".pick", nullptr, st::StackCells::smaller);
     pick.grid.light_kind = lights_grid.light_kind;
     pick.grid.lights = lights_grid.lights;
@@ -326,20 +404,127 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
   }
   const double smaller_s = since(t0);
 
-  // The default build's pack (split cells, stack_grid.hpp): K stays at the default, only a
-  // cell whose kept form overflows 64 KiB is split below it; written as the builder writes
-  // it, opened and verified (every tile opens as its cell's geometry).
+  // The split-cells pack (stack_grid.hpp "Split cells", build --split-cells): K stays at
+  // the default (or the default + each of --split-k's shifts), only a cell whose kept form
+  // overflows 64 KiB is split below it; written as the builder writes it, opened and
+  // verified (every tile opens as its cell's geometry). Where its bytes go: per level-K
+  // cell kind (octree tile, per-slice tile, split) and per section, against the separate
+  // packs' stored tiles of the same squares and slices (each 2D pack's index).
   t0 = Clock::now();
   uint64_t split_file = 0, split_tiles = 0, split_cells = 0, split_max_tile = 0;
-  {
-    st::BlockedStackCut cut(spill, K, 64 * 1024, spill_path + ".split", nullptr, st::StackCells::smaller, true);
+  nlohmann::json split_runs = nlohmann::json::array();
+  for (const int shift : split_shifts) {
+    const uint32_t Ks = uint32_t(int(K) + shift);
+    if (int(K) + shift < 0 || g.xy_bits(Ks) > a) {
+      std::printf("split cells at K = %d: skipped (the breakdown needs K <= the default)\n", int(K) + shift);
+      continue;
+    }
+    const auto r0 = Clock::now();
+    st::BlockedStackCut cut(spill, Ks, 64 * 1024, spill_path + ".split", nullptr, st::StackCells::smaller, true);
     cut.grid.light_kind = lights_grid.light_kind;
     cut.grid.lights = lights_grid.lights;
     cut.grid.spec = lights_grid.spec;
-    split_file = st::write_stack_pack(stack_path, cut.grid, cut.tile_count(), [&](size_t i) { return cut.tile(i); }, sp);
-    split_tiles = cut.tile_count(), split_cells = cut.split_cells, split_max_tile = cut.max_tile_bytes;
+    const uint64_t file = st::write_stack_pack(stack_path, cut.grid, cut.tile_count(), [&](size_t i) { return cut.tile(i); }, sp);
     st::PackReader::open(stack_path)->verify();
     std::filesystem::remove(stack_path);
+    const double run_s = since(r0);
+    if (cut.grid.skip_level != Ks) throw st::Error("split cells: the cut moved K from " + std::to_string(Ks));
+    // Level-Ks cell -> its region's separate bytes: squares of the default level a, slices of its w range.
+    const uint32_t as = g.xy_bits(Ks), bs = g.w_bits(Ks), da = a - as, dwb = k - bs;
+    auto separate_of = [&](uint64_t root) {
+      const uint64_t x = root & ((uint64_t(1) << as) - 1), y = (root >> as) & ((uint64_t(1) << as) - 1), w = root >> (2 * as);
+      double sum = 0;
+      for (uint64_t sw = w << dwb; sw < std::min<uint64_t>((w + 1) << dwb, n); ++sw)
+        for (uint64_t sy = y << da; sy < (y + 1) << da; ++sy)
+          for (uint64_t sx = x << da; sx < (x + 1) << da; ++sx) sum += double(sq_pack[sw * cells_xy + (sy << a) + sx]);
+      return sum;
+    };
+    // Kinds: 0 octree cell, 1 per-slice cell, 2 split cell (its tiles any form), 3 constant.
+    std::vector<KindBytes> kinds(4);
+    std::vector<int> root_kind(cut.grid.cells(Ks), 3);
+    uint64_t tiles_stored = 0;
+    KindBytes oct_sec, sl_sec;  // sections over every tile of each form, split or not
+    oct_sec.sec_raw.assign(5, 0), sl_sec.sec_raw.assign(7, 0), sl_sec.sec_stored.assign(7, 0);
+    for (size_t i = 0; i < cut.tile_count(); ++i) {
+      const auto place = cut.tile_place(i);
+      const auto [cell, raw] = cut.tile(i);
+      const std::vector<uint8_t> grouped = st::group_slice_tiles(raw);  // as the writer stores it
+      const uint64_t stored = st::zlib_compress(grouped, 6).size();
+      tiles_stored += stored;
+      const int kind = place.level > Ks ? 2 : place.octree ? 0 : 1;
+      root_kind[place.root] = kind;
+      KindBytes& kb = kinds[size_t(kind)];
+      ++kb.tiles, kb.raw += raw.size(), kb.stored += stored;
+      KindBytes& form = place.octree ? oct_sec : sl_sec;
+      ++form.tiles, form.raw += raw.size(), form.stored += stored;
+      if (place.octree) {
+        OctBytes o;
+        add_octree_bytes(raw, o);
+        oct_sec.sec_raw[0] += o.header, oct_sec.sec_raw[1] += o.node, oct_sec.sec_raw[2] += o.value;
+        oct_sec.sec_raw[3] += o.far, oct_sec.sec_raw[4] += o.pad;
+      } else {
+        const std::vector<uint64_t> sec = slice_cell_sections(raw);
+        uint64_t at = 0;
+        for (size_t j = 0; j < sec.size(); ++j) {
+          sl_sec.sec_raw[j] += sec[j];
+          if (sec[j] && st::is_grouped_slice_tiles(grouped))
+            sl_sec.sec_stored[j] += st::zlib_compress(std::span<const uint8_t>(grouped.data() + at, sec[j]), 6).size();
+          at += sec[j];
+        }
+      }
+    }
+    for (uint64_t root = 0; root < root_kind.size(); ++root) {
+      KindBytes& kb = kinds[size_t(root_kind[root])];
+      ++kb.cells, kb.separate += separate_of(root);
+    }
+    const uint64_t other = file - tiles_stored;  // header, params, grid, index, padding
+    std::printf("split cells at K = %u (cells 2^%u a side x %u slices): %llu bytes = %.3f x the separate packs (%llu cells "
+                "split, %zu tiles, largest %llu B; cut + write + verify %.1f s)\n",
+                Ks, level - as, 1u << dwb, (unsigned long long)file, double(file) / double(packs_bytes),
+                (unsigned long long)cut.split_cells, cut.tile_count(), (unsigned long long)cut.max_tile_bytes, run_s);
+    std::printf("  | level-K cells | cells | tiles | raw | stored | separate packs, same squares x slices | stored / separate |\n");
+    std::printf("  | --- | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+    const char* kind_name[4] = {"octree tile", "per-slice tile", "split (tiles below K)", "constant"};
+    nlohmann::json kj = nlohmann::json::object();
+    for (size_t j = 0; j < 4; ++j) {
+      const KindBytes& kb = kinds[j];
+      std::printf("  | %s | %llu | %llu | %llu | %llu | %.0f | %.3f |\n", kind_name[j], (unsigned long long)kb.cells,
+                  (unsigned long long)kb.tiles, (unsigned long long)kb.raw, (unsigned long long)kb.stored, kb.separate,
+                  kb.separate > 0 ? double(kb.stored) / kb.separate : 0.0);
+      kj[kind_name[j]] = {{"cells", kb.cells}, {"tiles", kb.tiles}, {"raw", kb.raw}, {"stored", kb.stored}, {"separate", kb.separate}};
+    }
+    std::printf("  | header, params, grid, index (separate packs: and dictionary) | | | | %llu | %llu | %.3f |\n",
+                (unsigned long long)other, (unsigned long long)packs_other, double(other) / double(std::max<uint64_t>(packs_other, 1)));
+    std::printf("  octree-form tiles (%llu, stored %llu): raw %llu = header %llu, node words %llu, value words %llu, far "
+                "words %llu, padding %llu\n",
+                (unsigned long long)oct_sec.tiles, (unsigned long long)oct_sec.stored, (unsigned long long)oct_sec.raw,
+                (unsigned long long)oct_sec.sec_raw[0], (unsigned long long)oct_sec.sec_raw[1],
+                (unsigned long long)oct_sec.sec_raw[2], (unsigned long long)oct_sec.sec_raw[3],
+                (unsigned long long)oct_sec.sec_raw[4]);
+    const char* sec_name[7] = {"STSL header+entries", "2D heads", "DAG-MH structure", "MMH node words",
+                               "DAG-MH multipliers", "MMH values", "zero bytes"};
+    std::printf("  per-slice tiles (%llu, stored %llu; a section's stored bytes: that section of each grouped tile "
+                "deflated alone):\n",
+                (unsigned long long)sl_sec.tiles, (unsigned long long)sl_sec.stored);
+    nlohmann::json sj = nlohmann::json::object();
+    for (size_t j = 0; j < 7; ++j) {
+      std::printf("    %-20s raw %10llu  stored alone %10llu\n", sec_name[j], (unsigned long long)sl_sec.sec_raw[j],
+                  (unsigned long long)sl_sec.sec_stored[j]);
+      sj[sec_name[j]] = {{"raw", sl_sec.sec_raw[j]}, {"stored_alone", sl_sec.sec_stored[j]}};
+    }
+    std::fflush(stdout);
+    split_runs.push_back({{"skip_level", Ks},
+                          {"bytes", file},
+                          {"over_separate", double(file) / double(packs_bytes)},
+                          {"split_cells", cut.split_cells},
+                          {"tiles", cut.tile_count()},
+                          {"kinds", kj},
+                          {"slice_sections", sj},
+                          {"octree_sections",
+                           {{"header", oct_sec.sec_raw[0]}, {"node", oct_sec.sec_raw[1]}, {"value", oct_sec.sec_raw[2]},
+                            {"far", oct_sec.sec_raw[3]}, {"pad", oct_sec.sec_raw[4]}}},
+                          {"other", other}});
+    if (split_file == 0) split_file = file, split_tiles = cut.tile_count(), split_cells = cut.split_cells, split_max_tile = cut.max_tile_bytes;
   }
   const double split_s = since(t0);
 
@@ -501,6 +686,7 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
           {"stack_pack_split_over_separate", double(split_file) / double(packs_bytes)},
           {"stack_pack_split_tiles", split_tiles},
           {"stack_pack_split_cells", split_cells},
+          {"split_runs", split_runs},
           {"adaptive_estimate_bytes", adaptive_bytes},
           {"adaptive_estimate_tiles", adaptive_tiles},
           {"adaptive_estimate_split_cells", adaptive_split},
@@ -523,7 +709,8 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
 int main(int argc, char** argv) {
   try {
     uint32_t level = 12, samples = 32, area_samples = 64;
-    bool bytes_only = false, adaptive = false;
+    bool bytes_only = false, adaptive = false, split_only = false;
+    std::vector<int> split_shifts{0};
     std::string dump_dir;
     std::string which = "all", json_path = "build/bench_stack_slices.json", spill_dir = "/tmp";
     for (int i = 1; i < argc; ++i) {
@@ -540,6 +727,16 @@ int main(int argc, char** argv) {
       else if (arg == "--spill-dir") spill_dir = next();
       else if (arg == "--bytes-only") bytes_only = true;
       else if (arg == "--adaptive") adaptive = true;
+      else if (arg == "--split-only") split_only = true;
+      else if (arg == "--split-k") {  // comma-separated shifts of K for the split pack, e.g. 0,-1
+        split_shifts.clear();
+        std::string v = next();
+        for (size_t at = 0; at <= v.size();) {
+          const size_t end = std::min(v.find(',', at), v.size());
+          split_shifts.push_back(std::stoi(v.substr(at, end - at)));
+          at = end + 1;
+        }
+      }
       else if (arg == "--dump-tiles") dump_dir = next();
       else throw st::Error("unknown option " + arg);
     }
@@ -555,7 +752,7 @@ int main(int argc, char** argv) {
     if (cases.empty()) throw st::Error("--case: expected city, engine, hairball or all");
     nlohmann::json out = nlohmann::json::array();
     for (const Case& c : cases) {
-      out.push_back(run_case(c, level, spill_dir, bytes_only, dump_dir, adaptive));
+      out.push_back(run_case(c, level, spill_dir, bytes_only, dump_dir, adaptive, split_only, split_shifts));
       std::ofstream(json_path) << out.dump(2) << "\n";  // after each case: long runs keep what finished
     }
     std::printf("\n| case | N | separate DAG-MH packs | octree stack pack | / separate | per-cell pack, uniform cut | / "

@@ -19,6 +19,7 @@
 #include "tiles/encode/stack_pack.hpp"
 #include "tiles/core/pack_reader.hpp"
 #include "tiles/core/stack_map.hpp"
+#include "tiles/core/stack_slices.hpp"
 
 namespace st {
 namespace {
@@ -195,7 +196,20 @@ TEST(StackBlocked, SplitCellsKeepTheSkipLevelAndAnswerLikeTheOctree) {
       uint32_t deepest = 0;
       for (const StackEntry& e : cut.grid.entries) deepest = std::max<uint32_t>(deepest, e.level);
       EXPECT_GT(deepest, K);
-      for (size_t i = 0; i < cut.tile_count(); ++i) EXPECT_LE(cut.tile(i).second.size(), 200u);
+      for (size_t i = 0; i < cut.tile_count(); ++i) {
+        const auto [cell, bytes] = cut.tile(i);
+        EXPECT_LE(bytes.size(), 200u);
+        // Where the tile lies (the bytes bench's accounting): its own level, its form, and
+        // the level-K cell it is (level K) or lies below (a split one).
+        const BlockedStackCut::TilePlace at = cut.tile_place(i);
+        EXPECT_EQ(at.level, cut.grid.entries[cell].level) << "tile " << i;
+        EXPECT_EQ(at.octree, !is_slice_tiles(bytes)) << "tile " << i;
+        ASSERT_LT(at.root, cut.grid.cells(K)) << "tile " << i;
+        EXPECT_EQ(cut.grid.entries[at.root].kind, at.level == K ? 1 : kStackSplit) << "tile " << i;
+        if (at.level == K) {
+          EXPECT_EQ(at.root, cell) << "tile " << i;
+        }
+      }
       fill_lights(cut.grid, s.slices);
       const StackGrid back = StackGrid::parse(cut.grid.serialize(), "split");
       ASSERT_EQ(back.entries.size(), cut.grid.entries.size());

@@ -264,9 +264,10 @@ void BlockedStackCut::run(const StackSpill& spill, uint32_t K, uint32_t tile_byt
               }
               return bytes;
             };
-            auto put_tile = [&](uint64_t cell, const std::vector<uint8_t>& bytes, bool octree) {
+            uint64_t root_cell = 0;  // the level-K cell whose tiles are being put
+            auto put_tile = [&](uint64_t cell, const std::vector<uint8_t>& bytes, bool octree, uint32_t level) {
               write_all(fd_, bytes.data(), bytes.size(), at, path_);
-              tiles_.push_back({cell, at, uint32_t(bytes.size()), octree});
+              tiles_.push_back({cell, at, uint32_t(bytes.size()), octree, root_cell, level});
               at += bytes.size();
               if (bytes.size() > largest) largest = bytes.size(), largest_cell = cell;
             };
@@ -299,7 +300,7 @@ void BlockedStackCut::run(const StackSpill& spill, uint32_t K, uint32_t tile_byt
                 const std::vector<uint8_t> bytes = form(r + 1, ch, x, y, w, cur, octree);
                 if (bytes.size() <= tile_bytes) {
                   nodes_[slot].kind = 1, nodes_[slot].ref = uint32_t(tiles_.size());
-                  put_tile(~uint64_t(0), bytes, octree);
+                  put_tile(~uint64_t(0), bytes, octree, l + 1);
                 } else {
                   const uint32_t children = self(self, r + 1, ch);
                   nodes_[slot].kind = kStackSplit, nodes_[slot].ref = children;
@@ -313,12 +314,13 @@ void BlockedStackCut::run(const StackSpill& spill, uint32_t K, uint32_t tile_byt
               oct_coords(sub.geo, rel, cr.code, x, y, w);
               const uint64_t cell = grid.index(K, (bx << da) + x, (by << da) + y, (bw << dw) + w);
               bool octree = true;
+              root_cell = cell;
               const std::vector<uint8_t> bytes = form(rel, cr, x, y, w, cursor, octree);
               if (split_ && bytes.size() > tile_bytes) {
                 split_roots_.emplace_back(cell, split_children(split_children, rel, cr));
                 continue;
               }
-              put_tile(cell, bytes, octree);
+              put_tile(cell, bytes, octree, K);
             }
             if (largest <= tile_bytes) continue;
             if (K + 1 >= L) throw too_big(largest_cell, largest);
@@ -405,6 +407,11 @@ void BlockedStackCut::run(const StackSpill& spill, uint32_t K, uint32_t tile_byt
     if (stats) *stats = st;
     return;
   }
+}
+
+BlockedStackCut::TilePlace BlockedStackCut::tile_place(size_t i) const {
+  const Ref& r = tiles_.at(i);
+  return {r.root, r.level, r.octree};
 }
 
 BlockedStackCut::~BlockedStackCut() {

@@ -104,12 +104,22 @@ class BlockedStackCut {
   size_t tile_count() const { return tiles_.size(); }
   // Tile i (increasing cell order): its cell and octree buffer.
   std::pair<uint64_t, std::vector<uint8_t>> tile(size_t i) const;
+  // Where tile i lies (benchmarks' byte accounting): the level-K cell it is, or is below
+  // (a split cell's), its own octree level, and whether it is the octree form.
+  struct TilePlace {
+    uint64_t root = 0;
+    uint32_t level = 0;
+    bool octree = true;
+  };
+  TilePlace tile_place(size_t i) const;
 
  private:
   struct Ref {
     uint64_t cell, offset;  // cell: a split child's is set once the cut is done
     uint32_t size;
     bool octree;
+    uint64_t root;  // the level-K cell it is or lies below
+    uint32_t level;
   };
   // A cell below a split one while the blocks are read (numbered when the cut is done):
   // kind as StackEntry, value NaN where it inherits its parent's, ref its tile (kind 1)
