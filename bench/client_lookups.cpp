@@ -314,9 +314,14 @@ int main(int argc, char** argv) {
                                                          std::make_shared<st::client::Notifier>());
       fill_cache(*e.remote, *e.reader);
       e.map = st::client::MapAccess::wrap(e.remote);
-      std::printf("  %-6s pack %10llu bytes, %6llu tiles, %s and made resident in %.1f s\n", e.name.c_str(),
-                  (unsigned long long)e.pack_bytes, (unsigned long long)e.tiles, given.empty() ? "built" : "opened",
-                  seconds_since(t0));
+      // Where the client holds the tiles (client/tile_arena.hpp): map tiles once, in the arena;
+      // slot bytes only for index tiles.
+      const st::client::MapStats ms = e.remote->stats();
+      std::printf("  %-6s pack %10llu bytes, %6llu tiles, %s and made resident in %.1f s (arena %.2f MiB, slot bytes "
+                  "written %.2f MiB, %u slots)\n",
+                  e.name.c_str(), (unsigned long long)e.pack_bytes, (unsigned long long)e.tiles,
+                  given.empty() ? "built" : "opened", seconds_since(t0), double(ms.arena_bytes) / 1048576,
+                  double(ms.slot_bytes_written) / 1048576, ms.tile_slots);
       std::fflush(stdout);
       encoded.push_back(std::move(e));
     }

@@ -10,8 +10,8 @@
 // they used with the current epoch (an atomic per slot), and note the tiles they missed
 // in a small list on their stack, queued under the exclusive lock after the shared part
 // (only when something was missed). The fetcher takes it exclusive only for O(1)
-// bookkeeping and writes tile bytes into a reserved (pinned, unpublished) slot outside
-// it, so lookups never wait on the network, on decompression or on tile validation, and
+// bookkeeping and writes tile bytes for a reserved (pinned, unpublished) slot outside it
+// (into the tile arena, tile_arena.hpp, or the slot itself), so lookups never wait on the network, on decompression or on tile validation, and
 // lookups on many threads do not wait for each other.
 //
 // LRU from stamps: before the fetcher evicts (reserve), it replays the use since the
@@ -422,10 +422,12 @@ class RemoteMap final : public Evaluator {
   // tile_arrived once its record was found: the checks, the slot, the publication.
   void tile_answer(const proto::TileMeta& meta, uint32_t request_id, std::span<const uint8_t> stored,
                    const GridEntry& entry) noexcept;
-  // Decompresses (or copies) `stored` into the reserved `slot` and opens it; false if the
-  // bytes do not make the tile `entry` names. Runs without the lock.
+  // Decompresses (or copies) `stored` into the arena (to_arena, room there: `held` is
+  // then its bytes) or else into the reserved `slot`, and opens it; false if the bytes do
+  // not make the tile `entry` names. Runs without the lock.
   bool fill_slot(uint32_t slot, const proto::TileMeta& meta, const GridEntry& entry,
-                 std::span<const uint8_t> stored, std::unique_ptr<Evaluator>& ev, CutGrid& grid) noexcept;
+                 std::span<const uint8_t> stored, bool to_arena, std::unique_ptr<Evaluator>& ev, CutGrid& grid,
+                 std::span<const uint8_t>& held) noexcept;
   // Visits the tiles needed for lookups at `level` in [x0, x1) x [y0, y1) (lock held):
   // fn(tile_id, entry, page) for each non-resident one; returns false if fn did.
   template <class Fn>
@@ -499,9 +501,9 @@ class RemoteMap final : public Evaluator {
 
   mutable RwLock mu_;
   mutable TileCache cache_;
-  // The map tiles' bytes the evaluators read: copies packed tightly (tile_arena.hpp), not
-  // the slots, which are the tile bound apart (the GPU mirror's layout); at most an eighth
-  // of the pool's bytes, past which a tile is read in its slot.
+  // Where the 2D map tiles' bytes live: packed tightly (tile_arena.hpp), not in the slots,
+  // which are the tile bound apart (the GPU mirror's layout); the cache's slot holds them
+  // by reference (TileCache::commit_held). Index tiles and stack cells stay in slots.
   TileArena arena_;
   uint64_t metadata_bytes_ = 0;    // accounted outside the slots (ClientOptions::cache_bytes)
   uint32_t dictionary_slots_ = 0;  // MapStats::dictionary_slots

@@ -143,8 +143,8 @@ RemoteMap::RemoteMap(std::string name, std::vector<uint8_t> header_bytes, std::v
       dictionary_(dictionary_of(header_, grid_bytes, name_)),
       light_(LightSpace::from_array(header_.light_kind, header_.light)),
       cache_(budget_slots(options, header_, dictionary_.get(), grid_bytes.size(), name_), slot_size_for(header_)),
-      // The copies' ceiling: an eighth of the pool's bytes (tile_arena.hpp).
-      arena_(cache_.slot_count(), cache_.slot_bytes(), std::max<uint32_t>(2, cache_.slot_count() / 8)),
+      // No ceiling below the slots': a tile is in the arena or in its slot (tile_arena.hpp).
+      arena_(cache_.slot_count(), cache_.slot_bytes()),
       metadata_bytes_(metadata_bytes(options, header_, grid_bytes.size(), dictionary_.get())),
       dictionary_slots_(displaced_slots(options, header_, dictionary_.get(), grid_bytes, name_, cache_.slot_count())),
       requests_(size_t(options.want_capacity) + size_t(options.max_in_flight) * options.tiles_per_request,
@@ -298,6 +298,8 @@ MapStats RemoteMap::stats() const noexcept {
   s.dictionary_bytes = dictionary_ ? dictionary_->memory_bytes() : 0;
   s.accounted_bytes = metadata_bytes_ + uint64_t(cache_.slot_count()) * (cache_.slot_bytes() + kSlotOverheadBytes);
   s.tile_slots = cache_.slot_count();
+  s.arena_bytes = arena_.held_bytes();
+  s.slot_bytes_written = cache_.written_bytes();
   s.dictionary_slots = dictionary_slots_;
   s.views = view_count_;
   s.view_slots = view_slots();
@@ -423,10 +425,18 @@ void RemoteMap::retry_or_give_up_locked(uint64_t tile, uint32_t request_id, uint
 }
 
 bool RemoteMap::fill_slot(uint32_t slot, const proto::TileMeta& meta, const GridEntry& entry,
-                          std::span<const uint8_t> stored, std::unique_ptr<Evaluator>& ev, CutGrid& grid) noexcept {
+                          std::span<const uint8_t> stored, bool to_arena, std::unique_ptr<Evaluator>& ev, CutGrid& grid,
+                          std::span<const uint8_t>& held) noexcept {
   try {
     const std::string what = "map '" + name_ + "': " + describe_tile(meta.tile_id);
-    const std::span<uint8_t> raw = cache_.slot_span(slot).first(meta.uncompressed_size);
+    // A map tile is inflated once, into the arena (tile_arena.hpp), where its evaluator
+    // and the cache's readers (TileCache::commit_held) find it; its slot is never
+    // written. Index tiles, stack cells and a tile past the arena's ceiling go in the slot.
+    std::span<uint8_t> raw;
+    if (to_arena) raw = arena_.reserve(slot, meta.uncompressed_size);
+    else arena_.release(slot);  // nothing of the slot's last tile is kept
+    if (raw.data()) held = raw;
+    else raw = cache_.slot_span(slot, meta.uncompressed_size);  // the slot's own entry only: no lock needed
     if (meta.flags & proto::kTileFlagZlib) zlib_decompress_into(stored, raw, what);
     else if (!raw.empty()) std::memcpy(raw.data(), stored.data(), raw.size());  // sizes checked by the caller
     const TileAddress a = tile_address(meta.tile_id);
@@ -444,11 +454,7 @@ bool RemoteMap::fill_slot(uint32_t slot, const proto::TileMeta& meta, const Grid
         if ((header_.flags & need) != need) return false;
         unpack_plane_tile(raw);
       }
-      // Opened on its copy in the arena (tile_arena.hpp: packed tightly, not a slot apart).
-      // At the arena's ceiling the tile is read in its slot.
-      const std::span<const uint8_t> copy = arena_.place(slot, raw);
-      ev = open_pack_tile(header_.encoding, copy.data() ? copy : std::span<const uint8_t>(raw),
-                          dictionary_);  // v2 DAG-MH tiles through the dictionary
+      ev = open_pack_tile(header_.encoding, raw, dictionary_);  // v2 DAG-MH tiles through the dictionary
       return ev && ev->finest_level() == header_.map_level - a.level;
     }
     grid = CutGrid::parse(raw, what, kMaxIndexLevels);
@@ -487,6 +493,7 @@ void RemoteMap::tile_answer(const proto::TileMeta& meta, uint32_t request_id, st
   if (meta.uncompressed_size > cache_.slot_bytes() || (!zlib && stored.size() != meta.uncompressed_size))
     return retry_or_give_up(tile, request_id, &MapStats::decode_errors);
   uint32_t slot = kNoSlot;
+  bool to_arena = false;
   {
     std::lock_guard lock(mu_);
     RequestRecord* r = sent_record_locked(tile, request_id);
@@ -495,6 +502,10 @@ void RemoteMap::tile_answer(const proto::TileMeta& meta, uint32_t request_id, st
       sync_lru_locked();            // the lookups' use since the last arrival, then
       slot = cache_.reserve(tile);  // evict the least recently used unpinned tile
       slot_in_view_[slot] = view_count_ && in_other_view_locked(nullptr, tile);
+      // A 2D map tile goes in the arena when its slot holds no bytes then (pages an index
+      // tile wrote are given back first): each tile's bytes in one place, so the slots'
+      // written bytes and the arena's chunks stay within the slots' budget together.
+      to_arena = !stack_grid_ && entry.kind == EntryKind::tile && cache_.release_pages(slot);
     } catch (...) {
       ++stats_.cache_full;
       drop_locked(*r);
@@ -502,11 +513,12 @@ void RemoteMap::tile_answer(const proto::TileMeta& meta, uint32_t request_id, st
     }
     stats_.bytes_received += stored.size();
   }
-  // The slot is pinned and unpublished: inflate straight into it and open it without the
-  // lock, so lookups never wait on decompression or validation.
+  // The slot is pinned and unpublished: inflate straight into its place (the arena or the
+  // slot) and open it without the lock, so lookups never wait on decompression or validation.
   std::unique_ptr<Evaluator> ev;
   CutGrid grid;
-  const bool ok = fill_slot(slot, meta, entry, stored, ev, grid);
+  std::span<const uint8_t> held;  // the tile's bytes in the arena (no data: in its slot)
+  const bool ok = fill_slot(slot, meta, entry, stored, to_arena, ev, grid, held);
   {
     std::lock_guard lock(mu_);
     if (!ok) {
@@ -526,9 +538,11 @@ void RemoteMap::tile_answer(const proto::TileMeta& meta, uint32_t request_id, st
       slot_grid_[slot] = std::move(grid);
       bool committed = false;
       try {
-        committed = cache_.commit(slot, meta.uncompressed_size);  // size checked above
+        committed = held.data() ? cache_.commit_held(slot, held)
+                                : cache_.commit(slot, meta.uncompressed_size);  // size checked above
       } catch (...) {
       }
+      if (!committed) arena_.release(slot);  // the slot went back free: its copy goes too
       if (RequestRecord* r = sent_record_locked(tile, request_id)) requests_.erase(*r);
       if (committed) {
         ++stats_.tiles_received;

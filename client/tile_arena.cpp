@@ -31,17 +31,19 @@ uint32_t TileArena::new_chunk_locked() {
   return id;
 }
 
-std::span<const uint8_t> TileArena::place(uint32_t slot, std::span<const uint8_t> bytes) {
-  if (bytes.size() > chunk_bytes_)
-    throw Error("tile arena: a tile of " + std::to_string(bytes.size()) + " bytes exceeds the chunk's " +
+std::span<uint8_t> TileArena::reserve(uint32_t slot, size_t bytes) {
+  if (bytes > chunk_bytes_)
+    throw Error("tile arena: a tile of " + std::to_string(bytes) + " bytes exceeds the chunk's " +
                 std::to_string(chunk_bytes_));
   std::lock_guard lock(mu_);
-  release_locked(slot);
-  if (bytes.empty()) return {};
-  const uint32_t size = uint32_t((bytes.size() + kAlign - 1) / kAlign * kAlign);  // <= chunk_bytes_
+  release_locked(slot, bytes > 0);
+  if (bytes == 0) return {};
+  const uint32_t size = uint32_t((bytes + kAlign - 1) / kAlign * kAlign);  // <= chunk_bytes_
   // A full chunk keeps a live tile (one whose tiles all left started over, below).
   if (current_ == kNone || chunks_[current_].used + size > chunk_bytes_) {
-    if (held_ >= max_chunks_) return {};  // at the ceiling: the caller reads its own bytes
+    if (current_ != kNone && chunks_[current_].live == 0) free_chunk_locked(current_);  // emptied, yet too full
+    current_ = kNone;
+    if (held_ >= max_chunks_) return {};  // at the ceiling: the caller keeps the tile itself
     current_ = new_chunk_locked();
   }
   Chunk& c = chunks_[current_];
@@ -49,11 +51,23 @@ std::span<const uint8_t> TileArena::place(uint32_t slot, std::span<const uint8_t
   c.used += size;
   ++c.live;
   homes_[slot].chunk = current_;
-  std::memcpy(at, bytes.data(), bytes.size());
-  return {at, bytes.size()};
+  return {at, bytes};
 }
 
-void TileArena::release_locked(uint32_t slot) noexcept {
+std::span<const uint8_t> TileArena::place(uint32_t slot, std::span<const uint8_t> bytes) {
+  const std::span<uint8_t> room = reserve(slot, bytes.size());
+  if (room.data()) std::memcpy(room.data(), bytes.data(), bytes.size());
+  return room;
+}
+
+void TileArena::free_chunk_locked(uint32_t id) noexcept {
+  chunks_[id].data.reset();
+  free_ids_.push_back(id);
+  --held_;
+  if (id == current_) current_ = kNone;
+}
+
+void TileArena::release_locked(uint32_t slot, bool keep_current) noexcept {
   Home& h = homes_[slot];
   if (h.chunk == kNone) return;
   const uint32_t id = h.chunk;
@@ -62,16 +76,14 @@ void TileArena::release_locked(uint32_t slot) noexcept {
   if (--c.live > 0) return;
   if (id == current_) {
     c.used = 0;  // the chunk being filled starts over
-    return;
+    if (keep_current) return;
   }
-  c.data.reset();
-  free_ids_.push_back(id);
-  --held_;
+  free_chunk_locked(id);
 }
 
 void TileArena::release(uint32_t slot) noexcept {
   std::lock_guard lock(mu_);
-  release_locked(slot);
+  release_locked(slot, false);
 }
 
 uint64_t TileArena::held_bytes() const noexcept {

@@ -1,28 +1,29 @@
 #pragma once
-// The CPU lookups' copies of the resident map tiles' bytes, packed tightly.
+// Where a 2D map's resident tiles live on the CPU: packed tightly, not in their slots.
 //
 // The tile cache's slots are `slot_bytes` apart (the pack's tile bound, 64 KiB in most
 // packs), so that a GPU mirror can address slot i at i * slot_bytes. A real level's tiles
 // are a few hundred bytes: opened in place, every tile's header and first records sit at
 // the same offset of its own page, i.e. in the same few L1/L2 cache sets, and each tile a
-// lookup enters is another page (another TLB entry). The evaluators therefore read a copy
-// of each tile placed here, one after another in chunks (64-byte aligned), so that the
-// tiles a frame walks share lines' sets and pages like any small array (oa_dm1 8K^2,
+// lookup enters is another page (another TLB entry). So an arriving map tile is inflated
+// here, one after another in chunks (64-byte aligned), and its evaluator reads it here:
+// the tiles a frame walks share lines' sets and pages like any small array (oa_dm1 8K^2,
 // one thread: the render's taps 34.5 -> 28.7 ns each, bench_client_lookups --profile-map).
-// The slot keeps its bytes (the GPU mirror's copy).
+// The slot itself is committed with these bytes (TileCache::commit_held) and never
+// written: a GPU mirror reads a tile through the cache (CacheView's SlotChange bytes),
+// which gives these, and places it at slot i in its own buffer.
 //
 //   chunk: [tile a | pad to 64][tile b | pad to 64] ... [unused tail]   chunk_bytes in all
 //
-// A chunk's bump pointer only rewinds when its last tile is released; a chunk with no
-// live tile (other than the one being filled) is freed. So the arena holds at most
-// (live tiles + 1) chunks, and in a steady state about the live tiles' bytes. Under heavy
-// eviction a chunk may keep a single live tile, so the arena also has a ceiling,
-// `max_chunks` (RemoteMap: an eighth of the pool's bytes): a copy that would need a chunk
-// past it is not made, and that tile is read in its slot as before (slower, never more
-// memory than the cache's budget plus that eighth).
+// A chunk's bump pointer only rewinds when its last tile is released, and a chunk with
+// no live tile is freed (the one being filled too, once nothing is being placed in it).
+// So the arena never holds more chunks than live tiles: with each tile here and not in
+// its slot, the tiles' bytes stay within slots x chunk_bytes (the cache's budget,
+// RemoteMap). A ceiling of chunks, `max_chunks`, may be set lower: a tile that would need
+// a chunk past it is not placed and its owner keeps it in its slot.
 //
-// Thread safety: place and release may be called from any thread (an internal mutex);
-// the returned bytes stay valid until the slot's next place or release.
+// Thread safety: reserve, place and release may be called from any thread (an internal
+// mutex); the returned bytes stay valid until the slot's next reserve, place or release.
 
 #include <cstdint>
 #include <cstdlib>
@@ -39,10 +40,12 @@ class TileArena {
   // most chunks held at once (at least 1).
   TileArena(uint32_t slot_count, uint32_t chunk_bytes, uint32_t max_chunks = ~0u);
 
-  // Copies `bytes` into the arena as `slot`'s tile (its previous copy released first) and
-  // returns the copy; a span without data (data() == nullptr) when the copy would need a
-  // chunk past max_chunks: nothing is placed, the caller reads its own bytes. Throws
+  // Room for `bytes` bytes as `slot`'s tile (its previous one released first), for the
+  // caller to write (inflate) into; a span without data (data() == nullptr) when it would
+  // need a chunk past max_chunks, or for 0 bytes: nothing is placed. Throws
   // std::bad_alloc, or st::Error when bytes exceed a chunk.
+  std::span<uint8_t> reserve(uint32_t slot, size_t bytes);
+  // reserve, then a copy of `bytes` into it (the copy returned; no data: none made).
   std::span<const uint8_t> place(uint32_t slot, std::span<const uint8_t> bytes);
   // Drops `slot`'s copy (none: nothing happens).
   void release(uint32_t slot) noexcept;
@@ -66,7 +69,9 @@ class TileArena {
   struct Home {
     uint32_t chunk = kNone;
   };
-  void release_locked(uint32_t slot) noexcept;
+  // keep_current: a chunk being filled that empties is kept (reserve fills it next).
+  void release_locked(uint32_t slot, bool keep_current) noexcept;
+  void free_chunk_locked(uint32_t id) noexcept;
   uint32_t new_chunk_locked();
 
   mutable std::mutex mu_;

@@ -5,6 +5,7 @@
 // up.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <bit>
 #include <filesystem>
@@ -74,6 +75,32 @@ TEST(RemoteMap, FetchesEveryTileAndAnswersBitExactlyLikeThePack) {
     EXPECT_EQ(s.crc_errors, 0u);
     EXPECT_EQ(s.tiles_failed, 0u);
     EXPECT_EQ(s.cache.evictions, 0u);
+    // Each tile written once (client/tile_arena.hpp): the map tiles only in the arena,
+    // which the cache hands out as their bytes, and only the index tiles in their slots.
+    uint64_t index_bytes = 0, encoded = 0;
+    for (const TileIndexEntry& t : p.reader->tiles()) {
+      if (t.kind == TileKind::index) index_bytes += t.raw_size;
+      else ++encoded;
+    }
+    EXPECT_EQ(s.slot_bytes_written, index_bytes);
+    EXPECT_GT(s.arena_bytes, 0u);
+    EXPECT_LE(s.arena_bytes, encoded * ((map.slot_bytes() + 63) / 64 * 64));
+    uint64_t in_pool = 0, in_arena = 0;
+    MapAccess::remote(map).inspect_cache([&](const TileCache& c) {
+      const uint8_t* p0 = c.pool().data();
+      for (uint32_t slot = 0; slot < c.slot_count(); ++slot) {
+        if (!c.slot_resident(slot)) continue;
+        const std::span<const uint8_t> b = c.tile_bytes(slot);
+        const bool pool = b.data() >= p0 && b.data() < p0 + c.pool().size();
+        (pool ? in_pool : in_arena) += b.size();
+        if (!pool) {  // the slot itself was never written
+          const auto own = c.pool().subspan(c.slot_offset(slot), c.slot_bytes());
+          EXPECT_TRUE(std::all_of(own.begin(), own.end(), [](uint8_t v) { return v == 0; })) << slot;
+        }
+      }
+    });
+    EXPECT_EQ(in_pool, index_bytes);
+    EXPECT_GT(in_arena, 0u);
   }
 }
 
@@ -108,11 +135,55 @@ TEST(RemoteMap, TinyCacheRandomWalkEvictsRefetchesAndStaysExact) {
       return true;
     });
     ASSERT_TRUE(exact) << "step " << step << " texel (" << x << ", " << y << ")";
+    const MapStats now = map.stats();
+    ASSERT_LE(now.arena_bytes + now.slot_bytes_written, uint64_t(now.tile_slots) * ((map.slot_bytes() + 63) / 64 * 64))
+        << "step " << step;
   }
   const MapStats s = map.stats();
   EXPECT_GT(s.cache.evictions, 0u);
   EXPECT_LE(s.cache.resident, 4u);
+  // The tiles' bytes, in the arena or their slots, within the slots' (tile_arena.hpp).
+  EXPECT_LE(s.arena_bytes + s.slot_bytes_written, uint64_t(s.tile_slots) * ((map.slot_bytes() + 63) / 64 * 64));
   EXPECT_EQ(s.tiles_failed, 0u);
+}
+
+// A byte budget of kMinTileSlots page-sized slots over a map of more tiles: tiles arrive
+// and evict each other, and at every poll the tiles' bytes (the arena's chunks and the
+// slot bytes written: client/tile_arena.hpp) stay within the slots' bytes (each tile in
+// one place; a slot an index tile wrote gives its pages back before a map tile goes to
+// the arena), and the map's accounted bytes never pass the budget.
+TEST(RemoteMap, ByteBudgetHoldsTheArenaAndTheSlotsUnderChurn) {
+  const auto encodings = looptest::available_encodings();
+  ASSERT_FALSE(encodings.empty());
+  const uint32_t level = test_level(), side = 1u << level;
+  auto p = build_pack("budget", level, 5, encodings[0], 3, 4096);
+  auto srv = start_server({p.path});
+  ClientOptions big = quick_options();
+  big.cache_bytes = uint64_t(16) << 20;
+  Client probe({"127.0.0.1", srv.port}, big);
+  const Map pm = probe.open("budget");
+  const uint64_t per_slot = pm.slot_bytes() + kSlotOverheadBytes;
+  const uint64_t meta = pm.stats().accounted_bytes - uint64_t(pm.stats().tile_slots) * per_slot;
+  ClientOptions o = quick_options();
+  o.cache_bytes = meta + kMinTileSlots * per_slot;
+  Client client({"127.0.0.1", srv.port}, o);
+  Map map = client.open("budget");
+  ASSERT_EQ(map.stats().tile_slots, kMinTileSlots);
+  ASSERT_GT(p.reader->tiles().size(), kMinTileSlots + 2u) << "no churn: the test proves nothing";
+  uint64_t polls = 0, most = 0;
+  const bool done = wait_until([&] {
+    map.request_region(level, 0, 0, side, side, 5);
+    const MapStats s = map.stats();
+    ++polls;
+    most = std::max(most, s.arena_bytes + s.slot_bytes_written);
+    EXPECT_LE(s.accounted_bytes, o.cache_bytes);
+    EXPECT_LE(s.arena_bytes + s.slot_bytes_written, uint64_t(s.tile_slots) * ((map.slot_bytes() + 63) / 64 * 64))
+        << s.arena_bytes << " + " << s.slot_bytes_written;
+    return s.cache.evictions >= 2 * kMinTileSlots;
+  });
+  ASSERT_TRUE(done) << map.stats().cache.evictions << " evictions";
+  EXPECT_GT(most, 0u);
+  EXPECT_GT(polls, 0u);
 }
 
 TEST(RemoteMap, WantCapacityBoundsTheQueueAndTheMapStillArrivesWhole) {

@@ -1,9 +1,13 @@
 #include "common/hash.hpp"
 #include "tiles/core/tile_cache.hpp"
 
+#include <sys/mman.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <bit>
 #include <cassert>
+#include <cerrno>
 #include <cstring>
 #include <string>
 
@@ -25,7 +29,7 @@ TileCache::TileCache(uint32_t slot_count, uint32_t slot_bytes)
   if (uint64_t(slot_count) * slot_bytes > kMaxPoolBytes)
     throw Error("tile cache: pool of " + std::to_string(slot_count) + " x " +
                 std::to_string(slot_bytes) + " bytes exceeds 2^40");
-  pool_.assign(size_t(slot_count) * slot_bytes, 0);
+  pool_ = Pool(size_t(slot_count) * slot_bytes);
   slots_.resize(slot_count);
   // Free list in ascending slot order, so an empty cache fills slots 0, 1, 2, ...
   for (uint32_t s = slot_count; s-- > 0;) free_push(s);
@@ -33,14 +37,53 @@ TileCache::TileCache(uint32_t slot_count, uint32_t slot_bytes)
   journal_.assign(std::bit_ceil(std::max<uint64_t>(slot_count, 64)), kNoSlot);
 }
 
-std::span<const uint8_t> TileCache::tile_bytes(uint32_t slot) const {
-  assert(slot < slot_count_);
-  return std::span<const uint8_t>(pool_).subspan(slot_offset(slot), slots_[slot].used);
+TileCache::Pool::Pool(size_t bytes) : size(bytes) {
+  // Anonymous pages read as zero until written: no up-front clearing of slots x slot_bytes.
+  void* p = ::mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE, -1, 0);
+  if (p == MAP_FAILED)
+    throw Error("tile cache: cannot map a pool of " + std::to_string(bytes) + " bytes: " + std::strerror(errno));
+  data = static_cast<uint8_t*>(p);
 }
 
-std::span<uint8_t> TileCache::slot_span(uint32_t slot) {
+TileCache::Pool::~Pool() {
+  if (data) ::munmap(data, size);
+}
+
+std::span<const uint8_t> TileCache::tile_bytes(uint32_t slot) const {
   assert(slot < slot_count_);
-  return std::span<uint8_t>(pool_).subspan(slot_offset(slot), slot_bytes_);
+  const Slot& n = slots_[slot];
+  if (n.held) return {n.held, n.used};
+  return {pool_.data + slot_offset(slot), n.used};
+}
+
+std::span<uint8_t> TileCache::slot_span(uint32_t slot, uint32_t bytes) {
+  assert(slot < slot_count_ && bytes <= slot_bytes_);
+  Slot& n = slots_[slot];
+  n.written = std::max(n.written, bytes);
+  return {pool_.data + slot_offset(slot), bytes};
+}
+
+void TileCache::note_touched(Slot& n) {
+  if (n.written <= n.touched) return;
+  written_total_ += n.written - n.touched;
+  n.touched = n.written;
+}
+
+bool TileCache::release_pages(uint32_t slot) noexcept {
+  assert(slot < slot_count_);
+  Slot& n = slots_[slot];
+  if (n.written != 0) return false;
+  if (n.touched == 0) return true;
+  static const uint64_t page = uint64_t(::sysconf(_SC_PAGESIZE));
+  const uint64_t off = slot_offset(slot);
+  const uint64_t end = (off + slot_bytes_) / page * page;              // the slot's last whole page ends here
+  const uint64_t reach = (off + n.touched + page - 1) / page * page;  // the written pages end here
+  // Only when the written part lies in whole pages of this slot alone.
+  if (off % page != 0 || reach > end) return false;
+  if (::madvise(pool_.data + off, reach - off, MADV_DONTNEED) != 0) return false;  // they read as zero again
+  written_total_ -= n.touched;
+  n.touched = 0;
+  return true;
 }
 
 // ---------------------------------------------------------------- LRU and free lists
@@ -95,8 +138,11 @@ void TileCache::drop_slot(uint32_t s) {
     --resident_count_;
     journal(s);  // its tile leaves the pool (a filling slot never held a resident tile)
   }
-  // Zero the used bytes so a slot's unused tail is always zero (deterministic uploads).
-  std::memset(pool_.data() + slot_offset(s), 0, n.used);
+  // Zero the written bytes so a slot's unused tail is always zero (deterministic uploads).
+  note_touched(n);
+  std::memset(pool_.data + slot_offset(s), 0, n.written);
+  n.written = 0;
+  n.held = nullptr;
   n.used = 0;
   n.pins = 0;
   free_push(s);
@@ -250,7 +296,11 @@ bool TileCache::commit(uint32_t slot, uint32_t used_bytes) {
     return false;
   }
   n.used = used_bytes;
-  std::memset(pool_.data() + slot_offset(slot) + used_bytes, 0, slot_bytes_ - used_bytes);
+  // The rest of the slot zero again: past the tile, or all of it for a tile held elsewhere.
+  note_touched(n);
+  const uint32_t keep = n.held ? 0 : used_bytes;
+  if (n.written > keep) std::memset(pool_.data + slot_offset(slot) + keep, 0, n.written - keep);
+  n.written = keep;
   n.state = SlotState::resident;
   ++resident_count_;
   PageEntry& e = upsert(n.tile);
@@ -265,9 +315,14 @@ void TileCache::abort(uint32_t slot) {
   Slot& n = slots_[slot];
   assert(n.state == SlotState::filling);
   const TileId tile = n.tile;
-  n.used = slot_bytes_;  // unknown how much the fetch wrote: clear the whole slot
-  drop_slot(slot);
+  drop_slot(slot);  // clears what slot_span handed out
   cancel_request(tile);
+}
+
+bool TileCache::commit_held(uint32_t slot, std::span<const uint8_t> bytes) {
+  assert(slot < slot_count_ && slots_[slot].state == SlotState::filling);
+  slots_[slot].held = bytes.empty() ? nullptr : bytes.data();
+  return commit(slot, uint32_t(std::min<size_t>(bytes.size(), ~uint32_t(0))));
 }
 
 uint32_t TileCache::insert(TileId tile, std::span<const uint8_t> bytes) {
@@ -275,7 +330,7 @@ uint32_t TileCache::insert(TileId tile, std::span<const uint8_t> bytes) {
     throw Error("tile cache: tile " + std::to_string(tile) + " of " + std::to_string(bytes.size()) +
                 " bytes exceeds the slot size " + std::to_string(slot_bytes_));
   uint32_t s = reserve(tile);
-  if (!bytes.empty()) std::memcpy(slot_span(s).data(), bytes.data(), bytes.size());
+  if (!bytes.empty()) std::memcpy(slot_span(s, uint32_t(bytes.size())).data(), bytes.data(), bytes.size());
   if (!commit(s, uint32_t(bytes.size()))) return lookup(tile).slot;
   return s;
 }

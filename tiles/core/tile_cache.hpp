@@ -17,7 +17,16 @@
 //   ...
 //   i * slot_bytes                  slot_bytes   slot i   (i < slot_count)
 //
-// A slot's tile occupies its first used(i) bytes; the rest of the slot is zero.
+// A slot's tile occupies its first used(i) bytes; the rest of the slot is zero. A tile
+// committed with commit_held keeps its bytes with the owner (RemoteMap's tile arena,
+// client/tile_arena.hpp): tile_bytes() gives the owner's bytes and the slot stays zero.
+//
+// The pool is mapped, not filled: its pages are the system's zero pages until a slot is
+// written, so a cache of many 64 KiB slots costs nothing up front, and a slot whose tile
+// is held elsewhere never costs its bytes. The cache remembers how far each slot was
+// written (zeroed again on commit and drop, so the rest stays zero without clearing a
+// whole slot) and how far it was ever written (written_bytes(): the pool's memory in
+// use); release_pages gives a slot's pages back.
 //
 // Page table: tile id -> PageState. `constant` pages carry a value that answers for the
 // whole tile (nothing to fetch); `requested` pages are on their way; `resident` pages
@@ -41,6 +50,7 @@
 #pragma once
 #include <cstdint>
 #include <span>
+#include <utility>
 #include <vector>
 
 #include "common/error.hpp"
@@ -75,18 +85,32 @@ class CacheFullError : public Error {
 
 class TileCache {
  public:
-  // Throws st::Error if slot_count or slot_bytes is 0 or the pool would exceed 2^40 bytes.
+  // Throws st::Error if slot_count or slot_bytes is 0 or the pool would exceed 2^40 bytes
+  // (or cannot be mapped).
   TileCache(uint32_t slot_count, uint32_t slot_bytes);
 
   // ---- the pool ----
   uint32_t slot_count() const { return slot_count_; }
   uint32_t slot_bytes() const { return slot_bytes_; }
-  std::span<const uint8_t> pool() const { return pool_; }
+  std::span<const uint8_t> pool() const { return {pool_.data, pool_.size}; }
   uint64_t slot_offset(uint32_t slot) const { return uint64_t(slot) * slot_bytes_; }
-  // The tile bytes of a resident or filling slot (the first used(slot) bytes).
+  // The tile bytes of a resident or filling slot (the first used(slot) bytes), or the
+  // owner's bytes of a tile committed with commit_held.
   std::span<const uint8_t> tile_bytes(uint32_t slot) const;
-  // The whole slot, writable: a fetch decompresses into it between reserve and commit.
-  std::span<uint8_t> slot_span(uint32_t slot);
+  // The slot's first `bytes` (at most slot_bytes), writable: a fetch decompresses into
+  // it between reserve and commit. Only the slot's own entry changes (the owner may call
+  // it without its lock on a slot it reserved). Without `bytes`: the whole slot.
+  std::span<uint8_t> slot_span(uint32_t slot, uint32_t bytes);
+  std::span<uint8_t> slot_span(uint32_t slot) { return slot_span(slot, slot_bytes_); }
+  // Gives the pages of a reserved slot, which must hold no written bytes (a filling slot
+  // nobody wrote since reserve), back to the system. True when none of the slot's bytes
+  // are in use now (written_bytes counts none of it): its pages were given back, or the
+  // slot was never written. False when part of it shares a page with a neighbour (a slot
+  // size that is not a multiple of the page size).
+  bool release_pages(uint32_t slot) noexcept;
+  // Pool bytes in use: the sum over slots of how far each was written since its pages
+  // were last given back (a slot whose tile is held elsewhere adds nothing).
+  uint64_t written_bytes() const { return written_total_; }
   uint32_t used(uint32_t slot) const { return slots_[slot].used; }
   TileId slot_tile(uint32_t slot) const { return slots_[slot].tile; }
   // The slot holds its tile resident (committed, not dropped): exactly when
@@ -124,6 +148,11 @@ class TileCache {
   // are good). Returns false (and frees the slot, as abort) if the page became constant
   // or resident in another slot meanwhile.
   bool commit(uint32_t slot, uint32_t used_bytes);
+  // commit for a tile whose bytes the owner holds (client/tile_arena.hpp): tile_bytes()
+  // is `bytes` until the slot is dropped, evicted or reserved again, and the slot's own
+  // bytes stay as they are (zero where nothing was written). The owner keeps `bytes`
+  // valid that long.
+  bool commit_held(uint32_t slot, std::span<const uint8_t> bytes);
   // Gives a reserved slot back (fetch failed): slot free, page absent.
   void abort(uint32_t slot);
   // reserve + copy + commit. Throws st::Error if bytes exceed a slot.
@@ -159,7 +188,11 @@ class TileCache {
   enum class SlotState : uint8_t { free, filling, resident };
   struct Slot {
     TileId tile = kInvalidTile;
+    const uint8_t* held = nullptr;  // commit_held's bytes (null: the tile is in the slot)
     uint32_t used = 0, pins = 0;
+    // Bytes that may be non-zero (the rest of the slot is zero), and how far the slot was
+    // written since its pages were last given back (written_bytes).
+    uint32_t written = 0, touched = 0;
     uint32_t prev = kNoSlot, next = kNoSlot;  // LRU list (resident, unpinned) or free list
     SlotState state = SlotState::free;
     bool on_lru = false;
@@ -174,6 +207,7 @@ class TileCache {
   void free_push(uint32_t s);
   uint32_t free_pop();
   void drop_slot(uint32_t s);  // resident/filling -> free, clears bytes
+  void note_touched(Slot& n);  // folds n.written into n.touched and written_total_
   void journal(uint32_t s) { journal_[journal_end_++ & (journal_.size() - 1)] = s; }
 
   size_t find_bucket(TileId key) const noexcept;  // bucket index or npos
@@ -181,8 +215,24 @@ class TileCache {
   void erase(TileId key);
   void grow();
 
+  // The pool's mapping (anonymous, zero until written; unmapped on destruction).
+  struct Pool {
+    uint8_t* data = nullptr;
+    size_t size = 0;
+    Pool() = default;
+    explicit Pool(size_t bytes);
+    Pool(Pool&& o) noexcept : data(std::exchange(o.data, nullptr)), size(std::exchange(o.size, 0)) {}
+    Pool& operator=(Pool&& o) noexcept {
+      std::swap(data, o.data);
+      std::swap(size, o.size);
+      return *this;
+    }
+    ~Pool();
+  };
+
   uint32_t slot_count_, slot_bytes_;
-  std::vector<uint8_t> pool_;
+  Pool pool_;
+  uint64_t written_total_ = 0;
   std::vector<Slot> slots_;
   uint32_t lru_head_ = kNoSlot, lru_tail_ = kNoSlot;  // head = most recently used
   uint32_t free_head_ = kNoSlot;

@@ -274,6 +274,14 @@ struct MapStats {
   // The memory this map accounts for: metadata (the dictionary included) + slots x (slot
   // bytes + kSlotOverheadBytes); within ClientOptions::cache_bytes when that is set.
   uint64_t accounted_bytes = 0;
+  // Where the resident tiles' bytes are now, within the slots' part of accounted_bytes
+  // (arena_bytes + slot_bytes_written <= tile_slots x (slot bytes + 64)): a 2D map's
+  // tiles packed tightly for the CPU lookups (arena_bytes, whole chunks of a slot's size,
+  // never more chunks than tiles in them), and the slot bytes written (index tiles, stack
+  // cells; a slot whose tile is in the arena is never written: its pages are the system's
+  // zero pages).
+  uint64_t arena_bytes = 0;
+  uint64_t slot_bytes_written = 0;
   uint32_t dictionary_slots = 0;
   uint32_t tile_slots = 0;           // slots for tiles
   // Views (Map::request_view). view_slots: the slots views may hold (tile_slots less a
