@@ -5,7 +5,11 @@
 // OUT for bench_pack_bytes (per-section bytes, the planes section included).
 //
 //   bench_plane_packs SCENE@RES... [--out DIR] [--json PATH] [--light SPEC] [--min-shift S] [--min-nodes N] [--min-reused N]
-//                     [--no-merge] [--no-round] [--no-pack] [--no-predict] [--only default,static,planes]
+//                     [--no-merge] [--no-round] [--no-pack] [--no-predict] [--no-grow] [--stats]
+//                     [--only default,static,planes]
+// (--no-grow: a labelled block's missing texels get one plane fitted to them all or none,
+// PlaneFitOptions::grow_labels; --stats: where the planes build's valued nodes went,
+// PlaneFitStats, printed after each scene.)
 // (--no-pack stores plane tiles as STPN instead of packed, MapBuildOptions::pack_plane_tiles;
 // --no-predict packs them without predicted labels, "STPQ", MapBuildOptions::predict_plane_labels.)
 // (--only builds the named variants alone; the others' columns print 0).
@@ -41,7 +45,7 @@ int main(int argc, char** argv) try {
   st::PlaneFitOptions fit;
   std::string out_dir = "bench-out/planes", json_path, light_spec = "sun:azimuth=30,elevation=50";
   std::vector<std::string> only;
-  bool pack_planes = true, predict_labels = true;
+  bool pack_planes = true, predict_labels = true, stats = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
     auto next = [&]() -> std::string {
@@ -58,6 +62,8 @@ int main(int argc, char** argv) try {
     else if (a == "--no-round") fit.round_planes = false;
     else if (a == "--no-pack") pack_planes = false;
     else if (a == "--no-predict") predict_labels = false;
+    else if (a == "--no-grow") fit.grow_labels = false;
+    else if (a == "--stats") stats = true;
     else if (a == "--only") {
       std::string list = next(), name;
       for (char ch : list + ',')
@@ -81,6 +87,7 @@ int main(int argc, char** argv) try {
     std::string stem = fs::path(spec.substr(spec.rfind(':') == std::string::npos ? 0 : spec.rfind(':') + 1)).stem().string();
     if (stem.empty()) stem = "scene";
     nlohmann::json row = {{"scene", spec}, {"resolution", res}};
+    st::PlaneFitStats fit_stats;
     uint64_t bytes[3] = {};
     double secs[3] = {};
     for (int v = 0; v < 3; ++v) {
@@ -91,6 +98,7 @@ int main(int argc, char** argv) try {
       o.dagmh_dictionary = o.dagmh_mixed_tiles = true;  // the CLI's default build
       o.planes = variants[v].planes;
       o.plane_fit = fit;
+      if (stats) o.plane_fit.stats = &fit_stats;
       o.pack_plane_tiles = pack_planes;
       o.predict_plane_labels = predict_labels;
       if (variants[v].static_intervals) o.intervals = st::IntervalRule::static_geometry;
@@ -111,6 +119,31 @@ int main(int argc, char** argv) try {
     std::printf("%-40s %6s %12llu %12llu %12llu %8.2f %8.2f %8.3f %8.1f %8.1f\n", stem.c_str(), res.c_str(),
                 (unsigned long long)bytes[0], (unsigned long long)bytes[1], (unsigned long long)bytes[2], ps, ds, pd,
                 secs[0], secs[2]);
+    if (stats && fit_stats.tiles) {
+      const st::PlaneFitStats& f = fit_stats;
+      std::printf("  fit: %llu tiles searched; valued nodes %llu -> %llu left (finest texels %llu -> %llu); "
+                  "%llu plane blocks, %llu labelled\n",
+                  (unsigned long long)f.tiles, (unsigned long long)f.values_before, (unsigned long long)f.values_after,
+                  (unsigned long long)f.leaves_before, (unsigned long long)f.leaves_after,
+                  (unsigned long long)f.plane_blocks, (unsigned long long)f.labelled_blocks);
+      const char* why[3] = {"fewer nodes than min_labelled", "a texel without preimage", "more planes than 4"};
+      for (int r = 0; r < 3; ++r)
+        std::printf("  8x8 left, %-30s %9llu blocks %10llu valued nodes\n", why[r], (unsigned long long)f.left_blocks[r],
+                    (unsigned long long)f.left_values[r]);
+      std::printf("  8x8 tried, planes the growth needs: blocks (valued nodes)\n   ");
+      for (int k = 0; k <= 16; ++k)
+        if (f.need_blocks[k])
+          std::printf(" %s%d: %llu (%llu)", k == 16 ? ">=" : "", k, (unsigned long long)f.need_blocks[k],
+                      (unsigned long long)f.need_values[k]);
+      std::printf("\n");
+      nlohmann::json js = {{"tiles", f.tiles.load()}, {"values_before", f.values_before.load()},
+                           {"values_after", f.values_after.load()}, {"leaves_before", f.leaves_before.load()},
+                           {"leaves_after", f.leaves_after.load()}};
+      for (int k = 0; k <= 16; ++k) js["need_blocks"].push_back(f.need_blocks[k].load());
+      for (int k = 0; k <= 16; ++k) js["need_values"].push_back(f.need_values[k].load());
+      for (int r = 0; r < 3; ++r) js["left_blocks"].push_back(f.left_blocks[r].load()), js["left_values"].push_back(f.left_values[r].load());
+      row["fit_stats"] = js;
+    }
     std::fflush(stdout);
     rows.push_back(row);
   }

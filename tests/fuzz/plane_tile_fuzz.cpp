@@ -24,7 +24,8 @@ namespace {
 
 // A tile of `level` whose texels lie on a few slanted planes (open geometry: hi = lo), the
 // field plane tiles are made for: one plane, two halves (labelled blocks on their edge), a
-// plane with a step of holes.
+// plane with a step of holes, and facets: three planes of its own in every 8x8 block (the
+// labelled blocks whose planes are grown from seeds, PlaneFitOptions::grow_labels).
 st::IntervalTile planar_tile(uint32_t level, int kind) {
   const uint32_t side = 1u << level;
   st::IntervalTile t{level, 0, 0, side, side, {}};
@@ -34,6 +35,11 @@ st::IntervalTile planar_tile(uint32_t level, int kind) {
       double d = 0.3 + 0.0011 * x + 0.0007 * y;
       if (kind == 1 && 2 * x + y >= side) d = 0.6 - 0.0013 * x + 0.0002 * y;  // a slanted edge
       if (kind == 2 && (x / 8 + y / 8) % 3 == 0) d = 1.0;  // no hit
+      if (kind == 4) {
+        const uint32_t u = x % 8, v = y % 8, facet = u + v < 6 ? 0 : u > v ? 1 : 2;
+        const double sx[3] = {0.0011, -0.0023, 0.0004}, sy[3] = {0.0007, 0.0015, -0.0031};
+        d = 0.3 + 0.01 * double(x / 8 + 3 * (y / 8)) + 0.05 * facet + sx[facet] * x + sy[facet] * y;
+      }
       const float f = float(d);
       t.at(x, y) = {f, kind == 3 ? f + 0.01f : f};
     }
@@ -45,7 +51,7 @@ st::IntervalTile planar_tile(uint32_t level, int kind) {
 std::vector<st::fuzz::Bytes> st::fuzz::seeds() {
   std::vector<Bytes> out;
   for (uint32_t level : {3u, 4u, 5u})
-    for (int kind = 0; kind < 4; ++kind) {
+    for (int kind = 0; kind < 5; ++kind) {
       const st::PlaneSplit s = st::fit_planes(st::build_hierarchy(planar_tile(level, kind)), st::PlaneFitOptions{3, 1, 10});
       if (s.planes.empty() && s.labelled.empty()) continue;
       for (st::Encoding e : {st::Encoding::dagmh, st::Encoding::mmh}) {

@@ -35,6 +35,7 @@ Built build(const Scene& scene, const LightSpace& light, uint32_t level, Encodin
   o.dagmh_dictionary = e == Encoding::dagmh;  // as the CLI builds by default
   o.dagmh_mixed_tiles = mixed;
   o.dagmh_mixed_exhaustive = exhaustive;
+  o.planes = false;  // the tree encodings' own choice, without plane tiles (plane_tiles_test.cpp)
   fs::create_directories(SHADOWTILE_TEST_TMP);
   Built b;
   b.path = std::string(SHADOWTILE_TEST_TMP) + "/mixed_" + name + ".pack";

@@ -108,8 +108,10 @@ struct MapBuildOptions {
   bool dagmh_mixed_tiles = false;
   // MH, MMH, DAG-MH: a tile whose finest texels hold blocks of one plane each also tries
   // plane blocks over the encoding of the rest (TileCodec::with_planes; pack feature
-  // plane_tiles, tiles/core/PLANES.md) and keeps what stores smaller.
-  bool planes = false;
+  // plane_tiles, tiles/core/PLANES.md) and keeps what stores smaller. On, as in the CLI
+  // (--planes auto); tiles of closed scenes are not searched (PlaneFitOptions::
+  // min_zero_width_share), so they build as without. VS-DAG has no plane tiles: ignored there.
+  bool planes = true;
   PlaneFitOptions plane_fit;  // which blocks are tried (plane_fit.hpp)
   // Plane tiles stored packed (PackParams::pack_plane_tiles, feature packed_plane_tiles).
   bool pack_plane_tiles = true;

@@ -279,6 +279,121 @@ bool fit_texels(const std::vector<uint32_t>& texels, uint32_t side, std::span<co
   return false;
 }
 
+// The texels of `cand` (y * 8 + x in an 8x8 block, cand[0] the seed) that one plane grown
+// from the seed answers: the texels nearest the seed first, each kept when a plane answers it
+// and every texel kept before (the LP refitted over them only when the current plane misses
+// it), so a block across several small triangles or a curved patch splits into the planes of
+// its parts. `q` answers every texel of `kept` (fit_texels verifies with the decoder's
+// function); false when no plane answers the seed alone (no preimage).
+bool grow_plane(const std::vector<uint32_t>& cand, std::span<const float> lo, std::span<const float> hi, TilePlane& q,
+                std::vector<uint32_t>& kept) {
+  const uint32_t seed = cand.front();
+  std::vector<uint32_t> order(cand.begin() + 1, cand.end());
+  auto dist = [&](uint32_t t) {
+    const int dx = int(t % 8) - int(seed % 8), dy = int(t / 8) - int(seed / 8);
+    return dx * dx + dy * dy;
+  };
+  std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return dist(a) < dist(b); });
+  kept.assign(1, seed);
+  if (!fit_texels(kept, 8, lo, hi, q)) return false;
+  for (uint32_t t : order) {
+    const float v = q.depth(t % 8, t / 8);
+    kept.push_back(t);
+    if (lo[t] <= v && v <= hi[t]) continue;
+    TilePlane r;
+    if (fit_texels(kept, 8, lo, hi, r)) q = r;
+    else kept.pop_back();
+  }
+  return true;
+}
+
+// Up to `max_planes` planes that together answer every texel of an 8x8 block (a labelled
+// block's palette and labels), chosen greedily as a set cover: each round takes, of the
+// candidates, the one answering the most texels no plane taken answers yet. Candidates: the
+// tile's known planes (`known`, resolved to the block's corner), one plane fitted to all the
+// texels left (the others unconstrained), and planes grown (grow_plane) from up to 3 seeds
+// among them, spread apart (the first left texel, then each next the farthest from those
+// before). `fresh[k]`: palette entry k is not one of `known`. Every texel's label names the
+// first palette plane that answers it (the decoder's function). False when some texel is
+// left after `max_planes`.
+bool cover_block(std::span<const float> lo, std::span<const float> hi, uint32_t start, const std::vector<Plane>& known,
+                 uint32_t max_planes, std::vector<Plane>& palette, uint8_t* label, std::vector<uint8_t>& fresh) {
+  auto mask_of = [&](const Plane& q) {
+    uint64_t m = 0;
+    for (uint32_t i = 0; i < 64; ++i) {
+      const float v = q.depth(i % 8, i / 8);
+      if (lo[i] <= v && v <= hi[i]) m |= uint64_t(1) << i;
+    }
+    return m;
+  };
+  std::vector<uint64_t> known_mask(known.size());
+  for (size_t k = 0; k < known.size(); ++k) known_mask[k] = mask_of(known[k]);
+  palette.clear();
+  fresh.clear();
+  uint64_t left = ~uint64_t(0);
+  std::vector<uint32_t> cand, kept;
+  std::vector<float> slo(lo.begin(), lo.begin() + 64), shi(hi.begin(), hi.begin() + 64);
+  while (left && palette.size() < max_planes) {
+    Plane best;
+    uint64_t best_mask = 0;
+    bool best_fresh = false;
+    auto offer = [&](const Plane& q, uint64_t m, bool is_fresh) {
+      if (std::popcount(m & left) > std::popcount(best_mask & left)) best = q, best_mask = m, best_fresh = is_fresh;
+    };
+    for (size_t k = 0; k < known.size(); ++k) offer(known[k], known_mask[k], false);
+    if ((best_mask & left) != left) {
+      for (uint32_t i = 0; i < 64; ++i) {
+        const bool open = left >> i & 1;
+        slo[i] = open ? lo[i] : 0.0f, shi[i] = open ? hi[i] : 1.0f;
+      }
+      Plane q;
+      if (fit_block(slo, shi, kLabelShift, q)) offer(q, mask_of(q), true);
+    }
+    if ((best_mask & left) != left) {
+      uint32_t seeds[3], n_seeds = 0;
+      seeds[n_seeds++] = uint32_t(std::countr_zero(left));
+      while (n_seeds < 3) {
+        int far = -1;
+        uint32_t pick = 0;
+        for (uint32_t i = 0; i < 64; ++i) {
+          if (!(left >> i & 1)) continue;
+          int dmin = INT32_MAX;
+          for (uint32_t k = 0; k < n_seeds; ++k) {
+            const int dx = int(i % 8) - int(seeds[k] % 8), dy = int(i / 8) - int(seeds[k] / 8);
+            dmin = std::min(dmin, dx * dx + dy * dy);
+          }
+          if (dmin > far) far = dmin, pick = i;
+        }
+        if (far <= 0) break;
+        seeds[n_seeds++] = pick;
+      }
+      for (uint32_t k = 0; k < n_seeds; ++k) {
+        cand.assign(1, seeds[k]);
+        for (uint32_t i = 0; i < 64; ++i)
+          if ((left >> i & 1) && i != seeds[k]) cand.push_back(i);
+        TilePlane t;
+        if (!grow_plane(cand, lo, hi, t, kept)) continue;
+        const Plane q{0, kLabelShift, t.a0, t.b, t.c};
+        if (abs64(q.a) > kMaxBase || abs64(q.b) > kMaxSlope || abs64(q.c) > kMaxSlope) continue;
+        offer(q, mask_of(q), true);
+      }
+    }
+    if (!(best_mask & left)) return false;
+    best.start = start;
+    best.shift = kLabelShift;
+    palette.push_back(best);
+    fresh.push_back(best_fresh);
+    left &= ~best_mask;
+  }
+  if (left) return false;
+  for (uint32_t i = 0; i < 64; ++i) {
+    uint32_t k = 0;
+    while (!(mask_of(palette[k]) >> i & 1)) ++k;
+    label[i] = uint8_t(k);
+  }
+  return true;
+}
+
 // The distinct planes of a tile's blocks and palettes (tile coordinates), each with the
 // texels it answers and the corners of the blocks that use it.
 struct PlaneUses {
@@ -528,6 +643,9 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
   std::vector<std::vector<uint8_t>> cut(d + 1), under(d + 1);
   for (uint32_t l = 0; l <= d; ++l) cut[l].assign(h.levels[l].size(), 0), under[l].assign(h.levels[l].size(), 0);
   std::vector<float> blo, bhi;
+  // Why each 8x8 block (level d - 3) was not labelled (PlaneFitStats::left_blocks), 0xFF: it was.
+  std::vector<uint8_t> reason8;
+  if (o.stats && d >= kLabelShift) reason8.assign(h.levels[d - kLabelShift].size(), 0xFF);
   for (uint32_t l = 0; l <= d; ++l) {
     const uint32_t s = d - l, w = 1u << s;
     const bool sized = s >= std::max(o.min_shift, kMinShift) && s <= kMaxShift;
@@ -557,9 +675,11 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
           taken = true;
         }
         if (!taken && s == kLabelShift && below[l][j] >= o.min_labelled_nodes) {
-          // Labels: each texel takes the first palette plane that answers it, else the most
-          // recently used known plane that does; the texels none answers get a plane fitted
-          // to them alone (the block's other texels unconstrained). At most 4 planes in all.
+          // Labels (grow_labels): at most 4 planes chosen as a set cover of the block's texels
+          // from the known planes, a fit to the texels left and planes grown from seeds among
+          // them (cover_block). Without: each texel takes the first palette plane that answers
+          // it, else the most recently used known plane that does; the texels none answers get
+          // a plane fitted to them alone (the block's other texels unconstrained).
           LabelBlock lb;
           lb.start = uint32_t(n.morton << (2 * s));
           auto fits = [&](const Plane& q, uint32_t i) {
@@ -567,8 +687,13 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
             return blo[i] <= v && v <= bhi[i];
           };
           constexpr uint8_t kNone = 0xFF;
+          bool preimages = true;
+          for (uint32_t i = 0; i < 64 && preimages; ++i) {
+            int64_t a, b;
+            preimages = preimage(blo[i], bhi[i], a, b);
+          }
           uint32_t missing = 0;
-          for (uint32_t i = 0; i < 64; ++i) {
+          for (uint32_t i = 0; i < 64 && preimages && !o.grow_labels; ++i) {
             size_t k = 0;
             while (k < lb.palette.size() && !fits(lb.palette[k], i)) ++k;
             if (k == lb.palette.size() && k < kPalette) {
@@ -588,28 +713,83 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
             lb.label[i] = uint8_t(k);
             missing += k == kNone;
           }
-          bool ok = true;
-          while (missing && ok) {
-            ok = false;
-            if (lb.palette.size() == kPalette) break;
+          // Without grow_labels, one more plane for the texels still missing, fitted to them all.
+          std::vector<uint32_t> cand, kept;
+          auto next_plane = [&](Plane& q) {
             std::vector<float> slo(blo), shi(bhi);
             for (uint32_t i = 0; i < 64; ++i)
               if (lb.label[i] != kNone) slo[i] = 0.0f, shi[i] = 1.0f;
+            return fit_block(slo, shi, s, q);
+          };
+          bool ok = preimages;
+          std::vector<Plane> resolved;
+          std::vector<uint8_t> fresh;
+          if (o.grow_labels && ok) {
+            for (size_t t = known.size(), tries = 0; t-- > 0 && tries < kReuseTries; ++tries) {
+              Plane q;
+              q.shift = s, q.start = lb.start, q.b = known[t].b, q.c = known[t].c;
+              q.a = int64_t(uint64_t(known[t].a0) + uint64_t(q.b) * x0 + uint64_t(q.c) * y0);
+              if (abs64(q.a) <= kMaxBase) resolved.push_back(q);
+            }
+            ok = cover_block(blo, bhi, lb.start, resolved, kPalette, lb.palette, lb.label, fresh);
+            if (ok)
+              for (size_t k = 0; k < lb.palette.size(); ++k)
+                if (fresh[k]) known.push_back(Known{lb.palette[k].origin_a(x0, y0), lb.palette[k].b, lb.palette[k].c});
+            missing = ok ? 0 : 1;
+          }
+          while (missing && ok && !o.grow_labels) {
+            ok = false;
+            if (lb.palette.size() == kPalette) break;
             Plane q;
-            if (!fit_block(slo, shi, s, q)) break;
+            if (!next_plane(q)) break;
             q.start = lb.start;
+            uint32_t got = 0;
             for (uint32_t i = 0; i < 64; ++i)
-              if (lb.label[i] == kNone && fits(q, i)) lb.label[i] = uint8_t(lb.palette.size()), --missing;
+              if (lb.label[i] == kNone && fits(q, i)) lb.label[i] = uint8_t(lb.palette.size()), --missing, ++got;
+            if (got == 0) break;
             known.push_back(Known{q.origin_a(x0, y0), q.b, q.c});
             lb.palette.push_back(q);
             ok = true;
           }
           ok = ok && missing == 0 && !lb.palette.empty();
+          if (o.stats) {
+            uint32_t need = 16;
+            if (ok) need = uint32_t(lb.palette.size());
+            else if (preimages && o.stats->count_needs) {
+              // How many planes the growth would need: on past the palette, up to 16.
+              need = uint32_t(lb.palette.size());
+              if (o.grow_labels) {
+                std::vector<Plane> pal;
+                uint8_t lab[64];
+                need = cover_block(blo, bhi, lb.start, resolved, 15, pal, lab, fresh) ? uint32_t(pal.size()) : 16;
+              }
+              std::vector<uint8_t> open(o.grow_labels ? 0 : 64);
+              for (uint32_t i = 0; i < open.size(); ++i) open[i] = lb.label[i] == kNone;
+              while (need < 16 && !o.grow_labels) {
+                cand.clear();
+                for (uint32_t i = 0; i < 64; ++i)
+                  if (open[i]) cand.push_back(i);
+                if (cand.empty()) break;
+                TilePlane t;
+                if (!grow_plane(cand, blo, bhi, t, kept)) {
+                  need = 16;
+                  break;
+                }
+                for (uint32_t i : kept) open[i] = 0;
+                ++need;
+              }
+            }
+            o.stats->need_blocks[need]++;
+            o.stats->need_values[need] += below[l][j];
+            if (!ok) reason8[j] = preimages ? 2 : 1;
+          }
           if (ok) {
             out.labelled.push_back(std::move(lb));
             out.texels += 64;
             cut[l][j] = 1;
           }
+        } else if (!taken && s == kLabelShift && o.stats) {
+          reason8[j] = 0;
         }
         if (taken) {
           p.start = uint32_t(n.morton << (2 * s));
@@ -621,6 +801,39 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
       if (l < d)
         for (uint32_t c = 0, k = first[l][j]; c < uint32_t(std::popcount(unsigned(n.child_mask))); ++c, ++k)
           under[l + 1][k] = under[l][j] || cut[l][j];
+    }
+  }
+  if (o.stats) {
+    PlaneFitStats& st = *o.stats;
+    st.tiles++;
+    uint64_t values = 0, kept = 0;
+    for (uint32_t l = 0; l <= d; ++l)
+      for (size_t j = 0; j < h.levels[l].size(); ++j) {
+        values += h.levels[l][j].has_value;
+        kept += h.levels[l][j].has_value && !under[l][j];
+      }
+    uint64_t leaves = 0, leaves_kept = 0;
+    for (size_t j = 0; j < h.levels[d].size(); ++j)
+      leaves += h.levels[d][j].has_value, leaves_kept += h.levels[d][j].has_value && !under[d][j];
+    st.values_before += values, st.values_after += kept;
+    st.leaves_before += leaves, st.leaves_after += leaves_kept;
+    st.plane_blocks += out.planes.size(), st.labelled_blocks += out.labelled.size();
+    if (!reason8.empty()) {
+      // Valued nodes left below each 8x8 block (not under a block of its own), bottom-up.
+      const uint32_t l8 = d - kLabelShift;
+      std::vector<uint64_t> rem(h.levels[d].size(), 0), up;
+      for (uint32_t l = d; l-- > l8;) {
+        up.assign(h.levels[l].size(), 0);
+        for (size_t j = 0; j < h.levels[l].size(); ++j)
+          for (uint32_t c = 0, k = first[l][j]; c < uint32_t(std::popcount(unsigned(h.levels[l][j].child_mask))); ++c, ++k)
+            if (!cut[l + 1][k]) up[j] += rem[k] + h.levels[l + 1][k].has_value;
+        rem.swap(up);
+      }
+      for (size_t j = 0; j < reason8.size(); ++j)
+        if (reason8[j] != 0xFF && !cut[l8][j] && !under[l8][j] && rem[j]) {
+          st.left_blocks[reason8[j]]++;
+          st.left_values[reason8[j]] += rem[j];
+        }
     }
   }
   if (out.planes.empty() && out.labelled.empty()) return out;

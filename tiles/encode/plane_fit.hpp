@@ -16,6 +16,8 @@
 // the [lo, hi] of the deepest valued node that answers it (hierarchy.hpp: that interval is
 // admissible for every texel the node answers for).
 #pragma once
+#include <array>
+#include <atomic>
 #include <cstdint>
 #include <span>
 #include <vector>
@@ -24,6 +26,26 @@
 #include "tiles/core/plane_format.hpp"
 
 namespace st {
+
+// Where a build's texels went (bench_plane_packs --stats): counted over every tile searched
+// (a tile the cut encodes twice counts twice). Optional: PlaneFitOptions::stats.
+struct PlaneFitStats {
+  std::atomic<uint64_t> tiles{0};              // tiles searched
+  std::atomic<uint64_t> values_before{0};      // valued nodes of the searched tiles' hierarchies
+  std::atomic<uint64_t> values_after{0};       // ... left in the pruned hierarchies
+  std::atomic<uint64_t> leaves_before{0};      // valued finest texels (one value each)
+  std::atomic<uint64_t> leaves_after{0};       // ... left
+  std::atomic<uint64_t> plane_blocks{0}, labelled_blocks{0};
+  // 8x8 blocks (not inside a larger block) with valued nodes left after the search, by why
+  // they were not labelled, and those nodes: [0] fewer than min_labelled_nodes, [1] a texel
+  // without a preimage (tiny depth, above 1), [2] more planes than the palette holds.
+  std::array<std::atomic<uint64_t>, 3> left_blocks{}, left_values{};
+  // Labelled or left 8x8 blocks by how many planes the greedy growth needs for all their
+  // texels ([16]: 16 or more, or a texel without a preimage), and their valued nodes.
+  std::array<std::atomic<uint64_t>, 17> need_blocks{}, need_values{};
+  // Count needs beyond the palette (costs a growth to 16 planes per rejected block).
+  bool count_needs = true;
+};
 
 struct PlaneFitOptions {
   uint32_t min_shift = 2;          // smallest block: 2^min_shift a side
@@ -46,6 +68,12 @@ struct PlaneFitOptions {
   bool packed = true;
   // ... with its labels predicted ("STPL", PackParams::predict_plane_labels), else "STPQ".
   bool predicted = true;
+  // An 8x8 block's texels that no palette or known plane answers get planes grown from a
+  // seed texel (the LP over the texels taken so far, each next-nearest texel added when a
+  // plane still answers them all), so a block across several small triangles is labelled;
+  // false: one plane fitted to all of them at once (the form before).
+  bool grow_labels = true;
+  PlaneFitStats* stats = nullptr;  // not owned; counted into when set
 };
 
 // An 8x8 block whose texels are answered by up to 4 planes (plane_format.hpp, labelled block).
