@@ -109,7 +109,7 @@ Args parse(int argc, char** argv) {
               a.kernels.clear();
               for (const std::string& v : split_list(list)) {
                 const unsigned long r = v.find_first_not_of("0123456789") == std::string::npos && !v.empty() ? std::stoul(v) : 0;
-                if (r < 1 || r > 9 || r % 2 == 0) throw Error("bench_raster: --kernels takes odd sides 1..9, got '" + v + "'");
+                if (r < 1 || r > 9 || r % 2 == 0) throw Error("--kernels takes odd sides 1..9, got '" + v + "'");
                 a.kernels.push_back(uint32_t(r));
               }
             }, "PCF sides, odd 1..9, comma-separated [1,5]")
@@ -128,7 +128,7 @@ Args parse(int argc, char** argv) {
       .with("--region", [&](const std::string& v) {
               TexelRegion r;
               if (std::sscanf(v.c_str(), "%lu,%lu,%lu,%lu", &r.x, &r.y, &r.w, &r.h) != 4 || r.w == 0 || r.h == 0)
-                throw Error("bench_raster: --region X,Y,W,H (finest texels), got '" + v + "'");
+                throw Error("--region X,Y,W,H (finest texels), got '" + v + "'");
               a.region = r;
             }, "A window X,Y,W,H of the map built (finest texels; the rest constant, lit)");
   opt.parse(argc, argv);
