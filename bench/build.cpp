@@ -43,6 +43,7 @@
 #include <thread>
 #include <vector>
 
+#include "bench/options.hpp"
 #include "bench/dagmh_dict_figures.hpp"
 #include "tiles/bake/depth_bounds.hpp"
 #include "tiles/bake/map_build.hpp"
@@ -135,30 +136,16 @@ int main(int argc, char** argv) {
   std::string scene_spec = "procedural:city", light_spec = "sun:azimuth=30,elevation=50",
               resolutions = "4k,16k", encodings = "dagmh", builders = "raster,embree",
               intervals = "default", json_path, out_dir = "/tmp";
-  for (int i = 1; i < argc; ++i) {
-    std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "bench_build: %s needs a value\n", a.c_str());
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--scene") scene_spec = next();
-    else if (a == "--light") light_spec = next();
-    else if (a == "--resolution" || a == "--resolutions") resolutions = next();
-    else if (a == "--encodings") encodings = next();
-    else if (a == "--builders") builders = next();
-    else if (a == "--intervals") intervals = next();
-    else if (a == "--json") json_path = next();
-    else if (a == "--out") out_dir = next();
-    else {
-      std::fprintf(stderr, "usage: bench_build [--scene S] [--light L] [--resolutions 4k,16k] "
-                           "[--encodings dagmh,dagmh+dict,mmh,mh] [--builders raster,embree] [--intervals default,static] "
-                           "[--json PATH] [--out DIR]\n");
-      return 2;
-    }
-  }
+  st::bench::Options opt("bench_build", "Depth bounds and whole builds with each builder and encoding, side by side");
+  opt.value("--scene", scene_spec, "Scene spec")
+      .value("--light", light_spec, "Light spec")
+      .value("--resolutions,--resolution", resolutions, "Map sides, comma-separated (4k,16k,64k)")
+      .value("--encodings", encodings, "dagmh, dagmh+dict, mmh, mh (comma-separated)")
+      .value("--builders", builders, "raster, raster-off, raster-narrow, raster-regions, embree (comma-separated)")
+      .value("--intervals", intervals, "Interval rules: default, static (comma-separated)")
+      .value("--json", json_path, "Write the rows as JSON to PATH")
+      .value("--out", out_dir, "Folder for the packs built");
+  opt.parse(argc, argv);
   try {
     st::Scene scene = st::load_scene(scene_spec);
     st::LightSpace light = st::LightSpace::fit(st::LightSpec::parse(light_spec), scene.bounds());

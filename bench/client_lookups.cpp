@@ -47,6 +47,7 @@
 #include <nlohmann/json.hpp>
 #include <random>
 
+#include "bench/options.hpp"
 #include "bench/bench_map.hpp"
 #include "client/map_access.hpp"
 #include "tiles/bake/map_build.hpp"
@@ -181,54 +182,42 @@ int main(int argc, char** argv) {
   bool profile_cold = false;
   bool quick = false, level_given = false, use_cpu = true, render_reps_given = false, render_only = false;
   try {
-    for (int i = 1; i < argc; ++i) {
-      std::string a = argv[i];
-      auto next = [&]() -> std::string {
-        if (i + 1 >= argc) throw st::Error(a + " needs a value");
-        return argv[++i];
-      };
-      if (a == "--scene") scene_spec = next();
-      else if (a == "--light") light_spec = next();
-      else if (a == "--res") level = parse_level(next()), level_given = true;
-      else if (a == "--encodings") enc_names = split_list(next());
-      else if (a == "--tile-bytes") tile_bytes = uint32_t(std::stoul(next()));
-      else if (a == "--lookups") count = size_t(std::max(1024ll, std::stoll(next())));
-      else if (a == "--batch") batch = size_t(std::max(1ll, std::stoll(next())));
-      else if (a == "--reps") reps = std::max(1, std::stoi(next()));
-      else if (a == "--render-reps") render_reps = std::max(1, std::stoi(next())), render_reps_given = true;
-      else if (a == "--threads") {
-        thread_counts.clear();
-        for (const auto& t : split_list(next())) thread_counts.push_back(unsigned(std::clamp(std::stoi(t), 1, 64)));
-      } else if (a == "--size") size_spec = next();
-      else if (a == "--camera") camera_spec = next();
-      else if (a == "--quick") quick = true;
-      else if (a == "--render-only") render_only = true;
-      else if (a == "--profile-map") profile_map = std::max(1, std::stoi(next()));
-      else if (a == "--cold") profile_cold = true;
-      else if (a == "--patterns") pattern_names = split_list(next());
-      else if (a == "--subjects") subject_names = split_list(next());
-      else if (a == "--kernels") {
-        radii.clear();
-        for (const auto& k : split_list(next())) {
-          if (k != "1" && k != "5") throw st::Error("--kernels: expected 1 or 5, got '" + k + "'");
-          radii.push_back(k == "1" ? 0u : 2u);
-        }
-      }
-      else if (a == "--json") json_path = next();
-      else if (a == "--pack") pack_paths = split_list(next());
-      else if (a == "--clock") {
-        const std::string c = next();
-        if (c != "cpu" && c != "wall") throw st::Error("--clock: expected cpu or wall, got '" + c + "'");
-        use_cpu = c == "cpu";
-      }
-      else
-        throw st::Error("usage: bench_client_lookups [--scene S] [--light L] [--res 4k] [--encodings mh,mmh,dagmh] "
-                        "[--tile-bytes N] [--lookups N] [--batch N] [--reps R] [--render-reps R] [--threads 1,2] "
-                        "[--size WxH] "
-                        "[--camera SPEC] [--clock cpu|wall] [--quick] [--render-only] [--patterns random,coherent] "
-                        "[--kernels 1,5] [--subjects array,single,batch,filtered] [--pack P1,P2,...] [--profile-map N [--cold]] "
-                        "[--json PATH]");
-    }
+    st::bench::Options opt("bench_client_lookups", "The client's lookups (single, batched, filtered) beside a float array, and render's map shadows");
+    opt.value("--scene", scene_spec, "Scene spec (a bare name is procedural:NAME)")
+        .value("--light", light_spec, "Light spec")
+        .with("--res", [&](const std::string& v) { level = parse_level(v), level_given = true; }, "Map side (at least 512) [4k]")
+        .with("--encodings", [&](const std::string& v) { enc_names = split_list(v); }, "mh, mmh, dagmh (comma-separated) [mh,mmh,dagmh]")
+        .value("--tile-bytes", tile_bytes, "Tile budget in bytes")
+        .with("--lookups", [&](const std::string& v) { count = size_t(std::max(1024ll, std::stoll(v))); }, "Lookups per pattern (at least 1024) [262144]")
+        .with("--batch", [&](const std::string& v) { batch = size_t(std::max(1ll, std::stoll(v))); }, "Points per batch [1024]")
+        .with("--reps", [&](const std::string& v) { reps = std::max(1, std::stoi(v)); }, "Median of R passes [5]")
+        .with("--render-reps", [&](const std::string& v) { render_reps = std::max(1, std::stoi(v)), render_reps_given = true; }, "Render passes [3]")
+        .with("--threads", [&](const std::string& v) {
+                thread_counts.clear();
+                for (const auto& t : split_list(v)) thread_counts.push_back(unsigned(std::clamp(std::stoi(t), 1, 64)));
+              }, "Thread counts, comma-separated (1..64) [1,2]")
+        .value("--size", size_spec, "The render's view WxH (at most 8192x8192)")
+        .value("--camera", camera_spec, "The render's camera spec")
+        .flag("--quick", quick, "2K^2, 64K lookups, 3 reps, one render rep")
+        .flag("--render-only", render_only, "Only the render comparison")
+        .with("--profile-map", [&](const std::string& v) { profile_map = std::max(1, std::stoi(v)); }, "With --render-only: the render's single taps alone through the client, N times")
+        .flag("--cold", profile_cold, "With --profile-map: each pass after 64 MiB of other memory is written")
+        .with("--patterns", [&](const std::string& v) { pattern_names = split_list(v); }, "random, coherent (comma-separated)")
+        .with("--subjects", [&](const std::string& v) { subject_names = split_list(v); }, "array, single, batch, filtered (comma-separated)")
+        .with("--kernels", [&](const std::string& v) {
+                radii.clear();
+                for (const auto& k : split_list(v)) {
+                  if (k != "1" && k != "5") throw st::Error("--kernels: expected 1 or 5, got '" + k + "'");
+                  radii.push_back(k == "1" ? 0u : 2u);
+                }
+              }, "1 (single tap), 5 (5x5 PCF), comma-separated [1,5]")
+        .value("--json", json_path, "Write the rows as JSON to PATH")
+        .with("--pack", [&](const std::string& v) { pack_paths = split_list(v); }, "Packs already built, comma-separated (P1,P2,...): lookups on them instead of building")
+        .with("--clock", [&](const std::string& c) {
+                if (c != "cpu" && c != "wall") throw st::Error("--clock: expected cpu or wall, got '" + c + "'");
+                use_cpu = c == "cpu";
+              }, "The clock of the cost ratios: cpu or wall [cpu]");
+    opt.parse(argc, argv);
     if (scene_spec.find(':') == std::string::npos && !std::filesystem::exists(scene_spec))
       scene_spec = "procedural:" + scene_spec;  // a bare name; a file path stays a file
     if (quick) {

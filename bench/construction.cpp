@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/options.hpp"
 #include "common/error.hpp"
 #include "tiles/encode/mh_build.hpp"
 // The field generators are the tests' (one definition of "realistic" for both; the
@@ -83,18 +84,14 @@ int main(int argc, char** argv) {
   uint32_t side = 4096;
   int reps = 5;
   std::string json_path, only, only_field;  // --only METHOD, --field NAME: profile one
-  for (int i = 1; i < argc; ++i) {
-    std::string a = argv[i];
-    if (a == "--side" && i + 1 < argc) side = uint32_t(std::atoi(argv[++i]));
-    else if (a == "--reps" && i + 1 < argc) reps = std::max(1, std::atoi(argv[++i]));
-    else if (a == "--json" && i + 1 < argc) json_path = argv[++i];
-    else if (a == "--only" && i + 1 < argc) only = argv[++i];
-    else if (a == "--field" && i + 1 < argc) only_field = argv[++i];
-    else {
-      std::fprintf(stderr, "usage: %s [--side N] [--reps R] [--json PATH] [--only bottom_up|bottom_up_16_tiles|top_down] [--field scene|city|terrain|uniform]\n", argv[0]);
-      return 2;
-    }
-  }
+  st::bench::Options opt("bench_construction", "Construction (MH 3.1): bottom-up, top-down and tiled beside a min-max mipmap, on synthetic fields");
+  opt.value("--side", side, "Map side, a power of two in [4, 16384]")
+      .value("--reps", reps, "Median of R runs")
+      .value("--json", json_path, "Write the rows as JSON to PATH")
+      .value("--only", only, "Profile one method: bottom_up, bottom_up_16_tiles or top_down")
+      .value("--field", only_field, "One field: scene, city, terrain or uniform");
+  opt.parse(argc, argv);
+  reps = std::max(1, reps);
   if (!st::is_power_of_two(side) || side < 4 || side > (1u << 14)) {
     std::fprintf(stderr, "bench_construction: --side must be a power of two in [4, 16384]\n");
     return 2;

@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/options.hpp"
 #include "tiles/encode/dagmh_encode.hpp"
 #include "tiles/encode/encode.hpp"
 #include "common/error.hpp"
@@ -105,17 +106,13 @@ int main(int argc, char** argv) {
   uint32_t side = 2048;
   int reps = 5;
   std::string json_path, only_field;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--side" && i + 1 < argc) side = uint32_t(std::atoi(argv[++i]));
-    else if (a == "--reps" && i + 1 < argc) reps = std::max(1, std::atoi(argv[++i]));
-    else if (a == "--json" && i + 1 < argc) json_path = argv[++i];
-    else if (a == "--field" && i + 1 < argc) only_field = argv[++i];
-    else {
-      std::fprintf(stderr, "usage: %s [--side N] [--reps R] [--json PATH] [--field scene|city|terrain|uniform]\n", argv[0]);
-      return 2;
-    }
-  }
+  st::bench::Options opt("bench_dagmh", "DAG-MH (2021, 4): size, encode and open time, lookups beside a float array");
+  opt.value("--side", side, "Map side, a power of two in [16, 8192]")
+      .value("--reps", reps, "Median of R runs")
+      .value("--json", json_path, "Write the rows as JSON to PATH")
+      .value("--field", only_field, "One field: scene, city, terrain or uniform");
+  opt.parse(argc, argv);
+  reps = std::max(1, reps);
   if (!st::is_power_of_two(side) || side < 16 || side > 8192) {
     std::fprintf(stderr, "bench_dagmh: --side must be a power of two in [16, 8192]\n");
     return 2;

@@ -40,6 +40,7 @@
 #include <unordered_set>
 #include <vector>
 
+#include "bench/options.hpp"
 #include "common/error.hpp"
 #include "bench/dagmh_dict_figures.hpp"
 #include "bench/timing.hpp"
@@ -181,16 +182,13 @@ int main(int argc, char** argv) {
     std::vector<std::string> packs, mmh_packs;
     std::string json_path;
     bool check = false;
-    const char* usage = "usage: bench_dagmh_sharing PACK... [--mmh PACK]... [--check] [--json PATH]";
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      if (a == "--json" && i + 1 < argc) json_path = argv[++i];
-      else if (a == "--mmh" && i + 1 < argc) mmh_packs.push_back(argv[++i]);
-      else if (a == "--check") check = true;
-      else if (a.starts_with("--")) throw st::Error(usage);
-      else packs.push_back(a);
-    }
-    if (packs.empty()) throw st::Error(usage);
+    st::bench::Options opt("bench_dagmh_sharing", "What a pack-wide dictionary saves on DAG-MH packs (DAG-MH 2021, 3.1-3.4)");
+    opt.rest("PACK", packs, "DAG-MH packs (at least one)")
+        .each("--mmh", mmh_packs, "The MMH pack of the same map, one per PACK, in order (repeat the option)")
+        .flag("--check", check, "Every texel of every tile bit-equal with and without the dictionary")
+        .value("--json", json_path, "Write the rows as JSON to PATH");
+    opt.parse(argc, argv);
+    if (packs.empty()) opt.fail("give at least one PACK");
     if (!mmh_packs.empty() && mmh_packs.size() != packs.size()) throw st::Error("--mmh: give one per pack, in order");
     std::vector<nlohmann::json> dict_rows;
     nlohmann::json out = nlohmann::json::array();

@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/options.hpp"
 #include "tiles/bake/deep_sampler.hpp"
 #include "tiles/encode/deep_encode.hpp"
 #include "tiles/core/deep_tile.hpp"
@@ -34,15 +35,9 @@ double now() {
 int main(int argc, char** argv) {
   bool quick = false;
   std::string json_path;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--quick") quick = true;
-    else if (a == "--json" && i + 1 < argc) json_path = argv[++i];
-    else {
-      std::fprintf(stderr, "usage: bench_deep [--quick] [--json PATH]\n");
-      return 2;
-    }
-  }
+  st::bench::Options opt("bench_deep", "Deep shadow maps (DSM 2000): vertices per texel, tile bytes, sampling and lookup time, error");
+  opt.flag("--quick", quick, "N up to 64 samples per texel and fewer error probes").value("--json", json_path, "Write the rows as JSON to PATH");
+  opt.parse(argc, argv);
   const uint32_t level = 7, bits = 5, side = 1u << bits;
   const uint64_t x0 = 48, y0 = 48;
   const std::vector<std::pair<std::string, std::string>> scenes = {

@@ -47,6 +47,7 @@
 #include <map>
 #include <nlohmann/json.hpp>
 
+#include "bench/options.hpp"
 #include "bench/bench_map.hpp"
 #include "tiles/encode/dagmh_dictionary.hpp"
 #include "tiles/encode/encode.hpp"
@@ -252,30 +253,22 @@ int main(int argc, char** argv) {
   int zstd_level = 19;
   bool quick = false;
   try {
-    for (int i = 1; i < argc; ++i) {
-      std::string a = argv[i];
-      auto next = [&]() -> std::string {
-        if (i + 1 >= argc) throw st::Error(a + " needs a value");
-        return argv[++i];
-      };
-      if (a == "--scenes") scenes = next();
-      else if (a == "--light") light_spec = next();
-      else if (a == "--min-res") min_level = parse_level(next());
-      else if (a == "--max-res") max_level = parse_level(next());
-      else if (a == "--whole-max") whole_max = parse_level(next());
-      else if (a == "--workers") workers = unsigned(std::max(1, std::stoi(next())));
-      else if (a == "--zstd-level") zstd_level = std::stoi(next());
-      else if (a == "--zstd-max-res") zstd_max = parse_level(next());
-      else if (a == "--quick") quick = true;
-      else if (a == "--depth-bits") g_depth_bits = uint32_t(std::stoul(next()));
-      else if (a == "--json") json_path = next();
-      else if (a == "--builder") builder = next();
-      else if (a == "--intervals") rules = next();
-      else
-        throw st::Error("usage: bench_encodings [--scenes city,terrain,hairball,soup] [--light L] [--min-res 4k] "
-                        "[--max-res 16k|64k] [--whole-max 16k] [--workers N] [--zstd-level 19] [--zstd-max-res R] "
-                        "[--depth-bits 16] [--builder embree|raster] [--intervals default,static] [--quick] [--json PATH]");
-    }
+    st::bench::Options opt("bench_encodings", "Encoded sizes (DAG-MH 2021 Table 1): MH, MMH, DAG-MH beside the raw map and zstd");
+    opt.value("--scenes", scenes, "Procedural names or scene specs, comma-separated")
+        .value("--light", light_spec, "Light spec")
+        .with("--min-res", [&](const std::string& v) { min_level = parse_level(v); }, "Smallest map side [4k]")
+        .with("--max-res", [&](const std::string& v) { max_level = parse_level(v); }, "Largest map side [16k]")
+        .with("--whole-max", [&](const std::string& v) { whole_max = parse_level(v); }, "Largest side whose whole-map hierarchy is kept [16k]")
+        .value("--workers", workers, "Worker threads")
+        .value("--zstd-level", zstd_level, "zstd level of the raw map's chunks")
+        .with("--zstd-max-res", [&](const std::string& v) { zstd_max = parse_level(v); }, "Largest side compressed with zstd [all]")
+        .flag("--quick", quick, "2K^2 only")
+        .value("--depth-bits", g_depth_bits, "Depth bits of the encodings")
+        .value("--json", json_path, "Write the rows as JSON to PATH")
+        .value("--builder", builder, "Where the bounds come from: embree or raster")
+        .value("--intervals", rules, "Interval rules for open scenes: default, static (comma-separated)");
+    opt.parse(argc, argv);
+    workers = std::max(1u, workers);
     for (const std::string& r : split_list(rules))
       if (r != "default" && r != "static") throw st::Error("--intervals: expected default or static, got '" + r + "'");
     if (builder != "embree" && builder != "raster")

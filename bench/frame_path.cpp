@@ -11,8 +11,9 @@
 // arrivals evict (the LRU slots come back with other tiles: unlink + link); with 1 it holds
 // them all and a pass ends when the map is resident (a new RemoteMap and GpuMap then, untimed).
 // Then the frame's three calls are timed on the host around a real command buffer of a
-// Vulkan device (an engine's own: this file creates instance, device, command buffers and
-// fences, and hands GpuMap an EngineDevice), which is submitted and waited for, untimed.
+// Vulkan device (an engine's own: the rasterizer's instance and device set-up,
+// examples/raster/engine_device.hpp, then this file's command buffers and fences; GpuMap gets
+// an EngineDevice), which is submitted and waited for, untimed.
 // Before each timed frame --flush-mib MiB of other memory are written, as an engine's frame
 // (and the fetch thread's inflate) leaves the caches cold for the frame path (0: warm).
 //
@@ -48,7 +49,9 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "bench/options.hpp"
 #include "bench/bench_map.hpp"
+#include "examples/raster/engine_device.hpp"
 #include "client/map_access.hpp"
 #include "client/remote_map.hpp"
 #include "shadowtile/gpu.hpp"
@@ -74,27 +77,22 @@ struct Args {
 
 Args parse_args(int argc, char** argv) {
   Args a;
-  for (int i = 1; i < argc; ++i) {
-    const std::string k = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) throw Error("bench_frame_path: " + k + " needs a value");
-      return argv[++i];
-    };
-    if (k == "--packs") a.packs = next();
-    else if (k == "--scenes") a.scenes = next();
-    else if (k == "--light") a.light = next();
-    else if (k == "--res") a.res = next();
-    else if (k == "--tile-bytes") a.tile_bytes = uint32_t(std::stoul(next()));
-    else if (k == "--out") a.out = next();
-    else if (k == "--frames") a.frames = uint32_t(std::stoul(next()));
-    else if (k == "--arriving") a.arriving = uint32_t(std::stoul(next()));
-    else if (k == "--cache-fraction") a.cache_fraction = std::stod(next());
-    else if (k == "--flush-mib") a.flush_mib = uint32_t(std::stoul(next()));
-    else if (k == "--device") a.device = next();
-    else if (k == "--json") a.json = next();
-    else if (k == "--scene-limits") a.limits = parse_scene_limits(next(), a.limits);
-    else throw Error("bench_frame_path: unknown option " + k);
-  }
+  Options opt("bench_frame_path", "Engine mode's frame path alone on the engine's Vulkan device");
+  opt.value("--packs", a.packs, "Packs already built, comma-separated (instead of --scenes)")
+      .value("--scenes", a.scenes, "Scene specs, comma-separated")
+      .value("--light", a.light, "Light spec")
+      .value("--res", a.res, "Map side")
+      .value("--tile-bytes", a.tile_bytes, "Tile budget in bytes")
+      .value("--out", a.out, "Folder for the packs built")
+      .value("--frames", a.frames, "Frames timed (> 0)")
+      .value("--arriving", a.arriving, "Tiles arriving per frame (> 0)")
+      .value("--cache-fraction", a.cache_fraction, "The GPU tile cache as a fraction of the map's tiles, in (0, 1]")
+      .value("--flush-mib", a.flush_mib, "MiB written between frames to flush the CPU caches")
+      .value("--device", a.device, "Vulkan device (by name)")
+      .value("--json", a.json, "Write the rows as JSON to PATH [bench-out/frame_path.json]")
+      .with("--scene-limits", [&](const std::string& v) { a.limits = parse_scene_limits(v, a.limits); },
+            "What reading a scene file may cost, KEY=VALUE[,...] (scene/scene_limits.hpp)");
+  opt.parse(argc, argv);
   if (a.frames == 0 || a.arriving == 0) throw Error("bench_frame_path: --frames and --arriving must be > 0");
   if (!(a.cache_fraction > 0 && a.cache_fraction <= 1)) throw Error("bench_frame_path: --cache-fraction must be in (0, 1]");
   if (a.json.empty()) a.json = "bench-out/frame_path.json";
@@ -113,82 +111,40 @@ void vk_ok(VkResult r, const char* what) {
   if (r != VK_SUCCESS) throw Error(std::string("bench_frame_path: ") + what + " failed: " + std::to_string(int(r)));
 }
 
-// What a game's renderer owns: instance, device, one queue, a command buffer and fence per
-// frame in flight. No layers (validation would time itself).
+// What a game's renderer owns: instance, device, one queue (the engine's device of
+// examples/raster/engine_device.hpp: a compute queue, no layers, since validation would time
+// itself), a command buffer and fence per frame in flight.
 struct Engine {
-  VkInstance instance = VK_NULL_HANDLE;
-  VkPhysicalDevice physical = VK_NULL_HANDLE;
+  raster::VulkanDevice dev;
   VkDevice device = VK_NULL_HANDLE;
   VkQueue queue = VK_NULL_HANDLE;
-  uint32_t family = ~0u;
   VkCommandPool pool = VK_NULL_HANDLE;
   std::vector<VkCommandBuffer> cmds;
   std::vector<VkFence> fences;
-  std::string name;
+  const std::string& name = dev.name;
 
-  Engine(const std::string& want, uint32_t frames_in_flight) {
-    VkApplicationInfo app{};
-    app.sType = VK_STRUCTURE_TYPE_APPLICATION_INFO;
-    app.apiVersion = VK_API_VERSION_1_2;
-    VkInstanceCreateInfo ici{};
-    ici.sType = VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO;
-    ici.pApplicationInfo = &app;
-    vk_ok(vkCreateInstance(&ici, nullptr, &instance), "vkCreateInstance");
-    uint32_t n = 0;
-    vkEnumeratePhysicalDevices(instance, &n, nullptr);
-    std::vector<VkPhysicalDevice> devs(n);
-    vkEnumeratePhysicalDevices(instance, &n, devs.data());
-    for (VkPhysicalDevice d : devs) {
-      VkPhysicalDeviceProperties p{};
-      vkGetPhysicalDeviceProperties(d, &p);
-      if (!physical && (want.empty() || std::strstr(p.deviceName, want.c_str()))) physical = d, name = p.deviceName;
-    }
-    if (!physical) throw Error("bench_frame_path: no Vulkan device named like '" + want + "' (--device)");
-    uint32_t qn = 0;
-    vkGetPhysicalDeviceQueueFamilyProperties(physical, &qn, nullptr);
-    std::vector<VkQueueFamilyProperties> qs(qn);
-    vkGetPhysicalDeviceQueueFamilyProperties(physical, &qn, qs.data());
-    for (uint32_t i = 0; i < qn && family == ~0u; ++i)
-      if (qs[i].queueFlags & VK_QUEUE_COMPUTE_BIT) family = i;
-    if (family == ~0u) throw Error("bench_frame_path: no compute queue on " + name);
-    const float prio = 1;
-    VkDeviceQueueCreateInfo qci{};
-    qci.sType = VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO;
-    qci.queueFamilyIndex = family;
-    qci.queueCount = 1;
-    qci.pQueuePriorities = &prio;
-    VkDeviceCreateInfo dci{};
-    dci.sType = VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO;
-    dci.queueCreateInfoCount = 1;
-    dci.pQueueCreateInfos = &qci;
-    vk_ok(vkCreateDevice(physical, &dci, nullptr, &device), "vkCreateDevice");
-    vkGetDeviceQueue(device, family, 0, &queue);
+  static raster::EngineDeviceOptions options(const std::string& want) {
+    raster::EngineDeviceOptions o;
+    o.device = want, o.graphics = false, o.app_name.clear();
+    return o;
+  }
+  Engine(const std::string& want, uint32_t frames_in_flight)
+      : dev(options(want)), device(dev.device), queue(dev.queue) {
     const vk_setup::Device<vk_setup::Loader> v{vk_setup::kLoader, device};
-    pool = vk_setup::command_pool(v, family, true);
+    pool = vk_setup::command_pool(v, dev.family, true);
     cmds.resize(frames_in_flight);
     vk_setup::command_buffers(v, pool, cmds);
     for (uint32_t i = 0; i < frames_in_flight; ++i) fences.push_back(vk_setup::fence(v, false));
   }
   ~Engine() {
-    if (device) vkDeviceWaitIdle(device);
+    vkDeviceWaitIdle(device);
     for (VkFence f : fences) vkDestroyFence(device, f, nullptr);
     if (pool) vkDestroyCommandPool(device, pool, nullptr);
-    if (device) vkDestroyDevice(device, nullptr);
-    if (instance) vkDestroyInstance(instance, nullptr);
   }
   Engine(const Engine&) = delete;
   Engine& operator=(const Engine&) = delete;
 
-  gpu::EngineDevice engine_device() const {
-    gpu::EngineDevice d;
-    d.instance = instance;
-    d.physical_device = physical;
-    d.device = device;
-    d.queue_family = family;
-    d.get_instance_proc_addr = &vkGetInstanceProcAddr;
-    d.get_device_proc_addr = &vkGetDeviceProcAddr;
-    return d;
-  }
+  gpu::EngineDevice engine_device() const { return dev.engine_device(); }
   VkCommandBuffer begin(uint64_t frame) {
     VkCommandBuffer c = cmds[frame % cmds.size()];
     vk_ok(vkResetCommandBuffer(c, 0), "vkResetCommandBuffer");

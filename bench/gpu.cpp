@@ -40,6 +40,7 @@
 #include <random>
 #include <thread>
 
+#include "bench/options.hpp"
 #include "bench/bench_map.hpp"
 #include "client/map_access.hpp"
 #include "gpu/gpu_map.hpp"
@@ -68,31 +69,25 @@ struct Args {
 
 Args parse(int argc, char** argv) {
   Args a;
-  for (int i = 1; i < argc; ++i) {
-    const std::string k = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) throw Error("bench_gpu: " + k + " needs a value");
-      return argv[++i];
-    };
-    if (k == "--scene") a.scene = next();
-    else if (k == "--light") a.light = next();
-    else if (k == "--res") a.res = next();
-    else if (k == "--encodings") a.encodings = next();
-    else if (k == "--lookups") a.lookups = uint32_t(std::stoul(next()));
-    else if (k == "--reps") a.reps = uint32_t(std::stoul(next()));
-    else if (k == "--width") a.width = uint32_t(std::stoul(next()));
-    else if (k == "--height") a.height = uint32_t(std::stoul(next()));
-    else if (k == "--tile-bytes") a.tile_bytes = uint32_t(std::stoul(next()));
-    else if (k == "--device") a.device = next();
-    else if (k == "--max-r32f-bytes") a.max_r32f_bytes = std::stoull(next());
-    else if (k == "--out") a.out = next();
-    else if (k == "--json") a.json = next();
-    else if (k == "--camera") a.camera = next();
-    else if (k == "--view-size") a.view_size = next();
-    else if (k == "--view-out") a.view_out = next();
-    else if (k == "--view-pcf") a.view_kernel = uint32_t(std::stoul(next()));
-    else throw Error("bench_gpu: unknown option " + k);
-  }
+  Options opt("bench_gpu", "GPU lookups through the tile cache beside an uncompressed R32F image on the same device");
+  opt.value("--scene", a.scene, "Scene spec")
+      .value("--light", a.light, "Light spec")
+      .value("--res", a.res, "Map side")
+      .value("--encodings", a.encodings, "mh, mmh, dagmh (comma-separated)")
+      .value("--lookups", a.lookups, "Lookups per pass")
+      .value("--reps", a.reps, "Median of R passes")
+      .value("--width", a.width, "Screen width")
+      .value("--height", a.height, "Screen height")
+      .value("--tile-bytes", a.tile_bytes, "Tile budget in bytes")
+      .value("--device", a.device, "Vulkan device (by name)")
+      .value("--max-r32f-bytes", a.max_r32f_bytes, "Largest R32F image the baseline allocates")
+      .value("--out", a.out, "Prefix of the pictures written")
+      .value("--json", a.json, "Write the rows as JSON to PATH")
+      .value("--camera", a.camera, "Camera spec of the view pictures (first encoding)")
+      .value("--view-size", a.view_size, "The view pictures' WxH (1..8192)")
+      .value("--view-out", a.view_out, "Where the view pictures go")
+      .value("--view-pcf", a.view_kernel, "The view pictures' PCF side");
+  opt.parse(argc, argv);
   if (a.lookups == 0 || a.reps == 0 || a.width == 0 || a.height == 0) throw Error("bench_gpu: counts must be > 0");
   return a;
 }

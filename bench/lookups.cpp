@@ -35,6 +35,7 @@
 #include <nlohmann/json.hpp>
 #include <random>
 
+#include "bench/options.hpp"
 #include "bench/bench_map.hpp"
 #include "tiles/encode/encode.hpp"
 #include "tiles/core/evaluator.hpp"
@@ -103,26 +104,18 @@ int main(int argc, char** argv) {
   unsigned workers = 1;
   bool quick = false, level_given = false;
   try {
-    for (int i = 1; i < argc; ++i) {
-      std::string a = argv[i];
-      auto next = [&]() -> std::string {
-        if (i + 1 >= argc) throw st::Error(a + " needs a value");
-        return argv[++i];
-      };
-      if (a == "--scene") scene_spec = next();
-      else if (a == "--light") light_spec = next();
-      else if (a == "--res") level = parse_level(next()), level_given = true;
-      else if (a == "--lookups") count = size_t(std::max(1ll, std::stoll(next())));
-      else if (a == "--reps") reps = std::max(1, std::stoi(next()));
-      else if (a == "--workers") workers = unsigned(std::max(1, std::stoi(next())));
-      else if (a == "--quick") quick = true;
-      else if (a == "--json") json_path = next();
-      else if (a == "--builder") builder = next();
-      else if (a == "--intervals") rule = next();
-      else
-        throw st::Error("usage: bench_lookups [--scene S] [--light L] [--res 16k] [--lookups N] [--reps R] "
-                        "[--quick] [--workers N] [--builder embree|raster] [--intervals default|static] [--json PATH]");
-    }
+    st::bench::Options opt("bench_lookups", "Lookup speed: single taps and PCF on each encoding beside a float array");
+    opt.value("--scene", scene_spec, "Scene spec (a bare name is procedural:NAME)")
+        .value("--light", light_spec, "Light spec")
+        .with("--res", [&](const std::string& v) { level = parse_level(v), level_given = true; }, "Map side (at least 512) [16k]")
+        .with("--lookups", [&](const std::string& v) { count = size_t(std::max(1ll, std::stoll(v))); }, "Lookups per pattern [1048576]")
+        .with("--reps", [&](const std::string& v) { reps = std::max(1, std::stoi(v)); }, "Median of R passes [5]")
+        .with("--workers", [&](const std::string& v) { workers = unsigned(std::max(1, std::stoi(v))); }, "Worker threads of the build [1]")
+        .flag("--quick", quick, "8K^2, 128K lookups, 3 reps")
+        .value("--json", json_path, "Write the rows as JSON to PATH")
+        .value("--builder", builder, "Where the bounds come from: embree or raster")
+        .value("--intervals", rule, "Interval rule: default or static");
+    opt.parse(argc, argv);
     if (rule != "default" && rule != "static")
       throw st::Error("--intervals: expected default or static, got '" + rule + "'");
     if (scene_spec.find(':') == std::string::npos) scene_spec = "procedural:" + scene_spec;

@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/options.hpp"
 #include "tiles/encode/encode.hpp"
 #include "tiles/encode/mh_build.hpp"
 #include "tiles/encode/mh_quadtree_layout.hpp"
@@ -41,18 +42,14 @@ int main(int argc, char** argv) {
   int reps = 3;
   uint64_t lookups = 2000000;
   std::string only, json_path;
-  for (int i = 1; i + 1 < argc; i += 2) {
-    const std::string a = argv[i];
-    if (a == "--side") side = uint32_t(std::atoi(argv[i + 1]));
-    else if (a == "--reps") reps = std::max(1, std::atoi(argv[i + 1]));
-    else if (a == "--lookups") lookups = uint64_t(std::atoll(argv[i + 1]));
-    else if (a == "--field") only = argv[i + 1];
-    else if (a == "--json") json_path = argv[i + 1];
-    else {
-      std::fprintf(stderr, "unknown option %s\n", a.c_str());
-      return 2;
-    }
-  }
+  st::bench::Options opt("bench_mh_quadtree", "MH quadtree vs MMH (MH 3.2, 3.3): bytes, encode and open time, lookups beside a float array");
+  opt.value("--side", side, "Map side, a power of two")
+      .value("--reps", reps, "Median of R runs")
+      .value("--lookups", lookups, "Lookups per field")
+      .value("--field", only, "One field (its name in the table)")
+      .value("--json", json_path, "Write the rows as JSON to PATH");
+  opt.parse(argc, argv);
+  reps = std::max(1, reps);
   if (!st::is_power_of_two(side)) {
     std::fprintf(stderr, "--side must be a power of two\n");
     return 2;

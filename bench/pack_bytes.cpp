@@ -22,6 +22,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/options.hpp"
 #include "common/error.hpp"
 #include "tiles/core/dagmh_format.hpp"
 #include "tiles/core/encoding.hpp"
@@ -279,12 +280,10 @@ int main(int argc, char** argv) {
   try {
     std::vector<std::string> packs;
     std::string json_path;
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      if (a == "--json" && i + 1 < argc) json_path = argv[++i];
-      else packs.push_back(a);
-    }
-    if (packs.empty()) throw st::Error("usage: bench_pack_bytes PACK... [--json PATH]");
+    st::bench::Options opt("bench_pack_bytes", "Where a pack's bytes go, section by section");
+    opt.rest("PACK", packs, "Packs (at least one)").value("--json", json_path, "Write the rows as JSON to PATH");
+    opt.parse(argc, argv);
+    if (packs.empty()) opt.fail("give at least one PACK");
     nlohmann::json all = nlohmann::json::array();
     for (const auto& p : packs) all.push_back(measure(p));
     if (!json_path.empty()) std::ofstream(json_path) << all.dump(2) << "\n";

@@ -24,6 +24,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/options.hpp"
 #include "common/error.hpp"
 #include "tiles/bake/map_build.hpp"
 #include "scene/scene.hpp"
@@ -46,32 +47,27 @@ int main(int argc, char** argv) try {
   std::string out_dir = "bench-out/planes", json_path, light_spec = "sun:azimuth=30,elevation=50";
   std::vector<std::string> only;
   bool pack_planes = true, predict_labels = true, stats = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) throw st::Error(a + ": value missing");
-      return argv[++i];
-    };
-    if (a == "--out") out_dir = next();
-    else if (a == "--json") json_path = next();
-    else if (a == "--light") light_spec = next();
-    else if (a == "--min-shift") fit.min_shift = uint32_t(std::stoul(next()));
-    else if (a == "--min-nodes") fit.min_stored_nodes = uint32_t(std::stoul(next()));
-    else if (a == "--min-reused") fit.min_reused_nodes = uint32_t(std::stoul(next()));
-    else if (a == "--no-merge") fit.merge_surfaces = false;
-    else if (a == "--no-round") fit.round_planes = false;
-    else if (a == "--no-pack") pack_planes = false;
-    else if (a == "--no-predict") predict_labels = false;
-    else if (a == "--no-grow") fit.grow_labels = false;
-    else if (a == "--stats") stats = true;
-    else if (a == "--only") {
-      std::string list = next(), name;
-      for (char ch : list + ',')
-        if (ch == ',') only.push_back(name), name.clear();
-        else name.push_back(ch);
-    }
-    else scenes.push_back(a);
-  }
+  st::bench::Options opt("bench_plane_packs", "Pack bytes with and without plane tiles beside static-interval packs");
+  opt.rest("SCENE@RES", scenes, "Scenes and map sides (procedural:city@4096, FILE@8192)")
+      .value("--out", out_dir, "Folder for the packs (kept for bench_pack_bytes)")
+      .value("--json", json_path, "Write the rows as JSON to PATH")
+      .value("--light", light_spec, "Light spec")
+      .value("--min-shift", fit.min_shift, "PlaneFitOptions::min_shift")
+      .value("--min-nodes", fit.min_stored_nodes, "PlaneFitOptions::min_stored_nodes")
+      .value("--min-reused", fit.min_reused_nodes, "PlaneFitOptions::min_reused_nodes")
+      .flag("--no-merge", fit.merge_surfaces, "PlaneFitOptions::merge_surfaces off", false)
+      .flag("--no-round", fit.round_planes, "PlaneFitOptions::round_planes off", false)
+      .flag("--no-pack", pack_planes, "Store plane tiles as STPN instead of packed", false)
+      .flag("--no-predict", predict_labels, "Pack plane tiles without predicted labels (STPQ)", false)
+      .flag("--no-grow", fit.grow_labels, "PlaneFitOptions::grow_labels off (the old texel-order labelling)", false)
+      .flag("--stats", stats, "Print where values go and why blocks are rejected")
+      .with("--only", [&](const std::string& list) {
+              std::string name;
+              for (char ch : list + ',')
+                if (ch == ',') only.push_back(name), name.clear();
+                else name.push_back(ch);
+            }, "Build the named variants alone: default, static, planes (comma-separated)");
+  opt.parse(argc, argv);
   if (scenes.empty()) throw st::Error("usage: bench_plane_packs SCENE@RES... [--out DIR] [--json PATH] [--light SPEC]");
   fs::create_directories(out_dir);
   const Variant variants[] = {{"default", false, false}, {"static", false, true}, {"planes", true, false}};

@@ -68,6 +68,7 @@
 #include <nlohmann/json.hpp>
 #include <thread>
 
+#include "bench/options.hpp"
 #include "bench/bench_map.hpp"
 #include "examples/raster/flat_mesh.hpp"
 #include "examples/raster/raster.hpp"
@@ -104,48 +105,42 @@ struct Args {
 
 Args parse(int argc, char** argv) {
   Args a;
-  for (int i = 1; i < argc; ++i) {
-    const std::string k = argv[i];
-    auto next = [&]() -> std::string {
-      if (i + 1 >= argc) throw Error("bench_raster: " + k + " needs a value");
-      return argv[++i];
-    };
-    if (k == "--scenes") a.scenes = next();
-    else if (k == "--light") a.light = next();
-    else if (k == "--res") a.res = next();
-    else if (k == "--encoding") a.encoding = next();
-    else if (k == "--tile-bytes") a.tile_bytes = uint32_t(std::stoul(next()));
-    else if (k == "--width") a.width = uint32_t(std::stoul(next()));
-    else if (k == "--height") a.height = uint32_t(std::stoul(next()));
-    else if (k == "--reps") a.reps = uint32_t(std::stoul(next()));
-    else if (k == "--kernels") {
-      a.kernels.clear();
-      for (const std::string& v : split_list(next())) {
-        const unsigned long r = v.find_first_not_of("0123456789") == std::string::npos && !v.empty() ? std::stoul(v) : 0;
-        if (r < 1 || r > 9 || r % 2 == 0) throw Error("bench_raster: --kernels takes odd sides 1..9, got '" + v + "'");
-        a.kernels.push_back(uint32_t(r));
-      }
-    }
-    else if (k == "--arriving") a.arriving = uint32_t(std::stoul(next()));
-    else if (k == "--arrival-frames") a.arrival_frames = uint32_t(std::stoul(next()));
-    else if (k == "--device") a.device = next();
-    else if (k == "--out") a.out = next();
-    else if (k == "--json") a.json = next();
-    else if (k == "--no-frame-path") a.frame_path = false;
-    else if (k == "--overlap") a.idle = false;
-    else if (k == "--scene-limits") a.limits = parse_scene_limits(next(), a.limits);
-    else if (k == "--no-ratio") a.ratio = false;
-    else if (k == "--no-r32f") a.r32f = false;
-    else if (k == "--cpu-time") a.cpu_time = true;
-    else if (k == "--region") {
-      TexelRegion r;
-      const std::string v = next();
-      if (std::sscanf(v.c_str(), "%lu,%lu,%lu,%lu", &r.x, &r.y, &r.w, &r.h) != 4 || r.w == 0 || r.h == 0)
-        throw Error("bench_raster: --region X,Y,W,H (finest texels), got '" + v + "'");
-      a.region = r;
-    }
-    else throw Error("bench_raster: unknown option " + k);
-  }
+  Options opt("bench_raster", "Lookups in a rasterizer's fragment shader against an R32F shadow map, and engine mode's frame path");
+  opt.value("--scenes", a.scenes, "Scene specs, comma-separated")
+      .value("--light", a.light, "Light spec")
+      .value("--res", a.res, "Map side")
+      .value("--encoding", a.encoding, "mh, mmh or dagmh")
+      .value("--tile-bytes", a.tile_bytes, "Tile budget in bytes")
+      .value("--width", a.width, "Framebuffer width")
+      .value("--height", a.height, "Framebuffer height")
+      .value("--reps", a.reps, "Median of R frames")
+      .with("--kernels", [&](const std::string& list) {
+              a.kernels.clear();
+              for (const std::string& v : split_list(list)) {
+                const unsigned long r = v.find_first_not_of("0123456789") == std::string::npos && !v.empty() ? std::stoul(v) : 0;
+                if (r < 1 || r > 9 || r % 2 == 0) throw Error("--kernels takes odd sides 1..9, got '" + v + "'");
+                a.kernels.push_back(uint32_t(r));
+              }
+            }, "PCF sides, odd 1..9, comma-separated [1,5]")
+      .value("--arriving", a.arriving, "Tiles arriving per frame in the frame path (> 0)")
+      .value("--arrival-frames", a.arrival_frames, "Timed frame-path frames with arrivals")
+      .value("--device", a.device, "Vulkan device (by name)")
+      .value("--out", a.out, "Prefix of the pictures and packs written")
+      .value("--json", a.json, "Write the rows as JSON to PATH [OUT.json]")
+      .flag("--no-frame-path", a.frame_path, "Skip engine mode's frame path (part 2)", false)
+      .flag("--overlap", a.idle, "Frame path: record while the frames in flight still run", false)
+      .with("--scene-limits", [&](const std::string& v) { a.limits = parse_scene_limits(v, a.limits); },
+            "What reading a scene file may cost, KEY=VALUE[,...] (scene/scene_limits.hpp)")
+      .flag("--no-ratio", a.ratio, "Skip the lookup ratio (part 1)", false)
+      .flag("--no-r32f", a.r32f, "Skip the R32F baseline (its rows print '-')", false)
+      .flag("--cpu-time", a.cpu_time, "Timed frames one at a time, the process's CPU time per frame too")
+      .with("--region", [&](const std::string& v) {
+              TexelRegion r;
+              if (std::sscanf(v.c_str(), "%lu,%lu,%lu,%lu", &r.x, &r.y, &r.w, &r.h) != 4 || r.w == 0 || r.h == 0)
+                throw Error("--region X,Y,W,H (finest texels), got '" + v + "'");
+              a.region = r;
+            }, "A window X,Y,W,H of the map built (finest texels; the rest constant, lit)");
+  opt.parse(argc, argv);
   if (a.reps == 0 || a.width == 0 || a.height == 0 || a.arriving == 0) throw Error("bench_raster: counts must be > 0");
   if (a.kernels.empty()) throw Error("bench_raster: --kernels needs at least one side");
   if (a.json.empty()) a.json = a.out + ".json";

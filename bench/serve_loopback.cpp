@@ -24,6 +24,7 @@
 #include <thread>
 #include <vector>
 
+#include "bench/options.hpp"
 #include "client/map_access.hpp"
 #include "proto/proto.hpp"
 #include "server/server.hpp"
@@ -127,12 +128,11 @@ double raw_fetch_all(uint16_t port, const std::vector<uint64_t>& ids) {
 int main(int argc, char** argv) {
   uint32_t level = 10, reps = 3;
   std::string json_path = "bench-out/serve_loopback.json";
-  for (int i = 1; i + 1 < argc; i += 2) {
-    std::string k = argv[i];
-    if (k == "--level") level = uint32_t(std::stoul(argv[i + 1]));
-    else if (k == "--reps") reps = uint32_t(std::stoul(argv[i + 1]));
-    else if (k == "--json") json_path = argv[i + 1];
-  }
+  st::bench::Options opt("bench_serve_loopback", "Loopback throughput of the tile server and the client beside the local pack read");
+  opt.value("--level", level, "Map level (side 2^level)")
+      .value("--reps", reps, "Median of R runs")
+      .value("--json", json_path, "Write the rows as JSON to PATH");
+  opt.parse(argc, argv);
   try {
     namespace fs = std::filesystem;
     fs::path dir = fs::temp_directory_path() / "shadowtile_bench_serve";

@@ -60,6 +60,7 @@
 #include <thread>
 #include <vector>
 
+#include "bench/options.hpp"
 #include "proto/proto.hpp"
 #include "server/server.hpp"
 #include "common/error.hpp"
@@ -565,29 +566,25 @@ int main(int argc, char** argv) {
   int skip = -1;  // cut level K; default level - 5: 1024 tiles of 32x32 texels, a few KiB each
   double seconds = 3, warmup = 0.3;
   std::string conns_arg = "1,8,64", workers_arg = "1,auto", nginx_arg, json_path = "bench-out/serve_vs_nginx.json";
-  for (int i = 1; i + 1 < argc; i += 2) {
-    std::string k = argv[i], v = argv[i + 1];
-    if (k == "--level") level = uint32_t(std::stoul(v));
-    else if (k == "--seconds") seconds = std::stod(v);
-    else if (k == "--warmup") warmup = std::stod(v);
-    else if (k == "--depth") depth = uint32_t(std::stoul(v));
-    else if (k == "--conns") conns_arg = v;
-    else if (k == "--nginx-workers") workers_arg = v;
-    else if (k == "--nginx") nginx_arg = v;
-    else if (k == "--nginx-extra") nginx_extra = v;
-    else if (k == "--skip") skip = int(std::stoi(v));
-    else if (k == "--json") json_path = v;
-    else if (k == "--threads") threads = uint32_t(std::stoul(v));
-    else if (k == "--busy-poll-us") busy_poll_us = uint32_t(std::stoul(v));
-    else if (k == "--reps") reps = std::max<uint32_t>(1, uint32_t(std::stoul(v)));
-    else if (k == "--rate-fraction") rate_fraction = std::stod(v);
-    else if (k == "--rate") fixed_rate = std::stod(v);
-    else if (k == "--tile-cache-mib") tile_cache_mib = std::stod(v);
-    else {
-      std::fprintf(stderr, "bench_serve_vs_nginx: unknown option %s\n", k.c_str());
-      return 2;
-    }
-  }
+  st::bench::Options opt("bench_serve_vs_nginx", "Our tile server against nginx serving the same tile bytes as static files");
+  opt.value("--level", level, "Map level (side 2^level)")
+      .value("--seconds", seconds, "Seconds per cell")
+      .value("--warmup", warmup, "Warm-up seconds per cell")
+      .value("--depth", depth, "Requests in flight per connection (1..64)")
+      .value("--conns", conns_arg, "Connection counts, comma-separated")
+      .value("--nginx-workers", workers_arg, "nginx worker counts, comma-separated (auto: the cores)")
+      .value("--nginx", nginx_arg, "The nginx binary (default: nginx on PATH)")
+      .value("--nginx-extra", nginx_extra, "Extra nginx http-block config (\"\" for the plain config)")
+      .value("--skip", skip, "Cut level K (-1: level - 5, at most 8)")
+      .value("--json", json_path, "Write the rows as JSON to PATH")
+      .value("--threads", threads, "Our server's I/O threads")
+      .value("--busy-poll-us", busy_poll_us, "Our server's busy-poll microseconds")
+      .value("--reps", reps, "Runs per cell (servers alternating), the median reported")
+      .value("--rate-fraction", rate_fraction, "Open-loop cells at F x our peak rate (0 < F <= 1; 0: none)")
+      .value("--rate", fixed_rate, "Open-loop cells at R requests/s in all (0: none)")
+      .value("--tile-cache-mib", tile_cache_mib, "Our payload cache in MiB (0: pread + CRC per tile)");
+  opt.parse(argc, argv);
+  reps = std::max<uint32_t>(1, reps);
   // Our GetTiles ids live in a 1024-slot ring and the server grants 64 in flight.
   depth = std::clamp<uint32_t>(depth, 1, 64);
   fs::path dir = fs::temp_directory_path() / ("shadowtile_bench_nginx_" + std::to_string(::getpid()));

@@ -59,6 +59,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/options.hpp"
 #include "common/error.hpp"
 #include "scene/scene.hpp"
 #include "tiles/bake/stack_build.hpp"
@@ -713,33 +714,26 @@ int main(int argc, char** argv) {
     std::vector<int> split_shifts{0};
     std::string dump_dir;
     std::string which = "all", json_path = "build/bench_stack_slices.json", spill_dir = "/tmp";
-    for (int i = 1; i < argc; ++i) {
-      const std::string arg = argv[i];
-      auto next = [&]() -> std::string {
-        if (i + 1 >= argc) throw st::Error(arg + " needs a value");
-        return argv[++i];
-      };
-      if (arg == "--res") level = st::parse_resolution(next());
-      else if (arg == "--samples") samples = uint32_t(std::stoul(next()));
-      else if (arg == "--area-samples") area_samples = uint32_t(std::stoul(next()));
-      else if (arg == "--case") which = next();
-      else if (arg == "--json") json_path = next();
-      else if (arg == "--spill-dir") spill_dir = next();
-      else if (arg == "--bytes-only") bytes_only = true;
-      else if (arg == "--adaptive") adaptive = true;
-      else if (arg == "--split-only") split_only = true;
-      else if (arg == "--split-k") {  // comma-separated shifts of K for the split pack, e.g. 0,-1
-        split_shifts.clear();
-        std::string v = next();
-        for (size_t at = 0; at <= v.size();) {
-          const size_t end = std::min(v.find(',', at), v.size());
-          split_shifts.push_back(std::stoi(v.substr(at, end - at)));
-          at = end + 1;
-        }
-      }
-      else if (arg == "--dump-tiles") dump_dir = next();
-      else throw st::Error("unknown option " + arg);
-    }
+    st::bench::Options opt("bench_stack_slices", "Where a shadow-map stack's bytes go, against the same samples as separate DAG-MH packs");
+    opt.with("--res", [&](const std::string& v) { level = st::parse_resolution(v); }, "Map side per slice [4k]")
+        .value("--samples", samples, "Sun samples of the day's path")
+        .value("--area-samples", area_samples, "Area light samples (hairball)")
+        .value("--case", which, "city, engine, hairball or all")
+        .value("--json", json_path, "Write the rows as JSON to PATH (after each case)")
+        .value("--spill-dir", spill_dir, "Folder for the traced slices' spill")
+        .flag("--bytes-only", bytes_only, "Skip the octree pack, the dictionary measure and their DAG-MH tiles")
+        .flag("--adaptive", adaptive, "Estimate a cut that goes deeper only where a cell overflows")
+        .flag("--split-only", split_only, "Write only the split pack")
+        .with("--split-k", [&](const std::string& v) {  // comma-separated shifts of K for the split pack, e.g. 0,-1
+                split_shifts.clear();
+                for (size_t at = 0; at <= v.size();) {
+                  const size_t end = std::min(v.find(',', at), v.size());
+                  split_shifts.push_back(std::stoi(v.substr(at, end - at)));
+                  at = end + 1;
+                }
+              }, "Write the split pack at these shifts of K (comma-separated, e.g. 0,-1)")
+        .value("--dump-tiles", dump_dir, "Write the per-cell pack's raw tiles to DIR/<cell>.bin");
+    opt.parse(argc, argv);
     const std::string day = "sun-path:azimuth=100..260,elevation=25..65,samples=" + std::to_string(samples) + ",frame=ground";
     std::vector<Case> cases;
     if (which == "all" || which == "city") cases.push_back({"city-day", "procedural:city", day});

@@ -77,6 +77,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/options.hpp"
 #include "common/error.hpp"
 #include "common/hash.hpp"
 #include "tiles/bake/depth_bounds.hpp"
@@ -782,35 +783,30 @@ int main(int argc, char** argv) {
     int reps = 3;
     std::string which = "all", json_path = "build/bench_stacks.json", mode = "auto", tracer = "auto", spill_dir = "/tmp",
                 frame = "ground";
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      auto next = [&]() -> std::string {
-        if (i + 1 >= argc) throw st::Error(a + " needs a value");
-        return argv[++i];
-      };
-      if (a == "--res") level = st::parse_resolution(next());
-      else if (a == "--city-samples") city_n = uint32_t(std::stoul(next()));
-      else if (a == "--hair-samples") hair_n = uint32_t(std::stoul(next()));
-      else if (a == "--lookups") lookups = std::stoul(next());
-      else if (a == "--hair-jitter") hair_jitter = next();
-      else if (a == "--hair-frame") hair_frame = next();
-      else if (a == "--reps") reps = std::max(1, std::stoi(next()));
-      else if (a == "--case") which = next();
-      else if (a == "--json") json_path = next();
-      else if (a == "--mode") mode = next();
-      else if (a == "--tracer") tracer = next();
-      else if (a == "--spill-dir") spill_dir = next();
-      else if (a == "--frame") frame = next();
-      else if (a == "--all-2d") g_all_2d = true;
-      else if (a == "--split-cells") g_split_cells = true;
-      else if (a == "--stack-cells") g_stack_cells = st::parse_stack_cells(g_stack_cells_name = next());
-      else if (a == "--oct-merge") {
-        const std::string v = next();
-        if (v != "on" && v != "off") throw st::Error("--oct-merge: expected on or off");
-        g_oct_merge = v == "on";
-      }
-      else throw st::Error("unknown option " + a);
-    }
+    st::bench::Options opt("bench_stacks", "Shadow-map stacks (MH 2016, 4) beside N 2D maps: bytes, build time, lookups");
+    opt.with("--res", [&](const std::string& v) { level = st::parse_resolution(v); }, "Map side per slice [256]")
+        .value("--city-samples", city_n, "Sun samples of the city cases")
+        .value("--hair-samples", hair_n, "Area light samples of the hairball and engine-area cases")
+        .value("--lookups", lookups, "Lookups per kind")
+        .value("--hair-jitter", hair_jitter, "The hairball area light's jitter")
+        .value("--hair-frame", hair_frame, "The hairball area light's frame: window, translate or both")
+        .value("--reps", reps, "Median of R rounds")
+        .value("--case", which, "city, city-hour, hairball, engine, engine-area, real or all")
+        .value("--json", json_path, "Write the rows as JSON to PATH")
+        .value("--mode", mode, "auto, whole or blocked")
+        .value("--tracer", tracer, "auto or embree")
+        .value("--spill-dir", spill_dir, "Folder for the traced slices' spill (blocked mode)")
+        .value("--frame", frame, "The sun paths' frame: ground, ortho or both")
+        .flag("--all-2d", g_all_2d, "Whole mode: every slice also encoded as MMH and DAG-MH")
+        .flag("--split-cells", g_split_cells, "Blocked mode: a cell over 64 KiB is split below K")
+        .with("--stack-cells", [&](const std::string& v) { g_stack_cells = st::parse_stack_cells(g_stack_cells_name = v); },
+              "Blocked mode: the cells' form: octree, slices or smaller")
+        .with("--oct-merge", [&](const std::string& v) {
+                if (v != "on" && v != "off") throw st::Error("--oct-merge: expected on or off");
+                g_oct_merge = v == "on";
+              }, "The whole-stack octree with the encoder's subtree merger: on or off");
+    opt.parse(argc, argv);
+    reps = std::max(1, reps);
     if (frame != "ground" && frame != "ortho" && frame != "both") throw st::Error("--frame: expected ground, ortho or both");
     std::vector<std::string> frames;
     if (frame != "ground") frames.push_back("ortho");

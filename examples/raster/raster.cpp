@@ -11,6 +11,7 @@
 #include <cstring>
 #include <stdexcept>
 
+#include "examples/raster/engine_device.hpp"
 #include "shadowtile/vk_setup.hpp"  // the Vulkan set-up, over the plain loader
 #include "tiles/core/camera.hpp"  // header-only: the pinhole camera `shadowtile render` uses
 
@@ -39,137 +40,15 @@ constexpr uint32_t kStamps = 5;  // begin, uploads done, depth pre-pass done, sh
 using Buffer = vk_setup::Buffer;
 using Image = vk_setup::Image;
 
-// The engine's device: instance, physical device, one graphics + compute queue.
-struct Device {
-  VkInstance instance = VK_NULL_HANDLE;
-  VkPhysicalDevice physical = VK_NULL_HANDLE;
-  VkDevice device = VK_NULL_HANDLE;
-  VkQueue queue = VK_NULL_HANDLE;
-  uint32_t family = ~0u;
-  VkPhysicalDeviceMemoryProperties mem{};
-  VkPhysicalDeviceProperties props{};
-  uint32_t timestamp_bits = 0;
-  std::string name;
-
-  VkDebugUtilsMessengerEXT messenger = VK_NULL_HANDLE;
-  uint64_t messages = 0;
-  std::string first_message;
-
-  static VKAPI_ATTR VkBool32 VKAPI_CALL on_message(VkDebugUtilsMessageSeverityFlagBitsEXT,
-                                                   VkDebugUtilsMessageTypeFlagsEXT,
-                                                   const VkDebugUtilsMessengerCallbackDataEXT* data, void* user) {
-    auto* d = static_cast<Device*>(user);
-    if (d->messages++ == 0 && data && data->pMessage) d->first_message = data->pMessage;
-    return VK_FALSE;
+// The engine's device (engine_device.hpp: instance, physical device, one graphics + compute
+// queue) and the rasterizer's memory on it.
+struct Device : VulkanDevice {
+  Device(const std::string& want, bool validation) : VulkanDevice(options(want, validation)) {}
+  static EngineDeviceOptions options(const std::string& want, bool validation) {
+    EngineDeviceOptions o;
+    o.device = want, o.validation = validation;
+    return o;
   }
-
-  Device(std::string want, bool validation) {
-    if (want.empty())
-      if (const char* e = std::getenv("SHADOWTILE_VK_DEVICE")) want = e;
-    VkApplicationInfo app{};
-    app.sType = VK_STRUCTURE_TYPE_APPLICATION_INFO;
-    app.pApplicationName = "shadowtile raster";
-    app.apiVersion = VK_API_VERSION_1_2;
-    VkInstanceCreateInfo ici{};
-    ici.sType = VK_STRUCTURE_TYPE_INSTANCE_CREATE_INFO;
-    ici.pApplicationInfo = &app;
-    const char* layer = "VK_LAYER_KHRONOS_validation";
-    const char* ext = VK_EXT_DEBUG_UTILS_EXTENSION_NAME;
-    VkDebugUtilsMessengerCreateInfoEXT mci{};
-    mci.sType = VK_STRUCTURE_TYPE_DEBUG_UTILS_MESSENGER_CREATE_INFO_EXT;
-    mci.messageSeverity = VK_DEBUG_UTILS_MESSAGE_SEVERITY_WARNING_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_SEVERITY_ERROR_BIT_EXT;
-    mci.messageType = VK_DEBUG_UTILS_MESSAGE_TYPE_GENERAL_BIT_EXT | VK_DEBUG_UTILS_MESSAGE_TYPE_VALIDATION_BIT_EXT;
-    mci.pfnUserCallback = &on_message;
-    mci.pUserData = this;
-    if (validation) {
-      ici.enabledLayerCount = 1;
-      ici.ppEnabledLayerNames = &layer;
-      ici.enabledExtensionCount = 1;
-      ici.ppEnabledExtensionNames = &ext;
-      ici.pNext = &mci;  // instance creation and destruction too
-    }
-    if (VkResult r = vkCreateInstance(&ici, nullptr, &instance); r != VK_SUCCESS)
-      throw std::runtime_error(std::string("vkCreateInstance failed: VkResult ") + std::to_string(int(r)) +
-                               (validation ? " (is VK_LAYER_KHRONOS_validation installed?)" : ""));
-    if (validation) {
-      auto create = reinterpret_cast<PFN_vkCreateDebugUtilsMessengerEXT>(
-          vkGetInstanceProcAddr(instance, "vkCreateDebugUtilsMessengerEXT"));
-      if (!create || create(instance, &mci, nullptr, &messenger) != VK_SUCCESS) {
-        vkDestroyInstance(instance, nullptr);
-        throw std::runtime_error("vkCreateDebugUtilsMessengerEXT failed");
-      }
-    }
-    uint32_t n = 0;
-    vkEnumeratePhysicalDevices(instance, &n, nullptr);
-    std::vector<VkPhysicalDevice> devs(n);
-    vkEnumeratePhysicalDevices(instance, &n, devs.data());
-    std::string names;
-    for (VkPhysicalDevice d : devs) {
-      VkPhysicalDeviceProperties p{};
-      vkGetPhysicalDeviceProperties(d, &p);
-      names += std::string(names.empty() ? "" : ", ") + "'" + p.deviceName + "'";
-      if (!physical && (want.empty() || std::strstr(p.deviceName, want.c_str()))) physical = d, props = p;
-    }
-    if (!physical) {
-      destroy_messenger();
-      vkDestroyInstance(instance, nullptr);
-      throw std::runtime_error("no Vulkan device named like '" + want + "' (present: " + (names.empty() ? "none" : names) + ")");
-    }
-    name = props.deviceName;
-    vkGetPhysicalDeviceMemoryProperties(physical, &mem);
-    uint32_t qn = 0;
-    vkGetPhysicalDeviceQueueFamilyProperties(physical, &qn, nullptr);
-    std::vector<VkQueueFamilyProperties> qs(qn);
-    vkGetPhysicalDeviceQueueFamilyProperties(physical, &qn, qs.data());
-    for (uint32_t i = 0; i < qn && family == ~0u; ++i)
-      if ((qs[i].queueFlags & VK_QUEUE_GRAPHICS_BIT) && (qs[i].queueFlags & VK_QUEUE_COMPUTE_BIT)) family = i;
-    if (family == ~0u) {
-      destroy_messenger();
-      vkDestroyInstance(instance, nullptr);
-      throw std::runtime_error("device '" + name + "' has no graphics + compute queue");
-    }
-    timestamp_bits = props.limits.timestampComputeAndGraphics ? qs[family].timestampValidBits : 0;
-    VkPhysicalDeviceFeatures have{};
-    vkGetPhysicalDeviceFeatures(physical, &have);
-    if (!have.fragmentStoresAndAtomics) {
-      destroy_messenger();
-      vkDestroyInstance(instance, nullptr);
-      throw std::runtime_error("device '" + name + "' has no fragmentStoresAndAtomics (the fragment shader writes feedback)");
-    }
-    const float prio = 1;
-    VkDeviceQueueCreateInfo qci{};
-    qci.sType = VK_STRUCTURE_TYPE_DEVICE_QUEUE_CREATE_INFO;
-    qci.queueFamilyIndex = family;
-    qci.queueCount = 1;
-    qci.pQueuePriorities = &prio;
-    VkPhysicalDeviceFeatures features{};
-    features.fragmentStoresAndAtomics = VK_TRUE;
-    VkDeviceCreateInfo dci{};
-    dci.sType = VK_STRUCTURE_TYPE_DEVICE_CREATE_INFO;
-    dci.queueCreateInfoCount = 1;
-    dci.pQueueCreateInfos = &qci;
-    dci.pEnabledFeatures = &features;
-    if (VkResult r = vkCreateDevice(physical, &dci, nullptr, &device); r != VK_SUCCESS) {
-      destroy_messenger();
-      vkDestroyInstance(instance, nullptr);
-      check(r, "vkCreateDevice");
-    }
-    vkGetDeviceQueue(device, family, 0, &queue);
-  }
-  ~Device() {
-    vkDestroyDevice(device, nullptr);
-    destroy_messenger();
-    vkDestroyInstance(instance, nullptr);
-  }
-  void destroy_messenger() {
-    if (!messenger) return;
-    auto destroy = reinterpret_cast<PFN_vkDestroyDebugUtilsMessengerEXT>(
-        vkGetInstanceProcAddr(instance, "vkDestroyDebugUtilsMessengerEXT"));
-    if (destroy) destroy(instance, messenger, nullptr);
-    messenger = VK_NULL_HANDLE;
-  }
-  Device(const Device&) = delete;
-  Device& operator=(const Device&) = delete;
 
   vk_setup::Device<vk_setup::Loader> setup() const { return {vk_setup::kLoader, device}; }
   // Host-visible, coherent and mapped.
@@ -266,13 +145,7 @@ struct Rasterizer::Impl {
     for (size_t i = 0; i < tri.size(); i += 6)
       for (int k = 0; k < 3; ++k) lo[k] = std::min<double>(lo[k], tri[i + k]), hi[k] = std::max<double>(hi[k], tri[i + k]);
 
-    gpu::EngineDevice ed;
-    ed.instance = dev.instance;
-    ed.physical_device = dev.physical;
-    ed.device = dev.device;
-    ed.queue_family = dev.family;
-    ed.get_instance_proc_addr = &vkGetInstanceProcAddr;
-    ed.get_device_proc_addr = &vkGetDeviceProcAddr;
+    const gpu::EngineDevice ed = dev.engine_device();
     gpu::GpuOptions go;
     go.frames_in_flight = o.frames_in_flight;
     go.upload_budget_bytes = o.upload_budget_bytes;
@@ -695,8 +568,8 @@ void Rasterizer::wait_idle() {
 }
 uint64_t Rasterizer::frames() const { return impl_->frame; }
 uint64_t Rasterizer::ring_waits() const { return impl_->waits; }
-uint64_t Rasterizer::validation_messages() const { return impl_->dev.messages; }
-const std::string& Rasterizer::first_validation_message() const { return impl_->dev.first_message; }
+uint64_t Rasterizer::validation_messages() const { return impl_->dev.messages(); }
+const std::string& Rasterizer::first_validation_message() const { return impl_->dev.first_message(); }
 double Rasterizer::retire_host_us_last() const { return impl_->retire_us; }
 const std::string& Rasterizer::device_name() const { return impl_->dev.name; }
 gpu::GpuStats Rasterizer::stats() const { return impl_->g->stats(); }

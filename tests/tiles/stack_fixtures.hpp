@@ -1,5 +1,6 @@
 // Interval stacks for the shadow-map stack tests (MH 2016 §4): random, coherent and
-// traced ones, and the lossless check over every texel of every slice.
+// traced ones, the lossless check over every texel of every slice, and a pack's round trip
+// against its octree.
 #pragma once
 #include <cstdint>
 #include <string>
@@ -33,6 +34,26 @@ std::string first_violation(const IntervalStack& s, F&& depth) {
           return "texel (" + std::to_string(x) + ", " + std::to_string(y) + ") of slice " + std::to_string(w) +
                  ": " + std::to_string(v) + " outside [" + std::to_string(iv.lo) + ", " + std::to_string(iv.hi) + "]";
       }
+  return "";
+}
+
+// A stack pack's round trip against its octree: "" when map.depth(x, y, w, level) (a
+// StackMap read back from the pack) equals the uncut octree's depth_at at every level of every
+// slice, else the first difference.
+template <class Map>
+std::string first_octree_difference(const OctHierarchy& h, const Map& map) {
+  const moct::Geometry& g = h.geo;
+  for (uint32_t level = 0; level <= g.n; ++level) {
+    const uint32_t T = g.level_of_xy(level);
+    for (uint32_t w = 0; w < h.slices; ++w)
+      for (uint64_t y = 0; y < (uint64_t(1) << level); ++y)
+        for (uint64_t x = 0; x < (uint64_t(1) << level); ++x) {
+          const float got = map.depth(x, y, w, level), want = h.depth_at(T, x, y, w >> (g.k - g.w_bits(T)));
+          if (!(got == want))
+            return "level " + std::to_string(level) + " texel (" + std::to_string(x) + ", " + std::to_string(y) +
+                   ") slice " + std::to_string(w) + ": " + std::to_string(got) + ", the octree " + std::to_string(want);
+        }
+  }
   return "";
 }
 
