@@ -19,11 +19,9 @@
 // Figures: per frame with arrivals, host time of the three calls (and record_uploads alone),
 // median / p10 / p90 / p99 / min; hardware counters of the same span from perf_event_open
 // (instructions, cache misses, dTLB read misses) where the kernel and the machine allow,
-// else software ones (task clock, page faults, context switches), else none ("-"); the
-// thread's CPU time of the span (CLOCK_THREAD_CPUTIME_ID: a few us above the wall time on an
-// idle machine, the clock's own cost), and the wall time's percentiles over the frames with
-// no context switch inside the span (a loaded machine's preemptions, not the frame path's
-// cost; their count is printed). A digest
+// else software ones (task clock, page faults, context switches), else none ("-"); and the
+// percentiles over the frames with no context switch inside the span (a loaded machine's
+// preemptions, not the frame path's cost; their count is printed). A digest
 // of every frame's upload figures (slots, tile bytes, page-table bytes) says whether two
 // builds did the same work frame for frame.
 //
@@ -48,7 +46,6 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
-#include <ctime>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -273,7 +270,6 @@ double percentile(std::vector<double> v, double p) {
 
 struct FrameRow {
   double host_us, uploads_us, retire_us, end_us;
-  double cpu_us;  // the thread's CPU time over the same span (CLOCK_THREAD_CPUTIME_ID)
   uint32_t slots;
   uint64_t tile_bytes, page_bytes;
   std::vector<int64_t> counts;  // per Counters::all, -1 unavailable
@@ -403,8 +399,6 @@ int main(int argc, char** argv) try {
         if (!flush.empty()) flush_sink = flush_sink + flush[flush.size() / 2];
         VkCommandBuffer c = engine.begin(frame);
         counters.read_all(c0);
-        timespec cpu0{}, cpu1{};
-        clock_gettime(CLOCK_THREAD_CPUTIME_ID, &cpu0);
         const auto t0 = Clock::now();
         gm.retire(frame - 1);
         const auto t1 = Clock::now();
@@ -412,14 +406,12 @@ int main(int argc, char** argv) try {
         const auto t2 = Clock::now();
         gm.record_end_of_frame(c, frame);
         const auto t3 = Clock::now();
-        clock_gettime(CLOCK_THREAD_CPUTIME_ID, &cpu1);
         counters.read_all(c1);
         engine.submit_and_wait(frame);
         ++frame;
         if (fs.slots_uploaded == 0) continue;
         auto us = [](Clock::time_point x, Clock::time_point y) { return std::chrono::duration<double, std::micro>(y - x).count(); };
-        const double cpu_us = double(cpu1.tv_sec - cpu0.tv_sec) * 1e6 + double(cpu1.tv_nsec - cpu0.tv_nsec) * 1e-3;
-        FrameRow r{us(t0, t3), us(t1, t2), us(t0, t1), us(t2, t3), cpu_us, fs.slots_uploaded, fs.tile_bytes, fs.page_bytes, {}};
+        FrameRow r{us(t0, t3), us(t1, t2), us(t0, t1), us(t2, t3), fs.slots_uploaded, fs.tile_bytes, fs.page_bytes, {}};
         for (size_t i = 0; i < c0.size(); ++i) r.counts.push_back(c0[i] < 0 || c1[i] < 0 ? -1 : c1[i] - c0[i]);
         mix(fs.slots_uploaded), mix(fs.tile_bytes), mix(fs.page_bytes);
         got.push_back(std::move(r));
@@ -428,11 +420,11 @@ int main(int argc, char** argv) try {
       evictions_guess += gm.stats().slots_uploaded > slots ? gm.stats().slots_uploaded - slots : 0;
       if (got.empty() && passes > 1) throw Error("bench_frame_path: " + path + ": no tile arrived (an empty map?)");
     }
-    std::vector<double> host, up, ret, ntiles, tile_b, page_b, cpu, quiet;
+    std::vector<double> host, up, ret, ntiles, tile_b, page_b, quiet;
     size_t switched = 0;  // frames with a context switch inside the span (the machine's, not ours)
     const size_t csw = 5;  // Counters::all's context_switches
     for (const FrameRow& r : got) {
-      host.push_back(r.host_us), up.push_back(r.uploads_us), ret.push_back(r.retire_us), cpu.push_back(r.cpu_us);
+      host.push_back(r.host_us), up.push_back(r.uploads_us), ret.push_back(r.retire_us);
       ntiles.push_back(r.slots), tile_b.push_back(double(r.tile_bytes)), page_b.push_back(double(r.page_bytes));
       if (r.counts.size() > csw && r.counts[csw] > 0) ++switched;
       else quiet.push_back(r.host_us);
@@ -446,7 +438,6 @@ int main(int argc, char** argv) try {
       const double q = p == std::string("min") ? 0.0 : p == std::string("p10") ? 0.1 : p == std::string("median") ? 0.5 : p == std::string("p90") ? 0.9 : 0.99;
       row[std::string("host_us_") + p] = percentile(host, q);
       row[std::string("record_uploads_us_") + p] = percentile(up, q);
-      row[std::string("cpu_us_") + p] = percentile(cpu, q);
       row[std::string("host_us_unswitched_") + p] = percentile(quiet, q);
     }
     row["retire_us_median"] = percentile(ret, 0.5);
@@ -469,20 +460,16 @@ int main(int argc, char** argv) try {
                   row_name.c_str(), (unsigned long long)tiles, slots, got.size(), median(ntiles), median(tile_b),
                   median(page_b), percentile(host, 0), percentile(host, 0.1), percentile(host, 0.5), percentile(host, 0.9),
                   percentile(host, 0.99), percentile(up, 0.1), percentile(up, 0.5), (unsigned long long)digest);
-    char cpu_line[256];
-    std::snprintf(cpu_line, sizeof cpu_line,
-                  "%32scpu us p10 %.1f median %.1f p90 %.1f p99 %.1f | %zu frames switched; the others p50 %.1f p90 %.1f "
-                  "p99 %.1f",
-                  "", percentile(cpu, 0.1), percentile(cpu, 0.5), percentile(cpu, 0.9), percentile(cpu, 0.99), switched,
-                  percentile(quiet, 0.5), percentile(quiet, 0.9), percentile(quiet, 0.99));
-    lines.push_back(std::string(line) + "\n" + cpu_line +
+    char quiet_line[256];
+    std::snprintf(quiet_line, sizeof quiet_line, "%32s%zu frames with a context switch; the others: median %.1f p90 %.1f p99 %.1f",
+                  "", switched, percentile(quiet, 0.5), percentile(quiet, 0.9), percentile(quiet, 0.99));
+    lines.push_back(std::string(line) + "\n" + quiet_line +
                     (counter_cells.empty() ? "" : "\n" + std::string(32, ' ') + "counters (median):" + counter_cells));
     std::fprintf(stderr, "bench_frame_path: %s done\n", row_name.c_str());
   }
   std::printf("device '%s', %u frames per scene, %u tiles arriving per frame, cache %.2f of the tiles, %u MiB flushed before each frame\n",
               engine.name.c_str(), a.frames, a.arriving, a.cache_fraction, a.flush_mib);
-  std::printf("host us = retire + record_uploads + record_end_of_frame (wall); cpu us the thread's CPU time of the "
-              "same span; frames that uploaded tiles; load average %.1f\n",
+  std::printf("host us = retire + record_uploads + record_end_of_frame; frames that uploaded tiles; load average %.1f\n",
               load_average());
   std::printf("counters available: %s\n", counter_names.empty() ? "none (perf_event_open refused)" : counter_names.c_str());
   std::printf("%-30s %6s %6s %6s %5s %8s %6s | %6s %6s %6s %6s %6s | %6s %6s | %s\n", "scene", "tiles", "slots", "frames",
