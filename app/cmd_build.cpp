@@ -58,7 +58,7 @@ struct BuildArgs {
   std::string dagmh_dictionary = "on";  // tiles/PACK.md "DAG-MH dictionary"
   std::string dagmh_tiles = "mixed";     // tiles/PACK.md "Mixed tiles"
   std::string planes = "auto";           // tiles/core/PLANES.md
-  bool split_cells = false;              // stack packs: split only overflowing cells (tiles/core/MHOCT.md "Split cells")
+  bool split_cells = true;               // stack packs: split only overflowing cells (tiles/core/MHOCT.md "Split cells")
   std::string stack_cells = "smaller";   // light sets: tiles/core/MHOCT.md "Per-slice cells"
 };
 
@@ -388,11 +388,11 @@ void setup_build(CLI::App& app) {
                  "reader, the GPU passes included, takes all three")
       ->check(CLI::IsMember({"octree", "smaller", "slices"}))
       ->capture_default_str();
-  app.add_flag("--split-cells", a->split_cells,
-               "light sets (stack packs): where a cell overflows --tile-bytes split only that cell one level "
-               "deeper (feature stack_split_cells; smaller packs) instead of moving the whole cut deeper. "
-               "The CPU client and the server read such packs; the GPU passes do not yet, so it is off by "
-               "default");
+  app.add_flag("--split-cells,!--no-split-cells", a->split_cells,
+               "light sets (stack packs): on (default) where a cell overflows --tile-bytes split only that "
+               "cell one level deeper (feature stack_split_cells; smaller packs; every reader, the GPU passes "
+               "included, takes them); --no-split-cells (or --split-cells=false) moves the whole cut deeper "
+               "instead (the uniform cut, a pack readers before split cells open)");
   app.add_option("--planes", a->planes,
                  "on: a tile may store blocks of texels that one plane answers exactly as planes over the "
                  "encoding of the rest, where that stores smaller (open surfaces; tiles/core/PLANES.md); "

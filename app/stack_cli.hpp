@@ -21,7 +21,7 @@ struct StackBuildArgs {
   int compression = 6;
   bool quiet = false;
   std::string cells = "smaller";  // --stack-cells: octree | slices | smaller
-  bool split_cells = false;       // on: --split-cells
+  bool split_cells = true;        // off: --no-split-cells
 };
 void run_stack_build(const StackBuildArgs& a);
 

@@ -438,11 +438,11 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
   std::printf("the slices' 2D tiles of the stack's cells (2^%u a side; DAG-MH or MMH, the smaller): %llu stored "
               "(octree tiles %llu stored)\n",
               a, (unsigned long long)stored_2d, (unsigned long long)oct_stored);
-  std::printf("stack pack, cells the smaller form, uniform cut (build's default): %llu bytes = %.3f x the separate packs (%llu of %llu "
+  std::printf("stack pack, cells the smaller form, uniform cut (build --no-split-cells): %llu bytes = %.3f x the separate packs (%llu of %llu "
               "tiles per slice; cut %.1f s)\n",
               (unsigned long long)smaller_file, double(smaller_file) / double(packs_bytes),
               (unsigned long long)smaller_slice_cells, (unsigned long long)smaller_tiles, smaller_s);
-  std::printf("stack pack, split cells (build --split-cells): %llu bytes = %.3f x the separate packs (K = %u, %llu "
+  std::printf("stack pack, split cells (build's default): %llu bytes = %.3f x the separate packs (K = %u, %llu "
               "cells split, %llu tiles, largest %llu B; cut + write + verify %.1f s)\n",
               (unsigned long long)split_file, double(split_file) / double(packs_bytes), K,
               (unsigned long long)split_cells, (unsigned long long)split_tiles, (unsigned long long)split_max_tile, split_s);

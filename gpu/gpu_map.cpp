@@ -170,9 +170,6 @@ struct GpuMap::Impl {
     if (!map.valid()) throw std::runtime_error("GpuMap: the Map is not open (default-constructed)");
     view = std::make_unique<client::CacheView>(map);
     sg = view->stack();
-    if (sg && std::any_of(sg->cells.begin(), sg->cells.end(), [](const client::CacheEntry& e) { return e.kind == 2; }))
-      throw GpuError("GpuMap: the stack pack splits cells below its skip level (feature stack_split_cells), which the "
-                     "GPU stack passes do not read yet; build it without --split-cells for the GPU");
     deep_part = !sg && view->has_deep();
     if (opt.frames_in_flight < 1 || opt.frames_in_flight > 4) throw GpuError("GpuMap: frames_in_flight must be 1..4");
     if (opt.feedback_capacity < 16 || !std::has_single_bit(opt.feedback_capacity) || opt.feedback_capacity > (1u << 20))
@@ -410,9 +407,26 @@ struct GpuMap::Impl {
       for (float v : g.coarse[l]) p[o++] = std::bit_cast<uint32_t>(v);
     }
     h[L::kStEntries] = o;
-    for (const client::CacheEntry& e : g.cells) {
+    // A split entry's kind word also names its first child's cell: the children follow
+    // level K's cells as blocks, one per split entry in cell order (breadth first,
+    // tiles/core/stack_grid.hpp), 2^step_bits(l) of them for a split at level l.
+    const moct::Geometry geo{g.xy_level, g.w_level};
+    std::vector<uint8_t> level(g.cells.size(), uint8_t(K));
+    uint64_t next = uint64_t(1) << (2 * geo.xy_bits(K) + geo.w_bits(K));
+    for (size_t c = 0; c < g.cells.size(); ++c) {
+      const client::CacheEntry& e = g.cells[c];
+      uint32_t kind = e.kind;
+      if (e.kind == L::kStKindSplit) {
+        const uint32_t l = level[c];
+        const uint64_t children = uint64_t(1) << geo.step_bits(l);
+        if (l >= geo.depth() || next + children > g.cells.size())  // the grid's parser refuses both
+          throw GpuError("GpuMap: the stack grid's split cell " + std::to_string(c) + " has no children");
+        kind |= uint32_t(next) << L::kStFirstChildShift;
+        std::fill(level.begin() + ptrdiff_t(next), level.begin() + ptrdiff_t(next + children), uint8_t(l + 1));
+        next += children;
+      }
       p[o++] = std::bit_cast<uint32_t>(e.value);
-      p[o++] = e.kind;
+      p[o++] = kind;
     }
     h[L::kStCellSlots] = off_cell_slots = o;
     for (size_t c = 0; c < g.cells.size(); ++c) p[o++] = L::kNoSlot;

@@ -78,6 +78,8 @@ static_assert(layout::kSlMagic == kSliceTilesMagic && layout::kSlHeaderWords * 4
 // st_oct_step's far offsets (version 3): off < -32736 reads the far word at pos + 1 + off + 32768.
 static_assert(moct::kVersion == 3 && moct::kFarOffsetMin == -32768 && moct::kFarLimit == -32736);
 static_assert(layout::kMaxStackCells == kStackMaxCells);
+// A split stack entry's kind word: kind | first child << kStFirstChildShift, every cell fits.
+static_assert(layout::kStKindSplit == kStackSplit && (uint64_t(layout::kMaxStackCells - 1) << layout::kStFirstChildShift) <= 0xFFFFFFFFu);
 static_assert(layout::kStLightWords >= 13 && layout::kStHeaderWords > layout::kStLights);
 static_assert(layout::kStLightCentreU == 13 && layout::kStLightCentreV == 14 &&
               layout::kStLightProjection == 15 && layout::kStLightProjection < layout::kStLightWords);

@@ -17,7 +17,7 @@ namespace st::gpu::layout {
 #define ST_UINT(name, value) const uint name = value;
 #endif
 
-ST_UINT(kLayoutVersion, 7u)  // 2: the map preview (kPtPreview); 3: the stack block (kPtStack); 4: the DAG-MH dictionary (kPtDictionary); 5: the 2D light (kPtLight); 6: the deep block (kPtDeep); 7: a light's receiver-slope cap (kStLightSlopeCap)
+ST_UINT(kLayoutVersion, 8u)  // 2: the map preview (kPtPreview); 3: the stack block (kPtStack); 4: the DAG-MH dictionary (kPtDictionary); 5: the 2D light (kPtLight); 6: the deep block (kPtDeep); 7: a light's receiver-slope cap (kStLightSlopeCap); 8: split stack cells (kStKindSplit)
 
 // ---- page-table buffer (binding kBindPage) ----
 // header words, then the skip grid's coarse values and entries, the skip grid's slot
@@ -80,8 +80,10 @@ ST_UINT(kGridHeaderWords, 2u)
 // The stack block (a map of a stack pack: tiles/PACK.md "Stack packs", tiles/core/MHOCT.md),
 // at word kPtStack: a header, then K words (the word offset of octree level l's coarse
 // values, l < K), then the coarse values (f32; level l holds 4^a(l) 2^b(l) values in
-// (w, y, x) row-major order), the level-K cells' entries (kEntryWords each: f32 value,
-// kind 0 constant / 1 tile), one slot pointer per cell (kNoSlot: not on the GPU), and one
+// (w, y, x) row-major order), the cells' entries (kEntryWords each: f32 value, kind 0
+// constant / 1 tile / kStKindSplit | first child << kStFirstChildShift; level K's cells,
+// then a version-2 grid's split children, tiles/core/stack_grid.hpp), one slot pointer per
+// cell (kNoSlot: not on the GPU), and one
 // float32 light space per slice (kStLightWords each: the order of kPcOrigin..kPcNear, then
 // a perspective light's centre and the projection word; GPU_LAYOUT.md "The stack block").
 ST_UINT(kStXyLevel, 0u)         // n: slices are 2^n texels a side
@@ -98,6 +100,8 @@ ST_UINT(kStLightCentreV, 14u)   // f32: likewise v
 ST_UINT(kStLightProjection, 15u)  // 0: affine (u = x, v = y), 1: perspective (x / z, y / z)
 ST_UINT(kStLightSlopeCap, 16u)  // f32: the receiver plane's steepest slope per finest texel (st_plane.glsl)
 ST_UINT(kMaxStackCells, 0x400000u)  // kStackMaxCells: cells < 2^22
+ST_UINT(kStKindSplit, 2u)       // an entry's kind (low 8 bits): split (st::kStackSplit), answered by its children below
+ST_UINT(kStFirstChildShift, 8u)  // a split entry's kind word: its first child's cell << this (cells < 2^22)
 // A per-slice cell's tile (tiles/core/stack_slices.hpp "STSL"): a 4-word header, then per
 // slice 2 words (byte offset of its 2D tile, 0: a constant; then the size or the f32 bits).
 ST_UINT(kSlMagic, 0x4C535453u)     // "STSL"

@@ -1,6 +1,6 @@
 // shadowtile GPU evaluators for stack maps (shadow-map stacks, MH 2016 §4): the MH octree
-// tile decoder, per-slice cells (each slice's own 2D tile) and the walk of the stack block (the octree's top K levels and the level-K
-// cells, gpu/GPU_LAYOUT.md "The stack block"), the same operations as the CPU's
+// tile decoder, per-slice cells (each slice's own 2D tile) and the walk of the stack block (the octree's top K levels, the level-K
+// cells and split cells' children, gpu/GPU_LAYOUT.md "The stack block"), the same operations as the CPU's
 // MhOctree::depth (tiles/core/mh_octree_reader.cpp) and StackMap::depth
 // (tiles/core/stack_map.cpp), so every answer is bit-exact with the CPU's.
 //
@@ -148,9 +148,11 @@ float st_slices_depth(uint base, uint x, uint y, uint w, uint level) {
 
 // ---- the stack block's walk (StackMap::depth over the GPU's copy of the cache) ----
 // Texel (x, y) of the level-`level` map of slice w. Out of range: lit. Levels above K
-// read the dense coarse values; a constant cell, or level K itself, its entry's value; a
-// cell whose tile is not on the GPU answers its entry's value (the level-K map: coarser,
-// never missing) and is recorded in the feedback.
+// read the dense coarse values; from K down, the cell is level K's, then down split cells
+// (a version-2 grid: entry kind kStKindSplit, its children from the cell in its kind word's
+// upper bits) while above the level read, as StackGrid::cell_at; a constant cell, or one at
+// that level, answers its entry's value; a cell whose tile is not on the GPU answers its
+// entry's value (its level's map: coarser, never missing) and is recorded in the feedback.
 float st_stack_depth(uint x, uint y, uint w, uint level, inout StProbe probe) {
   const uint blk = ST_PAGE(kPtStack);
   const uint n = ST_PAGE(blk + kStXyLevel), k = ST_PAGE(blk + kStWLevel);
@@ -159,19 +161,29 @@ float st_stack_depth(uint x, uint y, uint w, uint level, inout StProbe probe) {
   const uint K = ST_PAGE(blk + kStSkipLevel);
   const uint depth = max(n, k);
   const uint T = level + depth - n;  // the octree level with 2^level texels a side
-  const uint TK = min(T, K);
-  const uint a = st_oct_xy_bits(TK, n, depth), b = st_oct_xy_bits(TK, k, depth);
-  const uint cx = x >> (level - a), cy = y >> (level - a), cw = w >> (k - b);
-  const uint index = (((cw << a) + cy) << a) + cx;
+  uint l = min(T, K);                // the node's level: T above K, else the cell's
+  uint a = st_oct_xy_bits(l, n, depth), b = st_oct_xy_bits(l, k, depth);
+  uint index = (((((w >> (k - b)) << a) + (y >> (level - a))) << a) + (x >> (level - a)));
   if (T < K) return uintBitsToFloat(ST_PAGE(ST_PAGE(blk + kStHeaderWords + T) + index));
-  const uint e = ST_PAGE(blk + kStEntries) + kEntryWords * index;
-  const uint value_bits = ST_PAGE(e), kind = ST_PAGE(e + 1u) & 0xFFu;
-  if (kind == kKindConstant || T == K) return uintBitsToFloat(value_bits);
+  const uint entries = ST_PAGE(blk + kStEntries);
+  uint kind_word = ST_PAGE(entries + kEntryWords * index + 1u);
+  while (l < T && (kind_word & 0xFFu) == kStKindSplit) {  // down a split cell: its child over (x, y, w)
+    const uint dx = l + n >= depth ? 1u : 0u, dw = l + k >= depth ? 1u : 0u;  // the step halves x, y / w
+    ++l;
+    a = st_oct_xy_bits(l, n, depth);
+    b = st_oct_xy_bits(l, k, depth);
+    const uint ox = (x >> (level - a)) & dx, oy = (y >> (level - a)) & dx, ow = (w >> (k - b)) & dw;
+    index = (kind_word >> kStFirstChildShift) + ((((ow << dx) + oy) << dx) + ox);
+    kind_word = ST_PAGE(entries + kEntryWords * index + 1u);
+  }
+  const uint value_bits = ST_PAGE(entries + kEntryWords * index);
+  if ((kind_word & 0xFFu) != kKindTile || T == l) return uintBitsToFloat(value_bits);
   const uint slot = ST_PAGE(ST_PAGE(blk + kStCellSlots) + index);
   if (slot == kNoSlot) {
-    st_feedback(kFbStackKeyBit | index, K, index, 0u, value_bits, kKindTile, probe);
+    st_feedback(kFbStackKeyBit | index, l, index, 0u, value_bits, kKindTile, probe);
     return uintBitsToFloat(value_bits);
   }
+  const uint cx = x >> (level - a), cy = y >> (level - a), cw = w >> (k - b);
   const uint rel = level - a;  // the tile's own x, y level
   const uint tile = slot * ST_PAGE(kPtSlotWords), tx = x - (cx << rel), ty = y - (cy << rel), tw = w - (cw << (k - b));
   if (ST_POOL(tile) == kSlMagic) return st_slices_depth(tile, tx, ty, tw, rel);  // a per-slice cell

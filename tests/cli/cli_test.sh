@@ -48,9 +48,14 @@ else
   echo "skip real assets: $models missing (scripts/deps installs assimp-testmodels)"
 fi
 # Stack packs (a light set): build, inspect, verify every texel of every slice, export a slice.
+# The 200-byte tile bound splits cells below the skip level (the default; the pack every
+# later stack check reads, the GPU views included); --split-cells=false keeps the uniform cut.
 stackl="--light sun-path:azimuth=170..185,elevation=50..52,samples=4"
-check stack-build 0 "stack of 4 slices of 128\^2" -- "$st" build $scene $stackl --resolution 128 --tile-bytes 4096 -o stack.pack -q
+check stack-build 0 "stack of 4 slices of 128\^2" -- "$st" build $scene $stackl --resolution 128 --tile-bytes 200 -o stack.pack -q
 check stack-inspect 0 "light set    sun-path" -- "$st" inspect stack.pack
+check stack-inspect-split 0 "features .*stack-split-cells" -- "$st" inspect stack.pack
+check stack-build-uniform 0 "octree skip level 6 \(8192 cells\)" -- "$st" build $scene $stackl --resolution 128 \
+  --tile-bytes 200 --split-cells=false -o stack_uniform.pack -q
 check stack-verify 0 "every texel of all 4 slices" -- "$st" verify stack.pack $scene
 check stack-export 0 "exported slice 2 level 6" -- "$st" export stack.pack --slice 2 --level 6 -o slice.exr
 check stack-export-noslice 1 "stack pack: pass --slice" -- "$st" export stack.pack -o x.exr

@@ -37,7 +37,7 @@ TEST(GpuLayout, TheShaderSeesEveryConstantTheCppSideSees) {
       L::kPcSliceB, L::kPcTimeWeight, L::kStLightCentreU, L::kStLightCentreV, L::kStLightProjection, L::kFlagSoft,
       L::kFlagResumeWalks, L::kPtDeep, L::kDpLevel, L::kDpSideBits, L::kDpCount, L::kDpCapacity,
       L::kDpDepthBias, L::kDpHeaderWords, L::kDeepQuery, L::kDtTexelCount, L::kDtHeaderWords, L::kStLightSlopeCap,
-      L::kFlagReceiverPlane};
+      L::kFlagReceiverPlane, L::kStKindSplit, L::kStFirstChildShift};
   ASSERT_LE(want.size(), L::kProbeWords);
   uint64_t messages = 0;
   const std::vector<uint32_t> got = run_layout_probe(gputest::device(), true, &messages);
@@ -84,14 +84,16 @@ TEST(GpuLayout, StackBlockHeaderWordsAreWhereTheDrawingPutsThem) {
   EXPECT_EQ(L::kFlagReceiverPlane, 8u);
   EXPECT_EQ(L::kFlagSoft, 2u);
   EXPECT_EQ(L::kFlagResumeWalks, 4u);
+  EXPECT_EQ(L::kStKindSplit, 2u);  // layout version 8: split cells, kind | first child << 8
+  EXPECT_EQ(L::kStFirstChildShift, 8u);
 }
 
 // The page-table header and the deep block as GPU_LAYOUT.md draws them ("The page table",
 // "The deep block"): layout version 6 added the header word kPtDeep (7: a light's word
-// kStLightSlopeCap).
+// kStLightSlopeCap; 8: split stack entries).
 TEST(GpuLayout, DeepBlockWordsAreWhereTheDrawingPutsThem) {
   namespace L = layout;
-  EXPECT_EQ(L::kLayoutVersion, 7u);
+  EXPECT_EQ(L::kLayoutVersion, 8u);
   EXPECT_EQ(L::kPtLight, 15u);
   EXPECT_EQ(L::kPtDeep, 16u);
   EXPECT_EQ(L::kPtHeaderWords, 17u);

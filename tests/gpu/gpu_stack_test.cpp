@@ -62,6 +62,8 @@ struct ServedStack {
 };
 
 constexpr uint32_t kSlices = 10;
+// A tile bound that splits cells of this file's small stacks below K (split cells).
+constexpr uint32_t kSplitTileBytes = 256;
 
 // An area light over the G-buffer's box (light_set.hpp "area"): 10 Hilbert-ordered points
 // of a 6 x 4 rectangle, frame window (spot_window samples) or translate (spots).
@@ -76,6 +78,7 @@ struct StackSource {
   std::optional<uint32_t> skip_level;
   uint32_t tile_bytes = 512;
   StackCells cells = StackCells::octree;  // else the blocked cut's per-slice or smaller cells
+  bool split = false;  // the blocked cut splitting cells over tile_bytes below K (grid version 2)
 };
 
 // The blocked cut of `is` (the builder's; cut_stack's bytes for octree cells) with `cells`.
@@ -85,7 +88,10 @@ StackCut blocked_cut(const IntervalStack& is, const std::string& name, const Sta
   const size_t area = size_t(is.side() * is.side());
   for (uint32_t w = 0; w < is.slices; ++w)
     spill.write_rows(w, 0, is.side(), std::span<const Interval>(is.data.data() + w * area, area));
-  BlockedStackCut blocked(spill, src.skip_level, src.tile_bytes, base + ".tiles", nullptr, src.cells);
+  BlockedStackCut blocked(spill, src.skip_level, src.tile_bytes, base + ".tiles", nullptr, src.cells, src.split);
+  if (src.split && blocked.split_cells == 0) ADD_FAILURE() << name << ": no cell split";
+  if (src.split) std::printf("%s: K = %u, %llu cells split, %zu entries, %zu tiles\n", name.c_str(), blocked.grid.skip_level,
+                             (unsigned long long)blocked.split_cells, blocked.grid.entries.size(), blocked.tile_count());
   StackCut cut;
   cut.grid = blocked.grid;
   for (size_t i = 0; i < blocked.tile_count(); ++i) cut.tiles.push_back(blocked.tile(i));
@@ -98,8 +104,9 @@ StackCut blocked_cut(const IntervalStack& is, const std::string& name, const Sta
 ServedStack serve_stack(const std::string& name, const std::string& frame = "ground", const StackSource& src = {}) {
   ServedStack s;
   const IntervalStack is = src.stack ? *src.stack : sliding_stack(looptest::small_scale() ? 5 : 6, kSlices);
-  StackCut cut = src.cells == StackCells::octree ? cut_stack(build_octree(is), src.skip_level, src.tile_bytes)
-                                                 : blocked_cut(is, name, src);
+  StackCut cut = src.cells == StackCells::octree && !src.split
+                     ? cut_stack(build_octree(is), src.skip_level, src.tile_bytes)
+                     : blocked_cut(is, name, src);
   Aabb box;
   box.extend({-10, 0, -10});
   box.extend({10, 5, 10});
@@ -635,13 +642,17 @@ TEST(GpuStack, AreaLightStackPassesEqualTheirCpuTwins) {
 }
 
 
-// Engine mode on stack maps (a sun path's ground frame, and an area light's perspective
-// samples): the pass over the engine's images, at sample times, between them and soft,
-// equals the CPU twin bit for bit; the light spaces come from the GPU-resident stack block.
+// Engine mode on stack maps (a sun path's ground frame, its cells split below K, and an
+// area light's perspective samples): the pass over the engine's images, at sample times,
+// between them and soft, equals the CPU twin bit for bit; the light spaces come from the
+// GPU-resident stack block.
 TEST(GpuStack, EngineModePassesOverTheEnginesImagesEqualTheCpuTwin) {
   for (const std::string& spec : {std::string("ground"), area_spec("window")}) {
     SCOPED_TRACE(spec);
-    ServedStack s = serve_frozen(spec == "ground" ? "gpu_stack_engine_sun" : "gpu_stack_engine_area", spec, kSlices / 2);
+    const bool split = spec == "ground";
+    ServedStack s = serve_frozen(split ? "gpu_stack_engine_sun" : "gpu_stack_engine_area", spec, kSlices / 2,
+                                 StackSource{nullptr, std::nullopt, split ? 96u : 512u, StackCells::octree, split});
+    ASSERT_EQ(client::MapAccess::remote(s.map).stack_grid()->split(), split);
     const GBuffer gb;
     enginetest::TestEngine e(2);
     enginetest::Targets t(e, gb.width, gb.height, gb.pos, gb.nrm, 2);
@@ -717,11 +728,12 @@ IntervalStack mixed_stack(uint32_t level, uint32_t slices) {
 
 // Per-slice cells (tiles/core/stack_slices.hpp): each cell its slices' own DAG-MH or MMH
 // tiles or constants (every cell, under a sun path's ground frame), and the smaller form's
-// mix of those and octree cells (mixed_stack, under an area light's windowed spots). With the
-// later slices absent: every texel of every level of every slice equals the CPU's
-// (Map::slice_depth), the time pass at samples and between and the soft pass equal their
-// CPU twins on every pixel, with and without resumed walks (st_stack.glsl resumes octree
-// walks only).
+// mix of those and octree cells (mixed_stack, under an area light's windowed spots) with a
+// tile bound that splits cells below K (split cells, grid version 2: st_stack_depth walks
+// down them as StackGrid::cell_at). With the later slices absent: every texel of every level
+// of every slice equals the CPU's (Map::slice_depth), the time pass at samples and between
+// and the soft pass equal their CPU twins on every pixel, with and without resumed walks
+// (st_stack.glsl resumes octree walks only).
 TEST(GpuStack, PerSliceCellsAnswerBitExactlyLikeTheCpu) {
   const uint32_t level = looptest::small_scale() ? 5 : 6;
   const IntervalStack sliding = sliding_stack(level, kSlices), mixed = mixed_stack(level, kSlices);
@@ -731,7 +743,7 @@ TEST(GpuStack, PerSliceCellsAnswerBitExactlyLikeTheCpu) {
     SCOPED_TRACE(all ? "slices" : "smaller");
     const std::string name = all ? "gpu_stack_slices_all" : "gpu_stack_slices_smaller";
     ServedStack s = serve_frozen(name, all ? "ground" : area_spec("window"), kSlices / 2 - 1,
-                                 StackSource{&is, std::nullopt, 4096, cells});
+                                 StackSource{&is, std::nullopt, all ? 4096u : kSplitTileBytes, cells, !all});
     const std::array<size_t, 5> f = tile_forms(s);
     if (all) {
       EXPECT_EQ(f[0], 0u);
@@ -744,6 +756,15 @@ TEST(GpuStack, PerSliceCellsAnswerBitExactlyLikeTheCpu) {
     }
     EXPECT_GT(f[2] + f[3], 0u);
     ASSERT_TRUE(client::MapAccess::remote(s.map).header().flags & kFeatureStackSliceTiles);
+    const StackGrid& grid = *client::MapAccess::remote(s.map).stack_grid();
+    EXPECT_EQ(grid.split(), !all);
+    if (!all) {
+      // Splits two levels down or more (the walk's loop, not one step); the small scale's
+      // 32^2 slices split one level.
+      uint32_t deepest = 0;
+      for (const StackEntry& e : grid.entries) deepest = std::max<uint32_t>(deepest, e.level);
+      EXPECT_GE(deepest, grid.skip_level + (looptest::small_scale() ? 1 : 2)) << grid.entries.size() << " entries";
+    }
     GpuMap g(s.map, gputest::options());
     const uint32_t n = client::MapAccess::remote(s.map).stack_grid()->geo.n;
     EXPECT_EQ(compare_every_texel(g, s.map, n), "");

@@ -41,9 +41,9 @@ struct StackBuildOptions {
   std::string spill_dir;  // default: the output's directory
   StackCells cells = StackCells::smaller;  // each cell's form (stack_slices_encode.hpp)
   // A cell over tile_bytes split below K rather than the whole cut moved deeper
-  // (BlockedStackCut, stack_grid.hpp "Split cells"). Off by default while the GPU stack
-  // passes cannot read a split grid (GpuMap refuses such a pack by name).
-  bool split_cells = false;
+  // (BlockedStackCut, stack_grid.hpp "Split cells"; every reader, the GPU passes included,
+  // takes both). Off: the uniform cut of earlier versions (a version-1 grid).
+  bool split_cells = true;
 };
 
 struct StackBuildReport {

@@ -67,7 +67,8 @@ struct PreviewTables {
 struct StackTables {
   uint32_t xy_level = 0, w_level = 0, slices = 0, skip_level = 0;
   std::vector<std::span<const float>> coarse;  // per octree level l < skip_level
-  std::span<const CacheEntry> cells;           // the level-K cells (kind 0 constant, 1 tile)
+  std::span<const CacheEntry> cells;           // level K's cells, then split cells' children (stack_grid.hpp;
+                                               // kind 0 constant, 1 tile, 2 split)
   std::span<const LightParams> lights;         // one per slice
 };
 

@@ -430,7 +430,7 @@ class GpuMap {
   // Submits a shadow pass (width * height <= max_pixels) and returns its frame number;
   // waits only when every ring slot is still in flight. On a stack map, the pass answers
   // at `in.time`, or the soft shadow with `in.soft`, from the stack's tiles (absent cells:
-  // the level-K value, and feedback). A 2D map's pass supports suns only (GpuError);
+  // their entry's value, level K's or a split cell's, and feedback). A 2D map's pass supports suns only (GpuError);
   // `in.soft` on a 2D map is a GpuError.
   uint64_t submit_shadow_pass(const ShadowPassInput& in);
   // Waits for `frame`, copies its visibility image into `out` (width * height floats) and

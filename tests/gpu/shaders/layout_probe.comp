@@ -33,6 +33,6 @@ void main() {
                           kSqLevel, kSqReceiver, kSqFootprint, kSqR, kFbStackKeyBit, kPcSliceA, kPcSliceB,
                           kPcTimeWeight, kStLightCentreU, kStLightCentreV, kStLightProjection, kFlagSoft,
                           kFlagResumeWalks, kPtDeep, kDpLevel, kDpSideBits, kDpCount, kDpCapacity, kDpDepthBias, kDpHeaderWords, kDeepQuery, kDtTexelCount, kDtHeaderWords,
-                          kStLightSlopeCap, kFlagReceiverPlane);
+                          kStLightSlopeCap, kFlagReceiverPlane, kStKindSplit, kStFirstChildShift);
   for (uint i = 0u; i < kProbeWords; ++i) st_output[i] = uintBitsToFloat(i < v.length() ? v[i] : 0u);
 }
