@@ -20,7 +20,9 @@
 // Figures: per frame with arrivals, host time of the three calls (and record_uploads alone),
 // median / p10 / p90 / p99 / min; hardware counters of the same span from perf_event_open
 // (instructions, cache misses, dTLB read misses) where the kernel and the machine allow,
-// else software ones (task clock, page faults, context switches), else none ("-"). A digest
+// else software ones (task clock, page faults, context switches), else none ("-"); and the
+// percentiles over the frames with no context switch inside the span (a loaded machine's
+// preemptions, not the frame path's cost; their count is printed). A digest
 // of every frame's upload figures (slots, tile bytes, page-table bytes) says whether two
 // builds did the same work frame for frame.
 //
@@ -374,20 +376,25 @@ int main(int argc, char** argv) try {
       evictions_guess += gm.stats().slots_uploaded > slots ? gm.stats().slots_uploaded - slots : 0;
       if (got.empty() && passes > 1) throw Error("bench_frame_path: " + path + ": no tile arrived (an empty map?)");
     }
-    std::vector<double> host, up, ret, ntiles, tile_b, page_b;
+    std::vector<double> host, up, ret, ntiles, tile_b, page_b, quiet;
+    size_t switched = 0;  // frames with a context switch inside the span (the machine's, not ours)
+    const size_t csw = 5;  // Counters::all's context_switches
     for (const FrameRow& r : got) {
       host.push_back(r.host_us), up.push_back(r.uploads_us), ret.push_back(r.retire_us);
       ntiles.push_back(r.slots), tile_b.push_back(double(r.tile_bytes)), page_b.push_back(double(r.page_bytes));
+      if (r.counts.size() > csw && r.counts[csw] > 0) ++switched;
+      else quiet.push_back(r.host_us);
     }
     nlohmann::json row = {{"scene", row_name}, {"pack", path}, {"tiles", tiles}, {"cache_slots", slots},
                           {"frames", got.size()}, {"passes", passes}, {"slot_reuses", evictions_guess},
                           {"tiles_per_frame_median", median(ntiles)}, {"tile_bytes_per_frame_median", median(tile_b)},
-                          {"page_bytes_per_frame_median", median(page_b)}, {"upload_digest", digest},
+                          {"page_bytes_per_frame_median", median(page_b)}, {"frames_context_switched", switched}, {"upload_digest", digest},
                           {"seconds", std::chrono::duration<double>(Clock::now() - t_scene).count()}};
     for (const char* p : {"min", "p10", "median", "p90", "p99"}) {
       const double q = p == std::string("min") ? 0.0 : p == std::string("p10") ? 0.1 : p == std::string("median") ? 0.5 : p == std::string("p90") ? 0.9 : 0.99;
       row[std::string("host_us_") + p] = percentile(host, q);
       row[std::string("record_uploads_us_") + p] = percentile(up, q);
+      row[std::string("host_us_unswitched_") + p] = percentile(quiet, q);
     }
     row["retire_us_median"] = percentile(ret, 0.5);
     std::string counter_cells;
@@ -409,7 +416,11 @@ int main(int argc, char** argv) try {
                   row_name.c_str(), (unsigned long long)tiles, slots, got.size(), median(ntiles), median(tile_b),
                   median(page_b), percentile(host, 0), percentile(host, 0.1), percentile(host, 0.5), percentile(host, 0.9),
                   percentile(host, 0.99), percentile(up, 0.1), percentile(up, 0.5), (unsigned long long)digest);
-    lines.push_back(std::string(line) + (counter_cells.empty() ? "" : "\n" + std::string(32, ' ') + "counters (median):" + counter_cells));
+    char quiet_line[256];
+    std::snprintf(quiet_line, sizeof quiet_line, "%32s%zu frames with a context switch; the others: median %.1f p90 %.1f p99 %.1f",
+                  "", switched, percentile(quiet, 0.5), percentile(quiet, 0.9), percentile(quiet, 0.99));
+    lines.push_back(std::string(line) + "\n" + quiet_line +
+                    (counter_cells.empty() ? "" : "\n" + std::string(32, ' ') + "counters (median):" + counter_cells));
     std::fprintf(stderr, "bench_frame_path: %s done\n", row_name.c_str());
   }
   std::printf("device '%s', %u frames per scene, %u tiles arriving per frame, cache %.2f of the tiles, %u MiB flushed before each frame\n",

@@ -26,6 +26,8 @@ namespace {
 
 constexpr uint32_t kGridMagicWord = 0x52475453u;  // "STGR": a serialized CutGrid (index tile)
 constexpr uint32_t kDirtyBlockWords = 64;
+// Regions per vkCmdCopyBuffer call (GpuMap::Impl::record_copies).
+constexpr uint32_t kRegionsPerCall = 8;
 
 uint32_t align4(uint32_t n) { return (n + 3u) & ~3u; }
 
@@ -147,6 +149,12 @@ struct GpuMap::Impl {
   std::vector<uint32_t> dirty_list;
   std::vector<TileId> mirror_tile;       // per slot: the tile the device holds, or kInvalidTile
   std::vector<uint8_t> slot_levels;      // per slot: index tile levels d, 0 for an encoded tile
+  // Per slot: the page-table word last pointed at its tile (low 32 bits) and, for a word in
+  // a child table, that table's slot's link count then (high 32: a later link of that slot
+  // rewrote its table, so the word no longer speaks for this child); ~0: none. unlink
+  // clears the pointer from here instead of looking for the parent again.
+  std::vector<uint64_t> slot_pointer;
+  std::vector<uint32_t> slot_links;      // per slot: link() calls so far
   TileSlotTable tile_slot;
   std::vector<VkBufferCopy> pool_copies, page_copies;
   std::vector<client::WantedTile> wanted;
@@ -327,6 +335,8 @@ struct GpuMap::Impl {
     dirty_list.reserve(dirty.size());
     mirror_tile.assign(slot_count, kInvalidTile);
     slot_levels.assign(slot_count, 0);
+    slot_pointer.assign(slot_count, ~uint64_t(0));
+    slot_links.assign(slot_count, 0);
     tile_slot.init(slot_count);
     pool_copies.reserve(slot_count);
     page_copies.reserve(dirty.size());
@@ -519,10 +529,21 @@ struct GpuMap::Impl {
     return ~0u;
   }
 
+  // slot_pointer's tag of page-table word w.
+  uint64_t pointer_tag(uint32_t w) const {
+    if (w >= off_children && w < off_pcf) return uint64_t(slot_links[(w - off_children) / L::kChildTableWords]) << 32 | w;
+    return w;
+  }
+
   void unlink(uint32_t s) {
     const TileId t = mirror_tile[s];
-    const uint32_t w = pointer_word(t);
-    if (w != ~0u && page_shadow[w] == s) set_page_word(w, L::kNoSlot);
+    // The word pointer_word(t) would find (the tile's parent, if the device holds it, set
+    // it when the later of the two was linked), unless its child table was rewritten since:
+    // no walk up through the tile -> slot table (a cache miss or two per level tried).
+    const uint64_t tag = slot_pointer[s];
+    const uint32_t w = uint32_t(tag);
+    if (tag != ~uint64_t(0) && pointer_tag(w) == tag && page_shadow[w] == s) set_page_word(w, L::kNoSlot);
+    slot_pointer[s] = ~uint64_t(0);
     // The cache may already have moved the tile to another slot that this pass linked
     // first (slots are compared in index order): that mapping must survive, or an index
     // tile linked later would not find its child and answer coarser than the CPU.
@@ -538,6 +559,7 @@ struct GpuMap::Impl {
     mirror_tile[s] = tile;
     tile_slot.set(tile, s);
     ++resident;
+    ++slot_links[s];
     uint32_t magic = 0, d = 0;
     if (b.size() >= 8) std::memcpy(&magic, b.data(), 4), std::memcpy(&d, b.data() + 4, 4);
     slot_levels[s] = 0;
@@ -552,11 +574,14 @@ struct GpuMap::Impl {
           const uint32_t cx = (a.x << d) + (c & ((1u << d) - 1)), cy = (a.y << d) + (c >> d);
           ptr = tile_slot.find(make_tile_id(a.level + d, cx, cy));
         }
-        set_page_word(off_children + s * L::kChildTableWords + c, ptr);
+        const uint32_t w = off_children + s * L::kChildTableWords + c;
+        set_page_word(w, ptr);
+        if (ptr != L::kNoSlot) slot_pointer[ptr] = pointer_tag(w);
       }
     }
     const uint32_t w = pointer_word(tile);
     if (w != ~0u) set_page_word(w, s);
+    slot_pointer[s] = w != ~0u ? pointer_tag(w) : ~uint64_t(0);
   }
 
   // One copy region more, or the last one longer when both ranges continue it (adjacent
@@ -751,6 +776,16 @@ struct GpuMap::Impl {
     ctx->vk.CmdPipelineBarrier(cmd, src, dst, 0, 1, &mb, 0, nullptr, 0, nullptr);
   }
 
+  // The copies in calls of at most kRegionsPerCall regions. Mesa's common command queue
+  // (lavapipe's) copies a call's regions into one allocation of 40 bytes a region (and
+  // converts them through another past 8): past about 1 KiB that is a large-bin malloc,
+  // which took 30-40 us in a quarter of bench_frame_path's frames (100 tiles, 100 regions,
+  // cold caches: its p90); in calls of 8 the recording stays in the allocator's fast paths.
+  void record_copies(VkCommandBuffer cmd, VkBuffer src, VkBuffer dst, const std::vector<VkBufferCopy>& copies) const {
+    for (size_t i = 0; i < copies.size(); i += kRegionsPerCall)
+      ctx->vk.CmdCopyBuffer(cmd, src, dst, uint32_t(std::min<size_t>(kRegionsPerCall, copies.size() - i)), copies.data() + i);
+  }
+
   FrameStats record_uploads(VkCommandBuffer cmd, uint64_t frame) {
     need_engine("record_uploads");
     if (any_recorded && frame <= last_recorded)
@@ -773,10 +808,8 @@ struct GpuMap::Impl {
       barrier(cmd, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_ACCESS_TRANSFER_WRITE_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT,
               VK_ACCESS_TRANSFER_WRITE_BIT);
     }
-    if (!pool_copies.empty())
-      vk.CmdCopyBuffer(cmd, f.staging.buffer, pool.buffer, uint32_t(pool_copies.size()), pool_copies.data());
-    if (!page_copies.empty())
-      vk.CmdCopyBuffer(cmd, f.staging.buffer, page.buffer, uint32_t(page_copies.size()), page_copies.data());
+    record_copies(cmd, f.staging.buffer, pool.buffer, pool_copies);
+    record_copies(cmd, f.staging.buffer, page.buffer, page_copies);
     // The frame's feedback set is empty already: collect_feedback cleared it on the host
     // when the frame that last used the ring slot retired (host-coherent memory, written
     // before the engine submits this frame).
@@ -996,10 +1029,8 @@ struct GpuMap::Impl {
       war.dstAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
       ctx->vk.CmdPipelineBarrier(cmd, VK_PIPELINE_STAGE_COMPUTE_SHADER_BIT, VK_PIPELINE_STAGE_TRANSFER_BIT, 0, 1, &war, 0,
                            nullptr, 0, nullptr);
-      if (!pool_copies.empty())
-        ctx->vk.CmdCopyBuffer(cmd, f.staging.buffer, pool.buffer, uint32_t(pool_copies.size()), pool_copies.data());
-      if (!page_copies.empty())
-        ctx->vk.CmdCopyBuffer(cmd, f.staging.buffer, page.buffer, uint32_t(page_copies.size()), page_copies.data());
+      record_copies(cmd, f.staging.buffer, pool.buffer, pool_copies);
+      record_copies(cmd, f.staging.buffer, page.buffer, page_copies);
       const VkBufferCopy in_copy{0, 0, f.input_bytes}, n_copy{0, 0, f.normals_bytes};
       if (f.input_bytes) ctx->vk.CmdCopyBuffer(cmd, f.input_host.buffer, f.input.buffer, 1, &in_copy);
       if (f.normals_bytes) ctx->vk.CmdCopyBuffer(cmd, f.normals_host.buffer, f.normals.buffer, 1, &n_copy);
