@@ -587,11 +587,9 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
   // The tile source as a resident map keeps it (ResidentStack): one dense entry per cell.
   std::vector<st::StackTileRef> by_cell(cut.grid.entries.size());
   for (size_t i = 0; i < cells.size(); ++i) by_cell.at(cells[i]) = trees[i].ref();
-  const st::StackMap map(
-      cut.grid, [&](uint64_t cell) -> st::StackTileRef { return cell < by_cell.size() ? by_cell[cell] : st::StackTileRef(); },
-      [&](const uint64_t* cells, uint32_t cn, st::StackTileRef* out) {  // as ResidentStack's
-        for (uint32_t i = 0; i < cn; ++i) out[i] = cells[i] < by_cell.size() ? by_cell[cells[i]] : st::StackTileRef();
-      });
+  const st::StackMap map(cut.grid, [&](const uint64_t* cells, uint32_t cn, st::StackTileRef* out) {  // as ResidentStack's
+    for (uint32_t i = 0; i < cn; ++i) out[i] = cells[i] < by_cell.size() ? by_cell[cells[i]] : st::StackTileRef();
+  });
   std::vector<std::unique_ptr<st::Evaluator>> ev;
   for (const auto& b : mh) ev.push_back(st::open_mh(b));
 

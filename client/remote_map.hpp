@@ -433,11 +433,12 @@ class RemoteMap final : public Evaluator {
   template <class Fn>
   bool walk_region(uint32_t level, uint64_t x0, uint64_t y0, uint64_t x1, uint64_t y1, Fn&& fn) const;
   void rerequest_regions_locked();
-  // Stack lookups: the StackMap's tile source reads the cache (shared lock held) and
-  // notes misses in a per-thread scratch; they are wanted once the lock is dropped.
+  // Stack lookups: the StackMap's tile source (stack_tiles) reads the cache (shared lock
+  // held) and notes misses in a per-thread scratch; they are wanted once the lock is dropped.
+  // One cell's tile, its miss noted (stack_tiles' non-resident cells).
   StackTileRef stack_tile(uint64_t cell) const noexcept;
   // out[i] = stack_tile(cells[i]) for i < n, the pages first, then the resident slots'
-  // evaluators prefetched, then the refs (StackMap::TileBatch: the loads overlap).
+  // evaluators prefetched, then the refs (StackMap::TileSource: the loads overlap).
   void stack_tiles(const uint64_t* cells, uint32_t n, StackTileRef* out) const noexcept;
   void open_stack(const std::vector<uint8_t>& grid_bytes);  // the constructor's, for stack packs
   static std::unique_ptr<Evaluator> open_stack_tile(const StackGrid& g, uint64_t id, std::span<uint8_t> raw);

@@ -37,8 +37,7 @@ void RemoteMap::open_stack(const std::vector<uint8_t>& grid_bytes) {
   if (g.skip_level != header_.skip_level || g.geo.n != header_.map_level)
     throw FormatError("map '" + name_ + "': stack grid disagrees with the header's levels");
   stack_map_ = std::make_unique<StackMap>(
-      g, [this](uint64_t cell) { return stack_tile(cell); },
-      [this](const uint64_t* cells, uint32_t n, StackTileRef* out) { stack_tiles(cells, n, out); });
+      g, [this](const uint64_t* cells, uint32_t n, StackTileRef* out) { stack_tiles(cells, n, out); });
 }
 
 SurfaceExtent RemoteMap::stack_surface() {

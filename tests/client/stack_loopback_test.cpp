@@ -91,7 +91,7 @@ void served_stack_answers_like_local(const std::string& light_set, const std::st
   for (int i = 0; i < 300; ++i) points.push_back({-10 + 20 * next(), 5 * next(), -10 + 20 * next()});
   // While tiles stream (each miss queues its tile), a slice depth is either the coarser
   // level-K value or already the exact one: never missing, never anything else.
-  const StackMap coarse(*reader->stack(), [](uint64_t) -> const MhOctree* { return nullptr; });
+  const StackMap coarse(*reader->stack());  // no tile: the cells' level-K values
   const uint32_t n = reader->stack()->geo.n;
   int coarse_answers = 0;
   for (uint64_t y = 0; y < (uint64_t(1) << n); ++y) {

@@ -303,7 +303,7 @@ TEST(GpuStack, AbsentCellsAnswerTheirLevelKValueAndFeedbackNamesExactlyThem) {
   EXPECT_EQ(compare_every_texel(g, s.map, n), "");
   // Every finest texel of the later slices: the cells they fall in that are tiles and not
   // resident are exactly the feedback, each with the number of queries in it.
-  const StackMap cells(grid, [](uint64_t) -> const MhOctree* { return nullptr; });
+  const StackMap cells(grid);  // no tile: the cells' level-K values
   std::vector<GpuStackQuery> q;
   std::map<uint64_t, uint32_t> want;
   for (uint32_t w = kSlices / 2 - 1; w < kSlices; ++w)

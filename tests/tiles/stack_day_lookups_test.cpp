@@ -118,8 +118,10 @@ void expect_like_definition(const StackMap& m, const std::vector<Vec3d>& pts, co
   EXPECT_GT(partial, 0u);
 }
 
+// `mmh_slices` (if given) gains the per-slice tiles' MMH slices (walked by the lookups'
+// own MMH steps, stack_map.cpp), so that a caller can check the packs had some.
 void expect_every_form_like_definition(const IntervalStack& s, const std::string& light_set, const std::string& what,
-                                       std::optional<uint32_t> skip_level = std::nullopt) {
+                                       std::optional<uint32_t> skip_level = std::nullopt, size_t* mmh_slices = nullptr) {
   for (StackCells form : {StackCells::octree, StackCells::slices, StackCells::smaller}) {
     const std::string name = form == StackCells::octree ? "octree" : form == StackCells::slices ? "slices" : "smaller";
     const auto pack = build(s, form, light_set, name, skip_level);
@@ -132,6 +134,7 @@ void expect_every_form_like_definition(const IntervalStack& s, const std::string
       if (!is_slice_tiles(raw)) continue;
       const SliceTiles t = SliceTiles::open(raw);
       for (uint32_t w = 0; w < t.slices(); ++w) {
+        if (mmh_slices) *mmh_slices += t.record(w).kind == SliceTiles::RecordKind::mmh;
         const SliceTiles::Bounds b = t.bounds(w);
         if (std::isnan(b.lo)) continue;
         ++bounded;
@@ -159,24 +162,31 @@ void expect_every_form_like_definition(const IntervalStack& s, const std::string
     }
     std::vector<StackTile> tiles;
     for (const auto& b : bufs) tiles.push_back(StackTile::open(b));
-    const StackMap holes(g, [&](uint64_t cell) -> StackTileRef {
-      const size_t i = size_t(std::lower_bound(cells.begin(), cells.end(), cell) - cells.begin());
-      return i < cells.size() && cells[i] == cell && i % 3 != 1 ? tiles[i].ref() : StackTileRef();
+    const StackMap holes(g, [&](const uint64_t* want, uint32_t n, StackTileRef* out) {
+      for (uint32_t k = 0; k < n; ++k) {
+        const size_t i = size_t(std::lower_bound(cells.begin(), cells.end(), want[k]) - cells.begin());
+        out[k] = i < cells.size() && cells[i] == want[k] && i % 3 != 1 ? tiles[i].ref() : StackTileRef();
+      }
     });
     expect_like_definition(holes, pts, what + ", " + name + " cells, a third absent");
   }
 }
 
 TEST(StackDayLookups, TimeAndSoftEqualTheirPerSampleDefinitionOnEveryTexel) {
+  size_t mmh = 0;
   const IntervalStack sun = stacks::coherent_stack(6, 9, 11);
-  expect_every_form_like_definition(sun, "sun-path:azimuth=150..200,elevation=40..60,samples=9", "sun path, 64^2 x 9");
+  expect_every_form_like_definition(sun, "sun-path:azimuth=150..200,elevation=40..60,samples=9", "sun path, 64^2 x 9",
+                                    std::nullopt, &mmh);
   // Slices of 128^2 in one cell (skip level 0): per-slice tiles finer than the DAG-MH
   // skip table's level 6, so their walks descend inner nodes below it (the lockstep rounds).
   expect_every_form_like_definition(stacks::coherent_stack(7, 3, 13),
-                                    "sun-path:azimuth=120..220,elevation=30..70,samples=3", "sun path, 128^2 x 3", 0u);
+                                    "sun-path:azimuth=120..220,elevation=30..70,samples=3", "sun path, 128^2 x 3", 0u,
+                                    &mmh);
   const IntervalStack rnd = stacks::random_stack(4, 6, 12);
   expect_every_form_like_definition(rnd, "area:pos=0,20,0,target=0,0,0,size=4,4,samples=6,jitter=0.5",
-                                    "area light, random 16^2 x 6");
+                                    "area light, random 16^2 x 6", std::nullopt, &mmh);
+  // Some slices were MMH tiles (the lookups' MMH walks were compared too).
+  EXPECT_GT(mmh, 0u);
 }
 
 }  // namespace stack_day_lookups_test

@@ -106,7 +106,7 @@ TEST(StackPack, LookupsMatchTheWholeOctreeAndAbsentTilesAnswerCoarser) {
   const StackLookup ref(tree, set);
   auto reader = PackReader::open(write(h, set, 2, 512, "lookups.pack"));
   const ResidentStack rs(*reader);
-  const StackMap none(*reader->stack(), [](uint64_t) -> const MhOctree* { return nullptr; });
+  const StackMap none(*reader->stack());  // no tile: the cells' level-K values
   uint64_t rng = 12345;
   auto next = [&] {
     rng = rng * 6364136223846793005ull + 1442695040888963407ull;
@@ -426,11 +426,13 @@ TEST(StackPack, SoftVisibilitySharedWalkEqualsSeparateLookups) {
     }
     std::vector<MhOctree> trees;
     for (const auto& b : bufs) trees.push_back(MhOctree::open(b));
-    auto source = [&](bool every_other) {
-      return [&, every_other](uint64_t cell) -> const MhOctree* {
-        const auto it = std::lower_bound(cells.begin(), cells.end(), cell);
-        if (it == cells.end() || *it != cell || (every_other && (it - cells.begin()) % 2)) return nullptr;
-        return &trees[size_t(it - cells.begin())];
+    auto source = [&](bool every_other) -> StackMap::TileSource {
+      return [&, every_other](const uint64_t* want, uint32_t n, StackTileRef* out) {
+        for (uint32_t i = 0; i < n; ++i) {
+          const auto it = std::lower_bound(cells.begin(), cells.end(), want[i]);
+          const bool absent = it == cells.end() || *it != want[i] || (every_other && (it - cells.begin()) % 2);
+          out[i] = absent ? nullptr : &trees[size_t(it - cells.begin())];
+        }
       };
     };
     const StackMap full(grid, source(false)), half(grid, source(true));

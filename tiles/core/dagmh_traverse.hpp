@@ -226,6 +226,8 @@ struct View {
   float value(uint32_t index) const { return read_value(chunks, multipliers, index); }
   // The chunk value(index) reads first (for a prefetch).
   const uint8_t* chunk_at(uint32_t index) const { return chunks + size_t(index / kChunkValues) * sizeof(ChunkInfo); }
+  // The multiplier bits value(index) reads after the chunk, or nullptr (value_bits_at).
+  const uint8_t* value_bits_at(uint32_t index) const { return dagmh::value_bits_at(chunks, multipliers, index); }
 
   uint32_t lookup_index(uint32_t level, uint64_t x, uint64_t y) const {
     const Cursor c = descend(start(level, level, x, y), level, level, x, y);

@@ -57,4 +57,20 @@ inline float read_value(const uint8_t* chunks, const uint8_t* multipliers, uint3
                       std::bit_cast<float>(st::load_le<uint32_t>(c + offsetof(ChunkInfo, c_f))), i);
 }
 
+// Where read_value(chunks, multipliers, index) reads its multiplier bits, or nullptr when
+// the chunk's base answers (for a prefetch: it reads the chunk, so a caller that gathers
+// many values prefetches the chunks first, then these, then reads the values).
+inline const uint8_t* value_bits_at(const uint8_t* chunks, const uint8_t* multipliers, uint32_t index) {
+  const uint8_t* c = chunks + size_t(index / kChunkValues) * sizeof(ChunkInfo);
+  const uint32_t bit = index % kChunkValues;
+  const uint32_t mask = st::load_le<uint32_t>(c + offsetof(ChunkInfo, mask));
+  if (!((mask >> bit) & 1)) return nullptr;
+  const uint32_t packed = st::load_le<uint32_t>(c + offsetof(ChunkInfo, packed));
+  const uint32_t code = packed >> kBitOffsetBits;
+  const uint32_t k = code == kRawFactorCode ? kRawFactorBits : code;
+  const uint32_t rank = bit_count(uint64_t(mask & ((1u << bit) - 1)));
+  const uint64_t pos = uint64_t(packed & kBitOffsetMask) + uint64_t(rank) * k;
+  return multipliers + (pos >> 3);
+}
+
 }  // namespace st::dagmh

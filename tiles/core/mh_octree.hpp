@@ -108,6 +108,8 @@ class MhOctree {
   }
   float along_value(const Walk& k) const noexcept { return moct::bits_float(word_inline(k.val)); }
   const void* along_next(const Walk& k) const noexcept { return tree_ + 4 * k.pos; }
+  // The tree's first word (the root's), which every walk reads first (StackTileRef keeps it).
+  const uint8_t* words() const noexcept { return tree_; }
 
   // The walk, for lookups that share it among samples (stack_lookup.hpp). A cursor stands
   // on a node; `val` is the word of the last valued node's float on its path.

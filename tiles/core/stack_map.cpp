@@ -8,11 +8,12 @@
 #include "tiles/core/evaluator.hpp"
 #include "tiles/core/filter_level.hpp"
 #include "tiles/core/interval.hpp"
+#include "tiles/core/mh_quadtree_format.hpp"
 
 namespace st {
 
-StackMap::StackMap(const StackGrid& grid, TileSource tile, TileBatch batch)
-    : grid_(grid), tile_(std::move(tile)), batch_(std::move(batch)) {
+StackMap::StackMap(const StackGrid& grid, TileSource tiles) : grid_(grid), tiles_(std::move(tiles)) {
+  if (!tiles_) tiles_ = [](const uint64_t*, uint32_t n, StackTileRef* out) { std::fill(out, out + n, StackTileRef()); };
   lights_.reserve(grid.slices);
   for (uint32_t w = 0; w < grid.slices; ++w) lights_.push_back(grid.light(w));
   texels_ = SampleTexels(lights_, grid_.geo.n);
@@ -38,7 +39,8 @@ float StackMap::depth(uint64_t x, uint64_t y, uint32_t w, uint32_t level, bool* 
   if (e.kind != 1 || T == l) return e.value;  // a split cell here is at level T
   const uint32_t a = g.xy_bits(l), b = g.w_bits(l);
   const uint64_t cx = x >> (level - a), cy = y >> (level - a), cw = uint64_t(w) >> (g.k - b);
-  const StackTileRef t = tile_(cell);
+  StackTileRef t;
+  tiles_(&cell, 1, &t);
   if (!t) {
     if (exact) *exact = false;
     return e.value;
@@ -125,6 +127,48 @@ void stack_map_prefetch_object(const T* p) {
   for (size_t o = 0; o < sizeof(T); o += 64) __builtin_prefetch(b + o);
 }
 
+// An MMH slice's walk (SliceTiles::RecordKind::mmh) in resumable steps: the evaluator's
+// depth(level, x, y) (mh_quadtree_reader.cpp, TreeEvaluator<relative>: root, then
+// descend to `level`, a leaf or a missing child, summing the relative values with
+// mmh_add) with each child's value read one step later, once the line it lies on (the
+// child's, prefetched by the step that went there) has arrived. Same words, same adds in
+// the same order: the same float bit for bit.
+struct MmhWalk {
+  const uint8_t* tree;
+  uint64_t pos, vp;     // the current node's word; the value word still to apply (pending)
+  float value;          // the decoded value of the last valued node applied
+  uint32_t code, level, until;
+  uint32_t pending;     // 0 none, 1 relative (mmh_add), 2 absolute
+  uint32_t word(uint64_t w) const { return st::load_le<uint32_t>(tree + 4 * w); }
+  void begin(const SliceTiles::Record& r) {
+    tree = r.mmh_tree, pos = 0, vp = r.mmh_root_leaf ? 0 : 1, value = 0;
+    code = r.mmh_root_leaf ? mhq::kCodeLeaf : mhq::kCodeInner, level = 0, until = r.xy_level, pending = 2;
+  }
+  // One step towards (x, y) of `until`; false once the walk has its answer (`value`).
+  bool step(uint64_t x, uint64_t y) {
+    if (pending) {
+      const float s = mhq::bits_float(word(vp));
+      value = pending == 2 ? s : mhq::mmh_add(value, s);
+      pending = 0;
+    }
+    if (level >= until || code == mhq::kCodeLeaf) return false;
+    const uint32_t bit = until - (level + 1);
+    const uint32_t slot = uint32_t((x >> bit) & 1u) | uint32_t(((y >> bit) & 1u) << 1);
+    const uint32_t w = word(pos);
+    const uint32_t mask = mhq::word_mask(w), cc = mhq::child_code(mask, slot);
+    if (!cc) return false;
+    const uint64_t at = mhq::block_start(pos, mhq::word_shift(w), mhq::word_offset(w)) + mhq::child_skip(mask, slot);
+    __builtin_prefetch(tree + 4 * at);
+    if (cc != mhq::kCodeEmpty) {
+      vp = cc == mhq::kCodeLeaf ? at : at + 1;
+      pending = (mhq::word_abs_flags(w) >> slot & 1u) ? 2 : 1;
+      __builtin_prefetch(tree + 4 * vp);  // an inner node's value may start the next line
+    }
+    pos = at, code = cc, ++level;
+    return true;
+  }
+};
+
 }  // namespace
 
 uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint32_t m, bool* exact) const {
@@ -134,20 +178,21 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
   // across cells from one sample to the next: 2CylinderEngine.glb at 1024^2 x 64 keeps
   // 1.7 samples a cell, so nearly every sample reads a cold tile):
   //   1. each sample's cell and entry (outside the slice, a constant cell: the value);
-  //   2. the tile of each cell (its change of cell; all in one batch_ call when the
-  //      source has one, else a tile_ call each), the reader objects prefetched;
-  //   3. per-slice samples: their slice's record (SliceTiles::Record, prefetched);
-  //      octree samples: gathered into one chain per cell (the root word prefetched),
-  //      the chain's samples walked one
-  //      after another along one path (MhOctree::along_*: each walk starts from the
-  //      deepest node it shares with the chain's previous one, as depth_along);
+  //   2. the tiles of the distinct cells, in one tiles_ call; each octree's reader object
+  //      and root word prefetched (the ref carries the root: StackTileRef::root);
+  //   3. per-slice samples: their slice's record (SliceTiles::Record, reached from the
+  //      ref's records without the reader object, prefetched); octree samples: gathered
+  //      into one chain per cell, the chain's samples walked one after another along one
+  //      path (MhOctree::along_*: each walk starts from the deepest node it shares with
+  //      the chain's previous one, as depth_along);
   //   4. per-slice samples: the bounds (d <= lo lit, d > hi shadowed exactly as the walk
-  //      would say), a constant's value, an MMH tile (its evaluator prefetched; its
-  //      depth() one per round of step 5), or a DAG-MH walk (skip entry prefetched, then
-  //      read: its start);
-  //   5. rounds of one step of every DAG-MH walk (View::descend's own step) and of every
-  //      octree chain, each prefetching the node it goes to; then the DAG-MH walks'
-  //      finish (treelets) and values.
+  //      would say), a constant's value, a DAG-MH walk (skip entry prefetched, then read:
+  //      its start) or an MMH walk (its root word prefetched), another 2D tile (its
+  //      evaluator prefetched; its depth() one per round of step 5);
+  //   5. rounds of one step of every DAG-MH walk (View::descend's own step), every MMH
+  //      walk (MmhWalk) and every octree chain, each prefetching the node it goes to;
+  //      then the DAG-MH walks' finish (treelets), their values' chunks, the chunks'
+  //      multiplier bits, and the values.
   // Each answer is the sample's own depth(x, y, w, n), bit for bit (tested).
   constexpr uint32_t G = kGather, R = SampleTexels::kRun;
   CellTexel c[G];
@@ -159,7 +204,7 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
   }
   StackTileRef t[G];
   {
-    // The distinct cells in a row, fetched in one batch call when the source has one.
+    // The distinct cells in a row, fetched in one call.
     uint64_t cells[G];
     uint8_t of[G];
     uint32_t nu = 0;
@@ -169,15 +214,12 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
       of[i] = uint8_t(nu - 1);
     }
     StackTileRef got[G];
-    if (batch_) {
-      batch_(cells, nu, got);
-    } else {
-      for (uint32_t u = 0; u < nu; ++u) got[u] = tile_(cells[u]);
-    }
-    for (uint32_t u = 0; u < nu; ++u) {
-      if (got[u].slices) stack_map_prefetch_object(got[u].slices);
-      if (got[u].octree) stack_map_prefetch_object(got[u].octree);
-    }
+    if (nu) tiles_(cells, nu, got);
+    for (uint32_t u = 0; u < nu; ++u)
+      if (got[u].octree) {
+        stack_map_prefetch_object(got[u].octree);
+        __builtin_prefetch(got[u].root);
+      }
     for (uint32_t i = 0; i < m; ++i)
       if (c[i].tiled) t[i] = got[of[i]];
   }
@@ -196,7 +238,7 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
     if (!c[i].tiled) {
       set(i, d[i] <= c[i].value);
     } else if (t[i].slices) {
-      const SliceTiles::Record* r = &t[i].slices->record(c[i].lw);
+      const SliceTiles::Record* r = static_cast<const SliceTiles::Record*>(t[i].root) + c[i].lw;
       __builtin_prefetch(r);
       __builtin_prefetch(reinterpret_cast<const char*>(r) + 64);
       rec[nr] = r, rec_sample[nr++] = uint8_t(i);
@@ -208,7 +250,6 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
       }
       if (j == nc) {
         chain_tree[j] = t[i].octree, chain_cell[j] = c[i].cell, chain_head[j] = uint8_t(i);
-        __builtin_prefetch(t[i].octree->along_next(MhOctree::Walk{}));  // the root's word
         ++nc;
       } else {
         next_of[chain_tail[j]] = uint8_t(i);
@@ -219,15 +260,18 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
       set(i, d[i] <= c[i].value);
     }
   }
-  // DAG-MH walks of per-slice samples.
+  // DAG-MH and MMH walks of per-slice samples.
   const dagmh::View* view[G];
-  const SliceTiles::Record* mmh[G];
-  uint8_t mmh_sample[G];
-  uint32_t nm = 0;
+  const SliceTiles::Record* other[G];
+  uint8_t other_sample[G];
+  uint32_t no = 0;
   dagmh::Cursor cur[G];
   uint32_t level[G];
   uint8_t walk_sample[G], active[G];
   uint32_t nw = 0;
+  MmhWalk mw[G];
+  uint8_t mmh_sample[G];
+  uint32_t nm = 0;
   for (uint32_t k = 0; k < nr; ++k) {
     const SliceTiles::Record& r = *rec[k];
     const uint32_t i = rec_sample[k];
@@ -240,11 +284,14 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
         if (r.view.skip_level > 0 && r.xy_level >= r.view.skip_level)
           __builtin_prefetch(r.view.skip_entry_at(r.xy_level, c[i].lx, c[i].ly));
         ++nw;
+      } else if (r.kind == SliceTiles::RecordKind::mmh) {
+        mw[nm].begin(r);
+        __builtin_prefetch(r.mmh_tree);  // the root's word and value
+        mmh_sample[nm++] = uint8_t(i);
       } else if (r.kind == SliceTiles::RecordKind::evaluator) {
-        // Answered one per round of the walks below (its chain of misses in the shadow of
-        // theirs), the evaluator's object on its way.
+        // Answered one per round of the walks below, the evaluator's object on its way.
         __builtin_prefetch(r.eval);
-        mmh[nm] = &r, mmh_sample[nm++] = uint8_t(i);
+        other[no] = &r, other_sample[no++] = uint8_t(i);
       } else {
         set(i, d[i] <= r.lo);
       }
@@ -275,15 +322,28 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
     new (walk[j].bytes) MhOctree::Walk(chain_tree[j]->along_begin(path[j].get(), c[i].lx, c[i].ly, c[i].lw));
     chains[j] = uint8_t(j);
   }
-  uint32_t live = nc, next_mmh = 0;
-  auto answer_mmh = [&](uint32_t k) {
-    const SliceTiles::Record& r = *mmh[k];
-    const uint32_t i = mmh_sample[k];
+  uint8_t mmh_live[G];
+  for (uint32_t k = 0; k < nm; ++k) mmh_live[k] = uint8_t(k);
+  uint32_t live = nc, nml = nm, next_other = 0;
+  auto answer_other = [&](uint32_t k) {
+    const SliceTiles::Record& r = *other[k];
+    const uint32_t i = other_sample[k];
     set(i, d[i] <= r.eval->depth(r.xy_level, c[i].lx, c[i].ly));
   };
-  while (na || live) {
-    if (next_mmh < nm) answer_mmh(next_mmh++);
+  while (na || live || nml) {
+    if (next_other < no) answer_other(next_other++);
     uint32_t kept = 0;
+    for (uint32_t a = 0; a < nml; ++a) {  // one step of every MMH walk
+      const uint32_t k = mmh_live[a];
+      const uint32_t i = mmh_sample[k];
+      if (mw[k].step(c[i].lx, c[i].ly)) {
+        mmh_live[kept++] = uint8_t(k);
+      } else {
+        set(i, d[i] <= mw[k].value);
+      }
+    }
+    nml = kept;
+    kept = 0;
     for (uint32_t a = 0; a < na; ++a) {  // one level of every DAG-MH walk that still descends
       const uint32_t k = active[a];
       const uint32_t i = walk_sample[k];
@@ -315,13 +375,15 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
     }
     live = kept;
   }
-  while (next_mmh < nm) answer_mmh(next_mmh++);
+  while (next_other < no) answer_other(next_other++);
   uint32_t index[G];
   for (uint32_t k = 0; k < nw; ++k) {
     const uint32_t i = walk_sample[k];
     index[k] = view[k]->finish(cur[k], level[k], c[i].lx, c[i].ly);
     __builtin_prefetch(view[k]->chunk_at(index[k]));  // the value's chunk, read below
   }
+  for (uint32_t k = 0; k < nw; ++k)  // then the multiplier bits each chunk points to
+    if (const uint8_t* bits = view[k]->value_bits_at(index[k])) __builtin_prefetch(bits);
   for (uint32_t k = 0; k < nw; ++k) {
     const uint32_t i = walk_sample[k];
     set(i, d[i] <= view[k]->value(index[k]));
@@ -415,11 +477,9 @@ ResidentStack::ResidentStack(const PackReader& pack) {
     if (cells_[i] >= by_cell_.size()) throw FormatError(pack.name() + ": " + describe_tile(pack.tiles()[i].id) + " names no stack cell");
     by_cell_[cells_[i]] = trees_[i].ref();
   }
-  map_ = std::make_unique<StackMap>(
-      *g, [this](uint64_t cell) -> StackTileRef { return cell < by_cell_.size() ? by_cell_[cell] : StackTileRef(); },
-      [this](const uint64_t* cells, uint32_t n, StackTileRef* out) {
-        for (uint32_t i = 0; i < n; ++i) out[i] = cells[i] < by_cell_.size() ? by_cell_[cells[i]] : StackTileRef();
-      });
+  map_ = std::make_unique<StackMap>(*g, [this](const uint64_t* cells, uint32_t n, StackTileRef* out) {
+    for (uint32_t i = 0; i < n; ++i) out[i] = cells[i] < by_cell_.size() ? by_cell_[cells[i]] : StackTileRef();
+  });
 }
 
 }  // namespace st

@@ -24,15 +24,15 @@ namespace st {
 
 class StackMap {
  public:
-  // The tile of cell i (its dense index at the skip level): its MH octree or its per-slice
-  // tiles (stack_slices.hpp), or nothing (nullptr) while absent.
-  using TileSource = std::function<StackTileRef(uint64_t cell)>;
-  // Optional: out[i] = tile(cells[i]) for i < n, the cells of one soft (or time) lookup in
-  // one call, so that a source can keep their loads in flight together (ResidentStack: one
-  // loop over its dense array; through TileSource each cell is a call whose load the next
-  // one waits behind). Without it the lookups call `tile` once per cell.
-  using TileBatch = std::function<void(const uint64_t* cells, uint32_t n, StackTileRef* out)>;
-  StackMap(const StackGrid& grid, TileSource tile, TileBatch batch = {});
+  // The tiles of cells[i] (dense indices of the grid's entries) for i < n: out[i] the
+  // cell's MH octree or per-slice tiles (stack_slices.hpp), or nothing while absent. One
+  // callback for every lookup: a soft (or time) lookup asks for all its distinct cells in
+  // one call, so that a source keeps their loads in flight together (ResidentStack: one
+  // loop over its dense array; the client: every page looked up, then the evaluators
+  // prefetched, then the refs); a single-slice lookup asks for one. An empty source holds
+  // no tile (every tiled cell answers its level-K value, `exact` cleared).
+  using TileSource = std::function<void(const uint64_t* cells, uint32_t n, StackTileRef* out)>;
+  explicit StackMap(const StackGrid& grid, TileSource tiles = {});
 
   const StackGrid& grid() const { return grid_; }
   uint32_t slices() const { return grid_.slices; }
@@ -105,8 +105,7 @@ class StackMap {
   uint64_t lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint32_t m, bool* exact) const;
 
   const StackGrid& grid_;
-  TileSource tile_;
-  TileBatch batch_;
+  TileSource tiles_;
   std::vector<LightSpace> lights_;
   SampleTexels texels_;  // the soft lookups' batched transforms (sample_texels.hpp)
 };

@@ -96,6 +96,10 @@ SliceTiles SliceTiles::open(std::span<const uint8_t> b) {
     const dagmh::View* view = dagmh_view(*ev);
     t.views_.push_back(view ? *view : dagmh::View{});
     t.has_view_.push_back(view != nullptr);
+    // An MMH tile (validated by open_encoded as such): its tree for the lookups' walks.
+    const bool mmh = !view && sub.size() >= mhq::kHeaderFixedSize && u32_at(sub, 0) == mhq::kMagicMmh;
+    t.mmh_tree_.push_back(mmh ? sub.data() + mhq::tree_offset(sub[mhq::kOffLevels]) : nullptr);
+    t.mmh_root_leaf_.push_back(mmh && (sub[mhq::kOffFlags] & mhq::kFlagRootLeaf));
     if (view && view->value_count > 0) {  // every answer is one of the stored values (validated indices)
       float lo = view->value(0), hi = lo;
       bool nan = std::isnan(lo);
@@ -127,6 +131,9 @@ void SliceTiles::build_records() {
       r.kind = RecordKind::constant;
     } else if (const dagmh::View* v = view(w)) {
       r.kind = RecordKind::view, r.view = *v;
+    } else if (const uint8_t* tree = mmh_tree_[size_t(slot_[w])]) {
+      r.kind = RecordKind::mmh, r.eval = &evaluator(w);
+      r.mmh_tree = tree, r.mmh_root_leaf = mmh_root_leaf_[size_t(slot_[w])];
     } else {
       r.kind = RecordKind::evaluator, r.eval = &evaluator(w);
     }

@@ -89,15 +89,24 @@ class SliceTiles {
   // sample costs one record (two cache lines, prefetched together) instead of a chain of
   // the object's arrays (slot_, has_view_, views_, bounds_: a dependent miss each). Built
   // at the end of open() from the accessors above and equal to them.
-  enum class RecordKind : uint32_t { constant, view, evaluator };
+  // An MMH slice's record holds its tree (the first tree word, MHQUAD.md) and whether the
+  // root is a leaf, so that the lookups walk it in their rounds (stack_map.cpp: the same
+  // walk as the evaluator's depth(), a step per round); kind evaluator is any other 2D
+  // tile (none today), answered by its evaluator.
+  enum class RecordKind : uint32_t { constant, view, mmh, evaluator };
   struct alignas(64) Record {
     float lo, hi;             // bounds(w); a constant: its value twice
     RecordKind kind;
     uint32_t xy_level;        // xy_level()
-    const Evaluator* eval;    // kind evaluator: &evaluator(w) (an MMH tile)
+    const Evaluator* eval;    // kinds mmh and evaluator: &evaluator(w)
     dagmh::View view;         // kind view: *view(w)
+    const uint8_t* mmh_tree;  // kind mmh: word 0 of the MMH tree (validated at open)
+    uint32_t mmh_root_leaf;   // kind mmh: the root is a leaf (a constant tile)
   };
   const Record& record(uint32_t w) const { return records_[w]; }
+  // record(0)'s address (slice w's at records() + w): a StackTileRef keeps it, so that a
+  // lookup reaches a slice's record without loading this object first.
+  const Record* records() const { return records_.data(); }
 
  private:
   void build_records();
@@ -108,6 +117,8 @@ class SliceTiles {
   std::vector<std::shared_ptr<const Evaluator>> evals_;
   std::vector<dagmh::View> views_;  // per evaluator: its DAG-MH view (when has_view_)
   std::vector<uint8_t> has_view_;
+  std::vector<const uint8_t*> mmh_tree_;  // per evaluator: an MMH tile's tree, else nullptr
+  std::vector<uint8_t> mmh_root_leaf_;
   std::vector<Bounds> bounds_;  // per slice
   std::vector<Record> records_;  // per slice (build_records)
 };
@@ -170,12 +181,17 @@ void mmh_word_roles(uint64_t W, bool root_leaf, std::vector<uint8_t>& role, Node
 
 // A stack tile as lookups see it: an MH octree or per-slice tiles (or neither: absent).
 // Converts from either pointer, so a tile source may hand out `const MhOctree*` as before.
+// It also carries where a lookup starts in the tile (the octree's root word, the slices'
+// records), taken from the reader when the ref is made: a soft lookup that gets a cell's
+// ref then loads its first node or record at once instead of the reader object before it
+// (one cache miss fewer on the chain of each cell it crosses).
 struct StackTileRef {
   const MhOctree* octree = nullptr;
   const SliceTiles* slices = nullptr;
+  const void* root = nullptr;  // octree: octree->words(); slices: slices->records()
   StackTileRef() = default;
-  StackTileRef(const MhOctree* o) : octree(o) {}      // NOLINT: implicit by design
-  StackTileRef(const SliceTiles* s) : slices(s) {}    // NOLINT: implicit by design
+  StackTileRef(const MhOctree* o) : octree(o), root(o ? o->words() : nullptr) {}  // NOLINT: implicit by design
+  StackTileRef(const SliceTiles* s) : slices(s), root(s ? s->records() : nullptr) {}  // NOLINT: implicit by design
   StackTileRef(std::nullptr_t) {}                     // NOLINT: implicit by design
   explicit operator bool() const { return octree || slices; }
   // depth(x, y, w, level) of whichever it is (present; arguments in range).
