@@ -291,24 +291,35 @@ VkDescriptorSet allocate_set(const Device<Vk>& d, VkDescriptorPool pool, VkDescr
   return s;
 }
 
-// Storage buffers into bindings first, first + step, ... of `set` (no allocation).
-template <class Vk>
-void write_buffers(const Device<Vk>& d, VkDescriptorSet set, std::span<const VkDescriptorBufferInfo> buffers,
-                   uint32_t first = 0, uint32_t step = 1) {
+namespace detail {
+// Descriptors of one type into bindings first, first + step, ... of `set`, eight writes per
+// vkUpdateDescriptorSets call (no allocation); `fill(write, i)` points write at item i.
+template <class Vk, class Fill>
+void write_descriptors(const Device<Vk>& d, VkDescriptorSet set, size_t count, VkDescriptorType type,
+                       uint32_t first, uint32_t step, Fill fill) {
   VkWriteDescriptorSet w[8];
-  for (size_t at = 0; at < buffers.size(); at += 8) {
-    const uint32_t n = uint32_t(std::min<size_t>(8, buffers.size() - at));
+  for (size_t at = 0; at < count; at += 8) {
+    const uint32_t n = uint32_t(std::min<size_t>(8, count - at));
     for (uint32_t i = 0; i < n; ++i) {
       w[i] = {};
       w[i].sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
       w[i].dstSet = set;
       w[i].dstBinding = first + step * uint32_t(at + i);
       w[i].descriptorCount = 1;
-      w[i].descriptorType = VK_DESCRIPTOR_TYPE_STORAGE_BUFFER;
-      w[i].pBufferInfo = &buffers[at + i];
+      w[i].descriptorType = type;
+      fill(w[i], at + i);
     }
     d.vk.UpdateDescriptorSets(d.device, n, w, 0, nullptr);
   }
+}
+}  // namespace detail
+
+// Storage buffers into bindings first, first + step, ... of `set` (no allocation).
+template <class Vk>
+void write_buffers(const Device<Vk>& d, VkDescriptorSet set, std::span<const VkDescriptorBufferInfo> buffers,
+                   uint32_t first = 0, uint32_t step = 1) {
+  detail::write_descriptors(d, set, buffers.size(), VK_DESCRIPTOR_TYPE_STORAGE_BUFFER, first, step,
+                            [&](VkWriteDescriptorSet& w, size_t i) { w.pBufferInfo = &buffers[i]; });
 }
 
 // Uniform texel buffers (GpuDescriptors::pool_view, page_table_view) into bindings first,
@@ -316,20 +327,8 @@ void write_buffers(const Device<Vk>& d, VkDescriptorSet set, std::span<const VkD
 template <class Vk>
 void write_texel_buffers(const Device<Vk>& d, VkDescriptorSet set, std::span<const VkBufferView> views,
                          uint32_t first = 0, uint32_t step = 1) {
-  VkWriteDescriptorSet w[8];
-  for (size_t at = 0; at < views.size(); at += 8) {
-    const uint32_t n = uint32_t(std::min<size_t>(8, views.size() - at));
-    for (uint32_t i = 0; i < n; ++i) {
-      w[i] = {};
-      w[i].sType = VK_STRUCTURE_TYPE_WRITE_DESCRIPTOR_SET;
-      w[i].dstSet = set;
-      w[i].dstBinding = first + step * uint32_t(at + i);
-      w[i].descriptorCount = 1;
-      w[i].descriptorType = VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER;
-      w[i].pTexelBufferView = &views[at + i];
-    }
-    d.vk.UpdateDescriptorSets(d.device, n, w, 0, nullptr);
-  }
+  detail::write_descriptors(d, set, views.size(), VK_DESCRIPTOR_TYPE_UNIFORM_TEXEL_BUFFER, first, step,
+                            [&](VkWriteDescriptorSet& w, size_t i) { w.pTexelBufferView = &views[i]; });
 }
 
 // Combined image samplers into bindings 0, 1, ... of `set`.
