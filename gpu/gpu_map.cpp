@@ -3,6 +3,7 @@
 #include "gpu/gpu_map.hpp"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cstring>
 #include <utility>
@@ -61,6 +62,12 @@ class TileSlotTable {
       if (keys_[i] == t) return slots_[i];
       if (keys_[i] == kInvalidTile) return layout::kNoSlot;
     }
+  }
+  // Starts loading the lines find(t) / set / erase will read first.
+  void prefetch(TileId t) const {
+    const uint64_t i = home(t);
+    __builtin_prefetch(&keys_[i]);
+    __builtin_prefetch(&slots_[i]);
   }
   void set(TileId t, uint32_t slot) {
     uint64_t i = home(t);
@@ -148,13 +155,33 @@ struct GpuMap::Impl {
   std::vector<uint8_t> dirty;            // per kDirtyBlockWords block of page_shadow
   std::vector<uint32_t> dirty_list;
   std::vector<TileId> mirror_tile;       // per slot: the tile the device holds, or kInvalidTile
-  std::vector<uint8_t> slot_levels;      // per slot: index tile levels d, 0 for an encoded tile
-  // Per slot: the page-table word last pointed at its tile (low 32 bits) and, for a word in
-  // a child table, that table's slot's link count then (high 32: a later link of that slot
-  // rewrote its table, so the word no longer speaks for this child); ~0: none. unlink
-  // clears the pointer from here instead of looking for the parent again.
-  std::vector<uint64_t> slot_pointer;
-  std::vector<uint32_t> slot_links;      // per slot: link() calls so far
+  // Per slot, in one 16-byte record (the frame path reads them together, from cold caches):
+  // - pointer: the page-table word last pointed at its tile (low 32 bits) and, for a word in
+  //   a child table, that table's slot's link count then (high 32: a later link of that slot
+  //   rewrote its table, so the word no longer speaks for this child); ~0: none. unlink
+  //   clears the pointer from here instead of looking for the parent again;
+  // - links: link() calls so far; levels: index tile levels d, 0 for an encoded tile.
+  struct SlotLinks {
+    uint64_t pointer = ~uint64_t(0);
+    uint32_t links = 0;
+    uint8_t levels = 0;
+  };
+  std::vector<SlotLinks> slot_links;
+  // One changed slot as stage_changes queued it: unlinked (old_tile) and linked (tile) a
+  // few changes later, so the lines they read were prefetched meanwhile (the frame path runs
+  // on cold caches, and one change's misses depend on each other: bucket, parent, word).
+  // Captured while the cache's bytes are readable: an index tile's levels and which of
+  // its entries are not constant (the children link looks up).
+  struct Change {
+    uint32_t slot = 0;
+    uint8_t levels = 0;  // an index tile's d, else 0
+    bool link = false;   // else the slot only empties (or waits for a later frame)
+    TileId old_tile = kInvalidTile, tile = kInvalidTile;
+    std::array<uint64_t, 4> live{};  // bit c: entry c of an index tile is not constant
+  };
+  static constexpr uint32_t kChangeLag = 8;  // changes queued before the oldest is applied
+  std::array<Change, kChangeLag> changes;    // a ring: `changes_head`, `changes_count`
+  uint32_t changes_head = 0, changes_count = 0;
   TileSlotTable tile_slot;
   std::vector<VkBufferCopy> pool_copies, page_copies;
   std::vector<client::WantedTile> wanted;
@@ -334,9 +361,7 @@ struct GpuMap::Impl {
     dirty.assign((words + kDirtyBlockWords - 1) / kDirtyBlockWords, 0);
     dirty_list.reserve(dirty.size());
     mirror_tile.assign(slot_count, kInvalidTile);
-    slot_levels.assign(slot_count, 0);
-    slot_pointer.assign(slot_count, ~uint64_t(0));
-    slot_links.assign(slot_count, 0);
+    slot_links.assign(slot_count, SlotLinks{});
     tile_slot.init(slot_count);
     pool_copies.reserve(slot_count);
     page_copies.reserve(dirty.size());
@@ -521,7 +546,7 @@ struct GpuMap::Impl {
     if (level == k) return off_skip_slots + uint32_t((uint64_t(morton_compact(morton >> 1)) << k) + morton_compact(morton));
     for (uint32_t j = 1; j <= kMaxIndexLevels && j <= level - k; ++j) {
       const uint32_t s = tile_slot.find(tile_parent(tile, j));
-      if (s == L::kNoSlot || slot_levels[s] != j) continue;
+      if (s == L::kNoSlot || slot_links[s].levels != j) continue;
       const uint64_t low = tile_child_morton(tile, j);
       const uint32_t c = (morton_compact(low >> 1) << j) + morton_compact(low);
       return off_children + s * L::kChildTableWords + c;
@@ -529,59 +554,103 @@ struct GpuMap::Impl {
     return ~0u;
   }
 
-  // slot_pointer's tag of page-table word w.
+  // SlotLinks::pointer's tag of page-table word w.
   uint64_t pointer_tag(uint32_t w) const {
-    if (w >= off_children && w < off_pcf) return uint64_t(slot_links[(w - off_children) / L::kChildTableWords]) << 32 | w;
+    if (w >= off_children && w < off_pcf) return uint64_t(slot_links[(w - off_children) / L::kChildTableWords].links) << 32 | w;
     return w;
   }
 
-  void unlink(uint32_t s) {
-    const TileId t = mirror_tile[s];
+  void unlink(uint32_t s, TileId t) {
     // The word pointer_word(t) would find (the tile's parent, if the device holds it, set
     // it when the later of the two was linked), unless its child table was rewritten since:
     // no walk up through the tile -> slot table (a cache miss or two per level tried).
-    const uint64_t tag = slot_pointer[s];
+    SlotLinks& sl = slot_links[s];
+    const uint64_t tag = sl.pointer;
     const uint32_t w = uint32_t(tag);
     if (tag != ~uint64_t(0) && pointer_tag(w) == tag && page_shadow[w] == s) set_page_word(w, L::kNoSlot);
-    slot_pointer[s] = ~uint64_t(0);
+    sl.pointer = ~uint64_t(0);
     // The cache may already have moved the tile to another slot that this pass linked
     // first (slots are compared in index order): that mapping must survive, or an index
     // tile linked later would not find its child and answer coarser than the CPU.
     tile_slot.erase(t, s);
     mirror_tile[s] = kInvalidTile;
-    slot_levels[s] = 0;
+    sl.levels = 0;
     --resident;
   }
 
-  // Slot `s` now holds `tile` (bytes `b`) on the device: point its parent at it, and if it
-  // is an index tile, point its entries at those of its children the device holds.
-  void link(uint32_t s, TileId tile, std::span<const uint8_t> b) {
+  // Slot `c.slot` now holds `c.tile` on the device: point its parent at it, and if it is
+  // an index tile, point its entries at those of its children the device holds.
+  void link(const Change& c) {
+    const uint32_t s = c.slot;
+    const TileId tile = c.tile;
     mirror_tile[s] = tile;
     tile_slot.set(tile, s);
     ++resident;
-    ++slot_links[s];
-    uint32_t magic = 0, d = 0;
-    if (b.size() >= 8) std::memcpy(&magic, b.data(), 4), std::memcpy(&d, b.data() + 4, 4);
-    slot_levels[s] = 0;
-    if (magic == kGridMagicWord && d >= 1 && d <= kMaxIndexLevels) {
-      slot_levels[s] = uint8_t(d);
+    SlotLinks& sl = slot_links[s];
+    ++sl.links;
+    sl.levels = c.levels;
+    if (const uint32_t d = c.levels) {
       const TileAddress a = tile_address(tile);
-      const size_t entries = 8 + 4 * CutGrid::coarse_count(d);
-      for (uint32_t c = 0; c < (1u << (2 * d)); ++c) {
-        const uint8_t kind = entries + 8 * c + 4 < b.size() ? b[entries + 8 * c + 4] : 0;
+      for (uint32_t e = 0; e < (1u << (2 * d)); ++e) {
         uint32_t ptr = L::kNoSlot;
-        if (kind != L::kKindConstant) {
-          const uint32_t cx = (a.x << d) + (c & ((1u << d) - 1)), cy = (a.y << d) + (c >> d);
+        if (c.live[e >> 6] >> (e & 63) & 1) {
+          const uint32_t cx = (a.x << d) + (e & ((1u << d) - 1)), cy = (a.y << d) + (e >> d);
           ptr = tile_slot.find(make_tile_id(a.level + d, cx, cy));
         }
-        const uint32_t w = off_children + s * L::kChildTableWords + c;
+        const uint32_t w = off_children + s * L::kChildTableWords + e;
         set_page_word(w, ptr);
-        if (ptr != L::kNoSlot) slot_pointer[ptr] = pointer_tag(w);
+        if (ptr != L::kNoSlot) slot_links[ptr].pointer = pointer_tag(w);
       }
     }
     const uint32_t w = pointer_word(tile);
     if (w != ~0u) set_page_word(w, s);
-    slot_pointer[s] = w != ~0u ? pointer_tag(w) : ~uint64_t(0);
+    sl.pointer = w != ~0u ? pointer_tag(w) : ~uint64_t(0);
+  }
+
+  // The change as link() reads it: an index tile's levels and live entries from its bytes.
+  static void read_index_entries(Change& c, std::span<const uint8_t> b) {
+    uint32_t magic = 0, d = 0;
+    if (b.size() >= 8) std::memcpy(&magic, b.data(), 4), std::memcpy(&d, b.data() + 4, 4);
+    if (magic != kGridMagicWord || d < 1 || d > kMaxIndexLevels) return;
+    c.levels = uint8_t(d);
+    const size_t entries = 8 + 4 * CutGrid::coarse_count(d);
+    for (uint32_t e = 0; e < (1u << (2 * d)); ++e) {
+      const uint8_t kind = entries + 8 * e + 4 < b.size() ? b[entries + 8 * e + 4] : 0;
+      if (kind != L::kKindConstant) c.live[e >> 6] |= uint64_t(1) << (e & 63);
+    }
+  }
+
+  // Loads what applying `c` reads first: its slot's record, its buckets (the old tile's,
+  // the new tile's, its parent's one level up, its live children's), its child table.
+  void prefetch_change(const Change& c) const {
+    __builtin_prefetch(&slot_links[c.slot]);
+    if (c.old_tile != kInvalidTile) tile_slot.prefetch(c.old_tile);
+    if (!c.link) return;
+    tile_slot.prefetch(c.tile);
+    if (!sg && tile_level(c.tile) > k) tile_slot.prefetch(tile_parent(c.tile, 1));
+    if (const uint32_t d = c.levels) {
+      const uint32_t w0 = off_children + c.slot * L::kChildTableWords, n = 1u << (2 * d);
+      for (uint32_t e = 0; e < n; e += 16) __builtin_prefetch(&page_shadow[w0 + e]);
+      __builtin_prefetch(&dirty[w0 / kDirtyBlockWords]);
+      const TileAddress a = tile_address(c.tile);
+      for (uint32_t e = 0; e < n; ++e)
+        if (c.live[e >> 6] >> (e & 63) & 1)
+          tile_slot.prefetch(make_tile_id(a.level + d, (a.x << d) + (e & ((1u << d) - 1)), (a.y << d) + (e >> d)));
+    }
+  }
+
+  // Applies the oldest queued change (unlink, then link), in the order they were queued.
+  void apply_oldest_change() {
+    const Change& c = changes[changes_head];
+    if (c.old_tile != kInvalidTile) unlink(c.slot, c.old_tile);
+    if (c.link) link(c);
+    changes_head = (changes_head + 1) % kChangeLag;
+    --changes_count;
+  }
+  void queue_change(const Change& c) {
+    if (changes_count == kChangeLag) apply_oldest_change();
+    changes[(changes_head + changes_count++) % kChangeLag] = c;
+    prefetch_change(c);
   }
 
   // One copy region more, or the last one longer when both ranges continue it (adjacent
@@ -607,24 +676,36 @@ struct GpuMap::Impl {
     auto* staging = static_cast<uint8_t*>(f.staging.mapped);
     // The cache's changed slots (client::CacheView), in slot order; mirror_tile is the
     // view's `known`: a slot left for a later frame (budget) stays unlinked until then.
-    view->changed_slots(mirror_tile, [&](const client::SlotChange& c) {
-      const uint32_t s = c.slot;
-      if (mirror_tile[s] != kInvalidTile) unlink(s);
-      if (c.tile == client::kNoTile) return true;
-      const uint32_t bytes = align4(uint32_t(c.bytes.size()));
-      if (off > 0 && off + bytes > opt.upload_budget_bytes) {  // one slot always fits: no starvation
-        ++totals.slots_deferred;
-        return false;
+    // The mirror's updates (unlink, link) are queued and applied kChangeLag changes later,
+    // in the same order; mirror_tile[s] may show a queued change's tile meanwhile (the view
+    // writes it), which nothing before its link reads: unlink gets the old tile with it.
+    view->changed_slots(mirror_tile, [&](const client::SlotChange& sc) {
+      const uint32_t s = sc.slot;
+      Change c;
+      c.slot = s;
+      c.old_tile = mirror_tile[s];
+      bool done = true;
+      if (sc.tile != client::kNoTile) {
+        const uint32_t bytes = align4(uint32_t(sc.bytes.size()));
+        if (off > 0 && off + bytes > opt.upload_budget_bytes) {  // one slot always fits: no starvation
+          ++totals.slots_deferred;
+          done = false;
+        } else {
+          std::memcpy(staging + off, sc.bytes.data(), sc.bytes.size());
+          std::memset(staging + off + sc.bytes.size(), 0, bytes - sc.bytes.size());
+          const uint64_t dst = uint64_t(s) * slot_words * 4;
+          if (bytes) add_copy(pool_copies, off, dst, bytes);
+          off += bytes;
+          c.link = true;
+          c.tile = sc.tile;
+          read_index_entries(c, sc.bytes);
+          ++fs.slots_uploaded;
+        }
       }
-      std::memcpy(staging + off, c.bytes.data(), c.bytes.size());
-      std::memset(staging + off + c.bytes.size(), 0, bytes - c.bytes.size());
-      const uint64_t dst = uint64_t(s) * slot_words * 4;
-      if (bytes) add_copy(pool_copies, off, dst, bytes);
-      off += bytes;
-      link(s, c.tile, c.bytes);
-      ++fs.slots_uploaded;
-      return true;
+      if (c.old_tile != kInvalidTile || c.link) queue_change(c);
+      return done;
     });
+    while (changes_count > 0) apply_oldest_change();
     fs.tile_bytes = off;
     if (deep_part) deep.update(*view, [this](uint32_t w, uint32_t v) { set_page_word(w, v); });
     if (engine && !page_table_sent) {  // engine mode's first frame: the whole page table
