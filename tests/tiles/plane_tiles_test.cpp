@@ -428,7 +428,7 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
   if (scene.triangles.empty()) GTEST_SKIP() << "assimp-testmodels missing: run scripts/deps";
   const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), scene.bounds());
   const uint32_t depth = 7, level = 9;
-  uint64_t plane_texels = 0, labelled = 0, table_merged = 0, table_unmerged = 0, values = 0, values_ungrown = 0;
+  uint64_t plane_texels = 0, labelled = 0, table_merged = 0, table_unmerged = 0, values = 0, values_ungrown = 0, values_narrow = 0;
   uint64_t zeros_rounded = 0, zeros_unrounded = 0, z_rounded = 0, z_unrounded = 0, z_stpn = 0, z_packed = 0;
   // Trailing zero bits of a plane tile's table entries (a, b, c), and its table's zlib size.
   auto table_of = [](const std::vector<uint8_t>& tile, uint64_t& zeros, uint64_t& z) {
@@ -447,6 +447,10 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
       ungrown.grow_labels = false;
       values += s.pruned.valued_count();
       values_ungrown += fit_planes(t.h, ungrown).pruned.valued_count();
+      // Wide labelled blocks (up to 8 planes) answer more of them than a palette of 4.
+      PlaneFitOptions narrow;
+      narrow.max_palette = planes::kPalette;
+      values_narrow += fit_planes(t.h, narrow).pruned.valued_count();
     }
     if (s.planes.empty() && s.labelled.empty()) continue;
     labelled += s.labelled.size();
@@ -515,6 +519,7 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
   EXPECT_GT(plane_texels, 0u) << "the engine's flat faces seen at a slant are planes";
   EXPECT_GT(labelled, 0u) << "blocks across the engine's edges are labelled";
   EXPECT_LT(values, values_ungrown) << "grown labels leave fewer values to the inner trees";
+  EXPECT_LT(values, values_narrow) << "wide labelled blocks leave fewer values to the inner trees";
   EXPECT_LT(table_merged, table_unmerged) << "planes of one surface found on separate blocks are merged";
   EXPECT_GT(zeros_rounded, zeros_unrounded + 20 * table_merged) << "rounded planes end in zero bits";
   EXPECT_LT(z_rounded, z_unrounded) << "rounded planes deflate smaller";
