@@ -5,11 +5,12 @@
 // OUT for bench_pack_bytes (per-section bytes, the planes section included).
 //
 //   bench_plane_packs SCENE@RES... [--out DIR] [--json PATH] [--light SPEC] [--min-shift S] [--min-nodes N] [--min-reused N]
-//                     [--no-merge] [--no-round] [--no-pack] [--no-predict] [--no-grow] [--stats]
+//                     [--no-merge] [--no-round] [--no-pack] [--no-predict] [--no-grow] [--max-palette N] [--grow-seeds N] [--stats]
 //                     [--only default,static,planes]
 // (--no-grow: a labelled block's missing texels get one plane fitted to them all or none,
 // PlaneFitOptions::grow_labels; --stats: where the planes build's valued nodes went,
-// PlaneFitStats, printed after each scene.)
+// PlaneFitStats, printed after each scene; --max-palette 4: no wide labelled blocks, the
+// version 2 tiles of before, byte for byte.)
 // (--no-pack stores plane tiles as STPN instead of packed, MapBuildOptions::pack_plane_tiles;
 // --no-predict packs them without predicted labels, "STPQ", MapBuildOptions::predict_plane_labels.)
 // (--only builds the named variants alone; the others' columns print 0).
@@ -60,6 +61,8 @@ int main(int argc, char** argv) try {
       .flag("--no-pack", pack_planes, "Store plane tiles as STPN instead of packed", false)
       .flag("--no-predict", predict_labels, "Pack plane tiles without predicted labels (STPQ)", false)
       .flag("--no-grow", fit.grow_labels, "PlaneFitOptions::grow_labels off (the old texel-order labelling)", false)
+      .value("--max-palette", fit.max_palette, "PlaneFitOptions::max_palette (4: no wide labelled blocks, the form before)")
+      .value("--grow-seeds", fit.grow_seeds, "PlaneFitOptions::grow_seeds (1..3)")
       .flag("--stats", stats, "Print where values go and why blocks are rejected")
       .with("--only", [&](const std::string& list) {
               std::string name;
@@ -118,11 +121,11 @@ int main(int argc, char** argv) try {
     if (stats && fit_stats.tiles) {
       const st::PlaneFitStats& f = fit_stats;
       std::printf("  fit: %llu tiles searched; valued nodes %llu -> %llu left (finest texels %llu -> %llu); "
-                  "%llu plane blocks, %llu labelled\n",
+                  "%llu plane blocks, %llu labelled (%llu wide)\n",
                   (unsigned long long)f.tiles, (unsigned long long)f.values_before, (unsigned long long)f.values_after,
                   (unsigned long long)f.leaves_before, (unsigned long long)f.leaves_after,
-                  (unsigned long long)f.plane_blocks, (unsigned long long)f.labelled_blocks);
-      const char* why[3] = {"fewer nodes than min_labelled", "a texel without preimage", "more planes than 4"};
+                  (unsigned long long)f.plane_blocks, (unsigned long long)f.labelled_blocks, (unsigned long long)f.wide_blocks);
+      const char* why[3] = {"fewer nodes than min_labelled", "a texel without preimage", "more planes than max_palette"};
       for (int r = 0; r < 3; ++r)
         std::printf("  8x8 left, %-30s %9llu blocks %10llu valued nodes\n", why[r], (unsigned long long)f.left_blocks[r],
                     (unsigned long long)f.left_values[r]);
@@ -134,7 +137,7 @@ int main(int argc, char** argv) try {
       std::printf("\n");
       nlohmann::json js = {{"tiles", f.tiles.load()}, {"values_before", f.values_before.load()},
                            {"values_after", f.values_after.load()}, {"leaves_before", f.leaves_before.load()},
-                           {"leaves_after", f.leaves_after.load()}};
+                           {"leaves_after", f.leaves_after.load()}, {"wide_blocks", f.wide_blocks.load()}};
       for (int k = 0; k <= 16; ++k) js["need_blocks"].push_back(f.need_blocks[k].load());
       for (int k = 0; k <= 16; ++k) js["need_values"].push_back(f.need_values[k].load());
       for (int r = 0; r < 3; ++r) js["left_blocks"].push_back(f.left_blocks[r].load()), js["left_values"].push_back(f.left_values[r].load());

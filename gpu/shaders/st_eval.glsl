@@ -433,7 +433,8 @@ float st_plane_round(uint hi, uint lo) {
 // Whether plane tile `base` answers (rel, x, y); its depth in `d`. Words: 2 block count B,
 // 4 table count T, 5 labelled blocks L, 6 the table (6 words a plane: a, b, c), 6 + 6T the
 // blocks (2 words: start, shift | kind << 8 | index << 16), 6 + 6T + 2B the labelled blocks
-// (6 words: palette u16 x 4, 2-bit labels); v = a + b fx + c fy modulo 2^64 in tile coordinates.
+// (6-word slots: kind 1 palette u16 x 4, 2-bit labels; kind 2, two slots: palette u16 x 8,
+// 3 bit planes of 2 words); v = a + b fx + c fy modulo 2^64 in tile coordinates.
 bool st_plane_lookup(uint base, uint rel, uint x, uint y, out float d) {
   const uint finest = ((ST_POOL(base + 1u) >> 16u) & 0xFFu) - 1u;
   const uint s = finest - min(rel, finest);
@@ -453,10 +454,17 @@ bool st_plane_lookup(uint base, uint rel, uint x, uint y, out float d) {
   const uint start = ST_POOL(r), w = ST_POOL(r + 1u), shift = w & 0xFFu;
   if (shift <= s || key - start >= (1u << (2u * shift))) return false;
   uint entry = w >> 16u;
-  if (((w >> 8u) & 0xFFu) == 1u) {  // labelled 8x8 block: the texel's label picks the plane
+  const uint kind = (w >> 8u) & 0xFFu;
+  if (kind != 0u) {  // labelled 8x8 block: the texel's label picks the plane
     const uint lb = blocks + 2u * ST_POOL(base + 2u) + 6u * entry;
     const uint i = ((fy & 7u) << 3u) | (fx & 7u);
-    const uint label = (ST_POOL(lb + 2u + (i >> 4u)) >> (2u * (i & 15u))) & 3u;
+    uint label;
+    if (kind == 1u) {
+      label = (ST_POOL(lb + 2u + (i >> 4u)) >> (2u * (i & 15u))) & 3u;
+    } else {  // wide: bit k of the label in bit plane k (words 4 + 2k, 5 + 2k)
+      const uint bw = lb + 4u + (i >> 5u), bit = i & 31u;
+      label = ((ST_POOL(bw) >> bit) & 1u) | (((ST_POOL(bw + 2u) >> bit) & 1u) << 1u) | (((ST_POOL(bw + 4u) >> bit) & 1u) << 2u);
+    }
     entry = (ST_POOL(lb + (label >> 1u)) >> (16u * (label & 1u))) & 0xFFFFu;
   }
   const uint t = base + 6u + 6u * entry;

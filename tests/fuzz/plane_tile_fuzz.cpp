@@ -25,7 +25,8 @@ namespace {
 // A tile of `level` whose texels lie on a few slanted planes (open geometry: hi = lo), the
 // field plane tiles are made for: one plane, two halves (labelled blocks on their edge), a
 // plane with a step of holes, and facets: three planes of its own in every 8x8 block (the
-// labelled blocks whose planes are grown from seeds, PlaneFitOptions::grow_labels).
+// labelled blocks whose planes are grown from seeds, PlaneFitOptions::grow_labels), or six
+// (wide labelled blocks).
 st::IntervalTile planar_tile(uint32_t level, int kind) {
   const uint32_t side = 1u << level;
   st::IntervalTile t{level, 0, 0, side, side, {}};
@@ -40,6 +41,10 @@ st::IntervalTile planar_tile(uint32_t level, int kind) {
         const double sx[3] = {0.0011, -0.0023, 0.0004}, sy[3] = {0.0007, 0.0015, -0.0031};
         d = 0.3 + 0.01 * double(x / 8 + 3 * (y / 8)) + 0.05 * facet + sx[facet] * x + sy[facet] * y;
       }
+      if (kind == 5) {  // six facets a block: wide labelled blocks (3-bit labels)
+        const uint32_t facet = (x % 8) / 3 + 3 * ((y % 8) / 4);
+        d = 0.2 + 0.01 * double(x / 8 + 3 * (y / 8)) + 0.07 * facet + 0.0003 * facet * x - 0.0002 * facet * y;
+      }
       const float f = float(d);
       t.at(x, y) = {f, kind == 3 ? f + 0.01f : f};
     }
@@ -51,7 +56,7 @@ st::IntervalTile planar_tile(uint32_t level, int kind) {
 std::vector<st::fuzz::Bytes> st::fuzz::seeds() {
   std::vector<Bytes> out;
   for (uint32_t level : {3u, 4u, 5u})
-    for (int kind = 0; kind < 5; ++kind) {
+    for (int kind = 0; kind < 6; ++kind) {
       const st::PlaneSplit s = st::fit_planes(st::build_hierarchy(planar_tile(level, kind)), st::PlaneFitOptions{3, 1, 10});
       if (s.planes.empty() && s.labelled.empty()) continue;
       for (st::Encoding e : {st::Encoding::dagmh, st::Encoding::mmh}) {

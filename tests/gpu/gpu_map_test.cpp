@@ -284,7 +284,7 @@ TEST(GpuMap, EveryTexelOfAPlaneTilesPackAnswersBitExactlyLikeTheCpu) {
         ps.push_back(p);
       }
     }
-    // Labelled 8x8 blocks in free squares: 1-4 random planes, a random label per texel.
+    // Labelled 8x8 blocks in free squares: 1-8 random planes (past 4 a wide block), a random label per texel.
     std::vector<LabelBlock> lbs;
     for (int k = 0; k < 3 && t.depth > planes::kLabelShift; ++k) {
       LabelBlock lb;
@@ -294,7 +294,7 @@ TEST(GpuMap, EveryTexelOfAPlaneTilesPackAnswersBitExactlyLikeTheCpu) {
         free &= lb.start + 64 <= q.start || q.start + (uint64_t(1) << (2 * q.shift)) <= lb.start;
       for (const LabelBlock& q : lbs) free &= lb.start != q.start;
       if (!free) continue;
-      const size_t n = 1 + r() % planes::kPalette;
+      const size_t n = 1 + r() % planes::kWidePalette;
       for (size_t j = 0; j < n; ++j) {
         const int64_t mag = int64_t(1) << (r() % 53);
         planes::Plane q;

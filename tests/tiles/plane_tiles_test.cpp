@@ -5,6 +5,7 @@
 // the packed form a pack stores them in (plane_pack.hpp) likewise.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <bit>
 #include <cmath>
 #include <cstring>
@@ -85,7 +86,8 @@ TEST(PlaneFormat, LayoutIsPinned) {
   static_assert(kOffA == 0 && kOffB == 8 && kOffC == 16);
   static_assert(kOffStart == 0 && kOffShift == 4 && kOffKind == 5 && kOffIndex == 6 && kOffLabelBits == 8);
   static_assert(kKindPlane == 0 && kKindLabels == 1 && kLabelShift == 3 && kPalette == 4);
-  static_assert(kMagic == 0x4E505453u && kVersion == 2 && kFracBits == 60);
+  static_assert(kMagic == 0x4E505453u && kVersion == 3 && kVersionNarrow == 2 && kFracBits == 60);
+  static_assert(kKindWide == 2 && kWidePalette == 8 && kWideSlots == 2 && kOffWideBits == 16 && kOffWidePad == 40);
   // Tile of finest level 4 (16x16): an 8x8 block at (8, 0) and a 4x4 block at (0, 8) on one
   // plane (one table entry), and a labelled 8x8 block at (8, 8) whose odd columns take a
   // second plane.
@@ -180,6 +182,109 @@ TEST(PlaneFormat, LayoutIsPinned) {
   back = predicted_want;
   unpack_plane_tile(back);
   EXPECT_EQ(back, b);
+}
+
+// A wide labelled block (version 3, plane_format.hpp): 5 planes, label i mod 5 at texel i,
+// two slots, then a labelled block of two planes in the third slot. Every byte of the STPN
+// tile and of its packed forms is pinned; wide-block fields that are not the writer's are
+// refused by name.
+TEST(PlaneFormat, WideLabelledBlocksArePinnedAndChecked) {
+  LabelBlock wide, narrow;
+  wide.start = 0;      // (0, 0)
+  narrow.start = 192;  // (8, 8)
+  for (int64_t k = 0; k < 5; ++k) {
+    Plane q;
+    q.shift = 3;
+    q.a = 100 * k, q.b = k, q.c = -k;  // at the corner (0, 0): the table's a
+    wide.palette.push_back(q);
+  }
+  for (uint32_t i = 0; i < 64; ++i) wide.label[i] = uint8_t(i % 5), narrow.label[i] = uint8_t(i % 2);
+  for (size_t k : {4, 1}) {
+    Plane q = wide.palette[k];
+    q.a += 8 * q.b + 8 * q.c;  // at (8, 8)
+    narrow.palette.push_back(q);
+  }
+  const std::vector<uint8_t> inner{1, 2, 3, 4};
+  const std::vector<uint8_t> b = wrap_planes({}, 4, inner, {wide, narrow});
+  std::vector<uint8_t> want{'S', 'T', 'P', 'N', 3, 0, 5, 0,  // magic, version 3, levels, flags
+                            2, 0, 0, 0, 236, 0, 0, 0,        // 2 blocks, byte size 24 + 120 + 16 + 72 + 4
+                            5, 0, 0, 0, 3, 0, 0, 0};         // 5 planes, 3 label slots
+  for (int64_t k = 0; k < 5; ++k)
+    for (int64_t v : {100 * k, k, -k})
+      for (int n = 0; n < 8; ++n) want.push_back(uint8_t(uint64_t(v) >> (8 * n)));
+  const std::vector<uint8_t> blocks{0, 0, 0, 0, 3, 2, 0, 0,     // start 0, shift 3, wide, slot 0
+                                    192, 0, 0, 0, 3, 1, 2, 0};  // start 192, shift 3, labelled, slot 2
+  want.insert(want.end(), blocks.begin(), blocks.end());
+  const std::vector<uint8_t> wide_bytes{
+      0,    0,    1,    0,    2,    0,    3,    0,    4, 0, 4, 0, 4, 0, 4, 0,  // palette, unused entries repeat the last
+      0x4A, 0x29, 0xA5, 0x94, 0x52, 0x4A, 0x29, 0xA5,                          // label bit 0 of texels 0..63
+      0x8C, 0x31, 0xC6, 0x18, 0x63, 0x8C, 0x31, 0xC6,                          // bit 1
+      0x10, 0x42, 0x08, 0x21, 0x84, 0x10, 0x42, 0x08,                          // bit 2
+      0,    0,    0,    0,    0,    0,    0,    0};                            // padding
+  want.insert(want.end(), wide_bytes.begin(), wide_bytes.end());
+  const std::vector<uint8_t> narrow_palette{4, 0, 1, 0, 1, 0, 1, 0};
+  want.insert(want.end(), narrow_palette.begin(), narrow_palette.end());
+  want.insert(want.end(), 16, uint8_t(0x44));  // labels 0, 1, 0, 1 in each byte
+  want.insert(want.end(), inner.begin(), inner.end());
+  EXPECT_EQ(b, want);
+  const PlaneTileView v = validate_plane_tile(b);
+  EXPECT_EQ(v.label_count, 3u);
+  for (uint32_t i = 0; i < 64; ++i) EXPECT_EQ(v.plane_at(0, i % 8, i / 8).b, int64_t(i % 5)) << "texel " << i;
+  EXPECT_EQ(v.plane_at(0, 7, 7).fixed(7, 7), 100 * 3 + 3 * 7 - 3 * 7);  // texel 63: plane 3
+  EXPECT_EQ(v.plane_at(1, 8, 9).b, 4);
+  EXPECT_EQ(v.plane_at(1, 9, 9).a, 100 + 8 - 8);  // odd column: plane 1 at the block's corner
+  // Refused: a wide block in a version 2 tile, its padding, its slot, the slot count, its palette.
+  auto refused = [](std::vector<uint8_t> bad, size_t at, uint8_t value, const char* what) {
+    bad[at] = value;
+    try {
+      validate_plane_tile(bad);
+      ADD_FAILURE() << "accepted: " << what;
+    } catch (const FormatError& e) {
+      EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+    }
+  };
+  const size_t records = 24 + 120, slots = records + 16;
+  refused(b, kOffVersion, 2, "unknown kind 2 in a version 2 tile");
+  refused(b, slots + 40, 1, "padding at byte 200: not zero");
+  refused(b, records + 14, 1, "labelled blocks not in order");
+  refused(b, kOffLabelCount, 2, "past the 2 label slots");
+  refused(b, slots + 2 * 7, 5, "palette at byte 174: plane index >= 5");
+  // Packed: no plane block indices; the wide block's palette bytes (0, 0x80), its 8 entries
+  // and 24 label bytes as stored; the labelled block as before (plane_pack.hpp).
+  std::vector<uint8_t> packed_want(want.begin(), want.begin() + 24 + 120);
+  packed_want[3] = 'Q';
+  const std::vector<uint8_t> packed_parts{
+      0x0D, 0x03,                     // kinds: split, labelled, empty, empty | labelled
+      0x00, 0x80, 0x54, 0x03,         // palettes: wide; classes 0, 1, 1, 1 using entries 0 and 1
+      0, 1, 2, 3, 4, 4, 4, 4, 4, 1};  // the wide block's entries, the labelled block's distinct planes
+  packed_want.insert(packed_want.end(), packed_parts.begin(), packed_parts.end());
+  packed_want.insert(packed_want.end(), wide_bytes.begin() + 16, wide_bytes.begin() + 40);
+  packed_want.insert(packed_want.end(), 8, uint8_t(0xAA));  // one bit a texel: odd columns entry 1
+  packed_want.resize(want.size() - inner.size(), 0);
+  packed_want.insert(packed_want.end(), inner.begin(), inner.end());
+  EXPECT_EQ(pack_plane_tile(b, nullptr, false), packed_want);
+  std::vector<uint8_t> predicted_want = packed_want;  // plane 1 is least everywhere: mode 0 ties the others
+  predicted_want[3] = 'L';
+  EXPECT_EQ(pack_plane_tile(b), predicted_want);
+  for (const std::vector<uint8_t>& p : {packed_want, predicted_want}) {
+    std::vector<uint8_t> back = p;
+    unpack_plane_tile(back);
+    EXPECT_EQ(back, b);
+    auto refused_packed = [&](size_t at, uint8_t value, const char* what) {
+      std::vector<uint8_t> bad = p;
+      bad[at] = value;
+      try {
+        unpack_plane_tile(bad);
+        ADD_FAILURE() << "unpacked: " << what;
+      } catch (const FormatError& e) {
+        EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+      }
+    };
+    const size_t palettes = 24 + 120 + 2;
+    refused_packed(palettes, 1, "labelled block 0 classes at byte 146: not zero in a wide block");
+    refused_packed(palettes + 1, 0x81, "2 labelled blocks take 2 slots, label_count says 3");  // not wide
+    refused_packed(kOffLabelCount, 2, "2 labelled blocks take 3 slots, label_count says 2");
+  }
 }
 
 // Predicted labels (plane_pack.hpp, "STPL"): two labelled 8x8 blocks where a rising plane
@@ -323,7 +428,7 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
   if (scene.triangles.empty()) GTEST_SKIP() << "assimp-testmodels missing: run scripts/deps";
   const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), scene.bounds());
   const uint32_t depth = 7, level = 9;
-  uint64_t plane_texels = 0, labelled = 0, table_merged = 0, table_unmerged = 0, values = 0, values_ungrown = 0;
+  uint64_t plane_texels = 0, labelled = 0, table_merged = 0, table_unmerged = 0, values = 0, values_ungrown = 0, values_narrow = 0;
   uint64_t zeros_rounded = 0, zeros_unrounded = 0, z_rounded = 0, z_unrounded = 0, z_stpn = 0, z_packed = 0;
   // Trailing zero bits of a plane tile's table entries (a, b, c), and its table's zlib size.
   auto table_of = [](const std::vector<uint8_t>& tile, uint64_t& zeros, uint64_t& z) {
@@ -342,6 +447,10 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
       ungrown.grow_labels = false;
       values += s.pruned.valued_count();
       values_ungrown += fit_planes(t.h, ungrown).pruned.valued_count();
+      // Wide labelled blocks (up to 8 planes) answer more of them than a palette of 4.
+      PlaneFitOptions narrow;
+      narrow.max_palette = planes::kPalette;
+      values_narrow += fit_planes(t.h, narrow).pruned.valued_count();
     }
     if (s.planes.empty() && s.labelled.empty()) continue;
     labelled += s.labelled.size();
@@ -410,6 +519,7 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
   EXPECT_GT(plane_texels, 0u) << "the engine's flat faces seen at a slant are planes";
   EXPECT_GT(labelled, 0u) << "blocks across the engine's edges are labelled";
   EXPECT_LT(values, values_ungrown) << "grown labels leave fewer values to the inner trees";
+  EXPECT_LT(values, values_narrow) << "wide labelled blocks leave fewer values to the inner trees";
   EXPECT_LT(table_merged, table_unmerged) << "planes of one surface found on separate blocks are merged";
   EXPECT_GT(zeros_rounded, zeros_unrounded + 20 * table_merged) << "rounded planes end in zero bits";
   EXPECT_LT(z_rounded, z_unrounded) << "rounded planes deflate smaller";
@@ -528,10 +638,13 @@ TEST(PlaneTileHostile, TruncatedAndFlippedBuffersAreRefusedOrAnswerSafely) {
   for (uint32_t ty = 0; ty < 64 && good.empty(); ++ty) {
     const Traced t = trace_tile(scene, light, 9, 192 + 32 * (ty % 8), 128 + 32 * (ty / 8), depth);
     const PlaneSplit s = fit_planes(t.h, PlaneFitOptions{3, 1, 10});
-    if (!s.planes.empty() && !s.labelled.empty())
+    auto has = [&](bool wide) {
+      return std::any_of(s.labelled.begin(), s.labelled.end(), [&](const LabelBlock& b) { return (b.palette.size() > kPalette) == wide; });
+    };
+    if (!s.planes.empty() && has(false) && has(true))
       good = wrap_planes(s.planes, depth, encode(s.pruned, Encoding::dagmh), s.labelled);
   }
-  ASSERT_FALSE(good.empty()) << "no tile with a plane block and a labelled block";
+  ASSERT_FALSE(good.empty()) << "no tile with a plane block, a labelled block and a wide one";
   ASSERT_NO_THROW(open_encoded(Encoding::dagmh, good));
   auto probe = [&](std::span<const uint8_t> b) {
     std::unique_ptr<Evaluator> ev;
@@ -594,12 +707,12 @@ TEST(PlaneTileHostile, TruncatedAndFlippedBuffersAreRefusedOrAnswerSafely) {
       probe_packed(std::move(bad));
     }
   std::vector<uint8_t> newer = good;
-  newer[kOffVersion] = 3;
+  newer[kOffVersion] = 4;
   try {
     open_encoded(Encoding::dagmh, newer);
-    ADD_FAILURE() << "a version-3 plane tile opened";
+    ADD_FAILURE() << "a version-4 plane tile opened";
   } catch (const FormatError& e) {
-    EXPECT_NE(std::string(e.what()).find("version 3, this reader knows 2"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("version 4, this reader knows 2 and 3"), std::string::npos) << e.what();
   }
   std::vector<uint8_t> nested = wrap_planes({validate_plane_tile(good).plane(0)}, depth, good);
   EXPECT_THROW(open_encoded(Encoding::dagmh, nested), FormatError);

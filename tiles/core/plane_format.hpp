@@ -9,14 +9,16 @@
 //
 //   offset        size  field
 //   0             4     magic        "STPN", bytes in that order
-//   4             2     version      kVersion (2; version 1 had a plane per block)
+//   4             2     version      kVersion (3: wide labelled blocks) or 2 (none); version
+//                                    1 had a plane per block
 //   6             1     levels       the tile's finest level + 1 (1..kMaxLevels); the inner
 //                                    buffer has the same finest level
 //   7             1     flags        zero (no flag is defined)
 //   8             4     block_count  B (1..kMaxPlanes)
 //   12            4     byte_size    whole buffer, header, table, blocks and inner buffer
 //   16            4     table_count  T (1..kMaxTable)
-//   20            4     label_count  L (0..kMaxTable): labelled blocks
+//   20            4     label_count  L (0..kMaxTable): labels section slots (a labelled block
+//                                    one, a wide one two)
 //   24            24*T  table        planes (a, b, c) of the tile (below)
 //   24+24T        8*B   blocks       sorted by `start`, disjoint (below)
 //   24+24T+8B     24*L  labels       the labelled blocks' palettes and labels (below)
@@ -31,11 +33,20 @@
 //                  4^shift (the block is an aligned square of the tile)
 //   4  u8  shift   log2 of the block's side, kMinShift..kMaxShift, <= the tile's finest level
 //   5  u8  kind    kKindPlane: one plane answers the block; kKindLabels: a labelled block
-//                  (shift kLabelShift), its texels answered by the planes their labels name
-//   6  u16 index   kKindPlane: index into the table, < T; kKindLabels: into the labels, < L
+//                  (shift kLabelShift), its texels answered by the planes their labels name;
+//                  kKindWide (version 3): a wide labelled block (8 planes, 3-bit labels)
+//   6  u16 index   kKindPlane: index into the table, < T; kKindLabels, kKindWide: the slot of
+//                  the labels section (24 bytes a slot) where the block starts, < L
 // Labelled block (24 bytes): 0 four u16 palette entries, each < T; 8 sixteen bytes of
 //   2-bit labels, texel (x, y) of the block (i = 8 y + x) in bits 2 (i mod 4) .. +1 of byte
 //   i / 4: its plane is palette[label] (unused palette entries repeat a used one).
+// Wide labelled block (version 3, record kind kKindWide, shift kLabelShift; two consecutive
+//   24-byte slots of the labels section, the record's index naming the first; 48 bytes):
+//   0 eight u16 palette entries, each < T; 16 three 8-byte bit planes of 3-bit labels, bit k
+//   of texel i's label in bit i mod 8 of byte 16 + 8 k + i / 8; 40 eight zero bytes. The
+//   labels section's slots are taken in the order of the records (a labelled block one, a
+//   wide one two), so L counts slots. Version 2 tiles (no wide block) read unchanged; the
+//   writer writes version 2 when a tile has no wide block.
 //
 // Depth of a finest texel (x, y) of a block (tile coordinates) whose plane is (a, b, c):
 // v = a + b x + c y modulo 2^64, read as a signed 64-bit integer. The validator requires
@@ -58,16 +69,26 @@
 namespace st::planes {
 
 inline constexpr uint32_t kMagic = 0x4E505453u;  // bytes "STPN"
-inline constexpr uint16_t kVersion = 2;
+inline constexpr uint16_t kVersion = 3;
+inline constexpr uint16_t kVersionNarrow = 2;  // written when no block is wide; read as version 3
 inline constexpr uint32_t kMaxLevels = 17;  // finest level <= 16: starts fit 32 bits
 inline constexpr size_t kOffMagic = 0, kOffVersion = 4, kOffLevels = 6, kOffFlags = 7;
 inline constexpr size_t kOffPlaneCount = 8, kOffByteSize = 12, kOffTableCount = 16, kOffLabelCount = 20;
 inline constexpr size_t kHeaderSize = 24;
 inline constexpr size_t kEntrySize = 24, kOffA = 0, kOffB = 8, kOffC = 16;  // table entry
 inline constexpr size_t kRecordSize = 8, kOffStart = 0, kOffShift = 4, kOffKind = 5, kOffIndex = 6;  // block
-inline constexpr uint8_t kKindPlane = 0, kKindLabels = 1;
+inline constexpr uint8_t kKindPlane = 0, kKindLabels = 1, kKindWide = 2;
 inline constexpr uint32_t kLabelShift = 3, kPalette = 4;
 inline constexpr size_t kLabelSize = 24, kOffLabelBits = 8;  // labelled block: palette, then labels
+// Wide labelled block: two slots, 8 palette entries, 3 bit planes of 8 bytes, 8 zero bytes.
+inline constexpr uint32_t kWidePalette = 8, kWideSlots = 2, kWideLabelBits = 3;
+inline constexpr size_t kOffWideBits = 16, kOffWidePad = 40, kWideSize = kWideSlots * kLabelSize;
+// Texel i's (i = 8 y + x) label in a wide labelled block's bit planes `bits` (its byte 16 on).
+inline uint32_t wide_label(const uint8_t* bits, uint32_t i) {
+  const uint32_t byte = i / 8, bit = i % 8;
+  return uint32_t((bits[byte] >> bit) & 1u) | uint32_t((bits[8 + byte] >> bit) & 1u) << 1 |
+         uint32_t((bits[16 + byte] >> bit) & 1u) << 2;
+}
 inline constexpr uint32_t kMaxTable = 0xFFFFu;
 inline constexpr uint32_t kMinShift = 2, kMaxShift = 8;
 inline constexpr uint32_t kMaxPlanes = 1u << 20;

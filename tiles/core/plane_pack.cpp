@@ -23,6 +23,9 @@ inline constexpr uint32_t kMagicPredicted = 0x4C505453u;  // bytes "STPL": label
 // 4..5: 0 none, 1 the least plane, 2 the greatest), all predicted (bit 6: no label bytes).
 inline constexpr uint32_t kModeNone = 0, kModeLeast = 1, kModeGreatest = 2, kModes = 3;
 inline constexpr uint32_t kModeShift = 4, kAllPredicted = 0x40;
+// A wide labelled block's use byte (STPQ and STPL), its class byte 0: its 8 palette entries
+// follow in the planes stream as indices, its 24 label bytes (3 bit planes) in the labels.
+inline constexpr uint8_t kWideUse = 0x80;
 // STPL header byte 7 (the STPN flags, 0): the inner buffer's kind when its header's
 // derivable fields are left out (zeros in place): 0 none left out, 1 MH, 2 MMH.
 inline constexpr uint32_t kInnerKept = 0, kInnerMh = 1, kInnerMmh = 2;
@@ -207,6 +210,17 @@ bool emit_node(const PlaneTileView& v, uint64_t start, uint32_t s, uint32_t& nex
     }
     out.node(kNodeLabels);
     const uint8_t* l = v.labels.data() + size_t(index) * kLabelSize;
+    if (r[kOffKind] == kKindWide) {  // as stored: 8 entries, 24 label bytes
+      out.palettes.push_back(0);
+      out.palettes.push_back(kWideUse);
+      for (uint32_t k = 0; k < kWidePalette; ++k) {
+        const uint32_t e = load_le<uint16_t>(l + 2 * k);
+        out.planes.push_back(uint8_t(e));
+        if (v.table_count > 256) out.planes.push_back(uint8_t(e >> 8));
+      }
+      out.labels.insert(out.labels.end(), l + kOffWideBits, l + kOffWidePad);
+      return true;
+    }
     uint32_t palette[kPalette], distinct[kPalette], n = 0, classes = 0;
     for (uint32_t k = 0; k < kPalette; ++k) {
       palette[k] = load_le<uint16_t>(l + 2 * k);
@@ -382,7 +396,8 @@ void unpack(std::span<uint8_t> b) {
   const uint32_t label_count = load_le<uint32_t>(b.data() + kOffLabelCount);
   if (count > kMaxPlanes) fail("block_count", kOffPlaneCount, std::to_string(count) + " above 2^20");
   if (tables > kMaxTable) fail("table_count", kOffTableCount, std::to_string(tables) + " above 65535");
-  if (label_count > count) fail("label_count", kOffLabelCount, std::to_string(label_count) + " above block_count");
+  if (label_count > uint64_t(kWideSlots) * count)
+    fail("label_count", kOffLabelCount, std::to_string(label_count) + " above 2 block_count");
   const size_t table_end = kHeaderSize + size_t(tables) * kEntrySize;
   const size_t labels_at = table_end + size_t(count) * kRecordSize;
   const size_t inner_at = labels_at + size_t(label_count) * kLabelSize;
@@ -400,27 +415,46 @@ void unpack(std::span<uint8_t> b) {
     fail("block kinds", kinds_at, std::to_string(blocks.size()) + " blocks, block_count says " + std::to_string(count));
   const bool wide = tables > 256;
   std::vector<uint16_t> index(count);
-  std::vector<uint32_t> label_start;  // each labelled block's start, in order
-  label_start.reserve(label_count);
+  std::vector<uint32_t> label_start, label_block;  // each labelled block's start and block number, in order
   for (uint32_t i = 0; i < count; ++i) {
     if (blocks[i].kind == kKindPlane) {
       index[i] = uint16_t(r.index("plane index", wide));
     } else {
-      index[i] = uint16_t(label_start.size());
+      label_block.push_back(i);
       label_start.push_back(blocks[i].start);
     }
   }
   const uint32_t labelled = uint32_t(label_start.size());
-  if (labelled != label_count)
-    fail("block kinds", kinds_at, std::to_string(labelled) + " labelled blocks, label_count says " + std::to_string(label_count));
-  std::vector<uint8_t> palettes(2 * size_t(label_count));
+  if (labelled > label_count)
+    fail("block kinds", kinds_at, std::to_string(labelled) + " labelled blocks, label_count says " + std::to_string(label_count) + " slots");
+  std::vector<uint8_t> palettes(2 * size_t(labelled));
   for (uint8_t& p : palettes) p = r.byte("palettes");
+  // Each labelled block's first slot (a wide one takes two), in record order.
+  std::vector<uint32_t> slot(labelled);
+  uint32_t slots = 0;
+  for (uint32_t j = 0; j < labelled; ++j) {
+    const bool is_wide = palettes[2 * j + 1] == kWideUse;
+    slot[j] = slots;
+    slots += is_wide ? kWideSlots : 1;
+    if (slots <= label_count) {
+      index[label_block[j]] = uint16_t(slot[j]);
+      blocks[label_block[j]].kind = is_wide ? kKindWide : kKindLabels;
+    }
+  }
+  if (slots != label_count)
+    fail("block kinds", kinds_at, std::to_string(labelled) + " labelled blocks take " + std::to_string(slots) +
+                                      " slots, label_count says " + std::to_string(label_count));
+  auto is_wide = [&](uint32_t j) { return blocks[label_block[j]].kind == kKindWide; };
   std::vector<uint8_t> labels(size_t(label_count) * kLabelSize);
-  std::vector<uint8_t> distinct_count(label_count);
-  for (uint32_t j = 0; j < label_count; ++j) {
+  std::vector<uint8_t> distinct_count(labelled);
+  for (uint32_t j = 0; j < labelled; ++j) {
     const uint32_t classes = palettes[2 * j], used = palettes[2 * j + 1] & (predicted ? 0x0Fu : 0xFFu);
     const uint32_t mode = palettes[2 * j + 1] >> kModeShift & 3u, all = palettes[2 * j + 1] & kAllPredicted;
-    const size_t at = r.at() - 2 * size_t(label_count - j);  // its palette bytes
+    const size_t at = r.at() - 2 * size_t(labelled - j);  // its palette bytes
+    if (is_wide(j)) {
+      if (classes != 0) fail("labelled block " + std::to_string(j) + " classes", at, "not zero in a wide block");
+      continue;
+    }
     uint32_t n = 0;
     for (uint32_t k = 0; k < kPalette; ++k) {
       const uint32_t c = (classes >> (2 * k)) & 3u;
@@ -434,8 +468,13 @@ void unpack(std::span<uint8_t> b) {
                                                                               " with " + std::to_string(std::popcount(used)) + " entries used");
     distinct_count[j] = uint8_t(n);
   }
-  std::vector<uint32_t> entries(size_t(label_count) * kPalette);  // each block's palette as table indices
-  for (uint32_t j = 0; j < label_count; ++j) {
+  std::vector<uint32_t> entries(size_t(labelled) * kPalette);  // each block's palette as table indices
+  for (uint32_t j = 0; j < labelled; ++j) {
+    if (is_wide(j)) {  // its 8 entries as stored (the STPN validator checks them)
+      uint8_t* l = labels.data() + size_t(slot[j]) * kLabelSize;
+      for (uint32_t k = 0; k < kWidePalette; ++k) store_le<uint16_t>(l + 2 * k, uint16_t(r.index("palette planes", wide)));
+      continue;
+    }
     const uint32_t classes = palettes[2 * j];
     uint32_t distinct[kPalette] = {};
     for (uint32_t c = 0; c < distinct_count[j]; ++c) {
@@ -446,15 +485,20 @@ void unpack(std::span<uint8_t> b) {
       if (predicted && distinct[c] >= tables)
         fail("labelled block " + std::to_string(j) + " planes", at, "plane " + std::to_string(distinct[c]) + " of " + std::to_string(tables));
     }
-    uint8_t* l = labels.data() + size_t(j) * kLabelSize;
+    uint8_t* l = labels.data() + size_t(slot[j]) * kLabelSize;
     for (uint32_t k = 0; k < kPalette; ++k) {
       entries[size_t(j) * kPalette + k] = distinct[(classes >> (2 * k)) & 3u];
       store_le<uint16_t>(l + 2 * k, uint16_t(entries[size_t(j) * kPalette + k]));
     }
   }
-  for (uint32_t j = 0; j < label_count; ++j) {
+  for (uint32_t j = 0; j < labelled; ++j) {
     const uint32_t used = palettes[2 * j + 1] & 0x0Fu;
-    uint8_t* bits = labels.data() + size_t(j) * kLabelSize + kOffLabelBits;
+    if (is_wide(j)) {  // its 24 label bytes as stored
+      uint8_t* bits = labels.data() + size_t(slot[j]) * kLabelSize + kOffWideBits;
+      for (size_t k = 0; k < kOffWidePad - kOffWideBits; ++k) bits[k] = r.byte("labels");
+      continue;
+    }
+    uint8_t* bits = labels.data() + size_t(slot[j]) * kLabelSize + kOffLabelBits;
     const size_t at = r.at();
     if (predicted && std::popcount(used) == 2) {
       // One bit a texel against a two-plane prediction: undo it, check the mode is the writer's.

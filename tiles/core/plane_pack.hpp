@@ -9,7 +9,7 @@
 //
 //   offset  size  field
 //   0       4     magic   "STPQ", bytes in that order
-//   4       20    the STPN header's bytes 4..23 unchanged (version 2, levels, flags,
+//   4       20    the STPN header's bytes 4..23 unchanged (version 2 or 3, levels, flags,
 //                 block_count B, byte_size, table_count T, label_count L)
 //   24      24*T  the plane table, unchanged (a varint form without the rounded planes'
 //                 trailing zero bits deflated no smaller: zlib stores those zero bytes)
@@ -18,23 +18,27 @@
 //                          (shift = finest level), children in Morton order:
 //                          0 no block in it, 1 split into four (only above kMinShift),
 //                          2 one plane block (shift kMinShift..kMaxShift), 3 a labelled
-//                          block (shift kLabelShift); the last byte's unused bits zero
+//                          block, wide or not (shift kLabelShift); the last byte's unused
+//                          bits zero
 //   then          indices  a plane block's table index, in block order: one byte when
 //                          T <= 256, else two (little-endian)
 //   then          palettes a labelled block's 2 bytes, in block order: byte 0 the class of
 //                          each of its 4 palette entries (bits 2k..2k+1: the k-th entry is
 //                          the class-th distinct plane, classes in first-seen order),
-//                          byte 1 the palette entries its labels use (bit k: entry k)
+//                          byte 1 the palette entries its labels use (bit k: entry k);
+//                          a wide labelled block (plane_format.hpp) 0 and 0x80 (kWideUse):
+//                          its slots, two, are implied by it (L counts slots)
 //   then          planes   each labelled block's distinct planes, class order, one or two
-//                          bytes each as indices
+//                          bytes each as indices; a wide block's 8 palette entries as stored
 //   then          labels   per labelled block: nothing when it uses one entry; 8 bytes
 //                          when it uses two (bit i of byte i / 8 for texel i = 8 y + x:
-//                          set = the higher entry); else its 16 STPN label bytes
+//                          set = the higher entry); else its 16 STPN label bytes; a wide
+//                          block's 24 label bytes (bit planes) as stored
 //   then          zeros    up to where the STPN tile's inner buffer starts
 //   24+24T+8B+24L the inner buffer, unchanged
 //
 // Predicted labels (magic "STPL", pack feature bit 14 predicted_plane_labels; otherwise
-// the STPQ layout): a labelled block using two or more entries has in its use byte bits
+// the STPQ layout): a labelled block (not wide) using two or more entries has in its use byte bits
 // 4..5 a prediction mode (0 none, 1 each texel takes the used entry whose plane is least
 // there, a crease's near surface, 2 the greatest; ties to the lower entry; plane values
 // a + b x + c y summed modulo 2^64 at the texel's tile coordinates) and bit 6 "all

@@ -210,6 +210,7 @@ class PlaneTileEvaluator final : public Evaluator, public TapWalks {
     uint64_t x = ~uint64_t(0), y = ~uint64_t(0);
     uint32_t index = 0, shift = 0;
     const uint8_t* labels = nullptr;
+    bool wide = false;  // labels: a wide labelled block's
     uint64_t a = 0, b = 0, c = 0;
   };
   // The block holding finest texel (fx, fy), searched outward from b.index (the last
@@ -254,8 +255,9 @@ void PlaneTileEvaluator::find_tap_block(uint64_t fx, uint64_t fy, TapBlock& blk)
   if (m >= uint64_t(start) + (uint64_t(1) << (2 * shift))) return;  // past the block's end (block_end)
   blk.x = morton_compact(start), blk.y = morton_compact(uint64_t(start) >> 1), blk.shift = shift;
   const uint32_t index = load_le<uint16_t>(b + kOffIndex);
-  if (b[kOffKind] == kKindLabels) {
+  if (b[kOffKind] != kKindPlane) {
     blk.labels = v_.labels.data() + size_t(index) * kLabelSize;
+    blk.wide = b[kOffKind] == kKindWide;
   } else {
     const uint8_t* e = v_.table.data() + size_t(index) * kEntrySize;
     blk.labels = nullptr;
@@ -285,6 +287,7 @@ TapRunEnd PlaneTileEvaluator::tap_run(const TapRun& run, TapPath& path) const no
   uint64_t bx = ~uint64_t(0), by = ~uint64_t(0), pa = 0, pb = 0, pc = 0;
   uint32_t bshift = 0, bindex = 0;
   const uint8_t* blabels = nullptr;
+  bool bwide = false;
   for (size_t k = 0; k < n; ++k) {
     const uint32_t i = order[k];
     const PcfQuery& q = queries[i];
@@ -300,13 +303,14 @@ TapRunEnd PlaneTileEvaluator::tap_run(const TapRun& run, TapPath& path) const no
       blk.index = bindex;
       find_tap_block(fx, fy, blk);
       bx = blk.x, by = blk.y, bshift = blk.shift, bindex = blk.index;
-      blabels = blk.labels, pa = blk.a, pb = blk.b, pc = blk.c;
+      blabels = blk.labels, bwide = blk.wide, pa = blk.a, pb = blk.b, pc = blk.c;
     }
     if (bshift > s) {  // from_plane: a block coarser than the texel answers it
       uint64_t a = pa, b = pb, c = pc;
-      if (blabels) [[unlikely]] {  // plane_at's label: the texel's 2 bits, then its palette entry
+      if (blabels) [[unlikely]] {  // plane_at's label: the texel's 2 (3) bits, then its palette entry
         const uint32_t t = uint32_t(((fy - by) << kLabelShift) + (fx - bx));
-        const uint32_t label = (blabels[kOffLabelBits + t / 4] >> (2 * (t % 4))) & 3u;
+        const uint32_t label =
+            bwide ? wide_label(blabels + kOffWideBits, t) : (blabels[kOffLabelBits + t / 4] >> (2 * (t % 4))) & 3u;
         const uint8_t* e = table + size_t(load_le<uint16_t>(blabels + 2 * label)) * kEntrySize;
         a = load_le<uint64_t>(e + kOffA), b = load_le<uint64_t>(e + kOffB), c = load_le<uint64_t>(e + kOffC);
       }
@@ -337,10 +341,11 @@ Plane PlaneTileView::plane_at(uint32_t i, uint32_t fx, uint32_t fy) const {
   p.shift = r[kOffShift];
   const uint32_t x0 = morton_compact(p.start), y0 = morton_compact(uint64_t(p.start) >> 1);
   uint32_t entry = load_le<uint16_t>(r + kOffIndex);
-  if (r[kOffKind] == kKindLabels) {
+  if (r[kOffKind] != kKindPlane) {  // a labelled block (validated: kKindLabels or kKindWide)
     const uint8_t* lb = labels.data() + size_t(entry) * kLabelSize;
     const uint32_t t = ((fy - y0) << kLabelShift) + (fx - x0);
-    const uint32_t label = (lb[kOffLabelBits + t / 4] >> (2 * (t % 4))) & 3u;
+    const uint32_t label = r[kOffKind] == kKindWide ? wide_label(lb + kOffWideBits, t)
+                                                    : (lb[kOffLabelBits + t / 4] >> (2 * (t % 4))) & 3u;
     entry = load_le<uint16_t>(lb + 2 * label);
   }
   const uint8_t* e = table.data() + size_t(entry) * kEntrySize;
@@ -386,8 +391,10 @@ PlaneTileView validate_plane_tile(std::span<const uint8_t> b) {
     fail("header", 0, std::to_string(b.size()) + " bytes, need at least " + std::to_string(kHeaderSize));
   if (load_le<uint32_t>(b.data()) != kMagic) fail("magic", kOffMagic, "not \"STPN\"");
   const uint16_t version = load_le<uint16_t>(b.data() + kOffVersion);
-  if (version != kVersion)
-    fail("version", kOffVersion, "version " + std::to_string(version) + ", this reader knows " + std::to_string(kVersion));
+  if (version != kVersion && version != kVersionNarrow)
+    fail("version", kOffVersion,
+         "version " + std::to_string(version) + ", this reader knows " + std::to_string(kVersionNarrow) + " and " +
+             std::to_string(kVersion));
   const uint32_t levels = b[kOffLevels];
   if (levels < 1 || levels > kMaxLevels) fail("levels", kOffLevels, std::to_string(levels) + " outside 1..17");
   if (b[kOffFlags] != 0) fail("flags", kOffFlags, "unknown flags " + std::to_string(b[kOffFlags]));
@@ -399,8 +406,8 @@ PlaneTileView validate_plane_tile(std::span<const uint8_t> b) {
   const uint32_t tables = load_le<uint32_t>(b.data() + kOffTableCount);
   if (tables < 1 || tables > kMaxTable) fail("table_count", kOffTableCount, std::to_string(tables) + " outside 1..65535");
   const uint32_t label_count = load_le<uint32_t>(b.data() + kOffLabelCount);
-  if (label_count > kMaxTable || label_count > count)
-    fail("label_count", kOffLabelCount, std::to_string(label_count) + " outside 0..min(65535, block_count)");
+  if (label_count > kMaxTable || label_count > uint64_t(kWideSlots) * count)
+    fail("label_count", kOffLabelCount, std::to_string(label_count) + " outside 0..min(65535, 2 block_count)");
   const size_t blocks_at = kHeaderSize + size_t(tables) * kEntrySize;
   const size_t labels_at = blocks_at + size_t(count) * kRecordSize;
   const size_t inner_at = labels_at + size_t(label_count) * kLabelSize;
@@ -432,20 +439,28 @@ PlaneTileView validate_plane_tile(std::span<const uint8_t> b) {
     const size_t at = blocks_at + size_t(i) * kRecordSize;
     const std::string what = "block " + std::to_string(i);
     const uint8_t kind = b[at + kOffKind];
-    if (kind != kKindPlane && kind != kKindLabels) fail(what + " kind", at + kOffKind, "unknown kind " + std::to_string(kind));
+    if (kind != kKindPlane && kind != kKindLabels && (kind != kKindWide || version != kVersion))
+      fail(what + " kind", at + kOffKind,
+           "unknown kind " + std::to_string(kind) + (kind == kKindWide ? " in a version 2 tile" : ""));
     const uint32_t index = load_le<uint16_t>(b.data() + at + kOffIndex);
-    const uint32_t limit = kind == kKindPlane ? tables : label_count;
-    if (index >= limit)
+    const uint32_t slots = kind == kKindWide ? kWideSlots : 1;
+    const uint64_t limit = kind == kKindPlane ? tables : label_count;
+    if (index + uint64_t(kind == kKindPlane ? 1 : slots) > limit)
       fail(what + " index", at + kOffIndex,
-           std::to_string(index) + " >= " + std::to_string(limit) + (kind == kKindPlane ? " planes" : " labelled blocks"));
-    if (kind == kKindLabels) {
+           std::to_string(index) + (kind == kKindPlane ? " >= " + std::to_string(limit) + " planes"
+                                                       : " past the " + std::to_string(limit) + " label slots"));
+    if (kind != kKindPlane) {
       if (b[at + kOffShift] != kLabelShift) fail(what + " shift", at + kOffShift, "a labelled block's shift is not 3");
       if (index != labelled) fail(what + " index", at + kOffIndex, "labelled blocks not in order");
-      ++labelled;
+      labelled += slots;
       const size_t lat = labels_at + size_t(index) * kLabelSize;
-      for (uint32_t k = 0; k < kPalette; ++k)
+      const uint32_t entries = kind == kKindWide ? kWidePalette : kPalette;
+      for (uint32_t k = 0; k < entries; ++k)
         if (load_le<uint16_t>(b.data() + lat + 2 * k) >= tables)
           fail("labelled block " + std::to_string(index) + " palette", lat + 2 * k, "plane index >= " + std::to_string(tables));
+      if (kind == kKindWide)
+        for (size_t k = kOffWidePad; k < kWideSize; ++k)
+          if (b[lat + k] != 0) fail("labelled block " + std::to_string(index) + " padding", lat + k, "not zero");
     }
     const Plane p = v.plane(i);
     if (p.shift < kMinShift || p.shift > kMaxShift || p.shift > v.finest_level)
@@ -457,12 +472,13 @@ PlaneTileView validate_plane_tile(std::span<const uint8_t> b) {
     end = p.start + size;
     // Each plane the block can answer with, at the block's corner (plane_format.hpp).
     const uint32_t x0 = morton_compact(p.start), y0 = morton_compact(uint64_t(p.start) >> 1);
-    for (uint32_t k = 0; k < (kind == kKindLabels ? 64u : 1u); ++k)
+    for (uint32_t k = 0; k < (kind == kKindPlane ? 1u : 64u); ++k)
       if (abs64(v.plane_at(i, x0 + k % 8, y0 + k / 8).a) > kMaxBase)
         fail(what + " plane", at + kOffIndex, "|a| at the block's corner > 2^61");
   }
   if (labelled != label_count)
-    fail("label_count", kOffLabelCount, std::to_string(label_count) + " but " + std::to_string(labelled) + " blocks are labelled");
+    fail("label_count", kOffLabelCount,
+         std::to_string(label_count) + " but the labelled blocks take " + std::to_string(labelled) + " slots");
   return v;
 }
 

@@ -311,13 +311,14 @@ bool grow_plane(const std::vector<uint32_t>& cand, std::span<const float> lo, st
 // block's palette and labels), chosen greedily as a set cover: each round takes, of the
 // candidates, the one answering the most texels no plane taken answers yet. Candidates: the
 // tile's known planes (`known`, resolved to the block's corner), one plane fitted to all the
-// texels left (the others unconstrained), and planes grown (grow_plane) from up to 3 seeds
-// among them, spread apart (the first left texel, then each next the farthest from those
-// before). `fresh[k]`: palette entry k is not one of `known`. Every texel's label names the
-// first palette plane that answers it (the decoder's function). False when some texel is
-// left after `max_planes`.
+// texels left (the others unconstrained), and planes grown (grow_plane) from up to
+// `max_seeds` (1..3) seeds among them, spread apart (the first left texel, then each next
+// the farthest from those before). `fresh[k]`: palette entry k is not one of `known`. Every
+// texel's label names the first palette plane that answers it (the decoder's function).
+// False when some texel is left after `max_planes`.
 bool cover_block(std::span<const float> lo, std::span<const float> hi, uint32_t start, const std::vector<Plane>& known,
-                 uint32_t max_planes, std::vector<Plane>& palette, uint8_t* label, std::vector<uint8_t>& fresh) {
+                 uint32_t max_planes, uint32_t max_seeds, std::vector<Plane>& palette, uint8_t* label,
+                 std::vector<uint8_t>& fresh) {
   auto mask_of = [&](const Plane& q) {
     uint64_t m = 0;
     for (uint32_t i = 0; i < 64; ++i) {
@@ -352,7 +353,7 @@ bool cover_block(std::span<const float> lo, std::span<const float> hi, uint32_t 
     if ((best_mask & left) != left) {
       uint32_t seeds[3], n_seeds = 0;
       seeds[n_seeds++] = uint32_t(std::countr_zero(left));
-      while (n_seeds < 3) {
+      while (n_seeds < std::clamp<uint32_t>(max_seeds, 1, 3)) {
         int far = -1;
         uint32_t pick = 0;
         for (uint32_t i = 0; i < 64; ++i) {
@@ -675,8 +676,8 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
           taken = true;
         }
         if (!taken && s == kLabelShift && below[l][j] >= o.min_labelled_nodes) {
-          // Labels (grow_labels): at most 4 planes chosen as a set cover of the block's texels
-          // from the known planes, a fit to the texels left and planes grown from seeds among
+          // Labels (grow_labels): at most max_palette planes (past 4: a wide block) chosen as a
+          // set cover of the block's texels from the known planes, a fit to the texels left and planes grown from seeds among
           // them (cover_block). Without: each texel takes the first palette plane that answers
           // it, else the most recently used known plane that does; the texels none answers get
           // a plane fitted to them alone (the block's other texels unconstrained).
@@ -731,7 +732,8 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
               q.a = int64_t(uint64_t(known[t].a0) + uint64_t(q.b) * x0 + uint64_t(q.c) * y0);
               if (abs64(q.a) <= kMaxBase) resolved.push_back(q);
             }
-            ok = cover_block(blo, bhi, lb.start, resolved, kPalette, lb.palette, lb.label, fresh);
+            ok = cover_block(blo, bhi, lb.start, resolved, std::clamp<uint32_t>(o.max_palette, 1, kWidePalette),
+                             o.grow_seeds, lb.palette, lb.label, fresh);
             if (ok)
               for (size_t k = 0; k < lb.palette.size(); ++k)
                 if (fresh[k]) known.push_back(Known{lb.palette[k].origin_a(x0, y0), lb.palette[k].b, lb.palette[k].c});
@@ -761,7 +763,7 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
               if (o.grow_labels) {
                 std::vector<Plane> pal;
                 uint8_t lab[64];
-                need = cover_block(blo, bhi, lb.start, resolved, 15, pal, lab, fresh) ? uint32_t(pal.size()) : 16;
+                need = cover_block(blo, bhi, lb.start, resolved, 15, o.grow_seeds, pal, lab, fresh) ? uint32_t(pal.size()) : 16;
               }
               std::vector<uint8_t> open(o.grow_labels ? 0 : 64);
               for (uint32_t i = 0; i < open.size(); ++i) open[i] = lb.label[i] == kNone;
@@ -818,6 +820,7 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
     st.values_before += values, st.values_after += kept;
     st.leaves_before += leaves, st.leaves_after += leaves_kept;
     st.plane_blocks += out.planes.size(), st.labelled_blocks += out.labelled.size();
+    for (const LabelBlock& lb : out.labelled) st.wide_blocks += lb.palette.size() > kPalette;
     if (!reason8.empty()) {
       // Valued nodes left below each 8x8 block (not under a block of its own), bottom-up.
       const uint32_t l8 = d - kLabelShift;
@@ -881,7 +884,6 @@ std::vector<uint8_t> wrap_planes(const std::vector<Plane>& ps, uint32_t finest_l
                                  const std::vector<LabelBlock>& labelled) {
   const size_t blocks = ps.size() + labelled.size();
   ST_CHECK(blocks >= 1 && blocks <= kMaxPlanes && finest_level + 1 <= kMaxLevels);
-  if (labelled.size() > kMaxTable) throw Error("plane tile: " + std::to_string(labelled.size()) + " labelled blocks, at most 65535");
   // The table: one entry per distinct plane (a at the tile's origin, b, c), in order of first use.
   struct Entry {
     int64_t a, b, c;
@@ -903,34 +905,38 @@ std::vector<uint8_t> wrap_planes(const std::vector<Plane>& ps, uint32_t finest_l
   };
   std::vector<Rec> recs;
   recs.reserve(blocks);
-  size_t i = 0, k = 0;
-  std::vector<uint32_t> palettes;
+  size_t i = 0, k = 0, slots = 0;
+  std::vector<uint32_t> palettes;  // kWidePalette entries a labelled block (a narrow one's first kPalette used)
   while (i < ps.size() || k < labelled.size()) {
     if (k == labelled.size() || (i < ps.size() && ps[i].start < labelled[k].start)) {
       recs.push_back(Rec{ps[i].start, ps[i].shift, kKindPlane, entry(ps[i], ps[i].start)});
       ++i;
     } else {
       const LabelBlock& lb = labelled[k];
-      ST_CHECK(!lb.palette.empty() && lb.palette.size() <= kPalette);
-      for (uint32_t t = 0; t < kPalette; ++t) palettes.push_back(entry(lb.palette[std::min<size_t>(t, lb.palette.size() - 1)], lb.start));
-      recs.push_back(Rec{lb.start, kLabelShift, kKindLabels, uint32_t(k)});
+      ST_CHECK(!lb.palette.empty() && lb.palette.size() <= kWidePalette);
+      const bool wide = lb.palette.size() > kPalette;
+      for (uint32_t t = 0; t < kWidePalette; ++t) palettes.push_back(entry(lb.palette[std::min<size_t>(t, lb.palette.size() - 1)], lb.start));
+      recs.push_back(Rec{lb.start, kLabelShift, wide ? kKindWide : kKindLabels, uint32_t(slots)});
+      slots += wide ? kWideSlots : 1;
       ++k;
     }
   }
   if (table.size() > kMaxTable) throw Error("plane tile: " + std::to_string(table.size()) + " planes, at most 65535");
+  if (slots > kMaxTable) throw Error("plane tile: " + std::to_string(slots) + " label slots, at most 65535");
+  const bool any_wide = slots > labelled.size();
   const size_t blocks_at = kHeaderSize + table.size() * kEntrySize;
   const size_t labels_at = blocks_at + blocks * kRecordSize;
-  const size_t inner_at = labels_at + labelled.size() * kLabelSize;
+  const size_t inner_at = labels_at + slots * kLabelSize;
   const size_t size = inner_at + inner.size();
   if (size > 0xFFFFFFFFull) throw Error("plane tile: " + std::to_string(size) + " bytes do not fit its 32-bit size");
   std::vector<uint8_t> out(size, 0);
   store_le<uint32_t>(out.data() + kOffMagic, kMagic);
-  store_le<uint16_t>(out.data() + kOffVersion, kVersion);
+  store_le<uint16_t>(out.data() + kOffVersion, any_wide ? kVersion : kVersionNarrow);
   out[kOffLevels] = uint8_t(finest_level + 1);
   store_le<uint32_t>(out.data() + kOffPlaneCount, uint32_t(blocks));
   store_le<uint32_t>(out.data() + kOffByteSize, uint32_t(size));
   store_le<uint32_t>(out.data() + kOffTableCount, uint32_t(table.size()));
-  store_le<uint32_t>(out.data() + kOffLabelCount, uint32_t(labelled.size()));
+  store_le<uint32_t>(out.data() + kOffLabelCount, uint32_t(slots));
   for (size_t t = 0; t < table.size(); ++t) {
     uint8_t* e = out.data() + kHeaderSize + t * kEntrySize;
     store_le<uint64_t>(e + kOffA, uint64_t(table[t].a));
@@ -944,13 +950,20 @@ std::vector<uint8_t> wrap_planes(const std::vector<Plane>& ps, uint32_t finest_l
     o[kOffKind] = recs[r].kind;
     store_le<uint16_t>(o + kOffIndex, uint16_t(recs[r].index));
   }
+  uint8_t* o = out.data() + labels_at;
   for (size_t b = 0; b < labelled.size(); ++b) {
-    uint8_t* o = out.data() + labels_at + b * kLabelSize;
-    for (uint32_t t = 0; t < kPalette; ++t) store_le<uint16_t>(o + 2 * t, uint16_t(palettes[b * kPalette + t]));
+    const bool wide = labelled[b].palette.size() > kPalette;
+    for (uint32_t t = 0; t < (wide ? kWidePalette : kPalette); ++t)
+      store_le<uint16_t>(o + 2 * t, uint16_t(palettes[b * kWidePalette + t]));
     for (uint32_t t = 0; t < 64; ++t) {
-      ST_CHECK(labelled[b].label[t] < labelled[b].palette.size());
-      o[kOffLabelBits + t / 4] |= uint8_t(labelled[b].label[t] << (2 * (t % 4)));
+      const uint32_t label = labelled[b].label[t];
+      ST_CHECK(label < labelled[b].palette.size());
+      if (wide)
+        for (uint32_t bit = 0; bit < kWideLabelBits; ++bit) o[kOffWideBits + 8 * bit + t / 8] |= uint8_t((label >> bit & 1u) << (t % 8));
+      else
+        o[kOffLabelBits + t / 4] |= uint8_t(label << (2 * (t % 4)));
     }
+    o += wide ? kWideSize : kLabelSize;
   }
   std::copy(inner.begin(), inner.end(), out.begin() + ptrdiff_t(inner_at));
   return out;

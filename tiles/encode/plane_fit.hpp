@@ -35,10 +35,10 @@ struct PlaneFitStats {
   std::atomic<uint64_t> values_after{0};       // ... left in the pruned hierarchies
   std::atomic<uint64_t> leaves_before{0};      // valued finest texels (one value each)
   std::atomic<uint64_t> leaves_after{0};       // ... left
-  std::atomic<uint64_t> plane_blocks{0}, labelled_blocks{0};
+  std::atomic<uint64_t> plane_blocks{0}, labelled_blocks{0}, wide_blocks{0};  // wide: of the labelled, 5+ planes
   // 8x8 blocks (not inside a larger block) with valued nodes left after the search, by why
   // they were not labelled, and those nodes: [0] fewer than min_labelled_nodes, [1] a texel
-  // without a preimage (tiny depth, above 1), [2] more planes than the palette holds.
+  // without a preimage (tiny depth, above 1), [2] more planes than the palette holds (max_palette).
   std::array<std::atomic<uint64_t>, 3> left_blocks{}, left_values{};
   // Labelled or left 8x8 blocks by how many planes the greedy growth needs for all their
   // texels ([16]: 16 or more, or a texel without a preimage), and their valued nodes.
@@ -52,7 +52,10 @@ struct PlaneFitOptions {
   uint32_t min_stored_nodes = 8;   // a block with a plane of its own must take at least this many valued nodes out
   uint32_t max_tile_depth = 10;    // tiles deeper than this are not searched (memory, time)
   uint32_t min_reused_nodes = 2;   // a block that reuses a plane already in the tile's table: at least this many
-  uint32_t min_labelled_nodes = 4; // an 8x8 block labelled with up to 4 of the table's planes: at least this many
+  uint32_t min_labelled_nodes = 4; // an 8x8 block labelled with up to max_palette planes: at least this many
+  // A labelled block's most planes: 1..4 a labelled block (2-bit labels), 5..8 a wide one
+  // (3-bit labels, plane_format.hpp, version 3 tiles); 4: no wide block (the form before).
+  uint32_t max_palette = planes::kWidePalette;
   // Planes of one surface merged after the search: a plane that answers another's texels
   // too, or one refitted over both, replaces them (fewer table entries; tiles/core/PLANES.md).
   bool merge_surfaces = true;
@@ -73,13 +76,17 @@ struct PlaneFitOptions {
   // plane still answers them all), so a block across several small triangles is labelled;
   // false: one plane fitted to all of them at once (the form before).
   bool grow_labels = true;
+  // Seeds a labelled block's growth tries each round (1..3: the first texel left, then each
+  // next the farthest from those before).
+  uint32_t grow_seeds = 3;
   PlaneFitStats* stats = nullptr;  // not owned; counted into when set
 };
 
-// An 8x8 block whose texels are answered by up to 4 planes (plane_format.hpp, labelled block).
+// An 8x8 block whose texels are answered by up to 8 planes (plane_format.hpp, labelled block;
+// a wide one when it has more than 4).
 struct LabelBlock {
   uint32_t start = 0;                  // finest-level morton code of the block's first texel
-  std::vector<planes::Plane> palette;  // 1..4 planes resolved to the block's corner (shift 3)
+  std::vector<planes::Plane> palette;  // 1..8 planes resolved to the block's corner (shift 3)
   uint8_t label[64] = {};              // texel (x, y) of the block: palette[label[8 y + x]]
 };
 
@@ -92,7 +99,7 @@ struct PlaneSplit {
 
 // Blocks are tried top-down (the largest first, down to min_shift), each first with the
 // planes already found in the tile, then with a fit of its own; an 8x8 block that neither
-// answers is labelled when up to 4 of the planes found answer all its texels. No block:
+// answers is labelled when up to max_palette planes answer all its texels. No block:
 // `planes` and `labelled` are empty and `pruned` a copy of h.
 PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o = {});
 
