@@ -14,7 +14,10 @@
 // default K to the level the default pack ended at, with no tile bound, combined per cell.
 // --split-only skips the uniform-cut pack (its lines print 0); --split-k writes the split
 // pack at each listed shift of the default K (0: the default; -1: cells twice as large),
-// each with its bytes per cell kind and section against the separate packs.
+// each with its bytes per cell kind and section against the separate packs, and the same
+// under other stored-tile codecs (bench/stored_codec.hpp: LZMA, zstd 19; every tile of the
+// split pack and of the separate packs coded, decoded and compared), their decode speed,
+// and the MMH value words' order-0 estimates raw and against three predictions.
 //
 // Per case every slice is traced into a spill (trace_stack_to_spill, as `shadowtile build`
 // does), then:
