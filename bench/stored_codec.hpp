@@ -7,7 +7,7 @@
 //     bytes, literal context lc = 0, literal position bits lp = 2 and pb = 2 (so each byte of
 //     a 4-byte word has its own literal model: value words' sign/exponent bytes apart from
 //     their low mantissa bytes), preset 6, the dictionary the raw size rounded up to a power
-//     of two (at least 4 KiB): the decoder's memory is that dictionary plus a fixed ~30 KB of
+//     of two (at least 4 KiB): the decoder's memory is that dictionary plus a fixed state of tens of KB of
 //     probabilities, bounded by the tile bound. Both sides fix the properties, so the stream
 //     carries no header; its raw size is the index entry's, as for zlib.
 //   zstd: libzstd (already a benchmark dependency) at level 19, one frame per tile.
