@@ -14,7 +14,10 @@
 // default K to the level the default pack ended at, with no tile bound, combined per cell.
 // --split-only skips the uniform-cut pack (its lines print 0); --split-k writes the split
 // pack at each listed shift of the default K (0: the default; -1: cells twice as large),
-// each with its bytes per cell kind and section against the separate packs.
+// each with its bytes per cell kind and section against the separate packs, and the same
+// under other stored-tile codecs (bench/stored_codec.hpp: LZMA, zstd 19; every tile of the
+// split pack and of the separate packs coded, decoded and compared), their decode speed,
+// and the MMH value words' order-0 estimates raw and against three predictions.
 //
 // Per case every slice is traced into a spill (trace_stack_to_spill, as `shadowtile build`
 // does), then:
@@ -44,9 +47,11 @@
 // frame), procedural:hairball under a 4 m x 4 m area light 25 m above it (window frame),
 // and a real open mesh, assimp's 2CylinderEngine.glb, under the same day's sun.
 #include <sys/resource.h>
+#include <time.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <unordered_map>
 #include <chrono>
@@ -60,6 +65,7 @@
 #include <vector>
 
 #include "bench/options.hpp"
+#include "bench/stored_codec.hpp"
 #include "common/error.hpp"
 #include "scene/scene.hpp"
 #include "tiles/bake/stack_build.hpp"
@@ -181,6 +187,129 @@ std::vector<uint64_t> slice_cell_sections(const std::vector<uint8_t>& b) {
   return sec;
 }
 
+// ---- Stored-tile codecs (bench/stored_codec.hpp; MHOCT.md "Stored-tile codecs against zlib")
+// Codec c: 0 zlib (level 6, as packs store tiles), 1 lzma, 2 zstd 19. A tile's bytes under
+// codec c are the smaller of its zlib stream and the codec's stream + 1 byte (the form a
+// per-tile stored form would record), so no codec makes a tile larger than today.
+constexpr size_t kCodecs = 3;
+const char* const kCodecName[kCodecs] = {"zlib 6", "lzma", "zstd 19"};
+using CodecBytes = std::array<uint64_t, kCodecs>;
+
+double thread_seconds() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return double(t.tv_sec) + 1e-9 * double(t.tv_nsec);
+}
+
+// Decode CPU seconds per codec over the tiles measured with timing, and their raw bytes.
+struct CodecDecode {
+  std::array<double, kCodecs> seconds{};
+  uint64_t raw = 0;
+};
+
+// `raw`: the tile's stored-form raw bytes (what the pack deflates: a grouped per-slice cell
+// as STSP); `zlib`: its zlib stream. Every codec's stream is decoded and compared with `raw`
+// (throws on a mismatch); with `dec`, each decode is timed (thread CPU time).
+CodecBytes codec_bytes(std::span<const uint8_t> raw, std::span<const uint8_t> zlib, CodecDecode* dec) {
+  CodecBytes out{};
+  out[0] = zlib.size();
+  std::vector<uint8_t> back(raw.size());
+  auto timed = [&](size_t c, auto&& decode) {
+    std::fill(back.begin(), back.end(), uint8_t(0xA5));
+    const double t0 = thread_seconds();
+    decode();
+    if (dec) dec->seconds[c] += thread_seconds() - t0;
+    if (!std::equal(back.begin(), back.end(), raw.begin())) throw st::Error(std::string(kCodecName[c]) + ": round trip differs");
+  };
+  timed(0, [&] { st::zlib_decompress_into(zlib, back, "bench tile"); });
+#if ST_BENCH_LZMA
+  const std::vector<uint8_t> lz = st::bench::lzma_tile_compress(raw);
+  timed(1, [&] { st::bench::lzma_tile_decompress_into(lz, back); });
+  out[1] = std::min<uint64_t>(zlib.size(), lz.size() + 1);
+#else
+  out[1] = zlib.size();  // built without liblzma: the column equals zlib's
+#endif
+  const std::vector<uint8_t> zs = st::bench::zstd_tile_compress(raw);
+  timed(2, [&] { st::bench::zstd_tile_decompress_into(zs, back); });
+  out[2] = std::min<uint64_t>(zlib.size(), zs.size() + 1);
+  if (dec) dec->raw += raw.size();
+  return out;
+}
+
+void add_codec(CodecBytes& to, const CodecBytes& b) {
+  for (size_t c = 0; c < kCodecs; ++c) to[c] += b[c];
+}
+
+// What an entropy coder of MMH value words could take (adaptive order-0 per byte position,
+// reset per tile, st::bench::WordCost): the value words of every MMH buffer of a per-slice
+// cell, raw and as the xor of their bit patterns with three predictions: the previous value
+// word of the tree (word order), the nearest valued ancestor's stored word, and the previous
+// value in the same child block (else raw). MMH values are already relative to that
+// ancestor (MHQUAD.md "Values and lookups"), which is why none of these predicts much.
+struct ValueCosts {
+  uint64_t words = 0;
+  std::array<double, 4> bits{};  // raw, previous word, ancestor, previous sibling
+};
+const char* const kValuePredictor[4] = {"raw", "xor previous value word", "xor ancestor's stored value",
+                                        "xor previous sibling"};
+
+void mmh_value_costs(std::span<const uint8_t> b, ValueCosts& out) {
+  if (!st::is_slice_tiles(b) || b.size() < st::kSliceTilesHeaderBytes || b[7] > 12) return;
+  auto u32 = [&](uint64_t off) {
+    uint32_t v;
+    std::memcpy(&v, b.data() + off, 4);
+    return v;
+  };
+  std::array<st::bench::WordCost, 4> cost;
+  const uint64_t count = uint64_t(1) << b[7];
+  uint64_t next = st::kSliceTilesHeaderBytes + st::kSliceTilesEntryBytes * count;
+  for (uint64_t w = 0; w < count; ++w) {
+    const uint32_t off = u32(st::kSliceTilesHeaderBytes + st::kSliceTilesEntryBytes * w);
+    const uint32_t size = u32(st::kSliceTilesHeaderBytes + st::kSliceTilesEntryBytes * w + 4);
+    if (off == 0 || off < next) continue;
+    next = (uint64_t(off) + size + 3) & ~uint64_t(3);
+    if (u32(off) != st::mhq::kMagicMmh) continue;
+    const uint64_t head = st::mhq::tree_offset(b[off + 6]), W = (size - head) / 4, tree = off + head;
+    const bool root_leaf = b[off + st::mhq::kOffFlags] & st::mhq::kFlagRootLeaf;
+    // Forward scan as mmh_word_roles (stack_slices.hpp): role 1 node word, 2 value word;
+    // anc: a node's or value's nearest valued ancestor's value word; own: a node's value word.
+    std::vector<uint8_t> role(W, 0);
+    std::vector<int64_t> anc(W, -1), own(W, -1), sib(W, -1);
+    if (W == 0) continue;
+    role[0] = root_leaf ? 2 : 1;
+    if (!root_leaf && W > 1) role[1] = 2, own[0] = 1;
+    uint32_t prev = 0;
+    for (uint64_t i = 0; i < W; ++i) {
+      if (role[i] == 1) {
+        const uint32_t word = u32(tree + 4 * i), mask = word & 0xFFu, shift = (word >> 12) & 0xFu, o = word >> 16;
+        const int64_t valued = own[i] >= 0 ? own[i] : anc[i];
+        uint64_t at = ((i >> shift) + o) << shift;
+        int64_t last = -1;
+        for (uint32_t c = 0; c < 4; ++c) {
+          const uint32_t code = (mask >> (2 * c)) & 3u;
+          if (code == 0) continue;
+          if (at > i && at < W && role[at] == 0) {
+            role[at] = code == 1 ? 2 : 1, anc[at] = valued;
+            if (code == 1) sib[at] = last, last = int64_t(at);
+            if (code == 3 && at + 1 < W && role[at + 1] == 0)
+              role[at + 1] = 2, anc[at + 1] = valued, own[at] = int64_t(at + 1), sib[at + 1] = last, last = int64_t(at + 1);
+          }
+          at += code == 3 ? 2 : 1;
+        }
+      } else if (role[i] == 2) {
+        const uint32_t v = u32(tree + 4 * i);
+        ++out.words;
+        cost[0].code(v);
+        cost[1].code(v ^ prev);
+        cost[2].code(anc[i] >= 0 ? v ^ u32(tree + 4 * uint64_t(anc[i])) : v);
+        cost[3].code(sib[i] >= 0 ? v ^ u32(tree + 4 * uint64_t(sib[i])) : v);
+        prev = v;
+      }
+    }
+  }
+  for (size_t j = 0; j < 4; ++j) out.bits[j] += cost[j].bits;
+}
+
 // Where a stack pack's bytes go, per cell kind and section, against the separate 2D packs'
 // bytes of the same squares and slices (the stack's level-K cells). `sq` is each slice's
 // stored bytes per level-K square (the bench's 2D tiles of the stack's cells) scaled to
@@ -188,8 +317,70 @@ std::vector<uint64_t> slice_cell_sections(const std::vector<uint8_t>& b) {
 struct KindBytes {
   uint64_t tiles = 0, raw = 0, stored = 0, cells = 0;
   double separate = 0;                       // the separate packs' bytes for those cells
+  CodecBytes codec{}, separate_codec{};      // stored under each codec (codec_bytes), stack and separate
   std::vector<uint64_t> sec_raw, sec_stored;  // sections (octree: header, node, value, far, pad)
 };
+
+// The codec tables of one split pack: per level-K cell kind and codec its tiles' stored
+// bytes against the separate packs' tiles of the same squares and slices, under zlib and
+// under the same codec; the whole files; decode speed; the per-slice sections under lzma
+// alone; the MMH value words' estimates (ValueCosts).
+nlohmann::json print_codec_tables(const std::vector<KindBytes>& kinds, const char* const* kind_name,
+                                  const CodecBytes& tiles_codec, uint64_t file, const CodecBytes& packs_tiles_codec,
+                                  uint64_t packs_bytes, const CodecDecode& stack_decode, const CodecDecode& packs_decode,
+                                  const std::vector<uint64_t>& sec_lzma, const char* const* sec_name, const ValueCosts& vc) {
+  nlohmann::json out = nlohmann::json::object();
+  std::printf("  stored-tile codecs (bench/stored_codec.hpp; each tile the smaller of its zlib stream and the codec's + 1 "
+              "byte, the separate packs' tiles the same)%s:\n",
+              ST_BENCH_LZMA ? "" : " [built without liblzma: lzma = zlib]");
+  std::printf("  | level-K cells | codec | stored | separate, same codec | separate, zlib | / separate zlib | / separate same codec |\n");
+  std::printf("  | --- | --- | ---: | ---: | ---: | ---: | ---: |\n");
+  nlohmann::json kj = nlohmann::json::object();
+  for (size_t j = 0; j < kinds.size(); ++j) {
+    const KindBytes& kb = kinds[j];
+    if (kb.tiles == 0) continue;
+    for (size_t c = 0; c < kCodecs; ++c) {
+      const double sep = double(kb.separate_codec[c]), sep0 = double(kb.separate_codec[0]);
+      std::printf("  | %s | %s | %llu | %.0f | %.0f | %.3f | %.3f |\n", kind_name[j], kCodecName[c],
+                  (unsigned long long)kb.codec[c], sep, sep0, sep0 > 0 ? double(kb.codec[c]) / sep0 : 0.0,
+                  sep > 0 ? double(kb.codec[c]) / sep : 0.0);
+      kj[kind_name[j]][kCodecName[c]] = {{"stored", kb.codec[c]}, {"separate_same_codec", sep}, {"separate_zlib", sep0}};
+    }
+  }
+  out["kinds"] = kj;
+  nlohmann::json wj = nlohmann::json::object();
+  for (size_t c = 0; c < kCodecs; ++c) {
+    const uint64_t stack = file - tiles_codec[0] + tiles_codec[c];
+    const uint64_t sep = packs_bytes - packs_tiles_codec[0] + packs_tiles_codec[c];
+    std::printf("  | whole files (grid, index, dictionaries as stored) | %s | %llu | %llu | %llu | %.3f | %.3f |\n",
+                kCodecName[c], (unsigned long long)stack, (unsigned long long)sep, (unsigned long long)packs_bytes,
+                double(stack) / double(packs_bytes), double(stack) / double(sep));
+    wj[kCodecName[c]] = {{"stack", stack}, {"separate_same_codec", sep}, {"separate_zlib", packs_bytes}};
+  }
+  out["whole_files"] = wj;
+  auto mbs = [](const CodecDecode& d, size_t c) { return d.seconds[c] > 0 ? double(d.raw) / d.seconds[c] / 1e6 : 0.0; };
+  std::printf("  decode, raw MB/s of thread CPU time (each tile decoded once): stack tiles (%.1f MB) zlib %.0f, lzma %.0f, "
+              "zstd %.0f; separate packs' tiles (%.1f MB) zlib %.0f, lzma %.0f, zstd %.0f\n",
+              double(stack_decode.raw) / 1e6, mbs(stack_decode, 0), mbs(stack_decode, 1), mbs(stack_decode, 2),
+              double(packs_decode.raw) / 1e6, mbs(packs_decode, 0), mbs(packs_decode, 1), mbs(packs_decode, 2));
+  out["decode_mb_s"] = {{"stack", {mbs(stack_decode, 0), mbs(stack_decode, 1), mbs(stack_decode, 2)}},
+                        {"separate", {mbs(packs_decode, 0), mbs(packs_decode, 1), mbs(packs_decode, 2)}}};
+  std::printf("  per-slice sections, lzma alone:");
+  for (size_t j = 0; j < sec_lzma.size(); ++j) std::printf(" %s %llu;", sec_name[j], (unsigned long long)sec_lzma[j]);
+  std::printf("\n  MMH value words of per-slice cells (%llu): adaptive order-0 bits a word (per byte position, reset per "
+              "tile):",
+              (unsigned long long)vc.words);
+  nlohmann::json vj = nlohmann::json::object();
+  for (size_t j = 0; j < vc.bits.size(); ++j) {
+    const double b = vc.words ? vc.bits[j] / double(vc.words) : 0.0;
+    std::printf(" %s %.2f;", kValuePredictor[j], b);
+    vj[kValuePredictor[j]] = b;
+  }
+  std::printf("\n");
+  out["mmh_value_bits_per_word"] = vj;
+  out["mmh_value_words"] = vc.words;
+  return out;
+}
 
 double peak_rss_mib() {
   rusage ru{};
@@ -225,6 +416,10 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
   std::vector<std::vector<std::vector<uint8_t>>> dag_tiles(n);  // DAG-MH tiles per slice (dictionary measure)
   // The separate packs' stored tile bytes per slice w and level-K square c: [w * cells_xy + c].
   std::vector<uint64_t> sq_pack(cells_xy * n, 0);
+  // The same under each stored-tile codec (codec_bytes), and every tile of the packs.
+  std::vector<CodecBytes> sq_codec(cells_xy * n, CodecBytes{});
+  CodecBytes packs_tiles_codec{};
+  CodecDecode packs_decode;
   uint64_t packs_other = 0;
   uint64_t res_count = 0, res_prev = 0, res_prev_zero = 0, res_left = 0, res_left_zero = 0, res_lin = 0, res_both = 0;
   uint64_t stored_2d = 0, raw_2d = 0, raw_equal_prev = 0, texels_equal = 0, texels_meet = 0, texels_compared = 0;
@@ -257,6 +452,10 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
         uint64_t in_tiles = 0;
         for (const st::TileIndexEntry& e : reader->tiles()) {
           const st::TileAddress t = st::tile_address(e.id);
+          const std::vector<uint8_t> stored = reader->read_stored(e.id);
+          const CodecBytes cb = codec_bytes(st::zlib_decompress(stored, e.raw_size, "bench tile"), stored, &packs_decode);
+          add_codec(packs_tiles_codec, cb);
+          if (t.level >= a) add_codec(sq_codec[w * cells_xy + ((uint64_t(t.y) >> (t.level - a)) << a) + (t.x >> (t.level - a))], cb);
           if (t.level < a) continue;
           sq_pack[w * cells_xy + ((uint64_t(t.y) >> (t.level - a)) << a) + (t.x >> (t.level - a))] += e.stored_size;
           in_tiles += e.stored_size;
@@ -440,22 +639,38 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
           for (uint64_t sx = x << da; sx < (x + 1) << da; ++sx) sum += double(sq_pack[sw * cells_xy + (sy << a) + sx]);
       return sum;
     };
+    auto separate_codec_of = [&](uint64_t root) {
+      const uint64_t x = root & ((uint64_t(1) << as) - 1), y = (root >> as) & ((uint64_t(1) << as) - 1), w = root >> (2 * as);
+      CodecBytes sum{};
+      for (uint64_t sw = w << dwb; sw < std::min<uint64_t>((w + 1) << dwb, n); ++sw)
+        for (uint64_t sy = y << da; sy < (y + 1) << da; ++sy)
+          for (uint64_t sx = x << da; sx < (x + 1) << da; ++sx) add_codec(sum, sq_codec[sw * cells_xy + (sy << a) + sx]);
+      return sum;
+    };
     // Kinds: 0 octree cell, 1 per-slice cell, 2 split cell (its tiles any form), 3 constant.
     std::vector<KindBytes> kinds(4);
     std::vector<int> root_kind(cut.grid.cells(Ks), 3);
     uint64_t tiles_stored = 0;
     KindBytes oct_sec, sl_sec;  // sections over every tile of each form, split or not
     oct_sec.sec_raw.assign(5, 0), sl_sec.sec_raw.assign(7, 0), sl_sec.sec_stored.assign(7, 0);
+    std::vector<uint64_t> sec_lzma(7, 0);  // a per-slice section's lzma stream alone (codec 1)
+    CodecBytes tiles_codec{};
+    CodecDecode stack_decode;
+    ValueCosts value_costs;
     for (size_t i = 0; i < cut.tile_count(); ++i) {
       const auto place = cut.tile_place(i);
       const auto [cell, raw] = cut.tile(i);
       const std::vector<uint8_t> grouped = st::group_slice_tiles(raw);  // as the writer stores it
-      const uint64_t stored = st::zlib_compress(grouped, 6).size();
+      const std::vector<uint8_t> zlib = st::zlib_compress(grouped, 6);
+      const uint64_t stored = zlib.size();
       tiles_stored += stored;
       const int kind = place.level > Ks ? 2 : place.octree ? 0 : 1;
       root_kind[place.root] = kind;
       KindBytes& kb = kinds[size_t(kind)];
       ++kb.tiles, kb.raw += raw.size(), kb.stored += stored;
+      const CodecBytes cb = codec_bytes(grouped, zlib, &stack_decode);
+      add_codec(kb.codec, cb), add_codec(tiles_codec, cb);
+      if (!place.octree) mmh_value_costs(raw, value_costs);
       KindBytes& form = place.octree ? oct_sec : sl_sec;
       ++form.tiles, form.raw += raw.size(), form.stored += stored;
       if (place.octree) {
@@ -468,8 +683,13 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
         uint64_t at = 0;
         for (size_t j = 0; j < sec.size(); ++j) {
           sl_sec.sec_raw[j] += sec[j];
-          if (sec[j] && st::is_grouped_slice_tiles(grouped))
-            sl_sec.sec_stored[j] += st::zlib_compress(std::span<const uint8_t>(grouped.data() + at, sec[j]), 6).size();
+          if (sec[j] && st::is_grouped_slice_tiles(grouped)) {
+            const std::span<const uint8_t> part(grouped.data() + at, sec[j]);
+            sl_sec.sec_stored[j] += st::zlib_compress(part, 6).size();
+#if ST_BENCH_LZMA
+            sec_lzma[j] += st::bench::lzma_tile_compress(part).size();
+#endif
+          }
           at += sec[j];
         }
       }
@@ -477,6 +697,7 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
     for (uint64_t root = 0; root < root_kind.size(); ++root) {
       KindBytes& kb = kinds[size_t(root_kind[root])];
       ++kb.cells, kb.separate += separate_of(root);
+      add_codec(kb.separate_codec, separate_codec_of(root));
     }
     const uint64_t other = file - tiles_stored;  // header, params, grid, index, padding
     std::printf("split cells at K = %u (cells 2^%u a side x %u slices): %llu bytes = %.3f x the separate packs (%llu cells "
@@ -511,8 +732,10 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
     for (size_t j = 0; j < 7; ++j) {
       std::printf("    %-20s raw %10llu  stored alone %10llu\n", sec_name[j], (unsigned long long)sl_sec.sec_raw[j],
                   (unsigned long long)sl_sec.sec_stored[j]);
-      sj[sec_name[j]] = {{"raw", sl_sec.sec_raw[j]}, {"stored_alone", sl_sec.sec_stored[j]}};
+      sj[sec_name[j]] = {{"raw", sl_sec.sec_raw[j]}, {"stored_alone", sl_sec.sec_stored[j]}, {"lzma_alone", sec_lzma[j]}};
     }
+    const nlohmann::json cj = print_codec_tables(kinds, kind_name, tiles_codec, file, packs_tiles_codec, packs_bytes,
+                                                 stack_decode, packs_decode, sec_lzma, sec_name, value_costs);
     std::fflush(stdout);
     split_runs.push_back({{"skip_level", Ks},
                           {"bytes", file},
@@ -521,6 +744,7 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
                           {"tiles", cut.tile_count()},
                           {"kinds", kj},
                           {"slice_sections", sj},
+                          {"codecs", cj},
                           {"octree_sections",
                            {{"header", oct_sec.sec_raw[0]}, {"node", oct_sec.sec_raw[1]}, {"value", oct_sec.sec_raw[2]},
                             {"far", oct_sec.sec_raw[3]}, {"pad", oct_sec.sec_raw[4]}}},
