@@ -48,6 +48,7 @@ TEST(PlaneFormat, FixedPointDepthIsTheNearestFloatTiesToEven) {
   for (int i = 0; i < 200000; ++i) {
     const int64_t v = int64_t(rng() >> (4 + rng() % 60));
     ASSERT_EQ(plane_fixed_to_float(v), reference_round(v)) << v;
+    ASSERT_EQ(std::bit_cast<uint32_t>(plane_fixed_to_float_cpu(v)), std::bit_cast<uint32_t>(reference_round(v))) << v;
   }
   // Exact ties between two floats round to the even one, both ways.
   const int64_t one_and_half_ulp = (int64_t(1) << 59) + (int64_t(3) << 35);  // 0.5 + 1.5 ulp(0.5)
@@ -56,6 +57,8 @@ TEST(PlaneFormat, FixedPointDepthIsTheNearestFloatTiesToEven) {
   EXPECT_EQ(plane_fixed_to_float(kOne - 1), 1.0f);  // carries into the next binade
   EXPECT_EQ(plane_fixed_to_float(0), 0.0f);
   EXPECT_EQ(plane_fixed_to_float(-5), 0.0f);
+  for (const int64_t v : {int64_t(0), int64_t(-5), INT64_MIN, kOne - 1, kOne, kOne + 12345, INT64_MAX, int64_t(1)})
+    EXPECT_EQ(std::bit_cast<uint32_t>(plane_fixed_to_float_cpu(v)), std::bit_cast<uint32_t>(plane_fixed_to_float(v))) << v;
   EXPECT_EQ(plane_fixed_to_float(kOne + 12345), 1.0f);
   EXPECT_EQ(plane_fixed_to_float(1), 0x1p-60f);
   EXPECT_EQ(plane_fixed_to_float(int64_t(1) << 40), 0x1p-20f);
@@ -68,12 +71,14 @@ TEST(PlaneFormat, FixedPointDepthIsTheNearestFloatTiesToEven) {
       if (k <= 0) {
         const int64_t v = int64_t(m >> (23 - p));
         ASSERT_EQ(plane_fixed_to_float(v), reference_round(v)) << v;
+        ASSERT_EQ(std::bit_cast<uint32_t>(plane_fixed_to_float_cpu(v)), std::bit_cast<uint32_t>(reference_round(v))) << v;
         continue;
       }
       const uint64_t half = uint64_t(1) << (k - 1);
       for (const uint64_t rem : {uint64_t(0), half - 1, half, half + 1, (uint64_t(1) << k) - 1}) {
         const int64_t v = int64_t((m << k) | rem);
         ASSERT_EQ(plane_fixed_to_float(v), reference_round(v)) << v;
+        ASSERT_EQ(std::bit_cast<uint32_t>(plane_fixed_to_float_cpu(v)), std::bit_cast<uint32_t>(reference_round(v))) << v;
       }
     }
   }

@@ -117,6 +117,17 @@ inline float plane_fixed_to_float(int64_t v) {
   return f;
 }
 
+// plane_fixed_to_float's bits from the CPU's own conversion, for the CPU's hot lookups:
+// for 0 < v < 2^60, float(v) is v rounded once to binary32, ties to even (the default
+// rounding mode), and scaling by 2^-60 is exact (the result stays a normal float), so the
+// product is v 2^-60 rounded once, the integer version's answer; at and above 2^60 the
+// product is >= 1 and at or below 0 it is <= 0 (+0 for 0), clamped as that version does.
+// Tests check both on every binade's rounding cases.
+inline float plane_fixed_to_float_cpu(int64_t v) {
+  const float f = float(v) * 0x1p-60f;
+  return f < 0.0f ? 0.0f : (f > 1.0f ? 1.0f : f);
+}
+
 // One block with its plane resolved to the block's corner: a = the table's a + b x0 + c y0.
 struct Plane {
   uint32_t start = 0, shift = 0;

@@ -314,7 +314,7 @@ TapRunEnd PlaneTileEvaluator::tap_run(const TapRun& run, TapPath& path) const no
         const uint8_t* e = table + size_t(load_le<uint16_t>(blabels + 2 * label)) * kEntrySize;
         a = load_le<uint64_t>(e + kOffA), b = load_le<uint64_t>(e + kOffB), c = load_le<uint64_t>(e + kOffC);
       }
-      er = {plane_fixed_to_float(int64_t(a + b * fx + c * fy)), 0};
+      er = {plane_fixed_to_float_cpu(int64_t(a + b * fx + c * fy)), 0};
       kept = false;
     } else {
       er = inner_region(run.rel, x, y, inner_walk(run.rel, x, y, path));

@@ -49,22 +49,30 @@ inline constexpr std::array<uint16_t, 256> kMortonSpread = [] {
 // along a row is best answered in its own order, remote_map.hpp). No allocation.
 inline bool tap_order(std::span<const PcfQuery> queries, uint32_t finest, uint16_t* order) {
   const size_t n = std::min(queries.size(), kTapOrderMax);
-  for (size_t i = 0; i < n; ++i)
-    if (queries[i].r > 1 || queries[i].level > finest) return false;
   if (n == 0) return true;
   auto scaled = [finest](const PcfQuery& q, uint64_t v) { return v << (finest - std::min(q.level, finest)); };
+  // One pass: the refusal's test, and the bits in which the texels differ.
   const uint64_t x0 = scaled(queries[0], queries[0].x), y0 = scaled(queries[0], queries[0].y);
   uint64_t differ = 0;
-  for (size_t i = 0; i < n; ++i) differ |= (scaled(queries[i], queries[i].x) ^ x0) | (scaled(queries[i], queries[i].y) ^ y0);
+  uint32_t refuse = 0;
+  for (size_t i = 0; i < n; ++i) {
+    const PcfQuery& q = queries[i];
+    refuse |= uint32_t(q.r > 1) | uint32_t(q.level > finest);
+    differ |= (scaled(q, q.x) ^ x0) | (scaled(q, q.y) ^ y0);
+  }
+  if (refuse) return false;
   const uint32_t high = uint32_t(std::bit_width(differ));
   const uint32_t shift = high > 8 ? high - 8 : 0;
-  uint16_t key[kTapOrderMax], tmp[kTapOrderMax];
+  // Each tap as key << 16 | index (pass 2 reads its key without a second load), sorted
+  // by the key's low byte, then stably by its high byte: a 16-bit LSD radix sort.
+  uint32_t keyed[kTapOrderMax], tmp[kTapOrderMax];
   uint32_t lo[256] = {}, hi[256] = {};
   for (size_t i = 0; i < n; ++i) {
-    const uint32_t kx = uint32_t(scaled(queries[i], queries[i].x) >> shift) & 255u;
-    const uint32_t ky = uint32_t(scaled(queries[i], queries[i].y) >> shift) & 255u;
-    const uint16_t k = uint16_t(detail::kMortonSpread[kx] | detail::kMortonSpread[ky] << 1);
-    key[i] = k;
+    const PcfQuery& t = queries[i];
+    const uint32_t kx = uint32_t(scaled(t, t.x) >> shift) & 255u;
+    const uint32_t ky = uint32_t(scaled(t, t.y) >> shift) & 255u;
+    const uint32_t k = uint32_t(detail::kMortonSpread[kx] | detail::kMortonSpread[ky] << 1);
+    keyed[i] = k << 16 | uint32_t(i);
     ++lo[k & 255u], ++hi[k >> 8];
   }
   uint32_t sum_lo = 0, sum_hi = 0;
@@ -73,8 +81,8 @@ inline bool tap_order(std::span<const PcfQuery> queries, uint32_t finest, uint16
     lo[d] = sum_lo, hi[d] = sum_hi;
     sum_lo += a, sum_hi += b;
   }
-  for (size_t i = 0; i < n; ++i) tmp[lo[key[i] & 255u]++] = uint16_t(i);
-  for (size_t j = 0; j < n; ++j) order[hi[key[tmp[j]] >> 8]++] = tmp[j];
+  for (size_t i = 0; i < n; ++i) tmp[lo[(keyed[i] >> 16) & 255u]++] = keyed[i];
+  for (size_t j = 0; j < n; ++j) order[hi[tmp[j] >> 24]++] = uint16_t(tmp[j]);
   return true;
 }
 
