@@ -779,7 +779,7 @@ TEST(GpuStack, PerSliceCellsAnswerBitExactlyLikeTheCpu) {
       EXPECT_GT(f[0], 0u);  // both forms in one pack
       EXPECT_GT(f[1], 0u);
     }
-    EXPECT_GT(f[2] + f[3], 0u);
+    EXPECT_GT(f[2] + f[3] + f[5], 0u);
     ASSERT_TRUE(client::MapAccess::remote(s.map).header().flags & kFeatureStackSliceTiles);
     const StackGrid& grid = *client::MapAccess::remote(s.map).stack_grid();
     EXPECT_EQ(grid.split(), !all);
