@@ -564,5 +564,45 @@ TEST(StackSlicesPack, ATileWithoutTheFeatureBitIsRefused) {
   }
 }
 
+// Plane slices in a pack without the plane features: verify names what is missing, for
+// grouped cells (their packed plane slices) and for plain STSL cells (their STPN slices).
+TEST(StackSlicesPack, PlaneSlicesWithoutTheFeatureBitsAreRefused) {
+  const IntervalStack s = planar_stack(5, 2);
+  auto spill = spill_of(s, 0, "noplane.spill");
+  BlockedStackCut cut(*spill, 1u, 64 * 1024, tmp("noplane.tiles"), nullptr, StackCells::slices, false, PlaneFitOptions{});
+  const LightSet set = LightSet::fit(LightSetSpec::parse("sun-path:azimuth=150..200,elevation=40..60,samples=2"),
+                                     Aabb{{-10, 0, -10}, {10, 5, 10}});
+  cut.grid.light_kind = set.samples[0].kind();
+  for (const LightSpace& l : set.samples) cut.grid.lights.push_back(l.to_array());
+  cut.grid.spec = set.spec.to_string();
+  const uint32_t planes = kFeaturePlaneTiles | kFeaturePackedPlaneTiles | kFeaturePredictedPlaneLabels;
+  for (const bool grouped : {true, false}) {
+    StackPackParams p;
+    p.group_slice_tiles = grouped;
+    write_stack_pack(tmp("noplane.pack"), cut.grid, cut.tile_count(), [&](size_t i) { return cut.tile(i); }, p);
+    PackReader::open(tmp("noplane.pack"))->verify();
+    std::vector<uint8_t> file;
+    {
+      std::ifstream f(tmp("noplane.pack"), std::ios::binary);
+      file.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+    }
+    PackHeader h = PackHeader::parse(std::span<const uint8_t>(file.data(), kPackHeaderBytes), "noplane");
+    EXPECT_EQ(h.flags & planes, grouped ? planes : uint32_t(kFeaturePlaneTiles));
+    h.flags &= ~planes;
+    const auto head = h.serialize();
+    std::memcpy(file.data(), head.data(), head.size());
+    {
+      std::ofstream f(tmp("noplane.pack"), std::ios::binary | std::ios::trunc);
+      f.write(reinterpret_cast<const char*>(file.data()), std::streamsize(file.size()));
+    }
+    try {
+      PackReader::open(tmp("noplane.pack"))->verify();
+      ADD_FAILURE() << "verify accepted plane slices without plane_tiles" << (grouped ? " (grouped)" : "");
+    } catch (const FormatError& e) {
+      EXPECT_NE(std::string(e.what()).find("without feature plane_tiles"), std::string::npos) << e.what();
+    }
+  }
+}
+
 }  // namespace stack_slices_test
 }  // namespace st
