@@ -96,7 +96,7 @@ class SliceTiles {
   // An MMH slice's record holds its tree (the first tree word, MHQUAD.md) and whether the
   // root is a leaf, so that the lookups walk it in their rounds (stack_map.cpp: the same
   // walk as the evaluator's depth(), a step per round); kind evaluator is any other 2D
-  // tile (none today), answered by its evaluator.
+  // tile (a plane slice, "STPN"), answered by its evaluator.
   enum class RecordKind : uint32_t { constant, view, mmh, evaluator };
   struct alignas(64) Record {
     float lo, hi;             // bounds(w); a constant: its value twice
