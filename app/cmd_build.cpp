@@ -159,11 +159,13 @@ std::optional<DeepPart> build_deep_part(const BuildArgs& a, const Scene& scene, 
 }
 
 void run_build(const BuildArgs& a) {
+  if (a.planes != "on" && a.planes != "off" && a.planes != "auto")
+    throw Error("--planes: expected auto, on or off, got '" + a.planes + "'");
   if (LightSetSpec::names_light_set(a.light)) {  // a stack (app/stack_cli.cpp)
     if (a.resume || a.mpi || !a.shard.empty() || !a.region.empty())
       throw Error("build: --resume, --mpi, --shard and --region are not supported for light sets (stack packs)");
     return run_stack_build({a.scene, a.light, a.resolution, a.out, a.up, a.skip_level, a.tile_bytes, a.compression,
-                            a.quiet, a.stack_cells, a.split_cells});
+                            a.quiet, a.stack_cells, a.split_cells, a.planes != "off"});
   }
   MapBuildOptions o;
   o.map_level = parse_resolution(a.resolution);
@@ -195,8 +197,6 @@ void run_build(const BuildArgs& a) {
     throw Error("--dagmh-tiles: expected mixed, exhaustive or dagmh, got '" + a.dagmh_tiles + "'");
   o.dagmh_mixed_tiles = a.dagmh_tiles != "dagmh" && o.encoding == Encoding::dagmh;
   o.dagmh_mixed_exhaustive = a.dagmh_tiles == "exhaustive";
-  if (a.planes != "on" && a.planes != "off" && a.planes != "auto")
-    throw Error("--planes: expected auto, on or off, got '" + a.planes + "'");
   if (a.planes == "on" && o.encoding == Encoding::vsdag) throw Error("--planes on: vsdag has no plane tiles (mh, mmh, dagmh do)");
   o.planes = a.planes == "on" || (a.planes == "auto" && o.encoding != Encoding::vsdag);
   if (!a.shard.empty()) o.shard = BuildShard::parse(a.shard);
@@ -396,7 +396,8 @@ void setup_build(CLI::App& app) {
   app.add_option("--planes", a->planes,
                  "on: a tile may store blocks of texels that one plane answers exactly as planes over the "
                  "encoding of the rest, where that stores smaller (open surfaces; tiles/core/PLANES.md); "
-                 "auto (default): on for mh, mmh and dagmh, off for vsdag; off: never")
+                 "auto (default): on for mh, mmh and dagmh, off for vsdag, on for light sets (a per-slice "
+                 "cell's slices); off: never")
       ->capture_default_str();
   app.add_option("--dagmh-tiles", a->dagmh_tiles,
                  "dagmh: mixed (default) writes a tile as MMH where that is likely to store in fewer bytes "

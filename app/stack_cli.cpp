@@ -23,6 +23,7 @@ void run_stack_build(const StackBuildArgs& a) {
   o.compression_level = a.compression;
   o.cells = parse_stack_cells(a.cells);
   o.split_cells = a.split_cells;
+  o.planes = a.planes;
   o.scene_spec = a.scene;
   o.light_spec = a.light;
   SceneOptions so;

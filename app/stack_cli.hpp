@@ -22,6 +22,7 @@ struct StackBuildArgs {
   bool quiet = false;
   std::string cells = "smaller";  // --stack-cells: octree | slices | smaller
   bool split_cells = true;        // off: --no-split-cells
+  bool planes = true;             // per-slice cells' slices may be plane tiles (off: --planes off)
 };
 void run_stack_build(const StackBuildArgs& a);
 

@@ -5,6 +5,10 @@
 //   bench_stack_slices [--res 4k] [--samples 32] [--area-samples 64]
 //                      [--case city|hairball|engine|all] [--json PATH] [--spill-dir /tmp]
 //                      [--bytes-only] [--dump-tiles DIR] [--adaptive] [--split-only] [--split-k 0,-1]
+//                      [--no-planes]
+//
+// Plane tiles (tiles/core/PLANES.md) are on for both sides, as `shadowtile build` makes
+// them: the separate packs' tiles and the per-slice cells' slices; --no-planes: neither.
 //
 // --bytes-only skips the octree pack, the dictionary measure, the slices' own 2D tiles of
 // the stack's cells, the whole-slice DAG-MH sections and the open values (those lines
@@ -61,6 +65,7 @@
 #include <fstream>
 #include <functional>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -149,6 +154,13 @@ void add_octree_bytes(const std::vector<uint8_t>& b, OctBytes& out) {
 // A per-slice cell's raw bytes by section, in the grouped layout's order (STSP,
 // stack_slices.hpp): STSL header and entries, 2D heads, DAG-MH structure, MMH node words,
 // DAG-MH multipliers, MMH values, zero bytes. Empty when `b` is not a per-slice cell.
+// Plane tiles on both sides (off: --no-planes): the separate packs' tiles and the stack's
+// per-slice cells' slices, as `shadowtile build` makes them by default.
+bool g_planes = true;
+std::optional<st::PlaneFitOptions> stack_planes() {
+  return g_planes ? std::optional<st::PlaneFitOptions>(st::PlaneFitOptions{}) : std::nullopt;
+}
+
 std::vector<uint64_t> slice_cell_sections(const std::vector<uint8_t>& b) {
   if (!st::is_slice_tiles(b) || b.size() < st::kSliceTilesHeaderBytes) return {};
   auto u32 = [&](uint64_t off) {
@@ -166,7 +178,9 @@ std::vector<uint64_t> slice_cell_sections(const std::vector<uint8_t>& b) {
     const uint32_t off = u32(st::kSliceTilesHeaderBytes + st::kSliceTilesEntryBytes * w);
     const uint32_t size = u32(st::kSliceTilesHeaderBytes + st::kSliceTilesEntryBytes * w + 4);
     if (off == 0 || off < next) continue;
-    if (u32(off) == st::dagmh::kMagic) {
+    if (u32(off) == 0x4E505453u) {  // a plane slice ("STPN"): grouped whole among the heads
+      sec[1] += size;
+    } else if (u32(off) == st::dagmh::kMagic) {
       const uint32_t S = b[off + 9];
       const uint64_t structure = (S ? uint64_t(16) << (2 * S) : 0) + 4 * uint64_t(u32(off + 16)) +
                                  12 * uint64_t(u32(off + 20)) + 20 * ((uint64_t(u32(off + 24)) + 31) / 32);
@@ -435,6 +449,7 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
       cut.map_level = level;
       cut.skip_level = K2;
       cut.codec = st::TileCodec::dagmh_or_mmh();
+      if (g_planes) cut.codec = st::TileCodec::with_planes(cut.codec, cut.tile_bytes);
       // A 2D pack holds a plain sun or spot (the ground and window frames are stack-only
       // header kinds): the header's light is a plain sun of the same box; the tiles are
       // this slice's, byte for byte what its own build would cut (the header is 256 bytes
@@ -576,7 +591,7 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
   uint64_t smaller_file = 0, ungrouped_file = 0, journal_file = 0, smaller_slice_cells = 0, smaller_tiles = 0;
   uint64_t pick_stored = 0, pick_grid = 0, pick_level = K;
   if (!split_only) {
-    st::BlockedStackCut pick(spill, K, 64 * 1024, spill_path + ".pick", nullptr, st::StackCells::smaller);
+    st::BlockedStackCut pick(spill, K, 64 * 1024, spill_path + ".pick", nullptr, st::StackCells::smaller, false, stack_planes());
     pick.grid.light_kind = lights_grid.light_kind;
     pick.grid.lights = lights_grid.lights;
     pick.grid.spec = lights_grid.spec;
@@ -620,7 +635,7 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
       continue;
     }
     const auto r0 = Clock::now();
-    st::BlockedStackCut cut(spill, Ks, 64 * 1024, spill_path + ".split", nullptr, st::StackCells::smaller, true);
+    st::BlockedStackCut cut(spill, Ks, 64 * 1024, spill_path + ".split", nullptr, st::StackCells::smaller, true, stack_planes());
     cut.grid.light_kind = lights_grid.light_kind;
     cut.grid.lights = lights_grid.lights;
     cut.grid.spec = lights_grid.spec;
@@ -771,7 +786,7 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
     const uint32_t Kp = uint32_t(pick_level);
     const double per_tile = double(journal_file - pick_stored - pick_grid) / double(std::max<uint64_t>(smaller_tiles, 1));
     for (uint32_t l = K; l <= Kp; ++l) {
-      st::BlockedStackCut cut(spill, l, st::kMaxTileBytes, spill_path + ".adaptive", nullptr, st::StackCells::smaller);
+      st::BlockedStackCut cut(spill, l, st::kMaxTileBytes, spill_path + ".adaptive", nullptr, st::StackCells::smaller, false, stack_planes());
       auto& m = at.emplace_back();
       uint64_t total = 0;
       for (size_t i = 0; i < cut.tile_count(); ++i) {
@@ -934,7 +949,7 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
 int main(int argc, char** argv) {
   try {
     uint32_t level = 12, samples = 32, area_samples = 64;
-    bool bytes_only = false, adaptive = false, split_only = false;
+    bool bytes_only = false, adaptive = false, split_only = false, no_planes = false;
     std::vector<int> split_shifts{0};
     std::string dump_dir;
     std::string which = "all", json_path = "build/bench_stack_slices.json", spill_dir = "/tmp";
@@ -948,6 +963,7 @@ int main(int argc, char** argv) {
         .flag("--bytes-only", bytes_only, "Skip the octree pack, the dictionary measure and their DAG-MH tiles")
         .flag("--adaptive", adaptive, "Estimate a cut that goes deeper only where a cell overflows")
         .flag("--split-only", split_only, "Write only the split pack")
+        .flag("--no-planes", no_planes, "No plane tiles in the separate packs nor in the stack's per-slice cells")
         .with("--split-k", [&](const std::string& v) {  // comma-separated shifts of K for the split pack, e.g. 0,-1
                 split_shifts.clear();
                 for (size_t at = 0; at <= v.size();) {
@@ -958,6 +974,7 @@ int main(int argc, char** argv) {
               }, "Write the split pack at these shifts of K (comma-separated, e.g. 0,-1)")
         .value("--dump-tiles", dump_dir, "Write the per-cell pack's raw tiles to DIR/<cell>.bin");
     opt.parse(argc, argv);
+    g_planes = !no_planes;
     const std::string day = "sun-path:azimuth=100..260,elevation=25..65,samples=" + std::to_string(samples) + ",frame=ground";
     std::vector<Case> cases;
     if (which == "all" || which == "city") cases.push_back({"city-day", "procedural:city", day});

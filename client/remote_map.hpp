@@ -441,7 +441,7 @@ class RemoteMap final : public Evaluator {
   // evaluators prefetched, then the refs (StackMap::TileSource: the loads overlap).
   void stack_tiles(const uint64_t* cells, uint32_t n, StackTileRef* out) const noexcept;
   void open_stack(const std::vector<uint8_t>& grid_bytes);  // the constructor's, for stack packs
-  static std::unique_ptr<Evaluator> open_stack_tile(const StackGrid& g, uint64_t id, std::span<uint8_t> raw);
+  static std::unique_ptr<Evaluator> open_stack_tile(const StackGrid& g, uint64_t id, std::span<uint8_t> raw, uint32_t pack_flags);
   template <class Fn>
   auto stack_lookup(Fn&& fn) const noexcept;
 

@@ -443,9 +443,11 @@ bool RemoteMap::fill_slot(uint32_t slot, const proto::TileMeta& meta, const Grid
     if (stack_grid_) {  // an MH octree of one stack cell (remote_stack.cpp)
       if (is_grouped_slice_tiles(raw)) {  // a grouped per-slice cell: only in a pack that says so
         if (!(header_.flags & kFeatureStackGroupedTiles)) return false;
-        ungroup_slice_tiles(raw);
+        uint32_t need = 0;  // packed plane slices: only in a pack that says so
+        ungroup_slice_tiles(raw, &need);
+        if ((header_.flags & need) != need) return false;
       }
-      ev = open_stack_tile(*stack_grid_, meta.tile_id, raw);
+      ev = open_stack_tile(*stack_grid_, meta.tile_id, raw, header_.flags);
       return bool(ev);
     }
     if (entry.kind == EntryKind::tile) {

@@ -51,12 +51,13 @@ SurfaceExtent RemoteMap::stack_surface() {
   return surface_extent(*info_light_, grid);
 }
 
-std::unique_ptr<Evaluator> RemoteMap::open_stack_tile(const StackGrid& g, uint64_t id, std::span<uint8_t> raw) {
+std::unique_ptr<Evaluator> RemoteMap::open_stack_tile(const StackGrid& g, uint64_t id, std::span<uint8_t> raw, uint32_t pack_flags) {
   uint64_t cell = 0;
   if (!g.cell_of(id, cell) || g.entries[cell].kind != 1) return nullptr;
   StackTile t = StackTile::open(raw);  // validates the whole buffer; throws FormatError
   const uint32_t l = g.entries[cell].level;  // K, or deeper for a split cell's child
   if (t.xy_level() != g.geo.n - g.geo.xy_bits(l) || t.w_level() != g.geo.k - g.geo.w_bits(l)) return nullptr;
+  if (t.has_planes() && !(pack_flags & kFeaturePlaneTiles)) return nullptr;  // only in a pack that says so
   return std::make_unique<StackTileEvaluator>(std::move(t));
 }
 

@@ -136,12 +136,18 @@ float st_oct_depth_resumed(uint base, uint x, uint y, uint w, uint level) {
 // (level <= its xy_level, w < its 2^w_level entries: the caller checks): entry w's first word
 // is the byte offset of the slice's own 2D tile (4-aligned), 0 for a constant slice whose f32
 // bits are the second word; the tile is DAG-MH, or MMH by its magic, as st_tile_depth reads a
-// DAG-MH pack's mixed tiles. The same answer as SliceTiles::depth.
+// DAG-MH pack's mixed tiles, or a plane tile ("STPN") over either, read as st_tile_depth
+// reads one (st_plane_lookup, then the inner buffer). The same answer as SliceTiles::depth.
 float st_slices_depth(uint base, uint x, uint y, uint w, uint level) {
   const uint e = base + kSlHeaderWords + kSlEntryWords * w;
   const uint off = ST_POOL(e);
   if (off == 0u) return uintBitsToFloat(ST_POOL(e + 1u));
-  const uint tile = base + (off >> 2u);
+  uint tile = base + (off >> 2u);
+  if (ST_POOL(tile) == 0x4E505453u) {  // "STPN": plane blocks over a DAG-MH or MMH buffer (st_tile_depth's)
+    float d;
+    if (st_plane_lookup(tile, level, x, y, d)) return d;
+    tile += 6u + 6u * ST_POOL(tile + 4u) + 2u * ST_POOL(tile + 2u) + 6u * ST_POOL(tile + 5u);
+  }
   if (ST_POOL(tile) == kMmhMagic) return st_mh_depth(tile, level, x, y, true);
   return st_dag_depth(tile, level, x, y);
 }

@@ -3,7 +3,8 @@
 // ungroup_slice_tiles turns back into STSL or refuses with st::FormatError (the seeds hold
 // both); an STSL buffer that opens comes back byte for byte through group_slice_tiles and
 // ungroup_slice_tiles. Contract: SliceTiles::open validates the
-// header, every entry and every slice's 2D tile (DAG-MH or MMH) or throws
+// header, every entry and every slice's 2D tile (DAG-MH, MMH, or a plane tile over either:
+// seeds with plane slices, grouped with them packed) or throws
 // st::FormatError; a buffer it accepts answers depth() at every level of every slice
 // without reading out of bounds, deterministically, and StackTile::open accepts it too
 // and answers the same.
@@ -15,6 +16,7 @@
 #include "tests/fuzz/evaluator_probe.hpp"
 #include "tests/fuzz/fuzz_harness.hpp"
 #include "tiles/encode/stack_slices_encode.hpp"
+#include "tiles/core/plane_format.hpp"
 #include "tiles/core/stack_slices.hpp"
 
 namespace {
@@ -36,6 +38,10 @@ std::vector<st::IntervalTile> seed_slices(uint32_t m, uint32_t count, uint64_t s
         float a = float(rng.uniform()), b = float(rng.uniform());
         if (pattern == 1) a = (x + w / 2 < side / 2 && y > side / 3) ? 0.3f : 0.8f, b = a;
         if (pattern == 2) a = 0.5f, b = 0.5f;
+        if (pattern == 4)  // a slanted plane's exact depths (plane slices), a box of wide intervals
+          a = b = x < 2 && y < 2 ? 0.2f
+                                 : st::planes::plane_fixed_to_float(st::planes::kOne / 2 + st::planes::kOne / 512 * int64_t(x + w) +
+                                                                    st::planes::kOne / 1024 * int64_t(y));
         t.data[size_t(y) * side + x] = {std::min(a, b), std::max(a, b)};
       }
     if (pattern == 3 && w % 2 == 1) t = out.back();
@@ -51,10 +57,12 @@ std::vector<st::fuzz::Bytes> st::fuzz::seeds() {
   const std::pair<uint32_t, uint32_t> shapes[] = {{0, 1}, {1, 2}, {2, 4}, {3, 3}, {3, 8}, {4, 2}};
   uint64_t seed = 1;
   for (auto [m, count] : shapes)
-    for (int pattern = 0; pattern < 4; ++pattern) {
+    for (int pattern = 0; pattern < 5; ++pattern) {
       uint32_t j = 0;
       while ((1u << j) < count) ++j;
-      out.push_back(encode_slice_tiles(seed_slices(m, count, seed++, pattern), m, j + (pattern == 2)));
+      if (pattern == 4 && m < 3) continue;  // plane slices: 8x8 squares and larger
+      const PlaneFitOptions fit;
+      out.push_back(encode_slice_tiles(seed_slices(m, count, seed++, pattern), m, j + (pattern == 2), pattern == 4 ? &fit : nullptr));
       out.push_back(group_slice_tiles(out.back()));
     }
   return out;

@@ -30,6 +30,7 @@
 #include "tiles/core/filter_level.hpp"
 #include "tiles/core/light_set.hpp"
 #include "tiles/core/mh_octree.hpp"
+#include "tiles/core/plane_format.hpp"
 #include "tiles/core/stack_map.hpp"
 #include "tiles/core/stack_slices.hpp"
 
@@ -49,6 +50,21 @@ IntervalStack sliding_stack(uint32_t level, uint32_t slices) {
       for (uint64_t y = y0; y < y0 + 10; ++y)
         for (uint64_t x = x0; x < x0 + 10; ++x) s.at(x, y, w) = {0.2f + 0.1f * float(b), 0.35f + 0.1f * float(b)};
     }
+  return s;
+}
+
+// sliding_stack over a slanted ground: each ground texel the decoded depth of one plane
+// (plane_format.hpp, exact), so per-slice cells store plane slices there.
+IntervalStack planar_stack(uint32_t level, uint32_t slices) {
+  IntervalStack s = sliding_stack(level, slices);
+  for (uint32_t w = 0; w < slices; ++w)
+    for (uint64_t y = 0; y < s.side(); ++y)
+      for (uint64_t x = 0; x < s.side(); ++x)
+        if (s.at(x, y, w).lo == 0.8f) {
+          const float v = planes::plane_fixed_to_float(planes::kOne / 2 + planes::kOne / 512 * int64_t(x) +
+                                                       planes::kOne / 1024 * int64_t(y));
+          s.at(x, y, w) = {v, v};
+        }
   return s;
 }
 
@@ -79,6 +95,7 @@ struct StackSource {
   uint32_t tile_bytes = 512;
   StackCells cells = StackCells::octree;  // else the blocked cut's per-slice or smaller cells
   bool split = false;  // the blocked cut splitting cells over tile_bytes below K (grid version 2)
+  bool planes = false;  // per-slice cells' slices may be plane tiles (tiles/core/PLANES.md)
 };
 
 // The blocked cut of `is` (the builder's; cut_stack's bytes for octree cells) with `cells`.
@@ -88,7 +105,8 @@ StackCut blocked_cut(const IntervalStack& is, const std::string& name, const Sta
   const size_t area = size_t(is.side() * is.side());
   for (uint32_t w = 0; w < is.slices; ++w)
     spill.write_rows(w, 0, is.side(), std::span<const Interval>(is.data.data() + w * area, area));
-  BlockedStackCut blocked(spill, src.skip_level, src.tile_bytes, base + ".tiles", nullptr, src.cells, src.split);
+  BlockedStackCut blocked(spill, src.skip_level, src.tile_bytes, base + ".tiles", nullptr, src.cells, src.split,
+                          src.planes ? std::optional<PlaneFitOptions>(PlaneFitOptions{}) : std::nullopt);
   if (src.split && blocked.split_cells == 0) ADD_FAILURE() << name << ": no cell split";
   if (src.split) std::printf("%s: K = %u, %llu cells split, %zu entries, %zu tiles\n", name.c_str(), blocked.grid.skip_level,
                              (unsigned long long)blocked.split_cells, blocked.grid.entries.size(), blocked.tile_count());
@@ -689,8 +707,8 @@ TEST(GpuStack, EngineModePassesOverTheEnginesImagesEqualTheCpuTwin) {
 
 // The forms of a served stack's tiles: [octree tiles, per-slice tiles, their slices that are
 // DAG-MH tiles, MMH tiles, constants] (stack_slices.hpp's layout, read here by hand).
-std::array<size_t, 5> tile_forms(const ServedStack& s) {
-  std::array<size_t, 5> f{};
+std::array<size_t, 6> tile_forms(const ServedStack& s) {
+  std::array<size_t, 6> f{};
   auto u32 = [](const std::vector<uint8_t>& b, size_t at) {
     uint32_t v;
     std::memcpy(&v, b.data() + at, 4);
@@ -704,7 +722,7 @@ std::array<size_t, 5> tile_forms(const ServedStack& s) {
     ++f[1];
     for (uint32_t w = 0; w < (1u << t[7]); ++w) {
       const uint32_t off = u32(t, kSliceTilesHeaderBytes + kSliceTilesEntryBytes * w);
-      ++f[off == 0 ? 4 : u32(t, off) == 0x4D4D5453u ? 3 : 2];  // "STMM": MMH
+      ++f[off == 0 ? 4 : u32(t, off) == 0x4D4D5453u ? 3 : u32(t, off) == 0x4E505453u ? 5 : 2];  // "STMM": MMH, "STPN": planes
     }
   }
   return f;
@@ -737,15 +755,22 @@ IntervalStack mixed_stack(uint32_t level, uint32_t slices) {
 TEST(GpuStack, PerSliceCellsAnswerBitExactlyLikeTheCpu) {
   const uint32_t level = looptest::small_scale() ? 5 : 6;
   const IntervalStack sliding = sliding_stack(level, kSlices), mixed = mixed_stack(level, kSlices);
-  for (const StackCells cells : {StackCells::slices, StackCells::smaller}) {
-    const bool all = cells == StackCells::slices;
-    const IntervalStack& is = all ? sliding : mixed;
-    SCOPED_TRACE(all ? "slices" : "smaller");
-    const std::string name = all ? "gpu_stack_slices_all" : "gpu_stack_slices_smaller";
+  const IntervalStack planar = planar_stack(level, kSlices);
+  // Per-slice cells only; both forms (split); per-slice cells with plane slices.
+  for (const int form : {0, 1, 2}) {
+    const StackCells cells = form == 1 ? StackCells::smaller : StackCells::slices;
+    const bool all = cells == StackCells::slices, planes = form == 2;
+    const IntervalStack& is = planes ? planar : all ? sliding : mixed;
+    SCOPED_TRACE(planes ? "slices with planes" : all ? "slices" : "smaller");
+    const std::string name = planes ? "gpu_stack_slices_planes" : all ? "gpu_stack_slices_all" : "gpu_stack_slices_smaller";
     ServedStack s = serve_frozen(name, all ? "ground" : area_spec("window"), kSlices / 2 - 1,
-                                 StackSource{&is, std::nullopt, all ? 4096u : kSplitTileBytes, cells, !all});
-    const std::array<size_t, 5> f = tile_forms(s);
-    if (all) {
+                                 StackSource{&is, std::nullopt, all ? 4096u : kSplitTileBytes, cells, !all, planes});
+    const std::array<size_t, 6> f = tile_forms(s);
+    EXPECT_EQ(f[5] > 0, planes) << "plane slices";
+    EXPECT_EQ(bool(client::MapAccess::remote(s.map).header().flags & kFeaturePlaneTiles), planes);
+    if (planes) {
+      EXPECT_EQ(f[0], 0u);
+    } else if (all) {
       EXPECT_EQ(f[0], 0u);
       EXPECT_GT(f[2], 0u);  // DAG-MH slices
       EXPECT_GT(f[3], 0u);  // MMH slices
@@ -754,7 +779,7 @@ TEST(GpuStack, PerSliceCellsAnswerBitExactlyLikeTheCpu) {
       EXPECT_GT(f[0], 0u);  // both forms in one pack
       EXPECT_GT(f[1], 0u);
     }
-    EXPECT_GT(f[2] + f[3], 0u);
+    EXPECT_GT(f[2] + f[3] + f[5], 0u);
     ASSERT_TRUE(client::MapAccess::remote(s.map).header().flags & kFeatureStackSliceTiles);
     const StackGrid& grid = *client::MapAccess::remote(s.map).stack_grid();
     EXPECT_EQ(grid.split(), !all);
@@ -773,6 +798,7 @@ TEST(GpuStack, PerSliceCellsAnswerBitExactlyLikeTheCpu) {
     FrameStats fs;
     for (const bool resume : {true, false})
       for (const double time : {0.0, 0.43, 1.0, -1.0}) {  // -1: soft
+        if (planes && (!resume || time == 1.0)) continue;  // the plane slices' reads: every texel and three passes
         SCOPED_TRACE("time " + std::to_string(time) + (resume ? "" : ", walks from the root"));
         ShadowPassInput in = gb.input(std::max(time, 0.0), 3, time < 0);
         in.resume_walks = resume;

@@ -15,6 +15,8 @@
 #include "common/hash.hpp"
 #include "tests/test_tmp.hpp"
 #include "tests/tiles/stack_fixtures.hpp"
+#include "scene/scene.hpp"
+#include "tiles/bake/stack_build.hpp"
 #include "tiles/encode/stack_blocked.hpp"
 #include "tiles/encode/stack_pack.hpp"
 #include "tiles/encode/stack_slices_encode.hpp"
@@ -22,6 +24,8 @@
 #include "tiles/encode/mh_build.hpp"
 #include "tiles/core/pack_format.hpp"
 #include "tiles/core/pack_reader.hpp"
+#include "tiles/core/plane_format.hpp"
+#include "tiles/core/plane_pack.hpp"
 #include "tiles/core/stack_map.hpp"
 #include "tiles/core/stack_slices.hpp"
 
@@ -235,6 +239,83 @@ TEST(StackSlicesFormat, GroupedCellsRoundTripAndHostileOnesAreRefused) {
     }
 }
 
+// A 16x16 square on a slanted plane (each texel the plane's own decoded depth, exact:
+// plane_format.hpp) with a box of wide intervals in one corner: plane blocks over the rest.
+IntervalTile planar_square(int64_t slope) {
+  IntervalTile t = square(4, 0, 0);
+  for (uint32_t y = 0; y < 16; ++y)
+    for (uint32_t x = 0; x < 16; ++x) {
+      const float v = planes::plane_fixed_to_float(planes::kOne / 2 + slope * x + planes::kOne / 1024 * y);
+      t.data[y * 16 + x] = x < 3 && y < 3 ? Interval{0.1f, 0.2f} : Interval{v, v};
+    }
+  return t;
+}
+
+// Plane slices (tiles/core/PLANES.md) in a per-slice cell: the entry names an "STPN" buffer,
+// the grouped form holds it whole and packed ("STPL") among the heads and says which
+// features that needs, every slice reads back each texel's value, and hostile buffers
+// (every truncation, every byte flipped) are refused in one line or read, never a crash.
+TEST(StackSlicesFormat, PlaneSlicesArePinnedAndHostileOnesAreRefused) {
+  const std::vector<IntervalTile> squares{planar_square(planes::kOne / 512), planar_square(planes::kOne / 256)};
+  const PlaneFitOptions fit;
+  const std::vector<uint8_t> stsl = encode_slice_tiles(squares, 4, 1, &fit);
+  EXPECT_EQ(encode_slice_tiles(squares, 4, 1), encode_slice_tiles(squares, 4, 1, nullptr));
+  const SliceTiles t = SliceTiles::open(stsl);
+  ASSERT_TRUE(t.has_planes());
+  EXPECT_FALSE(SliceTiles::open(encode_slice_tiles(squares, 4, 1)).has_planes());
+  ASSERT_EQ(u32(stsl, 16), 32u);  // slice 0's buffer right after the 2 entries
+  const uint32_t size0 = u32(stsl, 20);
+  EXPECT_EQ(u32(stsl, 32), 0x4E505453u);  // "STPN"
+  for (uint32_t w = 0; w < 2; ++w)
+    for (uint32_t y = 0; y < 16; ++y)
+      for (uint32_t x = 0; x < 16; ++x) {
+        const Interval iv = squares[w].data[y * 16 + x];
+        const float v = t.depth(x, y, w, 4);
+        ASSERT_TRUE(iv.lo <= v && v <= iv.hi) << x << " " << y << " " << w;
+      }
+  // Grouped: the plane buffer whole, in its packed form, where its head would be.
+  const std::vector<uint8_t> grouped = group_slice_tiles(stsl);
+  ASSERT_TRUE(is_grouped_slice_tiles(grouped));
+  const std::vector<uint8_t> packed = pack_plane_tile(std::span<const uint8_t>(stsl).subspan(32, size0));
+  ASSERT_EQ(packed.size(), size0);
+  EXPECT_EQ(u32(packed, 0), 0x4C505453u);  // "STPL"
+  EXPECT_TRUE(std::equal(packed.begin(), packed.end(), grouped.begin() + 32));
+  std::vector<uint8_t> back = grouped;
+  uint32_t need = 0;
+  ungroup_slice_tiles(back, &need);
+  EXPECT_EQ(back, stsl);
+  EXPECT_EQ(need, uint32_t(kFeaturePlaneTiles | kFeaturePackedPlaneTiles | kFeaturePredictedPlaneLabels));
+  auto refused = [](std::vector<uint8_t> b, bool group) -> std::string {
+    try {
+      if (group) ungroup_slice_tiles(b);
+      SliceTiles::open(b);
+    } catch (const FormatError& e) {
+      const std::string m = e.what();
+      const bool named = m.rfind("slice tiles: ", 0) == 0 || m.rfind("grouped slice tiles: ", 0) == 0;
+      return named && m.find('\n') == std::string::npos ? "" : "not one named line: " + m;
+    }
+    return "accepted";
+  };
+  for (const bool group : {false, true}) {
+    const std::vector<uint8_t>& good = group ? grouped : stsl;
+    for (size_t n = 0; n < good.size(); ++n) {  // every truncation, even with a matching byte_size
+      std::vector<uint8_t> b(good.begin(), good.begin() + ptrdiff_t(n));
+      if (b.size() >= 12) std::memcpy(b.data() + 8, &n, 4);
+      EXPECT_EQ(refused(b, group), "") << n << " bytes";
+    }
+    for (size_t i = 0; i < good.size(); ++i)  // any one byte changed: refused in one line or read
+      for (uint8_t x : {uint8_t(1), uint8_t(0x80)}) {
+        std::vector<uint8_t> b = good;
+        b[i] ^= x;
+        const std::string r = refused(b, group);
+        EXPECT_TRUE(r.empty() || r == "accepted") << i << ": " << r;
+      }
+  }
+  std::vector<uint8_t> b = stsl;
+  b[32 + 4] ^= 0xFF;  // the plane tile's version
+  EXPECT_NE(refused(b, false), "accepted");
+}
+
 TEST(StackSlicesPack, PerSliceCellsAreStoredGroupedAndReadAsStsl) {
   const IntervalStack s = stacks::random_stack(5, 3, 4);
   auto spill = spill_of(s, 0, "grouped.spill");
@@ -276,10 +357,13 @@ std::unique_ptr<StackSpill> spill_of(const IntervalStack& s, uint32_t block_leve
 }
 
 // The pack of `s` with cells in form `cells`, written and opened as a client would.
+// `planes`: per-slice cells' slices may be plane tiles.
 std::unique_ptr<PackReader> build(const IntervalStack& s, StackCells cells, const std::string& name,
-                                  uint64_t* slice_cells = nullptr) {
+                                  uint64_t* slice_cells = nullptr, bool planes = false,
+                                  std::optional<uint32_t> skip_level = std::nullopt) {
   auto spill = spill_of(s, 0, name + ".spill");
-  BlockedStackCut cut(*spill, std::nullopt, 64 * 1024, tmp(name + ".tiles"), nullptr, cells);
+  BlockedStackCut cut(*spill, skip_level, 64 * 1024, tmp(name + ".tiles"), nullptr, cells, false,
+                      planes ? std::optional<PlaneFitOptions>(PlaneFitOptions{}) : std::nullopt);
   if (slice_cells) *slice_cells = cut.slice_cells;
   const LightSet set = LightSet::fit(
       LightSetSpec::parse("sun-path:azimuth=150..200,elevation=40..60,samples=" + std::to_string(s.slices)),
@@ -293,17 +377,39 @@ std::unique_ptr<PackReader> build(const IntervalStack& s, StackCells cells, cons
   return r;
 }
 
-void expect_lossless_and_like_octree(const IntervalStack& s, const std::string& what) {
+// A stack of zero-width intervals on planes (each texel one plane's exact decoded depth,
+// plane_format.hpp), two planes meeting along a crease that moves with w, and a box of
+// wide intervals sliding with w: the plane slices' blocks, labelled blocks and inner tree.
+IntervalStack planar_stack(uint32_t level, uint32_t slices) {
+  IntervalStack s{level, slices, std::vector<Interval>((size_t(1) << (2 * level)) * slices)};
+  for (uint32_t w = 0; w < slices; ++w)
+    for (uint64_t y = 0; y < s.side(); ++y)
+      for (uint64_t x = 0; x < s.side(); ++x) {
+        const bool right = x + y / 3 > 20 + 3 * w;
+        const int64_t v = right ? planes::kOne / 2 + planes::kOne / 512 * int64_t(x) + planes::kOne / 1024 * int64_t(y)
+                                : planes::kOne / 3 + planes::kOne / 300 * int64_t(y) + planes::kOne / 4096 * int64_t(x);
+        const float d = planes::plane_fixed_to_float(v);
+        const bool box = x >= 5 + 2 * w && x < 14 + 2 * w && y >= 40 && y < 49;
+        s.at(x, y, w) = box ? Interval{0.1f, 0.25f} : Interval{d, d};
+      }
+  return s;
+}
+
+// `planes`: the per-slice cells' slices may be plane tiles, and in the all-slices pack some are.
+// `skip_level`: the cut's (default: the stack's default).
+void expect_lossless_and_like_octree(const IntervalStack& s, const std::string& what, bool planes = false,
+                                     std::optional<uint32_t> skip_level = std::nullopt) {
   SCOPED_TRACE(what);
-  const auto oct = build(s, StackCells::octree, "oct");
+  const auto oct = build(s, StackCells::octree, "oct", nullptr, false, skip_level);
   EXPECT_FALSE(oct->header().flags & kFeatureStackSliceTiles);
   const ResidentStack ro(*oct);
   for (StackCells form : {StackCells::slices, StackCells::smaller}) {
     uint64_t slice_cells = 0;
-    const auto pack = build(s, form, form == StackCells::slices ? "slices" : "smaller", &slice_cells);
+    const auto pack = build(s, form, form == StackCells::slices ? "slices" : "smaller", &slice_cells, planes, skip_level);
     EXPECT_EQ(bool(pack->header().flags & kFeatureStackSliceTiles), slice_cells > 0);
     if (form == StackCells::slices) {
       EXPECT_EQ(slice_cells, pack->tiles().size());
+      EXPECT_EQ(bool(pack->header().flags & kFeaturePlaneTiles), planes) << "plane slices";
     }
     const ResidentStack rs(*pack);
     const StackMap& m = rs.map();
@@ -335,6 +441,11 @@ TEST(StackSlicesPack, EveryTexelOfEverySliceIsLossless) {
   expect_lossless_and_like_octree(stacks::coherent_stack(6, 5, 3), "coherent 64^2 x 5");
   expect_lossless_and_like_octree(stacks::random_stack(5, 3, 4), "random 32^2 x 3");
   expect_lossless_and_like_octree(stacks::coherent_stack(3, 20, 6), "coherent 8^2 x 20 (deeper than wide)");
+  // Zero-width intervals on planes, as an open mesh's: per-slice cells with plane slices
+  // (tiles/core/PLANES.md), read back exactly by the pack reader and the lookups. (The
+  // demo's real day, 2CylinderEngine.glb at 1024^2 x 16, is re-traced on every texel by
+  // `shadowtile verify --all`: tiles/core/MHOCT.md "Plane slices".)
+  expect_lossless_and_like_octree(planar_stack(6, 4), "planes 64^2 x 4 with plane slices", true, 1);
 }
 
 TEST(StackSlicesPack, SmallerFormIsNeverLargerThanTheOctree) {
@@ -449,6 +560,46 @@ TEST(StackSlicesPack, ATileWithoutTheFeatureBitIsRefused) {
       ADD_FAILURE() << "verify accepted a per-slice cell without the feature bit " << name;
     } catch (const FormatError& e) {
       EXPECT_NE(std::string(e.what()).find(name), std::string::npos) << e.what();
+    }
+  }
+}
+
+// Plane slices in a pack without the plane features: verify names what is missing, for
+// grouped cells (their packed plane slices) and for plain STSL cells (their STPN slices).
+TEST(StackSlicesPack, PlaneSlicesWithoutTheFeatureBitsAreRefused) {
+  const IntervalStack s = planar_stack(5, 2);
+  auto spill = spill_of(s, 0, "noplane.spill");
+  BlockedStackCut cut(*spill, 1u, 64 * 1024, tmp("noplane.tiles"), nullptr, StackCells::slices, false, PlaneFitOptions{});
+  const LightSet set = LightSet::fit(LightSetSpec::parse("sun-path:azimuth=150..200,elevation=40..60,samples=2"),
+                                     Aabb{{-10, 0, -10}, {10, 5, 10}});
+  cut.grid.light_kind = set.samples[0].kind();
+  for (const LightSpace& l : set.samples) cut.grid.lights.push_back(l.to_array());
+  cut.grid.spec = set.spec.to_string();
+  const uint32_t planes = kFeaturePlaneTiles | kFeaturePackedPlaneTiles | kFeaturePredictedPlaneLabels;
+  for (const bool grouped : {true, false}) {
+    StackPackParams p;
+    p.group_slice_tiles = grouped;
+    write_stack_pack(tmp("noplane.pack"), cut.grid, cut.tile_count(), [&](size_t i) { return cut.tile(i); }, p);
+    PackReader::open(tmp("noplane.pack"))->verify();
+    std::vector<uint8_t> file;
+    {
+      std::ifstream f(tmp("noplane.pack"), std::ios::binary);
+      file.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
+    }
+    PackHeader h = PackHeader::parse(std::span<const uint8_t>(file.data(), kPackHeaderBytes), "noplane");
+    EXPECT_EQ(h.flags & planes, grouped ? planes : uint32_t(kFeaturePlaneTiles));
+    h.flags &= ~planes;
+    const auto head = h.serialize();
+    std::memcpy(file.data(), head.data(), head.size());
+    {
+      std::ofstream f(tmp("noplane.pack"), std::ios::binary | std::ios::trunc);
+      f.write(reinterpret_cast<const char*>(file.data()), std::streamsize(file.size()));
+    }
+    try {
+      PackReader::open(tmp("noplane.pack"))->verify();
+      ADD_FAILURE() << "verify accepted plane slices without plane_tiles" << (grouped ? " (grouped)" : "");
+    } catch (const FormatError& e) {
+      EXPECT_NE(std::string(e.what()).find("without feature plane_tiles"), std::string::npos) << e.what();
     }
   }
 }

@@ -174,7 +174,8 @@ StackBuildReport build_stack_pack(const Scene& scene, const LightSetSpec& spec_i
   r.trace_seconds = seconds_since(t0);
   t0 = std::chrono::steady_clock::now();
   BlockedCutStats bst;
-  BlockedStackCut cut(spill, K, o.tile_bytes, spill_path + ".tiles", &bst, o.cells, o.split_cells);
+  BlockedStackCut cut(spill, K, o.tile_bytes, spill_path + ".tiles", &bst, o.cells, o.split_cells,
+                      o.planes ? std::optional<PlaneFitOptions>(PlaneFitOptions{}) : std::nullopt);
   r.slice_cells = cut.slice_cells;
   r.split_cells = cut.split_cells;
   r.octree_seconds = bst.reduce_seconds;

@@ -44,6 +44,9 @@ struct StackBuildOptions {
   // (BlockedStackCut, stack_grid.hpp "Split cells"; every reader, the GPU passes included,
   // takes both). Off: the uniform cut of earlier versions (a version-1 grid).
   bool split_cells = true;
+  // A per-slice cell's slices may be plane tiles where those store smaller, as a 2D pack's
+  // (stack_slices_encode.hpp; feature plane_tiles). Off: DAG-MH or MMH slices only.
+  bool planes = true;
 };
 
 struct StackBuildReport {

@@ -142,9 +142,10 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
     fail(20, "feature predicted_plane_labels without packed_plane_tiles");
   if ((h.flags & uint32_t(kFeatureMixedTiles)) && (stack || h.encoding != Encoding::dagmh))
     fail(20, "feature mixed_tiles on a pack that is not a DAG-MH map (encoding " + to_string(h.encoding) + ")");
-  if ((h.flags & uint32_t(kFeaturePlaneTiles)) && (stack || h.encoding == Encoding::vsdag))
-    fail(20, "feature plane_tiles on a pack that is not an MH, MMH or DAG-MH map (encoding " + to_string(h.encoding) +
-                 (stack ? ", a stack" : "") + ")");
+  // A stack's plane tiles are per-slice cells' slices (stack_slices.hpp).
+  if ((h.flags & uint32_t(kFeaturePlaneTiles)) && (stack ? !(h.flags & uint32_t(kFeatureStackSliceTiles)) : h.encoding == Encoding::vsdag))
+    fail(20, stack ? std::string("feature plane_tiles on a stack without stack_slice_tiles")
+                   : "feature plane_tiles on a pack that is not an MH, MMH or DAG-MH map (encoding " + to_string(h.encoding) + ")");
   if ((h.flags & uint32_t(kFeatureDagmhDictionary)) && (stack || h.encoding != Encoding::dagmh))
     fail(20, "feature dagmh_dictionary on a pack whose tiles are not DAG-MH (encoding " + to_string(h.encoding) +
                  (stack ? ", a stack" : "") + ")");

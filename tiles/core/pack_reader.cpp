@@ -19,6 +19,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <functional>
 #include <map>
 
 #include <libdeflate.h>
@@ -283,7 +284,7 @@ namespace {
 // One stored form back to its plain bytes in place, by `unpack`: refused by name when the
 // pack's flags lack `feature`, the form's `bit_name`; the unpacker's error gains the tile's name.
 void pack_reader_unpack(const PackHeader& h, uint32_t feature, const char* form, const char* bit_name,
-                        std::span<uint8_t> raw, const std::string& what, void (*unpack)(std::span<uint8_t>)) {
+                        std::span<uint8_t> raw, const std::string& what, const std::function<void(std::span<uint8_t>)>& unpack) {
   if (!(h.flags & feature))
     throw FormatError(what + ": " + form + " in a pack without feature " + bit_name);
   try {
@@ -304,8 +305,13 @@ void pack_reader_ungroup(const PackHeader& h, bool stack, std::span<uint8_t> raw
     pack_reader_unpack(h, kFeaturePackedPlaneTiles, "a packed plane tile (\"STPQ\" or \"STPL\")", "packed_plane_tiles",
                        raw, what, unpack_plane_tile);
   } else if (stack && is_grouped_slice_tiles(raw)) {
+    uint32_t need = 0;  // what its packed plane slices need
     pack_reader_unpack(h, kFeatureStackGroupedTiles, "a grouped per-slice cell (\"STSP\")", "stack_grouped_tiles", raw,
-                       what, ungroup_slice_tiles);
+                       what, [&](std::span<uint8_t> r) { ungroup_slice_tiles(r, &need); });
+    for (auto [bit, name] : {std::pair{kFeaturePlaneTiles, "plane_tiles"}, std::pair{kFeaturePackedPlaneTiles, "packed_plane_tiles"},
+                             std::pair{kFeaturePredictedPlaneLabels, "predicted_plane_labels"}})
+      if ((need & bit) && !(h.flags & bit))
+        throw FormatError(what + ": a per-slice cell with packed plane slices in a pack without feature " + name);
   }
 }
 

@@ -66,6 +66,8 @@ void PackReader::verify_stack() const {
         throw FormatError(what + ": " + err.what());
       }
       if (t.xy_level() != n || t.w_level() != k) throw FormatError(what + ": per-slice cell geometry differs from its cell's");
+      if (t.has_planes() && !(header_.flags & kFeaturePlaneTiles))
+        throw FormatError(what + ": a per-slice cell with plane slices (\"STPN\") in a pack without feature plane_tiles");
       continue;
     }
     MhOctree t;

@@ -12,6 +12,9 @@
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/mh_octree_format.hpp"
 #include "tiles/core/mh_quadtree_format.hpp"
+#include "tiles/core/pack_format.hpp"
+#include "tiles/core/plane_pack.hpp"
+#include "tiles/core/plane_tile.hpp"
 
 namespace st {
 namespace {
@@ -85,13 +88,16 @@ SliceTiles SliceTiles::open(std::span<const uint8_t> b) {
     const std::span<const uint8_t> sub = b.subspan(off, word);
     std::unique_ptr<Evaluator> ev;
     try {
-      ev = open_encoded(Encoding::dagmh, sub);  // DAG-MH, or MMH by its magic ("Mixed tiles")
+      // DAG-MH, or MMH by its magic ("Mixed tiles"), or plane blocks over either ("STPN",
+      // PLANES.md; open_plane_tile refuses a plane tile inside another)
+      ev = open_encoded(Encoding::dagmh, sub);
     } catch (const Error& e) {
       bad("slice " + std::to_string(w) + "'s tile", off, e.what());
     }
     if (ev->finest_level() != t.xy_level_)
       bad("slice " + std::to_string(w) + "'s tile", off,
           "finest level " + std::to_string(ev->finest_level()) + ", the cell's is " + std::to_string(t.xy_level_));
+    t.planes_ = t.planes_ || is_plane_buffer(sub);
     t.slot_[w] = int32_t(t.evals_.size());
     const dagmh::View* view = dagmh_view(*ev);
     t.views_.push_back(view ? *view : dagmh::View{});
@@ -152,7 +158,7 @@ namespace {
 
 }  // namespace
 
-void ungroup_slice_tiles(std::span<uint8_t> b) {
+void ungroup_slice_tiles(std::span<uint8_t> b, uint32_t* plane_features) {
   const size_t size = b.size();
   if (size < kSliceTilesHeaderBytes) bad_grouped("header", 0, std::to_string(size) + " bytes, below the 16-byte header");
   if (u32_at(b, 0) != kGroupedSliceTilesMagic) bad_grouped("magic", 0, "not \"STSP\"");
@@ -163,7 +169,7 @@ void ungroup_slice_tiles(std::span<uint8_t> b) {
   if (first > size) bad_grouped("entries", kSliceTilesHeaderBytes, std::to_string(count) + " entries run past the buffer");
   struct Buf {
     uint64_t off = 0, size = 0, head = 0, structure = 0;  // structure: DAG-MH only
-    bool dagmh = false;
+    bool dagmh = false, plane = false;  // plane: a packed plane slice, whole among the heads
     std::vector<uint8_t> role;  // MMH only
   };
   std::vector<Buf> bufs;
@@ -215,14 +221,24 @@ void ungroup_slice_tiles(std::span<uint8_t> b) {
       f.head = mhq::tree_offset(levels);
       if (f.size < f.head || (f.size - f.head) % 4) bad_grouped("head", at, "an MMH buffer of " + std::to_string(f.size) + " bytes");
       copy(f.off, f.head, "head");
+    } else if (is_packed_plane_tile(std::span<const uint8_t>(src).subspan(at, 8))) {
+      f.plane = true, f.head = f.size;
+      const uint64_t base = at;
+      copy(f.off, f.head, "head");
+      if (plane_features) *plane_features |= kFeaturePlaneTiles | packed_plane_tile_features(b.subspan(f.off, 4));
+      try {
+        unpack_plane_tile(b.subspan(f.off, f.size));
+      } catch (const FormatError& e) {
+        bad_grouped("plane slice", base, e.what());
+      }
     } else {
-      bad_grouped("head", at, "neither a DAG-MH nor an MMH buffer");
+      bad_grouped("head", at, "neither a DAG-MH, an MMH nor a packed plane buffer");
     }
   }
   for (const Buf& f : bufs)
     if (f.dagmh) copy(f.off + f.head, f.structure, "structure");
   for (Buf& f : bufs) {
-    if (f.dagmh) continue;
+    if (f.dagmh || f.plane) continue;
     const uint64_t tree = f.off + f.head;
     mmh_word_roles((f.size - f.head) / 4, b[f.off + mhq::kOffFlags] & mhq::kFlagRootLeaf, f.role, [&](uint64_t i) {
       copy(tree + 4 * i, 4, "node words");

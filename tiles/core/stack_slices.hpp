@@ -16,7 +16,9 @@
 //   16  8 2^j  entries, slice 0 first: u32 offset, u32 word
 //                offset 0: the slice is constant, word = the f32 value's bits
 //                else: the slice's 2D buffer is bytes [offset, offset + word) (word = its
-//                size), a DAG-MH ("DGMH") or MMH ("STMM") buffer of finest level m
+//                size), a DAG-MH ("DGMH") or MMH ("STMM") buffer of finest level m, or
+//                a plane tile ("STPN", tiles/core/PLANES.md) over one of those (a pack
+//                holding one declares feature plane_tiles)
 //   B          the 2D buffers, back to back in order of first use, each followed by zero
 //              bytes to a multiple of 4; B = 16 + 8 2^j; slices with equal buffers name
 //              the same one; the last buffer's padding ends the buffer (byte_size)
@@ -55,6 +57,8 @@ class SliceTiles {
   uint32_t slices() const { return uint32_t(slot_.size()); }
   size_t byte_size() const { return byte_size_; }
   size_t buffers() const { return evals_.size(); }
+  // Whether some slice's tile is a plane tile ("STPN"): its pack must declare plane_tiles.
+  bool has_planes() const { return planes_; }
 
   // Texel (x, y) of the level-`level` map of slice w (level <= xy_level(); x, y < 2^level;
   // w < slices(); not checked): the slice's 2D tile's answer, or its constant.
@@ -92,7 +96,7 @@ class SliceTiles {
   // An MMH slice's record holds its tree (the first tree word, MHQUAD.md) and whether the
   // root is a leaf, so that the lookups walk it in their rounds (stack_map.cpp: the same
   // walk as the evaluator's depth(), a step per round); kind evaluator is any other 2D
-  // tile (none today), answered by its evaluator.
+  // tile (a plane slice, "STPN"), answered by its evaluator.
   enum class RecordKind : uint32_t { constant, view, mmh, evaluator };
   struct alignas(64) Record {
     float lo, hi;             // bounds(w); a constant: its value twice
@@ -112,6 +116,7 @@ class SliceTiles {
   void build_records();
   uint32_t xy_level_ = 0, w_level_ = 0;
   size_t byte_size_ = 0;
+  bool planes_ = false;
   std::vector<int32_t> slot_;  // per slice: index into evals_, or -1 (constant)
   std::vector<float> value_;   // per slice: the constant (when slot_ < 0)
   std::vector<std::shared_ptr<const Evaluator>> evals_;
@@ -130,7 +135,9 @@ class SliceTiles {
 // client ungroup a tile as it is read (before any reader, CPU or GPU, sees it), so every
 // lookup reads plain STSL. Layout after the STSL header and entries (the magic "STSP",
 // the rest as in STSL), each part the distinct 2D buffers' pieces in order of first use:
-//   heads       DAG-MH: its 32-byte header; MMH: its header and shifts (tree offset)
+//   heads       DAG-MH: its 32-byte header; MMH: its header and shifts (tree offset);
+//               a plane tile: the whole buffer in its packed form ("STPL" or "STPQ",
+//               plane_pack.hpp, the same size; nothing of it in the parts below)
 //   structure   DAG-MH: skip table, inner nodes, treelets and chunk infos
 //   node words  MMH: the tree words that are nodes, in word order (mmh_word_roles)
 //   multipliers DAG-MH: the multiplier section
@@ -145,7 +152,10 @@ bool is_grouped_slice_tiles(std::span<const uint8_t> bytes);
 // the permutation needs (header, entries in first-use order, each buffer's kind and
 // section sizes, a zero tail) and throws st::FormatError("grouped slice tiles: <field> at
 // byte <offset>: ...") otherwise; the result still goes through SliceTiles::open.
-void ungroup_slice_tiles(std::span<uint8_t> bytes);
+// `plane_features` (if given) gets ORed the pack features the cell's packed plane slices
+// need (plane_tiles, packed_plane_tiles, predicted_plane_labels for "STPL"; pack_format.hpp):
+// a reader refuses a cell whose pack lacks one.
+void ungroup_slice_tiles(std::span<uint8_t> bytes, uint32_t* plane_features = nullptr);
 
 // The roles of an MMH tree's W words (MHQUAD.md), as the grouped form splits them:
 // 1 node word, 2 value word, 0 neither (padding). A forward scan: word 0 is the root (a
@@ -210,6 +220,8 @@ class StackTile {
   uint32_t xy_level() const { return octree_ ? octree_->geometry().n : slices_->xy_level(); }
   uint32_t w_level() const { return octree_ ? octree_->geometry().k : slices_->w_level(); }
   bool is_octree() const { return bool(octree_); }
+  // Per-slice with a plane slice (SliceTiles::has_planes): its pack declares plane_tiles.
+  bool has_planes() const { return slices_ && slices_->has_planes(); }
 
  private:
   std::unique_ptr<MhOctree> octree_;

@@ -58,7 +58,7 @@ void read_all(int fd, void* data, size_t size, uint64_t off, const std::string& 
 // The per-slice form of level-K cell (x, y, w) of block `blk` (block-local cell
 // coordinates): each real slice's square of the cell (stack_slices_encode.hpp).
 std::vector<uint8_t> cell_slice_tiles(const IntervalStack& blk, const moct::Geometry& g, uint32_t K, uint32_t B,
-                                      uint64_t x, uint64_t y, uint64_t w) {
+                                      uint64_t x, uint64_t y, uint64_t w, const PlaneFitOptions* planes = nullptr) {
   (void)B;
   const uint32_t m = g.n - g.xy_bits(K), j = g.k - g.w_bits(K);
   const uint64_t cs = uint64_t(1) << m, W = uint64_t(1) << j;
@@ -72,7 +72,7 @@ std::vector<uint8_t> cell_slice_tiles(const IntervalStack& blk, const moct::Geom
       for (uint64_t tx = 0; tx < cs; ++tx) t.data[ty * cs + tx] = blk.at(x * cs + tx, y * cs + ty, s);
     slices.push_back(std::move(t));
   }
-  return encode_slice_tiles(slices, m, j);
+  return encode_slice_tiles(slices, m, j, planes);
 }
 
 }  // namespace
@@ -144,8 +144,9 @@ Interval StackSpill::texel(uint64_t x, uint64_t y, uint32_t w) const {
 }
 
 BlockedStackCut::BlockedStackCut(const StackSpill& spill, std::optional<uint32_t> skip_level, uint32_t tile_bytes,
-                                 std::string tile_path, BlockedCutStats* stats, StackCells cells, bool split)
-    : cells_(cells), split_(split), path_(std::move(tile_path)) {
+                                 std::string tile_path, BlockedCutStats* stats, StackCells cells, bool split,
+                                 std::optional<PlaneFitOptions> planes)
+    : cells_(cells), split_(split), planes_(std::move(planes)), path_(std::move(tile_path)) {
   const moct::Geometry& g = spill.geo();
   const uint32_t L = g.depth(), B = spill.block_level();
   uint32_t K = skip_level.value_or(std::max(default_stack_skip_level(g), B));
@@ -255,7 +256,10 @@ void BlockedStackCut::run(const StackSpill& spill, uint32_t K, uint32_t tile_byt
               std::vector<uint8_t> bytes = encode_octree(cell_subtree(sub, r, cr, 0.0f, cur));
               octree = true;
               if (cells_ != StackCells::octree) {
-                std::vector<uint8_t> per_slice = cell_slice_tiles(blk, g, B + r, B, x, y, w);
+                // With planes, the plane slices' form unless it overflows the bound where
+                // the plain one fits (the bound the cut's block_fits checked).
+                std::vector<uint8_t> per_slice = cell_slice_tiles(blk, g, B + r, B, x, y, w, planes_ ? &*planes_ : nullptr);
+                if (planes_ && per_slice.size() > tile_bytes) per_slice = cell_slice_tiles(blk, g, B + r, B, x, y, w);
                 const bool take = cells_ == StackCells::slices ||
                                   (per_slice.size() <= tile_bytes &&
                                    (bytes.size() > tile_bytes ||

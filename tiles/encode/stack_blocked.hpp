@@ -90,9 +90,11 @@ class BlockedStackCut {
   // children one level deeper (and so on down; stack_grid.hpp "Split cells") instead of
   // the whole cut moving deeper: K stays where it starts, only the overflowing cells go
   // deeper (the pack then has feature stack_split_cells).
+  // `planes`: a per-slice cell's slices may be plane tiles (encode_slice_tiles; the pack
+  // then has feature plane_tiles); none: DAG-MH or MMH slices only.
   BlockedStackCut(const StackSpill& spill, std::optional<uint32_t> skip_level, uint32_t tile_bytes,
                   std::string tile_path, BlockedCutStats* stats = nullptr, StackCells cells = StackCells::octree,
-                  bool split = false);
+                  bool split = false, std::optional<PlaneFitOptions> planes = std::nullopt);
   ~BlockedStackCut();
   BlockedStackCut(const BlockedStackCut&) = delete;
   BlockedStackCut& operator=(const BlockedStackCut&) = delete;
@@ -132,6 +134,7 @@ class BlockedStackCut {
   void run(const StackSpill& spill, uint32_t K, uint32_t tile_bytes, BlockedCutStats* stats);
   StackCells cells_ = StackCells::octree;
   bool split_ = false;
+  std::optional<PlaneFitOptions> planes_;
   std::vector<Ref> tiles_;
   std::vector<SplitNode> nodes_;
   std::vector<std::pair<uint64_t, uint32_t>> split_roots_;  // (level-K cell, its first child node)

@@ -163,6 +163,14 @@ uint64_t write_stack_pack(const std::string& path, const StackGrid& sg, size_t c
     const std::vector<uint8_t> grouped = p.group_slice_tiles ? group_slice_tiles(raw) : std::vector<uint8_t>{};
     const bool is_grouped = p.group_slice_tiles && is_grouped_slice_tiles(grouped);
     if (is_grouped) h.flags |= kFeatureStackGroupedTiles;
+    if (is_slice_tiles(raw)) {  // plane slices (stack_slices.hpp): plane_tiles, and what their packed forms need
+      uint32_t planes = 0;
+      if (is_grouped) {
+        std::vector<uint8_t> back = grouped;
+        ungroup_slice_tiles(back, &planes);
+      }
+      if (planes || SliceTiles::open(raw).has_planes()) h.flags |= kFeaturePlaneTiles | planes;
+    }
     const std::vector<uint8_t> stored = zlib_compress(is_grouped ? std::span<const uint8_t>(grouped) : std::span<const uint8_t>(raw), p.compression_level);
     r.stored_size = uint32_t(stored.size());
     r.raw_size = uint32_t(raw.size());

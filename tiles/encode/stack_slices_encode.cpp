@@ -9,7 +9,10 @@
 #include "tiles/encode/encode.hpp"
 #include "tiles/encode/mh_build.hpp"
 #include "tiles/core/pack_format.hpp"
+#include "tiles/core/plane_pack.hpp"
+#include "tiles/core/plane_tile.hpp"
 #include "tiles/core/stack_slices.hpp"
+#include "tiles/encode/tile_cut.hpp"
 
 namespace st {
 
@@ -20,7 +23,8 @@ StackCells parse_stack_cells(const std::string& text) {
   throw Error("--stack-cells: expected octree, slices or smaller, got '" + text + "'");
 }
 
-std::vector<uint8_t> encode_slice_tiles(std::span<const IntervalTile> slices, uint32_t m, uint32_t j) {
+std::vector<uint8_t> encode_slice_tiles(std::span<const IntervalTile> slices, uint32_t m, uint32_t j,
+                                        const PlaneFitOptions* planes) {
   const uint64_t count = uint64_t(1) << j;
   if (slices.size() > count) throw Error("slice tiles: " + std::to_string(slices.size()) + " slices for 2^" + std::to_string(j) + " entries");
   std::vector<uint8_t> out(kSliceTilesHeaderBytes + kSliceTilesEntryBytes * count, 0);
@@ -31,6 +35,10 @@ std::vector<uint8_t> encode_slice_tiles(std::span<const IntervalTile> slices, ui
   out[6] = uint8_t(m);
   out[7] = uint8_t(j);
   std::vector<std::pair<std::vector<uint8_t>, uint32_t>> seen;  // buffer, its offset (compared in full)
+  // With planes: a 2D pack's plane-mixed tile codec, every candidate fitting (a cell's
+  // bound is the cut's business), DAG-MH and MMH both tried as without planes.
+  TileCodec codec;
+  if (planes) codec = TileCodec::with_planes(TileCodec::dagmh_or_mmh(true), UINT32_MAX, *planes);
   for (uint64_t w = 0; w < count; ++w) {
     const size_t at = kSliceTilesHeaderBytes + kSliceTilesEntryBytes * w;
     if (w >= slices.size()) {
@@ -52,9 +60,14 @@ std::vector<uint8_t> encode_slice_tiles(std::span<const IntervalTile> slices, ui
       put32(at + 4, bits);
       continue;
     }
-    std::vector<uint8_t> dag = encode_dagmh(h), mmh = encode_mmh(h);
-    const bool use_dag = zlib_compress(dag, 6).size() <= zlib_compress(mmh, 6).size();
-    std::vector<uint8_t>& buf = use_dag ? dag : mmh;
+    std::vector<uint8_t> buf;
+    if (planes) {
+      buf = codec.encode(h);
+    } else {
+      std::vector<uint8_t> dag = encode_dagmh(h), mmh = encode_mmh(h);
+      const bool use_dag = zlib_compress(dag, 6).size() <= zlib_compress(mmh, 6).size();
+      buf = use_dag ? std::move(dag) : std::move(mmh);
+    }
     size_t s = 0;
     while (s < seen.size() && seen[s].first != buf) ++s;
     if (s == seen.size()) {
@@ -70,7 +83,7 @@ std::vector<uint8_t> encode_slice_tiles(std::span<const IntervalTile> slices, ui
   return out;
 }
 
-std::vector<uint8_t> group_slice_tiles(std::span<const uint8_t> b) {
+std::vector<uint8_t> group_slice_tiles(std::span<const uint8_t> b, bool predict_plane_labels) {
   const std::vector<uint8_t> same(b.begin(), b.end());
   if (!is_slice_tiles(b) || b.size() < kSliceTilesHeaderBytes || b[7] > 12) return same;
   auto u32 = [&](uint64_t off) {
@@ -85,6 +98,7 @@ std::vector<uint8_t> group_slice_tiles(std::span<const uint8_t> b) {
     uint64_t off = 0, size = 0, head = 0, structure = 0;
     bool dagmh = false;
     std::vector<uint8_t> role;
+    std::vector<uint8_t> packed;  // a plane slice: its packed form, stored whole among the heads
   };
   std::vector<Buf> bufs;
   uint64_t next = first;
@@ -106,6 +120,10 @@ std::vector<uint8_t> group_slice_tiles(std::span<const uint8_t> b) {
       const uint32_t levels = b[off + 6];
       f.head = mhq::tree_offset(levels);
       if (levels < 1 || levels > mhq::kMaxLevels || word < f.head || (word - f.head) % 4) return same;
+    } else if (is_plane_buffer(b.subspan(off, word))) {
+      f.packed = pack_plane_tile(b.subspan(off, word), nullptr, predict_plane_labels);
+      if (f.packed.size() != word) return same;
+      f.head = word;
     } else {
       return same;
     }
@@ -118,11 +136,14 @@ std::vector<uint8_t> group_slice_tiles(std::span<const uint8_t> b) {
   const uint32_t magic = kGroupedSliceTilesMagic;
   std::memcpy(out.data(), &magic, 4);
   auto put = [&](uint64_t from, uint64_t n) { out.insert(out.end(), b.begin() + from, b.begin() + from + n); };
-  for (const Buf& f : bufs) put(f.off, f.head);
+  for (const Buf& f : bufs) {
+    if (!f.packed.empty()) out.insert(out.end(), f.packed.begin(), f.packed.end());
+    else put(f.off, f.head);
+  }
   for (const Buf& f : bufs)
     if (f.dagmh) put(f.off + f.head, f.structure);
   for (Buf& f : bufs) {
-    if (f.dagmh) continue;
+    if (f.dagmh || !f.packed.empty()) continue;
     const uint64_t tree = f.off + f.head;
     mmh_word_roles((f.size - f.head) / 4, b[f.off + mhq::kOffFlags] & mhq::kFlagRootLeaf, f.role, [&](uint64_t i) {
       put(tree + 4 * i, 4);

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "tiles/core/interval.hpp"
+#include "tiles/encode/plane_fit.hpp"
 
 namespace st {
 
@@ -22,12 +23,20 @@ StackCells parse_stack_cells(const std::string& text);  // "octree" | "slices" |
 // `slices` (at most 2^j of them; the entries past them are constant kLitDepth). A slice
 // whose square stores nothing below its root is a constant entry; equal buffers are
 // stored once. Throws st::Error when the result exceeds the format's 32-bit size.
-std::vector<uint8_t> encode_slice_tiles(std::span<const IntervalTile> slices, uint32_t m, uint32_t j);
+// `planes` (optional): a slice's tile may also be a plane tile ("STPN", tiles/core/
+// PLANES.md) over DAG-MH or MMH, the same candidates a 2D pack with plane tiles weighs
+// (TileCodec::with_planes over TileCodec::dagmh_or_mmh, exhaustive), kept where its zlib
+// stream (of its packed form, as a grouped cell stores it) is shorter. Null: DAG-MH or
+// MMH only (the buffers before plane slices, byte for byte).
+std::vector<uint8_t> encode_slice_tiles(std::span<const IntervalTile> slices, uint32_t m, uint32_t j,
+                                        const PlaneFitOptions* planes = nullptr);
 
 // The grouped stored form ("STSP", stack_slices.hpp) of an STSL buffer: the same bytes
 // permuted so like lies with like, the same size; ungroup_slice_tiles gives `stsl` back
-// (checked here on every call). Anything else (an octree tile, a buffer that does not
-// group) comes back unchanged. Used by the stack pack writer on every per-slice cell.
-std::vector<uint8_t> group_slice_tiles(std::span<const uint8_t> stsl);
+// (checked here on every call). A plane slice ("STPN") is stored whole in its packed form
+// ("STPL" with predicted labels, plane_pack.hpp; `predict_plane_labels` false: "STPQ")
+// among the heads. Anything else (an octree tile, a buffer that does not group) comes back
+// unchanged. Used by the stack pack writer on every per-slice cell.
+std::vector<uint8_t> group_slice_tiles(std::span<const uint8_t> stsl, bool predict_plane_labels = true);
 
 }  // namespace st
