@@ -697,37 +697,6 @@ void st_pcf_block(uint x, uint y, uint r, uint side, uint i, uint j, uint n, uin
   }
 }
 
-// Bounds of every value a DAG-MH tile can answer (its chunk infos, DAG-MH §3.4 Fig. 4): a chunk's
-// values are its `base` and c_l + c_f * i for its multipliers i < 2^k (st_dag_value's float
-// operations, monotone in i since rounding is), so the least and greatest are among base,
-// c_l + c_f * 0 and c_l + c_f * (2^k - 1). Ordered as st_lit orders (st_order on the bits, so a
-// device flushing subnormals in compares agrees). False when no bounds are known: a raw-float
-// chunk (k = 32), a NaN among them, or more than max_chunks chunks (none read then).
-bool st_dag_bounds(StDagTile t, uint max_chunks, out float lo, out float hi) {
-  int a = 0x7FFFFFFF, b = -0x7FFFFFFF;
-  const uint chunks = (ST_POOL(t.base + 6u) + 31u) / 32u;
-  bool ok = chunks != 0u && chunks <= max_chunks;
-  for (uint c = 0u; c < (ok ? chunks : 0u); ++c) {
-    const uint w = t.chunk_words + 5u * c;
-    const uint base = ST_POOL(w), mask = ST_POOL(w + 1u), code = ST_POOL(w + 4u) >> 27u;
-    const float c_l = uintBitsToFloat(ST_POOL(w + 2u)), c_f = uintBitsToFloat(ST_POOL(w + 3u));
-    precise float p0 = c_f * 0.0;
-    precise float v0 = c_l + p0;
-    precise float p1 = c_f * float(code >= 25u ? 0u : (1u << code) - 1u);
-    precise float v1 = c_l + p1;
-    const uint b0 = floatBitsToUint(v0), b1 = floatBitsToUint(v1);
-    const bool mult = mask != 0u;
-    ok = ok && (base & 0x7FFFFFFFu) <= 0x7F800000u &&
-         (!mult || (code < 25u && (b0 & 0x7FFFFFFFu) <= 0x7F800000u && (b1 & 0x7FFFFFFFu) <= 0x7F800000u));
-    const int o = st_order(base), o0 = st_order(b0), o1 = st_order(b1);
-    a = min(a, mult ? min(o, min(o0, o1)) : o);
-    b = max(b, mult ? max(o, max(o0, o1)) : o);
-  }
-  lo = uintBitsToFloat(a < 0 ? uint(-a) | 0x80000000u : uint(a));
-  hi = uintBitsToFloat(b < 0 ? uint(-b) | 0x80000000u : uint(b));
-  return ok;
-}
-
 // The first tap (row-major index) of an r x r kernel not in the mask (w0, w1, w2); 96: none.
 uint st_pcf_next(uint w0, uint w1, uint w2) {
   const int f0 = findLSB(~w0), f1 = findLSB(~w1), f2 = findLSB(~w2);
@@ -747,9 +716,8 @@ uint st_pcf_next(uint w0, uint w1, uint w2) {
 // an earlier, smaller one: only its new taps count). A block's plane depths are least and
 // greatest at two opposite corner taps (float rounding is monotone): all lit at the
 // greatest, or none at the least, counts the block at once; else its new taps one by one.
-// A kernel inside one page-table value, leaf or missing child costs one walk; a kernel inside
-// one DAG-MH tile whose value bounds (st_dag_bounds) answer every tap alike costs no tap.
-// The count is the per-tap count, so the answer is the CPU's bit for bit.
+// A kernel inside one page-table value, leaf or missing child costs one walk. The count is
+// the per-tap count, so the answer is the CPU's bit for bit.
 // Two loops: the first answers the taps of page-table values and of MH, MMH, DAG-MH and plane
 // tiles (a DAG-MH tile's header decoded once per walk; a plane tile's plane blocks answer the
 // texel alone, its inner buffer as st_tile_depth) and leaves the others (absent and voxel
@@ -768,14 +736,7 @@ float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint
   StWalk w = st_walk(level, st_pcf_tap(x, 0u, r, side), st_pcf_tap(y, 0u, r, side));
   StDagTile t;  // w's tile (opened: its header decoded once per walk)
   bool opened = false, lean = false, dag = false, mmh = false;  // an MH/MMH/DAG-MH/plane tile; which
-  // The early out (MH §3.3's lowest common node, at the tile): a DAG-MH tile's value bounds
-  // (st_dag_bounds, [vlo, vhi]) read once per walk; where the receiver plane's greatest depth
-  // over the kernel's taps in the walk's square is lit against vlo (all lit) or its least
-  // depth is not lit against vhi (none), those taps count at once, with no decode. A kernel
-  // inside one such tile costs one pass of the loop; a device that runs lanes under masks
-  // (llvmpipe) leaves the loop when every lane of a group is answered so.
-  bool bounded = false, planes = false;  // planes: w's tile is a plane tile at pbase
-  float vlo = 0.0, vhi = 0.0;
+  bool planes = false;  // w's tile is a plane tile at pbase
   uint pbase = 0u;
   while (k < taps) {
     const uint j = k / r, i = k - j * r;
@@ -796,8 +757,6 @@ float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint
       if (dag) t = st_dag_open(base);
       t.base = base;
       opened = true;
-      bounded = false;
-      if (r > 1u && dag && lean && !planes) bounded = st_dag_bounds(t, 2u * taps, vlo, vhi);  // a chunk costs less than a tap
     }
     if (w.kind == 2u || (w.kind == 1u && !lean)) {  // the second loop's: every tap of the kernel in w's square
       const uint sw = level - w.l, n = st_pcf_run(x, i, r, side, sw), m = st_pcf_run(y, j, r, side, sw);
@@ -813,15 +772,6 @@ float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint
       if (w.kind == 1u) {
         const uint rel = level - w.l;
         bool decided = false;
-        if (bounded) {  // the taps from (i, j) in w's square: all lit, or none, by the tile's bounds
-          const uint x0 = tx, x1 = st_pcf_tap(x, i + st_pcf_run(x, i, r, side, rel) - 1u, r, side);
-          const uint y0 = ty, y1 = st_pcf_tap(y, j + st_pcf_run(y, j, r, side, rel) - 1u, r, side);
-          const bool all = st_lit(st_plane_depth(plane, f, up, plane.y < 0.0 ? x0 : x1, plane.z < 0.0 ? y0 : y1), vlo);
-          const bool none = !st_lit(st_plane_depth(plane, f, up, plane.y < 0.0 ? x1 : x0, plane.z < 0.0 ? y1 : y0), vhi);
-          decided = all || none;
-          value = all ? vlo : vhi;  // st_pcf_block's corner tests then count the block all lit or none
-          s = rel;
-        }
         const uint lx = tx - (w.ex << rel), ly = ty - (w.ey << rel);
         float pd = 0.0;
         if (planes && st_plane_lookup(pbase, rel, lx, ly, pd)) {  // a plane block: the texel alone
