@@ -49,7 +49,7 @@
 // So the example keeps storage buffers; the texel mode stays for engines (tested bit-exact).
 // Plane tiles: the real open mesh's pack has them (features plane-tiles, mixed-tiles; the
 // city's has none), and st_pcf_plane used to send every tap of a plane tile to its second
-// loop, through st_answer and every decoder: that was most of the engine's 5x5 cost. Taken in
+// loop, through st_answer and every decoder: about a third of the engine's 5x5 cost. Taken in
 // the first loop (a plane block answers the texel alone, else the inner buffer), the same
 // command (load 8-18, main's binary A and the new one B alternated) gave the engine's 5x5
 // ratio A 5.62/6.47 (process CPU 5.20/4.96) against B 4.32/4.04 (CPU 3.71/3.59); city and
