@@ -52,7 +52,8 @@
 // loop, through st_answer and every decoder: about a third of the engine's 5x5 cost. Taken in
 // the first loop (a plane block answers the texel alone, else the inner buffer), the same
 // command (load 8-18, main's binary A and the new one B alternated) gave the engine's 5x5
-// ratio A 5.62/6.47 (process CPU 5.20/4.96) against B 4.32/4.04 (CPU 3.71/3.59); city and
+// ratio A 5.62/6.47/5.56 (process CPU 5.20/4.96/4.65) against B 4.32/4.04/4.75 (CPU
+// 3.71/3.59/3.40; the first two B with the bounds test below still in); city and
 // the single tap unchanged (city 5x5 A 2.25/2.13, B 2.17/2.34). A DAG-MH tile's value bounds
 // from its chunk infos (every kernel tap in the tile lit or none at once) did not move it:
 // within noise, even when every such kernel was answered with no tap at all (a non-exact
