@@ -47,6 +47,17 @@
 // Process CPU per frame (st 5x5 / R32F 5x5, ms): engine A 512/157, 447/136, B 505/134, 417/118;
 // the R32F frames (whose page reads became fetches too) got cheaper, the 5x5 lookup hardly.
 // So the example keeps storage buffers; the texel mode stays for engines (tested bit-exact).
+// Plane tiles: the real open mesh's pack has them (features plane-tiles, mixed-tiles; the
+// city's has none), and st_pcf_plane used to send every tap of a plane tile to its second
+// loop, through st_answer and every decoder: about a third of the engine's 5x5 cost. Taken in
+// the first loop (a plane block answers the texel alone, else the inner buffer), the same
+// command (load 8-18, main's binary A and the new one B alternated) gave the engine's 5x5
+// ratio A 5.62/6.47/5.56 (process CPU 5.20/4.96/4.65) against B 4.32/4.04/4.75 (CPU
+// 3.71/3.59/3.40; the first two B with the bounds test below still in); city and
+// the single tap unchanged (city 5x5 A 2.25/2.13, B 2.17/2.34). A DAG-MH tile's value bounds
+// from its chunk infos (every kernel tap in the tile lit or none at once) did not move it:
+// within noise, even when every such kernel was answered with no tap at all (a non-exact
+// test build), so it was not kept.
 // --region builds only a window of the map (finest texels; the rest lit): a 64K^2 map in
 // minutes; the camera then looks at the window. The R32F map (the finest level, 4^L floats)
 // is skipped with --no-r32f, with --region, and above 16K^2: its rows print '-'.

@@ -726,9 +726,10 @@ uint st_pcf_next(uint w0, uint w1, uint w2) {
 // greatest, or none at the least, counts the block at once; else its new taps one by one.
 // A kernel inside one page-table value, leaf or missing child costs one walk. The count is
 // the per-tap count, so the answer is the CPU's bit for bit.
-// Two loops: the first answers the taps of page-table values and of MH, MMH and DAG-MH tiles
-// (a DAG-MH tile's header decoded once per walk) and leaves the others (absent tiles, plane
-// and voxel tiles) for the second, which answers any tap (st_answer).
+// Two loops: the first answers the taps of page-table values and of MH, MMH, DAG-MH and plane
+// tiles (a DAG-MH tile's header decoded once per walk; a plane tile's plane blocks answer the
+// texel alone, its inner buffer as st_tile_depth) and leaves the others (absent and voxel
+// tiles) for the second, which answers any tap (st_answer).
 // A device that runs every branch of a loop body under a lane mask (llvmpipe) pays for the
 // decoders no tap needs once per loop pass, not once per tap: the first loop's body is small.
 float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint finest, inout StProbe probe) {
@@ -742,7 +743,9 @@ float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint
   uint k = 0u;
   StWalk w = st_walk(level, st_pcf_tap(x, 0u, r, side), st_pcf_tap(y, 0u, r, side));
   StDagTile t;  // w's tile (opened: its header decoded once per walk)
-  bool opened = false, lean = false, dag = false, mmh = false;  // an MH/MMH/DAG-MH tile; which
+  bool opened = false, lean = false, dag = false, mmh = false;  // an MH/MMH/DAG-MH/plane tile; which
+  bool planes = false;  // w's tile is a plane tile at pbase
+  uint pbase = 0u;
   while (k < taps) {
     const uint j = k / r, i = k - j * r;
     const uint tx = st_pcf_tap(x, i, r, side), ty = st_pcf_tap(y, j, r, side);
@@ -751,11 +754,14 @@ float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint
       opened = false;
     }
     if (!opened && w.kind == 1u) {
-      const uint base = w.slot * ST_PAGE(kPtSlotWords);
+      pbase = w.slot * ST_PAGE(kPtSlotWords);
+      uint base = pbase;
+      planes = ST_POOL(base) == 0x4E505453u;  // "STPN": plane blocks over an inner buffer (st_tile_depth)
+      if (planes) base += 6u + 6u * ST_POOL(base + 4u) + 2u * ST_POOL(base + 2u) + 6u * ST_POOL(base + 5u);
       const uint magic = ST_POOL(base);
       mmh = enc == 1u || (enc == 2u && magic == 0x4D4D5453u);  // "STMM": a DAG-MH pack's MMH tile
       dag = enc == 2u && !mmh;
-      lean = enc != 3u && magic != 0x4E505453u;  // not a voxel tile, not "STPN" (a plane tile)
+      lean = enc != 3u;  // not a voxel tile
       if (dag) t = st_dag_open(base);
       t.base = base;
       opened = true;
@@ -772,9 +778,19 @@ float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint
       uint s = level - w.l;
       float value = w.value;
       if (w.kind == 1u) {
-        const uint rel = level - w.l, lx = tx - (w.ex << rel), ly = ty - (w.ey << rel);
-        value = dag ? st_dag_depth_in(t, rel, lx, ly, s) : st_mh_depth(t.base, rel, lx, ly, mmh, s);
-        s = min(s, rel);
+        const uint rel = level - w.l;
+        bool decided = false;
+        const uint lx = tx - (w.ex << rel), ly = ty - (w.ey << rel);
+        float pd = 0.0;
+        if (planes && st_plane_lookup(pbase, rel, lx, ly, pd)) {  // a plane block: the texel alone
+          value = pd;
+          s = 0u;
+          decided = true;
+        }
+        if (!decided) {
+          value = dag ? st_dag_depth_in(t, rel, lx, ly, s) : st_mh_depth(t.base, rel, lx, ly, mmh, s);
+          s = planes ? 0u : min(s, rel);  // st_tile_depth's shift
+        }
       }
       st_pcf_block(x, y, r, side, i, j, st_pcf_run(x, i, r, side, s), st_pcf_run(y, j, r, side, s), value, plane, f,
                    up, lit, done0, done1, done2);

@@ -67,7 +67,7 @@ TEST(GpuPcfSide, EvenZeroAndLargeKernelsAreRefusedByName) {
 // overlap). The count must stay the per-tap count: every texel of every level,
 // every kernel side, against the CPU's PCF, with each receiver at (or one float either side
 // of) the depth of one of its own taps, so a run that swallowed a tap of another depth
-// flips the count. The random field mixes constant blocks (wide missing children), noise
+// flips the count; and receivers below and above every depth (all lit, none). The random field mixes constant blocks (wide missing children), noise
 // (treelets), slopes and lit blocks; the map edges clamp taps.
 TEST(GpuPcfSide, KernelRunsCountEveryTapLikeTheCpu) {
   for (Encoding e : looptest::available_encodings()) {
@@ -93,9 +93,11 @@ TEST(GpuPcfSide, KernelRunsCountEveryTapLikeTheCpu) {
           const uint32_t r = uint32_t(1 + 2 * (rng() % 5)), h = (r - 1) / 2, n = 1u << level;
           auto tap = [&](uint32_t t, uint32_t i) { return uint32_t(std::clamp<int>(int(t) - int(h) + int(i), 0, int(n) - 1)); };
           float d = map.depth(level, tap(x, uint32_t(rng() % r)), tap(y, uint32_t(rng() % r)));
-          const uint32_t nudge = uint32_t(rng() % 3);
+          const uint32_t nudge = uint32_t(rng() % 5);
           if (nudge == 1) d = std::nextafter(d, -1.0f);
           if (nudge == 2) d = std::nextafter(d, 2.0f);
+          if (nudge == 3) d = -0.0f;  // below every depth: all lit
+          if (nudge == 4) d = 2.0f;   // above every depth: none lit
           q.push_back({x, y, d, 1, r, level});
         }
     std::vector<float> out(q.size());
