@@ -4,6 +4,7 @@
 // A real open mesh (2CylinderEngine) with plane tiles, DAG-MH and MMH.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <random>
 
@@ -51,6 +52,18 @@ TEST(PackEvaluatorBatch, AnswersLikePcfPerQueryInAnyOrderWithASmallCache) {
       const int pick = int(rng() % 3);
       t.receiver = pick == 0 ? v : pick == 1 ? std::nextafter(v, 0.0f) : std::nextafter(v, 2.0f);
     }
+    // Each opened tile wrote its raw bytes into its slot, not the whole slot: with no
+    // evictions (4096 slots) the slots hold at most every encoded tile's raw bytes once,
+    // and less than a whole slot per opened tile (index tiles write none).
+    uint64_t raw_total = 0, slot_bytes = 1;  // a slot holds the pack's largest raw tile
+    for (const TileIndexEntry& t : reader->tiles()) {
+      raw_total += t.kind == TileKind::index ? 0 : t.raw_size;
+      slot_bytes = std::max<uint64_t>(slot_bytes, t.raw_size);
+    }
+    ASSERT_GT(big.tiles_opened(), 0u);
+    EXPECT_GT(big.slot_bytes_written(), 0u);
+    EXPECT_LE(big.slot_bytes_written(), raw_total) << to_string(e);
+    EXPECT_LT(big.slot_bytes_written(), big.tiles_opened() * slot_bytes) << to_string(e);
     for (int shuffled = 0; shuffled < 2; ++shuffled) {
       if (shuffled) std::shuffle(q.begin(), q.end(), rng);
       for (const PackEvaluator* ev : {&small, &big}) {

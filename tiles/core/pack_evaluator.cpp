@@ -1,6 +1,7 @@
 #include "tiles/core/pack_evaluator.hpp"
 
 #include <algorithm>
+#include <optional>
 
 #include "common/error.hpp"
 #include "tiles/core/page_table.hpp"
@@ -38,6 +39,11 @@ uint64_t PackEvaluator::tiles_opened() const {
   return opened_;
 }
 
+uint64_t PackEvaluator::slot_bytes_written() const {
+  std::lock_guard lock(mu_);
+  return cache_.written_bytes();
+}
+
 void PackEvaluator::give_back(std::unique_lock<std::mutex>& lock, uint32_t slot,
                               void (TileCache::*release)(uint32_t)) const {
   lock.lock();
@@ -58,15 +64,20 @@ uint32_t PackEvaluator::resident_slot(uint64_t id, const GridEntry& entry, std::
       unpinned_.wait(lock);
     }
   }
-  const std::span<uint8_t> into = cache_.slot_span(slot);
   lock.unlock();
   std::unique_ptr<Evaluator> eval;
   CutGrid grid;
   size_t used = 0;
   try {
     if (entry.kind == EntryKind::index) {
-      grid = reader_->read_index_tile(id, entry);
+      grid = reader_->read_index_tile(id, entry);  // parsed apart: the slot stays unwritten
     } else {
+      // Only the tile's raw bytes of the slot (the slot's own entry: no lock needed), so
+      // that commit clears nothing past them. A tile larger than the slot gets the whole
+      // slot, and read_raw_into refuses it naming both sizes; an unknown id is refused there.
+      const std::optional<TileIndexEntry> t = reader_->find(id);
+      const std::span<uint8_t> into =
+          cache_.slot_span(slot, t ? std::min(t->raw_size, cache_.slot_bytes()) : 0);
       used = reader_->read_raw_into(id, into);
       const std::string what = reader_->name() + ": " + describe_tile(id);
       try {

@@ -45,6 +45,9 @@ class PackEvaluator : public Evaluator {
 
   const PackReader& reader() const { return *reader_; }
   uint64_t tiles_opened() const;  // cache misses so far
+  // Slot bytes written so far (TileCache::written_bytes): each opened tile's raw bytes,
+  // never a whole slot, so a commit clears no tail past the tile.
+  uint64_t slot_bytes_written() const;
 
  private:
   // The slot holding tile `id` (resident; read and opened first if needed). Called and

@@ -450,10 +450,19 @@ std::vector<uint8_t> zlib_compress(std::span<const uint8_t> raw, int level) {
   struct Free {
     void operator()(libdeflate_compressor* c) const { libdeflate_free_compressor(c); }
   };
-  std::unique_ptr<libdeflate_compressor, Free> c(libdeflate_alloc_compressor(level));
+  // One compressor per thread and level (libdeflate's levels 0..12), kept like the
+  // decompressor below: a compressor is 0.3-1 MB, and a stack build compresses thousands
+  // of small cells, each of which allocated and freed one (under ASan a map and an unmap
+  // each). A compressor keeps no state between calls: the bytes are the same.
+  thread_local std::unique_ptr<libdeflate_compressor, Free> by_level[13];
+  libdeflate_compressor* c = nullptr;
+  if (level >= 0 && level <= 12) {
+    if (!by_level[level]) by_level[level].reset(libdeflate_alloc_compressor(level));
+    c = by_level[level].get();
+  }
   if (!c) throw Error("zlib: cannot allocate a compressor at level " + std::to_string(level));
-  std::vector<uint8_t> out(libdeflate_zlib_compress_bound(c.get(), raw.size()));
-  size_t n = libdeflate_zlib_compress(c.get(), raw.data(), raw.size(), out.data(), out.size());
+  std::vector<uint8_t> out(libdeflate_zlib_compress_bound(c, raw.size()));
+  size_t n = libdeflate_zlib_compress(c, raw.data(), raw.size(), out.data(), out.size());
   ST_CHECK(n != 0 && n <= max_stored_size(raw.size()));  // libdeflate's bound guarantees both
   out.resize(n);
   return out;
