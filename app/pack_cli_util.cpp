@@ -23,6 +23,8 @@ std::string feature_names(uint32_t flags) {
   add(kFeatureCompressedGrid, "compressed-grid");
   add(kFeaturePayloadsOnly, "payloads-only");
   add(kFeatureMixedTiles, "mixed-tiles");
+  add(kFeatureStackSliceTiles, "stack-slice-tiles");
+  add(kFeatureStackGroupedTiles, "stack-grouped-tiles");
   add(kFeaturePlaneTiles, "plane-tiles");
   add(kFeaturePackedPlaneTiles, "packed-plane-tiles");
   add(kFeaturePredictedPlaneLabels, "predicted-plane-labels");

@@ -108,8 +108,9 @@ enum PackFeature : uint32_t {
   kFeatureStackSliceTiles = 1u << 10,
   // Some encoded tiles are plane tiles (magic "STPN", tiles/core/PLANES.md): plane blocks
   // over an inner buffer of the pack's encoding (MH, MMH or DAG-MH; in a DAG-MH pack also
-  // MMH, then with mixed_tiles). Never with stack or vsdag. Readers before it refuse the
-  // pack by this bit.
+  // MMH, then with mixed_tiles); in a stack, some per-slice cells' slices are plane tiles
+  // (only with stack_slice_tiles, tiles/core/MHOCT.md "Per-slice cells"). Never with vsdag.
+  // Readers before it refuse the pack by this bit.
   kFeaturePlaneTiles = 1u << 11,
   // Some per-slice cells are stored grouped (magic "STSP", stack_slices.hpp, tiles/core/MHOCT.md
   // "Grouped per-slice cells"): an STSL cell's bytes reordered so like lies with like, the same
