@@ -146,7 +146,8 @@ nlohmann::json measure(const std::string& path) {
     ++plane_tiles;
     planes += v.plane_count;
     table += v.table_count;
-    labelled += v.label_count;
+    for (uint32_t i = 0; i < v.plane_count; ++i)  // label_count counts slots: a wide block takes two
+      labelled += v.records[8 * i + 5] != st::planes::kKindPlane;
     for (uint32_t i = 0; i < v.plane_count; ++i) plane_texels += uint64_t(1) << (2 * v.plane(i).shift);
     plane_raw += raw.size() - v.inner.size();
     const uint64_t whole = st::zlib_compress(raw, 6).size(), inner = st::zlib_compress(v.inner, 6).size();

@@ -20,7 +20,7 @@ struct PlaneTileView {
   uint32_t finest_level = 0;
   uint32_t plane_count = 0;          // blocks
   uint32_t table_count = 0;          // distinct planes
-  uint32_t label_count = 0;          // labelled blocks
+  uint32_t label_count = 0;          // labels section slots (a labelled block one, a wide one two)
   std::span<const uint8_t> table;    // table_count * 24 bytes
   std::span<const uint8_t> records;  // plane_count * 8 bytes
   std::span<const uint8_t> labels;   // label_count * 24 bytes
