@@ -3,9 +3,9 @@
 // DAG-MH 2021 §3.1; tiles/core/MHOCT.md "Stack against separate DAG-MH packs").
 //
 //   bench_stack_slices [--res 4k] [--samples 32] [--area-samples 64]
-//                      [--case city|hairball|engine|all] [--json PATH] [--spill-dir /tmp]
+//                      [--case city|hairball|engine|demo|all] [--json PATH] [--spill-dir /tmp]
 //                      [--bytes-only] [--dump-tiles DIR] [--adaptive] [--split-only] [--split-k 0,-1]
-//                      [--no-planes]
+//                      [--no-planes] [--own-frames]
 //
 // Plane tiles (tiles/core/PLANES.md) are on for both sides, as `shadowtile build` makes
 // them: the separate packs' tiles and the per-slice cells' slices; --no-planes: neither.
@@ -47,9 +47,15 @@
 //     slice w-1's; and a DAG-MH dictionary (dagmh::share_across_tiles) over every slice's
 //     DAG-MH tiles at once against one per slice (structure and treelets shared across
 //     slices; values stay per tile).
+// --own-frames also traces each sample as the sun alone, in its own box fitted to the scene
+// (`shadowtile build --light sun:...`, as scripts/demo-day's separate packs), writes it as a
+// 2D pack the same way, and prints per slice both frames' box side, ground area per texel,
+// texels whose first hit stands above the ground, empty texels, tiles and bytes.
 // Cases: procedural:city under a day's sun (azimuth 100..260, elevation 25..65, ground
 // frame), procedural:hairball under a 4 m x 4 m area light 25 m above it (window frame),
-// and a real open mesh, assimp's 2CylinderEngine.glb, under the same day's sun.
+// and a real open mesh, assimp's 2CylinderEngine.glb, under the same day's sun; `demo`
+// (not in `all`): scripts/demo-day's day, the engine on its ground quad under
+// azimuth 90..270, elevation 25..60 (pass --samples 16 for the demo's stack).
 #include <sys/resource.h>
 #include <time.h>
 #include <unistd.h>
@@ -59,6 +65,7 @@
 #include <bit>
 #include <unordered_map>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -402,8 +409,43 @@ double peak_rss_mib() {
   return double(ru.ru_maxrss) / 1024.0;
 }
 
+// One slice's 2D map in one frame: its light box, the ground area one texel covers, the
+// texels whose first hit stands above the ground (the occluder's own texels) and the
+// texels that hit nothing, and its 2D pack's bytes and tiles (--own-frames).
+struct SliceFrame {
+  double side = 0, ground_area = 0;
+  uint64_t above = 0, empty = 0, bytes = 0, tiles = 0;
+};
+struct SliceRow {
+  double azimuth = 0, elevation = 0;
+  SliceFrame ground, own;  // the stack's frame (its slice as a 2D pack); the sun's own box
+};
+
+// The ground area of one texel: a ground-frame texel is a square of the ground; a sun's
+// texel (a square across the sun's rays) falls on level ground as a strip 1 / sin E long.
+SliceFrame measure_slice(const st::LightSpace& l, const st::IntervalTile& t, uint32_t level, double ground, uint64_t bytes,
+                         size_t tiles) {
+  SliceFrame f;
+  const double R = double(uint64_t(1) << level), e = l.extent_uv() / R;
+  f.side = l.extent_uv();
+  f.ground_area = l.kind() == st::LightKind::sun_ground ? e * e : e * e / std::abs(l.forward().y);
+  f.bytes = bytes, f.tiles = tiles;
+  for (uint32_t j = 0; j < t.height; ++j)
+    for (uint32_t i = 0; i < t.width; ++i) {
+      const st::Interval iv = t.at(i, j);
+      if (iv.lo == st::kLitDepth) {
+        ++f.empty;
+        continue;
+      }
+      const st::Vec3d p = l.to_world((double(t.x0 + i) + 0.5) / R, (double(t.y0 + j) + 0.5) / R, double(iv.lo));
+      f.above += p.y > ground + 1e-3 * l.extent_uv();
+    }
+  return f;
+}
+
 nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_dir, bool bytes_only,
-                        const std::string& dump_dir, bool adaptive, bool split_only, std::vector<int> split_shifts) {
+                        const std::string& dump_dir, bool adaptive, bool split_only, std::vector<int> split_shifts,
+                        bool own_frames) {
   std::printf("\n== %s: %s, %s, %u^2 per slice\n", c.name.c_str(), c.scene.c_str(), c.light.c_str(), 1u << level);
   std::fflush(stdout);
   const st::Scene scene = st::load_scene(c.scene);
@@ -441,8 +483,13 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
   const st::LightSpace header_light = st::LightSpace::fit(st::LightSpec{}, scene.bounds());
   double pack_s = 0, cells_s = 0;
   auto t0 = Clock::now();
+  std::vector<SliceRow> rows;
+  // The reference height "above the ground" counts from: the ground frame's plane, or the box's bottom.
+  const double ground_y = std::isnan(set.spec.ground) ? scene.bounds().lo.y : set.spec.ground;
   st::trace_stack_to_spill(scene, set, spill, nullptr, {}, [&](uint32_t w, const st::IntervalTile& tile) {
     const st::Hierarchy h = st::build_hierarchy(tile);
+    SliceRow row;
+    row.azimuth = set.samples[w].spec().azimuth_deg, row.elevation = set.samples[w].spec().elevation_deg;
     auto p0 = Clock::now();
     {
       st::CutParams cut;
@@ -476,8 +523,19 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
           in_tiles += e.stored_size;
         }
         packs_other += file - in_tiles;
+        row.ground = measure_slice(set.samples[w], tile, level, ground_y, file, reader->tiles().size());
       }
       std::filesystem::remove(path);
+      if (own_frames) {
+        // The same sun in its own fitted box (`shadowtile build --light sun:...`), the
+        // 2D pack a user builds one sun at a time: traced, cut and written the same way.
+        const st::LightSpace own = st::LightSpace::fit(set.samples[w].spec(), scene.bounds());
+        const st::IntervalTile ot = st::trace_slice(scene, own, {level, 0, 0, 1u << level, 1u << level});
+        st::write_pack(path, st::build_hierarchy(ot), cut, st::PackParams::from(own, cut));
+        row.own = measure_slice(own, ot, level, ground_y, std::filesystem::file_size(path), st::PackReader::open(path)->tiles().size());
+        std::filesystem::remove(path);
+      }
+      rows.push_back(row);
       if (!bytes_only) {
         st::dagmh::EncodeStats s;
         st::dagmh::encode(h, &s);
@@ -847,6 +905,35 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
 
   const double r_stack = double(stack_file) / double(packs_bytes);
   std::printf("separate DAG-MH packs: %llu bytes (%u packs, %.1f s to write)\n", (unsigned long long)packs_bytes, n, pack_s);
+  SliceFrame sum_g, sum_o;
+  if (own_frames) {
+    // The stack's slices in its one frame against each sun in its own fitted box: the
+    // separate packs above are the former; `shadowtile build --light sun:...` writes the latter.
+    std::printf("  per slice: the stack's frame (its slice as a 2D pack) | the sun's own box (a user's 2D pack)\n");
+    std::printf("  | w | azimuth | elevation | box side | own box side | ground area per texel | own | texels above "
+                "the ground | own | empty texels | own | tiles | own | bytes | own | bytes / own |\n");
+    std::printf("  | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+    for (size_t w = 0; w < rows.size(); ++w) {
+      const SliceRow& r = rows[w];
+      std::printf("  | %zu | %.1f | %.1f | %.1f | %.1f | %.3f | %.3f | %llu | %llu | %llu | %llu | %llu | %llu | %llu | %llu | %.3f |\n",
+                  w, r.azimuth, r.elevation, r.ground.side, r.own.side, r.ground.ground_area, r.own.ground_area,
+                  (unsigned long long)r.ground.above, (unsigned long long)r.own.above, (unsigned long long)r.ground.empty,
+                  (unsigned long long)r.own.empty, (unsigned long long)r.ground.tiles, (unsigned long long)r.own.tiles,
+                  (unsigned long long)r.ground.bytes, (unsigned long long)r.own.bytes,
+                  double(r.ground.bytes) / double(r.own.bytes));
+      for (auto [a, b] : {std::pair{&sum_g, &r.ground}, std::pair{&sum_o, &r.own}}) {
+        a->ground_area += b->ground_area / double(rows.size());
+        a->above += b->above, a->empty += b->empty, a->tiles += b->tiles, a->bytes += b->bytes;
+      }
+    }
+    std::printf("  | all | | | | | %.3f | %.3f | %llu | %llu | %llu | %llu | %llu | %llu | %llu | %llu | %.3f |\n",
+                sum_g.ground_area, sum_o.ground_area, (unsigned long long)sum_g.above, (unsigned long long)sum_o.above,
+                (unsigned long long)sum_g.empty, (unsigned long long)sum_o.empty, (unsigned long long)sum_g.tiles,
+                (unsigned long long)sum_o.tiles, (unsigned long long)sum_g.bytes, (unsigned long long)sum_o.bytes,
+                double(sum_g.bytes) / double(sum_o.bytes));
+    std::printf("  each sun in its own box: %llu bytes; the split stack pack = %.3f x those\n",
+                (unsigned long long)sum_o.bytes, double(split_file) / double(sum_o.bytes));
+  }
   std::printf("  whole-slice DAG-MH raw: %llu = nodes %llu + treelets %llu + value chunks %llu + multipliers %llu + "
               "header/skip %llu\n",
               (unsigned long long)sum.total_bytes, (unsigned long long)sum.node_bytes, (unsigned long long)sum.treelet_bytes,
@@ -938,6 +1025,19 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
           {"dictionary_per_slice_raw", per_slice_after},
           {"dictionary_across_slices_raw", across_after},
           {"dagmh_tiles_raw", per_slice_before},
+          {"own_frame_packs_bytes", sum_o.bytes},
+          {"stack_pack_split_over_own_frame_packs", own_frames ? double(split_file) / double(sum_o.bytes) : 0.0},
+          {"slices_in_frames", [&] {
+             nlohmann::json a = nlohmann::json::array();
+             for (const SliceRow& r : rows) {
+               auto one = [](const SliceFrame& f) {
+                 return nlohmann::json{{"box_side", f.side}, {"ground_area_per_texel", f.ground_area}, {"texels_above_ground", f.above},
+                                       {"empty_texels", f.empty}, {"tiles", f.tiles}, {"bytes", f.bytes}};
+               };
+               a.push_back({{"azimuth", r.azimuth}, {"elevation", r.elevation}, {"stack_frame", one(r.ground)}, {"own_frame", one(r.own)}});
+             }
+             return a;
+           }()},
           {"trace_s", trace_s},
           {"packs_s", pack_s},
           {"stack_s", stack_s},
@@ -949,7 +1049,7 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
 int main(int argc, char** argv) {
   try {
     uint32_t level = 12, samples = 32, area_samples = 64;
-    bool bytes_only = false, adaptive = false, split_only = false, no_planes = false;
+    bool bytes_only = false, adaptive = false, split_only = false, no_planes = false, own_frames = false;
     std::vector<int> split_shifts{0};
     std::string dump_dir;
     std::string which = "all", json_path = "build/bench_stack_slices.json", spill_dir = "/tmp";
@@ -957,12 +1057,13 @@ int main(int argc, char** argv) {
     opt.with("--res", [&](const std::string& v) { level = st::parse_resolution(v); }, "Map side per slice [4k]")
         .value("--samples", samples, "Sun samples of the day's path")
         .value("--area-samples", area_samples, "Area light samples (hairball)")
-        .value("--case", which, "city, engine, hairball or all")
+        .value("--case", which, "city, engine, hairball, demo or all (demo: not in all)")
         .value("--json", json_path, "Write the rows as JSON to PATH (after each case)")
         .value("--spill-dir", spill_dir, "Folder for the traced slices' spill")
         .flag("--bytes-only", bytes_only, "Skip the octree pack, the dictionary measure and their DAG-MH tiles")
         .flag("--adaptive", adaptive, "Estimate a cut that goes deeper only where a cell overflows")
         .flag("--split-only", split_only, "Write only the split pack")
+        .flag("--own-frames", own_frames, "Also build each sun in its own fitted box (a user's 2D pack) and compare per slice")
         .flag("--no-planes", no_planes, "No plane tiles in the separate packs nor in the stack's per-slice cells")
         .with("--split-k", [&](const std::string& v) {  // comma-separated shifts of K for the split pack, e.g. 0,-1
                 split_shifts.clear();
@@ -980,14 +1081,17 @@ int main(int argc, char** argv) {
     if (which == "all" || which == "city") cases.push_back({"city-day", "procedural:city", day});
     if (which == "all" || which == "engine")
       cases.push_back({"engine-day", "/usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb", day});
+    if (which == "demo")  // scripts/demo-day's day: the engine on its ground quad, its sun path
+      cases.push_back({"demo-day", "grid:/usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb,n=1,gap=1.5",
+                       "sun-path:azimuth=90..270,elevation=25..60,samples=" + std::to_string(samples)});
     if (which == "all" || which == "hairball")
       cases.push_back({"hairball-area", "procedural:hairball",
                        "area:pos=0,25,0,target=0,0,0,size=4,4,samples=" + std::to_string(area_samples) +
                            ",jitter=0.5,frame=window"});
-    if (cases.empty()) throw st::Error("--case: expected city, engine, hairball or all");
+    if (cases.empty()) throw st::Error("--case: expected city, engine, hairball, demo or all");
     nlohmann::json out = nlohmann::json::array();
     for (const Case& c : cases) {
-      out.push_back(run_case(c, level, spill_dir, bytes_only, dump_dir, adaptive, split_only, split_shifts));
+      out.push_back(run_case(c, level, spill_dir, bytes_only, dump_dir, adaptive, split_only, split_shifts, own_frames));
       std::ofstream(json_path) << out.dump(2) << "\n";  // after each case: long runs keep what finished
     }
     std::printf("\n| case | N | separate DAG-MH packs | octree stack pack | / separate | per-cell pack, uniform cut | / "

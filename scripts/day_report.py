@@ -2,10 +2,12 @@
 """day_report.py DAY: gathers the demo's day (scripts/demo-day) into DAY/day.json and
 DAY/day.txt, from what the commands wrote there and nothing else (standard library only):
 
-  builds.tsv          scene, light, then `stack SECONDS BYTES PATH` and one
-                      `2d SECONDS BYTES PATH AZIMUTH ELEVATION` row per sample (the
-                      demo's timings of `shadowtile build`; BYTES checked against the file),
-                      `2d_all SECONDS` the wall time of all 2D builds (two at a time)
+  builds.tsv          scene, light, then `stack SECONDS BYTES PATH [AREA]` and one
+                      `2d SECONDS BYTES PATH AZIMUTH ELEVATION [AREA]` row per sample (the
+                      demo's timings of `shadowtile build`; BYTES checked against the file;
+                      AREA the ground area one texel covers), `2d_all SECONDS` the wall time
+                      of all 2D builds (two at a time); optionally the same suns at twice
+                      the resolution: `2d_fine ...` rows and `2d_fine_all SECONDS`
   stack_build.txt     the stack build's summary line (slices, tiles)
   load/load.json      `shadowtile load --time-sweep` (frames, frame_ms, stack.crossings)
   render_T.txt        `shadowtile render --time T --diff` per time T (the map's view, its
@@ -48,24 +50,29 @@ def match(pattern, text, path, what):
 
 def builds(day):
     path = os.path.join(day, "builds.tsv")
-    out = {"scene": None, "light": None, "stack": None, "packs_2d": [], "all_2d_s": None}
+    out = {"scene": None, "light": None, "stack": None, "packs_2d": [], "all_2d_s": None, "packs_2d_fine": [],
+           "all_2d_fine_s": None}
     for n, line in enumerate(read(path).splitlines(), 1):
         f = line.split("\t")
         try:
             if f[0] in ("scene", "light") and len(f) == 2:
                 out[f[0]] = f[1]
                 continue
-            if f[0] == "2d_all" and len(f) == 2:
-                out["all_2d_s"] = float(f[1])
+            if f[0] in ("2d_all", "2d_fine_all") and len(f) == 2:
+                out["all_" + f[0][:-4] + "_s"] = float(f[1])
                 continue
             row = {"seconds": float(f[1]), "bytes": int(f[2]), "path": f[3]}
-            if f[0] == "stack" and len(f) == 4:
+            if f[0] == "stack" and len(f) in (4, 5):
                 out["stack"] = row
-            elif f[0] == "2d" and len(f) == 6:
+            elif f[0] in ("2d", "2d_fine") and len(f) in (6, 7):
                 row.update(azimuth=float(f[4]), elevation=float(f[5]))
-                out["packs_2d"].append(row)
+                out["packs_" + f[0]].append(row)
             else:
                 raise ValueError
+            if len(f) in (5, 7):
+                row["texel_ground_area"] = float(f[-1])
+                if not row["texel_ground_area"] > 0:
+                    raise ValueError
         except (ValueError, IndexError):
             raise BadInput("%s:%d: unexpected row '%s'" % (path, n, line))
         if os.path.exists(row["path"]) and os.path.getsize(row["path"]) != row["bytes"]:
@@ -73,6 +80,8 @@ def builds(day):
                                                                   row["bytes"]))
     if not out["stack"] or not out["packs_2d"] or not out["scene"] or out["all_2d_s"] is None:
         raise BadInput("%s: needs scene, light, one stack row, 2d rows and 2d_all" % path)
+    if out["packs_2d_fine"] and (len(out["packs_2d_fine"]) != len(out["packs_2d"]) or out["all_2d_fine_s"] is None):
+        raise BadInput("%s: 2d_fine rows need one per 2d row and 2d_fine_all" % path)
     return out
 
 
@@ -149,16 +158,41 @@ def main():
     s2 = sum(p["bytes"] for p in b["packs_2d"])
     t2 = b["all_2d_s"]
     j = {"scene": b["scene"], "light": b["light"], "slices": int(st.group(1)), "resolution": int(st.group(2)),
-         "stack": {"bytes": b["stack"]["bytes"], "build_s": b["stack"]["seconds"], "tiles": int(st.group(3))},
+         "stack": {"bytes": b["stack"]["bytes"], "build_s": b["stack"]["seconds"], "tiles": int(st.group(3)),
+                   "texel_ground_area": b["stack"].get("texel_ground_area")},
          "packs_2d": {"count": len(b["packs_2d"]), "bytes": s2, "build_s": t2,
                       "build_s_sum_of_each": sum(p["seconds"] for p in b["packs_2d"]), "each": b["packs_2d"]},
          "stack_over_2d_bytes": b["stack"]["bytes"] / s2 if s2 else None,
          "load": load, "renders": renders, "gpu": g}
+    fine = b["packs_2d_fine"]
+    if fine:
+        sf = sum(p["bytes"] for p in fine)
+        j["packs_2d_fine"] = {"count": len(fine), "bytes": sf, "build_s": b["all_2d_fine_s"],
+                              "build_s_sum_of_each": sum(p["seconds"] for p in fine), "each": fine}
+        j["stack_over_2d_fine_bytes"] = b["stack"]["bytes"] / sf if sf else None
     text = []
     text.append("scene %s, light %s: %d slices of %d^2" % (j["scene"], j["light"], j["slices"], j["resolution"]))
     text.append("bytes: stack pack %d B (built in %.2f s) vs %d separate 2D packs %d B (built in %.2f s, two at a "
                 "time): stack / 2D = %.3f" % (j["stack"]["bytes"], j["stack"]["build_s"], len(b["packs_2d"]), s2, t2,
                                                  j["stack_over_2d_bytes"]))
+    area = b["stack"].get("texel_ground_area")
+    def areas(packs):
+        a = [p.get("texel_ground_area") for p in packs]
+        return None if None in a else (min(a), max(a))
+    a2 = areas(b["packs_2d"])
+    if area and a2:
+        # Texels per unit of ground: the stack's against each 2D pack's (more is finer).
+        text.append("texels on the ground: a stack texel covers %.4g units^2 of ground in every slice; a 2D pack's at "
+                    "%d^2 %.4g..%.4g (the stack holds %.2f..%.2fx their texels per unit of ground)" % (
+                        area, j["resolution"], a2[0], a2[1], a2[0] / area, a2[1] / area))
+    if fine:
+        af = areas(fine)
+        text.append("the same %d suns at %d^2: %d B (built in %.2f s)%s: stack / 2D at %d^2 = %.3f" % (
+                        len(fine), 2 * j["resolution"], j["packs_2d_fine"]["bytes"], j["packs_2d_fine"]["build_s"],
+                        (", a texel %.4g..%.4g units^2 of ground (%.2f..%.2fx the stack's%s)" % (
+                            af[0], af[1], af[0] / area, af[1] / area,
+                            ": every one at least as fine" if af[1] <= area else ""))
+                        if af and area else "", 2 * j["resolution"], j["stack_over_2d_fine_bytes"]))
     fm, cr = load["frame_ms"], load["crossings"]
     text.append("sweep: %d camera at %g FPS, the whole day in %g s: %d frames, %d late (max lag %.1f ms), %d with holes; "
                 "frame work ms mean %.3f, p50 %.3f, p99 %.3f, max %.3f" % (

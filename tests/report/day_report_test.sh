@@ -14,6 +14,7 @@ export SHADOWTILE_DAY_LOAD_SECONDS=1 SHADOWTILE_DAY_GPU=0
 export SHADOWTILE_HTML=0  # load's own page: report.pages_in_chromium tests those
 "$src/scripts/demo-day" build "$st" out day >build.log 2>&1 || { tail -5 build.log; fail "demo-day build"; }
 [ "$(awk -F'\t' '$1 == "2d"' day/builds.tsv | wc -l)" = 4 ] || fail "expected 4 2D packs in builds.tsv"
+[ "$(awk -F'\t' '$1 == "2d_fine"' day/builds.tsv | wc -l)" = 4 ] || fail "expected 4 2D packs at 256^2 in builds.tsv"
 
 port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
 "$st" serve out/day.pack --listen "127.0.0.1:$port" >serve.log 2>&1 &
@@ -26,8 +27,8 @@ done
 "$src/scripts/demo-day" stream "$st" "$port" day >stream.log 2>&1 || { tail -5 stream.log; fail "demo-day stream"; }
 
 # day.json against the sources it was gathered from.
-python3 - "$work" <<'PY' || exit 1
-import json, os, re, sys
+python3 - "$work" "$st" <<'PY' || exit 1
+import json, math, os, re, subprocess, sys
 d = os.path.join(sys.argv[1], "day")
 j = json.load(open(os.path.join(d, "day.json")))
 def check(ok, what):
@@ -37,6 +38,22 @@ check(j["stack"]["bytes"] == os.path.getsize(os.path.join(sys.argv[1], "out", "d
 sizes = [os.path.getsize(os.path.join(sys.argv[1], "out", "day2d", "s%d.pack" % w)) for w in range(4)]
 check(j["packs_2d"]["count"] == 4 and j["packs_2d"]["bytes"] == sum(sizes), "2D bytes = the packs' sizes")
 check(abs(j["stack_over_2d_bytes"] - j["stack"]["bytes"] / sum(sizes)) < 1e-12, "the bytes ratio")
+fine = [os.path.getsize(os.path.join(sys.argv[1], "out", "day2d_fine", "s%d.pack" % w)) for w in range(4)]
+check(j["packs_2d_fine"]["count"] == 4 and j["packs_2d_fine"]["bytes"] == sum(fine), "2D bytes at 256^2 = the packs' sizes")
+check(abs(j["stack_over_2d_fine_bytes"] - j["stack"]["bytes"] / sum(fine)) < 1e-12, "the bytes ratio at 256^2")
+# Ground area per texel from each pack's light box: the ground frame's square over 128^2
+# in every slice; a sun's side over 128 (256) squared, stretched by 1 / sin(elevation).
+def texel_area(path, res):
+    t = json.loads(subprocess.run([sys.argv[2], "inspect", "--json", path], capture_output=True, check=True).stdout)["light_transform"]
+    e = t["extent"] / res
+    return e * e if t["kind"] == "sun-ground" else e * e / math.sin(math.radians(t["array"][16]))
+check(abs(j["stack"]["texel_ground_area"] / texel_area(os.path.join(sys.argv[1], "out", "day.pack"), 128) - 1) < 1e-9, "the stack's texel area")
+for w, p in enumerate(j["packs_2d"]["each"] + j["packs_2d_fine"]["each"]):
+    res, folder = (128, "day2d") if w < 4 else (256, "day2d_fine")
+    a = texel_area(os.path.join(sys.argv[1], "out", folder, "s%d.pack" % (w % 4)), res)
+    check(abs(p["texel_ground_area"] / a - 1) < 1e-9, "pack %d's texel area" % w)
+    if w >= 4:  # the same sun's box at twice the resolution: a quarter of the area
+        check(abs(p["texel_ground_area"] * 4 / j["packs_2d"]["each"][w - 4]["texel_ground_area"] - 1) < 1e-9, "pack %d at 256^2" % w)
 check(j["stack"]["build_s"] > 0 and j["packs_2d"]["build_s"] > 0 and all(p["seconds"] > 0 for p in j["packs_2d"]["each"]), "build times measured")
 # The 2D packs' suns are the stack's samples (azimuth, elevation linear in w / 3).
 for w, p in enumerate(j["packs_2d"]["each"]):
@@ -59,6 +76,7 @@ check(0 < L["frame_ms"]["p50"] <= L["frame_ms"]["max"] and L["crossings"]["max_m
 check(j["gpu"] is None, "no GPU view asked for")
 txt = open(os.path.join(d, "day.txt")).read()
 check("stack / 2D = %.3f" % j["stack_over_2d_bytes"] in txt, "day.txt carries the ratio")
+check("stack / 2D at 256^2 = %.3f" % j["stack_over_2d_fine_bytes"] in txt, "day.txt carries the ratio at 256^2")
 print("ok   day.json: stack %d B, 2D %d B, %d frames, %d crossings" % (j["stack"]["bytes"], sum(sizes), L["frames"],
                                                                        L["crossings"]["frames"]))
 PY
