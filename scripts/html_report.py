@@ -674,6 +674,11 @@ def day_section(d):
         "Slice crossings (frames reading a slice their previous frame did not): %s, %s with holes, work ms mean %s, "
         "max %s" % (cr["frames"], cr["with_holes"], num(cr["mean_ms"]), num(cr["max_ms"])),
     ]
+    if j.get("packs_2d_fine"):  # the same suns at twice the resolution
+        pf = j["packs_2d_fine"]
+        facts.insert(2, "The same %d suns at %d^2 (day.txt sets each pack's ground area per texel against the "
+                        "stack's): %s B: stack / 2D bytes %s" % (pf["count"], 2 * j["resolution"], pf["bytes"],
+                                                                num(j["stack_over_2d_fine_bytes"])))
     parts = ["<ul>%s</ul>" % "".join("<li>%s</li>" % esc(x) for x in facts)]
     if os.path.exists(os.path.join(d, "day", "load", "load.html")):
         parts.append('<p>The sweep\'s load page: <a href="day/load/load.html">day/load/load.html</a></p>')
