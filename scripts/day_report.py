@@ -7,7 +7,8 @@ DAY/day.txt, from what the commands wrote there and nothing else (standard libra
                       demo's timings of `shadowtile build`; BYTES checked against the file;
                       AREA the ground area one texel covers), `2d_all SECONDS` the wall time
                       of all 2D builds (two at a time); optionally the same suns at twice
-                      the resolution: `2d_fine ...` rows and `2d_fine_all SECONDS`
+                      the resolution (`2d_fine ...` rows, `2d_fine_all SECONDS`) and each as
+                      a one-sample sun-path stack (`stack1 ...` rows, `stack1_all SECONDS`)
   stack_build.txt     the stack build's summary line (slices, tiles)
   load/load.json      `shadowtile load --time-sweep` (frames, frame_ms, stack.crossings)
   render_T.txt        `shadowtile render --time T --diff` per time T (the map's view, its
@@ -51,20 +52,20 @@ def match(pattern, text, path, what):
 def builds(day):
     path = os.path.join(day, "builds.tsv")
     out = {"scene": None, "light": None, "stack": None, "packs_2d": [], "all_2d_s": None, "packs_2d_fine": [],
-           "all_2d_fine_s": None}
+           "all_2d_fine_s": None, "packs_stack1": [], "all_stack1_s": None}
     for n, line in enumerate(read(path).splitlines(), 1):
         f = line.split("\t")
         try:
             if f[0] in ("scene", "light") and len(f) == 2:
                 out[f[0]] = f[1]
                 continue
-            if f[0] in ("2d_all", "2d_fine_all") and len(f) == 2:
+            if f[0] in ("2d_all", "2d_fine_all", "stack1_all") and len(f) == 2:
                 out["all_" + f[0][:-4] + "_s"] = float(f[1])
                 continue
             row = {"seconds": float(f[1]), "bytes": int(f[2]), "path": f[3]}
             if f[0] == "stack" and len(f) in (4, 5):
                 out["stack"] = row
-            elif f[0] in ("2d", "2d_fine") and len(f) in (6, 7):
+            elif f[0] in ("2d", "2d_fine", "stack1") and len(f) in (6, 7):
                 row.update(azimuth=float(f[4]), elevation=float(f[5]))
                 out["packs_" + f[0]].append(row)
             else:
@@ -80,8 +81,9 @@ def builds(day):
                                                                   row["bytes"]))
     if not out["stack"] or not out["packs_2d"] or not out["scene"] or out["all_2d_s"] is None:
         raise BadInput("%s: needs scene, light, one stack row, 2d rows and 2d_all" % path)
-    if out["packs_2d_fine"] and (len(out["packs_2d_fine"]) != len(out["packs_2d"]) or out["all_2d_fine_s"] is None):
-        raise BadInput("%s: 2d_fine rows need one per 2d row and 2d_fine_all" % path)
+    for k in ("2d_fine", "stack1"):
+        if out["packs_" + k] and (len(out["packs_" + k]) != len(out["packs_2d"]) or out["all_%s_s" % k] is None):
+            raise BadInput("%s: %s rows need one per 2d row and %s_all" % (path, k, k))
     return out
 
 
@@ -170,6 +172,12 @@ def main():
         j["packs_2d_fine"] = {"count": len(fine), "bytes": sf, "build_s": b["all_2d_fine_s"],
                               "build_s_sum_of_each": sum(p["seconds"] for p in fine), "each": fine}
         j["stack_over_2d_fine_bytes"] = b["stack"]["bytes"] / sf if sf else None
+    one = b["packs_stack1"]
+    if one:
+        so = sum(p["bytes"] for p in one)
+        j["packs_stack1"] = {"count": len(one), "bytes": so, "build_s": b["all_stack1_s"],
+                             "build_s_sum_of_each": sum(p["seconds"] for p in one), "each": one}
+        j["stack_over_stack1_bytes"] = b["stack"]["bytes"] / so if so else None
     text = []
     text.append("scene %s, light %s: %d slices of %d^2" % (j["scene"], j["light"], j["slices"], j["resolution"]))
     text.append("bytes: stack pack %d B (built in %.2f s) vs %d separate 2D packs %d B (built in %.2f s, two at a "
@@ -193,6 +201,14 @@ def main():
                             af[0], af[1], af[0] / area, af[1] / area,
                             ": every one at least as fine" if af[1] <= area else ""))
                         if af and area else "", 2 * j["resolution"], j["stack_over_2d_fine_bytes"]))
+    if one:
+        ao = areas(one)
+        text.append("each sun alone in the stack's frame, a one-sample sun-path stack (its ground square fitted to that "
+                    "sun): %d B (built in %.2f s)%s: stack / those = %.3f" % (
+                        j["packs_stack1"]["bytes"], j["packs_stack1"]["build_s"],
+                        (", a texel %.4g..%.4g units^2 of ground (%.3f..%.3fx the stack's)" % (
+                            ao[0], ao[1], ao[0] / area, ao[1] / area)) if ao and area else "",
+                        j["stack_over_stack1_bytes"]))
     fm, cr = load["frame_ms"], load["crossings"]
     text.append("sweep: %d camera at %g FPS, the whole day in %g s: %d frames, %d late (max lag %.1f ms), %d with holes; "
                 "frame work ms mean %.3f, p50 %.3f, p99 %.3f, max %.3f" % (

@@ -679,6 +679,10 @@ def day_section(d):
         facts.insert(2, "The same %d suns at %d^2 (day.txt sets each pack's ground area per texel against the "
                         "stack's): %s B: stack / 2D bytes %s" % (pf["count"], 2 * j["resolution"], pf["bytes"],
                                                                 num(j["stack_over_2d_fine_bytes"])))
+    if j.get("packs_stack1"):  # each sun alone in the stack's frame
+        facts.insert(2, "The same %d suns one at a time as one-sample stacks (the same ground frame, fitted to each "
+                        "sun): %s B: stack / those bytes %s" % (j["packs_stack1"]["count"], j["packs_stack1"]["bytes"],
+                                                                num(j["stack_over_stack1_bytes"])))
     parts = ["<ul>%s</ul>" % "".join("<li>%s</li>" % esc(x) for x in facts)]
     if os.path.exists(os.path.join(d, "day", "load", "load.html")):
         parts.append('<p>The sweep\'s load page: <a href="day/load/load.html">day/load/load.html</a></p>')

@@ -15,6 +15,7 @@ export SHADOWTILE_HTML=0  # load's own page: report.pages_in_chromium tests thos
 "$src/scripts/demo-day" build "$st" out day >build.log 2>&1 || { tail -5 build.log; fail "demo-day build"; }
 [ "$(awk -F'\t' '$1 == "2d"' day/builds.tsv | wc -l)" = 4 ] || fail "expected 4 2D packs in builds.tsv"
 [ "$(awk -F'\t' '$1 == "2d_fine"' day/builds.tsv | wc -l)" = 4 ] || fail "expected 4 2D packs at 256^2 in builds.tsv"
+[ "$(awk -F'\t' '$1 == "stack1"' day/builds.tsv | wc -l)" = 4 ] || fail "expected 4 one-sample stacks in builds.tsv"
 
 port=$(python3 -c 'import socket; s=socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
 "$st" serve out/day.pack --listen "127.0.0.1:$port" >serve.log 2>&1 &
@@ -41,6 +42,9 @@ check(abs(j["stack_over_2d_bytes"] - j["stack"]["bytes"] / sum(sizes)) < 1e-12, 
 fine = [os.path.getsize(os.path.join(sys.argv[1], "out", "day2d_fine", "s%d.pack" % w)) for w in range(4)]
 check(j["packs_2d_fine"]["count"] == 4 and j["packs_2d_fine"]["bytes"] == sum(fine), "2D bytes at 256^2 = the packs' sizes")
 check(abs(j["stack_over_2d_fine_bytes"] - j["stack"]["bytes"] / sum(fine)) < 1e-12, "the bytes ratio at 256^2")
+one = [os.path.getsize(os.path.join(sys.argv[1], "out", "day1", "s%d.pack" % w)) for w in range(4)]
+check(j["packs_stack1"]["count"] == 4 and j["packs_stack1"]["bytes"] == sum(one), "one-sample stacks' bytes = the packs' sizes")
+check(abs(j["stack_over_stack1_bytes"] - j["stack"]["bytes"] / sum(one)) < 1e-12, "the bytes ratio to one-sample stacks")
 # Ground area per texel from each pack's light box: the ground frame's square over 128^2
 # in every slice; a sun's side over 128 (256) squared, stretched by 1 / sin(elevation).
 def texel_area(path, res):
@@ -48,11 +52,13 @@ def texel_area(path, res):
     e = t["extent"] / res
     return e * e if t["kind"] == "sun-ground" else e * e / math.sin(math.radians(t["array"][16]))
 check(abs(j["stack"]["texel_ground_area"] / texel_area(os.path.join(sys.argv[1], "out", "day.pack"), 128) - 1) < 1e-9, "the stack's texel area")
-for w, p in enumerate(j["packs_2d"]["each"] + j["packs_2d_fine"]["each"]):
-    res, folder = (128, "day2d") if w < 4 else (256, "day2d_fine")
+for w, p in enumerate(j["packs_2d"]["each"] + j["packs_2d_fine"]["each"] + j["packs_stack1"]["each"]):
+    res, folder = [(128, "day2d"), (256, "day2d_fine"), (128, "day1")][w // 4]
     a = texel_area(os.path.join(sys.argv[1], "out", folder, "s%d.pack" % (w % 4)), res)
     check(abs(p["texel_ground_area"] / a - 1) < 1e-9, "pack %d's texel area" % w)
-    if w >= 4:  # the same sun's box at twice the resolution: a quarter of the area
+    if w >= 8:  # one sun's ground square: inside the union of every sun's, so no coarser
+        check(p["texel_ground_area"] <= j["stack"]["texel_ground_area"], "one-sample stack %d no coarser" % (w - 8))
+    elif w >= 4:  # the same sun's box at twice the resolution: a quarter of the area
         check(abs(p["texel_ground_area"] * 4 / j["packs_2d"]["each"][w - 4]["texel_ground_area"] - 1) < 1e-9, "pack %d at 256^2" % w)
 check(j["stack"]["build_s"] > 0 and j["packs_2d"]["build_s"] > 0 and all(p["seconds"] > 0 for p in j["packs_2d"]["each"]), "build times measured")
 # The 2D packs' suns are the stack's samples (azimuth, elevation linear in w / 3).
@@ -77,6 +83,7 @@ check(j["gpu"] is None, "no GPU view asked for")
 txt = open(os.path.join(d, "day.txt")).read()
 check("stack / 2D = %.3f" % j["stack_over_2d_bytes"] in txt, "day.txt carries the ratio")
 check("stack / 2D at 256^2 = %.3f" % j["stack_over_2d_fine_bytes"] in txt, "day.txt carries the ratio at 256^2")
+check("stack / those = %.3f" % j["stack_over_stack1_bytes"] in txt, "day.txt carries the ratio to one-sample stacks")
 print("ok   day.json: stack %d B, 2D %d B, %d frames, %d crossings" % (j["stack"]["bytes"], sum(sizes), L["frames"],
                                                                        L["crossings"]["frames"]))
 PY
