@@ -10,7 +10,7 @@ fail() { echo "FAIL: $*"; exit 1; }
 export SHADOWTILE_DAY_SCENE="procedural:city,size=2" SHADOWTILE_DAY_RES=128 SHADOWTILE_DAY_SIZE=96x54
 export SHADOWTILE_DAY_LIGHT="sun-path:azimuth=150..200,elevation=40..60,samples=4"
 export SHADOWTILE_DAY_CAMERA="pos=-60,50,-70,target=0,0,0,fov=50" SHADOWTILE_DAY_TIMES="0.5 1"
-export SHADOWTILE_DAY_LOAD_SECONDS=1 SHADOWTILE_DAY_GPU=0
+export SHADOWTILE_DAY_LOAD_SECONDS=1 SHADOWTILE_DAY_GPU=0 SHADOWTILE_DAY_FINE=1
 export SHADOWTILE_HTML=0  # load's own page: report.pages_in_chromium tests those
 "$src/scripts/demo-day" build "$st" out day >build.log 2>&1 || { tail -5 build.log; fail "demo-day build"; }
 [ "$(awk -F'\t' '$1 == "2d"' day/builds.tsv | wc -l)" = 4 ] || fail "expected 4 2D packs in builds.tsv"
