@@ -29,6 +29,7 @@ std::string feature_names(uint32_t flags) {
   add(kFeaturePackedPlaneTiles, "packed-plane-tiles");
   add(kFeaturePredictedPlaneLabels, "predicted-plane-labels");
   add(kFeatureStackSplitCells, "stack-split-cells");
+  add(kFeatureWidePlaneBlocks, "wide-plane-blocks");
   return s.empty() ? "none" : s;
 }
 

@@ -10,13 +10,20 @@
 // padding, found by walking each tree from its root (tiles/core/mh_quadtree_format.hpp).
 // Plane tiles (tiles/core/PLANES.md) count their header and plane records as the section
 // "planes" (marginal stored: the tile's zlib size minus its inner buffer's) and their inner
-// buffer with the MH/MMH or DAG-MH tiles.
+// buffer with the MH/MMH or DAG-MH tiles. Planes shared across tiles: how many table planes
+// recur in other tiles, as stored (a at the tile's origin) and as the map's plane (a moved
+// to the map's origin), with those planes' marginal stored bytes; and a pool built tile by
+// tile that reuses an earlier tile's plane wherever it gives the same float at every texel
+// the plane answers (what a pack-wide table could share if the fit chose planes across
+// tiles), with the pool's records as one zlib stream.
 //
 //   bench_pack_bytes PACK... [--json PATH]
 #include <bit>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <map>
+#include <tuple>
 #include <nlohmann/json.hpp>
 #include <span>
 #include <string>
@@ -28,6 +35,7 @@
 #include "tiles/core/encoding.hpp"
 #include "tiles/core/mh_quadtree_format.hpp"
 #include "tiles/core/map_preview.hpp"
+#include "tiles/core/morton.hpp"
 #include "tiles/core/pack_reader.hpp"
 #include "tiles/core/plane_pack.hpp"
 #include "tiles/core/plane_tile.hpp"
@@ -138,6 +146,133 @@ nlohmann::json measure(const std::string& path) {
     out.insert(out.end(), b.begin() + long(to), b.end());
     return st::zlib_compress(out, 6).size();
   };
+  // Planes shared across tiles: each table plane as stored (a at the tile's texel (0, 0))
+  // and as the map's plane (a moved to the map's texel (0, 0): the tiles' finest texels are
+  // the map's), counted by how many tiles hold it.
+  using Key = std::tuple<uint64_t, uint64_t, uint64_t>;
+  std::map<Key, uint32_t> stored_tiles, map_tiles;
+  std::vector<std::pair<uint64_t, std::vector<Key>>> tile_planes;  // tile id, its planes as the map's
+  for (const auto& e : reader->tiles()) {
+    if (e.kind != st::TileKind::encoded) continue;
+    const std::vector<uint8_t> raw = reader->read_raw(e.id);
+    if (!st::is_plane_buffer(raw)) continue;
+    const st::PlaneTileView v = st::validate_plane_tile(raw);
+    const st::TileAddress ta = st::tile_address(e.id);
+    const uint64_t x0 = uint64_t(ta.x) << (h.map_level - ta.level), y0 = uint64_t(ta.y) << (h.map_level - ta.level);
+    std::map<Key, bool> seen_stored, seen_map;
+    tile_planes.push_back({e.id, {}});
+    for (uint32_t i = 0; i < v.table_count; ++i) {
+      const uint8_t* t = v.table.data() + 24 * size_t(i);
+      const uint64_t a = st::load_le<uint64_t>(t), b = st::load_le<uint64_t>(t + 8), c = st::load_le<uint64_t>(t + 16);
+      const Key k{a, b, c}, m{a - b * x0 - c * y0, b, c};
+      if (!seen_stored[k]) seen_stored[k] = true, ++stored_tiles[k];
+      if (!seen_map[m]) seen_map[m] = true, ++map_tiles[m];
+      tile_planes.back().second.push_back(m);
+    }
+  }
+  {
+    uint64_t in_other_stored = 0, in_other_map = 0, shared_keys = 0, planes_all = 0, dup_stored = 0, dup_whole = 0;
+    std::map<Key, bool> counted;
+    for (const auto& [id, ks] : tile_planes) {
+      const std::vector<uint8_t> raw = reader->read_raw(id);
+      const st::PlaneTileView v = st::validate_plane_tile(raw);
+      std::vector<uint8_t> kept(raw.begin(), raw.begin() + st::planes::kHeaderSize);
+      for (uint32_t i = 0; i < v.table_count; ++i) {
+        const uint8_t* t = v.table.data() + 24 * size_t(i);
+        const Key k{st::load_le<uint64_t>(t), st::load_le<uint64_t>(t + 8), st::load_le<uint64_t>(t + 16)};
+        ++planes_all;
+        in_other_stored += stored_tiles[k] > 1;
+        const bool shared = map_tiles[ks[i]] > 1;
+        in_other_map += shared;
+        if (shared && !counted[ks[i]]) counted[ks[i]] = true, ++shared_keys;
+        if (!shared) kept.insert(kept.end(), t, t + 24);
+      }
+      kept.insert(kept.end(), raw.begin() + long(st::planes::kHeaderSize + v.table.size()), raw.end());
+      const uint64_t whole = st::zlib_compress(raw, 6).size();
+      dup_whole += whole;
+      dup_stored += whole - st::zlib_compress(kept, 6).size();
+    }
+    if (planes_all)
+      std::printf("  table planes %llu: stored record also in another tile %llu; the map's plane also in another tile %llu "
+                  "(%llu distinct such planes), their marginal stored bytes (STPN) %llu of %llu\n",
+                  (unsigned long long)planes_all, (unsigned long long)in_other_stored, (unsigned long long)in_other_map,
+                  (unsigned long long)shared_keys, (unsigned long long)dup_stored, (unsigned long long)dup_whole);
+  }
+  // Planes a pack-wide table could share if the fit chose them across tiles: tile by tile
+  // (id order), each table plane joins a pool unless a pool plane (from an earlier tile)
+  // gives the same float at every texel the plane answers in its tile (the decoder's
+  // function; the pack is exact, so that plane answers them too).
+  {
+    struct Pooled {
+      uint64_t a, b, c;  // a at the map's texel (0, 0)
+    };
+    std::vector<Pooled> pool;
+    std::multimap<int64_t, size_t> by_b;
+    uint64_t all = 0, reused = 0;
+    const int64_t slack = int64_t(1) << 34;
+    for (const auto& [id, ks] : tile_planes) {
+      const std::vector<uint8_t> raw = reader->read_raw(id);
+      const st::PlaneTileView v = st::validate_plane_tile(raw);
+      const st::TileAddress ta = st::tile_address(id);
+      const uint64_t x0 = uint64_t(ta.x) << (h.map_level - ta.level), y0 = uint64_t(ta.y) << (h.map_level - ta.level);
+      std::map<Key, uint32_t> index;  // stored record -> table index
+      for (uint32_t i = 0; i < v.table_count; ++i) {
+        const uint8_t* t = v.table.data() + 24 * size_t(i);
+        index[Key{st::load_le<uint64_t>(t), st::load_le<uint64_t>(t + 8), st::load_le<uint64_t>(t + 16)}] = i;
+      }
+      std::vector<std::vector<std::pair<uint32_t, uint32_t>>> texels(v.table_count);  // tile coordinates
+      for (uint32_t i = 0; i < v.plane_count; ++i) {
+        const uint32_t start = v.block_start(i), side = 1u << v.block_shift(i);
+        const uint32_t bx = st::morton_compact(start), by = st::morton_compact(uint64_t(start) >> 1);
+        for (uint32_t y = by; y < by + side; ++y)
+          for (uint32_t x = bx; x < bx + side; ++x) {
+            const st::planes::Plane p = v.plane_at(i, x, y);
+            texels[index.at(Key{uint64_t(p.origin_a(bx, by)), uint64_t(p.b), uint64_t(p.c)})].push_back({x, y});
+          }
+      }
+      for (uint32_t i = 0; i < v.table_count; ++i) {
+        ++all;
+        const Key& m = ks[i];
+        const auto [a, b, c] = m;
+        auto value = [&](uint64_t pa, uint64_t pb, uint64_t pc, uint32_t x, uint32_t y) {
+          return int64_t(pa + pb * (x0 + x) + pc * (y0 + y));
+        };
+        bool found = false;
+        if (!texels[i].empty()) {
+          const auto [fx, fy] = texels[i][0];
+          const int64_t v0 = value(a, b, c, fx, fy);
+          for (auto it = by_b.lower_bound(int64_t(b) - slack); it != by_b.end() && it->first <= int64_t(b) + slack && !found; ++it) {
+            const Pooled& q = pool[it->second];
+            if (std::llabs(int64_t(q.c - c)) > slack) continue;
+            const int64_t q0 = value(q.a, q.b, q.c, fx, fy);
+            if (std::llabs(q0 - v0) > (int64_t(1) << 40)) continue;
+            found = true;
+            for (const auto& [x, y] : texels[i])
+              if (st::planes::plane_fixed_to_float(value(q.a, q.b, q.c, x, y)) !=
+                  st::planes::plane_fixed_to_float(value(a, b, c, x, y))) {
+                found = false;
+                break;
+              }
+          }
+        }
+        if (found) {
+          ++reused;
+        } else {
+          by_b.emplace(int64_t(b), pool.size());
+          pool.push_back({a, b, c});
+        }
+      }
+    }
+    std::vector<uint8_t> records;
+    for (const Pooled& q : pool)
+      for (uint64_t w : {q.a, q.b, q.c})
+        for (int k = 0; k < 8; ++k) records.push_back(uint8_t(w >> (8 * k)));
+    if (all)
+      std::printf("  a pack-wide pool of planes chosen across tiles: %llu of %llu table planes answered by an earlier tile's; "
+                  "pool %llu planes, %zu bytes raw, %zu zlib\n",
+                  (unsigned long long)reused, (unsigned long long)all, (unsigned long long)pool.size(), records.size(),
+                  st::zlib_compress(records, 6).size());
+  }
   for (const auto& e : reader->tiles()) {
     if (e.kind != st::TileKind::encoded) continue;
     const std::vector<uint8_t> raw = reader->read_raw(e.id);

@@ -451,11 +451,10 @@ bool RemoteMap::fill_slot(uint32_t slot, const proto::TileMeta& meta, const Grid
       return bool(ev);
     }
     if (entry.kind == EntryKind::tile) {
-      if (is_packed_plane_tile(raw)) {  // a packed plane tile: only in a pack that says so
-        const uint32_t need = packed_plane_tile_features(raw);
-        if ((header_.flags & need) != need) return false;
-        unpack_plane_tile(raw);
-      }
+      // A packed or version 3 plane tile: only in a pack that says so.
+      const uint32_t need = plane_tile_features(raw);
+      if ((header_.flags & need) != need) return false;
+      if (is_packed_plane_tile(raw)) unpack_plane_tile(raw);
       ev = open_pack_tile(header_.encoding, raw, dictionary_);  // v2 DAG-MH tiles through the dictionary
       return ev && ev->finest_level() == header_.map_level - a.level;
     }

@@ -58,6 +58,7 @@ std::unique_ptr<Evaluator> RemoteMap::open_stack_tile(const StackGrid& g, uint64
   const uint32_t l = g.entries[cell].level;  // K, or deeper for a split cell's child
   if (t.xy_level() != g.geo.n - g.geo.xy_bits(l) || t.w_level() != g.geo.k - g.geo.w_bits(l)) return nullptr;
   if (t.has_planes() && !(pack_flags & kFeaturePlaneTiles)) return nullptr;  // only in a pack that says so
+  if (t.has_wide_planes() && !(pack_flags & kFeatureWidePlaneBlocks)) return nullptr;
   return std::make_unique<StackTileEvaluator>(std::move(t));
 }
 

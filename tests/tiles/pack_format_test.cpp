@@ -79,6 +79,8 @@ TEST(PackFormat, HeaderOffsetsArePinned) {
   EXPECT_EQ(back.file_size(), h.index_offset + 96);
 }
 
+static_assert(kFeatureWidePlaneBlocks == 1u << 16 && kKnownFeatures == 0x1FFFF, "the feature bits are format constants");
+
 TEST(PackFormat, HeaderRefusesEveryBadField) {
   auto good = sample_header().serialize();
   EXPECT_THROW(PackHeader::parse(std::span(good).first(255), "x.pack"), FormatError);
@@ -101,6 +103,9 @@ TEST(PackFormat, HeaderRefusesEveryBadField) {
       resigned([](PackHeader& h) { h.flags |= kFeaturePackedPlaneTiles; }),
       // Predicted plane labels (bit 14): only with packed_plane_tiles (bit 13).
       resigned([](PackHeader& h) { h.flags |= kFeaturePredictedPlaneLabels | kFeaturePlaneTiles; }),
+      // Wide plane blocks (bit 16, version 3 plane tiles): only with plane_tiles; bit 17 is unknown.
+      resigned([](PackHeader& h) { h.flags |= kFeatureWidePlaneBlocks; }),
+      resigned([](PackHeader& h) { h.flags |= 1u << 17; }),
       resigned([](PackHeader& h) { h.map_level = 21; }),
       resigned([](PackHeader& h) { h.skip_level = 11; }),
       resigned([](PackHeader& h) { h.tile_bytes = 0; }),

@@ -184,6 +184,9 @@ TEST(PlaneFormat, LayoutIsPinned) {
   predicted_want[3] = 'L';
   EXPECT_EQ(pack_plane_tile(b), predicted_want);
   EXPECT_EQ(packed_plane_tile_features(predicted_want), uint32_t(kFeaturePackedPlaneTiles | kFeaturePredictedPlaneLabels));
+  // A version 2 tile needs no wide_plane_blocks, in any form.
+  EXPECT_EQ(plane_tile_features(b), 0u);
+  EXPECT_EQ(plane_tile_features(predicted_want), uint32_t(kFeaturePackedPlaneTiles | kFeaturePredictedPlaneLabels));
   back = predicted_want;
   unpack_plane_tile(back);
   EXPECT_EQ(back, b);
@@ -271,6 +274,12 @@ TEST(PlaneFormat, WideLabelledBlocksArePinnedAndChecked) {
   std::vector<uint8_t> predicted_want = packed_want;  // plane 1 is least everywhere: mode 0 ties the others
   predicted_want[3] = 'L';
   EXPECT_EQ(pack_plane_tile(b), predicted_want);
+  // Version 3 in every form: a pack holding it declares wide_plane_blocks (pack_format.hpp).
+  EXPECT_EQ(plane_tile_features(b), uint32_t(kFeatureWidePlaneBlocks));
+  EXPECT_EQ(plane_tile_features(packed_want), uint32_t(kFeaturePackedPlaneTiles | kFeatureWidePlaneBlocks));
+  EXPECT_EQ(plane_tile_features(predicted_want),
+            uint32_t(kFeaturePackedPlaneTiles | kFeaturePredictedPlaneLabels | kFeatureWidePlaneBlocks));
+  EXPECT_EQ(plane_tile_features(inner), 0u);
   for (const std::vector<uint8_t>& p : {packed_want, predicted_want}) {
     std::vector<uint8_t> back = p;
     unpack_plane_tile(back);
@@ -577,7 +586,7 @@ TEST_P(PlanePacks, EveryTexelIsWithinTheFreshTraceAndPlaneTilesAreUsed) {
   EXPECT_TRUE(reader->header().flags & kFeaturePackedPlaneTiles) << "plane tiles are stored packed";
   EXPECT_TRUE(reader->header().flags & kFeaturePredictedPlaneLabels) << "their labels predicted (STPL)";
   // Stored packed (STPQ), read back as STPN: never more stored bytes than STPN's.
-  uint64_t plane_tiles = 0, packed_tiles = 0, stored = 0, stpn_stored = 0;
+  uint64_t plane_tiles = 0, packed_tiles = 0, wide_tiles = 0, stored = 0, stpn_stored = 0;
   for (const TileIndexEntry& t : reader->tiles()) {
     if (t.kind != TileKind::encoded) continue;
     const std::vector<uint8_t> raw = reader->read_raw(t.id);
@@ -585,12 +594,19 @@ TEST_P(PlanePacks, EveryTexelIsWithinTheFreshTraceAndPlaneTilesAreUsed) {
     ++plane_tiles;
     const std::vector<uint8_t> as_stored = zlib_decompress(reader->read_stored(t.id), t.raw_size, "test");
     packed_tiles += is_packed_plane_tile(as_stored);
+    wide_tiles += (plane_tile_features(as_stored) & kFeatureWidePlaneBlocks) != 0;  // version 3
     stored += t.stored_size;
     stpn_stored += zlib_compress(raw, 6).size();
   }
   EXPECT_GT(plane_tiles, 0u);
   EXPECT_GT(packed_tiles, 0u);
   EXPECT_LT(stored, stpn_stored);
+  // Feature wide_plane_blocks exactly when some plane tile is version 3 (wide labelled blocks).
+  EXPECT_EQ(bool(reader->header().flags & kFeatureWidePlaneBlocks), wide_tiles > 0);
+  const bool wide = wide_tiles > 0;
+  if (std::string(c.file).find("2CylinderEngine") != std::string::npos) {
+    EXPECT_TRUE(wide) << "the engine has wide blocks";
+  }
   const IntervalTile truth = RasterBounds(scene, light).trace(TraceRegion{L, 0, 0, 1u << L, 1u << L});
   PackEvaluator eval(std::move(reader));
   EXPECT_EQ(fields::first_violation(truth, [&](uint32_t i, uint32_t j) { return eval.depth(L, i, j); }), "");
@@ -600,9 +616,12 @@ TEST_P(PlanePacks, EveryTexelIsWithinTheFreshTraceAndPlaneTilesAreUsed) {
     std::ifstream f(path, std::ios::binary);
     file.assign(std::istreambuf_iterator<char>(f), std::istreambuf_iterator<char>());
   }
+  // Each case takes its bits off the file the case before left (the wide bit last).
   for (const auto& [bits, name] : {std::pair{uint32_t(kFeaturePredictedPlaneLabels), "without feature predicted_plane_labels"},
                                    std::pair{uint32_t(kFeaturePredictedPlaneLabels | kFeaturePackedPlaneTiles),
-                                             "without feature packed_plane_tiles"}}) {
+                                             "without feature packed_plane_tiles"},
+                                   std::pair{wide ? uint32_t(kFeatureWidePlaneBlocks) : 0u, "without feature wide_plane_blocks"}}) {
+    if (bits == 0) continue;  // no version 3 tile
     PackHeader h = PackHeader::parse(std::span<const uint8_t>(file.data(), kPackHeaderBytes), path);
     h.flags &= ~bits;
     const auto head = h.serialize();

@@ -140,6 +140,8 @@ PackHeader PackHeader::parse(std::span<const uint8_t> b, const std::string& what
     fail(20, "feature packed_plane_tiles without plane_tiles");
   if ((h.flags & uint32_t(kFeaturePredictedPlaneLabels)) && !(h.flags & uint32_t(kFeaturePackedPlaneTiles)))
     fail(20, "feature predicted_plane_labels without packed_plane_tiles");
+  if ((h.flags & uint32_t(kFeatureWidePlaneBlocks)) && !(h.flags & uint32_t(kFeaturePlaneTiles)))
+    fail(20, "feature wide_plane_blocks without plane_tiles");
   if ((h.flags & uint32_t(kFeatureMixedTiles)) && (stack || h.encoding != Encoding::dagmh))
     fail(20, "feature mixed_tiles on a pack that is not a DAG-MH map (encoding " + to_string(h.encoding) + ")");
   // A stack's plane tiles are per-slice cells' slices (stack_slices.hpp).

@@ -130,7 +130,12 @@ enum PackFeature : uint32_t {
   // the tile bound is answered by its children, one octree level deeper, instead of the
   // whole cut moving deeper. Only with stack. Readers before it refuse the pack by this bit.
   kFeatureStackSplitCells = 1u << 15,
-  kKnownFeatures = 0xFFFF,
+  // Some plane tiles are version 3 (tiles/core/PLANES.md "Layout"): they hold wide labelled
+  // blocks (8 planes, 3-bit labels). Set by the writers iff some plane tile (a 2D pack's,
+  // or a stack's plane slice) is version 3; a reader refuses a version 3 plane tile in a pack
+  // without it. Only with plane_tiles. Readers before it refuse the pack by this bit.
+  kFeatureWidePlaneBlocks = 1u << 16,
+  kKnownFeatures = 0x1FFFF,
 };
 
 // Header layout (offset: size field):

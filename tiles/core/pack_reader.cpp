@@ -298,6 +298,8 @@ void pack_reader_unpack(const PackHeader& h, uint32_t feature, const char* form,
 // and a packed plane tile ("STPQ" or "STPL", plane_pack.hpp) back to its STPN bytes, in place;
 // anything else is left alone.
 void pack_reader_ungroup(const PackHeader& h, bool stack, std::span<uint8_t> raw, const std::string& what) {
+  if (!stack && (plane_tile_features(raw) & kFeatureWidePlaneBlocks) && !(h.flags & kFeatureWidePlaneBlocks))
+    throw FormatError(what + ": a plane tile with wide labelled blocks (version 3) in a pack without feature wide_plane_blocks");
   if (!stack && is_packed_plane_tile(raw)) {
     if ((h.flags & kFeaturePackedPlaneTiles) && !(h.flags & kFeaturePredictedPlaneLabels) &&
         (packed_plane_tile_features(raw) & kFeaturePredictedPlaneLabels))
@@ -309,7 +311,8 @@ void pack_reader_ungroup(const PackHeader& h, bool stack, std::span<uint8_t> raw
     pack_reader_unpack(h, kFeatureStackGroupedTiles, "a grouped per-slice cell (\"STSP\")", "stack_grouped_tiles", raw,
                        what, [&](std::span<uint8_t> r) { ungroup_slice_tiles(r, &need); });
     for (auto [bit, name] : {std::pair{kFeaturePlaneTiles, "plane_tiles"}, std::pair{kFeaturePackedPlaneTiles, "packed_plane_tiles"},
-                             std::pair{kFeaturePredictedPlaneLabels, "predicted_plane_labels"}})
+                             std::pair{kFeaturePredictedPlaneLabels, "predicted_plane_labels"},
+                             std::pair{kFeatureWidePlaneBlocks, "wide_plane_blocks"}})
       if ((need & bit) && !(h.flags & bit))
         throw FormatError(what + ": a per-slice cell with packed plane slices in a pack without feature " + name);
   }
@@ -541,10 +544,11 @@ std::string PackReader::summary() const {
                                                     {kFeatureStackGroupedTiles, "stack_grouped_tiles"},
                                                     {kFeaturePackedPlaneTiles, "packed_plane_tiles"},
                                                     {kFeaturePredictedPlaneLabels, "predicted_plane_labels"},
-                                                    {kFeatureStackSplitCells, "stack_split_cells"}};
+                                                    {kFeatureStackSplitCells, "stack_split_cells"},
+                                                    {kFeatureWidePlaneBlocks, "wide_plane_blocks"}};
   for (auto [bit, n] : names)
     if (header_.flags & bit) features += std::string(features.empty() ? "" : ",") + n;
-  char buf[320];
+  char buf[512];
   std::string out = name_ + "\n";
   std::snprintf(buf, sizeof buf, "  version %u, encoding %s, light %s, map level %u (%llu texels a side), skip level %u\n",
                 kPackVersion, to_string(header_.encoding).c_str(), light_kind_name(header_.light_kind),

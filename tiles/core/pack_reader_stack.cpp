@@ -68,6 +68,8 @@ void PackReader::verify_stack() const {
       if (t.xy_level() != n || t.w_level() != k) throw FormatError(what + ": per-slice cell geometry differs from its cell's");
       if (t.has_planes() && !(header_.flags & kFeaturePlaneTiles))
         throw FormatError(what + ": a per-slice cell with plane slices (\"STPN\") in a pack without feature plane_tiles");
+      if (t.has_wide_planes() && !(header_.flags & kFeatureWidePlaneBlocks))
+        throw FormatError(what + ": a per-slice cell with wide labelled plane slices (version 3) in a pack without feature wide_plane_blocks");
       continue;
     }
     MhOctree t;

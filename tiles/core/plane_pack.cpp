@@ -605,6 +605,12 @@ uint32_t packed_plane_tile_features(std::span<const uint8_t> bytes) {
                                                                         : kFeaturePackedPlaneTiles;
 }
 
+uint32_t plane_tile_features(std::span<const uint8_t> bytes) {
+  if (!is_plane_buffer(bytes) && !is_packed_plane_tile(bytes)) return 0;
+  const bool wide = bytes.size() >= 6 && load_le<uint16_t>(bytes.data() + 4) > planes::kVersionNarrow;
+  return packed_plane_tile_features(bytes) | (wide ? uint32_t(kFeatureWidePlaneBlocks) : 0);
+}
+
 std::vector<uint8_t> pack_plane_tile(std::span<const uint8_t> stpn, PlanePackParts* parts, bool predict_labels) {
   return plane_pack::pack(stpn, parts, predict_labels);
 }

@@ -71,6 +71,12 @@ bool is_packed_plane_tile(std::span<const uint8_t> bytes);
 // packed_plane_tiles, and predicted_plane_labels for "STPL"; 0 for anything else.
 uint32_t packed_plane_tile_features(std::span<const uint8_t> bytes);
 
+// The pack features beyond plane_tiles that a pack holding plane tile `bytes` ("STPN",
+// "STPQ" or "STPL") must declare: packed_plane_tile_features, and wide_plane_blocks when
+// its version field (bytes 4..5, the same in every form) is 3; 0 for anything else. Reads
+// at most 6 bytes; the tile's own validation comes later.
+uint32_t plane_tile_features(std::span<const uint8_t> bytes);
+
 // The byte counts of a packed tile's parts after the table (for bench_pack_bytes).
 struct PlanePackParts {
   size_t kinds = 0, indices = 0, palettes = 0, planes = 0, labels = 0;

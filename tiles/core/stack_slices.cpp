@@ -98,6 +98,7 @@ SliceTiles SliceTiles::open(std::span<const uint8_t> b) {
       bad("slice " + std::to_string(w) + "'s tile", off,
           "finest level " + std::to_string(ev->finest_level()) + ", the cell's is " + std::to_string(t.xy_level_));
     t.planes_ = t.planes_ || is_plane_buffer(sub);
+    t.wide_planes_ = t.wide_planes_ || (plane_tile_features(sub) & kFeatureWidePlaneBlocks);
     t.slot_[w] = int32_t(t.evals_.size());
     const dagmh::View* view = dagmh_view(*ev);
     t.views_.push_back(view ? *view : dagmh::View{});
@@ -225,7 +226,7 @@ void ungroup_slice_tiles(std::span<uint8_t> b, uint32_t* plane_features) {
       f.plane = true, f.head = f.size;
       const uint64_t base = at;
       copy(f.off, f.head, "head");
-      if (plane_features) *plane_features |= kFeaturePlaneTiles | packed_plane_tile_features(b.subspan(f.off, 4));
+      if (plane_features) *plane_features |= kFeaturePlaneTiles | plane_tile_features(b.subspan(f.off, std::min<uint64_t>(f.size, 8)));
       try {
         unpack_plane_tile(b.subspan(f.off, f.size));
       } catch (const FormatError& e) {

@@ -59,6 +59,9 @@ class SliceTiles {
   size_t buffers() const { return evals_.size(); }
   // Whether some slice's tile is a plane tile ("STPN"): its pack must declare plane_tiles.
   bool has_planes() const { return planes_; }
+  // Whether some slice's plane tile is version 3 (wide labelled blocks): its pack must
+  // declare wide_plane_blocks too.
+  bool has_wide_planes() const { return wide_planes_; }
 
   // Texel (x, y) of the level-`level` map of slice w (level <= xy_level(); x, y < 2^level;
   // w < slices(); not checked): the slice's 2D tile's answer, or its constant.
@@ -116,7 +119,7 @@ class SliceTiles {
   void build_records();
   uint32_t xy_level_ = 0, w_level_ = 0;
   size_t byte_size_ = 0;
-  bool planes_ = false;
+  bool planes_ = false, wide_planes_ = false;
   std::vector<int32_t> slot_;  // per slice: index into evals_, or -1 (constant)
   std::vector<float> value_;   // per slice: the constant (when slot_ < 0)
   std::vector<std::shared_ptr<const Evaluator>> evals_;
@@ -222,6 +225,7 @@ class StackTile {
   bool is_octree() const { return bool(octree_); }
   // Per-slice with a plane slice (SliceTiles::has_planes): its pack declares plane_tiles.
   bool has_planes() const { return slices_ && slices_->has_planes(); }
+  bool has_wide_planes() const { return slices_ && slices_->has_wide_planes(); }
 
  private:
   std::unique_ptr<MhOctree> octree_;

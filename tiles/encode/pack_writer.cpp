@@ -410,10 +410,8 @@ uint32_t PackWriter::tile_kind_features() const {
     pack_io::pread_all(fd_, t.offset, stored, what);
     if (crc32_of(stored) != t.crc) throw Error(what + ": " + describe_tile(t.id) + " fails its CRC on the read back");
     std::vector<uint8_t> raw = zlib_decompress(stored, t.raw_size, what + ": " + describe_tile(t.id));
-    if (is_packed_plane_tile(raw)) {
-      flags |= packed_plane_tile_features(raw);
-      unpack_plane_tile(raw);
-    }
+    flags |= plane_tile_features(raw);  // packed forms, version 3 (wide labelled blocks)
+    if (is_packed_plane_tile(raw)) unpack_plane_tile(raw);
     std::span<const uint8_t> tile = raw;
     if (is_plane_buffer(tile)) {
       flags |= kFeaturePlaneTiles;

@@ -158,7 +158,8 @@ class PackWriter {
   // stored bytes it saves the tiles.
   std::vector<uint8_t> share_dictionary(RewrittenTiles& rewritten, bool must_pay);
   // The features the encoded tiles' kinds call for: kFeatureMixedTiles (a DAG-MH pack with
-  // an MMH tile, also inside a plane tile) and kFeaturePlaneTiles (a plane tile).
+  // an MMH tile, also inside a plane tile), kFeaturePlaneTiles (a plane tile) and what its
+  // stored form needs (plane_tile_features: packed forms, wide_plane_blocks for version 3).
   uint32_t tile_kind_features() const;  // under mu_
   // finish()'s file: `h` complete but for the offsets, sizes and CRCs it fills.
   void write_finished(PackHeader h, std::vector<uint8_t> grid_bytes, const RewrittenTiles& rewritten);

@@ -169,7 +169,9 @@ uint64_t write_stack_pack(const std::string& path, const StackGrid& sg, size_t c
         std::vector<uint8_t> back = grouped;
         ungroup_slice_tiles(back, &planes);
       }
-      if (planes || SliceTiles::open(raw).has_planes()) h.flags |= kFeaturePlaneTiles | planes;
+      const SliceTiles t = SliceTiles::open(raw);
+      if (planes || t.has_planes()) h.flags |= kFeaturePlaneTiles | planes;
+      if (t.has_wide_planes()) h.flags |= kFeatureWidePlaneBlocks;  // version 3 plane slices
     }
     const std::vector<uint8_t> stored = zlib_compress(is_grouped ? std::span<const uint8_t>(grouped) : std::span<const uint8_t>(raw), p.compression_level);
     r.stored_size = uint32_t(stored.size());
