@@ -84,6 +84,18 @@ TEST(PlaneFormat, FixedPointDepthIsTheNearestFloatTiesToEven) {
   }
 }
 
+// Both pinned layouts below end alike: a labelled block of two planes (its palette, then
+// labels 0, 1, 0, 1 in each byte) and the inner bytes. Appends those to `want`, checks the
+// written tile `b` against it and returns the tile's view.
+PlaneTileView expect_labelled_tail(const std::vector<uint8_t>& b, std::vector<uint8_t>& want,
+                                   const std::vector<uint8_t>& palette, const std::vector<uint8_t>& inner) {
+  want.insert(want.end(), palette.begin(), palette.end());
+  want.insert(want.end(), 16, uint8_t(0x44));  // labels 0, 1, 0, 1 in each byte
+  want.insert(want.end(), inner.begin(), inner.end());
+  EXPECT_EQ(b, want);
+  return validate_plane_tile(b);
+}
+
 TEST(PlaneFormat, LayoutIsPinned) {
   static_assert(kHeaderSize == 24 && kEntrySize == 24 && kRecordSize == 8 && kLabelSize == 24);
   static_assert(kOffMagic == 0 && kOffVersion == 4 && kOffLevels == 6 && kOffFlags == 7);
@@ -135,12 +147,8 @@ TEST(PlaneFormat, LayoutIsPinned) {
                                     128, 0, 0, 0, 2, 0, 0, 0,   // start 128, shift 2, plane, index 0
                                     192, 0, 0, 0, 3, 1, 0, 0};  // start 192, shift 3, labelled, block 0
   want.insert(want.end(), blocks.begin(), blocks.end());
-  const std::vector<uint8_t> palette{0, 0, 1, 0, 1, 0, 1, 0};  // unused entries repeat the last
-  want.insert(want.end(), palette.begin(), palette.end());
-  want.insert(want.end(), 16, uint8_t(0x44));  // labels 0, 1, 0, 1 in each byte
-  want.insert(want.end(), inner.begin(), inner.end());
-  EXPECT_EQ(b, want);
-  const PlaneTileView v = validate_plane_tile(b);
+  // The labelled block's palette: unused entries repeat the last.
+  const PlaneTileView v = expect_labelled_tail(b, want, {0, 0, 1, 0, 1, 0, 1, 0}, inner);
   EXPECT_EQ(v.finest_level, 4u);
   EXPECT_EQ(v.table_count, 2u);
   EXPECT_EQ(v.label_count, 1u);
@@ -230,12 +238,7 @@ TEST(PlaneFormat, WideLabelledBlocksArePinnedAndChecked) {
       0x10, 0x42, 0x08, 0x21, 0x84, 0x10, 0x42, 0x08,                          // bit 2
       0,    0,    0,    0,    0,    0,    0,    0};                            // padding
   want.insert(want.end(), wide_bytes.begin(), wide_bytes.end());
-  const std::vector<uint8_t> narrow_palette{4, 0, 1, 0, 1, 0, 1, 0};
-  want.insert(want.end(), narrow_palette.begin(), narrow_palette.end());
-  want.insert(want.end(), 16, uint8_t(0x44));  // labels 0, 1, 0, 1 in each byte
-  want.insert(want.end(), inner.begin(), inner.end());
-  EXPECT_EQ(b, want);
-  const PlaneTileView v = validate_plane_tile(b);
+  const PlaneTileView v = expect_labelled_tail(b, want, {4, 0, 1, 0, 1, 0, 1, 0}, inner);  // the narrow block
   EXPECT_EQ(v.label_count, 3u);
   for (uint32_t i = 0; i < 64; ++i) EXPECT_EQ(v.plane_at(0, i % 8, i / 8).b, int64_t(i % 5)) << "texel " << i;
   EXPECT_EQ(v.plane_at(0, 7, 7).fixed(7, 7), 100 * 3 + 3 * 7 - 3 * 7);  // texel 63: plane 3

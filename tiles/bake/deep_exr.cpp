@@ -58,6 +58,40 @@ void samples_of(const VisibilityFunction& f, std::vector<Sample>& out) {
 
 const char* const kColour[3] = {"AR", "AG", "AB"};
 
+// OpenEXR's deep slices over `samples` (counts[i] of them for pixel i, pixel after pixel):
+// each channel holds a pointer a pixel to its first sample's value, samples sizeof(Sample)
+// apart; a pixel without samples points at `dummy`. One layout for the writer and the reader.
+struct SampleSlices {
+  std::vector<char*> z, zb, a[3];
+  Sample dummy{};
+  SampleSlices(std::vector<Sample>& samples, const std::vector<unsigned>& counts)
+      : z(counts.size()), zb(counts.size()) {
+    for (auto& v : a) v.resize(counts.size());
+    size_t at = 0;
+    for (size_t i = 0; i < counts.size(); ++i) {
+      Sample* s = counts[i] ? &samples[at] : &dummy;
+      at += counts[i];
+      z[i] = reinterpret_cast<char*>(&s->z);
+      zb[i] = reinterpret_cast<char*>(&s->zb);
+      for (int c = 0; c < 3; ++c) a[c][i] = reinterpret_cast<char*>(&s->a[c]);
+    }
+  }
+  SampleSlices(const SampleSlices&) = delete;  // the pointers may point at `dummy`
+  // Z, ZBack where the file has it, and AR/AG/AB (colour) or A, for rows `width` pixels wide.
+  void insert_into(Imf::DeepFrameBuffer& fb, size_t width, bool has_back, bool colour) {
+    const size_t xs = sizeof(char*), ys = xs * width;
+    auto slice = [&](std::vector<char*>& v) {
+      return Imf::DeepSlice(Imf::FLOAT, reinterpret_cast<char*>(v.data()), xs, ys, sizeof(Sample));
+    };
+    fb.insert("Z", slice(z));
+    if (has_back) fb.insert("ZBack", slice(zb));
+    if (colour)
+      for (int c = 0; c < 3; ++c) fb.insert(kColour[c], slice(a[c]));
+    else
+      fb.insert("A", slice(a[0]));
+  }
+};
+
 }  // namespace
 
 void write_deep_exr(const std::string& path, const DeepRegion& region, double epsilon) {
@@ -76,22 +110,12 @@ void write_deep_exr(const std::string& path, const DeepRegion& region, const Dee
   for (const VisibilityFunction& f : region.functions) colour = colour || !f.monochrome;
   std::vector<Sample> samples;
   std::vector<unsigned> counts(region.functions.size());
-  std::vector<size_t> first(region.functions.size());
   for (size_t i = 0; i < region.functions.size(); ++i) {
-    first[i] = samples.size();
+    const size_t first = samples.size();
     samples_of(region.functions[i], samples);
-    counts[i] = unsigned(samples.size() - first[i]);
+    counts[i] = unsigned(samples.size() - first);
   }
-  const size_t n = region.functions.size();
-  std::vector<char*> z(n), zb(n), a[3];
-  for (auto& v : a) v.resize(n);
-  Sample dummy{};
-  for (size_t i = 0; i < n; ++i) {
-    Sample* s = counts[i] ? &samples[first[i]] : &dummy;
-    z[i] = reinterpret_cast<char*>(&s->z);
-    zb[i] = reinterpret_cast<char*>(&s->zb);
-    for (int c = 0; c < 3; ++c) a[c][i] = reinterpret_cast<char*>(&s->a[c]);
-  }
+  SampleSlices slices(samples, counts);
   Imf::Header h(int(r.width), int(r.height));
   h.setType(Imf::DEEPSCANLINE);
   h.compression() = Imf::ZIPS_COMPRESSION;
@@ -113,18 +137,10 @@ void write_deep_exr(const std::string& path, const DeepRegion& region, const Dee
   if (info.samples_per_side > 0) h.insert(kAttrSamples, Imf::IntAttribute(int(info.samples_per_side)));
   if (!info.light.empty()) h.insert(kAttrLight, Imf::StringAttribute(info.light));
   if (!info.scene_hash.empty()) h.insert(kAttrScene, Imf::StringAttribute(info.scene_hash));
-  const size_t xs = sizeof(char*), ys = xs * r.width;
   Imf::DeepFrameBuffer fb;
   fb.insertSampleCountSlice(Imf::Slice(Imf::UINT, reinterpret_cast<char*>(counts.data()),
                                        sizeof(unsigned), sizeof(unsigned) * r.width));
-  fb.insert("Z", Imf::DeepSlice(Imf::FLOAT, reinterpret_cast<char*>(z.data()), xs, ys, sizeof(Sample)));
-  fb.insert("ZBack", Imf::DeepSlice(Imf::FLOAT, reinterpret_cast<char*>(zb.data()), xs, ys, sizeof(Sample)));
-  if (colour)
-    for (int c = 0; c < 3; ++c)
-      fb.insert(kColour[c], Imf::DeepSlice(Imf::FLOAT, reinterpret_cast<char*>(a[c].data()), xs, ys,
-                                           sizeof(Sample)));
-  else
-    fb.insert("A", Imf::DeepSlice(Imf::FLOAT, reinterpret_cast<char*>(a[0].data()), xs, ys, sizeof(Sample)));
+  slices.insert_into(fb, r.width, true, colour);
   const std::string tmp = path + ".tmp";
   try {
     Imf::DeepScanLineOutputFile out(tmp.c_str(), h);
@@ -226,27 +242,8 @@ DeepRegion read_deep_exr(const std::string& path, DeepExrInfo* info, uint64_t ma
     for (unsigned c : counts) total += c;
     if (total > kMaxDeepExrSamples) fail("more than 2^28 deep samples");
     std::vector<Sample> samples(total);
-    std::vector<char*> z(n), zb(n), a[3];
-    for (auto& v : a) v.resize(n);
-    Sample dummy{};
-    size_t at = 0;
-    for (size_t i = 0; i < n; ++i) {
-      Sample* s = counts[i] ? &samples[at] : &dummy;
-      at += counts[i];
-      z[i] = reinterpret_cast<char*>(&s->z);
-      zb[i] = reinterpret_cast<char*>(&s->zb);
-      for (int c = 0; c < 3; ++c) a[c][i] = reinterpret_cast<char*>(&s->a[c]);
-    }
-    const size_t xs = sizeof(char*), ys = xs * w;
-    fb.insert("Z", Imf::DeepSlice(Imf::FLOAT, reinterpret_cast<char*>(z.data()), xs, ys, sizeof(Sample)));
-    if (has_back)
-      fb.insert("ZBack", Imf::DeepSlice(Imf::FLOAT, reinterpret_cast<char*>(zb.data()), xs, ys, sizeof(Sample)));
-    if (colour)
-      for (int c = 0; c < 3; ++c)
-        fb.insert(kColour[c], Imf::DeepSlice(Imf::FLOAT, reinterpret_cast<char*>(a[c].data()), xs, ys,
-                                             sizeof(Sample)));
-    else
-      fb.insert("A", Imf::DeepSlice(Imf::FLOAT, reinterpret_cast<char*>(a[0].data()), xs, ys, sizeof(Sample)));
+    SampleSlices slices(samples, counts);
+    slices.insert_into(fb, w, has_back, colour);
     // A new frame buffer forgets the counts: read them again (the same values) first.
     // The sample pointers were laid out for these counts: they must not change.
     const std::vector<unsigned> laid_out = counts;
@@ -256,7 +253,7 @@ DeepRegion read_deep_exr(const std::string& path, DeepExrInfo* info, uint64_t ma
     in.readPixels(0, int(hh) - 1);
     // Rebuild each function front to back: T drops by (1 - alpha) across each sample.
     out.functions.resize(n);
-    at = 0;
+    size_t at = 0;
     for (size_t i = 0; i < n; ++i) {
       VisibilityFunction& f = out.functions[i];
       f.monochrome = !colour;
