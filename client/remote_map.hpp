@@ -340,7 +340,33 @@ class RemoteMap final : public Evaluator {
   };
   // Walks (level, x, y) (in the map) under the shared lock. True: it ends in a resident
   // encoded tile, now sc's current one. False: `value` answers (coarse when missed).
-  bool enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc, float& value) const noexcept;
+  // What a walk that ended in a resident tile passed through (TileMemo's entry, the
+  // batch's memo in remote_map_lookups.cpp): the tile's slot and the index tiles' slots on
+  // its way (path_count > kMemoPath: too many to keep).
+  static constexpr uint32_t kMemoPath = 3;
+  struct WalkNote {
+    uint32_t slot = kNoSlot;
+    uint32_t path_count = 0;
+    uint32_t path[kMemoPath];
+  };
+  bool enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc, float& value,
+                  WalkNote* note = nullptr) const noexcept;
+  // A thread's memo of the resident tiles its batches entered, across calls (the render's
+  // batches of one frame come in screen order, and neighbouring batches meet the same
+  // tiles): a texel's tile without the page-table walk (the skip grid, the cache's hash
+  // bucket, index tiles, the slot arrays: a chain of dependent loads per run of taps).
+  // Each entry holds for as long as no tile of this map became resident or left
+  // (TileCache::journal_end unchanged: the walks' answers are then the same).
+  struct TileMemo;  // remote_map_lookups.cpp
+  // This thread's memo, emptied if another map or another residency filled it; null when
+  // it could not be allocated (the batch then walks every tile).
+  TileMemo* tile_memo() const noexcept;
+  // The memo's tile holding (level, x, y), marked used (with the index tiles its walk
+  // passed) and prefetched as prefetch_tile does; false if the memo has none.
+  bool memo_tile(TileMemo& m, uint32_t level, uint64_t x, uint64_t y, LookupScratch::TileView& tile) const noexcept;
+  // Keeps `tile` (the walk of texel (x, y)'s, with its note) in the memo.
+  static void memo_keep(TileMemo& m, uint64_t x, uint64_t y, const LookupScratch::TileView& tile,
+                        const WalkNote& note) noexcept;
   float depth_shared(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc) const noexcept;
   // Whether (level, x, y) (in the map) lies in a resident encoded tile; if so `tile` is
   // it, as enter_tile would enter it (marked used), and its bytes start toward the cache
@@ -348,7 +374,8 @@ class RemoteMap final : public Evaluator {
   // miss: a missing tile is for enter_tile). A batch asks it for the next run's tile
   // before it walks the current run, and enters that tile from it without a second
   // page-table walk. Lock held shared.
-  bool prefetch_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch::TileView& tile) const noexcept;
+  bool prefetch_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch::TileView& tile,
+                     WalkNote* note = nullptr) const noexcept;
   // Evaluator::pcf's answer, from the kept regions: a kernel with no tap clamped on the
   // rows of the columns kept ahead (LookupScratch::Ahead) and reaching at most to the
   // column after them (a screen-coherent row of kernels) counts its r * r depths there,
@@ -508,6 +535,10 @@ class RemoteMap final : public Evaluator {
   TileArena arena_;
   uint64_t metadata_bytes_ = 0;    // accounted outside the slots (ClientOptions::cache_bytes)
   uint32_t dictionary_slots_ = 0;  // MapStats::dictionary_slots
+  // This map among every RemoteMap of the process (never reused): a thread's tile memo
+  // (remote_map_lookups.cpp) holds one map's tiles and knows which.
+  const uint64_t serial_ = next_serial();
+  static uint64_t next_serial() noexcept;
   std::unique_ptr<std::atomic<uint32_t>[]> slot_used_;  // epoch of each slot's last use
   uint32_t epoch_ = 1;                                   // written under the exclusive lock
   struct alignas(64) CounterShard {

@@ -9,6 +9,8 @@
 
 #include <atomic>
 #include <bit>
+#include <cmath>
+#include <string>
 #include <thread>
 
 #include "client/map_access.hpp"
@@ -358,6 +360,38 @@ TEST(ClientLookups, TilesUsedSinceTheLastArrivalAreNotTheNextVictims) {
   EXPECT_TRUE(resident(tiles[0]));
   EXPECT_FALSE(resident(tiles[1]));
   EXPECT_TRUE(resident(tiles[2]));
+  // Batches remember the tiles this thread entered across calls (RemoteMap::TileMemo):
+  // after tiles came and went they still answer like single lookups, each texel against
+  // its own depth and the next float up (a tile's stale evaluator would flip one).
+  auto batch_differs = [&](std::initializer_list<uint64_t> ts) -> std::string {
+    std::vector<PcfQuery> q;
+    for (uint64_t t : ts) {
+      const auto p = texel_of_tile(t);
+      for (uint64_t i = 0; i < 64; ++i) {
+        const uint64_t x = p[0] + i % 8, y = p[1] + i / 8;
+        const float d = f.map->depth(f.level, x, y);
+        q.push_back({x, y, f.level, 1, d});
+        q.push_back({x, y, f.level, 1, std::nextafter(d, 2.0f)});
+      }
+    }
+    std::vector<float> got(q.size());
+    f.map->pcf_batch(q, got);
+    for (size_t i = 0; i < q.size(); ++i)
+      if (bits(got[i]) != bits(f.map->pcf(q[i].level, q[i].x, q[i].y, 1, q[i].receiver)))
+        return "query " + std::to_string(i) + " texel (" + std::to_string(q[i].x) + ", " + std::to_string(q[i].y) + ")";
+    return "";
+  };
+  EXPECT_EQ(batch_differs({tiles[2]}), "");
+  EXPECT_EQ(batch_differs({tiles[0]}), "");
+  want(tiles[1]);  // evicts one of the two the last batches entered
+  EXPECT_TRUE(resident(tiles[1]));
+  EXPECT_EQ(batch_differs({tiles[0]}), "");
+  EXPECT_EQ(batch_differs({tiles[2]}), "");
+  EXPECT_EQ(batch_differs({tiles[1]}), "");
+  want(tiles[0]);
+  want(tiles[2]);
+  EXPECT_EQ(batch_differs({tiles[1]}), "");
+  EXPECT_EQ(batch_differs({tiles[2], tiles[1], tiles[0]}), "");
 }
 
 TEST(ClientLookups, TwoThreadsLookUpWhileTilesArriveAndEndExact) {
