@@ -58,6 +58,17 @@
 // from its chunk infos (every kernel tap in the tile lit or none at once) did not move it:
 // within noise, even when every such kernel was answered with no tap at all (a non-exact
 // test build), so it was not kept.
+// Plane blocks by groups: st_pcf_plane's first loop answered a plane tile's taps one a pass,
+// each with its own block search and the plane's six reads. Now one search finds the block of
+// the first tap not counted and every kernel tap in that block with the same plane (the
+// block's, or the tap's label's palette entry) counts in the same pass from the plane's words
+// read once; the first loop also walks and opens the tile once a pass, the walk's taps in an
+// inner loop. The same command (load 6-33, alternated; main A, this B; B1-B4 the
+// intermediate builds, B5-B6 the final one), ratio to R32F 5x5 device / process CPU:
+// 2CylinderEngine.glb A 3.57/3.54, 3.38/3.15, 4.06/3.60, 4.19/3.69, B 2.41/2.30, 2.48/2.23,
+// 2.65/2.32, 2.68/2.25, 2.13/2.14, 2.45/2.24; city A 2.23/2.33, 2.56/2.36, 2.35/2.29,
+// 2.10/1.97, B 2.79/2.58, 2.48/2.28, 2.47/2.48, 2.39/2.23, 2.02/2.00, 2.49/2.37 (no plane
+// tiles: its change is noise). The single tap did not move (engine ~1.7-2.0 CPU).
 // --region builds only a window of the map (finest texels; the rest lit): a 64K^2 map in
 // minutes; the camera then looks at the window. The R32F map (the finest level, 4^L floats)
 // is skipped with --no-r32f, with --region, and above 16K^2: its rows print '-'.

@@ -475,6 +475,19 @@ bool st_plane_lookup(uint base, uint rel, uint x, uint y, out float d) {
   return true;
 }
 
+// Texel i (8 y + x) of a labelled block's label from its label words: kind 1, words 2..5 of
+// its slot (2 bits a texel); kind 2 (wide), words 4..9 (bit plane k in words 2k, 2k + 1).
+uint st_plane_label(uint kind, uint l0, uint l1, uint l2, uint l3, uint l4, uint l5, uint i) {
+  if (kind == 1u) {
+    const uint q = i >> 4u;
+    return ((q == 0u ? l0 : q == 1u ? l1 : q == 2u ? l2 : l3) >> (2u * (i & 15u))) & 3u;
+  }
+  const bool upper = i >= 32u;
+  const uint b = i & 31u;
+  return (((upper ? l1 : l0) >> b) & 1u) | ((((upper ? l3 : l2) >> b) & 1u) << 1u) |
+         ((((upper ? l5 : l4) >> b) & 1u) << 2u);
+}
+
 // The depth of texel (x, y) of level `rel` below a tile's root, and in `shift` the square
 // of texels that share it (st_mh_depth, st_dag_depth; 0 for voxel and plane tiles: a plane
 // block may sit where the inner buffer has a missing child).
@@ -727,11 +740,16 @@ uint st_pcf_next(uint w0, uint w1, uint w2) {
 // A kernel inside one page-table value, leaf or missing child costs one walk. The count is
 // the per-tap count, so the answer is the CPU's bit for bit.
 // Two loops: the first answers the taps of page-table values and of MH, MMH, DAG-MH and plane
-// tiles (a DAG-MH tile's header decoded once per walk; a plane tile's plane blocks answer the
-// texel alone, its inner buffer as st_tile_depth) and leaves the others (absent and voxel
-// tiles) for the second, which answers any tap (st_answer).
+// tiles and leaves the others (absent and voxel tiles) for the second, which answers any tap
+// (st_answer). The first walks once a pass and opens the walk's tile once (a DAG-MH tile's
+// header, a plane tile's sections), then counts the walk's taps in its inner loop. A plane
+// tile's block is searched once per block (its record and labels kept for its next taps),
+// and every kernel tap in the block with the same plane as the first tap not counted is
+// counted with it, from the plane's words read once; a tap no block answers takes the inner
+// buffer's answer for its texel alone (st_tile_depth's shift).
 // A device that runs every branch of a loop body under a lane mask (llvmpipe) pays for the
-// decoders no tap needs once per loop pass, not once per tap: the first loop's body is small.
+// decoders no tap needs once per loop pass, not once per tap: the first loop's body is small,
+// and its inner loop's smaller (no walk, no tile header).
 float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint finest, inout StProbe probe) {
   r = clamp(r, 1u, kMaxPcf);
   if (level > ST_PAGE(kPtMapLevel)) return 1.0;
@@ -741,32 +759,44 @@ float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint
   uint lit = 0u, done0 = 0u, done1 = 0u, done2 = 0u, later0 = 0u, later1 = 0u, later2 = 0u;
   const uint enc = ST_PAGE(kPtEncoding);
   uint k = 0u;
-  StWalk w = st_walk(level, st_pcf_tap(x, 0u, r, side), st_pcf_tap(y, 0u, r, side));
-  StDagTile t;  // w's tile (opened: its header decoded once per walk)
-  bool opened = false, lean = false, dag = false, mmh = false;  // an MH/MMH/DAG-MH/plane tile; which
+  StWalk w;
+  StDagTile t;  // w's tile (its header decoded once per walk)
+  bool lean = false, dag = false, mmh = false;  // an MH/MMH/DAG-MH/plane tile; which
   bool planes = false;  // w's tile is a plane tile at pbase
   uint pbase = 0u;
-  while (k < taps) {
-    const uint j = k / r, i = k - j * r;
-    const uint tx = st_pcf_tap(x, i, r, side), ty = st_pcf_tap(y, j, r, side);
-    if (!st_in_walk(w, level, tx, ty)) {
-      w = st_walk(level, tx, ty);
-      opened = false;
+  // w's plane tile (planes): its finest level, block count, records and labelled blocks; and
+  // the block record of its last search (bstart, bword; bshift 0: none) with that block's
+  // labels (st_plane_label's l0..l5; every word read lies inside the tile, those a kind
+  // does not use are ignored).
+  uint pfinest = 0u, pcount = 0u, pblocks = 0u, plabels = 0u;
+  uint bstart = 0u, bword = 0u, bshift = 0u, blb = 0u, l0 = 0u, l1 = 0u, l2 = 0u, l3 = 0u, l4 = 0u, l5 = 0u;
+  while (k < taps) {  // one walk a pass: its tile opened once, its taps in the inner loop
+    {
+      const uint j = k / r, i = k - j * r;
+      w = st_walk(level, st_pcf_tap(x, i, r, side), st_pcf_tap(y, j, r, side));
     }
-    if (!opened && w.kind == 1u) {
+    lean = false;
+    if (w.kind == 1u) {
       pbase = w.slot * ST_PAGE(kPtSlotWords);
       uint base = pbase;
       planes = ST_POOL(base) == 0x4E505453u;  // "STPN": plane blocks over an inner buffer (st_tile_depth)
-      if (planes) base += 6u + 6u * ST_POOL(base + 4u) + 2u * ST_POOL(base + 2u) + 6u * ST_POOL(base + 5u);
+      bshift = 0u;
+      if (planes) {
+        pfinest = ((ST_POOL(base + 1u) >> 16u) & 0xFFu) - 1u;
+        pcount = ST_POOL(base + 2u);
+        pblocks = base + 6u + 6u * ST_POOL(base + 4u);
+        plabels = pblocks + 2u * pcount;
+        base = plabels + 6u * ST_POOL(base + 5u);
+      }
       const uint magic = ST_POOL(base);
       mmh = enc == 1u || (enc == 2u && magic == 0x4D4D5453u);  // "STMM": a DAG-MH pack's MMH tile
       dag = enc == 2u && !mmh;
       lean = enc != 3u;  // not a voxel tile
       if (dag) t = st_dag_open(base);
       t.base = base;
-      opened = true;
     }
     if (w.kind == 2u || (w.kind == 1u && !lean)) {  // the second loop's: every tap of the kernel in w's square
+      const uint j = k / r, i = k - j * r;
       const uint sw = level - w.l, n = st_pcf_run(x, i, r, side, sw), m = st_pcf_run(y, j, r, side, sw);
       for (uint jj = j; jj < j + m; ++jj) {
         const uint lo = jj * r + i, hi = lo + n;
@@ -774,28 +804,101 @@ float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint
         later1 |= st_bit_span(lo, hi, 32u) & ~done1;
         later2 |= st_bit_span(lo, hi, 64u) & ~done2;
       }
+      k = st_pcf_next(done0 | later0, done1 | later1, done2 | later2);
     } else {
-      uint s = level - w.l;
-      float value = w.value;
-      if (w.kind == 1u) {
-        const uint rel = level - w.l;
-        bool decided = false;
-        const uint lx = tx - (w.ex << rel), ly = ty - (w.ey << rel);
-        float pd = 0.0;
-        if (planes && st_plane_lookup(pbase, rel, lx, ly, pd)) {  // a plane block: the texel alone
-          value = pd;
-          s = 0u;
-          decided = true;
+      bool more = true;
+      while (more) {  // w's taps, from tap k
+        const uint j = k / r, i = k - j * r;
+        const uint tx = st_pcf_tap(x, i, r, side), ty = st_pcf_tap(y, j, r, side);
+        uint s = level - w.l;
+        float value = w.value;
+        bool grouped = false;  // the taps of a plane block's plane counted (below)
+        if (w.kind == 1u) {
+          const uint rel = level - w.l;
+          const uint lx = tx - (w.ex << rel), ly = ty - (w.ey << rel);
+          if (planes) {  // st_plane_lookup's block search, once per plane and block
+            const uint ps = pfinest - min(rel, pfinest);
+            const uint h = ps == 0u ? 0u : 1u << (ps - 1u);
+            const uint fx = (lx << ps) + h, fy = (ly << ps) + h;
+            const uint key = st_spread16(fx) | (st_spread16(fy) << 1u);
+            bool in_block = bshift > ps && key - bstart < (1u << (2u * bshift));
+            if (!in_block && ps < 8u) {
+              uint a = 0u, b = pcount;  // the last block whose start <= key
+              while (a < b) {
+                const uint mid = (a + b) >> 1u;
+                if (ST_POOL(pblocks + 2u * mid) <= key) a = mid + 1u;
+                else b = mid;
+              }
+              if (a != 0u) {
+                const uint rec = pblocks + 2u * (a - 1u);
+                bstart = ST_POOL(rec);
+                bword = ST_POOL(rec + 1u);
+                bshift = bword & 0xFFu;
+                blb = plabels + 6u * (bword >> 16u);
+                const uint bkind = (bword >> 8u) & 0xFFu;  // kind 0: six words of the tile's records and past, unused
+                const uint lw = bkind == 0u ? rec : blb + (bkind == 2u ? 4u : 2u);
+                l0 = ST_POOL(lw);
+                l1 = ST_POOL(lw + 1u);
+                l2 = ST_POOL(lw + 2u);
+                l3 = ST_POOL(lw + 3u);
+                l4 = ST_POOL(lw + 4u);
+                l5 = ST_POOL(lw + 5u);
+                in_block = bshift > ps && key - bstart < (1u << (2u * bshift));
+              }
+            }
+            if (in_block) {
+              // Tap k's plane (its label's palette entry in a labelled block), then every tap of the
+              // kernel not counted yet in the block (an aligned square of 2^(bshift - ps) texels
+              // holding tap k's; rows before j are counted) whose texel has that plane: its
+              // depth as st_plane_lookup's, each compared alone (st_pcf_block's 1 x 1 block).
+              const uint kind = (bword >> 8u) & 0xFFu;
+              const uint label = st_plane_label(kind, l0, l1, l2, l3, l4, l5, ((fy & 7u) << 3u) | (fx & 7u));
+              const uint entry =
+                  kind == 0u ? bword >> 16u : (ST_POOL(blb + (label >> 1u)) >> (16u * (label & 1u))) & 0xFFFFu;
+              const uint pt = pbase + 6u + 6u * entry;
+              const uint a_lo = ST_POOL(pt), a_hi = ST_POOL(pt + 1u), b_lo = ST_POOL(pt + 2u), b_hi = ST_POOL(pt + 3u),
+                         c_lo = ST_POOL(pt + 4u), c_hi = ST_POOL(pt + 5u);
+              const uint sb = bshift - ps, ox = w.ex << rel, oy = w.ey << rel;
+              const uint low = (tx >> sb) << sb;  // the block's first texel of `level` along x
+              const int from = int(low) - int(x) + int((r - 1u) / 2u);
+              const uint i0 = low == 0u ? 0u : uint(max(from, 0));  // its first tap column
+              const uint n = st_pcf_run(x, i0, r, side, sb), m = st_pcf_run(y, j, r, side, sb);
+              for (uint jj = j; jj < j + m; ++jj) {
+                const uint yy = st_pcf_tap(y, jj, r, side);
+                const uint fyy = ((yy - oy) << ps) + h;
+                for (uint ii = i0; ii < i0 + n; ++ii) {
+                  const uint bit = jj * r + ii;
+                  const uint word = bit < 32u ? done0 : bit < 64u ? done1 : done2;
+                  const uint xx = st_pcf_tap(x, ii, r, side);
+                  const uint fxx = ((xx - ox) << ps) + h;
+                  const uint texel = ((fyy & 7u) << 3u) | (fxx & 7u);
+                  const uint other = kind == 0u ? label : st_plane_label(kind, l0, l1, l2, l3, l4, l5, texel);
+                  if (((word >> (bit & 31u)) & 1u) != 0u || other != label) continue;
+                  uint hi = a_hi, lo = a_lo;
+                  st_mad64(hi, lo, b_lo, b_hi, fxx);
+                  st_mad64(hi, lo, c_lo, c_hi, fyy);
+                  if (st_lit(st_plane_depth(plane, f, up, xx, yy), st_plane_round(hi, lo))) ++lit;
+                  const uint one = 1u << (bit & 31u);
+                  if (bit < 32u) done0 |= one;
+                  else if (bit < 64u) done1 |= one;
+                  else done2 |= one;
+                }
+              }
+              grouped = true;
+            }
+          }
+          if (!grouped) {
+            value = dag ? st_dag_depth_in(t, rel, lx, ly, s) : st_mh_depth(t.base, rel, lx, ly, mmh, s);
+            s = planes ? 0u : min(s, rel);  // st_tile_depth's shift
+          }
         }
-        if (!decided) {
-          value = dag ? st_dag_depth_in(t, rel, lx, ly, s) : st_mh_depth(t.base, rel, lx, ly, mmh, s);
-          s = planes ? 0u : min(s, rel);  // st_tile_depth's shift
-        }
+        if (!grouped)
+          st_pcf_block(x, y, r, side, i, j, st_pcf_run(x, i, r, side, s), st_pcf_run(y, j, r, side, s), value, plane, f,
+                       up, lit, done0, done1, done2);
+        k = st_pcf_next(done0 | later0, done1 | later1, done2 | later2);
+        more = k < taps && st_in_walk(w, level, st_pcf_tap(x, k % r, r, side), st_pcf_tap(y, k / r, r, side));
       }
-      st_pcf_block(x, y, r, side, i, j, st_pcf_run(x, i, r, side, s), st_pcf_run(y, j, r, side, s), value, plane, f,
-                   up, lit, done0, done1, done2);
     }
-    k = st_pcf_next(done0 | later0, done1 | later1, done2 | later2);
   }
   // The rest: any tap (st_answer). An absent tile's taps go one by one: each is counted in
   // the feedback.
