@@ -29,7 +29,7 @@ StackCells parse_stack_cells(const std::string& text);  // "octree" | "slices" |
 // stream (of its packed form, as a grouped cell stores it) is shorter. Null: DAG-MH or
 // MMH only (the buffers before plane slices, byte for byte).
 std::vector<uint8_t> encode_slice_tiles(std::span<const IntervalTile> slices, uint32_t m, uint32_t j,
-                                        const PlaneFitOptions* planes = nullptr);
+                                        const PlaneFitOptions* planes = nullptr, std::span<const uint8_t> plain = {});
 
 // The grouped stored form ("STSP", stack_slices.hpp) of an STSL buffer: the same bytes
 // permuted so like lies with like, the same size; ungroup_slice_tiles gives `stsl` back
