@@ -5,6 +5,7 @@
 // batched) equal the slices' lit tests.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <bit>
 #include <cstring>
 #include <filesystem>
@@ -263,6 +264,19 @@ TEST(StackSlicesFormat, PlaneSlicesArePinnedAndHostileOnesAreRefused) {
   const SliceTiles t = SliceTiles::open(stsl);
   ASSERT_TRUE(t.has_planes());
   EXPECT_FALSE(SliceTiles::open(encode_slice_tiles(squares, 4, 1)).has_planes());
+  // The stack cut's second pass: the cell's plain buffer given, a slice whose plain tile
+  // deflates above 80 bytes is fitted as without it, a smaller one kept as it was; the
+  // plain buffer of another shape is refused.
+  const std::vector<uint8_t> plain = encode_slice_tiles(squares, 4, 1);
+  const std::vector<uint8_t> reused = encode_slice_tiles(squares, 4, 1, &fit, plain);
+  for (uint32_t w = 0; w < 2; ++w) {
+    const std::span<const uint8_t> p(plain.data() + u32(plain, 16 + 8 * w), u32(plain, 20 + 8 * w));
+    const std::span<const uint8_t> r(reused.data() + u32(reused, 16 + 8 * w), u32(reused, 20 + 8 * w));
+    const std::span<const uint8_t> f(stsl.data() + u32(stsl, 16 + 8 * w), u32(stsl, 20 + 8 * w));
+    const bool fitted = zlib_compress(p, 6).size() > 80;
+    EXPECT_TRUE(std::ranges::equal(r, fitted ? f : p)) << "slice " << w << (fitted ? " fitted" : " kept");
+  }
+  EXPECT_THROW(encode_slice_tiles(squares, 4, 2, &fit, plain), Error);
   ASSERT_EQ(u32(stsl, 16), 32u);  // slice 0's buffer right after the 2 entries
   const uint32_t size0 = u32(stsl, 20);
   EXPECT_EQ(u32(stsl, 32), 0x4E505453u);  // "STPN"

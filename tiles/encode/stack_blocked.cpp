@@ -4,12 +4,16 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cerrno>
 #include <cfloat>
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#include <exception>
 #include <limits>
+#include <mutex>
+#include <thread>
 
 #include "common/error.hpp"
 #include "tiles/encode/mh_octree_encode.hpp"
@@ -58,7 +62,8 @@ void read_all(int fd, void* data, size_t size, uint64_t off, const std::string& 
 // The per-slice form of level-K cell (x, y, w) of block `blk` (block-local cell
 // coordinates): each real slice's square of the cell (stack_slices_encode.hpp).
 std::vector<uint8_t> cell_slice_tiles(const IntervalStack& blk, const moct::Geometry& g, uint32_t K, uint32_t B,
-                                      uint64_t x, uint64_t y, uint64_t w, const PlaneFitOptions* planes = nullptr) {
+                                      uint64_t x, uint64_t y, uint64_t w, const PlaneFitOptions* planes = nullptr,
+                                      std::span<const uint8_t> plain = {}) {
   (void)B;
   const uint32_t m = g.n - g.xy_bits(K), j = g.k - g.w_bits(K);
   const uint64_t cs = uint64_t(1) << m, W = uint64_t(1) << j;
@@ -72,7 +77,7 @@ std::vector<uint8_t> cell_slice_tiles(const IntervalStack& blk, const moct::Geom
       for (uint64_t tx = 0; tx < cs; ++tx) t.data[ty * cs + tx] = blk.at(x * cs + tx, y * cs + ty, s);
     slices.push_back(std::move(t));
   }
-  return encode_slice_tiles(slices, m, j, planes);
+  return encode_slice_tiles(slices, m, j, planes, plain);
 }
 
 }  // namespace
@@ -250,23 +255,36 @@ void BlockedStackCut::run(const StackSpill& spill, uint32_t K, uint32_t tile_byt
             }
             const uint32_t da = g.xy_bits(K) - g.xy_bits(B), dw = g.w_bits(K) - g.w_bits(B);
             std::vector<size_t> cursor(sub.geo.depth() + 1, 0);
-            // The form a cell of block level r (octree level B + r; block-local x, y, w) keeps.
+            // The form a cell of block level r (octree level B + r; block-local x, y, w) keeps,
+            // given its octree tile: the octree or its per-slice tiles (DAG-MH or MMH slices,
+            // the cheap form, weighed first), and with planes, where that keeps the per-slice
+            // form, its slices refitted with plane tiles (encode_slice_tiles reuses the plain
+            // slices too small for planes), kept where the cell's stream is smaller still.
+            // Plane fitting is most of a stack build's time: it runs only for cells the plain
+            // per-slice form already takes (a cell the octree keeps fits no planes).
+            auto slice_form = [&](uint32_t r, uint64_t x, uint64_t y, uint64_t w, std::vector<uint8_t> bytes,
+                                  bool& octree) {
+              octree = true;
+              if (cells_ == StackCells::octree) return bytes;
+              std::vector<uint8_t> per_slice = cell_slice_tiles(blk, g, B + r, B, x, y, w);
+              size_t per_slice_z = SIZE_MAX;
+              bool take = cells_ == StackCells::slices;
+              if (!take && per_slice.size() <= tile_bytes) {
+                per_slice_z = zlib_compress(group_slice_tiles(per_slice), 6).size();
+                take = bytes.size() > tile_bytes || per_slice_z < zlib_compress(bytes, 6).size();
+              }
+              if (take && planes_) {
+                std::vector<uint8_t> with = cell_slice_tiles(blk, g, B + r, B, x, y, w, &*planes_, per_slice);
+                if (with.size() <= tile_bytes &&
+                    (cells_ == StackCells::slices || zlib_compress(group_slice_tiles(with), 6).size() < per_slice_z))
+                  per_slice = std::move(with);
+              }
+              if (take) bytes = std::move(per_slice), octree = false;
+              return bytes;
+            };
             auto form = [&](uint32_t r, const OctNode& cr, uint64_t x, uint64_t y, uint64_t w,
                             std::vector<size_t>& cur, bool& octree) {
-              std::vector<uint8_t> bytes = encode_octree(cell_subtree(sub, r, cr, 0.0f, cur));
-              octree = true;
-              if (cells_ != StackCells::octree) {
-                // With planes, the plane slices' form unless it overflows the bound where
-                // the plain one fits (the bound the cut's block_fits checked).
-                std::vector<uint8_t> per_slice = cell_slice_tiles(blk, g, B + r, B, x, y, w, planes_ ? &*planes_ : nullptr);
-                if (planes_ && per_slice.size() > tile_bytes) per_slice = cell_slice_tiles(blk, g, B + r, B, x, y, w);
-                const bool take = cells_ == StackCells::slices ||
-                                  (per_slice.size() <= tile_bytes &&
-                                   (bytes.size() > tile_bytes ||
-                                    zlib_compress(group_slice_tiles(per_slice), 6).size() < zlib_compress(bytes, 6).size()));
-                if (take) bytes = std::move(per_slice), octree = false;
-              }
-              return bytes;
+              return slice_form(r, x, y, w, encode_octree(cell_subtree(sub, r, cr, 0.0f, cur)), octree);
             };
             uint64_t root_cell = 0;  // the level-K cell whose tiles are being put
             auto put_tile = [&](uint64_t cell, const std::vector<uint8_t>& bytes, bool octree, uint32_t level) {
@@ -312,19 +330,55 @@ void BlockedStackCut::run(const StackSpill& spill, uint32_t K, uint32_t tile_byt
               }
               return first;
             };
+            // The level-K cells' octree tiles in order (cell_subtree's cursor), then their
+            // forms on every hardware thread (each cell's alone, so the same bytes whatever
+            // the threads), then the tiles put in cell order.
+            struct Cell {
+              const OctNode* cr;
+              uint64_t x, y, w;
+              std::vector<uint8_t> bytes;
+              bool octree = true;
+            };
+            std::vector<Cell> cells;
             for (const OctNode& cr : sub.levels[rel]) {
               if (!cr.child_mask) continue;
-              uint64_t x, y, w;
-              oct_coords(sub.geo, rel, cr.code, x, y, w);
-              const uint64_t cell = grid.index(K, (bx << da) + x, (by << da) + y, (bw << dw) + w);
-              bool octree = true;
+              Cell c{&cr, 0, 0, 0, {}, true};
+              oct_coords(sub.geo, rel, cr.code, c.x, c.y, c.w);
+              c.bytes = encode_octree(cell_subtree(sub, rel, cr, 0.0f, cursor));
+              cells.push_back(std::move(c));
+            }
+            {
+              std::atomic<size_t> next{0};
+              std::exception_ptr failure;
+              std::mutex failure_lock;
+              auto work = [&] {
+                for (size_t i; (i = next++) < cells.size();) {
+                  try {
+                    Cell& c = cells[i];
+                    c.bytes = slice_form(rel, c.x, c.y, c.w, std::move(c.bytes), c.octree);
+                  } catch (...) {
+                    const std::lock_guard<std::mutex> hold(failure_lock);
+                    if (!failure) failure = std::current_exception();
+                    next = cells.size();
+                  }
+                }
+              };
+              const size_t threads = cells_ == StackCells::octree ? 1 : std::min<size_t>(std::max(1u, std::thread::hardware_concurrency()), cells.size());
+              std::vector<std::thread> workers;
+              for (size_t t = 1; t < threads; ++t) workers.emplace_back(work);
+              work();
+              for (std::thread& t : workers) t.join();
+              if (failure) std::rethrow_exception(failure);
+            }
+            for (Cell& c : cells) {
+              const uint64_t cell = grid.index(K, (bx << da) + c.x, (by << da) + c.y, (bw << dw) + c.w);
               root_cell = cell;
-              const std::vector<uint8_t> bytes = form(rel, cr, x, y, w, cursor, octree);
-              if (split_ && bytes.size() > tile_bytes) {
-                split_roots_.emplace_back(cell, split_children(split_children, rel, cr));
+              if (split_ && c.bytes.size() > tile_bytes) {
+                split_roots_.emplace_back(cell, split_children(split_children, rel, *c.cr));
                 continue;
               }
-              put_tile(cell, bytes, octree, K);
+              put_tile(cell, c.bytes, c.octree, K);
+              std::vector<uint8_t>().swap(c.bytes);
             }
             if (largest <= tile_bytes) continue;
             if (K + 1 >= L) throw too_big(largest_cell, largest);

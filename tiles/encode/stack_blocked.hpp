@@ -91,7 +91,10 @@ class BlockedStackCut {
   // the whole cut moving deeper: K stays where it starts, only the overflowing cells go
   // deeper (the pack then has feature stack_split_cells).
   // `planes`: a per-slice cell's slices may be plane tiles (encode_slice_tiles; the pack
-  // then has feature plane_tiles); none: DAG-MH or MMH slices only.
+  // then has feature plane_tiles); none: DAG-MH or MMH slices only. Each cell first weighs
+  // its octree against its plain per-slice form; only a cell that keeps the per-slice form
+  // fits planes, and keeps them where its grouped stream gets shorter still. The level-K
+  // cells of a block are weighed on every hardware thread (the bytes do not depend on it).
   BlockedStackCut(const StackSpill& spill, std::optional<uint32_t> skip_level, uint32_t tile_bytes,
                   std::string tile_path, BlockedCutStats* stats = nullptr, StackCells cells = StackCells::octree,
                   bool split = false, std::optional<PlaneFitOptions> planes = std::nullopt);

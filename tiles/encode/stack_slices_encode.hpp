@@ -27,9 +27,13 @@ StackCells parse_stack_cells(const std::string& text);  // "octree" | "slices" |
 // PLANES.md) over DAG-MH or MMH, the same candidates a 2D pack with plane tiles weighs
 // (TileCodec::with_planes over TileCodec::dagmh_or_mmh, exhaustive), kept where its zlib
 // stream (of its packed form, as a grouped cell stores it) is shorter. Null: DAG-MH or
-// MMH only (the buffers before plane slices, byte for byte).
+// MMH only (the buffers before plane slices, byte for byte). Both ways each slice is
+// encoded by one TileCodec (TileCodec::encode_smaller). `plain` (with `planes`, optional):
+// this cell's buffer without planes (encode_slice_tiles(slices, m, j)); its constant slices
+// and the tiles too small for a plane tile to store smaller (at most 80 zlib bytes,
+// stack_slices_encode.cpp) are taken from it as they are, only the others fitted.
 std::vector<uint8_t> encode_slice_tiles(std::span<const IntervalTile> slices, uint32_t m, uint32_t j,
-                                        const PlaneFitOptions* planes = nullptr);
+                                        const PlaneFitOptions* planes = nullptr, std::span<const uint8_t> plain = {});
 
 // The grouped stored form ("STSP", stack_slices.hpp) of an STSL buffer: the same bytes
 // permuted so like lies with like, the same size; ungroup_slice_tiles gives `stsl` back

@@ -49,6 +49,17 @@ TileCodec TileCodec::dagmh_or_mmh(bool exhaustive) {
   return c;
 }
 
+std::vector<uint8_t> TileCodec::encode_smaller(const Hierarchy& h) const {
+  const int pick = alternative && choose ? choose(h) : 0;
+  if (pick > 0) return alternative(h);
+  std::vector<uint8_t> bytes = encode(h);
+  if (!alternative || pick < 0) return bytes;
+  std::vector<uint8_t> alt = alternative(h);
+  return zlib_compress(alt, kEncodingChoiceZlibLevel).size() < zlib_compress(bytes, kEncodingChoiceZlibLevel).size()
+             ? alt
+             : bytes;
+}
+
 uint32_t default_skip_level(uint32_t map_level) { return std::min<uint32_t>((map_level + 1) / 2, 8); }
 
 void CutParams::validate() const {

@@ -57,6 +57,10 @@ struct TileCodec {
   // other still where it does not fit tile_bytes); unsure or empty: both, as above.
   std::function<int(const Hierarchy&)> choose;
   static TileCodec of(Encoding e);
+  // The encoding a cut keeps for a subtree with no tile bound: encode()'s, or the
+  // alternative's where it deflates (kEncodingChoiceZlibLevel) strictly smaller; a sure
+  // `choose` guess encodes only its pick (tile_cut.cpp's cut_subtree, less the bound).
+  std::vector<uint8_t> encode_smaller(const Hierarchy& h) const;
   // DAG-MH tiles, each an MMH buffer instead where that stores smaller (map builds'
   // default). Unless `exhaustive`, only tiles whose share of zero-width intervals leaves
   // the winner unsure are encoded both ways (tile_cut.cpp, predict_dagmh_or_mmh): a tile
