@@ -72,14 +72,10 @@ class MhOctree {
   Walk along_begin(Path& p, uint64_t x, uint64_t y, uint32_t w) const noexcept {
     uint32_t start = 0;
     if (p.valid) {  // as depth_along
-      const uint32_t L = geo_.depth();
-      const uint32_t hx = uint32_t(std::bit_width((x ^ p.x) | (y ^ p.y)));
-      const uint32_t hw = uint32_t(std::bit_width(uint32_t(w ^ p.w)));
-      start = std::min({L - std::min(L, hx), L - std::min(L, hw), uint32_t(p.reached)});
+      start = std::min(shared_levels(x, y, w, p.x, p.y, p.w), uint32_t(p.reached));
     } else {
-      p.pos[0] = 0;
-      p.val[0] = root_leaf_ ? 0 : 1;
-      p.code[0] = root_leaf_ ? moct::kCodeLeaf : moct::kCodeInner;
+      const Walk r = along_root();
+      p.pos[0] = uint32_t(r.pos), p.val[0] = uint32_t(r.val), p.code[0] = uint8_t(r.code);
     }
     p.reached = uint8_t(start);
     p.x = uint32_t(x), p.y = uint32_t(y), p.w = w;
@@ -87,11 +83,35 @@ class MhOctree {
     return {p.pos[start], p.val[start], p.code[start], start};
   }
   bool along_step(Path& p, Walk& k) const noexcept {
+    if (!along_step_to(k, p.x, p.y, p.w)) return false;
+    const uint32_t l = k.level;
+    p.pos[l] = uint32_t(k.pos), p.val[l] = uint32_t(k.val), p.code[l] = uint8_t(k.code);
+    p.reached = uint8_t(l);
+    ++p.steps;
+    return true;
+  }
+  // The walk without a path, for callers that keep many walks and hand a node on
+  // themselves (StackMap's gathered soft lookups: a sample's walk starts from a copy of
+  // another's at the deepest level their paths share): the root's cursor; one step of the
+  // walk towards (x, y, w), as along_step; and the deepest octree level whose node lies on
+  // the paths to both (x, y, w) and (x2, y2, w2) (nodes of level l agree iff x, y agree
+  // above bit depth - l and w above bit depth - l: the geometry's xy and w bits end
+  // together at the finest level).
+  Walk along_root() const noexcept {
+    return {0, root_leaf_ ? 0u : 1u, root_leaf_ ? uint32_t(moct::kCodeLeaf) : uint32_t(moct::kCodeInner), 0};
+  }
+  uint32_t shared_levels(uint64_t x, uint64_t y, uint32_t w, uint64_t x2, uint64_t y2, uint32_t w2) const noexcept {
+    const uint32_t L = geo_.depth();
+    const uint32_t hx = uint32_t(std::bit_width((x ^ x2) | (y ^ y2)));
+    const uint32_t hw = uint32_t(std::bit_width(uint32_t(w ^ w2)));
+    return L - std::min(L, std::max(hx, hw));
+  }
+  bool along_step_to(Walk& k, uint64_t x, uint64_t y, uint32_t w) const noexcept {
     const uint32_t l = k.level;
     if (l >= geo_.depth() || k.code == moct::kCodeLeaf) return false;
     const StepBits s = step_bits_[l];
-    const uint32_t slot = ((p.x >> s.xy_shift) & s.xy_bit) | ((p.y >> s.xy_shift) & s.xy_bit) << 1 |
-                          ((p.w >> s.w_shift) & s.w_bit) << 2;
+    const uint32_t slot = uint32_t((x >> s.xy_shift) & s.xy_bit) | uint32_t((y >> s.xy_shift) & s.xy_bit) << 1 |
+                          ((w >> s.w_shift) & s.w_bit) << 2;
     const uint32_t word_p = word_inline(k.pos);
     const uint32_t mask = moct::word_mask(word_p);
     const uint32_t cc = moct::child_code(mask, slot);
@@ -101,9 +121,6 @@ class MhOctree {
     k.val = cc == moct::kCodeEmpty ? k.val : k.pos + (cc >> 1);
     k.code = cc;
     k.level = l + 1;
-    p.pos[l + 1] = uint32_t(k.pos), p.val[l + 1] = uint32_t(k.val), p.code[l + 1] = uint8_t(cc);
-    p.reached = uint8_t(l + 1);
-    ++p.steps;
     return true;
   }
   float along_value(const Walk& k) const noexcept { return moct::bits_float(word_inline(k.val)); }

@@ -3,7 +3,6 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
-#include <new>
 
 #include "tiles/core/evaluator.hpp"
 #include "tiles/core/filter_level.hpp"
@@ -112,14 +111,6 @@ float StackMap::soft_visibility(const Vec3d& p, bool* exact) const {
 
 namespace {
 
-// Raw storage for a walk state built only where used (a gathered call sets up as many
-// octree paths as it has cells, not kGather of them).
-template <class T>
-struct StackMapSlot {
-  alignas(T) unsigned char bytes[sizeof(T)];
-  T& get() { return *std::launder(reinterpret_cast<T*>(bytes)); }
-};
-
 // The cache lines of a tile's reader object (its fields are what a walk reads first).
 template <class T>
 void stack_map_prefetch_object(const T* p) {
@@ -181,16 +172,17 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
   //   2. the tiles of the distinct cells, in one tiles_ call; each octree's reader object
   //      and root word prefetched (the ref carries the root: StackTileRef::root);
   //   3. per-slice samples: their slice's record (SliceTiles::Record, reached from the
-  //      ref's records without the reader object, prefetched); octree samples: gathered
-  //      into one chain per cell, the chain's samples walked one after another along one
-  //      path (MhOctree::along_*: each walk starts from the deepest node it shares with
-  //      the chain's previous one, as depth_along);
+  //      ref's records without the reader object, prefetched); octree samples: a lane
+  //      each, forking from the walk of an earlier sample of its cell at the deepest
+  //      level their paths share (MhOctree::shared_levels: a cell's samples read only the
+  //      nodes where their paths part, as depth_along's walks do);
   //   4. per-slice samples: the bounds (d <= lo lit, d > hi shadowed exactly as the walk
   //      would say), a constant's value, a DAG-MH walk (skip entry prefetched, then read:
   //      its start) or an MMH walk (its root word prefetched), another 2D tile (its
   //      evaluator prefetched; its depth() one per round of step 5);
   //   5. rounds of one step of every DAG-MH walk (View::descend's own step), every MMH
-  //      walk (MmhWalk) and every octree chain, each prefetching the node it goes to;
+  //      walk (MmhWalk) and every octree lane (round r: the lanes forking at level r
+  //      join, every live lane steps from level r), each prefetching the node it goes to;
   //      then the DAG-MH walks' finish (treelets), their values' chunks, the chunks'
   //      multiplier bits, and the values.
   // Each answer is the sample's own depth(x, y, w, n), bit for bit (tested).
@@ -225,12 +217,13 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
   }
   uint64_t lit = 0;
   auto set = [&](uint32_t i, bool v) { lit |= uint64_t(v) << i; };
-  // Octree chains: samples in one cell, linked in sample order.
-  constexpr uint8_t kEnd = 0xFF;
-  uint8_t next_of[G], chain_head[G], chain_tail[G], chain_at[G];
-  const MhOctree* chain_tree[G];
-  uint64_t chain_cell[G];
-  uint32_t nc = 0, last_chain = 0;
+  // Octree samples: one lane each, in sample order, with the lane of the cell's previous
+  // octree sample (`back`) and the deepest level its path shares with that one's (`fork`).
+  constexpr uint8_t kNone = 0xFF;
+  const MhOctree* oct_tree[G];
+  uint64_t oct_cell[G];
+  uint8_t oct_sample[G], oct_back[G], oct_fork[G], oct_last[G];
+  uint32_t no_lanes = 0, ncells = 0, last_cell = 0;
   const SliceTiles::Record* rec[G];
   uint8_t rec_sample[G];
   uint32_t nr = 0;
@@ -243,18 +236,20 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
       __builtin_prefetch(reinterpret_cast<const char*>(r) + 64);
       rec[nr] = r, rec_sample[nr++] = uint8_t(i);
     } else if (t[i].octree) {
-      uint32_t j = last_chain;
-      if (j >= nc || chain_cell[j] != c[i].cell) {
+      uint32_t j = last_cell;  // the cell's index among this call's octree cells
+      if (j >= ncells || oct_cell[j] != c[i].cell) {
         j = 0;
-        while (j < nc && chain_cell[j] != c[i].cell) ++j;
+        while (j < ncells && oct_cell[j] != c[i].cell) ++j;
+        if (j == ncells) oct_cell[ncells++] = c[i].cell, oct_last[j] = kNone;
       }
-      if (j == nc) {
-        chain_tree[j] = t[i].octree, chain_cell[j] = c[i].cell, chain_head[j] = uint8_t(i);
-        ++nc;
-      } else {
-        next_of[chain_tail[j]] = uint8_t(i);
+      last_cell = j;
+      const uint32_t q = no_lanes++;
+      oct_tree[q] = t[i].octree, oct_sample[q] = uint8_t(i), oct_back[q] = oct_last[j], oct_fork[q] = 0;
+      if (oct_last[j] != kNone) {
+        const uint32_t b = oct_sample[oct_last[j]];
+        oct_fork[q] = uint8_t(t[i].octree->shared_levels(c[i].lx, c[i].ly, c[i].lw, c[b].lx, c[b].ly, c[b].lw));
       }
-      chain_tail[j] = uint8_t(i), next_of[i] = kEnd, last_chain = j;
+      oct_last[j] = uint8_t(q);
     } else {
       if (exact) *exact = false;
       set(i, d[i] <= c[i].value);
@@ -311,27 +306,46 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
       __builtin_prefetch(view[k]->treelet_at(cur[k].ref & dagmh::kRefIndexMask));
     }
   }
-  // Octree chains begin.
-  StackMapSlot<MhOctree::Path> path[G];
-  StackMapSlot<MhOctree::Walk> walk[G];
-  uint8_t chains[G];
-  for (uint32_t j = 0; j < nc; ++j) {
-    const uint32_t i = chain_head[j];
-    new (path[j].bytes) MhOctree::Path();
-    chain_at[j] = uint8_t(i);
-    new (walk[j].bytes) MhOctree::Walk(chain_tree[j]->along_begin(path[j].get(), c[i].lx, c[i].ly, c[i].lw));
-    chains[j] = uint8_t(j);
+  // Octree lanes: each walks from the node at its fork level, copied from the lane of the
+  // cell's nearest earlier sample whose own walk passes there (a lane back along the cell
+  // whose fork is no deeper: the paths agree down to the lesser fork). Level by level, so
+  // that every lane's step of one level is in flight together (a chain of the cell's
+  // samples walked one after another would be one dependent miss after another); the
+  // nodes read are those of depth_along's walks (a walk that ended above a lane's fork
+  // ends that lane where it ended: the same node, the same value).
+  MhOctree::Walk ow[G];
+  uint8_t oct_from[G], order[G], oct_live[G];
+  uint32_t n_order = 0;
+  {
+    uint8_t count[moct::kMaxLevels + 1] = {};
+    for (uint32_t q = 0; q < no_lanes; ++q) {
+      uint32_t b = oct_back[q];
+      while (b != kNone && oct_fork[b] > oct_fork[q]) b = oct_back[b];
+      oct_from[q] = uint8_t(b);
+      ++count[oct_fork[q]];
+    }
+    uint8_t at[moct::kMaxLevels + 1];
+    for (uint32_t l = 0, sum = 0; l <= moct::kMaxLevels; ++l) at[l] = uint8_t(sum), sum += count[l];
+    for (uint32_t q = 0; q < no_lanes; ++q) order[at[oct_fork[q]]++] = uint8_t(q);  // by fork, stable
+    n_order = no_lanes;
   }
   uint8_t mmh_live[G];
   for (uint32_t k = 0; k < nm; ++k) mmh_live[k] = uint8_t(k);
-  uint32_t live = nc, nml = nm, next_other = 0;
+  uint32_t live = 0, nml = nm, next_other = 0, next_fork = 0, round = 0;
   auto answer_other = [&](uint32_t k) {
     const SliceTiles::Record& r = *other[k];
     const uint32_t i = other_sample[k];
     set(i, d[i] <= r.eval->depth(r.xy_level, c[i].lx, c[i].ly));
   };
-  while (na || live || nml) {
+  while (na || live || nml || next_fork < n_order) {
     if (next_other < no) answer_other(next_other++);
+    // The octree lanes forking at this level join (every live lane stands at it).
+    for (; next_fork < n_order && oct_fork[order[next_fork]] == round; ++next_fork) {
+      const uint32_t q = order[next_fork];
+      // A copy of a walk that has ended (above this level) ends again at its first step.
+      ow[q] = oct_from[q] == kNone ? oct_tree[q]->along_root() : ow[oct_from[q]];
+      oct_live[live++] = uint8_t(q);
+    }
     uint32_t kept = 0;
     for (uint32_t a = 0; a < nml; ++a) {  // one step of every MMH walk
       const uint32_t k = mmh_live[a];
@@ -357,23 +371,19 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
     }
     na = kept;
     kept = 0;
-    for (uint32_t a = 0; a < live; ++a) {  // one step of every octree chain
-      const uint32_t j = chains[a];
-      const MhOctree& tree = *chain_tree[j];
-      MhOctree::Walk& k = walk[j].get();
-      if (tree.along_step(path[j].get(), k)) {
-        __builtin_prefetch(tree.along_next(k));
-        chains[kept++] = uint8_t(j);
-        continue;
+    for (uint32_t a = 0; a < live; ++a) {  // one step of every octree lane
+      const uint32_t q = oct_live[a];
+      const MhOctree& tree = *oct_tree[q];
+      const uint32_t i = oct_sample[q];
+      if (tree.along_step_to(ow[q], c[i].lx, c[i].ly, c[i].lw)) {
+        __builtin_prefetch(tree.along_next(ow[q]));
+        oct_live[kept++] = uint8_t(q);
+      } else {
+        set(i, d[i] <= tree.along_value(ow[q]));
       }
-      uint32_t i = chain_at[j];
-      set(i, d[i] <= tree.along_value(k));
-      if ((i = next_of[i]) == kEnd) continue;
-      chain_at[j] = uint8_t(i);
-      k = tree.along_begin(path[j].get(), c[i].lx, c[i].ly, c[i].lw);
-      chains[kept++] = uint8_t(j);
     }
     live = kept;
+    ++round;
   }
   while (next_other < no) answer_other(next_other++);
   uint32_t index[G];
