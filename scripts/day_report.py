@@ -166,18 +166,15 @@ def main():
                       "build_s_sum_of_each": sum(p["seconds"] for p in b["packs_2d"]), "each": b["packs_2d"]},
          "stack_over_2d_bytes": b["stack"]["bytes"] / s2 if s2 else None,
          "load": load, "renders": renders, "gpu": g}
-    fine = b["packs_2d_fine"]
-    if fine:
-        sf = sum(p["bytes"] for p in fine)
-        j["packs_2d_fine"] = {"count": len(fine), "bytes": sf, "build_s": b["all_2d_fine_s"],
-                              "build_s_sum_of_each": sum(p["seconds"] for p in fine), "each": fine}
-        j["stack_over_2d_fine_bytes"] = b["stack"]["bytes"] / sf if sf else None
-    one = b["packs_stack1"]
-    if one:
-        so = sum(p["bytes"] for p in one)
-        j["packs_stack1"] = {"count": len(one), "bytes": so, "build_s": b["all_stack1_s"],
-                             "build_s_sum_of_each": sum(p["seconds"] for p in one), "each": one}
-        j["stack_over_stack1_bytes"] = b["stack"]["bytes"] / so if so else None
+    def pack_set(key, packs, all_s):  # one more set of packs beside the stack: its sizes and the bytes ratio
+        if packs:
+            total = sum(p["bytes"] for p in packs)
+            j["packs_" + key] = {"count": len(packs), "bytes": total, "build_s": all_s,
+                                 "build_s_sum_of_each": sum(p["seconds"] for p in packs), "each": packs}
+            j["stack_over_" + key + "_bytes"] = b["stack"]["bytes"] / total if total else None
+    fine, one = b["packs_2d_fine"], b["packs_stack1"]
+    pack_set("2d_fine", fine, b["all_2d_fine_s"])
+    pack_set("stack1", one, b["all_stack1_s"])
     text = []
     text.append("scene %s, light %s: %d slices of %d^2" % (j["scene"], j["light"], j["slices"], j["resolution"]))
     text.append("bytes: stack pack %d B (built in %.2f s) vs %d separate 2D packs %d B (built in %.2f s, two at a "
