@@ -351,6 +351,18 @@ class RemoteMap final : public Evaluator {
   };
   bool enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc, float& value,
                   WalkNote* note = nullptr) const noexcept;
+  // The page-table walk both of them make over the cache: each resident index tile on the
+  // way marked used and its slot kept (up to kMemoPath); `page` is the cache's answer for
+  // the tile the walk ended at (for a value: the last tile it asked about).
+  struct ResidentWalk {
+    PageHit hit;
+    PageEntry page;
+    uint32_t path_count = 0;
+    uint32_t path[kMemoPath];
+    // `note` (if any) names `slot` and the index tiles passed.
+    void fill(uint32_t slot, WalkNote* note) const noexcept;
+  };
+  ResidentWalk walk_resident(uint32_t level, uint64_t x, uint64_t y) const noexcept;
   // A thread's memo of the resident tiles its batches entered, across calls (the render's
   // batches of one frame come in screen order, and neighbouring batches meet the same
   // tiles): a texel's tile without the page-table walk (the skip grid, the cache's hash

@@ -88,27 +88,38 @@ namespace {
 }
 }  // namespace
 
+void RemoteMap::ResidentWalk::fill(uint32_t slot, WalkNote* note) const noexcept {
+  if (!note) return;
+  note->slot = slot, note->path_count = path_count;
+  std::copy_n(path, std::min(path_count, kMemoPath), note->path);
+}
+
+RemoteMap::ResidentWalk RemoteMap::walk_resident(uint32_t level, uint64_t x, uint64_t y) const noexcept {
+  ResidentWalk w;
+  w.hit = walk_page_table(grid_, level, x, y, [&](uint64_t id, const GridEntry&) -> const CutGrid* {
+    w.page = cache_.lookup(id);
+    if (w.page.state != PageState::resident) return nullptr;
+    mark_used(w.page.slot);
+    if (w.path_count < kMemoPath) w.path[w.path_count] = w.page.slot;
+    ++w.path_count;
+    return &slot_grid_[w.page.slot];
+  });
+  if (w.hit.kind == PageHit::Kind::tile) w.page = cache_.lookup(w.hit.tile);
+  return w;
+}
+
 // The page-table walk of PackEvaluator::depth, over the cache: where a tile is missing,
 // the entry's own value answers (the node's value stands for all its descendants).
 bool RemoteMap::enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc, float& value,
                            WalkNote* note) const noexcept {
-  PageEntry page;  // the cache's answer for the last tile the walk asked about
-  uint32_t path_count = 0, path[kMemoPath];
-  auto resident_index = [&](uint64_t id, const GridEntry&) -> const CutGrid* {
-    page = cache_.lookup(id);
-    if (page.state != PageState::resident) return nullptr;
-    mark_used(page.slot);
-    if (path_count < kMemoPath) path[path_count] = page.slot;
-    ++path_count;
-    return &slot_grid_[page.slot];
-  };
-  const PageHit hit = walk_page_table(grid_, level, x, y, resident_index);
+  const ResidentWalk w = walk_resident(level, x, y);
+  const PageHit& hit = w.hit;
+  PageEntry page = w.page;
   value = hit.value;
   if (hit.kind == PageHit::Kind::value) {
     sc.set_region(level, x, y, hit.region_shift, value, LookupScratch::Counted::none);
     return false;
   }
-  if (hit.kind == PageHit::Kind::tile) page = cache_.lookup(hit.tile);
   if (page.state == PageState::constant) {  // given up: coarse for good
     value = page.value;
     sc.set_region(level, x, y, hit.region_shift, value, LookupScratch::Counted::none);
@@ -137,10 +148,7 @@ bool RemoteMap::enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch
     return false;
   }
   mark_used(page.slot);
-  if (note) {
-    note->slot = page.slot, note->path_count = path_count;
-    std::copy_n(path, std::min(path_count, kMemoPath), note->path);
-  }
+  w.fill(page.slot, note);
   sc.ev = slot_eval_[page.slot].get();
   sc.win = slot_window_[page.slot];
   sc.walks = slot_walks_[page.slot];
@@ -158,24 +166,12 @@ bool RemoteMap::enter_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch
 bool RemoteMap::prefetch_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch::TileView& tile,
                               WalkNote* note) const noexcept {
   if (!texel_in_map(header_.map_level, level, x, y)) return false;
-  PageEntry page;
-  uint32_t path_count = 0, path[kMemoPath];
-  const PageHit hit = walk_page_table(grid_, level, x, y, [&](uint64_t id, const GridEntry&) -> const CutGrid* {
-    page = cache_.lookup(id);
-    if (page.state != PageState::resident) return nullptr;
-    mark_used(page.slot);
-    if (path_count < kMemoPath) path[path_count] = page.slot;
-    ++path_count;
-    return &slot_grid_[page.slot];
-  });
-  if (hit.kind != PageHit::Kind::tile) return false;
-  page = cache_.lookup(hit.tile);
-  if (page.state != PageState::resident) return false;
+  const ResidentWalk walk = walk_resident(level, x, y);
+  const PageHit& hit = walk.hit;
+  const PageEntry& page = walk.page;
+  if (hit.kind != PageHit::Kind::tile || page.state != PageState::resident) return false;
   mark_used(page.slot);
-  if (note) {
-    note->slot = page.slot, note->path_count = path_count;
-    std::copy_n(path, std::min(path_count, kMemoPath), note->path);
-  }
+  walk.fill(page.slot, note);
   const WindowDepths* w = slot_window_[page.slot];
   const TapWalks* t = slot_walks_[page.slot];
   if (w) w->prefetch();

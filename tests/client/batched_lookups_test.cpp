@@ -394,6 +394,67 @@ TEST(ClientLookups, TilesUsedSinceTheLastArrivalAreNotTheNextVictims) {
   EXPECT_EQ(batch_differs({tiles[2], tiles[1], tiles[0]}), "");
 }
 
+// A lookup marks the index tiles its walk passed used too, single or batched: after it the
+// next arrival evicts a tile nobody looked at, not the index tile the looked-at tile hangs
+// from (which would cut that tile off).
+TEST(ClientLookups, IndexTilesOnALookupsWayAreUsedToo) {
+  Fixture f = make_fixture("lru_index", looptest::first_encoding(), 512);  // index tiles
+  // Three encoded tiles below one index tile.
+  std::vector<uint64_t> kids;
+  for (const TileIndexEntry& i : f.pack.reader->tiles()) {
+    if (i.kind != TileKind::index) continue;
+    const TileAddress b = tile_address(i.id);
+    kids.clear();
+    for (const TileIndexEntry& e : f.pack.reader->tiles()) {
+      const TileAddress a = tile_address(e.id);
+      if (e.kind == TileKind::encoded && a.level == b.level + 1 && a.x / 2 == b.x && a.y / 2 == b.y) kids.push_back(e.id);
+    }
+    if (kids.size() >= 3) break;
+  }
+  ASSERT_GE(kids.size(), 3u);
+  auto texel_of_tile = [&](uint64_t t) {
+    const TileAddress a = tile_address(t);
+    const uint32_t s = f.level - a.level;
+    return std::array<uint64_t, 2>{uint64_t(a.x) << s, uint64_t(a.y) << s};
+  };
+  for (int batched = 0; batched < 2; ++batched) {
+    const char* how = batched ? "batched" : "single";
+    ClientOptions o = looptest::quick_options();
+    o.cache_slots = 3;  // the index tile and two of its children
+    const auto h = f.pack.reader->header_bytes();
+    const auto g = f.pack.reader->grid_bytes();
+    f.map = std::make_shared<RemoteMap>("lru_index", std::vector<uint8_t>(h.begin(), h.end()),
+                                        std::vector<uint8_t>(g.begin(), g.end()), o, std::make_shared<Notifier>());
+    auto want = [&](uint64_t t) {
+      const auto p = texel_of_tile(t);
+      for (int round = 0; round < 4; ++round) {
+        f.map->request_region(f.level, p[0], p[1], 1, 1, 1);
+        if (f.deliver_round() == 0) break;
+      }
+    };
+    auto resident = [&](uint64_t t) {
+      const auto p = texel_of_tile(t);
+      return f.map->region_resident(f.level, p[0], p[1], 1, 1);
+    };
+    want(kids[0]);  // the index tile, then its child: the index tile is the least recently used
+    want(kids[1]);
+    ASSERT_TRUE(resident(kids[0])) << how;
+    ASSERT_TRUE(resident(kids[1])) << how;
+    const auto p = texel_of_tile(kids[0]);
+    if (batched) {
+      const PcfQuery q{p[0], p[1], f.level, 1, 0.5f};
+      float got = -1.0f;
+      f.map->pcf_batch(std::span(&q, 1), std::span(&got, 1));
+    } else {
+      f.map->depth(f.level, p[0], p[1]);
+    }
+    want(kids[2]);  // kids[1], used by nobody since it arrived, is the victim
+    EXPECT_TRUE(resident(kids[0])) << how;
+    EXPECT_FALSE(resident(kids[1])) << how;
+    EXPECT_TRUE(resident(kids[2])) << how;
+  }
+}
+
 TEST(ClientLookups, TwoThreadsLookUpWhileTilesArriveAndEndExact) {
   Fixture f = make_fixture("threads", looptest::first_encoding(), 1024);
   const uint64_t side = uint64_t(1) << f.level;
