@@ -49,15 +49,35 @@ TileCodec TileCodec::dagmh_or_mmh(bool exhaustive) {
   return c;
 }
 
-std::vector<uint8_t> TileCodec::encode_smaller(const Hierarchy& h) const {
+TileCodec::Fit TileCodec::encode_within(const Hierarchy& h, size_t bound, bool may_refuse) const {
+  Fit f;
   const int pick = alternative && choose ? choose(h) : 0;
-  if (pick > 0) return alternative(h);
-  std::vector<uint8_t> bytes = encode(h);
-  if (!alternative || pick < 0) return bytes;
-  std::vector<uint8_t> alt = alternative(h);
-  return zlib_compress(alt, kEncodingChoiceZlibLevel).size() < zlib_compress(bytes, kEncodingChoiceZlibLevel).size()
-             ? alt
-             : bytes;
+  if (pick > 0) {
+    std::vector<uint8_t> alt = alternative(h);
+    if (alt.size() <= bound) {
+      f.bytes = std::move(alt);
+      return f;
+    }
+    f.smallest = alt.size();
+  }
+  try {
+    std::vector<uint8_t> bytes = encode(h);
+    if (bytes.size() <= bound) f.bytes = std::move(bytes);
+    else f.smallest = std::min(f.smallest, bytes.size());
+  } catch (const Error&) {
+    if (!may_refuse) throw;
+  }
+  if ((alternative && pick == 0) || (pick < 0 && f.bytes.empty())) {
+    // The second encoding where it stores smaller (what a pack keeps is the zlib stream).
+    std::vector<uint8_t> alt = alternative(h);
+    if (alt.size() <= bound &&
+        (f.bytes.empty() || zlib_compress(alt, kEncodingChoiceZlibLevel).size() <
+                                zlib_compress(f.bytes, kEncodingChoiceZlibLevel).size()))
+      f.bytes = std::move(alt);
+    else if (f.bytes.empty())
+      f.smallest = std::min(f.smallest, alt.size());
+  }
+  return f;
 }
 
 uint32_t default_skip_level(uint32_t map_level) { return std::min<uint32_t>((map_level + 1) / 2, 8); }
@@ -183,37 +203,11 @@ GridEntry cut_subtree(const CutParams& p, Hierarchy&& h, uint32_t level, uint32_
   const HNode root = h.levels[0][0];
   if (root.child_mask == 0) return GridEntry{root.value, EntryKind::constant, 0};
   const uint64_t id = make_tile_id(level, x, y);
-  size_t encoded_size = SIZE_MAX;
-  std::vector<uint8_t> fits;
-  // TileCodec::choose: > 0 the alternative alone where it fits, < 0 encode() alone where it
-  // fits, 0 both and the smaller stream.
-  const int pick = p.codec.alternative && p.codec.choose ? p.codec.choose(h) : 0;
-  if (pick > 0) {
-    std::vector<uint8_t> alt = p.codec.alternative(h);
-    if (alt.size() <= p.tile_bytes) {
-      out.push_back(CutTile{id, TileKind::encoded, std::move(alt)});
-      return GridEntry{root.value, EntryKind::tile, 0};
-    }
-    encoded_size = alt.size();
-  }
-  try {
-    std::vector<uint8_t> bytes = p.codec.encode(h);
-    if (bytes.size() <= p.tile_bytes) fits = std::move(bytes);
-    else encoded_size = std::min(encoded_size, bytes.size());
-  } catch (const Error&) {
-    // An encoder may refuse a subtree too large for its format (e.g. offsets that no
-    // longer fit): cut it deeper like any oversized subtree. A small one is a real error.
-    if (h.depth <= kMaxIndexLevels && !p.codec.alternative) throw;
-  }
-  if ((p.codec.alternative && pick == 0) || (pick < 0 && fits.empty())) {
-    // The second encoding where it stores smaller (what a pack keeps is the zlib stream).
-    std::vector<uint8_t> alt = p.codec.alternative(h);
-    if (alt.size() <= p.tile_bytes &&
-        (fits.empty() || zlib_compress(alt, kEncodingChoiceZlibLevel).size() < zlib_compress(fits, kEncodingChoiceZlibLevel).size()))
-      fits = std::move(alt);
-    else if (fits.empty())
-      encoded_size = std::min(encoded_size, alt.size());
-  }
+  // An encoder may refuse a subtree too large for its format (e.g. offsets that no longer
+  // fit): it is cut deeper like any oversized subtree. A small one is a real error.
+  TileCodec::Fit fit = p.codec.encode_within(h, p.tile_bytes, h.depth > kMaxIndexLevels || bool(p.codec.alternative));
+  std::vector<uint8_t>& fits = fit.bytes;
+  const size_t encoded_size = fit.smallest;
   if (!fits.empty()) {
     out.push_back(CutTile{id, TileKind::encoded, std::move(fits)});
     return GridEntry{root.value, EntryKind::tile, 0};

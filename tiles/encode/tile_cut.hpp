@@ -57,10 +57,19 @@ struct TileCodec {
   // other still where it does not fit tile_bytes); unsure or empty: both, as above.
   std::function<int(const Hierarchy&)> choose;
   static TileCodec of(Encoding e);
-  // The encoding a cut keeps for a subtree with no tile bound: encode()'s, or the
-  // alternative's where it deflates (kEncodingChoiceZlibLevel) strictly smaller; a sure
-  // `choose` guess encodes only its pick (tile_cut.cpp's cut_subtree, less the bound).
-  std::vector<uint8_t> encode_smaller(const Hierarchy& h) const;
+  // The encoding a cut keeps for a subtree under a bound of `bound` bytes: encode()'s, or
+  // the alternative's where it fits and deflates (kEncodingChoiceZlibLevel) strictly
+  // smaller or encode()'s does not fit; a sure `choose` guess encodes only its pick (the
+  // other still where the pick does not fit). `bytes` empty: none fits, and `smallest` is
+  // the smallest encoding seen. With `may_refuse`, an encode() that throws st::Error (a
+  // subtree too large for its format) counts as one that does not fit.
+  struct Fit {
+    std::vector<uint8_t> bytes;
+    size_t smallest = SIZE_MAX;
+  };
+  Fit encode_within(const Hierarchy& h, size_t bound, bool may_refuse = false) const;
+  // encode_within with no bound: the encoding a cut keeps where the tile bound does not bite.
+  std::vector<uint8_t> encode_smaller(const Hierarchy& h) const { return encode_within(h, SIZE_MAX).bytes; }
   // DAG-MH tiles, each an MMH buffer instead where that stores smaller (map builds'
   // default). Unless `exhaustive`, only tiles whose share of zero-width intervals leaves
   // the winner unsure are encoded both ways (tile_cut.cpp, predict_dagmh_or_mmh): a tile
