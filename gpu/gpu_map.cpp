@@ -891,9 +891,10 @@ struct GpuMap::Impl {
   // (lavapipe's) copies a call's regions into one allocation of 40 bytes a region (and
   // converts them through another past 8): past about 1 KiB that is a large-bin malloc,
   // which took 30-40 us in a quarter of bench_frame_path's frames (100 tiles, 100 regions,
-  // cold caches: its p90). 25 regions (1000 bytes) stay within glibc's per-thread cache
-  // sizes; each call also costs the queue two small allocations of its own, so 4 calls of
-  // 25 record 100 tiles in about half the time of 13 calls of 8 (bench_frame_path).
+  // cold caches: its p90). 25 regions (1000 bytes) stay within the sizes glibc's
+  // per-thread cache serves, and each call costs the queue allocations of its own besides:
+  // 4 calls of 25 recorded 100 tiles in about half the time of 13 calls of 8
+  // (bench_frame_path, lavapipe).
   void record_copies(VkCommandBuffer cmd, VkBuffer src, VkBuffer dst, const std::vector<VkBufferCopy>& copies) const {
     for (size_t i = 0; i < copies.size(); i += kRegionsPerCall)
       ctx->vk.CmdCopyBuffer(cmd, src, dst, uint32_t(std::min<size_t>(kRegionsPerCall, copies.size() - i)), copies.data() + i);
