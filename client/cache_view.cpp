@@ -149,7 +149,29 @@ size_t CacheView::changed_slots_impl(std::span<uint64_t> known, void* visit,
     if (scan) {
       for (uint32_t s = 0; s < slots; ++s) compare(s);
     } else {
-      for (uint32_t s : m.scratch) compare(s);
+      // The slots are scattered and cold (the fetch thread wrote them): each one's record
+      // and `known` word are asked for kSlotsAhead slots before it is compared, and the
+      // bytes of a resident one kBytesAhead before (its record is in by then), so the
+      // misses overlap instead of waiting on each other. Loads only: nothing changes.
+      constexpr size_t kSlotsAhead = 8, kBytesAhead = 4;
+      const size_t count = m.scratch.size();
+      for (size_t i = 0; i < count; ++i) {
+        if (i + kSlotsAhead < count) {
+          const uint32_t s = m.scratch[i + kSlotsAhead];
+          c.prefetch_slot(s);
+          __builtin_prefetch(&known[s]);
+        }
+        if (i + kBytesAhead < count) {
+          const uint32_t s = m.scratch[i + kBytesAhead];
+          if (c.slot_resident(s)) {
+            const std::span<const uint8_t> b = c.tile_bytes(s);
+            const auto first = reinterpret_cast<uintptr_t>(b.data()) & ~uintptr_t(63);
+            for (uintptr_t p = first; p < reinterpret_cast<uintptr_t>(b.data() + b.size()); p += 64)
+              __builtin_prefetch(reinterpret_cast<const void*>(p));
+          }
+        }
+        compare(m.scratch[i]);
+      }
     }
     m.cursor = c.journal_end();
     m.cursor_valid = true;
