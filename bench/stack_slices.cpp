@@ -459,7 +459,8 @@ SliceFrame measure_slice(const st::LightSpace& l, const st::IntervalTile& t, uin
 // of its keyframe group, takes the last slice r <= s whose bit is set (or the keyframe) and
 // walks slice r's tile: one walk, whatever the chain. The change bits are stored as one
 // column per texel (N - 1 bits, byte-aligned, the cell's texels in Morton order): one load
-// gives the whole chain.
+// gives the whole chain. Also measured: the same bits as one bitmap a non-key slice (Morton
+// order) after the tiles instead of the columns (a lookup then tests up to N - 1 bits).
 // Criteria for "unchanged" (each measured, each also in a "+marker" form, kDeltaMarker):
 //   prev   interval equal to slice s - 1's (the measured 58-89%);
 //   runs   a texel's run of slices keeps one value while the intersection of their intervals
@@ -476,6 +477,7 @@ struct DeltaVariant {
   int crit = 0;  // 0 prev, 1 runs, 2 key
   uint32_t N = 8;
   uint64_t raw = 0, stored = 0, tiles_stored = 0, cols_stored = 0, changed = 0, texels = 0, max_raw = 0;
+  uint64_t planar_stored = 0, planar_alone = 0;  // the change bits as one bitmap a slice instead of columns
   uint64_t hit = 0, hit_changed = 0;  // of the non-key texels, those that hit something (lo != kLitDepth)
   double seconds = 0;
 };
@@ -542,6 +544,8 @@ nlohmann::json slice_delta_measure(const std::vector<st::IntervalTile>& all, con
           const uint64_t bpt = (v.N - 1 + 7) / 8;  // change-column bytes a texel, per keyframe group
           const uint64_t key_groups = (S.size() + v.N - 1) / v.N;
           std::vector<uint8_t> cols(marked ? 0 : key_groups * T * bpt, 0);
+          const uint64_t bmp = (T + 7) / 8;  // one bitmap a non-key slice, Morton order
+          std::vector<uint8_t> planar(marked ? 0 : (S.size() - key_groups) * bmp, 0);
           for (uint64_t t = 0; t < T; ++t) {
             uint64_t run = 0;  // the slice whose tile answers the current run
             st::Interval R = S[0].data[t];
@@ -559,7 +563,10 @@ nlohmann::json slice_delta_measure(const std::vector<st::IntervalTile>& all, con
                 run = s, R = iv;
                 if (s != key) {
                   const uint64_t bit = s - key - 1;
-                  if (!marked) cols[((key / v.N) * T + morton[t]) * bpt + bit / 8] |= uint8_t(1u << (bit % 8));
+                  if (!marked) {
+                    cols[((key / v.N) * T + morton[t]) * bpt + bit / 8] |= uint8_t(1u << (bit % 8));
+                    planar[(s - s / v.N - 1) * bmp + morton[t] / 8] |= uint8_t(1u << (morton[t] % 8));
+                  }
                   ++v.changed;
                 }
               } else {
@@ -599,15 +606,21 @@ nlohmann::json slice_delta_measure(const std::vector<st::IntervalTile>& all, con
           v.stored += st::zlib_compress(raw, 6).size();
           v.tiles_stored += st::zlib_compress(tiles, 6).size();
           v.cols_stored += cols.empty() ? 0 : st::zlib_compress(cols, 6).size();
+          if (!marked) {
+            std::vector<uint8_t> alt = tiles;
+            alt.insert(alt.end(), planar.begin(), planar.end());
+            v.planar_stored += st::zlib_compress(alt, 6).size();
+            v.planar_alone += st::zlib_compress(planar, 6).size();
+          }
           v.seconds += time_of(t0);
         }
       }
   std::printf("  delta slices over every level-K cell (K = %u: %llu cells of %llu^2 texels x %llu slices; no plane tiles either "
               "side; one zlib stream a cell):\n",
               K, (unsigned long long)cells, (unsigned long long)cs, (unsigned long long)W);
-  std::printf("  | form | changed texels | of those that hit | raw | max cell raw | stored | tiles alone | change columns alone | / base | encode s |\n");
-  std::printf("  | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
-  std::printf("  | base: each slice its own tile | | | %llu | %llu | %llu | | | 1.000 | %.1f |\n", (unsigned long long)base_raw,
+  std::printf("  | form | changed texels | of those that hit | raw | max cell raw | stored | tiles alone | change columns alone | / base | stored, bitmaps a slice | bitmaps alone | / base | encode s |\n");
+  std::printf("  | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+  std::printf("  | base: each slice its own tile | | | %llu | %llu | %llu | | | 1.000 | | | | %.1f |\n", (unsigned long long)base_raw,
               (unsigned long long)base_max_raw, (unsigned long long)base_stored, base_s);
   nlohmann::json out = {{"K", K}, {"cells", cells}, {"cell_side", cs}, {"cell_slices", W},
                         {"base", {{"raw", base_raw}, {"stored", base_stored}, {"max_cell_raw", base_max_raw}, {"seconds", base_s}}}};
@@ -615,14 +628,17 @@ nlohmann::json slice_delta_measure(const std::vector<st::IntervalTile>& all, con
   for (const DeltaVariant& v : vars) {
     const double share = v.texels ? double(v.changed) / double(v.texels) : 0.0;
     const double hit_share = v.hit ? double(v.hit_changed) / double(v.hit) : 0.0;
-    std::printf("  | %s | %.1f%% | %.1f%% | %llu | %llu | %llu | %llu | %llu | %.3f | %.1f |\n", v.name.c_str(), 100.0 * share,
+    std::printf("  | %s | %.1f%% | %.1f%% | %llu | %llu | %llu | %llu | %llu | %.3f | %llu | %llu | %.3f | %.1f |\n", v.name.c_str(),
+                100.0 * share,
                 100.0 * hit_share,
                 (unsigned long long)v.raw, (unsigned long long)v.max_raw, (unsigned long long)v.stored,
                 (unsigned long long)v.tiles_stored, (unsigned long long)v.cols_stored,
-                double(v.stored) / double(std::max<uint64_t>(base_stored, 1)), v.seconds);
+                double(v.stored) / double(std::max<uint64_t>(base_stored, 1)), (unsigned long long)v.planar_stored,
+                (unsigned long long)v.planar_alone, double(v.planar_stored) / double(std::max<uint64_t>(base_stored, 1)), v.seconds);
     vj.push_back({{"form", v.name}, {"criterion", kDeltaCriterion[v.crit]}, {"keyframe_every", v.N},
                   {"changed_share", share}, {"hit_texels", v.hit}, {"hit_changed_share", hit_share}, {"raw", v.raw}, {"max_cell_raw", v.max_raw}, {"stored", v.stored},
                   {"tiles_alone", v.tiles_stored}, {"columns_alone", v.cols_stored},
+                  {"stored_with_bitmaps", v.planar_stored}, {"bitmaps_alone", v.planar_alone},
                   {"over_base", double(v.stored) / double(std::max<uint64_t>(base_stored, 1))}, {"seconds", v.seconds}});
   }
   out["variants"] = vj;
