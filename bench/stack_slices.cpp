@@ -5,7 +5,7 @@
 //   bench_stack_slices [--res 4k] [--samples 32] [--area-samples 64]
 //                      [--case city|hairball|engine|demo|all] [--json PATH] [--spill-dir /tmp]
 //                      [--bytes-only] [--dump-tiles DIR] [--adaptive] [--split-only] [--split-k 0,-1]
-//                      [--no-planes] [--own-frames]
+//                      [--no-planes] [--own-frames] [--slice-delta 4,8 [--delta-only]]
 //
 // Plane tiles (tiles/core/PLANES.md) are on for both sides, as `shadowtile build` makes
 // them: the separate packs' tiles and the per-slice cells' slices; --no-planes: neither.
@@ -51,6 +51,10 @@
 // (`shadowtile build --light sun:...`, as scripts/demo-day's separate packs), writes it as a
 // 2D pack the same way, and prints per slice both frames' box side, ground area per texel,
 // texels whose first hit stands above the ground, empty texels, tiles and bytes.
+// --slice-delta N,...: every slice also kept in memory (32 x 8 B a texel), and every level-K
+// cell written in delta-slice forms (a keyframe every N slices of the cell, the others as
+// change sets: slice_delta_measure below) against the same cell with each slice its own
+// tile; --delta-only traces and measures that alone (the packs' lines print 0).
 // Cases: procedural:city under a day's sun (azimuth 100..260, elevation 25..65, ground
 // frame), procedural:hairball under a 4 m x 4 m area light 25 m above it (window frame),
 // and a real open mesh, assimp's 2CylinderEngine.glb, under the same day's sun; `demo`
@@ -88,6 +92,7 @@
 #include "tiles/encode/pack_writer.hpp"
 #include "tiles/encode/stack_blocked.hpp"
 #include "tiles/encode/stack_pack.hpp"
+#include "tiles/encode/stack_slices_encode.hpp"
 #include "tiles/core/pack_reader.hpp"
 #include "tiles/encode/tile_cut.hpp"
 #include "tiles/core/dagmh_format.hpp"
@@ -443,9 +448,235 @@ SliceFrame measure_slice(const st::LightSpace& l, const st::IntervalTile& t, uin
   return f;
 }
 
+// ---- Delta slices (--slice-delta; MHOCT.md "Delta slices: the per-texel repetition, measured")
+// A concrete exact form of a per-slice cell that stores a slice as a change set over the
+// slices before it: within a cell's slices, every N-th slice (local 0, N, 2N, ...) is a
+// keyframe, stored as today (its own 2D DAG-MH or MMH tile of the cell); any other slice s
+// stores (1) a change bit per texel and (2) its own 2D tile over the changed texels only,
+// the unchanged ones given the whole depth range [lo, hi] of the cell (any value answers
+// for them, so MH §3.1's merge takes them with their neighbours). A texel unchanged at s
+// answers what it answered at s - 1, so a lookup at slice s reads the texel's change bits
+// of its keyframe group, takes the last slice r <= s whose bit is set (or the keyframe) and
+// walks slice r's tile: one walk, whatever the chain. The change bits are stored as one
+// column per texel (N - 1 bits, byte-aligned, the cell's texels in Morton order): one load
+// gives the whole chain. Also measured: the same bits as one bitmap a non-key slice (Morton
+// order) after the tiles instead of the columns (a lookup then tests up to N - 1 bits).
+// Criteria for "unchanged" (each measured, each also in a "+marker" form, kDeltaMarker):
+//   prev   interval equal to slice s - 1's (the measured 58-89%);
+//   runs   a texel's run of slices keeps one value while the intersection of their intervals
+//          is not empty: the run's first slice gets that intersection (narrowed; any value
+//          in it lies in every interval of the run), the others the whole range;
+//   key    interval equal to the keyframe's (no chain: one bit, one walk).
+// Each variant's cell is written as real bytes: the STSL buffer of its (partly wildcard)
+// slices, grouped (STSP) as the pack stores it, followed by the change columns, deflated as
+// one zlib stream (level 6); the base is the same cell with every slice its own tile.
+// The construction is checked per texel: the interval a lookup reaches contains the slice's
+// own interval's answer set (resolved interval subset of the slice's interval).
+struct DeltaVariant {
+  std::string name;
+  int crit = 0;  // 0 prev, 1 runs, 2 key
+  uint32_t N = 8;
+  uint64_t raw = 0, stored = 0, tiles_stored = 0, cols_stored = 0, changed = 0, texels = 0, max_raw = 0;
+  uint64_t planar_stored = 0, planar_alone = 0;  // the change bits as one bitmap a slice instead of columns
+  double ctx_bits = 0;  // the change bits under an adaptive context model (an estimate: no such coder built)
+  uint64_t hit = 0, hit_changed = 0;  // of the non-key texels, those that hit something (lo != kLitDepth)
+  double seconds = 0;
+};
+
+const char* const kDeltaCriterion[6] = {"prev", "runs", "key", "prev+marker", "runs+marker", "key+marker"};
+// The "+marker" forms store no change columns: an unchanged texel holds this interval in its
+// slice's tile (a depth no texel has: depths lie in [0, 1]), and a lookup that reads it walks
+// the slice the criterion names (s - 1, or the keyframe) next: a chain of walks.
+constexpr st::Interval kDeltaMarker{2.0f, 2.0f};
+
+uint64_t morton2(uint64_t x, uint64_t y) {
+  uint64_t r = 0;
+  for (uint32_t b = 0; b < 32; ++b) r |= ((x >> b) & 1u) << (2 * b) | ((y >> b) & 1u) << (2 * b + 1);
+  return r;
+}
+
+nlohmann::json slice_delta_measure(const std::vector<st::IntervalTile>& all, const st::moct::Geometry& g, uint32_t K,
+                                   const std::vector<uint32_t>& keyframe_every) {
+  const uint32_t a = g.xy_bits(K), m = g.n - a, j = g.k - g.w_bits(K);
+  const uint64_t cs = uint64_t(1) << m, W = uint64_t(1) << j, cells_x = uint64_t(1) << a, side = uint64_t(1) << g.n;
+  const uint64_t T = cs * cs, groups = (all.size() + W - 1) / W;
+  std::vector<DeltaVariant> vars;
+  for (uint32_t N : keyframe_every) {
+    N = uint32_t(std::min<uint64_t>(std::max<uint32_t>(N, 2), W));
+    for (int crit = 0; crit < 6; ++crit)
+      vars.push_back({std::string(kDeltaCriterion[crit]) + " N=" + std::to_string(N), crit, N});
+  }
+  uint64_t base_raw = 0, base_stored = 0, base_max_raw = 0, cells = 0, slices_total = 0;
+  double base_s = 0;
+  std::vector<uint32_t> morton(T);
+  for (uint64_t y = 0; y < cs; ++y)
+    for (uint64_t x = 0; x < cs; ++x) morton[y * cs + x] = uint32_t(morton2(x, y));
+  auto time_of = [](Clock::time_point t0) { return since(t0); };
+  for (uint64_t cy = 0; cy < cells_x; ++cy)
+    for (uint64_t cx = 0; cx < cells_x; ++cx)
+      for (uint64_t cw = 0; cw < groups; ++cw) {
+        std::vector<st::IntervalTile> S;
+        float lo = st::kLitDepth, hi = st::kLitDepth;
+        for (uint64_t s = cw * W; s < std::min<uint64_t>(all.size(), (cw + 1) * W); ++s) {
+          st::IntervalTile t;
+          t.level = m;
+          t.width = t.height = uint32_t(cs);
+          t.data.resize(T);
+          for (uint64_t ty = 0; ty < cs; ++ty)
+            for (uint64_t tx = 0; tx < cs; ++tx) {
+              const st::Interval iv = all[s].data[(cy * cs + ty) * side + cx * cs + tx];
+              t.data[ty * cs + tx] = iv;
+              lo = std::min(lo, iv.lo), hi = std::max(hi, iv.hi);
+            }
+          S.push_back(std::move(t));
+        }
+        const st::Interval wild{lo, hi};
+        ++cells, slices_total += S.size();
+        auto t0 = Clock::now();
+        const std::vector<uint8_t> base = st::group_slice_tiles(st::encode_slice_tiles(S, m, j));
+        base_raw += base.size(), base_max_raw = std::max<uint64_t>(base_max_raw, base.size());
+        base_stored += st::zlib_compress(base, 6).size();
+        base_s += time_of(t0);
+        for (DeltaVariant& v : vars) {
+          t0 = Clock::now();
+          std::vector<st::IntervalTile> D = S;
+          const bool marked = v.crit >= 3;  // unchanged texels marked in the tile, no change columns
+          const int crit = v.crit % 3;
+          const uint64_t bpt = (v.N - 1 + 7) / 8;  // change-column bytes a texel, per keyframe group
+          const uint64_t key_groups = (S.size() + v.N - 1) / v.N;
+          std::vector<uint8_t> cols(marked ? 0 : key_groups * T * bpt, 0);
+          const uint64_t bmp = (T + 7) / 8;  // one bitmap a non-key slice, Morton order
+          std::vector<uint8_t> planar(marked ? 0 : (S.size() - key_groups) * bmp, 0);
+          for (uint64_t t = 0; t < T; ++t) {
+            uint64_t run = 0;  // the slice whose tile answers the current run
+            st::Interval R = S[0].data[t];
+            auto close_run = [&] { D[run].data[t] = R; };
+            for (uint64_t s = 0; s < S.size(); ++s) {
+              const st::Interval iv = S[s].data[t];
+              const uint64_t key = s - s % v.N;
+              bool same;
+              if (s == key) same = false;
+              else if (crit == 0) same = iv == S[s - 1].data[t];
+              else if (crit == 2) same = iv == S[key].data[t];
+              else same = std::max(R.lo, iv.lo) <= std::min(R.hi, iv.hi);
+              if (!same) {
+                if (crit == 1) close_run();
+                run = s, R = iv;
+                if (s != key) {
+                  const uint64_t bit = s - key - 1;
+                  if (!marked) {
+                    cols[((key / v.N) * T + morton[t]) * bpt + bit / 8] |= uint8_t(1u << (bit % 8));
+                    planar[(s - s / v.N - 1) * bmp + morton[t] / 8] |= uint8_t(1u << (morton[t] % 8));
+                  }
+                  ++v.changed;
+                }
+              } else {
+                if (crit == 1) R = {std::max(R.lo, iv.lo), std::min(R.hi, iv.hi)};
+                D[s].data[t] = marked ? kDeltaMarker : wild;
+              }
+              v.texels += s != key;
+              if (s != key && iv.lo != st::kLitDepth) ++v.hit, v.hit_changed += !same;
+            }
+            if (crit == 1) close_run();
+            // Check the construction: what a lookup of (t, s) reaches lies in S[s]'s interval.
+            for (uint64_t s = 0; s < S.size(); ++s) {
+              const uint64_t key = s - s % v.N;
+              uint64_t r = s;
+              if (marked) {
+                while (r != key && D[r].data[t] == kDeltaMarker) r = crit == 2 ? key : r - 1;
+              } else if (crit == 2) {
+                const uint64_t bit = s - key - 1;
+                if (s != key && !(cols[((key / v.N) * T + morton[t]) * bpt + bit / 8] >> (bit % 8) & 1u)) r = key;
+              } else {
+                while (r != key) {
+                  const uint64_t bit = r - key - 1;
+                  if (cols[((key / v.N) * T + morton[t]) * bpt + bit / 8] >> (bit % 8) & 1u) break;
+                  --r;
+                }
+              }
+              const st::Interval got = D[r].data[t], want = S[s].data[t];
+              if (!(want.lo <= got.lo && got.hi <= want.hi))
+                throw st::Error("slice delta " + v.name + ": texel " + std::to_string(t) + " slice " + std::to_string(s) +
+                                " resolves to slice " + std::to_string(r) + " outside its interval");
+            }
+          }
+          const std::vector<uint8_t> tiles = st::group_slice_tiles(st::encode_slice_tiles(D, m, j));
+          std::vector<uint8_t> raw = tiles;
+          raw.insert(raw.end(), cols.begin(), cols.end());
+          v.raw += raw.size(), v.max_raw = std::max<uint64_t>(v.max_raw, raw.size());
+          v.stored += st::zlib_compress(raw, 6).size();
+          v.tiles_stored += st::zlib_compress(tiles, 6).size();
+          v.cols_stored += cols.empty() ? 0 : st::zlib_compress(cols, 6).size();
+          if (!marked) {
+            std::vector<uint8_t> alt = tiles;
+            alt.insert(alt.end(), planar.begin(), planar.end());
+            v.planar_stored += st::zlib_compress(alt, 6).size();
+            v.planar_alone += st::zlib_compress(planar, 6).size();
+            // An adaptive binary model of the bits, reset per cell: context = the left, upper
+            // and upper-left bits of the same slice and the same texel's bit one slice earlier
+            // (0 at a keyframe's first follower); KT counts; the ideal code length.
+            auto bit = [&](uint64_t idx, uint64_t x, uint64_t y) {
+              const uint32_t mo = morton[y * cs + x];
+              return uint32_t(planar[idx * bmp + mo / 8] >> (mo % 8) & 1u);
+            };
+            std::array<std::array<double, 2>, 16> cnt{};
+            double bits = 0;
+            for (uint64_t s = 0; s < S.size(); ++s) {
+              if (s % v.N == 0) continue;
+              const uint64_t idx = s - s / v.N - 1;
+              const bool first = s % v.N == 1;
+              for (uint64_t y = 0; y < cs; ++y)
+                for (uint64_t x = 0; x < cs; ++x) {
+                  const uint32_t c = (x ? bit(idx, x - 1, y) : 0u) | (y ? bit(idx, x, y - 1) : 0u) << 1 |
+                                     (x && y ? bit(idx, x - 1, y - 1) : 0u) << 2 | (first ? 0u : bit(idx - 1, x, y)) << 3;
+                  const uint32_t b = bit(idx, x, y);
+                  bits -= std::log2((cnt[c][b] + 0.5) / (cnt[c][0] + cnt[c][1] + 1.0));
+                  cnt[c][b] += 1;
+                }
+            }
+            v.ctx_bits += std::ceil(bits / 8.0) * 8.0;
+          }
+          v.seconds += time_of(t0);
+        }
+      }
+  std::printf("  delta slices over every level-K cell (K = %u: %llu cells of %llu^2 texels x %llu slices; no plane tiles either "
+              "side; one zlib stream a cell):\n",
+              K, (unsigned long long)cells, (unsigned long long)cs, (unsigned long long)W);
+  std::printf("  | form | changed texels | of those that hit | raw | max cell raw | stored | tiles alone | change columns alone | / base | stored, bitmaps a slice | bitmaps alone | / base | bits, context model (estimate) | tiles + that / base | encode s |\n");
+  std::printf("  | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |\n");
+  std::printf("  | base: each slice its own tile | | | %llu | %llu | %llu | | | 1.000 | | | | | | %.1f |\n", (unsigned long long)base_raw,
+              (unsigned long long)base_max_raw, (unsigned long long)base_stored, base_s);
+  nlohmann::json out = {{"K", K}, {"cells", cells}, {"cell_side", cs}, {"cell_slices", W},
+                        {"base", {{"raw", base_raw}, {"stored", base_stored}, {"max_cell_raw", base_max_raw}, {"seconds", base_s}}}};
+  nlohmann::json vj = nlohmann::json::array();
+  for (const DeltaVariant& v : vars) {
+    const double share = v.texels ? double(v.changed) / double(v.texels) : 0.0;
+    const double hit_share = v.hit ? double(v.hit_changed) / double(v.hit) : 0.0;
+    const double ctx_bytes = v.ctx_bits / 8.0;
+    std::printf("  | %s | %.1f%% | %.1f%% | %llu | %llu | %llu | %llu | %llu | %.3f | %llu | %llu | %.3f | %.0f | %.3f | %.1f |\n",
+                v.name.c_str(),
+                100.0 * share,
+                100.0 * hit_share,
+                (unsigned long long)v.raw, (unsigned long long)v.max_raw, (unsigned long long)v.stored,
+                (unsigned long long)v.tiles_stored, (unsigned long long)v.cols_stored,
+                double(v.stored) / double(std::max<uint64_t>(base_stored, 1)), (unsigned long long)v.planar_stored,
+                (unsigned long long)v.planar_alone, double(v.planar_stored) / double(std::max<uint64_t>(base_stored, 1)), ctx_bytes,
+                (double(v.tiles_stored) + ctx_bytes) / double(std::max<uint64_t>(base_stored, 1)), v.seconds);
+    vj.push_back({{"form", v.name}, {"criterion", kDeltaCriterion[v.crit]}, {"keyframe_every", v.N},
+                  {"changed_share", share}, {"hit_texels", v.hit}, {"hit_changed_share", hit_share}, {"raw", v.raw}, {"max_cell_raw", v.max_raw}, {"stored", v.stored},
+                  {"tiles_alone", v.tiles_stored}, {"columns_alone", v.cols_stored},
+                  {"stored_with_bitmaps", v.planar_stored}, {"bitmaps_alone", v.planar_alone},
+                  {"bits_context_model_bytes", ctx_bytes},
+                  {"over_base", double(v.stored) / double(std::max<uint64_t>(base_stored, 1))}, {"seconds", v.seconds}});
+  }
+  out["variants"] = vj;
+  std::fflush(stdout);
+  return out;
+}
+
 nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_dir, bool bytes_only,
                         const std::string& dump_dir, bool adaptive, bool split_only, std::vector<int> split_shifts,
-                        bool own_frames) {
+                        bool own_frames, const std::vector<uint32_t>& delta, bool delta_only) {
   std::printf("\n== %s: %s, %s, %u^2 per slice\n", c.name.c_str(), c.scene.c_str(), c.light.c_str(), 1u << level);
   std::fflush(stdout);
   const st::Scene scene = st::load_scene(c.scene);
@@ -486,7 +717,14 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
   std::vector<SliceRow> rows;
   // The reference height "above the ground" counts from: the ground frame's plane, or the box's bottom.
   const double ground_y = std::isnan(set.spec.ground) ? scene.bounds().lo.y : set.spec.ground;
+  std::vector<st::IntervalTile> keep(delta.empty() ? 0 : n);  // every slice, for --slice-delta
   st::trace_stack_to_spill(scene, set, spill, nullptr, {}, [&](uint32_t w, const st::IntervalTile& tile) {
+    if (!delta.empty()) keep[w] = tile;
+    if (delta_only) {
+      std::printf("  slice %u/%u (%.0f s)\r", w + 1, n, since(t0));
+      std::fflush(stdout);
+      return;
+    }
     const st::Hierarchy h = st::build_hierarchy(tile);
     SliceRow row;
     row.azimuth = set.samples[w].spec().azimuth_deg, row.elevation = set.samples[w].spec().elevation_deg;
@@ -614,6 +852,16 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
   std::printf("\n");
   prev_tile = {};
   const double trace_s = since(t0) - pack_s - cells_s;
+  nlohmann::json delta_json;
+  if (!delta.empty()) {
+    delta_json = slice_delta_measure(keep, g, K, delta);
+    keep = {};
+    if (delta_only)
+      return {{"case", c.name}, {"resolution", 1u << level}, {"slices", n}, {"separate_dagmh_packs_bytes", 0},
+              {"stack_pack_bytes", 0}, {"stack_over_separate", 0.0}, {"stack_pack_smaller_bytes", 0},
+              {"stack_pack_smaller_over_separate", 0.0}, {"stack_pack_split_bytes", 0}, {"stack_pack_split_over_separate", 0.0},
+              {"slice_delta", delta_json}, {"trace_s", trace_s}, {"peak_rss_mib", peak_rss_mib()}};
+  }
 
   // The stack pack and its tiles by role; the per-cell choice.
   t0 = Clock::now();
@@ -1014,6 +1262,7 @@ nlohmann::json run_case(const Case& c, uint32_t level, const std::string& spill_
           {"stack_pack_split_tiles", split_tiles},
           {"stack_pack_split_cells", split_cells},
           {"split_runs", split_runs},
+          {"slice_delta", delta_json},
           {"adaptive_estimate_bytes", adaptive_bytes},
           {"adaptive_estimate_tiles", adaptive_tiles},
           {"adaptive_estimate_split_cells", adaptive_split},
@@ -1051,6 +1300,8 @@ int main(int argc, char** argv) {
     uint32_t level = 12, samples = 32, area_samples = 64;
     bool bytes_only = false, adaptive = false, split_only = false, no_planes = false, own_frames = false;
     std::vector<int> split_shifts{0};
+    std::vector<uint32_t> delta;
+    bool delta_only = false;
     std::string dump_dir;
     std::string which = "all", json_path = "build/bench_stack_slices.json", spill_dir = "/tmp";
     st::bench::Options opt("bench_stack_slices", "Where a shadow-map stack's bytes go, against the same samples as separate DAG-MH packs");
@@ -1073,6 +1324,15 @@ int main(int argc, char** argv) {
                   at = end + 1;
                 }
               }, "Write the split pack at these shifts of K (comma-separated, e.g. 0,-1)")
+        .with("--slice-delta", [&](const std::string& v) {  // keyframe spacings, e.g. 4,8,32
+                delta.clear();
+                for (size_t at = 0; at <= v.size();) {
+                  const size_t end = std::min(v.find(',', at), v.size());
+                  delta.push_back(uint32_t(std::stoul(v.substr(at, end - at))));
+                  at = end + 1;
+                }
+              }, "Measure delta slices (a keyframe every N slices of a cell; comma-separated N)")
+        .flag("--delta-only", delta_only, "With --slice-delta: trace and measure the delta slices only")
         .value("--dump-tiles", dump_dir, "Write the per-cell pack's raw tiles to DIR/<cell>.bin");
     opt.parse(argc, argv);
     g_planes = !no_planes;
@@ -1091,7 +1351,7 @@ int main(int argc, char** argv) {
     if (cases.empty()) throw st::Error("--case: expected city, engine, hairball, demo or all");
     nlohmann::json out = nlohmann::json::array();
     for (const Case& c : cases) {
-      out.push_back(run_case(c, level, spill_dir, bytes_only, dump_dir, adaptive, split_only, split_shifts, own_frames));
+      out.push_back(run_case(c, level, spill_dir, bytes_only, dump_dir, adaptive, split_only, split_shifts, own_frames, delta, delta_only && !delta.empty()));
       std::ofstream(json_path) << out.dump(2) << "\n";  // after each case: long runs keep what finished
     }
     std::printf("\n| case | N | separate DAG-MH packs | octree stack pack | / separate | per-cell pack, uniform cut | / "
