@@ -601,7 +601,8 @@ namespace {
 // Labels as the packed form stores them smallest (tiles/core/plane_pack.hpp, STPL): a
 // texel that several palette planes answer may take any of them. For each labelled block
 // (after the merge and rounding, with the final planes; every texel checked with the
-// decoder's function): the fewest of its palette planes that answer every texel (any
+// decoder's function): its palette ordered by the texels each plane answers, most first;
+// then the fewest of its palette planes that answer every texel (any
 // subset, smallest first), and of those subsets and the labellings each prediction mode
 // gives (none: the lowest entry answering; least, greatest: the plane the mode predicts
 // where it answers, else the lowest), the one whose labels the best mode leaves the fewest
@@ -631,6 +632,25 @@ void relabel_blocks(PlaneSplit& out, uint32_t d, std::span<const float> lo, std:
     if (!ok) {  // not what the cover gives: kept as it is
       kept.push_back(std::move(lb));
       continue;
+    }
+    {  // the palette in order of the texels each plane answers, most first (then the lowest
+       // entries, the ones the labels take where nothing predicts, are the commonest)
+      uint32_t order[kWidePalette], count[kWidePalette] = {};
+      for (uint32_t e = 0; e < n; ++e) {
+        order[e] = e;
+        for (uint32_t i = 0; i < 64; ++i) count[e] += ans[i] >> e & 1u;
+      }
+      std::stable_sort(order, order + n, [&](uint32_t x, uint32_t y) { return count[x] > count[y]; });
+      std::vector<Plane> palette(n);
+      int64_t v[kWidePalette][64];
+      for (uint32_t e = 0; e < n; ++e) palette[e] = lb.palette[order[e]], std::copy_n(val[order[e]], 64, v[e]);
+      for (uint32_t i = 0; i < 64; ++i) {
+        uint32_t a = 0;
+        for (uint32_t e = 0; e < n; ++e) a |= (ans[i] >> order[e] & 1u) << e;
+        ans[i] = a;
+      }
+      lb.palette = std::move(palette);
+      for (uint32_t e = 0; e < n; ++e) std::copy_n(v[e], 64, val[e]);
     }
     uint32_t k = n + 1;
     for (uint32_t set = 1; set < (1u << n); ++set) {
