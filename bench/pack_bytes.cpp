@@ -139,7 +139,7 @@ nlohmann::json measure(const std::string& path) {
   // and packed (plane_pack.hpp, STPL, as the pack stores them with predicted_plane_labels):
   // the table's, the records' and the labelled blocks' own marginal shares of each.
   uint64_t plane_tiles = 0, planes = 0, table = 0, labelled = 0, plane_texels = 0, plane_raw = 0, plane_stored = 0;
-  uint64_t packed_stored = 0, table_stored = 0, records_stored = 0, labels_stored = 0, packed_table_stored = 0;
+  uint64_t table_variant_stored[4] = {}; int64_t mtf_saved = 0; uint64_t mtf_longer = 0; uint64_t packed_stored = 0, table_stored = 0, records_stored = 0, labels_stored = 0, packed_table_stored = 0;
   Part packed_parts[5] = {{"kinds"}, {"indices"}, {"palettes"}, {"palette planes"}, {"labels"}};
   auto without = [](std::span<const uint8_t> b, size_t from, size_t to) {
     std::vector<uint8_t> out(b.begin(), b.begin() + long(from));
@@ -297,6 +297,86 @@ nlohmann::json measure(const std::string& path) {
     const uint64_t packed_whole = st::zlib_compress(packed, 6).size();
     packed_stored += packed_whole - inner;
     packed_table_stored += packed_whole - without(packed, t_at, r_at);
+    {  // table transforms (offline measurement): 0 transposed, 1 delta prev + transposed, 2 first-use order, a at corner
+      const uint32_t T = v.table_count;
+      std::vector<uint64_t> first(T, ~uint64_t(0));
+      for (uint32_t i = 0; i < v.plane_count; ++i) {
+        const uint8_t* r = v.records.data() + 8 * size_t(i);
+        const uint64_t start = st::load_le<uint32_t>(r);
+        const uint32_t idx = st::load_le<uint16_t>(r + 6);
+        if (r[5] == st::planes::kKindPlane) {
+          first[idx] = std::min(first[idx], start);
+        } else {
+          const uint8_t* l = v.labels.data() + size_t(idx) * 24;
+          const uint32_t n = r[5] == st::planes::kKindWide ? 8 : 4;
+          for (uint32_t k = 0; k < n; ++k) { const uint32_t e = st::load_le<uint16_t>(l + 2 * k); if (e < T) first[e] = std::min(first[e], start); }
+        }
+      }
+      auto tv = [&](uint32_t i, int f) { return st::load_le<uint64_t>(v.table.data() + 24 * size_t(i) + 8 * size_t(f)); };
+      auto zz = [](uint64_t d) { return (d << 1) ^ uint64_t(int64_t(d) >> 63); };
+      for (int variant = 0; variant < 4; ++variant) {
+        std::vector<uint32_t> order(T);
+        for (uint32_t i = 0; i < T; ++i) order[i] = i;
+        if (variant >= 2) std::stable_sort(order.begin(), order.end(), [&](uint32_t x, uint32_t y) { return first[x] < first[y]; });
+        std::vector<uint64_t> vals(3 * size_t(T));
+        for (uint32_t k = 0; k < T; ++k) {
+          const uint32_t p = order[k];
+          const uint64_t st0 = first[p] == ~uint64_t(0) ? 0 : first[p];
+          const uint64_t x0 = st::morton_compact(st0), y0 = st::morton_compact(st0 >> 1);
+          uint64_t pa = 0, pb = 0, pc = 0;
+          if (k > 0 && variant >= 1) { const uint32_t q = order[k - 1]; pa = tv(q, 0), pb = tv(q, 1), pc = tv(q, 2); }
+          uint64_t a = tv(p, 0), b = tv(p, 1), c = tv(p, 2);
+          if (variant == 3) { a = a + b * x0 + c * y0; pa = pa + pb * x0 + pc * y0; }
+          vals[3 * k] = variant == 0 ? a : zz(a - pa);
+          vals[3 * k + 1] = variant == 0 ? b : zz(b - pb);
+          vals[3 * k + 2] = variant == 0 ? c : zz(c - pc);
+        }
+        std::vector<uint8_t> alt = packed;
+        for (uint32_t f = 0; f < 3; ++f)
+          for (uint32_t byte = 0; byte < 8; ++byte)
+            for (uint32_t k = 0; k < T; ++k) alt[t_at + (size_t(f) * 8 + byte) * T + k] = uint8_t(vals[3 * k + f] >> (8 * byte));
+        table_variant_stored[variant] += packed_whole - st::zlib_compress(alt, 6).size();
+      }
+    }
+    {  // plane references as "next new" / move-to-front ranks (offline measurement)
+      std::vector<uint32_t> mtf;
+      uint32_t next_new = 0;
+      std::vector<uint8_t> idx_codes, pal_codes;
+      auto code = [&](uint32_t e, std::vector<uint8_t>& out) {
+        if (e == next_new) { out.push_back(0); ++next_new; mtf.insert(mtf.begin(), e); return; }
+        auto it = std::find(mtf.begin(), mtf.end(), e);
+        const size_t rank = size_t(it - mtf.begin());
+        if (rank < 254) out.push_back(uint8_t(1 + rank)); else { out.push_back(255); out.push_back(uint8_t(e)); out.push_back(uint8_t(e >> 8)); }
+        if (it != mtf.end()) mtf.erase(it);
+        mtf.insert(mtf.begin(), e);
+      };
+      for (uint32_t i = 0; i < v.plane_count; ++i) {
+        const uint8_t* r = v.records.data() + 8 * size_t(i);
+        const uint32_t idx = st::load_le<uint16_t>(r + 6);
+        if (r[5] == st::planes::kKindPlane) { code(idx, idx_codes); continue; }
+        const uint8_t* l = v.labels.data() + size_t(idx) * 24;
+        const uint32_t n = r[5] == st::planes::kKindWide ? 8 : 4;
+        uint32_t seen[8]; uint32_t ns = 0;
+        for (uint32_t k = 0; k < n; ++k) {
+          const uint32_t e = st::load_le<uint16_t>(l + 2 * k);
+          if (n == 4) { bool dup = false; for (uint32_t d = 0; d < ns; ++d) dup |= seen[d] == e; if (dup) continue; seen[ns++] = e; }
+          code(e, pal_codes);
+        }
+      }
+      std::vector<uint8_t> alt = packed;
+      const size_t i_at = r_at + pp.kinds, end_planes = i_at + pp.indices + pp.palettes + pp.planes;
+      std::vector<uint8_t> mid(alt.begin() + long(i_at + pp.indices), alt.begin() + long(i_at + pp.indices + pp.palettes));
+      std::vector<uint8_t> seq = idx_codes;
+      seq.insert(seq.end(), mid.begin(), mid.end());
+      seq.insert(seq.end(), pal_codes.begin(), pal_codes.end());
+      if (seq.size() <= end_planes - i_at) {
+        std::copy(seq.begin(), seq.end(), alt.begin() + long(i_at));
+        std::fill(alt.begin() + long(i_at + seq.size()), alt.begin() + long(end_planes), uint8_t(0));
+        mtf_saved += int64_t(packed_whole) - int64_t(st::zlib_compress(alt, 6).size());
+      } else {
+        ++mtf_longer;
+      }
+    }
     size_t at = r_at;
     const size_t sizes[5] = {pp.kinds, pp.indices, pp.palettes, pp.planes, pp.labels};
     for (int k = 0; k < 5; ++k) {
@@ -313,6 +393,9 @@ nlohmann::json measure(const std::string& path) {
     std::printf("    STPN marginal stored: table %llu, block records %llu, labelled blocks %llu; packed (STPL: labels predicted, implied inner header fields left out) planes section %llu (table %llu)\n",
                 (unsigned long long)table_stored, (unsigned long long)records_stored, (unsigned long long)labels_stored,
                 (unsigned long long)packed_stored, (unsigned long long)packed_table_stored);
+    std::printf("    table variants (stored bytes saved): transposed %lld, delta+transposed %lld, first-use order %lld, a at corner %lld\n",
+                (long long)table_variant_stored[0], (long long)table_variant_stored[1], (long long)table_variant_stored[2], (long long)table_variant_stored[3]);
+    std::printf("    references as next-new/MTF ranks: stored bytes saved %lld (%llu tiles longer)\n", (long long)mtf_saved, (unsigned long long)mtf_longer);
     std::printf("    packed parts raw / marginal stored:");
     for (const Part& p : packed_parts)
       std::printf(" %s %llu / %llu;", p.name, (unsigned long long)p.raw, (unsigned long long)p.stored);

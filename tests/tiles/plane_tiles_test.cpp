@@ -446,6 +446,7 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
   const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), scene.bounds());
   const uint32_t depth = 7, level = 9;
   uint64_t plane_texels = 0, labelled = 0, table_merged = 0, table_unmerged = 0, values = 0, values_ungrown = 0, values_narrow = 0;
+  uint64_t fewest_checked = 0;
   uint64_t zeros_rounded = 0, zeros_unrounded = 0, z_rounded = 0, z_unrounded = 0, z_stpn = 0, z_packed = 0;
   // Trailing zero bits of a plane tile's table entries (a, b, c), and its table's zlib size.
   auto table_of = [](const std::vector<uint8_t>& tile, uint64_t& zeros, uint64_t& z) {
@@ -472,6 +473,31 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
     if (s.planes.empty() && s.labelled.empty()) continue;
     labelled += s.labelled.size();
     EXPECT_LT(s.pruned.valued_count(), t.h.valued_count());
+    // A labelled block keeps the fewest of its planes that answer all its texels (the labels
+    // chosen after the cover, for the packed form): at least two, each used, none of them
+    // answered by the others.
+    for (const LabelBlock& lb : s.labelled) {
+      const uint32_t x0 = morton_compact(lb.start), y0 = morton_compact(uint64_t(lb.start) >> 1), n = uint32_t(lb.palette.size());
+      ASSERT_GE(n, 2u);
+      uint32_t used = 0, need[64];
+      for (uint32_t i = 0; i < 64; ++i) {
+        used |= 1u << lb.label[i];
+        const Interval iv = t.truth.at(x0 + i % 8, y0 + i / 8);
+        need[i] = 0;
+        for (uint32_t e = 0; e < n; ++e) {
+          const float v = lb.palette[e].depth(i % 8, i / 8);
+          need[i] |= uint32_t(iv.lo <= v && v <= iv.hi) << e;
+        }
+      }
+      EXPECT_EQ(used, (1u << n) - 1) << "every palette plane is used";
+      for (uint32_t set = 1; set + 1 < (1u << n); ++set) {
+        if (std::popcount(set) >= int(n)) continue;
+        bool covers = true;
+        for (uint32_t i = 0; i < 64 && covers; ++i) covers = (need[i] & set) != 0;
+        EXPECT_FALSE(covers) << "block " << lb.start << ": " << std::popcount(set) << " of its " << n << " planes answer every texel";
+      }
+      fewest_checked += n;
+    }
     {
       // Merging the planes of one surface changes planes, never blocks: the same blocks,
       // fewer table entries (and every texel still exact: checked below on the merged split).
@@ -535,6 +561,7 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
   }
   EXPECT_GT(plane_texels, 0u) << "the engine's flat faces seen at a slant are planes";
   EXPECT_GT(labelled, 0u) << "blocks across the engine's edges are labelled";
+  EXPECT_GT(fewest_checked, 0u);
   EXPECT_LT(values, values_ungrown) << "grown labels leave fewer values to the inner trees";
   EXPECT_LT(values, values_narrow) << "wide labelled blocks leave fewer values to the inner trees";
   EXPECT_LT(table_merged, table_unmerged) << "planes of one surface found on separate blocks are merged";

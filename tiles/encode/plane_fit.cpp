@@ -596,6 +596,122 @@ void round_planes(PlaneSplit& out, uint32_t d, std::span<const float> lo, std::s
 
 }  // namespace
 
+namespace {
+
+// Labels as the packed form stores them smallest (tiles/core/plane_pack.hpp, STPL): a
+// texel that several palette planes answer may take any of them. For each labelled block
+// (after the merge and rounding, with the final planes; every texel checked with the
+// decoder's function): its palette ordered by the texels each plane answers, most first;
+// then the fewest of its palette planes that answer every texel (any
+// subset, smallest first), and of those subsets and the labellings each prediction mode
+// gives (none: the lowest entry answering; least, greatest: the plane the mode predicts
+// where it answers, else the lowest), the one whose labels the best mode leaves the fewest
+// texels unpredicted (the first such: deterministic). The palette keeps the planes used, in
+// order; a block left with one plane becomes a plane block, one left with at most 4 a
+// labelled block of 2-bit labels. The cover's search is unchanged.
+void relabel_blocks(PlaneSplit& out, uint32_t d, std::span<const float> lo, std::span<const float> hi) {
+  const uint32_t side = 1u << d;
+  std::vector<LabelBlock> kept;
+  kept.reserve(out.labelled.size());
+  for (LabelBlock& lb : out.labelled) {
+    const uint32_t n = uint32_t(lb.palette.size());
+    const uint32_t x0 = morton_compact(lb.start), y0 = morton_compact(uint64_t(lb.start) >> 1);
+    uint32_t ans[64];
+    int64_t val[kWidePalette][64];
+    bool ok = n >= 1 && n <= kWidePalette;
+    for (uint32_t i = 0; i < 64 && ok; ++i) {
+      const size_t t = size_t(y0 + i / 8) * side + x0 + i % 8;
+      ans[i] = 0;
+      for (uint32_t e = 0; e < n; ++e) {
+        val[e][i] = lb.palette[e].fixed(i % 8, i / 8);
+        const float v = plane_fixed_to_float(val[e][i]);
+        if (lo[t] <= v && v <= hi[t]) ans[i] |= 1u << e;
+      }
+      ok = lb.label[i] < n && (ans[i] >> lb.label[i] & 1u);
+    }
+    if (!ok) {  // not what the cover gives: kept as it is
+      kept.push_back(std::move(lb));
+      continue;
+    }
+    {  // the palette in order of the texels each plane answers, most first (then the lowest
+       // entries, the ones the labels take where nothing predicts, are the commonest)
+      uint32_t order[kWidePalette], count[kWidePalette] = {};
+      for (uint32_t e = 0; e < n; ++e) {
+        order[e] = e;
+        for (uint32_t i = 0; i < 64; ++i) count[e] += ans[i] >> e & 1u;
+      }
+      std::stable_sort(order, order + n, [&](uint32_t x, uint32_t y) { return count[x] > count[y]; });
+      std::vector<Plane> palette(n);
+      int64_t v[kWidePalette][64];
+      for (uint32_t e = 0; e < n; ++e) palette[e] = lb.palette[order[e]], std::copy_n(val[order[e]], 64, v[e]);
+      for (uint32_t i = 0; i < 64; ++i) {
+        uint32_t a = 0;
+        for (uint32_t e = 0; e < n; ++e) a |= (ans[i] >> order[e] & 1u) << e;
+        ans[i] = a;
+      }
+      lb.palette = std::move(palette);
+      for (uint32_t e = 0; e < n; ++e) std::copy_n(v[e], 64, val[e]);
+    }
+    uint32_t k = n + 1;
+    for (uint32_t set = 1; set < (1u << n); ++set) {
+      bool covers = true;
+      for (uint32_t i = 0; i < 64 && covers; ++i) covers = (ans[i] & set) != 0;
+      if (covers) k = std::min(k, uint32_t(std::popcount(set)));
+    }
+    uint32_t best_set = 0, best_misses = 65;
+    uint8_t best[64] = {};
+    for (uint32_t set = 1; set < (1u << n); ++set) {
+      if (uint32_t(std::popcount(set)) != k) continue;
+      bool covers = true;
+      for (uint32_t i = 0; i < 64 && covers; ++i) covers = (ans[i] & set) != 0;
+      if (!covers) continue;
+      const uint32_t low = uint32_t(std::countr_zero(set));
+      uint8_t pred[3][64];  // each mode's prediction over `set` (ties: the lower entry)
+      for (uint32_t i = 0; i < 64; ++i) {
+        pred[0][i] = uint8_t(low);
+        pred[1][i] = pred[2][i] = uint8_t(low);
+        for (uint32_t e = low + 1; e < n; ++e) {
+          if (!(set >> e & 1u)) continue;
+          if (val[e][i] < val[pred[1][i]][i]) pred[1][i] = uint8_t(e);
+          if (val[e][i] > val[pred[2][i]][i]) pred[2][i] = uint8_t(e);
+        }
+      }
+      for (uint32_t m = 0; m < 3 && (m == 0 || k <= kPalette); ++m) {
+        uint8_t lab[64];
+        for (uint32_t i = 0; i < 64; ++i)
+          lab[i] = (ans[i] >> pred[m][i] & 1u) ? pred[m][i] : uint8_t(std::countr_zero(ans[i] & set));
+        uint32_t misses = 65;
+        for (uint32_t q = 0; q < 3; ++q) {
+          uint32_t miss = 0;
+          for (uint32_t i = 0; i < 64; ++i) miss += lab[i] != pred[q][i];
+          misses = std::min(misses, miss);
+        }
+        if (k > kPalette) misses = 0;  // wide: no prediction, the lowest entries
+        if (misses < best_misses) {
+          best_misses = misses, best_set = set;
+          std::copy_n(lab, 64, best);
+        }
+      }
+    }
+    uint8_t position[kWidePalette] = {};
+    std::vector<Plane> palette;
+    for (uint32_t e = 0; e < n; ++e)
+      if (best_set >> e & 1u) position[e] = uint8_t(palette.size()), palette.push_back(lb.palette[e]);
+    if (palette.size() == 1) {
+      Plane p = palette[0];
+      p.start = lb.start, p.shift = kLabelShift;
+      out.planes.push_back(p);
+      continue;
+    }
+    lb.palette = std::move(palette);
+    for (uint32_t i = 0; i < 64; ++i) lb.label[i] = position[best[i]];
+    kept.push_back(std::move(lb));
+  }
+  out.labelled = std::move(kept);
+}
+
+}  // namespace
+
 PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
   PlaneSplit out;
   out.pruned = h;
@@ -842,6 +958,7 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
   if (out.planes.empty() && out.labelled.empty()) return out;
   if (o.merge_surfaces) merge_surfaces(out, d, lo, hi);
   if (o.round_planes) round_planes(out, d, lo, hi);
+  relabel_blocks(out, d, lo, hi);
   std::sort(out.planes.begin(), out.planes.end(), [](const Plane& a, const Plane& b) { return a.start < b.start; });
   std::sort(out.labelled.begin(), out.labelled.end(),
             [](const LabelBlock& a, const LabelBlock& b) { return a.start < b.start; });
