@@ -7,6 +7,7 @@
 //                [--mode auto|whole|blocked] [--tracer auto|embree] [--spill-dir /tmp]
 //                [--frame ground|ortho|both] [--hair-frame window|translate|both] [--all-2d]
 //                [--oct-merge on|off] [--stack-cells octree|slices|smaller] [--split-cells]
+//                [--profile-soft N]
 //
 // --all-2d (whole mode): every slice also encoded as MMH and DAG-MH, the smaller 2D
 // encodings, so the octree is set against the best of them too ("best 2D" line). Every
@@ -22,6 +23,12 @@
 // default here, the earlier figures), slices, or smaller (what `build` writes by default).
 // --split-cells (blocked mode): a cell over 64 KiB is split below K (what `build` does by
 // default) rather than the whole cut moving deeper.
+//
+// --profile-soft N (blocked mode): after the timings, N more passes of the single soft
+// lookups over the same points, so that `perf record` over the whole run (minutes of
+// tracing and the cut) catches the lookups: a profile of the soft lookups alone. The
+// blocked rows also time the soft lookup over 32 points cycled ("cache-hot": their tiles'
+// lines stay cached), the compute floor beside the cold figure.
 //
 // --frame: the sun paths' frame (light_set.hpp "Frames"): ground (the default, the
 // oblique ground-aligned frame), ortho (an orthographic box per sample), or both (each

@@ -193,9 +193,9 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
   //      that level;
   //   5. rounds of one step of every DAG-MH walk (View::descend's own step), every MMH
   //      walk (MmhWalk) and every octree lane (round r: the lanes forking at level r
-  //      join, every live lane steps from level r), each prefetching the node it goes to;
-  //      then the DAG-MH walks' finish (treelets), their values' chunks, the chunks'
-  //      multiplier bits, and the values.
+  //      join, every live lane steps from level r), each prefetching the node it goes to,
+  //      and in the same rounds, a stage a round, each ended DAG-MH walk's finish
+  //      (treelet), its value's chunk, the chunk's multiplier bits, and the value.
   // Each answer is the sample's own depth(x, y, w, n), bit for bit (tested).
   constexpr uint32_t G = kGather, R = SampleTexels::kRun;
   CellTexel c[G];
@@ -356,15 +356,27 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
   auto descending = [&](uint32_t k) {
     return (cur[k].ref & dagmh::kRefTagMask) == dagmh::kRefInner && cur[k].level < level[k];
   };
-  uint32_t na = 0;
+  // DAG-MH walks past their descent go through three stages, one a round, beside the other
+  // walks' rounds (a walk that ends early has its value's chain in flight while the
+  // octree lanes still step): 1. finish (the treelet, prefetched when the descent ended)
+  // and the value's chunk prefetched; 2. the chunk's multiplier bits prefetched; 3. the
+  // value.
+  uint8_t ending[G], stage[G];
+  uint32_t index[G];
+  uint32_t na = 0, ne = 0;
+  auto end_descent = [&](uint32_t k) {
+    if ((cur[k].ref & dagmh::kRefTagMask) == dagmh::kRefTreelet)
+      __builtin_prefetch(view[k]->treelet_at(cur[k].ref & dagmh::kRefIndexMask));
+    stage[k] = 1, ending[ne++] = uint8_t(k);
+  };
   for (uint32_t k = 0; k < nw; ++k) {  // the starts, each walk's first node on its way
     const uint32_t i = walk_sample[k];
     cur[k] = view[k]->start(level[k], level[k], c[i].lx, c[i].ly);
     if (descending(k)) {
       __builtin_prefetch(view[k]->node_at(cur[k].ref & dagmh::kRefIndexMask));
       active[na++] = uint8_t(k);
-    } else if ((cur[k].ref & dagmh::kRefTagMask) == dagmh::kRefTreelet) {
-      __builtin_prefetch(view[k]->treelet_at(cur[k].ref & dagmh::kRefIndexMask));
+    } else {
+      end_descent(k);
     }
   }
   uint8_t mmh_live[G];
@@ -375,7 +387,7 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
     const uint32_t i = other_sample[k];
     set(i, d[i] <= r.eval->depth(r.xy_level, c[i].lx, c[i].ly));
   };
-  while (na || live || nml || next_fork < n_order) {
+  while (na || ne || live || nml || next_fork < n_order) {
     if (next_other < no) answer_other(next_other++);
     // The octree lanes forking at this level join (every live lane stands at it).
     for (; next_fork < n_order && oct_fork[order[next_fork]] == round; ++next_fork) {
@@ -396,6 +408,22 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
     }
     nml = kept;
     kept = 0;
+    for (uint32_t a = 0; a < ne; ++a) {  // one stage of every DAG-MH walk past its descent
+      const uint32_t k = ending[a];
+      const uint32_t i = walk_sample[k];
+      if (stage[k] == 1) {
+        index[k] = view[k]->finish(cur[k], level[k], c[i].lx, c[i].ly);
+        __builtin_prefetch(view[k]->chunk_at(index[k]));
+      } else if (stage[k] == 2) {
+        if (const uint8_t* bits = view[k]->value_bits_at(index[k])) __builtin_prefetch(bits);
+      } else {
+        set(i, d[i] <= view[k]->value(index[k]));
+        continue;
+      }
+      ++stage[k], ending[kept++] = uint8_t(k);
+    }
+    ne = kept;
+    kept = 0;
     for (uint32_t a = 0; a < na; ++a) {  // one level of every DAG-MH walk that still descends
       const uint32_t k = active[a];
       const uint32_t i = walk_sample[k];
@@ -403,8 +431,8 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
       if (descending(k)) {
         __builtin_prefetch(view[k]->node_at(cur[k].ref & dagmh::kRefIndexMask));
         active[kept++] = uint8_t(k);
-      } else if ((cur[k].ref & dagmh::kRefTagMask) == dagmh::kRefTreelet) {
-        __builtin_prefetch(view[k]->treelet_at(cur[k].ref & dagmh::kRefIndexMask));
+      } else {
+        end_descent(k);
       }
     }
     na = kept;
@@ -424,18 +452,6 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
     ++round;
   }
   while (next_other < no) answer_other(next_other++);
-  uint32_t index[G];
-  for (uint32_t k = 0; k < nw; ++k) {
-    const uint32_t i = walk_sample[k];
-    index[k] = view[k]->finish(cur[k], level[k], c[i].lx, c[i].ly);
-    __builtin_prefetch(view[k]->chunk_at(index[k]));  // the value's chunk, read below
-  }
-  for (uint32_t k = 0; k < nw; ++k)  // then the multiplier bits each chunk points to
-    if (const uint8_t* bits = view[k]->value_bits_at(index[k])) __builtin_prefetch(bits);
-  for (uint32_t k = 0; k < nw; ++k) {
-    const uint32_t i = walk_sample[k];
-    set(i, d[i] <= view[k]->value(index[k]));
-  }
   return lit;
 }
 
