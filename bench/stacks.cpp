@@ -7,6 +7,7 @@
 //                [--mode auto|whole|blocked] [--tracer auto|embree] [--spill-dir /tmp]
 //                [--frame ground|ortho|both] [--hair-frame window|translate|both] [--all-2d]
 //                [--oct-merge on|off] [--stack-cells octree|slices|smaller] [--split-cells]
+//                [--profile-soft N]
 //
 // --all-2d (whole mode): every slice also encoded as MMH and DAG-MH, the smaller 2D
 // encodings, so the octree is set against the best of them too ("best 2D" line). Every
@@ -22,6 +23,12 @@
 // default here, the earlier figures), slices, or smaller (what `build` writes by default).
 // --split-cells (blocked mode): a cell over 64 KiB is split below K (what `build` does by
 // default) rather than the whole cut moving deeper.
+//
+// --profile-soft N (blocked mode): after the timings, N more passes of the single soft
+// lookups over the same points, so that `perf record` over the whole run (minutes of
+// tracing and the cut) catches the lookups: a profile of the soft lookups alone. The
+// blocked rows also time the soft lookup over 32 points cycled ("cache-hot": their tiles'
+// lines stay cached), the compute floor beside the cold figure.
 //
 // --frame: the sun paths' frame (light_set.hpp "Frames"): ground (the default, the
 // oblique ground-aligned frame), ortho (an orthographic box per sample), or both (each
@@ -118,6 +125,7 @@ bool g_oct_merge = false;  // --oct-merge
 st::StackCells g_stack_cells = st::StackCells::octree;  // --stack-cells (blocked mode)
 std::string g_stack_cells_name = "octree";
 bool g_split_cells = false;  // --split-cells (blocked mode): cells over 64 KiB split below K
+size_t g_profile_soft = 0;    // --profile-soft (blocked mode): extra passes of the soft lookups
 
 double peak_rss_mib() {
   rusage ru{};
@@ -614,7 +622,8 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
   float acc = 0;
   const size_t ms = std::max<size_t>(1, m / 8);
   std::vector<float> batch_out(ms);
-  double ns_2d = 0, ns_oct = 0, ns_time = 0, ns_time_def = 0, ns_soft = 0, ns_batch = 0, ns_soft_sep = 0, ns_soft2d = 0;
+  double ns_2d = 0, ns_oct = 0, ns_time = 0, ns_time_def = 0, ns_soft = 0, ns_batch = 0, ns_soft_sep = 0, ns_soft2d = 0,
+         ns_soft_hot = 0;
   // visibility(p, time) as the contract defines it (stack_lookup.hpp): lit() of the two
   // nearest slices blended, or of the one slice at a sample's time.
   auto time_by_definition = [&](const st::Vec3d& p, double time) {
@@ -637,6 +646,11 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
     map.soft_visibility(std::span<const st::Vec3d>(pts.data(), ms), batch_out);
     for (float v : batch_out) acc += v;
   });
+  // The compute floor: the soft lookups over 32 points cycled (their tiles' lines stay in
+  // the caches), against the cold figure above: what the loads cost.
+  std::vector<st::Vec3d> hot;
+  for (size_t i = 0; i < ms; ++i) hot.push_back(pts[i % std::min<size_t>(32, ms)]);
+  timing.add(ns_soft_hot, ms, [&] { for (size_t i = 0; i < ms; ++i) acc += map.soft_visibility(hot[i]); });
   timing.add(ns_soft_sep, ms, [&] {
     for (size_t i = 0; i < ms; ++i) {
       uint32_t lit = 0;
@@ -652,6 +666,10 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
     }
   });
   timing.run(reps);
+  // The soft lookups alone, over and over, for a profiler (perf record): the trace and the
+  // cut take minutes, the timed lookups milliseconds.
+  for (size_t r = 0; r < g_profile_soft; ++r)
+    for (size_t i = 0; i < ms; ++i) acc += map.soft_visibility(pts[i]);
   map.soft_visibility(std::span<const st::Vec3d>(pts.data(), ms), batch_out);
   for (size_t i = 0; i < ms; ++i)
     if (batch_out[i] != map.soft_visibility(pts[i])) throw st::Error("bench: the pack's batched soft lookup differs");
@@ -722,6 +740,7 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
   row("pack time, two lit() (definition)", ns_time_def);
   row("pack soft (all N, shared walk)", ns_soft);
   row("pack soft, batched interleaved", ns_batch);
+  row("pack soft, 32 points (cache-hot)", ns_soft_hot);
   row("pack soft, N lit() lookups", ns_soft_sep);
   row("soft, N 2D lookups", ns_soft2d);
   std::printf("soft per sample: pack %.1f ns, batched %.1f ns (N lit() %.1f ns), 2D %.1f ns\n", ns_soft / n, ns_batch / n,
@@ -760,6 +779,7 @@ nlohmann::json run_case_blocked(const Case& c, uint32_t level, size_t lookups, i
           {"ns_pack_soft", ns_soft},
           {"ns_pack_soft_separate", ns_soft_sep},
           {"ns_pack_soft_batched", ns_batch},
+          {"ns_pack_soft_hot", ns_soft_hot},
           {"soft_share_octree_cells", mix_octree / all_samples},
           {"soft_share_slice_cells", mix_slices / all_samples},
           {"soft_share_constant_cells", mix_constant / all_samples},
@@ -797,6 +817,7 @@ int main(int argc, char** argv) {
         .value("--frame", frame, "The sun paths' frame: ground, ortho or both")
         .flag("--all-2d", g_all_2d, "Whole mode: every slice also encoded as MMH and DAG-MH")
         .flag("--split-cells", g_split_cells, "Blocked mode: a cell over 64 KiB is split below K")
+        .value("--profile-soft", g_profile_soft, "Blocked mode: N more passes of the soft lookups after the timings (for perf)")
         .with("--stack-cells", [&](const std::string& v) { g_stack_cells = st::parse_stack_cells(g_stack_cells_name = v); },
               "Blocked mode: the cells' form: octree, slices or smaller")
         .with("--oct-merge", [&](const std::string& v) {

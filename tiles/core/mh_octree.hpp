@@ -15,8 +15,10 @@
 
 namespace st {
 
-class MhOctree {
+class alignas(64) MhOctree {
  public:
+  // The bytes at the object's start that hold every field a walk reads (see the members).
+  static constexpr size_t kWalkBytes = 128;
   // Validates the whole buffer: header fields, every node reached from the root once (in
   // bounds, no overlap, only the child slots the level's geometry splits, no children at
   // the finest level, each offset naming either a block it claims after its node or a
@@ -143,23 +145,27 @@ class MhOctree {
  private:
   uint32_t word(uint64_t w) const noexcept;
   uint32_t word_inline(uint64_t w) const noexcept { return st::load_le<uint32_t>(tree_ + 4 * w); }
-  std::span<const uint8_t> bytes_;
+  // What a walk reads (along_root, shared_levels, along_step_to, along_value) first, in the
+  // object's first kWalkBytes (the class is aligned to a cache line): a lookup that meets a
+  // cell prefetches those lines of its object only (stack_map.cpp).
   const uint8_t* tree_ = nullptr;
   moct::Geometry geo_{};
-  uint32_t slices_ = 0, node_count_ = 0;
-  bool root_leaf_ = false;
-  uint8_t shift_[moct::kMaxLevels] = {};
-  // Per level l (the step to l + 1): whether it halves x, y / w, the x, y resolution bits
-  // of level l + 1, and the bit of a full-resolution w it reads.
-  bool split_xy_[moct::kMaxLevels] = {}, split_w_[moct::kMaxLevels] = {};
-  uint8_t xy_next_[moct::kMaxLevels] = {}, w_shift_[moct::kMaxLevels] = {};
-  // The same per level for along_step, without branches: the child slot is
+  // Per level l (the step to l + 1), for along_step, without branches: the child slot is
   // (x >> xy_shift & xy_bit) | (y >> xy_shift & xy_bit) << 1 | (w >> w_shift & w_bit) << 2,
   // a bit 0 where the level does not split that axis.
   struct StepBits {
     uint8_t xy_shift = 0, w_shift = 0, xy_bit = 0, w_bit = 0;
   };
   StepBits step_bits_[moct::kMaxLevels] = {};
+  uint8_t shift_[moct::kMaxLevels] = {};
+  bool root_leaf_ = false;
+  // The rest.
+  std::span<const uint8_t> bytes_;
+  uint32_t slices_ = 0, node_count_ = 0;
+  // Per level l (the step to l + 1): whether it halves x, y / w, the x, y resolution bits
+  // of level l + 1, and the bit of a full-resolution w it reads.
+  bool split_xy_[moct::kMaxLevels] = {}, split_w_[moct::kMaxLevels] = {};
+  uint8_t xy_next_[moct::kMaxLevels] = {}, w_shift_[moct::kMaxLevels] = {};
 };
 
 }  // namespace st

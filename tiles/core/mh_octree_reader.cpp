@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <cstddef>
 #include <string>
 #include <vector>
 
@@ -126,6 +127,7 @@ MhOctree MhOctree::open(std::span<const uint8_t> bytes) {
          "version " + std::to_string(version) + (version == 1 ? " (forward offsets only)" : " (no far words)") +
              " is no longer read; this reader reads version 3: rebuild the stack");
   if (version != kVersion) fail("version", kOffVersion, "unsupported version " + std::to_string(version));
+  static_assert(offsetof(MhOctree, root_leaf_) < kWalkBytes && offsetof(MhOctree, step_bits_) < kWalkBytes);
   MhOctree t;
   t.geo_.n = b[kOffXyLevel];
   t.geo_.k = b[kOffWLevel];

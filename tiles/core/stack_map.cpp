@@ -111,11 +111,18 @@ float StackMap::soft_visibility(const Vec3d& p, bool* exact) const {
 
 namespace {
 
-// The cache lines of a tile's reader object (its fields are what a walk reads first).
-template <class T>
-void stack_map_prefetch_object(const T* p) {
+// Room for N objects left unset (no zeroing of a lookup's arrays, a few KiB per call): a
+// slot is assigned before it is read.
+template <class T, size_t N>
+union Uninitialized {
+  Uninitialized() {}
+  T v[N];
+};
+
+// The cache lines of an octree's reader object that a walk reads (MhOctree::kWalkBytes).
+void stack_map_prefetch_walk(const MhOctree* p) {
   const char* b = reinterpret_cast<const char*>(p);
-  for (size_t o = 0; o < sizeof(T); o += 64) __builtin_prefetch(b + o);
+  for (size_t o = 0; o < MhOctree::kWalkBytes; o += 64) __builtin_prefetch(b + o);
 }
 
 // An MMH slice's walk (SliceTiles::RecordKind::mmh) in resumable steps: the evaluator's
@@ -168,52 +175,80 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
   // sample's dependent chain after another's (a day's sun moves a raised receiver's texel
   // across cells from one sample to the next: 2CylinderEngine.glb at 1024^2 x 64 keeps
   // 1.7 samples a cell, so nearly every sample reads a cold tile):
-  //   1. each sample's cell and entry (outside the slice, a constant cell: the value);
-  //   2. the tiles of the distinct cells, in one tiles_ call; each octree's reader object
-  //      and root word prefetched (the ref carries the root: StackTileRef::root);
+  //   1. each sample's cell and entry (outside the slice, a constant cell: the value); a
+  //      sample in the previous sample's cell takes it without the grid's descent;
+  //   2. the tiles of the distinct cells, in one tiles_ call; each octree's walk fields
+  //      (MhOctree::kWalkBytes) and root word prefetched (the ref carries the root:
+  //      StackTileRef::root);
   //   3. per-slice samples: their slice's record (SliceTiles::Record, reached from the
   //      ref's records without the reader object, prefetched); octree samples: a lane
-  //      each, forking from the walk of an earlier sample of its cell at the deepest
-  //      level their paths share (MhOctree::shared_levels: a cell's samples read only the
-  //      nodes where their paths part, as depth_along's walks do);
+  //      each, after the cell's previous octree sample;
   //   4. per-slice samples: the bounds (d <= lo lit, d > hi shadowed exactly as the walk
   //      would say), a constant's value, a DAG-MH walk (skip entry prefetched, then read:
-  //      its start) or an MMH walk (its root word prefetched), another 2D tile (its
-  //      evaluator prefetched; its depth() one per round of step 5);
+  //      its start, after the next step) or an MMH walk (its root word prefetched),
+  //      another 2D tile (its evaluator prefetched; its depth() one per round of step 5);
+  //      octree lanes: each forks from the walk of an earlier sample of its cell at the
+  //      deepest level their paths share (MhOctree::shared_levels: a cell's samples read
+  //      only the nodes where their paths part, as depth_along's walks do), ordered by
+  //      that level;
   //   5. rounds of one step of every DAG-MH walk (View::descend's own step), every MMH
   //      walk (MmhWalk) and every octree lane (round r: the lanes forking at level r
-  //      join, every live lane steps from level r), each prefetching the node it goes to;
-  //      then the DAG-MH walks' finish (treelets), their values' chunks, the chunks'
-  //      multiplier bits, and the values.
+  //      join, every live lane steps from level r), each prefetching the node it goes to,
+  //      and in the same rounds, a stage a round, each ended DAG-MH walk's finish
+  //      (treelet), its value's chunk, the chunk's multiplier bits, and the value.
   // Each answer is the sample's own depth(x, y, w, n), bit for bit (tested).
   constexpr uint32_t G = kGather, R = SampleTexels::kRun;
   CellTexel c[G];
   float d[G];
-  for (uint32_t i = 0; i < m; ++i) {
-    const SampleTexels::Run& run = runs[i / R];
-    c[i] = cell_texel(run.x[i % R], run.y[i % R], w0 + i);
-    d[i] = run.d[i % R];
-  }
-  StackTileRef t[G];
   {
-    // The distinct cells in a row, fetched in one call.
+    // cell_texel per sample, where a sample whose texel agrees with the last in-range
+    // sample's above that sample's cell level (x, y above bit sx, w above bit sw) takes
+    // its cell and entry without the grid's descent: the descent reads only those bits, so
+    // it would end in the same cell (a day's sun keeps runs of samples in one cell).
+    const moct::Geometry& g = grid_.geo;
+    bool prev = false;
+    uint32_t sx = 0, sw = 0, pw = 0, w_mask = 0;
+    uint64_t px = 0, py = 0, xy_mask = 0;
+    for (uint32_t i = 0; i < m; ++i) {
+      const SampleTexels::Run& run = runs[i / R];
+      const uint64_t x = run.x[i % R], y = run.y[i % R];
+      const uint32_t w = w0 + i;
+      d[i] = run.d[i % R];
+      if ((x >> g.n) || (y >> g.n)) {
+        c[i] = {kLitDepth, false, 0, 0, 0, 0};
+        continue;
+      }
+      if (prev && !(((x ^ px) | (y ^ py)) >> sx) && !((w ^ pw) >> sw)) {
+        const CellTexel& p = c[pw - w0];  // the last in-range sample's
+        c[i] = {p.value, p.tiled, p.cell, x & xy_mask, y & xy_mask, w & w_mask};
+      } else {
+        uint32_t l;  // K, or deeper in a split cell
+        const uint64_t cell = grid_.cell_at(g.depth(), g.n, x, y, w, l);
+        const StackEntry& e = grid_.entries[cell];
+        sx = g.n - g.xy_bits(l), sw = g.k - g.w_bits(l);
+        xy_mask = (uint64_t(1) << sx) - 1, w_mask = (uint32_t(1) << sw) - 1;
+        c[i] = {e.value, e.kind == 1 && g.depth() != l, cell, x & xy_mask, y & xy_mask, w & w_mask};
+      }
+      prev = true, px = x, py = y, pw = w;
+    }
+  }
+  // The tiles of the distinct cells in a row, fetched in one call (got[of[i]]: sample i's).
+  Uninitialized<StackTileRef, G> got;
+  uint8_t of[G];
+  {
     uint64_t cells[G];
-    uint8_t of[G];
     uint32_t nu = 0;
     for (uint32_t i = 0; i < m; ++i) {
       if (!c[i].tiled) continue;
       if (nu == 0 || c[i].cell != cells[nu - 1]) cells[nu++] = c[i].cell;
       of[i] = uint8_t(nu - 1);
     }
-    StackTileRef got[G];
-    if (nu) tiles_(cells, nu, got);
+    if (nu) tiles_(cells, nu, got.v);
     for (uint32_t u = 0; u < nu; ++u)
-      if (got[u].octree) {
-        stack_map_prefetch_object(got[u].octree);
-        __builtin_prefetch(got[u].root);
+      if (got.v[u].octree) {
+        stack_map_prefetch_walk(got.v[u].octree);
+        __builtin_prefetch(got.v[u].root);
       }
-    for (uint32_t i = 0; i < m; ++i)
-      if (c[i].tiled) t[i] = got[of[i]];
   }
   uint64_t lit = 0;
   auto set = [&](uint32_t i, bool v) { lit |= uint64_t(v) << i; };
@@ -230,12 +265,12 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
   for (uint32_t i = 0; i < m; ++i) {
     if (!c[i].tiled) {
       set(i, d[i] <= c[i].value);
-    } else if (t[i].slices) {
-      const SliceTiles::Record* r = static_cast<const SliceTiles::Record*>(t[i].root) + c[i].lw;
+    } else if (got.v[of[i]].slices) {
+      const SliceTiles::Record* r = static_cast<const SliceTiles::Record*>(got.v[of[i]].root) + c[i].lw;
       __builtin_prefetch(r);
       __builtin_prefetch(reinterpret_cast<const char*>(r) + 64);
       rec[nr] = r, rec_sample[nr++] = uint8_t(i);
-    } else if (t[i].octree) {
+    } else if (got.v[of[i]].octree) {
       uint32_t j = last_cell;  // the cell's index among this call's octree cells
       if (j >= ncells || oct_cell[j] != c[i].cell) {
         j = 0;
@@ -244,11 +279,7 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
       }
       last_cell = j;
       const uint32_t q = no_lanes++;
-      oct_tree[q] = t[i].octree, oct_sample[q] = uint8_t(i), oct_back[q] = oct_last[j], oct_fork[q] = 0;
-      if (oct_last[j] != kNone) {
-        const uint32_t b = oct_sample[oct_last[j]];
-        oct_fork[q] = uint8_t(t[i].octree->shared_levels(c[i].lx, c[i].ly, c[i].lw, c[b].lx, c[b].ly, c[b].lw));
-      }
+      oct_tree[q] = got.v[of[i]].octree, oct_sample[q] = uint8_t(i), oct_back[q] = oct_last[j];
       oct_last[j] = uint8_t(q);
     } else {
       if (exact) *exact = false;
@@ -292,20 +323,6 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
       }
     }
   }
-  auto descending = [&](uint32_t k) {
-    return (cur[k].ref & dagmh::kRefTagMask) == dagmh::kRefInner && cur[k].level < level[k];
-  };
-  uint32_t na = 0;
-  for (uint32_t k = 0; k < nw; ++k) {  // the starts, each walk's first node on its way
-    const uint32_t i = walk_sample[k];
-    cur[k] = view[k]->start(level[k], level[k], c[i].lx, c[i].ly);
-    if (descending(k)) {
-      __builtin_prefetch(view[k]->node_at(cur[k].ref & dagmh::kRefIndexMask));
-      active[na++] = uint8_t(k);
-    } else if ((cur[k].ref & dagmh::kRefTagMask) == dagmh::kRefTreelet) {
-      __builtin_prefetch(view[k]->treelet_at(cur[k].ref & dagmh::kRefIndexMask));
-    }
-  }
   // Octree lanes: each walks from the node at its fork level, copied from the lane of the
   // cell's nearest earlier sample whose own walk passes there (a lane back along the cell
   // whose fork is no deeper: the paths agree down to the lesser fork). Level by level, so
@@ -313,13 +330,20 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
   // samples walked one after another would be one dependent miss after another); the
   // nodes read are those of depth_along's walks (a walk that ended above a lane's fork
   // ends that lane where it ended: the same node, the same value).
-  MhOctree::Walk ow[G];
+  Uninitialized<MhOctree::Walk, G> lanes;  // set when a lane joins
+  MhOctree::Walk* const ow = lanes.v;
   uint8_t oct_from[G], order[G], oct_live[G];
   uint32_t n_order = 0;
-  {
+  {  // (here, between the records' reads and the skip entries', while those are in flight,
+     // and once the octrees' objects have had the records' time to arrive)
     uint8_t count[moct::kMaxLevels + 1] = {};
     for (uint32_t q = 0; q < no_lanes; ++q) {
       uint32_t b = oct_back[q];
+      oct_fork[q] = 0;
+      if (b != kNone) {
+        const uint32_t i = oct_sample[q], e = oct_sample[b];
+        oct_fork[q] = uint8_t(oct_tree[q]->shared_levels(c[i].lx, c[i].ly, c[i].lw, c[e].lx, c[e].ly, c[e].lw));
+      }
       while (b != kNone && oct_fork[b] > oct_fork[q]) b = oct_back[b];
       oct_from[q] = uint8_t(b);
       ++count[oct_fork[q]];
@@ -329,6 +353,32 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
     for (uint32_t q = 0; q < no_lanes; ++q) order[at[oct_fork[q]]++] = uint8_t(q);  // by fork, stable
     n_order = no_lanes;
   }
+  auto descending = [&](uint32_t k) {
+    return (cur[k].ref & dagmh::kRefTagMask) == dagmh::kRefInner && cur[k].level < level[k];
+  };
+  // DAG-MH walks past their descent go through three stages, one a round, beside the other
+  // walks' rounds (a walk that ends early has its value's chain in flight while the
+  // octree lanes still step): 1. finish (the treelet, prefetched when the descent ended)
+  // and the value's chunk prefetched; 2. the chunk's multiplier bits prefetched; 3. the
+  // value.
+  uint8_t ending[G], stage[G];
+  uint32_t index[G];
+  uint32_t na = 0, ne = 0;
+  auto end_descent = [&](uint32_t k) {
+    if ((cur[k].ref & dagmh::kRefTagMask) == dagmh::kRefTreelet)
+      __builtin_prefetch(view[k]->treelet_at(cur[k].ref & dagmh::kRefIndexMask));
+    stage[k] = 1, ending[ne++] = uint8_t(k);
+  };
+  for (uint32_t k = 0; k < nw; ++k) {  // the starts, each walk's first node on its way
+    const uint32_t i = walk_sample[k];
+    cur[k] = view[k]->start(level[k], level[k], c[i].lx, c[i].ly);
+    if (descending(k)) {
+      __builtin_prefetch(view[k]->node_at(cur[k].ref & dagmh::kRefIndexMask));
+      active[na++] = uint8_t(k);
+    } else {
+      end_descent(k);
+    }
+  }
   uint8_t mmh_live[G];
   for (uint32_t k = 0; k < nm; ++k) mmh_live[k] = uint8_t(k);
   uint32_t live = 0, nml = nm, next_other = 0, next_fork = 0, round = 0;
@@ -337,7 +387,7 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
     const uint32_t i = other_sample[k];
     set(i, d[i] <= r.eval->depth(r.xy_level, c[i].lx, c[i].ly));
   };
-  while (na || live || nml || next_fork < n_order) {
+  while (na || ne || live || nml || next_fork < n_order) {
     if (next_other < no) answer_other(next_other++);
     // The octree lanes forking at this level join (every live lane stands at it).
     for (; next_fork < n_order && oct_fork[order[next_fork]] == round; ++next_fork) {
@@ -358,6 +408,22 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
     }
     nml = kept;
     kept = 0;
+    for (uint32_t a = 0; a < ne; ++a) {  // one stage of every DAG-MH walk past its descent
+      const uint32_t k = ending[a];
+      const uint32_t i = walk_sample[k];
+      if (stage[k] == 1) {
+        index[k] = view[k]->finish(cur[k], level[k], c[i].lx, c[i].ly);
+        __builtin_prefetch(view[k]->chunk_at(index[k]));
+      } else if (stage[k] == 2) {
+        if (const uint8_t* bits = view[k]->value_bits_at(index[k])) __builtin_prefetch(bits);
+      } else {
+        set(i, d[i] <= view[k]->value(index[k]));
+        continue;
+      }
+      ++stage[k], ending[kept++] = uint8_t(k);
+    }
+    ne = kept;
+    kept = 0;
     for (uint32_t a = 0; a < na; ++a) {  // one level of every DAG-MH walk that still descends
       const uint32_t k = active[a];
       const uint32_t i = walk_sample[k];
@@ -365,8 +431,8 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
       if (descending(k)) {
         __builtin_prefetch(view[k]->node_at(cur[k].ref & dagmh::kRefIndexMask));
         active[kept++] = uint8_t(k);
-      } else if ((cur[k].ref & dagmh::kRefTagMask) == dagmh::kRefTreelet) {
-        __builtin_prefetch(view[k]->treelet_at(cur[k].ref & dagmh::kRefIndexMask));
+      } else {
+        end_descent(k);
       }
     }
     na = kept;
@@ -386,18 +452,6 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
     ++round;
   }
   while (next_other < no) answer_other(next_other++);
-  uint32_t index[G];
-  for (uint32_t k = 0; k < nw; ++k) {
-    const uint32_t i = walk_sample[k];
-    index[k] = view[k]->finish(cur[k], level[k], c[i].lx, c[i].ly);
-    __builtin_prefetch(view[k]->chunk_at(index[k]));  // the value's chunk, read below
-  }
-  for (uint32_t k = 0; k < nw; ++k)  // then the multiplier bits each chunk points to
-    if (const uint8_t* bits = view[k]->value_bits_at(index[k])) __builtin_prefetch(bits);
-  for (uint32_t k = 0; k < nw; ++k) {
-    const uint32_t i = walk_sample[k];
-    set(i, d[i] <= view[k]->value(index[k]));
-  }
   return lit;
 }
 

@@ -30,7 +30,8 @@ class StackMap {
   // one call, so that a source keeps their loads in flight together (ResidentStack: one
   // loop over its dense array; the client: every page looked up, then the evaluators
   // prefetched, then the refs); a single-slice lookup asks for one. An empty source holds
-  // no tile (every tiled cell answers its level-K value, `exact` cleared).
+  // no tile (every tiled cell answers its level-K value, `exact` cleared). A source writes
+  // every out[i] (the lookups hand it room left unset).
   using TileSource = std::function<void(const uint64_t* cells, uint32_t n, StackTileRef* out)>;
   explicit StackMap(const StackGrid& grid, TileSource tiles = {});
 
