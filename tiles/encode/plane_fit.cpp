@@ -425,9 +425,11 @@ bool cover_block(std::span<const float> lo, std::span<const float> hi, uint32_t 
     left &= ~best_mask;
   }
   if (left) return false;
+  uint64_t masks[kWidePalette * 2];  // max_planes: at most 15 (the stats' count)
+  for (size_t k = 0; k < palette.size(); ++k) masks[k] = mask_of(palette[k]);
   for (uint32_t i = 0; i < 64; ++i) {
     uint32_t k = 0;
-    while (!(mask_of(palette[k]) >> i & 1)) ++k;
+    while (!(masks[k] >> i & 1)) ++k;
     label[i] = uint8_t(k);
   }
   return true;
