@@ -1,6 +1,7 @@
 #include "tiles/encode/plane_fit.hpp"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <limits>
@@ -322,8 +323,99 @@ struct FitMemo {
   }
 };
 
+// Every fixed-point value the decoder maps into a texel's [lo, hi] (preimage's interval
+// widened by the rounding ties it excludes; unbounded below where lo <= 0, above where hi >= 1).
+struct Reach {
+  __int128 lo, hi;
+  bool lo_open, hi_open;  // unbounded
+};
+
+std::array<Reach, 64> block_reach(std::span<const float> lo, std::span<const float> hi) {
+  std::array<Reach, 64> r;
+  for (uint32_t i = 0; i < 64; ++i) {
+    int64_t vmin = 0, vmax = 0;
+    const bool ok = preimage(lo[i], hi[i], vmin, vmax);
+    r[i] = Reach{__int128(vmin) - 1, __int128(vmax) + 1, !ok || lo[i] <= 0.0f, !ok || hi[i] >= 1.0f};
+  }
+  return r;
+}
+
+// True when no plane answers texel t together with texels a, b, c (y * 8 + x; c = 64: the
+// three collinear, t on the line of a and b): the value at t of an integer plane
+// (a0 + b x + c y, no overflow within the fit's bounds) is the affine combination of its
+// values at the others, m v_t = sum mu_i v_i in exact integers, and each value lies in its
+// texel's Reach. An exact certificate that fit_texels fails on any set holding the four.
+bool apart(const std::array<Reach, 64>& reach, uint32_t t, uint32_t a, uint32_t b, uint32_t c) {
+  const int64_t xt = t % 8, yt = t / 8, xa = a % 8, ya = a / 8, xb = b % 8, yb = b / 8;
+  int64_t m, mu[3];
+  uint32_t id[3] = {a, b, c};
+  int n = 3;
+  if (c == 64) {
+    const int64_t dx = xb - xa, dy = yb - ya;
+    if ((xt - xa) * dy != (yt - ya) * dx || (dx == 0 && dy == 0)) return false;
+    m = dx != 0 ? dx : dy;
+    const int64_t k = dx != 0 ? xt - xa : yt - ya;
+    mu[0] = m - k, mu[1] = k, n = 2;
+  } else {
+    const int64_t xc = c % 8, yc = c / 8;
+    m = (xb - xa) * (yc - ya) - (xc - xa) * (yb - ya);
+    if (m == 0) return false;
+    mu[1] = (xt - xa) * (yc - ya) - (xc - xa) * (yt - ya);
+    mu[2] = (xb - xa) * (yt - ya) - (xt - xa) * (yb - ya);
+    mu[0] = m - mu[1] - mu[2];
+  }
+  if (m < 0) {
+    m = -m;
+    for (int i = 0; i < n; ++i) mu[i] = -mu[i];
+  }
+  // The reach of sum mu_i v_i: [low, high], each end open when some term's is.
+  __int128 low = 0, high = 0;
+  bool low_open = false, high_open = false;
+  for (int i = 0; i < n; ++i) {
+    const Reach& r = reach[id[i]];
+    if (mu[i] > 0) {
+      low_open |= r.lo_open, high_open |= r.hi_open;
+      if (!r.lo_open) low += mu[i] * r.lo;
+      if (!r.hi_open) high += mu[i] * r.hi;
+    } else if (mu[i] < 0) {
+      low_open |= r.hi_open, high_open |= r.lo_open;
+      if (!r.hi_open) low += mu[i] * r.hi;
+      if (!r.lo_open) high += mu[i] * r.lo;
+    }
+  }
+  const Reach& rt = reach[t];
+  if (!rt.hi_open && !low_open && m * rt.hi < low) return true;
+  if (!rt.lo_open && !high_open && m * rt.lo > high) return true;
+  return false;
+}
+
+// Whether some three or two (collinear with t) of the kept texels nearest t rule t out
+// (apart): a refit over kept and t would fail, so it is not tried.
+bool ruled_out(const std::array<Reach, 64>& reach, const std::vector<uint32_t>& kept, uint32_t t) {
+  constexpr int kNear = 4;
+  uint32_t near[kNear];
+  int dn[kNear], n = 0;
+  for (uint32_t k : kept) {
+    if (k == t) continue;
+    const int dx = int(k % 8) - int(t % 8), dy = int(k / 8) - int(t / 8), d = dx * dx + dy * dy;
+    int at = n < kNear ? n++ : kNear;
+    while (at > 0 && dn[at - 1] > d) {
+      if (at < kNear) near[at] = near[at - 1], dn[at] = dn[at - 1];
+      --at;
+    }
+    if (at < kNear) near[at] = k, dn[at] = d;
+  }
+  for (int i = 0; i < n; ++i)
+    for (int j = i + 1; j < n; ++j) {
+      if (apart(reach, t, near[i], near[j], 64)) return true;
+      for (int k = j + 1; k < n; ++k)
+        if (apart(reach, t, near[i], near[j], near[k])) return true;
+    }
+  return false;
+}
+
 bool grow_plane(const std::vector<uint32_t>& cand, std::span<const float> lo, std::span<const float> hi, TilePlane& q,
-                std::vector<uint32_t>& kept, FitMemo& memo) {
+                std::vector<uint32_t>& kept, FitMemo& memo, const std::array<Reach, 64>& reach) {
   const uint32_t seed = cand.front();
   std::vector<uint32_t> order(cand.begin() + 1, cand.end());
   auto dist = [&](uint32_t t) {
@@ -338,7 +430,8 @@ bool grow_plane(const std::vector<uint32_t>& cand, std::span<const float> lo, st
     kept.push_back(t);
     if (lo[t] <= v && v <= hi[t]) continue;
     TilePlane r;
-    if (memo.fit(kept, lo, hi, r)) q = r;
+    if (ruled_out(reach, kept, t)) kept.pop_back();
+    else if (memo.fit(kept, lo, hi, r)) q = r;
     else kept.pop_back();
   }
   return true;
@@ -372,6 +465,7 @@ bool cover_block(std::span<const float> lo, std::span<const float> hi, uint32_t 
   std::vector<uint32_t> cand, kept;
   std::vector<float> slo(lo.begin(), lo.begin() + 64), shi(hi.begin(), hi.begin() + 64);
   FitMemo memo;
+  const std::array<Reach, 64> reach = block_reach(lo, hi);
   while (left && palette.size() < max_planes) {
     Plane best;
     uint64_t best_mask = 0;
@@ -411,7 +505,7 @@ bool cover_block(std::span<const float> lo, std::span<const float> hi, uint32_t 
         for (uint32_t i = 0; i < 64; ++i)
           if ((left >> i & 1) && i != seeds[k]) cand.push_back(i);
         TilePlane t;
-        if (!grow_plane(cand, lo, hi, t, kept, memo)) continue;
+        if (!grow_plane(cand, lo, hi, t, kept, memo, reach)) continue;
         const Plane q{0, kLabelShift, t.a0, t.b, t.c};
         if (abs64(q.a) > kMaxBase || abs64(q.b) > kMaxSlope || abs64(q.c) > kMaxSlope) continue;
         offer(q, mask_of(q), true);
@@ -814,7 +908,7 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
                 if (cand.empty()) break;
                 TilePlane t;
                 FitMemo memo;
-                if (!grow_plane(cand, blo, bhi, t, kept, memo)) {
+                if (!grow_plane(cand, blo, bhi, t, kept, memo, block_reach(blo, bhi))) {
                   need = 16;
                   break;
                 }
