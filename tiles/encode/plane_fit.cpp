@@ -415,7 +415,7 @@ bool ruled_out(const std::array<Reach, 64>& reach, const std::vector<uint32_t>& 
 }
 
 bool grow_plane(const std::vector<uint32_t>& cand, std::span<const float> lo, std::span<const float> hi, TilePlane& q,
-                std::vector<uint32_t>& kept, FitMemo& memo, const std::array<Reach, 64>& reach) {
+                std::vector<uint32_t>& kept, FitMemo& memo, const std::array<Reach, 64>* reach) {
   const uint32_t seed = cand.front();
   std::vector<uint32_t> order(cand.begin() + 1, cand.end());
   auto dist = [&](uint32_t t) {
@@ -430,7 +430,7 @@ bool grow_plane(const std::vector<uint32_t>& cand, std::span<const float> lo, st
     kept.push_back(t);
     if (lo[t] <= v && v <= hi[t]) continue;
     TilePlane r;
-    if (ruled_out(reach, kept, t)) kept.pop_back();
+    if (reach && ruled_out(*reach, kept, t)) kept.pop_back();
     else if (memo.fit(kept, lo, hi, r)) q = r;
     else kept.pop_back();
   }
@@ -447,7 +447,7 @@ bool grow_plane(const std::vector<uint32_t>& cand, std::span<const float> lo, st
 // texel's label names the first palette plane that answers it (the decoder's function).
 // False when some texel is left after `max_planes`.
 bool cover_block(std::span<const float> lo, std::span<const float> hi, uint32_t start, const std::vector<Plane>& known,
-                 uint32_t max_planes, uint32_t max_seeds, std::vector<Plane>& palette, uint8_t* label,
+                 uint32_t max_planes, uint32_t max_seeds, bool rule_out, std::vector<Plane>& palette, uint8_t* label,
                  std::vector<uint8_t>& fresh) {
   auto mask_of = [&](const Plane& q) {
     uint64_t m = 0;
@@ -505,7 +505,7 @@ bool cover_block(std::span<const float> lo, std::span<const float> hi, uint32_t 
         for (uint32_t i = 0; i < 64; ++i)
           if ((left >> i & 1) && i != seeds[k]) cand.push_back(i);
         TilePlane t;
-        if (!grow_plane(cand, lo, hi, t, kept, memo, reach)) continue;
+        if (!grow_plane(cand, lo, hi, t, kept, memo, rule_out ? &reach : nullptr)) continue;
         const Plane q{0, kLabelShift, t.a0, t.b, t.c};
         if (abs64(q.a) > kMaxBase || abs64(q.b) > kMaxSlope || abs64(q.c) > kMaxSlope) continue;
         offer(q, mask_of(q), true);
@@ -867,7 +867,7 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
               if (abs64(q.a) <= kMaxBase) resolved.push_back(q);
             }
             ok = cover_block(blo, bhi, lb.start, resolved, std::clamp<uint32_t>(o.max_palette, 1, kWidePalette),
-                             o.grow_seeds, lb.palette, lb.label, fresh);
+                             o.grow_seeds, o.rule_out, lb.palette, lb.label, fresh);
             if (ok)
               for (size_t k = 0; k < lb.palette.size(); ++k)
                 if (fresh[k]) known.push_back(Known{lb.palette[k].origin_a(x0, y0), lb.palette[k].b, lb.palette[k].c});
@@ -897,7 +897,7 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
               if (o.grow_labels) {
                 std::vector<Plane> pal;
                 uint8_t lab[64];
-                need = cover_block(blo, bhi, lb.start, resolved, 15, o.grow_seeds, pal, lab, fresh) ? uint32_t(pal.size()) : 16;
+                need = cover_block(blo, bhi, lb.start, resolved, 15, o.grow_seeds, o.rule_out, pal, lab, fresh) ? uint32_t(pal.size()) : 16;
               }
               std::vector<uint8_t> open(o.grow_labels ? 0 : 64);
               for (uint32_t i = 0; i < open.size(); ++i) open[i] = lb.label[i] == kNone;
@@ -908,7 +908,8 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
                 if (cand.empty()) break;
                 TilePlane t;
                 FitMemo memo;
-                if (!grow_plane(cand, blo, bhi, t, kept, memo, block_reach(blo, bhi))) {
+                const std::array<Reach, 64> reach = block_reach(blo, bhi);
+                if (!grow_plane(cand, blo, bhi, t, kept, memo, o.rule_out ? &reach : nullptr)) {
                   need = 16;
                   break;
                 }
