@@ -12,6 +12,7 @@
 #include <filesystem>
 #include <fstream>
 #include <random>
+#include <tuple>
 
 #include "common/bytes.hpp"
 #include "common/error.hpp"
@@ -469,6 +470,27 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
       PlaneFitOptions narrow;
       narrow.max_palette = planes::kPalette;
       values_narrow += fit_planes(t.h, narrow).pruned.valued_count();
+      // The growth's certificate that four texels share no plane only skips refits that fail:
+      // every refit tried gives the very same blocks, palettes, labels and planes.
+      PlaneFitOptions every_refit;
+      every_refit.rule_out = false;
+      const PlaneSplit e = fit_planes(t.h, every_refit);
+      ASSERT_EQ(e.planes.size(), s.planes.size());
+      for (size_t i = 0; i < e.planes.size(); ++i)
+        EXPECT_TRUE(std::tie(e.planes[i].start, e.planes[i].shift, e.planes[i].a, e.planes[i].b, e.planes[i].c) ==
+                    std::tie(s.planes[i].start, s.planes[i].shift, s.planes[i].a, s.planes[i].b, s.planes[i].c))
+            << "plane " << i;
+      ASSERT_EQ(e.labelled.size(), s.labelled.size());
+      for (size_t i = 0; i < e.labelled.size(); ++i) {
+        EXPECT_EQ(e.labelled[i].start, s.labelled[i].start);
+        EXPECT_TRUE(std::equal(std::begin(e.labelled[i].label), std::end(e.labelled[i].label), std::begin(s.labelled[i].label)))
+            << "labelled block " << i;
+        ASSERT_EQ(e.labelled[i].palette.size(), s.labelled[i].palette.size());
+        for (size_t k = 0; k < e.labelled[i].palette.size(); ++k)
+          EXPECT_TRUE(std::tie(e.labelled[i].palette[k].a, e.labelled[i].palette[k].b, e.labelled[i].palette[k].c) ==
+                      std::tie(s.labelled[i].palette[k].a, s.labelled[i].palette[k].b, s.labelled[i].palette[k].c))
+              << "labelled block " << i << " palette " << k;
+      }
     }
     if (s.planes.empty() && s.labelled.empty()) continue;
     labelled += s.labelled.size();

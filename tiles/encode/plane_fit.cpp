@@ -1,11 +1,14 @@
 #include "tiles/encode/plane_fit.hpp"
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <limits>
 #include <map>
+#include <string>
 #include <tuple>
+#include <unordered_map>
 
 #include "common/bytes.hpp"
 #include "common/error.hpp"
@@ -23,13 +26,18 @@ using LD = long double;
 // in (0, 2^-30) (tiny depths: left to the inner encoding).
 bool preimage(float lo, float hi, int64_t& vmin, int64_t& vmax) {
   constexpr float kTiny = 0x1p-30f;
+  // x 2^kFracBits is exact for these floats (powers of two scale exactly: ldexp's value), and
+  // a positive finite float's neighbours are its bit pattern -1 / +1 (nextafter's).
+  constexpr double kScale = 0x1p60;
+  static_assert(kFracBits == 60);
   if (!(lo <= hi) || lo > 1.0f) return false;
   if (lo <= 0.0f) {
     vmin = -kOne;
   } else {
     if (lo < kTiny) return false;
-    const int64_t f = int64_t(std::ldexp(double(lo), int(kFracBits)));
-    const int64_t below = f - int64_t(std::ldexp(double(std::nextafter(lo, 0.0f)), int(kFracBits)));
+    const int64_t f = int64_t(double(lo) * kScale);
+    const float down = std::bit_cast<float>(std::bit_cast<uint32_t>(lo) - 1);  // nextafter(lo, 0)
+    const int64_t below = f - int64_t(double(down) * kScale);
     vmin = f - below / 2 + 1;
   }
   if (hi >= 1.0f) {
@@ -39,8 +47,9 @@ bool preimage(float lo, float hi, int64_t& vmin, int64_t& vmax) {
     vmax = 0;
   } else {
     if (hi < kTiny) return false;
-    const int64_t f = int64_t(std::ldexp(double(hi), int(kFracBits)));
-    const int64_t above = int64_t(std::ldexp(double(std::nextafter(hi, 2.0f)), int(kFracBits))) - f;
+    const int64_t f = int64_t(double(hi) * kScale);
+    const float up = std::bit_cast<float>(std::bit_cast<uint32_t>(hi) + 1);  // nextafter(hi, 2)
+    const int64_t above = int64_t(double(up) * kScale) - f;
     vmax = f + above / 2 - 1;
   }
   return vmin <= vmax;
@@ -55,7 +64,10 @@ struct Con {
   LD b;
 };
 
-bool seidel(int n, const LD* box, const Con* cons, size_t count, LD* x) {
+// Constraints [0, start) were taken already, x the point they left (a run resumed after
+// constraints were appended gives the bits of a run from the start: the same steps in the
+// same order). The projected constraints of each level live in a per-thread buffer.
+bool seidel(int n, const LD* box, const Con* cons, size_t count, LD* x, size_t start = 0) {
   constexpr LD kEps = 1e-15L;
   if (n == 1) {
     LD lo = -box[0], hi = box[0];
@@ -70,9 +82,11 @@ bool seidel(int n, const LD* box, const Con* cons, size_t count, LD* x) {
     x[0] = (lo + hi) / 2;
     return true;
   }
-  for (int j = 0; j < n; ++j) x[j] = 0;
-  std::vector<Con> sub;
-  for (size_t i = 0; i < count; ++i) {
+  if (start == 0)
+    for (int j = 0; j < n; ++j) x[j] = 0;
+  thread_local std::vector<Con> subs[4];
+  std::vector<Con>& sub = subs[n];
+  for (size_t i = start; i < count; ++i) {
     const Con& h = cons[i];
     LD ax = 0;
     for (int j = 0; j < n; ++j) ax += h.a[j] * x[j];
@@ -82,14 +96,15 @@ bool seidel(int n, const LD* box, const Con* cons, size_t count, LD* x) {
     for (int j = 1; j < n; ++j)
       if (std::fabs(h.a[j]) > std::fabs(h.a[k])) k = j;
     if (std::fabs(h.a[k]) == 0) return false;  // 0 <= b violated
-    sub.clear();
+    sub.resize(i + 2);
+    Con* out = sub.data();
     auto project = [&](const LD* ga, LD gb) {
       Con s{};
       const LD r = ga[k] / h.a[k];
       for (int j = 0, t = 0; j < n; ++j)
         if (j != k) s.a[t++] = ga[j] - r * h.a[j];
       s.b = gb - r * h.b;
-      sub.push_back(s);
+      *out++ = s;
     };
     LD e[3] = {0, 0, 0};
     e[k] = 1;
@@ -100,7 +115,7 @@ bool seidel(int n, const LD* box, const Con* cons, size_t count, LD* x) {
     LD sub_box[2], y[2];
     for (int j = 0, t = 0; j < n; ++j)
       if (j != k) sub_box[t++] = box[j];
-    if (!seidel(n - 1, sub_box, sub.data(), sub.size(), y)) return false;
+    if (!seidel(n - 1, sub_box, sub.data(), i + 2, y)) return false;
     LD rest = h.b;
     for (int j = 0, t = 0; j < n; ++j)
       if (j != k) {
@@ -162,11 +177,14 @@ void push_texel_cons(std::vector<Con>& cons, LD u, LD v, int64_t vmin, int64_t v
 
 // The LP over `cons` solved in its box and rounded to integers: slopes bb, cc (each within
 // kMaxSlope, else false) and a0, the value at (0, 0) for the centre (mx, my).
-bool solve_rounded(const std::vector<Con>& cons, int64_t r, LD unit, LD mx, LD my, LD& a0, LD& bb, LD& cc) {
+// `x`, `start`: resume the LP (seidel) after constraints were appended to those it solved.
+bool solve_rounded(const std::vector<Con>& cons, int64_t r, LD unit, LD mx, LD my, LD& a0, LD& bb, LD& cc,
+                   LD* x = nullptr, size_t start = 0) {
   const LD slope_box = LD(kMaxSlope) / unit;
   const LD box[3] = {LD(kOne) * 4 / unit, slope_box, slope_box};
-  LD x[3];
-  if (!seidel(3, box, cons.data(), cons.size(), x)) return false;
+  LD own[3];
+  if (!x) x = own, start = 0;
+  if (!seidel(3, box, cons.data(), cons.size(), x, start)) return false;
   bb = std::round(x[1] * unit), cc = std::round(x[2] * unit);
   if (std::fabs(bb) > LD(kMaxSlope) || std::fabs(cc) > LD(kMaxSlope)) return false;
   a0 = std::round(LD(r) + x[0] * unit - bb * mx - cc * my);
@@ -250,16 +268,22 @@ bool fit_texels(const std::vector<uint32_t>& texels, uint32_t side, std::span<co
   std::vector<uint32_t> active;
   for (size_t i = 0; i < texels.size(); i += 16) active.push_back(texels[i]);
   active.push_back(texels.back());
-  std::vector<Con> cons;
+  // Each round appends the texels missed to `active`: their constraints are appended and
+  // the LP resumed where the last round left it (the bits of solving them all again).
+  thread_local std::vector<Con> cons;
+  cons.clear();
+  size_t taken = 0;
+  LD x[3];
   for (int round = 0; round < 6; ++round) {
-    cons.clear();
-    for (uint32_t t : active) {
+    const size_t solved = cons.size();
+    for (; taken < active.size(); ++taken) {
+      const uint32_t t = active[taken];
       int64_t vmin, vmax;
       bounds(t, vmin, vmax);
       push_texel_cons(cons, LD(t % side) - mx, LD(t / side) - my, vmin, vmax, r, unit);
     }
     LD a0, bb, cc;
-    if (!solve_rounded(cons, r, unit, mx, my, a0, bb, cc)) return false;
+    if (!solve_rounded(cons, r, unit, mx, my, a0, bb, cc, x, solved)) return false;
     if (std::fabs(a0) > LD(kOne) * 4) return false;
     TilePlane q{int64_t(a0), int64_t(bb), int64_t(cc)};
     size_t missed = 0;
@@ -285,8 +309,113 @@ bool fit_texels(const std::vector<uint32_t>& texels, uint32_t side, std::span<co
 // it), so a block across several small triangles or a curved patch splits into the planes of
 // its parts. `q` answers every texel of `kept` (fit_texels verifies with the decoder's
 // function); false when no plane answers the seed alone (no preimage).
+// The fits of one 8x8 block's texel lists (fit_texels of the same list gives the same plane):
+// a block's seeds and rounds grow from the same texels in the same order again and again.
+struct FitMemo {
+  std::unordered_map<std::string, std::pair<bool, TilePlane>> fits;
+  std::string key;
+  bool fit(const std::vector<uint32_t>& texels, std::span<const float> lo, std::span<const float> hi, TilePlane& out) {
+    key.assign(texels.begin(), texels.end());  // texels < 64: one char each
+    auto [it, fresh] = fits.try_emplace(key);
+    if (fresh) it->second.first = fit_texels(texels, 8, lo, hi, it->second.second);
+    if (it->second.first) out = it->second.second;
+    return it->second.first;
+  }
+};
+
+// Every fixed-point value the decoder maps into a texel's [lo, hi] (preimage's interval
+// widened by the rounding ties it excludes; unbounded below where lo <= 0, above where hi >= 1).
+struct Reach {
+  __int128 lo, hi;
+  bool lo_open, hi_open;  // unbounded
+};
+
+std::array<Reach, 64> block_reach(std::span<const float> lo, std::span<const float> hi) {
+  std::array<Reach, 64> r;
+  for (uint32_t i = 0; i < 64; ++i) {
+    int64_t vmin = 0, vmax = 0;
+    const bool ok = preimage(lo[i], hi[i], vmin, vmax);
+    r[i] = Reach{__int128(vmin) - 1, __int128(vmax) + 1, !ok || lo[i] <= 0.0f, !ok || hi[i] >= 1.0f};
+  }
+  return r;
+}
+
+// True when no plane answers texel t together with texels a, b, c (y * 8 + x; c = 64: the
+// three collinear, t on the line of a and b): the value at t of an integer plane
+// (a0 + b x + c y, no overflow within the fit's bounds) is the affine combination of its
+// values at the others, m v_t = sum mu_i v_i in exact integers, and each value lies in its
+// texel's Reach. An exact certificate that fit_texels fails on any set holding the four.
+bool apart(const std::array<Reach, 64>& reach, uint32_t t, uint32_t a, uint32_t b, uint32_t c) {
+  const int64_t xt = t % 8, yt = t / 8, xa = a % 8, ya = a / 8, xb = b % 8, yb = b / 8;
+  int64_t m, mu[3];
+  uint32_t id[3] = {a, b, c};
+  int n = 3;
+  if (c == 64) {
+    const int64_t dx = xb - xa, dy = yb - ya;
+    if ((xt - xa) * dy != (yt - ya) * dx || (dx == 0 && dy == 0)) return false;
+    m = dx != 0 ? dx : dy;
+    const int64_t k = dx != 0 ? xt - xa : yt - ya;
+    mu[0] = m - k, mu[1] = k, n = 2;
+  } else {
+    const int64_t xc = c % 8, yc = c / 8;
+    m = (xb - xa) * (yc - ya) - (xc - xa) * (yb - ya);
+    if (m == 0) return false;
+    mu[1] = (xt - xa) * (yc - ya) - (xc - xa) * (yt - ya);
+    mu[2] = (xb - xa) * (yt - ya) - (xt - xa) * (yb - ya);
+    mu[0] = m - mu[1] - mu[2];
+  }
+  if (m < 0) {
+    m = -m;
+    for (int i = 0; i < n; ++i) mu[i] = -mu[i];
+  }
+  // The reach of sum mu_i v_i: [low, high], each end open when some term's is.
+  __int128 low = 0, high = 0;
+  bool low_open = false, high_open = false;
+  for (int i = 0; i < n; ++i) {
+    const Reach& r = reach[id[i]];
+    if (mu[i] > 0) {
+      low_open |= r.lo_open, high_open |= r.hi_open;
+      if (!r.lo_open) low += mu[i] * r.lo;
+      if (!r.hi_open) high += mu[i] * r.hi;
+    } else if (mu[i] < 0) {
+      low_open |= r.hi_open, high_open |= r.lo_open;
+      if (!r.hi_open) low += mu[i] * r.hi;
+      if (!r.lo_open) high += mu[i] * r.lo;
+    }
+  }
+  const Reach& rt = reach[t];
+  if (!rt.hi_open && !low_open && m * rt.hi < low) return true;
+  if (!rt.lo_open && !high_open && m * rt.lo > high) return true;
+  return false;
+}
+
+// Whether some three or two (collinear with t) of the kept texels nearest t rule t out
+// (apart): a refit over kept and t would fail, so it is not tried.
+bool ruled_out(const std::array<Reach, 64>& reach, const std::vector<uint32_t>& kept, uint32_t t) {
+  constexpr int kNear = 4;
+  uint32_t near[kNear];
+  int dn[kNear], n = 0;
+  for (uint32_t k : kept) {
+    if (k == t) continue;
+    const int dx = int(k % 8) - int(t % 8), dy = int(k / 8) - int(t / 8), d = dx * dx + dy * dy;
+    int at = n < kNear ? n++ : kNear;
+    while (at > 0 && dn[at - 1] > d) {
+      if (at < kNear) near[at] = near[at - 1], dn[at] = dn[at - 1];
+      --at;
+    }
+    if (at < kNear) near[at] = k, dn[at] = d;
+  }
+  for (int i = 0; i < n; ++i)
+    for (int j = i + 1; j < n; ++j) {
+      if (apart(reach, t, near[i], near[j], 64)) return true;
+      for (int k = j + 1; k < n; ++k)
+        if (apart(reach, t, near[i], near[j], near[k])) return true;
+    }
+  return false;
+}
+
 bool grow_plane(const std::vector<uint32_t>& cand, std::span<const float> lo, std::span<const float> hi, TilePlane& q,
-                std::vector<uint32_t>& kept) {
+                std::vector<uint32_t>& kept, FitMemo& memo, const std::array<Reach, 64>* reach) {
   const uint32_t seed = cand.front();
   std::vector<uint32_t> order(cand.begin() + 1, cand.end());
   auto dist = [&](uint32_t t) {
@@ -295,13 +424,14 @@ bool grow_plane(const std::vector<uint32_t>& cand, std::span<const float> lo, st
   };
   std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return dist(a) < dist(b); });
   kept.assign(1, seed);
-  if (!fit_texels(kept, 8, lo, hi, q)) return false;
+  if (!memo.fit(kept, lo, hi, q)) return false;
   for (uint32_t t : order) {
     const float v = q.depth(t % 8, t / 8);
     kept.push_back(t);
     if (lo[t] <= v && v <= hi[t]) continue;
     TilePlane r;
-    if (fit_texels(kept, 8, lo, hi, r)) q = r;
+    if (reach && ruled_out(*reach, kept, t)) kept.pop_back();
+    else if (memo.fit(kept, lo, hi, r)) q = r;
     else kept.pop_back();
   }
   return true;
@@ -317,7 +447,7 @@ bool grow_plane(const std::vector<uint32_t>& cand, std::span<const float> lo, st
 // texel's label names the first palette plane that answers it (the decoder's function).
 // False when some texel is left after `max_planes`.
 bool cover_block(std::span<const float> lo, std::span<const float> hi, uint32_t start, const std::vector<Plane>& known,
-                 uint32_t max_planes, uint32_t max_seeds, std::vector<Plane>& palette, uint8_t* label,
+                 uint32_t max_planes, uint32_t max_seeds, bool rule_out, std::vector<Plane>& palette, uint8_t* label,
                  std::vector<uint8_t>& fresh) {
   auto mask_of = [&](const Plane& q) {
     uint64_t m = 0;
@@ -334,6 +464,8 @@ bool cover_block(std::span<const float> lo, std::span<const float> hi, uint32_t 
   uint64_t left = ~uint64_t(0);
   std::vector<uint32_t> cand, kept;
   std::vector<float> slo(lo.begin(), lo.begin() + 64), shi(hi.begin(), hi.begin() + 64);
+  FitMemo memo;
+  const std::array<Reach, 64> reach = block_reach(lo, hi);
   while (left && palette.size() < max_planes) {
     Plane best;
     uint64_t best_mask = 0;
@@ -373,7 +505,7 @@ bool cover_block(std::span<const float> lo, std::span<const float> hi, uint32_t 
         for (uint32_t i = 0; i < 64; ++i)
           if ((left >> i & 1) && i != seeds[k]) cand.push_back(i);
         TilePlane t;
-        if (!grow_plane(cand, lo, hi, t, kept)) continue;
+        if (!grow_plane(cand, lo, hi, t, kept, memo, rule_out ? &reach : nullptr)) continue;
         const Plane q{0, kLabelShift, t.a0, t.b, t.c};
         if (abs64(q.a) > kMaxBase || abs64(q.b) > kMaxSlope || abs64(q.c) > kMaxSlope) continue;
         offer(q, mask_of(q), true);
@@ -387,9 +519,11 @@ bool cover_block(std::span<const float> lo, std::span<const float> hi, uint32_t 
     left &= ~best_mask;
   }
   if (left) return false;
+  uint64_t masks[kWidePalette * 2];  // max_planes: at most 15 (the stats' count)
+  for (size_t k = 0; k < palette.size(); ++k) masks[k] = mask_of(palette[k]);
   for (uint32_t i = 0; i < 64; ++i) {
     uint32_t k = 0;
-    while (!(mask_of(palette[k]) >> i & 1)) ++k;
+    while (!(masks[k] >> i & 1)) ++k;
     label[i] = uint8_t(k);
   }
   return true;
@@ -849,7 +983,7 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
               if (abs64(q.a) <= kMaxBase) resolved.push_back(q);
             }
             ok = cover_block(blo, bhi, lb.start, resolved, std::clamp<uint32_t>(o.max_palette, 1, kWidePalette),
-                             o.grow_seeds, lb.palette, lb.label, fresh);
+                             o.grow_seeds, o.rule_out, lb.palette, lb.label, fresh);
             if (ok)
               for (size_t k = 0; k < lb.palette.size(); ++k)
                 if (fresh[k]) known.push_back(Known{lb.palette[k].origin_a(x0, y0), lb.palette[k].b, lb.palette[k].c});
@@ -879,7 +1013,7 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
               if (o.grow_labels) {
                 std::vector<Plane> pal;
                 uint8_t lab[64];
-                need = cover_block(blo, bhi, lb.start, resolved, 15, o.grow_seeds, pal, lab, fresh) ? uint32_t(pal.size()) : 16;
+                need = cover_block(blo, bhi, lb.start, resolved, 15, o.grow_seeds, o.rule_out, pal, lab, fresh) ? uint32_t(pal.size()) : 16;
               }
               std::vector<uint8_t> open(o.grow_labels ? 0 : 64);
               for (uint32_t i = 0; i < open.size(); ++i) open[i] = lb.label[i] == kNone;
@@ -889,7 +1023,9 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
                   if (open[i]) cand.push_back(i);
                 if (cand.empty()) break;
                 TilePlane t;
-                if (!grow_plane(cand, blo, bhi, t, kept)) {
+                FitMemo memo;
+                const std::array<Reach, 64> reach = block_reach(blo, bhi);
+                if (!grow_plane(cand, blo, bhi, t, kept, memo, o.rule_out ? &reach : nullptr)) {
                   need = 16;
                   break;
                 }

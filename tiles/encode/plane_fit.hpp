@@ -79,6 +79,9 @@ struct PlaneFitOptions {
   // Seeds a labelled block's growth tries each round (1..3: the first texel left, then each
   // next the farthest from those before).
   uint32_t grow_seeds = 3;
+  // The growth skips a refit that four of its texels already rule out (an exact certificate:
+  // the same planes either way, only faster); false: every refit is tried (the tests compare).
+  bool rule_out = true;
   PlaneFitStats* stats = nullptr;  // not owned; counted into when set
 };
 
