@@ -7,6 +7,7 @@
 // RemoteMap (tile_arrived), no socket.
 #include <gtest/gtest.h>
 
+#include <array>
 #include <atomic>
 #include <bit>
 #include <cmath>
@@ -55,6 +56,21 @@ struct Fixture {
         for (uint64_t cx = (cy & 1); cx < 8; cx += 2) map->request_region(level, cx * cell, cy * cell, cell, cell, 1);
       if (deliver_round() == 0) break;
     }
+  }
+  // A new map over the same pack, with `slots` cache slots.
+  void new_map(const std::string& name, uint32_t slots) {
+    ClientOptions o = looptest::quick_options();
+    o.cache_slots = slots;
+    const auto h = pack.reader->header_bytes();
+    const auto g = pack.reader->grid_bytes();
+    map = std::make_shared<RemoteMap>(name, std::vector<uint8_t>(h.begin(), h.end()),
+                                      std::vector<uint8_t>(g.begin(), g.end()), o, std::make_shared<Notifier>());
+  }
+  // The first texel of tile t at the fixture's level.
+  std::array<uint64_t, 2> texel_of_tile(uint64_t t) const {
+    const TileAddress a = tile_address(t);
+    const uint32_t s = level - a.level;
+    return {uint64_t(a.x) << s, uint64_t(a.y) << s};
   }
   void make_all_resident() {
     const uint64_t side = uint64_t(1) << level;
@@ -331,18 +347,8 @@ TEST(ClientLookups, TilesUsedSinceTheLastArrivalAreNotTheNextVictims) {
   for (const TileIndexEntry& e : f.pack.reader->tiles())
     if (tile_address(e.id).level == 3) tiles.push_back(e.id);
   ASSERT_GE(tiles.size(), 3u);
-  // Rebuild the map with exactly two slots.
-  ClientOptions o = looptest::quick_options();
-  o.cache_slots = 2;
-  const auto h = f.pack.reader->header_bytes();
-  const auto g = f.pack.reader->grid_bytes();
-  f.map = std::make_shared<RemoteMap>("lru", std::vector<uint8_t>(h.begin(), h.end()),
-                                      std::vector<uint8_t>(g.begin(), g.end()), o, std::make_shared<Notifier>());
-  auto texel_of_tile = [&](uint64_t t) {
-    const TileAddress a = tile_address(t);
-    const uint32_t s = f.level - a.level;
-    return std::array<uint64_t, 2>{uint64_t(a.x) << s, uint64_t(a.y) << s};
-  };
+  f.new_map("lru", 2);  // exactly two slots
+  auto texel_of_tile = [&](uint64_t t) { return f.texel_of_tile(t); };
   auto want = [&](uint64_t t) {
     const auto p = texel_of_tile(t);
     f.map->request_region(f.level, p[0], p[1], 1, 1, 1);
@@ -412,19 +418,10 @@ TEST(ClientLookups, IndexTilesOnALookupsWayAreUsedToo) {
     if (kids.size() >= 3) break;
   }
   ASSERT_GE(kids.size(), 3u);
-  auto texel_of_tile = [&](uint64_t t) {
-    const TileAddress a = tile_address(t);
-    const uint32_t s = f.level - a.level;
-    return std::array<uint64_t, 2>{uint64_t(a.x) << s, uint64_t(a.y) << s};
-  };
+  auto texel_of_tile = [&](uint64_t t) { return f.texel_of_tile(t); };
   for (int batched = 0; batched < 2; ++batched) {
     const char* how = batched ? "batched" : "single";
-    ClientOptions o = looptest::quick_options();
-    o.cache_slots = 3;  // the index tile and two of its children
-    const auto h = f.pack.reader->header_bytes();
-    const auto g = f.pack.reader->grid_bytes();
-    f.map = std::make_shared<RemoteMap>("lru_index", std::vector<uint8_t>(h.begin(), h.end()),
-                                        std::vector<uint8_t>(g.begin(), g.end()), o, std::make_shared<Notifier>());
+    f.new_map("lru_index", 3);  // the index tile and two of its children
     auto want = [&](uint64_t t) {
       const auto p = texel_of_tile(t);
       for (int round = 0; round < 4; ++round) {
