@@ -3,7 +3,6 @@
 // and writes it as a deep scanline OpenEXR (tiles/bake/deep_exr.hpp).
 #include <chrono>
 #include <cstdio>
-#include <thread>
 
 #include "scene/scene_limits.hpp"
 #include "tiles/bake/deep_exr.hpp"
@@ -15,6 +14,7 @@
 #include "app/stack_cli.hpp"
 #include "tiles/core/stack_grid.hpp"
 #include "common/error.hpp"
+#include "common/parallel.hpp"
 #include "tiles/core/pack_evaluator.hpp"
 
 namespace st::cli {
@@ -109,25 +109,12 @@ void run_export(const ExportArgs& a) {
   IntervalTile t;
   t.level = level, t.x0 = r.x, t.y0 = r.y, t.width = uint32_t(r.w), t.height = uint32_t(r.h);
   t.data.resize(r.w * r.h);
-  const unsigned n = std::max(1u, std::thread::hardware_concurrency());
-  std::vector<std::thread> workers;
-  std::exception_ptr failure;
-  std::mutex mu;
-  for (unsigned k = 0; k < n; ++k)
-    workers.emplace_back([&, k]() {
-      try {
-        for (uint64_t j = k; j < r.h; j += n)
-          for (uint64_t i = 0; i < r.w; ++i) {
-            float v = eval.depth(level, r.x + i, r.y + j);
-            t.data[j * r.w + i] = {v, v};
-          }
-      } catch (...) {
-        std::lock_guard lock(mu);
-        if (!failure) failure = std::current_exception();
-      }
-    });
-  for (auto& w : workers) w.join();
-  if (failure) std::rethrow_exception(failure);
+  for_each_index(r.h, 0, [&](size_t j) {
+    for (uint64_t i = 0; i < r.w; ++i) {
+      const float v = eval.depth(level, r.x + i, r.y + j);
+      t.data[j * r.w + i] = {v, v};
+    }
+  });
   ExrLightInfo info;
   info.spec = reader->light().spec().to_string();
   info.space = reader->light();

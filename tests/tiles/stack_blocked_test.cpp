@@ -5,11 +5,13 @@
 // and the traced sun slices (the rasterizer) are the canonical definition's bounds.
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cstring>
 #include <fstream>
 #include <iterator>
 
 #include "common/error.hpp"
+#include "common/parallel.hpp"
 #include "tests/test_tmp.hpp"
 #include "tests/tiles/stack_fixtures.hpp"
 #include "tiles/bake/raster_bounds.hpp"
@@ -352,4 +354,23 @@ TEST(StackBlocked, HostileSplitGridsAreRefused) {
 }
 
 }  // namespace
+// The blocked cut weighs a block's cells with for_each_index: every index once, whatever
+// the threads, and a cell's failure rethrown to the cut with the others stopped.
+TEST(ForEachIndex, EveryIndexOnceAndTheFirstFailureRethrown) {
+  for (size_t threads : {size_t(0), size_t(1), size_t(4)}) {
+    std::vector<std::atomic<int>> seen(1000);
+    for_each_index(seen.size(), threads, [&](size_t i) { ++seen[i]; });
+    for (size_t i = 0; i < seen.size(); ++i) ASSERT_EQ(seen[i].load(), 1) << i << " threads " << threads;
+    std::atomic<size_t> after{0};
+    EXPECT_THROW(for_each_index(1000, threads,
+                                [&](size_t i) {
+                                  if (i == 5) throw Error("cell 5");
+                                  if (i > 500) ++after;
+                                }),
+                 Error);
+    EXPECT_LT(after.load(), 495u) << "threads " << threads;  // the others stopped early
+  }
+  for_each_index(0, 0, [](size_t) { FAIL(); });
+}
+
 }  // namespace st

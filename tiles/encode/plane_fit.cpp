@@ -10,6 +10,7 @@
 #include <tuple>
 #include <unordered_map>
 
+#include "common/bit_count.hpp"
 #include "common/bytes.hpp"
 #include "common/error.hpp"
 #include "tiles/core/morton.hpp"
@@ -786,19 +787,18 @@ void relabel_blocks(PlaneSplit& out, uint32_t d, std::span<const float> lo, std:
       lb.palette = std::move(palette);
       for (uint32_t e = 0; e < n; ++e) std::copy_n(v[e], 64, val[e]);
     }
+    bool covers[1u << kWidePalette] = {};  // the subsets of the palette answering every texel
     uint32_t k = n + 1;
     for (uint32_t set = 1; set < (1u << n); ++set) {
-      bool covers = true;
-      for (uint32_t i = 0; i < 64 && covers; ++i) covers = (ans[i] & set) != 0;
-      if (covers) k = std::min(k, uint32_t(std::popcount(set)));
+      bool all = true;
+      for (uint32_t i = 0; i < 64 && all; ++i) all = (ans[i] & set) != 0;
+      covers[set] = all;
+      if (all) k = std::min(k, bit_count(set));
     }
     uint32_t best_set = 0, best_misses = 65;
     uint8_t best[64] = {};
     for (uint32_t set = 1; set < (1u << n); ++set) {
-      if (uint32_t(std::popcount(set)) != k) continue;
-      bool covers = true;
-      for (uint32_t i = 0; i < 64 && covers; ++i) covers = (ans[i] & set) != 0;
-      if (!covers) continue;
+      if (!covers[set] || bit_count(set) != k) continue;
       const uint32_t low = uint32_t(std::countr_zero(set));
       uint8_t pred[3][64];  // each mode's prediction over `set` (ties: the lower entry)
       for (uint32_t i = 0; i < 64; ++i) {

@@ -4,18 +4,15 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <atomic>
 #include <cerrno>
 #include <cfloat>
 #include <chrono>
 #include <cmath>
 #include <cstring>
-#include <exception>
 #include <limits>
-#include <mutex>
-#include <thread>
 
 #include "common/error.hpp"
+#include "common/parallel.hpp"
 #include "tiles/encode/mh_octree_encode.hpp"
 #include "tiles/encode/stack_pack.hpp"
 #include "tiles/core/pack_format.hpp"
@@ -347,29 +344,10 @@ void BlockedStackCut::run(const StackSpill& spill, uint32_t K, uint32_t tile_byt
               c.bytes = encode_octree(cell_subtree(sub, rel, cr, 0.0f, cursor));
               cells.push_back(std::move(c));
             }
-            {
-              std::atomic<size_t> next{0};
-              std::exception_ptr failure;
-              std::mutex failure_lock;
-              auto work = [&] {
-                for (size_t i; (i = next++) < cells.size();) {
-                  try {
-                    Cell& c = cells[i];
-                    c.bytes = slice_form(rel, c.x, c.y, c.w, std::move(c.bytes), c.octree);
-                  } catch (...) {
-                    const std::lock_guard<std::mutex> hold(failure_lock);
-                    if (!failure) failure = std::current_exception();
-                    next = cells.size();
-                  }
-                }
-              };
-              const size_t threads = cells_ == StackCells::octree ? 1 : std::min<size_t>(std::max(1u, std::thread::hardware_concurrency()), cells.size());
-              std::vector<std::thread> workers;
-              for (size_t t = 1; t < threads; ++t) workers.emplace_back(work);
-              work();
-              for (std::thread& t : workers) t.join();
-              if (failure) std::rethrow_exception(failure);
-            }
+            for_each_index(cells.size(), cells_ == StackCells::octree ? 1 : 0, [&](size_t i) {
+              Cell& c = cells[i];
+              c.bytes = slice_form(rel, c.x, c.y, c.w, std::move(c.bytes), c.octree);
+            });
             for (Cell& c : cells) {
               const uint64_t cell = grid.index(K, (bx << da) + c.x, (by << da) + c.y, (bw << dw) + c.w);
               root_cell = cell;
