@@ -12,10 +12,10 @@
 #include <functional>
 #include <memory>
 #include <mutex>
-#include <thread>
 #include <vector>
 
 #include "common/hash.hpp"
+#include "common/parallel.hpp"
 #include "scene/scene_limits.hpp"
 #include "tiles/bake/deep_sampler.hpp"
 #include "tiles/bake/depth_bounds.hpp"
@@ -120,8 +120,6 @@ uint64_t verify_every_texel(const VerifyArgs& a, const TraceFn& trace,
                             uint64_t& checked, Progress& progress, uint64_t done_before, uint64_t grand_total,
                             TracedHulls* hulls) {
   constexpr uint64_t kChunk = 1024;
-  const uint64_t total = region.w * region.h;
-  const unsigned threads = std::max(1u, std::thread::hardware_concurrency());
   std::atomic<uint64_t> bad{0};
   std::mutex print;
   std::string read_error;
@@ -131,39 +129,35 @@ uint64_t verify_every_texel(const VerifyArgs& a, const TraceFn& trace,
       const uint32_t w = uint32_t(std::min(kChunk, region.x + region.w - cx));
       const uint32_t h = uint32_t(std::min(kChunk, region.y + region.h - cy));
       const IntervalTile t = trace({L, cx, cy, w, h});
-      auto check_rows = [&](uint32_t first) {
-        for (uint32_t j = first; j < h && bad < a.max_mismatches; j += threads)
-          for (uint32_t i = 0; i < w; ++i) {
-            const Interval iv = t.at(i, j);
-            float v = 0;
-            try {
-              v = eval.depth(L, cx + i, cy + j);
-            } catch (const FormatError& e) {
-              std::lock_guard lock(print);
-              if (read_error.empty())
-                read_error = "texel (" + std::to_string(cx + i) + ", " + std::to_string(cy + j) +
-                             "): " + e.what();
-              bad = a.max_mismatches;
-              return;
-            }
-            if (contract.holds(iv, v)) continue;
+      st::for_each_index(h, 0, [&](size_t row) {
+        const uint32_t j = uint32_t(row);
+        if (bad >= a.max_mismatches) return;
+        for (uint32_t i = 0; i < w; ++i) {
+          const Interval iv = t.at(i, j);
+          float v = 0;
+          try {
+            v = eval.depth(L, cx + i, cy + j);
+          } catch (const FormatError& e) {
             std::lock_guard lock(print);
-            if (bad >= a.max_mismatches) return;
-            std::printf("mismatch: texel (%llu, %llu) of level %u: stored %.9g outside [%.9g, %.9g]\n",
-                        (unsigned long long)(cx + i), (unsigned long long)(cy + j), L, v, iv.lo,
-                        iv.hi);
-            ++bad;
+            if (read_error.empty())
+              read_error = "texel (" + std::to_string(cx + i) + ", " + std::to_string(cy + j) +
+                           "): " + e.what();
+            bad = a.max_mismatches;
+            return;
           }
-      };
-      std::vector<std::thread> pool;
-      for (unsigned k = 1; k < threads; ++k) pool.emplace_back(check_rows, k);
-      check_rows(0);
-      for (auto& th : pool) th.join();
+          if (contract.holds(iv, v)) continue;
+          std::lock_guard lock(print);
+          if (bad >= a.max_mismatches) return;
+          std::printf("mismatch: texel (%llu, %llu) of level %u: stored %.9g outside [%.9g, %.9g]\n",
+                      (unsigned long long)(cx + i), (unsigned long long)(cy + j), L, v, iv.lo,
+                      iv.hi);
+          ++bad;
+        }
+      });
       if (hulls) hulls->add(t, cx, cy, w, h);
       checked += uint64_t(w) * h;
       progress.update(done_before + checked, grand_total, done_before + checked);
     }
-  (void)total;
   if (!read_error.empty()) {
     std::printf("verify: FAILED reading %s\n", read_error.c_str());
     exit_with(kExitMismatch);
