@@ -5,7 +5,7 @@
 // OUT for bench_pack_bytes (per-section bytes, the planes section included).
 //
 //   bench_plane_packs SCENE@RES... [--out DIR] [--json PATH] [--light SPEC] [--min-shift S] [--min-nodes N] [--min-reused N]
-//                     [--no-merge] [--no-round] [--no-pack] [--no-predict] [--no-grow] [--max-palette N] [--grow-seeds N] [--stats]
+//                     [--no-merge] [--no-round] [--no-pack] [--no-predict] [--no-grow] [--keep-coarse] [--max-palette N] [--grow-seeds N] [--stats]
 //                     [--only default,static,planes]
 // (--no-grow: a labelled block's missing texels get one plane fitted to them all or none,
 // PlaneFitOptions::grow_labels; --stats: where the planes build's valued nodes went,
@@ -60,6 +60,7 @@ int main(int argc, char** argv) try {
       .flag("--no-round", fit.round_planes, "PlaneFitOptions::round_planes off", false)
       .flag("--no-pack", pack_planes, "Store plane tiles as STPN instead of packed", false)
       .flag("--no-predict", predict_labels, "Pack plane tiles without predicted labels (STPQ)", false)
+      .flag("--keep-coarse", fit.drop_coarse_values, "PlaneFitOptions::drop_coarse_values off (the hierarchy's coarse values above the blocks)", false)
       .flag("--no-grow", fit.grow_labels, "PlaneFitOptions::grow_labels off (the old texel-order labelling)", false)
       .value("--max-palette", fit.max_palette, "PlaneFitOptions::max_palette (4: no wide labelled blocks, the form before)")
       .value("--grow-seeds", fit.grow_seeds, "PlaneFitOptions::grow_seeds (1..3)")

@@ -446,7 +446,8 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
   if (scene.triangles.empty()) GTEST_SKIP() << "assimp-testmodels missing: run scripts/deps";
   const LightSpace light = LightSpace::fit(LightSpec::parse("sun:azimuth=30,elevation=50"), scene.bounds());
   const uint32_t depth = 7, level = 9;
-  uint64_t plane_texels = 0, labelled = 0, table_merged = 0, table_unmerged = 0, values = 0, values_ungrown = 0, values_narrow = 0;
+  uint64_t plane_texels = 0, labelled = 0, table_merged = 0, table_unmerged = 0, values = 0, values_ungrown = 0, values_narrow = 0,
+           values_kept = 0;
   uint64_t fewest_checked = 0;
   uint64_t zeros_rounded = 0, zeros_unrounded = 0, z_rounded = 0, z_unrounded = 0, z_stpn = 0, z_packed = 0;
   // Trailing zero bits of a plane tile's table entries (a, b, c), and its table's zlib size.
@@ -470,6 +471,10 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
       PlaneFitOptions narrow;
       narrow.max_palette = planes::kPalette;
       values_narrow += fit_planes(t.h, narrow).pruned.valued_count();
+      // Coarse values above the blocks that an ancestor's value stands for are dropped.
+      PlaneFitOptions kept;
+      kept.drop_coarse_values = false;
+      values_kept += fit_planes(t.h, kept).pruned.valued_count();
       // The growth's certificate that four texels share no plane only skips refits that fail:
       // every refit tried gives the very same blocks, palettes, labels and planes.
       PlaneFitOptions every_refit;
@@ -564,12 +569,32 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
           const float d = ev->depth(depth, x, y);
           ASSERT_TRUE(iv.lo <= d && d <= iv.hi) << to_string(e) << " texel " << x << "," << y;
         }
-      // Coarser levels answer too (the multiresolution map stays complete); a region shares
-      // its value at every texel; PCF is the mean of the single taps.
+      // Coarser levels answer too (the multiresolution map stays complete: within [min lo,
+      // max hi] of the texels below); a region shares its value at every texel; PCF is the
+      // mean of the single taps.
+      std::vector<std::vector<Interval>> hull(depth + 1);
+      hull[depth].resize(size_t(side) * side);
+      for (uint32_t y = 0; y < side; ++y)
+        for (uint32_t x = 0; x < side; ++x) hull[depth][size_t(y) * side + x] = t.truth.at(x, y);
+      for (uint32_t l = depth; l-- > 0;) {
+        const uint32_t w = 1u << l;
+        hull[l].resize(size_t(w) * w);
+        for (uint32_t y = 0; y < w; ++y)
+          for (uint32_t x = 0; x < w; ++x) {
+            Interval& h = hull[l][size_t(y) * w + x];
+            h = hull[l + 1][size_t(2 * y) * 2 * w + 2 * x];
+            for (uint32_t c = 1; c < 4; ++c) {
+              const Interval& ch = hull[l + 1][size_t(2 * y + (c >> 1)) * 2 * w + 2 * x + (c & 1)];
+              h.lo = std::min(h.lo, ch.lo), h.hi = std::max(h.hi, ch.hi);
+            }
+          }
+      }
       std::mt19937 rng(ty);
       for (uint32_t l = 0; l <= depth; ++l)
         for (int k = 0; k < 200; ++k) {
           const uint32_t x = rng() % (1u << l), y = rng() % (1u << l);
+          const Interval& h = hull[l][(size_t(y) << l) + x];
+          ASSERT_TRUE(h.lo <= ev->depth(l, x, y) && ev->depth(l, x, y) <= h.hi) << "level " << l << " " << x << "," << y;
           const DepthRegion reg = ev->depth_region(l, x, y);
           ASSERT_EQ(reg.value, ev->depth(l, x, y));
           const uint32_t rx = (x >> reg.shift << reg.shift) + rng() % (1u << reg.shift);
@@ -586,6 +611,7 @@ TEST(PlaneFit, RealOpenMeshTilesAreAnsweredExactlyByPlanesAndTheRest) {
   EXPECT_GT(fewest_checked, 0u);
   EXPECT_LT(values, values_ungrown) << "grown labels leave fewer values to the inner trees";
   EXPECT_LT(values, values_narrow) << "wide labelled blocks leave fewer values to the inner trees";
+  EXPECT_LT(values, values_kept) << "coarse values that an ancestor's value stands for are dropped";
   EXPECT_LT(table_merged, table_unmerged) << "planes of one surface found on separate blocks are merged";
   EXPECT_GT(zeros_rounded, zeros_unrounded + 20 * table_merged) << "rounded planes end in zero bits";
   EXPECT_LT(z_rounded, z_unrounded) << "rounded planes deflate smaller";

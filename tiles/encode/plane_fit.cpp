@@ -844,6 +844,123 @@ void relabel_blocks(PlaneSplit& out, uint32_t d, std::span<const float> lo, std:
   out.labelled = std::move(kept);
 }
 
+// After the prune: a valued node above the blocks (not the root, not a finest texel) whose
+// value its nearest valued ancestor's value A could stand for is made empty (or dropped with
+// no children left). A stands for it when every position the node's value answers lies in
+// its bounds: a finest texel its admissible [lo, hi] (so every texel stays exact), a coarser
+// position [min lo, max hi] of the texels below it (hierarchy.hpp: every level stays a
+// complete map). Positions a block's plane answers (finer than the block) or a deeper valued
+// node answers are not the node's. The ancestor's [lo, hi] is narrowed to those bounds (the
+// encoders may pick any value inside); a node kept (below the root) gets the bounds of its
+// positions as its [lo, hi], and may move its value into a descendant's bounds to take it.
+// Nodes are visited coarse to fine, so a node's A is the answer after the drops above it.
+// What it saves: the inner tree's values above plane blocks (a block's own level, the levels
+// above it), and the map preview's nodes that now answer their parent's value (tiles/PACK.md
+// "Map preview": only nodes differing from their parent are stored).
+void drop_coarse_values(Hierarchy& t, uint32_t d, std::span<const float> lo, std::span<const float> hi,
+                        const std::vector<Plane>& blocks, const std::vector<LabelBlock>& labelled) {
+  if (d < 2) return;
+  const uint32_t side = 1u << d;
+  // Per finest texel, the shift of the block holding it (0: none).
+  std::vector<uint8_t> bshift(size_t(side) * side, 0);
+  auto mark = [&](uint32_t start, uint32_t shift) {
+    const uint32_t x0 = morton_compact(start), y0 = morton_compact(start >> 1), w = 1u << shift;
+    for (uint32_t y = y0; y < y0 + w; ++y) std::fill_n(bshift.begin() + size_t(y) * side + x0, w, uint8_t(shift));
+  };
+  for (const Plane& p : blocks) mark(p.start, p.shift);
+  for (const LabelBlock& b : labelled) mark(b.start, kLabelShift);
+  // [min lo, max hi] of the texels below each position, per level (dense).
+  std::vector<std::vector<float>> mn(d + 1), mx(d + 1);
+  mn[d].assign(lo.begin(), lo.end());
+  mx[d].assign(hi.begin(), hi.end());
+  for (uint32_t l = d; l-- > 0;) {
+    const uint32_t w = 1u << l;
+    mn[l].resize(size_t(w) * w), mx[l].resize(size_t(w) * w);
+    for (uint32_t y = 0; y < w; ++y)
+      for (uint32_t x = 0; x < w; ++x) {
+        const size_t c0 = size_t(2 * y) * (2 * w) + 2 * x, c1 = c0 + 2 * w;
+        mn[l][size_t(y) * w + x] = std::min({mn[l + 1][c0], mn[l + 1][c0 + 1], mn[l + 1][c1], mn[l + 1][c1 + 1]});
+        mx[l][size_t(y) * w + x] = std::max({mx[l + 1][c0], mx[l + 1][c0 + 1], mx[l + 1][c1], mx[l + 1][c1 + 1]});
+      }
+  }
+  // Present nodes per level (dense): index into t.levels[l], or -1.
+  std::vector<std::vector<int32_t>> at(d + 1);
+  for (uint32_t l = 0; l <= d; ++l) {
+    const uint32_t w = 1u << l;
+    at[l].assign(size_t(w) * w, -1);
+    for (size_t j = 0; j < t.levels[l].size(); ++j) {
+      const uint64_t m = t.levels[l][j].morton;
+      at[l][size_t(morton_compact(m >> 1)) * w + morton_compact(m)] = int32_t(j);
+    }
+  }
+  auto valued = [&](uint32_t l, uint32_t x, uint32_t y) {
+    const int32_t j = at[l][(size_t(y) << l) + x];
+    return j >= 0 && t.levels[l][size_t(j)].has_value;
+  };
+  // The intersection of the bounds of every position (l, x, y) the node at level l0 answers.
+  auto bounds = [&](auto&& self, uint32_t l, uint32_t x, uint32_t y, uint32_t l0, float& blo, float& bhi) -> void {
+    if (l > l0) {
+      if (bshift[(size_t(y) << (d - l)) * side + (size_t(x) << (d - l))] > d - l) return;  // a plane's
+      if (valued(l, x, y)) return;
+    }
+    const size_t i = (size_t(y) << l) + x;
+    blo = std::max(blo, mn[l][i]), bhi = std::min(bhi, mx[l][i]);
+    if (l == d || blo > bhi) return;
+    for (uint32_t c = 0; c < 4; ++c) self(self, l + 1, 2 * x + (c & 1), 2 * y + (c >> 1), l0, blo, bhi);
+  };
+  // Per valued node below the root, once visited and kept: whether its value may move
+  // within [lo, hi] (its [lo, hi] is then the bounds of every position it answers).
+  std::vector<std::vector<uint8_t>> movable(d + 1);
+  for (uint32_t l = 0; l <= d; ++l) movable[l].assign(t.levels[l].size(), 0);
+  for (uint32_t l = 1; l < d; ++l)
+    for (size_t j = 0; j < t.levels[l].size(); ++j) {
+      HNode& n = t.levels[l][j];
+      if (!n.has_value) continue;
+      const uint32_t x = morton_compact(n.morton), y = morton_compact(n.morton >> 1);
+      uint32_t ul = 0;
+      size_t uj = 0;
+      for (uint32_t k = l; k-- > 0;)  // the nearest valued ancestor (the root is valued)
+        if (valued(k, x >> (l - k), y >> (l - k))) {
+          ul = k, uj = size_t(at[k][(size_t(y >> (l - k)) << k) + (x >> (l - k))]);
+          break;
+        }
+      HNode& up = t.levels[ul][uj];
+      float blo = -std::numeric_limits<float>::infinity(), bhi = std::numeric_limits<float>::infinity();
+      bounds(bounds, l, x, y, l, blo, bhi);
+      const float klo = std::max(up.lo, blo), khi = std::min(up.hi, bhi);
+      // The ancestor takes this node's positions when its value is in their bounds, or can
+      // move into them (not the root: the skip grid's entry holds its value).
+      const bool inside = up.lo <= up.value && up.value <= up.hi;
+      if (inside && ((blo <= up.value && up.value <= bhi) || (movable[ul][uj] && klo <= khi))) {
+        // The encoders choose the ancestor's value within its [lo, hi] (MMH merges, DAG-MH
+        // value codes), so that narrows to the bounds of every position it answers.
+        up.lo = klo, up.hi = khi;
+        up.value = std::clamp(up.value, klo, khi);
+        n.has_value = 0;
+        continue;
+      }
+      // Kept: any value within the bounds of its positions is as exact as its own (the
+      // hierarchy's [lo, hi] only knew its texels, which blocks may answer now).
+      if (blo <= n.value && n.value <= bhi) n.lo = blo, n.hi = bhi, movable[l][j] = 1;
+    }
+  // Bottom-up: an empty node without children goes, and its parent's bit.
+  for (uint32_t l = d; l > 0; --l) {
+    std::vector<HNode>& lv = t.levels[l];
+    size_t kept = 0;
+    for (size_t j = 0; j < lv.size(); ++j) {
+      const HNode& n = lv[j];
+      if (!n.has_value && n.child_mask == 0) {
+        const uint32_t x = morton_compact(n.morton), y = morton_compact(n.morton >> 1);
+        HNode& pn = t.levels[l - 1][size_t(at[l - 1][(size_t(y >> 1) << (l - 1)) + (x >> 1)])];
+        pn.child_mask &= uint8_t(~(1u << ((x & 1) | (y & 1) << 1)));
+        continue;
+      }
+      lv[kept++] = n;
+    }
+    lv.resize(kept);
+  }
+}
+
 }  // namespace
 
 PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
@@ -1130,6 +1247,7 @@ PlaneSplit fit_planes(const Hierarchy& h, const PlaneFitOptions& o) {
       dst.push_back(n);
     }
   }
+  if (o.drop_coarse_values) drop_coarse_values(out.pruned, d, lo, hi, out.planes, out.labelled);
   return out;
 }
 

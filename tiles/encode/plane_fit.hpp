@@ -82,6 +82,11 @@ struct PlaneFitOptions {
   // The growth skips a refit that four of its texels already rule out (an exact certificate:
   // the same planes either way, only faster); false: every refit is tried (the tests compare).
   bool rule_out = true;
+  // After the prune, a valued node above the blocks whose nearest valued ancestor's value is
+  // admissible everywhere it answers (every finest texel exact, every coarser level within
+  // the texels' [min lo, max hi]) is emptied: fewer inner values and map-preview nodes
+  // (tiles/core/PLANES.md); false: the hierarchy's own coarse values (the form before).
+  bool drop_coarse_values = true;
   PlaneFitStats* stats = nullptr;  // not owned; counted into when set
 };
 
