@@ -685,9 +685,8 @@ struct GpuMap::Impl {
   // The second look, kChangeLag / 2 changes before `c` is applied, when the lines
   // prefetch_change asked for are in: the words unlink and link will write (the old
   // tile's pointer word; the parent's child-table or skip word) with their dirty bytes and
-  // the records their tags read, and the records of the parent and live children
-  // the buckets name. Loads only; a word another change moves meanwhile is
-  // found again when applied.
+  // the records their tags read, and the parent's record (the one its buckets name).
+  // Loads only; a word another change moves meanwhile is found again when applied.
   void prefetch_words(const Change& c) const {
     auto word = [&](uint32_t w) {
       __builtin_prefetch(&page_shadow[w]);
@@ -699,14 +698,6 @@ struct GpuMap::Impl {
       if (tag != ~uint64_t(0) && uint32_t(tag) < page_shadow.size()) word(uint32_t(tag));
     }
     if (!c.link || sg) return;
-    if (const uint32_t d = c.levels) {  // the records of the children link will find
-      const TileAddress a = tile_address(c.tile);
-      for (uint32_t e = 0; e < (1u << (2 * d)); ++e)
-        if (c.live[e >> 6] >> (e & 63) & 1) {
-          const uint32_t s = tile_slot.guess(make_tile_id(a.level + d, (a.x << d) + (e & ((1u << d) - 1)), (a.y << d) + (e >> d)));
-          if (s < slot_count) __builtin_prefetch(&slot_recs[s]);
-        }
-    }
     const uint32_t level = tile_level(c.tile);
     if (level < k) return;
     const uint64_t morton = tile_morton(c.tile);
