@@ -49,57 +49,78 @@ void check_query_kernels(std::span<const Query> queries) {
 
 // Tile -> the slot holding it on the device: open addressing, linear probing, backward-shift
 // deletion, sized once for at most slot_count keys (load <= 1/2), so linking and unlinking
-// tiles on the frame path never allocates.
+// tiles on the frame path never allocates. A bucket is 8 bytes, eight a cache line: the
+// slot and 32 bits of the key's hash (its home and a filter); the key itself is the tile
+// its slot's record holds (GpuMap::Impl::SlotRec), read only when the hash bits match, and
+// that record is what the caller reads next anyway. A slot sits in at most one bucket, and
+// only while its record's tile is that bucket's key (set() moves a tile's bucket to its
+// new slot, erase() removes a slot's bucket): so erase needs no key and a shift no record.
 class TileSlotTable {
  public:
   void init(uint32_t max_keys) {
     mask_ = std::bit_ceil(std::max<uint64_t>(16, uint64_t(max_keys) * 2)) - 1;
-    keys_.assign(mask_ + 1, kInvalidTile);
-    slots_.assign(mask_ + 1, 0);
+    buckets_.assign(mask_ + 1, Bucket{});
   }
-  uint32_t find(TileId t) const {
-    for (uint64_t i = home(t);; i = (i + 1) & mask_) {
-      if (keys_[i] == t) return slots_[i];
-      if (keys_[i] == kInvalidTile) return layout::kNoSlot;
+  // key_of(slot): the tile slot's record holds.
+  template <typename KeyOf>
+  uint32_t find(TileId t, const KeyOf& key_of) const {
+    const uint32_t h = hash(t);
+    for (uint64_t i = h & mask_;; i = (i + 1) & mask_) {
+      const Bucket b = buckets_[i];
+      if (b.slot == layout::kNoSlot) return layout::kNoSlot;
+      if (b.hash == h && key_of(b.slot) == t) return b.slot;
     }
   }
-  // Starts loading the lines find(t) / set / erase will read first.
-  void prefetch(TileId t) const {
-    const uint64_t i = home(t);
-    __builtin_prefetch(&keys_[i]);
-    __builtin_prefetch(&slots_[i]);
+  // The slot find(t) most likely answers, from the buckets alone (no record read), or
+  // kNoSlot: for prefetching the record before find runs.
+  uint32_t guess(TileId t) const {
+    const uint32_t h = hash(t);
+    for (uint64_t i = h & mask_;; i = (i + 1) & mask_) {
+      const Bucket b = buckets_[i];
+      if (b.slot == layout::kNoSlot || b.hash == h) return b.slot;
+    }
   }
-  void set(TileId t, uint32_t slot) {
-    uint64_t i = home(t);
-    while (keys_[i] != kInvalidTile && keys_[i] != t) i = (i + 1) & mask_;
-    keys_[i] = t;
-    slots_[i] = slot;
+  // Starts loading the line find(t) / set / erase will read first.
+  void prefetch(TileId t) const { __builtin_prefetch(&buckets_[hash(t) & mask_]); }
+  // t is now in `slot` (whose record already or soon holds t; a bucket of t's
+  // earlier slot moves here).
+  template <typename KeyOf>
+  void set(TileId t, uint32_t slot, const KeyOf& key_of) {
+    const uint32_t h = hash(t);
+    uint64_t i = h & mask_;
+    while (buckets_[i].slot != layout::kNoSlot && !(buckets_[i].hash == h && key_of(buckets_[i].slot) == t))
+      i = (i + 1) & mask_;
+    buckets_[i] = {h, slot};
   }
-  // Removes t only while it still maps to `slot`.
+  // Removes `slot`'s bucket (key t), if it has one: a tile since moved to another slot
+  // keeps that mapping.
   void erase(TileId t, uint32_t slot) {
-    uint64_t i = home(t);
-    while (keys_[i] != t) {
-      if (keys_[i] == kInvalidTile) return;
+    const uint32_t h = hash(t);
+    uint64_t i = h & mask_;
+    while (!(buckets_[i].slot == slot && buckets_[i].hash == h)) {
+      if (buckets_[i].slot == layout::kNoSlot) return;
       i = (i + 1) & mask_;
     }
-    if (slots_[i] != slot) return;
     for (uint64_t j = i;;) {  // shift later keys of the run back over the hole
       j = (j + 1) & mask_;
-      if (keys_[j] == kInvalidTile) break;
-      const uint64_t h = home(keys_[j]);
-      if (((j - h) & mask_) < ((j - i) & mask_)) continue;  // its home lies after the hole: stays
-      keys_[i] = keys_[j];
-      slots_[i] = slots_[j];
+      if (buckets_[j].slot == layout::kNoSlot) break;
+      const uint64_t home = buckets_[j].hash & mask_;
+      if (((j - home) & mask_) < ((j - i) & mask_)) continue;  // its home lies after the hole: stays
+      buckets_[i] = buckets_[j];
       i = j;
     }
-    keys_[i] = kInvalidTile;
+    buckets_[i] = Bucket{};
   }
 
  private:
-  uint64_t home(TileId t) const { return ((t ^ (t >> 29)) * 0x9E3779B97F4A7C15ull >> 17) & mask_; }
+  struct Bucket {
+    uint32_t hash = 0;
+    uint32_t slot = layout::kNoSlot;  // kNoSlot: empty
+  };
+  // 32 bits of the old 64-bit mix: a table has at most 2^24 buckets (2^23 slots).
+  static uint32_t hash(TileId t) { return uint32_t((t ^ (t >> 29)) * 0x9E3779B97F4A7C15ull >> 17); }
   uint64_t mask_ = 0;
-  std::vector<TileId> keys_;
-  std::vector<uint32_t> slots_;
+  std::vector<Bucket> buckets_;
 };
 
 }  // namespace
@@ -152,21 +173,30 @@ struct GpuMap::Impl {
 
   // ---- the mirror (what the device holds, as the host last recorded it) ----
   std::vector<uint32_t> page_shadow;     // the page-table buffer's contents
-  std::vector<uint8_t> dirty;            // per kDirtyBlockWords block of page_shadow
+  std::vector<uint64_t> dirty;           // a bit per kDirtyBlockWords block of page_shadow
   std::vector<uint32_t> dirty_list;
   std::vector<TileId> mirror_tile;       // per slot: the tile the device holds, or kInvalidTile
-  // Per slot, in one 16-byte record (the frame path reads them together, from cold caches):
+                                         // (the view's `known`: may run ahead of the links)
+  // Per slot, one 32-byte record, two a cache line (the frame path reads a changed slot's,
+  // its parent's and its children's from cold caches: one line each, the tile_slot key
+  // check included):
+  // - tile: the tile linked in the slot (tile_slot's key for it), else kInvalidTile;
   // - pointer: the page-table word last pointed at its tile (low 32 bits) and, for a word in
   //   a child table, that table's slot's link count then (high 32: a later link of that slot
   //   rewrote its table, so the word no longer speaks for this child); ~0: none. unlink
   //   clears the pointer from here instead of looking for the parent again;
   // - links: link() calls so far; levels: index tile levels d, 0 for an encoded tile.
-  struct SlotLinks {
+  struct alignas(32) SlotRec {
+    TileId tile = kInvalidTile;
     uint64_t pointer = ~uint64_t(0);
     uint32_t links = 0;
     uint8_t levels = 0;
   };
-  std::vector<SlotLinks> slot_links;
+  static_assert(sizeof(SlotRec) == 32);
+  std::vector<SlotRec> slot_recs;
+  auto slot_key() const {
+    return [this](uint32_t s) { return slot_recs[s].tile; };
+  }
   // One changed slot as stage_changes queued it: unlinked (old_tile) and linked (tile) a
   // few changes later, so the lines they read were prefetched meanwhile (the frame path runs
   // on cold caches, and one change's misses depend on each other: bucket, parent, word).
@@ -358,13 +388,14 @@ struct GpuMap::Impl {
       }
     }
     if (deep_part) deep.init(deep_at, deep_words, p, view->light());
-    dirty.assign((words + kDirtyBlockWords - 1) / kDirtyBlockWords, 0);
-    dirty_list.reserve(dirty.size());
+    const uint32_t blocks = (words + kDirtyBlockWords - 1) / kDirtyBlockWords;
+    dirty.assign((blocks + 63) / 64, 0);
+    dirty_list.reserve(blocks);
     mirror_tile.assign(slot_count, kInvalidTile);
-    slot_links.assign(slot_count, SlotLinks{});
+    slot_recs.assign(slot_count, SlotRec{});
     tile_slot.init(slot_count);
     pool_copies.reserve(slot_count);
-    page_copies.reserve(dirty.size());
+    page_copies.reserve(blocks);
     wanted.reserve(opt.feedback_capacity);
     deep_wanted.reserve(opt.feedback_capacity);
     feedback.reserve(opt.feedback_capacity);
@@ -523,7 +554,9 @@ struct GpuMap::Impl {
     if (page_shadow[w] == v) return;
     page_shadow[w] = v;
     const uint32_t b = w / kDirtyBlockWords;
-    if (!dirty[b]) dirty[b] = 1, dirty_list.push_back(b);
+    uint64_t& bits = dirty[b / 64];
+    const uint64_t bit = uint64_t(1) << (b % 64);
+    if (!(bits & bit)) bits |= bit, dirty_list.push_back(b);
   }
 
   // The page-table word that points at `tile` on the device: its skip cell's slot word,
@@ -545,8 +578,8 @@ struct GpuMap::Impl {
     if (level < k) return ~0u;
     if (level == k) return off_skip_slots + uint32_t((uint64_t(morton_compact(morton >> 1)) << k) + morton_compact(morton));
     for (uint32_t j = 1; j <= kMaxIndexLevels && j <= level - k; ++j) {
-      const uint32_t s = tile_slot.find(tile_parent(tile, j));
-      if (s == L::kNoSlot || slot_links[s].levels != j) continue;
+      const uint32_t s = tile_slot.find(tile_parent(tile, j), slot_key());
+      if (s == L::kNoSlot || slot_recs[s].levels != j) continue;
       const uint64_t low = tile_child_morton(tile, j);
       const uint32_t c = (morton_compact(low >> 1) << j) + morton_compact(low);
       return off_children + s * L::kChildTableWords + c;
@@ -556,7 +589,7 @@ struct GpuMap::Impl {
 
   // SlotLinks::pointer's tag of page-table word w.
   uint64_t pointer_tag(uint32_t w) const {
-    if (w >= off_children && w < off_pcf) return uint64_t(slot_links[(w - off_children) / L::kChildTableWords].links) << 32 | w;
+    if (w >= off_children && w < off_pcf) return uint64_t(slot_recs[(w - off_children) / L::kChildTableWords].links) << 32 | w;
     return w;
   }
 
@@ -564,7 +597,7 @@ struct GpuMap::Impl {
     // The word pointer_word(t) would find (the tile's parent, if the device holds it, set
     // it when the later of the two was linked), unless its child table was rewritten since:
     // no walk up through the tile -> slot table (a cache miss or two per level tried).
-    SlotLinks& sl = slot_links[s];
+    SlotRec& sl = slot_recs[s];
     const uint64_t tag = sl.pointer;
     const uint32_t w = uint32_t(tag);
     if (tag != ~uint64_t(0) && pointer_tag(w) == tag && page_shadow[w] == s) set_page_word(w, L::kNoSlot);
@@ -574,6 +607,7 @@ struct GpuMap::Impl {
     // tile linked later would not find its child and answer coarser than the CPU.
     tile_slot.erase(t, s);
     mirror_tile[s] = kInvalidTile;
+    sl.tile = kInvalidTile;
     sl.levels = 0;
     --resident;
   }
@@ -584,9 +618,10 @@ struct GpuMap::Impl {
     const uint32_t s = c.slot;
     const TileId tile = c.tile;
     mirror_tile[s] = tile;
-    tile_slot.set(tile, s);
+    SlotRec& sl = slot_recs[s];
+    tile_slot.set(tile, s, slot_key());
+    sl.tile = tile;
     ++resident;
-    SlotLinks& sl = slot_links[s];
     ++sl.links;
     sl.levels = c.levels;
     if (const uint32_t d = c.levels) {
@@ -595,11 +630,11 @@ struct GpuMap::Impl {
         uint32_t ptr = L::kNoSlot;
         if (c.live[e >> 6] >> (e & 63) & 1) {
           const uint32_t cx = (a.x << d) + (e & ((1u << d) - 1)), cy = (a.y << d) + (e >> d);
-          ptr = tile_slot.find(make_tile_id(a.level + d, cx, cy));
+          ptr = tile_slot.find(make_tile_id(a.level + d, cx, cy), slot_key());
         }
         const uint32_t w = off_children + s * L::kChildTableWords + e;
         set_page_word(w, ptr);
-        if (ptr != L::kNoSlot) slot_links[ptr].pointer = pointer_tag(w);
+        if (ptr != L::kNoSlot) slot_recs[ptr].pointer = pointer_tag(w);
       }
     }
     const uint32_t w = pointer_word(tile);
@@ -623,7 +658,7 @@ struct GpuMap::Impl {
   // Loads what applying `c` reads first: its slot's record, its buckets (the old tile's,
   // the new tile's, its parent's one level up, its live children's), its child table.
   void prefetch_change(const Change& c) const {
-    __builtin_prefetch(&slot_links[c.slot]);
+    __builtin_prefetch(&slot_recs[c.slot]);
     if (c.old_tile != kInvalidTile) tile_slot.prefetch(c.old_tile);
     if (!c.link) return;
     tile_slot.prefetch(c.tile);
@@ -631,7 +666,7 @@ struct GpuMap::Impl {
     if (const uint32_t d = c.levels) {
       const uint32_t w0 = off_children + c.slot * L::kChildTableWords, n = 1u << (2 * d);
       for (uint32_t e = 0; e < n; e += 16) __builtin_prefetch(&page_shadow[w0 + e]);
-      __builtin_prefetch(&dirty[w0 / kDirtyBlockWords]);
+      __builtin_prefetch(&dirty[w0 / kDirtyBlockWords / 64]);
       const TileAddress a = tile_address(c.tile);
       for (uint32_t e = 0; e < n; ++e)
         if (c.live[e >> 6] >> (e & 63) & 1)
@@ -650,16 +685,16 @@ struct GpuMap::Impl {
   // The second look, kChangeLag / 2 changes before `c` is applied, when the lines
   // prefetch_change asked for are in: the words unlink and link will write (the old
   // tile's pointer word; the parent's child-table or skip word) with their dirty bytes and
-  // the records their tags read. Loads only; a word another change moves meanwhile is
-  // found again when applied.
+  // the records their tags read, and the parent's record (the one its buckets name).
+  // Loads only; a word another change moves meanwhile is found again when applied.
   void prefetch_words(const Change& c) const {
     auto word = [&](uint32_t w) {
       __builtin_prefetch(&page_shadow[w]);
-      __builtin_prefetch(&dirty[w / kDirtyBlockWords]);
-      if (w >= off_children && w < off_pcf) __builtin_prefetch(&slot_links[(w - off_children) / L::kChildTableWords]);
+      __builtin_prefetch(&dirty[w / kDirtyBlockWords / 64]);
+      if (w >= off_children && w < off_pcf) __builtin_prefetch(&slot_recs[(w - off_children) / L::kChildTableWords]);
     };
     if (c.old_tile != kInvalidTile) {
-      const uint64_t tag = slot_links[c.slot].pointer;
+      const uint64_t tag = slot_recs[c.slot].pointer;
       if (tag != ~uint64_t(0) && uint32_t(tag) < page_shadow.size()) word(uint32_t(tag));
     }
     if (!c.link || sg) return;
@@ -670,9 +705,9 @@ struct GpuMap::Impl {
       word(off_skip_slots + uint32_t((uint64_t(morton_compact(morton >> 1)) << k) + morton_compact(morton)));
       return;
     }
-    const uint32_t p = tile_slot.find(tile_parent(c.tile, 1));
-    if (p == L::kNoSlot) return;
-    __builtin_prefetch(&slot_links[p]);
+    const uint32_t p = tile_slot.guess(tile_parent(c.tile, 1));
+    if (p >= slot_count) return;
+    __builtin_prefetch(&slot_recs[p]);
     const uint64_t low = tile_child_morton(c.tile, 1);
     word(off_children + p * L::kChildTableWords + (morton_compact(low >> 1) << 1) + morton_compact(low));
   }
@@ -743,7 +778,7 @@ struct GpuMap::Impl {
       page_copies.push_back({off, 0, page_shadow.size() * 4});
       off += page_shadow.size() * 4;
       totals.page_words_uploaded += page_shadow.size();
-      for (uint32_t blk : dirty_list) dirty[blk] = 0;
+      for (uint32_t blk : dirty_list) dirty[blk / 64] = 0;
       dirty_list.clear();
       page_table_sent = true;
     }
@@ -754,7 +789,7 @@ struct GpuMap::Impl {
       std::memcpy(staging + off, page_shadow.data() + w0, n * 4);
       add_copy(page_copies, off, uint64_t(w0) * 4, uint64_t(n) * 4);
       off += n * 4;
-      dirty[blk] = 0;
+      dirty[blk / 64] = 0;
       totals.page_words_uploaded += n;
     }
     dirty_list.clear();
