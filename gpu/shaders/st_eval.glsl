@@ -132,16 +132,18 @@ uint st_byte(uint base_word, uint byte_offset) {
 // The depth of texel (x, y) of `level` and in `shift` the square of texels that share it
 // (those with the same x >> shift, y >> shift): a walk that ends above `level` at a leaf or
 // a missing child ends there for every texel under that node, with the same value.
-float st_mh_depth(uint base, uint level, uint x, uint y, bool relative, out uint shift) {
+// The tree's first word and the root's value (st_mh_depth_at's hdr and root, read once a tile).
+uint st_mh_tree(uint base, uint hdr) { return base + 4u + ((((hdr >> 16u) & 0xFFu) + 3u) >> 2u); }
+uint st_mh_root(uint base, uint hdr) { return ST_POOL(st_mh_tree(base, hdr) + (((hdr >> 24u) & 1u) != 0u ? 0u : 1u)); }
+// st_mh_depth with the tile's header word 1 (hdr) and its root's value bits (root) given.
+float st_mh_depth_at(uint base, uint hdr, uint root, uint level, uint x, uint y, bool relative, out uint shift) {
   level = min(level, kMaxMapLevel);
-  const uint hdr = ST_POOL(base + 1u);
-  const uint levels = (hdr >> 16u) & 0xFFu;
   const bool root_leaf = ((hdr >> 24u) & 1u) != 0u;
-  const uint tree = base + 4u + ((levels + 3u) >> 2u);
+  const uint tree = st_mh_tree(base, hdr);
   uint pos = 0u;
   uint code = root_leaf ? 1u : 3u;
   uint val_pos = root_leaf ? 0u : 1u;
-  precise float value = uintBitsToFloat(ST_POOL(tree + val_pos));
+  precise float value = uintBitsToFloat(root);
   uint l = 0u, end = level;  // end: the level of the node whose texels share the answer
   while (l < level && code != 1u) {
     const uint bit = level - (l + 1u);
@@ -172,6 +174,10 @@ float st_mh_depth(uint base, uint level, uint x, uint y, bool relative, out uint
   if (code == 1u) end = l;  // a leaf (a missing child's break leaves code != 1)
   shift = level - end;
   return relative ? value : uintBitsToFloat(ST_POOL(tree + val_pos));
+}
+float st_mh_depth(uint base, uint level, uint x, uint y, bool relative, out uint shift) {
+  const uint hdr = ST_POOL(base + 1u);
+  return st_mh_depth_at(base, hdr, st_mh_root(base, hdr), level, x, y, relative, shift);
 }
 float st_mh_depth(uint base, uint level, uint x, uint y, bool relative) {
   uint shift;
@@ -845,6 +851,7 @@ float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint
   bool lean = false, dag = false, mmh = false;  // an MH/MMH/DAG-MH/plane tile; which
   bool planes = false;  // w's tile is a plane tile at pbase
   uint pbase = 0u;
+  uint mh_hdr = 0u, mh_root = 0u;  // w's MH or MMH tile: header word 1, the root's value bits
   // w's plane tile (planes): its finest level, block count, records and labelled blocks; and
   // the block record of its last search (bstart, bword; bshift 0: none) with that block's
   // labels (st_plane_label's l0..l5; every word read lies inside the tile, those a kind
@@ -860,21 +867,25 @@ float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint
     if (w.kind == 1u) {
       pbase = w.slot * pt.slot_words;
       uint base = pbase;
-      planes = ST_POOL(base) == 0x4E505453u;  // "STPN": plane blocks over an inner buffer (st_tile_depth)
+      uvec4 ph, pl;  // a plane tile's header: magic, finest, blocks, -, planes, labelled blocks
+      st_pool_run8(base, 6u, ph, pl);
+      planes = ph.x == 0x4E505453u;  // "STPN": plane blocks over an inner buffer (st_tile_depth)
       bshift = 0u;
       if (planes) {
-        pfinest = ((ST_POOL(base + 1u) >> 16u) & 0xFFu) - 1u;
-        pcount = ST_POOL(base + 2u);
-        pblocks = base + 6u + 6u * ST_POOL(base + 4u);
+        pfinest = ((ph.y >> 16u) & 0xFFu) - 1u;
+        pcount = ph.z;
+        pblocks = base + 6u + 6u * pl.x;
         plabels = pblocks + 2u * pcount;
-        base = plabels + 6u * ST_POOL(base + 5u);
+        base = plabels + 6u * pl.y;
       }
-      const uint magic = ST_POOL(base);
-      mmh = enc == 1u || (enc == 2u && magic == 0x4D4D5453u);  // "STMM": a DAG-MH pack's MMH tile
+      const uvec4 head = st_pool_run(base, 2u);  // magic, MH header word 1
+      mmh = enc == 1u || (enc == 2u && head.x == 0x4D4D5453u);  // "STMM": a DAG-MH pack's MMH tile
       dag = enc == 2u && !mmh;
       lean = enc != 3u;  // not a voxel tile
       if (dag) t = st_dag_open(base);
       t.base = base;
+      mh_hdr = head.y;
+      if (lean && !dag) mh_root = st_mh_root(base, mh_hdr);  // an MH or MMH tile
     }
     if (w.kind == 2u || (w.kind == 1u && !lean)) {  // the second loop's: every tap of the kernel in w's square
       const uint j = k / r, i = k - j * r;
@@ -972,7 +983,7 @@ float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint
             }
           }
           if (!grouped) {
-            value = dag ? st_dag_depth_in(t, rel, lx, ly, s) : st_mh_depth(t.base, rel, lx, ly, mmh, s);
+            value = dag ? st_dag_depth_in(t, rel, lx, ly, s) : st_mh_depth_at(t.base, mh_hdr, mh_root, rel, lx, ly, mmh, s);
             s = planes ? 0u : min(s, rel);  // st_tile_depth's shift
           }
         }
