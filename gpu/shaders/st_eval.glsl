@@ -8,6 +8,7 @@
 //   #define ST_POOL(w) my_pool[w]      // the slot pool (slot s at word s * slot_words)
 //   #define ST_PAGE(w) my_page[w]      // the page-table buffer
 //   #define ST_FB(w)   my_feedback[w]  // the feedback buffer (read-write, atomics)
+//   #define ST_POOL4(q) my_pool_quads[q] // optional: the same pool as uvec4 quads (words 4q..4q+3)
 // Entry points: st_depth(level, x, y, probe), st_pcf(level, x, y, r, receiver, probe),
 // st_lookup(x, y, receiver, footprint, r, probe) (level from a footprint, MH §3.3), and
 // st_pcf_plane / st_lookup_plane (a receiver plane per tap: tiles/core/receiver_plane.hpp).
