@@ -69,6 +69,19 @@
 // 2.65/2.32, 2.68/2.25, 2.13/2.14, 2.45/2.24; city A 2.23/2.33, 2.56/2.36, 2.35/2.29,
 // 2.10/1.97, B 2.79/2.58, 2.48/2.28, 2.47/2.48, 2.39/2.23, 2.02/2.00, 2.49/2.37 (no plane
 // tiles: its change is noise). The single tap did not move (engine ~1.7-2.0 CPU).
+// Buffer-read sites per loop pass: llvmpipe compiles each storage-buffer load to a loop over the
+// 8 lanes (one loop per load, all its components inside), run on every pass of the enclosing
+// loop. The GLSL PCF now reads runs of tile words as the uvec4 quads that hold them (ST_POOL4:
+// a DAG-MH chunk, skip entry, treelet, tile header, a plane's and a block's labels' six words),
+// the page table's header once a call, an MH tile's header and root once a walk, and its second
+// loop decodes voxel tiles alone: scene.frag's read sites 426 -> 324. The same command (load
+// 15-34, main A and the new binary B alternated, 4 rounds each; the first B without the MH and
+// plane-header reads once a walk), ratio to R32F 5x5 process CPU
+// (device): city A 2.30/2.20/2.11/2.28 (2.07/2.10/2.70/2.46), B 2.12/2.23/2.16/2.14
+// (1.98/2.28/2.71/2.16); 2CylinderEngine.glb A 2.14/2.33/2.39/2.30 (2.50/2.91/2.42/2.75),
+// B 2.12/2.05/2.13/2.09 (2.11/2.37/2.75/2.80). CPU ms per 5x5 frame: city A 1125-1326, B 904-1022;
+// engine A 339-423, B 249-296; the "none" and R32F frames, which run this shader with the
+// lookup's lanes off, got cheaper too (city "none" A 416-541, B 377-458), so the ratio moved less.
 // --region builds only a window of the map (finest texels; the rest lit): a 64K^2 map in
 // minutes; the camera then looks at the window. The R32F map (the finest level, 4^L floats)
 // is skipped with --no-r32f, with --region, and above 16K^2: its rows print '-'.

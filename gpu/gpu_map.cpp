@@ -31,6 +31,8 @@ constexpr uint32_t kDirtyBlockWords = 64;
 constexpr uint32_t kRegionsPerCall = 25;
 
 uint32_t align4(uint32_t n) { return (n + 3u) & ~3u; }
+// Slots are whole 16-byte quads: shaders may read the pool as uvec4s (st_eval.glsl's ST_POOL4).
+uint32_t align16(uint32_t n) { return (n + 15u) & ~15u; }
 
 // PCF takes the kernel side everywhere (client.hpp "PCF"): odd, 1..9. A shadow pass's
 // kernel must be one; a query's r is one, or 0 for the depth.
@@ -240,7 +242,7 @@ struct GpuMap::Impl {
     encoding = shape.encoding;
     slot_count = shape.slot_count;
     slot_bytes = shape.slot_bytes;
-    slot_words = align4(slot_bytes) / 4;
+    slot_words = align16(slot_bytes) / 4;
     if (slot_count > (1u << 23)) throw GpuError("GpuMap: more than 2^23 cache slots");
     pool_bytes = uint64_t(slot_count) * slot_words * 4;
     engine = e != nullptr;
@@ -1243,7 +1245,7 @@ GpuMap::GpuMap(client::Map map, const EngineDevice& device, GpuOptions options)
 GpuMap::~GpuMap() = default;
 
 uint32_t GpuMap::max_cache_slots(uint64_t storage_range, uint32_t slot_bytes) {
-  const uint64_t slot = align4(std::max<uint32_t>(slot_bytes, 1));  // as Impl's pool_bytes
+  const uint64_t slot = align16(std::max<uint32_t>(slot_bytes, 1));  // as Impl's pool_bytes
   return uint32_t(std::min<uint64_t>(storage_range / slot, uint64_t(1) << 23));
 }
 // The pool's byte range on a device: its storage-buffer range, and with texel buffers

@@ -95,8 +95,10 @@ layout(set = ST_SET, binding = ST_BINDING_PAGE) uniform usamplerBuffer st_page_t
 #define ST_PAGE(i) texelFetch(st_page_texels, int(i)).x
 #else
 layout(std430, set = ST_SET, binding = ST_BINDING_POOL) readonly buffer StPoolBuffer { uint st_pool[]; };
+layout(std430, set = ST_SET, binding = ST_BINDING_POOL) readonly buffer StPoolQuads { uvec4 st_pool_quads[]; };  // the same pool
 layout(std430, set = ST_SET, binding = ST_BINDING_PAGE) readonly buffer StPageBuffer { uint st_page[]; };
 #define ST_POOL(i) st_pool[i]
+#define ST_POOL4(q) st_pool_quads[q]
 #define ST_PAGE(i) st_page[i]
 #endif
 #if ST_FEEDBACK

@@ -5,6 +5,7 @@
 
 layout(local_size_x = 64) in;
 layout(std430, set = 0, binding = 0) readonly buffer StPool { uint st_pool_words[]; };
+layout(std430, set = 0, binding = 0) readonly buffer StPoolQuads { uvec4 st_pool_quads[]; };  // the same pool
 layout(std430, set = 0, binding = 1) readonly buffer StPage { uint st_page_words[]; };
 layout(std430, set = 0, binding = 2) readonly buffer StInput { uint st_input_words[]; };
 layout(std430, set = 0, binding = 3) readonly buffer StNormals { uint st_normal_words[]; };
@@ -13,6 +14,7 @@ layout(std430, set = 0, binding = 5) coherent buffer StFeedback { uint st_fb_wor
 layout(push_constant) uniform StPush { uint w[kPcWords]; } st_pc;
 
 #define ST_POOL(i) st_pool_words[i]
+#define ST_POOL4(q) st_pool_quads[q]
 #define ST_PAGE(i) st_page_words[i]
 #define ST_FB(i) st_fb_words[i]
 #include "st_eval.glsl"

@@ -8,6 +8,7 @@
 //   #define ST_POOL(w) my_pool[w]      // the slot pool (slot s at word s * slot_words)
 //   #define ST_PAGE(w) my_page[w]      // the page-table buffer
 //   #define ST_FB(w)   my_feedback[w]  // the feedback buffer (read-write, atomics)
+//   #define ST_POOL4(q) my_pool_quads[q] // optional: the same pool as uvec4 quads (words 4q..4q+3)
 // Entry points: st_depth(level, x, y, probe), st_pcf(level, x, y, r, receiver, probe),
 // st_lookup(x, y, receiver, footprint, r, probe) (level from a footprint, MH §3.3), and
 // st_pcf_plane / st_lookup_plane (a receiver plane per tap: tiles/core/receiver_plane.hpp).
@@ -82,6 +83,48 @@ void st_feedback(uint key, uint level, uint ex, uint ey, uint value_bits, uint k
 
 // ---- small helpers ----
 uint st_coarse_index(uint level) { return ((1u << (2u * level)) - 1u) / 3u; }
+
+// ---- runs of pool words ----
+// With ST_POOL4(q) defined (the same pool as uvec4 quads: words 4q..4q+3; shadowtile.glsl and
+// st_buffers.glsl declare it), a run of up to 4 (5, 8) words is read as the 2 (2, 3) aligned quads
+// that hold it: a device that compiles each buffer read to a loop over its lanes (llvmpipe)
+// runs one such loop per quad, not one per word. Every quad read holds a word of the run, and
+// GpuMap's pool is a whole number of quads (its slots are), so no read leaves the buffer.
+// Without ST_POOL4 (texel buffers, an engine's own accessors) the words are read one by one.
+#ifdef ST_POOL4
+uvec4 st_quad_shift(uvec4 a, uvec4 b, uint o) {  // words o..o+3 of the eight words (a, b)
+  return o == 0u ? a : o == 1u ? uvec4(a.yzw, b.x) : o == 2u ? uvec4(a.zw, b.xy) : uvec4(a.w, b.xyz);
+}
+// Words w..w+n-1 (n in 1..4) in the first n components (the others: any words).
+uvec4 st_pool_run(uint w, uint n) {
+  return st_quad_shift(ST_POOL4(w >> 2u), ST_POOL4((w + n - 1u) >> 2u), w & 3u);
+}
+// Words w..w+3 in `lo`, w+4 in `e`.
+void st_pool_run5(uint w, out uvec4 lo, out uint e) {
+  const uvec4 a = ST_POOL4(w >> 2u), b = ST_POOL4((w >> 2u) + 1u);
+  const uint o = w & 3u;
+  lo = st_quad_shift(a, b, o);
+  e = o == 0u ? b.x : o == 1u ? b.y : o == 2u ? b.z : b.w;
+}
+// Words w..w+3 in `lo`, w+4..w+n-1 (n in 5..8) in `hi`'s first n - 4 components.
+void st_pool_run8(uint w, uint n, out uvec4 lo, out uvec4 hi) {
+  const uvec4 a = ST_POOL4(w >> 2u), b = ST_POOL4((w >> 2u) + 1u), c = ST_POOL4((w + n - 1u) >> 2u);
+  lo = st_quad_shift(a, b, w & 3u);
+  hi = st_quad_shift(b, c, w & 3u);
+}
+#else
+uvec4 st_pool_run(uint w, uint n) {
+  return uvec4(ST_POOL(w), n > 1u ? ST_POOL(w + 1u) : 0u, n > 2u ? ST_POOL(w + 2u) : 0u, n > 3u ? ST_POOL(w + 3u) : 0u);
+}
+void st_pool_run5(uint w, out uvec4 lo, out uint e) {
+  lo = uvec4(ST_POOL(w), ST_POOL(w + 1u), ST_POOL(w + 2u), ST_POOL(w + 3u));
+  e = ST_POOL(w + 4u);
+}
+void st_pool_run8(uint w, uint n, out uvec4 lo, out uvec4 hi) {
+  lo = uvec4(ST_POOL(w), ST_POOL(w + 1u), ST_POOL(w + 2u), ST_POOL(w + 3u));
+  hi = uvec4(ST_POOL(w + 4u), n > 5u ? ST_POOL(w + 5u) : 0u, n > 6u ? ST_POOL(w + 6u) : 0u, n > 7u ? ST_POOL(w + 7u) : 0u);
+}
+#endif
 uint st_byte(uint base_word, uint byte_offset) {
   return (ST_POOL(base_word + (byte_offset >> 2u)) >> (8u * (byte_offset & 3u))) & 0xFFu;
 }
@@ -90,16 +133,18 @@ uint st_byte(uint base_word, uint byte_offset) {
 // The depth of texel (x, y) of `level` and in `shift` the square of texels that share it
 // (those with the same x >> shift, y >> shift): a walk that ends above `level` at a leaf or
 // a missing child ends there for every texel under that node, with the same value.
-float st_mh_depth(uint base, uint level, uint x, uint y, bool relative, out uint shift) {
+// The tree's first word and the root's value (st_mh_depth_at's hdr and root, read once a tile).
+uint st_mh_tree(uint base, uint hdr) { return base + 4u + ((((hdr >> 16u) & 0xFFu) + 3u) >> 2u); }
+uint st_mh_root(uint base, uint hdr) { return ST_POOL(st_mh_tree(base, hdr) + (((hdr >> 24u) & 1u) != 0u ? 0u : 1u)); }
+// st_mh_depth with the tile's header word 1 (hdr) and its root's value bits (root) given.
+float st_mh_depth_at(uint base, uint hdr, uint root, uint level, uint x, uint y, bool relative, out uint shift) {
   level = min(level, kMaxMapLevel);
-  const uint hdr = ST_POOL(base + 1u);
-  const uint levels = (hdr >> 16u) & 0xFFu;
   const bool root_leaf = ((hdr >> 24u) & 1u) != 0u;
-  const uint tree = base + 4u + ((levels + 3u) >> 2u);
+  const uint tree = st_mh_tree(base, hdr);
   uint pos = 0u;
   uint code = root_leaf ? 1u : 3u;
   uint val_pos = root_leaf ? 0u : 1u;
-  precise float value = uintBitsToFloat(ST_POOL(tree + val_pos));
+  precise float value = uintBitsToFloat(root);
   uint l = 0u, end = level;  // end: the level of the node whose texels share the answer
   while (l < level && code != 1u) {
     const uint bit = level - (l + 1u);
@@ -131,6 +176,10 @@ float st_mh_depth(uint base, uint level, uint x, uint y, bool relative, out uint
   shift = level - end;
   return relative ? value : uintBitsToFloat(ST_POOL(tree + val_pos));
 }
+float st_mh_depth(uint base, uint level, uint x, uint y, bool relative, out uint shift) {
+  const uint hdr = ST_POOL(base + 1u);
+  return st_mh_depth_at(base, hdr, st_mh_root(base, hdr), level, x, y, relative, shift);
+}
 float st_mh_depth(uint base, uint level, uint x, uint y, bool relative) {
   uint shift;
   return st_mh_depth(base, level, x, y, relative, shift);
@@ -144,9 +193,11 @@ struct StDagCursor {
 float st_dag_value(uint base, uint chunks, uint mults, uint index) {
   const uint c = chunks + (index / 32u) * 5u;
   const uint bit = index % 32u;
-  const uint mask = ST_POOL(c + 1u);
-  if (((mask >> bit) & 1u) == 0u) return uintBitsToFloat(ST_POOL(c));
-  const uint packed = ST_POOL(c + 4u);
+  uvec4 info;  // the chunk's words: value, mask, c_l, c_f; then packed
+  uint packed;
+  st_pool_run5(c, info, packed);
+  const uint mask = info.y;
+  if (((mask >> bit) & 1u) == 0u) return uintBitsToFloat(info.x);
   const uint code = packed >> 27u;
   const uint k = code == 31u ? 32u : code;
   const uint rank = uint(bitCount(mask & ((1u << bit) - 1u)));
@@ -156,8 +207,8 @@ float st_dag_value(uint base, uint chunks, uint mults, uint index) {
   if (s != 0u) i |= ST_POOL(mults + wi + 1u) << (32u - s);
   if (k == 32u) return uintBitsToFloat(i);
   i &= (1u << k) - 1u;
-  const float c_l = uintBitsToFloat(ST_POOL(c + 2u));
-  const float c_f = uintBitsToFloat(ST_POOL(c + 3u));
+  const float c_l = uintBitsToFloat(info.z);
+  const float c_f = uintBitsToFloat(info.w);
   // affine_value: the product rounded to float, then the sum; `precise` forbids the fma
   precise float product = c_f * float(i);
   precise float v = c_l + product;
@@ -179,8 +230,13 @@ uint st_dag_node_word(StDagSpace s, uint i) {
   return i < s.d ? ST_PAGE(s.dnodes + i) : ST_POOL(s.nodes + (i - s.d));
 }
 
-uint st_dag_treelet_word(StDagSpace s, uint t, uint w) {
-  return t < s.t ? ST_PAGE(s.dtreelets + t * 3u + w) : ST_POOL(s.treelets + (t - s.t) * 3u + w);
+// A treelet's three bitmap words.
+uvec3 st_dag_treelet(StDagSpace s, uint t) {
+  if (t < s.t) {
+    const uint p = s.dtreelets + t * 3u;
+    return uvec3(ST_PAGE(p), ST_PAGE(p + 1u), ST_PAGE(p + 2u));
+  }
+  return st_pool_run(s.treelets + (t - s.t) * 3u, 3u).xyz;
 }
 
 // Whether any of bits [lo, hi) of a treelet's 96-bit bitmap (w0, w1, w2) is set.
@@ -200,7 +256,7 @@ bool st_treelet_any(uint w0, uint w1, uint w2, uint lo, uint hi) {
 // A DAG-MH tile's header decoded (st_dag_open): what st_dag_depth_in reads per texel, so
 // that a PCF kernel's taps in one tile decode it once.
 struct StDagTile {
-  uint base, finest, skip_level, skip_words, chunk_words, mult_words;
+  uint base, finest, skip_level, skip_words, chunk_words, mult_words, root;
   StDagSpace sp;
 };
 
@@ -209,14 +265,18 @@ StDagTile st_dag_open(uint base) {
   // the sections follow from the counts (dagmh::sections_of).
   StDagTile t;
   t.base = base;
-  const uint w2 = ST_POOL(base + 2u);
+  uvec4 h;  // header words 2..5 (flags and levels, root, node words, treelets); then 6 (values)
+  uint values;
+  st_pool_run5(base + 2u, h, values);
+  const uint w2 = h.x;
+  t.root = h.y;
   t.finest = w2 & 0xFFu;
   t.skip_level = (w2 >> 8u) & 0xFFu;
   t.skip_words = base + 8u;
   t.sp.nodes = t.skip_words + (t.skip_level == 0u ? 0u : 4u << (2u * t.skip_level));  // S = 0: no table
-  t.sp.treelets = t.sp.nodes + ST_POOL(base + 4u);
-  t.chunk_words = t.sp.treelets + 3u * ST_POOL(base + 5u);
-  t.mult_words = t.chunk_words + 5u * ((ST_POOL(base + 6u) + 31u) / 32u);
+  t.sp.treelets = t.sp.nodes + h.z;
+  t.chunk_words = t.sp.treelets + 3u * h.w;
+  t.mult_words = t.chunk_words + 5u * ((values + 31u) / 32u);
   t.sp.d = 0u;
   t.sp.t = 0u;
   t.sp.dnodes = 0u;
@@ -249,13 +309,13 @@ float st_dag_depth_in(StDagTile t, uint level, uint x, uint y, out uint shift) {
   StDagCursor c;
   if (skip_level > 0u && level >= skip_level) {
     const uint sh = level - skip_level;
-    const uint e = skip_words + 4u * (((y >> sh) << skip_level) + (x >> sh));
-    c.ref = ST_POOL(e);
-    c.level = ST_POOL(e + 1u);
-    c.base = ST_POOL(e + 2u);
-    c.last = ST_POOL(e + 3u);
+    const uvec4 e = st_pool_run(skip_words + 4u * (((y >> sh) << skip_level) + (x >> sh)), 4u);
+    c.ref = e.x;
+    c.level = e.y;
+    c.base = e.z;
+    c.last = e.w;
   } else {
-    c.ref = ST_POOL(base + 3u);
+    c.ref = t.root;
     c.level = 0u;
     c.base = 0u;
     c.last = 0u;
@@ -286,8 +346,8 @@ float st_dag_depth_in(StDagTile t, uint level, uint x, uint y, out uint shift) {
     shift += level - c.level;
   } else {
     const uint t = c.ref & 0x3FFFFFFFu;
-    const uint w0 = st_dag_treelet_word(sp, t, 0u), w1 = st_dag_treelet_word(sp, t, 1u),
-               w2 = st_dag_treelet_word(sp, t, 2u);
+    const uvec3 tw = st_dag_treelet(sp, t);
+    const uint w0 = tw.x, w1 = tw.y, w2 = tw.z;
     const uint depth = min(level - c.level, 3u);
     uint p[4];
     p[0] = 0u;
@@ -524,7 +584,16 @@ struct StWalk {
   uint key, value_bits, kind_word;  // absent: what the feedback records
 };
 
-StWalk st_walk(uint level, uint x, uint y) {
+// The page table's header words a walk reads, read once (st_pcf_plane: before its loops).
+struct StPt {
+  uint map_level, skip_level, slot_words, skip_coarse, skip_entries, skip_slots, child_slots;
+};
+StPt st_pt() {
+  return StPt(ST_PAGE(kPtMapLevel), ST_PAGE(kPtSkipLevel), ST_PAGE(kPtSlotWords), ST_PAGE(kPtSkipCoarse),
+              ST_PAGE(kPtSkipEntries), ST_PAGE(kPtSkipSlots), ST_PAGE(kPtChildSlots));
+}
+
+StWalk st_walk(StPt pt, uint level, uint x, uint y) {
   StWalk w;
   w.kind = 0u;
   w.slot = kNoSlot;
@@ -535,22 +604,22 @@ StWalk st_walk(uint level, uint x, uint y) {
   w.key = 0u;
   w.value_bits = kLitDepthBits;
   w.kind_word = 0u;
-  const uint map_level = ST_PAGE(kPtMapLevel);
+  const uint map_level = pt.map_level;
   if (level > map_level || (x >> level) != 0u || (y >> level) != 0u) {
     w.value = uintBitsToFloat(kLitDepthBits);
     return w;
   }
-  const uint k = ST_PAGE(kPtSkipLevel);
+  const uint k = pt.skip_level;
   if (level < k) {
-    w.value = uintBitsToFloat(ST_PAGE(ST_PAGE(kPtSkipCoarse) + st_coarse_index(level) + (y << level) + x));
+    w.value = uintBitsToFloat(ST_PAGE(pt.skip_coarse + st_coarse_index(level) + (y << level) + x));
     return w;
   }
   uint l = k;
   uint ex = x >> (level - k), ey = y >> (level - k);
   uint e = (ey << k) + ex;
-  uint value_bits = ST_PAGE(ST_PAGE(kPtSkipEntries) + kEntryWords * e);
-  uint kind_word = ST_PAGE(ST_PAGE(kPtSkipEntries) + kEntryWords * e + 1u);
-  uint ptr = ST_PAGE(ST_PAGE(kPtSkipSlots) + e);
+  uint value_bits = ST_PAGE(pt.skip_entries + kEntryWords * e);
+  uint kind_word = ST_PAGE(pt.skip_entries + kEntryWords * e + 1u);
+  uint ptr = ST_PAGE(pt.skip_slots + e);
   uint key = e + 1u;
   for (;;) {
     const uint kind = kind_word & 0xFFu;
@@ -576,7 +645,7 @@ StWalk st_walk(uint level, uint x, uint y) {
     }
     // an index tile: a CutGrid of d levels in slot `ptr`
     const uint d = (kind_word >> 8u) & 0xFFu;
-    const uint g = ptr * ST_PAGE(kPtSlotWords) + kGridHeaderWords;
+    const uint g = ptr * pt.slot_words + kGridHeaderWords;
     if (rel < d) {
       w.l = level;
       w.ex = x;
@@ -593,10 +662,11 @@ StWalk st_walk(uint level, uint x, uint y) {
     value_bits = ST_POOL(ent);
     kind_word = ST_POOL(ent + 1u) & 0xFFFFu;
     key = kFbChildKeyBit | (ptr * kChildTableWords + c);
-    ptr = ST_PAGE(ST_PAGE(kPtChildSlots) + ptr * kChildTableWords + c);
+    ptr = ST_PAGE(pt.child_slots + ptr * kChildTableWords + c);
   }
   return w;  // not reached
 }
+StWalk st_walk(uint level, uint x, uint y) { return st_walk(st_pt(), level, x, y); }
 
 // The map preview's answer (tiles/core/map_preview.hpp MapPreview::coarse_answer) for
 // texel (x, y) of `level` whose walk reached an absent tile at level `reached` with the
@@ -718,6 +788,23 @@ void st_pcf_block(uint x, uint y, uint r, uint side, uint i, uint j, uint n, uin
   }
 }
 
+// st_answer for st_pcf_plane's second loop, whose walks are absent tiles and voxel tiles alone
+// (the first loop answers values and every other tile): a tile is decoded as a voxel tile
+// (st_tile_depth's answer for one: shift 0), so no other decoder is compiled into the loop.
+float st_answer_rest(StPt pt, StWalk w, uint level, uint x, uint y, inout StProbe probe, out uint shift) {
+  shift = 0u;
+  if (w.kind == 1u) {
+    const uint rel = level - w.l;
+    return st_vsdag_depth(w.slot * pt.slot_words, rel, x - (w.ex << rel), y - (w.ey << rel));
+  }
+  if (w.kind == 2u) {
+    st_feedback(w.key, w.l, w.ex, w.ey, w.value_bits, w.kind_word, probe);
+    return st_preview(level, x, y, w.l, w.value);
+  }
+  shift = level - w.l;
+  return w.value;
+}
+
 // The first tap (row-major index) of an r x r kernel not in the mask (w0, w1, w2); 96: none.
 uint st_pcf_next(uint w0, uint w1, uint w2) {
   const int f0 = findLSB(~w0), f1 = findLSB(~w1), f2 = findLSB(~w2);
@@ -752,7 +839,8 @@ uint st_pcf_next(uint w0, uint w1, uint w2) {
 // and its inner loop's smaller (no walk, no tile header).
 float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint finest, inout StProbe probe) {
   r = clamp(r, 1u, kMaxPcf);
-  if (level > ST_PAGE(kPtMapLevel)) return 1.0;
+  const StPt pt = st_pt();
+  if (level > pt.map_level) return 1.0;
   const uint side = 1u << level, up = finest - level, taps = r * r;
   // taps counted so far: bit j * r + i of (done0, done1, done2); r * r <= 81. Left to the
   // second loop: (later0, later1, later2).
@@ -764,6 +852,7 @@ float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint
   bool lean = false, dag = false, mmh = false;  // an MH/MMH/DAG-MH/plane tile; which
   bool planes = false;  // w's tile is a plane tile at pbase
   uint pbase = 0u;
+  uint mh_hdr = 0u, mh_root = 0u;  // w's MH or MMH tile: header word 1, the root's value bits
   // w's plane tile (planes): its finest level, block count, records and labelled blocks; and
   // the block record of its last search (bstart, bword; bshift 0: none) with that block's
   // labels (st_plane_label's l0..l5; every word read lies inside the tile, those a kind
@@ -773,27 +862,31 @@ float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint
   while (k < taps) {  // one walk a pass: its tile opened once, its taps in the inner loop
     {
       const uint j = k / r, i = k - j * r;
-      w = st_walk(level, st_pcf_tap(x, i, r, side), st_pcf_tap(y, j, r, side));
+      w = st_walk(pt, level, st_pcf_tap(x, i, r, side), st_pcf_tap(y, j, r, side));
     }
     lean = false;
     if (w.kind == 1u) {
-      pbase = w.slot * ST_PAGE(kPtSlotWords);
+      pbase = w.slot * pt.slot_words;
       uint base = pbase;
-      planes = ST_POOL(base) == 0x4E505453u;  // "STPN": plane blocks over an inner buffer (st_tile_depth)
+      uvec4 ph, pl;  // a plane tile's header: magic, finest, blocks, -, planes, labelled blocks
+      st_pool_run8(base, 6u, ph, pl);
+      planes = ph.x == 0x4E505453u;  // "STPN": plane blocks over an inner buffer (st_tile_depth)
       bshift = 0u;
       if (planes) {
-        pfinest = ((ST_POOL(base + 1u) >> 16u) & 0xFFu) - 1u;
-        pcount = ST_POOL(base + 2u);
-        pblocks = base + 6u + 6u * ST_POOL(base + 4u);
+        pfinest = ((ph.y >> 16u) & 0xFFu) - 1u;
+        pcount = ph.z;
+        pblocks = base + 6u + 6u * pl.x;
         plabels = pblocks + 2u * pcount;
-        base = plabels + 6u * ST_POOL(base + 5u);
+        base = plabels + 6u * pl.y;
       }
-      const uint magic = ST_POOL(base);
-      mmh = enc == 1u || (enc == 2u && magic == 0x4D4D5453u);  // "STMM": a DAG-MH pack's MMH tile
+      const uvec4 head = st_pool_run(base, 2u);  // magic, MH header word 1
+      mmh = enc == 1u || (enc == 2u && head.x == 0x4D4D5453u);  // "STMM": a DAG-MH pack's MMH tile
       dag = enc == 2u && !mmh;
       lean = enc != 3u;  // not a voxel tile
       if (dag) t = st_dag_open(base);
       t.base = base;
+      mh_hdr = head.y;
+      if (lean && !dag) mh_root = st_mh_root(base, mh_hdr);  // an MH or MMH tile
     }
     if (w.kind == 2u || (w.kind == 1u && !lean)) {  // the second loop's: every tap of the kernel in w's square
       const uint j = k / r, i = k - j * r;
@@ -837,12 +930,14 @@ float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint
                 blb = plabels + 6u * (bword >> 16u);
                 const uint bkind = (bword >> 8u) & 0xFFu;  // kind 0: six words of the tile's records and past, unused
                 const uint lw = bkind == 0u ? rec : blb + (bkind == 2u ? 4u : 2u);
-                l0 = ST_POOL(lw);
-                l1 = ST_POOL(lw + 1u);
-                l2 = ST_POOL(lw + 2u);
-                l3 = ST_POOL(lw + 3u);
-                l4 = ST_POOL(lw + 4u);
-                l5 = ST_POOL(lw + 5u);
+                uvec4 la, lb;
+                st_pool_run8(lw, 6u, la, lb);
+                l0 = la.x;
+                l1 = la.y;
+                l2 = la.z;
+                l3 = la.w;
+                l4 = lb.x;
+                l5 = lb.y;
                 in_block = bshift > ps && key - bstart < (1u << (2u * bshift));
               }
             }
@@ -856,8 +951,9 @@ float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint
               const uint entry =
                   kind == 0u ? bword >> 16u : (ST_POOL(blb + (label >> 1u)) >> (16u * (label & 1u))) & 0xFFFFu;
               const uint pt = pbase + 6u + 6u * entry;
-              const uint a_lo = ST_POOL(pt), a_hi = ST_POOL(pt + 1u), b_lo = ST_POOL(pt + 2u), b_hi = ST_POOL(pt + 3u),
-                         c_lo = ST_POOL(pt + 4u), c_hi = ST_POOL(pt + 5u);
+              uvec4 pa, pc;  // the plane's a, b (64-bit, low word first); then c
+              st_pool_run8(pt, 6u, pa, pc);
+              const uint a_lo = pa.x, a_hi = pa.y, b_lo = pa.z, b_hi = pa.w, c_lo = pc.x, c_hi = pc.y;
               const uint sb = bshift - ps, ox = w.ex << rel, oy = w.ey << rel;
               const uint low = (tx >> sb) << sb;  // the block's first texel of `level` along x
               const int from = int(low) - int(x) + int((r - 1u) / 2u);
@@ -888,7 +984,7 @@ float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint
             }
           }
           if (!grouped) {
-            value = dag ? st_dag_depth_in(t, rel, lx, ly, s) : st_mh_depth(t.base, rel, lx, ly, mmh, s);
+            value = dag ? st_dag_depth_in(t, rel, lx, ly, s) : st_mh_depth_at(t.base, mh_hdr, mh_root, rel, lx, ly, mmh, s);
             s = planes ? 0u : min(s, rel);  // st_tile_depth's shift
           }
         }
@@ -903,13 +999,13 @@ float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint
   // The rest: any tap (st_answer). An absent tile's taps go one by one: each is counted in
   // the feedback.
   k = st_pcf_next(~later0 | done0, ~later1 | done1, ~later2 | done2);
-  if (k < taps) w = st_walk(level, st_pcf_tap(x, k % r, r, side), st_pcf_tap(y, k / r, r, side));
+  if (k < taps) w = st_walk(pt, level, st_pcf_tap(x, k % r, r, side), st_pcf_tap(y, k / r, r, side));
   while (k < taps) {
     const uint j = k / r, i = k - j * r;
     const uint tx = st_pcf_tap(x, i, r, side), ty = st_pcf_tap(y, j, r, side);
-    if (!st_in_walk(w, level, tx, ty)) w = st_walk(level, tx, ty);  // else: the same walk
+    if (!st_in_walk(w, level, tx, ty)) w = st_walk(pt, level, tx, ty);  // else: the same walk
     uint s;
-    const float value = st_answer(w, level, tx, ty, probe, s);
+    const float value = st_answer_rest(pt, w, level, tx, ty, probe, s);
     const uint n = w.kind == 2u ? 1u : st_pcf_run(x, i, r, side, s);
     const uint m = w.kind == 2u ? 1u : st_pcf_run(y, j, r, side, s);
     st_pcf_block(x, y, r, side, i, j, n, m, value, plane, f, up, lit, done0, done1, done2);

@@ -614,7 +614,7 @@ TEST(GpuEngine, MaxCacheSlotsFillsTheDevicesStorageRangeAndNoMore) {
   const uint64_t range = p.limits.maxStorageBufferRange;
   for (const uint32_t slot_bytes : {2396u, 4099u, 65536u, 1u << 20}) {
     SCOPED_TRACE(slot_bytes);
-    const uint64_t words = (uint64_t(slot_bytes) + 3) / 4 * 4;
+    const uint64_t words = (uint64_t(slot_bytes) + 15) / 16 * 16;  // a slot: whole 16-byte quads
     const uint32_t n = GpuMap::max_cache_slots(e.engine_device(), slot_bytes);
     EXPECT_LE(n * words, range);
     EXPECT_GT((n + 1) * words, range);
@@ -624,7 +624,7 @@ TEST(GpuEngine, MaxCacheSlotsFillsTheDevicesStorageRangeAndNoMore) {
     const uint64_t texel_range = std::min<uint64_t>(range, uint64_t(p.limits.maxTexelBufferElements) * 4);
     EXPECT_EQ(GpuMap::max_cache_slots(e.engine_device(), slot_bytes, true), GpuMap::max_cache_slots(texel_range, slot_bytes));
   }
-  EXPECT_EQ(GpuMap::max_cache_slots(1000, 10), 83u);  // 12-byte slots
+  EXPECT_EQ(GpuMap::max_cache_slots(1000, 10), 62u);  // 16-byte slots
   EXPECT_EQ(GpuMap::max_cache_slots(uint64_t(1) << 40, 4), 1u << 23);
   EXPECT_EQ(GpuMap::max_cache_slots(GpuMap::kAnyDeviceStorageRange, 4096), 32768u);
   EXPECT_EQ(e.messages(), 0u) << e.first_message();
