@@ -8,7 +8,9 @@
 // st_pcf_tap). Entry points: st_oct_depth(base, x, y, w, level) (one tile),
 // st_oct_depth_resumed (the same answer, the walk resumed from the invocation's previous
 // walk in that tile; st_oct_path_reset(resume) first, which also makes st_stack_depth use it),
-// st_stack_depth(x, y, w, level, probe), st_stack_pcf(level, x, y, w, r, receiver, probe),
+// st_stack_depth(x, y, w, level, probe) (= st_stack_cell_depth(st_stack_cell(...), ...): the
+// descent to the texel's cell, then the texel; a PCF kernel descends once per cell),
+// st_stack_pcf(level, x, y, w, r, receiver, probe),
 // st_stack_lookup(x, y, w, receiver, footprint, r, probe) (level from a footprint), their
 // receiver-plane forms st_stack_pcf_plane and st_stack_lookup_plane, and
 // st_fdiv(a, b) (st_fdiv.glsl: a / b rounded as the CPU's float division, for the passes' divides).
