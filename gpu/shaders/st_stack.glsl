@@ -8,9 +8,7 @@
 // st_pcf_tap). Entry points: st_oct_depth(base, x, y, w, level) (one tile),
 // st_oct_depth_resumed (the same answer, the walk resumed from the invocation's previous
 // walk in that tile; st_oct_path_reset(resume) first, which also makes st_stack_depth use it),
-// st_stack_depth(x, y, w, level, probe) (= st_stack_cell_depth(st_stack_cell(...), ...): the
-// descent to the texel's cell, then the texel; a PCF kernel descends once per cell),
-// st_stack_pcf(level, x, y, w, r, receiver, probe),
+// st_stack_depth(x, y, w, level, probe), st_stack_pcf(level, x, y, w, r, receiver, probe),
 // st_stack_lookup(x, y, w, receiver, footprint, r, probe) (level from a footprint), their
 // receiver-plane forms st_stack_pcf_plane and st_stack_lookup_plane, and
 // st_fdiv(a, b) (st_fdiv.glsl: a / b rounded as the CPU's float division, for the passes' divides).
@@ -161,37 +159,18 @@ float st_slices_depth(uint base, uint x, uint y, uint w, uint level) {
 // upper bits) while above the level read, as StackGrid::cell_at; a constant cell, or one at
 // that level, answers its entry's value; a cell whose tile is not on the GPU answers its
 // entry's value (its level's map: coarser, never missing) and is recorded in the feedback.
-// In two steps: st_stack_cell, the descent to the texel's cell (what every texel of the
-// cell shares), then st_stack_cell_depth, the texel in that cell. A PCF kernel descends
-// once for the taps of one cell (st_stack_cell_holds): taps of slice w at one level whose
-// cells are the same square of texels.
-const uint kStCellLit = 0u;     // out of range: every texel lit
-const uint kStCellCoarse = 1u;  // a level above K: the dense values, one word per texel from `word`
-const uint kStCellValue = 2u;   // a constant cell or one at the level read: `value`
-const uint kStCellAbsent = 3u;  // a tile cell not on the GPU: `value`, each texel fed back (key from `index`, `l`)
-const uint kStCellTile = 4u;    // a tile cell on the GPU: pool word `word`, slice `tw` in it
-struct StStackCell {
-  uint kind, word, value, shift, cx, cy, tw, index, l;  // shift: the cell's texels share x >> shift, y >> shift
-};
-
-StStackCell st_stack_cell(uint x, uint y, uint w, uint level) {
-  const uint top = min(level, 31u);  // lit: the texels with the same x >> level, y >> level
-  StStackCell c = StStackCell(kStCellLit, 0u, kLitDepthBits, top, x >> top, y >> top, 0u, 0u, 0u);
+float st_stack_depth(uint x, uint y, uint w, uint level, inout StProbe probe) {
   const uint blk = ST_PAGE(kPtStack);
   const uint n = ST_PAGE(blk + kStXyLevel), k = ST_PAGE(blk + kStWLevel);
-  if (level > n || w >= ST_PAGE(blk + kStSlices) || (x >> level) != 0u || (y >> level) != 0u) return c;
+  if (level > n || w >= ST_PAGE(blk + kStSlices) || (x >> level) != 0u || (y >> level) != 0u)
+    return uintBitsToFloat(kLitDepthBits);
   const uint K = ST_PAGE(blk + kStSkipLevel);
   const uint depth = max(n, k);
   const uint T = level + depth - n;  // the octree level with 2^level texels a side
   uint l = min(T, K);                // the node's level: T above K, else the cell's
   uint a = st_oct_xy_bits(l, n, depth), b = st_oct_xy_bits(l, k, depth);
-  if (T < K) {  // a = level: the slice's dense map, texel (x, y) at word + (y << a) + x
-    c.kind = kStCellCoarse;
-    c.word = ST_PAGE(blk + kStHeaderWords + T) + (((w >> (k - b)) << a) << a);
-    c.shift = a;
-    return c;
-  }
   uint index = (((((w >> (k - b)) << a) + (y >> (level - a))) << a) + (x >> (level - a)));
+  if (T < K) return uintBitsToFloat(ST_PAGE(ST_PAGE(blk + kStHeaderWords + T) + index));
   const uint entries = ST_PAGE(blk + kStEntries);
   uint kind_word = ST_PAGE(entries + kEntryWords * index + 1u);
   while (l < T && (kind_word & 0xFFu) == kStKindSplit) {  // down a split cell: its child over (x, y, w)
@@ -203,43 +182,18 @@ StStackCell st_stack_cell(uint x, uint y, uint w, uint level) {
     index = (kind_word >> kStFirstChildShift) + ((((ow << dx) + oy) << dx) + ox);
     kind_word = ST_PAGE(entries + kEntryWords * index + 1u);
   }
-  c.value = ST_PAGE(entries + kEntryWords * index);
-  c.shift = level - a;  // the tile's own x, y level
-  c.cx = x >> c.shift;
-  c.cy = y >> c.shift;
-  c.kind = kStCellValue;
-  if ((kind_word & 0xFFu) != kKindTile || T == l) return c;
+  const uint value_bits = ST_PAGE(entries + kEntryWords * index);
+  if ((kind_word & 0xFFu) != kKindTile || T == l) return uintBitsToFloat(value_bits);
   const uint slot = ST_PAGE(ST_PAGE(blk + kStCellSlots) + index);
-  c.index = index;
-  c.l = l;
   if (slot == kNoSlot) {
-    c.kind = kStCellAbsent;
-    return c;
+    st_feedback(kFbStackKeyBit | index, l, index, 0u, value_bits, kKindTile, probe);
+    return uintBitsToFloat(value_bits);
   }
-  c.kind = kStCellTile;
-  c.word = slot * ST_PAGE(kPtSlotWords);
-  c.tw = w - ((w >> (k - b)) << (k - b));
-  return c;
-}
-
-// Whether texel (x, y) of the same slice and level lies in cell c (its descent ends there).
-bool st_stack_cell_holds(StStackCell c, uint x, uint y) {
-  return c.kind == kStCellCoarse || ((x >> c.shift) == c.cx && (y >> c.shift) == c.cy);
-}
-
-// Texel (x, y) of cell c (st_stack_cell of a texel of the same slice w and level whose
-// cell holds (x, y)).
-float st_stack_cell_depth(StStackCell c, uint x, uint y, uint w, uint level, inout StProbe probe) {
-  if (c.kind == kStCellCoarse) return uintBitsToFloat(ST_PAGE(c.word + (y << c.shift) + x));
-  if (c.kind == kStCellAbsent) st_feedback(kFbStackKeyBit | c.index, c.l, c.index, 0u, c.value, kKindTile, probe);
-  if (c.kind != kStCellTile) return uintBitsToFloat(c.value);
-  const uint tx = x - (c.cx << c.shift), ty = y - (c.cy << c.shift);
-  if (ST_POOL(c.word) == kSlMagic) return st_slices_depth(c.word, tx, ty, c.tw, c.shift);  // a per-slice cell
-  return st_oct_resume ? st_oct_depth_resumed(c.word, tx, ty, c.tw, c.shift) : st_oct_depth(c.word, tx, ty, c.tw, c.shift);
-}
-
-float st_stack_depth(uint x, uint y, uint w, uint level, inout StProbe probe) {
-  return st_stack_cell_depth(st_stack_cell(x, y, w, level), x, y, w, level, probe);
+  const uint cx = x >> (level - a), cy = y >> (level - a), cw = w >> (k - b);
+  const uint rel = level - a;  // the tile's own x, y level
+  const uint tile = slot * ST_PAGE(kPtSlotWords), tx = x - (cx << rel), ty = y - (cy << rel), tw = w - (cw << (k - b));
+  if (ST_POOL(tile) == kSlMagic) return st_slices_depth(tile, tx, ty, tw, rel);  // a per-slice cell
+  return st_oct_resume ? st_oct_depth_resumed(tile, tx, ty, tw, rel) : st_oct_depth(tile, tx, ty, tw, rel);
 }
 
 // r x r PCF in slice w (StackMap::filtered's kernel: lit taps / (r * r), taps clamped to
@@ -252,15 +206,11 @@ float st_stack_pcf_plane(uint level, uint x, uint y, uint w, uint r, vec3 plane,
   r = clamp(r, 1u, kMaxPcf);
   const uint side = 1u << min(level, 31u);
   uint lit = 0u;
-  StStackCell cell;
-  bool have = false;  // a tap descends only where the previous tap's cell does not hold it
   for (uint j = 0u; j < r; ++j)
     for (uint i = 0u; i < r; ++i) {
       const uint tx = st_pcf_tap(x, i, r, side), ty = st_pcf_tap(y, j, r, side);
-      if (!have || !st_stack_cell_holds(cell, tx, ty)) cell = st_stack_cell(tx, ty, w, level), have = true;
-      lit += st_lit(st_plane_depth(plane, f, finest - level, tx, ty), st_stack_cell_depth(cell, tx, ty, w, level, probe))
-                 ? 1u
-                 : 0u;
+      lit += st_lit(st_plane_depth(plane, f, finest - level, tx, ty), st_stack_depth(tx, ty, w, level, probe)) ? 1u
+                                                                                                                 : 0u;
     }
   return uintBitsToFloat(ST_PAGE(ST_PAGE(kPtPcfTable) + (r - 1u) * kPcfTableStride + lit));
 }
