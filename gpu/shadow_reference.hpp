@@ -37,7 +37,8 @@ namespace st::gpu {
 //   u = x / z + cu,  v = y / z + cv,  d = z - near_scaled   av likewise, fw = forward / (far - near)
 //   cu = 0.5 - c_u / E, cv = 0.5 - c_v / E (c: a spot_window's shift; 0 for a spot), each
 //   rounded once from double; every product, sum and the quotient rounded once (the
-//   shader divides in integers, st_fdiv, since Vulkan's division may be off by 2.5 ulp).
+//   shader's st_fdiv makes the device's division exact in integers, since Vulkan's may be
+//   off by 2.5 ulp).
 // The same box test, texel and neighbour footprint follow. z <= 0 (behind the light) gives
 // d < 0 (near > 0) or a quotient that fails the box test: lit, on both sides.
 struct ShadowLight {

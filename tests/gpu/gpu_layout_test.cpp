@@ -116,8 +116,11 @@ TEST(GpuLayout, DeepBlockWordsAreWhereTheDrawingPutsThem) {
 // and soft average, on the device: every quotient has the bits of the CPU's float
 // division (IEEE 754, round to nearest even; a NaN quotient only needs to be a NaN), over
 // random bit patterns (every exponent: subnormals, infinities, NaNs), near-equal
-// significands, subnormal quotients, the passes' own operands (PCF sums over slice
-// counts, light-space coordinates over depths) and the special values against each other.
+// significands, subnormal quotients, exact quotients and halfway cases, the passes' own
+// operands (PCF sums over slice counts, light-space coordinates over depths) and the
+// special values against each other. Each pair runs twice: as the passes divide (skew 0)
+// and with the device's estimate moved by -3..3 ulps (st_fdiv_est), past Vulkan's 2.5-ulp
+// division, so the exact steps are checked on a device that divides exactly (lavapipe).
 TEST(GpuLayout, StFdivRoundsLikeTheCpusFloatDivision) {
   std::vector<uint32_t> a, b;
   auto add = [&](float x, float y) { a.push_back(std::bit_cast<uint32_t>(x)), b.push_back(std::bit_cast<uint32_t>(y)); };
@@ -136,15 +139,34 @@ TEST(GpuLayout, StFdivRoundsLikeTheCpusFloatDivision) {
                               0x00800000u, 0x7F7FFFFFu, 0x3F800000u, 0xBF800000u, 0x00400000u, 0x34000000u};
   for (uint32_t x : special)
     for (uint32_t y : special) a.push_back(x), b.push_back(y);
+  for (int i = 0; i < 20000; ++i) {  // exact quotients: b * q with a short q
+    const float y = std::bit_cast<float>(0x3F800000u | (uint32_t(rng()) & 0x7FFFFFu));
+    add(y * std::bit_cast<float>(0x3F800000u | (uint32_t(rng()) & 0xFFFu) << 11), y);
+  }
+  for (uint32_t m = 1; m < 64; ++m)  // halfway quotients (only subnormal ones exist): ties to even
+    for (uint32_t k = 1; k <= 4; ++k) a.push_back(m), b.push_back((127u + k) << 23);
+  for (int i = 0; i < 5000; ++i) {  // significands at the ends of [1, 2): quotients just under 1 and 2, and near min/max
+    const uint32_t lo = uint32_t(rng()) & 0x3Fu, hi = 0x7FFFFFu - (uint32_t(rng()) & 0x3Fu);
+    const uint32_t e = (uint32_t(rng()) % 254u + 1u) << 23, r = uint32_t(rng()) & 0x7FFFFFu;
+    a.push_back(e | lo), b.push_back(0x3F800000u | hi);
+    a.push_back(e | hi), b.push_back(0x3F800000u | lo);
+    a.push_back(0x7F000000u | hi), b.push_back(0x00800000u | r);  // overflow to inf
+    a.push_back(0x00800000u | lo), b.push_back(0x4B000000u | r);  // subnormal quotients, rounding across
+  }
+  const size_t pairs = a.size();
+  std::vector<int32_t> skew(pairs, 0);
+  a.reserve(2 * pairs), b.reserve(2 * pairs), skew.reserve(2 * pairs);
+  for (size_t i = 0; i < pairs; ++i) a.push_back(a[i]), b.push_back(b[i]), skew.push_back(int32_t(i % 7) - 3);
   uint64_t messages = 0;
-  const std::vector<uint32_t> got = run_fdiv_probe(gputest::device(), true, a, b, &messages);
+  const std::vector<uint32_t> got = run_fdiv_probe(gputest::device(), true, a, b, skew, &messages);
   ASSERT_EQ(got.size(), a.size());
   size_t bad = 0;
   for (size_t i = 0; i < a.size(); ++i) {
     const float want = std::bit_cast<float>(a[i]) / std::bit_cast<float>(b[i]);
     const bool same = std::isnan(want) ? std::isnan(std::bit_cast<float>(got[i])) : std::bit_cast<uint32_t>(want) == got[i];
     if (!same && bad++ < 5)
-      ADD_FAILURE() << std::hex << a[i] << " / " << b[i] << ": gpu " << got[i] << ", cpu " << std::bit_cast<uint32_t>(want);
+      ADD_FAILURE() << std::hex << a[i] << " / " << b[i] << std::dec << " (skew " << skew[i] << std::hex << "): gpu "
+                    << got[i] << ", cpu " << std::bit_cast<uint32_t>(want);
   }
   EXPECT_EQ(bad, 0u);
   EXPECT_EQ(messages, 0u);

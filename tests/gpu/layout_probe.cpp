@@ -79,11 +79,13 @@ std::vector<uint32_t> run_layout_probe(const std::string& device, bool validatio
 }
 
 std::vector<uint32_t> run_fdiv_probe(const std::string& device, bool validation, std::span<const uint32_t> a,
-                                     std::span<const uint32_t> b, uint64_t* validation_messages) {
-  if (a.size() != b.size() || a.empty() || a.size() > (size_t(1) << 22))
-    throw GpuError("run_fdiv_probe: want 1..2^22 pairs of equal counts");
-  std::vector<uint32_t> input(2 * a.size());
-  for (size_t i = 0; i < a.size(); ++i) input[2 * i] = a[i], input[2 * i + 1] = b[i];
+                                     std::span<const uint32_t> b, std::span<const int32_t> skew,
+                                     uint64_t* validation_messages) {
+  if (a.size() != b.size() || a.empty() || a.size() > (size_t(1) << 22) || (!skew.empty() && skew.size() != a.size()))
+    throw GpuError("run_fdiv_probe: want 1..2^22 pairs of equal counts (and no skews or one per pair)");
+  std::vector<uint32_t> input(3 * a.size());
+  for (size_t i = 0; i < a.size(); ++i)
+    input[3 * i] = a[i], input[3 * i + 1] = b[i], input[3 * i + 2] = skew.empty() ? 0u : uint32_t(skew[i]);
   return run_probe(device, validation, input, uint32_t(a.size()), a.size(), validation_messages);
 }
 

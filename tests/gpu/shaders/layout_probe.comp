@@ -2,7 +2,9 @@
 // Writes the layout constants this shader compiles against, in a fixed order, so a test
 // compares them with the C++ side's (tests/gpu/gpu_layout_test.cpp).
 // With a count in push-constant word kPcCount it probes st_fdiv instead: invocation i
-// writes st_fdiv(a, b) of input words 2i and 2i + 1 to output word i (the division test).
+// writes st_fdiv_est(a, b, skew) of input words 3i, 3i + 1 and 3i + 2 (a, b as floats, skew
+// as an int: the device's estimate moved by that many ulps; 0 is st_fdiv) to output word i
+// (the division test).
 #include "st_buffers.glsl"
 
 #include "st_stack.glsl"
@@ -11,7 +13,9 @@ void main() {
   const uint count = st_pc.w[kPcCount];
   if (count != 0u) {
     const uint i = gl_GlobalInvocationID.x;
-    if (i < count) st_output[i] = st_fdiv(uintBitsToFloat(st_input_words[2u * i]), uintBitsToFloat(st_input_words[2u * i + 1u]));
+    if (i < count)
+      st_output[i] = st_fdiv_est(uintBitsToFloat(st_input_words[3u * i]), uintBitsToFloat(st_input_words[3u * i + 1u]),
+                                 int(st_input_words[3u * i + 2u]));
     return;
   }
   if (gl_GlobalInvocationID.x != 0u) return;
