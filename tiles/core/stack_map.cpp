@@ -125,6 +125,16 @@ void stack_map_prefetch_walk(const MhOctree* p) {
   for (size_t o = 0; o < MhOctree::kWalkBytes; o += 64) __builtin_prefetch(b + o);
 }
 
+// A prefetch of both ends of the `bytes` bytes at p: a DAG-MH node (up to 36 bytes: its
+// child entries lie after the flags), a treelet, a chunk or a value's multiplier bits
+// may straddle two cache lines, and a walk that finds the second one cold waits for it
+// (the descent's entry loads were the lookup's hottest stall).
+inline void stack_map_prefetch_span(const void* p, size_t bytes) {
+  __builtin_prefetch(p);
+  __builtin_prefetch(static_cast<const char*>(p) + bytes - 1);
+}
+constexpr size_t kDagNodeBytes = 4 + 8 * 4;  // flags, then up to 4 child entries (ref, value offset)
+
 // An MMH slice's walk (SliceTiles::RecordKind::mmh) in resumable steps: the evaluator's
 // depth(level, x, y) (mh_quadtree_reader.cpp, TreeEvaluator<relative>: root, then
 // descend to `level`, a leaf or a missing child, summing the relative values with
@@ -169,7 +179,8 @@ struct MmhWalk {
 
 }  // namespace
 
-uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint32_t m, bool* exact) const {
+[[gnu::always_inline]] inline uint64_t StackMap::lit_samples_body(const SampleTexels::Run* runs, uint32_t w0,
+                                                                 uint32_t m, bool* exact) const {
   // Every sample of the run settled in phases, each phase over all samples before the
   // next, so that the loads of different samples are in flight together rather than one
   // sample's dependent chain after another's (a day's sun moves a raised receiver's texel
@@ -366,14 +377,14 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
   uint32_t na = 0, ne = 0;
   auto end_descent = [&](uint32_t k) {
     if ((cur[k].ref & dagmh::kRefTagMask) == dagmh::kRefTreelet)
-      __builtin_prefetch(view[k]->treelet_at(cur[k].ref & dagmh::kRefIndexMask));
+      stack_map_prefetch_span(view[k]->treelet_at(cur[k].ref & dagmh::kRefIndexMask), dagmh::kTreeletBytes);
     stage[k] = 1, ending[ne++] = uint8_t(k);
   };
   for (uint32_t k = 0; k < nw; ++k) {  // the starts, each walk's first node on its way
     const uint32_t i = walk_sample[k];
     cur[k] = view[k]->start(level[k], level[k], c[i].lx, c[i].ly);
     if (descending(k)) {
-      __builtin_prefetch(view[k]->node_at(cur[k].ref & dagmh::kRefIndexMask));
+      stack_map_prefetch_span(view[k]->node_at(cur[k].ref & dagmh::kRefIndexMask), kDagNodeBytes);
       active[na++] = uint8_t(k);
     } else {
       end_descent(k);
@@ -413,9 +424,9 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
       const uint32_t i = walk_sample[k];
       if (stage[k] == 1) {
         index[k] = view[k]->finish(cur[k], level[k], c[i].lx, c[i].ly);
-        __builtin_prefetch(view[k]->chunk_at(index[k]));
+        stack_map_prefetch_span(view[k]->chunk_at(index[k]), sizeof(dagmh::ChunkInfo));
       } else if (stage[k] == 2) {
-        if (const uint8_t* bits = view[k]->value_bits_at(index[k])) __builtin_prefetch(bits);
+        if (const uint8_t* bits = view[k]->value_bits_at(index[k])) stack_map_prefetch_span(bits, 8);
       } else {
         set(i, d[i] <= view[k]->value(index[k]));
         continue;
@@ -429,7 +440,7 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
       const uint32_t i = walk_sample[k];
       cur[k] = view[k]->descend(cur[k], cur[k].level + 1, level[k], c[i].lx, c[i].ly);
       if (descending(k)) {
-        __builtin_prefetch(view[k]->node_at(cur[k].ref & dagmh::kRefIndexMask));
+        stack_map_prefetch_span(view[k]->node_at(cur[k].ref & dagmh::kRefIndexMask), kDagNodeBytes);
         active[kept++] = uint8_t(k);
       } else {
         end_descent(k);
@@ -442,7 +453,7 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
       const MhOctree& tree = *oct_tree[q];
       const uint32_t i = oct_sample[q];
       if (tree.along_step_to(ow[q], c[i].lx, c[i].ly, c[i].lw)) {
-        __builtin_prefetch(tree.along_next(ow[q]));
+        stack_map_prefetch_span(tree.along_next(ow[q]), 8);  // an inner node's value word next to it
         oct_live[kept++] = uint8_t(q);
       } else {
         set(i, d[i] <= tree.along_value(ow[q]));
@@ -453,6 +464,27 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
   }
   while (next_other < no) answer_other(next_other++);
   return lit;
+}
+
+// x86-64 without a POPCNT target (the baseline this project builds for): lit_samples runs
+// a clone of its body compiled for POPCNT where the CPU has it, chosen at run time. The
+// body's bit counts (st::bit_count's SWAR form, which the octree, MMH, treelet and value
+// ranks use) become one instruction there: GCC recognises the form (as clang does) in a
+// function whose target has POPCNT. Same integer results, so the same answers bit for
+// bit; any other CPU or target runs the plain body.
+#if (defined(__x86_64__) || defined(__i386__)) && !defined(__POPCNT__) && defined(__GNUC__)
+#define ST_STACK_MAP_POPCNT_CLONE 1
+__attribute__((target("popcnt"))) uint64_t StackMap::lit_samples_popcnt(const SampleTexels::Run* runs, uint32_t w0,
+                                                                        uint32_t m, bool* exact) const {
+  return lit_samples_body(runs, w0, m, exact);
+}
+#endif
+
+uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint32_t m, bool* exact) const {
+#ifdef ST_STACK_MAP_POPCNT_CLONE
+  if (__builtin_cpu_supports("popcnt")) return lit_samples_popcnt(runs, w0, m, exact);
+#endif
+  return lit_samples_body(runs, w0, m, exact);
 }
 
 void StackMap::soft_visibility(std::span<const Vec3d> points, std::span<float> out, bool* exact) const {
