@@ -125,16 +125,6 @@ void stack_map_prefetch_walk(const MhOctree* p) {
   for (size_t o = 0; o < MhOctree::kWalkBytes; o += 64) __builtin_prefetch(b + o);
 }
 
-// A prefetch of both ends of the `bytes` bytes at p: a DAG-MH node (up to 36 bytes: its
-// child entries lie after the flags), a treelet, a chunk or a value's multiplier bits
-// may straddle two cache lines, and a walk that finds the second one cold waits for it
-// (the descent's entry loads were the lookup's hottest stall).
-inline void stack_map_prefetch_span(const void* p, size_t bytes) {
-  __builtin_prefetch(p);
-  __builtin_prefetch(static_cast<const char*>(p) + bytes - 1);
-}
-constexpr size_t kDagNodeBytes = 4 + 8 * 4;  // flags, then up to 4 child entries (ref, value offset)
-
 // An MMH slice's walk (SliceTiles::RecordKind::mmh) in resumable steps: the evaluator's
 // depth(level, x, y) (mh_quadtree_reader.cpp, TreeEvaluator<relative>: root, then
 // descend to `level`, a leaf or a missing child, summing the relative values with
@@ -377,14 +367,14 @@ struct MmhWalk {
   uint32_t na = 0, ne = 0;
   auto end_descent = [&](uint32_t k) {
     if ((cur[k].ref & dagmh::kRefTagMask) == dagmh::kRefTreelet)
-      stack_map_prefetch_span(view[k]->treelet_at(cur[k].ref & dagmh::kRefIndexMask), dagmh::kTreeletBytes);
+      __builtin_prefetch(view[k]->treelet_at(cur[k].ref & dagmh::kRefIndexMask));
     stage[k] = 1, ending[ne++] = uint8_t(k);
   };
   for (uint32_t k = 0; k < nw; ++k) {  // the starts, each walk's first node on its way
     const uint32_t i = walk_sample[k];
     cur[k] = view[k]->start(level[k], level[k], c[i].lx, c[i].ly);
     if (descending(k)) {
-      stack_map_prefetch_span(view[k]->node_at(cur[k].ref & dagmh::kRefIndexMask), kDagNodeBytes);
+      __builtin_prefetch(view[k]->node_at(cur[k].ref & dagmh::kRefIndexMask));
       active[na++] = uint8_t(k);
     } else {
       end_descent(k);
@@ -424,9 +414,9 @@ struct MmhWalk {
       const uint32_t i = walk_sample[k];
       if (stage[k] == 1) {
         index[k] = view[k]->finish(cur[k], level[k], c[i].lx, c[i].ly);
-        stack_map_prefetch_span(view[k]->chunk_at(index[k]), sizeof(dagmh::ChunkInfo));
+        __builtin_prefetch(view[k]->chunk_at(index[k]));
       } else if (stage[k] == 2) {
-        if (const uint8_t* bits = view[k]->value_bits_at(index[k])) stack_map_prefetch_span(bits, 8);
+        if (const uint8_t* bits = view[k]->value_bits_at(index[k])) __builtin_prefetch(bits);
       } else {
         set(i, d[i] <= view[k]->value(index[k]));
         continue;
@@ -440,7 +430,7 @@ struct MmhWalk {
       const uint32_t i = walk_sample[k];
       cur[k] = view[k]->descend(cur[k], cur[k].level + 1, level[k], c[i].lx, c[i].ly);
       if (descending(k)) {
-        stack_map_prefetch_span(view[k]->node_at(cur[k].ref & dagmh::kRefIndexMask), kDagNodeBytes);
+        __builtin_prefetch(view[k]->node_at(cur[k].ref & dagmh::kRefIndexMask));
         active[kept++] = uint8_t(k);
       } else {
         end_descent(k);
@@ -453,7 +443,7 @@ struct MmhWalk {
       const MhOctree& tree = *oct_tree[q];
       const uint32_t i = oct_sample[q];
       if (tree.along_step_to(ow[q], c[i].lx, c[i].ly, c[i].lw)) {
-        stack_map_prefetch_span(tree.along_next(ow[q]), 8);  // an inner node's value word next to it
+        __builtin_prefetch(tree.along_next(ow[q]));
         oct_live[kept++] = uint8_t(q);
       } else {
         set(i, d[i] <= tree.along_value(ow[q]));
@@ -468,10 +458,10 @@ struct MmhWalk {
 
 // x86-64 without a POPCNT target (the baseline this project builds for): lit_samples runs
 // a clone of its body compiled for POPCNT where the CPU has it, chosen at run time. The
-// body's bit counts (st::bit_count's SWAR form, which the octree, MMH, treelet and value
-// ranks use) become one instruction there: GCC recognises the form (as clang does) in a
-// function whose target has POPCNT. Same integer results, so the same answers bit for
-// bit; any other CPU or target runs the plain body.
+// body's bit counts (st::bit_count's SWAR form, which the octree, treelet and value ranks
+// use) become one instruction there: GCC recognises the form in a function whose target
+// has POPCNT. Same integer results, so the same answers bit for bit; any other CPU or
+// target runs the plain body.
 #if (defined(__x86_64__) || defined(__i386__)) && !defined(__POPCNT__) && defined(__GNUC__)
 #define ST_STACK_MAP_POPCNT_CLONE 1
 __attribute__((target("popcnt"))) uint64_t StackMap::lit_samples_popcnt(const SampleTexels::Run* runs, uint32_t w0,
