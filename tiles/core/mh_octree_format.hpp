@@ -44,6 +44,8 @@
 #include <cstdint>
 #include <cstring>
 
+#include "common/bit_count.hpp"
+
 namespace st::moct {
 
 static_assert(std::endian::native == std::endian::little, "tree words are little-endian");
@@ -78,13 +80,9 @@ inline uint32_t word_mask(uint32_t w) { return w & 0xFFFFu; }
 inline int32_t word_offset(uint32_t w) { return int32_t(int16_t(uint16_t(w >> 16))); }
 inline uint32_t node_word(uint32_t mask, int32_t off) { return mask | (uint32_t(uint16_t(int16_t(off))) << 16); }
 inline uint32_t child_code(uint32_t mask, uint32_t slot) { return (mask >> (2 * slot)) & 3u; }
-// Bit count of a 16-bit mask without a library call (the build has no -mpopcnt).
-inline uint32_t popcount16(uint32_t m) {
-  m = m - ((m >> 1) & 0x5555u);
-  m = (m & 0x3333u) + ((m >> 2) & 0x3333u);
-  m = (m + (m >> 4)) & 0x0F0Fu;
-  return (m + (m >> 8)) & 0x1Fu;
-}
+// Bit count of a 16-bit mask: st::bit_count's form, which a caller compiled for POPCNT
+// turns into the instruction (StackMap's soft lookups; the build has no -mpopcnt).
+inline uint32_t popcount16(uint32_t m) { return st::bit_count(uint64_t(m)); }
 inline uint32_t child_skip(uint32_t mask, uint32_t slot) { return popcount16(mask & ((1u << (2 * slot)) - 1u)); }
 // For a validated tree the result lies in the buffer (an offset never reaches before
 // word 0: the validator checks it).

@@ -169,7 +169,8 @@ struct MmhWalk {
 
 }  // namespace
 
-uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint32_t m, bool* exact) const {
+[[gnu::always_inline]] inline uint64_t StackMap::lit_samples_body(const SampleTexels::Run* runs, uint32_t w0,
+                                                                 uint32_t m, bool* exact) const {
   // Every sample of the run settled in phases, each phase over all samples before the
   // next, so that the loads of different samples are in flight together rather than one
   // sample's dependent chain after another's (a day's sun moves a raised receiver's texel
@@ -453,6 +454,27 @@ uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint3
   }
   while (next_other < no) answer_other(next_other++);
   return lit;
+}
+
+// x86-64 without a POPCNT target (the baseline this project builds for): lit_samples runs
+// a clone of its body compiled for POPCNT where the CPU has it, chosen at run time. The
+// body's bit counts (st::bit_count's SWAR form, which the octree, treelet and value ranks
+// use) become one instruction there: GCC recognises the form in a function whose target
+// has POPCNT. Same integer results, so the same answers bit for bit; any other CPU or
+// target runs the plain body.
+#if (defined(__x86_64__) || defined(__i386__)) && !defined(__POPCNT__) && defined(__GNUC__)
+#define ST_STACK_MAP_POPCNT_CLONE 1
+__attribute__((target("popcnt"))) uint64_t StackMap::lit_samples_popcnt(const SampleTexels::Run* runs, uint32_t w0,
+                                                                        uint32_t m, bool* exact) const {
+  return lit_samples_body(runs, w0, m, exact);
+}
+#endif
+
+uint64_t StackMap::lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint32_t m, bool* exact) const {
+#ifdef ST_STACK_MAP_POPCNT_CLONE
+  if (__builtin_cpu_supports("popcnt")) return lit_samples_popcnt(runs, w0, m, exact);
+#endif
+  return lit_samples_body(runs, w0, m, exact);
 }
 
 void StackMap::soft_visibility(std::span<const Vec3d> points, std::span<float> out, bool* exact) const {

@@ -104,6 +104,10 @@ class StackMap {
   // w0 + i, n) exactly, with their loads gathered across samples (stack_map.cpp). `exact`
   // is cleared when an absent tile answered.
   uint64_t lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint32_t m, bool* exact) const;
+  // Its body, and that body compiled for POPCNT (x86 builds without it; chosen at run time
+  // where the CPU has it; stack_map.cpp).
+  inline uint64_t lit_samples_body(const SampleTexels::Run* runs, uint32_t w0, uint32_t m, bool* exact) const;
+  uint64_t lit_samples_popcnt(const SampleTexels::Run* runs, uint32_t w0, uint32_t m, bool* exact) const;
 
   const StackGrid& grid_;
   TileSource tiles_;
