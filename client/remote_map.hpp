@@ -570,7 +570,10 @@ class RemoteMap final : public Evaluator {
     uint64_t x0, y0, x1, y1;
     uint16_t priority;
   };
-  static constexpr size_t kMaxRegions = 16;  // remembered so index tiles' children follow
+  // Remembered so that index tiles' children follow (the newest kMaxRegions; cancel_outside
+  // forgets those it leaves): enough for a frame's worth of cells requested at once (a view's
+  // cells, a report's cut), each walked again when an index tile arrives.
+  static constexpr size_t kMaxRegions = 1024;
   std::array<Region, kMaxRegions> regions_{};
   size_t region_count_ = 0;
   mutable MapStats stats_;
