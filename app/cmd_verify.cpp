@@ -114,6 +114,24 @@ struct TracedHulls {
   }
 };
 
+// One texel's check (--all's rows and the random blocks): the stored depth of texel (x, y)
+// of level L against its re-traced interval. A read error sets `error` ("texel (x, y): why").
+enum class TexelCheck { holds, mismatch, unreadable };
+TexelCheck check_texel(const PackEvaluator& eval, const Contract& contract, uint32_t L, uint64_t x, uint64_t y,
+                       const Interval& iv, float& v, std::string& error) {
+  try {
+    v = eval.depth(L, x, y);
+  } catch (const FormatError& e) {
+    error = "texel (" + std::to_string(x) + ", " + std::to_string(y) + "): " + e.what();
+    return TexelCheck::unreadable;
+  }
+  return contract.holds(iv, v) ? TexelCheck::holds : TexelCheck::mismatch;
+}
+void print_mismatch(uint64_t x, uint64_t y, uint32_t L, float v, const Interval& iv) {
+  std::printf("mismatch: texel (%llu, %llu) of level %u: stored %.9g outside [%.9g, %.9g]\n", (unsigned long long)x,
+              (unsigned long long)y, L, v, iv.lo, iv.hi);
+}
+
 // `progress` counts from `done_before` towards `grand_total` (several regions share one bar).
 uint64_t verify_every_texel(const VerifyArgs& a, const TraceFn& trace,
                             const Contract& contract, const PackEvaluator& eval, uint32_t L, const Rect& region,
@@ -135,22 +153,17 @@ uint64_t verify_every_texel(const VerifyArgs& a, const TraceFn& trace,
         for (uint32_t i = 0; i < w; ++i) {
           const Interval iv = t.at(i, j);
           float v = 0;
-          try {
-            v = eval.depth(L, cx + i, cy + j);
-          } catch (const FormatError& e) {
-            std::lock_guard lock(print);
-            if (read_error.empty())
-              read_error = "texel (" + std::to_string(cx + i) + ", " + std::to_string(cy + j) +
-                           "): " + e.what();
+          std::string error;
+          const TexelCheck r = check_texel(eval, contract, L, cx + i, cy + j, iv, v, error);
+          if (r == TexelCheck::holds) continue;
+          std::lock_guard lock(print);
+          if (r == TexelCheck::unreadable) {
+            if (read_error.empty()) read_error = std::move(error);
             bad = a.max_mismatches;
             return;
           }
-          if (contract.holds(iv, v)) continue;
-          std::lock_guard lock(print);
           if (bad >= a.max_mismatches) return;
-          std::printf("mismatch: texel (%llu, %llu) of level %u: stored %.9g outside [%.9g, %.9g]\n",
-                      (unsigned long long)(cx + i), (unsigned long long)(cy + j), L, v, iv.lo,
-                      iv.hi);
+          print_mismatch(cx + i, cy + j, L, v, iv);
           ++bad;
         }
       });
@@ -360,18 +373,15 @@ void run_verify(const VerifyArgs& a) {
       for (uint32_t i = 0; i < bw; ++i) {
         const Interval iv = t.at(i, j);
         float v = 0;
-        try {
-          v = eval.depth(L, x0 + i, y0 + j);
-        } catch (const FormatError& e) {
-          std::printf("verify: FAILED reading texel (%llu, %llu): %s\n", (unsigned long long)(x0 + i),
-                      (unsigned long long)(y0 + j), e.what());
+        std::string error;
+        const TexelCheck r = check_texel(eval, contract, L, x0 + i, y0 + j, iv, v, error);
+        if (r == TexelCheck::unreadable) {
+          std::printf("verify: FAILED reading %s\n", error.c_str());
           exit_with(kExitMismatch);
         }
         ++checked;
-        if (!contract.holds(iv, v)) {
-          if (bad < a.show)
-            std::printf("mismatch: texel (%llu, %llu) of level %u: stored %.9g outside [%.9g, %.9g]\n",
-                        (unsigned long long)(x0 + i), (unsigned long long)(y0 + j), L, v, iv.lo, iv.hi);
+        if (r == TexelCheck::mismatch) {
+          if (bad < a.show) print_mismatch(x0 + i, y0 + j, L, v, iv);
           ++bad;
         }
       }

@@ -81,6 +81,14 @@ inline constexpr uint64_t kPageReserve = 4096;
 // for every tile of the map, one after another, for ever.
 inline constexpr uint64_t kMaxFailedTiles = 4096;
 
+// A region of one level's texels, [x0, x1) x [y0, y1), asked for at `priority`
+// (RemoteMap::request_region).
+struct RegionRequest {
+  uint32_t level;
+  uint64_t x0, y0, x1, y1;
+  uint16_t priority;
+};
+
 class RemoteMap final : public Evaluator {
  public:
   // Parses and checks the MapInfo blobs (st::Error naming the map otherwise).
@@ -471,6 +479,11 @@ class RemoteMap final : public Evaluator {
   // fn(tile_id, entry, page) for each non-resident one; returns false if fn did.
   template <class Fn>
   bool walk_region(uint32_t level, uint64_t x0, uint64_t y0, uint64_t x1, uint64_t y1, Fn&& fn) const;
+  // Regions asked for and not yet resident (request_region): each index tile's arrival walks
+  // them again so that its children follow. Complete regions are forgotten (remember: a region
+  // the walk found resident is never kept; rerequest: those now resident are dropped); a region
+  // inside a remembered one of its level only raises that one's priority.
+  void remember_region_locked(const RegionRequest& r);
   void rerequest_regions_locked();
   // Stack lookups: the StackMap's tile source (stack_tiles) reads the cache (shared lock
   // held) and notes misses in a per-thread scratch; they are wanted once the lock is dropped.
@@ -565,16 +578,12 @@ class RemoteMap final : public Evaluator {
   // want_capacity queued + max_in_flight * tiles_per_request sent; never grows.
   mutable TileRequests requests_;
   std::vector<uint64_t> cancels_;  // reserved to the sent bound: cancel_outside never allocates
-  struct Region {
-    uint32_t level;
-    uint64_t x0, y0, x1, y1;
-    uint16_t priority;
-  };
-  // Remembered so that index tiles' children follow (the newest kMaxRegions; cancel_outside
-  // forgets those it leaves): enough for a frame's worth of cells requested at once (a view's
-  // cells, a report's cut), each walked again when an index tile arrives.
+  // Remembered so that index tiles' children follow, until resident (remember_region_locked;
+  // cancel_outside forgets those it leaves). Only pending regions count toward kMaxRegions: a
+  // frame's cells requested at once (a view's cells, a report's cut) while their index tiles
+  // are on the way. Past it the oldest quarter goes (then at most one sweep per quarter).
   static constexpr size_t kMaxRegions = 1024;
-  std::array<Region, kMaxRegions> regions_{};
+  std::array<RegionRequest, kMaxRegions> regions_{};
   size_t region_count_ = 0;
   mutable MapStats stats_;
   uint64_t failed_ = 0;  // tiles given up and remembered (constant pages), <= kMaxFailedTiles

@@ -218,29 +218,57 @@ size_t RemoteMap::request_region(uint32_t level, uint64_t x0, uint64_t y0, uint6
   const Clamped c = clamp_region(level, header_.map_level, x0, y0, w, h);
   if (c.empty) return 0;
   std::lock_guard lock(mu_);
-  // Remember the region so that the children of index tiles arriving later follow.
-  Region r{level, c.x0, c.y0, c.x1, c.y1, priority};
-  if (region_count_ == kMaxRegions) {
-    std::move(regions_.begin() + 1, regions_.end(), regions_.begin());
-    --region_count_;
-  }
-  regions_[region_count_++] = r;
   size_t queued = 0;
+  bool pending = false;
   walk_region(level, c.x0, c.y0, c.x1, c.y1, [&](uint64_t id, const GridEntry& e) {
+    pending = true;
     queued += want_locked(id, e, priority);
     return true;
   });
+  // Not resident yet: remembered so that the children of index tiles arriving later follow.
+  if (pending) remember_region_locked(RegionRequest{level, c.x0, c.y0, c.x1, c.y1, priority});
   return queued;
 }
 
-void RemoteMap::rerequest_regions_locked() {
+void RemoteMap::remember_region_locked(const RegionRequest& r) {
+  auto contains = [](const RegionRequest& a, const RegionRequest& b) {
+    return a.level == b.level && a.x0 <= b.x0 && a.y0 <= b.y0 && b.x1 <= a.x1 && b.y1 <= a.y1;
+  };
+  size_t kept = 0;
   for (size_t i = 0; i < region_count_; ++i) {
-    const Region& r = regions_[i];
+    RegionRequest& q = regions_[i];
+    if (contains(q, r)) {  // asked again (a view's cells every frame): one entry, the higher priority
+      q.priority = std::max(q.priority, r.priority);
+      return;
+    }
+    if (contains(r, q)) continue;  // the new one covers it
+    regions_[kept++] = q;
+  }
+  region_count_ = kept;
+  if (region_count_ == kMaxRegions) {
+    rerequest_regions_locked();  // drops the complete ones
+    if (region_count_ > kMaxRegions - kMaxRegions / 4) {
+      const size_t drop = region_count_ - (kMaxRegions - kMaxRegions / 4);  // the oldest
+      std::move(regions_.begin() + drop, regions_.begin() + region_count_, regions_.begin());
+      region_count_ -= drop;
+    }
+  }
+  regions_[region_count_++] = r;
+}
+
+void RemoteMap::rerequest_regions_locked() {
+  size_t kept = 0;
+  for (size_t i = 0; i < region_count_; ++i) {
+    const RegionRequest r = regions_[i];
+    bool pending = false;
     walk_region(r.level, r.x0, r.y0, r.x1, r.y1, [&](uint64_t id, const GridEntry& e) {
+      pending = true;
       want_locked(id, e, r.priority);
       return true;
     });
+    if (pending) regions_[kept++] = r;
   }
+  region_count_ = kept;
 }
 
 bool RemoteMap::region_resident(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, uint64_t h) const noexcept {
@@ -281,7 +309,7 @@ size_t RemoteMap::cancel_outside(uint32_t level, uint64_t x0, uint64_t y0, uint6
   });
   size_t kept = 0;
   for (size_t i = 0; i < region_count_; ++i) {
-    const Region& r = regions_[i];
+    const RegionRequest& r = regions_[i];
     const uint32_t ru = L - r.level;
     const bool meets = !c.empty && !((r.x1 << ru) <= fx0 || (r.x0 << ru) >= fx1 ||
                                      (r.y1 << ru) <= fy0 || (r.y0 << ru) >= fy1);

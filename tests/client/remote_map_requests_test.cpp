@@ -55,14 +55,17 @@ struct Fixture {
   }
 };
 
-Fixture make_fixture(const std::string& name, ClientOptions o = looptest::quick_options()) {
+// tile_bytes 1 MiB: no index tiles (every tile sits right below the skip grid); 512: index
+// tiles with encoded tiles below them.
+Fixture make_fixture(const std::string& name, ClientOptions o = looptest::quick_options(),
+                     uint32_t tile_bytes = 1 << 20) {
   Fixture f;
   f.level = looptest::small_scale() ? 6 : 7;
-  f.pack = looptest::build_pack(name, f.level, 29, looptest::first_encoding(), f.k, 1 << 20);  // no index tiles
+  f.pack = looptest::build_pack(name, f.level, 29, looptest::first_encoding(), f.k, tile_bytes);
   for (const TileIndexEntry& e : f.pack.reader->tiles())
     if (tile_address(e.id).level == f.k) f.tiles.push_back(e.id);
   ST_CHECK(f.tiles.size() >= 4);
-  o.cache_slots = uint32_t(f.tiles.size()) + 4;
+  o.cache_slots = uint32_t(f.pack.reader->tiles().size()) + 4;  // nothing evicted
   const auto h = f.pack.reader->header_bytes();
   const auto g = f.pack.reader->grid_bytes();
   f.map = std::make_unique<RemoteMap>(name, std::vector<uint8_t>(h.begin(), h.end()),
@@ -217,6 +220,48 @@ TEST(RemoteMapRequests, WantCapacityBoundsTheQueueNotTheTilesInFlight) {
   EXPECT_EQ(again[0], t[2]) << "queued before the connection dropped";
   ASSERT_TRUE(again[1] == t[0] || again[1] == t[1]);
   EXPECT_EQ(f.want(again[1] == t[0] ? t[1] : t[0], 1), 1u);
+}
+
+// A region asked for while its index tile is on the way gets the index tile's children when
+// it arrives, however many other regions were asked for meanwhile (the client keeps the
+// regions not yet resident, not the newest N asked for: a report's cut asks for hundreds).
+TEST(RemoteMapRequests, ChildrenOfALateIndexTileFollowAfterManyOtherRegions) {
+  ClientOptions o = looptest::quick_options();
+  o.want_capacity = 1u << 12;
+  Fixture f = make_fixture("req_late_index", o, 512);
+  uint64_t index = kInvalidTile;
+  for (const TileIndexEntry& e : f.pack.reader->tiles())
+    if (e.kind == TileKind::index && tile_address(e.id).level == f.k) index = e.id;
+  ASSERT_NE(index, kInvalidTile) << "no index tile below the skip grid";
+  const TileAddress a = tile_address(index);
+  const uint32_t s = f.level - a.level;
+  const uint64_t x0 = uint64_t(a.x) << s, y0 = uint64_t(a.y) << s, side = uint64_t(1) << s;
+  EXPECT_EQ(f.map->request_region(f.level, x0, y0, side, side, 3), 1u) << "the index tile only: its children unknown";
+  ASSERT_EQ(ids(f.take(1, 1u << 12)), std::vector<uint64_t>{index});
+  // 1,500 single texels elsewhere, each delivered before the next is asked for.
+  uint32_t request_id = 2;
+  size_t asked = 0;
+  const uint64_t n = uint64_t(1) << f.level;
+  for (uint64_t i = 0; i < n * n && asked < 1500; i += 3) {
+    const uint64_t x = i % n, y = i / n;
+    if (x >= x0 && x < x0 + side && y >= y0 && y < y0 + side) continue;
+    f.map->request_region(f.level, x, y, 1, 1, 1);
+    ++asked;
+    for (auto t = f.take(request_id, 1u << 12); !t.empty(); t = f.take(++request_id, 1u << 12))
+      for (const auto& r : t) f.deliver(r.tile_id, request_id);
+    ++request_id;
+  }
+  ASSERT_EQ(asked, 1500u);
+  ASSERT_FALSE(f.map->region_resident(f.level, x0, y0, side, side));
+  f.deliver(index, 1);  // its children are wanted now, nobody asked again
+  size_t delivered = 0;
+  for (auto t = f.take(request_id, 1u << 12); !t.empty(); t = f.take(++request_id, 1u << 12))
+    for (const auto& r : t) {
+      f.deliver(r.tile_id, request_id);
+      ++delivered;
+    }
+  EXPECT_GT(delivered, 0u);
+  EXPECT_TRUE(f.map->region_resident(f.level, x0, y0, side, side));
 }
 
 }  // namespace

@@ -442,9 +442,10 @@ class SHADOWTILE_API Map {
   Transmittance transmittance_at(const LightCoord& c, double footprint_uv = 0) const noexcept;
 
   // Queues the fetch of every tile under texels [x0, x0+w) x [y0, y0+h) of `level`
-  // (clamped to the map), walking index tiles as they arrive (the newest 1,024 regions
-  // are remembered for that). Larger priority = sooner. Returns the number of tiles newly
-  // queued.
+  // (clamped to the map), walking index tiles as they arrive: a region is remembered until
+  // its tiles are resident (up to 1,024 pending at once; past that the oldest quarter is
+  // forgotten, and asking again brings them back). Larger priority = sooner. Returns the
+  // number of tiles newly queued.
   size_t request_region(uint32_t level, uint64_t x0, uint64_t y0, uint64_t w, uint64_t h,
                         uint16_t priority) noexcept;
   // Cancels queued and in-flight fetches of tiles outside the region.
