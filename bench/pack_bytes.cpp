@@ -139,7 +139,7 @@ nlohmann::json measure(const std::string& path) {
   // and packed (plane_pack.hpp, STPL, as the pack stores them with predicted_plane_labels):
   // the table's, the records' and the labelled blocks' own marginal shares of each.
   uint64_t plane_tiles = 0, planes = 0, table = 0, labelled = 0, plane_texels = 0, plane_raw = 0, plane_stored = 0;
-  uint64_t table_variant_stored[4] = {}; int64_t mtf_saved = 0; uint64_t mtf_longer = 0; uint64_t packed_stored = 0, table_stored = 0, records_stored = 0, labels_stored = 0, packed_table_stored = 0;
+  uint64_t table_variant_stored[5] = {}, sig_bits_total = 0; int64_t mtf_saved = 0; uint64_t mtf_longer = 0; uint64_t packed_stored = 0, table_stored = 0, records_stored = 0, labels_stored = 0, packed_table_stored = 0;
   Part packed_parts[5] = {{"kinds"}, {"indices"}, {"palettes"}, {"palette planes"}, {"labels"}};
   auto without = [](std::span<const uint8_t> b, size_t from, size_t to) {
     std::vector<uint8_t> out(b.begin(), b.begin() + long(from));
@@ -337,6 +337,35 @@ nlohmann::json measure(const std::string& path) {
             for (uint32_t k = 0; k < T; ++k) alt[t_at + (size_t(f) * 8 + byte) * T + k] = uint8_t(vals[3 * k + f] >> (8 * byte));
         table_variant_stored[variant] += packed_whole - st::zlib_compress(alt, 6).size();
       }
+      {  // bit-packed: per coefficient (tz, significant length) bytes, then the significant bits less the leading one
+        std::vector<uint8_t> heads, bits;
+        uint64_t acc = 0;
+        uint32_t nacc = 0;
+        auto put = [&](uint64_t val, uint32_t n) {
+          for (uint32_t i = 0; i < n; ++i) {
+            acc |= ((val >> i) & 1u) << nacc;
+            if (++nacc == 8) bits.push_back(uint8_t(acc)), acc = 0, nacc = 0;
+          }
+        };
+        for (uint32_t k = 0; k < T; ++k)
+          for (int f = 0; f < 3; ++f) {
+            const uint64_t raw64 = tv(k, f);
+            const uint32_t tz = raw64 == 0 ? 0 : uint32_t(std::countr_zero(raw64));
+            const uint64_t m = zz(uint64_t(int64_t(raw64) >> tz));
+            const uint32_t len = m == 0 ? 0 : uint32_t(64 - std::countl_zero(m));
+            heads.push_back(uint8_t(tz)), heads.push_back(uint8_t(len));
+            sig_bits_total += len;
+            if (len > 1) put(m, len - 1);
+          }
+        if (nacc) bits.push_back(uint8_t(acc));
+        std::vector<uint8_t> alt = packed;
+        std::fill(alt.begin() + long(t_at), alt.begin() + long(r_at), uint8_t(0));
+        std::vector<uint8_t> seq;
+        for (int f = 0; f < 6; ++f) for (uint32_t k = 0; k < T; ++k) seq.push_back(heads[6 * size_t(k) + size_t(f)]);
+        seq.insert(seq.end(), bits.begin(), bits.end());
+        std::copy(seq.begin(), seq.end(), alt.begin() + long(t_at));
+        table_variant_stored[4] += int64_t(packed_whole) - int64_t(st::zlib_compress(alt, 6).size());
+      }
     }
     {  // plane references as "next new" / move-to-front ranks (offline measurement)
       std::vector<uint32_t> mtf;
@@ -395,6 +424,8 @@ nlohmann::json measure(const std::string& path) {
                 (unsigned long long)packed_stored, (unsigned long long)packed_table_stored);
     std::printf("    table variants (stored bytes saved): transposed %lld, delta+transposed %lld, first-use order %lld, a at corner %lld\n",
                 (long long)table_variant_stored[0], (long long)table_variant_stored[1], (long long)table_variant_stored[2], (long long)table_variant_stored[3]);
+    std::printf("    bit-packed table (heads by column, then significant bits): stored bytes saved %lld; significant bits %llu (%.1f a plane)\n",
+                (long long)table_variant_stored[4], (unsigned long long)sig_bits_total, double(sig_bits_total) / double(table));
     std::printf("    references as next-new/MTF ranks: stored bytes saved %lld (%llu tiles longer)\n", (long long)mtf_saved, (unsigned long long)mtf_longer);
     std::printf("    packed parts raw / marginal stored:");
     for (const Part& p : packed_parts)
