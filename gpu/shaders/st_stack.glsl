@@ -52,7 +52,10 @@ uint st_oct_step(uint base, uint tree, uint n, uint k, uint depth, uint l, uint 
   return code;
 }
 
-float st_oct_depth(uint base, uint x, uint y, uint w, uint level) {
+// shift: the square of texels of the same slice (x >> shift, y >> shift equal) that get the
+// same answer: the node the walk ended at (a leaf, or the missing child: every texel under it
+// takes the same path to the same last valued node), 0 when it reached `level`.
+float st_oct_depth(uint base, uint x, uint y, uint w, uint level, out uint shift) {
   const uint h1 = ST_POOL(base + 1u), h2 = ST_POOL(base + 2u);
   const uint n = (h1 >> 16u) & 0xFFu, k = h1 >> 24u;
   const bool root_leaf = ((h2 >> 16u) & 1u) != 0u;
@@ -62,12 +65,18 @@ float st_oct_depth(uint base, uint x, uint y, uint w, uint level) {
   uint pos = 0u;
   uint val = root_leaf ? 0u : 1u;
   uint code = root_leaf ? 1u : 3u;
-  for (uint l = 0u; l < target && code != 1u; ++l) {
+  uint l = 0u;
+  for (; l < target && code != 1u; ++l) {
     code = st_oct_step(base, tree, n, k, depth, l, x, y, w, level, pos);
     if (code == 0u) break;  // missing child: the last valued node answers
     if (code != 2u) val = code == 1u ? pos : pos + 1u;
   }
+  shift = level - st_oct_xy_bits(code == 0u ? l + 1u : l, n, depth);  // the node the walk ended at
   return uintBitsToFloat(ST_POOL(tree + val));
+}
+float st_oct_depth(uint base, uint x, uint y, uint w, uint level) {
+  uint shift;
+  return st_oct_depth(base, x, y, w, level, shift);
 }
 
 // ---- resumed walks (MH 2016 §3.3's last-sample cache, carried over w) ----
@@ -95,7 +104,7 @@ void st_oct_path_reset(bool resume) {
   st_oct_resume = resume;
 }
 
-float st_oct_depth_resumed(uint base, uint x, uint y, uint w, uint level) {
+float st_oct_depth_resumed(uint base, uint x, uint y, uint w, uint level, out uint shift) {
   const uint h1 = ST_POOL(base + 1u);
   const uint n = (h1 >> 16u) & 0xFFu, k = h1 >> 24u;
   const uint depth = max(n, k);
@@ -128,7 +137,12 @@ float st_oct_depth_resumed(uint base, uint x, uint y, uint w, uint level) {
   st_oct_path_y = fy;
   st_oct_path_w = w;
   st_oct_path_reached = l;
+  shift = level - st_oct_xy_bits(code == 0u ? l + 1u : l, n, depth);  // as st_oct_depth's
   return uintBitsToFloat(ST_POOL(tree + val));
+}
+float st_oct_depth_resumed(uint base, uint x, uint y, uint w, uint level) {
+  uint shift;
+  return st_oct_depth_resumed(base, x, y, w, level, shift);
 }
 
 // ---- per-slice cells (tiles/core/stack_slices.hpp "STSL") ----
@@ -159,11 +173,17 @@ float st_slices_depth(uint base, uint x, uint y, uint w, uint level) {
 // upper bits) while above the level read, as StackGrid::cell_at; a constant cell, or one at
 // that level, answers its entry's value; a cell whose tile is not on the GPU answers its
 // entry's value (its level's map: coarser, never missing) and is recorded in the feedback.
-float st_stack_depth(uint x, uint y, uint w, uint level, inout StProbe probe) {
+// shift: the square of texels of slice w (x >> shift, y >> shift equal) that get the same
+// answer (st_answer's for 2D maps): a constant cell's, an octree walk's node, a constant
+// slice's cell; 0 for a dense coarse value, an absent tile (fed back per texel, as before)
+// and a per-slice 2D tile.
+float st_stack_depth(uint x, uint y, uint w, uint level, inout StProbe probe, out uint shift) {
   const uint blk = ST_PAGE(kPtStack);
   const uint n = ST_PAGE(blk + kStXyLevel), k = ST_PAGE(blk + kStWLevel);
+  shift = level;
   if (level > n || w >= ST_PAGE(blk + kStSlices) || (x >> level) != 0u || (y >> level) != 0u)
     return uintBitsToFloat(kLitDepthBits);
+  shift = 0u;
   const uint K = ST_PAGE(blk + kStSkipLevel);
   const uint depth = max(n, k);
   const uint T = level + depth - n;  // the octree level with 2^level texels a side
@@ -183,17 +203,27 @@ float st_stack_depth(uint x, uint y, uint w, uint level, inout StProbe probe) {
     kind_word = ST_PAGE(entries + kEntryWords * index + 1u);
   }
   const uint value_bits = ST_PAGE(entries + kEntryWords * index);
-  if ((kind_word & 0xFFu) != kKindTile || T == l) return uintBitsToFloat(value_bits);
+  const uint rel = level - a;  // the cell's (the tile's own) x, y level
+  if ((kind_word & 0xFFu) != kKindTile || T == l) {
+    shift = rel;  // the cell's value holds for its square
+    return uintBitsToFloat(value_bits);
+  }
   const uint slot = ST_PAGE(ST_PAGE(blk + kStCellSlots) + index);
   if (slot == kNoSlot) {
     st_feedback(kFbStackKeyBit | index, l, index, 0u, value_bits, kKindTile, probe);
     return uintBitsToFloat(value_bits);
   }
-  const uint cx = x >> (level - a), cy = y >> (level - a), cw = w >> (k - b);
-  const uint rel = level - a;  // the tile's own x, y level
+  const uint cx = x >> rel, cy = y >> rel, cw = w >> (k - b);
   const uint tile = slot * ST_PAGE(kPtSlotWords), tx = x - (cx << rel), ty = y - (cy << rel), tw = w - (cw << (k - b));
-  if (ST_POOL(tile) == kSlMagic) return st_slices_depth(tile, tx, ty, tw, rel);  // a per-slice cell
-  return st_oct_resume ? st_oct_depth_resumed(tile, tx, ty, tw, rel) : st_oct_depth(tile, tx, ty, tw, rel);
+  if (ST_POOL(tile) == kSlMagic) {  // a per-slice cell; a constant slice holds for the cell's square
+    if (ST_POOL(tile + kSlHeaderWords + kSlEntryWords * tw) == 0u) shift = rel;
+    return st_slices_depth(tile, tx, ty, tw, rel);
+  }
+  return st_oct_resume ? st_oct_depth_resumed(tile, tx, ty, tw, rel, shift) : st_oct_depth(tile, tx, ty, tw, rel, shift);
+}
+float st_stack_depth(uint x, uint y, uint w, uint level, inout StProbe probe) {
+  uint shift;
+  return st_stack_depth(x, y, w, level, probe, shift);
 }
 
 // r x r PCF in slice w (StackMap::filtered's kernel: lit taps / (r * r), taps clamped to
@@ -201,17 +231,24 @@ float st_stack_depth(uint x, uint y, uint w, uint level, inout StProbe probe) {
 // the receiver's plane (corner, gx, gy) over the tap's texel (tiles/core/receiver_plane.hpp,
 // StackMap::filtered_on_plane; st_plane_depth: f the receiver's texel of the slice's finest
 // level `finest`). Zero slopes: one receiver depth, the corner (st_stack_pcf).
+// Taps counted in blocks as st_pcf_plane counts a 2D map's (MH §3.3's hierarchical PCF): a
+// tap's answer holds for the square st_stack_depth's shift names, so every kernel tap in it
+// counts with it (st_pcf_block: at once where the plane decides the block, else one by one)
+// and the next descent starts at the first tap not counted: a kernel inside one constant
+// cell or octree leaf costs one descent. The count is the per-tap count: the CPU's answer.
 float st_stack_pcf_plane(uint level, uint x, uint y, uint w, uint r, vec3 plane, uvec2 f, uint finest,
                          inout StProbe probe) {
   r = clamp(r, 1u, kMaxPcf);
-  const uint side = 1u << min(level, 31u);
-  uint lit = 0u;
-  for (uint j = 0u; j < r; ++j)
-    for (uint i = 0u; i < r; ++i) {
-      const uint tx = st_pcf_tap(x, i, r, side), ty = st_pcf_tap(y, j, r, side);
-      lit += st_lit(st_plane_depth(plane, f, finest - level, tx, ty), st_stack_depth(tx, ty, w, level, probe)) ? 1u
-                                                                                                                 : 0u;
-    }
+  const uint side = 1u << min(level, 31u), taps = r * r;
+  uint lit = 0u, done0 = 0u, done1 = 0u, done2 = 0u;
+  for (uint k = 0u; k < taps; k = st_pcf_next(done0, done1, done2)) {  // one descent a pass
+    const uint j = k / r, i = k - j * r;
+    uint shift;
+    const float value = st_stack_depth(st_pcf_tap(x, i, r, side), st_pcf_tap(y, j, r, side), w, level, probe, shift);
+    shift = min(shift, level);
+    st_pcf_block(x, y, r, side, i, j, st_pcf_run(x, i, r, side, shift), st_pcf_run(y, j, r, side, shift), value, plane,
+                 f, finest - level, lit, done0, done1, done2);
+  }
   return uintBitsToFloat(ST_PAGE(ST_PAGE(kPtPcfTable) + (r - 1u) * kPcfTableStride + lit));
 }
 float st_stack_pcf(uint level, uint x, uint y, uint w, uint r, float receiver, inout StProbe probe) {
