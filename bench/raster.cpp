@@ -302,7 +302,11 @@ int main(int argc, char** argv) try {
       raster::RasterOptions ro;
       ro.width = a.width, ro.height = a.height, ro.device = a.device;
       ro.readback = false;
-      ro.upload_budget_bytes = 1ull << 30;  // the whole cache in the first frame
+      // The whole cache in the first frame (no tile is larger than --tile-bytes). Sized to the
+      // pack: GpuMap writes each frame's staging buffer (budget + slot + page table) once when
+      // it is made, and a 1 GiB budget made that first touch (~2 GiB for two frames in flight)
+      // a third of a run's process samples, outside the timed frames.
+      ro.upload_budget_bytes = std::max<uint64_t>(16u << 20, uint64_t(s.tiles + 8) * a.tile_bytes);
       if (r32f) ro.r32f_level = level, ro.r32f = depths;
       raster::Rasterizer r(map, tri, ro);
       device = r.device_name();
