@@ -899,98 +899,113 @@ float st_pcf_plane(uint level, uint x, uint y, uint r, vec3 plane, uvec2 f, uint
       }
       k = st_pcf_next(done0 | later0, done1 | later1, done2 | later2);
     } else {
-      bool more = true;
-      while (more) {  // w's taps, from tap k
+      // A plane tile's taps first, in a loop of their own: every tap of the walk that a plane
+      // block answers is counted by plane and block (st_plane_lookup's block search, once per
+      // plane and block); a tap no block answers is left (pend) to the decode loop below, which
+      // answers it from the inner buffer alone (st_tile_depth's shift). So neither loop's body
+      // carries the other's reads (a lane-masked device runs a loop body's every read each pass).
+      uint pend0 = 0u, pend1 = 0u, pend2 = 0u;
+      const bool grouping = w.kind == 1u && planes;
+      bool more = grouping;
+      while (more) {  // w's plane taps, from tap k
+        const uint j = k / r, i = k - j * r;
+        const uint tx = st_pcf_tap(x, i, r, side), ty = st_pcf_tap(y, j, r, side);
+        const uint rel = level - w.l;
+        const uint lx = tx - (w.ex << rel), ly = ty - (w.ey << rel);
+        const uint ps = pfinest - min(rel, pfinest);
+        const uint h = ps == 0u ? 0u : 1u << (ps - 1u);
+        const uint fx = (lx << ps) + h, fy = (ly << ps) + h;
+        const uint key = st_spread16(fx) | (st_spread16(fy) << 1u);
+        bool in_block = bshift > ps && key - bstart < (1u << (2u * bshift));
+        if (!in_block && ps < 8u) {
+          uint a = 0u, b = pcount;  // the last block whose start <= key
+          while (a < b) {
+            const uint mid = (a + b) >> 1u;
+            if (ST_POOL(pblocks + 2u * mid) <= key) a = mid + 1u;
+            else b = mid;
+          }
+          if (a != 0u) {
+            const uint rec = pblocks + 2u * (a - 1u);
+            bstart = ST_POOL(rec);
+            bword = ST_POOL(rec + 1u);
+            bshift = bword & 0xFFu;
+            blb = plabels + 6u * (bword >> 16u);
+            const uint bkind = (bword >> 8u) & 0xFFu;  // kind 0: six words of the tile's records and past, unused
+            const uint lw = bkind == 0u ? rec : blb + (bkind == 2u ? 4u : 2u);
+            uvec4 la, lb;
+            st_pool_run8(lw, 6u, la, lb);
+            l0 = la.x;
+            l1 = la.y;
+            l2 = la.z;
+            l3 = la.w;
+            l4 = lb.x;
+            l5 = lb.y;
+            in_block = bshift > ps && key - bstart < (1u << (2u * bshift));
+          }
+        }
+        if (in_block) {
+          // Tap k's plane (its label's palette entry in a labelled block), then every tap of the
+          // kernel not counted yet in the block (an aligned square of 2^(bshift - ps) texels
+          // holding tap k's; rows before j are counted) whose texel has that plane: its
+          // depth as st_plane_lookup's, each compared alone (st_pcf_block's 1 x 1 block).
+          const uint kind = (bword >> 8u) & 0xFFu;
+          const uint label = st_plane_label(kind, l0, l1, l2, l3, l4, l5, ((fy & 7u) << 3u) | (fx & 7u));
+          const uint entry =
+              kind == 0u ? bword >> 16u : (ST_POOL(blb + (label >> 1u)) >> (16u * (label & 1u))) & 0xFFFFu;
+          const uint pt = pbase + 6u + 6u * entry;
+          uvec4 pa, pc;  // the plane's a, b (64-bit, low word first); then c
+          st_pool_run8(pt, 6u, pa, pc);
+          const uint a_lo = pa.x, a_hi = pa.y, b_lo = pa.z, b_hi = pa.w, c_lo = pc.x, c_hi = pc.y;
+          const uint sb = bshift - ps, ox = w.ex << rel, oy = w.ey << rel;
+          const uint low = (tx >> sb) << sb;  // the block's first texel of `level` along x
+          const int from = int(low) - int(x) + int((r - 1u) / 2u);
+          const uint i0 = low == 0u ? 0u : uint(max(from, 0));  // its first tap column
+          const uint n = st_pcf_run(x, i0, r, side, sb), m = st_pcf_run(y, j, r, side, sb);
+          for (uint jj = j; jj < j + m; ++jj) {
+            const uint yy = st_pcf_tap(y, jj, r, side);
+            const uint fyy = ((yy - oy) << ps) + h;
+            for (uint ii = i0; ii < i0 + n; ++ii) {
+              const uint bit = jj * r + ii;
+              const uint word = bit < 32u ? done0 : bit < 64u ? done1 : done2;
+              const uint xx = st_pcf_tap(x, ii, r, side);
+              const uint fxx = ((xx - ox) << ps) + h;
+              const uint texel = ((fyy & 7u) << 3u) | (fxx & 7u);
+              const uint other = kind == 0u ? label : st_plane_label(kind, l0, l1, l2, l3, l4, l5, texel);
+              if (((word >> (bit & 31u)) & 1u) != 0u || other != label) continue;
+              uint hi = a_hi, lo = a_lo;
+              st_mad64(hi, lo, b_lo, b_hi, fxx);
+              st_mad64(hi, lo, c_lo, c_hi, fyy);
+              if (st_lit(st_plane_depth(plane, f, up, xx, yy), st_plane_round(hi, lo))) ++lit;
+              const uint one = 1u << (bit & 31u);
+              if (bit < 32u) done0 |= one;
+              else if (bit < 64u) done1 |= one;
+              else done2 |= one;
+            }
+          }
+        } else {  // no block: the inner buffer's answer, in the decode loop
+          const uint one = 1u << (k & 31u);
+          if (k < 32u) pend0 |= one;
+          else if (k < 64u) pend1 |= one;
+          else pend2 |= one;
+        }
+        k = st_pcf_next(done0 | later0 | pend0, done1 | later1 | pend1, done2 | later2 | pend2);
+        more = k < taps && st_in_walk(w, level, st_pcf_tap(x, k % r, r, side), st_pcf_tap(y, k / r, r, side));
+      }
+      if (grouping) k = st_pcf_next(done0 | later0, done1 | later1, done2 | later2);  // the first tap pending, if any
+      more = k < taps && st_in_walk(w, level, st_pcf_tap(x, k % r, r, side), st_pcf_tap(y, k / r, r, side));
+      while (more) {  // w's taps not counted, from tap k: a value, or decoded (DAG-MH, MH, MMH)
         const uint j = k / r, i = k - j * r;
         const uint tx = st_pcf_tap(x, i, r, side), ty = st_pcf_tap(y, j, r, side);
         uint s = level - w.l;
         float value = w.value;
-        bool grouped = false;  // the taps of a plane block's plane counted (below)
         if (w.kind == 1u) {
           const uint rel = level - w.l;
           const uint lx = tx - (w.ex << rel), ly = ty - (w.ey << rel);
-          if (planes) {  // st_plane_lookup's block search, once per plane and block
-            const uint ps = pfinest - min(rel, pfinest);
-            const uint h = ps == 0u ? 0u : 1u << (ps - 1u);
-            const uint fx = (lx << ps) + h, fy = (ly << ps) + h;
-            const uint key = st_spread16(fx) | (st_spread16(fy) << 1u);
-            bool in_block = bshift > ps && key - bstart < (1u << (2u * bshift));
-            if (!in_block && ps < 8u) {
-              uint a = 0u, b = pcount;  // the last block whose start <= key
-              while (a < b) {
-                const uint mid = (a + b) >> 1u;
-                if (ST_POOL(pblocks + 2u * mid) <= key) a = mid + 1u;
-                else b = mid;
-              }
-              if (a != 0u) {
-                const uint rec = pblocks + 2u * (a - 1u);
-                bstart = ST_POOL(rec);
-                bword = ST_POOL(rec + 1u);
-                bshift = bword & 0xFFu;
-                blb = plabels + 6u * (bword >> 16u);
-                const uint bkind = (bword >> 8u) & 0xFFu;  // kind 0: six words of the tile's records and past, unused
-                const uint lw = bkind == 0u ? rec : blb + (bkind == 2u ? 4u : 2u);
-                uvec4 la, lb;
-                st_pool_run8(lw, 6u, la, lb);
-                l0 = la.x;
-                l1 = la.y;
-                l2 = la.z;
-                l3 = la.w;
-                l4 = lb.x;
-                l5 = lb.y;
-                in_block = bshift > ps && key - bstart < (1u << (2u * bshift));
-              }
-            }
-            if (in_block) {
-              // Tap k's plane (its label's palette entry in a labelled block), then every tap of the
-              // kernel not counted yet in the block (an aligned square of 2^(bshift - ps) texels
-              // holding tap k's; rows before j are counted) whose texel has that plane: its
-              // depth as st_plane_lookup's, each compared alone (st_pcf_block's 1 x 1 block).
-              const uint kind = (bword >> 8u) & 0xFFu;
-              const uint label = st_plane_label(kind, l0, l1, l2, l3, l4, l5, ((fy & 7u) << 3u) | (fx & 7u));
-              const uint entry =
-                  kind == 0u ? bword >> 16u : (ST_POOL(blb + (label >> 1u)) >> (16u * (label & 1u))) & 0xFFFFu;
-              const uint pt = pbase + 6u + 6u * entry;
-              uvec4 pa, pc;  // the plane's a, b (64-bit, low word first); then c
-              st_pool_run8(pt, 6u, pa, pc);
-              const uint a_lo = pa.x, a_hi = pa.y, b_lo = pa.z, b_hi = pa.w, c_lo = pc.x, c_hi = pc.y;
-              const uint sb = bshift - ps, ox = w.ex << rel, oy = w.ey << rel;
-              const uint low = (tx >> sb) << sb;  // the block's first texel of `level` along x
-              const int from = int(low) - int(x) + int((r - 1u) / 2u);
-              const uint i0 = low == 0u ? 0u : uint(max(from, 0));  // its first tap column
-              const uint n = st_pcf_run(x, i0, r, side, sb), m = st_pcf_run(y, j, r, side, sb);
-              for (uint jj = j; jj < j + m; ++jj) {
-                const uint yy = st_pcf_tap(y, jj, r, side);
-                const uint fyy = ((yy - oy) << ps) + h;
-                for (uint ii = i0; ii < i0 + n; ++ii) {
-                  const uint bit = jj * r + ii;
-                  const uint word = bit < 32u ? done0 : bit < 64u ? done1 : done2;
-                  const uint xx = st_pcf_tap(x, ii, r, side);
-                  const uint fxx = ((xx - ox) << ps) + h;
-                  const uint texel = ((fyy & 7u) << 3u) | (fxx & 7u);
-                  const uint other = kind == 0u ? label : st_plane_label(kind, l0, l1, l2, l3, l4, l5, texel);
-                  if (((word >> (bit & 31u)) & 1u) != 0u || other != label) continue;
-                  uint hi = a_hi, lo = a_lo;
-                  st_mad64(hi, lo, b_lo, b_hi, fxx);
-                  st_mad64(hi, lo, c_lo, c_hi, fyy);
-                  if (st_lit(st_plane_depth(plane, f, up, xx, yy), st_plane_round(hi, lo))) ++lit;
-                  const uint one = 1u << (bit & 31u);
-                  if (bit < 32u) done0 |= one;
-                  else if (bit < 64u) done1 |= one;
-                  else done2 |= one;
-                }
-              }
-              grouped = true;
-            }
-          }
-          if (!grouped) {
-            value = dag ? st_dag_depth_in(t, rel, lx, ly, s) : st_mh_depth_at(t.base, mh_hdr, mh_root, rel, lx, ly, mmh, s);
-            s = planes ? 0u : min(s, rel);  // st_tile_depth's shift
-          }
+          value = dag ? st_dag_depth_in(t, rel, lx, ly, s) : st_mh_depth_at(t.base, mh_hdr, mh_root, rel, lx, ly, mmh, s);
+          s = planes ? 0u : min(s, rel);  // st_tile_depth's shift
         }
-        if (!grouped)
-          st_pcf_block(x, y, r, side, i, j, st_pcf_run(x, i, r, side, s), st_pcf_run(y, j, r, side, s), value, plane, f,
-                       up, lit, done0, done1, done2);
+        st_pcf_block(x, y, r, side, i, j, st_pcf_run(x, i, r, side, s), st_pcf_run(y, j, r, side, s), value, plane, f, up,
+                     lit, done0, done1, done2);
         k = st_pcf_next(done0 | later0, done1 | later1, done2 | later2);
         more = k < taps && st_in_walk(w, level, st_pcf_tap(x, k % r, r, side), st_pcf_tap(y, k / r, r, side));
       }
