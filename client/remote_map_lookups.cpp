@@ -750,53 +750,22 @@ void RemoteMap::pcf_batch_shared(std::span<const PcfQuery> queries, std::span<fl
         cur = t;
       }
       const Tile& tl = tiles[t];
-      // The run: this tap and the single taps after it in the same tile.
-      size_t e = k + 1;
-      for (; e < bn; ++e) {
-        const PcfQuery& nq = base[order[e]];
-        if (nq.r > 1 || !tl.covers(nq.level, std::min(nq.x, top), std::min(nq.y, top))) break;
-      }
-      // The next run's tile, entered now (one page-table walk) so that its bytes arrive
-      // while this run walks; the next run finds it among the kept tiles.
-      if (e < bn) {
-        const PcfQuery& nq = base[order[e]];
-        if (nq.r <= 1 && nq.level <= map_level) {
-          const uint64_t ntop = (uint64_t(1) << nq.level) - 1;
-          const uint64_t nx = std::min(nq.x, ntop), ny = std::min(nq.y, ntop);
-          bool kept = false;
-          for (size_t j = 0; j < used_tiles && !kept; ++j) kept = tiles[j].covers(nq.level, nx, ny);
-          LookupScratch::TileView v;
-          bool got = false;
-          if (!kept) {
-            got = memo && memo_tile(*memo, nq.level, nx, ny, v);
-            WalkNote note;
-            if (!got && prefetch_tile(nq.level, nx, ny, v, &note)) {
-              got = true;
-              if (memo) memo_keep(*memo, nx, ny, v, note);
-            }
-          }
-          if (got) {
-            size_t u = used_tiles < kTiles ? used_tiles++ : next_tile;
-            if (u == t) u = (u + 1) % kTiles;  // never the tile this run walks
-            next_tile = (u + 1) % kTiles;
-            tiles[u] = Tile{v.ev, v.walks, v.level, v.rel, v.x0, v.y0, v.side};
-            paths[u].owner = nullptr;  // a new tile: its path starts empty
-          }
-        }
-      }
+      // The run: this tap and the single taps after it in the same tile, which the run's
+      // own loop finds (TapRun::side): no pass of its own over the taps.
+      const TapRun run{base, order + k, bn - k, q.level, tl.rel, tl.x0, tl.y0, base_out, tl.side};
       TapRunEnd end;
       if (tl.walks) {
-        end = tl.walks->tap_run(TapRun{base, order + k, e - k, q.level, tl.rel, tl.x0, tl.y0, base_out}, paths[t]);
+        end = tl.walks->tap_run(run, paths[t]);
       } else {
-        end = tap_run_loop(TapRun{base, order + k, e - k, q.level, tl.rel, tl.x0, tl.y0, base_out},
-                           [&](uint32_t l, uint64_t tx, uint64_t ty) {
-                             try {
-                               return tl.ev->depth_region(l, tx, ty);
-                             } catch (...) {  // an opened tile does not throw; if one did, stay lit and alive
-                               return DepthRegion{kLitDepth, 0};
-                             }
-                           });
+        end = tap_run_loop(run, [&](uint32_t l, uint64_t tx, uint64_t ty) {
+          try {
+            return tl.ev->depth_region(l, tx, ty);
+          } catch (...) {  // an opened tile does not throw; if one did, stay lit and alive
+            return DepthRegion{kLitDepth, 0};
+          }
+        });
       }
+      const size_t e = k + end.count;
       walked += e - k;
       k = e;
       // The last walk's region (the tile is aligned to its side, >= the region's, so it
