@@ -382,20 +382,13 @@ class RemoteMap final : public Evaluator {
   // it could not be allocated (the batch then walks every tile).
   TileMemo* tile_memo() const noexcept;
   // The memo's tile holding (level, x, y), marked used (with the index tiles its walk
-  // passed) and prefetched as prefetch_tile does; false if the memo has none.
+  // passed) and prefetched (WindowDepths::prefetch, TapWalks::prefetch); false if the memo
+  // has none.
   bool memo_tile(TileMemo& m, uint32_t level, uint64_t x, uint64_t y, LookupScratch::TileView& tile) const noexcept;
   // Keeps `tile` (the walk of texel (x, y)'s, with its note) in the memo.
   static void memo_keep(TileMemo& m, uint64_t x, uint64_t y, const LookupScratch::TileView& tile,
                         const WalkNote& note) noexcept;
   float depth_shared(uint32_t level, uint64_t x, uint64_t y, LookupScratch& sc) const noexcept;
-  // Whether (level, x, y) (in the map) lies in a resident encoded tile; if so `tile` is
-  // it, as enter_tile would enter it (marked used), and its bytes start toward the cache
-  // (WindowDepths::prefetch, TapWalks::prefetch). Nothing else changes (no region, no
-  // miss: a missing tile is for enter_tile). A batch asks it for the next run's tile
-  // before it walks the current run, and enters that tile from it without a second
-  // page-table walk. Lock held shared.
-  bool prefetch_tile(uint32_t level, uint64_t x, uint64_t y, LookupScratch::TileView& tile,
-                     WalkNote* note = nullptr) const noexcept;
   // Evaluator::pcf's answer, from the kept regions: a kernel with no tap clamped on the
   // rows of the columns kept ahead (LookupScratch::Ahead) and reaching at most to the
   // column after them (a screen-coherent row of kernels) counts its r * r depths there,

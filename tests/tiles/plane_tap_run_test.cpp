@@ -1,7 +1,8 @@
 // A plane tile's taps in runs (TapWalks::tap_run, what the client's batches call): every
 // tap answers depth_region's value with the lit test, whatever the order of the run
 // (Morton, shuffled, with repeats), and the run's end region holds its value on every
-// texel; walk_tap is depth_region. On real open-mesh tiles (2CylinderEngine), every level,
+// texel; a run bounded by a tile's side (TapRun::side) stops at its first tap outside;
+// walk_tap is depth_region. On real open-mesh tiles (2CylinderEngine), every level,
 // each inner encoding.
 #include <gtest/gtest.h>
 
@@ -47,6 +48,21 @@ void expect_run_like_regions(const Evaluator& ev, const TapWalks& walks, uint32_
     const DepthRegion reg = ev.depth_region(level, s.x, s.y);
     ASSERT_EQ(out[order[k]], s.receiver <= reg.value ? 1.0f : 0.0f)
         << "level " << level << " tap " << k << " texel " << s.x << "," << s.y;
+  }
+  ASSERT_EQ(end.count, n);
+  // With TapRun::side the run is its prefix inside the tile (here the quadrant x, y < half
+  // at (0, 0)): those taps answered as above, the run ending at the first tap outside.
+  if (level >= 1) {
+    const uint64_t half = uint64_t(1) << (level - 1);
+    size_t m = 0;
+    while (m < n && stored[order[m]].x < half && stored[order[m]].y < half) ++m;
+    if (m > 0) {
+      std::vector<float> part(n, -1.0f);
+      TapRun run{stored.data(), order.data(), n, level, level, 0, 0, part.data()};
+      run.side = half;
+      ASSERT_EQ(walks.tap_run(run, path).count, m) << "level " << level;
+      for (size_t k = 0; k < n; ++k) ASSERT_EQ(part[order[k]], k < m ? out[order[k]] : -1.0f) << "tap " << k;
+    }
   }
   // The end region: the last tap lies in it and every texel of it answers its value.
   const PcfQuery& last = stored[order[n - 1]];

@@ -164,29 +164,25 @@ void PackEvaluator::pcf_batch(std::span<const PcfQuery> queries, std::span<float
       const uint32_t slot = resident_slot(hit.tile, hit.entry, lock);
       cache_.pin(slot);  // evaluated outside the lock: nothing may evict it meanwhile
       lock.unlock();
-      // The run: this tap and the single taps after it in the same tile.
+      // The run: this tap and the single taps after it in the same tile, which the run's
+      // own loop finds (TapRun::side).
       const uint64_t x0 = x - hit.tx, y0 = y - hit.ty, side = uint64_t(1) << hit.rel;
-      size_t e = k + 1;
-      for (; e < bn; ++e) {
-        const PcfQuery& nq = base[order[e]];
-        if (nq.r > 1 || nq.level != q.level || std::min(nq.x, top) - x0 >= side || std::min(nq.y, top) - y0 >= side)
-          break;
-      }
       const Evaluator* ev = slot_eval_[slot].get();
-      const TapRun run{base, order + k, e - k, q.level, hit.rel, x0, y0, base_out};
+      const TapRun run{base, order + k, bn - k, q.level, hit.rel, x0, y0, base_out, side};
       path.owner = nullptr;  // the slot's evaluator may stand at a freed one's address
+      TapRunEnd end;
       try {
         if (const auto* walks = dynamic_cast<const TapWalks*>(ev)) {
-          walks->tap_run(run, path);
+          end = walks->tap_run(run, path);
         } else {
-          tap_run_loop(run, [&](uint32_t l, uint64_t tx, uint64_t ty) { return ev->depth_region(l, tx, ty); });
+          end = tap_run_loop(run, [&](uint32_t l, uint64_t tx, uint64_t ty) { return ev->depth_region(l, tx, ty); });
         }
       } catch (...) {
         give_back(lock, slot, &TileCache::unpin);
         throw;
       }
       give_back(lock, slot, &TileCache::unpin);
-      k = e;
+      k += end.count;
     }
   }
 }

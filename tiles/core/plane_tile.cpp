@@ -288,10 +288,13 @@ TapRunEnd PlaneTileEvaluator::tap_run(const TapRun& run, TapPath& path) const no
   uint32_t bshift = 0, bindex = 0;
   const uint8_t* blabels = nullptr;
   bool bwide = false;
-  for (size_t k = 0; k < n; ++k) {
+  size_t k = 0;
+  for (; k < n; ++k) {
     const uint32_t i = order[k];
     const PcfQuery& q = queries[i];
     const uint64_t x = std::min(q.x, top) - x0, y = std::min(q.y, top) - y0;
+    if (run.ends(q, x, y)) [[unlikely]]
+      break;
     if (kept && (((x ^ ex) | (y ^ ey)) >> er.shift) == 0) {
       out[i] = tap_lit(q.receiver, er.value);
       continue;
@@ -324,7 +327,7 @@ TapRunEnd PlaneTileEvaluator::tap_run(const TapRun& run, TapPath& path) const no
     out[i] = tap_lit(q.receiver, er.value);
   }
   TapRunEnd end;
-  end.x = ex, end.y = ey, end.region = er, end.walks = walks;
+  end.x = ex, end.y = ey, end.region = er, end.walks = walks, end.count = k;
   return end;
 }
 

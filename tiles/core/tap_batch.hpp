@@ -147,6 +147,10 @@ struct TapPath {
 // tap k is queries[order[k]], a tap of `level` (its x, y clamped to 2^level - 1 as
 // pcf_tap clamps one tap), inside the tile whose first texel at `level` is (x0, y0) and
 // whose tree answers it at its own level `rel`; its answer goes to out[order[k]].
+// With `side` set (the tile's side at `level`, 2^rel), order[0, count) may go on past the
+// tile: the run is then its longest prefix of single taps (r <= 1) of `level` inside the
+// tile, which the caller need not find in a pass of its own (TapRunEnd::count). The first
+// tap must be one of them.
 struct TapRun {
   const PcfQuery* queries = nullptr;
   const uint16_t* order = nullptr;
@@ -154,14 +158,21 @@ struct TapRun {
   uint32_t level = 0, rel = 0;
   uint64_t x0 = 0, y0 = 0;
   float* out = nullptr;
+  uint64_t side = ~uint64_t(0);  // ~0: every tap of order[0, count) is in the run
+  // Whether tap q, at (x, y) relative to the tile (clamped, unsigned), ends the run.
+  bool ends(const PcfQuery& q, uint64_t x, uint64_t y) const {
+    return (q.r > 1) | (q.level != level) | (x >= side) | (y >= side);
+  }
 };
 
 // What a run ends with: the last tap's texel (relative to the tile, at `rel`) and its
-// answer's region, which the caller may keep; and how many taps walked the tree.
+// answer's region, which the caller may keep; how many taps walked the tree; and how
+// many taps the run had (TapRun::side).
 struct TapRunEnd {
   uint64_t x = 0, y = 0;
   DepthRegion region;
   uint64_t walks = 0;
+  size_t count = 0;
 };
 
 // The answer of one tap of a run: receiver <= the texel's value (the lit test).
@@ -176,10 +187,12 @@ TapRunEnd tap_run_loop(const TapRun& run, Walk&& walk) {
   TapRunEnd end;
   const uint64_t top = (uint64_t(1) << run.level) - 1;
   bool have = false;
-  for (size_t k = 0; k < run.count; ++k) {
+  size_t k = 0;
+  for (; k < run.count; ++k) {
     const uint32_t i = run.order[k];
     const PcfQuery& q = run.queries[i];
     const uint64_t x = std::min(q.x, top) - run.x0, y = std::min(q.y, top) - run.y0;
+    if (run.ends(q, x, y)) break;
     if (!have || (((x ^ end.x) | (y ^ end.y)) >> end.region.shift) != 0) {
       end.region = walk(run.rel, x, y);
       end.x = x, end.y = y, have = true;
@@ -187,13 +200,15 @@ TapRunEnd tap_run_loop(const TapRun& run, Walk&& walk) {
     }
     run.out[i] = tap_lit(q.receiver, end.region.value);
   }
+  end.count = k;
   return end;
 }
 
 class TapWalks {
  public:
   virtual DepthRegion walk_tap(uint32_t level, uint64_t x, uint64_t y, TapPath& path) const noexcept = 0;
-  // Every tap of `run` (count >= 1), bit for bit walk_tap's answers with the lit test:
+  // Every tap of `run` (count >= 1; with side set, its taps up to the first that leaves
+  // the tile, TapRunEnd::count), bit for bit walk_tap's answers with the lit test:
   // out[order[k]] = receiver <= walk_tap(rel, x - x0, y - y0).value. The walks resume
   // from `path` and leave their last one in it. Default: tap_run_loop over walk_tap.
   virtual TapRunEnd tap_run(const TapRun& run, TapPath& path) const noexcept {
