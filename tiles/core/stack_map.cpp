@@ -462,8 +462,8 @@ struct MmhWalk {
 // use) become one instruction there: GCC recognises the form in a function whose target
 // has POPCNT. Same integer results, so the same answers bit for bit; any other CPU or
 // target runs the plain body.
-#if (defined(__x86_64__) || defined(__i386__)) && !defined(__POPCNT__) && defined(__GNUC__)
-#define ST_STACK_MAP_POPCNT_CLONE 1
+// (ST_STACK_MAP_POPCNT_CLONE: stack_map.hpp, where the clone is declared on those builds only.)
+#ifdef ST_STACK_MAP_POPCNT_CLONE
 __attribute__((target("popcnt"))) uint64_t StackMap::lit_samples_popcnt(const SampleTexels::Run* runs, uint32_t w0,
                                                                         uint32_t m, bool* exact) const {
   return lit_samples_body(runs, w0, m, exact);
