@@ -287,8 +287,10 @@ struct MmhWalk {
     }
   }
   // DAG-MH and MMH walks of per-slice samples.
-  Uninitialized<dagmh::View, G> views;  // kind view's walks: their record's view (SliceTiles::Record::dagmh)
-  dagmh::View* const view = views.v;
+  // Kind view's walks: their records; each step rebuilds the view from its record's line
+  // (SliceTiles::Record::dagmh, the fields it reads only) rather than keeping 64 views.
+  const SliceTiles::Record* walk_rec[G];
+  auto view = [&](uint32_t k) { return walk_rec[k]->dagmh(); };
   const SliceTiles::Record* other[G];
   uint8_t other_sample[G];
   uint32_t no = 0;
@@ -307,9 +309,9 @@ struct MmhWalk {
     } else if (!(d[i] > r.hi)) {  // a constant slice never gets here with a number d
       if (r.kind == SliceTiles::RecordKind::view) {
         // The start is read in the next loop, once every walk's skip entry is on its way.
-        view[nw] = r.dagmh(), level[nw] = r.xy_level, walk_sample[nw] = uint8_t(i);
+        walk_rec[nw] = &r, level[nw] = r.xy_level, walk_sample[nw] = uint8_t(i);
         if (r.skip_level > 0 && r.xy_level >= r.skip_level)
-          __builtin_prefetch(view[nw].skip_entry_at(r.xy_level, c[i].lx, c[i].ly));
+          __builtin_prefetch(r.dagmh().skip_entry_at(r.xy_level, c[i].lx, c[i].ly));
         ++nw;
       } else if (r.kind == SliceTiles::RecordKind::mmh) {
         mw[nm].begin(r);
@@ -367,14 +369,14 @@ struct MmhWalk {
   uint32_t na = 0, ne = 0;
   auto end_descent = [&](uint32_t k) {
     if ((cur[k].ref & dagmh::kRefTagMask) == dagmh::kRefTreelet)
-      __builtin_prefetch(view[k].treelet_at(cur[k].ref & dagmh::kRefIndexMask));
+      __builtin_prefetch(view(k).treelet_at(cur[k].ref & dagmh::kRefIndexMask));
     stage[k] = 1, ending[ne++] = uint8_t(k);
   };
   for (uint32_t k = 0; k < nw; ++k) {  // the starts, each walk's first node on its way
     const uint32_t i = walk_sample[k];
-    cur[k] = view[k].start(level[k], level[k], c[i].lx, c[i].ly);
+    cur[k] = view(k).start(level[k], level[k], c[i].lx, c[i].ly);
     if (descending(k)) {
-      __builtin_prefetch(view[k].node_at(cur[k].ref & dagmh::kRefIndexMask));
+      __builtin_prefetch(view(k).node_at(cur[k].ref & dagmh::kRefIndexMask));
       active[na++] = uint8_t(k);
     } else {
       end_descent(k);
@@ -413,12 +415,12 @@ struct MmhWalk {
       const uint32_t k = ending[a];
       const uint32_t i = walk_sample[k];
       if (stage[k] == 1) {
-        index[k] = view[k].finish(cur[k], level[k], c[i].lx, c[i].ly);
-        __builtin_prefetch(view[k].chunk_at(index[k]));
+        index[k] = view(k).finish(cur[k], level[k], c[i].lx, c[i].ly);
+        __builtin_prefetch(view(k).chunk_at(index[k]));
       } else if (stage[k] == 2) {
-        if (const uint8_t* bits = view[k].value_bits_at(index[k])) __builtin_prefetch(bits);
+        if (const uint8_t* bits = view(k).value_bits_at(index[k])) __builtin_prefetch(bits);
       } else {
-        set(i, d[i] <= view[k].value(index[k]));
+        set(i, d[i] <= view(k).value(index[k]));
         continue;
       }
       ++stage[k], ending[kept++] = uint8_t(k);
@@ -428,9 +430,9 @@ struct MmhWalk {
     for (uint32_t a = 0; a < na; ++a) {  // one level of every DAG-MH walk that still descends
       const uint32_t k = active[a];
       const uint32_t i = walk_sample[k];
-      cur[k] = view[k].descend(cur[k], cur[k].level + 1, level[k], c[i].lx, c[i].ly);
+      cur[k] = view(k).descend(cur[k], cur[k].level + 1, level[k], c[i].lx, c[i].ly);
       if (descending(k)) {
-        __builtin_prefetch(view[k].node_at(cur[k].ref & dagmh::kRefIndexMask));
+        __builtin_prefetch(view(k).node_at(cur[k].ref & dagmh::kRefIndexMask));
         active[kept++] = uint8_t(k);
       } else {
         end_descent(k);
