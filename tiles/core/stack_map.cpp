@@ -139,7 +139,7 @@ struct MmhWalk {
   uint32_t pending;     // 0 none, 1 relative (mmh_add), 2 absolute
   uint32_t word(uint64_t w) const { return st::load_le<uint32_t>(tree + 4 * w); }
   void begin(const SliceTiles::Record& r) {
-    tree = r.mmh_tree, pos = 0, vp = r.mmh_root_leaf ? 0 : 1, value = 0;
+    tree = r.base, pos = 0, vp = r.mmh_root_leaf ? 0 : 1, value = 0;
     code = r.mmh_root_leaf ? mhq::kCodeLeaf : mhq::kCodeInner, level = 0, until = r.xy_level, pending = 2;
   }
   // One step towards (x, y) of `until`; false once the walk has its answer (`value`).
@@ -268,8 +268,7 @@ struct MmhWalk {
       set(i, d[i] <= c[i].value);
     } else if (got.v[of[i]].slices) {
       const SliceTiles::Record* r = static_cast<const SliceTiles::Record*>(got.v[of[i]].root) + c[i].lw;
-      __builtin_prefetch(r);
-      __builtin_prefetch(reinterpret_cast<const char*>(r) + 64);
+      __builtin_prefetch(r);  // one line (SliceTiles::Record)
       rec[nr] = r, rec_sample[nr++] = uint8_t(i);
     } else if (got.v[of[i]].octree) {
       uint32_t j = last_cell;  // the cell's index among this call's octree cells
@@ -288,7 +287,10 @@ struct MmhWalk {
     }
   }
   // DAG-MH and MMH walks of per-slice samples.
-  const dagmh::View* view[G];
+  // Kind view's walks: their records; each step rebuilds the view from its record's line
+  // (SliceTiles::Record::dagmh, the fields it reads only) rather than keeping 64 views.
+  const SliceTiles::Record* walk_rec[G];
+  auto view = [&](uint32_t k) { return walk_rec[k]->dagmh(); };
   const SliceTiles::Record* other[G];
   uint8_t other_sample[G];
   uint32_t no = 0;
@@ -307,13 +309,13 @@ struct MmhWalk {
     } else if (!(d[i] > r.hi)) {  // a constant slice never gets here with a number d
       if (r.kind == SliceTiles::RecordKind::view) {
         // The start is read in the next loop, once every walk's skip entry is on its way.
-        view[nw] = &r.view, level[nw] = r.xy_level, walk_sample[nw] = uint8_t(i);
-        if (r.view.skip_level > 0 && r.xy_level >= r.view.skip_level)
-          __builtin_prefetch(r.view.skip_entry_at(r.xy_level, c[i].lx, c[i].ly));
+        walk_rec[nw] = &r, level[nw] = r.xy_level, walk_sample[nw] = uint8_t(i);
+        if (r.skip_level > 0 && r.xy_level >= r.skip_level)
+          __builtin_prefetch(r.dagmh().skip_entry_at(r.xy_level, c[i].lx, c[i].ly));
         ++nw;
       } else if (r.kind == SliceTiles::RecordKind::mmh) {
         mw[nm].begin(r);
-        __builtin_prefetch(r.mmh_tree);  // the root's word and value
+        __builtin_prefetch(r.base);  // the root's word and value
         mmh_sample[nm++] = uint8_t(i);
       } else if (r.kind == SliceTiles::RecordKind::evaluator) {
         // Answered one per round of the walks below, the evaluator's object on its way.
@@ -367,14 +369,14 @@ struct MmhWalk {
   uint32_t na = 0, ne = 0;
   auto end_descent = [&](uint32_t k) {
     if ((cur[k].ref & dagmh::kRefTagMask) == dagmh::kRefTreelet)
-      __builtin_prefetch(view[k]->treelet_at(cur[k].ref & dagmh::kRefIndexMask));
+      __builtin_prefetch(view(k).treelet_at(cur[k].ref & dagmh::kRefIndexMask));
     stage[k] = 1, ending[ne++] = uint8_t(k);
   };
   for (uint32_t k = 0; k < nw; ++k) {  // the starts, each walk's first node on its way
     const uint32_t i = walk_sample[k];
-    cur[k] = view[k]->start(level[k], level[k], c[i].lx, c[i].ly);
+    cur[k] = view(k).start(level[k], level[k], c[i].lx, c[i].ly);
     if (descending(k)) {
-      __builtin_prefetch(view[k]->node_at(cur[k].ref & dagmh::kRefIndexMask));
+      __builtin_prefetch(view(k).node_at(cur[k].ref & dagmh::kRefIndexMask));
       active[na++] = uint8_t(k);
     } else {
       end_descent(k);
@@ -413,12 +415,12 @@ struct MmhWalk {
       const uint32_t k = ending[a];
       const uint32_t i = walk_sample[k];
       if (stage[k] == 1) {
-        index[k] = view[k]->finish(cur[k], level[k], c[i].lx, c[i].ly);
-        __builtin_prefetch(view[k]->chunk_at(index[k]));
+        index[k] = view(k).finish(cur[k], level[k], c[i].lx, c[i].ly);
+        __builtin_prefetch(view(k).chunk_at(index[k]));
       } else if (stage[k] == 2) {
-        if (const uint8_t* bits = view[k]->value_bits_at(index[k])) __builtin_prefetch(bits);
+        if (const uint8_t* bits = view(k).value_bits_at(index[k])) __builtin_prefetch(bits);
       } else {
-        set(i, d[i] <= view[k]->value(index[k]));
+        set(i, d[i] <= view(k).value(index[k]));
         continue;
       }
       ++stage[k], ending[kept++] = uint8_t(k);
@@ -428,9 +430,9 @@ struct MmhWalk {
     for (uint32_t a = 0; a < na; ++a) {  // one level of every DAG-MH walk that still descends
       const uint32_t k = active[a];
       const uint32_t i = walk_sample[k];
-      cur[k] = view[k]->descend(cur[k], cur[k].level + 1, level[k], c[i].lx, c[i].ly);
+      cur[k] = view(k).descend(cur[k], cur[k].level + 1, level[k], c[i].lx, c[i].ly);
       if (descending(k)) {
-        __builtin_prefetch(view[k]->node_at(cur[k].ref & dagmh::kRefIndexMask));
+        __builtin_prefetch(view(k).node_at(cur[k].ref & dagmh::kRefIndexMask));
         active[kept++] = uint8_t(k);
       } else {
         end_descent(k);
@@ -462,8 +464,8 @@ struct MmhWalk {
 // use) become one instruction there: GCC recognises the form in a function whose target
 // has POPCNT. Same integer results, so the same answers bit for bit; any other CPU or
 // target runs the plain body.
-#if (defined(__x86_64__) || defined(__i386__)) && !defined(__POPCNT__) && defined(__GNUC__)
-#define ST_STACK_MAP_POPCNT_CLONE 1
+// (ST_STACK_MAP_POPCNT_CLONE: stack_map.hpp, where the clone is declared on those builds only.)
+#ifdef ST_STACK_MAP_POPCNT_CLONE
 __attribute__((target("popcnt"))) uint64_t StackMap::lit_samples_popcnt(const SampleTexels::Run* runs, uint32_t w0,
                                                                         uint32_t m, bool* exact) const {
   return lit_samples_body(runs, w0, m, exact);

@@ -104,10 +104,13 @@ class StackMap {
   // w0 + i, n) exactly, with their loads gathered across samples (stack_map.cpp). `exact`
   // is cleared when an absent tile answered.
   uint64_t lit_samples(const SampleTexels::Run* runs, uint32_t w0, uint32_t m, bool* exact) const;
-  // Its body, and that body compiled for POPCNT (x86 builds without it; chosen at run time
-  // where the CPU has it; stack_map.cpp).
+  // Its body, and that body compiled for POPCNT (x86 builds without it, GCC and clang;
+  // chosen at run time where the CPU has it; stack_map.cpp): declared where it is defined.
   inline uint64_t lit_samples_body(const SampleTexels::Run* runs, uint32_t w0, uint32_t m, bool* exact) const;
+#if (defined(__x86_64__) || defined(__i386__)) && !defined(__POPCNT__) && defined(__GNUC__)
+#define ST_STACK_MAP_POPCNT_CLONE 1
   uint64_t lit_samples_popcnt(const SampleTexels::Run* runs, uint32_t w0, uint32_t m, bool* exact) const;
+#endif
 
   const StackGrid& grid_;
   TileSource tiles_;

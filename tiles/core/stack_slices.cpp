@@ -129,6 +129,26 @@ SliceTiles SliceTiles::open(std::span<const uint8_t> b) {
   return t;
 }
 
+namespace {
+
+// A record's DAG-MH fields from view v (SliceTiles::Record): false where they do not fit
+// (a dictionary, a section before the skip table or 4 GiB past it), which a record
+// answers through the evaluator instead.
+bool compact_view(const dagmh::View& v, SliceTiles::Record& r) {
+  if (v.dict_node_words || v.dict_treelet_count || !v.skip) return false;
+  uint32_t off[4];
+  const uint8_t* const at[4] = {v.nodes, v.treelets, v.chunks, v.multipliers};
+  for (int i = 0; i < 4; ++i) {
+    if (at[i] < v.skip || uint64_t(at[i] - v.skip) > 0xFFFFFFFFull) return false;
+    off[i] = uint32_t(at[i] - v.skip);
+  }
+  r.base = v.skip, r.nodes = off[0], r.treelets = off[1], r.chunks = off[2], r.multipliers = off[3];
+  r.root_ref = v.root_ref, r.skip_level = uint8_t(v.skip_level);
+  return v.skip_level <= 0xFF && v.finest_level == r.xy_level;
+}
+
+}  // namespace
+
 void SliceTiles::build_records() {
   records_.assign(slot_.size(), Record{});
   for (uint32_t w = 0; w < slices(); ++w) {
@@ -136,11 +156,11 @@ void SliceTiles::build_records() {
     r.lo = bounds_[w].lo, r.hi = bounds_[w].hi, r.xy_level = xy_level_;
     if (is_constant(w)) {
       r.kind = RecordKind::constant;
-    } else if (const dagmh::View* v = view(w)) {
-      r.kind = RecordKind::view, r.view = *v;
+    } else if (const dagmh::View* v = view(w); v && compact_view(*v, r)) {
+      r.kind = RecordKind::view;
     } else if (const uint8_t* tree = mmh_tree_[size_t(slot_[w])]) {
       r.kind = RecordKind::mmh, r.eval = &evaluator(w);
-      r.mmh_tree = tree, r.mmh_root_leaf = mmh_root_leaf_[size_t(slot_[w])];
+      r.base = tree, r.mmh_root_leaf = mmh_root_leaf_[size_t(slot_[w])];
     } else {
       r.kind = RecordKind::evaluator, r.eval = &evaluator(w);
     }

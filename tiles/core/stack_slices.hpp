@@ -93,23 +93,38 @@ class SliceTiles {
 
   // What the soft and time lookups' gathered walks (stack_map.cpp) read of slice w, in one
   // place: its bounds, its kind, and the tile's level and DAG-MH view inline, so that a
-  // sample costs one record (two cache lines, prefetched together) instead of a chain of
+  // sample costs one record (one cache line, Record below) instead of a chain of
   // the object's arrays (slot_, has_view_, views_, bounds_: a dependent miss each). Built
   // at the end of open() from the accessors above and equal to them.
   // An MMH slice's record holds its tree (the first tree word, MHQUAD.md) and whether the
   // root is a leaf, so that the lookups walk it in their rounds (stack_map.cpp: the same
   // walk as the evaluator's depth(), a step per round); kind evaluator is any other 2D
   // tile (a plane slice, "STPN"), answered by its evaluator.
+  // One cache line: a DAG-MH view's sections as 32-bit offsets from its skip table (the
+  // sections follow it in one buffer, DAGMH.md), so that a sample's record is one line
+  // rather than two (a soft lookup's loads are bounded by the lines in flight). A DAG-MH
+  // tile with a dictionary (its references partly outside the tile) is kind evaluator.
   enum class RecordKind : uint32_t { constant, view, mmh, evaluator };
   struct alignas(64) Record {
     float lo, hi;             // bounds(w); a constant: its value twice
     RecordKind kind;
     uint32_t xy_level;        // xy_level()
     const Evaluator* eval;    // kinds mmh and evaluator: &evaluator(w)
-    dagmh::View view;         // kind view: *view(w)
-    const uint8_t* mmh_tree;  // kind mmh: word 0 of the MMH tree (validated at open)
-    uint32_t mmh_root_leaf;   // kind mmh: the root is a leaf (a constant tile)
+    const uint8_t* base;      // kind view: view(w)->skip; kind mmh: word 0 of the MMH tree (validated at open)
+    uint32_t nodes, treelets, chunks, multipliers;  // kind view: view(w)'s sections, bytes after `base`
+    uint32_t root_ref;        // kind view: view(w)->root_ref
+    uint8_t skip_level;       // kind view: view(w)->skip_level
+    uint8_t mmh_root_leaf;    // kind mmh: the root is a leaf (a constant tile)
+    // Kind view: *view(w) for the walks (no dictionary; value_count left zero: a walk
+    // never reads it).
+    dagmh::View dagmh() const {
+      dagmh::View v;
+      v.skip = base, v.nodes = base + nodes, v.treelets = base + treelets, v.chunks = base + chunks;
+      v.multipliers = base + multipliers, v.finest_level = xy_level, v.skip_level = skip_level, v.root_ref = root_ref;
+      return v;
+    }
   };
+  static_assert(sizeof(Record) == 64);
   const Record& record(uint32_t w) const { return records_[w]; }
   // record(0)'s address (slice w's at records() + w): a StackTileRef keeps it, so that a
   // lookup reaches a slice's record without loading this object first.
