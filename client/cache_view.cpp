@@ -151,9 +151,8 @@ size_t CacheView::changed_slots_impl(std::span<uint64_t> known, void* visit,
     } else {
       // The slots are scattered and cold (the fetch thread wrote them): each one's record
       // and `known` word are asked for kSlotsAhead slots before it is compared, and the
-      // bytes of a resident one that compare will find changed kBytesAhead before (its
-      // record and `known` word are in by then; an unchanged slot's bytes are not read), so
-      // the misses overlap instead of waiting on each other. Loads only: nothing changes.
+      // bytes of a resident one kBytesAhead before (its record is in by then), so the
+      // misses overlap instead of waiting on each other. Loads only: nothing changes.
       constexpr size_t kSlotsAhead = 8, kBytesAhead = 4;
       const size_t count = m.scratch.size();
       for (size_t i = 0; i < count; ++i) {
@@ -164,7 +163,7 @@ size_t CacheView::changed_slots_impl(std::span<uint64_t> known, void* visit,
         }
         if (i + kBytesAhead < count) {
           const uint32_t s = m.scratch[i + kBytesAhead];
-          if (c.slot_resident(s) && known[s] != c.slot_tile(s)) {  // only bytes compare will pass on
+          if (c.slot_resident(s)) {
             const std::span<const uint8_t> b = c.tile_bytes(s);
             const auto first = reinterpret_cast<uintptr_t>(b.data()) & ~uintptr_t(63);
             for (uintptr_t p = first; p < reinterpret_cast<uintptr_t>(b.data() + b.size()); p += 64)

@@ -717,20 +717,12 @@ struct GpuMap::Impl {
     const uint64_t low = tile_child_morton(c.tile, 1);
     word(off_children + p * L::kChildTableWords + (morton_compact(low >> 1) << 1) + morton_compact(low));
   }
-  // The ring's next change, reset, for the caller to fill in place (a Change copied in
-  // from the stack cost a store-forwarding stall per change) and queue_change() to queue,
-  // or to drop by not calling it; the oldest is applied first when the ring is full.
-  Change& next_change() {
+  void queue_change(const Change& c) {
     if (changes_count == kChangeLag) apply_oldest_change();
-    Change& c = changes[(changes_head + changes_count) % kChangeLag];
-    c = Change{};
-    return c;
-  }
-  void queue_change() {
-    prefetch_change(changes[(changes_head + changes_count++) % kChangeLag]);
+    changes[(changes_head + changes_count++) % kChangeLag] = c;
+    prefetch_change(c);
     if (changes_count > kChangeLag / 2) prefetch_words(changes[(changes_head + changes_count - 1 - kChangeLag / 2) % kChangeLag]);
   }
-
   // One copy region more, or the last one longer when both ranges continue it (adjacent
   // dirty page-table blocks; a tile that fills its slot next to the last): fewer regions
   // for the driver to record and the device to run, the same bytes.
@@ -759,7 +751,7 @@ struct GpuMap::Impl {
     // writes it), which nothing before its link reads: unlink gets the old tile with it.
     view->changed_slots(mirror_tile, [&](const client::SlotChange& sc) {
       const uint32_t s = sc.slot;
-      Change& c = next_change();
+      Change c;
       c.slot = s;
       c.old_tile = mirror_tile[s];
       bool done = true;
@@ -780,7 +772,7 @@ struct GpuMap::Impl {
           ++fs.slots_uploaded;
         }
       }
-      if (c.old_tile != kInvalidTile || c.link) queue_change();
+      if (c.old_tile != kInvalidTile || c.link) queue_change(c);
       return done;
     });
     while (changes_count > 0) apply_oldest_change();
