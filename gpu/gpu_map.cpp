@@ -67,20 +67,13 @@ class TileSlotTable {
   template <typename KeyOf>
   uint32_t find(TileId t, const KeyOf& key_of) const {
     const uint32_t h = hash(t);
-    for (uint64_t i = h & mask_;; i = (i + 1) & mask_) {
-      const Bucket b = buckets_[i];
-      if (b.slot == layout::kNoSlot) return layout::kNoSlot;
-      if (b.hash == h && key_of(b.slot) == t) return b.slot;
-    }
+    return buckets_[probe(h, [&](const Bucket& b) { return b.slot == layout::kNoSlot || (b.hash == h && key_of(b.slot) == t); })].slot;
   }
   // The slot find(t) most likely answers, from the buckets alone (no record read), or
   // kNoSlot: for prefetching the record before find runs.
   uint32_t guess(TileId t) const {
     const uint32_t h = hash(t);
-    for (uint64_t i = h & mask_;; i = (i + 1) & mask_) {
-      const Bucket b = buckets_[i];
-      if (b.slot == layout::kNoSlot || b.hash == h) return b.slot;
-    }
+    return buckets_[probe(h, [&](const Bucket& b) { return b.slot == layout::kNoSlot || b.hash == h; })].slot;
   }
   // Starts loading the line find(t) / set / erase will read first.
   void prefetch(TileId t) const { __builtin_prefetch(&buckets_[hash(t) & mask_]); }
@@ -89,23 +82,18 @@ class TileSlotTable {
   template <typename KeyOf>
   void set(TileId t, uint32_t slot, const KeyOf& key_of) {
     const uint32_t h = hash(t);
-    uint64_t i = h & mask_;
-    while (buckets_[i].slot != layout::kNoSlot && !(buckets_[i].hash == h && key_of(buckets_[i].slot) == t))
-      i = (i + 1) & mask_;
-    buckets_[i] = {h, slot};
+    buckets_[probe(h, [&](const Bucket& b) { return b.slot == layout::kNoSlot || (b.hash == h && key_of(b.slot) == t); })] = {h, slot};
   }
   // Removes `slot`'s bucket (key t), if it has one: a tile since moved to another slot
   // keeps that mapping.
   void erase(TileId t, uint32_t slot) {
     const uint32_t h = hash(t);
-    uint64_t i = h & mask_;
-    while (!(buckets_[i].slot == slot && buckets_[i].hash == h)) {
-      if (buckets_[i].slot == layout::kNoSlot) return;
-      i = (i + 1) & mask_;
-    }
-    for (uint64_t j = i;;) {  // shift later keys of the run back over the hole
+    uint64_t i = probe(h, [&](const Bucket& b) { return b.slot == layout::kNoSlot || (b.slot == slot && b.hash == h); });
+    if (buckets_[i].slot == layout::kNoSlot) return;
+    for (uint64_t j = i, n = 0;;) {  // shift later keys of the run back over the hole
       j = (j + 1) & mask_;
       if (buckets_[j].slot == layout::kNoSlot) break;
+      if (++n > mask_) broken();
       const uint64_t home = buckets_[j].hash & mask_;
       if (((j - home) & mask_) < ((j - i) & mask_)) continue;  // its home lies after the hole: stays
       buckets_[i] = buckets_[j];
@@ -121,6 +109,22 @@ class TileSlotTable {
   };
   // 32 bits of the old 64-bit mix: a table has at most 2^24 buckets (2^23 slots).
   static uint32_t hash(TileId t) { return uint32_t((t ^ (t >> 29)) * 0x9E3779B97F4A7C15ull >> 17); }
+  // The buckets from hash h's home on, in probe order, to the first that stop(bucket)
+  // accepts: its index. find, guess, set and erase differ only in the stop test. The table
+  // always keeps an empty bucket (load <= 1/2), so every probe ends within a lap; one that
+  // does not (nor a shift that finds no end) means a broken invariant (a deletion that left
+  // duplicates, a full table): it throws instead of spinning forever on the frame path.
+  template <typename Stop>
+  uint64_t probe(uint32_t h, const Stop& stop) const {
+    uint64_t i = h & mask_;
+    for (uint64_t n = 0; n <= mask_; ++n, i = (i + 1) & mask_)
+      if (stop(buckets_[i])) return i;
+    broken();
+  }
+  [[noreturn]] void broken() const {
+    throw GpuError("GpuMap: the tile -> slot table has no empty bucket left (" + std::to_string(mask_ + 1) +
+                   " buckets): a deletion broke its runs");
+  }
   uint64_t mask_ = 0;
   std::vector<Bucket> buckets_;
 };
@@ -719,7 +723,6 @@ struct GpuMap::Impl {
     prefetch_change(c);
     if (changes_count > kChangeLag / 2) prefetch_words(changes[(changes_head + changes_count - 1 - kChangeLag / 2) % kChangeLag]);
   }
-
   // One copy region more, or the last one longer when both ranges continue it (adjacent
   // dirty page-table blocks; a tile that fills its slot next to the last): fewer regions
   // for the driver to record and the device to run, the same bytes.
