@@ -57,10 +57,11 @@ struct Fixture {
 
 // tile_bytes 1 MiB: no index tiles (every tile sits right below the skip grid); 512: index
 // tiles with encoded tiles below them.
+// level 0: 6 under SHADOWTILE_TEST_SCALE=small, else 7.
 Fixture make_fixture(const std::string& name, ClientOptions o = looptest::quick_options(),
-                     uint32_t tile_bytes = 1 << 20) {
+                     uint32_t tile_bytes = 1 << 20, uint32_t level = 0) {
   Fixture f;
-  f.level = looptest::small_scale() ? 6 : 7;
+  f.level = level ? level : looptest::small_scale() ? 6 : 7;
   f.pack = looptest::build_pack(name, f.level, 29, looptest::first_encoding(), f.k, tile_bytes);
   for (const TileIndexEntry& e : f.pack.reader->tiles())
     if (tile_address(e.id).level == f.k) f.tiles.push_back(e.id);
@@ -228,7 +229,7 @@ TEST(RemoteMapRequests, WantCapacityBoundsTheQueueNotTheTilesInFlight) {
 TEST(RemoteMapRequests, ChildrenOfALateIndexTileFollowAfterManyOtherRegions) {
   ClientOptions o = looptest::quick_options();
   o.want_capacity = 1u << 12;
-  Fixture f = make_fixture("req_late_index", o, 512);
+  Fixture f = make_fixture("req_late_index", o, 512, 7);  // level 7 at every scale: index tiles below the grid
   uint64_t index = kInvalidTile;
   for (const TileIndexEntry& e : f.pack.reader->tiles())
     if (e.kind == TileKind::index && tile_address(e.id).level == f.k) index = e.id;
