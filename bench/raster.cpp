@@ -90,6 +90,14 @@
 // 2.35/2.02, 2.57/2.22, 2.08/2.25 (no plane tiles: within noise); 2CylinderEngine.glb A
 // 2.61/2.19, 2.62/2.12, 2.98/2.18, 1.90/2.00, 2.02/2.12, B 2.10/1.96, 2.38/2.10, 2.24/2.03,
 // 2.61/2.03, 2.38/2.06 (medians A 2.61/2.12, B 2.38/2.03; CPU ms per 5x5 frame 271 -> 260).
+// The DAG-MH dictionary in the pool (GPU_LAYOUT.md layout 9: a node word of either side is
+// one pool read, where the page-table dictionary made it a page read and a pool read per
+// word): the same command, fresh MESA_SHADER_CACHE_DIR per run, main A and B alternated in
+// 10 pairs at load 16-29, ratio to R32F 5x5 medians device / process CPU: city A 2.42/2.15,
+// B 2.23/2.07 (B lower in 7 of 10 pairs, both); 2CylinderEngine.glb (no dictionary: only the
+// masked page reads left) A 2.33/2.03, B 2.33/2.01 (CPU lower in 8 of 10). Median CPU ms
+// none / 1 tap / 5x5 / R32F 5x5: city A 359/763/948/405, B 337/680/856/409; the first tap
+// (st 1 - none: A 404, B 343 ms) is most of a 5x5's lookup (st 5x5 - none: A 589, B 519).
 // --region builds only a window of the map (finest texels; the rest lit): a 64K^2 map in
 // minutes; the camera then looks at the window. The R32F map (the finest level, 4^L floats)
 // is skipped with --no-r32f, with --region, and above 16K^2: its rows print '-'.

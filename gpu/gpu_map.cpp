@@ -155,6 +155,7 @@ struct GpuMap::Impl {
   GpuOptions opt;
   uint32_t map_level = 0, k = 0, encoding = 0, slot_count = 0, slot_bytes = 0, slot_words = 0;
   uint64_t pool_bytes = 0;
+  uint32_t dict_at = 0, dict_words = 0;  // the DAG-MH dictionary in the pool, after the slots (0, 0: none)
   std::unique_ptr<VkContext> ctx;
   bool engine = false;  // engine mode: the engine's device, recordings only
   Kernels kernels;
@@ -248,13 +249,18 @@ struct GpuMap::Impl {
     slot_bytes = shape.slot_bytes;
     slot_words = align16(slot_bytes) / 4;
     if (slot_count > (1u << 23)) throw GpuError("GpuMap: more than 2^23 cache slots");
-    pool_bytes = uint64_t(slot_count) * slot_words * 4;
+    // The pack's DAG-MH dictionary sits in the pool after the last slot (whole quads), so a
+    // DAG-MH descent reads [dictionary | tile] node words from one buffer (st_dag_node_word).
+    dict_words = uint32_t(view->dictionary().size() / 4);
+    dict_at = dict_words == 0 ? 0u : slot_count * slot_words;
+    pool_bytes = (uint64_t(slot_count) * slot_words + ((uint64_t(dict_words) + 3) & ~uint64_t(3))) * 4;
     engine = e != nullptr;
     ctx = engine ? std::make_unique<VkContext>(*e) : std::make_unique<VkContext>(opt.device, opt.validation);
     totals.device = ctx->device_name();
     totals.slot_count = slot_count;
     if (pool_bytes > ctx->properties().limits.maxStorageBufferRange)
-      throw GpuError("GpuMap: the slot pool (" + std::to_string(pool_bytes) + " bytes) exceeds device '" +
+      throw GpuError("GpuMap: the slot pool (" + std::to_string(pool_bytes) +
+                     " bytes, DAG-MH dictionary included) exceeds device '" +
                      ctx->device_name() + "' maxStorageBufferRange (" +
                      std::to_string(ctx->properties().limits.maxStorageBufferRange) + "); use fewer cache slots");
     build_page_table();
@@ -325,21 +331,14 @@ struct GpuMap::Impl {
     const uint32_t pv_cells = off_preview + L::kPvHeaderWords + cells;
     const uint32_t pv_cell_words = L::kPvCellHeaderWords + 2 * pv_words;
     const uint32_t pv_values = pv_cells + uint32_t(pv.bases.size()) * pv_cell_words;
-    // The pack's DAG-MH dictionary, word for word, uploaded once with the page table
-    // (tiles with the dictionary flag reference it: st_dag_depth).
-    const std::span<const uint8_t> dict = view->dictionary();
-    const uint32_t off_dict = pv_values + uint32_t(pv.values.size());
-    const uint32_t pv_end = off_dict + uint32_t(dict.size() / 4);  // then the 2D light or the stack block
+    const uint32_t pv_end = pv_values + uint32_t(pv.values.size());  // then the 2D light or the stack block
     const uint32_t light_words = sg ? 0u : L::kStLightWords;  // a 2D map's light (kPtLight)
     const uint32_t deep_at = pv_end + light_words + stack_words();  // then the deep block
     const uint32_t deep_words = DeepMirror::words(deep_part, opt.deep_bytes);
     const uint32_t words = deep_at + deep_words;
     page_shadow.assign(words, 0);
     uint32_t* p = page_shadow.data();
-    if (!dict.empty()) {
-      std::memcpy(p + off_dict, dict.data(), dict.size());  // little-endian words
-      p[L::kPtDictionary] = off_dict;
-    }
+    p[L::kPtDictionary] = dict_at;  // the pool word of the DAG-MH dictionary (stage_dictionary), 0: none
     p[L::kPtMagic] = L::kPageMagic;
     p[L::kPtVersion] = L::kLayoutVersion;
     p[L::kPtMapLevel] = map_level;
@@ -414,7 +413,8 @@ struct GpuMap::Impl {
     kernels.create(*ctx, opt.frames_in_flight, own);
     cmd_pool = ctx->make_command_pool(true);
     queries = ctx->make_timestamp_queries(2 * opt.frames_in_flight);
-    const uint64_t staging = opt.upload_budget_bytes + uint64_t(slot_words) * 4 + page_shadow.size() * 4;
+    const uint64_t staging =
+        opt.upload_budget_bytes + uint64_t(slot_words) * 4 + page_shadow.size() * 4 + uint64_t(dict_words) * 4;
     const uint64_t query_words = sg ? L::kSqWords : L::kQueryWords;
     const uint64_t in_bytes = std::max<uint64_t>(uint64_t(opt.max_queries) * query_words * 4, uint64_t(opt.max_pixels) * 16);
     // A deep part's passes and queries write rgb after the answers: 4 floats each.
@@ -534,15 +534,28 @@ struct GpuMap::Impl {
   void upload_all_page_table() {
     Frame& f = frames[0];
     std::memcpy(f.staging.mapped, page_shadow.data(), page_shadow.size() * 4);
+    const VkBufferCopy dict = stage_dictionary(f, page_shadow.size() * 4);
     VkCommandBufferBeginInfo bi{};
     bi.sType = VK_STRUCTURE_TYPE_COMMAND_BUFFER_BEGIN_INFO;
     bi.flags = VK_COMMAND_BUFFER_USAGE_ONE_TIME_SUBMIT_BIT;
     vk_check(ctx->vk.BeginCommandBuffer(f.cmd, &bi), "vkBeginCommandBuffer");
     VkBufferCopy all{0, 0, page_shadow.size() * 4};
     ctx->vk.CmdCopyBuffer(f.cmd, f.staging.buffer, page.buffer, 1, &all);
-    ctx->vk.CmdFillBuffer(f.cmd, pool.buffer, 0, VK_WHOLE_SIZE, 0);
+    // The slots zeroed, the dictionary after them (disjoint ranges: no barrier between).
+    ctx->vk.CmdFillBuffer(f.cmd, pool.buffer, 0, dict_words ? uint64_t(dict_at) * 4 : VK_WHOLE_SIZE, 0);
+    if (dict.size) ctx->vk.CmdCopyBuffer(f.cmd, f.staging.buffer, pool.buffer, 1, &dict);
     vk_check(ctx->vk.EndCommandBuffer(f.cmd), "vkEndCommandBuffer");
     submit_and_wait(f);
+  }
+
+  // The pack's DAG-MH dictionary, word for word, into `f`'s staging at byte `off`: the copy
+  // that puts it at pool word dict_at (size 0: no dictionary). Sent once, with the first
+  // page table; it never changes while the map is open.
+  VkBufferCopy stage_dictionary(Frame& f, uint64_t off) {
+    const std::span<const uint8_t> dict = view->dictionary();
+    if (dict.empty()) return VkBufferCopy{0, 0, 0};
+    std::memcpy(static_cast<uint8_t*>(f.staging.mapped) + off, dict.data(), dict.size());  // little-endian words
+    return VkBufferCopy{off, uint64_t(dict_at) * 4, dict.size()};
   }
 
   void submit_and_wait(Frame& f) {
@@ -783,6 +796,9 @@ struct GpuMap::Impl {
       page_copies.push_back({off, 0, page_shadow.size() * 4});
       off += page_shadow.size() * 4;
       totals.page_words_uploaded += page_shadow.size();
+      const VkBufferCopy dict = stage_dictionary(f, off);  // into the pool after the first frame's fill
+      if (dict.size) pool_copies.push_back(dict);
+      off += dict.size;
       for (uint32_t blk : dirty_list) dirty[blk / 64] = 0;
       dirty_list.clear();
       page_table_sent = true;
@@ -852,7 +868,8 @@ struct GpuMap::Impl {
         shader_stages |= VK_PIPELINE_STAGE_VERTEX_SHADER_BIT | VK_PIPELINE_STAGE_FRAGMENT_SHADER_BIT;
     }
     create_pool_and_page();
-    const uint64_t staging = opt.upload_budget_bytes + uint64_t(slot_words) * 4 + page_shadow.size() * 4;
+    const uint64_t staging =
+        opt.upload_budget_bytes + uint64_t(slot_words) * 4 + page_shadow.size() * 4 + uint64_t(dict_words) * 4;
     const uint64_t fb_bytes = (L::kFbHeaderWords + uint64_t(opt.feedback_capacity) * (2 + L::kFbRecordWords)) * 4;
     retired.reserve(opt.frames_in_flight);
     frames.resize(opt.frames_in_flight);

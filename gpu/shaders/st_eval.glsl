@@ -217,26 +217,24 @@ float st_dag_value(uint base, uint chunks, uint mults, uint index) {
 
 // Tiles with the dictionary flag (tiles/core/DAGMH.md "Dictionary") address [the pack dictionary's
 // nodes | their own] as one space, and likewise treelets: index i < D (T) reads the
-// dictionary block in the page table (kPtDictionary), else the tile's own i - D (t - T),
-// the compare View::node_at / treelet_at make. A node lies wholly on one side, so its
-// words n + k are on the side of n. Tiles without the flag have D = T = 0.
+// dictionary block (in the pool after the slots, at the pool word kPtDictionary names), else
+// the tile's own i - D (t - T), the compare View::node_at / treelet_at make. A node lies
+// wholly on one side, so its words n + k are on the side of n. Both sides are pool words, so
+// a word is one read at a chosen address (one buffer read per word on a device that loops
+// over lanes per read site, as llvmpipe does). Tiles without the flag have D = T = 0.
 struct StDagSpace {
   uint nodes, treelets;    // the tile's sections (pool words)
-  uint dnodes, dtreelets;  // the dictionary's (page-table words)
+  uint dnodes, dtreelets;  // the dictionary's (pool words)
   uint d, t;               // D node words, T treelets
 };
 
 uint st_dag_node_word(StDagSpace s, uint i) {
-  return i < s.d ? ST_PAGE(s.dnodes + i) : ST_POOL(s.nodes + (i - s.d));
+  return ST_POOL(i < s.d ? s.dnodes + i : s.nodes + (i - s.d));
 }
 
 // A treelet's three bitmap words.
 uvec3 st_dag_treelet(StDagSpace s, uint t) {
-  if (t < s.t) {
-    const uint p = s.dtreelets + t * 3u;
-    return uvec3(ST_PAGE(p), ST_PAGE(p + 1u), ST_PAGE(p + 2u));
-  }
-  return st_pool_run(s.treelets + (t - s.t) * 3u, 3u).xyz;
+  return st_pool_run(t < s.t ? s.dtreelets + t * 3u : s.treelets + (t - s.t) * 3u, 3u).xyz;
 }
 
 // Whether any of bits [lo, hi) of a treelet's 96-bit bitmap (w0, w1, w2) is set.
@@ -282,9 +280,10 @@ StDagTile st_dag_open(uint base) {
   t.sp.dnodes = 0u;
   t.sp.dtreelets = 0u;
   if (((w2 >> 16u) & 1u) != 0u) {  // flag dictionary: opened by the client against the dictionary GpuMap uploaded
-    const uint dict = ST_PAGE(kPtDictionary);
-    t.sp.d = ST_PAGE(dict + kDictNodeWords);
-    t.sp.t = ST_PAGE(dict + kDictTreeletCount);
+    const uint dict = ST_PAGE(kPtDictionary);  // a pool word
+    const uvec4 dh = st_pool_run(dict + kDictNodeWords, 2u);  // D, T
+    t.sp.d = dh.x;
+    t.sp.t = dh.y;
     t.sp.dnodes = dict + kDictHeaderWords;
     t.sp.dtreelets = t.sp.dnodes + t.sp.d;
   }

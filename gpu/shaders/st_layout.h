@@ -17,7 +17,7 @@ namespace st::gpu::layout {
 #define ST_UINT(name, value) const uint name = value;
 #endif
 
-ST_UINT(kLayoutVersion, 8u)  // 2: the map preview (kPtPreview); 3: the stack block (kPtStack); 4: the DAG-MH dictionary (kPtDictionary); 5: the 2D light (kPtLight); 6: the deep block (kPtDeep); 7: a light's receiver-slope cap (kStLightSlopeCap); 8: split stack cells (kStKindSplit)
+ST_UINT(kLayoutVersion, 9u)  // 2: the map preview (kPtPreview); 3: the stack block (kPtStack); 4: the DAG-MH dictionary (kPtDictionary); 5: the 2D light (kPtLight); 6: the deep block (kPtDeep); 7: a light's receiver-slope cap (kStLightSlopeCap); 8: split stack cells (kStKindSplit); 9: the DAG-MH dictionary in the pool
 
 // ---- page-table buffer (binding kBindPage) ----
 // header words, then the skip grid's coarse values and entries, the skip grid's slot
@@ -36,15 +36,16 @@ ST_UINT(kPtSkipSlots, 9u)      // word offset: 4^K slot pointers (kNoSlot: not o
 ST_UINT(kPtChildSlots, 10u)    // word offset: slot_count * kChildTableWords slot pointers
 ST_UINT(kPtPcfTable, 11u)      // word offset: kMaxPcf * kPcfTableStride f32 quotients
 ST_UINT(kPtPreview, 12u)       // word offset: the map preview (kPv* header, then its arrays)
-ST_UINT(kPtDictionary, 13u)    // word offset: the pack's DAG-MH dictionary (kDict*), 0: none
+ST_UINT(kPtDictionary, 13u)    // POOL word offset: the pack's DAG-MH dictionary (kDict*), 0: none
 ST_UINT(kPtStack, 14u)         // word offset: the stack block (kSt*) of a stack map; 0 for a 2D map
 ST_UINT(kPtLight, 15u)         // word offset: a 2D map's light space (kStLightWords words, the stack block's
                                // light layout; projection 0), 0: none (a stack map, or a light the pass refuses)
 ST_UINT(kPtDeep, 16u)          // word offset: the deep block (kDp*) of a 2D map with a deep part; 0: none
 ST_UINT(kPtHeaderWords, 17u)
 
-// The DAG-MH dictionary block (tiles/core/DAGMH.md "Dictionary"), at word kPtDictionary:
-// the dictionary buffer MapInfo carries (inflated), word for word: its 8-word header (D node
+// The DAG-MH dictionary block (tiles/core/DAGMH.md "Dictionary"), in the slot pool after the
+// last slot, at the pool word the page table's kPtDictionary names: the dictionary buffer
+// MapInfo carries (inflated), word for word: its 8-word header (D node
 // words at kDictNodeWords, T treelets at kDictTreeletCount), D node words, 3 T treelet
 // words. A version-2 tile's inner reference i < D is the dictionary's node word i, else
 // its own word i - D; a treelet t < T the dictionary's, else its own t - T.

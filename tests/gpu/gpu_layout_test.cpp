@@ -90,10 +90,10 @@ TEST(GpuLayout, StackBlockHeaderWordsAreWhereTheDrawingPutsThem) {
 
 // The page-table header and the deep block as GPU_LAYOUT.md draws them ("The page table",
 // "The deep block"): layout version 6 added the header word kPtDeep (7: a light's word
-// kStLightSlopeCap; 8: split stack entries).
+// kStLightSlopeCap; 8: split stack entries; 9: the DAG-MH dictionary in the pool).
 TEST(GpuLayout, DeepBlockWordsAreWhereTheDrawingPutsThem) {
   namespace L = layout;
-  EXPECT_EQ(L::kLayoutVersion, 8u);
+  EXPECT_EQ(L::kLayoutVersion, 9u);
   EXPECT_EQ(L::kPtLight, 15u);
   EXPECT_EQ(L::kPtDeep, 16u);
   EXPECT_EQ(L::kPtHeaderWords, 17u);

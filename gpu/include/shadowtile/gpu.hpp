@@ -357,7 +357,8 @@ struct GpuStats {
   uint32_t deep_tiles = 0;       // deep tiles the device holds now (0: no deep part)
   uint32_t deep_tiles_dropped = 0;  // resident deep tiles that did not fit deep_bytes
   uint32_t slot_count = 0;
-  // Device memory of the two shared buffers. The page table goes up whole once (the own-
+  // Device memory of the two shared buffers (the pool's includes a DAG-MH pack's
+  // dictionary, after the slots). The page table and the dictionary go up whole once (the own-
   // device constructor, or engine mode's first record_uploads, beyond upload_budget_bytes):
   // plan that frame for it; later frames send only changed 64-word blocks.
   uint64_t pool_bytes = 0, page_table_bytes = 0;
@@ -389,7 +390,8 @@ class GpuMap {
   // maxStorageBufferRange (2^27 bytes on some devices, lavapipe's; a bigger cache makes the
   // constructors throw). Engine mode: the engine's device; own-device: the device
   // options.device chooses (a short-lived instance and device). Throws GpuError as the
-  // constructors do.
+  // constructors do. A DAG-MH pack's dictionary (MapStats::dictionary_bytes) also lies in
+  // the pool, after the slots: leave its bytes out of the range (slots only here).
   // texel_buffers (GpuOptions::texel_buffers; the GpuOptions overload reads options'): the
   // pool must also fit maxTexelBufferElements words.
   static uint32_t max_cache_slots(const EngineDevice& device, uint32_t slot_bytes, bool texel_buffers = false);
