@@ -126,15 +126,12 @@ void run_view(const ViewArgs& a) {
     gpu::GpuOptions probe;
     probe.device = a.device;
     uint32_t fit = 0;
+    const uint64_t dict = map.stats().dictionary_bytes;  // in the pool after the slots
     try {
-      fit = gpu::GpuMap::max_cache_slots(probe, map.slot_bytes());
+      fit = gpu::GpuMap::max_cache_slots(probe, map.slot_bytes(), dict);
     } catch (const gpu::GpuError&) {  // several devices, none named: the raster takes the first
-      fit = gpu::GpuMap::max_cache_slots(gpu::GpuMap::kAnyDeviceStorageRange, map.slot_bytes());
+      fit = gpu::GpuMap::max_cache_slots(gpu::GpuMap::kAnyDeviceStorageRange, map.slot_bytes(), dict);
     }
-    // GpuMap keeps the pack's DAG-MH dictionary in the pool after the slots: room for it too.
-    const uint64_t slot16 = (uint64_t(map.slot_bytes()) + 15) / 16 * 16;
-    const uint64_t dict_slots = (map.stats().dictionary_bytes + slot16 - 1) / slot16;
-    fit = uint32_t(fit > dict_slots ? fit - dict_slots : 0);
     const uint32_t asked = co.cache_slots;
     for (int i = 0; i < 16 && co.cache_slots > fit; ++i) {
       co.cache_bytes = uint64_t(double(co.cache_bytes) * std::min(double(fit) / double(co.cache_slots), 0.99));

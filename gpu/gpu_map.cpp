@@ -1264,9 +1264,11 @@ GpuMap::GpuMap(client::Map map, const EngineDevice& device, GpuOptions options)
     : impl_(std::make_unique<Impl>(std::move(map), &device, std::move(options))) {}
 GpuMap::~GpuMap() = default;
 
-uint32_t GpuMap::max_cache_slots(uint64_t storage_range, uint32_t slot_bytes) {
+uint32_t GpuMap::max_cache_slots(uint64_t storage_range, uint32_t slot_bytes, uint64_t dictionary_bytes) {
   const uint64_t slot = align16(std::max<uint32_t>(slot_bytes, 1));  // as Impl's pool_bytes
-  return uint32_t(std::min<uint64_t>(storage_range / slot, uint64_t(1) << 23));
+  const uint64_t dict = (dictionary_bytes + 15) / 16 * 16;             // whole quads after the slots
+  const uint64_t room = storage_range > dict ? storage_range - dict : 0;
+  return uint32_t(std::min<uint64_t>(room / slot, uint64_t(1) << 23));
 }
 // The pool's byte range on a device: its storage-buffer range, and with texel buffers
 // also its texel-buffer range (R32_UINT texels).
@@ -1276,13 +1278,14 @@ uint64_t pool_range(const VkPhysicalDeviceLimits& l, bool texel_buffers) {
   return texel_buffers ? std::min<uint64_t>(storage, uint64_t(l.maxTexelBufferElements) * 4) : storage;
 }
 }  // namespace
-uint32_t GpuMap::max_cache_slots(const EngineDevice& device, uint32_t slot_bytes, bool texel_buffers) {
+uint32_t GpuMap::max_cache_slots(const EngineDevice& device, uint32_t slot_bytes, bool texel_buffers,
+                                 uint64_t dictionary_bytes) {
   const VkContext ctx(device);
-  return max_cache_slots(pool_range(ctx.properties().limits, texel_buffers), slot_bytes);
+  return max_cache_slots(pool_range(ctx.properties().limits, texel_buffers), slot_bytes, dictionary_bytes);
 }
-uint32_t GpuMap::max_cache_slots(const GpuOptions& options, uint32_t slot_bytes) {
+uint32_t GpuMap::max_cache_slots(const GpuOptions& options, uint32_t slot_bytes, uint64_t dictionary_bytes) {
   const VkContext ctx(options.device, false);
-  return max_cache_slots(pool_range(ctx.properties().limits, options.texel_buffers), slot_bytes);
+  return max_cache_slots(pool_range(ctx.properties().limits, options.texel_buffers), slot_bytes, dictionary_bytes);
 }
 
 std::span<const FrameStats> GpuMap::retire(uint64_t completed_frame) { return impl_->retire(completed_frame); }

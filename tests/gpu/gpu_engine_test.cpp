@@ -625,6 +625,8 @@ TEST(GpuEngine, MaxCacheSlotsFillsTheDevicesStorageRangeAndNoMore) {
     EXPECT_EQ(GpuMap::max_cache_slots(e.engine_device(), slot_bytes, true), GpuMap::max_cache_slots(texel_range, slot_bytes));
   }
   EXPECT_EQ(GpuMap::max_cache_slots(1000, 10), 62u);  // 16-byte slots
+  EXPECT_EQ(GpuMap::max_cache_slots(1000, 10, 100), 55u);  // a 100-byte dictionary takes 7 quads
+  EXPECT_EQ(GpuMap::max_cache_slots(100, 10, 200), 0u);
   EXPECT_EQ(GpuMap::max_cache_slots(uint64_t(1) << 40, 4), 1u << 23);
   EXPECT_EQ(GpuMap::max_cache_slots(GpuMap::kAnyDeviceStorageRange, 4096), 32768u);
   EXPECT_EQ(e.messages(), 0u) << e.first_message();

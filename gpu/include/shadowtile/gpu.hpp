@@ -390,14 +390,16 @@ class GpuMap {
   // maxStorageBufferRange (2^27 bytes on some devices, lavapipe's; a bigger cache makes the
   // constructors throw). Engine mode: the engine's device; own-device: the device
   // options.device chooses (a short-lived instance and device). Throws GpuError as the
-  // constructors do. A DAG-MH pack's dictionary (MapStats::dictionary_bytes) also lies in
-  // the pool, after the slots: leave its bytes out of the range (slots only here).
+  // constructors do. A DAG-MH pack's dictionary also lies in the pool, after the slots:
+  // pass its bytes (MapStats::dictionary_bytes) as dictionary_bytes and the count leaves
+  // room for it (0: slots only).
   // texel_buffers (GpuOptions::texel_buffers; the GpuOptions overload reads options'): the
   // pool must also fit maxTexelBufferElements words.
-  static uint32_t max_cache_slots(const EngineDevice& device, uint32_t slot_bytes, bool texel_buffers = false);
-  static uint32_t max_cache_slots(const GpuOptions& options, uint32_t slot_bytes);
+  static uint32_t max_cache_slots(const EngineDevice& device, uint32_t slot_bytes, bool texel_buffers = false,
+                                  uint64_t dictionary_bytes = 0);
+  static uint32_t max_cache_slots(const GpuOptions& options, uint32_t slot_bytes, uint64_t dictionary_bytes = 0);
   // The same for a storage-buffer range in bytes (kAnyDeviceStorageRange: every device).
-  static uint32_t max_cache_slots(uint64_t storage_range, uint32_t slot_bytes);
+  static uint32_t max_cache_slots(uint64_t storage_range, uint32_t slot_bytes, uint64_t dictionary_bytes = 0);
   static constexpr uint64_t kAnyDeviceStorageRange = uint64_t(1) << 27;  // Vulkan's minimum maxStorageBufferRange
 
   // Frames are the engine's own counter (strictly increasing, any start); frame f uses ring
