@@ -5,6 +5,7 @@
 // OUT for bench_pack_bytes (per-section bytes, the planes section included).
 //
 //   bench_plane_packs SCENE@RES... [--out DIR] [--json PATH] [--light SPEC] [--min-shift S] [--min-nodes N] [--min-reused N]
+//                     [--min-labelled N]
 //                     [--no-merge] [--no-round] [--no-pack] [--no-predict] [--no-grow] [--keep-coarse] [--max-palette N] [--grow-seeds N] [--stats]
 //                     [--only default,static,planes]
 // (--no-grow: a labelled block's missing texels get one plane fitted to them all or none,
@@ -56,6 +57,7 @@ int main(int argc, char** argv) try {
       .value("--min-shift", fit.min_shift, "PlaneFitOptions::min_shift")
       .value("--min-nodes", fit.min_stored_nodes, "PlaneFitOptions::min_stored_nodes")
       .value("--min-reused", fit.min_reused_nodes, "PlaneFitOptions::min_reused_nodes")
+      .value("--min-labelled", fit.min_labelled_nodes, "PlaneFitOptions::min_labelled_nodes")
       .flag("--no-merge", fit.merge_surfaces, "PlaneFitOptions::merge_surfaces off", false)
       .flag("--no-round", fit.round_planes, "PlaneFitOptions::round_planes off", false)
       .flag("--no-pack", pack_planes, "Store plane tiles as STPN instead of packed", false)

@@ -861,17 +861,8 @@ void drop_coarse_values(Hierarchy& t, uint32_t d, std::span<const float> lo, std
                         const std::vector<Plane>& blocks, const std::vector<LabelBlock>& labelled) {
   if (d < 2) return;
   const uint32_t side = 1u << d;
-  // The dense tables below are kept per thread and reused from tile to tile (their sizes
-  // depend on the tile's depth only): a tile's fit allocates none of them again.
-  thread_local struct {
-    std::vector<uint8_t> bshift;
-    std::vector<std::vector<float>> mn, mx;
-    std::vector<std::vector<int32_t>> at;
-    std::vector<std::vector<uint8_t>> movable;
-  } scratch;
   // Per finest texel, the shift of the block holding it (0: none).
-  std::vector<uint8_t>& bshift = scratch.bshift;
-  bshift.assign(size_t(side) * side, 0);
+  std::vector<uint8_t> bshift(size_t(side) * side, 0);
   auto mark = [&](uint32_t start, uint32_t shift) {
     const uint32_t x0 = morton_compact(start), y0 = morton_compact(start >> 1), w = 1u << shift;
     for (uint32_t y = y0; y < y0 + w; ++y) std::fill_n(bshift.begin() + size_t(y) * side + x0, w, uint8_t(shift));
@@ -879,8 +870,7 @@ void drop_coarse_values(Hierarchy& t, uint32_t d, std::span<const float> lo, std
   for (const Plane& p : blocks) mark(p.start, p.shift);
   for (const LabelBlock& b : labelled) mark(b.start, kLabelShift);
   // [min lo, max hi] of the texels below each position, per level (dense).
-  std::vector<std::vector<float>>&mn = scratch.mn, &mx = scratch.mx;
-  if (mn.size() < d + 1) mn.resize(d + 1), mx.resize(d + 1);
+  std::vector<std::vector<float>> mn(d + 1), mx(d + 1);
   mn[d].assign(lo.begin(), lo.end());
   mx[d].assign(hi.begin(), hi.end());
   for (uint32_t l = d; l-- > 0;) {
@@ -894,8 +884,7 @@ void drop_coarse_values(Hierarchy& t, uint32_t d, std::span<const float> lo, std
       }
   }
   // Present nodes per level (dense): index into t.levels[l], or -1.
-  std::vector<std::vector<int32_t>>& at = scratch.at;
-  if (at.size() < d + 1) at.resize(d + 1);
+  std::vector<std::vector<int32_t>> at(d + 1);
   for (uint32_t l = 0; l <= d; ++l) {
     const uint32_t w = 1u << l;
     at[l].assign(size_t(w) * w, -1);
@@ -921,8 +910,7 @@ void drop_coarse_values(Hierarchy& t, uint32_t d, std::span<const float> lo, std
   };
   // Per valued node below the root, once visited and kept: whether its value may move
   // within [lo, hi] (its [lo, hi] is then the bounds of every position it answers).
-  std::vector<std::vector<uint8_t>>& movable = scratch.movable;
-  if (movable.size() < d + 1) movable.resize(d + 1);
+  std::vector<std::vector<uint8_t>> movable(d + 1);
   for (uint32_t l = 0; l <= d; ++l) movable[l].assign(t.levels[l].size(), 0);
   for (uint32_t l = 1; l < d; ++l)
     for (size_t j = 0; j < t.levels[l].size(); ++j) {
