@@ -41,7 +41,11 @@
 // (its receivers, order and queries; pcf_batch over --batch queries) on one thread, N
 // times, the median printed (for perf: the samples fall in the lookups); with --cold each
 // pass after 64 MiB of other memory is written (as the render's passes find the caches
-// after the rays and the image).
+// after the rays and the image). It also prints the passes that kept their CPU (no
+// involuntary context switch of the thread) apart from those that did not: on a loaded
+// machine a pass that lost its core finds its caches cold when it comes back.
+#include <sys/resource.h>
+
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -463,22 +467,39 @@ int main(int argc, char** argv) {
       std::vector<uint32_t> index(facing.size());
       queries.resize(st::sun_tap_queries(light, level, 0, facing, queries.data(), index.data()));
       std::vector<float> answers(queries.size());
+      auto switches = [] {  // this thread's involuntary context switches so far
+        rusage u{};
+        getrusage(RUSAGE_THREAD, &u);
+        return u.ru_nivcsw;
+      };
       for (const Encoded& e : encoded) {
-        std::vector<double> cpu;
+        std::vector<double> cpu, kept, lost;
+        std::vector<long> lost_switches;
         std::vector<uint8_t> other(profile_cold ? size_t(64) << 20 : 0);
         for (int rep = 0; rep < profile_map + 1; ++rep) {  // the first pass warms up
           for (size_t i = 0; i < other.size(); i += 64) other[i] = uint8_t(other[i] + rep);
+          const long s0 = switches();
           const double c0 = thread_cpu_now();
           for (size_t i = 0; i < queries.size(); i += batch) {
             const size_t n = std::min(batch, queries.size() - i);
             e.remote->pcf_batch(std::span(queries).subspan(i, n), std::span(answers).subspan(i, n));
           }
-          if (rep > 0) cpu.push_back(thread_cpu_now() - c0);
+          const double c = thread_cpu_now() - c0;
+          if (rep == 0) continue;
+          cpu.push_back(c);
+          lost_switches.push_back(switches() - s0);
+          (lost_switches.back() == 0 ? kept : lost).push_back(c);
         }
+        const double per = 1e9 / double(std::max<size_t>(queries.size(), 1));
         std::printf("%-8s client taps of the render, one thread, batches of %zu: median %.2f ms CPU, %.1f ns per "
-                    "query (%zu)\n",
-                    e.name.c_str(), batch, 1e3 * median(cpu), 1e9 * median(cpu) / double(std::max<size_t>(queries.size(), 1)),
-                    queries.size());
+                    "query (%zu); passes that kept their core %.1f ns (%zu), that lost it %.1f ns (%zu)\n",
+                    e.name.c_str(), batch, 1e3 * median(cpu), per * median(cpu), queries.size(),
+                    kept.empty() ? 0.0 : per * median(kept), kept.size(), lost.empty() ? 0.0 : per * median(lost),
+                    lost.size());
+        std::printf("  (anonymous memory in huge pages: %.1f MiB) each pass, ns per query / its involuntary context switches:",
+                    anon_huge_mib());
+        for (size_t k = 0; k < cpu.size(); ++k) std::printf(" %.1f/%ld", per * cpu[k], lost_switches[k]);
+        std::printf("\n");
       }
       return 0;
     }

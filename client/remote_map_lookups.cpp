@@ -749,6 +749,14 @@ void RemoteMap::pcf_batch_shared(std::span<const PcfQuery> queries, std::span<fl
           }
         });
       }
+      // A run that ended at once (its first tap outside it: a broken run): this tap answered
+      // singly, so such a run costs time, never a loop that does not advance.
+      if (end.count == 0) {
+        base_out[i] = pcf_shared(q.level, q.x, q.y, 1, q.receiver, sc);
+        if (sc.used) take(sc.regions[sc.last]);
+        ++k;
+        continue;
+      }
       const size_t e = k + end.count;
       walked += e - k;
       k = e;

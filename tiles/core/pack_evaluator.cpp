@@ -182,6 +182,12 @@ void PackEvaluator::pcf_batch(std::span<const PcfQuery> queries, std::span<float
         throw;
       }
       give_back(lock, slot, &TileCache::unpin);
+      // A run that ended at once (its first tap outside it: a broken run): this tap answered
+      // singly, so such a run costs time, never a loop that does not advance.
+      if (end.count == 0) {
+        base_out[i] = pcf(q.level, q.x, q.y, 1, q.receiver);
+        end.count = 1;
+      }
       k += end.count;
     }
   }
