@@ -22,13 +22,25 @@
 // (instructions, cache misses, dTLB read misses) where the kernel and the machine allow,
 // else software ones (task clock, page faults, context switches), else none ("-"); and the
 // percentiles over the frames with no context switch inside the span (a loaded machine's
-// preemptions, not the frame path's cost; their count is printed). A digest
+// preemptions, not the frame path's cost; their count is printed). Beside the wall time, the
+// calling thread's CPU time over the same span (CLOCK_THREAD_CPUTIME_ID, read just outside
+// it: a preemption inside the span does not count; on a VM whose syscalls cost ~10 us the
+// reads stay out of the wall span, and their own CPU share is a constant ~1-3 us). A digest
 // of every frame's upload figures (slots, tile bytes, page-table bytes) says whether two
 // builds did the same work frame for frame.
 //
 //   bench_frame_path [--packs P1,P2] [--scenes procedural:city,FILE] [--res 4k] [--tile-bytes 1024]
 //                    [--out bench-out/raster] [--frames 1000] [--arriving 100] [--cache-fraction 0.5]
-//                    [--flush-mib 32] [--device llvmpipe] [--json PATH]
+//                    [--flush-mib 32] [--claims 0] [--device llvmpipe] [--json PATH]
+//
+// --claims N: the feedback readback exercised as a shadow pass would leave it (the bench
+// records none): each timed frame's feedback buffer gets N claims written by the device
+// (vkCmdUpdateBuffer after record_end_of_frame, untimed) the way st_feedback (st_eval.glsl)
+// lays them out: absent skip-grid entries (key e + 1 at level K, hashed and probed as the
+// shader does), a rotating run of the grid's tile and index entries. The next frame's
+// retire reads them (GpuMap's collect_feedback: claims into the client's wanted queue), so
+// retire's time grows by their cost, and the arrivals follow the claims too (another
+// digest than --claims 0). Default 0: no claims, as before.
 //
 // Packs: --packs names built packs; else each --scenes entry's pack in --out under
 // bench_raster's name (SCENE_RES_dagmh_tBYTES.pack), built there if absent. Defaults: the
@@ -38,10 +50,12 @@
 #include <linux/perf_event.h>
 #include <sys/ioctl.h>
 #include <sys/syscall.h>
+#include <time.h>
 #include <unistd.h>
 #include <vulkan/vulkan.h>
 
 #include <algorithm>
+#include <bit>
 #include <cctype>
 #include <chrono>
 #include <cmath>
@@ -56,6 +70,7 @@
 #include "examples/raster/engine_device.hpp"
 #include "client/map_access.hpp"
 #include "client/remote_map.hpp"
+#include "gpu/layout.hpp"
 #include "shadowtile/gpu.hpp"
 #include "scene/scene_limits.hpp"
 #include "shadowtile/vk_setup.hpp"
@@ -69,10 +84,12 @@ using namespace st::bench;
 using Clock = std::chrono::steady_clock;
 volatile uint8_t flush_sink = 0;  // keeps the cache flush between frames
 
+constexpr uint32_t kFeedbackCapacity = 1024;  // GpuOptions::feedback_capacity here
+
 struct Args {
   std::string packs, scenes = "procedural:city,/usr/share/assimp/models/glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb";
   std::string light = "sun:azimuth=30,elevation=50", res = "4k", out = "bench-out/raster", device = "llvmpipe", json;
-  uint32_t tile_bytes = 1024, frames = 1000, arriving = 100, flush_mib = 32;
+  uint32_t tile_bytes = 1024, frames = 1000, arriving = 100, flush_mib = 32, claims = 0;
   double cache_fraction = 0.5;
   SceneLimits limits;
 };
@@ -90,12 +107,14 @@ Args parse_args(int argc, char** argv) {
       .value("--arriving", a.arriving, "Tiles arriving per frame (> 0)")
       .value("--cache-fraction", a.cache_fraction, "The GPU tile cache as a fraction of the map's tiles, in (0, 1]")
       .value("--flush-mib", a.flush_mib, "MiB written between frames to flush the CPU caches")
+      .value("--claims", a.claims, "Feedback claims written into each frame's feedback buffer (0..512)")
       .value("--device", a.device, "Vulkan device (by name)")
       .value("--json", a.json, "Write the rows as JSON to PATH [bench-out/frame_path.json]")
       .with("--scene-limits", [&](const std::string& v) { a.limits = parse_scene_limits(v, a.limits); },
             "What reading a scene file may cost, KEY=VALUE[,...] (scene/scene_limits.hpp)");
   opt.parse(argc, argv);
   if (a.frames == 0 || a.arriving == 0) throw Error("bench_frame_path: --frames and --arriving must be > 0");
+  if (a.claims > kFeedbackCapacity / 2) throw Error("bench_frame_path: --claims must be at most " + std::to_string(kFeedbackCapacity / 2));
   if (!(a.cache_fraction > 0 && a.cache_fraction <= 1)) throw Error("bench_frame_path: --cache-fraction must be in (0, 1]");
   if (a.json.empty()) a.json = "bench-out/frame_path.json";
   return a;
@@ -215,6 +234,46 @@ struct Counters {
   }
 };
 
+// The calling thread's CPU time, ns.
+int64_t thread_cpu_ns() {
+  timespec t{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+  return int64_t(t.tv_sec) * 1000000000 + t.tv_nsec;
+}
+
+// A feedback buffer as a shadow pass leaves it with `n` claims (st_feedback's layout,
+// st_layout.h): absent skip-grid entries, starting at entry *next of the grid's non-constant
+// ones (round and round), key e + 1, hashed into the key set and probed as the shader does.
+// Empty when the grid has no such entry.
+void fake_claims(const CutGrid& grid, uint32_t n, uint32_t& next, std::vector<uint32_t>& fb) {
+  namespace L = gpu::layout;
+  const uint32_t cap = kFeedbackCapacity;
+  fb.assign(L::kFbHeaderWords + size_t(cap) * (2 + L::kFbRecordWords), 0u);
+  fb[L::kFbCapacity] = cap;
+  const uint32_t entries = uint32_t(grid.entries.size()), k = grid.levels;
+  uint32_t used = 0;
+  for (uint32_t tried = 0; used < n && tried < entries; ++tried, next = (next + 1) % entries) {
+    const GridEntry& g = grid.entries[next];
+    if (g.kind == EntryKind::constant) continue;
+    const uint32_t key = next + 1;
+    uint32_t h = (key * 0x9E3779B1u) & (cap - 1);
+    while (fb[L::kFbHeaderWords + h] != 0) h = (h + 1) & (cap - 1);  // n <= cap / 2: ends
+    fb[L::kFbHeaderWords + h] = key;
+    uint32_t* rec = fb.data() + L::kFbHeaderWords + cap + size_t(h) * L::kFbRecordWords;
+    rec[L::kFbRecLevel] = k;
+    rec[L::kFbRecX] = next & ((1u << k) - 1);
+    rec[L::kFbRecY] = next >> k;
+    rec[L::kFbRecValue] = std::bit_cast<uint32_t>(g.value);
+    rec[L::kFbRecKind] = uint32_t(g.kind) | uint32_t(g.index_levels) << 8;
+    rec[L::kFbRecCount] = 1 + used % 7;
+    fb[L::kFbHeaderWords + size_t(cap) * (1 + L::kFbRecordWords) + used] = h;
+    fb[L::kFbAbsentTaps] += rec[L::kFbRecCount];
+    ++used;
+  }
+  fb[L::kFbUsed] = used;
+  fb[L::kFbHoles] = used;
+}
+
 double percentile(std::vector<double> v, double p) {
   if (v.empty()) return 0;
   std::sort(v.begin(), v.end());
@@ -225,7 +284,7 @@ double percentile(std::vector<double> v, double p) {
 }
 
 struct FrameRow {
-  double host_us, uploads_us, retire_us, end_us;
+  double host_us, uploads_us, retire_us, end_us, cpu_us;
   uint32_t slots;
   uint64_t tile_bytes, page_bytes;
   std::vector<int64_t> counts;  // per Counters::all, -1 unavailable
@@ -294,6 +353,9 @@ int main(int argc, char** argv) try {
     };
     uint64_t frame = 100, evictions_guess = 0, passes = 0;
     std::vector<int64_t> c0, c1;
+    std::vector<uint32_t> claim_words;
+    uint32_t claim_next = 0;
+    uint64_t claims_read = 0;
     std::vector<proto::TileRequest> want;
     const auto t_scene = Clock::now();
     while (got.size() < a.frames) {
@@ -309,7 +371,7 @@ int main(int argc, char** argv) try {
                                                         std::make_shared<client::Notifier>());
       gpu::GpuOptions go;
       go.frames_in_flight = kFramesInFlight;
-      go.feedback_capacity = 1024;
+      go.feedback_capacity = kFeedbackCapacity;
       gpu::GpuMap gm(client::MapAccess::wrap(remote), engine.engine_device(), go);
       // The first frame sends the whole page table: untimed.
       {
@@ -355,19 +417,33 @@ int main(int argc, char** argv) try {
         if (!flush.empty()) flush_sink = flush_sink + flush[flush.size() / 2];
         VkCommandBuffer c = engine.begin(frame);
         counters.read_all(c0);
+        const int64_t cpu0 = thread_cpu_ns();
         const auto t0 = Clock::now();
-        gm.retire(frame - 1);
+        const std::span<const gpu::FrameStats> done = gm.retire(frame - 1);
         const auto t1 = Clock::now();
+        for (const gpu::FrameStats& d : done) claims_read += d.feedback_tiles;
         const gpu::FrameStats fs = gm.record_uploads(c, frame);
         const auto t2 = Clock::now();
         gm.record_end_of_frame(c, frame);
         const auto t3 = Clock::now();
+        const int64_t cpu1 = thread_cpu_ns();
         counters.read_all(c1);
+        if (a.claims > 0) {  // what a shadow pass would have claimed: read by the next frame's retire
+          fake_claims(remote->grid(), a.claims, claim_next, claim_words);
+          const gpu::GpuDescriptors d = gm.descriptors(frame);
+          const VkDeviceSize bytes = std::min<VkDeviceSize>(claim_words.size() * 4, 65536);
+          vkCmdUpdateBuffer(c, d.feedback.buffer, 0, bytes, claim_words.data());
+          VkMemoryBarrier mb{};
+          mb.sType = VK_STRUCTURE_TYPE_MEMORY_BARRIER;
+          mb.srcAccessMask = VK_ACCESS_TRANSFER_WRITE_BIT;
+          mb.dstAccessMask = VK_ACCESS_HOST_READ_BIT;
+          vkCmdPipelineBarrier(c, VK_PIPELINE_STAGE_TRANSFER_BIT, VK_PIPELINE_STAGE_HOST_BIT, 0, 1, &mb, 0, nullptr, 0, nullptr);
+        }
         engine.submit_and_wait(frame);
         ++frame;
         if (fs.slots_uploaded == 0) continue;
         auto us = [](Clock::time_point x, Clock::time_point y) { return std::chrono::duration<double, std::micro>(y - x).count(); };
-        FrameRow r{us(t0, t3), us(t1, t2), us(t0, t1), us(t2, t3), fs.slots_uploaded, fs.tile_bytes, fs.page_bytes, {}};
+        FrameRow r{us(t0, t3), us(t1, t2), us(t0, t1), us(t2, t3), double(cpu1 - cpu0) / 1000, fs.slots_uploaded, fs.tile_bytes, fs.page_bytes, {}};
         for (size_t i = 0; i < c0.size(); ++i) r.counts.push_back(c0[i] < 0 || c1[i] < 0 ? -1 : c1[i] - c0[i]);
         mix(fs.slots_uploaded), mix(fs.tile_bytes), mix(fs.page_bytes);
         got.push_back(std::move(r));
@@ -376,27 +452,31 @@ int main(int argc, char** argv) try {
       evictions_guess += gm.stats().slots_uploaded > slots ? gm.stats().slots_uploaded - slots : 0;
       if (got.empty() && passes > 1) throw Error("bench_frame_path: " + path + ": no tile arrived (an empty map?)");
     }
-    std::vector<double> host, up, ret, ntiles, tile_b, page_b, quiet;
+    std::vector<double> host, up, ret, ntiles, tile_b, page_b, quiet, cpu, quiet_cpu;
     size_t switched = 0;  // frames with a context switch inside the span (the machine's, not ours)
     const size_t csw = 5;  // Counters::all's context_switches
     for (const FrameRow& r : got) {
-      host.push_back(r.host_us), up.push_back(r.uploads_us), ret.push_back(r.retire_us);
+      host.push_back(r.host_us), up.push_back(r.uploads_us), ret.push_back(r.retire_us), cpu.push_back(r.cpu_us);
       ntiles.push_back(r.slots), tile_b.push_back(double(r.tile_bytes)), page_b.push_back(double(r.page_bytes));
       if (r.counts.size() > csw && r.counts[csw] > 0) ++switched;
-      else quiet.push_back(r.host_us);
+      else quiet.push_back(r.host_us), quiet_cpu.push_back(r.cpu_us);
     }
     nlohmann::json row = {{"scene", row_name}, {"pack", path}, {"tiles", tiles}, {"cache_slots", slots},
                           {"frames", got.size()}, {"passes", passes}, {"slot_reuses", evictions_guess},
                           {"tiles_per_frame_median", median(ntiles)}, {"tile_bytes_per_frame_median", median(tile_b)},
                           {"page_bytes_per_frame_median", median(page_b)}, {"frames_context_switched", switched}, {"upload_digest", digest},
+                          {"claims_per_frame", a.claims}, {"claims_read", claims_read},
                           {"seconds", std::chrono::duration<double>(Clock::now() - t_scene).count()}};
     for (const char* p : {"min", "p10", "median", "p90", "p99"}) {
       const double q = p == std::string("min") ? 0.0 : p == std::string("p10") ? 0.1 : p == std::string("median") ? 0.5 : p == std::string("p90") ? 0.9 : 0.99;
       row[std::string("host_us_") + p] = percentile(host, q);
       row[std::string("record_uploads_us_") + p] = percentile(up, q);
       row[std::string("host_us_unswitched_") + p] = percentile(quiet, q);
+      row[std::string("cpu_us_") + p] = percentile(cpu, q);
+      row[std::string("cpu_us_unswitched_") + p] = percentile(quiet_cpu, q);
     }
     row["retire_us_median"] = percentile(ret, 0.5);
+    row["retire_us_p90"] = percentile(ret, 0.9);
     std::string counter_cells;
     for (size_t i = 0; i < counters.all.size(); ++i) {
       std::vector<double> v;
@@ -410,15 +490,20 @@ int main(int argc, char** argv) try {
       counter_cells += cell;
     }
     row["host_us"] = host;
+    row["cpu_us"] = cpu;
     rows.push_back(row);
     char line[512];
     std::snprintf(line, sizeof line, "%-30s %6llu %6u %6zu %5.0f %8.0f %6.0f | %6.1f %6.1f %6.1f %6.1f %6.1f | %6.1f %6.1f | %016llx",
                   row_name.c_str(), (unsigned long long)tiles, slots, got.size(), median(ntiles), median(tile_b),
                   median(page_b), percentile(host, 0), percentile(host, 0.1), percentile(host, 0.5), percentile(host, 0.9),
                   percentile(host, 0.99), percentile(up, 0.1), percentile(up, 0.5), (unsigned long long)digest);
-    char quiet_line[256];
-    std::snprintf(quiet_line, sizeof quiet_line, "%32s%zu frames with a context switch; the others: median %.1f p90 %.1f p99 %.1f",
-                  "", switched, percentile(quiet, 0.5), percentile(quiet, 0.9), percentile(quiet, 0.99));
+    char quiet_line[512];
+    std::snprintf(quiet_line, sizeof quiet_line,
+                  "%32s%zu frames with a context switch; the others: median %.1f p90 %.1f p99 %.1f; thread CPU median %.1f p90 %.1f p99 %.1f\n"
+                  "%32sretire median %.1f p90 %.1f (claims read %llu)",
+                  "", switched, percentile(quiet, 0.5), percentile(quiet, 0.9), percentile(quiet, 0.99), percentile(quiet_cpu, 0.5),
+                  percentile(quiet_cpu, 0.9), percentile(quiet_cpu, 0.99), "", percentile(ret, 0.5), percentile(ret, 0.9),
+                  (unsigned long long)claims_read);
     lines.push_back(std::string(line) + "\n" + quiet_line +
                     (counter_cells.empty() ? "" : "\n" + std::string(32, ' ') + "counters (median):" + counter_cells));
     std::fprintf(stderr, "bench_frame_path: %s done\n", row_name.c_str());

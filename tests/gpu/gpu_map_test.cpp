@@ -16,6 +16,7 @@
 #include "tests/client/loopback.hpp"
 #include "tests/gpu/gpu_test_util.hpp"
 #include "tests/gpu/shadow_twins.hpp"
+#include "gpu/tile_slot_table.hpp"
 #include "tiles/encode/mh_build.hpp"
 #include "tiles/encode/pack_writer.hpp"
 #include "tiles/encode/plane_fit.hpp"
@@ -375,6 +376,49 @@ TEST(GpuMap, AbsentTilesAnswerCoarselyLikeTheCpuAndFeedbackNamesExactlyThem) {
     EXPECT_EQ(compare(q, out, [&](size_t i) { return s.map.depth(l, q[i].x, q[i].y); }), "");
     expect_bit_exact(g, s.map, 12);
     EXPECT_EQ(g.stats().validation_messages, 0u);
+  }
+}
+
+// GpuMap's tile -> slot hash (gpu/tile_slot_table.hpp) churned against a reference map, no
+// device: slots take tiles and lose them in random order, a tile sometimes moving to a second
+// slot before its first one empties (as link runs before the old slot's unlink). Tiles drawn
+// from a small set at load 1/2 share homes, so runs form, wrap past the last bucket and are
+// shifted back over every hole; each tile must stay findable in its latest slot after every
+// step. (The GpuMap churn test below links too few slots to reach a broken shift.)
+TEST(GpuMap, TheTileSlotTableFindsEveryTileThroughChurnAndBackShifts) {
+  for (const uint32_t slots : {8u, 64u}) {
+    SCOPED_TRACE(slots);
+    TileSlotTable table;
+    table.init(slots);
+    std::vector<TileId> rec(slots, kInvalidTile);  // a slot's record: the key the table reads
+    auto key_of = [&](uint32_t s) { return rec[s]; };
+    std::map<TileId, uint32_t> owner;  // the reference: tile -> the slot find must answer
+    std::vector<TileId> pool;
+    for (uint32_t i = 0; i < 3 * slots; ++i) pool.push_back(make_tile_id(6, i % 64, i / 64));
+    std::mt19937_64 rng(slots);
+    uint64_t busy_steps = 0;
+    for (int step = 0; step < 4000; ++step) {
+      const uint32_t s = uint32_t(rng() % slots);
+      if (rec[s] != kInvalidTile) {  // unlink: the slot loses its tile (its bucket, if it has one)
+        const TileId t = rec[s];
+        table.erase(t, s);
+        if (auto it = owner.find(t); it != owner.end() && it->second == s) owner.erase(it);
+        rec[s] = kInvalidTile;
+      } else {  // link: a tile not held anywhere, or now and then one held in another slot
+        TileId t = pool[rng() % pool.size()];
+        if (owner.count(t) && rng() % 4 != 0) continue;
+        table.set(t, s, key_of);
+        rec[s] = t;
+        owner[t] = s;
+      }
+      for (const auto& [t, slot] : owner) ASSERT_EQ(table.find(t, key_of), slot) << "step " << step << " tile " << t;
+      for (int i = 0; i < 4; ++i) {
+        const TileId t = pool[rng() % pool.size()];
+        if (!owner.count(t)) ASSERT_EQ(table.find(t, key_of), layout::kNoSlot) << "step " << step << " tile " << t;
+      }
+      busy_steps += owner.size() > slots / 2;
+    }
+    EXPECT_GT(busy_steps, 100u);  // more than half the slots held tiles for a while
   }
 }
 
