@@ -185,6 +185,7 @@ void PackEvaluator::pcf_batch(std::span<const PcfQuery> queries, std::span<float
       // A run that ended at once (its first tap outside it: a broken run): this tap answered
       // singly, so such a run costs time, never a loop that does not advance.
       if (end.count == 0) {
+        lock.unlock();  // give_back took the lock again; pcf takes it itself
         base_out[i] = pcf(q.level, q.x, q.y, 1, q.receiver);
         end.count = 1;
       }
