@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "gpu/layout.hpp"
+#include "gpu/shaders/st_layout.h"
 #include "shadowtile/gpu.hpp"
 #include "tiles/core/tile_cache.hpp"
 
