@@ -414,7 +414,9 @@ TEST(GpuMap, TheTileSlotTableFindsEveryTileThroughChurnAndBackShifts) {
       for (const auto& [t, slot] : owner) ASSERT_EQ(table.find(t, key_of), slot) << "step " << step << " tile " << t;
       for (int i = 0; i < 4; ++i) {
         const TileId t = pool[rng() % pool.size()];
-        if (!owner.count(t)) ASSERT_EQ(table.find(t, key_of), layout::kNoSlot) << "step " << step << " tile " << t;
+        if (!owner.count(t)) {
+          ASSERT_EQ(table.find(t, key_of), layout::kNoSlot) << "step " << step << " tile " << t;
+        }
       }
       busy_steps += owner.size() > slots / 2;
     }
