@@ -17,8 +17,9 @@ namespace st {
 
 class alignas(64) MhOctree {
  public:
-  // The bytes at the object's start that hold every field a walk reads (see the members).
-  static constexpr size_t kWalkBytes = 128;
+  // The bytes at the object's start that hold every field a walk reads (see the members):
+  // one cache line.
+  static constexpr size_t kWalkBytes = 64;
   // Validates the whole buffer: header fields, every node reached from the root once (in
   // bounds, no overlap, only the child slots the level's geometry splits, no children at
   // the finest level, each offset naming either a block it claims after its node or a
@@ -111,9 +112,13 @@ class alignas(64) MhOctree {
   bool along_step_to(Walk& k, uint64_t x, uint64_t y, uint32_t w) const noexcept {
     const uint32_t l = k.level;
     if (l >= geo_.depth() || k.code == moct::kCodeLeaf) return false;
-    const StepBits s = step_bits_[l];
-    const uint32_t slot = uint32_t((x >> s.xy_shift) & s.xy_bit) | uint32_t((y >> s.xy_shift) & s.xy_bit) << 1 |
-                          ((w >> s.w_shift) & s.w_bit) << 2;
+    // The child slot without branches or a table: the step from level l halves x and y
+    // where l + n >= depth and w where l + k >= depth (moct::Geometry), and then reads
+    // the bit depth - l - 1 of each (xy_bits(l + 1) = l + 1 + n - depth resolution bits of
+    // n, w_bits(l + 1) of k); a 0 bit masks an axis the level does not split.
+    const uint32_t L = geo_.depth(), s = L - l - 1;
+    const uint32_t xy_bit = uint32_t(l + geo_.n >= L), w_bit = uint32_t(l + geo_.k >= L);
+    const uint32_t slot = uint32_t((x >> s) & xy_bit) | uint32_t((y >> s) & xy_bit) << 1 | ((w >> s) & w_bit) << 2;
     const uint32_t word_p = word_inline(k.pos);
     const uint32_t mask = moct::word_mask(word_p);
     const uint32_t cc = moct::child_code(mask, slot);
@@ -146,17 +151,11 @@ class alignas(64) MhOctree {
   uint32_t word(uint64_t w) const noexcept;
   uint32_t word_inline(uint64_t w) const noexcept { return st::load_le<uint32_t>(tree_ + 4 * w); }
   // What a walk reads (along_root, shared_levels, along_step_to, along_value) first, in the
-  // object's first kWalkBytes (the class is aligned to a cache line): a lookup that meets a
-  // cell prefetches those lines of its object only (stack_map.cpp).
+  // object's first kWalkBytes, one cache line (the class is aligned to one): a lookup that
+  // meets a cell prefetches that line of its object only (stack_map.cpp). The step's child
+  // slot comes from geo_ and the level (along_step_to), not from a per-level table.
   const uint8_t* tree_ = nullptr;
   moct::Geometry geo_{};
-  // Per level l (the step to l + 1), for along_step, without branches: the child slot is
-  // (x >> xy_shift & xy_bit) | (y >> xy_shift & xy_bit) << 1 | (w >> w_shift & w_bit) << 2,
-  // a bit 0 where the level does not split that axis.
-  struct StepBits {
-    uint8_t xy_shift = 0, w_shift = 0, xy_bit = 0, w_bit = 0;
-  };
-  StepBits step_bits_[moct::kMaxLevels] = {};
   uint8_t shift_[moct::kMaxLevels] = {};
   bool root_leaf_ = false;
   // The rest.

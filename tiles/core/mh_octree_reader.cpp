@@ -127,7 +127,8 @@ MhOctree MhOctree::open(std::span<const uint8_t> bytes) {
          "version " + std::to_string(version) + (version == 1 ? " (forward offsets only)" : " (no far words)") +
              " is no longer read; this reader reads version 3: rebuild the stack");
   if (version != kVersion) fail("version", kOffVersion, "unsupported version " + std::to_string(version));
-  static_assert(offsetof(MhOctree, root_leaf_) < kWalkBytes && offsetof(MhOctree, step_bits_) < kWalkBytes);
+  static_assert(offsetof(MhOctree, tree_) + sizeof(tree_) <= kWalkBytes && offsetof(MhOctree, geo_) + sizeof(geo_) <= kWalkBytes &&
+                offsetof(MhOctree, shift_) + sizeof(shift_) <= kWalkBytes && offsetof(MhOctree, root_leaf_) < kWalkBytes);
   MhOctree t;
   t.geo_.n = b[kOffXyLevel];
   t.geo_.k = b[kOffWLevel];
@@ -166,8 +167,6 @@ MhOctree MhOctree::open(std::span<const uint8_t> bytes) {
     t.split_xy_[l] = t.geo_.splits_xy(l), t.split_w_[l] = t.geo_.splits_w(l);
     t.xy_next_[l] = uint8_t(t.geo_.xy_bits(l + 1));
     t.w_shift_[l] = uint8_t(t.geo_.k - t.geo_.w_bits(l + 1));
-    t.step_bits_[l] = {uint8_t(t.geo_.n - t.xy_next_[l]), t.w_shift_[l], uint8_t(t.split_xy_[l]),
-                       uint8_t(t.split_w_[l])};
   }
   t.bytes_ = bytes;
   t.tree_ = b + tree_off;

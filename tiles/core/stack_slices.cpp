@@ -131,11 +131,13 @@ SliceTiles SliceTiles::open(std::span<const uint8_t> b) {
 
 namespace {
 
-// A record's DAG-MH fields from view v (SliceTiles::Record): false where they do not fit
-// (a dictionary, a section before the skip table or 4 GiB past it), which a record
-// answers through the evaluator instead.
+// A record's DAG-MH fields from view v (SliceTiles::Record): false, with r untouched, where
+// they do not fit (a dictionary, a section before the skip table or 4 GiB past it, a skip
+// level over 255, another finest level), which a record answers through the evaluator
+// instead. Every check comes before the first write.
 bool compact_view(const dagmh::View& v, SliceTiles::Record& r) {
   if (v.dict_node_words || v.dict_treelet_count || !v.skip) return false;
+  if (v.skip_level > 0xFF || v.finest_level != r.xy_level) return false;
   uint32_t off[4];
   const uint8_t* const at[4] = {v.nodes, v.treelets, v.chunks, v.multipliers};
   for (int i = 0; i < 4; ++i) {
@@ -144,7 +146,7 @@ bool compact_view(const dagmh::View& v, SliceTiles::Record& r) {
   }
   r.base = v.skip, r.nodes = off[0], r.treelets = off[1], r.chunks = off[2], r.multipliers = off[3];
   r.root_ref = v.root_ref, r.skip_level = uint8_t(v.skip_level);
-  return v.skip_level <= 0xFF && v.finest_level == r.xy_level;
+  return true;
 }
 
 }  // namespace
