@@ -50,7 +50,6 @@
 #include <linux/perf_event.h>
 #include <sys/ioctl.h>
 #include <sys/syscall.h>
-#include <time.h>
 #include <unistd.h>
 #include <vulkan/vulkan.h>
 
@@ -67,6 +66,7 @@
 
 #include "bench/options.hpp"
 #include "bench/bench_map.hpp"
+#include "bench/timing.hpp"
 #include "examples/raster/engine_device.hpp"
 #include "client/map_access.hpp"
 #include "client/remote_map.hpp"
@@ -233,13 +233,6 @@ struct Counters {
     }
   }
 };
-
-// The calling thread's CPU time, ns.
-int64_t thread_cpu_ns() {
-  timespec t{};
-  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-  return int64_t(t.tv_sec) * 1000000000 + t.tv_nsec;
-}
 
 // A feedback buffer as a shadow pass leaves it with `n` claims (st_feedback's layout,
 // st_layout.h): absent skip-grid entries, starting at entry *next of the grid's non-constant
@@ -417,7 +410,7 @@ int main(int argc, char** argv) try {
         if (!flush.empty()) flush_sink = flush_sink + flush[flush.size() / 2];
         VkCommandBuffer c = engine.begin(frame);
         counters.read_all(c0);
-        const int64_t cpu0 = thread_cpu_ns();
+        const double cpu0 = thread_cpu_now();
         const auto t0 = Clock::now();
         const std::span<const gpu::FrameStats> done = gm.retire(frame - 1);
         const auto t1 = Clock::now();
@@ -426,7 +419,7 @@ int main(int argc, char** argv) try {
         const auto t2 = Clock::now();
         gm.record_end_of_frame(c, frame);
         const auto t3 = Clock::now();
-        const int64_t cpu1 = thread_cpu_ns();
+        const double cpu1 = thread_cpu_now();
         counters.read_all(c1);
         if (a.claims > 0) {  // what a shadow pass would have claimed: read by the next frame's retire
           fake_claims(remote->grid(), a.claims, claim_next, claim_words);
@@ -443,7 +436,7 @@ int main(int argc, char** argv) try {
         ++frame;
         if (fs.slots_uploaded == 0) continue;
         auto us = [](Clock::time_point x, Clock::time_point y) { return std::chrono::duration<double, std::micro>(y - x).count(); };
-        FrameRow r{us(t0, t3), us(t1, t2), us(t0, t1), us(t2, t3), double(cpu1 - cpu0) / 1000, fs.slots_uploaded, fs.tile_bytes, fs.page_bytes, {}};
+        FrameRow r{us(t0, t3), us(t1, t2), us(t0, t1), us(t2, t3), (cpu1 - cpu0) * 1e6, fs.slots_uploaded, fs.tile_bytes, fs.page_bytes, {}};
         for (size_t i = 0; i < c0.size(); ++i) r.counts.push_back(c0[i] < 0 || c1[i] < 0 ? -1 : c1[i] - c0[i]);
         mix(fs.slots_uploaded), mix(fs.tile_bytes), mix(fs.page_bytes);
         got.push_back(std::move(r));
